@@ -1,0 +1,623 @@
+//! The zero-copy reader: [`Container::open`] maps a file, validates it once (spec §9.1) and then
+//! hands out typed slices that cannot fail.
+
+use std::path::{Path, PathBuf};
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::{Error, Result};
+use crate::metadata::{MAX_META_BYTES, Metadata};
+use crate::records::{
+    BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord,
+    LineRecord, MAGIC, MAJOR, MaterialRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
+    SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+};
+
+/// Largest section table a reader accepts (spec §12).
+pub const MAX_SECTIONS: u32 = 256;
+/// Largest header a reader accepts (spec §12).
+pub const MAX_HEADER_SIZE: u32 = 4096;
+/// A compressed section may decode to at most this many times its stored size (spec §8).
+pub const MAX_COMPRESSION_RATIO: u64 = 1024;
+/// Default budget for all decoded compressed sections together (spec §8).
+pub const DEFAULT_DECODE_BUDGET: u64 = 4 << 30;
+/// Largest grid axis (spec §6.1).
+pub const MAX_GRID_AXIS: u32 = 256;
+/// Largest number of grid cells (spec §6.1).
+pub const MAX_GRID_CELLS: usize = 65_536;
+
+/// Settings of [`Container::open_with`].
+#[derive(Clone, Debug)]
+pub struct OpenOptions {
+    /// Largest total of decoded compressed sections, in bytes. Default 4 GiB.
+    pub decode_budget: u64,
+}
+
+impl Default for OpenOptions {
+    fn default() -> Self {
+        Self { decode_budget: DEFAULT_DECODE_BUDGET }
+    }
+}
+
+/// 16 bytes with 16-byte alignment: the unit of [`AlignedBuf`].
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct Chunk([u8; 16]);
+
+/// An owned byte buffer aligned to 16 bytes, so record slices can be cast from it.
+pub(crate) struct AlignedBuf {
+    chunks: Vec<Chunk>,
+    len: usize,
+}
+
+impl AlignedBuf {
+    pub(crate) fn zeroed(len: usize) -> Self {
+        Self { chunks: vec![Chunk::zeroed(); len.div_ceil(16)], len }
+    }
+
+    pub(crate) fn copy_from(bytes: &[u8]) -> Self {
+        let mut buf = Self::zeroed(bytes.len());
+        buf.as_mut_bytes().copy_from_slice(bytes);
+        buf
+    }
+
+    pub(crate) fn as_bytes(&self) -> &[u8] {
+        &bytemuck::cast_slice(&self.chunks)[..self.len]
+    }
+
+    fn as_mut_bytes(&mut self) -> &mut [u8] {
+        &mut bytemuck::cast_slice_mut(&mut self.chunks)[..self.len]
+    }
+}
+
+enum Storage {
+    Mapped(memmap2::Mmap),
+    Owned(AlignedBuf),
+}
+
+impl Storage {
+    fn bytes(&self) -> &[u8] {
+        match self {
+            Self::Mapped(map) => map,
+            Self::Owned(buf) => buf.as_bytes(),
+        }
+    }
+}
+
+/// A section as listed in the table, with its decoded bytes if it was compressed.
+pub struct Section {
+    /// The table entry as stored.
+    pub entry: SectionEntry,
+    decoded: Option<AlignedBuf>,
+}
+
+impl Section {
+    /// The section's kind.
+    #[must_use]
+    pub fn kind(&self) -> SectionKind {
+        SectionKind(self.entry.kind)
+    }
+
+    /// Whether the payload is stored as a zstd frame.
+    #[must_use]
+    pub fn is_compressed(&self) -> bool {
+        self.entry.flags & FLAG_ZSTD != 0
+    }
+
+    /// Number of records (`raw_length / record_size`; bytes for byte sections).
+    #[must_use]
+    pub fn record_count(&self) -> u64 {
+        self.entry.raw_length / u64::from(self.entry.record_size.max(1))
+    }
+}
+
+/// An open, validated `.treelod` container.
+///
+/// Everything returned after [`Container::open`] succeeded is a view into the mapped file (or into
+/// the decoded copy of a compressed section): no accessor can fail.
+pub struct Container {
+    storage: Storage,
+    header: Header,
+    sections: Vec<Section>,
+    metadata: Metadata,
+    path: Option<PathBuf>,
+}
+
+impl std::fmt::Debug for Container {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Container")
+            .field("path", &self.path)
+            .field("version", &(self.header.major, self.header.minor))
+            .field("sections", &self.sections.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Container {
+    /// Maps and validates the file at `path` (spec §9.1). Errors name the file.
+    ///
+    /// Cost is independent of the size of the bulk arrays: only the header, section table, `META`,
+    /// `BLOCK`, `CELLS` and compressed sections are read.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if the file cannot be read, any other variant (wrapped in [`Error::InFile`]) if it
+    /// is not a valid container.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self> {
+        Self::open_with(path, &OpenOptions::default())
+    }
+
+    /// [`Container::open`] with explicit options.
+    ///
+    /// # Errors
+    /// As [`Container::open`].
+    pub fn open_with(path: impl AsRef<Path>, options: &OpenOptions) -> Result<Self> {
+        let path = path.as_ref();
+        let io = |source| Error::Io { path: path.to_owned(), source };
+        let file = std::fs::File::open(path).map_err(io)?;
+        let len = file.metadata().map_err(io)?.len();
+        let storage = if len == 0 {
+            // An empty file cannot be mapped on every platform; it is invalid anyway.
+            Storage::Owned(AlignedBuf::zeroed(0))
+        } else {
+            // SAFETY: the map is read-only and private to this process. Another process truncating or
+            // rewriting the file while it is mapped is outside this crate's contract (as for every
+            // memory-mapped reader); treelod itself replaces files by atomic rename, never in place.
+            Storage::Mapped(unsafe { memmap2::Mmap::map(&file) }.map_err(io)?)
+        };
+        let mut container = Self::validate(storage, options).map_err(|e| e.in_file(path))?;
+        container.path = Some(path.to_owned());
+        Ok(container)
+    }
+
+    /// Validates a container held in memory. The bytes are copied once into an aligned buffer.
+    ///
+    /// # Errors
+    /// Any variant but [`Error::Io`] if the bytes are not a valid container.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
+        Self::from_bytes_with(bytes, &OpenOptions::default())
+    }
+
+    /// [`Container::from_bytes`] with explicit options.
+    ///
+    /// # Errors
+    /// As [`Container::from_bytes`].
+    pub fn from_bytes_with(bytes: &[u8], options: &OpenOptions) -> Result<Self> {
+        Self::validate(Storage::Owned(AlignedBuf::copy_from(bytes)), options)
+    }
+
+    fn validate(storage: Storage, options: &OpenOptions) -> Result<Self> {
+        let bytes = storage.bytes();
+        let available = bytes.len() as u64;
+        let header = read_header(bytes)?;
+        let entries = read_table(bytes, &header)?;
+        let mut sections = Vec::with_capacity(entries.len());
+        let mut budget = options.decode_budget;
+        for (index, entry) in entries.into_iter().enumerate() {
+            let decoded = decode_section(bytes, index, &entry, &mut budget)?;
+            sections.push(Section { entry, decoded });
+        }
+        debug_assert_eq!(available, header.file_size);
+        let mut container = Self { storage, header, sections, metadata: Metadata::default(), path: None };
+        for kind in [SectionKind::META, SectionKind::BLOCK, SectionKind::CELLS] {
+            let Some(section) = container.section(kind) else {
+                return Err(Error::MissingSection { kind });
+            };
+            // Read at every open anyway, so their checksums cost nothing extra (spec §9.1).
+            if !section.is_compressed() {
+                check_section_checksum(container.storage.bytes(), section)?;
+            }
+        }
+        container.metadata = postcard::from_bytes(container.raw_bytes(SectionKind::META))
+            .map_err(|e| Error::Metadata(e.to_string()))?;
+        container.validate_block_and_cells()?;
+        Ok(container)
+    }
+
+    /// Spec §6.1 grid and bounds, §6.2 cell count and tiling.
+    fn validate_block_and_cells(&self) -> Result<()> {
+        let blocks: &[BlockRecord] = self.records(SectionKind::BLOCK);
+        let [block] = blocks else {
+            return Err(bad_record(SectionKind::BLOCK, 0, format!("{} records, the spec requires 1", blocks.len())));
+        };
+        let grid = block.grid;
+        if grid.iter().any(|&g| g == 0 || g > MAX_GRID_AXIS) || block.grid_cell_count() > MAX_GRID_CELLS {
+            return Err(bad_record(
+                SectionKind::BLOCK,
+                0,
+                format!("grid {grid:?} is outside 1..=256 per axis, 65536 cells"),
+            ));
+        }
+        let finite = block.bounds_min.iter().chain(&block.bounds_max).all(|v| v.is_finite());
+        if !finite || (0..3).any(|i| block.bounds_min[i] > block.bounds_max[i]) {
+            return Err(bad_record(
+                SectionKind::BLOCK,
+                0,
+                format!("bounds {:?}..{:?} are not finite and ordered", block.bounds_min, block.bounds_max),
+            ));
+        }
+        if block.tree_count == 0 {
+            return Err(bad_record(SectionKind::BLOCK, 0, "tree_count is 0".into()));
+        }
+        let cells = self.cells();
+        let expected = block.grid_cell_count() + 1;
+        if cells.len() != expected {
+            return Err(bad_record(
+                SectionKind::CELLS,
+                0,
+                format!("{} cell records, the grid {grid:?} needs {expected} (cells + block cell)", cells.len()),
+            ));
+        }
+        for slot in 0..6 {
+            let kind = cells[0].ranges()[slot].0;
+            let total = self.record_count(kind);
+            let mut next = 0u64;
+            for (index, cell) in cells.iter().enumerate() {
+                let range = cell.ranges()[slot].1;
+                if u64::from(range.first) != next {
+                    return Err(Error::BadCell {
+                        cell: index,
+                        reason: format!("{kind} range starts at {}, expected {next} (ranges tile the array)", range.first),
+                    });
+                }
+                next += u64::from(range.count);
+            }
+            if next != total {
+                return Err(Error::BadCell {
+                    cell: cells.len() - 1,
+                    reason: format!("{kind} ranges end at {next}, the section has {total} records"),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The header as stored.
+    #[must_use]
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The path the container was opened from, if any.
+    #[must_use]
+    pub fn path(&self) -> Option<&Path> {
+        self.path.as_deref()
+    }
+
+    /// The whole file's bytes (mapped or owned).
+    #[must_use]
+    pub fn file_bytes(&self) -> &[u8] {
+        self.storage.bytes()
+    }
+
+    /// Every section in table order, known or not.
+    #[must_use]
+    pub fn sections(&self) -> &[Section] {
+        &self.sections
+    }
+
+    /// The section of `kind`, if present.
+    #[must_use]
+    pub fn section(&self, kind: SectionKind) -> Option<&Section> {
+        self.sections.iter().find(|s| s.kind() == kind)
+    }
+
+    /// The stored (possibly compressed) bytes of a section. Bounds checked in `open`.
+    #[must_use]
+    pub fn stored_bytes(&self, section: &Section) -> &[u8] {
+        stored_slice(self.storage.bytes(), &section.entry)
+    }
+
+    /// The decoded bytes of section `kind`, empty if absent.
+    #[must_use]
+    pub fn raw_bytes(&self, kind: SectionKind) -> &[u8] {
+        match self.section(kind) {
+            None => &[],
+            Some(section) => match &section.decoded {
+                Some(buf) => buf.as_bytes(),
+                // Unknown compressed kinds are not decoded; they have no typed accessor either.
+                None if section.is_compressed() => &[],
+                None => self.stored_bytes(section),
+            },
+        }
+    }
+
+    /// Number of records of a known kind (0 if absent).
+    #[must_use]
+    pub fn record_count(&self, kind: SectionKind) -> u64 {
+        self.section(kind).map_or(0, Section::record_count)
+    }
+
+    /// The records of section `kind` as a typed slice, empty if absent.
+    ///
+    #[must_use]
+    pub(crate) fn records<T: Pod>(&self, kind: SectionKind) -> &[T] {
+        let bytes = self.raw_bytes(kind);
+        if bytes.is_empty() {
+            return &[]; // an empty `&[u8]` may have a dangling, unaligned pointer
+        }
+        // Length is a multiple of the record size and the start is 16-byte aligned: checked in `open`.
+        bytemuck::cast_slice(bytes)
+    }
+
+    /// The decoded metadata.
+    #[must_use]
+    pub fn metadata(&self) -> &Metadata {
+        &self.metadata
+    }
+
+    /// The block record (bounds and grid).
+    #[must_use]
+    pub fn block(&self) -> &BlockRecord {
+        // Exactly one record: checked in `open`.
+        &self.records::<BlockRecord>(SectionKind::BLOCK)[0]
+    }
+
+    /// All cell records: the grid cells in index order, then the block cell.
+    #[must_use]
+    pub fn cells(&self) -> &[CellRecord] {
+        self.records(SectionKind::CELLS)
+    }
+
+    /// All vertices.
+    #[must_use]
+    pub fn vertices(&self) -> &[VertexRecord] {
+        self.records(SectionKind::VERTICES)
+    }
+
+    /// All triangles, size-sorted per cell.
+    #[must_use]
+    pub fn triangles(&self) -> &[TriangleRecord] {
+        self.records(SectionKind::TRIANGLES)
+    }
+
+    /// All points, in SPT order per cell.
+    #[must_use]
+    pub fn points(&self) -> &[PointRecord] {
+        self.records(SectionKind::POINTS)
+    }
+
+    /// All materials.
+    #[must_use]
+    pub fn materials(&self) -> &[MaterialRecord] {
+        self.records(SectionKind::MATERIALS)
+    }
+
+    /// All images.
+    #[must_use]
+    pub fn images(&self) -> &[ImageRecord] {
+        self.records(SectionKind::IMAGES)
+    }
+
+    /// The texel bytes of all images.
+    #[must_use]
+    pub fn image_data(&self) -> &[u8] {
+        self.raw_bytes(SectionKind::IMAGE_DATA)
+    }
+
+    /// All ellipsoids, in SPT order per cell.
+    #[must_use]
+    pub fn ellipsoids(&self) -> &[EllipsoidRecord] {
+        self.records(SectionKind::ELLIPSOIDS)
+    }
+
+    /// All lines, in SPT order per cell.
+    #[must_use]
+    pub fn lines(&self) -> &[LineRecord] {
+        self.records(SectionKind::LINES)
+    }
+
+    /// All impostor planes, in SPT order per cell.
+    #[must_use]
+    pub fn planes(&self) -> &[PlaneRecord] {
+        self.records(SectionKind::PLANES)
+    }
+
+    /// The pruning priority lists, per cell.
+    #[must_use]
+    pub fn prune_leaves(&self) -> &[PruneLeafRecord] {
+        self.records(SectionKind::PRUNE_LEAVES)
+    }
+
+    /// Triangles of the pruned leaves.
+    #[must_use]
+    pub fn prune_triangles(&self) -> &[TriangleRecord] {
+        self.records(SectionKind::PRUNE_TRIANGLES)
+    }
+
+    /// `s_opt(λ)` samples.
+    #[must_use]
+    pub fn prune_scale(&self) -> &[CurveSample] {
+        self.records(SectionKind::PRUNE_SCALE)
+    }
+
+    /// `λ(projected height)` samples.
+    #[must_use]
+    pub fn prune_lambda(&self) -> &[CurveSample] {
+        self.records(SectionKind::PRUNE_LAMBDA)
+    }
+}
+
+fn bad_record(kind: SectionKind, index: usize, reason: String) -> Error {
+    Error::BadRecord { kind, index, reason }
+}
+
+fn bad_header(field: &'static str, value: u64, rule: &'static str) -> Error {
+    Error::BadHeader { field, value, rule }
+}
+
+/// Spec §3: magic, version, header fields, checksum, file size.
+fn read_header(bytes: &[u8]) -> Result<Header> {
+    let available = bytes.len() as u64;
+    let Some(head) = bytes.get(..HEADER_SIZE) else {
+        // A short file that does not even start with the magic is "not a treelod file".
+        let n = bytes.len().min(MAGIC.len());
+        if bytes[..n] != MAGIC[..n] {
+            let mut found = [0u8; 12];
+            found[..n].copy_from_slice(&bytes[..n]);
+            return Err(Error::BadMagic { found });
+        }
+        return Err(Error::Truncated { what: "header", needed: HEADER_SIZE as u64, available });
+    };
+    let header: Header = bytemuck::pod_read_unaligned(head);
+    if header.magic != MAGIC {
+        return Err(Error::BadMagic { found: header.magic });
+    }
+    // The magic and version fields keep their place in every major version (spec §11).
+    if header.major != MAJOR {
+        let hint = if header.major > MAJOR {
+            "; the file was written by a newer treelod, upgrade to read it"
+        } else {
+            "; pre-release files must be rebuilt"
+        };
+        return Err(Error::UnsupportedVersion { major: header.major, minor: header.minor, supported: MAJOR, hint });
+    }
+    let header_size = header.header_size;
+    if !(HEADER_SIZE as u32..=MAX_HEADER_SIZE).contains(&header_size) || header_size % 16 != 0 {
+        return Err(bad_header("header_size", header_size.into(), "must be a multiple of 16 in 64..=4096"));
+    }
+    if header.section_count > MAX_SECTIONS {
+        return Err(bad_header("section_count", header.section_count.into(), "at most 256"));
+    }
+    if header.table_offset % SECTION_ALIGN != 0 || header.table_offset < u64::from(header_size) {
+        return Err(bad_header("table_offset", header.table_offset, "multiple of 16, at or after the header"));
+    }
+    // Cannot overflow: offset is checked against the file length first, count is at most 256.
+    let table_end = header.table_offset.saturating_add(u64::from(header.section_count) * SECTION_ENTRY_SIZE as u64);
+    if table_end > available {
+        return Err(Error::Truncated { what: "section table", needed: table_end, available });
+    }
+    let hs = header_size as usize;
+    if hs > bytes.len() {
+        return Err(Error::Truncated { what: "header", needed: hs as u64, available });
+    }
+    let mut crc = crc32fast::Hasher::new();
+    crc.update(&bytes[..60]);
+    crc.update(&[0; 4]);
+    crc.update(&bytes[64..hs]);
+    #[expect(clippy::cast_possible_truncation, reason = "table_end <= file length, which is addressable")]
+    crc.update(&bytes[header.table_offset as usize..table_end as usize]);
+    let computed = crc.finalize();
+    if computed != header.header_checksum {
+        return Err(Error::ChecksumMismatch { what: "header and section table".into(), stored: header.header_checksum, computed });
+    }
+    if available < header.file_size {
+        return Err(Error::Truncated { what: "file", needed: header.file_size, available });
+    }
+    if available > header.file_size {
+        return Err(Error::TrailingBytes { file_size: header.file_size, extra: available - header.file_size });
+    }
+    Ok(header)
+}
+
+/// Spec §4: the section table's rules.
+fn read_table(bytes: &[u8], header: &Header) -> Result<Vec<SectionEntry>> {
+    let count = header.section_count as usize;
+    #[expect(clippy::cast_possible_truncation, reason = "bounds checked in read_header")]
+    let start = header.table_offset as usize;
+    let table_end = (start + count * SECTION_ENTRY_SIZE) as u64;
+    let mut entries: Vec<SectionEntry> = Vec::with_capacity(count);
+    let mut prev_end = table_end;
+    for index in 0..count {
+        let at = start + index * SECTION_ENTRY_SIZE;
+        let entry: SectionEntry = bytemuck::pod_read_unaligned(&bytes[at..at + SECTION_ENTRY_SIZE]);
+        let kind = SectionKind(entry.kind);
+        let bad = |reason: String| Error::BadSection { index, kind, reason };
+        if entry.offset % SECTION_ALIGN != 0 {
+            return Err(bad(format!("offset {} is not a multiple of 16", entry.offset)));
+        }
+        if entry.offset < prev_end {
+            return Err(bad(format!(
+                "offset {} overlaps the previous section or the table (which end at {prev_end}); sections are in offset order",
+                entry.offset
+            )));
+        }
+        let end = entry
+            .offset
+            .checked_add(entry.length)
+            .filter(|&end| end <= header.file_size)
+            .ok_or_else(|| bad(format!("bytes {}+{} reach past the file size {}", entry.offset, entry.length, header.file_size)))?;
+        prev_end = end;
+        if entries.iter().any(|e| e.kind == entry.kind) {
+            return Err(bad("the kind appears twice".into()));
+        }
+        let Some(record_size) = kind.record_size() else {
+            entries.push(entry);
+            continue; // unknown kind: bounds checked, then skipped (spec §4)
+        };
+        if entry.flags & !FLAG_ZSTD != 0 {
+            return Err(Error::UnsupportedFeature { kind, flags: entry.flags });
+        }
+        if entry.record_size != record_size {
+            return Err(bad(format!("record_size {} but the spec's record is {record_size} bytes", entry.record_size)));
+        }
+        if entry.raw_length % u64::from(record_size) != 0 {
+            return Err(bad(format!("raw_length {} is not a multiple of the record size {record_size}", entry.raw_length)));
+        }
+        if entry.raw_length / u64::from(record_size) > u64::from(u32::MAX) {
+            return Err(bad(format!("{} records, the limit is 2^32-1", entry.raw_length / u64::from(record_size))));
+        }
+        if entry.flags & FLAG_ZSTD == 0 && entry.raw_length != entry.length {
+            return Err(bad(format!("uncompressed but raw_length {} != length {}", entry.raw_length, entry.length)));
+        }
+        if kind == SectionKind::META && entry.raw_length > MAX_META_BYTES {
+            return Err(Error::DecodeLimit { kind, raw_length: entry.raw_length, limit: MAX_META_BYTES, rule: "metadata limit" });
+        }
+        entries.push(entry);
+    }
+    Ok(entries)
+}
+
+fn stored_slice<'a>(bytes: &'a [u8], entry: &SectionEntry) -> &'a [u8] {
+    #[expect(clippy::cast_possible_truncation, reason = "bounds checked against the file length in read_table")]
+    &bytes[entry.offset as usize..(entry.offset + entry.length) as usize]
+}
+
+pub(crate) fn check_section_checksum(bytes: &[u8], section: &Section) -> Result<()> {
+    let computed = crc32fast::hash(stored_slice(bytes, &section.entry));
+    if computed != section.entry.checksum {
+        return Err(Error::ChecksumMismatch {
+            what: format!("section {}", section.kind()),
+            stored: section.entry.checksum,
+            computed,
+        });
+    }
+    Ok(())
+}
+
+/// Spec §8: limits first, then checksum, then the zstd frame into an exactly sized buffer.
+fn decode_section(bytes: &[u8], index: usize, entry: &SectionEntry, budget: &mut u64) -> Result<Option<AlignedBuf>> {
+    let kind = SectionKind(entry.kind);
+    if entry.flags & FLAG_ZSTD == 0 || kind.record_size().is_none() {
+        return Ok(None);
+    }
+    let ratio_limit = entry.length.saturating_mul(MAX_COMPRESSION_RATIO);
+    if entry.raw_length > ratio_limit {
+        return Err(Error::DecodeLimit { kind, raw_length: entry.raw_length, limit: ratio_limit, rule: "1024 x stored size" });
+    }
+    if entry.raw_length > *budget {
+        return Err(Error::DecodeLimit { kind, raw_length: entry.raw_length, limit: *budget, rule: "decode budget" });
+    }
+    *budget -= entry.raw_length;
+    let section = Section { entry: *entry, decoded: None };
+    check_section_checksum(bytes, &section)?;
+    let stored = stored_slice(bytes, entry);
+    let corrupt = |reason: String| Error::Decompress { kind, reason };
+    match zstd::zstd_safe::get_frame_content_size(stored) {
+        Ok(Some(size)) if size == entry.raw_length => {}
+        Ok(Some(size)) => return Err(corrupt(format!("frame declares {size} bytes, the table {}", entry.raw_length))),
+        Ok(None) => return Err(corrupt("frame does not declare its content size".into())),
+        Err(_) => return Err(corrupt("not a zstd frame".into())),
+    }
+    match zstd::zstd_safe::find_frame_compressed_size(stored) {
+        Ok(n) if n == stored.len() => {}
+        _ => return Err(corrupt(format!("the {} stored bytes are not exactly one zstd frame", stored.len()))),
+    }
+    let raw_len = usize::try_from(entry.raw_length)
+        .map_err(|_| Error::DecodeLimit { kind, raw_length: entry.raw_length, limit: usize::MAX as u64, rule: "address space" })?;
+    let mut buf = AlignedBuf::zeroed(raw_len);
+    let written = zstd::bulk::decompress_to_buffer(stored, buf.as_mut_bytes()).map_err(|e| corrupt(e.to_string()))?;
+    if written != raw_len {
+        return Err(corrupt(format!("decoded {written} bytes, the table says {raw_len} (section {index})")));
+    }
+    Ok(Some(buf))
+}

@@ -1,0 +1,577 @@
+//! On-disk record types, one `#[repr(C)]` struct per table of `format-spec/treelod.md` §6.
+//!
+//! Every record is `Pod`, 4-byte aligned and free of implicit padding, so an array of them can be
+//! viewed in place from a memory map. A size assertion sits beside each struct.
+
+use bytemuck::{Pod, Zeroable};
+
+/// The twelve magic bytes that open every file (spec §3): `\x89 TREELOD \r \n \x1A \n`.
+pub const MAGIC: [u8; 12] = *b"\x89TREELOD\r\n\x1a\n";
+/// Major version written and read by this crate (spec §11).
+pub const MAJOR: u16 = 1;
+/// Minor version written by this crate.
+pub const MINOR: u16 = 0;
+/// Size of the fixed header in bytes (spec §3).
+pub const HEADER_SIZE: usize = 64;
+/// Size of one section-table entry in bytes (spec §4).
+pub const SECTION_ENTRY_SIZE: usize = 48;
+/// Every section payload starts on a multiple of this (spec §1).
+pub const SECTION_ALIGN: u64 = 16;
+/// Section flag bit 0: the payload is one zstd frame (spec §4, §8).
+pub const FLAG_ZSTD: u32 = 1;
+/// The `image` value of a material without texture (spec §6.6).
+pub const NO_IMAGE: u32 = u32::MAX;
+
+/// A run of records `first .. first + count` in one array (spec §2).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Pod, Zeroable)]
+pub struct Range {
+    /// Index of the first record.
+    pub first: u32,
+    /// Number of records.
+    pub count: u32,
+}
+const _: () = assert!(size_of::<Range>() == 8);
+
+impl Range {
+    /// The records as a `usize` range, for slicing.
+    ///
+    /// Computed in `u64` first, so it cannot overflow on any target with 64-bit `usize`.
+    #[must_use]
+    pub fn as_usize(self) -> core::ops::Range<usize> {
+        let first = self.first as usize;
+        first..first + self.count as usize
+    }
+
+    /// One past the last record, or `None` if that overflows `u32`.
+    #[must_use]
+    pub fn end(self) -> Option<u32> {
+        self.first.checked_add(self.count)
+    }
+}
+
+/// The fixed 64-byte header at offset 0 (spec §3).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct Header {
+    /// [`MAGIC`].
+    pub magic: [u8; 12],
+    /// Major version, [`MAJOR`].
+    pub major: u16,
+    /// Minor version.
+    pub minor: u16,
+    /// Bytes in the header, 64 in 1.0.
+    pub header_size: u32,
+    /// Entries in the section table.
+    pub section_count: u32,
+    /// Byte offset of the section table.
+    pub table_offset: u64,
+    /// Total file length in bytes.
+    pub file_size: u64,
+    /// Reserved, 0.
+    pub flags: u32,
+    /// Reserved, 0.
+    pub reserved: [u8; 16],
+    /// CRC-32 of the header (this field as zero) followed by the section table.
+    pub header_checksum: u32,
+}
+const _: () = assert!(size_of::<Header>() == HEADER_SIZE);
+
+/// One entry of the section table (spec §4).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub struct SectionEntry {
+    /// Section kind, see [`SectionKind`].
+    pub kind: u32,
+    /// Bit 0: zstd ([`FLAG_ZSTD`]); others reserved.
+    pub flags: u32,
+    /// Byte offset of the stored payload, multiple of 16.
+    pub offset: u64,
+    /// Stored payload length in bytes.
+    pub length: u64,
+    /// Payload length after decoding.
+    pub raw_length: u64,
+    /// Bytes per record; 1 for byte sections.
+    pub record_size: u32,
+    /// CRC-32 of the stored bytes.
+    pub checksum: u32,
+    /// Reserved, 0.
+    pub reserved: u64,
+}
+const _: () = assert!(size_of::<SectionEntry>() == SECTION_ENTRY_SIZE);
+
+/// A section kind (spec §5). Unknown values are kept as raw numbers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct SectionKind(pub u32);
+
+impl SectionKind {
+    /// Postcard metadata (§7.1).
+    pub const META: Self = Self(0x0001);
+    /// One [`BlockRecord`].
+    pub const BLOCK: Self = Self(0x0002);
+    /// [`CellRecord`]s, one per grid cell plus the block cell.
+    pub const CELLS: Self = Self(0x0003);
+    /// [`VertexRecord`]s.
+    pub const VERTICES: Self = Self(0x0010);
+    /// [`TriangleRecord`]s, size-sorted per cell.
+    pub const TRIANGLES: Self = Self(0x0011);
+    /// [`PointRecord`]s in SPT order per cell.
+    pub const POINTS: Self = Self(0x0012);
+    /// [`MaterialRecord`]s.
+    pub const MATERIALS: Self = Self(0x0013);
+    /// [`ImageRecord`]s.
+    pub const IMAGES: Self = Self(0x0014);
+    /// Texel bytes of the images.
+    pub const IMAGE_DATA: Self = Self(0x0015);
+    /// [`EllipsoidRecord`]s in SPT order per cell.
+    pub const ELLIPSOIDS: Self = Self(0x0020);
+    /// [`LineRecord`]s in SPT order per cell.
+    pub const LINES: Self = Self(0x0021);
+    /// [`PlaneRecord`]s in SPT order per cell.
+    pub const PLANES: Self = Self(0x0030);
+    /// [`PruneLeafRecord`]s in priority order per cell.
+    pub const PRUNE_LEAVES: Self = Self(0x0040);
+    /// [`TriangleRecord`]s of the pruned leaves.
+    pub const PRUNE_TRIANGLES: Self = Self(0x0041);
+    /// [`CurveSample`]s of `s_opt(λ)`.
+    pub const PRUNE_SCALE: Self = Self(0x0042);
+    /// [`CurveSample`]s of `λ(projected height)`.
+    pub const PRUNE_LAMBDA: Self = Self(0x0043);
+
+    /// Every kind this version knows, in ascending order.
+    pub const KNOWN: [Self; 16] = [
+        Self::META,
+        Self::BLOCK,
+        Self::CELLS,
+        Self::VERTICES,
+        Self::TRIANGLES,
+        Self::POINTS,
+        Self::MATERIALS,
+        Self::IMAGES,
+        Self::IMAGE_DATA,
+        Self::ELLIPSOIDS,
+        Self::LINES,
+        Self::PLANES,
+        Self::PRUNE_LEAVES,
+        Self::PRUNE_TRIANGLES,
+        Self::PRUNE_SCALE,
+        Self::PRUNE_LAMBDA,
+    ];
+
+    /// The spec's name of a known kind.
+    #[must_use]
+    pub fn name(self) -> Option<&'static str> {
+        Some(match self {
+            Self::META => "META",
+            Self::BLOCK => "BLOCK",
+            Self::CELLS => "CELLS",
+            Self::VERTICES => "VERTICES",
+            Self::TRIANGLES => "TRIANGLES",
+            Self::POINTS => "POINTS",
+            Self::MATERIALS => "MATERIALS",
+            Self::IMAGES => "IMAGES",
+            Self::IMAGE_DATA => "IMAGE_DATA",
+            Self::ELLIPSOIDS => "ELLIPSOIDS",
+            Self::LINES => "LINES",
+            Self::PLANES => "PLANES",
+            Self::PRUNE_LEAVES => "PRUNE_LEAVES",
+            Self::PRUNE_TRIANGLES => "PRUNE_TRIANGLES",
+            Self::PRUNE_SCALE => "PRUNE_SCALE",
+            Self::PRUNE_LAMBDA => "PRUNE_LAMBDA",
+            _ => return None,
+        })
+    }
+
+    /// Bytes per record of a known kind (1 for byte sections), `None` for unknown kinds.
+    #[must_use]
+    pub fn record_size(self) -> Option<u32> {
+        let size = match self {
+            Self::META | Self::IMAGE_DATA => 1,
+            Self::BLOCK => size_of::<BlockRecord>(),
+            Self::CELLS => size_of::<CellRecord>(),
+            Self::VERTICES => size_of::<VertexRecord>(),
+            Self::TRIANGLES | Self::PRUNE_TRIANGLES => size_of::<TriangleRecord>(),
+            Self::POINTS => size_of::<PointRecord>(),
+            Self::MATERIALS => size_of::<MaterialRecord>(),
+            Self::IMAGES => size_of::<ImageRecord>(),
+            Self::ELLIPSOIDS => size_of::<EllipsoidRecord>(),
+            Self::LINES => size_of::<LineRecord>(),
+            Self::PLANES => size_of::<PlaneRecord>(),
+            Self::PRUNE_LEAVES => size_of::<PruneLeafRecord>(),
+            Self::PRUNE_SCALE | Self::PRUNE_LAMBDA => size_of::<CurveSample>(),
+            _ => return None,
+        };
+        #[expect(clippy::cast_possible_truncation, reason = "record sizes are below 100")]
+        Some(size as u32)
+    }
+
+    /// Whether the writer may compress this kind (spec §8: never `BLOCK` or `CELLS`).
+    #[must_use]
+    pub fn compressible(self) -> bool {
+        !matches!(self, Self::BLOCK | Self::CELLS)
+    }
+}
+
+impl core::fmt::Display for SectionKind {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.name() {
+            Some(name) => f.write_str(name),
+            None => write!(f, "0x{:04X}", self.0),
+        }
+    }
+}
+
+/// The block: bounds and grid (spec §6.1). Exactly one per file.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct BlockRecord {
+    /// Block bounds, metres, block space.
+    pub bounds_min: [f32; 3],
+    /// Upper corner, `≥ bounds_min` per axis.
+    pub bounds_max: [f32; 3],
+    /// Cells along x, y, z: each `1 ..= 256`, product `≤ 65536`.
+    pub grid: [u32; 3],
+    /// Number of source trees in the block, `≥ 1`.
+    pub tree_count: u32,
+    /// Reserved, 0.
+    pub flags: u32,
+    /// Padding, 0.
+    pub _pad: u32,
+}
+const _: () = assert!(size_of::<BlockRecord>() == 48);
+
+impl BlockRecord {
+    /// Number of grid cells (not counting the block cell).
+    #[must_use]
+    pub fn grid_cell_count(&self) -> usize {
+        self.grid.iter().map(|&n| n as usize).product()
+    }
+
+    /// Index of grid cell `(x, y, z)`: `x + gx·(y + gy·z)` (spec §6.1).
+    #[must_use]
+    pub fn cell_index(&self, x: u32, y: u32, z: u32) -> usize {
+        x as usize + self.grid[0] as usize * (y as usize + self.grid[1] as usize * z as usize)
+    }
+
+    /// The grid coordinates of cell `index` (inverse of [`Self::cell_index`]).
+    #[must_use]
+    pub fn cell_coords(&self, index: usize) -> [u32; 3] {
+        let gx = self.grid[0] as usize;
+        let gy = self.grid[1] as usize;
+        #[expect(clippy::cast_possible_truncation, reason = "grid axes are at most 256")]
+        [(index % gx) as u32, ((index / gx) % gy) as u32, (index / (gx * gy)) as u32]
+    }
+}
+
+/// One grid cell, or the block cell that follows them (spec §6.2).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct CellRecord {
+    /// Tight bounds of the cell's content, metres; zero for an empty cell.
+    pub bounds_min: [f32; 3],
+    /// Upper corner.
+    pub bounds_max: [f32; 3],
+    /// Into `TRIANGLES`.
+    pub triangles: Range,
+    /// Into `POINTS`.
+    pub points: Range,
+    /// Into `ELLIPSOIDS`.
+    pub ellipsoids: Range,
+    /// Into `LINES`.
+    pub lines: Range,
+    /// Into `PLANES`.
+    pub planes: Range,
+    /// Into `PRUNE_LEAVES`.
+    pub prune_leaves: Range,
+    /// Reserved, 0.
+    pub flags: u32,
+    /// Padding, 0.
+    pub _pad: u32,
+}
+const _: () = assert!(size_of::<CellRecord>() == 80);
+
+impl CellRecord {
+    /// Whether the cell holds no record of any kind.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.ranges().iter().all(|(_, r)| r.count == 0)
+    }
+
+    /// The cell's range for every per-cell kind, in spec order.
+    #[must_use]
+    pub fn ranges(&self) -> [(SectionKind, Range); 6] {
+        [
+            (SectionKind::TRIANGLES, self.triangles),
+            (SectionKind::POINTS, self.points),
+            (SectionKind::ELLIPSOIDS, self.ellipsoids),
+            (SectionKind::LINES, self.lines),
+            (SectionKind::PLANES, self.planes),
+            (SectionKind::PRUNE_LEAVES, self.prune_leaves),
+        ]
+    }
+}
+
+/// A vertex of a triangle (spec §6.3).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct VertexRecord {
+    /// Metres, block space.
+    pub position: [f32; 3],
+    /// Octahedral normal, see [`crate::pack::oct_encode`].
+    pub normal: u32,
+    /// Texture coordinates (glTF convention).
+    pub uv: [f32; 2],
+    /// RGBA8 vertex colour, `0xFFFF_FFFF` when the source has none.
+    pub color: u32,
+}
+const _: () = assert!(size_of::<VertexRecord>() == 28);
+
+/// A triangle of the Gilet hierarchy or of a pruned leaf (spec §6.4).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct TriangleRecord {
+    /// Indices into `VERTICES`, counter-clockwise front face.
+    pub indices: [u32; 3],
+    /// Diameter of the disc of equal area, metres; the sort key (largest first).
+    pub size: f32,
+    /// Leaf id in the cell's point hierarchy (in `PRUNE_TRIANGLES`: the pruned leaf's index).
+    pub leaf: u32,
+    /// Index into `MATERIALS`.
+    pub material: u32,
+}
+const _: () = assert!(size_of::<TriangleRecord>() == 24);
+
+/// A point of the Gilet hierarchy, with its SPT interval (spec §6.5).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PointRecord {
+    /// Disc centre, metres.
+    pub position: [f32; 3],
+    /// Disc radius to draw, metres.
+    pub radius: f32,
+    /// Octahedral normal.
+    pub normal: u32,
+    /// RGBA8 colour; alpha is the opaque fraction of the represented area.
+    pub color: u32,
+    /// Selection size gated against `τ_t`, metres.
+    pub size: f32,
+    /// Lower end of the threshold interval, metres.
+    pub lo: f32,
+    /// Upper end of the threshold interval (`+∞` for a root); the sort key (largest first).
+    pub hi: f32,
+    /// First leaf (triangle leaf id) represented.
+    pub leaf_first: u32,
+    /// Number of leaves represented, `≥ 1`.
+    pub leaf_count: u32,
+    /// Reserved, 0.
+    pub flags: u32,
+}
+const _: () = assert!(size_of::<PointRecord>() == 48);
+
+/// A material of triangles (spec §6.6).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct MaterialRecord {
+    /// Linear RGBA factor.
+    pub base_color: [f32; 4],
+    /// Index into `IMAGES`, [`NO_IMAGE`] for none.
+    pub image: u32,
+    /// 0 opaque, 1 mask, 2 blend.
+    pub alpha_mode: u32,
+    /// Alpha-test threshold for mask, `[0, 1]`.
+    pub alpha_cutoff: f32,
+    /// 0 bark, 1 leaf, 2 other.
+    pub class: u32,
+    /// Bit 0: double-sided.
+    pub flags: u32,
+    /// Padding, 0.
+    pub _pad: u32,
+}
+const _: () = assert!(size_of::<MaterialRecord>() == 40);
+
+/// Material class values (spec §6.6).
+pub mod material_class {
+    /// Branches and trunk.
+    pub const BARK: u32 = 0;
+    /// Leaves, needles, foliage.
+    pub const LEAF: u32 = 1;
+    /// Anything else.
+    pub const OTHER: u32 = 2;
+}
+
+/// Material flag bit 0: draw both faces.
+pub const MATERIAL_DOUBLE_SIDED: u32 = 1;
+
+/// An image: a texture or an impostor atlas (spec §6.7).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct ImageRecord {
+    /// Texels, `1 ..= 16384`.
+    pub width: u32,
+    /// Texels, `1 ..= 16384`.
+    pub height: u32,
+    /// Mip levels, largest first.
+    pub mip_count: u32,
+    /// 1 RGBA8 sRGB, 2 RGBA8 linear.
+    pub format: u32,
+    /// Byte offset into `IMAGE_DATA`, multiple of 16.
+    pub data_offset: u64,
+    /// Bytes of all mip levels.
+    pub data_length: u64,
+}
+const _: () = assert!(size_of::<ImageRecord>() == 32);
+
+/// Image format values (spec §6.7).
+pub mod image_format {
+    /// RGBA8 with sRGB colour.
+    pub const RGBA8_SRGB: u32 = 1;
+    /// RGBA8, linear.
+    pub const RGBA8_LINEAR: u32 = 2;
+}
+
+impl ImageRecord {
+    /// Bytes the image's mip chain needs (spec §6.7), `None` on overflow.
+    #[must_use]
+    pub fn expected_data_length(&self) -> Option<u64> {
+        let mut total = 0u64;
+        for level in 0..self.mip_count.min(32) {
+            let w = u64::from((self.width >> level).max(1));
+            let h = u64::from((self.height >> level).max(1));
+            total = total.checked_add(w.checked_mul(h)?.checked_mul(4)?)?;
+        }
+        Some(total)
+    }
+}
+
+/// A leaf-cluster ellipsoid (Clasen 2011) with its SPT interval (spec §6.8).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct EllipsoidRecord {
+    /// Centre, metres.
+    pub center: [f32; 3],
+    /// Semi-axis lengths, metres.
+    pub radii: [f32; 3],
+    /// Unit quaternion `(x, y, z, w)` as snorm16, local → block space.
+    pub orientation: [i16; 4],
+    /// RGBA8 colour.
+    pub color: u32,
+    /// Noise alpha-test threshold, `[0, 1]`.
+    pub alpha_threshold: f32,
+    /// Noise mip level.
+    pub noise_mip: f32,
+    /// Lower end of the threshold interval, metres.
+    pub lo: f32,
+    /// Upper end of the threshold interval; the sort key (largest first).
+    pub hi: f32,
+    /// First source leaf represented.
+    pub leaf_first: u32,
+    /// Number of leaves represented.
+    pub leaf_count: u32,
+    /// Reserved, 0.
+    pub flags: u32,
+}
+const _: () = assert!(size_of::<EllipsoidRecord>() == 64);
+
+/// A branch line (Clasen 2011) with its SPT interval (spec §6.9).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct LineRecord {
+    /// First endpoint, metres.
+    pub p0: [f32; 3],
+    /// Radius at `p0`, metres.
+    pub r0: f32,
+    /// Second endpoint, metres.
+    pub p1: [f32; 3],
+    /// Radius at `p1`, metres.
+    pub r1: f32,
+    /// RGBA8 colour.
+    pub color: u32,
+    /// Lower end of the threshold interval, metres.
+    pub lo: f32,
+    /// Upper end; the sort key (largest first).
+    pub hi: f32,
+    /// First source branch segment represented.
+    pub leaf_first: u32,
+    /// Number of segments represented.
+    pub leaf_count: u32,
+    /// Reserved, 0.
+    pub flags: u32,
+}
+const _: () = assert!(size_of::<LineRecord>() == 56);
+
+/// A leaf-cluster impostor plane (Garcia 2005) with its SPT interval (spec §6.10).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PlaneRecord {
+    /// Centre, metres.
+    pub center: [f32; 3],
+    /// Half-extent vector along texture u, metres.
+    pub axis_u: [f32; 3],
+    /// Half-extent vector along texture v, metres.
+    pub axis_v: [f32; 3],
+    /// Index into `IMAGES`.
+    pub image: u32,
+    /// Atlas rectangle corner, two unorm16 (u low, v high).
+    pub uv_min: u32,
+    /// Opposite corner.
+    pub uv_max: u32,
+    /// Lower end of the threshold interval, metres.
+    pub lo: f32,
+    /// Upper end; the sort key (largest first).
+    pub hi: f32,
+    /// First source leaf represented.
+    pub leaf_first: u32,
+    /// Number of leaves represented.
+    pub leaf_count: u32,
+}
+const _: () = assert!(size_of::<PlaneRecord>() == 64);
+
+/// A leaf of Neubert's priority list (spec §6.11).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PruneLeafRecord {
+    /// Scaling pivot, metres.
+    pub center: [f32; 3],
+    /// One-sided leaf area, m².
+    pub area: f32,
+    /// Into `PRUNE_TRIANGLES`.
+    pub first_triangle: u32,
+    /// Number of triangles, `≥ 1`.
+    pub triangle_count: u32,
+}
+const _: () = assert!(size_of::<PruneLeafRecord>() == 24);
+
+/// One sample of a piecewise-linear curve (spec §6.11).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct CurveSample {
+    /// Abscissa, strictly increasing within a section.
+    pub x: f32,
+    /// Value.
+    pub y: f32,
+}
+const _: () = assert!(size_of::<CurveSample>() == 8);
+
+/// The SPT view of a hierarchical record: interval and leaf run (spec §10).
+pub trait SptElement: Pod {
+    /// Lower end of the threshold interval.
+    fn lo(&self) -> f32;
+    /// Upper end of the threshold interval; the sort key.
+    fn hi(&self) -> f32;
+    /// First leaf represented.
+    fn leaf_first(&self) -> u32;
+    /// Number of leaves represented.
+    fn leaf_count(&self) -> u32;
+}
+
+macro_rules! spt_element {
+    ($($t:ty),*) => {$(
+        impl SptElement for $t {
+            fn lo(&self) -> f32 { self.lo }
+            fn hi(&self) -> f32 { self.hi }
+            fn leaf_first(&self) -> u32 { self.leaf_first }
+            fn leaf_count(&self) -> u32 { self.leaf_count }
+        }
+    )*};
+}
+spt_element!(PointRecord, EllipsoidRecord, LineRecord, PlaneRecord);

@@ -1,0 +1,1 @@
+//! Synthetic containers for tests.

@@ -1,0 +1,2 @@
+//! The `treelod` command-line tool.
+fn main() {}
