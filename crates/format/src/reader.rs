@@ -8,7 +8,7 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
-    BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord,
+    BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord,
     LineRecord, MAGIC, MAJOR, MaterialRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
     SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
@@ -544,8 +544,11 @@ fn read_table(bytes: &[u8], header: &Header) -> Result<Vec<SectionEntry>> {
             entries.push(entry);
             continue; // unknown kind: bounds checked, then skipped (spec §4)
         };
-        if entry.flags & !FLAG_ZSTD != 0 {
+        if entry.flags & !(FLAG_ZSTD | FLAG_SHUFFLE) != 0 {
             return Err(Error::UnsupportedFeature { kind, flags: entry.flags });
+        }
+        if entry.flags & FLAG_SHUFFLE != 0 && (entry.flags & FLAG_ZSTD == 0 || record_size == 1) {
+            return Err(bad("the shuffle flag needs the zstd flag and a record size above 1".into()));
         }
         if entry.record_size != record_size {
             return Err(bad(format!("record_size {} but the spec's record is {record_size} bytes", entry.record_size)));
@@ -619,5 +622,30 @@ fn decode_section(bytes: &[u8], index: usize, entry: &SectionEntry, budget: &mut
     if written != raw_len {
         return Err(corrupt(format!("decoded {written} bytes, the table says {raw_len} (section {index})")));
     }
+    if entry.flags & FLAG_SHUFFLE != 0 {
+        let mut records = AlignedBuf::zeroed(raw_len);
+        unshuffle(buf.as_bytes(), entry.record_size as usize, records.as_mut_bytes());
+        buf = records;
+    }
     Ok(Some(buf))
+}
+
+/// Byte shuffle (spec §8): byte `j` of record `i` goes to `j·n + i`, grouping equal byte positions.
+pub(crate) fn shuffle(records: &[u8], record_size: usize, out: &mut [u8]) {
+    let n = records.len() / record_size;
+    for (i, record) in records.chunks_exact(record_size).enumerate() {
+        for (j, &byte) in record.iter().enumerate() {
+            out[j * n + i] = byte;
+        }
+    }
+}
+
+/// Inverse of [`shuffle`].
+fn unshuffle(shuffled: &[u8], record_size: usize, out: &mut [u8]) {
+    let n = shuffled.len() / record_size;
+    for (i, record) in out.chunks_exact_mut(record_size).enumerate() {
+        for (j, byte) in record.iter_mut().enumerate() {
+            *byte = shuffled[j * n + i];
+        }
+    }
 }

@@ -19,6 +19,9 @@ pub const SECTION_ENTRY_SIZE: usize = 48;
 pub const SECTION_ALIGN: u64 = 16;
 /// Section flag bit 0: the payload is one zstd frame (spec §4, §8).
 pub const FLAG_ZSTD: u32 = 1;
+/// Section flag bit 1: the zstd frame holds the records byte-transposed (spec §8). Only with
+/// [`FLAG_ZSTD`] and a record size above 1.
+pub const FLAG_SHUFFLE: u32 = 2;
 /// The `image` value of a material without texture (spec §6.6).
 pub const NO_IMAGE: u32 = u32::MAX;
 
@@ -83,7 +86,7 @@ const _: () = assert!(size_of::<Header>() == HEADER_SIZE);
 pub struct SectionEntry {
     /// Section kind, see [`SectionKind`].
     pub kind: u32,
-    /// Bit 0: zstd ([`FLAG_ZSTD`]); others reserved.
+    /// Bit 0: zstd ([`FLAG_ZSTD`]); bit 1: byte shuffle ([`FLAG_SHUFFLE`]); others reserved.
     pub flags: u32,
     /// Byte offset of the stored payload, multiple of 16.
     pub offset: u64,
@@ -412,7 +415,7 @@ pub struct ImageRecord {
     pub height: u32,
     /// Mip levels, largest first.
     pub mip_count: u32,
-    /// 1 RGBA8 sRGB, 2 RGBA8 linear.
+    /// Texel encoding, see [`image_format`].
     pub format: u32,
     /// Byte offset into `IMAGE_DATA`, multiple of 16.
     pub data_offset: u64,
@@ -427,10 +430,14 @@ pub mod image_format {
     pub const RGBA8_SRGB: u32 = 1;
     /// RGBA8, linear.
     pub const RGBA8_LINEAR: u32 = 2;
+    /// One PNG file, decoded on load.
+    pub const PNG: u32 = 3;
+    /// One JPEG file, decoded on load.
+    pub const JPEG: u32 = 4;
 }
 
 impl ImageRecord {
-    /// Bytes the image's mip chain needs (spec §6.7), `None` on overflow.
+    /// Bytes the raw mip chain of formats 1 and 2 needs (spec §6.7), `None` on overflow.
     #[must_use]
     pub fn expected_data_length(&self) -> Option<u64> {
         let mut total = 0u64;

@@ -10,9 +10,9 @@ use bytemuck::Pod;
 
 use crate::error::{Error, Result};
 use crate::metadata::Metadata;
-use crate::reader::{Container, MAX_COMPRESSION_RATIO};
+use crate::reader::{Container, MAX_COMPRESSION_RATIO, shuffle};
 use crate::records::{
-    BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord,
+    BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord,
     LineRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
     SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
@@ -164,10 +164,18 @@ impl ContainerData {
         for (kind, raw, record_size) in sections {
             let (stored, flags) = match compression {
                 Compression::Zstd { level } if kind.compressible() && kind.record_size().is_some() && !raw.is_empty() => {
-                    let packed = compress(&raw, level)?;
+                    // Record arrays are byte-shuffled first: equal byte positions of neighbouring
+                    // records (exponents, high index bytes, zero fields) then sit side by side.
+                    let (packed, flags) = if record_size > 1 {
+                        let mut shuffled = vec![0; raw.len()];
+                        shuffle(&raw, record_size as usize, &mut shuffled);
+                        (compress(&shuffled, level)?, FLAG_ZSTD | FLAG_SHUFFLE)
+                    } else {
+                        (compress(&raw, level)?, FLAG_ZSTD)
+                    };
                     let pays = packed.len() < raw.len();
                     let within_limit = raw.len() as u64 <= packed.len() as u64 * MAX_COMPRESSION_RATIO;
-                    if pays && within_limit { (packed, FLAG_ZSTD) } else { (raw.clone(), 0) }
+                    if pays && within_limit { (packed, flags) } else { (raw.clone(), 0) }
                 }
                 _ => (raw.clone(), 0),
             };

@@ -1,0 +1,10 @@
+//! Builds `.treelod` containers: hierarchies of level-of-detail representations of tree meshes,
+//! flattened into the size-sorted arrays of `format-spec/treelod.md`.
+//!
+//! Stages so far: [`spt`] turns any per-cell hierarchy (Gilet's point clustering, Clasen's
+//! ellipsoid levels, Garcia's nested planes) into sequential-point-tree order with each element's
+//! threshold interval, so that every threshold draws an exact cut (spec §10).
+
+pub mod spt;
+
+pub use spt::{FlattenError, Spt, SptNode, flatten};

@@ -1,0 +1,10 @@
+//! The treelod runtime: maps containers and selects what to draw of every cell.
+//!
+//! Selection is plain Rust over the container's slices (no GPU types), so it is unit-tested and
+//! benchmarked on the CPU. [`select`] holds the per-cell rule of `format-spec/treelod.md` §10:
+//! pixel thresholds become world-size thresholds, a binary search of the size-sorted arrays gives
+//! the prefix to draw, and [`select::point_drawn`] is the per-element test the vertex shader makes.
+
+pub mod select;
+
+pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};

@@ -1,0 +1,104 @@
+// The container's records as the GPU reads them from storage buffers (vertex pulling).
+//
+// Each struct is the WGSL twin of the Rust record of the same name in
+// crates/format/src/records.rs and of the byte table in format-spec/treelod.md §6. Only
+// 4-byte scalars and arrays of them are used, so every struct has alignment 4 and its array
+// stride equals the record size; crates/runtime/tests/wgsl_layout.rs checks sizes and offsets.
+
+// Rust twin: treelod_format::VertexRecord (28 bytes, spec §6.3).
+struct VertexRecord {
+    position: array<f32, 3>,
+    normal: u32,
+    uv: array<f32, 2>,
+    color: u32,
+}
+
+// Rust twin: treelod_format::TriangleRecord (24 bytes, spec §6.4).
+struct TriangleRecord {
+    indices: array<u32, 3>,
+    size: f32,
+    leaf: u32,
+    material: u32,
+}
+
+// Rust twin: treelod_format::PointRecord (48 bytes, spec §6.5).
+struct PointRecord {
+    position: array<f32, 3>,
+    radius: f32,
+    normal: u32,
+    color: u32,
+    size: f32,
+    lo: f32,
+    hi: f32,
+    leaf_first: u32,
+    leaf_count: u32,
+    flags: u32,
+}
+
+// Rust twin: treelod_format::EllipsoidRecord (64 bytes, spec §6.8). `orientation` holds the
+// quaternion's snorm16 pairs (x, y) and (z, w).
+struct EllipsoidRecord {
+    center: array<f32, 3>,
+    radii: array<f32, 3>,
+    orientation: array<u32, 2>,
+    color: u32,
+    alpha_threshold: f32,
+    noise_mip: f32,
+    lo: f32,
+    hi: f32,
+    leaf_first: u32,
+    leaf_count: u32,
+    flags: u32,
+}
+
+// Rust twin: treelod_format::LineRecord (56 bytes, spec §6.9).
+struct LineRecord {
+    p0: array<f32, 3>,
+    r0: f32,
+    p1: array<f32, 3>,
+    r1: f32,
+    color: u32,
+    lo: f32,
+    hi: f32,
+    leaf_first: u32,
+    leaf_count: u32,
+    flags: u32,
+}
+
+// Rust twin: treelod_format::PlaneRecord (64 bytes, spec §6.10).
+struct PlaneRecord {
+    center: array<f32, 3>,
+    axis_u: array<f32, 3>,
+    axis_v: array<f32, 3>,
+    image: u32,
+    uv_min: u32,
+    uv_max: u32,
+    lo: f32,
+    hi: f32,
+    leaf_first: u32,
+    leaf_count: u32,
+}
+
+// Octahedral normal (spec §2): x in the low 16 bits, y in the high, both snorm16.
+fn decode_normal(packed: u32) -> vec3<f32> {
+    let e = unpack2x16snorm(packed);
+    var v = vec3<f32>(e.x, e.y, 1.0 - abs(e.x) - abs(e.y));
+    if v.z < 0.0 {
+        let s = select(vec2<f32>(-1.0), vec2<f32>(1.0), e >= vec2<f32>(0.0));
+        v = vec3<f32>((1.0 - abs(e.yx)) * s, v.z);
+    }
+    return normalize(v);
+}
+
+// RGBA8 colour (spec §2): sRGB-encoded RGB, linear alpha; returns linear RGBA.
+fn decode_color(packed: u32) -> vec4<f32> {
+    let c = unpack4x8unorm(packed);
+    let lo = c.rgb / 12.92;
+    let hi = pow((c.rgb + 0.055) / 1.055, vec3<f32>(2.4));
+    return vec4<f32>(select(hi, lo, c.rgb <= vec3<f32>(0.04045)), c.a);
+}
+
+// The point rule of spec §10: inside [lo, hi) at tau_p and not larger than tau_t.
+fn point_drawn(p: PointRecord, tau_p: f32, tau_t: f32) -> bool {
+    return p.lo <= tau_p && tau_p < p.hi && p.size <= tau_t;
+}
