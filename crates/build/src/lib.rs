@@ -5,6 +5,14 @@
 //! ellipsoid levels, Garcia's nested planes) into sequential-point-tree order with each element's
 //! threshold interval, so that every threshold draws an exact cut (spec §10).
 
+pub mod assemble;
+pub mod classify;
+mod error;
+pub mod gilet;
+pub mod scene;
 pub mod spt;
+pub mod texture;
 
+pub use assemble::{BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block};
+pub use error::BuildError;
 pub use spt::{FlattenError, Spt, SptNode, flatten};

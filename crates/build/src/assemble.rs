@@ -1,0 +1,435 @@
+//! The build pipeline: placed scenes in, [`ContainerData`] out.
+//!
+//! Stages, in order: classify parts; gather and filter triangles; bounds and grid; assign
+//! triangles to cells by centroid; per cell (in parallel, results kept in cell order) leaf points,
+//! point hierarchy and size-sorted triangles; vertices renumbered in first-use order; materials,
+//! images and metadata.
+
+use glam::{Vec2, Vec3, Vec4};
+use rayon::prelude::*;
+use treelod_format::{
+    BlockRecord, CellRecord, ContainerData, ImageRecord, MATERIAL_DOUBLE_SIDED, MaterialInfo, MaterialRecord, Metadata,
+    NO_IMAGE, PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, image_format, material_class, pack,
+};
+
+use crate::classify::{ClassifyOptions, classify};
+use crate::error::BuildError;
+use crate::gilet::{CellHierarchy, GiletConfig, LeafPoint, build_cell};
+use crate::scene::{AlphaMode, Class, ImageEncoding, Scene};
+use crate::texture::{TriangleSurface, integrate, linear_to_srgb};
+
+/// Triangles with less area than this (m²) are degenerate and dropped.
+const MIN_AREA: f32 = 1e-12;
+
+/// Everything that controls a build. Recorded in the container's settings (spec §7.1).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BuildConfig {
+    /// Grid cells along x, y, z; `None` chooses from the block's aspect (see [`auto_grid`]).
+    pub grid: Option<[u32; 3]>,
+    /// Point hierarchy tunables.
+    pub gilet: GiletConfig,
+    /// Leaf / bark overrides.
+    pub classify: ClassifyOptions,
+}
+
+/// A scene placed in the block.
+#[derive(Clone, Copy, Debug)]
+pub struct Placed<'a> {
+    /// The tree.
+    pub scene: &'a Scene,
+    /// Its offset in block space, metres.
+    pub translation: Vec3,
+}
+
+/// Counts of a finished build, for the summary a user sees.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct BuildStats {
+    /// Triangles read from the sources.
+    pub triangles_in: u64,
+    /// Triangles dropped as degenerate or non-finite.
+    pub triangles_dropped: u64,
+    /// Triangles classified as leaves (kept).
+    pub leaf_triangles: u64,
+    /// Triangles classified as bark (kept).
+    pub bark_triangles: u64,
+    /// Vertices written.
+    pub vertices: u64,
+    /// Triangles written.
+    pub triangles: u64,
+    /// Points written (leaf points and inner nodes).
+    pub points: u64,
+    /// Grid dimensions.
+    pub grid: [u32; 3],
+    /// Grid cells holding anything.
+    pub nonempty_cells: u64,
+}
+
+/// What a build returns.
+#[derive(Clone, Debug)]
+pub struct BuildOutput {
+    /// The container, ready for `to_bytes`.
+    pub data: ContainerData,
+    /// Counts.
+    pub stats: BuildStats,
+    /// Warnings of the importers and of the build, one sentence each.
+    pub warnings: Vec<String>,
+}
+
+/// The grid for a block of the given extent: 4 cells along the shortest axis and proportionally
+/// more along the others, each axis in `4..=16` (Gilet: 4×4×4 for one tree, up to 4×16×16 for a
+/// group).
+#[must_use]
+pub fn auto_grid(extent: Vec3) -> [u32; 3] {
+    let longest = extent.max_element();
+    // Axes thinner than 1 % of the longest do not set the scale (a flat group of trees).
+    let shortest = extent.to_array().into_iter().filter(|&e| e > 0.01 * longest).fold(f32::INFINITY, f32::min);
+    if !shortest.is_finite() || shortest <= 0.0 {
+        return [4, 4, 4];
+    }
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 4..=16")]
+    extent.to_array().map(|e| (4.0 * e / shortest).round().clamp(4.0, 16.0) as u32)
+}
+
+/// One kept triangle during the build.
+#[derive(Clone, Copy)]
+struct Tri {
+    /// Global vertex ids (before renumbering).
+    v: [u32; 3],
+    material: u32,
+    size: f32,
+    leaf: LeafPoint,
+}
+
+/// Builds a block from placed scenes (spec §6, Gilet 2005). `name` names the block; `generator`
+/// is recorded as the tool and version.
+///
+/// # Errors
+/// [`BuildError::NoGeometry`] if no drawable triangle remains, [`BuildError::Setting`] for a bad
+/// grid, [`BuildError::Spt`] if an internal invariant breaks.
+pub fn build_block(name: &str, trees: &[Placed<'_>], config: &BuildConfig, generator: &str) -> Result<BuildOutput, BuildError> {
+    if let Some(grid) = config.grid
+        && grid.iter().any(|&g| g == 0 || g > treelod_format::MAX_GRID_AXIS)
+    {
+        return Err(BuildError::Setting(format!("grid {grid:?}: each axis must be in 1..=256")));
+    }
+    let mut stats = BuildStats::default();
+    let mut warnings: Vec<String> = Vec::new();
+
+    // Stage: classify parts; materials become (tree, material, class) triples in first-use order.
+    let mut material_keys: Vec<(usize, usize, Class)> = Vec::new();
+    let mut material_info: Vec<MaterialInfo> = Vec::new();
+    let mut vertices: Vec<VertexRecord> = Vec::new();
+    let mut tris: Vec<Tri> = Vec::new();
+    for (t, placed) in trees.iter().enumerate() {
+        let scene = placed.scene;
+        warnings.extend(scene.warnings.iter().map(|w| format!("{}: {w}", scene.name)));
+        let classes = classify(scene, &config.classify);
+        for (part, class) in scene.parts.iter().zip(&classes) {
+            let key = (t, part.material, class.class);
+            let material = match material_keys.iter().position(|k| *k == key) {
+                Some(m) => m,
+                None => {
+                    material_keys.push(key);
+                    let name = scene.materials.get(part.material).map_or(String::new(), |m| m.name.clone());
+                    material_info.push(MaterialInfo { name, classified_by: class.by.as_str().to_owned() });
+                    material_keys.len() - 1
+                }
+            };
+            let source_material = scene.materials.get(part.material).cloned().unwrap_or_default();
+            let image = source_material.image.and_then(|i| scene.images.get(i));
+            let base = u32::try_from(vertices.len()).map_err(|_| BuildError::Setting("more than 2^32 vertices".into()))?;
+            for (i, p) in part.positions.iter().enumerate() {
+                let position = (Vec3::from_array(*p) + placed.translation).to_array();
+                let normal = part.normals.get(i).copied().unwrap_or([0.0, 1.0, 0.0]);
+                let uv = part.uvs.get(i).copied().unwrap_or([0.0, 0.0]);
+                let color = part.colors.get(i).map_or(u32::MAX, |c| {
+                    pack::rgba8([linear_to_srgb(c[0]), linear_to_srgb(c[1]), linear_to_srgb(c[2]), c[3]])
+                });
+                vertices.push(VertexRecord { position, normal: pack::oct_encode(normal), uv, color });
+            }
+            let mut dropped = 0u64;
+            for tri in &part.triangles {
+                stats.triangles_in += 1;
+                let Some(corners) = tri.iter().map(|&i| vertices.get((base + i) as usize).filter(|_| (i as usize) < part.positions.len())).collect::<Option<Vec<_>>>() else {
+                    dropped += 1;
+                    continue;
+                };
+                let [a, b, c] = [0, 1, 2].map(|k| Vec3::from_array(corners[k].position));
+                let cross = (b - a).cross(c - a);
+                let area = 0.5 * cross.length();
+                if !(a.is_finite() && b.is_finite() && c.is_finite() && area.is_finite() && area > MIN_AREA) {
+                    dropped += 1;
+                    continue;
+                }
+                let surface = TriangleSurface {
+                    uv: tri.map(|i| Vec2::from_array(part.uvs.get(i as usize).copied().unwrap_or([0.0, 0.0]))),
+                    color: tri.map(|i| Vec4::from_array(part.colors.get(i as usize).copied().unwrap_or([1.0; 4]))),
+                };
+                let size = 2.0 * (area / std::f32::consts::PI).sqrt();
+                let leaf = LeafPoint {
+                    position: (a + b + c) / 3.0,
+                    normal: cross / (2.0 * area),
+                    area,
+                    color: integrate(&source_material, image, &surface),
+                    size,
+                };
+                match class.class {
+                    Class::Leaf => stats.leaf_triangles += 1,
+                    Class::Bark => stats.bark_triangles += 1,
+                }
+                #[expect(clippy::cast_possible_truncation, reason = "materials are few")]
+                tris.push(Tri { v: tri.map(|i| base + i), material: material as u32, size, leaf });
+            }
+            if dropped > 0 {
+                warnings.push(format!("{}: {}: dropped {dropped} degenerate or non-finite triangles", scene.name, part.label()));
+                stats.triangles_dropped += dropped;
+            }
+        }
+    }
+    if tris.is_empty() {
+        return Err(BuildError::NoGeometry {
+            name: name.to_owned(),
+            reason: format!("{} triangles read, {} dropped", stats.triangles_in, stats.triangles_dropped),
+        });
+    }
+    if stats.leaf_triangles == 0 {
+        warnings.push(format!("{name}: no part was classified as leaves; pass --leaves PATTERN if that is wrong"));
+    }
+
+    // Stage: bounds and grid.
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for t in &tris {
+        for &v in &t.v {
+            let p = Vec3::from_array(vertices[v as usize].position);
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    let grid = config.grid.unwrap_or_else(|| auto_grid(hi - lo));
+    let cell_count = grid.iter().map(|&g| g as usize).product::<usize>();
+    if cell_count > treelod_format::MAX_GRID_CELLS {
+        return Err(BuildError::Setting(format!("grid {grid:?} has more than 65536 cells")));
+    }
+    stats.grid = grid;
+
+    // Stage: assign each triangle to the cell of its centroid.
+    let dims = Vec3::new(grid[0] as f32, grid[1] as f32, grid[2] as f32);
+    let cell_size = (hi - lo) / dims;
+    let mut per_cell: Vec<Vec<u32>> = vec![Vec::new(); cell_count];
+    for (i, t) in tris.iter().enumerate() {
+        let rel = (t.leaf.position - lo) / cell_size.max(Vec3::splat(f32::MIN_POSITIVE));
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
+        let c = (rel.floor().max(Vec3::ZERO).min(dims - 1.0)).to_array().map(|v| v as usize);
+        #[expect(clippy::cast_possible_truncation, reason = "fewer than 2^32 triangles (checked via vertex count)")]
+        per_cell[c[0] + grid[0] as usize * (c[1] + grid[1] as usize * c[2])].push(i as u32);
+    }
+
+    // Stage: per cell, the point hierarchy (parallel; collected in cell order).
+    let hierarchies: Vec<CellHierarchy> = per_cell
+        .par_iter()
+        .map(|ids| {
+            let leaves: Vec<LeafPoint> = ids.iter().map(|&i| tris[i as usize].leaf).collect();
+            build_cell(&leaves, &config.gilet)
+        })
+        .collect::<Result<_, _>>()?;
+
+    // Stage: records, cell by cell; vertices renumbered by first use.
+    let mut remap = vec![u32::MAX; vertices.len()];
+    let mut out_vertices: Vec<VertexRecord> = Vec::new();
+    let mut triangles: Vec<TriangleRecord> = Vec::with_capacity(tris.len());
+    let mut points: Vec<PointRecord> = Vec::new();
+    let mut cells: Vec<CellRecord> = Vec::with_capacity(cell_count + 1);
+    for (ids, hierarchy) in per_cell.iter().zip(&hierarchies) {
+        let mut order: Vec<usize> = (0..ids.len()).collect();
+        order.sort_by(|&a, &b| {
+            tris[ids[b] as usize].size.total_cmp(&tris[ids[a] as usize].size).then(hierarchy.leaf_of_triangle[a].cmp(&hierarchy.leaf_of_triangle[b]))
+        });
+        let (mut cmin, mut cmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let first_triangle = triangles.len();
+        for k in order {
+            let t = &tris[ids[k] as usize];
+            let indices = t.v.map(|v| {
+                let slot = &mut remap[v as usize];
+                if *slot == u32::MAX {
+                    #[expect(clippy::cast_possible_truncation, reason = "vertex count checked to fit u32 above")]
+                    let id = out_vertices.len() as u32;
+                    *slot = id;
+                    out_vertices.push(vertices[v as usize]);
+                }
+                let p = Vec3::from_array(vertices[v as usize].position);
+                cmin = cmin.min(p);
+                cmax = cmax.max(p);
+                *slot
+            });
+            triangles.push(TriangleRecord { indices, size: t.size, leaf: hierarchy.leaf_of_triangle[k], material: t.material });
+        }
+        let first_point = points.len();
+        for p in &hierarchy.points {
+            cmin = cmin.min(p.position - p.radius);
+            cmax = cmax.max(p.position + p.radius);
+            let rgb = p.color.truncate().to_array().map(linear_to_srgb);
+            points.push(PointRecord {
+                position: p.position.to_array(),
+                radius: p.radius,
+                normal: pack::oct_encode(p.normal.to_array()),
+                color: pack::rgba8([rgb[0], rgb[1], rgb[2], p.color.w]),
+                size: p.size,
+                lo: p.lo,
+                hi: p.hi,
+                leaf_first: p.leaf_first,
+                leaf_count: p.leaf_count,
+                flags: 0,
+            });
+        }
+        let empty = ids.is_empty();
+        if !empty {
+            stats.nonempty_cells += 1;
+        }
+        cells.push(CellRecord {
+            bounds_min: if empty { [0.0; 3] } else { cmin.to_array() },
+            bounds_max: if empty { [0.0; 3] } else { cmax.to_array() },
+            triangles: range(first_triangle, triangles.len()),
+            points: range(first_point, points.len()),
+            ..CellRecord::default()
+        });
+    }
+    // The block cell: Gilet's representation lives in the grid cells only.
+    cells.push(CellRecord {
+        triangles: range(triangles.len(), triangles.len()),
+        points: range(points.len(), points.len()),
+        ..CellRecord::default()
+    });
+
+    // Stage: materials and images (only those used, in first-use order).
+    let mut images: Vec<ImageRecord> = Vec::new();
+    let mut image_data: Vec<u8> = Vec::new();
+    let mut image_keys: Vec<(usize, usize)> = Vec::new();
+    let mut materials: Vec<MaterialRecord> = Vec::new();
+    for &(t, m, class) in &material_keys {
+        let scene = trees[t].scene;
+        let source = scene.materials.get(m).cloned().unwrap_or_default();
+        let image = match source.image.and_then(|i| scene.images.get(i).map(|img| (i, img))) {
+            None => NO_IMAGE,
+            Some((i, img)) => match image_keys.iter().position(|k| *k == (t, i)) {
+                #[expect(clippy::cast_possible_truncation, reason = "images are few")]
+                Some(existing) => existing as u32,
+                None => {
+                    let (format, bytes): (u32, &[u8]) = match img.encoding {
+                        ImageEncoding::Png => (image_format::PNG, &img.encoded),
+                        ImageEncoding::Jpeg => (image_format::JPEG, &img.encoded),
+                        ImageEncoding::Raw => (image_format::RGBA8_SRGB, &img.rgba),
+                    };
+                    image_data.resize(image_data.len().div_ceil(16) * 16, 0);
+                    images.push(ImageRecord {
+                        width: img.width,
+                        height: img.height,
+                        mip_count: 1,
+                        format,
+                        data_offset: image_data.len() as u64,
+                        data_length: bytes.len() as u64,
+                    });
+                    image_data.extend_from_slice(bytes);
+                    image_keys.push((t, i));
+                    #[expect(clippy::cast_possible_truncation, reason = "images are few")]
+                    let id = (images.len() - 1) as u32;
+                    id
+                }
+            },
+        };
+        materials.push(MaterialRecord {
+            base_color: source.base_color,
+            image,
+            alpha_mode: match source.alpha_mode {
+                AlphaMode::Opaque => 0,
+                AlphaMode::Mask => 1,
+                AlphaMode::Blend => 2,
+            },
+            alpha_cutoff: source.alpha_cutoff.clamp(0.0, 1.0),
+            class: match class {
+                Class::Bark => material_class::BARK,
+                Class::Leaf => material_class::LEAF,
+            },
+            flags: if source.double_sided { MATERIAL_DOUBLE_SIDED } else { 0 },
+            _pad: 0,
+        });
+    }
+
+    // Stage: metadata.
+    let mut sources: Vec<Source> = Vec::new();
+    let mut tree_meta: Vec<Tree> = Vec::new();
+    for placed in trees {
+        let s = &placed.scene.source;
+        let source = match sources.iter().position(|x| x.path == s.path && x.content_hash == s.content_hash && !s.path.is_empty()) {
+            Some(i) => i,
+            None => {
+                sources.push(Source { path: s.path.clone(), content_hash: s.content_hash.clone(), byte_length: s.byte_length, unit_scale: s.unit_scale });
+                sources.len() - 1
+            }
+        };
+        let (mut tmin, mut tmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for p in placed.scene.parts.iter().flat_map(|p| &p.positions) {
+            let v = Vec3::from_array(*p) + placed.translation;
+            if v.is_finite() {
+                tmin = tmin.min(v);
+                tmax = tmax.max(v);
+            }
+        }
+        #[expect(clippy::cast_possible_truncation, reason = "sources are few")]
+        tree_meta.push(Tree {
+            name: placed.scene.name.clone(),
+            source: source as u32,
+            translation: placed.translation.to_array(),
+            bounds_min: tmin.to_array(),
+            bounds_max: tmax.to_array(),
+        });
+    }
+    let mut settings = vec![
+        Setting { key: "grid".into(), value: format!("{},{},{}", grid[0], grid[1], grid[2]) },
+        Setting { key: "grid.auto".into(), value: config.grid.is_none().to_string() },
+        Setting { key: "points.cluster_max".into(), value: config.gilet.cluster_max.max(2).to_string() },
+    ];
+    if !config.classify.leaves.is_empty() {
+        settings.push(Setting { key: "classify.leaves".into(), value: config.classify.leaves.join(" ") });
+    }
+    if !config.classify.bark.is_empty() {
+        settings.push(Setting { key: "classify.bark".into(), value: config.classify.bark.join(" ") });
+    }
+    settings.sort();
+
+    stats.vertices = out_vertices.len() as u64;
+    stats.triangles = triangles.len() as u64;
+    stats.points = points.len() as u64;
+    let data = ContainerData {
+        metadata: Metadata {
+            generator: generator.to_owned(),
+            name: name.to_owned(),
+            sources,
+            trees: tree_meta,
+            materials: material_info,
+            settings,
+        },
+        block: BlockRecord {
+            bounds_min: lo.to_array(),
+            bounds_max: hi.to_array(),
+            grid,
+            #[expect(clippy::cast_possible_truncation, reason = "a block holds few trees")]
+            tree_count: trees.len() as u32,
+            flags: 0,
+            _pad: 0,
+        },
+        cells,
+        vertices: out_vertices,
+        triangles,
+        points,
+        materials,
+        images,
+        image_data,
+        ..ContainerData::default()
+    };
+    Ok(BuildOutput { data, stats, warnings })
+}
+
+#[expect(clippy::cast_possible_truncation, reason = "record counts fit u32 (checked by the writer)")]
+fn range(first: usize, end: usize) -> Range {
+    Range { first: first as u32, count: (end - first) as u32 }
+}

@@ -1,0 +1,313 @@
+//! Gilet, Meyer & Neyret 2005: the triangle + point hierarchy of one grid cell.
+//!
+//! Per cell: one point per triangle (centroid; equal-area radius; triangle normal; texture colour
+//! integrated over the triangle), then a binary PCA clustering (split at the centroid across the
+//! direction of greatest variance until a cluster holds at most [`GiletConfig::cluster_max`]
+//! points) whose inner nodes average their children, with the paper's radius rule
+//! `R = 2/π · (R_m + α(R_M − R_m))` made monotone. The hierarchy is flattened by [`crate::spt`].
+
+use glam::{Vec3, Vec4};
+
+use crate::spt::{FlattenError, flatten};
+
+/// Tunables of the point hierarchy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GiletConfig {
+    /// A cluster with at most this many points is not split further; its points become the
+    /// children of one node. Gilet uses about 5. Default 5; at least 2.
+    pub cluster_max: usize,
+}
+
+impl Default for GiletConfig {
+    fn default() -> Self {
+        Self { cluster_max: 5 }
+    }
+}
+
+/// The point of one triangle, before clustering.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LeafPoint {
+    /// Centroid, metres.
+    pub position: Vec3,
+    /// Unit triangle normal.
+    pub normal: Vec3,
+    /// Triangle area, m².
+    pub area: f32,
+    /// Linear RGB of the opaque part, and in `w` the opaque fraction of the area (coverage).
+    pub color: Vec4,
+    /// Triangle size `2·sqrt(area/π)` (spec §2), metres.
+    pub size: f32,
+}
+
+/// A node of the flattened cell hierarchy, ready to become a `PointRecord`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellPoint {
+    /// Disc centre, metres.
+    pub position: Vec3,
+    /// Unit normal.
+    pub normal: Vec3,
+    /// Linear RGB and coverage.
+    pub color: Vec4,
+    /// Disc radius to draw: the radius rule over coverage-scaled radii, so a mostly transparent
+    /// leaf card draws a disc of its opaque area, keeping canopy density right.
+    pub radius: f32,
+    /// Selection size, metres (monotone).
+    pub size: f32,
+    /// Threshold interval.
+    pub lo: f32,
+    /// Threshold interval, `+∞` for the root.
+    pub hi: f32,
+    /// Leaf run.
+    pub leaf_first: u32,
+    /// Leaf run length.
+    pub leaf_count: u32,
+}
+
+/// The flattened hierarchy of one cell.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CellHierarchy {
+    /// Points in SPT order (`hi` descending).
+    pub points: Vec<CellPoint>,
+    /// Per input leaf point (= per triangle of the cell, in input order): its leaf id.
+    pub leaf_of_triangle: Vec<u32>,
+}
+
+/// Builds and flattens the point hierarchy over the leaf points of one cell.
+///
+/// # Errors
+/// Only if the leaf points carry non-finite sizes, which the build filters out before.
+pub fn build_cell(leaves: &[LeafPoint], config: &GiletConfig) -> Result<CellHierarchy, FlattenError> {
+    if leaves.is_empty() {
+        return Ok(CellHierarchy::default());
+    }
+    let cluster_max = config.cluster_max.max(2);
+    // Arena: nodes 0..n are the leaf points; inner nodes are appended.
+    let mut children: Vec<Vec<u32>> = vec![Vec::new(); leaves.len()];
+    let mut nodes: Vec<Node> = leaves.iter().map(Node::leaf).collect();
+    let mut indices: Vec<u32> = (0..leaves.len() as u32).collect();
+    cluster(&mut indices, leaves, cluster_max, &mut children, &mut nodes);
+
+    let sizes: Vec<f32> = nodes.iter().map(|n| n.size).collect();
+    let spt = flatten(&children, &sizes)?;
+    let points = spt
+        .order
+        .iter()
+        .map(|&i| {
+            let node = &nodes[i as usize];
+            let flat = spt.nodes[i as usize];
+            let is_leaf = children[i as usize].is_empty();
+            CellPoint {
+                position: node.position,
+                normal: node.normal,
+                color: node.color,
+                radius: node.draw_radius,
+                // Leaf points keep the triangle's size bit for bit (spec §10 rule 3).
+                size: if is_leaf { leaves[i as usize].size } else { flat.size },
+                lo: flat.lo,
+                hi: flat.hi,
+                leaf_first: flat.leaf_first,
+                leaf_count: flat.leaf_count,
+            }
+        })
+        .collect();
+    let leaf_of_triangle = spt.leaf_id[..leaves.len()].iter().map(|id| id.unwrap_or(0)).collect();
+    Ok(CellHierarchy { points, leaf_of_triangle })
+}
+
+/// Attributes of a hierarchy node.
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    position: Vec3,
+    normal: Vec3,
+    color: Vec4,
+    /// Represented area, m² (the averaging weight).
+    area: f32,
+    /// Radius from full areas, for selection.
+    radius: f32,
+    /// Radius from coverage-scaled areas, for drawing.
+    draw_radius: f32,
+    /// `2·radius`.
+    size: f32,
+}
+
+impl Node {
+    fn leaf(p: &LeafPoint) -> Self {
+        let radius = p.size * 0.5;
+        Self {
+            position: p.position,
+            normal: p.normal,
+            color: p.color,
+            area: p.area,
+            radius,
+            draw_radius: radius * p.color.w.clamp(0.0, 1.0).sqrt(),
+            size: p.size,
+        }
+    }
+
+    /// Gilet's average of two nodes: area-weighted position, normal and colour; the radius rule
+    /// `2/π · (R_m + α(R_M − R_m))` with `R_M = R_l + R_r`, `R_m = (R_l + R_r)/2`,
+    /// `α = |N_l · N_r|`.
+    fn merge(l: &Self, r: &Self) -> Self {
+        let area = l.area + r.area;
+        let (wl, wr) = if area > 0.0 { (l.area / area, r.area / area) } else { (0.5, 0.5) };
+        let normal = (l.normal * wl + r.normal * wr).try_normalize().unwrap_or(if wl >= wr { l.normal } else { r.normal });
+        let alpha = l.normal.dot(r.normal).abs().min(1.0);
+        let rule = |a: f32, b: f32| std::f32::consts::FRAC_2_PI * (0.5 * (a + b) + alpha * 0.5 * (a + b));
+        let radius = rule(l.radius, r.radius);
+        // Coverage of the union is the area-weighted mean; colour of the opaque part is weighted by
+        // opaque area.
+        let (ol, or) = (l.area * l.color.w, r.area * r.color.w);
+        let rgb = if ol + or > 0.0 {
+            (l.color.truncate() * ol + r.color.truncate() * or) / (ol + or)
+        } else {
+            l.color.truncate() * wl + r.color.truncate() * wr
+        };
+        Self {
+            position: l.position * wl + r.position * wr,
+            normal,
+            color: rgb.extend(l.color.w * wl + r.color.w * wr),
+            area,
+            radius,
+            draw_radius: rule(l.draw_radius, r.draw_radius),
+            size: 2.0 * radius,
+        }
+    }
+}
+
+/// Recursive PCA split of `indices` (leaf point ids); appends inner nodes and returns the id of
+/// the subtree's root.
+fn cluster(indices: &mut [u32], leaves: &[LeafPoint], cluster_max: usize, children: &mut Vec<Vec<u32>>, nodes: &mut Vec<Node>) -> u32 {
+    if indices.len() == 1 {
+        return indices[0];
+    }
+    let kids: Vec<u32> = if indices.len() <= cluster_max {
+        indices.to_vec()
+    } else {
+        let split = split_at_centroid(indices, leaves);
+        let (left, right) = indices.split_at_mut(split);
+        vec![cluster(left, leaves, cluster_max, children, nodes), cluster(right, leaves, cluster_max, children, nodes)]
+    };
+    // Fold the binary rule over the children in order (a bottom cluster may hold up to
+    // `cluster_max` points).
+    let mut node = nodes[kids[0] as usize];
+    for &k in &kids[1..] {
+        node = Node::merge(&node, &nodes[k as usize]);
+    }
+    #[expect(clippy::cast_possible_truncation, reason = "a cell holds fewer than 2^31 nodes")]
+    let id = nodes.len() as u32;
+    nodes.push(node);
+    children.push(kids);
+    id
+}
+
+/// Reorders `indices` so the points on the negative side of the plane through their centroid,
+/// across the direction of greatest variance, come first; returns the split position, which is
+/// always in `1..len` (ties fall back to the median along that direction).
+fn split_at_centroid(indices: &mut [u32], leaves: &[LeafPoint]) -> usize {
+    let n = indices.len() as f32;
+    let centroid = indices.iter().map(|&i| leaves[i as usize].position).sum::<Vec3>() / n;
+    let mut cov = [[0.0f32; 3]; 3];
+    for &i in indices.iter() {
+        let d = (leaves[i as usize].position - centroid).to_array();
+        for (r, row) in cov.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                *v += d[r] * d[c];
+            }
+        }
+    }
+    let axis = principal_axis(cov);
+    let key = |i: u32| (leaves[i as usize].position - centroid).dot(axis);
+    // Stable order along the axis (ties by id) keeps the result deterministic.
+    indices.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
+    let split = indices.partition_point(|&i| key(i) < 0.0);
+    if split == 0 || split == indices.len() { indices.len() / 2 } else { split }
+}
+
+/// Eigenvector of the largest eigenvalue of a symmetric 3×3 matrix, by power iteration started
+/// from the column of largest norm (so the start is never orthogonal to it in practice).
+fn principal_axis(cov: [[f32; 3]; 3]) -> Vec3 {
+    let m = glam::Mat3::from_cols_array_2d(&cov);
+    let mut v = [m.x_axis, m.y_axis, m.z_axis]
+        .into_iter()
+        .max_by(|a, b| a.length_squared().total_cmp(&b.length_squared()))
+        .unwrap_or(Vec3::X);
+    if v.length_squared() <= f32::MIN_POSITIVE {
+        return Vec3::X; // all points coincide
+    }
+    for _ in 0..32 {
+        let next = m * v;
+        match next.try_normalize() {
+            Some(n) => v = n,
+            None => break,
+        }
+    }
+    v.try_normalize().unwrap_or(Vec3::X)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn leaf(x: f32, y: f32, size: f32) -> LeafPoint {
+        let r = size * 0.5;
+        LeafPoint {
+            position: Vec3::new(x, y, 0.0),
+            normal: Vec3::Z,
+            area: std::f32::consts::PI * r * r,
+            color: Vec4::new(0.2, 0.5, 0.1, 1.0),
+            size,
+        }
+    }
+
+    #[test]
+    fn clusters_split_along_the_longest_axis_and_stop_at_cluster_max() {
+        // Two groups far apart along x: the first split separates them.
+        let mut leaves: Vec<LeafPoint> = (0..6).map(|i| leaf(i as f32 * 0.01, 0.0, 0.1)).collect();
+        leaves.extend((0..6).map(|i| leaf(10.0 + i as f32 * 0.01, 0.0, 0.1)));
+        let h = build_cell(&leaves, &GiletConfig::default()).unwrap();
+        let root = h.points[0];
+        assert_eq!(root.leaf_count, 12);
+        assert!(root.hi.is_infinite());
+        // Root's two children each cover one group of 6, which splits once more (6 > 5).
+        let children: Vec<_> = h.points.iter().filter(|p| p.hi == root.lo).collect();
+        assert_eq!(children.len(), 2);
+        assert!(children.iter().all(|c| c.leaf_count == 6));
+        // 12 leaves + root + 2 group nodes + 4 bottom clusters of 3.
+        assert_eq!(h.points.len(), 12 + 1 + 2 + 4);
+    }
+
+    #[test]
+    fn radius_rule_follows_the_paper_and_sizes_are_monotone() {
+        // Parallel normals (α = 1): R = 2/π · (R_l + R_r).
+        let h = build_cell(&[leaf(0.0, 0.0, 2.0), leaf(1.0, 0.0, 2.0)], &GiletConfig::default()).unwrap();
+        let root = h.points[0];
+        assert!((root.radius - std::f32::consts::FRAC_2_PI * 2.0).abs() < 1e-6);
+        // Perpendicular normals (α = 0): the rule gives 2/π · R_m < R, made monotone for selection.
+        let mut b = leaf(1.0, 0.0, 2.0);
+        b.normal = Vec3::X;
+        let h = build_cell(&[leaf(0.0, 0.0, 2.0), b], &GiletConfig::default()).unwrap();
+        assert!(h.points[0].size >= 2.0, "parent selection size never below a child's");
+        for p in &h.points[1..] {
+            assert_eq!(p.lo, 0.0);
+            assert_eq!(p.hi, h.points[0].lo);
+        }
+    }
+
+    #[test]
+    fn leaf_points_keep_the_triangle_size_and_coverage_shrinks_the_disc() {
+        let mut card = leaf(0.0, 0.0, 0.3);
+        card.color.w = 0.25;
+        let h = build_cell(&[card, leaf(0.5, 0.0, 0.2)], &GiletConfig::default()).unwrap();
+        let p = h.points.iter().find(|p| p.leaf_count == 1 && p.size == 0.3).unwrap();
+        assert!((p.radius - 0.075).abs() < 1e-6, "radius 0.15 scaled by sqrt(0.25)");
+        assert_eq!(h.leaf_of_triangle.len(), 2);
+    }
+
+    #[test]
+    fn identical_positions_still_split() {
+        let leaves: Vec<LeafPoint> = (0..40).map(|_| leaf(1.0, 1.0, 0.1)).collect();
+        let h = build_cell(&leaves, &GiletConfig { cluster_max: 2 }).unwrap();
+        assert_eq!(h.points.iter().filter(|p| p.leaf_count == 1).count(), 40);
+        assert_eq!(h.points[0].leaf_count, 40);
+    }
+}
