@@ -95,8 +95,8 @@ mod tests {
             [-0.3, 0.9, -0.3],
         ];
         for d in dirs {
-            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f32;
-            let n = d.map(|c: f32| c / len.sqrt());
+            let len: f32 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            let n = d.map(|c| c / len.sqrt());
             let back = oct_decode(oct_encode(n));
             for i in 0..3 {
                 assert!((back[i] - n[i]).abs() < 1e-3, "{n:?} -> {back:?}");

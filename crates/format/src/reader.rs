@@ -472,13 +472,13 @@ fn read_header(bytes: &[u8]) -> Result<Header> {
         return Err(Error::UnsupportedVersion { major: header.major, minor: header.minor, supported: MAJOR, hint });
     }
     let header_size = header.header_size;
-    if !(HEADER_SIZE as u32..=MAX_HEADER_SIZE).contains(&header_size) || header_size % 16 != 0 {
+    if !(HEADER_SIZE as u32..=MAX_HEADER_SIZE).contains(&header_size) || !header_size.is_multiple_of(16) {
         return Err(bad_header("header_size", header_size.into(), "must be a multiple of 16 in 64..=4096"));
     }
     if header.section_count > MAX_SECTIONS {
         return Err(bad_header("section_count", header.section_count.into(), "at most 256"));
     }
-    if header.table_offset % SECTION_ALIGN != 0 || header.table_offset < u64::from(header_size) {
+    if !header.table_offset.is_multiple_of(SECTION_ALIGN) || header.table_offset < u64::from(header_size) {
         return Err(bad_header("table_offset", header.table_offset, "multiple of 16, at or after the header"));
     }
     // Cannot overflow: offset is checked against the file length first, count is at most 256.
@@ -522,7 +522,7 @@ fn read_table(bytes: &[u8], header: &Header) -> Result<Vec<SectionEntry>> {
         let entry: SectionEntry = bytemuck::pod_read_unaligned(&bytes[at..at + SECTION_ENTRY_SIZE]);
         let kind = SectionKind(entry.kind);
         let bad = |reason: String| Error::BadSection { index, kind, reason };
-        if entry.offset % SECTION_ALIGN != 0 {
+        if !entry.offset.is_multiple_of(SECTION_ALIGN) {
             return Err(bad(format!("offset {} is not a multiple of 16", entry.offset)));
         }
         if entry.offset < prev_end {
@@ -553,7 +553,7 @@ fn read_table(bytes: &[u8], header: &Header) -> Result<Vec<SectionEntry>> {
         if entry.record_size != record_size {
             return Err(bad(format!("record_size {} but the spec's record is {record_size} bytes", entry.record_size)));
         }
-        if entry.raw_length % u64::from(record_size) != 0 {
+        if !entry.raw_length.is_multiple_of(u64::from(record_size)) {
             return Err(bad(format!("raw_length {} is not a multiple of the record size {record_size}", entry.raw_length)));
         }
         if entry.raw_length / u64::from(record_size) > u64::from(u32::MAX) {
