@@ -1,1 +1,107 @@
-//! Synthetic containers for tests.
+//! Test data for treelod: a generator of synthetic, valid `.treelod` containers, byte-level
+//! patching helpers for hostile-input tests, the golden-file recipes and the spec's hex dump.
+//!
+//! [`synthetic`] is the test data source of every crate: given a seed and [`SyntheticOptions`] it
+//! builds a [`ContainerData`](treelod_format::ContainerData) that follows `format-spec/treelod.md` in every rule `verify` checks
+//! (grid, per-cell triangle sets with a Gilet point hierarchy flattened by
+//! [`treelod_build::flatten`], optional ellipsoid, line and plane hierarchies, pruning lists and
+//! curves, materials, images with mip chains, metadata, extension sections). The same seed and
+//! options always give the same data.
+//!
+//! ```
+//! use treelod_format::{Compression, Container, ContainerData};
+//! use treelod_tests::{SyntheticOptions, synthetic};
+//!
+//! let data = synthetic(7, &SyntheticOptions::everything());
+//! let bytes = data.to_bytes(Compression::None)?;
+//! let container = Container::from_bytes(&bytes)?;
+//! assert_eq!(ContainerData::from_container(&container), data);
+//! # Ok::<(), treelod_format::Error>(())
+//! ```
+
+mod hexdump;
+pub mod raw;
+mod rng;
+mod synth;
+
+use std::path::PathBuf;
+
+pub use hexdump::spec_hex_dump;
+pub use rng::SplitMix64;
+pub use synth::{SyntheticOptions, synthetic};
+use treelod_format::Compression;
+
+/// One golden file of `tests/data/v1_0`: how it was made.
+///
+/// Golden files are written once by `cargo run -p treelod-tests --bin make-golden` and then kept
+/// forever (spec §11). Tests read the files, never these recipes, so a later change of the
+/// generator or the writer cannot silently change what the golden tests expect.
+#[derive(Clone, Debug)]
+pub struct GoldenFile {
+    /// File name inside the golden directory, e.g. `minimal.treelod`.
+    pub name: &'static str,
+    /// What the file exercises.
+    pub description: &'static str,
+    /// Seed of [`synthetic`].
+    pub seed: u64,
+    /// Options of [`synthetic`].
+    pub options: SyntheticOptions,
+    /// How the sections were stored.
+    pub compression: Compression,
+}
+
+/// The golden files of format version 1.0, in the order `make-golden` writes them.
+#[must_use]
+pub fn golden_files() -> Vec<GoldenFile> {
+    vec![
+        GoldenFile {
+            name: "minimal.treelod",
+            description: "one grid cell, one triangle, its leaf point and one material; uncompressed",
+            seed: 1,
+            options: SyntheticOptions::minimal(),
+            compression: Compression::None,
+        },
+        GoldenFile {
+            name: "gilet.treelod",
+            description: "a 3x2x2 grid of Gilet cells (triangles and point hierarchies), a texture; uncompressed",
+            seed: 2,
+            options: SyntheticOptions::gilet([3, 2, 2]),
+            compression: Compression::None,
+        },
+        GoldenFile {
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.0, zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions::everything(),
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            name: "extension.treelod",
+            description: "a one-cell file with a reserved kind 0x0100 and a private kind 0x10000 readers skip",
+            seed: 4,
+            options: SyntheticOptions {
+                extension_kinds: vec![0x0100, 0x0001_0000],
+                triangles_per_cell: 2..=2,
+                ..SyntheticOptions::minimal()
+            },
+            compression: Compression::None,
+        },
+    ]
+}
+
+/// The directory of the golden files of version 1.0: `tests/data/v1_0` in the source tree.
+#[must_use]
+pub fn golden_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join("v1_0")
+}
+
+/// The spec file, `format-spec/treelod.md` in the source tree.
+#[must_use]
+pub fn spec_path() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join("format-spec").join("treelod.md")
+}
+
+/// Marker line before the generated hex dump in the spec (§13.1).
+pub const SPEC_EXAMPLE_BEGIN: &str = "<!-- spec-example:begin -->";
+/// Marker line after the generated hex dump in the spec (§13.1).
+pub const SPEC_EXAMPLE_END: &str = "<!-- spec-example:end -->";

@@ -9,7 +9,8 @@ use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use treelod_format::{
     BlockRecord, CellRecord, ContainerData, ImageRecord, MATERIAL_DOUBLE_SIDED, MaterialInfo, MaterialRecord, Metadata,
-    NO_IMAGE, PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, image_format, material_class, pack,
+    NO_IMAGE, PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, image_format, material_class,
+    pack,
 };
 
 use crate::classify::{ClassifyOptions, classify};
@@ -106,7 +107,12 @@ struct Tri {
 /// # Errors
 /// [`BuildError::NoGeometry`] if no drawable triangle remains, [`BuildError::Setting`] for a bad
 /// grid, [`BuildError::Spt`] if an internal invariant breaks.
-pub fn build_block(name: &str, trees: &[Placed<'_>], config: &BuildConfig, generator: &str) -> Result<BuildOutput, BuildError> {
+pub fn build_block(
+    name: &str,
+    trees: &[Placed<'_>],
+    config: &BuildConfig,
+    generator: &str,
+) -> Result<BuildOutput, BuildError> {
     if let Some(grid) = config.grid
         && grid.iter().any(|&g| g == 0 || g > treelod_format::MAX_GRID_AXIS)
     {
@@ -137,7 +143,8 @@ pub fn build_block(name: &str, trees: &[Placed<'_>], config: &BuildConfig, gener
             };
             let source_material = scene.materials.get(part.material).cloned().unwrap_or_default();
             let image = source_material.image.and_then(|i| scene.images.get(i));
-            let base = u32::try_from(vertices.len()).map_err(|_| BuildError::Setting("more than 2^32 vertices".into()))?;
+            let base =
+                u32::try_from(vertices.len()).map_err(|_| BuildError::Setting("more than 2^32 vertices".into()))?;
             for (i, p) in part.positions.iter().enumerate() {
                 let position = (Vec3::from_array(*p) + placed.translation).to_array();
                 let normal = part.normals.get(i).copied().unwrap_or([0.0, 1.0, 0.0]);
@@ -150,7 +157,11 @@ pub fn build_block(name: &str, trees: &[Placed<'_>], config: &BuildConfig, gener
             let mut dropped = 0u64;
             for tri in &part.triangles {
                 stats.triangles_in += 1;
-                let Some(corners) = tri.iter().map(|&i| vertices.get((base + i) as usize).filter(|_| (i as usize) < part.positions.len())).collect::<Option<Vec<_>>>() else {
+                let Some(corners) = tri
+                    .iter()
+                    .map(|&i| vertices.get((base + i) as usize).filter(|_| (i as usize) < part.positions.len()))
+                    .collect::<Option<Vec<_>>>()
+                else {
                     dropped += 1;
                     continue;
                 };
@@ -181,7 +192,11 @@ pub fn build_block(name: &str, trees: &[Placed<'_>], config: &BuildConfig, gener
                 tris.push(Tri { v: tri.map(|i| base + i), material: material as u32, size, leaf });
             }
             if dropped > 0 {
-                warnings.push(format!("{}: {}: dropped {dropped} degenerate or non-finite triangles", scene.name, part.label()));
+                warnings.push(format!(
+                    "{}: {}: dropped {dropped} degenerate or non-finite triangles",
+                    scene.name,
+                    part.label()
+                ));
                 stats.triangles_dropped += dropped;
             }
         }
@@ -242,7 +257,10 @@ pub fn build_block(name: &str, trees: &[Placed<'_>], config: &BuildConfig, gener
     for (ids, hierarchy) in per_cell.iter().zip(&hierarchies) {
         let mut order: Vec<usize> = (0..ids.len()).collect();
         order.sort_by(|&a, &b| {
-            tris[ids[b] as usize].size.total_cmp(&tris[ids[a] as usize].size).then(hierarchy.leaf_of_triangle[a].cmp(&hierarchy.leaf_of_triangle[b]))
+            tris[ids[b] as usize]
+                .size
+                .total_cmp(&tris[ids[a] as usize].size)
+                .then(hierarchy.leaf_of_triangle[a].cmp(&hierarchy.leaf_of_triangle[b]))
         });
         let (mut cmin, mut cmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         let first_triangle = triangles.len();
@@ -261,7 +279,12 @@ pub fn build_block(name: &str, trees: &[Placed<'_>], config: &BuildConfig, gener
                 cmax = cmax.max(p);
                 *slot
             });
-            triangles.push(TriangleRecord { indices, size: t.size, leaf: hierarchy.leaf_of_triangle[k], material: t.material });
+            triangles.push(TriangleRecord {
+                indices,
+                size: t.size,
+                leaf: hierarchy.leaf_of_triangle[k],
+                material: t.material,
+            });
         }
         let first_point = points.len();
         for p in &hierarchy.points {
@@ -359,10 +382,18 @@ pub fn build_block(name: &str, trees: &[Placed<'_>], config: &BuildConfig, gener
     let mut tree_meta: Vec<Tree> = Vec::new();
     for placed in trees {
         let s = &placed.scene.source;
-        let source = match sources.iter().position(|x| x.path == s.path && x.content_hash == s.content_hash && !s.path.is_empty()) {
+        let source = match sources
+            .iter()
+            .position(|x| x.path == s.path && x.content_hash == s.content_hash && !s.path.is_empty())
+        {
             Some(i) => i,
             None => {
-                sources.push(Source { path: s.path.clone(), content_hash: s.content_hash.clone(), byte_length: s.byte_length, unit_scale: s.unit_scale });
+                sources.push(Source {
+                    path: s.path.clone(),
+                    content_hash: s.content_hash.clone(),
+                    byte_length: s.byte_length,
+                    unit_scale: s.unit_scale,
+                });
                 sources.len() - 1
             }
         };

@@ -244,7 +244,13 @@ mod tests {
         Scene {
             parts: vec![quads, trunk],
             materials: vec![
-                Material { name: material.into(), base_color: color, alpha_mode: mode, image: image.then_some(0), ..Material::default() },
+                Material {
+                    name: material.into(),
+                    base_color: color,
+                    alpha_mode: mode,
+                    image: image.then_some(0),
+                    ..Material::default()
+                },
                 Material { name: "Wood".into(), base_color: [0.4, 0.3, 0.2, 1.0], ..Material::default() },
             ],
             ..Scene::default()
@@ -264,9 +270,15 @@ mod tests {
     #[test]
     fn unnamed_green_small_flat_pieces_are_leaves() {
         let s = scene_with("Green", "CommonTree_1", AlphaMode::Opaque, [0.2, 0.6, 0.1, 1.0], false);
-        assert_eq!(classify(&s, &ClassifyOptions::default())[0], Classification { class: Class::Leaf, by: ClassifiedBy::Geometry });
+        assert_eq!(
+            classify(&s, &ClassifyOptions::default())[0],
+            Classification { class: Class::Leaf, by: ClassifiedBy::Geometry }
+        );
         let brown = scene_with("Mat", "CommonTree_1", AlphaMode::Opaque, [0.6, 0.4, 0.2, 1.0], false);
-        assert_eq!(classify(&brown, &ClassifyOptions::default())[0], Classification { class: Class::Bark, by: ClassifiedBy::Default });
+        assert_eq!(
+            classify(&brown, &ClassifyOptions::default())[0],
+            Classification { class: Class::Bark, by: ClassifiedBy::Default }
+        );
         let masked = scene_with("Mat", "x", AlphaMode::Mask, [1.0; 4], true);
         assert_eq!(classify(&masked, &ClassifyOptions::default())[0].by, ClassifiedBy::Geometry);
     }

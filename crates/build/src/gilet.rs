@@ -150,7 +150,8 @@ impl Node {
     fn merge(l: &Self, r: &Self) -> Self {
         let area = l.area + r.area;
         let (wl, wr) = if area > 0.0 { (l.area / area, r.area / area) } else { (0.5, 0.5) };
-        let normal = (l.normal * wl + r.normal * wr).try_normalize().unwrap_or(if wl >= wr { l.normal } else { r.normal });
+        let normal =
+            (l.normal * wl + r.normal * wr).try_normalize().unwrap_or(if wl >= wr { l.normal } else { r.normal });
         let alpha = l.normal.dot(r.normal).abs().min(1.0);
         let rule = |a: f32, b: f32| std::f32::consts::FRAC_2_PI * (0.5 * (a + b) + alpha * 0.5 * (a + b));
         let radius = rule(l.radius, r.radius);
@@ -176,7 +177,13 @@ impl Node {
 
 /// Recursive PCA split of `indices` (leaf point ids); appends inner nodes and returns the id of
 /// the subtree's root.
-fn cluster(indices: &mut [u32], leaves: &[LeafPoint], cluster_max: usize, children: &mut Vec<Vec<u32>>, nodes: &mut Vec<Node>) -> u32 {
+fn cluster(
+    indices: &mut [u32],
+    leaves: &[LeafPoint],
+    cluster_max: usize,
+    children: &mut Vec<Vec<u32>>,
+    nodes: &mut Vec<Node>,
+) -> u32 {
     if indices.len() == 1 {
         return indices[0];
     }

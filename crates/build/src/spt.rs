@@ -99,9 +99,7 @@ pub fn flatten(children: &[Vec<u32>], sizes: &[f32]) -> Result<Spt, FlattenError
     let mut parent = vec![None::<u32>; count];
     for (node, kids) in children.iter().enumerate() {
         for &child in kids {
-            let slot = parent
-                .get_mut(child as usize)
-                .ok_or(FlattenError::ChildOutOfRange { node, child, count })?;
+            let slot = parent.get_mut(child as usize).ok_or(FlattenError::ChildOutOfRange { node, child, count })?;
             if slot.is_some() || child as usize == node {
                 return Err(FlattenError::NotAForest { node: child as usize });
             }
@@ -163,7 +161,10 @@ pub fn flatten(children: &[Vec<u32>], sizes: &[f32]) -> Result<Spt, FlattenError
     let mut order: Vec<u32> = (0..count as u32).collect();
     order.sort_by(|&a, &b| {
         let (x, y) = (&nodes[a as usize], &nodes[b as usize]);
-        y.hi.total_cmp(&x.hi).then(x.leaf_first.cmp(&y.leaf_first)).then(y.leaf_count.cmp(&x.leaf_count)).then(a.cmp(&b))
+        y.hi.total_cmp(&x.hi)
+            .then(x.leaf_first.cmp(&y.leaf_first))
+            .then(y.leaf_count.cmp(&x.leaf_count))
+            .then(a.cmp(&b))
     });
     Ok(Spt { nodes, order, leaf_id })
 }
@@ -248,7 +249,10 @@ mod tests {
         assert_eq!(flatten(&[vec![1], vec![0]], &[1.0, 1.0]), Err(FlattenError::NotAForest { node: 0 }));
         assert_eq!(flatten(&[vec![0]], &[1.0]), Err(FlattenError::NotAForest { node: 0 }));
         assert_eq!(flatten(&[vec![7]], &[1.0]), Err(FlattenError::ChildOutOfRange { node: 0, child: 7, count: 1 }));
-        assert_eq!(flatten(&[vec![]], &[f32::NAN]).unwrap_err().to_string(), "node 0 has size NaN, sizes must be finite and >= 0");
+        assert_eq!(
+            flatten(&[vec![]], &[f32::NAN]).unwrap_err().to_string(),
+            "node 0 has size NaN, sizes must be finite and >= 0"
+        );
         assert_eq!(flatten(&[vec![], vec![]], &[1.0]), Err(FlattenError::LengthMismatch { sizes: 1, nodes: 2 }));
     }
 }

@@ -59,7 +59,8 @@ pub fn integrate(material: &Material, image: Option<&Image>, surface: &TriangleS
     };
     let lut = srgb_to_linear_table();
     let kf = k as f32;
-    let (mut rgb_opaque, mut opaque, mut rgb_all, mut alpha_sum, mut n) = (Vec3::ZERO, 0.0f32, Vec3::ZERO, 0.0f32, 0.0f32);
+    let (mut rgb_opaque, mut opaque, mut rgb_all, mut alpha_sum, mut n) =
+        (Vec3::ZERO, 0.0f32, Vec3::ZERO, 0.0f32, 0.0f32);
     let mut sample = |a: f32, b: f32| {
         let w = Vec3::new(1.0 - a - b, a, b);
         let vc = surface.color[0] * w.x + surface.color[1] * w.y + surface.color[2] * w.z;
@@ -112,7 +113,13 @@ mod tests {
 
     fn checker_image() -> Image {
         // 2×1 texels: left opaque red, right transparent.
-        Image { width: 2, height: 1, rgba: vec![255, 0, 0, 255, 0, 0, 255, 0], encoded: Vec::new(), encoding: ImageEncoding::Raw }
+        Image {
+            width: 2,
+            height: 1,
+            rgba: vec![255, 0, 0, 255, 0, 0, 255, 0],
+            encoded: Vec::new(),
+            encoding: ImageEncoding::Raw,
+        }
     }
 
     fn material(mode: AlphaMode) -> Material {

@@ -40,7 +40,13 @@ fn tiny_tree(leaves: u32) -> Scene {
         name: "tiny".into(),
         parts: vec![leaf, bark],
         materials: vec![
-            Material { name: "leaves".into(), base_color: [0.2, 0.5, 0.1, 1.0], alpha_mode: AlphaMode::Opaque, double_sided: true, ..Material::default() },
+            Material {
+                name: "leaves".into(),
+                base_color: [0.2, 0.5, 0.1, 1.0],
+                alpha_mode: AlphaMode::Opaque,
+                double_sided: true,
+                ..Material::default()
+            },
             Material { name: "bark".into(), base_color: [0.4, 0.3, 0.2, 1.0], ..Material::default() },
         ],
         ..Scene::default()
@@ -91,13 +97,16 @@ fn degenerate_and_non_finite_triangles_are_dropped_with_a_warning() {
     part.triangles.push([0, 0, 1]); // zero area
     let out = build(&scene, &BuildConfig::default());
     assert_eq!(out.stats.triangles_dropped, 2);
-    assert!(out.warnings.iter().any(|w| w.contains("dropped 2 degenerate or non-finite triangles") && w.contains("leaves")));
+    assert!(
+        out.warnings.iter().any(|w| w.contains("dropped 2 degenerate or non-finite triangles") && w.contains("leaves"))
+    );
 }
 
 #[test]
 fn nothing_drawable_is_a_typed_error() {
     let scene = Scene { name: "empty".into(), ..Scene::default() };
-    let err = build_block("empty", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "t").unwrap_err();
+    let err = build_block("empty", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "t")
+        .unwrap_err();
     assert!(matches!(err, BuildError::NoGeometry { .. }), "{err}");
     let bad_grid = BuildConfig { grid: Some([0, 4, 4]), ..BuildConfig::default() };
     let scene = tiny_tree(5);
@@ -108,9 +117,14 @@ fn nothing_drawable_is_a_typed_error() {
 #[test]
 fn a_block_of_trees_spans_one_grid() {
     let a = tiny_tree(50);
-    let trees: Vec<Placed> = (0..4).map(|i| Placed { scene: &a, translation: Vec3::new(i as f32 * 4.0, 0.0, 0.0) }).collect();
+    let trees: Vec<Placed> =
+        (0..4).map(|i| Placed { scene: &a, translation: Vec3::new(i as f32 * 4.0, 0.0, 0.0) }).collect();
     let out = build_block("row", &trees, &BuildConfig::default(), "t").expect("builds");
     assert_eq!(out.data.block.tree_count, 4);
     assert_eq!(out.data.metadata.trees.len(), 4);
-    assert!(out.stats.grid[0] > out.stats.grid[2], "a row of trees gets more cells along its length: {:?}", out.stats.grid);
+    assert!(
+        out.stats.grid[0] > out.stats.grid[2],
+        "a row of trees gets more cells along its length: {:?}",
+        out.stats.grid
+    );
 }

@@ -29,5 +29,5 @@ pub use reader::{
     MAX_SECTIONS, OpenOptions, Section,
 };
 pub use records::*;
-pub use verify::{VerifyReport, verify};
+pub use verify::{SptSummary, VerifyReport, check_point_cut, check_spt, triangle_leaf_sizes, verify};
 pub use writer::{Compression, ContainerData, write_atomically};

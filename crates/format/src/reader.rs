@@ -207,8 +207,8 @@ impl Container {
                 check_section_checksum(container.storage.bytes(), section)?;
             }
         }
-        container.metadata = postcard::from_bytes(container.raw_bytes(SectionKind::META))
-            .map_err(|e| Error::Metadata(e.to_string()))?;
+        container.metadata =
+            postcard::from_bytes(container.raw_bytes(SectionKind::META)).map_err(|e| Error::Metadata(e.to_string()))?;
         container.validate_block_and_cells()?;
         Ok(container)
     }
@@ -256,7 +256,10 @@ impl Container {
                 if u64::from(range.first) != next {
                     return Err(Error::BadCell {
                         cell: index,
-                        reason: format!("{kind} range starts at {}, expected {next} (ranges tile the array)", range.first),
+                        reason: format!(
+                            "{kind} range starts at {}, expected {next} (ranges tile the array)",
+                            range.first
+                        ),
                     });
                 }
                 next += u64::from(range.count);
@@ -498,7 +501,11 @@ fn read_header(bytes: &[u8]) -> Result<Header> {
     crc.update(&bytes[header.table_offset as usize..table_end as usize]);
     let computed = crc.finalize();
     if computed != header.header_checksum {
-        return Err(Error::ChecksumMismatch { what: "header and section table".into(), stored: header.header_checksum, computed });
+        return Err(Error::ChecksumMismatch {
+            what: "header and section table".into(),
+            stored: header.header_checksum,
+            computed,
+        });
     }
     if available < header.file_size {
         return Err(Error::Truncated { what: "file", needed: header.file_size, available });
@@ -531,11 +538,9 @@ fn read_table(bytes: &[u8], header: &Header) -> Result<Vec<SectionEntry>> {
                 entry.offset
             )));
         }
-        let end = entry
-            .offset
-            .checked_add(entry.length)
-            .filter(|&end| end <= header.file_size)
-            .ok_or_else(|| bad(format!("bytes {}+{} reach past the file size {}", entry.offset, entry.length, header.file_size)))?;
+        let end = entry.offset.checked_add(entry.length).filter(|&end| end <= header.file_size).ok_or_else(|| {
+            bad(format!("bytes {}+{} reach past the file size {}", entry.offset, entry.length, header.file_size))
+        })?;
         prev_end = end;
         if entries.iter().any(|e| e.kind == entry.kind) {
             return Err(bad("the kind appears twice".into()));
@@ -554,7 +559,10 @@ fn read_table(bytes: &[u8], header: &Header) -> Result<Vec<SectionEntry>> {
             return Err(bad(format!("record_size {} but the spec's record is {record_size} bytes", entry.record_size)));
         }
         if !entry.raw_length.is_multiple_of(u64::from(record_size)) {
-            return Err(bad(format!("raw_length {} is not a multiple of the record size {record_size}", entry.raw_length)));
+            return Err(bad(format!(
+                "raw_length {} is not a multiple of the record size {record_size}",
+                entry.raw_length
+            )));
         }
         if entry.raw_length / u64::from(record_size) > u64::from(u32::MAX) {
             return Err(bad(format!("{} records, the limit is 2^32-1", entry.raw_length / u64::from(record_size))));
@@ -563,7 +571,12 @@ fn read_table(bytes: &[u8], header: &Header) -> Result<Vec<SectionEntry>> {
             return Err(bad(format!("uncompressed but raw_length {} != length {}", entry.raw_length, entry.length)));
         }
         if kind == SectionKind::META && entry.raw_length > MAX_META_BYTES {
-            return Err(Error::DecodeLimit { kind, raw_length: entry.raw_length, limit: MAX_META_BYTES, rule: "metadata limit" });
+            return Err(Error::DecodeLimit {
+                kind,
+                raw_length: entry.raw_length,
+                limit: MAX_META_BYTES,
+                rule: "metadata limit",
+            });
         }
         entries.push(entry);
     }
@@ -595,7 +608,12 @@ fn decode_section(bytes: &[u8], index: usize, entry: &SectionEntry, budget: &mut
     }
     let ratio_limit = entry.length.saturating_mul(MAX_COMPRESSION_RATIO);
     if entry.raw_length > ratio_limit {
-        return Err(Error::DecodeLimit { kind, raw_length: entry.raw_length, limit: ratio_limit, rule: "1024 x stored size" });
+        return Err(Error::DecodeLimit {
+            kind,
+            raw_length: entry.raw_length,
+            limit: ratio_limit,
+            rule: "1024 x stored size",
+        });
     }
     if entry.raw_length > *budget {
         return Err(Error::DecodeLimit { kind, raw_length: entry.raw_length, limit: *budget, rule: "decode budget" });
@@ -615,8 +633,12 @@ fn decode_section(bytes: &[u8], index: usize, entry: &SectionEntry, budget: &mut
         Ok(n) if n == stored.len() => {}
         _ => return Err(corrupt(format!("the {} stored bytes are not exactly one zstd frame", stored.len()))),
     }
-    let raw_len = usize::try_from(entry.raw_length)
-        .map_err(|_| Error::DecodeLimit { kind, raw_length: entry.raw_length, limit: usize::MAX as u64, rule: "address space" })?;
+    let raw_len = usize::try_from(entry.raw_length).map_err(|_| Error::DecodeLimit {
+        kind,
+        raw_length: entry.raw_length,
+        limit: usize::MAX as u64,
+        rule: "address space",
+    })?;
     let mut buf = AlignedBuf::zeroed(raw_len);
     let written = zstd::bulk::decompress_to_buffer(stored, buf.as_mut_bytes()).map_err(|e| corrupt(e.to_string()))?;
     if written != raw_len {

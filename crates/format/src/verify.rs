@@ -1,7 +1,1153 @@
-//! Full verification (spec §9.2).
-use crate::{Container, Result};
-/// Report.
-#[derive(Debug, Default)]
-pub struct VerifyReport {}
-/// Verify.
-pub fn verify(_c: &Container) -> Result<VerifyReport> { Ok(VerifyReport {}) }
+//! Full verification (spec §9.2): checksums, zero padding, every record rule of §6, the ordering
+//! rules and the exact-cut invariants of §10.
+//!
+//! [`verify`] runs on an opened [`Container`], so everything §9.1 checks at open already holds:
+//! section bounds, record sizes, the cell count and the tiling of every per-cell kind. The exact-cut
+//! check of one cell is also available on plain slices ([`check_spt`], [`check_point_cut`],
+//! [`triangle_leaf_sizes`]) for builders and tests.
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+use crate::error::{Error, Result};
+use crate::reader::{Container, check_section_checksum};
+use crate::records::{
+    CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord, MaterialRecord, NO_IMAGE, PlaneRecord,
+    PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord,
+    image_format,
+};
+
+/// Largest image side in texels (spec §6.7, §12).
+const MAX_IMAGE_SIDE: u32 = 16_384;
+/// The PNG file signature (spec §6.7).
+const PNG_SIGNATURE: [u8; 8] = [0x89, 0x50, 0x4E, 0x47, 0x0D, 0x0A, 0x1A, 0x0A];
+/// The start of every JPEG file (spec §6.7).
+const JPEG_SIGNATURE: [u8; 3] = [0xFF, 0xD8, 0xFF];
+
+/// What a successful [`verify`] checked, for printing.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub struct VerifyReport {
+    /// Sections whose checksum was verified (every entry of the table, known kind or not).
+    pub sections: usize,
+    /// Stored bytes covered by those checksums.
+    pub checksummed_bytes: u64,
+    /// Padding bytes (outside the header, the table and the sections) found zero.
+    pub padding_bytes: u64,
+    /// Cell records checked, the block cell included.
+    pub cells: usize,
+    /// Cells without any record (their bounds are all zero).
+    pub empty_cells: usize,
+    /// `VERTICES` records checked.
+    pub vertices: u64,
+    /// `TRIANGLES` records checked.
+    pub triangles: u64,
+    /// `POINTS` records checked.
+    pub points: u64,
+    /// `MATERIALS` records checked.
+    pub materials: u64,
+    /// `IMAGES` records checked.
+    pub images: u64,
+    /// Bytes of `IMAGE_DATA`.
+    pub image_data_bytes: u64,
+    /// `ELLIPSOIDS` records checked.
+    pub ellipsoids: u64,
+    /// `LINES` records checked.
+    pub lines: u64,
+    /// `PLANES` records checked.
+    pub planes: u64,
+    /// `PRUNE_LEAVES` records checked.
+    pub prune_leaves: u64,
+    /// `PRUNE_TRIANGLES` records checked.
+    pub prune_triangles: u64,
+    /// `PRUNE_SCALE` and `PRUNE_LAMBDA` samples checked.
+    pub curve_samples: u64,
+    /// Leaves whose exact cut was verified, summed over cells and the point, ellipsoid, line and
+    /// plane hierarchies (spec §10 rule 2).
+    pub cut_leaves: u64,
+    /// Deepest nesting of leaf runs met in any hierarchy (1 for a flat list of roots).
+    pub max_depth: usize,
+}
+
+impl core::fmt::Display for VerifyReport {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        writeln!(
+            f,
+            "checksums: {} sections, {} bytes; padding: {} bytes, all zero",
+            self.sections, self.checksummed_bytes, self.padding_bytes
+        )?;
+        writeln!(f, "cells: {} ({} empty)", self.cells, self.empty_cells)?;
+        writeln!(
+            f,
+            "records: {} vertices, {} triangles, {} points, {} materials, {} images ({} data bytes)",
+            self.vertices, self.triangles, self.points, self.materials, self.images, self.image_data_bytes
+        )?;
+        writeln!(
+            f,
+            "         {} ellipsoids, {} lines, {} planes, {} pruned leaves, {} pruned triangles, {} curve samples",
+            self.ellipsoids, self.lines, self.planes, self.prune_leaves, self.prune_triangles, self.curve_samples
+        )?;
+        write!(f, "exact cut: {} leaves, runs nested up to {} deep", self.cut_leaves, self.max_depth)
+    }
+}
+
+/// What [`check_spt`] and [`check_point_cut`] found in one cell's hierarchy.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SptSummary {
+    /// `n`: the largest `leaf_first + leaf_count` of the records, 0 if none (spec §10 rule 2).
+    pub leaves: u64,
+    /// Deepest nesting of leaf runs (0 if there are no records).
+    pub max_depth: usize,
+}
+
+/// Checks everything spec §9.2 lists: all section checksums, zero padding, every record rule of
+/// §6, the ordering rules and the exact-cut invariants of §10.
+///
+/// Reserved fields, flags and `_pad` fields are not checked: readers ignore them (spec §2).
+/// Cost is linear in the file size, plus `O(m log m)` per cell and kind for `m` hierarchy records.
+///
+/// # Errors
+/// The first problem found: [`Error::ChecksumMismatch`] for a section whose bytes do not match its
+/// checksum; [`Error::BadSection`] (or [`Error::BadHeader`] before the table) for a nonzero padding
+/// byte; [`Error::BadRecord`] for a record that breaks a rule of its own (a field out of range, an
+/// index out of range, the sort order); [`Error::BadCell`] for a cell whose bounds or hierarchy
+/// break §6.2 or §10.
+pub fn verify(c: &Container) -> Result<VerifyReport> {
+    let mut report = VerifyReport::default();
+    check_checksums(c, &mut report)?;
+    check_padding(c, &mut report)?;
+
+    let vertex_count = c.vertices().len();
+    let material_count = c.materials().len();
+    let image_count = c.images().len();
+    check_vertices(c.vertices())?;
+    check_materials(c.materials(), image_count)?;
+    check_images(c.images(), c.image_data())?;
+    check_triangle_fields(SectionKind::TRIANGLES, c.triangles(), vertex_count, material_count)?;
+    check_triangle_fields(SectionKind::PRUNE_TRIANGLES, c.prune_triangles(), vertex_count, material_count)?;
+    check_points(c.points())?;
+    check_ellipsoids(c.ellipsoids())?;
+    check_lines(c.lines())?;
+    check_planes(c.planes(), image_count)?;
+    check_prune(c.prune_leaves(), c.prune_triangles())?;
+    check_curve(SectionKind::PRUNE_SCALE, c.prune_scale())?;
+    check_curve(SectionKind::PRUNE_LAMBDA, c.prune_lambda())?;
+
+    for (index, cell) in c.cells().iter().enumerate() {
+        if cell.is_empty() {
+            report.empty_cells += 1;
+        }
+        let spt = check_cell(c, index, cell)?;
+        report.cut_leaves += spt.leaves;
+        report.max_depth = report.max_depth.max(spt.max_depth);
+    }
+
+    report.cells = c.cells().len();
+    report.vertices = vertex_count as u64;
+    report.triangles = c.triangles().len() as u64;
+    report.points = c.points().len() as u64;
+    report.materials = material_count as u64;
+    report.images = image_count as u64;
+    report.image_data_bytes = c.image_data().len() as u64;
+    report.ellipsoids = c.ellipsoids().len() as u64;
+    report.lines = c.lines().len() as u64;
+    report.planes = c.planes().len() as u64;
+    report.prune_leaves = c.prune_leaves().len() as u64;
+    report.prune_triangles = c.prune_triangles().len() as u64;
+    report.curve_samples = (c.prune_scale().len() + c.prune_lambda().len()) as u64;
+    Ok(report)
+}
+
+// ---------------------------------------------------------------------------------------------
+// File level: checksums and padding (spec §3, §4, §8).
+
+fn check_checksums(c: &Container, report: &mut VerifyReport) -> Result<()> {
+    for section in c.sections() {
+        check_section_checksum(c.file_bytes(), section)?;
+        report.sections += 1;
+        report.checksummed_bytes += section.entry.length;
+    }
+    Ok(())
+}
+
+/// Every byte outside the header, the table and the sections is zero (spec §3).
+fn check_padding(c: &Container, report: &mut VerifyReport) -> Result<()> {
+    let bytes = c.file_bytes();
+    let header = c.header();
+    let table_end = header.table_offset + u64::from(header.section_count) * SECTION_ENTRY_SIZE as u64;
+    if let Some(offset) = first_nonzero(bytes, u64::from(header.header_size), header.table_offset, report) {
+        return Err(Error::BadHeader {
+            field: "padding",
+            value: offset,
+            rule: "the bytes between the header and the section table are zero (§3)",
+        });
+    }
+    let mut gap_start = table_end;
+    for (index, section) in c.sections().iter().enumerate() {
+        let start = section.entry.offset;
+        if let Some(offset) = first_nonzero(bytes, gap_start, start, report) {
+            return Err(Error::BadSection {
+                index,
+                kind: section.kind(),
+                reason: format!("nonzero padding byte at offset {offset} before the section (§3: padding is zero)"),
+            });
+        }
+        gap_start = gap_start.max(start.saturating_add(section.entry.length));
+    }
+    if let Some(offset) = first_nonzero(bytes, gap_start, header.file_size, report) {
+        let last = c.sections().len().saturating_sub(1);
+        let kind = c.sections().last().map_or(SectionKind(0), |s| s.kind());
+        return Err(Error::BadSection {
+            index: last,
+            kind,
+            reason: format!("nonzero byte at offset {offset} after the last section (§1: the file ends with it)"),
+        });
+    }
+    Ok(())
+}
+
+/// The offset of the first nonzero byte of `start .. end`, counting the bytes checked.
+fn first_nonzero(bytes: &[u8], start: u64, end: u64, report: &mut VerifyReport) -> Option<u64> {
+    if end <= start {
+        return None;
+    }
+    let slice = usize::try_from(start)
+        .ok()
+        .zip(usize::try_from(end).ok())
+        .and_then(|(s, e)| bytes.get(s..e))
+        // Open checked every offset against the file length; an unaddressable range reports its start.
+        .ok_or(start);
+    match slice {
+        Err(start) => Some(start),
+        Ok(slice) => {
+            report.padding_bytes += slice.len() as u64;
+            slice.iter().position(|&b| b != 0).map(|i| start + i as u64)
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Record rules of spec §6, per section.
+
+fn bad(kind: SectionKind, index: usize, reason: String) -> Error {
+    Error::BadRecord { kind, index, reason }
+}
+
+fn finite3(v: [f32; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// Finite and `≥ 0` (`-0.0` counts as zero).
+fn non_negative(v: f32) -> bool {
+    v.is_finite() && v >= 0.0
+}
+
+fn unit(v: f32) -> bool {
+    (0.0..=1.0).contains(&v)
+}
+
+fn check_vertices(vertices: &[VertexRecord]) -> Result<()> {
+    let kind = SectionKind::VERTICES;
+    for (i, v) in vertices.iter().enumerate() {
+        if !finite3(v.position) {
+            return Err(bad(kind, i, format!("position {:?} is not finite", v.position)));
+        }
+        if !v.uv.iter().all(|x| x.is_finite()) {
+            return Err(bad(kind, i, format!("uv {:?} is not finite", v.uv)));
+        }
+    }
+    Ok(())
+}
+
+fn check_materials(materials: &[MaterialRecord], image_count: usize) -> Result<()> {
+    let kind = SectionKind::MATERIALS;
+    for (i, m) in materials.iter().enumerate() {
+        if !m.base_color.iter().all(|x| x.is_finite()) {
+            return Err(bad(kind, i, format!("base_color {:?} is not finite", m.base_color)));
+        }
+        if m.image != NO_IMAGE && m.image as usize >= image_count {
+            return Err(bad(
+                kind,
+                i,
+                format!("image {} is out of range ({image_count} images, none = 0xFFFFFFFF)", m.image),
+            ));
+        }
+        if !unit(m.alpha_cutoff) {
+            return Err(bad(kind, i, format!("alpha_cutoff {} is outside [0, 1]", m.alpha_cutoff)));
+        }
+    }
+    Ok(())
+}
+
+/// Spec §6.7: sizes, mip counts and data ranges; the data of PNG and JPEG images starts with the
+/// format's signature. Images of formats this version does not define are checked only for their
+/// data range.
+fn check_images(images: &[ImageRecord], data: &[u8]) -> Result<()> {
+    let kind = SectionKind::IMAGES;
+    let data_len = data.len() as u64;
+    let mut ranges: Vec<(u64, u64, usize)> = Vec::with_capacity(images.len());
+    for (i, img) in images.iter().enumerate() {
+        if img.data_offset % 16 != 0 {
+            return Err(bad(kind, i, format!("data_offset {} is not a multiple of 16", img.data_offset)));
+        }
+        let end = img.data_offset.checked_add(img.data_length).filter(|&e| e <= data_len).ok_or_else(|| {
+            bad(
+                kind,
+                i,
+                format!("data {}+{} reaches past IMAGE_DATA ({data_len} bytes)", img.data_offset, img.data_length),
+            )
+        })?;
+        if img.data_length > 0 {
+            ranges.push((img.data_offset, end, i));
+        }
+        let known = matches!(
+            img.format,
+            image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR | image_format::PNG | image_format::JPEG
+        );
+        if !known {
+            continue;
+        }
+        for (name, side) in [("width", img.width), ("height", img.height)] {
+            if !(1..=MAX_IMAGE_SIDE).contains(&side) {
+                return Err(bad(kind, i, format!("{name} {side} is outside 1..=16384")));
+            }
+        }
+        let bytes = usize::try_from(img.data_offset)
+            .ok()
+            .zip(usize::try_from(end).ok())
+            .and_then(|(s, e)| data.get(s..e))
+            .unwrap_or_default();
+        match img.format {
+            image_format::PNG | image_format::JPEG => {
+                if img.mip_count != 1 {
+                    return Err(bad(kind, i, format!("mip_count {} but an encoded image has 1", img.mip_count)));
+                }
+                let (signature, name): (&[u8], _) =
+                    if img.format == image_format::PNG { (&PNG_SIGNATURE, "PNG") } else { (&JPEG_SIGNATURE, "JPEG") };
+                if !bytes.starts_with(signature) {
+                    let head = &bytes[..bytes.len().min(signature.len())];
+                    return Err(bad(
+                        kind,
+                        i,
+                        format!("data starts with {head:02X?}, not the {name} signature {signature:02X?}"),
+                    ));
+                }
+            }
+            _ => {
+                let max_mips = 32 - img.width.max(img.height).leading_zeros();
+                if !(1..=max_mips).contains(&img.mip_count) {
+                    return Err(bad(
+                        kind,
+                        i,
+                        format!(
+                            "mip_count {} is outside 1..={max_mips} for {}x{}",
+                            img.mip_count, img.width, img.height
+                        ),
+                    ));
+                }
+                if img.expected_data_length() != Some(img.data_length) {
+                    return Err(bad(
+                        kind,
+                        i,
+                        format!(
+                            "data_length {} but {}x{} with {} mip levels needs {:?} bytes",
+                            img.data_length,
+                            img.width,
+                            img.height,
+                            img.mip_count,
+                            img.expected_data_length()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    ranges.sort_unstable();
+    for pair in ranges.windows(2) {
+        if let [(a_start, a_end, a), (b_start, b_end, b)] = *pair
+            && b_start < a_end
+        {
+            return Err(bad(
+                kind,
+                b,
+                format!("data {b_start}..{b_end} overlaps the data {a_start}..{a_end} of image {a}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Spec §6.4 for `TRIANGLES` and `PRUNE_TRIANGLES`: indices, material, size. (Order and leaf ids
+/// are per cell, see [`triangle_leaf_sizes`]; the leaf of a pruned triangle, [`check_prune`].)
+fn check_triangle_fields(
+    kind: SectionKind,
+    triangles: &[TriangleRecord],
+    vertex_count: usize,
+    material_count: usize,
+) -> Result<()> {
+    for (i, t) in triangles.iter().enumerate() {
+        if let Some(&v) = t.indices.iter().find(|&&v| v as usize >= vertex_count) {
+            return Err(bad(kind, i, format!("vertex index {v} is out of range ({vertex_count} vertices)")));
+        }
+        if t.material as usize >= material_count {
+            return Err(bad(kind, i, format!("material {} is out of range ({material_count} materials)", t.material)));
+        }
+        if !non_negative(t.size) {
+            return Err(bad(kind, i, format!("size {} is not finite and >= 0", t.size)));
+        }
+    }
+    Ok(())
+}
+
+fn check_points(points: &[PointRecord]) -> Result<()> {
+    let kind = SectionKind::POINTS;
+    for (i, p) in points.iter().enumerate() {
+        if !finite3(p.position) {
+            return Err(bad(kind, i, format!("position {:?} is not finite", p.position)));
+        }
+        if !non_negative(p.radius) {
+            return Err(bad(kind, i, format!("radius {} is not finite and >= 0", p.radius)));
+        }
+        if !non_negative(p.size) {
+            return Err(bad(kind, i, format!("size {} is not finite and >= 0", p.size)));
+        }
+    }
+    Ok(())
+}
+
+fn check_ellipsoids(ellipsoids: &[EllipsoidRecord]) -> Result<()> {
+    let kind = SectionKind::ELLIPSOIDS;
+    for (i, e) in ellipsoids.iter().enumerate() {
+        if !finite3(e.center) {
+            return Err(bad(kind, i, format!("center {:?} is not finite", e.center)));
+        }
+        if !e.radii.iter().all(|&r| non_negative(r)) {
+            return Err(bad(kind, i, format!("radii {:?} are not finite and >= 0", e.radii)));
+        }
+        if !unit(e.alpha_threshold) {
+            return Err(bad(kind, i, format!("alpha_threshold {} is outside [0, 1]", e.alpha_threshold)));
+        }
+        if !non_negative(e.noise_mip) {
+            return Err(bad(kind, i, format!("noise_mip {} is not finite and >= 0", e.noise_mip)));
+        }
+    }
+    Ok(())
+}
+
+fn check_lines(lines: &[LineRecord]) -> Result<()> {
+    let kind = SectionKind::LINES;
+    for (i, l) in lines.iter().enumerate() {
+        if !finite3(l.p0) || !finite3(l.p1) {
+            return Err(bad(kind, i, format!("endpoints {:?}, {:?} are not finite", l.p0, l.p1)));
+        }
+        if !non_negative(l.r0) || !non_negative(l.r1) {
+            return Err(bad(kind, i, format!("radii {}, {} are not finite and >= 0", l.r0, l.r1)));
+        }
+    }
+    Ok(())
+}
+
+fn check_planes(planes: &[PlaneRecord], image_count: usize) -> Result<()> {
+    let kind = SectionKind::PLANES;
+    for (i, p) in planes.iter().enumerate() {
+        if !finite3(p.center) || !finite3(p.axis_u) || !finite3(p.axis_v) {
+            return Err(bad(
+                kind,
+                i,
+                format!("center {:?}, axis_u {:?}, axis_v {:?} are not all finite", p.center, p.axis_u, p.axis_v),
+            ));
+        }
+        if p.image as usize >= image_count {
+            return Err(bad(kind, i, format!("image {} is out of range ({image_count} images)", p.image)));
+        }
+        let (min_u, min_v) = (p.uv_min & 0xFFFF, p.uv_min >> 16);
+        let (max_u, max_v) = (p.uv_max & 0xFFFF, p.uv_max >> 16);
+        if min_u > max_u || min_v > max_v {
+            return Err(bad(
+                kind,
+                i,
+                format!("uv_min ({min_u}, {min_v}) is not <= uv_max ({max_u}, {max_v}) per component"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Spec §6.11: pruned leaves' fields; their triangle ranges tile `PRUNE_TRIANGLES` in leaf order;
+/// each pruned triangle's `leaf` is the index of the leaf whose range holds it.
+fn check_prune(leaves: &[PruneLeafRecord], triangles: &[TriangleRecord]) -> Result<()> {
+    let kind = SectionKind::PRUNE_LEAVES;
+    let mut next = 0u64;
+    for (i, leaf) in leaves.iter().enumerate() {
+        if !finite3(leaf.center) {
+            return Err(bad(kind, i, format!("center {:?} is not finite", leaf.center)));
+        }
+        if !non_negative(leaf.area) {
+            return Err(bad(kind, i, format!("area {} is not finite and >= 0", leaf.area)));
+        }
+        if leaf.triangle_count == 0 {
+            return Err(bad(kind, i, "triangle_count is 0, a pruned leaf has at least one triangle".into()));
+        }
+        if u64::from(leaf.first_triangle) != next {
+            return Err(bad(
+                kind,
+                i,
+                format!(
+                    "first_triangle {}, expected {next} (the leaves' ranges tile PRUNE_TRIANGLES in order)",
+                    leaf.first_triangle
+                ),
+            ));
+        }
+        let end = next + u64::from(leaf.triangle_count);
+        let owned = usize::try_from(next)
+            .ok()
+            .zip(usize::try_from(end).ok())
+            .and_then(|(s, e)| triangles.get(s..e))
+            .ok_or_else(|| {
+                bad(
+                    kind,
+                    i,
+                    format!("triangles {next}..{end} reach past PRUNE_TRIANGLES ({} records)", triangles.len()),
+                )
+            })?;
+        for (k, t) in owned.iter().enumerate() {
+            if t.leaf as usize != i {
+                #[expect(clippy::cast_possible_truncation, reason = "next indexes a slice, so it fits usize")]
+                let index = next as usize + k;
+                return Err(bad(
+                    SectionKind::PRUNE_TRIANGLES,
+                    index,
+                    format!("leaf {} but the record lies in the range of pruned leaf {i}", t.leaf),
+                ));
+            }
+        }
+        next = end;
+    }
+    if next != triangles.len() as u64 {
+        #[expect(clippy::cast_possible_truncation, reason = "next <= triangles.len()")]
+        return Err(bad(
+            SectionKind::PRUNE_TRIANGLES,
+            next as usize,
+            format!("belongs to no pruned leaf: the leaves' ranges end at {next}, the section has {}", triangles.len()),
+        ));
+    }
+    Ok(())
+}
+
+fn check_curve(kind: SectionKind, samples: &[CurveSample]) -> Result<()> {
+    for (i, s) in samples.iter().enumerate() {
+        if !s.x.is_finite() || !s.y.is_finite() {
+            return Err(bad(kind, i, format!("sample ({}, {}) is not finite", s.x, s.y)));
+        }
+        if let Some(prev) = i.checked_sub(1).and_then(|p| samples.get(p))
+            && s.x <= prev.x
+        {
+            return Err(bad(kind, i, format!("x {} does not increase strictly after {}", s.x, prev.x)));
+        }
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cells: bounds (spec §6.2), order and exact cut (§6.4, §6.5, §10).
+
+/// The records of one cell of one kind; open checked that the ranges tile the arrays.
+fn cell_slice<T>(kind: SectionKind, cell: usize, all: &[T], range: Range) -> Result<&[T]> {
+    all.get(range.as_usize()).ok_or_else(|| Error::BadCell {
+        cell,
+        reason: format!("{kind} range {}+{} lies outside the {} records", range.first, range.count, all.len()),
+    })
+}
+
+/// Bounds, order and exact cut of one cell; returns the leaves and depth of its hierarchies.
+fn check_cell(c: &Container, index: usize, cell: &CellRecord) -> Result<SptSummary> {
+    let triangles = cell_slice(SectionKind::TRIANGLES, index, c.triangles(), cell.triangles)?;
+    let points = cell_slice(SectionKind::POINTS, index, c.points(), cell.points)?;
+    let ellipsoids = cell_slice(SectionKind::ELLIPSOIDS, index, c.ellipsoids(), cell.ellipsoids)?;
+    let lines = cell_slice(SectionKind::LINES, index, c.lines(), cell.lines)?;
+    let planes = cell_slice(SectionKind::PLANES, index, c.planes(), cell.planes)?;
+    let prune = cell_slice(SectionKind::PRUNE_LEAVES, index, c.prune_leaves(), cell.prune_leaves)?;
+
+    // Bounds (§6.2).
+    let (lo, hi) = (cell.bounds_min, cell.bounds_max);
+    if cell.is_empty() {
+        if lo.iter().chain(&hi).any(|&v| v != 0.0) {
+            return Err(Error::BadCell {
+                cell: index,
+                reason: format!("no records but bounds {lo:?}..{hi:?}; an empty cell has all-zero bounds"),
+            });
+        }
+    } else if !finite3(lo) || !finite3(hi) || (0..3).any(|k| lo[k] > hi[k]) {
+        return Err(Error::BadCell {
+            cell: index,
+            reason: format!("bounds {lo:?}..{hi:?} are not finite and ordered"),
+        });
+    }
+    let inside = |p: [f32; 3]| (0..3).all(|k| lo[k] <= p[k] && p[k] <= hi[k]);
+    let outside = |kind: SectionKind, first: u32, i: usize, what: &str, p: [f32; 3]| Error::BadCell {
+        cell: index,
+        reason: format!(
+            "{kind} record {} {what} {p:?} lies outside the cell bounds {lo:?}..{hi:?}",
+            first as usize + i
+        ),
+    };
+    let vertices = c.vertices();
+    for (i, t) in triangles.iter().enumerate() {
+        for v in t.indices {
+            // Indices were checked against the vertex count before.
+            let p = vertices.get(v as usize).map_or([f32::NAN; 3], |v| v.position);
+            if !inside(p) {
+                return Err(outside(SectionKind::TRIANGLES, cell.triangles.first, i, &format!("vertex {v} at"), p));
+            }
+        }
+    }
+    for (i, p) in points.iter().enumerate() {
+        if !inside(p.position) {
+            return Err(outside(SectionKind::POINTS, cell.points.first, i, "position", p.position));
+        }
+    }
+    for (i, e) in ellipsoids.iter().enumerate() {
+        if !inside(e.center) {
+            return Err(outside(SectionKind::ELLIPSOIDS, cell.ellipsoids.first, i, "center", e.center));
+        }
+    }
+    for (i, l) in lines.iter().enumerate() {
+        for (what, p) in [("p0", l.p0), ("p1", l.p1)] {
+            if !inside(p) {
+                return Err(outside(SectionKind::LINES, cell.lines.first, i, what, p));
+            }
+        }
+    }
+    for (i, p) in planes.iter().enumerate() {
+        if !inside(p.center) {
+            return Err(outside(SectionKind::PLANES, cell.planes.first, i, "center", p.center));
+        }
+    }
+    for (i, p) in prune.iter().enumerate() {
+        if !inside(p.center) {
+            return Err(outside(SectionKind::PRUNE_LEAVES, cell.prune_leaves.first, i, "center", p.center));
+        }
+    }
+
+    // Order and exact cut (§6.4, §6.5, §10).
+    let leaf_sizes = triangle_leaf_sizes(index, cell.triangles.first as usize, triangles)?;
+    let mut total = SptSummary::default();
+    for s in [
+        check_point_cut(index, cell.points.first as usize, points, &leaf_sizes)?,
+        check_spt(SectionKind::ELLIPSOIDS, index, cell.ellipsoids.first as usize, ellipsoids)?,
+        check_spt(SectionKind::LINES, index, cell.lines.first as usize, lines)?,
+        check_spt(SectionKind::PLANES, index, cell.planes.first as usize, planes)?,
+    ] {
+        total.leaves += s.leaves;
+        total.max_depth = total.max_depth.max(s.max_depth);
+    }
+    Ok(total)
+}
+
+/// Checks one cell's triangles (spec §6.4, §10 rule 3) and returns the size of each leaf id.
+///
+/// `first` is the index of `triangles[0]` in `TRIANGLES`, used in errors. Checks that every size is
+/// finite and `≥ 0`, that sizes do not increase, and that the `leaf` values are exactly
+/// `0 .. triangles.len()`. The result's entry `ℓ` is the size of the triangle with leaf `ℓ`.
+///
+/// # Errors
+/// [`Error::BadRecord`] naming the first triangle that breaks a rule.
+pub fn triangle_leaf_sizes(cell: usize, first: usize, triangles: &[TriangleRecord]) -> Result<Vec<f32>> {
+    let kind = SectionKind::TRIANGLES;
+    let t = triangles.len();
+    // The triangle holding each leaf id; `usize::MAX` while none does.
+    let mut owner = vec![usize::MAX; t];
+    let mut prev = f32::INFINITY;
+    for (i, tri) in triangles.iter().enumerate() {
+        if !non_negative(tri.size) {
+            return Err(bad(kind, first + i, format!("size {} is not finite and >= 0", tri.size)));
+        }
+        if tri.size > prev {
+            return Err(bad(
+                kind,
+                first + i,
+                format!(
+                    "size {} is larger than {prev} of the record before (cell {cell} sorts by size, largest first)",
+                    tri.size
+                ),
+            ));
+        }
+        prev = tri.size;
+        let Some(slot) = owner.get_mut(tri.leaf as usize) else {
+            return Err(bad(
+                kind,
+                first + i,
+                format!(
+                    "leaf {} is out of range: cell {cell} has {t} triangles, leaf ids are 0..{t} (§10 rule 3)",
+                    tri.leaf
+                ),
+            ));
+        };
+        if *slot != usize::MAX {
+            return Err(bad(
+                kind,
+                first + i,
+                format!(
+                    "leaf {} is also the leaf of record {} (cell {cell}; leaf ids are unique)",
+                    tri.leaf,
+                    first + *slot
+                ),
+            ));
+        }
+        *slot = i;
+    }
+    // `t` distinct ids below `t`: every id has its triangle.
+    Ok(owner.iter().map(|&i| triangles.get(i).map_or(f32::NAN, |tri| tri.size)).collect())
+}
+
+/// Checks one cell's hierarchy of ellipsoids, lines or planes (spec §6.8–§6.10, §10 rules 1–2).
+///
+/// `first` is the index of `records[0]` in its section, used in errors. Checks every record's
+/// interval (`lo` finite and `≥ 0`, `lo ≤ hi`, `hi` possibly `+∞`) and `leaf_count ≥ 1`, that `hi`
+/// does not increase, that the leaf runs are laminar, and that for each leaf `ℓ < n` the non-empty
+/// intervals of the records whose run holds `ℓ` chain from 0 to `+∞` without gap or overlap.
+///
+/// Cost: `O(m log m)` time and `O(m)` memory for `m` records, whatever the number of leaves.
+///
+/// # Errors
+/// [`Error::BadRecord`] for a record's own fields or order, [`Error::BadCell`] for the hierarchy.
+pub fn check_spt<T: SptElement>(kind: SectionKind, cell: usize, first: usize, records: &[T]) -> Result<SptSummary> {
+    sweep(kind, cell, first, records, None)
+}
+
+/// Checks one cell's points against its triangles (spec §6.5, §10 rules 1–3).
+///
+/// Everything [`check_spt`] checks, and: the points cover exactly the leaves `0 .. t` of the
+/// cell's `t` triangles (no points if there are no triangles), and every point with a non-empty
+/// interval `[lo, hi)` has, for each leaf `ℓ` of its run, `size = size(ℓ)` or both `size ≤ lo` and
+/// `size(ℓ) ≤ lo`. `leaf_sizes` is what [`triangle_leaf_sizes`] returns for the cell.
+///
+/// Cost: `O(m log m + t)` time and `O(m)` memory.
+///
+/// # Errors
+/// As [`check_spt`]; [`Error::BadCell`] also for a non-finite or negative leaf size.
+pub fn check_point_cut(cell: usize, first: usize, points: &[PointRecord], leaf_sizes: &[f32]) -> Result<SptSummary> {
+    let kind = SectionKind::POINTS;
+    if let Some(leaf) = leaf_sizes.iter().position(|&s| !non_negative(s)) {
+        return Err(Error::BadCell {
+            cell,
+            reason: format!("leaf {leaf} has size {:?}, not finite and >= 0", leaf_sizes.get(leaf)),
+        });
+    }
+    let summary = sweep(kind, cell, first, points, Some((leaf_sizes, |p: &PointRecord| p.size)))?;
+    Ok(summary)
+}
+
+/// For points: the size of each leaf and the point's gate size (spec §10 rule 3).
+type Gate<'a, T> = Option<(&'a [f32], fn(&T) -> f32)>;
+
+/// What the sweep needs of one record, copied out so the sweep reads memory in order: records are
+/// stored by `hi` but visited by leaf.
+#[derive(Clone, Copy)]
+struct Item {
+    /// First leaf of the run.
+    first: u32,
+    /// Leaves in the run, `>= 1`.
+    count: u32,
+    lo: f32,
+    hi: f32,
+    /// The gate size of a point (rule 3); 0 for other kinds.
+    size: f32,
+    /// Index into the cell's records.
+    index: u32,
+}
+
+impl Item {
+    fn start(&self) -> u64 {
+        u64::from(self.first)
+    }
+
+    /// One past the run's last leaf.
+    fn end(&self) -> u64 {
+        u64::from(self.first) + u64::from(self.count)
+    }
+
+    fn index(&self) -> usize {
+        self.index as usize
+    }
+}
+
+/// A record on the sweep's stack: its run is open at the current leaf.
+struct Open {
+    item: Item,
+    /// Smallest and largest leaf size seen in the run so far (rule 3).
+    min: f32,
+    max: f32,
+}
+
+fn spt_bad_cell(kind: SectionKind, cell: usize, reason: String) -> Error {
+    Error::BadCell { cell, reason: format!("{kind}: {reason}") }
+}
+
+/// Rules 1–3 of spec §10 for one cell and kind.
+///
+/// Records are sorted by `(leaf_first, larger runs first)`, then swept leaf by leaf with a stack of
+/// the runs open at the current leaf: a run that starts inside the top run but ends after it breaks
+/// rule 1. Between two run boundaries the open runs do not change, so rule 2 is checked once per
+/// such segment: the non-empty intervals chain from 0 to `+∞` exactly when, counting `+1` at each
+/// `lo` and `−1` at each `hi`, every value sums to 0 except `0` (`+1`) and `+∞` (`−1`) — intervals
+/// with `lo < hi` form a path of increasing values, so balanced degrees leave one path from 0 to
+/// `+∞` through all of them. The balance is kept incrementally as runs open and close, which makes
+/// each segment `O(1)`. For rule 3 each open run folds the min and max leaf size of its leaves.
+fn sweep<T: SptElement>(
+    kind: SectionKind,
+    cell: usize,
+    first: usize,
+    records: &[T],
+    gate: Gate<'_, T>,
+) -> Result<SptSummary> {
+    // Each record's own fields and the order.
+    let mut n = 0u64;
+    let mut prev_hi = f32::INFINITY;
+    if u32::try_from(records.len()).is_err() {
+        return Err(spt_bad_cell(kind, cell, format!("{} records, a section holds at most 2^32-1", records.len())));
+    }
+    let mut items = Vec::with_capacity(records.len());
+    for (index, r) in records.iter().enumerate() {
+        let (lo, hi) = (r.lo(), r.hi());
+        if !non_negative(lo) {
+            return Err(bad(kind, first + index, format!("lo {lo} is not finite and >= 0")));
+        }
+        if hi.is_nan() || hi < lo {
+            return Err(bad(kind, first + index, format!("hi {hi} is below lo {lo} or NaN")));
+        }
+        if r.leaf_count() == 0 {
+            return Err(bad(kind, first + index, "leaf_count is 0".into()));
+        }
+        if hi > prev_hi {
+            return Err(bad(
+                kind,
+                first + index,
+                format!(
+                    "hi {hi} is larger than {prev_hi} of the record before (cell {cell} sorts by hi, largest first)"
+                ),
+            ));
+        }
+        prev_hi = hi;
+        let (first, count) = (r.leaf_first(), r.leaf_count());
+        n = n.max(u64::from(first) + u64::from(count));
+        let size = gate.map_or(0.0, |(_, size_of)| size_of(r));
+        #[expect(clippy::cast_possible_truncation, reason = "the record count fits u32, checked above")]
+        items.push(Item { first, count, lo, hi, size, index: index as u32 });
+    }
+    let sizes = gate.map(|(sizes, _)| sizes);
+    if let Some(sizes) = sizes {
+        let t = sizes.len() as u64;
+        if t == 0 && !records.is_empty() {
+            return Err(spt_bad_cell(kind, cell, format!("{} records but no triangles (§10 rule 3)", records.len())));
+        }
+        if n != t {
+            return Err(spt_bad_cell(
+                kind,
+                cell,
+                format!("the runs cover leaves 0..{n}, the cell has {t} triangles (§10 rule 3)"),
+            ));
+        }
+    }
+
+    // Start order, larger runs first among equal starts, so a run comes after every run holding it.
+    let items = sort_by_start(items, n);
+
+    let mut state =
+        Sweep { kind, cell, first, sizes, stack: Vec::new(), balance: Balance::default(), cur: 0, depth: 0 };
+    for &item in &items {
+        // Close the runs that end at or before this one's start, checking the segments on the way.
+        loop {
+            let stop = state.stack.last().map_or(item.start(), |top| top.item.end().min(item.start()));
+            state.segment(stop)?;
+            match state.stack.last() {
+                Some(top) if top.item.end() <= item.start() => state.pop()?,
+                _ => break,
+            }
+        }
+        if let Some(top) = state.stack.last()
+            && item.end() > top.item.end()
+        {
+            return Err(spt_bad_cell(
+                kind,
+                cell,
+                format!(
+                    "the leaf runs of records {} (leaves {}..{}) and {} (leaves {}..{}) overlap without nesting (§10 rule 1)",
+                    first + top.item.index(),
+                    top.item.start(),
+                    top.item.end(),
+                    first + item.index(),
+                    item.start(),
+                    item.end()
+                ),
+            ));
+        }
+        state.push(item);
+    }
+    while let Some(top) = state.stack.last() {
+        let end = top.item.end();
+        state.segment(end)?;
+        state.pop()?;
+    }
+    Ok(SptSummary { leaves: n, max_depth: state.depth })
+}
+
+/// Sorts by `(start, end descending, index)`: by buckets of equal start when the leaves are not
+/// many more than the records (the usual case: a hierarchy has about two records per leaf), else
+/// by comparison.
+fn sort_by_start(mut items: Vec<Item>, n: u64) -> Vec<Item> {
+    let key = |it: &Item| (core::cmp::Reverse(it.count), it.index);
+    let buckets = usize::try_from(n).ok().filter(|&n| n <= 4 * items.len() + 64);
+    let Some(buckets) = buckets else {
+        items.sort_unstable_by_key(|it| (it.first, core::cmp::Reverse(it.count), it.index));
+        return items;
+    };
+    // `ends[s]`: one past the last slot of the records starting at leaf `s` (every start is < n).
+    let mut ends = vec![0usize; buckets + 1];
+    for it in &items {
+        if let Some(c) = ends.get_mut(it.first as usize + 1) {
+            *c += 1;
+        }
+    }
+    for s in 1..ends.len() {
+        ends[s] += ends[s - 1];
+    }
+    let mut next = ends.clone();
+    let mut sorted = items.clone();
+    for it in &items {
+        if let Some(slot) = next.get_mut(it.first as usize) {
+            if let Some(dst) = sorted.get_mut(*slot) {
+                *dst = *it;
+            }
+            *slot += 1;
+        }
+    }
+    for w in ends.windows(2) {
+        if let [a, b] = *w
+            && b > a + 1
+            && let Some(bucket) = sorted.get_mut(a..b)
+        {
+            bucket.sort_unstable_by_key(key);
+        }
+    }
+    sorted
+}
+
+/// The state of [`sweep`].
+struct Sweep<'a> {
+    kind: SectionKind,
+    cell: usize,
+    first: usize,
+    /// For points: the size of each leaf (rule 3).
+    sizes: Option<&'a [f32]>,
+    /// The runs open at leaf `cur`, outermost first.
+    stack: Vec<Open>,
+    /// `+1` per `lo`, `−1` per `hi` of the open records with a non-empty interval.
+    balance: Balance,
+    /// The first leaf not checked yet.
+    cur: u64,
+    /// Deepest stack seen.
+    depth: usize,
+}
+
+impl Sweep<'_> {
+    fn push(&mut self, item: Item) {
+        if item.lo < item.hi {
+            self.balance.add(item.lo, 1);
+            self.balance.add(item.hi, -1);
+        }
+        self.stack.push(Open { item, min: f32::INFINITY, max: f32::NEG_INFINITY });
+        self.depth = self.depth.max(self.stack.len());
+    }
+
+    /// Closes the top run: rule 3 over all its leaves, then its leaves' sizes go to the parent.
+    fn pop(&mut self) -> Result<()> {
+        let Some(open) = self.stack.pop() else {
+            return Ok(());
+        };
+        let Item { lo, hi, size, .. } = open.item;
+        let (start, end, index) = (open.item.start(), open.item.end(), open.item.index());
+        if lo < hi {
+            self.balance.add(lo, -1);
+            self.balance.add(hi, 1);
+            if let Some(sizes) = self.sizes {
+                // For every leaf: size = size(ℓ), or size <= lo and size(ℓ) <= lo.
+                let ok = if size <= lo { open.max <= lo } else { open.min == size && open.max == size };
+                if !ok {
+                    let leaf_size =
+                        |l: u64| usize::try_from(l).ok().and_then(|l| sizes.get(l)).copied().unwrap_or(f32::NAN);
+                    let leaf = (start..end)
+                        .find(|&l| {
+                            let s = leaf_size(l);
+                            !(s == size || (size <= lo && s <= lo))
+                        })
+                        .unwrap_or(start);
+                    return Err(spt_bad_cell(
+                        self.kind,
+                        self.cell,
+                        format!(
+                            "record {} (leaves {start}..{end}, size {size}, interval [{lo}, {hi})): leaf {leaf} has triangle size \
+                             {}; the sizes must be equal or both <= lo (§10 rule 3)",
+                            self.first + index,
+                            leaf_size(leaf)
+                        ),
+                    ));
+                }
+            }
+        }
+        if let Some(parent) = self.stack.last_mut() {
+            parent.min = parent.min.min(open.min);
+            parent.max = parent.max.max(open.max);
+        }
+        Ok(())
+    }
+
+    /// Checks the leaves `cur .. stop`, which the open runs all hold, and moves `cur` to `stop`.
+    fn segment(&mut self, stop: u64) -> Result<()> {
+        if stop <= self.cur {
+            return Ok(());
+        }
+        if !self.balance.is_chain() {
+            return Err(self.chain_error(self.cur));
+        }
+        if let Some(sizes) = self.sizes
+            && let Some(top) = self.stack.last_mut()
+        {
+            let leaves = usize::try_from(self.cur)
+                .ok()
+                .zip(usize::try_from(stop).ok())
+                .and_then(|(a, b)| sizes.get(a..b))
+                .unwrap_or_default();
+            for &s in leaves {
+                top.min = top.min.min(s);
+                top.max = top.max.max(s);
+            }
+        }
+        self.cur = stop;
+        Ok(())
+    }
+
+    /// Describes why the open intervals at `leaf` do not chain from 0 to `+∞` (rule 2).
+    fn chain_error(&self, leaf: u64) -> Error {
+        let mut chain: Vec<(f32, f32, usize)> = self
+            .stack
+            .iter()
+            .map(|o| (o.item.lo, o.item.hi, self.first + o.item.index()))
+            .filter(|(lo, hi, _)| lo < hi)
+            .collect();
+        chain.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.2.cmp(&b.2)));
+        let reason = match chain.as_slice() {
+            [] => format!("leaf {leaf} is represented by no record with a non-empty interval (§10 rule 2)"),
+            [(lo, hi, r), ..] if *lo != 0.0 => {
+                format!("leaf {leaf}: its first interval, [{lo}, {hi}) of record {r}, does not start at 0 (§10 rule 2)")
+            }
+            _ => {
+                let step = chain.windows(2).find_map(|w| match *w {
+                    [(alo, ahi, a), (blo, bhi, b)] if ahi != blo => {
+                        let what = if ahi < blo { "leave a gap" } else { "overlap" };
+                        Some(format!(
+                            "leaf {leaf}: the intervals [{alo}, {ahi}) of record {a} and [{blo}, {bhi}) of record {b} {what} (§10 rule 2)"
+                        ))
+                    }
+                    _ => None,
+                });
+                match (step, chain.last()) {
+                    (Some(step), _) => step,
+                    (None, Some((lo, hi, r))) => {
+                        format!(
+                            "leaf {leaf}: its last interval, [{lo}, {hi}) of record {r}, does not end at +inf (§10 rule 2)"
+                        )
+                    }
+                    (None, None) => format!("leaf {leaf}: the intervals do not chain from 0 to +inf (§10 rule 2)"),
+                }
+            }
+        };
+        spt_bad_cell(self.kind, self.cell, reason)
+    }
+}
+
+/// Per interval end value (as normalised bits), `+1` per `lo` minus `1` per `hi`; zero entries are
+/// removed, so it holds at most two entries per open record.
+///
+/// In a well-formed hierarchy a child's `hi` cancels its parent's `lo`, so only a handful of entries
+/// are nonzero: they live in a small vector, and move to a hash map if a cell ever needs more.
+#[derive(Default)]
+struct Balance {
+    small: Vec<(u32, i64)>,
+    map: Option<HashMap<u32, i64, BuildHasherDefault<MixHasher>>>,
+}
+
+impl Balance {
+    /// Entries kept in the vector before switching to the map.
+    const SMALL: usize = 16;
+
+    /// `-0.0` and `0.0` are the same threshold.
+    fn key(v: f32) -> u32 {
+        (v + 0.0).to_bits()
+    }
+
+    fn add(&mut self, v: f32, delta: i64) {
+        let key = Self::key(v);
+        if let Some(map) = &mut self.map {
+            let entry = map.entry(key).or_insert(0);
+            *entry += delta;
+            if *entry == 0 {
+                map.remove(&key);
+            }
+            return;
+        }
+        match self.small.iter().position(|&(k, _)| k == key) {
+            Some(i) => {
+                if let Some(entry) = self.small.get_mut(i) {
+                    entry.1 += delta;
+                    if entry.1 == 0 {
+                        self.small.swap_remove(i);
+                    }
+                }
+            }
+            None if self.small.len() < Self::SMALL => self.small.push((key, delta)),
+            None => {
+                let mut map: HashMap<_, _, _> = self.small.drain(..).collect();
+                map.insert(key, delta);
+                self.map = Some(map);
+            }
+        }
+    }
+
+    fn get(&self, v: f32) -> i64 {
+        let key = Self::key(v);
+        match &self.map {
+            Some(map) => map.get(&key).copied().unwrap_or(0),
+            None => self.small.iter().find(|&&(k, _)| k == key).map_or(0, |&(_, d)| d),
+        }
+    }
+
+    /// Whether the intervals counted form one chain from 0 to `+∞`.
+    fn is_chain(&self) -> bool {
+        let len = self.map.as_ref().map_or(self.small.len(), HashMap::len);
+        len == 2 && self.get(0.0) == 1 && self.get(f32::INFINITY) == -1
+    }
+}
+
+/// A fast hasher for `u32` keys (the `splitmix64` finaliser); [`Balance`] holds few keys.
+#[derive(Default)]
+struct MixHasher(u64);
+
+impl Hasher for MixHasher {
+    fn finish(&self) -> u64 {
+        let mut z = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 << 8) | u64::from(b);
+        }
+    }
+
+    fn write_u32(&mut self, v: u32) {
+        self.0 = u64::from(v);
+    }
+}

@@ -163,7 +163,9 @@ impl ContainerData {
         let mut stored_payloads = Vec::with_capacity(sections.len());
         for (kind, raw, record_size) in sections {
             let (stored, flags) = match compression {
-                Compression::Zstd { level } if kind.compressible() && kind.record_size().is_some() && !raw.is_empty() => {
+                Compression::Zstd { level }
+                    if kind.compressible() && kind.record_size().is_some() && !raw.is_empty() =>
+                {
                     // Record arrays are byte-shuffled first: equal byte positions of neighbouring
                     // records (exponents, high index bytes, zero fields) then sit side by side.
                     let (packed, flags) = if record_size > 1 {
@@ -246,7 +248,13 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::Builder::new().prefix(".treelod-").suffix(".tmp").tempfile_in(dir).map_err(io)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".treelod-").suffix(".tmp");
+    // A temporary file is created 0600; the renamed result must get the mode any new file gets
+    // (0666 less the umask), as a plain `File::create` would give it.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let mut tmp = builder.tempfile_in(dir).map_err(io)?;
     tmp.write_all(bytes).map_err(io)?;
     tmp.as_file().sync_all().map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;

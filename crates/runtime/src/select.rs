@@ -60,7 +60,12 @@ pub fn point_drawn(point: &PointRecord, t: Thresholds) -> bool {
 /// If the cell's ranges lie outside the arrays, which cannot happen for a cell and arrays of the
 /// same opened container (ranges are checked when it is opened).
 #[must_use]
-pub fn select_cell(cell: &CellRecord, triangles: &[TriangleRecord], points: &[PointRecord], t: Thresholds) -> CellSelection {
+pub fn select_cell(
+    cell: &CellRecord,
+    triangles: &[TriangleRecord],
+    points: &[PointRecord],
+    t: Thresholds,
+) -> CellSelection {
     let tris = &triangles[cell.triangles.as_usize()];
     let pts = &points[cell.points.as_usize()];
     #[expect(clippy::cast_possible_truncation, reason = "a cell's range count is a u32")]
@@ -99,7 +104,14 @@ mod tests {
             .iter()
             .map(|&i| {
                 let node = spt.nodes[i as usize];
-                PointRecord { size: node.size, lo: node.lo, hi: node.hi, leaf_first: node.leaf_first, leaf_count: node.leaf_count, ..PointRecord::default() }
+                PointRecord {
+                    size: node.size,
+                    lo: node.lo,
+                    hi: node.hi,
+                    leaf_first: node.leaf_first,
+                    leaf_count: node.leaf_count,
+                    ..PointRecord::default()
+                }
             })
             .collect();
         let mut triangles: Vec<TriangleRecord> = (0..n)

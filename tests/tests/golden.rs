@@ -1,0 +1,305 @@
+//! Golden files of format version 1.0 (`tests/data/v1_0`): every file opens and verifies, the
+//! minimal file decodes to literal values written out here (so a change in reading is caught even
+//! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
+
+use std::path::PathBuf;
+
+use treelod_format::{
+    BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, MaterialInfo, MaterialRecord, Metadata,
+    NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, verify,
+};
+use treelod_tests::{SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_files, spec_hex_dump, spec_path};
+
+fn golden(name: &str) -> PathBuf {
+    golden_dir().join(name)
+}
+
+fn open(name: &str) -> Container {
+    Container::open(golden(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+#[test]
+fn every_golden_file_opens_and_verifies() {
+    let mut names: Vec<String> = std::fs::read_dir(golden_dir())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".treelod"))
+        .collect();
+    names.sort();
+    for recipe in golden_files() {
+        assert!(names.iter().any(|n| n == recipe.name), "golden file {} is missing", recipe.name);
+    }
+    for name in &names {
+        let container = open(name);
+        verify(&container).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let header = container.header();
+        assert_eq!((header.major, header.minor), (1, 0), "{name}");
+        // The same content read from memory equals the mapped file's.
+        let bytes = std::fs::read(golden(name)).unwrap();
+        let from_memory = Container::from_bytes(&bytes).unwrap();
+        let data = ContainerData::from_container(&container);
+        assert_eq!(ContainerData::from_container(&from_memory), data, "{name}");
+        // Rewritten uncompressed and read back, the content survives.
+        let again = data.to_bytes(Compression::None).unwrap();
+        assert_eq!(ContainerData::from_container(&Container::from_bytes(&again).unwrap()), data, "{name}");
+    }
+}
+
+#[test]
+fn uncompressed_golden_files_are_what_the_writer_writes() {
+    // The writer is deterministic and writes 1.0 files exactly like these: if this fails, the
+    // writer's output changed (the golden files must not be regenerated; see make-golden).
+    for name in ["minimal.treelod", "gilet.treelod", "extension.treelod"] {
+        let bytes = std::fs::read(golden(name)).unwrap();
+        let data = ContainerData::from_container(&Container::from_bytes(&bytes).unwrap());
+        assert!(data.to_bytes(Compression::None).unwrap() == bytes, "{name}: the writer no longer reproduces it");
+    }
+}
+
+#[test]
+fn the_minimal_file_decodes_to_these_values() {
+    let c = open("minimal.treelod");
+    let header = c.header();
+    assert_eq!(header.magic, *b"\x89TREELOD\r\n\x1a\n");
+    assert_eq!((header.header_size, header.section_count, header.table_offset, header.file_size), (64, 7, 64, 1064));
+    assert_eq!((header.flags, header.reserved, header.header_checksum), (0, [0; 16], 0xEC06_C529));
+    let table: Vec<(u32, u32, u64, u64, u64, u32, u32)> = c
+        .sections()
+        .iter()
+        .map(|s| {
+            let e = s.entry;
+            (e.kind, e.flags, e.offset, e.length, e.raw_length, e.record_size, e.checksum)
+        })
+        .collect();
+    assert_eq!(
+        table,
+        [
+            (0x01, 0, 400, 238, 238, 1, 0xF2B6_49F3),
+            (0x02, 0, 640, 48, 48, 48, 0xD153_01CD),
+            (0x03, 0, 688, 160, 160, 80, 0x472C_5355),
+            (0x10, 0, 848, 84, 84, 28, 0xAAFE_5794),
+            (0x11, 0, 944, 24, 24, 24, 0x6C7C_0676),
+            (0x12, 0, 976, 48, 48, 48, 0xF43C_42AD),
+            (0x13, 0, 1024, 40, 40, 40, 0x07EE_E70E),
+        ]
+    );
+
+    let expected_metadata = Metadata {
+        generator: "treelod-tests 0.1.0".into(),
+        name: "minimal".into(),
+        sources: vec![Source {
+            path: "trees/tree-0.glb".into(),
+            content_hash: "blake3:2153f064169b27f5e08611c088b8470905911e29d2f9b090789fdcce1ba6386c".into(),
+            byte_length: 3_810_352_352,
+            unit_scale: 0.01,
+        }],
+        trees: vec![Tree {
+            name: "tree-0".into(),
+            source: 0,
+            translation: [1.157_694_6, 0.647_479_3, 6.061_854_4],
+            bounds_min: [0.817_572_9, 1.680_373_9, 4.073_139],
+            bounds_max: [2.048_088_3, 1.700_481, 5.646_667],
+        }],
+        materials: vec![MaterialInfo { name: "material-0".into(), classified_by: "node".into() }],
+        settings: vec![
+            Setting { key: "gilet.cluster_max".into(), value: "2".into() },
+            Setting { key: "grid".into(), value: "1x1x1".into() },
+            Setting { key: "synthetic.seed".into(), value: "1".into() },
+        ],
+    };
+    assert_eq!(c.metadata(), &expected_metadata);
+    assert_eq!(
+        *c.block(),
+        BlockRecord {
+            bounds_min: [0.532_492_16, 0.491_563_44, 3.768_021_6],
+            bounds_max: [2.143_390_2, 2.102_225, 6.175_257_7],
+            grid: [1, 1, 1],
+            tree_count: 1,
+            flags: 0,
+            _pad: 0,
+        }
+    );
+    let empty = |first| Range { first, count: 0 };
+    assert_eq!(
+        c.cells(),
+        [
+            CellRecord {
+                bounds_min: [1.163_686_8, 1.271_219_3, 4.787_289_6],
+                bounds_max: [1.702_643_8, 1.560_854_7, 5.396_181_6],
+                triangles: Range { first: 0, count: 1 },
+                points: Range { first: 0, count: 1 },
+                ellipsoids: empty(0),
+                lines: empty(0),
+                planes: empty(0),
+                prune_leaves: empty(0),
+                flags: 0,
+                _pad: 0,
+            },
+            CellRecord {
+                bounds_min: [0.0; 3],
+                bounds_max: [0.0; 3],
+                triangles: empty(1),
+                points: empty(1),
+                ellipsoids: empty(0),
+                lines: empty(0),
+                planes: empty(0),
+                prune_leaves: empty(0),
+                flags: 0,
+                _pad: 0,
+            },
+        ]
+    );
+    let normal = 0x5E7E_ABF1; // 1585359857
+    assert_eq!(
+        c.vertices(),
+        [
+            VertexRecord {
+                position: [1.702_643_8, 1.271_219_3, 4.787_289_6],
+                normal,
+                uv: [0.253_273_13, 0.529_757_4],
+                color: 0xFFFF_FFFF,
+            },
+            VertexRecord {
+                position: [1.452_346_1, 1.308_038, 4.985_161_3],
+                normal,
+                uv: [0.708_179_24, 0.236_360_49],
+                color: 3_819_622_847,
+            },
+            VertexRecord {
+                position: [1.163_686_8, 1.560_854_7, 5.396_181_6],
+                normal,
+                uv: [0.893_939, 0.912_690_16],
+                color: 1_398_003_422,
+            },
+        ]
+    );
+    assert_eq!(c.triangles(), [TriangleRecord { indices: [0, 1, 2], size: 0.222_833_25, leaf: 0, material: 0 }]);
+    assert_eq!(
+        c.points(),
+        [PointRecord {
+            position: [1.439_558_9, 1.380_037_3, 5.056_211],
+            radius: 0.111_416_62,
+            normal,
+            color: 2_476_120_318,
+            size: 0.222_833_25,
+            lo: 0.0,
+            hi: f32::INFINITY,
+            leaf_first: 0,
+            leaf_count: 1,
+            flags: 0,
+        }]
+    );
+    assert_eq!(c.triangles()[0].size.to_bits(), c.points()[0].size.to_bits(), "leaf point size, bit for bit");
+    assert_eq!(
+        c.materials(),
+        [MaterialRecord {
+            base_color: [0.877_348_66, 0.523_067_2, 0.285_508_63, 0.896_998_3],
+            image: NO_IMAGE,
+            alpha_mode: 1,
+            alpha_cutoff: 0.605_420_35,
+            class: 1,
+            flags: 1,
+            _pad: 0,
+        }]
+    );
+    assert!(c.images().is_empty() && c.image_data().is_empty() && c.ellipsoids().is_empty() && c.lines().is_empty());
+    assert!(c.planes().is_empty() && c.prune_leaves().is_empty() && c.prune_triangles().is_empty());
+    assert!(c.prune_scale().is_empty() && c.prune_lambda().is_empty());
+}
+
+#[test]
+fn the_gilet_file_has_a_grid_of_point_hierarchies() {
+    let c = open("gilet.treelod");
+    assert_eq!(c.block().grid, [3, 2, 2]);
+    let counts: Vec<(u32, u32)> = c.cells().iter().map(|cell| (cell.triangles.count, cell.points.count)).collect();
+    assert_eq!(
+        counts,
+        [(1, 1), (5, 9), (2, 3), (5, 9), (6, 11), (5, 9), (1, 1), (5, 9), (1, 1), (1, 1), (0, 0), (4, 7), (0, 0)]
+    );
+    assert_eq!(c.images().len(), 1);
+}
+
+#[test]
+fn the_every_kind_file_has_every_kind_compressed_where_it_pays() {
+    let c = open("every-kind-zstd.treelod");
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    let compressed: Vec<SectionKind> =
+        c.sections().iter().filter(|s| s.entry.flags & FLAG_ZSTD != 0).map(|s| s.kind()).collect();
+    // Everything but BLOCK and CELLS (never compressed), IMAGE_DATA (random texels) and the two
+    // 32-byte curves (too small to gain).
+    assert_eq!(compressed.len(), 11, "{compressed:?}");
+    assert!(!compressed.contains(&SectionKind::BLOCK) && !compressed.contains(&SectionKind::CELLS));
+}
+
+#[test]
+fn the_extension_file_skips_its_unknown_kinds() {
+    let c = open("extension.treelod");
+    let kinds: Vec<u32> = c.sections().iter().map(|s| s.entry.kind).collect();
+    assert_eq!(kinds, [0x01, 0x02, 0x03, 0x10, 0x11, 0x12, 0x13, 0x0100, 0x0001_0000]);
+    let data = ContainerData::from_container(&c);
+    let extra: Vec<(u32, usize)> = data.extra_sections.iter().map(|(k, b)| (*k, b.len())).collect();
+    assert_eq!(extra, [(0x0100, 44), (0x0001_0000, 4)]);
+    assert_eq!(data.triangles.len(), 2);
+    assert_eq!(data.points.len(), 3);
+}
+
+/// The text between the spec's markers, without the newlines that frame it.
+fn spec_example_in_spec() -> String {
+    let spec = std::fs::read_to_string(spec_path()).expect("the spec is readable");
+    let start = spec.find(SPEC_EXAMPLE_BEGIN).expect("the spec has the begin marker") + SPEC_EXAMPLE_BEGIN.len();
+    let end = spec[start..].find(SPEC_EXAMPLE_END).expect("the spec has the end marker") + start;
+    spec[start..end].trim_matches('\n').to_owned()
+}
+
+#[test]
+fn spec_example_matches() {
+    let bytes = std::fs::read(golden("minimal.treelod")).unwrap();
+    let dump = spec_hex_dump(&bytes).unwrap();
+    assert!(
+        spec_example_in_spec() == dump.trim_matches('\n'),
+        "format-spec/treelod.md §13.1 differs from `cargo run -p treelod-tests --bin spec-example`; paste its output \
+         between the markers"
+    );
+    // Every byte of the file appears once in the dump.
+    let hex_bytes: usize = dump
+        .lines()
+        .filter(|l| l.len() > 10 && l.as_bytes()[..8].iter().all(u8::is_ascii_hexdigit) && &l[8..10] == "  ")
+        .map(|l| l[10..59].split_whitespace().count())
+        .sum();
+    assert_eq!(hex_bytes, bytes.len());
+}
+
+#[test]
+fn the_spec_example_program_prints_the_spec_text() {
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_spec-example")).output().unwrap();
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(String::from_utf8(output.stdout).unwrap().trim_matches('\n'), spec_example_in_spec());
+}
+
+#[test]
+fn make_golden_never_overwrites_a_file_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_make-golden")).args(args).arg(dir.path()).output().unwrap()
+    };
+    assert!(run(&[]).status.success());
+    for recipe in golden_files() {
+        let path = dir.path().join(recipe.name);
+        Container::open(&path).and_then(|c| verify(&c)).unwrap_or_else(|e| panic!("{}: {e}", recipe.name));
+    }
+    let again = run(&[]);
+    assert!(again.status.success());
+    assert!(String::from_utf8_lossy(&again.stdout).contains("unchanged"));
+
+    let minimal = dir.path().join("minimal.treelod");
+    std::fs::write(&minimal, b"a golden file from another time").unwrap();
+    let refused = run(&[]);
+    assert!(!refused.status.success(), "a differing golden file is reported");
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--force"));
+    assert_eq!(std::fs::read(&minimal).unwrap(), b"a golden file from another time", "and kept");
+
+    assert!(run(&["--force"]).status.success());
+    Container::open(&minimal).unwrap();
+}
