@@ -132,6 +132,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_prune(c.prune_leaves(), c.prune_triangles())?;
     check_curve(SectionKind::PRUNE_SCALE, c.prune_scale())?;
     check_curve(SectionKind::PRUNE_LAMBDA, c.prune_lambda())?;
+    check_metadata(c)?;
 
     for (index, cell) in c.cells().iter().enumerate() {
         if cell.is_empty() {
@@ -160,6 +161,40 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
 
 // ---------------------------------------------------------------------------------------------
 // File level: checksums and padding (spec §3, §4, §8).
+
+/// Spec §7.1: the metadata agrees with the records, and §1: the file ends at its last section.
+fn check_metadata(c: &Container) -> Result<()> {
+    let meta = c.metadata();
+    let bad = |reason: String| Error::BadRecord { kind: SectionKind::META, index: 0, reason };
+    let tree_count = c.block().tree_count as usize;
+    if meta.trees.len() != tree_count {
+        return Err(bad(format!("{} trees listed, BLOCK says tree_count = {tree_count}", meta.trees.len())));
+    }
+    if let Some((i, tree)) = meta.trees.iter().enumerate().find(|(_, t)| t.source as usize >= meta.sources.len()) {
+        return Err(bad(format!("tree {i} names source {}, there are {}", tree.source, meta.sources.len())));
+    }
+    if meta.materials.len() != c.materials().len() {
+        return Err(bad(format!(
+            "{} material entries for {} MATERIALS records",
+            meta.materials.len(),
+            c.materials().len()
+        )));
+    }
+    if let Some(pair) = meta.settings.windows(2).find(|w| w[0].key >= w[1].key) {
+        return Err(bad(format!("settings are not sorted by unique key: {:?} before {:?}", pair[0].key, pair[1].key)));
+    }
+    let end = c.sections().iter().map(|s| s.entry.offset + s.entry.length).max();
+    let table_end = c.header().table_offset + c.sections().len() as u64 * crate::records::SECTION_ENTRY_SIZE as u64;
+    let expected = end.unwrap_or(table_end).max(table_end);
+    if c.header().file_size != expected {
+        return Err(Error::BadHeader {
+            field: "file_size",
+            value: c.header().file_size,
+            rule: "the file ends where its last section ends (spec §1)",
+        });
+    }
+    Ok(())
+}
 
 fn check_checksums(c: &Container, report: &mut VerifyReport) -> Result<()> {
     for section in c.sections() {

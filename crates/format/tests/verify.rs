@@ -166,6 +166,8 @@ fn valid() -> ContainerData {
             generator: "test".into(),
             name: "fixture".into(),
             materials: vec![MaterialInfo { name: "leaf".into(), classified_by: "name".into() }],
+            sources: vec![treelod_format::Source::default()],
+            trees: vec![treelod_format::Tree::default()],
             ..Metadata::default()
         },
         block: BlockRecord { bounds_max: [4.0, 2.0, 2.0], grid: [2, 1, 1], tree_count: 1, ..BlockRecord::default() },
@@ -353,19 +355,17 @@ fn a_nonzero_padding_byte_is_refused() {
 }
 
 #[test]
-fn bytes_after_the_last_section_must_be_zero() {
+fn the_file_ends_where_its_last_section_ends() {
+    // Spec §1: file_size is the end of the last section, so even zero bytes after it (declared in
+    // file_size, so open accepts them) are refused by verify.
     let mut bytes = bytes_of(&valid());
     let len = bytes.len();
     bytes.extend_from_slice(&[0; 16]);
     bytes[32..40].copy_from_slice(&(len as u64 + 16).to_le_bytes());
     reseal(&mut bytes);
-    verify_bytes(&bytes).expect("zero bytes at the end are padding");
-    bytes[len + 3] = 0xAA;
     match verify_bytes(&bytes) {
-        Err(Error::BadSection { reason, .. }) => {
-            assert!(reason.contains("after the last section"), "{reason}")
-        }
-        other => panic!("expected BadSection, got {other:?}"),
+        Err(Error::BadHeader { field: "file_size", value, .. }) => assert_eq!(value, len as u64 + 16),
+        other => panic!("expected BadHeader file_size, got {other:?}"),
     }
 }
 
@@ -834,6 +834,12 @@ fn large_container(t: usize) -> ContainerData {
     let (triangles, points) = gilet_cell(t, 0x2545_F491_4F6C_DD1D);
     let vertex = |p| VertexRecord { position: p, normal: 0, uv: [0.0; 2], color: u32::MAX };
     ContainerData {
+        metadata: Metadata {
+            sources: vec![treelod_format::Source::default()],
+            trees: vec![treelod_format::Tree::default()],
+            materials: vec![MaterialInfo::default()],
+            ..Metadata::default()
+        },
         block: BlockRecord { bounds_max: [1.0; 3], grid: [1, 1, 1], tree_count: 1, ..BlockRecord::default() },
         cells: vec![
             CellRecord {
