@@ -184,7 +184,7 @@ fn check_metadata(c: &Container) -> Result<()> {
         return Err(bad(format!("settings are not sorted by unique key: {:?} before {:?}", pair[0].key, pair[1].key)));
     }
     let end = c.sections().iter().map(|s| s.entry.offset + s.entry.length).max();
-    let table_end = c.header().table_offset + c.sections().len() as u64 * crate::records::SECTION_ENTRY_SIZE as u64;
+    let table_end = c.header().table_offset + c.sections().len() as u64 * SECTION_ENTRY_SIZE as u64;
     let expected = end.unwrap_or(table_end).max(table_end);
     if c.header().file_size != expected {
         return Err(Error::BadHeader {

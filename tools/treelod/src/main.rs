@@ -1,2 +1,60 @@
-//! The `treelod` command-line tool.
-fn main() {}
+//! The `treelod` command-line tool: build, inspect and check `.treelod` containers.
+//!
+//! This file only parses the command line, dispatches to one module per subcommand and turns the
+//! outcome into an exit code ([`report::Failed::exit_code`]). Each subcommand prints its own
+//! results to stdout and its errors to stderr, every error line as `error: PATH: reason`.
+
+mod dump;
+mod report;
+mod table;
+mod verify;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// The exit codes, shown at the end of `--help` (and documented in `docs/cli.md`).
+const EXIT_CODES: &str = "\
+Exit codes:
+  0  success
+  2  usage error (unknown subcommand or option, missing argument)
+  3  invalid input: not a valid .treelod container, a glTF file that does not parse or holds
+     nothing drawable, a bad placement file
+  4  unsupported: a newer format version, a feature this build of treelod lacks (e.g. a glTF
+     compression extension)
+  5  I/O error: a file cannot be read or written (missing, a directory, no permission)
+With several files every file is processed and the exit code is that of the first failure.
+Errors go to stderr as `error: FILE: reason`, warnings as `warning: FILE: message`.";
+
+/// Build, inspect and check .treelod level-of-detail containers for tree meshes.
+#[derive(Debug, Parser)]
+#[command(name = "treelod", version, after_help = EXIT_CODES)]
+struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// The subcommands, one module each.
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Print what a container holds: sections, block, metadata, per-cell counts, size histograms.
+    #[command(after_help = EXIT_CODES)]
+    Dump(dump::Args),
+    /// Fully check containers (format spec §9.2): checksums, records, orderings, exact cuts.
+    #[command(after_help = EXIT_CODES)]
+    Verify(verify::Args),
+}
+
+fn main() -> ExitCode {
+    // Usage errors: clap prints `error: …` and the usage to stderr and exits with 2.
+    let cli = Cli::parse();
+    let outcome = match &cli.command {
+        Command::Dump(args) => dump::run(args),
+        Command::Verify(args) => verify::run(args),
+    };
+    match outcome {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(failed) => ExitCode::from(failed.exit_code()),
+    }
+}

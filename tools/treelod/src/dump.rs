@@ -1,0 +1,708 @@
+//! `treelod dump FILE [--json]`: print what a container holds.
+//!
+//! The content is gathered once into a [`Dump`] and rendered either as aligned text for humans or
+//! as one JSON object (keys in declaration order). Both are deterministic: they depend only on the
+//! file's bytes and on the path as it was passed.
+//!
+//! Only the cheap validation of `Container::open` (spec §9.1) has run, so record fields may hold
+//! any value (NaN sizes, out-of-range indices, mismatched material counts): nothing here indexes
+//! or computes in a way that could panic on them.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+use treelod_format::{
+    CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, Section, SectionKind, Setting, Source, Tree, material_class,
+};
+
+use crate::report::{self, Failed};
+use crate::table::{Align, Table};
+
+/// Arguments of `treelod dump`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The container to describe.
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+    /// Print one JSON object with the same content instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `treelod dump`.
+pub fn run(args: &Args) -> Result<(), Failed> {
+    let container = report::open(&args.file)?;
+    let dump = Dump::new(&args.file, &container);
+    let text = if args.json { dump.to_json() } else { dump.to_text() };
+    report::write_stdout(&text)
+}
+
+/// The measure each histogram buckets, as printed in the output.
+const HISTOGRAM_NOTE: &str = "element sizes in metres, log2 buckets [2^k, 2^(k+1)); \
+triangle: size; point: size; ellipsoid: 2*max(radii); line: |p1 - p0|; plane: 2*max(|axis_u|, |axis_v|)";
+
+/// [`HISTOGRAM_NOTE`] as the text form's two header lines.
+const HISTOGRAM_TEXT_HEADER: &str = "\nhistograms: log2 buckets [2^k, 2^(k+1)) of element sizes in metres\n  \
+(triangle: size; point: size; ellipsoid: 2*max(radii); line: |p1 - p0|; plane: 2*max(|axis_u|, |axis_v|))\n";
+
+/// Everything `dump` prints, in output order.
+#[derive(Debug, Serialize)]
+struct Dump<'a> {
+    /// The path as passed on the command line.
+    file: String,
+    /// `major.minor` of the header.
+    version: String,
+    /// Bytes in the file (the header's `file_size`, equal to the file length after open).
+    file_size: u64,
+    /// Bytes in the header.
+    header_size: u32,
+    /// Offset of the section table.
+    table_offset: u64,
+    /// The section table in file order.
+    sections: Vec<SectionInfo>,
+    /// The `BLOCK` record.
+    block: BlockInfo,
+    /// The `META` section joined with the `MATERIALS` records.
+    metadata: MetadataInfo<'a>,
+    /// Per-cell record counts.
+    cells: CellsInfo,
+    /// Size histograms of the hierarchical kinds.
+    histograms: Histograms,
+}
+
+/// One entry of the section table.
+#[derive(Debug, Serialize)]
+struct SectionInfo {
+    /// The raw kind value.
+    kind: u32,
+    /// The spec's name, or the kind in hex for kinds this version does not know.
+    name: String,
+    /// The raw flags.
+    flags: u32,
+    /// `zstd`, `shuffle`, and any other set bit in hex.
+    flag_names: Vec<String>,
+    /// Offset of the stored payload.
+    offset: u64,
+    /// Stored length.
+    length: u64,
+    /// Decoded length.
+    raw_length: u64,
+    /// `raw_length / length`, rounded to three decimals; `None` for an empty section.
+    ratio: Option<f64>,
+    /// Bytes per record.
+    record_size: u32,
+    /// `raw_length / record_size`.
+    record_count: u64,
+    /// CRC-32 of the stored bytes, as stored.
+    checksum: u32,
+}
+
+/// The `BLOCK` record.
+#[derive(Debug, Serialize)]
+struct BlockInfo {
+    /// Lower corner of the block bounds.
+    bounds_min: [f32; 3],
+    /// Upper corner.
+    bounds_max: [f32; 3],
+    /// Cells along x, y, z.
+    grid: [u32; 3],
+    /// Number of source trees.
+    tree_count: u32,
+}
+
+/// The metadata, with materials joined to their records.
+#[derive(Debug, Serialize)]
+struct MetadataInfo<'a> {
+    /// Tool that wrote the file.
+    generator: &'a str,
+    /// Block name.
+    name: &'a str,
+    /// Source files.
+    sources: &'a [Source],
+    /// Trees of the block.
+    trees: &'a [Tree],
+    /// One entry per material record or metadata entry, whichever are more.
+    materials: Vec<MaterialOut>,
+    /// Build settings.
+    settings: &'a [Setting],
+}
+
+/// A material: its class from `MATERIALS`, its name and provenance from `META`.
+#[derive(Debug, Serialize)]
+struct MaterialOut {
+    /// Index in `MATERIALS`.
+    index: usize,
+    /// The record's raw `class`, `None` if there is no record for this index.
+    class: Option<u32>,
+    /// `bark`, `leaf`, `other` or `unknown(N)`; `None` without record.
+    class_name: Option<String>,
+    /// The material's name, `None` without metadata entry.
+    name: Option<String>,
+    /// How the class was decided, `None` without metadata entry.
+    classified_by: Option<String>,
+}
+
+/// Record counts of one cell or of all cells.
+#[derive(Debug, Default, Serialize)]
+struct Counts {
+    /// `TRIANGLES` records.
+    triangles: u64,
+    /// `POINTS` records.
+    points: u64,
+    /// `ELLIPSOIDS` records.
+    ellipsoids: u64,
+    /// `LINES` records.
+    lines: u64,
+    /// `PLANES` records.
+    planes: u64,
+    /// `PRUNE_LEAVES` records.
+    prune_leaves: u64,
+}
+
+impl Counts {
+    /// The counts of a cell's ranges.
+    fn of(cell: &CellRecord) -> Self {
+        let n = |r: treelod_format::Range| u64::from(r.count);
+        Self {
+            triangles: n(cell.triangles),
+            points: n(cell.points),
+            ellipsoids: n(cell.ellipsoids),
+            lines: n(cell.lines),
+            planes: n(cell.planes),
+            prune_leaves: n(cell.prune_leaves),
+        }
+    }
+
+    /// Adds `other` to `self`.
+    fn add(&mut self, other: &Self) {
+        self.triangles += other.triangles;
+        self.points += other.points;
+        self.ellipsoids += other.ellipsoids;
+        self.lines += other.lines;
+        self.planes += other.planes;
+        self.prune_leaves += other.prune_leaves;
+    }
+
+    /// The counts in column order.
+    fn values(&self) -> [u64; 6] {
+        [self.triangles, self.points, self.ellipsoids, self.lines, self.planes, self.prune_leaves]
+    }
+
+    /// Whether every count is zero.
+    fn is_zero(&self) -> bool {
+        self.values().iter().all(|&v| v == 0)
+    }
+}
+
+/// Per-cell counts.
+#[derive(Debug, Serialize)]
+struct CellsInfo {
+    /// Number of grid cells (without the block cell).
+    grid_cells: usize,
+    /// Number of cells with at least one record, the block cell included.
+    non_empty: usize,
+    /// The non-empty cells in index order.
+    list: Vec<CellInfo>,
+    /// Sums over all cells.
+    totals: Counts,
+}
+
+/// One non-empty cell.
+#[derive(Debug, Serialize)]
+struct CellInfo {
+    /// Index in `CELLS`.
+    index: usize,
+    /// Whether this is the block cell (the last record).
+    block: bool,
+    /// Grid coordinates, `None` for the block cell.
+    xyz: Option<[u32; 3]>,
+    /// Its record counts.
+    counts: Counts,
+}
+
+/// One histogram per hierarchical kind.
+#[derive(Debug, Serialize)]
+struct Histograms {
+    /// What is measured, as in the text header.
+    note: &'static str,
+    /// Triangle `size`.
+    triangles: Histogram,
+    /// Point `size`.
+    points: Histogram,
+    /// Ellipsoid `2·max(radii)`.
+    ellipsoids: Histogram,
+    /// Line `|p1 − p0|`.
+    lines: Histogram,
+    /// Plane `2·max(|axis_u|, |axis_v|)`.
+    planes: Histogram,
+}
+
+/// A log2-bucketed histogram of element sizes.
+#[derive(Debug, Serialize)]
+struct Histogram {
+    /// The measure, e.g. `size`.
+    measure: &'static str,
+    /// Elements counted, including the special ones below.
+    count: u64,
+    /// Elements of size zero.
+    zero: u64,
+    /// Elements of negative size (invalid, but counted rather than hidden).
+    negative: u64,
+    /// Elements whose size is NaN or infinite.
+    non_finite: u64,
+    /// The non-empty buckets, smallest first.
+    buckets: Vec<Bucket>,
+}
+
+/// The elements with a size in `[2^log2, 2^(log2+1))`.
+#[derive(Debug, Serialize)]
+struct Bucket {
+    /// The bucket's exponent.
+    log2: i32,
+    /// `2^log2`, metres.
+    min: f64,
+    /// `2^(log2+1)`, metres.
+    max: f64,
+    /// Elements in the bucket.
+    count: u64,
+}
+
+impl Histogram {
+    /// Buckets `sizes`.
+    fn new(measure: &'static str, sizes: impl Iterator<Item = f32>) -> Self {
+        let mut h = Self { measure, count: 0, zero: 0, negative: 0, non_finite: 0, buckets: Vec::new() };
+        let mut by_exponent = std::collections::BTreeMap::<i32, u64>::new();
+        for size in sizes {
+            h.count += 1;
+            if !size.is_finite() {
+                h.non_finite += 1;
+            } else if size == 0.0 {
+                h.zero += 1;
+            } else if size < 0.0 {
+                h.negative += 1;
+            } else {
+                *by_exponent.entry(floor_log2(size)).or_default() += 1;
+            }
+        }
+        h.buckets = by_exponent
+            .into_iter()
+            .map(|(k, count)| Bucket { log2: k, min: 2f64.powi(k), max: 2f64.powi(k + 1), count })
+            .collect();
+        h
+    }
+}
+
+/// `floor(log2(v))` of a finite positive `v`, exactly, from the bits (subnormals included).
+fn floor_log2(v: f32) -> i32 {
+    let bits = v.to_bits() & 0x7FFF_FFFF;
+    let exponent = bits >> 23;
+    let mantissa = bits & 0x7F_FFFF;
+    #[expect(clippy::cast_possible_wrap, reason = "both values are below 256")]
+    if exponent == 0 {
+        // Subnormal: v = m·2^-149 with 0 < m < 2^23 (zero is counted apart by the caller).
+        (31 - mantissa.leading_zeros().min(31)) as i32 - 149
+    } else {
+        exponent as i32 - 127
+    }
+}
+
+/// Length of a 3-vector in `f32` (NaN or infinity propagate).
+fn length(v: [f32; 3]) -> f32 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// The larger of two sizes, NaN if either is NaN (so it is counted as non-finite).
+fn max_or_nan(a: f32, b: f32) -> f32 {
+    if a.is_nan() || b.is_nan() { f32::NAN } else { a.max(b) }
+}
+
+impl<'a> Dump<'a> {
+    /// Gathers the content of `container`, opened from `path`.
+    fn new(path: &Path, container: &'a Container) -> Self {
+        let header = container.header();
+        let block = container.block();
+        let meta = container.metadata();
+        let records = container.materials();
+        let materials = (0..records.len().max(meta.materials.len()))
+            .map(|index| {
+                let record = records.get(index);
+                let info = meta.materials.get(index);
+                MaterialOut {
+                    index,
+                    class: record.map(|r| r.class),
+                    class_name: record.map(|r| class_name(r.class)),
+                    name: info.map(|i| i.name.clone()),
+                    classified_by: info.map(|i| i.classified_by.clone()),
+                }
+            })
+            .collect();
+
+        let cell_records = container.cells();
+        let grid_cells = block.grid_cell_count();
+        let mut totals = Counts::default();
+        let mut list = Vec::new();
+        for (index, cell) in cell_records.iter().enumerate() {
+            let counts = Counts::of(cell);
+            totals.add(&counts);
+            if !counts.is_zero() {
+                let is_block = index >= grid_cells;
+                let xyz = (!is_block).then(|| block.cell_coords(index));
+                list.push(CellInfo { index, block: is_block, xyz, counts });
+            }
+        }
+
+        let histograms = Histograms {
+            note: HISTOGRAM_NOTE,
+            triangles: Histogram::new("size", container.triangles().iter().map(|t| t.size)),
+            points: Histogram::new("size", container.points().iter().map(|p| p.size)),
+            ellipsoids: Histogram::new(
+                "2*max(radii)",
+                container.ellipsoids().iter().map(|e| 2.0 * max_or_nan(e.radii[0], max_or_nan(e.radii[1], e.radii[2]))),
+            ),
+            lines: Histogram::new(
+                "|p1 - p0|",
+                container.lines().iter().map(|l| length([l.p1[0] - l.p0[0], l.p1[1] - l.p0[1], l.p1[2] - l.p0[2]])),
+            ),
+            planes: Histogram::new(
+                "2*max(|axis_u|, |axis_v|)",
+                container.planes().iter().map(|p| 2.0 * max_or_nan(length(p.axis_u), length(p.axis_v))),
+            ),
+        };
+
+        Self {
+            file: path.display().to_string(),
+            version: format!("{}.{}", header.major, header.minor),
+            file_size: header.file_size,
+            header_size: header.header_size,
+            table_offset: header.table_offset,
+            sections: container.sections().iter().map(section_info).collect(),
+            block: BlockInfo {
+                bounds_min: block.bounds_min,
+                bounds_max: block.bounds_max,
+                grid: block.grid,
+                tree_count: block.tree_count,
+            },
+            metadata: MetadataInfo {
+                generator: &meta.generator,
+                name: &meta.name,
+                sources: &meta.sources,
+                trees: &meta.trees,
+                materials,
+                settings: &meta.settings,
+            },
+            cells: CellsInfo { grid_cells, non_empty: list.len(), list, totals },
+            histograms,
+        }
+    }
+
+    /// The JSON form: one pretty-printed object and a newline.
+    fn to_json(&self) -> String {
+        // Serializing plain structs of numbers and strings cannot fail (non-finite floats are
+        // written as null); should it ever, the error is shown in place of the object.
+        match serde_json::to_string_pretty(self) {
+            Ok(mut json) => {
+                json.push('\n');
+                json
+            }
+            Err(e) => format!("{{\"error\": {:?}}}\n", e.to_string()),
+        }
+    }
+
+    /// The text form.
+    fn to_text(&self) -> String {
+        let mut out = format!(
+            "file       {}\nversion    {}\nfile size  {} bytes (header {}, section table at {})\n",
+            self.file, self.version, self.file_size, self.header_size, self.table_offset
+        );
+
+        out.push_str(&format!("\nsections ({})\n", self.sections.len()));
+        out.push_str(&self.sections_table().render("  "));
+
+        let b = &self.block;
+        out.push_str("\nblock\n");
+        out.push_str(&format!("  bounds  {} .. {}\n", vec3(b.bounds_min), vec3(b.bounds_max)));
+        out.push_str(&format!(
+            "  grid    {} x {} x {} = {} cells + block cell\n",
+            b.grid[0], b.grid[1], b.grid[2], self.cells.grid_cells
+        ));
+        out.push_str(&format!("  trees   {}\n", b.tree_count));
+
+        out.push_str(&self.metadata_text());
+        out.push_str(&self.cells_text());
+        out.push_str(&self.histograms_text());
+        out
+    }
+
+    /// The section table as text.
+    fn sections_table(&self) -> Table {
+        let mut t = Table::new(&[
+            ("kind", Align::Left),
+            ("flags", Align::Left),
+            ("offset", Align::Right),
+            ("stored", Align::Right),
+            ("raw", Align::Right),
+            ("ratio", Align::Right),
+            ("record", Align::Right),
+            ("records", Align::Right),
+            ("checksum", Align::Left),
+        ]);
+        for s in &self.sections {
+            t.row(vec![
+                s.name.clone(),
+                if s.flag_names.is_empty() { "-".into() } else { s.flag_names.join("+") },
+                s.offset.to_string(),
+                s.length.to_string(),
+                s.raw_length.to_string(),
+                s.ratio.map_or_else(|| "-".into(), |r| format!("{r:.2}")),
+                s.record_size.to_string(),
+                s.record_count.to_string(),
+                format!("{:#010x}", s.checksum),
+            ]);
+        }
+        t
+    }
+
+    /// The metadata as text.
+    fn metadata_text(&self) -> String {
+        let m = &self.metadata;
+        let mut out = String::from("\nmetadata\n");
+        out.push_str(&format!("  generator  {:?}\n", m.generator));
+        out.push_str(&format!("  name       {:?}\n", m.name));
+
+        out.push_str(&format!("  sources ({})\n", m.sources.len()));
+        if !m.sources.is_empty() {
+            let mut t = Table::new(&[
+                ("#", Align::Right),
+                ("path", Align::Left),
+                ("bytes", Align::Right),
+                ("unit scale", Align::Right),
+                ("content hash", Align::Left),
+            ]);
+            for (i, s) in m.sources.iter().enumerate() {
+                t.row(vec![
+                    i.to_string(),
+                    format!("{:?}", s.path),
+                    s.byte_length.to_string(),
+                    s.unit_scale.to_string(),
+                    format!("{:?}", s.content_hash),
+                ]);
+            }
+            out.push_str(&t.render("    "));
+        }
+
+        out.push_str(&format!("  trees ({})\n", m.trees.len()));
+        if !m.trees.is_empty() {
+            let mut t = Table::new(&[
+                ("#", Align::Right),
+                ("name", Align::Left),
+                ("source", Align::Right),
+                ("translation", Align::Left),
+                ("bounds", Align::Left),
+            ]);
+            for (i, tree) in m.trees.iter().enumerate() {
+                t.row(vec![
+                    i.to_string(),
+                    format!("{:?}", tree.name),
+                    tree.source.to_string(),
+                    vec3(tree.translation),
+                    format!("{} .. {}", vec3(tree.bounds_min), vec3(tree.bounds_max)),
+                ]);
+            }
+            out.push_str(&t.render("    "));
+        }
+
+        out.push_str(&format!("  materials ({})\n", m.materials.len()));
+        if !m.materials.is_empty() {
+            let mut t = Table::new(&[
+                ("#", Align::Right),
+                ("class", Align::Left),
+                ("classified by", Align::Left),
+                ("name", Align::Left),
+            ]);
+            let missing = || "-".to_owned();
+            for mat in &m.materials {
+                t.row(vec![
+                    mat.index.to_string(),
+                    mat.class_name.clone().unwrap_or_else(missing),
+                    mat.classified_by.as_ref().map_or_else(missing, |s| format!("{s:?}")),
+                    mat.name.as_ref().map_or_else(missing, |s| format!("{s:?}")),
+                ]);
+            }
+            out.push_str(&t.render("    "));
+        }
+
+        out.push_str(&format!("  settings ({})\n", m.settings.len()));
+        for s in m.settings {
+            out.push_str(&format!("    {} = {:?}\n", s.key.escape_debug(), s.value));
+        }
+        out
+    }
+
+    /// The per-cell counts as text.
+    fn cells_text(&self) -> String {
+        let c = &self.cells;
+        let mut out = format!(
+            "\ncells ({} of {} non-empty: {} grid cells + block cell)\n",
+            c.non_empty,
+            c.grid_cells + 1,
+            c.grid_cells
+        );
+        let mut t = Table::new(&[
+            ("cell", Align::Left),
+            ("xyz", Align::Left),
+            ("triangles", Align::Right),
+            ("points", Align::Right),
+            ("ellipsoids", Align::Right),
+            ("lines", Align::Right),
+            ("planes", Align::Right),
+            ("prune leaves", Align::Right),
+        ]);
+        let row = |label: String, xyz: String, counts: &Counts| {
+            let mut cells = vec![label, xyz];
+            cells.extend(counts.values().iter().map(u64::to_string));
+            cells
+        };
+        for cell in &c.list {
+            let (label, xyz) = match cell.xyz {
+                Some([x, y, z]) => (cell.index.to_string(), format!("({x},{y},{z})")),
+                None => ("block".to_owned(), String::new()),
+            };
+            t.row(row(label, xyz, &cell.counts));
+        }
+        t.row(row("total".to_owned(), String::new(), &c.totals));
+        out.push_str(&t.render("  "));
+        out
+    }
+
+    /// The histograms as text.
+    fn histograms_text(&self) -> String {
+        let h = &self.histograms;
+        let mut out = String::from(HISTOGRAM_TEXT_HEADER);
+        let kinds = [
+            ("triangles", &h.triangles),
+            ("points", &h.points),
+            ("ellipsoids", &h.ellipsoids),
+            ("lines", &h.lines),
+            ("planes", &h.planes),
+        ];
+        let mut any = false;
+        for (name, hist) in kinds.into_iter().filter(|(_, hist)| hist.count > 0) {
+            any = true;
+            let plural = if hist.count == 1 { "" } else { "s" };
+            out.push_str(&format!("  {name}: {} ({} element{plural})\n", hist.measure, hist.count));
+            let mut t = Table::new(&[("", Align::Left), ("", Align::Left), ("", Align::Right), ("", Align::Left)]);
+            let widest = hist.buckets.iter().map(|b| b.count).max().unwrap_or(0).max(1);
+            let mut previous: Option<i32> = None;
+            for b in &hist.buckets {
+                // Gaps of up to two empty buckets are shown as such, longer ones as one line.
+                let gap = previous.map_or(0, |p| b.log2 - p - 1);
+                if gap > 2 {
+                    t.row(vec!["...".into(), format!("({gap} empty buckets)")]);
+                } else {
+                    for k in b.log2 - gap..b.log2 {
+                        t.row(vec![format!("2^{k}"), bucket_range(k), "0".into()]);
+                    }
+                }
+                previous = Some(b.log2);
+                t.row(vec![
+                    format!("2^{}", b.log2),
+                    bucket_range(b.log2),
+                    b.count.to_string(),
+                    "#".repeat(usize::try_from((b.count * 30).div_ceil(widest)).unwrap_or(30)),
+                ]);
+            }
+            for (label, n) in [("zero", hist.zero), ("negative", hist.negative), ("non-finite", hist.non_finite)] {
+                if n > 0 {
+                    t.row(vec![label.to_owned(), String::new(), n.to_string(), String::new()]);
+                }
+            }
+            out.push_str(&t.render("    "));
+        }
+        if !any {
+            out.push_str("  (no elements)\n");
+        }
+        out
+    }
+}
+
+/// A section-table entry for the dump.
+fn section_info(section: &Section) -> SectionInfo {
+    let e = &section.entry;
+    let mut flag_names = Vec::new();
+    if e.flags & FLAG_ZSTD != 0 {
+        flag_names.push("zstd".to_owned());
+    }
+    if e.flags & FLAG_SHUFFLE != 0 {
+        flag_names.push("shuffle".to_owned());
+    }
+    let other = e.flags & !(FLAG_ZSTD | FLAG_SHUFFLE);
+    if other != 0 {
+        flag_names.push(format!("{other:#x}"));
+    }
+    #[expect(clippy::cast_precision_loss, reason = "a ratio for display")]
+    let ratio = (e.length > 0).then(|| (e.raw_length as f64 / e.length as f64 * 1000.0).round() / 1000.0);
+    SectionInfo {
+        kind: e.kind,
+        name: SectionKind(e.kind).to_string(),
+        flags: e.flags,
+        flag_names,
+        offset: e.offset,
+        length: e.length,
+        raw_length: e.raw_length,
+        ratio,
+        record_size: e.record_size,
+        record_count: section.record_count(),
+        checksum: e.checksum,
+    }
+}
+
+/// The name of a material class value (spec §6.6).
+fn class_name(class: u32) -> String {
+    match class {
+        material_class::BARK => "bark".into(),
+        material_class::LEAF => "leaf".into(),
+        material_class::OTHER => "other".into(),
+        other => format!("unknown({other})"),
+    }
+}
+
+/// `[x, y, z]` with the shortest exact form of each value.
+fn vec3(v: [f32; 3]) -> String {
+    format!("[{}, {}, {}]", v[0], v[1], v[2])
+}
+
+/// `[2^k, 2^(k+1))` for the text form.
+fn bucket_range(k: i32) -> String {
+    format!("[{}, {})", power_of_two(k), power_of_two(k + 1))
+}
+
+/// `2^k` as a decimal for moderate `k`, in exponent form beyond.
+fn power_of_two(k: i32) -> String {
+    let v = 2f64.powi(k);
+    if (-20..=30).contains(&k) { v.to_string() } else { format!("{v:e}") }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floor_log2_is_exact_at_powers_of_two_and_for_subnormals() {
+        assert_eq!(floor_log2(1.0), 0);
+        assert_eq!(floor_log2(0.999_999_94), -1);
+        assert_eq!(floor_log2(0.5), -1);
+        assert_eq!(floor_log2(3.0), 1);
+        assert_eq!(floor_log2(f32::MAX), 127);
+        assert_eq!(floor_log2(f32::from_bits(1)), -149);
+        assert_eq!(floor_log2(f32::MIN_POSITIVE), -126);
+        assert_eq!(floor_log2(f32::MIN_POSITIVE / 2.0), -127);
+    }
+
+    #[test]
+    fn histogram_counts_special_values_apart_and_keeps_non_empty_buckets() {
+        let h = Histogram::new("size", [0.3, 1.5, 0.0, -1.0, f32::NAN, f32::INFINITY].into_iter());
+        assert_eq!((h.count, h.zero, h.negative, h.non_finite), (6, 1, 1, 2));
+        let buckets: Vec<(i32, u64)> = h.buckets.iter().map(|b| (b.log2, b.count)).collect();
+        assert_eq!(buckets, [(-2, 1), (0, 1)]);
+    }
+}

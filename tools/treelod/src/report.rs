@@ -1,0 +1,87 @@
+//! Error reporting and exit codes shared by the subcommands.
+//!
+//! Nothing here panics: writes to stderr ignore failures (there is nowhere left to report them),
+//! writes to stdout turn a closed pipe into a quiet stop and other failures into an I/O error.
+
+use std::io::{self, Write as _};
+use std::path::Path;
+
+use treelod_format::{Container, Error, ErrorClass};
+
+/// Exit code of invalid input ([`ErrorClass::Invalid`]).
+pub const EXIT_INVALID: u8 = 3;
+/// Exit code of an unsupported version or feature ([`ErrorClass::Unsupported`]).
+pub const EXIT_UNSUPPORTED: u8 = 4;
+/// Exit code of an operating-system error ([`ErrorClass::Io`]).
+pub const EXIT_IO: u8 = 5;
+
+/// A failure that has already been printed to stderr; only its class is left to decide the exit
+/// code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Failed {
+    /// The class of the failure.
+    pub class: ErrorClass,
+}
+
+impl Failed {
+    /// The process exit code of this failure's class.
+    #[must_use]
+    pub fn exit_code(self) -> u8 {
+        match self.class {
+            ErrorClass::Invalid => EXIT_INVALID,
+            ErrorClass::Unsupported => EXIT_UNSUPPORTED,
+            ErrorClass::Io => EXIT_IO,
+        }
+    }
+}
+
+/// Opens and validates a container (spec §9.1), reporting a failure as [`file_error`] does.
+///
+/// A directory is refused up front with a clear message (mapping one fails with an obscure
+/// operating-system error).
+pub fn open(path: &Path) -> Result<Container, Failed> {
+    if path.is_dir() {
+        print_error(&format!("{}: is a directory, not a .treelod file", path.display()));
+        return Err(Failed { class: ErrorClass::Io });
+    }
+    Container::open(path).map_err(|e| file_error(path, &e))
+}
+
+/// Prints `error: PATH: reason` for an error concerning `path` and returns its class.
+///
+/// The format crate already wraps errors with a path ([`Error::InFile`], [`Error::Io`]); that
+/// wrapper is taken off here so the line names the file exactly once, as it was passed.
+pub fn file_error(path: &Path, error: &Error) -> Failed {
+    print_error(&format!("{}: {}", path.display(), reason(error)));
+    Failed { class: error.class() }
+}
+
+/// The error's message without the path of its file.
+fn reason(error: &Error) -> String {
+    match error {
+        Error::InFile { source, .. } => reason(source),
+        Error::Io { source, .. } => source.to_string(),
+        other => other.to_string(),
+    }
+}
+
+/// Writes `error: MESSAGE` to stderr, ignoring a failure to do so.
+fn print_error(message: &str) {
+    let _ = writeln!(io::stderr().lock(), "error: {message}");
+}
+
+/// Writes `text` to stdout and flushes it.
+///
+/// A closed pipe (`treelod dump x | head`) is not an error: the reader has what it wanted, the
+/// rest is dropped. Any other failure is reported as an I/O error on `<stdout>`.
+pub fn write_stdout(text: &str) -> Result<(), Failed> {
+    let mut out = io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == io::ErrorKind::BrokenPipe => Ok(()),
+        Err(e) => {
+            print_error(&format!("<stdout>: {e}"));
+            Err(Failed { class: ErrorClass::Io })
+        }
+    }
+}

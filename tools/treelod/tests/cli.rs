@@ -1,0 +1,623 @@
+//! End-to-end tests of the `treelod` binary: output of `dump` and `verify`, exit codes, error
+//! messages, robustness against files that are not containers, and the golden dumps of
+//! `tests/data/v1_0/`.
+
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use treelod_format::pack::{oct_encode, rgba8};
+use treelod_format::{
+    BlockRecord, CellRecord, Compression, ContainerData, EllipsoidRecord, LineRecord, MaterialInfo, MaterialRecord,
+    Metadata, NO_IMAGE, PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, material_class,
+};
+
+/// Runs the binary with `args` in the current directory.
+fn treelod(args: &[&str]) -> Output {
+    treelod_in(Path::new("."), args)
+}
+
+/// Runs the binary with `args` in `dir`.
+fn treelod_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).current_dir(dir).output().expect("the binary runs")
+}
+
+fn stdout(out: &Output) -> String {
+    String::from_utf8(out.stdout.clone()).expect("stdout is UTF-8")
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8(out.stderr.clone()).expect("stderr is UTF-8")
+}
+
+/// A fresh scratch directory for one test.
+fn scratch(test: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("treelod-cli").join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch directory");
+    dir
+}
+
+/// The size of a triangle (spec §2): the diameter of the disc of equal area.
+fn triangle_size(p: [[f32; 3]; 3]) -> f32 {
+    let d = |a: [f32; 3], b: [f32; 3]| [f64::from(b[0] - a[0]), f64::from(b[1] - a[1]), f64::from(b[2] - a[2])];
+    let (u, v) = (d(p[0], p[1]), d(p[0], p[2]));
+    let c = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    let area = 0.5 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+    (2.0 * (area / PI).sqrt()) as f32
+}
+
+fn centroid(p: [[f32; 3]; 3]) -> [f32; 3] {
+    std::array::from_fn(|i| (p[0][i] + p[1][i] + p[2][i]) / 3.0)
+}
+
+/// A leaf point of a triangle (spec §6.5): `lo = 0`, `size` = the triangle's size.
+fn leaf_point(tri: [[f32; 3]; 3], leaf: u32, hi: f32) -> PointRecord {
+    let size = triangle_size(tri);
+    PointRecord {
+        position: centroid(tri),
+        radius: size / 2.0,
+        normal: oct_encode([0.0, 0.0, 1.0]),
+        color: rgba8([0.2, 0.6, 0.1, 1.0]),
+        size,
+        lo: 0.0,
+        hi,
+        leaf_first: leaf,
+        leaf_count: 1,
+        flags: 0,
+    }
+}
+
+/// A 2x1x1 grid over `[0,0,0]..[2,1,1]`: cell 0 holds two triangles under a root point, cell 1 one
+/// triangle whose leaf point is the root, the block cell one ellipsoid and one line. Every cut
+/// invariant of spec §10 holds.
+fn tiny() -> ContainerData {
+    let big = [[0.1, 0.1, 0.5], [0.9, 0.1, 0.5], [0.1, 0.9, 0.5]];
+    let small = [[0.2, 0.2, 0.6], [0.4, 0.2, 0.6], [0.2, 0.4, 0.6]];
+    let right = [[1.2, 0.2, 0.2], [1.8, 0.2, 0.2], [1.2, 0.8, 0.2]];
+    let vertices = [big, small, right]
+        .iter()
+        .flatten()
+        .map(|&position| VertexRecord {
+            position,
+            normal: oct_encode([0.0, 0.0, 1.0]),
+            uv: [0.5, 0.5],
+            color: u32::MAX,
+        })
+        .collect();
+    let tri = |first: u32, corners, leaf, material| TriangleRecord {
+        indices: [first, first + 1, first + 2],
+        size: triangle_size(corners),
+        leaf,
+        material,
+    };
+    let root_size = 0.8;
+    let root = PointRecord {
+        position: [0.5, 0.5, 0.55],
+        radius: root_size / 2.0,
+        normal: oct_encode([0.0, 0.0, 1.0]),
+        color: rgba8([0.2, 0.6, 0.1, 1.0]),
+        size: root_size,
+        lo: root_size,
+        hi: f32::INFINITY,
+        leaf_first: 0,
+        leaf_count: 2,
+        flags: 0,
+    };
+    let range = |first, count| Range { first, count };
+    let cells = vec![
+        CellRecord {
+            bounds_min: [0.1, 0.1, 0.5],
+            bounds_max: [0.9, 0.9, 0.6],
+            triangles: range(0, 2),
+            points: range(0, 3),
+            ..CellRecord::default()
+        },
+        CellRecord {
+            bounds_min: [1.2, 0.2, 0.2],
+            bounds_max: [1.8, 0.8, 0.2],
+            triangles: range(2, 1),
+            points: range(3, 1),
+            ..CellRecord::default()
+        },
+        CellRecord {
+            bounds_min: [0.5, 0.0, 0.2],
+            bounds_max: [1.5, 1.0, 0.8],
+            triangles: range(3, 0),
+            points: range(4, 0),
+            ellipsoids: range(0, 1),
+            lines: range(0, 1),
+            ..CellRecord::default()
+        },
+    ];
+    let material = |class, alpha_mode| MaterialRecord {
+        base_color: [1.0; 4],
+        image: NO_IMAGE,
+        alpha_mode,
+        alpha_cutoff: 0.5,
+        class,
+        flags: 0,
+        _pad: 0,
+    };
+    let bounds_max = [2.0, 1.0, 1.0];
+    ContainerData {
+        metadata: Metadata {
+            generator: "treelod cli test".into(),
+            name: "tiny".into(),
+            sources: vec![Source {
+                path: "trees/tiny.glb".into(),
+                content_hash: String::new(),
+                byte_length: 1234,
+                unit_scale: 1.0,
+            }],
+            trees: vec![Tree {
+                name: "tiny".into(),
+                source: 0,
+                translation: [0.0; 3],
+                bounds_min: [0.0; 3],
+                bounds_max,
+            }],
+            materials: vec![
+                MaterialInfo { name: "Bark".into(), classified_by: "name".into() },
+                MaterialInfo { name: "Leaves".into(), classified_by: "override".into() },
+            ],
+            settings: vec![
+                Setting { key: "grid".into(), value: "2x1x1".into() },
+                Setting { key: "points".into(), value: "gilet".into() },
+            ],
+        },
+        block: BlockRecord { bounds_max, grid: [2, 1, 1], tree_count: 1, ..BlockRecord::default() },
+        cells,
+        vertices,
+        triangles: vec![tri(0, big, 0, 1), tri(3, small, 1, 1), tri(6, right, 0, 0)],
+        points: vec![
+            root,
+            leaf_point(big, 0, root_size),
+            leaf_point(small, 1, root_size),
+            leaf_point(right, 0, f32::INFINITY),
+        ],
+        materials: vec![material(material_class::BARK, 0), material(material_class::LEAF, 1)],
+        ellipsoids: vec![EllipsoidRecord {
+            center: [1.0, 0.5, 0.5],
+            radii: [0.5, 0.3, 0.3],
+            orientation: [0, 0, 0, 32767],
+            color: rgba8([0.2, 0.6, 0.1, 1.0]),
+            alpha_threshold: 0.5,
+            noise_mip: 0.0,
+            lo: 0.0,
+            hi: f32::INFINITY,
+            leaf_first: 0,
+            leaf_count: 1,
+            flags: 0,
+        }],
+        lines: vec![LineRecord {
+            p0: [1.0, 0.0, 0.5],
+            r0: 0.05,
+            p1: [1.0, 0.8, 0.5],
+            r1: 0.02,
+            color: rgba8([0.3, 0.2, 0.1, 1.0]),
+            lo: 0.0,
+            hi: f32::INFINITY,
+            leaf_first: 0,
+            leaf_count: 1,
+            flags: 0,
+        }],
+        ..ContainerData::default()
+    }
+}
+
+/// Writes [`tiny`] uncompressed to `dir/tiny.treelod` and returns its path.
+fn write_tiny(dir: &Path) -> PathBuf {
+    let path = dir.join("tiny.treelod");
+    tiny().write_to_path(&path, Compression::None).expect("the test container is valid");
+    path
+}
+
+/// Asserts that the run failed with `code` and one error line naming `path` exactly once.
+fn assert_fails(out: &Output, code: i32, path: &Path) {
+    let err = stderr(out);
+    let shown = path.display().to_string();
+    assert_eq!(out.status.code(), Some(code), "stderr: {err}");
+    assert!(err.starts_with(&format!("error: {shown}: ")), "stderr: {err}");
+    assert_eq!(err.matches(&shown).count(), 1, "the path is named once: {err}");
+    assert!(!err.contains("panicked"), "stderr: {err}");
+}
+
+#[test]
+fn dump_text_shows_every_part() {
+    let dir = scratch("dump_text");
+    write_tiny(&dir);
+    let out = treelod_in(&dir, &["dump", "tiny.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    let len = std::fs::metadata(dir.join("tiny.treelod")).expect("written").len();
+    for expected in [
+        "file       tiny.treelod\n".to_owned(),
+        "version    1.0\n".to_owned(),
+        format!("file size  {len} bytes (header 64, section table at 64)\n"),
+        "\nsections (9)\n".to_owned(),
+        "  bounds  [0, 0, 0] .. [2, 1, 1]\n".to_owned(),
+        "  grid    2 x 1 x 1 = 2 cells + block cell\n".to_owned(),
+        "  generator  \"treelod cli test\"\n".to_owned(),
+        "    grid = \"2x1x1\"\n".to_owned(),
+        "\ncells (3 of 3 non-empty: 2 grid cells + block cell)\n".to_owned(),
+    ] {
+        assert!(text.contains(&expected), "missing {expected:?} in\n{text}");
+    }
+    // Section rows: kind, flags, offset, stored, raw, ratio, record size, records, checksum.
+    let row = |kind: &str| {
+        text.lines()
+            .find(|l| l.split_whitespace().next() == Some(kind))
+            .unwrap_or_else(|| panic!("no {kind} row in\n{text}"))
+            .split_whitespace()
+            .collect::<Vec<_>>()
+    };
+    let triangles = row("TRIANGLES");
+    assert_eq!(triangles[1], "-");
+    assert_eq!(&triangles[3..8], ["72", "72", "1.00", "24", "3"]);
+    assert!(triangles[8].starts_with("0x") && triangles[8].len() == 10);
+    assert_eq!(&row("POINTS")[6..8], ["48", "4"]);
+    // Materials: index, class from the record, classified_by and name from the metadata.
+    assert!(text.contains("    0  bark   \"name\"         \"Bark\"\n"), "{text}");
+    assert!(text.contains("    1  leaf   \"override\"     \"Leaves\"\n"), "{text}");
+    // Per-cell counts.
+    let cell_rows: Vec<Vec<&str>> = text
+        .lines()
+        .skip_while(|l| !l.starts_with("cells ("))
+        .skip(2)
+        .take(4)
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    assert_eq!(cell_rows[0], ["0", "(0,0,0)", "2", "3", "0", "0", "0", "0"]);
+    assert_eq!(cell_rows[1], ["1", "(1,0,0)", "1", "1", "0", "0", "0", "0"]);
+    assert_eq!(cell_rows[2], ["block", "0", "0", "1", "1", "0", "0"]);
+    assert_eq!(cell_rows[3], ["total", "3", "4", "1", "1", "0", "0"]);
+    // Histograms: documented measure, one block per non-empty hierarchical kind.
+    assert!(text.contains("\nhistograms: log2 buckets [2^k, 2^(k+1)) of element sizes in metres\n"), "{text}");
+    assert!(text.contains("line: |p1 - p0|"), "the measures are documented: {text}");
+    assert!(text.contains("  triangles: size (3 elements)\n"), "{text}");
+    assert!(text.contains("  ellipsoids: 2*max(radii) (1 element)\n    2^0  [1, 2)  1"), "{text}");
+    assert!(!text.contains("  planes:"), "{text}");
+    // Deterministic: a second run prints the same bytes.
+    assert_eq!(treelod_in(&dir, &["dump", "tiny.treelod"]).stdout, out.stdout);
+}
+
+#[test]
+fn dump_json_has_the_same_content_in_a_stable_order() {
+    let dir = scratch("dump_json");
+    let path = write_tiny(&dir);
+    let out = treelod_in(&dir, &["dump", "--json", "tiny.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    let json: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
+    // `serde_json::Value` sorts its keys: the printed order is read from the text.
+    let mut in_text_order: Vec<&str> = json.as_object().expect("an object").keys().map(String::as_str).collect();
+    in_text_order.sort_by_key(|k| text.find(&format!("\n  \"{k}\":")));
+    assert_eq!(
+        in_text_order,
+        [
+            "file",
+            "version",
+            "file_size",
+            "header_size",
+            "table_offset",
+            "sections",
+            "block",
+            "metadata",
+            "cells",
+            "histograms"
+        ]
+    );
+    assert_eq!(json["file"], "tiny.treelod");
+    assert_eq!(json["version"], "1.0");
+    assert_eq!(json["file_size"], std::fs::metadata(&path).expect("written").len());
+    let sections = json["sections"].as_array().expect("sections");
+    let names: Vec<&str> = sections.iter().map(|s| s["name"].as_str().expect("name")).collect();
+    assert_eq!(
+        names,
+        ["META", "BLOCK", "CELLS", "VERTICES", "TRIANGLES", "POINTS", "MATERIALS", "ELLIPSOIDS", "LINES"]
+    );
+    assert_eq!(sections[4]["record_count"], 3);
+    assert_eq!(sections[4]["ratio"], 1.0);
+    assert_eq!(json["block"]["grid"], serde_json::json!([2, 1, 1]));
+    assert_eq!(json["metadata"]["materials"][1]["class_name"], "leaf");
+    assert_eq!(json["metadata"]["materials"][1]["classified_by"], "override");
+    assert_eq!(json["metadata"]["settings"][0]["key"], "grid");
+    assert_eq!(json["cells"]["non_empty"], 3);
+    assert_eq!(json["cells"]["list"][2]["block"], true);
+    assert_eq!(json["cells"]["list"][2]["xyz"], serde_json::Value::Null);
+    assert_eq!(json["cells"]["list"][1]["xyz"], serde_json::json!([1, 0, 0]));
+    assert_eq!(json["cells"]["totals"]["points"], 4);
+    let points = &json["histograms"]["points"];
+    let bucketed: u64 =
+        points["buckets"].as_array().expect("buckets").iter().map(|b| b["count"].as_u64().unwrap_or(0)).sum();
+    assert_eq!((points["count"].as_u64(), bucketed), (Some(4), 4));
+    assert_eq!(json["histograms"]["planes"]["buckets"], serde_json::json!([]));
+}
+
+#[test]
+fn verify_accepts_a_valid_file() {
+    let dir = scratch("verify_ok");
+    let path = write_tiny(&dir);
+    let out = treelod(&["verify", path.to_str().expect("UTF-8 path")]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    assert!(stdout(&out).starts_with(&format!("{}: ok", path.display())), "{}", stdout(&out));
+    assert_eq!(stdout(&out).lines().count(), 1);
+    assert!(out.stderr.is_empty());
+}
+
+#[test]
+fn a_corrupted_header_is_invalid_input() {
+    let dir = scratch("corrupt_header");
+    let path = write_tiny(&dir);
+    let mut bytes = std::fs::read(&path).expect("written");
+    bytes[20] ^= 0x01; // section_count: caught by the header checksum
+    std::fs::write(&path, bytes).expect("rewritten");
+    for command in ["dump", "verify"] {
+        let out = treelod(&[command, path.to_str().expect("UTF-8 path")]);
+        assert_fails(&out, 3, &path);
+        assert!(stdout(&out).is_empty());
+    }
+}
+
+#[test]
+fn a_corrupted_payload_is_found_by_verify_only() {
+    // Checksums of uncompressed sections are not read at open (spec §9.1), so dump still works.
+    let dir = scratch("corrupt_payload");
+    let path = write_tiny(&dir);
+    let mut bytes = std::fs::read(&path).expect("written");
+    let (offset, _) = section(&bytes, 0x0011).expect("TRIANGLES");
+    bytes[offset + 12] ^= 0x40; // the first triangle's size
+    std::fs::write(&path, bytes).expect("rewritten");
+    let arg = path.to_str().expect("UTF-8 path");
+    assert_eq!(treelod(&["dump", arg]).status.code(), Some(0));
+    let out = treelod(&["verify", arg]);
+    assert_fails(&out, 3, &path);
+    assert!(stderr(&out).contains("checksum"), "{}", stderr(&out));
+}
+
+/// Payload offset and table index of section `kind` in a file with a 64-byte header.
+fn section(bytes: &[u8], kind: u32) -> Option<(usize, usize)> {
+    let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+    (0..u32_at(20) as usize).find_map(|index| {
+        let entry = 64 + 48 * index;
+        (u32_at(entry) == kind).then(|| (u32_at(entry + 8) as usize, index))
+    })
+}
+
+/// CRC-32/ISO-HDLC (spec §8), bit by bit: enough for a test that re-signs a header.
+fn crc32(bytes: &[u8]) -> u32 {
+    !bytes.iter().fold(!0u32, |crc, &byte| {
+        (0..8).fold(crc ^ u32::from(byte), |c, _| if c & 1 == 1 { (c >> 1) ^ 0xEDB8_8320 } else { c >> 1 })
+    })
+}
+
+#[test]
+fn an_unknown_flag_on_a_known_section_is_unsupported() {
+    let dir = scratch("unsupported_flag");
+    let path = write_tiny(&dir);
+    let mut bytes = std::fs::read(&path).expect("written");
+    assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    let (_, index) = section(&bytes, 0x0012).expect("POINTS");
+    bytes[64 + 48 * index + 4] |= 0x04; // flags bit 2: a feature of a later version
+    let table_end = 64 + 48 * u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
+    let mut signed = bytes[..table_end].to_vec();
+    signed[60..64].fill(0);
+    let checksum = crc32(&signed);
+    bytes[60..64].copy_from_slice(&checksum.to_le_bytes());
+    std::fs::write(&path, bytes).expect("rewritten");
+    for command in ["dump", "verify"] {
+        assert_fails(&treelod(&[command, path.to_str().expect("UTF-8 path")]), 4, &path);
+    }
+}
+
+#[test]
+fn a_future_major_version_is_unsupported() {
+    let dir = scratch("future_major");
+    let path = write_tiny(&dir);
+    let mut bytes = std::fs::read(&path).expect("written");
+    bytes[12..14].copy_from_slice(&2u16.to_le_bytes()); // nothing else fixed: the version comes first
+    std::fs::write(&path, bytes).expect("rewritten");
+    for command in ["dump", "verify"] {
+        let out = treelod(&[command, path.to_str().expect("UTF-8 path")]);
+        assert_fails(&out, 4, &path);
+        assert!(stderr(&out).contains("2.0"), "names the file's version: {}", stderr(&out));
+    }
+}
+
+#[test]
+fn a_missing_file_is_an_io_error() {
+    let dir = scratch("missing");
+    let path = dir.join("no-such.treelod");
+    for command in ["dump", "verify"] {
+        assert_fails(&treelod(&[command, path.to_str().expect("UTF-8 path")]), 5, &path);
+    }
+}
+
+#[test]
+fn files_that_are_not_containers_never_panic() {
+    let dir = scratch("garbage");
+    let garbage = dir.join("garbage.treelod");
+    std::fs::write(&garbage, (0..4096u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect::<Vec<_>>())
+        .expect("written");
+    let empty = dir.join("empty.treelod");
+    std::fs::write(&empty, b"").expect("written");
+    let magic_only = dir.join("magic.treelod");
+    std::fs::write(&magic_only, b"\x89TREELOD\r\n\x1a\n\x01\x00").expect("written");
+    let truncated = dir.join("truncated.treelod");
+    let full = std::fs::read(write_tiny(&dir)).expect("written");
+    std::fs::write(&truncated, &full[..full.len() / 2]).expect("written");
+    let cases = [
+        (&garbage, 3),
+        (&empty, 3),
+        (&magic_only, 3),
+        (&truncated, 3),
+        (&dir.join("nonexistent.treelod"), 5),
+        (&dir, 5),
+    ];
+    for (path, code) in cases {
+        for args in [&["dump"][..], &["dump", "--json"], &["verify"]] {
+            let mut args = args.to_vec();
+            args.push(path.to_str().expect("UTF-8 path"));
+            let out = treelod(&args);
+            assert_fails(&out, code, path);
+            assert!(stdout(&out).is_empty(), "{args:?}: {}", stdout(&out));
+            assert_eq!(stderr(&out).lines().count(), 1, "{args:?}: {}", stderr(&out));
+        }
+    }
+}
+
+#[test]
+fn dump_shows_records_that_only_verify_would_refuse() {
+    // `open` does not look inside the bulk arrays (spec §9.1): dump must cope with any values.
+    let dir = scratch("hostile_records");
+    let mut data = tiny();
+    data.triangles[0].size = f32::NAN;
+    data.triangles[1].size = -1.0;
+    data.triangles[2].size = 0.0;
+    data.points[0].size = f32::from_bits(1); // the smallest subnormal
+    data.points[1].size = f32::MAX;
+    data.ellipsoids[0].radii = [f32::INFINITY, 0.0, f32::NAN];
+    data.lines[0].p1 = [f32::MAX, -f32::MAX, 0.0];
+    data.materials[1].class = 99;
+    data.materials.push(data.materials[0]); // three records, two names
+    data.metadata.name = "line\nbreak \u{1b}[31m".into();
+    data.extra_sections = vec![(0x0_0004, Vec::new()), (0x1_0000, b"private".to_vec())];
+    let path = dir.join("hostile.treelod");
+    data.write_to_path(&path, Compression::default()).expect("open-level valid");
+    let out = treelod_in(&dir, &["dump", "hostile.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    // Compared with the runs of spaces of the column alignment squeezed to one.
+    let squeezed: String = text.lines().map(|l| l.split_whitespace().collect::<Vec<_>>().join(" ") + "\n").collect();
+    for expected in [
+        "name \"line\\nbreak \\u{1b}[31m\"\n",
+        "\n1 unknown(99) \"override\" \"Leaves\"\n",
+        "\n2 bark - -\n",
+        "triangles: size (3 elements)\nzero 1\nnegative 1\nnon-finite 1\n",
+        "\npoints: size (4 elements)\n2^-149 [1.401298464324817e-45, 2.802596928649634e-45) 1 #",
+        "\n... (145 empty buckets)\n2^-3 [0.125, 0.25) 1 #",
+        "\n... (128 empty buckets)\n2^127 [",
+        "\n2^127 [1.7014118346046923e38, 3.402823669209385e38) 1 #",
+        "ellipsoids: 2*max(radii) (1 element)\nnon-finite 1\n",
+    ] {
+        assert!(squeezed.contains(expected), "missing {expected:?} in\n{text}");
+    }
+    let kinds: Vec<&str> = text.lines().filter_map(|l| l.strip_prefix("  0x")).collect();
+    assert_eq!(kinds.len(), 2, "unknown kinds are listed in hex: {text}");
+    assert!(text.lines().any(|l| l.starts_with("  VERTICES    zstd+shuffle")), "{text}");
+
+    let out = treelod_in(&dir, &["dump", "--json", "hostile.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&out)).expect("valid JSON");
+    assert_eq!(json["histograms"]["triangles"]["non_finite"], 1);
+    assert_eq!(json["histograms"]["triangles"]["negative"], 1);
+    assert_eq!(json["histograms"]["triangles"]["zero"], 1);
+    assert_eq!(json["metadata"]["materials"][2]["name"], serde_json::Value::Null);
+    assert_eq!(json["sections"][3]["name"], "0x0004");
+    assert_eq!(json["sections"][3]["ratio"], serde_json::Value::Null);
+
+    assert_fails(&treelod_in(&dir, &["verify", "hostile.treelod"]), 3, Path::new("hostile.treelod"));
+}
+
+#[test]
+fn verify_checks_every_file_and_exits_with_the_first_failure() {
+    let dir = scratch("several");
+    let good = write_tiny(&dir);
+    let missing = dir.join("missing.treelod");
+    let bad = dir.join("bad.treelod");
+    std::fs::write(&bad, b"not a container").expect("written");
+    let arg = |p: &Path| p.to_str().expect("UTF-8 path").to_owned();
+    let out = treelod(&["verify", &arg(&good), &arg(&missing), &arg(&bad), &arg(&good)]);
+    assert_eq!(out.status.code(), Some(5), "the first failure is the missing file");
+    assert_eq!(stdout(&out).lines().count(), 2, "both copies of the good file are reported ok");
+    let err = stderr(&out);
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 2, "{err}");
+    assert!(lines[0].starts_with(&format!("error: {}: ", missing.display())));
+    assert!(lines[1].starts_with(&format!("error: {}: ", bad.display())));
+
+    let out = treelod(&["verify", &arg(&bad), &arg(&missing)]);
+    assert_eq!(out.status.code(), Some(3), "the first failure is the invalid file");
+}
+
+#[test]
+fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
+    for args in [&[][..], &["dump"], &["verify"], &["dump", "--bogus", "x"], &["frobnicate"]] {
+        let out = treelod(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(stdout(&out).is_empty(), "{args:?}");
+    }
+    for args in [&["--help"][..], &["dump", "--help"], &["verify", "--help"]] {
+        let out = treelod(args);
+        assert_eq!(out.status.code(), Some(0));
+        let help = stdout(&out);
+        for code in ["0  success", "2  usage error", "3  invalid input", "4  unsupported", "5  I/O error"] {
+            assert!(help.contains(code), "{args:?} help lacks {code:?}:\n{help}");
+        }
+    }
+}
+
+/// Golden files: every `tests/data/v1_0/NAME.treelod` has `NAME.dump.txt` and `NAME.dump.json`
+/// beside it, the exact output of `treelod dump NAME.treelod` and `treelod dump --json
+/// NAME.treelod` run in that directory. With no `.treelod` there yet, the test passes; a
+/// `.treelod` without its expected output fails it.
+///
+/// To (re)write the expected files after a deliberate change of the dump output, run
+/// `TREELOD_BLESS=1 cargo test -p treelod --test cli golden` and review the diff.
+#[test]
+fn golden_dumps_match() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/v1_0");
+    let bless = std::env::var_os("TREELOD_BLESS").is_some_and(|v| v == "1");
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return; // no golden directory yet
+    };
+    let mut names: Vec<String> = entries
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|name| name.ends_with(".treelod"))
+        .collect();
+    names.sort();
+    let mut failures = Vec::new();
+    for name in &names {
+        let stem = name.trim_end_matches(".treelod");
+        for (args, expected_name) in [
+            (vec!["dump", name.as_str()], format!("{stem}.dump.txt")),
+            (vec!["dump", "--json", name.as_str()], format!("{stem}.dump.json")),
+        ] {
+            let out = treelod_in(&dir, &args);
+            assert_eq!(out.status.code(), Some(0), "treelod {args:?}: {}", stderr(&out));
+            let expected_path = dir.join(&expected_name);
+            if bless {
+                std::fs::write(&expected_path, &out.stdout).expect("expected output written");
+                continue;
+            }
+            match std::fs::read(&expected_path) {
+                Ok(expected) if expected == out.stdout => {}
+                Ok(expected) => failures.push(format!(
+                    "{expected_name}: `treelod {}` differs:\n{}",
+                    args.join(" "),
+                    first_difference(&String::from_utf8_lossy(&expected), &stdout(&out))
+                )),
+                Err(e) => failures.push(format!("{expected_name}: cannot read the expected output ({e})")),
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "golden dumps in {} (rewrite with TREELOD_BLESS=1 if the change is deliberate):\n{}",
+        dir.display(),
+        failures.join("\n")
+    );
+}
+
+/// The first differing line of two texts, for a readable failure.
+fn first_difference(expected: &str, actual: &str) -> String {
+    let expected: Vec<&str> = expected.lines().collect();
+    let actual: Vec<&str> = actual.lines().collect();
+    for i in 0..expected.len().max(actual.len()) {
+        if expected.get(i) != actual.get(i) {
+            return format!("line {}:\n  expected: {:?}\n  actual:   {:?}", i + 1, expected.get(i), actual.get(i));
+        }
+    }
+    "only line endings differ".into()
+}
