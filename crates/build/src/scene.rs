@@ -1,6 +1,6 @@
 //! The build's input: triangle soups with materials and decoded textures, in block space.
 //!
-//! Importers ([`crate::import`] for glTF, [`crate::demo`] for the procedural demo tree) produce a
+//! Importers (glTF import, the procedural demo tree) produce a
 //! [`Scene`]; every later stage reads only this, never the source format.
 
 /// One source tree (or one source file) ready to build.
