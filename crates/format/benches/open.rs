@@ -8,7 +8,7 @@ use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use treelod_format::{BlockRecord, CellRecord, Compression, Container, ContainerData, Metadata, Range, VertexRecord};
+use treelod_format::{BlockRecord, CellRecord, Compression, Container, ContainerData, Metadata, VertexRecord};
 
 /// An uncompressed container whose `VERTICES` section makes it about `bytes` long.
 fn write_container(path: &Path, bytes: usize) {
@@ -16,8 +16,7 @@ fn write_container(path: &Path, bytes: usize) {
     let vertices: Vec<VertexRecord> = (0..count)
         .map(|i| VertexRecord { position: [i as f32, 0.5, 0.25], normal: 0, uv: [0.0, 1.0], color: u32::MAX })
         .collect();
-    let mut cells = vec![CellRecord::default(); 65];
-    cells[0].triangles = Range::default();
+    let cells = vec![CellRecord::default(); 65];
     let data = ContainerData {
         metadata: Metadata { generator: "bench".into(), name: "open".into(), ..Metadata::default() },
         block: BlockRecord { bounds_max: [1.0; 3], grid: [4, 4, 4], tree_count: 1, ..BlockRecord::default() },
