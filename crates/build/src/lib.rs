@@ -7,6 +7,7 @@
 
 pub mod assemble;
 pub mod classify;
+pub mod demo;
 mod error;
 pub mod gilet;
 pub mod scene;
@@ -14,5 +15,6 @@ pub mod spt;
 pub mod texture;
 
 pub use assemble::{BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block};
+pub use demo::{DemoTreeConfig, demo_tree};
 pub use error::BuildError;
 pub use spt::{FlattenError, Spt, SptNode, flatten};

@@ -4,6 +4,7 @@
 //! outcome into an exit code ([`report::Failed::exit_code`]). Each subcommand prints its own
 //! results to stdout and its errors to stderr, every error line as `error: PATH: reason`.
 
+mod build;
 mod dump;
 mod report;
 mod table;
@@ -38,6 +39,9 @@ struct Cli {
 /// The subcommands, one module each.
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Build the built-in procedural demo tree into a container (no input needed).
+    #[command(after_help = EXIT_CODES)]
+    Demo(build::DemoArgs),
     /// Print what a container holds: sections, block, metadata, per-cell counts, size histograms.
     #[command(after_help = EXIT_CODES)]
     Dump(dump::Args),
@@ -50,11 +54,22 @@ fn main() -> ExitCode {
     // Usage errors: clap prints `error: …` and the usage to stderr and exits with 2.
     let cli = Cli::parse();
     let outcome = match &cli.command {
+        Command::Demo(args) => build::run_demo(args),
         Command::Dump(args) => dump::run(args),
         Command::Verify(args) => verify::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,
         Err(failed) => ExitCode::from(failed.exit_code()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_definition_is_consistent() {
+        super::Cli::command().debug_assert();
     }
 }

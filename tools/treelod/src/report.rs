@@ -85,3 +85,30 @@ pub fn write_stdout(text: &str) -> Result<(), Failed> {
         }
     }
 }
+
+/// Prints `warning: PATH: message`, ignoring a failure to do so.
+pub fn print_warning(path: &Path, message: &str) {
+    let _ = writeln!(io::stderr().lock(), "warning: {}: {message}", path.display());
+}
+
+/// Prints a build error as `error: PATH: reason` and returns its class: I/O errors are
+/// [`ErrorClass::Io`], unsupported glTF features [`ErrorClass::Unsupported`], the rest
+/// [`ErrorClass::Invalid`].
+pub fn build_error(path: &Path, error: &treelod_build::BuildError) -> Failed {
+    use treelod_build::BuildError;
+    let class = match error {
+        BuildError::Io { .. } => ErrorClass::Io,
+        BuildError::Unsupported { .. } => ErrorClass::Unsupported,
+        BuildError::Format(e) => e.class(),
+        _ => ErrorClass::Invalid,
+    };
+    // Errors about a file already start with its path; the others get the input's.
+    let text = error.to_string();
+    let shown = path.display().to_string();
+    if text.starts_with(&shown) {
+        print_error(&text);
+    } else {
+        print_error(&format!("{shown}: {text}"));
+    }
+    Failed { class }
+}

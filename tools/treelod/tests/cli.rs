@@ -621,3 +621,42 @@ fn first_difference(expected: &str, actual: &str) -> String {
     }
     "only line endings differ".into()
 }
+
+#[test]
+fn demo_builds_a_verified_container_with_no_input() {
+    let dir = tempfile_dir("demo");
+    let out = dir.join("demo.treelod");
+    let run = Command::new(env!("CARGO_BIN_EXE_treelod"))
+        .args(["demo", "--leaf-count", "500", "-o"])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "stderr: {}", String::from_utf8_lossy(&run.stderr));
+    assert!(stdout.contains("built from the built-in demo tree"), "{stdout}");
+    assert!(stdout.contains("(leaf 1000, bark"), "500 leaf quads are 1000 leaf triangles: {stdout}");
+    assert!(stdout.contains("verify        ok"), "{stdout}");
+    let container = treelod_format::Container::open(&out).expect("opens");
+    treelod_format::verify(&container).expect("verifies");
+    assert_eq!(container.metadata().name, "demo-tree");
+    // Same seed, same bytes.
+    let again = dir.join("again.treelod");
+    let status = Command::new(env!("CARGO_BIN_EXE_treelod"))
+        .args(["demo", "--leaf-count", "500", "--json", "-o"])
+        .arg(&again)
+        .output()
+        .expect("runs");
+    assert!(status.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&status.stdout).expect("one JSON object");
+    assert_eq!(json["leaf_triangles"], 1000);
+    assert_eq!(std::fs::read(&out).expect("reads"), std::fs::read(&again).expect("reads"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A fresh directory under the system temporary directory for one test.
+fn tempfile_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("treelod-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("creates a temporary directory");
+    dir
+}
