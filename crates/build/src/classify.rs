@@ -6,9 +6,10 @@
 //! 2. keywords in the material name, then the mesh name, then the node name (case-insensitive):
 //!    leaf words `leaf leaves foliage needle canopy crown frond`; bark words `bark trunk branch twig
 //!    stem wood`;
-//! 3. geometry and appearance: a part whose material is alpha-tested (`MASK`/`BLEND`) with a texture
-//!    is leaves; otherwise a part of small, flat pieces (mean piece area small against the tree and
-//!    pieces nearly planar) whose colour is green is leaves;
+//! 3. geometry and appearance: a part is leaves if its material is alpha-tested (`MASK`/`BLEND`)
+//!    with a texture, or its base colour is green (low-poly canopies such as Quaternius' "Green"),
+//!    or it consists of small, flat pieces (mean piece extent under 5 % of the tree, pieces nearly
+//!    planar);
 //! 4. otherwise bark (`default`).
 //!
 //! Connectivity alone is not used as evidence of leaves: generators such as Sapling and ez-tree
@@ -98,7 +99,8 @@ fn classify_part(scene: &Scene, part: &Part, options: &ClassifyOptions, tree_ext
         }
     }
     let masked = material.is_some_and(|m| m.alpha_mode != AlphaMode::Opaque && m.image.is_some());
-    if masked || (small_flat_pieces(part, tree_extent) && material.is_some_and(|m| is_green(m.base_color))) {
+    let green = material.is_some_and(|m| is_green(m.base_color));
+    if masked || green || small_flat_pieces(part, tree_extent) {
         return Classification { class: Class::Leaf, by: ClassifiedBy::Geometry };
     }
     Classification { class: Class::Bark, by: ClassifiedBy::Default }
@@ -268,19 +270,22 @@ mod tests {
     }
 
     #[test]
-    fn unnamed_green_small_flat_pieces_are_leaves() {
+    fn unnamed_green_or_small_flat_pieces_are_leaves() {
         let s = scene_with("Green", "CommonTree_1", AlphaMode::Opaque, [0.2, 0.6, 0.1, 1.0], false);
-        assert_eq!(
-            classify(&s, &ClassifyOptions::default())[0],
-            Classification { class: Class::Leaf, by: ClassifiedBy::Geometry }
-        );
+        let c = classify(&s, &ClassifyOptions::default());
+        assert_eq!(c[0], Classification { class: Class::Leaf, by: ClassifiedBy::Geometry });
+        assert_eq!(c[1], Classification { class: Class::Bark, by: ClassifiedBy::Name }, "\"Wood\" is bark");
         let brown = scene_with("Mat", "CommonTree_1", AlphaMode::Opaque, [0.6, 0.4, 0.2, 1.0], false);
-        assert_eq!(
-            classify(&brown, &ClassifyOptions::default())[0],
-            Classification { class: Class::Bark, by: ClassifiedBy::Default }
-        );
+        assert_eq!(classify(&brown, &ClassifyOptions::default())[0].by, ClassifiedBy::Geometry, "small flat quads");
         let masked = scene_with("Mat", "x", AlphaMode::Mask, [1.0; 4], true);
         assert_eq!(classify(&masked, &ClassifyOptions::default())[0].by, ClassifiedBy::Geometry);
+        // One large brown piece with no telling name: bark by default.
+        let mut trunk = scene_with("Mat", "x", AlphaMode::Opaque, [0.6, 0.4, 0.2, 1.0], false);
+        trunk.materials[1].name = "Mat.002".into();
+        assert_eq!(
+            classify(&trunk, &ClassifyOptions::default())[1],
+            Classification { class: Class::Bark, by: ClassifiedBy::Default }
+        );
     }
 
     #[test]

@@ -1,11 +1,12 @@
-//! `treelod demo` (and the shared build path): a tree in, a verified container out, with a summary.
+//! `treelod build` and `treelod demo`: trees in, verified containers out, with a summary.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
+use treelod_build::scene::Scene;
 use treelod_build::{BuildConfig, BuildOutput, Placed, build_block};
-use treelod_format::{Compression, Container};
+use treelod_format::{Compression, Container, ErrorClass};
 
 use crate::report::{self, Failed};
 
@@ -70,6 +71,30 @@ fn parse_grid(s: &str) -> Result<[u32; 3], String> {
     Ok([n(x)?, n(y)?, n(z)?])
 }
 
+/// Arguments of `treelod build`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Source trees: glTF 2.0 files (`.glb` or `.gltf`).
+    #[arg(value_name = "INPUT", required_unless_present = "placement")]
+    pub inputs: Vec<PathBuf>,
+    /// Output: a `.treelod` file for one input or `--block`, otherwise a directory that receives
+    /// `<input stem>.treelod` per input (created if missing).
+    #[arg(short, long, value_name = "PATH")]
+    pub output: PathBuf,
+    /// Put all inputs into one block (Gilet's compact group of trees), side by side along x, so
+    /// one grid spans the group.
+    #[arg(long)]
+    pub block: bool,
+    /// With `--block`: a placement file instead of side by side. One tree per line, `PATH X Y Z`
+    /// (metres; PATH relative to the placement file; `#` starts a comment). Trees listed here are
+    /// added after any INPUTs.
+    #[arg(long, value_name = "FILE", requires = "block")]
+    pub placement: Option<PathBuf>,
+    /// Build settings.
+    #[command(flatten)]
+    pub options: BuildOptions,
+}
+
 /// Arguments of `treelod demo`.
 #[derive(Debug, clap::Args)]
 pub struct DemoArgs {
@@ -85,6 +110,66 @@ pub struct DemoArgs {
     /// Build settings.
     #[command(flatten)]
     pub options: BuildOptions,
+}
+
+/// Runs `treelod build`.
+pub fn run(args: &Args) -> Result<(), Failed> {
+    let mut trees: Vec<(PathBuf, Vec3)> = Vec::new();
+    let mut x = 0.0f32;
+    let mut scenes: Vec<Scene> = Vec::new();
+    let progress = progress_bar(args.inputs.len() as u64);
+    for input in &args.inputs {
+        progress.set_message(format!("importing {}", input.display()));
+        let scene = import(input)?;
+        // Side by side along x with a 10 % gap, each tree's own x extent apart.
+        let (lo, hi) = scene_x_range(&scene);
+        let offset = if args.block { x - lo } else { 0.0 };
+        x = offset + hi + 0.1 * (hi - lo).max(0.0);
+        trees.push((input.clone(), Vec3::new(offset, 0.0, 0.0)));
+        scenes.push(scene);
+        progress.inc(1);
+    }
+    if let Some(placement) = &args.placement {
+        for (path, at) in read_placement(placement)? {
+            progress.set_message(format!("importing {}", path.display()));
+            scenes.push(import(&path)?);
+            trees.push((path, at));
+        }
+    }
+    progress.finish_and_clear();
+
+    if args.block {
+        let name = args.output.file_stem().map_or_else(|| "block".to_owned(), |s| s.to_string_lossy().into_owned());
+        let placed: Vec<Placed> =
+            scenes.iter().zip(&trees).map(|(scene, (_, at))| Placed { scene, translation: *at }).collect();
+        let sources: Vec<&Path> = trees.iter().map(|(p, _)| p.as_path()).collect();
+        return build_one(&name, &placed, &sources, &args.output, &args.options);
+    }
+    let to_directory =
+        trees.len() > 1 || args.output.is_dir() || args.output.as_os_str().to_string_lossy().ends_with('/');
+    if to_directory {
+        std::fs::create_dir_all(&args.output).map_err(|e| report::io_error(&args.output, &e))?;
+    }
+    let mut first_failure = None;
+    let mut seen: Vec<PathBuf> = Vec::new();
+    for (scene, (input, _)) in scenes.iter().zip(&trees) {
+        let output =
+            if to_directory { args.output.join(format!("{}.treelod", scene.name)) } else { args.output.clone() };
+        if seen.contains(&output) {
+            report::message_error(
+                input,
+                &format!("another input also writes {}; rename one or use --block", output.display()),
+            );
+            first_failure.get_or_insert(Failed { class: ErrorClass::Invalid });
+            continue;
+        }
+        seen.push(output.clone());
+        let placed = [Placed { scene, translation: Vec3::ZERO }];
+        if let Err(failed) = build_one(&scene.name, &placed, &[input.as_path()], &output, &args.options) {
+            first_failure.get_or_insert(failed);
+        }
+    }
+    first_failure.map_or(Ok(()), Err)
 }
 
 /// Runs `treelod demo`: builds the built-in procedural tree (no input needed).
@@ -211,4 +296,60 @@ impl Summary<'_> {
         });
         format!("{value}\n")
     }
+}
+
+fn import(path: &Path) -> Result<Scene, Failed> {
+    treelod_build::import_gltf(path).map_err(|e| report::build_error(path, &e))
+}
+
+fn scene_x_range(scene: &Scene) -> (f32, f32) {
+    let xs = scene.parts.iter().flat_map(|p| &p.positions).map(|p| p[0]).filter(|x| x.is_finite());
+    let (lo, hi) = xs.fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)));
+    if lo <= hi { (lo, hi) } else { (0.0, 0.0) }
+}
+
+/// Reads a placement file: `PATH X Y Z` per line, `#` comments, blank lines ignored.
+fn read_placement(path: &Path) -> Result<Vec<(PathBuf, Vec3)>, Failed> {
+    let text = std::fs::read_to_string(path).map_err(|e| report::io_error(path, &e))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split_whitespace().collect();
+        let parsed = match fields.as_slice() {
+            [p, x, y, z] => match (x.parse::<f32>(), y.parse::<f32>(), z.parse::<f32>()) {
+                (Ok(x), Ok(y), Ok(z)) if x.is_finite() && y.is_finite() && z.is_finite() => {
+                    Some((base.join(p), Vec3::new(x, y, z)))
+                }
+                _ => None,
+            },
+            _ => None,
+        };
+        match parsed {
+            Some(entry) => out.push(entry),
+            None => {
+                report::message_error(
+                    path,
+                    &format!("line {}: expected `PATH X Y Z` with finite numbers, got {line:?}", n + 1),
+                );
+                return Err(Failed { class: ErrorClass::Invalid });
+            }
+        }
+    }
+    if out.is_empty() {
+        report::message_error(path, "lists no trees");
+        return Err(Failed { class: ErrorClass::Invalid });
+    }
+    Ok(out)
+}
+
+fn progress_bar(len: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} [{pos}/{len}] {msg}") {
+        bar.set_style(style);
+    }
+    bar
 }

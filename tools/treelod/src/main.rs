@@ -39,6 +39,9 @@ struct Cli {
 /// The subcommands, one module each.
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Build containers from glTF trees (Gilet's triangle + point hierarchy per grid cell).
+    #[command(after_help = EXIT_CODES)]
+    Build(build::Args),
     /// Build the built-in procedural demo tree into a container (no input needed).
     #[command(after_help = EXIT_CODES)]
     Demo(build::DemoArgs),
@@ -54,6 +57,7 @@ fn main() -> ExitCode {
     // Usage errors: clap prints `error: …` and the usage to stderr and exits with 2.
     let cli = Cli::parse();
     let outcome = match &cli.command {
+        Command::Build(args) => build::run(args),
         Command::Demo(args) => build::run_demo(args),
         Command::Dump(args) => dump::run(args),
         Command::Verify(args) => verify::run(args),

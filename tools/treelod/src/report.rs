@@ -86,6 +86,17 @@ pub fn write_stdout(text: &str) -> Result<(), Failed> {
     }
 }
 
+/// Prints `error: PATH: reason` for an operating-system error on `path`.
+pub fn io_error(path: &Path, error: &io::Error) -> Failed {
+    print_error(&format!("{}: {error}", path.display()));
+    Failed { class: ErrorClass::Io }
+}
+
+/// Prints `error: PATH: message` for a problem with the contents of `path`.
+pub fn message_error(path: &Path, message: &str) {
+    print_error(&format!("{}: {message}", path.display()));
+}
+
 /// Prints `warning: PATH: message`, ignoring a failure to do so.
 pub fn print_warning(path: &Path, message: &str) {
     let _ = writeln!(io::stderr().lock(), "warning: {}: {message}", path.display());

@@ -660,3 +660,44 @@ fn tempfile_dir(name: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).expect("creates a temporary directory");
     dir
 }
+
+#[test]
+fn build_writes_one_verified_container_per_input_and_reports_bad_gltf() {
+    let dir = tempfile_dir("build");
+    let model =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/trees/quaternius-common-tree-1-3k.glb");
+    assert!(model.exists(), "the shared models sit in ../shared beside the repository");
+    let run = Command::new(env!("CARGO_BIN_EXE_treelod"))
+        .arg("build")
+        .arg(&model)
+        .arg("-o")
+        .arg(&dir)
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "stderr: {}", String::from_utf8_lossy(&run.stderr));
+    assert!(stdout.contains("(leaf 528, bark 2360; dropped 0)"), "{stdout}");
+    let out = dir.join("quaternius-common-tree-1-3k.treelod");
+    treelod_format::verify(&treelod_format::Container::open(&out).expect("opens")).expect("verifies");
+    let dump = Command::new(env!("CARGO_BIN_EXE_treelod")).arg("dump").arg(&out).output().expect("runs");
+    let dump = String::from_utf8_lossy(&dump.stdout);
+    assert!(
+        dump.contains("leaf   \"geometry\"") || dump.contains("\"geometry\""),
+        "dump shows how classes were decided: {dump}"
+    );
+
+    let bad = dir.join("bad.glb");
+    std::fs::write(&bad, b"glTF garbage").expect("writes");
+    let run = Command::new(env!("CARGO_BIN_EXE_treelod"))
+        .arg("build")
+        .arg(&bad)
+        .arg("-o")
+        .arg(dir.join("bad.treelod"))
+        .output()
+        .expect("runs");
+    assert_eq!(run.status.code(), Some(3));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(stderr.starts_with(&format!("error: {}: ", bad.display())), "{stderr}");
+    assert!(!dir.join("bad.treelod").exists(), "nothing written for a failed build");
+    let _ = std::fs::remove_dir_all(&dir);
+}
