@@ -302,8 +302,10 @@ fn round_trip_through_a_memory_mapped_file() {
         [("plain.treelod", Compression::None), ("packed.treelod", Compression::Zstd { level: 5 })]
     {
         let path = dir.path().join(name);
-        data.write_to_path(&path, compression).unwrap();
+        let size = data.write_to_path(&path, compression).unwrap();
+        // The streaming writer and the in-memory one give the same bytes.
         assert_eq!(std::fs::read(&path).unwrap(), data.to_bytes(compression).unwrap());
+        assert_eq!(size, std::fs::metadata(&path).unwrap().len());
         let container = Container::open(&path).unwrap();
         assert_eq!(container.path(), Some(path.as_path()));
         assert_eq!(ContainerData::from_container(&container), data);

@@ -15,8 +15,9 @@ use treelod_format::{
 
 use crate::classify::{ClassifyOptions, classify};
 use crate::error::BuildError;
-use crate::gilet::{CellHierarchy, GiletConfig, LeafPoint, build_cell};
-use crate::scene::{AlphaMode, Class, ImageEncoding, Scene};
+use crate::gilet::{CellPoint, GiletConfig, LeafPoint, build_cell};
+use crate::scene::{AlphaMode, Class, Image, ImageEncoding, Material, Part, Scene};
+use crate::spt::FlattenError;
 use crate::texture::{TriangleSurface, integrate, linear_to_srgb};
 
 /// Triangles with less area than this (m²) are degenerate and dropped.
@@ -91,14 +92,25 @@ pub fn auto_grid(extent: Vec3) -> [u32; 3] {
     extent.to_array().map(|e| (4.0 * e / shortest).round().clamp(4.0, 16.0) as u32)
 }
 
-/// One kept triangle during the build.
+/// One kept triangle during the build: 24 bytes, so a large tree's triangles cost little before
+/// the per-cell stage derives their points.
 #[derive(Clone, Copy)]
 struct Tri {
     /// Global vertex ids (before renumbering).
     v: [u32; 3],
     material: u32,
     size: f32,
-    leaf: LeafPoint,
+    /// Index into the build's part list, for the texture and vertex colours of the leaf point.
+    part: u32,
+}
+
+/// A source part as the per-cell stage sees it.
+struct PartRef<'a> {
+    part: &'a Part,
+    material: Material,
+    image: Option<&'a Image>,
+    /// Global id of the part's first vertex.
+    base: u32,
 }
 
 /// Builds a block from placed scenes (spec §6, Gilet 2005). `name` names the block; `generator`
@@ -126,6 +138,7 @@ pub fn build_block(
     let mut material_info: Vec<MaterialInfo> = Vec::new();
     let mut vertices: Vec<VertexRecord> = Vec::new();
     let mut tris: Vec<Tri> = Vec::new();
+    let mut parts: Vec<PartRef<'_>> = Vec::new();
     for (t, placed) in trees.iter().enumerate() {
         let scene = placed.scene;
         warnings.extend(scene.warnings.iter().map(|w| format!("{}: {w}", scene.name)));
@@ -145,6 +158,10 @@ pub fn build_block(
             let image = source_material.image.and_then(|i| scene.images.get(i));
             let base =
                 u32::try_from(vertices.len()).map_err(|_| BuildError::Setting("more than 2^32 vertices".into()))?;
+            #[expect(clippy::cast_possible_truncation, reason = "parts are fewer than vertices")]
+            let part_id = parts.len() as u32;
+            parts.push(PartRef { part, material: source_material, image, base });
+            vertices.reserve(part.positions.len());
             for (i, p) in part.positions.iter().enumerate() {
                 let position = (Vec3::from_array(*p) + placed.translation).to_array();
                 let normal = part.normals.get(i).copied().unwrap_or([0.0, 1.0, 0.0]);
@@ -157,39 +174,23 @@ pub fn build_block(
             let mut dropped = 0u64;
             for tri in &part.triangles {
                 stats.triangles_in += 1;
-                let Some(corners) = tri
-                    .iter()
-                    .map(|&i| vertices.get((base + i) as usize).filter(|_| (i as usize) < part.positions.len()))
-                    .collect::<Option<Vec<_>>>()
-                else {
+                if tri.iter().any(|&i| i as usize >= part.positions.len()) {
                     dropped += 1;
                     continue;
-                };
-                let [a, b, c] = [0, 1, 2].map(|k| Vec3::from_array(corners[k].position));
-                let cross = (b - a).cross(c - a);
-                let area = 0.5 * cross.length();
+                }
+                let [a, b, c] = tri.map(|i| Vec3::from_array(vertices[(base + i) as usize].position));
+                let area: f32 = 0.5 * (b - a).cross(c - a).length();
                 if !(a.is_finite() && b.is_finite() && c.is_finite() && area.is_finite() && area > MIN_AREA) {
                     dropped += 1;
                     continue;
                 }
-                let surface = TriangleSurface {
-                    uv: tri.map(|i| Vec2::from_array(part.uvs.get(i as usize).copied().unwrap_or([0.0, 0.0]))),
-                    color: tri.map(|i| Vec4::from_array(part.colors.get(i as usize).copied().unwrap_or([1.0; 4]))),
-                };
                 let size = 2.0 * (area / std::f32::consts::PI).sqrt();
-                let leaf = LeafPoint {
-                    position: (a + b + c) / 3.0,
-                    normal: cross / (2.0 * area),
-                    area,
-                    color: integrate(&source_material, image, &surface),
-                    size,
-                };
                 match class.class {
                     Class::Leaf => stats.leaf_triangles += 1,
                     Class::Bark => stats.bark_triangles += 1,
                 }
                 #[expect(clippy::cast_possible_truncation, reason = "materials are few")]
-                tris.push(Tri { v: tri.map(|i| base + i), material: material as u32, size, leaf });
+                tris.push(Tri { v: tri.map(|i| base + i), material: material as u32, size, part: part_id });
             }
             if dropped > 0 {
                 warnings.push(format!(
@@ -232,90 +233,66 @@ pub fn build_block(
     let cell_size = (hi - lo) / dims;
     let mut per_cell: Vec<Vec<u32>> = vec![Vec::new(); cell_count];
     for (i, t) in tris.iter().enumerate() {
-        let rel = (t.leaf.position - lo) / cell_size.max(Vec3::splat(f32::MIN_POSITIVE));
+        let rel = (centroid(&vertices, t) - lo) / cell_size.max(Vec3::splat(f32::MIN_POSITIVE));
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
         let c = (rel.floor().max(Vec3::ZERO).min(dims - 1.0)).to_array().map(|v| v as usize);
         #[expect(clippy::cast_possible_truncation, reason = "fewer than 2^32 triangles (checked via vertex count)")]
         per_cell[c[0] + grid[0] as usize * (c[1] + grid[1] as usize * c[2])].push(i as u32);
     }
 
-    // Stage: per cell, the point hierarchy (parallel; collected in cell order).
-    let hierarchies: Vec<CellHierarchy> = per_cell
-        .par_iter()
-        .map(|ids| {
-            let leaves: Vec<LeafPoint> = ids.iter().map(|&i| tris[i as usize].leaf).collect();
-            build_cell(&leaves, &config.gilet)
-        })
-        .collect::<Result<_, _>>()?;
-
-    // Stage: records, cell by cell; vertices renumbered by first use.
+    // Stage: per cell, the leaf points, the point hierarchy as point records, and the triangles in
+    // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
+    // built in parallel a few at a time (results kept in cell order), and each batch is copied out
+    // and freed before the next, so the per-cell results never hold a second copy of the points.
     let mut remap = vec![u32::MAX; vertices.len()];
-    let mut out_vertices: Vec<VertexRecord> = Vec::new();
+    // Upper bounds (a hierarchy has fewer inner nodes than leaves): reserved address space, of
+    // which only what is written becomes resident.
+    let mut out_vertices: Vec<VertexRecord> = Vec::with_capacity(vertices.len());
     let mut triangles: Vec<TriangleRecord> = Vec::with_capacity(tris.len());
-    let mut points: Vec<PointRecord> = Vec::new();
+    let mut points: Vec<PointRecord> = Vec::with_capacity(2 * tris.len());
     let mut cells: Vec<CellRecord> = Vec::with_capacity(cell_count + 1);
-    for (ids, hierarchy) in per_cell.iter().zip(&hierarchies) {
-        let mut order: Vec<usize> = (0..ids.len()).collect();
-        order.sort_by(|&a, &b| {
-            tris[ids[b] as usize]
-                .size
-                .total_cmp(&tris[ids[a] as usize].size)
-                .then(hierarchy.leaf_of_triangle[a].cmp(&hierarchy.leaf_of_triangle[b]))
-        });
-        let (mut cmin, mut cmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        let first_triangle = triangles.len();
-        for k in order {
-            let t = &tris[ids[k] as usize];
-            let indices = t.v.map(|v| {
-                let slot = &mut remap[v as usize];
-                if *slot == u32::MAX {
-                    #[expect(clippy::cast_possible_truncation, reason = "vertex count checked to fit u32 above")]
-                    let id = out_vertices.len() as u32;
-                    *slot = id;
-                    out_vertices.push(vertices[v as usize]);
-                }
-                let p = Vec3::from_array(vertices[v as usize].position);
-                cmin = cmin.min(p);
-                cmax = cmax.max(p);
-                *slot
-            });
-            triangles.push(TriangleRecord {
-                indices,
-                size: t.size,
-                leaf: hierarchy.leaf_of_triangle[k],
-                material: t.material,
-            });
-        }
-        let first_point = points.len();
-        for p in &hierarchy.points {
-            cmin = cmin.min(p.position - p.radius);
-            cmax = cmax.max(p.position + p.radius);
-            let rgb = p.color.truncate().to_array().map(linear_to_srgb);
-            points.push(PointRecord {
-                position: p.position.to_array(),
-                radius: p.radius,
-                normal: pack::oct_encode(p.normal.to_array()),
-                color: pack::rgba8([rgb[0], rgb[1], rgb[2], p.color.w]),
-                size: p.size,
-                lo: p.lo,
-                hi: p.hi,
-                leaf_first: p.leaf_first,
-                leaf_count: p.leaf_count,
-                flags: 0,
+    let batch = 2 * rayon::current_num_threads().max(1);
+    for cell_batch in per_cell.chunks(batch) {
+        let outputs: Vec<CellOutput> = cell_batch
+            .par_iter()
+            .map(|ids| cell_output(ids, &tris, &vertices, &parts, &config.gilet))
+            .collect::<Result<_, FlattenError>>()?;
+        for cell in outputs {
+            let (mut cmin, mut cmax) = cell.bounds;
+            let first_triangle = triangles.len();
+            for (id, leaf) in cell.order {
+                let t = &tris[id as usize];
+                let indices = t.v.map(|v| {
+                    let slot = &mut remap[v as usize];
+                    if *slot == u32::MAX {
+                        #[expect(clippy::cast_possible_truncation, reason = "vertex count checked to fit u32 above")]
+                        let id = out_vertices.len() as u32;
+                        *slot = id;
+                        out_vertices.push(vertices[v as usize]);
+                    }
+                    let p = Vec3::from_array(vertices[v as usize].position);
+                    cmin = cmin.min(p);
+                    cmax = cmax.max(p);
+                    *slot
+                });
+                triangles.push(TriangleRecord { indices, size: t.size, leaf, material: t.material });
+            }
+            let first_point = points.len();
+            points.extend(cell.points);
+            let empty = first_triangle == triangles.len();
+            if !empty {
+                stats.nonempty_cells += 1;
+            }
+            cells.push(CellRecord {
+                bounds_min: if empty { [0.0; 3] } else { cmin.to_array() },
+                bounds_max: if empty { [0.0; 3] } else { cmax.to_array() },
+                triangles: range(first_triangle, triangles.len()),
+                points: range(first_point, points.len()),
+                ..CellRecord::default()
             });
         }
-        let empty = ids.is_empty();
-        if !empty {
-            stats.nonempty_cells += 1;
-        }
-        cells.push(CellRecord {
-            bounds_min: if empty { [0.0; 3] } else { cmin.to_array() },
-            bounds_max: if empty { [0.0; 3] } else { cmax.to_array() },
-            triangles: range(first_triangle, triangles.len()),
-            points: range(first_point, points.len()),
-            ..CellRecord::default()
-        });
     }
+    drop((per_cell, tris, vertices, remap, parts));
     // The block cell: Gilet's representation lives in the grid cells only.
     cells.push(CellRecord {
         triangles: range(triangles.len(), triangles.len()),
@@ -458,6 +435,85 @@ pub fn build_block(
         ..ContainerData::default()
     };
     Ok(BuildOutput { data, stats, warnings })
+}
+
+/// What the per-cell stage hands to the serial one.
+struct CellOutput {
+    /// The cell's triangles, largest first: (triangle id, leaf id).
+    order: Vec<(u32, u32)>,
+    /// Its points in SPT order.
+    points: Vec<PointRecord>,
+    /// Bounds of the points' discs.
+    bounds: (Vec3, Vec3),
+}
+
+/// Builds one cell: its leaf points, their hierarchy, and its triangles in size order.
+fn cell_output(
+    ids: &[u32],
+    tris: &[Tri],
+    vertices: &[VertexRecord],
+    parts: &[PartRef<'_>],
+    config: &GiletConfig,
+) -> Result<CellOutput, FlattenError> {
+    let leaves: Vec<LeafPoint> = ids.iter().map(|&i| leaf_point(&tris[i as usize], vertices, parts)).collect();
+    let hierarchy = build_cell(&leaves, config)?;
+    drop(leaves);
+    let mut order: Vec<(u32, u32)> =
+        ids.iter().zip(&hierarchy.leaf_of_triangle).map(|(&id, &leaf)| (id, leaf)).collect();
+    order.sort_by(|a, b| tris[b.0 as usize].size.total_cmp(&tris[a.0 as usize].size).then(a.1.cmp(&b.1)));
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let points = hierarchy
+        .points
+        .iter()
+        .map(|p| {
+            lo = lo.min(p.position - p.radius);
+            hi = hi.max(p.position + p.radius);
+            point_record(p)
+        })
+        .collect();
+    Ok(CellOutput { order, points, bounds: (lo, hi) })
+}
+
+fn centroid(vertices: &[VertexRecord], t: &Tri) -> Vec3 {
+    let [a, b, c] = t.v.map(|v| Vec3::from_array(vertices[v as usize].position));
+    (a + b + c) / 3.0
+}
+
+/// The point of one triangle (Gilet 2005 §4): centroid, equal-area size, unit normal, and the
+/// colour and coverage of its texture integrated over it.
+fn leaf_point(t: &Tri, vertices: &[VertexRecord], parts: &[PartRef<'_>]) -> LeafPoint {
+    let [a, b, c] = t.v.map(|v| Vec3::from_array(vertices[v as usize].position));
+    let cross = (b - a).cross(c - a);
+    let area = 0.5 * cross.length();
+    let part = &parts[t.part as usize];
+    let local = t.v.map(|v| (v - part.base) as usize);
+    let surface = TriangleSurface {
+        uv: local.map(|i| Vec2::from_array(part.part.uvs.get(i).copied().unwrap_or([0.0, 0.0]))),
+        color: local.map(|i| Vec4::from_array(part.part.colors.get(i).copied().unwrap_or([1.0; 4]))),
+    };
+    LeafPoint {
+        position: (a + b + c) / 3.0,
+        normal: cross / (2.0 * area),
+        area,
+        color: integrate(&part.material, part.image, &surface),
+        size: t.size,
+    }
+}
+
+fn point_record(p: &CellPoint) -> PointRecord {
+    let rgb = p.color.truncate().to_array().map(linear_to_srgb);
+    PointRecord {
+        position: p.position.to_array(),
+        radius: p.radius,
+        normal: pack::oct_encode(p.normal.to_array()),
+        color: pack::rgba8([rgb[0], rgb[1], rgb[2], p.color.w]),
+        size: p.size,
+        lo: p.lo,
+        hi: p.hi,
+        leaf_first: p.leaf_first,
+        leaf_count: p.leaf_count,
+        flags: 0,
+    }
 }
 
 #[expect(clippy::cast_possible_truncation, reason = "record counts fit u32 (checked by the writer)")]

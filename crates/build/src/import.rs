@@ -18,6 +18,13 @@ use crate::scene::{AlphaMode, Image, ImageEncoding, Material, Part, Scene, Sourc
 /// Extensions that change how geometry or images are stored, which treelod does not decode.
 const UNDECODED: [&str; 3] = ["KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_texture_basisu"];
 
+/// The name a tree imported from `path` gets: the file stem (`"tree"` if there is none). Outputs
+/// written to a directory are named after it.
+#[must_use]
+pub fn scene_name(path: &Path) -> String {
+    path.file_stem().map_or_else(|| "tree".to_owned(), |s| s.to_string_lossy().into_owned())
+}
+
 /// Reads the glTF (`.glb` or `.gltf`) at `path`.
 ///
 /// # Errors
@@ -54,7 +61,7 @@ pub fn import_gltf_bytes(bytes: &[u8], path: &Path, base_dir: Option<&Path>) -> 
     };
     let buffers = load_buffers(&document, blob, path, base_dir)?;
     let mut scene = Scene {
-        name: path.file_stem().map_or_else(|| "tree".to_owned(), |s| s.to_string_lossy().into_owned()),
+        name: scene_name(path),
         source: SourceInfo {
             path: path.to_string_lossy().replace('\\', "/"),
             content_hash: format!("sha256:{}", hex(&sha2::Sha256::digest(bytes))),

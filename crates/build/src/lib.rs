@@ -18,5 +18,5 @@ pub mod texture;
 pub use assemble::{BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block};
 pub use demo::{DemoTreeConfig, demo_tree};
 pub use error::BuildError;
-pub use import::{import_gltf, import_gltf_bytes};
+pub use import::{import_gltf, import_gltf_bytes, scene_name};
 pub use spt::{FlattenError, Spt, SptNode, flatten};

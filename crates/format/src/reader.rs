@@ -215,63 +215,7 @@ impl Container {
 
     /// Spec §6.1 grid and bounds, §6.2 cell count and tiling.
     fn validate_block_and_cells(&self) -> Result<()> {
-        let blocks: &[BlockRecord] = self.records(SectionKind::BLOCK);
-        let [block] = blocks else {
-            return Err(bad_record(SectionKind::BLOCK, 0, format!("{} records, the spec requires 1", blocks.len())));
-        };
-        let grid = block.grid;
-        if grid.iter().any(|&g| g == 0 || g > MAX_GRID_AXIS) || block.grid_cell_count() > MAX_GRID_CELLS {
-            return Err(bad_record(
-                SectionKind::BLOCK,
-                0,
-                format!("grid {grid:?} is outside 1..=256 per axis, 65536 cells"),
-            ));
-        }
-        let finite = block.bounds_min.iter().chain(&block.bounds_max).all(|v| v.is_finite());
-        if !finite || (0..3).any(|i| block.bounds_min[i] > block.bounds_max[i]) {
-            return Err(bad_record(
-                SectionKind::BLOCK,
-                0,
-                format!("bounds {:?}..{:?} are not finite and ordered", block.bounds_min, block.bounds_max),
-            ));
-        }
-        if block.tree_count == 0 {
-            return Err(bad_record(SectionKind::BLOCK, 0, "tree_count is 0".into()));
-        }
-        let cells = self.cells();
-        let expected = block.grid_cell_count() + 1;
-        if cells.len() != expected {
-            return Err(bad_record(
-                SectionKind::CELLS,
-                0,
-                format!("{} cell records, the grid {grid:?} needs {expected} (cells + block cell)", cells.len()),
-            ));
-        }
-        for slot in 0..6 {
-            let kind = cells[0].ranges()[slot].0;
-            let total = self.record_count(kind);
-            let mut next = 0u64;
-            for (index, cell) in cells.iter().enumerate() {
-                let range = cell.ranges()[slot].1;
-                if u64::from(range.first) != next {
-                    return Err(Error::BadCell {
-                        cell: index,
-                        reason: format!(
-                            "{kind} range starts at {}, expected {next} (ranges tile the array)",
-                            range.first
-                        ),
-                    });
-                }
-                next += u64::from(range.count);
-            }
-            if next != total {
-                return Err(Error::BadCell {
-                    cell: cells.len() - 1,
-                    reason: format!("{kind} ranges end at {next}, the section has {total} records"),
-                });
-            }
-        }
-        Ok(())
+        check_block_and_cells(self.records(SectionKind::BLOCK), self.cells(), |kind| self.record_count(kind))
     }
 
     /// The header as stored.
@@ -670,4 +614,65 @@ fn unshuffle(shuffled: &[u8], record_size: usize, out: &mut [u8]) {
             *byte = shuffled[j * n + i];
         }
     }
+}
+
+/// Spec §6.1 grid and bounds, §6.2 cell count and tiling: the checks every open makes, shared with
+/// the writer so it never emits a file the reader refuses. `count` gives a section's record count.
+pub(crate) fn check_block_and_cells(
+    blocks: &[BlockRecord],
+    cells: &[CellRecord],
+    count: impl Fn(SectionKind) -> u64,
+) -> Result<()> {
+    let [block] = blocks else {
+        return Err(bad_record(SectionKind::BLOCK, 0, format!("{} records, the spec requires 1", blocks.len())));
+    };
+    let grid = block.grid;
+    if grid.iter().any(|&g| g == 0 || g > MAX_GRID_AXIS) || block.grid_cell_count() > MAX_GRID_CELLS {
+        return Err(bad_record(
+            SectionKind::BLOCK,
+            0,
+            format!("grid {grid:?} is outside 1..=256 per axis, 65536 cells"),
+        ));
+    }
+    let finite = block.bounds_min.iter().chain(&block.bounds_max).all(|v| v.is_finite());
+    if !finite || (0..3).any(|i| block.bounds_min[i] > block.bounds_max[i]) {
+        return Err(bad_record(
+            SectionKind::BLOCK,
+            0,
+            format!("bounds {:?}..{:?} are not finite and ordered", block.bounds_min, block.bounds_max),
+        ));
+    }
+    if block.tree_count == 0 {
+        return Err(bad_record(SectionKind::BLOCK, 0, "tree_count is 0".into()));
+    }
+    let expected = block.grid_cell_count() + 1;
+    if cells.len() != expected {
+        return Err(bad_record(
+            SectionKind::CELLS,
+            0,
+            format!("{} cell records, the grid {grid:?} needs {expected} (cells + block cell)", cells.len()),
+        ));
+    }
+    for slot in 0..6 {
+        let kind = cells[0].ranges()[slot].0;
+        let total = count(kind);
+        let mut next = 0u64;
+        for (index, cell) in cells.iter().enumerate() {
+            let range = cell.ranges()[slot].1;
+            if u64::from(range.first) != next {
+                return Err(Error::BadCell {
+                    cell: index,
+                    reason: format!("{kind} range starts at {}, expected {next} (ranges tile the array)", range.first),
+                });
+            }
+            next += u64::from(range.count);
+        }
+        if next != total {
+            return Err(Error::BadCell {
+                cell: cells.len() - 1,
+                reason: format!("{kind} ranges end at {next}, the section has {total} records"),
+            });
+        }
+    }
+    Ok(())
 }

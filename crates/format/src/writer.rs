@@ -3,14 +3,16 @@
 //! Sections are written in ascending kind order, each on a 16-byte boundary with zero padding, so
 //! the same data and options always give the same bytes.
 
-use std::io::Write as _;
+use std::borrow::Cow;
+use std::io::{Read as _, Write as _};
 use std::path::Path;
 
 use bytemuck::Pod;
 
 use crate::error::{Error, Result};
+use crate::metadata::MAX_META_BYTES;
 use crate::metadata::Metadata;
-use crate::reader::{Container, MAX_COMPRESSION_RATIO, shuffle};
+use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells, shuffle};
 use crate::records::{
     BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord,
     LineRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
@@ -106,11 +108,15 @@ impl ContainerData {
         }
     }
 
-    /// The sections to write, in ascending kind order, as (kind, bytes, record size).
-    fn sections(&self) -> Result<Vec<(SectionKind, Vec<u8>, u32)>> {
+    /// The sections to write, in ascending kind order, as (kind, bytes, record size). Record arrays
+    /// are borrowed, not copied: a large build encodes one section at a time.
+    fn sections(&self) -> Result<Vec<SectionBytes<'_>>> {
         let meta = postcard::to_allocvec(&self.metadata).map_err(|e| Error::Write(format!("metadata: {e}")))?;
-        let mut out: Vec<(SectionKind, Vec<u8>, u32)> = vec![
-            (SectionKind::META, meta, 1),
+        if meta.len() as u64 > MAX_META_BYTES {
+            return Err(Error::Write(format!("metadata is {} bytes, the limit is {MAX_META_BYTES}", meta.len())));
+        }
+        let mut out: Vec<SectionBytes<'_>> = vec![
+            (SectionKind::META, Cow::Owned(meta), 1),
             (SectionKind::BLOCK, bytes_of(std::slice::from_ref(&self.block)), 0),
             (SectionKind::CELLS, bytes_of(&self.cells), 0),
         ];
@@ -120,7 +126,7 @@ impl ContainerData {
             (SectionKind::POINTS, bytes_of(&self.points)),
             (SectionKind::MATERIALS, bytes_of(&self.materials)),
             (SectionKind::IMAGES, bytes_of(&self.images)),
-            (SectionKind::IMAGE_DATA, self.image_data.clone()),
+            (SectionKind::IMAGE_DATA, Cow::Borrowed(self.image_data.as_slice())),
             (SectionKind::ELLIPSOIDS, bytes_of(&self.ellipsoids)),
             (SectionKind::LINES, bytes_of(&self.lines)),
             (SectionKind::PLANES, bytes_of(&self.planes)),
@@ -135,17 +141,26 @@ impl ContainerData {
             if kind.record_size().is_some() {
                 return Err(Error::Write(format!("extra section kind {kind} is a known kind")));
             }
-            out.push((kind, bytes.clone(), 1));
+            out.push((kind, Cow::Borrowed(bytes.as_slice()), 1));
         }
         out.sort_by_key(|(k, _, _)| *k);
         if out.windows(2).any(|w| w[0].0 == w[1].0) {
             return Err(Error::Write("an extra section kind appears twice".into()));
         }
-        for (kind, _, size) in &mut out {
+        for (kind, bytes, size) in &mut out {
             if let Some(known) = kind.record_size() {
                 *size = known;
             }
+            if bytes.len() as u64 / u64::from((*size).max(1)) > u64::from(u32::MAX) {
+                return Err(Error::Write(format!("section {kind} has more than 2^32-1 records")));
+            }
         }
+        let count = |kind: SectionKind| {
+            out.iter().find(|(k, _, _)| *k == kind).map_or(0, |(_, b, size)| b.len() as u64 / u64::from((*size).max(1)))
+        };
+        // The writer never emits a file its own reader refuses (spec §6.1, §6.2).
+        check_block_and_cells(std::slice::from_ref(&self.block), &self.cells, count)
+            .map_err(|e| Error::Write(format!("the data breaks the spec: {e}")))?;
         Ok(out)
     }
 
@@ -153,16 +168,54 @@ impl ContainerData {
     ///
     /// # Errors
     /// [`Error::Write`] if the data cannot make a file this crate would open (wrong cell count, ranges
-    /// that do not tile the arrays, too many records), checked by opening the result.
+    /// that do not tile the arrays, too many records).
     pub fn to_bytes(&self, compression: Compression) -> Result<Vec<u8>> {
+        let mut out = std::io::Cursor::new(Vec::new());
+        self.encode(compression, &mut out).map_err(|e| match e {
+            EncodeError::Data(e) => e,
+            EncodeError::Io(e) => Error::Write(format!("in memory: {e}")),
+        })?;
+        Ok(out.into_inner())
+    }
+
+    /// Encodes and writes the container to `path` atomically: to a temporary file in the same
+    /// directory, flushed, then renamed over `path`. On failure `path` is untouched. Sections are
+    /// compressed and written one at a time, so the memory this takes beyond the data itself is
+    /// about one section's size, not the file's. Returns the file's size in bytes.
+    ///
+    /// # Errors
+    /// [`Error::Write`] as [`Self::to_bytes`]; [`Error::Io`] naming the path if writing fails.
+    pub fn write_to_path(&self, path: impl AsRef<Path>, compression: Compression) -> Result<u64> {
+        let path = path.as_ref();
+        let io = |source| Error::Io { path: path.to_owned(), source };
+        let mut tmp = temporary_beside(path)?;
+        let mut sink = std::io::BufWriter::new(tmp.as_file_mut());
+        let size = self.encode(compression, &mut sink).map_err(|e| match e {
+            EncodeError::Data(e) => e,
+            EncodeError::Io(e) => io(e),
+        })?;
+        sink.flush().map_err(io)?;
+        drop(sink);
+        tmp.as_file().sync_all().map_err(io)?;
+        tmp.persist(path).map_err(|e| io(e.error))?;
+        Ok(size)
+    }
+
+    /// Writes the file to `sink`: a zeroed header and table, each section's payload as it is
+    /// encoded, then the real header and table. Returns the file size.
+    fn encode<W: std::io::Write + std::io::Seek>(
+        &self,
+        compression: Compression,
+        sink: &mut W,
+    ) -> std::result::Result<u64, EncodeError> {
         let sections = self.sections()?;
         let table_offset = HEADER_SIZE as u64;
         let table_len = sections.len() * SECTION_ENTRY_SIZE;
+        let mut position = 0u64;
         let mut payload_offset = align(table_offset + table_len as u64);
         let mut entries = Vec::with_capacity(sections.len());
-        let mut stored_payloads = Vec::with_capacity(sections.len());
         for (kind, raw, record_size) in sections {
-            let (stored, flags) = match compression {
+            let (stored, flags): (Cow<'_, [u8]>, u32) = match compression {
                 Compression::Zstd { level }
                     if kind.compressible() && kind.record_size().is_some() && !raw.is_empty() =>
                 {
@@ -177,7 +230,7 @@ impl ContainerData {
                     };
                     let pays = packed.len() < raw.len();
                     let within_limit = raw.len() as u64 <= packed.len() as u64 * MAX_COMPRESSION_RATIO;
-                    if pays && within_limit { (packed, flags) } else { (raw.clone(), 0) }
+                    if pays && within_limit { (Cow::Owned(packed), flags) } else { (raw.clone(), 0) }
                 }
                 _ => (raw.clone(), 0),
             };
@@ -191,10 +244,13 @@ impl ContainerData {
                 checksum: crc32fast::hash(&stored),
                 reserved: 0,
             });
-            payload_offset = align(payload_offset + stored.len() as u64);
-            stored_payloads.push(stored);
+            zeros(sink, payload_offset - position)?;
+            sink.write_all(&stored)?;
+            position = payload_offset + stored.len() as u64;
+            payload_offset = align(position);
         }
         let file_size = entries.last().map_or(table_offset + table_len as u64, |e| e.offset + e.length);
+        zeros(sink, file_size.saturating_sub(position))?;
         let mut header = Header {
             magic: MAGIC,
             major: MAJOR,
@@ -212,38 +268,41 @@ impl ContainerData {
         crc.update(bytemuck::bytes_of(&header));
         crc.update(table);
         header.header_checksum = crc.finalize();
-
-        let size = usize::try_from(file_size).map_err(|_| Error::Write("file too large for this machine".into()))?;
-        let mut out = Vec::with_capacity(size);
-        out.extend_from_slice(bytemuck::bytes_of(&header));
-        out.extend_from_slice(table);
-        for (entry, stored) in entries.iter().zip(&stored_payloads) {
-            out.resize(usize::try_from(entry.offset).unwrap_or(usize::MAX), 0);
-            out.extend_from_slice(stored);
-        }
-        // The writer never emits a file its own reader refuses.
-        Container::from_bytes(&out).map_err(|e| Error::Write(format!("the data breaks the spec: {e}")))?;
-        Ok(out)
-    }
-
-    /// Encodes and writes the container to `path` atomically: to a temporary file in the same
-    /// directory, flushed, then renamed over `path`. On failure `path` is untouched.
-    ///
-    /// # Errors
-    /// [`Error::Write`] as [`Self::to_bytes`]; [`Error::Io`] naming the path if writing fails.
-    pub fn write_to_path(&self, path: impl AsRef<Path>, compression: Compression) -> Result<()> {
-        let bytes = self.to_bytes(compression)?;
-        write_atomically(path.as_ref(), &bytes)
+        sink.seek(std::io::SeekFrom::Start(0))?;
+        sink.write_all(bytemuck::bytes_of(&header))?;
+        sink.write_all(table)?;
+        sink.seek(std::io::SeekFrom::Start(file_size))?;
+        Ok(file_size)
     }
 }
 
-/// Writes `bytes` to `path` through a temporary file and a rename, so readers see the old file or
-/// the new one, never a half-written one.
-///
-/// # Errors
-/// [`Error::Io`] naming `path`.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let io = |source| Error::Io { path: path.to_owned(), source };
+/// A section to write: kind, raw bytes, record size.
+type SectionBytes<'a> = (SectionKind, Cow<'a, [u8]>, u32);
+
+/// Why [`ContainerData::encode`] failed: the data, or the sink.
+enum EncodeError {
+    Data(Error),
+    Io(std::io::Error),
+}
+
+impl From<Error> for EncodeError {
+    fn from(e: Error) -> Self {
+        Self::Data(e)
+    }
+}
+
+impl From<std::io::Error> for EncodeError {
+    fn from(e: std::io::Error) -> Self {
+        Self::Io(e)
+    }
+}
+
+fn zeros(sink: &mut impl std::io::Write, count: u64) -> std::io::Result<()> {
+    std::io::copy(&mut std::io::repeat(0).take(count), sink).map(|_| ())
+}
+
+/// A temporary file in `path`'s directory, to be renamed over `path`.
+fn temporary_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -254,7 +313,17 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     // (0666 less the umask), as a plain `File::create` would give it.
     #[cfg(unix)]
     builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-    let mut tmp = builder.tempfile_in(dir).map_err(io)?;
+    builder.tempfile_in(dir).map_err(|source| Error::Io { path: path.to_owned(), source })
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename, so readers see the old file or
+/// the new one, never a half-written one.
+///
+/// # Errors
+/// [`Error::Io`] naming `path`.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let io = |source| Error::Io { path: path.to_owned(), source };
+    let mut tmp = temporary_beside(path)?;
     tmp.write_all(bytes).map_err(io)?;
     tmp.as_file().sync_all().map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;
@@ -273,6 +342,6 @@ fn align(offset: u64) -> u64 {
     offset.div_ceil(SECTION_ALIGN) * SECTION_ALIGN
 }
 
-fn bytes_of<T: Pod>(records: &[T]) -> Vec<u8> {
-    bytemuck::cast_slice(records).to_vec()
+fn bytes_of<T: Pod>(records: &[T]) -> Cow<'_, [u8]> {
+    Cow::Borrowed(bytemuck::cast_slice(records))
 }

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use treelod_build::scene::Scene;
-use treelod_build::{BuildConfig, BuildOutput, Placed, build_block};
+use treelod_build::{BuildConfig, BuildOutput, BuildStats, Placed, build_block};
 use treelod_format::{Compression, Container, ErrorClass};
 
 use crate::report::{self, Failed};
@@ -114,47 +114,24 @@ pub struct DemoArgs {
 
 /// Runs `treelod build`.
 pub fn run(args: &Args) -> Result<(), Failed> {
-    let mut trees: Vec<(PathBuf, Vec3)> = Vec::new();
-    let mut x = 0.0f32;
-    let mut scenes: Vec<Scene> = Vec::new();
-    let progress = progress_bar(args.inputs.len() as u64);
-    for input in &args.inputs {
-        progress.set_message(format!("importing {}", input.display()));
-        let scene = import(input)?;
-        // Side by side along x with a 10 % gap, each tree's own x extent apart.
-        let (lo, hi) = scene_x_range(&scene);
-        let offset = if args.block { x - lo } else { 0.0 };
-        x = offset + hi + 0.1 * (hi - lo).max(0.0);
-        trees.push((input.clone(), Vec3::new(offset, 0.0, 0.0)));
-        scenes.push(scene);
-        progress.inc(1);
-    }
-    if let Some(placement) = &args.placement {
-        for (path, at) in read_placement(placement)? {
-            progress.set_message(format!("importing {}", path.display()));
-            scenes.push(import(&path)?);
-            trees.push((path, at));
-        }
-    }
-    progress.finish_and_clear();
-
     if args.block {
-        let name = args.output.file_stem().map_or_else(|| "block".to_owned(), |s| s.to_string_lossy().into_owned());
-        let placed: Vec<Placed> =
-            scenes.iter().zip(&trees).map(|(scene, (_, at))| Placed { scene, translation: *at }).collect();
-        let sources: Vec<&Path> = trees.iter().map(|(p, _)| p.as_path()).collect();
-        return build_one(&name, &placed, &sources, &args.output, &args.options);
+        return run_block(args);
     }
     let to_directory =
-        trees.len() > 1 || args.output.is_dir() || args.output.as_os_str().to_string_lossy().ends_with('/');
+        args.inputs.len() > 1 || args.output.is_dir() || args.output.as_os_str().to_string_lossy().ends_with('/');
     if to_directory {
         std::fs::create_dir_all(&args.output).map_err(|e| report::io_error(&args.output, &e))?;
     }
+    // One input at a time: import, build, write, then drop it before the next, so a batch takes the
+    // memory of its largest tree, and one bad file does not stop the others.
     let mut first_failure = None;
     let mut seen: Vec<PathBuf> = Vec::new();
-    for (scene, (input, _)) in scenes.iter().zip(&trees) {
-        let output =
-            if to_directory { args.output.join(format!("{}.treelod", scene.name)) } else { args.output.clone() };
+    for input in &args.inputs {
+        let output = if to_directory {
+            args.output.join(format!("{}.treelod", treelod_build::scene_name(input)))
+        } else {
+            args.output.clone()
+        };
         if seen.contains(&output) {
             report::message_error(
                 input,
@@ -164,12 +141,45 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             continue;
         }
         seen.push(output.clone());
-        let placed = [Placed { scene, translation: Vec3::ZERO }];
-        if let Err(failed) = build_one(&scene.name, &placed, &[input.as_path()], &output, &args.options) {
+        let result = import(input).and_then(|scene| {
+            let name = scene.name.clone();
+            build_one(&name, vec![(scene, Vec3::ZERO)], &[input.as_path()], &output, &args.options)
+        });
+        if let Err(failed) = result {
             first_failure.get_or_insert(failed);
         }
     }
     first_failure.map_or(Ok(()), Err)
+}
+
+/// `--block`: every input (and every tree of the placement file) in one block.
+fn run_block(args: &Args) -> Result<(), Failed> {
+    let mut paths: Vec<PathBuf> = Vec::new();
+    let mut x = 0.0f32;
+    let mut scenes: Vec<(Scene, Vec3)> = Vec::new();
+    let progress = progress_bar(args.inputs.len() as u64);
+    for input in &args.inputs {
+        progress.set_message(format!("importing {}", input.display()));
+        let scene = import(input)?;
+        // Side by side along x with a 10 % gap, each tree's own x extent apart.
+        let (lo, hi) = scene_x_range(&scene);
+        let offset = x - lo;
+        x = offset + hi + 0.1 * (hi - lo).max(0.0);
+        paths.push(input.clone());
+        scenes.push((scene, Vec3::new(offset, 0.0, 0.0)));
+        progress.inc(1);
+    }
+    if let Some(placement) = &args.placement {
+        for (path, at) in read_placement(placement)? {
+            progress.set_message(format!("importing {}", path.display()));
+            scenes.push((import(&path)?, at));
+            paths.push(path);
+        }
+    }
+    progress.finish_and_clear();
+    let name = args.output.file_stem().map_or_else(|| "block".to_owned(), |s| s.to_string_lossy().into_owned());
+    let sources: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
+    build_one(&name, scenes, &sources, &args.output, &args.options)
 }
 
 /// Runs `treelod demo`: builds the built-in procedural tree (no input needed).
@@ -180,31 +190,39 @@ pub fn run_demo(args: &DemoArgs) -> Result<(), Failed> {
         ..treelod_build::DemoTreeConfig::default()
     };
     let scene = treelod_build::demo_tree(&config);
-    build_one(&scene.name, &[Placed { scene: &scene, translation: Vec3::ZERO }], &[], &args.output, &args.options)?;
+    let name = scene.name.clone();
+    build_one(&name, vec![(scene, Vec3::ZERO)], &[], &args.output, &args.options)?;
     if !args.options.json {
         report::write_stdout(&format!("next: treelod dump {}\n", args.output.display()))?;
     }
     Ok(())
 }
 
-/// Builds, writes atomically, reopens and verifies one container, then prints its summary.
+/// Builds, writes atomically, reopens and verifies one container, then prints its summary. The
+/// scenes are dropped once built and the built arrays once written, before verification reads the
+/// file back, so the stages do not hold each other's memory.
 fn build_one(
     name: &str,
-    placed: &[Placed<'_>],
+    scenes: Vec<(Scene, Vec3)>,
     sources: &[&Path],
     output: &Path,
     options: &BuildOptions,
 ) -> Result<(), Failed> {
     let start = Instant::now();
     let source_label = sources.first().copied().unwrap_or(output);
-    let built: BuildOutput =
-        build_block(name, placed, &options.config(), &format!("treelod {}", env!("CARGO_PKG_VERSION")))
-            .map_err(|e| report::build_error(source_label, &e))?;
-    for warning in &built.warnings {
+    let placed: Vec<Placed<'_>> =
+        scenes.iter().map(|(scene, translation)| Placed { scene, translation: *translation }).collect();
+    let built = build_block(name, &placed, &options.config(), &format!("treelod {}", env!("CARGO_PKG_VERSION")))
+        .map_err(|e| report::build_error(source_label, &e));
+    drop(placed);
+    drop(scenes);
+    let BuildOutput { data, stats, warnings } = built?;
+    for warning in &warnings {
         report::print_warning(source_label, warning);
     }
-    let bytes = built.data.to_bytes(options.compression()).map_err(|e| report::file_error(output, &e))?;
-    treelod_format::write_atomically(output, &bytes).map_err(|e| report::file_error(output, &e))?;
+    let file_bytes = data.write_to_path(output, options.compression()).map_err(|e| report::file_error(output, &e))?;
+    let (materials, images) = (data.materials.len(), data.images.len());
+    drop(data);
     let verified = if options.no_verify {
         None
     } else {
@@ -216,8 +234,11 @@ fn build_one(
     let summary = Summary {
         output,
         sources,
-        built: &built,
-        file_bytes: bytes.len() as u64,
+        stats: &stats,
+        warnings: &warnings,
+        materials,
+        images,
+        file_bytes,
         source_bytes,
         seconds,
         verified: verified.is_some(),
@@ -229,7 +250,10 @@ fn build_one(
 struct Summary<'a> {
     output: &'a Path,
     sources: &'a [&'a Path],
-    built: &'a BuildOutput,
+    stats: &'a BuildStats,
+    warnings: &'a [String],
+    materials: usize,
+    images: usize,
     file_bytes: u64,
     source_bytes: u64,
     seconds: f64,
@@ -238,7 +262,7 @@ struct Summary<'a> {
 
 impl Summary<'_> {
     fn to_text(&self) -> String {
-        let s = &self.built.stats;
+        let s = self.stats;
         let from = if self.sources.is_empty() {
             "the built-in demo tree".to_owned()
         } else {
@@ -260,8 +284,8 @@ impl Summary<'_> {
             s.vertices,
             s.triangles,
             s.points,
-            self.built.data.materials.len(),
-            self.built.data.images.len(),
+            self.materials,
+            self.images,
             s.grid[0],
             s.grid[1],
             s.grid[2],
@@ -273,7 +297,7 @@ impl Summary<'_> {
     }
 
     fn to_json(&self) -> String {
-        let s = &self.built.stats;
+        let s = self.stats;
         let value = serde_json::json!({
             "output": self.output.display().to_string(),
             "sources": self.sources.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
@@ -285,14 +309,14 @@ impl Summary<'_> {
             "vertices": s.vertices,
             "triangles": s.triangles,
             "points": s.points,
-            "materials": self.built.data.materials.len(),
-            "images": self.built.data.images.len(),
+            "materials": self.materials,
+            "images": self.images,
             "grid": s.grid,
             "nonempty_cells": s.nonempty_cells,
             "file_bytes": self.file_bytes,
             "source_bytes": self.source_bytes,
             "verified": self.verified,
-            "warnings": self.built.warnings,
+            "warnings": self.warnings,
         });
         format!("{value}\n")
     }

@@ -699,5 +699,23 @@ fn build_writes_one_verified_container_per_input_and_reports_bad_gltf() {
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(stderr.starts_with(&format!("error: {}: ", bad.display())), "{stderr}");
     assert!(!dir.join("bad.treelod").exists(), "nothing written for a failed build");
+
+    // In a batch, a bad file is reported and the others are still built.
+    let batch = dir.join("batch");
+    let run = Command::new(env!("CARGO_BIN_EXE_treelod"))
+        .arg("build")
+        .arg(&bad)
+        .arg(&model)
+        .arg("-o")
+        .arg(&batch)
+        .output()
+        .expect("runs");
+    assert_eq!(run.status.code(), Some(3), "the batch exits with the first failure");
+    assert!(String::from_utf8_lossy(&run.stderr).contains(&bad.display().to_string()));
+    treelod_format::verify(
+        &treelod_format::Container::open(batch.join("quaternius-common-tree-1-3k.treelod")).expect("opens"),
+    )
+    .expect("the good input is built despite the bad one before it");
+    assert!(!batch.join("bad.treelod").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
