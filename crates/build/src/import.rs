@@ -228,9 +228,9 @@ fn load_images(
             }
         };
         let decoded = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
-            decode_png(&bytes).map(|(w, h, rgba)| (w, h, rgba, ImageEncoding::Png))
+            treelod_format::image::decode_png(&bytes).map(|(w, h, rgba)| (w, h, rgba, ImageEncoding::Png))
         } else if bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {
-            decode_jpeg(&bytes).map(|(w, h, rgba)| (w, h, rgba, ImageEncoding::Jpeg))
+            treelod_format::image::decode_jpeg(&bytes).map(|(w, h, rgba)| (w, h, rgba, ImageEncoding::Jpeg))
         } else {
             warnings.push(format!(
                 "image {index} ({}) is neither PNG nor JPEG; its materials are drawn untextured",
@@ -250,44 +250,6 @@ fn load_images(
         images.push(Image { width, height, rgba, encoded: bytes, encoding });
     }
     Ok(images)
-}
-
-fn decode_png(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
-    let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
-    decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
-    let mut reader = decoder.read_info().map_err(|e| e.to_string())?;
-    let size = reader.output_buffer_size().ok_or("image too large")?;
-    let mut buf = vec![0; size];
-    let info = reader.next_frame(&mut buf).map_err(|e| e.to_string())?;
-    let pixels = &buf[..info.buffer_size()];
-    let rgba: Vec<u8> = match info.color_type {
-        png::ColorType::Rgba => pixels.to_vec(),
-        png::ColorType::Rgb => pixels.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect(),
-        png::ColorType::GrayscaleAlpha => pixels.chunks_exact(2).flat_map(|p| [p[0], p[0], p[0], p[1]]).collect(),
-        png::ColorType::Grayscale => pixels.iter().flat_map(|&g| [g, g, g, 255]).collect(),
-        png::ColorType::Indexed => return Err("indexed colour was not expanded".into()),
-    };
-    Ok((info.width, info.height, rgba))
-}
-
-fn decode_jpeg(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
-    let mut decoder = jpeg_decoder::Decoder::new(std::io::Cursor::new(bytes));
-    let pixels = decoder.decode().map_err(|e| e.to_string())?;
-    let info = decoder.info().ok_or("no image information")?;
-    let rgba: Vec<u8> = match info.pixel_format {
-        jpeg_decoder::PixelFormat::RGB24 => pixels.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect(),
-        jpeg_decoder::PixelFormat::L8 => pixels.iter().flat_map(|&g| [g, g, g, 255]).collect(),
-        jpeg_decoder::PixelFormat::L16 => pixels.chunks_exact(2).flat_map(|p| [p[0], p[0], p[0], 255]).collect(),
-        jpeg_decoder::PixelFormat::CMYK32 => pixels
-            .chunks_exact(4)
-            .flat_map(|p| {
-                let k = u16::from(255 - p[3]);
-                let c = |v: u8| ((u16::from(255 - v) * k) / 255) as u8;
-                [c(p[0]), c(p[1]), c(p[2]), 255]
-            })
-            .collect(),
-    };
-    Ok((u32::from(info.width), u32::from(info.height), rgba))
 }
 
 /// One primitive as a [`Part`] in world space, or `None` (with a warning) if it holds no triangles.

@@ -15,6 +15,8 @@
 //! ```
 
 mod error;
+#[cfg(feature = "images")]
+pub mod image;
 mod metadata;
 pub mod pack;
 mod reader;
