@@ -169,7 +169,11 @@ impl Node {
             color: rgb.extend(l.color.w * wl + r.color.w * wr),
             area,
             radius,
-            draw_radius: rule(l.draw_radius, r.draw_radius),
+            // The paper's rule shrinks a disc below its children's total area when their normals
+            // differ (α < 1: R → 2/π·R_m), and repeated over a deep binary tree it thins the canopy
+            // at a distance. Splats always face the camera, so the disc drawn for a node keeps at
+            // least the opaque area of its children together.
+            draw_radius: rule(l.draw_radius, r.draw_radius).max(l.draw_radius.hypot(r.draw_radius)),
             size: 2.0 * radius,
         }
     }
@@ -285,15 +289,18 @@ mod tests {
 
     #[test]
     fn radius_rule_follows_the_paper_and_sizes_are_monotone() {
-        // Parallel normals (α = 1): R = 2/π · (R_l + R_r).
+        // Parallel normals (α = 1): R = 2/π · (R_l + R_r) sets the selection size; the drawn disc
+        // keeps at least the children's area, sqrt(1² + 1²).
         let h = build_cell(&[leaf(0.0, 0.0, 2.0), leaf(1.0, 0.0, 2.0)], &GiletConfig::default()).unwrap();
         let root = h.points[0];
-        assert!((root.radius - std::f32::consts::FRAC_2_PI * 2.0).abs() < 1e-6);
+        assert!((root.size - 2.0 * std::f32::consts::FRAC_2_PI * 2.0).abs() < 1e-6);
+        assert!((root.radius - std::f32::consts::SQRT_2).abs() < 1e-6);
         // Perpendicular normals (α = 0): the rule gives 2/π · R_m < R, made monotone for selection.
         let mut b = leaf(1.0, 0.0, 2.0);
         b.normal = Vec3::X;
         let h = build_cell(&[leaf(0.0, 0.0, 2.0), b], &GiletConfig::default()).unwrap();
         assert!(h.points[0].size >= 2.0, "parent selection size never below a child's");
+        assert!(h.points[0].radius >= std::f32::consts::SQRT_2 - 1e-6, "the disc keeps the children's area");
         for p in &h.points[1..] {
             assert_eq!(p.lo, 0.0);
             assert_eq!(p.hi, h.points[0].lo);
