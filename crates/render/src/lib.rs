@@ -1,0 +1,54 @@
+//! Draws `.treelod` containers with wgpu inside a render pass the host owns.
+//!
+//! The host keeps its device, queue, targets and pass; treelod adds its draws:
+//!
+//! ```no_run
+//! # fn frame(device: &wgpu::Device, queue: &wgpu::Queue, view: &wgpu::TextureView, depth: &wgpu::TextureView) -> Result<(), Box<dyn std::error::Error>> {
+//! use treelod_render::{Camera, Instance, Renderer, RendererFormats, Settings};
+//!
+//! let formats = RendererFormats {
+//!     color: wgpu::TextureFormat::Rgba8UnormSrgb,
+//!     depth: wgpu::TextureFormat::Depth32Float,
+//!     sample_count: 1,
+//! };
+//! let mut renderer = Renderer::new(device, formats, Settings::default());
+//! let container = treelod_format::Container::open("tree.treelod")?;
+//! let tree = renderer.add_model(device, queue, &container)?;
+//! renderer.set_instances(&[Instance { model: tree, transform: glam::Mat4::IDENTITY }]);
+//!
+//! // Every frame:
+//! let camera = Camera::look_at(glam::vec3(0.0, 3.0, 15.0), glam::vec3(0.0, 3.0, 0.0), 0.8, 1280, 720);
+//! let stats = renderer.prepare(device, queue, &camera);
+//! let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+//! {
+//!     let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+//!         color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+//!             view,
+//!             depth_slice: None,
+//!             resolve_target: None,
+//!             ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::WHITE), store: wgpu::StoreOp::Store },
+//!         })],
+//!         depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+//!             view: depth,
+//!             depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+//!             stencil_ops: None,
+//!         }),
+//!         ..Default::default()
+//!     });
+//!     renderer.render(&mut pass);
+//! }
+//! queue.submit([encoder.finish()]);
+//! println!("{} triangles, {} points", stats.triangles, stats.points);
+//! # Ok(()) }
+//! ```
+//!
+//! The device must have [`Renderer::required_features`] (indirect draws with a first instance).
+//! [`offscreen`] renders to an image with no window, for tools and tests.
+
+mod camera;
+pub mod offscreen;
+mod renderer;
+mod textures;
+
+pub use camera::Camera;
+pub use renderer::{DebugView, FrameStats, Instance, ModelId, RenderError, Renderer, RendererFormats, Settings};

@@ -1,0 +1,179 @@
+//! Rendering with no window: a device of its own, an offscreen target, and the pixels read back.
+
+use crate::{Camera, Renderer, RendererFormats};
+
+/// The colour format of offscreen images.
+pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// The depth format of offscreen images.
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// Why no offscreen device could be made.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter at all (no Vulkan driver, not even a software one).
+    #[error("no GPU adapter: {0} (on a machine without a GPU, install Mesa's lavapipe: mesa-vulkan-drivers)")]
+    NoAdapter(String),
+    /// The adapter lacks a feature the renderer needs.
+    #[error("the adapter {adapter} lacks {missing:?}")]
+    MissingFeatures {
+        /// Adapter name.
+        adapter: String,
+        /// What is missing.
+        missing: wgpu::Features,
+    },
+    /// Device creation failed.
+    #[error("cannot create a device: {0}")]
+    Device(String),
+    /// Reading the image back failed.
+    #[error("cannot read the image back: {0}")]
+    Readback(String),
+}
+
+/// A device and queue made for offscreen work.
+pub struct Gpu {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// What the adapter says of itself.
+    pub info: wgpu::AdapterInfo,
+}
+
+impl Gpu {
+    /// Opens the first adapter the environment allows (`WGPU_BACKEND` may restrict it) with the
+    /// features [`Renderer::required_features`] names.
+    ///
+    /// # Errors
+    /// [`GpuError`] if there is no adapter or it lacks the features.
+    pub fn new() -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            ..wgpu::RequestAdapterOptions::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let missing = Renderer::required_features() - adapter.features();
+        if !missing.is_empty() {
+            return Err(GpuError::MissingFeatures { adapter: info.name, missing });
+        }
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("treelod offscreen"),
+            required_features: Renderer::required_features(),
+            required_limits: adapter.limits(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(Self { device, queue, info })
+    }
+
+    /// The formats [`render_image`] draws with.
+    #[must_use]
+    pub fn formats() -> RendererFormats {
+        RendererFormats { color: COLOR_FORMAT, depth: DEPTH_FORMAT, sample_count: 1 }
+    }
+}
+
+/// An RGBA8 (sRGB) image read back from the GPU.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Image {
+    /// Pixels across.
+    pub width: u32,
+    /// Pixels down.
+    pub height: u32,
+    /// `width · height · 4` bytes, rows top to bottom.
+    pub rgba: Vec<u8>,
+}
+
+impl Image {
+    /// The pixel at `(x, y)`.
+    #[must_use]
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
+        let i = (y as usize * self.width as usize + x as usize) * 4;
+        [self.rgba[i], self.rgba[i + 1], self.rgba[i + 2], self.rgba[i + 3]]
+    }
+}
+
+/// Prepares and renders one frame of `renderer` for `camera` into a new `camera.width`×`camera.height`
+/// image cleared to `background`, and reads it back.
+///
+/// # Errors
+/// [`GpuError::Readback`] if mapping the read-back buffer fails.
+pub fn render_image(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    camera: &Camera,
+    background: wgpu::Color,
+) -> Result<(Image, crate::FrameStats), GpuError> {
+    let (width, height) = (camera.width.max(1), camera.height.max(1));
+    let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
+    let target = |format, usage| {
+        gpu.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("treelod offscreen"),
+            size: extent,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let color = target(COLOR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC);
+    let depth = target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+    let stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
+    let color_view = color.create_view(&wgpu::TextureViewDescriptor::default());
+    let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
+    let mut encoder =
+        gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod frame") });
+    {
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("treelod offscreen"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &color_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(background), store: wgpu::StoreOp::Store },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth_view,
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                stencil_ops: None,
+            }),
+            ..wgpu::RenderPassDescriptor::default()
+        });
+        renderer.render(&mut pass);
+    }
+    let row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let readback = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("treelod readback"),
+        size: u64::from(row) * u64::from(height),
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    encoder.copy_texture_to_buffer(
+        color.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &readback,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(height) },
+        },
+        extent,
+    );
+    gpu.queue.submit([encoder.finish()]);
+    let slice = readback.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |_| {});
+    gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+    let mapped = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+    let mut rgba = Vec::with_capacity((width * height * 4) as usize);
+    for y in 0..height {
+        let start = (y * row) as usize;
+        rgba.extend_from_slice(&mapped[start..start + (width * 4) as usize]);
+    }
+    drop(mapped);
+    readback.unmap();
+    Ok((Image { width, height, rgba }, stats))
+}

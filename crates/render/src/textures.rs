@@ -1,0 +1,131 @@
+//! A model's images as one texture array: every image resampled to one square layer size, with
+//! a full mip chain made on the CPU.
+
+use treelod_format::Container;
+
+/// Largest layer size; leaf textures seldom need more at the distances where triangles are drawn.
+const MAX_LAYER: u32 = 512;
+
+/// The texel layers of one model: `layers` images of `size`×`size`, each with `mips` levels,
+/// level-major per layer (level 0 of layer 0, level 1 of layer 0, …).
+pub(crate) struct Layers {
+    pub size: u32,
+    pub mips: u32,
+    /// Per layer, per level, RGBA8 sRGB texels.
+    pub levels: Vec<Vec<Vec<u8>>>,
+}
+
+/// Decodes every image of `container`. An image that fails to decode becomes a grey layer and a
+/// warning, so one bad texture does not stop a forest from drawing.
+pub(crate) fn layers(container: &Container, warnings: &mut Vec<String>) -> Layers {
+    let mut decoded = Vec::new();
+    for (index, record) in container.images().iter().enumerate() {
+        let start = usize::try_from(record.data_offset).unwrap_or(usize::MAX);
+        let end = start.saturating_add(usize::try_from(record.data_length).unwrap_or(usize::MAX));
+        let result = container
+            .image_data()
+            .get(start..end)
+            .ok_or_else(|| "its bytes lie outside IMAGE_DATA".to_owned())
+            .and_then(|data| treelod_format::image::decode(record, data));
+        match result {
+            Ok(image) => decoded.push(Some(image)),
+            Err(e) => {
+                warnings.push(format!("image {index}: {e}; drawn grey"));
+                decoded.push(None);
+            }
+        }
+    }
+    let largest = decoded.iter().flatten().map(|i| i.width.max(i.height)).max().unwrap_or(1);
+    let size = largest.next_power_of_two().clamp(1, MAX_LAYER);
+    let mips = size.ilog2() + 1;
+    let mut levels = Vec::with_capacity(decoded.len().max(1));
+    for image in &decoded {
+        let base = match image {
+            Some(image) => resample(&image.texels, image.width, image.height, size),
+            None => vec![128; (size * size * 4) as usize],
+        };
+        levels.push(mip_chain(base, size));
+    }
+    if levels.is_empty() {
+        // A texture array needs a layer even when no material samples it.
+        levels.push(mip_chain(vec![255; (size * size * 4) as usize], size));
+    }
+    Layers { size, mips, levels }
+}
+
+/// Bilinear resampling of an RGBA8 image to `size`×`size` (texel centres aligned, edges clamped).
+fn resample(texels: &[u8], width: u32, height: u32, size: u32) -> Vec<u8> {
+    let (w, h) = (width.max(1) as usize, height.max(1) as usize);
+    let at = |x: usize, y: usize, c: usize| f32::from(texels.get((y * w + x) * 4 + c).copied().unwrap_or(255));
+    let mut out = Vec::with_capacity((size * size * 4) as usize);
+    for y in 0..size {
+        let fy = ((y as f32 + 0.5) * h as f32 / size as f32 - 0.5).clamp(0.0, (h - 1) as f32);
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the image")]
+        let (y0, ty) = (fy.floor() as usize, fy.fract());
+        let y1 = (y0 + 1).min(h - 1);
+        for x in 0..size {
+            let fx = ((x as f32 + 0.5) * w as f32 / size as f32 - 0.5).clamp(0.0, (w - 1) as f32);
+            #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the image")]
+            let (x0, tx) = (fx.floor() as usize, fx.fract());
+            let x1 = (x0 + 1).min(w - 1);
+            for c in 0..4 {
+                let top = at(x0, y0, c) * (1.0 - tx) + at(x1, y0, c) * tx;
+                let bottom = at(x0, y1, c) * (1.0 - tx) + at(x1, y1, c) * tx;
+                #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "in 0..=255")]
+                out.push((top * (1.0 - ty) + bottom * ty).round().clamp(0.0, 255.0) as u8);
+            }
+        }
+    }
+    out
+}
+
+/// Box-filtered mips down to 1×1. Alpha is averaged like colour; leaves far enough away for the
+/// small mips to thin them out are drawn as points instead.
+fn mip_chain(base: Vec<u8>, size: u32) -> Vec<Vec<u8>> {
+    let mut chain = vec![base];
+    let mut s = size as usize;
+    while s > 1 {
+        let half = s / 2;
+        let Some(prev) = chain.last() else { break };
+        let mut next = Vec::with_capacity(half * half * 4);
+        for y in 0..half {
+            for x in 0..half {
+                for c in 0..4 {
+                    let sum: u32 = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                        .iter()
+                        .map(|(dx, dy)| u32::from(prev[((2 * y + dy) * s + 2 * x + dx) * 4 + c]))
+                        .sum();
+                    #[expect(clippy::cast_possible_truncation, reason = "an average of bytes")]
+                    next.push(((sum + 2) / 4) as u8);
+                }
+            }
+        }
+        chain.push(next);
+        s = half;
+    }
+    chain
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resampling_keeps_flat_colour_and_mips_reach_one_texel() {
+        let texels: Vec<u8> = [10u8, 20, 30, 255].repeat(3 * 5);
+        let out = resample(&texels, 3, 5, 8);
+        assert_eq!(out.len(), 8 * 8 * 4);
+        assert!(out.chunks_exact(4).all(|t| t == [10, 20, 30, 255]));
+        let chain = mip_chain(out, 8);
+        assert_eq!(chain.iter().map(Vec::len).collect::<Vec<_>>(), [256, 64, 16, 4]);
+        assert_eq!(chain[3], [10, 20, 30, 255]);
+    }
+
+    #[test]
+    fn mips_average_a_checkerboard() {
+        let base: Vec<u8> =
+            (0..4).flat_map(|i| if i % 3 == 0 { [0u8, 0, 0, 0] } else { [255, 255, 255, 255] }).collect();
+        let chain = mip_chain(base, 2);
+        assert_eq!(chain[1], [128, 128, 128, 128]);
+    }
+}

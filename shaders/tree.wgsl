@@ -1,0 +1,172 @@
+// Drawing a tree container: vertex-pulled triangles and screen-facing disc splats.
+//
+// Prepended with shared/records.wgsl. One indirect draw per selected range: `first_instance` is
+// the index of the range's `DrawInfo`, `first_vertex` is 3 × its first triangle (or 6 × its first
+// point), so the vertex index names the element and its corner.
+
+struct Frame {
+    view_proj: mat4x4<f32>,
+    // Camera position (xyz), viewport height in pixels (w).
+    eye: vec4<f32>,
+    // Camera right (xyz) and the projection's y scale 1/tan(fovy/2) (w), for splats facing the
+    // screen and their size in pixels.
+    right: vec4<f32>,
+    // Camera up (xyz) and the splat radius scale (w).
+    up: vec4<f32>,
+    // Direction towards the sun (xyz), ambient light (w).
+    sun: vec4<f32>,
+    // 0 shaded, 1 colour by cell, 2 colour by kind.
+    debug: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
+struct DrawInfo {
+    // Column-major world-from-model transform.
+    model: mat4x4<f32>,
+    // The thresholds the range was selected with (model units), then the cell index.
+    tau_p: f32,
+    tau_t: f32,
+    cell: u32,
+    // Uniform scale of the transform, for splat radii.
+    scale: f32,
+}
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<storage, read> draws: array<DrawInfo>;
+@group(1) @binding(0) var<storage, read> vertices: array<VertexRecord>;
+@group(1) @binding(1) var<storage, read> triangles: array<TriangleRecord>;
+@group(1) @binding(2) var<storage, read> points: array<PointRecord>;
+@group(1) @binding(3) var<storage, read> materials: array<MaterialGpu>;
+@group(1) @binding(4) var textures: texture_2d_array<f32>;
+@group(1) @binding(5) var linear_sampler: sampler;
+
+// The material as uploaded: the record's fields that shading needs, 32 bytes.
+struct MaterialGpu {
+    base_color: vec4<f32>,
+    // Texture array layer, or -1 for none.
+    layer: i32,
+    alpha_mode: u32,
+    alpha_cutoff: f32,
+    material_class: u32,
+}
+
+struct Varyings {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal: vec3<f32>,
+    @location(1) uv: vec2<f32>,
+    @location(2) color: vec4<f32>,
+    // Triangles: material index; points: 0xFFFFFFFF.
+    @location(3) @interpolate(flat) material: u32,
+    @location(4) @interpolate(flat) tint: vec3<f32>,
+    // Points: position on the unit disc.
+    @location(5) disc: vec2<f32>,
+}
+
+// A colour per cell index, for `debug = 1`.
+fn cell_tint(cell: u32) -> vec3<f32> {
+    let h = cell * 2654435761u;
+    return vec3<f32>(f32(h & 255u), f32((h >> 8u) & 255u), f32((h >> 16u) & 255u)) / 255.0 * 0.8 + 0.2;
+}
+
+fn offscreen() -> Varyings {
+    var out: Varyings;
+    out.clip = vec4<f32>(0.0, 0.0, -2.0, 1.0);
+    return out;
+}
+
+@vertex
+fn vs_triangle(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
+    let draw = draws[draw_index];
+    let tri = triangles[vertex_index / 3u];
+    let v = vertices[tri.indices[vertex_index % 3u]];
+    let p = vec3<f32>(v.position[0], v.position[1], v.position[2]);
+    let world = draw.model * vec4<f32>(p, 1.0);
+    var out: Varyings;
+    out.clip = frame.view_proj * world;
+    out.normal = normalize((draw.model * vec4<f32>(decode_normal(v.normal), 0.0)).xyz);
+    out.uv = vec2<f32>(v.uv[0], v.uv[1]);
+    out.color = decode_color(v.color);
+    out.material = tri.material;
+    out.disc = vec2<f32>(0.0);
+    switch frame.debug {
+        case 1u: { out.tint = cell_tint(draw.cell); }
+        case 2u: { out.tint = vec3<f32>(0.9, 0.3, 0.2); }
+        default: { out.tint = vec3<f32>(1.0); }
+    }
+    return out;
+}
+
+const CORNERS = array<vec2<f32>, 6>(
+    vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
+    vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
+);
+
+@vertex
+fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
+    let draw = draws[draw_index];
+    let point = points[vertex_index / 6u];
+    // The prefix holds points whose interval lies below tau_p: they are not part of the cut.
+    if !point_drawn(point, draw.tau_p, draw.tau_t) {
+        return offscreen();
+    }
+    let corner = CORNERS[vertex_index % 6u];
+    let centre = draw.model * vec4<f32>(point.position[0], point.position[1], point.position[2], 1.0);
+    // A drawn point is at most tau_p (about a pixel) across: like Gilet's GL points it covers at
+    // least one pixel, or sub-pixel discs would fall between pixel centres and thin the canopy.
+    let depth = max((frame.view_proj * centre).w, 1e-6);
+    let pixel = 2.0 * depth / (frame.right.w * frame.eye.w);
+    let disc_r = point.radius * draw.scale * frame.up.w;
+    let r = max(disc_r, 0.5 * pixel);
+    let world = centre.xyz + (corner.x * frame.right.xyz + corner.y * frame.up.xyz) * r;
+    var out: Varyings;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.normal = normalize((draw.model * vec4<f32>(decode_normal(point.normal), 0.0)).xyz);
+    out.uv = vec2<f32>(0.0);
+    out.color = decode_color(point.color);
+    out.material = 0xFFFFFFFFu;
+    // A splat at the one-pixel minimum is a square: a disc inscribed in one pixel misses its centre
+    // a fifth of the time.
+    out.disc = select(corner, corner * 0.70710677, disc_r < 0.5 * pixel);
+    switch frame.debug {
+        case 1u: { out.tint = cell_tint(draw.cell); }
+        case 2u: { out.tint = vec3<f32>(0.2, 0.5, 0.95); }
+        default: { out.tint = vec3<f32>(1.0); }
+    }
+    return out;
+}
+
+// Two-sided Lambert with ambient: leaves are lit from both faces.
+fn shade(albedo: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
+    let diffuse = abs(dot(normalize(normal), frame.sun.xyz));
+    return albedo * (frame.sun.w + (1.0 - frame.sun.w) * diffuse);
+}
+
+@fragment
+fn fs_triangle(in: Varyings) -> @location(0) vec4<f32> {
+    let material = materials[in.material];
+    // Sampled unconditionally: implicit derivatives need uniform control flow.
+    let texel = textureSample(textures, linear_sampler, in.uv, max(material.layer, 0));
+    let albedo = material.base_color * in.color * select(vec4<f32>(1.0), texel, material.layer >= 0);
+    // Masked and blended materials are alpha-tested (blend is drawn as a mask at 0.5).
+    let cutoff = select(select(material.alpha_cutoff, 0.5, material.alpha_mode == 2u), -1.0, material.alpha_mode == 0u);
+    if albedo.a < cutoff {
+        discard;
+    }
+    if frame.debug != 0u {
+        return vec4<f32>(in.tint, 1.0);
+    }
+    return vec4<f32>(shade(albedo.rgb, in.normal), 1.0);
+}
+
+@fragment
+fn fs_point(in: Varyings) -> @location(0) vec4<f32> {
+    if dot(in.disc, in.disc) > 1.0 {
+        discard;
+    }
+    if frame.debug != 0u {
+        return vec4<f32>(in.tint, 1.0);
+    }
+    return vec4<f32>(shade(in.color.rgb, in.normal), 1.0);
+}
