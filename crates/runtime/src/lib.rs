@@ -4,7 +4,14 @@
 //! benchmarked on the CPU. [`select`] holds the per-cell rule of `format-spec/treelod.md` §10:
 //! pixel thresholds become world-size thresholds, a binary search of the size-sorted arrays gives
 //! the prefix to draw, and [`select::point_drawn`] is the per-element test the vertex shader makes.
+//! [`frame`] applies it to a whole frame: frustum culling of instances and cells, Gilet's depth
+//! bias per cell, a reusable draw list, and a controller that keeps the primitive count on budget.
 
+pub mod frame;
 pub mod select;
 
+pub use frame::{
+    BudgetController, Camera, CellLod, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings,
+    ModelError, ModelLod, ROOTS_CELL, select_frame,
+};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};

@@ -1,0 +1,1515 @@
+//! Frame-level selection on the CPU: which instances are in view, and per instance and cell which
+//! prefixes of the triangle and point arrays to draw (spec §10; Gilet, Meyer, Neyret 2005, §5).
+//!
+//! [`ModelLod`] is a per-model view of a container made once (cell bounds, ranges, and the sort keys
+//! of each cell copied into compact arrays). Each frame, [`select_frame`] walks the instances in
+//! order, culls them against the [`Frustum`] of the [`Camera`], computes per cell the two world-size
+//! thresholds `τ_p ≤ τ_t` from the pixel thresholds of [`LodSettings`] (with Gilet's front-to-back
+//! depth bias), binary-searches the size-sorted arrays and appends one [`DrawRange`] per non-empty
+//! prefix to a reused [`DrawList`]. [`BudgetController`] adjusts `s_min` from frame to frame to keep
+//! the primitive count near a target (Gilet §5.1: `s_m` "allows the user to control the frame rate,
+//! or to keep the frame rate constant").
+//!
+//! Nothing here touches the GPU: a renderer uploads the draw list as indirect draws, and the vertex
+//! shader drops the points of a prefix that fail [`crate::point_drawn`] at the range's thresholds.
+
+use glam::{Mat4, Vec3, Vec4};
+use treelod_format::{BlockRecord, CellRecord, Container, PointRecord, Range, TriangleRecord};
+
+/// A perspective camera as selection sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye position, world space, metres.
+    pub position: Vec3,
+    /// World to clip, WebGPU conventions (clip-space depth `0 ..= w`).
+    pub view_proj: Mat4,
+    /// Viewport height, pixels (`> 0`).
+    pub viewport_height: f32,
+    /// Vertical field of view, radians, in `(0, π)`.
+    pub fovy: f32,
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target` with Y up (Z up when looking straight up or down),
+    /// vertical field of view `fovy` radians, a `width`×`height` pixel viewport, near plane 0.05 m
+    /// and far plane 20 km (the same projection as `treelod-render`'s camera).
+    #[must_use]
+    pub fn look_at(eye: Vec3, target: Vec3, fovy: f32, width: u32, height: u32) -> Self {
+        let forward = (target - eye).normalize_or(Vec3::NEG_Z);
+        let up = if forward.cross(Vec3::Y).length_squared() < 1e-8 { Vec3::Z } else { Vec3::Y };
+        let aspect = width.max(1) as f32 / height.max(1) as f32;
+        let view = glam::camera::rh::view::look_at_mat4(eye, target, up);
+        let proj = glam::camera::rh::proj::directx::perspective(fovy, aspect, 0.05, 20_000.0);
+        #[expect(clippy::cast_precision_loss, reason = "viewport heights are far below 2^24")]
+        Self { position: eye, view_proj: proj * view, viewport_height: height.max(1) as f32, fovy }
+    }
+
+    /// World size per pixel at one metre of distance: `2·tan(fovy/2) / H` (spec §10.1), so
+    /// `τ = s_px · d · world_per_pixel()`.
+    #[must_use]
+    pub fn world_per_pixel(&self) -> f32 {
+        2.0 * (0.5 * self.fovy).tan() / self.viewport_height
+    }
+}
+
+/// Where a bounding volume lies with respect to a [`Frustum`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Containment {
+    Outside,
+    Inside,
+    Straddles,
+}
+
+/// The six planes of a view-projection's frustum, for conservative culling.
+///
+/// Each plane is `(n, w)` with `n` a unit normal pointing into the frustum: a point `p` is on the
+/// inner side when `n·p + w ≥ 0`. Planes are extracted from the rows of the matrix (Gribb and
+/// Hartmann) for WebGPU clip space: `−w ≤ x ≤ w`, `−w ≤ y ≤ w`, `0 ≤ z ≤ w`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frustum {
+    planes: [Vec4; 6],
+}
+
+impl Frustum {
+    /// The frustum of `view_proj` (world to clip, clip-space depth `0 ..= w`).
+    #[must_use]
+    pub fn from_view_proj(view_proj: Mat4) -> Self {
+        let r = [view_proj.row(0), view_proj.row(1), view_proj.row(2), view_proj.row(3)];
+        let planes = [r[3] + r[0], r[3] - r[0], r[3] + r[1], r[3] - r[1], r[2], r[3] - r[2]]
+            .map(|p| p / p.truncate().length().max(f32::MIN_POSITIVE));
+        Self { planes }
+    }
+
+    /// The planes: left, right, bottom, top, near, far; see the type's documentation.
+    #[must_use]
+    pub fn planes(&self) -> &[Vec4; 6] {
+        &self.planes
+    }
+
+    /// Whether the world-space box `min ..= max` may be visible: `false` only if it lies entirely
+    /// outside one plane (conservative: a box near a corner of the frustum may be kept).
+    #[must_use]
+    pub fn intersects_aabb(&self, min: Vec3, max: Vec3) -> bool {
+        let centre = 0.5 * (min + max);
+        let half = 0.5 * (max - min);
+        self.planes.iter().all(|p| p.truncate().dot(centre) + p.w >= -p.truncate().abs().dot(half))
+    }
+
+    /// Whether the world-space sphere may be visible (conservative as [`Self::intersects_aabb`]).
+    #[must_use]
+    pub fn intersects_sphere(&self, centre: Vec3, radius: f32) -> bool {
+        self.classify_sphere(centre, radius) != Containment::Outside
+    }
+
+    fn classify_sphere(&self, centre: Vec3, radius: f32) -> Containment {
+        let mut inside = true;
+        for p in &self.planes {
+            let distance = p.truncate().dot(centre) + p.w;
+            if distance < -radius {
+                return Containment::Outside;
+            }
+            inside &= distance >= radius;
+        }
+        if inside { Containment::Inside } else { Containment::Straddles }
+    }
+
+    /// Whether the oriented box with world centre `centre` and half-axis vectors `axes` may be visible.
+    fn intersects_box(&self, centre: Vec3, axes: [Vec3; 3]) -> bool {
+        self.planes.iter().all(|p| {
+            let n = p.truncate();
+            let reach = n.dot(axes[0]).abs() + n.dot(axes[1]).abs() + n.dot(axes[2]).abs();
+            n.dot(centre) + p.w >= -reach
+        })
+    }
+}
+
+/// Level-of-detail settings of [`select_frame`].
+///
+/// Gilet et al. give no default values for the pixel thresholds; the defaults here are one-pixel
+/// points and triangles from four pixels on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LodSettings {
+    /// `s_m`, pixels: the smallest projected size of a drawn point; finer points give way to their
+    /// parent (Gilet §5.1). Default 1.
+    pub s_min: f32,
+    /// `s_M`, pixels: primitives projecting larger than this are drawn as triangles (Gilet §5.1);
+    /// raised to `s_min` if smaller. Default 4.
+    pub s_max: f32,
+    /// `k`, pixels: Gilet's depth bias (§5.2, eq. 2 and 3), added to both pixel thresholds times
+    /// `Z_i ∈ [−1, 1]` (front to back of the block), so the back of a block is drawn coarser and
+    /// the front finer; see [`Self::biased_pixels`]. The paper writes the shift on its thresholds
+    /// `S_m`, `S_M` and shows them in pixel units (its Figure 3); applied in pixels, as here, the
+    /// front/back contrast is the same at every distance, whereas a shift in metres would vanish
+    /// for far blocks and swamp near ones. 0 disables it. Default 0.
+    pub depth_bias_k: f32,
+    /// `(L_m, L_M)`: Gilet's estimated self-shadowing (§5.3), stored per draw as
+    /// [`DrawRange::shading`]; `None` stores 1. Default `None`.
+    pub shading: Option<(f32, f32)>,
+    /// An instance whose bounding radius is below this fraction of its distance takes the far path:
+    /// every cell uses the block centre's distance and a linearised `Z_i`, so a cell's thresholds
+    /// are off by at most `r/(1 − r)` for `r` this fraction, and no cell is culled on its own. 0 disables the far path.
+    /// Default 0.02 (thresholds within 2 %).
+    pub far_ratio: f32,
+}
+
+impl Default for LodSettings {
+    fn default() -> Self {
+        Self { s_min: 1.0, s_max: 4.0, depth_bias_k: 0.0, shading: None, far_ratio: 0.02 }
+    }
+}
+
+impl LodSettings {
+    /// The biased pixel thresholds `(s_min_i, s_max_i)` of a cell at depth `z = Z_i` (Gilet §5.2,
+    /// eq. 2 and 3): `s_m^i = s_m + k·Z_i`, `s_M^i = s_M + k·Z_i`, then clamped so that
+    /// `0 ≤ s_min_i ≤ s_max_i`.
+    #[must_use]
+    #[inline]
+    pub fn biased_pixels(&self, z: f32) -> (f32, f32) {
+        let shift = self.depth_bias_k * z;
+        let s_min = (self.s_min + shift).max(0.0);
+        (s_min, (self.s_max + shift).max(s_min))
+    }
+
+    /// Gilet's estimated lighting of a cell at depth `z = Z_i` (§5.3): `L = L_M + (Z_i − 1)/2 ·
+    /// (L_M − L_m)`, as the paper writes it (so `L_m` at the nearest cell, `L_M` at the farthest);
+    /// 1 without [`Self::shading`].
+    #[must_use]
+    #[inline]
+    pub fn shading_at(&self, z: f32) -> f32 {
+        match self.shading {
+            Some((l_min, l_max)) => l_max + 0.5 * (z - 1.0) * (l_max - l_min),
+            None => 1.0,
+        }
+    }
+}
+
+/// Why [`ModelLod::from_records`] refused its input.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum ModelError {
+    /// The block bounds are not finite or not ordered.
+    BlockBounds {
+        /// Lower corner.
+        min: [f32; 3],
+        /// Upper corner.
+        max: [f32; 3],
+    },
+    /// A cell's range reaches past the end of its array.
+    RangeOutOfBounds {
+        /// Index of the cell.
+        cell: usize,
+        /// `"triangles"` or `"points"`.
+        kind: &'static str,
+        /// The range.
+        range: Range,
+        /// Length of the array.
+        len: usize,
+    },
+    /// A cell's array is not sorted by its key, largest first (spec §6.4, §6.5).
+    NotSorted {
+        /// Index of the cell.
+        cell: usize,
+        /// `"triangles"` (by `size`) or `"points"` (by `hi`).
+        kind: &'static str,
+    },
+    /// A non-empty cell's bounds are not finite.
+    CellBounds {
+        /// Index of the cell.
+        cell: usize,
+    },
+    /// More cells than a `u32` counts.
+    TooManyCells,
+}
+
+impl std::fmt::Display for ModelError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::BlockBounds { min, max } => write!(f, "block bounds {min:?} ..= {max:?} are not finite and ordered"),
+            Self::RangeOutOfBounds { cell, kind, range, len } => write!(
+                f,
+                "cell {cell}: {kind} {}..{} reach past the array of {len}",
+                range.first,
+                u64::from(range.first) + u64::from(range.count)
+            ),
+            Self::NotSorted { cell, kind } => write!(f, "cell {cell}: {kind} are not sorted largest first"),
+            Self::CellBounds { cell } => write!(f, "cell {cell}: bounds are not finite"),
+            Self::TooManyCells => f.write_str("more cells than a u32 counts"),
+        }
+    }
+}
+
+impl std::error::Error for ModelError {}
+
+/// One non-empty cell of a [`ModelLod`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellLod {
+    /// Centre of the cell's bounds, model space.
+    centre: Vec3,
+    /// Half extent of the cell's bounds, model space.
+    half: Vec3,
+    /// Index of the cell in the container's `CELLS`.
+    index: u32,
+    /// Whether this is the block cell (selected at the block centre's distance, `Z_i = 0`).
+    block_cell: bool,
+    /// The cell's triangles in the container's `TRIANGLES`.
+    triangles: Range,
+    /// The cell's points in the container's `POINTS`.
+    points: Range,
+    /// Where the cell's triangle sizes start in [`ModelLod::triangle_sizes`].
+    sizes_at: u32,
+    /// Where the cell's point `hi` values start in [`ModelLod::point_hi`].
+    hi_at: u32,
+    /// Size of the cell's largest triangle, `−∞` without triangles: no triangle is drawn at
+    /// `τ_t ≥ largest`, and the sizes need not be read.
+    largest: f32,
+    /// Number of leading points with `hi = +∞` (the roots), drawn at every finite `τ_p ≥ next_hi`.
+    roots: u32,
+    /// `hi` of the first point after the roots, `−∞` if none.
+    next_hi: f32,
+    /// `hi` of the first point, `−∞` if none: the point prefix is non-empty exactly when `τ_p < hi0`.
+    hi0: f32,
+}
+
+impl CellLod {
+    /// Index of the cell in the container's `CELLS` (the block cell is the last one).
+    #[must_use]
+    pub fn index(&self) -> u32 {
+        self.index
+    }
+
+    /// Whether this is the block cell, selected at the block centre's distance (spec §6.2).
+    #[must_use]
+    pub fn is_block_cell(&self) -> bool {
+        self.block_cell
+    }
+
+    /// The cell's bounds, model space, metres.
+    #[must_use]
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        (self.centre - self.half, self.centre + self.half)
+    }
+
+    /// The cell's range in the container's `TRIANGLES`.
+    #[must_use]
+    pub fn triangles(&self) -> Range {
+        self.triangles
+    }
+
+    /// The cell's range in the container's `POINTS`.
+    #[must_use]
+    pub fn points(&self) -> Range {
+        self.points
+    }
+}
+
+/// What selection needs of one model (container), made once: block bounds and radius, the
+/// non-empty cells, and per cell the triangle sizes and point `hi` values in compact arrays.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ModelLod {
+    /// Centre of the block bounds, model space.
+    centre: Vec3,
+    /// Half extent of the block bounds.
+    half: Vec3,
+    /// `R`, half the diagonal of the block bounds.
+    radius: f32,
+    /// Centre, half extent and bounding radius of the box that holds the block bounds and every
+    /// non-empty cell's bounds (cells may reach past the block by their elements' radii): culling.
+    cull_centre: Vec3,
+    cull_half: Vec3,
+    cull_radius: f32,
+    cells: Vec<CellLod>,
+    triangle_sizes: Vec<f32>,
+    point_hi: Vec<f32>,
+    /// The cells' `hi0`, largest first: how many cells draw points at one `τ_p`.
+    cells_by_hi0: Vec<f32>,
+    /// The cells' `largest`, largest first: how many cells draw triangles at one `τ_t`.
+    cells_by_largest: Vec<f32>,
+    /// `POINTS` indices of every cell's roots, in cell order.
+    roots: Vec<u32>,
+    /// Largest `next_hi` of the cells: at `τ_p ≥` it (and `τ_t` at or above every triangle) each
+    /// cell draws exactly its roots.
+    roots_tau: f32,
+}
+
+impl ModelLod {
+    /// The selection view of an open container.
+    #[must_use]
+    pub fn from_container(container: &Container) -> Self {
+        // Ranges and bounds were checked when the container was opened (spec §9.1).
+        Self::build(container.block(), container.cells(), container.triangles(), container.points())
+    }
+
+    /// The selection view of raw records (for example synthetic ones in tests). `cells` are the
+    /// container's cells in order; the one at index `block.grid_cell_count()`, if present, is the
+    /// block cell. Cells with neither triangles nor points are skipped.
+    ///
+    /// # Errors
+    /// [`ModelError`] if the block bounds are not finite and ordered, a cell's range reaches past
+    /// its array, a non-empty cell's bounds are not finite, or a cell's triangles (points) are not
+    /// sorted by `size` (`hi`), largest first.
+    pub fn from_records(
+        block: &BlockRecord,
+        cells: &[CellRecord],
+        triangles: &[TriangleRecord],
+        points: &[PointRecord],
+    ) -> Result<Self, ModelError> {
+        let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+        if !min.is_finite() || !max.is_finite() || min.cmpgt(max).any() {
+            return Err(ModelError::BlockBounds { min: block.bounds_min, max: block.bounds_max });
+        }
+        if u32::try_from(cells.len()).is_err() {
+            return Err(ModelError::TooManyCells);
+        }
+        for (index, cell) in cells.iter().enumerate() {
+            for (kind, range, len) in
+                [("triangles", cell.triangles, triangles.len()), ("points", cell.points, points.len())]
+            {
+                if range.as_usize().end > len {
+                    return Err(ModelError::RangeOutOfBounds { cell: index, kind, range, len });
+                }
+            }
+            let tris = &triangles[cell.triangles.as_usize()];
+            let pts = &points[cell.points.as_usize()];
+            let finite = Vec3::from_array(cell.bounds_min).is_finite() && Vec3::from_array(cell.bounds_max).is_finite();
+            if (!tris.is_empty() || !pts.is_empty()) && !finite {
+                return Err(ModelError::CellBounds { cell: index });
+            }
+            if tris.windows(2).any(|w| w[0].size < w[1].size) {
+                return Err(ModelError::NotSorted { cell: index, kind: "triangles" });
+            }
+            if pts.windows(2).any(|w| w[0].hi < w[1].hi) {
+                return Err(ModelError::NotSorted { cell: index, kind: "points" });
+            }
+        }
+        Ok(Self::build(block, cells, triangles, points))
+    }
+
+    /// Builds the view; a range outside its array counts as empty (cannot happen once checked).
+    fn build(block: &BlockRecord, cells: &[CellRecord], triangles: &[TriangleRecord], points: &[PointRecord]) -> Self {
+        let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+        let block_cell = block.grid_cell_count();
+        let mut model = Self {
+            centre: 0.5 * (min + max),
+            half: 0.5 * (max - min),
+            radius: 0.5 * (max - min).length(),
+            ..Self::default()
+        };
+        for (index, cell) in cells.iter().enumerate() {
+            let tris = triangles.get(cell.triangles.as_usize()).unwrap_or_default();
+            let pts = points.get(cell.points.as_usize()).unwrap_or_default();
+            let (Ok(index_u32), Ok(sizes_at), Ok(hi_at)) =
+                (u32::try_from(index), u32::try_from(model.triangle_sizes.len()), u32::try_from(model.point_hi.len()))
+            else {
+                break;
+            };
+            if tris.is_empty() && pts.is_empty() {
+                continue;
+            }
+            let (lo, hi) = (Vec3::from_array(cell.bounds_min), Vec3::from_array(cell.bounds_max));
+            let roots = pts.iter().take_while(|p| p.hi == f32::INFINITY).count();
+            model.cells.push(CellLod {
+                centre: 0.5 * (lo + hi),
+                half: (0.5 * (hi - lo)).abs(),
+                index: index_u32,
+                block_cell: index == block_cell,
+                triangles: if tris.is_empty() { Range::default() } else { cell.triangles },
+                points: if pts.is_empty() { Range::default() } else { cell.points },
+                sizes_at,
+                hi_at,
+                largest: tris.first().map_or(f32::NEG_INFINITY, |t| t.size),
+                roots: u32::try_from(roots).unwrap_or(u32::MAX),
+                next_hi: pts.get(roots).map_or(f32::NEG_INFINITY, |p| p.hi),
+                hi0: pts.first().map_or(f32::NEG_INFINITY, |p| p.hi),
+            });
+            model.roots.extend((0..u32::try_from(roots).unwrap_or(0)).map(|i| cell.points.first + i));
+            model.triangle_sizes.extend(tris.iter().map(|t| t.size));
+            model.point_hi.extend(pts.iter().map(|p| p.hi));
+        }
+        let (lo, hi) =
+            model.cells.iter().fold((min, max), |(lo, hi), c| (lo.min(c.centre - c.half), hi.max(c.centre + c.half)));
+        model.cull_centre = 0.5 * (lo + hi);
+        model.cull_half = 0.5 * (hi - lo);
+        model.cull_radius = model.cull_half.length();
+        // NaN compares like −∞ (never above τ), so it sorts as −∞ here.
+        let key = |v: f32| if v.is_nan() { f32::NEG_INFINITY } else { v };
+        model.cells_by_hi0 = model.cells.iter().map(|c| key(c.hi0)).collect();
+        model.cells_by_hi0.sort_by(|a, b| b.total_cmp(a));
+        model.cells_by_largest = model.cells.iter().map(|c| key(c.largest)).collect();
+        model.cells_by_largest.sort_by(|a, b| b.total_cmp(a));
+        // A cell whose points are all roots, or that has none, adds no bound.
+        model.roots_tau = model.cells.iter().map(|c| key(c.next_hi)).fold(f32::NEG_INFINITY, f32::max);
+        model
+    }
+
+    /// `POINTS` indices of every cell's roots (its leading points with `hi = +∞`), in cell order.
+    ///
+    /// When an instance is so far away that every cell would draw exactly its roots and no
+    /// triangle, [`select_frame`] emits one [`Kind::Roots`] range over this list instead of one
+    /// range per cell: a renderer keeps these points contiguous (a copy) and draws a far tree
+    /// with one draw. Gilet's hierarchies are per cell, so a far tree is still one point per cell.
+    #[must_use]
+    pub fn roots(&self) -> &[u32] {
+        &self.roots
+    }
+
+    /// Whether an instance whose smallest and largest thresholds over its cells are `(τ_p, τ_t)`
+    /// draws exactly the roots of every cell and no triangle.
+    fn roots_only(&self, tau_points: f32, tau_triangles: f32) -> bool {
+        !self.roots.is_empty()
+            && tau_points >= self.roots_tau
+            && tau_points < f32::INFINITY
+            && self.cells_by_largest.first().is_none_or(|&largest| tau_triangles >= largest)
+            // A cell with points but no roots would draw more than its roots.
+            && self.cells_by_hi0.iter().all(|&hi0| hi0 == f32::INFINITY || hi0 <= tau_points)
+    }
+
+    /// The block bounds, model space, metres.
+    #[must_use]
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        (self.centre - self.half, self.centre + self.half)
+    }
+
+    /// `R`: half the diagonal of the block bounds, metres, model space (Gilet §5.2's block size).
+    #[must_use]
+    pub fn radius(&self) -> f32 {
+        self.radius
+    }
+
+    /// The non-empty cells, in container order.
+    #[must_use]
+    pub fn cells(&self) -> &[CellLod] {
+        &self.cells
+    }
+
+    /// The triangle sizes of `cell`, largest first.
+    #[must_use]
+    pub fn triangle_sizes(&self, cell: &CellLod) -> &[f32] {
+        let at = cell.sizes_at as usize;
+        self.triangle_sizes.get(at..at + cell.triangles.count as usize).unwrap_or_default()
+    }
+
+    /// The point `hi` values of `cell`, largest first.
+    #[must_use]
+    pub fn point_hi(&self, cell: &CellLod) -> &[f32] {
+        let at = cell.hi_at as usize;
+        self.point_hi.get(at..at + cell.points.count as usize).unwrap_or_default()
+    }
+}
+
+/// One placed copy of a model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Instance {
+    /// Index into the `models` of [`select_frame`].
+    pub model: u32,
+    /// World from model: an affine transform (rotation, translation, scale). Sizes are converted
+    /// with the largest axis scale, so a uniform scale gives exact thresholds and a non-uniform
+    /// one errs towards finer detail; culling is conservative for any affine transform.
+    pub transform: Mat4,
+}
+
+/// Which array a [`DrawRange`] indexes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[repr(u32)]
+pub enum Kind {
+    /// `TRIANGLES`: draw every triangle of the range.
+    Triangles = 0,
+    /// `POINTS`: draw the points of the range that pass [`crate::point_drawn`].
+    Points = 1,
+    /// The roots of every cell of the model at once: `first..first + count` indexes
+    /// [`ModelLod::roots`], a list of `POINTS` indices (see [`ModelLod::roots`] for when).
+    Roots = 2,
+}
+
+/// [`DrawRange::cell`] of a [`Kind::Roots`] range, which spans every cell.
+pub const ROOTS_CELL: u32 = u32::MAX;
+
+/// One range to draw: a prefix of one cell's triangles or points for one instance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DrawRange {
+    /// Index of the instance in the `instances` of [`select_frame`].
+    pub instance: u32,
+    /// The instance's model.
+    pub model: u32,
+    /// Index of the cell in the model's `CELLS`; [`ROOTS_CELL`] for a [`Kind::Roots`] range.
+    pub cell: u32,
+    /// Which array `first` indexes.
+    pub kind: Kind,
+    /// First record, absolute index in the container's `TRIANGLES` or `POINTS`, or in
+    /// [`ModelLod::roots`] for [`Kind::Roots`].
+    pub first: u32,
+    /// Number of records, `≥ 1`.
+    pub count: u32,
+    /// `τ_p`, metres, model space: the shader draws a point where `lo ≤ τ_p < hi`.
+    pub tau_points: f32,
+    /// `τ_t`, metres, model space: triangles larger are drawn, and points larger are not.
+    pub tau_triangles: f32,
+    /// Estimated lighting factor of the cell ([`LodSettings::shading_at`]), 1 without shading.
+    pub shading: f32,
+}
+
+/// The ranges of one frame, in instance order, then cell order, triangles before points. Reuse
+/// one list across frames: [`select_frame`] overwrites it and keeps its allocations.
+#[derive(Clone, Debug, Default)]
+pub struct DrawList {
+    /// Storage; the list is `storage[..len]`. Entries past `len` are stale ranges kept so the
+    /// parallel path can write into slices without clearing (or `unsafe`).
+    storage: Vec<DrawRange>,
+    len: usize,
+    triangle_ranges: u32,
+    point_ranges: u32,
+    /// Per-chunk range counts and tallies of the parallel path, kept between frames.
+    chunk_lens: Vec<usize>,
+    chunk_tallies: Vec<(Tally, bool)>,
+    /// Per-instance culling results of the parallel path's first pass, replayed by the second.
+    visibility: Vec<Visibility>,
+}
+
+impl DrawList {
+    /// An empty list.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// An empty list with room for `ranges` ranges.
+    #[must_use]
+    pub fn with_capacity(ranges: usize) -> Self {
+        Self { storage: Vec::with_capacity(ranges), ..Self::default() }
+    }
+
+    /// Empties the list, keeping its allocations.
+    pub fn clear(&mut self) {
+        self.len = 0;
+        self.triangle_ranges = 0;
+        self.point_ranges = 0;
+    }
+
+    /// The ranges.
+    #[must_use]
+    pub fn ranges(&self) -> &[DrawRange] {
+        self.storage.get(..self.len).unwrap_or_default()
+    }
+
+    /// Number of ranges.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the list holds no range.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Ranges the list holds without reallocating.
+    #[must_use]
+    pub fn capacity(&self) -> usize {
+        self.storage.capacity()
+    }
+
+    /// Number of [`Kind::Triangles`] ranges.
+    #[must_use]
+    pub fn triangle_ranges(&self) -> u32 {
+        self.triangle_ranges
+    }
+
+    /// Number of [`Kind::Points`] ranges.
+    #[must_use]
+    pub fn point_ranges(&self) -> u32 {
+        self.point_ranges
+    }
+}
+
+/// Counts of one [`select_frame`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameStats {
+    /// Instances inside the view frustum.
+    pub instances_visible: u32,
+    /// Visible instances that took the far path ([`LodSettings::far_ratio`]).
+    pub instances_far: u32,
+    /// Instances skipped because their model index is out of range or their transform degenerate.
+    pub instances_invalid: u32,
+    /// Non-empty cells of visible instances that were selected.
+    pub cells_visible: u32,
+    /// Non-empty cells of visible instances culled on their own bounds.
+    pub cells_culled: u32,
+    /// Ranges in the draw list.
+    pub ranges: u32,
+    /// Triangles submitted (all are drawn).
+    pub triangles: u64,
+    /// Points submitted: the prefixes, of which the shader draws those in the cut.
+    pub points: u64,
+}
+
+impl FrameStats {
+    /// Triangles and points submitted, the count [`BudgetController::update`] steers.
+    #[must_use]
+    pub fn primitives(&self) -> u64 {
+        self.triangles + self.points
+    }
+}
+
+/// Per-frame constants of the selection.
+struct Frame<'a> {
+    frustum: Frustum,
+    eye: Vec3,
+    world_per_pixel: f32,
+    settings: &'a LodSettings,
+    /// Whether `Z_i` matters (depth bias or shading on).
+    needs_z: bool,
+}
+
+/// Selects what to draw of every instance for `camera` (spec §10) into `out`, which is cleared
+/// first; returns the frame's counts.
+///
+/// Per instance, in order:
+///
+/// 1. **Cull** the bounding sphere of the block and its cells' bounds, then, if it straddles the
+///    frustum, their transformed box.
+/// 2. **Depth** of each non-empty cell (Gilet §5.2): `d_cell` from the eye to the cell's centre and
+///    `d_block` to the block's centre, world space, and `Z_i = clamp((d_cell − d_block) / R, −1, 1)`
+///    with `R` the block radius in world units. The block cell uses `d_block` and `Z_i = 0`.
+/// 3. **Thresholds**: Gilet's eq. (2) and (3), `s_m^i = s_m + k·Z_i` and `s_M^i = s_M + k·Z_i`
+///    ([`LodSettings::biased_pixels`]), turned into metres at `d_cell` (spec §10.1) and into model
+///    space by dividing by the instance's largest axis scale: `τ = s^i · d_cell · 2·tan(fovy/2) /
+///    (H · scale)`.
+/// 4. **Prefixes**: triangles with `size > τ_t`, points with `hi > τ_p` (spec §10), found by a
+///    galloping binary search of the cell's sorted keys.
+///
+/// **Far path.** When `R·scale < far_ratio · d_block` the block is small on screen: every grid cell
+/// uses `d_block` (each `d_cell` is within `R·scale` of it, so thresholds are off by at most
+/// `r/(1 − r)`, `r = far_ratio`), and `Z_i` is linearised as `(c_i − c_block)·v̂ / R` with `v̂` the
+/// unit view direction to the block, one dot product per cell; with `k = 0` and no shading the
+/// thresholds are the same for every cell. The far path's list equals the near path's except for
+/// elements whose key lies within that threshold error. **Cell culling** happens only on the near
+/// path, and only for instances straddling the frustum.
+///
+/// Instances whose `model` is not an index of `models`, or whose transform has a zero or
+/// non-finite scale, are skipped and counted in [`FrameStats::instances_invalid`].
+///
+/// **Threads.** From [`PARALLEL_MIN_INSTANCES`] instances on, chunks of [`CHUNK_INSTANCES`]
+/// instances run on rayon's pool in two passes: the first counts each chunk's ranges, the second
+/// writes each chunk into its own slice of the list. The output is the same as on one thread.
+pub fn select_frame(
+    models: &[ModelLod],
+    instances: &[Instance],
+    camera: &Camera,
+    settings: &LodSettings,
+    out: &mut DrawList,
+) -> FrameStats {
+    let frame = Frame {
+        frustum: Frustum::from_view_proj(camera.view_proj),
+        eye: camera.position,
+        world_per_pixel: camera.world_per_pixel(),
+        settings,
+        needs_z: settings.depth_bias_k != 0.0 || settings.shading.is_some(),
+    };
+    if instances.len() >= PARALLEL_MIN_INSTANCES && rayon::current_num_threads() > 1 {
+        select_parallel(&frame, models, instances, out)
+    } else {
+        select_sequential(&frame, models, instances, out)
+    }
+}
+
+/// Instances per chunk of the parallel path: enough to amortise a task, few enough that the
+/// chunks of a frame balance across threads when visibility is uneven.
+pub const CHUNK_INSTANCES: usize = 256;
+
+/// Smallest instance count [`select_frame`] spreads over threads.
+pub const PARALLEL_MIN_INSTANCES: usize = 4 * CHUNK_INSTANCES;
+
+/// Counts gathered while selecting.
+#[derive(Clone, Copy, Debug, Default)]
+struct Tally {
+    stats: FrameStats,
+    triangle_ranges: u32,
+}
+
+impl Tally {
+    fn add(&mut self, other: &Self) {
+        let (a, b) = (&mut self.stats, &other.stats);
+        a.instances_visible += b.instances_visible;
+        a.instances_far += b.instances_far;
+        a.instances_invalid += b.instances_invalid;
+        a.cells_visible += b.cells_visible;
+        a.cells_culled += b.cells_culled;
+        a.triangles += b.triangles;
+        a.points += b.points;
+        self.triangle_ranges += other.triangle_ranges;
+    }
+
+    fn finish(mut self, out: &mut DrawList) -> FrameStats {
+        self.stats.ranges = u32::try_from(out.len).unwrap_or(u32::MAX);
+        out.triangle_ranges = self.triangle_ranges;
+        out.point_ranges = self.stats.ranges.saturating_sub(self.triangle_ranges);
+        self.stats
+    }
+}
+
+/// Where selected ranges go: appended to a vector, written into a slice sized by a counting pass,
+/// or only counted.
+trait Sink {
+    /// Whether only the number of ranges matters (no range is built).
+    const COUNT_ONLY: bool;
+    /// Takes one range.
+    fn push(&mut self, range: DrawRange);
+    /// Takes `n` ranges that were only counted.
+    fn count(&mut self, n: usize);
+}
+
+impl Sink for Vec<DrawRange> {
+    const COUNT_ONLY: bool = false;
+    #[inline(always)]
+    fn push(&mut self, range: DrawRange) {
+        Vec::push(self, range);
+    }
+    fn count(&mut self, _: usize) {}
+}
+
+/// Counts ranges (the first pass of the parallel path).
+struct Counter(usize);
+
+impl Sink for Counter {
+    const COUNT_ONLY: bool = true;
+    fn push(&mut self, _: DrawRange) {
+        self.0 += 1;
+    }
+    #[inline(always)]
+    fn count(&mut self, n: usize) {
+        self.0 += n;
+    }
+}
+
+/// Writes ranges into a slice that a [`Counter`] pass sized; `at` ends at its length.
+struct SliceSink<'a> {
+    slice: &'a mut [DrawRange],
+    at: usize,
+}
+
+impl Sink for SliceSink<'_> {
+    const COUNT_ONLY: bool = false;
+    #[inline(always)]
+    fn push(&mut self, range: DrawRange) {
+        if let Some(slot) = self.slice.get_mut(self.at) {
+            *slot = range;
+        }
+        self.at += 1;
+    }
+    fn count(&mut self, _: usize) {}
+}
+
+/// Whether an instance is drawn, and how it lies in the frustum.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+enum Visibility {
+    /// Outside the frustum.
+    #[default]
+    Hidden,
+    /// Unknown model, degenerate transform, or an index past `u32`.
+    Invalid,
+    /// Wholly inside the frustum: no cell is culled.
+    Inside,
+    /// Crossing a plane: cells may be culled.
+    Straddles,
+}
+
+/// How [`select_chunk`] learns the instances' [`Visibility`].
+enum Culling<'a> {
+    /// Cull each instance.
+    Compute,
+    /// Cull each instance and record the result (first pass of the parallel path).
+    Record(&'a mut [Visibility]),
+    /// Reuse recorded results (second pass).
+    Replay(&'a [Visibility]),
+}
+
+/// Culls one instance (step 1 of [`select_frame`]).
+fn cull_instance(frame: &Frame<'_>, models: &[ModelLod], instance: &Instance) -> Visibility {
+    let Some(model) = models.get(instance.model as usize) else {
+        return Visibility::Invalid;
+    };
+    let m = instance.transform;
+    let (ax, ay, az) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
+    let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
+    if !(scale > 0.0 && scale.is_finite()) {
+        return Visibility::Invalid;
+    }
+    let centre = m.transform_point3(model.cull_centre);
+    let h = model.cull_half;
+    match frame.frustum.classify_sphere(centre, model.cull_radius * scale) {
+        Containment::Inside => Visibility::Inside,
+        Containment::Straddles if frame.frustum.intersects_box(centre, [ax * h.x, ay * h.y, az * h.z]) => {
+            Visibility::Straddles
+        }
+        Containment::Straddles | Containment::Outside => Visibility::Hidden,
+    }
+}
+
+/// Selects `instances`, numbering them from `first`.
+fn select_chunk<S: Sink>(
+    frame: &Frame<'_>,
+    models: &[ModelLod],
+    first: usize,
+    instances: &[Instance],
+    mut culling: Culling<'_>,
+    sink: &mut S,
+    tally: &mut Tally,
+) {
+    for (offset, instance) in instances.iter().enumerate() {
+        let mut visibility = match &culling {
+            Culling::Replay(recorded) => recorded.get(offset).copied().unwrap_or_default(),
+            Culling::Compute | Culling::Record(_) => cull_instance(frame, models, instance),
+        };
+        let index = u32::try_from(first + offset);
+        if index.is_err() {
+            visibility = Visibility::Invalid;
+        }
+        if let Culling::Record(recorded) = &mut culling
+            && let Some(slot) = recorded.get_mut(offset)
+        {
+            *slot = visibility;
+        }
+        match (visibility, index, models.get(instance.model as usize)) {
+            (Visibility::Hidden, ..) => {}
+            (Visibility::Inside | Visibility::Straddles, Ok(index), Some(model)) => {
+                let straddles = visibility == Visibility::Straddles;
+                select_instance(frame, model, index, instance, straddles, sink, tally);
+            }
+            _ => tally.stats.instances_invalid += 1,
+        }
+    }
+}
+
+fn select_sequential(frame: &Frame<'_>, models: &[ModelLod], instances: &[Instance], out: &mut DrawList) -> FrameStats {
+    out.clear();
+    out.storage.clear();
+    let mut tally = Tally::default();
+    select_chunk(frame, models, 0, instances, Culling::Compute, &mut out.storage, &mut tally);
+    out.len = out.storage.len();
+    tally.finish(out)
+}
+
+/// Two passes over chunks of instances on rayon's pool: cull every instance and count each
+/// chunk's ranges (far instances by binary search over their cells' first keys, see
+/// [`count_far`]), then write each chunk into its own slice of the list, replaying the culling,
+/// so nothing is copied and the order is the sequential one. The count and the writes decide
+/// each range from the same comparisons, so they agree; should they ever not, the frame is redone
+/// sequentially (and debug builds panic).
+fn select_parallel(frame: &Frame<'_>, models: &[ModelLod], instances: &[Instance], out: &mut DrawList) -> FrameStats {
+    use rayon::prelude::*;
+    out.clear();
+    let chunk_count = instances.len().div_ceil(CHUNK_INSTANCES);
+    out.chunk_lens.clear();
+    out.visibility.clear();
+    out.visibility.resize(instances.len(), Visibility::Hidden);
+    instances
+        .par_chunks(CHUNK_INSTANCES)
+        .zip(out.visibility.par_chunks_mut(CHUNK_INSTANCES))
+        .enumerate()
+        .map(|(c, (part, visibility))| {
+            let mut counter = Counter(0);
+            let culling = Culling::Record(visibility);
+            select_chunk(frame, models, c * CHUNK_INSTANCES, part, culling, &mut counter, &mut Tally::default());
+            counter.0
+        })
+        .collect_into_vec(&mut out.chunk_lens);
+    let total: usize = out.chunk_lens.iter().sum();
+    // Grow the storage only past its high-water mark; below it, stale entries are overwritten.
+    if out.storage.len() < total {
+        let filler = DrawRange {
+            instance: 0,
+            model: 0,
+            cell: 0,
+            kind: Kind::Points,
+            first: 0,
+            count: 0,
+            tau_points: 0.0,
+            tau_triangles: 0.0,
+            shading: 0.0,
+        };
+        out.storage.resize(total, filler);
+    }
+    out.chunk_tallies.clear();
+    let lens = &out.chunk_lens;
+    let slices = SplitAt { rest: &mut out.storage[..total], lens: lens.iter() };
+    slices
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .zip(instances.par_chunks(CHUNK_INSTANCES))
+        .zip(out.visibility.par_chunks(CHUNK_INSTANCES))
+        .enumerate()
+        .map(|(c, ((slice, part), visibility))| {
+            let len = slice.len();
+            let mut sink = SliceSink { slice, at: 0 };
+            let mut tally = Tally::default();
+            let culling = Culling::Replay(visibility);
+            select_chunk(frame, models, c * CHUNK_INSTANCES, part, culling, &mut sink, &mut tally);
+            (tally, sink.at == len)
+        })
+        .collect_into_vec(&mut out.chunk_tallies);
+    if out.chunk_tallies.len() != chunk_count || out.chunk_tallies.iter().any(|(_, exact)| !exact) {
+        debug_assert!(false, "the counting pass disagrees with the writing pass");
+        return select_sequential(frame, models, instances, out);
+    }
+    let mut tally = Tally::default();
+    for (chunk, _) in &out.chunk_tallies {
+        tally.add(chunk);
+    }
+    out.len = total;
+    tally.finish(out)
+}
+
+/// Splits a slice into consecutive pieces of the given lengths.
+struct SplitAt<'a, I> {
+    rest: &'a mut [DrawRange],
+    lens: I,
+}
+
+impl<'a, I: Iterator<Item = &'a usize>> Iterator for SplitAt<'a, I> {
+    type Item = &'a mut [DrawRange];
+    fn next(&mut self) -> Option<Self::Item> {
+        let len = *self.lens.next()?;
+        let rest = std::mem::take(&mut self.rest);
+        let (head, tail) = rest.split_at_mut(len.min(rest.len()));
+        self.rest = tail;
+        Some(head)
+    }
+}
+
+/// Selects the cells of a visible instance (steps 2–4 of [`select_frame`]); `straddles` if it
+/// crosses a frustum plane, so its cells may be culled.
+fn select_instance<S: Sink>(
+    frame: &Frame<'_>,
+    model: &ModelLod,
+    index: u32,
+    instance: &Instance,
+    straddles: bool,
+    sink: &mut S,
+    tally: &mut Tally,
+) {
+    let m = instance.transform;
+    let (ax, ay, az, t) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate(), m.w_axis.truncate());
+    let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
+    let to_world = |p: Vec3| t + ax * p.x + ay * p.y + az * p.z;
+    let centre = to_world(model.centre);
+    let radius = model.radius * scale;
+    tally.stats.instances_visible += 1;
+    let to_block = centre - frame.eye;
+    let d_block = to_block.length();
+    let inv_radius = if radius > 0.0 { radius.recip() } else { 0.0 };
+    let mut cells = CellEmitter {
+        settings: *frame.settings,
+        model,
+        instance: index,
+        model_index: instance.model,
+        // τ (model space) = s_px · d · per_metre.
+        per_metre: frame.world_per_pixel / scale,
+        sink,
+        cells: 0,
+        triangle_ranges: 0,
+        triangles: 0,
+        points: 0,
+    };
+
+    if radius < frame.settings.far_ratio * d_block {
+        // Far path: d_cell − d_block ≈ v̂·M·(c_i − c_block), so Z_i ≈ (c_i − c_block)·(Mᵀv̂)/R.
+        tally.stats.instances_far += 1;
+        let (a, b) = (cells.thresholds(-1.0, d_block), cells.thresholds(1.0, d_block));
+        let (lowest_p, lowest_t) =
+            if frame.needs_z { (a.0.min(b.0), a.1.min(b.1)) } else { cells.thresholds(0.0, d_block) };
+        if model.roots_only(lowest_p, lowest_t) {
+            cells.emit_roots(lowest_p, lowest_t);
+        } else if S::COUNT_ONLY
+            && let Some(n) = count_far(model, &cells, d_block)
+        {
+            cells.sink.count(n);
+        } else if frame.needs_z && d_block > 0.0 {
+            let to_z = Vec3::new(ax.dot(to_block), ay.dot(to_block), az.dot(to_block)) * (inv_radius / d_block);
+            for cell in &model.cells {
+                let z = if cell.block_cell { 0.0 } else { (cell.centre - model.centre).dot(to_z).clamp(-1.0, 1.0) };
+                cells.emit(cell, z, d_block);
+            }
+        } else {
+            for cell in &model.cells {
+                cells.emit(cell, 0.0, d_block);
+            }
+        }
+    } else {
+        // Near path: exact per-cell distances; cells culled on their own if the block straddles.
+        let cull = straddles;
+        // Per plane: n·p + w as a function of the model-space point, and the reach of a unit
+        // half-extent along each model axis.
+        let planes: [(Vec4, Vec3); 6] = frame.frustum.planes.map(|p| {
+            let n = p.truncate();
+            let along = Vec3::new(n.dot(ax), n.dot(ay), n.dot(az));
+            (along.extend(n.dot(t) + p.w), along.abs())
+        });
+        for cell in &model.cells {
+            if cell.block_cell {
+                cells.emit(cell, 0.0, d_block);
+                continue;
+            }
+            if cull && planes.iter().any(|(p, reach)| p.truncate().dot(cell.centre) + p.w < -reach.dot(cell.half)) {
+                tally.stats.cells_culled += 1;
+                continue;
+            }
+            let d_cell = to_world(cell.centre).distance(frame.eye);
+            let z = if frame.needs_z { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) } else { 0.0 };
+            cells.emit(cell, z, d_cell);
+        }
+    }
+    tally.stats.cells_visible += cells.cells;
+    tally.stats.triangles += cells.triangles;
+    tally.stats.points += cells.points;
+    tally.triangle_ranges += cells.triangle_ranges;
+}
+
+/// The number of ranges of a far instance at distance `d_block`, by binary search over the cells'
+/// first keys, if the depth bias leaves it unambiguous.
+///
+/// On the far path every cell's thresholds are `emitter.thresholds(z, d_block)` for some
+/// `z ∈ [−1, 1]`, monotone in `z` (also in floating point: every step rounds monotonically), so a
+/// cell whose first key is above the largest threshold has a range and one at or below the smallest
+/// has none. When the two counts agree they are exact; otherwise `None` and the caller counts cell
+/// by cell.
+fn count_far<S: Sink>(model: &ModelLod, emitter: &CellEmitter<'_, S>, d_block: f32) -> Option<usize> {
+    let (a, b) = (emitter.thresholds(-1.0, d_block), emitter.thresholds(1.0, d_block));
+    let mut n = 0;
+    for (keys, low, high) in
+        [(&model.cells_by_hi0, a.0.min(b.0), a.0.max(b.0)), (&model.cells_by_largest, a.1.min(b.1), a.1.max(b.1))]
+    {
+        let sure = keys.partition_point(|&key| key > high);
+        if keys.partition_point(|&key| key > low) != sure {
+            return None;
+        }
+        n += sure;
+    }
+    Some(n)
+}
+
+/// Selects the cells of one visible instance into a [`Sink`].
+struct CellEmitter<'a, S> {
+    /// A copy, so the hot loop reads it from registers or the stack, not through a pointer.
+    settings: LodSettings,
+    model: &'a ModelLod,
+    instance: u32,
+    model_index: u32,
+    /// World per pixel per metre of distance, divided by the instance's scale.
+    per_metre: f32,
+    sink: &'a mut S,
+    cells: u32,
+    triangle_ranges: u32,
+    triangles: u64,
+    points: u64,
+}
+
+impl<S: Sink> CellEmitter<'_, S> {
+    /// `(τ_p, τ_t)`, model space, of a cell at depth `z` and distance `distance` (world metres).
+    #[inline(always)]
+    fn thresholds(&self, z: f32, distance: f32) -> (f32, f32) {
+        let (s_min, s_max) = self.settings.biased_pixels(z);
+        let unit = distance.max(0.0) * self.per_metre;
+        (s_min * unit, s_max * unit)
+    }
+
+    /// Passes on one [`Kind::Roots`] range at thresholds under which every cell draws its roots.
+    fn emit_roots(&mut self, tau_points: f32, tau_triangles: f32) {
+        let count = u32::try_from(self.model.roots.len()).unwrap_or(u32::MAX);
+        self.cells += u32::try_from(self.model.cells.iter().filter(|c| c.roots > 0).count()).unwrap_or(u32::MAX);
+        self.points += u64::from(count);
+        self.sink.push(DrawRange {
+            instance: self.instance,
+            model: self.model_index,
+            cell: ROOTS_CELL,
+            kind: Kind::Roots,
+            first: 0,
+            count,
+            tau_points,
+            tau_triangles,
+            shading: self.settings.shading_at(0.0),
+        });
+    }
+
+    /// Selects `cell` at depth `z` and distance `distance` (world metres) and passes on its ranges.
+    #[inline(always)]
+    fn emit(&mut self, cell: &CellLod, z: f32, distance: f32) {
+        let (tau_points, tau_triangles) = self.thresholds(z, distance);
+        // Whether each prefix is empty, from the cell's first keys (`leading_above` > 0 exactly
+        // when the first key is above τ).
+        let any_triangles = cell.largest > tau_triangles;
+        let any_points = cell.hi0 > tau_points;
+        if S::COUNT_ONLY {
+            self.sink.count(usize::from(any_triangles) + usize::from(any_points));
+            return;
+        }
+        let triangles = if any_triangles { leading_above(self.model.triangle_sizes(cell), tau_triangles) } else { 0 };
+        let points = if !any_points {
+            0
+        } else if tau_points >= cell.next_hi && tau_points < f32::INFINITY {
+            // Every point after the roots has `hi ≤ τ_p`: the prefix is the roots.
+            cell.roots
+        } else {
+            leading_above(self.model.point_hi(cell), tau_points)
+        };
+        self.cells += 1;
+        self.triangles += u64::from(triangles);
+        self.points += u64::from(points);
+        let mut range = DrawRange {
+            instance: self.instance,
+            model: self.model_index,
+            cell: cell.index,
+            kind: Kind::Triangles,
+            first: cell.triangles.first,
+            count: triangles,
+            tau_points,
+            tau_triangles,
+            shading: self.settings.shading_at(z),
+        };
+        if triangles > 0 {
+            self.sink.push(range);
+            self.triangle_ranges += 1;
+        }
+        if points > 0 {
+            range.kind = Kind::Points;
+            range.first = cell.points.first;
+            range.count = points;
+            self.sink.push(range);
+        }
+    }
+}
+
+/// Number of leading `values` above `tau`, `values` sorted largest first: `partition_point(v > τ)`
+/// by galloping from the front, so a short prefix (a far cell) costs `O(log prefix)`.
+fn leading_above(values: &[f32], tau: f32) -> u32 {
+    let n = values.len();
+    if !values.first().is_some_and(|&v| v > tau) {
+        return 0;
+    }
+    // Invariant: values[bound / 2] > tau.
+    let mut bound = 1;
+    while bound < n && values[bound] > tau {
+        bound *= 2;
+    }
+    let start = bound / 2 + 1;
+    let end = bound.min(n);
+    let count = start + values[start..end].partition_point(|&v| v > tau);
+    u32::try_from(count).unwrap_or(u32::MAX)
+}
+
+/// Keeps the primitive count near a target by adjusting `s_min` from frame to frame.
+///
+/// Gilet et al. note that `s_m` "allows the user to control the frame rate, or to keep the frame
+/// rate constant if required" (§5.1) without giving a rule; this is ours. With `r = last / target`:
+///
+/// - **Hysteresis**: while idle, nothing changes until `|r − 1| > dead_band`; once adjusting, it goes
+///   on until `|r − 1| ≤ dead_band / 2`, so a count hovering at the band's edge does not flicker.
+/// - **Step**: `s_min ← s_min · r^(gain/2)`, the factor clamped to `[1/max_step, max_step]` and
+///   `s_min` to `[s_min_floor, s_min_ceiling]`. The count of a cut falls roughly as `1/s_min²` (the
+///   elements are areas), so `r^(1/2)` would jump to the target; `gain < 1` damps it so a model
+///   that reacts more steeply than that still converges without overshoot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BudgetController {
+    /// Primitives (triangles + points) per frame to aim for.
+    pub target_primitives: u64,
+    /// Relative error tolerated before adjusting. Default 0.05.
+    pub dead_band: f32,
+    /// Largest factor `s_min` changes by in one frame (`> 1`). Default 1.25.
+    pub max_step: f32,
+    /// Damping of the step, in `(0, 1]`. Default 0.5.
+    pub gain: f32,
+    /// Smallest `s_min`, pixels. Default 0.5.
+    pub s_min_floor: f32,
+    /// Largest `s_min`, pixels. Default 64.
+    pub s_min_ceiling: f32,
+    s_min: f32,
+    adjusting: bool,
+}
+
+impl BudgetController {
+    /// A controller aiming at `target_primitives`, starting from `s_min` pixels.
+    #[must_use]
+    pub fn new(target_primitives: u64, s_min: f32) -> Self {
+        Self {
+            target_primitives,
+            dead_band: 0.05,
+            max_step: 1.25,
+            gain: 0.5,
+            s_min_floor: 0.5,
+            s_min_ceiling: 64.0,
+            s_min,
+            adjusting: false,
+        }
+    }
+
+    /// The current `s_min`, pixels.
+    #[must_use]
+    pub fn s_min(&self) -> f32 {
+        self.s_min
+    }
+
+    /// Takes the primitive count of the last frame ([`FrameStats::primitives`]) and returns the
+    /// `s_min` for the next one (see the type's documentation for the rule).
+    pub fn update(&mut self, last_frame_primitives: u64) -> f32 {
+        #[expect(clippy::cast_precision_loss, reason = "a ratio of counts needs no integer precision")]
+        let ratio = last_frame_primitives as f64 / self.target_primitives.max(1) as f64;
+        let error = (ratio - 1.0).abs();
+        let band = f64::from(self.dead_band.max(0.0));
+        self.adjusting = if self.adjusting { error > 0.5 * band } else { error > band };
+        if self.adjusting {
+            let max_step = f64::from(self.max_step.max(1.0));
+            let factor =
+                ratio.max(0.0).powf(0.5 * f64::from(self.gain.clamp(0.0, 1.0))).clamp(max_step.recip(), max_step);
+            #[expect(clippy::cast_possible_truncation, reason = "s_min is a small number of pixels")]
+            let next = (f64::from(self.s_min) * factor) as f32;
+            self.s_min = next.clamp(self.s_min_floor, self.s_min_ceiling.max(self.s_min_floor));
+        }
+        self.s_min
+    }
+
+    /// [`Self::update`], then writes the new `s_min` into `settings` and scales `s_max` by the same
+    /// factor, so the point/triangle boundary keeps its ratio to the point threshold.
+    pub fn apply(&mut self, last_frame_primitives: u64, settings: &mut LodSettings) {
+        let before = settings.s_min;
+        let s_min = self.update(last_frame_primitives);
+        if before > 0.0 {
+            settings.s_max *= s_min / before;
+        }
+        settings.s_min = s_min;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn galloping_equals_partition_point(
+            mut values in proptest::collection::vec(0.0f32..10.0, 0..300),
+            tau in -1.0f32..11.0,
+        ) {
+            values.sort_by(|a, b| b.total_cmp(a));
+            let expected = values.partition_point(|&v| v > tau);
+            prop_assert_eq!(leading_above(&values, tau) as usize, expected);
+        }
+    }
+
+    #[test]
+    fn galloping_edges() {
+        assert_eq!(leading_above(&[], 0.0), 0);
+        assert_eq!(leading_above(&[f32::INFINITY], 1e30), 1);
+        assert_eq!(leading_above(&[3.0, 2.0, 1.0], 0.5), 3);
+        assert_eq!(leading_above(&[3.0, 2.0, 1.0], 3.0), 0);
+        let many: Vec<f32> = (0..1000).rev().map(|i| i as f32).collect();
+        for tau in [-1.0, 0.0, 0.5, 1.0, 511.0, 512.0, 998.5, 999.0] {
+            assert_eq!(leading_above(&many, tau) as usize, many.partition_point(|&v| v > tau), "{tau}");
+        }
+    }
+
+    #[test]
+    fn frustum_planes_bound_the_view() {
+        let camera = Camera::look_at(Vec3::ZERO, Vec3::NEG_Z, 1.0, 800, 600);
+        let f = Frustum::from_view_proj(camera.view_proj);
+        assert!(f.intersects_sphere(Vec3::new(0.0, 0.0, -10.0), 0.1));
+        assert!(!f.intersects_sphere(Vec3::new(0.0, 0.0, 10.0), 1.0), "behind");
+        assert!(!f.intersects_sphere(Vec3::new(0.0, 0.0, -30_000.0), 1.0), "past the far plane");
+        assert!(!f.intersects_aabb(Vec3::new(100.0, -1.0, -11.0), Vec3::new(101.0, 1.0, -9.0)), "to the right");
+        assert!(f.intersects_aabb(Vec3::new(-1.0, -1.0, -11.0), Vec3::new(1.0, 1.0, 20.0)), "around the eye");
+        // Planes are normalised: the sphere test is in metres. Half-angle 0.5 rad, 10 m ahead: the
+        // top plane is 10·sin(0.5) ≈ 4.79 m above the axis, measured perpendicular to it.
+        let top = f.planes()[3];
+        let d = top.truncate().dot(Vec3::new(0.0, 0.0, -10.0)) + top.w;
+        assert!((d - 10.0 * 0.5f32.sin()).abs() < 1e-3, "{d}");
+        assert_eq!(f.classify_sphere(Vec3::new(0.0, 0.0, -10.0), 0.1), Containment::Inside);
+        assert_eq!(f.classify_sphere(Vec3::new(0.0, 0.0, -10.0), 6.0), Containment::Straddles);
+    }
+
+    #[test]
+    fn oriented_box_test_matches_the_aabb_test_without_rotation() {
+        let camera = Camera::look_at(Vec3::new(0.0, 2.0, 5.0), Vec3::ZERO, 0.9, 640, 480);
+        let f = Frustum::from_view_proj(camera.view_proj);
+        for i in 0..200 {
+            let c = Vec3::new((i % 20) as f32 * 3.0 - 30.0, (i / 20) as f32 - 5.0, -(i % 7) as f32 * 4.0 + 8.0);
+            let h = Vec3::new(0.5, 1.0, 1.5);
+            assert_eq!(
+                f.intersects_box(c, [Vec3::X * h.x, Vec3::Y * h.y, Vec3::Z * h.z]),
+                f.intersects_aabb(c - h, c + h)
+            );
+        }
+    }
+
+    #[test]
+    fn bias_follows_gilet_eq_2_and_3() {
+        let s = LodSettings { s_min: 1.0, s_max: 4.0, depth_bias_k: 0.5, ..LodSettings::default() };
+        assert_eq!(s.biased_pixels(0.0), (1.0, 4.0));
+        assert_eq!(s.biased_pixels(1.0), (1.5, 4.5));
+        assert_eq!(s.biased_pixels(-1.0), (0.5, 3.5));
+        let strong = LodSettings { depth_bias_k: 3.0, ..s };
+        assert_eq!(strong.biased_pixels(-1.0), (0.0, 1.0), "s_min_i is clamped at 0");
+        let shade = LodSettings { shading: Some((0.4, 1.0)), ..s };
+        assert!((shade.shading_at(-1.0) - 0.4).abs() < 1e-6);
+        assert!((shade.shading_at(1.0) - 1.0).abs() < 1e-6);
+        assert!((shade.shading_at(0.0) - 0.7).abs() < 1e-6);
+        assert_eq!(s.shading_at(-1.0), 1.0);
+    }
+
+    /// A block of 4 × 1 × 4 cells, each with a few triangles under a root and leaf points.
+    fn synthetic_model() -> ModelLod {
+        let block = BlockRecord {
+            bounds_min: [0.0; 3],
+            bounds_max: [4.0, 6.0, 4.0],
+            grid: [4, 1, 4],
+            tree_count: 1,
+            ..BlockRecord::default()
+        };
+        let (mut cells, mut triangles, mut points) = (Vec::new(), Vec::new(), Vec::new());
+        for i in 0..16u32 {
+            let (x, z) = ((i % 4) as f32, (i / 4) as f32);
+            let n = 1 + i % 5;
+            let sizes: Vec<f32> = (0..n).map(|j| 0.3 / (1.0 + j as f32) * (1.0 + 0.1 * i as f32)).collect();
+            let root = sizes.iter().sum::<f32>();
+            cells.push(CellRecord {
+                bounds_min: [x, 0.0, z],
+                bounds_max: [x + 1.0, 6.0, z + 1.0],
+                triangles: Range { first: triangles.len() as u32, count: n },
+                points: Range { first: points.len() as u32, count: n + 1 },
+                ..CellRecord::default()
+            });
+            points.push(PointRecord {
+                size: root,
+                lo: root,
+                hi: f32::INFINITY,
+                leaf_count: n,
+                ..PointRecord::default()
+            });
+            for (j, &size) in sizes.iter().enumerate() {
+                triangles.push(TriangleRecord { size, leaf: j as u32, ..TriangleRecord::default() });
+                points.push(PointRecord {
+                    size,
+                    lo: 0.0,
+                    hi: root,
+                    leaf_first: j as u32,
+                    leaf_count: 1,
+                    ..PointRecord::default()
+                });
+            }
+        }
+        cells.push(CellRecord {
+            triangles: Range { first: triangles.len() as u32, count: 0 },
+            points: Range { first: points.len() as u32, count: 0 },
+            ..CellRecord::default()
+        });
+        ModelLod::from_records(&block, &cells, &triangles, &points).unwrap()
+    }
+
+    #[test]
+    fn parallel_path_equals_sequential_path() {
+        let models = [synthetic_model()];
+        let instances: Vec<Instance> = (0..3000)
+            .map(|i| Instance {
+                model: if i % 997 == 5 { 3 } else { 0 }, // a few invalid ones
+                transform: Mat4::from_scale_rotation_translation(
+                    Vec3::splat(0.8 + 0.0001 * i as f32),
+                    glam::Quat::from_rotation_y(i as f32 * 0.7),
+                    Vec3::new((i % 60) as f32 * 7.0 - 200.0, 0.0, -((i / 60) as f32) * 9.0),
+                ),
+            })
+            .collect();
+        let cameras = [
+            Camera::look_at(Vec3::new(0.0, 3.0, 10.0), Vec3::new(10.0, 2.0, -50.0), 1.0, 1280, 720),
+            Camera::look_at(Vec3::new(0.0, 400.0, 100.0), Vec3::new(0.0, 0.0, -200.0), 1.0, 1280, 720),
+        ];
+        for camera in &cameras {
+            for settings in [
+                LodSettings::default(),
+                LodSettings { s_min: 0.3, depth_bias_k: 0.8, shading: Some((0.4, 1.0)), ..LodSettings::default() },
+            ] {
+                let frame = Frame {
+                    frustum: Frustum::from_view_proj(camera.view_proj),
+                    eye: camera.position,
+                    world_per_pixel: camera.world_per_pixel(),
+                    settings: &settings,
+                    needs_z: settings.depth_bias_k != 0.0 || settings.shading.is_some(),
+                };
+                let (mut a, mut b) = (DrawList::new(), DrawList::new());
+                let sa = select_sequential(&frame, &models, &instances, &mut a);
+                let sb = select_parallel(&frame, &models, &instances, &mut b);
+                assert_eq!(sa, sb);
+                assert_eq!(a.ranges(), b.ranges());
+                assert_eq!((a.triangle_ranges(), a.point_ranges()), (b.triangle_ranges(), b.point_ranges()));
+                assert!(sa.instances_visible > 100 && sa.instances_invalid == 4 && sa.ranges > 1000, "{sa:?}");
+                // A smaller frame after a larger one: stale storage past the end is not shown.
+                let sc = select_parallel(&frame, &models, &instances[..1500], &mut b);
+                let sd = select_sequential(&frame, &models, &instances[..1500], &mut a);
+                assert_eq!(sc, sd);
+                assert_eq!(a.ranges(), b.ranges());
+            }
+        }
+    }
+
+    /// A synthetic scene: the count of a cut falls as `C / s_min²`.
+    fn run_budget(c: f64, exponent: f64, controller: &mut BudgetController, frames: usize) -> Vec<f32> {
+        let mut trace = Vec::new();
+        let mut s = controller.s_min();
+        for _ in 0..frames {
+            let primitives = (c / f64::from(s).powf(exponent)).round() as u64;
+            s = controller.update(primitives);
+            trace.push(s);
+        }
+        trace
+    }
+
+    #[test]
+    fn budget_converges_without_oscillating() {
+        for (start, target_s) in [(1.0f32, 3.0f64), (8.0, 1.5), (2.0, 2.0), (0.6, 20.0)] {
+            let c = 1e6 * target_s * target_s; // target reached at s = target_s
+            let mut controller = BudgetController::new(1_000_000, start);
+            let trace = run_budget(c, 2.0, &mut controller, 120);
+            let last = *trace.last().unwrap();
+            assert!((f64::from(last) / target_s - 1.0).abs() < 0.03, "start {start}: ended at {last}, want {target_s}");
+            // Monotone towards the target: never overshoots, never turns back.
+            let up = target_s > f64::from(start);
+            for pair in trace.windows(2) {
+                assert!(if up { pair[1] >= pair[0] } else { pair[1] <= pair[0] }, "start {start}: {trace:?}");
+            }
+            // Settled: the last 60 frames do not move at all.
+            assert!(trace[60..].iter().all(|&s| s == last), "start {start}: {trace:?}");
+        }
+    }
+
+    #[test]
+    fn budget_converges_for_steeper_and_flatter_scenes() {
+        for exponent in [1.0, 3.0] {
+            let target_s = 3.0f64;
+            let c = 1e6 * target_s.powf(exponent);
+            let mut controller = BudgetController::new(1_000_000, 1.0);
+            let trace = run_budget(c, exponent, &mut controller, 200);
+            let last = *trace.last().unwrap();
+            let primitives = c / f64::from(last).powf(exponent);
+            assert!((primitives / 1e6 - 1.0).abs() <= 0.05 + 1e-9, "exponent {exponent}: {trace:?}");
+            let changes = trace.windows(3).filter(|w| (w[1] - w[0]) * (w[2] - w[1]) < 0.0).count();
+            assert_eq!(changes, 0, "exponent {exponent}: turned back: {trace:?}");
+            assert!(trace[100..].iter().all(|&s| s == last));
+        }
+    }
+
+    #[test]
+    fn budget_respects_the_clamps_and_the_step_limit() {
+        let mut controller = BudgetController::new(1000, 4.0);
+        let s = controller.update(1_000_000_000);
+        assert!((s - 5.0).abs() < 1e-5, "one step of at most 1.25×: {s}");
+        for _ in 0..100 {
+            controller.update(1_000_000_000);
+        }
+        assert_eq!(controller.s_min(), 64.0);
+        for _ in 0..100 {
+            controller.update(0);
+        }
+        assert_eq!(controller.s_min(), 0.5);
+        let mut settings = LodSettings { s_min: 2.0, s_max: 6.0, ..LodSettings::default() };
+        let mut controller = BudgetController::new(1000, 2.0);
+        controller.apply(4000, &mut settings);
+        assert!(settings.s_min > 2.0 && (settings.s_max / settings.s_min - 3.0).abs() < 1e-5);
+    }
+}
