@@ -2,7 +2,9 @@
 //
 // Prepended with shared/records.wgsl. One indirect draw per selected range: `first_instance` is
 // the index of the range's `DrawInfo`, `first_vertex` is 3 × its first triangle (or 6 × its first
-// point), so the vertex index names the element and its corner.
+// point) in the pool, so the vertex index names the element and its corner. The pool holds the
+// streamed prefixes of every model in 48-byte units and is bound twice: as triangles (two per
+// unit) and as points (one per unit).
 
 struct Frame {
     view_proj: mat4x4<f32>,
@@ -31,16 +33,21 @@ struct DrawInfo {
     cell: u32,
     // Uniform scale of the transform, for splat radii.
     scale: f32,
+    // Gilet's estimated self-shadowing of the cell (1 without).
+    shading: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> draws: array<DrawInfo>;
+@group(0) @binding(2) var<storage, read> triangles: array<TriangleRecord>;
+@group(0) @binding(3) var<storage, read> points: array<PointRecord>;
 @group(1) @binding(0) var<storage, read> vertices: array<VertexRecord>;
-@group(1) @binding(1) var<storage, read> triangles: array<TriangleRecord>;
-@group(1) @binding(2) var<storage, read> points: array<PointRecord>;
-@group(1) @binding(3) var<storage, read> materials: array<MaterialGpu>;
-@group(1) @binding(4) var textures: texture_2d_array<f32>;
-@group(1) @binding(5) var linear_sampler: sampler;
+@group(1) @binding(1) var<storage, read> materials: array<MaterialGpu>;
+@group(1) @binding(2) var textures: texture_2d_array<f32>;
+@group(1) @binding(3) var linear_sampler: sampler;
 
 // The material as uploaded: the record's fields that shading needs, 32 bytes.
 struct MaterialGpu {
@@ -93,7 +100,7 @@ fn vs_triangle(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.9, 0.3, 0.2); }
-        default: { out.tint = vec3<f32>(1.0); }
+        default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;
 }
@@ -132,7 +139,7 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.2, 0.5, 0.95); }
-        default: { out.tint = vec3<f32>(1.0); }
+        default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;
 }
@@ -157,7 +164,8 @@ fn fs_triangle(in: Varyings) -> @location(0) vec4<f32> {
     if frame.debug != 0u {
         return vec4<f32>(in.tint, 1.0);
     }
-    return vec4<f32>(shade(albedo.rgb, in.normal), 1.0);
+    // The tint is the cell's estimated self-shadowing when shaded.
+    return vec4<f32>(shade(albedo.rgb, in.normal) * in.tint, 1.0);
 }
 
 @fragment
@@ -168,5 +176,5 @@ fn fs_point(in: Varyings) -> @location(0) vec4<f32> {
     if frame.debug != 0u {
         return vec4<f32>(in.tint, 1.0);
     }
-    return vec4<f32>(shade(in.color.rgb, in.normal), 1.0);
+    return vec4<f32>(shade(in.color.rgb, in.normal) * in.tint, 1.0);
 }

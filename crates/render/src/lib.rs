@@ -12,8 +12,8 @@
 //!     sample_count: 1,
 //! };
 //! let mut renderer = Renderer::new(device, formats, Settings::default());
-//! let container = treelod_format::Container::open("tree.treelod")?;
-//! let tree = renderer.add_model(device, queue, &container)?;
+//! let container = std::sync::Arc::new(treelod_format::Container::open("tree.treelod")?);
+//! let tree = renderer.add_model(device, queue, container)?;
 //! renderer.set_instances(&[Instance { model: tree, transform: glam::Mat4::IDENTITY }]);
 //!
 //! // Every frame:
@@ -48,7 +48,11 @@
 mod camera;
 pub mod offscreen;
 mod renderer;
+mod streaming;
 mod textures;
 
 pub use camera::Camera;
-pub use renderer::{DebugView, FrameStats, Instance, ModelId, RenderError, Renderer, RendererFormats, Settings};
+pub use renderer::{
+    DebugView, DrawSource, FrameStats, Instance, ModelId, RecordedDraw, RenderError, Renderer, RendererFormats,
+    Settings,
+};

@@ -1,12 +1,15 @@
 //! The renderer: models uploaded from containers, instances, per-frame selection into indirect
 //! draws, and the draws themselves inside the host's render pass.
 
+use std::sync::Arc;
+
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
-use treelod_format::{CellRecord, Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleRecord};
-use treelod_runtime::{Thresholds, select_cell};
+use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord};
+use treelod_runtime::{DrawList, DrawRange, Kind, LodSettings, ModelLod, ROOTS_CELL, select_frame};
 
 use crate::camera::Camera;
+use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::textures;
 
 /// WGSL of the pipelines: the record structs, then the tree shader.
@@ -43,6 +46,9 @@ pub struct Settings {
     pub s_min: f32,
     /// `s_max`, pixels: triangles projecting larger than this are drawn as triangles.
     pub s_max: f32,
+    /// `k`, pixels: Gilet's depth bias, added to both thresholds times `Z_i ∈ [−1, 1]` from the
+    /// front to the back of each tree ([`LodSettings::depth_bias_k`]); 0 for none.
+    pub depth_bias_k: f32,
     /// Scale of the splat radii: 1 draws each point as a disc of the opaque area it stands for.
     pub point_scale: f32,
     /// Draw every triangle and no point: the full mesh, for comparison.
@@ -53,6 +59,13 @@ pub struct Settings {
     pub sun: Vec3,
     /// Ambient share of the light, 0..1.
     pub ambient: f32,
+    /// Bytes of triangles and points uploaded per frame at most: prefixes grow towards the
+    /// selection by this much each frame, emptiest cells first.
+    pub upload_budget: u64,
+    /// Bytes of GPU memory for streamed triangles and points (fixed at [`Renderer::new`], and
+    /// capped there by the device's storage-binding limit). When full, the finest halves of the
+    /// least recently needed cells' prefixes are evicted.
+    pub memory_budget: u64,
 }
 
 impl Default for Settings {
@@ -61,11 +74,14 @@ impl Default for Settings {
         Self {
             s_min: 1.0,
             s_max: 2.0,
+            depth_bias_k: 0.0,
             point_scale: 1.0,
             full_mesh: false,
             debug: DebugView::Shaded,
             sun: Vec3::new(0.4, 0.8, 0.45),
             ambient: 0.35,
+            upload_budget: 64 << 20,
+            memory_budget: 1 << 30,
         }
     }
 }
@@ -91,12 +107,17 @@ pub struct FrameStats {
     pub instances_visible: u32,
     /// Indirect draws recorded (one per non-empty range).
     pub ranges: u32,
+    /// Draws made coarser than the selection because their prefix is not resident yet.
+    pub ranges_clamped: u32,
     /// Triangles submitted.
     pub triangles: u64,
     /// Points submitted (the prefix; the vertex shader drops those outside the cut).
     pub points: u64,
-    /// Bytes of model data on the GPU.
+    /// Bytes of model data on the GPU: vertices, materials and images of every model, and the
+    /// streamed prefixes and roots in use.
     pub bytes_resident: u64,
+    /// Bytes of triangles and points uploaded by this frame.
+    pub bytes_uploaded: u64,
 }
 
 /// Why a model could not be added.
@@ -111,6 +132,14 @@ pub enum RenderError {
         bytes: u64,
         /// The device limit.
         limit: u64,
+    },
+    /// The memory budget cannot hold the roots every cell keeps resident.
+    #[error("the model's roots need {bytes} bytes of a streaming budget of {budget} bytes that is full")]
+    Budget {
+        /// Bytes needed.
+        bytes: u64,
+        /// The budget as capped by the device.
+        budget: u64,
     },
 }
 
@@ -134,6 +163,8 @@ struct DrawInfo {
     tau_t: f32,
     cell: u32,
     scale: f32,
+    shading: f32,
+    _pad: [u32; 3],
 }
 
 #[repr(C)]
@@ -146,33 +177,62 @@ struct MaterialGpu {
     material_class: u32,
 }
 
-/// The CPU copy of what selection reads, and the GPU resources of one model.
+/// The GPU resources of one model and what drawing it needs of its container.
 struct Model {
-    cells: Vec<CellRecord>,
-    /// Per cell: triangle sizes and point `hi`, copied so selection runs without the container.
-    triangles: Vec<TriangleRecord>,
-    points: Vec<PointRecord>,
-    /// Model-space bounds of the whole block.
-    bounds: (Vec3, Vec3),
+    /// The mapped container: streamed ranges are uploaded from it.
+    container: Arc<Container>,
+    /// Vertices, materials, images and the sampler.
     bind_group: wgpu::BindGroup,
-    bytes: u64,
+    /// Bytes uploaded whole at [`Renderer::add_model`] (vertices, materials, images).
+    static_bytes: u64,
+    /// Pool unit (= point index) of the pinned copy of [`ModelLod::roots`].
+    roots_start: u32,
+    /// Per container cell: where its roots start in [`ModelLod::roots`], and how many.
+    cell_roots: Vec<(u32, u32)>,
+    /// Per container cell: its index in [`ModelLod::cells`], `u32::MAX` if empty.
+    cell_lod: Vec<u32>,
 }
 
-/// One selected range: its draw info, first element and element count.
-type Draw = (DrawInfo, u32, u32);
+/// Where a recorded draw reads its elements.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DrawSource {
+    /// The leading `count` triangles of the cell's range (resident in the pool).
+    Triangles,
+    /// The leading `count` points of the cell's range (resident in the pool).
+    Points,
+    /// The cell's roots, from the model's pinned copy of the roots: the cell's points are not
+    /// resident yet, or (for [`treelod_runtime::ROOTS_CELL`]) a far tree drawn with one range.
+    Roots,
+}
 
-/// Draws of one model in this frame: ranges into the indirect buffer.
-#[derive(Clone, Copy, Default)]
-struct ModelDraws {
-    triangles: (u32, u32),
-    points: (u32, u32),
+/// One draw of the last [`Renderer::prepare`], as the GPU will execute it, for tests and tools.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecordedDraw {
+    /// Index of the instance in [`Renderer::set_instances`]'s list.
+    pub instance: u32,
+    /// The instance's model.
+    pub model: ModelId,
+    /// The container cell, or [`treelod_runtime::ROOTS_CELL`] for a far tree's roots.
+    pub cell: u32,
+    /// What is drawn.
+    pub source: DrawSource,
+    /// Elements drawn: a prefix of the cell's range (or all the roots it stands for).
+    pub count: u32,
+    /// `τ_p` the shader tests points with, model units (raised above the selection's when the
+    /// resident prefix is shorter than the selection asked for).
+    pub tau_points: f32,
+    /// `τ_t`, model units, likewise.
+    pub tau_triangles: f32,
+    /// Whether residency made this draw coarser than the selection.
+    pub clamped: bool,
 }
 
 /// Draws treelod models inside a host's render pass. See the crate documentation for a frame.
 pub struct Renderer {
     settings: Settings,
     models: Vec<Model>,
-    instances: Vec<Instance>,
+    lods: Vec<ModelLod>,
+    instances: Vec<treelod_runtime::Instance>,
     model_layout: wgpu::BindGroupLayout,
     frame_layout: wgpu::BindGroupLayout,
     triangle_pipeline: wgpu::RenderPipeline,
@@ -181,13 +241,26 @@ pub struct Renderer {
     frame_buffer: wgpu::Buffer,
     draw_buffer: wgpu::Buffer,
     indirect_buffer: wgpu::Buffer,
+    /// The streamed triangles and points of every model (see `streaming`).
+    pool_buffer: wgpu::Buffer,
     frame_bind_group: wgpu::BindGroup,
-    /// Per model, this frame's draw ranges.
-    model_draws: Vec<ModelDraws>,
+    residency: Residency,
+    /// Per model, per kind (triangles, points): this frame's range of the indirect buffer.
+    model_draws: Vec<[(u32, u32); 2]>,
     // Scratch reused between frames.
+    selection: DrawList,
+    recorded: Vec<RecordedDraw>,
+    requests: Vec<Request>,
+    uploads: Vec<Upload>,
+    /// Per model, per cell: the largest prefix asked for this frame (triangles, points).
+    wanted: Vec<Vec<[u32; 2]>>,
+    buckets: Vec<Vec<(DrawInfo, u32, u32)>>,
     draw_infos: Vec<DrawInfo>,
     indirect: Vec<wgpu::util::DrawIndirectArgs>,
 }
+
+/// Pool units the pool buffer starts with (1.5 MiB).
+const INITIAL_POOL_UNITS: u32 = 1 << 15;
 
 impl Renderer {
     /// The device features the renderer needs: indirect draws that set the first instance.
@@ -197,6 +270,10 @@ impl Renderer {
     }
 
     /// Creates the pipelines for the host's target formats.
+    ///
+    /// The memory budget of `settings` is fixed here, capped by the device's largest storage
+    /// binding (the pool is one binding): ask for larger `max_storage_buffer_binding_size` and
+    /// `max_buffer_size` limits when creating the device to stream more.
     #[must_use]
     pub fn new(device: &wgpu::Device, formats: RendererFormats, settings: Settings) -> Self {
         let storage = |binding: u32, visibility: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
@@ -223,17 +300,17 @@ impl Renderer {
                     count: None,
                 },
                 storage(1, wgpu::ShaderStages::VERTEX),
+                storage(2, wgpu::ShaderStages::VERTEX),
+                storage(3, wgpu::ShaderStages::VERTEX),
             ],
         });
         let model_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("treelod model"),
             entries: &[
                 storage(0, wgpu::ShaderStages::VERTEX),
-                storage(1, wgpu::ShaderStages::VERTEX),
-                storage(2, wgpu::ShaderStages::VERTEX),
-                storage(3, wgpu::ShaderStages::FRAGMENT),
+                storage(1, wgpu::ShaderStages::FRAGMENT),
                 wgpu::BindGroupLayoutEntry {
-                    binding: 4,
+                    binding: 2,
                     visibility: wgpu::ShaderStages::FRAGMENT,
                     ty: wgpu::BindingType::Texture {
                         sample_type: wgpu::TextureSampleType::Float { filterable: true },
@@ -243,7 +320,7 @@ impl Renderer {
                     count: None,
                 },
                 wgpu::BindGroupLayoutEntry {
-                    binding: 5,
+                    binding: 3,
                     visibility: wgpu::ShaderStages::FRAGMENT,
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
@@ -318,12 +395,18 @@ impl Renderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let draw_buffer = storage_buffer(device, "treelod draws", 64 * size_of::<DrawInfo>() as u64);
+        let draw_buffer = storage_buffer(device, "treelod draws", 64 * size_of::<DrawInfo>() as u64, false);
         let indirect_buffer = indirect_buffer(device, 64);
-        let frame_bind_group = frame_bind_group(device, &frame_layout, &frame_buffer, &draw_buffer);
+        let limits = device.limits();
+        let binding_limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_units = u32::try_from(settings.memory_budget.min(binding_limit) / UNIT).unwrap_or(u32::MAX).max(1);
+        let pool = Pool::new(INITIAL_POOL_UNITS, max_units);
+        let pool_buffer = storage_buffer(device, "treelod pool", u64::from(pool.capacity()).max(1) * UNIT, true);
+        let frame_bind_group = frame_bind_group(device, &frame_layout, &frame_buffer, &draw_buffer, &pool_buffer);
         Self {
             settings,
             models: Vec::new(),
+            lods: Vec::new(),
             instances: Vec::new(),
             model_layout,
             frame_layout,
@@ -333,8 +416,16 @@ impl Renderer {
             frame_buffer,
             draw_buffer,
             indirect_buffer,
+            pool_buffer,
             frame_bind_group,
+            residency: Residency::new(pool),
             model_draws: Vec::new(),
+            selection: DrawList::new(),
+            recorded: Vec::new(),
+            requests: Vec::new(),
+            uploads: Vec::new(),
+            wanted: Vec::new(),
+            buckets: Vec::new(),
             draw_infos: Vec::new(),
             indirect: Vec::new(),
         }
@@ -351,16 +442,18 @@ impl Renderer {
         &self.settings
     }
 
-    /// Uploads a container's vertices, triangles, points, materials and images. Images that fail
-    /// to decode are drawn grey; the returned warnings say which.
+    /// Adds a container: uploads its vertices, materials and images, and a copy of every cell's
+    /// roots; its triangles and points stream from the mapped file as frames need them. Images
+    /// that fail to decode are drawn grey; [`Self::add_model_with_warnings`] says which.
     ///
     /// # Errors
-    /// [`RenderError::TooLarge`] if an array exceeds the device's storage-buffer binding limit.
+    /// [`RenderError::TooLarge`] if the vertices or materials exceed the device's storage-buffer
+    /// binding limit, [`RenderError::Budget`] if the memory budget cannot hold the roots.
     pub fn add_model(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        container: &Container,
+        container: Arc<Container>,
     ) -> Result<ModelId, RenderError> {
         self.add_model_with_warnings(device, queue, container).map(|(id, _)| id)
     }
@@ -373,7 +466,7 @@ impl Renderer {
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        container: &Container,
+        container: Arc<Container>,
     ) -> Result<(ModelId, Vec<String>), RenderError> {
         let limit = device.limits().max_storage_buffer_binding_size;
         let mut warnings = Vec::new();
@@ -384,12 +477,12 @@ impl Renderer {
             }
             // Bindings may not be empty: an empty array becomes 16 zero bytes no draw reads.
             let padded = data.len().max(16).next_multiple_of(4) as u64;
-            let buffer = storage_buffer(device, what, padded);
+            let buffer = storage_buffer(device, what, padded, false);
             queue.write_buffer(&buffer, 0, data);
             bytes += padded;
             Ok(buffer)
         };
-        let layers = textures::layers(container, &mut warnings);
+        let layers = textures::layers(&container, &mut warnings);
         let image_layer =
             |image: u32| -> i32 { if image == NO_IMAGE { -1 } else { i32::try_from(image).unwrap_or(-1) } };
         let materials: Vec<MaterialGpu> = container
@@ -404,9 +497,34 @@ impl Renderer {
             })
             .collect();
         let vertices = upload("VERTICES", bytemuck::cast_slice(container.vertices()))?;
-        let triangles = upload("TRIANGLES", bytemuck::cast_slice(container.triangles()))?;
-        let points = upload("POINTS", bytemuck::cast_slice(container.points()))?;
         let materials = upload("MATERIALS", bytemuck::cast_slice(&materials))?;
+
+        // The roots, pinned in the pool: what a cell draws before its own points are resident.
+        let lod = ModelLod::from_container(&container);
+        let roots: Vec<PointRecord> = lod.roots().iter().map(|&i| container.points()[i as usize]).collect();
+        let roots_len = u32::try_from(roots.len()).unwrap_or(u32::MAX);
+        let cells = container.cells().len();
+        let Some(roots_start) = self.residency.add_model(cells, roots_len) else {
+            return Err(RenderError::Budget { bytes: u64::from(roots_len) * UNIT, budget: self.pool_budget() });
+        };
+        self.grow_pool_buffer(device, queue);
+        if !roots.is_empty() {
+            queue.write_buffer(&self.pool_buffer, u64::from(roots_start) * UNIT, bytemuck::cast_slice(&roots));
+        }
+        let mut cell_roots = vec![(0, 0); cells];
+        let mut cell_lod = vec![u32::MAX; cells];
+        let mut at = 0u32;
+        for (i, cell) in lod.cells().iter().enumerate() {
+            let count = lod.roots()[at as usize..]
+                .iter()
+                .take_while(|&&p| cell.points().as_usize().contains(&(p as usize)))
+                .count();
+            let count = u32::try_from(count).unwrap_or(0);
+            cell_roots[cell.index() as usize] = (at, count);
+            cell_lod[cell.index() as usize] = u32::try_from(i).unwrap_or(u32::MAX);
+            at += count;
+        }
+
         let texture = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("treelod images"),
             size: wgpu::Extent3d {
@@ -451,106 +569,200 @@ impl Renderer {
             layout: &self.model_layout,
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: triangles.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: points.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&view) },
-                wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                wgpu::BindGroupEntry { binding: 1, resource: materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&view) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
             ],
         });
-        let block = container.block();
         let id = ModelId(u32::try_from(self.models.len()).unwrap_or(u32::MAX));
-        self.models.push(Model {
-            cells: container.cells().to_vec(),
-            triangles: container.triangles().to_vec(),
-            points: container.points().to_vec(),
-            bounds: (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max)),
-            bind_group,
-            bytes,
-        });
+        self.models.push(Model { container, bind_group, static_bytes: bytes, roots_start, cell_roots, cell_lod });
+        self.lods.push(lod);
+        self.wanted.push(vec![[0; 2]; cells]);
         Ok((id, warnings))
+    }
+
+    /// The largest pool, bytes (the memory budget as capped by the device).
+    fn pool_budget(&self) -> u64 {
+        u64::from(self.residency.pool.max()) * UNIT
+    }
+
+    /// Replaces the pool buffer by a larger one if the pool grew, keeping its contents.
+    fn grow_pool_buffer(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
+        let size = u64::from(self.residency.pool.capacity()).max(1) * UNIT;
+        if size <= self.pool_buffer.size() {
+            return;
+        }
+        let buffer = storage_buffer(device, "treelod pool", size, true);
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod pool") });
+        encoder.copy_buffer_to_buffer(&self.pool_buffer, 0, &buffer, 0, self.pool_buffer.size());
+        // Submitted now: the writes that follow are made at the start of the next submission,
+        // after this copy.
+        queue.submit([encoder.finish()]);
+        self.pool_buffer = buffer;
+        self.frame_bind_group =
+            frame_bind_group(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
     }
 
     /// Replaces the instances drawn from the next frame on. Instances of unknown models are ignored.
     pub fn set_instances(&mut self, instances: &[Instance]) {
         self.instances.clear();
-        self.instances.extend(instances.iter().filter(|i| (i.model.0 as usize) < self.models.len()));
+        self.instances.extend(
+            instances
+                .iter()
+                .filter(|i| (i.model.0 as usize) < self.models.len())
+                .map(|i| treelod_runtime::Instance { model: i.model.0, transform: i.transform }),
+        );
     }
 
-    /// Selects what to draw for `camera` (per instance and cell, spec §10) and uploads the draws.
+    /// The selection of the last [`Self::prepare`] (before residency clamped it).
+    #[must_use]
+    pub fn selection(&self) -> &DrawList {
+        &self.selection
+    }
+
+    /// The draws of the last [`Self::prepare`], as recorded for the GPU, in selection order.
+    #[must_use]
+    pub fn draws(&self) -> &[RecordedDraw] {
+        &self.recorded
+    }
+
+    /// Leading triangles and points of a cell's ranges that are resident on the GPU.
+    #[must_use]
+    pub fn resident(&self, model: ModelId, cell: u32) -> (u32, u32) {
+        let (m, c) = (model.0 as usize, cell as usize);
+        (self.residency.slot(m, c, Array::Triangles).resident, self.residency.slot(m, c, Array::Points).resident)
+    }
+
+    /// Selects what to draw for `camera` (per instance and cell, spec §10, with
+    /// [`treelod_runtime::select_frame`]), streams what the selection needs within the budgets,
+    /// and uploads the draws, clamped to what is resident.
     pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
-        let mut stats =
-            FrameStats { bytes_resident: self.models.iter().map(|m| m.bytes).sum(), ..FrameStats::default() };
-        let view_proj = camera.view_proj();
-        let frustum = Frustum::new(view_proj);
         let settings = self.settings;
-        // Per model, per kind: the draws in instance order, gathered model by model so each model's
-        // draws are contiguous in the indirect buffer.
-        let mut per_model: Vec<(Vec<Draw>, Vec<Draw>)> = self.models.iter().map(|_| (Vec::new(), Vec::new())).collect();
-        for instance in &self.instances {
-            let model = &self.models[instance.model.0 as usize];
-            let (lo, hi) = model.bounds;
-            if !frustum.intersects(instance.transform, lo, hi) {
-                continue;
-            }
-            stats.instances_visible += 1;
-            let scale = instance.transform.x_axis.truncate().length().max(1e-12);
-            let (tri_draws, point_draws) = &mut per_model[instance.model.0 as usize];
-            for (index, cell) in model.cells.iter().enumerate() {
-                if cell.triangles.count == 0 && cell.points.count == 0 {
+        let view_proj = camera.view_proj();
+        let (s_min, s_max) = if settings.full_mesh { (0.0, 0.0) } else { (settings.s_min, settings.s_max) };
+        let lod_settings = LodSettings { s_min, s_max, depth_bias_k: settings.depth_bias_k, ..LodSettings::default() };
+        let runtime_camera = treelod_runtime::Camera {
+            position: camera.position,
+            view_proj,
+            viewport_height: camera.height as f32,
+            fovy: camera.fovy,
+        };
+        let selected = select_frame(&self.lods, &self.instances, &runtime_camera, &lod_settings, &mut self.selection);
+
+        // What each cell needs: the largest prefix any instance asked for.
+        self.residency.begin_frame();
+        self.requests.clear();
+        for range in self.selection.ranges() {
+            let array = match range.kind {
+                Kind::Triangles => Array::Triangles,
+                Kind::Points => Array::Points,
+                Kind::Roots => continue,
+            };
+            let (m, c) = (range.model as usize, range.cell as usize);
+            if settings.full_mesh && array == Array::Points {
+                // The full mesh needs points only while its triangles are not all resident.
+                let wanted_triangles = self.wanted[m][c][0];
+                if self.residency.slot(m, c, Array::Triangles).resident >= wanted_triangles {
                     continue;
                 }
-                let centre = 0.5 * (Vec3::from_array(cell.bounds_min) + Vec3::from_array(cell.bounds_max));
-                let distance = instance.transform.transform_point3(centre).distance(camera.position);
-                let t = if settings.full_mesh {
-                    Thresholds { points: 0.0, triangles: 0.0 }
-                } else {
-                    let world = Thresholds::from_pixels(
-                        settings.s_min,
-                        settings.s_max,
-                        distance,
-                        camera.fovy,
-                        camera.height as f32,
-                    );
-                    Thresholds { points: world.points / scale, triangles: world.triangles / scale }
-                };
-                let selection = select_cell(cell, &model.triangles, &model.points, t);
+            }
+            let wanted = &mut self.wanted[m][c][array as usize];
+            if *wanted == 0 {
+                self.requests.push(Request { model: m, cell: c, array, first: range.first, wanted: 0 });
+            }
+            *wanted = (*wanted).max(range.count);
+        }
+        for request in &mut self.requests {
+            request.wanted = self.wanted[request.model][request.cell][request.array as usize];
+        }
+        self.uploads.clear();
+        let streamed = self.residency.stream(&mut self.requests, settings.upload_budget, &mut self.uploads);
+        for request in &self.requests {
+            self.wanted[request.model][request.cell] = [0; 2];
+        }
+        self.grow_pool_buffer(device, queue);
+        for upload in &self.uploads {
+            let Some(model) = self.models.get(upload.model) else { continue };
+            let (first, end) = (upload.first as usize, (upload.first + upload.count) as usize);
+            let data: &[u8] = match upload.array {
+                Array::Triangles => bytemuck::cast_slice(&model.container.triangles()[first..end]),
+                Array::Points => bytemuck::cast_slice(&model.container.points()[first..end]),
+            };
+            queue.write_buffer(&self.pool_buffer, upload.offset, data);
+        }
+
+        // The draws, clamped to what is resident, bucketed by model and kind.
+        let mut stats = FrameStats {
+            instances_visible: selected.instances_visible,
+            bytes_uploaded: streamed.bytes_uploaded,
+            bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
+                + u64::from(self.residency.pool.used()) * UNIT,
+            ..FrameStats::default()
+        };
+        self.recorded.clear();
+        self.buckets.resize_with(2 * self.models.len(), Vec::new);
+        for bucket in &mut self.buckets {
+            bucket.clear();
+        }
+        let ranges = self.selection.ranges();
+        let mut i = 0;
+        while i < ranges.len() {
+            let range = ranges[i];
+            // A cell's triangle range is followed by its point range, if any.
+            let points = ranges
+                .get(i + 1)
+                .filter(|next| {
+                    range.kind == Kind::Triangles
+                        && next.kind == Kind::Points
+                        && (next.instance, next.cell) == (range.instance, range.cell)
+                })
+                .copied();
+            i += 1 + usize::from(points.is_some());
+            let (triangles, points) = match range.kind {
+                Kind::Triangles => (Some(range), points),
+                Kind::Points | Kind::Roots => (None, Some(range)),
+            };
+            for draw in self.clamp(range, triangles, points, settings.full_mesh) {
+                let Some(draw) = draw else { continue };
+                stats.ranges_clamped += u32::from(draw.clamped);
+                let (bucket, first_vertex, corners) = self.gpu_first(&draw);
+                match draw.source {
+                    DrawSource::Triangles => stats.triangles += u64::from(draw.count),
+                    DrawSource::Points | DrawSource::Roots => stats.points += u64::from(draw.count),
+                }
+                let transform = self.instances[draw.instance as usize].transform;
                 let info = DrawInfo {
-                    model: instance.transform.to_cols_array_2d(),
-                    tau_p: t.points,
-                    tau_t: t.triangles,
-                    cell: u32::try_from(index).unwrap_or(u32::MAX),
-                    scale,
+                    model: transform.to_cols_array_2d(),
+                    tau_p: draw.tau_points,
+                    tau_t: draw.tau_triangles,
+                    cell: draw.cell,
+                    scale: max_axis_scale(transform),
+                    shading: range.shading,
+                    _pad: [0; 3],
                 };
-                if selection.triangles > 0 {
-                    tri_draws.push((info, cell.triangles.first, selection.triangles));
-                    stats.triangles += u64::from(selection.triangles);
-                }
-                if selection.points > 0 && !settings.full_mesh {
-                    point_draws.push((info, cell.points.first, selection.points));
-                    stats.points += u64::from(selection.points);
-                }
+                self.buckets[bucket].push((info, first_vertex, draw.count * corners));
+                self.recorded.push(draw);
             }
         }
         self.draw_infos.clear();
         self.indirect.clear();
         self.model_draws.clear();
-        for (tri_draws, point_draws) in per_model {
-            let mut draws = ModelDraws::default();
-            for (kind, list, corners) in [(0, tri_draws, 3u32), (1, point_draws, 6u32)] {
+        for pair in self.buckets.chunks(2) {
+            let mut draws = [(0, 0); 2];
+            for (kind, bucket) in pair.iter().enumerate() {
                 let start = u32::try_from(self.indirect.len()).unwrap_or(u32::MAX);
-                for (info, first, count) in list {
+                for &(info, first_vertex, vertex_count) in bucket {
                     let index = u32::try_from(self.draw_infos.len()).unwrap_or(u32::MAX);
                     self.draw_infos.push(info);
                     self.indirect.push(wgpu::util::DrawIndirectArgs {
-                        vertex_count: count * corners,
+                        vertex_count,
                         instance_count: 1,
-                        first_vertex: first * corners,
+                        first_vertex,
                         first_instance: index,
                     });
                 }
-                let range = (start, u32::try_from(self.indirect.len()).unwrap_or(u32::MAX) - start);
-                if kind == 0 { draws.triangles = range } else { draws.points = range }
+                draws[kind] = (start, u32::try_from(self.indirect.len()).unwrap_or(u32::MAX) - start);
             }
             self.model_draws.push(draws);
         }
@@ -574,8 +786,9 @@ impl Renderer {
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
         let draw_bytes = (self.draw_infos.len().max(1) * size_of::<DrawInfo>()) as u64;
         if draw_bytes > self.draw_buffer.size() {
-            self.draw_buffer = storage_buffer(device, "treelod draws", draw_bytes.next_power_of_two());
-            self.frame_bind_group = frame_bind_group(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer);
+            self.draw_buffer = storage_buffer(device, "treelod draws", draw_bytes.next_power_of_two(), false);
+            self.frame_bind_group =
+                frame_bind_group(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
         }
         if !self.draw_infos.is_empty() {
             queue.write_buffer(&self.draw_buffer, 0, bytemuck::cast_slice(&self.draw_infos));
@@ -591,14 +804,114 @@ impl Renderer {
         stats
     }
 
+    /// The draws of one selected cell (or one roots range), clamped to what is resident so that
+    /// a missing prefix shows coarser data, never a hole:
+    ///
+    /// - **Points**: if only `r` leading points are resident, `τ_p` rises to the `hi` of the first
+    ///   missing one, so every point the cut needs lies in the resident prefix; with nothing (or
+    ///   less than the roots) resident, the cell draws its roots from the pinned copy.
+    /// - **Triangles**: `τ_t` rises to at least `τ_p` (the rule needs `τ_p ≤ τ_t`) and, if only `r`
+    ///   leading triangles are resident, to the size of the first missing one; the smaller
+    ///   triangles are then drawn through their points.
+    ///
+    /// For any `τ_p ≤ τ_t` the drawn elements are an exact cut (spec §10), so a clamped cell is a
+    /// valid coarser level of detail.
+    fn clamp(
+        &self,
+        range: DrawRange,
+        triangles: Option<DrawRange>,
+        points: Option<DrawRange>,
+        full_mesh: bool,
+    ) -> [Option<RecordedDraw>; 2] {
+        let base = RecordedDraw {
+            instance: range.instance,
+            model: ModelId(range.model),
+            cell: range.cell,
+            source: DrawSource::Roots,
+            count: 0,
+            tau_points: range.tau_points,
+            tau_triangles: range.tau_triangles,
+            clamped: false,
+        };
+        let (m, c) = (range.model as usize, range.cell as usize);
+        let (Some(model), Some(lod)) = (self.models.get(m), self.lods.get(m)) else { return [None, None] };
+        if range.kind == Kind::Roots {
+            return [None, Some(RecordedDraw { count: range.count, ..base })];
+        }
+        let Some(cell) = model.cell_lod.get(c).and_then(|&i| lod.cells().get(i as usize)) else {
+            return [None, None];
+        };
+        let (sizes, his) = (lod.triangle_sizes(cell), lod.point_hi(cell));
+        let (mut tau_p, mut tau_t) = (range.tau_points, range.tau_triangles);
+        let resident_t = self.residency.slot(m, c, Array::Triangles).resident as usize;
+        let resident_p = self.residency.slot(m, c, Array::Points).resident as usize;
+        let roots = model.cell_roots.get(c).map_or(0, |r| r.1) as usize;
+        let triangles_complete = triangles.is_none_or(|t| resident_t >= t.count as usize);
+        let mut point_draw = None;
+        let mut clamped = false;
+        if let Some(p) = points.filter(|_| !(full_mesh && triangles_complete)) {
+            let wanted = p.count as usize;
+            let (source, count) = if resident_p >= wanted {
+                (DrawSource::Points, wanted)
+            } else if resident_p >= roots.max(1) {
+                tau_p = tau_p.max(his[resident_p]);
+                (DrawSource::Points, leading_above(his, tau_p))
+            } else {
+                tau_p = tau_p.max(his.get(roots).copied().unwrap_or(tau_p));
+                (DrawSource::Roots, roots)
+            };
+            clamped |= count < wanted || source == DrawSource::Roots;
+            if count > 0 {
+                point_draw = Some((source, count));
+            }
+        }
+        tau_t = tau_t.max(tau_p);
+        let mut count_t = leading_above(sizes, tau_t);
+        if count_t > resident_t {
+            tau_t = tau_t.max(sizes[resident_t]);
+            count_t = leading_above(sizes, tau_t);
+        }
+        clamped |= triangles.is_some_and(|t| count_t < t.count as usize);
+        let base = RecordedDraw { tau_points: tau_p, tau_triangles: tau_t, clamped, ..base };
+        let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+        [
+            (count_t > 0).then(|| RecordedDraw { source: DrawSource::Triangles, count: count(count_t), ..base }),
+            point_draw.map(|(source, n)| RecordedDraw { source, count: count(n), ..base }),
+        ]
+    }
+
+    /// The bucket (model × kind), first vertex and vertices per element of a recorded draw.
+    fn gpu_first(&self, draw: &RecordedDraw) -> (usize, u32, u32) {
+        let m = draw.model.0 as usize;
+        let model = &self.models[m];
+        match draw.source {
+            DrawSource::Triangles => {
+                let slot = self.residency.slot(m, draw.cell as usize, Array::Triangles);
+                (2 * m, 2 * slot.start * 3, 3)
+            }
+            DrawSource::Points => {
+                let slot = self.residency.slot(m, draw.cell as usize, Array::Points);
+                (2 * m + 1, slot.start * 6, 6)
+            }
+            DrawSource::Roots => {
+                let at = if draw.cell == ROOTS_CELL {
+                    0
+                } else {
+                    model.cell_roots.get(draw.cell as usize).map_or(0, |r| r.0)
+                };
+                (2 * m + 1, (model.roots_start + at) * 6, 6)
+            }
+        }
+    }
+
     /// Records this frame's draws into the host's pass (after [`Self::prepare`]).
     pub fn render(&self, pass: &mut wgpu::RenderPass<'_>) {
         let stride = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
         pass.set_bind_group(0, &self.frame_bind_group, &[]);
-        for (pipeline, triangles) in [(&self.triangle_pipeline, true), (&self.point_pipeline, false)] {
+        for (pipeline, kind) in [(&self.triangle_pipeline, 0), (&self.point_pipeline, 1)] {
             pass.set_pipeline(pipeline);
             for (model, draws) in self.models.iter().zip(&self.model_draws) {
-                let (first, count) = if triangles { draws.triangles } else { draws.points };
+                let (first, count) = draws[kind];
                 if count == 0 {
                     continue;
                 }
@@ -609,11 +922,23 @@ impl Renderer {
     }
 }
 
-fn storage_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+/// Number of leading `values` (sorted largest first) above `tau`.
+fn leading_above(values: &[f32], tau: f32) -> usize {
+    values.partition_point(|&v| v > tau)
+}
+
+/// The largest axis scale of an affine transform (what selection converts sizes with).
+fn max_axis_scale(m: Mat4) -> f32 {
+    let (x, y, z) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
+    x.length_squared().max(y.length_squared()).max(z.length_squared()).sqrt().max(1e-12)
+}
+
+fn storage_buffer(device: &wgpu::Device, label: &str, size: u64, copy_src: bool) -> wgpu::Buffer {
+    let copy = if copy_src { wgpu::BufferUsages::COPY_SRC } else { wgpu::BufferUsages::empty() };
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | copy,
         mapped_at_creation: false,
     })
 }
@@ -627,11 +952,13 @@ fn indirect_buffer(device: &wgpu::Device, draws: u64) -> wgpu::Buffer {
     })
 }
 
+/// The frame bind group: uniform, draw infos, and the pool bound twice (triangles, points).
 fn frame_bind_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     frame: &wgpu::Buffer,
     draws: &wgpu::Buffer,
+    pool: &wgpu::Buffer,
 ) -> wgpu::BindGroup {
     device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("treelod frame"),
@@ -639,31 +966,8 @@ fn frame_bind_group(
         entries: &[
             wgpu::BindGroupEntry { binding: 0, resource: frame.as_entire_binding() },
             wgpu::BindGroupEntry { binding: 1, resource: draws.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: pool.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 3, resource: pool.as_entire_binding() },
         ],
     })
-}
-
-/// The six planes of a view-projection's frustum (WebGPU depth 0..1), for conservative culling.
-struct Frustum {
-    planes: [Vec4; 6],
-}
-
-impl Frustum {
-    fn new(m: Mat4) -> Self {
-        let r = [m.row(0), m.row(1), m.row(2), m.row(3)];
-        Self { planes: [r[3] + r[0], r[3] - r[0], r[3] + r[1], r[3] - r[1], r[2], r[3] - r[2]] }
-    }
-
-    /// Whether the box `lo..hi` under `transform` may be visible.
-    fn intersects(&self, transform: Mat4, lo: Vec3, hi: Vec3) -> bool {
-        let corners: [Vec4; 8] = std::array::from_fn(|i| {
-            let p = Vec3::new(
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            );
-            transform.transform_point3(p).extend(1.0)
-        });
-        self.planes.iter().all(|plane| corners.iter().any(|c| plane.dot(*c) >= 0.0))
-    }
 }

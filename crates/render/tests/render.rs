@@ -5,7 +5,8 @@ use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, Image, render_image};
-use treelod_render::{Camera, DebugView, Instance, Renderer, Settings};
+use treelod_render::{Camera, DebugView, DrawSource, Instance, RecordedDraw, Renderer, Settings};
+use treelod_runtime::{Kind, Thresholds, point_drawn};
 
 const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
 
@@ -55,9 +56,9 @@ fn precision_recall(lod: &Image, full: &Image) -> (f64, f64) {
 #[test]
 fn lod_covers_the_pixels_of_the_full_mesh_at_every_distance() {
     let gpu = gpu();
-    let container = demo_container();
+    let container = std::sync::Arc::new(demo_container());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, &container).expect("uploads");
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
     renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
     let total = container.triangles().len() as u64;
     let mut drawn = Vec::new();
@@ -95,9 +96,9 @@ fn lod_covers_the_pixels_of_the_full_mesh_at_every_distance() {
 #[test]
 fn an_instance_behind_the_camera_draws_nothing_and_debug_views_colour_by_kind() {
     let gpu = gpu();
-    let container = demo_container();
+    let container = std::sync::Arc::new(demo_container());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, &container).expect("uploads");
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
     let cam = camera(&container, 15.0, 256);
     renderer.set_instances(&[Instance { model: tree, transform: Mat4::from_translation(vec3(0.0, 0.0, 100.0)) }]);
     let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
@@ -111,4 +112,184 @@ fn an_instance_behind_the_camera_draws_nothing_and_debug_views_colour_by_kind() 
     let red = image.rgba.chunks_exact(4).filter(|p| p[0] > 200 && p[2] < 150).count();
     let blue = image.rgba.chunks_exact(4).filter(|p| p[2] > 200 && p[0] < 150).count();
     assert!(red > 0 && blue > 0, "both kinds visible: {red} red, {blue} blue pixels");
+}
+
+/// Checks the draws of one frame against the container: each draw reads only resident records,
+/// and the draws of each cell are an exact cut at their thresholds (spec §10), so a frame that
+/// streaming clamped is coarser, never missing a leaf.
+fn check_draws(renderer: &Renderer, container: &Container) {
+    let model = treelod_runtime::ModelLod::from_container(container);
+    let mut by_cell: std::collections::BTreeMap<(u32, u32), Vec<RecordedDraw>> = Default::default();
+    for draw in renderer.draws() {
+        by_cell.entry((draw.instance, draw.cell)).or_default().push(*draw);
+    }
+    for ((_, cell_index), draws) in by_cell {
+        if cell_index == treelod_runtime::ROOTS_CELL {
+            assert_eq!(draws.len(), 1);
+            assert_eq!(draws[0].count as usize, model.roots().len());
+            continue;
+        }
+        let (resident_t, resident_p) = renderer.resident(draws[0].model, cell_index);
+        let t = Thresholds { points: draws[0].tau_points, triangles: draws[0].tau_triangles };
+        assert!(t.points <= t.triangles, "{draws:?}");
+        let cell = container.cells()[cell_index as usize];
+        let triangles = &container.triangles()[cell.triangles.as_usize()];
+        let points = &container.points()[cell.points.as_usize()];
+        let roots = points.iter().take_while(|p| p.hi == f32::INFINITY).count();
+        let mut cover = vec![0u32; triangles.len()];
+        for draw in &draws {
+            assert_eq!((draw.tau_points, draw.tau_triangles), (t.points, t.triangles), "one cut per cell");
+            let drawn: Vec<usize> = match draw.source {
+                DrawSource::Triangles => {
+                    assert!(draw.count <= resident_t, "cell {cell_index}: {draw:?} past {resident_t} resident");
+                    let drawn = &triangles[..draw.count as usize];
+                    assert!(drawn.iter().all(|tri| tri.size > t.triangles));
+                    assert!(triangles.get(draw.count as usize).is_none_or(|tri| tri.size <= t.triangles));
+                    drawn.iter().map(|tri| tri.leaf as usize).collect()
+                }
+                DrawSource::Points | DrawSource::Roots => {
+                    if draw.source == DrawSource::Points {
+                        assert!(draw.count <= resident_p, "cell {cell_index}: {draw:?} past {resident_p} resident");
+                    } else {
+                        assert_eq!(draw.count as usize, roots);
+                    }
+                    let prefix = &points[..draw.count as usize];
+                    // Every point the cut needs lies in the drawn prefix.
+                    assert!(points[draw.count as usize..].iter().all(|p| !point_drawn(p, t)), "cell {cell_index}");
+                    prefix
+                        .iter()
+                        .filter(|p| point_drawn(p, t))
+                        .flat_map(|p| (p.leaf_first..p.leaf_first + p.leaf_count).map(|l| l as usize))
+                        .collect()
+                }
+            };
+            for leaf in drawn {
+                cover[leaf] += 1;
+            }
+        }
+        assert!(cover.iter().all(|&n| n == 1), "cell {cell_index}: not an exact cut at {t:?}");
+    }
+}
+
+#[test]
+fn with_unlimited_budgets_the_draws_are_the_cpu_selection() {
+    let gpu = gpu();
+    let container = std::sync::Arc::new(demo_container());
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    let beside = Mat4::from_translation(vec3(6.0, 0.0, -20.0));
+    let far = Mat4::from_translation(vec3(-40.0, 0.0, -900.0));
+    renderer.set_instances(&[
+        Instance { model: tree, transform: Mat4::IDENTITY },
+        Instance { model: tree, transform: beside },
+        Instance { model: tree, transform: far },
+    ]);
+    let stats = renderer.prepare(&gpu.device, &gpu.queue, &camera(&container, 15.0, 256));
+    assert_eq!(stats.ranges_clamped, 0, "{stats:?}");
+    let selection = renderer.selection().ranges().to_vec();
+    assert!(selection.iter().any(|r| r.kind == Kind::Roots), "the far tree is one roots range");
+    let draws = renderer.draws();
+    assert_eq!(draws.len(), selection.len());
+    assert_eq!(stats.ranges as usize, selection.len());
+    for (draw, range) in draws.iter().zip(&selection) {
+        let source = match range.kind {
+            Kind::Triangles => DrawSource::Triangles,
+            Kind::Points => DrawSource::Points,
+            Kind::Roots => DrawSource::Roots,
+        };
+        assert_eq!(
+            (draw.instance, draw.cell, draw.source, draw.count, draw.tau_points, draw.tau_triangles),
+            (
+                range.instance,
+                range.cell,
+                source,
+                range.count,
+                range.tau_points,
+                range.tau_triangles.max(range.tau_points)
+            )
+        );
+    }
+    check_draws(&renderer, &container);
+}
+
+#[test]
+fn streaming_with_a_tiny_budget_shows_coarser_data_never_holes_and_converges() {
+    let gpu = gpu();
+    let container = std::sync::Arc::new(demo_container());
+    let budget = 48 << 10;
+    let settings = Settings { upload_budget: budget, ..Settings::default() };
+    let cam = camera(&container, 15.0, 160);
+
+    // The image once everything needed is resident.
+    let mut reference = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+    let tree = reference.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    reference.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let (full, full_stats) = render_image(&gpu, &mut reference, &cam, BACKGROUND).expect("renders");
+    assert_eq!(full_stats.ranges_clamped, 0);
+
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut frames = 0;
+    let mut worst_recall = 1.0f64;
+    loop {
+        let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+        frames += 1;
+        assert!(stats.bytes_uploaded <= budget, "frame {frames}: {stats:?}");
+        check_draws(&renderer, &container);
+        let (_, recall) = precision_recall(&image, &full);
+        worst_recall = worst_recall.min(recall);
+        keep(&image, &format!("streaming-{frames}"));
+        if stats.ranges_clamped == 0 {
+            assert_eq!((stats.triangles, stats.points), (full_stats.triangles, full_stats.points));
+            assert_eq!(image.rgba, full.rgba, "converged to the full selection's image");
+            break;
+        }
+        assert!(frames < 200, "streaming does not converge: {stats:?}");
+    }
+    // The selection needs about 1 MB: at 48 KiB a frame, many frames are clamped.
+    assert!(frames > 10, "{frames} frames");
+    // Clamped frames draw coarser data over the same canopy: no holes open.
+    assert!(worst_recall > 0.9, "a clamped frame covers {worst_recall:.3} of the full image's pixels");
+    eprintln!("converged after {frames} frames; worst recall {worst_recall:.3}");
+}
+
+#[test]
+fn a_small_memory_budget_is_never_exceeded_and_evicts_what_is_no_longer_needed() {
+    let gpu = gpu();
+    let container = std::sync::Arc::new(demo_container());
+    let budget = 256 << 10;
+    let settings = Settings { memory_budget: budget, ..Settings::default() };
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    // Two models (residency is per model and cell) seen in turn: close up, each needs more than
+    // the budget holds.
+    let a = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    let b = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    let left = Mat4::from_translation(vec3(-200.0, 0.0, 0.0));
+    let right = Mat4::from_translation(vec3(200.0, 0.0, 0.0));
+    renderer.set_instances(&[Instance { model: a, transform: left }, Instance { model: b, transform: right }]);
+    let static_bytes = {
+        // With nothing in view only the whole-model uploads and the pinned roots are resident.
+        let away = Camera::look_at(vec3(0.0, 5.0, 0.0), vec3(0.0, 5.0, 100.0), 0.8, 128, 128);
+        renderer.prepare(&gpu.device, &gpu.queue, &away).bytes_resident
+    };
+    let centre = {
+        let b = container.block();
+        0.5 * (Vec3::from_array(b.bounds_min) + Vec3::from_array(b.bounds_max))
+    };
+    let mut uploaded = Vec::new();
+    for (frame, x) in [-200.0f32, 200.0, -200.0, 200.0].into_iter().enumerate() {
+        let eye = centre + vec3(x, 0.0, 6.0);
+        let cam = Camera::look_at(eye, centre + vec3(x, 0.0, 0.0), 0.8, 128, 128);
+        for _ in 0..3 {
+            let stats = renderer.prepare(&gpu.device, &gpu.queue, &cam);
+            assert!(stats.bytes_resident <= static_bytes + budget, "frame {frame}: {stats:?}");
+            uploaded.push(stats.bytes_uploaded);
+            assert!(stats.triangles + stats.points > 0);
+            check_draws(&renderer, &container);
+        }
+        // Each tree is uploaded when it comes into view (evicting the other), then stays.
+        let n = uploaded.len();
+        assert!(uploaded[n - 3] > 0 && uploaded[n - 1] == 0, "frame {frame}: {uploaded:?}");
+    }
 }

@@ -126,14 +126,15 @@ impl Frustum {
 /// Level-of-detail settings of [`select_frame`].
 ///
 /// Gilet et al. give no default values for the pixel thresholds; the defaults here are one-pixel
-/// points and triangles from four pixels on.
+/// points and triangles from two pixels on (the renderer's defaults: at 1–2 px a point and the
+/// triangle it replaces cover the same pixels, see `crates/render/tests/render.rs`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LodSettings {
     /// `s_m`, pixels: the smallest projected size of a drawn point; finer points give way to their
     /// parent (Gilet §5.1). Default 1.
     pub s_min: f32,
     /// `s_M`, pixels: primitives projecting larger than this are drawn as triangles (Gilet §5.1);
-    /// raised to `s_min` if smaller. Default 4.
+    /// raised to `s_min` if smaller. Default 2.
     pub s_max: f32,
     /// `k`, pixels: Gilet's depth bias (§5.2, eq. 2 and 3), added to both pixel thresholds times
     /// `Z_i ∈ [−1, 1]` (front to back of the block), so the back of a block is drawn coarser and
@@ -154,7 +155,7 @@ pub struct LodSettings {
 
 impl Default for LodSettings {
     fn default() -> Self {
-        Self { s_min: 1.0, s_max: 4.0, depth_bias_k: 0.0, shading: None, far_ratio: 0.02 }
+        Self { s_min: 1.0, s_max: 2.0, depth_bias_k: 0.0, shading: None, far_ratio: 0.02 }
     }
 }
 
