@@ -49,6 +49,10 @@ pub struct Settings {
     /// `k`, pixels: Gilet's depth bias, added to both thresholds times `Z_i ∈ [−1, 1]` from the
     /// front to the back of each tree ([`LodSettings::depth_bias_k`]); 0 for none.
     pub depth_bias_k: f32,
+    /// `(L_m, L_M)`: Gilet's estimated self-shadowing, a brightness per cell from `L_m` at the
+    /// front of each tree to `L_M` at the back as the paper writes it
+    /// ([`LodSettings::shading_at`]); `None` for none.
+    pub shading: Option<(f32, f32)>,
     /// Scale of the splat radii: 1 draws each point as a disc of the opaque area it stands for.
     pub point_scale: f32,
     /// Draw every triangle and no point: the full mesh, for comparison.
@@ -75,6 +79,7 @@ impl Default for Settings {
             s_min: 1.0,
             s_max: 2.0,
             depth_bias_k: 0.0,
+            shading: None,
             point_scale: 1.0,
             full_mesh: false,
             debug: DebugView::Shaded,
@@ -641,7 +646,13 @@ impl Renderer {
         let settings = self.settings;
         let view_proj = camera.view_proj();
         let (s_min, s_max) = if settings.full_mesh { (0.0, 0.0) } else { (settings.s_min, settings.s_max) };
-        let lod_settings = LodSettings { s_min, s_max, depth_bias_k: settings.depth_bias_k, ..LodSettings::default() };
+        let lod_settings = LodSettings {
+            s_min,
+            s_max,
+            depth_bias_k: settings.depth_bias_k,
+            shading: settings.shading,
+            ..LodSettings::default()
+        };
         let runtime_camera = treelod_runtime::Camera {
             position: camera.position,
             view_proj,

@@ -293,3 +293,55 @@ fn a_small_memory_budget_is_never_exceeded_and_evicts_what_is_no_longer_needed()
         assert!(uploaded[n - 3] > 0 && uploaded[n - 1] == 0, "frame {frame}: {uploaded:?}");
     }
 }
+
+/// Compares `image` with the golden PNG `tests/golden/{name}.png`, or writes it when
+/// `TREELOD_BLESS=1` (then look at it before committing). Tolerance, over the pixels covered in
+/// either image (a far tree covers few): rasterisers may differ on edge pixels, so at most 5 % of
+/// them may differ by more than 48 in a channel, and their mean difference must stay under 8.
+fn check_golden(image: &Image, name: &str) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden").join(format!("{name}.png"));
+    if std::env::var_os("TREELOD_BLESS").is_some() {
+        std::fs::create_dir_all(path.parent().expect("has a parent")).expect("creates tests/golden");
+        let file = std::fs::File::create(&path).expect("creates the golden image");
+        let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), image.width, image.height);
+        encoder.set_color(png::ColorType::Rgba);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.write_header().expect("writes").write_image_data(&image.rgba).expect("writes");
+        return;
+    }
+    let bytes = std::fs::read(&path)
+        .unwrap_or_else(|e| panic!("{}: {e} (run with TREELOD_BLESS=1 to create it)", path.display()));
+    let (width, height, golden) = treelod_format::image::decode_png(&bytes).expect("a PNG");
+    assert_eq!((width, height), (image.width, image.height), "{name}: size");
+    let (mut far_off, mut total, mut pixels) = (0usize, 0u64, 0usize);
+    for (a, b) in image.rgba.chunks_exact(4).zip(golden.chunks_exact(4)) {
+        if a[..3].iter().chain(&b[..3]).all(|&c| c >= 250) {
+            continue;
+        }
+        let d = (0..3).map(|i| a[i].abs_diff(b[i])).max().unwrap_or(0);
+        pixels += 1;
+        far_off += usize::from(d > 48);
+        total += u64::from(d);
+    }
+    assert!(pixels > 0, "{name}: nothing drawn in either image");
+    let mean = total as f64 / pixels as f64;
+    keep(image, &format!("golden-{name}"));
+    assert!(
+        far_off * 20 <= pixels && mean < 8.0,
+        "{name}: {far_off} of {pixels} covered pixels differ by more than 48, mean difference {mean:.2} (images kept under $TREELOD_TEST_IMAGES)"
+    );
+}
+
+#[test]
+fn the_demo_tree_matches_its_golden_images_at_three_distances() {
+    let gpu = gpu();
+    let container = std::sync::Arc::new(demo_container());
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    for distance in [15.0, 45.0, 120.0] {
+        let (image, _) =
+            render_image(&gpu, &mut renderer, &camera(&container, distance, 128), BACKGROUND).expect("renders");
+        check_golden(&image, &format!("demo-{distance}m"));
+    }
+}
