@@ -6,7 +6,10 @@
 
 mod build;
 mod dump;
+mod render;
 mod report;
+mod scatter;
+mod scene;
 mod table;
 mod verify;
 
@@ -20,9 +23,9 @@ Exit codes:
   0  success
   2  usage error (unknown subcommand or option, missing argument)
   3  invalid input: not a valid .treelod container, a glTF file that does not parse or holds
-     nothing drawable, a bad placement file
+     nothing drawable, a bad placement or scene file
   4  unsupported: a newer format version, a feature this build of treelod lacks (e.g. a glTF
-     compression extension)
+     compression extension), no Vulkan adapter for render
   5  I/O error: a file cannot be read or written (missing, a directory, no permission)
 With several files every file is processed and the exit code is that of the first failure.
 Errors go to stderr as `error: FILE: reason`, warnings as `warning: FILE: message`.";
@@ -51,6 +54,12 @@ enum Command {
     /// Fully check containers (format spec §9.2): checksums, records, orderings, exact cuts.
     #[command(after_help = EXIT_CODES)]
     Verify(verify::Args),
+    /// Write a scene file of N instances of containers scattered on the ground (deterministic).
+    #[command(after_help = EXIT_CODES)]
+    Scatter(scatter::Args),
+    /// Render a container or scene file offscreen to a PNG (Vulkan; lavapipe without a GPU).
+    #[command(after_help = EXIT_CODES)]
+    Render(render::Args),
 }
 
 fn main() -> ExitCode {
@@ -61,6 +70,8 @@ fn main() -> ExitCode {
         Command::Demo(args) => build::run_demo(args),
         Command::Dump(args) => dump::run(args),
         Command::Verify(args) => verify::run(args),
+        Command::Scatter(args) => scatter::run(args),
+        Command::Render(args) => render::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -66,7 +66,7 @@ fn reason(error: &Error) -> String {
 }
 
 /// Writes `error: MESSAGE` to stderr, ignoring a failure to do so.
-fn print_error(message: &str) {
+pub fn print_error(message: &str) {
     let _ = writeln!(io::stderr().lock(), "error: {message}");
 }
 
@@ -122,4 +122,14 @@ pub fn build_error(path: &Path, error: &treelod_build::BuildError) -> Failed {
         print_error(&format!("{shown}: {text}"));
     }
     Failed { class }
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename
+/// ([`treelod_format::write_atomically`]), reporting a failure as `error: FILE: reason`.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), Failed> {
+    if path.is_dir() {
+        message_error(path, "is a directory; name the file to write");
+        return Err(Failed { class: ErrorClass::Io });
+    }
+    treelod_format::write_atomically(path, bytes).map_err(|e| file_error(path, &e))
 }

@@ -719,3 +719,264 @@ fn build_writes_one_verified_container_per_input_and_reports_bad_gltf() {
     assert!(!batch.join("bad.treelod").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Scene files, `scatter` and `render`.
+
+/// A demo container (500 leaf quads) built once by the binary and shared by the tests below.
+fn shared_demo() -> &'static Path {
+    static DEMO: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DEMO.get_or_init(|| {
+        let dir = scratch("shared-demo");
+        let path = dir.join("demo.treelod");
+        let out = Command::new(env!("CARGO_BIN_EXE_treelod"))
+            .args(["demo", "--leaf-count", "500", "--no-verify", "-o"])
+            .arg(&path)
+            .output()
+            .expect("runs");
+        assert!(out.status.success(), "demo: {}", stderr(&out));
+        path
+    })
+}
+
+/// Runs the binary with `args` (paths as `OsStr`s) in the current directory.
+fn run_os<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).output().expect("the binary runs")
+}
+
+/// Decodes an 8-bit RGBA PNG: `(width, height, pixels)`.
+fn read_png(path: &Path) -> (u32, u32, Vec<[u8; 4]>) {
+    let file = std::io::BufReader::new(std::fs::File::open(path).expect("the PNG exists"));
+    let mut reader = png::Decoder::new(file).read_info().expect("a PNG");
+    let mut buffer = vec![0; reader.output_buffer_size().expect("fits in memory")];
+    let info = reader.next_frame(&mut buffer).expect("decodes");
+    assert_eq!((info.color_type, info.bit_depth), (png::ColorType::Rgba, png::BitDepth::Eight));
+    let pixels = buffer[..info.buffer_size()].chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
+    (info.width, info.height, pixels)
+}
+
+fn close_to(p: [u8; 4], rgb: [u8; 3]) -> bool {
+    (0..3).all(|i| p[i].abs_diff(rgb[i]) <= 1)
+}
+
+/// Renders `input` to `output` with `extra` options; asserts success and returns stdout.
+fn render_ok(input: &Path, output: &Path, extra: &[&str]) -> String {
+    let mut args: Vec<std::ffi::OsString> = vec!["render".into(), input.into(), "-o".into(), output.into()];
+    args.extend(extra.iter().map(Into::into));
+    let out = run_os(&args);
+    assert!(
+        out.status.success(),
+        "render {extra:?} failed (a Vulkan adapter is required: install mesa-vulkan-drivers): {}",
+        stderr(&out)
+    );
+    assert!(!stderr(&out).contains("panicked"), "{}", stderr(&out));
+    stdout(&out)
+}
+
+#[test]
+fn scatter_is_deterministic_and_writes_a_scene_the_loader_reads() {
+    let demo = shared_demo();
+    let dir = scratch("scatter");
+    std::fs::create_dir_all(dir.join("scenes")).expect("creates");
+    let write = |name: &str, seed: &str| {
+        let path = dir.join("scenes").join(name);
+        let out = run_os([
+            "scatter".as_ref(),
+            "-o".as_ref(),
+            path.as_os_str(),
+            "--count".as_ref(),
+            "12".as_ref(),
+            "--seed".as_ref(),
+            seed.as_ref(),
+            demo.as_os_str(),
+            demo.as_os_str(),
+        ]);
+        assert!(out.status.success(), "scatter: {}", stderr(&out));
+        assert!(stdout(&out).contains("12 instances of 2 model(s)"), "{}", stdout(&out));
+        (path.clone(), std::fs::read(&path).expect("written"))
+    };
+    let (first, bytes) = write("a.json", "5");
+    let (_, again) = write("b.json", "5");
+    let (_, other) = write("c.json", "6");
+    assert_eq!(bytes, again, "the same arguments give the same bytes");
+    assert_ne!(bytes, other, "another seed, another forest");
+
+    let json: serde_json::Value = serde_json::from_slice(&bytes).expect("valid JSON");
+    assert_eq!(json["version"], 1);
+    assert_eq!(json["models"], serde_json::json!(["../../shared-demo/demo.treelod", "../../shared-demo/demo.treelod"]));
+    let instances = json["instances"].as_array().expect("instances");
+    assert_eq!(instances.len(), 12);
+    // Default area: one tree per 25 m², a square of side 5·sqrt(12) ≈ 17.3 m around the origin.
+    for instance in instances {
+        let t = &instance["translation"];
+        assert_eq!(t[1], 0.0);
+        assert!(t[0].as_f64().expect("x").abs() <= 8.7 && t[2].as_f64().expect("z").abs() <= 8.7, "{t}");
+        let scale = instance["scale"].as_f64().expect("scale");
+        assert!((0.8..=1.2).contains(&scale), "{scale}");
+    }
+    // The loader reads it back: rendering the scene loads every instance.
+    let stdout = render_ok(&first, &dir.join("forest.png"), &["--size", "64x48"]);
+    assert!(stdout.contains("of 12 instance(s) visible"), "{stdout}");
+    assert!(
+        !std::fs::read_dir(dir.join("scenes"))
+            .expect("lists")
+            .any(|e| { e.expect("entry").file_name().to_string_lossy().ends_with(".tmp") }),
+        "no temporary file is left behind"
+    );
+
+    // A model that is not a container is refused before anything is written.
+    let bad = dir.join("bad.treelod");
+    std::fs::write(&bad, b"nope").expect("writes");
+    let out = run_os([
+        "scatter".as_ref(),
+        "-o".as_ref(),
+        dir.join("x.json").as_os_str(),
+        "--count".as_ref(),
+        "3".as_ref(),
+        bad.as_os_str(),
+    ]);
+    assert_fails(&out, 3, &bad);
+    assert!(!dir.join("x.json").exists());
+}
+
+#[test]
+fn bad_scene_files_fail_with_a_message_naming_the_file() {
+    let demo = shared_demo();
+    let dir = scratch("bad-scenes");
+    std::fs::copy(demo, dir.join("demo.treelod")).expect("copies");
+    let cases: [(&str, &str, i32, &str); 6] = [
+        ("syntax.json", "{\"version\": 1,\n \"models\": [\"demo.treelod\",]\n}", 3, "line 2, column"),
+        (
+            "index.json",
+            r#"{"version": 1, "models": ["demo.treelod"], "instances": [{"model": 1, "translation": [0,0,0]}]}"#,
+            3,
+            "instance 0: model 1 is out of range",
+        ),
+        ("missing.json", r#"{"version": 1, "models": ["nowhere.treelod"], "instances": []}"#, 5, "model 0: "),
+        (
+            "scale.json",
+            r#"{"version": 1, "models": ["demo.treelod"], "instances": [{"model": 0, "translation": [0,0,0], "scale": 0}]}"#,
+            3,
+            "`scale` must be positive",
+        ),
+        (
+            "unknown.json",
+            r#"{"version": 1, "models": ["demo.treelod"], "instances": [], "camera": 1}"#,
+            3,
+            "unknown field `camera`",
+        ),
+        ("future.json", r#"{"version": 2, "models": ["demo.treelod"], "instances": []}"#, 4, "unknown scene version 2"),
+    ];
+    for (name, text, code, reason) in cases {
+        let scene = dir.join(name);
+        std::fs::write(&scene, text).expect("writes");
+        let png = dir.join(format!("{name}.png"));
+        let out = run_os([
+            "render".as_ref(),
+            scene.as_os_str(),
+            "-o".as_ref(),
+            png.as_os_str(),
+            "--size".as_ref(),
+            "32x32".as_ref(),
+        ]);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(code), "{name}: {err}");
+        assert!(err.contains(&format!("error: {}: ", scene.display())), "{name}: the message names the file: {err}");
+        assert!(err.contains(reason), "{name}: {err}");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+        assert!(stdout(&out).is_empty());
+        assert!(!png.exists(), "{name}: nothing written");
+    }
+    // A missing scene file or container is an I/O error naming it.
+    for missing in [dir.join("absent.json"), dir.join("absent.treelod")] {
+        let out = run_os(["render".as_ref(), missing.as_os_str(), "-o".as_ref(), dir.join("x.png").as_os_str()]);
+        assert_fails(&out, 5, &missing);
+    }
+    // A scene whose model is not a container names the model.
+    let garbage = dir.join("garbage.treelod");
+    std::fs::write(&garbage, b"not a container at all").expect("writes");
+    let scene = dir.join("garbage.json");
+    std::fs::write(&scene, r#"{"version": 1, "models": ["garbage.treelod"], "instances": []}"#).expect("writes");
+    let out = run_os([
+        "render".as_ref(),
+        scene.as_os_str(),
+        "-o".as_ref(),
+        dir.join("x.png").as_os_str(),
+        "--size".as_ref(),
+        "32x32".as_ref(),
+    ]);
+    // Mesa's lavapipe may print its own lines once the device is open; ours is the last line.
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    let last = err.lines().last().unwrap_or_default();
+    assert!(last.starts_with(&format!("error: {}: not a .treelod file", garbage.display())), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn render_writes_a_png_of_the_requested_size_showing_the_tree() {
+    let demo = shared_demo();
+    let dir = scratch("render");
+    let png = dir.join("tree.png");
+    let stdout = render_ok(demo, &png, &["--size", "256x192", "--background", "336699"]);
+    assert!(stdout.starts_with(&format!("{}: 256x192, 1 of 1 instance(s) visible, ", png.display())), "{stdout}");
+    let (width, height, pixels) = read_png(&png);
+    assert_eq!((width, height), (256, 192));
+    assert!(pixels.iter().all(|p| p[3] == 255), "opaque");
+    assert!(close_to(pixels[0], [0x33, 0x66, 0x99]), "the corner is background: {:?}", pixels[0]);
+    let drawn = pixels.iter().filter(|p| !close_to(**p, [0x33, 0x66, 0x99])).count();
+    assert!(drawn > 500, "the tree covers pixels: {drawn}");
+    // The tree is framed: nothing drawn on the image border.
+    let border = |i: usize| {
+        let (x, y) = (i % width as usize, i / width as usize);
+        x == 0 || y == 0 || x + 1 == width as usize || y + 1 == height as usize
+    };
+    assert!(pixels.iter().enumerate().all(|(i, p)| !border(i) || close_to(*p, [0x33, 0x66, 0x99])), "framed");
+
+    // An explicit camera looking away from the tree sees only background.
+    let away = dir.join("away.png");
+    let stdout = render_ok(demo, &away, &["--size", "64x48", "--eye", "0,2,-10", "--target", "0,2,-20"]);
+    assert!(stdout.contains("0 of 1 instance(s) visible, 0 triangles, 0 points"), "{stdout}");
+    let (_, _, pixels) = read_png(&away);
+    assert!(pixels.iter().all(|p| close_to(*p, [255, 255, 255])), "white background by default");
+}
+
+#[test]
+fn render_compare_writes_lod_and_full_mesh_side_by_side() {
+    let demo = shared_demo();
+    let dir = scratch("render-compare");
+    let png = dir.join("compare.png");
+    let stdout = render_ok(demo, &png, &["--size", "128x96", "--compare"]);
+    assert!(stdout.contains("; full mesh ") && stdout.contains("LoD/full "), "{stdout}");
+    let (width, height, pixels) = read_png(&png);
+    assert_eq!((width, height), (256, 96));
+    let drawn = |from: usize, to: usize| {
+        pixels.chunks_exact(256).flat_map(|row| &row[from..to]).filter(|p| !close_to(**p, [255, 255, 255])).count()
+    };
+    assert!(drawn(0, 128) > 100 && drawn(128, 256) > 100, "both halves show the tree");
+}
+
+#[test]
+fn render_debug_kinds_colours_triangles_red_and_points_blue() {
+    let demo = shared_demo();
+    let dir = scratch("render-debug");
+    let png = dir.join("kinds.png");
+    // Thresholds low enough that both triangles and points are drawn at this size.
+    let stdout = render_ok(demo, &png, &["--size", "128x96", "--debug", "kinds", "--s-min", "0.5", "--s-max", "1"]);
+    assert!(!stdout.contains(" 0 triangles") && !stdout.contains(" 0 points"), "{stdout}");
+    let (width, height, pixels) = read_png(&png);
+    assert_eq!((width, height), (128, 96));
+    // Triangles are drawn (0.9, 0.3, 0.2) and points (0.2, 0.5, 0.95), linear: in sRGB about
+    // (243, 149, 124) and (124, 188, 250).
+    let rgb = |p: &[u8; 4]| (i32::from(p[0]), i32::from(p[1]), i32::from(p[2]));
+    let red = pixels.iter().map(rgb).filter(|&(r, g, b)| r > 200 && r > g + 60 && r > b + 60).count();
+    let blue = pixels.iter().map(rgb).filter(|&(r, g, b)| b > 200 && b > r + 60 && b > g + 30).count();
+    assert!(red > 0 && blue > 0, "red triangles {red}, blue points {blue}");
+    let cells = dir.join("cells.png");
+    render_ok(demo, &cells, &["--size", "64x48", "--debug", "cells"]);
+    assert_eq!(read_png(&cells).0, 64);
+}

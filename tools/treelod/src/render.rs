@@ -1,0 +1,309 @@
+//! `treelod render`: draws a container or a scene file offscreen (wgpu on Vulkan; Mesa lavapipe on
+//! machines without a GPU) and writes a PNG, optionally beside the full mesh for comparison.
+
+use std::path::PathBuf;
+
+use glam::Vec3;
+use treelod_format::ErrorClass;
+use treelod_render::offscreen::{Gpu, Image, render_image};
+use treelod_render::{Camera, DebugView, FrameStats, Renderer, Settings};
+
+use crate::report::{self, Failed};
+use crate::scene;
+
+/// The direction from the target towards the eye when the camera frames the scene: in front
+/// (+z), to the right and a little above.
+const FRAMING_DIRECTION: Vec3 = Vec3::new(0.6, 0.45, 1.0);
+
+/// Frames at most prepared before the image while streaming catches up with the selection.
+const MAX_STREAMING_FRAMES: u32 = 1000;
+
+/// Arguments of `treelod render`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A `.treelod` container (drawn once at the origin) or a JSON scene file.
+    #[arg(value_name = "FILE|SCENE")]
+    pub input: PathBuf,
+    /// Where to write the PNG.
+    #[arg(short, long, value_name = "PATH")]
+    pub output: PathBuf,
+    /// Image size in pixels, `WIDTHxHEIGHT`.
+    #[arg(long, value_name = "WxH", default_value = "1024x768", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Eye position `x,y,z` (metres); default: framing the whole scene from the front right.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub eye: Option<Vec3>,
+    /// Point looked at, `x,y,z` (metres); default: the centre of the scene's bounds.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub target: Option<Vec3>,
+    /// Vertical field of view in degrees.
+    #[arg(long, value_name = "DEGREES", default_value_t = 50.0, value_parser = parse_fov)]
+    pub fov: f32,
+    /// Write the level of detail (left) beside the full mesh (right), twice as wide.
+    #[arg(long)]
+    pub compare: bool,
+    /// Colour by grid cell (`cells`) or by kind (`kinds`: triangles red, points blue).
+    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds"])]
+    pub debug: Option<String>,
+    /// Point threshold `s_min` in pixels (Gilet 2005): points are drawn down to this size.
+    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    pub s_min: Option<f32>,
+    /// Triangle threshold `s_max` in pixels: triangles larger than this are drawn as triangles.
+    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    pub s_max: Option<f32>,
+    /// Background colour, `RRGGBB` (sRGB hex, an optional leading `#`).
+    #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
+    pub background: [u8; 3],
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let err = || format!("expected WIDTHxHEIGHT, each 1..=16384 pixels (e.g. 1024x768), got {s:?}");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(err)?;
+    let n = |v: &str| v.trim().parse::<u32>().ok().filter(|n| (1..=16384).contains(n)).ok_or_else(err);
+    Ok((n(w)?, n(h)?))
+}
+
+fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let values: Vec<Option<f32>> =
+        s.split(',').map(|v| v.trim().parse::<f32>().ok().filter(|v| v.is_finite())).collect();
+    match values.as_slice() {
+        [Some(x), Some(y), Some(z)] => Ok(Vec3::new(*x, *y, *z)),
+        _ => Err(format!("expected X,Y,Z (three finite numbers), got {s:?}")),
+    }
+}
+
+fn parse_fov(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (1.0..=170.0).contains(&v) => Ok(v),
+        _ => Err(format!("expected a field of view in degrees, 1..=170, got {s:?}")),
+    }
+}
+
+fn parse_pixels(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("expected a size in pixels, a number ≥ 0, got {s:?}")),
+    }
+}
+
+fn parse_colour(s: &str) -> Result<[u8; 3], String> {
+    let hex = s.trim().trim_start_matches('#');
+    let err = || format!("expected a colour RRGGBB in hex (e.g. ffffff), got {s:?}");
+    if hex.len() != 6 || !hex.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return Err(err());
+    }
+    let byte = |i: usize| u8::from_str_radix(&hex[i..i + 2], 16).map_err(|_| err());
+    Ok([byte(0)?, byte(2)?, byte(4)?])
+}
+
+/// Runs `treelod render`.
+pub fn run(args: &Args) -> Result<(), Failed> {
+    if let (Some(eye), Some(target)) = (args.eye, args.target)
+        && eye.distance_squared(target) < 1e-12
+    {
+        clap::Error::raw(clap::error::ErrorKind::ValueValidation, "--eye and --target are the same point\n").exit();
+    }
+    let scene = scene::load(&args.input).map_err(|e| scene_failed(&e))?;
+    let gpu = Gpu::new().map_err(|e| {
+        report::message_error(&args.output, &format!("cannot render: {e}"));
+        Failed { class: ErrorClass::Unsupported }
+    })?;
+    let (width, height) = args.size;
+    let limit = gpu.device.limits().max_texture_dimension_2d;
+    if width > limit || height > limit {
+        report::message_error(
+            &args.output,
+            &format!("{width}x{height} is larger than the device draws ({limit} pixels per side at most)"),
+        );
+        return Err(Failed { class: ErrorClass::Unsupported });
+    }
+    let mut settings = Settings::default();
+    if let Some(s_min) = args.s_min {
+        settings.s_min = s_min;
+    }
+    if let Some(s_max) = args.s_max {
+        settings.s_max = s_max;
+    }
+    settings.debug = match args.debug.as_deref() {
+        Some("cells") => DebugView::Cells,
+        Some("kinds") => DebugView::Kinds,
+        _ => DebugView::Shaded,
+    };
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let bounds =
+        scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
+    let camera = frame_camera(bounds, args.eye, args.target, args.fov.to_radians(), width, height);
+    let background = clear_colour(args.background);
+    let render = |renderer: &mut Renderer| -> Result<(Image, FrameStats), Failed> {
+        settle_streaming(&gpu, renderer, &camera);
+        render_image(&gpu, renderer, &camera, background).map_err(|e| {
+            report::message_error(&args.output, &format!("cannot render: {e}"));
+            Failed { class: ErrorClass::Io }
+        })
+    };
+    let (lod, stats) = render(&mut renderer)?;
+    let mut line = format!(
+        "{}: {width}x{height}, {} of {} instance(s) visible, {} triangles, {} points",
+        args.output.display(),
+        stats.instances_visible,
+        scene.instances.len(),
+        stats.triangles,
+        stats.points
+    );
+    let image = if args.compare {
+        renderer.settings_mut().full_mesh = true;
+        let (full, full_stats) = render(&mut renderer)?;
+        let ratio = (stats.triangles + stats.points) as f64 / full_stats.triangles.max(1) as f64;
+        line.push_str(&format!(
+            "; full mesh {} triangles; LoD/full {ratio:.3} (left LoD, right full mesh)",
+            full_stats.triangles
+        ));
+        side_by_side(&lod, &full)
+    } else {
+        lod
+    };
+    line.push('\n');
+    let png = encode_png(&image).map_err(|e| {
+        report::message_error(&args.output, &format!("cannot encode the PNG: {e}"));
+        Failed { class: ErrorClass::Io }
+    })?;
+    report::write_atomically(&args.output, &png)?;
+    report::write_stdout(&line)
+}
+
+/// Prints a scene error (its message starts with the file) and returns its class.
+pub fn scene_failed(error: &scene::SceneError) -> Failed {
+    report::print_error(&error.to_string());
+    Failed { class: error.class() }
+}
+
+/// Prepares frames until every draw's prefix is resident (the renderer streams triangles and
+/// points within a per-frame upload budget), so the image shows the selection rather than the
+/// coarser stand-ins of a first frame.
+fn settle_streaming(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) {
+    for _ in 0..MAX_STREAMING_FRAMES {
+        let stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
+        gpu.queue.submit([]);
+        if stats.ranges_clamped == 0 || stats.bytes_uploaded == 0 {
+            break;
+        }
+    }
+}
+
+/// The camera: `eye` and `target` as given; a missing target is the centre of `bounds`; a missing
+/// eye stands back from the target along [`FRAMING_DIRECTION`] far enough that the sphere around
+/// `bounds` (centred on the target) fits the field of view.
+fn frame_camera(
+    bounds: (Vec3, Vec3),
+    eye: Option<Vec3>,
+    target: Option<Vec3>,
+    fovy: f32,
+    width: u32,
+    height: u32,
+) -> Camera {
+    let (lo, hi) = bounds;
+    let target = target.unwrap_or(0.5 * (lo + hi));
+    let eye = eye.unwrap_or_else(|| {
+        // The farthest corner of the bounds from the target.
+        let radius = (target - lo).abs().max((hi - target).abs()).length().max(0.1);
+        let aspect = width.max(1) as f32 / height.max(1) as f32;
+        let half_x = ((0.5 * fovy).tan() * aspect).atan();
+        let half = (0.5 * fovy).min(half_x);
+        let distance = 1.05 * radius / half.sin();
+        target + FRAMING_DIRECTION.normalize() * distance
+    });
+    Camera::look_at(eye, target, fovy, width, height)
+}
+
+/// The clear colour whose sRGB encoding is `rgb` (the target is sRGB, the clear value linear).
+fn clear_colour(rgb: [u8; 3]) -> wgpu::Color {
+    let linear = |c: u8| {
+        let c = f64::from(c) / 255.0;
+        if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+    };
+    wgpu::Color { r: linear(rgb[0]), g: linear(rgb[1]), b: linear(rgb[2]), a: 1.0 }
+}
+
+/// `left` and `right` (the same size) side by side.
+fn side_by_side(left: &Image, right: &Image) -> Image {
+    let (width, height) = (left.width + right.width, left.height.max(right.height));
+    let mut rgba = Vec::with_capacity(width as usize * height as usize * 4);
+    for y in 0..height as usize {
+        for image in [left, right] {
+            let row = image.width as usize * 4;
+            match image.rgba.get(y * row..(y + 1) * row) {
+                Some(pixels) => rgba.extend_from_slice(pixels),
+                None => rgba.extend(std::iter::repeat_n(0, row)),
+            }
+        }
+    }
+    Image { width, height, rgba }
+}
+
+/// The image as an 8-bit RGBA PNG tagged sRGB.
+fn encode_png(image: &Image) -> Result<Vec<u8>, png::EncodingError> {
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut bytes, image.width, image.height);
+        encoder.set_color(png::ColorType::Rgba);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+        let mut writer = encoder.write_header()?;
+        writer.write_image_data(&image.rgba)?;
+        writer.finish()?;
+    }
+    Ok(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_parse_and_refuse_nonsense() {
+        assert_eq!(parse_size("256x192"), Ok((256, 192)));
+        assert_eq!(parse_size("8X8"), Ok((8, 8)));
+        for bad in ["0x10", "10", "10x", "x10", "-1x5", "99999x1"] {
+            assert!(parse_size(bad).is_err(), "{bad}");
+        }
+        assert_eq!(parse_vec3("1,-2.5, 3"), Ok(Vec3::new(1.0, -2.5, 3.0)));
+        assert!(parse_vec3("1,2").is_err() && parse_vec3("1,2,nan").is_err() && parse_vec3("1,2,3,4").is_err());
+        assert_eq!(parse_colour("#ff8000"), Ok([255, 128, 0]));
+        assert!(parse_colour("fff").is_err() && parse_colour("gggggg").is_err() && parse_colour("ffé00").is_err());
+        assert!(parse_fov("0").is_err() && parse_fov("180").is_err() && parse_fov("50").is_ok());
+        assert!(parse_pixels("-1").is_err() && parse_pixels("inf").is_err() && parse_pixels("0.5").is_ok());
+    }
+
+    #[test]
+    fn the_framing_camera_sees_every_corner() {
+        let bounds = (Vec3::new(-10.0, 0.0, -4.0), Vec3::new(30.0, 12.0, 6.0));
+        for (w, h) in [(1024, 768), (200, 800)] {
+            let camera = frame_camera(bounds, None, None, 50f32.to_radians(), w, h);
+            for corner in 0..8 {
+                let p = Vec3::select(
+                    glam::BVec3::new(corner & 1 == 0, corner & 2 == 0, corner & 4 == 0),
+                    bounds.0,
+                    bounds.1,
+                );
+                let clip = camera.view_proj() * p.extend(1.0);
+                let ndc = clip.truncate() / clip.w;
+                assert!(clip.w > 0.0 && ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0, "{w}x{h}: corner {p} at {ndc}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_background_comes_out_as_given() {
+        let c = clear_colour([255, 128, 0]);
+        assert!((c.r - 1.0).abs() < 1e-9 && c.b == 0.0 && (c.g - 0.2158605).abs() < 1e-4, "{c:?}");
+    }
+
+    #[test]
+    fn side_by_side_doubles_the_width() {
+        let a = Image { width: 2, height: 1, rgba: vec![1; 8] };
+        let b = Image { width: 2, height: 1, rgba: vec![2; 8] };
+        let both = side_by_side(&a, &b);
+        assert_eq!((both.width, both.height), (4, 1));
+        assert_eq!(both.rgba, [1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 2]);
+    }
+}
