@@ -67,15 +67,14 @@ fn covered(image: &Image) -> Vec<bool> {
 }
 
 fn main() {
-    let count: usize =
-        std::env::var("TREELOD_BENCH_INSTANCES").ok().and_then(|v| v.parse().ok()).unwrap_or(1000);
+    let count: usize = std::env::var("TREELOD_BENCH_INSTANCES").ok().and_then(|v| v.parse().ok()).unwrap_or(1000);
     let half = 0.5 * (count as f32 * 400.0).sqrt();
     let gpu = Gpu::new().expect("a Vulkan adapter (lavapipe: mesa-vulkan-drivers)");
     let scene = demo_tree(&DemoTreeConfig::default());
-    let built = build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "bench")
-        .expect("the demo tree builds");
-    let container =
-        Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens");
+    let built =
+        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "bench")
+            .expect("the demo tree builds");
+    let container = Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens");
     let full_triangles = container.triangles().len();
     let mut rng = Rng(2005);
     let mut lod = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
