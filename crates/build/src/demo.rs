@@ -6,6 +6,7 @@
 
 use glam::{Quat, Vec3};
 
+use crate::rng::SplitMix64;
 use crate::scene::{AlphaMode, Image, ImageEncoding, Material, Part, Scene, SourceInfo};
 
 /// Settings of [`demo_tree`].
@@ -29,26 +30,6 @@ impl Default for DemoTreeConfig {
     }
 }
 
-/// splitmix64: small, fast, identical everywhere.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[0, 1)`.
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-}
-
 /// One branch: a straight-ish tube from `start` along `dir`.
 struct Branch {
     start: Vec3,
@@ -61,7 +42,7 @@ struct Branch {
 /// Builds the demo tree (see the module documentation).
 #[must_use]
 pub fn demo_tree(config: &DemoTreeConfig) -> Scene {
-    let mut rng = Rng(config.seed);
+    let mut rng = SplitMix64(config.seed);
     let sides = config.sides.clamp(3, 32);
     let mut bark = Part { mesh_name: "bark".into(), node_name: "demo-tree".into(), material: 1, ..Part::default() };
     let mut tips: Vec<(Vec3, Vec3, f32)> = Vec::new(); // (point, direction, branch length) for leaves
@@ -116,7 +97,7 @@ pub fn demo_tree(config: &DemoTreeConfig) -> Scene {
     let mut leaves = Part { mesh_name: "leaves".into(), node_name: "demo-tree".into(), material: 0, ..Part::default() };
     if !tips.is_empty() {
         for _ in 0..config.leaves {
-            let (q, dir, len) = tips[(rng.next() % tips.len() as u64) as usize];
+            let (q, dir, len) = tips[(rng.next_u64() % tips.len() as u64) as usize];
             let center = q
                 + Vec3::new(rng.range(-1.0, 1.0), rng.range(-0.6, 0.8), rng.range(-1.0, 1.0)) * 0.35 * len
                 + dir * 0.1 * len;

@@ -11,6 +11,7 @@ pub mod demo;
 mod error;
 pub mod gilet;
 pub mod import;
+pub mod rng;
 pub mod scene;
 pub mod spt;
 pub mod texture;
@@ -19,4 +20,5 @@ pub use assemble::{BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, buil
 pub use demo::{DemoTreeConfig, demo_tree};
 pub use error::BuildError;
 pub use import::{import_gltf, import_gltf_bytes, scene_name};
+pub use rng::SplitMix64;
 pub use spt::{FlattenError, Spt, SptNode, flatten};

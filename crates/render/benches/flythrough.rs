@@ -13,7 +13,7 @@
 use std::time::Instant;
 
 use glam::{Mat4, Quat, Vec3};
-use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
+use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, Instance, Renderer, Settings};
@@ -22,22 +22,6 @@ const WIDTH: u32 = 480;
 const HEIGHT: u32 = 270;
 const FOVY: f32 = 1.0;
 const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
-
-/// splitmix64: the same forest on every machine.
-struct Rng(u64);
-
-impl Rng {
-    fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-}
 
 fn poses(half: f32) -> Vec<(&'static str, Camera)> {
     let mut poses = Vec::new();
@@ -76,7 +60,7 @@ fn main() {
             .expect("the demo tree builds");
     let container = Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens");
     let full_triangles = container.triangles().len();
-    let mut rng = Rng(2005);
+    let mut rng = SplitMix64(2005);
     let mut lod = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
     let mut full = Renderer::new(&gpu.device, Gpu::formats(), Settings { full_mesh: true, ..Settings::default() });
     let container = std::sync::Arc::new(container);

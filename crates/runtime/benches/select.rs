@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::{Mat4, Quat, Vec3};
-use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
+use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container};
 use treelod_runtime::{Camera, DrawList, FrameStats, Instance, LodSettings, ModelLod, select_frame};
 
@@ -19,22 +19,6 @@ const HALF_SIDE: f32 = 1000.0;
 const WIDTH: u32 = 1920;
 const HEIGHT: u32 = 1080;
 const FOVY: f32 = 1.0;
-
-/// splitmix64: the same forest on every machine.
-struct Rng(u64);
-
-impl Rng {
-    fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
-}
 
 fn demo_model() -> ModelLod {
     let scene = demo_tree(&DemoTreeConfig::default());
@@ -46,7 +30,7 @@ fn demo_model() -> ModelLod {
 }
 
 fn forest() -> Vec<Instance> {
-    let mut rng = Rng(2005);
+    let mut rng = SplitMix64(2005);
     (0..INSTANCES)
         .map(|_| {
             let position = Vec3::new(rng.range(-HALF_SIDE, HALF_SIDE), 0.0, rng.range(-HALF_SIDE, HALF_SIDE));

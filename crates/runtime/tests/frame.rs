@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use glam::{Mat4, Quat, Vec3};
-use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
+use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{BlockRecord, CellRecord, Compression, Container, PointRecord, Range, TriangleRecord};
 use treelod_runtime::{
     Camera, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings, ModelError, ModelLod, ROOTS_CELL,
@@ -21,22 +21,6 @@ fn demo_container() -> Container {
         build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "test")
             .expect("the demo tree builds");
     Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens")
-}
-
-/// splitmix64, for deterministic random cameras.
-struct Rng(u64);
-
-impl Rng {
-    fn unit(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.unit()
-    }
 }
 
 fn block_centre(c: &Container) -> Vec3 {
@@ -183,7 +167,7 @@ fn every_drawn_cell_is_an_exact_cut_for_random_cameras() {
     let models = [ModelLod::from_container(&c)];
     let instances = three_instances();
     let centre = block_centre(&c);
-    let mut rng = Rng(7);
+    let mut rng = SplitMix64(7);
     let mut list = DrawList::new();
     let mut drawn_cells = 0;
     let mut triangles_seen = false;
