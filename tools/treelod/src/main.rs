@@ -12,6 +12,7 @@ mod scatter;
 mod scene;
 mod table;
 mod verify;
+mod view;
 
 use std::process::ExitCode;
 
@@ -25,7 +26,7 @@ Exit codes:
   3  invalid input: not a valid .treelod container, a glTF file that does not parse or holds
      nothing drawable, a bad placement or scene file
   4  unsupported: a newer format version, a feature this build of treelod lacks (e.g. a glTF
-     compression extension), no Vulkan adapter for render
+     compression extension), no Vulkan adapter for render or view, no display for view
   5  I/O error: a file cannot be read or written (missing, a directory, no permission)
 With several files every file is processed and the exit code is that of the first failure.
 Errors go to stderr as `error: FILE: reason`, warnings as `warning: FILE: message`.";
@@ -60,6 +61,14 @@ enum Command {
     /// Render a container or scene file offscreen to a PNG (Vulkan; lavapipe without a GPU).
     #[command(after_help = EXIT_CODES)]
     Render(render::Args),
+    /// Open a window with a fly camera over a container or scene file (X11, Vulkan).
+    ///
+    /// Drag with the left mouse button to look; W A S D move, E and Q rise and sink, Shift is
+    /// faster. `[` `]` halve and double s_min, `-` `=` s_max, K and J raise and lower the depth
+    /// bias k, F toggles the full mesh, 1 2 3 show shaded, cells, kinds; Esc quits. The title shows
+    /// fps, visible instances, triangles, points and the thresholds.
+    #[command(after_help = EXIT_CODES)]
+    View(view::Args),
 }
 
 fn main() -> ExitCode {
@@ -72,6 +81,7 @@ fn main() -> ExitCode {
         Command::Verify(args) => verify::run(args),
         Command::Scatter(args) => scatter::run(args),
         Command::Render(args) => render::run(args),
+        Command::View(args) => view::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

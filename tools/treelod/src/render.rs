@@ -56,14 +56,14 @@ pub struct Args {
     pub background: [u8; 3],
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let err = || format!("expected WIDTHxHEIGHT, each 1..=16384 pixels (e.g. 1024x768), got {s:?}");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(err)?;
     let n = |v: &str| v.trim().parse::<u32>().ok().filter(|n| (1..=16384).contains(n)).ok_or_else(err);
     Ok((n(w)?, n(h)?))
 }
 
-fn parse_vec3(s: &str) -> Result<Vec3, String> {
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     let values: Vec<Option<f32>> =
         s.split(',').map(|v| v.trim().parse::<f32>().ok().filter(|v| v.is_finite())).collect();
     match values.as_slice() {
@@ -193,7 +193,7 @@ fn settle_streaming(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) {
 /// The camera: `eye` and `target` as given; a missing target is the centre of `bounds`; a missing
 /// eye stands back from the target along [`FRAMING_DIRECTION`] far enough that the sphere around
 /// `bounds` (centred on the target) fits the field of view.
-fn frame_camera(
+pub fn frame_camera(
     bounds: (Vec3, Vec3),
     eye: Option<Vec3>,
     target: Option<Vec3>,
@@ -241,7 +241,7 @@ fn side_by_side(left: &Image, right: &Image) -> Image {
 }
 
 /// The image as an 8-bit RGBA PNG tagged sRGB.
-fn encode_png(image: &Image) -> Result<Vec<u8>, png::EncodingError> {
+pub fn encode_png(image: &Image) -> Result<Vec<u8>, png::EncodingError> {
     let mut bytes = Vec::new();
     {
         let mut encoder = png::Encoder::new(&mut bytes, image.width, image.height);

@@ -980,3 +980,59 @@ fn render_debug_kinds_colours_triangles_red_and_points_blue() {
     render_ok(demo, &cells, &["--size", "64x48", "--debug", "cells"]);
     assert_eq!(read_png(&cells).0, 64);
 }
+
+// ---------------------------------------------------------------------------------------------
+// `view`: a window, under Xvfb (xvfb-run and xauth are required: .ci/run installs them).
+
+#[test]
+fn view_screenshot_under_xvfb_is_window_sized_and_shows_the_tree() {
+    let demo = shared_demo();
+    let dir = scratch("view");
+    let png = dir.join("view.png");
+    let out = Command::new("xvfb-run")
+        .args(["-a", env!("CARGO_BIN_EXE_treelod"), "view"])
+        .arg(demo)
+        .arg("--screenshot")
+        .arg(&png)
+        .args(["--frames", "3", "--size", "160x120"])
+        .output()
+        .expect("xvfb-run runs (install xvfb and xauth, as .ci/run does)");
+    let err = stderr(&out);
+    assert!(out.status.success(), "view failed (needs Xvfb and a Vulkan adapter, e.g. mesa-vulkan-drivers): {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let stdout = stdout(&out);
+    assert!(stdout.starts_with(&format!("{}: 160x120, 1 of 1 instance(s) visible, ", png.display())), "{stdout}");
+    let (width, height, pixels) = read_png(&png);
+    assert_eq!((width, height), (160, 120));
+    assert!(pixels.iter().all(|p| p[3] == 255), "opaque");
+    assert!(close_to(pixels[0], [255, 255, 255]), "the corner is the white background: {:?}", pixels[0]);
+    let drawn = pixels.iter().filter(|p| !close_to(**p, [255, 255, 255])).count();
+    assert!(drawn > 100, "the tree covers pixels: {drawn}");
+}
+
+#[test]
+fn view_fails_with_a_message_without_a_display_or_with_a_bad_file() {
+    let dir = scratch("view-errors");
+    let no_display = |args: &[&std::ffi::OsStr]| {
+        Command::new(env!("CARGO_BIN_EXE_treelod"))
+            .arg("view")
+            .args(args)
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .output()
+            .expect("the binary runs")
+    };
+    let demo = shared_demo();
+    let out = no_display(&[demo.as_os_str()]);
+    assert_fails(&out, 4, demo);
+    assert!(stderr(&out).contains("cannot open a window") && stderr(&out).contains("DISPLAY"), "{}", stderr(&out));
+
+    // A bad file is reported as such before any window is needed.
+    let garbage = dir.join("garbage.treelod");
+    std::fs::write(&garbage, b"not a container").expect("writes");
+    assert_fails(&no_display(&[garbage.as_os_str()]), 3, &garbage);
+    let missing = dir.join("missing.treelod");
+    assert_fails(&no_display(&[missing.as_os_str()]), 5, &missing);
+    // --frames only goes with --screenshot.
+    assert_eq!(no_display(&[demo.as_os_str(), "--frames".as_ref(), "3".as_ref()]).status.code(), Some(2));
+}
