@@ -723,11 +723,13 @@ fn build_writes_one_verified_container_per_input_and_reports_bad_gltf() {
 // ---------------------------------------------------------------------------------------------
 // Scene files, `scatter` and `render`.
 
-/// A demo container (500 leaf quads) built once by the binary and shared by the tests below.
+/// A demo container (500 leaf quads) built once per test process by the binary and shared by the
+/// tests below. The directory is per process: nextest runs every test in its own process, and a
+/// shared one would be removed by one test while another reads it.
 fn shared_demo() -> &'static Path {
     static DEMO: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     DEMO.get_or_init(|| {
-        let dir = scratch("shared-demo");
+        let dir = scratch(&format!("shared-demo-{}", std::process::id()));
         let path = dir.join("demo.treelod");
         let out = Command::new(env!("CARGO_BIN_EXE_treelod"))
             .args(["demo", "--leaf-count", "500", "--no-verify", "-o"])
