@@ -41,7 +41,8 @@ pub struct Gpu {
 
 impl Gpu {
     /// Opens the first adapter the environment allows (`WGPU_BACKEND` may restrict it) with the
-    /// features [`Renderer::required_features`] names.
+    /// features [`Renderer::required_features`] names, and timestamp queries where the adapter
+    /// offers them (for [`render_image_timed`]).
     ///
     /// # Errors
     /// [`GpuError`] if there is no adapter or it lacks the features.
@@ -59,9 +60,10 @@ impl Gpu {
         if !missing.is_empty() {
             return Err(GpuError::MissingFeatures { adapter: info.name, missing });
         }
+        let timestamps = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("treelod offscreen"),
-            required_features: Renderer::required_features(),
+            required_features: Renderer::required_features() | timestamps,
             required_limits: adapter.limits(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -109,6 +111,21 @@ pub fn render_image(
     camera: &Camera,
     background: wgpu::Color,
 ) -> Result<(Image, crate::FrameStats), GpuError> {
+    render_image_timed(gpu, renderer, camera, background).map(|(image, stats, _)| (image, stats))
+}
+
+/// [`render_image`], and the GPU time of the render pass in milliseconds, from timestamp queries
+/// written at its beginning and end — `None` when the device has no timestamp queries
+/// ([`Gpu::new`] asks for them where the adapter offers them).
+///
+/// # Errors
+/// [`GpuError::Readback`] if mapping a read-back buffer fails.
+pub fn render_image_timed(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    camera: &Camera,
+    background: wgpu::Color,
+) -> Result<(Image, crate::FrameStats, Option<f64>), GpuError> {
     let (width, height) = (camera.width.max(1), camera.height.max(1));
     let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
     let target = |format, usage| {
@@ -130,6 +147,7 @@ pub fn render_image(
     let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
     let mut encoder =
         gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod frame") });
+    let timer = gpu.device.features().contains(wgpu::Features::TIMESTAMP_QUERY).then(|| PassTimer::new(&gpu.device));
     {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("treelod offscreen"),
@@ -144,9 +162,13 @@ pub fn render_image(
                 depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
                 stencil_ops: None,
             }),
+            timestamp_writes: timer.as_ref().map(PassTimer::writes),
             ..wgpu::RenderPassDescriptor::default()
         });
         renderer.render(&mut pass);
+    }
+    if let Some(timer) = &timer {
+        timer.resolve(&mut encoder);
     }
     let row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
     let readback = gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -175,5 +197,66 @@ pub fn render_image(
     }
     drop(mapped);
     readback.unmap();
-    Ok((Image { width, height, rgba }, stats))
+    let gpu_ms = match &timer {
+        Some(timer) => timer.read(gpu)?,
+        None => None,
+    };
+    Ok((Image { width, height, rgba }, stats, gpu_ms))
+}
+
+/// Two timestamp queries around a pass, resolved into a buffer that is read back.
+struct PassTimer {
+    queries: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    readback: wgpu::Buffer,
+}
+
+impl PassTimer {
+    const BYTES: u64 = 2 * size_of::<u64>() as u64;
+
+    fn new(device: &wgpu::Device) -> Self {
+        let queries = device.create_query_set(&wgpu::QuerySetDescriptor {
+            label: Some("treelod pass timer"),
+            ty: wgpu::QueryType::Timestamp,
+            count: 2,
+        });
+        let buffer = |usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("treelod pass timer"),
+                size: Self::BYTES,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let resolved = buffer(wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC);
+        let readback = buffer(wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ);
+        Self { queries, resolved, readback }
+    }
+
+    fn writes(&self) -> wgpu::RenderPassTimestampWrites<'_> {
+        wgpu::RenderPassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: Some(1),
+        }
+    }
+
+    fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.resolve_query_set(&self.queries, 0..2, &self.resolved, 0);
+        encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.readback, 0, Self::BYTES);
+    }
+
+    /// The pass's milliseconds; `None` if the end reads before the beginning (a driver that
+    /// reset its counter).
+    fn read(&self, gpu: &Gpu) -> Result<Option<f64>, GpuError> {
+        let slice = self.readback.slice(..);
+        slice.map_async(wgpu::MapMode::Read, |_| {});
+        gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        let mapped = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+        let ticks: [u64; 2] = bytemuck::pod_read_unaligned(&mapped[..Self::BYTES as usize]);
+        drop(mapped);
+        self.readback.unmap();
+        let period_ns = f64::from(gpu.queue.get_timestamp_period());
+        Ok(ticks[1].checked_sub(ticks[0]).map(|t| t as f64 * period_ns * 1e-6))
+    }
 }
