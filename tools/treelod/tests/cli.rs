@@ -809,7 +809,9 @@ fn scatter_is_deterministic_and_writes_a_scene_the_loader_reads() {
 
     let json: serde_json::Value = serde_json::from_slice(&bytes).expect("valid JSON");
     assert_eq!(json["version"], 1);
-    assert_eq!(json["models"], serde_json::json!(["../../shared-demo/demo.treelod", "../../shared-demo/demo.treelod"]));
+    let demo_dir = demo.parent().and_then(Path::file_name).expect("a directory").to_string_lossy();
+    let relative = format!("../../{demo_dir}/demo.treelod");
+    assert_eq!(json["models"], serde_json::json!([relative, relative]), "paths relative to the scene file");
     let instances = json["instances"].as_array().expect("instances");
     assert_eq!(instances.len(), 12);
     // Default area: one tree per 25 m², a square of side 5·sqrt(12) ≈ 17.3 m around the origin.
