@@ -6,6 +6,7 @@
 
 mod build;
 mod dump;
+mod eval;
 mod render;
 mod report;
 mod scatter;
@@ -69,6 +70,15 @@ enum Command {
     /// fps, visible instances, triangles, points and the thresholds.
     #[command(after_help = EXIT_CODES)]
     View(view::Args),
+    /// Measure techniques against the full mesh: primitives, Precision/Recall/Q, multi-scale RMSE,
+    /// temporal noise and wall time per frame along a camera path (Vulkan; lavapipe works).
+    ///
+    /// The reference is the full mesh drawn --supersample times larger and box-filtered down.
+    /// Techniques: full (the full mesh drawn as the reference is: reads perfect), full-1x (the
+    /// full mesh at the image size), spt (triangles + points, the default renderer); ellipsoids,
+    /// impostors, prune-opt, prune-cook and policy are reported as absent or not implemented yet.
+    #[command(after_help = EXIT_CODES)]
+    Eval(eval::Args),
 }
 
 fn main() -> ExitCode {
@@ -82,6 +92,7 @@ fn main() -> ExitCode {
         Command::Scatter(args) => scatter::run(args),
         Command::Render(args) => render::run(args),
         Command::View(args) => view::run(args),
+        Command::Eval(args) => eval::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -13,7 +13,7 @@ use crate::scene;
 
 /// The direction from the target towards the eye when the camera frames the scene: in front
 /// (+z), to the right and a little above.
-const FRAMING_DIRECTION: Vec3 = Vec3::new(0.6, 0.45, 1.0);
+pub const FRAMING_DIRECTION: Vec3 = Vec3::new(0.6, 0.45, 1.0);
 
 /// Frames at most prepared before the image while streaming catches up with the selection.
 const MAX_STREAMING_FRAMES: u32 = 1000;
@@ -72,21 +72,21 @@ pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
-fn parse_fov(s: &str) -> Result<f32, String> {
+pub fn parse_fov(s: &str) -> Result<f32, String> {
     match s.trim().parse::<f32>() {
         Ok(v) if (1.0..=170.0).contains(&v) => Ok(v),
         _ => Err(format!("expected a field of view in degrees, 1..=170, got {s:?}")),
     }
 }
 
-fn parse_pixels(s: &str) -> Result<f32, String> {
+pub fn parse_pixels(s: &str) -> Result<f32, String> {
     match s.trim().parse::<f32>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
         _ => Err(format!("expected a size in pixels, a number ≥ 0, got {s:?}")),
     }
 }
 
-fn parse_colour(s: &str) -> Result<[u8; 3], String> {
+pub fn parse_colour(s: &str) -> Result<[u8; 3], String> {
     let hex = s.trim().trim_start_matches('#');
     let err = || format!("expected a colour RRGGBB in hex (e.g. ffffff), got {s:?}");
     if hex.len() != 6 || !hex.bytes().all(|b| b.is_ascii_hexdigit()) {
@@ -180,7 +180,7 @@ pub fn scene_failed(error: &scene::SceneError) -> Failed {
 /// Prepares frames until every draw's prefix is resident (the renderer streams triangles and
 /// points within a per-frame upload budget), so the image shows the selection rather than the
 /// coarser stand-ins of a first frame.
-fn settle_streaming(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) {
+pub fn settle_streaming(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) {
     for _ in 0..MAX_STREAMING_FRAMES {
         let stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
         gpu.queue.submit([]);
@@ -216,7 +216,7 @@ pub fn frame_camera(
 }
 
 /// The clear colour whose sRGB encoding is `rgb` (the target is sRGB, the clear value linear).
-fn clear_colour(rgb: [u8; 3]) -> wgpu::Color {
+pub fn clear_colour(rgb: [u8; 3]) -> wgpu::Color {
     let linear = |c: u8| {
         let c = f64::from(c) / 255.0;
         if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }

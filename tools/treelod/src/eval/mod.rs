@@ -1,0 +1,669 @@
+//! `treelod eval`: the measuring instrument. Renders the full mesh as the reference (supersampled,
+//! box-filtered down) and every chosen technique at the same cameras, and reports per frame and in
+//! total what each drew and how close its image is to the reference (pixel Precision and Recall,
+//! Neubert's `Q`, multi-scale RMSE, temporal noise) and what it cost (wall time).
+//!
+//! The metrics themselves are in [`metrics`] (no GPU types), camera paths in [`path`], the
+//! table, CSV, JSON and contact sheet in [`output`].
+
+pub mod metrics;
+mod output;
+pub mod path;
+mod plot;
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use glam::Vec3;
+use treelod_format::{Container, ErrorClass};
+use treelod_render::offscreen::{Gpu, render_image_timed};
+use treelod_render::{Camera, FrameStats, Renderer, Settings};
+
+use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse};
+use self::path::Pose;
+use crate::render::{FRAMING_DIRECTION, clear_colour, frame_camera, parse_colour, parse_fov, parse_pixels, parse_size};
+use crate::report::{self, Failed};
+use crate::scene::{self, Scene};
+
+/// Frames of the contact sheet at most.
+const SHEET_FRAMES: usize = 4;
+/// Views on each circle of `--orbit`.
+const ORBIT_VIEWS: usize = 8;
+/// `--approach` starts this many metres from the centre, or [`APPROACH_FAR_RADII`] bounding radii
+/// if that is farther…
+const APPROACH_FAR_METRES: f32 = 1000.0;
+/// …(for models in units larger than metres)…
+const APPROACH_FAR_RADII: f32 = 100.0;
+/// …and ends this many bounding radii from the centre, inside the crown.
+const APPROACH_NEAR_RADII: f32 = 0.3;
+/// `--views` when no camera option is given.
+const DEFAULT_VIEWS: u32 = 8;
+
+/// Arguments of `treelod eval`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A `.treelod` container (drawn once at the origin) or a JSON scene file.
+    #[arg(value_name = "FILE|SCENE")]
+    pub input: PathBuf,
+    /// N directions around the model on a circle (at the framing elevation), each at the distance
+    /// that frames it [default: 8 when no camera option is given].
+    #[arg(long, value_name = "N", conflicts_with_all = ["orbit", "path"],
+          value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub views: Option<u32>,
+    /// 8 views on a circle at each distance, in bounding radii of the scene (e.g. `2,6,20`).
+    #[arg(long, value_name = "D1,D2,…", conflicts_with = "path", value_parser = parse_orbit)]
+    pub orbit: Option<Distances>,
+    /// N cameras flying in from afar to inside the crown: along the framing direction towards the
+    /// centre of the bounds, from 1 km (or 100 bounding radii, if farther) to 0.3 bounding radii,
+    /// each frame the same fraction closer. Temporal noise along it shows pops.
+    #[arg(long, value_name = "N", conflicts_with_all = ["views", "orbit", "path"],
+          value_parser = clap::value_parser!(u32).range(2..=100_000))]
+    pub approach: Option<u32>,
+    /// A camera path file: a JSON array of `{"eye": [x, y, z], "target": [x, y, z]}`.
+    #[arg(long, value_name = "FILE")]
+    pub path: Option<PathBuf>,
+    /// Techniques to measure, separated by commas. Those not available are reported as absent.
+    #[arg(long, value_name = "NAMES", value_enum, value_delimiter = ',', default_values = ["full", "full-1x", "spt"])]
+    pub technique: Vec<TechniqueName>,
+    /// Image size in pixels, `WIDTHxHEIGHT`.
+    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// The reference is drawn K times larger per side and box-filtered down.
+    #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub supersample: u32,
+    /// Vertical field of view in degrees.
+    #[arg(long, value_name = "DEGREES", default_value_t = 50.0, value_parser = parse_fov)]
+    pub fov: f32,
+    /// Background colour, `RRGGBB` (sRGB hex): pixels of this colour count as not covered.
+    #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
+    pub background: [u8; 3],
+    /// Point threshold `s_min` in pixels of the `spt` technique.
+    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    pub s_min: Option<f32>,
+    /// Triangle threshold `s_max` in pixels of the `spt` technique.
+    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    pub s_max: Option<f32>,
+    /// Write one CSV row per frame and technique.
+    #[arg(long, value_name = "PATH")]
+    pub csv: Option<PathBuf>,
+    /// Write a JSON summary.
+    #[arg(long, value_name = "PATH")]
+    pub json: Option<PathBuf>,
+    /// Write a PNG contact sheet: per frame (up to 4), the reference, then each technique and its
+    /// difference.
+    #[arg(long, value_name = "PATH")]
+    pub sheet: Option<PathBuf>,
+    /// Write a PNG plot of quality Q against primitives drawn: a dot per frame and technique, a
+    /// large one at each technique's mean.
+    #[arg(long, value_name = "PATH")]
+    pub quality_plot: Option<PathBuf>,
+    /// Write a PNG plot of per-frame curves along the path: Q, multi-scale RMSE, primitives drawn
+    /// and temporal noise (the reference's beside it).
+    #[arg(long, value_name = "PATH")]
+    pub frame_plot: Option<PathBuf>,
+}
+
+/// `--orbit`'s distances, in bounding radii.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Distances(pub Vec<f32>);
+
+fn parse_orbit(s: &str) -> Result<Distances, String> {
+    path::parse_distances(s).map(Distances)
+}
+
+/// The techniques `--technique` names, available or not.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum TechniqueName {
+    /// The full mesh drawn exactly as the reference is (supersampled and box-filtered): the
+    /// instrument's check (it must read perfect) and the full mesh's cost.
+    #[value(name = "full")]
+    Full,
+    /// The full mesh drawn at the image size, no supersampling: the aliasing floor of every
+    /// technique drawn at the image size.
+    #[value(name = "full-1x")]
+    Full1x,
+    /// Triangles and points (Gilet 2005 in sequential point trees): the default renderer.
+    #[value(name = "spt")]
+    Spt,
+    /// Clustered ellipsoids and lines (Clasen 2011).
+    #[value(name = "ellipsoids")]
+    Ellipsoids,
+    /// Leaf-cluster impostor planes (Garcia 2005).
+    #[value(name = "impostors")]
+    Impostors,
+    /// Pruning with the optimised scale `s_opt` (Neubert 2011).
+    #[value(name = "prune-opt")]
+    PruneOpt,
+    /// Pruning with `s_Cook = 1/λ`, the stochastic baseline.
+    #[value(name = "prune-cook")]
+    PruneCook,
+    /// The default distance policy choosing among techniques.
+    #[value(name = "policy")]
+    Policy,
+}
+
+impl TechniqueName {
+    /// The name as `--technique` takes it.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Full => "full",
+            Self::Full1x => "full-1x",
+            Self::Spt => "spt",
+            Self::Ellipsoids => "ellipsoids",
+            Self::Impostors => "impostors",
+            Self::PruneOpt => "prune-opt",
+            Self::PruneCook => "prune-cook",
+            Self::Policy => "policy",
+        }
+    }
+}
+
+/// Whether a technique can be measured on this input, and why not.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Availability {
+    /// It is measured.
+    Measured,
+    /// The input holds none of the data it draws.
+    Absent(String),
+    /// The data is there (or not needed) but treelod cannot draw it yet.
+    NotImplemented(String),
+}
+
+impl Availability {
+    /// `measured`, `absent` or `not implemented yet`.
+    #[must_use]
+    pub fn status(&self) -> &'static str {
+        match self {
+            Self::Measured => "measured",
+            Self::Absent(_) => "absent",
+            Self::NotImplemented(_) => "not implemented yet",
+        }
+    }
+
+    /// Why it is not measured; `None` if it is.
+    #[must_use]
+    pub fn reason(&self) -> Option<&str> {
+        match self {
+            Self::Measured => None,
+            Self::Absent(r) | Self::NotImplemented(r) => Some(r),
+        }
+    }
+}
+
+/// Records of the optional kinds summed over the input's models.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct OptionalData {
+    /// Ellipsoids and lines.
+    pub ellipsoids: u64,
+    /// Impostor planes.
+    pub planes: u64,
+    /// Pruned leaves.
+    pub prune_leaves: u64,
+}
+
+/// Whether `technique` can be measured on an input holding `data`; `scene` words the reason for a
+/// scene file rather than one container.
+#[must_use]
+pub fn availability(technique: TechniqueName, data: OptionalData, scene: bool) -> Availability {
+    let holder = if scene { "no model of the scene holds" } else { "this container holds no" };
+    let absent_or = |count: u64, what: &str, renderer: &str| {
+        if count == 0 {
+            Availability::Absent(format!("{holder} {what}"))
+        } else {
+            Availability::NotImplemented(format!("the renderer does not draw {renderer}"))
+        }
+    };
+    match technique {
+        TechniqueName::Full | TechniqueName::Full1x | TechniqueName::Spt => Availability::Measured,
+        TechniqueName::Ellipsoids => absent_or(data.ellipsoids, "ellipsoids or lines", "ellipsoids and lines"),
+        TechniqueName::Impostors => absent_or(data.planes, "impostor planes", "impostor planes"),
+        TechniqueName::PruneOpt | TechniqueName::PruneCook => {
+            absent_or(data.prune_leaves, "pruning priority lists", "pruned leaves")
+        }
+        TechniqueName::Policy => {
+            Availability::NotImplemented("there is no distance policy choosing among techniques".to_owned())
+        }
+    }
+}
+
+/// A technique being measured: its renderer and how its images are made.
+struct Measured {
+    name: TechniqueName,
+    renderer: Renderer,
+    /// Drawn this many times larger per side, then box-filtered (the reference's factor for
+    /// `full`, 1 for the rest).
+    supersample: u32,
+    /// The previous frame's image, for temporal noise.
+    previous: Option<LinearImage>,
+}
+
+/// An image of a frame as the metrics take it.
+struct Shot {
+    image: LinearImage,
+    mask: Mask,
+    stats: FrameStats,
+    prepare_ms: f64,
+    gpu_ms: Option<f64>,
+    wall_ms: f64,
+}
+
+/// One frame of one technique: what it drew, how close it came, what it cost.
+#[derive(Clone, Debug)]
+pub struct Row {
+    /// Frame index along the path.
+    pub frame: usize,
+    /// The technique.
+    pub technique: TechniqueName,
+    /// What `prepare` selected and submitted.
+    pub stats: FrameStats,
+    /// Pixel classification against the reference.
+    pub coverage: Coverage,
+    /// Multi-scale RMSE against the reference.
+    pub rmse: MultiScaleRmse,
+    /// Multi-scale RMSE summary against this technique's previous frame (`None` for frame 0).
+    pub noise: Option<f64>,
+    /// The same for the reference.
+    pub reference_noise: Option<f64>,
+    /// Wall milliseconds of `prepare` alone (selection; streaming has settled).
+    pub prepare_ms: f64,
+    /// GPU milliseconds of the render pass from timestamp queries (`None` without them).
+    pub gpu_ms: Option<f64>,
+    /// Wall milliseconds of prepare + render + read-back.
+    pub wall_ms: f64,
+}
+
+impl Row {
+    /// Bytes of geometry records the frame reads: 24 per triangle and 48 per point submitted.
+    #[must_use]
+    pub fn geometry_bytes(&self) -> u64 {
+        geometry_bytes(&self.stats)
+    }
+}
+
+/// Bytes of triangle and point records submitted in a frame.
+#[must_use]
+pub fn geometry_bytes(stats: &FrameStats) -> u64 {
+    stats.triangles * size_of::<treelod_format::TriangleRecord>() as u64
+        + stats.points * size_of::<treelod_format::PointRecord>() as u64
+}
+
+/// Everything a run measured, for the outputs.
+pub struct Report {
+    /// The input as given.
+    pub input: PathBuf,
+    /// How the cameras were chosen, as the command line says it.
+    pub camera_source: String,
+    /// The cameras.
+    pub poses: Vec<Pose>,
+    /// Image size.
+    pub size: (u32, u32),
+    /// Supersampling factor of the reference.
+    pub supersample: u32,
+    /// Vertical field of view, degrees.
+    pub fov_degrees: f32,
+    /// Background, sRGB.
+    pub background: [u8; 3],
+    /// The adapter.
+    pub adapter: Adapter,
+    /// Whether the device writes timestamp queries (the `gpu_ms` figures).
+    pub timestamps: bool,
+    /// Every technique asked for, in order, with its availability.
+    pub techniques: Vec<(TechniqueName, Availability)>,
+    /// Rows, frame-major, techniques in order.
+    pub rows: Vec<Row>,
+    /// Contact-sheet frames: the frame, the reference, and per measured technique its image and
+    /// mask, with the reference's mask.
+    pub sheet: Vec<SheetFrame>,
+}
+
+/// What the adapter says of itself.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Adapter {
+    /// Its name (e.g. `llvmpipe (LLVM 15.0.6, 256 bits)`).
+    pub name: String,
+    /// Its backend (`Vulkan`).
+    pub backend: String,
+    /// Its kind (`Cpu`, `DiscreteGpu`, …).
+    pub device_type: String,
+    /// Driver name and version.
+    pub driver: String,
+}
+
+impl Adapter {
+    /// From wgpu's description.
+    #[must_use]
+    pub fn new(info: &wgpu::AdapterInfo) -> Self {
+        Self {
+            name: info.name.clone(),
+            backend: format!("{:?}", info.backend),
+            device_type: format!("{:?}", info.device_type),
+            driver: format!("{} {}", info.driver, info.driver_info).trim().to_owned(),
+        }
+    }
+}
+
+/// One frame of the contact sheet.
+pub struct SheetFrame {
+    /// Frame index.
+    pub frame: usize,
+    /// The reference image and coverage.
+    pub reference: (LinearImage, Mask),
+    /// Per measured technique, its image and coverage.
+    pub techniques: Vec<(TechniqueName, LinearImage, Mask)>,
+}
+
+/// Runs `treelod eval`.
+pub fn run(args: &Args) -> Result<(), Failed> {
+    for output in [&args.csv, &args.json, &args.sheet, &args.quality_plot, &args.frame_plot].into_iter().flatten() {
+        if output.is_dir() {
+            report::message_error(output, "is a directory; name the file to write");
+            return Err(Failed { class: ErrorClass::Io });
+        }
+    }
+    let scene = scene::load(&args.input).map_err(|e| crate::render::scene_failed(&e))?;
+    let path_poses = match &args.path {
+        Some(file) => Some(path::load(file).map_err(|(io, message)| {
+            report::message_error(file, &message);
+            Failed { class: if io { ErrorClass::Io } else { ErrorClass::Invalid } }
+        })?),
+        None => None,
+    };
+    let data = optional_data(&scene)?;
+    let mut techniques: Vec<(TechniqueName, Availability)> = Vec::new();
+    for &name in &args.technique {
+        if !techniques.iter().any(|(n, _)| *n == name) {
+            techniques.push((name, availability(name, data, !scene::is_container_path(&args.input))));
+        }
+    }
+    if techniques.iter().all(|(_, a)| *a != Availability::Measured) {
+        report::write_stdout(&output::unavailable(&techniques))?;
+        report::message_error(&args.input, "none of the techniques asked for can be measured");
+        return Err(Failed { class: ErrorClass::Unsupported });
+    }
+    let gpu = Gpu::new().map_err(|e| {
+        report::message_error(&args.input, &format!("cannot render: {e}"));
+        Failed { class: ErrorClass::Unsupported }
+    })?;
+    let (width, height) = args.size;
+    let k = args.supersample;
+    let limit = gpu.device.limits().max_texture_dimension_2d;
+    if u64::from(width) * u64::from(k) > u64::from(limit) || u64::from(height) * u64::from(k) > u64::from(limit) {
+        report::message_error(
+            &args.input,
+            &format!(
+                "the reference, {width}x{height} supersampled {k} times, is larger than the device draws ({limit} pixels per side at most)"
+            ),
+        );
+        return Err(Failed { class: ErrorClass::Unsupported });
+    }
+
+    let add = |settings: Settings| -> Result<(Renderer, (Vec3, Vec3)), Failed> {
+        let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+        let bounds = scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer)
+            .map_err(|e| crate::render::scene_failed(&e))?;
+        Ok((renderer, bounds))
+    };
+    let full_settings = Settings { full_mesh: true, ..Settings::default() };
+    let (mut reference, bounds) = add(full_settings)?;
+    let mut measured = Vec::new();
+    for (name, availability) in &techniques {
+        if *availability != Availability::Measured {
+            continue;
+        }
+        let (settings, supersample) = match name {
+            TechniqueName::Full => (full_settings, k),
+            TechniqueName::Full1x => (full_settings, 1),
+            _ => {
+                let mut settings = Settings::default();
+                settings.s_min = args.s_min.unwrap_or(settings.s_min);
+                settings.s_max = args.s_max.unwrap_or(settings.s_max);
+                (settings, 1)
+            }
+        };
+        measured.push(Measured { name: *name, renderer: add(settings)?.0, supersample, previous: None });
+    }
+
+    let fovy = args.fov.to_radians();
+    let (poses, camera_source) = cameras(args, path_poses, bounds, fovy);
+    let background = clear_colour(args.background);
+    let camera = |pose: &Pose, k: u32| Camera::look_at(pose.eye, pose.target, fovy, width * k, height * k);
+    let shoot = |renderer: &mut Renderer, pose: &Pose, k: u32| -> Result<Shot, Failed> {
+        let camera = camera(pose, k);
+        crate::render::settle_streaming(&gpu, renderer, &camera);
+        let start = Instant::now();
+        renderer.prepare(&gpu.device, &gpu.queue, &camera);
+        gpu.queue.submit([]);
+        let prepare_ms = start.elapsed().as_secs_f64() * 1e3;
+        let start = Instant::now();
+        let (image, stats, gpu_ms) = render_image_timed(&gpu, renderer, &camera, background).map_err(|e| {
+            report::message_error(&args.input, &format!("cannot render: {e}"));
+            Failed { class: ErrorClass::Io }
+        })?;
+        let wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        let internal = |e: metrics::SizeMismatch| {
+            report::message_error(&args.input, &format!("internal error: {e}"));
+            Failed { class: ErrorClass::Io }
+        };
+        let linear = LinearImage::from_srgba8(image.width, image.height, &image.rgba).map_err(internal)?;
+        let mask = Mask::from_srgba8(image.width, image.height, &image.rgba, args.background).map_err(internal)?;
+        Ok(Shot {
+            image: linear.box_filter(k).map_err(internal)?,
+            mask: mask.reduce_majority(k).map_err(internal)?,
+            stats,
+            prepare_ms,
+            gpu_ms,
+            wall_ms,
+        })
+    };
+    let compare = |a: &LinearImage, b: &LinearImage| {
+        multiscale_rmse(a, b).map_err(|e| {
+            report::message_error(&args.input, &format!("internal error: {e}"));
+            Failed { class: ErrorClass::Io }
+        })
+    };
+
+    // Warm up every renderer once (shader compilation happens at the first draw) so the first
+    // frame's time is not the compiler's.
+    if let Some(first) = poses.first() {
+        shoot(&mut reference, first, k)?;
+        for m in &mut measured {
+            shoot(&mut m.renderer, first, m.supersample)?;
+        }
+    }
+    let sheet_frames = sheet_frames(poses.len());
+    let progress = progress_bar(poses.len() as u64);
+    let mut rows = Vec::with_capacity(poses.len() * measured.len());
+    let mut sheet = Vec::new();
+    let mut previous_reference: Option<LinearImage> = None;
+    for (frame, pose) in poses.iter().enumerate() {
+        progress.set_position(frame as u64);
+        let reference_shot = shoot(&mut reference, pose, k)?;
+        let reference_noise = match &previous_reference {
+            Some(previous) => Some(compare(&reference_shot.image, previous)?.summary()),
+            None => None,
+        };
+        let mut sheet_techniques = Vec::new();
+        for m in &mut measured {
+            let shot = shoot(&mut m.renderer, pose, m.supersample)?;
+            let coverage = Coverage::compare(&reference_shot.mask, &shot.mask).map_err(|e| {
+                report::message_error(&args.input, &format!("internal error: {e}"));
+                Failed { class: ErrorClass::Io }
+            })?;
+            let rmse = compare(&shot.image, &reference_shot.image)?;
+            let noise = match &m.previous {
+                Some(previous) => Some(compare(&shot.image, previous)?.summary()),
+                None => None,
+            };
+            rows.push(Row {
+                frame,
+                technique: m.name,
+                stats: shot.stats,
+                coverage,
+                rmse,
+                noise,
+                reference_noise,
+                prepare_ms: shot.prepare_ms,
+                gpu_ms: shot.gpu_ms,
+                wall_ms: shot.wall_ms,
+            });
+            if args.sheet.is_some() && sheet_frames.contains(&frame) {
+                sheet_techniques.push((m.name, shot.image.clone(), shot.mask));
+            }
+            m.previous = Some(shot.image);
+        }
+        if args.sheet.is_some() && sheet_frames.contains(&frame) {
+            sheet.push(SheetFrame {
+                frame,
+                reference: (reference_shot.image.clone(), reference_shot.mask),
+                techniques: sheet_techniques,
+            });
+        }
+        previous_reference = Some(reference_shot.image);
+    }
+    progress.finish_and_clear();
+
+    let report = Report {
+        input: args.input.clone(),
+        camera_source,
+        poses,
+        size: args.size,
+        supersample: k,
+        fov_degrees: args.fov,
+        background: args.background,
+        adapter: Adapter::new(&gpu.info),
+        timestamps: gpu.device.features().contains(wgpu::Features::TIMESTAMP_QUERY),
+        techniques,
+        rows,
+        sheet,
+    };
+    if let Some(csv) = &args.csv {
+        report::write_atomically(csv, output::csv(&report).as_bytes())?;
+    }
+    if let Some(json) = &args.json {
+        let text = output::json(&report).map_err(|e| {
+            report::message_error(json, &format!("cannot encode the JSON: {e}"));
+            Failed { class: ErrorClass::Io }
+        })?;
+        report::write_atomically(json, text.as_bytes())?;
+    }
+    if let Some(sheet) = &args.sheet {
+        let png = crate::render::encode_png(&output::contact_sheet(&report)).map_err(|e| {
+            report::message_error(sheet, &format!("cannot encode the PNG: {e}"));
+            Failed { class: ErrorClass::Io }
+        })?;
+        report::write_atomically(sheet, &png)?;
+    }
+    for (file, draw) in [
+        (&args.quality_plot, plot::quality_vs_primitives as fn(&Report) -> treelod_render::offscreen::Image),
+        (&args.frame_plot, plot::per_frame),
+    ] {
+        if let Some(file) = file {
+            let png = crate::render::encode_png(&draw(&report)).map_err(|e| {
+                report::message_error(file, &format!("cannot encode the PNG: {e}"));
+                Failed { class: ErrorClass::Io }
+            })?;
+            report::write_atomically(file, &png)?;
+        }
+    }
+    report::write_stdout(&output::text(
+        &report,
+        [&args.csv, &args.json, &args.sheet, &args.quality_plot, &args.frame_plot],
+    ))
+}
+
+/// Sums the optional record kinds over the scene's models (each opened and checked as every
+/// reader does).
+fn optional_data(scene: &Scene) -> Result<OptionalData, Failed> {
+    let mut data = OptionalData::default();
+    for model in &scene.models {
+        let container = Container::open(model).map_err(|e| report::file_error(model, &e))?;
+        data.ellipsoids += (container.ellipsoids().len() + container.lines().len()) as u64;
+        data.planes += container.planes().len() as u64;
+        data.prune_leaves += container.prune_leaves().len() as u64;
+    }
+    Ok(data)
+}
+
+/// The cameras the arguments ask for, and how to say where they came from.
+fn cameras(args: &Args, path_poses: Option<Vec<Pose>>, bounds: (Vec3, Vec3), fovy: f32) -> (Vec<Pose>, String) {
+    let (width, height) = args.size;
+    let framing = frame_camera(bounds, None, None, fovy, width, height);
+    let target = 0.5 * (bounds.0 + bounds.1);
+    if let Some(poses) = path_poses {
+        let source = args.path.as_ref().map(|p| format!("--path {}", p.display())).unwrap_or_default();
+        return (poses, source);
+    }
+    // The bounding radius as `render` frames it: the half diagonal of the bounds.
+    let radius = (0.5 * (bounds.1 - bounds.0)).length().max(0.1);
+    if let Some(count) = args.approach {
+        let (far, near) = (APPROACH_FAR_METRES.max(APPROACH_FAR_RADII * radius), APPROACH_NEAR_RADII * radius);
+        let poses = path::approach(target, FRAMING_DIRECTION, far, near, count as usize);
+        return (poses, format!("--approach {count}: {far:.0} to {near:.2} from the centre"));
+    }
+    if let Some(Distances(distances)) = &args.orbit {
+        let poses =
+            distances.iter().flat_map(|d| path::circle(target, FRAMING_DIRECTION, d * radius, ORBIT_VIEWS)).collect();
+        let list: Vec<String> = distances.iter().map(f32::to_string).collect();
+        return (poses, format!("--orbit {}", list.join(",")));
+    }
+    let views = args.views.unwrap_or(DEFAULT_VIEWS);
+    let distance = framing.position.distance(target);
+    (path::circle(target, FRAMING_DIRECTION, distance, views as usize), format!("--views {views}"))
+}
+
+/// Up to [`SHEET_FRAMES`] frames spread evenly over `count`, first and last included.
+fn sheet_frames(count: usize) -> Vec<usize> {
+    if count <= SHEET_FRAMES {
+        return (0..count).collect();
+    }
+    // round(i · (count − 1) / (SHEET_FRAMES − 1))
+    let steps = SHEET_FRAMES - 1;
+    let mut frames: Vec<usize> = (0..SHEET_FRAMES).map(|i| (2 * i * (count - 1) + steps) / (2 * steps)).collect();
+    frames.dedup();
+    frames
+}
+
+/// A progress bar on stderr (drawn only on a terminal).
+fn progress_bar(len: u64) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} eval [frame {pos}/{len}] {elapsed}") {
+        bar.set_style(style);
+    }
+    bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn techniques_that_do_not_exist_yet_are_reported_not_skipped() {
+        let none = OptionalData::default();
+        assert_eq!(availability(TechniqueName::Spt, none, false), Availability::Measured);
+        assert_eq!(
+            availability(TechniqueName::Ellipsoids, none, false),
+            Availability::Absent("this container holds no ellipsoids or lines".to_owned())
+        );
+        assert_eq!(
+            availability(TechniqueName::Impostors, none, true).reason(),
+            Some("no model of the scene holds impostor planes")
+        );
+        let some = OptionalData { ellipsoids: 3, planes: 1, prune_leaves: 2 };
+        for t in [TechniqueName::Ellipsoids, TechniqueName::Impostors, TechniqueName::PruneOpt, TechniqueName::Policy] {
+            let a = availability(t, some, false);
+            assert_eq!(a.status(), "not implemented yet", "{t:?}");
+            assert!(
+                a.reason().is_some_and(|r| r.starts_with("the renderer does not draw") || t == TechniqueName::Policy)
+            );
+        }
+    }
+
+    #[test]
+    fn the_sheet_spreads_its_frames_over_the_path() {
+        assert_eq!(sheet_frames(0), Vec::<usize>::new());
+        assert_eq!(sheet_frames(3), [0, 1, 2]);
+        assert_eq!(sheet_frames(24), [0, 8, 15, 23]);
+        assert_eq!(sheet_frames(5), [0, 1, 3, 4]);
+    }
+}

@@ -1,0 +1,598 @@
+//! What `treelod eval` writes: the table on stdout, the per-frame CSV, the JSON summary and the
+//! contact sheet.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use serde::Serialize;
+use treelod_render::offscreen::Image;
+
+use super::metrics::{self, Coverage, LinearImage, Mask};
+use super::{Adapter, Availability, Report, Row, TechniqueName};
+use crate::table::{Align, Table};
+
+/// What the time columns measure, said wherever they appear.
+fn timing(timestamps: bool) -> &'static str {
+    if timestamps {
+        "prepare ms: wall clock of selection and submission; GPU ms: the render pass from GPU timestamp queries; \
+         wall ms: wall clock of prepare + render + read-back"
+    } else {
+        "prepare ms: wall clock of selection and submission; GPU ms: none (the adapter offers no timestamp \
+         queries); wall ms: wall clock of prepare + render + read-back"
+    }
+}
+/// Width in pixels of the grey lines between the contact sheet's panels.
+const GAP: u32 = 2;
+/// Grey of those lines, sRGB.
+const GAP_GREY: u8 = 128;
+
+/// Per-technique figures over all frames.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Summary {
+    /// Frames measured.
+    pub frames: usize,
+    /// Means per frame.
+    pub mean: Means,
+    /// Sums over the frames.
+    pub total: Totals,
+    /// Precision, Recall and Q of all frames' pixels taken together (from the summed counts).
+    pub pooled: Pooled,
+}
+
+/// Means per frame of one technique.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Means {
+    /// Triangles submitted.
+    pub triangles: f64,
+    /// Points submitted.
+    pub points: f64,
+    /// Bytes of triangle and point records submitted.
+    pub geometry_bytes: f64,
+    /// Bytes of model data resident on the GPU.
+    pub bytes_resident: f64,
+    /// True positive pixels.
+    pub tp: f64,
+    /// False positive pixels.
+    pub fp: f64,
+    /// False negative pixels.
+    #[serde(rename = "fn")]
+    pub fn_: f64,
+    /// Precision.
+    pub precision: f64,
+    /// Recall.
+    pub recall: f64,
+    /// Neubert's Q.
+    pub q: f64,
+    /// Multi-scale RMSE summary (mean over levels).
+    pub rmse: f64,
+    /// Multi-scale RMSE per level, finest first.
+    pub rmse_levels: Vec<f64>,
+    /// Temporal noise over frames 1.. (`None` with fewer than two frames).
+    pub temporal_noise: Option<f64>,
+    /// The reference's temporal noise over the same frames.
+    pub reference_temporal_noise: Option<f64>,
+    /// Wall milliseconds of `prepare` alone.
+    pub prepare_ms: f64,
+    /// GPU milliseconds of the render pass (`None` without timestamp queries).
+    pub gpu_ms: Option<f64>,
+    /// Wall milliseconds of prepare + render + read-back.
+    pub wall_ms: f64,
+}
+
+/// Sums over the frames of one technique.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Totals {
+    /// Triangles submitted.
+    pub triangles: u64,
+    /// Points submitted.
+    pub points: u64,
+    /// Bytes of triangle and point records submitted.
+    pub geometry_bytes: u64,
+    /// True positive pixels.
+    pub tp: u64,
+    /// False positive pixels.
+    pub fp: u64,
+    /// False negative pixels.
+    #[serde(rename = "fn")]
+    pub fn_: u64,
+}
+
+/// Precision, Recall and Q of summed pixel counts.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Pooled {
+    /// Precision.
+    pub precision: f64,
+    /// Recall.
+    pub recall: f64,
+    /// Q.
+    pub q: f64,
+}
+
+/// The summary of the rows of `technique`.
+#[must_use]
+pub fn summarise(rows: &[Row], technique: TechniqueName) -> Summary {
+    let rows: Vec<&Row> = rows.iter().filter(|r| r.technique == technique).collect();
+    let n = rows.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&Row) -> f64| rows.iter().map(|r| f(r)).sum::<f64>() / n;
+    let mean_of = |values: Vec<f64>| (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64);
+    let levels = rows.first().map_or(0, |r| r.rmse.levels.len());
+    let total = Totals {
+        triangles: rows.iter().map(|r| r.stats.triangles).sum(),
+        points: rows.iter().map(|r| r.stats.points).sum(),
+        geometry_bytes: rows.iter().map(|r| r.geometry_bytes()).sum(),
+        tp: rows.iter().map(|r| r.coverage.tp).sum(),
+        fp: rows.iter().map(|r| r.coverage.fp).sum(),
+        fn_: rows.iter().map(|r| r.coverage.fn_).sum(),
+    };
+    let pooled = Coverage { tp: total.tp, fp: total.fp, fn_: total.fn_ };
+    Summary {
+        frames: rows.len(),
+        mean: Means {
+            triangles: mean(&|r| r.stats.triangles as f64),
+            points: mean(&|r| r.stats.points as f64),
+            geometry_bytes: mean(&|r| r.geometry_bytes() as f64),
+            bytes_resident: mean(&|r| r.stats.bytes_resident as f64),
+            tp: mean(&|r| r.coverage.tp as f64),
+            fp: mean(&|r| r.coverage.fp as f64),
+            fn_: mean(&|r| r.coverage.fn_ as f64),
+            precision: mean(&|r| r.coverage.precision()),
+            recall: mean(&|r| r.coverage.recall()),
+            q: mean(&|r| r.coverage.quality()),
+            rmse: mean(&|r| r.rmse.summary()),
+            rmse_levels: (0..levels).map(|l| mean(&|r| r.rmse.levels.get(l).copied().unwrap_or(0.0))).collect(),
+            temporal_noise: mean_of(rows.iter().filter_map(|r| r.noise).collect()),
+            reference_temporal_noise: mean_of(rows.iter().filter_map(|r| r.reference_noise).collect()),
+            prepare_ms: mean(&|r| r.prepare_ms),
+            gpu_ms: mean_of(rows.iter().filter_map(|r| r.gpu_ms).collect()),
+            wall_ms: mean(&|r| r.wall_ms),
+        },
+        total,
+        pooled: Pooled { precision: pooled.precision(), recall: pooled.recall(), q: pooled.quality() },
+    }
+}
+
+/// The description of a technique, for the JSON summary.
+fn description(technique: TechniqueName) -> &'static str {
+    match technique {
+        TechniqueName::Full => {
+            "the full mesh drawn as the reference is (supersampled, box-filtered): must read perfect"
+        }
+        TechniqueName::Full1x => "the full mesh drawn at the image size (no supersampling): the aliasing floor",
+        TechniqueName::Spt => "triangles and points (Gilet 2005, sequential point trees): the default renderer",
+        TechniqueName::Ellipsoids => "clustered ellipsoids and lines (Clasen 2011)",
+        TechniqueName::Impostors => "leaf-cluster impostor planes (Garcia 2005)",
+        TechniqueName::PruneOpt => "pruning with s_opt (Neubert 2011)",
+        TechniqueName::PruneCook => "pruning with s_Cook = 1/lambda (stochastic baseline)",
+        TechniqueName::Policy => "the default distance policy",
+    }
+}
+
+/// `value` with `digits` decimals, `-` for none.
+fn opt(value: Option<f64>, digits: usize) -> String {
+    value.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"))
+}
+
+/// One line per technique that is not measured: `technique NAME: STATUS: REASON`.
+#[must_use]
+pub fn unavailable(techniques: &[(TechniqueName, Availability)]) -> String {
+    let mut out = String::new();
+    for (name, availability) in techniques {
+        if let Some(reason) = availability.reason() {
+            let _ = writeln!(out, "technique {}: {}: {reason}", name.name(), availability.status());
+        }
+    }
+    out
+}
+
+/// The report as text: a heading, absent techniques, the table, the files written.
+#[must_use]
+pub fn text(report: &Report, files: [&Option<PathBuf>; 5]) -> String {
+    let (w, h) = report.size;
+    let k = report.supersample;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "{}: {} frame(s) ({}), {w}x{h}; reference: the full mesh drawn at {}x{} and box-filtered (supersample {k})",
+        report.input.display(),
+        report.poses.len(),
+        report.camera_source,
+        w * k,
+        h * k,
+    );
+    let _ = writeln!(
+        out,
+        "adapter: {} ({}, {}); times: {}",
+        report.adapter.name,
+        report.adapter.backend,
+        report.adapter.device_type,
+        timing(report.timestamps)
+    );
+    out.push_str(&unavailable(&report.techniques));
+    let mut table = Table::new(&[
+        ("frame", Align::Right),
+        ("technique", Align::Left),
+        ("triangles", Align::Right),
+        ("points", Align::Right),
+        ("geometry KiB", Align::Right),
+        ("TP", Align::Right),
+        ("FP", Align::Right),
+        ("FN", Align::Right),
+        ("P", Align::Right),
+        ("R", Align::Right),
+        ("Q", Align::Right),
+        ("RMSE", Align::Right),
+        ("noise", Align::Right),
+        ("ref noise", Align::Right),
+        ("prepare ms", Align::Right),
+        ("GPU ms", Align::Right),
+        ("wall ms", Align::Right),
+    ]);
+    for row in &report.rows {
+        table.row(vec![
+            row.frame.to_string(),
+            row.technique.name().to_owned(),
+            row.stats.triangles.to_string(),
+            row.stats.points.to_string(),
+            format!("{:.1}", row.geometry_bytes() as f64 / 1024.0),
+            row.coverage.tp.to_string(),
+            row.coverage.fp.to_string(),
+            row.coverage.fn_.to_string(),
+            format!("{:.4}", row.coverage.precision()),
+            format!("{:.4}", row.coverage.recall()),
+            format!("{:.4}", row.coverage.quality()),
+            format!("{:.5}", row.rmse.summary()),
+            opt(row.noise, 5),
+            opt(row.reference_noise, 5),
+            format!("{:.1}", row.prepare_ms),
+            opt(row.gpu_ms, 2),
+            format!("{:.1}", row.wall_ms),
+        ]);
+    }
+    for (name, availability) in &report.techniques {
+        if *availability != Availability::Measured {
+            continue;
+        }
+        let s = summarise(&report.rows, *name);
+        let m = &s.mean;
+        table.row(vec![
+            "mean".to_owned(),
+            name.name().to_owned(),
+            format!("{:.0}", m.triangles),
+            format!("{:.0}", m.points),
+            format!("{:.1}", m.geometry_bytes / 1024.0),
+            format!("{:.0}", m.tp),
+            format!("{:.0}", m.fp),
+            format!("{:.0}", m.fn_),
+            format!("{:.4}", m.precision),
+            format!("{:.4}", m.recall),
+            format!("{:.4}", m.q),
+            format!("{:.5}", m.rmse),
+            opt(m.temporal_noise, 5),
+            opt(m.reference_temporal_noise, 5),
+            format!("{:.1}", m.prepare_ms),
+            opt(m.gpu_ms, 2),
+            format!("{:.1}", m.wall_ms),
+        ]);
+    }
+    out.push_str(&table.render(""));
+    for (what, file) in ["csv", "json", "sheet", "quality plot", "frame plot"].into_iter().zip(files) {
+        if let Some(file) = file {
+            let _ = write!(out, "{what}: {}", file.display());
+            if what == "sheet" {
+                let frames: Vec<String> = report.sheet.iter().map(|f| f.frame.to_string()).collect();
+                let _ = write!(
+                    out,
+                    " (frames {}; columns: reference, then each technique and its difference)",
+                    frames.join(", ")
+                );
+            }
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// One CSV row per frame and technique, with a header line.
+#[must_use]
+pub fn csv(report: &Report) -> String {
+    let levels = report.rows.first().map_or(0, |r| r.rmse.levels.len());
+    let mut out = String::from(
+        "frame,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,triangles,points,\
+         geometry_bytes,bytes_resident,tp,fp,fn,precision,recall,q,rmse",
+    );
+    for l in 0..levels {
+        let _ = write!(out, ",rmse_{}px", 1u64 << l);
+    }
+    out.push_str(",temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms\n");
+    let optional = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
+    for row in &report.rows {
+        let pose = report
+            .poses
+            .get(row.frame)
+            .copied()
+            .unwrap_or(super::path::Pose { eye: glam::Vec3::ZERO, target: glam::Vec3::ZERO });
+        let _ = write!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            row.frame,
+            row.technique.name(),
+            pose.eye.x,
+            pose.eye.y,
+            pose.eye.z,
+            pose.target.x,
+            pose.target.y,
+            pose.target.z,
+            row.stats.instances_visible,
+            row.stats.triangles,
+            row.stats.points,
+            row.geometry_bytes(),
+            row.stats.bytes_resident,
+            row.coverage.tp,
+            row.coverage.fp,
+            row.coverage.fn_,
+            row.coverage.precision(),
+            row.coverage.recall(),
+            row.coverage.quality(),
+            row.rmse.summary(),
+        );
+        for level in &row.rmse.levels {
+            let _ = write!(out, ",{level}");
+        }
+        let _ = writeln!(
+            out,
+            ",{},{},{:.3},{},{:.3}",
+            optional(row.noise),
+            optional(row.reference_noise),
+            row.prepare_ms,
+            row.gpu_ms.map(|v| format!("{v:.4}")).unwrap_or_default(),
+            row.wall_ms
+        );
+    }
+    out
+}
+
+/// The JSON summary, as written.
+#[derive(Serialize)]
+struct JsonReport<'a> {
+    input: String,
+    frames: usize,
+    cameras: &'a str,
+    size: [u32; 2],
+    supersample: u32,
+    reference_size: [u32; 2],
+    fov_degrees: f32,
+    background: String,
+    colour_space: &'static str,
+    rmse_levels: usize,
+    rmse_summary: &'static str,
+    adapter: &'a Adapter,
+    timing: &'static str,
+    techniques: Vec<JsonTechnique>,
+    poses: Vec<JsonPose>,
+}
+
+#[derive(Serialize)]
+struct JsonTechnique {
+    name: &'static str,
+    status: &'static str,
+    reason: Option<String>,
+    description: &'static str,
+    summary: Option<Summary>,
+}
+
+#[derive(Serialize)]
+struct JsonPose {
+    eye: [f32; 3],
+    target: [f32; 3],
+}
+
+/// The JSON summary, pretty-printed, with a final newline.
+///
+/// # Errors
+/// If serialisation fails (it does not for these types).
+pub fn json(report: &Report) -> Result<String, serde_json::Error> {
+    let (w, h) = report.size;
+    let k = report.supersample;
+    let [r, g, b] = report.background;
+    let value = JsonReport {
+        input: report.input.display().to_string(),
+        frames: report.poses.len(),
+        cameras: &report.camera_source,
+        size: [w, h],
+        supersample: k,
+        reference_size: [w * k, h * k],
+        fov_degrees: report.fov_degrees,
+        background: format!("{r:02x}{g:02x}{b:02x}"),
+        colour_space: "linear",
+        rmse_levels: metrics::level_count(w, h),
+        rmse_summary: "mean over levels",
+        adapter: &report.adapter,
+        timing: timing(report.timestamps),
+        techniques: report
+            .techniques
+            .iter()
+            .map(|(name, availability)| JsonTechnique {
+                name: name.name(),
+                status: availability.status(),
+                reason: availability.reason().map(str::to_owned),
+                description: description(*name),
+                summary: (*availability == Availability::Measured).then(|| summarise(&report.rows, *name)),
+            })
+            .collect(),
+        poses: report.poses.iter().map(|p| JsonPose { eye: p.eye.to_array(), target: p.target.to_array() }).collect(),
+    };
+    let mut text = serde_json::to_string_pretty(&value)?;
+    text.push('\n');
+    Ok(text)
+}
+
+/// The difference panel of a technique against the reference: red where only the technique
+/// covers a pixel (false positive), blue where only the reference does (false negative), else a
+/// grey level of the colour error (black where equal; the linear RMS over the channels times 4,
+/// white from 0.25 on).
+#[must_use]
+pub fn difference(reference: (&LinearImage, &Mask), sample: (&LinearImage, &Mask)) -> Vec<[u8; 3]> {
+    let (a, am) = reference;
+    let (b, bm) = sample;
+    a.pixels
+        .iter()
+        .zip(&b.pixels)
+        .zip(am.covered.iter().zip(&bm.covered))
+        .map(|((p, q), (&r, &s))| match (r, s) {
+            (false, true) => [255, 40, 40],
+            (true, false) => [40, 90, 255],
+            _ => {
+                let e = ((0..3).map(|c| (f64::from(p[c]) - f64::from(q[c])).powi(2)).sum::<f64>() / 3.0).sqrt();
+                let v = (4.0 * 255.0 * e).round().clamp(0.0, 255.0) as u8;
+                [v, v, v]
+            }
+        })
+        .collect()
+}
+
+/// The contact sheet: one row per chosen frame; the reference, then per measured technique its
+/// image and its [`difference`]; panels separated by grey lines.
+#[must_use]
+pub fn contact_sheet(report: &Report) -> Image {
+    let (w, h) = report.size;
+    let columns = 1 + 2 * report.sheet.first().map_or(0, |f| f.techniques.len()) as u32;
+    let rows = report.sheet.len().max(1) as u32;
+    let width = columns * w + (columns - 1) * GAP;
+    let height = rows * h + (rows - 1) * GAP;
+    let mut rgba: Vec<u8> = [GAP_GREY, GAP_GREY, GAP_GREY, 255].repeat(width as usize * height as usize);
+    let mut put = |row: u32, column: u32, pixels: &[[u8; 3]]| {
+        let (x0, y0) = (column * (w + GAP), row * (h + GAP));
+        for (i, p) in pixels.iter().enumerate().take(w as usize * h as usize) {
+            let (x, y) = (x0 + i as u32 % w, y0 + i as u32 / w);
+            let at = (y as usize * width as usize + x as usize) * 4;
+            rgba[at..at + 4].copy_from_slice(&[p[0], p[1], p[2], 255]);
+        }
+    };
+    let srgb =
+        |image: &LinearImage| -> Vec<[u8; 3]> { image.pixels.iter().map(|p| p.map(metrics::linear_to_srgb)).collect() };
+    for (row, frame) in report.sheet.iter().enumerate() {
+        let row = row as u32;
+        let (reference, reference_mask) = (&frame.reference.0, &frame.reference.1);
+        put(row, 0, &srgb(reference));
+        for (i, (_, image, mask)) in frame.techniques.iter().enumerate() {
+            let column = 1 + 2 * i as u32;
+            put(row, column, &srgb(image));
+            put(row, column + 1, &difference((reference, reference_mask), (image, mask)));
+        }
+    }
+    Image { width, height, rgba }
+}
+
+#[cfg(test)]
+pub(super) mod tests {
+    use treelod_render::FrameStats;
+
+    use super::super::metrics::MultiScaleRmse;
+    use super::super::path::Pose;
+    use super::super::{Adapter, Report, SheetFrame};
+    use super::*;
+
+    fn row(frame: usize, technique: TechniqueName, tp: u64, noise: Option<f64>) -> Row {
+        Row {
+            frame,
+            technique,
+            stats: FrameStats { triangles: 10, points: 4, ..FrameStats::default() },
+            coverage: Coverage { tp, fp: 1, fn_: 2 },
+            rmse: MultiScaleRmse { levels: vec![0.2, 0.1, 0.0] },
+            noise,
+            reference_noise: noise.map(|n| n / 2.0),
+            prepare_ms: 1.0,
+            gpu_ms: Some(0.5),
+            wall_ms: 3.0,
+        }
+    }
+
+    /// A small report: `spt` measured over two frames, `ellipsoids` absent, one sheet frame.
+    pub(in super::super) fn report() -> Report {
+        let image = LinearImage::filled(3, 2, [0.5; 3]);
+        let mask = Mask { width: 3, height: 2, covered: vec![true, true, false, false, true, false] };
+        let mut other = mask.clone();
+        other.covered = vec![true, false, true, false, true, false];
+        Report {
+            input: "demo.treelod".into(),
+            camera_source: "--views 2".to_owned(),
+            poses: vec![
+                Pose { eye: glam::Vec3::new(0.0, 1.0, 5.0), target: glam::Vec3::ZERO },
+                Pose { eye: glam::Vec3::new(5.0, 1.0, 0.0), target: glam::Vec3::ZERO },
+            ],
+            size: (3, 2),
+            supersample: 2,
+            fov_degrees: 50.0,
+            background: [255, 255, 255],
+            adapter: Adapter {
+                name: "test".to_owned(),
+                backend: "Vulkan".to_owned(),
+                device_type: "Cpu".to_owned(),
+                driver: String::new(),
+            },
+            timestamps: true,
+            techniques: vec![
+                (TechniqueName::Spt, Availability::Measured),
+                (TechniqueName::Ellipsoids, Availability::Absent("this container holds no ellipsoids".to_owned())),
+            ],
+            rows: vec![row(0, TechniqueName::Spt, 5, None), row(1, TechniqueName::Spt, 7, Some(0.1))],
+            sheet: vec![SheetFrame {
+                frame: 0,
+                reference: (image.clone(), mask),
+                techniques: vec![(TechniqueName::Spt, image, other)],
+            }],
+        }
+    }
+
+    #[test]
+    fn the_summary_averages_frames_and_pools_counts() {
+        let s = summarise(&report().rows, TechniqueName::Spt);
+        assert_eq!(s.frames, 2);
+        assert_eq!((s.total.tp, s.total.fp, s.total.fn_, s.total.geometry_bytes), (12, 2, 4, 2 * (240 + 192)));
+        assert!((s.mean.precision - (5.0 / 6.0 + 7.0 / 8.0) / 2.0).abs() < 1e-12);
+        assert!((s.pooled.precision - 12.0 / 14.0).abs() < 1e-12 && (s.pooled.recall - 12.0 / 16.0).abs() < 1e-12);
+        assert_eq!(s.mean.temporal_noise, Some(0.1), "frame 0 has no previous frame");
+        assert_eq!(s.mean.reference_temporal_noise, Some(0.05));
+        assert!((s.mean.rmse - 0.1).abs() < 1e-12 && s.mean.rmse_levels == [0.2, 0.1, 0.0]);
+    }
+
+    #[test]
+    fn text_csv_and_json_hold_every_row_and_the_absent_technique() {
+        let report = report();
+        let text = text(&report, [&Some("e.csv".into()), &None, &None, &None, &None]);
+        assert!(text.contains("technique ellipsoids: absent: this container holds no ellipsoids"), "{text}");
+        assert!(
+            text.contains("wall ms") && text.contains("GPU ms: the render pass from GPU timestamp queries"),
+            "{text}"
+        );
+        assert_eq!(text.lines().filter(|l| l.contains(" spt ")).count(), 3, "two frames and the mean: {text}");
+        assert!(text.ends_with("csv: e.csv\n"), "{text}");
+        let csv = csv(&report);
+        let lines: Vec<&str> = csv.lines().collect();
+        assert_eq!(lines.len(), 3);
+        let columns = lines[0].split(',').count();
+        assert!(lines.iter().all(|l| l.split(',').count() == columns), "{csv}");
+        assert!(lines[0].contains(",rmse_1px,rmse_2px,rmse_4px,") && lines[1].starts_with("0,spt,0,1,5,"), "{csv}");
+        let json: serde_json::Value = serde_json::from_str(&json(&report).expect("encodes")).expect("parses");
+        assert_eq!(json["techniques"][0]["summary"]["frames"], 2);
+        assert_eq!(json["techniques"][1]["status"], "absent");
+        assert!(json["techniques"][1]["summary"].is_null());
+        assert_eq!(json["adapter"]["backend"], "Vulkan");
+        assert_eq!(json["rmse_levels"], 3);
+    }
+
+    #[test]
+    fn the_contact_sheet_shows_reference_image_and_difference() {
+        let report = report();
+        let sheet = contact_sheet(&report);
+        assert_eq!((sheet.width, sheet.height), (3 * 3 + 2 * GAP, 2));
+        // Difference panel: pixel 1 is a false negative (blue), pixel 2 a false positive (red),
+        // pixel 0 equal (black).
+        let diff_x = 2 * (3 + GAP);
+        assert_eq!(sheet.pixel(diff_x, 0), [0, 0, 0, 255]);
+        assert_eq!(sheet.pixel(diff_x + 1, 0), [40, 90, 255, 255]);
+        assert_eq!(sheet.pixel(diff_x + 2, 0), [255, 40, 40, 255]);
+        assert_eq!(sheet.pixel(3, 0), [GAP_GREY, GAP_GREY, GAP_GREY, 255]);
+        assert_eq!(sheet.pixel(0, 0), [188, 188, 188, 255]);
+    }
+}

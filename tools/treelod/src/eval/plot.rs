@@ -1,0 +1,444 @@
+//! The PNG plots of `treelod eval`: quality against primitives drawn per technique, and
+//! per-frame curves along the path. Lines, markers and text are drawn with `embedded-graphics`
+//! (its 6×10 bitmap font needs no font files) into an RGB canvas that becomes a PNG.
+
+use embedded_graphics::mono_font::MonoTextStyle;
+use embedded_graphics::mono_font::ascii::FONT_6X10;
+use embedded_graphics::pixelcolor::Rgb888;
+use embedded_graphics::prelude::*;
+use embedded_graphics::primitives::{Circle, Line, PrimitiveStyle, Rectangle};
+use embedded_graphics::text::{Alignment, Baseline, Text, TextStyleBuilder};
+use treelod_render::offscreen::Image;
+
+use super::{Availability, Report, Row, TechniqueName};
+
+/// Colours of the techniques, in the order they are measured (Tableau 10).
+const PALETTE: [Rgb888; 8] = [
+    Rgb888::new(31, 119, 180),
+    Rgb888::new(255, 127, 14),
+    Rgb888::new(44, 160, 44),
+    Rgb888::new(214, 39, 40),
+    Rgb888::new(148, 103, 189),
+    Rgb888::new(140, 86, 75),
+    Rgb888::new(227, 119, 194),
+    Rgb888::new(127, 127, 127),
+];
+const BLACK: Rgb888 = Rgb888::new(0, 0, 0);
+const GRID: Rgb888 = Rgb888::new(225, 225, 225);
+const REFERENCE: Rgb888 = Rgb888::new(110, 110, 110);
+
+/// An RGB canvas, white when made.
+struct Canvas {
+    width: u32,
+    height: u32,
+    pixels: Vec<Rgb888>,
+}
+
+impl Canvas {
+    fn new(width: u32, height: u32) -> Self {
+        Self { width, height, pixels: vec![Rgb888::WHITE; width as usize * height as usize] }
+    }
+
+    fn into_image(self) -> Image {
+        let rgba = self.pixels.iter().flat_map(|p| [p.r(), p.g(), p.b(), 255]).collect();
+        Image { width: self.width, height: self.height, rgba }
+    }
+}
+
+impl OriginDimensions for Canvas {
+    fn size(&self) -> Size {
+        Size::new(self.width, self.height)
+    }
+}
+
+impl DrawTarget for Canvas {
+    type Color = Rgb888;
+    type Error = core::convert::Infallible;
+
+    fn draw_iter<I>(&mut self, pixels: I) -> Result<(), Self::Error>
+    where
+        I: IntoIterator<Item = Pixel<Self::Color>>,
+    {
+        for Pixel(p, colour) in pixels {
+            if let (Ok(x), Ok(y)) = (u32::try_from(p.x), u32::try_from(p.y))
+                && x < self.width
+                && y < self.height
+            {
+                self.pixels[y as usize * self.width as usize + x as usize] = colour;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Draws `text` at `at` (every drawing into a [`Canvas`] is infallible).
+fn label(canvas: &mut Canvas, text: &str, at: Point, alignment: Alignment, baseline: Baseline, colour: Rgb888) {
+    let style = TextStyleBuilder::new().alignment(alignment).baseline(baseline).build();
+    let Ok(_) = Text::with_text_style(text, at, MonoTextStyle::new(&FONT_6X10, colour), style).draw(canvas);
+}
+
+fn line(canvas: &mut Canvas, from: Point, to: Point, colour: Rgb888, width: u32) {
+    let Ok(()) = Line::new(from, to).into_styled(PrimitiveStyle::with_stroke(colour, width)).draw(canvas);
+}
+
+fn dot(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888) {
+    let Ok(()) = Circle::with_center(centre, diameter).into_styled(PrimitiveStyle::with_fill(colour)).draw(canvas);
+}
+
+/// A value axis: linear or base-10 logarithmic over `[lo, hi]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Axis {
+    lo: f64,
+    hi: f64,
+    log: bool,
+}
+
+impl Axis {
+    /// A linear axis over the values with a little room, widened to at least `min_span`.
+    fn linear(values: impl Iterator<Item = f64>, min_span: f64) -> Self {
+        let (mut lo, mut hi) = min_max(values).unwrap_or((0.0, 1.0));
+        let span = (hi - lo).max(min_span);
+        let middle = 0.5 * (lo + hi);
+        lo = lo.min(middle - 0.5 * span);
+        hi = hi.max(middle + 0.5 * span);
+        let pad = 0.05 * (hi - lo);
+        Self { lo: lo - pad, hi: hi + pad, log: false }
+    }
+
+    /// A logarithmic axis from the power of ten at or below the smallest positive value to the
+    /// one at or above the largest.
+    fn log(values: impl Iterator<Item = f64>) -> Self {
+        let (lo, hi) = min_max(values.filter(|v| *v > 0.0)).unwrap_or((1.0, 10.0));
+        let lo = 10f64.powf(lo.log10().floor());
+        let hi = 10f64.powf(hi.log10().ceil()).max(lo * 10.0);
+        Self { lo, hi, log: true }
+    }
+
+    /// Where `v` falls, 0 at `lo` and 1 at `hi` (non-positive values on a log axis at 0).
+    fn fraction(&self, v: f64) -> f64 {
+        if self.log {
+            if v <= 0.0 {
+                return 0.0;
+            }
+            (v.log10() - self.lo.log10()) / (self.hi.log10() - self.lo.log10())
+        } else {
+            (v - self.lo) / (self.hi - self.lo)
+        }
+    }
+
+    /// The tick values: powers of ten on a log axis, else 1, 2 or 5 times a power of ten apart.
+    fn ticks(&self) -> Vec<f64> {
+        if self.log {
+            let (a, b) = (self.lo.log10().round() as i32, self.hi.log10().round() as i32);
+            return (a..=b).map(|e| 10f64.powi(e)).collect();
+        }
+        let raw = (self.hi - self.lo) / 5.0;
+        let magnitude = 10f64.powf(raw.log10().floor());
+        let step = [1.0, 2.0, 5.0, 10.0].into_iter().map(|m| m * magnitude).find(|s| *s >= raw).unwrap_or(raw);
+        let first = (self.lo / step).ceil() as i64;
+        let last = (self.hi / step).floor() as i64;
+        (first..=last).map(|i| i as f64 * step).collect()
+    }
+
+    /// A tick's text.
+    fn tick_label(&self, v: f64) -> String {
+        if self.log {
+            return compact(v);
+        }
+        let step = self.ticks().windows(2).map(|w| w[1] - w[0]).next().unwrap_or(1.0);
+        let digits = (-step.log10().floor()).max(0.0) as usize;
+        format!("{v:.digits$}")
+    }
+}
+
+/// `1`, `10`, `100`, `1k`, `10k`, `1M`, … for counts.
+fn compact(v: f64) -> String {
+    let (value, suffix) = if v >= 1e9 {
+        (v / 1e9, "G")
+    } else if v >= 1e6 {
+        (v / 1e6, "M")
+    } else if v >= 1e3 {
+        (v / 1e3, "k")
+    } else {
+        (v, "")
+    };
+    let text = format!("{value:.1}");
+    format!("{}{suffix}", text.trim_end_matches('0').trim_end_matches('.'))
+}
+
+fn min_max(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    values.filter(|v| v.is_finite()).fold(None, |acc, v| match acc {
+        None => Some((v, v)),
+        Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
+    })
+}
+
+/// A plot area on a canvas with its two axes.
+struct Panel {
+    area: Rectangle,
+    x: Axis,
+    y: Axis,
+}
+
+impl Panel {
+    fn point(&self, x: f64, y: f64) -> Point {
+        let (left, top) = (self.area.top_left.x, self.area.top_left.y);
+        let (w, h) = (self.area.size.width as f64, self.area.size.height as f64);
+        let fx = self.x.fraction(x).clamp(0.0, 1.0);
+        let fy = self.y.fraction(y).clamp(0.0, 1.0);
+        Point::new(left + (fx * (w - 1.0)).round() as i32, top + ((1.0 - fy) * (h - 1.0)).round() as i32)
+    }
+
+    /// Grid, frame, tick labels, the title above and the x label below.
+    fn draw_axes(&self, canvas: &mut Canvas, title: &str, x_label: Option<&str>) {
+        let (left, top) = (self.area.top_left.x, self.area.top_left.y);
+        let (right, bottom) = (left + self.area.size.width as i32 - 1, top + self.area.size.height as i32 - 1);
+        for v in self.y.ticks() {
+            let y = self.point(self.x.lo, v).y;
+            line(canvas, Point::new(left, y), Point::new(right, y), GRID, 1);
+            let text = self.y.tick_label(v);
+            label(canvas, &text, Point::new(left - 4, y), Alignment::Right, Baseline::Middle, BLACK);
+        }
+        for v in self.x.ticks() {
+            let x = self.point(v, self.y.lo).x;
+            line(canvas, Point::new(x, top), Point::new(x, bottom), GRID, 1);
+            if x_label.is_some() {
+                let text = self.x.tick_label(v);
+                label(canvas, &text, Point::new(x, bottom + 4), Alignment::Center, Baseline::Top, BLACK);
+            }
+        }
+        let Ok(()) = self.area.into_styled(PrimitiveStyle::with_stroke(BLACK, 1)).draw(canvas);
+        label(canvas, title, Point::new(left, top - 4), Alignment::Left, Baseline::Bottom, BLACK);
+        if let Some(text) = x_label {
+            label(
+                canvas,
+                text,
+                Point::new(left + self.area.size.width as i32 / 2, bottom + 18),
+                Alignment::Center,
+                Baseline::Top,
+                BLACK,
+            );
+        }
+    }
+
+    fn polyline(&self, canvas: &mut Canvas, points: &[(f64, f64)], colour: Rgb888, dashed: bool) {
+        for (i, pair) in points.windows(2).enumerate() {
+            if dashed && i % 2 == 1 {
+                continue;
+            }
+            line(canvas, self.point(pair[0].0, pair[0].1), self.point(pair[1].0, pair[1].1), colour, 2);
+        }
+        if points.len() == 1 {
+            dot(canvas, self.point(points[0].0, points[0].1), 5, colour);
+        }
+    }
+}
+
+/// The measured techniques with their colours.
+fn measured(report: &Report) -> Vec<(TechniqueName, Rgb888)> {
+    report
+        .techniques
+        .iter()
+        .filter(|(_, a)| *a == Availability::Measured)
+        .enumerate()
+        .map(|(i, (name, _))| (*name, PALETTE[i % PALETTE.len()]))
+        .collect()
+}
+
+fn rows_of(report: &Report, technique: TechniqueName) -> impl Iterator<Item = &Row> {
+    report.rows.iter().filter(move |r| r.technique == technique)
+}
+
+/// Primitives a frame drew: triangles and points.
+fn primitives(row: &Row) -> f64 {
+    (row.stats.triangles + row.stats.points) as f64
+}
+
+/// A legend box at the top right of `area`.
+fn legend(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, Rgb888)]) {
+    let width = 28 + 6 * entries.iter().map(|(t, _)| t.chars().count()).max().unwrap_or(0) as i32;
+    let height = 6 + 12 * entries.len() as i32;
+    let right = area.top_left.x + area.size.width as i32 - 6;
+    let top = area.top_left.y + 6;
+    let frame = Rectangle::new(Point::new(right - width, top), Size::new(width as u32, height as u32));
+    let Ok(()) = frame.into_styled(PrimitiveStyle::with_fill(Rgb888::WHITE)).draw(canvas);
+    let Ok(()) = frame.into_styled(PrimitiveStyle::with_stroke(GRID, 1)).draw(canvas);
+    for (i, (text, colour)) in entries.iter().enumerate() {
+        let y = top + 9 + 12 * i as i32;
+        line(canvas, Point::new(right - width + 5, y), Point::new(right - width + 19, y), *colour, 2);
+        label(canvas, text, Point::new(right - width + 24, y), Alignment::Left, Baseline::Middle, BLACK);
+    }
+}
+
+/// Quality `Q` against primitives drawn (log scale): a small dot per frame and a large one at
+/// each technique's mean; the better technique sits higher and further left.
+#[must_use]
+pub fn quality_vs_primitives(report: &Report) -> Image {
+    let (width, height) = (720u32, 480u32);
+    let mut canvas = Canvas::new(width, height);
+    let techniques = measured(report);
+    let x = Axis::log(report.rows.iter().map(primitives));
+    let y = Axis::linear(report.rows.iter().map(|r| r.coverage.quality()).chain([1.0]), 0.1);
+    let area = Rectangle::new(Point::new(64, 36), Size::new(width - 64 - 24, height - 36 - 48));
+    let panel = Panel { area, x, y };
+    panel.draw_axes(
+        &mut canvas,
+        "quality Q = 1 - |(1 - P, 1 - R)| against primitives drawn per frame",
+        Some("triangles + points (log)"),
+    );
+    for (name, colour) in &techniques {
+        for row in rows_of(report, *name) {
+            dot(&mut canvas, panel.point(primitives(row), row.coverage.quality()), 5, *colour);
+        }
+        let rows: Vec<&Row> = rows_of(report, *name).collect();
+        if !rows.is_empty() {
+            let n = rows.len() as f64;
+            let mean_x = rows.iter().map(|r| primitives(r)).sum::<f64>() / n;
+            let mean_q = rows.iter().map(|r| r.coverage.quality()).sum::<f64>() / n;
+            let centre = panel.point(mean_x, mean_q);
+            dot(&mut canvas, centre, 13, BLACK);
+            dot(&mut canvas, centre, 9, *colour);
+        }
+    }
+    let entries: Vec<(String, Rgb888)> =
+        techniques.iter().map(|(n, c)| (format!("{} (large: mean)", n.name()), *c)).collect();
+    legend(&mut canvas, &area, &entries);
+    canvas.into_image()
+}
+
+/// Per-frame curves along the path, one panel each: Q, multi-scale RMSE, primitives drawn (log)
+/// and temporal noise (the reference's dashed in grey).
+#[must_use]
+pub fn per_frame(report: &Report) -> Image {
+    let (width, panel_height, gap) = (720u32, 150u32, 44u32);
+    let panels = 4u32;
+    let height = 24 + panels * (panel_height + gap);
+    let mut canvas = Canvas::new(width, height);
+    let techniques = measured(report);
+    let frames = report.poses.len().max(1);
+    let x = Axis { lo: 0.0, hi: (frames - 1).max(1) as f64, log: false };
+    type Metric = fn(&Row) -> Option<f64>;
+    // Per panel: title, value, log axis, and the value a linear axis always shows (Q's best, the
+    // other figures' zero).
+    let metrics: [(&str, Metric, bool, f64); 4] = [
+        ("quality Q", |r| Some(r.coverage.quality()), false, 1.0),
+        ("multi-scale RMSE (linear colour, mean over scales)", |r| Some(r.rmse.summary()), false, 0.0),
+        ("primitives drawn: triangles + points (log)", |r| Some(primitives(r)), true, 0.0),
+        ("temporal noise: multi-scale RMSE against the previous frame", |r| r.noise, false, 0.0),
+    ];
+    for (i, (title, metric, log, anchor)) in metrics.iter().enumerate() {
+        let top = 24 + i as i32 * (panel_height + gap) as i32;
+        let area = Rectangle::new(Point::new(64, top), Size::new(width - 64 - 24, panel_height));
+        let mut values: Vec<f64> = report.rows.iter().filter_map(metric).collect();
+        let noise_panel = i == 3;
+        if noise_panel {
+            values.extend(report.rows.iter().filter_map(|r| r.reference_noise));
+        }
+        let y =
+            if *log { Axis::log(values.into_iter()) } else { Axis::linear(values.into_iter().chain([*anchor]), 1e-3) };
+        let panel = Panel { area, x, y };
+        let last = i + 1 == metrics.len();
+        panel.draw_axes(&mut canvas, title, last.then_some("frame"));
+        if noise_panel {
+            // The reference's noise, once (every technique's rows carry the same figure).
+            if let Some((first, _)) = techniques.first() {
+                let points: Vec<(f64, f64)> =
+                    rows_of(report, *first).filter_map(|r| r.reference_noise.map(|n| (r.frame as f64, n))).collect();
+                panel.polyline(&mut canvas, &points, REFERENCE, true);
+            }
+        }
+        for (name, colour) in &techniques {
+            let points: Vec<(f64, f64)> =
+                rows_of(report, *name).filter_map(|r| metric(r).map(|v| (r.frame as f64, v))).collect();
+            panel.polyline(&mut canvas, &points, *colour, false);
+        }
+        if i == 0 {
+            let entries: Vec<(String, Rgb888)> = techniques.iter().map(|(n, c)| (n.name().to_owned(), *c)).collect();
+            legend(&mut canvas, &area, &entries);
+        }
+        if noise_panel {
+            legend(&mut canvas, &area, &[("reference (full mesh)".to_owned(), REFERENCE)]);
+        }
+    }
+    canvas.into_image()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axes_place_values_and_choose_round_ticks() {
+        let linear = Axis::linear([0.2, 0.9].into_iter(), 0.0);
+        assert!(linear.lo < 0.2 && linear.hi > 0.9);
+        assert!((linear.fraction(linear.lo)).abs() < 1e-12 && (linear.fraction(linear.hi) - 1.0).abs() < 1e-12);
+        let ticks = linear.ticks();
+        assert_eq!(ticks.len(), 4, "{ticks:?}");
+        assert!(ticks.iter().zip([0.2, 0.4, 0.6, 0.8]).all(|(t, e)| (t - e).abs() < 1e-12), "{ticks:?}");
+        assert_eq!(linear.tick_label(0.4), "0.4");
+        let log = Axis::log([30.0, 45_000.0, 0.0].into_iter());
+        assert_eq!((log.lo, log.hi), (10.0, 100_000.0));
+        assert_eq!(log.ticks(), [10.0, 100.0, 1000.0, 10_000.0, 100_000.0]);
+        assert!((log.fraction(1000.0) - 0.5).abs() < 1e-12);
+        assert_eq!(log.tick_label(10_000.0), "10k");
+        assert_eq!(
+            (compact(1.0), compact(2_500_000.0), compact(1e9)),
+            ("1".to_owned(), "2.5M".to_owned(), "1G".to_owned())
+        );
+        // A constant series still spans something.
+        let flat = Axis::linear([0.5, 0.5].into_iter(), 1e-3);
+        assert!(flat.hi > flat.lo);
+    }
+
+    /// The mean x and y of the pixels of `colour`.
+    fn centroid(image: &Image, colour: Rgb888) -> (f64, f64) {
+        let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0);
+        for y in 0..image.height {
+            for x in 0..image.width {
+                if image.pixel(x, y)[..3] == [colour.r(), colour.g(), colour.b()] {
+                    (sx, sy, n) = (sx + f64::from(x), sy + f64::from(y), n + 1.0);
+                }
+            }
+        }
+        assert!(n > 0.0, "no pixel of {colour:?}");
+        (sx / n, sy / n)
+    }
+
+    #[test]
+    fn the_quality_plot_puts_fewer_primitives_left_and_better_quality_higher() {
+        let mut report = super::super::output::tests::report();
+        report.techniques =
+            vec![(TechniqueName::Full, Availability::Measured), (TechniqueName::Spt, Availability::Measured)];
+        let mut rows = Vec::new();
+        for frame in 0..2 {
+            let mut full = report.rows[frame].clone();
+            full.technique = TechniqueName::Full;
+            full.stats.triangles = 100_000;
+            full.coverage = super::super::metrics::Coverage { tp: 100, fp: 0, fn_: 0 };
+            let mut spt = report.rows[frame].clone();
+            spt.stats.triangles = 500;
+            spt.coverage = super::super::metrics::Coverage { tp: 80, fp: 20, fn_: 20 };
+            rows.extend([full, spt]);
+        }
+        report.rows = rows;
+        let plot = quality_vs_primitives(&report);
+        let (full, spt) = (centroid(&plot, PALETTE[0]), centroid(&plot, PALETTE[1]));
+        assert!(spt.0 < full.0 - 200.0, "fewer primitives to the left: {spt:?} {full:?}");
+        assert!(full.1 < spt.1 - 100.0, "higher Q higher up: {spt:?} {full:?}");
+        let frames = per_frame(&report);
+        assert_eq!((frames.width, frames.height), (720, 800));
+        centroid(&frames, PALETTE[0]);
+        centroid(&frames, PALETTE[1]);
+        centroid(&frames, REFERENCE);
+    }
+
+    #[test]
+    fn the_canvas_clips_what_falls_outside() {
+        let mut canvas = Canvas::new(4, 3);
+        line(&mut canvas, Point::new(-5, 1), Point::new(10, 1), BLACK, 1);
+        let image = canvas.into_image();
+        assert_eq!((image.width, image.height), (4, 3));
+        assert!((0..4).all(|x| image.pixel(x, 1) == [0, 0, 0, 255]));
+        assert_eq!(image.pixel(0, 0), [255, 255, 255, 255]);
+    }
+}

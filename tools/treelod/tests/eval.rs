@@ -1,0 +1,290 @@
+//! End-to-end tests of `treelod eval` on the built-in demo tree, rendered with Vulkan (Mesa's
+//! lavapipe on machines without a GPU: `mesa-vulkan-drivers`). Without an adapter these tests
+//! fail; they do not skip.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// A fresh scratch directory for one test.
+fn scratch(test: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("treelod-eval").join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch directory");
+    dir
+}
+
+/// Runs the binary with `args`.
+fn run<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).env("NODEVICE_SELECT", "1").output().expect("runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).expect("UTF-8")
+}
+
+/// A demo container (500 leaf quads) built once per test process by the binary and shared by the
+/// tests (per process: nextest runs each test in its own, and a shared directory would be removed
+/// by one test while another reads it).
+fn demo() -> &'static Path {
+    static DEMO: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DEMO.get_or_init(|| {
+        let path = scratch(&format!("shared-demo-{}", std::process::id())).join("demo.treelod");
+        let out = run(["demo".as_ref(), "--leaf-count".as_ref(), "500".as_ref(), "-o".as_ref(), path.as_os_str()]);
+        assert!(out.status.success(), "demo: {}", text(&out.stderr));
+        path
+    })
+}
+
+/// Runs `treelod eval DEMO ARGS…` at 128×96 with supersample 2; asserts success, returns stdout.
+fn eval_ok(extra: &[&std::ffi::OsStr]) -> String {
+    let mut args: Vec<&std::ffi::OsStr> = vec![
+        "eval".as_ref(),
+        demo().as_os_str(),
+        "--size".as_ref(),
+        "128x96".as_ref(),
+        "--supersample".as_ref(),
+        "2".as_ref(),
+    ];
+    args.extend_from_slice(extra);
+    let out = run(&args);
+    let err = text(&out.stderr);
+    assert!(
+        out.status.success(),
+        "eval {extra:?} failed (a Vulkan adapter is required: install mesa-vulkan-drivers): {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    text(&out.stdout)
+}
+
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).expect("the JSON was written")).expect("the JSON parses")
+}
+
+/// The CSV as a header and rows of named fields.
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let csv = std::fs::read_to_string(path).expect("the CSV was written");
+    let mut lines = csv.lines();
+    let header: Vec<String> = lines.next().expect("a header").split(',').map(str::to_owned).collect();
+    let rows: Vec<Vec<String>> = lines.map(|l| l.split(',').map(str::to_owned).collect()).collect();
+    for row in &rows {
+        assert_eq!(row.len(), header.len(), "{row:?}");
+    }
+    (header, rows)
+}
+
+/// The value of `column` in `row` as a number.
+fn field(header: &[String], row: &[String], column: &str) -> f64 {
+    let i = header.iter().position(|h| h == column).unwrap_or_else(|| panic!("no column {column}"));
+    row[i].parse().unwrap_or_else(|_| panic!("{column} = {:?} is not a number", row[i]))
+}
+
+fn technique<'a>(json: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    json["techniques"].as_array().expect("techniques").iter().find(|t| t["name"] == name).expect("the technique")
+}
+
+#[test]
+fn the_full_mesh_against_the_reference_is_exactly_perfect() {
+    let dir = scratch("full");
+    let (csv, json) = (dir.join("full.csv"), dir.join("full.json"));
+    let stdout = eval_ok(&[
+        "--technique".as_ref(),
+        "full".as_ref(),
+        "--views".as_ref(),
+        "2".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
+    assert!(stdout.contains("2 frame(s) (--views 2), 128x96; reference: the full mesh drawn at 256x192"), "{stdout}");
+    assert!(stdout.contains("(Vulkan, "), "rendered with Vulkan: {stdout}");
+    let json = read_json(&json);
+    assert_eq!(json["adapter"]["backend"], "Vulkan");
+    let full = technique(&json, "full");
+    assert_eq!(full["status"], "measured");
+    let summary = &full["summary"];
+    assert_eq!(summary["frames"], 2);
+    for key in ["precision", "recall", "q"] {
+        assert_eq!(summary["mean"][key], 1.0, "{key}: {summary}");
+        assert_eq!(summary["pooled"][key], 1.0, "{key}: {summary}");
+    }
+    assert_eq!(summary["mean"]["rmse"], 0.0, "{summary}");
+    let levels = summary["mean"]["rmse_levels"].as_array().expect("levels");
+    assert_eq!(levels.len(), 8, "128 pixels: 1, 2, 4, … 128-pixel blocks");
+    assert!(levels.iter().all(|l| *l == 0.0), "{levels:?}");
+    assert_eq!((summary["total"]["fp"].as_u64(), summary["total"]["fn"].as_u64()), (Some(0), Some(0)));
+    assert!(summary["total"]["tp"].as_u64().is_some_and(|tp| tp > 100), "the tree covers pixels: {summary}");
+    assert!(summary["mean"]["triangles"].as_f64().is_some_and(|t| t > 1000.0), "{summary}");
+    assert_eq!(summary["mean"]["points"], 0.0, "the full mesh draws no point");
+    // The full technique is drawn as the reference is, so its temporal noise is the reference's.
+    assert_eq!(summary["mean"]["temporal_noise"], summary["mean"]["reference_temporal_noise"]);
+
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 2);
+    for row in &rows {
+        assert_eq!(row[1], "full");
+        for column in ["precision", "recall", "q"] {
+            assert_eq!(field(&header, row, column), 1.0, "{column}");
+        }
+        for column in ["rmse", "rmse_1px", "rmse_128px", "fp", "fn"] {
+            assert_eq!(field(&header, row, column), 0.0, "{column}");
+        }
+    }
+}
+
+#[test]
+fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
+    let dir = scratch("spt");
+    let (csv, json, sheet) = (dir.join("spt.csv"), dir.join("spt.json"), dir.join("spt.png"));
+    let (quality_plot, frame_plot) = (dir.join("quality.png"), dir.join("frames.png"));
+    let stdout = eval_ok(&[
+        "--technique".as_ref(),
+        "spt,ellipsoids,policy".as_ref(),
+        "--views".as_ref(),
+        "2".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+        "--sheet".as_ref(),
+        sheet.as_os_str(),
+        "--quality-plot".as_ref(),
+        quality_plot.as_os_str(),
+        "--frame-plot".as_ref(),
+        frame_plot.as_os_str(),
+    ]);
+    assert!(stdout.contains("technique ellipsoids: absent: this container holds no ellipsoids or lines"), "{stdout}");
+    assert!(stdout.contains("technique policy: not implemented yet: "), "{stdout}");
+    let table: Vec<&str> = stdout.lines().filter(|l| l.contains(" spt ")).collect();
+    assert_eq!(table.len(), 3, "two frames and the mean: {stdout}");
+    assert!(table[2].trim_start().starts_with("mean"), "{stdout}");
+
+    let json = read_json(&json);
+    assert_eq!(technique(&json, "ellipsoids")["status"], "absent");
+    assert_eq!(technique(&json, "policy")["status"], "not implemented yet");
+    assert!(technique(&json, "ellipsoids")["summary"].is_null());
+    let spt = &technique(&json, "spt")["summary"];
+    for key in ["precision", "recall", "q"] {
+        let v = spt["mean"][key].as_f64().expect("a number");
+        assert!(v > 0.5 && v <= 1.0, "{key} = {v}: {spt}");
+    }
+    let rmse = spt["mean"]["rmse"].as_f64().expect("a number");
+    assert!(rmse > 0.0 && rmse < 0.2, "{spt}");
+    assert!(spt["mean"]["points"].as_f64().is_some_and(|p| p > 0.0), "spt draws points: {spt}");
+    assert!(spt["mean"]["temporal_noise"].as_f64().is_some() && spt["mean"]["wall_ms"].as_f64().is_some());
+
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 2);
+    for row in &rows {
+        assert_eq!(row[1], "spt");
+        assert!(field(&header, row, "precision") > 0.5 && field(&header, row, "recall") > 0.5, "{row:?}");
+        let (tp, fp, fn_) = (field(&header, row, "tp"), field(&header, row, "fp"), field(&header, row, "fn"));
+        assert!((field(&header, row, "precision") - tp / (tp + fp)).abs() < 1e-12);
+        assert!((field(&header, row, "recall") - tp / (tp + fn_)).abs() < 1e-12);
+        assert!(field(&header, row, "geometry_bytes") > 0.0 && field(&header, row, "wall_ms") > 0.0);
+    }
+    assert_eq!(rows[0][header.iter().position(|h| h == "temporal_noise").expect("column")], "", "no frame before 0");
+    assert!(field(&header, &rows[1], "temporal_noise") > 0.0);
+
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&sheet).expect("the sheet")));
+    let info = decoder.read_info().expect("a PNG").info().clone();
+    assert_eq!((info.width, info.height), (3 * 128 + 2 * 2, 2 * 96 + 2), "reference | spt | difference, two frames");
+
+    // The plots: the first measured technique's colour (spt, blue) marks its frames and mean.
+    for (plot, size) in [(&quality_plot, (720, 480)), (&frame_plot, (720, 800))] {
+        let (width, height, pixels) = read_rgba(plot);
+        assert_eq!((width, height), size, "{}", plot.display());
+        let blue = pixels.iter().filter(|p| p[..3] == [31, 119, 180]).count();
+        assert!(blue > 50, "{}: {blue} pixels of the technique's colour", plot.display());
+    }
+    assert!(stdout.contains("quality plot: ") && stdout.contains("frame plot: "), "{stdout}");
+    // GPU time is a number where the adapter has timestamp queries, and said to be absent otherwise.
+    let timed = json["timing"].as_str().expect("timing").contains("from GPU timestamp queries");
+    assert_eq!(spt["mean"]["gpu_ms"].is_number(), timed, "{spt}");
+}
+
+/// Decodes an 8-bit RGBA PNG: `(width, height, pixels)`.
+fn read_rgba(path: &Path) -> (u32, u32, Vec<[u8; 4]>) {
+    let file = std::io::BufReader::new(std::fs::File::open(path).expect("the PNG exists"));
+    let mut reader = png::Decoder::new(file).read_info().expect("a PNG");
+    let mut buffer = vec![0; reader.output_buffer_size().expect("fits in memory")];
+    let info = reader.next_frame(&mut buffer).expect("decodes");
+    assert_eq!((info.color_type, info.bit_depth), (png::ColorType::Rgba, png::BitDepth::Eight));
+    let pixels = buffer[..info.buffer_size()].chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
+    (info.width, info.height, pixels)
+}
+
+#[test]
+fn a_path_file_drives_the_camera_and_a_still_camera_has_no_temporal_noise() {
+    let dir = scratch("path");
+    let path = dir.join("path.json");
+    let frame = r#"{"eye": [4.0, 3.0, 12.0], "target": [0.0, 2.5, 0.0]}"#;
+    std::fs::write(&path, format!("[{frame},\n {frame}]")).expect("writes");
+    let json = dir.join("path-summary.json");
+    let stdout = eval_ok(&[
+        "--technique".as_ref(),
+        "full-1x,spt".as_ref(),
+        "--path".as_ref(),
+        path.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
+    assert!(stdout.contains("2 frame(s) (--path "), "{stdout}");
+    let json = read_json(&json);
+    assert_eq!(json["poses"][1]["eye"], serde_json::json!([4.0, 3.0, 12.0]));
+    for name in ["full-1x", "spt"] {
+        let mean = &technique(&json, name)["summary"]["mean"];
+        assert_eq!(mean["temporal_noise"], 0.0, "{name}: {mean}");
+        assert_eq!(mean["reference_temporal_noise"], 0.0, "{name}: {mean}");
+    }
+}
+
+#[test]
+fn bad_input_fails_with_a_message_naming_the_file() {
+    let dir = scratch("bad");
+    let fails = |args: &[&std::ffi::OsStr], code: i32, expected: &str| {
+        let out = run(args);
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        let last = err.lines().last().unwrap_or_default();
+        assert!(last.starts_with(expected), "{args:?}: expected {expected:?}, got {err}");
+        text(&out.stdout)
+    };
+    let missing = dir.join("missing.treelod");
+    fails(&["eval".as_ref(), missing.as_os_str()], 5, &format!("error: {}: No such file", missing.display()));
+    let garbage = dir.join("garbage.treelod");
+    std::fs::write(&garbage, b"not a container at all").expect("writes");
+    fails(&["eval".as_ref(), garbage.as_os_str()], 3, &format!("error: {}: not a .treelod file", garbage.display()));
+    let scene = dir.join("scene.json");
+    std::fs::write(&scene, r#"{"version": 1, "models": ["nowhere.treelod"], "instances": []}"#).expect("writes");
+    fails(&["eval".as_ref(), scene.as_os_str()], 5, &format!("error: {}: model 0: ", scene.display()));
+    let path = dir.join("path.json");
+    std::fs::write(&path, r#"[{"eye": [0, 0, 1]}]"#).expect("writes");
+    fails(
+        &["eval".as_ref(), demo().as_os_str(), "--path".as_ref(), path.as_os_str()],
+        3,
+        &format!("error: {}: line 1, column 19: missing field `target`", path.display()),
+    );
+    fails(&["eval".as_ref(), demo().as_os_str(), "--technique".as_ref(), "nonsense".as_ref()], 2, "");
+    fails(
+        &["eval".as_ref(), demo().as_os_str(), "--views".as_ref(), "2".as_ref(), "--orbit".as_ref(), "2".as_ref()],
+        2,
+        "",
+    );
+    // Only techniques that do not exist yet: they are reported, and nothing can be measured.
+    let stdout = fails(
+        &["eval".as_ref(), demo().as_os_str(), "--technique".as_ref(), "impostors,prune-cook".as_ref()],
+        4,
+        &format!("error: {}: none of the techniques asked for can be measured", demo().display()),
+    );
+    assert_eq!(
+        stdout,
+        "technique impostors: absent: this container holds no impostor planes\n\
+         technique prune-cook: absent: this container holds no pruning priority lists\n"
+    );
+}
