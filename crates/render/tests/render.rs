@@ -82,11 +82,14 @@ fn lod_covers_the_pixels_of_the_full_mesh_at_every_distance() {
         rows.push((distance, precision, recall));
         drawn.push(stats.triangles + stats.points);
     }
-    // Close up the LoD is the mesh. Farther away the splats keep the canopy's density (recall) and
-    // over-cover a little where leaves of a cluster overlap (precision). Measured on lavapipe:
-    // 0.985/0.990 at 15 m, 0.866/0.981 at 45 m, 0.667/0.970 at 120 m (a 14-pixel-tall tree).
+    // Close up the LoD is the mesh. Farther away splats stand for leaves with the area they cover
+    // on screen on average (half a flat leaf's, and overlapping leaves once). Measured on lavapipe:
+    // 0.993/0.986 at 15 m, 0.876/0.962 at 45 m, 0.860/0.747 at 120 m (a 14-pixel-tall tree). The
+    // reference here is the full mesh at the same resolution, which itself under-covers sub-pixel
+    // leaves: against a supersampled reference (`treelod eval`) recall at that size is 0.81, the
+    // full mesh's own 0.88.
     for (distance, precision, recall) in rows {
-        let (p_min, r_min) = if distance < 30.0 { (0.95, 0.95) } else { (0.6, 0.9) };
+        let (p_min, r_min) = if distance < 30.0 { (0.95, 0.95) } else { (0.75, 0.7) };
         assert!(precision >= p_min && recall >= r_min, "at {distance} m: precision {precision}, recall {recall}");
     }
     assert!(drawn[2] < drawn[0], "fewer primitives far away: {drawn:?}");
@@ -249,8 +252,10 @@ fn streaming_with_a_tiny_budget_shows_coarser_data_never_holes_and_converges() {
     }
     // The selection needs about 1 MB: at 48 KiB a frame, many frames are clamped.
     assert!(frames > 10, "{frames} frames");
-    // Clamped frames draw coarser data over the same canopy: no holes open.
-    assert!(worst_recall > 0.9, "a clamped frame covers {worst_recall:.3} of the full image's pixels");
+    // Clamped frames draw coarser data over the same canopy: no holes open. Coarse points carry the
+    // expected coverage of their leaves, so the canopy is thinner until the finer data arrives
+    // (0.745 of the pixels at worst, measured on lavapipe), never empty.
+    assert!(worst_recall > 0.7, "a clamped frame covers {worst_recall:.3} of the full image's pixels");
     eprintln!("converged after {frames} frames; worst recall {worst_recall:.3}");
 }
 
