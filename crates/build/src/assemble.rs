@@ -34,6 +34,31 @@ pub struct BuildConfig {
     pub classify: ClassifyOptions,
 }
 
+/// The build settings a build with `config` records in the container's metadata (spec §7.1), sorted
+/// by key: `grid` (the grid used, `X,Y,Z`), `grid.auto`, `points.cluster_max` and, when given,
+/// `classify.leaves` and `classify.bark`. `grid` is the grid chosen for the block, which is
+/// `config.grid` when that is set.
+///
+/// A tool that wants to know whether a container was built with `config` compares its settings with
+/// these, taking `grid` from the container when `config.grid` is `None` (the automatic grid depends
+/// only on the sources, which it compares by content hash).
+#[must_use]
+pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
+    let mut settings = vec![
+        Setting { key: "grid".into(), value: format!("{},{},{}", grid[0], grid[1], grid[2]) },
+        Setting { key: "grid.auto".into(), value: config.grid.is_none().to_string() },
+        Setting { key: "points.cluster_max".into(), value: config.gilet.cluster_max.max(2).to_string() },
+    ];
+    if !config.classify.leaves.is_empty() {
+        settings.push(Setting { key: "classify.leaves".into(), value: config.classify.leaves.join(" ") });
+    }
+    if !config.classify.bark.is_empty() {
+        settings.push(Setting { key: "classify.bark".into(), value: config.classify.bark.join(" ") });
+    }
+    settings.sort();
+    settings
+}
+
 /// A scene placed in the block.
 #[derive(Clone, Copy, Debug)]
 pub struct Placed<'a> {
@@ -391,18 +416,7 @@ pub fn build_block(
             bounds_max: tmax.to_array(),
         });
     }
-    let mut settings = vec![
-        Setting { key: "grid".into(), value: format!("{},{},{}", grid[0], grid[1], grid[2]) },
-        Setting { key: "grid.auto".into(), value: config.grid.is_none().to_string() },
-        Setting { key: "points.cluster_max".into(), value: config.gilet.cluster_max.max(2).to_string() },
-    ];
-    if !config.classify.leaves.is_empty() {
-        settings.push(Setting { key: "classify.leaves".into(), value: config.classify.leaves.join(" ") });
-    }
-    if !config.classify.bark.is_empty() {
-        settings.push(Setting { key: "classify.bark".into(), value: config.classify.bark.join(" ") });
-    }
-    settings.sort();
+    let settings = recorded_settings(config, grid);
 
     stats.vertices = out_vertices.len() as u64;
     stats.triangles = triangles.len() as u64;

@@ -25,6 +25,13 @@ pub fn scene_name(path: &Path) -> String {
     path.file_stem().map_or_else(|| "tree".to_owned(), |s| s.to_string_lossy().into_owned())
 }
 
+/// The content hash an import records for a source file of these bytes (spec §7.1
+/// `Source::content_hash`): `"sha256:<lowercase hex>"`.
+#[must_use]
+pub fn content_hash(bytes: &[u8]) -> String {
+    format!("sha256:{}", hex(&sha2::Sha256::digest(bytes)))
+}
+
 /// Reads the glTF (`.glb` or `.gltf`) at `path`.
 ///
 /// # Errors
@@ -64,7 +71,7 @@ pub fn import_gltf_bytes(bytes: &[u8], path: &Path, base_dir: Option<&Path>) -> 
         name: scene_name(path),
         source: SourceInfo {
             path: path.to_string_lossy().replace('\\', "/"),
-            content_hash: format!("sha256:{}", hex(&sha2::Sha256::digest(bytes))),
+            content_hash: content_hash(bytes),
             byte_length: bytes.len() as u64,
             unit_scale: 1.0,
         },

@@ -16,9 +16,9 @@ pub mod scene;
 pub mod spt;
 pub mod texture;
 
-pub use assemble::{BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block};
+pub use assemble::{BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, recorded_settings};
 pub use demo::{DemoTreeConfig, demo_tree};
 pub use error::BuildError;
-pub use import::{import_gltf, import_gltf_bytes, scene_name};
+pub use import::{content_hash, import_gltf, import_gltf_bytes, scene_name};
 pub use rng::SplitMix64;
 pub use spt::{FlattenError, Spt, SptNode, flatten};

@@ -32,4 +32,4 @@ pub use reader::{
 };
 pub use records::*;
 pub use verify::{SptSummary, VerifyReport, check_point_cut, check_spt, triangle_leaf_sizes, verify};
-pub use writer::{Compression, ContainerData, write_atomically};
+pub use writer::{Compression, ContainerData, temporary_target, write_atomically};

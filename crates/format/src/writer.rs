@@ -301,19 +301,46 @@ fn zeros(sink: &mut impl std::io::Write, count: u64) -> std::io::Result<()> {
     std::io::copy(&mut std::io::repeat(0).take(count), sink).map(|_| ())
 }
 
-/// A temporary file in `path`'s directory, to be renamed over `path`.
+/// Longest file name (bytes) whose temporary files are named after it; longer names would make the
+/// temporary name exceed the 255-byte limit of common file systems.
+const MAX_NAMED_TEMPORARY: usize = 200;
+
+/// Length of the random part of a temporary file's name.
+const TEMPORARY_RANDOM_CHARS: usize = 6;
+
+/// A temporary file in `path`'s directory, to be renamed over `path`: `.<file name>.<random>.tmp`
+/// (see [`temporary_target`]), or `.treelod-<random>.tmp` for a file name that is very long or not
+/// valid UTF-8.
 fn temporary_beside(path: &Path) -> Result<tempfile::NamedTempFile> {
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
+    let prefix = match path.file_name().and_then(|n| n.to_str()) {
+        Some(name) if name.len() <= MAX_NAMED_TEMPORARY => format!(".{name}."),
+        _ => ".treelod-".to_owned(),
+    };
     let mut builder = tempfile::Builder::new();
-    builder.prefix(".treelod-").suffix(".tmp");
+    builder.prefix(&prefix).suffix(".tmp").rand_bytes(TEMPORARY_RANDOM_CHARS);
     // A temporary file is created 0600; the renamed result must get the mode any new file gets
     // (0666 less the umask), as a plain `File::create` would give it.
     #[cfg(unix)]
     builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
     builder.tempfile_in(dir).map_err(|source| Error::Io { path: path.to_owned(), source })
+}
+
+/// The file name a temporary file of [`ContainerData::write_to_path`] or [`write_atomically`] was
+/// to be renamed to, if `file_name` is one: `.tree.treelod.Ab12Cd.tmp` gives `tree.treelod`.
+///
+/// A process killed while writing leaves its temporary file behind (the target is untouched); this
+/// lets a later run recognise such leftovers by the file they were for and remove them. The random
+/// part is six ASCII letters and digits.
+#[must_use]
+pub fn temporary_target(file_name: &str) -> Option<&str> {
+    let inner = file_name.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let (target, random) = inner.rsplit_once('.')?;
+    let random_ok = random.len() == TEMPORARY_RANDOM_CHARS && random.bytes().all(|b| b.is_ascii_alphanumeric());
+    (random_ok && !target.is_empty()).then_some(target)
 }
 
 /// Writes `bytes` to `path` through a temporary file and a rename, so readers see the old file or
@@ -344,4 +371,32 @@ fn align(offset: u64) -> u64 {
 
 fn bytes_of<T: Pod>(records: &[T]) -> Cow<'_, [u8]> {
     Cow::Borrowed(bytemuck::cast_slice(records))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{temporary_beside, temporary_target};
+
+    #[test]
+    fn temporary_files_are_named_after_their_target() {
+        let dir = tempfile::tempdir().unwrap();
+        let tmp = temporary_beside(&dir.path().join("tree.treelod")).unwrap();
+        let name = tmp.path().file_name().unwrap().to_str().unwrap().to_owned();
+        assert!(name.starts_with(".tree.treelod.") && name.ends_with(".tmp"), "{name}");
+        assert_eq!(temporary_target(&name), Some("tree.treelod"));
+        let long = "x".repeat(240);
+        let tmp = temporary_beside(&dir.path().join(&long)).unwrap();
+        let name = tmp.path().file_name().unwrap().to_str().unwrap().to_owned();
+        assert!(name.starts_with(".treelod-"), "a long name falls back to a short prefix: {name}");
+    }
+
+    #[test]
+    fn only_temporary_names_have_a_target() {
+        assert_eq!(temporary_target(".a.b.treelod.X1y2Z3.tmp"), Some("a.b.treelod"));
+        let not_temporary =
+            ["tree.treelod", ".tree.treelod", ".tree.treelod.tmp", "..Ab12Cd.tmp", ".tree.treelod.a-b_cd.tmp", "x.tmp"];
+        for name in not_temporary {
+            assert_eq!(temporary_target(name), None, "{name}");
+        }
+    }
 }

@@ -6,7 +6,7 @@ use std::time::Instant;
 use glam::Vec3;
 use treelod_build::scene::Scene;
 use treelod_build::{BuildConfig, BuildOutput, BuildStats, Placed, build_block};
-use treelod_format::{Compression, Container, ErrorClass};
+use treelod_format::{Compression, Container, ErrorClass, Setting};
 
 use crate::report::{self, Failed};
 
@@ -43,7 +43,8 @@ pub struct BuildOptions {
 }
 
 impl BuildOptions {
-    fn config(&self) -> BuildConfig {
+    /// The build crate's configuration of these options.
+    pub(crate) fn config(&self) -> BuildConfig {
         BuildConfig {
             grid: self.grid,
             gilet: treelod_build::gilet::GiletConfig { cluster_max: self.cluster_max as usize },
@@ -51,12 +52,38 @@ impl BuildOptions {
         }
     }
 
-    fn compression(&self) -> Compression {
+    /// How sections are stored.
+    pub(crate) fn compression(&self) -> Compression {
         if self.compression == "none" { Compression::None } else { Compression::Zstd { level: self.level } }
+    }
+
+    /// The `compression` setting recorded in the metadata: `zstd:LEVEL` or `none`.
+    fn compression_setting(&self) -> Setting {
+        let value = match self.compression() {
+            Compression::None => "none".to_owned(),
+            Compression::Zstd { level } => format!("zstd:{level}"),
+        };
+        Setting { key: "compression".into(), value }
+    }
+
+    /// Every setting a container built with these options records (spec §7.1), sorted by key: the
+    /// build crate's ([`treelod_build::recorded_settings`]) and `compression`. `grid` is the grid
+    /// the block was built with.
+    pub(crate) fn recorded_settings(&self, grid: [u32; 3]) -> Vec<Setting> {
+        let mut settings = treelod_build::recorded_settings(&self.config(), grid);
+        settings.push(self.compression_setting());
+        settings.sort();
+        settings
     }
 }
 
-fn parse_grid(s: &str) -> Result<[u32; 3], String> {
+/// The `generator` recorded in the metadata of every container this tool writes.
+pub(crate) fn generator() -> String {
+    format!("treelod {}", env!("CARGO_PKG_VERSION"))
+}
+
+/// Parses `X,Y,Z`, each in 1..=256 (the `--grid` option and the recorded `grid` setting).
+pub(crate) fn parse_grid(s: &str) -> Result<[u32; 3], String> {
     let parts: Vec<&str> = s.split(',').collect();
     let [x, y, z] = parts.as_slice() else {
         return Err(format!("expected X,Y,Z (three numbers), got {s:?}"));
@@ -198,9 +225,7 @@ pub fn run_demo(args: &DemoArgs) -> Result<(), Failed> {
     Ok(())
 }
 
-/// Builds, writes atomically, reopens and verifies one container, then prints its summary. The
-/// scenes are dropped once built and the built arrays once written, before verification reads the
-/// file back, so the stages do not hold each other's memory.
+/// Builds, writes atomically, reopens and verifies one container, then prints its summary.
 fn build_one(
     name: &str,
     scenes: Vec<(Scene, Vec3)>,
@@ -208,75 +233,98 @@ fn build_one(
     output: &Path,
     options: &BuildOptions,
 ) -> Result<(), Failed> {
+    let built = build_container(name, scenes, sources, output, options)?;
+    let summary = Summary { output, sources, built: &built };
+    report::write_stdout(&if options.json { summary.to_json() } else { summary.to_text() })
+}
+
+/// What [`build_container`] built.
+pub(crate) struct Built {
+    /// Counts of the build.
+    pub stats: BuildStats,
+    /// Warnings of the import and the build (already printed to stderr).
+    pub warnings: Vec<String>,
+    /// Materials written.
+    pub materials: usize,
+    /// Images written.
+    pub images: usize,
+    /// Size of the written file.
+    pub file_bytes: u64,
+    /// Total size of the source files.
+    pub source_bytes: u64,
+    /// Wall-clock seconds from build to verification.
+    pub seconds: f64,
+    /// Whether the written file was fully verified (not with `--no-verify`).
+    pub verified: bool,
+}
+
+/// Builds one container, writes it atomically (temporary file, then rename), reopens and verifies
+/// it unless `--no-verify`, and returns what was built; prints warnings and errors (naming the
+/// first source, or `output` without one) to stderr, nothing to stdout. The metadata records the
+/// tool as generator and [`BuildOptions::recorded_settings`].
+///
+/// The scenes are dropped once built and the built arrays once written, before verification reads
+/// the file back, so the stages do not hold each other's memory.
+pub(crate) fn build_container(
+    name: &str,
+    scenes: Vec<(Scene, Vec3)>,
+    sources: &[&Path],
+    output: &Path,
+    options: &BuildOptions,
+) -> Result<Built, Failed> {
     let start = Instant::now();
     let source_label = sources.first().copied().unwrap_or(output);
     let placed: Vec<Placed<'_>> =
         scenes.iter().map(|(scene, translation)| Placed { scene, translation: *translation }).collect();
-    let built = build_block(name, &placed, &options.config(), &format!("treelod {}", env!("CARGO_PKG_VERSION")))
-        .map_err(|e| report::build_error(source_label, &e));
+    let built =
+        build_block(name, &placed, &options.config(), &generator()).map_err(|e| report::build_error(source_label, &e));
     drop(placed);
     drop(scenes);
-    let BuildOutput { data, stats, warnings } = built?;
+    let BuildOutput { mut data, stats, warnings } = built?;
     for warning in &warnings {
         report::print_warning(source_label, warning);
     }
+    data.metadata.settings.push(options.compression_setting());
+    data.metadata.settings.sort();
     let file_bytes = data.write_to_path(output, options.compression()).map_err(|e| report::file_error(output, &e))?;
     let (materials, images) = (data.materials.len(), data.images.len());
     drop(data);
     let verified = if options.no_verify {
-        None
+        false
     } else {
         let container = Container::open(output).map_err(|e| report::file_error(output, &e))?;
-        Some(treelod_format::verify(&container).map_err(|e| report::file_error(output, &e))?)
+        treelod_format::verify(&container).map_err(|e| report::file_error(output, &e))?;
+        true
     };
     let seconds = start.elapsed().as_secs_f64();
     let source_bytes: u64 = sources.iter().filter_map(|p| std::fs::metadata(p).ok()).map(|m| m.len()).sum();
-    let summary = Summary {
-        output,
-        sources,
-        stats: &stats,
-        warnings: &warnings,
-        materials,
-        images,
-        file_bytes,
-        source_bytes,
-        seconds,
-        verified: verified.is_some(),
-    };
-    report::write_stdout(&if options.json { summary.to_json() } else { summary.to_text() })
+    Ok(Built { stats, warnings, materials, images, file_bytes, source_bytes, seconds, verified })
 }
 
 /// What a finished build prints.
 struct Summary<'a> {
     output: &'a Path,
     sources: &'a [&'a Path],
-    stats: &'a BuildStats,
-    warnings: &'a [String],
-    materials: usize,
-    images: usize,
-    file_bytes: u64,
-    source_bytes: u64,
-    seconds: f64,
-    verified: bool,
+    built: &'a Built,
 }
 
 impl Summary<'_> {
     fn to_text(&self) -> String {
-        let s = self.stats;
+        let s = &self.built.stats;
         let from = if self.sources.is_empty() {
             "the built-in demo tree".to_owned()
         } else {
             self.sources.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
         };
-        let ratio = if self.source_bytes > 0 {
-            format!(" ({:.2}x the source)", self.file_bytes as f64 / self.source_bytes as f64)
+        let ratio = if self.built.source_bytes > 0 {
+            format!(" ({:.2}x the source)", self.built.file_bytes as f64 / self.built.source_bytes as f64)
         } else {
             String::new()
         };
         format!(
             "{}: built from {from} in {:.2} s\n  triangles in  {} (leaf {}, bark {}; dropped {})\n  written       {} vertices, {} triangles, {} points, {} material(s), {} image(s)\n  grid          {}x{}x{}, {} of {} cells non-empty\n  file          {} bytes{ratio}\n  verify        {}\n",
             self.output.display(),
-            self.seconds,
+            self.built.seconds,
             s.triangles_in,
             s.leaf_triangles,
             s.bark_triangles,
@@ -284,24 +332,24 @@ impl Summary<'_> {
             s.vertices,
             s.triangles,
             s.points,
-            self.materials,
-            self.images,
+            self.built.materials,
+            self.built.images,
             s.grid[0],
             s.grid[1],
             s.grid[2],
             s.nonempty_cells,
             s.grid.iter().product::<u32>(),
-            self.file_bytes,
-            if self.verified { "ok" } else { "skipped" },
+            self.built.file_bytes,
+            if self.built.verified { "ok" } else { "skipped" },
         )
     }
 
     fn to_json(&self) -> String {
-        let s = self.stats;
+        let (b, s) = (self.built, &self.built.stats);
         let value = serde_json::json!({
             "output": self.output.display().to_string(),
             "sources": self.sources.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-            "seconds": self.seconds,
+            "seconds": b.seconds,
             "triangles_in": s.triangles_in,
             "triangles_dropped": s.triangles_dropped,
             "leaf_triangles": s.leaf_triangles,
@@ -309,14 +357,14 @@ impl Summary<'_> {
             "vertices": s.vertices,
             "triangles": s.triangles,
             "points": s.points,
-            "materials": self.materials,
-            "images": self.images,
+            "materials": b.materials,
+            "images": b.images,
             "grid": s.grid,
             "nonempty_cells": s.nonempty_cells,
-            "file_bytes": self.file_bytes,
-            "source_bytes": self.source_bytes,
-            "verified": self.verified,
-            "warnings": self.warnings,
+            "file_bytes": b.file_bytes,
+            "source_bytes": b.source_bytes,
+            "verified": b.verified,
+            "warnings": b.warnings,
         });
         format!("{value}\n")
     }

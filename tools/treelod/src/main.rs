@@ -4,6 +4,7 @@
 //! outcome into an exit code ([`report::Failed::exit_code`]). Each subcommand prints its own
 //! results to stdout and its errors to stderr, every error line as `error: PATH: reason`.
 
+mod batch;
 mod build;
 mod dump;
 mod eval;
@@ -47,6 +48,14 @@ enum Command {
     /// Build containers from glTF trees (Gilet's triangle + point hierarchy per grid cell).
     #[command(after_help = EXIT_CODES)]
     Build(build::Args),
+    /// Convert a library of glTF trees in parallel into a mirrored tree of containers, skipping
+    /// those that are up to date.
+    ///
+    /// Each output is written atomically; a re-run (say after a kill) builds only what is missing
+    /// or stale (tool version, source content hash or settings changed). --shard I/N takes a stable
+    /// subset so a Kubernetes indexed Job or a Slurm array spreads a library over machines.
+    #[command(after_help = EXIT_CODES)]
+    Batch(batch::Args),
     /// Build the built-in procedural demo tree into a container (no input needed).
     #[command(after_help = EXIT_CODES)]
     Demo(build::DemoArgs),
@@ -86,6 +95,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let outcome = match &cli.command {
         Command::Build(args) => build::run(args),
+        Command::Batch(args) => batch::run(args),
         Command::Demo(args) => build::run_demo(args),
         Command::Dump(args) => dump::run(args),
         Command::Verify(args) => verify::run(args),

@@ -2,9 +2,11 @@
 //!
 //! Nothing here panics: writes to stderr ignore failures (there is nowhere left to report them),
 //! writes to stdout turn a closed pipe into a quiet stop and other failures into an I/O error.
+//! While a progress bar is registered ([`set_progress_bar`]), every line is printed above it.
 
 use std::io::{self, Write as _};
 use std::path::Path;
+use std::sync::{Mutex, PoisonError};
 
 use treelod_format::{Container, Error, ErrorClass};
 
@@ -32,6 +34,25 @@ impl Failed {
             ErrorClass::Unsupported => EXIT_UNSUPPORTED,
             ErrorClass::Io => EXIT_IO,
         }
+    }
+}
+
+/// The progress bar drawn on stderr, if any.
+static PROGRESS: Mutex<Option<indicatif::ProgressBar>> = Mutex::new(None);
+
+/// Registers `bar` (or none) as the progress bar that the printing functions of this module hide
+/// while they write a line and redraw after, so lines and bar do not garble each other. A bar that
+/// is not drawn (stderr is not a terminal) costs nothing.
+pub fn set_progress_bar(bar: Option<indicatif::ProgressBar>) {
+    *PROGRESS.lock().unwrap_or_else(PoisonError::into_inner) = bar;
+}
+
+/// Runs `print` with the registered progress bar, if any, hidden.
+fn above_progress<R>(print: impl FnOnce() -> R) -> R {
+    let bar = PROGRESS.lock().unwrap_or_else(PoisonError::into_inner).clone();
+    match bar {
+        Some(bar) => bar.suspend(print),
+        None => print(),
     }
 }
 
@@ -67,7 +88,9 @@ fn reason(error: &Error) -> String {
 
 /// Writes `error: MESSAGE` to stderr, ignoring a failure to do so.
 pub fn print_error(message: &str) {
-    let _ = writeln!(io::stderr().lock(), "error: {message}");
+    above_progress(|| {
+        let _ = writeln!(io::stderr().lock(), "error: {message}");
+    });
 }
 
 /// Writes `text` to stdout and flushes it.
@@ -75,8 +98,11 @@ pub fn print_error(message: &str) {
 /// A closed pipe (`treelod dump x | head`) is not an error: the reader has what it wanted, the
 /// rest is dropped. Any other failure is reported as an I/O error on `<stdout>`.
 pub fn write_stdout(text: &str) -> Result<(), Failed> {
-    let mut out = io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+    let written = above_progress(|| {
+        let mut out = io::stdout().lock();
+        out.write_all(text.as_bytes()).and_then(|()| out.flush())
+    });
+    match written {
         Ok(()) => Ok(()),
         Err(e) if e.kind() == io::ErrorKind::BrokenPipe => Ok(()),
         Err(e) => {
@@ -99,7 +125,9 @@ pub fn message_error(path: &Path, message: &str) {
 
 /// Prints `warning: PATH: message`, ignoring a failure to do so.
 pub fn print_warning(path: &Path, message: &str) {
-    let _ = writeln!(io::stderr().lock(), "warning: {}: {message}", path.display());
+    above_progress(|| {
+        let _ = writeln!(io::stderr().lock(), "warning: {}: {message}", path.display());
+    });
 }
 
 /// Prints a build error as `error: PATH: reason` and returns its class: I/O errors are
