@@ -150,22 +150,67 @@ fn shade(albedo: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
     return albedo * (frame.sun.w + (1.0 - frame.sun.w) * diffuse);
 }
 
+// MSAA samples of the target (set by the pipeline). With more than one, alpha-tested materials
+// write a sample mask instead of testing: alpha to coverage.
+override sample_count: u32 = 1u;
+
+struct TriangleOut {
+    @location(0) color: vec4<f32>,
+    @builtin(sample_mask) mask: u32,
+}
+
+// The samples of a pixel that a fragment of `coverage` (0..1) covers: `coverage · sample_count`
+// of them, rounded, starting at a sample chosen by a hash of the pixel and the fragment's depth,
+// so neighbouring pixels do not repeat a pattern and leaves behind one another cover different
+// samples and add up, as they do with a stochastic test (a hash of the pixel alone would let
+// every layer of a quarter-covered canopy cover the same quarter).
+fn coverage_mask(coverage: f32, fragment: vec4<f32>) -> u32 {
+    let n = u32(floor(clamp(coverage, 0.0, 1.0) * f32(sample_count) + 0.5));
+    if n >= sample_count {
+        return 0xFFFFFFFFu;
+    }
+    let p = vec2<u32>(fragment.xy);
+    let start = ((p.x * 1973u) ^ (p.y * 9277u) ^ (bitcast<u32>(fragment.z) * 0x5bd1e995u)) * 2654435761u >> 16u;
+    let shift = start % sample_count;
+    let run = (1u << n) - 1u;
+    let all = (1u << sample_count) - 1u;
+    return ((run << shift) | (run >> (sample_count - shift))) & all;
+}
+
 @fragment
-fn fs_triangle(in: Varyings) -> @location(0) vec4<f32> {
+fn fs_triangle(in: Varyings) -> TriangleOut {
     let material = materials[in.material];
     // Sampled unconditionally: implicit derivatives need uniform control flow.
     let texel = textureSample(textures, linear_sampler, in.uv, max(material.layer, 0));
     let albedo = material.base_color * in.color * select(vec4<f32>(1.0), texel, material.layer >= 0);
     // Masked and blended materials are alpha-tested (blend is drawn as a mask at 0.5).
     let cutoff = select(select(material.alpha_cutoff, 0.5, material.alpha_mode == 2u), -1.0, material.alpha_mode == 0u);
-    if albedo.a < cutoff {
-        discard;
+    // Texels per pixel, for alpha to coverage below (derivatives need uniform control flow).
+    let footprint = max(length(dpdx(in.uv)), length(dpdy(in.uv))) * f32(textureDimensions(textures).x);
+    var mask = 0xFFFFFFFFu;
+    if sample_count == 1u || cutoff < 0.0 {
+        if albedo.a < cutoff {
+            discard;
+        }
+    } else {
+        // Alpha to coverage. Alpha-tested images have binary alpha filtered into their mips
+        // (textures.rs), so a minified texel's alpha is the fraction of its footprint that is
+        // opaque: covering that fraction of the samples keeps a distant canopy's density where a
+        // test against the cutoff thins it out. Magnified (a texel over a pixel or more) the
+        // test itself keeps edges crisp; in between the two blend over one mip level.
+        let minified = clamp(log2(max(footprint, 1e-6)), 0.0, 1.0);
+        let tested = select(0.0, 1.0, albedo.a >= cutoff);
+        let coverage = mix(tested, albedo.a, minified);
+        mask = coverage_mask(coverage, in.clip);
+        if mask == 0u {
+            discard;
+        }
     }
     if frame.debug != 0u {
-        return vec4<f32>(in.tint, 1.0);
+        return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
     }
     // The tint is the cell's estimated self-shadowing when shaded.
-    return vec4<f32>(shade(albedo.rgb, in.normal) * in.tint, 1.0);
+    return TriangleOut(vec4<f32>(shade(albedo.rgb, in.normal) * in.tint, 1.0), mask);
 }
 
 @fragment

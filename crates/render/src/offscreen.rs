@@ -73,10 +73,18 @@ impl Gpu {
         Ok(Self { device, queue, info })
     }
 
-    /// The formats [`render_image`] draws with.
+    /// The formats [`render_image`] draws with, without MSAA.
     #[must_use]
     pub fn formats() -> RendererFormats {
-        RendererFormats { color: COLOR_FORMAT, depth: DEPTH_FORMAT, sample_count: 1 }
+        Self::formats_msaa(1)
+    }
+
+    /// The formats [`render_image`] draws with, with `sample_count` MSAA samples (1 or 4: the
+    /// counts every adapter offers for these formats). [`render_image`] makes multisampled
+    /// targets for a renderer made with them and resolves the colour.
+    #[must_use]
+    pub fn formats_msaa(sample_count: u32) -> RendererFormats {
+        RendererFormats { color: COLOR_FORMAT, depth: DEPTH_FORMAT, sample_count }
     }
 }
 
@@ -128,22 +136,26 @@ pub fn render_image_timed(
 ) -> Result<(Image, crate::FrameStats, Option<f64>), GpuError> {
     let (width, height) = (camera.width.max(1), camera.height.max(1));
     let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
-    let target = |format, usage| {
+    let samples = renderer.formats().sample_count.max(1);
+    let target = |format, usage, sample_count| {
         gpu.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("treelod offscreen"),
             size: extent,
             mip_level_count: 1,
-            sample_count: 1,
+            sample_count,
             dimension: wgpu::TextureDimension::D2,
             format,
             usage,
             view_formats: &[],
         })
     };
-    let color = target(COLOR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC);
-    let depth = target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+    let color = target(COLOR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC, 1);
+    let depth = target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT, samples);
+    // With MSAA the pass draws into a multisampled target resolved into `color`.
+    let multisampled = (samples > 1).then(|| target(COLOR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT, samples));
     let stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
     let color_view = color.create_view(&wgpu::TextureViewDescriptor::default());
+    let multisampled_view = multisampled.as_ref().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
     let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
     let mut encoder =
         gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod frame") });
@@ -151,11 +163,19 @@ pub fn render_image_timed(
     {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("treelod offscreen"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &color_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations { load: wgpu::LoadOp::Clear(background), store: wgpu::StoreOp::Store },
+            color_attachments: &[Some(match &multisampled_view {
+                Some(view) => wgpu::RenderPassColorAttachment {
+                    view,
+                    depth_slice: None,
+                    resolve_target: Some(&color_view),
+                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(background), store: wgpu::StoreOp::Discard },
+                },
+                None => wgpu::RenderPassColorAttachment {
+                    view: &color_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(background), store: wgpu::StoreOp::Store },
+                },
             })],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &depth_view,

@@ -23,7 +23,9 @@ pub struct RendererFormats {
     pub color: wgpu::TextureFormat,
     /// Depth attachment format (depth-tested, depth-written).
     pub depth: wgpu::TextureFormat,
-    /// MSAA samples of both attachments (1 for none).
+    /// MSAA samples of both attachments (1 for none). With more than one, alpha-tested leaves
+    /// write a sample mask from their filtered alpha where their texture is minified (alpha to
+    /// coverage), keeping a distant canopy's density; the host resolves the colour target.
     pub sample_count: u32,
 }
 
@@ -235,6 +237,7 @@ pub struct RecordedDraw {
 /// Draws treelod models inside a host's render pass. See the crate documentation for a frame.
 pub struct Renderer {
     settings: Settings,
+    formats: RendererFormats,
     models: Vec<Model>,
     lods: Vec<ModelLod>,
     instances: Vec<treelod_runtime::Instance>,
@@ -341,6 +344,13 @@ impl Renderer {
             label: Some("treelod tree.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
+        // With MSAA, alpha-tested leaves write a sample mask from their filtered alpha (alpha to
+        // coverage, in the shader) so their density holds where small mips thin out a test.
+        let overrides = [("sample_count", f64::from(formats.sample_count.max(1)))];
+        let constants = || wgpu::PipelineCompilationOptions {
+            constants: &overrides,
+            ..wgpu::PipelineCompilationOptions::default()
+        };
         let pipeline = |label: &str, vs: &str, fs: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
@@ -348,7 +358,7 @@ impl Renderer {
                 vertex: wgpu::VertexState {
                     module: &module,
                     entry_point: Some(vs),
-                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    compilation_options: constants(),
                     buffers: &[],
                 },
                 primitive: wgpu::PrimitiveState {
@@ -372,7 +382,7 @@ impl Renderer {
                 fragment: Some(wgpu::FragmentState {
                     module: &module,
                     entry_point: Some(fs),
-                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    compilation_options: constants(),
                     targets: &[Some(wgpu::ColorTargetState {
                         format: formats.color,
                         blend: None,
@@ -409,6 +419,7 @@ impl Renderer {
         let pool_buffer = storage_buffer(device, "treelod pool", u64::from(pool.capacity()).max(1) * UNIT, true);
         let frame_bind_group = frame_bind_group(device, &frame_layout, &frame_buffer, &draw_buffer, &pool_buffer);
         Self {
+            formats,
             settings,
             models: Vec::new(),
             lods: Vec::new(),
@@ -434,6 +445,12 @@ impl Renderer {
             draw_infos: Vec::new(),
             indirect: Vec::new(),
         }
+    }
+
+    /// The target formats the pipelines were made for.
+    #[must_use]
+    pub fn formats(&self) -> RendererFormats {
+        self.formats
     }
 
     /// The settings used by the next [`Self::prepare`].

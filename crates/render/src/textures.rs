@@ -1,5 +1,7 @@
 //! A model's images as one texture array: every image resampled to one square layer size, with
-//! a full mip chain made on the CPU.
+//! a full mip chain made on the CPU. Images that materials alpha-test get a binary alpha (opaque
+//! where the test passes, else transparent) before their mips are filtered, so a mip's alpha is the
+//! fraction of its footprint that is opaque — what alpha to coverage (with MSAA) draws.
 
 use treelod_format::Container;
 
@@ -35,15 +37,19 @@ pub(crate) fn layers(container: &Container, warnings: &mut Vec<String>) -> Layer
             }
         }
     }
+    let cutoffs = alpha_cutoffs(container, decoded.len());
     let largest = decoded.iter().flatten().map(|i| i.width.max(i.height)).max().unwrap_or(1);
     let size = largest.next_power_of_two().clamp(1, MAX_LAYER);
     let mips = size.ilog2() + 1;
     let mut levels = Vec::with_capacity(decoded.len().max(1));
-    for image in &decoded {
-        let base = match image {
+    for (image, cutoff) in decoded.iter().zip(&cutoffs) {
+        let mut base = match image {
             Some(image) => resample(&image.texels, image.width, image.height, size),
             None => vec![128; (size * size * 4) as usize],
         };
+        if let Some(cutoff) = cutoff {
+            binarise_alpha(&mut base, *cutoff);
+        }
         levels.push(mip_chain(base, size));
     }
     if levels.is_empty() {
@@ -77,6 +83,36 @@ fn resample(texels: &[u8], width: u32, height: u32, size: u32) -> Vec<u8> {
         }
     }
     out
+}
+
+/// Per image, the texel alpha below which the first material that alpha-tests it discards
+/// (`alpha_cutoff` for mask, 0.5 for blend — the shader draws blend as a mask — divided by the
+/// material's base-colour alpha, which multiplies the texel's); `None` for images no material
+/// alpha-tests.
+fn alpha_cutoffs(container: &Container, images: usize) -> Vec<Option<f32>> {
+    let mut cutoffs = vec![None; images];
+    for material in container.materials() {
+        let cutoff = match material.alpha_mode {
+            1 => material.alpha_cutoff,
+            2 => 0.5,
+            _ => continue,
+        };
+        let factor = material.base_color[3];
+        let Some(slot) = usize::try_from(material.image).ok().and_then(|i| cutoffs.get_mut(i)) else { continue };
+        if slot.is_none() && factor > 0.0 && cutoff.is_finite() {
+            *slot = Some((cutoff / factor).clamp(0.0, 1.0));
+        }
+    }
+    cutoffs
+}
+
+/// Sets every alpha to 255 where it passes `cutoff` (texel alpha, `0..=1`) and to 0 elsewhere.
+/// The test at full resolution is unchanged; the mips then average coverage rather than soft
+/// alpha (a card's faint fringe no longer reads as partly covered at a distance).
+fn binarise_alpha(rgba: &mut [u8], cutoff: f32) {
+    for texel in rgba.chunks_exact_mut(4) {
+        texel[3] = if f32::from(texel[3]) / 255.0 >= cutoff { 255 } else { 0 };
+    }
 }
 
 /// Box-filtered mips down to 1×1. Alpha is averaged like colour; leaves far enough away for the
@@ -119,6 +155,17 @@ mod tests {
         let chain = mip_chain(out, 8);
         assert_eq!(chain.iter().map(Vec::len).collect::<Vec<_>>(), [256, 64, 16, 4]);
         assert_eq!(chain[3], [10, 20, 30, 255]);
+    }
+
+    #[test]
+    fn alpha_tested_images_become_binary_and_their_mips_hold_the_opaque_fraction() {
+        // A soft card: alpha ramps 0, 85, 170, 255 across; tested at 0.5, half of it is opaque.
+        let mut texels: Vec<u8> = (0..16).flat_map(|i| [10, 200, 30, [0u8, 85, 170, 255][i % 4]]).collect();
+        binarise_alpha(&mut texels, 0.5);
+        assert_eq!(texels.chunks_exact(4).map(|t| t[3]).take(4).collect::<Vec<_>>(), [0, 0, 255, 255]);
+        let chain = mip_chain(texels, 4);
+        assert_eq!(chain[2][3], 128, "the 1×1 mip is half covered");
+        assert_eq!(chain[2][1], 200, "colour averages as before");
     }
 
     #[test]

@@ -45,6 +45,10 @@ pub struct Args {
     /// Colour by grid cell (`cells`) or by kind (`kinds`: triangles red, points blue).
     #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds"])]
     pub debug: Option<String>,
+    /// MSAA samples, 1 or 4; with 4, alpha-tested leaves cover samples in proportion to their
+    /// filtered alpha (alpha to coverage) instead of being tested against the cutoff.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = parse_msaa)]
+    pub msaa: u32,
     /// Point threshold `s_min` in pixels (Gilet 2005): points are drawn down to this size.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_min: Option<f32>,
@@ -83,6 +87,15 @@ pub fn parse_pixels(s: &str) -> Result<f32, String> {
     match s.trim().parse::<f32>() {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
         _ => Err(format!("expected a size in pixels, a number ≥ 0, got {s:?}")),
+    }
+}
+
+/// Parses an MSAA sample count: 1 or 4, the counts every adapter offers for the offscreen formats.
+pub fn parse_msaa(s: &str) -> Result<u32, String> {
+    match s.trim() {
+        "1" => Ok(1),
+        "4" => Ok(4),
+        _ => Err(format!("expected 1 or 4 MSAA samples, got {s:?}")),
     }
 }
 
@@ -129,7 +142,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         Some("kinds") => DebugView::Kinds,
         _ => DebugView::Shaded,
     };
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
         scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
     let camera = frame_camera(bounds, args.eye, args.target, args.fov.to_radians(), width, height);

@@ -77,6 +77,10 @@ pub struct Args {
     /// Background colour, `RRGGBB` (sRGB hex): pixels of this colour count as not covered.
     #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
     pub background: [u8; 3],
+    /// MSAA samples (1 or 4) of every technique but `full` (drawn as the reference is); with 4,
+    /// alpha-tested leaves cover samples in proportion to their filtered alpha (alpha to coverage).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = crate::render::parse_msaa)]
+    pub msaa: u32,
     /// Point threshold `s_min` in pixels of the `spt` technique.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_min: Option<f32>,
@@ -300,6 +304,8 @@ pub struct Report {
     pub size: (u32, u32),
     /// Supersampling factor of the reference.
     pub supersample: u32,
+    /// MSAA samples of the techniques other than `full`.
+    pub msaa: u32,
     /// Vertical field of view, degrees.
     pub fov_degrees: f32,
     /// Background, sRGB.
@@ -398,14 +404,14 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         return Err(Failed { class: ErrorClass::Unsupported });
     }
 
-    let add = |settings: Settings| -> Result<(Renderer, (Vec3, Vec3)), Failed> {
-        let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let add = |settings: Settings, samples: u32| -> Result<(Renderer, (Vec3, Vec3)), Failed> {
+        let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(samples), settings);
         let bounds = scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer)
             .map_err(|e| crate::render::scene_failed(&e))?;
         Ok((renderer, bounds))
     };
     let full_settings = Settings { full_mesh: true, ..Settings::default() };
-    let (mut reference, bounds) = add(full_settings)?;
+    let (mut reference, bounds) = add(full_settings, 1)?;
     let mut measured = Vec::new();
     for (name, availability) in &techniques {
         if *availability != Availability::Measured {
@@ -421,7 +427,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 (settings, 1)
             }
         };
-        measured.push(Measured { name: *name, renderer: add(settings)?.0, supersample, previous: None });
+        let samples = if *name == TechniqueName::Full { 1 } else { args.msaa };
+        measured.push(Measured { name: *name, renderer: add(settings, samples)?.0, supersample, previous: None });
     }
 
     let fovy = args.fov.to_radians();
@@ -529,6 +536,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         poses,
         size: args.size,
         supersample: k,
+        msaa: args.msaa,
         fov_degrees: args.fov,
         background: args.background,
         adapter: Adapter::new(&gpu.info),

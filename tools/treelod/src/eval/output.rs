@@ -192,12 +192,17 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 5]) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "{}: {} frame(s) ({}), {w}x{h}; reference: the full mesh drawn at {}x{} and box-filtered (supersample {k})",
+        "{}: {} frame(s) ({}), {w}x{h}; reference: the full mesh drawn at {}x{} and box-filtered (supersample {k}){}",
         report.input.display(),
         report.poses.len(),
         report.camera_source,
         w * k,
         h * k,
+        if report.msaa > 1 {
+            format!("; techniques but full: {}x MSAA, alpha to coverage", report.msaa)
+        } else {
+            String::new()
+        },
     );
     let _ = writeln!(
         out,
@@ -359,6 +364,7 @@ struct JsonReport<'a> {
     cameras: &'a str,
     size: [u32; 2],
     supersample: u32,
+    msaa: u32,
     reference_size: [u32; 2],
     fov_degrees: f32,
     background: String,
@@ -400,6 +406,7 @@ pub fn json(report: &Report) -> Result<String, serde_json::Error> {
         cameras: &report.camera_source,
         size: [w, h],
         supersample: k,
+        msaa: report.msaa,
         reference_size: [w * k, h * k],
         fov_degrees: report.fov_degrees,
         background: format!("{r:02x}{g:02x}{b:02x}"),
@@ -522,6 +529,7 @@ pub(super) mod tests {
             ],
             size: (3, 2),
             supersample: 2,
+            msaa: 1,
             fov_degrees: 50.0,
             background: [255, 255, 255],
             adapter: Adapter {
