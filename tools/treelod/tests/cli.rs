@@ -2,6 +2,8 @@
 //! messages, robustness against files that are not containers, and the golden dumps of
 //! `tests/data/v1_0/`.
 
+mod common;
+use common::read_png;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -748,17 +750,6 @@ where
     S: AsRef<std::ffi::OsStr>,
 {
     Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).output().expect("the binary runs")
-}
-
-/// Decodes an 8-bit RGBA PNG: `(width, height, pixels)`.
-fn read_png(path: &Path) -> (u32, u32, Vec<[u8; 4]>) {
-    let file = std::io::BufReader::new(std::fs::File::open(path).expect("the PNG exists"));
-    let mut reader = png::Decoder::new(file).read_info().expect("a PNG");
-    let mut buffer = vec![0; reader.output_buffer_size().expect("fits in memory")];
-    let info = reader.next_frame(&mut buffer).expect("decodes");
-    assert_eq!((info.color_type, info.bit_depth), (png::ColorType::Rgba, png::BitDepth::Eight));
-    let pixels = buffer[..info.buffer_size()].chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
-    (info.width, info.height, pixels)
 }
 
 fn close_to(p: [u8; 4], rgb: [u8; 3]) -> bool {

@@ -2,6 +2,8 @@
 //! lavapipe on machines without a GPU: `mesa-vulkan-drivers`). Without an adapter these tests
 //! fail; they do not skip.
 
+mod common;
+use common::read_png;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -196,7 +198,7 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
 
     // The plots: the first measured technique's colour (spt, blue) marks its frames and mean.
     for (plot, size) in [(&quality_plot, (720, 480)), (&frame_plot, (720, 800))] {
-        let (width, height, pixels) = read_rgba(plot);
+        let (width, height, pixels) = read_png(plot);
         assert_eq!((width, height), size, "{}", plot.display());
         let blue = pixels.iter().filter(|p| p[..3] == [31, 119, 180]).count();
         assert!(blue > 50, "{}: {blue} pixels of the technique's colour", plot.display());
@@ -205,17 +207,6 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
     // GPU time is a number where the adapter has timestamp queries, and said to be absent otherwise.
     let timed = json["timing"].as_str().expect("timing").contains("from GPU timestamp queries");
     assert_eq!(spt["mean"]["gpu_ms"].is_number(), timed, "{spt}");
-}
-
-/// Decodes an 8-bit RGBA PNG: `(width, height, pixels)`.
-fn read_rgba(path: &Path) -> (u32, u32, Vec<[u8; 4]>) {
-    let file = std::io::BufReader::new(std::fs::File::open(path).expect("the PNG exists"));
-    let mut reader = png::Decoder::new(file).read_info().expect("a PNG");
-    let mut buffer = vec![0; reader.output_buffer_size().expect("fits in memory")];
-    let info = reader.next_frame(&mut buffer).expect("decodes");
-    assert_eq!((info.color_type, info.bit_depth), (png::ColorType::Rgba, png::BitDepth::Eight));
-    let pixels = buffer[..info.buffer_size()].chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
-    (info.width, info.height, pixels)
 }
 
 #[test]
