@@ -21,21 +21,12 @@ pub struct Camera {
 
 impl Camera {
     /// A camera at `eye` looking at `target` with Y up, vertical field of view `fovy` (radians),
-    /// a `width`×`height` viewport, near plane 0.05 m and far plane 20 km.
+    /// a `width`×`height` viewport: the runtime's projection ([`treelod_runtime::look_at_matrices`],
+    /// near plane 0.05 m, far plane 20 km).
     #[must_use]
     pub fn look_at(eye: Vec3, target: Vec3, fovy: f32, width: u32, height: u32) -> Self {
-        let forward = (target - eye).normalize_or(Vec3::NEG_Z);
-        // Looking straight up or down: any up vector not parallel to the view direction.
-        let up = if forward.cross(Vec3::Y).length_squared() < 1e-8 { Vec3::Z } else { Vec3::Y };
-        let aspect = width.max(1) as f32 / height.max(1) as f32;
-        Self {
-            position: eye,
-            view: glam::camera::rh::view::look_at_mat4(eye, target, up),
-            proj: glam::camera::rh::proj::directx::perspective(fovy, aspect, 0.05, 20_000.0),
-            fovy,
-            width,
-            height,
-        }
+        let (view, proj) = treelod_runtime::look_at_matrices(eye, target, fovy, width, height);
+        Self { position: eye, view, proj, fovy, width, height }
     }
 
     /// `proj · view`.

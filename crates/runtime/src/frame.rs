@@ -30,16 +30,11 @@ pub struct Camera {
 }
 
 impl Camera {
-    /// A camera at `eye` looking at `target` with Y up (Z up when looking straight up or down),
-    /// vertical field of view `fovy` radians, a `width`×`height` pixel viewport, near plane 0.05 m
-    /// and far plane 20 km (the same projection as `treelod-render`'s camera).
+    /// A camera at `eye` looking at `target` (see [`look_at_matrices`]), vertical field of view
+    /// `fovy` radians, a `width`×`height` pixel viewport.
     #[must_use]
     pub fn look_at(eye: Vec3, target: Vec3, fovy: f32, width: u32, height: u32) -> Self {
-        let forward = (target - eye).normalize_or(Vec3::NEG_Z);
-        let up = if forward.cross(Vec3::Y).length_squared() < 1e-8 { Vec3::Z } else { Vec3::Y };
-        let aspect = width.max(1) as f32 / height.max(1) as f32;
-        let view = glam::camera::rh::view::look_at_mat4(eye, target, up);
-        let proj = glam::camera::rh::proj::directx::perspective(fovy, aspect, 0.05, 20_000.0);
+        let (view, proj) = look_at_matrices(eye, target, fovy, width, height);
         #[expect(clippy::cast_precision_loss, reason = "viewport heights are far below 2^24")]
         Self { position: eye, view_proj: proj * view, viewport_height: height.max(1) as f32, fovy }
     }
@@ -50,6 +45,22 @@ impl Camera {
     pub fn world_per_pixel(&self) -> f32 {
         2.0 * (0.5 * self.fovy).tan() / self.viewport_height
     }
+}
+
+/// The view and projection of a camera at `eye` looking at `target` with Y up (Z up when looking
+/// straight up or down), vertical field of view `fovy` radians, a `width`×`height` viewport:
+/// right-handed view, WebGPU depth range 0..1, near plane 0.05 m, far plane 20 km. The one
+/// projection of the runtime's and `treelod-render`'s cameras.
+#[must_use]
+pub fn look_at_matrices(eye: Vec3, target: Vec3, fovy: f32, width: u32, height: u32) -> (Mat4, Mat4) {
+    let forward = (target - eye).normalize_or(Vec3::NEG_Z);
+    // Looking straight up or down: any up vector not parallel to the view direction.
+    let up = if forward.cross(Vec3::Y).length_squared() < 1e-8 { Vec3::Z } else { Vec3::Y };
+    #[expect(clippy::cast_precision_loss, reason = "viewport sizes are far below 2^24")]
+    let aspect = width.max(1) as f32 / height.max(1) as f32;
+    let view = glam::camera::rh::view::look_at_mat4(eye, target, up);
+    let proj = glam::camera::rh::proj::directx::perspective(fovy, aspect, 0.05, 20_000.0);
+    (view, proj)
 }
 
 /// Where a bounding volume lies with respect to a [`Frustum`].

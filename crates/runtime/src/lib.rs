@@ -12,6 +12,6 @@ pub mod select;
 
 pub use frame::{
     BudgetController, Camera, CellLod, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings,
-    ModelError, ModelLod, ROOTS_CELL, select_frame,
+    ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
 };
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
