@@ -190,38 +190,81 @@ pub fn render_image_timed(
     if let Some(timer) = &timer {
         timer.resolve(&mut encoder);
     }
-    let row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-    let readback = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("treelod readback"),
-        size: u64::from(row) * u64::from(height),
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    encoder.copy_texture_to_buffer(
-        color.as_image_copy(),
-        wgpu::TexelCopyBufferInfo {
-            buffer: &readback,
-            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(height) },
-        },
-        extent,
-    );
+    let readback = Readback::record(&gpu.device, &mut encoder, &color);
     gpu.queue.submit([encoder.finish()]);
-    let slice = readback.slice(..);
-    slice.map_async(wgpu::MapMode::Read, |_| {});
-    gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-    let mapped = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
-    let mut rgba = Vec::with_capacity((width * height * 4) as usize);
-    for y in 0..height {
-        let start = (y * row) as usize;
-        rgba.extend_from_slice(&mapped[start..start + (width * 4) as usize]);
-    }
-    drop(mapped);
-    readback.unmap();
+    let image = readback.read(&gpu.device)?;
     let gpu_ms = match &timer {
         Some(timer) => timer.read(gpu)?,
         None => None,
     };
-    Ok((Image { width, height, rgba }, stats, gpu_ms))
+    Ok((image, stats, gpu_ms))
+}
+
+/// A copy of a texture of 4-byte texels (RGBA8 or BGRA8) into a mappable buffer, recorded in an
+/// encoder; [`Self::read`] returns the texels once the encoder is submitted.
+pub struct Readback {
+    buffer: wgpu::Buffer,
+    width: u32,
+    height: u32,
+    /// Bytes per row in the buffer (rows are padded to `COPY_BYTES_PER_ROW_ALIGNMENT`).
+    row: u32,
+}
+
+impl Readback {
+    /// Records the copy of the whole of `texture` (its first mip level) into `encoder`.
+    #[must_use]
+    pub fn record(device: &wgpu::Device, encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture) -> Self {
+        let (width, height) = (texture.width(), texture.height());
+        let row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("treelod readback"),
+            size: u64::from(row) * u64::from(height),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        encoder.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(height),
+                },
+            },
+            wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        );
+        Self { buffer, width, height, row }
+    }
+
+    /// Waits for the copy (the encoder must have been submitted) and returns the texels as
+    /// stored, rows top to bottom without padding.
+    ///
+    /// # Errors
+    /// [`GpuError::Readback`] if mapping the buffer fails.
+    pub fn read(self, device: &wgpu::Device) -> Result<Image, GpuError> {
+        let (width, height, row) = (self.width as usize, self.height as usize, self.row as usize);
+        let rgba = read_mapped(device, &self.buffer, |mapped| {
+            let mut rgba = Vec::with_capacity(width * height * 4);
+            for y in 0..height {
+                rgba.extend_from_slice(&mapped[y * row..y * row + width * 4]);
+            }
+            rgba
+        })?;
+        Ok(Image { width: self.width, height: self.height, rgba })
+    }
+}
+
+/// Maps `buffer` for reading (its copies submitted), waits, hands its bytes to `f` and unmaps it.
+fn read_mapped<R>(device: &wgpu::Device, buffer: &wgpu::Buffer, f: impl FnOnce(&[u8]) -> R) -> Result<R, GpuError> {
+    let slice = buffer.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |_| {});
+    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+    let mapped = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+    let result = f(&mapped);
+    drop(mapped);
+    buffer.unmap();
+    Ok(result)
 }
 
 /// Two timestamp queries around a pass, resolved into a buffer that is read back.
@@ -269,13 +312,9 @@ impl PassTimer {
     /// The pass's milliseconds; `None` if the end reads before the beginning (a driver that
     /// reset its counter).
     fn read(&self, gpu: &Gpu) -> Result<Option<f64>, GpuError> {
-        let slice = self.readback.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
-        let mapped = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
-        let ticks: [u64; 2] = bytemuck::pod_read_unaligned(&mapped[..Self::BYTES as usize]);
-        drop(mapped);
-        self.readback.unmap();
+        let ticks: [u64; 2] = read_mapped(&gpu.device, &self.readback, |mapped| {
+            bytemuck::pod_read_unaligned(&mapped[..Self::BYTES as usize])
+        })?;
         let period_ns = f64::from(gpu.queue.get_timestamp_period());
         Ok(ticks[1].checked_sub(ticks[0]).map(|t| t as f64 * period_ns * 1e-6))
     }

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use treelod_format::ErrorClass;
-use treelod_render::offscreen::{GpuError, Image};
+use treelod_render::offscreen::{GpuError, Image, Readback};
 use treelod_render::{Camera, DebugView, FrameStats, Renderer, RendererFormats, Settings};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
@@ -538,20 +538,16 @@ fn bgra(format: wgpu::TextureFormat) -> Option<bool> {
 /// The screenshot frame drawn a second time, into a texture of the window's size and format,
 /// and copied to a buffer to read back.
 struct Capture {
-    buffer: wgpu::Buffer,
-    width: u32,
-    height: u32,
-    row: u32,
+    readback: Readback,
     bgra: bool,
 }
 
 impl Capture {
     fn record(viewer: &Viewer, encoder: &mut wgpu::CommandEncoder) -> Self {
         let (width, height) = (viewer.config.width, viewer.config.height);
-        let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
         let texture = viewer.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("treelod view screenshot"),
-            size: extent,
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
@@ -561,44 +557,18 @@ impl Capture {
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
         draw_pass(encoder, &view, &viewer.depth, &viewer.renderer);
-        let row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let buffer = viewer.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("treelod view readback"),
-            size: u64::from(row) * u64::from(height),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        encoder.copy_texture_to_buffer(
-            texture.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(height),
-                },
-            },
-            extent,
-        );
+        let readback = Readback::record(&viewer.device, encoder, &texture);
         // The format was chosen readable when a screenshot is asked for.
-        Self { buffer, width, height, row, bgra: bgra(viewer.config.format).unwrap_or(false) }
+        Self { readback, bgra: bgra(viewer.config.format).unwrap_or(false) }
     }
 
     /// Waits for the copy (submitted since [`Self::record`]) and returns the RGBA pixels.
     fn read(self, device: &wgpu::Device) -> Result<Image, String> {
-        let slice = self.buffer.slice(..);
-        slice.map_async(wgpu::MapMode::Read, |_| {});
-        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| e.to_string())?;
-        let mapped = slice.get_mapped_range().map_err(|e| e.to_string())?;
-        let mut rgba = Vec::with_capacity(self.width as usize * self.height as usize * 4);
-        for y in 0..self.height as usize {
-            let start = y * self.row as usize;
-            for pixel in mapped[start..start + self.width as usize * 4].chunks_exact(4) {
-                let (r, b) = if self.bgra { (pixel[2], pixel[0]) } else { (pixel[0], pixel[2]) };
-                rgba.extend_from_slice(&[r, pixel[1], b, pixel[3]]);
-            }
+        let mut image = self.readback.read(device).map_err(|e| e.to_string())?;
+        if self.bgra {
+            image.rgba.chunks_exact_mut(4).for_each(|pixel| pixel.swap(0, 2));
         }
-        Ok(Image { width: self.width, height: self.height, rgba })
+        Ok(image)
     }
 }
 
