@@ -435,6 +435,11 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let (poses, camera_source) = cameras(args, path_poses, bounds, fovy);
     let background = clear_colour(args.background);
     let camera = |pose: &Pose, k: u32| Camera::look_at(pose.eye, pose.target, fovy, width * k, height * k);
+    // Images and masks of one run always match in size; a mismatch is a bug, reported as such.
+    let internal = |e: metrics::SizeMismatch| {
+        report::message_error(&args.input, &format!("internal error: {e}"));
+        Failed { class: ErrorClass::Io }
+    };
     let shoot = |renderer: &mut Renderer, pose: &Pose, k: u32| -> Result<Shot, Failed> {
         let camera = camera(pose, k);
         crate::render::settle_streaming(&gpu, renderer, &camera);
@@ -448,10 +453,6 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             Failed { class: ErrorClass::Io }
         })?;
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        let internal = |e: metrics::SizeMismatch| {
-            report::message_error(&args.input, &format!("internal error: {e}"));
-            Failed { class: ErrorClass::Io }
-        };
         let linear = LinearImage::from_srgba8(image.width, image.height, &image.rgba).map_err(internal)?;
         let mask = Mask::from_srgba8(image.width, image.height, &image.rgba, args.background).map_err(internal)?;
         Ok(Shot {
@@ -463,12 +464,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             wall_ms,
         })
     };
-    let compare = |a: &LinearImage, b: &LinearImage| {
-        multiscale_rmse(a, b).map_err(|e| {
-            report::message_error(&args.input, &format!("internal error: {e}"));
-            Failed { class: ErrorClass::Io }
-        })
-    };
+    let compare = |a: &LinearImage, b: &LinearImage| multiscale_rmse(a, b).map_err(internal);
 
     // Warm up every renderer once (shader compilation happens at the first draw) so the first
     // frame's time is not the compiler's.
@@ -493,10 +489,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         let mut sheet_techniques = Vec::new();
         for m in &mut measured {
             let shot = shoot(&mut m.renderer, pose, m.supersample)?;
-            let coverage = Coverage::compare(&reference_shot.mask, &shot.mask).map_err(|e| {
-                report::message_error(&args.input, &format!("internal error: {e}"));
-                Failed { class: ErrorClass::Io }
-            })?;
+            let coverage = Coverage::compare(&reference_shot.mask, &shot.mask).map_err(internal)?;
             let rmse = compare(&shot.image, &reference_shot.image)?;
             let noise = match &m.previous {
                 Some(previous) => Some(compare(&shot.image, previous)?.summary()),
