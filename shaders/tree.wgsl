@@ -35,9 +35,10 @@ struct DrawInfo {
     scale: f32,
     // Gilet's estimated self-shadowing of the cell (1 without).
     shading: f32,
+    // Size factor of pruned leaves about their centres (1 for everything else).
+    leaf_scale: f32,
     _pad0: u32,
     _pad1: u32,
-    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -48,6 +49,10 @@ struct DrawInfo {
 @group(1) @binding(1) var<storage, read> materials: array<MaterialGpu>;
 @group(1) @binding(2) var textures: texture_2d_array<f32>;
 @group(1) @binding(3) var linear_sampler: sampler;
+// Pruning: the pruned leaves' triangles followed by the bark triangles, and the leaves (their
+// centres are the pivots of the survivors' scaling).
+@group(1) @binding(4) var<storage, read> extra_triangles: array<TriangleRecord>;
+@group(1) @binding(5) var<storage, read> prune_leaves: array<PruneLeafRecord>;
 
 // The material as uploaded: the record's fields that shading needs, 32 bytes.
 struct MaterialGpu {
@@ -83,12 +88,8 @@ fn offscreen() -> Varyings {
     return out;
 }
 
-@vertex
-fn vs_triangle(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
-    let draw = draws[draw_index];
-    let tri = triangles[vertex_index / 3u];
-    let v = vertices[tri.indices[vertex_index % 3u]];
-    let p = vec3<f32>(v.position[0], v.position[1], v.position[2]);
+// One corner of triangle `tri`: vertex `v`, placed at `p` (model space).
+fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, v: VertexRecord, p: vec3<f32>) -> Varyings {
     let world = draw.model * vec4<f32>(p, 1.0);
     var out: Varyings;
     out.clip = frame.view_proj * world;
@@ -101,6 +102,34 @@ fn vs_triangle(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.9, 0.3, 0.2); }
         default: { out.tint = vec3<f32>(draw.shading); }
+    }
+    return out;
+}
+
+@vertex
+fn vs_triangle(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
+    let draw = draws[draw_index];
+    let tri = triangles[vertex_index / 3u];
+    let v = vertices[tri.indices[vertex_index % 3u]];
+    return triangle_corner(draw, tri, v, vec3<f32>(v.position[0], v.position[1], v.position[2]));
+}
+
+// Pruned leaves (scaled by `leaf_scale` about their leaf's centre, spec §6.11) and bark.
+@vertex
+fn vs_pruned(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
+    let draw = draws[draw_index];
+    let tri = extra_triangles[vertex_index / 3u];
+    let v = vertices[tri.indices[vertex_index % 3u]];
+    var p = vec3<f32>(v.position[0], v.position[1], v.position[2]);
+    if draw.leaf_scale != 1.0 {
+        let leaf = prune_leaves[tri.leaf];
+        let centre = vec3<f32>(leaf.center[0], leaf.center[1], leaf.center[2]);
+        p = centre + (p - centre) * draw.leaf_scale;
+    }
+    var out = triangle_corner(draw, tri, v, p);
+    if frame.debug == 2u && draw.cell != 0xFFFFFFFFu {
+        // Pruned leaves green in the kinds view.
+        out.tint = vec3<f32>(0.2, 0.75, 0.3);
     }
     return out;
 }

@@ -79,6 +79,14 @@ struct PlaneRecord {
     leaf_count: u32,
 }
 
+// Rust twin: treelod_format::PruneLeafRecord (24 bytes, spec §6.11).
+struct PruneLeafRecord {
+    center: array<f32, 3>,
+    area: f32,
+    first_triangle: u32,
+    triangle_count: u32,
+}
+
 // Octahedral normal (spec §2): x in the low 16 bits, y in the high, both snorm16.
 fn decode_normal(packed: u32) -> vec3<f32> {
     let e = unpack2x16snorm(packed);

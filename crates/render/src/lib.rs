@@ -46,6 +46,7 @@
 //! [`offscreen`] renders to an image with no window, for tools and tests.
 
 mod camera;
+mod occlusion;
 pub mod offscreen;
 mod renderer;
 mod streaming;
@@ -53,6 +54,7 @@ mod textures;
 
 pub use camera::Camera;
 pub use renderer::{
-    DebugView, DrawSource, FrameStats, Instance, ModelId, RecordedDraw, RenderError, Renderer, RendererFormats,
-    Settings,
+    DebugView, DrawSource, FrameStats, Instance, ModelId, Pruning, RecordedDraw, RenderError, Renderer,
+    RendererFormats, Settings,
 };
+pub use treelod_runtime::{Hysteresis, PruneScale};

@@ -134,6 +134,23 @@ pub fn render_image_timed(
     camera: &Camera,
     background: wgpu::Color,
 ) -> Result<(Image, crate::FrameStats, Option<f64>), GpuError> {
+    let stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
+    let (image, gpu_ms) = render_prepared_timed(gpu, renderer, camera, background)?;
+    Ok((image, stats, gpu_ms))
+}
+
+/// [`render_image_timed`] without the [`Renderer::prepare`]: draws what the renderer's last
+/// `prepare` (for `camera`) recorded, so a caller can time the preparation on its own and draw
+/// each frame's selection exactly once, as a host does.
+///
+/// # Errors
+/// [`GpuError::Readback`] if mapping a read-back buffer fails.
+pub fn render_prepared_timed(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    camera: &Camera,
+    background: wgpu::Color,
+) -> Result<(Image, Option<f64>), GpuError> {
     let (width, height) = (camera.width.max(1), camera.height.max(1));
     let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
     let samples = renderer.formats().sample_count.max(1);
@@ -150,10 +167,11 @@ pub fn render_image_timed(
         })
     };
     let color = target(COLOR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC, 1);
-    let depth = target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT, samples);
+    // Sampled after the pass by the occlusion measurement of pruned trees.
+    let depth =
+        target(DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING, samples);
     // With MSAA the pass draws into a multisampled target resolved into `color`.
     let multisampled = (samples > 1).then(|| target(COLOR_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT, samples));
-    let stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
     let color_view = color.create_view(&wgpu::TextureViewDescriptor::default());
     let multisampled_view = multisampled.as_ref().map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
     let depth_view = depth.create_view(&wgpu::TextureViewDescriptor::default());
@@ -190,6 +208,7 @@ pub fn render_image_timed(
     if let Some(timer) = &timer {
         timer.resolve(&mut encoder);
     }
+    renderer.measure_occlusion(&gpu.device, &mut encoder, &depth_view);
     let readback = Readback::record(&gpu.device, &mut encoder, &color);
     gpu.queue.submit([encoder.finish()]);
     let image = readback.read(&gpu.device)?;
@@ -197,7 +216,7 @@ pub fn render_image_timed(
         Some(timer) => timer.read(gpu)?,
         None => None,
     };
-    Ok((image, stats, gpu_ms))
+    Ok((image, gpu_ms))
 }
 
 /// A copy of a texture of 4-byte texels (RGBA8 or BGRA8) into a mappable buffer, recorded in an

@@ -5,10 +5,15 @@ use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
-use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord};
-use treelod_runtime::{DrawList, DrawRange, Kind, LodSettings, ModelLod, ROOTS_CELL, select_frame};
+use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleRecord, material_class};
+use treelod_runtime::prune::{MIN_VISIBLE_FRACTION, leaf_scale, leaves_drawn, projected_height, size_factor};
+use treelod_runtime::{
+    DrawList, DrawRange, Frustum, Hysteresis, Kind, LodSettings, ModelLod, PruneLod, PruneScale, ROOTS_CELL,
+    select_frame,
+};
 
 use crate::camera::Camera;
+use crate::occlusion::{Job, Occlusion};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::textures;
 
@@ -72,6 +77,47 @@ pub struct Settings {
     /// capped there by the device's storage-binding limit). When full, the finest halves of the
     /// least recently needed cells' prefixes are evicted.
     pub memory_budget: u64,
+    /// Draw near trees with pruned leaves (Neubert et al. 2011) where their containers have
+    /// priority lists; `None` draws every tree with the sequential point trees.
+    pub pruning: Option<Pruning>,
+}
+
+/// Pruning settings: which trees are pruned, by how much, and how survivors are scaled.
+///
+/// A pruned tree draws every bark triangle of its container and, of each cell's leaf priority
+/// list, the first `ceil(λ·count)` leaves, scaled about their centres (spec §6.11). `λ` is the
+/// container's `λ(h)` at the tree's projected height `h` (or [`Self::lambda`]), times
+/// `max(f, 0.1)` with `f` the visible fraction of the tree's hull samples measured by
+/// [`Renderer::measure_occlusion`] on an earlier frame, then held by [`Self::hysteresis`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pruning {
+    /// How survivors are scaled: `s_opt(λ)` from the container, Cook's `1/λ`, or not at all.
+    pub scale: PruneScale,
+    /// A fixed `λ` for every pruned tree instead of the container's `λ(h)` (for comparisons).
+    pub lambda: Option<f32>,
+    /// Multiply `λ` by the trees' measured visible fraction (needs
+    /// [`Renderer::measure_occlusion`] each frame; without measurements every tree counts as
+    /// visible).
+    pub occlusion: bool,
+    /// Hold `λ` while its target stays within a band, so it does not flicker.
+    pub hysteresis: Hysteresis,
+    /// Trees projecting fewer pixels high than this are drawn with the sequential point tree
+    /// instead (pruning is the near-to-mid-field representation); 0 prunes every tree.
+    pub spt_below_pixels: f32,
+}
+
+impl Default for Pruning {
+    /// `s_opt`, `λ(h)` from the container, occlusion on, ±10 % hysteresis, trees below 64 pixels
+    /// high by the sequential point tree.
+    fn default() -> Self {
+        Self {
+            scale: PruneScale::Optimal,
+            lambda: None,
+            occlusion: true,
+            hysteresis: Hysteresis::default(),
+            spt_below_pixels: 64.0,
+        }
+    }
 }
 
 impl Default for Settings {
@@ -89,6 +135,7 @@ impl Default for Settings {
             ambient: 0.35,
             upload_budget: 64 << 20,
             memory_budget: 1 << 30,
+            pruning: None,
         }
     }
 }
@@ -125,6 +172,10 @@ pub struct FrameStats {
     pub bytes_resident: u64,
     /// Bytes of triangles and points uploaded by this frame.
     pub bytes_uploaded: u64,
+    /// Visible instances drawn with pruned leaves ([`Settings::pruning`]).
+    pub instances_pruned: u32,
+    /// Leaves drawn by pruned instances (their triangles count in [`Self::triangles`]).
+    pub leaves_pruned: u64,
 }
 
 /// Why a model could not be added.
@@ -171,7 +222,9 @@ struct DrawInfo {
     cell: u32,
     scale: f32,
     shading: f32,
-    _pad: [u32; 3],
+    /// Size factor of pruned leaves about their centres (1 for everything else).
+    leaf_scale: f32,
+    _pad: [u32; 2],
 }
 
 #[repr(C)]
@@ -198,6 +251,13 @@ struct Model {
     cell_roots: Vec<(u32, u32)>,
     /// Per container cell: its index in [`ModelLod::cells`], `u32::MAX` if empty.
     cell_lod: Vec<u32>,
+    /// The priority lists, if the container has them.
+    prune: Option<PruneLod>,
+    /// The bark triangles in the model's extra triangle buffer (after `PRUNE_TRIANGLES`): first
+    /// and count. Pruned trees draw them all.
+    bark: (u32, u32),
+    /// The hull samples of the occlusion test: first and count in the sample buffer.
+    samples: (u32, u32),
 }
 
 /// Where a recorded draw reads its elements.
@@ -210,6 +270,12 @@ pub enum DrawSource {
     /// The cell's roots, from the model's pinned copy of the roots: the cell's points are not
     /// resident yet, or (for [`treelod_runtime::ROOTS_CELL`]) a far tree drawn with one range.
     Roots,
+    /// The leading `count` triangles of the cell's pruned leaves (a pruned tree, uploaded whole
+    /// at [`Renderer::add_model`]).
+    PrunedLeaves,
+    /// All `count` bark triangles of the model (a pruned tree; `cell` is
+    /// [`treelod_runtime::ROOTS_CELL`]).
+    Bark,
 }
 
 /// One draw of the last [`Renderer::prepare`], as the GPU will execute it, for tests and tools.
@@ -226,9 +292,9 @@ pub struct RecordedDraw {
     /// Elements drawn: a prefix of the cell's range (or all the roots it stands for).
     pub count: u32,
     /// `τ_p` the shader tests points with, model units (raised above the selection's when the
-    /// resident prefix is shorter than the selection asked for).
+    /// resident prefix is shorter than the selection asked for); for pruned leaves, `λ`.
     pub tau_points: f32,
-    /// `τ_t`, model units, likewise.
+    /// `τ_t`, model units, likewise; for pruned leaves, their size factor.
     pub tau_triangles: f32,
     /// Whether residency made this draw coarser than the selection.
     pub clamped: bool,
@@ -245,6 +311,8 @@ pub struct Renderer {
     frame_layout: wgpu::BindGroupLayout,
     triangle_pipeline: wgpu::RenderPipeline,
     point_pipeline: wgpu::RenderPipeline,
+    /// Pruned leaves and bark, from each model's extra triangle buffer.
+    pruned_pipeline: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
     frame_buffer: wgpu::Buffer,
     draw_buffer: wgpu::Buffer,
@@ -253,8 +321,24 @@ pub struct Renderer {
     pool_buffer: wgpu::Buffer,
     frame_bind_group: wgpu::BindGroup,
     residency: Residency,
-    /// Per model, per kind (triangles, points): this frame's range of the indirect buffer.
-    model_draws: Vec<[(u32, u32); 2]>,
+    /// Per model, per kind (triangles, points, pruned): this frame's range of the indirect buffer.
+    model_draws: Vec<[(u32, u32); BUCKETS]>,
+    /// Per instance: the `λ` its pruned leaves were drawn with last frame (hysteresis).
+    prune_shown: Vec<Option<f32>>,
+    /// Per instance: the visible fraction of its hull samples last measured (1 if never).
+    visible_fraction: Vec<f32>,
+    /// Instances drawn with the sequential point tree this frame when pruning is on, and their
+    /// indices in `instances` (empty when pruning is off: then selection indices are instances').
+    spt_instances: Vec<treelod_runtime::Instance>,
+    spt_map: Vec<u32>,
+    /// Pruned draws of this frame: (instance, cell or `ROOTS_CELL` for bark, source, first, count,
+    /// λ, leaf scale).
+    pruned: Vec<PrunedDraw>,
+    /// The occlusion measurement, and the trees to measure after this frame.
+    occlusion: Occlusion,
+    occlusion_jobs: Vec<Job>,
+    /// The camera of the last `prepare`: view-projection, eye, forward, viewport size.
+    last_camera: Option<(Mat4, Vec3, Vec3, (u32, u32))>,
     // Scratch reused between frames.
     selection: DrawList,
     recorded: Vec<RecordedDraw>,
@@ -269,6 +353,24 @@ pub struct Renderer {
 
 /// Pool units the pool buffer starts with (1.5 MiB).
 const INITIAL_POOL_UNITS: u32 = 1 << 15;
+
+/// Draw buckets per model: triangles, points, pruned (leaves and bark).
+const BUCKETS: usize = 3;
+
+/// One draw of a pruned tree: leaves of one cell, or the bark.
+#[derive(Clone, Copy, Debug)]
+struct PrunedDraw {
+    instance: u32,
+    model: u32,
+    /// Container cell, or `ROOTS_CELL` for the bark.
+    cell: u32,
+    source: DrawSource,
+    /// Into the model's extra triangle buffer.
+    first: u32,
+    count: u32,
+    lambda: f32,
+    leaf_scale: f32,
+}
 
 impl Renderer {
     /// The device features the renderer needs: indirect draws that set the first instance.
@@ -333,6 +435,8 @@ impl Renderer {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                storage(4, wgpu::ShaderStages::VERTEX),
+                storage(5, wgpu::ShaderStages::VERTEX),
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -395,6 +499,7 @@ impl Renderer {
         };
         let triangle_pipeline = pipeline("treelod triangles", "vs_triangle", "fs_triangle");
         let point_pipeline = pipeline("treelod points", "vs_point", "fs_point");
+        let pruned_pipeline = pipeline("treelod pruned leaves and bark", "vs_pruned", "fs_triangle");
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("treelod textures"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -428,6 +533,7 @@ impl Renderer {
             frame_layout,
             triangle_pipeline,
             point_pipeline,
+            pruned_pipeline,
             sampler,
             frame_buffer,
             draw_buffer,
@@ -436,6 +542,14 @@ impl Renderer {
             frame_bind_group,
             residency: Residency::new(pool),
             model_draws: Vec::new(),
+            prune_shown: Vec::new(),
+            visible_fraction: Vec::new(),
+            spt_instances: Vec::new(),
+            spt_map: Vec::new(),
+            pruned: Vec::new(),
+            occlusion: Occlusion::new(device, formats.sample_count.max(1)),
+            occlusion_jobs: Vec::new(),
+            last_camera: None,
             selection: DrawList::new(),
             recorded: Vec::new(),
             requests: Vec::new(),
@@ -520,6 +634,25 @@ impl Renderer {
             .collect();
         let vertices = upload("VERTICES", bytemuck::cast_slice(container.vertices()))?;
         let materials = upload("MATERIALS", bytemuck::cast_slice(&materials))?;
+        // Pruning: the leaves' triangles, then every bark (non-leaf) triangle, and the leaves.
+        let prune = PruneLod::from_container(&container);
+        let (extra, prune_leaves, bark) = if prune.is_some() {
+            let classes = container.materials();
+            let mut extra: Vec<TriangleRecord> = container.prune_triangles().to_vec();
+            let bark_first = u32::try_from(extra.len()).unwrap_or(u32::MAX);
+            extra.extend(
+                container
+                    .triangles()
+                    .iter()
+                    .filter(|t| classes.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF)),
+            );
+            let bark_count = u32::try_from(extra.len()).unwrap_or(u32::MAX) - bark_first;
+            let extra = upload("PRUNE_TRIANGLES and bark", bytemuck::cast_slice(&extra))?;
+            let leaves = upload("PRUNE_LEAVES", bytemuck::cast_slice(container.prune_leaves()))?;
+            (extra, leaves, (bark_first, bark_count))
+        } else {
+            (upload("no pruned triangles", &[])?, upload("no pruned leaves", &[])?, (0, 0))
+        };
 
         // The roots, pinned in the pool: what a cell draws before its own points are resident.
         let lod = ModelLod::from_container(&container);
@@ -594,10 +727,26 @@ impl Renderer {
                 wgpu::BindGroupEntry { binding: 1, resource: materials.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&view) },
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                wgpu::BindGroupEntry { binding: 4, resource: extra.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: prune_leaves.as_entire_binding() },
             ],
         });
         let id = ModelId(u32::try_from(self.models.len()).unwrap_or(u32::MAX));
-        self.models.push(Model { container, bind_group, static_bytes: bytes, roots_start, cell_roots, cell_lod });
+        let samples = match &prune {
+            Some(p) => (self.occlusion.add_samples(p.samples()), u32::try_from(p.samples().len()).unwrap_or(0)),
+            None => (0, 0),
+        };
+        self.models.push(Model {
+            samples,
+            container,
+            bind_group,
+            static_bytes: bytes,
+            roots_start,
+            cell_roots,
+            cell_lod,
+            prune,
+            bark,
+        });
         self.lods.push(lod);
         self.wanted.push(vec![[0; 2]; cells]);
         Ok((id, warnings))
@@ -627,7 +776,11 @@ impl Renderer {
     }
 
     /// Replaces the instances drawn from the next frame on. Instances of unknown models are ignored.
+    ///
+    /// Per-instance pruning state (the held `λ`, the measured visible fraction) is kept by index
+    /// when the number of instances stays the same (moving trees), and reset otherwise.
     pub fn set_instances(&mut self, instances: &[Instance]) {
+        let before = self.instances.len();
         self.instances.clear();
         self.instances.extend(
             instances
@@ -635,6 +788,99 @@ impl Renderer {
                 .filter(|i| (i.model.0 as usize) < self.models.len())
                 .map(|i| treelod_runtime::Instance { model: i.model.0, transform: i.transform }),
         );
+        if self.instances.len() != before {
+            self.prune_shown = vec![None; self.instances.len()];
+            self.visible_fraction = vec![1.0; self.instances.len()];
+        }
+    }
+
+    /// Which instances are drawn pruned this frame (see [`Pruning`]): fills `pruned` with their
+    /// draws and `spt_instances`/`spt_map` with the others. Returns the pruned instances inside
+    /// the frustum and the leaves they draw.
+    fn select_pruned(&mut self, pruning: &Pruning, camera: &treelod_runtime::Camera) -> (u32, u64) {
+        let frustum = Frustum::from_view_proj(camera.view_proj);
+        let world_per_pixel = camera.world_per_pixel();
+        self.pruned.clear();
+        self.spt_instances.clear();
+        self.spt_map.clear();
+        self.occlusion_jobs.clear();
+        let (mut visible, mut leaves) = (0u32, 0u64);
+        for (i, instance) in self.instances.iter().enumerate() {
+            let m = instance.model as usize;
+            let (Some(model), Some(lod)) = (self.models.get(m), self.lods.get(m)) else { continue };
+            let index = u32::try_from(i).unwrap_or(u32::MAX);
+            let scale = max_axis_scale(instance.transform);
+            let (centre, radius) = lod.cull_sphere();
+            let world_centre = instance.transform.transform_point3(centre);
+            let height = model.prune.as_ref().map_or(0.0, |p| {
+                projected_height(p.height(), scale, world_centre.distance(camera.position), world_per_pixel)
+            });
+            let Some(prune) = model.prune.as_ref().filter(|_| height >= pruning.spt_below_pixels) else {
+                self.prune_shown[i] = None;
+                self.spt_instances.push(*instance);
+                self.spt_map.push(index);
+                continue;
+            };
+            if !frustum.intersects_sphere(world_centre, radius * scale) {
+                self.prune_shown[i] = None;
+                continue;
+            }
+            visible += 1;
+            if pruning.occlusion && model.samples.1 > 0 {
+                self.occlusion_jobs.push(Job {
+                    instance: index,
+                    transform: instance.transform,
+                    centre,
+                    radius: radius * scale,
+                    first: model.samples.0,
+                    count: model.samples.1,
+                });
+            }
+            let target = pruning.lambda.unwrap_or_else(|| prune.lambda_at(height));
+            let seen = if pruning.occlusion { self.visible_fraction[i].max(MIN_VISIBLE_FRACTION) } else { 1.0 };
+            let lambda = pruning.hysteresis.update(self.prune_shown[i], target * seen);
+            self.prune_shown[i] = Some(lambda);
+            let factor = size_factor(leaf_scale(pruning.scale, prune.scale_curve(), lambda));
+            for cell in prune.cells() {
+                let drawn = leaves_drawn(cell.leaves.count, lambda);
+                let (first, count) = prune.prefix_triangles(cell, drawn);
+                leaves += u64::from(drawn);
+                if count > 0 {
+                    self.pruned.push(PrunedDraw {
+                        instance: index,
+                        model: instance.model,
+                        cell: cell.cell,
+                        source: DrawSource::PrunedLeaves,
+                        first,
+                        count,
+                        lambda,
+                        leaf_scale: factor,
+                    });
+                }
+            }
+            if model.bark.1 > 0 {
+                self.pruned.push(PrunedDraw {
+                    instance: index,
+                    model: instance.model,
+                    cell: ROOTS_CELL,
+                    source: DrawSource::Bark,
+                    first: model.bark.0,
+                    count: model.bark.1,
+                    lambda,
+                    leaf_scale: 1.0,
+                });
+            }
+        }
+        (visible, leaves)
+    }
+
+    /// The index in `instances` of an instance of this frame's selection.
+    fn instance_index(&self, selected: u32) -> u32 {
+        if self.settings.pruning.is_some() && !self.settings.full_mesh {
+            self.spt_map.get(selected as usize).copied().unwrap_or(selected)
+        } else {
+            selected
+        }
     }
 
     /// The selection of the last [`Self::prepare`] (before residency clamped it).
@@ -676,7 +922,23 @@ impl Renderer {
             viewport_height: camera.height as f32,
             fovy: camera.fovy,
         };
-        let selected = select_frame(&self.lods, &self.instances, &runtime_camera, &lod_settings, &mut self.selection);
+        let pruning = settings.pruning.filter(|_| !settings.full_mesh);
+        let forward = -camera.view.row(2).truncate().normalize_or(Vec3::NEG_Z);
+        self.last_camera = Some((view_proj, camera.position, forward, (camera.width, camera.height)));
+        let (instances_pruned, leaves_pruned) = match &pruning {
+            Some(pruning) => {
+                if pruning.occlusion {
+                    self.occlusion.collect(device, camera.position, forward, &mut self.visible_fraction);
+                }
+                self.select_pruned(pruning, &runtime_camera)
+            }
+            None => {
+                self.pruned.clear();
+                (0, 0)
+            }
+        };
+        let spt_instances = if pruning.is_some() { &self.spt_instances } else { &self.instances };
+        let selected = select_frame(&self.lods, spt_instances, &runtime_camera, &lod_settings, &mut self.selection);
 
         // What each cell needs: the largest prefix any instance asked for.
         self.residency.begin_frame();
@@ -722,14 +984,16 @@ impl Renderer {
 
         // The draws, clamped to what is resident, bucketed by model and kind.
         let mut stats = FrameStats {
-            instances_visible: selected.instances_visible,
+            instances_visible: selected.instances_visible + instances_pruned,
+            instances_pruned,
+            leaves_pruned,
             bytes_uploaded: streamed.bytes_uploaded,
             bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
                 + u64::from(self.residency.pool.used()) * UNIT,
             ..FrameStats::default()
         };
         self.recorded.clear();
-        self.buckets.resize_with(2 * self.models.len(), Vec::new);
+        self.buckets.resize_with(BUCKETS * self.models.len(), Vec::new);
         for bucket in &mut self.buckets {
             bucket.clear();
         }
@@ -756,7 +1020,9 @@ impl Renderer {
                 stats.ranges_clamped += u32::from(draw.clamped);
                 let (bucket, first_vertex, corners) = self.gpu_first(&draw);
                 match draw.source {
-                    DrawSource::Triangles => stats.triangles += u64::from(draw.count),
+                    DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark => {
+                        stats.triangles += u64::from(draw.count);
+                    }
                     DrawSource::Points | DrawSource::Roots => stats.points += u64::from(draw.count),
                 }
                 let transform = self.instances[draw.instance as usize].transform;
@@ -767,17 +1033,45 @@ impl Renderer {
                     cell: draw.cell,
                     scale: max_axis_scale(transform),
                     shading: range.shading,
-                    _pad: [0; 3],
+                    leaf_scale: 1.0,
+                    _pad: [0; 2],
                 };
                 self.buckets[bucket].push((info, first_vertex, draw.count * corners));
                 self.recorded.push(draw);
             }
         }
+        // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
+        // per-cell estimate (it is a property of the point hierarchy's cells).
+        for draw in &self.pruned {
+            let transform = self.instances[draw.instance as usize].transform;
+            let info = DrawInfo {
+                model: transform.to_cols_array_2d(),
+                tau_p: draw.lambda,
+                tau_t: draw.leaf_scale,
+                cell: draw.cell,
+                scale: max_axis_scale(transform),
+                shading: 1.0,
+                leaf_scale: draw.leaf_scale,
+                _pad: [0; 2],
+            };
+            self.buckets[BUCKETS * draw.model as usize + 2].push((info, 3 * draw.first, 3 * draw.count));
+            stats.triangles += u64::from(draw.count);
+            self.recorded.push(RecordedDraw {
+                instance: draw.instance,
+                model: ModelId(draw.model),
+                cell: draw.cell,
+                source: draw.source,
+                count: draw.count,
+                tau_points: draw.lambda,
+                tau_triangles: draw.leaf_scale,
+                clamped: false,
+            });
+        }
         self.draw_infos.clear();
         self.indirect.clear();
         self.model_draws.clear();
-        for pair in self.buckets.chunks(2) {
-            let mut draws = [(0, 0); 2];
+        for pair in self.buckets.chunks(BUCKETS) {
+            let mut draws = [(0, 0); BUCKETS];
             for (kind, bucket) in pair.iter().enumerate() {
                 let start = u32::try_from(self.indirect.len()).unwrap_or(u32::MAX);
                 for &(info, first_vertex, vertex_count) in bucket {
@@ -852,7 +1146,7 @@ impl Renderer {
         full_mesh: bool,
     ) -> [Option<RecordedDraw>; 2] {
         let base = RecordedDraw {
-            instance: range.instance,
+            instance: self.instance_index(range.instance),
             model: ModelId(range.model),
             cell: range.cell,
             source: DrawSource::Roots,
@@ -915,11 +1209,11 @@ impl Renderer {
         match draw.source {
             DrawSource::Triangles => {
                 let slot = self.residency.slot(m, draw.cell as usize, Array::Triangles);
-                (2 * m, 2 * slot.start * 3, 3)
+                (BUCKETS * m, 2 * slot.start * 3, 3)
             }
             DrawSource::Points => {
                 let slot = self.residency.slot(m, draw.cell as usize, Array::Points);
-                (2 * m + 1, slot.start * 6, 6)
+                (BUCKETS * m + 1, slot.start * 6, 6)
             }
             DrawSource::Roots => {
                 let at = if draw.cell == ROOTS_CELL {
@@ -927,16 +1221,42 @@ impl Renderer {
                 } else {
                     model.cell_roots.get(draw.cell as usize).map_or(0, |r| r.0)
                 };
-                (2 * m + 1, (model.roots_start + at) * 6, 6)
+                (BUCKETS * m + 1, (model.roots_start + at) * 6, 6)
             }
+            // Recorded directly by `prepare`, never clamped.
+            DrawSource::PrunedLeaves | DrawSource::Bark => (BUCKETS * m + 2, 0, 3),
         }
+    }
+
+    /// Measures which of the trees drawn pruned this frame are hidden, for the occlusion factor
+    /// of later frames ([`Pruning::occlusion`]): call it after the pass that drew this frame,
+    /// in the same or a later encoder, with that pass's depth attachment (`depth_view`, which
+    /// needs [`wgpu::TextureUsages::TEXTURE_BINDING`]). It records a small compute pass; the
+    /// result is read by a later [`Self::prepare`] without waiting for the GPU. Does nothing when
+    /// pruning or its occlusion factor is off, or while an earlier measurement is in flight.
+    pub fn measure_occlusion(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        depth_view: &wgpu::TextureView,
+    ) {
+        let on = self.settings.pruning.is_some_and(|p| p.occlusion) && !self.settings.full_mesh;
+        let Some((view_proj, eye, forward, size)) = self.last_camera.filter(|_| on) else { return };
+        self.occlusion.record(device, encoder, depth_view, size, view_proj, eye, forward, &self.occlusion_jobs);
+    }
+
+    /// The visible fraction of each instance's hull samples last measured by
+    /// [`Self::measure_occlusion`] (1 where never measured, off-screen or after a camera jump).
+    #[must_use]
+    pub fn visible_fractions(&self) -> &[f32] {
+        &self.visible_fraction
     }
 
     /// Records this frame's draws into the host's pass (after [`Self::prepare`]).
     pub fn render(&self, pass: &mut wgpu::RenderPass<'_>) {
         let stride = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
         pass.set_bind_group(0, &self.frame_bind_group, &[]);
-        for (pipeline, kind) in [(&self.triangle_pipeline, 0), (&self.point_pipeline, 1)] {
+        for (pipeline, kind) in [(&self.triangle_pipeline, 0), (&self.point_pipeline, 1), (&self.pruned_pipeline, 2)] {
             pass.set_pipeline(pipeline);
             for (model, draws) in self.models.iter().zip(&self.model_draws) {
                 let (first, count) = draws[kind];

@@ -165,6 +165,7 @@ fn check_draws(renderer: &Renderer, container: &Container) {
                         .flat_map(|p| (p.leaf_first..p.leaf_first + p.leaf_count).map(|l| l as usize))
                         .collect()
                 }
+                DrawSource::PrunedLeaves | DrawSource::Bark => panic!("{draw:?} without pruning"),
             };
             for leaf in drawn {
                 cover[leaf] += 1;

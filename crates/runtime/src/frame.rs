@@ -487,6 +487,13 @@ impl ModelLod {
         self.radius
     }
 
+    /// A sphere, model space, holding the block and every non-empty cell's bounds (cells reach
+    /// past the block by their elements' radii): `(centre, radius)`, what culling tests.
+    #[must_use]
+    pub fn cull_sphere(&self) -> (Vec3, f32) {
+        (self.cull_centre, self.cull_radius)
+    }
+
     /// The non-empty cells, in container order.
     #[must_use]
     pub fn cells(&self) -> &[CellLod] {

@@ -8,10 +8,12 @@
 //! bias per cell, a reusable draw list, and a controller that keeps the primitive count on budget.
 
 pub mod frame;
+pub mod prune;
 pub mod select;
 
 pub use frame::{
     BudgetController, Camera, CellLod, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings,
     ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
 };
+pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};

@@ -3,7 +3,9 @@
 
 use std::mem::offset_of;
 
-use treelod_format::{EllipsoidRecord, LineRecord, PlaneRecord, PointRecord, TriangleRecord, VertexRecord};
+use treelod_format::{
+    EllipsoidRecord, LineRecord, PlaneRecord, PointRecord, PruneLeafRecord, TriangleRecord, VertexRecord,
+};
 
 const SHADER: &str = include_str!("../../../shaders/shared/records.wgsl");
 
@@ -93,6 +95,16 @@ fn rust_layouts() -> Vec<(&'static str, usize, Vec<usize>)> {
                 offset_of!(PlaneRecord, hi),
                 offset_of!(PlaneRecord, leaf_first),
                 offset_of!(PlaneRecord, leaf_count),
+            ],
+        ),
+        (
+            "PruneLeafRecord",
+            size_of::<PruneLeafRecord>(),
+            vec![
+                offset_of!(PruneLeafRecord, center),
+                offset_of!(PruneLeafRecord, area),
+                offset_of!(PruneLeafRecord, first_triangle),
+                offset_of!(PruneLeafRecord, triangle_count),
             ],
         ),
     ]

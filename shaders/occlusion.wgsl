@@ -1,0 +1,68 @@
+// The occlusion factor of pruned trees (crates/render/src/occlusion.rs): per tree, how many of
+// its hull samples face the camera and how many of those the depth buffer shows.
+//
+// One workgroup per tree (a 2D dispatch of rows of 65535), one invocation per sample.
+// `DEPTH_TEXTURE` is replaced by `texture_depth_2d` or `texture_depth_multisampled_2d`.
+
+struct OcclusionFrame {
+    view_proj: mat4x4<f32>,
+    eye: vec4<f32>,
+    // Viewport size, pixels.
+    size: vec2<f32>,
+    jobs: u32,
+    _pad: u32,
+}
+
+struct OcclusionJob {
+    // World from model.
+    model: mat4x4<f32>,
+    // Hull centre (xyz), model space; how far samples move towards the eye (w), world units.
+    centre: vec4<f32>,
+    first: u32,
+    count: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> frame: OcclusionFrame;
+@group(0) @binding(1) var<storage, read> jobs: array<OcclusionJob>;
+@group(0) @binding(2) var<storage, read> samples: array<vec4<f32>>;
+// Per job: samples facing the camera, and of those the visible ones.
+@group(0) @binding(3) var<storage, read_write> counts: array<atomic<u32>>;
+@group(0) @binding(4) var depth: DEPTH_TEXTURE;
+
+@compute @workgroup_size(64)
+fn measure(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) i: u32) {
+    let j = group.x + group.y * 65535u;
+    if j >= frame.jobs {
+        return;
+    }
+    let job = jobs[j];
+    if i >= job.count {
+        return;
+    }
+    let s = samples[job.first + i];
+    let world = (job.model * vec4<f32>(s.xyz, 1.0)).xyz;
+    let centre = (job.model * vec4<f32>(job.centre.xyz, 1.0)).xyz;
+    let to_eye = frame.eye.xyz - world;
+    // The far side of the hull is hidden by the tree itself: it says nothing about occluders.
+    if dot(world - centre, to_eye) <= 0.0 {
+        return;
+    }
+    atomicAdd(&counts[2u * j], 1u);
+    // Off the leaf the sample sits on, towards the eye.
+    let p = world + normalize(to_eye) * job.centre.w;
+    let clip = frame.view_proj * vec4<f32>(p, 1.0);
+    var visible = true;
+    if clip.w > 0.0 {
+        let ndc = clip.xyz / clip.w;
+        if all(abs(ndc.xy) <= vec2<f32>(1.0)) && ndc.z >= 0.0 && ndc.z <= 1.0 {
+            let last = vec2<i32>(frame.size) - vec2<i32>(1);
+            let pixel = clamp(vec2<i32>(vec2<f32>(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y) * frame.size), vec2<i32>(0), last);
+            visible = ndc.z <= textureLoad(depth, pixel, 0);
+        }
+    }
+    if visible {
+        atomicAdd(&counts[2u * j + 1u], 1u);
+    }
+}
