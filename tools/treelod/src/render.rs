@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{Gpu, Image, render_image};
-use treelod_render::{Camera, DebugView, FrameStats, Renderer, Settings};
+use treelod_render::{Camera, DebugView, FrameStats, PruneScale, Pruning, Renderer, Settings};
 
 use crate::report::{self, Failed};
 use crate::scene;
@@ -42,7 +42,8 @@ pub struct Args {
     /// Write the level of detail (left) beside the full mesh (right), twice as wide.
     #[arg(long)]
     pub compare: bool,
-    /// Colour by grid cell (`cells`) or by kind (`kinds`: triangles red, points blue).
+    /// Colour by grid cell (`cells`) or by kind (`kinds`: triangles red, points blue, pruned
+    /// leaves green).
     #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds"])]
     pub debug: Option<String>,
     /// MSAA samples, 1 or 4; with 4, alpha-tested leaves cover samples in proportion to their
@@ -58,6 +59,44 @@ pub struct Args {
     /// Background colour, `RRGGBB` (sRGB hex, an optional leading `#`).
     #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
     pub background: [u8; 3],
+    #[command(flatten)]
+    pub prune: PruneArgs,
+}
+
+/// Pruning options shared by `render` and `view`.
+#[derive(Debug, clap::Args)]
+pub struct PruneArgs {
+    /// Draw trees at least 64 pixels high with pruned leaves where their containers have
+    /// priority lists (Neubert 2011; build with `--prune`): a fraction λ of each cell's leaves,
+    /// most important first, scaled by `opt` (the container's s_opt(λ)), `cook` (1/λ, the
+    /// stochastic-pruning baseline) or `none`; bark whole. λ is the container's λ(h) for the
+    /// tree's projected height, times the visible fraction of the tree measured on the previous
+    /// frame.
+    #[arg(long, value_name = "SCALE", value_parser = ["opt", "cook", "none"])]
+    pub prune: Option<String>,
+    /// A fixed fraction of leaves, in (0, 1], for pruned trees instead of the container's λ(h).
+    #[arg(long, value_name = "LAMBDA", value_parser = parse_fraction, requires = "prune")]
+    pub prune_lambda: Option<f32>,
+}
+
+impl PruneArgs {
+    /// The renderer's pruning settings these options ask for.
+    pub fn settings(&self) -> Option<Pruning> {
+        let scale = match self.prune.as_deref()? {
+            "cook" => PruneScale::Cook,
+            "none" => PruneScale::None,
+            _ => PruneScale::Optimal,
+        };
+        Some(Pruning { scale, lambda: self.prune_lambda, ..Pruning::default() })
+    }
+}
+
+/// Parses a fraction in (0, 1].
+pub fn parse_fraction(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v > 0.0 && v <= 1.0 => Ok(v),
+        _ => Err(format!("expected a fraction in (0, 1], got {s:?}")),
+    }
 }
 
 pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -142,6 +181,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         Some("kinds") => DebugView::Kinds,
         _ => DebugView::Shaded,
     };
+    settings.pruning = args.prune.settings();
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
         scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
@@ -149,10 +189,17 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let background = clear_colour(args.background);
     let render = |renderer: &mut Renderer| -> Result<(Image, FrameStats), Failed> {
         settle_streaming(&gpu, renderer, &camera);
-        render_image(&gpu, renderer, &camera, background).map_err(|e| {
-            report::message_error(&args.output, &format!("cannot render: {e}"));
-            Failed { class: ErrorClass::Io }
-        })
+        let frame = |renderer: &mut Renderer| {
+            render_image(&gpu, renderer, &camera, background).map_err(|e| {
+                report::message_error(&args.output, &format!("cannot render: {e}"));
+                Failed { class: ErrorClass::Io }
+            })
+        };
+        if renderer.settings().pruning.is_some() && !renderer.settings().full_mesh {
+            // The occlusion factor of pruned trees is measured on the frame before.
+            frame(renderer)?;
+        }
+        frame(renderer)
     };
     let (lod, stats) = render(&mut renderer)?;
     let mut line = format!(
@@ -163,6 +210,9 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         stats.triangles,
         stats.points
     );
+    if renderer.settings().pruning.is_some() {
+        line.push_str(&format!(", {} pruned tree(s) drawing {} leaves", stats.instances_pruned, stats.leaves_pruned));
+    }
     let image = if args.compare {
         renderer.settings_mut().full_mesh = true;
         let (full, full_stats) = render(&mut renderer)?;

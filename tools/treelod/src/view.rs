@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{GpuError, Image, Readback};
-use treelod_render::{Camera, DebugView, FrameStats, Renderer, RendererFormats, Settings};
+use treelod_render::{Camera, DebugView, FrameStats, Pruning, Renderer, RendererFormats, Settings};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, KeyEvent, MouseButton, WindowEvent};
@@ -19,7 +19,7 @@ use winit::event_loop::{ActiveEventLoop, EventLoop, OwnedDisplayHandle};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
-use crate::render::{encode_png, frame_camera, parse_size, parse_vec3, scene_failed};
+use crate::render::{PruneArgs, encode_png, frame_camera, parse_size, parse_vec3, scene_failed};
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
 
@@ -56,6 +56,8 @@ pub struct Args {
     #[arg(long, value_name = "N", default_value_t = 10, requires = "screenshot",
           value_parser = clap::value_parser!(u32).range(1..))]
     pub frames: u32,
+    #[command(flatten)]
+    pub prune: PruneArgs,
 }
 
 /// Runs `treelod view`.
@@ -281,7 +283,8 @@ impl Viewer {
         let depth = depth_view(&device, config.width, config.height);
 
         let formats = RendererFormats { color: format, depth: DEPTH_FORMAT, sample_count: 1 };
-        let mut renderer = Renderer::new(&device, formats, Settings::default());
+        let settings = Settings { pruning: args.prune.settings(), ..Settings::default() };
+        let mut renderer = Renderer::new(&device, formats, settings);
         let bounds = scene::add_to_renderer(scene, &device, &queue, &mut renderer).map_err(|e| scene_failed(&e))?;
 
         let fovy = FOVY_DEGREES.to_radians();
@@ -352,6 +355,12 @@ impl Viewer {
             KeyCode::KeyK => settings.depth_bias_k += 0.5,
             KeyCode::KeyJ => settings.depth_bias_k = (settings.depth_bias_k - 0.5).max(0.0),
             KeyCode::KeyF => settings.full_mesh = !settings.full_mesh,
+            KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
+            KeyCode::KeyO => {
+                if let Some(pruning) = &mut settings.pruning {
+                    pruning.occlusion = !pruning.occlusion;
+                }
+            }
             KeyCode::Digit1 => settings.debug = DebugView::Shaded,
             KeyCode::Digit2 => settings.debug = DebugView::Cells,
             KeyCode::Digit3 => settings.debug = DebugView::Kinds,
@@ -420,6 +429,7 @@ impl Viewer {
         let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         let view = texture.texture.create_view(&wgpu::TextureViewDescriptor::default());
         draw_pass(&mut encoder, &view, &self.depth, &self.renderer);
+        self.renderer.measure_occlusion(&self.device, &mut encoder, &self.depth);
         let capture = match screenshot {
             Some(_) if self.frames + 1 >= frames => Some(Capture::record(self, &mut encoder)),
             _ => None,
@@ -461,12 +471,20 @@ impl Viewer {
         }
         let fps = f64::from(self.title_frames) / elapsed.as_secs_f64();
         let settings = self.renderer.settings();
-        let mode = match (settings.full_mesh, settings.debug) {
+        let mut mode = match (settings.full_mesh, settings.debug) {
             (true, _) => " | full mesh",
             (false, DebugView::Shaded) => "",
             (false, DebugView::Cells) => " | cells",
             (false, DebugView::Kinds) => " | kinds",
-        };
+        }
+        .to_owned();
+        if let Some(pruning) = settings.pruning.filter(|_| !settings.full_mesh) {
+            let occlusion = if pruning.occlusion { ", occlusion" } else { "" };
+            mode.push_str(&format!(
+                " | pruning{occlusion}: {} trees, {} leaves",
+                self.stats.instances_pruned, self.stats.leaves_pruned
+            ));
+        }
         let name = self.input.file_name().map_or_else(|| self.input.display().to_string(), |n| n.display().to_string());
         self.window.set_title(&format!(
             "{name} | {fps:.1} fps | {} of {} instances | {} triangles | {} points | s_min {} s_max {} k {}{mode}",
@@ -518,7 +536,8 @@ fn depth_view(device: &wgpu::Device, width: u32, height: u32) -> wgpu::TextureVi
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            // Sampled by the occlusion measurement of pruned trees.
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             view_formats: &[],
         })
         .create_view(&wgpu::TextureViewDescriptor::default())
