@@ -10,6 +10,7 @@ pub mod classify;
 pub mod demo;
 mod error;
 pub mod gilet;
+pub mod precision;
 pub mod import;
 pub mod rng;
 pub mod scene;
