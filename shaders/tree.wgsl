@@ -37,7 +37,8 @@ struct DrawInfo {
     shading: f32,
     // Size factor of pruned leaves about their centres (1 for everything else).
     leaf_scale: f32,
-    _pad0: u32,
+    // Index of the instance in the renderer's list (for read-backs; not read here).
+    instance: u32,
     _pad1: u32,
 }
 

@@ -44,8 +44,24 @@
 //!
 //! The device must have [`Renderer::required_features`] (indirect draws with a first instance).
 //! [`offscreen`] renders to an image with no window, for tools and tests.
+//!
+//! **Selection on the CPU or the GPU.** By default `prepare` selects with
+//! [`treelod_runtime::select_frame`] on the CPU and streams the prefixes it needs. For
+//! 10^5–10^6 instances, [`Renderer::enable_gpu_selection`] moves selection into two compute
+//! dispatches (`shaders/select.wgsl`): blocks of 64 instances (Morton order, a bounding sphere
+//! each) are culled first, then one workgroup per visible block selects its instances as
+//! `select_frame` does — frustum culling of instances and cells, Gilet's depth bias and shading,
+//! the far path and its single roots range — and appends the indirect draws into one bucket per
+//! model and kind, drawn with `multi_draw_indirect_count` (ask for
+//! [`Renderer::gpu_selection_features`]). `prepare` and `render` stay the same calls with O(models)
+//! CPU work per frame. GPU selection keeps every model's triangles and points resident whole
+//! (a model over [`Settings::memory_budget`] is refused with
+//! [`RenderError::GpuSelectionBudget`]) instead of streaming; its [`FrameStats`] counts come from a
+//! read-back one or two frames old ([`FrameStats::gpu_selection`]); frames with
+//! [`Settings::pruning`] or [`Settings::full_mesh`] are still selected on the CPU.
 
 mod camera;
+mod gpu_select;
 mod occlusion;
 pub mod offscreen;
 mod renderer;

@@ -41,8 +41,8 @@ pub struct Gpu {
 
 impl Gpu {
     /// Opens the first adapter the environment allows (`WGPU_BACKEND` may restrict it) with the
-    /// features [`Renderer::required_features`] names, and timestamp queries where the adapter
-    /// offers them (for [`render_image_timed`]).
+    /// features [`Renderer::required_features`] names, and where the adapter offers them
+    /// timestamp queries (for [`render_image_timed`]) and [`Renderer::gpu_selection_features`].
     ///
     /// # Errors
     /// [`GpuError`] if there is no adapter or it lacks the features.
@@ -60,10 +60,11 @@ impl Gpu {
         if !missing.is_empty() {
             return Err(GpuError::MissingFeatures { adapter: info.name, missing });
         }
-        let timestamps = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+        // Timestamps for the timed renders, the indirect count for GPU selection, where offered.
+        let optional = adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | Renderer::gpu_selection_features());
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("treelod offscreen"),
-            required_features: Renderer::required_features() | timestamps,
+            required_features: Renderer::required_features() | optional,
             required_limits: adapter.limits(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,

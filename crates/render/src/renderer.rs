@@ -13,6 +13,7 @@ use treelod_runtime::{
 };
 
 use crate::camera::Camera;
+use crate::gpu_select::{GpuSelection, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::textures;
@@ -176,6 +177,15 @@ pub struct FrameStats {
     pub instances_pruned: u32,
     /// Leaves drawn by pruned instances (their triangles count in [`Self::triangles`]).
     pub leaves_pruned: u64,
+    /// Whether this frame was selected on the GPU ([`Renderer::enable_gpu_selection`]). Then
+    /// [`Self::instances_visible`], [`Self::ranges`], [`Self::triangles`], [`Self::points`] and
+    /// [`Self::ranges_dropped`] are those of the latest earlier frame whose counters have been
+    /// read back (without waiting: usually one or two frames old, zero before the first),
+    /// [`Self::bytes_resident`] is current, and the other fields are zero.
+    pub gpu_selection: bool,
+    /// GPU selection: ranges selected but not drawn because their bucket was full (the buckets
+    /// grow for later frames once the counters are read back).
+    pub ranges_dropped: u32,
 }
 
 /// Why a model could not be added.
@@ -199,6 +209,22 @@ pub enum RenderError {
         /// The budget as capped by the device.
         budget: u64,
     },
+    /// GPU selection ([`Renderer::enable_gpu_selection`]) keeps every model's triangles and
+    /// points resident whole, and they do not fit the memory budget.
+    #[error(
+        "GPU selection needs {bytes} bytes for the models up to model {model}, the memory budget is {budget} bytes"
+    )]
+    GpuSelectionBudget {
+        /// The first model that does not fit.
+        model: u32,
+        /// Bytes of the models up to and including it.
+        bytes: u64,
+        /// [`Settings::memory_budget`] as capped by the device's binding limit.
+        budget: u64,
+    },
+    /// Reading GPU buffers back failed.
+    #[error("cannot read the GPU selection back: {0}")]
+    Readback(String),
 }
 
 #[repr(C)]
@@ -213,19 +239,24 @@ struct FrameUniform {
     _pad: [u32; 3],
 }
 
+/// One draw's constants. WGSL twin: `DrawInfo` in `shaders/tree.wgsl` and `shaders/select.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
-struct DrawInfo {
-    model: [[f32; 4]; 4],
-    tau_p: f32,
-    tau_t: f32,
-    cell: u32,
-    scale: f32,
-    shading: f32,
+pub(crate) struct DrawInfo {
+    pub(crate) model: [[f32; 4]; 4],
+    pub(crate) tau_p: f32,
+    pub(crate) tau_t: f32,
+    pub(crate) cell: u32,
+    pub(crate) scale: f32,
+    pub(crate) shading: f32,
     /// Size factor of pruned leaves about their centres (1 for everything else).
-    leaf_scale: f32,
-    _pad: [u32; 2],
+    pub(crate) leaf_scale: f32,
+    /// Index of the instance in [`Renderer::set_instances`]' list (not read by the shaders).
+    pub(crate) instance: u32,
+    pub(crate) _pad: u32,
 }
+
+const _: () = assert!(size_of::<DrawInfo>() == 96);
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -339,6 +370,12 @@ pub struct Renderer {
     occlusion_jobs: Vec<Job>,
     /// The camera of the last `prepare`: view-projection, eye, forward, viewport size.
     last_camera: Option<(Mat4, Vec3, Vec3, (u32, u32))>,
+    /// GPU-driven selection, when enabled ([`Self::enable_gpu_selection`]).
+    gpu: Option<GpuSelection>,
+    /// Whether the last `prepare` selected on the GPU (then `render` draws its buckets).
+    gpu_frame: bool,
+    /// The instances changed since GPU selection last sorted them into blocks.
+    gpu_instances_stale: bool,
     // Scratch reused between frames.
     selection: DrawList,
     recorded: Vec<RecordedDraw>,
@@ -377,6 +414,14 @@ impl Renderer {
     #[must_use]
     pub fn required_features() -> wgpu::Features {
         wgpu::Features::INDIRECT_FIRST_INSTANCE
+    }
+
+    /// The device features GPU selection ([`Self::enable_gpu_selection`]) uses where present:
+    /// `MULTI_DRAW_INDIRECT_COUNT`, so each bucket draws exactly the ranges the compute pass
+    /// appended (without it, whole buckets are drawn with empty draws in the unused slots).
+    #[must_use]
+    pub fn gpu_selection_features() -> wgpu::Features {
+        wgpu::Features::MULTI_DRAW_INDIRECT_COUNT
     }
 
     /// Creates the pipelines for the host's target formats.
@@ -550,6 +595,9 @@ impl Renderer {
             occlusion: Occlusion::new(device, formats.sample_count.max(1)),
             occlusion_jobs: Vec::new(),
             last_camera: None,
+            gpu: None,
+            gpu_frame: false,
+            gpu_instances_stale: false,
             selection: DrawList::new(),
             recorded: Vec::new(),
             requests: Vec::new(),
@@ -605,6 +653,17 @@ impl Renderer {
         container: Arc<Container>,
     ) -> Result<(ModelId, Vec<String>), RenderError> {
         let limit = device.limits().max_storage_buffer_binding_size;
+        if self.gpu.is_some() {
+            // GPU selection keeps every model whole: refuse what does not fit before adding it.
+            let lod = ModelLod::from_container(&container);
+            let bytes = self.gpu.as_ref().map_or(0, GpuSelection::pool_bytes)
+                + crate::gpu_select::model_units(&container, &lod) * UNIT;
+            let budget = self.gpu_budget(device);
+            if bytes > budget {
+                let model = u32::try_from(self.models.len()).unwrap_or(u32::MAX);
+                return Err(RenderError::GpuSelectionBudget { model, bytes, budget });
+            }
+        }
         let mut warnings = Vec::new();
         let mut bytes = 0u64;
         let mut upload = |what: &'static str, data: &[u8]| -> Result<wgpu::Buffer, RenderError> {
@@ -749,7 +808,81 @@ impl Renderer {
         });
         self.lods.push(lod);
         self.wanted.push(vec![[0; 2]; cells]);
+        if self.gpu.is_some() {
+            // Checked above, so it fits; should it not, GPU selection is turned off.
+            if self.enable_gpu_selection(device, queue).is_err() {
+                self.gpu = None;
+            }
+        }
         Ok((id, warnings))
+    }
+
+    /// Bytes GPU selection may keep resident: [`Settings::memory_budget`] capped by the device's
+    /// largest storage binding and buffer.
+    fn gpu_budget(&self, device: &wgpu::Device) -> u64 {
+        let limits = device.limits();
+        self.settings.memory_budget.min(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size)
+    }
+
+    /// Turns on GPU-driven selection: from the next [`Self::prepare`] on, compute shaders select
+    /// the instances and write the indirect draws (`crate::gpu_select`; same inputs and, up to
+    /// `f32` rounding at thresholds, the same ranges as [`treelod_runtime::select_frame`]), so the
+    /// CPU does O(models) work per frame, not O(instances). Uploads every model's triangles and
+    /// points whole into a pool of their own (GPU selection does not stream: everything a
+    /// selection may ask for is resident); models added later are uploaded when added. Calling
+    /// it again re-uploads.
+    ///
+    /// The CPU path is still used for frames with [`Settings::pruning`] or
+    /// [`Settings::full_mesh`] on, and when there are more than about 4.19 M instances
+    /// (`64 × 65535`, one dispatch of instance blocks). Needs a device with
+    /// [`wgpu::Features::MULTI_DRAW_INDIRECT_COUNT`] for best results; without it every bucket
+    /// is drawn at its full capacity with unused slots as empty draws.
+    ///
+    /// # Errors
+    /// [`RenderError::GpuSelectionBudget`] if the models' triangles, points and roots do not fit
+    /// [`Settings::memory_budget`] (capped by the device's largest storage binding); GPU
+    /// selection then stays off.
+    pub fn enable_gpu_selection(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<(), RenderError> {
+        let budget = self.gpu_budget(device);
+        let containers: Vec<&Container> = self.models.iter().map(|m| &*m.container).collect();
+        let mut gpu = GpuSelection::new(device, queue, &containers, &self.lods, budget)?;
+        gpu.set_instances(device, queue, &self.instances, &self.lods);
+        self.gpu = Some(gpu);
+        self.gpu_instances_stale = false;
+        Ok(())
+    }
+
+    /// Turns GPU-driven selection off and frees its buffers: the CPU selects from the next
+    /// [`Self::prepare`] on.
+    pub fn disable_gpu_selection(&mut self) {
+        self.gpu = None;
+        self.gpu_frame = false;
+    }
+
+    /// Whether GPU-driven selection is on ([`Self::enable_gpu_selection`]).
+    #[must_use]
+    pub fn gpu_selection_enabled(&self) -> bool {
+        self.gpu.is_some()
+    }
+
+    /// The ranges the GPU selected in the last [`Self::prepare`], read back (this blocks until
+    /// the GPU has finished): as [`treelod_runtime::select_frame`] lists them, with `instance`
+    /// the index in [`Self::set_instances`]' list, grouped by model and kind in no fixed order.
+    /// Ranges dropped for lack of capacity ([`FrameStats::ranges_dropped`]) are missing. `None`
+    /// if the last frame was selected on the CPU ([`Self::selection`] has it). For tests and
+    /// tools.
+    ///
+    /// # Errors
+    /// [`RenderError::Readback`] if mapping the buffers fails.
+    pub fn read_gpu_selection(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Option<Vec<DrawRange>>, RenderError> {
+        match &self.gpu {
+            Some(gpu) if self.gpu_frame => gpu.read_ranges(device, queue).map(Some),
+            _ => Ok(None),
+        }
     }
 
     /// The largest pool, bytes (the memory budget as capped by the device).
@@ -792,6 +925,7 @@ impl Renderer {
             self.prune_shown = vec![None; self.instances.len()];
             self.visible_fraction = vec![1.0; self.instances.len()];
         }
+        self.gpu_instances_stale = true;
     }
 
     /// Which instances are drawn pruned this frame (see [`Pruning`]): fills `pruned` with their
@@ -937,6 +1071,39 @@ impl Renderer {
                 (0, 0)
             }
         };
+        if self.gpu_instances_stale
+            && let Some(gpu) = &mut self.gpu
+        {
+            gpu.set_instances(device, queue, &self.instances, &self.lods);
+        }
+        self.gpu_instances_stale = false;
+        self.gpu_frame = false;
+        if pruning.is_none()
+            && !settings.full_mesh
+            && let Some(gpu) = self.gpu.as_mut().filter(|g| g.usable())
+        {
+            // GPU selection: one compute submission writes the draws; nothing per instance here.
+            self.pruned.clear();
+            self.selection.clear();
+            self.recorded.clear();
+            let counts = gpu.prepare(device, queue, select_frame_gpu(&runtime_camera, &lod_settings));
+            gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer);
+            let pool_bytes = gpu.pool_bytes();
+            self.gpu_frame = true;
+            self.write_frame_uniform(queue, camera);
+            return FrameStats {
+                instances_visible: counts.instances_visible,
+                ranges: counts.ranges,
+                triangles: counts.triangles,
+                points: counts.points,
+                bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
+                    + u64::from(self.residency.pool.used()) * UNIT
+                    + pool_bytes,
+                gpu_selection: true,
+                ranges_dropped: counts.dropped,
+                ..FrameStats::default()
+            };
+        }
         let spt_instances = if pruning.is_some() { &self.spt_instances } else { &self.instances };
         let selected = select_frame(&self.lods, spt_instances, &runtime_camera, &lod_settings, &mut self.selection);
 
@@ -1034,7 +1201,8 @@ impl Renderer {
                     scale: max_axis_scale(transform),
                     shading: range.shading,
                     leaf_scale: 1.0,
-                    _pad: [0; 2],
+                    instance: draw.instance,
+                    _pad: 0,
                 };
                 self.buckets[bucket].push((info, first_vertex, draw.count * corners));
                 self.recorded.push(draw);
@@ -1052,7 +1220,8 @@ impl Renderer {
                 scale: max_axis_scale(transform),
                 shading: 1.0,
                 leaf_scale: draw.leaf_scale,
-                _pad: [0; 2],
+                instance: draw.instance,
+                _pad: 0,
             };
             self.buckets[BUCKETS * draw.model as usize + 2].push((info, 3 * draw.first, 3 * draw.count));
             stats.triangles += u64::from(draw.count);
@@ -1090,22 +1259,7 @@ impl Renderer {
         }
         stats.ranges = u32::try_from(self.indirect.len()).unwrap_or(u32::MAX);
 
-        let (right, up) = camera.right_up();
-        let sun = settings.sun.normalize_or(Vec3::Y);
-        let uniform = FrameUniform {
-            view_proj: view_proj.to_cols_array_2d(),
-            eye: camera.position.extend(camera.height as f32).to_array(),
-            right: right.extend(camera.proj.y_axis.y).to_array(),
-            up: up.extend(settings.point_scale.max(0.0)).to_array(),
-            sun: Vec4::new(sun.x, sun.y, sun.z, settings.ambient.clamp(0.0, 1.0)).to_array(),
-            debug: match settings.debug {
-                DebugView::Shaded => 0,
-                DebugView::Cells => 1,
-                DebugView::Kinds => 2,
-            },
-            _pad: [0; 3],
-        };
-        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
+        self.write_frame_uniform(queue, camera);
         let draw_bytes = (self.draw_infos.len().max(1) * size_of::<DrawInfo>()) as u64;
         if draw_bytes > self.draw_buffer.size() {
             self.draw_buffer = storage_buffer(device, "treelod draws", draw_bytes.next_power_of_two(), false);
@@ -1124,6 +1278,28 @@ impl Renderer {
             queue.write_buffer(&self.indirect_buffer, 0, &bytes);
         }
         stats
+    }
+
+    /// Writes the frame uniform (camera, light, debug view) for `camera`.
+    fn write_frame_uniform(&self, queue: &wgpu::Queue, camera: &Camera) {
+        let settings = &self.settings;
+        let view_proj = camera.view_proj();
+        let (right, up) = camera.right_up();
+        let sun = settings.sun.normalize_or(Vec3::Y);
+        let uniform = FrameUniform {
+            view_proj: view_proj.to_cols_array_2d(),
+            eye: camera.position.extend(camera.height as f32).to_array(),
+            right: right.extend(camera.proj.y_axis.y).to_array(),
+            up: up.extend(settings.point_scale.max(0.0)).to_array(),
+            sun: Vec4::new(sun.x, sun.y, sun.z, settings.ambient.clamp(0.0, 1.0)).to_array(),
+            debug: match settings.debug {
+                DebugView::Shaded => 0,
+                DebugView::Cells => 1,
+                DebugView::Kinds => 2,
+            },
+            _pad: [0; 3],
+        };
+        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
     }
 
     /// The draws of one selected cell (or one roots range), clamped to what is resident so that
@@ -1254,6 +1430,13 @@ impl Renderer {
 
     /// Records this frame's draws into the host's pass (after [`Self::prepare`]).
     pub fn render(&self, pass: &mut wgpu::RenderPass<'_>) {
+        if self.gpu_frame
+            && let Some(gpu) = &self.gpu
+        {
+            let groups: Vec<&wgpu::BindGroup> = self.models.iter().map(|m| &m.bind_group).collect();
+            gpu.render(pass, [&self.triangle_pipeline, &self.point_pipeline], &groups);
+            return;
+        }
         let stride = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
         pass.set_bind_group(0, &self.frame_bind_group, &[]);
         for (pipeline, kind) in [(&self.triangle_pipeline, 0), (&self.point_pipeline, 1), (&self.pruned_pipeline, 2)] {

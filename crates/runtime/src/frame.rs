@@ -312,6 +312,40 @@ impl CellLod {
     pub fn points(&self) -> Range {
         self.points
     }
+
+    /// Centre and half extent of the cell's bounds, model space, exactly as selection uses them
+    /// (for mirrors of [`select_frame`], such as a GPU one).
+    #[must_use]
+    pub fn centre_half(&self) -> (Vec3, Vec3) {
+        (self.centre, self.half)
+    }
+
+    /// Size of the cell's largest triangle, `−∞` without triangles: the triangle prefix is
+    /// non-empty exactly when `τ_t` is below it.
+    #[must_use]
+    pub fn largest_triangle(&self) -> f32 {
+        self.largest
+    }
+
+    /// Number of leading points with `hi = +∞` (the cell's roots).
+    #[must_use]
+    pub fn root_count(&self) -> u32 {
+        self.roots
+    }
+
+    /// `hi` of the first point after the roots, `−∞` if none: at finite `τ_p ≥` it the point prefix
+    /// is the roots.
+    #[must_use]
+    pub fn next_hi(&self) -> f32 {
+        self.next_hi
+    }
+
+    /// `hi` of the first point, `−∞` if none: the point prefix is non-empty exactly when `τ_p` is
+    /// below it.
+    #[must_use]
+    pub fn first_hi(&self) -> f32 {
+        self.hi0
+    }
 }
 
 /// What selection needs of one model (container), made once: block bounds and radius, the
@@ -479,6 +513,35 @@ impl ModelLod {
     #[must_use]
     pub fn bounds(&self) -> (Vec3, Vec3) {
         (self.centre - self.half, self.centre + self.half)
+    }
+
+    /// Centre of the block bounds, model space, exactly as selection uses it (`d_block` is measured
+    /// to it).
+    #[must_use]
+    pub fn centre(&self) -> Vec3 {
+        self.centre
+    }
+
+    /// Centre and half extent, model space, of the box culling tests (the block and every
+    /// non-empty cell's bounds); [`Self::cull_sphere`] is its bounding sphere.
+    #[must_use]
+    pub fn cull_box(&self) -> (Vec3, Vec3) {
+        (self.cull_centre, self.cull_half)
+    }
+
+    /// The bounds under which a far instance draws only the roots of every cell (the
+    /// [`Kind::Roots`] range), for mirrors of [`select_frame`]: at its smallest thresholds
+    /// `(τ_p, τ_t)` it does exactly when the model has roots, `τ_p` is finite and
+    /// `τ_p ≥ max(roots_tau, largest_finite_hi0)` and `τ_t ≥ largest_triangle`. Returns
+    /// `(roots_tau, largest_triangle, largest_finite_hi0)`: the largest `hi` after any cell's
+    /// roots, the largest triangle of any cell, and the largest finite first `hi` of any cell
+    /// (`−∞` where there is none; NaN counts as `−∞`).
+    #[must_use]
+    pub fn roots_only_bounds(&self) -> (f32, f32, f32) {
+        let largest = self.cells_by_largest.first().copied().unwrap_or(f32::NEG_INFINITY);
+        let finite_hi0 =
+            self.cells_by_hi0.iter().copied().find(|&hi0| hi0 != f32::INFINITY).unwrap_or(f32::NEG_INFINITY);
+        (self.roots_tau, largest, finite_hi0)
     }
 
     /// `R`: half the diagonal of the block bounds, metres, model space (Gilet §5.2's block size).

@@ -61,6 +61,10 @@ pub struct Args {
     pub background: [u8; 3],
     #[command(flatten)]
     pub prune: PruneArgs,
+    /// Select on the GPU (compute shaders write the indirect draws; every model is kept resident
+    /// whole). Frames with pruning or the full mesh (`--compare`'s right half) select on the CPU.
+    #[arg(long)]
+    pub gpu_selection: bool,
 }
 
 /// Pruning options shared by `render` and `view`.
@@ -185,10 +189,21 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
         scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
+    if args.gpu_selection {
+        renderer.enable_gpu_selection(&gpu.device, &gpu.queue).map_err(|e| {
+            report::message_error(&args.input, &format!("cannot select on the GPU: {e}"));
+            Failed { class: ErrorClass::Unsupported }
+        })?;
+    }
     let camera = frame_camera(bounds, args.eye, args.target, args.fov.to_radians(), width, height);
     let background = clear_colour(args.background);
     let render = |renderer: &mut Renderer| -> Result<(Image, FrameStats), Failed> {
         settle_streaming(&gpu, renderer, &camera);
+        if renderer.gpu_selection_enabled() {
+            // GPU selection reports the counts of a frame read back earlier: let the settling
+            // frame (same camera) finish, so the image's frame reports its counts.
+            let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        }
         let frame = |renderer: &mut Renderer| {
             render_image(&gpu, renderer, &camera, background).map_err(|e| {
                 report::message_error(&args.output, &format!("cannot render: {e}"));

@@ -1,0 +1,869 @@
+//! GPU-driven selection: [`treelod_runtime::select_frame`] as compute shaders
+//! (`shaders/select.wgsl`) that write the indirect draws themselves, for 10^5–10^6 instances.
+//!
+//! **Data.** When it is turned on ([`crate::Renderer::enable_gpu_selection`]) every model's
+//! triangles and points are uploaded whole into a pool of their own (the streamed pool is left as
+//! it is), with a contiguous copy of its roots, so every prefix selection can ask for is resident;
+//! a model that does not fit the memory budget is refused. Next to it: per model the block sphere,
+//! culling box and roots-only bounds of its [`ModelLod`], per non-empty cell its bounds, ranges and
+//! first keys, and the cells' sorted keys (triangle sizes, point `hi`) in one array.
+//!
+//! **Instances** are sorted once per [`crate::Renderer::set_instances`] into blocks of
+//! [`BLOCK_INSTANCES`] by the Morton code of their culling sphere's centre (ties by index, so the
+//! order is deterministic), each block with a bounding sphere. Each record keeps the instance's
+//! index in the renderer's list, which is what the draws carry back.
+//!
+//! **A frame** is one compute pass of two dispatches and O(models) CPU work: `cull_blocks` tests
+//! every block's sphere and appends the visible ones, counting them into the x of an indirect
+//! dispatch; `select_instances` runs one workgroup per visible block and selects each instance as
+//! the CPU does (culling, far path and roots range, near path with cell culling, Gilet's depth
+//! bias and shading, prefix search), appending one `DrawInfo` + `DrawIndirectArgs` pair per range
+//! to its model's triangle or point bucket through an atomic counter. The render pass draws each
+//! bucket with `multi_draw_indirect_count` (the counter is the count), or, on adapters without
+//! `MULTI_DRAW_INDIRECT_COUNT`, with `multi_draw_indirect` over the whole bucket after the
+//! indirect buffer was cleared (unused slots are empty draws).
+//!
+//! **Capacity.** Each bucket's slots are fixed on the CPU (the bind group and the render pass
+//! need them): `min(upper bound, max(2^16, what earlier frames needed × 1.25))`, the upper bound
+//! being the model's instances times its cells with triangles (points). Ranges past a bucket's
+//! capacity are dropped that frame and counted; the counters are read back without blocking a
+//! frame or two later, and the buckets that overflowed grow for the next frames.
+//!
+//! **Order.** Within a bucket the draws come in the order the atomics hand out slots, which
+//! varies between runs: the set of draws equals the CPU selection's (up to `f32` rounding of keys
+//! that lie at a threshold), their order does not, so images may differ where two primitives tie
+//! in depth.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use treelod_format::{Container, PointRecord};
+use treelod_runtime::{DrawRange, Kind, ModelLod, ROOTS_CELL};
+
+use crate::renderer::{DrawInfo, RenderError};
+use crate::streaming::UNIT;
+
+/// WGSL of the selection.
+const SHADER: &str = include_str!("../../../shaders/select.wgsl");
+
+/// Instances per block: one workgroup of `select_instances`.
+pub const BLOCK_INSTANCES: usize = 64;
+
+/// Most blocks a frame dispatches (one dispatch dimension): beyond
+/// `BLOCK_INSTANCES × MAX_BLOCKS` ≈ 4.19 M instances the renderer selects on the CPU.
+pub const MAX_BLOCKS: usize = 65_535;
+
+/// Slots a bucket starts with (if its upper bound is not smaller).
+const INITIAL_BUCKET_DRAWS: u32 = 1 << 16;
+
+/// Statistics counters after the bucket counters.
+const STATS: usize = 6;
+
+/// Bytes of one indirect draw.
+const INDIRECT_BYTES: u64 = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
+
+/// Per-frame constants of the selection. WGSL twin: `SelectFrame` in `shaders/select.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub(crate) struct SelectFrameGpu {
+    /// Frustum planes, as [`treelod_runtime::Frustum::planes`].
+    pub planes: [[f32; 4]; 6],
+    /// Eye (xyz), world size per pixel at one metre (w).
+    pub eye: [f32; 4],
+    /// `s_min`, `s_max`, `k`, far ratio.
+    pub pixels: [f32; 4],
+    /// `L_m`, `L_M`, shading on (1/0), `Z_i` needed (1/0).
+    pub shading: [f32; 4],
+    pub block_count: u32,
+    pub stats_at: u32,
+    pub _pad: [u32; 2],
+}
+
+/// A block of instances. WGSL twin: `Block`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct BlockGpu {
+    centre: [f32; 3],
+    radius: f32,
+    first: u32,
+    count: u32,
+    _pad: [u32; 2],
+}
+
+/// An instance. WGSL twin: `InstanceGpu`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct InstanceGpu {
+    transform: [[f32; 4]; 4],
+    model: u32,
+    index: u32,
+    _pad: [u32; 2],
+}
+
+/// A model's selection constants and buckets. WGSL twin: `ModelGpu`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct ModelGpu {
+    centre: [f32; 3],
+    radius: f32,
+    cull_centre: [f32; 3],
+    cull_radius: f32,
+    cull_half: [f32; 3],
+    first_cell: u32,
+    cell_count: u32,
+    roots_tau: f32,
+    largest: f32,
+    finite_hi0: f32,
+    root_count: u32,
+    root_cells: u32,
+    roots_at: u32,
+    triangle_base: u32,
+    point_base: u32,
+    bucket_first: [u32; 2],
+    bucket_capacity: [u32; 2],
+}
+
+/// A non-empty cell. WGSL twin: `CellGpu`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct CellGpu {
+    centre: [f32; 3],
+    index: u32,
+    half: [f32; 3],
+    block_cell: u32,
+    triangles_first: u32,
+    triangles_count: u32,
+    points_first: u32,
+    points_count: u32,
+    sizes_at: u32,
+    hi_at: u32,
+    largest: f32,
+    roots: u32,
+    next_hi: f32,
+    hi0: f32,
+    _pad: [u32; 2],
+}
+
+const _: () = assert!(size_of::<SelectFrameGpu>() == 160);
+const _: () = assert!(size_of::<BlockGpu>() == 32);
+const _: () = assert!(size_of::<InstanceGpu>() == 80);
+const _: () = assert!(size_of::<ModelGpu>() == 100);
+const _: () = assert!(size_of::<CellGpu>() == 80);
+
+/// A key as the shader holds it: ±∞ as ±`f32::MAX`, NaN as `−f32::MAX` (selection's thresholds
+/// are finite and non-negative, so every comparison gives the CPU's result).
+fn key(v: f32) -> f32 {
+    if v.is_nan() { -f32::MAX } else { v.clamp(-f32::MAX, f32::MAX) }
+}
+
+/// What the counters of a finished frame said.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct GpuCounts {
+    pub instances_visible: u32,
+    pub instances_far: u32,
+    pub cells_visible: u32,
+    pub cells_culled: u32,
+    pub triangles: u64,
+    pub points: u64,
+    pub ranges: u32,
+    pub dropped: u32,
+}
+
+/// A counter read-back in flight.
+struct Pending {
+    staging: wgpu::Buffer,
+    mapping: bool,
+    /// 0 mapping, 1 mapped, 2 failed.
+    state: Arc<AtomicU8>,
+}
+
+/// Pool units a model takes whole: its triangles, points and a copy of its roots.
+pub(crate) fn model_units(container: &Container, lod: &ModelLod) -> u64 {
+    let triangles = u64::try_from(container.triangles().len()).unwrap_or(u64::MAX).div_ceil(2);
+    let points = u64::try_from(container.points().len()).unwrap_or(u64::MAX);
+    let roots = u64::try_from(lod.roots().len()).unwrap_or(u64::MAX);
+    triangles.saturating_add(points).saturating_add(roots)
+}
+
+/// The GPU state of the selection.
+pub(crate) struct GpuSelection {
+    cull_pipeline: wgpu::ComputePipeline,
+    select_pipeline: wgpu::ComputePipeline,
+    /// `multi_draw_indirect_count` is available.
+    count_feature: bool,
+    uniform: wgpu::Buffer,
+    models_cpu: Vec<ModelGpu>,
+    models: wgpu::Buffer,
+    cells: wgpu::Buffer,
+    keys: wgpu::Buffer,
+    /// The whole triangles, points and roots of every model, in 48-byte units.
+    pool: wgpu::Buffer,
+    pool_bytes: u64,
+    blocks: wgpu::Buffer,
+    block_count: u32,
+    /// More blocks than one dispatch holds: the CPU selects.
+    too_many: bool,
+    instances: wgpu::Buffer,
+    /// Per model, its valid instances.
+    per_model: Vec<u32>,
+    visible: wgpu::Buffer,
+    dispatch: wgpu::Buffer,
+    counters: wgpu::Buffer,
+    draws: wgpu::Buffer,
+    indirect: wgpu::Buffer,
+    /// Per model: cells with triangles, cells with points (the upper bounds per instance).
+    cells_with: Vec<[u32; 2]>,
+    /// Per model and kind: slots needed by the largest frame read back so far.
+    needed: Vec<[u32; 2]>,
+    cull_group: Option<wgpu::BindGroup>,
+    select_group: Option<wgpu::BindGroup>,
+    /// The render pass's frame bind group over the draws and the whole pool.
+    frame_group: Option<wgpu::BindGroup>,
+    pending: Option<Pending>,
+    last: GpuCounts,
+}
+
+fn buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        // At least one element of every array the shaders bind (the largest is 100 bytes).
+        size: size.max(256).next_multiple_of(16),
+        usage: usage | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE;
+
+impl GpuSelection {
+    /// The pipelines and the scene of `models` (checked against `budget` bytes).
+    ///
+    /// # Errors
+    /// [`RenderError::GpuSelectionBudget`] if the models' triangles and points do not fit.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        containers: &[&Container],
+        lods: &[ModelLod],
+        budget: u64,
+    ) -> Result<Self, RenderError> {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("treelod select.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let pipeline = |entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                cache: None,
+            })
+        };
+        let empty = |label| buffer(device, label, 16, STORAGE);
+        let mut selection = Self {
+            cull_pipeline: pipeline("cull_blocks"),
+            select_pipeline: pipeline("select_instances"),
+            count_feature: device.features().contains(wgpu::Features::MULTI_DRAW_INDIRECT_COUNT),
+            uniform: buffer(
+                device,
+                "treelod select frame",
+                size_of::<SelectFrameGpu>() as u64,
+                wgpu::BufferUsages::UNIFORM,
+            ),
+            models_cpu: Vec::new(),
+            models: empty("treelod select models"),
+            cells: empty("treelod select cells"),
+            keys: empty("treelod select keys"),
+            pool: empty("treelod select pool"),
+            pool_bytes: 0,
+            blocks: empty("treelod select blocks"),
+            block_count: 0,
+            too_many: false,
+            instances: empty("treelod select instances"),
+            per_model: Vec::new(),
+            visible: empty("treelod select visible blocks"),
+            dispatch: buffer(device, "treelod select dispatch", 16, STORAGE | wgpu::BufferUsages::INDIRECT),
+            counters: empty("treelod select counters"),
+            draws: empty("treelod select draws"),
+            indirect: empty("treelod select indirect"),
+            cells_with: Vec::new(),
+            needed: Vec::new(),
+            cull_group: None,
+            select_group: None,
+            frame_group: None,
+            pending: None,
+            last: GpuCounts::default(),
+        };
+        selection.load_models(device, queue, containers, lods, budget)?;
+        Ok(selection)
+    }
+
+    /// Bytes of the whole pool.
+    pub fn pool_bytes(&self) -> u64 {
+        self.pool_bytes
+    }
+
+    /// Whether the instances fit one dispatch (else the CPU selects).
+    pub fn usable(&self) -> bool {
+        !self.too_many
+    }
+
+    /// Uploads the models whole and their selection tables.
+    fn load_models(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        containers: &[&Container],
+        lods: &[ModelLod],
+        budget: u64,
+    ) -> Result<(), RenderError> {
+        let limits = device.limits();
+        let budget = budget.min(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let mut units = 0u64;
+        for (m, (container, lod)) in containers.iter().zip(lods).enumerate() {
+            units = units.saturating_add(model_units(container, lod));
+            if units.saturating_mul(UNIT) > budget {
+                return Err(RenderError::GpuSelectionBudget {
+                    model: u32::try_from(m).unwrap_or(u32::MAX),
+                    bytes: units.saturating_mul(UNIT),
+                    budget,
+                });
+            }
+        }
+        let to_u32 = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+        self.pool_bytes = units * UNIT;
+        self.pool = buffer(device, "treelod select pool", self.pool_bytes, STORAGE);
+        let (mut models, mut cells, mut keys) = (Vec::new(), Vec::new(), Vec::<f32>::new());
+        self.cells_with.clear();
+        let mut at = 0u64;
+        for (container, lod) in containers.iter().zip(lods) {
+            let unit = |n: u64| u32::try_from(n).unwrap_or(u32::MAX);
+            let (triangles, points) = (container.triangles(), container.points());
+            let roots: Vec<PointRecord> = lod.roots().iter().map(|&i| points[i as usize]).collect();
+            let triangles_at = at;
+            let points_at = triangles_at + u64::try_from(triangles.len()).unwrap_or(0).div_ceil(2);
+            let roots_at = points_at + u64::try_from(points.len()).unwrap_or(0);
+            at = roots_at + u64::try_from(roots.len()).unwrap_or(0);
+            for (unit_at, bytes) in [
+                (triangles_at, bytemuck::cast_slice::<_, u8>(triangles)),
+                (points_at, bytemuck::cast_slice(points)),
+                (roots_at, bytemuck::cast_slice(&roots)),
+            ] {
+                if !bytes.is_empty() {
+                    queue.write_buffer(&self.pool, unit_at * UNIT, bytes);
+                }
+            }
+            let (roots_tau, largest, finite_hi0) = lod.roots_only_bounds();
+            let (cull_centre, cull_half) = lod.cull_box();
+            let first_cell = to_u32(cells.len());
+            let mut with = [0u32; 2];
+            for cell in lod.cells() {
+                let (centre, half) = cell.centre_half();
+                let (t, p) = (cell.triangles(), cell.points());
+                with[0] += u32::from(t.count > 0);
+                with[1] += u32::from(p.count > 0);
+                cells.push(CellGpu {
+                    centre: centre.to_array(),
+                    index: cell.index(),
+                    half: half.to_array(),
+                    block_cell: u32::from(cell.is_block_cell()),
+                    triangles_first: t.first,
+                    triangles_count: t.count,
+                    points_first: p.first,
+                    points_count: p.count,
+                    sizes_at: to_u32(keys.len()),
+                    hi_at: to_u32(keys.len() + lod.triangle_sizes(cell).len()),
+                    largest: key(cell.largest_triangle()),
+                    roots: cell.root_count(),
+                    next_hi: key(cell.next_hi()),
+                    hi0: key(cell.first_hi()),
+                    _pad: [0; 2],
+                });
+                keys.extend(lod.triangle_sizes(cell).iter().map(|&v| key(v)));
+                keys.extend(lod.point_hi(cell).iter().map(|&v| key(v)));
+            }
+            self.cells_with.push(with);
+            models.push(ModelGpu {
+                centre: lod.centre().to_array(),
+                radius: lod.radius(),
+                cull_centre: cull_centre.to_array(),
+                cull_radius: lod.cull_sphere().1,
+                cull_half: cull_half.to_array(),
+                first_cell,
+                cell_count: to_u32(lod.cells().len()),
+                roots_tau: key(roots_tau),
+                largest: key(largest),
+                finite_hi0: key(finite_hi0),
+                root_count: to_u32(roots.len()),
+                root_cells: to_u32(lod.cells().iter().filter(|c| c.root_count() > 0).count()),
+                roots_at: unit(roots_at),
+                triangle_base: unit(2 * triangles_at),
+                point_base: unit(points_at),
+                bucket_first: [0; 2],
+                bucket_capacity: [0; 2],
+            });
+        }
+        let upload = |label, bytes: &[u8]| {
+            let b = buffer(device, label, bytes.len() as u64, STORAGE);
+            queue.write_buffer(&b, 0, bytes);
+            b
+        };
+        self.cells = upload("treelod select cells", bytemuck::cast_slice(&cells));
+        self.keys = upload("treelod select keys", bytemuck::cast_slice(&keys));
+        self.models_cpu = models;
+        self.needed = vec![[0; 2]; self.models_cpu.len()];
+        self.per_model = vec![0; self.models_cpu.len()];
+        self.counters = buffer(
+            device,
+            "treelod select counters",
+            4 * (2 * self.models_cpu.len() + STATS) as u64,
+            STORAGE | wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC,
+        );
+        self.pending = None;
+        self.last = GpuCounts::default();
+        Ok(())
+    }
+
+    /// Sorts `instances` into blocks and uploads them (see the module documentation).
+    pub fn set_instances(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        instances: &[treelod_runtime::Instance],
+        lods: &[ModelLod],
+    ) {
+        // Valid instances with their culling spheres, world space.
+        let mut spheres = Vec::with_capacity(instances.len());
+        self.per_model.iter_mut().for_each(|n| *n = 0);
+        for (i, instance) in instances.iter().enumerate() {
+            let (Some(lod), Ok(index)) = (lods.get(instance.model as usize), u32::try_from(i)) else { continue };
+            let m = instance.transform;
+            let scale = m
+                .x_axis
+                .truncate()
+                .length_squared()
+                .max(m.y_axis.truncate().length_squared())
+                .max(m.z_axis.truncate().length_squared())
+                .sqrt();
+            if !(scale > 0.0 && scale.is_finite()) {
+                continue;
+            }
+            let (centre, radius) = lod.cull_sphere();
+            spheres.push((m.transform_point3(centre), radius * scale, index));
+            if let Some(n) = self.per_model.get_mut(instance.model as usize) {
+                *n += 1;
+            }
+        }
+        // Morton order of the centres over their bounds, ties by index.
+        let (lo, hi) = spheres
+            .iter()
+            .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), s| (lo.min(s.0), hi.max(s.0)));
+        let extent = (hi - lo).max(Vec3::splat(1e-6));
+        let mut order: Vec<(u32, u32, usize)> = spheres
+            .iter()
+            .enumerate()
+            .map(|(k, s)| {
+                let q = ((s.0 - lo) / extent * 1023.0).clamp(Vec3::ZERO, Vec3::splat(1023.0));
+                #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 0..=1023")]
+                let code = morton(q.x as u32, q.y as u32, q.z as u32);
+                (code, s.2, k)
+            })
+            .collect();
+        order.sort_unstable();
+        let mut gpu_instances = Vec::with_capacity(order.len());
+        let mut blocks = Vec::with_capacity(order.len().div_ceil(BLOCK_INSTANCES));
+        for chunk in order.chunks(BLOCK_INSTANCES) {
+            let first = u32::try_from(gpu_instances.len()).unwrap_or(u32::MAX);
+            let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+            for &(_, index, k) in chunk {
+                let (c, r, _) = spheres[k];
+                lo = lo.min(c - Vec3::splat(r));
+                hi = hi.max(c + Vec3::splat(r));
+                let instance = &instances[index as usize];
+                gpu_instances.push(InstanceGpu {
+                    transform: instance.transform.to_cols_array_2d(),
+                    model: instance.model,
+                    index,
+                    _pad: [0; 2],
+                });
+            }
+            let centre = 0.5 * (lo + hi);
+            let radius =
+                chunk.iter().map(|&(_, _, k)| spheres[k].0.distance(centre) + spheres[k].1).fold(0.0, f32::max);
+            // Inflated so rounding never culls a block whose instance the exact test keeps.
+            let radius = radius * 1.001 + 1e-4 * centre.length() + 0.01;
+            blocks.push(BlockGpu {
+                centre: centre.to_array(),
+                radius,
+                first,
+                count: u32::try_from(chunk.len()).unwrap_or(0),
+                _pad: [0; 2],
+            });
+        }
+        self.too_many = blocks.len() > MAX_BLOCKS;
+        self.block_count = u32::try_from(blocks.len()).unwrap_or(u32::MAX);
+        let upload = |label, bytes: &[u8]| {
+            let b = buffer(device, label, bytes.len() as u64, STORAGE);
+            queue.write_buffer(&b, 0, bytes);
+            b
+        };
+        self.instances = upload("treelod select instances", bytemuck::cast_slice(&gpu_instances));
+        self.blocks = upload("treelod select blocks", bytemuck::cast_slice(&blocks));
+        self.visible = buffer(device, "treelod select visible blocks", 8 * blocks.len() as u64, STORAGE);
+        self.cull_group = None;
+        self.select_group = None;
+        self.layout_buckets(device, queue);
+    }
+
+    /// Fixes each bucket's slots (see the module documentation), reallocates the draw buffers if
+    /// they grew, and drops the bind groups that name them.
+    fn layout_buckets(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
+        let limits = device.limits();
+        let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_draws = limit / size_of::<DrawInfo>() as u64;
+        let mut wanted = Vec::with_capacity(self.models_cpu.len());
+        for ((&n, with), needed) in self.per_model.iter().zip(&self.cells_with).zip(&self.needed) {
+            let mut caps = [0u64; 2];
+            for kind in 0..2 {
+                let upper = u64::from(n) * u64::from(with[kind]);
+                let grown = u64::from(needed[kind]).saturating_mul(5).div_ceil(4).next_power_of_two();
+                caps[kind] = upper.min(grown.max(u64::from(INITIAL_BUCKET_DRAWS)));
+            }
+            wanted.push(caps);
+        }
+        let total: u64 = wanted.iter().flatten().sum();
+        // Scaled down if the device cannot bind that many draws.
+        let scale = if total > max_draws { max_draws as f64 / total as f64 } else { 1.0 };
+        let mut first = 0u32;
+        for (model, caps) in self.models_cpu.iter_mut().zip(&wanted) {
+            for (kind, &wanted) in caps.iter().enumerate() {
+                #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "at most max_draws")]
+                let cap = ((wanted as f64 * scale) as u64).min(u64::from(u32::MAX)) as u32;
+                model.bucket_first[kind] = first;
+                model.bucket_capacity[kind] = cap;
+                first = first.saturating_add(cap);
+            }
+        }
+        let draws_bytes = u64::from(first) * size_of::<DrawInfo>() as u64;
+        if draws_bytes > self.draws.size() || self.frame_group.is_none() {
+            self.draws = buffer(
+                device,
+                "treelod select draws",
+                draws_bytes.next_power_of_two(),
+                STORAGE | wgpu::BufferUsages::COPY_SRC,
+            );
+            self.indirect = buffer(
+                device,
+                "treelod select indirect",
+                (u64::from(first) * INDIRECT_BYTES).next_power_of_two(),
+                STORAGE | wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC,
+            );
+            self.frame_group = None;
+        }
+        self.models =
+            buffer(device, "treelod select models", (self.models_cpu.len() * size_of::<ModelGpu>()) as u64, STORAGE);
+        queue.write_buffer(&self.models, 0, bytemuck::cast_slice(&self.models_cpu));
+        self.cull_group = None;
+        self.select_group = None;
+    }
+
+    /// Makes the render pass's frame bind group (uniform, draws, pool twice) if it is missing.
+    pub fn ensure_frame_group(&mut self, device: &wgpu::Device, layout: &wgpu::BindGroupLayout, frame: &wgpu::Buffer) {
+        if self.frame_group.is_some() {
+            return;
+        }
+        self.frame_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("treelod select frame"),
+            layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: frame.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: self.draws.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: self.pool.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: self.pool.as_entire_binding() },
+            ],
+        }));
+    }
+
+    /// Runs the selection for `frame` (its `block_count` and `stats_at` are filled here): one
+    /// submission; returns the counts of the latest frame read back so far.
+    pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, mut frame: SelectFrameGpu) -> GpuCounts {
+        if self.collect(device) {
+            self.layout_buckets(device, queue);
+        }
+        frame.block_count = self.block_count;
+        frame.stats_at = u32::try_from(2 * self.models_cpu.len()).unwrap_or(u32::MAX);
+        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&frame));
+        let zeros = vec![0u32; 2 * self.models_cpu.len() + STATS];
+        queue.write_buffer(&self.counters, 0, bytemuck::cast_slice(&zeros));
+        queue.write_buffer(&self.dispatch, 0, bytemuck::cast_slice(&[0u32, 1, 1]));
+        let cull_group = self.cull_group.get_or_insert_with(|| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("treelod cull blocks"),
+                layout: &self.cull_pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: self.uniform.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: self.blocks.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: self.visible.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 3, resource: self.dispatch.as_entire_binding() },
+                ],
+            })
+        });
+        let select_group = self.select_group.get_or_insert_with(|| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("treelod select instances"),
+                layout: &self.select_pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: self.uniform.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 4, resource: self.visible.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 5, resource: self.instances.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 6, resource: self.models.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 7, resource: self.cells.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 8, resource: self.keys.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 9, resource: self.counters.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 10, resource: self.draws.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 11, resource: self.indirect.as_entire_binding() },
+                ],
+            })
+        });
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod select") });
+        if !self.count_feature {
+            // Every slot past a bucket's count must be an empty draw.
+            encoder.clear_buffer(&self.indirect, 0, None);
+        }
+        if self.block_count > 0 {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("treelod select"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.cull_pipeline);
+            pass.set_bind_group(0, &*cull_group, &[]);
+            pass.dispatch_workgroups(self.block_count.div_ceil(64), 1, 1);
+            pass.set_pipeline(&self.select_pipeline);
+            pass.set_bind_group(0, &*select_group, &[]);
+            pass.dispatch_workgroups_indirect(&self.dispatch, 0);
+        }
+        let read_now = self.pending.is_none();
+        if read_now {
+            let staging = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("treelod select counters read-back"),
+                size: self.counters.size(),
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            });
+            encoder.copy_buffer_to_buffer(&self.counters, 0, &staging, 0, self.counters.size());
+            self.pending = Some(Pending { staging, mapping: false, state: Arc::new(AtomicU8::new(0)) });
+        }
+        queue.submit([encoder.finish()]);
+        if let Some(pending) = self.pending.as_mut().filter(|p| !p.mapping) {
+            let state = Arc::clone(&pending.state);
+            pending.staging.slice(..).map_async(wgpu::MapMode::Read, move |result| {
+                state.store(if result.is_ok() { 1 } else { 2 }, Ordering::Release);
+            });
+            pending.mapping = true;
+        }
+        self.last
+    }
+
+    /// Reads a finished counter read-back, if any, without blocking; returns whether a bucket
+    /// needs more slots than it has.
+    fn collect(&mut self, device: &wgpu::Device) -> bool {
+        let Some(pending) = &self.pending else { return false };
+        // A failed poll leaves the read-back pending; the next frame tries again.
+        let _ = device.poll(wgpu::PollType::Poll);
+        match pending.state.load(Ordering::Acquire) {
+            1 => {}
+            2 => {
+                self.pending = None;
+                return false;
+            }
+            _ => return false,
+        }
+        let mut grow = false;
+        if let Ok(mapped) = pending.staging.slice(..).get_mapped_range() {
+            let words: &[u32] = bytemuck::cast_slice(&mapped);
+            let n = self.models_cpu.len();
+            if words.len() >= 2 * n + STATS {
+                let mut counts = GpuCounts::default();
+                for (m, model) in self.models_cpu.iter().enumerate() {
+                    for kind in 0..2 {
+                        let (wanted, cap) = (words[2 * m + kind], model.bucket_capacity[kind]);
+                        counts.ranges += wanted.min(cap);
+                        counts.dropped += wanted.saturating_sub(cap);
+                        if wanted > cap {
+                            grow = true;
+                        }
+                        self.needed[m][kind] = self.needed[m][kind].max(wanted);
+                    }
+                }
+                let s = &words[2 * n..];
+                counts.instances_visible = s[0];
+                counts.instances_far = s[1];
+                counts.cells_visible = s[2];
+                counts.cells_culled = s[3];
+                counts.triangles = u64::from(s[4]);
+                counts.points = u64::from(s[5]);
+                self.last = counts;
+            }
+        }
+        pending.staging.unmap();
+        self.pending = None;
+        grow
+    }
+
+    /// Records the draws into the host's pass: per kind (pipeline) and model, one
+    /// `multi_draw_indirect_count` over its bucket.
+    pub fn render(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        pipelines: [&wgpu::RenderPipeline; 2],
+        model_groups: &[&wgpu::BindGroup],
+    ) {
+        let Some(frame_group) = &self.frame_group else { return };
+        pass.set_bind_group(0, frame_group, &[]);
+        for (kind, pipeline) in pipelines.into_iter().enumerate() {
+            pass.set_pipeline(pipeline);
+            for (m, (model, group)) in self.models_cpu.iter().zip(model_groups).enumerate() {
+                let (first, capacity) = (model.bucket_first[kind], model.bucket_capacity[kind]);
+                if capacity == 0 || self.per_model.get(m).is_none_or(|&n| n == 0) {
+                    continue;
+                }
+                pass.set_bind_group(1, *group, &[]);
+                let offset = u64::from(first) * INDIRECT_BYTES;
+                if self.count_feature {
+                    let count_at = 4 * (2 * m + kind) as u64;
+                    pass.multi_draw_indirect_count(&self.indirect, offset, &self.counters, count_at, capacity);
+                } else {
+                    pass.multi_draw_indirect(&self.indirect, offset, capacity);
+                }
+            }
+        }
+    }
+
+    /// Reads the draws of the last [`Self::prepare`] back, blocking until the GPU is done: the
+    /// ranges as the CPU selection would list them (in bucket order, not the CPU's), for tests
+    /// and tools. Ranges dropped for lack of capacity are missing.
+    ///
+    /// # Errors
+    /// [`RenderError::Readback`] if mapping fails.
+    pub fn read_ranges(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<DrawRange>, RenderError> {
+        let mut encoder =
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod select read") });
+        let copy = |encoder: &mut wgpu::CommandEncoder, source: &wgpu::Buffer| {
+            let staging = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("treelod select read"),
+                size: source.size(),
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            });
+            encoder.copy_buffer_to_buffer(source, 0, &staging, 0, source.size());
+            staging
+        };
+        let (counters, draws, indirect) =
+            (copy(&mut encoder, &self.counters), copy(&mut encoder, &self.draws), copy(&mut encoder, &self.indirect));
+        queue.submit([encoder.finish()]);
+        let read = |b: &wgpu::Buffer| -> Result<Vec<u8>, RenderError> {
+            let (sender, receiver) = std::sync::mpsc::channel();
+            b.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                let _ = sender.send(r);
+            });
+            device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| RenderError::Readback(e.to_string()))?;
+            receiver
+                .recv()
+                .map_err(|e| RenderError::Readback(e.to_string()))?
+                .map_err(|e| RenderError::Readback(e.to_string()))?;
+            let bytes = b.slice(..).get_mapped_range().map_err(|e| RenderError::Readback(e.to_string()))?.to_vec();
+            b.unmap();
+            Ok(bytes)
+        };
+        let (counters, draws, indirect) = (read(&counters)?, read(&draws)?, read(&indirect)?);
+        let counters: &[u32] = bytemuck::cast_slice(&counters);
+        let draws: &[DrawInfo] =
+            bytemuck::cast_slice(&draws[..draws.len() / size_of::<DrawInfo>() * size_of::<DrawInfo>()]);
+        let indirect: &[[u32; 4]] = bytemuck::cast_slice(&indirect[..indirect.len() / 16 * 16]);
+        let mut ranges = Vec::new();
+        for (m, model) in self.models_cpu.iter().enumerate() {
+            for kind in 0..2 {
+                let n = counters.get(2 * m + kind).copied().unwrap_or(0).min(model.bucket_capacity[kind]);
+                for s in 0..n {
+                    let slot = (model.bucket_first[kind] + s) as usize;
+                    let (Some(info), Some(args)) = (draws.get(slot), indirect.get(slot)) else { continue };
+                    let (kind, first, count) = match kind {
+                        0 => (Kind::Triangles, args[2] / 3 - model.triangle_base, args[0] / 3),
+                        _ if info.cell == ROOTS_CELL => (Kind::Roots, args[2] / 6 - model.roots_at, args[0] / 6),
+                        _ => (Kind::Points, args[2] / 6 - model.point_base, args[0] / 6),
+                    };
+                    ranges.push(DrawRange {
+                        instance: info.instance,
+                        model: u32::try_from(m).unwrap_or(u32::MAX),
+                        cell: info.cell,
+                        kind,
+                        first,
+                        count,
+                        tau_points: info.tau_p,
+                        tau_triangles: info.tau_t,
+                        shading: info.shading,
+                    });
+                }
+            }
+        }
+        Ok(ranges)
+    }
+}
+
+/// Interleaves the low 10 bits of `x`, `y`, `z` (x lowest).
+fn morton(x: u32, y: u32, z: u32) -> u32 {
+    fn spread(mut v: u32) -> u32 {
+        v &= 0x3ff;
+        v = (v | (v << 16)) & 0x0300_00ff;
+        v = (v | (v << 8)) & 0x0300_f00f;
+        v = (v | (v << 4)) & 0x030c_30c3;
+        (v | (v << 2)) & 0x0924_9249
+    }
+    spread(x) | (spread(y) << 1) | (spread(z) << 2)
+}
+
+/// The frame constants for a camera and settings (`block_count`, `stats_at` filled later).
+pub(crate) fn select_frame_gpu(
+    camera: &treelod_runtime::Camera,
+    settings: &treelod_runtime::LodSettings,
+) -> SelectFrameGpu {
+    let frustum = treelod_runtime::Frustum::from_view_proj(camera.view_proj);
+    let (l_min, l_max) = settings.shading.unwrap_or((1.0, 1.0));
+    let needs_z = settings.depth_bias_k != 0.0 || settings.shading.is_some();
+    SelectFrameGpu {
+        planes: frustum.planes().map(|p| p.to_array()),
+        eye: camera.position.extend(camera.world_per_pixel()).to_array(),
+        pixels: [settings.s_min, settings.s_max, settings.depth_bias_k, settings.far_ratio],
+        shading: [l_min, l_max, f32::from(u8::from(settings.shading.is_some())), f32::from(u8::from(needs_z))],
+        block_count: 0,
+        stats_at: 0,
+        _pad: [0; 2],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn morton_interleaves() {
+        assert_eq!(morton(1, 0, 0), 1);
+        assert_eq!(morton(0, 1, 0), 2);
+        assert_eq!(morton(0, 0, 1), 4);
+        assert_eq!(morton(3, 0, 0), 0b1001);
+        assert_eq!(morton(1023, 1023, 1023), (1 << 30) - 1);
+    }
+
+    #[test]
+    fn keys_keep_comparisons_with_finite_thresholds() {
+        assert_eq!(key(f32::INFINITY), f32::MAX);
+        assert_eq!(key(f32::NEG_INFINITY), -f32::MAX);
+        assert_eq!(key(f32::NAN), -f32::MAX);
+        assert_eq!(key(0.5), 0.5);
+    }
+}

@@ -1,0 +1,315 @@
+//! GPU-driven selection on the Vulkan backend (Mesa lavapipe in CI): for a few hundred instances
+//! of the demo tree at several cameras, the draw records the compute shaders write, read back,
+//! equal the CPU selection (up to `f32` rounding of keys at a threshold), and both paths render
+//! the same image.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+
+use glam::{Mat4, Quat, Vec3, vec3};
+use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
+use treelod_format::{Compression, Container};
+use treelod_render::offscreen::{Gpu, Image, render_image};
+use treelod_render::{Camera, Instance, ModelId, Renderer, Settings};
+use treelod_runtime::{DrawRange, Kind, ModelLod};
+
+const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
+
+/// The relative distance from a threshold within which `f32` rounding may put a key on the other
+/// side.
+const ROUNDING: f32 = 1e-5;
+
+fn gpu() -> Gpu {
+    let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+    assert_eq!(gpu.info.backend, wgpu::Backend::Vulkan, "rendering tests run on Vulkan, got {:?}", gpu.info);
+    assert!(
+        gpu.device.features().contains(wgpu::Features::MULTI_DRAW_INDIRECT_COUNT),
+        "lavapipe offers MULTI_DRAW_INDIRECT_COUNT"
+    );
+    gpu
+}
+
+fn demo_container() -> Arc<Container> {
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let built =
+        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "test")
+            .expect("the demo tree builds");
+    Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
+}
+
+/// 300 trees on a jittered 20 × 15 grid (15 m apart) in front of the origin, 40 far away (the far
+/// path and its roots ranges), 20 behind the origin; random rotations and scales 0.8–1.2.
+fn forest(model: ModelId) -> Vec<Instance> {
+    let mut rng = SplitMix64(9);
+    let mut place = |x: f32, z: f32| {
+        let rotation = Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU));
+        let scale = Vec3::splat(rng.range(0.8, 1.2));
+        let position = vec3(x + rng.range(-4.0, 4.0), 0.0, z + rng.range(-4.0, 4.0));
+        Instance { model, transform: Mat4::from_scale_rotation_translation(scale, rotation, position) }
+    };
+    let mut instances = Vec::new();
+    for i in 0..300 {
+        instances.push(place((i % 20) as f32 * 15.0 - 150.0, -((i / 20) as f32) * 15.0));
+    }
+    for i in 0..40 {
+        instances.push(place((i % 8) as f32 * 60.0 - 240.0, -400.0 - (i / 8) as f32 * 200.0));
+    }
+    for i in 0..20 {
+        instances.push(place((i % 10) as f32 * 20.0 - 100.0, 60.0 + (i / 10) as f32 * 20.0));
+    }
+    instances
+}
+
+/// Cameras: near inside the forest, an overview, one looking along the forest's edge (half the
+/// trees outside the frustum), and random ones.
+fn cameras(width: u32, height: u32) -> Vec<(String, Camera)> {
+    let mut cams = vec![
+        ("near".to_owned(), Camera::look_at(vec3(3.0, 4.0, 10.0), vec3(-10.0, 3.0, -60.0), 0.9, width, height)),
+        ("overview".to_owned(), Camera::look_at(vec3(0.0, 180.0, 250.0), vec3(0.0, 0.0, -300.0), 0.9, width, height)),
+        ("edge".to_owned(), Camera::look_at(vec3(-160.0, 6.0, -100.0), vec3(-150.0, 4.0, 200.0), 1.0, width, height)),
+    ];
+    let mut rng = SplitMix64(77);
+    for i in 0..4 {
+        let eye = vec3(rng.range(-200.0, 200.0), rng.range(2.0, 120.0), rng.range(-300.0, 120.0));
+        let target = vec3(rng.range(-150.0, 150.0), 0.0, rng.range(-250.0, 0.0));
+        cams.push((format!("random-{i}"), Camera::look_at(eye, target, rng.range(0.5, 1.2), width, height)));
+    }
+    cams
+}
+
+/// Two renderers of the same scene: the CPU path and the GPU path.
+fn renderers(gpu: &Gpu, settings: Settings) -> (Renderer, Renderer, Arc<Container>) {
+    let container = demo_container();
+    let mut cpu = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let mut on_gpu = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let a = cpu.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    on_gpu.enable_gpu_selection(&gpu.device, &gpu.queue).expect("an empty scene fits");
+    let b = on_gpu.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    cpu.set_instances(&forest(a));
+    on_gpu.set_instances(&forest(b));
+    (cpu, on_gpu, container)
+}
+
+/// One range per (instance, cell, kind), a roots range spread over the cells it stands for.
+type Key = (u32, u32, Kind);
+/// First, count, τ_p, τ_t, and whether it came from a roots range.
+type Entry = (u32, u32, f32, f32, bool);
+
+fn by_cell(ranges: &[DrawRange], lod: &ModelLod) -> BTreeMap<Key, Entry> {
+    let mut map = BTreeMap::new();
+    for r in ranges {
+        if r.kind == Kind::Roots {
+            assert_eq!(r.count as usize, lod.roots().len(), "{r:?}");
+            for cell in lod.cells().iter().filter(|c| c.root_count() > 0) {
+                let entry = (cell.points().first, cell.root_count(), r.tau_points, r.tau_triangles, true);
+                assert!(map.insert((r.instance, cell.index(), Kind::Points), entry).is_none(), "{r:?}");
+            }
+        } else {
+            let entry = (r.first, r.count, r.tau_points, r.tau_triangles, false);
+            assert!(map.insert((r.instance, r.cell, r.kind), entry).is_none(), "two ranges for one cell: {r:?}");
+        }
+    }
+    map
+}
+
+/// Asserts that the GPU's ranges are the CPU's: the same (instance, cell, kind, first, count),
+/// except where every element between the two counts has its key (triangle size, point `hi`)
+/// within [`ROUNDING`] of the threshold. Returns how many ranges differed that way.
+fn assert_same_selection(what: &str, cpu: &[DrawRange], gpu: &[DrawRange], lod: &ModelLod) -> usize {
+    let (a, b) = (by_cell(cpu, lod), by_cell(gpu, lod));
+    let roots = |ranges: &[DrawRange]| -> BTreeSet<u32> {
+        ranges.iter().filter(|r| r.kind == Kind::Roots).map(|r| r.instance).collect()
+    };
+    let cells: BTreeMap<u32, &treelod_runtime::CellLod> = lod.cells().iter().map(|c| (c.index(), c)).collect();
+    let mut tolerated = 0;
+    for key in a.keys().chain(b.keys()).collect::<BTreeSet<_>>() {
+        let (x, y) = (a.get(key), b.get(key));
+        if let (Some(x), Some(y)) = (x, y) {
+            assert_eq!(x.0, y.0, "{what}: {key:?}: first differs: cpu {x:?}, gpu {y:?}");
+            if !x.4 && !y.4 {
+                for (s, t) in [(x.2, y.2), (x.3, y.3)] {
+                    assert!((s - t).abs() <= ROUNDING * s.abs().max(t.abs()), "{what}: {key:?}: cpu {x:?}, gpu {y:?}");
+                }
+            }
+            if x.1 == y.1 {
+                continue;
+            }
+        }
+        // Counts differ: only keys at the threshold may lie between them.
+        let count = |e: Option<&Entry>| e.map_or(0, |e| e.1) as usize;
+        let (lo, hi) = (count(x).min(count(y)), count(x).max(count(y)));
+        let cell = cells.get(&key.1).unwrap_or_else(|| panic!("{what}: {key:?}: no such cell"));
+        let keys = match key.2 {
+            Kind::Triangles => lod.triangle_sizes(cell),
+            _ => lod.point_hi(cell),
+        };
+        let taus: Vec<f32> =
+            [x, y].into_iter().flatten().map(|e| if key.2 == Kind::Triangles { e.3 } else { e.2 }).collect();
+        for &k in &keys[lo..hi] {
+            assert!(
+                taus.iter().any(|&tau| (k - tau).abs() <= ROUNDING * tau.abs()),
+                "{what}: {key:?}: cpu {x:?}, gpu {y:?}: key {k} is not at a threshold {taus:?}"
+            );
+        }
+        tolerated += 1;
+    }
+    if tolerated == 0 {
+        assert_eq!(roots(cpu), roots(gpu), "{what}: roots ranges");
+    }
+    tolerated
+}
+
+fn gpu_ranges(gpu: &Gpu, renderer: &Renderer) -> Vec<DrawRange> {
+    renderer.read_gpu_selection(&gpu.device, &gpu.queue).expect("reads back").expect("the GPU selected")
+}
+
+#[test]
+fn gpu_selection_equals_the_cpu_selection_at_many_cameras() {
+    let gpu = gpu();
+    let mut roots_ranges = 0;
+    for (label, settings) in [
+        ("default", Settings::default()),
+        (
+            "bias",
+            Settings { s_min: 0.7, s_max: 3.0, depth_bias_k: 0.8, shading: Some((0.4, 1.0)), ..Settings::default() },
+        ),
+    ] {
+        let (mut cpu, mut on_gpu, container) = renderers(&gpu, settings);
+        let lod = ModelLod::from_container(&container);
+        let mut totals = (0usize, 0usize, 0usize);
+        for (name, cam) in cameras(1280, 720) {
+            let what = format!("{label}/{name}");
+            let cpu_stats = cpu.prepare(&gpu.device, &gpu.queue, &cam);
+            assert!(!cpu_stats.gpu_selection && cpu_stats.ranges_clamped == 0, "{what}: {cpu_stats:?}");
+            let stats = on_gpu.prepare(&gpu.device, &gpu.queue, &cam);
+            assert!(stats.gpu_selection, "{what}: {stats:?}");
+            let reference = cpu.selection().ranges().to_vec();
+            let ranges = gpu_ranges(&gpu, &on_gpu);
+            assert!(ranges.len() > 10, "{what}: {} ranges", ranges.len());
+            let tolerated = assert_same_selection(&what, &reference, &ranges, &lod);
+            let roots = ranges.iter().filter(|r| r.kind == Kind::Roots).count();
+            eprintln!(
+                "{what}: {} ranges ({roots} roots ranges), {} visible instances, {tolerated} at a threshold",
+                ranges.len(),
+                cpu_stats.instances_visible
+            );
+            totals = (totals.0 + ranges.len(), totals.1 + roots, totals.2 + tolerated);
+            // Instance indices are the caller's: each drawn instance is one the CPU drew.
+            assert!(ranges.iter().all(|r| (r.instance as usize) < 360 && r.model == 0));
+        }
+        assert!(totals.2 * 1000 <= totals.0, "{label}: {totals:?}: rounding explains only a few ranges");
+        roots_ranges += totals.1;
+    }
+    assert!(roots_ranges > 0, "some far tree is one roots range");
+}
+
+#[test]
+fn gpu_statistics_arrive_a_frame_or_two_later_and_match_the_cpu() {
+    let gpu = gpu();
+    let (mut cpu, mut on_gpu, container) = renderers(&gpu, Settings::default());
+    let lod = ModelLod::from_container(&container);
+    let (_, cam) = cameras(640, 360).swap_remove(0);
+    let expected = cpu.prepare(&gpu.device, &gpu.queue, &cam);
+    let first = on_gpu.prepare(&gpu.device, &gpu.queue, &cam);
+    assert_eq!((first.instances_visible, first.ranges), (0, 0), "nothing read back before the first frame");
+    let exact = assert_same_selection("stats", cpu.selection().ranges(), &gpu_ranges(&gpu, &on_gpu), &lod) == 0;
+    let mut stats = first;
+    for _ in 0..20 {
+        gpu.device.poll(wgpu::PollType::wait_indefinitely()).expect("polls");
+        stats = on_gpu.prepare(&gpu.device, &gpu.queue, &cam);
+        if stats.ranges > 0 {
+            break;
+        }
+    }
+    assert_eq!(stats.instances_visible, expected.instances_visible, "{stats:?} vs {expected:?}");
+    assert_eq!(stats.ranges_dropped, 0);
+    if exact {
+        assert_eq!(
+            (stats.ranges, stats.triangles, stats.points),
+            (expected.ranges, expected.triangles, expected.points)
+        );
+    }
+}
+
+/// Pixels of `a` and `b` that differ by more than 48 in a channel, and pixels covered in either.
+fn differing(a: &Image, b: &Image) -> (usize, usize) {
+    let covered = |p: &[u8]| p[0] < 250 || p[1] < 250 || p[2] < 250;
+    let mut diff = 0;
+    let mut any = 0;
+    for (p, q) in a.rgba.chunks_exact(4).zip(b.rgba.chunks_exact(4)) {
+        any += usize::from(covered(p) || covered(q));
+        diff += usize::from(p.iter().zip(q).any(|(x, y)| x.abs_diff(*y) > 48));
+    }
+    (diff, any)
+}
+
+#[test]
+fn both_paths_render_the_same_image() {
+    let gpu = gpu();
+    let settings = Settings { depth_bias_k: 0.5, shading: Some((0.5, 1.0)), ..Settings::default() };
+    let (mut cpu, mut on_gpu, _) = renderers(&gpu, settings);
+    for (name, cam) in cameras(256, 256).into_iter().take(4) {
+        let (a, sa) = render_image(&gpu, &mut cpu, &cam, BACKGROUND).expect("renders");
+        let (b, sb) = render_image(&gpu, &mut on_gpu, &cam, BACKGROUND).expect("renders");
+        assert!(!sa.gpu_selection && sb.gpu_selection);
+        let (diff, covered) = differing(&a, &b);
+        eprintln!("{name}: {diff} of {covered} covered pixels differ");
+        assert!(covered > 100, "{name}: the forest is in view");
+        // Draw order within a bucket follows the atomics, so depth ties may resolve otherwise.
+        assert!(diff * 200 <= covered, "{name}: {diff} of {covered} pixels differ");
+    }
+}
+
+#[test]
+fn instances_behind_the_camera_and_an_empty_list_draw_nothing() {
+    let gpu = gpu();
+    let container = demo_container();
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("fits");
+    let cam = Camera::look_at(vec3(0.0, 4.0, 0.0), vec3(0.0, 4.0, -100.0), 0.8, 128, 128);
+
+    // An empty list: no dispatch, no draw, no error.
+    renderer.set_instances(&[]);
+    let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+    assert!(stats.gpu_selection);
+    assert!(gpu_ranges(&gpu, &renderer).is_empty());
+    assert!(image.rgba.chunks_exact(4).all(|p| p[..3] == [255, 255, 255]));
+
+    // Behind the camera, near and far.
+    let behind: Vec<Instance> = (0..100)
+        .map(|i| Instance {
+            model: tree,
+            transform: Mat4::from_translation(vec3((i % 10) as f32 * 12.0 - 60.0, 0.0, 15.0 + (i / 10) as f32 * 90.0)),
+        })
+        .collect();
+    renderer.set_instances(&behind);
+    let (image, _) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+    assert!(gpu_ranges(&gpu, &renderer).is_empty(), "nothing behind the camera is drawn");
+    assert!(image.rgba.chunks_exact(4).all(|p| p[..3] == [255, 255, 255]));
+
+    // Turned around, they are drawn; off again, the CPU selects.
+    let back = Camera::look_at(vec3(0.0, 4.0, 0.0), vec3(0.0, 4.0, 100.0), 0.8, 128, 128);
+    renderer.prepare(&gpu.device, &gpu.queue, &back);
+    let ranges = gpu_ranges(&gpu, &renderer);
+    assert!(!ranges.is_empty());
+    renderer.disable_gpu_selection();
+    let stats = renderer.prepare(&gpu.device, &gpu.queue, &back);
+    assert!(!stats.gpu_selection && stats.ranges > 0);
+    assert!(renderer.read_gpu_selection(&gpu.device, &gpu.queue).expect("reads").is_none());
+    let lod = ModelLod::from_container(&container);
+    assert_same_selection("behind, turned", renderer.selection().ranges(), &ranges, &lod);
+}
+
+#[test]
+fn a_model_that_does_not_fit_the_budget_is_refused() {
+    let gpu = gpu();
+    let container = demo_container();
+    let settings = Settings { memory_budget: 64 << 10, ..Settings::default() };
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("an empty scene fits");
+    let error =
+        renderer.add_model(&gpu.device, &gpu.queue, container).expect_err("the demo tree needs more than 64 KiB");
+    assert!(matches!(error, treelod_render::RenderError::GpuSelectionBudget { model: 0, .. }), "{error}");
+    assert!(renderer.gpu_selection_enabled());
+}

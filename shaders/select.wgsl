@@ -1,0 +1,401 @@
+// GPU-driven selection: the compute twin of treelod_runtime::select_frame (crates/runtime/src/
+// frame.rs), run by crates/render/src/gpu_select.rs. Two entry points:
+//
+// 1. `cull_blocks`, one invocation per instance block (64 instances in Morton order): a block
+//    whose bounding sphere lies outside a frustum plane is skipped; a visible one is appended to
+//    `visible_out` and counted into the x of the indirect dispatch of pass 2.
+// 2. `select_instances`, one workgroup per visible block, one invocation per instance: the
+//    instance's culling, depth, thresholds and prefixes exactly as `select_frame` computes them
+//    (same operations, same order, same far path and roots range), and one `DrawInfo` +
+//    `DrawIndirectArgs` pair per non-empty range, appended to its model's triangle or point
+//    bucket by an atomic counter (the count `multi_draw_indirect_count` reads).
+//
+// Keys that the CPU holds as ±∞ are uploaded as ±f32::MAX (selection thresholds are finite and
+// non-negative, so every comparison gives the same result).
+
+const OUTSIDE: u32 = 0u;
+const INSIDE: u32 = 1u;
+const STRADDLES: u32 = 2u;
+const ROOTS_CELL: u32 = 0xFFFFFFFFu;
+const F32_MAX: f32 = 3.40282347e+38;
+
+// Rust twin: SelectFrameGpu (crates/render/src/gpu_select.rs).
+struct SelectFrame {
+    // Left, right, bottom, top, near, far: unit normal into the frustum (xyz), offset (w).
+    planes: array<vec4<f32>, 6>,
+    // Eye, world (xyz); world size per pixel at one metre, 2·tan(fovy/2)/H (w).
+    eye: vec4<f32>,
+    // s_min, s_max, depth bias k (pixels), far ratio.
+    pixels: vec4<f32>,
+    // L_m, L_M, shading on (1 or 0), Z needed (1 or 0: bias or shading on).
+    shading: vec4<f32>,
+    block_count: u32,
+    // Index of the first statistics counter in `counters` (= 2 × models).
+    stats_at: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+// Rust twin: BlockGpu.
+struct Block {
+    centre: array<f32, 3>,
+    radius: f32,
+    first: u32,
+    count: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+// Rust twin: InstanceGpu. `index` is the instance's index in `Renderer::set_instances`' list.
+struct InstanceGpu {
+    transform: mat4x4<f32>,
+    model: u32,
+    index: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+// Rust twin: ModelGpu. Pool indices: `triangle_base + i` is container triangle `i` in the pool
+// bound as triangles, `point_base + i` container point `i` bound as points, `roots_at` the first
+// of the model's roots (`ModelLod::roots`, copied contiguously).
+struct ModelGpu {
+    centre: array<f32, 3>,
+    radius: f32,
+    cull_centre: array<f32, 3>,
+    cull_radius: f32,
+    cull_half: array<f32, 3>,
+    first_cell: u32,
+    cell_count: u32,
+    roots_tau: f32,
+    largest: f32,
+    finite_hi0: f32,
+    root_count: u32,
+    root_cells: u32,
+    roots_at: u32,
+    triangle_base: u32,
+    point_base: u32,
+    // Triangle bucket, point bucket: first slot of the draw buffers, and slots.
+    bucket_first: array<u32, 2>,
+    bucket_capacity: array<u32, 2>,
+}
+
+// Rust twin: CellGpu. `sizes_at` / `hi_at` index `keys`.
+struct CellGpu {
+    centre: array<f32, 3>,
+    index: u32,
+    half: array<f32, 3>,
+    block_cell: u32,
+    triangles_first: u32,
+    triangles_count: u32,
+    points_first: u32,
+    points_count: u32,
+    sizes_at: u32,
+    hi_at: u32,
+    largest: f32,
+    roots: u32,
+    next_hi: f32,
+    hi0: f32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+// Rust twin: DrawInfo (crates/render/src/renderer.rs); the same struct as in tree.wgsl, whose
+// `_pad0` this path fills with the instance index.
+struct DrawInfo {
+    model: mat4x4<f32>,
+    tau_p: f32,
+    tau_t: f32,
+    cell: u32,
+    scale: f32,
+    shading: f32,
+    leaf_scale: f32,
+    instance: u32,
+    _pad1: u32,
+}
+
+// wgpu::util::DrawIndirectArgs.
+struct DrawIndirect {
+    vertex_count: u32,
+    instance_count: u32,
+    first_vertex: u32,
+    first_instance: u32,
+}
+
+struct DispatchArgs {
+    x: atomic<u32>,
+    y: u32,
+    z: u32,
+}
+
+@group(0) @binding(0) var<uniform> frame: SelectFrame;
+// cull_blocks
+@group(0) @binding(1) var<storage, read> blocks: array<Block>;
+@group(0) @binding(2) var<storage, read_write> visible_out: array<vec2<u32>>;
+@group(0) @binding(3) var<storage, read_write> dispatch: DispatchArgs;
+// select_instances
+@group(0) @binding(4) var<storage, read> visible: array<vec2<u32>>;
+@group(0) @binding(5) var<storage, read> instances: array<InstanceGpu>;
+@group(0) @binding(6) var<storage, read> models: array<ModelGpu>;
+@group(0) @binding(7) var<storage, read> cells: array<CellGpu>;
+@group(0) @binding(8) var<storage, read> keys: array<f32>;
+// Per bucket (2 × model + kind) the ranges appended, then the statistics: instances visible,
+// far, cells selected, cells culled, triangles, points.
+@group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
+@group(0) @binding(10) var<storage, read_write> draws: array<DrawInfo>;
+@group(0) @binding(11) var<storage, read_write> indirect: array<DrawIndirect>;
+
+fn v3(a: array<f32, 3>) -> vec3<f32> {
+    return vec3<f32>(a[0], a[1], a[2]);
+}
+
+// Frustum::classify_sphere.
+fn classify_sphere(centre: vec3<f32>, radius: f32) -> u32 {
+    var inside = true;
+    for (var i = 0u; i < 6u; i++) {
+        let p = frame.planes[i];
+        let d = dot(p.xyz, centre) + p.w;
+        if d < -radius {
+            return OUTSIDE;
+        }
+        inside = inside && d >= radius;
+    }
+    return select(STRADDLES, INSIDE, inside);
+}
+
+// Frustum::intersects_box.
+fn intersects_box(centre: vec3<f32>, a0: vec3<f32>, a1: vec3<f32>, a2: vec3<f32>) -> bool {
+    for (var i = 0u; i < 6u; i++) {
+        let p = frame.planes[i];
+        let n = p.xyz;
+        let reach = abs(dot(n, a0)) + abs(dot(n, a1)) + abs(dot(n, a2));
+        if dot(n, centre) + p.w < -reach {
+            return false;
+        }
+    }
+    return true;
+}
+
+@compute @workgroup_size(64)
+fn cull_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
+    let b = id.x;
+    if b >= frame.block_count {
+        return;
+    }
+    let block = blocks[b];
+    if classify_sphere(v3(block.centre), block.radius) == OUTSIDE {
+        return;
+    }
+    let slot = atomicAdd(&dispatch.x, 1u);
+    visible_out[slot] = vec2<u32>(block.first, block.count);
+}
+
+// The instance being selected by this invocation.
+var<private> current: InstanceGpu;
+var<private> cur_model: ModelGpu;
+var<private> model_index: u32;
+// World size per pixel per metre, divided by the instance's scale.
+var<private> per_metre: f32;
+var<private> draw_scale: f32;
+var<private> tally_cells: u32;
+var<private> tally_triangles: u32;
+var<private> tally_points: u32;
+
+// LodSettings::biased_pixels, then CellEmitter::thresholds: (τ_p, τ_t), model space.
+fn thresholds(z: f32, distance: f32) -> vec2<f32> {
+    let shift = frame.pixels.z * z;
+    let s_min = max(frame.pixels.x + shift, 0.0);
+    let s_max = max(frame.pixels.y + shift, s_min);
+    let unit = max(distance, 0.0) * per_metre;
+    return vec2<f32>(s_min * unit, s_max * unit);
+}
+
+// LodSettings::shading_at.
+fn shading_at(z: f32) -> f32 {
+    if frame.shading.z == 0.0 {
+        return 1.0;
+    }
+    let l_min = frame.shading.x;
+    let l_max = frame.shading.y;
+    return l_max + 0.5 * (z - 1.0) * (l_max - l_min);
+}
+
+// Number of leading keys[at .. at + n] (sorted largest first) above tau: partition_point.
+fn leading_above(at: u32, n: u32, tau: f32) -> u32 {
+    var lo = 0u;
+    var hi = n;
+    while lo < hi {
+        let mid = (lo + hi) / 2u;
+        if keys[at + mid] > tau {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+// Appends one range: `first` is a pool index (triangles or points), `kind` 0 triangles, 1 points.
+fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, shading: f32) {
+    let s = atomicAdd(&counters[2u * model_index + kind], 1u);
+    if s >= cur_model.bucket_capacity[kind] {
+        return;
+    }
+    let slot = cur_model.bucket_first[kind] + s;
+    draws[slot] = DrawInfo(current.transform, taus.x, max(taus.y, taus.x), cell, draw_scale, shading, 1.0,
+                           current.index, 0u);
+    let corners = select(6u, 3u, kind == 0u);
+    indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
+}
+
+// CellEmitter::emit.
+fn emit(c: CellGpu, z: f32, distance: f32) {
+    let taus = thresholds(z, distance);
+    let any_triangles = c.largest > taus.y;
+    let any_points = c.hi0 > taus.x;
+    var triangles = 0u;
+    if any_triangles {
+        triangles = leading_above(c.sizes_at, c.triangles_count, taus.y);
+    }
+    var points = 0u;
+    if any_points {
+        if taus.x >= c.next_hi && taus.x < F32_MAX {
+            points = c.roots;
+        } else {
+            points = leading_above(c.hi_at, c.points_count, taus.x);
+        }
+    }
+    tally_cells += 1u;
+    tally_triangles += triangles;
+    tally_points += points;
+    let shading = shading_at(z);
+    if triangles > 0u {
+        write_range(0u, c.index, cur_model.triangle_base + c.triangles_first, triangles, taus, shading);
+    }
+    if points > 0u {
+        write_range(1u, c.index, cur_model.point_base + c.points_first, points, taus, shading);
+    }
+}
+
+@compute @workgroup_size(64)
+fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let block = visible[group.x];
+    if lane >= block.y {
+        return;
+    }
+    current = instances[block.x + lane];
+    model_index = current.model;
+    cur_model = models[model_index];
+    let m = current.transform;
+    let ax = m[0].xyz;
+    let ay = m[1].xyz;
+    let az = m[2].xyz;
+    let t = m[3].xyz;
+    let scale = sqrt(max(max(dot(ax, ax), dot(ay, ay)), dot(az, az)));
+    draw_scale = max(scale, 1e-12);
+
+    // cull_instance: the sphere, then the transformed box if the sphere straddles.
+    let cc = v3(cur_model.cull_centre);
+    let cull_centre = ax * cc.x + ay * cc.y + az * cc.z + t;
+    let visibility = classify_sphere(cull_centre, cur_model.cull_radius * scale);
+    if visibility == OUTSIDE {
+        return;
+    }
+    let h = v3(cur_model.cull_half);
+    if visibility == STRADDLES && !intersects_box(cull_centre, ax * h.x, ay * h.y, az * h.z) {
+        return;
+    }
+
+    // select_instance.
+    let mc = v3(cur_model.centre);
+    let centre = t + ax * mc.x + ay * mc.y + az * mc.z;
+    let radius = cur_model.radius * scale;
+    let eye = frame.eye.xyz;
+    let to_block = centre - eye;
+    let d_block = length(to_block);
+    var inv_radius = 0.0;
+    if radius > 0.0 {
+        inv_radius = 1.0 / radius;
+    }
+    per_metre = frame.eye.w / scale;
+    let needs_z = frame.shading.w != 0.0;
+    var far = 0u;
+    var culled = 0u;
+    let cell_end = cur_model.first_cell + cur_model.cell_count;
+
+    if radius < frame.pixels.w * d_block {
+        far = 1u;
+        let a = thresholds(-1.0, d_block);
+        let b = thresholds(1.0, d_block);
+        var lowest = thresholds(0.0, d_block);
+        if needs_z {
+            lowest = min(a, b);
+        }
+        // ModelLod::roots_only.
+        let roots_only = cur_model.root_count > 0u && lowest.x >= cur_model.roots_tau && lowest.x < F32_MAX
+            && lowest.y >= cur_model.largest && lowest.x >= cur_model.finite_hi0;
+        if roots_only {
+            tally_cells += cur_model.root_cells;
+            tally_points += cur_model.root_count;
+            write_range(1u, ROOTS_CELL, cur_model.roots_at, cur_model.root_count, lowest, shading_at(0.0));
+        } else if needs_z && d_block > 0.0 {
+            let to_z = vec3<f32>(dot(ax, to_block), dot(ay, to_block), dot(az, to_block)) * (inv_radius / d_block);
+            for (var i = cur_model.first_cell; i < cell_end; i++) {
+                let c = cells[i];
+                var z = 0.0;
+                if c.block_cell == 0u {
+                    z = clamp(dot(v3(c.centre) - mc, to_z), -1.0, 1.0);
+                }
+                emit(c, z, d_block);
+            }
+        } else {
+            for (var i = cur_model.first_cell; i < cell_end; i++) {
+                emit(cells[i], 0.0, d_block);
+            }
+        }
+    } else {
+        // Near path: exact per-cell distances; cells culled on their own if the block straddles.
+        // Per plane: n·p + w as a function of the model-space point, and the reach of a unit
+        // half-extent along each model axis.
+        var planes: array<vec4<f32>, 6>;
+        var reach: array<vec3<f32>, 6>;
+        for (var j = 0u; j < 6u; j++) {
+            let p = frame.planes[j];
+            let n = p.xyz;
+            let along = vec3<f32>(dot(n, ax), dot(n, ay), dot(n, az));
+            planes[j] = vec4<f32>(along, dot(n, t) + p.w);
+            reach[j] = abs(along);
+        }
+        let straddles = visibility == STRADDLES;
+        for (var i = cur_model.first_cell; i < cell_end; i++) {
+            let c = cells[i];
+            if c.block_cell != 0u {
+                emit(c, 0.0, d_block);
+                continue;
+            }
+            let cc = v3(c.centre);
+            if straddles {
+                var out = false;
+                for (var j = 0u; j < 6u; j++) {
+                    out = out || dot(planes[j].xyz, cc) + planes[j].w < -dot(reach[j], v3(c.half));
+                }
+                if out {
+                    culled += 1u;
+                    continue;
+                }
+            }
+            let d_cell = distance(t + ax * cc.x + ay * cc.y + az * cc.z, eye);
+            var z = 0.0;
+            if needs_z {
+                z = clamp((d_cell - d_block) * inv_radius, -1.0, 1.0);
+            }
+            emit(c, z, d_cell);
+        }
+    }
+    let at = frame.stats_at;
+    atomicAdd(&counters[at], 1u);
+    atomicAdd(&counters[at + 1u], far);
+    atomicAdd(&counters[at + 2u], tally_cells);
+    atomicAdd(&counters[at + 3u], culled);
+    atomicAdd(&counters[at + 4u], tally_triangles);
+    atomicAdd(&counters[at + 5u], tally_points);
+}
