@@ -1029,6 +1029,48 @@ impl Renderer {
         &self.recorded
     }
 
+    /// The points of the last [`Self::prepare`]'s draws that the vertex shader keeps (those in the
+    /// cut: [`treelod_runtime::point_drawn`] at each draw's thresholds), as opposed to
+    /// [`FrameStats::points`], the prefixes submitted. A scan of the submitted points on the CPU,
+    /// for tools and reports, not for every frame of a host; 0 after a GPU-selected frame.
+    #[must_use]
+    pub fn points_in_cut(&self) -> u64 {
+        let mut drawn = 0u64;
+        for draw in &self.recorded {
+            let (Some(model), Some(lod)) =
+                (self.models.get(draw.model.0 as usize), self.lods.get(draw.model.0 as usize))
+            else {
+                continue;
+            };
+            let points = model.container.points();
+            let t = treelod_runtime::Thresholds { points: draw.tau_points, triangles: draw.tau_triangles };
+            let count = draw.count as usize;
+            let kept = |p: &PointRecord| treelod_runtime::point_drawn(p, t);
+            drawn += match draw.source {
+                DrawSource::Points => {
+                    let first = model.container.cells().get(draw.cell as usize).map_or(0, |c| c.points.first as usize);
+                    points.get(first..first + count).unwrap_or_default().iter().filter(|p| kept(p)).count()
+                }
+                DrawSource::Roots => {
+                    let at = if draw.cell == ROOTS_CELL {
+                        0
+                    } else {
+                        model.cell_roots.get(draw.cell as usize).map_or(0, |r| r.0 as usize)
+                    };
+                    lod.roots()
+                        .get(at..at + count)
+                        .unwrap_or_default()
+                        .iter()
+                        .filter_map(|&i| points.get(i as usize))
+                        .filter(|p| kept(p))
+                        .count()
+                }
+                DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark => 0,
+            } as u64;
+        }
+        drawn
+    }
+
     /// Leading triangles and points of a cell's ranges that are resident on the GPU.
     #[must_use]
     pub fn resident(&self, model: ModelId, cell: u32) -> (u32, u32) {

@@ -214,6 +214,25 @@ fn with_unlimited_budgets_the_draws_are_the_cpu_selection() {
         );
     }
     check_draws(&renderer, &container);
+    // The points the shader keeps: those of each submitted prefix inside the cut.
+    let points = container.points();
+    let model = treelod_runtime::ModelLod::from_container(&container);
+    let in_cut: u64 = selection
+        .iter()
+        .map(|r| {
+            let t = Thresholds { points: r.tau_points, triangles: r.tau_triangles.max(r.tau_points) };
+            let indices: Vec<usize> = match r.kind {
+                Kind::Triangles => Vec::new(),
+                Kind::Points => (r.first as usize..(r.first + r.count) as usize).collect(),
+                Kind::Roots => {
+                    model.roots()[r.first as usize..(r.first + r.count) as usize].iter().map(|&i| i as usize).collect()
+                }
+            };
+            indices.iter().filter(|&&i| point_drawn(&points[i], t)).count() as u64
+        })
+        .sum();
+    assert_eq!(renderer.points_in_cut(), in_cut);
+    assert!(in_cut > 0 && in_cut < stats.points, "{in_cut} of {} submitted points are in the cut", stats.points);
 }
 
 #[test]
