@@ -1,4 +1,5 @@
-// Drawing a tree container: vertex-pulled triangles and screen-facing disc splats.
+// Drawing a tree container: vertex-pulled triangles, screen-facing disc splats, and fixed
+// impostor planes (Garcia et al. 2005) textured from the model's atlas.
 //
 // Prepended with shared/records.wgsl. One indirect draw per selected range: `first_instance` is
 // the index of the range's `DrawInfo`, `first_vertex` is 3 × its first triangle (or 6 × its first
@@ -54,6 +55,10 @@ struct DrawInfo {
 // centres are the pivots of the survivors' scaling).
 @group(1) @binding(4) var<storage, read> extra_triangles: array<TriangleRecord>;
 @group(1) @binding(5) var<storage, read> prune_leaves: array<PruneLeafRecord>;
+// Impostors: the container's planes, and the atlas they sample (clamped, with its stored mips).
+@group(1) @binding(6) var<storage, read> planes: array<PlaneRecord>;
+@group(1) @binding(7) var atlas: texture_2d<f32>;
+@group(1) @binding(8) var atlas_sampler: sampler;
 
 // The material as uploaded: the record's fields that shading needs, 32 bytes.
 struct MaterialGpu {
@@ -174,6 +179,36 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     return out;
 }
 
+// One corner of an impostor plane (spec §6.10): `center ± axis_u ± axis_v`, never turned to the
+// camera, the corner `center − axis_u − axis_v` at `uv_min`. `first_vertex` is 6 × the range's
+// first plane; planes outside the level `tau_p` selects are dropped.
+@vertex
+fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
+    let draw = draws[draw_index];
+    let plane = planes[vertex_index / 6u];
+    if !plane_drawn(plane, draw.tau_p) {
+        return offscreen();
+    }
+    let corner = CORNERS[vertex_index % 6u];
+    let u = vec3<f32>(plane.axis_u[0], plane.axis_u[1], plane.axis_u[2]);
+    let v = vec3<f32>(plane.axis_v[0], plane.axis_v[1], plane.axis_v[2]);
+    let p = vec3<f32>(plane.center[0], plane.center[1], plane.center[2]) + corner.x * u + corner.y * v;
+    let t = 0.5 * (corner + 1.0);
+    var out: Varyings;
+    out.clip = frame.view_proj * (draw.model * vec4<f32>(p, 1.0));
+    out.normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
+    out.uv = mix(unpack2x16unorm(plane.uv_min), unpack2x16unorm(plane.uv_max), t);
+    out.color = vec4<f32>(1.0);
+    out.material = 0xFFFFFFFFu;
+    out.disc = vec2<f32>(0.0);
+    switch frame.debug {
+        case 1u: { out.tint = cell_tint(draw.cell); }
+        case 2u: { out.tint = vec3<f32>(0.95, 0.75, 0.15); }
+        default: { out.tint = vec3<f32>(draw.shading); }
+    }
+    return out;
+}
+
 // Two-sided Lambert with ambient: leaves are lit from both faces.
 fn shade(albedo: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
     let diffuse = abs(dot(normalize(normal), frame.sun.xyz));
@@ -207,20 +242,14 @@ fn coverage_mask(coverage: f32, fragment: vec4<f32>) -> u32 {
     return ((run << shift) | (run >> (sample_count - shift))) & all;
 }
 
-@fragment
-fn fs_triangle(in: Varyings) -> TriangleOut {
-    let material = materials[in.material];
-    // Sampled unconditionally: implicit derivatives need uniform control flow.
-    let texel = textureSample(textures, linear_sampler, in.uv, max(material.layer, 0));
-    let albedo = material.base_color * in.color * select(vec4<f32>(1.0), texel, material.layer >= 0);
-    // Masked and blended materials are alpha-tested (blend is drawn as a mask at 0.5).
-    let cutoff = select(select(material.alpha_cutoff, 0.5, material.alpha_mode == 2u), -1.0, material.alpha_mode == 0u);
-    // Texels per pixel, for alpha to coverage below (derivatives need uniform control flow).
-    let footprint = max(length(dpdx(in.uv)), length(dpdy(in.uv))) * f32(textureDimensions(textures).x);
+// The samples an alpha-tested fragment covers (0: discard it): with one sample the test of
+// `alpha` against `cutoff` (a negative cutoff passes everything); with MSAA alpha to coverage.
+// `footprint` is texels per pixel.
+fn alpha_mask(alpha: f32, cutoff: f32, footprint: f32, clip: vec4<f32>) -> u32 {
     var mask = 0xFFFFFFFFu;
     if sample_count == 1u || cutoff < 0.0 {
-        if albedo.a < cutoff {
-            discard;
+        if alpha < cutoff {
+            mask = 0u;
         }
     } else {
         // Alpha to coverage. Alpha-tested images have binary alpha filtered into their mips
@@ -229,18 +258,48 @@ fn fs_triangle(in: Varyings) -> TriangleOut {
         // test against the cutoff thins it out. Magnified (a texel over a pixel or more) the
         // test itself keeps edges crisp; in between the two blend over one mip level.
         let minified = clamp(log2(max(footprint, 1e-6)), 0.0, 1.0);
-        let tested = select(0.0, 1.0, albedo.a >= cutoff);
-        let coverage = mix(tested, albedo.a, minified);
-        mask = coverage_mask(coverage, in.clip);
-        if mask == 0u {
-            discard;
-        }
+        let tested = select(0.0, 1.0, alpha >= cutoff);
+        let coverage = mix(tested, alpha, minified);
+        mask = coverage_mask(coverage, clip);
+    }
+    return mask;
+}
+
+@fragment
+fn fs_triangle(in: Varyings) -> TriangleOut {
+    let material = materials[in.material];
+    // Sampled unconditionally: implicit derivatives need uniform control flow.
+    let texel = textureSample(textures, linear_sampler, in.uv, max(material.layer, 0));
+    let albedo = material.base_color * in.color * select(vec4<f32>(1.0), texel, material.layer >= 0);
+    // Masked and blended materials are alpha-tested (blend is drawn as a mask at 0.5).
+    let cutoff = select(select(material.alpha_cutoff, 0.5, material.alpha_mode == 2u), -1.0, material.alpha_mode == 0u);
+    // Texels per pixel, for alpha to coverage (derivatives need uniform control flow).
+    let footprint = max(length(dpdx(in.uv)), length(dpdy(in.uv))) * f32(textureDimensions(textures).x);
+    let mask = alpha_mask(albedo.a, cutoff, footprint, in.clip);
+    if mask == 0u {
+        discard;
     }
     if frame.debug != 0u {
         return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
     }
     // The tint is the cell's estimated self-shadowing when shaded.
     return TriangleOut(vec4<f32>(shade(albedo.rgb, in.normal) * in.tint, 1.0), mask);
+}
+
+// An impostor plane's texel: the baked leaves' colour (linear after the sRGB fetch) and, in
+// alpha, the fraction of the texel they cover, tested at one half. The atlas's mips scale alpha
+// so that the test keeps the covered fraction at every level (Castaño's alpha mipmaps), so the
+// test is right at any distance, with or without MSAA (no alpha to coverage here).
+@fragment
+fn fs_plane(in: Varyings) -> @location(0) vec4<f32> {
+    let texel = textureSample(atlas, atlas_sampler, in.uv);
+    if texel.a < 0.5 {
+        discard;
+    }
+    if frame.debug != 0u {
+        return vec4<f32>(in.tint, 1.0);
+    }
+    return vec4<f32>(shade(texel.rgb, in.normal) * in.tint, 1.0);
 }
 
 @fragment

@@ -110,3 +110,8 @@ fn decode_color(packed: u32) -> vec4<f32> {
 fn point_drawn(p: PointRecord, tau_p: f32, tau_t: f32) -> bool {
     return p.lo <= tau_p && tau_p < p.hi && p.size <= tau_t;
 }
+
+// The plane rule of spec §10: inside [lo, hi) at tau.
+fn plane_drawn(p: PlaneRecord, tau: f32) -> bool {
+    return p.lo <= tau && tau < p.hi;
+}

@@ -43,15 +43,21 @@ proptest! {
 #[test]
 fn the_trimmed_demo_tree_verifies_and_compresses_smaller() {
     let scene = demo_tree(&DemoTreeConfig::default());
+    let config = BuildConfig { precision: Precision::FULL, ..BuildConfig::default() };
     let built =
-        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "test")
-            .expect("builds");
+        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
     let compression = Compression::Zstd { level: 9 };
     let full = built.data.to_bytes(compression).unwrap().len();
     let mut data = built.data.clone();
     trim(&mut data, &Precision::default());
     let bytes = data.to_bytes(compression).unwrap();
     verify(&Container::from_bytes(&bytes).unwrap()).expect("the trimmed tree verifies");
+    // The build trims by default, to the same bits.
+    let default =
+        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "test")
+            .expect("builds");
+    assert_eq!(default.data.vertices, data.vertices);
+    assert_eq!(default.data.points, data.points);
     eprintln!("demo tree: {full} bytes, trimmed {} bytes", bytes.len());
     assert!((bytes.len() as f64) < 0.9 * full as f64, "{} bytes trimmed vs {full}", bytes.len());
     // Positions move by at most their rounding.

@@ -1,21 +1,26 @@
 //! The build pipeline: placed scenes in, [`ContainerData`] out.
 //!
 //! Stages, in order: classify parts; gather and filter triangles; bounds and grid; assign
-//! triangles to cells by centroid; per cell (in parallel, results kept in cell order) leaf points,
-//! point hierarchy and size-sorted triangles; vertices renumbered in first-use order; materials,
-//! images and metadata.
+//! triangles to cells by centroid; with pruning, the leaves' priority list and curves
+//! ([`crate::prune`]); per cell (in parallel, results kept in cell order) leaf points, point
+//! hierarchy and size-sorted triangles; vertices renumbered in first-use order; the pruned leaves
+//! per cell; materials, images and metadata.
 
 use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use treelod_format::{
     BlockRecord, CellRecord, ContainerData, ImageRecord, MATERIAL_DOUBLE_SIDED, MaterialInfo, MaterialRecord, Metadata,
-    NO_IMAGE, PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, image_format, material_class,
-    pack,
+    NO_IMAGE, PointRecord, PruneLeafRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, image_format,
+    material_class, pack,
 };
 
 use crate::classify::{ClassifyOptions, classify};
 use crate::error::BuildError;
 use crate::gilet::{CellPoint, GiletConfig, LeafPoint, build_cell};
+use crate::impostor::{ImpostorConfig, ImpostorMesh, Impostors, LeafTriangle, Surface, build_impostors};
+use crate::precision::Precision;
+use crate::prune::{MeshTriangle, PruneConfig, PruneMesh, PruneReport, Pruned};
+use crate::raster::{AlphaMask, NO_ALPHA};
 use crate::scene::{AlphaMode, Class, Image, ImageEncoding, Material, Part, Scene};
 use crate::spt::FlattenError;
 use crate::texture::{TriangleSurface, integrate, linear_to_srgb};
@@ -32,12 +37,28 @@ pub struct BuildConfig {
     pub gilet: GiletConfig,
     /// Leaf / bark overrides.
     pub classify: ClassifyOptions,
+    /// Pruning (Neubert et al. 2011, spec §6.11): the leaves' priority lists, `s_opt(λ)` and
+    /// `λ(h)`. Default `None`: pruning is opt-in, it adds the measuring of many coverage images
+    /// to the build (see [`crate::prune`]).
+    pub prune: Option<PruneConfig>,
+    /// Leaf-cluster impostors (Garcia et al. 2005, spec §6.10): nested levels of textured planes
+    /// per tree in the block cell, and their atlas image. Default `None`: impostors are opt-in,
+    /// their atlas is several times larger than the rest of a container (see
+    /// [`crate::impostor`]).
+    pub impostors: Option<ImpostorConfig>,
+    /// Significant bits kept of the written floats ([`crate::precision`]): by default rounded so
+    /// that zstd compresses the container about a third smaller; [`Precision::FULL`] keeps every
+    /// bit.
+    pub precision: Precision,
 }
 
 /// The build settings a build with `config` records in the container's metadata (spec §7.1), sorted
-/// by key: `grid` (the grid used, `X,Y,Z`), `grid.auto`, `points.cluster_max` and, when given,
-/// `classify.leaves` and `classify.bark`. `grid` is the grid chosen for the block, which is
-/// `config.grid` when that is set.
+/// by key: `grid` (the grid used, `X,Y,Z`), `grid.auto`, `points.cluster_max`, when given
+/// `classify.leaves` and `classify.bark`, and with pruning `prune.order`, `prune.min_quality`,
+/// `prune.resolution`, `prune.views` and `prune.seed`, and with impostors `impostors.levels`,
+/// `impostors.alpha_scale`, `impostors.texels_per_metre`, `impostors.max_texels`,
+/// `impostors.iterations` and `impostors.seed`. `grid` is the grid chosen for the block,
+/// which is `config.grid` when that is set.
 ///
 /// A tool that wants to know whether a container was built with `config` compares its settings with
 /// these, taking `grid` from the container when `config.grid` is `None` (the automatic grid depends
@@ -55,6 +76,13 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
     if !config.classify.bark.is_empty() {
         settings.push(Setting { key: "classify.bark".into(), value: config.classify.bark.join(" ") });
     }
+    if let Some(prune) = &config.prune {
+        settings.extend(prune.settings());
+    }
+    if let Some(impostors) = &config.impostors {
+        settings.extend(impostors.settings());
+    }
+    settings.push(Setting { key: "precision".into(), value: config.precision.setting() });
     settings.sort();
     settings
 }
@@ -89,6 +117,16 @@ pub struct BuildStats {
     pub grid: [u32; 3],
     /// Grid cells holding anything.
     pub nonempty_cells: u64,
+    /// Pruned leaves written (0 without pruning).
+    pub prune_leaves: u64,
+    /// Triangles of the pruned leaves written.
+    pub prune_triangles: u64,
+    /// Impostor planes written (0 without impostors).
+    pub planes: u64,
+    /// Impostor planes per level, finest first, summed over the trees (empty without).
+    pub planes_per_level: Vec<u32>,
+    /// The impostor atlas, texels across and down (`[0, 0]` without).
+    pub atlas: [u32; 2],
 }
 
 /// What a build returns.
@@ -138,22 +176,32 @@ struct PartRef<'a> {
     base: u32,
 }
 
-/// Builds a block from placed scenes (spec §6, Gilet 2005). `name` names the block; `generator`
-/// is recorded as the tool and version.
-///
-/// # Errors
-/// [`BuildError::NoGeometry`] if no drawable triangle remains, [`BuildError::Setting`] for a bad
-/// grid, [`BuildError::Spt`] if an internal invariant breaks.
-pub fn build_block(
-    name: &str,
-    trees: &[Placed<'_>],
-    config: &BuildConfig,
-    generator: &str,
-) -> Result<BuildOutput, BuildError> {
+/// The triangles of a build, gathered from the placed scenes.
+struct Gathered<'a> {
+    /// (tree, source material, class) per output material, in first-use order.
+    material_keys: Vec<(usize, usize, Class)>,
+    material_info: Vec<MaterialInfo>,
+    /// Every source vertex, in block space (global ids; renumbered when written).
+    vertices: Vec<VertexRecord>,
+    tris: Vec<Tri>,
+    parts: Vec<PartRef<'a>>,
+    stats: BuildStats,
+    warnings: Vec<String>,
+}
+
+/// The first stage of a build: checks the settings, classifies parts and gathers their
+/// triangles, dropping degenerate ones.
+fn gather<'a>(name: &str, trees: &[Placed<'a>], config: &BuildConfig) -> Result<Gathered<'a>, BuildError> {
     if let Some(grid) = config.grid
         && grid.iter().any(|&g| g == 0 || g > treelod_format::MAX_GRID_AXIS)
     {
         return Err(BuildError::Setting(format!("grid {grid:?}: each axis must be in 1..=256")));
+    }
+    if let Some(prune) = &config.prune {
+        prune.validate()?;
+    }
+    if let Some(impostors) = &config.impostors {
+        impostors.validate()?;
     }
     let mut stats = BuildStats::default();
     let mut warnings: Vec<String> = Vec::new();
@@ -236,34 +284,151 @@ pub fn build_block(
     if stats.leaf_triangles == 0 {
         warnings.push(format!("{name}: no part was classified as leaves; pass --leaves PATTERN if that is wrong"));
     }
+    Ok(Gathered { material_keys, material_info, vertices, tris, parts, stats, warnings })
+}
+
+/// The bounds and grid of a block (spec §6.1).
+struct BlockGrid {
+    lo: Vec3,
+    hi: Vec3,
+    grid: [u32; 3],
+    cell_count: usize,
+}
+
+impl BlockGrid {
+    /// The bounds of `tris` and the grid of `config` (or the automatic one).
+    fn new(tris: &[Tri], vertices: &[VertexRecord], config: &BuildConfig) -> Result<Self, BuildError> {
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for t in tris {
+            for &v in &t.v {
+                let p = Vec3::from_array(vertices[v as usize].position);
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        let grid = config.grid.unwrap_or_else(|| auto_grid(hi - lo));
+        let cell_count = grid.iter().map(|&g| g as usize).product::<usize>();
+        if cell_count > treelod_format::MAX_GRID_CELLS {
+            return Err(BuildError::Setting(format!("grid {grid:?} has more than 65536 cells")));
+        }
+        Ok(Self { lo, hi, grid, cell_count })
+    }
+
+    /// The index of the cell holding `p` (a point outside the bounds goes to the nearest cell).
+    fn cell_of(&self, p: Vec3) -> usize {
+        let dims = Vec3::new(self.grid[0] as f32, self.grid[1] as f32, self.grid[2] as f32);
+        let cell_size = (self.hi - self.lo) / dims;
+        let rel = (p - self.lo) / cell_size.max(Vec3::splat(f32::MIN_POSITIVE));
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
+        let c = (rel.floor().max(Vec3::ZERO).min(dims - 1.0)).to_array().map(|v| v as usize);
+        c[0] + self.grid[0] as usize * (c[1] + self.grid[1] as usize * c[2])
+    }
+
+    /// [`Self::cell_of`] as a `u32` (grids have at most 65536 cells).
+    fn cell_id(&self, p: Vec3) -> u32 {
+        #[expect(clippy::cast_possible_truncation, reason = "at most 65536 cells")]
+        let cell = self.cell_of(p) as u32;
+        cell
+    }
+}
+
+/// The gathered triangles as pruning sees them: the leaf-class ones (with their ids in the
+/// gathered triangles), the others, and one alpha test per alpha-tested output material.
+struct PruneInput {
+    leaves: Vec<MeshTriangle>,
+    leaf_ids: Vec<u32>,
+    bark: Vec<MeshTriangle>,
+    alphas: Vec<AlphaMask>,
+}
+
+impl PruneInput {
+    fn new(material_keys: &[(usize, usize, Class)], tris: &[Tri], trees: &[Placed<'_>]) -> Self {
+        let mut alphas: Vec<AlphaMask> = Vec::new();
+        let alpha_of: Vec<u32> = material_keys
+            .iter()
+            .map(|&(t, m, _)| {
+                let scene = trees[t].scene;
+                let material = scene.materials.get(m).cloned().unwrap_or_default();
+                let image = material.image.and_then(|i| scene.images.get(i));
+                AlphaMask::for_material(&material, image).map_or(NO_ALPHA, |mask| {
+                    alphas.push(mask);
+                    #[expect(clippy::cast_possible_truncation, reason = "materials are few")]
+                    let id = (alphas.len() - 1) as u32;
+                    id
+                })
+            })
+            .collect();
+        let (mut leaves, mut leaf_ids, mut bark) = (Vec::new(), Vec::new(), Vec::new());
+        for (i, t) in tris.iter().enumerate() {
+            let triangle = MeshTriangle { v: t.v, alpha: alpha_of[t.material as usize] };
+            if material_keys[t.material as usize].2 == Class::Leaf {
+                leaves.push(triangle);
+                #[expect(clippy::cast_possible_truncation, reason = "fewer than 2^32 triangles")]
+                leaf_ids.push(i as u32);
+            } else {
+                bark.push(triangle);
+            }
+        }
+        Self { leaves, leaf_ids, bark, alphas }
+    }
+
+    fn mesh<'a>(&'a self, vertices: &'a [VertexRecord]) -> PruneMesh<'a> {
+        PruneMesh { vertices, leaves: &self.leaves, bark: &self.bark, alphas: &self.alphas }
+    }
+}
+
+/// Compares the priority orders of pruning on a block (`treelod build --prune-report`); see
+/// [`crate::prune::compare`]. `config.prune` sets the images and the quality (the default
+/// [`PruneConfig`] when `None`; its order is ignored).
+///
+/// # Errors
+/// As [`build_block`]: [`BuildError::NoGeometry`], [`BuildError::Setting`].
+pub fn prune_report(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<PruneReport, BuildError> {
+    let gathered = gather(name, trees, config)?;
+    let grid = BlockGrid::new(&gathered.tris, &gathered.vertices, config)?;
+    let input = PruneInput::new(&gathered.material_keys, &gathered.tris, trees);
+    let prune = config.prune.clone().unwrap_or_default();
+    crate::prune::compare(input.mesh(&gathered.vertices), |p| grid.cell_id(p), grid.hi.y - grid.lo.y, &prune)
+}
+
+/// Builds a block from placed scenes (spec §6, Gilet 2005; with [`BuildConfig::prune`] also
+/// Neubert's pruning, §6.11). `name` names the block; `generator` is recorded as the tool and
+/// version.
+///
+/// # Errors
+/// [`BuildError::NoGeometry`] if no drawable triangle remains, [`BuildError::Setting`] for a bad
+/// grid or pruning setting, [`BuildError::Spt`] if an internal invariant breaks.
+pub fn build_block(
+    name: &str,
+    trees: &[Placed<'_>],
+    config: &BuildConfig,
+    generator: &str,
+) -> Result<BuildOutput, BuildError> {
+    // Stage: classify parts and gather their triangles.
+    let Gathered { material_keys, material_info, vertices, tris, parts, mut stats, warnings } =
+        gather(name, trees, config)?;
 
     // Stage: bounds and grid.
-    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    for t in &tris {
-        for &v in &t.v {
-            let p = Vec3::from_array(vertices[v as usize].position);
-            lo = lo.min(p);
-            hi = hi.max(p);
-        }
-    }
-    let grid = config.grid.unwrap_or_else(|| auto_grid(hi - lo));
-    let cell_count = grid.iter().map(|&g| g as usize).product::<usize>();
-    if cell_count > treelod_format::MAX_GRID_CELLS {
-        return Err(BuildError::Setting(format!("grid {grid:?} has more than 65536 cells")));
-    }
+    let block_grid = BlockGrid::new(&tris, &vertices, config)?;
+    let BlockGrid { lo, hi, grid, cell_count } = block_grid;
     stats.grid = grid;
 
     // Stage: assign each triangle to the cell of its centroid.
-    let dims = Vec3::new(grid[0] as f32, grid[1] as f32, grid[2] as f32);
-    let cell_size = (hi - lo) / dims;
     let mut per_cell: Vec<Vec<u32>> = vec![Vec::new(); cell_count];
     for (i, t) in tris.iter().enumerate() {
-        let rel = (centroid(&vertices, t) - lo) / cell_size.max(Vec3::splat(f32::MIN_POSITIVE));
-        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
-        let c = (rel.floor().max(Vec3::ZERO).min(dims - 1.0)).to_array().map(|v| v as usize);
         #[expect(clippy::cast_possible_truncation, reason = "fewer than 2^32 triangles (checked via vertex count)")]
-        per_cell[c[0] + grid[0] as usize * (c[1] + grid[1] as usize * c[2])].push(i as u32);
+        per_cell[block_grid.cell_of(centroid(&vertices, t))].push(i as u32);
     }
+
+    // Stage: pruning (Neubert 2011): leaves, their priority list, s_opt(λ) and λ(h).
+    let pruned: Option<(Pruned, PruneInput)> = match &config.prune {
+        Some(prune) => {
+            let input = PruneInput::new(&material_keys, &tris, trees);
+            let pruned = crate::prune::prune(input.mesh(&vertices), |p| block_grid.cell_id(p), hi.y - lo.y, prune)?;
+            Some((pruned, input))
+        }
+        None => None,
+    };
 
     // Stage: per cell, the leaf points, the point hierarchy as point records, and the triangles in
     // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
@@ -305,9 +470,6 @@ pub fn build_block(
             let first_point = points.len();
             points.extend(cell.points);
             let empty = first_triangle == triangles.len();
-            if !empty {
-                stats.nonempty_cells += 1;
-            }
             cells.push(CellRecord {
                 bounds_min: if empty { [0.0; 3] } else { cmin.to_array() },
                 bounds_max: if empty { [0.0; 3] } else { cmax.to_array() },
@@ -317,13 +479,77 @@ pub fn build_block(
             });
         }
     }
+    // Stage: the pruned leaves of each cell in priority order, their triangles in leaf order with
+    // the vertices written above (every leaf triangle is also in TRIANGLES).
+    let (mut prune_leaves, mut prune_triangles) = (Vec::new(), Vec::new());
+    let (mut prune_scale, mut prune_lambda) = (Vec::new(), Vec::new());
+    if let Some((pruned, input)) = pruned {
+        // Cell bounds hold the leaves grown by the largest s_opt (an area factor: √ on distances).
+        let grow = pruned.scale.iter().map(|s| s.y).fold(1.0f32, f32::max).sqrt();
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); cell_count];
+        for &l in &pruned.order {
+            lists[block_grid.cell_of(pruned.leaves.leaves[l as usize].centre)].push(l);
+        }
+        for (cell, list) in cells.iter_mut().zip(&lists) {
+            let first = prune_leaves.len();
+            let (mut cmin, mut cmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            for &l in list {
+                let leaf = &pruned.leaves.leaves[l as usize];
+                #[expect(clippy::cast_possible_truncation, reason = "fewer leaves than triangles, which fit u32")]
+                let (index, first_triangle) = (prune_leaves.len() as u32, prune_triangles.len() as u32);
+                for &m in pruned.leaves.triangles_of(leaf) {
+                    let t = &tris[input.leaf_ids[m as usize] as usize];
+                    for &v in &t.v {
+                        let p = leaf.centre + (Vec3::from_array(vertices[v as usize].position) - leaf.centre) * grow;
+                        cmin = cmin.min(p);
+                        cmax = cmax.max(p);
+                    }
+                    let indices = t.v.map(|v| remap[v as usize]);
+                    debug_assert!(indices.iter().all(|&i| i != u32::MAX), "a leaf triangle was not written");
+                    prune_triangles.push(TriangleRecord { indices, size: t.size, leaf: index, material: t.material });
+                }
+                cmin = cmin.min(leaf.centre);
+                cmax = cmax.max(leaf.centre);
+                prune_leaves.push(PruneLeafRecord {
+                    center: leaf.centre.to_array(),
+                    area: leaf.area,
+                    first_triangle,
+                    triangle_count: leaf.count,
+                });
+            }
+            cell.prune_leaves = range(first, prune_leaves.len());
+            if !list.is_empty() {
+                if cell.triangles.count > 0 {
+                    cmin = cmin.min(Vec3::from_array(cell.bounds_min));
+                    cmax = cmax.max(Vec3::from_array(cell.bounds_max));
+                }
+                cell.bounds_min = cmin.to_array();
+                cell.bounds_max = cmax.to_array();
+            }
+        }
+        prune_scale = pruned.scale;
+        prune_lambda = pruned.lambda;
+    }
+    // Stage: impostors (Garcia 2005): nested planes per tree and their atlas, in the block cell.
+    let impostors = match &config.impostors {
+        Some(impostor_config) => block_impostors(&material_keys, &tris, &vertices, trees, impostor_config)?,
+        None => None,
+    };
     drop((per_cell, tris, vertices, remap, parts));
-    // The block cell: Gilet's representation lives in the grid cells only.
+    // The block cell: Gilet's representation and the pruned leaves live in the grid cells only;
+    // the impostor planes of the whole block live here.
+    let plane_count = impostors.as_ref().map_or(0, |i| i.planes.len());
+    let (planes_min, planes_max) = impostors.as_ref().map_or((Vec3::ZERO, Vec3::ZERO), |i| i.bounds);
     cells.push(CellRecord {
+        bounds_min: planes_min.to_array(),
+        bounds_max: planes_max.to_array(),
         triangles: range(triangles.len(), triangles.len()),
         points: range(points.len(), points.len()),
+        planes: range(0, plane_count),
+        prune_leaves: range(prune_leaves.len(), prune_leaves.len()),
         ..CellRecord::default()
     });
+    stats.nonempty_cells = cells[..cell_count].iter().filter(|c| !c.is_empty()).count() as u64;
 
     // Stage: materials and images (only those used, in first-use order).
     let mut images: Vec<ImageRecord> = Vec::new();
@@ -379,6 +605,28 @@ pub fn build_block(
         });
     }
 
+    // Stage: the impostor atlas after the materials' images; the planes point at it.
+    let mut planes: Vec<treelod_format::PlaneRecord> = Vec::new();
+    if let Some(impostors) = impostors {
+        let atlas = impostors.atlas;
+        image_data.resize(image_data.len().div_ceil(16) * 16, 0);
+        #[expect(clippy::cast_possible_truncation, reason = "images are few")]
+        let index = images.len() as u32;
+        images.push(ImageRecord {
+            width: atlas.width,
+            height: atlas.height,
+            mip_count: atlas.mip_count,
+            format: image_format::RGBA8_SRGB,
+            data_offset: image_data.len() as u64,
+            data_length: atlas.texels.len() as u64,
+        });
+        image_data.extend_from_slice(&atlas.texels);
+        planes = impostors.planes.into_iter().map(|p| treelod_format::PlaneRecord { image: index, ..p }).collect();
+        stats.planes = planes.len() as u64;
+        stats.planes_per_level = impostors.planes_per_level;
+        stats.atlas = [atlas.width, atlas.height];
+    }
+
     // Stage: metadata.
     let mut sources: Vec<Source> = Vec::new();
     let mut tree_meta: Vec<Tree> = Vec::new();
@@ -421,6 +669,8 @@ pub fn build_block(
     stats.vertices = out_vertices.len() as u64;
     stats.triangles = triangles.len() as u64;
     stats.points = points.len() as u64;
+    stats.prune_leaves = prune_leaves.len() as u64;
+    stats.prune_triangles = prune_triangles.len() as u64;
     let data = ContainerData {
         metadata: Metadata {
             generator: generator.to_owned(),
@@ -446,9 +696,46 @@ pub fn build_block(
         materials,
         images,
         image_data,
+        prune_leaves,
+        prune_triangles,
+        prune_scale,
+        prune_lambda,
+        planes,
         ..ContainerData::default()
     };
+    let mut data = data;
+    crate::precision::trim(&mut data, &config.precision);
     Ok(BuildOutput { data, stats, warnings })
+}
+
+/// The impostors of a block's leaf-class triangles ([`crate::impostor`]): each tree's leaves
+/// drawn with their source material and image.
+fn block_impostors(
+    material_keys: &[(usize, usize, Class)],
+    tris: &[Tri],
+    vertices: &[VertexRecord],
+    trees: &[Placed<'_>],
+    config: &ImpostorConfig,
+) -> Result<Option<Impostors>, BuildError> {
+    let default_material = Material::default();
+    let surfaces: Vec<Surface<'_>> = material_keys
+        .iter()
+        .map(|&(t, m, _)| {
+            let scene = trees[t].scene;
+            let material = scene.materials.get(m).unwrap_or(&default_material);
+            Surface { material, image: material.image.and_then(|i| scene.images.get(i)) }
+        })
+        .collect();
+    let leaves: Vec<LeafTriangle> = tris
+        .iter()
+        .filter(|t| material_keys[t.material as usize].2 == Class::Leaf)
+        .map(|t| {
+            #[expect(clippy::cast_possible_truncation, reason = "a block holds few trees")]
+            let tree = material_keys[t.material as usize].0 as u32;
+            LeafTriangle { v: t.v, material: t.material, tree }
+        })
+        .collect();
+    build_impostors(&ImpostorMesh { vertices, triangles: &leaves, surfaces: &surfaces }, config)
 }
 
 /// What the per-cell stage hands to the serial one.

@@ -10,16 +10,23 @@ pub mod classify;
 pub mod demo;
 mod error;
 pub mod gilet;
-pub mod precision;
 pub mod import;
+pub mod impostor;
+pub mod precision;
+pub mod prune;
+pub mod raster;
 pub mod rng;
 pub mod scene;
 pub mod spt;
 pub mod texture;
 
-pub use assemble::{BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, recorded_settings};
+pub use assemble::{
+    BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, prune_report, recorded_settings,
+};
 pub use demo::{DemoTreeConfig, demo_tree};
 pub use error::BuildError;
 pub use import::{content_hash, import_gltf, import_gltf_bytes, scene_name};
+pub use impostor::{ImpostorConfig, Impostors};
+pub use prune::{PruneConfig, PruneOrder, PruneReport};
 pub use rng::SplitMix64;
 pub use spt::{FlattenError, Spt, SptNode, flatten};

@@ -38,10 +38,16 @@ impl Default for Precision {
 }
 
 impl Precision {
+    /// Every bit kept: no rounding.
+    pub const FULL: Self = Self { position: 23, uv: 23, size: 23, normal: 16 };
+
     /// The settings value recorded in the container's metadata (spec §7.1), e.g.
     /// `position 16, uv 16, size 12, normal 10`.
     #[must_use]
     pub fn setting(&self) -> String {
+        if *self == Self::FULL {
+            return "full".to_owned();
+        }
         format!("position {}, uv {}, size {}, normal {}", self.position, self.uv, self.size, self.normal)
     }
 }

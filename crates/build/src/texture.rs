@@ -10,7 +10,7 @@ use crate::scene::{AlphaMode, Image, Material};
 const MAX_SPLITS: u32 = 8;
 
 /// sRGB-encoded byte → linear value.
-fn srgb_to_linear_table() -> &'static [f32; 256] {
+pub(crate) fn srgb_to_linear_table() -> &'static [f32; 256] {
     static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {
         core::array::from_fn(|i| {

@@ -548,6 +548,19 @@ pub struct PruneLeafRecord {
 }
 const _: () = assert!(size_of::<PruneLeafRecord>() == 24);
 
+/// Leaves drawn of a priority list of `count` leaves at the fraction `lambda` (spec §6.11):
+/// `ceil(λ·count)`, at least one of a non-empty list and at most `count`. The one rule of builders
+/// (which measure pruned images) and renderers.
+#[must_use]
+pub fn prune_leaves_drawn(count: u32, lambda: f32) -> u32 {
+    if count == 0 {
+        return 0;
+    }
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 1..=count")]
+    let n = (f64::from(lambda.clamp(0.0, 1.0)) * f64::from(count)).ceil().clamp(1.0, f64::from(count)) as u32;
+    n
+}
+
 /// One sample of a piecewise-linear curve (spec §6.11).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]

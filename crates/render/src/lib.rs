@@ -58,7 +58,14 @@
 //! (a model over [`Settings::memory_budget`] is refused with
 //! [`RenderError::GpuSelectionBudget`]) instead of streaming; its [`FrameStats`] counts come from a
 //! read-back one or two frames old ([`FrameStats::gpu_selection`]); frames with
-//! [`Settings::pruning`] or [`Settings::full_mesh`] are still selected on the CPU.
+//! [`Settings::pruning`], [`Settings::impostors`] or [`Settings::full_mesh`] are still selected on
+//! the CPU.
+//!
+//! **Impostors.** With [`Settings::impostors`], a tree whose container has impostor planes (Garcia
+//! et al. 2005, spec §6.10) draws its leaves as those fixed, alpha-tested, depth-writing quads
+//! (`vs_plane`/`fs_plane` in `shaders/tree.wgsl`, from the model's uploaded `PLANES` and its atlas
+//! bound as a texture of its own, clamped, nearest mip) at the level whose interval holds `τ` from
+//! `s_min` at the block centre's distance, and its bark as all its bark triangles.
 
 mod camera;
 mod gpu_select;

@@ -8,8 +8,8 @@ use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleRecord, material_class};
 use treelod_runtime::prune::{MIN_VISIBLE_FRACTION, leaf_scale, leaves_drawn, projected_height, size_factor};
 use treelod_runtime::{
-    DrawList, DrawRange, Frustum, Hysteresis, Kind, LodSettings, ModelLod, PruneLod, PruneScale, ROOTS_CELL,
-    select_frame,
+    DrawList, DrawRange, Frustum, Hysteresis, Kind, LodSettings, ModelLod, PlaneLod, PlaneRange, PruneLod, PruneScale,
+    ROOTS_CELL, select_frame,
 };
 
 use crate::camera::Camera;
@@ -81,6 +81,13 @@ pub struct Settings {
     /// Draw near trees with pruned leaves (Neubert et al. 2011) where their containers have
     /// priority lists; `None` draws every tree with the sequential point trees.
     pub pruning: Option<Pruning>,
+    /// Draw the leaves of every tree whose container has impostor planes (Garcia et al. 2005,
+    /// spec §6.10) as those planes, and its bark as all its bark triangles (the paper keeps the
+    /// trunk polygonal; a container has no coarser bark of its own). The level of planes is the
+    /// one whose interval holds `τ` from [`Self::s_min`] pixels at the block centre's distance,
+    /// as the point thresholds are chosen (spec §10.1). Trees without planes are drawn with the
+    /// sequential point trees. Takes precedence over [`Self::pruning`].
+    pub impostors: bool,
 }
 
 /// Pruning settings: which trees are pruned, by how much, and how survivors are scaled.
@@ -137,6 +144,7 @@ impl Default for Settings {
             upload_budget: 64 << 20,
             memory_budget: 1 << 30,
             pruning: None,
+            impostors: false,
         }
     }
 }
@@ -177,6 +185,10 @@ pub struct FrameStats {
     pub instances_pruned: u32,
     /// Leaves drawn by pruned instances (their triangles count in [`Self::triangles`]).
     pub leaves_pruned: u64,
+    /// Visible instances drawn with impostor planes ([`Settings::impostors`]).
+    pub instances_impostors: u32,
+    /// Impostor planes submitted (the prefixes; the vertex shader drops those outside the level).
+    pub planes: u64,
     /// Whether this frame was selected on the GPU ([`Renderer::enable_gpu_selection`]). Then
     /// [`Self::instances_visible`], [`Self::ranges`], [`Self::triangles`], [`Self::points`] and
     /// [`Self::ranges_dropped`] are those of the latest earlier frame whose counters have been
@@ -285,8 +297,10 @@ struct Model {
     /// The priority lists, if the container has them.
     prune: Option<PruneLod>,
     /// The bark triangles in the model's extra triangle buffer (after `PRUNE_TRIANGLES`): first
-    /// and count. Pruned trees draw them all.
+    /// and count. Pruned trees and trees drawn with impostors draw them all.
     bark: (u32, u32),
+    /// The impostor planes, if the container has them (uploaded whole with their atlas).
+    planes: Option<PlaneLod>,
     /// The hull samples of the occlusion test: first and count in the sample buffer.
     samples: (u32, u32),
 }
@@ -304,9 +318,12 @@ pub enum DrawSource {
     /// The leading `count` triangles of the cell's pruned leaves (a pruned tree, uploaded whole
     /// at [`Renderer::add_model`]).
     PrunedLeaves,
-    /// All `count` bark triangles of the model (a pruned tree; `cell` is
-    /// [`treelod_runtime::ROOTS_CELL`]).
+    /// All `count` bark triangles of the model (a pruned tree or one drawn with impostors;
+    /// `cell` is [`treelod_runtime::ROOTS_CELL`]).
     Bark,
+    /// The leading `count` impostor planes of the cell's range (uploaded whole at
+    /// [`Renderer::add_model`]); `tau_points` is the `τ` the shader tests them with.
+    Planes,
 }
 
 /// One draw of the last [`Renderer::prepare`], as the GPU will execute it, for tests and tools.
@@ -344,7 +361,12 @@ pub struct Renderer {
     point_pipeline: wgpu::RenderPipeline,
     /// Pruned leaves and bark, from each model's extra triangle buffer.
     pruned_pipeline: wgpu::RenderPipeline,
+    /// Impostor planes, from each model's plane buffer and atlas.
+    plane_pipeline: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
+    /// The atlases' sampler: clamped, so a region's edge never wraps to the atlas's far side,
+    /// and the nearest mip level.
+    atlas_sampler: wgpu::Sampler,
     frame_buffer: wgpu::Buffer,
     draw_buffer: wgpu::Buffer,
     indirect_buffer: wgpu::Buffer,
@@ -365,6 +387,9 @@ pub struct Renderer {
     /// Pruned draws of this frame: (instance, cell or `ROOTS_CELL` for bark, source, first, count,
     /// λ, leaf scale).
     pruned: Vec<PrunedDraw>,
+    /// Impostor draws of this frame: per instance and plane cell, the prefix and its `τ`.
+    plane_draws: Vec<PlaneDraw>,
+    plane_ranges: Vec<PlaneRange>,
     /// The occlusion measurement, and the trees to measure after this frame.
     occlusion: Occlusion,
     occlusion_jobs: Vec<Job>,
@@ -391,8 +416,16 @@ pub struct Renderer {
 /// Pool units the pool buffer starts with (1.5 MiB).
 const INITIAL_POOL_UNITS: u32 = 1 << 15;
 
-/// Draw buckets per model: triangles, points, pruned (leaves and bark).
-const BUCKETS: usize = 3;
+/// Draw buckets per model: triangles, points, pruned (leaves and bark), impostor planes.
+const BUCKETS: usize = 4;
+
+/// One draw of impostor planes: a prefix of one cell's planes for one instance.
+#[derive(Clone, Copy, Debug)]
+struct PlaneDraw {
+    instance: u32,
+    model: u32,
+    range: PlaneRange,
+}
 
 /// One draw of a pruned tree: leaves of one cell, or the bark.
 #[derive(Clone, Copy, Debug)]
@@ -482,6 +515,24 @@ impl Renderer {
                 },
                 storage(4, wgpu::ShaderStages::VERTEX),
                 storage(5, wgpu::ShaderStages::VERTEX),
+                // Impostor planes and their atlas.
+                storage(6, wgpu::ShaderStages::VERTEX),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 7,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 8,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -545,6 +596,7 @@ impl Renderer {
         let triangle_pipeline = pipeline("treelod triangles", "vs_triangle", "fs_triangle");
         let point_pipeline = pipeline("treelod points", "vs_point", "fs_point");
         let pruned_pipeline = pipeline("treelod pruned leaves and bark", "vs_pruned", "fs_triangle");
+        let plane_pipeline = pipeline("treelod impostor planes", "vs_plane", "fs_plane");
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("treelod textures"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -552,6 +604,17 @@ impl Renderer {
             mag_filter: wgpu::FilterMode::Linear,
             min_filter: wgpu::FilterMode::Linear,
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..wgpu::SamplerDescriptor::default()
+        });
+        // Nearest mip: each level's alpha is scaled so that its filtered test covers what the
+        // leaves cover (the build's coverage-preserving mips); a blend of two levels would not.
+        let atlas_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("treelod atlases"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Nearest,
             ..wgpu::SamplerDescriptor::default()
         });
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
@@ -579,7 +642,9 @@ impl Renderer {
             triangle_pipeline,
             point_pipeline,
             pruned_pipeline,
+            plane_pipeline,
             sampler,
+            atlas_sampler,
             frame_buffer,
             draw_buffer,
             indirect_buffer,
@@ -592,6 +657,8 @@ impl Renderer {
             spt_instances: Vec::new(),
             spt_map: Vec::new(),
             pruned: Vec::new(),
+            plane_draws: Vec::new(),
+            plane_ranges: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1)),
             occlusion_jobs: Vec::new(),
             last_camera: None,
@@ -670,22 +737,24 @@ impl Renderer {
             if data.len() as u64 > limit {
                 return Err(RenderError::TooLarge { what, bytes: data.len() as u64, limit });
             }
-            // Bindings may not be empty: an empty array becomes 16 zero bytes no draw reads.
-            let padded = data.len().max(16).next_multiple_of(4) as u64;
+            // Bindings may not be empty, nor smaller than one record of the array they hold: an
+            // empty array becomes 64 zero bytes (the largest record) no draw reads.
+            let padded = data.len().max(64).next_multiple_of(4) as u64;
             let buffer = storage_buffer(device, what, padded, false);
             queue.write_buffer(&buffer, 0, data);
             bytes += padded;
             Ok(buffer)
         };
         let layers = textures::layers(&container, &mut warnings);
-        let image_layer =
-            |image: u32| -> i32 { if image == NO_IMAGE { -1 } else { i32::try_from(image).unwrap_or(-1) } };
+        let image_layer = |image: u32| -> i32 {
+            if image == NO_IMAGE { -1 } else { layers.layer_of.get(image as usize).copied().unwrap_or(-1) }
+        };
         let materials: Vec<MaterialGpu> = container
             .materials()
             .iter()
             .map(|m: &MaterialRecord| MaterialGpu {
                 base_color: m.base_color,
-                layer: if (m.image as usize) < layers.levels.len() { image_layer(m.image) } else { -1 },
+                layer: image_layer(m.image),
                 alpha_mode: m.alpha_mode,
                 alpha_cutoff: m.alpha_cutoff,
                 material_class: m.class,
@@ -694,8 +763,10 @@ impl Renderer {
         let vertices = upload("VERTICES", bytemuck::cast_slice(container.vertices()))?;
         let materials = upload("MATERIALS", bytemuck::cast_slice(&materials))?;
         // Pruning: the leaves' triangles, then every bark (non-leaf) triangle, and the leaves.
+        // Impostors draw the bark triangles too.
         let prune = PruneLod::from_container(&container);
-        let (extra, prune_leaves, bark) = if prune.is_some() {
+        let planes = PlaneLod::from_container(&container);
+        let (extra, prune_leaves, bark) = if prune.is_some() || planes.is_some() {
             let classes = container.materials();
             let mut extra: Vec<TriangleRecord> = container.prune_triangles().to_vec();
             let bark_first = u32::try_from(extra.len()).unwrap_or(u32::MAX);
@@ -712,6 +783,7 @@ impl Renderer {
         } else {
             (upload("no pruned triangles", &[])?, upload("no pruned leaves", &[])?, (0, 0))
         };
+        let plane_buffer = upload("PLANES", bytemuck::cast_slice(container.planes()))?;
 
         // The roots, pinned in the pool: what a cell draws before its own points are resident.
         let lod = ModelLod::from_container(&container);
@@ -778,6 +850,61 @@ impl Renderer {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..wgpu::TextureViewDescriptor::default()
         });
+        // The impostor atlas, as stored with its mips; without planes (or if it does not decode,
+        // then without impostors) one transparent texel.
+        let blank = || textures::Atlas { width: 1, height: 1, srgb: true, levels: vec![vec![0; 4]] };
+        let (atlas, planes) = match planes {
+            Some(p) => match textures::atlas(&container, p.image()) {
+                Ok(atlas) if atlas.width.max(atlas.height) > device.limits().max_texture_dimension_2d => {
+                    warnings.push(format!(
+                        "impostor atlas (image {}) is {}x{}, larger than the device's textures; impostors are not drawn",
+                        p.image(),
+                        atlas.width,
+                        atlas.height
+                    ));
+                    (blank(), None)
+                }
+                Ok(atlas) => (atlas, Some(p)),
+                Err(e) => {
+                    warnings.push(format!("impostor atlas (image {}): {e}; impostors are not drawn", p.image()));
+                    (blank(), None)
+                }
+            },
+            None => (blank(), None),
+        };
+        if planes.as_ref().is_some_and(|p| container.planes().iter().any(|q| q.image != p.image())) {
+            warnings.push(format!(
+                "impostor planes sample several images; all are drawn from image {}",
+                planes.as_ref().map_or(0, PlaneLod::image)
+            ));
+        }
+        let atlas_texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("treelod impostor atlas"),
+            size: wgpu::Extent3d { width: atlas.width, height: atlas.height, depth_or_array_layers: 1 },
+            mip_level_count: u32::try_from(atlas.levels.len()).unwrap_or(1),
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: if atlas.srgb { wgpu::TextureFormat::Rgba8UnormSrgb } else { wgpu::TextureFormat::Rgba8Unorm },
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        for (level, texels) in atlas.levels.iter().enumerate() {
+            let level = u32::try_from(level).unwrap_or(0);
+            let (w, h) = ((atlas.width >> level).max(1), (atlas.height >> level).max(1));
+            queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &atlas_texture,
+                    mip_level: level,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                texels,
+                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(w * 4), rows_per_image: Some(h) },
+                wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+            );
+            bytes += texels.len() as u64;
+        }
+        let atlas_view = atlas_texture.create_view(&wgpu::TextureViewDescriptor::default());
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("treelod model"),
             layout: &self.model_layout,
@@ -788,6 +915,9 @@ impl Renderer {
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
                 wgpu::BindGroupEntry { binding: 4, resource: extra.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 5, resource: prune_leaves.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: plane_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::TextureView(&atlas_view) },
+                wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(&self.atlas_sampler) },
             ],
         });
         let id = ModelId(u32::try_from(self.models.len()).unwrap_or(u32::MAX));
@@ -805,6 +935,7 @@ impl Renderer {
             cell_lod,
             prune,
             bark,
+            planes,
         });
         self.lods.push(lod);
         self.wanted.push(vec![[0; 2]; cells]);
@@ -928,6 +1059,49 @@ impl Renderer {
         self.gpu_instances_stale = true;
     }
 
+    /// Which instances are drawn with impostor planes this frame ([`Settings::impostors`]): fills
+    /// `plane_draws`, and `pruned` with their bark, for instances whose model has planes, and
+    /// `spt_instances`/`spt_map` with the others. Returns the impostor instances inside the
+    /// frustum.
+    fn select_impostors(&mut self, camera: &treelod_runtime::Camera) -> u32 {
+        let frustum = Frustum::from_view_proj(camera.view_proj);
+        self.plane_draws.clear();
+        self.pruned.clear();
+        self.spt_instances.clear();
+        self.spt_map.clear();
+        let mut visible = 0;
+        for (i, instance) in self.instances.iter().enumerate() {
+            let index = u32::try_from(i).unwrap_or(u32::MAX);
+            let Some(model) = self.models.get(instance.model as usize) else { continue };
+            let Some(planes) = &model.planes else {
+                self.spt_instances.push(*instance);
+                self.spt_map.push(index);
+                continue;
+            };
+            self.plane_ranges.clear();
+            if !planes.select(instance.transform, camera, &frustum, self.settings.s_min, &mut self.plane_ranges) {
+                continue;
+            }
+            visible += 1;
+            for range in &self.plane_ranges {
+                self.plane_draws.push(PlaneDraw { instance: index, model: instance.model, range: *range });
+            }
+            if model.bark.1 > 0 {
+                self.pruned.push(PrunedDraw {
+                    instance: index,
+                    model: instance.model,
+                    cell: ROOTS_CELL,
+                    source: DrawSource::Bark,
+                    first: model.bark.0,
+                    count: model.bark.1,
+                    lambda: 1.0,
+                    leaf_scale: 1.0,
+                });
+            }
+        }
+        visible
+    }
+
     /// Which instances are drawn pruned this frame (see [`Pruning`]): fills `pruned` with their
     /// draws and `spt_instances`/`spt_map` with the others. Returns the pruned instances inside
     /// the frustum and the leaves they draw.
@@ -1010,7 +1184,7 @@ impl Renderer {
 
     /// The index in `instances` of an instance of this frame's selection.
     fn instance_index(&self, selected: u32) -> u32 {
-        if self.settings.pruning.is_some() && !self.settings.full_mesh {
+        if (self.settings.pruning.is_some() || self.settings.impostors) && !self.settings.full_mesh {
             self.spt_map.get(selected as usize).copied().unwrap_or(selected)
         } else {
             selected
@@ -1065,7 +1239,7 @@ impl Renderer {
                         .filter(|p| kept(p))
                         .count()
                 }
-                DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark => 0,
+                DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::Planes => 0,
             } as u64;
         }
         drawn
@@ -1098,7 +1272,8 @@ impl Renderer {
             viewport_height: camera.height as f32,
             fovy: camera.fovy,
         };
-        let pruning = settings.pruning.filter(|_| !settings.full_mesh);
+        let impostors = settings.impostors && !settings.full_mesh;
+        let pruning = settings.pruning.filter(|_| !settings.full_mesh && !impostors);
         let forward = -camera.view.row(2).truncate().normalize_or(Vec3::NEG_Z);
         self.last_camera = Some((view_proj, camera.position, forward, (camera.width, camera.height)));
         let (instances_pruned, leaves_pruned) = match &pruning {
@@ -1113,6 +1288,12 @@ impl Renderer {
                 (0, 0)
             }
         };
+        let instances_impostors = if impostors {
+            self.select_impostors(&runtime_camera)
+        } else {
+            self.plane_draws.clear();
+            0
+        };
         if self.gpu_instances_stale
             && let Some(gpu) = &mut self.gpu
         {
@@ -1122,6 +1303,7 @@ impl Renderer {
         self.gpu_frame = false;
         if pruning.is_none()
             && !settings.full_mesh
+            && !impostors
             && let Some(gpu) = self.gpu.as_mut().filter(|g| g.usable())
         {
             // GPU selection: one compute submission writes the draws; nothing per instance here.
@@ -1146,7 +1328,7 @@ impl Renderer {
                 ..FrameStats::default()
             };
         }
-        let spt_instances = if pruning.is_some() { &self.spt_instances } else { &self.instances };
+        let spt_instances = if pruning.is_some() || impostors { &self.spt_instances } else { &self.instances };
         let selected = select_frame(&self.lods, spt_instances, &runtime_camera, &lod_settings, &mut self.selection);
 
         // What each cell needs: the largest prefix any instance asked for.
@@ -1193,9 +1375,10 @@ impl Renderer {
 
         // The draws, clamped to what is resident, bucketed by model and kind.
         let mut stats = FrameStats {
-            instances_visible: selected.instances_visible + instances_pruned,
+            instances_visible: selected.instances_visible + instances_pruned + instances_impostors,
             instances_pruned,
             leaves_pruned,
+            instances_impostors,
             bytes_uploaded: streamed.bytes_uploaded,
             bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
                 + u64::from(self.residency.pool.used()) * UNIT,
@@ -1233,6 +1416,7 @@ impl Renderer {
                         stats.triangles += u64::from(draw.count);
                     }
                     DrawSource::Points | DrawSource::Roots => stats.points += u64::from(draw.count),
+                    DrawSource::Planes => stats.planes += u64::from(draw.count),
                 }
                 let transform = self.instances[draw.instance as usize].transform;
                 let info = DrawInfo {
@@ -1275,6 +1459,34 @@ impl Renderer {
                 count: draw.count,
                 tau_points: draw.lambda,
                 tau_triangles: draw.leaf_scale,
+                clamped: false,
+            });
+        }
+        // Impostor planes: a prefix of one cell's planes, the level chosen in the shader by `τ`.
+        for draw in &self.plane_draws {
+            let transform = self.instances[draw.instance as usize].transform;
+            let range = draw.range;
+            let info = DrawInfo {
+                model: transform.to_cols_array_2d(),
+                tau_p: range.tau,
+                tau_t: range.tau,
+                cell: range.cell,
+                scale: max_axis_scale(transform),
+                shading: 1.0,
+                leaf_scale: 1.0,
+                instance: draw.instance,
+                _pad: 0,
+            };
+            self.buckets[BUCKETS * draw.model as usize + 3].push((info, 6 * range.first, 6 * range.count));
+            stats.planes += u64::from(range.count);
+            self.recorded.push(RecordedDraw {
+                instance: draw.instance,
+                model: ModelId(draw.model),
+                cell: range.cell,
+                source: DrawSource::Planes,
+                count: range.count,
+                tau_points: range.tau,
+                tau_triangles: range.tau,
                 clamped: false,
             });
         }
@@ -1443,6 +1655,7 @@ impl Renderer {
             }
             // Recorded directly by `prepare`, never clamped.
             DrawSource::PrunedLeaves | DrawSource::Bark => (BUCKETS * m + 2, 0, 3),
+            DrawSource::Planes => (BUCKETS * m + 3, 0, 6),
         }
     }
 
@@ -1481,7 +1694,12 @@ impl Renderer {
         }
         let stride = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
         pass.set_bind_group(0, &self.frame_bind_group, &[]);
-        for (pipeline, kind) in [(&self.triangle_pipeline, 0), (&self.point_pipeline, 1), (&self.pruned_pipeline, 2)] {
+        for (pipeline, kind) in [
+            (&self.triangle_pipeline, 0),
+            (&self.point_pipeline, 1),
+            (&self.pruned_pipeline, 2),
+            (&self.plane_pipeline, 3),
+        ] {
             pass.set_pipeline(pipeline);
             for (model, draws) in self.models.iter().zip(&self.model_draws) {
                 let (first, count) = draws[kind];

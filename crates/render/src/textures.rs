@@ -2,8 +2,11 @@
 //! a full mip chain made on the CPU. Images that materials alpha-test get a binary alpha (opaque
 //! where the test passes, else transparent) before their mips are filtered, so a mip's alpha is the
 //! fraction of its footprint that is opaque — what alpha to coverage (with MSAA) draws.
+//!
+//! Images only impostor planes sample (an atlas, spec §6.10) get no layer: they are uploaded as
+//! they are stored, with their own mips, by the renderer ([`atlas`]).
 
-use treelod_format::Container;
+use treelod_format::{Container, image_format};
 
 /// Largest layer size; leaf textures seldom need more at the distances where triangles are drawn.
 const MAX_LAYER: u32 = 512;
@@ -15,13 +18,33 @@ pub(crate) struct Layers {
     pub mips: u32,
     /// Per layer, per level, RGBA8 sRGB texels.
     pub levels: Vec<Vec<Vec<u8>>>,
+    /// Per image of the container, its layer, or −1 for an image without one (an atlas).
+    pub layer_of: Vec<i32>,
 }
 
 /// Decodes every image of `container`. An image that fails to decode becomes a grey layer and a
 /// warning, so one bad texture does not stop a forest from drawing.
 pub(crate) fn layers(container: &Container, warnings: &mut Vec<String>) -> Layers {
+    // Images sampled by planes and by no material are atlases: no layer.
+    let mut atlas = vec![false; container.images().len()];
+    for plane in container.planes() {
+        if let Some(slot) = atlas.get_mut(plane.image as usize) {
+            *slot = true;
+        }
+    }
+    for material in container.materials() {
+        if let Some(slot) = atlas.get_mut(material.image as usize) {
+            *slot = false;
+        }
+    }
     let mut decoded = Vec::new();
+    let mut layer_of = Vec::with_capacity(atlas.len());
     for (index, record) in container.images().iter().enumerate() {
+        if atlas[index] {
+            layer_of.push(-1);
+            continue;
+        }
+        layer_of.push(i32::try_from(decoded.len()).unwrap_or(-1));
         let start = usize::try_from(record.data_offset).unwrap_or(usize::MAX);
         let end = start.saturating_add(usize::try_from(record.data_length).unwrap_or(usize::MAX));
         let result = container
@@ -37,7 +60,8 @@ pub(crate) fn layers(container: &Container, warnings: &mut Vec<String>) -> Layer
             }
         }
     }
-    let cutoffs = alpha_cutoffs(container, decoded.len());
+    let by_image = alpha_cutoffs(container, atlas.len());
+    let cutoffs: Vec<Option<f32>> = (0..atlas.len()).filter(|&i| !atlas[i]).map(|i| by_image[i]).collect();
     let largest = decoded.iter().flatten().map(|i| i.width.max(i.height)).max().unwrap_or(1);
     let size = largest.next_power_of_two().clamp(1, MAX_LAYER);
     let mips = size.ilog2() + 1;
@@ -56,7 +80,44 @@ pub(crate) fn layers(container: &Container, warnings: &mut Vec<String>) -> Layer
         // A texture array needs a layer even when no material samples it.
         levels.push(mip_chain(vec![255; (size * size * 4) as usize], size));
     }
-    Layers { size, mips, levels }
+    Layers { size, mips, levels, layer_of }
+}
+
+/// An image as stored, with the mips it holds, for a texture of its own.
+pub(crate) struct Atlas {
+    pub width: u32,
+    pub height: u32,
+    /// Whether RGB is sRGB-encoded.
+    pub srgb: bool,
+    /// Level by level, largest first, RGBA8 texels.
+    pub levels: Vec<Vec<u8>>,
+}
+
+/// The image `index` of `container` with its stored mips (raw RGBA8 formats), or decoded with one
+/// level (PNG, JPEG).
+pub(crate) fn atlas(container: &Container, index: u32) -> Result<Atlas, String> {
+    let record = container.images().get(index as usize).ok_or_else(|| format!("image {index} does not exist"))?;
+    let start = usize::try_from(record.data_offset).unwrap_or(usize::MAX);
+    let end = start.saturating_add(usize::try_from(record.data_length).unwrap_or(usize::MAX));
+    let data = container.image_data().get(start..end).ok_or("its bytes lie outside IMAGE_DATA")?;
+    let (width, height) = (record.width.max(1), record.height.max(1));
+    match record.format {
+        image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR => {
+            let mut levels = Vec::new();
+            let mut at = 0usize;
+            for level in 0..record.mip_count.max(1) {
+                let (w, h) = ((width >> level).max(1) as usize, (height >> level).max(1) as usize);
+                let texels = data.get(at..at + w * h * 4).ok_or_else(|| format!("mip {level} is cut short"))?;
+                levels.push(texels.to_vec());
+                at += w * h * 4;
+            }
+            Ok(Atlas { width, height, srgb: record.format == image_format::RGBA8_SRGB, levels })
+        }
+        _ => {
+            let image = treelod_format::image::decode(record, data)?;
+            Ok(Atlas { width: image.width, height: image.height, srgb: true, levels: vec![image.texels] })
+        }
+    }
 }
 
 /// Bilinear resampling of an RGBA8 image to `size`×`size` (texel centres aligned, edges clamped).

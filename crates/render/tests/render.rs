@@ -165,7 +165,9 @@ fn check_draws(renderer: &Renderer, container: &Container) {
                         .flat_map(|p| (p.leaf_first..p.leaf_first + p.leaf_count).map(|l| l as usize))
                         .collect()
                 }
-                DrawSource::PrunedLeaves | DrawSource::Bark => panic!("{draw:?} without pruning"),
+                DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::Planes => {
+                    panic!("{draw:?} without pruning or impostors")
+                }
             };
             for leaf in drawn {
                 cover[leaf] += 1;
@@ -424,4 +426,66 @@ fn msaa_draws_the_full_mesh_closer_to_the_supersampled_image() {
         eprintln!("{distance} m: RMSE against the supersampled image {e1:.4} alpha-tested, {e4:.4} with 4x MSAA");
         assert!(e4 < 0.9 * e1, "at {distance} m 4x MSAA is closer: {e4} vs {e1}");
     }
+}
+
+#[test]
+fn impostor_planes_cover_the_full_mesh_from_every_direction() {
+    let gpu = gpu();
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let config = BuildConfig { impostors: Some(treelod_build::ImpostorConfig::default()), ..BuildConfig::default() };
+    let built =
+        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
+    let container = std::sync::Arc::new(
+        Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"),
+    );
+    let bark = container
+        .triangles()
+        .iter()
+        .filter(|t| container.materials()[t.material as usize].class != treelod_format::material_class::LEAF)
+        .count() as u64;
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings { impostors: true, ..Settings::default() });
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let block = container.block();
+    let centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
+    let mut rows = Vec::new();
+    for distance in [15.0f32, 45.0] {
+        // Six directions around the tree, one from 45° above.
+        let directions = (0..6)
+            .map(|k| {
+                let a = k as f32 * std::f32::consts::FRAC_PI_3;
+                vec3(a.sin(), 0.0, a.cos())
+            })
+            .chain([vec3(0.0, 1.0, 1.0).normalize()]);
+        for (d, direction) in directions.enumerate() {
+            let cam = Camera::look_at(centre + direction * distance, centre, 0.8, 256, 256);
+            renderer.settings_mut().full_mesh = true;
+            let (full, _) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+            renderer.settings_mut().full_mesh = false;
+            let (planes, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+            keep(&planes, &format!("impostors-{distance}-{d}"));
+            assert_eq!((stats.triangles, stats.points, stats.instances_impostors), (bark, 0, 1), "{stats:?}");
+            assert!(stats.planes > 0);
+            assert!(renderer.draws().iter().all(|d| matches!(d.source, DrawSource::Planes | DrawSource::Bark)));
+            let (precision, recall) = precision_recall(&planes, &full);
+            eprintln!("impostors at {distance} m, direction {d}: precision {precision:.3}, recall {recall:.3}");
+            rows.push((distance, d, precision, recall));
+        }
+    }
+    // Measured on lavapipe (α scale 0.1, 24 texels/m): at 15 m P 0.85–0.89 and R 0.74–0.82, at
+    // 45 m P 0.93–0.96 and R 0.68–0.76 over the seven directions. The bark is exact; the leaves
+    // lie 0.25 m (RMS) off their 32 planes, which moves them a few pixels with the view: the
+    // spread over directions is the parallax the paper trades for 32 quads. At 45 m the
+    // reference over-covers (a one-pixel leaf's smallest mip passes the test whole, a full quad),
+    // hence the lower recall there. The thresholds sit a few points below the minima measured.
+    for (distance, d, precision, recall) in rows {
+        let (p_min, r_min) = if distance < 30.0 { (0.8, 0.7) } else { (0.88, 0.63) };
+        assert!(precision >= p_min && recall >= r_min, "{distance} m, direction {d}: P {precision:.3}, R {recall:.3}");
+    }
+    let (image, _) = render_image(&gpu, &mut renderer, &camera(&container, 15.0, 128), BACKGROUND).expect("renders");
+    check_golden(&image, "demo-impostors-15m");
+    renderer.settings_mut().debug = DebugView::Kinds;
+    let (image, _) = render_image(&gpu, &mut renderer, &camera(&container, 15.0, 128), BACKGROUND).expect("renders");
+    let yellow = image.rgba.chunks_exact(4).filter(|p| p[0] > 200 && p[1] > 180 && p[2] < 150).count();
+    assert!(yellow > 100, "planes drawn in the kinds view: {yellow} yellow pixels");
 }

@@ -6,8 +6,10 @@
 //! the prefix to draw, and [`select::point_drawn`] is the per-element test the vertex shader makes.
 //! [`frame`] applies it to a whole frame: frustum culling of instances and cells, Gilet's depth
 //! bias per cell, a reusable draw list, and a controller that keeps the primitive count on budget.
+//! [`impostor`] selects the level of impostor planes of an instance the same way.
 
 pub mod frame;
+pub mod impostor;
 pub mod prune;
 pub mod select;
 
@@ -15,5 +17,6 @@ pub use frame::{
     BudgetController, Camera, CellLod, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings,
     ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
 };
+pub use impostor::{PlaneCell, PlaneLod, PlaneRange, plane_drawn};
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};

@@ -70,17 +70,7 @@ pub fn size_factor(s: f32) -> f32 {
     s.max(0.0).sqrt()
 }
 
-/// Leaves drawn of a list of `count` at `lambda`: `ceil(λ·count)`, at least one of a non-empty
-/// list, at most `count` (spec §6.11).
-#[must_use]
-pub fn leaves_drawn(count: u32, lambda: f32) -> u32 {
-    if count == 0 {
-        return 0;
-    }
-    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 1..=count")]
-    let n = (f64::from(lambda.clamp(0.0, 1.0)) * f64::from(count)).ceil().clamp(1.0, f64::from(count)) as u32;
-    n
-}
+pub use treelod_format::prune_leaves_drawn as leaves_drawn;
 
 /// Hysteresis on `λ`: the shown value follows the target only when the target leaves a band of
 /// relative width `band` around it, so an occlusion factor that wavers by a few sample points, or

@@ -5,10 +5,11 @@ use std::time::Instant;
 
 use glam::Vec3;
 use treelod_build::scene::Scene;
-use treelod_build::{BuildConfig, BuildOutput, BuildStats, Placed, build_block};
-use treelod_format::{Compression, Container, ErrorClass, Setting};
+use treelod_build::{BuildConfig, BuildOutput, BuildStats, Placed, PruneConfig, PruneOrder, PruneReport, build_block};
+use treelod_format::{Compression, Container, CurveSample, ErrorClass, Setting};
 
 use crate::report::{self, Failed};
+use crate::table::{Align, Table};
 
 /// Options shared by `build` and `demo`.
 #[derive(clap::Args, Debug, Clone)]
@@ -34,6 +35,45 @@ pub struct BuildOptions {
     /// zstd level, 1..=22.
     #[arg(long, default_value_t = 9, value_parser = clap::value_parser!(i32).range(1..=22))]
     pub level: i32,
+    /// Pruning (Neubert et al. 2011): write each cell's leaves as a priority list in this order,
+    /// with the optimal scale s_opt(λ) and the fraction λ(h) per projected height (spec §6.11).
+    /// `none` writes no lists. Measuring the curves renders coverage images on the CPU: it adds
+    /// about as much time as the rest of the build on large trees.
+    #[arg(long, default_value = "none", value_parser = ["none", "stochastic", "density", "orientation", "combined"])]
+    pub prune: String,
+    /// With --prune: the minimum quality Q = 1 - |(1 - P, 1 - R)| that λ(h) keeps, in [0, 1]. At
+    /// each distance λ(h) reaches the quality of Cook's stochastic pruning there (Neubert et al.'s
+    /// rule) and never less than Q; 0 follows Cook's quality everywhere.
+    #[arg(long, default_value_t = 0.9, value_name = "Q", value_parser = parse_quality)]
+    pub prune_quality: f32,
+    /// With --prune: side in pixels of the coverage images s_opt is measured on (the tree's
+    /// bounding sphere spans the image).
+    #[arg(long, default_value_t = 256, value_name = "PIXELS", value_parser = clap::value_parser!(u32).range(16..=4096))]
+    pub prune_resolution: u32,
+    /// With --prune: view directions measured (2/3 around the tree, 1/3 from 45° above).
+    #[arg(long, default_value_t = 8, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub prune_views: u32,
+    /// Leaf-cluster impostors (Garcia 2005): cluster each tree's leaves onto nested levels of
+    /// planes (--impostor-levels) in the block cell and bake them into one atlas image (spec
+    /// §6.10). The atlas is typically several times larger than the rest of the container.
+    #[arg(long)]
+    pub impostors: bool,
+    /// With --impostors: planes per tree at each level, finest first, strictly decreasing.
+    #[arg(long, value_name = "N,N,…", default_value = "32,16,8", value_parser = parse_levels, requires = "impostors")]
+    pub impostor_levels: Levels,
+    /// With --impostors: α of the clustering error as a fraction of the crown radius R,
+    /// α = (SCALE·R)²: how far off a plane costs as much as a leaf at right angles to it.
+    #[arg(long, value_name = "SCALE", default_value_t = 0.1, requires = "impostors")]
+    pub impostor_alpha: f32,
+    /// With --impostors: atlas texels per metre of plane (lowered if the atlas would exceed
+    /// 4096 texels per side).
+    #[arg(long, value_name = "N", default_value_t = 24.0, requires = "impostors")]
+    pub impostor_texels: f32,
+    /// Keep every bit of the written floats. By default positions and texture coordinates keep
+    /// 16 significant bits, sizes 12 and normals 10 per component (0.15 mm on a 10 m tree), which
+    /// zstd compresses about a third smaller.
+    #[arg(long)]
+    pub full_precision: bool,
     /// Skip the full verification of each written file.
     #[arg(long)]
     pub no_verify: bool,
@@ -49,6 +89,29 @@ impl BuildOptions {
             grid: self.grid,
             gilet: treelod_build::gilet::GiletConfig { cluster_max: self.cluster_max as usize },
             classify: treelod_build::classify::ClassifyOptions { leaves: self.leaves.clone(), bark: self.bark.clone() },
+            prune: PruneOrder::parse(&self.prune).map(|order| self.prune_config(order)),
+            impostors: self.impostors.then(|| treelod_build::ImpostorConfig {
+                levels: self.impostor_levels.0.clone(),
+                alpha_scale: self.impostor_alpha,
+                texels_per_metre: self.impostor_texels,
+                ..treelod_build::ImpostorConfig::default()
+            }),
+            precision: if self.full_precision {
+                treelod_build::precision::Precision::FULL
+            } else {
+                treelod_build::precision::Precision::default()
+            },
+        }
+    }
+
+    /// The pruning settings of these options with `order`.
+    pub(crate) fn prune_config(&self, order: PruneOrder) -> PruneConfig {
+        PruneConfig {
+            order,
+            min_quality: self.prune_quality,
+            resolution: self.prune_resolution,
+            views: self.prune_views,
+            ..PruneConfig::default()
         }
     }
 
@@ -80,6 +143,32 @@ impl BuildOptions {
 /// The `generator` recorded in the metadata of every container this tool writes.
 pub(crate) fn generator() -> String {
     format!("treelod {}", env!("CARGO_PKG_VERSION"))
+}
+
+/// `--impostor-levels`: plane counts per tree, finest first.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Levels(pub Vec<u32>);
+
+/// Parses `--impostor-levels`: plane counts, strictly decreasing, each in 1..=4096.
+fn parse_levels(s: &str) -> Result<Levels, String> {
+    let levels = s
+        .split(',')
+        .map(|v| v.trim().parse::<u32>().ok().filter(|n| (1..=4096).contains(n)))
+        .collect::<Option<Vec<u32>>>()
+        .ok_or_else(|| format!("{s:?}: expected numbers in 1..=4096 separated by commas"))?;
+    if levels.windows(2).any(|w| w[1] >= w[0]) {
+        return Err(format!("{s:?}: levels must decrease strictly (finest first)"));
+    }
+    Ok(Levels(levels))
+}
+
+/// Parses a quality in [0, 1] (`--prune-quality`).
+fn parse_quality(s: &str) -> Result<f32, String> {
+    s.trim()
+        .parse::<f32>()
+        .ok()
+        .filter(|q| (0.0..=1.0).contains(q))
+        .ok_or_else(|| format!("{s:?} is not a number in [0, 1]"))
 }
 
 /// Parses `X,Y,Z`, each in 1..=256 (the `--grid` option and the recorded `grid` setting).
@@ -117,6 +206,12 @@ pub struct Args {
     /// added after any INPUTs.
     #[arg(long, value_name = "FILE", requires = "block")]
     pub placement: Option<PathBuf>,
+    /// Before building each input, compare the pruning orders on it and print the table: for
+    /// each order with s_opt, and for Cook's stochastic order with s = 1/λ, the quality Q along
+    /// λ and the λ that reaches --prune-quality (the geometry saved at equal quality), measured
+    /// on the images of --prune-resolution and --prune-views.
+    #[arg(long)]
+    pub prune_report: bool,
     /// Build settings.
     #[command(flatten)]
     pub options: BuildOptions,
@@ -170,6 +265,9 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         seen.push(output.clone());
         let result = import(input).and_then(|scene| {
             let name = scene.name.clone();
+            if args.prune_report {
+                print_prune_report(&name, &scene, input, &args.options)?;
+            }
             build_one(&name, vec![(scene, Vec3::ZERO)], &[input.as_path()], &output, &args.options)
         });
         if let Err(failed) = result {
@@ -206,7 +304,109 @@ fn run_block(args: &Args) -> Result<(), Failed> {
     progress.finish_and_clear();
     let name = args.output.file_stem().map_or_else(|| "block".to_owned(), |s| s.to_string_lossy().into_owned());
     let sources: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
+    if args.prune_report {
+        let placed: Vec<Placed<'_>> =
+            scenes.iter().map(|(scene, translation)| Placed { scene, translation: *translation }).collect();
+        let config = args.options.config();
+        let report = treelod_build::prune_report(&name, &placed, &config)
+            .map_err(|e| report::build_error(sources.first().copied().unwrap_or(&args.output), &e))?;
+        report::write_stdout(&prune_report_text(&name, &report, args.options.json))?;
+    }
     build_one(&name, scenes, &sources, &args.output, &args.options)
+}
+
+/// Compares the pruning orders on one tree and prints the table (`--prune-report`).
+fn print_prune_report(name: &str, scene: &Scene, input: &Path, options: &BuildOptions) -> Result<(), Failed> {
+    let start = Instant::now();
+    let placed = [Placed { scene, translation: Vec3::ZERO }];
+    let report =
+        treelod_build::prune_report(name, &placed, &options.config()).map_err(|e| report::build_error(input, &e))?;
+    let mut text = prune_report_text(name, &report, options.json);
+    if !options.json {
+        text.push_str(&format!("  ({:.2} s)\n", start.elapsed().as_secs_f64()));
+    }
+    report::write_stdout(&text)
+}
+
+/// The `--prune-report` table as text, or as one JSON object.
+pub(crate) fn prune_report_text(name: &str, report: &PruneReport, json: bool) -> String {
+    let lambdas = treelod_build::prune::LAMBDAS;
+    let saved = |lambda: f32| 1.0 - lambda / report.cook_lambda.max(f32::MIN_POSITIVE);
+    if json {
+        let orders: Vec<serde_json::Value> = report
+            .orders
+            .iter()
+            .map(|o| {
+                serde_json::json!({
+                    "order": o.order.as_str(),
+                    "s_opt": o.scale,
+                    "quality": o.quality,
+                    "lambda": o.lambda,
+                    "saved": saved(o.lambda),
+                })
+            })
+            .collect();
+        let value = serde_json::json!({
+            "name": name,
+            "leaves": report.leaves,
+            "resolution": report.resolution,
+            "pixel_height": report.pixel_height,
+            "min_quality": report.min_quality,
+            "lambdas": lambdas,
+            "cook": { "s": lambdas.iter().map(|l| 1.0 / l).collect::<Vec<f32>>(), "quality": report.cook_quality, "lambda": report.cook_lambda },
+            "orders": orders,
+        });
+        return format!("{value}\n");
+    }
+    let mut out = format!(
+        "{name}: pruning orders compared on {} leaves, {} px images (the tree {:.0} px high), Q >= {}\n",
+        report.leaves, report.resolution, report.pixel_height, report.min_quality
+    );
+    let mut header = vec![("", Align::Left)];
+    header.extend(lambdas.iter().map(|_| ("", Align::Right)));
+    let mut t = Table::new(&header);
+    let row = |label: &str, values: Vec<String>| {
+        let mut cells = vec![label.to_owned()];
+        cells.extend(values);
+        cells
+    };
+    t.row(row("λ", lambdas.iter().map(|l| format!("{l}")).collect()));
+    t.row(row("s_Cook = 1/λ", lambdas.iter().map(|l| format!("{:.2}", 1.0 / l)).collect()));
+    t.row(row("Q stochastic + s_Cook", report.cook_quality.iter().map(|q| format!("{q:.3}")).collect()));
+    for o in &report.orders {
+        t.row(row(&format!("s_opt {}", o.order.as_str()), o.scale.iter().map(|s| format!("{s:.2}")).collect()));
+        t.row(row(&format!("Q {} + s_opt", o.order.as_str()), o.quality.iter().map(|q| format!("{q:.3}")).collect()));
+    }
+    out.push_str(&t.render("  "));
+    out.push_str(&format!("  λ for Q >= {} (leaf geometry saved against stochastic + s_Cook):\n", report.min_quality));
+    out.push_str(&format!("    stochastic + s_Cook  {:.3}\n", report.cook_lambda));
+    for o in &report.orders {
+        out.push_str(&format!(
+            "    {:<11} + s_opt   {:.3}  ({:+.1} %)\n",
+            o.order.as_str(),
+            o.lambda,
+            100.0 * saved(o.lambda)
+        ));
+    }
+    // The paper's comparison at a mid distance: Cook's own quality at λ = (1 − d)².
+    for cook_lambda in [0.25f32] {
+        let d = 1.0 - cook_lambda.sqrt();
+        let target = report.cook_quality.get(lambdas.iter().position(|&l| l == cook_lambda).unwrap_or(0)).copied();
+        let Some(target) = target else { continue };
+        out.push_str(&format!(
+            "  λ for Cook's quality at d = {d:.2} (λ = {cook_lambda}, Q = {target:.3}) (leaf geometry saved):\n"
+        ));
+        for o in &report.orders {
+            let lambda = treelod_build::prune::lambda_reaching(&o.quality, target);
+            out.push_str(&format!(
+                "    {:<11} + s_opt   {:.3}  ({:+.1} %)\n",
+                o.order.as_str(),
+                lambda,
+                100.0 * (1.0 - lambda / cook_lambda)
+            ));
+        }
+    }
+    out
 }
 
 /// Runs `treelod demo`: builds the built-in procedural tree (no input needed).
@@ -256,6 +456,8 @@ pub(crate) struct Built {
     pub seconds: f64,
     /// Whether the written file was fully verified (not with `--no-verify`).
     pub verified: bool,
+    /// The pruning curves written: `s_opt(λ)` and `λ(h)` (empty without pruning).
+    pub prune_curves: (Vec<CurveSample>, Vec<CurveSample>),
 }
 
 /// Builds one container, writes it atomically (temporary file, then rename), reopens and verifies
@@ -288,6 +490,7 @@ pub(crate) fn build_container(
     data.metadata.settings.sort();
     let file_bytes = data.write_to_path(output, options.compression()).map_err(|e| report::file_error(output, &e))?;
     let (materials, images) = (data.materials.len(), data.images.len());
+    let prune_curves = (std::mem::take(&mut data.prune_scale), std::mem::take(&mut data.prune_lambda));
     drop(data);
     let verified = if options.no_verify {
         false
@@ -298,7 +501,7 @@ pub(crate) fn build_container(
     };
     let seconds = start.elapsed().as_secs_f64();
     let source_bytes: u64 = sources.iter().filter_map(|p| std::fs::metadata(p).ok()).map(|m| m.len()).sum();
-    Ok(Built { stats, warnings, materials, images, file_bytes, source_bytes, seconds, verified })
+    Ok(Built { stats, warnings, materials, images, file_bytes, source_bytes, seconds, verified, prune_curves })
 }
 
 /// What a finished build prints.
@@ -341,6 +544,42 @@ impl Summary<'_> {
             s.grid.iter().product::<u32>(),
             self.built.file_bytes,
             if self.built.verified { "ok" } else { "skipped" },
+        ) + &self.prune_text()
+            + &self.impostor_text()
+    }
+
+    /// The impostor line of the text summary (none without impostors).
+    fn impostor_text(&self) -> String {
+        let s = &self.built.stats;
+        if s.planes == 0 {
+            return String::new();
+        }
+        let levels: Vec<String> = s.planes_per_level.iter().map(u32::to_string).collect();
+        format!(
+            "  impostors     {} planes (per level {}), atlas {}x{}\n",
+            s.planes,
+            levels.join(", "),
+            s.atlas[0],
+            s.atlas[1]
+        )
+    }
+
+    /// The pruning lines of the text summary (none without pruning).
+    fn prune_text(&self) -> String {
+        let s = &self.built.stats;
+        if s.prune_leaves == 0 {
+            return String::new();
+        }
+        let (scale, lambda) = &self.built.prune_curves;
+        let curve = |c: &[CurveSample], x: &dyn Fn(f32) -> String| {
+            c.iter().map(|p| format!("{}:{:.2}", x(p.x), p.y)).collect::<Vec<_>>().join(" ")
+        };
+        format!(
+            "  prune         {} leaves, {} triangles\n  s_opt(λ)      {}\n  λ(h pixels)   {}\n",
+            s.prune_leaves,
+            s.prune_triangles,
+            curve(scale, &|x| format!("{x}")),
+            curve(lambda, &|x| format!("{x:.0}")),
         )
     }
 
@@ -364,6 +603,13 @@ impl Summary<'_> {
             "file_bytes": b.file_bytes,
             "source_bytes": b.source_bytes,
             "verified": b.verified,
+            "prune_leaves": s.prune_leaves,
+            "prune_triangles": s.prune_triangles,
+            "prune_scale": b.prune_curves.0.iter().map(|c| [c.x, c.y]).collect::<Vec<_>>(),
+            "prune_lambda": b.prune_curves.1.iter().map(|c| [c.x, c.y]).collect::<Vec<_>>(),
+            "planes": s.planes,
+            "planes_per_level": s.planes_per_level,
+            "atlas": s.atlas,
             "warnings": b.warnings,
         });
         format!("{value}\n")

@@ -66,6 +66,12 @@ struct Dump<'a> {
     metadata: MetadataInfo<'a>,
     /// Per-cell record counts.
     cells: CellsInfo,
+    /// The pruning sections (spec §6.11), when the container has any of their records.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pruning: Option<PruningInfo>,
+    /// The impostor planes and the images they sample (spec §6.10), when the container has planes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    impostors: Option<ImpostorInfo>,
     /// Size histograms of the hierarchical kinds.
     histograms: Histograms,
 }
@@ -205,6 +211,167 @@ struct CellsInfo {
     list: Vec<CellInfo>,
     /// Sums over all cells.
     totals: Counts,
+}
+
+/// The pruning sections: the leaves' lists per cell and the two curves (spec §6.11).
+#[derive(Debug, Serialize)]
+struct PruningInfo {
+    /// `PRUNE_LEAVES` records.
+    leaves: u64,
+    /// `PRUNE_TRIANGLES` records.
+    triangles: u64,
+    /// Cells whose list is not empty.
+    cells: u64,
+    /// Fewest, median and most leaves in a non-empty list (zeros without lists).
+    leaves_per_cell: [u64; 3],
+    /// `PRUNE_SCALE` as `[λ, s_opt]` pairs.
+    scale: Vec<[f32; 2]>,
+    /// `PRUNE_LAMBDA` as `[projected height in pixels, λ]` pairs.
+    lambda: Vec<[f32; 2]>,
+}
+
+impl PruningInfo {
+    /// The pruning content of `container`, `None` if it has no pruning records.
+    fn new(container: &Container) -> Option<Self> {
+        let (scale, lambda) = (container.prune_scale(), container.prune_lambda());
+        let (leaves, triangles) = (container.prune_leaves().len(), container.prune_triangles().len());
+        if leaves == 0 && triangles == 0 && scale.is_empty() && lambda.is_empty() {
+            return None;
+        }
+        let mut counts: Vec<u64> =
+            container.cells().iter().map(|c| u64::from(c.prune_leaves.count)).filter(|&n| n > 0).collect();
+        counts.sort_unstable();
+        let leaves_per_cell = match (counts.first(), counts.last()) {
+            (Some(&min), Some(&max)) => [min, counts[(counts.len() - 1) / 2], max],
+            _ => [0; 3],
+        };
+        Some(Self {
+            leaves: leaves as u64,
+            triangles: triangles as u64,
+            cells: counts.len() as u64,
+            leaves_per_cell,
+            scale: scale.iter().map(|c| [c.x, c.y]).collect(),
+            lambda: lambda.iter().map(|c| [c.x, c.y]).collect(),
+        })
+    }
+
+    /// The text form: counts, then each curve as a two-row table.
+    fn to_text(&self) -> String {
+        let [min, median, max] = self.leaves_per_cell;
+        let mut out = format!(
+            "\npruning\n  leaves     {} in {} cells (per cell: min {min}, median {median}, max {max}), {} triangles\n",
+            self.leaves, self.cells, self.triangles
+        );
+        let curve = |out: &mut String, title: &str, x: &str, y: &str, samples: &[[f32; 2]]| {
+            out.push_str(&format!("  {title} ({} samples)\n", samples.len()));
+            if samples.is_empty() {
+                return;
+            }
+            let mut columns = vec![("", Align::Left)];
+            columns.extend(samples.iter().map(|_| ("", Align::Right)));
+            let mut t = Table::new(&columns);
+            for (label, k) in [(x, 0), (y, 1)] {
+                let mut row = vec![label.to_owned()];
+                row.extend(samples.iter().map(|s| s[k].to_string()));
+                t.row(row);
+            }
+            out.push_str(&t.render("    "));
+        };
+        curve(&mut out, "PRUNE_SCALE s_opt(λ)", "λ", "s_opt", &self.scale);
+        curve(&mut out, "PRUNE_LAMBDA λ(h), h = projected block height in pixels", "h", "λ", &self.lambda);
+        out
+    }
+}
+
+/// The impostor planes (spec §6.10): how many, where, and the atlas images they sample.
+#[derive(Debug, Serialize)]
+struct ImpostorInfo {
+    /// `PLANES` records.
+    planes: u64,
+    /// Cells holding planes.
+    cells: u64,
+    /// Planes of the finest level (`lo = 0`).
+    finest: u64,
+    /// Planes of the coarsest level (`hi = +∞`).
+    roots: u64,
+    /// The images the planes sample.
+    atlases: Vec<AtlasInfo>,
+}
+
+/// One image sampled by planes.
+#[derive(Debug, Serialize)]
+struct AtlasInfo {
+    /// Index in `IMAGES`.
+    image: u32,
+    /// Texels across.
+    width: u32,
+    /// Texels down.
+    height: u32,
+    /// The `format` value (spec §6.7).
+    format: u32,
+    /// Mip levels stored.
+    mip_count: u32,
+    /// Bytes of its data in `IMAGE_DATA` (decoded).
+    bytes: u64,
+    /// Planes sampling it.
+    planes: u64,
+}
+
+impl ImpostorInfo {
+    /// The planes of `container`, `None` if it has none.
+    fn new(container: &Container) -> Option<Self> {
+        let planes = container.planes();
+        if planes.is_empty() {
+            return None;
+        }
+        let mut images: Vec<u32> = planes.iter().map(|p| p.image).collect();
+        images.sort_unstable();
+        images.dedup();
+        let atlases = images
+            .iter()
+            .filter_map(|&image| {
+                let r = container.images().get(image as usize)?;
+                Some(AtlasInfo {
+                    image,
+                    width: r.width,
+                    height: r.height,
+                    format: r.format,
+                    mip_count: r.mip_count,
+                    bytes: r.data_length,
+                    planes: planes.iter().filter(|p| p.image == image).count() as u64,
+                })
+            })
+            .collect();
+        Some(Self {
+            planes: planes.len() as u64,
+            cells: container.cells().iter().filter(|c| c.planes.count > 0).count() as u64,
+            finest: planes.iter().filter(|p| p.lo == 0.0).count() as u64,
+            roots: planes.iter().filter(|p| p.hi == f32::INFINITY).count() as u64,
+            atlases,
+        })
+    }
+
+    /// The text form.
+    fn to_text(&self) -> String {
+        let mut out = format!(
+            "\nimpostors\n  planes     {} in {} cell(s): {} at the finest level (lo = 0), {} at the coarsest (hi = inf)\n",
+            self.planes, self.cells, self.finest, self.roots
+        );
+        for a in &self.atlases {
+            let format = match a.format {
+                treelod_format::image_format::RGBA8_SRGB => "RGBA8_SRGB".to_owned(),
+                treelod_format::image_format::RGBA8_LINEAR => "RGBA8_LINEAR".to_owned(),
+                treelod_format::image_format::PNG => "PNG".to_owned(),
+                treelod_format::image_format::JPEG => "JPEG".to_owned(),
+                other => format!("format {other}"),
+            };
+            out.push_str(&format!(
+                "  atlas      image {}: {} x {} {format}, {} mip(s), {} bytes, {} plane(s)\n",
+                a.image, a.width, a.height, a.mip_count, a.bytes, a.planes
+            ));
+        }
+        out
+    }
 }
 
 /// One non-empty cell.
@@ -391,6 +558,8 @@ impl<'a> Dump<'a> {
                 settings: &meta.settings,
             },
             cells: CellsInfo { grid_cells, non_empty: list.len(), list, totals },
+            pruning: PruningInfo::new(container),
+            impostors: ImpostorInfo::new(container),
             histograms,
         }
     }
@@ -429,6 +598,12 @@ impl<'a> Dump<'a> {
 
         out.push_str(&self.metadata_text());
         out.push_str(&self.cells_text());
+        if let Some(pruning) = &self.pruning {
+            out.push_str(&pruning.to_text());
+        }
+        if let Some(impostors) = &self.impostors {
+            out.push_str(&impostors.to_text());
+        }
         out.push_str(&self.histograms_text());
         out
     }

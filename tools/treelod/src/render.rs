@@ -43,7 +43,7 @@ pub struct Args {
     #[arg(long)]
     pub compare: bool,
     /// Colour by grid cell (`cells`) or by kind (`kinds`: triangles red, points blue, pruned
-    /// leaves green).
+    /// leaves green, impostor planes yellow).
     #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds"])]
     pub debug: Option<String>,
     /// MSAA samples, 1 or 4; with 4, alpha-tested leaves cover samples in proportion to their
@@ -61,6 +61,11 @@ pub struct Args {
     pub background: [u8; 3],
     #[command(flatten)]
     pub prune: PruneArgs,
+    /// Draw the leaves of trees whose containers have impostor planes (Garcia 2005; build with
+    /// `--impostors`) as those planes, the level chosen by `--s-min` at the tree's distance, and
+    /// their bark as triangles; other trees as usual. Takes precedence over `--prune`.
+    #[arg(long)]
+    pub impostors: bool,
     /// Select on the GPU (compute shaders write the indirect draws; every model is kept resident
     /// whole). Frames with pruning or the full mesh (`--compare`'s right half) select on the CPU.
     #[arg(long)]
@@ -186,6 +191,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         _ => DebugView::Shaded,
     };
     settings.pruning = args.prune.settings();
+    settings.impostors = args.impostors;
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
         scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
@@ -210,7 +216,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 Failed { class: ErrorClass::Io }
             })
         };
-        if renderer.settings().pruning.is_some() && !renderer.settings().full_mesh {
+        if renderer.settings().pruning.is_some() && !renderer.settings().impostors && !renderer.settings().full_mesh {
             // The occlusion factor of pruned trees is measured on the frame before.
             frame(renderer)?;
         }
@@ -225,8 +231,14 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         stats.triangles,
         stats.points
     );
-    if renderer.settings().pruning.is_some() {
+    if renderer.settings().pruning.is_some() && !renderer.settings().impostors {
         line.push_str(&format!(", {} pruned tree(s) drawing {} leaves", stats.instances_pruned, stats.leaves_pruned));
+    }
+    if renderer.settings().impostors {
+        line.push_str(&format!(
+            ", {} tree(s) with impostors submitting {} planes",
+            stats.instances_impostors, stats.planes
+        ));
     }
     let image = if args.compare {
         renderer.settings_mut().full_mesh = true;

@@ -58,6 +58,9 @@ pub struct Args {
     pub frames: u32,
     #[command(flatten)]
     pub prune: PruneArgs,
+    /// Start with impostor planes on (key `I`) for trees whose containers have them.
+    #[arg(long)]
+    pub impostors: bool,
 }
 
 /// Runs `treelod view`.
@@ -283,7 +286,7 @@ impl Viewer {
         let depth = depth_view(&device, config.width, config.height);
 
         let formats = RendererFormats { color: format, depth: DEPTH_FORMAT, sample_count: 1 };
-        let settings = Settings { pruning: args.prune.settings(), ..Settings::default() };
+        let settings = Settings { pruning: args.prune.settings(), impostors: args.impostors, ..Settings::default() };
         let mut renderer = Renderer::new(&device, formats, settings);
         let bounds = scene::add_to_renderer(scene, &device, &queue, &mut renderer).map_err(|e| scene_failed(&e))?;
 
@@ -356,6 +359,7 @@ impl Viewer {
             KeyCode::KeyJ => settings.depth_bias_k = (settings.depth_bias_k - 0.5).max(0.0),
             KeyCode::KeyF => settings.full_mesh = !settings.full_mesh,
             KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
+            KeyCode::KeyI => settings.impostors = !settings.impostors,
             KeyCode::KeyO => {
                 if let Some(pruning) = &mut settings.pruning {
                     pruning.occlusion = !pruning.occlusion;
@@ -478,7 +482,12 @@ impl Viewer {
             (false, DebugView::Kinds) => " | kinds",
         }
         .to_owned();
-        if let Some(pruning) = settings.pruning.filter(|_| !settings.full_mesh) {
+        if settings.impostors && !settings.full_mesh {
+            mode.push_str(&format!(
+                " | impostors: {} trees, {} planes",
+                self.stats.instances_impostors, self.stats.planes
+            ));
+        } else if let Some(pruning) = settings.pruning.filter(|_| !settings.full_mesh) {
             let occlusion = if pruning.occlusion { ", occlusion" } else { "" };
             mode.push_str(&format!(
                 " | pruning{occlusion}: {} trees, {} leaves",

@@ -722,6 +722,61 @@ fn build_writes_one_verified_container_per_input_and_reports_bad_gltf() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+#[test]
+fn build_with_pruning_writes_the_lists_dump_shows_them_and_the_report_compares_orders() {
+    let dir = tempfile_dir("prune");
+    let model =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/trees/quaternius-common-tree-1-3k.glb");
+    let out = dir.join("pruned.treelod");
+    let small = ["--prune-resolution", "64", "--prune-views", "3"];
+    let run = Command::new(env!("CARGO_BIN_EXE_treelod"))
+        .arg("build")
+        .arg(&model)
+        .arg("-o")
+        .arg(&out)
+        .args(["--prune", "density", "--prune-quality", "0.8", "--prune-report"])
+        .args(small)
+        .output()
+        .expect("runs");
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "stderr: {}", String::from_utf8_lossy(&run.stderr));
+    // The report: every order against Cook, then the build's summary with the curves.
+    assert!(text.contains("pruning orders compared on"), "{text}");
+    for line in ["Q stochastic + s_Cook", "s_opt density", "Q combined + s_opt", "stochastic + s_Cook  "] {
+        assert!(text.contains(line), "{line:?} in {text}");
+    }
+    assert!(text.contains("  prune         ") && text.contains("  s_opt(λ)      0.05:"), "{text}");
+    let container = treelod_format::Container::open(&out).expect("opens");
+    treelod_format::verify(&container).expect("verifies");
+    assert!(!container.prune_leaves().is_empty());
+    let setting = |key: &str| container.metadata().setting(key).map(str::to_owned);
+    assert_eq!(setting("prune.order").as_deref(), Some("density"));
+    assert_eq!(setting("prune.min_quality").as_deref(), Some("0.8"));
+    let dump = treelod(&["dump", out.to_str().expect("UTF-8 path")]);
+    let dump = stdout(&dump);
+    assert!(dump.contains("\npruning\n  leaves     "), "{dump}");
+    assert!(dump.contains("PRUNE_SCALE s_opt(λ) (14 samples)") && dump.contains("(20 samples)"), "{dump}");
+    let json = treelod(&["dump", "--json", out.to_str().expect("UTF-8 path")]);
+    let json: serde_json::Value = serde_json::from_slice(&json.stdout).expect("JSON");
+    assert_eq!(json["pruning"]["scale"].as_array().map(Vec::len), Some(14));
+    // Without --prune nothing is pruned, and a quality outside [0, 1] is a usage error.
+    let plain = dir.join("plain.treelod");
+    let run = Command::new(env!("CARGO_BIN_EXE_treelod")).arg("build").arg(&model).arg("-o").arg(&plain).output();
+    assert!(run.expect("runs").status.success());
+    let plain = treelod_format::Container::open(&plain).expect("opens");
+    assert!(plain.prune_leaves().is_empty() && plain.metadata().setting("prune.order").is_none());
+    let bad = Command::new(env!("CARGO_BIN_EXE_treelod"))
+        .arg("build")
+        .arg(&model)
+        .arg("-o")
+        .arg(dir.join("bad.treelod"))
+        .args(["--prune", "combined", "--prune-quality", "1.5"])
+        .output()
+        .expect("runs");
+    assert_eq!(bad.status.code(), Some(2));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Scene files, `scatter` and `render`.
 

@@ -9,7 +9,7 @@
 pub mod metrics;
 mod output;
 pub mod path;
-mod plot;
+pub(crate) mod plot;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -17,7 +17,7 @@ use std::time::Instant;
 use glam::Vec3;
 use treelod_format::{Container, ErrorClass};
 use treelod_render::offscreen::{Gpu, render_image_timed};
-use treelod_render::{Camera, FrameStats, Renderer, Settings};
+use treelod_render::{Camera, FrameStats, PruneScale, Pruning, Renderer, Settings};
 
 use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse};
 use self::path::Pose;
@@ -221,9 +221,11 @@ pub fn availability(technique: TechniqueName, data: OptionalData, scene: bool) -
     match technique {
         TechniqueName::Full | TechniqueName::Full1x | TechniqueName::Spt => Availability::Measured,
         TechniqueName::Ellipsoids => absent_or(data.ellipsoids, "ellipsoids or lines", "ellipsoids and lines"),
-        TechniqueName::Impostors => absent_or(data.planes, "impostor planes", "impostor planes"),
+        TechniqueName::Impostors if data.planes > 0 => Availability::Measured,
+        TechniqueName::Impostors => Availability::Absent(format!("{holder} impostor planes")),
+        TechniqueName::PruneOpt | TechniqueName::PruneCook if data.prune_leaves > 0 => Availability::Measured,
         TechniqueName::PruneOpt | TechniqueName::PruneCook => {
-            absent_or(data.prune_leaves, "pruning priority lists", "pruned leaves")
+            Availability::Absent(format!("{holder} pruning priority lists"))
         }
         TechniqueName::Policy => {
             Availability::NotImplemented("there is no distance policy choosing among techniques".to_owned())
@@ -278,18 +280,20 @@ pub struct Row {
 }
 
 impl Row {
-    /// Bytes of geometry records the frame reads: 24 per triangle and 48 per point submitted.
+    /// Bytes of geometry records the frame reads: 24 per triangle, 48 per point and 64 per impostor
+    /// plane submitted.
     #[must_use]
     pub fn geometry_bytes(&self) -> u64 {
         geometry_bytes(&self.stats)
     }
 }
 
-/// Bytes of triangle and point records submitted in a frame.
+/// Bytes of triangle, point and impostor plane records submitted in a frame.
 #[must_use]
 pub fn geometry_bytes(stats: &FrameStats) -> u64 {
     stats.triangles * size_of::<treelod_format::TriangleRecord>() as u64
         + stats.points * size_of::<treelod_format::PointRecord>() as u64
+        + stats.planes * size_of::<treelod_format::PlaneRecord>() as u64
 }
 
 /// Everything a run measured, for the outputs.
@@ -424,6 +428,16 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 let mut settings = Settings::default();
                 settings.s_min = args.s_min.unwrap_or(settings.s_min);
                 settings.s_max = args.s_max.unwrap_or(settings.s_max);
+                // The pruning techniques prune every tree at every distance (no point tree for
+                // small ones), with the container's λ(h), the occlusion factor and hysteresis.
+                let scale = match name {
+                    TechniqueName::PruneOpt => Some(PruneScale::Optimal),
+                    TechniqueName::PruneCook => Some(PruneScale::Cook),
+                    _ => None,
+                };
+                settings.pruning = scale.map(|scale| Pruning { scale, spt_below_pixels: 0.0, ..Pruning::default() });
+                // Impostors: the leaves of every tree with planes as planes, its bark as triangles.
+                settings.impostors = *name == TechniqueName::Impostors;
                 (settings, 1)
             }
         };
@@ -453,16 +467,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             Failed { class: ErrorClass::Io }
         })?;
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        let linear = LinearImage::from_srgba8(image.width, image.height, &image.rgba).map_err(internal)?;
-        let mask = Mask::from_srgba8(image.width, image.height, &image.rgba, args.background).map_err(internal)?;
-        Ok(Shot {
-            image: linear.box_filter(k).map_err(internal)?,
-            mask: mask.reduce_majority(k).map_err(internal)?,
-            stats,
-            prepare_ms,
-            gpu_ms,
-            wall_ms,
-        })
+        let (image, mask) = measurable(&image, k, args.background).map_err(internal)?;
+        Ok(Shot { image, mask, stats, prepare_ms, gpu_ms, wall_ms })
     };
     let compare = |a: &LinearImage, b: &LinearImage| multiscale_rmse(a, b).map_err(internal);
 
@@ -573,6 +579,21 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     ))
 }
 
+/// A read-back image as the metrics take it: linear colour box-filtered over `k`×`k` blocks, and
+/// coverage (pixels not exactly `background`) by the majority of each block.
+///
+/// # Errors
+/// [`metrics::SizeMismatch`] if the image's pixels do not match its size or `k` does not divide it.
+pub(crate) fn measurable(
+    image: &treelod_render::offscreen::Image,
+    k: u32,
+    background: [u8; 3],
+) -> Result<(LinearImage, Mask), metrics::SizeMismatch> {
+    let linear = LinearImage::from_srgba8(image.width, image.height, &image.rgba)?;
+    let mask = Mask::from_srgba8(image.width, image.height, &image.rgba, background)?;
+    Ok((linear.box_filter(k)?, mask.reduce_majority(k)?))
+}
+
 /// Sums the optional record kinds over the scene's models (each opened and checked as every
 /// reader does).
 fn optional_data(scene: &Scene) -> Result<OptionalData, Failed> {
@@ -651,7 +672,11 @@ mod tests {
             Some("no model of the scene holds impostor planes")
         );
         let some = OptionalData { ellipsoids: 3, planes: 1, prune_leaves: 2 };
-        for t in [TechniqueName::Ellipsoids, TechniqueName::Impostors, TechniqueName::PruneOpt, TechniqueName::Policy] {
+        for t in [TechniqueName::PruneOpt, TechniqueName::PruneCook, TechniqueName::Impostors] {
+            assert_eq!(availability(t, some, false), Availability::Measured);
+            assert_eq!(availability(t, none, false).status(), "absent");
+        }
+        for t in [TechniqueName::Ellipsoids, TechniqueName::Policy] {
             let a = availability(t, some, false);
             assert_eq!(a.status(), "not implemented yet", "{t:?}");
             assert!(

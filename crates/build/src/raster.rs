@@ -1,0 +1,702 @@
+//! A small deterministic CPU rasteriser of coverage: which pixels of an orthographic view a triangle
+//! soup covers, with alpha-tested textures. The build measures image error with it (pruning's
+//! Precision and Recall, Neubert et al. 2011 §2.2), so no GPU is needed to build.
+//!
+//! - **Views** ([`View`]) are orthographic, square, `size` pixels across, fitted to a bounding
+//!   sphere: its diameter spans the image. [`view_directions`] gives the standard set: directions
+//!   around the vertical axis at 0° elevation over half a turn (the view from the opposite side
+//!   is the mirror image), then a ring at 45° elevation (a third of the count) over a full turn,
+//!   so no view repeats another's silhouette.
+//! - **Sampling**: one sample at each pixel centre `(x + ½, y + ½)`; pixel `(0, 0)` is the top-left
+//!   corner of the image, `y` grows downwards. Vertices are snapped to 1/256 pixel and the edge
+//!   functions are evaluated exactly in 64-bit integers, with the top-left fill rule (a centre on
+//!   an edge belongs to the triangle only if the edge is a top or a left edge), so two triangles
+//!   sharing an edge leave no gap and the result is the same on every machine. Both faces are
+//!   drawn (coverage does not depend on winding).
+//! - **Alpha test**: a triangle with an [`AlphaMask`] covers a pixel only where the texel nearest
+//!   to the interpolated UV passes, as the renderer's `fs_triangle` tests the base-colour alpha
+//!   (texture alpha times the material's alpha factor) against the cutoff.
+//! - **Coverage** is a bit-packed [`Mask`], one `u64` per 64 pixels of a row; images are compared
+//!   with [`precision_recall`] and [`quality`].
+//!
+//! Everything is sequential per image; [`render_views`] runs views in parallel (rayon), each into
+//! its own mask, so the result does not depend on the thread count.
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use crate::scene::{AlphaMode, Image, Material};
+
+/// The `alpha` of a [`RasterTriangle`] without alpha test: every covered pixel counts.
+pub const NO_ALPHA: u32 = u32::MAX;
+
+/// Sub-pixel precision of snapped vertices: 1/256 pixel.
+const SUBPIXEL_BITS: u32 = 8;
+const SUBPIXEL: i64 = 1 << SUBPIXEL_BITS;
+/// Snapped coordinates are clamped to ±2^24 (±65536 pixels), so edge-function products stay far
+/// inside `i64` whatever the input; triangles entirely outside the image are skipped before.
+const COORD_LIMIT: f32 = (1u32 << 24) as f32;
+/// Largest image side [`Mask::new`] accepts.
+pub const MAX_SIZE: u32 = 16_384;
+
+/// A square coverage bitmask: bit `x % 64` of word `y · stride + x / 64` is pixel `(x, y)`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Mask {
+    size: u32,
+    stride: usize,
+    words: Vec<u64>,
+}
+
+impl Mask {
+    /// An empty mask of `size × size` pixels (`size` clamped to `1 ..= MAX_SIZE`).
+    #[must_use]
+    pub fn new(size: u32) -> Self {
+        let size = size.clamp(1, MAX_SIZE);
+        let stride = (size as usize).div_ceil(64);
+        Self { size, stride, words: vec![0; stride * size as usize] }
+    }
+
+    /// Pixels along each side.
+    #[must_use]
+    pub fn size(&self) -> u32 {
+        self.size
+    }
+
+    /// Words per row.
+    #[must_use]
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+
+    /// The bits, rows top to bottom, `stride` words each; bits past `size` in a row are zero.
+    #[must_use]
+    pub fn words(&self) -> &[u64] {
+        &self.words
+    }
+
+    /// Whether pixel `(x, y)` is covered; `false` outside the image.
+    #[must_use]
+    pub fn get(&self, x: u32, y: u32) -> bool {
+        x < self.size && y < self.size && self.words[y as usize * self.stride + x as usize / 64] >> (x % 64) & 1 == 1
+    }
+
+    /// Covers pixel `(x, y)`; nothing outside the image.
+    pub fn set(&mut self, x: u32, y: u32) {
+        if x < self.size && y < self.size {
+            self.words[y as usize * self.stride + x as usize / 64] |= 1 << (x % 64);
+        }
+    }
+
+    /// Covered pixels.
+    #[must_use]
+    pub fn count(&self) -> u64 {
+        self.words.iter().map(|w| u64::from(w.count_ones())).sum()
+    }
+
+    /// Makes `self` a copy of `other`, reusing the allocation.
+    pub fn copy_from(&mut self, other: &Self) {
+        self.size = other.size;
+        self.stride = other.stride;
+        self.words.clone_from(&other.words);
+    }
+}
+
+/// Pixel counts of a test mask against a reference (Neubert et al. 2011, Table 1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Confusion {
+    /// Covered in both.
+    pub true_positives: u64,
+    /// Covered in the test only.
+    pub false_positives: u64,
+    /// Covered in the reference only.
+    pub false_negatives: u64,
+}
+
+impl Confusion {
+    /// Counts the pixels of `test` against `reference`.
+    ///
+    /// # Panics
+    /// If the masks differ in size.
+    #[must_use]
+    pub fn of(test: &Mask, reference: &Mask) -> Self {
+        assert_eq!(test.size, reference.size, "masks of different sizes");
+        let mut c = Self::default();
+        for (&t, &r) in test.words.iter().zip(&reference.words) {
+            c.true_positives += u64::from((t & r).count_ones());
+            c.false_positives += u64::from((t & !r).count_ones());
+            c.false_negatives += u64::from((!t & r).count_ones());
+        }
+        c
+    }
+
+    /// Precision `tp / (tp + fp)` and recall `tp / (tp + fn)` (Neubert et al. eq. 1). An empty
+    /// test image has precision 1 (it sets no wrong pixel), an empty reference recall 1 (there
+    /// is nothing to miss): two empty images score `(1, 1)`.
+    #[must_use]
+    pub fn precision_recall(&self) -> (f64, f64) {
+        let ratio = |tp: u64, other: u64| if tp + other == 0 { 1.0 } else { tp as f64 / (tp + other) as f64 };
+        (ratio(self.true_positives, self.false_positives), ratio(self.true_positives, self.false_negatives))
+    }
+}
+
+/// Precision and recall of `test` against `reference`; see [`Confusion::precision_recall`] for
+/// the empty cases.
+///
+/// # Panics
+/// If the masks differ in size.
+#[must_use]
+pub fn precision_recall(test: &Mask, reference: &Mask) -> (f64, f64) {
+    Confusion::of(test, reference).precision_recall()
+}
+
+/// Neubert et al.'s quality `Q = 1 − ‖(1 − P, 1 − R)‖` (eq. 4): 1 for a perfect image, 0 at
+/// distance 1 from the corner `(1, 1)` of the PR diagram, down to `1 − √2` when nothing is right.
+#[must_use]
+pub fn quality(precision: f64, recall: f64) -> f64 {
+    1.0 - (1.0 - precision).hypot(1.0 - recall)
+}
+
+/// The alpha test of one material: a bit per texel of its base-colour image, set where the texel
+/// passes (texel alpha × the material's alpha factor ≥ cutoff).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AlphaMask {
+    width: u32,
+    height: u32,
+    bits: Vec<u64>,
+}
+
+impl AlphaMask {
+    /// The alpha test of `material` with its base-colour `image` as the renderer applies it:
+    /// `None` for an opaque material (nothing is tested); `MASK` against the material's cutoff;
+    /// `BLEND` as a mask at 0.5. A material without image tests its alpha factor alone (a 1 × 1
+    /// mask). Vertex-colour alpha is not taken into account.
+    #[must_use]
+    pub fn for_material(material: &Material, image: Option<&Image>) -> Option<Self> {
+        let cutoff = match material.alpha_mode {
+            AlphaMode::Opaque => return None,
+            AlphaMode::Mask => material.alpha_cutoff,
+            AlphaMode::Blend => 0.5,
+        };
+        let factor = material.base_color[3];
+        Some(match image {
+            Some(image) => Self::from_image(image, factor, cutoff),
+            None => Self { width: 1, height: 1, bits: vec![u64::from(factor >= cutoff)] },
+        })
+    }
+
+    /// The texels of `image` whose alpha times `factor` is at least `cutoff`.
+    #[must_use]
+    pub fn from_image(image: &Image, factor: f32, cutoff: f32) -> Self {
+        let (width, height) = (image.width.max(1), image.height.max(1));
+        let n = width as usize * height as usize;
+        let mut bits = vec![0u64; n.div_ceil(64)];
+        for (i, word) in bits.iter_mut().enumerate() {
+            for b in 0..64 {
+                let t = i * 64 + b;
+                if t >= n {
+                    break;
+                }
+                // A short texel array (a malformed image) reads as opaque, as `Image::texel` does.
+                let alpha = image.rgba.get(t * 4 + 3).copied().unwrap_or(255);
+                if f32::from(alpha) / 255.0 * factor >= cutoff {
+                    *word |= 1 << b;
+                }
+            }
+        }
+        Self { width, height, bits }
+    }
+
+    /// Whether the texel nearest to `uv` passes; UVs wrap (glTF's default `REPEAT`), as in
+    /// [`Image::texel`].
+    #[must_use]
+    pub fn passes(&self, uv: Vec2) -> bool {
+        let (w, h) = (i64::from(self.width), i64::from(self.height));
+        let (x, y) = (floor_i64(uv.x * self.width as f32), floor_i64(uv.y * self.height as f32));
+        // Most coordinates lie in the texture: no division for those.
+        let x = if (0..w).contains(&x) { x } else { x.rem_euclid(w) };
+        let y = if (0..h).contains(&y) { y } else { y.rem_euclid(h) };
+        #[expect(clippy::cast_sign_loss, clippy::cast_possible_truncation, reason = "wrapped into 0..w·h")]
+        let t = (y * w + x) as usize;
+        self.bits[t / 64] >> (t % 64) & 1 == 1
+    }
+
+    /// The fraction of texels that pass.
+    #[must_use]
+    pub fn opaque_fraction(&self) -> f32 {
+        let n = self.width as usize * self.height as usize;
+        self.bits.iter().map(|w| w.count_ones() as usize).sum::<usize>() as f32 / n as f32
+    }
+}
+
+/// One triangle of a soup to rasterise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RasterTriangle {
+    /// Corners, metres.
+    pub positions: [Vec3; 3],
+    /// Texture coordinates of the corners (ignored without alpha test).
+    pub uvs: [Vec2; 3],
+    /// Index into the alpha masks, or [`NO_ALPHA`].
+    pub alpha: u32,
+}
+
+/// An orthographic view fitted to a sphere: the sphere's diameter spans the `size`-pixel image.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct View {
+    /// Unit vector from the model towards the viewer.
+    pub direction: Vec3,
+    /// Image `x` axis in model space (unit).
+    pub right: Vec3,
+    /// Image up axis in model space (unit; image `y` grows the other way).
+    pub up: Vec3,
+    /// The model-space point at the image centre.
+    pub centre: Vec3,
+    /// Pixels per metre.
+    pub scale: f32,
+    /// Pixels along each side.
+    pub size: u32,
+}
+
+impl View {
+    /// The view from `direction` (towards the viewer; need not be unit) of the sphere `centre`,
+    /// `radius`, at `size × size` pixels. Up is +Y projected into the image plane (for a view
+    /// along the vertical, −Z). A zero direction looks along −Z; a zero or non-finite radius
+    /// counts as 1 mm.
+    #[must_use]
+    pub fn fit(direction: Vec3, centre: Vec3, radius: f32, size: u32) -> Self {
+        let direction = direction.normalize_or(Vec3::Z);
+        let reference = if direction.y.abs() > 0.999 { Vec3::NEG_Z * direction.y.signum() } else { Vec3::Y };
+        let right = reference.cross(direction).normalize_or(Vec3::X);
+        let up = direction.cross(right);
+        let radius = if radius.is_finite() && radius > 1e-3 { radius } else { 1e-3 };
+        let size = size.clamp(1, MAX_SIZE);
+        Self { direction, right, up, centre, scale: size as f32 / (2.0 * radius), size }
+    }
+
+    /// Pixel coordinates of a model-space point (`x` right, `y` down, pixel centres at `+½`).
+    #[must_use]
+    pub fn project(&self, p: Vec3) -> Vec2 {
+        let d = p - self.centre;
+        let half = 0.5 * self.size as f32;
+        Vec2::new(half + d.dot(self.right) * self.scale, half - d.dot(self.up) * self.scale)
+    }
+}
+
+/// `count` unit view directions (towards the viewer): `ceil(2·count/3)` around the vertical
+/// axis at 0° elevation, spread over half a turn starting at +Z (an orthographic view from the
+/// opposite side sees the mirror image, the same coverage), then the rest at 45° elevation over a
+/// full turn, offset by half their step. 8 gives 6 horizontal views 30° apart and 2 from above.
+#[must_use]
+pub fn view_directions(count: usize) -> Vec<Vec3> {
+    let horizontal = (2 * count).div_ceil(3);
+    let elevated = count - horizontal;
+    let ring = |n: usize, elevation: f32, turn: f32, offset: f32| {
+        (0..n).map(move |k| {
+            let azimuth = turn * (k as f32 + offset) / n as f32;
+            let (s, c) = azimuth.sin_cos();
+            Vec3::new(elevation.cos() * s, elevation.sin(), elevation.cos() * c)
+        })
+    };
+    let (half, full) = (std::f32::consts::PI, std::f32::consts::TAU);
+    ring(horizontal, 0.0, half, 0.0).chain(ring(elevated, std::f32::consts::FRAC_PI_4, full, 0.5)).collect()
+}
+
+/// A sphere holding `points`: the centre of their bounding box and the largest distance from it.
+/// `(ZERO, 0)` for no (finite) points.
+#[must_use]
+pub fn bounding_sphere(points: impl Iterator<Item = Vec3> + Clone) -> (Vec3, f32) {
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for p in points.clone().filter(|p| p.is_finite()) {
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    if lo.x > hi.x {
+        return (Vec3::ZERO, 0.0);
+    }
+    let centre = 0.5 * (lo + hi);
+    let radius = points.filter(|p| p.is_finite()).map(|p| p.distance(centre)).fold(0.0, f32::max);
+    (centre, radius)
+}
+
+/// Covers the pixels of the triangle with corners `p` (pixel coordinates, as [`View::project`])
+/// whose centres it holds, after the alpha test with `alpha` at the interpolated `uv`. Pixels
+/// already covered are not tested again.
+pub fn fill_triangle(mask: &mut Mask, p: [Vec2; 3], uv: [Vec2; 3], alpha: Option<&AlphaMask>) {
+    let size = mask.size as f32;
+    // Entirely outside the image, or not finite: nothing to do.
+    let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+    if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= size && min.y <= size) {
+        return;
+    }
+    let mut v = p.map(|q| (snap(q.x), snap(q.y)));
+    // Pixel centres inside the snapped box: x·256 + 128 ∈ [min, max] (shifts divide by 256,
+    // rounding down).
+    let half = SUBPIXEL / 2;
+    let last = i64::from(mask.size) - 1;
+    let (x0, x1) = (
+        (-((half - v[0].0.min(v[1].0).min(v[2].0)) >> SUBPIXEL_BITS)).max(0),
+        ((v[0].0.max(v[1].0).max(v[2].0) - half) >> SUBPIXEL_BITS).min(last),
+    );
+    let (y0, y1) = (
+        (-((half - v[0].1.min(v[1].1).min(v[2].1)) >> SUBPIXEL_BITS)).max(0),
+        ((v[0].1.max(v[1].1).max(v[2].1) - half) >> SUBPIXEL_BITS).min(last),
+    );
+    if x0 > x1 || y0 > y1 {
+        return;
+    }
+    let mut uv = uv;
+    let mut area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[1].1 - v[0].1) * (v[2].0 - v[0].0);
+    if area == 0 {
+        return;
+    }
+    if area < 0 {
+        v.swap(1, 2);
+        uv.swap(1, 2);
+        area = -area;
+    }
+    // Edge k runs from v[k+1] to v[k+2], opposite corner k; inside where all edge functions are
+    // positive, or zero on a top or left edge (y down: an edge going up, or a horizontal edge
+    // going right), which the bias of −1 on the other edges turns into "≥ 0" everywhere.
+    let edges: [Edge; 3] = core::array::from_fn(|k| {
+        let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
+        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+        let top_left = dy < 0 || (dy == 0 && dx > 0);
+        Edge { a, dx, dy, bias: if top_left { 0 } else { -1 } }
+    });
+    // Along a row each edge function changes by `slope` per pixel; `inverse` estimates where it
+    // crosses zero without an integer division, and the estimate is corrected exactly below.
+    let slope = edges.map(|e| -e.dy * SUBPIXEL);
+    #[expect(clippy::cast_precision_loss, reason = "an estimate, corrected exactly")]
+    let inverse = slope.map(|s| if s == 0 { 0.0 } else { 1.0 / s as f64 });
+    let mut row_start = edges.map(|e| e.at(x0, y0));
+    let width = x1 - x0;
+    #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
+    let inv_area = 1.0 / area as f32;
+    let stride = mask.stride;
+    for y in y0..=y1 {
+        let at_x0 = row_start;
+        for k in 0..3 {
+            row_start[k] += edges[k].dx * SUBPIXEL;
+        }
+        // The row's span: each edge bounds x on one side (exact, with the estimate corrected).
+        let (mut lo, mut hi) = (0i64, width);
+        for k in 0..3 {
+            let (w, s) = (at_x0[k], slope[k]);
+            if s > 0 {
+                if w < 0 {
+                    // The first t with w + t·s ≥ 0.
+                    #[expect(clippy::cast_precision_loss, reason = "an estimate, corrected exactly")]
+                    let mut t = ceil_f64(-w as f64 * inverse[k]).clamp(0, width + 1);
+                    if w + t * s < 0 {
+                        t += 1;
+                    } else if t > 0 && w + (t - 1) * s >= 0 {
+                        t -= 1;
+                    }
+                    lo = lo.max(t);
+                }
+            } else if s < 0 {
+                if w < 0 {
+                    hi = -1;
+                } else {
+                    // The last t with w + t·s ≥ 0.
+                    #[expect(clippy::cast_precision_loss, reason = "an estimate, corrected exactly")]
+                    let mut t = floor_f64(w as f64 * -inverse[k]).clamp(0, width + 1);
+                    if w + t * s < 0 {
+                        t -= 1;
+                    } else if w + (t + 1) * s >= 0 {
+                        t += 1;
+                    }
+                    hi = hi.min(t);
+                }
+            } else if w < 0 {
+                hi = -1;
+            }
+        }
+        if lo > hi {
+            continue;
+        }
+        #[expect(clippy::cast_sign_loss, clippy::cast_possible_truncation, reason = "0 <= x0 + lo <= x0 + hi < size")]
+        let (row, first_x, last_x) = (y as usize * stride, (x0 + lo) as usize, (x0 + hi) as usize);
+        for word in first_x / 64..=last_x / 64 {
+            let first = if word == first_x / 64 { first_x % 64 } else { 0 };
+            let last = if word == last_x / 64 { last_x % 64 } else { 63 };
+            let span = (u64::MAX >> (63 - last)) & (u64::MAX << first);
+            let slot = &mut mask.words[row + word];
+            let Some(alpha) = alpha else {
+                *slot |= span;
+                continue;
+            };
+            // Only pixels not yet covered need the alpha test.
+            let mut todo = span & !*slot;
+            while todo != 0 {
+                let bit = todo.trailing_zeros() as usize;
+                todo &= todo - 1;
+                #[expect(clippy::cast_possible_wrap, reason = "x < size <= 16384")]
+                let t = (word * 64 + bit) as i64 - x0;
+                let (w0, w1) = (at_x0[0] + slope[0] * t, at_x0[1] + slope[1] * t);
+                // Barycentrics from the biased edge values: off by 1/2^16 pixel at most.
+                #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
+                let (b0, b1) = (w0 as f32 * inv_area, w1 as f32 * inv_area);
+                if alpha.passes(uv[0] * b0 + uv[1] * b1 + uv[2] * (1.0 - b0 - b1)) {
+                    *slot |= 1 << bit;
+                }
+            }
+        }
+    }
+}
+
+/// A pixel coordinate in fixed point: the nearest multiple of 1/256 pixel, clamped to ±2^24.
+fn snap(v: f32) -> i64 {
+    floor_i64((v * SUBPIXEL as f32).clamp(-COORD_LIMIT, COORD_LIMIT) + 0.5)
+}
+
+/// `floor(v)` as an integer without a libm call (saturating; NaN gives 0).
+#[expect(clippy::cast_possible_truncation, clippy::cast_precision_loss, reason = "saturating conversion")]
+fn floor_i64(v: f32) -> i64 {
+    let i = v as i64;
+    if (i as f32) > v { i.saturating_sub(1) } else { i }
+}
+
+/// `floor(v)` of an `f64` as an integer (saturating).
+#[expect(clippy::cast_possible_truncation, clippy::cast_precision_loss, reason = "saturating conversion")]
+fn floor_f64(v: f64) -> i64 {
+    let i = v as i64;
+    if (i as f64) > v { i.saturating_sub(1) } else { i }
+}
+
+/// `ceil(v)` of an `f64` as an integer (saturating).
+#[expect(clippy::cast_possible_truncation, clippy::cast_precision_loss, reason = "saturating conversion")]
+fn ceil_f64(v: f64) -> i64 {
+    let i = v as i64;
+    if (i as f64) < v { i.saturating_add(1) } else { i }
+}
+
+/// One edge of a snapped triangle (fixed point, [`SUBPIXEL`] units).
+#[derive(Clone, Copy)]
+struct Edge {
+    /// Start.
+    a: (i64, i64),
+    dx: i64,
+    dy: i64,
+    /// 0 on a top or left edge, −1 on the others (the fill rule).
+    bias: i64,
+}
+
+impl Edge {
+    /// The biased edge function at the centre of pixel `(x, y)`: `≥ 0` on the inner side.
+    fn at(&self, x: i64, y: i64) -> i64 {
+        let half = SUBPIXEL / 2;
+        self.dx * (y * SUBPIXEL + half - self.a.1) - self.dy * (x * SUBPIXEL + half - self.a.0) + self.bias
+    }
+}
+
+/// Rasterises `triangles` into `mask` as seen from `view` (the mask's size should be the view's).
+/// A triangle whose `alpha` is not an index into `alphas` is drawn without alpha test.
+pub fn rasterize(mask: &mut Mask, view: &View, triangles: &[RasterTriangle], alphas: &[AlphaMask]) {
+    for t in triangles {
+        let alpha = alphas.get(t.alpha as usize);
+        fill_triangle(mask, t.positions.map(|p| view.project(p)), t.uvs, alpha);
+    }
+}
+
+/// The coverage of `triangles` from each view, in view order (views in parallel; the result is
+/// the same for any number of threads).
+#[must_use]
+pub fn render_views(views: &[View], triangles: &[RasterTriangle], alphas: &[AlphaMask]) -> Vec<Mask> {
+    views
+        .par_iter()
+        .map(|view| {
+            let mut mask = Mask::new(view.size);
+            rasterize(&mut mask, view, triangles, alphas);
+            mask
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::ImageEncoding;
+
+    fn square(mask: &mut Mask, lo: Vec2, hi: Vec2) {
+        let uv = [Vec2::ZERO; 3];
+        fill_triangle(mask, [lo, Vec2::new(hi.x, lo.y), hi], uv, None);
+        fill_triangle(mask, [lo, hi, Vec2::new(lo.x, hi.y)], uv, None);
+    }
+
+    #[test]
+    fn a_square_on_pixel_edges_covers_exactly_its_pixels() {
+        // 4 × 3 pixels: its edges pass between pixel centres.
+        let mut mask = Mask::new(16);
+        square(&mut mask, Vec2::new(2.0, 5.0), Vec2::new(6.0, 8.0));
+        assert_eq!(mask.count(), 12);
+        for y in 0..16 {
+            for x in 0..16 {
+                assert_eq!(mask.get(x, y), (2..6).contains(&x) && (5..8).contains(&y), "pixel ({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn the_top_left_rule_counts_a_centre_on_a_shared_edge_once() {
+        // A square whose edges run through pixel centres: the left and top rows of centres are
+        // in, the right and bottom ones out, and the diagonal shared by the two triangles leaves
+        // no gap. Both windings cover the same.
+        let (lo, hi) = (Vec2::new(2.5, 2.5), Vec2::new(6.5, 6.5));
+        let mut mask = Mask::new(10);
+        square(&mut mask, lo, hi);
+        assert_eq!(mask.count(), 16);
+        assert!(mask.get(2, 2) && mask.get(5, 5) && !mask.get(6, 2) && !mask.get(2, 6));
+        let mut reversed = Mask::new(10);
+        let uv = [Vec2::ZERO; 3];
+        fill_triangle(&mut reversed, [lo, hi, Vec2::new(hi.x, lo.y)], uv, None);
+        fill_triangle(&mut reversed, [lo, Vec2::new(lo.x, hi.y), hi], uv, None);
+        assert_eq!(reversed, mask);
+    }
+
+    #[test]
+    fn a_right_triangle_covers_the_centres_below_its_diagonal() {
+        // Corners (0,0), (8,0), (0,8): centres with x + y + 1 < 8 are inside, x + y + 1 = 8 lies
+        // on the hypotenuse (a right edge here: excluded) — 28 pixels.
+        let mut mask = Mask::new(8);
+        fill_triangle(&mut mask, [Vec2::ZERO, Vec2::new(8.0, 0.0), Vec2::new(0.0, 8.0)], [Vec2::ZERO; 3], None);
+        assert_eq!(mask.count(), 28);
+        assert!(mask.get(0, 6) && !mask.get(0, 7) && !mask.get(7, 0));
+        // Degenerate and off-screen triangles cover nothing.
+        let mut empty = Mask::new(8);
+        fill_triangle(&mut empty, [Vec2::ZERO, Vec2::new(4.0, 4.0), Vec2::new(8.0, 8.0)], [Vec2::ZERO; 3], None);
+        fill_triangle(&mut empty, [Vec2::splat(-9.0), Vec2::new(-1.0, -9.0), Vec2::splat(-1.0)], [Vec2::ZERO; 3], None);
+        fill_triangle(&mut empty, [Vec2::splat(f32::NAN); 3], [Vec2::ZERO; 3], None);
+        assert_eq!(empty.count(), 0);
+    }
+
+    /// Pixel `(x, y)` by the definition: the snapped triangle's edge functions at the centre.
+    fn covers(p: [Vec2; 3], x: i64, y: i64) -> bool {
+        let v = p.map(|q| (snap(q.x), snap(q.y)));
+        let area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[1].1 - v[0].1) * (v[2].0 - v[0].0);
+        if area == 0 {
+            return false;
+        }
+        let (px, py) = (x * SUBPIXEL + SUBPIXEL / 2, y * SUBPIXEL + SUBPIXEL / 2);
+        (0..3).all(|k| {
+            let (a, b) = if area > 0 { (v[(k + 1) % 3], v[(k + 2) % 3]) } else { (v[(k + 2) % 3], v[(k + 1) % 3]) };
+            let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+            let e = dx * (py - a.1) - dy * (px - a.0);
+            e > 0 || (e == 0 && (dy < 0 || (dy == 0 && dx > 0)))
+        })
+    }
+
+    #[test]
+    fn spans_agree_with_the_edge_functions_at_every_pixel() {
+        // Small, large, thin, partly off-screen and sub-pixel triangles against the definition.
+        let mut rng = crate::rng::SplitMix64(11);
+        for i in 0..400 {
+            let scale = [0.7, 4.0, 30.0, 90.0][i % 4];
+            let c = Vec2::new(rng.range(-10.0, 50.0), rng.range(-10.0, 50.0));
+            let p = [0; 3].map(|_| c + scale * Vec2::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)));
+            let mut mask = Mask::new(40);
+            fill_triangle(&mut mask, p, [Vec2::ZERO; 3], None);
+            for y in 0..40 {
+                for x in 0..40 {
+                    assert_eq!(
+                        mask.get(x, y),
+                        covers(p, i64::from(x), i64::from(y)),
+                        "triangle {i} {p:?} pixel ({x}, {y})"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn an_alpha_tested_quad_covers_the_opaque_texels_only() {
+        // A 4 × 4 texture whose left half is opaque, drawn over 16 × 16 pixels: 8 columns pass.
+        let rgba = (0..16).flat_map(|i| [255, 255, 255, if i % 4 < 2 { 255 } else { 0 }]).collect();
+        let image = Image { width: 4, height: 4, rgba, encoded: Vec::new(), encoding: ImageEncoding::Raw };
+        let material =
+            Material { base_color: [1.0; 4], alpha_mode: AlphaMode::Mask, alpha_cutoff: 0.5, ..Material::default() };
+        let alpha = AlphaMask::for_material(&material, Some(&image)).expect("a masked material is tested");
+        assert_eq!(alpha.opaque_fraction(), 0.5);
+        let mut mask = Mask::new(16);
+        let (a, b, c, d) = (Vec2::ZERO, Vec2::new(16.0, 0.0), Vec2::splat(16.0), Vec2::new(0.0, 16.0));
+        let (ua, ub, uc, ud) = (Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y);
+        fill_triangle(&mut mask, [a, b, c], [ua, ub, uc], Some(&alpha));
+        fill_triangle(&mut mask, [a, c, d], [ua, uc, ud], Some(&alpha));
+        assert_eq!(mask.count(), 8 * 16);
+        assert!((0..16).all(|y| mask.get(7, y) && !mask.get(8, y)));
+        // The alpha factor takes part: at half alpha nothing passes a cutoff of 0.6.
+        let faint = Material { base_color: [1.0, 1.0, 1.0, 0.5], alpha_cutoff: 0.6, ..material.clone() };
+        let none = AlphaMask::for_material(&faint, Some(&image)).expect("tested");
+        assert_eq!(none.opaque_fraction(), 0.0);
+        // Opaque materials are not tested; blend is a mask at 0.5.
+        let opaque = Material { alpha_mode: AlphaMode::Opaque, ..material.clone() };
+        assert!(AlphaMask::for_material(&opaque, Some(&image)).is_none());
+        let blend = Material { alpha_mode: AlphaMode::Blend, alpha_cutoff: 0.9, ..material };
+        assert_eq!(AlphaMask::for_material(&blend, Some(&image)).map(|m| m.opaque_fraction()), Some(0.5));
+    }
+
+    #[test]
+    fn precision_and_recall_of_known_masks() {
+        let mut reference = Mask::new(70);
+        let mut test = Mask::new(70);
+        for x in 0..10 {
+            reference.set(x, 0);
+        }
+        for x in 5..20 {
+            test.set(x, 0);
+        }
+        test.set(69, 69);
+        // tp 5, fp 11, fn 5.
+        let c = Confusion::of(&test, &reference);
+        assert_eq!((c.true_positives, c.false_positives, c.false_negatives), (5, 11, 5));
+        let (p, r) = precision_recall(&test, &reference);
+        assert_eq!((p, r), (5.0 / 16.0, 0.5));
+        assert!((quality(p, r) - (1.0 - (11.0f64 / 16.0).hypot(0.5))).abs() < 1e-12);
+        assert_eq!(precision_recall(&reference, &reference), (1.0, 1.0));
+        assert_eq!(quality(1.0, 1.0), 1.0);
+        // Empty cases.
+        let empty = Mask::new(70);
+        assert_eq!(precision_recall(&empty, &empty), (1.0, 1.0));
+        assert_eq!(precision_recall(&empty, &reference), (1.0, 0.0));
+        assert_eq!(precision_recall(&reference, &empty), (0.0, 1.0));
+        assert_eq!(quality(1.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn views_fit_the_sphere_and_look_from_the_given_directions() {
+        let dirs = view_directions(12);
+        assert_eq!(dirs.len(), 12);
+        assert_eq!(dirs.iter().filter(|d| d.y.abs() < 1e-6).count(), 8);
+        // No two directions are equal or opposite (an opposite view repeats the silhouette).
+        for (i, a) in dirs.iter().enumerate() {
+            assert!(dirs[i + 1..].iter().all(|b| a.dot(*b).abs() < 0.999), "{a} repeats a silhouette");
+        }
+        assert!(dirs.iter().all(|d| (d.length() - 1.0).abs() < 1e-5));
+        assert_eq!(view_directions(1).len(), 1);
+        let view = View::fit(Vec3::Z, Vec3::new(0.0, 1.0, 0.0), 2.0, 100);
+        // The sphere's top and right reach the image edges; +Y is up.
+        assert!(view.project(Vec3::new(0.0, 3.0, 0.0)).abs_diff_eq(Vec2::new(50.0, 0.0), 1e-4));
+        assert!(view.project(Vec3::new(2.0, 1.0, 5.0)).abs_diff_eq(Vec2::new(100.0, 50.0), 1e-4));
+        let top = View::fit(Vec3::Y, Vec3::ZERO, 1.0, 10);
+        assert!(top.right.is_normalized() && top.up.is_normalized() && top.right.dot(top.up).abs() < 1e-6);
+        let (c, r) = bounding_sphere([Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0)].into_iter());
+        assert_eq!((c, r), (Vec3::new(1.0, 0.5, 0.0), 1.25f32.sqrt()));
+    }
+
+    #[test]
+    fn rendering_views_is_independent_of_the_thread_count() {
+        let mut rng = crate::rng::SplitMix64(3);
+        let triangles: Vec<RasterTriangle> = (0..300)
+            .map(|_| {
+                let c = Vec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0));
+                let mut corner = || c + 0.2 * Vec3::new(rng.unit(), rng.unit(), rng.unit());
+                RasterTriangle { positions: [corner(), corner(), corner()], uvs: [Vec2::ZERO; 3], alpha: NO_ALPHA }
+            })
+            .collect();
+        let views: Vec<View> = view_directions(6).into_iter().map(|d| View::fit(d, Vec3::ZERO, 2.0, 64)).collect();
+        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+        let a = one.install(|| render_views(&views, &triangles, &[]));
+        let b = render_views(&views, &triangles, &[]);
+        assert_eq!(a, b);
+        assert!(a.iter().all(|m| m.count() > 100));
+    }
+}

@@ -1,0 +1,194 @@
+//! Impostor planes at run time (Garcia, Sbert and Szirmay-Kalos 2005; spec §6.10, §10): which
+//! prefix of each cell's planes an instance draws.
+//!
+//! A container's planes are nested levels flattened into sequential-point-tree order: per cell,
+//! sorted by `hi`, largest first, each with its interval `[lo, hi)` of world-size thresholds. For
+//! an instance, [`PlaneLod::select`] turns the pixel threshold `s_min` into `τ` at the distance of
+//! each cell holding planes (the block cell at the block centre's distance, spec §6.2) as for
+//! points (§10.1), and passes on the leading planes with `hi > τ`; the vertex shader then drops
+//! those failing [`plane_drawn`] (`lo ≤ τ < hi`), so exactly one level covers each leaf.
+
+use glam::{Mat4, Vec3};
+use treelod_format::{Container, PlaneRecord, Range};
+
+use crate::frame::{Camera, Frustum};
+
+/// Whether a plane is drawn at `τ` (spec §10): its interval holds `τ`.
+#[must_use]
+pub fn plane_drawn(plane: &PlaneRecord, tau: f32) -> bool {
+    plane.lo <= tau && tau < plane.hi
+}
+
+/// One cell holding planes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneCell {
+    /// Index of the cell in the container's `CELLS`.
+    pub cell: u32,
+    /// Its planes in the container's `PLANES`.
+    pub planes: Range,
+    /// Where `τ` is measured from, model space: the block centre for the block cell, else the
+    /// centre of the cell's bounds.
+    pub anchor: Vec3,
+    /// Where the cell's `hi` values start in [`PlaneLod`]'s compact array.
+    hi_at: u32,
+}
+
+/// One prefix of a cell's planes to draw.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneRange {
+    /// Index of the cell in the container's `CELLS`.
+    pub cell: u32,
+    /// First plane, absolute index in `PLANES`.
+    pub first: u32,
+    /// Leading planes of the cell with `hi > τ`, `≥ 1`.
+    pub count: u32,
+    /// `τ`, metres, model space: the shader draws a plane where `lo ≤ τ < hi`.
+    pub tau: f32,
+}
+
+/// What drawing a model's planes needs of its container, made once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlaneLod {
+    cells: Vec<PlaneCell>,
+    hi: Vec<f32>,
+    /// A sphere, model space, holding the block and every plane cell's bounds: culling.
+    centre: Vec3,
+    radius: f32,
+    /// The image of the first plane: the atlas.
+    image: u32,
+}
+
+impl PlaneLod {
+    /// The planes of an open container; `None` if it has none.
+    #[must_use]
+    pub fn from_container(container: &Container) -> Option<Self> {
+        let planes = container.planes();
+        let first = planes.first()?;
+        let block = container.block();
+        let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+        let block_cell = block.grid_cell_count();
+        let (mut lo, mut hi) = (min, max);
+        let mut lod = Self { cells: Vec::new(), hi: Vec::new(), centre: Vec3::ZERO, radius: 0.0, image: first.image };
+        for (index, cell) in container.cells().iter().enumerate() {
+            // Ranges were checked when the container was opened (spec §9.1).
+            let Some(records) = planes.get(cell.planes.as_usize()).filter(|r| !r.is_empty()) else { continue };
+            let (Ok(index_u32), Ok(hi_at)) = (u32::try_from(index), u32::try_from(lod.hi.len())) else { break };
+            let (cmin, cmax) = (Vec3::from_array(cell.bounds_min), Vec3::from_array(cell.bounds_max));
+            if cmin.is_finite() && cmax.is_finite() {
+                lo = lo.min(cmin);
+                hi = hi.max(cmax);
+            }
+            let anchor = if index == block_cell { 0.5 * (min + max) } else { 0.5 * (cmin + cmax) };
+            lod.cells.push(PlaneCell { cell: index_u32, planes: cell.planes, anchor, hi_at });
+            lod.hi.extend(records.iter().map(|p| p.hi));
+        }
+        lod.centre = 0.5 * (lo + hi);
+        lod.radius = 0.5 * (hi - lo).length();
+        Some(lod)
+    }
+
+    /// The cells holding planes, in container order.
+    #[must_use]
+    pub fn cells(&self) -> &[PlaneCell] {
+        &self.cells
+    }
+
+    /// The image the first plane samples: the atlas a renderer binds (builders write one).
+    #[must_use]
+    pub fn image(&self) -> u32 {
+        self.image
+    }
+
+    /// A sphere, model space, holding the block bounds and every plane cell's bounds:
+    /// `(centre, radius)`.
+    #[must_use]
+    pub fn sphere(&self) -> (Vec3, f32) {
+        (self.centre, self.radius)
+    }
+
+    /// Number of leading planes of `cell` with `hi > τ` (spec §10).
+    #[must_use]
+    pub fn prefix(&self, cell: &PlaneCell, tau: f32) -> u32 {
+        let at = cell.hi_at as usize;
+        let his = self.hi.get(at..at + cell.planes.count as usize).unwrap_or_default();
+        u32::try_from(his.partition_point(|&hi| hi > tau)).unwrap_or(u32::MAX)
+    }
+
+    /// The planes an instance with world-from-model `transform` draws for `camera`, at `s_min`
+    /// pixels (spec §10.1: `τ = s_min · d · 2·tan(fovy/2) / H`, divided by the transform's
+    /// largest axis scale, `d` the distance to each cell's anchor), appended to `out`. Returns
+    /// `false`, appending nothing, if the instance's sphere lies outside `frustum` or the
+    /// transform is degenerate.
+    pub fn select(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        s_min: f32,
+        out: &mut Vec<PlaneRange>,
+    ) -> bool {
+        let (ax, ay, az) = (transform.x_axis.truncate(), transform.y_axis.truncate(), transform.z_axis.truncate());
+        let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
+        if !(scale > 0.0 && scale.is_finite()) {
+            return false;
+        }
+        if !frustum.intersects_sphere(transform.transform_point3(self.centre), self.radius * scale) {
+            return false;
+        }
+        let per_metre = s_min.max(0.0) * camera.world_per_pixel() / scale;
+        for cell in &self.cells {
+            let distance = transform.transform_point3(cell.anchor).distance(camera.position);
+            let tau = distance * per_metre;
+            let count = self.prefix(cell, tau);
+            if count > 0 {
+                out.push(PlaneRange { cell: cell.cell, first: cell.planes.first, count, tau });
+            }
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use treelod_build::{BuildConfig, DemoTreeConfig, ImpostorConfig, Placed, build_block, demo_tree};
+    use treelod_format::Compression;
+
+    fn demo() -> Container {
+        let scene = demo_tree(&DemoTreeConfig { leaves: 1000, ..DemoTreeConfig::default() });
+        let config = BuildConfig { impostors: Some(ImpostorConfig::default()), ..BuildConfig::default() };
+        let built = build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "t").unwrap();
+        Container::from_bytes(&built.data.to_bytes(Compression::None).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn each_distance_draws_one_level_covering_every_leaf_once_and_far_means_coarser() {
+        let container = demo();
+        let lod = PlaneLod::from_container(&container).unwrap();
+        assert_eq!(lod.cells().len(), 1, "the block cell");
+        let planes = container.planes();
+        let leaves = planes.iter().map(|p| p.leaf_first + p.leaf_count).max().unwrap();
+        let mut previous = usize::MAX;
+        for distance in [5.0, 50.0, 500.0, 5000.0, 15_000.0] {
+            let camera = Camera::look_at(Vec3::new(0.0, 4.0, distance), Vec3::new(0.0, 4.0, 0.0), 0.8, 512, 512);
+            let frustum = Frustum::from_view_proj(camera.view_proj);
+            let mut out = Vec::new();
+            assert!(lod.select(Mat4::IDENTITY, &camera, &frustum, 1.0, &mut out));
+            let [range] = out[..] else { panic!("one range: {out:?}") };
+            let first = range.first as usize;
+            let drawn: Vec<&PlaneRecord> =
+                planes[first..first + range.count as usize].iter().filter(|p| plane_drawn(p, range.tau)).collect();
+            let mut covered: Vec<u32> = drawn.iter().flat_map(|p| p.leaf_first..p.leaf_first + p.leaf_count).collect();
+            covered.sort_unstable();
+            assert_eq!(covered, (0..leaves).collect::<Vec<_>>(), "at {distance} m");
+            assert!(drawn.len() <= previous, "fewer planes farther away");
+            previous = drawn.len();
+        }
+        assert!(previous < 32, "the far levels are coarser: {previous}");
+        // Behind the camera: culled.
+        let camera = Camera::look_at(Vec3::new(0.0, 4.0, 50.0), Vec3::new(0.0, 4.0, 100.0), 0.8, 512, 512);
+        let mut out = Vec::new();
+        assert!(!lod.select(Mat4::IDENTITY, &camera, &Frustum::from_view_proj(camera.view_proj), 1.0, &mut out));
+        assert!(out.is_empty());
+    }
+}
