@@ -5,6 +5,7 @@
 //! results to stdout and its errors to stderr, every error line as `error: PATH: reason`.
 
 mod batch;
+mod bench;
 mod build;
 mod dump;
 mod eval;
@@ -88,6 +89,16 @@ enum Command {
     /// impostors, prune-opt, prune-cook and policy are reported as absent or not implemented yet.
     #[command(after_help = EXIT_CODES)]
     Eval(eval::Args),
+    /// The fly-through benchmark (Clasen 2011 §7): a forest of 10,000 trees in groups and a camera
+    /// path from an overview down into the forest, to a separate group and back; per frame and
+    /// technique the selection time, primitives, streaming, GPU time and optionally quality.
+    ///
+    /// Without inputs the forest is made of built-in demo trees. full (the full mesh) is counted
+    /// from the selection, not drawn, unless --quality draws it as the reference; spt is the
+    /// default renderer; prune-cook and prune-opt fly the renderer's pruning policy with Cook's or
+    /// the optimal scale where the models hold priority lists (reported as absent otherwise).
+    #[command(after_help = EXIT_CODES)]
+    Bench(bench::Args),
 }
 
 fn main() -> ExitCode {
@@ -103,6 +114,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render::run(args),
         Command::View(args) => view::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Bench(args) => bench::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

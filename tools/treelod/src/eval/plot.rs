@@ -13,7 +13,7 @@ use treelod_render::offscreen::Image;
 use super::{Availability, Report, Row, TechniqueName};
 
 /// Colours of the techniques, in the order they are measured (Tableau 10).
-const PALETTE: [Rgb888; 8] = [
+pub(crate) const PALETTE: [Rgb888; 8] = [
     Rgb888::new(31, 119, 180),
     Rgb888::new(255, 127, 14),
     Rgb888::new(44, 160, 44),
@@ -23,23 +23,23 @@ const PALETTE: [Rgb888; 8] = [
     Rgb888::new(227, 119, 194),
     Rgb888::new(127, 127, 127),
 ];
-const BLACK: Rgb888 = Rgb888::new(0, 0, 0);
-const GRID: Rgb888 = Rgb888::new(225, 225, 225);
-const REFERENCE: Rgb888 = Rgb888::new(110, 110, 110);
+pub(crate) const BLACK: Rgb888 = Rgb888::new(0, 0, 0);
+pub(crate) const GRID: Rgb888 = Rgb888::new(225, 225, 225);
+pub(crate) const REFERENCE: Rgb888 = Rgb888::new(110, 110, 110);
 
 /// An RGB canvas, white when made.
-struct Canvas {
+pub(crate) struct Canvas {
     width: u32,
     height: u32,
     pixels: Vec<Rgb888>,
 }
 
 impl Canvas {
-    fn new(width: u32, height: u32) -> Self {
+    pub(crate) fn new(width: u32, height: u32) -> Self {
         Self { width, height, pixels: vec![Rgb888::WHITE; width as usize * height as usize] }
     }
 
-    fn into_image(self) -> Image {
+    pub(crate) fn into_image(self) -> Image {
         let rgba = self.pixels.iter().flat_map(|p| [p.r(), p.g(), p.b(), 255]).collect();
         Image { width: self.width, height: self.height, rgba }
     }
@@ -72,30 +72,37 @@ impl DrawTarget for Canvas {
 }
 
 /// Draws `text` at `at` (every drawing into a [`Canvas`] is infallible).
-fn label(canvas: &mut Canvas, text: &str, at: Point, alignment: Alignment, baseline: Baseline, colour: Rgb888) {
+pub(crate) fn label(
+    canvas: &mut Canvas,
+    text: &str,
+    at: Point,
+    alignment: Alignment,
+    baseline: Baseline,
+    colour: Rgb888,
+) {
     let style = TextStyleBuilder::new().alignment(alignment).baseline(baseline).build();
     let Ok(_) = Text::with_text_style(text, at, MonoTextStyle::new(&FONT_6X10, colour), style).draw(canvas);
 }
 
-fn line(canvas: &mut Canvas, from: Point, to: Point, colour: Rgb888, width: u32) {
+pub(crate) fn line(canvas: &mut Canvas, from: Point, to: Point, colour: Rgb888, width: u32) {
     let Ok(()) = Line::new(from, to).into_styled(PrimitiveStyle::with_stroke(colour, width)).draw(canvas);
 }
 
-fn dot(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888) {
+pub(crate) fn dot(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888) {
     let Ok(()) = Circle::with_center(centre, diameter).into_styled(PrimitiveStyle::with_fill(colour)).draw(canvas);
 }
 
 /// A value axis: linear or base-10 logarithmic over `[lo, hi]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct Axis {
-    lo: f64,
-    hi: f64,
-    log: bool,
+pub(crate) struct Axis {
+    pub(crate) lo: f64,
+    pub(crate) hi: f64,
+    pub(crate) log: bool,
 }
 
 impl Axis {
     /// A linear axis over the values with a little room, widened to at least `min_span`.
-    fn linear(values: impl Iterator<Item = f64>, min_span: f64) -> Self {
+    pub(crate) fn linear(values: impl Iterator<Item = f64>, min_span: f64) -> Self {
         let (mut lo, mut hi) = min_max(values).unwrap_or((0.0, 1.0));
         let span = (hi - lo).max(min_span);
         let middle = 0.5 * (lo + hi);
@@ -107,7 +114,7 @@ impl Axis {
 
     /// A logarithmic axis from the power of ten at or below the smallest positive value to the
     /// one at or above the largest.
-    fn log(values: impl Iterator<Item = f64>) -> Self {
+    pub(crate) fn log(values: impl Iterator<Item = f64>) -> Self {
         let (lo, hi) = min_max(values.filter(|v| *v > 0.0)).unwrap_or((1.0, 10.0));
         let lo = 10f64.powf(lo.log10().floor());
         let hi = 10f64.powf(hi.log10().ceil()).max(lo * 10.0);
@@ -174,14 +181,14 @@ fn min_max(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 }
 
 /// A plot area on a canvas with its two axes.
-struct Panel {
-    area: Rectangle,
-    x: Axis,
-    y: Axis,
+pub(crate) struct Panel {
+    pub(crate) area: Rectangle,
+    pub(crate) x: Axis,
+    pub(crate) y: Axis,
 }
 
 impl Panel {
-    fn point(&self, x: f64, y: f64) -> Point {
+    pub(crate) fn point(&self, x: f64, y: f64) -> Point {
         let (left, top) = (self.area.top_left.x, self.area.top_left.y);
         let (w, h) = (self.area.size.width as f64, self.area.size.height as f64);
         let fx = self.x.fraction(x).clamp(0.0, 1.0);
@@ -190,7 +197,7 @@ impl Panel {
     }
 
     /// Grid, frame, tick labels, the title above and the x label below.
-    fn draw_axes(&self, canvas: &mut Canvas, title: &str, x_label: Option<&str>) {
+    pub(crate) fn draw_axes(&self, canvas: &mut Canvas, title: &str, x_label: Option<&str>) {
         let (left, top) = (self.area.top_left.x, self.area.top_left.y);
         let (right, bottom) = (left + self.area.size.width as i32 - 1, top + self.area.size.height as i32 - 1);
         for v in self.y.ticks() {
@@ -221,7 +228,7 @@ impl Panel {
         }
     }
 
-    fn polyline(&self, canvas: &mut Canvas, points: &[(f64, f64)], colour: Rgb888, dashed: bool) {
+    pub(crate) fn polyline(&self, canvas: &mut Canvas, points: &[(f64, f64)], colour: Rgb888, dashed: bool) {
         for (i, pair) in points.windows(2).enumerate() {
             if dashed && i % 2 == 1 {
                 continue;
@@ -255,7 +262,7 @@ fn primitives(row: &Row) -> f64 {
 }
 
 /// A legend box at the top right of `area`.
-fn legend(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, Rgb888)]) {
+pub(crate) fn legend(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, Rgb888)]) {
     let width = 28 + 6 * entries.iter().map(|(t, _)| t.chars().count()).max().unwrap_or(0) as i32;
     let height = 6 + 12 * entries.len() as i32;
     let right = area.top_left.x + area.size.width as i32 - 6;

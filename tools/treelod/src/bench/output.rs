@@ -1,0 +1,484 @@
+//! What `treelod bench` writes: the summary table on stdout, the per-frame CSV, the JSON summary
+//! and the PNG plot (drawn with `eval`'s plot helpers).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use embedded_graphics::pixelcolor::Rgb888;
+use embedded_graphics::prelude::*;
+use embedded_graphics::primitives::Rectangle;
+use embedded_graphics::text::{Alignment, Baseline};
+use serde::Serialize;
+use treelod_render::offscreen::Image;
+
+use super::path::Phase;
+use super::{Report, Row, Technique};
+use crate::eval::Availability;
+use crate::eval::plot::{self, Axis, BLACK, Canvas, PALETTE, Panel, REFERENCE};
+use crate::table::{Align, Table};
+
+/// What the time columns measure, said wherever they appear.
+fn timing(report: &Report) -> String {
+    let gpu = match (report.rendered, report.timestamps) {
+        (false, _) => "none (--no-render)",
+        (true, true) => "the render pass from GPU timestamp queries",
+        (true, false) => "none (the adapter offers no timestamp queries)",
+    };
+    format!(
+        "selection ms: wall clock of Renderer::prepare (culling, per-cell selection, streaming, draw records); \
+         full: the runtime's selection with thresholds 0 over all instances (counted, not drawn); GPU ms: {gpu}{}",
+        if report.quality.is_some() { " (full: the reference's pass)" } else { "" }
+    )
+}
+
+/// Mean, median, 95th percentile and maximum of a series.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Spread {
+    /// Arithmetic mean.
+    pub mean: f64,
+    /// Median (the mean of the middle two for an even count).
+    pub median: f64,
+    /// 95th percentile (nearest rank).
+    pub p95: f64,
+    /// Largest value.
+    pub max: f64,
+}
+
+/// The spread of `values`; `None` for none.
+#[must_use]
+pub fn spread(values: &[f64]) -> Option<Spread> {
+    if values.is_empty() {
+        return None;
+    }
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    let median = if n % 2 == 1 { sorted[n / 2] } else { 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]) };
+    let rank = ((0.95 * n as f64).ceil() as usize).clamp(1, n);
+    Some(Spread { mean: sorted.iter().sum::<f64>() / n as f64, median, p95: sorted[rank - 1], max: sorted[n - 1] })
+}
+
+/// Per-technique figures over all frames.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Summary {
+    /// Frames measured.
+    pub frames: usize,
+    /// Selection milliseconds.
+    pub selection_ms: Spread,
+    /// Mean instances in view.
+    pub instances_visible: f64,
+    /// Mean triangles submitted.
+    pub triangles: f64,
+    /// Mean points submitted.
+    pub points: f64,
+    /// Mean primitives (triangles + points).
+    pub primitives: f64,
+    /// Most primitives in a frame.
+    pub primitives_max: u64,
+    /// Mean triangles and points in the cut (what is rasterised).
+    pub primitives_in_cut: f64,
+    /// The full mesh's mean primitives over this technique's in the cut.
+    pub full_ratio_in_cut: Option<f64>,
+    /// The full mesh's mean primitives over this technique's (when `full` was measured too).
+    pub full_ratio: Option<f64>,
+    /// Mean instances drawn with pruned leaves.
+    pub instances_pruned: Option<f64>,
+    /// Mean bytes streamed per frame.
+    pub bytes_uploaded: Option<f64>,
+    /// Mean draws made coarser while their data streamed in.
+    pub ranges_clamped: Option<f64>,
+    /// GPU milliseconds of the render pass.
+    pub gpu_ms: Option<Spread>,
+    /// Mean precision against the reference.
+    pub precision: Option<f64>,
+    /// Mean recall.
+    pub recall: Option<f64>,
+    /// Mean Q.
+    pub q: Option<f64>,
+    /// Mean multi-scale RMSE.
+    pub rmse: Option<f64>,
+}
+
+fn rows_of(report: &Report, technique: Technique) -> impl Iterator<Item = &Row> {
+    report.rows.iter().filter(move |r| r.technique == technique)
+}
+
+/// The summary of `technique`'s rows.
+#[must_use]
+pub fn summarise(report: &Report, technique: Technique) -> Summary {
+    let rows: Vec<&Row> = rows_of(report, technique).collect();
+    let n = rows.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&Row) -> f64| rows.iter().map(|r| f(r)).sum::<f64>() / n;
+    let mean_of = |values: Vec<f64>| (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64);
+    let primitives = mean(&|r| r.primitives() as f64);
+    let in_cut = mean(&|r| r.primitives_in_cut() as f64);
+    let full: Vec<f64> = rows_of(report, Technique::Full).map(|r| r.primitives() as f64).collect();
+    let full_mean = mean_of(full);
+    let selection: Vec<f64> = rows.iter().map(|r| r.selection_ms).collect();
+    let gpu: Vec<f64> = rows.iter().filter_map(|r| r.gpu_ms).collect();
+    Summary {
+        frames: rows.len(),
+        selection_ms: spread(&selection).unwrap_or_default(),
+        instances_visible: mean(&|r| f64::from(r.instances_visible)),
+        triangles: mean(&|r| r.triangles as f64),
+        points: mean(&|r| r.points as f64),
+        primitives,
+        primitives_max: rows.iter().map(|r| r.primitives()).max().unwrap_or(0),
+        full_ratio: full_mean.filter(|_| primitives > 0.0).map(|f| f / primitives),
+        primitives_in_cut: in_cut,
+        full_ratio_in_cut: full_mean.filter(|_| in_cut > 0.0).map(|f| f / in_cut),
+        instances_pruned: mean_of(rows.iter().filter_map(|r| r.instances_pruned).map(f64::from).collect()),
+        bytes_uploaded: mean_of(rows.iter().filter_map(|r| r.bytes_uploaded).map(|b| b as f64).collect()),
+        ranges_clamped: mean_of(rows.iter().filter_map(|r| r.ranges_clamped).map(f64::from).collect()),
+        gpu_ms: spread(&gpu),
+        precision: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.precision()).collect()),
+        recall: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.recall()).collect()),
+        q: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.quality()).collect()),
+        rmse: mean_of(rows.iter().filter_map(|r| r.rmse).collect()),
+    }
+}
+
+/// The phases of the path as runs of frames `(phase, first, last)`.
+#[must_use]
+pub fn phases(report: &Report) -> Vec<(Phase, usize, usize)> {
+    let mut runs: Vec<(Phase, usize, usize)> = Vec::new();
+    for (i, frame) in report.frames.iter().enumerate() {
+        match runs.last_mut() {
+            Some((phase, _, last)) if *phase == frame.phase => *last = i,
+            _ => runs.push((frame.phase, i, i)),
+        }
+    }
+    runs
+}
+
+/// `value` with `digits` decimals, `-` for none.
+fn opt(value: Option<f64>, digits: usize) -> String {
+    value.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"))
+}
+
+/// One line per technique that is not measured: `technique NAME: STATUS: REASON`.
+#[must_use]
+pub fn unavailable(techniques: &[(Technique, Availability)]) -> String {
+    let mut out = String::new();
+    for (technique, availability) in techniques {
+        if let Some(reason) = availability.reason() {
+            let _ = writeln!(out, "technique {}: {}: {reason}", technique.name(), availability.status());
+        }
+    }
+    out
+}
+
+/// The forest in one line.
+fn forest_line(report: &Report) -> String {
+    let f = &report.forest;
+    let mut line = format!(
+        "{} trees (layout seed {}) of {}: a main forest of {} trees in {} group(s) within {:.0} m of the origin",
+        f.trees.len(),
+        report.seed,
+        report.models.source,
+        f.main_trees,
+        f.groups,
+        f.main_radius
+    );
+    if f.small_trees > 0 {
+        let _ = write!(
+            line,
+            " and a separate group of {} trees {:.0} m east (radius {:.0} m)",
+            f.small_trees, f.small_centre.x, f.small_radius
+        );
+    }
+    let _ = write!(line, "; {:.1} m² per tree in a group, trees {:.1} m tall", f.area_per_tree, f.tree_height);
+    line
+}
+
+/// The report as text: the forest, the path, the adapter and timing, absent techniques, the
+/// summary table, the files written.
+#[must_use]
+pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
+    let (w, h) = report.size;
+    let mut out = String::new();
+    let _ = writeln!(out, "forest: {}", forest_line(report));
+    let phases: Vec<String> = phases(report).iter().map(|(p, a, b)| format!("{} {a}-{b}", p.name())).collect();
+    let _ = writeln!(
+        out,
+        "path: {} frame(s) at {w}x{h}, fov {}°: {}",
+        report.frames.len(),
+        report.fov_degrees,
+        phases.join(", ")
+    );
+    let drawn = match (report.rendered, report.quality) {
+        (false, _) => "nothing drawn (--no-render)".to_owned(),
+        (true, None) => "every frame drawn once; full counted".to_owned(),
+        (true, Some(k)) => format!(
+            "every frame drawn once, and the full mesh as the reference at {}x{} (supersample {k})",
+            w * k,
+            h * k
+        ),
+    };
+    match &report.adapter {
+        Some(a) => {
+            let _ = writeln!(out, "adapter: {} ({}, {}); {drawn}", a.name, a.backend, a.device_type);
+        }
+        None => {
+            let _ = writeln!(out, "adapter: none opened (the full mesh is counted on the CPU)");
+        }
+    }
+    let _ = writeln!(out, "times: {}", timing(report));
+    out.push_str(&unavailable(&report.techniques));
+    let mut table = Table::new(&[
+        ("technique", Align::Left),
+        ("frames", Align::Right),
+        ("visible", Align::Right),
+        ("triangles", Align::Right),
+        ("points", Align::Right),
+        ("primitives", Align::Right),
+        ("full/this", Align::Right),
+        ("in cut", Align::Right),
+        ("full/cut", Align::Right),
+        ("select ms", Align::Right),
+        ("median", Align::Right),
+        ("p95", Align::Right),
+        ("max", Align::Right),
+        ("upload KiB", Align::Right),
+        ("GPU ms", Align::Right),
+        ("P", Align::Right),
+        ("R", Align::Right),
+        ("Q", Align::Right),
+        ("RMSE", Align::Right),
+    ]);
+    for (technique, availability) in &report.techniques {
+        if *availability != Availability::Measured {
+            continue;
+        }
+        let s = summarise(report, *technique);
+        table.row(vec![
+            technique.name().to_owned(),
+            s.frames.to_string(),
+            format!("{:.0}", s.instances_visible),
+            format!("{:.0}", s.triangles),
+            format!("{:.0}", s.points),
+            format!("{:.0}", s.primitives),
+            opt(s.full_ratio, 1),
+            format!("{:.0}", s.primitives_in_cut),
+            opt(s.full_ratio_in_cut, 1),
+            format!("{:.2}", s.selection_ms.mean),
+            format!("{:.2}", s.selection_ms.median),
+            format!("{:.2}", s.selection_ms.p95),
+            format!("{:.2}", s.selection_ms.max),
+            opt(s.bytes_uploaded.map(|b| b / 1024.0), 1),
+            opt(s.gpu_ms.map(|g| g.mean), 2),
+            opt(s.precision, 4),
+            opt(s.recall, 4),
+            opt(s.q, 4),
+            opt(s.rmse, 5),
+        ]);
+    }
+    out.push_str(&table.render(""));
+    let _ = writeln!(out, "means per frame; {:.1} s in all", report.seconds);
+    for (what, file) in ["csv", "json", "plot"].into_iter().zip(files) {
+        if let Some(file) = file {
+            let _ = writeln!(out, "{what}: {}", file.display());
+        }
+    }
+    out
+}
+
+/// The CSV header.
+pub const CSV_HEADER: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
+triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
+precision,recall,q,rmse,points_in_cut,primitives_in_cut";
+
+/// One CSV row per frame and technique, with a header line; empty fields where a figure was not
+/// measured.
+#[must_use]
+pub fn csv(report: &Report) -> String {
+    let mut out = format!("{CSV_HEADER}\n");
+    let text = |v: Option<String>| v.unwrap_or_default();
+    for row in &report.rows {
+        let Some(frame) = report.frames.get(row.frame) else { continue };
+        let (eye, target) = (frame.pose.eye, frame.pose.target);
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{}",
+            row.frame,
+            frame.phase.name(),
+            row.technique.name(),
+            eye.x,
+            eye.y,
+            eye.z,
+            target.x,
+            target.y,
+            target.z,
+            row.instances_visible,
+            row.triangles,
+            row.points,
+            row.primitives(),
+            text(row.instances_pruned.map(|v| v.to_string())),
+            text(row.leaves_pruned.map(|v| v.to_string())),
+            text(row.ranges.map(|v| v.to_string())),
+            text(row.ranges_clamped.map(|v| v.to_string())),
+            text(row.bytes_uploaded.map(|v| v.to_string())),
+            text(row.bytes_resident.map(|v| v.to_string())),
+            row.selection_ms,
+            text(row.gpu_ms.map(|v| format!("{v:.4}"))),
+            text(row.coverage.map(|c| c.precision().to_string())),
+            text(row.coverage.map(|c| c.recall().to_string())),
+            text(row.coverage.map(|c| c.quality().to_string())),
+            text(row.rmse.map(|v| v.to_string())),
+            text(row.points_in_cut.map(|v| v.to_string())),
+            row.primitives_in_cut(),
+        );
+    }
+    out
+}
+
+/// The JSON summary: models, forest, path, settings, adapter, and per technique its status and
+/// summary.
+///
+/// # Errors
+/// If serialisation fails (it does not for these types).
+pub fn json(report: &Report) -> Result<String, serde_json::Error> {
+    let f = &report.forest;
+    let techniques: Vec<serde_json::Value> = report
+        .techniques
+        .iter()
+        .map(|(technique, availability)| {
+            serde_json::json!({
+                "name": technique.name(),
+                "description": technique.description(),
+                "status": availability.status(),
+                "reason": availability.reason(),
+                "summary": (*availability == Availability::Measured).then(|| summarise(report, *technique)),
+            })
+        })
+        .collect();
+    let phases: Vec<serde_json::Value> = phases(report)
+        .iter()
+        .map(|(phase, first, last)| serde_json::json!({"phase": phase.name(), "first": first, "last": last}))
+        .collect();
+    let value = serde_json::json!({
+        "models": {"source": report.models.source, "labels": report.models.labels},
+        "forest": {
+            "trees": f.trees.len(),
+            "seed": report.seed,
+            "groups": f.groups,
+            "main_trees": f.main_trees,
+            "main_radius_m": f.main_radius,
+            "small_trees": f.small_trees,
+            "small_centre_m": [f.small_centre.x, 0.0, f.small_centre.y],
+            "small_radius_m": f.small_radius,
+            "area_per_tree_m2": f.area_per_tree,
+            "tree_height_m": f.tree_height,
+        },
+        "path": {"frames": report.frames.len(), "phases": phases},
+        "size": [report.size.0, report.size.1],
+        "fov_degrees": report.fov_degrees,
+        "rendered": report.rendered,
+        "quality": report.quality.map(|k| serde_json::json!({"supersample": k})),
+        "adapter": report.adapter,
+        "times": timing(report),
+        "seconds": report.seconds,
+        "techniques": techniques,
+    });
+    serde_json::to_string_pretty(&value).map(|mut s| {
+        s.push('\n');
+        s
+    })
+}
+
+/// The plot: per-frame curves along the path, one panel each — primitives submitted and in the
+/// cut (log), selection
+/// milliseconds, GPU milliseconds (when measured) and Q (with `--quality`) — with the phases of
+/// the path marked.
+#[must_use]
+pub fn plot(report: &Report) -> Image {
+    type Metric = fn(&Row) -> Option<f64>;
+    // Per panel: title, value, log axis, and the value a linear axis always shows (Q's best, the
+    // times' zero).
+    let mut panels: Vec<(&str, Metric, bool, f64)> = vec![
+        ("primitives submitted per frame: triangles + points (log)", |r| Some(r.primitives() as f64), true, 0.0),
+        (
+            "primitives in the cut per frame: triangles + points kept (log)",
+            |r| Some(r.primitives_in_cut() as f64),
+            true,
+            0.0,
+        ),
+        ("selection ms per frame (Renderer::prepare; full: counting)", |r| Some(r.selection_ms), false, 0.0),
+    ];
+    if report.rows.iter().any(|r| r.gpu_ms.is_some()) {
+        panels.push(("GPU ms per frame (render pass)", |r| r.gpu_ms, false, 0.0));
+    }
+    if report.rows.iter().any(|r| r.coverage.is_some()) {
+        panels.push(("quality Q against the full mesh", |r| r.coverage.map(|c| c.quality()), false, 1.0));
+    }
+    let (width, panel_height, gap) = (960u32, 170u32, 44u32);
+    let height = 24 + panels.len() as u32 * (panel_height + gap);
+    let mut canvas = Canvas::new(width, height);
+    let techniques: Vec<(Technique, Rgb888)> = report
+        .techniques
+        .iter()
+        .filter(|(_, a)| *a == Availability::Measured)
+        .enumerate()
+        .map(|(i, (t, _))| (*t, PALETTE[i % PALETTE.len()]))
+        .collect();
+    let frames = report.frames.len().max(1);
+    let x = Axis { lo: 0.0, hi: (frames - 1).max(1) as f64, log: false };
+    let phases = phases(report);
+    for (i, (title, metric, log, anchor)) in panels.iter().enumerate() {
+        let top = 24 + i as i32 * (panel_height + gap) as i32;
+        let area = Rectangle::new(Point::new(64, top), Size::new(width - 64 - 24, panel_height));
+        let values = report.rows.iter().filter_map(metric);
+        let y = if *log { Axis::log(values) } else { Axis::linear(values.chain([*anchor]), 1e-3) };
+        let panel = Panel { area, x, y };
+        panel.draw_axes(&mut canvas, title, (i + 1 == panels.len()).then_some("frame"));
+        // Phase boundaries, dashed, with the phase's name at the top of the first panel.
+        for (phase, first, _) in &phases {
+            let at = panel.point(*first as f64, y.lo).x;
+            if *first > 0 {
+                let (a, b) = (panel.point(0.0, y.hi).y, panel.point(0.0, y.lo).y);
+                let mut y0 = a;
+                while y0 < b {
+                    plot::line(&mut canvas, Point::new(at, y0), Point::new(at, (y0 + 4).min(b)), REFERENCE, 1);
+                    y0 += 8;
+                }
+            }
+            if i == 0 {
+                plot::label(
+                    &mut canvas,
+                    phase.name(),
+                    Point::new(at + 3, top + 3),
+                    Alignment::Left,
+                    Baseline::Top,
+                    BLACK,
+                );
+            }
+        }
+        for (technique, colour) in &techniques {
+            let points: Vec<(f64, f64)> =
+                rows_of(report, *technique).filter_map(|r| metric(r).map(|v| (r.frame as f64, v))).collect();
+            panel.polyline(&mut canvas, &points, *colour, false);
+        }
+        if i == 0 {
+            let entries: Vec<(String, Rgb888)> = techniques.iter().map(|(t, c)| (t.name().to_owned(), *c)).collect();
+            plot::legend(&mut canvas, &area, &entries);
+        }
+    }
+    canvas.into_image()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spreads_are_the_usual_statistics() {
+        assert_eq!(spread(&[]), None);
+        let s = spread(&[4.0, 1.0, 3.0, 2.0]).expect("values");
+        assert_eq!((s.mean, s.median, s.max), (2.5, 2.5, 4.0));
+        assert_eq!(s.p95, 4.0);
+        let values: Vec<f64> = (1..=100).map(f64::from).collect();
+        let s = spread(&values).expect("values");
+        assert_eq!((s.median, s.p95, s.max), (50.5, 95.0, 100.0));
+        assert_eq!(spread(&[7.0]).expect("one").p95, 7.0);
+    }
+}

@@ -1,0 +1,323 @@
+//! End-to-end tests of `treelod bench`: short fly-throughs over small forests, rendered with
+//! Vulkan (Mesa's lavapipe on machines without a GPU: `mesa-vulkan-drivers`). Without an adapter
+//! the rendering tests fail; they do not skip.
+
+mod common;
+use common::read_png;
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// A fresh scratch directory for one test.
+fn scratch(test: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("treelod-bench").join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch directory");
+    dir
+}
+
+/// Runs the binary with `args`.
+fn run<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<OsStr>,
+{
+    Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).env("NODEVICE_SELECT", "1").output().expect("runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).expect("UTF-8")
+}
+
+/// A demo container (500 leaf quads) built once per test process (nextest runs each test in its
+/// own process, so each has its own directory).
+fn demo() -> &'static Path {
+    static DEMO: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DEMO.get_or_init(|| {
+        let path = scratch(&format!("shared-demo-{}", std::process::id())).join("demo.treelod");
+        let out = run(["demo".as_ref(), "--leaf-count".as_ref(), "500".as_ref(), "-o".as_ref(), path.as_os_str()]);
+        assert!(out.status.success(), "demo: {}", text(&out.stderr));
+        path
+    })
+}
+
+/// Runs `treelod bench ARGS…`, asserts success and no panic, returns stdout.
+fn bench_ok(args: &[&OsStr]) -> String {
+    let out = run(std::iter::once(OsStr::new("bench")).chain(args.iter().copied()));
+    let err = text(&out.stderr);
+    assert!(
+        out.status.success(),
+        "bench {args:?} failed (a Vulkan adapter is required: install mesa-vulkan-drivers): {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    text(&out.stdout)
+}
+
+/// The CSV as a header and rows of fields.
+fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let csv = std::fs::read_to_string(path).expect("the CSV was written");
+    let mut lines = csv.lines();
+    let header: Vec<String> = lines.next().expect("a header").split(',').map(str::to_owned).collect();
+    let rows: Vec<Vec<String>> = lines.map(|l| l.split(',').map(str::to_owned).collect()).collect();
+    for row in &rows {
+        assert_eq!(row.len(), header.len(), "{row:?}");
+    }
+    (header, rows)
+}
+
+/// The field `column` of `row`.
+fn field<'a>(header: &[String], row: &'a [String], column: &str) -> &'a str {
+    let i = header.iter().position(|h| h == column).unwrap_or_else(|| panic!("no column {column}"));
+    &row[i]
+}
+
+/// The field `column` of `row` as a number.
+fn number(header: &[String], row: &[String], column: &str) -> f64 {
+    let value = field(header, row, column);
+    value.parse().unwrap_or_else(|_| panic!("{column} = {value:?} is not a number"))
+}
+
+const COLUMNS: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
+triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
+precision,recall,q,rmse,points_in_cut,primitives_in_cut";
+
+#[test]
+fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
+    let dir = scratch("short");
+    let (csv, json, plot) = (dir.join("bench.csv"), dir.join("bench.json"), dir.join("bench.png"));
+    let stdout = bench_ok(&[
+        "--trees".as_ref(),
+        "200".as_ref(),
+        "--frames".as_ref(),
+        "6".as_ref(),
+        "--size".as_ref(),
+        "320x180".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+        "--plot".as_ref(),
+        plot.as_os_str(),
+    ]);
+    assert!(stdout.contains("forest: 200 trees (layout seed 1) of 4 built-in demo trees"), "{stdout}");
+    assert!(stdout.contains("path: 6 frame(s) at 320x180"), "{stdout}");
+    assert!(stdout.contains("(Vulkan, "), "rendered with Vulkan: {stdout}");
+    assert!(
+        stdout.lines().any(|l| l.starts_with("full ")) && stdout.lines().any(|l| l.starts_with("spt ")),
+        "{stdout}"
+    );
+
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(header.join(","), COLUMNS);
+    assert_eq!(rows.len(), 6 * 2, "one row per frame and technique");
+    for frame in 0..6 {
+        let of = |technique: &str| {
+            rows.iter()
+                .find(|r| {
+                    field(&header, r, "frame") == frame.to_string() && field(&header, r, "technique") == technique
+                })
+                .unwrap_or_else(|| panic!("frame {frame} {technique}"))
+        };
+        let (full, spt) = (of("full"), of("spt"));
+        // Both select the same instances; spt's triangles are prefixes of the full mesh's.
+        assert_eq!(number(&header, full, "instances_visible"), number(&header, spt, "instances_visible"));
+        assert!(number(&header, full, "triangles") >= number(&header, spt, "triangles"), "frame {frame}");
+        // At this size and distance spt draws far fewer primitives (in close-ups it can submit
+        // more: whole point prefixes, of which the shader draws only the cut).
+        assert!(number(&header, full, "primitives") >= number(&header, spt, "primitives"), "frame {frame}");
+        assert_eq!(number(&header, full, "points"), 0.0);
+        assert!(number(&header, spt, "selection_ms") > 0.0 && number(&header, full, "selection_ms") > 0.0);
+        // spt is drawn (lavapipe has timestamp queries), the full mesh only counted.
+        assert!(number(&header, spt, "gpu_ms") > 0.0, "{spt:?}");
+        assert_eq!(field(&header, full, "gpu_ms"), "");
+        assert!(number(&header, spt, "bytes_resident") > 0.0);
+        assert_eq!(field(&header, spt, "q"), "", "no quality without --quality");
+    }
+    let phases: Vec<&str> = rows.iter().step_by(2).map(|r| field(&header, r, "phase")).collect();
+    assert_eq!(phases.first(), Some(&"overview"));
+    assert_eq!(phases.last(), Some(&"back"));
+
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).expect("json")).expect("parses");
+    assert_eq!(json["forest"]["trees"], 200);
+    assert_eq!(json["path"]["frames"], 6);
+    assert_eq!(json["adapter"]["backend"], "Vulkan");
+    let spt = json["techniques"].as_array().expect("techniques").iter().find(|t| t["name"] == "spt").expect("spt");
+    assert_eq!(spt["status"], "measured");
+    assert!(spt["summary"]["full_ratio"].as_f64().is_some_and(|r| r > 1.0), "{spt}");
+    assert!(spt["summary"]["selection_ms"]["p95"].as_f64().is_some_and(|ms| ms > 0.0), "{spt}");
+
+    let (width, height, pixels) = read_png(&plot);
+    assert_eq!((width, height), (960, 24 + 4 * (170 + 44)), "primitives submitted and in the cut, selection, GPU");
+    assert!(
+        spt["summary"]["full_ratio_in_cut"]
+            .as_f64()
+            .is_some_and(|r| r > spt["summary"]["full_ratio"].as_f64().unwrap()),
+        "{spt}"
+    );
+    assert!(pixels.iter().any(|p| p[..3] != [255, 255, 255]));
+}
+
+#[test]
+fn quality_is_measured_against_the_full_mesh_and_missing_techniques_are_reported() {
+    let dir = scratch("quality");
+    let csv = dir.join("q.csv");
+    let stdout = bench_ok(&[
+        demo().as_os_str(),
+        "--trees".as_ref(),
+        "40".as_ref(),
+        "--frames".as_ref(),
+        "3".as_ref(),
+        "--size".as_ref(),
+        "160x90".as_ref(),
+        "--quality".as_ref(),
+        "--technique".as_ref(),
+        "full,spt,prune-cook".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+    ]);
+    assert!(
+        stdout.contains("technique prune-cook: absent: no model of the forest holds pruning priority lists"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("the full mesh as the reference at 160x90"), "{stdout}");
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 3 * 2, "prune-cook has no rows");
+    for row in &rows {
+        match field(&header, row, "technique") {
+            "spt" => {
+                for column in ["precision", "recall", "q"] {
+                    let v = number(&header, row, column);
+                    assert!((0.0..=1.0).contains(&v), "{column} {v}");
+                }
+                assert!(number(&header, row, "rmse") >= 0.0);
+            }
+            "full" => {
+                assert_eq!(field(&header, row, "q"), "", "the reference is not measured against itself");
+                assert!(number(&header, row, "gpu_ms") > 0.0, "the reference's pass is timed");
+            }
+            other => panic!("unexpected technique {other}"),
+        }
+    }
+}
+
+#[test]
+fn pruning_techniques_fly_where_the_models_hold_priority_lists() {
+    let dir = scratch("prune");
+    let pruned = dir.join("pruned.treelod");
+    let out = run([
+        "demo".as_ref(),
+        "--leaf-count".as_ref(),
+        "300".as_ref(),
+        "--prune".as_ref(),
+        "stochastic".as_ref(),
+        "--prune-views".as_ref(),
+        "2".as_ref(),
+        "--prune-resolution".as_ref(),
+        "64".as_ref(),
+        "-o".as_ref(),
+        pruned.as_os_str(),
+    ]);
+    assert!(out.status.success(), "demo --prune: {}", text(&out.stderr));
+    let csv = dir.join("p.csv");
+    let stdout = bench_ok(&[
+        pruned.as_os_str(),
+        "--trees".as_ref(),
+        "300".as_ref(),
+        "--frames".as_ref(),
+        "8".as_ref(),
+        "--size".as_ref(),
+        "320x180".as_ref(),
+        "--technique".as_ref(),
+        "spt,prune-cook,prune-opt".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+    ]);
+    assert!(!stdout.contains("absent"), "{stdout}");
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 8 * 3);
+    for technique in ["prune-cook", "prune-opt"] {
+        let of: Vec<&Vec<String>> = rows.iter().filter(|r| field(&header, r, "technique") == technique).collect();
+        assert_eq!(of.len(), 8);
+        // Near trees (inside the forest) are pruned; the overview's small trees are not.
+        assert_eq!(number(&header, of[0], "instances_pruned"), 0.0, "{technique}");
+        assert!(of.iter().any(|r| number(&header, r, "leaves_pruned") > 0.0), "{technique}: no frame pruned");
+    }
+    assert!(rows.iter().filter(|r| field(&header, r, "technique") == "spt").all(|r| number(
+        &header,
+        r,
+        "instances_pruned"
+    ) == 0.0));
+}
+
+#[test]
+fn without_rendering_only_selection_is_measured() {
+    let dir = scratch("no-render");
+    let csv = dir.join("n.csv");
+    let stdout = bench_ok(&[
+        demo().as_os_str(),
+        demo().as_os_str(),
+        "--trees".as_ref(),
+        "3000".as_ref(),
+        "--frames".as_ref(),
+        "4".as_ref(),
+        "--no-render".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+    ]);
+    assert!(stdout.contains("of 1 model(s)"), "the same container twice is one model: {stdout}");
+    assert!(stdout.contains("nothing drawn (--no-render)"), "{stdout}");
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 4 * 2);
+    assert!(rows.iter().all(|r| field(&header, r, "gpu_ms").is_empty()));
+    // The full mesh alone needs no device at all.
+    let stdout = bench_ok(&[
+        demo().as_os_str(),
+        "--trees".as_ref(),
+        "100".as_ref(),
+        "--frames".as_ref(),
+        "2".as_ref(),
+        "--technique".as_ref(),
+        "full".as_ref(),
+    ]);
+    assert!(stdout.contains("adapter: none opened"), "{stdout}");
+}
+
+#[test]
+fn bad_arguments_and_inputs_are_clear_errors() {
+    let dir = scratch("errors");
+    let usage = [
+        vec!["--trees", "0"],
+        vec!["--trees", "ten"],
+        vec!["--frames", "0"],
+        vec!["--size", "0x10"],
+        vec!["--technique", "bogus"],
+        vec!["--no-render", "--quality"],
+        vec!["--supersample", "2"],
+        vec!["--fov", "200"],
+    ];
+    for args in usage {
+        let out = run(std::iter::once("bench").chain(args.iter().copied()));
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.starts_with("error: ") && !err.contains("panicked"), "{args:?}: {err}");
+    }
+    let missing = dir.join("missing.treelod");
+    let out = run(["bench".as_ref(), missing.as_os_str()]);
+    assert_eq!(out.status.code(), Some(5), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).starts_with(&format!("error: {}: ", missing.display())), "{}", text(&out.stderr));
+    let scene = dir.join("forest.json");
+    std::fs::write(&scene, "{\"version\": 1, \"models\": [], \"instances\": []}").expect("write");
+    let out = run(["bench".as_ref(), scene.as_os_str()]);
+    assert_eq!(out.status.code(), Some(3), "{}", text(&out.stderr));
+    let garbage = dir.join("garbage.treelod");
+    std::fs::write(&garbage, b"not a container").expect("write");
+    let out = run(["bench".as_ref(), garbage.as_os_str()]);
+    assert_eq!(out.status.code(), Some(3), "{}", text(&out.stderr));
+    let out = run(["bench", "--technique", "prune-opt", "--trees", "10", "--frames", "1"]);
+    assert_eq!(out.status.code(), Some(4), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("technique prune-opt: absent"), "{}", text(&out.stdout));
+    assert!(text(&out.stderr).contains("none of the techniques asked for can be measured"));
+    let out = run(["bench".as_ref(), demo().as_os_str(), "--csv".as_ref(), dir.as_os_str()]);
+    assert_eq!(out.status.code(), Some(5), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("is a directory"), "{}", text(&out.stderr));
+}
