@@ -99,19 +99,6 @@ struct CellGpu {
     _pad1: u32,
 }
 
-// Rust twin: DrawInfo (crates/render/src/renderer.rs); the same struct as in tree.wgsl, whose
-// `_pad0` this path fills with the instance index.
-struct DrawInfo {
-    model: mat4x4<f32>,
-    tau_p: f32,
-    tau_t: f32,
-    cell: u32,
-    scale: f32,
-    shading: f32,
-    leaf_scale: f32,
-    instance: u32,
-    _pad1: u32,
-}
 
 // wgpu::util::DrawIndirectArgs.
 struct DrawIndirect {

@@ -25,23 +25,6 @@ struct Frame {
     _pad2: u32,
 }
 
-struct DrawInfo {
-    // Column-major world-from-model transform.
-    model: mat4x4<f32>,
-    // The thresholds the range was selected with (model units), then the cell index.
-    tau_p: f32,
-    tau_t: f32,
-    cell: u32,
-    // Uniform scale of the transform, for splat radii.
-    scale: f32,
-    // Gilet's estimated self-shadowing of the cell (1 without).
-    shading: f32,
-    // Size factor of pruned leaves about their centres (1 for everything else).
-    leaf_scale: f32,
-    // Index of the instance in the renderer's list (for read-backs; not read here).
-    instance: u32,
-    _pad1: u32,
-}
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<storage, read> draws: array<DrawInfo>;

@@ -45,8 +45,9 @@ use treelod_runtime::{DrawRange, Kind, ModelLod, ROOTS_CELL};
 use crate::renderer::{DrawInfo, RenderError};
 use crate::streaming::UNIT;
 
-/// WGSL of the selection.
-const SHADER: &str = include_str!("../../../shaders/select.wgsl");
+/// WGSL of the selection: the draw constants it writes, then the two compute entry points.
+const SHADER: &str =
+    concat!(include_str!("../../../shaders/shared/draw.wgsl"), include_str!("../../../shaders/select.wgsl"));
 
 /// Instances per block: one workgroup of `select_instances`.
 pub const BLOCK_INSTANCES: usize = 64;

@@ -18,9 +18,12 @@ use crate::occlusion::{Job, Occlusion};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::textures;
 
-/// WGSL of the pipelines: the record structs, then the tree shader.
-const SHADER: &str =
-    concat!(include_str!("../../../shaders/shared/records.wgsl"), include_str!("../../../shaders/tree.wgsl"));
+/// WGSL of the pipelines: the record structs, the draw constants, then the tree shader.
+const SHADER: &str = concat!(
+    include_str!("../../../shaders/shared/records.wgsl"),
+    include_str!("../../../shaders/shared/draw.wgsl"),
+    include_str!("../../../shaders/tree.wgsl")
+);
 
 /// The target formats of the host's render pass.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -492,47 +495,35 @@ impl Renderer {
                 storage(3, wgpu::ShaderStages::VERTEX),
             ],
         });
+        let texture = |binding: u32, view_dimension| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let sampler = |binding: u32| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            count: None,
+        };
         let model_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("treelod model"),
             entries: &[
                 storage(0, wgpu::ShaderStages::VERTEX),
                 storage(1, wgpu::ShaderStages::FRAGMENT),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
+                texture(2, wgpu::TextureViewDimension::D2Array),
+                sampler(3),
                 storage(4, wgpu::ShaderStages::VERTEX),
                 storage(5, wgpu::ShaderStages::VERTEX),
                 // Impostor planes and their atlas.
                 storage(6, wgpu::ShaderStages::VERTEX),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 7,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 8,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
+                texture(7, wgpu::TextureViewDimension::D2),
+                sampler(8),
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -253,11 +253,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         lod
     };
     line.push('\n');
-    let png = encode_png(&image).map_err(|e| {
-        report::message_error(&args.output, &format!("cannot encode the PNG: {e}"));
-        Failed { class: ErrorClass::Io }
-    })?;
-    report::write_atomically(&args.output, &png)?;
+    write_png(&args.output, &image)?;
     report::write_stdout(&line)
 }
 
@@ -328,6 +324,25 @@ fn side_by_side(left: &Image, right: &Image) -> Image {
         }
     }
     Image { width, height, rgba }
+}
+
+/// Writes `image` as a PNG to `path`, atomically; errors are printed naming the file.
+pub fn write_png(path: &std::path::Path, image: &Image) -> Result<(), Failed> {
+    let png = encode_png(image).map_err(|e| {
+        report::message_error(path, &format!("cannot encode the PNG: {e}"));
+        Failed { class: ErrorClass::Io }
+    })?;
+    report::write_atomically(path, &png)
+}
+
+/// Writes the JSON `text` (or the error that kept it from being encoded) to `path`, atomically;
+/// errors are printed naming the file.
+pub fn write_json(path: &std::path::Path, text: Result<String, serde_json::Error>) -> Result<(), Failed> {
+    let text = text.map_err(|e| {
+        report::message_error(path, &format!("cannot encode the JSON: {e}"));
+        Failed { class: ErrorClass::Io }
+    })?;
+    report::write_atomically(path, text.as_bytes())
 }
 
 /// The image as an 8-bit RGBA PNG tagged sRGB.

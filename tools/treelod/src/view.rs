@@ -19,7 +19,7 @@ use winit::event_loop::{ActiveEventLoop, EventLoop, OwnedDisplayHandle};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
-use crate::render::{PruneArgs, encode_png, frame_camera, parse_size, parse_vec3, scene_failed};
+use crate::render::{PruneArgs, frame_camera, parse_size, parse_vec3, scene_failed, write_png};
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
 
@@ -96,11 +96,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         report::message_error(path, "the window was closed before the screenshot was taken; nothing written");
         return Err(Failed { class: ErrorClass::Io });
     };
-    let png = encode_png(&image).map_err(|e| {
-        report::message_error(path, &format!("cannot encode the PNG: {e}"));
-        Failed { class: ErrorClass::Io }
-    })?;
-    report::write_atomically(path, &png)?;
+    write_png(path, &image)?;
     report::write_stdout(&format!(
         "{}: {}x{}, {} of {} instance(s) visible, {} triangles, {} points\n",
         path.display(),

@@ -3,42 +3,16 @@
 //! the rendering tests fail; they do not skip.
 
 mod common;
-use common::read_png;
+use common::{read_png, run, text};
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-/// A fresh scratch directory for one test.
 fn scratch(test: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("treelod-bench").join(test);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch directory");
-    dir
+    common::scratch("treelod-bench", test)
 }
 
-/// Runs the binary with `args`.
-fn run<I, S>(args: I) -> Output
-where
-    I: IntoIterator<Item = S>,
-    S: AsRef<OsStr>,
-{
-    Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).env("NODEVICE_SELECT", "1").output().expect("runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8(bytes.to_vec()).expect("UTF-8")
-}
-
-/// A demo container (500 leaf quads) built once per test process (nextest runs each test in its
-/// own process, so each has its own directory).
 fn demo() -> &'static Path {
-    static DEMO: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
-    DEMO.get_or_init(|| {
-        let path = scratch(&format!("shared-demo-{}", std::process::id())).join("demo.treelod");
-        let out = run(["demo".as_ref(), "--leaf-count".as_ref(), "500".as_ref(), "-o".as_ref(), path.as_os_str()]);
-        assert!(out.status.success(), "demo: {}", text(&out.stderr));
-        path
-    })
+    common::demo("treelod-bench")
 }
 
 /// Runs `treelod bench ARGS…`, asserts success and no panic, returns stdout.

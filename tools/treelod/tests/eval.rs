@@ -3,42 +3,15 @@
 //! fail; they do not skip.
 
 mod common;
-use common::read_png;
+use common::{read_png, run, text};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-/// A fresh scratch directory for one test.
 fn scratch(test: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("treelod-eval").join(test);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch directory");
-    dir
+    common::scratch("treelod-eval", test)
 }
 
-/// Runs the binary with `args`.
-fn run<I, S>(args: I) -> Output
-where
-    I: IntoIterator<Item = S>,
-    S: AsRef<std::ffi::OsStr>,
-{
-    Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).env("NODEVICE_SELECT", "1").output().expect("runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8(bytes.to_vec()).expect("UTF-8")
-}
-
-/// A demo container (500 leaf quads) built once per test process by the binary and shared by the
-/// tests (per process: nextest runs each test in its own, and a shared directory would be removed
-/// by one test while another reads it).
 fn demo() -> &'static Path {
-    static DEMO: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
-    DEMO.get_or_init(|| {
-        let path = scratch(&format!("shared-demo-{}", std::process::id())).join("demo.treelod");
-        let out = run(["demo".as_ref(), "--leaf-count".as_ref(), "500".as_ref(), "-o".as_ref(), path.as_os_str()]);
-        assert!(out.status.success(), "demo: {}", text(&out.stderr));
-        path
-    })
+    common::demo("treelod-eval")
 }
 
 /// Runs `treelod eval DEMO ARGS…` at 128×96 with supersample 2; asserts success, returns stdout.

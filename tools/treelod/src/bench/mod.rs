@@ -555,18 +555,10 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         report::write_atomically(csv, output::csv(&report).as_bytes())?;
     }
     if let Some(json) = &args.json {
-        let text = output::json(&report).map_err(|e| {
-            report::message_error(json, &format!("cannot encode the JSON: {e}"));
-            Failed { class: ErrorClass::Io }
-        })?;
-        report::write_atomically(json, text.as_bytes())?;
+        crate::render::write_json(json, output::json(&report))?;
     }
     if let Some(plot) = &args.plot {
-        let png = crate::render::encode_png(&output::plot(&report)).map_err(|e| {
-            report::message_error(plot, &format!("cannot encode the PNG: {e}"));
-            Failed { class: ErrorClass::Io }
-        })?;
-        report::write_atomically(plot, &png)?;
+        crate::render::write_png(plot, &output::plot(&report))?;
     }
     report::write_stdout(&output::text(&report, [&args.csv, &args.json, &args.plot]))
 }

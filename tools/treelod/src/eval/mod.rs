@@ -548,29 +548,17 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         report::write_atomically(csv, output::csv(&report).as_bytes())?;
     }
     if let Some(json) = &args.json {
-        let text = output::json(&report).map_err(|e| {
-            report::message_error(json, &format!("cannot encode the JSON: {e}"));
-            Failed { class: ErrorClass::Io }
-        })?;
-        report::write_atomically(json, text.as_bytes())?;
+        crate::render::write_json(json, output::json(&report))?;
     }
     if let Some(sheet) = &args.sheet {
-        let png = crate::render::encode_png(&output::contact_sheet(&report)).map_err(|e| {
-            report::message_error(sheet, &format!("cannot encode the PNG: {e}"));
-            Failed { class: ErrorClass::Io }
-        })?;
-        report::write_atomically(sheet, &png)?;
+        crate::render::write_png(sheet, &output::contact_sheet(&report))?;
     }
     for (file, draw) in [
         (&args.quality_plot, plot::quality_vs_primitives as fn(&Report) -> treelod_render::offscreen::Image),
         (&args.frame_plot, plot::per_frame),
     ] {
         if let Some(file) = file {
-            let png = crate::render::encode_png(&draw(&report)).map_err(|e| {
-                report::message_error(file, &format!("cannot encode the PNG: {e}"));
-                Failed { class: ErrorClass::Io }
-            })?;
-            report::write_atomically(file, &png)?;
+            crate::render::write_png(file, &draw(&report))?;
         }
     }
     report::write_stdout(&output::text(

@@ -1,6 +1,44 @@
-//! Helpers shared by the command-line tests.
+//! Helpers shared by the command-line tests (each test file uses some of them).
+#![allow(dead_code, reason = "each test crate compiles this module and uses a part of it")]
 
-use std::path::Path;
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// A fresh scratch directory for one test, under `area` (one per test file).
+pub fn scratch(area: &str, test: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(area).join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch directory");
+    dir
+}
+
+/// Runs the binary with `args` (Mesa's device-select layer silenced).
+pub fn run<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<OsStr>,
+{
+    Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).env("NODEVICE_SELECT", "1").output().expect("runs")
+}
+
+/// Program output as text.
+pub fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).expect("UTF-8")
+}
+
+/// A demo container (500 leaf quads) built once per test process by the binary, under `area`, and
+/// shared by that process's tests (per process: nextest runs each test in its own, and a shared
+/// directory would be removed by one test while another reads it).
+pub fn demo(area: &str) -> &'static Path {
+    static DEMO: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DEMO.get_or_init(|| {
+        let path = scratch(area, &format!("shared-demo-{}", std::process::id())).join("demo.treelod");
+        let out = run(["demo".as_ref(), "--leaf-count".as_ref(), "500".as_ref(), "-o".as_ref(), path.as_os_str()]);
+        assert!(out.status.success(), "demo: {}", text(&out.stderr));
+        path
+    })
+}
 
 /// Decodes an 8-bit RGBA PNG: `(width, height, pixels)`.
 pub fn read_png(path: &Path) -> (u32, u32, Vec<[u8; 4]>) {

@@ -1,0 +1,21 @@
+// One indirect draw's constants, written by the CPU path (crates/render/src/renderer.rs) or by
+// the GPU selection (shaders/select.wgsl) and read by the tree shader (shaders/tree.wgsl).
+// Rust twin: `DrawInfo` in crates/render/src/renderer.rs (96 bytes).
+
+struct DrawInfo {
+    // Column-major world-from-model transform.
+    model: mat4x4<f32>,
+    // The thresholds the range was selected with (model units), then the cell index.
+    tau_p: f32,
+    tau_t: f32,
+    cell: u32,
+    // Uniform scale of the transform, for splat radii.
+    scale: f32,
+    // Gilet's estimated self-shadowing of the cell (1 without).
+    shading: f32,
+    // Size factor of pruned leaves about their centres (1 for everything else).
+    leaf_scale: f32,
+    // Index of the instance in the renderer's list (for read-backs; not read here).
+    instance: u32,
+    _pad1: u32,
+}
