@@ -182,7 +182,7 @@ fn a_tree_hidden_behind_another_draws_fewer_leaves_until_the_camera_jumps() {
     render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
     let f = renderer.visible_fractions().to_vec();
     eprintln!("visible fractions {f:?}");
-    assert!(f[0] > 0.8, "the front tree is visible: {f:?}");
+    assert!(f[0] > 0.95, "the front tree is visible, its own crown does not hide its hull: {f:?}");
     assert!(f[1] < 0.5, "the tree behind it is mostly hidden: {f:?}");
     assert_eq!(f[2], 1.0, "the third tree is off-screen and counts as visible: {f:?}");
     let lambda_of = |renderer: &Renderer, instance: u32| {

@@ -212,6 +212,10 @@ pub struct Args {
     /// on the images of --prune-resolution and --prune-views.
     #[arg(long)]
     pub prune_report: bool,
+    /// With --prune-report: also plot, for each output, s_opt(λ) of every order against Cook's
+    /// 1/λ and the quality each reaches, as DIR/STEM.prune.png (STEM the output's file stem).
+    #[arg(long, value_name = "DIR", requires = "prune_report")]
+    pub prune_plot: Option<PathBuf>,
     /// Build settings.
     #[command(flatten)]
     pub options: BuildOptions,
@@ -266,7 +270,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         let result = import(input).and_then(|scene| {
             let name = scene.name.clone();
             if args.prune_report {
-                print_prune_report(&name, &scene, input, &args.options)?;
+                let plot = args.prune_plot.as_deref().map(|dir| prune_plot_path(dir, &output));
+                print_prune_report(&name, &scene, input, &args.options, plot.as_deref())?;
             }
             build_one(&name, vec![(scene, Vec3::ZERO)], &[input.as_path()], &output, &args.options)
         });
@@ -311,12 +316,21 @@ fn run_block(args: &Args) -> Result<(), Failed> {
         let report = treelod_build::prune_report(&name, &placed, &config)
             .map_err(|e| report::build_error(sources.first().copied().unwrap_or(&args.output), &e))?;
         report::write_stdout(&prune_report_text(&name, &report, args.options.json))?;
+        if let Some(dir) = &args.prune_plot {
+            write_prune_plot(&prune_plot_path(dir, &args.output), &name, &report)?;
+        }
     }
     build_one(&name, scenes, &sources, &args.output, &args.options)
 }
 
 /// Compares the pruning orders on one tree and prints the table (`--prune-report`).
-fn print_prune_report(name: &str, scene: &Scene, input: &Path, options: &BuildOptions) -> Result<(), Failed> {
+fn print_prune_report(
+    name: &str,
+    scene: &Scene,
+    input: &Path,
+    options: &BuildOptions,
+    plot: Option<&Path>,
+) -> Result<(), Failed> {
     let start = Instant::now();
     let placed = [Placed { scene, translation: Vec3::ZERO }];
     let report =
@@ -325,7 +339,26 @@ fn print_prune_report(name: &str, scene: &Scene, input: &Path, options: &BuildOp
     if !options.json {
         text.push_str(&format!("  ({:.2} s)\n", start.elapsed().as_secs_f64()));
     }
-    report::write_stdout(&text)
+    report::write_stdout(&text)?;
+    match plot {
+        Some(path) => write_prune_plot(path, name, &report),
+        None => Ok(()),
+    }
+}
+
+/// The `--prune-plot` file of the container written to `output`: `DIR/STEM.prune.png`.
+fn prune_plot_path(dir: &Path, output: &Path) -> PathBuf {
+    let stem = output.file_stem().map_or_else(|| "block".into(), |s| s.to_string_lossy().into_owned());
+    dir.join(format!("{stem}.prune.png"))
+}
+
+/// Writes the `--prune-plot` PNG of one tree (or block) to `path`, in an existing directory.
+fn write_prune_plot(path: &Path, name: &str, report: &PruneReport) -> Result<(), Failed> {
+    if let Some(dir) = path.parent().filter(|d| !d.is_dir()) {
+        report::message_error(dir, "is not a directory (--prune-plot names the directory the plots go into)");
+        return Err(Failed { class: ErrorClass::Io });
+    }
+    crate::render::write_png(path, &crate::prune_plot::plot(name, report))
 }
 
 /// The `--prune-report` table as text, or as one JSON object.

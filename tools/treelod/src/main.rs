@@ -9,6 +9,7 @@ mod bench;
 mod build;
 mod dump;
 mod eval;
+mod prune_plot;
 mod render;
 mod report;
 mod scatter;

@@ -734,7 +734,8 @@ fn build_with_pruning_writes_the_lists_dump_shows_them_and_the_report_compares_o
         .arg(&model)
         .arg("-o")
         .arg(&out)
-        .args(["--prune", "density", "--prune-quality", "0.8", "--prune-report"])
+        .args(["--prune", "density", "--prune-quality", "0.8", "--prune-report", "--prune-plot"])
+        .arg(&dir)
         .args(small)
         .output()
         .expect("runs");
@@ -759,6 +760,24 @@ fn build_with_pruning_writes_the_lists_dump_shows_them_and_the_report_compares_o
     let json = treelod(&["dump", "--json", out.to_str().expect("UTF-8 path")]);
     let json: serde_json::Value = serde_json::from_slice(&json.stdout).expect("JSON");
     assert_eq!(json["pruning"]["scale"].as_array().map(Vec::len), Some(14));
+    // The plot of s_opt and Q against λ.
+    let (width, height, pixels) = common::read_png(&dir.join("pruned.prune.png"));
+    assert_eq!((width, height), (720, 24 + 2 * (200 + 48)));
+    assert!(pixels.iter().filter(|p| p[..3] != [255, 255, 255]).count() > 1000);
+    // Drawn pruned: near trees draw a fraction of their leaves.
+    let png = dir.join("pruned.png");
+    let out_str = out.to_str().expect("UTF-8 path");
+    let png_str = png.to_str().expect("UTF-8 path");
+    let drawn = treelod(&["render", out_str, "-o", png_str, "--size", "200x200", "--prune", "opt"]);
+    let line = stdout(&drawn);
+    assert!(line.contains(", 1 pruned tree(s) drawing "), "{line}");
+    let all =
+        treelod(&["render", out_str, "-o", png_str, "--size", "200x200", "--prune", "none", "--prune-lambda", "1"]);
+    let leaves = |line: &str| -> u64 {
+        line.split(" drawing ").nth(1).and_then(|t| t.split(' ').next()).and_then(|n| n.parse().ok()).expect("a count")
+    };
+    assert_eq!(leaves(&stdout(&all)), container.prune_leaves().len() as u64, "λ = 1 draws every leaf");
+    assert!(leaves(&line) < container.prune_leaves().len() as u64, "{line}");
     // Without --prune nothing is pruned, and a quality outside [0, 1] is a usage error.
     let plain = dir.join("plain.treelod");
     let run = Command::new(env!("CARGO_BIN_EXE_treelod")).arg("build").arg(&model).arg("-o").arg(&plain).output();
