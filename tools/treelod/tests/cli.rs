@@ -761,7 +761,7 @@ fn build_with_pruning_writes_the_lists_dump_shows_them_and_the_report_compares_o
     let json: serde_json::Value = serde_json::from_slice(&json.stdout).expect("JSON");
     assert_eq!(json["pruning"]["scale"].as_array().map(Vec::len), Some(14));
     // The plot of s_opt and Q against λ.
-    let (width, height, pixels) = common::read_png(&dir.join("pruned.prune.png"));
+    let (width, height, pixels) = read_png(&dir.join("pruned.prune.png"));
     assert_eq!((width, height), (720, 24 + 2 * (200 + 48)));
     assert!(pixels.iter().filter(|p| p[..3] != [255, 255, 255]).count() > 1000);
     // Drawn pruned: near trees draw a fraction of their leaves.
