@@ -287,7 +287,16 @@ fn bad_arguments_and_inputs_are_clear_errors() {
     std::fs::write(&garbage, b"not a container").expect("write");
     let out = run(["bench".as_ref(), garbage.as_os_str()]);
     assert_eq!(out.status.code(), Some(3), "{}", text(&out.stderr));
-    let out = run(["bench", "--technique", "prune-opt", "--trees", "10", "--frames", "1"]);
+    let out = run([
+        "bench".as_ref(),
+        demo().as_os_str(),
+        "--technique".as_ref(),
+        "prune-opt".as_ref(),
+        "--trees".as_ref(),
+        "10".as_ref(),
+        "--frames".as_ref(),
+        "1".as_ref(),
+    ]);
     assert_eq!(out.status.code(), Some(4), "{}", text(&out.stderr));
     assert!(text(&out.stdout).contains("technique prune-opt: absent"), "{}", text(&out.stdout));
     assert!(text(&out.stderr).contains("none of the techniques asked for can be measured"));

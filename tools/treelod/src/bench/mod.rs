@@ -74,6 +74,11 @@ pub struct Args {
     /// forests on a software rasteriser).
     #[arg(long, conflicts_with = "quality")]
     pub no_render: bool,
+    /// Select `spt` on the GPU (compute shaders write the draws: `Renderer::enable_gpu_selection`,
+    /// every model resident whole); its counts are then those of a frame read back one or two
+    /// frames earlier, and its selection time is that of `prepare` submitting the compute work.
+    #[arg(long)]
+    pub gpu_selection: bool,
     /// Also draw the full mesh as the reference at every frame and measure each technique's
     /// image against it: P, R, Q and multi-scale RMSE (slow: the full mesh of every tree in view).
     #[arg(long)]
@@ -236,6 +241,9 @@ pub struct Models {
     /// One label per model (its path, or the demo tree's settings).
     pub labels: Vec<String>,
     containers: Vec<Arc<Container>>,
+    /// The built-in trees with stochastic priority lists, for `prune-cook` (Cook et al.'s uniform
+    /// stochastic pruning); `None` for given models, whose own lists `prune-cook` then uses.
+    stochastic: Option<Vec<Arc<Container>>>,
 }
 
 /// Everything a run measured, for the outputs.
@@ -325,8 +333,11 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             return Err(Failed { class: ErrorClass::Io });
         }
     }
-    let models = load_models(&args.inputs)?;
-    let data = optional_data(&models.containers);
+    let models = load_models(&args.inputs, &args.technique)?;
+    let mut data = optional_data(&models.containers);
+    if let Some(stochastic) = &models.stochastic {
+        data.prune_leaves += optional_data(stochastic).prune_leaves;
+    }
     let mut techniques: Vec<(Technique, Availability)> = Vec::new();
     for &technique in &args.technique {
         if !techniques.iter().any(|(t, _)| *t == technique) {
@@ -386,9 +397,13 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     // The renderers share one list of instances (the same model order in each).
     let instances: Vec<Instance> =
         forest.trees.iter().map(|t| Instance { model: ModelId(t.model), transform: t.transform() }).collect();
-    let add = |gpu: &Gpu, settings: Settings| -> Result<Renderer, Failed> {
+    let add = |gpu: &Gpu, settings: Settings, technique: Option<Technique>| -> Result<Renderer, Failed> {
         let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
-        for (index, (container, label)) in models.containers.iter().zip(&models.labels).enumerate() {
+        let containers = match (&models.stochastic, technique) {
+            (Some(stochastic), Some(Technique::PruneCook)) => stochastic,
+            _ => &models.containers,
+        };
+        for (index, (container, label)) in containers.iter().zip(&models.labels).enumerate() {
             let id = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(container)).map_err(|e| {
                 report::print_error(&format!("{label}: {e}"));
                 Failed { class: ErrorClass::Unsupported }
@@ -400,6 +415,12 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             }
         }
         renderer.set_instances(&instances);
+        if args.gpu_selection && technique == Some(Technique::Spt) {
+            renderer.enable_gpu_selection(&gpu.device, &gpu.queue).map_err(|e| {
+                report::message_error(&input_label(args), &format!("cannot select on the GPU: {e}"));
+                Failed { class: ErrorClass::Unsupported }
+            })?;
+        }
         Ok(renderer)
     };
     let mut flown = Vec::new();
@@ -407,11 +428,11 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     if let Some(gpu) = &gpu {
         for &technique in &measured {
             if let Some(settings) = technique.settings(args) {
-                flown.push(Flown { technique, renderer: add(gpu, settings)? });
+                flown.push(Flown { technique, renderer: add(gpu, settings, Some(technique))? });
             }
         }
         if args.quality {
-            reference = Some(add(gpu, Settings { full_mesh: true, ..Settings::default() })?);
+            reference = Some(add(gpu, Settings { full_mesh: true, ..Settings::default() }, None)?);
         }
     }
     drop(instances);
@@ -594,9 +615,9 @@ fn input_label(args: &Args) -> PathBuf {
 
 /// Opens the models of the inputs (containers, or the models of scene files, each path once), or
 /// builds the demo trees when there are none.
-fn load_models(inputs: &[PathBuf]) -> Result<Models, Failed> {
+fn load_models(inputs: &[PathBuf], techniques: &[Technique]) -> Result<Models, Failed> {
     if inputs.is_empty() {
-        return demo_models();
+        return demo_models(techniques);
     }
     let mut paths: Vec<PathBuf> = Vec::new();
     for input in inputs {
@@ -619,11 +640,37 @@ fn load_models(inputs: &[PathBuf]) -> Result<Models, Failed> {
     }
     let labels: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     let source = format!("{} model(s): {}", labels.len(), labels.join(", "));
-    Ok(Models { source, labels, containers })
+    Ok(Models { source, labels, containers, stochastic: None })
 }
 
-/// The built-in models: [`DEMO_TREES`] built in memory (no file written), in parallel.
-fn demo_models() -> Result<Models, Failed> {
+/// Pruning lists of the built-in trees: coarser measuring images than a build's default (128
+/// pixels, 4 views) keep the benchmark's start short.
+fn demo_prune(order: treelod_build::PruneOrder) -> treelod_build::PruneConfig {
+    treelod_build::PruneConfig { order, resolution: 128, views: 4, ..treelod_build::PruneConfig::default() }
+}
+
+/// The built-in models: [`DEMO_TREES`] built in memory (no file written), in parallel. With
+/// `prune-opt` asked for they hold density-ordered priority lists (the order that saved most
+/// geometry on the shared models); with `prune-cook` a second set holds stochastic lists.
+fn demo_models(techniques: &[Technique]) -> Result<Models, Failed> {
+    use treelod_build::PruneOrder;
+    let opt = techniques.contains(&Technique::PruneOpt).then(|| demo_prune(PruneOrder::Density));
+    let containers = demo_containers(opt.as_ref())?;
+    let stochastic = match techniques.contains(&Technique::PruneCook) {
+        true => Some(demo_containers(Some(&demo_prune(PruneOrder::Stochastic)))?),
+        false => None,
+    };
+    let labels: Vec<String> = DEMO_TREES
+        .iter()
+        .map(|(seed, leaves, height)| format!("demo tree seed {seed}, {leaves} leaves, trunk {height} m"))
+        .collect();
+    let source = format!("{} built-in demo trees (seeds 1-{})", labels.len(), labels.len());
+    Ok(Models { source, labels, containers, stochastic })
+}
+
+/// [`DEMO_TREES`] built with `prune`.
+fn demo_containers(prune: Option<&treelod_build::PruneConfig>) -> Result<Vec<Arc<Container>>, Failed> {
+    let build = treelod_build::BuildConfig { prune: prune.cloned(), ..treelod_build::BuildConfig::default() };
     let built: Result<Vec<Container>, Failed> = DEMO_TREES
         .par_iter()
         .map(|&(seed, leaves, height)| {
@@ -632,24 +679,13 @@ fn demo_models() -> Result<Models, Failed> {
             let tree = treelod_build::demo_tree(&config);
             let label = Path::new("bench");
             let placed = [treelod_build::Placed { scene: &tree, translation: Vec3::ZERO }];
-            let output = treelod_build::build_block(
-                &tree.name,
-                &placed,
-                &treelod_build::BuildConfig::default(),
-                &crate::build::generator(),
-            )
-            .map_err(|e| report::build_error(label, &e))?;
+            let output = treelod_build::build_block(&tree.name, &placed, &build, &crate::build::generator())
+                .map_err(|e| report::build_error(label, &e))?;
             let bytes = output.data.to_bytes(Compression::None).map_err(|e| report::file_error(label, &e))?;
             Container::from_bytes(&bytes).map_err(|e| report::file_error(label, &e))
         })
         .collect();
-    let containers: Vec<Arc<Container>> = built?.into_iter().map(Arc::new).collect();
-    let labels: Vec<String> = DEMO_TREES
-        .iter()
-        .map(|(seed, leaves, height)| format!("demo tree seed {seed}, {leaves} leaves, trunk {height} m"))
-        .collect();
-    let source = format!("{} built-in demo trees (seeds 1-{})", labels.len(), labels.len());
-    Ok(Models { source, labels, containers })
+    Ok(built?.into_iter().map(Arc::new).collect())
 }
 
 /// Sums the optional record kinds over the models.
