@@ -345,6 +345,16 @@ impl Viewer {
         if event.repeat {
             return Some(code);
         }
+        if code == KeyCode::KeyG {
+            // GPU selection: every model resident whole; refused (and left off) over the budget.
+            if self.renderer.gpu_selection_enabled() {
+                self.renderer.disable_gpu_selection();
+            } else if let Err(e) = self.renderer.enable_gpu_selection(&self.device, &self.queue) {
+                report::message_error(&self.input, &format!("cannot select on the GPU: {e}"));
+            }
+            self.title_now = true;
+            return Some(code);
+        }
         let settings = self.renderer.settings_mut();
         match code {
             KeyCode::BracketLeft => settings.s_min = (settings.s_min * 0.5).max(1.0 / 64.0),
@@ -478,6 +488,9 @@ impl Viewer {
             (false, DebugView::Kinds) => " | kinds",
         }
         .to_owned();
+        if self.renderer.gpu_selection_enabled() {
+            mode.push_str(" | GPU selection");
+        }
         if settings.impostors && !settings.full_mesh {
             mode.push_str(&format!(
                 " | impostors: {} trees, {} planes",
