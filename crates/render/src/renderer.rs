@@ -1428,21 +1428,8 @@ impl Renderer {
         // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
         // per-cell estimate (it is a property of the point hierarchy's cells).
         for draw in &self.pruned {
-            let transform = self.instances[draw.instance as usize].transform;
-            let info = DrawInfo {
-                model: transform.to_cols_array_2d(),
-                tau_p: draw.lambda,
-                tau_t: draw.leaf_scale,
-                cell: draw.cell,
-                scale: max_axis_scale(transform),
-                shading: 1.0,
-                leaf_scale: draw.leaf_scale,
-                instance: draw.instance,
-                _pad: 0,
-            };
-            self.buckets[BUCKETS * draw.model as usize + 2].push((info, 3 * draw.first, 3 * draw.count));
             stats.triangles += u64::from(draw.count);
-            self.recorded.push(RecordedDraw {
+            let record = RecordedDraw {
                 instance: draw.instance,
                 model: ModelId(draw.model),
                 cell: draw.cell,
@@ -1451,26 +1438,15 @@ impl Renderer {
                 tau_points: draw.lambda,
                 tau_triangles: draw.leaf_scale,
                 clamped: false,
-            });
+            };
+            let vertices = (3 * draw.first, 3 * draw.count);
+            record_direct(&self.instances, &mut self.buckets, &mut self.recorded, record, 2, vertices, draw.leaf_scale);
         }
         // Impostor planes: a prefix of one cell's planes, the level chosen in the shader by `τ`.
         for draw in &self.plane_draws {
-            let transform = self.instances[draw.instance as usize].transform;
             let range = draw.range;
-            let info = DrawInfo {
-                model: transform.to_cols_array_2d(),
-                tau_p: range.tau,
-                tau_t: range.tau,
-                cell: range.cell,
-                scale: max_axis_scale(transform),
-                shading: 1.0,
-                leaf_scale: 1.0,
-                instance: draw.instance,
-                _pad: 0,
-            };
-            self.buckets[BUCKETS * draw.model as usize + 3].push((info, 6 * range.first, 6 * range.count));
             stats.planes += u64::from(range.count);
-            self.recorded.push(RecordedDraw {
+            let record = RecordedDraw {
                 instance: draw.instance,
                 model: ModelId(draw.model),
                 cell: range.cell,
@@ -1479,7 +1455,9 @@ impl Renderer {
                 tau_points: range.tau,
                 tau_triangles: range.tau,
                 clamped: false,
-            });
+            };
+            let vertices = (6 * range.first, 6 * range.count);
+            record_direct(&self.instances, &mut self.buckets, &mut self.recorded, record, 3, vertices, 1.0);
         }
         self.draw_infos.clear();
         self.indirect.clear();
@@ -1702,6 +1680,34 @@ impl Renderer {
             }
         }
     }
+}
+
+/// Records a draw that streaming does not clamp (pruned leaves, bark, impostor planes: uploaded
+/// whole): its `DrawInfo` (thresholds from `record`, unshaded) into the model's bucket `kind` with
+/// `(first vertex, vertex count)`, and `record` itself.
+fn record_direct(
+    instances: &[treelod_runtime::Instance],
+    buckets: &mut [Vec<(DrawInfo, u32, u32)>],
+    recorded: &mut Vec<RecordedDraw>,
+    record: RecordedDraw,
+    kind: usize,
+    (first_vertex, vertices): (u32, u32),
+    leaf_scale: f32,
+) {
+    let transform = instances[record.instance as usize].transform;
+    let info = DrawInfo {
+        model: transform.to_cols_array_2d(),
+        tau_p: record.tau_points,
+        tau_t: record.tau_triangles,
+        cell: record.cell,
+        scale: max_axis_scale(transform),
+        shading: 1.0,
+        leaf_scale,
+        instance: record.instance,
+        _pad: 0,
+    };
+    buckets[BUCKETS * record.model.0 as usize + kind].push((info, first_vertex, vertices));
+    recorded.push(record);
 }
 
 /// Number of leading `values` (sorted largest first) above `tau`.
