@@ -717,23 +717,24 @@ impl GpuSelection {
     }
 
     /// Records the draws into the host's pass: per kind (pipeline) and model, one
-    /// `multi_draw_indirect_count` over its bucket.
-    pub fn render(
+    /// `multi_draw_indirect_count` over its bucket, with the model bind group `model_group(m)`.
+    pub fn render<'a>(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         pipelines: [&wgpu::RenderPipeline; 2],
-        model_groups: &[&wgpu::BindGroup],
+        model_group: impl Fn(usize) -> Option<&'a wgpu::BindGroup>,
     ) {
         let Some(frame_group) = &self.frame_group else { return };
         pass.set_bind_group(0, frame_group, &[]);
         for (kind, pipeline) in pipelines.into_iter().enumerate() {
             pass.set_pipeline(pipeline);
-            for (m, (model, group)) in self.models_cpu.iter().zip(model_groups).enumerate() {
+            for (m, model) in self.models_cpu.iter().enumerate() {
                 let (first, capacity) = (model.bucket_first[kind], model.bucket_capacity[kind]);
+                let Some(group) = model_group(m) else { continue };
                 if capacity == 0 || self.per_model.get(m).is_none_or(|&n| n == 0) {
                     continue;
                 }
-                pass.set_bind_group(1, *group, &[]);
+                pass.set_bind_group(1, group, &[]);
                 let offset = u64::from(first) * INDIRECT_BYTES;
                 if self.count_feature {
                     let count_at = 4 * (2 * m + kind) as u64;

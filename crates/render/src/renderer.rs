@@ -383,10 +383,13 @@ pub struct Renderer {
     prune_shown: Vec<Option<f32>>,
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     visible_fraction: Vec<f32>,
-    /// Instances drawn with the sequential point tree this frame when pruning is on, and their
-    /// indices in `instances` (empty when pruning is off: then selection indices are instances').
+    /// Instances drawn with the sequential point tree this frame when pruning or impostors are
+    /// on, and their indices in `instances` (see `spt_remapped`).
     spt_instances: Vec<treelod_runtime::Instance>,
     spt_map: Vec<u32>,
+    /// Whether this frame's selection ran over `spt_instances` (pruning or impostors on), so
+    /// its instance indices go through `spt_map`.
+    spt_remapped: bool,
     /// Pruned draws of this frame: (instance, cell or `ROOTS_CELL` for bark, source, first, count,
     /// λ, leaf scale).
     pruned: Vec<PrunedDraw>,
@@ -428,6 +431,23 @@ struct PlaneDraw {
     instance: u32,
     model: u32,
     range: PlaneRange,
+}
+
+impl Model {
+    /// The draw of all this model's bark triangles for instance `instance` (a pruned tree or one
+    /// drawn with impostors; `lambda` is recorded with it), if it has any.
+    fn bark_draw(&self, instance: u32, model: u32, lambda: f32) -> Option<PrunedDraw> {
+        (self.bark.1 > 0).then_some(PrunedDraw {
+            instance,
+            model,
+            cell: ROOTS_CELL,
+            source: DrawSource::Bark,
+            first: self.bark.0,
+            count: self.bark.1,
+            lambda,
+            leaf_scale: 1.0,
+        })
+    }
 }
 
 /// One draw of a pruned tree: leaves of one cell, or the bark.
@@ -647,6 +667,7 @@ impl Renderer {
             visible_fraction: Vec::new(),
             spt_instances: Vec::new(),
             spt_map: Vec::new(),
+            spt_remapped: false,
             pruned: Vec::new(),
             plane_draws: Vec::new(),
             plane_ranges: Vec::new(),
@@ -1077,18 +1098,7 @@ impl Renderer {
             for range in &self.plane_ranges {
                 self.plane_draws.push(PlaneDraw { instance: index, model: instance.model, range: *range });
             }
-            if model.bark.1 > 0 {
-                self.pruned.push(PrunedDraw {
-                    instance: index,
-                    model: instance.model,
-                    cell: ROOTS_CELL,
-                    source: DrawSource::Bark,
-                    first: model.bark.0,
-                    count: model.bark.1,
-                    lambda: 1.0,
-                    leaf_scale: 1.0,
-                });
-            }
+            self.pruned.extend(model.bark_draw(index, instance.model, 1.0));
         }
         visible
     }
@@ -1157,29 +1167,14 @@ impl Renderer {
                     });
                 }
             }
-            if model.bark.1 > 0 {
-                self.pruned.push(PrunedDraw {
-                    instance: index,
-                    model: instance.model,
-                    cell: ROOTS_CELL,
-                    source: DrawSource::Bark,
-                    first: model.bark.0,
-                    count: model.bark.1,
-                    lambda,
-                    leaf_scale: 1.0,
-                });
-            }
+            self.pruned.extend(model.bark_draw(index, instance.model, lambda));
         }
         (visible, leaves)
     }
 
     /// The index in `instances` of an instance of this frame's selection.
     fn instance_index(&self, selected: u32) -> u32 {
-        if (self.settings.pruning.is_some() || self.settings.impostors) && !self.settings.full_mesh {
-            self.spt_map.get(selected as usize).copied().unwrap_or(selected)
-        } else {
-            selected
-        }
+        if self.spt_remapped { self.spt_map.get(selected as usize).copied().unwrap_or(selected) } else { selected }
     }
 
     /// The selection of the last [`Self::prepare`] (before residency clamped it).
@@ -1319,7 +1314,8 @@ impl Renderer {
                 ..FrameStats::default()
             };
         }
-        let spt_instances = if pruning.is_some() || impostors { &self.spt_instances } else { &self.instances };
+        self.spt_remapped = pruning.is_some() || impostors;
+        let spt_instances = if self.spt_remapped { &self.spt_instances } else { &self.instances };
         let selected = select_frame(&self.lods, spt_instances, &runtime_camera, &lod_settings, &mut self.selection);
 
         // What each cell needs: the largest prefix any instance asked for.
@@ -1657,8 +1653,8 @@ impl Renderer {
         if self.gpu_frame
             && let Some(gpu) = &self.gpu
         {
-            let groups: Vec<&wgpu::BindGroup> = self.models.iter().map(|m| &m.bind_group).collect();
-            gpu.render(pass, [&self.triangle_pipeline, &self.point_pipeline], &groups);
+            let group = |m: usize| self.models.get(m).map(|model| &model.bind_group);
+            gpu.render(pass, [&self.triangle_pipeline, &self.point_pipeline], group);
             return;
         }
         let stride = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
