@@ -3,7 +3,7 @@
 //! the rendering tests fail; they do not skip.
 
 mod common;
-use common::{read_png, run, text};
+use common::{field, number, read_csv, read_png, run, succeeded, text};
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
@@ -17,38 +17,7 @@ fn demo() -> &'static Path {
 
 /// Runs `treelod bench ARGS…`, asserts success and no panic, returns stdout.
 fn bench_ok(args: &[&OsStr]) -> String {
-    let out = run(std::iter::once(OsStr::new("bench")).chain(args.iter().copied()));
-    let err = text(&out.stderr);
-    assert!(
-        out.status.success(),
-        "bench {args:?} failed (a Vulkan adapter is required: install mesa-vulkan-drivers): {err}"
-    );
-    assert!(!err.contains("panicked"), "{err}");
-    text(&out.stdout)
-}
-
-/// The CSV as a header and rows of fields.
-fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
-    let csv = std::fs::read_to_string(path).expect("the CSV was written");
-    let mut lines = csv.lines();
-    let header: Vec<String> = lines.next().expect("a header").split(',').map(str::to_owned).collect();
-    let rows: Vec<Vec<String>> = lines.map(|l| l.split(',').map(str::to_owned).collect()).collect();
-    for row in &rows {
-        assert_eq!(row.len(), header.len(), "{row:?}");
-    }
-    (header, rows)
-}
-
-/// The field `column` of `row`.
-fn field<'a>(header: &[String], row: &'a [String], column: &str) -> &'a str {
-    let i = header.iter().position(|h| h == column).unwrap_or_else(|| panic!("no column {column}"));
-    &row[i]
-}
-
-/// The field `column` of `row` as a number.
-fn number(header: &[String], row: &[String], column: &str) -> f64 {
-    let value = field(header, row, column);
-    value.parse().unwrap_or_else(|_| panic!("{column} = {value:?} is not a number"))
+    succeeded(&run(std::iter::once(OsStr::new("bench")).chain(args.iter().copied())), &format!("bench {args:?}"))
 }
 
 const COLUMNS: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\

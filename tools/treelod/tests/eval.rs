@@ -3,7 +3,7 @@
 //! fail; they do not skip.
 
 mod common;
-use common::{read_png, run, text};
+use common::{number, read_csv, read_png, run, succeeded, text};
 use std::path::{Path, PathBuf};
 
 fn scratch(test: &str) -> PathBuf {
@@ -25,36 +25,11 @@ fn eval_ok(extra: &[&std::ffi::OsStr]) -> String {
         "2".as_ref(),
     ];
     args.extend_from_slice(extra);
-    let out = run(&args);
-    let err = text(&out.stderr);
-    assert!(
-        out.status.success(),
-        "eval {extra:?} failed (a Vulkan adapter is required: install mesa-vulkan-drivers): {err}"
-    );
-    assert!(!err.contains("panicked"), "{err}");
-    text(&out.stdout)
+    succeeded(&run(&args), &format!("eval {extra:?}"))
 }
 
 fn read_json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).expect("the JSON was written")).expect("the JSON parses")
-}
-
-/// The CSV as a header and rows of named fields.
-fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
-    let csv = std::fs::read_to_string(path).expect("the CSV was written");
-    let mut lines = csv.lines();
-    let header: Vec<String> = lines.next().expect("a header").split(',').map(str::to_owned).collect();
-    let rows: Vec<Vec<String>> = lines.map(|l| l.split(',').map(str::to_owned).collect()).collect();
-    for row in &rows {
-        assert_eq!(row.len(), header.len(), "{row:?}");
-    }
-    (header, rows)
-}
-
-/// The value of `column` in `row` as a number.
-fn field(header: &[String], row: &[String], column: &str) -> f64 {
-    let i = header.iter().position(|h| h == column).unwrap_or_else(|| panic!("no column {column}"));
-    row[i].parse().unwrap_or_else(|_| panic!("{column} = {:?} is not a number", row[i]))
 }
 
 fn technique<'a>(json: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
@@ -103,10 +78,10 @@ fn the_full_mesh_against_the_reference_is_exactly_perfect() {
     for row in &rows {
         assert_eq!(row[1], "full");
         for column in ["precision", "recall", "q"] {
-            assert_eq!(field(&header, row, column), 1.0, "{column}");
+            assert_eq!(number(&header, row, column), 1.0, "{column}");
         }
         for column in ["rmse", "rmse_1px", "rmse_128px", "fp", "fn"] {
-            assert_eq!(field(&header, row, column), 0.0, "{column}");
+            assert_eq!(number(&header, row, column), 0.0, "{column}");
         }
     }
 }
@@ -156,14 +131,14 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
     assert_eq!(rows.len(), 2);
     for row in &rows {
         assert_eq!(row[1], "spt");
-        assert!(field(&header, row, "precision") > 0.5 && field(&header, row, "recall") > 0.5, "{row:?}");
-        let (tp, fp, fn_) = (field(&header, row, "tp"), field(&header, row, "fp"), field(&header, row, "fn"));
-        assert!((field(&header, row, "precision") - tp / (tp + fp)).abs() < 1e-12);
-        assert!((field(&header, row, "recall") - tp / (tp + fn_)).abs() < 1e-12);
-        assert!(field(&header, row, "geometry_bytes") > 0.0 && field(&header, row, "wall_ms") > 0.0);
+        assert!(number(&header, row, "precision") > 0.5 && number(&header, row, "recall") > 0.5, "{row:?}");
+        let (tp, fp, fn_) = (number(&header, row, "tp"), number(&header, row, "fp"), number(&header, row, "fn"));
+        assert!((number(&header, row, "precision") - tp / (tp + fp)).abs() < 1e-12);
+        assert!((number(&header, row, "recall") - tp / (tp + fn_)).abs() < 1e-12);
+        assert!(number(&header, row, "geometry_bytes") > 0.0 && number(&header, row, "wall_ms") > 0.0);
     }
     assert_eq!(rows[0][header.iter().position(|h| h == "temporal_noise").expect("column")], "", "no frame before 0");
-    assert!(field(&header, &rows[1], "temporal_noise") > 0.0);
+    assert!(number(&header, &rows[1], "temporal_noise") > 0.0);
 
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&sheet).expect("the sheet")));
     let info = decoder.read_info().expect("a PNG").info().clone();

@@ -50,3 +50,36 @@ pub fn read_png(path: &Path) -> (u32, u32, Vec<[u8; 4]>) {
     let pixels = buffer[..info.buffer_size()].chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect();
     (info.width, info.height, pixels)
 }
+
+/// Asserts that `out` (of the command described by `what`) succeeded without a panic; returns its
+/// stdout.
+pub fn succeeded(out: &Output, what: &str) -> String {
+    let err = text(&out.stderr);
+    assert!(out.status.success(), "{what} failed (a Vulkan adapter is required: install mesa-vulkan-drivers): {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    text(&out.stdout)
+}
+
+/// A CSV file as a header and rows of fields (every row as long as the header).
+pub fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let csv = std::fs::read_to_string(path).expect("the CSV was written");
+    let mut lines = csv.lines();
+    let header: Vec<String> = lines.next().expect("a header").split(',').map(str::to_owned).collect();
+    let rows: Vec<Vec<String>> = lines.map(|l| l.split(',').map(str::to_owned).collect()).collect();
+    for row in &rows {
+        assert_eq!(row.len(), header.len(), "{row:?}");
+    }
+    (header, rows)
+}
+
+/// The field `column` of `row`.
+pub fn field<'a>(header: &[String], row: &'a [String], column: &str) -> &'a str {
+    let i = header.iter().position(|h| h == column).unwrap_or_else(|| panic!("no column {column}"));
+    &row[i]
+}
+
+/// The field `column` of `row` as a number.
+pub fn number(header: &[String], row: &[String], column: &str) -> f64 {
+    let value = field(header, row, column);
+    value.parse().unwrap_or_else(|_| panic!("{column} = {value:?} is not a number"))
+}
