@@ -31,13 +31,16 @@ pub use rng::SplitMix64;
 pub use synth::{SyntheticOptions, synthetic};
 use treelod_format::Compression;
 
-/// One golden file of `tests/data/v1_0`: how it was made.
+/// One golden file of `tests/data/v1_<minor>`: how it was made.
 ///
 /// Golden files are written once by `cargo run -p treelod-tests --bin make-golden` and then kept
 /// forever (spec §11). Tests read the files, never these recipes, so a later change of the
 /// generator or the writer cannot silently change what the golden tests expect.
 #[derive(Clone, Debug)]
 pub struct GoldenFile {
+    /// The minor version of major 1 it was written for: its directory `tests/data/v1_<minor>`,
+    /// and the minor in its header.
+    pub minor: u16,
     /// File name inside the golden directory, e.g. `minimal.treelod`.
     pub name: &'static str,
     /// What the file exercises.
@@ -50,11 +53,12 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format version 1.0, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 and 1.1, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
         GoldenFile {
+            minor: 0,
             name: "minimal.treelod",
             description: "one grid cell, one triangle, its leaf point and one material; uncompressed",
             seed: 1,
@@ -62,6 +66,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
             compression: Compression::None,
         },
         GoldenFile {
+            minor: 0,
             name: "gilet.treelod",
             description: "a 3x2x2 grid of Gilet cells (triangles and point hierarchies), a texture; uncompressed",
             seed: 2,
@@ -69,13 +74,15 @@ pub fn golden_files() -> Vec<GoldenFile> {
             compression: Compression::None,
         },
         GoldenFile {
+            minor: 0,
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.0, zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions::everything(),
+            options: SyntheticOptions { lod_levels: 0, billboards: false, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
+            minor: 0,
             name: "extension.treelod",
             description: "a one-cell file with a reserved kind 0x0100 and a private kind 0x10000 readers skip",
             seed: 4,
@@ -86,13 +93,33 @@ pub fn golden_files() -> Vec<GoldenFile> {
             },
             compression: Compression::None,
         },
+        GoldenFile {
+            minor: 1,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.1 (1.0's and the baselines), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions::everything(),
+            compression: Compression::Zstd { level: 19 },
+        },
     ]
 }
 
 /// The directory of the golden files of version 1.0: `tests/data/v1_0` in the source tree.
 #[must_use]
 pub fn golden_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join("v1_0")
+    golden_dir_of(0)
+}
+
+/// The directory of the golden files of version 1.`minor`: `tests/data/v1_<minor>`.
+#[must_use]
+pub fn golden_dir_of(minor: u16) -> PathBuf {
+    golden_root().join(format!("v1_{minor}"))
+}
+
+/// The directory holding every version's golden directory: `tests/data` in the source tree.
+#[must_use]
+pub fn golden_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data")
 }
 
 /// The spec file, `format-spec/treelod.md` in the source tree.

@@ -5,9 +5,9 @@ use core::ops::RangeInclusive;
 use treelod_build::{SptNode, flatten};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
-    BlockRecord, CellRecord, ContainerData, CurveSample, EllipsoidRecord, ImageRecord, LineRecord, MaterialInfo,
-    MaterialRecord, NO_IMAGE, PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree,
-    TriangleRecord, VertexRecord, image_format,
+    BillboardRecord, BlockRecord, CellRecord, ContainerData, CurveSample, EllipsoidRecord, ImageRecord, LineRecord,
+    LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneRecord, PointRecord, PruneLeafRecord, Range,
+    SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -37,6 +37,12 @@ pub struct SyntheticOptions {
     pub block_ellipsoids: u32,
     /// Samples of each pruning curve, `PRUNE_SCALE` and `PRUNE_LAMBDA` (0: none).
     pub curve_samples: u32,
+    /// Levels of each tree's baseline LoD chain (spec §6.12), each of one to three triangles over
+    /// the written vertices (0: none; needs triangles).
+    pub lod_levels: u32,
+    /// A facing and a crossed baseline billboard quad per tree (spec §6.13), sampling the
+    /// impostor atlas (needs planes).
+    pub billboards: bool,
     /// Materials. At least one is made when triangles are.
     pub materials: u32,
     /// Raw RGBA8 textures with random mip chains that materials may use.
@@ -66,6 +72,8 @@ impl SyntheticOptions {
             prune_leaves_per_cell: 0..=0,
             block_ellipsoids: 0,
             curve_samples: 0,
+            lod_levels: 0,
+            billboards: false,
             materials: 1,
             textures: 0,
             png_image: false,
@@ -91,7 +99,8 @@ impl SyntheticOptions {
 
     /// Every section kind of version 1.0: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
-    /// materials, two textures, an atlas and a PNG image, two trees.
+    /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
+    /// baseline LoD chain and facing and crossed billboards.
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -103,6 +112,8 @@ impl SyntheticOptions {
             prune_leaves_per_cell: 1..=3,
             block_ellipsoids: 5,
             curve_samples: 4,
+            lod_levels: 3,
+            billboards: true,
             materials: 3,
             textures: 2,
             png_image: true,
@@ -785,6 +796,51 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
         let lambda = (k + 1) as f32 / n as f32;
         b.data.prune_scale.push(CurveSample { x: lambda, y: 1.0 / lambda.sqrt() });
         b.data.prune_lambda.push(CurveSample { x: (8u32 << k.min(20)) as f32, y: lambda });
+    }
+
+    // Baselines (spec §6.12, §6.13): per tree a chain of shrinking fractions and growing errors over
+    // random written triangles' vertices, and billboards on the atlas.
+    let vertex_count = b.data.vertices.len() as u32;
+    if options.lod_levels > 0 && vertex_count > 0 && !b.data.materials.is_empty() {
+        for tree in 0..tree_count {
+            let mut error = 0.0f32;
+            for level in 0..options.lod_levels {
+                let first = b.data.lod_triangles.len() as u32;
+                for _ in 0..1 + b.rng.below(3) {
+                    let indices = [b.rng.below(vertex_count), b.rng.below(vertex_count), b.rng.below(vertex_count)];
+                    let material = b.rng.below(b.data.materials.len() as u32);
+                    let size = b.rng.uniform(0.01, 0.5);
+                    b.data.lod_triangles.push(TriangleRecord { indices, size, leaf: 0, material });
+                }
+                error += b.rng.uniform(0.0, 0.2);
+                b.data.lod_levels.push(LodLevelRecord {
+                    tree,
+                    level,
+                    triangles: Range { first, count: b.data.lod_triangles.len() as u32 - first },
+                    error,
+                    fraction: 0.5 / (level + 1) as f32,
+                });
+            }
+        }
+    }
+    if let (true, Some(atlas)) = (options.billboards, b.atlas) {
+        for tree in 0..tree_count {
+            for kind in [billboard_kind::FACING, billboard_kind::CROSSED] {
+                let center = core::array::from_fn(|i| bounds_min[i] + b.rng.uniform(0.3, 0.7) * extent[i]);
+                let (r, h) = (b.rng.uniform(0.2, 1.0), b.rng.uniform(0.2, 1.0));
+                b.data.billboards.push(BillboardRecord {
+                    center,
+                    axis_u: [r, 0.0, 0.0],
+                    axis_v: [0.0, h, 0.0],
+                    image: atlas,
+                    uv_min: unorm16x2(0.0, 0.0),
+                    uv_max: unorm16x2(b.rng.uniform(0.1, 1.0), b.rng.uniform(0.1, 1.0)),
+                    tree,
+                    kind,
+                    reserved: [0; 2],
+                });
+            }
+        }
     }
 
     b.data.block = BlockRecord { bounds_min, bounds_max, grid: dims, tree_count, flags: 0, _pad: 0 };

@@ -1,4 +1,5 @@
-//! Golden files of format version 1.0 (`tests/data/v1_0`): every file opens and verifies, the
+//! Golden files of format versions 1.0 and 1.1 (`tests/data/v1_0`, `tests/data/v1_1`): every file
+//! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
 
@@ -8,7 +9,9 @@ use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, MaterialInfo, MaterialRecord, Metadata,
     NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, verify,
 };
-use treelod_tests::{SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_files, spec_hex_dump, spec_path};
+use treelod_tests::{
+    SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
+};
 
 fn golden(name: &str) -> PathBuf {
     golden_dir().join(name)
@@ -20,28 +23,40 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    let mut names: Vec<String> = std::fs::read_dir(golden_dir())
+    for minor in [0u16, 1] {
+        golden_files_of_version_open_and_verify(minor);
+    }
+}
+
+#[expect(clippy::unwrap_used, reason = "a test helper")]
+fn golden_files_of_version_open_and_verify(minor: u16) {
+    let dir = golden_dir_of(minor);
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .filter(|n| n.ends_with(".treelod"))
         .collect();
     names.sort();
-    for recipe in golden_files() {
-        assert!(names.iter().any(|n| n == recipe.name), "golden file {} is missing", recipe.name);
+    for recipe in golden_files().iter().filter(|r| r.minor == minor) {
+        assert!(names.iter().any(|n| n == recipe.name), "golden file v1_{minor}/{} is missing", recipe.name);
     }
     for name in &names {
-        let container = open(name);
+        let path = dir.join(name);
+        let container = Container::open(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
         verify(&container).unwrap_or_else(|e| panic!("{name}: {e}"));
         let header = container.header();
-        assert_eq!((header.major, header.minor), (1, 0), "{name}");
+        assert_eq!((header.major, header.minor), (1, minor), "v1_{minor}/{name}");
         // The same content read from memory equals the mapped file's.
-        let bytes = std::fs::read(golden(name)).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
         let from_memory = Container::from_bytes(&bytes).unwrap();
         let data = ContainerData::from_container(&container);
         assert_eq!(ContainerData::from_container(&from_memory), data, "{name}");
         // Rewritten uncompressed and read back, the content survives.
         let again = data.to_bytes(Compression::None).unwrap();
-        assert_eq!(ContainerData::from_container(&Container::from_bytes(&again).unwrap()), data, "{name}");
+        let back = Container::from_bytes(&again).unwrap();
+        assert_eq!(ContainerData::from_container(&back), data, "{name}");
+        // The writer marks the rewritten file with the same minor: the smallest its kinds need.
+        assert_eq!(back.header().minor, minor, "v1_{minor}/{name} rewritten");
     }
 }
 
@@ -222,8 +237,11 @@ fn the_gilet_file_has_a_grid_of_point_hierarchies() {
 #[test]
 fn the_every_kind_file_has_every_kind_compressed_where_it_pays() {
     let c = open("every-kind-zstd.treelod");
-    for kind in SectionKind::KNOWN {
+    for kind in SectionKind::KNOWN.into_iter().filter(|k| k.since_minor() == 0) {
         assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    for kind in SectionKind::KNOWN.into_iter().filter(|k| k.since_minor() > 0) {
+        assert!(c.section(kind).is_none(), "{kind} is not a kind of 1.0");
     }
     let compressed: Vec<SectionKind> =
         c.sections().iter().filter(|s| s.entry.flags & FLAG_ZSTD != 0).map(|s| s.kind()).collect();
@@ -231,6 +249,26 @@ fn the_every_kind_file_has_every_kind_compressed_where_it_pays() {
     // 32-byte curves (too small to gain).
     assert_eq!(compressed.len(), 11, "{compressed:?}");
     assert!(!compressed.contains(&SectionKind::BLOCK) && !compressed.contains(&SectionKind::CELLS));
+}
+
+#[test]
+fn the_1_1_every_kind_file_has_every_kind_of_1_1_and_the_baselines_verify() {
+    let path = golden_dir_of(1).join("every-kind-zstd.treelod");
+    let c = Container::open(&path).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 1);
+    // Two trees, three levels each, and a facing and a crossed quad each.
+    let levels: Vec<(u32, u32)> = c.lod_levels().iter().map(|l| (l.tree, l.level)).collect();
+    assert_eq!(levels, [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2)]);
+    let quads: Vec<(u32, u32)> = c.billboards().iter().map(|b| (b.tree, b.kind)).collect();
+    assert_eq!(quads, [(0, 0), (0, 1), (1, 0), (1, 1)]);
+    // Without its 1.1 sections the same content is a 1.0 file.
+    let mut data = ContainerData::from_container(&c);
+    (data.lod_levels, data.lod_triangles, data.billboards) = (Vec::new(), Vec::new(), Vec::new());
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 0);
 }
 
 #[test]
@@ -286,14 +324,14 @@ fn make_golden_never_overwrites_a_file_without_force() {
     };
     assert!(run(&[]).status.success());
     for recipe in golden_files() {
-        let path = dir.path().join(recipe.name);
+        let path = dir.path().join(format!("v1_{}", recipe.minor)).join(recipe.name);
         Container::open(&path).and_then(|c| verify(&c)).unwrap_or_else(|e| panic!("{}: {e}", recipe.name));
     }
     let again = run(&[]);
     assert!(again.status.success());
     assert!(String::from_utf8_lossy(&again.stdout).contains("unchanged"));
 
-    let minimal = dir.path().join("minimal.treelod");
+    let minimal = dir.path().join("v1_0").join("minimal.treelod");
     std::fs::write(&minimal, b"a golden file from another time").unwrap();
     let refused = run(&[]);
     assert!(!refused.status.success(), "a differing golden file is reported");

@@ -101,6 +101,8 @@ fn small_options() -> SyntheticOptions {
         prune_leaves_per_cell: 1..=1,
         block_ellipsoids: 2,
         curve_samples: 2,
+        lod_levels: 2,
+        billboards: true,
         materials: 1,
         textures: 1,
         png_image: false,
@@ -292,6 +294,9 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
+    // The fixture holds baseline sections, so it is a 1.1 file.
+    let minor = Container::from_bytes(&bytes).unwrap().header().minor;
+    assert_eq!(minor, 1);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());
@@ -304,12 +309,12 @@ fn other_major_versions_are_unsupported() {
             let case = format!("major {major}");
             let err = open_error(&case, &file.bytes);
             assert!(
-                matches!(err, Error::UnsupportedVersion { major: m, minor: 0, supported: 1, .. } if m == major),
+                matches!(err, Error::UnsupportedVersion { major: m, minor: n, supported: 1, .. } if m == major && n == minor),
                 "{case}: {err:?}"
             );
             assert_eq!(err.class(), ErrorClass::Unsupported, "{case}");
             let message = err.to_string();
-            assert!(message.contains(&format!("{major}.0")) && message.contains("1.x"), "{case}: {message}");
+            assert!(message.contains(&format!("{major}.{minor}")) && message.contains("1.x"), "{case}: {message}");
         }
     }
     // A later minor version of the same major is read.
@@ -1048,6 +1053,20 @@ fn verify_refuses_content_that_breaks_the_rules() {
         ),
         ("curve x repeated", Expect::Record(K::PRUNE_SCALE), Box::new(|d| d.prune_scale[1].x = d.prune_scale[0].x)),
         ("curve NaN", Expect::Record(K::PRUNE_LAMBDA), Box::new(|d| d.prune_lambda[0].y = f32::NAN)),
+        ("LoD level of no tree", Expect::Record(K::LOD_LEVELS), Box::new(|d| d.lod_levels[1].tree = 9)),
+        ("LoD level error NaN", Expect::Record(K::LOD_LEVELS), Box::new(|d| d.lod_levels[0].error = f32::NAN)),
+        (
+            "LoD level range past the end",
+            Expect::Record(K::LOD_LEVELS),
+            Box::new(|d| d.lod_levels[1].triangles.first = u32::MAX),
+        ),
+        (
+            "LoD triangle vertex out of range",
+            Expect::Record(K::LOD_TRIANGLES),
+            Box::new(|d| d.lod_triangles[0].indices[2] = u32::MAX),
+        ),
+        ("billboard image out of range", Expect::Record(K::BILLBOARDS), Box::new(|d| d.billboards[0].image = 99)),
+        ("billboard kind unknown", Expect::Record(K::BILLBOARDS), Box::new(|d| d.billboards[1].kind = 7)),
         (
             "cell bounds miss a vertex",
             Expect::CellOr(K::CELLS),

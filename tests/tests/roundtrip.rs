@@ -31,6 +31,9 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 prune_leaves_per_cell: prune,
                 block_ellipsoids,
                 curve_samples,
+                // Baselines with some of the curve and image draws, so the tuple stays small.
+                lod_levels: curve_samples.min(3),
+                billboards: png_image,
                 materials,
                 textures,
                 png_image,

@@ -8,9 +8,9 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
-    BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord,
-    LineRecord, MAGIC, MAJOR, MaterialRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
-    SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE,
+    Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -381,6 +381,24 @@ impl Container {
     #[must_use]
     pub fn prune_lambda(&self) -> &[CurveSample] {
         self.records(SectionKind::PRUNE_LAMBDA)
+    }
+
+    /// Baseline level-of-detail chains: the levels of every tree (spec §6.12).
+    #[must_use]
+    pub fn lod_levels(&self) -> &[LodLevelRecord] {
+        self.records(SectionKind::LOD_LEVELS)
+    }
+
+    /// Baseline level-of-detail chains: the levels' triangles.
+    #[must_use]
+    pub fn lod_triangles(&self) -> &[TriangleRecord] {
+        self.records(SectionKind::LOD_TRIANGLES)
+    }
+
+    /// Baseline billboards of every tree (spec §6.13).
+    #[must_use]
+    pub fn billboards(&self) -> &[BillboardRecord] {
+        self.records(SectionKind::BILLBOARDS)
     }
 }
 

@@ -9,8 +9,10 @@ use bytemuck::{Pod, Zeroable};
 pub const MAGIC: [u8; 12] = *b"\x89TREELOD\r\n\x1a\n";
 /// Major version written and read by this crate (spec §11).
 pub const MAJOR: u16 = 1;
-/// Minor version written by this crate.
-pub const MINOR: u16 = 0;
+/// The latest minor version this crate knows. The writer marks each file with the smallest minor
+/// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
+/// a 1.0 file.
+pub const MINOR: u16 = 1;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -140,9 +142,15 @@ impl SectionKind {
     pub const PRUNE_SCALE: Self = Self(0x0042);
     /// [`CurveSample`]s of `λ(projected height)`.
     pub const PRUNE_LAMBDA: Self = Self(0x0043);
+    /// Baseline: [`LodLevelRecord`]s of a discrete level-of-detail chain per tree (spec §6.12).
+    pub const LOD_LEVELS: Self = Self(0x0050);
+    /// Baseline: [`TriangleRecord`]s of the chain's levels.
+    pub const LOD_TRIANGLES: Self = Self(0x0051);
+    /// Baseline: [`BillboardRecord`]s, camera-facing and crossed billboards per tree (spec §6.13).
+    pub const BILLBOARDS: Self = Self(0x0052);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 16] = [
+    pub const KNOWN: [Self; 19] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -159,6 +167,9 @@ impl SectionKind {
         Self::PRUNE_TRIANGLES,
         Self::PRUNE_SCALE,
         Self::PRUNE_LAMBDA,
+        Self::LOD_LEVELS,
+        Self::LOD_TRIANGLES,
+        Self::BILLBOARDS,
     ];
 
     /// The spec's name of a known kind.
@@ -181,6 +192,9 @@ impl SectionKind {
             Self::PRUNE_TRIANGLES => "PRUNE_TRIANGLES",
             Self::PRUNE_SCALE => "PRUNE_SCALE",
             Self::PRUNE_LAMBDA => "PRUNE_LAMBDA",
+            Self::LOD_LEVELS => "LOD_LEVELS",
+            Self::LOD_TRIANGLES => "LOD_TRIANGLES",
+            Self::BILLBOARDS => "BILLBOARDS",
             _ => return None,
         })
     }
@@ -193,7 +207,7 @@ impl SectionKind {
             Self::BLOCK => size_of::<BlockRecord>(),
             Self::CELLS => size_of::<CellRecord>(),
             Self::VERTICES => size_of::<VertexRecord>(),
-            Self::TRIANGLES | Self::PRUNE_TRIANGLES => size_of::<TriangleRecord>(),
+            Self::TRIANGLES | Self::PRUNE_TRIANGLES | Self::LOD_TRIANGLES => size_of::<TriangleRecord>(),
             Self::POINTS => size_of::<PointRecord>(),
             Self::MATERIALS => size_of::<MaterialRecord>(),
             Self::IMAGES => size_of::<ImageRecord>(),
@@ -202,10 +216,23 @@ impl SectionKind {
             Self::PLANES => size_of::<PlaneRecord>(),
             Self::PRUNE_LEAVES => size_of::<PruneLeafRecord>(),
             Self::PRUNE_SCALE | Self::PRUNE_LAMBDA => size_of::<CurveSample>(),
+            Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
+            Self::BILLBOARDS => size_of::<BillboardRecord>(),
             _ => return None,
         };
         #[expect(clippy::cast_possible_truncation, reason = "record sizes are below 100")]
         Some(size as u32)
+    }
+
+    /// The minor version of major 1 that introduced this kind (spec §5): 1 for the baselines
+    /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 0 for the other known kinds and for kinds
+    /// this version does not know (private extensions do not raise a file's minor).
+    #[must_use]
+    pub fn since_minor(self) -> u16 {
+        match self {
+            Self::LOD_LEVELS | Self::LOD_TRIANGLES | Self::BILLBOARDS => 1,
+            _ => 0,
+        }
     }
 
     /// Whether the writer may compress this kind (spec §8: never `BLOCK` or `CELLS`).
@@ -571,6 +598,57 @@ pub struct CurveSample {
     pub y: f32,
 }
 const _: () = assert!(size_of::<CurveSample>() == 8);
+
+/// One level of a tree's baseline level-of-detail chain (spec §6.12): a general mesh
+/// simplifier's output, drawn instead of the whole tree when its error projects small enough.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct LodLevelRecord {
+    /// The tree of the block (index into the metadata's trees).
+    pub tree: u32,
+    /// Position in the tree's chain, 0 the finest.
+    pub level: u32,
+    /// Into `LOD_TRIANGLES`.
+    pub triangles: Range,
+    /// Geometric error of the level against the source, metres: the simplifier's deviation bound.
+    pub error: f32,
+    /// Share of the tree's source triangles the level aimed at (e.g. 0.25).
+    pub fraction: f32,
+}
+const _: () = assert!(size_of::<LodLevelRecord>() == 24);
+
+/// Baseline billboard kinds (spec §6.13).
+pub mod billboard_kind {
+    /// One quad turned about its `axis_v` towards the camera.
+    pub const FACING: u32 = 0;
+    /// Fixed quads crossing on the tree's vertical axis.
+    pub const CROSSED: u32 = 1;
+}
+
+/// A baseline billboard quad (spec §6.13): the whole tree baked onto one textured quad.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct BillboardRecord {
+    /// Centre, metres.
+    pub center: [f32; 3],
+    /// Half-extent vector along texture u, metres.
+    pub axis_u: [f32; 3],
+    /// Half-extent vector along texture v, metres.
+    pub axis_v: [f32; 3],
+    /// Index into `IMAGES`.
+    pub image: u32,
+    /// Atlas rectangle corner, two unorm16 (u low, v high).
+    pub uv_min: u32,
+    /// Opposite corner.
+    pub uv_max: u32,
+    /// The tree of the block.
+    pub tree: u32,
+    /// [`billboard_kind`].
+    pub kind: u32,
+    /// Reserved, 0.
+    pub reserved: [u32; 2],
+}
+const _: () = assert!(size_of::<BillboardRecord>() == 64);
 
 /// The SPT view of a hierarchical record: interval and leaf run (spec §10).
 pub trait SptElement: Pod {

@@ -12,9 +12,9 @@ use std::hash::{BuildHasherDefault, Hasher};
 use crate::error::{Error, Result};
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
-    CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord, MaterialRecord, NO_IMAGE, PlaneRecord,
-    PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord,
-    image_format,
+    BillboardRecord, CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord,
+    NO_IMAGE, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement,
+    TriangleRecord, VertexRecord, billboard_kind, image_format,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -62,6 +62,12 @@ pub struct VerifyReport {
     pub prune_triangles: u64,
     /// `PRUNE_SCALE` and `PRUNE_LAMBDA` samples checked.
     pub curve_samples: u64,
+    /// `LOD_LEVELS` records checked (baseline).
+    pub lod_levels: u64,
+    /// `LOD_TRIANGLES` records checked (baseline).
+    pub lod_triangles: u64,
+    /// `BILLBOARDS` records checked (baseline).
+    pub billboards: u64,
     /// Leaves whose exact cut was verified, summed over cells and the point, ellipsoid, line and
     /// plane hierarchies (spec §10 rule 2).
     pub cut_leaves: u64,
@@ -87,6 +93,13 @@ impl core::fmt::Display for VerifyReport {
             "         {} ellipsoids, {} lines, {} planes, {} pruned leaves, {} pruned triangles, {} curve samples",
             self.ellipsoids, self.lines, self.planes, self.prune_leaves, self.prune_triangles, self.curve_samples
         )?;
+        if self.lod_levels + self.billboards > 0 {
+            writeln!(
+                f,
+                "baselines: {} LoD levels, {} LoD triangles, {} billboards",
+                self.lod_levels, self.lod_triangles, self.billboards
+            )?;
+        }
         write!(f, "exact cut: {} leaves, runs nested up to {} deep", self.cut_leaves, self.max_depth)
     }
 }
@@ -132,6 +145,10 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_prune(c.prune_leaves(), c.prune_triangles())?;
     check_curve(SectionKind::PRUNE_SCALE, c.prune_scale())?;
     check_curve(SectionKind::PRUNE_LAMBDA, c.prune_lambda())?;
+    check_triangle_fields(SectionKind::LOD_TRIANGLES, c.lod_triangles(), vertex_count, material_count)?;
+    let tree_count = c.block().tree_count;
+    check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
+    check_billboards(c.billboards(), image_count, tree_count)?;
     check_metadata(c)?;
 
     for (index, cell) in c.cells().iter().enumerate() {
@@ -156,6 +173,9 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.prune_leaves = c.prune_leaves().len() as u64;
     report.prune_triangles = c.prune_triangles().len() as u64;
     report.curve_samples = (c.prune_scale().len() + c.prune_lambda().len()) as u64;
+    report.lod_levels = c.lod_levels().len() as u64;
+    report.lod_triangles = c.lod_triangles().len() as u64;
+    report.billboards = c.billboards().len() as u64;
     Ok(report)
 }
 
@@ -504,6 +524,102 @@ fn check_planes(planes: &[PlaneRecord], image_count: usize) -> Result<()> {
                 format!("uv_min ({min_u}, {min_v}) is not <= uv_max ({max_u}, {max_v}) per component"),
             ));
         }
+    }
+    Ok(())
+}
+
+/// Spec §6.12: levels sorted by `(tree, level)`, numbered without gaps per tree, fractions in
+/// `(0, 1)` strictly decreasing and errors finite, `≥ 0` and non-decreasing along each chain; the
+/// triangle ranges tile `LOD_TRIANGLES` in record order.
+fn check_lod_levels(levels: &[LodLevelRecord], triangle_count: usize, tree_count: u32) -> Result<()> {
+    let kind = SectionKind::LOD_LEVELS;
+    let mut next = 0u64;
+    let mut previous: Option<&LodLevelRecord> = None;
+    for (i, l) in levels.iter().enumerate() {
+        if l.tree >= tree_count {
+            return Err(bad(kind, i, format!("tree {} is out of range ({tree_count} trees)", l.tree)));
+        }
+        if !non_negative(l.error) {
+            return Err(bad(kind, i, format!("error {} is not finite and >= 0", l.error)));
+        }
+        if !(l.fraction > 0.0 && l.fraction < 1.0) {
+            return Err(bad(kind, i, format!("fraction {} is outside (0, 1)", l.fraction)));
+        }
+        let expected_level = match previous {
+            Some(p) if p.tree == l.tree => p.level + 1,
+            Some(p) if p.tree > l.tree => {
+                return Err(bad(kind, i, format!("tree {} after tree {}: not sorted by tree", l.tree, p.tree)));
+            }
+            _ => 0,
+        };
+        if l.level != expected_level {
+            return Err(bad(kind, i, format!("level {}, expected {expected_level}", l.level)));
+        }
+        if let Some(p) = previous.filter(|p| p.tree == l.tree) {
+            if l.fraction >= p.fraction {
+                return Err(bad(
+                    kind,
+                    i,
+                    format!("fraction {} is not below the previous level's {}", l.fraction, p.fraction),
+                ));
+            }
+            if l.error < p.error {
+                return Err(bad(kind, i, format!("error {} is below the previous level's {}", l.error, p.error)));
+            }
+        }
+        if u64::from(l.triangles.first) != next {
+            return Err(bad(
+                kind,
+                i,
+                format!(
+                    "triangles start at {}, expected {next} (the levels tile LOD_TRIANGLES in order)",
+                    l.triangles.first
+                ),
+            ));
+        }
+        next += u64::from(l.triangles.count);
+        previous = Some(l);
+    }
+    if next != triangle_count as u64 {
+        return Err(bad(SectionKind::LOD_TRIANGLES, 0, format!("{triangle_count} triangles, the levels cover {next}")));
+    }
+    Ok(())
+}
+
+/// Spec §6.13: billboards' fields, sorted by `(tree, kind)`.
+fn check_billboards(billboards: &[BillboardRecord], image_count: usize, tree_count: u32) -> Result<()> {
+    let kind = SectionKind::BILLBOARDS;
+    let mut previous = (0u32, 0u32);
+    for (i, b) in billboards.iter().enumerate() {
+        if !finite3(b.center) || !finite3(b.axis_u) || !finite3(b.axis_v) {
+            return Err(bad(
+                kind,
+                i,
+                format!("center {:?}, axis_u {:?}, axis_v {:?} are not all finite", b.center, b.axis_u, b.axis_v),
+            ));
+        }
+        if b.image as usize >= image_count {
+            return Err(bad(kind, i, format!("image {} is out of range ({image_count} images)", b.image)));
+        }
+        let (min_u, min_v) = (b.uv_min & 0xFFFF, b.uv_min >> 16);
+        let (max_u, max_v) = (b.uv_max & 0xFFFF, b.uv_max >> 16);
+        if min_u > max_u || min_v > max_v {
+            return Err(bad(
+                kind,
+                i,
+                format!("uv_min ({min_u}, {min_v}) is not <= uv_max ({max_u}, {max_v}) per component"),
+            ));
+        }
+        if b.tree >= tree_count {
+            return Err(bad(kind, i, format!("tree {} is out of range ({tree_count} trees)", b.tree)));
+        }
+        if b.kind > billboard_kind::CROSSED {
+            return Err(bad(kind, i, format!("kind {} is neither FACING (0) nor CROSSED (1)", b.kind)));
+        }
+        if (b.tree, b.kind) < previous {
+            return Err(bad(kind, i, format!("(tree, kind) ({}, {}) after {previous:?}: not sorted", b.tree, b.kind)));
+        }
+        previous = (b.tree, b.kind);
     }
     Ok(())
 }

@@ -14,9 +14,9 @@ use crate::metadata::MAX_META_BYTES;
 use crate::metadata::Metadata;
 use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells, shuffle};
 use crate::records::{
-    BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord,
-    LineRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
-    SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE,
+    Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// How sections are stored.
@@ -73,6 +73,12 @@ pub struct ContainerData {
     pub prune_scale: Vec<CurveSample>,
     /// `PRUNE_LAMBDA`.
     pub prune_lambda: Vec<CurveSample>,
+    /// `LOD_LEVELS` (baseline).
+    pub lod_levels: Vec<LodLevelRecord>,
+    /// `LOD_TRIANGLES` (baseline).
+    pub lod_triangles: Vec<TriangleRecord>,
+    /// `BILLBOARDS` (baseline).
+    pub billboards: Vec<BillboardRecord>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
     pub extra_sections: Vec<(u32, Vec<u8>)>,
@@ -99,6 +105,9 @@ impl ContainerData {
             prune_triangles: c.prune_triangles().to_vec(),
             prune_scale: c.prune_scale().to_vec(),
             prune_lambda: c.prune_lambda().to_vec(),
+            lod_levels: c.lod_levels().to_vec(),
+            lod_triangles: c.lod_triangles().to_vec(),
+            billboards: c.billboards().to_vec(),
             extra_sections: c
                 .sections()
                 .iter()
@@ -134,6 +143,9 @@ impl ContainerData {
             (SectionKind::PRUNE_TRIANGLES, bytes_of(&self.prune_triangles)),
             (SectionKind::PRUNE_SCALE, bytes_of(&self.prune_scale)),
             (SectionKind::PRUNE_LAMBDA, bytes_of(&self.prune_lambda)),
+            (SectionKind::LOD_LEVELS, bytes_of(&self.lod_levels)),
+            (SectionKind::LOD_TRIANGLES, bytes_of(&self.lod_triangles)),
+            (SectionKind::BILLBOARDS, bytes_of(&self.billboards)),
         ];
         out.extend(optional.into_iter().filter(|(_, b)| !b.is_empty()).map(|(k, b)| (k, b, 0)));
         for (kind, bytes) in &self.extra_sections {
@@ -254,7 +266,8 @@ impl ContainerData {
         let mut header = Header {
             magic: MAGIC,
             major: MAJOR,
-            minor: MINOR,
+            // The smallest minor whose kinds the file holds (spec §11).
+            minor: entries.iter().map(|e| SectionKind(e.kind).since_minor()).max().unwrap_or(0).min(MINOR),
             header_size: HEADER_SIZE as u32,
             section_count: u32::try_from(entries.len()).map_err(|_| Error::Write("too many sections".into()))?,
             table_offset,

@@ -2,10 +2,10 @@
 //! the specific error is expected. The exact-cut sweep is also checked against a brute-force oracle.
 
 use treelod_format::{
-    BlockRecord, CellRecord, Compression, Container, ContainerData, CurveSample, EllipsoidRecord, Error, ImageRecord,
-    LineRecord, MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, PlaneRecord, PointRecord, PruneLeafRecord, Range,
-    SectionKind, SptSummary, TriangleRecord, VerifyReport, VertexRecord, check_point_cut, check_spt, image_format,
-    pack, triangle_leaf_sizes, verify,
+    BillboardRecord, BlockRecord, CellRecord, Compression, Container, ContainerData, CurveSample, EllipsoidRecord,
+    Error, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, PlaneRecord,
+    PointRecord, PruneLeafRecord, Range, SectionKind, SptSummary, TriangleRecord, VerifyReport, VertexRecord,
+    billboard_kind, check_point_cut, check_spt, image_format, pack, triangle_leaf_sizes, verify,
 };
 
 const INF: f32 = f32::INFINITY;
@@ -193,7 +193,30 @@ fn valid() -> ContainerData {
         prune_triangles,
         prune_scale: vec![CurveSample { x: 0.1, y: 2.0 }, CurveSample { x: 1.0, y: 1.0 }],
         prune_lambda: vec![CurveSample { x: 10.0, y: 0.2 }, CurveSample { x: 100.0, y: 1.0 }],
-        extra_sections: Vec::new(),
+        // A two-level chain over triangles 0..2 and 0..1, and a facing plus one crossed billboard.
+        lod_levels: vec![
+            LodLevelRecord { tree: 0, level: 0, triangles: range(0, 2), error: 0.01, fraction: 0.5 },
+            LodLevelRecord { tree: 0, level: 1, triangles: range(2, 1), error: 0.05, fraction: 0.25 },
+        ],
+        lod_triangles: vec![
+            TriangleRecord { indices: [0, 1, 2], size: 0.2, leaf: 0, material: 0 },
+            TriangleRecord { indices: [3, 4, 5], size: 0.2, leaf: 0, material: 0 },
+            TriangleRecord { indices: [0, 4, 2], size: 0.3, leaf: 0, material: 0 },
+        ],
+        billboards: [billboard_kind::FACING, billboard_kind::CROSSED]
+            .map(|kind| BillboardRecord {
+                center: [2.0, 1.0, 1.0],
+                axis_u: [1.0, 0.0, 0.0],
+                axis_v: [0.0, 1.0, 0.0],
+                image: 0,
+                uv_min: 0,
+                uv_max: pack::unorm16x2(1.0, 1.0),
+                tree: 0,
+                kind,
+                reserved: [0; 2],
+            })
+            .to_vec(),
+        ..ContainerData::default()
     }
 }
 
@@ -267,6 +290,7 @@ fn the_fixture_verifies_with_full_counts() {
     assert_eq!((report.materials, report.images, report.image_data_bytes), (1, 2, 48));
     assert_eq!((report.ellipsoids, report.lines, report.planes), (5, 1, 1));
     assert_eq!((report.prune_leaves, report.prune_triangles, report.curve_samples), (2, 3, 4));
+    assert_eq!((report.lod_levels, report.lod_triangles, report.billboards), (2, 3, 2));
     // 4 point leaves + 3 ellipsoid leaves + 1 line leaf + 1 plane leaf.
     assert_eq!(report.cut_leaves, 9);
     assert_eq!(report.max_depth, 3);
@@ -277,6 +301,7 @@ fn the_fixture_verifies_with_full_counts() {
     assert!(report.padding_bytes > 0, "META's end is padded to 16 bytes");
     let text = report.to_string();
     assert!(text.contains("7 points") && text.contains("9 leaves"), "{text}");
+    assert!(text.contains("2 LoD levels, 3 LoD triangles, 2 billboards"), "{text}");
 }
 
 #[test]
@@ -565,6 +590,63 @@ fn prune_rules() {
     let mut data = valid();
     data.prune_triangles[0].indices[0] = 99;
     expect_record(&data, SectionKind::PRUNE_TRIANGLES, 0, "vertex index 99");
+}
+
+#[test]
+fn lod_chain_rules() {
+    let mut data = valid();
+    data.lod_levels[1].tree = 1;
+    expect_record(&data, SectionKind::LOD_LEVELS, 1, "tree 1 is out of range");
+    let mut data = valid();
+    data.lod_levels[1].level = 2;
+    expect_record(&data, SectionKind::LOD_LEVELS, 1, "level 2, expected 1");
+    let mut data = valid();
+    data.lod_levels[1].fraction = 0.5;
+    expect_record(&data, SectionKind::LOD_LEVELS, 1, "not below the previous level");
+    let mut data = valid();
+    data.lod_levels[1].error = 0.001;
+    expect_record(&data, SectionKind::LOD_LEVELS, 1, "below the previous level");
+    let mut data = valid();
+    data.lod_levels[0].error = f32::NAN;
+    expect_record(&data, SectionKind::LOD_LEVELS, 0, "error NaN");
+    let mut data = valid();
+    data.lod_levels[0].fraction = 1.0;
+    expect_record(&data, SectionKind::LOD_LEVELS, 0, "outside (0, 1)");
+    let mut data = valid();
+    data.lod_levels[1].triangles = range(1, 2);
+    expect_record(&data, SectionKind::LOD_LEVELS, 1, "expected 2");
+    let mut data = valid();
+    data.lod_levels[1].triangles.count = 0;
+    expect_record(&data, SectionKind::LOD_TRIANGLES, 0, "the levels cover 2");
+    let mut data = valid();
+    data.lod_triangles[2].indices[1] = 40;
+    expect_record(&data, SectionKind::LOD_TRIANGLES, 2, "vertex index 40");
+    let mut data = valid();
+    data.lod_triangles[0].material = 3;
+    expect_record(&data, SectionKind::LOD_TRIANGLES, 0, "material 3");
+}
+
+#[test]
+fn billboard_rules() {
+    let mut data = valid();
+    data.billboards[0].image = 5;
+    expect_record(&data, SectionKind::BILLBOARDS, 0, "image 5");
+    let mut data = valid();
+    data.billboards[1].kind = 2;
+    expect_record(&data, SectionKind::BILLBOARDS, 1, "neither FACING");
+    let mut data = valid();
+    data.billboards.swap(0, 1);
+    expect_record(&data, SectionKind::BILLBOARDS, 1, "not sorted");
+    let mut data = valid();
+    data.billboards[0].axis_u[2] = f32::INFINITY;
+    expect_record(&data, SectionKind::BILLBOARDS, 0, "not all finite");
+    let mut data = valid();
+    data.billboards[1].tree = 4;
+    expect_record(&data, SectionKind::BILLBOARDS, 1, "tree 4");
+    let mut data = valid();
+    data.billboards[0].uv_min = pack::unorm16x2(1.0, 0.0);
+    data.billboards[0].uv_max = pack::unorm16x2(0.5, 1.0);
+    expect_record(&data, SectionKind::BILLBOARDS, 0, "uv_min");
 }
 
 #[test]

@@ -1,4 +1,5 @@
-//! Writes the golden files of format version 1.0 into `tests/data/v1_0` (or the directory given).
+//! Writes the golden files of format versions 1.0 and 1.1 into `tests/data/v1_0` and
+//! `tests/data/v1_1` (or the `v1_0` and `v1_1` directories of the directory given).
 //!
 //! Golden files are written once and kept forever (spec §11): an existing file is never replaced
 //! unless `--force` is given. A file that exists and equals what would be written is reported as
@@ -12,31 +13,32 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use treelod_tests::{golden_dir, golden_files, synthetic};
+use treelod_tests::{golden_files, golden_root, synthetic};
 
 fn main() -> ExitCode {
     let mut force = false;
-    let mut dir = golden_dir();
+    let mut root = golden_root();
     for arg in std::env::args().skip(1) {
         match arg.as_str() {
             "--force" => force = true,
             "-h" | "--help" => {
-                println!("usage: make-golden [--force] [DIR]   (default DIR: {})", golden_dir().display());
+                println!("usage: make-golden [--force] [DIR]   (default DIR: {})", golden_root().display());
                 return ExitCode::SUCCESS;
             }
             other if other.starts_with('-') => {
                 eprintln!("make-golden: unknown option {other}");
                 return ExitCode::from(2);
             }
-            other => dir = PathBuf::from(other),
+            other => root = PathBuf::from(other),
         }
-    }
-    if let Err(e) = std::fs::create_dir_all(&dir) {
-        eprintln!("make-golden: {}: {e}", dir.display());
-        return ExitCode::FAILURE;
     }
     let mut failed = false;
     for golden in golden_files() {
+        let dir = root.join(format!("v1_{}", golden.minor));
+        if let Err(e) = std::fs::create_dir_all(&dir) {
+            eprintln!("make-golden: {}: {e}", dir.display());
+            return ExitCode::FAILURE;
+        }
         let path = dir.join(golden.name);
         let data = synthetic(golden.seed, &golden.options);
         let bytes = match data.to_bytes(golden.compression) {
