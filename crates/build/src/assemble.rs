@@ -4,20 +4,23 @@
 //! triangles to cells by centroid; with pruning, the leaves' priority list and curves
 //! ([`crate::prune`]); per cell (in parallel, results kept in cell order) leaf points, point
 //! hierarchy and size-sorted triangles; vertices renumbered in first-use order; the pruned leaves
-//! per cell; materials, images and metadata.
+//! per cell; with impostors, their planes and atlas; with baselines, each tree's LoD chain and
+//! billboards; materials, images and metadata.
 
 use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use treelod_format::{
-    BlockRecord, CellRecord, ContainerData, ImageRecord, MATERIAL_DOUBLE_SIDED, MaterialInfo, MaterialRecord, Metadata,
-    NO_IMAGE, PointRecord, PruneLeafRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, image_format,
-    material_class, pack,
+    BillboardRecord, BlockRecord, CellRecord, ContainerData, ImageRecord, LodLevelRecord, MATERIAL_DOUBLE_SIDED,
+    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, PointRecord, PruneLeafRecord, Range, Setting, Source, Tree,
+    TriangleRecord, VertexRecord, image_format, material_class, pack,
 };
 
+use crate::billboard::{Billboards, build_billboards};
 use crate::classify::{ClassifyOptions, classify};
 use crate::error::BuildError;
 use crate::gilet::{CellPoint, GiletConfig, LeafPoint, build_cell};
 use crate::impostor::{ImpostorConfig, ImpostorMesh, Impostors, LeafTriangle, Surface, build_impostors};
+use crate::lod_chain::{ChainTriangle, LodChainConfig, build_lod_chain};
 use crate::precision::Precision;
 use crate::prune::{MeshTriangle, PruneConfig, PruneMesh, PruneReport, Pruned};
 use crate::raster::{AlphaMask, NO_ALPHA};
@@ -46,6 +49,11 @@ pub struct BuildConfig {
     /// their atlas is several times larger than the rest of a container (see
     /// [`crate::impostor`]).
     pub impostors: Option<ImpostorConfig>,
+    /// Baselines (spec §6.12, §6.13) for comparisons: each tree's discrete LoD chain from
+    /// meshoptimizer's simplifiers ([`crate::lod_chain`]), and, when [`Self::impostors`] is set
+    /// too, facing and crossed billboards each baked at the texel budget of the tree's impostor
+    /// planes ([`crate::billboard`]). Default `None`.
+    pub baselines: Option<LodChainConfig>,
     /// Significant bits kept of the written floats ([`crate::precision`]): by default rounded so
     /// that zstd compresses the container about a third smaller; [`Precision::FULL`] keeps every
     /// bit.
@@ -81,6 +89,12 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
     }
     if let Some(impostors) = &config.impostors {
         settings.extend(impostors.settings());
+    }
+    if let Some(chain) = &config.baselines {
+        settings.extend(chain.settings());
+        if config.impostors.is_some() {
+            settings.push(Setting { key: "baselines.billboards".into(), value: "facing,crossed".into() });
+        }
     }
     settings.push(Setting { key: "precision".into(), value: config.precision.setting() });
     settings.sort();
@@ -127,6 +141,14 @@ pub struct BuildStats {
     pub planes_per_level: Vec<u32>,
     /// The impostor atlas, texels across and down (`[0, 0]` without).
     pub atlas: [u32; 2],
+    /// Baseline LoD chain levels written, summed over the trees (0 without baselines).
+    pub lod_levels: u64,
+    /// Triangles of the baseline LoD chains.
+    pub lod_triangles: u64,
+    /// Baseline billboard quads written.
+    pub billboards: u64,
+    /// The billboard atlas, texels across and down (`[0, 0]` without).
+    pub billboard_atlas: [u32; 2],
 }
 
 /// What a build returns.
@@ -535,6 +557,44 @@ pub fn build_block(
         Some(impostor_config) => block_impostors(&material_keys, &tris, &vertices, trees, impostor_config)?,
         None => None,
     };
+    // Stage: baselines: each tree's LoD chain (over the written vertices), and its billboards at
+    // the texel budget of its impostor planes.
+    let (mut lod_levels, mut lod_triangles) = (Vec::new(), Vec::new());
+    let mut billboards = None;
+    if let Some(chain_config) = &config.baselines {
+        let chain_input: Vec<ChainTriangle> = tris
+            .iter()
+            .map(|t| {
+                let (tree, _, class) = material_keys[t.material as usize];
+                #[expect(clippy::cast_possible_truncation, reason = "a block holds few trees")]
+                let tree = tree as u32;
+                ChainTriangle {
+                    v: t.v.map(|v| remap[v as usize]),
+                    material: t.material,
+                    tree,
+                    leaf: class == Class::Leaf,
+                }
+            })
+            .collect();
+        for level in build_lod_chain(&out_vertices, &chain_input, chain_config)? {
+            let first = lod_triangles.len();
+            lod_triangles.extend(level.triangles.iter().map(|&(indices, material)| {
+                let [a, b, c] = indices.map(|v| Vec3::from_array(out_vertices[v as usize].position));
+                let area = 0.5 * (b - a).cross(c - a).length();
+                TriangleRecord { indices, size: 2.0 * (area / std::f32::consts::PI).sqrt(), leaf: 0, material }
+            }));
+            lod_levels.push(LodLevelRecord {
+                tree: level.tree,
+                level: level.level,
+                triangles: range(first, lod_triangles.len()),
+                error: level.error,
+                fraction: level.fraction,
+            });
+        }
+        if let Some(impostors) = &impostors {
+            billboards = block_billboards(&material_keys, &tris, &vertices, trees, &impostors.texels_per_tree)?;
+        }
+    }
     drop((per_cell, tris, vertices, remap, parts));
     // The block cell: Gilet's representation and the pruned leaves live in the grid cells only;
     // the impostor planes of the whole block live here.
@@ -626,6 +686,25 @@ pub fn build_block(
         stats.planes_per_level = impostors.planes_per_level;
         stats.atlas = [atlas.width, atlas.height];
     }
+    // The billboard atlas after that.
+    let mut billboard_records: Vec<BillboardRecord> = Vec::new();
+    if let Some(billboards) = billboards {
+        let atlas = billboards.atlas;
+        image_data.resize(image_data.len().div_ceil(16) * 16, 0);
+        #[expect(clippy::cast_possible_truncation, reason = "images are few")]
+        let index = images.len() as u32;
+        images.push(ImageRecord {
+            width: atlas.width,
+            height: atlas.height,
+            mip_count: atlas.mip_count,
+            format: image_format::RGBA8_SRGB,
+            data_offset: image_data.len() as u64,
+            data_length: atlas.texels.len() as u64,
+        });
+        image_data.extend_from_slice(&atlas.texels);
+        billboard_records = billboards.records.into_iter().map(|b| BillboardRecord { image: index, ..b }).collect();
+        stats.billboard_atlas = [atlas.width, atlas.height];
+    }
 
     // Stage: metadata.
     let mut sources: Vec<Source> = Vec::new();
@@ -671,6 +750,9 @@ pub fn build_block(
     stats.points = points.len() as u64;
     stats.prune_leaves = prune_leaves.len() as u64;
     stats.prune_triangles = prune_triangles.len() as u64;
+    stats.lod_levels = lod_levels.len() as u64;
+    stats.lod_triangles = lod_triangles.len() as u64;
+    stats.billboards = billboard_records.len() as u64;
     let data = ContainerData {
         metadata: Metadata {
             generator: generator.to_owned(),
@@ -701,6 +783,9 @@ pub fn build_block(
         prune_scale,
         prune_lambda,
         planes,
+        lod_levels,
+        lod_triangles,
+        billboards: billboard_records,
         ..ContainerData::default()
     };
     let mut data = data;
@@ -718,14 +803,7 @@ fn block_impostors(
     config: &ImpostorConfig,
 ) -> Result<Option<Impostors>, BuildError> {
     let default_material = Material::default();
-    let surfaces: Vec<Surface<'_>> = material_keys
-        .iter()
-        .map(|&(t, m, _)| {
-            let scene = trees[t].scene;
-            let material = scene.materials.get(m).unwrap_or(&default_material);
-            Surface { material, image: material.image.and_then(|i| scene.images.get(i)) }
-        })
-        .collect();
+    let surfaces = surfaces(material_keys, trees, &default_material);
     let leaves: Vec<LeafTriangle> = tris
         .iter()
         .filter(|t| material_keys[t.material as usize].2 == Class::Leaf)
@@ -736,6 +814,46 @@ fn block_impostors(
         })
         .collect();
     build_impostors(&ImpostorMesh { vertices, triangles: &leaves, surfaces: &surfaces }, config)
+}
+
+/// How each output material looks, for the bakes: its source material and image.
+fn surfaces<'a>(
+    material_keys: &[(usize, usize, Class)],
+    trees: &[Placed<'a>],
+    default_material: &'a Material,
+) -> Vec<Surface<'a>> {
+    material_keys
+        .iter()
+        .map(|&(t, m, _)| {
+            let scene = trees[t].scene;
+            let material = scene.materials.get(m).unwrap_or(default_material);
+            Surface { material, image: material.image.and_then(|i| scene.images.get(i)) }
+        })
+        .collect()
+}
+
+/// The baseline billboards of a block ([`crate::billboard`]): every triangle of each tree, bark
+/// and leaves, baked with its source material, at `budget` texels per tree.
+fn block_billboards(
+    material_keys: &[(usize, usize, Class)],
+    tris: &[Tri],
+    vertices: &[VertexRecord],
+    trees: &[Placed<'_>],
+    budget: &[u64],
+) -> Result<Option<Billboards>, BuildError> {
+    let default_material = Material::default();
+    let surfaces = surfaces(material_keys, trees, &default_material);
+    let all: Vec<LeafTriangle> = tris
+        .iter()
+        .map(|t| {
+            #[expect(clippy::cast_possible_truncation, reason = "a block holds few trees")]
+            let tree = material_keys[t.material as usize].0 as u32;
+            LeafTriangle { v: t.v, material: t.material, tree }
+        })
+        .collect();
+    #[expect(clippy::cast_possible_truncation, reason = "a block holds few trees")]
+    let tree_count = trees.len() as u32;
+    build_billboards(&ImpostorMesh { vertices, triangles: &all, surfaces: &surfaces }, tree_count, budget)
 }
 
 /// What the per-cell stage hands to the serial one.

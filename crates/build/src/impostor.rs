@@ -81,10 +81,10 @@ const GUTTER: u32 = 4;
 
 /// Region sizes and places are multiples of this, `2^(MIP_LEVELS − 1)`: every mip texel of a
 /// region lies in that region.
-const ALIGN: u32 = 16;
+pub(crate) const ALIGN: u32 = 16;
 
 /// Mip levels of the atlas.
-const MIP_LEVELS: u32 = 5;
+pub(crate) const MIP_LEVELS: u32 = 5;
 
 /// Texels around coverage that get its colour, at every level.
 const DILATION: u32 = 2;
@@ -246,6 +246,11 @@ pub struct Impostors {
     /// The atlas density used, texels per metre (below the configured one if the atlas had to
     /// shrink to fit [`ImpostorConfig::max_atlas`]).
     pub texels_per_metre: f32,
+    /// Atlas texels of each tree's planes: their regions (gutter and alignment included) at mip
+    /// level 0, summed over the planes of every hierarchy level. Indexed by the triangles'
+    /// `tree`, up to the largest tree with leaves; a tree without leaves used 0. The texture
+    /// budget of the baseline billboards ([`crate::billboard`]).
+    pub texels_per_tree: Vec<u64>,
 }
 
 /// A plane `pᵀn + d = 0` with a unit normal.
@@ -270,9 +275,11 @@ pub struct ClusterLeaf {
 
 /// A plane in `f64` as the clustering fits it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct PlaneFit {
-    normal: DVec3,
-    offset: f64,
+pub(crate) struct PlaneFit {
+    /// Unit normal.
+    pub(crate) normal: DVec3,
+    /// `d` of `pᵀn + d = 0`, metres.
+    pub(crate) offset: f64,
 }
 
 impl PlaneFit {
@@ -587,29 +594,65 @@ impl Node {
 
 /// A plane's quad, relative to the origin of work.
 #[derive(Clone, Copy, Debug)]
-struct Quad {
-    centre: DVec3,
-    /// Half-extent vectors.
-    u: DVec3,
-    v: DVec3,
+pub(crate) struct Quad {
+    pub(crate) centre: DVec3,
+    /// Half-extent vectors: `u` along the texture's u, `v` along its v.
+    pub(crate) u: DVec3,
+    pub(crate) v: DVec3,
 }
 
 /// One region of the atlas: the content's texels and the region's place and size.
 #[derive(Clone, Copy, Debug, Default)]
-struct Region {
+pub(crate) struct Region {
     /// Content texels across and down.
-    tw: u32,
-    th: u32,
+    pub(crate) tw: u32,
+    pub(crate) th: u32,
     /// Region size (content, gutter, alignment).
-    rw: u32,
-    rh: u32,
+    pub(crate) rw: u32,
+    pub(crate) rh: u32,
     /// Region corner in the atlas.
-    x: u32,
-    y: u32,
+    pub(crate) x: u32,
+    pub(crate) y: u32,
 }
 
-fn align(v: u32) -> u32 {
+impl Region {
+    /// An unplaced region holding `tw × th` texels of content in its gutter, aligned.
+    pub(crate) fn new(tw: u32, th: u32) -> Self {
+        Self { tw, th, rw: align(tw + 2 * GUTTER), rh: align(th + 2 * GUTTER), x: 0, y: 0 }
+    }
+
+    /// Its texels (content, gutter and alignment), level 0.
+    pub(crate) fn texels(&self) -> u64 {
+        u64::from(self.rw) * u64::from(self.rh)
+    }
+
+    /// Its content rectangle as a record's `uv_min` and `uv_max` (spec §6.10) in a
+    /// `width × height` atlas.
+    pub(crate) fn uv(&self, width: u32, height: u32) -> (u32, u32) {
+        let (fw, fh) = (f64::from(width), f64::from(height));
+        let (cx, cy) = (f64::from(self.x + GUTTER), f64::from(self.y + GUTTER));
+        #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]")]
+        let uv = (
+            pack::unorm16x2((cx / fw) as f32, (cy / fh) as f32),
+            pack::unorm16x2(((cx + f64::from(self.tw)) / fw) as f32, ((cy + f64::from(self.th)) / fh) as f32),
+        );
+        uv
+    }
+}
+
+pub(crate) fn align(v: u32) -> u32 {
     v.div_ceil(ALIGN) * ALIGN
+}
+
+/// Which sample [`bake`] keeps where triangles overlap.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Winner {
+    /// The one nearest to the plane (`|distance|` least): impostor planes, whose leaves lie on
+    /// both sides.
+    Nearest,
+    /// The front-most seen from the side the plane's normal points to (signed distance along the
+    /// normal greatest): billboards, which show the whole tree as seen from one side.
+    Front,
 }
 
 /// Builds the impostor planes and their atlas for the leaves of `mesh` (see the module
@@ -668,11 +711,14 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
     trees.sort_unstable();
     trees.dedup();
     let mut nodes: Vec<Node> = Vec::new();
+    // The tree of each node.
+    let mut node_tree: Vec<u32> = Vec::new();
     let mut planes_per_level = vec![0u32; config.levels.len()];
     for &tree in &trees {
         #[expect(clippy::cast_possible_truncation, reason = "fewer leaves than triangles, which fit u32")]
         let ids: Vec<u32> = (0..data.len()).filter(|&i| data[i].tree == tree).map(|i| i as u32).collect();
         tree_levels(&data, &ids, tree, config, &mut nodes, &mut planes_per_level);
+        node_tree.resize(nodes.len(), tree);
     }
 
     // Stage: SPT intervals over the nesting, sizes = error sizes.
@@ -743,29 +789,18 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
     // Stage: bake each plane's leaves into its region, with mips.
     let baked: Vec<Vec<Vec<u8>>> = (0..nodes.len())
         .into_par_iter()
-        .map(|i| bake(mesh, placed_triangles(i), &nodes[i].plane, &quads[i], &regions[i]))
+        .map(|i| bake(mesh, placed_triangles(i), &nodes[i].plane, Winner::Nearest, &quads[i], &regions[i]))
         .collect();
 
-    // Stage: the atlas image, level by level.
-    let mut texels = Vec::new();
-    for level in 0..MIP_LEVELS {
-        let (w, h) = ((width >> level) as usize, (height >> level) as usize);
-        let at = texels.len();
-        texels.resize(at + w * h * 4, 0);
-        let image = &mut texels[at..];
-        for (region, chain) in regions.iter().zip(&baked) {
-            let (rx, ry, rw) =
-                ((region.x >> level) as usize, (region.y >> level) as usize, (region.rw >> level) as usize);
-            for (row, line) in chain[level as usize].chunks_exact(rw * 4).enumerate() {
-                let o = ((ry + row) * w + rx) * 4;
-                image[o..o + rw * 4].copy_from_slice(line);
-            }
-        }
+    // Stage: the atlas image, level by level, and each tree's share of it.
+    let texels = compose(&regions, &baked, width, height);
+    let mut texels_per_tree = vec![0u64; trees.last().map_or(0, |&t| t as usize + 1)];
+    for (region, &tree) in regions.iter().zip(&node_tree) {
+        texels_per_tree[tree as usize] += region.texels();
     }
 
     // Stage: the records in SPT order, and the bounds of the quads.
     let (mut bmin, mut bmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-    let (fw, fh) = (f64::from(width), f64::from(height));
     let mut planes = Vec::with_capacity(nodes.len());
     for &i in &spt.order {
         let (q, r, s) = (&quads[i as usize], &regions[i as usize], &spt.nodes[i as usize]);
@@ -775,16 +810,15 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
             bmin = bmin.min(corner);
             bmax = bmax.max(corner);
         }
-        let (cx, cy) = (f64::from(r.x + GUTTER), f64::from(r.y + GUTTER));
         let (leaf_first, leaf_count) = run(i as usize);
-        #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]")]
+        let (uv_min, uv_max) = r.uv(width, height);
         planes.push(PlaneRecord {
             center: centre.as_vec3().to_array(),
             axis_u: q.u.as_vec3().to_array(),
             axis_v: q.v.as_vec3().to_array(),
             image: 0,
-            uv_min: pack::unorm16x2((cx / fw) as f32, (cy / fh) as f32),
-            uv_max: pack::unorm16x2(((cx + f64::from(r.tw)) / fw) as f32, ((cy + f64::from(r.th)) / fh) as f32),
+            uv_min,
+            uv_max,
             lo: s.lo,
             hi: s.hi,
             leaf_first,
@@ -800,6 +834,7 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
         planes_per_level,
         leaves: leaf_count,
         texels_per_metre: density,
+        texels_per_tree,
     }))
 }
 
@@ -922,18 +957,27 @@ fn layout(quads: &[Quad], density: f32, max_texels: u32) -> (Vec<Region>, u32, u
         let t = (2.0 * half * f64::from(density)).ceil().clamp(1.0, f64::from(max_texels)) as u32;
         t
     };
-    let mut regions: Vec<Region> = quads
-        .iter()
-        .map(|q| {
-            let (tw, th) = (texels(q.u.length()), texels(q.v.length()));
-            Region { tw, th, rw: align(tw + 2 * GUTTER), rh: align(th + 2 * GUTTER), x: 0, y: 0 }
-        })
-        .collect();
+    let mut regions: Vec<Region> =
+        quads.iter().map(|q| Region::new(texels(q.u.length()), texels(q.v.length()))).collect();
+    let (width, height) = pack(&mut regions);
+    (regions, width, height)
+}
+
+/// Shelf-packs `regions` ([`shelf_pack`]) into an atlas a power of two wide (at least the
+/// widest region) and returns its size.
+fn pack(regions: &mut [Region]) -> (u32, u32) {
     let area: u64 = regions.iter().map(|r| u64::from(r.rw) * u64::from(r.rh)).sum();
     let widest = regions.iter().map(|r| r.rw).max().unwrap_or(ALIGN);
     #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a square root of a u64 area")]
     let side = (area as f64).sqrt().ceil() as u32;
     let width = side.next_power_of_two().max(widest).max(ALIGN);
+    (width, shelf_pack(regions, width))
+}
+
+/// Shelf-packs `regions` (tallest first, then widest, then in order) into an atlas `width`
+/// texels wide (a multiple of [`ALIGN`], at least the widest region), sets each region's place
+/// and returns the atlas's height.
+pub(crate) fn shelf_pack(regions: &mut [Region], width: u32) -> u32 {
     let mut order: Vec<usize> = (0..regions.len()).collect();
     order.sort_by(|&a, &b| regions[b].rh.cmp(&regions[a].rh).then(regions[b].rw.cmp(&regions[a].rw)).then(a.cmp(&b)));
     let (mut x, mut y, mut shelf) = (0u32, 0u32, 0u32);
@@ -949,16 +993,40 @@ fn layout(quads: &[Quad], density: f32, max_texels: u32) -> (Vec<Region>, u32, u
         x += r.rw;
         shelf = shelf.max(r.rh);
     }
-    (regions, width, align((y + shelf).max(1)))
+    align((y + shelf).max(1))
 }
 
-/// Draws the leaf triangles `triangles` (index and placed corners, relative to the origin of
-/// work) onto `quad` (module documentation) and returns the region's levels, RGBA8 sRGB, each
-/// `(rw >> l) × (rh >> l)`.
-fn bake(
+/// The atlas texels of all [`MIP_LEVELS`] levels, largest first, of a `width × height` atlas
+/// holding each region's levels from [`bake`] at its place; zero elsewhere.
+pub(crate) fn compose(regions: &[Region], baked: &[Vec<Vec<u8>>], width: u32, height: u32) -> Vec<u8> {
+    let mut texels = Vec::new();
+    for level in 0..MIP_LEVELS {
+        let (w, h) = ((width >> level) as usize, (height >> level) as usize);
+        let at = texels.len();
+        texels.resize(at + w * h * 4, 0);
+        let image = &mut texels[at..];
+        for (region, chain) in regions.iter().zip(baked) {
+            let (rx, ry, rw) =
+                ((region.x >> level) as usize, (region.y >> level) as usize, (region.rw >> level) as usize);
+            for (row, line) in chain[level as usize].chunks_exact(rw * 4).enumerate() {
+                let o = ((ry + row) * w + rx) * 4;
+                image[o..o + rw * 4].copy_from_slice(line);
+            }
+        }
+    }
+    texels
+}
+
+/// Draws the triangles `triangles` (index into `mesh.triangles` and placed corners, relative to
+/// the origin of work) onto `quad` (module documentation; `winner` keeps a sample where they
+/// overlap, by the distance from `plane`) and returns the region's levels, RGBA8 sRGB, each
+/// `(rw >> l) × (rh >> l)`. The sample at `quad.centre + s·u + t·v` lands at `((s + 1)/2,
+/// (t + 1)/2)` of the content rectangle, rows top to bottom (spec §6.10's texture coordinates).
+pub(crate) fn bake(
     mesh: &ImpostorMesh<'_>,
     triangles: impl Iterator<Item = (u32, [DVec3; 3])>,
     plane: &PlaneFit,
+    winner: Winner,
     quad: &Quad,
     region: &Region,
 ) -> Vec<Vec<u8>> {
@@ -999,8 +1067,13 @@ fn bake(
                     continue;
                 }
                 let i = sy * sw + sx;
+                // The sample's key: the least wins (ties: the first triangle).
+                let signed = w0 * dist[0] + w1 * dist[1] + w2 * dist[2];
                 #[expect(clippy::cast_possible_truncation, reason = "a distance in metres")]
-                let z = (w0 * dist[0] + w1 * dist[1] + w2 * dist[2]).abs() as f32;
+                let z = match winner {
+                    Winner::Nearest => signed.abs() as f32,
+                    Winner::Front => -signed as f32,
+                };
                 if z >= depth[i] {
                     continue;
                 }
@@ -1375,6 +1448,8 @@ mod tests {
         let (x0, y0) = ((u0 * atlas.width as f32).round() as usize, (v0 * atlas.height as f32).round() as usize);
         let (x1, y1) = ((u1 * atlas.width as f32).round() as usize, (v1 * atlas.height as f32).round() as usize);
         assert_eq!((x1 - x0, y1 - y0), (32, 32));
+        // That region is the tree's texel budget.
+        assert_eq!(out.texels_per_tree, [48 * 48]);
         let texel = |x: usize, y: usize| &level0[(y * atlas.width as usize + x) * 4..][..4];
         // The disc's middle is the texture's green, opaque (alpha scaled a little below 1 so the
         // filtered test covers the disc's area, not more); the corners transparent; the gutter

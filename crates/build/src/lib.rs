@@ -6,12 +6,14 @@
 //! threshold interval, so that every threshold draws an exact cut (spec §10).
 
 pub mod assemble;
+pub mod billboard;
 pub mod classify;
 pub mod demo;
 mod error;
 pub mod gilet;
 pub mod import;
 pub mod impostor;
+pub mod lod_chain;
 pub mod precision;
 pub mod prune;
 pub mod raster;
@@ -27,6 +29,7 @@ pub use demo::{DemoTreeConfig, demo_tree};
 pub use error::BuildError;
 pub use import::{content_hash, import_gltf, import_gltf_bytes, scene_name};
 pub use impostor::{ImpostorConfig, Impostors};
+pub use lod_chain::LodChainConfig;
 pub use prune::{PruneConfig, PruneOrder, PruneReport};
 pub use rng::SplitMix64;
 pub use spt::{FlattenError, Spt, SptNode, flatten};

@@ -1,0 +1,477 @@
+//! Baseline billboards (spec §6.13): per tree, one camera-facing quad and three crossed quads,
+//! each showing the whole tree (bark and leaves) baked from its full mesh, at the texel budget of
+//! the tree's impostor planes, in one atlas made as the impostor atlas is ([`crate::impostor`]).
+//!
+//! - **Axis**: vertical (`+Y` up) through the centre of the tree's bounds in `x` and `z`; the
+//!   quads' centre is the bounds' centre, their half-height `h` half the bounds' `y` extent, their
+//!   half-width `R` the largest horizontal distance of a vertex of the tree from the axis (each at
+//!   least half a millimetre, so no quad is degenerate).
+//! - **Quads**: `axis_v = (0, h, 0)` always. The facing quad has `axis_u = (R, 0, 0)`, normal
+//!   `axis_u × axis_v = +Z`; the runtime turns `axis_u` about the vertical towards the eye. The
+//!   crossed quads have `axis_u = R·(cos θ, 0, −sin θ)`, normal `(sin θ, 0, cos θ)`, for
+//!   `θ = 0°, 60°, 120°` about `+Y`.
+//! - **Images**: each quad's image is the tree projected orthographically along the quad's
+//!   normal, the front-most surface seen from the side the normal `axis_u × axis_v` points to
+//!   winning each sample (triangles are drawn front to back, so hidden ones are rarely shaded).
+//!   A viewer on that side, head along `axis_v`, sees `axis_u` to its right and the image
+//!   unmirrored, as the tree itself looks from there (the texel at `center + s·axis_u + t·axis_v` lies at `uv_min + ((s + 1)/2, (t + 1)/2)·(uv_max −
+//!   uv_min)`, spec §6.10, so the tree's foot, `t = −1`, is on the rectangle's top row). From the
+//!   other side a crossed quad shows the same silhouette, unmirrored, with the far side's
+//!   surface. Colour, coverage, mips (coverage-preserving alpha) and gutters are the impostor
+//!   atlas's, so the same shader draws both.
+//! - **Resolution**: the facing quad gets the tree's whole budget, each crossed quad a third of
+//!   it (so the atlas holds about twice the impostors' texels per tree). A quad's content keeps
+//!   the quad's aspect `R : h` (square texels) and is the size whose region (content, 4-texel
+//!   gutter, 16-texel alignment) is nearest to its budget in ratio (the largest content of
+//!   equal region). A quad's budget is at least [`MIN_QUAD_TEXELS`] (a 32 × 32 region), so a tree
+//!   whose budget is 0 (no leaves, hence no impostor planes) still gets images. If the atlas
+//!   would exceed [`MAX_ATLAS`] texels per side, every budget drops by 3/4 steps until it fits.
+//! - **Packing**: shelves as in the impostor atlas, at the width that wastes least (not a power
+//!   of two: with four large regions per tree that would leave up to half of the atlas empty).
+//!
+//! Everything is deterministic: quads are baked in parallel and collected in order.
+
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+use treelod_format::{BillboardRecord, billboard_kind};
+
+use crate::error::BuildError;
+use crate::impostor::{
+    ALIGN, Atlas, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, Winner, align, bake, compose, shelf_pack,
+};
+
+/// Crossed quads per tree.
+pub const CROSSED_QUADS: u32 = 3;
+
+/// The least texel budget of a quad: a 32 × 32 region (24 × 24 texels of content for a square
+/// quad).
+pub const MIN_QUAD_TEXELS: u64 = 32 * 32;
+
+/// Largest atlas side, texels: wgpu's default limit `max_texture_dimension_2d`.
+pub const MAX_ATLAS: u32 = 8192;
+
+/// Largest content side of one quad, texels.
+const MAX_CONTENT: u32 = 4096;
+
+/// What [`build_billboards`] returns.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Billboards {
+    /// Per tree with triangles, in tree order: its `FACING` record, then its three `CROSSED`
+    /// ones (0°, 60°, 120°); `image` 0: the caller sets the atlas's index.
+    pub records: Vec<BillboardRecord>,
+    /// The atlas every record samples.
+    pub atlas: Atlas,
+    /// Atlas texels of each tree's billboards, facing and crossed together (regions, gutter and
+    /// alignment included, level 0), per tree of the block; 0 for a tree without triangles.
+    pub texels_per_tree: Vec<u64>,
+    /// The facing quad's share of [`Self::texels_per_tree`].
+    pub facing_texels: Vec<u64>,
+    /// The crossed quads' share of [`Self::texels_per_tree`].
+    pub crossed_texels: Vec<u64>,
+}
+
+/// One quad to bake.
+struct Job {
+    tree: u32,
+    kind: u32,
+    /// The tree's centre, block space: the origin of work of its triangles.
+    centre: DVec3,
+    quad: Quad,
+    /// Its texel budget before any shrinking.
+    budget: u64,
+}
+
+/// Bakes the facing and crossed billboards of each of `trees` trees from `mesh`, whose triangles
+/// are all of the block's (bark and leaves) with their tree set (see the module documentation).
+/// `budget_texels[t]` is tree `t`'s texel budget (its impostors' texels, [`crate::Impostors`]'s
+/// `texels_per_tree`); a missing entry counts as 0. `None` when there are no triangles; a tree
+/// without triangles gets no records.
+///
+/// # Errors
+/// None yet: the signature leaves room for limits on the input.
+///
+/// # Panics
+/// If an index of `mesh` is out of range or a triangle's tree is not below `trees`.
+pub fn build_billboards(
+    mesh: &ImpostorMesh<'_>,
+    trees: u32,
+    budget_texels: &[u64],
+) -> Result<Option<Billboards>, BuildError> {
+    if mesh.triangles.is_empty() {
+        return Ok(None);
+    }
+    let position = |v: u32| Vec3::from_array(mesh.vertices[v as usize].position).as_dvec3();
+
+    // Stage: each tree's triangles.
+    let mut by_tree: Vec<Vec<u32>> = vec![Vec::new(); trees as usize];
+    for (i, t) in mesh.triangles.iter().enumerate() {
+        assert!(t.tree < trees, "triangle {i} is of tree {}, but the block has {trees}", t.tree);
+        #[expect(clippy::cast_possible_truncation, reason = "triangle counts fit u32")]
+        by_tree[t.tree as usize].push(i as u32);
+    }
+
+    // Stage: each tree's axis, extent and quads.
+    let mut jobs: Vec<Job> = Vec::new();
+    for (tree, tris) in by_tree.iter().enumerate() {
+        if tris.is_empty() {
+            continue;
+        }
+        #[expect(clippy::cast_possible_truncation, reason = "tree < trees: u32")]
+        let tree = tree as u32;
+        let corners = || tris.iter().flat_map(|&t| mesh.triangles[t as usize].v.map(position));
+        let (lo, hi) = corners().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p), hi.max(p)));
+        let centre = 0.5 * (lo + hi);
+        let radius = corners().map(|p| (p.x - centre.x).hypot(p.z - centre.z)).fold(0.0f64, f64::max).max(5e-4);
+        let half_height = (0.5 * (hi.y - lo.y)).max(5e-4);
+        let v = DVec3::new(0.0, half_height, 0.0);
+        let budget = budget_texels.get(tree as usize).copied().unwrap_or(0);
+        jobs.push(Job {
+            tree,
+            kind: billboard_kind::FACING,
+            centre,
+            quad: Quad { centre: DVec3::ZERO, u: DVec3::new(radius, 0.0, 0.0), v },
+            budget,
+        });
+        for k in 0..CROSSED_QUADS {
+            let angle = std::f64::consts::PI * f64::from(k) / f64::from(CROSSED_QUADS);
+            let (sin, cos) = angle.sin_cos();
+            jobs.push(Job {
+                tree,
+                kind: billboard_kind::CROSSED,
+                centre,
+                quad: Quad { centre: DVec3::ZERO, u: DVec3::new(cos, 0.0, -sin) * radius, v },
+                budget: budget / u64::from(CROSSED_QUADS),
+            });
+        }
+    }
+
+    // Stage: region sizes from the budgets, and their packing, shrinking until it fits.
+    let mut scale = 1.0f64;
+    let (regions, width, height) = loop {
+        let mut regions: Vec<Region> = jobs
+            .iter()
+            .map(|job| {
+                #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a positive texel count")]
+                let budget = (job.budget as f64 * scale) as u64;
+                let (tw, th) = content_size(budget, job.quad.u.length(), job.quad.v.length());
+                Region::new(tw, th)
+            })
+            .collect();
+        let (width, height) = pack_tight(&mut regions);
+        if (width <= MAX_ATLAS && height <= MAX_ATLAS) || scale < 1e-9 {
+            break (regions, width, height);
+        }
+        scale *= 0.75;
+    };
+
+    // Stage: bake each quad: the tree's triangles about its centre, front-most from the normal's
+    // side.
+    let baked: Vec<Vec<Vec<u8>>> = jobs
+        .par_iter()
+        .zip(&regions)
+        .map(|(job, region)| {
+            let normal = job.quad.u.cross(job.quad.v).normalize();
+            let plane = PlaneFit { normal, offset: 0.0 };
+            let corners = |t: u32| mesh.triangles[t as usize].v.map(|v| position(v) - job.centre);
+            // Front to back (by the nearest corner; ties in index order), so that the samples
+            // of the triangles behind fail the depth test before they are shaded.
+            let mut order: Vec<(f64, u32)> = by_tree[job.tree as usize]
+                .iter()
+                .map(|&t| (corners(t).iter().map(|p| p.dot(normal)).fold(f64::NEG_INFINITY, f64::max), t))
+                .collect();
+            order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            let triangles = order.into_iter().map(|(_, t)| (t, corners(t)));
+            bake(mesh, triangles, &plane, Winner::Front, &job.quad, region)
+        })
+        .collect();
+    let texels = compose(&regions, &baked, width, height);
+
+    // Stage: the records and each tree's texels.
+    let mut facing_texels = vec![0u64; trees as usize];
+    let mut crossed_texels = vec![0u64; trees as usize];
+    let mut records = Vec::with_capacity(jobs.len());
+    for (job, region) in jobs.iter().zip(&regions) {
+        let share = if job.kind == billboard_kind::FACING { &mut facing_texels } else { &mut crossed_texels };
+        share[job.tree as usize] += region.texels();
+        let (uv_min, uv_max) = region.uv(width, height);
+        records.push(BillboardRecord {
+            center: job.centre.as_vec3().to_array(),
+            axis_u: job.quad.u.as_vec3().to_array(),
+            axis_v: job.quad.v.as_vec3().to_array(),
+            image: 0,
+            uv_min,
+            uv_max,
+            tree: job.tree,
+            kind: job.kind,
+            reserved: [0; 2],
+        });
+    }
+    let texels_per_tree = facing_texels.iter().zip(&crossed_texels).map(|(f, c)| f + c).collect();
+    Ok(Some(Billboards {
+        records,
+        atlas: Atlas { width, height, mip_count: MIP_LEVELS, texels },
+        texels_per_tree,
+        facing_texels,
+        crossed_texels,
+    }))
+}
+
+/// Shelf-packs `regions` ([`shelf_pack`]) at the width, of up to 256 evenly spaced multiples of
+/// [`ALIGN`] from the widest region's to twice the side of a square of their area (and at most
+/// [`MAX_ATLAS`] where one fits), that gives the least atlas area (ties: the narrowest); returns
+/// the atlas's size. A power-of-two width, as the impostor atlas has, would leave up to half of
+/// the atlas empty: a tree's four regions are few and large.
+fn pack_tight(regions: &mut [Region]) -> (u32, u32) {
+    let area: u64 = regions.iter().map(Region::texels).sum();
+    let widest = regions.iter().map(|r| r.rw).max().unwrap_or(ALIGN).max(ALIGN);
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a square root of a u64 area")]
+    let side = (area as f64).sqrt().ceil() as u32;
+    let last = align(side.saturating_mul(2)).max(widest);
+    let step = align((last - widest) / 256).max(ALIGN);
+    let mut best: Option<(u64, u32)> = None;
+    for width in (widest..=last).step_by(step as usize).filter(|&w| w <= MAX_ATLAS || w == widest) {
+        let height = shelf_pack(regions, width);
+        let texels = u64::from(width) * u64::from(height);
+        if best.is_none_or(|(t, _)| texels < t) {
+            best = Some((texels, width));
+        }
+    }
+    let width = best.map_or(widest, |(_, w)| w);
+    (width, shelf_pack(regions, width))
+}
+
+/// Content texels across and down for a quad of half-extents `half_u × half_v` metres at
+/// `budget` texels (at least [`MIN_QUAD_TEXELS`]): the aspect of the quad, and the region
+/// ([`Region::new`]) nearest to the budget in ratio; of equal regions, the largest content.
+fn content_size(budget: u64, half_u: f64, half_v: f64) -> (u32, u32) {
+    let budget = budget.max(MIN_QUAD_TEXELS) as f64;
+    let aspect = half_v / half_u;
+    let mut best = (f64::INFINITY, 1, 1);
+    for tw in 1..=MAX_CONTENT {
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 1..=MAX_CONTENT")]
+        let th = (f64::from(tw) * aspect).round().clamp(1.0, f64::from(MAX_CONTENT)) as u32;
+        let texels = Region::new(tw, th).texels() as f64;
+        let miss = (texels / budget).ln().abs();
+        if miss <= best.0 {
+            best = (miss, tw, th);
+        }
+        if texels > 4.0 * budget {
+            break;
+        }
+    }
+    (best.1, best.2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::impostor::{LeafTriangle, Surface};
+    use crate::scene::{AlphaMode, Material};
+    use treelod_format::{VertexRecord, pack};
+
+    /// Opaque red, opaque blue and an invisible material (masked, alpha 0).
+    fn materials() -> [Material; 3] {
+        let colour = |base_color| Material { base_color, ..Material::default() };
+        let invisible = Material {
+            base_color: [1.0, 1.0, 1.0, 0.0],
+            alpha_mode: AlphaMode::Mask,
+            alpha_cutoff: 0.5,
+            ..Material::default()
+        };
+        [colour([1.0, 0.0, 0.0, 1.0]), colour([0.0, 0.0, 1.0, 1.0]), invisible]
+    }
+
+    /// An axis-aligned rectangle in the plane `z` = const: `x0..x1 × y0..y1`.
+    fn push_rect(
+        vertices: &mut Vec<VertexRecord>,
+        triangles: &mut Vec<LeafTriangle>,
+        [x0, x1, y0, y1, z]: [f32; 5],
+        material: u32,
+        tree: u32,
+    ) {
+        #[expect(clippy::cast_possible_truncation, reason = "a test mesh")]
+        let base = vertices.len() as u32;
+        for (x, y) in [(x0, y0), (x1, y0), (x1, y1), (x0, y1)] {
+            vertices.push(VertexRecord { position: [x, y, z], normal: 0, uv: [0.0; 2], color: u32::MAX });
+        }
+        triangles.push(LeafTriangle { v: [base, base + 1, base + 2], material, tree });
+        triangles.push(LeafTriangle { v: [base, base + 2, base + 3], material, tree });
+    }
+
+    /// A tree standing at `(dx, 0, 0)`: a red rectangle over `x ∈ [−1, 0]`, `y ∈ [0, 4]` at
+    /// `z = 0.6`, a blue one behind it at `z = −0.3`, and an invisible one over `x ∈ [0, 1]` at
+    /// `z = 0` that widens its bounds: the right half of a view from `+Z` is empty.
+    fn tree(vertices: &mut Vec<VertexRecord>, triangles: &mut Vec<LeafTriangle>, dx: f32, tree: u32) {
+        push_rect(vertices, triangles, [dx - 1.0, dx, 0.0, 4.0, -0.3], 1, tree);
+        push_rect(vertices, triangles, [dx - 1.0, dx, 0.0, 4.0, 0.6], 0, tree);
+        push_rect(vertices, triangles, [dx, dx + 1.0, 0.0, 4.0, 0.0], 2, tree);
+    }
+
+    fn build(vertices: &[VertexRecord], triangles: &[LeafTriangle], trees: u32, budget: &[u64]) -> Billboards {
+        let materials = materials();
+        let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
+        let mesh = ImpostorMesh { vertices, triangles, surfaces: &surfaces };
+        build_billboards(&mesh, trees, budget).unwrap().unwrap()
+    }
+
+    /// The content rectangle of a record in level 0: `(x0, y0, x1, y1)`, texels.
+    fn rect(atlas: &Atlas, record: &BillboardRecord) -> (usize, usize, usize, usize) {
+        let [u0, v0] = pack::unpack_unorm16x2(record.uv_min);
+        let [u1, v1] = pack::unpack_unorm16x2(record.uv_max);
+        let (w, h) = (atlas.width as f32, atlas.height as f32);
+        let px = |u: f32, size: f32| (u * size).round() as usize;
+        (px(u0, w), px(v0, h), px(u1, w), px(v1, h))
+    }
+
+    fn texel(atlas: &Atlas, x: usize, y: usize) -> [u8; 4] {
+        let i = (y * atlas.width as usize + x) * 4;
+        [atlas.texels[i], atlas.texels[i + 1], atlas.texels[i + 2], atlas.texels[i + 3]]
+    }
+
+    /// The level-0 texel of `record`'s image where the block-space point `p` projects.
+    fn texel_at(atlas: &Atlas, record: &BillboardRecord, p: Vec3) -> [u8; 4] {
+        let (c, u, v) =
+            (Vec3::from_array(record.center), Vec3::from_array(record.axis_u), Vec3::from_array(record.axis_v));
+        let (s, t) = ((p - c).dot(u) / u.length_squared(), (p - c).dot(v) / v.length_squared());
+        let (x0, y0, x1, y1) = rect(atlas, record);
+        let x = x0 as f32 + (s + 1.0) * 0.5 * (x1 - x0) as f32;
+        let y = y0 as f32 + (t + 1.0) * 0.5 * (y1 - y0) as f32;
+        texel(atlas, x.floor() as usize, y.floor() as usize)
+    }
+
+    const RED: [u8; 3] = [255, 0, 0];
+    const BLUE: [u8; 3] = [0, 0, 255];
+
+    #[test]
+    fn records_have_the_axis_extent_kind_and_order_of_the_module_documentation() {
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        tree(&mut vertices, &mut triangles, 0.0, 0);
+        let out = build(&vertices, &triangles, 1, &[20_000]);
+        let kinds: Vec<u32> = out.records.iter().map(|r| r.kind).collect();
+        assert_eq!(kinds, [billboard_kind::FACING, billboard_kind::CROSSED, billboard_kind::CROSSED, 1]);
+        // Bounds x ∈ [−1, 1], y ∈ [0, 4], z ∈ [−0.3, 0.6]: the axis at x = 0, z = 0.15; the
+        // farthest corners 1 across and 0.45 deep from it.
+        let radius = (1.0f32 + 0.45 * 0.45).sqrt();
+        for (k, r) in out.records.iter().enumerate() {
+            assert_eq!((r.tree, r.image, r.reserved), (0, 0, [0, 0]));
+            let (c, u, v) = (Vec3::from_array(r.center), Vec3::from_array(r.axis_u), Vec3::from_array(r.axis_v));
+            assert!(c.abs_diff_eq(Vec3::new(0.0, 2.0, 0.15), 1e-6), "{r:?}");
+            assert!(v.abs_diff_eq(Vec3::new(0.0, 2.0, 0.0), 1e-6), "{r:?}");
+            assert!((u.length() - radius).abs() < 1e-5 && u.y == 0.0, "{r:?}");
+            // Facing and the first crossed quad face +Z; the others are turned 60° and 120° about +Y.
+            let angle = std::f32::consts::FRAC_PI_3 * k.saturating_sub(1) as f32;
+            let normal = u.cross(v).normalize();
+            assert!(normal.abs_diff_eq(Vec3::new(angle.sin(), 0.0, angle.cos()), 1e-5), "record {k}: {normal}");
+        }
+    }
+
+    #[test]
+    fn images_show_the_front_most_surface_from_the_normal_side_unmirrored() {
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        tree(&mut vertices, &mut triangles, 0.0, 0);
+        let out = build(&vertices, &triangles, 1, &[20_000]);
+        let atlas = &out.atlas;
+        assert_eq!((atlas.width % 16, atlas.height % 16, atlas.mip_count), (0, 0, 5));
+        // Facing: the red rectangle hides the blue one; the tree's left half (−X, where the
+        // rectangles are) is covered and the right half empty: the image is not mirrored.
+        let facing = &out.records[0];
+        let (x0, y0, x1, y1) = rect(atlas, facing);
+        let mid = (x0 + x1) / 2;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let t = texel(atlas, x, y);
+                if x + 1 < mid && x > x0 + (x1 - x0) / 10 {
+                    assert_eq!(t[..3], RED, "({x}, {y}) of {x0}..{x1}");
+                    assert!(t[3] >= 128, "({x}, {y}): {t:?}");
+                } else if x > mid {
+                    assert!(t[3] == 0, "({x}, {y}) of {x0}..{x1}: {t:?}");
+                }
+            }
+        }
+        // Covered: the rectangles' width 1 of the quad's 2R, all of its height.
+        let covered =
+            (y0..y1).flat_map(|y| (x0..x1).map(move |x| (x, y))).filter(|&(x, y)| texel(atlas, x, y)[3] >= 128);
+        let (covered, all) = (covered.count() as f32, ((x1 - x0) * (y1 - y0)) as f32);
+        let radius = (1.0f32 + 0.45 * 0.45).sqrt();
+        let want = 0.5 / radius;
+        assert!((covered / all - want).abs() < 0.03, "{covered} of {all} texels covered, want {want}");
+        // The crossed quads: at 0° as the facing one; at 60° and 120° the two rectangles project
+        // apart, each where its points project, in its colour.
+        let red = |x: f32| Vec3::new(x, 2.0, 0.6);
+        let blue = |x: f32| Vec3::new(x, 2.0, -0.3);
+        for r in &out.records[..2] {
+            assert_eq!(texel_at(atlas, r, red(-0.5))[..3], RED);
+            assert_eq!(texel_at(atlas, r, blue(-0.5))[..3], RED);
+            assert_eq!(texel_at(atlas, r, Vec3::new(0.5, 2.0, 0.0))[3], 0);
+        }
+        for r in &out.records[2..] {
+            for x in [-0.8, -0.5, -0.2] {
+                assert_eq!(texel_at(atlas, r, red(x))[..3], RED, "{r:?}");
+                assert_eq!(texel_at(atlas, r, blue(x))[..3], BLUE, "{r:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_atlas_gives_each_quad_its_share_of_the_budget() {
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        tree(&mut vertices, &mut triangles, 0.0, 0);
+        tree(&mut vertices, &mut triangles, 5.0, 1);
+        let budget = [60_000, 0];
+        let out = build(&vertices, &triangles, 3, &budget);
+        // Two trees with triangles, the third none.
+        assert_eq!(out.records.len(), 8);
+        assert_eq!((out.texels_per_tree.len(), out.texels_per_tree[2]), (3, 0));
+        for t in 0..3 {
+            assert_eq!(out.texels_per_tree[t], out.facing_texels[t] + out.crossed_texels[t]);
+        }
+        // Within a few per cent of the budget for the facing quad and a third of it for each
+        // crossed one (16-texel steps of a 240-texel side).
+        let facing = out.facing_texels[0] as f64;
+        let crossed = out.crossed_texels[0] as f64;
+        assert!((facing / 60_000.0 - 1.0).abs() < 0.1, "{facing}");
+        assert!((crossed / 60_000.0 - 1.0).abs() < 0.15, "{crossed}");
+        // The tree without a budget gets the least size: a 32 × 32 region's worth per quad.
+        assert!((out.facing_texels[1] as f64 / 1024.0 - 1.0).abs() < 0.6, "{}", out.facing_texels[1]);
+        assert!((out.crossed_texels[1] as f64 / 3072.0 - 1.0).abs() < 0.6, "{}", out.crossed_texels[1]);
+        // Square texels: content aspect R : h.
+        let radius = (1.0f32 + 0.45 * 0.45).sqrt();
+        for r in &out.records {
+            let (x0, y0, x1, y1) = rect(&out.atlas, r);
+            let aspect = (x1 - x0) as f32 / (y1 - y0) as f32;
+            assert!((aspect / (radius / 2.0) - 1.0).abs() < 0.1, "{aspect}");
+        }
+        // The second tree's records stand at its place.
+        for (k, r) in out.records.iter().enumerate() {
+            let want = if k < 4 { 0 } else { 1 };
+            assert_eq!(r.tree, want);
+            assert!((r.center[0] - 5.0 * want as f32).abs() < 1e-5);
+        }
+        // Regions are disjoint.
+        let rects: Vec<_> = out.records.iter().map(|r| rect(&out.atlas, r)).collect();
+        for (i, a) in rects.iter().enumerate() {
+            for b in &rects[i + 1..] {
+                assert!(a.2 <= b.0 || b.2 <= a.0 || a.3 <= b.1 || b.3 <= a.1, "{a:?} overlaps {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_bake_is_the_same_on_any_number_of_threads_and_empty_input_gives_none() {
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        for t in 0..3 {
+            tree(&mut vertices, &mut triangles, 3.0 * t as f32, t);
+        }
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| build(&vertices, &triangles, 3, &[30_000, 10_000, 5_000]))
+        };
+        let one = run(1);
+        assert_eq!(one, run(3));
+        assert_eq!(one.records.len(), 12);
+        let materials = materials();
+        let surfaces = [Surface { material: &materials[0], image: None }];
+        let empty = ImpostorMesh { vertices: &vertices, triangles: &[], surfaces: &surfaces };
+        assert_eq!(build_billboards(&empty, 1, &[100]).unwrap(), None);
+    }
+}

@@ -1,0 +1,626 @@
+//! Baseline: discrete LoD chains from a general mesh simplifier (spec §6.12). This is what a
+//! user without treelod gets from meshoptimizer (the `meshopt` crate, meshoptimizer 1.3): for
+//! each tree, a few levels that keep a share of its source triangles (by default 50 %, 25 %,
+//! 10 %, 5 % and 1 %). Each level has a geometric error in metres, so that a runtime can switch
+//! levels by projected size with treelod's pixel thresholds.
+//!
+//! - **Groups.** A tree's triangles are grouped by material and class (bark, leaf), in ascending
+//!   order, and each group is simplified on its own, as gltfpack simplifies each primitive on its
+//!   own. A group of `n` triangles aims at `max(1, round(fraction·n))` triangles. A level is the
+//!   union of its groups, so it aims at about `fraction` of the tree's triangles.
+//! - **Welding.** Inside a group, vertices with the same position (bit for bit; `+0` and `−0` are
+//!   equal) become one vertex before simplifying. glTF splits vertices at UV and normal seams,
+//!   and meshoptimizer collapses seam vertices only along their seams. On a flat-shaded model,
+//!   every triangle has three vertices of its own, and nothing can collapse. Measured without
+//!   welding: the Quaternius tree's bark stayed at all of its 2,360 triangles at every level, the
+//!   orchid's at 4,584 of 4,736, and the jacaranda's at 15.8k of 26k at 1 %. With welding, all
+//!   three reach their targets or go a little under, apart from the jacaranda's trunk at 1 %.
+//!   A welded vertex is written as the lowest input id of its position in the group, so every
+//!   output index is an input vertex: the container stores a chain as triangles over its
+//!   existing vertex array (§6.12). At a former seam, a triangle then takes that vertex's normal
+//!   and UV; the baseline does not try to keep attributes.
+//! - **Compact buffers.** meshoptimizer sees only the group's welded vertices, renumbered from
+//!   0. Its cost and its extent (the unit of relative errors) then follow the group, not the
+//!   block.
+//! - **Bark**: `meshopt_simplify` with `ErrorAbsolute`, and an error limit equal to the group's
+//!   extent (`meshopt_simplifyScale`). That is no practical limit, so levels reach their targets
+//!   wherever topology allows. There is no `Prune`, although gltfpack sets it by default: on the
+//!   seven test models it changed only the pine's two coarsest bark levels, by 1 and 6
+//!   triangles, and it can overshoot to nothing. Its clean-up pass removes every piece under a
+//!   growing cutoff at once: aiming at 1 %, it removed all 12,860 triangles of the jacaranda's
+//!   trunk, and 2,000 leaf cards whose faces are stored twice all vanished together.
+//! - **Foliage** does what gltfpack does with `-sa` (aggressive): the regular simplifier as for
+//!   bark first. When that stays above the target, `meshopt_simplifySloppy` runs on its result.
+//!   It gets an error limit of 1, its largest, so it gets to or under the target whenever it
+//!   returns anything. Its error is relative to the buffer's extent; multiplied by
+//!   `meshopt_simplifyScale` of the same buffer it becomes metres, and it adds to the regular
+//!   pass's error. meshoptimizer 1.3's regular simplifier reduces disconnected leaf cards itself:
+//!   border collapses turn a quad into a triangle, then remove it. So on all seven models the
+//!   sloppy fallback never ran. It is there for foliage that cannot collapse, e.g. faces stored
+//!   twice. If the sloppy result is empty (a target below any grid's count), the regular result
+//!   stays.
+//! - **From the source.** Each level is simplified from the group's source triangles, not from
+//!   the previous level, as a gltfpack user makes each LoD with its own `-si` run. The error
+//!   meshoptimizer returns is then measured against the source itself. A chain that feeds each
+//!   level the previous one, as meshoptimizer's README suggests, has to sum the step errors to
+//!   bound the error. Measured at 1 %, those sums were 2 to 5 times the direct errors (the
+//!   willow's leaves: 0.22 m against 0.045 m), and a runtime would switch levels later than it
+//!   needs to. This costs about 2.3 times the simplification work of a chain, but the levels are
+//!   independent and run in parallel. The 669k-triangle maple takes 1.0 s on 2 cores.
+//! - **Error** of a level: the largest of its groups' errors, in metres. It is meshoptimizer's
+//!   quadric distance of the simplified surface from the source, and it is one-sided: a removed
+//!   leaf card counts for its own size, not for the hole it leaves. So foliage levels keep small
+//!   errors however many cards they drop: the willow's leaves measure 4.5 cm at 50 % and at 1 %.
+//!   Along the chain a running maximum keeps the error non-decreasing, because levels are
+//!   simplified independently and a coarser level can come out with a smaller error.
+//! - **Guards.** Input triangles with a repeated vertex (after welding) or a non-finite corner
+//!   are ignored; degenerate output triangles are dropped. A group's level never has more
+//!   triangles than its previous level and is never empty: such a result is replaced by the
+//!   group's previous level (or its source). So no group vanishes from a level. A tree with no
+//!   usable triangles gets no levels.
+//!
+//! Deterministic: meshoptimizer is, hash maps are only looked up, never iterated, and rayon runs
+//! over `(group, level)` pairs collected in order. The same input gives the same output for any
+//! thread count.
+
+use std::collections::HashMap;
+
+use meshopt::{SimplifyOptions, VertexDataAdapter};
+use rayon::prelude::*;
+use treelod_format::{Setting, VertexRecord};
+
+use crate::error::BuildError;
+
+/// Default shares of a tree's source triangles, finest level first.
+pub const DEFAULT_FRACTIONS: [f32; 5] = [0.5, 0.25, 0.1, 0.05, 0.01];
+
+/// Most levels a chain may have.
+pub const MAX_LEVELS: usize = 16;
+
+/// Error limit of the regular simplifier, as a share of the group's extent: 1 is no practical
+/// limit (a deviation as large as the whole group).
+const REGULAR_LIMIT: f32 = 1.0;
+
+/// Error limit of the sloppy simplifier, relative to the group's extent: its largest value, with
+/// which it always gets to or under the target.
+const SLOPPY_LIMIT: f32 = 1.0;
+
+/// A triangle of the block as the chain builder sees it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChainTriangle {
+    /// Indices into the block's vertices.
+    pub v: [u32; 3],
+    /// Material id; the output triangles keep it.
+    pub material: u32,
+    /// Tree id; each tree gets its own chain.
+    pub tree: u32,
+    /// Foliage (`true`) or bark (`false`): selects the simplifier.
+    pub leaf: bool,
+}
+
+/// Tunables of the chains (recorded in the container's settings as `baselines.*`, spec §7.1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LodChainConfig {
+    /// Share of each tree's source triangles that each level aims at, finest first: each in
+    /// `(0, 1)`, strictly decreasing, 1 to 16 of them. Default `[0.5, 0.25, 0.1, 0.05, 0.01]`.
+    pub fractions: Vec<f32>,
+}
+
+impl Default for LodChainConfig {
+    fn default() -> Self {
+        Self { fractions: DEFAULT_FRACTIONS.to_vec() }
+    }
+}
+
+impl LodChainConfig {
+    /// Checks the ranges documented on the fields.
+    ///
+    /// # Errors
+    /// [`BuildError::Setting`] naming the field.
+    pub fn validate(&self) -> Result<(), BuildError> {
+        let f = &self.fractions;
+        if f.is_empty()
+            || f.len() > MAX_LEVELS
+            || f.iter().any(|&x| !(x > 0.0 && x < 1.0))
+            || f.windows(2).any(|w| w[1] >= w[0])
+        {
+            return Err(BuildError::Setting(format!(
+                "LoD chain fractions {f:?}: 1 to {MAX_LEVELS} of them, strictly decreasing, each in (0, 1)"
+            )));
+        }
+        Ok(())
+    }
+
+    /// The settings to record in the container's metadata (spec §7.1), e.g.
+    /// `baselines.lod_fractions = 0.5,0.25,0.1,0.05,0.01`.
+    #[must_use]
+    pub fn settings(&self) -> Vec<Setting> {
+        let fractions: Vec<String> = self.fractions.iter().map(f32::to_string).collect();
+        vec![Setting { key: "baselines.lod_fractions".into(), value: fractions.join(",") }]
+    }
+}
+
+/// One level of one tree's chain.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChainLevel {
+    /// Tree id, as in the input triangles.
+    pub tree: u32,
+    /// Position in the tree's chain, 0 the finest.
+    pub level: u32,
+    /// Share of the tree's source triangles aimed at, from [`LodChainConfig::fractions`].
+    pub fraction: f32,
+    /// Geometric error against the source, metres: finite, `≥ 0`, non-decreasing along the chain.
+    pub error: f32,
+    /// Triangles as indices into the input vertices, each with its material.
+    pub triangles: Vec<([u32; 3], u32)>,
+}
+
+/// A group's key: tree, material, leaf; the sort order of groups.
+type GroupKey = (u32, u32, bool);
+
+/// A group's triangles over a compact buffer of its welded vertices.
+struct Local {
+    /// Input id written for each local vertex: the lowest input id of its position.
+    ids: Vec<u32>,
+    /// Position of each local vertex, metres.
+    positions: Vec<[f32; 3]>,
+    /// The group's usable triangles, three local indices each.
+    indices: Vec<u32>,
+}
+
+/// Builds the LoD chain of every tree of a block (see the module documentation). The levels
+/// come sorted by `(tree, level)`; each tree that has usable triangles gets one level per
+/// fraction.
+///
+/// # Errors
+/// [`BuildError::Setting`] for a bad `config`.
+///
+/// # Panics
+/// If a triangle indexes past `vertices`.
+pub fn build_lod_chain(
+    vertices: &[VertexRecord],
+    triangles: &[ChainTriangle],
+    config: &LodChainConfig,
+) -> Result<Vec<ChainLevel>, BuildError> {
+    config.validate()?;
+    let fractions = &config.fractions;
+
+    // Stage: group triangles by (tree, material, class), in that order.
+    let mut keys: Vec<GroupKey> = triangles.iter().map(|t| (t.tree, t.material, t.leaf)).collect();
+    keys.sort_unstable();
+    keys.dedup();
+    let mut groups: Vec<Vec<[u32; 3]>> = vec![Vec::new(); keys.len()];
+    for t in triangles {
+        assert!(t.v.iter().all(|&v| (v as usize) < vertices.len()), "triangle {:?} indexes past the vertices", t.v);
+        if let Ok(g) = keys.binary_search(&(t.tree, t.material, t.leaf)) {
+            groups[g].push(t.v);
+        }
+    }
+
+    // Stage: weld each group into a compact buffer.
+    let locals: Vec<Local> = groups.par_iter().map(|tris| weld(vertices, tris)).collect();
+
+    // Stage: simplify every (group, level) from the group's source.
+    let jobs: Vec<(usize, usize)> = (0..keys.len()).flat_map(|g| (0..fractions.len()).map(move |l| (g, l))).collect();
+    let simplified: Vec<(Vec<u32>, f32)> =
+        jobs.par_iter().map(|&(g, l)| simplify_level(&locals[g], keys[g].2, fractions[l])).collect();
+
+    // Stage: each tree's levels, the union of its groups, with the running maximum of errors.
+    let mut out: Vec<ChainLevel> = Vec::new();
+    let mut first = 0;
+    while first < keys.len() {
+        let tree = keys[first].0;
+        let end = first + keys[first..].iter().take_while(|k| k.0 == tree).count();
+        let range = first..end;
+        first = end;
+        if locals[range.clone()].iter().all(|l| l.indices.is_empty()) {
+            continue;
+        }
+        // Each group's latest level: its source before level 0.
+        let mut kept: Vec<(&[u32], f32)> = locals[range.clone()].iter().map(|l| (l.indices.as_slice(), 0.0)).collect();
+        let mut running = 0.0f32;
+        for (level, &fraction) in fractions.iter().enumerate() {
+            let mut error = running;
+            let mut tris: Vec<([u32; 3], u32)> = Vec::new();
+            for (k, g) in range.clone().enumerate() {
+                // A result that is empty or larger than the group's previous level keeps that one.
+                let (indices, e) = &simplified[g * fractions.len() + level];
+                if !indices.is_empty() && indices.len() <= kept[k].0.len() {
+                    kept[k] = (indices.as_slice(), *e);
+                }
+                let (indices, e) = kept[k];
+                error = error.max(e);
+                let ids = &locals[g].ids;
+                tris.extend(
+                    indices
+                        .chunks_exact(3)
+                        .map(|c| [ids[c[0] as usize], ids[c[1] as usize], ids[c[2] as usize]])
+                        .filter(|v| v[0] != v[1] && v[1] != v[2] && v[2] != v[0])
+                        .map(|v| (v, keys[g].1)),
+                );
+            }
+            // meshoptimizer's errors are finite for finite input; keep the spec's promise anyway.
+            if !error.is_finite() {
+                error = f32::MAX;
+            }
+            running = error;
+            #[expect(clippy::cast_possible_truncation, reason = "at most MAX_LEVELS levels")]
+            out.push(ChainLevel { tree, level: level as u32, fraction, error, triangles: tris });
+        }
+    }
+    Ok(out)
+}
+
+/// Welds a group's vertices by exact position into a compact buffer, dropping triangles with a
+/// repeated (welded) vertex or a non-finite corner.
+fn weld(vertices: &[VertexRecord], tris: &[[u32; 3]]) -> Local {
+    let mut local = Local { ids: Vec::new(), positions: Vec::new(), indices: Vec::with_capacity(tris.len() * 3) };
+    let mut by_position: HashMap<[u32; 3], u32> = HashMap::new();
+    for tri in tris {
+        let corners = tri.map(|v| vertices[v as usize].position);
+        if corners.iter().flatten().any(|x| !x.is_finite()) {
+            continue;
+        }
+        let welded = tri.map(|v| {
+            let p = vertices[v as usize].position;
+            // +0 and −0 are the same position.
+            let key = p.map(|x| if x == 0.0 { 0 } else { x.to_bits() });
+            #[expect(clippy::cast_possible_truncation, reason = "no more local vertices than u32 input ids")]
+            let next = local.ids.len() as u32;
+            let l = *by_position.entry(key).or_insert(next);
+            if l == next {
+                local.ids.push(v);
+                local.positions.push(p);
+            } else {
+                local.ids[l as usize] = local.ids[l as usize].min(v);
+            }
+            l
+        });
+        if welded[0] != welded[1] && welded[1] != welded[2] && welded[2] != welded[0] {
+            local.indices.extend_from_slice(&welded);
+        }
+    }
+    local
+}
+
+/// Simplifies a group from its source towards `fraction` of its triangles: the result (local
+/// indices, possibly none) and its error against the source, metres.
+fn simplify_level(local: &Local, leaf: bool, fraction: f32) -> (Vec<u32>, f32) {
+    let count = local.indices.len() / 3;
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "in 0..=count")]
+    let target = ((f64::from(fraction) * count as f64).round() as usize).max(1);
+    if count <= target {
+        return (local.indices.clone(), 0.0);
+    }
+    let adapter = VertexDataAdapter::new(meshopt::typed_to_bytes(&local.positions), size_of::<[f32; 3]>(), 0)
+        .expect("a [f32; 3] buffer divides into 12-byte vertices");
+    // Metres per unit of relative error: the group's extent.
+    let scale = meshopt::simplify_scale(&adapter);
+
+    // Stage: the regular simplifier, with no practical error limit.
+    let mut error = 0.0f32;
+    let mut result = meshopt::simplify(
+        &local.indices,
+        &adapter,
+        target * 3,
+        REGULAR_LIMIT * scale,
+        SimplifyOptions::ErrorAbsolute,
+        Some(&mut error),
+    );
+
+    // Stage: foliage still above the target goes on with the sloppy simplifier (gltfpack -sa).
+    if leaf && result.len() / 3 > target {
+        let mut relative = 0.0f32;
+        let sloppy = meshopt::simplify_sloppy(&result, &adapter, target * 3, SLOPPY_LIMIT, Some(&mut relative));
+        if !sloppy.is_empty() {
+            result = sloppy;
+            error += relative * scale;
+        }
+    }
+    (result, error)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashSet;
+
+    use super::*;
+    use crate::classify::{ClassifyOptions, classify};
+    use crate::rng::SplitMix64;
+    use crate::scene::Class;
+
+    /// A block under construction: vertices with positions only, and chain triangles.
+    #[derive(Default)]
+    struct Block {
+        vertices: Vec<VertexRecord>,
+        triangles: Vec<ChainTriangle>,
+    }
+
+    impl Block {
+        /// Appends a mesh (local indices) as one (tree, material, class) group.
+        fn push(&mut self, positions: &[[f32; 3]], tris: &[[u32; 3]], tree: u32, material: u32, leaf: bool) {
+            let base = u32::try_from(self.vertices.len()).expect("small test meshes");
+            self.vertices
+                .extend(positions.iter().map(|&position| VertexRecord { position, ..VertexRecord::default() }));
+            self.triangles.extend(tris.iter().map(|t| ChainTriangle { v: t.map(|i| base + i), material, tree, leaf }));
+        }
+
+        fn chain(&self, fractions: &[f32]) -> Vec<ChainLevel> {
+            build_lod_chain(&self.vertices, &self.triangles, &LodChainConfig { fractions: fractions.to_vec() })
+                .expect("valid config")
+        }
+    }
+
+    /// A flat `n × n` grid of quads in the XZ plane, 1 m cells.
+    fn grid(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let positions = (0..=n).flat_map(|z| (0..=n).map(move |x| [x as f32, 0.0, z as f32])).collect();
+        let id = |x: u32, z: u32| z * (n + 1) + x;
+        let tris = (0..n)
+            .flat_map(|z| {
+                (0..n).flat_map(move |x| {
+                    [[id(x, z), id(x, z + 1), id(x + 1, z)], [id(x + 1, z), id(x, z + 1), id(x + 1, z + 1)]]
+                })
+            })
+            .collect();
+        (positions, tris)
+    }
+
+    /// An open tube along Y: `sides` around, `rings` segments of 0.5 m, radius 0.3 m.
+    fn tube(sides: u32, rings: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let positions = (0..=rings)
+            .flat_map(|r| {
+                (0..sides).map(move |s| {
+                    let a = std::f32::consts::TAU * s as f32 / sides as f32;
+                    [0.3 * a.cos(), 0.5 * r as f32, 0.3 * a.sin()]
+                })
+            })
+            .collect();
+        let id = |s: u32, r: u32| r * sides + s % sides;
+        let tris = (0..rings)
+            .flat_map(|r| {
+                (0..sides).flat_map(move |s| {
+                    [[id(s, r), id(s, r + 1), id(s + 1, r)], [id(s + 1, r), id(s, r + 1), id(s + 1, r + 1)]]
+                })
+            })
+            .collect();
+        (positions, tris)
+    }
+
+    /// `count` disconnected 10 cm leaf quads scattered in a 10 m box, each face stored `copies`
+    /// times.
+    fn leaf_quads(count: u32, copies: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let mut rng = SplitMix64(seed);
+        let mut positions = Vec::new();
+        let mut tris = Vec::new();
+        for q in 0..count {
+            let c = [rng.range(0.0, 10.0), rng.range(0.0, 10.0), rng.range(0.0, 10.0)];
+            positions
+                .extend([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]].map(|[dx, dy]| [c[0] + dx, c[1] + dy, c[2]]));
+            let b = 4 * q;
+            for _ in 0..copies {
+                tris.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+            }
+        }
+        (positions, tris)
+    }
+
+    /// Checks the invariants of one tree's levels: numbered in order, the configured fractions,
+    /// finite non-decreasing errors; and each level's count near `fraction × source` (`groups`
+    /// rounding slack, and up to 30 % under, since meshoptimizer's passes overshoot a little).
+    fn check_tree(levels: &[ChainLevel], tree: u32, fractions: &[f32], source: usize, groups: usize) {
+        assert_eq!(levels.len(), fractions.len());
+        let mut previous = 0.0;
+        for (l, (level, &fraction)) in levels.iter().zip(fractions).enumerate() {
+            assert_eq!((level.tree, level.level as usize, level.fraction), (tree, l, fraction));
+            assert!(level.error.is_finite() && level.error >= previous, "level {l}: {} after {previous}", level.error);
+            previous = level.error;
+            let target = f64::from(fraction) * source as f64;
+            let count = level.triangles.len() as f64;
+            assert!(count <= target * 1.02 + groups as f64, "level {l}: {count} triangles for {target}");
+            assert!(count >= target * 0.7, "level {l}: {count} triangles for {target}");
+        }
+    }
+
+    #[test]
+    fn grid_and_tube_reach_their_fractions() {
+        let mut block = Block::default();
+        let (p, t) = grid(48);
+        block.push(&p, &t, 0, 0, false);
+        let (p, t) = tube(16, 64);
+        block.push(&p, &t, 1, 0, false);
+        let levels = block.chain(&DEFAULT_FRACTIONS);
+        assert_eq!(levels.len(), 10);
+        check_tree(&levels[..5], 0, &DEFAULT_FRACTIONS, 48 * 48 * 2, 1);
+        check_tree(&levels[5..], 1, &DEFAULT_FRACTIONS, 16 * 64 * 2, 1);
+        // A flat grid simplifies without leaving its plane: what error there is is rounding in
+        // meshoptimizer's quadrics (the square root of a tiny residue), under 10⁻⁴ of the 48 m grid.
+        let errors: Vec<f32> = levels.iter().map(|l| l.error).collect();
+        assert!(errors[..5].iter().all(|&e| e < 48e-4), "{errors:?}");
+        // The tube cannot: its coarse levels cut corners, by less than its diameter.
+        assert!(levels[9].error > 1e-3 && levels[9].error < 0.6, "{errors:?}");
+    }
+
+    #[test]
+    fn disconnected_leaf_quads_reach_their_fractions() {
+        let mut block = Block::default();
+        let (p, t) = leaf_quads(2000, 1, 3);
+        block.push(&p, &t, 0, 0, true);
+        let levels = block.chain(&DEFAULT_FRACTIONS);
+        check_tree(&levels, 0, &DEFAULT_FRACTIONS, 4000, 1);
+        // Removing a card costs its own size (14 cm diagonal) in meshoptimizer's error.
+        let errors: Vec<f32> = levels.iter().map(|l| l.error).collect();
+        assert!(errors.iter().all(|&e| e > 0.0 && e < 0.15), "{errors:?}");
+    }
+
+    #[test]
+    fn foliage_the_regular_simplifier_cannot_collapse_falls_back_to_sloppy() {
+        // Faces stored twice lock meshoptimizer's regular simplifier: as bark nothing changes.
+        let (p, t) = leaf_quads(2000, 2, 4);
+        let mut bark = Block::default();
+        bark.push(&p, &t, 0, 0, false);
+        let levels = bark.chain(&[0.1]);
+        assert_eq!((levels[0].triangles.len(), levels[0].error), (8000, 0.0));
+        // As foliage the sloppy pass takes it to the target.
+        let mut leaves = Block::default();
+        leaves.push(&p, &t, 0, 0, true);
+        let levels = leaves.chain(&[0.1]);
+        // The sloppy simplifier also merges the copies, so it lands well under the target.
+        let count = levels[0].triangles.len();
+        assert!((300..=800).contains(&count), "{count} triangles for 800");
+        assert!(levels[0].error > 0.0 && levels[0].error < 5.0, "{}", levels[0].error);
+    }
+
+    #[test]
+    fn seams_are_welded_to_the_lowest_input_vertex() {
+        // The grid again, with the vertices of column 24 split: the triangles right of it use
+        // copies with higher ids, as glTF splits vertices at a UV seam.
+        let n = 48;
+        let (p, t) = grid(n);
+        let mut split_p = p.clone();
+        let mut copy = HashMap::new();
+        for (i, q) in p.iter().enumerate() {
+            if q[0] == 24.0 {
+                copy.insert(i as u32, split_p.len() as u32);
+                split_p.push(*q);
+            }
+        }
+        let split_t: Vec<[u32; 3]> = t
+            .iter()
+            .map(|tri| {
+                let right = tri.iter().any(|&v| p[v as usize][0] > 24.0);
+                tri.map(|v| if right { copy.get(&v).copied().unwrap_or(v) } else { v })
+            })
+            .collect();
+        let mut plain = Block::default();
+        plain.push(&p, &t, 0, 0, false);
+        let mut split = Block::default();
+        split.push(&split_p, &split_t, 0, 0, false);
+        let levels = split.chain(&DEFAULT_FRACTIONS);
+        assert_eq!(levels, plain.chain(&DEFAULT_FRACTIONS));
+        let used: HashSet<u32> = split_t.iter().flatten().copied().collect();
+        for level in &levels {
+            for &(v, _) in &level.triangles {
+                assert!(v.iter().all(|&i| used.contains(&i) && (i as usize) < p.len()), "{v:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn trees_and_materials_stay_apart() {
+        let mut block = Block::default();
+        let (p, t) = grid(20);
+        block.push(&p, &t, 5, 0, false);
+        let (p, t) = leaf_quads(500, 1, 5);
+        block.push(&p, &t, 5, 2, true);
+        let (p, t) = tube(8, 30);
+        block.push(&p, &t, 2, 1, false);
+        let (p, t) = leaf_quads(300, 1, 6);
+        block.push(&p, &t, 2, 2, true);
+        let mut group_of: HashMap<u32, (u32, u32)> = HashMap::new();
+        for t in &block.triangles {
+            for v in t.v {
+                group_of.insert(v, (t.tree, t.material));
+            }
+        }
+        let levels = block.chain(&DEFAULT_FRACTIONS);
+        let order: Vec<(u32, u32)> = levels.iter().map(|l| (l.tree, l.level)).collect();
+        assert_eq!(order, [2, 5].iter().flat_map(|&t| (0..5).map(move |l| (t, l))).collect::<Vec<_>>());
+        check_tree(&levels[..5], 2, &DEFAULT_FRACTIONS, 8 * 30 * 2 + 600, 2);
+        check_tree(&levels[5..], 5, &DEFAULT_FRACTIONS, 20 * 20 * 2 + 1000, 2);
+        for level in &levels {
+            let mut materials = HashSet::new();
+            for &(v, material) in &level.triangles {
+                assert!(v.iter().all(|i| group_of[i] == (level.tree, material)), "{v:?} in tree {}", level.tree);
+                materials.insert(material);
+            }
+            // Every group keeps at least one triangle.
+            assert_eq!(materials.len(), 2);
+        }
+    }
+
+    #[test]
+    fn config_is_validated_and_recorded() {
+        assert!(LodChainConfig::default().validate().is_ok());
+        for bad in [
+            vec![],
+            vec![0.5, 0.5],
+            vec![0.25, 0.5],
+            vec![1.0, 0.5],
+            vec![0.5, 0.0],
+            vec![-0.1],
+            vec![f32::NAN],
+            vec![0.9; 1].into_iter().chain((1..17).map(|i| 0.9 / (i as f32 + 1.0))).collect(),
+        ] {
+            let config = LodChainConfig { fractions: bad };
+            assert!(matches!(config.validate(), Err(BuildError::Setting(_))), "{config:?}");
+            assert!(build_lod_chain(&[], &[], &config).is_err());
+        }
+        let sixteen: Vec<f32> = (0..16).map(|i| 0.9 / (i as f32 + 1.0)).collect();
+        assert!(LodChainConfig { fractions: sixteen }.validate().is_ok());
+        let settings = LodChainConfig::default().settings();
+        assert_eq!(settings.len(), 1);
+        assert_eq!(
+            (settings[0].key.as_str(), settings[0].value.as_str()),
+            ("baselines.lod_fractions", "0.5,0.25,0.1,0.05,0.01")
+        );
+    }
+
+    #[test]
+    fn unusable_trees_get_no_levels() {
+        assert!(build_lod_chain(&[], &[], &LodChainConfig::default()).expect("valid").is_empty());
+        let mut block = Block::default();
+        let (p, t) = grid(4);
+        block.push(&p, &t, 1, 0, false);
+        // Tree 0: a repeated index, and a non-finite corner.
+        block.push(&[[0.0; 3], [1.0, 0.0, 0.0], [f32::NAN, 0.0, 0.0]], &[[0, 0, 1], [0, 1, 2]], 0, 0, true);
+        let levels = block.chain(&[0.5]);
+        assert_eq!(levels.len(), 1);
+        assert_eq!(levels[0].tree, 1);
+    }
+
+    #[test]
+    #[should_panic(expected = "indexes past the vertices")]
+    fn an_index_past_the_vertices_panics() {
+        let triangle = ChainTriangle { v: [0, 1, 3], material: 0, tree: 0, leaf: false };
+        let _ = build_lod_chain(&[VertexRecord::default(); 3], &[triangle], &LodChainConfig::default());
+    }
+
+    /// The demo tree as chain triangles: parts appended, classified as the build does.
+    fn demo_block() -> Block {
+        let scene = crate::demo::demo_tree(&crate::DemoTreeConfig::default());
+        let classes = classify(&scene, &ClassifyOptions::default());
+        let mut block = Block::default();
+        for (part, class) in scene.parts.iter().zip(&classes) {
+            let material = u32::try_from(part.material).expect("few materials");
+            block.push(&part.positions, &part.triangles, 0, material, class.class == Class::Leaf);
+        }
+        block
+    }
+
+    #[test]
+    fn demo_tree_chain() {
+        let block = demo_block();
+        let leaves = block.triangles.iter().filter(|t| t.leaf).count();
+        assert!(leaves > 0 && leaves < block.triangles.len());
+        let levels = block.chain(&DEFAULT_FRACTIONS);
+        check_tree(&levels, 0, &DEFAULT_FRACTIONS, block.triangles.len(), 2);
+        let errors: Vec<f32> = levels.iter().map(|l| l.error).collect();
+        assert!(levels[4].error > 0.0 && levels[4].error < 4.0, "{errors:?}");
+    }
+
+    #[test]
+    fn deterministic_for_any_thread_count() {
+        let mut block = demo_block();
+        let (p, t) = leaf_quads(800, 1, 9);
+        block.push(&p, &t, 1, 7, true);
+        let (p, t) = tube(12, 40);
+        block.push(&p, &t, 1, 3, false);
+        let run = || block.chain(&DEFAULT_FRACTIONS);
+        let reference = run();
+        assert_eq!(run(), reference);
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
+            assert_eq!(pool.install(run), reference, "{threads} threads");
+        }
+    }
+}
