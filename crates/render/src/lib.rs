@@ -77,7 +77,7 @@ mod textures;
 
 pub use camera::Camera;
 pub use renderer::{
-    DebugView, DrawSource, FrameStats, Instance, ModelId, Pruning, RecordedDraw, RenderError, Renderer,
+    Baseline, DebugView, DrawSource, FrameStats, Instance, ModelId, Pruning, RecordedDraw, RenderError, Renderer,
     RendererFormats, Settings,
 };
-pub use treelod_runtime::{Hysteresis, PruneScale};
+pub use treelod_runtime::{BillboardKind, Hysteresis, PruneScale};

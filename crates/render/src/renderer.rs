@@ -8,8 +8,8 @@ use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleRecord, material_class};
 use treelod_runtime::prune::{MIN_VISIBLE_FRACTION, leaf_scale, leaves_drawn, projected_height, size_factor};
 use treelod_runtime::{
-    DrawList, DrawRange, Frustum, Hysteresis, Kind, LodSettings, ModelLod, PlaneLod, PlaneRange, PruneLod, PruneScale,
-    ROOTS_CELL, select_frame,
+    BillboardKind, Billboards, DrawList, DrawRange, Frustum, Hysteresis, Kind, LodChain, LodSettings, ModelLod,
+    PlaneLod, PlaneRange, PruneLod, PruneScale, ROOTS_CELL, instance_tau, select_frame,
 };
 
 use crate::camera::Camera;
@@ -91,6 +91,22 @@ pub struct Settings {
     /// as the point thresholds are chosen (spec §10.1). Trees without planes are drawn with the
     /// sequential point trees. Takes precedence over [`Self::pruning`].
     pub impostors: bool,
+    /// Draw every tree whose container has this baseline (spec §6.12, §6.13) with it instead of
+    /// treelod's representations, for comparisons; trees without it are drawn with the sequential
+    /// point trees. Takes precedence over [`Self::impostors`] and [`Self::pruning`].
+    pub baseline: Option<Baseline>,
+}
+
+/// A baseline a user would draw instead of treelod ([`Settings::baseline`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Baseline {
+    /// The discrete level-of-detail chain of a general mesh simplifier (spec §6.12): per
+    /// instance the coarsest level whose error projects below [`Settings::s_min`] pixels, the
+    /// full mesh nearer than the finest level's distance.
+    LodChain,
+    /// Billboards (spec §6.13): one quad per tree turned towards the camera, or fixed crossed
+    /// quads.
+    Billboard(BillboardKind),
 }
 
 /// Pruning settings: which trees are pruned, by how much, and how survivors are scaled.
@@ -148,6 +164,7 @@ impl Default for Settings {
             memory_budget: 1 << 30,
             pruning: None,
             impostors: false,
+            baseline: None,
         }
     }
 }
@@ -192,6 +209,11 @@ pub struct FrameStats {
     pub instances_impostors: u32,
     /// Impostor planes submitted (the prefixes; the vertex shader drops those outside the level).
     pub planes: u64,
+    /// Visible instances drawn with a baseline ([`Settings::baseline`]).
+    pub instances_baseline: u32,
+    /// Billboard quads submitted (their triangles are not counted in [`Self::triangles`]; LoD
+    /// chain triangles are).
+    pub billboards: u64,
     /// Whether this frame was selected on the GPU ([`Renderer::enable_gpu_selection`]). Then
     /// [`Self::instances_visible`], [`Self::ranges`], [`Self::triangles`], [`Self::points`] and
     /// [`Self::ranges_dropped`] are those of the latest earlier frame whose counters have been
@@ -306,6 +328,29 @@ struct Model {
     planes: Option<PlaneLod>,
     /// The hull samples of the occlusion test: first and count in the sample buffer.
     samples: (u32, u32),
+    /// The baseline LoD chain, if the container has one: levels, and where the full mesh and each
+    /// level lie in the extra triangle buffer.
+    chain: Option<ChainModel>,
+    /// The baseline billboards, if the container has them.
+    billboards: Option<BillboardModel>,
+}
+
+/// A model's baseline LoD chain on the GPU (after the bark in the extra triangle buffer).
+struct ChainModel {
+    chain: LodChain,
+    /// Every triangle of the container (the full mesh): first and count.
+    full: (u32, u32),
+    /// Per level, every tree's triangles of that level, contiguous: first and count.
+    levels: Vec<(u32, u32)>,
+}
+
+/// A model's baseline billboards on the GPU: a bind group like the model's with the billboards
+/// in place of the planes and their atlas in place of the impostor atlas.
+struct BillboardModel {
+    bind_group: wgpu::BindGroup,
+    /// The facing quads, then the crossed ones, in the billboard buffer: first and count each.
+    facing: (u32, u32),
+    crossed: (u32, u32),
 }
 
 /// Where a recorded draw reads its elements.
@@ -327,6 +372,12 @@ pub enum DrawSource {
     /// The leading `count` impostor planes of the cell's range (uploaded whole at
     /// [`Renderer::add_model`]); `tau_points` is the `τ` the shader tests them with.
     Planes,
+    /// A baseline LoD chain level (or the full mesh) of the whole block (`cell` is
+    /// [`treelod_runtime::ROOTS_CELL`]); `tau_points` is the instance's `τ`, `tau_triangles` the
+    /// level's error (0 for the full mesh).
+    LodLevel,
+    /// Baseline billboard quads of the block (`cell` is [`treelod_runtime::ROOTS_CELL`]).
+    Billboards,
 }
 
 /// One draw of the last [`Renderer::prepare`], as the GPU will execute it, for tests and tools.
@@ -366,6 +417,8 @@ pub struct Renderer {
     pruned_pipeline: wgpu::RenderPipeline,
     /// Impostor planes, from each model's plane buffer and atlas.
     plane_pipeline: wgpu::RenderPipeline,
+    /// Baseline billboards, from each model's billboard bind group.
+    billboard_pipeline: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
     /// The atlases' sampler: clamped, so a region's edge never wraps to the atlas's far side,
     /// and the nearest mip level.
@@ -396,6 +449,8 @@ pub struct Renderer {
     /// Impostor draws of this frame: per instance and plane cell, the prefix and its `τ`.
     plane_draws: Vec<PlaneDraw>,
     plane_ranges: Vec<PlaneRange>,
+    /// Baseline billboard draws of this frame: (instance, model, first quad, quads).
+    billboard_draws: Vec<(u32, u32, u32, u32)>,
     /// The occlusion measurement, and the trees to measure after this frame.
     occlusion: Occlusion,
     occlusion_jobs: Vec<Job>,
@@ -422,8 +477,9 @@ pub struct Renderer {
 /// Pool units the pool buffer starts with (1.5 MiB).
 const INITIAL_POOL_UNITS: u32 = 1 << 15;
 
-/// Draw buckets per model: triangles, points, pruned (leaves and bark), impostor planes.
-const BUCKETS: usize = 4;
+/// Draw buckets per model: triangles, points, pruned (leaves and bark, and LoD chain levels),
+/// impostor planes, billboards.
+const BUCKETS: usize = 5;
 
 /// One draw of impostor planes: a prefix of one cell's planes for one instance.
 #[derive(Clone, Copy, Debug)]
@@ -446,6 +502,7 @@ impl Model {
             count: self.bark.1,
             lambda,
             leaf_scale: 1.0,
+            tau_triangles: 1.0,
         })
     }
 }
@@ -463,6 +520,8 @@ struct PrunedDraw {
     count: u32,
     lambda: f32,
     leaf_scale: f32,
+    /// What [`RecordedDraw::tau_triangles`] reports: `leaf_scale`, or a chain level's error.
+    tau_triangles: f32,
 }
 
 impl Renderer {
@@ -608,6 +667,7 @@ impl Renderer {
         let point_pipeline = pipeline("treelod points", "vs_point", "fs_point");
         let pruned_pipeline = pipeline("treelod pruned leaves and bark", "vs_pruned", "fs_triangle");
         let plane_pipeline = pipeline("treelod impostor planes", "vs_plane", "fs_plane");
+        let billboard_pipeline = pipeline("treelod baseline billboards", "vs_billboard", "fs_plane");
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("treelod textures"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -654,6 +714,7 @@ impl Renderer {
             point_pipeline,
             pruned_pipeline,
             plane_pipeline,
+            billboard_pipeline,
             sampler,
             atlas_sampler,
             frame_buffer,
@@ -671,6 +732,7 @@ impl Renderer {
             pruned: Vec::new(),
             plane_draws: Vec::new(),
             plane_ranges: Vec::new(),
+            billboard_draws: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1)),
             occlusion_jobs: Vec::new(),
             last_camera: None,
@@ -778,22 +840,54 @@ impl Renderer {
         // Impostors draw the bark triangles too.
         let prune = PruneLod::from_container(&container);
         let planes = PlaneLod::from_container(&container);
-        let (extra, prune_leaves, bark) = if prune.is_some() || planes.is_some() {
+        let lod_chain = LodChain::from_container(&container);
+        let mut chain = None;
+        let (extra, prune_leaves, bark) = if prune.is_some() || planes.is_some() || lod_chain.is_some() {
             let classes = container.materials();
             let mut extra: Vec<TriangleRecord> = container.prune_triangles().to_vec();
-            let bark_first = u32::try_from(extra.len()).unwrap_or(u32::MAX);
+            let at = |extra: &Vec<TriangleRecord>| u32::try_from(extra.len()).unwrap_or(u32::MAX);
+            let bark_first = at(&extra);
             extra.extend(
                 container
                     .triangles()
                     .iter()
                     .filter(|t| classes.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF)),
             );
-            let bark_count = u32::try_from(extra.len()).unwrap_or(u32::MAX) - bark_first;
-            let extra = upload("PRUNE_TRIANGLES and bark", bytemuck::cast_slice(&extra))?;
+            let bark_count = at(&extra) - bark_first;
+            // The baseline chain: the full mesh, then each level with every tree's triangles.
+            if let Some(lod_chain) = lod_chain {
+                let full_first = at(&extra);
+                extra.extend_from_slice(container.triangles());
+                let full = (full_first, at(&extra) - full_first);
+                let mut levels = Vec::new();
+                for level in lod_chain.levels() {
+                    let first = at(&extra);
+                    for range in &level.ranges {
+                        extra.extend_from_slice(container.lod_triangles().get(range.as_usize()).unwrap_or_default());
+                    }
+                    levels.push((first, at(&extra) - first));
+                }
+                chain = Some(ChainModel { chain: lod_chain, full, levels });
+            }
+            let extra = upload("PRUNE_TRIANGLES, bark and LoD chain", bytemuck::cast_slice(&extra))?;
             let leaves = upload("PRUNE_LEAVES", bytemuck::cast_slice(container.prune_leaves()))?;
             (extra, leaves, (bark_first, bark_count))
         } else {
             (upload("no pruned triangles", &[])?, upload("no pruned leaves", &[])?, (0, 0))
+        };
+        // Baseline billboards: the facing quads, then the crossed ones.
+        let billboard_kinds = Billboards::from_container(&container);
+        let billboard_records: Vec<treelod_format::BillboardRecord> =
+            billboard_kinds.as_ref().map_or_else(Vec::new, |b| {
+                b.facing
+                    .iter()
+                    .chain(&b.crossed)
+                    .filter_map(|&i| container.billboards().get(i as usize).copied())
+                    .collect()
+            });
+        let billboard_buffer = match &billboard_kinds {
+            Some(_) => Some(upload("BILLBOARDS", bytemuck::cast_slice(&billboard_records))?),
+            None => None,
         };
         let plane_buffer = upload("PLANES", bytemuck::cast_slice(container.planes()))?;
 
@@ -890,48 +984,54 @@ impl Renderer {
                 planes.as_ref().map_or(0, PlaneLod::image)
             ));
         }
-        let atlas_texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("treelod impostor atlas"),
-            size: wgpu::Extent3d { width: atlas.width, height: atlas.height, depth_or_array_layers: 1 },
-            mip_level_count: u32::try_from(atlas.levels.len()).unwrap_or(1),
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: if atlas.srgb { wgpu::TextureFormat::Rgba8UnormSrgb } else { wgpu::TextureFormat::Rgba8Unorm },
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        for (level, texels) in atlas.levels.iter().enumerate() {
-            let level = u32::try_from(level).unwrap_or(0);
-            let (w, h) = ((atlas.width >> level).max(1), (atlas.height >> level).max(1));
-            queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &atlas_texture,
-                    mip_level: level,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                texels,
-                wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(w * 4), rows_per_image: Some(h) },
-                wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
-            );
-            bytes += texels.len() as u64;
-        }
-        let atlas_view = atlas_texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("treelod model"),
-            layout: &self.model_layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&view) },
-                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
-                wgpu::BindGroupEntry { binding: 4, resource: extra.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: prune_leaves.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 6, resource: plane_buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::TextureView(&atlas_view) },
-                wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(&self.atlas_sampler) },
-            ],
-        });
+        let (atlas_view, atlas_bytes) = upload_atlas(device, queue, &atlas, "treelod impostor atlas");
+        bytes += atlas_bytes;
+        let model_group = |label: &str, planes: &wgpu::Buffer, atlas: &wgpu::TextureView| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout: &self.model_layout,
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: materials.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&view) },
+                    wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                    wgpu::BindGroupEntry { binding: 4, resource: extra.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 5, resource: prune_leaves.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 6, resource: planes.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::TextureView(atlas) },
+                    wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(&self.atlas_sampler) },
+                ],
+            })
+        };
+        let bind_group = model_group("treelod model", &plane_buffer, &atlas_view);
+        // Billboards: their own atlas and bind group (the image of the first record; builders
+        // write one), not drawn if it does not decode or fit.
+        let billboards = match (billboard_kinds, billboard_buffer, billboard_records.first()) {
+            (Some(kinds), Some(buffer), Some(first)) => match textures::atlas(&container, first.image) {
+                Ok(atlas) if atlas.width.max(atlas.height) > device.limits().max_texture_dimension_2d => {
+                    warnings.push(format!(
+                        "billboard atlas (image {}) is {}x{}, larger than the device's textures; billboards are not drawn",
+                        first.image, atlas.width, atlas.height
+                    ));
+                    None
+                }
+                Ok(atlas) => {
+                    let (billboard_view, atlas_bytes) = upload_atlas(device, queue, &atlas, "treelod billboard atlas");
+                    bytes += atlas_bytes;
+                    let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+                    Some(BillboardModel {
+                        bind_group: model_group("treelod billboards", &buffer, &billboard_view),
+                        facing: (0, count(kinds.facing.len())),
+                        crossed: (count(kinds.facing.len()), count(kinds.crossed.len())),
+                    })
+                }
+                Err(e) => {
+                    warnings.push(format!("billboard atlas (image {}): {e}; billboards are not drawn", first.image));
+                    None
+                }
+            },
+            _ => None,
+        };
         let id = ModelId(u32::try_from(self.models.len()).unwrap_or(u32::MAX));
         let samples = match &prune {
             Some(p) => (self.occlusion.add_samples(p.samples()), u32::try_from(p.samples().len()).unwrap_or(0)),
@@ -948,6 +1048,8 @@ impl Renderer {
             prune,
             bark,
             planes,
+            chain,
+            billboards,
         });
         self.lods.push(lod);
         self.wanted.push(vec![[0; 2]; cells]);
@@ -1103,6 +1205,77 @@ impl Renderer {
         visible
     }
 
+    /// Which instances are drawn with a baseline this frame ([`Settings::baseline`]): fills
+    /// `pruned` with LoD chain draws or `billboard_draws` for instances whose model has the
+    /// baseline, and `spt_instances`/`spt_map` with the others. Returns the baseline instances
+    /// inside the frustum.
+    fn select_baseline(&mut self, baseline: Baseline, camera: &treelod_runtime::Camera) -> u32 {
+        let frustum = Frustum::from_view_proj(camera.view_proj);
+        self.pruned.clear();
+        self.billboard_draws.clear();
+        self.spt_instances.clear();
+        self.spt_map.clear();
+        let mut visible = 0;
+        for (i, instance) in self.instances.iter().enumerate() {
+            let index = u32::try_from(i).unwrap_or(u32::MAX);
+            let m = instance.model as usize;
+            let (Some(model), Some(lod)) = (self.models.get(m), self.lods.get(m)) else { continue };
+            let has = match baseline {
+                Baseline::LodChain => model.chain.is_some(),
+                Baseline::Billboard(_) => model.billboards.is_some(),
+            };
+            if !has {
+                self.spt_instances.push(*instance);
+                self.spt_map.push(index);
+                continue;
+            }
+            let block = model.container.block();
+            let anchor = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
+            let Some(tau) =
+                instance_tau(instance.transform, camera, &frustum, self.settings.s_min, lod.cull_sphere(), anchor)
+            else {
+                continue;
+            };
+            visible += 1;
+            match (baseline, &model.chain, &model.billboards) {
+                (Baseline::LodChain, Some(chain), _) => {
+                    let picked = chain.chain.pick(tau);
+                    let ((first, count), error) = match picked {
+                        Some(level) => (
+                            chain.levels.get(level as usize).copied().unwrap_or(chain.full),
+                            chain.chain.levels().get(level as usize).map_or(0.0, |l| l.error),
+                        ),
+                        None => (chain.full, 0.0),
+                    };
+                    if count > 0 {
+                        self.pruned.push(PrunedDraw {
+                            instance: index,
+                            model: instance.model,
+                            cell: ROOTS_CELL,
+                            source: DrawSource::LodLevel,
+                            first,
+                            count,
+                            lambda: tau,
+                            leaf_scale: 1.0,
+                            tau_triangles: error,
+                        });
+                    }
+                }
+                (Baseline::Billboard(kind), _, Some(billboards)) => {
+                    let (first, count) = match kind {
+                        BillboardKind::Facing => billboards.facing,
+                        BillboardKind::Crossed => billboards.crossed,
+                    };
+                    if count > 0 {
+                        self.billboard_draws.push((index, instance.model, first, count));
+                    }
+                }
+                _ => {}
+            }
+        }
+        visible
+    }
+
     /// Which instances are drawn pruned this frame (see [`Pruning`]): fills `pruned` with their
     /// draws and `spt_instances`/`spt_map` with the others. Returns the pruned instances inside
     /// the frustum and the leaves they draw.
@@ -1164,6 +1337,7 @@ impl Renderer {
                         count,
                         lambda,
                         leaf_scale: factor,
+                        tau_triangles: factor,
                     });
                 }
             }
@@ -1225,7 +1399,12 @@ impl Renderer {
                         .filter(|p| kept(p))
                         .count()
                 }
-                DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::Planes => 0,
+                DrawSource::Triangles
+                | DrawSource::PrunedLeaves
+                | DrawSource::Bark
+                | DrawSource::Planes
+                | DrawSource::LodLevel
+                | DrawSource::Billboards => 0,
             } as u64;
         }
         drawn
@@ -1258,8 +1437,9 @@ impl Renderer {
             viewport_height: camera.height as f32,
             fovy: camera.fovy,
         };
-        let impostors = settings.impostors && !settings.full_mesh;
-        let pruning = settings.pruning.filter(|_| !settings.full_mesh && !impostors);
+        let baseline = settings.baseline.filter(|_| !settings.full_mesh);
+        let impostors = settings.impostors && !settings.full_mesh && baseline.is_none();
+        let pruning = settings.pruning.filter(|_| !settings.full_mesh && !impostors && baseline.is_none());
         let forward = -camera.view.row(2).truncate().normalize_or(Vec3::NEG_Z);
         self.last_camera = Some((view_proj, camera.position, forward, (camera.width, camera.height)));
         let (instances_pruned, leaves_pruned) = match &pruning {
@@ -1272,6 +1452,13 @@ impl Renderer {
             None => {
                 self.pruned.clear();
                 (0, 0)
+            }
+        };
+        let instances_baseline = match baseline {
+            Some(baseline) => self.select_baseline(baseline, &runtime_camera),
+            None => {
+                self.billboard_draws.clear();
+                0
             }
         };
         let instances_impostors = if impostors {
@@ -1290,6 +1477,7 @@ impl Renderer {
         if pruning.is_none()
             && !settings.full_mesh
             && !impostors
+            && baseline.is_none()
             && let Some(gpu) = self.gpu.as_mut().filter(|g| g.usable())
         {
             // GPU selection: one compute submission writes the draws; nothing per instance here.
@@ -1314,7 +1502,7 @@ impl Renderer {
                 ..FrameStats::default()
             };
         }
-        self.spt_remapped = pruning.is_some() || impostors;
+        self.spt_remapped = pruning.is_some() || impostors || baseline.is_some();
         let spt_instances = if self.spt_remapped { &self.spt_instances } else { &self.instances };
         let selected = select_frame(&self.lods, spt_instances, &runtime_camera, &lod_settings, &mut self.selection);
 
@@ -1362,10 +1550,11 @@ impl Renderer {
 
         // The draws, clamped to what is resident, bucketed by model and kind.
         let mut stats = FrameStats {
-            instances_visible: selected.instances_visible + instances_pruned + instances_impostors,
+            instances_visible: selected.instances_visible + instances_pruned + instances_impostors + instances_baseline,
             instances_pruned,
             leaves_pruned,
             instances_impostors,
+            instances_baseline,
             bytes_uploaded: streamed.bytes_uploaded,
             bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
                 + u64::from(self.residency.pool.used()) * UNIT,
@@ -1399,11 +1588,12 @@ impl Renderer {
                 stats.ranges_clamped += u32::from(draw.clamped);
                 let (bucket, first_vertex, corners) = self.gpu_first(&draw);
                 match draw.source {
-                    DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark => {
+                    DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::LodLevel => {
                         stats.triangles += u64::from(draw.count);
                     }
                     DrawSource::Points | DrawSource::Roots => stats.points += u64::from(draw.count),
                     DrawSource::Planes => stats.planes += u64::from(draw.count),
+                    DrawSource::Billboards => stats.billboards += u64::from(draw.count),
                 }
                 let transform = self.instances[draw.instance as usize].transform;
                 let info = DrawInfo {
@@ -1432,7 +1622,7 @@ impl Renderer {
                 source: draw.source,
                 count: draw.count,
                 tau_points: draw.lambda,
-                tau_triangles: draw.leaf_scale,
+                tau_triangles: draw.tau_triangles,
                 clamped: false,
             };
             let vertices = (3 * draw.first, 3 * draw.count);
@@ -1454,6 +1644,29 @@ impl Renderer {
             };
             let vertices = (6 * range.first, 6 * range.count);
             record_direct(&self.instances, &mut self.buckets, &mut self.recorded, record, 3, vertices, 1.0);
+        }
+        // Baseline billboards: every quad of the chosen kind.
+        for &(instance, model, first, count) in &self.billboard_draws {
+            stats.billboards += u64::from(count);
+            let record = RecordedDraw {
+                instance,
+                model: ModelId(model),
+                cell: ROOTS_CELL,
+                source: DrawSource::Billboards,
+                count,
+                tau_points: 0.0,
+                tau_triangles: 0.0,
+                clamped: false,
+            };
+            record_direct(
+                &self.instances,
+                &mut self.buckets,
+                &mut self.recorded,
+                record,
+                4,
+                (6 * first, 6 * count),
+                1.0,
+            );
         }
         self.draw_infos.clear();
         self.indirect.clear();
@@ -1619,8 +1832,9 @@ impl Renderer {
                 (BUCKETS * m + 1, (model.roots_start + at) * 6, 6)
             }
             // Recorded directly by `prepare`, never clamped.
-            DrawSource::PrunedLeaves | DrawSource::Bark => (BUCKETS * m + 2, 0, 3),
+            DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::LodLevel => (BUCKETS * m + 2, 0, 3),
             DrawSource::Planes => (BUCKETS * m + 3, 0, 6),
+            DrawSource::Billboards => (BUCKETS * m + 4, 0, 6),
         }
     }
 
@@ -1664,6 +1878,7 @@ impl Renderer {
             (&self.point_pipeline, 1),
             (&self.pruned_pipeline, 2),
             (&self.plane_pipeline, 3),
+            (&self.billboard_pipeline, 4),
         ] {
             pass.set_pipeline(pipeline);
             for (model, draws) in self.models.iter().zip(&self.model_draws) {
@@ -1671,7 +1886,11 @@ impl Renderer {
                 if count == 0 {
                     continue;
                 }
-                pass.set_bind_group(1, &model.bind_group, &[]);
+                let group = match (kind, &model.billboards) {
+                    (4, Some(billboards)) => &billboards.bind_group,
+                    _ => &model.bind_group,
+                };
+                pass.set_bind_group(1, group, &[]);
                 pass.multi_draw_indirect(&self.indirect_buffer, u64::from(first) * stride, count);
             }
         }
@@ -1715,6 +1934,43 @@ fn leading_above(values: &[f32], tau: f32) -> usize {
 fn max_axis_scale(m: Mat4) -> f32 {
     let (x, y, z) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
     x.length_squared().max(y.length_squared()).max(z.length_squared()).sqrt().max(1e-12)
+}
+
+/// Uploads an atlas with its mips; returns its view and the bytes uploaded.
+fn upload_atlas(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    atlas: &textures::Atlas,
+    label: &str,
+) -> (wgpu::TextureView, u64) {
+    let texture = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d { width: atlas.width, height: atlas.height, depth_or_array_layers: 1 },
+        mip_level_count: u32::try_from(atlas.levels.len()).unwrap_or(1),
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: if atlas.srgb { wgpu::TextureFormat::Rgba8UnormSrgb } else { wgpu::TextureFormat::Rgba8Unorm },
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    let mut bytes = 0u64;
+    for (level, texels) in atlas.levels.iter().enumerate() {
+        let level = u32::try_from(level).unwrap_or(0);
+        let (w, h) = ((atlas.width >> level).max(1), (atlas.height >> level).max(1));
+        queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: level,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            texels,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(w * 4), rows_per_image: Some(h) },
+            wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+        );
+        bytes += texels.len() as u64;
+    }
+    (texture.create_view(&wgpu::TextureViewDescriptor::default()), bytes)
 }
 
 fn storage_buffer(device: &wgpu::Device, label: &str, size: u64, copy_src: bool) -> wgpu::Buffer {

@@ -165,8 +165,12 @@ fn check_draws(renderer: &Renderer, container: &Container) {
                         .flat_map(|p| (p.leaf_first..p.leaf_first + p.leaf_count).map(|l| l as usize))
                         .collect()
                 }
-                DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::Planes => {
-                    panic!("{draw:?} without pruning or impostors")
+                DrawSource::PrunedLeaves
+                | DrawSource::Bark
+                | DrawSource::Planes
+                | DrawSource::LodLevel
+                | DrawSource::Billboards => {
+                    panic!("{draw:?} without pruning, impostors or baselines")
                 }
             };
             for leaf in drawn {

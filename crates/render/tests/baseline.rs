@@ -1,0 +1,131 @@
+//! The baselines on the Vulkan backend (Mesa lavapipe in CI): a meshoptimizer LoD chain switched
+//! by its error in pixels, and facing and crossed billboards, against the full mesh.
+
+use std::sync::Arc;
+
+use glam::{Mat4, Vec3, vec3};
+use treelod_build::{BuildConfig, DemoTreeConfig, ImpostorConfig, LodChainConfig, Placed, build_block, demo_tree};
+use treelod_format::{Compression, Container};
+use treelod_render::offscreen::{Gpu, Image, render_image};
+use treelod_render::{Baseline, BillboardKind, Camera, DrawSource, Instance, Renderer, Settings};
+
+const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
+
+fn gpu() -> Gpu {
+    let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+    assert_eq!(gpu.info.backend, wgpu::Backend::Vulkan, "rendering tests run on Vulkan, got {:?}", gpu.info);
+    gpu
+}
+
+/// The demo tree built with its baselines (and the impostors that set the billboards' budget).
+fn demo_with_baselines() -> Arc<Container> {
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let config = BuildConfig {
+        impostors: Some(ImpostorConfig::default()),
+        baselines: Some(LodChainConfig::default()),
+        ..BuildConfig::default()
+    };
+    let built =
+        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
+    Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
+}
+
+fn covered(image: &Image) -> Vec<bool> {
+    image.rgba.chunks_exact(4).map(|p| p[0] < 250 || p[1] < 250 || p[2] < 250).collect()
+}
+
+/// Precision and recall of `test`'s covered pixels against `full`'s.
+fn precision_recall(test: &Image, full: &Image) -> (f64, f64) {
+    let (a, b) = (covered(test), covered(full));
+    let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count() as f64;
+    let test_n = a.iter().filter(|x| **x).count() as f64;
+    let full_n = b.iter().filter(|x| **x).count() as f64;
+    (both / test_n.max(1.0), both / full_n.max(1.0))
+}
+
+fn centre(container: &Container) -> Vec3 {
+    let block = container.block();
+    0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max))
+}
+
+fn renderer(gpu: &Gpu, container: &Arc<Container>, baseline: Baseline) -> Renderer {
+    let settings = Settings { baseline: Some(baseline), ..Settings::default() };
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(container)).expect("uploads");
+    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    renderer
+}
+
+#[test]
+fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
+    let gpu = gpu();
+    let container = demo_with_baselines();
+    let levels = container.lod_levels();
+    assert_eq!(levels.len(), 5, "50, 25, 10, 5 and 1 %");
+    let mut renderer = renderer(&gpu, &container, Baseline::LodChain);
+    let centre = centre(&container);
+    let total = container.triangles().len() as u64;
+    let mut previous = u64::MAX;
+    let mut counts = Vec::new();
+    for distance in [3.0f32, 30.0, 300.0, 3000.0] {
+        let cam = Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, 0.8, 256, 256);
+        let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+        assert_eq!((stats.instances_baseline, stats.points, stats.planes), (1, 0, 0), "{stats:?}");
+        let [draw] = renderer.draws() else { panic!("one draw: {:?}", renderer.draws()) };
+        assert_eq!(draw.source, DrawSource::LodLevel);
+        // The level is the coarsest whose error is at most τ (`tau_points`); its error is reported.
+        let tau = draw.tau_points;
+        let expected = levels.iter().filter(|l| l.error <= tau).map(|l| (l.triangles.count, l.error)).next_back();
+        match expected {
+            Some((count, error)) => assert_eq!((stats.triangles, draw.tau_triangles), (u64::from(count), error)),
+            None => assert_eq!((stats.triangles, draw.tau_triangles), (total, 0.0), "the full mesh"),
+        }
+        assert!(stats.triangles <= previous, "fewer triangles farther away: {counts:?}");
+        previous = stats.triangles;
+        counts.push(stats.triangles);
+        if distance < 5.0 {
+            // Nearer than the finest level's error allows: the full mesh, pixel for pixel.
+            renderer.settings_mut().full_mesh = true;
+            let (full, _) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+            renderer.settings_mut().full_mesh = false;
+            assert_eq!(stats.triangles, total);
+            assert_eq!(precision_recall(&image, &full), (1.0, 1.0));
+        }
+    }
+    assert!(previous < total / 10, "the far levels are coarse: {counts:?}");
+}
+
+#[test]
+fn billboards_cover_the_full_mesh_from_around_the_tree() {
+    let gpu = gpu();
+    let container = demo_with_baselines();
+    let billboards = container.billboards();
+    assert_eq!(billboards.len(), 4, "one facing and three crossed quads");
+    let centre = centre(&container);
+    let mut full_renderer = renderer(&gpu, &container, Baseline::LodChain);
+    full_renderer.settings_mut().full_mesh = true;
+    let mut rows = Vec::new();
+    for (name, kind) in [("facing", BillboardKind::Facing), ("crossed", BillboardKind::Crossed)] {
+        let mut renderer = renderer(&gpu, &container, Baseline::Billboard(kind));
+        for k in 0..8 {
+            let a = k as f32 * std::f32::consts::FRAC_PI_4 + 0.2;
+            let cam = Camera::look_at(centre + 40.0 * vec3(a.sin(), 0.15, a.cos()), centre, 0.8, 192, 192);
+            let (full, _) = render_image(&gpu, &mut full_renderer, &cam, BACKGROUND).expect("renders");
+            let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+            let quads = if kind == BillboardKind::Facing { 1 } else { 3 };
+            assert_eq!((stats.triangles, stats.points, stats.billboards), (0, 0, quads), "{stats:?}");
+            assert!(renderer.draws().iter().all(|d| d.source == DrawSource::Billboards));
+            let (precision, recall) = precision_recall(&image, &full);
+            eprintln!("{name} billboard, direction {k}: precision {precision:.3}, recall {recall:.3}");
+            rows.push((name, k, precision, recall));
+        }
+    }
+    // A billboard shows the silhouette seen from one side (the facing one) or three (crossed):
+    // from other directions the crown's outline differs, so precision and recall stay well below
+    // 1. Measured on lavapipe: facing P 0.58–0.75, R 0.47–0.72 (best from +z, the side it was
+    // baked from); crossed P 0.69–0.79, R 0.70–0.82. The bounds sit a little below the minima.
+    for (name, k, precision, recall) in rows {
+        let (p_min, r_min) = if name == "facing" { (0.52, 0.42) } else { (0.63, 0.63) };
+        assert!(precision > p_min && recall > r_min, "{name}, direction {k}: P {precision:.3}, R {recall:.3}");
+    }
+}

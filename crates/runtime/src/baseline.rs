@@ -1,0 +1,232 @@
+//! Baselines at run time (spec §6.12, §6.13): what a user would draw instead of treelod, chosen
+//! by the same pixel threshold, so that tools can compare both on one file.
+//!
+//! A discrete level-of-detail chain switches per instance: [`LodChain::pick`] returns the
+//! coarsest level whose geometric error projects below `s_min` pixels at the block centre's
+//! distance (the `τ_p` of spec §10.1, the threshold that chooses treelod's own points), or the
+//! full mesh when even the finest level's error is larger. A block of several trees switches all
+//! of its trees together (at level `ℓ` it draws every tree's level `ℓ`, the block's error being
+//! the largest of theirs): the container's `TRIANGLES` are not split by tree, and the full mesh
+//! is the block's. Billboards need no choice: the instance draws its billboard quads.
+
+use glam::{Mat4, Vec3};
+use treelod_format::{Container, Range, billboard_kind};
+
+use crate::frame::{Camera, Frustum};
+
+/// One level of a block's chain: every tree's level of that number.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChainLevel {
+    /// The largest error of the trees' levels, metres, model space.
+    pub error: f32,
+    /// The trees' triangle ranges in `LOD_TRIANGLES`, in tree order.
+    pub ranges: Vec<Range>,
+}
+
+/// A container's LoD chain, made once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LodChain {
+    levels: Vec<ChainLevel>,
+}
+
+impl LodChain {
+    /// The chain of an open container; `None` if it has none.
+    ///
+    /// A level number missing for some tree (verified files have none) ends the chain there, so
+    /// every level covers every tree that has a chain.
+    #[must_use]
+    pub fn from_container(container: &Container) -> Option<Self> {
+        let records = container.lod_levels();
+        let depth = records.iter().map(|l| l.level.saturating_add(1)).max()?;
+        let trees = {
+            let mut trees: Vec<u32> = records.iter().map(|l| l.tree).collect();
+            trees.dedup();
+            trees.len()
+        };
+        let mut levels = Vec::new();
+        for level in 0..depth {
+            let of_level: Vec<_> = records.iter().filter(|l| l.level == level).collect();
+            if of_level.len() != trees {
+                break;
+            }
+            let error = of_level.iter().map(|l| l.error).fold(0.0f32, f32::max);
+            levels.push(ChainLevel { error, ranges: of_level.iter().map(|l| l.triangles).collect() });
+        }
+        // Errors are non-decreasing per tree (spec §6.12), so their maximum is too; keep it so
+        // even for a file that breaks the rule, so `pick` can search.
+        let mut running = 0.0f32;
+        for level in &mut levels {
+            running = running.max(level.error);
+            level.error = running;
+        }
+        (!levels.is_empty()).then_some(Self { levels })
+    }
+
+    /// The levels, finest first.
+    #[must_use]
+    pub fn levels(&self) -> &[ChainLevel] {
+        &self.levels
+    }
+
+    /// The level drawn at the world-size threshold `tau` (metres, model space): the coarsest whose
+    /// error is at most `tau`, or `None` for the full mesh.
+    #[must_use]
+    pub fn pick(&self, tau: f32) -> Option<u32> {
+        let usable = self.levels.partition_point(|l| l.error <= tau);
+        usable.checked_sub(1).and_then(|l| u32::try_from(l).ok())
+    }
+}
+
+/// `τ` (metres, model space) of an instance for `camera` at `s_min` pixels, measured at the
+/// model-space point `anchor` (spec §10.1), and whether its sphere `(centre, radius)` (model
+/// space) meets `frustum`. `None` if it does not, or if the transform is degenerate.
+#[must_use]
+pub fn instance_tau(
+    transform: Mat4,
+    camera: &Camera,
+    frustum: &Frustum,
+    s_min: f32,
+    (centre, radius): (Vec3, f32),
+    anchor: Vec3,
+) -> Option<f32> {
+    let (ax, ay, az) = (transform.x_axis.truncate(), transform.y_axis.truncate(), transform.z_axis.truncate());
+    let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    if !frustum.intersects_sphere(transform.transform_point3(centre), radius * scale) {
+        return None;
+    }
+    let distance = transform.transform_point3(anchor).distance(camera.position);
+    Some(distance * s_min.max(0.0) * camera.world_per_pixel() / scale)
+}
+
+/// Which billboard a baseline draws.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BillboardKind {
+    /// One quad per tree turned towards the camera about the vertical.
+    Facing,
+    /// Fixed quads crossing on the tree's vertical axis.
+    Crossed,
+}
+
+impl BillboardKind {
+    /// The record value of spec §6.13.
+    #[must_use]
+    pub fn record_kind(self) -> u32 {
+        match self {
+            Self::Facing => billboard_kind::FACING,
+            Self::Crossed => billboard_kind::CROSSED,
+        }
+    }
+}
+
+/// A container's billboards, by kind: the record indices of each kind, in file order.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Billboards {
+    /// Indices into `BILLBOARDS` of the facing quads.
+    pub facing: Vec<u32>,
+    /// Indices of the crossed quads.
+    pub crossed: Vec<u32>,
+}
+
+impl Billboards {
+    /// The billboards of an open container; `None` if it has none.
+    #[must_use]
+    pub fn from_container(container: &Container) -> Option<Self> {
+        let records = container.billboards();
+        if records.is_empty() {
+            return None;
+        }
+        let mut out = Self::default();
+        for (i, b) in records.iter().enumerate() {
+            let Ok(i) = u32::try_from(i) else { break };
+            match b.kind {
+                billboard_kind::FACING => out.facing.push(i),
+                billboard_kind::CROSSED => out.crossed.push(i),
+                _ => {}
+            }
+        }
+        Some(out)
+    }
+
+    /// The record indices of one kind.
+    #[must_use]
+    pub fn of(&self, kind: BillboardKind) -> &[u32] {
+        match kind {
+            BillboardKind::Facing => &self.facing,
+            BillboardKind::Crossed => &self.crossed,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use treelod_format::{ContainerData, LodLevelRecord};
+
+    fn chain(errors: &[&[f32]]) -> LodChain {
+        let mut data = ContainerData::default();
+        let mut first = 0;
+        for (tree, errors) in errors.iter().enumerate() {
+            for (level, &error) in errors.iter().enumerate() {
+                data.lod_levels.push(LodLevelRecord {
+                    tree: tree as u32,
+                    level: level as u32,
+                    triangles: Range { first, count: 1 },
+                    error,
+                    fraction: 0.5 / (level + 1) as f32,
+                });
+                first += 1;
+            }
+        }
+        let container = Container::from_bytes(&minimal_with(data)).unwrap();
+        LodChain::from_container(&container).unwrap()
+    }
+
+    /// A file holding only the given chain (and the required sections).
+    fn minimal_with(mut data: ContainerData) -> Vec<u8> {
+        data.block =
+            treelod_format::BlockRecord { bounds_max: [1.0; 3], grid: [1, 1, 1], tree_count: 2, ..Default::default() };
+        data.cells = vec![treelod_format::CellRecord::default(); 2];
+        data.metadata.trees = vec![treelod_format::Tree::default(); 2];
+        data.metadata.sources = vec![treelod_format::Source::default()];
+        data.to_bytes(treelod_format::Compression::None).unwrap()
+    }
+
+    #[test]
+    fn the_coarsest_level_within_tau_is_picked_and_below_the_finest_the_full_mesh() {
+        let chain = chain(&[&[0.01, 0.05, 0.2]]);
+        assert_eq!(chain.levels().len(), 3);
+        assert_eq!(chain.pick(0.001), None, "full mesh");
+        assert_eq!(chain.pick(0.01), Some(0));
+        assert_eq!(chain.pick(0.049), Some(0));
+        assert_eq!(chain.pick(0.05), Some(1));
+        assert_eq!(chain.pick(10.0), Some(2));
+    }
+
+    #[test]
+    fn a_block_switches_its_trees_together_at_the_largest_error() {
+        let chain = chain(&[&[0.01, 0.05], &[0.02, 0.03]]);
+        let errors: Vec<f32> = chain.levels().iter().map(|l| l.error).collect();
+        assert_eq!(errors, [0.02, 0.05]);
+        assert_eq!(chain.levels()[1].ranges, [Range { first: 1, count: 1 }, Range { first: 3, count: 1 }]);
+        assert_eq!(chain.pick(0.015), None);
+        assert_eq!(chain.pick(0.02), Some(0));
+    }
+
+    #[test]
+    fn tau_grows_with_distance_and_culled_instances_have_none() {
+        let sphere = (Vec3::ZERO, 1.0);
+        let at = |z: f32| {
+            let camera = Camera::look_at(Vec3::new(0.0, 0.0, z), Vec3::ZERO, 0.8, 512, 512);
+            instance_tau(Mat4::IDENTITY, &camera, &Frustum::from_view_proj(camera.view_proj), 1.0, sphere, Vec3::ZERO)
+        };
+        let (near, far) = (at(10.0).unwrap(), at(100.0).unwrap());
+        assert!((far / near - 10.0).abs() < 1e-3, "{near} {far}");
+        let camera = Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::new(0.0, 0.0, 20.0), 0.8, 512, 512);
+        let frustum = Frustum::from_view_proj(camera.view_proj);
+        assert_eq!(instance_tau(Mat4::IDENTITY, &camera, &frustum, 1.0, sphere, Vec3::ZERO), None, "behind");
+        assert_eq!(instance_tau(Mat4::ZERO, &camera, &frustum, 1.0, sphere, Vec3::ZERO), None, "degenerate");
+    }
+}
