@@ -69,6 +69,17 @@ pub struct BuildOptions {
     /// 4096 texels per side).
     #[arg(long, value_name = "N", default_value_t = 24.0, requires = "impostors")]
     pub impostor_texels: f32,
+    /// Baselines to compare treelod with (spec §6.12, §6.13; `treelod eval --technique
+    /// lod-chain,billboard,crossed`): each tree's discrete LoD chain from meshoptimizer's
+    /// simplifiers (the regular one for bark, with the sloppy one as fallback for foliage, as
+    /// gltfpack does) and a camera-facing and a crossed (3 quads) billboard, each baked at the
+    /// texel budget of the tree's impostor planes. Implies --impostors, which set that budget.
+    #[arg(long)]
+    pub baselines: bool,
+    /// With --baselines: the chain's levels as shares of each tree's source triangles, finest
+    /// first, strictly decreasing.
+    #[arg(long, value_name = "F,F,…", default_value = "0.5,0.25,0.1,0.05,0.01", value_parser = parse_fractions, requires = "baselines")]
+    pub lod_fractions: Fractions,
     /// Keep every bit of the written floats. By default positions and texture coordinates keep
     /// 16 significant bits, sizes 12 and normals 10 per component (0.15 mm on a 10 m tree), which
     /// zstd compresses about a third smaller.
@@ -90,7 +101,10 @@ impl BuildOptions {
             gilet: treelod_build::gilet::GiletConfig { cluster_max: self.cluster_max as usize },
             classify: treelod_build::classify::ClassifyOptions { leaves: self.leaves.clone(), bark: self.bark.clone() },
             prune: PruneOrder::parse(&self.prune).map(|order| self.prune_config(order)),
-            impostors: self.impostors.then(|| treelod_build::ImpostorConfig {
+            baselines: self
+                .baselines
+                .then(|| treelod_build::LodChainConfig { fractions: self.lod_fractions.0.clone() }),
+            impostors: (self.impostors || self.baselines).then(|| treelod_build::ImpostorConfig {
                 levels: self.impostor_levels.0.clone(),
                 alpha_scale: self.impostor_alpha,
                 texels_per_metre: self.impostor_texels,
@@ -160,6 +174,26 @@ fn parse_levels(s: &str) -> Result<Levels, String> {
         return Err(format!("{s:?}: levels must decrease strictly (finest first)"));
     }
     Ok(Levels(levels))
+}
+
+/// `--lod-fractions`: shares of the source triangles, finest first.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fractions(pub Vec<f32>);
+
+/// Parses `--lod-fractions`: numbers in (0, 1), strictly decreasing, at most 16.
+fn parse_fractions(s: &str) -> Result<Fractions, String> {
+    let fractions = s
+        .split(',')
+        .map(|v| v.trim().parse::<f32>().ok().filter(|f| *f > 0.0 && *f < 1.0))
+        .collect::<Option<Vec<f32>>>()
+        .ok_or_else(|| format!("{s:?}: expected numbers between 0 and 1 (exclusive) separated by commas"))?;
+    if fractions.windows(2).any(|w| w[1] >= w[0]) {
+        return Err(format!("{s:?}: fractions must decrease strictly (finest first)"));
+    }
+    if fractions.len() > 16 {
+        return Err(format!("{s:?}: at most 16 levels"));
+    }
+    Ok(Fractions(fractions))
 }
 
 /// Parses a quality in [0, 1] (`--prune-quality`).
@@ -579,6 +613,19 @@ impl Summary<'_> {
             if self.built.verified { "ok" } else { "skipped" },
         ) + &self.prune_text()
             + &self.impostor_text()
+            + &self.baseline_text()
+    }
+
+    /// The baseline lines of the text summary (none without baselines).
+    fn baseline_text(&self) -> String {
+        let s = &self.built.stats;
+        if s.lod_levels == 0 && s.billboards == 0 {
+            return String::new();
+        }
+        format!(
+            "  baselines     LoD chain {} levels, {} triangles; {} billboard quads, atlas {}x{}\n",
+            s.lod_levels, s.lod_triangles, s.billboards, s.billboard_atlas[0], s.billboard_atlas[1]
+        )
     }
 
     /// The impostor line of the text summary (none without impostors).
@@ -643,6 +690,10 @@ impl Summary<'_> {
             "planes": s.planes,
             "planes_per_level": s.planes_per_level,
             "atlas": s.atlas,
+            "lod_levels": s.lod_levels,
+            "lod_triangles": s.lod_triangles,
+            "billboards": s.billboards,
+            "billboard_atlas": s.billboard_atlas,
             "warnings": b.warnings,
         });
         format!("{value}\n")

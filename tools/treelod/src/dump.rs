@@ -72,6 +72,9 @@ struct Dump<'a> {
     /// The impostor planes and the images they sample (spec §6.10), when the container has planes.
     #[serde(skip_serializing_if = "Option::is_none")]
     impostors: Option<ImpostorInfo>,
+    /// The baseline sections (spec §6.12, §6.13), when the container has any of their records.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    baselines: Option<BaselineInfo>,
     /// Size histograms of the hierarchical kinds.
     histograms: Histograms,
 }
@@ -374,6 +377,102 @@ impl ImpostorInfo {
     }
 }
 
+/// The baselines of a container (spec §6.12, §6.13): each tree's LoD chain and billboards.
+#[derive(Debug, Serialize)]
+struct BaselineInfo {
+    /// `LOD_LEVELS` records in file order.
+    lod_levels: Vec<LodLevelInfo>,
+    /// Billboard quads per (tree, kind name), in file order.
+    billboards: Vec<BillboardInfo>,
+}
+
+/// One level of a tree's chain.
+#[derive(Debug, Serialize)]
+struct LodLevelInfo {
+    tree: u32,
+    level: u32,
+    fraction: f32,
+    triangles: u32,
+    /// Metres.
+    error: f32,
+}
+
+/// The billboard quads of one tree and kind.
+#[derive(Debug, Serialize)]
+struct BillboardInfo {
+    tree: u32,
+    /// `facing` or `crossed` (or the raw value).
+    kind: String,
+    quads: u32,
+    /// Texels of their atlas rectangles (mip 0).
+    texels: u64,
+}
+
+impl BaselineInfo {
+    /// The baselines of `container`, `None` if it has none.
+    fn new(container: &Container) -> Option<Self> {
+        let (levels, billboards) = (container.lod_levels(), container.billboards());
+        if levels.is_empty() && billboards.is_empty() {
+            return None;
+        }
+        let lod_levels = levels
+            .iter()
+            .map(|l| LodLevelInfo {
+                tree: l.tree,
+                level: l.level,
+                fraction: l.fraction,
+                triangles: l.triangles.count,
+                error: l.error,
+            })
+            .collect();
+        let mut out: Vec<BillboardInfo> = Vec::new();
+        for b in billboards {
+            let texels = container.images().get(b.image as usize).map_or(0, |image| {
+                let [u0, v0] = treelod_format::pack::unpack_unorm16x2(b.uv_min);
+                let [u1, v1] = treelod_format::pack::unpack_unorm16x2(b.uv_max);
+                let w = ((u1 - u0) * image.width as f32).round() as u64;
+                let h = ((v1 - v0) * image.height as f32).round() as u64;
+                w * h
+            });
+            let kind = match b.kind {
+                treelod_format::billboard_kind::FACING => "facing".to_owned(),
+                treelod_format::billboard_kind::CROSSED => "crossed".to_owned(),
+                other => format!("kind {other}"),
+            };
+            match out.last_mut() {
+                Some(last) if last.tree == b.tree && last.kind == kind => {
+                    last.quads += 1;
+                    last.texels += texels;
+                }
+                _ => out.push(BillboardInfo { tree: b.tree, kind, quads: 1, texels }),
+            }
+        }
+        Some(Self { lod_levels, billboards: out })
+    }
+
+    /// The text form.
+    fn to_text(&self) -> String {
+        let mut out = String::from(
+            "
+baselines
+",
+        );
+        for l in &self.lod_levels {
+            out.push_str(&format!(
+                "  lod chain  tree {} level {}: {} of the source, {} triangles, error {} m\n",
+                l.tree, l.level, l.fraction, l.triangles, l.error
+            ));
+        }
+        for b in &self.billboards {
+            out.push_str(&format!(
+                "  billboard  tree {} {}: {} quad(s), {} texels\n",
+                b.tree, b.kind, b.quads, b.texels
+            ));
+        }
+        out
+    }
+}
+
 /// One non-empty cell.
 #[derive(Debug, Serialize)]
 struct CellInfo {
@@ -560,6 +659,7 @@ impl<'a> Dump<'a> {
             cells: CellsInfo { grid_cells, non_empty: list.len(), list, totals },
             pruning: PruningInfo::new(container),
             impostors: ImpostorInfo::new(container),
+            baselines: BaselineInfo::new(container),
             histograms,
         }
     }
@@ -603,6 +703,9 @@ impl<'a> Dump<'a> {
         }
         if let Some(impostors) = &self.impostors {
             out.push_str(&impostors.to_text());
+        }
+        if let Some(baselines) = &self.baselines {
+            out.push_str(&baselines.to_text());
         }
         out.push_str(&self.histograms_text());
         out

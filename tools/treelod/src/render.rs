@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{Gpu, Image, render_image};
-use treelod_render::{Camera, DebugView, FrameStats, PruneScale, Pruning, Renderer, Settings};
+use treelod_render::{Baseline, BillboardKind, Camera, DebugView, FrameStats, PruneScale, Pruning, Renderer, Settings};
 
 use crate::report::{self, Failed};
 use crate::scene;
@@ -66,6 +66,12 @@ pub struct Args {
     /// their bark as triangles; other trees as usual. Takes precedence over `--prune`.
     #[arg(long)]
     pub impostors: bool,
+    /// Draw trees whose containers have baselines (build with `--baselines`) with one of them
+    /// instead: `lod-chain` (meshoptimizer's levels, the coarsest whose error projects below
+    /// `--s-min` pixels), `billboard` (one camera-facing quad) or `crossed` (three fixed quads).
+    /// Takes precedence over `--impostors` and `--prune`.
+    #[arg(long, value_name = "BASELINE", value_parser = ["lod-chain", "billboard", "crossed"])]
+    pub baseline: Option<String>,
     /// Select on the GPU (compute shaders write the indirect draws; every model is kept resident
     /// whole). Frames with pruning or the full mesh (`--compare`'s right half) select on the CPU.
     #[arg(long)]
@@ -97,6 +103,16 @@ impl PruneArgs {
             _ => PruneScale::Optimal,
         };
         Some(Pruning { scale, lambda: self.prune_lambda, ..Pruning::default() })
+    }
+}
+
+/// The renderer's baseline for a `--baseline` value (checked by clap).
+pub fn parse_baseline(name: Option<&str>) -> Option<Baseline> {
+    match name? {
+        "lod-chain" => Some(Baseline::LodChain),
+        "billboard" => Some(Baseline::Billboard(BillboardKind::Facing)),
+        "crossed" => Some(Baseline::Billboard(BillboardKind::Crossed)),
+        _ => None,
     }
 }
 
@@ -192,6 +208,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     };
     settings.pruning = args.prune.settings();
     settings.impostors = args.impostors;
+    settings.baseline = parse_baseline(args.baseline.as_deref());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
         scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
@@ -216,7 +233,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 Failed { class: ErrorClass::Io }
             })
         };
-        if renderer.settings().pruning.is_some() && !renderer.settings().impostors && !renderer.settings().full_mesh {
+        let s = renderer.settings();
+        if s.pruning.is_some() && !s.impostors && s.baseline.is_none() && !s.full_mesh {
             // The occlusion factor of pruned trees is measured on the frame before.
             frame(renderer)?;
         }
@@ -231,10 +249,15 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         stats.triangles,
         stats.points
     );
-    if renderer.settings().pruning.is_some() && !renderer.settings().impostors {
+    if let Some(baseline) = &args.baseline {
+        line.push_str(&format!(
+            ", {} tree(s) drawn with the {baseline} baseline ({} billboard quads)",
+            stats.instances_baseline, stats.billboards
+        ));
+    } else if renderer.settings().pruning.is_some() && !renderer.settings().impostors {
         line.push_str(&format!(", {} pruned tree(s) drawing {} leaves", stats.instances_pruned, stats.leaves_pruned));
     }
-    if renderer.settings().impostors {
+    if renderer.settings().impostors && args.baseline.is_none() {
         line.push_str(&format!(
             ", {} tree(s) with impostors submitting {} planes",
             stats.instances_impostors, stats.planes

@@ -49,6 +49,9 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
         (report.prune_leaves, "pruned leaf", "pruned leaves"),
         (report.prune_triangles, "pruned triangle", "pruned triangles"),
         (report.curve_samples, "curve sample", "curve samples"),
+        (report.lod_levels, "LoD level", "LoD levels"),
+        (report.lod_triangles, "LoD triangle", "LoD triangles"),
+        (report.billboards, "billboard quad", "billboard quads"),
     ]
     .into_iter()
     .filter(|&(n, _, _)| n > 0)

@@ -11,7 +11,9 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{GpuError, Image, Readback};
-use treelod_render::{Camera, DebugView, FrameStats, Pruning, Renderer, RendererFormats, Settings};
+use treelod_render::{
+    Baseline, BillboardKind, Camera, DebugView, FrameStats, Pruning, Renderer, RendererFormats, Settings,
+};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, KeyEvent, MouseButton, WindowEvent};
@@ -61,6 +63,10 @@ pub struct Args {
     /// Start with impostor planes on (key `I`) for trees whose containers have them.
     #[arg(long)]
     pub impostors: bool,
+    /// Start with a baseline on (key `B` cycles none, lod-chain, billboard, crossed) for trees
+    /// whose containers have baselines (build with `--baselines`).
+    #[arg(long, value_name = "BASELINE", value_parser = ["lod-chain", "billboard", "crossed"])]
+    pub baseline: Option<String>,
 }
 
 /// Runs `treelod view`.
@@ -282,7 +288,12 @@ impl Viewer {
         let depth = depth_view(&device, config.width, config.height);
 
         let formats = RendererFormats { color: format, depth: DEPTH_FORMAT, sample_count: 1 };
-        let settings = Settings { pruning: args.prune.settings(), impostors: args.impostors, ..Settings::default() };
+        let settings = Settings {
+            pruning: args.prune.settings(),
+            impostors: args.impostors,
+            baseline: crate::render::parse_baseline(args.baseline.as_deref()),
+            ..Settings::default()
+        };
         let mut renderer = Renderer::new(&device, formats, settings);
         let bounds = scene::add_to_renderer(scene, &device, &queue, &mut renderer).map_err(|e| scene_failed(&e))?;
 
@@ -366,6 +377,16 @@ impl Viewer {
             KeyCode::KeyF => settings.full_mesh = !settings.full_mesh,
             KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
             KeyCode::KeyI => settings.impostors = !settings.impostors,
+            KeyCode::KeyB => {
+                settings.baseline = match settings.baseline {
+                    None => Some(Baseline::LodChain),
+                    Some(Baseline::LodChain) => Some(Baseline::Billboard(BillboardKind::Facing)),
+                    Some(Baseline::Billboard(BillboardKind::Facing)) => {
+                        Some(Baseline::Billboard(BillboardKind::Crossed))
+                    }
+                    Some(Baseline::Billboard(BillboardKind::Crossed)) => None,
+                }
+            }
             KeyCode::KeyO => {
                 if let Some(pruning) = &mut settings.pruning {
                     pruning.occlusion = !pruning.occlusion;
@@ -491,7 +512,17 @@ impl Viewer {
         if self.renderer.gpu_selection_enabled() {
             mode.push_str(" | GPU selection");
         }
-        if settings.impostors && !settings.full_mesh {
+        if let Some(baseline) = settings.baseline.filter(|_| !settings.full_mesh) {
+            let name = match baseline {
+                Baseline::LodChain => "lod-chain",
+                Baseline::Billboard(BillboardKind::Facing) => "billboard",
+                Baseline::Billboard(BillboardKind::Crossed) => "crossed",
+            };
+            mode.push_str(&format!(
+                " | baseline {name}: {} trees, {} triangles, {} quads",
+                self.stats.instances_baseline, self.stats.triangles, self.stats.billboards
+            ));
+        } else if settings.impostors && !settings.full_mesh {
             mode.push_str(&format!(
                 " | impostors: {} trees, {} planes",
                 self.stats.instances_impostors, self.stats.planes

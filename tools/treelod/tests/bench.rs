@@ -22,7 +22,7 @@ fn bench_ok(args: &[&OsStr]) -> String {
 
 const COLUMNS: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,points_in_cut,primitives_in_cut";
+precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads";
 
 #[test]
 fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {

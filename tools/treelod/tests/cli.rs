@@ -1,6 +1,6 @@
 //! End-to-end tests of the `treelod` binary: output of `dump` and `verify`, exit codes, error
 //! messages, robustness against files that are not containers, and the golden dumps of
-//! `tests/data/v1_0/`.
+//! `tests/data/v1_0/` and `tests/data/v1_1/`.
 
 mod common;
 use common::read_png;
@@ -560,7 +560,7 @@ fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
     }
 }
 
-/// Golden files: every `tests/data/v1_0/NAME.treelod` has `NAME.dump.txt` and `NAME.dump.json`
+/// Golden files: every `tests/data/v1_*/NAME.treelod` has `NAME.dump.txt` and `NAME.dump.json`
 /// beside it, the exact output of `treelod dump NAME.treelod` and `treelod dump --json
 /// NAME.treelod` run in that directory. With no `.treelod` there yet, the test passes; a
 /// `.treelod` without its expected output fails it.
@@ -569,7 +569,13 @@ fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
 /// `TREELOD_BLESS=1 cargo test -p treelod --test cli golden` and review the diff.
 #[test]
 fn golden_dumps_match() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/v1_0");
+    for version in ["v1_0", "v1_1"] {
+        golden_dumps_match_in(version);
+    }
+}
+
+fn golden_dumps_match_in(version: &str) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data").join(version);
     let bless = std::env::var_os("TREELOD_BLESS").is_some_and(|v| v == "1");
     let Ok(entries) = std::fs::read_dir(&dir) else {
         return; // no golden directory yet

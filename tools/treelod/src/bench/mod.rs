@@ -25,7 +25,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use treelod_format::{Compression, Container, ErrorClass};
 use treelod_render::offscreen::{Gpu, render_image_timed, render_prepared_timed};
-use treelod_render::{Camera, Instance, ModelId, PruneScale, Pruning, Renderer, Settings};
+use treelod_render::{Baseline, BillboardKind, Camera, Instance, ModelId, PruneScale, Pruning, Renderer, Settings};
 
 use self::forest::{Forest, Shape};
 use self::path::Frame;
@@ -123,6 +123,15 @@ pub enum Technique {
     /// Pruning with the optimised scale `s_opt` (Neubert 2011).
     #[value(name = "prune-opt")]
     PruneOpt,
+    /// Baseline: a discrete LoD chain from meshoptimizer's simplifiers (spec §6.12).
+    #[value(name = "lod-chain")]
+    LodChain,
+    /// Baseline: one camera-facing billboard per tree (spec §6.13).
+    #[value(name = "billboard")]
+    Billboard,
+    /// Baseline: crossed billboards, three fixed quads per tree (spec §6.13).
+    #[value(name = "crossed")]
+    Crossed,
 }
 
 impl Technique {
@@ -134,6 +143,9 @@ impl Technique {
             Self::Spt => "spt",
             Self::PruneCook => "prune-cook",
             Self::PruneOpt => "prune-opt",
+            Self::LodChain => "lod-chain",
+            Self::Billboard => "billboard",
+            Self::Crossed => "crossed",
         }
     }
 
@@ -145,6 +157,9 @@ impl Technique {
             Self::Spt => "triangles and points (Gilet 2005, sequential point trees): the default renderer",
             Self::PruneCook => "pruning with s_Cook = 1/lambda (uniform stochastic baseline, Neubert 2011)",
             Self::PruneOpt => "pruning with s_opt (Neubert 2011)",
+            Self::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
+            Self::Billboard => "baseline: one camera-facing billboard per tree",
+            Self::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
         }
     }
 
@@ -156,6 +171,11 @@ impl Technique {
             Self::PruneCook | Self::PruneOpt => Availability::Absent(
                 "no model of the forest holds pruning priority lists (build them with --prune)".to_owned(),
             ),
+            Self::LodChain if data.lod_levels > 0 => Availability::Measured,
+            Self::Billboard | Self::Crossed if data.billboards > 0 => Availability::Measured,
+            Self::LodChain | Self::Billboard | Self::Crossed => {
+                Availability::Absent("no model of the forest holds baselines (build them with --baselines)".to_owned())
+            }
         }
     }
 
@@ -167,7 +187,7 @@ impl Technique {
     fn settings(self, args: &Args) -> Option<Settings> {
         let scale = match self {
             Self::Full => return None,
-            Self::Spt => None,
+            Self::Spt | Self::LodChain | Self::Billboard | Self::Crossed => None,
             Self::PruneCook => Some(PruneScale::Cook),
             Self::PruneOpt => Some(PruneScale::Optimal),
         };
@@ -175,6 +195,12 @@ impl Technique {
         settings.s_min = args.s_min.unwrap_or(settings.s_min);
         settings.s_max = args.s_max.unwrap_or(settings.s_max);
         settings.pruning = scale.map(|scale| Pruning { scale, ..Pruning::default() });
+        settings.baseline = match self {
+            Self::LodChain => Some(Baseline::LodChain),
+            Self::Billboard => Some(Baseline::Billboard(BillboardKind::Facing)),
+            Self::Crossed => Some(Baseline::Billboard(BillboardKind::Crossed)),
+            _ => None,
+        };
         Some(settings)
     }
 }
@@ -195,6 +221,8 @@ pub struct Row {
     /// Of those, the points in the cut, which the shader keeps (`Renderer::points_in_cut`; 0 for
     /// the full mesh, `None` when the frame was selected on the GPU).
     pub points_in_cut: Option<u64>,
+    /// Impostor planes and billboard quads submitted (one primitive each, as a splat is).
+    pub quads: u64,
     /// Visible instances drawn with pruned leaves (`None` for the counted full mesh).
     pub instances_pruned: Option<u32>,
     /// Leaves drawn by pruned instances (their triangles count in `triangles`).
@@ -220,17 +248,17 @@ pub struct Row {
 }
 
 impl Row {
-    /// Triangles and points.
+    /// Triangles, points and quads.
     #[must_use]
     pub fn primitives(&self) -> u64 {
-        self.triangles + self.points
+        self.triangles + self.points + self.quads
     }
 
     /// Triangles and the points in the cut: what is rasterised (the submitted count where the
     /// cut was not counted).
     #[must_use]
     pub fn primitives_in_cut(&self) -> u64 {
-        self.triangles + self.points_in_cut.unwrap_or(self.points)
+        self.triangles + self.points_in_cut.unwrap_or(self.points) + self.quads
     }
 }
 
@@ -498,6 +526,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                     instances_visible: visible,
                     triangles,
                     points: 0,
+                    quads: 0,
                     points_in_cut: Some(0),
                     instances_pruned: None,
                     leaves_pruned: None,
@@ -527,6 +556,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 instances_visible: stats.instances_visible,
                 triangles: stats.triangles,
                 points: stats.points,
+                quads: stats.planes + stats.billboards,
                 // Counted on the CPU after the timed selection.
                 points_in_cut: (!stats.gpu_selection).then(|| f.renderer.points_in_cut()),
                 instances_pruned: Some(stats.instances_pruned),
@@ -651,13 +681,16 @@ fn demo_prune(order: treelod_build::PruneOrder) -> treelod_build::PruneConfig {
 
 /// The built-in models: [`DEMO_TREES`] built in memory (no file written), in parallel. With
 /// `prune-opt` asked for they hold density-ordered priority lists (the order that saved most
-/// geometry on the shared models); with `prune-cook` a second set holds stochastic lists.
+/// geometry on the shared models); with `prune-cook` a second set holds stochastic lists; with a
+/// baseline asked for they hold baselines (and the impostors that set the billboards' budget).
 fn demo_models(techniques: &[Technique]) -> Result<Models, Failed> {
     use treelod_build::PruneOrder;
     let opt = techniques.contains(&Technique::PruneOpt).then(|| demo_prune(PruneOrder::Density));
-    let containers = demo_containers(opt.as_ref())?;
+    let baselines =
+        techniques.iter().any(|t| matches!(t, Technique::LodChain | Technique::Billboard | Technique::Crossed));
+    let containers = demo_containers(opt.as_ref(), baselines)?;
     let stochastic = match techniques.contains(&Technique::PruneCook) {
-        true => Some(demo_containers(Some(&demo_prune(PruneOrder::Stochastic)))?),
+        true => Some(demo_containers(Some(&demo_prune(PruneOrder::Stochastic)), false)?),
         false => None,
     };
     let labels: Vec<String> = DEMO_TREES
@@ -668,9 +701,14 @@ fn demo_models(techniques: &[Technique]) -> Result<Models, Failed> {
     Ok(Models { source, labels, containers, stochastic })
 }
 
-/// [`DEMO_TREES`] built with `prune`.
-fn demo_containers(prune: Option<&treelod_build::PruneConfig>) -> Result<Vec<Arc<Container>>, Failed> {
-    let build = treelod_build::BuildConfig { prune: prune.cloned(), ..treelod_build::BuildConfig::default() };
+/// [`DEMO_TREES`] built with `prune`, and with `baselines` their baselines and impostors.
+fn demo_containers(prune: Option<&treelod_build::PruneConfig>, baselines: bool) -> Result<Vec<Arc<Container>>, Failed> {
+    let build = treelod_build::BuildConfig {
+        prune: prune.cloned(),
+        impostors: baselines.then(treelod_build::ImpostorConfig::default),
+        baselines: baselines.then(treelod_build::LodChainConfig::default),
+        ..treelod_build::BuildConfig::default()
+    };
     let built: Result<Vec<Container>, Failed> = DEMO_TREES
         .par_iter()
         .map(|&(seed, leaves, height)| {
@@ -695,6 +733,8 @@ fn optional_data(containers: &[Arc<Container>]) -> OptionalData {
         data.ellipsoids += (container.ellipsoids().len() + container.lines().len()) as u64;
         data.planes += container.planes().len() as u64;
         data.prune_leaves += container.prune_leaves().len() as u64;
+        data.lod_levels += container.lod_levels().len() as u64;
+        data.billboards += container.billboards().len() as u64;
     }
     data
 }

@@ -286,7 +286,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
 /// The CSV header.
 pub const CSV_HEADER: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,points_in_cut,primitives_in_cut";
+precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -299,7 +299,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -327,6 +327,7 @@ pub fn csv(report: &Report) -> String {
             text(row.rmse.map(|v| v.to_string())),
             text(row.points_in_cut.map(|v| v.to_string())),
             row.primitives_in_cut(),
+            row.quads,
         );
     }
     out

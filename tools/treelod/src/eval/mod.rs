@@ -17,7 +17,7 @@ use std::time::Instant;
 use glam::Vec3;
 use treelod_format::{Container, ErrorClass};
 use treelod_render::offscreen::{Gpu, render_prepared_timed};
-use treelod_render::{Camera, FrameStats, PruneScale, Pruning, Renderer, Settings};
+use treelod_render::{Baseline, BillboardKind, Camera, FrameStats, PruneScale, Pruning, Renderer, Settings};
 
 use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse};
 use self::path::Pose;
@@ -144,6 +144,15 @@ pub enum TechniqueName {
     /// The default distance policy choosing among techniques.
     #[value(name = "policy")]
     Policy,
+    /// Baseline: a discrete LoD chain from meshoptimizer's simplifiers (spec §6.12).
+    #[value(name = "lod-chain")]
+    LodChain,
+    /// Baseline: one camera-facing billboard per tree (spec §6.13).
+    #[value(name = "billboard")]
+    Billboard,
+    /// Baseline: crossed billboards, three fixed quads per tree (spec §6.13).
+    #[value(name = "crossed")]
+    Crossed,
 }
 
 impl TechniqueName {
@@ -159,6 +168,9 @@ impl TechniqueName {
             Self::PruneOpt => "prune-opt",
             Self::PruneCook => "prune-cook",
             Self::Policy => "policy",
+            Self::LodChain => "lod-chain",
+            Self::Billboard => "billboard",
+            Self::Crossed => "crossed",
         }
     }
 }
@@ -204,6 +216,10 @@ pub struct OptionalData {
     pub planes: u64,
     /// Pruned leaves.
     pub prune_leaves: u64,
+    /// Baseline LoD chain levels.
+    pub lod_levels: u64,
+    /// Baseline billboard quads.
+    pub billboards: u64,
 }
 
 /// Whether `technique` can be measured on an input holding `data`; `scene` words the reason for a
@@ -229,6 +245,14 @@ pub fn availability(technique: TechniqueName, data: OptionalData, scene: bool) -
         }
         TechniqueName::Policy => {
             Availability::NotImplemented("there is no distance policy choosing among techniques".to_owned())
+        }
+        TechniqueName::LodChain if data.lod_levels > 0 => Availability::Measured,
+        TechniqueName::LodChain => {
+            Availability::Absent(format!("{holder} baseline LoD chain (build with --baselines)"))
+        }
+        TechniqueName::Billboard | TechniqueName::Crossed if data.billboards > 0 => Availability::Measured,
+        TechniqueName::Billboard | TechniqueName::Crossed => {
+            Availability::Absent(format!("{holder} baseline billboards (build with --baselines)"))
         }
     }
 }
@@ -281,19 +305,33 @@ pub struct Row {
 
 impl Row {
     /// Bytes of geometry records the frame reads: 24 per triangle, 48 per point and 64 per impostor
-    /// plane submitted.
+    /// plane or billboard quad submitted.
     #[must_use]
     pub fn geometry_bytes(&self) -> u64 {
         geometry_bytes(&self.stats)
     }
+
+    /// Primitives the frame submitted: triangles, points, impostor planes and billboard quads
+    /// (a splat, a plane and a billboard are each one quad).
+    #[must_use]
+    pub fn primitives(&self) -> u64 {
+        primitives(&self.stats)
+    }
 }
 
-/// Bytes of triangle, point and impostor plane records submitted in a frame.
+/// Bytes of triangle, point, impostor plane and billboard records submitted in a frame.
 #[must_use]
 pub fn geometry_bytes(stats: &FrameStats) -> u64 {
     stats.triangles * size_of::<treelod_format::TriangleRecord>() as u64
         + stats.points * size_of::<treelod_format::PointRecord>() as u64
         + stats.planes * size_of::<treelod_format::PlaneRecord>() as u64
+        + stats.billboards * size_of::<treelod_format::BillboardRecord>() as u64
+}
+
+/// Primitives submitted in a frame: triangles, points, impostor planes and billboard quads.
+#[must_use]
+pub fn primitives(stats: &FrameStats) -> u64 {
+    stats.triangles + stats.points + stats.planes + stats.billboards
 }
 
 /// Everything a run measured, for the outputs.
@@ -438,6 +476,13 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 settings.pruning = scale.map(|scale| Pruning { scale, spt_below_pixels: 0.0, ..Pruning::default() });
                 // Impostors: the leaves of every tree with planes as planes, its bark as triangles.
                 settings.impostors = *name == TechniqueName::Impostors;
+                // Baselines: every tree with the baseline drawn with it.
+                settings.baseline = match name {
+                    TechniqueName::LodChain => Some(Baseline::LodChain),
+                    TechniqueName::Billboard => Some(Baseline::Billboard(BillboardKind::Facing)),
+                    TechniqueName::Crossed => Some(Baseline::Billboard(BillboardKind::Crossed)),
+                    _ => None,
+                };
                 (settings, 1)
             }
         };
@@ -592,6 +637,8 @@ fn optional_data(scene: &Scene) -> Result<OptionalData, Failed> {
         data.ellipsoids += (container.ellipsoids().len() + container.lines().len()) as u64;
         data.planes += container.planes().len() as u64;
         data.prune_leaves += container.prune_leaves().len() as u64;
+        data.lod_levels += container.lod_levels().len() as u64;
+        data.billboards += container.billboards().len() as u64;
     }
     Ok(data)
 }
@@ -660,8 +707,19 @@ mod tests {
             availability(TechniqueName::Impostors, none, true).reason(),
             Some("no model of the scene holds impostor planes")
         );
-        let some = OptionalData { ellipsoids: 3, planes: 1, prune_leaves: 2 };
-        for t in [TechniqueName::PruneOpt, TechniqueName::PruneCook, TechniqueName::Impostors] {
+        assert_eq!(
+            availability(TechniqueName::Crossed, none, false).reason(),
+            Some("this container holds no baseline billboards (build with --baselines)")
+        );
+        let some = OptionalData { ellipsoids: 3, planes: 1, prune_leaves: 2, lod_levels: 5, billboards: 4 };
+        for t in [
+            TechniqueName::PruneOpt,
+            TechniqueName::PruneCook,
+            TechniqueName::Impostors,
+            TechniqueName::LodChain,
+            TechniqueName::Billboard,
+            TechniqueName::Crossed,
+        ] {
             assert_eq!(availability(t, some, false), Availability::Measured);
             assert_eq!(availability(t, none, false).status(), "absent");
         }

@@ -163,6 +163,9 @@ fn description(technique: TechniqueName) -> &'static str {
         TechniqueName::Impostors => "leaf-cluster impostor planes (Garcia 2005)",
         TechniqueName::PruneOpt => "pruning with s_opt (Neubert 2011)",
         TechniqueName::PruneCook => "pruning with s_Cook = 1/lambda (stochastic baseline)",
+        TechniqueName::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
+        TechniqueName::Billboard => "baseline: one camera-facing billboard per tree",
+        TechniqueName::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
         TechniqueName::Policy => "the default distance policy",
     }
 }

@@ -256,9 +256,9 @@ fn rows_of(report: &Report, technique: TechniqueName) -> impl Iterator<Item = &R
     report.rows.iter().filter(move |r| r.technique == technique)
 }
 
-/// Primitives a frame drew: triangles and points.
+/// Primitives a frame drew ([`Row::primitives`]).
 fn primitives(row: &Row) -> f64 {
-    (row.stats.triangles + row.stats.points) as f64
+    row.primitives() as f64
 }
 
 /// A legend box at the top right of `area`.
