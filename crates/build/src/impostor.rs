@@ -76,6 +76,9 @@ pub const DEFAULT_LEVELS: [u32; 3] = [32, 16, 8];
 /// Samples per texel side when baking.
 const SAMPLES: usize = 4;
 
+/// Texel rows baked at a time: 64 rows of a 2048-texel-wide quad hold 33 MB of samples.
+const BAND_ROWS: usize = 64;
+
 /// Transparent texels around each region's content.
 const GUTTER: u32 = 4;
 
@@ -1024,7 +1027,7 @@ pub(crate) fn compose(regions: &[Region], baked: &[Vec<Vec<u8>>], width: u32, he
 /// (t + 1)/2)` of the content rectangle, rows top to bottom (spec §6.10's texture coordinates).
 pub(crate) fn bake(
     mesh: &ImpostorMesh<'_>,
-    triangles: impl Iterator<Item = (u32, [DVec3; 3])>,
+    triangles: impl Iterator<Item = (u32, [DVec3; 3])> + Clone,
     plane: &PlaneFit,
     winner: Winner,
     quad: &Quad,
@@ -1032,83 +1035,98 @@ pub(crate) fn bake(
 ) -> Vec<Vec<u8>> {
     let lut = srgb_to_linear_table();
     let (sw, sh) = (region.tw as usize * SAMPLES, region.th as usize * SAMPLES);
-    let mut depth = vec![f32::INFINITY; sw * sh];
-    let mut colour = vec![[0.0f32; 3]; sw * sh];
     let (hu2, hv2) = (quad.u.length_squared(), quad.v.length_squared());
-    for (t, local) in triangles {
-        let tri = &mesh.triangles[t as usize];
-        let surface = &mesh.surfaces[tri.material as usize];
-        let corners = tri.v.map(|v| &mesh.vertices[v as usize]);
-        // Sample coordinates: s = −1 ↦ 0, s = +1 ↦ sw (likewise t and sh).
-        let xy = local.map(|p| {
-            let d = p - quad.centre;
-            DVec2::new((d.dot(quad.u) / hu2 + 1.0) * 0.5 * sw as f64, (d.dot(quad.v) / hv2 + 1.0) * 0.5 * sh as f64)
-        });
-        let dist = local.map(|p| p.dot(plane.normal) + plane.offset);
-        let area = (xy[1] - xy[0]).perp_dot(xy[2] - xy[0]);
-        if area.abs() < 1e-12 || !area.is_finite() {
-            continue;
-        }
-        let (min, max) = (xy[0].min(xy[1]).min(xy[2]), xy[0].max(xy[1]).max(xy[2]));
-        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
-        let (x0, x1, y0, y1) = (
-            (min.x - 0.5).ceil().max(0.0) as usize,
-            ((max.x - 0.5).floor() + 1.0).clamp(0.0, sw as f64) as usize,
-            (min.y - 0.5).ceil().max(0.0) as usize,
-            ((max.y - 0.5).floor() + 1.0).clamp(0.0, sh as f64) as usize,
-        );
-        for sy in y0..y1 {
-            for sx in x0..x1 {
-                let p = DVec2::new(sx as f64 + 0.5, sy as f64 + 0.5);
-                let w1 = (p - xy[0]).perp_dot(xy[2] - xy[0]) / area;
-                let w2 = (xy[1] - xy[0]).perp_dot(p - xy[0]) / area;
-                let w0 = 1.0 - w1 - w2;
-                if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
-                    continue;
-                }
-                let i = sy * sw + sx;
-                // The sample's key: the least wins (ties: the first triangle).
-                let signed = w0 * dist[0] + w1 * dist[1] + w2 * dist[2];
-                #[expect(clippy::cast_possible_truncation, reason = "a distance in metres")]
-                let z = match winner {
-                    Winner::Nearest => signed.abs() as f32,
-                    Winner::Front => -signed as f32,
-                };
-                if z >= depth[i] {
-                    continue;
-                }
-                if let Some(rgb) = shade(surface, corners, [w0, w1, w2], lut) {
-                    depth[i] = z;
-                    colour[i] = rgb;
-                }
-            }
-        }
-    }
-
-    // Resolve samples into the region's content, then dilate colour into transparent texels.
     let (rw, rh) = (region.rw as usize, region.rh as usize);
     let mut texels = vec![[0.0f32; 4]; rw * rh];
     let g = GUTTER as usize;
-    for ty in 0..region.th as usize {
-        for tx in 0..region.tw as usize {
-            let (mut sum, mut covered) = ([0.0f32; 3], 0u32);
-            for sy in 0..SAMPLES {
-                let row = (ty * SAMPLES + sy) * sw + tx * SAMPLES;
-                for i in row..row + SAMPLES {
-                    if depth[i].is_finite() {
-                        covered += 1;
-                        for c in 0..3 {
-                            sum[c] += colour[i][c];
-                        }
+    // The samples of `BAND_ROWS` texel rows at a time, each band going over every triangle: a
+    // sample sees the same triangles in the same order as in one pass, so the result is the
+    // same, and the samples of a large quad (a whole-tree billboard of millions of texels) need
+    // a band's memory, not the quad's.
+    let band_samples = BAND_ROWS * SAMPLES;
+    let mut depth = vec![f32::INFINITY; sw * band_samples.min(sh)];
+    let mut colour = vec![[0.0f32; 3]; sw * band_samples.min(sh)];
+    for band_start in (0..sh).step_by(band_samples.max(1)) {
+        let band_end = (band_start + band_samples).min(sh);
+        depth.fill(f32::INFINITY);
+        for (t, local) in triangles.clone() {
+            let tri = &mesh.triangles[t as usize];
+            let surface = &mesh.surfaces[tri.material as usize];
+            let corners = tri.v.map(|v| &mesh.vertices[v as usize]);
+            // Sample coordinates: s = −1 ↦ 0, s = +1 ↦ sw (likewise t and sh).
+            let xy = local.map(|p| {
+                let d = p - quad.centre;
+                DVec2::new((d.dot(quad.u) / hu2 + 1.0) * 0.5 * sw as f64, (d.dot(quad.v) / hv2 + 1.0) * 0.5 * sh as f64)
+            });
+            let area = (xy[1] - xy[0]).perp_dot(xy[2] - xy[0]);
+            if area.abs() < 1e-12 || !area.is_finite() {
+                continue;
+            }
+            let (min, max) = (xy[0].min(xy[1]).min(xy[2]), xy[0].max(xy[1]).max(xy[2]));
+            #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
+            let (x0, x1, y0, y1) = (
+                (min.x - 0.5).ceil().max(0.0) as usize,
+                ((max.x - 0.5).floor() + 1.0).clamp(0.0, sw as f64) as usize,
+                (min.y - 0.5).ceil().max(0.0) as usize,
+                ((max.y - 0.5).floor() + 1.0).clamp(0.0, sh as f64) as usize,
+            );
+            let (y0, y1) = (y0.max(band_start), y1.min(band_end));
+            if y0 >= y1 || x0 >= x1 {
+                continue;
+            }
+            let dist = local.map(|p| p.dot(plane.normal) + plane.offset);
+            for sy in y0..y1 {
+                for sx in x0..x1 {
+                    let p = DVec2::new(sx as f64 + 0.5, sy as f64 + 0.5);
+                    let w1 = (p - xy[0]).perp_dot(xy[2] - xy[0]) / area;
+                    let w2 = (xy[1] - xy[0]).perp_dot(p - xy[0]) / area;
+                    let w0 = 1.0 - w1 - w2;
+                    if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+                        continue;
+                    }
+                    let i = (sy - band_start) * sw + sx;
+                    // The sample's key: the least wins (ties: the first triangle).
+                    let signed = w0 * dist[0] + w1 * dist[1] + w2 * dist[2];
+                    #[expect(clippy::cast_possible_truncation, reason = "a distance in metres")]
+                    let z = match winner {
+                        Winner::Nearest => signed.abs() as f32,
+                        Winner::Front => -signed as f32,
+                    };
+                    if z >= depth[i] {
+                        continue;
+                    }
+                    if let Some(rgb) = shade(surface, corners, [w0, w1, w2], lut) {
+                        depth[i] = z;
+                        colour[i] = rgb;
                     }
                 }
             }
-            if covered > 0 {
-                let n = covered as f32;
-                texels[(ty + g) * rw + tx + g] = [sum[0] / n, sum[1] / n, sum[2] / n, n / (SAMPLES * SAMPLES) as f32];
+        }
+
+        // Resolve the band's samples into the region's content.
+        for ty in band_start / SAMPLES..band_end / SAMPLES {
+            for tx in 0..region.tw as usize {
+                let (mut sum, mut covered) = ([0.0f32; 3], 0u32);
+                for sy in 0..SAMPLES {
+                    let row = (ty * SAMPLES + sy - band_start) * sw + tx * SAMPLES;
+                    for i in row..row + SAMPLES {
+                        if depth[i].is_finite() {
+                            covered += 1;
+                            for c in 0..3 {
+                                sum[c] += colour[i][c];
+                            }
+                        }
+                    }
+                }
+                if covered > 0 {
+                    let n = covered as f32;
+                    texels[(ty + g) * rw + tx + g] =
+                        [sum[0] / n, sum[1] / n, sum[2] / n, n / (SAMPLES * SAMPLES) as f32];
+                }
             }
         }
     }
+    // Then dilate colour into transparent texels (below, per level).
     let mut levels = vec![texels];
     let (mut w, mut h) = (rw, rh);
     for _ in 1..MIP_LEVELS {

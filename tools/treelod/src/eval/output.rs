@@ -311,7 +311,7 @@ pub fn csv(report: &Report) -> String {
     for l in 0..levels {
         let _ = write!(out, ",rmse_{}px", 1u64 << l);
     }
-    out.push_str(",temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms\n");
+    out.push_str(",temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms,quads,primitives\n");
     let optional = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
     for row in &report.rows {
         let pose = report
@@ -348,12 +348,14 @@ pub fn csv(report: &Report) -> String {
         }
         let _ = writeln!(
             out,
-            ",{},{},{:.3},{},{:.3}",
+            ",{},{},{:.3},{},{:.3},{},{}",
             optional(row.noise),
             optional(row.reference_noise),
             row.prepare_ms,
             row.gpu_ms.map(|v| format!("{v:.4}")).unwrap_or_default(),
-            row.wall_ms
+            row.wall_ms,
+            row.stats.planes + row.stats.billboards,
+            row.primitives(),
         );
     }
     out
