@@ -176,17 +176,33 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     let u = vec3<f32>(plane.axis_u[0], plane.axis_u[1], plane.axis_u[2]);
     let v = vec3<f32>(plane.axis_v[0], plane.axis_v[1], plane.axis_v[2]);
     let p = vec3<f32>(plane.center[0], plane.center[1], plane.center[2]) + corner.x * u + corner.y * v;
-    let t = 0.5 * (corner + 1.0);
+    let clip = frame.view_proj * (draw.model * vec4<f32>(p, 1.0));
+    let normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
+    return quad_corner(draw, clip, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
+}
+
+// The varyings of a textured quad's corner (impostor plane or billboard): texture coordinates
+// from the atlas rectangle `uv_min ..= uv_max` at `corner ∈ [−1, 1]²`, and `kinds` as its colour
+// in the kinds view.
+fn quad_corner(
+    draw: DrawInfo,
+    clip: vec4<f32>,
+    normal: vec3<f32>,
+    uv_min: u32,
+    uv_max: u32,
+    corner: vec2<f32>,
+    kinds: vec3<f32>,
+) -> Varyings {
     var out: Varyings;
-    out.clip = frame.view_proj * (draw.model * vec4<f32>(p, 1.0));
-    out.normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
-    out.uv = mix(unpack2x16unorm(plane.uv_min), unpack2x16unorm(plane.uv_max), t);
+    out.clip = clip;
+    out.normal = normal;
+    out.uv = mix(unpack2x16unorm(uv_min), unpack2x16unorm(uv_max), 0.5 * (corner + 1.0));
     out.color = vec4<f32>(1.0);
     out.material = 0xFFFFFFFFu;
     out.disc = vec2<f32>(0.0);
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
-        case 2u: { out.tint = vec3<f32>(0.95, 0.75, 0.15); }
+        case 2u: { out.tint = kinds; }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;
@@ -214,21 +230,8 @@ fn vs_billboard(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
             u = across * (length(u) / len);
         }
     }
-    let world = centre + corner.x * u + corner.y * v;
-    let t = 0.5 * (corner + 1.0);
-    var out: Varyings;
-    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
-    out.normal = normalize(cross(u, v));
-    out.uv = mix(unpack2x16unorm(quad.uv_min), unpack2x16unorm(quad.uv_max), t);
-    out.color = vec4<f32>(1.0);
-    out.material = 0xFFFFFFFFu;
-    out.disc = vec2<f32>(0.0);
-    switch frame.debug {
-        case 1u: { out.tint = cell_tint(draw.cell); }
-        case 2u: { out.tint = vec3<f32>(0.85, 0.35, 0.85); }
-        default: { out.tint = vec3<f32>(draw.shading); }
-    }
-    return out;
+    let clip = frame.view_proj * vec4<f32>(centre + corner.x * u + corner.y * v, 1.0);
+    return quad_corner(draw, clip, normalize(cross(u, v)), quad.uv_min, quad.uv_max, corner, vec3<f32>(0.85, 0.35, 0.85));
 }
 
 // Two-sided Lambert with ambient: leaves are lit from both faces.

@@ -505,25 +505,39 @@ fn check_lines(lines: &[LineRecord]) -> Result<()> {
 fn check_planes(planes: &[PlaneRecord], image_count: usize) -> Result<()> {
     let kind = SectionKind::PLANES;
     for (i, p) in planes.iter().enumerate() {
-        if !finite3(p.center) || !finite3(p.axis_u) || !finite3(p.axis_v) {
-            return Err(bad(
-                kind,
-                i,
-                format!("center {:?}, axis_u {:?}, axis_v {:?} are not all finite", p.center, p.axis_u, p.axis_v),
-            ));
-        }
-        if p.image as usize >= image_count {
-            return Err(bad(kind, i, format!("image {} is out of range ({image_count} images)", p.image)));
-        }
-        let (min_u, min_v) = (p.uv_min & 0xFFFF, p.uv_min >> 16);
-        let (max_u, max_v) = (p.uv_max & 0xFFFF, p.uv_max >> 16);
-        if min_u > max_u || min_v > max_v {
-            return Err(bad(
-                kind,
-                i,
-                format!("uv_min ({min_u}, {min_v}) is not <= uv_max ({max_u}, {max_v}) per component"),
-            ));
-        }
+        check_quad(kind, i, [p.center, p.axis_u, p.axis_v], p.image, [p.uv_min, p.uv_max], image_count)?;
+    }
+    Ok(())
+}
+
+/// Spec §6.10, §6.13: a textured quad's centre and axes are finite, its image exists, and its
+/// atlas rectangle's `uv_min ≤ uv_max` per component.
+fn check_quad(
+    kind: SectionKind,
+    i: usize,
+    [center, axis_u, axis_v]: [[f32; 3]; 3],
+    image: u32,
+    [uv_min, uv_max]: [u32; 2],
+    image_count: usize,
+) -> Result<()> {
+    if !finite3(center) || !finite3(axis_u) || !finite3(axis_v) {
+        return Err(bad(
+            kind,
+            i,
+            format!("center {center:?}, axis_u {axis_u:?}, axis_v {axis_v:?} are not all finite"),
+        ));
+    }
+    if image as usize >= image_count {
+        return Err(bad(kind, i, format!("image {image} is out of range ({image_count} images)")));
+    }
+    let (min_u, min_v) = (uv_min & 0xFFFF, uv_min >> 16);
+    let (max_u, max_v) = (uv_max & 0xFFFF, uv_max >> 16);
+    if min_u > max_u || min_v > max_v {
+        return Err(bad(
+            kind,
+            i,
+            format!("uv_min ({min_u}, {min_v}) is not <= uv_max ({max_u}, {max_v}) per component"),
+        ));
     }
     Ok(())
 }
@@ -591,25 +605,7 @@ fn check_billboards(billboards: &[BillboardRecord], image_count: usize, tree_cou
     let kind = SectionKind::BILLBOARDS;
     let mut previous = (0u32, 0u32);
     for (i, b) in billboards.iter().enumerate() {
-        if !finite3(b.center) || !finite3(b.axis_u) || !finite3(b.axis_v) {
-            return Err(bad(
-                kind,
-                i,
-                format!("center {:?}, axis_u {:?}, axis_v {:?} are not all finite", b.center, b.axis_u, b.axis_v),
-            ));
-        }
-        if b.image as usize >= image_count {
-            return Err(bad(kind, i, format!("image {} is out of range ({image_count} images)", b.image)));
-        }
-        let (min_u, min_v) = (b.uv_min & 0xFFFF, b.uv_min >> 16);
-        let (max_u, max_v) = (b.uv_max & 0xFFFF, b.uv_max >> 16);
-        if min_u > max_u || min_v > max_v {
-            return Err(bad(
-                kind,
-                i,
-                format!("uv_min ({min_u}, {min_v}) is not <= uv_max ({max_u}, {max_v}) per component"),
-            ));
-        }
+        check_quad(kind, i, [b.center, b.axis_u, b.axis_v], b.image, [b.uv_min, b.uv_max], image_count)?;
         if b.tree >= tree_count {
             return Err(bad(kind, i, format!("tree {} is out of range ({tree_count} trees)", b.tree)));
         }
