@@ -71,7 +71,7 @@ pub struct Summary {
     pub triangles: f64,
     /// Mean points submitted.
     pub points: f64,
-    /// Mean primitives (triangles + points).
+    /// Mean primitives (triangles + points + quads).
     pub primitives: f64,
     /// Most primitives in a frame.
     pub primitives_max: u64,
@@ -397,9 +397,9 @@ pub fn plot(report: &Report) -> Image {
     // Per panel: title, value, log axis, and the value a linear axis always shows (Q's best, the
     // times' zero).
     let mut panels: Vec<(&str, Metric, bool, f64)> = vec![
-        ("primitives submitted per frame: triangles + points (log)", |r| Some(r.primitives() as f64), true, 0.0),
+        ("primitives submitted per frame: triangles + points + quads (log)", |r| Some(r.primitives() as f64), true, 0.0),
         (
-            "primitives in the cut per frame: triangles + points kept (log)",
+            "primitives in the cut per frame: triangles + points kept + quads (log)",
             |r| Some(r.primitives_in_cut() as f64),
             true,
             0.0,

@@ -291,7 +291,7 @@ pub fn quality_vs_primitives(report: &Report) -> Image {
     panel.draw_axes(
         &mut canvas,
         "quality Q = 1 - |(1 - P, 1 - R)| against primitives drawn per frame",
-        Some("triangles + points (log)"),
+        Some("primitives: triangles + points + quads (log)"),
     );
     for (name, colour) in &techniques {
         for row in rows_of(report, *name) {
@@ -330,7 +330,7 @@ pub fn per_frame(report: &Report) -> Image {
     let metrics: [(&str, Metric, bool, f64); 4] = [
         ("quality Q", |r| Some(r.coverage.quality()), false, 1.0),
         ("multi-scale RMSE (linear colour, mean over scales)", |r| Some(r.rmse.summary()), false, 0.0),
-        ("primitives drawn: triangles + points (log)", |r| Some(primitives(r)), true, 0.0),
+        ("primitives drawn: triangles + points + quads (log)", |r| Some(primitives(r)), true, 0.0),
         ("temporal noise: multi-scale RMSE against the previous frame", |r| r.noise, false, 0.0),
     ];
     for (i, (title, metric, log, anchor)) in metrics.iter().enumerate() {
