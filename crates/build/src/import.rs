@@ -6,6 +6,7 @@
 //! typed error naming the file (compression extensions, missing buffers, indices out of range);
 //! what can be skipped is a warning naming the primitive (points and lines, unknown image types).
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
@@ -49,17 +50,43 @@ pub fn import_gltf(path: &Path) -> Result<Scene, BuildError> {
 /// As [`import_gltf`].
 pub fn import_gltf_bytes(bytes: &[u8], path: &Path, base_dir: Option<&Path>) -> Result<Scene, BuildError> {
     let gltf_error = |message: String| BuildError::Gltf { path: path.to_owned(), message };
-    let raw = gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| gltf_error(e.to_string()))?;
-    for ext in raw.extensions_required() {
-        if UNDECODED.contains(&ext) {
-            return Err(BuildError::Unsupported {
-                path: path.to_owned(),
-                what: format!("required extension {ext} (decode it first, e.g. with gltf-transform)"),
-            });
+    // As `gltf::Gltf::from_slice`, but parsed once and with the binary chunk borrowed from `bytes`
+    // rather than copied; the required extensions are checked before validation, which would fail
+    // on an undecoded one with a less helpful message.
+    let (root, blob): (gltf::json::Root, Option<Cow<'_, [u8]>>) = if bytes.starts_with(b"glTF") {
+        let glb = gltf::binary::Glb::from_slice(bytes).map_err(|e| gltf_error(e.to_string()))?;
+        let root = gltf::json::deserialize::from_slice(&glb.json)
+            .map_err(|e| gltf_error(gltf::Error::Deserialize(e).to_string()))?;
+        (root, glb.bin)
+    } else {
+        let root = gltf::json::deserialize::from_slice(bytes)
+            .map_err(|e| gltf_error(gltf::Error::Deserialize(e).to_string()))?;
+        (root, None)
+    };
+    if let Some(ext) = root.extensions_required.iter().find(|ext| UNDECODED.contains(&ext.as_str())) {
+        return Err(BuildError::Unsupported {
+            path: path.to_owned(),
+            what: format!("required extension {ext} (decode it first, e.g. with gltf-transform)"),
+        });
+    }
+    // gltf-json's validation indexes `accessors` with a primitive's POSITION index unchecked
+    // (gltf-json 1.4.1, mesh.rs): an index past the end would panic there, so it is refused here.
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let position = gltf::json::validation::Checked::Valid(gltf::json::mesh::Semantic::Positions);
+            if let Some(index) = primitive.attributes.get(&position)
+                && index.value() >= root.accessors.len()
+            {
+                return Err(gltf_error(format!(
+                    "invalid: meshes[{m}].primitives[{p}].attributes.POSITION: accessor {} does not exist ({} accessors)",
+                    index.value(),
+                    root.accessors.len()
+                )));
+            }
         }
     }
-    let gltf::Gltf { document, blob } = match gltf::Gltf::from_slice(bytes) {
-        Ok(g) => g,
+    let document = match gltf::Document::from_json(root) {
+        Ok(d) => d,
         Err(gltf::Error::Validation(errors)) => {
             let list: Vec<String> = errors.iter().take(3).map(|(p, e)| format!("{p}: {e}")).collect();
             return Err(gltf_error(format!("invalid: {}", list.join("; "))));
@@ -141,12 +168,12 @@ pub fn import_gltf_bytes(bytes: &[u8], path: &Path, base_dir: Option<&Path>) -> 
     Ok(scene)
 }
 
-fn load_buffers(
+fn load_buffers<'a>(
     document: &gltf::Document,
-    mut blob: Option<Vec<u8>>,
+    mut blob: Option<Cow<'a, [u8]>>,
     path: &Path,
     base_dir: Option<&Path>,
-) -> Result<Vec<Vec<u8>>, BuildError> {
+) -> Result<Vec<Cow<'a, [u8]>>, BuildError> {
     let mut out = Vec::new();
     for buffer in document.buffers() {
         let missing = |uri: &str, reason: String| BuildError::MissingBuffer {
@@ -159,7 +186,9 @@ fn load_buffers(
             gltf::buffer::Source::Bin => {
                 blob.take().ok_or_else(|| missing("GLB binary chunk", "the file has no binary chunk".into()))?
             }
-            gltf::buffer::Source::Uri(uri) => read_uri(uri, base_dir).map_err(|reason| missing(uri, reason))?,
+            gltf::buffer::Source::Uri(uri) => {
+                Cow::Owned(read_uri(uri, base_dir).map_err(|reason| missing(uri, reason))?)
+            }
         };
         if data.len() < buffer.length() {
             let uri = match buffer.source() {
@@ -205,7 +234,7 @@ fn percent_decode(s: &str) -> String {
 
 fn load_images(
     document: &gltf::Document,
-    buffers: &[Vec<u8>],
+    buffers: &[Cow<'_, [u8]>],
     path: &Path,
     base_dir: Option<&Path>,
     warnings: &mut Vec<String>,
@@ -263,14 +292,14 @@ fn load_images(
 fn read_primitive(
     primitive: &gltf::Primitive,
     mesh_name: &str,
-    buffers: &[Vec<u8>],
+    buffers: &[Cow<'_, [u8]>],
     world: Mat4,
     tex_coord_set: u32,
     path: &Path,
     warnings: &mut Vec<String>,
 ) -> Result<Option<Part>, BuildError> {
     let label = format!("mesh {mesh_name:?} primitive {}", primitive.index());
-    let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+    let reader = primitive.reader(|b| buffers.get(b.index()).map(|c| &**c));
     let Some(positions) = reader.read_positions() else {
         warnings.push(format!("{label}: no positions, skipped"));
         return Ok(None);

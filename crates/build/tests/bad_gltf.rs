@@ -98,3 +98,14 @@ fn garbage_empty_and_missing_files_are_typed_errors() {
     let err = import_gltf(Path::new("/nonexistent/tree.glb")).unwrap_err();
     assert!(matches!(err, BuildError::Io { .. }), "{err}");
 }
+
+#[test]
+fn a_position_accessor_that_does_not_exist_is_an_error_not_a_panic() {
+    // gltf-json's own validation would index the accessors with it unchecked.
+    let json = r#"{"asset":{"version":"2.0"},"meshes":[{"primitives":[{"attributes":{"POSITION":7}}]}],
+        "nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}]}"#;
+    let err = import(json).expect_err("refused");
+    assert!(matches!(err, BuildError::Gltf { .. }), "{err:?}");
+    let message = err.to_string();
+    assert!(message.contains("bad.gltf") && message.contains("POSITION: accessor 7 does not exist"), "{message}");
+}
