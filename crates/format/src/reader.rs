@@ -602,16 +602,60 @@ fn decode_section(bytes: &[u8], index: usize, entry: &SectionEntry, budget: &mut
         rule: "address space",
     })?;
     let mut buf = AlignedBuf::zeroed(raw_len);
+    if entry.flags & FLAG_SHUFFLE != 0 {
+        decode_shuffled(stored, entry.record_size as usize, buf.as_mut_bytes())
+            .map_err(|e| corrupt(format!("{e} (section {index})")))?;
+        return Ok(Some(buf));
+    }
     let written = zstd::bulk::decompress_to_buffer(stored, buf.as_mut_bytes()).map_err(|e| corrupt(e.to_string()))?;
     if written != raw_len {
         return Err(corrupt(format!("decoded {written} bytes, the table says {raw_len} (section {index})")));
     }
-    if entry.flags & FLAG_SHUFFLE != 0 {
-        let mut records = AlignedBuf::zeroed(raw_len);
-        unshuffle(buf.as_bytes(), entry.record_size as usize, records.as_mut_bytes());
-        buf = records;
-    }
     Ok(Some(buf))
+}
+
+/// Bytes of a shuffled section [`decode_shuffled`] decompresses at a time.
+const UNSHUFFLE_CHUNK: usize = 1 << 20;
+
+/// Decompresses the one zstd frame `stored` (of exactly `out.len()` content bytes, checked before)
+/// and unshuffles it into `out` as [`unshuffle`] does, a chunk at a time: without a second buffer
+/// of the whole section.
+fn decode_shuffled(stored: &[u8], record_size: usize, out: &mut [u8]) -> std::io::Result<()> {
+    use std::io::Read as _;
+    let raw_len = out.len();
+    let n = raw_len / record_size.max(1);
+    let mut decoder = zstd::stream::read::Decoder::with_buffer(stored)?.single_frame();
+    // As the one-shot decoder: no limit on the window the frame asks for (it is at most the
+    // section's size, whose decoding the caller's budget already allowed).
+    decoder.window_log_max(31)?;
+    let mut chunk = vec![0u8; UNSHUFFLE_CHUNK.min(raw_len)];
+    let mut decoded = 0usize;
+    while decoded < raw_len {
+        let len = UNSHUFFLE_CHUNK.min(raw_len - decoded);
+        decoder.read_exact(&mut chunk[..len]).map_err(|e| {
+            std::io::Error::new(e.kind(), format!("{e}: the frame ends within the {raw_len} bytes the table declares"))
+        })?;
+        // The chunk covers shuffled bytes `decoded..decoded + len`: byte `j` of records `i..`, in
+        // runs of one `j` each. Bytes past the last whole record (none in a valid section) are
+        // dropped, as `unshuffle` drops them.
+        let mut rest = &chunk[..len];
+        let mut at = decoded;
+        while !rest.is_empty() && n > 0 && at < n * record_size {
+            let (j, i) = (at / n, at % n);
+            let run = rest.len().min(n - i);
+            for (record, &byte) in out[i * record_size..].chunks_mut(record_size).zip(&rest[..run]) {
+                record[j] = byte;
+            }
+            rest = &rest[run..];
+            at += run;
+        }
+        decoded += len;
+    }
+    // Reading on past the content checks the frame's end and its checksum.
+    if decoder.read(&mut [0u8; 1])? != 0 {
+        return Err(std::io::Error::other(format!("decoded more than the {raw_len} bytes the table declares")));
+    }
+    Ok(())
 }
 
 /// Byte shuffle (spec §8): byte `j` of record `i` goes to `j·n + i`, grouping equal byte positions.
@@ -624,7 +668,8 @@ pub(crate) fn shuffle(records: &[u8], record_size: usize, out: &mut [u8]) {
     }
 }
 
-/// Inverse of [`shuffle`].
+/// Inverse of [`shuffle`] on a whole buffer (what [`decode_shuffled`] does a chunk at a time).
+#[cfg(test)]
 fn unshuffle(shuffled: &[u8], record_size: usize, out: &mut [u8]) {
     let n = shuffled.len() / record_size;
     for (i, record) in out.chunks_exact_mut(record_size).enumerate() {
@@ -693,4 +738,31 @@ pub(crate) fn check_block_and_cells(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{UNSHUFFLE_CHUNK, decode_shuffled, shuffle, unshuffle};
+
+    #[test]
+    fn chunked_decoding_unshuffles_as_a_whole_buffer() {
+        // Over two chunks, with a record size that does not divide the chunk, and a tail shorter
+        // than a record; then shorter than one record.
+        for (len, record_size) in [(2 * UNSHUFFLE_CHUNK + 1000 * 7 + 3, 7), (5, 24), (48 * 1000, 48)] {
+            #[expect(clippy::cast_possible_truncation, reason = "test bytes")]
+            let raw: Vec<u8> = (0..len).map(|i| (i * 31 % 251) as u8 ^ (i / 997) as u8).collect();
+            let mut shuffled = vec![0; len];
+            shuffle(&raw, record_size, &mut shuffled);
+            let frame = zstd::bulk::compress(&shuffled, 3).unwrap();
+            let mut expected = vec![0; len];
+            unshuffle(&shuffled, record_size, &mut expected);
+            let mut out = vec![0; len];
+            decode_shuffled(&frame, record_size, &mut out).unwrap();
+            assert!(out == expected, "len {len}, record size {record_size}");
+            let mut short = vec![0; len + 1];
+            assert!(decode_shuffled(&frame, record_size, &mut short).is_err(), "a frame shorter than declared");
+            let mut long = vec![0; len - 1];
+            assert!(decode_shuffled(&frame, record_size, &mut long).is_err(), "a frame longer than declared");
+        }
+    }
 }
