@@ -19,12 +19,12 @@ use crate::billboard::{Billboards, build_billboards};
 use crate::classify::{ClassifyOptions, classify};
 use crate::error::BuildError;
 use crate::gilet::{CellPoint, GiletConfig, LeafPoint, build_cell};
-use crate::impostor::{ImpostorConfig, ImpostorMesh, Impostors, LeafTriangle, Surface, build_impostors};
+use crate::impostor::{Atlas, ImpostorConfig, ImpostorMesh, Impostors, LeafTriangle, Surface, build_impostors};
 use crate::lod_chain::{ChainTriangle, LodChainConfig, build_lod_chain};
 use crate::precision::Precision;
 use crate::prune::{MeshTriangle, PruneConfig, PruneMesh, PruneReport, Pruned};
 use crate::raster::{AlphaMask, NO_ALPHA};
-use crate::scene::{AlphaMode, Class, Image, ImageEncoding, Material, Part, Scene};
+use crate::scene::{AlphaMode, Class, ImageEncoding, Material, Scene};
 use crate::spt::FlattenError;
 use crate::texture::{TriangleSurface, integrate, linear_to_srgb};
 
@@ -189,31 +189,37 @@ struct Tri {
     part: u32,
 }
 
-/// A source part as the per-cell stage sees it.
-struct PartRef<'a> {
-    part: &'a Part,
+/// A source part as the per-cell stage sees it. It borrows nothing from the scene, so that the
+/// scene's geometry can be freed once gathered ([`build_scenes`]).
+struct PartRef {
+    /// The part's vertex colours (linear; empty without), the only attribute the vertex records do
+    /// not keep exactly.
+    colors: Vec<[f32; 4]>,
     material: Material,
-    image: Option<&'a Image>,
+    /// (tree, image in its scene) of the material's image, if it has one.
+    image: Option<(usize, usize)>,
     /// Global id of the part's first vertex.
     base: u32,
 }
 
 /// The triangles of a build, gathered from the placed scenes.
-struct Gathered<'a> {
+struct Gathered {
     /// (tree, source material, class) per output material, in first-use order.
     material_keys: Vec<(usize, usize, Class)>,
     material_info: Vec<MaterialInfo>,
     /// Every source vertex, in block space (global ids; renumbered when written).
     vertices: Vec<VertexRecord>,
     tris: Vec<Tri>,
-    parts: Vec<PartRef<'a>>,
+    parts: Vec<PartRef>,
+    /// Bounds of each tree's finite source positions in block space (the metadata's tree bounds).
+    tree_bounds: Vec<(Vec3, Vec3)>,
     stats: BuildStats,
     warnings: Vec<String>,
 }
 
 /// The first stage of a build: checks the settings, classifies parts and gathers their
 /// triangles, dropping degenerate ones.
-fn gather<'a>(name: &str, trees: &[Placed<'a>], config: &BuildConfig) -> Result<Gathered<'a>, BuildError> {
+fn gather(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<Gathered, BuildError> {
     if let Some(grid) = config.grid
         && grid.iter().any(|&g| g == 0 || g > treelod_format::MAX_GRID_AXIS)
     {
@@ -233,9 +239,24 @@ fn gather<'a>(name: &str, trees: &[Placed<'a>], config: &BuildConfig) -> Result<
     let mut material_info: Vec<MaterialInfo> = Vec::new();
     let mut vertices: Vec<VertexRecord> = Vec::new();
     let mut tris: Vec<Tri> = Vec::new();
-    let mut parts: Vec<PartRef<'_>> = Vec::new();
+    let mut parts: Vec<PartRef> = Vec::new();
+    let mut tree_bounds: Vec<(Vec3, Vec3)> = Vec::with_capacity(trees.len());
+    // Reserved whole (at most what is read; degenerate triangles are dropped): grown piecemeal,
+    // the two largest arrays of the build would be copied as they grow and leave holes behind.
+    let all_parts = || trees.iter().flat_map(|placed| &placed.scene.parts);
+    vertices.reserve_exact(all_parts().map(|p| p.positions.len()).sum());
+    tris.reserve_exact(all_parts().map(|p| p.triangles.len()).sum());
     for (t, placed) in trees.iter().enumerate() {
         let scene = placed.scene;
+        let (mut tmin, mut tmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for p in scene.parts.iter().flat_map(|p| &p.positions) {
+            let v = Vec3::from_array(*p) + placed.translation;
+            if v.is_finite() {
+                tmin = tmin.min(v);
+                tmax = tmax.max(v);
+            }
+        }
+        tree_bounds.push((tmin, tmax));
         warnings.extend(scene.warnings.iter().map(|w| format!("{}: {w}", scene.name)));
         let classes = classify(scene, &config.classify);
         for (part, class) in scene.parts.iter().zip(&classes) {
@@ -250,13 +271,12 @@ fn gather<'a>(name: &str, trees: &[Placed<'a>], config: &BuildConfig) -> Result<
                 }
             };
             let source_material = scene.materials.get(part.material).cloned().unwrap_or_default();
-            let image = source_material.image.and_then(|i| scene.images.get(i));
+            let image = source_material.image.filter(|&i| i < scene.images.len()).map(|i| (t, i));
             let base =
                 u32::try_from(vertices.len()).map_err(|_| BuildError::Setting("more than 2^32 vertices".into()))?;
             #[expect(clippy::cast_possible_truncation, reason = "parts are fewer than vertices")]
             let part_id = parts.len() as u32;
-            parts.push(PartRef { part, material: source_material, image, base });
-            vertices.reserve(part.positions.len());
+            parts.push(PartRef { colors: part.colors.clone(), material: source_material, image, base });
             for (i, p) in part.positions.iter().enumerate() {
                 let position = (Vec3::from_array(*p) + placed.translation).to_array();
                 let normal = part.normals.get(i).copied().unwrap_or([0.0, 1.0, 0.0]);
@@ -306,7 +326,7 @@ fn gather<'a>(name: &str, trees: &[Placed<'a>], config: &BuildConfig) -> Result<
     if stats.leaf_triangles == 0 {
         warnings.push(format!("{name}: no part was classified as leaves; pass --leaves PATTERN if that is wrong"));
     }
-    Ok(Gathered { material_keys, material_info, vertices, tris, parts, stats, warnings })
+    Ok(Gathered { material_keys, material_info, vertices, tris, parts, tree_bounds, stats, warnings })
 }
 
 /// The bounds and grid of a block (spec §6.1).
@@ -426,9 +446,45 @@ pub fn build_block(
     config: &BuildConfig,
     generator: &str,
 ) -> Result<BuildOutput, BuildError> {
-    // Stage: classify parts and gather their triangles.
-    let Gathered { material_keys, material_info, vertices, tris, parts, mut stats, warnings } =
-        gather(name, trees, config)?;
+    let gathered = gather(name, trees, config)?;
+    assemble(name, trees, gathered, config, generator)
+}
+
+/// As [`build_block`] on owned scenes (each with its translation), giving the same output; each
+/// scene's parts (its geometry) are freed as soon as they are gathered into the build's own arrays,
+/// so the build does not hold the source geometry and its own copy at once. Only the scenes'
+/// materials, images and source information are kept until the build ends.
+///
+/// # Errors
+/// As [`build_block`].
+pub fn build_scenes(
+    name: &str,
+    mut scenes: Vec<(Scene, Vec3)>,
+    config: &BuildConfig,
+    generator: &str,
+) -> Result<BuildOutput, BuildError> {
+    let placed: Vec<Placed<'_>> =
+        scenes.iter().map(|(scene, translation)| Placed { scene, translation: *translation }).collect();
+    let gathered = gather(name, &placed, config)?;
+    drop(placed);
+    for (scene, _) in &mut scenes {
+        scene.parts = Vec::new();
+    }
+    let placed: Vec<Placed<'_>> =
+        scenes.iter().map(|(scene, translation)| Placed { scene, translation: *translation }).collect();
+    assemble(name, &placed, gathered, config, generator)
+}
+
+/// The stages of [`build_block`] after the gathering; reads only the scenes' materials, images,
+/// names and sources (not their parts).
+fn assemble(
+    name: &str,
+    trees: &[Placed<'_>],
+    gathered: Gathered,
+    config: &BuildConfig,
+    generator: &str,
+) -> Result<BuildOutput, BuildError> {
+    let Gathered { material_keys, material_info, vertices, tris, parts, tree_bounds, mut stats, warnings } = gathered;
 
     // Stage: bounds and grid.
     let block_grid = BlockGrid::new(&tris, &vertices, config)?;
@@ -467,7 +523,7 @@ pub fn build_block(
     for cell_batch in per_cell.chunks(batch) {
         let outputs: Vec<CellOutput> = cell_batch
             .par_iter()
-            .map(|ids| cell_output(ids, &tris, &vertices, &parts, &config.gilet))
+            .map(|ids| cell_output(ids, &tris, &vertices, &parts, trees, &config.gilet))
             .collect::<Result<_, FlattenError>>()?;
         for cell in outputs {
             let (mut cmin, mut cmax) = cell.bounds;
@@ -669,18 +725,7 @@ pub fn build_block(
     let mut planes: Vec<treelod_format::PlaneRecord> = Vec::new();
     if let Some(impostors) = impostors {
         let atlas = impostors.atlas;
-        image_data.resize(image_data.len().div_ceil(16) * 16, 0);
-        #[expect(clippy::cast_possible_truncation, reason = "images are few")]
-        let index = images.len() as u32;
-        images.push(ImageRecord {
-            width: atlas.width,
-            height: atlas.height,
-            mip_count: atlas.mip_count,
-            format: image_format::RGBA8_SRGB,
-            data_offset: image_data.len() as u64,
-            data_length: atlas.texels.len() as u64,
-        });
-        image_data.extend_from_slice(&atlas.texels);
+        let index = push_atlas(&mut images, &mut image_data, &atlas);
         planes = impostors.planes.into_iter().map(|p| treelod_format::PlaneRecord { image: index, ..p }).collect();
         stats.planes = planes.len() as u64;
         stats.planes_per_level = impostors.planes_per_level;
@@ -690,18 +735,7 @@ pub fn build_block(
     let mut billboard_records: Vec<BillboardRecord> = Vec::new();
     if let Some(billboards) = billboards {
         let atlas = billboards.atlas;
-        image_data.resize(image_data.len().div_ceil(16) * 16, 0);
-        #[expect(clippy::cast_possible_truncation, reason = "images are few")]
-        let index = images.len() as u32;
-        images.push(ImageRecord {
-            width: atlas.width,
-            height: atlas.height,
-            mip_count: atlas.mip_count,
-            format: image_format::RGBA8_SRGB,
-            data_offset: image_data.len() as u64,
-            data_length: atlas.texels.len() as u64,
-        });
-        image_data.extend_from_slice(&atlas.texels);
+        let index = push_atlas(&mut images, &mut image_data, &atlas);
         billboard_records = billboards.records.into_iter().map(|b| BillboardRecord { image: index, ..b }).collect();
         stats.billboard_atlas = [atlas.width, atlas.height];
     }
@@ -709,7 +743,7 @@ pub fn build_block(
     // Stage: metadata.
     let mut sources: Vec<Source> = Vec::new();
     let mut tree_meta: Vec<Tree> = Vec::new();
-    for placed in trees {
+    for (placed, &(tmin, tmax)) in trees.iter().zip(&tree_bounds) {
         let s = &placed.scene.source;
         let source = match sources
             .iter()
@@ -726,14 +760,6 @@ pub fn build_block(
                 sources.len() - 1
             }
         };
-        let (mut tmin, mut tmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for p in placed.scene.parts.iter().flat_map(|p| &p.positions) {
-            let v = Vec3::from_array(*p) + placed.translation;
-            if v.is_finite() {
-                tmin = tmin.min(v);
-                tmax = tmax.max(v);
-            }
-        }
         #[expect(clippy::cast_possible_truncation, reason = "sources are few")]
         tree_meta.push(Tree {
             name: placed.scene.name.clone(),
@@ -816,6 +842,24 @@ fn block_impostors(
     build_impostors(&ImpostorMesh { vertices, triangles: &leaves, surfaces: &surfaces }, config)
 }
 
+/// Appends a baked atlas (impostors, billboards) to `images` and its texels to `image_data`, on a
+/// 16-byte boundary; returns its index in `IMAGES`.
+fn push_atlas(images: &mut Vec<ImageRecord>, image_data: &mut Vec<u8>, atlas: &Atlas) -> u32 {
+    image_data.resize(image_data.len().div_ceil(16) * 16, 0);
+    #[expect(clippy::cast_possible_truncation, reason = "images are few")]
+    let index = images.len() as u32;
+    images.push(ImageRecord {
+        width: atlas.width,
+        height: atlas.height,
+        mip_count: atlas.mip_count,
+        format: image_format::RGBA8_SRGB,
+        data_offset: image_data.len() as u64,
+        data_length: atlas.texels.len() as u64,
+    });
+    image_data.extend_from_slice(&atlas.texels);
+    index
+}
+
 /// How each output material looks, for the bakes: its source material and image.
 fn surfaces<'a>(
     material_keys: &[(usize, usize, Class)],
@@ -871,10 +915,11 @@ fn cell_output(
     ids: &[u32],
     tris: &[Tri],
     vertices: &[VertexRecord],
-    parts: &[PartRef<'_>],
+    parts: &[PartRef],
+    trees: &[Placed<'_>],
     config: &GiletConfig,
 ) -> Result<CellOutput, FlattenError> {
-    let leaves: Vec<LeafPoint> = ids.iter().map(|&i| leaf_point(&tris[i as usize], vertices, parts)).collect();
+    let leaves: Vec<LeafPoint> = ids.iter().map(|&i| leaf_point(&tris[i as usize], vertices, parts, trees)).collect();
     let hierarchy = build_cell(&leaves, config)?;
     drop(leaves);
     let mut order: Vec<(u32, u32)> =
@@ -900,21 +945,22 @@ fn centroid(vertices: &[VertexRecord], t: &Tri) -> Vec3 {
 
 /// The point of one triangle (Gilet 2005 §4): centroid, equal-area size, unit normal, and the
 /// colour and coverage of its texture integrated over it.
-fn leaf_point(t: &Tri, vertices: &[VertexRecord], parts: &[PartRef<'_>]) -> LeafPoint {
+fn leaf_point(t: &Tri, vertices: &[VertexRecord], parts: &[PartRef], trees: &[Placed<'_>]) -> LeafPoint {
     let [a, b, c] = t.v.map(|v| Vec3::from_array(vertices[v as usize].position));
     let cross = (b - a).cross(c - a);
     let area = 0.5 * cross.length();
     let part = &parts[t.part as usize];
     let local = t.v.map(|v| (v - part.base) as usize);
     let surface = TriangleSurface {
-        uv: local.map(|i| Vec2::from_array(part.part.uvs.get(i).copied().unwrap_or([0.0, 0.0]))),
-        color: local.map(|i| Vec4::from_array(part.part.colors.get(i).copied().unwrap_or([1.0; 4]))),
+        // The vertex records hold the part's texture coordinates unchanged ([0, 0] without).
+        uv: t.v.map(|v| Vec2::from_array(vertices[v as usize].uv)),
+        color: local.map(|i| Vec4::from_array(part.colors.get(i).copied().unwrap_or([1.0; 4]))),
     };
     LeafPoint {
         position: (a + b + c) / 3.0,
         normal: cross / (2.0 * area),
         area,
-        color: integrate(&part.material, part.image, &surface),
+        color: integrate(&part.material, part.image.and_then(|(tree, i)| trees[tree].scene.images.get(i)), &surface),
         size: t.size,
     }
 }

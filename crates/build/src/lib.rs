@@ -23,7 +23,7 @@ pub mod spt;
 pub mod texture;
 
 pub use assemble::{
-    BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, prune_report, recorded_settings,
+    BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, build_scenes, prune_report, recorded_settings,
 };
 pub use demo::{DemoTreeConfig, demo_tree};
 pub use error::BuildError;

@@ -120,60 +120,98 @@ impl ContainerData {
     /// The sections to write, in ascending kind order, as (kind, bytes, record size). Record arrays
     /// are borrowed, not copied: a large build encodes one section at a time.
     fn sections(&self) -> Result<Vec<SectionBytes<'_>>> {
+        let meta = self.checked_metadata()?;
+        Ok(Self::arrange(self.borrowed_sections(meta)))
+    }
+
+    /// As [`Self::sections`], but with the arrays moved out of the data rather than borrowed, so
+    /// that each is freed as soon as its section is written.
+    fn into_sections(mut self) -> Result<Vec<SectionBytes<'static>>> {
+        let meta = self.checked_metadata()?;
+        macro_rules! take {
+            ($field:ident) => {{
+                let payload: Box<dyn Payload> = Box::new(std::mem::take(&mut self.$field));
+                payload
+            }};
+        }
+        let mut out: Vec<SectionBytes<'static>> = vec![
+            (SectionKind::META, Box::new(meta), 1),
+            (SectionKind::BLOCK, Box::new(vec![self.block]), 0),
+            (SectionKind::CELLS, take!(cells), 0),
+        ];
+        let optional = optional_sections!(take);
+        out.extend(optional.into_iter().filter(|(_, b)| !b.bytes().is_empty()).map(|(k, b)| (k, b, 0)));
+        out.extend(std::mem::take(&mut self.extra_sections).into_iter().map(|(kind, bytes)| {
+            let payload: Box<dyn Payload> = Box::new(bytes);
+            (SectionKind(kind), payload, 1)
+        }));
+        Ok(Self::arrange(out))
+    }
+
+    /// Every section borrowed, with `meta` as META, in field order; empty optional ones left out.
+    fn borrowed_sections(&self, meta: Vec<u8>) -> Vec<SectionBytes<'_>> {
+        macro_rules! borrow {
+            ($field:ident) => {{
+                let payload: Box<dyn Payload + '_> = Box::new(self.$field.as_slice());
+                payload
+            }};
+        }
+        let mut out: Vec<SectionBytes<'_>> = vec![
+            (SectionKind::META, Box::new(meta), 1),
+            (SectionKind::BLOCK, Box::new(std::slice::from_ref(&self.block)), 0),
+            (SectionKind::CELLS, borrow!(cells), 0),
+        ];
+        let optional = optional_sections!(borrow);
+        out.extend(optional.into_iter().filter(|(_, b)| !b.bytes().is_empty()).map(|(k, b)| (k, b, 0)));
+        out.extend(self.extra_sections.iter().map(|(kind, bytes)| {
+            let payload: Box<dyn Payload + '_> = Box::new(bytes.as_slice());
+            (SectionKind(*kind), payload, 1)
+        }));
+        out
+    }
+
+    /// Sections in ascending kind order with the record sizes of known kinds.
+    fn arrange(mut out: Vec<SectionBytes<'_>>) -> Vec<SectionBytes<'_>> {
+        out.sort_by_key(|(k, _, _)| *k);
+        for (kind, _, size) in &mut out {
+            if let Some(known) = kind.record_size() {
+                *size = known;
+            }
+        }
+        out
+    }
+
+    /// META's bytes, after checking that the data makes a file this crate opens: the metadata
+    /// within its limit, extra kinds unknown and distinct, record counts, block and cells.
+    fn checked_metadata(&self) -> Result<Vec<u8>> {
         let meta = postcard::to_allocvec(&self.metadata).map_err(|e| Error::Write(format!("metadata: {e}")))?;
         if meta.len() as u64 > MAX_META_BYTES {
             return Err(Error::Write(format!("metadata is {} bytes, the limit is {MAX_META_BYTES}", meta.len())));
         }
-        let mut out: Vec<SectionBytes<'_>> = vec![
-            (SectionKind::META, Cow::Owned(meta), 1),
-            (SectionKind::BLOCK, bytes_of(std::slice::from_ref(&self.block)), 0),
-            (SectionKind::CELLS, bytes_of(&self.cells), 0),
-        ];
-        let optional = [
-            (SectionKind::VERTICES, bytes_of(&self.vertices)),
-            (SectionKind::TRIANGLES, bytes_of(&self.triangles)),
-            (SectionKind::POINTS, bytes_of(&self.points)),
-            (SectionKind::MATERIALS, bytes_of(&self.materials)),
-            (SectionKind::IMAGES, bytes_of(&self.images)),
-            (SectionKind::IMAGE_DATA, Cow::Borrowed(self.image_data.as_slice())),
-            (SectionKind::ELLIPSOIDS, bytes_of(&self.ellipsoids)),
-            (SectionKind::LINES, bytes_of(&self.lines)),
-            (SectionKind::PLANES, bytes_of(&self.planes)),
-            (SectionKind::PRUNE_LEAVES, bytes_of(&self.prune_leaves)),
-            (SectionKind::PRUNE_TRIANGLES, bytes_of(&self.prune_triangles)),
-            (SectionKind::PRUNE_SCALE, bytes_of(&self.prune_scale)),
-            (SectionKind::PRUNE_LAMBDA, bytes_of(&self.prune_lambda)),
-            (SectionKind::LOD_LEVELS, bytes_of(&self.lod_levels)),
-            (SectionKind::LOD_TRIANGLES, bytes_of(&self.lod_triangles)),
-            (SectionKind::BILLBOARDS, bytes_of(&self.billboards)),
-        ];
-        out.extend(optional.into_iter().filter(|(_, b)| !b.is_empty()).map(|(k, b)| (k, b, 0)));
-        for (kind, bytes) in &self.extra_sections {
+        for (kind, _) in &self.extra_sections {
             let kind = SectionKind(*kind);
             if kind.record_size().is_some() {
                 return Err(Error::Write(format!("extra section kind {kind} is a known kind")));
             }
-            out.push((kind, Cow::Borrowed(bytes.as_slice()), 1));
         }
-        out.sort_by_key(|(k, _, _)| *k);
+        let out = Self::arrange(self.borrowed_sections(Vec::new()));
         if out.windows(2).any(|w| w[0].0 == w[1].0) {
             return Err(Error::Write("an extra section kind appears twice".into()));
         }
-        for (kind, bytes, size) in &mut out {
-            if let Some(known) = kind.record_size() {
-                *size = known;
-            }
-            if bytes.len() as u64 / u64::from((*size).max(1)) > u64::from(u32::MAX) {
+        for (kind, bytes, size) in &out {
+            if bytes.bytes().len() as u64 / u64::from((*size).max(1)) > u64::from(u32::MAX) {
                 return Err(Error::Write(format!("section {kind} has more than 2^32-1 records")));
             }
         }
         let count = |kind: SectionKind| {
-            out.iter().find(|(k, _, _)| *k == kind).map_or(0, |(_, b, size)| b.len() as u64 / u64::from((*size).max(1)))
+            out.iter()
+                .find(|(k, _, _)| *k == kind)
+                .map_or(0, |(_, b, size)| b.bytes().len() as u64 / u64::from((*size).max(1)))
         };
         // The writer never emits a file its own reader refuses (spec §6.1, §6.2).
         check_block_and_cells(std::slice::from_ref(&self.block), &self.cells, count)
             .map_err(|e| Error::Write(format!("the data breaks the spec: {e}")))?;
-        Ok(out)
+        Ok(meta)
     }
 
     /// Encodes the container (spec §3–§8). Deterministic: same data and compression, same bytes.
@@ -198,19 +236,18 @@ impl ContainerData {
     /// # Errors
     /// [`Error::Write`] as [`Self::to_bytes`]; [`Error::Io`] naming the path if writing fails.
     pub fn write_to_path(&self, path: impl AsRef<Path>, compression: Compression) -> Result<u64> {
+        write_sections_to_path(self.sections()?, path.as_ref(), compression)
+    }
+
+    /// As [`Self::write_to_path`], consuming the data: each array is freed as soon as its section
+    /// is written, so the memory this takes falls as the file grows. Same bytes.
+    ///
+    /// # Errors
+    /// As [`Self::write_to_path`].
+    pub fn into_path(self, path: impl AsRef<Path>, compression: Compression) -> Result<u64> {
         let path = path.as_ref();
-        let io = |source| Error::Io { path: path.to_owned(), source };
-        let mut tmp = temporary_beside(path)?;
-        let mut sink = std::io::BufWriter::new(tmp.as_file_mut());
-        let size = self.encode(compression, &mut sink).map_err(|e| match e {
-            EncodeError::Data(e) => e,
-            EncodeError::Io(e) => io(e),
-        })?;
-        sink.flush().map_err(io)?;
-        drop(sink);
-        tmp.as_file().sync_all().map_err(io)?;
-        tmp.persist(path).map_err(|e| io(e.error))?;
-        Ok(size)
+        let sections = self.into_sections()?;
+        write_sections_to_path(sections, path, compression)
     }
 
     /// Writes the file to `sink`: a zeroed header and table, each section's payload as it is
@@ -220,77 +257,144 @@ impl ContainerData {
         compression: Compression,
         sink: &mut W,
     ) -> std::result::Result<u64, EncodeError> {
-        let sections = self.sections()?;
-        let table_offset = HEADER_SIZE as u64;
-        let table_len = sections.len() * SECTION_ENTRY_SIZE;
-        let mut position = 0u64;
-        let mut payload_offset = align(table_offset + table_len as u64);
-        let mut entries = Vec::with_capacity(sections.len());
-        for (kind, raw, record_size) in sections {
-            let (stored, flags): (Cow<'_, [u8]>, u32) = match compression {
-                Compression::Zstd { level }
-                    if kind.compressible() && kind.record_size().is_some() && !raw.is_empty() =>
-                {
-                    // Record arrays are byte-shuffled first: equal byte positions of neighbouring
-                    // records (exponents, high index bytes, zero fields) then sit side by side.
-                    let (packed, flags) = if record_size > 1 {
-                        let mut shuffled = vec![0; raw.len()];
-                        shuffle(&raw, record_size as usize, &mut shuffled);
-                        (compress(&shuffled, level)?, FLAG_ZSTD | FLAG_SHUFFLE)
-                    } else {
-                        (compress(&raw, level)?, FLAG_ZSTD)
-                    };
-                    let pays = packed.len() < raw.len();
-                    let within_limit = raw.len() as u64 <= packed.len() as u64 * MAX_COMPRESSION_RATIO;
-                    if pays && within_limit { (Cow::Owned(packed), flags) } else { (raw.clone(), 0) }
-                }
-                _ => (raw.clone(), 0),
-            };
-            entries.push(SectionEntry {
-                kind: kind.0,
-                flags,
-                offset: payload_offset,
-                length: stored.len() as u64,
-                raw_length: raw.len() as u64,
-                record_size,
-                checksum: crc32fast::hash(&stored),
-                reserved: 0,
-            });
-            zeros(sink, payload_offset - position)?;
-            sink.write_all(&stored)?;
-            position = payload_offset + stored.len() as u64;
-            payload_offset = align(position);
-        }
-        let file_size = entries.last().map_or(table_offset + table_len as u64, |e| e.offset + e.length);
-        zeros(sink, file_size.saturating_sub(position))?;
-        let mut header = Header {
-            magic: MAGIC,
-            major: MAJOR,
-            // The smallest minor whose kinds the file holds (spec §11).
-            minor: entries.iter().map(|e| SectionKind(e.kind).since_minor()).max().unwrap_or(0).min(MINOR),
-            header_size: HEADER_SIZE as u32,
-            section_count: u32::try_from(entries.len()).map_err(|_| Error::Write("too many sections".into()))?,
-            table_offset,
-            file_size,
-            flags: 0,
-            reserved: [0; 16],
-            header_checksum: 0,
-        };
-        let table: &[u8] = bytemuck::cast_slice(&entries);
-        let mut crc = crc32fast::Hasher::new();
-        crc.update(bytemuck::bytes_of(&header));
-        crc.update(table);
-        header.header_checksum = crc.finalize();
-        sink.seek(std::io::SeekFrom::Start(0))?;
-        sink.write_all(bytemuck::bytes_of(&header))?;
-        sink.write_all(table)?;
-        sink.seek(std::io::SeekFrom::Start(file_size))?;
-        Ok(file_size)
+        encode_sections(self.sections()?, compression, sink)
     }
 }
 
+/// Writes `sections` to `path` atomically: to a temporary file in the same directory, flushed,
+/// then renamed over `path`.
+fn write_sections_to_path(sections: Vec<SectionBytes<'_>>, path: &Path, compression: Compression) -> Result<u64> {
+    let io = |source| Error::Io { path: path.to_owned(), source };
+    let mut tmp = temporary_beside(path)?;
+    let mut sink = std::io::BufWriter::new(tmp.as_file_mut());
+    let size = encode_sections(sections, compression, &mut sink).map_err(|e| match e {
+        EncodeError::Data(e) => e,
+        EncodeError::Io(e) => io(e),
+    })?;
+    sink.flush().map_err(io)?;
+    drop(sink);
+    tmp.as_file().sync_all().map_err(io)?;
+    tmp.persist(path).map_err(|e| io(e.error))?;
+    Ok(size)
+}
+
+/// Writes the file to `sink` ([`ContainerData::encode`]); each section's bytes are dropped once
+/// written.
+fn encode_sections<W: std::io::Write + std::io::Seek>(
+    sections: Vec<SectionBytes<'_>>,
+    compression: Compression,
+    sink: &mut W,
+) -> std::result::Result<u64, EncodeError> {
+    let table_offset = HEADER_SIZE as u64;
+    let table_len = sections.len() * SECTION_ENTRY_SIZE;
+    let mut position = 0u64;
+    let mut payload_offset = align(table_offset + table_len as u64);
+    let mut entries = Vec::with_capacity(sections.len());
+    for (kind, payload, record_size) in sections {
+        let raw = payload.bytes();
+        let (stored, flags): (Cow<'_, [u8]>, u32) = match compression {
+            Compression::Zstd { level } if kind.compressible() && kind.record_size().is_some() && !raw.is_empty() => {
+                // Record arrays are byte-shuffled first: equal byte positions of neighbouring
+                // records (exponents, high index bytes, zero fields) then sit side by side.
+                let (packed, flags) = if record_size > 1 {
+                    let mut shuffled = vec![0; raw.len()];
+                    shuffle(raw, record_size as usize, &mut shuffled);
+                    (compress(&shuffled, level)?, FLAG_ZSTD | FLAG_SHUFFLE)
+                } else {
+                    (compress(raw, level)?, FLAG_ZSTD)
+                };
+                let pays = packed.len() < raw.len();
+                let within_limit = raw.len() as u64 <= packed.len() as u64 * MAX_COMPRESSION_RATIO;
+                if pays && within_limit { (Cow::Owned(packed), flags) } else { (Cow::Borrowed(raw), 0) }
+            }
+            _ => (Cow::Borrowed(raw), 0),
+        };
+        entries.push(SectionEntry {
+            kind: kind.0,
+            flags,
+            offset: payload_offset,
+            length: stored.len() as u64,
+            raw_length: raw.len() as u64,
+            record_size,
+            checksum: crc32fast::hash(&stored),
+            reserved: 0,
+        });
+        zeros(sink, payload_offset - position)?;
+        sink.write_all(&stored)?;
+        position = payload_offset + stored.len() as u64;
+        payload_offset = align(position);
+    }
+    let file_size = entries.last().map_or(table_offset + table_len as u64, |e| e.offset + e.length);
+    zeros(sink, file_size.saturating_sub(position))?;
+    let mut header = Header {
+        magic: MAGIC,
+        major: MAJOR,
+        // The smallest minor whose kinds the file holds (spec §11).
+        minor: entries.iter().map(|e| SectionKind(e.kind).since_minor()).max().unwrap_or(0).min(MINOR),
+        header_size: HEADER_SIZE as u32,
+        section_count: u32::try_from(entries.len()).map_err(|_| Error::Write("too many sections".into()))?,
+        table_offset,
+        file_size,
+        flags: 0,
+        reserved: [0; 16],
+        header_checksum: 0,
+    };
+    let table: &[u8] = bytemuck::cast_slice(&entries);
+    let mut crc = crc32fast::Hasher::new();
+    crc.update(bytemuck::bytes_of(&header));
+    crc.update(table);
+    header.header_checksum = crc.finalize();
+    sink.seek(std::io::SeekFrom::Start(0))?;
+    sink.write_all(bytemuck::bytes_of(&header))?;
+    sink.write_all(table)?;
+    sink.seek(std::io::SeekFrom::Start(file_size))?;
+    Ok(file_size)
+}
+
 /// A section to write: kind, raw bytes, record size.
-type SectionBytes<'a> = (SectionKind, Cow<'a, [u8]>, u32);
+type SectionBytes<'a> = (SectionKind, Box<dyn Payload + 'a>, u32);
+
+/// A section's bytes: a record array, borrowed or owned.
+trait Payload {
+    fn bytes(&self) -> &[u8];
+}
+
+impl<T: Pod> Payload for Vec<T> {
+    fn bytes(&self) -> &[u8] {
+        bytemuck::cast_slice(self)
+    }
+}
+
+impl<T: Pod> Payload for &[T] {
+    fn bytes(&self) -> &[u8] {
+        bytemuck::cast_slice(self)
+    }
+}
+
+/// The optional record arrays in field order as (kind, payload), each made by `$payload!(field)`.
+macro_rules! optional_sections {
+    ($payload:ident) => {
+        [
+            (SectionKind::VERTICES, $payload!(vertices)),
+            (SectionKind::TRIANGLES, $payload!(triangles)),
+            (SectionKind::POINTS, $payload!(points)),
+            (SectionKind::MATERIALS, $payload!(materials)),
+            (SectionKind::IMAGES, $payload!(images)),
+            (SectionKind::IMAGE_DATA, $payload!(image_data)),
+            (SectionKind::ELLIPSOIDS, $payload!(ellipsoids)),
+            (SectionKind::LINES, $payload!(lines)),
+            (SectionKind::PLANES, $payload!(planes)),
+            (SectionKind::PRUNE_LEAVES, $payload!(prune_leaves)),
+            (SectionKind::PRUNE_TRIANGLES, $payload!(prune_triangles)),
+            (SectionKind::PRUNE_SCALE, $payload!(prune_scale)),
+            (SectionKind::PRUNE_LAMBDA, $payload!(prune_lambda)),
+            (SectionKind::LOD_LEVELS, $payload!(lod_levels)),
+            (SectionKind::LOD_TRIANGLES, $payload!(lod_triangles)),
+            (SectionKind::BILLBOARDS, $payload!(billboards)),
+        ]
+    };
+}
+use optional_sections;
 
 /// Why [`ContainerData::encode`] failed: the data, or the sink.
 enum EncodeError {
@@ -380,10 +484,6 @@ fn compress(raw: &[u8], level: i32) -> Result<Vec<u8>> {
 
 fn align(offset: u64) -> u64 {
     offset.div_ceil(SECTION_ALIGN) * SECTION_ALIGN
-}
-
-fn bytes_of<T: Pod>(records: &[T]) -> Cow<'_, [u8]> {
-    Cow::Borrowed(bytemuck::cast_slice(records))
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use treelod_build::scene::Scene;
-use treelod_build::{BuildConfig, BuildOutput, BuildStats, Placed, PruneConfig, PruneOrder, PruneReport, build_block};
+use treelod_build::{BuildConfig, BuildOutput, BuildStats, Placed, PruneConfig, PruneOrder, PruneReport, build_scenes};
 use treelod_format::{Compression, Container, CurveSample, ErrorClass, Setting};
 
 use crate::report::{self, Failed};
@@ -532,8 +532,9 @@ pub(crate) struct Built {
 /// first source, or `output` without one) to stderr, nothing to stdout. The metadata records the
 /// tool as generator and [`BuildOptions::recorded_settings`].
 ///
-/// The scenes are dropped once built and the built arrays once written, before verification reads
-/// the file back, so the stages do not hold each other's memory.
+/// The scenes' geometry is freed once gathered and the rest of them once built, and each built
+/// array once its section is written, before verification reads the file back, so the stages do
+/// not hold each other's memory.
 pub(crate) fn build_container(
     name: &str,
     scenes: Vec<(Scene, Vec3)>,
@@ -543,22 +544,19 @@ pub(crate) fn build_container(
 ) -> Result<Built, Failed> {
     let start = Instant::now();
     let source_label = sources.first().copied().unwrap_or(output);
-    let placed: Vec<Placed<'_>> =
-        scenes.iter().map(|(scene, translation)| Placed { scene, translation: *translation }).collect();
+    // The scenes are consumed: their geometry is freed once gathered, the rest when built.
     let built =
-        build_block(name, &placed, &options.config(), &generator()).map_err(|e| report::build_error(source_label, &e));
-    drop(placed);
-    drop(scenes);
+        build_scenes(name, scenes, &options.config(), &generator()).map_err(|e| report::build_error(source_label, &e));
     let BuildOutput { mut data, stats, warnings } = built?;
     for warning in &warnings {
         report::print_warning(source_label, warning);
     }
     data.metadata.settings.push(options.compression_setting());
     data.metadata.settings.sort();
-    let file_bytes = data.write_to_path(output, options.compression()).map_err(|e| report::file_error(output, &e))?;
     let (materials, images) = (data.materials.len(), data.images.len());
-    let prune_curves = (std::mem::take(&mut data.prune_scale), std::mem::take(&mut data.prune_lambda));
-    drop(data);
+    let prune_curves = (data.prune_scale.clone(), data.prune_lambda.clone());
+    // Consumed: each array is freed once its section is written.
+    let file_bytes = data.into_path(output, options.compression()).map_err(|e| report::file_error(output, &e))?;
     let verified = if options.no_verify {
         false
     } else {

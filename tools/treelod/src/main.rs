@@ -103,6 +103,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    fixed_mmap_threshold();
     // Usage errors: clap prints `error: …` and the usage to stderr and exits with 2.
     let cli = Cli::parse();
     let outcome = match &cli.command {
@@ -122,6 +123,27 @@ fn main() -> ExitCode {
         Err(failed) => ExitCode::from(failed.exit_code()),
     }
 }
+
+/// Keeps glibc's mmap threshold at 4 MiB. By default glibc raises it, up to 32 MiB, each time a
+/// block above it is freed; a build then takes its multi-megabyte arrays from the heap, where
+/// they stay resident after being freed and are seldom reused whole, and its peak memory grows by
+/// about a fifth (669k-triangle maple: 189 MB, 151 MB with the threshold fixed; the same time).
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn fixed_mmap_threshold() {
+    unsafe extern "C" {
+        fn mallopt(param: i32, value: i32) -> i32;
+    }
+    const M_MMAP_THRESHOLD: i32 = -3;
+    // SAFETY: `mallopt` only sets a parameter of glibc's allocator; it is called first thing in
+    // `main`, before any other thread exists.
+    unsafe {
+        mallopt(M_MMAP_THRESHOLD, 4 << 20);
+    }
+}
+
+/// Other allocators need no tuning.
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn fixed_mmap_threshold() {}
 
 #[cfg(test)]
 mod tests {

@@ -397,7 +397,12 @@ pub fn plot(report: &Report) -> Image {
     // Per panel: title, value, log axis, and the value a linear axis always shows (Q's best, the
     // times' zero).
     let mut panels: Vec<(&str, Metric, bool, f64)> = vec![
-        ("primitives submitted per frame: triangles + points + quads (log)", |r| Some(r.primitives() as f64), true, 0.0),
+        (
+            "primitives submitted per frame: triangles + points + quads (log)",
+            |r| Some(r.primitives() as f64),
+            true,
+            0.0,
+        ),
         (
             "primitives in the cut per frame: triangles + points kept + quads (log)",
             |r| Some(r.primitives_in_cut() as f64),
