@@ -1,21 +1,16 @@
 //! The baselines on the Vulkan backend (Mesa lavapipe in CI): a meshoptimizer LoD chain switched
 //! by its error in pixels, and facing and crossed billboards, against the full mesh.
 
+mod common;
+
 use std::sync::Arc;
 
+use common::{BACKGROUND, gpu, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, ImpostorConfig, LodChainConfig, Placed, build_block, demo_tree};
 use treelod_format::{Compression, Container};
-use treelod_render::offscreen::{Gpu, Image, render_image};
+use treelod_render::offscreen::{Gpu, render_image};
 use treelod_render::{Baseline, BillboardKind, Camera, DrawSource, Instance, Renderer, Settings};
-
-const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
-
-fn gpu() -> Gpu {
-    let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
-    assert_eq!(gpu.info.backend, wgpu::Backend::Vulkan, "rendering tests run on Vulkan, got {:?}", gpu.info);
-    gpu
-}
 
 /// The demo tree built with its baselines (and the impostors that set the billboards' budget).
 fn demo_with_baselines() -> Arc<Container> {
@@ -28,19 +23,6 @@ fn demo_with_baselines() -> Arc<Container> {
     let built =
         build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
     Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
-}
-
-fn covered(image: &Image) -> Vec<bool> {
-    image.rgba.chunks_exact(4).map(|p| p[0] < 250 || p[1] < 250 || p[2] < 250).collect()
-}
-
-/// Precision and recall of `test`'s covered pixels against `full`'s.
-fn precision_recall(test: &Image, full: &Image) -> (f64, f64) {
-    let (a, b) = (covered(test), covered(full));
-    let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count() as f64;
-    let test_n = a.iter().filter(|x| **x).count() as f64;
-    let full_n = b.iter().filter(|x| **x).count() as f64;
-    (both / test_n.max(1.0), both / full_n.max(1.0))
 }
 
 fn centre(container: &Container) -> Vec3 {

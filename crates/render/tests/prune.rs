@@ -6,21 +6,16 @@
 //! triangle, a seeded shuffle per cell), so what is checked is the renderer's side of spec §6.11
 //! whatever order a build chooses.
 
+mod common;
+
 use std::sync::Arc;
 
+use common::{BACKGROUND, gpu, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container, CurveSample, PruneLeafRecord, Range, material_class};
-use treelod_render::offscreen::{Gpu, Image, render_image};
+use treelod_render::offscreen::{Gpu, render_image};
 use treelod_render::{Camera, DrawSource, Instance, PruneScale, Pruning, Renderer, Settings};
-
-const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
-
-fn gpu() -> Gpu {
-    let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
-    assert_eq!(gpu.info.backend, wgpu::Backend::Vulkan, "rendering tests run on Vulkan, got {:?}", gpu.info);
-    gpu
-}
 
 /// The demo tree with a priority list per cell: every leaf triangle its own leaf, shuffled.
 fn pruned_demo() -> Container {
@@ -67,19 +62,6 @@ fn camera_at(container: &Container, offset: Vec3, size: u32) -> Camera {
     let block = container.block();
     let centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
     Camera::look_at(centre + offset, centre, 0.8, size, size)
-}
-
-fn covered(image: &Image) -> Vec<bool> {
-    image.rgba.chunks_exact(4).map(|p| p[0] < 250 || p[1] < 250 || p[2] < 250).collect()
-}
-
-/// Precision and recall of `test`'s covered pixels against `reference`'s.
-fn precision_recall(test: &Image, reference: &Image) -> (f64, f64) {
-    let (a, b) = (covered(test), covered(reference));
-    let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count() as f64;
-    let n_test = a.iter().filter(|x| **x).count() as f64;
-    let n_reference = b.iter().filter(|x| **x).count() as f64;
-    (both / n_test.max(1.0), both / n_reference.max(1.0))
 }
 
 fn pruning(lambda: f32, scale: PruneScale) -> Pruning {

@@ -1,20 +1,15 @@
 //! Rendering on the Vulkan backend (Mesa lavapipe in CI): the demo tree at several distances,
 //! the LoD image against the full mesh, and the CPU selection against the draws.
 
+mod common;
+
+use common::{BACKGROUND, covered, gpu, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, DebugView, DrawSource, Instance, RecordedDraw, Renderer, Settings};
 use treelod_runtime::{Kind, Thresholds, point_drawn};
-
-const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
-
-fn gpu() -> Gpu {
-    let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
-    assert_eq!(gpu.info.backend, wgpu::Backend::Vulkan, "rendering tests run on Vulkan, got {:?}", gpu.info);
-    gpu
-}
 
 fn demo_container() -> Container {
     let scene = demo_tree(&DemoTreeConfig::default());
@@ -38,19 +33,6 @@ fn keep(image: &Image, name: &str) {
         ppm.extend(image.rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]));
         std::fs::write(std::path::Path::new(&dir).join(format!("{name}.ppm")), ppm).expect("writes");
     }
-}
-
-fn covered(image: &Image) -> Vec<bool> {
-    image.rgba.chunks_exact(4).map(|p| p[0] < 250 || p[1] < 250 || p[2] < 250).collect()
-}
-
-/// Precision and recall of `lod`'s covered pixels against `full`'s.
-fn precision_recall(lod: &Image, full: &Image) -> (f64, f64) {
-    let (a, b) = (covered(lod), covered(full));
-    let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count() as f64;
-    let lod_n = a.iter().filter(|x| **x).count() as f64;
-    let full_n = b.iter().filter(|x| **x).count() as f64;
-    (both / lod_n.max(1.0), both / full_n.max(1.0))
 }
 
 #[test]

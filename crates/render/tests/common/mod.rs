@@ -1,0 +1,30 @@
+//! What the rendering tests share: the Vulkan adapter they must get, the background they clear to,
+//! and coverage precision and recall of one image against another.
+
+#![allow(dead_code, reason = "each test file uses part of it")]
+
+use treelod_render::offscreen::{Gpu, Image};
+
+/// White: a pixel of another colour is covered.
+pub const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
+
+/// The adapter: the tests run on Vulkan (lavapipe in CI) and fail without one.
+pub fn gpu() -> Gpu {
+    let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+    assert_eq!(gpu.info.backend, wgpu::Backend::Vulkan, "rendering tests run on Vulkan, got {:?}", gpu.info);
+    gpu
+}
+
+/// Pixels that differ from the white background (by more than a few levels).
+pub fn covered(image: &Image) -> Vec<bool> {
+    image.rgba.chunks_exact(4).map(|p| p[0] < 250 || p[1] < 250 || p[2] < 250).collect()
+}
+
+/// Precision and recall of `test`'s covered pixels against `reference`'s.
+pub fn precision_recall(test: &Image, reference: &Image) -> (f64, f64) {
+    let (a, b) = (covered(test), covered(reference));
+    let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count() as f64;
+    let n_test = a.iter().filter(|x| **x).count() as f64;
+    let n_reference = b.iter().filter(|x| **x).count() as f64;
+    (both / n_test.max(1.0), both / n_reference.max(1.0))
+}
