@@ -61,12 +61,10 @@ pub struct Billboards {
     pub records: Vec<BillboardRecord>,
     /// The atlas every record samples.
     pub atlas: Atlas,
-    /// Atlas texels of each tree's billboards, facing and crossed together (regions, gutter and
-    /// alignment included, level 0), per tree of the block; 0 for a tree without triangles.
-    pub texels_per_tree: Vec<u64>,
-    /// The facing quad's share of [`Self::texels_per_tree`].
+    /// Atlas texels of each tree's facing quad (region, gutter and alignment included, level 0),
+    /// per tree of the block; 0 for a tree without triangles.
     pub facing_texels: Vec<u64>,
-    /// The crossed quads' share of [`Self::texels_per_tree`].
+    /// The same for each tree's crossed quads together.
     pub crossed_texels: Vec<u64>,
 }
 
@@ -206,11 +204,9 @@ pub fn build_billboards(
             reserved: [0; 2],
         });
     }
-    let texels_per_tree = facing_texels.iter().zip(&crossed_texels).map(|(f, c)| f + c).collect();
     Ok(Some(Billboards {
         records,
         atlas: Atlas { width, height, mip_count: MIP_LEVELS, texels },
-        texels_per_tree,
         facing_texels,
         crossed_texels,
     }))
@@ -421,10 +417,8 @@ mod tests {
         let out = build(&vertices, &triangles, 3, &budget);
         // Two trees with triangles, the third none.
         assert_eq!(out.records.len(), 8);
-        assert_eq!((out.texels_per_tree.len(), out.texels_per_tree[2]), (3, 0));
-        for t in 0..3 {
-            assert_eq!(out.texels_per_tree[t], out.facing_texels[t] + out.crossed_texels[t]);
-        }
+        assert_eq!((out.facing_texels.len(), out.crossed_texels.len()), (3, 3));
+        assert_eq!((out.facing_texels[2], out.crossed_texels[2]), (0, 0));
         // Within a few per cent of the budget for the facing quad and a third of it for each
         // crossed one (16-texel steps of a 240-texel side).
         let facing = out.facing_texels[0] as f64;

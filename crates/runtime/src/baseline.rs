@@ -12,7 +12,7 @@
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, Range, billboard_kind};
 
-use crate::frame::{Camera, Frustum};
+use crate::frame::{Camera, Frustum, tau_per_metre};
 
 /// One level of a block's chain: every tree's level of that number.
 #[derive(Clone, Debug, PartialEq)]
@@ -89,16 +89,8 @@ pub fn instance_tau(
     (centre, radius): (Vec3, f32),
     anchor: Vec3,
 ) -> Option<f32> {
-    let (ax, ay, az) = (transform.x_axis.truncate(), transform.y_axis.truncate(), transform.z_axis.truncate());
-    let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
-    if !(scale > 0.0 && scale.is_finite()) {
-        return None;
-    }
-    if !frustum.intersects_sphere(transform.transform_point3(centre), radius * scale) {
-        return None;
-    }
-    let distance = transform.transform_point3(anchor).distance(camera.position);
-    Some(distance * s_min.max(0.0) * camera.world_per_pixel() / scale)
+    let per_metre = tau_per_metre(transform, camera, frustum, s_min, (centre, radius))?;
+    Some(transform.transform_point3(anchor).distance(camera.position) * per_metre)
 }
 
 /// Which billboard a baseline draws.

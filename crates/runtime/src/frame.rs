@@ -905,6 +905,28 @@ enum Culling<'a> {
     Replay(&'a [Visibility]),
 }
 
+/// `τ` per metre of distance for an instance drawn whole by one threshold (impostor planes,
+/// baselines): `s_min · 2·tan(fovy/2) / H` (spec §10.1) divided by the transform's largest axis
+/// scale, so `τ` is in model units. `None` if the instance's sphere `(centre, radius)` (model
+/// space) lies outside `frustum` or the transform is degenerate.
+pub(crate) fn tau_per_metre(
+    transform: Mat4,
+    camera: &Camera,
+    frustum: &Frustum,
+    s_min: f32,
+    (centre, radius): (Vec3, f32),
+) -> Option<f32> {
+    let (ax, ay, az) = (transform.x_axis.truncate(), transform.y_axis.truncate(), transform.z_axis.truncate());
+    let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    if !frustum.intersects_sphere(transform.transform_point3(centre), radius * scale) {
+        return None;
+    }
+    Some(s_min.max(0.0) * camera.world_per_pixel() / scale)
+}
+
 /// Culls one instance (step 1 of [`select_frame`]).
 fn cull_instance(frame: &Frame<'_>, models: &[ModelLod], instance: &Instance) -> Visibility {
     let Some(model) = models.get(instance.model as usize) else {

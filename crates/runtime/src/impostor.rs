@@ -11,7 +11,7 @@
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, PlaneRecord, Range};
 
-use crate::frame::{Camera, Frustum};
+use crate::frame::{Camera, Frustum, tau_per_metre};
 
 /// Whether a plane is drawn at `τ` (spec §10): its interval holds `τ`.
 #[must_use]
@@ -127,15 +127,9 @@ impl PlaneLod {
         s_min: f32,
         out: &mut Vec<PlaneRange>,
     ) -> bool {
-        let (ax, ay, az) = (transform.x_axis.truncate(), transform.y_axis.truncate(), transform.z_axis.truncate());
-        let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
-        if !(scale > 0.0 && scale.is_finite()) {
+        let Some(per_metre) = tau_per_metre(transform, camera, frustum, s_min, (self.centre, self.radius)) else {
             return false;
-        }
-        if !frustum.intersects_sphere(transform.transform_point3(self.centre), self.radius * scale) {
-            return false;
-        }
-        let per_metre = s_min.max(0.0) * camera.world_per_pixel() / scale;
+        };
         for cell in &self.cells {
             let distance = transform.transform_point3(cell.anchor).distance(camera.position);
             let tau = distance * per_metre;

@@ -106,14 +106,22 @@ impl PruneArgs {
     }
 }
 
+/// The baselines by the names `--baseline` takes, in the order `view`'s key B cycles them.
+pub const BASELINES: [(&str, Baseline); 3] = [
+    ("lod-chain", Baseline::LodChain),
+    ("billboard", Baseline::Billboard(BillboardKind::Facing)),
+    ("crossed", Baseline::Billboard(BillboardKind::Crossed)),
+];
+
 /// The renderer's baseline for a `--baseline` value (checked by clap).
 pub fn parse_baseline(name: Option<&str>) -> Option<Baseline> {
-    match name? {
-        "lod-chain" => Some(Baseline::LodChain),
-        "billboard" => Some(Baseline::Billboard(BillboardKind::Facing)),
-        "crossed" => Some(Baseline::Billboard(BillboardKind::Crossed)),
-        _ => None,
-    }
+    let name = name?;
+    BASELINES.iter().find(|(n, _)| *n == name).map(|&(_, b)| b)
+}
+
+/// The name of a baseline, as `--baseline` takes it.
+pub fn baseline_name(baseline: Baseline) -> &'static str {
+    BASELINES.iter().find(|(_, b)| *b == baseline).map_or("?", |&(n, _)| n)
 }
 
 /// Parses a fraction in (0, 1].

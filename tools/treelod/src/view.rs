@@ -11,9 +11,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{GpuError, Image, Readback};
-use treelod_render::{
-    Baseline, BillboardKind, Camera, DebugView, FrameStats, Pruning, Renderer, RendererFormats, Settings,
-};
+use treelod_render::{Camera, DebugView, FrameStats, Pruning, Renderer, RendererFormats, Settings};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, KeyEvent, MouseButton, WindowEvent};
@@ -21,7 +19,9 @@ use winit::event_loop::{ActiveEventLoop, EventLoop, OwnedDisplayHandle};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
-use crate::render::{PruneArgs, frame_camera, parse_size, parse_vec3, scene_failed, write_png};
+use crate::render::{
+    BASELINES, PruneArgs, baseline_name, frame_camera, parse_size, parse_vec3, scene_failed, write_png,
+};
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
 
@@ -378,14 +378,10 @@ impl Viewer {
             KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
             KeyCode::KeyI => settings.impostors = !settings.impostors,
             KeyCode::KeyB => {
-                settings.baseline = match settings.baseline {
-                    None => Some(Baseline::LodChain),
-                    Some(Baseline::LodChain) => Some(Baseline::Billboard(BillboardKind::Facing)),
-                    Some(Baseline::Billboard(BillboardKind::Facing)) => {
-                        Some(Baseline::Billboard(BillboardKind::Crossed))
-                    }
-                    Some(Baseline::Billboard(BillboardKind::Crossed)) => None,
-                }
+                // None, then each of `BASELINES` in turn, then none again.
+                let at = settings.baseline.and_then(|b| BASELINES.iter().position(|&(_, x)| x == b));
+                let next = at.map_or(0, |i| i + 1);
+                settings.baseline = BASELINES.get(next).map(|&(_, b)| b);
             }
             KeyCode::KeyO => {
                 if let Some(pruning) = &mut settings.pruning {
@@ -513,11 +509,7 @@ impl Viewer {
             mode.push_str(" | GPU selection");
         }
         if let Some(baseline) = settings.baseline.filter(|_| !settings.full_mesh) {
-            let name = match baseline {
-                Baseline::LodChain => "lod-chain",
-                Baseline::Billboard(BillboardKind::Facing) => "billboard",
-                Baseline::Billboard(BillboardKind::Crossed) => "crossed",
-            };
+            let name = baseline_name(baseline);
             mode.push_str(&format!(
                 " | baseline {name}: {} trees, {} triangles, {} quads",
                 self.stats.instances_baseline, self.stats.triangles, self.stats.billboards

@@ -556,7 +556,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 instances_visible: stats.instances_visible,
                 triangles: stats.triangles,
                 points: stats.points,
-                quads: stats.planes + stats.billboards,
+                quads: crate::eval::quads(&stats),
                 // Counted on the CPU after the timed selection.
                 points_in_cut: (!stats.gpu_selection).then(|| f.renderer.points_in_cut()),
                 instances_pruned: Some(stats.instances_pruned),

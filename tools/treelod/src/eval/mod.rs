@@ -328,10 +328,16 @@ pub fn geometry_bytes(stats: &FrameStats) -> u64 {
         + stats.billboards * size_of::<treelod_format::BillboardRecord>() as u64
 }
 
-/// Primitives submitted in a frame: triangles, points, impostor planes and billboard quads.
+/// Quads submitted in a frame: impostor planes and billboard quads.
+#[must_use]
+pub fn quads(stats: &FrameStats) -> u64 {
+    stats.planes + stats.billboards
+}
+
+/// Primitives submitted in a frame: triangles, points and [`quads`].
 #[must_use]
 pub fn primitives(stats: &FrameStats) -> u64 {
-    stats.triangles + stats.points + stats.planes + stats.billboards
+    stats.triangles + stats.points + quads(stats)
 }
 
 /// Everything a run measured, for the outputs.

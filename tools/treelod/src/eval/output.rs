@@ -354,7 +354,7 @@ pub fn csv(report: &Report) -> String {
             row.prepare_ms,
             row.gpu_ms.map(|v| format!("{v:.4}")).unwrap_or_default(),
             row.wall_ms,
-            row.stats.planes + row.stats.billboards,
+            super::quads(&row.stats),
             row.primitives(),
         );
     }
