@@ -1,5 +1,5 @@
 //! Encoders and decoders for the packed fields of spec §2: octahedral normals, RGBA8 colours and
-//! unorm16 pairs.
+//! unorm16 pairs; and the byte shuffle of compressed record arrays (spec §8).
 
 /// Encodes a unit vector as an octahedral `snorm16×2` normal (spec §2).
 ///
@@ -78,6 +78,29 @@ fn unorm8(v: f32) -> u8 {
 #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to [0, 65535]")]
 fn unorm16(v: f32) -> u16 {
     (v.clamp(0.0, 1.0) * 65535.0).round() as u16
+}
+
+/// Byte shuffle (spec §8): byte `j` of record `i` of `records` goes to `out[j·n + i]` (`n` whole
+/// records), grouping equal byte positions of neighbouring records. `out` holds at least `n`
+/// records; bytes past the last whole record are not read.
+pub fn shuffle(records: &[u8], record_size: usize, out: &mut [u8]) {
+    let n = records.len() / record_size.max(1);
+    for (i, record) in records.chunks_exact(record_size.max(1)).enumerate() {
+        for (j, &byte) in record.iter().enumerate() {
+            out[j * n + i] = byte;
+        }
+    }
+}
+
+/// Inverse of [`shuffle`]: byte `j·n + i` of `shuffled` goes to byte `j` of record `i` of `out`
+/// (`n` whole records in `out`).
+pub fn unshuffle(shuffled: &[u8], record_size: usize, out: &mut [u8]) {
+    let n = out.len() / record_size.max(1);
+    for (i, record) in out.chunks_exact_mut(record_size.max(1)).enumerate() {
+        for (j, byte) in record.iter_mut().enumerate() {
+            *byte = shuffled[j * n + i];
+        }
+    }
 }
 
 #[cfg(test)]

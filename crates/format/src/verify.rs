@@ -219,6 +219,7 @@ fn check_metadata(c: &Container) -> Result<()> {
 fn check_checksums(c: &Container, report: &mut VerifyReport) -> Result<()> {
     for section in c.sections() {
         check_section_checksum(c.file_bytes(), section)?;
+        c.release_stored(section);
         report.sections += 1;
         report.checksummed_bytes += section.entry.length;
     }
