@@ -20,7 +20,8 @@ struct Frame {
     sun: vec4<f32>,
     // 0 shaded, 1 colour by cell, 2 colour by kind.
     debug: u32,
-    _pad0: u32,
+    // 1: impostor planes morph towards their parents (Settings::impostor_morph).
+    morph: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -39,6 +40,7 @@ struct Frame {
 @group(1) @binding(4) var<storage, read> extra_triangles: array<TriangleRecord>;
 @group(1) @binding(5) var<storage, read> prune_leaves: array<PruneLeafRecord>;
 // Impostors: the container's planes, and the atlas they sample (clamped, with its stored mips).
+// As uploaded, a plane's `leaf_first` holds the index of its parent plane (0xFFFFFFFF for none).
 @group(1) @binding(6) var<storage, read> planes: array<PlaneRecord>;
 @group(1) @binding(7) var atlas: texture_2d<f32>;
 @group(1) @binding(8) var atlas_sampler: sampler;
@@ -164,7 +166,9 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
 
 // One corner of an impostor plane (spec §6.10): `center ± axis_u ± axis_v`, never turned to the
 // camera, the corner `center − axis_u − axis_v` at `uv_min`. `first_vertex` is 6 × the range's
-// first plane; planes outside the level `tau_p` selects are dropped.
+// first plane; planes outside the level `tau_p` selects are dropped. With `frame.morph`, over the
+// last octave of its interval a plane's corners slide along its parent's normal onto the parent's
+// plane (Garcia 2005 §2.4; Rust twins `morph_share` and `morph_corner` in treelod-runtime).
 @vertex
 fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
     let draw = draws[draw_index];
@@ -175,7 +179,17 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     let corner = CORNERS[vertex_index % 6u];
     let u = vec3<f32>(plane.axis_u[0], plane.axis_u[1], plane.axis_u[2]);
     let v = vec3<f32>(plane.axis_v[0], plane.axis_v[1], plane.axis_v[2]);
-    let p = vec3<f32>(plane.center[0], plane.center[1], plane.center[2]) + corner.x * u + corner.y * v;
+    var p = vec3<f32>(plane.center[0], plane.center[1], plane.center[2]) + corner.x * u + corner.y * v;
+    let start = max(plane.lo, 0.5 * plane.hi);
+    if frame.morph == 1u && plane.leaf_first != 0xFFFFFFFFu && plane.hi > start {
+        let parent = planes[plane.leaf_first];
+        let share = clamp((draw.tau_p - start) / (plane.hi - start), 0.0, 1.0);
+        let pu = vec3<f32>(parent.axis_u[0], parent.axis_u[1], parent.axis_u[2]);
+        let pv = vec3<f32>(parent.axis_v[0], parent.axis_v[1], parent.axis_v[2]);
+        let pn = normalize(cross(pu, pv));
+        let pc = vec3<f32>(parent.center[0], parent.center[1], parent.center[2]);
+        p = p - share * dot(p - pc, pn) * pn;
+    }
     let clip = frame.view_proj * (draw.model * vec4<f32>(p, 1.0));
     let normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
     return quad_corner(draw, clip, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));

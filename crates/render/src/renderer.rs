@@ -91,6 +91,11 @@ pub struct Settings {
     /// as the point thresholds are chosen (spec §10.1). Trees without planes are drawn with the
     /// sequential point trees. Takes precedence over [`Self::pruning`].
     pub impostors: bool,
+    /// With [`Self::impostors`]: Garcia's smooth level of detail. Over the last octave of each
+    /// plane's interval its corners slide onto the plane of the next coarser level, which takes
+    /// over where they arrive ([`treelod_runtime::morph_share`]), so a change of level moves no
+    /// leaf; `false` switches levels at once.
+    pub impostor_morph: bool,
     /// Draw every tree whose container has this baseline (spec §6.12, §6.13) with it instead of
     /// treelod's representations, for comparisons; trees without it are drawn with the sequential
     /// point trees. Takes precedence over [`Self::impostors`] and [`Self::pruning`].
@@ -164,6 +169,7 @@ impl Default for Settings {
             memory_budget: 1 << 30,
             pruning: None,
             impostors: false,
+            impostor_morph: true,
             baseline: None,
         }
     }
@@ -273,7 +279,9 @@ struct FrameUniform {
     up: [f32; 4],
     sun: [f32; 4],
     debug: u32,
-    _pad: [u32; 3],
+    /// 1 with [`Settings::impostor_morph`].
+    morph: u32,
+    _pad: [u32; 2],
 }
 
 /// One draw's constants. WGSL twin: `DrawInfo` in `shaders/tree.wgsl` and `shaders/select.wgsl`.
@@ -889,7 +897,16 @@ impl Renderer {
             Some(_) => Some(upload("BILLBOARDS", bytemuck::cast_slice(&billboard_records))?),
             None => None,
         };
-        let plane_buffer = upload("PLANES", bytemuck::cast_slice(container.planes()))?;
+        // As uploaded, each plane's `leaf_first` (which no shader reads) holds the index of its
+        // parent plane, for the morph between levels (`vs_plane`).
+        let parents = treelod_runtime::plane_parents(container.planes(), container.cells().iter().map(|c| c.planes));
+        let gpu_planes: Vec<treelod_format::PlaneRecord> = container
+            .planes()
+            .iter()
+            .zip(&parents)
+            .map(|(plane, &parent)| treelod_format::PlaneRecord { leaf_first: parent, ..*plane })
+            .collect();
+        let plane_buffer = upload("PLANES", bytemuck::cast_slice(&gpu_planes))?;
 
         // The roots, pinned in the pool: what a cell draws before its own points are resident.
         let lod = ModelLod::from_container(&container);
@@ -1729,7 +1746,8 @@ impl Renderer {
                 DebugView::Cells => 1,
                 DebugView::Kinds => 2,
             },
-            _pad: [0; 3],
+            morph: u32::from(settings.impostor_morph),
+            _pad: [0; 2],
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
     }

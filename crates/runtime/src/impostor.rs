@@ -19,6 +19,73 @@ pub fn plane_drawn(plane: &PlaneRecord, tau: f32) -> bool {
     plane.lo <= tau && tau < plane.hi
 }
 
+/// No parent plane ([`plane_parents`]): a root of its cell's hierarchy.
+pub const NO_PARENT: u32 = u32::MAX;
+
+/// The parent of every plane of `planes` (a container's `PLANES`, whose cells' ranges are
+/// `ranges`): the index of the plane of the next coarser level that holds its leaves, or
+/// [`NO_PARENT`] for a root. The levels nest (spec §6.10), so within a cell the leaf runs form a
+/// forest and a plane's parent is the smallest run around its own; its interval starts where the
+/// plane's ends (`parent.lo == hi`). Garcia's smooth level of detail interpolates a plane towards
+/// its parent before the parent takes over ([`morph_share`]).
+#[must_use]
+pub fn plane_parents(planes: &[PlaneRecord], ranges: impl IntoIterator<Item = Range>) -> Vec<u32> {
+    let mut parents = vec![NO_PARENT; planes.len()];
+    let mut order: Vec<u32> = Vec::new();
+    let mut open: Vec<u32> = Vec::new();
+    for range in ranges {
+        if planes.get(range.as_usize()).is_none() {
+            continue;
+        }
+        let end = |p: &PlaneRecord| u64::from(p.leaf_first) + u64::from(p.leaf_count);
+        // Enclosing runs first: by first leaf, then longest, then coarsest.
+        order.clear();
+        order.extend(range.first..range.first + range.count);
+        order.sort_by(|&a, &b| {
+            let (p, q) = (&planes[a as usize], &planes[b as usize]);
+            p.leaf_first.cmp(&q.leaf_first).then(end(q).cmp(&end(p))).then(q.lo.total_cmp(&p.lo))
+        });
+        open.clear();
+        for &i in &order {
+            let p = &planes[i as usize];
+            while let Some(&top) = open.last() {
+                let q = &planes[top as usize];
+                if q.leaf_first <= p.leaf_first && end(p) <= end(q) {
+                    break;
+                }
+                open.pop();
+            }
+            if let Some(&top) = open.last() {
+                parents[i as usize] = top;
+            }
+            open.push(i);
+        }
+    }
+    parents
+}
+
+/// How far a plane drawn at `τ` has moved towards its parent's plane (Garcia 2005 §2.4, "we can
+/// interpolate the plane parameters of the two enclosing levels"): 0 up to half its `hi`, then
+/// linearly to 1 at `hi`, where the parent takes over. Over that octave of distances the plane's
+/// corners slide, along the parent's normal, onto the parent's plane, so the switch moves no leaf
+/// (the parent's image is its leaves projected onto that plane). A root never moves.
+#[must_use]
+pub fn morph_share(plane: &PlaneRecord, tau: f32) -> f32 {
+    if !plane.hi.is_finite() {
+        return 0.0;
+    }
+    let start = plane.lo.max(0.5 * plane.hi);
+    if plane.hi <= start { 0.0 } else { ((tau - start) / (plane.hi - start)).clamp(0.0, 1.0) }
+}
+
+/// The corner `corner` of `plane` moved by `share` towards the plane of `parent` ([`morph_share`]):
+/// the WGSL twin is in `vs_plane`.
+#[must_use]
+pub fn morph_corner(corner: Vec3, parent: &PlaneRecord, share: f32) -> Vec3 {
+    let normal = Vec3::from_array(parent.axis_u).cross(Vec3::from_array(parent.axis_v)).normalize_or_zero();
+    corner - share * (corner - Vec3::from_array(parent.center)).dot(normal) * normal
+}
+
 /// One cell holding planes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlaneCell {
@@ -184,5 +251,42 @@ mod tests {
         let mut out = Vec::new();
         assert!(!lod.select(Mat4::IDENTITY, &camera, &Frustum::from_view_proj(camera.view_proj), 1.0, &mut out));
         assert!(out.is_empty());
+    }
+
+    #[test]
+    fn each_plane_morphs_onto_its_parent_which_takes_over_where_it_ends() {
+        let container = demo();
+        let planes = container.planes();
+        let parents = plane_parents(planes, container.cells().iter().map(|c| c.planes));
+        let mut children = 0;
+        for (plane, &parent) in planes.iter().zip(&parents) {
+            if parent == NO_PARENT {
+                assert!(plane.hi.is_infinite(), "only roots lack a parent: {plane:?}");
+                assert_eq!(morph_share(plane, 1e9), 0.0, "a root never moves");
+                continue;
+            }
+            children += 1;
+            let q = &planes[parent as usize];
+            assert_eq!(q.lo.to_bits(), plane.hi.to_bits(), "the parent's interval starts where the plane's ends");
+            assert!(
+                q.leaf_first <= plane.leaf_first && plane.leaf_first + plane.leaf_count <= q.leaf_first + q.leaf_count
+            );
+            assert!(q.leaf_count > plane.leaf_count, "a coarser plane holds more leaves");
+            // Unmoved in the lower half of its interval, on the parent's plane at its end.
+            assert_eq!(morph_share(plane, plane.lo), 0.0);
+            assert_eq!(morph_share(plane, 0.5 * plane.hi), 0.0);
+            let share = morph_share(plane, plane.hi * (1.0 - 1e-6));
+            assert!(share > 0.999, "{share}");
+            let normal = Vec3::from_array(q.axis_u).cross(Vec3::from_array(q.axis_v)).normalize();
+            let (c, u, v) =
+                (Vec3::from_array(plane.center), Vec3::from_array(plane.axis_u), Vec3::from_array(plane.axis_v));
+            for corner in [c + u + v, c - u + v, c + u - v, c - u - v] {
+                assert_eq!(morph_corner(corner, q, 0.0), corner);
+                let moved = morph_corner(corner, q, 1.0);
+                assert!((moved - Vec3::from_array(q.center)).dot(normal).abs() < 1e-4, "on the parent's plane");
+                assert!((moved - corner).cross(normal).length() < 1e-4, "moved along the parent's normal");
+            }
+        }
+        assert!(children >= 16, "the finer levels have parents: {children}");
     }
 }

@@ -66,6 +66,11 @@ pub struct Args {
     /// their bark as triangles; other trees as usual. Takes precedence over `--prune`.
     #[arg(long)]
     pub impostors: bool,
+    /// With `--impostors`: switch between levels of planes at once instead of sliding each
+    /// plane onto its parent's over the last octave of its distances (Garcia's smooth level of
+    /// detail, on by default).
+    #[arg(long)]
+    pub no_impostor_morph: bool,
     /// Draw trees whose containers have baselines (build with `--baselines`) with one of them
     /// instead: `lod-chain` (meshoptimizer's levels, the coarsest whose error projects below
     /// `--s-min` pixels), `billboard` (one camera-facing quad) or `crossed` (three fixed quads).
@@ -216,6 +221,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     };
     settings.pruning = args.prune.settings();
     settings.impostors = args.impostors;
+    settings.impostor_morph = !args.no_impostor_morph;
     settings.baseline = parse_baseline(args.baseline.as_deref());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =

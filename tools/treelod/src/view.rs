@@ -377,6 +377,7 @@ impl Viewer {
             KeyCode::KeyF => settings.full_mesh = !settings.full_mesh,
             KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
             KeyCode::KeyI => settings.impostors = !settings.impostors,
+            KeyCode::KeyM => settings.impostor_morph = !settings.impostor_morph,
             KeyCode::KeyB => {
                 // None, then each of `BASELINES` in turn, then none again.
                 let at = settings.baseline.and_then(|b| BASELINES.iter().position(|&(_, x)| x == b));
