@@ -65,7 +65,9 @@
 //! et al. 2005, spec §6.10) draws its leaves as those fixed, alpha-tested, depth-writing quads
 //! (`vs_plane`/`fs_plane` in `shaders/tree.wgsl`, from the model's uploaded `PLANES` and its atlas
 //! bound as a texture of its own, clamped, nearest mip) at the level whose interval holds `τ` from
-//! `s_min` at the block centre's distance, and its bark as all its bark triangles.
+//! `s_min` at the block centre's distance, sliding each plane onto its parent's before a level
+//! change ([`Settings::impostor_morph`]); its bark is all its bark triangles or, by
+//! [`ImpostorBark::Chain`], the bark of the container's LoD chain at the level `s_min` allows.
 
 mod camera;
 mod gpu_select;
@@ -77,7 +79,7 @@ mod textures;
 
 pub use camera::Camera;
 pub use renderer::{
-    Baseline, DebugView, DrawSource, FrameStats, Instance, ModelId, Pruning, RecordedDraw, RenderError, Renderer,
-    RendererFormats, Settings,
+    Baseline, DebugView, DrawSource, FrameStats, ImpostorBark, Instance, ModelId, Pruning, RecordedDraw, RenderError,
+    Renderer, RendererFormats, Settings,
 };
 pub use treelod_runtime::{BillboardKind, Hysteresis, PruneScale};

@@ -6,7 +6,9 @@ use std::path::PathBuf;
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{Gpu, Image, render_image};
-use treelod_render::{Baseline, BillboardKind, Camera, DebugView, FrameStats, PruneScale, Pruning, Renderer, Settings};
+use treelod_render::{
+    Baseline, BillboardKind, Camera, DebugView, FrameStats, ImpostorBark, PruneScale, Pruning, Renderer, Settings,
+};
 
 use crate::report::{self, Failed};
 use crate::scene;
@@ -71,6 +73,12 @@ pub struct Args {
     /// detail, on by default).
     #[arg(long)]
     pub no_impostor_morph: bool,
+    /// With `--impostors`: the bark beside the planes. `all` (the default): every bark triangle;
+    /// `chain`: where the container has a LoD chain (built with `--baselines`), the chain's bark
+    /// at the coarsest level whose error projects below half of `--s-min` pixels, else all bark
+    /// (a hundredth of the triangles far away, but thin branches go).
+    #[arg(long, value_name = "BARK", default_value = "all", value_parser = ["all", "chain"])]
+    pub impostor_bark: String,
     /// Draw trees whose containers have baselines (build with `--baselines`) with one of them
     /// instead: `lod-chain` (meshoptimizer's levels, the coarsest whose error projects below
     /// `--s-min` pixels), `billboard` (one camera-facing quad) or `crossed` (three fixed quads).
@@ -222,6 +230,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     settings.pruning = args.prune.settings();
     settings.impostors = args.impostors;
     settings.impostor_morph = !args.no_impostor_morph;
+    settings.impostor_bark = if args.impostor_bark == "chain" { ImpostorBark::Chain } else { ImpostorBark::All };
     settings.baseline = parse_baseline(args.baseline.as_deref());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
