@@ -18,6 +18,8 @@ struct Frame {
     up: vec4<f32>,
     // Direction towards the sun (xyz), ambient light (w).
     sun: vec4<f32>,
+    // Colour of the sunlight, linear RGB (xyz).
+    sun_colour: vec4<f32>,
     // 0 shaded, 1 colour by cell, 2 colour by kind.
     debug: u32,
     // 1: impostor planes morph towards their parents (Settings::impostor_morph).
@@ -251,7 +253,7 @@ fn vs_billboard(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
 // Two-sided Lambert with ambient: leaves are lit from both faces.
 fn shade(albedo: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
     let diffuse = abs(dot(normalize(normal), frame.sun.xyz));
-    return albedo * (frame.sun.w + (1.0 - frame.sun.w) * diffuse);
+    return albedo * (frame.sun.w + (1.0 - frame.sun.w) * diffuse * frame.sun_colour.xyz);
 }
 
 // MSAA samples of the target (set by the pipeline). With more than one, alpha-tested materials

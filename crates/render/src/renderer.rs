@@ -72,7 +72,10 @@ pub struct Settings {
     pub debug: DebugView,
     /// Direction towards the sun, world space.
     pub sun: Vec3,
-    /// Ambient share of the light, 0..1.
+    /// Colour of the sunlight, linear RGB (white: 1, 1, 1), multiplying its diffuse share.
+    pub sun_colour: Vec3,
+    /// Ambient share of the light, 0..1: a surface receives `ambient + (1 − ambient) · |n·l| ·
+    /// sun_colour` of its albedo (both faces lit: leaves are cards).
     pub ambient: f32,
     /// Bytes of triangles and points uploaded per frame at most: prefixes grow towards the
     /// selection by this much each frame, emptiest cells first.
@@ -185,6 +188,7 @@ impl Default for Settings {
             full_mesh: false,
             debug: DebugView::Shaded,
             sun: Vec3::new(0.4, 0.8, 0.45),
+            sun_colour: Vec3::ONE,
             ambient: 0.35,
             upload_budget: 64 << 20,
             memory_budget: 1 << 30,
@@ -300,6 +304,7 @@ struct FrameUniform {
     right: [f32; 4],
     up: [f32; 4],
     sun: [f32; 4],
+    sun_colour: [f32; 4],
     debug: u32,
     /// 1 with [`Settings::impostor_morph`].
     morph: u32,
@@ -1811,6 +1816,7 @@ impl Renderer {
             right: right.extend(camera.proj.y_axis.y).to_array(),
             up: up.extend(settings.point_scale.max(0.0)).to_array(),
             sun: Vec4::new(sun.x, sun.y, sun.z, settings.ambient.clamp(0.0, 1.0)).to_array(),
+            sun_colour: settings.sun_colour.max(Vec3::ZERO).extend(1.0).to_array(),
             debug: match settings.debug {
                 DebugView::Shaded => 0,
                 DebugView::Cells => 1,

@@ -551,3 +551,40 @@ fn morphing_impostor_planes_change_level_without_moving_leaves() {
         assert!(morphed * 2 < *sudden, "direction {d}: the morph hides the switch: {morphed} vs {sudden} pixels");
     }
 }
+
+#[test]
+fn the_sun_colour_tints_the_diffuse_light_and_the_ambient_share_does_not() {
+    let gpu = gpu();
+    let container = std::sync::Arc::new(demo_container());
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let cam = camera(&container, 15.0, 128);
+    let mut render = |sun_colour: Vec3, ambient: f32, sun: Vec3| {
+        let settings = renderer.settings_mut();
+        (settings.sun_colour, settings.ambient, settings.sun) = (sun_colour, ambient, sun);
+        render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders").0
+    };
+    let sun = Settings::default().sun;
+    // All light from a red sun: nothing green or blue is left.
+    let red = render(vec3(1.0, 0.0, 0.0), 0.0, sun);
+    let drawn: Vec<&[u8]> = red.rgba.chunks_exact(4).filter(|p| p[..3] != [255, 255, 255]).collect();
+    assert!(drawn.len() > 500, "the tree is drawn: {} pixels", drawn.len());
+    assert!(drawn.iter().all(|p| p[1] == 0 && p[2] == 0), "red light only");
+    // Its red channel is the white sun's.
+    let white = render(Vec3::ONE, 0.0, sun);
+    let red_channel = |image: &Image| image.rgba.iter().step_by(4).copied().collect::<Vec<u8>>();
+    assert!(red_channel(&red) == red_channel(&white), "the red channel as under a white sun");
+    assert!(drawn.iter().any(|p| p[0] > 0), "lit");
+    // All ambient: neither the sun's colour nor its direction matters.
+    let ambient = render(vec3(1.0, 0.0, 0.0), 1.0, sun);
+    assert!(ambient.rgba == render(Vec3::ONE, 1.0, vec3(-0.3, 0.2, -0.9)).rgba, "ambient light alone");
+    // The sun's direction moves the diffuse light: along the view, the leaves facing the camera
+    // are brighter than with the sun at right angles to them.
+    let brightness = |image: &Image| -> u64 {
+        image.rgba.chunks_exact(4).filter(|p| p[..3] != [255, 255, 255]).map(|p| u64::from(p[1])).sum()
+    };
+    let behind_camera = brightness(&render(Vec3::ONE, 0.0, vec3(0.0, 0.0, 1.0)));
+    let overhead = brightness(&render(Vec3::ONE, 0.0, vec3(0.0, 1.0, 0.0)));
+    assert_ne!(behind_camera, overhead, "the sun's direction changes the image");
+}

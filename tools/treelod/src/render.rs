@@ -63,6 +63,8 @@ pub struct Args {
     pub background: [u8; 3],
     #[command(flatten)]
     pub prune: PruneArgs,
+    #[command(flatten)]
+    pub light: LightArgs,
     /// Draw the leaves of trees whose containers have impostor planes (Garcia 2005; build with
     /// `--impostors`) as those planes, the level chosen by `--s-min` at the tree's distance, and
     /// their bark as triangles; other trees as usual. Takes precedence over `--prune`.
@@ -89,6 +91,47 @@ pub struct Args {
     /// whole). Frames with pruning or the full mesh (`--compare`'s right half) select on the CPU.
     #[arg(long)]
     pub gpu_selection: bool,
+}
+
+/// Lighting options shared by `render` and `view`.
+#[derive(Debug, clap::Args)]
+pub struct LightArgs {
+    /// Direction towards the sun, `x,y,z` (any length but zero) [default: 0.4,0.8,0.45].
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_direction, allow_hyphen_values = true)]
+    pub sun: Option<Vec3>,
+    /// Colour of the sunlight, `RRGGBB` in sRGB hex (e.g. `fff2d9` for a warm afternoon)
+    /// [default: ffffff].
+    #[arg(long, value_name = "RRGGBB", value_parser = parse_colour)]
+    pub sun_colour: Option<[u8; 3]>,
+    /// Ambient share of the light, 0..=1: a surface receives `ambient + (1 − ambient)·|n·l|` of
+    /// the sun [default: 0.35].
+    #[arg(long, value_name = "SHARE", value_parser = parse_share)]
+    pub ambient: Option<f32>,
+    /// Gilet's self-shadowing estimate (2005 §5.3) instead of none: each cell's brightness from
+    /// `L_m` at the front of its tree to `L_M` at the back, `L_m,L_M` each in 0..=1 (e.g. `0.6,1`).
+    #[arg(long, value_name = "L_m,L_M", value_parser = parse_self_shadow)]
+    pub self_shadow: Option<(f32, f32)>,
+}
+
+impl LightArgs {
+    /// Sets the renderer's light from these options; those not given keep `settings`' values.
+    pub fn apply(&self, settings: &mut Settings) {
+        if let Some(sun) = self.sun {
+            settings.sun = sun;
+        }
+        if let Some(colour) = self.sun_colour {
+            let linear = clear_colour(colour);
+            #[expect(clippy::cast_possible_truncation, reason = "colour components in [0, 1]")]
+            let rgb = Vec3::new(linear.r as f32, linear.g as f32, linear.b as f32);
+            settings.sun_colour = rgb;
+        }
+        if let Some(ambient) = self.ambient {
+            settings.ambient = ambient;
+        }
+        if self.self_shadow.is_some() {
+            settings.shading = self.self_shadow;
+        }
+    }
 }
 
 /// Pruning options shared by `render` and `view`.
@@ -161,6 +204,36 @@ pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
+/// The renderer's impostor bark for an `--impostor-bark` value (checked by clap: `all`, `chain`).
+pub fn impostor_bark(name: &str) -> ImpostorBark {
+    if name == "chain" { ImpostorBark::Chain } else { ImpostorBark::All }
+}
+
+/// A direction: three finite numbers, not all zero.
+pub fn parse_direction(s: &str) -> Result<Vec3, String> {
+    let v = parse_vec3(s)?;
+    if v.length_squared() > 0.0 && v.length_squared().is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("expected a direction X,Y,Z (three finite numbers, not all zero), got {s:?}"))
+    }
+}
+
+/// A share in [0, 1].
+pub fn parse_share(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("expected a share in [0, 1], got {s:?}")),
+    }
+}
+
+/// Gilet's `L_m,L_M`: two brightnesses in [0, 1].
+pub fn parse_self_shadow(s: &str) -> Result<(f32, f32), String> {
+    let err = || format!("expected L_m,L_M (two brightnesses in [0, 1], e.g. 0.6,1), got {s:?}");
+    let (a, b) = s.split_once(',').ok_or_else(err)?;
+    Ok((parse_share(a).map_err(|_| err())?, parse_share(b).map_err(|_| err())?))
+}
+
 pub fn parse_fov(s: &str) -> Result<f32, String> {
     match s.trim().parse::<f32>() {
         Ok(v) if (1.0..=170.0).contains(&v) => Ok(v),
@@ -228,9 +301,10 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         _ => DebugView::Shaded,
     };
     settings.pruning = args.prune.settings();
+    args.light.apply(&mut settings);
     settings.impostors = args.impostors;
     settings.impostor_morph = !args.no_impostor_morph;
-    settings.impostor_bark = if args.impostor_bark == "chain" { ImpostorBark::Chain } else { ImpostorBark::All };
+    settings.impostor_bark = impostor_bark(&args.impostor_bark);
     settings.baseline = parse_baseline(args.baseline.as_deref());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =

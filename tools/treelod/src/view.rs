@@ -20,10 +20,35 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::render::{
-    BASELINES, PruneArgs, baseline_name, frame_camera, parse_size, parse_vec3, scene_failed, write_png,
+    BASELINES, LightArgs, PruneArgs, baseline_name, frame_camera, parse_size, parse_vec3, scene_failed, write_png,
 };
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
+
+/// Gilet's self-shadowing `(L_m, L_M)` that key `L` turns on (unless `--self-shadow` gave one).
+const SELF_SHADOW: (f32, f32) = (0.6, 1.0);
+
+/// Degrees the sun turns per arrow key press: about the vertical (left, right) or up and down.
+const SUN_STEP_DEGREES: f32 = 15.0;
+
+/// The direction towards the sun after arrow key `key`: azimuth about +y, or elevation, by
+/// [`SUN_STEP_DEGREES`], the elevation kept within ±85° (lighting from below is allowed: leaves
+/// are lit on both faces).
+fn turn_sun(sun: Vec3, key: KeyCode) -> Vec3 {
+    let sun = sun.normalize_or(Vec3::Y);
+    let mut azimuth = sun.x.atan2(sun.z);
+    let mut elevation = sun.y.clamp(-1.0, 1.0).asin();
+    let step = SUN_STEP_DEGREES.to_radians();
+    match key {
+        KeyCode::ArrowLeft => azimuth -= step,
+        KeyCode::ArrowRight => azimuth += step,
+        KeyCode::ArrowUp => elevation += step,
+        KeyCode::ArrowDown => elevation -= step,
+        _ => {}
+    }
+    let elevation = elevation.clamp(-85f32.to_radians(), 85f32.to_radians());
+    Vec3::new(azimuth.sin() * elevation.cos(), elevation.sin(), azimuth.cos() * elevation.cos())
+}
 
 /// Vertical field of view (as `treelod render`'s default).
 const FOVY_DEGREES: f32 = 50.0;
@@ -60,6 +85,8 @@ pub struct Args {
     pub frames: u32,
     #[command(flatten)]
     pub prune: PruneArgs,
+    #[command(flatten)]
+    pub light: LightArgs,
     /// Start with impostor planes on (key `I`) for trees whose containers have them.
     #[arg(long)]
     pub impostors: bool,
@@ -288,12 +315,13 @@ impl Viewer {
         let depth = depth_view(&device, config.width, config.height);
 
         let formats = RendererFormats { color: format, depth: DEPTH_FORMAT, sample_count: 1 };
-        let settings = Settings {
+        let mut settings = Settings {
             pruning: args.prune.settings(),
             impostors: args.impostors,
             baseline: crate::render::parse_baseline(args.baseline.as_deref()),
             ..Settings::default()
         };
+        args.light.apply(&mut settings);
         let mut renderer = Renderer::new(&device, formats, settings);
         let bounds = scene::add_to_renderer(scene, &device, &queue, &mut renderer).map_err(|e| scene_failed(&e))?;
 
@@ -378,6 +406,15 @@ impl Viewer {
             KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
             KeyCode::KeyI => settings.impostors = !settings.impostors,
             KeyCode::KeyM => settings.impostor_morph = !settings.impostor_morph,
+            KeyCode::ArrowLeft | KeyCode::ArrowRight | KeyCode::ArrowUp | KeyCode::ArrowDown => {
+                settings.sun = turn_sun(settings.sun, code);
+            }
+            KeyCode::KeyL => {
+                settings.shading = match settings.shading {
+                    Some(_) => None,
+                    None => Some(SELF_SHADOW),
+                };
+            }
             KeyCode::KeyB => {
                 // None, then each of `BASELINES` in turn, then none again.
                 let at = settings.baseline.and_then(|b| BASELINES.iter().position(|&(_, x)| x == b));
@@ -527,6 +564,15 @@ impl Viewer {
                 self.stats.instances_pruned, self.stats.leaves_pruned
             ));
         }
+        let sun = settings.sun.normalize_or(Vec3::Y);
+        mode.push_str(&format!(
+            " | sun az {:.0} el {:.0}",
+            sun.x.atan2(sun.z).to_degrees(),
+            sun.y.clamp(-1.0, 1.0).asin().to_degrees()
+        ));
+        if let Some((l_min, l_max)) = settings.shading {
+            mode.push_str(&format!(" | self-shadow {l_min}..{l_max}"));
+        }
         let name = self.input.file_name().map_or_else(|| self.input.display().to_string(), |n| n.display().to_string());
         self.window.set_title(&format!(
             "{name} | {fps:.1} fps | {} of {} instances | {} triangles | {} points | s_min {} s_max {} k {}{mode}",
@@ -642,6 +688,24 @@ mod tests {
         let message = "os error at /src/winit/linux/mod.rs:765: DISPLAY is not set.";
         assert_eq!(winit_reason(message), "DISPLAY is not set.");
         assert_eq!(winit_reason("the event loop was already run"), "the event loop was already run");
+    }
+
+    #[test]
+    fn arrow_keys_turn_the_sun_about_the_vertical_and_up_and_down() {
+        let start = Vec3::new(0.0, 0.5f32.sqrt(), 0.5f32.sqrt());
+        let right = turn_sun(start, KeyCode::ArrowRight);
+        assert!((right.y - start.y).abs() < 1e-6, "the elevation is kept");
+        assert!((right.x.atan2(right.z).to_degrees() - SUN_STEP_DEGREES).abs() < 1e-3);
+        let back = turn_sun(right, KeyCode::ArrowLeft);
+        assert!((back - start).length() < 1e-5, "left undoes right: {back}");
+        let mut up = start;
+        for _ in 0..20 {
+            up = turn_sun(up, KeyCode::ArrowUp);
+        }
+        assert!((up.y.asin().to_degrees() - 85.0).abs() < 1e-3, "the elevation stops at 85°: {up}");
+        assert!((up.length() - 1.0).abs() < 1e-6);
+        let down = turn_sun(start, KeyCode::ArrowDown);
+        assert!((down.y.asin().to_degrees() - 30.0).abs() < 1e-3, "45° − 15°: {down}");
     }
 
     #[test]

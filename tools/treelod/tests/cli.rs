@@ -993,6 +993,40 @@ fn bad_scene_files_fail_with_a_message_naming_the_file() {
 }
 
 #[test]
+fn render_lights_the_tree_as_its_light_options_say_and_refuses_bad_ones() {
+    let demo = shared_demo();
+    let dir = scratch("render-light");
+    let png = dir.join("red.png");
+    // A red sun, no ambient light: the tree has red and nothing else.
+    render_ok(demo, &png, &["--size", "96x72", "--sun-colour", "ff0000", "--ambient", "0", "--sun", "0,1,1"]);
+    let (_, _, pixels) = read_png(&png);
+    let drawn: Vec<&[u8; 4]> = pixels.iter().filter(|p| !close_to(**p, [255, 255, 255])).collect();
+    assert!(drawn.len() > 100, "the tree is drawn: {}", drawn.len());
+    assert!(drawn.iter().all(|p| p[1] == 0 && p[2] == 0), "red light only");
+    // Gilet's self-shadowing darkens the tree.
+    let plain = dir.join("plain.png");
+    let shadowed = dir.join("shadowed.png");
+    render_ok(demo, &plain, &["--size", "96x72"]);
+    render_ok(demo, &shadowed, &["--size", "96x72", "--self-shadow", "0.2,0.6"]);
+    let sum = |path: &Path| read_png(path).2.iter().map(|p| u64::from(p[0]) + u64::from(p[1])).sum::<u64>();
+    assert!(sum(&shadowed) < sum(&plain), "darker with self-shadowing");
+    let bad: [&[&str]; 5] = [
+        &["--sun", "0,0,0"],
+        &["--sun", "1,nan,0"],
+        &["--sun-colour", "red"],
+        &["--ambient", "1.5"],
+        &["--self-shadow", "0.5"],
+    ];
+    for extra in bad {
+        let mut args = vec!["render", demo.to_str().expect("UTF-8"), "-o", "x.png"];
+        args.extend_from_slice(extra);
+        let out = treelod(&args);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains("expected"), "{extra:?}: the message says what is expected: {}", stderr(&out));
+    }
+}
+
+#[test]
 fn render_writes_a_png_of_the_requested_size_showing_the_tree() {
     let demo = shared_demo();
     let dir = scratch("render");
