@@ -75,11 +75,11 @@ pub struct Args {
     /// detail, on by default).
     #[arg(long)]
     pub no_impostor_morph: bool,
-    /// With `--impostors`: the bark beside the planes. `all` (the default): every bark triangle;
-    /// `chain`: where the container has a LoD chain (built with `--baselines`), the chain's bark
-    /// at the coarsest level whose error projects below half of `--s-min` pixels, else all bark
-    /// (a hundredth of the triangles far away, but thin branches go).
-    #[arg(long, value_name = "BARK", default_value = "all", value_parser = ["all", "chain"])]
+    /// With `--impostors`: the bark beside the planes. `chain` (the default): where the
+    /// container has a LoD chain (built with `--baselines`), the chain's bark at the coarsest
+    /// level whose error projects below half of `--s-min` pixels among those keeping 90 % of the
+    /// bark's area, else all bark; `all`: every bark triangle.
+    #[arg(long, value_name = "BARK", default_value = "chain", value_parser = ["chain", "all"])]
     pub impostor_bark: String,
     /// Draw trees whose containers have baselines (build with `--baselines`) with one of them
     /// instead: `lod-chain` (meshoptimizer's levels, the coarsest whose error projects below

@@ -91,7 +91,7 @@ pub struct Args {
     pub no_impostor_morph: bool,
     /// With the `impostors` technique: the bark beside the planes, `all` or `chain` (as
     /// `render`'s).
-    #[arg(long, value_name = "BARK", default_value = "all", value_parser = ["all", "chain"])]
+    #[arg(long, value_name = "BARK", default_value = "chain", value_parser = ["chain", "all"])]
     pub impostor_bark: String,
     /// Triangle threshold `s_max` in pixels of the `spt` technique.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
