@@ -5,12 +5,12 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, gpu, precision_recall};
-use glam::{Mat4, Vec3, vec3};
+use common::{BACKGROUND, bark_triangles, gpu, one_tree, precision_recall};
+use glam::{Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, ImpostorConfig, LodChainConfig, Placed, build_block, demo_tree};
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, render_image};
-use treelod_render::{Baseline, BillboardKind, Camera, DrawSource, ImpostorBark, Instance, Renderer, Settings};
+use treelod_render::{Baseline, BillboardKind, Camera, DrawSource, ImpostorBark, Renderer, Settings};
 
 /// The demo tree built with its baselines (and the impostors that set the billboards' budget).
 fn demo_with_baselines() -> Arc<Container> {
@@ -31,11 +31,7 @@ fn centre(container: &Container) -> Vec3 {
 }
 
 fn renderer(gpu: &Gpu, container: &Arc<Container>, baseline: Baseline) -> Renderer {
-    let settings = Settings { baseline: Some(baseline), ..Settings::default() };
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(container)).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
-    renderer
+    one_tree(gpu, container, Settings { baseline: Some(baseline), ..Settings::default() })
 }
 
 #[test]
@@ -116,17 +112,11 @@ fn billboards_cover_the_full_mesh_from_around_the_tree() {
 fn impostor_trees_draw_the_chains_bark_at_the_level_their_distance_allows() {
     let gpu = gpu();
     let container = demo_with_baselines();
-    let bark = container
-        .triangles()
-        .iter()
-        .filter(|t| container.materials()[t.material as usize].class != treelod_format::material_class::LEAF)
-        .count() as u64;
+    let bark = bark_triangles(&container);
     let levels = container.lod_levels();
     let full_area = bark_area(&container, container.triangles());
     let settings = Settings { impostors: true, ..Settings::default() };
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut renderer = one_tree(&gpu, &container, settings);
     let centre = centre(&container);
     let mut drawn = Vec::new();
     for distance in [3.0f32, 30.0, 100.0, 200.0, 300.0, 1000.0] {

@@ -10,7 +10,7 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, gpu, precision_recall};
+use common::{BACKGROUND, gpu, one_tree, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container, CurveSample, PruneLeafRecord, Range, material_class};
@@ -72,9 +72,7 @@ fn pruning(lambda: f32, scale: PruneScale) -> Pruning {
 fn all_leaves_unscaled_draw_the_full_mesh_and_a_prefix_draws_fewer() {
     let gpu = gpu();
     let container = Arc::new(pruned_demo());
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut renderer = one_tree(&gpu, &container, Settings::default());
     let cam = camera_at(&container, vec3(0.0, 0.0, 15.0), 256);
     let total = container.triangles().len() as u64;
     let leaves = container.prune_leaves().len() as u64;
@@ -118,9 +116,7 @@ fn all_leaves_unscaled_draw_the_full_mesh_and_a_prefix_draws_fewer() {
 fn lambda_follows_the_projected_height_and_far_trees_take_the_point_tree() {
     let gpu = gpu();
     let container = Arc::new(pruned_demo());
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut renderer = one_tree(&gpu, &container, Settings::default());
     renderer.settings_mut().pruning = Some(Pruning {
         lambda: None,
         occlusion: false,

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{BACKGROUND, covered, gpu, precision_recall};
+use common::{BACKGROUND, bark_triangles, covered, gpu, one_tree, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
 use treelod_format::{Compression, Container};
@@ -39,9 +39,7 @@ fn keep(image: &Image, name: &str) {
 fn lod_covers_the_pixels_of_the_full_mesh_at_every_distance() {
     let gpu = gpu();
     let container = std::sync::Arc::new(demo_container());
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut renderer = one_tree(&gpu, &container, Settings::default());
     let total = container.triangles().len() as u64;
     let mut drawn = Vec::new();
     let mut rows = Vec::new();
@@ -238,9 +236,7 @@ fn streaming_with_a_tiny_budget_shows_coarser_data_never_holes_and_converges() {
     let (full, full_stats) = render_image(&gpu, &mut reference, &cam, BACKGROUND).expect("renders");
     assert_eq!(full_stats.ranges_clamped, 0);
 
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut renderer = one_tree(&gpu, &container, settings);
     let mut frames = 0;
     let mut worst_recall = 1.0f64;
     loop {
@@ -349,9 +345,7 @@ fn check_golden(image: &Image, name: &str) {
 fn the_demo_tree_matches_its_golden_images_at_three_distances() {
     let gpu = gpu();
     let container = std::sync::Arc::new(demo_container());
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut renderer = one_tree(&gpu, &container, Settings::default());
     for distance in [15.0, 45.0, 120.0] {
         let (image, _) =
             render_image(&gpu, &mut renderer, &camera(&container, distance, 128), BACKGROUND).expect("renders");
@@ -414,24 +408,23 @@ fn msaa_draws_the_full_mesh_closer_to_the_supersampled_image() {
     }
 }
 
-#[test]
-fn impostor_planes_cover_the_full_mesh_from_every_direction() {
-    let gpu = gpu();
+/// The demo tree built with impostor planes (the default levels and atlas).
+fn demo_with_impostors() -> std::sync::Arc<Container> {
     let scene = demo_tree(&DemoTreeConfig::default());
     let config = BuildConfig { impostors: Some(treelod_build::ImpostorConfig::default()), ..BuildConfig::default() };
     let built =
         build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
-    let container = std::sync::Arc::new(
+    std::sync::Arc::new(
         Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"),
-    );
-    let bark = container
-        .triangles()
-        .iter()
-        .filter(|t| container.materials()[t.material as usize].class != treelod_format::material_class::LEAF)
-        .count() as u64;
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings { impostors: true, ..Settings::default() });
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    )
+}
+
+#[test]
+fn impostor_planes_cover_the_full_mesh_from_every_direction() {
+    let gpu = gpu();
+    let container = demo_with_impostors();
+    let bark = bark_triangles(&container);
+    let mut renderer = one_tree(&gpu, &container, Settings { impostors: true, ..Settings::default() });
     let block = container.block();
     let centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
     let mut rows = Vec::new();
@@ -484,13 +477,7 @@ fn differing(a: &Image, b: &Image) -> usize {
 #[test]
 fn morphing_impostor_planes_change_level_without_moving_leaves() {
     let gpu = gpu();
-    let scene = demo_tree(&DemoTreeConfig::default());
-    let config = BuildConfig { impostors: Some(treelod_build::ImpostorConfig::default()), ..BuildConfig::default() };
-    let built =
-        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
-    let container = std::sync::Arc::new(
-        Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"),
-    );
+    let container = demo_with_impostors();
     // The switch to test: the parent whose children lie farthest off its plane (area-weighted by
     // their quads), where the change of level is most visible.
     let planes = container.planes();
@@ -511,9 +498,7 @@ fn morphing_impostor_planes_change_level_without_moving_leaves() {
     let switch = planes[parent].lo;
     assert!(switch > 0.0 && score[parent] > 0.0, "a parent with children off its plane");
 
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings { impostors: true, ..Settings::default() });
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut renderer = one_tree(&gpu, &container, Settings { impostors: true, ..Settings::default() });
     let block = container.block();
     let centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
     let (distance, fovy, size) = (20.0f32, 0.8f32, 256u32);
@@ -556,9 +541,7 @@ fn morphing_impostor_planes_change_level_without_moving_leaves() {
 fn the_sun_colour_tints_the_diffuse_light_and_the_ambient_share_does_not() {
     let gpu = gpu();
     let container = std::sync::Arc::new(demo_container());
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
-    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    let mut renderer = one_tree(&gpu, &container, Settings::default());
     let cam = camera(&container, 15.0, 128);
     let mut render = |sun_colour: Vec3, ambient: f32, sun: Vec3| {
         let settings = renderer.settings_mut();

@@ -3,7 +3,12 @@
 
 #![allow(dead_code, reason = "each test file uses part of it")]
 
+use std::sync::Arc;
+
+use glam::Mat4;
+use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, Image};
+use treelod_render::{Instance, Renderer, Settings};
 
 /// White: a pixel of another colour is covered.
 pub const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
@@ -27,4 +32,20 @@ pub fn precision_recall(test: &Image, reference: &Image) -> (f64, f64) {
     let n_test = a.iter().filter(|x| **x).count() as f64;
     let n_reference = b.iter().filter(|x| **x).count() as f64;
     (both / n_test.max(1.0), both / n_reference.max(1.0))
+}
+
+/// A renderer with `settings` drawing one instance of `container` at the origin.
+pub fn one_tree(gpu: &Gpu, container: &Arc<Container>, settings: Settings) -> Renderer {
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(container)).expect("uploads");
+    renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+    renderer
+}
+
+/// The bark (non-leaf) triangles of `container`'s full mesh.
+pub fn bark_triangles(container: &Container) -> u64 {
+    let leaf = |t: &&treelod_format::TriangleRecord| {
+        container.materials()[t.material as usize].class == treelod_format::material_class::LEAF
+    };
+    container.triangles().iter().filter(|t| !leaf(t)).count() as u64
 }
