@@ -67,6 +67,9 @@ struct Varyings {
     @location(4) @interpolate(flat) tint: vec3<f32>,
     // Points: position on the unit disc.
     @location(5) disc: vec2<f32>,
+    // Impostor planes and billboards: drawn where the pixel's dither value h satisfies
+    // keep.x <= h < keep.y (the cross-fade between levels of planes).
+    @location(6) @interpolate(flat) keep: vec2<f32>,
 }
 
 // A colour per cell index, for `debug = 1`.
@@ -175,7 +178,23 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
 fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
     let draw = draws[draw_index];
     let plane = planes[vertex_index / 6u];
-    if !plane_drawn(plane, draw.tau_p) {
+    let has_parent = plane.leaf_first != 0xFFFFFFFFu;
+    // Rust twin: treelod_runtime::crossfade.
+    var keep = vec2<f32>(0.0, 2.0);
+    let tau = draw.tau_p;
+    if frame.morph == 1u {
+        let lo_ext = plane.lo * (1.0 - crossfade);
+        if !(lo_ext <= tau && tau < plane.hi) {
+            return offscreen();
+        }
+        if tau < plane.lo {
+            keep.y = (tau - lo_ext) / (plane.lo - lo_ext);
+        }
+        let start = plane.hi * (1.0 - crossfade);
+        if has_parent && tau >= start && plane.hi > start {
+            keep.x = (tau - start) / (plane.hi - start);
+        }
+    } else if !plane_drawn(plane, tau) {
         return offscreen();
     }
     let corner = CORNERS[vertex_index % 6u];
@@ -183,7 +202,7 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     let v = vec3<f32>(plane.axis_v[0], plane.axis_v[1], plane.axis_v[2]);
     var p = vec3<f32>(plane.center[0], plane.center[1], plane.center[2]) + corner.x * u + corner.y * v;
     let start = max(plane.lo, 0.5 * plane.hi);
-    if frame.morph == 1u && plane.leaf_first != 0xFFFFFFFFu && plane.hi > start {
+    if frame.morph == 1u && has_parent && plane.hi > start {
         let parent = planes[plane.leaf_first];
         let share = clamp((draw.tau_p - start) / (plane.hi - start), 0.0, 1.0);
         let pu = vec3<f32>(parent.axis_u[0], parent.axis_u[1], parent.axis_u[2]);
@@ -194,7 +213,9 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     }
     let clip = frame.view_proj * (draw.model * vec4<f32>(p, 1.0));
     let normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
-    return quad_corner(draw, clip, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
+    var out = quad_corner(draw, clip, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
+    out.keep = keep;
+    return out;
 }
 
 // The varyings of a textured quad's corner (impostor plane or billboard): texture coordinates
@@ -216,6 +237,7 @@ fn quad_corner(
     out.color = vec4<f32>(1.0);
     out.material = 0xFFFFFFFFu;
     out.disc = vec2<f32>(0.0);
+    out.keep = vec2<f32>(0.0, 2.0);
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = kinds; }
@@ -259,6 +281,10 @@ fn shade(albedo: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
 // MSAA samples of the target (set by the pipeline). With more than one, alpha-tested materials
 // write a sample mask instead of testing: alpha to coverage.
 override sample_count: u32 = 1u;
+
+// Share of τ below a switch of level over which impostor planes cross-fade (set from
+// treelod_runtime::CROSSFADE).
+override crossfade: f32 = 0.25;
 
 struct TriangleOut {
     @location(0) color: vec4<f32>,
@@ -334,7 +360,9 @@ fn fs_triangle(in: Varyings) -> TriangleOut {
 @fragment
 fn fs_plane(in: Varyings) -> @location(0) vec4<f32> {
     let texel = textureSample(atlas, atlas_sampler, in.uv);
-    if texel.a < 0.5 {
+    // Interleaved gradient noise (Jimenez 2014) of the pixel: the dither of the cross-fade.
+    let h = fract(52.9829189 * fract(dot(floor(in.clip.xy), vec2<f32>(0.06711056, 0.00583715))));
+    if texel.a < 0.5 || h < in.keep.x || h >= in.keep.y {
         discard;
     }
     if frame.debug != 0u {

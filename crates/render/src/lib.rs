@@ -65,8 +65,8 @@
 //! et al. 2005, spec §6.10) draws its leaves as those fixed, alpha-tested, depth-writing quads
 //! (`vs_plane`/`fs_plane` in `shaders/tree.wgsl`, from the model's uploaded `PLANES` and its atlas
 //! bound as a texture of its own, clamped, nearest mip) at the level whose interval holds `τ` from
-//! `s_min` at the block centre's distance, sliding each plane onto its parent's before a level
-//! change ([`Settings::impostor_morph`]); its bark is the bark of the container's LoD chain at
+//! `s_min` at the block centre's distance, sliding each plane onto its parent's and cross-fading
+//! the two before a level change ([`Settings::impostor_morph`]); its bark is the bark of the container's LoD chain at
 //! the level `s_min` allows where it has one ([`ImpostorBark`]), else all its bark triangles.
 
 mod camera;

@@ -94,10 +94,12 @@ pub struct Settings {
     /// as the point thresholds are chosen (spec §10.1). Trees without planes are drawn with the
     /// sequential point trees. Takes precedence over [`Self::pruning`].
     pub impostors: bool,
-    /// With [`Self::impostors`]: Garcia's smooth level of detail. Over the last octave of each
-    /// plane's interval its corners slide onto the plane of the next coarser level, which takes
-    /// over where they arrive ([`treelod_runtime::morph_share`]), so a change of level moves no
-    /// leaf; `false` switches levels at once.
+    /// With [`Self::impostors`]: smooth changes of level. Garcia's interpolation of the planes:
+    /// over the last octave of each plane's interval its corners slide onto the plane of the next
+    /// coarser level, which takes over where they arrive ([`treelod_runtime::morph_share`]), so a
+    /// change of level moves no leaf. And a cross-fade of the textures: over the last quarter of
+    /// the interval the plane and its parent are drawn on complementary dithered pixels
+    /// ([`treelod_runtime::crossfade`]). `false` switches levels at once.
     pub impostor_morph: bool,
     /// With [`Self::impostors`]: the bark drawn beside the planes.
     pub impostor_bark: ImpostorBark,
@@ -675,7 +677,10 @@ impl Renderer {
         });
         // With MSAA, alpha-tested leaves write a sample mask from their filtered alpha (alpha to
         // coverage, in the shader) so their density holds where small mips thin out a test.
-        let overrides = [("sample_count", f64::from(formats.sample_count.max(1)))];
+        let overrides = [
+            ("sample_count", f64::from(formats.sample_count.max(1))),
+            ("crossfade", f64::from(treelod_runtime::CROSSFADE)),
+        ];
         let constants = || wgpu::PipelineCompilationOptions {
             constants: &overrides,
             ..wgpu::PipelineCompilationOptions::default()

@@ -78,6 +78,33 @@ pub fn morph_share(plane: &PlaneRecord, tau: f32) -> f32 {
     if plane.hi <= start { 0.0 } else { ((tau - start) / (plane.hi - start)).clamp(0.0, 1.0) }
 }
 
+/// Share of `τ` below a switch of level over which the two levels cross-fade ([`crossfade`]).
+pub const CROSSFADE: f32 = 0.25;
+
+/// The part of a screen-space dither value `h ∈ [0, 1)` for which `plane` is drawn at `τ` with
+/// the cross-fade between levels: `Some((from, to))` draws where `from ≤ h < to`, `None` not at
+/// all. A plane is drawn over its interval `[lo, hi)` extended down to `lo·(1 − CROSSFADE)`; below
+/// `lo` it fades in (`h < f`), and in the last `CROSSFADE` of its interval, if it has a parent,
+/// it fades out (`h ≥ f`), with `f` rising from 0 to 1 across the band. A plane's `hi` is its
+/// parent's `lo`, so at every `τ` the two are drawn on complementary pixels: the texture changes
+/// a few pixels at a time instead of all at once. The WGSL twin is in `vs_plane`.
+#[must_use]
+pub fn crossfade(plane: &PlaneRecord, has_parent: bool, tau: f32) -> Option<(f32, f32)> {
+    let lo_ext = plane.lo * (1.0 - CROSSFADE);
+    if !(lo_ext <= tau && tau < plane.hi) {
+        return None;
+    }
+    let mut keep = (0.0, 1.0);
+    if tau < plane.lo {
+        keep.1 = (tau - lo_ext) / (plane.lo - lo_ext);
+    }
+    let start = plane.hi * (1.0 - CROSSFADE);
+    if has_parent && plane.hi.is_finite() && tau >= start {
+        keep.0 = (tau - start) / (plane.hi - start);
+    }
+    Some(keep)
+}
+
 /// The corner `corner` of `plane` moved by `share` towards the plane of `parent` ([`morph_share`]):
 /// the WGSL twin is in `vs_plane`.
 #[must_use]
@@ -288,5 +315,36 @@ mod tests {
             }
         }
         assert!(children >= 16, "the finer levels have parents: {children}");
+    }
+
+    #[test]
+    fn a_plane_and_its_parent_cross_fade_on_complementary_pixels() {
+        let container = demo();
+        let planes = container.planes();
+        let parents = plane_parents(planes, container.cells().iter().map(|c| c.planes));
+        for (plane, &parent) in planes.iter().zip(&parents) {
+            if parent == NO_PARENT {
+                continue;
+            }
+            let q = &planes[parent as usize];
+            let grandparent = parents[parent as usize] != NO_PARENT;
+            // Across the band below the switch, and on either side of it.
+            for step in 0..=40 {
+                let tau = plane.hi * (0.7 + 0.4 * step as f32 / 40.0);
+                let child = crossfade(plane, true, tau);
+                let coarse = crossfade(q, grandparent, tau);
+                if tau < plane.hi * (1.0 - CROSSFADE) {
+                    assert!(child.is_none_or(|(a, _)| a == 0.0), "the child is not fading out yet: {child:?}");
+                    assert_eq!(coarse, None, "the parent is not drawn yet");
+                } else if tau < plane.hi {
+                    let (Some((a, _)), Some((_, d))) = (child, coarse) else { panic!("both drawn in the band") };
+                    assert!((a - d).abs() < 1e-5, "complementary at τ = {tau}: child from {a}, parent to {d}");
+                } else {
+                    assert_eq!(child, None, "past the switch the child is gone");
+                    let faded_in = coarse.is_some_and(|(_, d)| d == 1.0);
+                    assert!(faded_in || tau >= q.hi, "the parent has faded in: {coarse:?}");
+                }
+            }
+        }
     }
 }

@@ -20,6 +20,9 @@ pub use frame::{
     BudgetController, Camera, CellLod, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings,
     ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
 };
-pub use impostor::{NO_PARENT, PlaneCell, PlaneLod, PlaneRange, morph_corner, morph_share, plane_drawn, plane_parents};
+pub use impostor::{
+    CROSSFADE, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share, plane_drawn,
+    plane_parents,
+};
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};

@@ -72,7 +72,7 @@ pub struct Args {
     pub impostors: bool,
     /// With `--impostors`: switch between levels of planes at once instead of sliding each
     /// plane onto its parent's over the last octave of its distances (Garcia's smooth level of
-    /// detail, on by default).
+    /// detail) and cross-fading their textures over the last quarter (both on by default).
     #[arg(long)]
     pub no_impostor_morph: bool,
     /// With `--impostors`: the bark beside the planes. `chain` (the default): where the
