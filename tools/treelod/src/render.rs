@@ -70,17 +70,8 @@ pub struct Args {
     /// their bark as triangles; other trees as usual. Takes precedence over `--prune`.
     #[arg(long)]
     pub impostors: bool,
-    /// With `--impostors`: switch between levels of planes at once instead of sliding each
-    /// plane onto its parent's over the last octave of its distances (Garcia's smooth level of
-    /// detail) and cross-fading their textures over the last quarter (both on by default).
-    #[arg(long)]
-    pub no_impostor_morph: bool,
-    /// With `--impostors`: the bark beside the planes. `chain` (the default): where the
-    /// container has a LoD chain (built with `--baselines`), the chain's bark at the coarsest
-    /// level whose error projects below half of `--s-min` pixels among those keeping 90 % of the
-    /// bark's area, else all bark; `all`: every bark triangle.
-    #[arg(long, value_name = "BARK", default_value = "chain", value_parser = ["chain", "all"])]
-    pub impostor_bark: String,
+    #[command(flatten)]
+    pub impostor: ImpostorArgs,
     /// Draw trees whose containers have baselines (build with `--baselines`) with one of them
     /// instead: `lod-chain` (meshoptimizer's levels, the coarsest whose error projects below
     /// `--s-min` pixels), `billboard` (one camera-facing quad) or `crossed` (three fixed quads).
@@ -91,6 +82,31 @@ pub struct Args {
     /// whole). Frames with pruning or the full mesh (`--compare`'s right half) select on the CPU.
     #[arg(long)]
     pub gpu_selection: bool,
+}
+
+/// How trees drawn with impostor planes change level and draw their bark: options shared by
+/// `render`, `view` and `eval`.
+#[derive(Debug, clap::Args)]
+pub struct ImpostorArgs {
+    /// With impostors: switch between levels of planes at once instead of sliding each plane onto
+    /// its parent's over the last octave of its distances (Garcia's smooth level of detail) and
+    /// cross-fading their textures over the last quarter (both on by default).
+    #[arg(long)]
+    pub no_impostor_morph: bool,
+    /// With impostors: the bark beside the planes. `chain` (the default): where the container has
+    /// a LoD chain (built with `--baselines`), the chain's bark at the coarsest level whose error
+    /// projects below half of `--s-min` pixels among those keeping 90 % of the bark's area, else
+    /// all bark; `all`: every bark triangle.
+    #[arg(long, value_name = "BARK", default_value = "chain", value_parser = ["chain", "all"])]
+    pub impostor_bark: String,
+}
+
+impl ImpostorArgs {
+    /// Sets the renderer's impostor morph and bark from these options.
+    pub fn apply(&self, settings: &mut Settings) {
+        settings.impostor_morph = !self.no_impostor_morph;
+        settings.impostor_bark = if self.impostor_bark == "all" { ImpostorBark::All } else { ImpostorBark::Chain };
+    }
 }
 
 /// Lighting options shared by `render` and `view`.
@@ -204,11 +220,6 @@ pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
-/// The renderer's impostor bark for an `--impostor-bark` value (checked by clap: `all`, `chain`).
-pub fn impostor_bark(name: &str) -> ImpostorBark {
-    if name == "chain" { ImpostorBark::Chain } else { ImpostorBark::All }
-}
-
 /// A direction: three finite numbers, not all zero.
 pub fn parse_direction(s: &str) -> Result<Vec3, String> {
     let v = parse_vec3(s)?;
@@ -303,8 +314,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     settings.pruning = args.prune.settings();
     args.light.apply(&mut settings);
     settings.impostors = args.impostors;
-    settings.impostor_morph = !args.no_impostor_morph;
-    settings.impostor_bark = impostor_bark(&args.impostor_bark);
+    args.impostor.apply(&mut settings);
     settings.baseline = parse_baseline(args.baseline.as_deref());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =

@@ -20,7 +20,8 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::render::{
-    BASELINES, LightArgs, PruneArgs, baseline_name, frame_camera, parse_size, parse_vec3, scene_failed, write_png,
+    BASELINES, ImpostorArgs, LightArgs, PruneArgs, baseline_name, frame_camera, parse_size, parse_vec3, scene_failed,
+    write_png,
 };
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
@@ -87,6 +88,8 @@ pub struct Args {
     pub prune: PruneArgs,
     #[command(flatten)]
     pub light: LightArgs,
+    #[command(flatten)]
+    pub impostor: ImpostorArgs,
     /// Start with impostor planes on (key `I`) for trees whose containers have them.
     #[arg(long)]
     pub impostors: bool,
@@ -322,6 +325,7 @@ impl Viewer {
             ..Settings::default()
         };
         args.light.apply(&mut settings);
+        args.impostor.apply(&mut settings);
         let mut renderer = Renderer::new(&device, formats, settings);
         let bounds = scene::add_to_renderer(scene, &device, &queue, &mut renderer).map_err(|e| scene_failed(&e))?;
 

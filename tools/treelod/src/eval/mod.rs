@@ -19,7 +19,7 @@ use treelod_format::{Container, ErrorClass};
 use treelod_render::offscreen::{Gpu, render_prepared_timed};
 use treelod_render::{Baseline, BillboardKind, Camera, FrameStats, PruneScale, Pruning, Renderer, Settings};
 
-use crate::render::impostor_bark;
+use crate::render::ImpostorArgs;
 
 use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse};
 use self::path::Pose;
@@ -86,13 +86,9 @@ pub struct Args {
     /// Point threshold `s_min` in pixels of the `spt` technique.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_min: Option<f32>,
-    /// With the `impostors` technique: switch levels of planes at once (as `render`'s).
-    #[arg(long)]
-    pub no_impostor_morph: bool,
-    /// With the `impostors` technique: the bark beside the planes, `all` or `chain` (as
-    /// `render`'s).
-    #[arg(long, value_name = "BARK", default_value = "chain", value_parser = ["chain", "all"])]
-    pub impostor_bark: String,
+    // How the `impostors` technique changes level and draws its bark, as `render`'s options.
+    #[command(flatten)]
+    pub impostor: ImpostorArgs,
     /// Triangle threshold `s_max` in pixels of the `spt` technique.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_max: Option<f32>,
@@ -491,8 +487,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 settings.pruning = scale.map(|scale| Pruning { scale, spt_below_pixels: 0.0, ..Pruning::default() });
                 // Impostors: the leaves of every tree with planes as planes, its bark as triangles.
                 settings.impostors = *name == TechniqueName::Impostors;
-                settings.impostor_morph = !args.no_impostor_morph;
-                settings.impostor_bark = impostor_bark(&args.impostor_bark);
+                args.impostor.apply(&mut settings);
                 // Baselines: every tree with the baseline drawn with it.
                 settings.baseline = match name {
                     TechniqueName::LodChain => Some(Baseline::LodChain),
