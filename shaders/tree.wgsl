@@ -22,7 +22,8 @@ struct Frame {
     sun_colour: vec4<f32>,
     // 0 shaded, 1 colour by cell, 2 colour by kind.
     debug: u32,
-    // 1: impostor planes morph towards their parents (Settings::impostor_morph).
+    // 1: impostor planes morph towards their parents and cross-fade with them
+    // (Settings::impostor_morph).
     morph: u32,
     _pad1: u32,
     _pad2: u32,
@@ -173,7 +174,8 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
 // camera, the corner `center − axis_u − axis_v` at `uv_min`. `first_vertex` is 6 × the range's
 // first plane; planes outside the level `tau_p` selects are dropped. With `frame.morph`, over the
 // last octave of its interval a plane's corners slide along its parent's normal onto the parent's
-// plane (Garcia 2005 §2.4; Rust twins `morph_share` and `morph_corner` in treelod-runtime).
+// plane (Garcia 2005 §2.4; Rust twins `morph_share` and `morph_corner` in treelod-runtime), and
+// over its last quarter it cross-fades with its parent (`crossfade`).
 @vertex
 fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
     let draw = draws[draw_index];
@@ -204,7 +206,7 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     let start = max(plane.lo, 0.5 * plane.hi);
     if frame.morph == 1u && has_parent && plane.hi > start {
         let parent = planes[plane.leaf_first];
-        let share = clamp((draw.tau_p - start) / (plane.hi - start), 0.0, 1.0);
+        let share = clamp((tau - start) / (plane.hi - start), 0.0, 1.0);
         let pu = vec3<f32>(parent.axis_u[0], parent.axis_u[1], parent.axis_u[2]);
         let pv = vec3<f32>(parent.axis_v[0], parent.axis_v[1], parent.axis_v[2]);
         let pn = normalize(cross(pu, pv));

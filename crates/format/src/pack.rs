@@ -1,5 +1,6 @@
 //! Encoders and decoders for the packed fields of spec §2: octahedral normals, RGBA8 colours and
-//! unorm16 pairs; and the byte shuffle of compressed record arrays (spec §8).
+//! unorm16 pairs; and, for tests, the byte shuffle of compressed record arrays (spec §8) done
+//! whole (the writer and reader stream it).
 
 /// Encodes a unit vector as an octahedral `snorm16×2` normal (spec §2).
 ///
@@ -83,7 +84,8 @@ fn unorm16(v: f32) -> u16 {
 /// Byte shuffle (spec §8): byte `j` of record `i` of `records` goes to `out[j·n + i]` (`n` whole
 /// records), grouping equal byte positions of neighbouring records. `out` holds at least `n`
 /// records; bytes past the last whole record are not read.
-pub fn shuffle(records: &[u8], record_size: usize, out: &mut [u8]) {
+#[cfg(test)]
+pub(crate) fn shuffle(records: &[u8], record_size: usize, out: &mut [u8]) {
     let n = records.len() / record_size.max(1);
     for (i, record) in records.chunks_exact(record_size.max(1)).enumerate() {
         for (j, &byte) in record.iter().enumerate() {
@@ -94,7 +96,8 @@ pub fn shuffle(records: &[u8], record_size: usize, out: &mut [u8]) {
 
 /// Inverse of [`shuffle`]: byte `j·n + i` of `shuffled` goes to byte `j` of record `i` of `out`
 /// (`n` whole records in `out`).
-pub fn unshuffle(shuffled: &[u8], record_size: usize, out: &mut [u8]) {
+#[cfg(test)]
+pub(crate) fn unshuffle(shuffled: &[u8], record_size: usize, out: &mut [u8]) {
     let n = out.len() / record_size.max(1);
     for (i, record) in out.chunks_exact_mut(record_size.max(1)).enumerate() {
         for (j, byte) in record.iter_mut().enumerate() {

@@ -649,7 +649,7 @@ fn decode_section(bytes: &[u8], index: usize, entry: &SectionEntry, budget: &mut
 const UNSHUFFLE_CHUNK: usize = 1 << 20;
 
 /// Decompresses the one zstd frame `stored` (of exactly `out.len()` content bytes, checked before)
-/// and unshuffles it into `out` as [`crate::pack::unshuffle`] does, a chunk at a time: without a second buffer
+/// and undoes its byte shuffle (spec §8) into `out`, a chunk at a time: without a second buffer
 /// of the whole section.
 fn decode_shuffled(stored: &[u8], record_size: usize, out: &mut [u8]) -> std::io::Result<()> {
     use std::io::Read as _;

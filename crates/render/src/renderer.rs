@@ -526,10 +526,11 @@ const BUCKETS: usize = 5;
 const BARK_AREA_KEPT: f64 = 0.9;
 
 /// The area of `triangles` of `container`, m² (model space).
-fn bark_area<'a>(container: &Container, triangles: impl Iterator<Item = &'a TriangleRecord>) -> f64 {
+fn area(container: &Container, triangles: &[TriangleRecord]) -> f64 {
     let vertices = container.vertices();
     let position = |i: u32| vertices.get(i as usize).map_or(Vec3::ZERO, |v| Vec3::from_array(v.position));
     triangles
+        .iter()
         .map(|t| {
             let [a, b, c] = t.indices.map(position);
             f64::from(0.5 * (b - a).cross(c - a).length())
@@ -554,17 +555,44 @@ impl Model {
     /// The draw of all this model's bark triangles for instance `instance` (a pruned tree or one
     /// drawn with impostors; `lambda` is recorded with it), if it has any.
     fn bark_draw(&self, instance: u32, model: u32, lambda: f32) -> Option<PrunedDraw> {
-        (self.bark.1 > 0).then_some(PrunedDraw {
+        Self::whole_draw(instance, model, DrawSource::Bark, self.bark, lambda, 1.0)
+    }
+
+    /// A draw of the triangles `first, count` of the extra triangle buffer for the whole tree
+    /// (no cell: the bark, a LoD chain level), if there are any; `lambda` and `tau_triangles`
+    /// are recorded with it.
+    fn whole_draw(
+        instance: u32,
+        model: u32,
+        source: DrawSource,
+        (first, count): (u32, u32),
+        lambda: f32,
+        tau_triangles: f32,
+    ) -> Option<PrunedDraw> {
+        (count > 0).then_some(PrunedDraw {
             instance,
             model,
             cell: ROOTS_CELL,
-            source: DrawSource::Bark,
-            first: self.bark.0,
-            count: self.bark.1,
+            source,
+            first,
+            count,
             lambda,
             leaf_scale: 1.0,
-            tau_triangles: 1.0,
+            tau_triangles,
         })
+    }
+
+    /// The centre of the model's block: where `τ` is measured for its baselines and impostors.
+    fn block_centre(&self) -> Vec3 {
+        let block = self.container.block();
+        0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max))
+    }
+}
+
+impl ChainModel {
+    /// The error of level `level`, metres (0 past the chain).
+    fn level_error(&self, level: usize) -> f32 {
+        self.chain.levels().get(level).map_or(0.0, |l| l.error)
     }
 }
 
@@ -908,15 +936,12 @@ impl Renderer {
         let mut chain = None;
         let (extra, prune_leaves, bark) = if prune.is_some() || planes.is_some() || lod_chain.is_some() {
             let classes = container.materials();
+            let is_bark =
+                |t: &&TriangleRecord| classes.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF);
             let mut extra: Vec<TriangleRecord> = container.prune_triangles().to_vec();
             let at = |extra: &Vec<TriangleRecord>| u32::try_from(extra.len()).unwrap_or(u32::MAX);
             let bark_first = at(&extra);
-            extra.extend(
-                container
-                    .triangles()
-                    .iter()
-                    .filter(|t| classes.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF)),
-            );
+            extra.extend(container.triangles().iter().filter(is_bark));
             let bark_count = at(&extra) - bark_first;
             // The baseline chain: the full mesh, then each level with every tree's triangles.
             if let Some(lod_chain) = lod_chain {
@@ -933,10 +958,7 @@ impl Renderer {
                 }
                 let mut bark_levels = Vec::new();
                 if planes.is_some() {
-                    let is_bark = |t: &&TriangleRecord| {
-                        classes.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF)
-                    };
-                    let full_area = bark_area(&container, container.triangles().iter().filter(is_bark));
+                    let full_area = area(&container, &extra[bark_first as usize..(bark_first + bark_count) as usize]);
                     for level in lod_chain.levels() {
                         let first = at(&extra);
                         for range in &level.ranges {
@@ -945,7 +967,7 @@ impl Renderer {
                         }
                         // The levels that keep the bark's surface: a coarser one collapses
                         // branches that its error does not count.
-                        let kept = bark_area(&container, extra[first as usize..].iter());
+                        let kept = area(&container, &extra[first as usize..]);
                         if kept < BARK_AREA_KEPT * full_area {
                             extra.truncate(first as usize);
                             break;
@@ -1295,35 +1317,23 @@ impl Renderer {
             for range in &self.plane_ranges {
                 self.plane_draws.push(PlaneDraw { instance: index, model: instance.model, range: *range });
             }
+            // The chain's bark level (its triangles and error), if the policy and the model have one.
             let chain_bark = match (self.settings.impostor_bark, &model.chain, self.lods.get(instance.model as usize)) {
                 (ImpostorBark::Chain, Some(chain), Some(lod)) => {
-                    let block = model.container.block();
-                    let anchor = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
-                    instance_tau(instance.transform, camera, &frustum, self.settings.s_min, lod.cull_sphere(), anchor)
+                    let (s_min, sphere) = (self.settings.s_min, lod.cull_sphere());
+                    instance_tau(instance.transform, camera, &frustum, s_min, sphere, model.block_centre())
                         .and_then(|tau| chain.chain.pick(tau * BARK_ERROR_SHARE))
                         .and_then(|level| {
                             let level = (level as usize).min(chain.bark_levels.len().checked_sub(1)?);
-                            let (first, count) = chain.bark_levels[level];
-                            let error = chain.chain.levels().get(level).map_or(0.0, |l| l.error);
-                            Some(PrunedDraw {
-                                instance: index,
-                                model: instance.model,
-                                cell: ROOTS_CELL,
-                                source: DrawSource::Bark,
-                                first,
-                                count,
-                                lambda: 1.0,
-                                leaf_scale: 1.0,
-                                tau_triangles: error,
-                            })
+                            Some((chain.bark_levels[level], chain.level_error(level)))
                         })
                 }
                 _ => None,
             };
-            match chain_bark {
-                Some(draw) => self.pruned.extend((draw.count > 0).then_some(draw)),
-                None => self.pruned.extend(model.bark_draw(index, instance.model, 1.0)),
-            }
+            self.pruned.extend(match chain_bark {
+                Some((range, error)) => Model::whole_draw(index, instance.model, DrawSource::Bark, range, 1.0, error),
+                None => model.bark_draw(index, instance.model, 1.0),
+            });
         }
         visible
     }
@@ -1352,37 +1362,34 @@ impl Renderer {
                 self.spt_map.push(index);
                 continue;
             }
-            let block = model.container.block();
-            let anchor = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
-            let Some(tau) =
-                instance_tau(instance.transform, camera, &frustum, self.settings.s_min, lod.cull_sphere(), anchor)
-            else {
+            let Some(tau) = instance_tau(
+                instance.transform,
+                camera,
+                &frustum,
+                self.settings.s_min,
+                lod.cull_sphere(),
+                model.block_centre(),
+            ) else {
                 continue;
             };
             visible += 1;
             match (baseline, &model.chain, &model.billboards) {
                 (Baseline::LodChain, Some(chain), _) => {
-                    let picked = chain.chain.pick(tau);
-                    let ((first, count), error) = match picked {
+                    let (range, error) = match chain.chain.pick(tau) {
                         Some(level) => (
                             chain.levels.get(level as usize).copied().unwrap_or(chain.full),
-                            chain.chain.levels().get(level as usize).map_or(0.0, |l| l.error),
+                            chain.level_error(level as usize),
                         ),
                         None => (chain.full, 0.0),
                     };
-                    if count > 0 {
-                        self.pruned.push(PrunedDraw {
-                            instance: index,
-                            model: instance.model,
-                            cell: ROOTS_CELL,
-                            source: DrawSource::LodLevel,
-                            first,
-                            count,
-                            lambda: tau,
-                            leaf_scale: 1.0,
-                            tau_triangles: error,
-                        });
-                    }
+                    self.pruned.extend(Model::whole_draw(
+                        index,
+                        instance.model,
+                        DrawSource::LodLevel,
+                        range,
+                        tau,
+                        error,
+                    ));
                 }
                 (Baseline::Billboard(kind), _, Some(billboards)) => {
                     let (first, count) = match kind {

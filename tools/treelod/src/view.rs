@@ -32,13 +32,18 @@ const SELF_SHADOW: (f32, f32) = (0.6, 1.0);
 /// Degrees the sun turns per arrow key press: about the vertical (left, right) or up and down.
 const SUN_STEP_DEGREES: f32 = 15.0;
 
+/// The sun's azimuth about +y (from +z towards +x) and elevation, radians, of the direction
+/// towards it (straight up if it has no length).
+fn sun_angles(sun: Vec3) -> (f32, f32) {
+    let sun = sun.normalize_or(Vec3::Y);
+    (sun.x.atan2(sun.z), sun.y.clamp(-1.0, 1.0).asin())
+}
+
 /// The direction towards the sun after arrow key `key`: azimuth about +y, or elevation, by
 /// [`SUN_STEP_DEGREES`], the elevation kept within ±85° (lighting from below is allowed: leaves
 /// are lit on both faces).
 fn turn_sun(sun: Vec3, key: KeyCode) -> Vec3 {
-    let sun = sun.normalize_or(Vec3::Y);
-    let mut azimuth = sun.x.atan2(sun.z);
-    let mut elevation = sun.y.clamp(-1.0, 1.0).asin();
+    let (mut azimuth, mut elevation) = sun_angles(sun);
     let step = SUN_STEP_DEGREES.to_radians();
     match key {
         KeyCode::ArrowLeft => azimuth -= step,
@@ -568,12 +573,8 @@ impl Viewer {
                 self.stats.instances_pruned, self.stats.leaves_pruned
             ));
         }
-        let sun = settings.sun.normalize_or(Vec3::Y);
-        mode.push_str(&format!(
-            " | sun az {:.0} el {:.0}",
-            sun.x.atan2(sun.z).to_degrees(),
-            sun.y.clamp(-1.0, 1.0).asin().to_degrees()
-        ));
+        let (azimuth, elevation) = sun_angles(settings.sun);
+        mode.push_str(&format!(" | sun az {:.0} el {:.0}", azimuth.to_degrees(), elevation.to_degrees()));
         if let Some((l_min, l_max)) = settings.shading {
             mode.push_str(&format!(" | self-shadow {l_min}..{l_max}"));
         }
