@@ -71,6 +71,9 @@ struct Varyings {
     // Impostor planes and billboards: drawn where the pixel's dither value h satisfies
     // keep.x <= h < keep.y (the cross-fade between levels of planes).
     @location(6) @interpolate(flat) keep: vec2<f32>,
+    // World position the shadow maps are looked up at (a splat's centre: splats are shadowed
+    // whole, as the points they stand for).
+    @location(7) world: vec3<f32>,
 }
 
 // A colour per cell index, for `debug = 1`.
@@ -90,6 +93,7 @@ fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, v: VertexRecord, p: vec3
     let world = draw.model * vec4<f32>(p, 1.0);
     var out: Varyings;
     out.clip = frame.view_proj * world;
+    out.world = world.xyz;
     out.normal = normalize((draw.model * vec4<f32>(decode_normal(v.normal), 0.0)).xyz);
     out.uv = vec2<f32>(v.uv[0], v.uv[1]);
     out.color = decode_color(v.color);
@@ -155,6 +159,7 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     let world = centre.xyz + (corner.x * frame.right.xyz + corner.y * frame.up.xyz) * r;
     var out: Varyings;
     out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.world = centre.xyz;
     out.normal = normalize((draw.model * vec4<f32>(decode_normal(point.normal), 0.0)).xyz);
     out.uv = vec2<f32>(0.0);
     out.color = decode_color(point.color);
@@ -162,6 +167,9 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     // A splat at the one-pixel minimum is a square: a disc inscribed in one pixel misses its centre
     // a fifth of the time.
     out.disc = select(corner, corner * 0.70710677, disc_r < 0.5 * pixel);
+    // The share of that pixel its disc covers: the shadow pass keeps the splat with this
+    // probability, so sub-texel points shade the ground by their area, not by whole texels.
+    out.keep = vec2<f32>(0.0, min(3.14159265 * disc_r * disc_r / (pixel * pixel), 1.0));
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.2, 0.5, 0.95); }
@@ -213,9 +221,9 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
         let pc = vec3<f32>(parent.center[0], parent.center[1], parent.center[2]);
         p = p - share * dot(p - pc, pn) * pn;
     }
-    let clip = frame.view_proj * (draw.model * vec4<f32>(p, 1.0));
+    let world = (draw.model * vec4<f32>(p, 1.0)).xyz;
     let normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
-    var out = quad_corner(draw, clip, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
+    var out = quad_corner(draw, world, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
     out.keep = keep;
     return out;
 }
@@ -225,7 +233,7 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
 // in the kinds view.
 fn quad_corner(
     draw: DrawInfo,
-    clip: vec4<f32>,
+    world: vec3<f32>,
     normal: vec3<f32>,
     uv_min: u32,
     uv_max: u32,
@@ -233,7 +241,8 @@ fn quad_corner(
     kinds: vec3<f32>,
 ) -> Varyings {
     var out: Varyings;
-    out.clip = clip;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.world = world;
     out.normal = normal;
     out.uv = mix(unpack2x16unorm(uv_min), unpack2x16unorm(uv_max), 0.5 * (corner + 1.0));
     out.color = vec4<f32>(1.0);
@@ -270,14 +279,19 @@ fn vs_billboard(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
             u = across * (length(u) / len);
         }
     }
-    let clip = frame.view_proj * vec4<f32>(centre + corner.x * u + corner.y * v, 1.0);
-    return quad_corner(draw, clip, normalize(cross(u, v)), quad.uv_min, quad.uv_max, corner, vec3<f32>(0.85, 0.35, 0.85));
+    let world = centre + corner.x * u + corner.y * v;
+    return quad_corner(draw, world, normalize(cross(u, v)), quad.uv_min, quad.uv_max, corner, vec3<f32>(0.85, 0.35, 0.85));
 }
 
-// Two-sided Lambert with ambient: leaves are lit from both faces.
-fn shade(albedo: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
+// Two-sided Lambert with ambient: leaves are lit from both faces; the sun's share is what the
+// shadow maps let through at `world` (shared/shadow.wgsl).
+fn shade(albedo: vec3<f32>, normal: vec3<f32>, world: vec3<f32>) -> vec3<f32> {
     let diffuse = abs(dot(normalize(normal), frame.sun.xyz));
-    return albedo * (frame.sun.w + (1.0 - frame.sun.w) * diffuse * frame.sun_colour.xyz);
+    var sun = 0.0;
+    if diffuse > 0.0 {
+        sun = diffuse * sunlit(world, normal, frame.sun.xyz);
+    }
+    return albedo * (frame.sun.w + (1.0 - frame.sun.w) * sun * frame.sun_colour.xyz);
 }
 
 // MSAA samples of the target (set by the pipeline). With more than one, alpha-tested materials
@@ -334,6 +348,12 @@ fn alpha_mask(alpha: f32, cutoff: f32, footprint: f32, clip: vec4<f32>) -> u32 {
     return mask;
 }
 
+// Interleaved gradient noise (Jimenez 2014) of the pixel, in [0, 1): the dither of the
+// cross-fade and of the shadow pass's alpha.
+fn dither(fragment: vec4<f32>) -> f32 {
+    return fract(52.9829189 * fract(dot(floor(fragment.xy), vec2<f32>(0.06711056, 0.00583715))));
+}
+
 @fragment
 fn fs_triangle(in: Varyings) -> TriangleOut {
     let material = materials[in.material];
@@ -352,7 +372,7 @@ fn fs_triangle(in: Varyings) -> TriangleOut {
         return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
     }
     // The tint is the cell's estimated self-shadowing when shaded.
-    return TriangleOut(vec4<f32>(shade(albedo.rgb, in.normal) * in.tint, 1.0), mask);
+    return TriangleOut(vec4<f32>(shade(albedo.rgb, in.normal, in.world) * in.tint, 1.0), mask);
 }
 
 // An impostor plane's texel: the baked leaves' colour (linear after the sRGB fetch) and, in
@@ -362,15 +382,14 @@ fn fs_triangle(in: Varyings) -> TriangleOut {
 @fragment
 fn fs_plane(in: Varyings) -> @location(0) vec4<f32> {
     let texel = textureSample(atlas, atlas_sampler, in.uv);
-    // Interleaved gradient noise (Jimenez 2014) of the pixel: the dither of the cross-fade.
-    let h = fract(52.9829189 * fract(dot(floor(in.clip.xy), vec2<f32>(0.06711056, 0.00583715))));
+    let h = dither(in.clip);
     if texel.a < 0.5 || h < in.keep.x || h >= in.keep.y {
         discard;
     }
     if frame.debug != 0u {
         return vec4<f32>(in.tint, 1.0);
     }
-    return vec4<f32>(shade(texel.rgb, in.normal) * in.tint, 1.0);
+    return vec4<f32>(shade(texel.rgb, in.normal, in.world) * in.tint, 1.0);
 }
 
 @fragment
@@ -381,5 +400,50 @@ fn fs_point(in: Varyings) -> @location(0) vec4<f32> {
     if frame.debug != 0u {
         return vec4<f32>(in.tint, 1.0);
     }
-    return vec4<f32>(shade(in.color.rgb, in.normal) * in.tint, 1.0);
+    return vec4<f32>(shade(in.color.rgb, in.normal, in.world) * in.tint, 1.0);
+}
+
+// The shadow pass (depth only, one pass per cascade, `frame` holding the light's view): the same
+// vertex stages, and fragment stages that keep what the colour pass keeps. Alpha-tested leaves:
+// where their texture is minified (a texel under a shadow-map texel), a test at the cutoff would
+// thin a distant canopy's shadow as it would its image, so they are kept where their filtered
+// alpha (the covered fraction) exceeds the texel's dither value: on average the leaves cover in
+// the map what they cover in the world.
+// A value in [0, 1) per pixel and depth, for the shadow pass's stochastic tests: surfaces at
+// different depths over one texel get independent values, so their coverages add up as
+// overlapping layers do (a value of the texel alone would let every layer cover the same share).
+fn layered_dither(fragment: vec4<f32>) -> f32 {
+    let p = vec2<u32>(fragment.xy);
+    let h = ((p.x * 1973u) ^ (p.y * 9277u) ^ (bitcast<u32>(fragment.z) * 0x5bd1e995u)) * 2654435761u;
+    return f32(h >> 8u) / 16777216.0;
+}
+
+@fragment
+fn fs_shadow_triangle(in: Varyings) {
+    let material = materials[in.material];
+    let texel = textureSample(textures, linear_sampler, in.uv, max(material.layer, 0));
+    let alpha = material.base_color.a * in.color.a * select(1.0, texel.a, material.layer >= 0);
+    let cutoff = select(select(material.alpha_cutoff, 0.5, material.alpha_mode == 2u), -1.0, material.alpha_mode == 0u);
+    let footprint = max(length(dpdx(in.uv)), length(dpdy(in.uv))) * f32(textureDimensions(textures).x);
+    let minified = clamp(log2(max(footprint, 1e-6)), 0.0, 1.0);
+    let coverage = mix(select(0.0, 1.0, alpha >= cutoff), alpha, minified);
+    if cutoff >= 0.0 && coverage <= layered_dither(in.clip) {
+        discard;
+    }
+}
+
+@fragment
+fn fs_shadow_plane(in: Varyings) {
+    let texel = textureSample(atlas, atlas_sampler, in.uv);
+    let h = dither(in.clip);
+    if texel.a < 0.5 || h < in.keep.x || h >= in.keep.y {
+        discard;
+    }
+}
+
+@fragment
+fn fs_shadow_point(in: Varyings) {
+    if dot(in.disc, in.disc) > 1.0 || layered_dither(in.clip) >= in.keep.y {
+        discard;
+    }
 }

@@ -71,15 +71,24 @@
 
 mod camera;
 mod gpu_select;
+mod ground;
 mod occlusion;
 pub mod offscreen;
 mod renderer;
+mod shadows;
 mod streaming;
 mod textures;
 
 pub use camera::Camera;
+pub use ground::Ground;
 pub use renderer::{
     Baseline, DebugView, DrawSource, FrameStats, ImpostorBark, Instance, ModelId, Pruning, RecordedDraw, RenderError,
-    Renderer, RendererFormats, Settings,
+    Renderer, RendererFormats, Settings, ShadowStats,
 };
+pub use shadows::{Cascade, MAX_CASCADES, Shadows, cascade_splits, fit_cascades};
+
+/// WGSL for receiving the renderer's shadows in a host's own pipeline: declares group 2
+/// ([`Renderer::shadow_bind_group`]) and `fn sunlit(world: vec3<f32>, normal: vec3<f32>, sun:
+/// vec3<f32>) -> f32`, the share of the sun reaching a point (1 lit, 0 shadowed).
+pub const SHADOW_WGSL: &str = include_str!("../../../shaders/shared/shadow.wgsl");
 pub use treelod_runtime::{BillboardKind, Hysteresis, PruneScale};

@@ -1,6 +1,6 @@
 //! Rendering with no window: a device of its own, an offscreen target, and the pixels read back.
 
-use crate::{Camera, Renderer, RendererFormats};
+use crate::{Camera, Ground, Renderer, RendererFormats};
 
 /// The colour format of offscreen images.
 pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -152,6 +152,23 @@ pub fn render_prepared_timed(
     camera: &Camera,
     background: wgpu::Color,
 ) -> Result<(Image, Option<f64>), GpuError> {
+    render_prepared_scene(gpu, renderer, camera, background, None, true)
+}
+
+/// [`render_prepared_timed`] with a `ground` drawn before the trees (receiving their shadows),
+/// and the trees drawn or not (`trees: false` shows only their shadows on the ground). With
+/// [`crate::Settings::shadows`] the shadow pass is recorded first.
+///
+/// # Errors
+/// [`GpuError::Readback`] if mapping a read-back buffer fails.
+pub fn render_prepared_scene(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    camera: &Camera,
+    background: wgpu::Color,
+    ground: Option<&Ground>,
+    trees: bool,
+) -> Result<(Image, Option<f64>), GpuError> {
     let (width, height) = (camera.width.max(1), camera.height.max(1));
     let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
     let samples = renderer.formats().sample_count.max(1);
@@ -179,6 +196,7 @@ pub fn render_prepared_timed(
     let mut encoder =
         gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod frame") });
     let timer = gpu.device.features().contains(wgpu::Features::TIMESTAMP_QUERY).then(|| PassTimer::new(&gpu.device));
+    renderer.render_shadows(&mut encoder);
     {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("treelod offscreen"),
@@ -204,7 +222,12 @@ pub fn render_prepared_timed(
             timestamp_writes: timer.as_ref().map(PassTimer::writes),
             ..wgpu::RenderPassDescriptor::default()
         });
-        renderer.render(&mut pass);
+        if let Some(ground) = ground {
+            ground.render(&gpu.queue, &mut pass, renderer, camera);
+        }
+        if trees {
+            renderer.render(&mut pass);
+        }
     }
     if let Some(timer) = &timer {
         timer.resolve(&mut encoder);

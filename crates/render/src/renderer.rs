@@ -15,6 +15,7 @@ use treelod_runtime::{
 use crate::camera::Camera;
 use crate::gpu_select::{GpuSelection, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
+use crate::shadows::{Cascade, MAX_CASCADES, SHADOW_FORMAT, ShadowMaps, ShadowUniform, Shadows, fit_cascades};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::textures;
 
@@ -22,6 +23,7 @@ use crate::textures;
 const SHADER: &str = concat!(
     include_str!("../../../shaders/shared/records.wgsl"),
     include_str!("../../../shaders/shared/draw.wgsl"),
+    include_str!("../../../shaders/shared/shadow.wgsl"),
     include_str!("../../../shaders/tree.wgsl")
 );
 
@@ -107,6 +109,10 @@ pub struct Settings {
     /// treelod's representations, for comparisons; trees without it are drawn with the sequential
     /// point trees. Takes precedence over [`Self::impostors`] and [`Self::pruning`].
     pub baseline: Option<Baseline>,
+    /// Cascaded shadow maps of the sun ([`Shadows`]); `None` for none. With shadows, each frame
+    /// also selects every cascade from the light's view (on the CPU, also when GPU selection is
+    /// on) and [`Renderer::render_shadows`] draws them before the host's pass.
+    pub shadows: Option<Shadows>,
 }
 
 /// The bark of a tree drawn with impostor planes ([`Settings::impostor_bark`]).
@@ -199,6 +205,7 @@ impl Default for Settings {
             impostor_morph: true,
             impostor_bark: ImpostorBark::default(),
             baseline: None,
+            shadows: None,
         }
     }
 }
@@ -257,6 +264,28 @@ pub struct FrameStats {
     /// GPU selection: ranges selected but not drawn because their bucket was full (the buckets
     /// grow for later frames once the counters are read back).
     pub ranges_dropped: u32,
+    /// What the shadow pass draws, all cascades together ([`Settings::shadows`]; zero without).
+    pub shadow: ShadowStats,
+}
+
+/// What the shadow pass of a frame draws, summed over its cascades (a tree in two cascades
+/// counts twice).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ShadowStats {
+    /// Cascades drawn.
+    pub cascades: u32,
+    /// Instances inside a cascade's frustum, per cascade.
+    pub instances_visible: u32,
+    /// Indirect draws.
+    pub ranges: u32,
+    /// Triangles submitted (bark, leaves, pruned leaves, LoD chain levels).
+    pub triangles: u64,
+    /// Points submitted.
+    pub points: u64,
+    /// Impostor planes submitted.
+    pub planes: u64,
+    /// Billboard quads submitted.
+    pub billboards: u64,
 }
 
 /// Why a model could not be added.
@@ -460,38 +489,38 @@ pub struct Renderer {
     plane_pipeline: wgpu::RenderPipeline,
     /// Baseline billboards, from each model's billboard bind group.
     billboard_pipeline: wgpu::RenderPipeline,
+    /// The shadow pass's depth-only pipelines, in bucket order (triangles, points, pruned,
+    /// planes, billboards).
+    shadow_pipelines: [wgpu::RenderPipeline; BUCKETS],
+    /// The receivers' bind group layout (group 2) and the maps.
+    shadow_layout: wgpu::BindGroupLayout,
+    shadow_maps: ShadowMaps,
+    /// This frame's cascades (empty without shadows).
+    cascades: Vec<Cascade>,
+    /// World bounds of the instances (their bounding spheres), for the cascades' casters.
+    scene_bounds: Option<(Vec3, Vec3)>,
     sampler: wgpu::Sampler,
     /// The atlases' sampler: clamped, so a region's edge never wraps to the atlas's far side,
     /// and the nearest mip level.
     atlas_sampler: wgpu::Sampler,
+    /// The frame uniforms: the camera's at offset 0, then each cascade's at
+    /// [`FRAME_UNIFORM_STRIDE`] steps.
     frame_buffer: wgpu::Buffer,
     draw_buffer: wgpu::Buffer,
     indirect_buffer: wgpu::Buffer,
     /// The streamed triangles and points of every model (see `streaming`).
     pool_buffer: wgpu::Buffer,
-    frame_bind_group: wgpu::BindGroup,
+    /// Per view (the camera, then each cascade): the frame bind group.
+    frame_bind_groups: Vec<wgpu::BindGroup>,
     residency: Residency,
-    /// Per model, per kind (triangles, points, pruned): this frame's range of the indirect buffer.
-    model_draws: Vec<[(u32, u32); BUCKETS]>,
+    /// The camera's selection and draws of this frame, and each cascade's.
+    main: View,
+    shadow_views: Vec<View>,
     /// Per instance: the `λ` its pruned leaves were drawn with last frame (hysteresis).
     prune_shown: Vec<Option<f32>>,
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     visible_fraction: Vec<f32>,
-    /// Instances drawn with the sequential point tree this frame when pruning or impostors are
-    /// on, and their indices in `instances` (see `spt_remapped`).
-    spt_instances: Vec<treelod_runtime::Instance>,
-    spt_map: Vec<u32>,
-    /// Whether this frame's selection ran over `spt_instances` (pruning or impostors on), so
-    /// its instance indices go through `spt_map`.
-    spt_remapped: bool,
-    /// Pruned draws of this frame: (instance, cell or `ROOTS_CELL` for bark, source, first, count,
-    /// λ, leaf scale).
-    pruned: Vec<PrunedDraw>,
-    /// Impostor draws of this frame: per instance and plane cell, the prefix and its `τ`.
-    plane_draws: Vec<PlaneDraw>,
     plane_ranges: Vec<PlaneRange>,
-    /// Baseline billboard draws of this frame: (instance, model, first quad, quads).
-    billboard_draws: Vec<(u32, u32, u32, u32)>,
     /// The occlusion measurement, and the trees to measure after this frame.
     occlusion: Occlusion,
     occlusion_jobs: Vec<Job>,
@@ -504,8 +533,6 @@ pub struct Renderer {
     /// The instances changed since GPU selection last sorted them into blocks.
     gpu_instances_stale: bool,
     // Scratch reused between frames.
-    selection: DrawList,
-    recorded: Vec<RecordedDraw>,
     requests: Vec<Request>,
     uploads: Vec<Upload>,
     /// Per model, per cell: the largest prefix asked for this frame (triangles, points).
@@ -514,6 +541,57 @@ pub struct Renderer {
     draw_infos: Vec<DrawInfo>,
     indirect: Vec<wgpu::util::DrawIndirectArgs>,
 }
+
+/// What one view of a frame (the camera, or a shadow cascade) selected and draws.
+#[derive(Default)]
+struct View {
+    selection: DrawList,
+    /// The draws, as recorded for the GPU.
+    recorded: Vec<RecordedDraw>,
+    /// Instances drawn with the sequential point tree when pruning, impostors or a baseline are
+    /// on, and their indices in `instances` (see `spt_remapped`).
+    spt_instances: Vec<treelod_runtime::Instance>,
+    spt_map: Vec<u32>,
+    /// Whether the selection ran over `spt_instances`, so its instance indices go through
+    /// `spt_map`.
+    spt_remapped: bool,
+    /// Pruned draws (pruned leaves, bark, LoD chain levels).
+    pruned: Vec<PrunedDraw>,
+    /// Impostor draws: per instance and plane cell, the prefix and its `τ`.
+    plane_draws: Vec<PlaneDraw>,
+    /// Baseline billboard draws: (instance, model, first quad, quads).
+    billboard_draws: Vec<(u32, u32, u32, u32)>,
+    /// Per model, per bucket: the view's range of the indirect buffer.
+    model_draws: Vec<[(u32, u32); BUCKETS]>,
+}
+
+impl View {
+    /// The index in the renderer's instances of an instance of this view's selection.
+    fn instance_index(&self, selected: u32) -> u32 {
+        if self.spt_remapped { self.spt_map.get(selected as usize).copied().unwrap_or(selected) } else { selected }
+    }
+}
+
+/// How the trees of a frame are drawn: the representations [`Settings`] turn on.
+#[derive(Clone, Copy)]
+struct Modes {
+    baseline: Option<Baseline>,
+    impostors: bool,
+    pruning: Option<Pruning>,
+}
+
+/// What [`Renderer::select_view`] counted.
+#[derive(Clone, Copy, Default)]
+struct ViewCounts {
+    instances_visible: u32,
+    instances_pruned: u32,
+    leaves_pruned: u64,
+    instances_impostors: u32,
+    instances_baseline: u32,
+}
+
+/// Bytes between the frame uniforms of the views (WebGPU's largest uniform offset alignment).
+const FRAME_UNIFORM_STRIDE: u64 = 256;
 
 /// Pool units the pool buffer starts with (1.5 MiB).
 const INITIAL_POOL_UNITS: u32 = 1 << 15;
@@ -694,8 +772,14 @@ impl Renderer {
                 sampler(8),
             ],
         });
+        let shadow_layout = ShadowMaps::layout(device);
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("treelod"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&model_layout), Some(&shadow_layout)],
+            immediate_size: 0,
+        });
+        let caster_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("treelod shadow casters"),
             bind_group_layouts: &[Some(&frame_layout), Some(&model_layout)],
             immediate_size: 0,
         });
@@ -760,6 +844,53 @@ impl Renderer {
         let pruned_pipeline = pipeline("treelod pruned leaves and bark", "vs_pruned", "fs_triangle");
         let plane_pipeline = pipeline("treelod impostor planes", "vs_plane", "fs_plane");
         let billboard_pipeline = pipeline("treelod baseline billboards", "vs_billboard", "fs_plane");
+        // The shadow pass: depth only, one sample, a slope-scaled bias against self-shadowing.
+        let caster_overrides = [("sample_count", 1.0), ("crossfade", f64::from(treelod_runtime::CROSSFADE))];
+        let caster = |label: &str, vs: &str, fs: &str| {
+            let options = || wgpu::PipelineCompilationOptions {
+                constants: &caster_overrides,
+                ..wgpu::PipelineCompilationOptions::default()
+            };
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&caster_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(vs),
+                    compilation_options: options(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    ..wgpu::PrimitiveState::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: SHADOW_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: wgpu::StencilState::default(),
+                    bias: wgpu::DepthBiasState { constant: 2, slope_scale: 2.0, clamp: 0.0 },
+                }),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(fs),
+                    compilation_options: options(),
+                    targets: &[],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let shadow_pipelines = [
+            caster("treelod shadow triangles", "vs_triangle", "fs_shadow_triangle"),
+            caster("treelod shadow points", "vs_point", "fs_shadow_point"),
+            caster("treelod shadow pruned leaves and bark", "vs_pruned", "fs_shadow_triangle"),
+            caster("treelod shadow impostor planes", "vs_plane", "fs_shadow_plane"),
+            caster("treelod shadow billboards", "vs_billboard", "fs_shadow_plane"),
+        ];
+        let shadow_maps = ShadowMaps::new(device, &shadow_layout, 1, 1);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("treelod textures"),
             address_mode_u: wgpu::AddressMode::Repeat,
@@ -782,7 +913,7 @@ impl Renderer {
         });
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("treelod frame"),
-            size: size_of::<FrameUniform>() as u64,
+            size: FRAME_UNIFORM_STRIDE * (1 + MAX_CASCADES as u64),
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -793,7 +924,7 @@ impl Renderer {
         let max_units = u32::try_from(settings.memory_budget.min(binding_limit) / UNIT).unwrap_or(u32::MAX).max(1);
         let pool = Pool::new(INITIAL_POOL_UNITS, max_units);
         let pool_buffer = storage_buffer(device, "treelod pool", u64::from(pool.capacity()).max(1) * UNIT, true);
-        let frame_bind_group = frame_bind_group(device, &frame_layout, &frame_buffer, &draw_buffer, &pool_buffer);
+        let frame_bind_groups = frame_bind_groups(device, &frame_layout, &frame_buffer, &draw_buffer, &pool_buffer);
         Self {
             formats,
             settings,
@@ -807,32 +938,30 @@ impl Renderer {
             pruned_pipeline,
             plane_pipeline,
             billboard_pipeline,
+            shadow_pipelines,
+            shadow_layout,
+            shadow_maps,
+            cascades: Vec::new(),
+            scene_bounds: None,
             sampler,
             atlas_sampler,
             frame_buffer,
             draw_buffer,
             indirect_buffer,
             pool_buffer,
-            frame_bind_group,
+            frame_bind_groups,
             residency: Residency::new(pool),
-            model_draws: Vec::new(),
+            main: View::default(),
+            shadow_views: Vec::new(),
             prune_shown: Vec::new(),
             visible_fraction: Vec::new(),
-            spt_instances: Vec::new(),
-            spt_map: Vec::new(),
-            spt_remapped: false,
-            pruned: Vec::new(),
-            plane_draws: Vec::new(),
             plane_ranges: Vec::new(),
-            billboard_draws: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1)),
             occlusion_jobs: Vec::new(),
             last_camera: None,
             gpu: None,
             gpu_frame: false,
             gpu_instances_stale: false,
-            selection: DrawList::new(),
-            recorded: Vec::new(),
             requests: Vec::new(),
             uploads: Vec::new(),
             wanted: Vec::new(),
@@ -1266,8 +1395,8 @@ impl Renderer {
         // after this copy.
         queue.submit([encoder.finish()]);
         self.pool_buffer = buffer;
-        self.frame_bind_group =
-            frame_bind_group(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
+        self.frame_bind_groups =
+            frame_bind_groups(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
     }
 
     /// Replaces the instances drawn from the next frame on. Instances of unknown models are ignored.
@@ -1287,6 +1416,16 @@ impl Renderer {
             self.prune_shown = vec![None; self.instances.len()];
             self.visible_fraction = vec![1.0; self.instances.len()];
         }
+        self.scene_bounds = self
+            .instances
+            .iter()
+            .filter_map(|i| {
+                let (centre, radius) = self.lods.get(i.model as usize)?.cull_sphere();
+                let r = Vec3::splat(radius * max_axis_scale(i.transform));
+                let c = i.transform.transform_point3(centre);
+                Some((c - r, c + r))
+            })
+            .reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)));
         self.gpu_instances_stale = true;
     }
 
@@ -1294,19 +1433,19 @@ impl Renderer {
     /// `plane_draws`, and `pruned` with their bark, for instances whose model has planes, and
     /// `spt_instances`/`spt_map` with the others. Returns the impostor instances inside the
     /// frustum.
-    fn select_impostors(&mut self, camera: &treelod_runtime::Camera) -> u32 {
+    fn select_impostors(&mut self, view: &mut View, camera: &treelod_runtime::Camera) -> u32 {
         let frustum = Frustum::from_view_proj(camera.view_proj);
-        self.plane_draws.clear();
-        self.pruned.clear();
-        self.spt_instances.clear();
-        self.spt_map.clear();
+        view.plane_draws.clear();
+        view.pruned.clear();
+        view.spt_instances.clear();
+        view.spt_map.clear();
         let mut visible = 0;
         for (i, instance) in self.instances.iter().enumerate() {
             let index = u32::try_from(i).unwrap_or(u32::MAX);
             let Some(model) = self.models.get(instance.model as usize) else { continue };
             let Some(planes) = &model.planes else {
-                self.spt_instances.push(*instance);
-                self.spt_map.push(index);
+                view.spt_instances.push(*instance);
+                view.spt_map.push(index);
                 continue;
             };
             self.plane_ranges.clear();
@@ -1315,7 +1454,7 @@ impl Renderer {
             }
             visible += 1;
             for range in &self.plane_ranges {
-                self.plane_draws.push(PlaneDraw { instance: index, model: instance.model, range: *range });
+                view.plane_draws.push(PlaneDraw { instance: index, model: instance.model, range: *range });
             }
             // The chain's bark level (its triangles and error), if the policy and the model have one.
             let chain_bark = match (self.settings.impostor_bark, &model.chain, self.lods.get(instance.model as usize)) {
@@ -1330,7 +1469,7 @@ impl Renderer {
                 }
                 _ => None,
             };
-            self.pruned.extend(match chain_bark {
+            view.pruned.extend(match chain_bark {
                 Some((range, error)) => Model::whole_draw(index, instance.model, DrawSource::Bark, range, 1.0, error),
                 None => model.bark_draw(index, instance.model, 1.0),
             });
@@ -1342,12 +1481,12 @@ impl Renderer {
     /// `pruned` with LoD chain draws or `billboard_draws` for instances whose model has the
     /// baseline, and `spt_instances`/`spt_map` with the others. Returns the baseline instances
     /// inside the frustum.
-    fn select_baseline(&mut self, baseline: Baseline, camera: &treelod_runtime::Camera) -> u32 {
+    fn select_baseline(&mut self, view: &mut View, baseline: Baseline, camera: &treelod_runtime::Camera) -> u32 {
         let frustum = Frustum::from_view_proj(camera.view_proj);
-        self.pruned.clear();
-        self.billboard_draws.clear();
-        self.spt_instances.clear();
-        self.spt_map.clear();
+        view.pruned.clear();
+        view.billboard_draws.clear();
+        view.spt_instances.clear();
+        view.spt_map.clear();
         let mut visible = 0;
         for (i, instance) in self.instances.iter().enumerate() {
             let index = u32::try_from(i).unwrap_or(u32::MAX);
@@ -1358,8 +1497,8 @@ impl Renderer {
                 Baseline::Billboard(_) => model.billboards.is_some(),
             };
             if !has {
-                self.spt_instances.push(*instance);
-                self.spt_map.push(index);
+                view.spt_instances.push(*instance);
+                view.spt_map.push(index);
                 continue;
             }
             let Some(tau) = instance_tau(
@@ -1382,7 +1521,7 @@ impl Renderer {
                         ),
                         None => (chain.full, 0.0),
                     };
-                    self.pruned.extend(Model::whole_draw(
+                    view.pruned.extend(Model::whole_draw(
                         index,
                         instance.model,
                         DrawSource::LodLevel,
@@ -1397,7 +1536,7 @@ impl Renderer {
                         BillboardKind::Crossed => billboards.crossed,
                     };
                     if count > 0 {
-                        self.billboard_draws.push((index, instance.model, first, count));
+                        view.billboard_draws.push((index, instance.model, first, count));
                     }
                 }
                 _ => {}
@@ -1408,14 +1547,23 @@ impl Renderer {
 
     /// Which instances are drawn pruned this frame (see [`Pruning`]): fills `pruned` with their
     /// draws and `spt_instances`/`spt_map` with the others. Returns the pruned instances inside
-    /// the frustum and the leaves they draw.
-    fn select_pruned(&mut self, pruning: &Pruning, camera: &treelod_runtime::Camera) -> (u32, u64) {
+    /// the frustum and the leaves they draw. Only the camera's view (`main`) holds `λ` between
+    /// frames and lists trees for the occlusion test.
+    fn select_pruned(
+        &mut self,
+        view: &mut View,
+        pruning: &Pruning,
+        camera: &treelod_runtime::Camera,
+        main: bool,
+    ) -> (u32, u64) {
         let frustum = Frustum::from_view_proj(camera.view_proj);
         let world_per_pixel = camera.world_per_pixel();
-        self.pruned.clear();
-        self.spt_instances.clear();
-        self.spt_map.clear();
-        self.occlusion_jobs.clear();
+        view.pruned.clear();
+        view.spt_instances.clear();
+        view.spt_map.clear();
+        if main {
+            self.occlusion_jobs.clear();
+        }
         let (mut visible, mut leaves) = (0u32, 0u64);
         for (i, instance) in self.instances.iter().enumerate() {
             let m = instance.model as usize;
@@ -1428,17 +1576,21 @@ impl Renderer {
                 projected_height(p.height(), scale, world_centre.distance(camera.position), world_per_pixel)
             });
             let Some(prune) = model.prune.as_ref().filter(|_| height >= pruning.spt_below_pixels) else {
-                self.prune_shown[i] = None;
-                self.spt_instances.push(*instance);
-                self.spt_map.push(index);
+                if main {
+                    self.prune_shown[i] = None;
+                }
+                view.spt_instances.push(*instance);
+                view.spt_map.push(index);
                 continue;
             };
             if !frustum.intersects_sphere(world_centre, radius * scale) {
-                self.prune_shown[i] = None;
+                if main {
+                    self.prune_shown[i] = None;
+                }
                 continue;
             }
             visible += 1;
-            if pruning.occlusion && model.samples.1 > 0 {
+            if main && pruning.occlusion && model.samples.1 > 0 {
                 self.occlusion_jobs.push(Job {
                     instance: index,
                     transform: instance.transform,
@@ -1449,16 +1601,23 @@ impl Renderer {
                 });
             }
             let target = pruning.lambda.unwrap_or_else(|| prune.lambda_at(height));
-            let seen = if pruning.occlusion { self.visible_fraction[i].max(MIN_VISIBLE_FRACTION) } else { 1.0 };
-            let lambda = pruning.hysteresis.update(self.prune_shown[i], target * seen);
-            self.prune_shown[i] = Some(lambda);
+            // A shadow cascade prunes by the tree's height in texels, with no hysteresis and no
+            // occlusion: what the camera cannot see may still cast.
+            let lambda = if main {
+                let seen = if pruning.occlusion { self.visible_fraction[i].max(MIN_VISIBLE_FRACTION) } else { 1.0 };
+                let lambda = pruning.hysteresis.update(self.prune_shown[i], target * seen);
+                self.prune_shown[i] = Some(lambda);
+                lambda
+            } else {
+                target
+            };
             let factor = size_factor(leaf_scale(pruning.scale, prune.scale_curve(), lambda));
             for cell in prune.cells() {
                 let drawn = leaves_drawn(cell.leaves.count, lambda);
                 let (first, count) = prune.prefix_triangles(cell, drawn);
                 leaves += u64::from(drawn);
                 if count > 0 {
-                    self.pruned.push(PrunedDraw {
+                    view.pruned.push(PrunedDraw {
                         instance: index,
                         model: instance.model,
                         cell: cell.cell,
@@ -1471,26 +1630,21 @@ impl Renderer {
                     });
                 }
             }
-            self.pruned.extend(model.bark_draw(index, instance.model, lambda));
+            view.pruned.extend(model.bark_draw(index, instance.model, lambda));
         }
         (visible, leaves)
-    }
-
-    /// The index in `instances` of an instance of this frame's selection.
-    fn instance_index(&self, selected: u32) -> u32 {
-        if self.spt_remapped { self.spt_map.get(selected as usize).copied().unwrap_or(selected) } else { selected }
     }
 
     /// The selection of the last [`Self::prepare`] (before residency clamped it).
     #[must_use]
     pub fn selection(&self) -> &DrawList {
-        &self.selection
+        &self.main.selection
     }
 
     /// The draws of the last [`Self::prepare`], as recorded for the GPU, in selection order.
     #[must_use]
     pub fn draws(&self) -> &[RecordedDraw] {
-        &self.recorded
+        &self.main.recorded
     }
 
     /// The points of the last [`Self::prepare`]'s draws that the vertex shader keeps (those in the
@@ -1500,7 +1654,7 @@ impl Renderer {
     #[must_use]
     pub fn points_in_cut(&self) -> u64 {
         let mut drawn = 0u64;
-        for draw in &self.recorded {
+        for draw in &self.main.recorded {
             let (Some(model), Some(lod)) =
                 (self.models.get(draw.model.0 as usize), self.lods.get(draw.model.0 as usize))
             else {
@@ -1549,7 +1703,9 @@ impl Renderer {
 
     /// Selects what to draw for `camera` (per instance and cell, spec §10, with
     /// [`treelod_runtime::select_frame`]), streams what the selection needs within the budgets,
-    /// and uploads the draws, clamped to what is resident.
+    /// and uploads the draws, clamped to what is resident. With [`Settings::shadows`], also fits
+    /// the cascades to `camera` and selects each from the sun's view (sizes in texels), streaming
+    /// what they need beside the camera's selection; [`Self::render_shadows`] draws them.
     pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
         let settings = self.settings;
         let view_proj = camera.view_proj();
@@ -1570,33 +1726,22 @@ impl Renderer {
         let baseline = settings.baseline.filter(|_| !settings.full_mesh);
         let impostors = settings.impostors && !settings.full_mesh && baseline.is_none();
         let pruning = settings.pruning.filter(|_| !settings.full_mesh && !impostors && baseline.is_none());
+        let modes = Modes { baseline, impostors, pruning };
         let forward = -camera.view.row(2).truncate().normalize_or(Vec3::NEG_Z);
         self.last_camera = Some((view_proj, camera.position, forward, (camera.width, camera.height)));
-        let (instances_pruned, leaves_pruned) = match &pruning {
-            Some(pruning) => {
-                if pruning.occlusion {
-                    self.occlusion.collect(device, camera.position, forward, &mut self.visible_fraction);
-                }
-                self.select_pruned(pruning, &runtime_camera)
+        if let Some(pruning) = &pruning
+            && pruning.occlusion
+        {
+            self.occlusion.collect(device, camera.position, forward, &mut self.visible_fraction);
+        }
+        self.cascades = match settings.shadows {
+            Some(mut shadows) => {
+                shadows.resolution = shadows.resolution.clamp(1, device.limits().max_texture_dimension_2d);
+                fit_cascades(camera, settings.sun, &shadows, self.scene_bounds)
             }
-            None => {
-                self.pruned.clear();
-                (0, 0)
-            }
+            None => Vec::new(),
         };
-        let instances_baseline = match baseline {
-            Some(baseline) => self.select_baseline(baseline, &runtime_camera),
-            None => {
-                self.billboard_draws.clear();
-                0
-            }
-        };
-        let instances_impostors = if impostors {
-            self.select_impostors(&runtime_camera)
-        } else {
-            self.plane_draws.clear();
-            0
-        };
+        self.ensure_shadow_maps(device, queue);
         if self.gpu_instances_stale
             && let Some(gpu) = &mut self.gpu
         {
@@ -1608,12 +1753,11 @@ impl Renderer {
             && !settings.full_mesh
             && !impostors
             && baseline.is_none()
+            && self.cascades.is_empty()
             && let Some(gpu) = self.gpu.as_mut().filter(|g| g.usable())
         {
             // GPU selection: one compute submission writes the draws; nothing per instance here.
-            self.pruned.clear();
-            self.selection.clear();
-            self.recorded.clear();
+            self.main = View::default();
             let counts = gpu.prepare(device, queue, select_frame_gpu(&runtime_camera, &lod_settings));
             gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer);
             let pool_bytes = gpu.pool_bytes();
@@ -1632,32 +1776,24 @@ impl Renderer {
                 ..FrameStats::default()
             };
         }
-        self.spt_remapped = pruning.is_some() || impostors || baseline.is_some();
-        let spt_instances = if self.spt_remapped { &self.spt_instances } else { &self.instances };
-        let selected = select_frame(&self.lods, spt_instances, &runtime_camera, &lod_settings, &mut self.selection);
 
-        // What each cell needs: the largest prefix any instance asked for.
+        // The camera's selection, then each cascade's.
+        let mut main = std::mem::take(&mut self.main);
+        let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, modes, true);
+        let mut shadow_views = std::mem::take(&mut self.shadow_views);
+        shadow_views.resize_with(self.cascades.len(), View::default);
+        let mut shadow =
+            ShadowStats { cascades: u32::try_from(self.cascades.len()).unwrap_or(0), ..ShadowStats::default() };
+        for (k, view) in shadow_views.iter_mut().enumerate() {
+            let light = self.cascades[k].selection_camera();
+            shadow.instances_visible += self.select_view(view, &light, &lod_settings, modes, false).instances_visible;
+        }
+
+        // What each cell needs: the largest prefix any view asked for.
         self.residency.begin_frame();
         self.requests.clear();
-        for range in self.selection.ranges() {
-            let array = match range.kind {
-                Kind::Triangles => Array::Triangles,
-                Kind::Points => Array::Points,
-                Kind::Roots => continue,
-            };
-            let (m, c) = (range.model as usize, range.cell as usize);
-            if settings.full_mesh && array == Array::Points {
-                // The full mesh needs points only while its triangles are not all resident.
-                let wanted_triangles = self.wanted[m][c][0];
-                if self.residency.slot(m, c, Array::Triangles).resident >= wanted_triangles {
-                    continue;
-                }
-            }
-            let wanted = &mut self.wanted[m][c][array as usize];
-            if *wanted == 0 {
-                self.requests.push(Request { model: m, cell: c, array, first: range.first, wanted: 0 });
-            }
-            *wanted = (*wanted).max(range.count);
+        for view in std::iter::once(&main).chain(&shadow_views) {
+            self.request(view, settings.full_mesh);
         }
         for request in &mut self.requests {
             request.wanted = self.wanted[request.model][request.cell][request.array as usize];
@@ -1678,24 +1814,123 @@ impl Renderer {
             queue.write_buffer(&self.pool_buffer, upload.offset, data);
         }
 
-        // The draws, clamped to what is resident, bucketed by model and kind.
+        // The draws of every view, clamped to what is resident, bucketed by model and kind.
+        self.draw_infos.clear();
+        self.indirect.clear();
         let mut stats = FrameStats {
-            instances_visible: selected.instances_visible + instances_pruned + instances_impostors + instances_baseline,
-            instances_pruned,
-            leaves_pruned,
-            instances_impostors,
-            instances_baseline,
+            instances_visible: counts.instances_visible,
+            instances_pruned: counts.instances_pruned,
+            leaves_pruned: counts.leaves_pruned,
+            instances_impostors: counts.instances_impostors,
+            instances_baseline: counts.instances_baseline,
             bytes_uploaded: streamed.bytes_uploaded,
             bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
                 + u64::from(self.residency.pool.used()) * UNIT,
             ..FrameStats::default()
         };
-        self.recorded.clear();
+        self.record_view(&mut main, settings.full_mesh, &mut stats);
+        for view in &mut shadow_views {
+            let mut counted = FrameStats::default();
+            self.record_view(view, settings.full_mesh, &mut counted);
+            shadow.ranges += counted.ranges;
+            shadow.triangles += counted.triangles;
+            shadow.points += counted.points;
+            shadow.planes += counted.planes;
+            shadow.billboards += counted.billboards;
+        }
+        stats.shadow = shadow;
+        self.main = main;
+        self.shadow_views = shadow_views;
+
+        self.write_frame_uniform(queue, camera);
+        let draw_bytes = (self.draw_infos.len().max(1) * size_of::<DrawInfo>()) as u64;
+        if draw_bytes > self.draw_buffer.size() {
+            self.draw_buffer = storage_buffer(device, "treelod draws", draw_bytes.next_power_of_two(), false);
+            self.frame_bind_groups =
+                frame_bind_groups(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
+        }
+        if !self.draw_infos.is_empty() {
+            queue.write_buffer(&self.draw_buffer, 0, bytemuck::cast_slice(&self.draw_infos));
+        }
+        let indirect_bytes = (self.indirect.len().max(1) * size_of::<wgpu::util::DrawIndirectArgs>()) as u64;
+        if indirect_bytes > self.indirect_buffer.size() {
+            self.indirect_buffer = indirect_buffer(device, self.indirect.len().next_power_of_two() as u64);
+        }
+        if !self.indirect.is_empty() {
+            let bytes: Vec<u8> = self.indirect.iter().flat_map(|a| a.as_bytes().iter().copied()).collect();
+            queue.write_buffer(&self.indirect_buffer, 0, &bytes);
+        }
+        stats
+    }
+
+    /// Selects one view: the trees drawn pruned, with impostors or a baseline per `modes`, and
+    /// the others with the sequential point trees. `main`: the camera's view (see
+    /// [`Self::select_pruned`]).
+    fn select_view(
+        &mut self,
+        view: &mut View,
+        camera: &treelod_runtime::Camera,
+        lod_settings: &LodSettings,
+        modes: Modes,
+        main: bool,
+    ) -> ViewCounts {
+        let mut counts = ViewCounts::default();
+        view.pruned.clear();
+        view.billboard_draws.clear();
+        view.plane_draws.clear();
+        if let Some(pruning) = &modes.pruning {
+            (counts.instances_pruned, counts.leaves_pruned) = self.select_pruned(view, pruning, camera, main);
+        }
+        if let Some(baseline) = modes.baseline {
+            counts.instances_baseline = self.select_baseline(view, baseline, camera);
+        }
+        if modes.impostors {
+            counts.instances_impostors = self.select_impostors(view, camera);
+        }
+        view.spt_remapped = modes.pruning.is_some() || modes.impostors || modes.baseline.is_some();
+        let spt_instances = if view.spt_remapped { &view.spt_instances } else { &self.instances };
+        let selected = select_frame(&self.lods, spt_instances, camera, lod_settings, &mut view.selection);
+        counts.instances_visible = selected.instances_visible
+            + counts.instances_pruned
+            + counts.instances_impostors
+            + counts.instances_baseline;
+        counts
+    }
+
+    /// Adds the prefixes `view`'s selection needs to this frame's requests (`wanted` holds the
+    /// largest per cell).
+    fn request(&mut self, view: &View, full_mesh: bool) {
+        for range in view.selection.ranges() {
+            let array = match range.kind {
+                Kind::Triangles => Array::Triangles,
+                Kind::Points => Array::Points,
+                Kind::Roots => continue,
+            };
+            let (m, c) = (range.model as usize, range.cell as usize);
+            if full_mesh && array == Array::Points {
+                // The full mesh needs points only while its triangles are not all resident.
+                let wanted_triangles = self.wanted[m][c][0];
+                if self.residency.slot(m, c, Array::Triangles).resident >= wanted_triangles {
+                    continue;
+                }
+            }
+            let wanted = &mut self.wanted[m][c][array as usize];
+            if *wanted == 0 {
+                self.requests.push(Request { model: m, cell: c, array, first: range.first, wanted: 0 });
+            }
+            *wanted = (*wanted).max(range.count);
+        }
+    }
+
+    /// Records `view`'s draws, clamped to what is resident, after the draw infos and indirect
+    /// draws of the views before it; counts them into `stats`.
+    fn record_view(&mut self, view: &mut View, full_mesh: bool, stats: &mut FrameStats) {
+        view.recorded.clear();
         self.buckets.resize_with(BUCKETS * self.models.len(), Vec::new);
         for bucket in &mut self.buckets {
             bucket.clear();
         }
-        let ranges = self.selection.ranges();
+        let ranges = view.selection.ranges();
         let mut i = 0;
         while i < ranges.len() {
             let range = ranges[i];
@@ -1713,7 +1948,8 @@ impl Renderer {
                 Kind::Triangles => (Some(range), points),
                 Kind::Points | Kind::Roots => (None, Some(range)),
             };
-            for draw in self.clamp(range, triangles, points, settings.full_mesh) {
+            let instance = view.instance_index(range.instance);
+            for draw in self.clamp(instance, range, triangles, points, full_mesh) {
                 let Some(draw) = draw else { continue };
                 stats.ranges_clamped += u32::from(draw.clamped);
                 let (bucket, first_vertex, corners) = self.gpu_first(&draw);
@@ -1738,12 +1974,12 @@ impl Renderer {
                     _pad: 0,
                 };
                 self.buckets[bucket].push((info, first_vertex, draw.count * corners));
-                self.recorded.push(draw);
+                view.recorded.push(draw);
             }
         }
         // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
         // per-cell estimate (it is a property of the point hierarchy's cells).
-        for draw in &self.pruned {
+        for draw in &view.pruned {
             stats.triangles += u64::from(draw.count);
             let record = RecordedDraw {
                 instance: draw.instance,
@@ -1756,10 +1992,10 @@ impl Renderer {
                 clamped: false,
             };
             let vertices = (3 * draw.first, 3 * draw.count);
-            record_direct(&self.instances, &mut self.buckets, &mut self.recorded, record, 2, vertices, draw.leaf_scale);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, 2, vertices, draw.leaf_scale);
         }
         // Impostor planes: a prefix of one cell's planes, the level chosen in the shader by `τ`.
-        for draw in &self.plane_draws {
+        for draw in &view.plane_draws {
             let range = draw.range;
             stats.planes += u64::from(range.count);
             let record = RecordedDraw {
@@ -1773,10 +2009,10 @@ impl Renderer {
                 clamped: false,
             };
             let vertices = (6 * range.first, 6 * range.count);
-            record_direct(&self.instances, &mut self.buckets, &mut self.recorded, record, 3, vertices, 1.0);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, 3, vertices, 1.0);
         }
         // Baseline billboards: every quad of the chosen kind.
-        for &(instance, model, first, count) in &self.billboard_draws {
+        for &(instance, model, first, count) in &view.billboard_draws {
             stats.billboards += u64::from(count);
             let record = RecordedDraw {
                 instance,
@@ -1791,16 +2027,15 @@ impl Renderer {
             record_direct(
                 &self.instances,
                 &mut self.buckets,
-                &mut self.recorded,
+                &mut view.recorded,
                 record,
                 4,
                 (6 * first, 6 * count),
                 1.0,
             );
         }
-        self.draw_infos.clear();
-        self.indirect.clear();
-        self.model_draws.clear();
+        view.model_draws.clear();
+        let before = self.indirect.len();
         for pair in self.buckets.chunks(BUCKETS) {
             let mut draws = [(0, 0); BUCKETS];
             for (kind, bucket) in pair.iter().enumerate() {
@@ -1817,39 +2052,33 @@ impl Renderer {
                 }
                 draws[kind] = (start, u32::try_from(self.indirect.len()).unwrap_or(u32::MAX) - start);
             }
-            self.model_draws.push(draws);
+            view.model_draws.push(draws);
         }
-        stats.ranges = u32::try_from(self.indirect.len()).unwrap_or(u32::MAX);
-
-        self.write_frame_uniform(queue, camera);
-        let draw_bytes = (self.draw_infos.len().max(1) * size_of::<DrawInfo>()) as u64;
-        if draw_bytes > self.draw_buffer.size() {
-            self.draw_buffer = storage_buffer(device, "treelod draws", draw_bytes.next_power_of_two(), false);
-            self.frame_bind_group =
-                frame_bind_group(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
-        }
-        if !self.draw_infos.is_empty() {
-            queue.write_buffer(&self.draw_buffer, 0, bytemuck::cast_slice(&self.draw_infos));
-        }
-        let indirect_bytes = (self.indirect.len().max(1) * size_of::<wgpu::util::DrawIndirectArgs>()) as u64;
-        if indirect_bytes > self.indirect_buffer.size() {
-            self.indirect_buffer = indirect_buffer(device, self.indirect.len().next_power_of_two() as u64);
-        }
-        if !self.indirect.is_empty() {
-            let bytes: Vec<u8> = self.indirect.iter().flat_map(|a| a.as_bytes().iter().copied()).collect();
-            queue.write_buffer(&self.indirect_buffer, 0, &bytes);
-        }
-        stats
+        stats.ranges += u32::try_from(self.indirect.len() - before).unwrap_or(u32::MAX);
     }
 
-    /// Writes the frame uniform (camera, light, debug view) for `camera`.
+    /// Creates the shadow maps the settings ask for when their size or cascades changed, and
+    /// writes the receivers' uniform for this frame's cascades.
+    fn ensure_shadow_maps(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
+        if let Some(cascade) = self.cascades.first() {
+            let size = (cascade.resolution, u32::try_from(self.cascades.len()).unwrap_or(1));
+            if self.shadow_maps.size != size {
+                self.shadow_maps = ShadowMaps::new(device, &self.shadow_layout, size.0, size.1);
+            }
+        }
+        let normal_offset = self.settings.shadows.map_or(0.0, |s| s.normal_offset);
+        let uniform = ShadowUniform::new(&self.cascades, normal_offset);
+        queue.write_buffer(&self.shadow_maps.uniform, 0, bytemuck::bytes_of(&uniform));
+    }
+
+    /// Writes the frame uniforms (camera, light, debug view) for `camera` and for each cascade's
+    /// shadow pass.
     fn write_frame_uniform(&self, queue: &wgpu::Queue, camera: &Camera) {
         let settings = &self.settings;
-        let view_proj = camera.view_proj();
         let (right, up) = camera.right_up();
         let sun = settings.sun.normalize_or(Vec3::Y);
         let uniform = FrameUniform {
-            view_proj: view_proj.to_cols_array_2d(),
+            view_proj: camera.view_proj().to_cols_array_2d(),
             eye: camera.position.extend(camera.height as f32).to_array(),
             right: right.extend(camera.proj.y_axis.y).to_array(),
             up: up.extend(settings.point_scale.max(0.0)).to_array(),
@@ -1864,6 +2093,18 @@ impl Renderer {
             _pad: [0; 2],
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
+        for (k, cascade) in self.cascades.iter().enumerate() {
+            let (eye, right, up) = crate::shadows::cascade_frame(cascade);
+            let light = FrameUniform {
+                view_proj: cascade.view_proj.to_cols_array_2d(),
+                eye: eye.to_array(),
+                right: right.to_array(),
+                up: up.extend(settings.point_scale.max(0.0)).to_array(),
+                debug: 0,
+                ..uniform
+            };
+            queue.write_buffer(&self.frame_buffer, (k as u64 + 1) * FRAME_UNIFORM_STRIDE, bytemuck::bytes_of(&light));
+        }
     }
 
     /// The draws of one selected cell (or one roots range), clamped to what is resident so that
@@ -1880,13 +2121,14 @@ impl Renderer {
     /// valid coarser level of detail.
     fn clamp(
         &self,
+        instance: u32,
         range: DrawRange,
         triangles: Option<DrawRange>,
         points: Option<DrawRange>,
         full_mesh: bool,
     ) -> [Option<RecordedDraw>; 2] {
         let base = RecordedDraw {
-            instance: self.instance_index(range.instance),
+            instance,
             model: ModelId(range.model),
             cell: range.cell,
             source: DrawSource::Roots,
@@ -2000,20 +2242,29 @@ impl Renderer {
             && let Some(gpu) = &self.gpu
         {
             let group = |m: usize| self.models.get(m).map(|model| &model.bind_group);
+            pass.set_bind_group(2, &self.shadow_maps.bind_group, &[]);
             gpu.render(pass, [&self.triangle_pipeline, &self.point_pipeline], group);
             return;
         }
+        pass.set_bind_group(0, &self.frame_bind_groups[0], &[]);
+        pass.set_bind_group(2, &self.shadow_maps.bind_group, &[]);
+        let pipelines = [
+            &self.triangle_pipeline,
+            &self.point_pipeline,
+            &self.pruned_pipeline,
+            &self.plane_pipeline,
+            &self.billboard_pipeline,
+        ];
+        self.draw_view(pass, &self.main, pipelines);
+    }
+
+    /// Draws `view`'s buckets with `pipelines` (in bucket order) into `pass`, whose frame bind
+    /// group is set.
+    fn draw_view(&self, pass: &mut wgpu::RenderPass<'_>, view: &View, pipelines: [&wgpu::RenderPipeline; BUCKETS]) {
         let stride = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
-        pass.set_bind_group(0, &self.frame_bind_group, &[]);
-        for (pipeline, kind) in [
-            (&self.triangle_pipeline, 0),
-            (&self.point_pipeline, 1),
-            (&self.pruned_pipeline, 2),
-            (&self.plane_pipeline, 3),
-            (&self.billboard_pipeline, 4),
-        ] {
+        for (kind, pipeline) in pipelines.into_iter().enumerate() {
             pass.set_pipeline(pipeline);
-            for (model, draws) in self.models.iter().zip(&self.model_draws) {
+            for (model, draws) in self.models.iter().zip(&view.model_draws) {
                 let (first, count) = draws[kind];
                 if count == 0 {
                     continue;
@@ -2026,6 +2277,64 @@ impl Renderer {
                 pass.multi_draw_indirect(&self.indirect_buffer, u64::from(first) * stride, count);
             }
         }
+    }
+
+    /// Records this frame's shadow pass ([`Settings::shadows`], after [`Self::prepare`]): one
+    /// depth-only pass per cascade into the renderer's shadow maps, drawing what each cascade
+    /// selected. Record it before the host's pass that calls [`Self::render`] (in the same
+    /// encoder or an earlier submission): that pass samples the maps. Does nothing without
+    /// shadows.
+    pub fn render_shadows(&self, encoder: &mut wgpu::CommandEncoder) {
+        let shadow_pipelines = [
+            &self.shadow_pipelines[0],
+            &self.shadow_pipelines[1],
+            &self.shadow_pipelines[2],
+            &self.shadow_pipelines[3],
+            &self.shadow_pipelines[4],
+        ];
+        for (k, view) in self.shadow_views.iter().enumerate().take(self.cascades.len()) {
+            let Some(layer) = self.shadow_maps.layers.get(k) else { continue };
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("treelod shadow cascade"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: layer,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                ..wgpu::RenderPassDescriptor::default()
+            });
+            pass.set_bind_group(0, &self.frame_bind_groups[k + 1], &[]);
+            self.draw_view(&mut pass, view, shadow_pipelines);
+        }
+    }
+
+    /// World bounds (min, max) of the instances' bounding spheres; `None` without instances.
+    #[must_use]
+    pub fn instance_bounds(&self) -> Option<(Vec3, Vec3)> {
+        self.scene_bounds
+    }
+
+    /// This frame's shadow cascades (empty without [`Settings::shadows`]): what a host needs to
+    /// draw its own receivers with [`Self::shadow_bind_group`].
+    #[must_use]
+    pub fn shadow_cascades(&self) -> &[Cascade] {
+        &self.cascades
+    }
+
+    /// The layout of [`Self::shadow_bind_group`]: bind it as group 2 of a host pipeline that
+    /// includes [`crate::SHADOW_WGSL`] and calls its `sunlit(world, normal, sun)`.
+    #[must_use]
+    pub fn shadow_bind_group_layout(&self) -> &wgpu::BindGroupLayout {
+        &self.shadow_layout
+    }
+
+    /// The receivers' bind group: this frame's cascades' matrices, the shadow maps and their
+    /// comparison sampler (everything lit without [`Settings::shadows`]). It may be replaced by
+    /// [`Self::prepare`] when the shadow settings change: fetch it each frame.
+    #[must_use]
+    pub fn shadow_bind_group(&self) -> &wgpu::BindGroup {
+        &self.shadow_maps.bind_group
     }
 }
 
@@ -2124,22 +2433,34 @@ fn indirect_buffer(device: &wgpu::Device, draws: u64) -> wgpu::Buffer {
     })
 }
 
-/// The frame bind group: uniform, draw infos, and the pool bound twice (triangles, points).
-fn frame_bind_group(
+/// The frame bind groups of the camera and of each cascade: the view's uniform, the draw infos,
+/// and the pool bound twice (triangles, points).
+fn frame_bind_groups(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     frame: &wgpu::Buffer,
     draws: &wgpu::Buffer,
     pool: &wgpu::Buffer,
-) -> wgpu::BindGroup {
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("treelod frame"),
-        layout,
-        entries: &[
-            wgpu::BindGroupEntry { binding: 0, resource: frame.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 1, resource: draws.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 2, resource: pool.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 3, resource: pool.as_entire_binding() },
-        ],
-    })
+) -> Vec<wgpu::BindGroup> {
+    (0..=MAX_CASCADES as u64)
+        .map(|view| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("treelod frame"),
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: frame,
+                            offset: view * FRAME_UNIFORM_STRIDE,
+                            size: wgpu::BufferSize::new(size_of::<FrameUniform>() as u64),
+                        }),
+                    },
+                    wgpu::BindGroupEntry { binding: 1, resource: draws.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: pool.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 3, resource: pool.as_entire_binding() },
+                ],
+            })
+        })
+        .collect()
 }
