@@ -48,13 +48,18 @@ pub struct Shadows {
     /// texels of the cascade it falls in: against self-shadowing ("acne") of surfaces at a
     /// grazing angle to the sun, on top of the shadow pass's slope-scaled depth bias.
     pub normal_offset: f32,
+    /// Texels per pixel of the cascades' level-of-detail selection: the thresholds
+    /// ([`crate::Settings::s_min`], [`crate::Settings::s_max`]) are taken in units of this many
+    /// texels. The receivers' filter spans 4×4 texels, so detail under two texels is blurred away
+    /// anyway; 1 selects as finely as the map resolves.
+    pub lod_texels: f32,
 }
 
 impl Default for Shadows {
     /// Three 2048² cascades over the first 150 m, splits weighted 0.75 towards logarithmic, a
-    /// normal offset of 1.5 texels.
+    /// normal offset of 1.5 texels, selection in pixels of 2 texels.
     fn default() -> Self {
-        Self { resolution: 2048, cascades: 3, distance: 150.0, split_lambda: 0.75, normal_offset: 1.5 }
+        Self { resolution: 2048, cascades: 3, distance: 150.0, split_lambda: 0.75, normal_offset: 1.5, lod_texels: 2.0 }
     }
 }
 
@@ -81,12 +86,15 @@ pub struct Cascade {
     pub reach: f32,
     /// Texels per side.
     pub resolution: u32,
+    /// [`Shadows::lod_texels`].
+    pub lod_texels: f32,
 }
 
 impl Cascade {
     /// The camera the cascade's trees are selected with: the orthographic view's frustum, and an
     /// eye far along the sun ([`SELECTION_DISTANCE`] times the cascade's depth) whose pixel at the
-    /// cascade's centre is one texel, so `τ = s · texel` for every tree to within 0.1 %.
+    /// cascade's centre is [`Self::lod_texels`] texels, so `τ = s · lod_texels · texel` for every
+    /// tree to within 0.1 %.
     #[must_use]
     pub fn selection_camera(&self) -> treelod_runtime::Camera {
         let distance = SELECTION_DISTANCE * (self.radius + self.reach);
@@ -95,7 +103,7 @@ impl Cascade {
         treelod_runtime::Camera {
             position: self.eye_far(),
             view_proj: self.view_proj,
-            viewport_height: texels,
+            viewport_height: texels / self.lod_texels.max(1e-3),
             fovy: 2.0 * (0.5 * self.texel * texels / distance).atan(),
         }
     }
@@ -196,6 +204,7 @@ pub fn fit_cascades(camera: &Camera, sun: Vec3, shadows: &Shadows, scene: Option
                 up,
                 reach,
                 resolution,
+                lod_texels: shadows.lod_texels,
             }
         })
         .collect()
@@ -439,16 +448,20 @@ mod tests {
     }
 
     #[test]
-    fn a_selection_pixel_is_a_texel() {
+    fn a_selection_pixel_is_lod_texels_texels() {
         let cam = camera(Vec3::new(0.0, 2.0, 0.0), Vec3::new(0.0, 2.0, -10.0));
-        for cascade in fit_cascades(&cam, Vec3::new(0.2, 1.0, 0.1), &Shadows::default(), None) {
-            let selection = cascade.selection_camera();
-            let at_centre = selection.world_per_pixel() * selection.position.distance(cascade.centre);
-            assert!((at_centre / cascade.texel - 1.0).abs() < 1e-3, "{at_centre} vs {}", cascade.texel);
-            // Across the sphere's depth the footprint stays within 0.1 %.
-            let near = selection.world_per_pixel()
-                * selection.position.distance(cascade.centre + cascade.sun * cascade.radius);
-            assert!((near / cascade.texel - 1.0).abs() < 1.1e-3);
+        for lod_texels in [1.0, 2.0] {
+            let shadows = Shadows { lod_texels, ..Shadows::default() };
+            for cascade in fit_cascades(&cam, Vec3::new(0.2, 1.0, 0.1), &shadows, None) {
+                let selection = cascade.selection_camera();
+                let pixel = lod_texels * cascade.texel;
+                let at_centre = selection.world_per_pixel() * selection.position.distance(cascade.centre);
+                assert!((at_centre / pixel - 1.0).abs() < 1e-3, "{at_centre} vs {pixel}");
+                // Across the sphere's depth the footprint stays within 0.1 %.
+                let near = selection.world_per_pixel()
+                    * selection.position.distance(cascade.centre + cascade.sun * cascade.radius);
+                assert!((near / pixel - 1.0).abs() < 1.1e-3);
+            }
         }
     }
 }

@@ -22,7 +22,7 @@ fn bench_ok(args: &[&OsStr]) -> String {
 
 const COLUMNS: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads";
+precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads,shadow_primitives";
 
 #[test]
 fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
@@ -75,6 +75,7 @@ fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
         assert_eq!(field(&header, full, "gpu_ms"), "");
         assert!(number(&header, spt, "bytes_resident") > 0.0);
         assert_eq!(field(&header, spt, "q"), "", "no quality without --quality");
+        assert_eq!(field(&header, spt, "shadow_primitives"), "", "no shadow pass without --shadows");
     }
     let phases: Vec<&str> = rows.iter().step_by(2).map(|r| field(&header, r, "phase")).collect();
     assert_eq!(phases.first(), Some(&"overview"));
@@ -98,6 +99,36 @@ fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
         "{spt}"
     );
     assert!(pixels.iter().any(|p| p[..3] != [255, 255, 255]));
+}
+
+#[test]
+fn with_shadows_each_frame_records_its_shadow_pass() {
+    let dir = scratch("shadows");
+    let (csv, json) = (dir.join("shadows.csv"), dir.join("shadows.json"));
+    let stdout = bench_ok(&[
+        "--shadows".as_ref(),
+        "--no-render".as_ref(),
+        "--trees".as_ref(),
+        "200".as_ref(),
+        "--frames".as_ref(),
+        "4".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
+    assert!(stdout.contains("shadow/this"), "{stdout}");
+    let (header, rows) = read_csv(&csv);
+    for row in &rows {
+        match field(&header, row, "technique") {
+            // Counted, not drawn: no shadow pass.
+            "full" => assert_eq!(field(&header, row, "shadow_primitives"), ""),
+            _ => assert!(number(&header, row, "shadow_primitives") > 0.0, "{row:?}"),
+        }
+    }
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).expect("json")).expect("parses");
+    let spt = json["techniques"].as_array().expect("techniques").iter().find(|t| t["name"] == "spt").expect("spt");
+    assert!(spt["summary"]["shadow_ratio"].as_f64().is_some_and(|r| r > 0.0), "{spt}");
 }
 
 #[test]

@@ -79,6 +79,13 @@ pub struct Args {
     /// frames earlier, and its selection time is that of `prepare` submitting the compute work.
     #[arg(long)]
     pub gpu_selection: bool,
+    /// Cast shadows: every technique the renderer flies also selects and draws three 2048²
+    /// shadow cascades of the sun over the first 150 m (`Settings::shadows`, the defaults), and
+    /// each frame records the primitives of that shadow pass (CSV column `shadow_primitives`).
+    /// The full mesh is counted, not drawn, so it has none; `--gpu-selection` frames are then
+    /// selected on the CPU.
+    #[arg(long)]
+    pub shadows: bool,
     /// Also draw the full mesh as the reference at every frame and measure each technique's
     /// image against it: P, R, Q and multi-scale RMSE (slow: the full mesh of every tree in view).
     #[arg(long)]
@@ -195,6 +202,7 @@ impl Technique {
         settings.s_min = args.s_min.unwrap_or(settings.s_min);
         settings.s_max = args.s_max.unwrap_or(settings.s_max);
         settings.pruning = scale.map(|scale| Pruning { scale, ..Pruning::default() });
+        settings.shadows = args.shadows.then(treelod_render::Shadows::default);
         settings.baseline = match self {
             Self::LodChain => Some(Baseline::LodChain),
             Self::Billboard => Some(Baseline::Billboard(BillboardKind::Facing)),
@@ -241,6 +249,9 @@ pub struct Row {
     /// GPU milliseconds of the render pass (timestamp queries); `None` when not drawn or not
     /// measurable.
     pub gpu_ms: Option<f64>,
+    /// With `--shadows`: triangles, points and quads the shadow pass submitted, all cascades
+    /// together (`None` without, and for the counted full mesh).
+    pub shadow_primitives: Option<u64>,
     /// Coverage against the reference (with `--quality`, not for the reference itself).
     pub coverage: Option<Coverage>,
     /// Multi-scale RMSE summary against the reference.
@@ -536,6 +547,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                     bytes_resident: None,
                     selection_ms: ms,
                     gpu_ms: reference_shot.as_ref().and_then(|(_, ms)| *ms),
+                    shadow_primitives: None,
                     coverage: None,
                     rmse: None,
                 });
@@ -567,6 +579,10 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 bytes_resident: Some(stats.bytes_resident),
                 selection_ms,
                 gpu_ms: None,
+                shadow_primitives: args.shadows.then(|| {
+                    let shadow = stats.shadow;
+                    shadow.triangles + shadow.points + shadow.planes + shadow.billboards
+                }),
                 coverage: None,
                 rmse: None,
             };

@@ -89,6 +89,10 @@ pub struct Summary {
     pub ranges_clamped: Option<f64>,
     /// GPU milliseconds of the render pass.
     pub gpu_ms: Option<Spread>,
+    /// Mean primitives of the shadow pass (with `--shadows`).
+    pub shadow_primitives: Option<f64>,
+    /// Those over the main pass's mean primitives.
+    pub shadow_ratio: Option<f64>,
     /// Mean precision against the reference.
     pub precision: Option<f64>,
     /// Mean recall.
@@ -116,7 +120,10 @@ pub fn summarise(report: &Report, technique: Technique) -> Summary {
     let full_mean = mean_of(full);
     let selection: Vec<f64> = rows.iter().map(|r| r.selection_ms).collect();
     let gpu: Vec<f64> = rows.iter().filter_map(|r| r.gpu_ms).collect();
+    let shadow_primitives = mean_of(rows.iter().filter_map(|r| r.shadow_primitives).map(|p| p as f64).collect());
     Summary {
+        shadow_primitives,
+        shadow_ratio: shadow_primitives.filter(|_| primitives > 0.0).map(|s| s / primitives),
         frames: rows.len(),
         selection_ms: spread(&selection).unwrap_or_default(),
         instances_visible: mean(&|r| f64::from(r.instances_visible)),
@@ -225,7 +232,8 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
     }
     let _ = writeln!(out, "times: {}", timing(report));
     out.push_str(&unavailable(&report.techniques));
-    let mut table = Table::new(&[
+    let shadows = report.rows.iter().any(|r| r.shadow_primitives.is_some());
+    let mut columns = vec![
         ("technique", Align::Left),
         ("frames", Align::Right),
         ("visible", Align::Right),
@@ -245,13 +253,17 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
         ("R", Align::Right),
         ("Q", Align::Right),
         ("RMSE", Align::Right),
-    ]);
+    ];
+    if shadows {
+        columns.extend([("shadow", Align::Right), ("shadow/this", Align::Right)]);
+    }
+    let mut table = Table::new(&columns);
     for (technique, availability) in &report.techniques {
         if *availability != Availability::Measured {
             continue;
         }
         let s = summarise(report, *technique);
-        table.row(vec![
+        let mut cells = vec![
             technique.name().to_owned(),
             s.frames.to_string(),
             format!("{:.0}", s.instances_visible),
@@ -271,7 +283,11 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
             opt(s.recall, 4),
             opt(s.q, 4),
             opt(s.rmse, 5),
-        ]);
+        ];
+        if shadows {
+            cells.extend([opt(s.shadow_primitives, 0), opt(s.shadow_ratio, 2)]);
+        }
+        table.row(cells);
     }
     out.push_str(&table.render(""));
     let _ = writeln!(out, "means per frame; {:.1} s in all", report.seconds);
@@ -286,7 +302,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
 /// The CSV header.
 pub const CSV_HEADER: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads";
+precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads,shadow_primitives";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -299,7 +315,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -328,6 +344,7 @@ pub fn csv(report: &Report) -> String {
             text(row.points_in_cut.map(|v| v.to_string())),
             row.primitives_in_cut(),
             row.quads,
+            text(row.shadow_primitives.map(|v| v.to_string())),
         );
     }
     out
