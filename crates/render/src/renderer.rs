@@ -2057,14 +2057,16 @@ impl Renderer {
         stats.ranges += u32::try_from(self.indirect.len() - before).unwrap_or(u32::MAX);
     }
 
-    /// Creates the shadow maps the settings ask for when their size or cascades changed, and
-    /// writes the receivers' uniform for this frame's cascades.
+    /// Creates the shadow maps this frame's cascades need when their size or number changed (a
+    /// 1×1 stand-in without shadows), and writes the receivers' uniform.
     fn ensure_shadow_maps(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
-        if let Some(cascade) = self.cascades.first() {
-            let size = (cascade.resolution, u32::try_from(self.cascades.len()).unwrap_or(1));
-            if self.shadow_maps.size != size {
-                self.shadow_maps = ShadowMaps::new(device, &self.shadow_layout, size.0, size.1);
-            }
+        // Without shadows a 1×1 map stands in (and a larger one is freed).
+        let size = self
+            .cascades
+            .first()
+            .map_or((1, 1), |cascade| (cascade.resolution, u32::try_from(self.cascades.len()).unwrap_or(1)));
+        if self.shadow_maps.size != size {
+            self.shadow_maps = ShadowMaps::new(device, &self.shadow_layout, size.0, size.1);
         }
         let normal_offset = self.settings.shadows.map_or(0.0, |s| s.normal_offset);
         let uniform = ShadowUniform::new(&self.cascades, normal_offset);

@@ -92,7 +92,7 @@ pub struct Cascade {
 
 impl Cascade {
     /// The camera the cascade's trees are selected with: the orthographic view's frustum, and an
-    /// eye far along the sun ([`SELECTION_DISTANCE`] times the cascade's depth) whose pixel at the
+    /// eye far along the sun (1000 times the cascade's depth) whose pixel at the
     /// cascade's centre is [`Self::lod_texels`] texels, so `τ = s · lod_texels · texel` for every
     /// tree to within 0.1 %.
     #[must_use]
@@ -117,7 +117,7 @@ impl Cascade {
 }
 
 /// The distances splitting `0 ..= distance` into `count` slices: `λ` of the logarithmic split
-/// (from [`SPLIT_NEAR`]) plus `1 − λ` of the uniform one. `count + 1` values from 0 to `distance`.
+/// (from 1 m) plus `1 − λ` of the uniform one. `count + 1` values from 0 to `distance`.
 #[must_use]
 pub fn cascade_splits(distance: f32, count: usize, lambda: f32) -> Vec<f32> {
     let far = distance.max(SPLIT_NEAR * 2.0);
