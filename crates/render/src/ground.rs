@@ -111,8 +111,9 @@ impl Ground {
         Self { centre, half_size, colour: Vec3::new(0.55, 0.6, 0.45), pipeline, uniform, bind_group }
     }
 
-    /// A ground under every instance of `renderer`: at the lowest point of their bounds, wide
-    /// enough to catch their shadows with the sun down to about 25° above the horizon.
+    /// A ground under every instance of `renderer`: at the lowest point of their blocks (the trunks'
+    /// bases, for trees standing upright), wide enough to catch their shadows with the sun down to
+    /// about 25° above the horizon.
     #[must_use]
     pub fn under_instances(device: &wgpu::Device, renderer: &Renderer) -> Self {
         let (min, max) = renderer.instance_bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));

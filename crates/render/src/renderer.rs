@@ -278,6 +278,9 @@ pub struct ShadowStats {
     pub instances_visible: u32,
     /// Indirect draws.
     pub ranges: u32,
+    /// Draws made coarser than the cascades' selections because their prefixes are not resident
+    /// yet (0 once the cascades' data has streamed in).
+    pub ranges_clamped: u32,
     /// Triangles submitted (bark, leaves, pruned leaves, LoD chain levels).
     pub triangles: u64,
     /// Points submitted.
@@ -1416,14 +1419,24 @@ impl Renderer {
             self.prune_shown = vec![None; self.instances.len()];
             self.visible_fraction = vec![1.0; self.instances.len()];
         }
+        // The union of the instances' transformed blocks (their container's bounds).
         self.scene_bounds = self
             .instances
             .iter()
             .filter_map(|i| {
-                let (centre, radius) = self.lods.get(i.model as usize)?.cull_sphere();
-                let r = Vec3::splat(radius * max_axis_scale(i.transform));
-                let c = i.transform.transform_point3(centre);
-                Some((c - r, c + r))
+                let block = self.models.get(i.model as usize)?.container.block();
+                let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+                (0..8)
+                    .map(|k| {
+                        let corner = Vec3::new(
+                            if k & 1 == 0 { min.x } else { max.x },
+                            if k & 2 == 0 { min.y } else { max.y },
+                            if k & 4 == 0 { min.z } else { max.z },
+                        );
+                        let p = i.transform.transform_point3(corner);
+                        (p, p)
+                    })
+                    .reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)))
             })
             .reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)));
         self.gpu_instances_stale = true;
@@ -1833,6 +1846,7 @@ impl Renderer {
             let mut counted = FrameStats::default();
             self.record_view(view, settings.full_mesh, &mut counted);
             shadow.ranges += counted.ranges;
+            shadow.ranges_clamped += counted.ranges_clamped;
             shadow.triangles += counted.triangles;
             shadow.points += counted.points;
             shadow.planes += counted.planes;
@@ -2311,7 +2325,8 @@ impl Renderer {
         }
     }
 
-    /// World bounds (min, max) of the instances' bounding spheres; `None` without instances.
+    /// World bounds (min, max) of the instances: the union of their containers' block bounds,
+    /// transformed; `None` without instances.
     #[must_use]
     pub fn instance_bounds(&self) -> Option<(Vec3, Vec3)> {
         self.scene_bounds

@@ -5,9 +5,10 @@ use std::path::PathBuf;
 
 use glam::Vec3;
 use treelod_format::ErrorClass;
-use treelod_render::offscreen::{Gpu, Image, render_image};
+use treelod_render::offscreen::{Gpu, Image, render_prepared_scene};
 use treelod_render::{
-    Baseline, BillboardKind, Camera, DebugView, FrameStats, ImpostorBark, PruneScale, Pruning, Renderer, Settings,
+    Baseline, BillboardKind, Camera, DebugView, FrameStats, Ground, ImpostorBark, PruneScale, Pruning, Renderer,
+    Settings, ShadowStats, Shadows,
 };
 
 use crate::report::{self, Failed};
@@ -65,6 +66,8 @@ pub struct Args {
     pub prune: PruneArgs,
     #[command(flatten)]
     pub light: LightArgs,
+    #[command(flatten)]
+    pub shadow: ShadowArgs,
     /// Draw the leaves of trees whose containers have impostor planes (Garcia 2005; build with
     /// `--impostors`) as those planes, the level chosen by `--s-min` at the tree's distance, and
     /// their bark as triangles; other trees as usual. Takes precedence over `--prune`.
@@ -146,6 +149,58 @@ impl LightArgs {
         }
         if self.self_shadow.is_some() {
             settings.shading = self.self_shadow;
+        }
+    }
+}
+
+/// Shadow-map options shared by `render` and `view`.
+#[derive(Debug, clap::Args)]
+pub struct ShadowArgs {
+    /// Cascaded shadow maps of the sun, and a ground under the trees receiving them: each cascade
+    /// is one more depth-only pass with its own level-of-detail selection from the sun's view
+    /// (sizes in shadow-map texels). Any `--shadow-*` option below implies it.
+    #[arg(long)]
+    pub shadows: bool,
+    /// Texels per side of each cascade's shadow map, 16..=8192 (implies `--shadows`)
+    /// [default: 2048].
+    #[arg(long, value_name = "N", allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u32).range(16..=8192))]
+    pub shadow_resolution: Option<u32>,
+    /// Shadow cascades, 1..=4, splitting the distance up to `--shadow-distance` (implies
+    /// `--shadows`) [default: 3].
+    #[arg(long, value_name = "N", allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u32).range(1..=4))]
+    pub shadow_cascades: Option<u32>,
+    /// Distance from the eye up to which surfaces receive shadows, metres, > 0 (implies
+    /// `--shadows`) [default: 150].
+    #[arg(long, value_name = "METRES", value_parser = parse_distance, allow_negative_numbers = true)]
+    pub shadow_distance: Option<f32>,
+}
+
+impl ShadowArgs {
+    /// Whether these options turn shadows on: `--shadows` or any `--shadow-*` value.
+    pub fn enabled(&self) -> bool {
+        self.shadows
+            || self.shadow_resolution.is_some()
+            || self.shadow_cascades.is_some()
+            || self.shadow_distance.is_some()
+    }
+
+    /// `base` with the values these options give.
+    pub fn shadows(&self, base: Shadows) -> Shadows {
+        Shadows {
+            resolution: self.shadow_resolution.unwrap_or(base.resolution),
+            cascades: self.shadow_cascades.unwrap_or(base.cascades),
+            distance: self.shadow_distance.unwrap_or(base.distance),
+            ..base
+        }
+    }
+
+    /// Turns the renderer's shadows on with these options' values (the others kept from
+    /// `settings`' shadows, or the defaults), if [`Self::enabled`]; otherwise leaves them.
+    pub fn apply(&self, settings: &mut Settings) {
+        if self.enabled() {
+            settings.shadows = Some(self.shadows(settings.shadows.unwrap_or_default()));
         }
     }
 }
@@ -313,12 +368,15 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     };
     settings.pruning = args.prune.settings();
     args.light.apply(&mut settings);
+    args.shadow.apply(&mut settings);
     settings.impostors = args.impostors;
     args.impostor.apply(&mut settings);
     settings.baseline = parse_baseline(args.baseline.as_deref());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
         scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
+    // With shadows, a ground under the trees receives them.
+    let ground = renderer.settings().shadows.is_some().then(|| Ground::under_instances(&gpu.device, &renderer));
     if args.gpu_selection {
         renderer.enable_gpu_selection(&gpu.device, &gpu.queue).map_err(|e| {
             report::message_error(&args.input, &format!("cannot select on the GPU: {e}"));
@@ -335,10 +393,13 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
         }
         let frame = |renderer: &mut Renderer| {
-            render_image(&gpu, renderer, &camera, background).map_err(|e| {
-                report::message_error(&args.output, &format!("cannot render: {e}"));
-                Failed { class: ErrorClass::Io }
-            })
+            let stats = renderer.prepare(&gpu.device, &gpu.queue, &camera);
+            render_prepared_scene(&gpu, renderer, &camera, background, ground.as_ref(), true)
+                .map(|(image, _)| (image, stats))
+                .map_err(|e| {
+                    report::message_error(&args.output, &format!("cannot render: {e}"));
+                    Failed { class: ErrorClass::Io }
+                })
         };
         let s = renderer.settings();
         if s.pruning.is_some() && !s.impostors && s.baseline.is_none() && !s.full_mesh {
@@ -370,6 +431,10 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             stats.instances_impostors, stats.planes
         ));
     }
+    if renderer.settings().shadows.is_some() {
+        line.push_str("; ");
+        line.push_str(&shadow_summary(&stats));
+    }
     let image = if args.compare {
         renderer.settings_mut().full_mesh = true;
         let (full, full_stats) = render(&mut renderer)?;
@@ -387,6 +452,39 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     report::write_stdout(&line)
 }
 
+/// A distance in metres: finite and > 0.
+pub fn parse_distance(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a distance in metres, a finite number > 0, got {s:?}")),
+    }
+}
+
+/// Triangles, points, impostor planes and billboard quads the shadow pass submitted.
+pub fn shadow_primitives(shadow: &ShadowStats) -> u64 {
+    shadow.triangles + shadow.points + shadow.planes + shadow.billboards
+}
+
+/// Triangles, points, impostor planes and billboard quads the camera's pass submitted.
+pub fn main_primitives(stats: &FrameStats) -> u64 {
+    stats.triangles + stats.points + stats.planes + stats.billboards
+}
+
+/// What the shadow pass of a frame drew, and its primitives over the main pass's.
+pub fn shadow_summary(stats: &FrameStats) -> String {
+    let shadow = &stats.shadow;
+    let main = main_primitives(stats);
+    let ratio = if main == 0 {
+        "(the main pass draws nothing)".to_owned()
+    } else {
+        format!("({:.2}× the main pass's primitives)", shadow_primitives(shadow) as f64 / main as f64)
+    };
+    format!(
+        "shadow pass: {} cascade(s), {} triangles, {} points, {} planes, {} billboards {ratio}",
+        shadow.cascades, shadow.triangles, shadow.points, shadow.planes, shadow.billboards
+    )
+}
+
 /// Prints a scene error (its message starts with the file) and returns its class.
 pub fn scene_failed(error: &scene::SceneError) -> Failed {
     report::print_error(&error.to_string());
@@ -396,11 +494,12 @@ pub fn scene_failed(error: &scene::SceneError) -> Failed {
 /// Prepares frames until every draw's prefix is resident (the renderer streams triangles and
 /// points within a per-frame upload budget), so the image shows the selection rather than the
 /// coarser stand-ins of a first frame.
+/// With shadows, the cascades' draws too ([`treelod_render::ShadowStats::ranges_clamped`]).
 pub fn settle_streaming(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) {
     for _ in 0..MAX_STREAMING_FRAMES {
         let stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
         gpu.queue.submit([]);
-        if stats.ranges_clamped == 0 || stats.bytes_uploaded == 0 {
+        if (stats.ranges_clamped == 0 && stats.shadow.ranges_clamped == 0) || stats.bytes_uploaded == 0 {
             break;
         }
     }
@@ -507,6 +606,67 @@ mod tests {
         assert!(parse_colour("fff").is_err() && parse_colour("gggggg").is_err() && parse_colour("ffé00").is_err());
         assert!(parse_fov("0").is_err() && parse_fov("180").is_err() && parse_fov("50").is_ok());
         assert!(parse_pixels("-1").is_err() && parse_pixels("inf").is_err() && parse_pixels("0.5").is_ok());
+    }
+
+    #[derive(Debug, clap::Parser)]
+    struct ShadowCli {
+        #[command(flatten)]
+        shadow: ShadowArgs,
+    }
+
+    fn shadow_settings(args: &[&str]) -> Result<Option<Shadows>, clap::Error> {
+        use clap::Parser;
+        let cli = ShadowCli::try_parse_from(std::iter::once("shadows").chain(args.iter().copied()))?;
+        let mut settings = Settings::default();
+        cli.shadow.apply(&mut settings);
+        Ok(settings.shadows)
+    }
+
+    #[test]
+    fn shadow_options_turn_shadows_on_with_their_values_and_refuse_nonsense() {
+        assert_eq!(shadow_settings(&[]).ok(), Some(None), "off unless asked for");
+        assert_eq!(shadow_settings(&["--shadows"]).ok(), Some(Some(Shadows::default())));
+        // A value option alone implies --shadows; the others keep their defaults.
+        let two = shadow_settings(&["--shadow-cascades", "2"]).ok().flatten();
+        assert_eq!(two, Some(Shadows { cascades: 2, ..Shadows::default() }));
+        let all = ["--shadows", "--shadow-resolution", "512", "--shadow-cascades", "4", "--shadow-distance", "40.5"];
+        let custom = Shadows { resolution: 512, cascades: 4, distance: 40.5, ..Shadows::default() };
+        assert_eq!(shadow_settings(&all).ok(), Some(Some(custom)));
+        let bad: [&[&str]; 9] = [
+            &["--shadow-cascades", "0"],
+            &["--shadow-cascades", "5"],
+            &["--shadow-resolution", "0"],
+            &["--shadow-resolution", "15"],
+            &["--shadow-resolution", "8193"],
+            &["--shadow-distance", "-1"],
+            &["--shadow-distance", "0"],
+            &["--shadow-distance", "inf"],
+            &["--shadow-distance", "nan"],
+        ];
+        for args in bad {
+            let error = shadow_settings(args).expect_err("refused");
+            assert_eq!(error.kind(), clap::error::ErrorKind::ValueValidation, "{args:?}");
+            assert!(error.to_string().contains(args[0]), "{args:?}: the message names the option: {error}");
+        }
+    }
+
+    #[test]
+    fn the_shadow_summary_compares_the_shadow_pass_with_the_main_pass() {
+        let mut stats = FrameStats { triangles: 100, points: 200, planes: 50, billboards: 50, ..FrameStats::default() };
+        stats.shadow = ShadowStats {
+            cascades: 3,
+            triangles: 300,
+            points: 400,
+            planes: 100,
+            billboards: 0,
+            ..ShadowStats::default()
+        };
+        assert_eq!(
+            shadow_summary(&stats),
+            "shadow pass: 3 cascade(s), 300 triangles, 400 points, 100 planes, 0 billboards (2.00× the main pass's primitives)"
+        );
+        let nothing = FrameStats { shadow: stats.shadow, ..FrameStats::default() };
+        assert!(shadow_summary(&nothing).ends_with("(the main pass draws nothing)"));
     }
 
     #[test]

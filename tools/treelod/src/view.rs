@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{GpuError, Image, Readback};
-use treelod_render::{Camera, DebugView, FrameStats, Pruning, Renderer, RendererFormats, Settings};
+use treelod_render::{Camera, DebugView, FrameStats, Ground, Pruning, Renderer, RendererFormats, Settings, Shadows};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, KeyEvent, MouseButton, WindowEvent};
@@ -20,8 +20,8 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::render::{
-    BASELINES, ImpostorArgs, LightArgs, PruneArgs, baseline_name, frame_camera, parse_size, parse_vec3, scene_failed,
-    write_png,
+    BASELINES, ImpostorArgs, LightArgs, PruneArgs, ShadowArgs, baseline_name, frame_camera, parse_size, parse_vec3,
+    scene_failed, shadow_primitives, shadow_summary, write_png,
 };
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
@@ -54,6 +54,14 @@ fn turn_sun(sun: Vec3, key: KeyCode) -> Vec3 {
     }
     let elevation = elevation.clamp(-85f32.to_radians(), 85f32.to_radians());
     Vec3::new(azimuth.sin() * elevation.cos(), elevation.sin(), azimuth.cos() * elevation.cos())
+}
+
+/// Key `H`: shadows off, keeping their settings in `last`, or back on with `last`.
+fn toggle_shadows(shadows: &mut Option<Shadows>, last: &mut Shadows) {
+    match shadows.take() {
+        Some(on) => *last = on,
+        None => *shadows = Some(*last),
+    }
 }
 
 /// Vertical field of view (as `treelod render`'s default).
@@ -93,6 +101,8 @@ pub struct Args {
     pub prune: PruneArgs,
     #[command(flatten)]
     pub light: LightArgs,
+    #[command(flatten)]
+    pub shadow: ShadowArgs,
     #[command(flatten)]
     pub impostor: ImpostorArgs,
     /// Start with impostor planes on (key `I`) for trees whose containers have them.
@@ -138,8 +148,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         return Err(Failed { class: ErrorClass::Io });
     };
     write_png(path, &image)?;
-    report::write_stdout(&format!(
-        "{}: {}x{}, {} of {} instance(s) visible, {} triangles, {} points\n",
+    let mut line = format!(
+        "{}: {}x{}, {} of {} instance(s) visible, {} triangles, {} points",
         path.display(),
         image.width,
         image.height,
@@ -147,7 +157,13 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         scene.instances.len(),
         stats.triangles,
         stats.points
-    ))
+    );
+    if stats.shadow.cascades > 0 {
+        line.push_str("; ");
+        line.push_str(&shadow_summary(&stats));
+    }
+    line.push('\n');
+    report::write_stdout(&line)
 }
 
 /// A winit error message without the source location winit prefixes to operating-system errors
@@ -226,6 +242,11 @@ struct Viewer {
     config: wgpu::SurfaceConfiguration,
     depth: wgpu::TextureView,
     renderer: Renderer,
+    /// The ground under the scene's instances, drawn while shadows are on (made once the
+    /// instances are set: it sizes itself from their bounds).
+    ground: Ground,
+    /// The shadow settings key `H` turns back on (the last ones on).
+    last_shadows: Shadows,
     input: PathBuf,
     instances: usize,
     /// Eye position, metres.
@@ -330,9 +351,12 @@ impl Viewer {
             ..Settings::default()
         };
         args.light.apply(&mut settings);
+        args.shadow.apply(&mut settings);
         args.impostor.apply(&mut settings);
+        let last_shadows = settings.shadows.unwrap_or_default();
         let mut renderer = Renderer::new(&device, formats, settings);
         let bounds = scene::add_to_renderer(scene, &device, &queue, &mut renderer).map_err(|e| scene_failed(&e))?;
+        let ground = Ground::under_instances(&device, &renderer);
 
         let fovy = FOVY_DEGREES.to_radians();
         let start = frame_camera(bounds, args.eye, args.target, fovy, config.width, config.height);
@@ -347,6 +371,8 @@ impl Viewer {
             config,
             depth,
             renderer,
+            ground,
+            last_shadows,
             input: args.input.clone(),
             instances: scene.instances.len(),
             position: start.position,
@@ -415,6 +441,7 @@ impl Viewer {
             KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
             KeyCode::KeyI => settings.impostors = !settings.impostors,
             KeyCode::KeyM => settings.impostor_morph = !settings.impostor_morph,
+            KeyCode::KeyH => toggle_shadows(&mut settings.shadows, &mut self.last_shadows),
             KeyCode::ArrowLeft | KeyCode::ArrowRight | KeyCode::ArrowUp | KeyCode::ArrowDown => {
                 settings.sun = turn_sun(settings.sun, code);
             }
@@ -502,10 +529,13 @@ impl Viewer {
         self.stats = self.renderer.prepare(&self.device, &self.queue, &camera);
         let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
         let view = texture.texture.create_view(&wgpu::TextureViewDescriptor::default());
-        draw_pass(&mut encoder, &view, &self.depth, &self.renderer);
+        // The shadow maps, drawn before (and sampled by) the passes below.
+        self.renderer.render_shadows(&mut encoder);
+        let ground = self.renderer.settings().shadows.is_some().then_some((&self.ground, &self.queue, &camera));
+        draw_pass(&mut encoder, &view, &self.depth, &self.renderer, ground);
         self.renderer.measure_occlusion(&self.device, &mut encoder, &self.depth);
         let capture = match screenshot {
-            Some(_) if self.frames + 1 >= frames => Some(Capture::record(self, &mut encoder)),
+            Some(_) if self.frames + 1 >= frames => Some(Capture::record(self, &mut encoder, &camera)),
             _ => None,
         };
         self.queue.submit([encoder.finish()]);
@@ -578,6 +608,16 @@ impl Viewer {
         if let Some((l_min, l_max)) = settings.shading {
             mode.push_str(&format!(" | self-shadow {l_min}..{l_max}"));
         }
+        match settings.shadows {
+            Some(shadows) => mode.push_str(&format!(
+                " | shadows on: {}x{}² to {} m, {} primitives",
+                self.stats.shadow.cascades,
+                shadows.resolution,
+                shadows.distance,
+                shadow_primitives(&self.stats.shadow)
+            )),
+            None => mode.push_str(" | shadows off"),
+        }
         let name = self.input.file_name().map_or_else(|| self.input.display().to_string(), |n| n.display().to_string());
         self.window.set_title(&format!(
             "{name} | {fps:.1} fps | {} of {} instances | {} triangles | {} points | s_min {} s_max {} k {}{mode}",
@@ -595,12 +635,14 @@ impl Viewer {
     }
 }
 
-/// Clears `color` to white and `depth` to far, and records the renderer's draws.
+/// Clears `color` to white and `depth` to far, and records the renderer's draws, after the
+/// `ground` (seen by the camera; its uniform written with the queue) if given.
 fn draw_pass(
     encoder: &mut wgpu::CommandEncoder,
     color: &wgpu::TextureView,
     depth: &wgpu::TextureView,
     renderer: &Renderer,
+    ground: Option<(&Ground, &wgpu::Queue, &Camera)>,
 ) {
     let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some("treelod view"),
@@ -617,6 +659,9 @@ fn draw_pass(
         }),
         ..wgpu::RenderPassDescriptor::default()
     });
+    if let Some((ground, queue, camera)) = ground {
+        ground.render(queue, &mut pass, renderer, camera);
+    }
     renderer.render(&mut pass);
 }
 
@@ -655,7 +700,7 @@ struct Capture {
 }
 
 impl Capture {
-    fn record(viewer: &Viewer, encoder: &mut wgpu::CommandEncoder) -> Self {
+    fn record(viewer: &Viewer, encoder: &mut wgpu::CommandEncoder, camera: &Camera) -> Self {
         let (width, height) = (viewer.config.width, viewer.config.height);
         let texture = viewer.device.create_texture(&wgpu::TextureDescriptor {
             label: Some("treelod view screenshot"),
@@ -668,7 +713,8 @@ impl Capture {
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        draw_pass(encoder, &view, &viewer.depth, &viewer.renderer);
+        let ground = viewer.renderer.settings().shadows.is_some().then_some((&viewer.ground, &viewer.queue, camera));
+        draw_pass(encoder, &view, &viewer.depth, &viewer.renderer, ground);
         let readback = Readback::record(&viewer.device, encoder, &texture);
         // The format was chosen readable when a screenshot is asked for.
         Self { readback, bgra: bgra(viewer.config.format).unwrap_or(false) }
@@ -711,6 +757,16 @@ mod tests {
         assert!((up.length() - 1.0).abs() < 1e-6);
         let down = turn_sun(start, KeyCode::ArrowDown);
         assert!((down.y.asin().to_degrees() - 30.0).abs() < 1e-3, "45° − 15°: {down}");
+    }
+
+    #[test]
+    fn key_h_turns_shadows_off_and_back_on_with_the_same_settings() {
+        let custom = Shadows { resolution: 512, cascades: 2, distance: 40.0, ..Shadows::default() };
+        let (mut shadows, mut last) = (Some(custom), Shadows::default());
+        toggle_shadows(&mut shadows, &mut last);
+        assert_eq!((shadows, last), (None, custom));
+        toggle_shadows(&mut shadows, &mut last);
+        assert_eq!(shadows, Some(custom));
     }
 
     #[test]

@@ -1090,6 +1090,87 @@ fn render_debug_kinds_colours_triangles_red_and_points_blue() {
     assert_eq!(read_png(&cells).0, 64);
 }
 
+/// The number after `prefix` in `text` (e.g. `shadow pass: ` → the cascades).
+fn count_after(text: &str, prefix: &str) -> Option<u64> {
+    let rest = &text[text.find(prefix)? + prefix.len()..];
+    rest.split(|c: char| !c.is_ascii_digit()).next()?.parse().ok()
+}
+
+#[test]
+fn render_shadows_draws_a_shadowed_ground_and_reports_the_shadow_pass() {
+    let demo = shared_demo();
+    let dir = scratch("render-shadows");
+    let plain = dir.join("plain.png");
+    let shadowed = dir.join("shadows.png");
+    render_ok(demo, &plain, &["--size", "128x96"]);
+    let stdout = render_ok(demo, &shadowed, &["--size", "128x96", "--shadows"]);
+    let line = stdout.lines().last().unwrap_or_default();
+    assert!(line.starts_with(&format!("{}: 128x96, 1 of 1 instance(s) visible, ", shadowed.display())), "{stdout}");
+    let shadow = &line[line.find("; shadow pass: ").unwrap_or_else(|| panic!("a shadow pass: {line}"))..];
+    assert_eq!(count_after(shadow, "shadow pass: "), Some(3), "the default cascades: {line}");
+    let primitives: u64 = ["cascade(s), ", "triangles, ", "points, ", "planes, "]
+        .iter()
+        .map(|before| count_after(shadow, before).unwrap_or_else(|| panic!("{before:?}: {line}")))
+        .sum();
+    assert!(primitives > 0, "the shadow pass draws the tree: {line}");
+    assert!(line.contains("× the main pass's primitives)"), "{line}");
+
+    // The ground under the tree covers much of the image, and somewhere it is in the tree's shadow.
+    let (width, height, pixels) = read_png(&shadowed);
+    assert_eq!((width, height), (128, 96));
+    let (_, _, plain_pixels) = read_png(&plain);
+    assert_ne!(pixels, plain_pixels, "shadows and a ground change the image");
+    let drawn = |pixels: &[[u8; 4]]| pixels.iter().filter(|p| !close_to(**p, [255, 255, 255])).count();
+    assert!(drawn(&pixels) > drawn(&plain_pixels) + 1000, "the ground is drawn");
+    // The sunlit ground is flat and of one colour, the most common one; shadowed ground is the
+    // same colour darker (the same fraction of each linear channel).
+    let mut counts = std::collections::HashMap::new();
+    for p in pixels.iter().filter(|p| !close_to(**p, [255, 255, 255])) {
+        *counts.entry(*p).or_insert(0usize) += 1;
+    }
+    let lit = counts.iter().max_by_key(|&(_, n)| *n).map(|(p, _)| *p).expect("pixels drawn");
+    let linear = |c: u8| {
+        let c = f64::from(c) / 255.0;
+        if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+    };
+    let shade = |p: &[u8; 4]| -> Option<f64> {
+        let k: Vec<f64> = (0..3).map(|i| linear(p[i]) / linear(lit[i]).max(1e-6)).collect();
+        let (lo, hi) = (k.iter().copied().fold(f64::MAX, f64::min), k.iter().copied().fold(0.0, f64::max));
+        (hi - lo < 0.08).then_some((lo + hi) / 2.0)
+    };
+    let in_shadow = pixels.iter().filter(|p| shade(p).is_some_and(|k| k < 0.75)).count();
+    assert!(in_shadow > 30, "the tree shadows the ground: {in_shadow} pixels (lit ground {lit:?})");
+
+    // A value option implies --shadows; the cascades are as asked.
+    let one = dir.join("one.png");
+    let stdout = render_ok(demo, &one, &["--size", "64x48", "--shadow-cascades", "1", "--shadow-resolution", "256"]);
+    assert_eq!(count_after(&stdout, "; shadow pass: "), Some(1), "{stdout}");
+    // Without shadows the line has no shadow pass.
+    assert!(!render_ok(demo, &plain, &["--size", "64x48"]).contains("shadow pass"));
+}
+
+#[test]
+fn render_refuses_bad_shadow_options_naming_them() {
+    let demo = shared_demo();
+    let bad: [&[&str]; 6] = [
+        &["--shadow-cascades", "0"],
+        &["--shadow-cascades", "5"],
+        &["--shadow-resolution", "0"],
+        &["--shadow-resolution", "8193"],
+        &["--shadow-distance", "-1"],
+        &["--shadow-distance", "nan"],
+    ];
+    for extra in bad {
+        let mut args = vec!["render", demo.to_str().expect("UTF-8"), "-o", "x.png", "--shadows"];
+        args.extend_from_slice(extra);
+        let out = treelod(&args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{extra:?}: {err}");
+        assert!(err.contains(&format!("invalid value '{}' for '{}", extra[1], extra[0])), "{extra:?}: {err}");
+        assert!(!err.contains("panicked"), "{extra:?}: {err}");
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // `view`: a window, under Xvfb (xvfb-run and xauth are required: .ci/run installs them).
 
@@ -1117,6 +1198,29 @@ fn view_screenshot_under_xvfb_is_window_sized_and_shows_the_tree() {
     assert!(close_to(pixels[0], [255, 255, 255]), "the corner is the white background: {:?}", pixels[0]);
     let drawn = pixels.iter().filter(|p| !close_to(**p, [255, 255, 255])).count();
     assert!(drawn > 100, "the tree covers pixels: {drawn}");
+}
+
+#[test]
+fn view_screenshot_with_shadows_draws_the_ground_and_reports_the_shadow_pass() {
+    let demo = shared_demo();
+    let dir = scratch("view-shadows");
+    let png = dir.join("view.png");
+    let out = Command::new("xvfb-run")
+        .args(["-a", env!("CARGO_BIN_EXE_treelod"), "view"])
+        .arg(demo)
+        .arg("--screenshot")
+        .arg(&png)
+        .args(["--frames", "3", "--size", "160x120", "--shadows", "--shadow-cascades", "2"])
+        .output()
+        .expect("xvfb-run runs (install xvfb and xauth, as .ci/run does)");
+    let err = stderr(&out);
+    assert!(out.status.success(), "view failed (needs Xvfb and a Vulkan adapter, e.g. mesa-vulkan-drivers): {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let stdout = stdout(&out);
+    assert_eq!(count_after(&stdout, "; shadow pass: "), Some(2), "{stdout}");
+    let (_, _, pixels) = read_png(&png);
+    let drawn = pixels.iter().filter(|p| !close_to(**p, [255, 255, 255])).count();
+    assert!(drawn > pixels.len() / 3, "the ground covers much of the window: {drawn} of {}", pixels.len());
 }
 
 #[test]
