@@ -796,14 +796,19 @@ impl Renderer {
             ("sample_count", f64::from(formats.sample_count.max(1))),
             ("crossfade", f64::from(treelod_runtime::CROSSFADE)),
         ];
-        let constants = || wgpu::PipelineCompilationOptions {
-            constants: &overrides,
-            ..wgpu::PipelineCompilationOptions::default()
-        };
-        let pipeline = |label: &str, vs: &str, fs: &str| {
+        // The shadow pass: depth only, one sample, a slope-scaled bias against self-shadowing.
+        let caster_overrides = [("sample_count", 1.0), ("crossfade", f64::from(treelod_runtime::CROSSFADE))];
+        let colour_target =
+            [Some(wgpu::ColorTargetState { format: formats.color, blend: None, write_mask: wgpu::ColorWrites::ALL })];
+        // A pipeline of the host's pass, or (`caster`) of the shadow pass.
+        let pipeline = |label: &str, vs: &str, fs: &str, caster: bool| {
+            let constants = || wgpu::PipelineCompilationOptions {
+                constants: if caster { &caster_overrides } else { &overrides },
+                ..wgpu::PipelineCompilationOptions::default()
+            };
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
-                layout: Some(&layout),
+                layout: Some(if caster { &caster_layout } else { &layout }),
                 vertex: wgpu::VertexState {
                     module: &module,
                     entry_point: Some(vs),
@@ -817,14 +822,18 @@ impl Renderer {
                     ..wgpu::PrimitiveState::default()
                 },
                 depth_stencil: Some(wgpu::DepthStencilState {
-                    format: formats.depth,
+                    format: if caster { SHADOW_FORMAT } else { formats.depth },
                     depth_write_enabled: Some(true),
                     depth_compare: Some(wgpu::CompareFunction::Less),
                     stencil: wgpu::StencilState::default(),
-                    bias: wgpu::DepthBiasState::default(),
+                    bias: if caster {
+                        wgpu::DepthBiasState { constant: 2, slope_scale: 2.0, clamp: 0.0 }
+                    } else {
+                        wgpu::DepthBiasState::default()
+                    },
                 }),
                 multisample: wgpu::MultisampleState {
-                    count: formats.sample_count.max(1),
+                    count: if caster { 1 } else { formats.sample_count.max(1) },
                     mask: !0,
                     alpha_to_coverage_enabled: false,
                 },
@@ -832,66 +841,23 @@ impl Renderer {
                     module: &module,
                     entry_point: Some(fs),
                     compilation_options: constants(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: formats.color,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
+                    targets: if caster { &[] } else { &colour_target },
                 }),
                 multiview_mask: None,
                 cache: None,
             })
         };
-        let triangle_pipeline = pipeline("treelod triangles", "vs_triangle", "fs_triangle");
-        let point_pipeline = pipeline("treelod points", "vs_point", "fs_point");
-        let pruned_pipeline = pipeline("treelod pruned leaves and bark", "vs_pruned", "fs_triangle");
-        let plane_pipeline = pipeline("treelod impostor planes", "vs_plane", "fs_plane");
-        let billboard_pipeline = pipeline("treelod baseline billboards", "vs_billboard", "fs_plane");
-        // The shadow pass: depth only, one sample, a slope-scaled bias against self-shadowing.
-        let caster_overrides = [("sample_count", 1.0), ("crossfade", f64::from(treelod_runtime::CROSSFADE))];
-        let caster = |label: &str, vs: &str, fs: &str| {
-            let options = || wgpu::PipelineCompilationOptions {
-                constants: &caster_overrides,
-                ..wgpu::PipelineCompilationOptions::default()
-            };
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&caster_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some(vs),
-                    compilation_options: options(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    cull_mode: None,
-                    ..wgpu::PrimitiveState::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: SHADOW_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: wgpu::StencilState::default(),
-                    bias: wgpu::DepthBiasState { constant: 2, slope_scale: 2.0, clamp: 0.0 },
-                }),
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(fs),
-                    compilation_options: options(),
-                    targets: &[],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
+        let triangle_pipeline = pipeline("treelod triangles", "vs_triangle", "fs_triangle", false);
+        let point_pipeline = pipeline("treelod points", "vs_point", "fs_point", false);
+        let pruned_pipeline = pipeline("treelod pruned leaves and bark", "vs_pruned", "fs_triangle", false);
+        let plane_pipeline = pipeline("treelod impostor planes", "vs_plane", "fs_plane", false);
+        let billboard_pipeline = pipeline("treelod baseline billboards", "vs_billboard", "fs_plane", false);
         let shadow_pipelines = [
-            caster("treelod shadow triangles", "vs_triangle", "fs_shadow_triangle"),
-            caster("treelod shadow points", "vs_point", "fs_shadow_point"),
-            caster("treelod shadow pruned leaves and bark", "vs_pruned", "fs_shadow_triangle"),
-            caster("treelod shadow impostor planes", "vs_plane", "fs_shadow_plane"),
-            caster("treelod shadow billboards", "vs_billboard", "fs_shadow_plane"),
+            pipeline("treelod shadow triangles", "vs_triangle", "fs_shadow_triangle", true),
+            pipeline("treelod shadow points", "vs_point", "fs_shadow_point", true),
+            pipeline("treelod shadow pruned leaves and bark", "vs_pruned", "fs_shadow_triangle", true),
+            pipeline("treelod shadow impostor planes", "vs_plane", "fs_shadow_plane", true),
+            pipeline("treelod shadow billboards", "vs_billboard", "fs_shadow_plane", true),
         ];
         let shadow_maps = ShadowMaps::new(device, &shadow_layout, 1, 1);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {

@@ -5,24 +5,20 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, bark_triangles, gpu, one_tree, precision_recall};
+use common::{BACKGROUND, bark_triangles, demo_built, gpu, one_tree, precision_recall};
 use glam::{Vec3, vec3};
-use treelod_build::{BuildConfig, DemoTreeConfig, ImpostorConfig, LodChainConfig, Placed, build_block, demo_tree};
-use treelod_format::{Compression, Container};
+use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig};
+use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, render_image};
 use treelod_render::{Baseline, BillboardKind, Camera, DrawSource, ImpostorBark, Renderer, Settings};
 
 /// The demo tree built with its baselines (and the impostors that set the billboards' budget).
 fn demo_with_baselines() -> Arc<Container> {
-    let scene = demo_tree(&DemoTreeConfig::default());
-    let config = BuildConfig {
+    demo_built(&BuildConfig {
         impostors: Some(ImpostorConfig::default()),
         baselines: Some(LodChainConfig::default()),
         ..BuildConfig::default()
-    };
-    let built =
-        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
-    Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
+    })
 }
 
 fn centre(container: &Container) -> Vec3 {

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{BACKGROUND, bark_triangles, covered, gpu, one_tree, precision_recall};
+use common::{BACKGROUND, bark_triangles, covered, demo_built, gpu, one_tree, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
 use treelod_format::{Compression, Container};
@@ -410,13 +410,7 @@ fn msaa_draws_the_full_mesh_closer_to_the_supersampled_image() {
 
 /// The demo tree built with impostor planes (the default levels and atlas).
 fn demo_with_impostors() -> std::sync::Arc<Container> {
-    let scene = demo_tree(&DemoTreeConfig::default());
-    let config = BuildConfig { impostors: Some(treelod_build::ImpostorConfig::default()), ..BuildConfig::default() };
-    let built =
-        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
-    std::sync::Arc::new(
-        Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"),
-    )
+    demo_built(&BuildConfig { impostors: Some(treelod_build::ImpostorConfig::default()), ..BuildConfig::default() })
 }
 
 #[test]

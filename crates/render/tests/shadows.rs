@@ -6,12 +6,10 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, gpu};
+use common::{BACKGROUND, demo_built, gpu};
 use glam::{Mat4, Vec3, vec3};
-use treelod_build::{
-    BuildConfig, DemoTreeConfig, ImpostorConfig, LodChainConfig, Placed, PruneConfig, build_block, demo_tree,
-};
-use treelod_format::{Compression, Container};
+use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig, PruneConfig};
+use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, Image, render_prepared_scene};
 use treelod_render::{
     Baseline, BillboardKind, Camera, FrameStats, Ground, Instance, Pruning, Renderer, Settings, Shadows,
@@ -19,16 +17,12 @@ use treelod_render::{
 
 /// The demo tree with every representation: points, pruning lists, impostors and baselines.
 fn demo_everything() -> Arc<Container> {
-    let scene = demo_tree(&DemoTreeConfig::default());
-    let config = BuildConfig {
+    demo_built(&BuildConfig {
         prune: Some(PruneConfig::default()),
         impostors: Some(ImpostorConfig::default()),
         baselines: Some(LodChainConfig::default()),
         ..BuildConfig::default()
-    };
-    let built =
-        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
-    Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
+    })
 }
 
 fn keep(image: &Image, name: &str) {

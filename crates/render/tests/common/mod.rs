@@ -5,8 +5,9 @@
 
 use std::sync::Arc;
 
-use glam::Mat4;
-use treelod_format::Container;
+use glam::{Mat4, Vec3};
+use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
+use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, Image};
 use treelod_render::{Instance, Renderer, Settings};
 
@@ -48,4 +49,12 @@ pub fn bark_triangles(container: &Container) -> u64 {
         container.materials()[t.material as usize].class == treelod_format::material_class::LEAF
     };
     container.triangles().iter().filter(|t| !leaf(t)).count() as u64
+}
+
+/// The default demo tree built with `config`, opened from its uncompressed bytes.
+pub fn demo_built(config: &BuildConfig) -> Arc<Container> {
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let built =
+        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], config, "test").expect("builds");
+    Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
 }
