@@ -1174,19 +1174,25 @@ fn render_refuses_bad_shadow_options_naming_them() {
 // ---------------------------------------------------------------------------------------------
 // `view`: a window, under Xvfb (xvfb-run and xauth are required: .ci/run installs them).
 
+/// `treelod view INPUT --screenshot PNG --frames 3 --size 160x120 EXTRA...` under Xvfb.
+fn view_screenshot(input: &Path, png: &Path, extra: &[&str]) -> Output {
+    Command::new("xvfb-run")
+        .args(["-a", env!("CARGO_BIN_EXE_treelod"), "view"])
+        .arg(input)
+        .arg("--screenshot")
+        .arg(png)
+        .args(["--frames", "3", "--size", "160x120"])
+        .args(extra)
+        .output()
+        .expect("xvfb-run runs (install xvfb and xauth, as .ci/run does)")
+}
+
 #[test]
 fn view_screenshot_under_xvfb_is_window_sized_and_shows_the_tree() {
     let demo = shared_demo();
     let dir = scratch("view");
     let png = dir.join("view.png");
-    let out = Command::new("xvfb-run")
-        .args(["-a", env!("CARGO_BIN_EXE_treelod"), "view"])
-        .arg(demo)
-        .arg("--screenshot")
-        .arg(&png)
-        .args(["--frames", "3", "--size", "160x120"])
-        .output()
-        .expect("xvfb-run runs (install xvfb and xauth, as .ci/run does)");
+    let out = view_screenshot(demo, &png, &[]);
     let err = stderr(&out);
     assert!(out.status.success(), "view failed (needs Xvfb and a Vulkan adapter, e.g. mesa-vulkan-drivers): {err}");
     assert!(!err.contains("panicked"), "{err}");
@@ -1205,14 +1211,7 @@ fn view_screenshot_with_shadows_draws_the_ground_and_reports_the_shadow_pass() {
     let demo = shared_demo();
     let dir = scratch("view-shadows");
     let png = dir.join("view.png");
-    let out = Command::new("xvfb-run")
-        .args(["-a", env!("CARGO_BIN_EXE_treelod"), "view"])
-        .arg(demo)
-        .arg("--screenshot")
-        .arg(&png)
-        .args(["--frames", "3", "--size", "160x120", "--shadows", "--shadow-cascades", "2"])
-        .output()
-        .expect("xvfb-run runs (install xvfb and xauth, as .ci/run does)");
+    let out = view_screenshot(demo, &png, &["--shadows", "--shadow-cascades", "2"]);
     let err = stderr(&out);
     assert!(out.status.success(), "view failed (needs Xvfb and a Vulkan adapter, e.g. mesa-vulkan-drivers): {err}");
     assert!(!err.contains("panicked"), "{err}");
