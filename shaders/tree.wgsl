@@ -317,12 +317,28 @@ fn coverage_mask(coverage: f32, fragment: vec4<f32>) -> u32 {
     if n >= sample_count {
         return 0xFFFFFFFFu;
     }
-    let p = vec2<u32>(fragment.xy);
-    let start = ((p.x * 1973u) ^ (p.y * 9277u) ^ (bitcast<u32>(fragment.z) * 0x5bd1e995u)) * 2654435761u >> 16u;
-    let shift = start % sample_count;
+    let shift = (pixel_depth_hash(fragment) >> 16u) % sample_count;
     let run = (1u << n) - 1u;
     let all = (1u << sample_count) - 1u;
     return ((run << shift) | (run >> (sample_count - shift))) & all;
+}
+
+// A hash of the fragment's pixel and depth: surfaces at different depths over one pixel get
+// independent values.
+fn pixel_depth_hash(fragment: vec4<f32>) -> u32 {
+    let p = vec2<u32>(fragment.xy);
+    return ((p.x * 1973u) ^ (p.y * 9277u) ^ (bitcast<u32>(fragment.z) * 0x5bd1e995u)) * 2654435761u;
+}
+
+// The share of the pixel an alpha-tested fragment stands for, `footprint` texels per pixel.
+// Alpha-tested images have binary alpha filtered into their mips (textures.rs), so a minified
+// texel's alpha is the fraction of its footprint that is opaque: covering that fraction keeps a
+// distant canopy's density where a test against the cutoff thins it out. Magnified (a texel over
+// a pixel or more) the test itself keeps edges crisp; in between the two blend over one mip level.
+fn filtered_coverage(alpha: f32, cutoff: f32, footprint: f32) -> f32 {
+    let minified = clamp(log2(max(footprint, 1e-6)), 0.0, 1.0);
+    let tested = select(0.0, 1.0, alpha >= cutoff);
+    return mix(tested, alpha, minified);
 }
 
 // The samples an alpha-tested fragment covers (0: discard it): with one sample the test of
@@ -335,36 +351,41 @@ fn alpha_mask(alpha: f32, cutoff: f32, footprint: f32, clip: vec4<f32>) -> u32 {
             mask = 0u;
         }
     } else {
-        // Alpha to coverage. Alpha-tested images have binary alpha filtered into their mips
-        // (textures.rs), so a minified texel's alpha is the fraction of its footprint that is
-        // opaque: covering that fraction of the samples keeps a distant canopy's density where a
-        // test against the cutoff thins it out. Magnified (a texel over a pixel or more) the
-        // test itself keeps edges crisp; in between the two blend over one mip level.
-        let minified = clamp(log2(max(footprint, 1e-6)), 0.0, 1.0);
-        let tested = select(0.0, 1.0, alpha >= cutoff);
-        let coverage = mix(tested, alpha, minified);
-        mask = coverage_mask(coverage, clip);
+        // Alpha to coverage.
+        mask = coverage_mask(filtered_coverage(alpha, cutoff, footprint), clip);
     }
     return mask;
 }
 
 // Interleaved gradient noise (Jimenez 2014) of the pixel, in [0, 1): the dither of the
-// cross-fade and of the shadow pass's alpha.
+// cross-fade.
 fn dither(fragment: vec4<f32>) -> f32 {
     return fract(52.9829189 * fract(dot(floor(fragment.xy), vec2<f32>(0.06711056, 0.00583715))));
+}
+
+// A triangle's albedo: its material's colour, times its vertex colour and its texture if it has
+// one. Call it in uniform control flow (the texture is sampled with implicit derivatives).
+fn triangle_albedo(material: MaterialGpu, in: Varyings) -> vec4<f32> {
+    let texel = textureSample(textures, linear_sampler, in.uv, max(material.layer, 0));
+    return material.base_color * in.color * select(vec4<f32>(1.0), texel, material.layer >= 0);
+}
+
+// The alpha cutoff of a material: masked and blended materials are alpha-tested (blend is drawn
+// as a mask at 0.5); opaque ones get -1, which passes everything.
+fn material_cutoff(material: MaterialGpu) -> f32 {
+    return select(select(material.alpha_cutoff, 0.5, material.alpha_mode == 2u), -1.0, material.alpha_mode == 0u);
+}
+
+// Texels of the material textures per pixel at `uv` (derivatives: uniform control flow).
+fn texel_footprint(uv: vec2<f32>) -> f32 {
+    return max(length(dpdx(uv)), length(dpdy(uv))) * f32(textureDimensions(textures).x);
 }
 
 @fragment
 fn fs_triangle(in: Varyings) -> TriangleOut {
     let material = materials[in.material];
-    // Sampled unconditionally: implicit derivatives need uniform control flow.
-    let texel = textureSample(textures, linear_sampler, in.uv, max(material.layer, 0));
-    let albedo = material.base_color * in.color * select(vec4<f32>(1.0), texel, material.layer >= 0);
-    // Masked and blended materials are alpha-tested (blend is drawn as a mask at 0.5).
-    let cutoff = select(select(material.alpha_cutoff, 0.5, material.alpha_mode == 2u), -1.0, material.alpha_mode == 0u);
-    // Texels per pixel, for alpha to coverage (derivatives need uniform control flow).
-    let footprint = max(length(dpdx(in.uv)), length(dpdy(in.uv))) * f32(textureDimensions(textures).x);
-    let mask = alpha_mask(albedo.a, cutoff, footprint, in.clip);
+    let albedo = triangle_albedo(material, in);
+    let mask = alpha_mask(albedo.a, material_cutoff(material), texel_footprint(in.uv), in.clip);
     if mask == 0u {
         discard;
     }
@@ -403,31 +424,25 @@ fn fs_point(in: Varyings) -> @location(0) vec4<f32> {
     return vec4<f32>(shade(in.color.rgb, in.normal, in.world) * in.tint, 1.0);
 }
 
+// A value in [0, 1) per pixel and depth, for the shadow pass's stochastic tests: surfaces at
+// different depths over one texel get independent values, so their coverages add up as
+// overlapping layers do (a value of the texel alone would let every layer cover the same share).
+fn layered_dither(fragment: vec4<f32>) -> f32 {
+    return f32(pixel_depth_hash(fragment) >> 8u) / 16777216.0;
+}
+
 // The shadow pass (depth only, one pass per cascade, `frame` holding the light's view): the same
 // vertex stages, and fragment stages that keep what the colour pass keeps. Alpha-tested leaves:
 // where their texture is minified (a texel under a shadow-map texel), a test at the cutoff would
 // thin a distant canopy's shadow as it would its image, so they are kept where their filtered
 // alpha (the covered fraction) exceeds the texel's dither value: on average the leaves cover in
 // the map what they cover in the world.
-// A value in [0, 1) per pixel and depth, for the shadow pass's stochastic tests: surfaces at
-// different depths over one texel get independent values, so their coverages add up as
-// overlapping layers do (a value of the texel alone would let every layer cover the same share).
-fn layered_dither(fragment: vec4<f32>) -> f32 {
-    let p = vec2<u32>(fragment.xy);
-    let h = ((p.x * 1973u) ^ (p.y * 9277u) ^ (bitcast<u32>(fragment.z) * 0x5bd1e995u)) * 2654435761u;
-    return f32(h >> 8u) / 16777216.0;
-}
-
 @fragment
 fn fs_shadow_triangle(in: Varyings) {
     let material = materials[in.material];
-    let texel = textureSample(textures, linear_sampler, in.uv, max(material.layer, 0));
-    let alpha = material.base_color.a * in.color.a * select(1.0, texel.a, material.layer >= 0);
-    let cutoff = select(select(material.alpha_cutoff, 0.5, material.alpha_mode == 2u), -1.0, material.alpha_mode == 0u);
-    let footprint = max(length(dpdx(in.uv)), length(dpdy(in.uv))) * f32(textureDimensions(textures).x);
-    let minified = clamp(log2(max(footprint, 1e-6)), 0.0, 1.0);
-    let coverage = mix(select(0.0, 1.0, alpha >= cutoff), alpha, minified);
-    if cutoff >= 0.0 && coverage <= layered_dither(in.clip) {
+    let alpha = triangle_albedo(material, in).a;
+    let cutoff = material_cutoff(material);
+    if cutoff >= 0.0 && filtered_coverage(alpha, cutoff, texel_footprint(in.uv)) <= layered_dither(in.clip) {
         discard;
     }
 }

@@ -500,7 +500,8 @@ pub struct Renderer {
     shadow_maps: ShadowMaps,
     /// This frame's cascades (empty without shadows).
     cascades: Vec<Cascade>,
-    /// World bounds of the instances (their bounding spheres), for the cascades' casters.
+    /// World bounds of the instances (their transformed blocks), for the cascades' casters and
+    /// [`Renderer::instance_bounds`].
     scene_bounds: Option<(Vec3, Vec3)>,
     sampler: wgpu::Sampler,
     /// The atlases' sampler: clamped, so a region's edge never wraps to the atlas's far side,
@@ -1386,38 +1387,23 @@ impl Renderer {
             self.visible_fraction = vec![1.0; self.instances.len()];
         }
         // The union of the instances' transformed blocks (their container's bounds).
-        self.scene_bounds = self
-            .instances
-            .iter()
-            .filter_map(|i| {
-                let block = self.models.get(i.model as usize)?.container.block();
-                let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
-                (0..8)
-                    .map(|k| {
-                        let corner = Vec3::new(
-                            if k & 1 == 0 { min.x } else { max.x },
-                            if k & 2 == 0 { min.y } else { max.y },
-                            if k & 4 == 0 { min.z } else { max.z },
-                        );
-                        let p = i.transform.transform_point3(corner);
-                        (p, p)
-                    })
-                    .reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)))
-            })
-            .reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)));
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for instance in &self.instances {
+            let block = self.models[instance.model as usize].container.block();
+            let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+            let (a, b) = transformed_bounds(instance.transform, min, max);
+            (lo, hi) = (lo.min(a), hi.max(b));
+        }
+        self.scene_bounds = (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then_some((lo, hi));
         self.gpu_instances_stale = true;
     }
 
-    /// Which instances are drawn with impostor planes this frame ([`Settings::impostors`]): fills
-    /// `plane_draws`, and `pruned` with their bark, for instances whose model has planes, and
+    /// Which instances are drawn with impostor planes this frame ([`Settings::impostors`]): appends to
+    /// `view`'s `plane_draws`, and `pruned` with their bark, for instances whose model has planes, and
     /// `spt_instances`/`spt_map` with the others. Returns the impostor instances inside the
     /// frustum.
     fn select_impostors(&mut self, view: &mut View, camera: &treelod_runtime::Camera) -> u32 {
         let frustum = Frustum::from_view_proj(camera.view_proj);
-        view.plane_draws.clear();
-        view.pruned.clear();
-        view.spt_instances.clear();
-        view.spt_map.clear();
         let mut visible = 0;
         for (i, instance) in self.instances.iter().enumerate() {
             let index = u32::try_from(i).unwrap_or(u32::MAX);
@@ -1456,16 +1442,12 @@ impl Renderer {
         visible
     }
 
-    /// Which instances are drawn with a baseline this frame ([`Settings::baseline`]): fills
-    /// `pruned` with LoD chain draws or `billboard_draws` for instances whose model has the
+    /// Which instances are drawn with a baseline this frame ([`Settings::baseline`]): appends to
+    /// `view`'s `pruned` with LoD chain draws or `billboard_draws` for instances whose model has the
     /// baseline, and `spt_instances`/`spt_map` with the others. Returns the baseline instances
     /// inside the frustum.
     fn select_baseline(&mut self, view: &mut View, baseline: Baseline, camera: &treelod_runtime::Camera) -> u32 {
         let frustum = Frustum::from_view_proj(camera.view_proj);
-        view.pruned.clear();
-        view.billboard_draws.clear();
-        view.spt_instances.clear();
-        view.spt_map.clear();
         let mut visible = 0;
         for (i, instance) in self.instances.iter().enumerate() {
             let index = u32::try_from(i).unwrap_or(u32::MAX);
@@ -1524,8 +1506,8 @@ impl Renderer {
         visible
     }
 
-    /// Which instances are drawn pruned this frame (see [`Pruning`]): fills `pruned` with their
-    /// draws and `spt_instances`/`spt_map` with the others. Returns the pruned instances inside
+    /// Which instances are drawn pruned this frame (see [`Pruning`]): appends to `view`'s `pruned`
+    /// their draws and `spt_instances`/`spt_map` with the others. Returns the pruned instances inside
     /// the frustum and the leaves they draw. Only the camera's view (`main`) holds `λ` between
     /// frames and lists trees for the occlusion test.
     fn select_pruned(
@@ -1537,9 +1519,6 @@ impl Renderer {
     ) -> (u32, u64) {
         let frustum = Frustum::from_view_proj(camera.view_proj);
         let world_per_pixel = camera.world_per_pixel();
-        view.pruned.clear();
-        view.spt_instances.clear();
-        view.spt_map.clear();
         if main {
             self.occlusion_jobs.clear();
         }
@@ -1843,8 +1822,8 @@ impl Renderer {
         stats
     }
 
-    /// Selects one view: the trees drawn pruned, with impostors or a baseline per `modes`, and
-    /// the others with the sequential point trees. `main`: the camera's view (see
+    /// Selects one view (its lists cleared first): the trees drawn pruned, with impostors or a
+    /// baseline per `modes`, and the others with the sequential point trees. `main`: the camera's view (see
     /// [`Self::select_pruned`]).
     fn select_view(
         &mut self,
@@ -1858,6 +1837,8 @@ impl Renderer {
         view.pruned.clear();
         view.billboard_draws.clear();
         view.plane_draws.clear();
+        view.spt_instances.clear();
+        view.spt_map.clear();
         if let Some(pruning) = &modes.pruning {
             (counts.instances_pruned, counts.leaves_pruned) = self.select_pruned(view, pruning, camera, main);
         }
@@ -2292,7 +2273,7 @@ impl Renderer {
     }
 
     /// World bounds (min, max) of the instances: the union of their containers' block bounds,
-    /// transformed; `None` without instances.
+    /// transformed; `None` without instances (or with only empty or non-finite blocks).
     #[must_use]
     pub fn instance_bounds(&self) -> Option<(Vec3, Vec3)> {
         self.scene_bounds
@@ -2347,6 +2328,26 @@ fn record_direct(
     };
     buckets[BUCKETS * record.model.0 as usize + kind].push((info, first_vertex, vertices));
     recorded.push(record);
+}
+
+/// The axis-aligned bounds of the box `min..max` transformed by `transform`; an empty or
+/// non-finite box gives an empty result (`+inf..-inf`).
+fn transformed_bounds(transform: Mat4, min: Vec3, max: Vec3) -> (Vec3, Vec3) {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    if !(min.is_finite() && max.is_finite() && min.cmple(max).all()) {
+        return (lo, hi);
+    }
+    for corner in 0..8 {
+        let p = Vec3::new(
+            if corner & 1 == 0 { min.x } else { max.x },
+            if corner & 2 == 0 { min.y } else { max.y },
+            if corner & 4 == 0 { min.z } else { max.z },
+        );
+        let q = transform.transform_point3(p);
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    (lo, hi)
 }
 
 /// Number of leading `values` (sorted largest first) above `tau`.
@@ -2446,4 +2447,20 @@ fn frame_bind_groups(
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transformed_bounds_cover_the_rotated_box() {
+        let t = Mat4::from_rotation_y(std::f32::consts::FRAC_PI_4);
+        let (lo, hi) = transformed_bounds(t, Vec3::splat(-1.0), Vec3::splat(1.0));
+        let r = std::f32::consts::SQRT_2;
+        assert!((hi - Vec3::new(r, 1.0, r)).length() < 1e-5, "{hi}");
+        assert!((lo + Vec3::new(r, 1.0, r)).length() < 1e-5, "{lo}");
+        let (lo, hi) = transformed_bounds(t, Vec3::ONE, Vec3::ZERO);
+        assert!(lo.x > hi.x, "an empty box stays empty");
+    }
 }

@@ -178,16 +178,11 @@ pub fn fit_cascades(camera: &Camera, sun: Vec3, shadows: &Shadows, scene: Option
             local.x = (local.x / texel).round() * texel;
             local.y = (local.y / texel).round() * texel;
             let centre = unbasis.transform_point3(local);
-            // Casters towards the sun beyond the sphere: up to the scene's farthest corner.
+            // Casters towards the sun beyond the sphere: up to the scene's farthest corner along
+            // the sun (its centre's distance plus the half-extents projected on |sun|).
             let reach = scene.map_or(radius, |(min, max)| {
-                let corners = (0..8).map(|i| {
-                    Vec3::new(
-                        if i & 1 == 0 { min.x } else { max.x },
-                        if i & 2 == 0 { min.y } else { max.y },
-                        if i & 4 == 0 { min.z } else { max.z },
-                    )
-                });
-                corners.map(|c| (c - centre).dot(sun)).fold(radius, f32::max)
+                let farthest = (0.5 * (min + max) - centre).dot(sun) + (0.5 * (max - min)).dot(sun.abs());
+                farthest.max(radius)
             });
             let eye = centre + sun * reach;
             let view = glam::camera::rh::view::look_to_mat4(eye, -sun, up_ref);

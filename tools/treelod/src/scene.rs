@@ -356,7 +356,6 @@ pub fn add_to_renderer(
     renderer: &mut Renderer,
 ) -> Result<(Vec3, Vec3), SceneError> {
     let mut ids = Vec::with_capacity(scene.models.len());
-    let mut model_bounds = Vec::with_capacity(scene.models.len());
     for path in &scene.models {
         if path.is_dir() {
             return Err(SceneError::Invalid {
@@ -365,47 +364,19 @@ pub fn add_to_renderer(
             });
         }
         let container = Container::open(path).map_err(|source| SceneError::Container { path: path.clone(), source })?;
-        let block = container.block();
-        model_bounds.push((Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max)));
         let id = renderer
             .add_model(device, queue, Arc::new(container))
             .map_err(|source| SceneError::Render { path: path.clone(), source })?;
         ids.push(id);
     }
-    let mut instances = Vec::with_capacity(scene.instances.len());
-    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    for instance in &scene.instances {
-        // `load` checks the indices; a hand-made `Scene` with a bad one is skipped, not a panic.
-        let (Some(&model), Some(&(min, max))) = (ids.get(instance.model), model_bounds.get(instance.model)) else {
-            continue;
-        };
-        instances.push(Instance { model, transform: instance.transform });
-        let (a, b) = transformed_bounds(instance.transform, min, max);
-        lo = lo.min(a);
-        hi = hi.max(b);
-    }
+    // `load` checks the indices; a hand-made `Scene` with a bad one is skipped, not a panic.
+    let instances: Vec<Instance> = scene
+        .instances
+        .iter()
+        .filter_map(|instance| Some(Instance { model: *ids.get(instance.model)?, transform: instance.transform }))
+        .collect();
     renderer.set_instances(&instances);
-    if lo.is_finite() && hi.is_finite() && lo.cmple(hi).all() { Ok((lo, hi)) } else { Ok((Vec3::ZERO, Vec3::ZERO)) }
-}
-
-/// The axis-aligned bounds of the box `min..max` transformed by `transform`; an empty or
-/// non-finite box gives an empty result (`+inf..-inf`).
-fn transformed_bounds(transform: Mat4, min: Vec3, max: Vec3) -> (Vec3, Vec3) {
-    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    if !(min.is_finite() && max.is_finite() && min.cmple(max).all()) {
-        return (lo, hi);
-    }
-    for corner in 0..8 {
-        let p = Vec3::new(
-            if corner & 1 == 0 { min.x } else { max.x },
-            if corner & 2 == 0 { min.y } else { max.y },
-            if corner & 4 == 0 { min.z } else { max.z },
-        );
-        let q = transform.transform_point3(p);
-        lo = lo.min(q);
-        hi = hi.max(q);
-    }
-    (lo, hi)
+    Ok(renderer.instance_bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO)))
 }
 
 #[cfg(test)]
@@ -550,16 +521,5 @@ mod tests {
         let Err(e) = load(&dir) else { panic!("a directory is no scene") };
         assert_eq!(e.class(), ErrorClass::Io);
         let _ = std::fs::remove_dir_all(&dir);
-    }
-
-    #[test]
-    fn transformed_bounds_cover_the_rotated_box() {
-        let t = Mat4::from_rotation_y(std::f32::consts::FRAC_PI_4);
-        let (lo, hi) = transformed_bounds(t, Vec3::splat(-1.0), Vec3::splat(1.0));
-        let r = std::f32::consts::SQRT_2;
-        assert!((hi - Vec3::new(r, 1.0, r)).length() < 1e-5, "{hi}");
-        assert!((lo + Vec3::new(r, 1.0, r)).length() < 1e-5, "{lo}");
-        let (lo, hi) = transformed_bounds(t, Vec3::ONE, Vec3::ZERO);
-        assert!(lo.x > hi.x, "an empty box stays empty");
     }
 }
