@@ -25,8 +25,17 @@ struct Frame {
     // 1: impostor planes morph towards their parents and cross-fade with them
     // (Settings::impostor_morph).
     morph: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // 1: the ambient share is scaled by the precomputed ambient occlusion
+    // (Settings::ambient_occlusion).
+    ambient_occlusion: u32,
+    _pad: u32,
+}
+
+// A vertex as uploaded: the record, then its ambient occlusion (spec §6.14; 0 without).
+// Rust twin: VertexGpu in crates/render/src/renderer.rs.
+struct VertexGpu {
+    record: VertexRecord,
+    ao: f32,
 }
 
 
@@ -34,7 +43,7 @@ struct Frame {
 @group(0) @binding(1) var<storage, read> draws: array<DrawInfo>;
 @group(0) @binding(2) var<storage, read> triangles: array<TriangleRecord>;
 @group(0) @binding(3) var<storage, read> points: array<PointRecord>;
-@group(1) @binding(0) var<storage, read> vertices: array<VertexRecord>;
+@group(1) @binding(0) var<storage, read> vertices: array<VertexGpu>;
 @group(1) @binding(1) var<storage, read> materials: array<MaterialGpu>;
 @group(1) @binding(2) var textures: texture_2d_array<f32>;
 @group(1) @binding(3) var linear_sampler: sampler;
@@ -74,6 +83,9 @@ struct Varyings {
     // World position the shadow maps are looked up at (a splat's centre: splats are shadowed
     // whole, as the points they stand for).
     @location(7) world: vec3<f32>,
+    // Precomputed ambient occlusion (spec §6.14): interpolated over triangles, one per splat or
+    // plane.
+    @location(8) ao: f32,
 }
 
 // A colour per cell index, for `debug = 1`.
@@ -89,9 +101,11 @@ fn offscreen() -> Varyings {
 }
 
 // One corner of triangle `tri`: vertex `v`, placed at `p` (model space).
-fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, v: VertexRecord, p: vec3<f32>) -> Varyings {
+fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, vertex: VertexGpu, p: vec3<f32>) -> Varyings {
+    let v = vertex.record;
     let world = draw.model * vec4<f32>(p, 1.0);
     var out: Varyings;
+    out.ao = vertex.ao;
     out.clip = frame.view_proj * world;
     out.world = world.xyz;
     out.normal = normalize((draw.model * vec4<f32>(decode_normal(v.normal), 0.0)).xyz);
@@ -112,7 +126,7 @@ fn vs_triangle(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index
     let draw = draws[draw_index];
     let tri = triangles[vertex_index / 3u];
     let v = vertices[tri.indices[vertex_index % 3u]];
-    return triangle_corner(draw, tri, v, vec3<f32>(v.position[0], v.position[1], v.position[2]));
+    return triangle_corner(draw, tri, v, vec3<f32>(v.record.position[0], v.record.position[1], v.record.position[2]));
 }
 
 // Pruned leaves (scaled by `leaf_scale` about their leaf's centre, spec §6.11) and bark.
@@ -121,7 +135,7 @@ fn vs_pruned(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) 
     let draw = draws[draw_index];
     let tri = extra_triangles[vertex_index / 3u];
     let v = vertices[tri.indices[vertex_index % 3u]];
-    var p = vec3<f32>(v.position[0], v.position[1], v.position[2]);
+    var p = vec3<f32>(v.record.position[0], v.record.position[1], v.record.position[2]);
     if draw.leaf_scale != 1.0 {
         let leaf = prune_leaves[tri.leaf];
         let centre = vec3<f32>(leaf.center[0], leaf.center[1], leaf.center[2]);
@@ -163,6 +177,8 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     out.normal = normalize((draw.model * vec4<f32>(decode_normal(point.normal), 0.0)).xyz);
     out.uv = vec2<f32>(0.0);
     out.color = decode_color(point.color);
+    // As uploaded, `flags` holds the point's ambient-occlusion byte.
+    out.ao = f32(point.flags & 255u) / 255.0;
     out.material = 0xFFFFFFFFu;
     // A splat at the one-pixel minimum is a square: a disc inscribed in one pixel misses its centre
     // a fifth of the time.
@@ -225,6 +241,8 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     let normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
     var out = quad_corner(draw, world, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
     out.keep = keep;
+    // As uploaded, `leaf_count` holds the plane's ambient-occlusion byte.
+    out.ao = f32(plane.leaf_count & 255u) / 255.0;
     return out;
 }
 
@@ -249,6 +267,7 @@ fn quad_corner(
     out.material = 0xFFFFFFFFu;
     out.disc = vec2<f32>(0.0);
     out.keep = vec2<f32>(0.0, 2.0);
+    out.ao = 0.0;
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = kinds; }
@@ -284,14 +303,16 @@ fn vs_billboard(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
 }
 
 // Two-sided Lambert with ambient: leaves are lit from both faces; the sun's share is what the
-// shadow maps let through at `world` (shared/shadow.wgsl).
-fn shade(albedo: vec3<f32>, normal: vec3<f32>, world: vec3<f32>) -> vec3<f32> {
+// shadow maps let through at `world` (shared/shadow.wgsl), the ambient share what the
+// precomputed ambient occlusion `ao` lets through.
+fn shade(albedo: vec3<f32>, normal: vec3<f32>, world: vec3<f32>, ao: f32) -> vec3<f32> {
     let diffuse = abs(dot(normalize(normal), frame.sun.xyz));
     var sun = 0.0;
     if diffuse > 0.0 {
         sun = diffuse * sunlit(world, normal, frame.sun.xyz);
     }
-    return albedo * (frame.sun.w + (1.0 - frame.sun.w) * sun * frame.sun_colour.xyz);
+    let ambient = frame.sun.w * select(1.0, 1.0 - ao, frame.ambient_occlusion == 1u);
+    return albedo * (ambient + (1.0 - frame.sun.w) * sun * frame.sun_colour.xyz);
 }
 
 // MSAA samples of the target (set by the pipeline). With more than one, alpha-tested materials
@@ -393,7 +414,7 @@ fn fs_triangle(in: Varyings) -> TriangleOut {
         return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
     }
     // The tint is the cell's estimated self-shadowing when shaded.
-    return TriangleOut(vec4<f32>(shade(albedo.rgb, in.normal, in.world) * in.tint, 1.0), mask);
+    return TriangleOut(vec4<f32>(shade(albedo.rgb, in.normal, in.world, in.ao) * in.tint, 1.0), mask);
 }
 
 // An impostor plane's texel: the baked leaves' colour (linear after the sRGB fetch) and, in
@@ -410,7 +431,7 @@ fn fs_plane(in: Varyings) -> @location(0) vec4<f32> {
     if frame.debug != 0u {
         return vec4<f32>(in.tint, 1.0);
     }
-    return vec4<f32>(shade(texel.rgb, in.normal, in.world) * in.tint, 1.0);
+    return vec4<f32>(shade(texel.rgb, in.normal, in.world, in.ao) * in.tint, 1.0);
 }
 
 @fragment
@@ -421,7 +442,7 @@ fn fs_point(in: Varyings) -> @location(0) vec4<f32> {
     if frame.debug != 0u {
         return vec4<f32>(in.tint, 1.0);
     }
-    return vec4<f32>(shade(in.color.rgb, in.normal, in.world) * in.tint, 1.0);
+    return vec4<f32>(shade(in.color.rgb, in.normal, in.world, in.ao) * in.tint, 1.0);
 }
 
 // A value in [0, 1) per pixel and depth, for the shadow pass's stochastic tests: surfaces at

@@ -12,8 +12,10 @@ use rayon::prelude::*;
 use treelod_format::{
     BillboardRecord, BlockRecord, CellRecord, ContainerData, ImageRecord, LodLevelRecord, MATERIAL_DOUBLE_SIDED,
     MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, PointRecord, PruneLeafRecord, Range, Setting, Source, Tree,
-    TriangleRecord, VertexRecord, image_format, material_class, pack,
+    TriangleRecord, VertexRecord, encode_ao, image_format, material_class, pack,
 };
+
+use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
 
 use crate::billboard::{Billboards, build_billboards};
 use crate::classify::{ClassifyOptions, classify};
@@ -54,6 +56,10 @@ pub struct BuildConfig {
     /// too, facing and crossed billboards each baked at the texel budget of the tree's impostor
     /// planes ([`crate::billboard`]). Default `None`.
     pub baselines: Option<LodChainConfig>,
+    /// Precomputed ambient occlusion (Clasen et al. 2011 §5, spec §6.14): per vertex by rays
+    /// through the block, per point and plane the mean of their leaves' ([`crate::ambient`]).
+    /// `None` writes none; tools turn it on by default.
+    pub ao: Option<AoConfig>,
     /// Significant bits kept of the written floats ([`crate::precision`]): by default rounded so
     /// that zstd compresses the container about a third smaller; [`Precision::FULL`] keeps every
     /// bit.
@@ -89,6 +95,9 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
     }
     if let Some(impostors) = &config.impostors {
         settings.extend(impostors.settings());
+    }
+    if let Some(ao) = &config.ao {
+        settings.extend(ao.settings());
     }
     if let Some(chain) = &config.baselines {
         settings.extend(chain.settings());
@@ -240,6 +249,9 @@ fn gather(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<Gath
     }
     if let Some(prune) = &config.prune {
         prune.validate()?;
+    }
+    if let Some(ao) = &config.ao {
+        ao.validate()?;
     }
     if let Some(impostors) = &config.impostors {
         impostors.validate()?;
@@ -589,6 +601,15 @@ fn assemble(
     scatter_in_place(&mut vertices, remap);
     vertices.truncate(written_vertices);
     vertices.shrink_to_fit();
+    // Stage: ambient occlusion of the vertices, then of each point (its leaves' mean).
+    let (vertex_ao, point_ao) = match &config.ao {
+        Some(ao) => {
+            let (vertex_ao, point_ao) =
+                block_occlusion(&tris, &order, &vertices, &points, &cells, &material_keys, trees, ao);
+            (Some(vertex_ao), point_ao)
+        }
+        None => (None, Vec::new()),
+    };
     // Stage: the pruned leaves of each cell in priority order, their triangles in leaf order with
     // the vertices written above (every leaf triangle is also in TRIANGLES).
     let (mut prune_leaves, mut prune_triangles) = (Vec::new(), Vec::new());
@@ -645,7 +666,9 @@ fn assemble(
     }
     // Stage: impostors (Garcia 2005): nested planes per tree and their atlas, in the block cell.
     let impostors = match &config.impostors {
-        Some(impostor_config) => block_impostors(&material_keys, &tris, &vertices, trees, impostor_config)?,
+        Some(impostor_config) => {
+            block_impostors(&material_keys, &tris, &vertices, vertex_ao.as_deref(), trees, impostor_config)?
+        }
         None => None,
     };
     // Stage: baselines: each tree's LoD chain (over the written vertices), and its billboards at
@@ -755,7 +778,9 @@ fn assemble(
 
     // Stage: the impostor atlas after the materials' images; the planes point at it.
     let mut planes: Vec<treelod_format::PlaneRecord> = Vec::new();
+    let mut plane_ao = Vec::new();
     if let Some(impostors) = impostors {
+        plane_ao = impostors.plane_ao.iter().map(|&a| encode_ao(a)).collect();
         let atlas = impostors.atlas;
         let index = push_atlas(&mut images, &mut image_data, &atlas);
         planes = impostors.planes.into_iter().map(|p| treelod_format::PlaneRecord { image: index, ..p }).collect();
@@ -844,6 +869,9 @@ fn assemble(
         lod_levels,
         lod_triangles,
         billboards: billboard_records,
+        vertex_ao: vertex_ao.map_or_else(Vec::new, |ao| ao.iter().map(|&a| encode_ao(a)).collect()),
+        point_ao,
+        plane_ao,
         ..ContainerData::default()
     };
     let mut data = data;
@@ -857,21 +885,89 @@ fn block_impostors(
     material_keys: &[(usize, usize, Class)],
     tris: &[Tri],
     vertices: &[VertexRecord],
+    vertex_ao: Option<&[f32]>,
     trees: &[Placed<'_>],
     config: &ImpostorConfig,
 ) -> Result<Option<Impostors>, BuildError> {
     let default_material = Material::default();
     let surfaces = surfaces(material_keys, trees, &default_material);
+    let is_leaf = |t: &&Tri| material_keys[t.material as usize].2 == Class::Leaf;
     let leaves: Vec<LeafTriangle> = tris
         .iter()
-        .filter(|t| material_keys[t.material as usize].2 == Class::Leaf)
+        .filter(is_leaf)
         .map(|t| {
             #[expect(clippy::cast_possible_truncation, reason = "a block holds few trees")]
             let tree = material_keys[t.material as usize].0 as u32;
             LeafTriangle { v: t.v, material: t.material, tree }
         })
         .collect();
-    build_impostors(&ImpostorMesh { vertices, triangles: &leaves, surfaces: &surfaces }, config)
+    let occlusion: Vec<f32> = vertex_ao
+        .map_or_else(Vec::new, |ao| tris.iter().filter(is_leaf).map(|t| triangle_occlusion(ao, t.v)).collect());
+    build_impostors(&ImpostorMesh { vertices, triangles: &leaves, surfaces: &surfaces, occlusion: &occlusion }, config)
+}
+
+/// The ambient occlusion of the written vertices ([`crate::ambient`]), and of each point, encoded:
+/// the mean of its leaves' (their triangles' corners' mean), weighted by their opaque area. A
+/// triangle stops rays by the coverage of its leaf point (spec §6.5's alpha).
+#[expect(clippy::too_many_arguments, reason = "the stage reads the build's arrays")]
+fn block_occlusion(
+    tris: &[Tri],
+    order: &[u32],
+    vertices: &[VertexRecord],
+    points: &[PointRecord],
+    cells: &[CellRecord],
+    material_keys: &[(usize, usize, Class)],
+    trees: &[Placed<'_>],
+    config: &AoConfig,
+) -> (Vec<f32>, Vec<u8>) {
+    // Each written triangle's coverage (its leaf point's alpha) and whether it is two-sided; a
+    // cell's triangles are `order[cell.triangles]`, each with its leaf id in `part`.
+    let mut coverage = vec![1.0f32; tris.len()];
+    for cell in cells {
+        let cell_points = &points[cell.points.as_usize()];
+        let mut alpha_of_leaf = vec![1.0f32; cell.triangles.count as usize];
+        for p in cell_points.iter().filter(|p| p.lo == 0.0 && p.leaf_count == 1) {
+            if let Some(slot) = alpha_of_leaf.get_mut(p.leaf_first as usize) {
+                *slot = f32::from((p.color >> 24) as u8) / 255.0;
+            }
+        }
+        for &id in &order[cell.triangles.as_usize()] {
+            coverage[id as usize] = alpha_of_leaf.get(tris[id as usize].part as usize).copied().unwrap_or(1.0);
+        }
+    }
+    let two_sided = |t: &Tri| {
+        let (tree, material, _) = material_keys[t.material as usize];
+        trees[tree].scene.materials.get(material).is_some_and(|m| m.double_sided)
+    };
+    let rays: Vec<AoTriangle> = tris
+        .iter()
+        .zip(&coverage)
+        .map(|(t, &opacity)| AoTriangle { v: t.v, opacity, two_sided: two_sided(t) })
+        .collect();
+    let vertex_ao = vertex_occlusion(vertices, &rays, config);
+    drop(rays);
+    // Per cell, each leaf's (occlusion × weight, weight) in leaf order, then each point's run.
+    let mut point_ao = vec![0u8; points.len()];
+    for cell in cells {
+        let mut by_leaf = vec![(0.0f32, 0.0f32); cell.triangles.count as usize];
+        for &id in &order[cell.triangles.as_usize()] {
+            let t = &tris[id as usize];
+            let weight = t.size * t.size * coverage[id as usize];
+            if let Some(slot) = by_leaf.get_mut(t.part as usize) {
+                *slot = (triangle_occlusion(&vertex_ao, t.v), weight);
+            }
+        }
+        for (i, p) in cell.points.as_usize().zip(&points[cell.points.as_usize()]) {
+            let leaves = by_leaf.get(p.leaf_first as usize..(p.leaf_first + p.leaf_count) as usize).unwrap_or_default();
+            let mut ao = mean_occlusion(leaves.iter().copied());
+            if leaves.iter().all(|l| l.1 == 0.0) {
+                // Fully transparent leaves: their plain mean.
+                ao = mean_occlusion(leaves.iter().map(|l| (l.0, 1.0)));
+            }
+            point_ao[i] = encode_ao(ao);
+        }
+    }
+    (vertex_ao, point_ao)
 }
 
 /// Appends a baked atlas (impostors, billboards) to `images` and its texels to `image_data`, on a
@@ -929,7 +1025,11 @@ fn block_billboards(
         .collect();
     #[expect(clippy::cast_possible_truncation, reason = "a block holds few trees")]
     let tree_count = trees.len() as u32;
-    build_billboards(&ImpostorMesh { vertices, triangles: &all, surfaces: &surfaces }, tree_count, budget)
+    build_billboards(
+        &ImpostorMesh { vertices, triangles: &all, surfaces: &surfaces, occlusion: &[] },
+        tree_count,
+        budget,
+    )
 }
 
 /// What the per-cell stage hands to the serial one.

@@ -306,7 +306,7 @@ mod tests {
     fn build(vertices: &[VertexRecord], triangles: &[LeafTriangle], trees: u32, budget: &[u64]) -> Billboards {
         let materials = materials();
         let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
-        let mesh = ImpostorMesh { vertices, triangles, surfaces: &surfaces };
+        let mesh = ImpostorMesh { vertices, triangles, surfaces: &surfaces, occlusion: &[] };
         build_billboards(&mesh, trees, budget).unwrap().unwrap()
     }
 
@@ -465,7 +465,7 @@ mod tests {
         assert_eq!(one.records.len(), 12);
         let materials = materials();
         let surfaces = [Surface { material: &materials[0], image: None }];
-        let empty = ImpostorMesh { vertices: &vertices, triangles: &[], surfaces: &surfaces };
+        let empty = ImpostorMesh { vertices: &vertices, triangles: &[], surfaces: &surfaces, occlusion: &[] };
         assert_eq!(build_billboards(&empty, 1, &[100]).unwrap(), None);
     }
 }

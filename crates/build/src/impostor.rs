@@ -217,6 +217,8 @@ pub struct ImpostorMesh<'a> {
     pub triangles: &'a [LeafTriangle],
     /// Per material index of the triangles.
     pub surfaces: &'a [Surface<'a>],
+    /// Ambient occlusion of each triangle ([`crate::ambient`]), or empty for none.
+    pub occlusion: &'a [f32],
 }
 
 /// The atlas image: RGBA8, RGB sRGB-encoded, alpha linear (spec §6.7 format 1).
@@ -254,6 +256,9 @@ pub struct Impostors {
     /// `tree`, up to the largest tree with leaves; a tree without leaves used 0. The texture
     /// budget of the baseline billboards ([`crate::billboard`]).
     pub texels_per_tree: Vec<u64>,
+    /// Ambient occlusion of each plane, in the order of [`Self::planes`]: the mean of its
+    /// triangles' ([`ImpostorMesh::occlusion`]) weighted by area; empty if the mesh has none.
+    pub plane_ao: Vec<f32>,
 }
 
 /// A plane `pᵀn + d = 0` with a unit normal.
@@ -805,7 +810,15 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
     // Stage: the records in SPT order, and the bounds of the quads.
     let (mut bmin, mut bmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     let mut planes = Vec::with_capacity(nodes.len());
+    let mut plane_ao = Vec::new();
     for &i in &spt.order {
+        if !mesh.occlusion.is_empty() {
+            plane_ao.push(crate::ambient::mean_occlusion(placed_triangles(i as usize).map(|(t, [a, b, c])| {
+                #[expect(clippy::cast_possible_truncation, reason = "an area as a weight")]
+                let area = (b - a).cross(c - a).length() as f32;
+                (mesh.occlusion.get(t as usize).copied().unwrap_or(0.0), area)
+            })));
+        }
         let (q, r, s) = (&quads[i as usize], &regions[i as usize], &spt.nodes[i as usize]);
         let centre = q.centre + origin;
         for (su, sv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
@@ -838,6 +851,7 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
         leaves: leaf_count,
         texels_per_metre: density,
         texels_per_tree,
+        plane_ao,
     }))
 }
 
@@ -1446,7 +1460,7 @@ mod tests {
         let surfaces = [Surface { material: &material, image: Some(&image) }];
         let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
         push_quad(&mut vertices, &mut triangles, Vec3::new(0.0, 2.0, 0.0), Vec3::X * 0.5, Vec3::Z * 0.5);
-        let mesh = ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces };
+        let mesh = ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &[] };
         let config = ImpostorConfig { texels_per_metre: 32.0, ..ImpostorConfig::default() };
         let out = build_impostors(&mesh, &config).unwrap().unwrap();
         assert_eq!(out.planes.len(), 1);
@@ -1534,7 +1548,7 @@ mod tests {
         let triangles: Vec<LeafTriangle> =
             leaf_part.triangles.iter().map(|&v| LeafTriangle { v, material: 0, tree: 0 }).collect();
         let surfaces = [Surface { material, image }];
-        let mesh = ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces };
+        let mesh = ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &[] };
         let out = build_impostors(&mesh, &ImpostorConfig::default()).unwrap().unwrap();
         assert_eq!(out.leaves, 4000);
         assert_eq!(out.planes_per_level, [32, 16, 8]);

@@ -5,6 +5,7 @@
 //! ellipsoid levels, Garcia's nested planes) into sequential-point-tree order with each element's
 //! threshold interval, so that every threshold draws an exact cut (spec §10).
 
+pub mod ambient;
 pub mod assemble;
 pub mod billboard;
 pub mod classify;
@@ -22,6 +23,7 @@ pub mod scene;
 pub mod spt;
 pub mod texture;
 
+pub use ambient::AoConfig;
 pub use assemble::{
     BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, build_scenes, prune_report, recorded_settings,
 };

@@ -8,9 +8,10 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
-    BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE,
-    Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneRecord, PointRecord,
-    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    AO_KINDS, BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD,
+    HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneRecord,
+    PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord,
+    VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -431,6 +432,25 @@ impl Container {
     pub fn billboards(&self) -> &[BillboardRecord] {
         self.records(SectionKind::BILLBOARDS)
     }
+
+    /// Ambient occlusion of each vertex (spec §6.14; [`crate::decode_ao`]), empty if the file has
+    /// none; otherwise as long as [`Container::vertices`] (checked at open).
+    #[must_use]
+    pub fn vertex_ao(&self) -> &[u8] {
+        self.raw_bytes(SectionKind::VERTEX_AO)
+    }
+
+    /// Ambient occlusion of each point, empty or as long as [`Container::points`].
+    #[must_use]
+    pub fn point_ao(&self) -> &[u8] {
+        self.raw_bytes(SectionKind::POINT_AO)
+    }
+
+    /// Ambient occlusion of each plane, empty or as long as [`Container::planes`].
+    #[must_use]
+    pub fn plane_ao(&self) -> &[u8] {
+        self.raw_bytes(SectionKind::PLANE_AO)
+    }
 }
 
 fn bad_record(kind: SectionKind, index: usize, reason: String) -> Error {
@@ -725,6 +745,13 @@ pub(crate) fn check_block_and_cells(
             0,
             format!("{} cell records, the grid {grid:?} needs {expected} (cells + block cell)", cells.len()),
         ));
+    }
+    // Spec §6.14: an ambient-occlusion section holds one byte per record of its array.
+    for (kind, of) in AO_KINDS {
+        let (ao, records) = (count(kind), count(of));
+        if ao != 0 && ao != records {
+            return Err(bad_record(kind, 0, format!("{ao} records, {of} has {records}: one per record or none")));
+        }
     }
     for slot in 0..6 {
         let kind = cells[0].ranges()[slot].0;

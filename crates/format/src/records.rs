@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 1;
+pub const MINOR: u16 = 2;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -148,9 +148,15 @@ impl SectionKind {
     pub const LOD_TRIANGLES: Self = Self(0x0051);
     /// Baseline: [`BillboardRecord`]s, camera-facing and crossed billboards per tree (spec §6.13).
     pub const BILLBOARDS: Self = Self(0x0052);
+    /// Ambient occlusion of each `VERTICES` record, one `unorm8` (spec §6.14). Since 1.2.
+    pub const VERTEX_AO: Self = Self(0x0060);
+    /// Ambient occlusion of each `POINTS` record, one `unorm8` (spec §6.14). Since 1.2.
+    pub const POINT_AO: Self = Self(0x0061);
+    /// Ambient occlusion of each `PLANES` record, one `unorm8` (spec §6.14). Since 1.2.
+    pub const PLANE_AO: Self = Self(0x0062);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 19] = [
+    pub const KNOWN: [Self; 22] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -170,6 +176,9 @@ impl SectionKind {
         Self::LOD_LEVELS,
         Self::LOD_TRIANGLES,
         Self::BILLBOARDS,
+        Self::VERTEX_AO,
+        Self::POINT_AO,
+        Self::PLANE_AO,
     ];
 
     /// The spec's name of a known kind.
@@ -195,6 +204,9 @@ impl SectionKind {
             Self::LOD_LEVELS => "LOD_LEVELS",
             Self::LOD_TRIANGLES => "LOD_TRIANGLES",
             Self::BILLBOARDS => "BILLBOARDS",
+            Self::VERTEX_AO => "VERTEX_AO",
+            Self::POINT_AO => "POINT_AO",
+            Self::PLANE_AO => "PLANE_AO",
             _ => return None,
         })
     }
@@ -203,7 +215,7 @@ impl SectionKind {
     #[must_use]
     pub fn record_size(self) -> Option<u32> {
         let size = match self {
-            Self::META | Self::IMAGE_DATA => 1,
+            Self::META | Self::IMAGE_DATA | Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO => 1,
             Self::BLOCK => size_of::<BlockRecord>(),
             Self::CELLS => size_of::<CellRecord>(),
             Self::VERTICES => size_of::<VertexRecord>(),
@@ -225,12 +237,14 @@ impl SectionKind {
     }
 
     /// The minor version of major 1 that introduced this kind (spec §5): 1 for the baselines
-    /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 0 for the other known kinds and for kinds
-    /// this version does not know (private extensions do not raise a file's minor).
+    /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 2 for ambient occlusion (`VERTEX_AO`,
+    /// `POINT_AO`, `PLANE_AO`), 0 for the other known kinds and for kinds this version does not
+    /// know (private extensions do not raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
         match self {
             Self::LOD_LEVELS | Self::LOD_TRIANGLES | Self::BILLBOARDS => 1,
+            Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO => 2,
             _ => 0,
         }
     }
@@ -240,6 +254,30 @@ impl SectionKind {
     pub fn compressible(self) -> bool {
         !matches!(self, Self::BLOCK | Self::CELLS)
     }
+}
+
+/// The ambient-occlusion kinds and the array each one parallels (spec §6.14).
+pub const AO_KINDS: [(SectionKind, SectionKind); 3] = [
+    (SectionKind::VERTEX_AO, SectionKind::VERTICES),
+    (SectionKind::POINT_AO, SectionKind::POINTS),
+    (SectionKind::PLANE_AO, SectionKind::PLANES),
+];
+
+/// Decodes a stored ambient-occlusion byte (spec §6.14) to the share of ambient light that is
+/// blocked, in `[0, 1]`.
+#[must_use]
+pub fn decode_ao(stored: u8) -> f32 {
+    f32::from(stored) / 255.0
+}
+
+/// Encodes a share of ambient light blocked (clamped to `[0, 1]`, NaN as 0) as stored (spec
+/// §6.14): rounded to the nearest of 256 steps.
+#[must_use]
+pub fn encode_ao(occlusion: f32) -> u8 {
+    // `as` saturates and maps NaN to 0.
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 0..=255")]
+    let stored = (occlusion.clamp(0.0, 1.0) * 255.0).round() as u8;
+    stored
 }
 
 impl core::fmt::Display for SectionKind {

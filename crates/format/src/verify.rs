@@ -68,6 +68,8 @@ pub struct VerifyReport {
     pub lod_triangles: u64,
     /// `BILLBOARDS` records checked (baseline).
     pub billboards: u64,
+    /// `VERTEX_AO`, `POINT_AO` and `PLANE_AO` bytes (their counts are checked at open).
+    pub ao: u64,
     /// Leaves whose exact cut was verified, summed over cells and the point, ellipsoid, line and
     /// plane hierarchies (spec §10 rule 2).
     pub cut_leaves: u64,
@@ -99,6 +101,9 @@ impl core::fmt::Display for VerifyReport {
                 "baselines: {} LoD levels, {} LoD triangles, {} billboards",
                 self.lod_levels, self.lod_triangles, self.billboards
             )?;
+        }
+        if self.ao > 0 {
+            writeln!(f, "ambient occlusion: {} values", self.ao)?;
         }
         write!(f, "exact cut: {} leaves, runs nested up to {} deep", self.cut_leaves, self.max_depth)
     }
@@ -176,6 +181,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.lod_levels = c.lod_levels().len() as u64;
     report.lod_triangles = c.lod_triangles().len() as u64;
     report.billboards = c.billboards().len() as u64;
+    report.ao = (c.vertex_ao().len() + c.point_ao().len() + c.plane_ao().len()) as u64;
     Ok(report)
 }
 

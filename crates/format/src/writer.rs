@@ -79,6 +79,12 @@ pub struct ContainerData {
     pub lod_triangles: Vec<TriangleRecord>,
     /// `BILLBOARDS` (baseline).
     pub billboards: Vec<BillboardRecord>,
+    /// `VERTEX_AO`: empty, or one byte per vertex ([`crate::encode_ao`]).
+    pub vertex_ao: Vec<u8>,
+    /// `POINT_AO`: empty, or one byte per point.
+    pub point_ao: Vec<u8>,
+    /// `PLANE_AO`: empty, or one byte per plane.
+    pub plane_ao: Vec<u8>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
     pub extra_sections: Vec<(u32, Vec<u8>)>,
@@ -108,6 +114,9 @@ impl ContainerData {
             lod_levels: c.lod_levels().to_vec(),
             lod_triangles: c.lod_triangles().to_vec(),
             billboards: c.billboards().to_vec(),
+            vertex_ao: c.vertex_ao().to_vec(),
+            point_ao: c.point_ao().to_vec(),
+            plane_ao: c.plane_ao().to_vec(),
             extra_sections: c
                 .sections()
                 .iter()
@@ -389,6 +398,9 @@ macro_rules! optional_sections {
             (SectionKind::LOD_LEVELS, $payload!(lod_levels)),
             (SectionKind::LOD_TRIANGLES, $payload!(lod_triangles)),
             (SectionKind::BILLBOARDS, $payload!(billboards)),
+            (SectionKind::VERTEX_AO, $payload!(vertex_ao)),
+            (SectionKind::POINT_AO, $payload!(point_ao)),
+            (SectionKind::PLANE_AO, $payload!(plane_ao)),
         ]
     };
 }

@@ -79,6 +79,10 @@ pub struct Settings {
     /// Ambient share of the light, 0..1: a surface receives `ambient + (1 − ambient) · |n·l| ·
     /// sun_colour` of its albedo (both faces lit: leaves are cards).
     pub ambient: f32,
+    /// Scale the ambient share by the containers' precomputed ambient occlusion `a` (spec
+    /// §6.14), where they have it: `ambient · (1 − a)`. The sun's share is the shadow maps'
+    /// business ([`Self::shadows`]).
+    pub ambient_occlusion: bool,
     /// Bytes of triangles and points uploaded per frame at most: prefixes grow towards the
     /// selection by this much each frame, emptiest cells first.
     pub upload_budget: u64,
@@ -198,6 +202,7 @@ impl Default for Settings {
             sun: Vec3::new(0.4, 0.8, 0.45),
             sun_colour: Vec3::ONE,
             ambient: 0.35,
+            ambient_occlusion: true,
             upload_budget: 64 << 20,
             memory_budget: 1 << 30,
             pruning: None,
@@ -342,7 +347,9 @@ struct FrameUniform {
     debug: u32,
     /// 1 with [`Settings::impostor_morph`].
     morph: u32,
-    _pad: [u32; 2],
+    /// 1 with [`Settings::ambient_occlusion`].
+    ambient_occlusion: u32,
+    _pad: u32,
 }
 
 /// One draw's constants. WGSL twin: `DrawInfo` in `shaders/tree.wgsl` and `shaders/select.wgsl`.
@@ -363,6 +370,21 @@ pub(crate) struct DrawInfo {
 }
 
 const _: () = assert!(size_of::<DrawInfo>() == 96);
+
+/// A vertex as the shaders read it: the record, then its ambient occlusion (0 without).
+/// WGSL twin: `VertexGpu` in `shaders/tree.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct VertexGpu {
+    record: treelod_format::VertexRecord,
+    ao: f32,
+}
+
+/// Point `index` of `container` as the pool holds it: its `flags` (reserved in the file, spec
+/// §6.5) carry its ambient-occlusion byte (§6.14), 0 without.
+fn gpu_point(container: &Container, index: usize, point: PointRecord) -> PointRecord {
+    PointRecord { flags: container.point_ao().get(index).copied().map_or(0, u32::from), ..point }
+}
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -1025,7 +1047,18 @@ impl Renderer {
                 material_class: m.class,
             })
             .collect();
-        let vertices = upload("VERTICES", bytemuck::cast_slice(container.vertices()))?;
+        // The vertices as the shaders read them: each record followed by its ambient occlusion.
+        let vertex_ao = container.vertex_ao();
+        let vertices: Vec<VertexGpu> = container
+            .vertices()
+            .iter()
+            .enumerate()
+            .map(|(i, &record)| VertexGpu {
+                record,
+                ao: vertex_ao.get(i).map_or(0.0, |&a| treelod_format::decode_ao(a)),
+            })
+            .collect();
+        let vertices = upload("VERTICES", bytemuck::cast_slice(&vertices))?;
         let materials = upload("MATERIALS", bytemuck::cast_slice(&materials))?;
         // Pruning: the leaves' triangles, then every bark (non-leaf) triangle, and the leaves.
         // Impostors draw the bark triangles too.
@@ -1097,19 +1130,27 @@ impl Renderer {
             None => None,
         };
         // As uploaded, each plane's `leaf_first` (which no shader reads) holds the index of its
-        // parent plane, for the morph between levels (`vs_plane`).
+        // parent plane, for the morph between levels (`vs_plane`), and its `leaf_count` its
+        // ambient occlusion byte (spec §6.14).
         let parents = treelod_runtime::plane_parents(container.planes(), container.cells().iter().map(|c| c.planes));
+        let plane_ao = container.plane_ao();
         let gpu_planes: Vec<treelod_format::PlaneRecord> = container
             .planes()
             .iter()
             .zip(&parents)
-            .map(|(plane, &parent)| treelod_format::PlaneRecord { leaf_first: parent, ..*plane })
+            .enumerate()
+            .map(|(i, (plane, &parent))| treelod_format::PlaneRecord {
+                leaf_first: parent,
+                leaf_count: plane_ao.get(i).copied().map_or(0, u32::from),
+                ..*plane
+            })
             .collect();
         let plane_buffer = upload("PLANES", bytemuck::cast_slice(&gpu_planes))?;
 
         // The roots, pinned in the pool: what a cell draws before its own points are resident.
         let lod = ModelLod::from_container(&container);
-        let roots: Vec<PointRecord> = lod.roots().iter().map(|&i| container.points()[i as usize]).collect();
+        let roots: Vec<PointRecord> =
+            lod.roots().iter().map(|&i| gpu_point(&container, i as usize, container.points()[i as usize])).collect();
         let roots_len = u32::try_from(roots.len()).unwrap_or(u32::MAX);
         let cells = container.cells().len();
         let Some(roots_start) = self.residency.add_model(cells, roots_len) else {
@@ -1762,12 +1803,21 @@ impl Renderer {
             self.wanted[request.model][request.cell] = [0; 2];
         }
         self.grow_pool_buffer(device, queue);
+        let mut points = Vec::new();
         for upload in &self.uploads {
             let Some(model) = self.models.get(upload.model) else { continue };
             let (first, end) = (upload.first as usize, (upload.first + upload.count) as usize);
             let data: &[u8] = match upload.array {
                 Array::Triangles => bytemuck::cast_slice(&model.container.triangles()[first..end]),
-                Array::Points => bytemuck::cast_slice(&model.container.points()[first..end]),
+                Array::Points if model.container.point_ao().is_empty() => {
+                    bytemuck::cast_slice(&model.container.points()[first..end])
+                }
+                Array::Points => {
+                    let records = &model.container.points()[first..end];
+                    points.clear();
+                    points.extend(records.iter().enumerate().map(|(k, &p)| gpu_point(&model.container, first + k, p)));
+                    bytemuck::cast_slice(&points)
+                }
             };
             queue.write_buffer(&self.pool_buffer, upload.offset, data);
         }
@@ -2053,7 +2103,8 @@ impl Renderer {
                 DebugView::Kinds => 2,
             },
             morph: u32::from(settings.impostor_morph),
-            _pad: [0; 2],
+            ambient_occlusion: u32::from(settings.ambient_occlusion),
+            _pad: 0,
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
         for (k, cascade) in self.cascades.iter().enumerate() {

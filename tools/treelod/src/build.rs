@@ -80,6 +80,11 @@ pub struct BuildOptions {
     /// first, strictly decreasing.
     #[arg(long, value_name = "F,F,…", default_value = "0.5,0.25,0.1,0.05,0.01", value_parser = parse_fractions, requires = "baselines")]
     pub lod_fractions: Fractions,
+    /// Ambient-occlusion rays per vertex (Clasen et al. 2011 §5, spec §6.14): each vertex's
+    /// share of the sky that the tree hides, traced through the whole block; points and impostor
+    /// planes get the mean of their leaves'. 0 writes no ambient occlusion.
+    #[arg(long, value_name = "N", default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=4096))]
+    pub ao_rays: u32,
     /// Keep every bit of the written floats. By default positions and texture coordinates keep
     /// 16 significant bits, sizes 12 and normals 10 per component (0.15 mm on a 10 m tree), which
     /// zstd compresses about a third smaller.
@@ -110,6 +115,8 @@ impl BuildOptions {
                 texels_per_metre: self.impostor_texels,
                 ..treelod_build::ImpostorConfig::default()
             }),
+            ao: (self.ao_rays > 0)
+                .then(|| treelod_build::AoConfig { rays: self.ao_rays, ..treelod_build::AoConfig::default() }),
             precision: if self.full_precision {
                 treelod_build::precision::Precision::FULL
             } else {

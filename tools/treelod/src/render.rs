@@ -130,6 +130,10 @@ pub struct LightArgs {
     /// `L_m` at the front of its tree to `L_M` at the back, `L_m,L_M` each in 0..=1 (e.g. `0.6,1`).
     #[arg(long, value_name = "L_m,L_M", value_parser = parse_self_shadow)]
     pub self_shadow: Option<(f32, f32)>,
+    /// Ignore the containers' precomputed ambient occlusion (spec §6.14; `build --ao-rays`):
+    /// the ambient share reaches every surface whole.
+    #[arg(long)]
+    pub no_ao: bool,
 }
 
 impl LightArgs {
@@ -150,6 +154,7 @@ impl LightArgs {
         if self.self_shadow.is_some() {
             settings.shading = self.self_shadow;
         }
+        settings.ambient_occlusion = !self.no_ao;
     }
 }
 

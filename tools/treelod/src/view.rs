@@ -442,6 +442,7 @@ impl Viewer {
             KeyCode::KeyI => settings.impostors = !settings.impostors,
             KeyCode::KeyM => settings.impostor_morph = !settings.impostor_morph,
             KeyCode::KeyH => toggle_shadows(&mut settings.shadows, &mut self.last_shadows),
+            KeyCode::KeyY => settings.ambient_occlusion = !settings.ambient_occlusion,
             KeyCode::ArrowLeft | KeyCode::ArrowRight | KeyCode::ArrowUp | KeyCode::ArrowDown => {
                 settings.sun = turn_sun(settings.sun, code);
             }
@@ -608,6 +609,7 @@ impl Viewer {
         if let Some((l_min, l_max)) = settings.shading {
             mode.push_str(&format!(" | self-shadow {l_min}..{l_max}"));
         }
+        mode.push_str(if settings.ambient_occlusion { " | AO on" } else { " | AO off" });
         match settings.shadows {
             Some(shadows) => mode.push_str(&format!(
                 " | shadows on: {}x{}² to {} m, {} primitives",
