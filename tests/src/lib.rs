@@ -78,7 +78,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.0, zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { lod_levels: 0, billboards: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions { lod_levels: 0, billboards: false, ao: false, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -97,6 +97,14 @@ pub fn golden_files() -> Vec<GoldenFile> {
             minor: 1,
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.1 (1.0's and the baselines), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { ao: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 2,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.2 (1.1's and ambient occlusion), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions::everything(),
             compression: Compression::Zstd { level: 19 },

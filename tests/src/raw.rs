@@ -228,7 +228,8 @@ pub fn layout(parts: &[Part]) -> Vec<u8> {
     let header = Header {
         magic: MAGIC,
         major: MAJOR,
-        minor: MINOR,
+        // The smallest minor whose kinds the file holds (spec §11), as the writer marks it.
+        minor: parts.iter().map(|p| SectionKind(p.kind).since_minor()).max().unwrap_or(0).min(MINOR),
         header_size: HEADER_SIZE as u32,
         section_count: parts.len() as u32,
         table_offset,

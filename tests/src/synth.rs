@@ -54,6 +54,8 @@ pub struct SyntheticOptions {
     /// Kinds of extension sections with random bytes. Known kinds are ignored; the list is sorted
     /// and deduplicated.
     pub extension_kinds: Vec<u32>,
+    /// Ambient occlusion (spec §6.14, 1.2): a random byte per vertex, point and plane.
+    pub ao: bool,
     /// Block name in the metadata; `None` gives `synthetic-<seed in hex>`.
     pub name: Option<String>,
 }
@@ -79,6 +81,7 @@ impl SyntheticOptions {
             png_image: false,
             tree_count: 1,
             extension_kinds: Vec::new(),
+            ao: false,
             name: Some("minimal".into()),
         }
     }
@@ -97,10 +100,10 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.0: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.2: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
-    /// baseline LoD chain and facing and crossed billboards.
+    /// baseline LoD chain and facing and crossed billboards, and ambient occlusion.
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -119,6 +122,7 @@ impl SyntheticOptions {
             png_image: true,
             tree_count: 2,
             extension_kinds: Vec::new(),
+            ao: true,
             name: Some("everything".into()),
         }
     }
@@ -885,6 +889,11 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     for kind in kinds {
         let len = 1 + rng.below(48) as usize;
         b.data.extra_sections.push((kind, rng.bytes(len)));
+    }
+    if options.ao {
+        b.data.vertex_ao = rng.bytes(b.data.vertices.len());
+        b.data.point_ao = rng.bytes(b.data.points.len());
+        b.data.plane_ao = rng.bytes(b.data.planes.len());
     }
     b.data
 }

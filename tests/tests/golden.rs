@@ -23,7 +23,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1] {
+    for minor in [0u16, 1, 2] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -256,7 +256,7 @@ fn the_1_1_every_kind_file_has_every_kind_of_1_1_and_the_baselines_verify() {
     let path = golden_dir_of(1).join("every-kind-zstd.treelod");
     let c = Container::open(&path).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 1, "{kind}");
     }
     assert_eq!(c.header().minor, 1);
     // Two trees, three levels each, and a facing and a crossed quad each.
@@ -269,6 +269,27 @@ fn the_1_1_every_kind_file_has_every_kind_of_1_1_and_the_baselines_verify() {
     (data.lod_levels, data.lod_triangles, data.billboards) = (Vec::new(), Vec::new(), Vec::new());
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 0);
+}
+
+#[test]
+fn the_1_2_every_kind_file_has_every_kind_and_ambient_occlusion_for_every_vertex_point_and_plane() {
+    let path = golden_dir_of(2).join("every-kind-zstd.treelod");
+    let c = Container::open(&path).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 2);
+    assert_eq!(
+        (c.vertex_ao().len(), c.point_ao().len(), c.plane_ao().len()),
+        (c.vertices().len(), c.points().len(), c.planes().len())
+    );
+    // Without its 1.2 sections the same content is a 1.1 file with the same records.
+    let mut data = ContainerData::from_container(&c);
+    (data.vertex_ao, data.point_ao, data.plane_ao) = (Vec::new(), Vec::new(), Vec::new());
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    let older = Container::from_bytes(&bytes).unwrap();
+    assert_eq!(older.header().minor, 1);
+    assert!(older.vertices() == c.vertices() && older.points() == c.points() && older.planes() == c.planes());
 }
 
 #[test]

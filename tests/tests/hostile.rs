@@ -108,6 +108,7 @@ fn small_options() -> SyntheticOptions {
         png_image: false,
         tree_count: 1,
         extension_kinds: vec![0x0001_0000],
+        ao: true,
         name: Some("hostile".into()),
     }
 }
@@ -294,9 +295,9 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds baseline sections, so it is a 1.1 file.
+    // The fixture holds ambient-occlusion sections, so it is a 1.2 file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 1);
+    assert_eq!(minor, 2);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());

@@ -39,6 +39,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 png_image,
                 tree_count,
                 extension_kinds,
+                // Ambient occlusion with half of the grids.
+                ao: grid[0] >= 2,
                 name: None,
             }
         })
