@@ -343,7 +343,10 @@ impl GpuSelection {
         let mut at = 0u64;
         for (container, lod) in containers.iter().zip(lods) {
             let unit = |n: u64| u32::try_from(n).unwrap_or(u32::MAX);
-            let (triangles, points) = (container.triangles(), container.points());
+            // The points with their ambient occlusion in `flags`, as the streamed pool holds them.
+            let mut scratch = Vec::new();
+            let triangles = container.triangles();
+            let points = crate::renderer::gpu_points(container, 0, container.points(), &mut scratch);
             let roots: Vec<PointRecord> = lod.roots().iter().map(|&i| points[i as usize]).collect();
             let triangles_at = at;
             let points_at = triangles_at + u64::try_from(triangles.len()).unwrap_or(0).div_ceil(2);

@@ -386,6 +386,23 @@ fn gpu_point(container: &Container, index: usize, point: PointRecord) -> PointRe
     PointRecord { flags: container.point_ao().get(index).copied().map_or(0, u32::from), ..point }
 }
 
+/// Points `first..` of `container` (`records`) as the pools hold them ([`gpu_point`]): the
+/// file's records themselves where they already are (no `POINT_AO` and every reserved `flags` 0,
+/// which the shaders would otherwise read as occlusion), else rewritten into `scratch`.
+pub(crate) fn gpu_points<'a>(
+    container: &Container,
+    first: usize,
+    records: &'a [PointRecord],
+    scratch: &'a mut Vec<PointRecord>,
+) -> &'a [PointRecord] {
+    if container.point_ao().is_empty() && records.iter().all(|p| p.flags == 0) {
+        return records;
+    }
+    scratch.clear();
+    scratch.extend(records.iter().enumerate().map(|(k, &p)| gpu_point(container, first + k, p)));
+    scratch
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct MaterialGpu {
@@ -1809,15 +1826,12 @@ impl Renderer {
             let (first, end) = (upload.first as usize, (upload.first + upload.count) as usize);
             let data: &[u8] = match upload.array {
                 Array::Triangles => bytemuck::cast_slice(&model.container.triangles()[first..end]),
-                Array::Points if model.container.point_ao().is_empty() => {
-                    bytemuck::cast_slice(&model.container.points()[first..end])
-                }
-                Array::Points => {
-                    let records = &model.container.points()[first..end];
-                    points.clear();
-                    points.extend(records.iter().enumerate().map(|(k, &p)| gpu_point(&model.container, first + k, p)));
-                    bytemuck::cast_slice(&points)
-                }
+                Array::Points => bytemuck::cast_slice(gpu_points(
+                    &model.container,
+                    first,
+                    &model.container.points()[first..end],
+                    &mut points,
+                )),
             };
             queue.write_buffer(&self.pool_buffer, upload.offset, data);
         }
