@@ -1,0 +1,370 @@
+//! Ambient occlusion in the container (spec §6.14): the `VERTEX_AO`, `POINT_AO` and `PLANE_AO`
+//! kinds, the byte encoding, the writer refusing arrays of the wrong length, the reader refusing
+//! such files at open, and files with ambient occlusion round-tripping as format 1.2.
+
+use treelod_format::{
+    AO_KINDS, BlockRecord, CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, MaterialInfo,
+    MaterialRecord, Metadata, NO_IMAGE, PlaneRecord, PointRecord, Range, SectionKind, TriangleRecord, VertexRecord,
+    decode_ao, encode_ao, image_format, pack, verify,
+};
+
+fn range(first: u32, count: u32) -> Range {
+    Range { first, count }
+}
+
+/// One 1×1×1 cell holding one triangle under its leaf point, the block cell one impostor plane
+/// with a 2×2 RGBA8 image; no ambient occlusion. Verifies.
+fn fixture() -> ContainerData {
+    let corners = [[0.2, 0.2, 0.5], [0.6, 0.2, 0.5], [0.2, 0.6, 0.5]];
+    let vertices: Vec<VertexRecord> = corners
+        .iter()
+        .map(|&position| VertexRecord {
+            position,
+            normal: pack::oct_encode([0.0, 0.0, 1.0]),
+            uv: [0.5, 0.5],
+            color: u32::MAX,
+        })
+        .collect();
+    // Area 0.08: size = 2·sqrt(0.08/π).
+    let size = 2.0 * (0.08f32 / std::f32::consts::PI).sqrt();
+    let triangles = vec![TriangleRecord { indices: [0, 1, 2], size, leaf: 0, material: 0 }];
+    let points = vec![PointRecord {
+        position: [0.2 + 0.4 / 3.0, 0.2 + 0.4 / 3.0, 0.5],
+        radius: size / 2.0,
+        normal: pack::oct_encode([0.0, 0.0, 1.0]),
+        color: 0xFF33_9933,
+        size,
+        lo: 0.0,
+        hi: f32::INFINITY,
+        leaf_first: 0,
+        leaf_count: 1,
+        flags: 0,
+    }];
+    let planes = vec![PlaneRecord {
+        center: [0.5, 0.5, 0.5],
+        axis_u: [0.25, 0.0, 0.0],
+        axis_v: [0.0, 0.25, 0.0],
+        image: 0,
+        uv_min: pack::unorm16x2(0.0, 0.0),
+        uv_max: pack::unorm16x2(1.0, 1.0),
+        lo: 0.0,
+        hi: f32::INFINITY,
+        leaf_first: 0,
+        leaf_count: 1,
+    }];
+    let cells = vec![
+        CellRecord {
+            bounds_min: [0.2, 0.2, 0.5],
+            bounds_max: [0.6, 0.6, 0.5],
+            triangles: range(0, 1),
+            points: range(0, 1),
+            ..CellRecord::default()
+        },
+        CellRecord {
+            bounds_min: [0.25, 0.25, 0.5],
+            bounds_max: [0.75, 0.75, 0.5],
+            triangles: range(1, 0),
+            points: range(1, 0),
+            planes: range(0, 1),
+            ..CellRecord::default()
+        },
+    ];
+    ContainerData {
+        metadata: Metadata {
+            generator: "test".into(),
+            name: "ao-fixture".into(),
+            materials: vec![MaterialInfo { name: "leaf".into(), classified_by: "name".into() }],
+            sources: vec![treelod_format::Source::default()],
+            trees: vec![treelod_format::Tree::default()],
+            ..Metadata::default()
+        },
+        block: BlockRecord { bounds_max: [1.0; 3], grid: [1, 1, 1], tree_count: 1, ..BlockRecord::default() },
+        cells,
+        vertices,
+        triangles,
+        points,
+        materials: vec![MaterialRecord {
+            base_color: [0.2, 0.6, 0.1, 1.0],
+            image: NO_IMAGE,
+            alpha_mode: 0,
+            alpha_cutoff: 0.5,
+            class: 1,
+            flags: 1,
+            _pad: 0,
+        }],
+        images: vec![ImageRecord {
+            width: 2,
+            height: 2,
+            mip_count: 1,
+            format: image_format::RGBA8_SRGB,
+            data_offset: 0,
+            data_length: 16,
+        }],
+        image_data: vec![0x80; 16],
+        planes,
+        ..ContainerData::default()
+    }
+}
+
+/// The fixture with a value for every vertex, point and plane.
+fn with_ao() -> ContainerData {
+    ContainerData { vertex_ao: vec![0, 128, 255], point_ao: vec![200], plane_ao: vec![77], ..fixture() }
+}
+
+/// Recomputes every section checksum and the header checksum after a byte-level edit.
+fn reseal(bytes: &mut [u8]) {
+    let count = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
+    let table = u64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes")) as usize;
+    for i in 0..count {
+        let at = table + 48 * i;
+        let offset = u64::from_le_bytes(bytes[at + 8..at + 16].try_into().expect("8 bytes")) as usize;
+        let length = u64::from_le_bytes(bytes[at + 16..at + 24].try_into().expect("8 bytes")) as usize;
+        let crc = crc32fast::hash(&bytes[offset..offset + length]);
+        bytes[at + 36..at + 40].copy_from_slice(&crc.to_le_bytes());
+    }
+    let mut crc = crc32fast::Hasher::new();
+    crc.update(&bytes[..60]);
+    crc.update(&[0; 4]);
+    crc.update(&bytes[table..table + 48 * count]);
+    bytes[60..64].copy_from_slice(&crc.finalize().to_le_bytes());
+}
+
+/// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,
+/// zeroing the bytes that leave or join it (growing the file past its last section), and reseals
+/// the file.
+fn resize_section(bytes: &[u8], kind: SectionKind, delta: i64) -> Vec<u8> {
+    let mut bytes = bytes.to_vec();
+    let count = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
+    let table = u64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes")) as usize;
+    let at = (0..count)
+        .map(|i| table + 48 * i)
+        .find(|&at| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes")) == kind.0)
+        .expect("the section is present");
+    assert_eq!(u32::from_le_bytes(bytes[at + 4..at + 8].try_into().expect("4 bytes")), 0, "stored uncompressed");
+    let offset = u64::from_le_bytes(bytes[at + 8..at + 16].try_into().expect("8 bytes"));
+    let length = u64::from_le_bytes(bytes[at + 16..at + 24].try_into().expect("8 bytes"));
+    let new_length = length.checked_add_signed(delta).expect("a length");
+    assert!(new_length <= length.next_multiple_of(16), "stays within the section's padding");
+    let changed = (offset + length.min(new_length)) as usize..(offset + length.max(new_length)) as usize;
+    if changed.end > bytes.len() {
+        // The file's last section: the file grows with it.
+        bytes.resize(changed.end, 0);
+        let file_size = bytes.len() as u64;
+        bytes[32..40].copy_from_slice(&file_size.to_le_bytes());
+    }
+    bytes[changed].fill(0);
+    bytes[at + 16..at + 24].copy_from_slice(&new_length.to_le_bytes());
+    bytes[at + 24..at + 32].copy_from_slice(&new_length.to_le_bytes());
+    reseal(&mut bytes);
+    bytes
+}
+
+#[test]
+fn the_kinds_are_numbered_named_and_sized_as_the_spec_says() {
+    assert_eq!(MINOR, 2, "ambient occlusion is format 1.2");
+    let expected = [
+        (SectionKind::VERTEX_AO, 0x0060, "VERTEX_AO", SectionKind::VERTICES),
+        (SectionKind::POINT_AO, 0x0061, "POINT_AO", SectionKind::POINTS),
+        (SectionKind::PLANE_AO, 0x0062, "PLANE_AO", SectionKind::PLANES),
+    ];
+    for (i, (kind, value, name, of)) in expected.into_iter().enumerate() {
+        assert_eq!(kind.0, value);
+        assert_eq!(kind.name(), Some(name));
+        assert_eq!(kind.to_string(), name);
+        assert_eq!(kind.record_size(), Some(1), "{name}: one byte per record");
+        assert_eq!(kind.since_minor(), 2, "{name}");
+        assert!(SectionKind::KNOWN.contains(&kind), "{name}");
+        assert_eq!(AO_KINDS[i], (kind, of), "{name} parallels {of}");
+    }
+    // KNOWN stays in ascending order with the new kinds at its end.
+    assert!(SectionKind::KNOWN.windows(2).all(|w| w[0] < w[1]));
+    assert_eq!(SectionKind::KNOWN[SectionKind::KNOWN.len() - 3..], AO_KINDS.map(|(k, _)| k));
+}
+
+#[test]
+fn encode_and_decode_round_trip_clamp_and_map_nan_to_zero() {
+    // Every stored byte survives decode then encode.
+    for b in 0..=255u8 {
+        assert_eq!(encode_ao(decode_ao(b)), b, "byte {b}");
+    }
+    assert_eq!(decode_ao(0), 0.0);
+    assert_eq!(decode_ao(255), 1.0);
+    assert!((decode_ao(51) - 0.2).abs() < 1e-7);
+    // Rounded to the nearest step; halves away from zero (0.5·255 = 127.5 exactly).
+    assert_eq!(encode_ao(0.5), 128);
+    assert_eq!(encode_ao(0.5 / 255.0 - 1e-4), 0);
+    assert_eq!(encode_ao(1.0 / 255.0), 1);
+    assert_eq!(encode_ao(254.4 / 255.0), 254);
+    // Within half a step of the value over [0, 1], and monotone.
+    let mut last = 0u8;
+    for i in 0..=10_000 {
+        let x = i as f32 / 10_000.0;
+        let b = encode_ao(x);
+        assert!((decode_ao(b) - x).abs() <= 0.5 / 255.0 + 1e-6, "{x} → {b}");
+        assert!(b >= last, "monotone at {x}");
+        last = b;
+    }
+    // Clamped to [0, 1]; NaN is 0 (no occlusion).
+    for (x, b) in [
+        (-0.0, 0),
+        (-0.3, 0),
+        (-1e30, 0),
+        (f32::NEG_INFINITY, 0),
+        (1.0, 255),
+        (1.0001, 255),
+        (7.5, 255),
+        (f32::INFINITY, 255),
+        (f32::NAN, 0),
+        (-f32::NAN, 0),
+        (f32::MIN_POSITIVE, 0),
+    ] {
+        assert_eq!(encode_ao(x), b, "{x}");
+    }
+}
+
+#[test]
+fn a_container_with_ao_round_trips_as_format_1_2() {
+    let plain = fixture();
+    for compression in [Compression::None, Compression::default()] {
+        // Without ambient occlusion the file stays 1.0 (no section of a later minor).
+        let bytes = plain.to_bytes(compression).expect("writes");
+        let c = Container::from_bytes(&bytes).expect("opens");
+        verify(&c).expect("the fixture verifies");
+        assert_eq!((c.header().major, c.header().minor), (1, 0));
+        assert!(c.vertex_ao().is_empty() && c.point_ao().is_empty() && c.plane_ao().is_empty());
+        assert!(AO_KINDS.iter().all(|(kind, _)| c.section(*kind).is_none()), "no empty AO section is written");
+
+        let data = with_ao();
+        let bytes = data.to_bytes(compression).expect("writes");
+        let c = Container::from_bytes(&bytes).expect("opens");
+        assert_eq!((c.header().major, c.header().minor), (1, 2), "{compression:?}");
+        assert_eq!(c.vertex_ao(), &[0, 128, 255]);
+        assert_eq!(c.point_ao(), &[200]);
+        assert_eq!(c.plane_ao(), &[77]);
+        for (kind, _) in AO_KINDS {
+            assert_eq!(c.section(kind).expect("present").entry.record_size, 1, "{kind}");
+        }
+        let report = verify(&c).expect("verifies");
+        assert_eq!(report.ao, 5);
+        assert!(report.to_string().contains("ambient occlusion: 5 values"), "{report}");
+        // Read back into data and written again: the same bytes.
+        let back = ContainerData::from_container(&c);
+        assert_eq!(back, data);
+        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+    }
+
+    // Any one of the three kinds makes a 1.2 file; the others read as empty.
+    for (i, (kind, _)) in AO_KINDS.into_iter().enumerate() {
+        let mut data = fixture();
+        match i {
+            0 => data.vertex_ao = vec![1, 2, 3],
+            1 => data.point_ao = vec![4],
+            _ => data.plane_ao = vec![5],
+        }
+        let bytes = data.to_bytes(Compression::None).expect("writes");
+        let c = Container::from_bytes(&bytes).expect("opens");
+        assert_eq!(c.header().minor, 2, "{kind} alone");
+        assert_eq!(c.sections().iter().filter(|s| s.kind().since_minor() == 2).count(), 1, "{kind} alone");
+        assert_eq!(c.vertex_ao().len() + c.point_ao().len() + c.plane_ao().len(), if i == 0 { 3 } else { 1 });
+        verify(&c).expect("verifies");
+    }
+
+    // Through a file on disk, too.
+    let dir = std::env::temp_dir().join(format!("treelod-format-ao-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("creates");
+    let path = dir.join("ao.treelod");
+    with_ao().write_to_path(&path, Compression::default()).expect("writes");
+    let c = Container::open(&path).expect("opens");
+    assert_eq!(
+        (c.header().minor, c.vertex_ao(), c.point_ao(), c.plane_ao()),
+        (2, &[0u8, 128, 255][..], &[200u8][..], &[77u8][..])
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_writer_refuses_ao_arrays_of_another_length_than_their_array() {
+    type Field = fn(&mut ContainerData) -> &mut Vec<u8>;
+    let fields: [(SectionKind, &str, Field); 3] = [
+        (SectionKind::VERTEX_AO, "VERTICES has 3", |d| &mut d.vertex_ao),
+        (SectionKind::POINT_AO, "POINTS has 1", |d| &mut d.point_ao),
+        (SectionKind::PLANE_AO, "PLANES has 1", |d| &mut d.plane_ao),
+    ];
+    let dir = std::env::temp_dir().join(format!("treelod-format-ao-refused-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("creates");
+    for (kind, array, field) in fields {
+        for wrong in [1usize, 2, 4, 9] {
+            let mut data = with_ao();
+            let ao = field(&mut data);
+            if ao.len() == wrong {
+                continue;
+            }
+            ao.resize(wrong, 9);
+            for compression in [Compression::None, Compression::default()] {
+                match data.to_bytes(compression) {
+                    Err(Error::Write(message)) => {
+                        assert!(message.contains(kind.name().expect("known")), "{kind} × {wrong}: {message}");
+                        assert!(message.contains(&format!("{wrong} records")), "{kind} × {wrong}: {message}");
+                        assert!(message.contains(array), "{kind} × {wrong}: {message}");
+                    }
+                    other => panic!("{kind} with {wrong} values: expected Error::Write, got {other:?}"),
+                }
+            }
+            // Nor is a file written.
+            let path = dir.join(format!("{kind}-{wrong}.treelod"));
+            assert!(matches!(data.write_to_path(&path, Compression::default()), Err(Error::Write(_))));
+            assert!(matches!(data.clone().into_path(&path, Compression::default()), Err(Error::Write(_))));
+            assert!(!path.exists(), "{kind} × {wrong}: nothing written");
+        }
+        // Empty is always allowed: no ambient occlusion for that array.
+        let mut data = with_ao();
+        field(&mut data).clear();
+        let bytes = data.to_bytes(Compression::None).expect("writes");
+        assert!(Container::from_bytes(&bytes).expect("opens").section(kind).is_none());
+    }
+    // An AO array for an array that is empty is refused too.
+    let data = ContainerData { plane_ao: vec![1], planes: Vec::new(), ..fixture() };
+    let data =
+        ContainerData { cells: data.cells.iter().map(|c| CellRecord { planes: range(0, 0), ..*c }).collect(), ..data };
+    match data.to_bytes(Compression::None) {
+        Err(Error::Write(message)) => {
+            assert!(message.contains("PLANE_AO") && message.contains("PLANES has 0"), "{message}")
+        }
+        other => panic!("expected Error::Write, got {other:?}"),
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_file_whose_ao_section_is_shorter_or_longer_than_its_array_is_refused_at_open() {
+    let bytes = with_ao().to_bytes(Compression::None).expect("writes");
+    Container::from_bytes(&resize_section(&bytes, SectionKind::VERTEX_AO, 0)).expect("the untouched file opens");
+    let cases = [
+        (SectionKind::VERTEX_AO, -1, "2 records, VERTICES has 3"),
+        (SectionKind::VERTEX_AO, 1, "4 records, VERTICES has 3"),
+        (SectionKind::POINT_AO, 1, "2 records, POINTS has 1"),
+        (SectionKind::PLANE_AO, 5, "6 records, PLANES has 1"),
+    ];
+    for (kind, delta, needle) in cases {
+        let edited = resize_section(&bytes, kind, delta);
+        let err = match Container::from_bytes(&edited) {
+            Ok(c) => panic!("{kind} {delta:+}: opened with {} AO bytes", c.raw_bytes(kind).len()),
+            Err(err) => err,
+        };
+        match &err {
+            Error::BadRecord { kind: k, reason, .. } => {
+                assert_eq!(*k, kind, "{err}");
+                assert!(reason.contains(needle), "{kind} {delta:+}: {err}");
+            }
+            other => panic!("{kind} {delta:+}: expected BadRecord, got {other:?}"),
+        }
+        let message = err.to_string();
+        assert!(message.starts_with(kind.name().expect("known")), "the message names the kind: {message}");
+        assert_eq!(err.class(), treelod_format::ErrorClass::Invalid);
+    }
+    // A zero-length AO section is the same as an absent one.
+    let emptied = resize_section(&bytes, SectionKind::POINT_AO, -1);
+    let c = Container::from_bytes(&emptied).expect("an empty AO section opens");
+    assert!(c.point_ao().is_empty());
+    assert_eq!(c.vertex_ao(), &[0, 128, 255]);
+}
