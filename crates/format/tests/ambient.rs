@@ -2,6 +2,9 @@
 //! kinds, the byte encoding, the writer refusing arrays of the wrong length, the reader refusing
 //! such files at open, and files with ambient occlusion round-tripping as format 1.2.
 
+mod common;
+
+use common::reseal;
 use treelod_format::{
     AO_KINDS, BlockRecord, CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, MaterialInfo,
     MaterialRecord, Metadata, NO_IMAGE, PlaneRecord, PointRecord, Range, SectionKind, TriangleRecord, VertexRecord,
@@ -109,24 +112,6 @@ fn fixture() -> ContainerData {
 /// The fixture with a value for every vertex, point and plane.
 fn with_ao() -> ContainerData {
     ContainerData { vertex_ao: vec![0, 128, 255], point_ao: vec![200], plane_ao: vec![77], ..fixture() }
-}
-
-/// Recomputes every section checksum and the header checksum after a byte-level edit.
-fn reseal(bytes: &mut [u8]) {
-    let count = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
-    let table = u64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes")) as usize;
-    for i in 0..count {
-        let at = table + 48 * i;
-        let offset = u64::from_le_bytes(bytes[at + 8..at + 16].try_into().expect("8 bytes")) as usize;
-        let length = u64::from_le_bytes(bytes[at + 16..at + 24].try_into().expect("8 bytes")) as usize;
-        let crc = crc32fast::hash(&bytes[offset..offset + length]);
-        bytes[at + 36..at + 40].copy_from_slice(&crc.to_le_bytes());
-    }
-    let mut crc = crc32fast::Hasher::new();
-    crc.update(&bytes[..60]);
-    crc.update(&[0; 4]);
-    crc.update(&bytes[table..table + 48 * count]);
-    bytes[60..64].copy_from_slice(&crc.finalize().to_le_bytes());
 }
 
 /// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,

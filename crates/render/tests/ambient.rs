@@ -9,7 +9,7 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, gpu, one_tree};
+use common::{BACKGROUND, gpu, keep, one_tree};
 use glam::{Vec3, vec3};
 use treelod_build::scene::{AlphaMode, Material, Part, Scene};
 use treelod_build::{AoConfig, BuildConfig, ImpostorConfig, Placed, build_block};
@@ -255,14 +255,6 @@ fn close(rgb: [f64; 3], expected: [f32; 3], tolerance: f64) -> bool {
 fn corners(image: &Image) -> Vec<[u8; 4]> {
     let m = image.width - 2;
     vec![image.pixel(1, 1), image.pixel(m, 1), image.pixel(1, m), image.pixel(m, m)]
-}
-
-fn keep(image: &Image, name: &str) {
-    if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
-        let mut ppm = format!("P6 {} {} 255\n", image.width, image.height).into_bytes();
-        ppm.extend(image.rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]));
-        std::fs::write(std::path::Path::new(&dir).join(format!("{name}.ppm")), ppm).expect("writes");
-    }
 }
 
 #[test]

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{BACKGROUND, bark_triangles, covered, demo_built, gpu, one_tree, precision_recall};
+use common::{BACKGROUND, bark_triangles, covered, demo_built, gpu, keep, one_tree, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
 use treelod_format::{Compression, Container};
@@ -24,15 +24,6 @@ fn camera(container: &Container, distance: f32, size: u32) -> Camera {
     let block = container.block();
     let centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
     Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, 0.8, size, size)
-}
-
-/// Writes `image` as a PPM under `$TREELOD_TEST_IMAGES` when that is set, for looking at failures.
-fn keep(image: &Image, name: &str) {
-    if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
-        let mut ppm = format!("P6 {} {} 255\n", image.width, image.height).into_bytes();
-        ppm.extend(image.rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]));
-        std::fs::write(std::path::Path::new(&dir).join(format!("{name}.ppm")), ppm).expect("writes");
-    }
 }
 
 #[test]

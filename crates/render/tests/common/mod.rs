@@ -58,3 +58,12 @@ pub fn demo_built(config: &BuildConfig) -> Arc<Container> {
         build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], config, "test").expect("builds");
     Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
 }
+
+/// Writes `image` as a PPM under `$TREELOD_TEST_IMAGES` when that is set, for looking at failures.
+pub fn keep(image: &Image, name: &str) {
+    if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
+        let mut ppm = format!("P6 {} {} 255\n", image.width, image.height).into_bytes();
+        ppm.extend(image.rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]));
+        std::fs::write(std::path::Path::new(&dir).join(format!("{name}.ppm")), ppm).expect("writes");
+    }
+}
