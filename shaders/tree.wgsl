@@ -178,7 +178,7 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     out.uv = vec2<f32>(0.0);
     out.color = decode_color(point.color);
     // As uploaded, `flags` holds the point's ambient-occlusion byte.
-    out.ao = f32(point.flags & 255u) / 255.0;
+    out.ao = decode_ao(point.flags);
     out.material = 0xFFFFFFFFu;
     // A splat at the one-pixel minimum is a square: a disc inscribed in one pixel misses its centre
     // a fifth of the time.
@@ -242,7 +242,7 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     var out = quad_corner(draw, world, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
     out.keep = keep;
     // As uploaded, `leaf_count` holds the plane's ambient-occlusion byte.
-    out.ao = f32(plane.leaf_count & 255u) / 255.0;
+    out.ao = decode_ao(plane.leaf_count);
     return out;
 }
 

@@ -106,6 +106,12 @@ fn decode_color(packed: u32) -> vec4<f32> {
     return vec4<f32>(select(hi, lo, c.rgb <= vec3<f32>(0.04045)), c.a);
 }
 
+// Ambient occlusion (spec §6.14) from its stored byte, in the low 8 bits of `packed`.
+// Rust twin: treelod_format::decode_ao.
+fn decode_ao(packed: u32) -> f32 {
+    return f32(packed & 255u) / 255.0;
+}
+
 // The point rule of spec §10: inside [lo, hi) at tau_p and not larger than tau_t.
 fn point_drawn(p: PointRecord, tau_p: f32, tau_t: f32) -> bool {
     return p.lo <= tau_p && tau_p < p.hi && p.size <= tau_t;

@@ -97,19 +97,19 @@ pub fn vertex_occlusion(vertices: &[VertexRecord], triangles: &[AoTriangle], con
             used[v as usize] |= 1 | (u8::from(t.two_sided) << 1);
         }
     }
-    let blockers: Vec<(Triangle, f32)> = triangles
+    let (shapes, opacities): (Vec<Triangle>, Vec<f32>) = triangles
         .iter()
         .filter(|t| t.opacity > 0.0)
         .map(|t| (Triangle { v0: position(t.v[0]), v1: position(t.v[1]), v2: position(t.v[2]) }, t.opacity.min(1.0)))
-        .collect();
-    if blockers.is_empty() {
+        .unzip();
+    if shapes.is_empty() {
         return vec![0.0; vertices.len()];
     }
-    let shapes: Vec<Triangle> = blockers.iter().map(|b| b.0).collect();
     let bvh = build_cwbvh_from_tris(&shapes, BvhBuildParams::medium_build(), &mut std::time::Duration::default());
     // The triangles in the BVH's order, so a leaf's index needs no indirection.
-    let ordered: Vec<(Triangle, f32)> = bvh.primitive_indices.iter().map(|&i| blockers[i as usize]).collect();
-    drop((blockers, shapes));
+    let ordered: Vec<(Triangle, f32)> =
+        bvh.primitive_indices.iter().map(|&i| (shapes[i as usize], opacities[i as usize])).collect();
+    drop((shapes, opacities));
 
     let (lo, hi) = vertices.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| {
         let p = Vec3::from_array(v.position);

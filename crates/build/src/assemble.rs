@@ -16,7 +16,6 @@ use treelod_format::{
 };
 
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
-
 use crate::billboard::{Billboards, build_billboards};
 use crate::classify::{ClassifyOptions, classify};
 use crate::error::BuildError;
@@ -959,12 +958,10 @@ fn block_occlusion(
         }
         for (i, p) in cell.points.as_usize().zip(&points[cell.points.as_usize()]) {
             let leaves = by_leaf.get(p.leaf_first as usize..(p.leaf_first + p.leaf_count) as usize).unwrap_or_default();
-            let mut ao = mean_occlusion(leaves.iter().copied());
-            if leaves.iter().all(|l| l.1 == 0.0) {
-                // Fully transparent leaves: their plain mean.
-                ao = mean_occlusion(leaves.iter().map(|l| (l.0, 1.0)));
-            }
-            point_ao[i] = encode_ao(ao);
+            // Fully transparent leaves count equally.
+            let transparent = leaves.iter().all(|l| l.1 == 0.0);
+            point_ao[i] =
+                encode_ao(mean_occlusion(leaves.iter().map(|&(ao, w)| (ao, if transparent { 1.0 } else { w }))));
         }
     }
     (vertex_ao, point_ao)

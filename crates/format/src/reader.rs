@@ -237,7 +237,7 @@ impl Container {
         Ok(container)
     }
 
-    /// Spec §6.1 grid and bounds, §6.2 cell count and tiling.
+    /// Spec §6.1 grid and bounds, §6.2 cell count and tiling, §6.14 ambient-occlusion lengths.
     fn validate_block_and_cells(&self) -> Result<()> {
         check_block_and_cells(self.records(SectionKind::BLOCK), self.cells(), |kind| self.record_count(kind))
     }
@@ -709,8 +709,9 @@ fn decode_shuffled(stored: &[u8], record_size: usize, out: &mut [u8]) -> std::io
     Ok(())
 }
 
-/// Spec §6.1 grid and bounds, §6.2 cell count and tiling: the checks every open makes, shared with
-/// the writer so it never emits a file the reader refuses. `count` gives a section's record count.
+/// Spec §6.1 grid and bounds, §6.2 cell count and tiling, §6.14 ambient-occlusion lengths: the
+/// checks every open makes, shared with the writer so it never emits a file the reader refuses.
+/// `count` gives a section's record count.
 pub(crate) fn check_block_and_cells(
     blocks: &[BlockRecord],
     cells: &[CellRecord],
