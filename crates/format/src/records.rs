@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 2;
+pub const MINOR: u16 = 3;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -134,6 +134,9 @@ impl SectionKind {
     pub const LINES: Self = Self(0x0021);
     /// [`PlaneRecord`]s in SPT order per cell.
     pub const PLANES: Self = Self(0x0030);
+    /// [`PlaneLeafRecord`]s of planes with indirect texturing, per `PLANES` record in order,
+    /// `leaf_count` of them each (spec §6.10.1). Since 1.3.
+    pub const PLANE_LEAVES: Self = Self(0x0031);
     /// [`PruneLeafRecord`]s in priority order per cell.
     pub const PRUNE_LEAVES: Self = Self(0x0040);
     /// [`TriangleRecord`]s of the pruned leaves.
@@ -156,7 +159,7 @@ impl SectionKind {
     pub const PLANE_AO: Self = Self(0x0062);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 22] = [
+    pub const KNOWN: [Self; 23] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -169,6 +172,7 @@ impl SectionKind {
         Self::ELLIPSOIDS,
         Self::LINES,
         Self::PLANES,
+        Self::PLANE_LEAVES,
         Self::PRUNE_LEAVES,
         Self::PRUNE_TRIANGLES,
         Self::PRUNE_SCALE,
@@ -197,6 +201,7 @@ impl SectionKind {
             Self::ELLIPSOIDS => "ELLIPSOIDS",
             Self::LINES => "LINES",
             Self::PLANES => "PLANES",
+            Self::PLANE_LEAVES => "PLANE_LEAVES",
             Self::PRUNE_LEAVES => "PRUNE_LEAVES",
             Self::PRUNE_TRIANGLES => "PRUNE_TRIANGLES",
             Self::PRUNE_SCALE => "PRUNE_SCALE",
@@ -226,6 +231,7 @@ impl SectionKind {
             Self::ELLIPSOIDS => size_of::<EllipsoidRecord>(),
             Self::LINES => size_of::<LineRecord>(),
             Self::PLANES => size_of::<PlaneRecord>(),
+            Self::PLANE_LEAVES => size_of::<PlaneLeafRecord>(),
             Self::PRUNE_LEAVES => size_of::<PruneLeafRecord>(),
             Self::PRUNE_SCALE | Self::PRUNE_LAMBDA => size_of::<CurveSample>(),
             Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
@@ -238,13 +244,15 @@ impl SectionKind {
 
     /// The minor version of major 1 that introduced this kind (spec §5): 1 for the baselines
     /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 2 for ambient occlusion (`VERTEX_AO`,
-    /// `POINT_AO`, `PLANE_AO`), 0 for the other known kinds and for kinds this version does not
-    /// know (private extensions do not raise a file's minor).
+    /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`), 0 for the other known
+    /// kinds and for kinds this version does not know (private extensions do not raise a file's
+    /// minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
         match self {
             Self::LOD_LEVELS | Self::LOD_TRIANGLES | Self::BILLBOARDS => 1,
             Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO => 2,
+            Self::PLANE_LEAVES => 3,
             _ => 0,
         }
     }
@@ -499,6 +507,9 @@ pub mod image_format {
     pub const PNG: u32 = 3;
     /// One JPEG file, decoded on load.
     pub const JPEG: u32 = 4;
+    /// A leaf-distribution image of indirectly textured planes (spec §6.10.1): per texel two
+    /// little-endian `u16` leaf slots, one mip level. Since 1.3.
+    pub const LEAF_SLOTS: u32 = 5;
 }
 
 impl ImageRecord {
@@ -597,6 +608,46 @@ pub struct PlaneRecord {
     pub leaf_count: u32,
 }
 const _: () = assert!(size_of::<PlaneRecord>() == 64);
+
+/// One leaf of an indirectly textured impostor plane (Garcia 2005 §2.3; spec §6.10.1): where the
+/// plane's point `center + s·axis_u + t·axis_v` falls in the leaf's own texture, as the affine map
+/// `uv = uv0 + s·du + t·dv`, and what colours it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PlaneLeafRecord {
+    /// Texture coordinates at the plane's centre (`s = t = 0`).
+    pub uv0: [f32; 2],
+    /// `∂uv/∂s`.
+    pub du: [f32; 2],
+    /// `∂uv/∂t`.
+    pub dv: [f32; 2],
+    /// Index into `MATERIALS`: the leaf's material (its texture, factor and alpha test).
+    pub material: u32,
+    /// RGBA8 (§2): the leaf's mean vertex colour, multiplied with the material's.
+    pub color: u32,
+}
+const _: () = assert!(size_of::<PlaneLeafRecord>() == 32);
+
+/// Where each plane's [`PlaneLeafRecord`]s start in `PLANE_LEAVES` (spec §6.10.1): `base(p) =
+/// Σ_{q < p} leaf_count(q)`, one entry per plane and then the total, the length `PLANE_LEAVES`
+/// must have when it is not empty.
+#[must_use]
+pub fn plane_leaf_bases(planes: &[PlaneRecord]) -> Vec<u64> {
+    let mut bases = Vec::with_capacity(planes.len() + 1);
+    let mut sum = 0u64;
+    for plane in planes {
+        bases.push(sum);
+        sum += u64::from(plane.leaf_count);
+    }
+    bases.push(sum);
+    bases
+}
+
+/// The two leaf slots `(a, b)` of a `LEAF_SLOTS` texel as stored (spec §6.10.1).
+#[must_use]
+pub fn leaf_slots(texel: [u8; 4]) -> (u16, u16) {
+    (u16::from_le_bytes([texel[0], texel[1]]), u16::from_le_bytes([texel[2], texel[3]]))
+}
 
 /// A leaf of Neubert's priority list (spec §6.11).
 #[repr(C)]

@@ -15,7 +15,7 @@ use crate::metadata::Metadata;
 use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
     BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE,
-    Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneRecord, PointRecord,
+    Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
     PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
 
@@ -65,6 +65,8 @@ pub struct ContainerData {
     pub lines: Vec<LineRecord>,
     /// `PLANES`.
     pub planes: Vec<PlaneRecord>,
+    /// `PLANE_LEAVES`: empty, or `leaf_count` records per plane (spec §6.10.1).
+    pub plane_leaves: Vec<PlaneLeafRecord>,
     /// `PRUNE_LEAVES`.
     pub prune_leaves: Vec<PruneLeafRecord>,
     /// `PRUNE_TRIANGLES`.
@@ -107,6 +109,7 @@ impl ContainerData {
             ellipsoids: c.ellipsoids().to_vec(),
             lines: c.lines().to_vec(),
             planes: c.planes().to_vec(),
+            plane_leaves: c.plane_leaves().to_vec(),
             prune_leaves: c.prune_leaves().to_vec(),
             prune_triangles: c.prune_triangles().to_vec(),
             prune_scale: c.prune_scale().to_vec(),
@@ -391,6 +394,7 @@ macro_rules! optional_sections {
             (SectionKind::ELLIPSOIDS, $payload!(ellipsoids)),
             (SectionKind::LINES, $payload!(lines)),
             (SectionKind::PLANES, $payload!(planes)),
+            (SectionKind::PLANE_LEAVES, $payload!(plane_leaves)),
             (SectionKind::PRUNE_LEAVES, $payload!(prune_leaves)),
             (SectionKind::PRUNE_TRIANGLES, $payload!(prune_triangles)),
             (SectionKind::PRUNE_SCALE, $payload!(prune_scale)),
