@@ -56,6 +56,11 @@ struct VertexGpu {
 @group(1) @binding(6) var<storage, read> planes: array<PlaneRecord>;
 @group(1) @binding(7) var atlas: texture_2d<f32>;
 @group(1) @binding(8) var atlas_sampler: sampler;
+// Indirect texturing (spec §6.10.1): the leaf-slot image and the planes' leaves. As uploaded, an
+// indirectly textured plane's `image` holds where its leaves start in `plane_leaves`
+// (0xFFFFFFFF for a plane with an RGBA atlas).
+@group(1) @binding(9) var leaf_slots: texture_2d<u32>;
+@group(1) @binding(10) var<storage, read> plane_leaves: array<PlaneLeafRecord>;
 
 // The material as uploaded: the record's fields that shading needs, 32 bytes.
 struct MaterialGpu {
@@ -72,10 +77,11 @@ struct Varyings {
     @location(0) normal: vec3<f32>,
     @location(1) uv: vec2<f32>,
     @location(2) color: vec4<f32>,
-    // Triangles: material index; points: 0xFFFFFFFF.
+    // Triangles: material index; points and quads: 0xFFFFFFFF; indirectly textured planes:
+    // where their leaves start in `plane_leaves`.
     @location(3) @interpolate(flat) material: u32,
     @location(4) @interpolate(flat) tint: vec3<f32>,
-    // Points: position on the unit disc.
+    // Points: position on the unit disc; quads: the plane coordinates (s, t) ∈ [−1, 1]².
     @location(5) disc: vec2<f32>,
     // Impostor planes and billboards: drawn where the pixel's dither value h satisfies
     // keep.x <= h < keep.y (the cross-fade between levels of planes).
@@ -241,6 +247,7 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     let normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
     var out = quad_corner(draw, world, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
     out.keep = keep;
+    out.material = plane.image;
     // As uploaded, `leaf_count` holds the plane's ambient-occlusion byte.
     out.ao = decode_ao(plane.leaf_count);
     return out;
@@ -265,7 +272,7 @@ fn quad_corner(
     out.uv = mix(unpack2x16unorm(uv_min), unpack2x16unorm(uv_max), 0.5 * (corner + 1.0));
     out.color = vec4<f32>(1.0);
     out.material = 0xFFFFFFFFu;
-    out.disc = vec2<f32>(0.0);
+    out.disc = corner;
     out.keep = vec2<f32>(0.0, 2.0);
     out.ao = 0.0;
     switch frame.debug {
@@ -417,21 +424,77 @@ fn fs_triangle(in: Varyings) -> TriangleOut {
     return TriangleOut(vec4<f32>(shade(albedo.rgb, in.normal, in.world, in.ao) * in.tint, 1.0), mask);
 }
 
-// An impostor plane's texel: the baked leaves' colour (linear after the sRGB fetch) and, in
-// alpha, the fraction of the texel they cover, tested at one half. The atlas's mips scale alpha
-// so that the test keeps the covered fraction at every level (Castaño's alpha mipmaps), so the
-// test is right at any distance, with or without MSAA (no alpha to coverage here).
+// What a quad shows at a fragment: its albedo, and how to test its alpha (as `alpha_mask` and
+// `filtered_coverage` take them).
+struct QuadTexel {
+    albedo: vec4<f32>,
+    cutoff: f32,
+    footprint: f32,
+}
+
+// An impostor plane's or billboard's texel. From an RGBA atlas: the baked leaves' colour
+// (linear after the sRGB fetch) and, in alpha, the fraction of the texel they cover, tested at
+// one half; the atlas's mips scale alpha so that the test keeps the covered fraction at every
+// level (Castaño's alpha mipmaps), so the test is right at any distance (footprint 0: no alpha
+// to coverage here). Indirectly textured (spec §6.10.1): the first of the slot texel's two leaves
+// whose own texture passes its material's alpha test at this point, sampled with the footprint
+// that the plane's screen derivatives give it, and tested as a triangle of that leaf would be.
+// Call it in uniform control flow (derivatives and the atlas's implicit ones).
+fn quad_texel(in: Varyings) -> QuadTexel {
+    let st_dx = dpdx(in.disc);
+    let st_dy = dpdy(in.disc);
+    let direct = textureSample(atlas, atlas_sampler, in.uv);
+    if in.material == 0xFFFFFFFFu {
+        return QuadTexel(direct, 0.5, 0.0);
+    }
+    let size = vec2<i32>(textureDimensions(leaf_slots));
+    let at = clamp(vec2<i32>(floor(in.uv * vec2<f32>(size))), vec2<i32>(0), size - 1);
+    let slots = textureLoad(leaf_slots, at, 0).xy;
+    var first = QuadTexel(vec4<f32>(0.0), 2.0, 0.0);
+    for (var i = 0u; i < 2u; i++) {
+        let slot = slots[i];
+        if slot == 0u {
+            continue;
+        }
+        let leaf = plane_leaves[in.material + slot - 1u];
+        let material = materials[leaf.material];
+        let du = vec2<f32>(leaf.du[0], leaf.du[1]);
+        let dv = vec2<f32>(leaf.dv[0], leaf.dv[1]);
+        let uv = vec2<f32>(leaf.uv0[0], leaf.uv0[1]) + in.disc.x * du + in.disc.y * dv;
+        // Clipped to the leaf's texture rectangle, if it has one.
+        let inside = leaf.uv_max == 0u
+            || (all(uv >= unpack2x16unorm(leaf.uv_min)) && all(uv <= unpack2x16unorm(leaf.uv_max)));
+        let gx = st_dx.x * du + st_dx.y * dv;
+        let gy = st_dy.x * du + st_dy.y * dv;
+        let texel = textureSampleGrad(textures, linear_sampler, uv, max(material.layer, 0), gx, gy);
+        var albedo = material.base_color * decode_color(leaf.color) * select(vec4<f32>(1.0), texel, material.layer >= 0);
+        if !inside {
+            albedo.a = 0.0;
+        }
+        let footprint = max(length(gx), length(gy)) * f32(textureDimensions(textures).x);
+        let candidate = QuadTexel(albedo, material_cutoff(material), footprint);
+        if albedo.a >= candidate.cutoff {
+            return candidate;
+        }
+        if i == 0u {
+            first = candidate;
+        }
+    }
+    return first;
+}
+
 @fragment
-fn fs_plane(in: Varyings) -> @location(0) vec4<f32> {
-    let texel = textureSample(atlas, atlas_sampler, in.uv);
+fn fs_plane(in: Varyings) -> TriangleOut {
+    let texel = quad_texel(in);
     let h = dither(in.clip);
-    if texel.a < 0.5 || h < in.keep.x || h >= in.keep.y {
+    let mask = alpha_mask(texel.albedo.a, texel.cutoff, texel.footprint, in.clip);
+    if mask == 0u || h < in.keep.x || h >= in.keep.y {
         discard;
     }
     if frame.debug != 0u {
-        return vec4<f32>(in.tint, 1.0);
+        return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
     }
-    return vec4<f32>(shade(texel.rgb, in.normal, in.world, in.ao) * in.tint, 1.0);
+    return TriangleOut(vec4<f32>(shade(texel.albedo.rgb, in.normal, in.world, in.ao) * in.tint, 1.0), mask);
 }
 
 @fragment
@@ -470,9 +533,13 @@ fn fs_shadow_triangle(in: Varyings) {
 
 @fragment
 fn fs_shadow_plane(in: Varyings) {
-    let texel = textureSample(atlas, atlas_sampler, in.uv);
+    let texel = quad_texel(in);
     let h = dither(in.clip);
-    if texel.a < 0.5 || h < in.keep.x || h >= in.keep.y {
+    var kept = texel.albedo.a >= texel.cutoff;
+    if in.material != 0xFFFFFFFFu && texel.cutoff >= 0.0 {
+        kept = filtered_coverage(texel.albedo.a, texel.cutoff, texel.footprint) > layered_dither(in.clip);
+    }
+    if !kept || h < in.keep.x || h >= in.keep.y {
         discard;
     }
 }

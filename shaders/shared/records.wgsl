@@ -79,6 +79,17 @@ struct PlaneRecord {
     leaf_count: u32,
 }
 
+// Rust twin: treelod_format::PlaneLeafRecord (40 bytes, spec §6.10.1).
+struct PlaneLeafRecord {
+    uv0: array<f32, 2>,
+    du: array<f32, 2>,
+    dv: array<f32, 2>,
+    uv_min: u32,
+    uv_max: u32,
+    material: u32,
+    color: u32,
+}
+
 // Rust twin: treelod_format::PruneLeafRecord (24 bytes, spec §6.11).
 struct PruneLeafRecord {
     center: array<f32, 3>,

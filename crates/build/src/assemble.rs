@@ -147,8 +147,11 @@ pub struct BuildStats {
     pub planes: u64,
     /// Impostor planes per level, finest first, summed over the trees (empty without).
     pub planes_per_level: Vec<u32>,
-    /// The impostor atlas, texels across and down (`[0, 0]` without).
+    /// The impostor atlas, texels across and down (`[0, 0]` without); with indirect texturing,
+    /// the leaf-slot image.
     pub atlas: [u32; 2],
+    /// `PLANE_LEAVES` records written (0 unless the planes are textured indirectly).
+    pub plane_leaves: u64,
     /// Baseline LoD chain levels written, summed over the trees (0 without baselines).
     pub lod_levels: u64,
     /// Triangles of the baseline LoD chains.
@@ -508,7 +511,7 @@ fn assemble(
     config: &BuildConfig,
     generator: &str,
 ) -> Result<BuildOutput, BuildError> {
-    let Gathered { material_keys, material_info, vertices, mut tris, parts, tree_bounds, mut stats, warnings } =
+    let Gathered { material_keys, material_info, vertices, mut tris, parts, tree_bounds, mut stats, mut warnings } =
         gathered;
 
     // Stage: bounds and grid.
@@ -778,11 +781,15 @@ fn assemble(
     // Stage: the impostor atlas after the materials' images; the planes point at it.
     let mut planes: Vec<treelod_format::PlaneRecord> = Vec::new();
     let mut plane_ao = Vec::new();
+    let mut plane_leaves = Vec::new();
     if let Some(impostors) = impostors {
         plane_ao = impostors.plane_ao.iter().map(|&a| encode_ao(a)).collect();
+        warnings.extend(impostors.note);
         let atlas = impostors.atlas;
         let index = push_atlas(&mut images, &mut image_data, &atlas);
         planes = impostors.planes.into_iter().map(|p| treelod_format::PlaneRecord { image: index, ..p }).collect();
+        plane_leaves = impostors.plane_leaves;
+        stats.plane_leaves = plane_leaves.len() as u64;
         stats.planes = planes.len() as u64;
         stats.planes_per_level = impostors.planes_per_level;
         stats.atlas = [atlas.width, atlas.height];
@@ -865,6 +872,7 @@ fn assemble(
         prune_scale,
         prune_lambda,
         planes,
+        plane_leaves,
         lod_levels,
         lod_triangles,
         billboards: billboard_records,
@@ -977,7 +985,7 @@ fn push_atlas(images: &mut Vec<ImageRecord>, image_data: &mut Vec<u8>, atlas: &A
         width: atlas.width,
         height: atlas.height,
         mip_count: atlas.mip_count,
-        format: image_format::RGBA8_SRGB,
+        format: atlas.format,
         data_offset: image_data.len() as u64,
         data_length: atlas.texels.len() as u64,
     });

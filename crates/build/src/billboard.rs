@@ -206,7 +206,7 @@ pub fn build_billboards(
     }
     Ok(Some(Billboards {
         records,
-        atlas: Atlas { width, height, mip_count: MIP_LEVELS, texels },
+        atlas: Atlas { width, height, format: treelod_format::image_format::RGBA8_SRGB, mip_count: MIP_LEVELS, texels },
         facing_texels,
         crossed_texels,
     }))

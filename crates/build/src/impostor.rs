@@ -58,9 +58,9 @@
 //! Everything is deterministic: fixed seeds, sums in a fixed order, rayon only over independent
 //! items collected in order.
 
-use glam::{DMat3, DQuat, DVec2, DVec3, Vec3};
+use glam::{DMat2, DMat3, DQuat, DVec2, DVec3, Vec3};
 use rayon::prelude::*;
-use treelod_format::{PlaneRecord, Setting, VertexRecord, pack};
+use treelod_format::{PlaneLeafRecord, PlaneRecord, Setting, VertexRecord, image_format, pack};
 
 use crate::error::BuildError;
 use crate::prune::{MeshTriangle, PruneMesh, find_leaves};
@@ -121,6 +121,35 @@ pub struct ImpostorConfig {
     pub iterations: u32,
     /// Seed of the k-means++ seeding. Default 1.
     pub seed: u64,
+    /// How planes are textured. Default [`Texturing::Direct`].
+    pub texturing: Texturing,
+    /// With [`Texturing::Indirect`], leaf-slot texels across the square root of the median leaf
+    /// area, `(0, 64]`. Default 2: a typical leaf spans about 2 × 2 slot texels.
+    pub slots_per_leaf: f32,
+}
+
+/// How impostor planes are textured (spec §6.10, §6.10.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Texturing {
+    /// An RGBA atlas of the leaves as seen on each plane, with coverage-preserving mips.
+    #[default]
+    Direct,
+    /// Garcia's §2.3 indirect texturing: a low-resolution leaf-slot image naming the leaf at each
+    /// texel, and per plane and leaf the affine map into the leaf's own texture
+    /// ([`treelod_format::PlaneLeafRecord`]). Needs leaves whose outline is in their texture's
+    /// alpha; otherwise the build falls back to [`Texturing::Direct`] and says why.
+    Indirect,
+}
+
+impl Texturing {
+    /// Its name in settings and on the command line.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Direct => "direct",
+            Self::Indirect => "indirect",
+        }
+    }
 }
 
 impl Default for ImpostorConfig {
@@ -133,6 +162,8 @@ impl Default for ImpostorConfig {
             max_atlas: 2048,
             iterations: 30,
             seed: 1,
+            texturing: Texturing::Direct,
+            slots_per_leaf: 2.0,
         }
     }
 }
@@ -165,6 +196,9 @@ impl ImpostorConfig {
         if !(1..=1000).contains(&self.iterations) {
             return bad(format!("impostor iterations {}: must be in 1..=1000", self.iterations));
         }
+        if !(self.slots_per_leaf > 0.0 && self.slots_per_leaf <= 64.0) {
+            return bad(format!("impostor slots per leaf {}: must be in (0, 64]", self.slots_per_leaf));
+        }
         Ok(())
     }
 
@@ -180,7 +214,9 @@ impl ImpostorConfig {
             setting("max_atlas", self.max_atlas.to_string()),
             setting("max_texels", self.max_texels.to_string()),
             setting("seed", self.seed.to_string()),
+            setting("slots_per_leaf", self.slots_per_leaf.to_string()),
             setting("texels_per_metre", self.texels_per_metre.to_string()),
+            setting("texturing", self.texturing.name().into()),
         ]
     }
 }
@@ -221,13 +257,16 @@ pub struct ImpostorMesh<'a> {
     pub occlusion: &'a [f32],
 }
 
-/// The atlas image: RGBA8, RGB sRGB-encoded, alpha linear (spec §6.7 format 1).
+/// The planes' image: an RGBA8 atlas, RGB sRGB-encoded, alpha linear (spec §6.7 format 1), or
+/// with indirect texturing a leaf-slot image (format 5, §6.10.1).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Atlas {
-    /// Texels across, a multiple of 16.
+    /// Texels across (an RGBA atlas: a multiple of 16).
     pub width: u32,
-    /// Texels down, a multiple of 16.
+    /// Texels down (an RGBA atlas: a multiple of 16).
     pub height: u32,
+    /// [`treelod_format::image_format`]: `RGBA8_SRGB` or `LEAF_SLOTS`.
+    pub format: u32,
     /// Mip levels stored.
     pub mip_count: u32,
     /// The levels, largest first, rows top to bottom, tightly packed.
@@ -259,6 +298,15 @@ pub struct Impostors {
     /// Ambient occlusion of each plane, in the order of [`Self::planes`]: the mean of its
     /// triangles' ([`ImpostorMesh::occlusion`]) weighted by area; empty if the mesh has none.
     pub plane_ao: Vec<f32>,
+    /// How the planes are textured: as configured, or [`Texturing::Direct`] where indirect
+    /// texturing does not apply ([`Self::note`] says why).
+    pub texturing: Texturing,
+    /// With [`Texturing::Indirect`], each plane's leaves in the order of [`Self::planes`]
+    /// (spec §6.10.1), their `material` the index of [`ImpostorMesh::surfaces`]; empty
+    /// otherwise.
+    pub plane_leaves: Vec<PlaneLeafRecord>,
+    /// Why indirect texturing was asked for and not used.
+    pub note: Option<String>,
 }
 
 /// A plane `pᵀn + d = 0` with a unit normal.
@@ -637,8 +685,13 @@ impl Region {
     /// Its content rectangle as a record's `uv_min` and `uv_max` (spec §6.10) in a
     /// `width × height` atlas.
     pub(crate) fn uv(&self, width: u32, height: u32) -> (u32, u32) {
+        self.uv_in(width, height, GUTTER)
+    }
+
+    /// [`Self::uv`] of a region whose content starts `border` texels in.
+    pub(crate) fn uv_in(&self, width: u32, height: u32, border: u32) -> (u32, u32) {
         let (fw, fh) = (f64::from(width), f64::from(height));
-        let (cx, cy) = (f64::from(self.x + GUTTER), f64::from(self.y + GUTTER));
+        let (cx, cy) = (f64::from(self.x + border), f64::from(self.y + border));
         #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]")]
         let uv = (
             pack::unorm16x2((cx / fw) as f32, (cy / fh) as f32),
@@ -762,10 +815,11 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
     // by the projection; a leaf that is not flat turns only by its flatness's share of that
     // rotation. Positions relative to the origin of work.
     let (leaf_sets, leaf_data) = (&leaves, &data);
-    let placed_triangles = |node: usize| {
+    // Each item is (the leaf's place in the node's run, the triangle, its placed corners).
+    let placed_leaves = |node: usize| {
         let (first, count) = run(node);
         let n = nodes[node].plane.normal;
-        ordered[first as usize..(first + count) as usize].iter().flat_map(move |&l| {
+        ordered[first as usize..(first + count) as usize].iter().enumerate().flat_map(move |(k, &l)| {
             let leaf = &leaf_data[l as usize];
             let from = if leaf.normal.dot(n) < 0.0 { -leaf.normal } else { leaf.normal };
             // A leaf turns as far as it is flat: a closed blob has no plane of its own to turn.
@@ -773,10 +827,11 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
             leaf_sets.triangles_of(&leaf_sets.leaves[l as usize]).iter().map(move |&t| {
                 let corners =
                     mesh.triangles[t as usize].v.map(|v| leaf.centre + turn * (position(v) - origin - leaf.centre));
-                (t, corners)
+                (k, t, corners)
             })
         })
     };
+    let placed_triangles = |node: usize| placed_leaves(node).map(|(_, t, corners)| (t, corners));
 
     // Stage: quads.
     let quads: Vec<Quad> = (0..nodes.len())
@@ -784,7 +839,8 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
         .map(|i| quad(&nodes[i].plane, placed_triangles(i).flat_map(|(_, c)| c)))
         .collect();
 
-    // Stage: atlas layout, shrinking the density until it fits.
+    // Stage: atlas layout, shrinking the density until it fits. The RGBA layout also sets each
+    // tree's texel budget, whichever texturing is used.
     let mut density = config.texels_per_metre;
     let (regions, width, height) = loop {
         let (regions, width, height) = layout(&quads, density, config.max_texels);
@@ -793,24 +849,76 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
         }
         density *= 0.75;
     };
-
-    // Stage: bake each plane's leaves into its region, with mips.
-    let baked: Vec<Vec<Vec<u8>>> = (0..nodes.len())
-        .into_par_iter()
-        .map(|i| bake(mesh, placed_triangles(i), &nodes[i].plane, Winner::Nearest, &quads[i], &regions[i]))
-        .collect();
-
-    // Stage: the atlas image, level by level, and each tree's share of it.
-    let texels = compose(&regions, &baked, width, height);
     let mut texels_per_tree = vec![0u64; trees.last().map_or(0, |&t| t as usize + 1)];
     for (region, &tree) in regions.iter().zip(&node_tree) {
         texels_per_tree[tree as usize] += region.texels();
     }
 
+    let (mut texturing, mut note) = (config.texturing, None);
+    if texturing == Texturing::Indirect {
+        let most = nodes.iter().enumerate().map(|(i, _)| run(i).1).max().unwrap_or(0);
+        if let Err(why) = indirect_applies(mesh, most) {
+            note = Some(format!("indirect impostor texturing not used: {why}; the planes get an RGBA atlas"));
+            texturing = Texturing::Direct;
+        }
+    }
+    let mut slot_layout: Option<Vec<Region>> = None;
+    let atlas = match texturing {
+        Texturing::Direct => {
+            // Stage: bake each plane's leaves into its region, with mips, and compose the atlas.
+            let baked: Vec<Vec<Vec<u8>>> = (0..nodes.len())
+                .into_par_iter()
+                .map(|i| bake(mesh, placed_triangles(i), &nodes[i].plane, Winner::Nearest, &quads[i], &regions[i]))
+                .collect();
+            let texels = compose(&regions, &baked, width, height);
+            Atlas { width, height, format: image_format::RGBA8_SRGB, mip_count: MIP_LEVELS, texels }
+        }
+        Texturing::Indirect => {
+            // Stage: the leaf-slot image (spec §6.10.1) at `slots_per_leaf` texels across the
+            // median leaf, shrunk until it fits.
+            let mut areas: Vec<f64> = data.iter().map(|d| d.moments.weight).filter(|a| *a > 0.0).collect();
+            areas.sort_by(f64::total_cmp);
+            let median = areas.get(areas.len() / 2).copied().unwrap_or(1.0);
+            #[expect(clippy::cast_possible_truncation, reason = "texels per metre")]
+            let mut slot_density = (f64::from(config.slots_per_leaf) / median.sqrt()) as f32;
+            let (slot_regions, sw, sh) = loop {
+                let mut regions: Vec<Region> = quads
+                    .iter()
+                    .map(|q| {
+                        let r = layout_side(q.u.length(), slot_density, config.max_texels);
+                        let t = layout_side(q.v.length(), slot_density, config.max_texels);
+                        Region { tw: r, th: t, rw: r + 2, rh: t + 2, x: 0, y: 0 }
+                    })
+                    .collect();
+                let (w, h) = pack(&mut regions);
+                if (w <= config.max_atlas && h <= config.max_atlas) || slot_density < 1e-3 {
+                    break (regions, w, h);
+                }
+                slot_density *= 0.75;
+            };
+            let baked: Vec<Vec<[u16; 2]>> = (0..nodes.len())
+                .into_par_iter()
+                .map(|i| bake_slots(mesh, placed_leaves(i), &nodes[i].plane, &quads[i], &slot_regions[i]))
+                .collect();
+            let mut texels = vec![0u8; sw as usize * sh as usize * 4];
+            for (region, slots) in slot_regions.iter().zip(&baked) {
+                for (k, pair) in slots.iter().enumerate() {
+                    let (x, y) = (region.x as usize + 1 + k % region.tw as usize, region.y as usize + 1 + k / region.tw as usize);
+                    let o = (y * sw as usize + x) * 4;
+                    texels[o..o + 2].copy_from_slice(&pair[0].to_le_bytes());
+                    texels[o + 2..o + 4].copy_from_slice(&pair[1].to_le_bytes());
+                }
+            }
+            slot_layout = Some(slot_regions);
+            Atlas { width: sw, height: sh, format: image_format::LEAF_SLOTS, mip_count: 1, texels }
+        }
+    };
+
     // Stage: the records in SPT order, and the bounds of the quads.
     let (mut bmin, mut bmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     let mut planes = Vec::with_capacity(nodes.len());
     let mut plane_ao = Vec::new();
+    let mut plane_leaves = Vec::new();
     for &i in &spt.order {
         if !mesh.occlusion.is_empty() {
             plane_ao.push(crate::ambient::mean_occlusion(placed_triangles(i as usize).map(|(t, [a, b, c])| {
@@ -827,7 +935,18 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
             bmax = bmax.max(corner);
         }
         let (leaf_first, leaf_count) = run(i as usize);
-        let (uv_min, uv_max) = r.uv(width, height);
+        let (uv_min, uv_max) = match &slot_layout {
+            Some(slots) => {
+                let q = &quads[i as usize];
+                let mut fits = vec![LeafFit::default(); leaf_count as usize];
+                for (k, t, corners) in placed_leaves(i as usize) {
+                    fits[k].add(mesh, t, corners, q);
+                }
+                plane_leaves.extend(fits.iter().map(LeafFit::record));
+                slots[i as usize].uv_in(atlas.width, atlas.height, 1)
+            }
+            None => r.uv(width, height),
+        };
         planes.push(PlaneRecord {
             center: centre.as_vec3().to_array(),
             axis_u: q.u.as_vec3().to_array(),
@@ -845,13 +964,16 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
     let leaf_count = data.len() as u32;
     Ok(Some(Impostors {
         planes,
-        atlas: Atlas { width, height, mip_count: MIP_LEVELS, texels },
+        atlas,
         bounds: (bmin, bmax),
         planes_per_level,
         leaves: leaf_count,
         texels_per_metre: density,
         texels_per_tree,
         plane_ao,
+        texturing,
+        plane_leaves,
+        note,
     }))
 }
 
@@ -969,15 +1091,19 @@ fn quad(plane: &PlaneFit, points: impl Iterator<Item = DVec3>) -> Quad {
 /// Region sizes at `density` texels per metre and their shelf packing (tallest first): the
 /// regions, in node order, and the atlas size.
 fn layout(quads: &[Quad], density: f32, max_texels: u32) -> (Vec<Region>, u32, u32) {
-    let texels = |half: f64| {
-        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 1..=max_texels")]
-        let t = (2.0 * half * f64::from(density)).ceil().clamp(1.0, f64::from(max_texels)) as u32;
-        t
-    };
+    let texels = |half: f64| layout_side(half, density, max_texels);
     let mut regions: Vec<Region> =
         quads.iter().map(|q| Region::new(texels(q.u.length()), texels(q.v.length()))).collect();
     let (width, height) = pack(&mut regions);
     (regions, width, height)
+}
+
+/// Texels across a quad side of half-length `half` metres at `density` texels per metre,
+/// `1 ..= max_texels`.
+fn layout_side(half: f64, density: f32, max_texels: u32) -> u32 {
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 1..=max_texels")]
+    let t = (2.0 * half * f64::from(density)).ceil().clamp(1.0, f64::from(max_texels)) as u32;
+    t
 }
 
 /// Shelf-packs `regions` ([`shelf_pack`]) into an atlas a power of two wide (at least the
@@ -1049,7 +1175,6 @@ pub(crate) fn bake(
 ) -> Vec<Vec<u8>> {
     let lut = srgb_to_linear_table();
     let (sw, sh) = (region.tw as usize * SAMPLES, region.th as usize * SAMPLES);
-    let (hu2, hv2) = (quad.u.length_squared(), quad.v.length_squared());
     let (rw, rh) = (region.rw as usize, region.rh as usize);
     let mut texels = vec![[0.0f32; 4]; rw * rh];
     let g = GUTTER as usize;
@@ -1067,54 +1192,20 @@ pub(crate) fn bake(
             let tri = &mesh.triangles[t as usize];
             let surface = &mesh.surfaces[tri.material as usize];
             let corners = tri.v.map(|v| &mesh.vertices[v as usize]);
-            // Sample coordinates: s = −1 ↦ 0, s = +1 ↦ sw (likewise t and sh).
-            let xy = local.map(|p| {
-                let d = p - quad.centre;
-                DVec2::new((d.dot(quad.u) / hu2 + 1.0) * 0.5 * sw as f64, (d.dot(quad.v) / hv2 + 1.0) * 0.5 * sh as f64)
-            });
-            let area = (xy[1] - xy[0]).perp_dot(xy[2] - xy[0]);
-            if area.abs() < 1e-12 || !area.is_finite() {
-                continue;
-            }
-            let (min, max) = (xy[0].min(xy[1]).min(xy[2]), xy[0].max(xy[1]).max(xy[2]));
-            #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
-            let (x0, x1, y0, y1) = (
-                (min.x - 0.5).ceil().max(0.0) as usize,
-                ((max.x - 0.5).floor() + 1.0).clamp(0.0, sw as f64) as usize,
-                (min.y - 0.5).ceil().max(0.0) as usize,
-                ((max.y - 0.5).floor() + 1.0).clamp(0.0, sh as f64) as usize,
-            );
-            let (y0, y1) = (y0.max(band_start), y1.min(band_end));
-            if y0 >= y1 || x0 >= x1 {
-                continue;
-            }
-            let dist = local.map(|p| p.dot(plane.normal) + plane.offset);
-            for sy in y0..y1 {
-                for sx in x0..x1 {
-                    let p = DVec2::new(sx as f64 + 0.5, sy as f64 + 0.5);
-                    let w1 = (p - xy[0]).perp_dot(xy[2] - xy[0]) / area;
-                    let w2 = (xy[1] - xy[0]).perp_dot(p - xy[0]) / area;
-                    let w0 = 1.0 - w1 - w2;
-                    if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
-                        continue;
-                    }
-                    let i = (sy - band_start) * sw + sx;
-                    // The sample's key: the least wins (ties: the first triangle).
-                    let signed = w0 * dist[0] + w1 * dist[1] + w2 * dist[2];
-                    #[expect(clippy::cast_possible_truncation, reason = "a distance in metres")]
-                    let z = match winner {
-                        Winner::Nearest => signed.abs() as f32,
-                        Winner::Front => -signed as f32,
-                    };
-                    if z >= depth[i] {
-                        continue;
-                    }
-                    if let Some(rgb) = shade(surface, corners, [w0, w1, w2], lut) {
-                        depth[i] = z;
-                        colour[i] = rgb;
-                    }
+            raster_band(&local, quad, plane, (sw, sh), (band_start, band_end), |i, w, signed| {
+                // The sample's key: the least wins (ties: the first triangle).
+                #[expect(clippy::cast_possible_truncation, reason = "a distance in metres")]
+                let z = match winner {
+                    Winner::Nearest => signed.abs() as f32,
+                    Winner::Front => -signed as f32,
+                };
+                if z < depth[i]
+                    && let Some(rgb) = shade(surface, corners, w, lut)
+                {
+                    depth[i] = z;
+                    colour[i] = rgb;
                 }
-            }
+            });
         }
 
         // Resolve the band's samples into the region's content.
@@ -1185,6 +1276,252 @@ pub(crate) fn bake(
                 .collect()
         })
         .collect()
+}
+
+/// Calls `f(sample index in the band, barycentric weights, signed distance from plane)` for
+/// every sample centre of rows `band_start .. band_end` of a `sw × sh` grid over `quad` that the
+/// triangle `local` (relative to the origin of work) covers. The sample at `quad.centre + s·u +
+/// t·v` has grid coordinates `((s + 1)/2·sw, (t + 1)/2·sh)`.
+fn raster_band(
+    local: &[DVec3; 3],
+    quad: &Quad,
+    plane: &PlaneFit,
+    (sw, sh): (usize, usize),
+    (band_start, band_end): (usize, usize),
+    mut f: impl FnMut(usize, [f64; 3], f64),
+) {
+    let (hu2, hv2) = (quad.u.length_squared(), quad.v.length_squared());
+    // Sample coordinates: s = −1 ↦ 0, s = +1 ↦ sw (likewise t and sh).
+    let xy = local.map(|p| {
+        let d = p - quad.centre;
+        DVec2::new((d.dot(quad.u) / hu2 + 1.0) * 0.5 * sw as f64, (d.dot(quad.v) / hv2 + 1.0) * 0.5 * sh as f64)
+    });
+    let area = (xy[1] - xy[0]).perp_dot(xy[2] - xy[0]);
+    if area.abs() < 1e-12 || !area.is_finite() {
+        return;
+    }
+    let (min, max) = (xy[0].min(xy[1]).min(xy[2]), xy[0].max(xy[1]).max(xy[2]));
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
+    let (x0, x1, y0, y1) = (
+        (min.x - 0.5).ceil().max(0.0) as usize,
+        ((max.x - 0.5).floor() + 1.0).clamp(0.0, sw as f64) as usize,
+        (min.y - 0.5).ceil().max(0.0) as usize,
+        ((max.y - 0.5).floor() + 1.0).clamp(0.0, sh as f64) as usize,
+    );
+    let (y0, y1) = (y0.max(band_start), y1.min(band_end));
+    if y0 >= y1 || x0 >= x1 {
+        return;
+    }
+    let dist = local.map(|p| p.dot(plane.normal) + plane.offset);
+    for sy in y0..y1 {
+        for sx in x0..x1 {
+            let p = DVec2::new(sx as f64 + 0.5, sy as f64 + 0.5);
+            let w1 = (p - xy[0]).perp_dot(xy[2] - xy[0]) / area;
+            let w2 = (xy[1] - xy[0]).perp_dot(p - xy[0]) / area;
+            let w0 = 1.0 - w1 - w2;
+            if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+                continue;
+            }
+            f((sy - band_start) * sw + sx, [w0, w1, w2], w0 * dist[0] + w1 * dist[1] + w2 * dist[2]);
+        }
+    }
+}
+
+/// The leaf slots (spec §6.10.1) of one plane's region: `leaves` are (the leaf's place in the
+/// plane's run, triangle, placed corners). Each of 4 × 4 samples per texel takes the leaf nearest
+/// to the plane that passes its alpha test there ([`shade`]); a texel's slot `a` is the leaf of
+/// most of its samples, `b` the next (ties: the lower slot). Returns the `tw × th` content texels,
+/// rows top to bottom.
+fn bake_slots(
+    mesh: &ImpostorMesh<'_>,
+    leaves: impl Iterator<Item = (usize, u32, [DVec3; 3])> + Clone,
+    plane: &PlaneFit,
+    quad: &Quad,
+    region: &Region,
+) -> Vec<[u16; 2]> {
+    let lut = srgb_to_linear_table();
+    let (tw, th) = (region.tw as usize, region.th as usize);
+    let (sw, sh) = (tw * SAMPLES, th * SAMPLES);
+    let mut texels = vec![[0u16; 2]; tw * th];
+    let band_samples = BAND_ROWS * SAMPLES;
+    let mut depth = vec![f32::INFINITY; sw * band_samples.min(sh)];
+    let mut slot = vec![0u16; sw * band_samples.min(sh)];
+    for band_start in (0..sh).step_by(band_samples.max(1)) {
+        let band_end = (band_start + band_samples).min(sh);
+        depth.fill(f32::INFINITY);
+        slot.fill(0);
+        for (k, t, local) in leaves.clone() {
+            let tri = &mesh.triangles[t as usize];
+            let surface = &mesh.surfaces[tri.material as usize];
+            let corners = tri.v.map(|v| &mesh.vertices[v as usize]);
+            #[expect(clippy::cast_possible_truncation, reason = "indirect_applies checked the leaf count")]
+            let k = k as u16 + 1;
+            raster_band(&local, quad, plane, (sw, sh), (band_start, band_end), |i, w, signed| {
+                #[expect(clippy::cast_possible_truncation, reason = "a distance in metres")]
+                let z = signed.abs() as f32;
+                if z < depth[i] && shade(surface, corners, w, lut).is_some() {
+                    depth[i] = z;
+                    slot[i] = k;
+                }
+            });
+        }
+        for ty in band_start / SAMPLES..band_end / SAMPLES {
+            for tx in 0..tw {
+                // (slot, samples), at most 16 entries.
+                let mut counts: Vec<(u16, u32)> = Vec::with_capacity(SAMPLES * SAMPLES);
+                for sy in 0..SAMPLES {
+                    let row = (ty * SAMPLES + sy - band_start) * sw + tx * SAMPLES;
+                    for &k in &slot[row..row + SAMPLES] {
+                        if k == 0 {
+                            continue;
+                        }
+                        match counts.iter_mut().find(|c| c.0 == k) {
+                            Some(c) => c.1 += 1,
+                            None => counts.push((k, 1)),
+                        }
+                    }
+                }
+                counts.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+                let pick = |n: usize| counts.get(n).map_or(0, |c| c.0);
+                texels[ty * tw + tx] = [pick(0), pick(1)];
+            }
+        }
+    }
+    texels
+}
+
+/// Whether indirect texturing can stand for a mesh's leaves (spec §6.10.1): every leaf
+/// material has an image and alpha mode `MASK` or `BLEND` (so a leaf's outline is in its
+/// texture, not in its geometry), and no plane holds more leaves than a slot can name.
+fn indirect_applies(mesh: &ImpostorMesh<'_>, most_leaves: u32) -> Result<(), String> {
+    let mut used = vec![false; mesh.surfaces.len()];
+    for t in mesh.triangles {
+        used[t.material as usize] = true;
+    }
+    for (surface, _) in mesh.surfaces.iter().zip(&used).filter(|(_, u)| **u) {
+        let name = &surface.material.name;
+        if surface.image.is_none() {
+            return Err(format!("leaf material '{name}' has no texture, so its leaves' outline is geometry"));
+        }
+        if surface.material.alpha_mode == AlphaMode::Opaque {
+            return Err(format!("leaf material '{name}' is OPAQUE, so its leaves' outline is geometry, not alpha"));
+        }
+    }
+    if most_leaves > u32::from(u16::MAX) {
+        return Err(format!("a plane holds {most_leaves} leaves, more than the 65535 a slot can name"));
+    }
+    Ok(())
+}
+
+/// The weighted least-squares fit of one leaf's affine map from plane coordinates `(s, t)` to
+/// texture coordinates (spec §6.10.1), each triangle's corners weighted by its area as
+/// projected on the plane, and its colour and material.
+#[derive(Clone, Copy, Debug)]
+struct LeafFit {
+    /// `Σ w`.
+    weight: f64,
+    /// `Σ w st`, `Σ w uv`.
+    st: DVec2,
+    uv: DVec2,
+    /// `Σ w st stᵀ`, `Σ w uv stᵀ`.
+    st_st: DMat2,
+    uv_st: DMat2,
+    /// `Σ w colour` (bytes as stored, RGBA).
+    colour: [f64; 4],
+    /// Bounds of the vertices' texture coordinates.
+    uv_min: DVec2,
+    uv_max: DVec2,
+    /// The material of the heaviest triangle, and its weight.
+    material: (u32, f64),
+}
+
+impl Default for LeafFit {
+    // Not derived: glam's matrices default to the identity.
+    fn default() -> Self {
+        Self {
+            weight: 0.0,
+            st: DVec2::ZERO,
+            uv: DVec2::ZERO,
+            st_st: DMat2::ZERO,
+            uv_st: DMat2::ZERO,
+            colour: [0.0; 4],
+            uv_min: DVec2::ZERO,
+            uv_max: DVec2::ZERO,
+            material: (0, 0.0),
+        }
+    }
+}
+
+fn outer2(a: DVec2, b: DVec2) -> DMat2 {
+    DMat2::from_cols(a * b.x, a * b.y)
+}
+
+impl LeafFit {
+    fn add(&mut self, mesh: &ImpostorMesh<'_>, t: u32, corners: [DVec3; 3], quad: &Quad) {
+        let tri = &mesh.triangles[t as usize];
+        let (hu2, hv2) = (quad.u.length_squared(), quad.v.length_squared());
+        let st = corners.map(|p| {
+            let d = p - quad.centre;
+            DVec2::new(d.dot(quad.u) / hu2, d.dot(quad.v) / hv2)
+        });
+        // Area in (s, t) units; the plane's metres would only scale every weight alike.
+        let w = 0.5 * (st[1] - st[0]).perp_dot(st[2] - st[0]).abs();
+        if !(w > 0.0 && w.is_finite()) {
+            return;
+        }
+        if w > self.material.1 {
+            self.material = (tri.material, w);
+        }
+        for (k, &v) in tri.v.iter().enumerate() {
+            let vertex = &mesh.vertices[v as usize];
+            let uv = DVec2::new(f64::from(vertex.uv[0]), f64::from(vertex.uv[1]));
+            if self.weight == 0.0 {
+                (self.uv_min, self.uv_max) = (uv, uv);
+            }
+            self.uv_min = self.uv_min.min(uv);
+            self.uv_max = self.uv_max.max(uv);
+            self.weight += w;
+            self.st += st[k] * w;
+            self.uv += uv * w;
+            self.st_st += outer2(st[k], st[k]) * w;
+            self.uv_st += outer2(uv, st[k]) * w;
+            for (c, byte) in self.colour.iter_mut().zip(vertex.color.to_le_bytes()) {
+                *c += w * f64::from(byte);
+            }
+        }
+    }
+
+    /// The record: `uv = ū + J (st − m)` with `J = Cov(uv, st) Cov(st)⁻¹` about the weighted
+    /// means; a leaf whose projection has no area (or is a line) gets its mean texture
+    /// coordinates and `J = 0`.
+    #[expect(clippy::cast_possible_truncation, reason = "texture coordinates and colour bytes")]
+    fn record(&self) -> PlaneLeafRecord {
+        if self.weight <= 0.0 || self.weight.is_nan() {
+            return PlaneLeafRecord { color: u32::MAX, ..PlaneLeafRecord::default() };
+        }
+        let (m, mean_uv) = (self.st / self.weight, self.uv / self.weight);
+        let cov = self.st_st * (1.0 / self.weight) - outer2(m, m);
+        let cross = self.uv_st * (1.0 / self.weight) - outer2(mean_uv, m);
+        let det = cov.determinant();
+        let trace = cov.x_axis.x + cov.y_axis.y;
+        // A flat 2D spread has det ≈ trace²/4; an edge-on leaf (a line) has det ≈ 0.
+        let j = if det > 1e-9 * trace * trace && det.is_finite() { cross * cov.inverse() } else { DMat2::ZERO };
+        let uv0 = mean_uv - j * m;
+        let colour = self.colour.map(|c| (c / self.weight).round().clamp(0.0, 255.0) as u8);
+        // A rectangle inside the image (a card); texture coordinates that leave it repeat the
+        // texture across the leaf, and the leaf is not clipped (spec §6.10.1).
+        let slack = 1e-3;
+        let unit = self.uv_min.min_element() >= -slack && self.uv_max.max_element() <= 1.0 + slack;
+        PlaneLeafRecord {
+            uv0: [uv0.x as f32, uv0.y as f32],
+            du: [j.x_axis.x as f32, j.x_axis.y as f32],
+            dv: [j.y_axis.x as f32, j.y_axis.y as f32],
+            uv_min: if unit { pack::unorm16x2(self.uv_min.x as f32, self.uv_min.y as f32) } else { 0 },
+            uv_max: if unit { pack::unorm16x2(self.uv_max.x as f32, self.uv_max.y as f32) } else { 0 },
+            material: self.material.0,
+            color: u32::from_le_bytes(colour),
+        }
+    }
 }
 
 /// Scales each level's alpha so that the alpha test at one half, of the bilinearly filtered
@@ -1591,3 +1928,4 @@ mod tests {
         }
     }
 }
+

@@ -30,7 +30,7 @@ pub use assemble::{
 pub use demo::{DemoTreeConfig, demo_tree};
 pub use error::BuildError;
 pub use import::{content_hash, import_gltf, import_gltf_bytes, scene_name};
-pub use impostor::{ImpostorConfig, Impostors};
+pub use impostor::{ImpostorConfig, Impostors, Texturing};
 pub use lod_chain::LodChainConfig;
 pub use prune::{PruneConfig, PruneOrder, PruneReport};
 pub use rng::SplitMix64;

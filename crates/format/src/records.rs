@@ -611,7 +611,7 @@ const _: () = assert!(size_of::<PlaneRecord>() == 64);
 
 /// One leaf of an indirectly textured impostor plane (Garcia 2005 §2.3; spec §6.10.1): where the
 /// plane's point `center + s·axis_u + t·axis_v` falls in the leaf's own texture, as the affine map
-/// `uv = uv0 + s·du + t·dv`, and what colours it.
+/// `uv = uv0 + s·du + t·dv` clipped to the leaf's texture rectangle, and what colours it.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct PlaneLeafRecord {
@@ -621,12 +621,17 @@ pub struct PlaneLeafRecord {
     pub du: [f32; 2],
     /// `∂uv/∂t`.
     pub dv: [f32; 2],
+    /// The leaf's texture rectangle's corner, two `unorm16` (u bits 0–15, v bits 16–31): the
+    /// leaf shows only where `uv` lies in `uv_min ..= uv_max`.
+    pub uv_min: u32,
+    /// The opposite corner, `≥ uv_min` per component.
+    pub uv_max: u32,
     /// Index into `MATERIALS`: the leaf's material (its texture, factor and alpha test).
     pub material: u32,
     /// RGBA8 (§2): the leaf's mean vertex colour, multiplied with the material's.
     pub color: u32,
 }
-const _: () = assert!(size_of::<PlaneLeafRecord>() == 32);
+const _: () = assert!(size_of::<PlaneLeafRecord>() == 40);
 
 /// Where each plane's [`PlaneLeafRecord`]s start in `PLANE_LEAVES` (spec §6.10.1): `base(p) =
 /// Σ_{q < p} leaf_count(q)`, one entry per plane and then the total, the length `PLANE_LEAVES`

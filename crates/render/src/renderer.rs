@@ -813,6 +813,18 @@ impl Renderer {
                 storage(6, wgpu::ShaderStages::VERTEX),
                 texture(7, wgpu::TextureViewDimension::D2),
                 sampler(8),
+                // Indirect texturing: the leaf-slot image and the planes' leaves.
+                wgpu::BindGroupLayoutEntry {
+                    binding: 9,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                storage(10, wgpu::ShaderStages::FRAGMENT),
             ],
         });
         let shadow_layout = ShadowMaps::layout(device);
@@ -1147,22 +1159,44 @@ impl Renderer {
             None => None,
         };
         // As uploaded, each plane's `leaf_first` (which no shader reads) holds the index of its
-        // parent plane, for the morph between levels (`vs_plane`), and its `leaf_count` its
-        // ambient occlusion byte (spec §6.14).
+        // parent plane, for the morph between levels (`vs_plane`), its `leaf_count` its ambient
+        // occlusion byte (spec §6.14), and its `image` (bound separately) where its leaves start
+        // in `PLANE_LEAVES` if it is textured indirectly (spec §6.10.1), else 0xFFFFFFFF.
         let parents = treelod_runtime::plane_parents(container.planes(), container.cells().iter().map(|c| c.planes));
         let plane_ao = container.plane_ao();
+        let bases = treelod_format::plane_leaf_bases(container.planes());
+        let is_slots = |image: u32| {
+            container.images().get(image as usize).is_some_and(|i| i.format == treelod_format::image_format::LEAF_SLOTS)
+        };
+        let indirect = container.planes().iter().any(|p| is_slots(p.image));
+        if indirect && bases.last().copied() != Some(container.plane_leaves().len() as u64) {
+            warnings.push(format!(
+                "PLANE_LEAVES holds {} records, the planes need {}; indirectly textured planes are not drawn",
+                container.plane_leaves().len(),
+                bases.last().copied().unwrap_or(0)
+            ));
+        }
+        let leaf_base = |i: usize, plane: &treelod_format::PlaneRecord| {
+            if is_slots(plane.image) && container.plane_leaves().len() as u64 == bases[bases.len() - 1] {
+                u32::try_from(bases[i]).unwrap_or(u32::MAX)
+            } else {
+                u32::MAX
+            }
+        };
         let gpu_planes: Vec<treelod_format::PlaneRecord> = container
             .planes()
             .iter()
             .zip(&parents)
             .enumerate()
             .map(|(i, (plane, &parent))| treelod_format::PlaneRecord {
+                image: leaf_base(i, plane),
                 leaf_first: parent,
                 leaf_count: plane_ao.get(i).copied().map_or(0, u32::from),
                 ..*plane
             })
             .collect();
         let plane_buffer = upload("PLANES", bytemuck::cast_slice(&gpu_planes))?;
+        let plane_leaves = upload("PLANE_LEAVES", bytemuck::cast_slice(container.plane_leaves()))?;
 
         // The roots, pinned in the pool: what a cell draws before its own points are resident.
         let lod = ModelLod::from_container(&container);
@@ -1232,7 +1266,7 @@ impl Renderer {
         });
         // The impostor atlas, as stored with its mips; without planes (or if it does not decode,
         // then without impostors) one transparent texel.
-        let blank = || textures::Atlas { width: 1, height: 1, srgb: true, levels: vec![vec![0; 4]] };
+        let blank = |slots| textures::Atlas { width: 1, height: 1, srgb: true, slots, levels: vec![vec![0; 4]] };
         let (atlas, planes) = match planes {
             Some(p) => match textures::atlas(&container, p.image()) {
                 Ok(atlas) if atlas.width.max(atlas.height) > device.limits().max_texture_dimension_2d => {
@@ -1242,16 +1276,19 @@ impl Renderer {
                         atlas.width,
                         atlas.height
                     ));
-                    (blank(), None)
+                    (blank(false), None)
                 }
                 Ok(atlas) => (atlas, Some(p)),
                 Err(e) => {
                     warnings.push(format!("impostor atlas (image {}): {e}; impostors are not drawn", p.image()));
-                    (blank(), None)
+                    (blank(false), None)
                 }
             },
-            None => (blank(), None),
+            None => (blank(false), None),
         };
+        // A leaf-slot image (spec §6.10.1) is bound as such, with a blank atlas; otherwise a blank
+        // slot image.
+        let (atlas, slots) = if atlas.slots { (blank(false), atlas) } else { (atlas, blank(true)) };
         if planes.as_ref().is_some_and(|p| container.planes().iter().any(|q| q.image != p.image())) {
             warnings.push(format!(
                 "impostor planes sample several images; all are drawn from image {}",
@@ -1259,7 +1296,8 @@ impl Renderer {
             ));
         }
         let (atlas_view, atlas_bytes) = upload_atlas(device, queue, &atlas, "treelod impostor atlas");
-        bytes += atlas_bytes;
+        let (slots_view, slot_bytes) = upload_atlas(device, queue, &slots, "treelod leaf slots");
+        bytes += atlas_bytes + slot_bytes;
         let model_group = |label: &str, planes: &wgpu::Buffer, atlas: &wgpu::TextureView| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(label),
@@ -1274,6 +1312,8 @@ impl Renderer {
                     wgpu::BindGroupEntry { binding: 6, resource: planes.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::TextureView(atlas) },
                     wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(&self.atlas_sampler) },
+                    wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::TextureView(&slots_view) },
+                    wgpu::BindGroupEntry { binding: 10, resource: plane_leaves.as_entire_binding() },
                 ],
             })
         };
@@ -2439,7 +2479,11 @@ fn upload_atlas(
         mip_level_count: u32::try_from(atlas.levels.len()).unwrap_or(1),
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
-        format: if atlas.srgb { wgpu::TextureFormat::Rgba8UnormSrgb } else { wgpu::TextureFormat::Rgba8Unorm },
+        format: match (atlas.slots, atlas.srgb) {
+            (true, _) => wgpu::TextureFormat::Rg16Uint,
+            (false, true) => wgpu::TextureFormat::Rgba8UnormSrgb,
+            (false, false) => wgpu::TextureFormat::Rgba8Unorm,
+        },
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         view_formats: &[],
     });

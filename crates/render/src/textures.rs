@@ -89,6 +89,8 @@ pub(crate) struct Atlas {
     pub height: u32,
     /// Whether RGB is sRGB-encoded.
     pub srgb: bool,
+    /// A leaf-slot image (spec §6.10.1): each texel two `u16` slots, uploaded as `Rg16Uint`.
+    pub slots: bool,
     /// Level by level, largest first, RGBA8 texels.
     pub levels: Vec<Vec<u8>>,
 }
@@ -111,11 +113,15 @@ pub(crate) fn atlas(container: &Container, index: u32) -> Result<Atlas, String> 
                 levels.push(texels.to_vec());
                 at += w * h * 4;
             }
-            Ok(Atlas { width, height, srgb: record.format == image_format::RGBA8_SRGB, levels })
+            Ok(Atlas { width, height, srgb: record.format == image_format::RGBA8_SRGB, slots: false, levels })
+        }
+        image_format::LEAF_SLOTS => {
+            let texels = data.get(..width as usize * height as usize * 4).ok_or("the leaf slots are cut short")?;
+            Ok(Atlas { width, height, srgb: false, slots: true, levels: vec![texels.to_vec()] })
         }
         _ => {
             let image = treelod_format::image::decode(record, data)?;
-            Ok(Atlas { width: image.width, height: image.height, srgb: true, levels: vec![image.texels] })
+            Ok(Atlas { width: image.width, height: image.height, srgb: true, slots: false, levels: vec![image.texels] })
         }
     }
 }

@@ -69,6 +69,16 @@ pub struct BuildOptions {
     /// 4096 texels per side).
     #[arg(long, value_name = "N", default_value_t = 24.0, requires = "impostors")]
     pub impostor_texels: f32,
+    /// With --impostors: how planes are textured. `direct`: an RGBA atlas of the leaves on each
+    /// plane. `indirect` (Garcia's indirect texturing, spec §6.10.1): a low-resolution image of
+    /// which leaf lies where, drawn from the leaves' own textures; for alpha-tested leaf cards
+    /// only (other leaves fall back to `direct`, with a warning).
+    #[arg(long, value_enum, value_name = "HOW", default_value_t = ImpostorTexturing::Direct, requires = "impostors")]
+    pub impostor_texturing: ImpostorTexturing,
+    /// With --impostor-texturing indirect: leaf-slot texels across a median leaf (its area's
+    /// square root), in (0, 64].
+    #[arg(long, value_name = "N", default_value_t = 2.0, requires = "impostors")]
+    pub impostor_slots_per_leaf: f32,
     /// Baselines to compare treelod with (spec §6.12, §6.13; `treelod eval --technique
     /// lod-chain,billboard,crossed`): each tree's discrete LoD chain from meshoptimizer's
     /// simplifiers (the regular one for bark, with the sloppy one as fallback for foliage, as
@@ -113,6 +123,11 @@ impl BuildOptions {
                 levels: self.impostor_levels.0.clone(),
                 alpha_scale: self.impostor_alpha,
                 texels_per_metre: self.impostor_texels,
+                texturing: match self.impostor_texturing {
+                    ImpostorTexturing::Direct => treelod_build::Texturing::Direct,
+                    ImpostorTexturing::Indirect => treelod_build::Texturing::Indirect,
+                },
+                slots_per_leaf: self.impostor_slots_per_leaf,
                 ..treelod_build::ImpostorConfig::default()
             }),
             ao: (self.ao_rays > 0)
@@ -164,6 +179,15 @@ impl BuildOptions {
 /// The `generator` recorded in the metadata of every container this tool writes.
 pub(crate) fn generator() -> String {
     format!("treelod {}", env!("CARGO_PKG_VERSION"))
+}
+
+/// `--impostor-texturing`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ImpostorTexturing {
+    /// An RGBA atlas of the leaves on each plane.
+    Direct,
+    /// A leaf-slot image and the leaves' own textures (spec §6.10.1).
+    Indirect,
 }
 
 /// `--impostor-levels`: plane counts per tree, finest first.
@@ -640,13 +664,12 @@ impl Summary<'_> {
             return String::new();
         }
         let levels: Vec<String> = s.planes_per_level.iter().map(u32::to_string).collect();
-        format!(
-            "  impostors     {} planes (per level {}), atlas {}x{}\n",
-            s.planes,
-            levels.join(", "),
-            s.atlas[0],
-            s.atlas[1]
-        )
+        let image = if s.plane_leaves > 0 {
+            format!("leaf slots {}x{}, {} plane leaves", s.atlas[0], s.atlas[1], s.plane_leaves)
+        } else {
+            format!("atlas {}x{}", s.atlas[0], s.atlas[1])
+        };
+        format!("  impostors     {} planes (per level {}), {image}\n", s.planes, levels.join(", "))
     }
 
     /// The pruning lines of the text summary (none without pruning).
