@@ -424,33 +424,39 @@ fn fs_triangle(in: Varyings) -> TriangleOut {
     return TriangleOut(vec4<f32>(shade(albedo.rgb, in.normal, in.world, in.ao) * in.tint, 1.0), mask);
 }
 
-// What a quad shows at a fragment: its albedo, and how to test its alpha (as `alpha_mask` and
-// `filtered_coverage` take them).
+// What a quad shows at a fragment: its albedo, and the share of the pixel it covers (0 or 1 where
+// its texture is not minified).
 struct QuadTexel {
     albedo: vec4<f32>,
-    cutoff: f32,
-    footprint: f32,
+    coverage: f32,
 }
 
 // An impostor plane's or billboard's texel. From an RGBA atlas: the baked leaves' colour
 // (linear after the sRGB fetch) and, in alpha, the fraction of the texel they cover, tested at
 // one half; the atlas's mips scale alpha so that the test keeps the covered fraction at every
-// level (Castaño's alpha mipmaps), so the test is right at any distance (footprint 0: no alpha
-// to coverage here). Indirectly textured (spec §6.10.1): the first of the slot texel's two leaves
-// whose own texture passes its material's alpha test at this point, sampled with the footprint
-// that the plane's screen derivatives give it, and tested as a triangle of that leaf would be.
-// Call it in uniform control flow (derivatives and the atlas's implicit ones).
+// level (Castaño's alpha mipmaps), so the test is right at any distance, with or without MSAA.
+//
+// Indirectly textured (spec §6.10.1): the slot texel's two leaves, each sampled from its own
+// texture with the footprint that the plane's screen derivatives give it. Magnified, the first
+// whose alpha passes its material's test shows, with crisp edges. Minified, each leaf covers the
+// share of the pixel its filtered alpha says (`filtered_coverage`, as alpha-tested triangles
+// with MSAA), the two together `1 − (1 − c_a)(1 − c_b)` with their colours so weighted: a plain
+// test of minified alpha would thin a distant crown, and one leaf alone would miss what the
+// other covers of the texel. Call it in uniform control flow (derivatives and the atlas's
+// implicit ones).
 fn quad_texel(in: Varyings) -> QuadTexel {
     let st_dx = dpdx(in.disc);
     let st_dy = dpdy(in.disc);
     let direct = textureSample(atlas, atlas_sampler, in.uv);
     if in.material == 0xFFFFFFFFu {
-        return QuadTexel(direct, 0.5, 0.0);
+        return QuadTexel(direct, select(0.0, 1.0, direct.a >= 0.5));
     }
     let size = vec2<i32>(textureDimensions(leaf_slots));
     let at = clamp(vec2<i32>(floor(in.uv * vec2<f32>(size))), vec2<i32>(0), size - 1);
     let slots = textureLoad(leaf_slots, at, 0).xy;
-    var first = QuadTexel(vec4<f32>(0.0), 2.0, 0.0);
+    var colour = vec3<f32>(0.0);
+    var weight = 0.0;
+    var uncovered = 1.0;
     for (var i = 0u; i < 2u; i++) {
         let slot = slots[i];
         if slot == 0u {
@@ -467,27 +473,34 @@ fn quad_texel(in: Varyings) -> QuadTexel {
         let gx = st_dx.x * du + st_dx.y * dv;
         let gy = st_dy.x * du + st_dy.y * dv;
         let texel = textureSampleGrad(textures, linear_sampler, uv, max(material.layer, 0), gx, gy);
-        var albedo = material.base_color * decode_color(leaf.color) * select(vec4<f32>(1.0), texel, material.layer >= 0);
-        if !inside {
-            albedo.a = 0.0;
-        }
+        let albedo = material.base_color * decode_color(leaf.color) * select(vec4<f32>(1.0), texel, material.layer >= 0);
         let footprint = max(length(gx), length(gy)) * f32(textureDimensions(textures).x);
-        let candidate = QuadTexel(albedo, material_cutoff(material), footprint);
-        if albedo.a >= candidate.cutoff {
-            return candidate;
+        let cutoff = material_cutoff(material);
+        var covered = select(filtered_coverage(albedo.a, cutoff, footprint), 1.0, cutoff < 0.0);
+        if !inside {
+            covered = 0.0;
         }
-        if i == 0u {
-            first = candidate;
+        if covered >= 1.0 {
+            // Opaque here: what lies behind it in the texel does not show.
+            return QuadTexel(vec4<f32>(albedo.rgb, 1.0), 1.0);
         }
+        colour += covered * uncovered * albedo.rgb;
+        weight += covered * uncovered;
+        uncovered *= 1.0 - covered;
     }
-    return first;
+    return QuadTexel(vec4<f32>(colour / max(weight, 1e-6), 1.0), 1.0 - uncovered);
 }
 
 @fragment
 fn fs_plane(in: Varyings) -> TriangleOut {
     let texel = quad_texel(in);
     let h = dither(in.clip);
-    let mask = alpha_mask(texel.albedo.a, texel.cutoff, texel.footprint, in.clip);
+    // A partial coverage (a minified indirect leaf) covers that share of the samples with MSAA,
+    // or of the pixels without (a hash of pixel and depth, so layers add up).
+    var mask = coverage_mask(texel.coverage, in.clip);
+    if sample_count == 1u {
+        mask = select(0u, 0xFFFFFFFFu, texel.coverage >= 1.0 || texel.coverage > layered_dither(in.clip));
+    }
     if mask == 0u || h < in.keep.x || h >= in.keep.y {
         discard;
     }
@@ -535,10 +548,7 @@ fn fs_shadow_triangle(in: Varyings) {
 fn fs_shadow_plane(in: Varyings) {
     let texel = quad_texel(in);
     let h = dither(in.clip);
-    var kept = texel.albedo.a >= texel.cutoff;
-    if in.material != 0xFFFFFFFFu && texel.cutoff >= 0.0 {
-        kept = filtered_coverage(texel.albedo.a, texel.cutoff, texel.footprint) > layered_dither(in.clip);
-    }
+    let kept = texel.coverage >= 1.0 || texel.coverage > layered_dither(in.clip);
     if !kept || h < in.keep.x || h >= in.keep.y {
         discard;
     }
