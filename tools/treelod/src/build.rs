@@ -77,7 +77,7 @@ pub struct BuildOptions {
     pub impostor_texturing: ImpostorTexturing,
     /// With --impostor-texturing indirect: leaf-slot texels across a median leaf (its area's
     /// square root), in (0, 64].
-    #[arg(long, value_name = "N", default_value_t = 2.0, requires = "impostors")]
+    #[arg(long, value_name = "N", default_value_t = 2.0, value_parser = parse_slots_per_leaf, requires = "impostors")]
     pub impostor_slots_per_leaf: f32,
     /// Baselines to compare treelod with (spec §6.12, §6.13; `treelod eval --technique
     /// lod-chain,billboard,crossed`): each tree's discrete LoD chain from meshoptimizer's
@@ -234,6 +234,15 @@ fn parse_quality(s: &str) -> Result<f32, String> {
         .ok()
         .filter(|q| (0.0..=1.0).contains(q))
         .ok_or_else(|| format!("{s:?} is not a number in [0, 1]"))
+}
+
+/// `--impostor-slots-per-leaf`: a number in (0, 64], the range the build accepts.
+fn parse_slots_per_leaf(s: &str) -> Result<f32, String> {
+    s.trim()
+        .parse::<f32>()
+        .ok()
+        .filter(|n| *n > 0.0 && *n <= 64.0)
+        .ok_or_else(|| format!("{s:?} is not a number in (0, 64]"))
 }
 
 /// Parses `X,Y,Z`, each in 1..=256 (the `--grid` option and the recorded `grid` setting).
