@@ -17,8 +17,9 @@ pub struct Rgba8 {
 /// Decodes image `record` whose bytes are `data` (its slice of `IMAGE_DATA`), level 0 only.
 ///
 /// # Errors
-/// A sentence naming what is wrong: an unknown format, a size that disagrees with the record, or
-/// bytes the codec refuses.
+/// A sentence naming what is wrong: an unknown format, a `LEAF_SLOTS` image (leaf slots, not a
+/// colour image: read its texels with [`crate::leaf_slots`]), a size that disagrees with the
+/// record, or bytes the codec refuses.
 pub fn decode(record: &ImageRecord, data: &[u8]) -> Result<Rgba8, String> {
     let (width, height, texels) = match record.format {
         image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR => {
@@ -28,6 +29,13 @@ pub fn decode(record: &ImageRecord, data: &[u8]) -> Result<Rgba8, String> {
         }
         image_format::PNG => decode_png(data)?,
         image_format::JPEG => decode_jpeg(data)?,
+        image_format::LEAF_SLOTS => {
+            return Err(format!(
+                "a {}x{} LEAF_SLOTS image holds leaf slots of indirectly textured planes (spec §6.10.1), \
+                 not colours: it is not a colour image",
+                record.width, record.height
+            ));
+        }
         other => return Err(format!("image format {other} is not defined by this version")),
     };
     if (width, height) != (record.width, record.height) {

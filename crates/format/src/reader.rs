@@ -9,9 +9,9 @@ use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD,
-    HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneLeafRecord, PlaneRecord,
-    PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord,
-    VertexRecord,
+    HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneLeafRecord,
+    PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
+    TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -393,7 +393,7 @@ impl Container {
 
     /// The leaves of indirectly textured planes (spec §6.10.1): per plane in
     /// [`Container::planes`] order, `leaf_count` records; empty if no plane is textured
-    /// indirectly. Its length is checked by [`crate::verify`], not at open.
+    /// indirectly. Its length is checked by [`crate::verify()`], not at open.
     #[must_use]
     pub fn plane_leaves(&self) -> &[PlaneLeafRecord] {
         self.records(SectionKind::PLANE_LEAVES)

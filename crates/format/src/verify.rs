@@ -13,8 +13,8 @@ use crate::error::{Error, Result};
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
     BillboardRecord, CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord,
-    NO_IMAGE, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement,
-    TriangleRecord, VertexRecord, billboard_kind, image_format,
+    NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind,
+    SptElement, TriangleRecord, VertexRecord, billboard_kind, image_format, leaf_slots, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -56,6 +56,11 @@ pub struct VerifyReport {
     pub lines: u64,
     /// `PLANES` records checked.
     pub planes: u64,
+    /// `PLANE_LEAVES` records checked (indirect texturing, spec §6.10.1).
+    pub plane_leaves: u64,
+    /// `PLANES` records textured indirectly: their image is a `LEAF_SLOTS` image, whose slots in
+    /// their rectangle were checked against their `leaf_count` (spec §6.10.1).
+    pub indirect_planes: u64,
     /// `PRUNE_LEAVES` records checked.
     pub prune_leaves: u64,
     /// `PRUNE_TRIANGLES` records checked.
@@ -105,6 +110,9 @@ impl core::fmt::Display for VerifyReport {
         if self.ao > 0 {
             writeln!(f, "ambient occlusion: {} values", self.ao)?;
         }
+        if self.plane_leaves + self.indirect_planes > 0 {
+            writeln!(f, "indirect texturing: {} planes, {} plane leaves", self.indirect_planes, self.plane_leaves)?;
+        }
         write!(f, "exact cut: {} leaves, runs nested up to {} deep", self.cut_leaves, self.max_depth)
     }
 }
@@ -147,6 +155,8 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_ellipsoids(c.ellipsoids())?;
     check_lines(c.lines())?;
     check_planes(c.planes(), image_count)?;
+    report.indirect_planes =
+        check_plane_leaves(c.plane_leaves(), c.planes(), c.images(), c.image_data(), material_count)?;
     check_prune(c.prune_leaves(), c.prune_triangles())?;
     check_curve(SectionKind::PRUNE_SCALE, c.prune_scale())?;
     check_curve(SectionKind::PRUNE_LAMBDA, c.prune_lambda())?;
@@ -175,6 +185,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.ellipsoids = c.ellipsoids().len() as u64;
     report.lines = c.lines().len() as u64;
     report.planes = c.planes().len() as u64;
+    report.plane_leaves = c.plane_leaves().len() as u64;
     report.prune_leaves = c.prune_leaves().len() as u64;
     report.prune_triangles = c.prune_triangles().len() as u64;
     report.curve_samples = (c.prune_scale().len() + c.prune_lambda().len()) as u64;
@@ -342,8 +353,8 @@ fn check_materials(materials: &[MaterialRecord], image_count: usize) -> Result<(
 }
 
 /// Spec §6.7: sizes, mip counts and data ranges; the data of PNG and JPEG images starts with the
-/// format's signature. Images of formats this version does not define are checked only for their
-/// data range.
+/// format's signature; a `LEAF_SLOTS` image has one level of `width · height` texels of 4 bytes
+/// (§6.10.1). Images of formats this version does not define are checked only for their data range.
 fn check_images(images: &[ImageRecord], data: &[u8]) -> Result<()> {
     let kind = SectionKind::IMAGES;
     let data_len = data.len() as u64;
@@ -364,7 +375,11 @@ fn check_images(images: &[ImageRecord], data: &[u8]) -> Result<()> {
         }
         let known = matches!(
             img.format,
-            image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR | image_format::PNG | image_format::JPEG
+            image_format::RGBA8_SRGB
+                | image_format::RGBA8_LINEAR
+                | image_format::PNG
+                | image_format::JPEG
+                | image_format::LEAF_SLOTS
         );
         if !known {
             continue;
@@ -380,6 +395,26 @@ fn check_images(images: &[ImageRecord], data: &[u8]) -> Result<()> {
             .and_then(|(s, e)| data.get(s..e))
             .unwrap_or_default();
         match img.format {
+            image_format::LEAF_SLOTS => {
+                if img.mip_count != 1 {
+                    return Err(bad(
+                        kind,
+                        i,
+                        format!("mip_count {} but a LEAF_SLOTS image has 1 (§6.7, §6.10.1)", img.mip_count),
+                    ));
+                }
+                let expected = u64::from(img.width) * u64::from(img.height) * 4;
+                if img.data_length != expected {
+                    return Err(bad(
+                        kind,
+                        i,
+                        format!(
+                            "data_length {} but a {}x{} LEAF_SLOTS image needs {expected} bytes (two u16 slots per texel)",
+                            img.data_length, img.width, img.height
+                        ),
+                    ));
+                }
+            }
             image_format::PNG | image_format::JPEG => {
                 if img.mip_count != 1 {
                     return Err(bad(kind, i, format!("mip_count {} but an encoded image has 1", img.mip_count)));
@@ -547,6 +582,244 @@ fn check_quad(
         ));
     }
     Ok(())
+}
+
+/// Spec §6.10.1, indirect texturing: `PLANE_LEAVES` is empty or holds `Σ leaf_count` records
+/// (plane `p`'s leaves from `base(p)`, [`plane_leaf_bases`]); it is not empty if a plane's image
+/// is `LEAF_SLOTS`; each record names an existing material, has finite `uv0`, `du`, `dv` and a
+/// texture rectangle with `uv_min ≤ uv_max` per component (its colour may be any value); and
+/// each texel of a `LEAF_SLOTS` plane's rectangle (the texels whose area meets it,
+/// [`texel_span`]) holds slots `a, b ≤ leaf_count`. Returns the number of planes textured
+/// indirectly.
+///
+/// Runs after [`check_images`] (a `LEAF_SLOTS` image's data is `width · height · 4` bytes inside
+/// `IMAGE_DATA`) and [`check_planes`] (every plane's image exists, `uv_min ≤ uv_max`).
+fn check_plane_leaves(
+    leaves: &[PlaneLeafRecord],
+    planes: &[PlaneRecord],
+    images: &[ImageRecord],
+    image_data: &[u8],
+    material_count: usize,
+) -> Result<u64> {
+    let kind = SectionKind::PLANE_LEAVES;
+    let bases = plane_leaf_bases(planes);
+    let total = bases.last().copied().unwrap_or(0);
+    if !leaves.is_empty() && leaves.len() as u64 != total {
+        return Err(bad(
+            kind,
+            0,
+            format!(
+                "{} records, the PLANES records' leaf_count sum to {total}: PLANE_LEAVES is empty or holds \
+                 leaf_count records per plane (§6.10.1)",
+                leaves.len()
+            ),
+        ));
+    }
+    let slots_image = |p: &PlaneRecord| images.get(p.image as usize).filter(|i| i.format == image_format::LEAF_SLOTS);
+    let indirect = planes.iter().filter(|p| slots_image(p).is_some()).count() as u64;
+    if leaves.is_empty() {
+        if let Some((i, p)) = planes.iter().enumerate().find(|(_, p)| slots_image(p).is_some()) {
+            return Err(bad(
+                SectionKind::PLANES,
+                i,
+                format!(
+                    "image {} is LEAF_SLOTS (indirect texturing) but PLANE_LEAVES is empty; it holds the leaves \
+                     its slots name (§6.10.1)",
+                    p.image
+                ),
+            ));
+        }
+        return Ok(indirect);
+    }
+    // The plane whose leaves record `i` belongs to: the last plane with base ≤ i (planes with no
+    // leaves share their base with the next one).
+    let owner = |i: usize| bases.partition_point(|&b| b <= i as u64).saturating_sub(1);
+    for (i, leaf) in leaves.iter().enumerate() {
+        let whose = || {
+            let p = owner(i);
+            let j = bases.get(p).map_or(0, |&b| i as u64 - b);
+            format!("(leaf {j} of plane {p})")
+        };
+        if leaf.material as usize >= material_count {
+            return Err(bad(
+                kind,
+                i,
+                format!("material {} is out of range ({material_count} materials) {}", leaf.material, whose()),
+            ));
+        }
+        for (name, v) in [("uv0", leaf.uv0), ("du", leaf.du), ("dv", leaf.dv)] {
+            if !v.iter().all(|x| x.is_finite()) {
+                return Err(bad(kind, i, format!("{name} {v:?} is not finite {}", whose())));
+            }
+        }
+        let (min, max) = (leaf.uv_min, leaf.uv_max);
+        if min & 0xFFFF > max & 0xFFFF || min >> 16 > max >> 16 {
+            return Err(bad(
+                kind,
+                i,
+                format!(
+                    "uv_min ({}, {}) is not <= uv_max ({}, {}) per component {}",
+                    min & 0xFFFF,
+                    min >> 16,
+                    max & 0xFFFF,
+                    max >> 16,
+                    whose()
+                ),
+            ));
+        }
+    }
+
+    // The slots: per LEAF_SLOTS image, a max pyramid built once, then one query per plane.
+    let mut pyramids: Vec<Option<SlotPyramid<'_>>> = Vec::new();
+    pyramids.resize_with(images.len(), || None);
+    for (i, p) in planes.iter().enumerate() {
+        let Some(image) = slots_image(p) else { continue };
+        let index = p.image as usize;
+        let Some(slot) = pyramids.get_mut(index) else { continue };
+        let pyramid = slot.get_or_insert_with(|| SlotPyramid::new(image, image_data));
+        let [x0, x1] = texel_span(p.uv_min & 0xFFFF, p.uv_max & 0xFFFF, image.width);
+        let [y0, y1] = texel_span(p.uv_min >> 16, p.uv_max >> 16, image.height);
+        let limit = u16::try_from(p.leaf_count).unwrap_or(u16::MAX);
+        if let Some((x, y, a, b)) = pyramid.first_above(limit, [x0, x1], [y0, y1]) {
+            return Err(bad(
+                SectionKind::PLANES,
+                i,
+                format!(
+                    "texel ({x}, {y}) of its LEAF_SLOTS image {index}, inside its rectangle (texels {x0}..={x1} x \
+                     {y0}..={y1}), holds slots ({a}, {b}), above its leaf_count {} (§6.10.1)",
+                    p.leaf_count
+                ),
+            ));
+        }
+    }
+    Ok(indirect)
+}
+
+/// The texels along one axis of `side` texels that the coordinates `min/65535 ..= max/65535`
+/// cover (spec §6.10.1): those whose extent `[k, k+1)/side` meets the closed interval in more
+/// than a point, `floor(min·side/65535) ..= ceil(max·side/65535) − 1`, or the texel holding
+/// `min` when the interval is a point on a texel edge; clamped to the image.
+fn texel_span(min: u32, max: u32, side: u32) -> [u32; 2] {
+    let side = u64::from(side.max(1));
+    let first = u64::from(min) * side / 65_535;
+    let last = (u64::from(max) * side).div_ceil(65_535).saturating_sub(1).max(first);
+    let clamp = |v: u64| u32::try_from(v.min(side - 1)).unwrap_or(u32::MAX);
+    [clamp(first), clamp(last)]
+}
+
+/// Texels per side of the finest level of a [`SlotPyramid`].
+const SLOT_BLOCK: u32 = 4;
+
+/// A `LEAF_SLOTS` image with the largest slot (`max(a, b)`) of each block of `SLOT_BLOCK`² texels
+/// and of each coarser block of 2×2 blocks, up to one block: a rectangle whose blocks all hold
+/// slots at most a plane's `leaf_count` is settled without reading its texels, so planes whose
+/// rectangles overlap (or cover the whole image) do not cost their area each.
+struct SlotPyramid<'a> {
+    /// `width · height · 4` bytes (checked by [`check_images`]; a shorter slice reads as zeros).
+    texels: &'a [u8],
+    width: u32,
+    height: u32,
+    /// Finest first: the blocks across, down and their maxima, row by row.
+    levels: Vec<(usize, usize, Vec<u16>)>,
+}
+
+impl<'a> SlotPyramid<'a> {
+    fn new(image: &ImageRecord, image_data: &'a [u8]) -> Self {
+        let (width, height) = (image.width.max(1), image.height.max(1));
+        let texels = usize::try_from(image.data_offset)
+            .ok()
+            .zip(usize::try_from(image.data_length).ok())
+            .and_then(|(start, len)| image_data.get(start..start.checked_add(len)?))
+            .unwrap_or_default();
+        let (bw, bh) = (width.div_ceil(SLOT_BLOCK) as usize, height.div_ceil(SLOT_BLOCK) as usize);
+        let block = SLOT_BLOCK as usize;
+        let mut finest = vec![0u16; bw * bh];
+        for (y, row) in texels.chunks_exact(width as usize * 4).enumerate() {
+            let Some(blocks) = finest.get_mut((y / block) * bw..(y / block + 1) * bw) else { break };
+            for (x, texel) in row.chunks_exact(4).enumerate() {
+                let (a, b) = leaf_slots([texel[0], texel[1], texel[2], texel[3]]);
+                if let Some(m) = blocks.get_mut(x / block) {
+                    *m = (*m).max(a).max(b);
+                }
+            }
+        }
+        let mut levels = vec![(bw, bh, finest)];
+        while let Some((w, h, below)) = levels.last().filter(|(w, h, _)| *w > 1 || *h > 1) {
+            let (nw, nh) = (w.div_ceil(2), h.div_ceil(2));
+            let mut up = vec![0u16; nw * nh];
+            for (y, row) in below.chunks_exact(*w).enumerate() {
+                let Some(ups) = up.get_mut((y / 2) * nw..(y / 2 + 1) * nw) else { break };
+                for (x, &m) in row.iter().enumerate() {
+                    if let Some(u) = ups.get_mut(x / 2) {
+                        *u = (*u).max(m);
+                    }
+                }
+            }
+            levels.push((nw, nh, up));
+        }
+        Self { texels, width, height, levels }
+    }
+
+    /// A texel of the rectangle `x0 ..= x1` × `y0 ..= y1` (texels) holding a slot above `limit`,
+    /// with its two slots: `(x, y, a, b)`. Blocks are visited depth first in row order, and those
+    /// outside the rectangle or with no slot above `limit` are skipped whole.
+    fn first_above(&self, limit: u16, [x0, x1]: [u32; 2], [y0, y1]: [u32; 2]) -> Option<(u32, u32, u16, u16)> {
+        // Blocks to visit as (level, bx, by), coarsest first.
+        let top = self.levels.len().checked_sub(1)?;
+        let mut stack = vec![(top, 0u32, 0u32)];
+        while let Some((level, bx, by)) = stack.pop() {
+            let (w, _, maxima) = self.levels.get(level)?;
+            let size = u64::from(SLOT_BLOCK) << level;
+            let (left, top_y) = (u64::from(bx) * size, u64::from(by) * size);
+            let meets = left <= u64::from(x1)
+                && left + size > u64::from(x0)
+                && top_y <= u64::from(y1)
+                && top_y + size > u64::from(y0);
+            let max = maxima.get(by as usize * *w + bx as usize).copied().unwrap_or(0);
+            if !meets || max <= limit {
+                continue;
+            }
+            if level == 0 {
+                if let Some(found) = self.scan_block(limit, bx, by, [x0, x1], [y0, y1]) {
+                    return Some(found);
+                }
+                continue;
+            }
+            let (cw, ch, _) = self.levels.get(level - 1)?;
+            // Children pushed last-first, so they are visited in row order.
+            for (dx, dy) in [(1, 1), (0, 1), (1, 0), (0, 0)] {
+                let (cx, cy) = (2 * bx + dx, 2 * by + dy);
+                if (cx as usize) < *cw && (cy as usize) < *ch {
+                    stack.push((level - 1, cx, cy));
+                }
+            }
+        }
+        None
+    }
+
+    /// The first texel in row order of finest block `(bx, by)` inside the rectangle holding a slot
+    /// above `limit`.
+    fn scan_block(
+        &self,
+        limit: u16,
+        bx: u32,
+        by: u32,
+        [x0, x1]: [u32; 2],
+        [y0, y1]: [u32; 2],
+    ) -> Option<(u32, u32, u16, u16)> {
+        let xs = (bx * SLOT_BLOCK).max(x0)..=((bx + 1) * SLOT_BLOCK - 1).min(x1).min(self.width - 1);
+        for y in (by * SLOT_BLOCK).max(y0)..=((by + 1) * SLOT_BLOCK - 1).min(y1).min(self.height - 1) {
+            for x in xs.clone() {
+                let at = (y as usize * self.width as usize + x as usize) * 4;
+                let texel = self.texels.get(at..at + 4).map_or([0; 4], |t| [t[0], t[1], t[2], t[3]]);
+                let (a, b) = leaf_slots(texel);
+                if a > limit || b > limit {
+                    return Some((x, y, a, b));
+                }
+            }
+        }
+        None
+    }
 }
 
 /// Spec §6.12: levels sorted by `(tree, level)`, numbered without gaps per tree, fractions in

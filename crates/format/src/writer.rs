@@ -15,8 +15,9 @@ use crate::metadata::Metadata;
 use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
     BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE,
-    Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
-    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneLeafRecord, PlaneRecord,
+    PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord,
+    VertexRecord,
 };
 
 /// How sections are stored.
