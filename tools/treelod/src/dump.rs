@@ -286,7 +286,8 @@ impl PruningInfo {
     }
 }
 
-/// The impostor planes (spec §6.10): how many, where, and the atlas images they sample.
+/// The impostor planes (spec §6.10): how many, where, the atlas images they sample, and for
+/// indirect texturing (§6.10.1) the `LEAF_SLOTS` images and the `PLANE_LEAVES` count.
 #[derive(Debug, Serialize)]
 struct ImpostorInfo {
     /// `PLANES` records.
@@ -299,6 +300,10 @@ struct ImpostorInfo {
     roots: u64,
     /// The images the planes sample.
     atlases: Vec<AtlasInfo>,
+    /// `PLANE_LEAVES` records (spec §6.10.1), when the container has any or a plane samples a
+    /// `LEAF_SLOTS` image.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    plane_leaves: Option<u64>,
 }
 
 /// One image sampled by planes.
@@ -330,7 +335,7 @@ impl ImpostorInfo {
         let mut images: Vec<u32> = planes.iter().map(|p| p.image).collect();
         images.sort_unstable();
         images.dedup();
-        let atlases = images
+        let atlases: Vec<AtlasInfo> = images
             .iter()
             .filter_map(|&image| {
                 let r = container.images().get(image as usize)?;
@@ -345,12 +350,15 @@ impl ImpostorInfo {
                 })
             })
             .collect();
+        let leaf_slots = atlases.iter().any(|a| a.format == treelod_format::image_format::LEAF_SLOTS);
+        let plane_leaves = container.plane_leaves().len() as u64;
         Some(Self {
             planes: planes.len() as u64,
             cells: container.cells().iter().filter(|c| c.planes.count > 0).count() as u64,
             finest: planes.iter().filter(|p| p.lo == 0.0).count() as u64,
             roots: planes.iter().filter(|p| p.hi == f32::INFINITY).count() as u64,
             atlases,
+            plane_leaves: (plane_leaves > 0 || leaf_slots).then_some(plane_leaves),
         })
     }
 
@@ -360,17 +368,26 @@ impl ImpostorInfo {
             "\nimpostors\n  planes     {} in {} cell(s): {} at the finest level (lo = 0), {} at the coarsest (hi = inf)\n",
             self.planes, self.cells, self.finest, self.roots
         );
+        let plane_leaves = self.plane_leaves.unwrap_or(0);
         for a in &self.atlases {
-            let format = match a.format {
-                treelod_format::image_format::RGBA8_SRGB => "RGBA8_SRGB".to_owned(),
-                treelod_format::image_format::RGBA8_LINEAR => "RGBA8_LINEAR".to_owned(),
-                treelod_format::image_format::PNG => "PNG".to_owned(),
-                treelod_format::image_format::JPEG => "JPEG".to_owned(),
-                other => format!("format {other}"),
-            };
+            let format = image_format_name(a.format);
+            if a.format == treelod_format::image_format::LEAF_SLOTS {
+                // A leaf distribution (spec §6.10.1): its slots name PLANE_LEAVES records.
+                out.push_str(&format!(
+                    "  leaf slots image {}: {} x {} {format}, {} bytes, {} plane(s), {plane_leaves} plane-leaf records\n",
+                    a.image, a.width, a.height, a.bytes, a.planes
+                ));
+            } else {
+                out.push_str(&format!(
+                    "  atlas      image {}: {} x {} {format}, {} mip(s), {} bytes, {} plane(s)\n",
+                    a.image, a.width, a.height, a.mip_count, a.bytes, a.planes
+                ));
+            }
+        }
+        let slots = self.atlases.iter().any(|a| a.format == treelod_format::image_format::LEAF_SLOTS);
+        if plane_leaves > 0 && !slots {
             out.push_str(&format!(
-                "  atlas      image {}: {} x {} {format}, {} mip(s), {} bytes, {} plane(s)\n",
-                a.image, a.width, a.height, a.mip_count, a.bytes, a.planes
+                "  leaves     {plane_leaves} plane-leaf records, no plane samples a LEAF_SLOTS image\n"
             ));
         }
         out
@@ -931,6 +948,20 @@ fn section_info(section: &Section) -> SectionInfo {
         record_size: e.record_size,
         record_count: section.record_count(),
         checksum: e.checksum,
+    }
+}
+
+/// The spec's name of an image `format` value (spec §6.7), or `format N` for values this version
+/// does not define.
+fn image_format_name(format: u32) -> String {
+    use treelod_format::image_format;
+    match format {
+        image_format::RGBA8_SRGB => "RGBA8_SRGB".to_owned(),
+        image_format::RGBA8_LINEAR => "RGBA8_LINEAR".to_owned(),
+        image_format::PNG => "PNG".to_owned(),
+        image_format::JPEG => "JPEG".to_owned(),
+        image_format::LEAF_SLOTS => "LEAF_SLOTS".to_owned(),
+        other => format!("format {other}"),
     }
 }
 
