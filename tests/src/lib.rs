@@ -53,7 +53,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 and 1.1, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.3, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -78,7 +78,13 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.0, zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { lod_levels: 0, billboards: false, ao: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                lod_levels: 0,
+                billboards: false,
+                ao: false,
+                indirect_planes: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -98,13 +104,22 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.1 (1.0's and the baselines), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { ao: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions { ao: false, indirect_planes: false, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
             minor: 2,
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.2 (1.1's and ambient occlusion), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { indirect_planes: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 3,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.3 (1.2's and indirectly textured planes: PLANE_LEAVES and a LEAF_SLOTS \
+                          image), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions::everything(),
             compression: Compression::Zstd { level: 19 },

@@ -6,8 +6,8 @@ use treelod_build::{SptNode, flatten};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CellRecord, ContainerData, CurveSample, EllipsoidRecord, ImageRecord, LineRecord,
-    LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneRecord, PointRecord, PruneLeafRecord, Range,
-    SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, image_format,
+    LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord,
+    Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -56,6 +56,13 @@ pub struct SyntheticOptions {
     pub extension_kinds: Vec<u32>,
     /// Ambient occlusion (spec §6.14, 1.2): a random byte per vertex, point and plane.
     pub ao: bool,
+    /// Indirect texturing of the impostor planes (spec §6.10.1, 1.3): every plane samples a
+    /// region of 2..=6 × 2..=6 texels (inside an 8 × 8 cell, so an empty border surrounds it) of
+    /// one `LEAF_SLOTS` image appended to `IMAGES`, whose slots name its leaves, and has
+    /// `leaf_count` random `PLANE_LEAVES` records. The RGBA atlas stays for the billboards. Needs
+    /// planes and a material; drawn after everything else, so the rest of the container is the
+    /// same as without it.
+    pub indirect_planes: bool,
     /// Block name in the metadata; `None` gives `synthetic-<seed in hex>`.
     pub name: Option<String>,
 }
@@ -82,6 +89,7 @@ impl SyntheticOptions {
             tree_count: 1,
             extension_kinds: Vec::new(),
             ao: false,
+            indirect_planes: false,
             name: Some("minimal".into()),
         }
     }
@@ -100,10 +108,11 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.2: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.3: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
-    /// baseline LoD chain and facing and crossed billboards, and ambient occlusion.
+    /// baseline LoD chain and facing and crossed billboards, ambient occlusion, and indirectly
+    /// textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -123,6 +132,7 @@ impl SyntheticOptions {
             tree_count: 2,
             extension_kinds: Vec::new(),
             ao: true,
+            indirect_planes: true,
             name: Some("everything".into()),
         }
     }
@@ -635,14 +645,8 @@ impl Builder<'_> {
     }
 
     /// Appends an image's data to `IMAGE_DATA` at the next multiple of 16 and its record.
-    fn push_image(&mut self, mut record: ImageRecord, bytes: &[u8]) -> u32 {
-        let offset = self.data.image_data.len().div_ceil(16) * 16;
-        self.data.image_data.resize(offset, 0);
-        self.data.image_data.extend_from_slice(bytes);
-        record.data_offset = offset as u64;
-        record.data_length = bytes.len() as u64;
-        self.data.images.push(record);
-        self.data.images.len() as u32 - 1
+    fn push_image(&mut self, record: ImageRecord, bytes: &[u8]) -> u32 {
+        push_image(&mut self.data, record, bytes)
     }
 
     fn raw_image(&mut self, width: u32, height: u32, format: u32, full_mips: bool) -> u32 {
@@ -653,6 +657,86 @@ impl Builder<'_> {
         let bytes = self.rng.bytes(length);
         self.push_image(record, &bytes)
     }
+}
+
+/// Appends an image's data to `IMAGE_DATA` at the next multiple of 16 and its record; returns its
+/// index.
+fn push_image(data: &mut ContainerData, mut record: ImageRecord, bytes: &[u8]) -> u32 {
+    let offset = data.image_data.len().div_ceil(16) * 16;
+    data.image_data.resize(offset, 0);
+    data.image_data.extend_from_slice(bytes);
+    record.data_offset = offset as u64;
+    record.data_length = bytes.len() as u64;
+    data.images.push(record);
+    data.images.len() as u32 - 1
+}
+
+/// Texels per side of the cell that holds one plane's region in the `LEAF_SLOTS` image.
+const SLOT_CELL: u32 = 8;
+
+/// Indirect texturing (spec §6.10.1): one `LEAF_SLOTS` image with a cell of `SLOT_CELL`² texels
+/// per plane, row by row; each plane's rectangle is a random region of 2..=6 × 2..=6 texels inside
+/// its cell, at least one texel from the cell's edge (so the texels a rectangle's rounded corners
+/// may touch are empty), whose texels hold slot `a` (a leaf of the plane, or 0 one time in five)
+/// and slot `b` (another leaf half the time, else 0); the rest of the image is 0. Each plane gets
+/// `leaf_count` `PLANE_LEAVES` records with random affine maps, texture rectangles (or none),
+/// materials and colours.
+fn indirect_texturing(rng: &mut SplitMix64, data: &mut ContainerData) {
+    let count = data.planes.len() as u32;
+    let materials = data.materials.len() as u32;
+    if count == 0 || materials == 0 {
+        return;
+    }
+    let mut columns = 1;
+    while columns * columns < count {
+        columns += 1;
+    }
+    let (width, height) = (columns * SLOT_CELL, count.div_ceil(columns) * SLOT_CELL);
+    let mut texels = vec![0u8; (width * height * 4) as usize];
+    let image = data.images.len() as u32;
+    for (p, plane) in data.planes.iter_mut().enumerate() {
+        let (cell_x, cell_y) = ((p as u32 % columns) * SLOT_CELL, (p as u32 / columns) * SLOT_CELL);
+        let (w, h) = (2 + rng.below(5), 2 + rng.below(5));
+        let x0 = cell_x + 1 + rng.below(SLOT_CELL - 1 - w);
+        let y0 = cell_y + 1 + rng.below(SLOT_CELL - 1 - h);
+        let leaves = plane.leaf_count;
+        for y in y0..y0 + h {
+            for x in x0..x0 + w {
+                let a = if rng.chance(0.8) { 1 + rng.below(leaves) } else { 0 };
+                let b = if a > 0 && leaves > 1 && rng.chance(0.5) {
+                    // Another leaf than a: a step of 1 ..= leaves − 1 around the plane's leaves.
+                    1 + (a + rng.below(leaves - 1)) % leaves
+                } else {
+                    0
+                };
+                let at = ((y * width + x) * 4) as usize;
+                texels[at..at + 2].copy_from_slice(&(a as u16).to_le_bytes());
+                texels[at + 2..at + 4].copy_from_slice(&(b as u16).to_le_bytes());
+            }
+        }
+        plane.image = image;
+        plane.uv_min = unorm16x2(x0 as f32 / width as f32, y0 as f32 / height as f32);
+        plane.uv_max = unorm16x2((x0 + w) as f32 / width as f32, (y0 + h) as f32 / height as f32);
+        for _ in 0..leaves {
+            let uv0 = [rng.unit(), rng.unit()];
+            let du = [rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)];
+            let dv = [rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)];
+            // A texture rectangle, or one time in four none (`uv_min = uv_max = 0`: not clipped).
+            let (uv_min, uv_max) = if rng.chance(0.25) {
+                (0, 0)
+            } else {
+                let (u0, v0) = (rng.uniform(0.0, 0.5), rng.uniform(0.0, 0.5));
+                let (u1, v1) = (u0 + rng.uniform(0.0, 0.5), v0 + rng.uniform(0.0, 0.5));
+                (unorm16x2(u0, v0), unorm16x2(u1, v1))
+            };
+            let material = rng.below(materials);
+            let color = if rng.chance(0.5) { u32::MAX } else { random_color(rng) };
+            data.plane_leaves.push(PlaneLeafRecord { uv0, du, dv, uv_min, uv_max, material, color });
+        }
+    }
+    let record =
+        ImageRecord { width, height, mip_count: 1, format: image_format::LEAF_SLOTS, data_offset: 0, data_length: 0 };
+    push_image(data, record, &texels);
 }
 
 /// A valid PNG file (8-bit RGBA, stored deflate blocks) of `width × height` random texels.
@@ -894,6 +978,9 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
         b.data.vertex_ao = rng.bytes(b.data.vertices.len());
         b.data.point_ao = rng.bytes(b.data.points.len());
         b.data.plane_ao = rng.bytes(b.data.planes.len());
+    }
+    if options.indirect_planes {
+        indirect_texturing(&mut rng, &mut b.data);
     }
     b.data
 }

@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 and 1.1 (`tests/data/v1_0`, `tests/data/v1_1`): every file
+//! Golden files of format versions 1.0 to 1.3 (`tests/data/v1_0` to `tests/data/v1_3`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -7,7 +7,8 @@ use std::path::PathBuf;
 
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, MaterialInfo, MaterialRecord, Metadata,
-    NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, verify,
+    NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, image_format,
+    leaf_slots, plane_leaf_bases, verify,
 };
 use treelod_tests::{
     SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
@@ -23,7 +24,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2] {
+    for minor in [0u16, 1, 2, 3] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -276,7 +277,7 @@ fn the_1_2_every_kind_file_has_every_kind_and_ambient_occlusion_for_every_vertex
     let path = golden_dir_of(2).join("every-kind-zstd.treelod");
     let c = Container::open(&path).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 2, "{kind}");
     }
     assert_eq!(c.header().minor, 2);
     assert_eq!(
@@ -290,6 +291,46 @@ fn the_1_2_every_kind_file_has_every_kind_and_ambient_occlusion_for_every_vertex
     let older = Container::from_bytes(&bytes).unwrap();
     assert_eq!(older.header().minor, 1);
     assert!(older.vertices() == c.vertices() && older.points() == c.points() && older.planes() == c.planes());
+}
+
+#[test]
+fn the_1_3_every_kind_file_has_every_kind_and_indirectly_textured_planes() {
+    let c = Container::open(golden_dir_of(3).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 3);
+    // Every plane samples the one LEAF_SLOTS image, the last image; PLANE_LEAVES holds every
+    // plane's leaves.
+    let slots = c.images().len() as u32 - 1;
+    assert_eq!(c.images()[slots as usize].format, image_format::LEAF_SLOTS);
+    assert!(c.planes().iter().all(|p| p.image == slots));
+    assert_eq!(c.plane_leaves().len() as u64, *plane_leaf_bases(c.planes()).last().unwrap());
+    assert_eq!(verify(&c).unwrap().indirect_planes, c.planes().len() as u64);
+    // Its slots name leaves, and some texels hold two.
+    let image = c.images()[slots as usize];
+    let texels = &c.image_data()[image.data_offset as usize..][..image.data_length as usize];
+    let slot_pairs: Vec<(u16, u16)> = texels.chunks_exact(4).map(|t| leaf_slots([t[0], t[1], t[2], t[3]])).collect();
+    assert!(slot_pairs.iter().any(|&(a, b)| a > 0 && b > 0 && a != b));
+    // Leaves with a texture rectangle and leaves without (uv_min = uv_max = 0, not clipped).
+    assert!(c.plane_leaves().iter().any(|l| l.uv_min == 0 && l.uv_max == 0));
+    assert!(c.plane_leaves().iter().any(|l| l.uv_max != 0));
+
+    // The rest is the 1.2 file's content: without PLANE_LEAVES, the LEAF_SLOTS image and the
+    // planes' new image and rectangles, the records are those of v1_2.
+    let v1_2 =
+        ContainerData::from_container(&Container::open(golden_dir_of(2).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.plane_leaves.clear();
+    data.images.pop();
+    data.image_data.truncate(v1_2.image_data.len());
+    for (plane, older) in data.planes.iter_mut().zip(&v1_2.planes) {
+        (plane.image, plane.uv_min, plane.uv_max) = (older.image, older.uv_min, older.uv_max);
+    }
+    assert!(data == v1_2, "v1_3 is v1_2 with indirect texturing");
+    // So without PLANE_LEAVES the writer marks it 1.2.
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 2);
 }
 
 #[test]

@@ -12,7 +12,8 @@ use std::cell::Cell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use treelod_format::{
-    Compression, Container, ContainerData, Error, ErrorClass, FLAG_SHUFFLE, FLAG_ZSTD, OpenOptions, SectionKind, verify,
+    Compression, Container, ContainerData, Error, ErrorClass, FLAG_SHUFFLE, FLAG_ZSTD, OpenOptions, PlaneLeafRecord,
+    SectionKind, image_format, verify,
 };
 use treelod_tests::raw::{Part, RawFile, layout};
 use treelod_tests::{SyntheticOptions, synthetic};
@@ -109,6 +110,7 @@ fn small_options() -> SyntheticOptions {
         tree_count: 1,
         extension_kinds: vec![0x0001_0000],
         ao: true,
+        indirect_planes: true,
         name: Some("hostile".into()),
     }
 }
@@ -199,6 +201,9 @@ fn fixtures_are_small_and_valid() {
         open_and_verify(name, &bytes, &OpenOptions::default()).unwrap();
     }
     let file = RawFile::new(compressed());
+    // Indirectly textured planes: PLANE_LEAVES and a LEAF_SLOTS image (spec §6.10.1).
+    assert!(file.find(SectionKind::PLANE_LEAVES).is_some());
+    assert!(small_data().images.iter().any(|i| i.format == image_format::LEAF_SLOTS));
     let flags: Vec<u32> = file.entries().iter().map(|e| e.flags).collect();
     assert!(flags.contains(&(FLAG_ZSTD | FLAG_SHUFFLE)), "a shuffled section: {flags:?}");
     assert!(flags.contains(&FLAG_ZSTD), "a plain zstd section: {flags:?}");
@@ -295,9 +300,9 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds ambient-occlusion sections, so it is a 1.2 file.
+    // The fixture holds indirectly textured planes (PLANE_LEAVES), so it is a 1.3 file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 2);
+    assert_eq!(minor, 3);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());
@@ -654,6 +659,38 @@ fn unknown_kinds_are_skipped_whatever_their_flags() {
 }
 
 #[test]
+fn plane_leaves_of_a_wrong_length_or_record_size() {
+    // Spec §6.10.1: PLANE_LEAVES' length against the planes is a verify rule, not an open rule: a
+    // section one record short or long opens and fails verify; a record size other than the
+    // kind's is refused at open (§4).
+    let bytes = small_data().to_bytes(Compression::None).unwrap();
+    let file = RawFile::new(bytes.clone());
+    let index = index_of(&file, SectionKind::PLANE_LEAVES);
+    let size = size_of::<PlaneLeafRecord>();
+    for delta in [-1i64, 1] {
+        let mut parts = file.parts();
+        let part = &mut parts[index];
+        if delta < 0 {
+            part.stored.truncate(part.stored.len() - size);
+        } else {
+            part.stored.extend(std::iter::repeat_n(0, size));
+        }
+        part.raw_length = part.stored.len() as u64;
+        let case = format!("PLANE_LEAVES {delta:+} record");
+        let err = rejected(&case, &layout(&parts));
+        assert!(matches!(err, Error::BadRecord { kind: SectionKind::PLANE_LEAVES, index: 0, .. }), "{case}: {err:?}");
+        assert_invalid(&case, &err);
+    }
+    for record_size in [1, size as u32 - 8, size as u32 + 8, u32::MAX] {
+        let mut bad = RawFile::new(bytes.clone());
+        bad.patch_entry(index, |e| e.record_size = record_size);
+        let case = format!("PLANE_LEAVES record_size {record_size}");
+        let err = open_error(&case, &bad.bytes);
+        assert!(matches!(err, Error::BadSection { index: i, .. } if i == index), "{case}: {err:?}");
+    }
+}
+
+#[test]
 fn missing_required_sections_are_refused() {
     for (name, bytes) in variants() {
         for kind in [SectionKind::META, SectionKind::BLOCK, SectionKind::CELLS] {
@@ -919,6 +956,7 @@ fn verify_refuses_content_that_breaks_the_rules() {
     type Mutation = Box<dyn Fn(&mut ContainerData)>;
     let leaf_point = |d: &ContainerData| d.points.iter().position(|p| p.leaf_count == 1 && p.hi.is_finite()).unwrap();
     let png = |d: &ContainerData| d.images.iter().find(|i| i.format == 3).unwrap().data_offset as usize;
+    let slots = |d: &ContainerData| d.images.iter().position(|i| i.format == image_format::LEAF_SLOTS).unwrap();
     let cases: Vec<(&str, Expect, Mutation)> = vec![
         ("vertex position NaN", Expect::Record(K::VERTICES), Box::new(|d| d.vertices[1].position[0] = f32::NAN)),
         ("vertex uv infinite", Expect::Record(K::VERTICES), Box::new(|d| d.vertices[2].uv[1] = f32::INFINITY)),
@@ -1010,6 +1048,53 @@ fn verify_refuses_content_that_breaks_the_rules() {
             Box::new(|d| {
                 let p = d.planes.iter_mut().find(|p| p.uv_min & 0xFFFF < p.uv_max & 0xFFFF).unwrap();
                 core::mem::swap(&mut p.uv_min, &mut p.uv_max);
+            }),
+        ),
+        ("plane leaves one record short", Expect::Record(K::PLANE_LEAVES), Box::new(|d| _ = d.plane_leaves.pop())),
+        (
+            "plane leaves one record too many",
+            Expect::Record(K::PLANE_LEAVES),
+            Box::new(|d| d.plane_leaves.push(d.plane_leaves[0])),
+        ),
+        (
+            "plane leaf material out of range",
+            Expect::Record(K::PLANE_LEAVES),
+            Box::new(|d| d.plane_leaves[1].material = d.materials.len() as u32),
+        ),
+        ("plane leaf uv0 NaN", Expect::Record(K::PLANE_LEAVES), Box::new(|d| d.plane_leaves[0].uv0[1] = f32::NAN)),
+        (
+            "plane leaf du infinite",
+            Expect::Record(K::PLANE_LEAVES),
+            Box::new(|d| d.plane_leaves[2].du[0] = f32::INFINITY),
+        ),
+        (
+            "LEAF_SLOTS planes without PLANE_LEAVES",
+            Expect::Record(K::PLANES),
+            Box::new(|d| d.plane_leaves = Vec::<PlaneLeafRecord>::new()),
+        ),
+        (
+            "LEAF_SLOTS image with two mips",
+            Expect::Record(K::IMAGES),
+            Box::new(move |d| {
+                let i = slots(d);
+                d.images[i].mip_count = 2;
+            }),
+        ),
+        (
+            "LEAF_SLOTS image one texel short",
+            Expect::Record(K::IMAGES),
+            Box::new(move |d| {
+                let i = slots(d);
+                d.images[i].data_length -= 4;
+            }),
+        ),
+        (
+            "slots above every plane's leaf_count",
+            Expect::Record(K::PLANES),
+            Box::new(move |d| {
+                let image = d.images[slots(d)];
+                let start = image.data_offset as usize;
+                d.image_data[start..start + image.data_length as usize].fill(0xFF);
             }),
         ),
         (

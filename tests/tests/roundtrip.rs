@@ -4,7 +4,8 @@
 
 use proptest::prelude::*;
 use treelod_format::{
-    CellRecord, Compression, Container, ContainerData, Error, ErrorClass, NO_IMAGE, SectionKind, SptElement, verify,
+    CellRecord, Compression, Container, ContainerData, Error, ErrorClass, NO_IMAGE, SectionKind, SptElement,
+    image_format, leaf_slots, verify,
 };
 use treelod_tests::{SyntheticOptions, synthetic};
 
@@ -41,6 +42,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 extension_kinds,
                 // Ambient occlusion with half of the grids.
                 ao: grid[0] >= 2,
+                // Indirectly textured planes with another half.
+                indirect_planes: grid[2] >= 2,
                 name: None,
             }
         })
@@ -206,8 +209,14 @@ fn check_rules(data: &ContainerData) -> Result<(), String> {
         if img.format <= 2 && img.expected_data_length() != Some(img.data_length) {
             return Err(format!("image data length {img:?}"));
         }
+        if img.format == image_format::LEAF_SLOTS
+            && (img.mip_count != 1 || img.data_length != u64::from(img.width * img.height * 4))
+        {
+            return Err(format!("LEAF_SLOTS image {img:?}"));
+        }
         end = img.data_offset + img.data_length;
     }
+    check_indirect_texturing(data)?;
     let mut next = 0;
     for (index, leaf) in data.prune_leaves.iter().enumerate() {
         if leaf.first_triangle != next || leaf.triangle_count == 0 {
@@ -242,6 +251,47 @@ fn check_rules(data: &ContainerData) -> Result<(), String> {
     }
     if meta.settings.windows(2).any(|w| w[0].key >= w[1].key) {
         return Err("settings not sorted and unique".into());
+    }
+    Ok(())
+}
+
+/// Spec §6.10.1: `PLANE_LEAVES` empty or `leaf_count` records per plane, present if a plane
+/// samples a `LEAF_SLOTS` image, with materials in range and finite maps; every texel whose centre
+/// lies in such a plane's rectangle names one of its leaves or none.
+fn check_indirect_texturing(data: &ContainerData) -> Result<(), String> {
+    let total: u64 = data.planes.iter().map(|p| u64::from(p.leaf_count)).sum();
+    if !data.plane_leaves.is_empty() && data.plane_leaves.len() as u64 != total {
+        return Err(format!("{} plane leaves for {total} leaves of planes", data.plane_leaves.len()));
+    }
+    for leaf in &data.plane_leaves {
+        let finite = leaf.uv0.iter().chain(&leaf.du).chain(&leaf.dv).all(|v| v.is_finite());
+        if leaf.material as usize >= data.materials.len() || !finite {
+            return Err(format!("plane leaf {leaf:?}"));
+        }
+    }
+    for (index, plane) in data.planes.iter().enumerate() {
+        let Some(image) = data.images.get(plane.image as usize).filter(|i| i.format == image_format::LEAF_SLOTS) else {
+            continue;
+        };
+        if data.plane_leaves.is_empty() {
+            return Err(format!("plane {index} samples LEAF_SLOTS without PLANE_LEAVES"));
+        }
+        let texels = &data.image_data[image.data_offset as usize..][..image.data_length as usize];
+        let [u0, v0] = treelod_format::pack::unpack_unorm16x2(plane.uv_min);
+        let [u1, v1] = treelod_format::pack::unpack_unorm16x2(plane.uv_max);
+        for y in 0..image.height {
+            for x in 0..image.width {
+                let (cu, cv) = ((x as f32 + 0.5) / image.width as f32, (y as f32 + 0.5) / image.height as f32);
+                if !(u0 <= cu && cu <= u1 && v0 <= cv && cv <= v1) {
+                    continue;
+                }
+                let at = ((y * image.width + x) * 4) as usize;
+                let (a, b) = leaf_slots([texels[at], texels[at + 1], texels[at + 2], texels[at + 3]]);
+                if u32::from(a.max(b)) > plane.leaf_count {
+                    return Err(format!("plane {index}: texel ({x}, {y}) holds slots ({a}, {b})"));
+                }
+            }
+        }
     }
     Ok(())
 }
@@ -285,6 +335,11 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
+    assert_eq!(container.header().minor, 3, "everything() holds the kinds of 1.3");
+    assert!(
+        everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
+        "the planes are textured indirectly"
+    );
     check_rules(&everything).unwrap();
 
     let extension =
