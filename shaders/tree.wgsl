@@ -470,8 +470,21 @@ fn quad_texel(in: Varyings) -> QuadTexel {
         // Clipped to the leaf's texture rectangle, if it has one.
         let inside = leaf.uv_max == 0u
             || (all(uv >= unpack2x16unorm(leaf.uv_min)) && all(uv <= unpack2x16unorm(leaf.uv_max)));
-        let gx = st_dx.x * du + st_dx.y * dv;
-        let gy = st_dy.x * du + st_dy.y * dv;
+        var gx = st_dx.x * du + st_dx.y * dv;
+        var gy = st_dy.x * du + st_dy.y * dv;
+        // A footprint at most half the leaf's texture rectangle: farther away, a pixel holds
+        // more than the leaf, and a coarser mip would mix in the texture's other leaves (or the
+        // empty space around them in an atlas of leaves); the slot texel under the pixel centre
+        // already samples which leaf covers it.
+        if leaf.uv_max != 0u {
+            let extent = unpack2x16unorm(leaf.uv_max) - unpack2x16unorm(leaf.uv_min);
+            let limit = 0.5 * max(extent.x, extent.y);
+            let reach = max(length(gx), length(gy));
+            if reach > limit && limit > 0.0 {
+                gx *= limit / reach;
+                gy *= limit / reach;
+            }
+        }
         let texel = textureSampleGrad(textures, linear_sampler, uv, max(material.layer, 0), gx, gy);
         let albedo = material.base_color * decode_color(leaf.color) * select(vec4<f32>(1.0), texel, material.layer >= 0);
         let footprint = max(length(gx), length(gy)) * f32(textureDimensions(textures).x);
