@@ -164,6 +164,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     let tree_count = c.block().tree_count;
     check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
     check_billboards(c.billboards(), image_count, tree_count)?;
+    check_slot_images_only_for_planes(c)?;
     check_metadata(c)?;
 
     for (index, cell) in c.cells().iter().enumerate() {
@@ -540,6 +541,24 @@ fn check_lines(lines: &[LineRecord]) -> Result<()> {
         if !non_negative(l.r0) || !non_negative(l.r1) {
             return Err(bad(kind, i, format!("radii {}, {} are not finite and >= 0", l.r0, l.r1)));
         }
+    }
+    Ok(())
+}
+
+/// Spec §6.10.1: a `LEAF_SLOTS` image is no colour image; no material or billboard names one.
+fn check_slot_images_only_for_planes(c: &Container) -> Result<()> {
+    let is_slots = |image: u32| c.images().get(image as usize).is_some_and(|i| i.format == image_format::LEAF_SLOTS);
+    if let Some(i) = c.materials().iter().position(|m| is_slots(m.image)) {
+        let image = c.materials()[i].image;
+        return Err(bad(SectionKind::MATERIALS, i, format!("image {image} is a LEAF_SLOTS image, not a colour image")));
+    }
+    if let Some(i) = c.billboards().iter().position(|b| is_slots(b.image)) {
+        let image = c.billboards()[i].image;
+        return Err(bad(
+            SectionKind::BILLBOARDS,
+            i,
+            format!("image {image} is a LEAF_SLOTS image, not a colour image"),
+        ));
     }
     Ok(())
 }

@@ -539,3 +539,11 @@ fn a_leaf_slots_image_does_not_decode_as_colour() {
     let texture = treelod_format::image::decode(&data.images[0], &data.image_data[..16]).expect("decodes");
     assert_eq!((texture.width, texture.height, texture.texels.len()), (2, 2, 16));
 }
+
+#[test]
+fn a_material_naming_a_leaf_slots_image_is_refused() {
+    let mut data = fixture();
+    // Image 1 holds the planes' leaf slots: no colour for a material to sample.
+    data.materials[1].image = 1;
+    expect_record(&data, SectionKind::MATERIALS, 1, &["image 1", "LEAF_SLOTS", "not a colour image"]);
+}
