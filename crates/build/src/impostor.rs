@@ -917,7 +917,10 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
             let mut texels = vec![0u8; sw as usize * sh as usize * 4];
             for (region, slots) in slot_regions.iter().zip(&baked) {
                 for (k, pair) in slots.iter().enumerate() {
-                    let (x, y) = (region.x as usize + 1 + k % region.tw as usize, region.y as usize + 1 + k / region.tw as usize);
+                    let (x, y) = (
+                        region.x as usize + 1 + k % region.tw as usize,
+                        region.y as usize + 1 + k / region.tw as usize,
+                    );
                     let o = (y * sw as usize + x) * 4;
                     texels[o..o + 2].copy_from_slice(&pair[0].to_le_bytes());
                     texels[o + 2..o + 4].copy_from_slice(&pair[1].to_le_bytes());
@@ -1942,4 +1945,3 @@ mod tests {
         }
     }
 }
-
