@@ -182,9 +182,14 @@ fn binarise_alpha(rgba: &mut [u8], cutoff: f32) {
     }
 }
 
-/// Box-filtered mips down to 1×1. Alpha is averaged like colour; leaves far enough away for the
-/// small mips to thin them out are drawn as points instead.
+/// Box-filtered mips down to 1×1, in linear light and weighted by alpha: RGB is sRGB-encoded
+/// (the array is `Rgba8UnormSrgb`), so averaging its bytes would darken every coarse level (a
+/// black and white checkerboard would become sRGB 128, linear 0.22, instead of linear 0.5), and
+/// the colour of transparent texels (often black) would bleed into the leaves at their edges.
+/// Alpha is averaged plainly; leaves far enough away for the small mips to thin them out are
+/// drawn as points instead.
 fn mip_chain(base: Vec<u8>, size: u32) -> Vec<Vec<u8>> {
+    let to_linear: Vec<f32> = (0..=255u8).map(|b| srgb_to_linear(f32::from(b) / 255.0)).collect();
     let mut chain = vec![base];
     let mut s = size as usize;
     while s > 1 {
@@ -193,20 +198,40 @@ fn mip_chain(base: Vec<u8>, size: u32) -> Vec<Vec<u8>> {
         let mut next = Vec::with_capacity(half * half * 4);
         for y in 0..half {
             for x in 0..half {
-                for c in 0..4 {
-                    let sum: u32 = [(0, 0), (1, 0), (0, 1), (1, 1)]
-                        .iter()
-                        .map(|(dx, dy)| u32::from(prev[((2 * y + dy) * s + 2 * x + dx) * 4 + c]))
-                        .sum();
-                    #[expect(clippy::cast_possible_truncation, reason = "an average of bytes")]
-                    next.push(((sum + 2) / 4) as u8);
+                let texels = [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| ((2 * y + dy) * s + 2 * x + dx) * 4);
+                let alpha: f32 = texels.iter().map(|&t| f32::from(prev[t + 3]) / 255.0).sum();
+                for c in 0..3 {
+                    let colour = if alpha > 0.0 {
+                        texels
+                            .iter()
+                            .map(|&t| to_linear[prev[t + c] as usize] * f32::from(prev[t + 3]) / 255.0)
+                            .sum::<f32>()
+                            / alpha
+                    } else {
+                        texels.iter().map(|&t| to_linear[prev[t + c] as usize]).sum::<f32>() / 4.0
+                    };
+                    next.push(unorm8(linear_to_srgb(colour)));
                 }
+                next.push(unorm8(alpha / 4.0));
             }
         }
         chain.push(next);
         s = half;
     }
     chain
+}
+
+fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) }
+}
+
+fn linear_to_srgb(v: f32) -> f32 {
+    if v <= 0.003_130_8 { v * 12.92 } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 }
+}
+
+#[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 0..=255")]
+fn unorm8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
 #[cfg(test)]
@@ -240,6 +265,16 @@ mod tests {
         let base: Vec<u8> =
             (0..4).flat_map(|i| if i % 3 == 0 { [0u8, 0, 0, 0] } else { [255, 255, 255, 255] }).collect();
         let chain = mip_chain(base, 2);
-        assert_eq!(chain[1], [128, 128, 128, 128]);
+        // The transparent black texels do not darken the opaque white ones.
+        assert_eq!(chain[1], [255, 255, 255, 128]);
+    }
+
+    #[test]
+    fn mips_average_in_linear_light() {
+        // Opaque black and white: half the light, sRGB 188, not the bytes' mean 128.
+        let base: Vec<u8> =
+            (0..4).flat_map(|i| if i % 3 == 0 { [0u8, 0, 0, 255] } else { [255, 255, 255, 255] }).collect();
+        let chain = mip_chain(base, 2);
+        assert_eq!(chain[1], [188, 188, 188, 255]);
     }
 }
