@@ -1347,9 +1347,8 @@ fn raster_band(
 /// The leaf slots (spec §6.10.1) of one plane's region: `leaves` are (the leaf's place in the
 /// plane's run, triangle, placed corners). Each of 4 × 4 samples per texel takes the leaf nearest
 /// to the plane that passes its alpha test there ([`shade`]); a texel's slot `a` is the leaf of
-/// most of its samples, `b` the next (ties: the lower slot); slots left empty then take their
-/// neighbours' leaves ([`fill_from_neighbours`]). Returns the `tw × th` content texels, rows top
-/// to bottom.
+/// most of its samples, `b` the next (ties: the lower slot). Returns the `tw × th` content texels,
+/// rows top to bottom.
 fn bake_slots(
     mesh: &ImpostorMesh<'_>,
     leaves: impl Iterator<Item = (usize, u32, [DVec3; 3])> + Clone,
@@ -1405,42 +1404,7 @@ fn bake_slots(
             }
         }
     }
-    fill_from_neighbours(&mut texels, tw, th);
     texels
-}
-
-/// Gives a slot texel's empty slots the leaves of its neighbours (edge neighbours first, then
-/// corners; each one's `a` then `b`; a leaf the texel names already is skipped). A leaf that
-/// reaches into a texel by less than the spacing of its samples is caught by none of them, and
-/// its outline would be cut straight at the texel's edge; naming it costs nothing where it does
-/// not reach, since the renderer clips each leaf by its alpha and texture rectangle.
-fn fill_from_neighbours(texels: &mut [[u16; 2]], tw: usize, th: usize) {
-    const AROUND: [(isize, isize); 8] = [(0, -1), (-1, 0), (1, 0), (0, 1), (-1, -1), (1, -1), (-1, 1), (1, 1)];
-    let baked = texels.to_vec();
-    for y in 0..th {
-        for x in 0..tw {
-            let slots = &mut texels[y * tw + x];
-            for (dx, dy) in AROUND {
-                if slots[1] != 0 {
-                    break;
-                }
-                let (nx, ny) = (x.wrapping_add_signed(dx), y.wrapping_add_signed(dy));
-                if nx >= tw || ny >= th {
-                    continue;
-                }
-                for leaf in baked[ny * tw + nx] {
-                    if leaf == 0 || slots.contains(&leaf) {
-                        continue;
-                    }
-                    if slots[0] == 0 {
-                        slots[0] = leaf;
-                    } else if slots[1] == 0 {
-                        slots[1] = leaf;
-                    }
-                }
-            }
-        }
-    }
 }
 
 /// Whether indirect texturing can stand for a mesh's leaves (spec §6.10.1): every leaf

@@ -108,9 +108,6 @@ fn indirect() -> BuildConfig {
         impostors: Some(ImpostorConfig {
             levels: vec![3],
             texturing: Texturing::Indirect,
-            // Fine enough that texels more than one from any leaf (which neighbours' leaves
-            // cannot reach) lie between the leaves.
-            slots_per_leaf: 6.0,
             ..ImpostorConfig::default()
         }),
         ..BuildConfig::default()
@@ -214,8 +211,7 @@ fn indirect_planes_map_each_leaf_onto_its_texture_and_name_it_in_the_slot_image(
             hits += 1;
         }
         // (c) Every slot of the plane's rectangle names one of its leaves or none; (b) a texel
-        // clear of every leaf's footprint by more than a texel (empty slots take their
-        // neighbours' leaves) names none.
+        // clear of every leaf's footprint (by a quarter texel) names none.
         let (lo, hi) = (
             texel_xy(plane, Vec2::NEG_ONE, image.width, image.height),
             texel_xy(plane, Vec2::ONE, image.width, image.height),
@@ -228,7 +224,7 @@ fn indirect_planes_map_each_leaf_onto_its_texture_and_name_it_in_the_slot_image(
                 let (a, b) = (Vec2::new(x as f32, y as f32), Vec2::new(x as f32 + 1.0, y as f32 + 1.0));
                 let clear = footprints
                     .iter()
-                    .all(|&(l, h)| b.x < l.x - 1.01 || a.x > h.x + 1.01 || b.y < l.y - 1.01 || a.y > h.y + 1.01);
+                    .all(|&(l, h)| b.x < l.x - 0.25 || a.x > h.x + 0.25 || b.y < l.y - 0.25 || a.y > h.y + 0.25);
                 if clear {
                     assert_eq!(pair, [0, 0], "plane {p} texel ({x}, {y}) lies off every leaf");
                     empty_texels += 1;
