@@ -6,16 +6,18 @@
 //! the prefix to draw, and [`select::point_drawn`] is the per-element test the vertex shader makes.
 //! [`frame`] applies it to a whole frame: frustum culling of instances and cells, Gilet's depth
 //! bias per cell, a reusable draw list, and a controller that keeps the primitive count on budget.
-//! [`impostor`] selects the level of impostor planes of an instance the same way, and [`baseline`]
-//! the level of a baseline LoD chain.
+//! [`impostor`] selects the level of impostor planes of an instance the same way, [`ellipsoid`] the
+//! level of Clasen's leaf ellipsoids, and [`baseline`] the level of a baseline LoD chain.
 
 pub mod baseline;
+pub mod ellipsoid;
 pub mod frame;
 pub mod impostor;
 pub mod prune;
 pub mod select;
 
 pub use baseline::{BillboardKind, Billboards, ChainLevel, LodChain, instance_tau};
+pub use ellipsoid::{EllipsoidCell, EllipsoidLod, EllipsoidRange, ellipsoid_drawn};
 pub use frame::{
     BudgetController, Camera, CellLod, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings,
     ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
