@@ -6,9 +6,8 @@ mod common;
 
 use common::reseal;
 use treelod_format::{
-    AO_KINDS, BlockRecord, CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, MaterialInfo,
-    MaterialRecord, Metadata, NO_IMAGE, PlaneRecord, PointRecord, Range, SectionKind, TriangleRecord, VertexRecord,
-    decode_ao, encode_ao, image_format, pack, verify,
+    AO_KINDS, CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, PlaneRecord, Range,
+    SectionKind, decode_ao, encode_ao, image_format, pack, verify,
 };
 
 fn range(first: u32, count: u32) -> Range {
@@ -18,32 +17,8 @@ fn range(first: u32, count: u32) -> Range {
 /// One 1×1×1 cell holding one triangle under its leaf point, the block cell one impostor plane
 /// with a 2×2 RGBA8 image; no ambient occlusion. Verifies.
 fn fixture() -> ContainerData {
-    let corners = [[0.2, 0.2, 0.5], [0.6, 0.2, 0.5], [0.2, 0.6, 0.5]];
-    let vertices: Vec<VertexRecord> = corners
-        .iter()
-        .map(|&position| VertexRecord {
-            position,
-            normal: pack::oct_encode([0.0, 0.0, 1.0]),
-            uv: [0.5, 0.5],
-            color: u32::MAX,
-        })
-        .collect();
-    // Area 0.08: size = 2·sqrt(0.08/π).
-    let size = 2.0 * (0.08f32 / std::f32::consts::PI).sqrt();
-    let triangles = vec![TriangleRecord { indices: [0, 1, 2], size, leaf: 0, material: 0 }];
-    let points = vec![PointRecord {
-        position: [0.2 + 0.4 / 3.0, 0.2 + 0.4 / 3.0, 0.5],
-        radius: size / 2.0,
-        normal: pack::oct_encode([0.0, 0.0, 1.0]),
-        color: 0xFF33_9933,
-        size,
-        lo: 0.0,
-        hi: f32::INFINITY,
-        leaf_first: 0,
-        leaf_count: 1,
-        flags: 0,
-    }];
-    let planes = vec![PlaneRecord {
+    let mut data = common::one_leaf_cell("ao-fixture");
+    data.planes = vec![PlaneRecord {
         center: [0.5, 0.5, 0.5],
         axis_u: [0.25, 0.0, 0.0],
         axis_v: [0.0, 0.25, 0.0],
@@ -55,58 +30,22 @@ fn fixture() -> ContainerData {
         leaf_first: 0,
         leaf_count: 1,
     }];
-    let cells = vec![
-        CellRecord {
-            bounds_min: [0.2, 0.2, 0.5],
-            bounds_max: [0.6, 0.6, 0.5],
-            triangles: range(0, 1),
-            points: range(0, 1),
-            ..CellRecord::default()
-        },
-        CellRecord {
-            bounds_min: [0.25, 0.25, 0.5],
-            bounds_max: [0.75, 0.75, 0.5],
-            triangles: range(1, 0),
-            points: range(1, 0),
-            planes: range(0, 1),
-            ..CellRecord::default()
-        },
-    ];
-    ContainerData {
-        metadata: Metadata {
-            generator: "test".into(),
-            name: "ao-fixture".into(),
-            materials: vec![MaterialInfo { name: "leaf".into(), classified_by: "name".into() }],
-            sources: vec![treelod_format::Source::default()],
-            trees: vec![treelod_format::Tree::default()],
-            ..Metadata::default()
-        },
-        block: BlockRecord { bounds_max: [1.0; 3], grid: [1, 1, 1], tree_count: 1, ..BlockRecord::default() },
-        cells,
-        vertices,
-        triangles,
-        points,
-        materials: vec![MaterialRecord {
-            base_color: [0.2, 0.6, 0.1, 1.0],
-            image: NO_IMAGE,
-            alpha_mode: 0,
-            alpha_cutoff: 0.5,
-            class: 1,
-            flags: 1,
-            _pad: 0,
-        }],
-        images: vec![ImageRecord {
-            width: 2,
-            height: 2,
-            mip_count: 1,
-            format: image_format::RGBA8_SRGB,
-            data_offset: 0,
-            data_length: 16,
-        }],
-        image_data: vec![0x80; 16],
-        planes,
-        ..ContainerData::default()
-    }
+    data.cells[1] = CellRecord {
+        bounds_min: [0.25, 0.25, 0.5],
+        bounds_max: [0.75, 0.75, 0.5],
+        planes: range(0, 1),
+        ..data.cells[1]
+    };
+    data.images = vec![ImageRecord {
+        width: 2,
+        height: 2,
+        mip_count: 1,
+        format: image_format::RGBA8_SRGB,
+        data_offset: 0,
+        data_length: 16,
+    }];
+    data.image_data = vec![0x80; 16];
+    data
 }
 
 /// The fixture with a value for every vertex, point and plane.

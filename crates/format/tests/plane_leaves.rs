@@ -2,10 +2,12 @@
 //! images round-trip and make a file 1.3; `verify` checks the section's length, its records, the
 //! images' format rules and every slot of each indirectly textured plane's rectangle.
 
+mod common;
+
 use treelod_format::{
-    BlockRecord, CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, MaterialInfo,
-    MaterialRecord, Metadata, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, Range, SectionKind, TriangleRecord,
-    VerifyReport, VertexRecord, image_format, leaf_slots, pack, plane_leaf_bases, verify,
+    CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, MaterialInfo, MaterialRecord,
+    NO_IMAGE, PlaneLeafRecord, PlaneRecord, Range, SectionKind, VerifyReport, image_format, leaf_slots, pack,
+    plane_leaf_bases, verify,
 };
 
 const INF: f32 = f32::INFINITY;
@@ -66,110 +68,46 @@ fn set_slots(data: &mut ContainerData, x: u32, y: u32, a: u16, b: u16) {
 /// texels around it), slots naming the planes' leaves; `PLANE_LEAVES` holds 2 + 1 + 1 records
 /// over two materials. Image 0 is a 2×2 RGBA8 texture of material 1. Verifies.
 fn fixture() -> ContainerData {
-    let corners = [[0.2, 0.2, 0.5], [0.6, 0.2, 0.5], [0.2, 0.6, 0.5]];
-    let vertices: Vec<VertexRecord> = corners
-        .iter()
-        .map(|&position| VertexRecord {
-            position,
-            normal: pack::oct_encode([0.0, 0.0, 1.0]),
-            uv: [0.5, 0.5],
-            color: u32::MAX,
-        })
-        .collect();
-    let size = 2.0 * (0.08f32 / std::f32::consts::PI).sqrt();
-    let triangles = vec![TriangleRecord { indices: [0, 1, 2], size, leaf: 0, material: 0 }];
-    let points = vec![PointRecord {
-        position: [0.2 + 0.4 / 3.0, 0.2 + 0.4 / 3.0, 0.5],
-        radius: size / 2.0,
-        normal: pack::oct_encode([0.0, 0.0, 1.0]),
-        color: 0xFF33_9933,
-        size,
-        lo: 0.0,
-        hi: INF,
-        leaf_first: 0,
-        leaf_count: 1,
-        flags: 0,
-    }];
-    let planes = vec![plane(0, 2, 1.0, INF, [1, 3]), plane(0, 1, 0.0, 1.0, [6, 8]), plane(1, 1, 0.0, 1.0, [11, 13])];
-    let plane_leaves = vec![leaf(0, 0.0), leaf(1, 0.1), leaf(1, 0.2), leaf(0, 0.3)];
-    let cells = vec![
-        CellRecord {
-            bounds_min: [0.2, 0.2, 0.5],
-            bounds_max: [0.6, 0.6, 0.5],
-            triangles: range(0, 1),
-            points: range(0, 1),
-            ..CellRecord::default()
+    let mut data = common::one_leaf_cell("indirect-fixture");
+    data.planes = vec![plane(0, 2, 1.0, INF, [1, 3]), plane(0, 1, 0.0, 1.0, [6, 8]), plane(1, 1, 0.0, 1.0, [11, 13])];
+    data.plane_leaves = vec![leaf(0, 0.0), leaf(1, 0.1), leaf(1, 0.2), leaf(0, 0.3)];
+    data.cells[1] = CellRecord { bounds_min: [0.5; 3], bounds_max: [0.5; 3], planes: range(0, 3), ..data.cells[1] };
+    // Material 0 is bark (the cell's triangle's), material 1 the textured leaf the planes' leaves use.
+    data.metadata.materials.insert(0, MaterialInfo { name: "bark".into(), classified_by: "name".into() });
+    data.materials.insert(
+        0,
+        MaterialRecord {
+            base_color: [0.4, 0.3, 0.2, 1.0],
+            image: NO_IMAGE,
+            alpha_mode: 0,
+            alpha_cutoff: 0.5,
+            class: 0,
+            flags: 0,
+            _pad: 0,
         },
-        CellRecord {
-            bounds_min: [0.5; 3],
-            bounds_max: [0.5; 3],
-            triangles: range(1, 0),
-            points: range(1, 0),
-            planes: range(0, 3),
-            ..CellRecord::default()
+    );
+    data.materials[1].image = 0;
+    data.materials[1].alpha_mode = 1;
+    let slots_length = u64::from(W * H * 4);
+    data.images = vec![
+        ImageRecord {
+            width: 2,
+            height: 2,
+            mip_count: 1,
+            format: image_format::RGBA8_SRGB,
+            data_offset: 0,
+            data_length: 16,
+        },
+        ImageRecord {
+            width: W,
+            height: H,
+            mip_count: 1,
+            format: image_format::LEAF_SLOTS,
+            data_offset: 16,
+            data_length: slots_length,
         },
     ];
-    let slots_length = u64::from(W * H * 4);
-    let mut data = ContainerData {
-        metadata: Metadata {
-            generator: "test".into(),
-            name: "indirect-fixture".into(),
-            materials: vec![
-                MaterialInfo { name: "bark".into(), classified_by: "name".into() },
-                MaterialInfo { name: "leaf".into(), classified_by: "name".into() },
-            ],
-            sources: vec![treelod_format::Source::default()],
-            trees: vec![treelod_format::Tree::default()],
-            ..Metadata::default()
-        },
-        block: BlockRecord { bounds_max: [1.0; 3], grid: [1, 1, 1], tree_count: 1, ..BlockRecord::default() },
-        cells,
-        vertices,
-        triangles,
-        points,
-        materials: vec![
-            MaterialRecord {
-                base_color: [0.4, 0.3, 0.2, 1.0],
-                image: NO_IMAGE,
-                alpha_mode: 0,
-                alpha_cutoff: 0.5,
-                class: 0,
-                flags: 0,
-                _pad: 0,
-            },
-            MaterialRecord {
-                base_color: [0.2, 0.6, 0.1, 1.0],
-                image: 0,
-                alpha_mode: 1,
-                alpha_cutoff: 0.5,
-                class: 1,
-                flags: 1,
-                _pad: 0,
-            },
-        ],
-        images: vec![
-            ImageRecord {
-                width: 2,
-                height: 2,
-                mip_count: 1,
-                format: image_format::RGBA8_SRGB,
-                data_offset: 0,
-                data_length: 16,
-            },
-            ImageRecord {
-                width: W,
-                height: H,
-                mip_count: 1,
-                format: image_format::LEAF_SLOTS,
-                data_offset: 16,
-                data_length: slots_length,
-            },
-        ],
-        image_data: vec![0x80; 16 + slots_length as usize],
-        planes,
-        plane_leaves,
-        ..ContainerData::default()
-    };
+    data.image_data = vec![0x80; 16 + slots_length as usize];
     data.image_data[16..].fill(0);
     for y in 1..=3 {
         for x in 1..=3 {
