@@ -512,6 +512,158 @@ pub fn render_views(views: &[View], triangles: &[RasterTriangle], alphas: &[Alph
         .collect()
 }
 
+/// The orthographic projection of the ellipsoid `{centre + Σ u_i·axes[i] : |u| ≤ 1}` (`axes`
+/// its three semi-axis vectors, metres, mutually orthogonal or not) in `view`: the ellipse's
+/// centre in pixels ([`View::project`]) and its 2 × 2 matrix `M = Σ (P a_i)(P a_i)ᵀ` as
+/// `[m_xx, m_xy, m_yy]`, pixels², `P` the view's map to pixels (`x` right, `y` down). The ellipse
+/// is `{p : (p − c)ᵀ M⁻¹ (p − c) ≤ 1}`: the image of the unit ball under `P·A` is the ellipse of
+/// `P A (P A)ᵀ`, which for `A = R·diag(r)` is `P R diag(r²) Rᵀ Pᵀ`.
+#[must_use]
+pub fn project_ellipsoid(view: &View, centre: Vec3, axes: [Vec3; 3]) -> (Vec2, [f64; 3]) {
+    let scale = f64::from(view.scale);
+    let mut m = [0.0f64; 3];
+    for a in axes {
+        let x = f64::from(a.dot(view.right)) * scale;
+        let y = -f64::from(a.dot(view.up)) * scale;
+        m[0] += x * x;
+        m[1] += x * y;
+        m[2] += y * y;
+    }
+    (view.project(centre), m)
+}
+
+/// Covers the pixels whose centres lie in the ellipse `{p : (p − c)ᵀ M⁻¹ (p − c) ≤ 1}` (`m` =
+/// `[m_xx, m_xy, m_yy]`, pixels², as [`project_ellipsoid`] gives it). Row by row: the slice of
+/// the ellipse at height `dy` from its centre is centred at `dx = m_xy/m_yy·dy` with half-width
+/// `sqrt(det M / m_yy · (1 − dy²/m_yy))`. An ellipse thinner than rounding (`m_yy` or `det M`
+/// not positive) covers at most the centres on its segment, none in practice: a flat disc seen
+/// edge-on covers nothing, as in a renderer.
+pub fn fill_ellipse(mask: &mut Mask, centre: Vec2, m: [f64; 3]) {
+    let [a, b, c] = m;
+    let det = a * c - b * b;
+    if !(c > 0.0 && a > 0.0 && det.is_finite() && centre.is_finite()) {
+        return;
+    }
+    let det = det.max(0.0);
+    let (cx, cy) = (f64::from(centre.x), f64::from(centre.y));
+    let half_height = c.sqrt();
+    let size = f64::from(mask.size);
+    let (y0, y1) =
+        (ceil_f64(cy - half_height - 0.5).max(0), floor_f64(cy + half_height - 0.5).min(i64::from(mask.size) - 1));
+    let last = i64::from(mask.size) - 1;
+    for y in y0..=y1 {
+        #[expect(clippy::cast_precision_loss, reason = "a pixel row")]
+        let dy = y as f64 + 0.5 - cy;
+        let t = 1.0 - dy * dy / c;
+        if t < 0.0 {
+            continue;
+        }
+        let mid = cx + b / c * dy;
+        let half = (det / c * t).sqrt();
+        if mid + half < 0.0 || mid - half > size {
+            continue;
+        }
+        let (x0, x1) = (ceil_f64(mid - half - 0.5).max(0), floor_f64(mid + half - 0.5).min(last));
+        if x0 > x1 {
+            continue;
+        }
+        #[expect(clippy::cast_sign_loss, clippy::cast_possible_truncation, reason = "0 <= x0 <= x1 < size")]
+        let (row, first_x, last_x) = (y as usize * mask.stride, x0 as usize, x1 as usize);
+        for word in first_x / 64..=last_x / 64 {
+            let first = if word == first_x / 64 { first_x % 64 } else { 0 };
+            let end = if word == last_x / 64 { last_x % 64 } else { 63 };
+            mask.words[row + word] |= (u64::MAX >> (63 - end)) & (u64::MAX << first);
+        }
+    }
+}
+
+/// Clasen et al.'s multi-scale image error (2011 §4) of coverage `test` against `reference`: the
+/// root-mean-square of the difference image `test − reference` (covered = 1) at resolutions
+/// `n, n/2, …, 2` (`log2 n` bands, `n` the masks' side, a power of two), where a pixel of band
+/// `b` is the mean difference over a `2^b × 2^b` block. Computed in one pass along the Z-order
+/// (Morton) curve, on which every block of every band is a contiguous run: each band keeps one
+/// running sum, closed every `4^b` pixels. The first band comes from the bits directly (its
+/// squared differences are the XOR's population count), the pass runs over the 2 × 2 block sums.
+///
+/// # Panics
+/// If the masks differ in size or the size is not a power of two of at least 2.
+#[must_use]
+pub fn multiscale_rmse(test: &Mask, reference: &Mask) -> Vec<f64> {
+    assert_eq!(test.size, reference.size, "masks of different sizes");
+    let n = test.size as usize;
+    assert!(n >= 2 && n.is_power_of_two(), "multi-scale RMSE needs a power-of-two side, got {n}");
+    let bands = n.trailing_zeros() as usize;
+    let mut squares = vec![0.0f64; bands];
+    let differ: u64 = test.words.iter().zip(&reference.words).map(|(t, r)| u64::from((t ^ r).count_ones())).sum();
+    squares[0] = differ as f64;
+    // 2 × 2 block sums of the difference, in -4..=4, on an (n/2)² grid.
+    let half = n / 2;
+    let mut blocks = vec![0i8; half * half];
+    let pairs = |w: u64| (w & 0x5555_5555_5555_5555) + ((w >> 1) & 0x5555_5555_5555_5555);
+    for by in 0..half {
+        for word in 0..test.stride {
+            let (r0, r1) = ((2 * by) * test.stride + word, (2 * by + 1) * test.stride + word);
+            let (t0, t1) = (pairs(test.words[r0]), pairs(test.words[r1]));
+            let (q0, q1) = (pairs(reference.words[r0]), pairs(reference.words[r1]));
+            for p in 0..32.min(half.saturating_sub(word * 32)) {
+                let field = |w: u64| ((w >> (2 * p)) & 3) as i8;
+                blocks[by * half + word * 32 + p] = field(t0) + field(t1) - field(q0) - field(q1);
+            }
+        }
+    }
+    // The pass along the Z-order curve of the block grid: sums[b] is the open block of band b.
+    let mut sums = vec![0i64; bands + 1];
+    for m in 0..if bands > 1 { half * half } else { 0 } {
+        let (x, y) = morton_decode(m);
+        sums[1] = i64::from(blocks[y * half + x]);
+        let mut b = 1;
+        loop {
+            #[expect(clippy::cast_precision_loss, reason = "small integers")]
+            let mean = sums[b] as f64 / f64::from(1u32 << (2 * b));
+            squares[b] += mean * mean;
+            sums[b + 1] += sums[b];
+            sums[b] = 0;
+            if b + 1 >= bands {
+                break;
+            }
+            // Band b + 1's block closes after every 4^b blocks of the 2 × 2 grid.
+            if (m + 1) % (1 << (2 * b)) != 0 {
+                break;
+            }
+            b += 1;
+        }
+    }
+    squares
+        .iter()
+        .enumerate()
+        .map(|(b, &sq)| {
+            let side = (n >> b) as f64;
+            (sq / (side * side)).sqrt()
+        })
+        .collect()
+}
+
+/// The mean of the bands of [`multiscale_rmse`]: one number for comparing images.
+#[must_use]
+pub fn multiscale_error(test: &Mask, reference: &Mask) -> f64 {
+    let bands = multiscale_rmse(test, reference);
+    bands.iter().sum::<f64>() / bands.len() as f64
+}
+
+/// `(x, y)` of the `m`-th cell along the Z-order curve: the even bits of `m` are `x`, the odd `y`.
+fn morton_decode(m: usize) -> (usize, usize) {
+    let compact = |mut v: u64| {
+        v &= 0x5555_5555_5555_5555;
+        v = (v | (v >> 1)) & 0x3333_3333_3333_3333;
+        v = (v | (v >> 2)) & 0x0F0F_0F0F_0F0F_0F0F;
+        v = (v | (v >> 4)) & 0x00FF_00FF_00FF_00FF;
+        v = (v | (v >> 8)) & 0x0000_FFFF_0000_FFFF;
+        v = (v | (v >> 16)) & 0x0000_0000_FFFF_FFFF;
+        v as usize
+    };
+    (compact(m as u64), compact(m as u64 >> 1))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -698,5 +850,116 @@ mod tests {
         let b = render_views(&views, &triangles, &[]);
         assert_eq!(a, b);
         assert!(a.iter().all(|m| m.count() > 100));
+    }
+
+    #[test]
+    fn a_circle_and_an_ellipse_cover_their_areas() {
+        let mut mask = Mask::new(128);
+        fill_ellipse(&mut mask, Vec2::new(64.0, 64.0), [400.0, 0.0, 400.0]);
+        let area = std::f64::consts::PI * 400.0;
+        assert!((mask.count() as f64 - area).abs() < 0.02 * area, "{}", mask.count());
+        assert!(mask.get(64, 64) && mask.get(83, 64) && !mask.get(85, 64) && !mask.get(64, 85));
+        // Semi-axes 30 and 6, turned by 30°: M = R diag(900, 36) Rᵀ.
+        let (s, c) = (0.5f64, 0.75f64.sqrt());
+        let m = [900.0 * c * c + 36.0 * s * s, (900.0 - 36.0) * c * s, 900.0 * s * s + 36.0 * c * c];
+        let mut turned = Mask::new(128);
+        fill_ellipse(&mut turned, Vec2::new(60.0, 70.0), m);
+        let area = std::f64::consts::PI * 30.0 * 6.0;
+        assert!((turned.count() as f64 - area).abs() < 0.03 * area, "{}", turned.count());
+        // Exactly the centres inside.
+        let det = m[0] * m[2] - m[1] * m[1];
+        for y in 0..128u32 {
+            for x in 0..128u32 {
+                let (dx, dy) = (f64::from(x) + 0.5 - 60.0, f64::from(y) + 0.5 - 70.0);
+                let q = (m[2] * dx * dx - 2.0 * m[1] * dx * dy + m[0] * dy * dy) / det;
+                if (q - 1.0).abs() > 1e-9 {
+                    assert_eq!(turned.get(x, y), q < 1.0, "pixel ({x}, {y}), q {q}");
+                }
+            }
+        }
+        // Off the image, degenerate or not finite: nothing, and no panic.
+        let mut none = Mask::new(16);
+        fill_ellipse(&mut none, Vec2::new(-50.0, 8.0), [9.0, 0.0, 9.0]);
+        fill_ellipse(&mut none, Vec2::new(8.0, 8.0), [9.0, 0.0, 0.0]);
+        fill_ellipse(&mut none, Vec2::new(f32::NAN, 8.0), [9.0, 0.0, 9.0]);
+        assert_eq!(none.count(), 0);
+        // Partly off the image: clipped.
+        fill_ellipse(&mut none, Vec2::new(0.0, 0.0), [16.0, 0.0, 16.0]);
+        assert!(none.count() > 8 && none.count() < 20, "{}", none.count());
+    }
+
+    #[test]
+    fn an_ellipsoid_projects_to_its_outline() {
+        // Seen from +Z (right = +X, up = +Y), an ellipsoid with semi-axes 2 (x), 1 (y), 5 (z):
+        // an ellipse of semi-axes 2 and 1 metres, at 10 pixels per metre.
+        let view = View::fit(Vec3::Z, Vec3::ZERO, 6.4, 128);
+        let (c, m) = project_ellipsoid(&view, Vec3::new(1.0, 1.0, 3.0), [Vec3::X * 2.0, Vec3::Y, Vec3::Z * 5.0]);
+        let s = f64::from(view.scale);
+        assert!(c.abs_diff_eq(Vec2::new(64.0 + view.scale, 64.0 - view.scale), 1e-4));
+        assert!((m[0] - 4.0 * s * s).abs() < 1e-6 * s * s && m[1].abs() < 1e-9 && (m[2] - s * s).abs() < 1e-6 * s * s);
+        // Turned by 90° about z, the long axis is vertical; the xy term follows the image's y-down.
+        let (_, m) = project_ellipsoid(&view, Vec3::ZERO, [Vec3::Y * 2.0, -Vec3::X, Vec3::Z * 5.0]);
+        assert!((m[0] - s * s).abs() < 1e-6 * s * s && (m[2] - 4.0 * s * s).abs() < 1e-6 * s * s);
+        let diagonal = Vec3::new(1.0, 1.0, 0.0).normalize();
+        let (_, m) = project_ellipsoid(&view, Vec3::ZERO, [diagonal * 2.0, Vec3::Z.cross(diagonal) * 0.1, Vec3::Z]);
+        assert!(m[1] < 0.0, "a long axis up and to the right runs to smaller image y: {m:?}");
+        // A sphere of radius r from any side: a circle of r·scale pixels.
+        let top = View::fit(Vec3::new(1.0, 2.0, 0.5), Vec3::ZERO, 1.0, 64);
+        let (_, m) = project_ellipsoid(&top, Vec3::ZERO, [Vec3::X * 0.5, Vec3::Y * 0.5, Vec3::Z * 0.5]);
+        let r2 = (0.5 * f64::from(top.scale)).powi(2);
+        assert!((m[0] - r2).abs() < 1e-3 * r2 && m[1].abs() < 1e-3 * r2 && (m[2] - r2).abs() < 1e-3 * r2);
+    }
+
+    #[test]
+    fn multiscale_rmse_is_zero_for_equal_images_and_exact_for_known_differences() {
+        let mut a = Mask::new(64);
+        fill_ellipse(&mut a, Vec2::new(30.0, 20.0), [100.0, 20.0, 50.0]);
+        let bands = multiscale_rmse(&a, &a.clone());
+        assert_eq!(bands, vec![0.0; 6]);
+        assert_eq!(multiscale_error(&a, &a), 0.0);
+        // One pixel differs: band b has one block of mean 1/4^b among (n/2^b)² blocks, so its
+        // RMSE is 1/(2^b·n).
+        let mut b = a.clone();
+        let (x, y) = (37, 41);
+        assert!(!b.get(x, y));
+        b.set(x, y);
+        for (band, rmse) in multiscale_rmse(&b, &a).into_iter().enumerate() {
+            let expected = 1.0 / (f64::from(1u32 << band) * 64.0);
+            assert!((rmse - expected).abs() < 1e-12, "band {band}: {rmse} vs {expected}");
+        }
+        // A full image against an empty one: 1 at every band; a checkerboard: 1/√2 at the
+        // finest band, 1/2 at every coarser one (each block is half covered).
+        let (mut full, empty, mut checker) = (Mask::new(32), Mask::new(32), Mask::new(32));
+        for y in 0..32 {
+            for x in 0..32 {
+                full.set(x, y);
+                if (x + y) % 2 == 0 {
+                    checker.set(x, y);
+                }
+            }
+        }
+        let bands = multiscale_rmse(&full, &empty);
+        assert!(bands.iter().all(|&r| (r - 1.0).abs() < 1e-12), "{bands:?}");
+        let bands = multiscale_rmse(&checker, &empty);
+        assert_eq!(bands.len(), 5);
+        assert!((bands[0] - 0.5f64.sqrt()).abs() < 1e-12);
+        assert!(bands[1..].iter().all(|&r| (r - 0.5).abs() < 1e-12), "{bands:?}");
+        // The sign of a difference counts at coarse bands: a block half too much and half too
+        // little cancels there.
+        let (mut left, mut right) = (Mask::new(4), Mask::new(4));
+        left.set(0, 0);
+        right.set(1, 0);
+        let bands = multiscale_rmse(&left, &right);
+        assert!((bands[0] - (2.0f64 / 16.0).sqrt()).abs() < 1e-12 && bands[1] == 0.0, "{bands:?}");
+        // The smallest image: one band.
+        assert_eq!(multiscale_rmse(&Mask::new(2), &Mask::new(2)), vec![0.0]);
+    }
+
+    #[test]
+    fn morton_order_visits_blocks_contiguously() {
+        let cells: Vec<(usize, usize)> = (0..16).map(morton_decode).collect();
+        assert_eq!(&cells[..4], &[(0, 0), (1, 0), (0, 1), (1, 1)]);
+        assert_eq!(cells[4], (2, 0));
+        assert_eq!(cells[15], (3, 3));
     }
 }
