@@ -9,7 +9,9 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, covered, gpu, keep, one_tree, precision_recall};
+use common::{
+    BACKGROUND, covered, gpu, keep, light_taken, mask_precision_recall, one_tree, precision_recall, shadow_mask,
+};
 use glam::{Mat4, Quat, Vec2, Vec3, vec3};
 use treelod_build::scene::{AlphaMode, Image as SourceImage, ImageEncoding, Material, Part, Scene};
 use treelod_build::{BuildConfig, ImpostorConfig, Placed, Texturing, build_block};
@@ -235,33 +237,6 @@ fn indirect_planes_cover_the_direct_ones_in_their_colour_and_show_the_leaf_textu
     assert!(precision >= 0.98 && recall >= 0.95, "the leaf's outline: P {precision:.3} R {recall:.3}");
 }
 
-/// Pixels of `shadowed` darker than 0.85 of the same pixel of `lit` (as in `shadows.rs`).
-fn mask(shadowed: &Image, lit: &Image) -> Vec<bool> {
-    shadowed
-        .rgba
-        .chunks_exact(4)
-        .zip(lit.rgba.chunks_exact(4))
-        .map(|(s, l)| f32::from(s[1]) < 0.85 * f32::from(l[1]))
-        .collect()
-}
-
-/// The sunlight a shadow takes from the ground: the sum over pixels of `1 − shadowed / lit`.
-fn occlusion(shadowed: &Image, lit: &Image) -> f64 {
-    shadowed
-        .rgba
-        .chunks_exact(4)
-        .zip(lit.rgba.chunks_exact(4))
-        .map(|(s, l)| 1.0 - f64::from(s[1]) / f64::from(l[1]).max(1.0))
-        .sum()
-}
-
-fn mask_precision_recall(test: &[bool], reference: &[bool]) -> (f64, f64) {
-    let both = test.iter().zip(reference).filter(|(a, b)| **a && **b).count() as f64;
-    let n_test = test.iter().filter(|a| **a).count() as f64;
-    let n_reference = reference.iter().filter(|a| **a).count() as f64;
-    (both / n_test.max(1.0), both / n_reference.max(1.0))
-}
-
 #[test]
 fn indirect_planes_cast_the_shadow_of_the_direct_ones() {
     let gpu = gpu();
@@ -290,10 +265,10 @@ fn indirect_planes_cast_the_shadow_of_the_direct_ones() {
     keep(&a, "indirect-shadow-direct");
     keep(&b, "indirect-shadow-indirect");
     assert!(a_stats.shadow.planes > 0 && b_stats.shadow.planes > 0, "{:?} {:?}", a_stats.shadow, b_stats.shadow);
-    let (ma, mb) = (mask(&a, &lit), mask(&b, &lit));
+    let (ma, mb) = (shadow_mask(&a, &lit), shadow_mask(&b, &lit));
     let (na, nb) = (ma.iter().filter(|m| **m).count(), mb.iter().filter(|m| **m).count());
     let (precision, recall) = mask_precision_recall(&mb, &ma);
-    let taken = occlusion(&b, &lit) / occlusion(&a, &lit);
+    let taken = light_taken(&b, &lit) / light_taken(&a, &lit);
     eprintln!(
         "shadow: direct {na} pixels, indirect {nb}; indirect P {precision:.3} R {recall:.3}, light taken {taken:.3} \
          of the direct planes'"

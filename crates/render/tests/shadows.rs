@@ -6,7 +6,7 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, demo_built, gpu};
+use common::{BACKGROUND, demo_built, gpu, light_taken, mask_precision_recall, shadow_mask};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig, PruneConfig};
 use treelod_format::Container;
@@ -40,34 +40,6 @@ fn frame(gpu: &Gpu, renderer: &mut Renderer, ground: &Ground, camera: &Camera, t
     (image, stats)
 }
 
-/// Pixels of `shadowed` darker than 0.85 of the same pixel of `lit` (the ground without shadows):
-/// the shadow mask.
-fn mask(shadowed: &Image, lit: &Image) -> Vec<bool> {
-    shadowed
-        .rgba
-        .chunks_exact(4)
-        .zip(lit.rgba.chunks_exact(4))
-        .map(|(s, l)| f32::from(s[1]) < 0.85 * f32::from(l[1]))
-        .collect()
-}
-
-/// The sunlight the shadow takes from the ground: the sum over pixels of `1 − shadowed / lit`.
-fn occlusion(shadowed: &Image, lit: &Image) -> f64 {
-    shadowed
-        .rgba
-        .chunks_exact(4)
-        .zip(lit.rgba.chunks_exact(4))
-        .map(|(s, l)| 1.0 - f64::from(s[1]) / f64::from(l[1]).max(1.0))
-        .sum()
-}
-
-fn precision_recall(test: &[bool], reference: &[bool]) -> (f64, f64) {
-    let both = test.iter().zip(reference).filter(|(a, b)| **a && **b).count() as f64;
-    let n_test = test.iter().filter(|a| **a).count() as f64;
-    let n_reference = reference.iter().filter(|a| **a).count() as f64;
-    (both / n_test.max(1.0), both / n_reference.max(1.0))
-}
-
 #[test]
 fn every_representation_casts_the_shadow_of_the_full_mesh() {
     let gpu = gpu();
@@ -91,24 +63,24 @@ fn every_representation_casts_the_shadow_of_the_full_mesh() {
     renderer.settings_mut().shadows = None;
     let (lit, _) = frame(&gpu, &mut renderer, &ground, &camera, false);
     keep(&lit, "shadow-lit");
-    assert!(mask(&lit, &lit).iter().all(|m| !m));
+    assert!(shadow_mask(&lit, &lit).iter().all(|m| !m));
     // The full mesh in a fine map (texels of a few millimetres), and in the map the
     // representations are drawn into.
     renderer.settings_mut().shadows = Some(Shadows { resolution: 4096, ..shadows });
     let (full, full_stats) = frame(&gpu, &mut renderer, &ground, &camera, false);
     keep(&full, "shadow-full");
-    let (fine, reference) = (occlusion(&full, &lit), mask(&full, &lit));
+    let (fine, reference) = (light_taken(&full, &lit), shadow_mask(&full, &lit));
     let area = reference.iter().filter(|m| **m).count();
     eprintln!("full mesh: {area} shadowed pixels, shadow pass {:?}", full_stats.shadow);
     assert!(area > 2000, "the full mesh casts a shadow ({area} pixels)");
     renderer.settings_mut().shadows = Some(shadows);
     let (full512, _) = frame(&gpu, &mut renderer, &ground, &camera, false);
     keep(&full512, "shadow-full512");
-    let same_map = mask(&full512, &lit);
-    let (p, r) = precision_recall(&same_map, &reference);
+    let same_map = shadow_mask(&full512, &lit);
+    let (p, r) = mask_precision_recall(&same_map, &reference);
     eprintln!(
         "full mesh, 512 texels: the fine map P {p:.3} R {r:.3}, light taken {:.3}",
-        occlusion(&full512, &lit) / fine
+        light_taken(&full512, &lit) / fine
     );
 
     // The representations that stand for the leaves (not the baselines): their shadow's mask
@@ -132,9 +104,9 @@ fn every_representation_casts_the_shadow_of_the_full_mesh() {
         *renderer.settings_mut() = case;
         let (image, stats) = frame(&gpu, &mut renderer, &ground, &camera, false);
         keep(&image, &format!("shadow-{name}"));
-        let (p, r) = precision_recall(&mask(&image, &lit), &same_map);
-        let (p_fine, r_fine) = precision_recall(&mask(&image, &lit), &reference);
-        let taken = occlusion(&image, &lit) / fine;
+        let (p, r) = mask_precision_recall(&shadow_mask(&image, &lit), &same_map);
+        let (p_fine, r_fine) = mask_precision_recall(&shadow_mask(&image, &lit), &reference);
+        let taken = light_taken(&image, &lit) / fine;
         eprintln!(
             "{name}: against the same map P {p:.3} R {r:.3}, the fine map P {p_fine:.3} R {r_fine:.3}, \
              light taken {taken:.3}; shadow pass {:?}",

@@ -28,11 +28,36 @@ pub fn covered(image: &Image) -> Vec<bool> {
 
 /// Precision and recall of `test`'s covered pixels against `reference`'s.
 pub fn precision_recall(test: &Image, reference: &Image) -> (f64, f64) {
-    let (a, b) = (covered(test), covered(reference));
-    let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count() as f64;
-    let n_test = a.iter().filter(|x| **x).count() as f64;
-    let n_reference = b.iter().filter(|x| **x).count() as f64;
+    mask_precision_recall(&covered(test), &covered(reference))
+}
+
+/// Precision and recall of the pixel mask `test` against `reference`.
+pub fn mask_precision_recall(test: &[bool], reference: &[bool]) -> (f64, f64) {
+    let both = test.iter().zip(reference).filter(|(a, b)| **a && **b).count() as f64;
+    let n_test = test.iter().filter(|a| **a).count() as f64;
+    let n_reference = reference.iter().filter(|a| **a).count() as f64;
     (both / n_test.max(1.0), both / n_reference.max(1.0))
+}
+
+/// Pixels of `shadowed` darker than 0.85 of the same pixel of `lit` (the ground without
+/// shadows): the shadow mask.
+pub fn shadow_mask(shadowed: &Image, lit: &Image) -> Vec<bool> {
+    shadowed
+        .rgba
+        .chunks_exact(4)
+        .zip(lit.rgba.chunks_exact(4))
+        .map(|(s, l)| f32::from(s[1]) < 0.85 * f32::from(l[1]))
+        .collect()
+}
+
+/// The sunlight a shadow takes from the ground: the sum over pixels of `1 − shadowed / lit`.
+pub fn light_taken(shadowed: &Image, lit: &Image) -> f64 {
+    shadowed
+        .rgba
+        .chunks_exact(4)
+        .zip(lit.rgba.chunks_exact(4))
+        .map(|(s, l)| 1.0 - f64::from(s[1]) / f64::from(l[1]).max(1.0))
+        .sum()
 }
 
 /// A renderer with `settings` drawing one instance of `container` at the origin.
