@@ -120,14 +120,7 @@ pub fn demo_tree(config: &DemoTreeConfig) -> Scene {
         source: SourceInfo { unit_scale: 1.0, ..SourceInfo::default() },
         parts: vec![leaves, bark],
         materials: vec![
-            Material {
-                name: "leaves".into(),
-                base_color: [1.0; 4],
-                image: Some(0),
-                alpha_mode: AlphaMode::Mask,
-                alpha_cutoff: 0.5,
-                double_sided: true,
-            },
+            leaf_material(),
             Material { name: "bark".into(), base_color: [0.35, 0.25, 0.18, 1.0], ..Material::default() },
         ],
         images: vec![leaf_texture(64)],
@@ -176,6 +169,48 @@ fn leaf_texture(size: u32) -> Image {
         }
     }
     Image { width: size, height: size, rgba, encoded: Vec::new(), encoding: ImageEncoding::Raw }
+}
+
+/// The demo's leaf material: `leaves`, white, image 0, alpha-tested at 0.5, two-sided.
+#[must_use]
+pub fn leaf_material() -> Material {
+    Material {
+        name: "leaves".into(),
+        base_color: [1.0; 4],
+        image: Some(0),
+        alpha_mode: AlphaMode::Mask,
+        alpha_cutoff: 0.5,
+        double_sided: true,
+    }
+}
+
+/// Square leaf cards lying on known planes, for tests and examples of leaf-cluster impostors:
+/// on each plane (a point on it and its unit normal) a `grid × grid` square of cards `spacing`
+/// metres apart centred on the point, each `2·half` metres across, card `k` (counted over all
+/// planes) turned in its plane by `k · turn` radians and every other one facing the opposite
+/// way. Corners run around the card, the first at texture coordinates `(0, 1)` of a card whose
+/// UVs cover `[0, 1]²` in the order `(0, 1), (1, 1), (1, 0), (0, 0)`.
+#[must_use]
+pub fn cards_on_planes(planes: &[(Vec3, Vec3)], grid: usize, spacing: f32, half: f32, turn: f32) -> Vec<[Vec3; 4]> {
+    let mut cards = Vec::with_capacity(planes.len() * grid * grid);
+    let offset = 0.5 * spacing * (grid as f32 - 1.0);
+    for &(centre, normal) in planes {
+        let (a, b) = normal.any_orthonormal_pair();
+        for i in 0..grid {
+            for j in 0..grid {
+                let k = cards.len();
+                let c = centre + a * (spacing * i as f32 - offset) + b * (spacing * j as f32 - offset);
+                let rotation = Quat::from_axis_angle(normal, k as f32 * turn);
+                let (u, v) = (rotation * a * half, rotation * b * half);
+                let mut corners = [c - u - v, c + u - v, c + u + v, c - u + v];
+                if k % 2 == 1 {
+                    corners.swap(1, 3);
+                }
+                cards.push(corners);
+            }
+        }
+    }
+    cards
 }
 
 #[cfg(test)]

@@ -27,7 +27,7 @@ pub use ambient::AoConfig;
 pub use assemble::{
     BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, build_scenes, prune_report, recorded_settings,
 };
-pub use demo::{DemoTreeConfig, demo_tree};
+pub use demo::{DemoTreeConfig, cards_on_planes, demo_tree, leaf_material};
 pub use error::BuildError;
 pub use import::{content_hash, import_gltf, import_gltf_bytes, scene_name};
 pub use impostor::{ImpostorConfig, Impostors, Texturing};

@@ -4,9 +4,12 @@
 //! counts, the fallback to the RGBA atlas for leaves whose outline is geometry, and setting
 //! errors.
 
-use glam::{Quat, Vec2, Vec3};
+use glam::{Vec2, Vec3};
 use treelod_build::scene::{AlphaMode, Image, ImageEncoding, Material, Part, Scene};
-use treelod_build::{BuildConfig, BuildError, BuildOutput, ImpostorConfig, Placed, Texturing, build_block};
+use treelod_build::{
+    BuildConfig, BuildError, BuildOutput, ImpostorConfig, Placed, Texturing, build_block, cards_on_planes,
+    leaf_material,
+};
 use treelod_format::{Compression, Container, PlaneRecord, image_format, material_class, pack};
 
 /// A leaf texture: opaque inside a disc of radius 0.45 about the centre, transparent outside,
@@ -40,29 +43,17 @@ struct Leaf {
 /// facing the other way, and the texture coordinates of some turned by a quarter: their UVs
 /// cover `[0, 1]²`.
 fn leaves() -> Vec<Leaf> {
-    let mut out = Vec::new();
-    for (p, &(centre, normal)) in PLANES.iter().enumerate() {
-        let (a, b) = normal.any_orthonormal_pair();
-        for i in 0..3 {
-            for j in 0..3 {
-                let k = p * 9 + i * 3 + j;
-                let c = centre + a * (0.5 * i as f32 - 0.5) + b * (0.5 * j as f32 - 0.5);
-                let turn = Quat::from_axis_angle(normal, k as f32 * 0.35);
-                let (u, v) = (turn * a * 0.1, turn * b * 0.1);
-                // Counter-clockwise about `normal`, or about its opposite.
-                let mut corners = [c - u - v, c + u - v, c + u + v, c - u + v];
-                if k % 2 == 1 {
-                    corners.swap(1, 3);
-                }
-                let mut uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
-                if k % 3 == 0 {
-                    uvs.rotate_left(1);
-                }
-                out.push(Leaf { corners, uvs });
+    cards_on_planes(&PLANES, 3, 0.5, 0.1, 0.35)
+        .into_iter()
+        .enumerate()
+        .map(|(k, corners)| {
+            let mut uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
+            if k % 3 == 0 {
+                uvs.rotate_left(1);
             }
-        }
-    }
-    out
+            Leaf { corners, uvs }
+        })
+        .collect()
 }
 
 /// The leaves of [`leaves`] as one part; with `colours`, each leaf's own vertex colour (so that
@@ -92,14 +83,7 @@ fn scene(material: Material, image: bool, colours: bool) -> Scene {
 }
 
 fn mask_leaves() -> Material {
-    Material {
-        name: "leaves".into(),
-        base_color: [1.0; 4],
-        image: Some(0),
-        alpha_mode: AlphaMode::Mask,
-        alpha_cutoff: 0.5,
-        double_sided: true,
-    }
+    leaf_material()
 }
 
 /// One level of three planes: one per known plane.
