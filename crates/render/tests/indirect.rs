@@ -14,7 +14,7 @@ use common::{
 };
 use glam::{Mat4, Quat, Vec2, Vec3, vec3};
 use treelod_build::scene::{AlphaMode, Image as SourceImage, ImageEncoding, Material, Part, Scene};
-use treelod_build::{BuildConfig, ImpostorConfig, Placed, Texturing, build_block};
+use treelod_build::{BuildConfig, ImpostorConfig, Placed, Texturing, build_block, cards_on_planes, leaf_material};
 use treelod_format::{Compression, Container, ContainerData, image_format};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
 use treelod_render::{Camera, Ground, Instance, Renderer, Settings, Shadows};
@@ -42,40 +42,20 @@ const PLANES: [(Vec3, Vec3); 3] =
 /// in its plane by its own angle, every other one facing the other way; UVs cover `[0, 1]²`.
 fn scene() -> Scene {
     let mut part = Part { mesh_name: "leaves".into(), material: 0, ..Part::default() };
-    for (p, &(centre, normal)) in PLANES.iter().enumerate() {
-        let (a, b) = normal.any_orthonormal_pair();
-        for i in 0..4 {
-            for j in 0..4 {
-                let k = p * 16 + i * 4 + j;
-                let c = centre + a * (0.7 * i as f32 - 1.05) + b * (0.7 * j as f32 - 1.05);
-                let turn = Quat::from_axis_angle(normal, k as f32 * 0.4);
-                let (u, v) = (turn * a * 0.2, turn * b * 0.2);
-                let mut corners = [c - u - v, c + u - v, c + u + v, c - u + v];
-                if k % 2 == 1 {
-                    corners.swap(1, 3);
-                }
-                let facing = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
-                let base = part.positions.len() as u32;
-                for (corner, uv) in corners.iter().zip([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]) {
-                    part.positions.push(corner.to_array());
-                    part.normals.push(facing.to_array());
-                    part.uvs.push(uv);
-                }
-                part.triangles.extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
-            }
+    for corners in cards_on_planes(&PLANES, 4, 0.7, 0.2, 0.4) {
+        let facing = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
+        let base = part.positions.len() as u32;
+        for (corner, uv) in corners.iter().zip([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]) {
+            part.positions.push(corner.to_array());
+            part.normals.push(facing.to_array());
+            part.uvs.push(uv);
         }
+        part.triangles.extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
     }
     Scene {
         name: "planes".into(),
         parts: vec![part],
-        materials: vec![Material {
-            name: "leaves".into(),
-            base_color: [1.0; 4],
-            image: Some(0),
-            alpha_mode: AlphaMode::Mask,
-            alpha_cutoff: 0.5,
-            double_sided: true,
-        }],
+        materials: vec![leaf_material()],
         images: vec![striped_leaf()],
         ..Scene::default()
     }

@@ -46,6 +46,7 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
         (report.ellipsoids, "ellipsoid", "ellipsoids"),
         (report.lines, "line", "lines"),
         (report.planes, "plane", "planes"),
+        (report.plane_leaves, "plane leaf", "plane leaves"),
         (report.prune_leaves, "pruned leaf", "pruned leaves"),
         (report.prune_triangles, "pruned triangle", "pruned triangles"),
         (report.curve_samples, "curve sample", "curve samples"),
