@@ -132,3 +132,9 @@ fn point_drawn(p: PointRecord, tau_p: f32, tau_t: f32) -> bool {
 fn plane_drawn(p: PlaneRecord, tau: f32) -> bool {
     return p.lo <= tau && tau < p.hi;
 }
+
+// The ellipsoid rule of spec §10: inside [lo, hi) at tau (metres per pixel).
+// Rust twin: treelod_runtime::ellipsoid_drawn.
+fn ellipsoid_drawn(e: EllipsoidRecord, tau: f32) -> bool {
+    return e.lo <= tau && tau < e.hi;
+}

@@ -90,6 +90,7 @@
 mod camera;
 mod gpu_select;
 mod ground;
+mod noise;
 mod occlusion;
 pub mod offscreen;
 mod renderer;

@@ -8,8 +8,8 @@ use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleRecord, material_class};
 use treelod_runtime::prune::{MIN_VISIBLE_FRACTION, leaf_scale, leaves_drawn, projected_height, size_factor};
 use treelod_runtime::{
-    BillboardKind, Billboards, DrawList, DrawRange, Frustum, Hysteresis, Kind, LodChain, LodSettings, ModelLod,
-    PlaneLod, PlaneRange, PruneLod, PruneScale, ROOTS_CELL, instance_tau, select_frame,
+    BillboardKind, Billboards, DrawList, DrawRange, EllipsoidLod, EllipsoidRange, Frustum, Hysteresis, Kind, LodChain,
+    LodSettings, ModelLod, PlaneLod, PlaneRange, PruneLod, PruneScale, ROOTS_CELL, instance_tau, select_frame,
 };
 
 use crate::camera::Camera;
@@ -109,6 +109,18 @@ pub struct Settings {
     pub impostor_morph: bool,
     /// With [`Self::impostors`]: the bark drawn beside the planes.
     pub impostor_bark: ImpostorBark,
+    /// Draw the leaves of every tree whose container has Clasen's ellipsoids (spec §6.8) as those
+    /// ellipsoids, ray-cast per pixel with their noise, and its bark as triangles (every bark
+    /// triangle, as [`ImpostorBark::All`]). Per cell, the level drawn is the one whose interval
+    /// holds `τ`, the metres per pixel at the cell's distance (the point threshold's `τ_p / s_min`,
+    /// Gilet's depth bias included) divided by [`Self::ellipsoid_quality`]. Takes precedence over
+    /// [`Self::impostors`] (a tree with both is drawn with ellipsoids, one with planes only with
+    /// planes) and [`Self::pruning`]; [`Self::baseline`] takes precedence over it. Selected on the
+    /// CPU (GPU selection is not used for such frames).
+    pub ellipsoids: bool,
+    /// With [`Self::ellipsoids`]: the user's quality factor `q`, `τ = mpp / q` (1: the level the
+    /// build chose for the pixel size; 2: the level for pixels half as large, finer).
+    pub ellipsoid_quality: f32,
     /// Draw every tree whose container has this baseline (spec §6.12, §6.13) with it instead of
     /// treelod's representations, for comparisons; trees without it are drawn with the sequential
     /// point trees. Takes precedence over [`Self::impostors`] and [`Self::pruning`].
@@ -209,6 +221,8 @@ impl Default for Settings {
             impostors: false,
             impostor_morph: true,
             impostor_bark: ImpostorBark::default(),
+            ellipsoids: false,
+            ellipsoid_quality: 1.0,
             baseline: None,
             shadows: None,
         }
@@ -255,6 +269,10 @@ pub struct FrameStats {
     pub instances_impostors: u32,
     /// Impostor planes submitted (the prefixes; the vertex shader drops those outside the level).
     pub planes: u64,
+    /// Visible instances drawn with ellipsoids ([`Settings::ellipsoids`]).
+    pub instances_ellipsoids: u32,
+    /// Ellipsoids submitted (the prefixes; the vertex shader drops those outside the level).
+    pub ellipsoids: u64,
     /// Visible instances drawn with a baseline ([`Settings::baseline`]).
     pub instances_baseline: u32,
     /// Billboard quads submitted (their triangles are not counted in [`Self::triangles`]; LoD
@@ -294,6 +312,8 @@ pub struct ShadowStats {
     pub planes: u64,
     /// Billboard quads submitted.
     pub billboards: u64,
+    /// Ellipsoids submitted.
+    pub ellipsoids: u64,
 }
 
 /// Why a model could not be added.
@@ -434,6 +454,8 @@ struct Model {
     bark: (u32, u32),
     /// The impostor planes, if the container has them (uploaded whole with their atlas).
     planes: Option<PlaneLod>,
+    /// Clasen's ellipsoids, if the container has them (uploaded whole).
+    ellipsoids: Option<EllipsoidLod>,
     /// The hull samples of the occlusion test: first and count in the sample buffer.
     samples: (u32, u32),
     /// The baseline LoD chain, if the container has one: levels, and where the full mesh and each
@@ -490,6 +512,10 @@ pub enum DrawSource {
     LodLevel,
     /// Baseline billboard quads of the block (`cell` is [`treelod_runtime::ROOTS_CELL`]).
     Billboards,
+    /// The leading `count` ellipsoids of the cell's range (uploaded whole at
+    /// [`Renderer::add_model`]); `tau_points` is the `τ` (metres per pixel) the shader tests them
+    /// with.
+    Ellipsoids,
 }
 
 /// One draw of the last [`Renderer::prepare`], as the GPU will execute it, for tests and tools.
@@ -531,8 +557,10 @@ pub struct Renderer {
     plane_pipeline: wgpu::RenderPipeline,
     /// Baseline billboards, from each model's billboard bind group.
     billboard_pipeline: wgpu::RenderPipeline,
+    /// Clasen's ellipsoids, ray-cast, from each model's ellipsoid buffer and the noise cube.
+    ellipsoid_pipeline: wgpu::RenderPipeline,
     /// The shadow pass's depth-only pipelines, in bucket order (triangles, points, pruned,
-    /// planes, billboards).
+    /// planes, billboards, ellipsoids).
     shadow_pipelines: [wgpu::RenderPipeline; BUCKETS],
     /// The receivers' bind group layout (group 2) and the maps.
     shadow_layout: wgpu::BindGroupLayout,
@@ -546,6 +574,10 @@ pub struct Renderer {
     /// The atlases' sampler: clamped, so a region's edge never wraps to the atlas's far side,
     /// and the nearest mip level.
     atlas_sampler: wgpu::Sampler,
+    /// The ellipsoids' white-noise cube map (`crate::noise`; uploaded by the first
+    /// [`Renderer::add_model`]) and its nearest-texel sampler.
+    noise_view: Option<wgpu::TextureView>,
+    noise_sampler: wgpu::Sampler,
     /// The frame uniforms: the camera's at offset 0, then each cascade's at
     /// [`FRAME_UNIFORM_STRIDE`] steps.
     frame_buffer: wgpu::Buffer,
@@ -564,6 +596,7 @@ pub struct Renderer {
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     visible_fraction: Vec<f32>,
     plane_ranges: Vec<PlaneRange>,
+    ellipsoid_ranges: Vec<EllipsoidRange>,
     /// The occlusion measurement, and the trees to measure after this frame.
     occlusion: Occlusion,
     occlusion_jobs: Vec<Job>,
@@ -602,6 +635,8 @@ struct View {
     pruned: Vec<PrunedDraw>,
     /// Impostor draws: per instance and plane cell, the prefix and its `τ`.
     plane_draws: Vec<PlaneDraw>,
+    /// Ellipsoid draws: per instance and ellipsoid cell, the prefix and its `τ`.
+    ellipsoid_draws: Vec<EllipsoidDraw>,
     /// Baseline billboard draws: (instance, model, first quad, quads).
     billboard_draws: Vec<(u32, u32, u32, u32)>,
     /// Per model, per bucket: the view's range of the indirect buffer.
@@ -620,6 +655,7 @@ impl View {
 struct Modes {
     baseline: Option<Baseline>,
     impostors: bool,
+    ellipsoids: bool,
     pruning: Option<Pruning>,
 }
 
@@ -630,6 +666,7 @@ struct ViewCounts {
     instances_pruned: u32,
     leaves_pruned: u64,
     instances_impostors: u32,
+    instances_ellipsoids: u32,
     instances_baseline: u32,
 }
 
@@ -640,8 +677,8 @@ const FRAME_UNIFORM_STRIDE: u64 = 256;
 const INITIAL_POOL_UNITS: u32 = 1 << 15;
 
 /// Draw buckets per model: triangles, points, pruned (leaves and bark, and LoD chain levels),
-/// impostor planes, billboards.
-const BUCKETS: usize = 5;
+/// impostor planes, billboards, ellipsoids.
+const BUCKETS: usize = 6;
 
 /// [`ImpostorBark::Chain`] draws only levels whose bark keeps this share of the full bark's area.
 const BARK_AREA_KEPT: f64 = 0.9;
@@ -670,6 +707,14 @@ struct PlaneDraw {
     instance: u32,
     model: u32,
     range: PlaneRange,
+}
+
+/// One draw of ellipsoids: a prefix of one cell's ellipsoids for one instance.
+#[derive(Clone, Copy, Debug)]
+struct EllipsoidDraw {
+    instance: u32,
+    model: u32,
+    range: EllipsoidRange,
 }
 
 impl Model {
@@ -779,7 +824,8 @@ impl Renderer {
                     },
                     count: None,
                 },
-                storage(1, wgpu::ShaderStages::VERTEX),
+                // The draws: the ellipsoids' fragment stage reads their transforms too.
+                storage(1, wgpu::ShaderStages::VERTEX_FRAGMENT),
                 storage(2, wgpu::ShaderStages::VERTEX),
                 storage(3, wgpu::ShaderStages::VERTEX),
             ],
@@ -825,6 +871,15 @@ impl Renderer {
                     count: None,
                 },
                 storage(10, wgpu::ShaderStages::FRAGMENT),
+                // Ellipsoids, and the white-noise cube map they sample.
+                storage(11, wgpu::ShaderStages::VERTEX_FRAGMENT),
+                texture(12, wgpu::TextureViewDimension::Cube),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 13,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
+                    count: None,
+                },
             ],
         });
         let shadow_layout = ShadowMaps::layout(device);
@@ -904,12 +959,14 @@ impl Renderer {
         let pruned_pipeline = pipeline("treelod pruned leaves and bark", "vs_pruned", "fs_triangle", false);
         let plane_pipeline = pipeline("treelod impostor planes", "vs_plane", "fs_plane", false);
         let billboard_pipeline = pipeline("treelod baseline billboards", "vs_billboard", "fs_plane", false);
+        let ellipsoid_pipeline = pipeline("treelod ellipsoids", "vs_ellipsoid", "fs_ellipsoid", false);
         let shadow_pipelines = [
             pipeline("treelod shadow triangles", "vs_triangle", "fs_shadow_triangle", true),
             pipeline("treelod shadow points", "vs_point", "fs_shadow_point", true),
             pipeline("treelod shadow pruned leaves and bark", "vs_pruned", "fs_shadow_triangle", true),
             pipeline("treelod shadow impostor planes", "vs_plane", "fs_shadow_plane", true),
             pipeline("treelod shadow billboards", "vs_billboard", "fs_shadow_plane", true),
+            pipeline("treelod shadow ellipsoids", "vs_ellipsoid", "fs_shadow_ellipsoid", true),
         ];
         let shadow_maps = ShadowMaps::new(device, &shadow_layout, 1, 1);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -932,6 +989,7 @@ impl Renderer {
             mipmap_filter: wgpu::MipmapFilterMode::Nearest,
             ..wgpu::SamplerDescriptor::default()
         });
+        let noise_sampler = crate::noise::sampler(device);
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("treelod frame"),
             size: FRAME_UNIFORM_STRIDE * (1 + MAX_CASCADES as u64),
@@ -959,6 +1017,7 @@ impl Renderer {
             pruned_pipeline,
             plane_pipeline,
             billboard_pipeline,
+            ellipsoid_pipeline,
             shadow_pipelines,
             shadow_layout,
             shadow_maps,
@@ -966,6 +1025,8 @@ impl Renderer {
             scene_bounds: None,
             sampler,
             atlas_sampler,
+            noise_view: None,
+            noise_sampler,
             frame_buffer,
             draw_buffer,
             indirect_buffer,
@@ -977,6 +1038,7 @@ impl Renderer {
             prune_shown: Vec::new(),
             visible_fraction: Vec::new(),
             plane_ranges: Vec::new(),
+            ellipsoid_ranges: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1)),
             occlusion_jobs: Vec::new(),
             last_camera: None,
@@ -1093,9 +1155,14 @@ impl Renderer {
         // Impostors draw the bark triangles too.
         let prune = PruneLod::from_container(&container);
         let planes = PlaneLod::from_container(&container);
+        let ellipsoids = EllipsoidLod::from_container(&container);
         let lod_chain = LodChain::from_container(&container);
         let mut chain = None;
-        let (extra, prune_leaves, bark) = if prune.is_some() || planes.is_some() || lod_chain.is_some() {
+        let (extra, prune_leaves, bark) = if prune.is_some()
+            || planes.is_some()
+            || ellipsoids.is_some()
+            || lod_chain.is_some()
+        {
             let classes = container.materials();
             let is_bark =
                 |t: &&TriangleRecord| classes.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF);
@@ -1197,6 +1264,12 @@ impl Renderer {
             .collect();
         let plane_buffer = upload("PLANES", bytemuck::cast_slice(&gpu_planes))?;
         let plane_leaves = upload("PLANE_LEAVES", bytemuck::cast_slice(container.plane_leaves()))?;
+        let ellipsoid_buffer = upload("ELLIPSOIDS", bytemuck::cast_slice(container.ellipsoids()))?;
+        if self.noise_view.is_none() {
+            let (view, noise_bytes) = crate::noise::upload(device, queue);
+            self.noise_view = Some(view);
+            bytes += noise_bytes;
+        }
 
         // The roots, pinned in the pool: what a cell draws before its own points are resident.
         let lod = ModelLod::from_container(&container);
@@ -1298,6 +1371,7 @@ impl Renderer {
         let (atlas_view, atlas_bytes) = upload_atlas(device, queue, &atlas, "treelod impostor atlas");
         let (slots_view, slot_bytes) = upload_atlas(device, queue, &slots, "treelod leaf slots");
         bytes += atlas_bytes + slot_bytes;
+        let Some(noise_view) = &self.noise_view else { unreachable!("uploaded above") };
         let model_group = |label: &str, planes: &wgpu::Buffer, atlas: &wgpu::TextureView| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some(label),
@@ -1314,6 +1388,9 @@ impl Renderer {
                     wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(&self.atlas_sampler) },
                     wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::TextureView(&slots_view) },
                     wgpu::BindGroupEntry { binding: 10, resource: plane_leaves.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 11, resource: ellipsoid_buffer.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 12, resource: wgpu::BindingResource::TextureView(noise_view) },
+                    wgpu::BindGroupEntry { binding: 13, resource: wgpu::BindingResource::Sampler(&self.noise_sampler) },
                 ],
             })
         };
@@ -1362,6 +1439,7 @@ impl Renderer {
             prune,
             bark,
             planes,
+            ellipsoids,
             chain,
             billboards,
         });
@@ -1499,13 +1577,17 @@ impl Renderer {
     /// Which instances are drawn with impostor planes this frame ([`Settings::impostors`]): appends to
     /// `view`'s `plane_draws`, and `pruned` with their bark, for instances whose model has planes, and
     /// `spt_instances`/`spt_map` with the others. Returns the impostor instances inside the
-    /// frustum.
-    fn select_impostors(&mut self, view: &mut View, camera: &treelod_runtime::Camera) -> u32 {
+    /// frustum. With `ellipsoids`, instances whose model has ellipsoids are skipped: they were
+    /// drawn by [`Self::select_ellipsoids`].
+    fn select_impostors(&mut self, view: &mut View, camera: &treelod_runtime::Camera, ellipsoids: bool) -> u32 {
         let frustum = Frustum::from_view_proj(camera.view_proj);
         let mut visible = 0;
         for (i, instance) in self.instances.iter().enumerate() {
             let index = u32::try_from(i).unwrap_or(u32::MAX);
             let Some(model) = self.models.get(instance.model as usize) else { continue };
+            if ellipsoids && model.ellipsoids.is_some() {
+                continue;
+            }
             let Some(planes) = &model.planes else {
                 view.spt_instances.push(*instance);
                 view.spt_map.push(index);
@@ -1536,6 +1618,51 @@ impl Renderer {
                 Some((range, error)) => Model::whole_draw(index, instance.model, DrawSource::Bark, range, 1.0, error),
                 None => model.bark_draw(index, instance.model, 1.0),
             });
+        }
+        visible
+    }
+
+    /// Which instances are drawn with ellipsoids this frame ([`Settings::ellipsoids`]): appends to
+    /// `view`'s `ellipsoid_draws`, and `pruned` with their bark (all of it), for instances whose
+    /// model has ellipsoids, and `spt_instances`/`spt_map` with the others, except those
+    /// [`Self::select_impostors`] draws (`impostors` on and the model has planes). Returns the
+    /// ellipsoid instances inside the frustum.
+    fn select_ellipsoids(
+        &mut self,
+        view: &mut View,
+        camera: &treelod_runtime::Camera,
+        lod_settings: &LodSettings,
+        impostors: bool,
+    ) -> u32 {
+        let frustum = Frustum::from_view_proj(camera.view_proj);
+        let quality = self.settings.ellipsoid_quality;
+        let mut visible = 0;
+        for (i, instance) in self.instances.iter().enumerate() {
+            let index = u32::try_from(i).unwrap_or(u32::MAX);
+            let Some(model) = self.models.get(instance.model as usize) else { continue };
+            let Some(ellipsoids) = &model.ellipsoids else {
+                if !(impostors && model.planes.is_some()) {
+                    view.spt_instances.push(*instance);
+                    view.spt_map.push(index);
+                }
+                continue;
+            };
+            self.ellipsoid_ranges.clear();
+            if !ellipsoids.select(
+                instance.transform,
+                camera,
+                &frustum,
+                lod_settings,
+                quality,
+                &mut self.ellipsoid_ranges,
+            ) {
+                continue;
+            }
+            visible += 1;
+            for range in &self.ellipsoid_ranges {
+                view.ellipsoid_draws.push(EllipsoidDraw { instance: index, model: instance.model, range: *range });
+            }
+            view.pruned.extend(model.bark_draw(index, instance.model, 1.0));
         }
         visible
     }
@@ -1744,7 +1871,8 @@ impl Renderer {
                 | DrawSource::Bark
                 | DrawSource::Planes
                 | DrawSource::LodLevel
-                | DrawSource::Billboards => 0,
+                | DrawSource::Billboards
+                | DrawSource::Ellipsoids => 0,
             } as u64;
         }
         drawn
@@ -1781,8 +1909,10 @@ impl Renderer {
         };
         let baseline = settings.baseline.filter(|_| !settings.full_mesh);
         let impostors = settings.impostors && !settings.full_mesh && baseline.is_none();
-        let pruning = settings.pruning.filter(|_| !settings.full_mesh && !impostors && baseline.is_none());
-        let modes = Modes { baseline, impostors, pruning };
+        let ellipsoids = settings.ellipsoids && !settings.full_mesh && baseline.is_none();
+        let pruning =
+            settings.pruning.filter(|_| !settings.full_mesh && !impostors && !ellipsoids && baseline.is_none());
+        let modes = Modes { baseline, impostors, ellipsoids, pruning };
         let forward = -camera.view.row(2).truncate().normalize_or(Vec3::NEG_Z);
         self.last_camera = Some((view_proj, camera.position, forward, (camera.width, camera.height)));
         if let Some(pruning) = &pruning
@@ -1808,6 +1938,7 @@ impl Renderer {
         if pruning.is_none()
             && !settings.full_mesh
             && !impostors
+            && !ellipsoids
             && baseline.is_none()
             && self.cascades.is_empty()
             && let Some(gpu) = self.gpu.as_mut().filter(|g| g.usable())
@@ -1884,6 +2015,7 @@ impl Renderer {
             instances_pruned: counts.instances_pruned,
             leaves_pruned: counts.leaves_pruned,
             instances_impostors: counts.instances_impostors,
+            instances_ellipsoids: counts.instances_ellipsoids,
             instances_baseline: counts.instances_baseline,
             bytes_uploaded: streamed.bytes_uploaded,
             bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
@@ -1900,6 +2032,7 @@ impl Renderer {
             shadow.points += counted.points;
             shadow.planes += counted.planes;
             shadow.billboards += counted.billboards;
+            shadow.ellipsoids += counted.ellipsoids;
         }
         stats.shadow = shadow;
         self.main = main;
@@ -1941,6 +2074,7 @@ impl Renderer {
         view.pruned.clear();
         view.billboard_draws.clear();
         view.plane_draws.clear();
+        view.ellipsoid_draws.clear();
         view.spt_instances.clear();
         view.spt_map.clear();
         if let Some(pruning) = &modes.pruning {
@@ -1949,15 +2083,19 @@ impl Renderer {
         if let Some(baseline) = modes.baseline {
             counts.instances_baseline = self.select_baseline(view, baseline, camera);
         }
-        if modes.impostors {
-            counts.instances_impostors = self.select_impostors(view, camera);
+        if modes.ellipsoids {
+            counts.instances_ellipsoids = self.select_ellipsoids(view, camera, lod_settings, modes.impostors);
         }
-        view.spt_remapped = modes.pruning.is_some() || modes.impostors || modes.baseline.is_some();
+        if modes.impostors {
+            counts.instances_impostors = self.select_impostors(view, camera, modes.ellipsoids);
+        }
+        view.spt_remapped = modes.pruning.is_some() || modes.impostors || modes.ellipsoids || modes.baseline.is_some();
         let spt_instances = if view.spt_remapped { &view.spt_instances } else { &self.instances };
         let selected = select_frame(&self.lods, spt_instances, camera, lod_settings, &mut view.selection);
         counts.instances_visible = selected.instances_visible
             + counts.instances_pruned
             + counts.instances_impostors
+            + counts.instances_ellipsoids
             + counts.instances_baseline;
         counts
     }
@@ -2025,6 +2163,7 @@ impl Renderer {
                     DrawSource::Points | DrawSource::Roots => stats.points += u64::from(draw.count),
                     DrawSource::Planes => stats.planes += u64::from(draw.count),
                     DrawSource::Billboards => stats.billboards += u64::from(draw.count),
+                    DrawSource::Ellipsoids => stats.ellipsoids += u64::from(draw.count),
                 }
                 let transform = self.instances[draw.instance as usize].transform;
                 let info = DrawInfo {
@@ -2075,6 +2214,23 @@ impl Renderer {
             };
             let vertices = (6 * range.first, 6 * range.count);
             record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, 3, vertices, 1.0);
+        }
+        // Ellipsoids: a prefix of one cell's ellipsoids, the level chosen in the shader by `τ`.
+        for draw in &view.ellipsoid_draws {
+            let range = draw.range;
+            stats.ellipsoids += u64::from(range.count);
+            let record = RecordedDraw {
+                instance: draw.instance,
+                model: ModelId(draw.model),
+                cell: range.cell,
+                source: DrawSource::Ellipsoids,
+                count: range.count,
+                tau_points: range.tau,
+                tau_triangles: range.tau,
+                clamped: false,
+            };
+            let vertices = (6 * range.first, 6 * range.count);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, 5, vertices, 1.0);
         }
         // Baseline billboards: every quad of the chosen kind.
         for &(instance, model, first, count) in &view.billboard_draws {
@@ -2277,6 +2433,7 @@ impl Renderer {
             DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::LodLevel => (BUCKETS * m + 2, 0, 3),
             DrawSource::Planes => (BUCKETS * m + 3, 0, 6),
             DrawSource::Billboards => (BUCKETS * m + 4, 0, 6),
+            DrawSource::Ellipsoids => (BUCKETS * m + 5, 0, 6),
         }
     }
 
@@ -2322,6 +2479,7 @@ impl Renderer {
             &self.pruned_pipeline,
             &self.plane_pipeline,
             &self.billboard_pipeline,
+            &self.ellipsoid_pipeline,
         ];
         self.draw_view(pass, &self.main, pipelines);
     }
@@ -2359,6 +2517,7 @@ impl Renderer {
             &self.shadow_pipelines[2],
             &self.shadow_pipelines[3],
             &self.shadow_pipelines[4],
+            &self.shadow_pipelines[5],
         ];
         for (k, view) in self.shadow_views.iter().enumerate().take(self.cascades.len()) {
             let Some(layer) = self.shadow_maps.layers.get(k) else { continue };

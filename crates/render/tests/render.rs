@@ -140,8 +140,9 @@ fn check_draws(renderer: &Renderer, container: &Container) {
                 | DrawSource::Bark
                 | DrawSource::Planes
                 | DrawSource::LodLevel
-                | DrawSource::Billboards => {
-                    panic!("{draw:?} without pruning, impostors or baselines")
+                | DrawSource::Billboards
+                | DrawSource::Ellipsoids => {
+                    panic!("{draw:?} without pruning, impostors, ellipsoids or baselines")
                 }
             };
             for leaf in drawn {
