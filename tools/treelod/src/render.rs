@@ -46,7 +46,7 @@ pub struct Args {
     #[arg(long)]
     pub compare: bool,
     /// Colour by grid cell (`cells`) or by kind (`kinds`: triangles red, points blue, pruned
-    /// leaves green, impostor planes yellow).
+    /// leaves green, impostor planes yellow, ellipsoids cyan).
     #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds"])]
     pub debug: Option<String>,
     /// MSAA samples, 1 or 4; with 4, alpha-tested leaves cover samples in proportion to their
@@ -75,6 +75,8 @@ pub struct Args {
     pub impostors: bool,
     #[command(flatten)]
     pub impostor: ImpostorArgs,
+    #[command(flatten)]
+    pub ellipsoid: EllipsoidArgs,
     /// Draw trees whose containers have baselines (build with `--baselines`) with one of them
     /// instead: `lod-chain` (meshoptimizer's levels, the coarsest whose error projects below
     /// `--s-min` pixels), `billboard` (one camera-facing quad) or `crossed` (three fixed quads).
@@ -109,6 +111,53 @@ impl ImpostorArgs {
     pub fn apply(&self, settings: &mut Settings) {
         settings.impostor_morph = !self.no_impostor_morph;
         settings.impostor_bark = if self.impostor_bark == "all" { ImpostorBark::All } else { ImpostorBark::Chain };
+    }
+}
+
+/// Clasen's ellipsoids: options shared by `render` and `view`.
+#[derive(Debug, clap::Args)]
+pub struct EllipsoidArgs {
+    /// Draw the leaves of trees whose containers have ellipsoids (Clasen 2011) as those
+    /// ellipsoids, ray-cast per pixel with their noise, per cell the level whose interval holds the
+    /// metres per pixel at the cell's distance (divided by `--ellipsoid-quality`), and their bark
+    /// as triangles; other trees as usual. Takes precedence over `--impostors` (a tree with both
+    /// is drawn with ellipsoids) and `--prune`; `--baseline` takes precedence over it.
+    #[arg(long)]
+    pub ellipsoids: bool,
+    /// With ellipsoids: the quality factor `q`; the level drawn is the one for pixels `q` times
+    /// smaller (2: finer, 0.5: coarser).
+    #[arg(long, value_name = "Q", default_value_t = 1.0, value_parser = parse_quality)]
+    pub ellipsoid_quality: f32,
+}
+
+impl EllipsoidArgs {
+    /// Sets the renderer's ellipsoid options from these.
+    pub fn apply(&self, settings: &mut Settings) {
+        settings.ellipsoids = self.ellipsoids;
+        settings.ellipsoid_quality = self.ellipsoid_quality;
+    }
+
+    /// With `--ellipsoids`, warns about each model of `models` that has no ellipsoids (its trees
+    /// are drawn as without the option).
+    pub fn warn_without(&self, models: &[PathBuf]) {
+        if !self.ellipsoids {
+            return;
+        }
+        for path in models {
+            if let Ok(container) = treelod_format::Container::open(path)
+                && container.ellipsoids().is_empty()
+            {
+                report::print_warning(path, "holds no ellipsoids; its trees are drawn without them");
+            }
+        }
+    }
+}
+
+/// A quality factor: finite and > 0.
+pub fn parse_quality(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("expected a quality factor, a finite number > 0, got {s:?}")),
     }
 }
 
@@ -376,10 +425,12 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     args.shadow.apply(&mut settings);
     settings.impostors = args.impostors;
     args.impostor.apply(&mut settings);
+    args.ellipsoid.apply(&mut settings);
     settings.baseline = parse_baseline(args.baseline.as_deref());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
         scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
+    args.ellipsoid.warn_without(&scene.models);
     // With shadows, a ground under the trees receives them.
     let ground = renderer.settings().shadows.is_some().then(|| Ground::under_instances(&gpu.device, &renderer));
     if args.gpu_selection {
@@ -407,7 +458,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 })
         };
         let s = renderer.settings();
-        if s.pruning.is_some() && !s.impostors && s.baseline.is_none() && !s.full_mesh {
+        if s.pruning.is_some() && !s.impostors && !s.ellipsoids && s.baseline.is_none() && !s.full_mesh {
             // The occlusion factor of pruned trees is measured on the frame before.
             frame(renderer)?;
         }
@@ -427,13 +478,20 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             ", {} tree(s) drawn with the {baseline} baseline ({} billboard quads)",
             stats.instances_baseline, stats.billboards
         ));
-    } else if renderer.settings().pruning.is_some() && !renderer.settings().impostors {
+    } else if renderer.settings().pruning.is_some() && !renderer.settings().impostors && !renderer.settings().ellipsoids
+    {
         line.push_str(&format!(", {} pruned tree(s) drawing {} leaves", stats.instances_pruned, stats.leaves_pruned));
     }
     if renderer.settings().impostors && args.baseline.is_none() {
         line.push_str(&format!(
             ", {} tree(s) with impostors submitting {} planes",
             stats.instances_impostors, stats.planes
+        ));
+    }
+    if renderer.settings().ellipsoids && args.baseline.is_none() {
+        line.push_str(&format!(
+            ", {} tree(s) with ellipsoids submitting {} ellipsoids",
+            stats.instances_ellipsoids, stats.ellipsoids
         ));
     }
     if renderer.settings().shadows.is_some() {
@@ -465,14 +523,14 @@ pub fn parse_distance(s: &str) -> Result<f32, String> {
     }
 }
 
-/// Triangles, points, impostor planes and billboard quads the shadow pass submitted.
+/// Triangles, points, impostor planes, billboard quads and ellipsoids the shadow pass submitted.
 pub fn shadow_primitives(shadow: &ShadowStats) -> u64 {
-    shadow.triangles + shadow.points + shadow.planes + shadow.billboards
+    shadow.triangles + shadow.points + shadow.planes + shadow.billboards + shadow.ellipsoids
 }
 
-/// Triangles, points, impostor planes and billboard quads the camera's pass submitted.
+/// Triangles, points, impostor planes, billboard quads and ellipsoids the camera's pass submitted.
 pub fn main_primitives(stats: &FrameStats) -> u64 {
-    stats.triangles + stats.points + stats.planes + stats.billboards
+    stats.triangles + stats.points + stats.planes + stats.billboards + stats.ellipsoids
 }
 
 /// What the shadow pass of a frame drew, and its primitives over the main pass's.
@@ -485,8 +543,8 @@ pub fn shadow_summary(stats: &FrameStats) -> String {
         format!("({:.2}× the main pass's primitives)", shadow_primitives(shadow) as f64 / main as f64)
     };
     format!(
-        "shadow pass: {} cascade(s), {} triangles, {} points, {} planes, {} billboards {ratio}",
-        shadow.cascades, shadow.triangles, shadow.points, shadow.planes, shadow.billboards
+        "shadow pass: {} cascade(s), {} triangles, {} points, {} planes, {} billboards, {} ellipsoids {ratio}",
+        shadow.cascades, shadow.triangles, shadow.points, shadow.planes, shadow.billboards, shadow.ellipsoids
     )
 }
 
@@ -668,7 +726,8 @@ mod tests {
         };
         assert_eq!(
             shadow_summary(&stats),
-            "shadow pass: 3 cascade(s), 300 triangles, 400 points, 100 planes, 0 billboards (2.00× the main pass's primitives)"
+            "shadow pass: 3 cascade(s), 300 triangles, 400 points, 100 planes, 0 billboards, 0 ellipsoids (2.00× the main \
+             pass's primitives)"
         );
         let nothing = FrameStats { shadow: stats.shadow, ..FrameStats::default() };
         assert!(shadow_summary(&nothing).ends_with("(the main pass draws nothing)"));

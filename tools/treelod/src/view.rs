@@ -20,8 +20,8 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::render::{
-    BASELINES, ImpostorArgs, LightArgs, PruneArgs, ShadowArgs, baseline_name, frame_camera, parse_size, parse_vec3,
-    scene_failed, shadow_primitives, shadow_summary, write_png,
+    BASELINES, EllipsoidArgs, ImpostorArgs, LightArgs, PruneArgs, ShadowArgs, baseline_name, frame_camera, parse_size,
+    parse_vec3, scene_failed, shadow_primitives, shadow_summary, write_png,
 };
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
@@ -108,6 +108,10 @@ pub struct Args {
     /// Start with impostor planes on (key `I`) for trees whose containers have them.
     #[arg(long)]
     pub impostors: bool,
+    // `--ellipsoids` starts with Clasen's ellipsoids on (key `C`) for trees whose containers
+    // have them.
+    #[command(flatten)]
+    pub ellipsoid: EllipsoidArgs,
     /// Start with a baseline on (key `B` cycles none, lod-chain, billboard, crossed) for trees
     /// whose containers have baselines (build with `--baselines`).
     #[arg(long, value_name = "BASELINE", value_parser = ["lod-chain", "billboard", "crossed"])]
@@ -126,6 +130,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     for model in &scene.models {
         report::open(model)?;
     }
+    args.ellipsoid.warn_without(&scene.models);
     if let Some(path) = args.screenshot.as_deref().filter(|p| p.is_dir()) {
         report::message_error(path, "is a directory; name the file to write");
         return Err(Failed { class: ErrorClass::Io });
@@ -353,6 +358,7 @@ impl Viewer {
         args.light.apply(&mut settings);
         args.shadow.apply(&mut settings);
         args.impostor.apply(&mut settings);
+        args.ellipsoid.apply(&mut settings);
         let last_shadows = settings.shadows.unwrap_or_default();
         let mut renderer = Renderer::new(&device, formats, settings);
         let bounds = scene::add_to_renderer(scene, &device, &queue, &mut renderer).map_err(|e| scene_failed(&e))?;
@@ -440,6 +446,7 @@ impl Viewer {
             KeyCode::KeyF => settings.full_mesh = !settings.full_mesh,
             KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
             KeyCode::KeyI => settings.impostors = !settings.impostors,
+            KeyCode::KeyC => settings.ellipsoids = !settings.ellipsoids,
             KeyCode::KeyM => settings.impostor_morph = !settings.impostor_morph,
             KeyCode::KeyH => toggle_shadows(&mut settings.shadows, &mut self.last_shadows),
             KeyCode::KeyY => settings.ambient_occlusion = !settings.ambient_occlusion,
@@ -592,6 +599,17 @@ impl Viewer {
                 " | baseline {name}: {} trees, {} triangles, {} quads",
                 self.stats.instances_baseline, self.stats.triangles, self.stats.billboards
             ));
+        } else if settings.ellipsoids && !settings.full_mesh {
+            mode.push_str(&format!(
+                " | ellipsoids (quality {}): {} trees, {} ellipsoids",
+                settings.ellipsoid_quality, self.stats.instances_ellipsoids, self.stats.ellipsoids
+            ));
+            if settings.impostors {
+                mode.push_str(&format!(
+                    ", impostors: {} trees, {} planes",
+                    self.stats.instances_impostors, self.stats.planes
+                ));
+            }
         } else if settings.impostors && !settings.full_mesh {
             mode.push_str(&format!(
                 " | impostors: {} trees, {} planes",

@@ -232,16 +232,10 @@ pub struct OptionalData {
 #[must_use]
 pub fn availability(technique: TechniqueName, data: OptionalData, scene: bool) -> Availability {
     let holder = if scene { "no model of the scene holds" } else { "this container holds no" };
-    let absent_or = |count: u64, what: &str, renderer: &str| {
-        if count == 0 {
-            Availability::Absent(format!("{holder} {what}"))
-        } else {
-            Availability::NotImplemented(format!("the renderer does not draw {renderer}"))
-        }
-    };
     match technique {
         TechniqueName::Full | TechniqueName::Full1x | TechniqueName::Spt => Availability::Measured,
-        TechniqueName::Ellipsoids => absent_or(data.ellipsoids, "ellipsoids or lines", "ellipsoids and lines"),
+        TechniqueName::Ellipsoids if data.ellipsoids > 0 => Availability::Measured,
+        TechniqueName::Ellipsoids => Availability::Absent(format!("{holder} ellipsoids or lines")),
         TechniqueName::Impostors if data.planes > 0 => Availability::Measured,
         TechniqueName::Impostors => Availability::Absent(format!("{holder} impostor planes")),
         TechniqueName::PruneOpt | TechniqueName::PruneCook if data.prune_leaves > 0 => Availability::Measured,
@@ -488,6 +482,9 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 // Impostors: the leaves of every tree with planes as planes, its bark as triangles.
                 settings.impostors = *name == TechniqueName::Impostors;
                 args.impostor.apply(&mut settings);
+                // Ellipsoids: the leaves of every tree with ellipsoids as ellipsoids, its bark as
+                // triangles (lines are not drawn yet).
+                settings.ellipsoids = *name == TechniqueName::Ellipsoids;
                 // Baselines: every tree with the baseline drawn with it.
                 settings.baseline = match name {
                     TechniqueName::LodChain => Some(Baseline::LodChain),
@@ -725,6 +722,7 @@ mod tests {
         );
         let some = OptionalData { ellipsoids: 3, planes: 1, prune_leaves: 2, lod_levels: 5, billboards: 4 };
         for t in [
+            TechniqueName::Ellipsoids,
             TechniqueName::PruneOpt,
             TechniqueName::PruneCook,
             TechniqueName::Impostors,
@@ -735,13 +733,8 @@ mod tests {
             assert_eq!(availability(t, some, false), Availability::Measured);
             assert_eq!(availability(t, none, false).status(), "absent");
         }
-        for t in [TechniqueName::Ellipsoids, TechniqueName::Policy] {
-            let a = availability(t, some, false);
-            assert_eq!(a.status(), "not implemented yet", "{t:?}");
-            assert!(
-                a.reason().is_some_and(|r| r.starts_with("the renderer does not draw") || t == TechniqueName::Policy)
-            );
-        }
+        let a = availability(TechniqueName::Policy, some, false);
+        assert_eq!(a.status(), "not implemented yet");
     }
 
     #[test]
