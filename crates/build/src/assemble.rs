@@ -18,6 +18,7 @@ use treelod_format::{
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
 use crate::billboard::{Billboards, build_billboards};
 use crate::classify::{ClassifyOptions, classify};
+use crate::ellipsoid::{EllipsoidConfig, EllipsoidMesh, Ellipsoids, build_ellipsoids};
 use crate::error::BuildError;
 use crate::gilet::{CellPoint, GiletConfig, LeafPoint, build_cell};
 use crate::impostor::{Atlas, ImpostorConfig, ImpostorMesh, Impostors, LeafTriangle, Surface, build_impostors};
@@ -50,6 +51,11 @@ pub struct BuildConfig {
     /// their atlas is several times larger than the rest of a container (see
     /// [`crate::impostor`]).
     pub impostors: Option<ImpostorConfig>,
+    /// Leaf ellipsoids (Clasen et al. 2011, spec §6.8): per grid cell, one ellipsoid per leaf and
+    /// nested levels of EM clusters above them, calibrated against the leaves' coverage (see
+    /// [`crate::ellipsoid`]). Default `None`: opt-in, the clustering and calibration take a few
+    /// seconds per 100k leaf triangles.
+    pub ellipsoids: Option<EllipsoidConfig>,
     /// Baselines (spec §6.12, §6.13) for comparisons: each tree's discrete LoD chain from
     /// meshoptimizer's simplifiers ([`crate::lod_chain`]), and, when [`Self::impostors`] is set
     /// too, facing and crossed billboards each baked at the texel budget of the tree's impostor
@@ -94,6 +100,9 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
     }
     if let Some(impostors) = &config.impostors {
         settings.extend(impostors.settings());
+    }
+    if let Some(ellipsoids) = &config.ellipsoids {
+        settings.extend(ellipsoids.settings());
     }
     if let Some(ao) = &config.ao {
         settings.extend(ao.settings());
@@ -160,6 +169,13 @@ pub struct BuildStats {
     pub billboards: u64,
     /// The billboard atlas, texels across and down (`[0, 0]` without).
     pub billboard_atlas: [u32; 2],
+    /// Leaf ellipsoids written (0 without).
+    pub ellipsoids: u64,
+    /// Leaf ellipsoids written per level of the cells' hierarchies, level 0 (the leaves) first,
+    /// summed over the cells (empty without).
+    pub ellipsoids_per_level: Vec<u32>,
+    /// Wall-clock time of the ellipsoid stage, milliseconds (0 without).
+    pub ellipsoid_millis: u64,
 }
 
 /// What a build returns.
@@ -257,6 +273,9 @@ fn gather(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<Gath
     }
     if let Some(impostors) = &config.impostors {
         impostors.validate()?;
+    }
+    if let Some(ellipsoids) = &config.ellipsoids {
+        ellipsoids.validate()?;
     }
     let mut stats = BuildStats::default();
     let mut warnings: Vec<String> = Vec::new();
@@ -536,6 +555,27 @@ fn assemble(
         None => None,
     };
 
+    // Stage: leaf ellipsoids (Clasen 2011), per cell; before the per-cell stage, which overwrites
+    // the triangles' parts (the ellipsoids' colours need them).
+    let ellipsoids: Option<Ellipsoids> = match &config.ellipsoids {
+        Some(ellipsoid_config) => {
+            let start = std::time::Instant::now();
+            let built = block_ellipsoids(
+                &material_keys,
+                &tris,
+                &vertices,
+                &parts,
+                trees,
+                |p| block_grid.cell_of(p),
+                cell_count,
+                ellipsoid_config,
+            )?;
+            stats.ellipsoid_millis = u64::try_from(start.elapsed().as_millis()).unwrap_or(u64::MAX);
+            Some(built)
+        }
+        None => None,
+    };
+
     // Stage: per cell, the leaf points, the point hierarchy as point records, and the triangles in
     // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
     // built in parallel a few at a time (results kept in cell order), and each batch is copied out
@@ -666,6 +706,26 @@ fn assemble(
         prune_scale = pruned.scale;
         prune_lambda = pruned.lambda;
     }
+    // Stage: the ellipsoid records of each grid cell, after the pruned leaves (which reset the
+    // bounds of cells without triangles); cell bounds grow to hold them.
+    let mut ellipsoid_records = Vec::new();
+    if let Some(built) = ellipsoids {
+        stats.ellipsoids_per_level = built.per_level();
+        for (cell, cell_ellipsoids) in cells.iter_mut().zip(built.cells) {
+            let first = ellipsoid_records.len();
+            if let Some((emin, emax)) = cell_ellipsoids.bounds {
+                let (bmin, bmax) = if cell.is_empty() {
+                    (emin, emax)
+                } else {
+                    (emin.min(Vec3::from_array(cell.bounds_min)), emax.max(Vec3::from_array(cell.bounds_max)))
+                };
+                cell.bounds_min = bmin.to_array();
+                cell.bounds_max = bmax.to_array();
+            }
+            ellipsoid_records.extend(cell_ellipsoids.records);
+            cell.ellipsoids = range(first, ellipsoid_records.len());
+        }
+    }
     // Stage: impostors (Garcia 2005): nested planes per tree and their atlas, in the block cell.
     let impostors = match &config.impostors {
         Some(impostor_config) => {
@@ -718,6 +778,7 @@ fn assemble(
         bounds_max: planes_max.to_array(),
         triangles: range(triangles.len(), triangles.len()),
         points: range(points.len(), points.len()),
+        ellipsoids: range(ellipsoid_records.len(), ellipsoid_records.len()),
         planes: range(0, plane_count),
         prune_leaves: range(prune_leaves.len(), prune_leaves.len()),
         ..CellRecord::default()
@@ -842,6 +903,7 @@ fn assemble(
     stats.lod_levels = lod_levels.len() as u64;
     stats.lod_triangles = lod_triangles.len() as u64;
     stats.billboards = billboard_records.len() as u64;
+    stats.ellipsoids = ellipsoid_records.len() as u64;
     let data = ContainerData {
         metadata: Metadata {
             generator: generator.to_owned(),
@@ -864,6 +926,7 @@ fn assemble(
         vertices,
         triangles,
         points,
+        ellipsoids: ellipsoid_records,
         materials,
         images,
         image_data,
@@ -911,6 +974,28 @@ fn block_impostors(
     let occlusion: Vec<f32> = vertex_ao
         .map_or_else(Vec::new, |ao| tris.iter().filter(is_leaf).map(|t| triangle_occlusion(ao, t.v)).collect());
     build_impostors(&ImpostorMesh { vertices, triangles: &leaves, surfaces: &surfaces, occlusion: &occlusion }, config)
+}
+
+/// The leaf ellipsoids of a block's leaf-class triangles ([`crate::ellipsoid`]): each triangle
+/// with its material's alpha test and its colour as Gilet's leaf points take it (texture × factor
+/// × vertex colour over the texels that pass). Reads the gathered triangles (global vertex ids,
+/// parts).
+#[expect(clippy::too_many_arguments, reason = "the stage reads the build's arrays")]
+fn block_ellipsoids(
+    material_keys: &[(usize, usize, Class)],
+    tris: &[Tri],
+    vertices: &[VertexRecord],
+    parts: &[PartRef],
+    trees: &[Placed<'_>],
+    cell_of: impl Fn(Vec3) -> usize + Sync,
+    cell_count: usize,
+    config: &EllipsoidConfig,
+) -> Result<Ellipsoids, BuildError> {
+    let input = PruneInput::new(material_keys, tris, trees);
+    let colours: Vec<Vec4> =
+        input.leaf_ids.par_iter().map(|&i| leaf_point(&tris[i as usize], vertices, parts, trees).color).collect();
+    let mesh = EllipsoidMesh { vertices, triangles: &input.leaves, alphas: &input.alphas, colours: &colours };
+    build_ellipsoids(&mesh, cell_of, cell_count, config)
 }
 
 /// The ambient occlusion of the written vertices ([`crate::ambient`]), and of each point, encoded:

@@ -10,6 +10,7 @@ pub mod assemble;
 pub mod billboard;
 pub mod classify;
 pub mod demo;
+pub mod ellipsoid;
 mod error;
 pub mod gilet;
 pub mod import;
@@ -28,6 +29,7 @@ pub use assemble::{
     BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, build_scenes, prune_report, recorded_settings,
 };
 pub use demo::{DemoTreeConfig, cards_on_planes, demo_tree, leaf_material};
+pub use ellipsoid::{Clustering, EllipsoidConfig, Ellipsoids};
 pub use error::BuildError;
 pub use import::{content_hash, import_gltf, import_gltf_bytes, scene_name};
 pub use impostor::{ImpostorConfig, Impostors, Texturing};

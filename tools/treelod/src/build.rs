@@ -79,6 +79,27 @@ pub struct BuildOptions {
     /// square root), in (0, 64].
     #[arg(long, value_name = "N", default_value_t = 2.0, value_parser = parse_slots_per_leaf, requires = "impostors")]
     pub impostor_slots_per_leaf: f32,
+    /// Leaf ellipsoids (Clasen et al. 2011, spec §6.8): per grid cell one ellipsoid per leaf (PCA
+    /// of its surface) and nested levels of EM clusters of them, each level's size calibrated
+    /// against the leaves' coverage and drawn while its mean ellipsoid is about
+    /// --ellipsoid-pixels across.
+    #[arg(long)]
+    pub ellipsoids: bool,
+    /// With --ellipsoids: mean ellipsoid diameter on screen, pixels, at which the next coarser
+    /// level takes over (Clasen: 5), in (0, 1000].
+    #[arg(long, value_name = "PIXELS", default_value_t = 5.0, value_parser = parse_ellipsoid_pixels, requires = "ellipsoids")]
+    pub ellipsoid_pixels: f32,
+    /// With --ellipsoids: clusterings tried per level, the one of least image error kept
+    /// (Clasen: 4).
+    #[arg(long, value_name = "N", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64), requires = "ellipsoids")]
+    pub ellipsoid_tries: u32,
+    /// With --ellipsoids: how levels are clustered: `em` (Clasen's Gaussian mixture) or
+    /// `kmeans` (hard, spherical clusters; the baseline of the paper's comparison).
+    #[arg(long, value_enum, value_name = "HOW", default_value_t = EllipsoidClustering::Em, requires = "ellipsoids")]
+    pub ellipsoid_clustering: EllipsoidClustering,
+    /// With --ellipsoids: seed of the clusterings' random starts.
+    #[arg(long, value_name = "N", default_value_t = 1, requires = "ellipsoids")]
+    pub ellipsoid_seed: u64,
     /// Baselines to compare treelod with (spec §6.12, §6.13; `treelod eval --technique
     /// lod-chain,billboard,crossed`): each tree's discrete LoD chain from meshoptimizer's
     /// simplifiers (the regular one for bark, with the sloppy one as fallback for foliage, as
@@ -129,6 +150,16 @@ impl BuildOptions {
                 },
                 slots_per_leaf: self.impostor_slots_per_leaf,
                 ..treelod_build::ImpostorConfig::default()
+            }),
+            ellipsoids: self.ellipsoids.then(|| treelod_build::EllipsoidConfig {
+                pixels: self.ellipsoid_pixels,
+                tries: self.ellipsoid_tries,
+                seed: self.ellipsoid_seed,
+                clustering: match self.ellipsoid_clustering {
+                    EllipsoidClustering::Em => treelod_build::Clustering::Em,
+                    EllipsoidClustering::Kmeans => treelod_build::Clustering::KMeans,
+                },
+                ..treelod_build::EllipsoidConfig::default()
             }),
             ao: (self.ao_rays > 0)
                 .then(|| treelod_build::AoConfig { rays: self.ao_rays, ..treelod_build::AoConfig::default() }),
@@ -188,6 +219,24 @@ pub enum ImpostorTexturing {
     Direct,
     /// A leaf-slot image and the leaves' own textures (spec §6.10.1).
     Indirect,
+}
+
+/// `--ellipsoid-clustering`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum EllipsoidClustering {
+    /// EM on a Gaussian mixture with full covariances (Clasen et al. 2011).
+    Em,
+    /// Lloyd's k-means: hard, spherical clusters.
+    Kmeans,
+}
+
+/// `--ellipsoid-pixels`: a number in (0, 1000], the range the build accepts.
+fn parse_ellipsoid_pixels(s: &str) -> Result<f32, String> {
+    s.trim()
+        .parse::<f32>()
+        .ok()
+        .filter(|n| *n > 0.0 && *n <= 1000.0)
+        .ok_or_else(|| format!("{s:?} is not a number in (0, 1000]"))
 }
 
 /// `--impostor-levels`: plane counts per tree, finest first.
@@ -651,6 +700,7 @@ impl Summary<'_> {
             if self.built.verified { "ok" } else { "skipped" },
         ) + &self.prune_text()
             + &self.impostor_text()
+            + &self.ellipsoid_text()
             + &self.baseline_text()
     }
 
@@ -663,6 +713,21 @@ impl Summary<'_> {
         format!(
             "  baselines     LoD chain {} levels, {} triangles; {} billboard quads, atlas {}x{}\n",
             s.lod_levels, s.lod_triangles, s.billboards, s.billboard_atlas[0], s.billboard_atlas[1]
+        )
+    }
+
+    /// The ellipsoid line of the text summary (none without ellipsoids).
+    fn ellipsoid_text(&self) -> String {
+        let s = &self.built.stats;
+        if s.ellipsoids == 0 {
+            return String::new();
+        }
+        let levels: Vec<String> = s.ellipsoids_per_level.iter().map(u32::to_string).collect();
+        format!(
+            "  ellipsoids    {} (per level {}), built in {:.2} s\n",
+            s.ellipsoids,
+            levels.join(", "),
+            s.ellipsoid_millis as f64 / 1000.0
         )
     }
 
@@ -726,6 +791,9 @@ impl Summary<'_> {
             "prune_lambda": b.prune_curves.1.iter().map(|c| [c.x, c.y]).collect::<Vec<_>>(),
             "planes": s.planes,
             "planes_per_level": s.planes_per_level,
+            "ellipsoids": s.ellipsoids,
+            "ellipsoids_per_level": s.ellipsoids_per_level,
+            "ellipsoid_seconds": s.ellipsoid_millis as f64 / 1000.0,
             "atlas": s.atlas,
             "lod_levels": s.lod_levels,
             "lod_triangles": s.lod_triangles,

@@ -1,0 +1,1196 @@
+//! Leaf ellipsoids (Clasen, Paar and Prohaska 2011 §3.1, §4, §6; spec §6.8, §10): per grid cell,
+//! one ellipsoid per leaf and nested levels of ellipsoid clusters above them, each level drawn in
+//! one interval of `τ`.
+//!
+//! - **Leaves** are [`crate::prune::find_leaves`]' connected sets of leaf-class triangles of one
+//!   part (as impostors and pruning take them); a leaf belongs to the grid cell holding its centre
+//!   (the area-weighted centroid), as pruned leaves do.
+//! - **Leaf ellipsoids**: [`EllipsoidConfig::samples`] deterministic stratified samples over the
+//!   leaf's surface (sample `k` at `(k + ½)/N` of the cumulative area picks the triangle, the
+//!   remainder and the golden-ratio sequence place it uniformly in it); samples that fail the
+//!   material's alpha test ([`AlphaMask`]) are dropped (all kept if none passes), so a leaf card
+//!   becomes the ellipsoid of its opaque leaves. Their mean and covariance give the centre and,
+//!   by PCA ([`symmetric_eigen`]), the axes; the semi-axes are `2σ` (a uniform disc or ellipse of
+//!   semi-axis `a` has `σ = a/2` along it), and the thinnest is at least [`MIN_THICKNESS`] (5 %)
+//!   of the largest, so a flat leaf has some volume. A leaf whose samples coincide gets the disc of
+//!   its area. The colour is the mean over the leaf's triangles of the texture × factor × vertex
+//!   colour over the texels that pass the alpha test ([`crate::texture::integrate`], as Gilet's
+//!   points), weighted by each triangle's opaque area; its alpha is 1.
+//! - **Image error** ([`crate::raster::multiscale_error`], Clasen §4): coverage of the cell's
+//!   leaves (alpha-tested triangles) and of a set of ellipsoids ([`crate::raster::fill_ellipse`])
+//!   in [`EllipsoidConfig::views`] orthographic views of [`EllipsoidConfig::resolution`]² pixels
+//!   fitted to the cell's leaves ([`crate::raster::view_directions`]), the mean over bands and
+//!   views of the multi-scale RMSE.
+//! - **Calibration**: every level's semi-axes are scaled by the factor of [`SCALE_FACTORS`]
+//!   (0.5, 0.6, …, 1.3) with the least image error (ties: the smaller), one factor per level and
+//!   cell (Clasen: "we compute the image error for multiple scaling factors and choose the
+//!   minimum").
+//! - **Levels** (Clasen's Algorithm 1, made to nest): level 0 is the leaf ellipsoids; each next
+//!   level clusters the previous level's `n` ellipsoids into `⌈n/4⌉` clusters, until one is left.
+//!   [`Clustering::Em`] (the paper's method): EM on a Gaussian mixture over the ellipsoids'
+//!   centres, each weighted by its leaves' area, with full covariances, started from random
+//!   centres in the bounding box of the centres ([`SplitMix64`], seeded from
+//!   [`EllipsoidConfig::seed`], the cell, the level and the try). Each element is a Gaussian
+//!   itself (its leaves' surface), so the M-step adds its own covariance to the scatter of the
+//!   centres, as when reducing a mixture (Vasconcelos and Lippman 1999), and the E-step its
+//!   expected log-density `log N(μ_i | m_j, Σ_j) − ½ tr(Σ_j⁻¹ C_i)`: clusters of four flat leaves
+//!   do not collapse to singular covariances. A regulariser of `(10⁻⁴·D)²` (D the diagonal of the
+//!   centres' box) is added to each covariance. To stay `O(n)`, each element's responsibilities
+//!   are taken over its [`CANDIDATES`] nearest cluster centres (a uniform grid of the centres);
+//!   a cluster no element considers moves to a random element during the first half of the
+//!   iterations. Iterations stop when the log-likelihood gains less than `10⁻⁴` per unit of
+//!   weight, or after [`EllipsoidConfig::iterations`]. [`Clustering::KMeans`] is the baseline
+//!   of the paper's comparison: Lloyd's k-means (hard, spherical) from the same starts.
+//! - **Membership and shape**: the hard membership (argmax of the fuzzy weight, ties: the lower
+//!   cluster) says which ellipsoids of the previous level a cluster contains, so levels nest and
+//!   every cluster's leaves are a contiguous run. The shape comes from the fuzzy weights (the
+//!   responsibilities renormalised over the clusters that keep members): the weighted mean and
+//!   the weighted covariance of the members' Gaussians (their centres' scatter plus their own
+//!   covariances, i.e. the second moments of the leaves' surface samples, not the centres alone),
+//!   turned into an ellipsoid as a leaf is. Clusters whose surface area is under 1 % of the
+//!   level's largest are dropped (Clasen §3.1): their elements' fuzzy weights are renormalised
+//!   over the kept clusters and an element whose candidates are all dropped goes to the kept
+//!   cluster with the nearest centre; the shapes are then recomputed.
+//! - **Tries**: each level is clustered [`EllipsoidConfig::tries`] times from different starts;
+//!   each result is calibrated and the one of least image error against the rendered leaves is
+//!   kept (ties: the first).
+//! - **Noise**: `noise_mip = 0.5·(1 + log2 Σ_i w_ij)` with `Σ_i w_ij` the cluster's fuzzy count of
+//!   leaves (0.5 for a leaf); `alpha_threshold` is [`ALPHA_THRESHOLD`] (0.5; not calibrated:
+//!   the calibration measures solid ellipses).
+//! - **Intervals** (Clasen §6): a level's error is `e_k = d̄_k / pixels`, `d̄_k` the mean over its
+//!   ellipsoids of the diameter of the sphere of equal surface area (`2·sqrt(S/4π)`, also the
+//!   diameter of the disc of the mean projected area `S/4` over all directions), metres, and
+//!   `pixels` [`EllipsoidConfig::pixels`] (5): level `k` is drawn for `τ ∈ [e_{k−1}, e_k)` (`τ`
+//!   metres per pixel), level 0 from 0 and the coarsest to `+∞`. A level whose error is not above
+//!   the last written level's is skipped (not written; the next level nests over it all the
+//!   same), so the intervals stay ordered. [`crate::spt::flatten`] turns the nesting into SPT
+//!   order with these intervals and numbers each cell's leaves in hierarchy order.
+//!
+//! Cells are built in parallel and collected in order, tries and images in parallel inside a
+//! cell; every sum runs in a fixed order, so the output does not depend on the thread count.
+
+use glam::{DMat3, DQuat, DVec3, Vec2, Vec3, Vec4};
+use rayon::prelude::*;
+use treelod_format::{EllipsoidRecord, Setting, VertexRecord, pack};
+
+use crate::error::BuildError;
+use crate::impostor::symmetric_eigen;
+use crate::prune::{MeshTriangle, PruneMesh, find_leaves};
+use crate::raster::{
+    AlphaMask, Mask, RasterTriangle, View, bounding_sphere, fill_ellipse, multiscale_error, project_ellipsoid,
+    rasterize, view_directions,
+};
+use crate::rng::SplitMix64;
+use crate::spt::flatten;
+use crate::texture::linear_to_srgb;
+
+/// The scale factors tried by the calibration (Clasen: "multiple scaling factors").
+pub const SCALE_FACTORS: [f64; 9] = [0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3];
+
+/// Thinnest semi-axis of an ellipsoid as a share of its largest.
+pub const MIN_THICKNESS: f64 = 0.05;
+
+/// Clusters with less surface area than this share of the level's largest are dropped.
+pub const DROP_AREA: f64 = 0.01;
+
+/// Cluster centres each element's responsibilities are computed over.
+pub const CANDIDATES: usize = 8;
+
+/// The noise alpha-test threshold written (Clasen's `t`; half the noise texels are cut).
+pub const ALPHA_THRESHOLD: f32 = 0.5;
+
+/// Elements per cluster of the next level (Clasen: `n ← n · ¼`).
+const BRANCHING: usize = 4;
+
+/// How each level is clustered.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Clustering {
+    /// Clasen's EM on a Gaussian mixture with full covariances: fuzzy, ellipsoidal clusters.
+    #[default]
+    Em,
+    /// Lloyd's k-means: hard, spherical clusters (the baseline Clasen compares with).
+    KMeans,
+}
+
+impl Clustering {
+    /// Its name in settings and on the command line.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Em => "em",
+            Self::KMeans => "kmeans",
+        }
+    }
+}
+
+/// Leaf-ellipsoid tunables (recorded in the container's settings as `ellipsoids.*`, spec §7.1).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EllipsoidConfig {
+    /// Target mean ellipsoid diameter on screen, pixels (Clasen §6: 5): a level is drawn while its
+    /// mean ellipsoid is at least this many pixels across. `(0, 1000]`.
+    pub pixels: f32,
+    /// Clusterings tried per level, the one of least image error kept (Clasen: 4). `1 ..= 64`.
+    pub tries: u32,
+    /// EM (or k-means) iterations at most per clustering. `1 ..= 1000`. Default 50.
+    pub iterations: u32,
+    /// Views of the image error. `1 ..= 16`. Default 3.
+    pub views: u32,
+    /// Side of the image-error views, pixels, a power of two in `16 ..= 1024`. Default 128.
+    pub resolution: u32,
+    /// Surface samples per leaf. `4 ..= 4096`. Default 64.
+    pub samples: u32,
+    /// Seed of the clusterings' starts. Default 1.
+    pub seed: u64,
+    /// How levels are clustered. Default [`Clustering::Em`].
+    pub clustering: Clustering,
+}
+
+impl Default for EllipsoidConfig {
+    fn default() -> Self {
+        Self {
+            pixels: 5.0,
+            tries: 4,
+            iterations: 50,
+            views: 3,
+            resolution: 128,
+            samples: 64,
+            seed: 1,
+            clustering: Clustering::Em,
+        }
+    }
+}
+
+impl EllipsoidConfig {
+    /// Checks the ranges documented on the fields.
+    ///
+    /// # Errors
+    /// [`BuildError::Setting`] naming the field.
+    pub fn validate(&self) -> Result<(), BuildError> {
+        let bad = |what: String| Err(BuildError::Setting(what));
+        if !(self.pixels > 0.0 && self.pixels <= 1000.0) {
+            return bad(format!("ellipsoid pixels {}: must be in (0, 1000]", self.pixels));
+        }
+        if !(1..=64).contains(&self.tries) {
+            return bad(format!("ellipsoid tries {}: must be in 1..=64", self.tries));
+        }
+        if !(1..=1000).contains(&self.iterations) {
+            return bad(format!("ellipsoid iterations {}: must be in 1..=1000", self.iterations));
+        }
+        if !(1..=16).contains(&self.views) {
+            return bad(format!("ellipsoid views {}: must be in 1..=16", self.views));
+        }
+        if !(16..=1024).contains(&self.resolution) || !self.resolution.is_power_of_two() {
+            return bad(format!("ellipsoid resolution {}: must be a power of two in 16..=1024", self.resolution));
+        }
+        if !(4..=4096).contains(&self.samples) {
+            return bad(format!("ellipsoid samples {}: must be in 4..=4096", self.samples));
+        }
+        Ok(())
+    }
+
+    /// The `ellipsoids.*` settings (spec §7.1), sorted by key.
+    #[must_use]
+    pub fn settings(&self) -> Vec<Setting> {
+        let setting = |key: &str, value: String| Setting { key: format!("ellipsoids.{key}"), value };
+        vec![
+            setting("clustering", self.clustering.name().into()),
+            setting("iterations", self.iterations.to_string()),
+            setting("pixels", self.pixels.to_string()),
+            setting("resolution", self.resolution.to_string()),
+            setting("samples", self.samples.to_string()),
+            setting("seed", self.seed.to_string()),
+            setting("tries", self.tries.to_string()),
+            setting("views", self.views.to_string()),
+        ]
+    }
+}
+
+/// The leaves of a block as the ellipsoid build sees them.
+///
+/// Every vertex index must be in range; [`build_ellipsoids`] panics otherwise.
+#[derive(Clone, Copy, Debug)]
+pub struct EllipsoidMesh<'a> {
+    /// Vertices (position and UV are read), metres, block space.
+    pub vertices: &'a [VertexRecord],
+    /// The leaf-class triangles, each with its alpha test (an index into `alphas` or
+    /// [`crate::raster::NO_ALPHA`]).
+    pub triangles: &'a [MeshTriangle],
+    /// Alpha tests of the triangles' materials.
+    pub alphas: &'a [AlphaMask],
+    /// Per triangle: linear RGB of its opaque part and in `w` its opaque fraction
+    /// ([`crate::texture::integrate`]); empty for white.
+    pub colours: &'a [Vec4],
+}
+
+/// One level of one cell's hierarchy, for reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LevelReport {
+    /// Ellipsoids built at this level.
+    pub count: u32,
+    /// Whether the level was written (a level whose error is not above the previous written
+    /// level's is skipped).
+    pub written: bool,
+    /// Its calibrated scale factor.
+    pub factor: f32,
+    /// Its image error against the cell's leaves (mean multi-scale RMSE of coverage).
+    pub error: f64,
+    /// Its error `e_k`, metres per pixel.
+    pub threshold: f32,
+}
+
+/// The ellipsoids of one grid cell.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CellEllipsoids {
+    /// In SPT order (spec §10).
+    pub records: Vec<EllipsoidRecord>,
+    /// Bounds of the ellipsoids (centres grown by their largest semi-axis), block space; `None`
+    /// without records.
+    pub bounds: Option<(Vec3, Vec3)>,
+    /// Its levels, finest (the leaves) first.
+    pub levels: Vec<LevelReport>,
+}
+
+/// What [`build_ellipsoids`] returns.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Ellipsoids {
+    /// Per grid cell, in cell order.
+    pub cells: Vec<CellEllipsoids>,
+    /// Leaves found.
+    pub leaves: u32,
+}
+
+impl Ellipsoids {
+    /// Ellipsoids written per level (level 0: the leaves), summed over the cells.
+    #[must_use]
+    pub fn per_level(&self) -> Vec<u32> {
+        let mut counts: Vec<u32> = Vec::new();
+        for cell in &self.cells {
+            for (k, level) in cell.levels.iter().enumerate() {
+                if counts.len() <= k {
+                    counts.resize(k + 1, 0);
+                }
+                if level.written {
+                    counts[k] += level.count;
+                }
+            }
+        }
+        counts
+    }
+
+    /// The image error of each level (level 0: the leaves), the mean over the cells that have it
+    /// weighted by their leaves; a cell with fewer levels counts with its coarsest.
+    #[must_use]
+    pub fn error_per_level(&self) -> Vec<f64> {
+        let depth = self.cells.iter().map(|c| c.levels.len()).max().unwrap_or(0);
+        (0..depth)
+            .map(|k| {
+                let (mut sum, mut weight) = (0.0, 0.0);
+                for cell in &self.cells {
+                    let (Some(first), Some(level)) = (cell.levels.first(), cell.levels.get(k).or(cell.levels.last()))
+                    else {
+                        continue;
+                    };
+                    sum += level.error * f64::from(first.count);
+                    weight += f64::from(first.count);
+                }
+                if weight > 0.0 { sum / weight } else { 0.0 }
+            })
+            .collect()
+    }
+
+    /// Records written, all cells.
+    #[must_use]
+    pub fn count(&self) -> usize {
+        self.cells.iter().map(|c| c.records.len()).sum()
+    }
+}
+
+/// A Gaussian element of a level: a leaf or a cluster, relative to its cell's origin.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Element {
+    mean: DVec3,
+    cov: DMat3,
+    /// Area of its leaves, m² (fuzzy for clusters).
+    weight: f64,
+    /// Its leaves, counted fuzzily (1 for a leaf).
+    leaves: f64,
+    /// Linear RGB.
+    colour: DVec3,
+}
+
+/// An ellipsoid at scale 1: unit axes (right-handed, largest first) and semi-axes, metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Shape {
+    axes: [DVec3; 3],
+    radii: [f64; 3],
+}
+
+impl Shape {
+    /// The ellipsoid of a Gaussian: PCA axes, semi-axes `2σ`, the thinnest at least
+    /// [`MIN_THICKNESS`] of the largest; the disc of area `weight` if the Gaussian is a point.
+    fn of(cov: &DMat3, weight: f64) -> Self {
+        let (values, vectors) = symmetric_eigen(*cov);
+        let mut radii = [values[2], values[1], values[0]].map(|v| 2.0 * v.max(0.0).sqrt());
+        let (x, y) = (vectors[2], vectors[1]);
+        let z = x.cross(y);
+        if !(radii[0] > 0.0 && radii[0].is_finite()) {
+            let r = (weight.max(0.0) / std::f64::consts::PI).sqrt();
+            radii = [r, r, 0.0];
+        }
+        let thinnest = MIN_THICKNESS * radii[0];
+        radii[1] = radii[1].max(thinnest);
+        radii[2] = radii[2].max(thinnest);
+        Self { axes: [x, y, z], radii }
+    }
+
+    /// Surface area at `factor` (Knud Thomsen's approximation, within 1.1 %).
+    fn area(&self, factor: f64) -> f64 {
+        const P: f64 = 1.6075;
+        let [a, b, c] = self.radii.map(|r| (r * factor).powf(P));
+        4.0 * std::f64::consts::PI * ((a * b + a * c + b * c) / 3.0).powf(1.0 / P)
+    }
+
+    /// The diameter of the sphere of equal surface area at `factor`.
+    fn diameter(&self, factor: f64) -> f64 {
+        2.0 * (self.area(factor) / (4.0 * std::f64::consts::PI)).sqrt()
+    }
+}
+
+/// One built level of a cell.
+#[derive(Clone, Debug)]
+struct Level {
+    elements: Vec<Element>,
+    shapes: Vec<Shape>,
+    /// Per element of the previous level, its cluster here (empty at level 0).
+    parent_of_prev: Vec<u32>,
+    factor: f64,
+    error: f64,
+}
+
+/// What the image error of a cell is measured against.
+struct Target {
+    origin: DVec3,
+    views: Vec<View>,
+    reference: Vec<Mask>,
+}
+
+impl Target {
+    /// The image error of `shapes` at `elements`' centres scaled by `factor`.
+    fn error(&self, elements: &[Element], shapes: &[Shape], factor: f64) -> f64 {
+        let total: f64 = self
+            .views
+            .iter()
+            .zip(&self.reference)
+            .map(|(view, reference)| {
+                let mut mask = Mask::new(view.size);
+                for (e, s) in elements.iter().zip(shapes) {
+                    let axes = [0, 1, 2].map(|i| (s.axes[i] * (s.radii[i] * factor)).as_vec3());
+                    let (c, m) = project_ellipsoid(view, (self.origin + e.mean).as_vec3(), axes);
+                    fill_ellipse(&mut mask, c, m);
+                }
+                multiscale_error(&mask, reference)
+            })
+            .sum();
+        total / self.views.len().max(1) as f64
+    }
+
+    /// The factor of [`SCALE_FACTORS`] of least error (ties: the smaller) and that error.
+    fn calibrate(&self, elements: &[Element], shapes: &[Shape]) -> (f64, f64) {
+        let errors: Vec<f64> = SCALE_FACTORS.par_iter().map(|&f| self.error(elements, shapes, f)).collect();
+        let mut best = (SCALE_FACTORS[0], errors[0]);
+        for (&f, &e) in SCALE_FACTORS.iter().zip(&errors) {
+            if e < best.1 {
+                best = (f, e);
+            }
+        }
+        best
+    }
+}
+
+/// Builds the ellipsoid hierarchies of every grid cell (see the module documentation): leaves go
+/// to `cell_of(centre)`, which must be below `cell_count`.
+///
+/// # Errors
+/// [`BuildError::Setting`] for a bad `config`, [`BuildError::Spt`] if an internal invariant breaks.
+///
+/// # Panics
+/// If a vertex index of `mesh` is out of range, or `cell_of` returns `cell_count` or more.
+pub fn build_ellipsoids(
+    mesh: &EllipsoidMesh<'_>,
+    cell_of: impl Fn(Vec3) -> usize + Sync,
+    cell_count: usize,
+    config: &EllipsoidConfig,
+) -> Result<Ellipsoids, BuildError> {
+    config.validate()?;
+    let prune_mesh = PruneMesh { vertices: mesh.vertices, leaves: mesh.triangles, bark: &[], alphas: mesh.alphas };
+    let leaves = find_leaves(&prune_mesh);
+    let mut per_cell: Vec<Vec<u32>> = vec![Vec::new(); cell_count];
+    for (i, leaf) in leaves.leaves.iter().enumerate() {
+        #[expect(clippy::cast_possible_truncation, reason = "fewer leaves than triangles")]
+        per_cell[cell_of(leaf.centre)].push(i as u32);
+    }
+    let position = |v: u32| Vec3::from_array(mesh.vertices[v as usize].position);
+    let cells: Vec<CellEllipsoids> = per_cell
+        .par_iter()
+        .enumerate()
+        .map(|(cell, ids)| {
+            if ids.is_empty() {
+                return Ok(CellEllipsoids::default());
+            }
+            let triangles: Vec<u32> =
+                ids.iter().flat_map(|&l| leaves.triangles_of(&leaves.leaves[l as usize]).iter().copied()).collect();
+            let (centre, radius) =
+                bounding_sphere(triangles.iter().flat_map(|&t| mesh.triangles[t as usize].v.map(position)));
+            let origin = centre.as_dvec3();
+            let raster: Vec<RasterTriangle> = triangles
+                .iter()
+                .map(|&t| {
+                    let tri = &mesh.triangles[t as usize];
+                    RasterTriangle {
+                        positions: tri.v.map(position),
+                        uvs: tri.v.map(|v| Vec2::from_array(mesh.vertices[v as usize].uv)),
+                        alpha: tri.alpha,
+                    }
+                })
+                .collect();
+            let views: Vec<View> = view_directions(config.views as usize)
+                .into_iter()
+                .map(|d| View::fit(d, centre, radius, config.resolution))
+                .collect();
+            let reference: Vec<Mask> = views
+                .par_iter()
+                .map(|view| {
+                    let mut mask = Mask::new(view.size);
+                    rasterize(&mut mask, view, &raster, mesh.alphas);
+                    mask
+                })
+                .collect();
+            drop(raster);
+            let target = Target { origin, views, reference };
+            let elements: Vec<Element> = ids
+                .par_iter()
+                .map(|&l| leaf_element(mesh, leaves.triangles_of(&leaves.leaves[l as usize]), origin, config.samples))
+                .collect();
+            build_cell(elements, &target, cell as u64, config)
+        })
+        .collect::<Result<_, BuildError>>()?;
+    #[expect(clippy::cast_possible_truncation, reason = "fewer leaves than triangles")]
+    let leaf_count = leaves.leaves.len() as u32;
+    Ok(Ellipsoids { cells, leaves: leaf_count })
+}
+
+/// The Gaussian of one leaf (module documentation): its surface samples' mean and covariance,
+/// its area and its colour. `triangles` index `mesh.triangles`.
+fn leaf_element(mesh: &EllipsoidMesh<'_>, triangles: &[u32], origin: DVec3, samples: u32) -> Element {
+    let corners = |t: u32| {
+        mesh.triangles[t as usize].v.map(|v| Vec3::from_array(mesh.vertices[v as usize].position).as_dvec3() - origin)
+    };
+    let areas: Vec<f64> = triangles
+        .iter()
+        .map(|&t| {
+            let [a, b, c] = corners(t);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .collect();
+    let total: f64 = areas.iter().sum();
+    // Stage: stratified samples, alpha-tested.
+    let golden = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut passed, mut all) = (Vec::new(), Vec::new());
+    let (mut t, mut below) = (0usize, 0.0f64);
+    for k in 0..samples {
+        let u = (f64::from(k) + 0.5) / f64::from(samples) * total;
+        while t + 1 < triangles.len() && below + areas[t] <= u {
+            below += areas[t];
+            t += 1;
+        }
+        let r1 = if areas[t] > 0.0 { ((u - below) / areas[t]).clamp(0.0, 1.0) } else { 0.5 };
+        let r2 = (f64::from(k) * golden + 0.5).fract();
+        let s = r1.sqrt();
+        let w = [1.0 - s, s * (1.0 - r2), s * r2];
+        let tri = &mesh.triangles[triangles[t] as usize];
+        let [a, b, c] = corners(triangles[t]);
+        let p = a * w[0] + b * w[1] + c * w[2];
+        all.push(p);
+        let passes = mesh.alphas.get(tri.alpha as usize).is_none_or(|mask| {
+            let uv = tri.v.map(|v| Vec2::from_array(mesh.vertices[v as usize].uv).as_dvec2());
+            mask.passes((uv[0] * w[0] + uv[1] * w[1] + uv[2] * w[2]).as_vec2())
+        });
+        if passes {
+            passed.push(p);
+        }
+    }
+    let points = if passed.is_empty() { &all } else { &passed };
+    let n = points.len().max(1) as f64;
+    let mean = points.iter().copied().sum::<DVec3>() / n;
+    let mut cov = DMat3::ZERO;
+    for &p in points {
+        cov += outer(p - mean, p - mean);
+    }
+    cov *= 1.0 / n;
+    // Stage: colour, weighted by opaque area.
+    let (mut rgb, mut weight, mut plain) = (DVec3::ZERO, 0.0, DVec3::ZERO);
+    for (&t, &area) in triangles.iter().zip(&areas) {
+        let c = mesh.colours.get(t as usize).copied().unwrap_or(Vec4::ONE).as_dvec4();
+        rgb += c.truncate() * (area * c.w);
+        weight += area * c.w;
+        plain += c.truncate() * area;
+    }
+    let colour = if weight > 0.0 {
+        rgb / weight
+    } else if total > 0.0 {
+        plain / total
+    } else {
+        DVec3::ONE
+    };
+    Element { mean, cov, weight: total, leaves: 1.0, colour }
+}
+
+fn outer(a: DVec3, b: DVec3) -> DMat3 {
+    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+/// The seed of one clustering.
+fn seed(config: &EllipsoidConfig, cell: u64, level: usize, attempt: u32) -> u64 {
+    let mut rng = SplitMix64(config.seed ^ cell.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    let a = rng.next_u64();
+    let mut rng = SplitMix64(a ^ (level as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
+    let b = rng.next_u64();
+    SplitMix64(b ^ u64::from(attempt).wrapping_mul(0x8CB9_2BA7_2F3D_8DD7)).next_u64()
+}
+
+/// The levels of one cell's leaves and their records (module documentation).
+fn build_cell(
+    leaves: Vec<Element>,
+    target: &Target,
+    cell: u64,
+    config: &EllipsoidConfig,
+) -> Result<CellEllipsoids, BuildError> {
+    let levels = build_levels(leaves, target, cell, config);
+    records(&levels, target.origin, config.pixels)
+}
+
+/// The levels of one cell, finest first: the leaves, then clusterings down to one ellipsoid.
+fn build_levels(leaves: Vec<Element>, target: &Target, cell: u64, config: &EllipsoidConfig) -> Vec<Level> {
+    let shapes: Vec<Shape> = leaves.iter().map(|e| Shape::of(&e.cov, e.weight)).collect();
+    let (factor, error) = target.calibrate(&leaves, &shapes);
+    let mut levels = vec![Level { elements: leaves, shapes, parent_of_prev: Vec::new(), factor, error }];
+    while let Some(prev) = levels.last()
+        && prev.elements.len() > 1
+    {
+        let k = prev.elements.len().div_ceil(BRANCHING);
+        let depth = levels.len();
+        let tries: Vec<Level> = (0..config.tries)
+            .into_par_iter()
+            .map(|attempt| {
+                let mut rng = SplitMix64(seed(config, cell, depth, attempt));
+                let fuzzy = match config.clustering {
+                    Clustering::Em => em(&prev.elements, k, config.iterations, &mut rng),
+                    Clustering::KMeans => kmeans(&prev.elements, k, config.iterations, &mut rng),
+                };
+                let (elements, shapes, parent_of_prev) = make_level(&prev.elements, fuzzy);
+                let (factor, error) = target.calibrate(&elements, &shapes);
+                Level { elements, shapes, parent_of_prev, factor, error }
+            })
+            .collect();
+        let mut best = 0;
+        for (i, t) in tries.iter().enumerate() {
+            if t.error < tries[best].error {
+                best = i;
+            }
+        }
+        let Some(chosen) = tries.into_iter().nth(best) else { break };
+        levels.push(chosen);
+    }
+    levels
+}
+
+/// Turns the levels into records in SPT order with their intervals (module documentation).
+fn records(levels: &[Level], origin: DVec3, pixels: f32) -> Result<CellEllipsoids, BuildError> {
+    let pixels = f64::from(pixels);
+    let thresholds: Vec<f64> = levels
+        .iter()
+        .map(|l| {
+            let sum: f64 = l.shapes.iter().map(|s| s.diameter(l.factor)).sum();
+            sum / l.shapes.len().max(1) as f64 / pixels
+        })
+        .collect();
+    // Which levels are written: the leaves, every level whose error is above the last written
+    // one's, and the coarsest.
+    let mut written = vec![false; levels.len()];
+    written[0] = true;
+    let mut last = thresholds[0];
+    for k in 1..levels.len() {
+        if k + 1 == levels.len() || thresholds[k] > last {
+            written[k] = true;
+            last = thresholds[k];
+        }
+    }
+    // Nodes of the written levels, finest first; each level's parents in the next written one.
+    let mut children: Vec<Vec<u32>> = Vec::new();
+    let mut sizes: Vec<f32> = Vec::new();
+    let mut node_of: Vec<(usize, usize)> = Vec::new();
+    let mut first_node_of_level = vec![0usize; levels.len()];
+    let mut previous: Option<usize> = None;
+    for (k, level) in levels.iter().enumerate() {
+        if !written[k] {
+            continue;
+        }
+        first_node_of_level[k] = children.len();
+        #[expect(clippy::cast_possible_truncation, reason = "metres")]
+        let size = previous.map_or(0.0, |p| thresholds[p] as f32);
+        for i in 0..level.elements.len() {
+            children.push(Vec::new());
+            sizes.push(size);
+            node_of.push((k, i));
+        }
+        if let Some(p) = previous {
+            // Each node of level p goes to its ancestor at level k.
+            for i in 0..levels[p].elements.len() {
+                let mut j = i as u32;
+                for level in &levels[p + 1..=k] {
+                    j = level.parent_of_prev[j as usize];
+                }
+                #[expect(clippy::cast_possible_truncation, reason = "fewer nodes than leaves")]
+                children[first_node_of_level[k] + j as usize].push((first_node_of_level[p] + i) as u32);
+            }
+        }
+        previous = Some(k);
+    }
+    let spt = flatten(&children, &sizes)?;
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    let mut out = Vec::with_capacity(node_of.len());
+    for &n in &spt.order {
+        let (k, i) = node_of[n as usize];
+        let (level, s) = (&levels[k], &spt.nodes[n as usize]);
+        let (e, shape) = (&level.elements[i], &level.shapes[i]);
+        let centre = (origin + e.mean).as_vec3();
+        let radii = shape.radii.map(|r| r * level.factor);
+        #[expect(clippy::cast_possible_truncation, reason = "metres")]
+        let reach = radii[0] as f32;
+        lo = lo.min(centre - reach);
+        hi = hi.max(centre + reach);
+        let rgb = e.colour.as_vec3().to_array().map(linear_to_srgb);
+        #[expect(clippy::cast_possible_truncation, reason = "a mip level")]
+        let noise_mip = (0.5 * (1.0 + e.leaves.max(1.0).log2())) as f32;
+        out.push(EllipsoidRecord {
+            center: centre.to_array(),
+            radii: radii.map(|r| r as f32),
+            orientation: quaternion(&shape.axes),
+            color: pack::rgba8([rgb[0], rgb[1], rgb[2], 1.0]),
+            alpha_threshold: ALPHA_THRESHOLD,
+            noise_mip,
+            lo: s.lo,
+            hi: s.hi,
+            leaf_first: s.leaf_first,
+            leaf_count: s.leaf_count,
+            flags: 0,
+        });
+    }
+    let reports = levels
+        .iter()
+        .zip(&thresholds)
+        .zip(&written)
+        .map(|((l, &t), &w)| {
+            #[expect(clippy::cast_possible_truncation, reason = "counts, factors and metres")]
+            let report = LevelReport {
+                count: l.elements.len() as u32,
+                written: w,
+                factor: l.factor as f32,
+                error: l.error,
+                threshold: t as f32,
+            };
+            report
+        })
+        .collect();
+    Ok(CellEllipsoids { records: out, bounds: Some((lo, hi)), levels: reports })
+}
+
+/// The unit quaternion (x, y, z, w) of the rotation whose columns are `axes` (right-handed), as
+/// snorm16 with `w ≥ 0`.
+fn quaternion(axes: &[DVec3; 3]) -> [i16; 4] {
+    let q = DQuat::from_mat3(&DMat3::from_cols(axes[0], axes[1], axes[2])).normalize();
+    let q = if q.w < 0.0 { -q } else { q };
+    #[expect(clippy::cast_possible_truncation, reason = "clamped to the snorm16 range")]
+    let snorm = |v: f64| (v.clamp(-1.0, 1.0) * 32767.0).round() as i16;
+    [snorm(q.x), snorm(q.y), snorm(q.z), snorm(q.w)]
+}
+
+/// Responsibilities of a clustering: per element, up to `slots` (cluster, weight) pairs.
+struct Fuzzy {
+    /// Clusters asked for.
+    k: usize,
+    slots: usize,
+    cluster: Vec<u32>,
+    weight: Vec<f64>,
+}
+
+/// A uniform grid over cluster centres, for the nearest ones to a point.
+struct CentreGrid {
+    lo: DVec3,
+    cell: f64,
+    dims: [i64; 3],
+    /// Cluster ids by grid cell (CSR).
+    start: Vec<u32>,
+    ids: Vec<u32>,
+}
+
+impl CentreGrid {
+    fn new(centres: &[DVec3], alive: &[bool]) -> Self {
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        let mut count = 0usize;
+        for (c, _) in centres.iter().zip(alive).filter(|(_, a)| **a) {
+            lo = lo.min(*c);
+            hi = hi.max(*c);
+            count += 1;
+        }
+        if count == 0 {
+            return Self { lo: DVec3::ZERO, cell: 1.0, dims: [1, 1, 1], start: vec![0, 0], ids: Vec::new() };
+        }
+        let extent = (hi - lo).max(DVec3::splat(1e-9));
+        let floor = extent.max_element() * 1e-3;
+        let volume = extent.max(DVec3::splat(floor)).element_product();
+        let cell = (2.0 * volume / count as f64).cbrt().max(floor).max(1e-9);
+        #[expect(clippy::cast_possible_truncation, reason = "clamped to 1..=128")]
+        let dims = extent.to_array().map(|e| ((e / cell).floor() as i64 + 1).clamp(1, 128));
+        let n = (dims[0] * dims[1] * dims[2]) as usize;
+        let mut grid = Self { lo, cell, dims, start: vec![0; n + 1], ids: Vec::with_capacity(count) };
+        let keys: Vec<usize> = centres.iter().map(|&c| grid.key(grid.coords(c))).collect();
+        for (&k, _) in keys.iter().zip(alive).filter(|(_, a)| **a) {
+            grid.start[k + 1] += 1;
+        }
+        for i in 0..n {
+            grid.start[i + 1] += grid.start[i];
+        }
+        let mut next = grid.start.clone();
+        grid.ids.resize(count, 0);
+        for (j, (&k, _)) in keys.iter().zip(alive).enumerate().filter(|(_, (_, a))| **a) {
+            #[expect(clippy::cast_possible_truncation, reason = "fewer clusters than leaves")]
+            let j = j as u32;
+            grid.ids[next[k] as usize] = j;
+            next[k] += 1;
+        }
+        grid
+    }
+
+    fn coords(&self, p: DVec3) -> [i64; 3] {
+        let r = (p - self.lo) / self.cell;
+        #[expect(clippy::cast_possible_truncation, reason = "clamped into the grid")]
+        let c = [0, 1, 2].map(|a| (r[a].floor().max(0.0) as i64).min(self.dims[a] - 1));
+        c
+    }
+
+    fn key(&self, c: [i64; 3]) -> usize {
+        #[expect(clippy::cast_sign_loss, clippy::cast_possible_truncation, reason = "inside the grid")]
+        let k = (c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])) as usize;
+        k
+    }
+
+    /// The `m` centres nearest to `p` (ties: lower id) as (squared distance, id), nearest first:
+    /// rings of grid cells around `p`'s until the `m`-th nearest found is nearer than anything
+    /// outside the rings can be.
+    fn nearest(&self, centres: &[DVec3], p: DVec3, m: usize, out: &mut Vec<(f64, u32)>) {
+        out.clear();
+        if self.ids.is_empty() || m == 0 {
+            return;
+        }
+        let c = self.coords(p);
+        let reach = self.dims.iter().copied().max().unwrap_or(1);
+        let visit = |out: &mut Vec<(f64, u32)>, x: i64, y: i64, z: i64| {
+            let k = self.key([x, y, z]);
+            for &j in &self.ids[self.start[k] as usize..self.start[k + 1] as usize] {
+                let item = (centres[j as usize].distance_squared(p), j);
+                let better = |a: &(f64, u32), b: &(f64, u32)| a.0 < b.0 || (a.0 == b.0 && a.1 < b.1);
+                if out.len() == m {
+                    if !better(&item, &out[m - 1]) {
+                        continue;
+                    }
+                    out.pop();
+                }
+                let at = out.iter().position(|o| better(&item, o)).unwrap_or(out.len());
+                out.insert(at, item);
+            }
+        };
+        for r in 0..=reach {
+            let (z0, z1) = ((c[2] - r).max(0), (c[2] + r).min(self.dims[2] - 1));
+            let (y0, y1) = ((c[1] - r).max(0), (c[1] + r).min(self.dims[1] - 1));
+            let (x0, x1) = ((c[0] - r).max(0), (c[0] + r).min(self.dims[0] - 1));
+            for z in z0..=z1 {
+                for y in y0..=y1 {
+                    if (z - c[2]).abs() == r || (y - c[1]).abs() == r {
+                        for x in x0..=x1 {
+                            visit(out, x, y, z);
+                        }
+                    } else {
+                        if c[0] - r >= 0 {
+                            visit(out, c[0] - r, y, z);
+                        }
+                        if c[0] + r < self.dims[0] {
+                            visit(out, c[0] + r, y, z);
+                        }
+                    }
+                }
+            }
+            if out.len() == m {
+                // Anything outside the block of rings is at least this far from `p`.
+                let mut bound = f64::INFINITY;
+                for a in 0..3 {
+                    #[expect(clippy::cast_precision_loss, reason = "grid coordinates")]
+                    let (lo, hi) = ((c[a] - r) as f64 * self.cell, (c[a] + r + 1) as f64 * self.cell);
+                    let q = p[a] - self.lo[a];
+                    if c[a] - r > 0 {
+                        bound = bound.min(q - lo);
+                    }
+                    if c[a] + r < self.dims[a] - 1 {
+                        bound = bound.min(hi - q);
+                    }
+                }
+                if bound == f64::INFINITY || out[m - 1].0 <= bound * bound {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// `k` random points uniformly in the bounding box of the elements' centres.
+fn random_starts(elements: &[Element], k: usize, rng: &mut SplitMix64) -> Vec<DVec3> {
+    let (lo, hi) =
+        elements.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), e| (lo.min(e.mean), hi.max(e.mean)));
+    (0..k).map(|_| lo + (hi - lo) * DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64())).collect()
+}
+
+/// A Gaussian of the mixture with what its density needs.
+#[derive(Clone, Copy)]
+struct Component {
+    mean: DVec3,
+    inverse: DMat3,
+    /// `log π_j − ½ log det Σ_j`.
+    log_norm: f64,
+}
+
+impl Component {
+    fn new(mean: DVec3, cov: DMat3, prior: f64) -> Self {
+        let det = cov.determinant().max(1e-300);
+        Self { mean, inverse: cov.inverse(), log_norm: prior.max(1e-300).ln() - 0.5 * det.ln() }
+    }
+
+    /// Expected log-density of the Gaussian `(mean, cov)` (up to a constant).
+    fn log_density(&self, mean: DVec3, cov: &DMat3) -> f64 {
+        let d = mean - self.mean;
+        let product = self.inverse * *cov;
+        let trace = product.x_axis.x + product.y_axis.y + product.z_axis.z;
+        self.log_norm - 0.5 * (d.dot(self.inverse * d) + trace)
+    }
+}
+
+/// Clasen's EM clustering into `k` Gaussians (module documentation): the responsibilities.
+fn em(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64) -> Fuzzy {
+    let n = elements.len();
+    let k = k.clamp(1, n);
+    let slots = CANDIDATES.min(k);
+    let (lo, hi) =
+        elements.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), e| (lo.min(e.mean), hi.max(e.mean)));
+    let diagonal = (hi - lo).length().max(1e-6);
+    let regulariser = DMat3::from_diagonal(DVec3::splat((1e-4 * diagonal).powi(2)));
+    let spread = (hi - lo).max_element().max(1e-6) / (2.0 * (k as f64).cbrt());
+    let start_cov = DMat3::from_diagonal(DVec3::splat(spread * spread)) + regulariser;
+    let mut means = random_starts(elements, k, rng);
+    let mut covs = vec![start_cov; k];
+    let mut priors = vec![1.0 / k as f64; k];
+    let total: f64 = elements.iter().map(|e| e.weight).sum::<f64>().max(1e-300);
+    let mut fuzzy = Fuzzy { k, slots, cluster: vec![0; n * slots], weight: vec![0.0; n * slots] };
+    let mut last_ll = f64::NEG_INFINITY;
+    let alive = vec![true; k];
+    for iteration in 0..iterations.max(1) {
+        // E-step over each element's nearest centres.
+        let components: Vec<Component> = (0..k).map(|j| Component::new(means[j], covs[j], priors[j])).collect();
+        let grid = CentreGrid::new(&means, &alive);
+        let ll: f64 = fuzzy
+            .cluster
+            .par_chunks_mut(slots)
+            .zip(fuzzy.weight.par_chunks_mut(slots))
+            .zip(elements.par_iter())
+            .map_init(Vec::new, |near, ((cluster, weight), e)| {
+                grid.nearest(&means, e.mean, slots, near);
+                let mut logs = [0.0f64; CANDIDATES];
+                for (l, &(_, j)) in logs.iter_mut().zip(near.iter()) {
+                    *l = components[j as usize].log_density(e.mean, &e.cov);
+                }
+                let logs = &mut logs[..near.len()];
+                let top = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                let mut sum = 0.0;
+                for l in logs.iter_mut() {
+                    *l = (*l - top).exp();
+                    sum += *l;
+                }
+                for (s, (&(_, j), l)) in near.iter().zip(logs.iter()).enumerate() {
+                    cluster[s] = j;
+                    weight[s] = l / sum;
+                }
+                weight[near.len()..].fill(0.0);
+                e.weight * (top + sum.ln())
+            })
+            .collect::<Vec<f64>>()
+            .iter()
+            .sum();
+        let converged = (ll - last_ll).abs() < 1e-4 * total;
+        last_ll = ll;
+        if converged || iteration + 1 == iterations.max(1) {
+            break;
+        }
+        // M-step, in element order.
+        let mut sums = vec![(0.0f64, DVec3::ZERO, DMat3::ZERO); k];
+        for (i, e) in elements.iter().enumerate() {
+            for s in 0..slots {
+                let r = fuzzy.weight[i * slots + s];
+                if r > 0.0 {
+                    let w = r * e.weight;
+                    let sum = &mut sums[fuzzy.cluster[i * slots + s] as usize];
+                    sum.0 += w;
+                    sum.1 += e.mean * w;
+                    sum.2 += (e.cov + outer(e.mean, e.mean)) * w;
+                }
+            }
+        }
+        for (j, &(w, first, second)) in sums.iter().enumerate() {
+            if w > 0.0 {
+                let m = first / w;
+                means[j] = m;
+                covs[j] = second * (1.0 / w) - outer(m, m) + regulariser;
+                priors[j] = w / total;
+            } else if iteration < iterations / 2 {
+                // No element considers it: it takes the place of a random element.
+                #[expect(clippy::cast_possible_truncation, reason = "an index below n")]
+                let i = rng.below(n as u64) as usize;
+                means[j] = elements[i].mean;
+                covs[j] = start_cov;
+                priors[j] = 1.0 / k as f64;
+            } else {
+                priors[j] = 1e-12;
+            }
+        }
+    }
+    fuzzy
+}
+
+/// Lloyd's k-means from the same random starts as [`em`]: hard, spherical clusters (one slot
+/// per element, weight 1).
+fn kmeans(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64) -> Fuzzy {
+    let n = elements.len();
+    let k = k.clamp(1, n);
+    let mut means = random_starts(elements, k, rng);
+    let alive = vec![true; k];
+    let mut assign: Vec<u32> = Vec::new();
+    for iteration in 0..iterations.max(1) {
+        let grid = CentreGrid::new(&means, &alive);
+        let next: Vec<u32> = elements
+            .par_iter()
+            .map_init(Vec::new, |near, e| {
+                grid.nearest(&means, e.mean, 1, near);
+                near.first().map_or(0, |&(_, j)| j)
+            })
+            .collect();
+        if next == assign {
+            break;
+        }
+        assign = next;
+        let mut sums = vec![(0.0f64, DVec3::ZERO); k];
+        for (e, &j) in elements.iter().zip(&assign) {
+            sums[j as usize].0 += e.weight;
+            sums[j as usize].1 += e.mean * e.weight;
+        }
+        for (j, &(w, first)) in sums.iter().enumerate() {
+            if w > 0.0 {
+                means[j] = first / w;
+            } else if iteration < iterations / 2 {
+                #[expect(clippy::cast_possible_truncation, reason = "an index below n")]
+                let i = rng.below(n as u64) as usize;
+                means[j] = elements[i].mean;
+            }
+        }
+    }
+    Fuzzy { k, slots: 1, cluster: assign, weight: vec![1.0; n] }
+}
+
+/// The clusters of a level from the responsibilities (module documentation): their elements,
+/// shapes, and each previous element's cluster.
+fn make_level(prev: &[Element], mut fuzzy: Fuzzy) -> (Vec<Element>, Vec<Shape>, Vec<u32>) {
+    let (n, slots) = (prev.len(), fuzzy.slots);
+    let mut alive = vec![false; fuzzy.k];
+    // Each element's cluster of greatest weight among `alive` ones (ties: the lower), u32::MAX
+    // if none.
+    let hard = |fuzzy: &Fuzzy, alive: &[bool]| -> Vec<u32> {
+        (0..n)
+            .map(|i| {
+                let mut best: Option<(f64, u32)> = None;
+                for s in 0..slots {
+                    let (j, w) = (fuzzy.cluster[i * slots + s], fuzzy.weight[i * slots + s]);
+                    if w > 0.0 && alive[j as usize] && best.is_none_or(|(bw, bj)| w > bw || (w == bw && j < bj)) {
+                        best = Some((w, j));
+                    }
+                }
+                best.map_or(u32::MAX, |b| b.1)
+            })
+            .collect()
+    };
+    let everyone = vec![true; fuzzy.k];
+    let mut assign = hard(&fuzzy, &everyone);
+    for (i, j) in assign.iter_mut().enumerate() {
+        if *j == u32::MAX {
+            // No weight anywhere (cannot happen with a non-empty mixture): its first candidate.
+            *j = fuzzy.cluster[i * slots];
+        }
+        alive[*j as usize] = true;
+    }
+    let mut clusters = moments(prev, &mut fuzzy, &alive, &assign);
+    // Drop the clusters of less than 1 % of the largest surface area.
+    let areas: Vec<f64> = clusters.iter().map(|c| c.as_ref().map_or(0.0, |(_, s)| s.area(1.0))).collect();
+    let largest = areas.iter().copied().fold(0.0, f64::max);
+    let mut dropped = false;
+    for (j, &a) in areas.iter().enumerate() {
+        if alive[j] && a < DROP_AREA * largest {
+            alive[j] = false;
+            dropped = true;
+        }
+    }
+    if dropped {
+        assign = hard(&fuzzy, &alive);
+        for i in 0..n {
+            if assign[i] != u32::MAX {
+                continue;
+            }
+            // All its candidates dropped: the kept cluster with the nearest centre.
+            let mut best: Option<(f64, u32)> = None;
+            for (j, c) in clusters.iter().enumerate() {
+                if let (true, Some((e, _))) = (alive[j], c) {
+                    let d = e.mean.distance_squared(prev[i].mean);
+                    if best.is_none_or(|(bd, _)| d < bd) {
+                        #[expect(clippy::cast_possible_truncation, reason = "fewer clusters than leaves")]
+                        let j = j as u32;
+                        best = Some((d, j));
+                    }
+                }
+            }
+            if let Some((_, j)) = best {
+                // Its whole weight goes there.
+                for s in 0..slots {
+                    fuzzy.weight[i * slots + s] = 0.0;
+                }
+                fuzzy.cluster[i * slots] = j;
+                fuzzy.weight[i * slots] = 1.0;
+                assign[i] = j;
+            }
+        }
+        alive.iter_mut().for_each(|a| *a = false);
+        for &j in &assign {
+            alive[j as usize] = true;
+        }
+        clusters = moments(prev, &mut fuzzy, &alive, &assign);
+    }
+    // Renumber the kept clusters densely in index order.
+    let mut renumber = vec![u32::MAX; fuzzy.k];
+    let (mut elements, mut shapes) = (Vec::new(), Vec::new());
+    for (j, c) in clusters.into_iter().enumerate() {
+        if let (true, Some((e, s))) = (alive[j], c) {
+            #[expect(clippy::cast_possible_truncation, reason = "fewer clusters than leaves")]
+            let id = elements.len() as u32;
+            renumber[j] = id;
+            elements.push(e);
+            shapes.push(s);
+        }
+    }
+    let parent = assign.iter().map(|&j| renumber[j as usize]).collect();
+    (elements, shapes, parent)
+}
+
+/// Renormalises the responsibilities over the `alive` clusters (an element with none left keeps
+/// its hard cluster `assign[i]` alone) and returns each alive cluster's fuzzy element and shape.
+fn moments(prev: &[Element], fuzzy: &mut Fuzzy, alive: &[bool], assign: &[u32]) -> Vec<Option<(Element, Shape)>> {
+    let slots = fuzzy.slots;
+    let mut sums = vec![(0.0f64, 0.0f64, DVec3::ZERO, DMat3::ZERO, DVec3::ZERO); fuzzy.k];
+    for (i, e) in prev.iter().enumerate() {
+        let row = i * slots..(i + 1) * slots;
+        let kept: f64 = row.clone().filter(|&s| alive[fuzzy.cluster[s] as usize]).map(|s| fuzzy.weight[s]).sum();
+        if kept <= 0.0 {
+            for s in row.clone() {
+                fuzzy.weight[s] = 0.0;
+            }
+            fuzzy.cluster[i * slots] = assign[i];
+            fuzzy.weight[i * slots] = 1.0;
+        } else {
+            for s in row.clone() {
+                fuzzy.weight[s] = if alive[fuzzy.cluster[s] as usize] { fuzzy.weight[s] / kept } else { 0.0 };
+            }
+        }
+        for s in row {
+            let r = fuzzy.weight[s];
+            if r > 0.0 {
+                let sum = &mut sums[fuzzy.cluster[s] as usize];
+                let w = r * e.weight;
+                sum.0 += w;
+                sum.1 += r * e.leaves;
+                sum.2 += e.mean * w;
+                sum.3 += (e.cov + outer(e.mean, e.mean)) * w;
+                sum.4 += e.colour * w;
+            }
+        }
+    }
+    sums.iter()
+        .zip(alive)
+        .map(|(&(w, leaves, first, second, colour), &a)| {
+            if !a || w <= 0.0 {
+                return None;
+            }
+            let mean = first / w;
+            let cov = second * (1.0 / w) - outer(mean, mean);
+            let e = Element { mean, cov, weight: w, leaves, colour: colour / w };
+            Some((e, Shape::of(&cov, w)))
+        })
+        .collect()
+}
+
+/// A cluster as [`cluster_points`] reports it: mean and covariance (columns).
+pub type ClusterStats = (Vec3, [[f32; 3]; 3]);
+
+/// One clustering of points, for tests: the EM (or k-means) clustering of points with unit
+/// weights into `k` clusters, as each point's hard cluster (numbered densely) and each
+/// cluster's mean and covariance.
+#[doc(hidden)]
+#[must_use]
+pub fn cluster_points(points: &[Vec3], k: usize, clustering: Clustering, seed: u64) -> (Vec<u32>, Vec<ClusterStats>) {
+    let elements: Vec<Element> = points
+        .iter()
+        .map(|p| Element { mean: p.as_dvec3(), cov: DMat3::ZERO, weight: 1.0, leaves: 1.0, colour: DVec3::ONE })
+        .collect();
+    let mut rng = SplitMix64(seed);
+    let fuzzy = match clustering {
+        Clustering::Em => em(&elements, k, 200, &mut rng),
+        Clustering::KMeans => kmeans(&elements, k, 200, &mut rng),
+    };
+    let (clusters, _, parent) = make_level(&elements, fuzzy);
+    let stats = clusters.iter().map(|c| (c.mean.as_vec3(), c.cov.as_mat3().to_cols_array_2d())).collect();
+    (parent, stats)
+}
+
+/// The ellipsoid of a leaf given as triangles (`positions`, metres) with `samples` surface
+/// samples and no alpha test, for tests: centre, unit axes (largest first) and semi-axes.
+#[doc(hidden)]
+#[must_use]
+pub fn leaf_ellipsoid(positions: &[[Vec3; 3]], samples: u32) -> (Vec3, [Vec3; 3], [f32; 3]) {
+    let vertices: Vec<VertexRecord> = positions
+        .iter()
+        .flatten()
+        .map(|p| VertexRecord { position: p.to_array(), ..VertexRecord::default() })
+        .collect();
+    #[expect(clippy::cast_possible_truncation, reason = "a test's few triangles")]
+    let triangles: Vec<MeshTriangle> = (0..positions.len() as u32)
+        .map(|t| MeshTriangle { v: [3 * t, 3 * t + 1, 3 * t + 2], alpha: crate::raster::NO_ALPHA })
+        .collect();
+    let ids: Vec<u32> = (0..triangles.len() as u32).collect();
+    let mesh = EllipsoidMesh { vertices: &vertices, triangles: &triangles, alphas: &[], colours: &[] };
+    let e = leaf_element(&mesh, &ids, DVec3::ZERO, samples);
+    let s = Shape::of(&e.cov, e.weight);
+    #[expect(clippy::cast_possible_truncation, reason = "metres")]
+    let radii = s.radii.map(|r| r as f32);
+    (e.mean.as_vec3(), s.axes.map(|a| a.as_vec3()), radii)
+}
