@@ -12,8 +12,8 @@ use std::sync::Arc;
 use common::{
     BACKGROUND, covered, gpu, keep, light_taken, mask_precision_recall, one_tree, precision_recall, shadow_mask,
 };
-use glam::{Mat4, Quat, Vec2, Vec3, vec3};
-use treelod_build::scene::{AlphaMode, Image as SourceImage, ImageEncoding, Material, Part, Scene};
+use glam::{Mat4, Vec2, Vec3, vec3};
+use treelod_build::scene::{Image as SourceImage, ImageEncoding, Part, Scene};
 use treelod_build::{BuildConfig, ImpostorConfig, Placed, Texturing, build_block, cards_on_planes, leaf_material};
 use treelod_format::{Compression, Container, ContainerData, image_format};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
