@@ -479,6 +479,29 @@ pub fn prune_report(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> R
     crate::prune::compare(input.mesh(&gathered.vertices), |p| grid.cell_id(p), grid.hi.y - grid.lo.y, &prune)
 }
 
+/// The leaf ellipsoids of a block as a build with `config` makes them ([`crate::ellipsoid`]), with
+/// each cell's levels, factors and image errors, without building the rest of the container:
+/// for comparing clusterings (`config.ellipsoids`, the default [`EllipsoidConfig`] when `None`).
+///
+/// # Errors
+/// As [`build_block`]: [`BuildError::NoGeometry`], [`BuildError::Setting`], [`BuildError::Spt`].
+pub fn ellipsoid_report(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<Ellipsoids, BuildError> {
+    let gathered = gather(name, trees, config)?;
+    let grid = BlockGrid::new(&gathered.tris, &gathered.vertices, config)?;
+    let ellipsoid_config = config.ellipsoids.clone().unwrap_or_default();
+    ellipsoid_config.validate()?;
+    block_ellipsoids(
+        &gathered.material_keys,
+        &gathered.tris,
+        &gathered.vertices,
+        &gathered.parts,
+        trees,
+        |p| grid.cell_of(p),
+        grid.cell_count,
+        &ellipsoid_config,
+    )
+}
+
 /// Builds a block from placed scenes (spec §6, Gilet 2005; with [`BuildConfig::prune`] also
 /// Neubert's pruning, §6.11). `name` names the block; `generator` is recorded as the tool and
 /// version.

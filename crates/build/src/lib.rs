@@ -26,7 +26,8 @@ pub mod texture;
 
 pub use ambient::AoConfig;
 pub use assemble::{
-    BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, build_scenes, prune_report, recorded_settings,
+    BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, build_scenes, ellipsoid_report, prune_report,
+    recorded_settings,
 };
 pub use demo::{DemoTreeConfig, cards_on_planes, demo_tree, leaf_material};
 pub use ellipsoid::{Clustering, EllipsoidConfig, Ellipsoids};
