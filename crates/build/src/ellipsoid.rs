@@ -17,14 +17,28 @@
 //!   colour over the texels that pass the alpha test ([`crate::texture::integrate`], as Gilet's
 //!   points), weighted by each triangle's opaque area; its alpha is 1.
 //! - **Image error** ([`crate::raster::multiscale_error`], Clasen §4): coverage of the cell's
-//!   leaves (alpha-tested triangles) and of a set of ellipsoids ([`crate::raster::fill_ellipse`])
-//!   in [`EllipsoidConfig::views`] orthographic views of [`EllipsoidConfig::resolution`]² pixels
-//!   fitted to the cell's leaves ([`crate::raster::view_directions`]), the mean over bands and
-//!   views of the multi-scale RMSE.
-//! - **Calibration**: every level's semi-axes are scaled by the factor of [`SCALE_FACTORS`]
-//!   (0.5, 0.6, …, 1.3) with the least image error (ties: the smaller), one factor per level and
-//!   cell (Clasen: "we compute the image error for multiple scaling factors and choose the
-//!   minimum").
+//!   leaves (alpha-tested triangles) and of a set of ellipsoids in [`EllipsoidConfig::views`]
+//!   orthographic views of [`EllipsoidConfig::resolution`]² pixels fitted to the cell's leaves
+//!   ([`crate::raster::view_directions`]), the mean over bands and views of the multi-scale RMSE.
+//!   The ellipsoids are drawn as the renderer draws them ([`crate::raster::fill_ellipsoid_noise`]):
+//!   each pixel of an ellipsoid's projection is hit on its front surface only (a hole shows what
+//!   lies behind it, other ellipsoids, never its own back: `ellipsoid_hit` takes the nearer
+//!   root) and is a hole where the renderer's noise cube, sampled at the hit's local direction,
+//!   is below the threshold `t`. The cube is the renderer's, texel for texel (the same hash), at
+//!   the mip the renderer picks for the ellipsoid when the level is drawn on screen
+//!   (`runtime_noise_levels`: its `noise_mip`, or the coarser level of the pixel footprint of an
+//!   ellipsoid about `√2·`[`EllipsoidConfig::pixels`] across). So a threshold `t` cuts about the
+//!   share `t` of each ellipsoid in holes of the sizes the renderer cuts, relative to the
+//!   ellipsoid (at mip 3 or 4, a few pixels wide in the build's views, about a pixel on
+//!   screen), and where ellipsoids overlap a pixel stays covered with probability `1 − t^m`.
+//! - **Calibration** (Clasen §3.1): every level's semi-axes are scaled by a factor of
+//!   [`SCALE_FACTORS`] (0.5, 0.6, …, 1.6) and its ellipsoids given a noise alpha-test threshold of
+//!   [`THRESHOLDS`] (0, 0.2, 0.4, 0.6), the pair of least image error chosen together (ties: the
+//!   smaller threshold, then the smaller factor), one pair per level and cell ("the image error
+//!   is computed for multiple values of t and corresponding scaling coefficients for the
+//!   ellipsoid area to compensate the area loss due to the alpha test"). Every other factor is
+//!   measured with all thresholds (one image of noise values serves them all), then the two
+//!   neighbours of the best pair's factor at its threshold.
 //! - **Levels** (Clasen's Algorithm 1, made to nest): level 0 is the leaf ellipsoids; each next
 //!   level clusters the previous level's `n` ellipsoids into `⌈n/4⌉` clusters, until one is left.
 //!   [`Clustering::Em`] (the paper's method): EM on a Gaussian mixture over the ellipsoids'
@@ -54,9 +68,9 @@
 //! - **Tries**: each level is clustered [`EllipsoidConfig::tries`] times from different starts;
 //!   each result is calibrated and the one of least image error against the rendered leaves is
 //!   kept (ties: the first).
-//! - **Noise**: `noise_mip = 0.5·(1 + log2 Σ_i w_ij)` with `Σ_i w_ij` the cluster's fuzzy count of
-//!   leaves (0.5 for a leaf); `alpha_threshold` is [`ALPHA_THRESHOLD`] (0.5; not calibrated:
-//!   the calibration measures solid ellipses).
+//! - **Noise**: `noise_mip = 0.5·(1 + log2 Σ_i w_ij)` (Clasen's `l_j`) with `Σ_i w_ij` the
+//!   cluster's fuzzy count of leaves (0.5 for a leaf); `alpha_threshold` is the level's
+//!   calibrated `t`.
 //! - **Intervals** (Clasen §6): a level's error is `e_k = d̄_k / pixels`, `d̄_k` the mean over its
 //!   ellipsoids of the diameter of the sphere of equal surface area (`2·sqrt(S/4π)`, also the
 //!   diameter of the disc of the mean projected area `S/4` over all directions), metres, and
@@ -77,15 +91,23 @@ use crate::error::BuildError;
 use crate::impostor::symmetric_eigen;
 use crate::prune::{MeshTriangle, PruneMesh, find_leaves};
 use crate::raster::{
-    AlphaMask, Mask, RasterTriangle, View, bounding_sphere, fill_ellipse, multiscale_error, project_ellipsoid,
-    rasterize, view_directions,
+    AlphaMask, Mask, NOISE_SIZE, RasterTriangle, View, bounding_sphere, coverage_values, fill_ellipsoid_noise,
+    multiscale_errors_of_grey, noise_cut, rasterize, view_directions,
 };
 use crate::rng::SplitMix64;
 use crate::spt::flatten;
 use crate::texture::linear_to_srgb;
 
-/// The scale factors tried by the calibration (Clasen: "multiple scaling factors").
-pub const SCALE_FACTORS: [f64; 9] = [0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3];
+/// The scale factors tried by the calibration (Clasen: "multiple scaling factors"), with every
+/// threshold of [`THRESHOLDS`].
+pub const SCALE_FACTORS: [f64; 12] = [0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6];
+
+/// The noise alpha-test thresholds tried by the calibration (Clasen's `t`, one per level).
+pub const THRESHOLDS: [f32; 4] = [0.0, 0.2, 0.4, 0.6];
+
+/// The renderer's noise texels per radian of the local hit direction at the cube's finest level
+/// (`shaders/tree.wgsl` `NOISE_TEXELS_PER_RADIAN`).
+const NOISE_TEXELS_PER_RADIAN: f64 = 40.0;
 
 /// Thinnest semi-axis of an ellipsoid as a share of its largest.
 pub const MIN_THICKNESS: f64 = 0.05;
@@ -95,9 +117,6 @@ pub const DROP_AREA: f64 = 0.01;
 
 /// Cluster centres each element's responsibilities are computed over.
 pub const CANDIDATES: usize = 8;
-
-/// The noise alpha-test threshold written (Clasen's `t`; half the noise texels are cut).
-pub const ALPHA_THRESHOLD: f32 = 0.5;
 
 /// Elements per cluster of the next level (Clasen: `n ← n · ¼`).
 const BRANCHING: usize = 4;
@@ -232,6 +251,8 @@ pub struct LevelReport {
     pub written: bool,
     /// Its calibrated scale factor.
     pub factor: f32,
+    /// Its calibrated noise alpha-test threshold (Clasen's `t`).
+    pub alpha_threshold: f32,
     /// Its image error against the cell's leaves (mean multi-scale RMSE of coverage).
     pub error: f64,
     /// Its error `e_k`, metres per pixel.
@@ -364,6 +385,8 @@ struct Level {
     /// Per element of the previous level, its cluster here (empty at level 0).
     parent_of_prev: Vec<u32>,
     factor: f64,
+    /// Clasen's `t`, calibrated with `factor`.
+    threshold: f32,
     error: f64,
 }
 
@@ -371,40 +394,95 @@ struct Level {
 struct Target {
     origin: DVec3,
     views: Vec<View>,
-    reference: Vec<Mask>,
+    /// Per view, the leaves' coverage as 0 and 1 ([`coverage_values`]).
+    reference: Vec<Vec<i32>>,
 }
 
 impl Target {
-    /// The image error of `shapes` at `elements`' centres scaled by `factor`.
-    fn error(&self, elements: &[Element], shapes: &[Shape], factor: f64) -> f64 {
-        let total: f64 = self
-            .views
-            .iter()
-            .zip(&self.reference)
-            .map(|(view, reference)| {
-                let mut mask = Mask::new(view.size);
-                for (e, s) in elements.iter().zip(shapes) {
-                    let axes = [0, 1, 2].map(|i| (s.axes[i] * (s.radii[i] * factor)).as_vec3());
-                    let (c, m) = project_ellipsoid(view, (self.origin + e.mean).as_vec3(), axes);
-                    fill_ellipse(&mut mask, c, m);
-                }
-                multiscale_error(&mask, reference)
-            })
-            .sum();
-        total / self.views.len().max(1) as f64
-    }
-
-    /// The factor of [`SCALE_FACTORS`] of least error (ties: the smaller) and that error.
-    fn calibrate(&self, elements: &[Element], shapes: &[Shape]) -> (f64, f64) {
-        let errors: Vec<f64> = SCALE_FACTORS.par_iter().map(|&f| self.error(elements, shapes, f)).collect();
-        let mut best = (SCALE_FACTORS[0], errors[0]);
-        for (&f, &e) in SCALE_FACTORS.iter().zip(&errors) {
-            if e < best.1 {
-                best = (f, e);
+    /// The image errors of `shapes` at `elements`' centres scaled by `factor`, drawn with the
+    /// renderer's noise holes ([`fill_ellipsoid_noise`] at each one's noise level,
+    /// [`runtime_noise_level`]), per threshold of [`THRESHOLDS`].
+    fn errors(&self, elements: &[Element], shapes: &[Shape], levels: &[u32], factor: f64) -> [f64; THRESHOLDS.len()] {
+        let mut total = [0.0; THRESHOLDS.len()];
+        for (view, reference) in self.views.iter().zip(&self.reference) {
+            let size = view.size as usize;
+            let mut grey = vec![0u16; size * size];
+            for ((e, s), &level) in elements.iter().zip(shapes).zip(levels) {
+                let axes = [0, 1, 2].map(|i| (s.axes[i] * (s.radii[i] * factor)).as_vec3());
+                fill_ellipsoid_noise(&mut grey, view, (self.origin + e.mean).as_vec3(), axes, level);
+            }
+            let cuts = THRESHOLDS.map(noise_cut);
+            for (sum, e) in total.iter_mut().zip(multiscale_errors_of_grey(&grey, reference, &cuts)) {
+                *sum += e;
             }
         }
-        best
+        total.map(|t| t / self.views.len().max(1) as f64)
     }
+
+    /// The pair of [`SCALE_FACTORS`] and [`THRESHOLDS`] of least error (ties: the smaller
+    /// threshold, then the smaller factor) and that error (Clasen §3.1: "the image error is
+    /// computed for multiple values of t and corresponding scaling coefficients"). Every other
+    /// factor is measured first (each image serves every threshold), then the neighbours of the
+    /// best pair's factor at its threshold.
+    fn calibrate(&self, elements: &[Element], shapes: &[Shape], pixels: f32) -> (f64, f32, f64) {
+        let levels = runtime_noise_levels(elements, shapes, pixels);
+        let coarse: Vec<usize> = (0..SCALE_FACTORS.len()).step_by(2).collect();
+        let errors: Vec<[f64; THRESHOLDS.len()]> =
+            coarse.par_iter().map(|&i| self.errors(elements, shapes, &levels, SCALE_FACTORS[i])).collect();
+        // (threshold index, factor index, error)
+        let mut best = (0usize, 0usize, f64::INFINITY);
+        for ti in 0..THRESHOLDS.len() {
+            for (&fi, e) in coarse.iter().zip(&errors) {
+                if e[ti] < best.2 {
+                    best = (ti, fi, e[ti]);
+                }
+            }
+        }
+        let (ti, fi, _) = best;
+        let fine: Vec<usize> =
+            [fi.checked_sub(1), Some(fi + 1)].into_iter().flatten().filter(|&i| i < SCALE_FACTORS.len()).collect();
+        let refined: Vec<f64> =
+            fine.par_iter().map(|&i| self.errors(elements, shapes, &levels, SCALE_FACTORS[i])[ti]).collect();
+        for (&i, &e) in fine.iter().zip(&refined) {
+            if e < best.2 || (e == best.2 && i < best.1) {
+                best = (ti, i, e);
+            }
+        }
+        (SCALE_FACTORS[best.1], THRESHOLDS[best.0], best.2)
+    }
+}
+
+/// Clasen's noise level of a cluster of `leaves` leaves (fuzzy count, spec §6.8 `noise_mip`):
+/// `0.5·(1 + log2 Σ_i w_ij)`, the paper's level `l_j` of `2^l × 2^l` texels per face.
+fn noise_mip(leaves: f64) -> f64 {
+    0.5 * (1.0 + leaves.max(1.0).log2())
+}
+
+/// The mip of the noise cube the renderer samples on each ellipsoid of a level (`ellipsoid_hit`
+/// in `shaders/tree.wgsl`): `max(log2 NOISE_SIZE − noise_mip, log2 footprint)`, the nearest mip
+/// (Vulkan's rounding, `⌈x + ½⌉ − 1`). The footprint is the noise texels per pixel at the middle
+/// of the ellipsoid when the level is drawn: a level is drawn while its mean diameter is between
+/// `pixels` and about twice that on screen, so the mean ellipsoid is taken `√2·pixels` across
+/// and each other in proportion to its diameter; at the middle of a sphere `R` pixels in radius
+/// the hit direction turns `1/R` radians per pixel. (Towards the rim it turns faster and the
+/// renderer picks coarser mips; not modelled.)
+fn runtime_noise_levels(elements: &[Element], shapes: &[Shape], pixels: f32) -> Vec<u32> {
+    let top = f64::from(NOISE_SIZE.ilog2());
+    let diameters: Vec<f64> = shapes.iter().map(|s| s.diameter(1.0)).collect();
+    let mean = diameters.iter().sum::<f64>() / diameters.len().max(1) as f64;
+    elements
+        .iter()
+        .zip(&diameters)
+        .map(|(e, &d)| {
+            let radius_px =
+                0.5 * std::f64::consts::SQRT_2 * f64::from(pixels) * if mean > 0.0 { d / mean } else { 1.0 };
+            let footprint = (NOISE_TEXELS_PER_RADIAN / radius_px.max(1e-6)).log2();
+            let level = (top - noise_mip(e.leaves)).max(footprint).clamp(0.0, top);
+            #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "in 0..=6")]
+            let mip = ((level + 0.5).ceil() - 1.0).clamp(0.0, top) as u32;
+            mip
+        })
+        .collect()
 }
 
 /// Builds the ellipsoid hierarchies of every grid cell (see the module documentation): leaves go
@@ -457,12 +535,12 @@ pub fn build_ellipsoids(
                 .into_iter()
                 .map(|d| View::fit(d, centre, radius, config.resolution))
                 .collect();
-            let reference: Vec<Mask> = views
+            let reference: Vec<Vec<i32>> = views
                 .par_iter()
                 .map(|view| {
                     let mut mask = Mask::new(view.size);
                     rasterize(&mut mask, view, &raster, mesh.alphas);
-                    mask
+                    coverage_values(&mask)
                 })
                 .collect();
             drop(raster);
@@ -572,8 +650,8 @@ fn build_cell(
 /// The levels of one cell, finest first: the leaves, then clusterings down to one ellipsoid.
 fn build_levels(leaves: Vec<Element>, target: &Target, cell: u64, config: &EllipsoidConfig) -> Vec<Level> {
     let shapes: Vec<Shape> = leaves.iter().map(|e| Shape::of(&e.cov, e.weight)).collect();
-    let (factor, error) = target.calibrate(&leaves, &shapes);
-    let mut levels = vec![Level { elements: leaves, shapes, parent_of_prev: Vec::new(), factor, error }];
+    let (factor, threshold, error) = target.calibrate(&leaves, &shapes, config.pixels);
+    let mut levels = vec![Level { elements: leaves, shapes, parent_of_prev: Vec::new(), factor, threshold, error }];
     while let Some(prev) = levels.last()
         && prev.elements.len() > 1
     {
@@ -588,8 +666,8 @@ fn build_levels(leaves: Vec<Element>, target: &Target, cell: u64, config: &Ellip
                     Clustering::KMeans => kmeans(&prev.elements, k, config.iterations, &mut rng),
                 };
                 let (elements, shapes, parent_of_prev) = make_level(&prev.elements, fuzzy);
-                let (factor, error) = target.calibrate(&elements, &shapes);
-                Level { elements, shapes, parent_of_prev, factor, error }
+                let (factor, threshold, error) = target.calibrate(&elements, &shapes, config.pixels);
+                Level { elements, shapes, parent_of_prev, factor, threshold, error }
             })
             .collect();
         let mut best = 0;
@@ -671,13 +749,13 @@ fn records(levels: &[Level], origin: DVec3, pixels: f32) -> Result<CellEllipsoid
         hi = hi.max(centre + reach);
         let rgb = e.colour.as_vec3().to_array().map(linear_to_srgb);
         #[expect(clippy::cast_possible_truncation, reason = "a mip level")]
-        let noise_mip = (0.5 * (1.0 + e.leaves.max(1.0).log2())) as f32;
+        let noise_mip = noise_mip(e.leaves) as f32;
         out.push(EllipsoidRecord {
             center: centre.to_array(),
             radii: radii.map(|r| r as f32),
             orientation: quaternion(&shape.axes),
             color: pack::rgba8([rgb[0], rgb[1], rgb[2], 1.0]),
-            alpha_threshold: ALPHA_THRESHOLD,
+            alpha_threshold: level.threshold,
             noise_mip,
             lo: s.lo,
             hi: s.hi,
@@ -696,6 +774,7 @@ fn records(levels: &[Level], origin: DVec3, pixels: f32) -> Result<CellEllipsoid
                 count: l.elements.len() as u32,
                 written: w,
                 factor: l.factor as f32,
+                alpha_threshold: l.threshold,
                 error: l.error,
                 threshold: t as f32,
             };

@@ -539,6 +539,21 @@ pub fn project_ellipsoid(view: &View, centre: Vec3, axes: [Vec3; 3]) -> (Vec2, [
 /// not positive) covers at most the centres on its segment, none in practice: a flat disc seen
 /// edge-on covers nothing, as in a renderer.
 pub fn fill_ellipse(mask: &mut Mask, centre: Vec2, m: [f64; 3]) {
+    let stride = mask.stride;
+    let words = &mut mask.words;
+    ellipse_spans(mask.size, centre, m, |y, first_x, last_x| {
+        let row = y * stride;
+        for word in first_x / 64..=last_x / 64 {
+            let first = if word == first_x / 64 { first_x % 64 } else { 0 };
+            let end = if word == last_x / 64 { last_x % 64 } else { 63 };
+            words[row + word] |= (u64::MAX >> (63 - end)) & (u64::MAX << first);
+        }
+    });
+}
+
+/// The spans `(y, x0, x1)` (inclusive) of the pixels of a `size × size` image whose centres lie
+/// in the ellipse of [`fill_ellipse`], row by row.
+fn ellipse_spans(size: u32, centre: Vec2, m: [f64; 3], mut span: impl FnMut(usize, usize, usize)) {
     let [a, b, c] = m;
     let det = a * c - b * b;
     if !(c > 0.0 && a > 0.0 && det.is_finite() && centre.is_finite()) {
@@ -547,10 +562,10 @@ pub fn fill_ellipse(mask: &mut Mask, centre: Vec2, m: [f64; 3]) {
     let det = det.max(0.0);
     let (cx, cy) = (f64::from(centre.x), f64::from(centre.y));
     let half_height = c.sqrt();
-    let size = f64::from(mask.size);
+    let width = f64::from(size);
     let (y0, y1) =
-        (ceil_f64(cy - half_height - 0.5).max(0), floor_f64(cy + half_height - 0.5).min(i64::from(mask.size) - 1));
-    let last = i64::from(mask.size) - 1;
+        (ceil_f64(cy - half_height - 0.5).max(0), floor_f64(cy + half_height - 0.5).min(i64::from(size) - 1));
+    let last = i64::from(size) - 1;
     for y in y0..=y1 {
         #[expect(clippy::cast_precision_loss, reason = "a pixel row")]
         let dy = y as f64 + 0.5 - cy;
@@ -560,7 +575,7 @@ pub fn fill_ellipse(mask: &mut Mask, centre: Vec2, m: [f64; 3]) {
         }
         let mid = cx + b / c * dy;
         let half = (det / c * t).sqrt();
-        if mid + half < 0.0 || mid - half > size {
+        if mid + half < 0.0 || mid - half > width {
             continue;
         }
         let (x0, x1) = (ceil_f64(mid - half - 0.5).max(0), floor_f64(mid + half - 0.5).min(last));
@@ -568,11 +583,151 @@ pub fn fill_ellipse(mask: &mut Mask, centre: Vec2, m: [f64; 3]) {
             continue;
         }
         #[expect(clippy::cast_sign_loss, clippy::cast_possible_truncation, reason = "0 <= x0 <= x1 < size")]
-        let (row, first_x, last_x) = (y as usize * mask.stride, x0 as usize, x1 as usize);
-        for word in first_x / 64..=last_x / 64 {
-            let first = if word == first_x / 64 { first_x % 64 } else { 0 };
-            let end = if word == last_x / 64 { last_x % 64 } else { 63 };
-            mask.words[row + word] |= (u64::MAX >> (63 - end)) & (u64::MAX << first);
+        span(y as usize, x0 as usize, x1 as usize);
+    }
+}
+
+/// Texels along a side of a face of the renderer's noise cube at its finest level
+/// (`crates/render/src/noise.rs` `NOISE_SIZE`).
+pub const NOISE_SIZE: u32 = 64;
+
+/// The renderer's noise cube (`crates/render/src/noise.rs`): the grey value, `0 ..= 255`, of
+/// the texel of mip `level` (`NOISE_SIZE >> level` texels per side) that the direction `d`
+/// (need not be unit) samples with the nearest texel (the cube-map face and `(s, t)` rules of
+/// Vulkan and WebGPU: the face of `d`'s largest component, `+X −X +Y −Y +Z −Z` = 0..5). The same
+/// hash as the renderer's texels, so the build sees the holes the renderer cuts.
+#[must_use]
+pub fn noise_grey(d: Vec3, level: u32) -> u8 {
+    let (table, offsets) = noise_table();
+    let level = level.min(NOISE_SIZE.ilog2());
+    noise_lookup(&table[offsets[level as usize]..], NOISE_SIZE >> level, d)
+}
+
+/// [`noise_grey`] in one level's texels (`side` per face side).
+#[inline]
+fn noise_lookup(texels: &[u8], side: u32, d: Vec3) -> u8 {
+    let (ax, ay, az) = (d.x.abs(), d.y.abs(), d.z.abs());
+    let (face, sc, tc, ma) = if ax >= ay && ax >= az {
+        if d.x >= 0.0 { (0u32, -d.z, -d.y, ax) } else { (1, d.z, -d.y, ax) }
+    } else if ay >= az {
+        if d.y >= 0.0 { (2, d.x, d.z, ay) } else { (3, d.x, -d.z, ay) }
+    } else if d.z >= 0.0 {
+        (4, d.x, -d.y, az)
+    } else {
+        (5, -d.x, -d.y, az)
+    };
+    let ma = ma.max(1e-30);
+    #[expect(clippy::cast_precision_loss, reason = "at most 64")]
+    let half = 0.5 * side as f32 / ma;
+    // Truncation is the floor here (negative values saturate to 0).
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the face")]
+    let texel = |v: f32| (((v + ma) * half) as u32).min(side - 1);
+    texels[(face * side * side + texel(tc) * side + texel(sc)) as usize]
+}
+
+/// The grey values of the noise cube, level by level, face by face, row by row (texel `i` of
+/// face `f` at level `l` at `offsets[l] + f·side² + i`), hashed as the renderer hashes them.
+fn noise_table() -> &'static (Vec<u8>, Vec<usize>) {
+    static TABLE: std::sync::OnceLock<(Vec<u8>, Vec<usize>)> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let (mut table, mut offsets) = (Vec::new(), Vec::new());
+        for level in 0..=NOISE_SIZE.ilog2() {
+            offsets.push(table.len());
+            let side = NOISE_SIZE >> level;
+            for face in 0..6u32 {
+                for i in 0..side * side {
+                    let mut h = noise_mix((u64::from(level) << 40) ^ (u64::from(face) << 32) ^ u64::from(i));
+                    // The renderer draws a random unit vector (two values) before the grey value.
+                    for _ in 0..3 {
+                        h = noise_mix(h);
+                    }
+                    table.push((h >> 56).to_le_bytes()[0]);
+                }
+            }
+        }
+        (table, offsets)
+    })
+}
+
+/// SplitMix64's finaliser, as the renderer's noise hashes its texels.
+fn noise_mix(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^ (x >> 31)
+}
+
+/// The ellipsoid `{centre + Σ u_i·axes[i] : |u| ≤ 1}` (`axes` orthogonal, as a record's frame)
+/// drawn as the renderer's `fs_ellipsoid` draws it, into `grey` (`size × size`, rows top to
+/// bottom): each pixel of its projection ([`fill_ellipse`]'s pixels) is hit on the front surface
+/// only (the nearer root of the ray; a hole shows what lies behind, never the ellipsoid's back),
+/// at the local direction `u` of the hit, and gets the grey value `g` of the noise cube's texel of
+/// mip `level` there ([`noise_grey`]). `grey` keeps per pixel `1 +` the largest `g` of the
+/// ellipsoids drawn over it (0: none), so the pixel is covered under the alpha threshold `t`
+/// (holes where `g / 255 < t`) if `grey ≥ 1 + ⌈255·t⌉` ([`noise_cut`]).
+///
+/// # Panics
+/// If `grey` is not `view.size²` long.
+pub fn fill_ellipsoid_noise(grey: &mut [u16], view: &View, centre: Vec3, axes: [Vec3; 3], level: u32) {
+    let size = view.size as usize;
+    assert_eq!(grey.len(), size * size, "grey image of the wrong size");
+    let (c, m) = project_ellipsoid(view, centre, axes);
+    // The local coordinates of a model-space offset: axes are orthogonal, so A⁻¹ = diag(1/r²)·Aᵀ.
+    let inverse = axes.map(|a| {
+        let r2 = a.length_squared();
+        if r2 > 0.0 { a / r2 } else { Vec3::ZERO }
+    });
+    let local = |v: Vec3| Vec3::new(inverse[0].dot(v), inverse[1].dot(v), inverse[2].dot(v));
+    // The ray towards the model through a pixel: from its point on the image plane through the
+    // centre, along −direction.
+    let d = local(-view.direction);
+    let dd = d.length_squared();
+    if !(dd > 0.0 && dd.is_finite()) {
+        return;
+    }
+    let half = 0.5 * view.size as f32;
+    let base = view.centre - centre;
+    let (table, offsets) = noise_table();
+    let level = level.min(NOISE_SIZE.ilog2());
+    let (texels, side) = (&table[offsets[level as usize]..], NOISE_SIZE >> level);
+    let inv_scale = 1.0 / view.scale;
+    let (step, inv_dd) = (local(view.right * inv_scale), 1.0 / dd);
+    ellipse_spans(view.size, c, m, |y, x0, x1| {
+        #[expect(clippy::cast_precision_loss, reason = "a pixel row")]
+        let py = (half - (y as f32 + 0.5)) * inv_scale;
+        let row = local(base + view.up * py);
+        for (x, slot) in (x0..=x1).zip(&mut grey[y * size + x0..=y * size + x1]) {
+            #[expect(clippy::cast_precision_loss, reason = "a pixel column")]
+            let o = row + step * (x as f32 + 0.5 - half);
+            let b = o.dot(d);
+            let disc = (b * b - dd * (o.length_squared() - 1.0)).max(0.0);
+            let t = (-b - disc.sqrt()) * inv_dd;
+            let g = 1 + u16::from(noise_lookup(texels, side, o + d * t));
+            *slot = (*slot).max(g);
+        }
+    });
+}
+
+/// The least value of a [`fill_ellipsoid_noise`] image that is covered under the alpha threshold
+/// `t`: `1 +` the least grey `g` with `g / 255 ≥ t` (the renderer's test, in `f32`).
+#[must_use]
+pub fn noise_cut(t: f32) -> u16 {
+    (0..=255u16).find(|&g| f32::from(g) / 255.0 >= t).map_or(u16::MAX, |g| g + 1)
+}
+
+/// The coverage of a [`fill_ellipsoid_noise`] image under the cut `cut` ([`noise_cut`]).
+///
+/// # Panics
+/// If `grey` is not `mask`'s size squared long.
+pub fn threshold_into(mask: &mut Mask, grey: &[u16], cut: u16) {
+    let size = mask.size as usize;
+    assert_eq!(grey.len(), size * size, "grey image of the wrong size");
+    mask.words.fill(0);
+    for (y, row) in grey.chunks_exact(size).enumerate() {
+        for (x, &g) in row.iter().enumerate() {
+            if g >= cut {
+                mask.words[y * mask.stride + x / 64] |= 1 << (x % 64);
+            }
         }
     }
 }
@@ -639,6 +794,65 @@ pub fn multiscale_rmse(test: &Mask, reference: &Mask) -> Vec<f64> {
         .map(|(b, &sq)| {
             let side = (n >> b) as f64;
             (sq / (side * side)).sqrt()
+        })
+        .collect()
+}
+
+/// A mask's pixels as 0 and 1, rows top to bottom (the reference of
+/// [`multiscale_errors_of_grey`]).
+#[must_use]
+pub fn coverage_values(mask: &Mask) -> Vec<i32> {
+    let n = mask.size as usize;
+    (0..n * n).map(|p| i32::from(mask.words[(p / n) * mask.stride + (p % n) / 64] >> (p % 64) & 1 == 1)).collect()
+}
+
+/// [`multiscale_error`] of the coverage of the [`fill_ellipsoid_noise`] image `grey` under each
+/// cut of `cuts` ([`noise_cut`]) against the coverage `reference` ([`coverage_values`]), in one
+/// pass per cut over a pyramid of block sums (the same numbers up to rounding).
+///
+/// # Panics
+/// If `grey` and `reference` differ in length or are not `n²` long for a power of two `n ≥ 2`.
+#[must_use]
+pub fn multiscale_errors_of_grey(grey: &[u16], reference: &[i32], cuts: &[u16]) -> Vec<f64> {
+    assert_eq!(grey.len(), reference.len(), "images of different sizes");
+    let n = grey.len().isqrt();
+    assert!(n >= 2 && n.is_power_of_two() && n * n == grey.len(), "multi-scale RMSE needs a power-of-two side");
+    let bands = n.trailing_zeros() as usize;
+    let mut level = vec![0i32; n * n];
+    let mut next = vec![0i32; n * n / 4];
+    cuts.iter()
+        .map(|&cut| {
+            for ((l, &g), &r) in level.iter_mut().zip(grey).zip(reference) {
+                *l = i32::from(g >= cut) - r;
+            }
+            let (mut side, mut total) = (n, 0.0f64);
+            for b in 0..bands {
+                // Squares of block sums fit in i32 up to 2^15 (a 2^b block sums to at most 4^b).
+                let squares: i64 =
+                    level[..side * side].chunks(1024).map(|c| i64::from(c.iter().map(|&v| v * v).sum::<i32>())).sum();
+                // A band-b pixel is the block sum over 4^b: its square is sum² / 16^b.
+                #[expect(
+                    clippy::cast_precision_loss,
+                    clippy::cast_possible_wrap,
+                    clippy::cast_possible_truncation,
+                    reason = "small numbers"
+                )]
+                let mean = squares as f64 / (16f64.powi(b as i32) * (side * side) as f64);
+                total += mean.sqrt();
+                if b + 1 < bands {
+                    let half = side / 2;
+                    for y in 0..half {
+                        let (r0, r1) =
+                            (&level[2 * y * side..(2 * y + 1) * side], &level[(2 * y + 1) * side..(2 * y + 2) * side]);
+                        for (x, out) in next[y * half..(y + 1) * half].iter_mut().enumerate() {
+                            *out = r0[2 * x] + r0[2 * x + 1] + r1[2 * x] + r1[2 * x + 1];
+                        }
+                    }
+                    level[..half * half].copy_from_slice(&next[..half * half]);
+                    side = half;
+                }
+            }
+            total / bands as f64
         })
         .collect()
 }
@@ -961,5 +1175,53 @@ mod tests {
         assert_eq!(&cells[..4], &[(0, 0), (1, 0), (0, 1), (1, 1)]);
         assert_eq!(cells[4], (2, 0));
         assert_eq!(cells[15], (3, 3));
+    }
+
+    #[test]
+    fn the_noise_cube_is_uniform_per_level_and_hashed_as_the_renderer_hashes_it() {
+        // Texel 0 of face 0, level 0, by the renderer's recipe: mix(key), two draws, then alpha.
+        let mut h = noise_mix(0);
+        for _ in 0..3 {
+            h = noise_mix(h);
+        }
+        let expected = (h >> 56).to_le_bytes()[0];
+        // The direction of face +X's corner texel (s, t) = (0, 0): sc = −z, tc = −y near −1.
+        assert_eq!(noise_grey(Vec3::new(1.0, 0.999, 0.999), 0), expected);
+        // Every level below 1×1 faces: about a share t of the texels is under t.
+        for level in 0..4u32 {
+            let side = NOISE_SIZE >> level;
+            let (table, offsets) = noise_table();
+            let texels = &table[offsets[level as usize]..offsets[level as usize] + 6 * (side * side) as usize];
+            for t in [0.2f32, 0.4, 0.6] {
+                let under = texels.iter().filter(|&&g| f32::from(g) / 255.0 < t).count() as f32 / texels.len() as f32;
+                assert!((under - t).abs() < 0.12, "level {level} t {t}: {under}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_noisy_ellipsoid_covers_the_ellipse_at_threshold_zero_and_about_one_minus_t_above() {
+        let view = View::fit(Vec3::new(0.3, 0.4, 1.0), Vec3::ZERO, 1.0, 128);
+        let axes = [Vec3::new(0.8, 0.1, 0.0), Vec3::new(-0.05, 0.4, 0.0), Vec3::new(0.0, 0.0, 0.3)];
+        let (c, m) = project_ellipsoid(&view, Vec3::ZERO, axes);
+        let mut solid = Mask::new(128);
+        fill_ellipse(&mut solid, c, m);
+        let mut grey = vec![0u16; 128 * 128];
+        fill_ellipsoid_noise(&mut grey, &view, Vec3::ZERO, axes, 2);
+        let mut mask = Mask::new(128);
+        threshold_into(&mut mask, &grey, noise_cut(0.0));
+        assert_eq!(mask, solid);
+        let area = solid.count() as f64;
+        for t in [0.2f32, 0.4, 0.6] {
+            threshold_into(&mut mask, &grey, noise_cut(t));
+            let kept = mask.count() as f64 / area;
+            assert!((kept - (1.0 - f64::from(t))).abs() < 0.15, "t {t}: {kept}");
+            // The errors of the grey image are those of its thresholded masks.
+            let reference = coverage_values(&solid);
+            let fast = multiscale_errors_of_grey(&grey, &reference, &[noise_cut(t)])[0];
+            assert!((fast - multiscale_error(&mask, &solid)).abs() < 1e-12, "{fast}");
+        }
+        assert_eq!(noise_cut(0.0), 1);
+        assert_eq!(noise_cut(0.2), 1 + 51);
     }
 }
