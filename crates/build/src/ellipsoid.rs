@@ -42,19 +42,24 @@
 //! - **Levels** (Clasen's Algorithm 1, made to nest): level 0 is the leaf ellipsoids; each next
 //!   level clusters the previous level's `n` ellipsoids into `⌈n/4⌉` clusters, until one is left.
 //!   [`Clustering::Em`] (the paper's method): EM on a Gaussian mixture over the ellipsoids'
-//!   centres, each weighted by its leaves' area, with full covariances, started from random
-//!   centres in the bounding box of the centres ([`SplitMix64`], seeded from
-//!   [`EllipsoidConfig::seed`], the cell, the level and the try). Each element is a Gaussian
+//!   centres, each weighted by its leaves' area, with full covariances, started from k-means++
+//!   starts at the elements' centres (`plus_plus_starts`: D² sampling by weight, [`SplitMix64`]
+//!   seeded from [`EllipsoidConfig::seed`], the cell, the level and the try). Each element is a Gaussian
 //!   itself (its leaves' surface), so the M-step adds its own covariance to the scatter of the
 //!   centres, as when reducing a mixture (Vasconcelos and Lippman 1999), and the E-step its
 //!   expected log-density `log N(μ_i | m_j, Σ_j) − ½ tr(Σ_j⁻¹ C_i)`: clusters of four flat leaves
 //!   do not collapse to singular covariances. A regulariser of `(10⁻⁴·D)²` (D the diagonal of the
 //!   centres' box) is added to each covariance. To stay `O(n)`, each element's responsibilities
-//!   are taken over its [`CANDIDATES`] nearest cluster centres (a uniform grid of the centres);
-//!   a cluster no element considers moves to a random element during the first half of the
-//!   iterations. Iterations stop when the log-likelihood gains less than `10⁻⁴` per unit of
-//!   weight, or after [`EllipsoidConfig::iterations`]. [`Clustering::KMeans`] is the baseline
-//!   of the paper's comparison: Lloyd's k-means (hard, spherical) from the same starts.
+//!   are taken over its [`CANDIDATES`] nearest cluster centres (a uniform grid of the centres).
+//!   A cluster that is no element's likeliest (it would end up without members) is re-seeded
+//!   after every M-step, for the whole run: it splits the cluster of most members, moving to
+//!   that cluster's member worst explained by the mixture with the same covariance and half the
+//!   prior each, so that levels keep close to `⌈n/4⌉` clusters.
+//!   Iterations stop when the log-likelihood gains less than `10⁻⁴` per unit of weight and every
+//!   cluster is some element's likeliest, or after [`EllipsoidConfig::iterations`].
+//!   [`Clustering::KMeans`] is the baseline of the paper's comparison: Lloyd's k-means (hard,
+//!   spherical) from the same starts, an empty cluster moved to the element farthest from its
+//!   centre.
 //! - **Membership and shape**: the hard membership (argmax of the fuzzy weight, ties: the lower
 //!   cluster) says which ellipsoids of the previous level a cluster contains, so levels nest and
 //!   every cluster's leaves are a contiguous run. The shape comes from the fuzzy weights (the
@@ -931,11 +936,74 @@ impl CentreGrid {
     }
 }
 
-/// `k` random points uniformly in the bounding box of the elements' centres.
-fn random_starts(elements: &[Element], k: usize, rng: &mut SplitMix64) -> Vec<DVec3> {
-    let (lo, hi) =
-        elements.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), e| (lo.min(e.mean), hi.max(e.mean)));
-    (0..k).map(|_| lo + (hi - lo) * DVec3::new(rng.next_f64(), rng.next_f64(), rng.next_f64())).collect()
+/// Above this many element–centre distances, [`plus_plus_starts`] takes distinct random elements
+/// instead of D² sampling.
+const PLUS_PLUS_WORK: usize = 50_000_000;
+
+/// `k` starting centres at elements' centres by k-means++ (Arthur and Vassilvitskii 2007): the
+/// first an element drawn by weight, each next one drawn with probability proportional to its
+/// weight times its squared distance to the nearest centre so far (an element drawn by weight if
+/// all coincide with centres). Above [`PLUS_PLUS_WORK`] distances, `k` distinct elements drawn
+/// uniformly. Deterministic from `rng`.
+fn plus_plus_starts(elements: &[Element], k: usize, rng: &mut SplitMix64) -> Vec<DVec3> {
+    let n = elements.len();
+    let k = k.min(n);
+    #[expect(clippy::cast_possible_truncation, reason = "an index below n")]
+    let below = |rng: &mut SplitMix64, n: usize| rng.below(n as u64) as usize;
+    if n.saturating_mul(k) > PLUS_PLUS_WORK {
+        // A partial Fisher–Yates shuffle.
+        let mut order: Vec<usize> = (0..n).collect();
+        for i in 0..k {
+            let j = i + below(rng, n - i);
+            order.swap(i, j);
+        }
+        return order[..k].iter().map(|&i| elements[i].mean).collect();
+    }
+    // The element at `u` of the way along the cumulative `score`, in element order.
+    let pick = |score: &[f64], u: f64| -> usize {
+        let total: f64 = score.iter().sum();
+        let target = u * total;
+        let mut sum = 0.0;
+        for (i, &s) in score.iter().enumerate() {
+            sum += s;
+            if sum > target {
+                return i;
+            }
+        }
+        score.iter().rposition(|&s| s > 0.0).unwrap_or(n - 1)
+    };
+    let weights: Vec<f64> = elements.iter().map(|e| e.weight.max(0.0)).collect();
+    let first = if weights.iter().any(|&w| w > 0.0) { pick(&weights, rng.next_f64()) } else { below(rng, n) };
+    let mut starts = vec![elements[first].mean];
+    let mut nearest: Vec<f64> = elements.iter().map(|e| e.mean.distance_squared(starts[0])).collect();
+    let mut score = vec![0.0f64; n];
+    while starts.len() < k {
+        for ((s, &w), &d) in score.iter_mut().zip(&weights).zip(&nearest) {
+            *s = w * d;
+        }
+        let u = rng.next_f64();
+        let i = if score.iter().any(|&s| s > 0.0) {
+            pick(&score, u)
+        } else if weights.iter().any(|&w| w > 0.0) {
+            pick(&weights, u)
+        } else {
+            below(rng, n)
+        };
+        let c = elements[i].mean;
+        starts.push(c);
+        for (d, e) in nearest.iter_mut().zip(elements) {
+            *d = d.min(e.mean.distance_squared(c));
+        }
+    }
+    starts
+}
+
+/// The elements by how badly they are explained, worst first (ties: the lower index), `fit[i]`
+/// higher for better explained.
+fn worst_first(fit: &[f64]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..fit.len()).collect();
+    order.sort_by(|&a, &b| fit[a].total_cmp(&fit[b]).then(a.cmp(&b)));
+    order
 }
 
 /// A Gaussian of the mixture with what its density needs.
@@ -973,7 +1041,7 @@ fn em(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64) -> 
     let regulariser = DMat3::from_diagonal(DVec3::splat((1e-4 * diagonal).powi(2)));
     let spread = (hi - lo).max_element().max(1e-6) / (2.0 * (k as f64).cbrt());
     let start_cov = DMat3::from_diagonal(DVec3::splat(spread * spread)) + regulariser;
-    let mut means = random_starts(elements, k, rng);
+    let mut means = plus_plus_starts(elements, k, rng);
     let mut covs = vec![start_cov; k];
     let mut priors = vec![1.0 / k as f64; k];
     let total: f64 = elements.iter().map(|e| e.weight).sum::<f64>().max(1e-300);
@@ -984,7 +1052,7 @@ fn em(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64) -> 
         // E-step over each element's nearest centres.
         let components: Vec<Component> = (0..k).map(|j| Component::new(means[j], covs[j], priors[j])).collect();
         let grid = CentreGrid::new(&means, &alive);
-        let ll: f64 = fuzzy
+        let fit: Vec<f64> = fuzzy
             .cluster
             .par_chunks_mut(slots)
             .zip(fuzzy.weight.par_chunks_mut(slots))
@@ -1007,12 +1075,29 @@ fn em(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64) -> 
                     weight[s] = l / sum;
                 }
                 weight[near.len()..].fill(0.0);
-                e.weight * (top + sum.ln())
+                top + sum.ln()
             })
-            .collect::<Vec<f64>>()
-            .iter()
-            .sum();
-        let converged = (ll - last_ll).abs() < 1e-4 * total;
+            .collect();
+        let ll: f64 = fit.iter().zip(elements).map(|(f, e)| e.weight * f).sum();
+        // Clusters that are no element's likeliest: they would end up empty.
+        let mut members = vec![0u32; k];
+        let mut owner = vec![0u32; n];
+        for ((cluster, weight), own) in
+            fuzzy.cluster.chunks_exact(slots).zip(fuzzy.weight.chunks_exact(slots)).zip(owner.iter_mut())
+        {
+            let mut best = (0.0f64, u32::MAX);
+            for (&j, &w) in cluster.iter().zip(weight) {
+                if w > best.0 || (w == best.0 && w > 0.0 && j < best.1) {
+                    best = (w, j);
+                }
+            }
+            if best.1 != u32::MAX {
+                members[best.1 as usize] += 1;
+                *own = best.1;
+            }
+        }
+        let empty: Vec<usize> = (0..k).filter(|&j| members[j] == 0).collect();
+        let converged = (ll - last_ll).abs() < 1e-4 * total && empty.is_empty();
         last_ll = ll;
         if converged || iteration + 1 == iterations.max(1) {
             break;
@@ -1037,15 +1122,37 @@ fn em(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64) -> 
                 means[j] = m;
                 covs[j] = second * (1.0 / w) - outer(m, m) + regulariser;
                 priors[j] = w / total;
-            } else if iteration < iterations / 2 {
-                // No element considers it: it takes the place of a random element.
-                #[expect(clippy::cast_possible_truncation, reason = "an index below n")]
-                let i = rng.below(n as u64) as usize;
-                means[j] = elements[i].mean;
-                covs[j] = start_cov;
-                priors[j] = 1.0 / k as f64;
             } else {
                 priors[j] = 1e-12;
+            }
+        }
+        // A cluster that no element prefers splits the cluster of most members (ties: the lower):
+        // it moves to that cluster's member worst explained by the mixture, with the same
+        // covariance and half its prior each, so the members on that side come along.
+        if !empty.is_empty() {
+            let mut worst: Vec<Option<(f64, usize)>> = vec![None; k];
+            for (i, (&o, &f)) in owner.iter().zip(&fit).enumerate() {
+                let slot = &mut worst[o as usize];
+                if slot.is_none_or(|(w, _)| f < w) {
+                    *slot = Some((f, i));
+                }
+            }
+            let mut count: Vec<f64> = members.iter().map(|&m| f64::from(m)).collect();
+            for &j in &empty {
+                let mut split: Option<usize> = None;
+                for o in 0..k {
+                    if worst[o].is_some() && count[o] > 1.0 && split.is_none_or(|b| count[o] > count[b]) {
+                        split = Some(o);
+                    }
+                }
+                let Some(o) = split else { break };
+                let Some((_, i)) = worst[o].take() else { break };
+                means[j] = elements[i].mean;
+                covs[j] = covs[o];
+                priors[o] *= 0.5;
+                priors[j] = priors[o];
+                count[o] *= 0.5;
+                count[j] = count[o];
             }
         }
     }
@@ -1057,7 +1164,7 @@ fn em(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64) -> 
 fn kmeans(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64) -> Fuzzy {
     let n = elements.len();
     let k = k.clamp(1, n);
-    let mut means = random_starts(elements, k, rng);
+    let mut means = plus_plus_starts(elements, k, rng);
     let alive = vec![true; k];
     let mut assign: Vec<u32> = Vec::new();
     for iteration in 0..iterations.max(1) {
@@ -1078,12 +1185,17 @@ fn kmeans(elements: &[Element], k: usize, iterations: u32, rng: &mut SplitMix64)
             sums[j as usize].0 += e.weight;
             sums[j as usize].1 += e.mean * e.weight;
         }
+        // Empty clusters move to the elements farthest from their centres, farthest first.
+        let fit: Vec<f64> =
+            elements.iter().zip(&assign).map(|(e, &j)| -e.mean.distance_squared(means[j as usize])).collect();
+        let empty: Vec<usize> = (0..k).filter(|&j| sums[j].0 <= 0.0).collect();
         for (j, &(w, first)) in sums.iter().enumerate() {
             if w > 0.0 {
                 means[j] = first / w;
-            } else if iteration < iterations / 2 {
-                #[expect(clippy::cast_possible_truncation, reason = "an index below n")]
-                let i = rng.below(n as u64) as usize;
+            }
+        }
+        if iteration + 1 < iterations.max(1) {
+            for (&j, i) in empty.iter().zip(worst_first(&fit)) {
                 means[j] = elements[i].mean;
             }
         }

@@ -207,6 +207,81 @@ fn bad_ellipsoid_settings_are_refused_naming_the_setting() {
     }
 }
 
+/// Square leaves (two triangles, no alpha test) of side `side` at `centres`, turned at random,
+/// built into one cell's ellipsoids with the default settings.
+fn square_leaves(centres: &[Vec3], side: f32, seed: u64) -> treelod_build::ellipsoid::CellEllipsoids {
+    use treelod_build::ellipsoid::{EllipsoidMesh, build_ellipsoids};
+    use treelod_build::prune::MeshTriangle;
+    use treelod_format::VertexRecord;
+    let mut rng = SplitMix64(seed);
+    let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+    for &c in centres {
+        let axis = Vec3::new(normal(&mut rng), normal(&mut rng), normal(&mut rng)).normalize_or(Vec3::Y);
+        let turn = glam::Quat::from_axis_angle(axis, rng.range(0.0, std::f32::consts::TAU));
+        let h = 0.5 * side;
+        let first = u32::try_from(vertices.len()).expect("few vertices");
+        for (x, z) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
+            vertices.push(VertexRecord {
+                position: (c + turn * Vec3::new(x, 0.0, z)).to_array(),
+                ..VertexRecord::default()
+            });
+        }
+        let alpha = treelod_build::raster::NO_ALPHA;
+        triangles.push(MeshTriangle { v: [first, first + 1, first + 2], alpha });
+        triangles.push(MeshTriangle { v: [first, first + 2, first + 3], alpha });
+    }
+    let mesh = EllipsoidMesh { vertices: &vertices, triangles: &triangles, alphas: &[], colours: &[] };
+    let built = build_ellipsoids(&mesh, |_| 0, 1, &EllipsoidConfig::default()).expect("builds");
+    assert_eq!(built.leaves as usize, centres.len());
+    built.cells.into_iter().next().expect("one cell")
+}
+
+#[test]
+fn separate_leaves_keep_their_ellipsoids_solid() {
+    // 50 leaves of 0.2 m, 1 m apart: level 0 (one ellipsoid per leaf) gets no holes.
+    let centres: Vec<Vec3> =
+        (0..50).map(|i| Vec3::new((i % 5) as f32, ((i / 5) % 5) as f32, (i / 25) as f32)).collect();
+    let cell = square_leaves(&centres, 0.2, 3);
+    assert_eq!(cell.levels[0].count, 50);
+    assert_eq!(cell.levels[0].alpha_threshold, 0.0, "{:?}", cell.levels[0]);
+    let leaves: Vec<&EllipsoidRecord> = cell.records.iter().filter(|r| r.lo == 0.0).collect();
+    assert_eq!(leaves.len(), 50);
+    assert!(leaves.iter().all(|r| r.alpha_threshold == 0.0 && r.noise_mip == 0.5));
+    // Every level's threshold is one of the calibrated values, and written as its records'.
+    for level in &cell.levels {
+        assert!(treelod_build::ellipsoid::THRESHOLDS.contains(&level.alpha_threshold), "{level:?}");
+    }
+    for r in &cell.records {
+        assert!(treelod_build::ellipsoid::THRESHOLDS.contains(&r.alpha_threshold), "{r:?}");
+    }
+}
+
+#[test]
+fn em_levels_keep_at_least_nine_tenths_of_the_requested_clusters_on_blobs() {
+    // 24 Gaussian blobs of 30 leaves each, of different sizes and densities.
+    let mut rng = SplitMix64(11);
+    let mut centres = Vec::new();
+    for b in 0..24 {
+        let mean = Vec3::new(rng.range(-6.0, 6.0), rng.range(-6.0, 6.0), rng.range(-6.0, 6.0));
+        let sigma = 0.2 + 0.1 * (b % 5) as f32;
+        for _ in 0..30 {
+            centres.push(mean + sigma * Vec3::new(normal(&mut rng), normal(&mut rng), normal(&mut rng)));
+        }
+    }
+    let cell = square_leaves(&centres, 0.1, 5);
+    assert!(cell.levels.len() >= 4, "{:?}", cell.levels);
+    for pair in cell.levels.windows(2) {
+        let requested = pair[0].count.div_ceil(4);
+        assert!(
+            f64::from(pair[1].count) >= 0.9 * f64::from(requested),
+            "{} of {requested} clusters: {:?}",
+            pair[1].count,
+            cell.levels
+        );
+    }
+    assert_eq!(cell.levels.last().map(|l| l.count), Some(1));
+}
+
 fn model(name: &str) -> PathBuf {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/trees").join(name);
     assert!(path.exists(), "{} is missing: the repository is checked out with ../shared beside it", path.display());
