@@ -56,12 +56,12 @@
 //!   drops by 3/4 steps until it fits.
 //! - **Indirect texturing** ([`Texturing::Indirect`], Garcia §2.3; spec §6.10.1), instead of the
 //!   atlas: each plane's quad gets a low-resolution grid of *leaf slots* at
-//!   [`ImpostorConfig::slots_per_leaf`] texels across the median leaf ([`bake_slots`]: 4 × 4
+//!   [`ImpostorConfig::slots_per_leaf`] texels across the median leaf (`bake_slots`: 4 × 4
 //!   samples per texel, each taking the leaf nearest to the plane that passes its alpha test; a
 //!   texel keeps the two leaves of most samples), and each (plane, leaf) a
 //!   [`PlaneLeafRecord`]: the weighted least-squares affine map from the plane's `(s, t)` to the
 //!   leaf's texture coordinates over its turned vertices, each triangle weighted by its area as
-//!   projected on the plane ([`LeafFit`]), and the leaf's texture rectangle, colour and
+//!   projected on the plane (`LeafFit`), and the leaf's texture rectangle, colour and
 //!   material. The renderer draws the leaves from their own textures, so a plane close up shows
 //!   the leaf texture's full detail. Garcia stores a corner and an angle per texel and keeps a
 //!   set of pre-rotated leaf images; the affine map does the rotation (and any scale or shear)
