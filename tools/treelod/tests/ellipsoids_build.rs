@@ -4,33 +4,17 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-
-use common::{run, scratch, succeeded, text};
+use common::{model, run_on, scratch, succeeded, text};
 use treelod_format::Container;
 
 const AREA: &str = "treelod-ellipsoids";
-
-/// A tree of the shared models beside the repository.
-fn model(name: &str) -> PathBuf {
-    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/trees").join(name);
-    assert!(model.exists(), "the shared models sit in ../shared beside the repository: {}", model.display());
-    model
-}
-
-/// Runs `treelod` with `args` then `paths`; returns its output.
-fn treelod(args: &[&str], paths: &[&Path]) -> std::process::Output {
-    let mut all: Vec<std::ffi::OsString> = args.iter().map(Into::into).collect();
-    all.extend(paths.iter().map(|p| p.as_os_str().to_owned()));
-    run(&all)
-}
 
 #[test]
 fn build_ellipsoids_writes_records_that_verify_and_dump_shows() {
     let dir = scratch(AREA, "build");
     let out_path = dir.join("tree.treelod");
     let args = ["build", "--ellipsoids", "--ellipsoid-tries", "2", "--ao-rays", "0", "-o"];
-    let out = treelod(&args, &[&out_path, &model("quaternius-common-tree-1-3k.glb")]);
+    let out = run_on(&args, &[&out_path, &model("quaternius-common-tree-1-3k.glb")]);
     let stdout = succeeded(&out, "build --ellipsoids");
     assert!(stdout.contains("verify        ok") && stdout.contains("ellipsoids "), "{stdout}");
 
@@ -44,16 +28,16 @@ fn build_ellipsoids_writes_records_that_verify_and_dump_shows() {
     let line = stdout.lines().find(|l| l.trim_start().starts_with("ellipsoids")).expect("an ellipsoid line");
     assert!(line.contains(&ellipsoids.len().to_string()) && line.contains("per level"), "{line}");
 
-    let dump = succeeded(&treelod(&["dump"], &[&out_path]), "dump");
+    let dump = succeeded(&run_on(&["dump"], &[&out_path]), "dump");
     assert!(dump.lines().any(|l| l.trim_start().starts_with("ELLIPSOIDS")), "{dump}");
     assert!(dump.contains("ellipsoids.tries = \"2\"") && dump.contains("ellipsoids.clustering = \"em\""), "{dump}");
-    let verified = succeeded(&treelod(&["verify"], &[&out_path]), "verify");
+    let verified = succeeded(&run_on(&["verify"], &[&out_path]), "verify");
     assert!(verified.contains(": ok"), "{verified}");
 
     // JSON carries the counts.
     let json_path = dir.join("json.treelod");
     let args = ["build", "--ellipsoids", "--ellipsoid-clustering", "kmeans", "--json", "--ao-rays", "0", "-o"];
-    let out = treelod(&args, &[&json_path, &model("quaternius-common-tree-1-3k.glb")]);
+    let out = run_on(&args, &[&json_path, &model("quaternius-common-tree-1-3k.glb")]);
     let value: serde_json::Value = serde_json::from_str(&succeeded(&out, "build --json")).expect("JSON");
     let per_level: u64 =
         value["ellipsoids_per_level"].as_array().expect("levels").iter().filter_map(serde_json::Value::as_u64).sum();
@@ -66,13 +50,13 @@ fn build_ellipsoids_writes_records_that_verify_and_dump_shows() {
 fn demo_takes_the_option_and_without_it_nothing_is_written() {
     let dir = scratch(AREA, "demo");
     let with = dir.join("with.treelod");
-    let out = treelod(&["demo", "--leaf-count", "300", "--ellipsoids", "--ao-rays", "0", "-o"], &[&with]);
+    let out = run_on(&["demo", "--leaf-count", "300", "--ellipsoids", "--ao-rays", "0", "-o"], &[&with]);
     succeeded(&out, "demo --ellipsoids");
     let c = Container::open(&with).expect("opens");
     treelod_format::verify(&c).expect("verifies");
     assert!(c.ellipsoids().len() > 300);
     let without = dir.join("without.treelod");
-    succeeded(&treelod(&["demo", "--leaf-count", "300", "--ao-rays", "0", "-o"], &[&without]), "demo");
+    succeeded(&run_on(&["demo", "--leaf-count", "300", "--ao-rays", "0", "-o"], &[&without]), "demo");
     let c = Container::open(&without).expect("opens");
     assert!(c.ellipsoids().is_empty());
     assert!(!c.metadata().settings.iter().any(|s| s.key.starts_with("ellipsoids.")));
@@ -97,7 +81,7 @@ fn bad_ellipsoid_options_are_usage_errors_naming_the_option() {
         let mut args = vec!["build"];
         args.extend(bad);
         args.push("-o");
-        let out = treelod(&args, &[&out_path, &tree]);
+        let out = run_on(&args, &[&out_path, &tree]);
         let stderr = text(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{bad:?}: {stderr}");
         assert!(stderr.contains(option), "{bad:?}: {stderr}");

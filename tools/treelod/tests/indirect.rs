@@ -6,26 +6,12 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use common::{read_png, run, scratch, succeeded, text};
+use common::{model, read_png, run_on, scratch, succeeded, text};
 use treelod_format::{Container, image_format};
 
 const AREA: &str = "treelod-indirect";
-
-/// A tree of the shared models beside the repository.
-fn model(name: &str) -> PathBuf {
-    let model = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/trees").join(name);
-    assert!(model.exists(), "the shared models sit in ../shared beside the repository: {}", model.display());
-    model
-}
-
-/// Runs `treelod` with `args` then `paths`; returns its output.
-fn treelod(args: &[&str], paths: &[&Path]) -> std::process::Output {
-    let mut all: Vec<std::ffi::OsString> = args.iter().map(Into::into).collect();
-    all.extend(paths.iter().map(|p| p.as_os_str().to_owned()));
-    run(&all)
-}
 
 /// Pixels of a render that are not its white background: (all, green ones).
 fn drawn(path: &Path) -> (usize, usize) {
@@ -39,7 +25,7 @@ fn an_oak_of_leaf_cards_builds_indirect_planes_that_verify_dump_and_render() {
     let dir = scratch(AREA, "oak");
     let out_path = dir.join("oak.treelod");
     let args = ["build", "--impostors", "--impostor-texturing", "indirect", "-o"];
-    let out = treelod(&args, &[&out_path, &model("ez-tree-oak-large-23k.glb")]);
+    let out = run_on(&args, &[&out_path, &model("ez-tree-oak-large-23k.glb")]);
     let stdout = succeeded(&out, "build --impostor-texturing indirect");
     assert!(!text(&out.stderr).contains("warning"), "{}", text(&out.stderr));
     assert!(stdout.contains("verify        ok") && stdout.contains("plane leaves"), "{stdout}");
@@ -51,11 +37,11 @@ fn an_oak_of_leaf_cards_builds_indirect_planes_that_verify_dump_and_render() {
     let slots = c.images()[c.planes()[0].image as usize];
     assert_eq!((slots.format, slots.mip_count), (image_format::LEAF_SLOTS, 1));
 
-    let dump = succeeded(&treelod(&["dump"], &[&out_path]), "dump");
+    let dump = succeeded(&run_on(&["dump"], &[&out_path]), "dump");
     assert!(dump.lines().any(|l| l.starts_with("version") && l.trim_end().ends_with("1.3")), "{dump}");
     assert!(dump.lines().any(|l| l.trim_start().starts_with("PLANE_LEAVES")), "{dump}");
     assert!(dump.contains("impostors.texturing = \"indirect\""), "{dump}");
-    let verified = succeeded(&treelod(&["verify"], &[&out_path]), "verify");
+    let verified = succeeded(&run_on(&["verify"], &[&out_path]), "verify");
     assert!(verified.contains(": ok"), "{verified}");
 
     // Drawn as impostors: the planes are submitted and show about the leaves the points do
@@ -63,11 +49,11 @@ fn an_oak_of_leaf_cards_builds_indirect_planes_that_verify_dump_and_render() {
     // 2427 and 1722 with the points).
     let (planes_png, points_png) = (dir.join("planes.png"), dir.join("points.png"));
     let stdout = succeeded(
-        &treelod(&["render", "--impostors", "--size", "160x160", "-o"], &[&planes_png, &out_path]),
+        &run_on(&["render", "--impostors", "--size", "160x160", "-o"], &[&planes_png, &out_path]),
         "render --impostors",
     );
     assert!(stdout.contains("1 tree(s) with impostors submitting"), "{stdout}");
-    succeeded(&treelod(&["render", "--size", "160x160", "-o"], &[&points_png, &out_path]), "render");
+    succeeded(&run_on(&["render", "--size", "160x160", "-o"], &[&points_png, &out_path]), "render");
     let ((planes, planes_green), (points, points_green)) = (drawn(&planes_png), drawn(&points_png));
     eprintln!("covered pixels: planes {planes} ({planes_green} green), points {points} ({points_green} green)");
     let share = planes as f64 / points as f64;
@@ -80,7 +66,7 @@ fn untextured_leaves_get_the_rgba_atlas_and_a_warning() {
     let dir = scratch(AREA, "untextured");
     let out_path = dir.join("tree.treelod");
     let args = ["build", "--impostors", "--impostor-texturing", "indirect", "-o"];
-    let out = treelod(&args, &[&out_path, &model("quaternius-common-tree-1-3k.glb")]);
+    let out = run_on(&args, &[&out_path, &model("quaternius-common-tree-1-3k.glb")]);
     let stdout = succeeded(&out, "build --impostor-texturing indirect");
     let stderr = text(&out.stderr);
     assert!(stderr.contains("warning:") && stderr.contains("indirect impostor texturing not used"), "{stderr}");
@@ -108,7 +94,7 @@ fn bad_indirect_texturing_options_are_usage_errors_naming_the_option() {
         let mut args = vec!["build", "--impostors"];
         args.extend(bad);
         args.push("-o");
-        let out = treelod(&args, &[&out_path, &tree]);
+        let out = run_on(&args, &[&out_path, &tree]);
         let stderr = text(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{bad:?}: {stderr}");
         assert!(stderr.contains(option), "{bad:?}: {stderr}");

@@ -22,6 +22,21 @@ where
     Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).env("NODEVICE_SELECT", "1").output().expect("runs")
 }
 
+/// Runs the binary with `args` then `paths`.
+pub fn run_on(args: &[&str], paths: &[&Path]) -> Output {
+    let mut all: Vec<std::ffi::OsString> = args.iter().map(Into::into).collect();
+    all.extend(paths.iter().map(|p| p.as_os_str().to_owned()));
+    run(&all)
+}
+
+/// A tree of the shared test models beside the repository (`../shared/assets/trees`, see its
+/// `SOURCES.md`).
+pub fn model(name: &str) -> PathBuf {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/trees").join(name);
+    assert!(path.exists(), "the shared models sit in ../shared beside the repository: {}", path.display());
+    path
+}
+
 /// Program output as text.
 pub fn text(bytes: &[u8]) -> String {
     String::from_utf8(bytes.to_vec()).expect("UTF-8")
