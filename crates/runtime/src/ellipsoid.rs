@@ -17,7 +17,7 @@
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, EllipsoidRecord, Range};
 
-use crate::frame::{Camera, Frustum, LodSettings, tau_per_metre};
+use crate::frame::{Camera, Frustum, LodSettings, prefix_above, tau_per_metre};
 
 /// Whether an ellipsoid is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is in
 /// `vs_ellipsoid`.
@@ -138,9 +138,7 @@ impl EllipsoidLod {
     /// Number of leading ellipsoids of `cell` with `hi > τ` (spec §10).
     #[must_use]
     pub fn prefix(&self, cell: &EllipsoidCell, tau: f32) -> u32 {
-        let at = cell.hi_at as usize;
-        let his = self.hi.get(at..at + cell.ellipsoids.count as usize).unwrap_or_default();
-        u32::try_from(his.partition_point(|&hi| hi > tau)).unwrap_or(u32::MAX)
+        prefix_above(&self.hi, cell.hi_at, cell.ellipsoids.count, tau)
     }
 
     /// The ellipsoids an instance with world-from-model `transform` draws for `camera`, appended

@@ -905,6 +905,13 @@ enum Culling<'a> {
     Replay(&'a [Visibility]),
 }
 
+/// How many of `count` thresholds `hi[first..]` (sorted largest first, spec §10) exceed `tau`:
+/// the leading elements a cell draws at `tau`.
+pub(crate) fn prefix_above(hi: &[f32], first: u32, count: u32, tau: f32) -> u32 {
+    let his = hi.get(first as usize..first as usize + count as usize).unwrap_or_default();
+    u32::try_from(his.partition_point(|&h| h > tau)).unwrap_or(u32::MAX)
+}
+
 /// `τ` per metre of distance for an instance drawn whole by one threshold (impostor planes,
 /// baselines): `s_min · 2·tan(fovy/2) / H` (spec §10.1) divided by the transform's largest axis
 /// scale, so `τ` is in model units. `None` if the instance's sphere `(centre, radius)` (model

@@ -11,7 +11,7 @@
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, PlaneRecord, Range};
 
-use crate::frame::{Camera, Frustum, tau_per_metre};
+use crate::frame::{Camera, Frustum, prefix_above, tau_per_metre};
 
 /// Whether a plane is drawn at `τ` (spec §10): its interval holds `τ`.
 #[must_use]
@@ -203,9 +203,7 @@ impl PlaneLod {
     /// Number of leading planes of `cell` with `hi > τ` (spec §10).
     #[must_use]
     pub fn prefix(&self, cell: &PlaneCell, tau: f32) -> u32 {
-        let at = cell.hi_at as usize;
-        let his = self.hi.get(at..at + cell.planes.count as usize).unwrap_or_default();
-        u32::try_from(his.partition_point(|&hi| hi > tau)).unwrap_or(u32::MAX)
+        prefix_above(&self.hi, cell.hi_at, cell.planes.count, tau)
     }
 
     /// The planes an instance with world-from-model `transform` draws for `camera`, at `s_min`
