@@ -83,6 +83,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 billboards: false,
                 ao: false,
                 indirect_planes: false,
+                ellipsoid_ao: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -104,7 +105,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.1 (1.0's and the baselines), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { ao: false, indirect_planes: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                ao: false,
+                indirect_planes: false,
+                ellipsoid_ao: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -112,14 +118,14 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.2 (1.1's and ambient occlusion), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { indirect_planes: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions { indirect_planes: false, ellipsoid_ao: false, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
             minor: 3,
             name: "every-kind-zstd.treelod",
-            description: "every section kind of 1.3 (1.2's and indirectly textured planes: PLANE_LEAVES and a LEAF_SLOTS \
-                          image), zstd level 19 with byte shuffle where it pays",
+            description: "every section kind of 1.3 (1.2's, indirectly textured planes: PLANE_LEAVES and a LEAF_SLOTS \
+                          image, and ELLIPSOID_AO), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions::everything(),
             compression: Compression::Zstd { level: 19 },

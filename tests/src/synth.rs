@@ -63,6 +63,9 @@ pub struct SyntheticOptions {
     /// planes and a material; drawn after everything else, so the rest of the container is the
     /// same as without it.
     pub indirect_planes: bool,
+    /// Ambient occlusion of the ellipsoids (spec §6.14, 1.3): a random byte per ellipsoid, in
+    /// `ELLIPSOID_AO`. Drawn last, so the rest of the container is the same as without it.
+    pub ellipsoid_ao: bool,
     /// Block name in the metadata; `None` gives `synthetic-<seed in hex>`.
     pub name: Option<String>,
 }
@@ -90,6 +93,7 @@ impl SyntheticOptions {
             extension_kinds: Vec::new(),
             ao: false,
             indirect_planes: false,
+            ellipsoid_ao: false,
             name: Some("minimal".into()),
         }
     }
@@ -111,8 +115,8 @@ impl SyntheticOptions {
     /// Every section kind of version 1.3: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
-    /// baseline LoD chain and facing and crossed billboards, ambient occlusion, and indirectly
-    /// textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`).
+    /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
+    /// too), and indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -133,6 +137,7 @@ impl SyntheticOptions {
             extension_kinds: Vec::new(),
             ao: true,
             indirect_planes: true,
+            ellipsoid_ao: true,
             name: Some("everything".into()),
         }
     }
@@ -981,6 +986,9 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     }
     if options.indirect_planes {
         indirect_texturing(&mut rng, &mut b.data);
+    }
+    if options.ellipsoid_ao {
+        b.data.ellipsoid_ao = rng.bytes(b.data.ellipsoids.len());
     }
     b.data
 }

@@ -111,6 +111,7 @@ fn small_options() -> SyntheticOptions {
         extension_kinds: vec![0x0001_0000],
         ao: true,
         indirect_planes: true,
+        ellipsoid_ao: true,
         name: Some("hostile".into()),
     }
 }

@@ -44,6 +44,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 ao: grid[0] >= 2,
                 // Indirectly textured planes with another half.
                 indirect_planes: grid[2] >= 2,
+                // Ellipsoid occlusion with a quarter.
+                ellipsoid_ao: grid[0] >= 2 && grid[2] >= 2,
                 name: None,
             }
         })

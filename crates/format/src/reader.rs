@@ -459,6 +459,13 @@ impl Container {
     pub fn plane_ao(&self) -> &[u8] {
         self.raw_bytes(SectionKind::PLANE_AO)
     }
+
+    /// Ambient occlusion of each ellipsoid, empty or as long as [`Container::ellipsoids`]. Since
+    /// 1.3.
+    #[must_use]
+    pub fn ellipsoid_ao(&self) -> &[u8] {
+        self.raw_bytes(SectionKind::ELLIPSOID_AO)
+    }
 }
 
 fn bad_record(kind: SectionKind, index: usize, reason: String) -> Error {

@@ -157,9 +157,11 @@ impl SectionKind {
     pub const POINT_AO: Self = Self(0x0061);
     /// Ambient occlusion of each `PLANES` record, one `unorm8` (spec §6.14). Since 1.2.
     pub const PLANE_AO: Self = Self(0x0062);
+    /// Ambient occlusion of each `ELLIPSOIDS` record, one `unorm8` (spec §6.14). Since 1.3.
+    pub const ELLIPSOID_AO: Self = Self(0x0063);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 23] = [
+    pub const KNOWN: [Self; 24] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -183,6 +185,7 @@ impl SectionKind {
         Self::VERTEX_AO,
         Self::POINT_AO,
         Self::PLANE_AO,
+        Self::ELLIPSOID_AO,
     ];
 
     /// The spec's name of a known kind.
@@ -212,6 +215,7 @@ impl SectionKind {
             Self::VERTEX_AO => "VERTEX_AO",
             Self::POINT_AO => "POINT_AO",
             Self::PLANE_AO => "PLANE_AO",
+            Self::ELLIPSOID_AO => "ELLIPSOID_AO",
             _ => return None,
         })
     }
@@ -220,7 +224,7 @@ impl SectionKind {
     #[must_use]
     pub fn record_size(self) -> Option<u32> {
         let size = match self {
-            Self::META | Self::IMAGE_DATA | Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO => 1,
+            Self::META | Self::IMAGE_DATA | Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO | Self::ELLIPSOID_AO => 1,
             Self::BLOCK => size_of::<BlockRecord>(),
             Self::CELLS => size_of::<CellRecord>(),
             Self::VERTICES => size_of::<VertexRecord>(),
@@ -244,15 +248,15 @@ impl SectionKind {
 
     /// The minor version of major 1 that introduced this kind (spec §5): 1 for the baselines
     /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 2 for ambient occlusion (`VERTEX_AO`,
-    /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`), 0 for the other known
-    /// kinds and for kinds this version does not know (private extensions do not raise a file's
+    /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`) and the ellipsoids'
+    /// ambient occlusion (`ELLIPSOID_AO`), 0 for the other known kinds and for kinds this version does not know (private extensions do not raise a file's
     /// minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
         match self {
             Self::LOD_LEVELS | Self::LOD_TRIANGLES | Self::BILLBOARDS => 1,
             Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO => 2,
-            Self::PLANE_LEAVES => 3,
+            Self::PLANE_LEAVES | Self::ELLIPSOID_AO => 3,
             _ => 0,
         }
     }
@@ -265,10 +269,11 @@ impl SectionKind {
 }
 
 /// The ambient-occlusion kinds and the array each one parallels (spec §6.14).
-pub const AO_KINDS: [(SectionKind, SectionKind); 3] = [
+pub const AO_KINDS: [(SectionKind, SectionKind); 4] = [
     (SectionKind::VERTEX_AO, SectionKind::VERTICES),
     (SectionKind::POINT_AO, SectionKind::POINTS),
     (SectionKind::PLANE_AO, SectionKind::PLANES),
+    (SectionKind::ELLIPSOID_AO, SectionKind::ELLIPSOIDS),
 ];
 
 /// Decodes a stored ambient-occlusion byte (spec §6.14) to the share of ambient light that is

@@ -12,9 +12,9 @@ use std::hash::{BuildHasherDefault, Hasher};
 use crate::error::{Error, Result};
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
-    BillboardRecord, CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord,
-    NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind,
-    SptElement, TriangleRecord, VertexRecord, billboard_kind, image_format, leaf_slots, plane_leaf_bases,
+    AO_KINDS, BillboardRecord, CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord,
+    MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE,
+    SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, image_format, leaf_slots, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -73,7 +73,8 @@ pub struct VerifyReport {
     pub lod_triangles: u64,
     /// `BILLBOARDS` records checked (baseline).
     pub billboards: u64,
-    /// `VERTEX_AO`, `POINT_AO` and `PLANE_AO` bytes (their counts are checked at open).
+    /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO` and `ELLIPSOID_AO` bytes (their counts are checked at
+    /// open).
     pub ao: u64,
     /// Leaves whose exact cut was verified, summed over cells and the point, ellipsoid, line and
     /// plane hierarchies (spec §10 rule 2).
@@ -193,7 +194,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.lod_levels = c.lod_levels().len() as u64;
     report.lod_triangles = c.lod_triangles().len() as u64;
     report.billboards = c.billboards().len() as u64;
-    report.ao = (c.vertex_ao().len() + c.point_ao().len() + c.plane_ao().len()) as u64;
+    report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
     Ok(report)
 }
 

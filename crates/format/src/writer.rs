@@ -88,6 +88,8 @@ pub struct ContainerData {
     pub point_ao: Vec<u8>,
     /// `PLANE_AO`: empty, or one byte per plane.
     pub plane_ao: Vec<u8>,
+    /// `ELLIPSOID_AO`: empty, or one byte per ellipsoid (since 1.3).
+    pub ellipsoid_ao: Vec<u8>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
     pub extra_sections: Vec<(u32, Vec<u8>)>,
@@ -121,6 +123,7 @@ impl ContainerData {
             vertex_ao: c.vertex_ao().to_vec(),
             point_ao: c.point_ao().to_vec(),
             plane_ao: c.plane_ao().to_vec(),
+            ellipsoid_ao: c.ellipsoid_ao().to_vec(),
             extra_sections: c
                 .sections()
                 .iter()
@@ -406,6 +409,7 @@ macro_rules! optional_sections {
             (SectionKind::VERTEX_AO, $payload!(vertex_ao)),
             (SectionKind::POINT_AO, $payload!(point_ao)),
             (SectionKind::PLANE_AO, $payload!(plane_ao)),
+            (SectionKind::ELLIPSOID_AO, $payload!(ellipsoid_ao)),
         ]
     };
 }

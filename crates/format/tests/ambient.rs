@@ -1,13 +1,14 @@
 //! Ambient occlusion in the container (spec §6.14): the `VERTEX_AO`, `POINT_AO` and `PLANE_AO`
-//! kinds, the byte encoding, the writer refusing arrays of the wrong length, the reader refusing
-//! such files at open, and files with ambient occlusion round-tripping as format 1.2.
+//! kinds (1.2) and `ELLIPSOID_AO` (1.3), the byte encoding, the writer refusing arrays of the
+//! wrong length, the reader refusing such files at open, and files with ambient occlusion
+//! round-tripping as format 1.2 (1.3 with `ELLIPSOID_AO`).
 
 mod common;
 
 use common::reseal;
 use treelod_format::{
-    AO_KINDS, CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, PlaneRecord, Range,
-    SectionKind, decode_ao, encode_ao, image_format, pack, verify,
+    AO_KINDS, CellRecord, Compression, Container, ContainerData, EllipsoidRecord, Error, ImageRecord, MINOR,
+    PlaneRecord, Range, SectionKind, decode_ao, encode_ao, image_format, pack, verify,
 };
 
 fn range(first: u32, count: u32) -> Range {
@@ -15,7 +16,7 @@ fn range(first: u32, count: u32) -> Range {
 }
 
 /// One 1×1×1 cell holding one triangle under its leaf point, the block cell one impostor plane
-/// with a 2×2 RGBA8 image; no ambient occlusion. Verifies.
+/// with a 2×2 RGBA8 image and one ellipsoid over the leaf; no ambient occlusion. Verifies.
 fn fixture() -> ContainerData {
     let mut data = common::one_leaf_cell("ao-fixture");
     data.planes = vec![PlaneRecord {
@@ -30,10 +31,24 @@ fn fixture() -> ContainerData {
         leaf_first: 0,
         leaf_count: 1,
     }];
+    data.ellipsoids = vec![EllipsoidRecord {
+        center: [0.5, 0.5, 0.5],
+        radii: [0.2, 0.2, 0.05],
+        orientation: [0, 0, 0, i16::MAX],
+        color: 0xFF33_9933,
+        alpha_threshold: 0.5,
+        noise_mip: 0.0,
+        lo: 0.0,
+        hi: f32::INFINITY,
+        leaf_first: 0,
+        leaf_count: 1,
+        flags: 0,
+    }];
     data.cells[1] = CellRecord {
         bounds_min: [0.25, 0.25, 0.5],
         bounds_max: [0.75, 0.75, 0.5],
         planes: range(0, 1),
+        ellipsoids: range(0, 1),
         ..data.cells[1]
     };
     data.images = vec![ImageRecord {
@@ -48,9 +63,14 @@ fn fixture() -> ContainerData {
     data
 }
 
-/// The fixture with a value for every vertex, point and plane.
+/// The fixture with a value for every vertex, point and plane (the 1.2 kinds).
 fn with_ao() -> ContainerData {
     ContainerData { vertex_ao: vec![0, 128, 255], point_ao: vec![200], plane_ao: vec![77], ..fixture() }
+}
+
+/// [`with_ao`] and a value for the ellipsoid, too (`ELLIPSOID_AO`, 1.3).
+fn with_all_ao() -> ContainerData {
+    ContainerData { ellipsoid_ao: vec![33], ..with_ao() }
 }
 
 /// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,
@@ -90,19 +110,21 @@ fn the_kinds_are_numbered_named_and_sized_as_the_spec_says() {
         (SectionKind::VERTEX_AO, 0x0060, "VERTEX_AO", SectionKind::VERTICES),
         (SectionKind::POINT_AO, 0x0061, "POINT_AO", SectionKind::POINTS),
         (SectionKind::PLANE_AO, 0x0062, "PLANE_AO", SectionKind::PLANES),
+        (SectionKind::ELLIPSOID_AO, 0x0063, "ELLIPSOID_AO", SectionKind::ELLIPSOIDS),
     ];
+    assert_eq!(AO_KINDS.len(), expected.len());
     for (i, (kind, value, name, of)) in expected.into_iter().enumerate() {
         assert_eq!(kind.0, value);
         assert_eq!(kind.name(), Some(name));
         assert_eq!(kind.to_string(), name);
         assert_eq!(kind.record_size(), Some(1), "{name}: one byte per record");
-        assert_eq!(kind.since_minor(), 2, "{name}");
+        assert_eq!(kind.since_minor(), if kind == SectionKind::ELLIPSOID_AO { 3 } else { 2 }, "{name}");
         assert!(SectionKind::KNOWN.contains(&kind), "{name}");
         assert_eq!(AO_KINDS[i], (kind, of), "{name} parallels {of}");
     }
     // KNOWN stays in ascending order with the new kinds at its end.
     assert!(SectionKind::KNOWN.windows(2).all(|w| w[0] < w[1]));
-    assert_eq!(SectionKind::KNOWN[SectionKind::KNOWN.len() - 3..], AO_KINDS.map(|(k, _)| k));
+    assert_eq!(SectionKind::KNOWN[SectionKind::KNOWN.len() - AO_KINDS.len()..], AO_KINDS.map(|(k, _)| k));
 }
 
 #[test]
@@ -156,6 +178,7 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
         verify(&c).expect("the fixture verifies");
         assert_eq!((c.header().major, c.header().minor), (1, 0));
         assert!(c.vertex_ao().is_empty() && c.point_ao().is_empty() && c.plane_ao().is_empty());
+        assert!(c.ellipsoid_ao().is_empty());
         assert!(AO_KINDS.iter().all(|(kind, _)| c.section(*kind).is_none()), "no empty AO section is written");
 
         let data = with_ao();
@@ -165,7 +188,8 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
         assert_eq!(c.vertex_ao(), &[0, 128, 255]);
         assert_eq!(c.point_ao(), &[200]);
         assert_eq!(c.plane_ao(), &[77]);
-        for (kind, _) in AO_KINDS {
+        assert!(c.ellipsoid_ao().is_empty() && c.section(SectionKind::ELLIPSOID_AO).is_none());
+        for (kind, _) in AO_KINDS.into_iter().filter(|&(k, _)| k != SectionKind::ELLIPSOID_AO) {
             assert_eq!(c.section(kind).expect("present").entry.record_size, 1, "{kind}");
         }
         let report = verify(&c).expect("verifies");
@@ -177,19 +201,23 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
         assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
     }
 
-    // Any one of the three kinds makes a 1.2 file; the others read as empty.
+    // Any one of the first three kinds makes a 1.2 file, `ELLIPSOID_AO` a 1.3 file; the others
+    // read as empty.
     for (i, (kind, _)) in AO_KINDS.into_iter().enumerate() {
         let mut data = fixture();
         match i {
             0 => data.vertex_ao = vec![1, 2, 3],
             1 => data.point_ao = vec![4],
-            _ => data.plane_ao = vec![5],
+            2 => data.plane_ao = vec![5],
+            _ => data.ellipsoid_ao = vec![6],
         }
         let bytes = data.to_bytes(Compression::None).expect("writes");
         let c = Container::from_bytes(&bytes).expect("opens");
-        assert_eq!(c.header().minor, 2, "{kind} alone");
-        assert_eq!(c.sections().iter().filter(|s| s.kind().since_minor() == 2).count(), 1, "{kind} alone");
-        assert_eq!(c.vertex_ao().len() + c.point_ao().len() + c.plane_ao().len(), if i == 0 { 3 } else { 1 });
+        assert_eq!(c.header().minor, if i == 3 { 3 } else { 2 }, "{kind} alone");
+        assert_eq!(c.sections().iter().filter(|s| s.kind().since_minor() >= 2).count(), 1, "{kind} alone");
+        let lengths = c.vertex_ao().len() + c.point_ao().len() + c.plane_ao().len() + c.ellipsoid_ao().len();
+        assert_eq!(lengths, if i == 0 { 3 } else { 1 });
+        assert_eq!(c.raw_bytes(kind).len(), lengths, "{kind}");
         verify(&c).expect("verifies");
     }
 
@@ -207,18 +235,42 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
 }
 
 #[test]
+fn a_container_with_ellipsoid_ao_round_trips_as_format_1_3() {
+    const { assert!(MINOR >= 3, "ELLIPSOID_AO is format 1.3") };
+    let data = with_all_ao();
+    for compression in [Compression::None, Compression::default()] {
+        let bytes = data.to_bytes(compression).expect("writes");
+        let c = Container::from_bytes(&bytes).expect("opens");
+        assert_eq!((c.header().major, c.header().minor), (1, 3), "{compression:?}");
+        assert_eq!(c.ellipsoid_ao(), &[33]);
+        assert_eq!(c.ellipsoid_ao().len(), c.ellipsoids().len());
+        assert_eq!((c.vertex_ao(), c.point_ao(), c.plane_ao()), (&[0u8, 128, 255][..], &[200u8][..], &[77u8][..]));
+        assert_eq!(c.section(SectionKind::ELLIPSOID_AO).expect("present").entry.record_size, 1);
+        // The file's own reserved `flags` stay 0: the occlusion lives only in its section.
+        assert_eq!(c.ellipsoids()[0].flags, 0);
+        let report = verify(&c).expect("verifies");
+        assert_eq!(report.ao, 6);
+        assert!(report.to_string().contains("ambient occlusion: 6 values"), "{report}");
+        let back = ContainerData::from_container(&c);
+        assert_eq!(back, data);
+        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+    }
+}
+
+#[test]
 fn the_writer_refuses_ao_arrays_of_another_length_than_their_array() {
     type Field = fn(&mut ContainerData) -> &mut Vec<u8>;
-    let fields: [(SectionKind, &str, Field); 3] = [
+    let fields: [(SectionKind, &str, Field); 4] = [
         (SectionKind::VERTEX_AO, "VERTICES has 3", |d| &mut d.vertex_ao),
         (SectionKind::POINT_AO, "POINTS has 1", |d| &mut d.point_ao),
         (SectionKind::PLANE_AO, "PLANES has 1", |d| &mut d.plane_ao),
+        (SectionKind::ELLIPSOID_AO, "ELLIPSOIDS has 1", |d| &mut d.ellipsoid_ao),
     ];
     let dir = std::env::temp_dir().join(format!("treelod-format-ao-refused-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("creates");
     for (kind, array, field) in fields {
         for wrong in [1usize, 2, 4, 9] {
-            let mut data = with_ao();
+            let mut data = with_all_ao();
             let ao = field(&mut data);
             if ao.len() == wrong {
                 continue;
@@ -241,7 +293,7 @@ fn the_writer_refuses_ao_arrays_of_another_length_than_their_array() {
             assert!(!path.exists(), "{kind} × {wrong}: nothing written");
         }
         // Empty is always allowed: no ambient occlusion for that array.
-        let mut data = with_ao();
+        let mut data = with_all_ao();
         field(&mut data).clear();
         let bytes = data.to_bytes(Compression::None).expect("writes");
         assert!(Container::from_bytes(&bytes).expect("opens").section(kind).is_none());
@@ -256,18 +308,32 @@ fn the_writer_refuses_ao_arrays_of_another_length_than_their_array() {
         }
         other => panic!("expected Error::Write, got {other:?}"),
     }
+    // So is an ellipsoid AO array without ellipsoids.
+    let data = ContainerData { ellipsoid_ao: vec![1], ellipsoids: Vec::new(), ..fixture() };
+    let data = ContainerData {
+        cells: data.cells.iter().map(|c| CellRecord { ellipsoids: range(0, 0), ..*c }).collect(),
+        ..data
+    };
+    match data.to_bytes(Compression::None) {
+        Err(Error::Write(message)) => {
+            assert!(message.contains("ELLIPSOID_AO") && message.contains("ELLIPSOIDS has 0"), "{message}")
+        }
+        other => panic!("expected Error::Write, got {other:?}"),
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn a_file_whose_ao_section_is_shorter_or_longer_than_its_array_is_refused_at_open() {
-    let bytes = with_ao().to_bytes(Compression::None).expect("writes");
+    let bytes = with_all_ao().to_bytes(Compression::None).expect("writes");
     Container::from_bytes(&resize_section(&bytes, SectionKind::VERTEX_AO, 0)).expect("the untouched file opens");
     let cases = [
         (SectionKind::VERTEX_AO, -1, "2 records, VERTICES has 3"),
         (SectionKind::VERTEX_AO, 1, "4 records, VERTICES has 3"),
         (SectionKind::POINT_AO, 1, "2 records, POINTS has 1"),
         (SectionKind::PLANE_AO, 5, "6 records, PLANES has 1"),
+        (SectionKind::ELLIPSOID_AO, 2, "3 records, ELLIPSOIDS has 1"),
+        (SectionKind::ELLIPSOID_AO, 15, "16 records, ELLIPSOIDS has 1"),
     ];
     for (kind, delta, needle) in cases {
         let edited = resize_section(&bytes, kind, delta);
@@ -291,4 +357,8 @@ fn a_file_whose_ao_section_is_shorter_or_longer_than_its_array_is_refused_at_ope
     let c = Container::from_bytes(&emptied).expect("an empty AO section opens");
     assert!(c.point_ao().is_empty());
     assert_eq!(c.vertex_ao(), &[0, 128, 255]);
+    let emptied = resize_section(&bytes, SectionKind::ELLIPSOID_AO, -1);
+    let c = Container::from_bytes(&emptied).expect("an empty ELLIPSOID_AO section opens");
+    assert!(c.ellipsoid_ao().is_empty());
+    assert_eq!(c.ellipsoid_ao().len() + 1, c.ellipsoids().len());
 }
