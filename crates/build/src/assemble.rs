@@ -18,7 +18,7 @@ use treelod_format::{
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
 use crate::billboard::{Billboards, build_billboards};
 use crate::classify::{ClassifyOptions, classify};
-use crate::ellipsoid::{EllipsoidConfig, EllipsoidMesh, Ellipsoids, build_ellipsoids};
+use crate::ellipsoid::{CellEllipsoids, EllipsoidConfig, EllipsoidMesh, Ellipsoids, build_ellipsoids};
 use crate::error::BuildError;
 use crate::gilet::{CellPoint, GiletConfig, LeafPoint, build_cell};
 use crate::impostor::{Atlas, ImpostorConfig, ImpostorMesh, Impostors, LeafTriangle, Surface, build_impostors};
@@ -666,14 +666,15 @@ fn assemble(
     scatter_in_place(&mut vertices, remap);
     vertices.truncate(written_vertices);
     vertices.shrink_to_fit();
-    // Stage: ambient occlusion of the vertices, then of each point (its leaves' mean).
-    let (vertex_ao, point_ao) = match &config.ao {
+    // Stage: ambient occlusion of the vertices, then of each point (its leaves' mean); each
+    // triangle's coverage is kept for the ellipsoids' occlusion.
+    let (vertex_ao, point_ao, coverage) = match &config.ao {
         Some(ao) => {
-            let (vertex_ao, point_ao) =
+            let (vertex_ao, point_ao, coverage) =
                 block_occlusion(&tris, &order, &vertices, &points, &cells, &material_keys, trees, ao);
-            (Some(vertex_ao), point_ao)
+            (Some(vertex_ao), point_ao, coverage)
         }
-        None => (None, Vec::new()),
+        None => (None, Vec::new(), Vec::new()),
     };
     // Stage: the pruned leaves of each cell in priority order, their triangles in leaf order with
     // the vertices written above (every leaf triangle is also in TRIANGLES).
@@ -732,9 +733,13 @@ fn assemble(
     // Stage: the ellipsoid records of each grid cell, after the pruned leaves (which reset the
     // bounds of cells without triangles); cell bounds grow to hold them.
     let mut ellipsoid_records = Vec::new();
+    let mut ellipsoid_ao = Vec::new();
     if let Some(built) = ellipsoids {
         stats.ellipsoids_per_level = built.per_level();
         for (cell, cell_ellipsoids) in cells.iter_mut().zip(built.cells) {
+            if let Some(vertex_ao) = &vertex_ao {
+                ellipsoid_ao.extend(ellipsoid_occlusion(&cell_ellipsoids, &tris, vertex_ao, &coverage));
+            }
             let first = ellipsoid_records.len();
             if let Some((emin, emax)) = cell_ellipsoids.bounds {
                 let (bmin, bmax) = if cell.is_empty() {
@@ -965,6 +970,7 @@ fn assemble(
         vertex_ao: vertex_ao.map_or_else(Vec::new, |ao| ao.iter().map(|&a| encode_ao(a)).collect()),
         point_ao,
         plane_ao,
+        ellipsoid_ao,
         ..ContainerData::default()
     };
     let mut data = data;
@@ -1002,7 +1008,7 @@ fn block_impostors(
 /// The leaf ellipsoids of a block's leaf-class triangles ([`crate::ellipsoid`]): each triangle
 /// with its material's alpha test and its colour as Gilet's leaf points take it (texture × factor
 /// × vertex colour over the texels that pass). Reads the gathered triangles (global vertex ids,
-/// parts).
+/// parts); the cells' `leaf_triangles` are returned as indices into `tris`.
 #[expect(clippy::too_many_arguments, reason = "the stage reads the build's arrays")]
 fn block_ellipsoids(
     material_keys: &[(usize, usize, Class)],
@@ -1018,12 +1024,20 @@ fn block_ellipsoids(
     let colours: Vec<Vec4> =
         input.leaf_ids.par_iter().map(|&i| leaf_point(&tris[i as usize], vertices, parts, trees).color).collect();
     let mesh = EllipsoidMesh { vertices, triangles: &input.leaves, alphas: &input.alphas, colours: &colours };
-    build_ellipsoids(&mesh, cell_of, cell_count, config)
+    let mut built = build_ellipsoids(&mesh, cell_of, cell_count, config)?;
+    // The leaves' triangles as indices into `tris` (the ambient-occlusion stage reads them).
+    for cell in &mut built.cells {
+        for t in cell.leaf_triangles.iter_mut().flatten() {
+            *t = input.leaf_ids[*t as usize];
+        }
+    }
+    Ok(built)
 }
 
 /// The ambient occlusion of the written vertices ([`crate::ambient`]), and of each point, encoded:
 /// the mean of its leaves' (their triangles' corners' mean), weighted by their opaque area. A
-/// triangle stops rays by the coverage of its leaf point (spec §6.5's alpha).
+/// triangle stops rays by the coverage of its leaf point (spec §6.5's alpha), returned third (per
+/// triangle of `tris`).
 #[expect(clippy::too_many_arguments, reason = "the stage reads the build's arrays")]
 fn block_occlusion(
     tris: &[Tri],
@@ -1034,7 +1048,7 @@ fn block_occlusion(
     material_keys: &[(usize, usize, Class)],
     trees: &[Placed<'_>],
     config: &AoConfig,
-) -> (Vec<f32>, Vec<u8>) {
+) -> (Vec<f32>, Vec<u8>, Vec<f32>) {
     // Each written triangle's coverage (its leaf point's alpha) and whether it is two-sided; a
     // cell's triangles are `order[cell.triangles]`, each with its leaf id in `part`.
     let mut coverage = vec![1.0f32; tris.len()];
@@ -1080,7 +1094,43 @@ fn block_occlusion(
                 encode_ao(mean_occlusion(leaves.iter().map(|&(ao, w)| (ao, if transparent { 1.0 } else { w }))));
         }
     }
-    (vertex_ao, point_ao)
+    (vertex_ao, point_ao, coverage)
+}
+
+/// The ambient occlusion of one cell's ellipsoid records, encoded (spec §6.14): as for points,
+/// the mean of the occlusion of the triangles of the ellipsoid's leaves (each its corners' mean),
+/// weighted by their opaque area (`size² · α`, `α` the triangle's `coverage`); a run of fully
+/// transparent leaves counts every triangle equally. `vertex_ao` is indexed by the written
+/// vertex ids that `tris` hold by now.
+fn ellipsoid_occlusion(cell: &CellEllipsoids, tris: &[Tri], vertex_ao: &[f32], coverage: &[f32]) -> Vec<u8> {
+    // Per leaf id, its (occlusion, opaque area): the leaf's triangles' weighted mean and sum.
+    let by_leaf: Vec<(f32, f32)> = cell
+        .leaf_triangles
+        .iter()
+        .map(|triangles| {
+            let items = || {
+                triangles.iter().map(|&id| {
+                    let t = &tris[id as usize];
+                    (
+                        triangle_occlusion(vertex_ao, t.v),
+                        t.size * t.size * coverage.get(id as usize).copied().unwrap_or(1.0),
+                    )
+                })
+            };
+            let weight: f32 = items().map(|(_, w)| w).sum();
+            let mean =
+                if weight > 0.0 { mean_occlusion(items()) } else { mean_occlusion(items().map(|(ao, _)| (ao, 1.0))) };
+            (mean, weight)
+        })
+        .collect();
+    cell.records
+        .iter()
+        .map(|e| {
+            let leaves = by_leaf.get(e.leaf_first as usize..(e.leaf_first + e.leaf_count) as usize).unwrap_or_default();
+            let transparent = leaves.iter().all(|l| l.1 == 0.0);
+            encode_ao(mean_occlusion(leaves.iter().map(|&(ao, w)| (ao, if transparent { 1.0 } else { w }))))
+        })
+        .collect()
 }
 
 /// Appends a baked atlas (impostors, billboards) to `images` and its texels to `image_data`, on a

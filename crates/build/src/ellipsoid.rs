@@ -274,6 +274,10 @@ pub struct CellEllipsoids {
     pub bounds: Option<(Vec3, Vec3)>,
     /// Its levels, finest (the leaves) first.
     pub levels: Vec<LevelReport>,
+    /// Per leaf id of the cell (the records' `leaf_first ..`, spec §6.8), the leaf's triangles as
+    /// indices into [`EllipsoidMesh::triangles`]: what the ambient occlusion of a record averages
+    /// over (spec §6.14).
+    pub leaf_triangles: Vec<Vec<u32>>,
 }
 
 /// What [`build_ellipsoids`] returns.
@@ -554,7 +558,15 @@ pub fn build_ellipsoids(
                 .par_iter()
                 .map(|&l| leaf_element(mesh, leaves.triangles_of(&leaves.leaves[l as usize]), origin, config.samples))
                 .collect();
-            build_cell(elements, &target, cell as u64, config)
+            let mut built = build_cell(elements, &target, cell as u64, config)?;
+            // `leaf_triangles` holds, per leaf id, the element (an index into `ids`); now the
+            // triangles of that element's leaf.
+            for slot in &mut built.leaf_triangles {
+                *slot = slot
+                    .first()
+                    .map_or_else(Vec::new, |&e| leaves.triangles_of(&leaves.leaves[ids[e as usize] as usize]).to_vec());
+            }
+            Ok(built)
         })
         .collect::<Result<_, BuildError>>()?;
     #[expect(clippy::cast_possible_truncation, reason = "fewer leaves than triangles")]
@@ -742,9 +754,17 @@ fn records(levels: &[Level], origin: DVec3, pixels: f32) -> Result<CellEllipsoid
     let spt = flatten(&children, &sizes)?;
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     let mut out = Vec::with_capacity(node_of.len());
+    // Per leaf id, the level-0 element it is (a leaf of the hierarchy: one leaf, its own id).
+    let mut leaf_elements = vec![Vec::new(); levels[0].elements.len()];
     for &n in &spt.order {
         let (k, i) = node_of[n as usize];
         let (level, s) = (&levels[k], &spt.nodes[n as usize]);
+        if k == 0
+            && let Some(slot) = leaf_elements.get_mut(s.leaf_first as usize)
+        {
+            #[expect(clippy::cast_possible_truncation, reason = "fewer elements than leaves")]
+            slot.push(i as u32);
+        }
         let (e, shape) = (&level.elements[i], &level.shapes[i]);
         let centre = (origin + e.mean).as_vec3();
         let radii = shape.radii.map(|r| r * level.factor);
@@ -786,7 +806,8 @@ fn records(levels: &[Level], origin: DVec3, pixels: f32) -> Result<CellEllipsoid
             report
         })
         .collect();
-    Ok(CellEllipsoids { records: out, bounds: Some((lo, hi)), levels: reports })
+    debug_assert!(leaf_elements.iter().all(|e| e.len() == 1), "each leaf id is one level-0 element");
+    Ok(CellEllipsoids { records: out, bounds: Some((lo, hi)), levels: reports, leaf_triangles: leaf_elements })
 }
 
 /// The unit quaternion (x, y, z, w) of the rotation whose columns are `axes` (right-handed), as

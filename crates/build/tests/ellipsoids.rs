@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use glam::Vec3;
 use treelod_build::ellipsoid::{Clustering, cluster_points, leaf_ellipsoid};
 use treelod_build::{
-    BuildConfig, BuildError, DemoTreeConfig, EllipsoidConfig, Placed, SplitMix64, build_block, demo_tree,
+    AoConfig, BuildConfig, BuildError, DemoTreeConfig, EllipsoidConfig, Placed, SplitMix64, build_block, demo_tree,
     ellipsoid_report, import_gltf,
 };
 use treelod_format::{Compression, Container, EllipsoidRecord};
@@ -178,8 +178,11 @@ fn ellipsoid_builds_are_identical_whatever_the_thread_count() {
     let bytes_with = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
         pool.install(|| {
-            let out = build_block("demo", &trees, &with_ellipsoids(), "t").expect("builds");
+            // With ambient occlusion: the ellipsoids' too (ELLIPSOID_AO).
+            let config = BuildConfig { ao: Some(AoConfig { rays: 4, ..AoConfig::default() }), ..with_ellipsoids() };
+            let out = build_block("demo", &trees, &config, "t").expect("builds");
             assert!(out.stats.ellipsoids > 800);
+            assert_eq!(out.data.ellipsoid_ao.len() as u64, out.stats.ellipsoids);
             out.data.to_bytes(Compression::default()).expect("writes")
         })
     };
@@ -328,4 +331,74 @@ fn em_against_kmeans_on_the_oak() {
 #[ignore = "a few seconds in release: cargo nextest run --release -p treelod-build --run-ignored all em_against"]
 fn em_against_kmeans_on_the_jacaranda() {
     compare("polyhaven-jacaranda-tree-55k.glb");
+}
+
+/// With ambient occlusion (the CLI's default) each ellipsoid gets an `ELLIPSOID_AO` byte (spec
+/// §6.14): a level-0 ellipsoid its leaf's occlusion, a cluster the opaque-area-weighted mean of
+/// its leaves', so between the least and the most occluded of them.
+#[test]
+fn the_demo_tree_s_ellipsoids_get_the_occlusion_of_their_leaves() {
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let trees = [Placed { scene: &scene, translation: Vec3::ZERO }];
+    let config = BuildConfig { ao: Some(AoConfig::default()), ..with_ellipsoids() };
+    let out = build_block("demo", &trees, &config, "t").expect("builds");
+    let bytes = out.data.to_bytes(Compression::default()).expect("writes");
+    let container = Container::from_bytes(&bytes).expect("opens");
+    treelod_format::verify(&container).expect("verifies");
+    assert_eq!(container.header().minor, 3, "ELLIPSOID_AO is a kind of 1.3");
+    let (ellipsoids, ao) = (container.ellipsoids(), container.ellipsoid_ao());
+    assert!(!ellipsoids.is_empty());
+    assert_eq!(ao.len(), ellipsoids.len(), "one byte per ellipsoid");
+    assert!(ellipsoids.iter().all(|e| e.flags == 0), "the records' reserved flags stay 0");
+    let (mut clusters, mut strictly_inside) = (0, 0);
+    let mut leaf_values = Vec::new();
+    for cell in container.cells() {
+        let range = cell.ellipsoids.as_usize();
+        let (records, values) = (&ellipsoids[range.clone()], &ao[range]);
+        // Each leaf id's own value: its level-0 ellipsoid's (leaf_count 1, lo 0).
+        let mut by_leaf = vec![None; records.iter().map(|e| (e.leaf_first + e.leaf_count) as usize).max().unwrap_or(0)];
+        for (e, &a) in records.iter().zip(values) {
+            if e.leaf_count == 1 && e.lo == 0.0 {
+                by_leaf[e.leaf_first as usize] = Some(a);
+            }
+        }
+        assert!(by_leaf.iter().all(Option::is_some), "every leaf id has its level-0 ellipsoid");
+        leaf_values.extend(by_leaf.iter().flatten().copied());
+        for (e, &a) in records.iter().zip(values) {
+            let leaves = &by_leaf[e.leaf_first as usize..(e.leaf_first + e.leaf_count) as usize];
+            let lo = leaves.iter().flatten().min().copied().expect("a leaf");
+            let hi = leaves.iter().flatten().max().copied().expect("a leaf");
+            assert!(
+                lo <= a && a <= hi,
+                "ellipsoid of leaves {}+{}: {a} outside {lo}..={hi}",
+                e.leaf_first,
+                e.leaf_count
+            );
+            if e.leaf_count > 1 {
+                clusters += 1;
+                strictly_inside += usize::from(lo < a && a < hi);
+            }
+        }
+    }
+    eprintln!("{} ellipsoids, {clusters} clusters, {strictly_inside} strictly between their leaves", ao.len());
+    assert!(clusters > 100 && strictly_inside * 2 > clusters, "{strictly_inside} of {clusters}");
+    // The leaves' values are the mesh's occlusion: spread out, and on average that of the leaf
+    // points (the same leaves' triangles, weighted the same way).
+    let mean = |v: &mut dyn Iterator<Item = u8>| {
+        let (sum, n) = v.fold((0.0f64, 0usize), |(s, n), a| (s + f64::from(a) / 255.0, n + 1));
+        sum / n.max(1) as f64
+    };
+    let leaf_mean = mean(&mut leaf_values.iter().copied());
+    let points = container.points();
+    let point_mean = mean(
+        &mut points.iter().zip(container.point_ao()).filter(|(p, _)| p.lo == 0.0 && p.leaf_count == 1).map(|(_, &a)| a),
+    );
+    let (min, max) = (leaf_values.iter().min().copied(), leaf_values.iter().max().copied());
+    eprintln!("leaf ellipsoids: mean AO {leaf_mean:.3} ({min:?}..={max:?}); leaf points: {point_mean:.3}");
+    assert!(max.unwrap_or(0) - min.unwrap_or(0) > 50, "{min:?}..={max:?}");
+    assert!((leaf_mean - point_mean).abs() < 0.1, "{leaf_mean} against {point_mean}");
+    // Without ambient occlusion: no ELLIPSOID_AO.
+    let out = build_block("demo", &trees, &with_ellipsoids(), "t").expect("builds");
+    assert!(with_ellipsoids().ao.is_none());
+    assert!(out.data.ellipsoid_ao.is_empty() && !out.data.ellipsoids.is_empty());
 }
