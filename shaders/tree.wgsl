@@ -804,8 +804,8 @@ fn fs_ellipsoid(in: EllipsoidVaryings) -> EllipsoidOut {
     let local_normal = normalize(mix(hit.local, normalize(random + vec3<f32>(1e-6)), ELLIPSOID_NORMAL_NOISE));
     let normal = normalize(transpose(hit.frame.inverse) * local_normal);
     let albedo = decode_color(hit.record.color).rgb;
-    // No ambient occlusion is stored for ellipsoids.
-    return EllipsoidOut(vec4<f32>(shade(albedo, normal, hit.world, 0.0) * in.tint, 1.0), hit.depth);
+    // As uploaded, `flags` holds the ellipsoid's ambient-occlusion byte (spec §6.14; 0 without).
+    return EllipsoidOut(vec4<f32>(shade(albedo, normal, hit.world, decode_ao(hit.record.flags)) * in.tint, 1.0), hit.depth);
 }
 
 // The shadow pass: the ray-cast depth (pushed ELLIPSOID_SHADOW_BIAS_TEXELS texels away from the

@@ -423,6 +423,19 @@ pub(crate) fn gpu_points<'a>(
     scratch
 }
 
+/// The ellipsoids of `container` as the GPU holds them: each one's `flags` (reserved in the file,
+/// spec §6.8, and not read) replaced by its ambient-occlusion byte (§6.14), 0 without
+/// `ELLIPSOID_AO`.
+fn gpu_ellipsoids(container: &Container) -> Vec<treelod_format::EllipsoidRecord> {
+    let ao = container.ellipsoid_ao();
+    container
+        .ellipsoids()
+        .iter()
+        .enumerate()
+        .map(|(i, &e)| treelod_format::EllipsoidRecord { flags: ao.get(i).copied().map_or(0, u32::from), ..e })
+        .collect()
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct MaterialGpu {
@@ -1264,7 +1277,11 @@ impl Renderer {
             .collect();
         let plane_buffer = upload("PLANES", bytemuck::cast_slice(&gpu_planes))?;
         let plane_leaves = upload("PLANE_LEAVES", bytemuck::cast_slice(container.plane_leaves()))?;
-        let ellipsoid_buffer = upload("ELLIPSOIDS", bytemuck::cast_slice(container.ellipsoids()))?;
+        // As uploaded, each ellipsoid's `flags` (reserved in the file, spec §6.8) holds its ambient
+        // occlusion byte (§6.14), 0 without `ELLIPSOID_AO`: never the file's own flags.
+        let gpu_ellipsoids = gpu_ellipsoids(&container);
+        let ellipsoid_buffer = upload("ELLIPSOIDS", bytemuck::cast_slice(&gpu_ellipsoids))?;
+        drop(gpu_ellipsoids);
         if self.noise_view.is_none() {
             let (view, noise_bytes) = crate::noise::upload(device, queue);
             self.noise_view = Some(view);

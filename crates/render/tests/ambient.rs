@@ -1,9 +1,11 @@
 //! Precomputed ambient occlusion (spec §6.14) on the Vulkan backend (Mesa lavapipe in CI): a leaf
 //! quad inside a closed opaque box is fully occluded and the box's outer faces are open, in the
-//! container's `VERTEX_AO` and `POINT_AO`; lit by ambient light alone and seen from inside the
-//! box, the quad is black with `Settings::ambient_occlusion` and its albedo without, drawn as
-//! triangles, as points selected on the CPU and on the GPU, and as an impostor plane, while the
-//! box's walls keep their albedo either way.
+//! container's `VERTEX_AO` and `POINT_AO` (and `PLANE_AO`, `ELLIPSOID_AO` when built with
+//! those); lit by ambient light alone and seen from inside the box, the quad is black with
+//! `Settings::ambient_occlusion` and its albedo without, drawn as triangles, as points selected on
+//! the CPU and on the GPU, as an impostor plane and as Clasen's ellipsoid, while the box's walls
+//! keep their albedo either way. Reserved `flags` of points and ellipsoids are never read as
+//! occlusion.
 
 mod common;
 
@@ -12,7 +14,7 @@ use std::sync::Arc;
 use common::{BACKGROUND, gpu, keep, one_tree};
 use glam::{Vec3, vec3};
 use treelod_build::scene::{AlphaMode, Material, Part, Scene};
-use treelod_build::{AoConfig, BuildConfig, ImpostorConfig, Placed, build_block};
+use treelod_build::{AoConfig, BuildConfig, EllipsoidConfig, ImpostorConfig, Placed, build_block};
 use treelod_format::{Compression, Container, ContainerData, material_class};
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, Renderer, Settings};
@@ -92,6 +94,20 @@ fn built_with_planes() -> ContainerData {
         impostors: Some(ImpostorConfig { texels_per_metre: 256.0, ..ImpostorConfig::default() }),
         ..BuildConfig::default()
     })
+}
+
+/// The scene built with ambient occlusion and leaf ellipsoids; their noise holes are closed
+/// (`alpha_threshold` 0), so the quad's ellipsoid covers the image's centre alone.
+fn built_with_ellipsoids() -> ContainerData {
+    let mut data = built_with(&BuildConfig {
+        ao: Some(AoConfig::default()),
+        ellipsoids: Some(EllipsoidConfig::default()),
+        ..BuildConfig::default()
+    });
+    for e in &mut data.ellipsoids {
+        e.alpha_threshold = 0.0;
+    }
+    data
 }
 
 fn open(data: &ContainerData) -> Arc<Container> {
@@ -192,6 +208,16 @@ fn a_quad_inside_a_closed_box_is_fully_occluded_in_the_container() {
     assert_eq!(planes.plane_ao().len(), planes.planes().len());
     assert!(planes.plane_ao().iter().all(|&a| a == 255), "{:?}", planes.plane_ao());
 
+    // With ellipsoids: the quad's (the only leaf) is the mean of its triangles', fully occluded;
+    // the records' own reserved flags stay 0.
+    let ellipsoids = open(&built_with_ellipsoids());
+    eprintln!("ellipsoids: {}, their AO {:?}", ellipsoids.ellipsoids().len(), ellipsoids.ellipsoid_ao());
+    assert!(!ellipsoids.ellipsoids().is_empty());
+    assert_eq!(ellipsoids.header().minor, 3);
+    assert_eq!(ellipsoids.ellipsoid_ao().len(), ellipsoids.ellipsoids().len());
+    assert!(ellipsoids.ellipsoid_ao().iter().all(|&a| a == 255), "{:?}", ellipsoids.ellipsoid_ao());
+    assert!(ellipsoids.ellipsoids().iter().all(|e| e.flags == 0));
+
     // Built without ambient occlusion: no sections, format 1.0.
     let scene = boxed_quad();
     let out = build_block("plain", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "t")
@@ -262,6 +288,7 @@ fn the_enclosed_quad_is_black_in_ambient_light_with_ao_and_lit_without() {
     let gpu = gpu();
     let container = open(&built());
     let with_planes = open(&built_with_planes());
+    let with_ellipsoids = open(&built_with_ellipsoids());
     // Inside the box, in front of the quad, looking at it: the walls around it are drawn too (no
     // pipeline culls back faces: leaves are cards), the far wall behind it.
     let camera = Camera::look_at(vec3(0.0, 0.0, 0.8), Vec3::ZERO, 0.8, SIZE, SIZE);
@@ -269,11 +296,13 @@ fn the_enclosed_quad_is_black_in_ambient_light_with_ao_and_lit_without() {
     let lit = Settings { ambient: 1.0, ..Settings::default() };
     let points = Settings { s_min: 1.0, s_max: 1e9, ..lit };
     let planes = Settings { impostors: true, ..lit };
+    let ellipsoids = Settings { ellipsoids: true, ..lit };
     let cases = [
         ("triangles", &container, lit, false),
         ("points", &container, points, false),
         ("gpu-points", &container, points, true),
         ("planes", &with_planes, planes, false),
+        ("ellipsoids", &with_ellipsoids, ellipsoids, false),
     ];
     let mut reference = None;
     for (name, container, settings, gpu_selection) in cases {
@@ -293,6 +322,7 @@ fn the_enclosed_quad_is_black_in_ambient_light_with_ao_and_lit_without() {
         match name {
             "triangles" => assert!(stats.triangles >= 14 && renderer.points_in_cut() == 0, "{name}: {stats:?}"),
             "planes" => assert!(stats.instances_impostors == 1 && stats.planes >= 1, "{name}: {stats:?}"),
+            "ellipsoids" => assert!(stats.instances_ellipsoids == 1 && stats.ellipsoids >= 1, "{name}: {stats:?}"),
             _ => {
                 assert!(stats.triangles == 0, "{name}: every triangle is drawn as points: {stats:?}");
                 if !gpu_selection {
@@ -357,4 +387,26 @@ fn reserved_point_flags_are_not_read_as_occlusion_without_point_ao() {
         eprintln!("reserved flags 0xFF, GPU selection {gpu_selection}: centre {mean:.1?}");
         assert!(close(mean, LEAF, 6.0), "GPU selection {gpu_selection}: lit as without occlusion: {mean:?}");
     }
+}
+
+#[test]
+fn reserved_ellipsoid_flags_are_not_read_as_occlusion_without_ellipsoid_ao() {
+    // Spec §6.8: an ellipsoid's `flags` are reserved (readers ignore them), and §6.14: without
+    // `ELLIPSOID_AO` every ellipsoid's occlusion is 0. A file of another writer may set them.
+    let gpu = gpu();
+    let mut data = built_with_ellipsoids();
+    data.ellipsoid_ao.clear();
+    for e in &mut data.ellipsoids {
+        e.flags = 0xFF;
+    }
+    let container = open(&data);
+    assert!(container.ellipsoid_ao().is_empty() && container.ellipsoids().iter().all(|e| e.flags == 0xFF));
+    let camera = Camera::look_at(vec3(0.0, 0.0, 0.8), Vec3::ZERO, 0.8, SIZE, SIZE);
+    let settings = Settings { ambient: 1.0, ellipsoids: true, ..Settings::default() };
+    let mut renderer = one_tree(&gpu, &container, settings);
+    let (image, stats) = settled(&gpu, &mut renderer, &camera);
+    assert!(stats.instances_ellipsoids == 1 && stats.ellipsoids >= 1, "{stats:?}");
+    let mean = centre_mean(&image, 2);
+    eprintln!("reserved ellipsoid flags 0xFF, no ELLIPSOID_AO: centre {mean:.1?}");
+    assert!(close(mean, LEAF, 6.0), "lit as without occlusion: {mean:?}");
 }
