@@ -8,8 +8,9 @@ use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleRecord, material_class};
 use treelod_runtime::prune::{MIN_VISIBLE_FRACTION, leaf_scale, leaves_drawn, projected_height, size_factor};
 use treelod_runtime::{
-    BillboardKind, Billboards, DrawList, DrawRange, EllipsoidLod, EllipsoidRange, Frustum, Hysteresis, Kind, LodChain,
-    LodSettings, ModelLod, PlaneLod, PlaneRange, PruneLod, PruneScale, ROOTS_CELL, instance_tau, select_frame,
+    BillboardKind, Billboards, CellPrefix, DrawList, DrawRange, EllipsoidLod, EllipsoidRange, Frustum, Hysteresis,
+    Kind, LodChain, LodSettings, ModelLod, PlaneLod, PlaneRange, PruneLod, PruneScale, ROOTS_CELL, instance_tau,
+    select_frame,
 };
 
 use crate::camera::Camera;
@@ -647,9 +648,9 @@ struct View {
     /// Pruned draws (pruned leaves, bark, LoD chain levels).
     pruned: Vec<PrunedDraw>,
     /// Impostor draws: per instance and plane cell, the prefix and its `τ`.
-    plane_draws: Vec<PlaneDraw>,
+    plane_draws: Vec<PrefixDraw>,
     /// Ellipsoid draws: per instance and ellipsoid cell, the prefix and its `τ`.
-    ellipsoid_draws: Vec<EllipsoidDraw>,
+    ellipsoid_draws: Vec<PrefixDraw>,
     /// Baseline billboard draws: (instance, model, first quad, quads).
     billboard_draws: Vec<(u32, u32, u32, u32)>,
     /// Per model, per bucket: the view's range of the indirect buffer.
@@ -714,20 +715,12 @@ fn area(container: &Container, triangles: &[TriangleRecord]) -> f64 {
 /// keeps the branches wider than about a pixel.
 const BARK_ERROR_SHARE: f32 = 0.5;
 
-/// One draw of impostor planes: a prefix of one cell's planes for one instance.
+/// One draw of impostor planes or ellipsoids: a prefix of one cell's elements for one instance.
 #[derive(Clone, Copy, Debug)]
-struct PlaneDraw {
+struct PrefixDraw {
     instance: u32,
     model: u32,
-    range: PlaneRange,
-}
-
-/// One draw of ellipsoids: a prefix of one cell's ellipsoids for one instance.
-#[derive(Clone, Copy, Debug)]
-struct EllipsoidDraw {
-    instance: u32,
-    model: u32,
-    range: EllipsoidRange,
+    range: CellPrefix,
 }
 
 impl Model {
@@ -1616,7 +1609,7 @@ impl Renderer {
             }
             visible += 1;
             for range in &self.plane_ranges {
-                view.plane_draws.push(PlaneDraw { instance: index, model: instance.model, range: *range });
+                view.plane_draws.push(PrefixDraw { instance: index, model: instance.model, range: *range });
             }
             // The chain's bark level (its triangles and error), if the policy and the model have one.
             let chain_bark = match (self.settings.impostor_bark, &model.chain, self.lods.get(instance.model as usize)) {
@@ -1677,7 +1670,7 @@ impl Renderer {
             }
             visible += 1;
             for range in &self.ellipsoid_ranges {
-                view.ellipsoid_draws.push(EllipsoidDraw { instance: index, model: instance.model, range: *range });
+                view.ellipsoid_draws.push(PrefixDraw { instance: index, model: instance.model, range: *range });
             }
             view.pruned.extend(model.bark_draw(index, instance.model, 1.0));
         }
@@ -2215,39 +2208,26 @@ impl Renderer {
             let vertices = (3 * draw.first, 3 * draw.count);
             record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, 2, vertices, draw.leaf_scale);
         }
-        // Impostor planes: a prefix of one cell's planes, the level chosen in the shader by `τ`.
-        for draw in &view.plane_draws {
+        // Impostor planes (bucket 3) and ellipsoids (bucket 5): a prefix of one cell's elements,
+        // six corners each, the level chosen in the shader by `τ`.
+        stats.planes += view.plane_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        stats.ellipsoids += view.ellipsoid_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        let prefixes = (view.plane_draws.iter().map(|d| (d, DrawSource::Planes, 3)))
+            .chain(view.ellipsoid_draws.iter().map(|d| (d, DrawSource::Ellipsoids, 5)));
+        for (draw, source, bucket) in prefixes {
             let range = draw.range;
-            stats.planes += u64::from(range.count);
             let record = RecordedDraw {
                 instance: draw.instance,
                 model: ModelId(draw.model),
                 cell: range.cell,
-                source: DrawSource::Planes,
+                source,
                 count: range.count,
                 tau_points: range.tau,
                 tau_triangles: range.tau,
                 clamped: false,
             };
             let vertices = (6 * range.first, 6 * range.count);
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, 3, vertices, 1.0);
-        }
-        // Ellipsoids: a prefix of one cell's ellipsoids, the level chosen in the shader by `τ`.
-        for draw in &view.ellipsoid_draws {
-            let range = draw.range;
-            stats.ellipsoids += u64::from(range.count);
-            let record = RecordedDraw {
-                instance: draw.instance,
-                model: ModelId(draw.model),
-                cell: range.cell,
-                source: DrawSource::Ellipsoids,
-                count: range.count,
-                tau_points: range.tau,
-                tau_triangles: range.tau,
-                clamped: false,
-            };
-            let vertices = (6 * range.first, 6 * range.count);
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, 5, vertices, 1.0);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, bucket, vertices, 1.0);
         }
         // Baseline billboards: every quad of the chosen kind.
         for &(instance, model, first, count) in &view.billboard_draws {

@@ -17,7 +17,7 @@
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, EllipsoidRecord, Range};
 
-use crate::frame::{Camera, Frustum, LodSettings, prefix_above, tau_per_metre};
+use crate::frame::{Camera, CellPrefix, Frustum, LodSettings, prefix_above, tau_per_metre};
 
 /// Whether an ellipsoid is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is in
 /// `vs_ellipsoid`.
@@ -43,17 +43,7 @@ pub struct EllipsoidCell {
 }
 
 /// One prefix of a cell's ellipsoids to draw.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct EllipsoidRange {
-    /// Index of the cell in the container's `CELLS`.
-    pub cell: u32,
-    /// First ellipsoid, absolute index in `ELLIPSOIDS`.
-    pub first: u32,
-    /// Leading ellipsoids of the cell with `hi > τ`, `≥ 1`.
-    pub count: u32,
-    /// `τ`, metres per pixel, model space: the shader draws an ellipsoid where `lo ≤ τ < hi`.
-    pub tau: f32,
-}
+pub type EllipsoidRange = CellPrefix;
 
 /// What drawing a model's ellipsoids needs of its container, made once.
 #[derive(Clone, Debug, PartialEq)]

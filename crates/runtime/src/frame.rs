@@ -905,6 +905,21 @@ enum Culling<'a> {
     Replay(&'a [Visibility]),
 }
 
+/// One prefix of a cell's elements of an SPT kind drawn as a whole range (impostor planes,
+/// ellipsoids; spec §10): the shader draws those of them whose interval holds `tau`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellPrefix {
+    /// Index of the cell in the container's `CELLS`.
+    pub cell: u32,
+    /// First element, absolute index in the kind's array.
+    pub first: u32,
+    /// Leading elements of the cell with `hi > τ`, `≥ 1`.
+    pub count: u32,
+    /// `τ`, model space, in the unit of the kind's intervals (metres for planes, metres per pixel
+    /// for ellipsoids).
+    pub tau: f32,
+}
+
 /// How many of `count` thresholds `hi[first..]` (sorted largest first, spec §10) exceed `tau`:
 /// the leading elements a cell draws at `tau`.
 pub(crate) fn prefix_above(hi: &[f32], first: u32, count: u32, tau: f32) -> u32 {

@@ -11,7 +11,7 @@
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, PlaneRecord, Range};
 
-use crate::frame::{Camera, Frustum, prefix_above, tau_per_metre};
+use crate::frame::{Camera, CellPrefix, Frustum, prefix_above, tau_per_metre};
 
 /// Whether a plane is drawn at `τ` (spec §10): its interval holds `τ`.
 #[must_use]
@@ -128,17 +128,7 @@ pub struct PlaneCell {
 }
 
 /// One prefix of a cell's planes to draw.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PlaneRange {
-    /// Index of the cell in the container's `CELLS`.
-    pub cell: u32,
-    /// First plane, absolute index in `PLANES`.
-    pub first: u32,
-    /// Leading planes of the cell with `hi > τ`, `≥ 1`.
-    pub count: u32,
-    /// `τ`, metres, model space: the shader draws a plane where `lo ≤ τ < hi`.
-    pub tau: f32,
-}
+pub type PlaneRange = CellPrefix;
 
 /// What drawing a model's planes needs of its container, made once.
 #[derive(Clone, Debug, PartialEq)]

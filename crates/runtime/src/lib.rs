@@ -19,8 +19,8 @@ pub mod select;
 pub use baseline::{BillboardKind, Billboards, ChainLevel, LodChain, instance_tau};
 pub use ellipsoid::{EllipsoidCell, EllipsoidLod, EllipsoidRange, ellipsoid_drawn};
 pub use frame::{
-    BudgetController, Camera, CellLod, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings,
-    ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
+    BudgetController, Camera, CellLod, CellPrefix, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind,
+    LodSettings, ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
 };
 pub use impostor::{
     CROSSFADE, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share, plane_drawn,
