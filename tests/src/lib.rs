@@ -84,6 +84,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 ao: false,
                 indirect_planes: false,
                 ellipsoid_ao: false,
+                line_ao: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -109,6 +110,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 ao: false,
                 indirect_planes: false,
                 ellipsoid_ao: false,
+                line_ao: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -118,7 +120,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.2 (1.1's and ambient occlusion), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { indirect_planes: false, ellipsoid_ao: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                indirect_planes: false,
+                ellipsoid_ao: false,
+                line_ao: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -126,6 +133,14 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.3 (1.2's, indirectly textured planes: PLANE_LEAVES and a LEAF_SLOTS \
                           image, and ELLIPSOID_AO), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { line_ao: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 4,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.4 (1.3's and LINE_AO), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions::everything(),
             compression: Compression::Zstd { level: 19 },

@@ -66,6 +66,9 @@ pub struct SyntheticOptions {
     /// Ambient occlusion of the ellipsoids (spec §6.14, 1.3): a random byte per ellipsoid, in
     /// `ELLIPSOID_AO`. Drawn last, so the rest of the container is the same as without it.
     pub ellipsoid_ao: bool,
+    /// Ambient occlusion of the lines (spec §6.14, 1.4): a random byte per line, in `LINE_AO`.
+    /// Drawn last, so the rest of the container is the same as without it.
+    pub line_ao: bool,
     /// Block name in the metadata; `None` gives `synthetic-<seed in hex>`.
     pub name: Option<String>,
 }
@@ -94,6 +97,7 @@ impl SyntheticOptions {
             ao: false,
             indirect_planes: false,
             ellipsoid_ao: false,
+            line_ao: false,
             name: Some("minimal".into()),
         }
     }
@@ -138,6 +142,7 @@ impl SyntheticOptions {
             ao: true,
             indirect_planes: true,
             ellipsoid_ao: true,
+            line_ao: true,
             name: Some("everything".into()),
         }
     }
@@ -989,6 +994,9 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     }
     if options.ellipsoid_ao {
         b.data.ellipsoid_ao = rng.bytes(b.data.ellipsoids.len());
+    }
+    if options.line_ao {
+        b.data.line_ao = rng.bytes(b.data.lines.len());
     }
     b.data
 }

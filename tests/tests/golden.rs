@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.3 (`tests/data/v1_0` to `tests/data/v1_3`): every file
+//! Golden files of format versions 1.0 to 1.4 (`tests/data/v1_0` to `tests/data/v1_4`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -24,7 +24,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3] {
+    for minor in [0u16, 1, 2, 3, 4] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -297,7 +297,7 @@ fn the_1_2_every_kind_file_has_every_kind_and_ambient_occlusion_for_every_vertex
 fn the_1_3_every_kind_file_has_every_kind_and_indirectly_textured_planes() {
     let c = Container::open(golden_dir_of(3).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 3, "{kind}");
     }
     assert_eq!(c.header().minor, 3);
     // Every plane samples the one LEAF_SLOTS image, the last image; PLANE_LEAVES holds every
@@ -333,6 +333,25 @@ fn the_1_3_every_kind_file_has_every_kind_and_indirectly_textured_planes() {
     // So without PLANE_LEAVES the writer marks it 1.2.
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 2);
+}
+
+#[test]
+fn the_1_4_every_kind_file_has_every_kind_and_line_occlusion() {
+    let c = Container::open(golden_dir_of(4).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 4);
+    assert_eq!(c.line_ao().len(), c.lines().len(), "LINE_AO, one byte per line");
+    assert!(!c.lines().is_empty());
+    // Without LINE_AO it is the 1.3 file, record for record, and the writer marks it 1.3.
+    let v1_3 =
+        ContainerData::from_container(&Container::open(golden_dir_of(3).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.line_ao.clear();
+    assert!(data == v1_3, "v1_4 is v1_3 with line occlusion");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 3);
 }
 
 #[test]

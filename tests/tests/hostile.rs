@@ -112,6 +112,7 @@ fn small_options() -> SyntheticOptions {
         ao: true,
         indirect_planes: true,
         ellipsoid_ao: true,
+        line_ao: true,
         name: Some("hostile".into()),
     }
 }
@@ -301,9 +302,9 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds indirectly textured planes (PLANE_LEAVES), so it is a 1.3 file.
+    // The fixture holds the lines' occlusion (LINE_AO), so it is a 1.4 file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 3);
+    assert_eq!(minor, 4);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());

@@ -46,6 +46,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 indirect_planes: grid[2] >= 2,
                 // Ellipsoid occlusion with a quarter.
                 ellipsoid_ao: grid[0] >= 2 && grid[2] >= 2,
+                // Line occlusion with another quarter.
+                line_ao: grid[0] >= 2 && grid[2] < 2,
                 name: None,
             }
         })
@@ -337,7 +339,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 3, "everything() holds the kinds of 1.3");
+    assert_eq!(container.header().minor, 4, "everything() holds the kinds of 1.4");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

@@ -466,6 +466,12 @@ impl Container {
     pub fn ellipsoid_ao(&self) -> &[u8] {
         self.raw_bytes(SectionKind::ELLIPSOID_AO)
     }
+
+    /// Ambient occlusion of each line, empty or as long as [`Container::lines`]. Since 1.4.
+    #[must_use]
+    pub fn line_ao(&self) -> &[u8] {
+        self.raw_bytes(SectionKind::LINE_AO)
+    }
 }
 
 fn bad_record(kind: SectionKind, index: usize, reason: String) -> Error {

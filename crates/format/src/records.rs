@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 3;
+pub const MINOR: u16 = 4;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -159,9 +159,11 @@ impl SectionKind {
     pub const PLANE_AO: Self = Self(0x0062);
     /// Ambient occlusion of each `ELLIPSOIDS` record, one `unorm8` (spec §6.14). Since 1.3.
     pub const ELLIPSOID_AO: Self = Self(0x0063);
+    /// Ambient occlusion of each `LINES` record, one `unorm8` (spec §6.14). Since 1.4.
+    pub const LINE_AO: Self = Self(0x0064);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 24] = [
+    pub const KNOWN: [Self; 25] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -186,6 +188,7 @@ impl SectionKind {
         Self::POINT_AO,
         Self::PLANE_AO,
         Self::ELLIPSOID_AO,
+        Self::LINE_AO,
     ];
 
     /// The spec's name of a known kind.
@@ -216,6 +219,7 @@ impl SectionKind {
             Self::POINT_AO => "POINT_AO",
             Self::PLANE_AO => "PLANE_AO",
             Self::ELLIPSOID_AO => "ELLIPSOID_AO",
+            Self::LINE_AO => "LINE_AO",
             _ => return None,
         })
     }
@@ -224,7 +228,13 @@ impl SectionKind {
     #[must_use]
     pub fn record_size(self) -> Option<u32> {
         let size = match self {
-            Self::META | Self::IMAGE_DATA | Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO | Self::ELLIPSOID_AO => 1,
+            Self::META
+            | Self::IMAGE_DATA
+            | Self::VERTEX_AO
+            | Self::POINT_AO
+            | Self::PLANE_AO
+            | Self::ELLIPSOID_AO
+            | Self::LINE_AO => 1,
             Self::BLOCK => size_of::<BlockRecord>(),
             Self::CELLS => size_of::<CellRecord>(),
             Self::VERTICES => size_of::<VertexRecord>(),
@@ -249,14 +259,16 @@ impl SectionKind {
     /// The minor version of major 1 that introduced this kind (spec §5): 1 for the baselines
     /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 2 for ambient occlusion (`VERTEX_AO`,
     /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`) and the ellipsoids'
-    /// ambient occlusion (`ELLIPSOID_AO`), 0 for the other known kinds and for kinds this version does not know (private extensions do not raise a file's
-    /// minor).
+    /// ambient occlusion (`ELLIPSOID_AO`), 4 for the lines' ambient occlusion (`LINE_AO`), 0 for
+    /// the other known kinds and for kinds this version does not know (private extensions do not
+    /// raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
         match self {
             Self::LOD_LEVELS | Self::LOD_TRIANGLES | Self::BILLBOARDS => 1,
             Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO => 2,
             Self::PLANE_LEAVES | Self::ELLIPSOID_AO => 3,
+            Self::LINE_AO => 4,
             _ => 0,
         }
     }
@@ -269,11 +281,12 @@ impl SectionKind {
 }
 
 /// The ambient-occlusion kinds and the array each one parallels (spec §6.14).
-pub const AO_KINDS: [(SectionKind, SectionKind); 4] = [
+pub const AO_KINDS: [(SectionKind, SectionKind); 5] = [
     (SectionKind::VERTEX_AO, SectionKind::VERTICES),
     (SectionKind::POINT_AO, SectionKind::POINTS),
     (SectionKind::PLANE_AO, SectionKind::PLANES),
     (SectionKind::ELLIPSOID_AO, SectionKind::ELLIPSOIDS),
+    (SectionKind::LINE_AO, SectionKind::LINES),
 ];
 
 /// Decodes a stored ambient-occlusion byte (spec §6.14) to the share of ambient light that is

@@ -73,7 +73,7 @@ pub struct VerifyReport {
     pub lod_triangles: u64,
     /// `BILLBOARDS` records checked (baseline).
     pub billboards: u64,
-    /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO` and `ELLIPSOID_AO` bytes (their counts are checked at
+    /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO` and `LINE_AO` bytes (their counts are checked at
     /// open).
     pub ao: u64,
     /// Leaves whose exact cut was verified, summed over cells and the point, ellipsoid, line and

@@ -90,6 +90,8 @@ pub struct ContainerData {
     pub plane_ao: Vec<u8>,
     /// `ELLIPSOID_AO`: empty, or one byte per ellipsoid (since 1.3).
     pub ellipsoid_ao: Vec<u8>,
+    /// `LINE_AO`: empty, or one byte per line (since 1.4).
+    pub line_ao: Vec<u8>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
     pub extra_sections: Vec<(u32, Vec<u8>)>,
@@ -124,6 +126,7 @@ impl ContainerData {
             point_ao: c.point_ao().to_vec(),
             plane_ao: c.plane_ao().to_vec(),
             ellipsoid_ao: c.ellipsoid_ao().to_vec(),
+            line_ao: c.line_ao().to_vec(),
             extra_sections: c
                 .sections()
                 .iter()
@@ -410,6 +413,7 @@ macro_rules! optional_sections {
             (SectionKind::POINT_AO, $payload!(point_ao)),
             (SectionKind::PLANE_AO, $payload!(plane_ao)),
             (SectionKind::ELLIPSOID_AO, $payload!(ellipsoid_ao)),
+            (SectionKind::LINE_AO, $payload!(line_ao)),
         ]
     };
 }

@@ -7,8 +7,8 @@ mod common;
 
 use common::reseal;
 use treelod_format::{
-    AO_KINDS, CellRecord, Compression, Container, ContainerData, EllipsoidRecord, Error, ImageRecord, MINOR,
-    PlaneRecord, Range, SectionKind, decode_ao, encode_ao, image_format, pack, verify,
+    AO_KINDS, CellRecord, Compression, Container, ContainerData, EllipsoidRecord, Error, ImageRecord, LineRecord,
+    MINOR, PlaneRecord, Range, SectionKind, decode_ao, encode_ao, image_format, pack, verify,
 };
 
 fn range(first: u32, count: u32) -> Range {
@@ -16,7 +16,8 @@ fn range(first: u32, count: u32) -> Range {
 }
 
 /// One 1×1×1 cell holding one triangle under its leaf point, the block cell one impostor plane
-/// with a 2×2 RGBA8 image and one ellipsoid over the leaf; no ambient occlusion. Verifies.
+/// with a 2×2 RGBA8 image, one ellipsoid over the leaf and one branch line; no ambient occlusion.
+/// Verifies.
 fn fixture() -> ContainerData {
     let mut data = common::one_leaf_cell("ao-fixture");
     data.planes = vec![PlaneRecord {
@@ -44,11 +45,24 @@ fn fixture() -> ContainerData {
         leaf_count: 1,
         flags: 0,
     }];
+    data.lines = vec![LineRecord {
+        p0: [0.3, 0.3, 0.5],
+        r0: 0.02,
+        p1: [0.7, 0.7, 0.5],
+        r1: 0.01,
+        color: 0xFF20_4060,
+        lo: 0.0,
+        hi: f32::INFINITY,
+        leaf_first: 0,
+        leaf_count: 1,
+        flags: 0,
+    }];
     data.cells[1] = CellRecord {
         bounds_min: [0.25, 0.25, 0.5],
         bounds_max: [0.75, 0.75, 0.5],
         planes: range(0, 1),
         ellipsoids: range(0, 1),
+        lines: range(0, 1),
         ..data.cells[1]
     };
     data.images = vec![ImageRecord {
@@ -68,9 +82,10 @@ fn with_ao() -> ContainerData {
     ContainerData { vertex_ao: vec![0, 128, 255], point_ao: vec![200], plane_ao: vec![77], ..fixture() }
 }
 
-/// [`with_ao`] and a value for the ellipsoid, too (`ELLIPSOID_AO`, 1.3).
+/// [`with_ao`] and a value for the ellipsoid (`ELLIPSOID_AO`, 1.3) and the line (`LINE_AO`,
+/// 1.4), too.
 fn with_all_ao() -> ContainerData {
-    ContainerData { ellipsoid_ao: vec![33], ..with_ao() }
+    ContainerData { ellipsoid_ao: vec![33], line_ao: vec![44], ..with_ao() }
 }
 
 /// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,
@@ -111,6 +126,7 @@ fn the_kinds_are_numbered_named_and_sized_as_the_spec_says() {
         (SectionKind::POINT_AO, 0x0061, "POINT_AO", SectionKind::POINTS),
         (SectionKind::PLANE_AO, 0x0062, "PLANE_AO", SectionKind::PLANES),
         (SectionKind::ELLIPSOID_AO, 0x0063, "ELLIPSOID_AO", SectionKind::ELLIPSOIDS),
+        (SectionKind::LINE_AO, 0x0064, "LINE_AO", SectionKind::LINES),
     ];
     assert_eq!(AO_KINDS.len(), expected.len());
     for (i, (kind, value, name, of)) in expected.into_iter().enumerate() {
@@ -118,7 +134,12 @@ fn the_kinds_are_numbered_named_and_sized_as_the_spec_says() {
         assert_eq!(kind.name(), Some(name));
         assert_eq!(kind.to_string(), name);
         assert_eq!(kind.record_size(), Some(1), "{name}: one byte per record");
-        assert_eq!(kind.since_minor(), if kind == SectionKind::ELLIPSOID_AO { 3 } else { 2 }, "{name}");
+        let since = match kind {
+            SectionKind::ELLIPSOID_AO => 3,
+            SectionKind::LINE_AO => 4,
+            _ => 2,
+        };
+        assert_eq!(kind.since_minor(), since, "{name}");
         assert!(SectionKind::KNOWN.contains(&kind), "{name}");
         assert_eq!(AO_KINDS[i], (kind, of), "{name} parallels {of}");
     }
@@ -189,7 +210,8 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
         assert_eq!(c.point_ao(), &[200]);
         assert_eq!(c.plane_ao(), &[77]);
         assert!(c.ellipsoid_ao().is_empty() && c.section(SectionKind::ELLIPSOID_AO).is_none());
-        for (kind, _) in AO_KINDS.into_iter().filter(|&(k, _)| k != SectionKind::ELLIPSOID_AO) {
+        assert!(c.line_ao().is_empty() && c.section(SectionKind::LINE_AO).is_none());
+        for (kind, _) in AO_KINDS.into_iter().filter(|&(k, _)| k.since_minor() == 2) {
             assert_eq!(c.section(kind).expect("present").entry.record_size, 1, "{kind}");
         }
         let report = verify(&c).expect("verifies");
@@ -201,21 +223,23 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
         assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
     }
 
-    // Any one of the first three kinds makes a 1.2 file, `ELLIPSOID_AO` a 1.3 file; the others
-    // read as empty.
+    // Any one of the first three kinds makes a 1.2 file, `ELLIPSOID_AO` a 1.3 file, `LINE_AO` a 1.4
+    // file; the others read as empty.
     for (i, (kind, _)) in AO_KINDS.into_iter().enumerate() {
         let mut data = fixture();
         match i {
             0 => data.vertex_ao = vec![1, 2, 3],
             1 => data.point_ao = vec![4],
             2 => data.plane_ao = vec![5],
-            _ => data.ellipsoid_ao = vec![6],
+            3 => data.ellipsoid_ao = vec![6],
+            _ => data.line_ao = vec![7],
         }
         let bytes = data.to_bytes(Compression::None).expect("writes");
         let c = Container::from_bytes(&bytes).expect("opens");
-        assert_eq!(c.header().minor, if i == 3 { 3 } else { 2 }, "{kind} alone");
+        assert_eq!(c.header().minor, if i >= 3 { i as u16 } else { 2 }, "{kind} alone");
         assert_eq!(c.sections().iter().filter(|s| s.kind().since_minor() >= 2).count(), 1, "{kind} alone");
-        let lengths = c.vertex_ao().len() + c.point_ao().len() + c.plane_ao().len() + c.ellipsoid_ao().len();
+        let lengths =
+            c.vertex_ao().len() + c.point_ao().len() + c.plane_ao().len() + c.ellipsoid_ao().len() + c.line_ao().len();
         assert_eq!(lengths, if i == 0 { 3 } else { 1 });
         assert_eq!(c.raw_bytes(kind).len(), lengths, "{kind}");
         verify(&c).expect("verifies");
@@ -237,7 +261,7 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
 #[test]
 fn a_container_with_ellipsoid_ao_round_trips_as_format_1_3() {
     const { assert!(MINOR >= 3, "ELLIPSOID_AO is format 1.3") };
-    let data = with_all_ao();
+    let data = ContainerData { line_ao: Vec::new(), ..with_all_ao() };
     for compression in [Compression::None, Compression::default()] {
         let bytes = data.to_bytes(compression).expect("writes");
         let c = Container::from_bytes(&bytes).expect("opens");
@@ -258,13 +282,36 @@ fn a_container_with_ellipsoid_ao_round_trips_as_format_1_3() {
 }
 
 #[test]
+fn a_container_with_line_ao_round_trips_as_format_1_4() {
+    const { assert!(MINOR >= 4, "LINE_AO is format 1.4") };
+    let data = with_all_ao();
+    for compression in [Compression::None, Compression::default()] {
+        let bytes = data.to_bytes(compression).expect("writes");
+        let c = Container::from_bytes(&bytes).expect("opens");
+        assert_eq!((c.header().major, c.header().minor), (1, 4), "{compression:?}");
+        assert_eq!((c.line_ao(), c.ellipsoid_ao()), (&[44u8][..], &[33u8][..]));
+        assert_eq!(c.line_ao().len(), c.lines().len());
+        assert_eq!(c.section(SectionKind::LINE_AO).expect("present").entry.record_size, 1);
+        // The file's own reserved `flags` stay 0: the occlusion lives only in its section.
+        assert_eq!(c.lines()[0].flags, 0);
+        let report = verify(&c).expect("verifies");
+        assert_eq!(report.ao, 7);
+        assert!(report.to_string().contains("ambient occlusion: 7 values"), "{report}");
+        let back = ContainerData::from_container(&c);
+        assert_eq!(back, data);
+        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+    }
+}
+
+#[test]
 fn the_writer_refuses_ao_arrays_of_another_length_than_their_array() {
     type Field = fn(&mut ContainerData) -> &mut Vec<u8>;
-    let fields: [(SectionKind, &str, Field); 4] = [
+    let fields: [(SectionKind, &str, Field); 5] = [
         (SectionKind::VERTEX_AO, "VERTICES has 3", |d| &mut d.vertex_ao),
         (SectionKind::POINT_AO, "POINTS has 1", |d| &mut d.point_ao),
         (SectionKind::PLANE_AO, "PLANES has 1", |d| &mut d.plane_ao),
         (SectionKind::ELLIPSOID_AO, "ELLIPSOIDS has 1", |d| &mut d.ellipsoid_ao),
+        (SectionKind::LINE_AO, "LINES has 1", |d| &mut d.line_ao),
     ];
     let dir = std::env::temp_dir().join(format!("treelod-format-ao-refused-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("creates");
@@ -334,6 +381,7 @@ fn a_file_whose_ao_section_is_shorter_or_longer_than_its_array_is_refused_at_ope
         (SectionKind::PLANE_AO, 5, "6 records, PLANES has 1"),
         (SectionKind::ELLIPSOID_AO, 2, "3 records, ELLIPSOIDS has 1"),
         (SectionKind::ELLIPSOID_AO, 15, "16 records, ELLIPSOIDS has 1"),
+        (SectionKind::LINE_AO, 1, "2 records, LINES has 1"),
     ];
     for (kind, delta, needle) in cases {
         let edited = resize_section(&bytes, kind, delta);
