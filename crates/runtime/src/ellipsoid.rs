@@ -13,131 +13,67 @@
 //! included as for points (the block cell at the block centre's distance with `Z_i = 0`) — divided
 //! by a quality factor: `τ = mpp / quality`, so a quality of 2 draws the level a camera twice as
 //! near would draw.
+//!
+//! Clasen's branch lines (spec §6.9) are selected the same way with the same `τ` ([`LineLod`],
+//! [`line_drawn`]); both are [`SptLod`]s, the per-cell prefix selector they share with impostor
+//! planes.
 
-use glam::{Mat4, Vec3};
-use treelod_format::{Container, EllipsoidRecord, Range};
+use std::ops::Deref;
 
-use crate::frame::{Camera, CellPrefix, Frustum, LodSettings, prefix_above, tau_per_metre};
+use glam::Mat4;
+use treelod_format::{Container, EllipsoidRecord, LineRecord};
+
+use crate::frame::{Camera, CellPrefix, Frustum, LodSettings};
+use crate::spt_lod::{SptCell, SptLod, spt_drawn};
 
 /// Whether an ellipsoid is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is in
 /// `vs_ellipsoid`.
 #[must_use]
 pub fn ellipsoid_drawn(ellipsoid: &EllipsoidRecord, tau: f32) -> bool {
-    ellipsoid.lo <= tau && tau < ellipsoid.hi
+    spt_drawn(ellipsoid, tau)
+}
+
+/// Whether a line is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is in
+/// `vs_line`.
+#[must_use]
+pub fn line_drawn(line: &LineRecord, tau: f32) -> bool {
+    spt_drawn(line, tau)
 }
 
 /// One cell holding ellipsoids.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct EllipsoidCell {
-    /// Index of the cell in the container's `CELLS`.
-    pub cell: u32,
-    /// Its ellipsoids in the container's `ELLIPSOIDS`.
-    pub ellipsoids: Range,
-    /// Where `τ` is measured from, model space: the block centre for the block cell, else the
-    /// centre of the cell's bounds.
-    pub anchor: Vec3,
-    /// Whether this is the block cell (`Z_i = 0` for the depth bias).
-    pub block_cell: bool,
-    /// Where the cell's `hi` values start in [`EllipsoidLod`]'s compact array.
-    hi_at: u32,
-}
+pub type EllipsoidCell = SptCell;
+
+/// One cell holding lines.
+pub type LineCell = SptCell;
 
 /// One prefix of a cell's ellipsoids to draw.
 pub type EllipsoidRange = CellPrefix;
 
-/// What drawing a model's ellipsoids needs of its container, made once.
+/// One prefix of a cell's lines to draw.
+pub type LineRange = CellPrefix;
+
+/// What drawing a model's ellipsoids needs of its container, made once: its [`SptLod`] over
+/// `ELLIPSOIDS`.
 #[derive(Clone, Debug, PartialEq)]
-pub struct EllipsoidLod {
-    cells: Vec<EllipsoidCell>,
-    hi: Vec<f32>,
-    /// A sphere, model space, holding the block and every ellipsoid cell's bounds: culling.
-    centre: Vec3,
-    radius: f32,
-    /// The block's centre and half diagonal, model space: `d_block` and `R` of Gilet's `Z_i`.
-    block_centre: Vec3,
-    block_radius: f32,
-}
+pub struct EllipsoidLod(SptLod);
+
+/// What drawing a model's branch lines (spec §6.9) needs of its container, made once: its
+/// [`SptLod`] over `LINES`. Lines share the ellipsoids' unit of `τ` (metres per pixel; their
+/// build targets one pixel of width), so one `τ` per cell serves both.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LineLod(SptLod);
 
 impl EllipsoidLod {
     /// The ellipsoids of an open container; `None` if it has none.
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        let ellipsoids = container.ellipsoids();
-        if ellipsoids.is_empty() {
-            return None;
-        }
-        let block = container.block();
-        let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
-        let block_cell = block.grid_cell_count();
-        let (mut lo, mut hi) = (min, max);
-        let mut lod = Self {
-            cells: Vec::new(),
-            hi: Vec::new(),
-            centre: Vec3::ZERO,
-            radius: 0.0,
-            block_centre: 0.5 * (min + max),
-            block_radius: 0.5 * (max - min).length(),
-        };
-        for (index, cell) in container.cells().iter().enumerate() {
-            // Ranges were checked when the container was opened (spec §9.1).
-            let Some(records) = ellipsoids.get(cell.ellipsoids.as_usize()).filter(|r| !r.is_empty()) else {
-                continue;
-            };
-            let (Ok(index_u32), Ok(hi_at)) = (u32::try_from(index), u32::try_from(lod.hi.len())) else { break };
-            let (cmin, cmax) = (Vec3::from_array(cell.bounds_min), Vec3::from_array(cell.bounds_max));
-            if cmin.is_finite() && cmax.is_finite() {
-                lo = lo.min(cmin);
-                hi = hi.max(cmax);
-            }
-            // The cell's bounds hold the centres; the ellipsoids reach out by their radii.
-            for e in records {
-                let (c, r) = (Vec3::from_array(e.center), Vec3::from_array(e.radii).max_element());
-                if c.is_finite() && r.is_finite() {
-                    lo = lo.min(c - r);
-                    hi = hi.max(c + r);
-                }
-            }
-            let is_block = index == block_cell;
-            let anchor = if is_block { lod.block_centre } else { 0.5 * (cmin + cmax) };
-            lod.cells.push(EllipsoidCell {
-                cell: index_u32,
-                ellipsoids: cell.ellipsoids,
-                anchor,
-                block_cell: is_block,
-                hi_at,
-            });
-            lod.hi.extend(records.iter().map(|e| e.hi));
-        }
-        lod.centre = 0.5 * (lo + hi);
-        lod.radius = 0.5 * (hi - lo).length();
-        Some(lod)
-    }
-
-    /// The cells holding ellipsoids, in container order.
-    #[must_use]
-    pub fn cells(&self) -> &[EllipsoidCell] {
-        &self.cells
-    }
-
-    /// A sphere, model space, holding the block bounds and every ellipsoid: `(centre, radius)`.
-    #[must_use]
-    pub fn sphere(&self) -> (Vec3, f32) {
-        (self.centre, self.radius)
-    }
-
-    /// Number of leading ellipsoids of `cell` with `hi > τ` (spec §10).
-    #[must_use]
-    pub fn prefix(&self, cell: &EllipsoidCell, tau: f32) -> u32 {
-        prefix_above(&self.hi, cell.hi_at, cell.ellipsoids.count, tau)
+        SptLod::from_container(container, container.ellipsoids(), |cell| cell.ellipsoids).map(Self)
     }
 
     /// The ellipsoids an instance with world-from-model `transform` draws for `camera`, appended
-    /// to `out`: per cell holding ellipsoids, `τ = mpp / quality` with `mpp = d · 2·tan(fovy/2) / H`
-    /// (spec §10.1; `d` the distance to the cell's anchor, divided by the transform's largest axis
-    /// scale) times Gilet's depth bias `s_min_i / s_min` of `settings` (the point threshold's, so
-    /// `mpp = τ_p / s_min`; `Z_i = clamp((d_cell − d_block) / R, −1, 1)`, 0 for the block cell),
-    /// and the leading ellipsoids with `hi > τ`. Returns `false`, appending nothing, if the
-    /// instance's sphere lies outside `frustum` or the transform is degenerate.
+    /// to `out` ([`SptLod::select_per_pixel`]: `τ` the metres per pixel at each cell's distance,
+    /// with Gilet's depth bias of `settings`, divided by `quality`). Returns `false`, appending
+    /// nothing, if the instance's sphere lies outside `frustum` or the transform is degenerate.
     pub fn select(
         &self,
         transform: Mat4,
@@ -147,31 +83,55 @@ impl EllipsoidLod {
         quality: f32,
         out: &mut Vec<EllipsoidRange>,
     ) -> bool {
-        let Some(per_metre) = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius)) else {
-            return false;
-        };
-        let quality = if quality > 0.0 && quality.is_finite() { quality } else { 1.0 };
-        let scale = camera.world_per_pixel() / per_metre;
-        let d_block = transform.transform_point3(self.block_centre).distance(camera.position);
-        let inv_radius = if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 };
-        for cell in &self.cells {
-            let d_cell = transform.transform_point3(cell.anchor).distance(camera.position);
-            let z = if cell.block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
-            let bias = if settings.s_min > 0.0 { settings.biased_pixels(z).0 / settings.s_min } else { 1.0 };
-            let tau = d_cell * per_metre * bias / quality;
-            let count = self.prefix(cell, tau);
-            if count > 0 {
-                out.push(EllipsoidRange { cell: cell.cell, first: cell.ellipsoids.first, count, tau });
-            }
-        }
-        true
+        self.0.select_per_pixel(transform, camera, frustum, settings, quality, out)
+    }
+}
+
+impl Deref for EllipsoidLod {
+    type Target = SptLod;
+
+    fn deref(&self) -> &SptLod {
+        &self.0
+    }
+}
+
+impl LineLod {
+    /// The lines of an open container; `None` if it has none.
+    #[must_use]
+    pub fn from_container(container: &Container) -> Option<Self> {
+        SptLod::from_container(container, container.lines(), |cell| cell.lines).map(Self)
+    }
+
+    /// The lines an instance with world-from-model `transform` draws for `camera`, appended to
+    /// `out`, with the same `τ` per cell as [`EllipsoidLod::select`]. Returns `false`, appending
+    /// nothing, if the instance's sphere (of the block and the lines) lies outside `frustum` or
+    /// the transform is degenerate.
+    pub fn select(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        quality: f32,
+        out: &mut Vec<LineRange>,
+    ) -> bool {
+        self.0.select_per_pixel(transform, camera, frustum, settings, quality, out)
+    }
+}
+
+impl Deref for LineLod {
+    type Target = SptLod;
+
+    fn deref(&self) -> &SptLod {
+        &self.0
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use treelod_format::{BlockRecord, CellRecord, Compression, ContainerData, Metadata, Source, Tree};
+    use glam::Vec3;
+    use treelod_format::{BlockRecord, CellRecord, Compression, ContainerData, Metadata, Range, Source, Tree};
 
     /// An ellipsoid at `center` of level interval `[lo, hi)` with leaves `leaves`.
     fn ellipsoid(center: [f32; 3], lo: f32, hi: f32, leaves: (u32, u32)) -> EllipsoidRecord {
@@ -190,11 +150,28 @@ mod tests {
         }
     }
 
+    /// A line from `p0` to `p1` of level interval `[lo, hi)` with segments `segments`.
+    fn line(p0: [f32; 3], p1: [f32; 3], lo: f32, hi: f32, segments: (u32, u32)) -> LineRecord {
+        LineRecord {
+            p0,
+            r0: 0.05,
+            p1,
+            r1: 0.02,
+            color: 0xff20_4060,
+            lo,
+            hi,
+            leaf_first: segments.0,
+            leaf_count: segments.1,
+            flags: 0,
+        }
+    }
+
     /// A 2×1×1 grid: cell 0 holds two levels of a 4-leaf hierarchy (4 ellipsoids below
     /// `e1 = 0.01`, 1 above), cell 1 none, the block cell one level of 2 ellipsoids below `0.02`
-    /// and 1 above; verified.
+    /// and 1 above; of lines, cell 0 none, cell 1 two levels of a 2-segment branch (2 lines below
+    /// `0.005`, 1 above) reaching 1 m past the block; verified.
     fn container() -> Container {
-        let e1 = 0.01;
+        let (e1, e2) = (0.01, 0.005);
         let cell0 = vec![
             ellipsoid([1.0, 1.0, 1.0], e1, f32::INFINITY, (0, 4)),
             ellipsoid([0.5, 1.0, 1.0], 0.0, e1, (0, 1)),
@@ -228,11 +205,21 @@ mod tests {
                 ..BlockRecord::default()
             },
             cells: vec![
-                cell(0, 5, [0.5, 0.5, 1.0], [1.5, 1.5, 1.0]),
-                cell(5, 0, [0.0; 3], [0.0; 3]),
-                cell(5, 3, [1.8, 1.0, 1.0], [2.2, 1.0, 1.0]),
+                CellRecord { lines: Range { first: 0, count: 0 }, ..cell(0, 5, [0.5, 0.5, 1.0], [1.5, 1.5, 1.0]) },
+                CellRecord {
+                    bounds_min: [2.5, 0.5, 0.5],
+                    bounds_max: [5.0, 1.5, 1.5],
+                    lines: Range { first: 0, count: 3 },
+                    ..cell(5, 0, [0.0; 3], [0.0; 3])
+                },
+                CellRecord { lines: Range { first: 3, count: 0 }, ..cell(5, 3, [1.8, 1.0, 1.0], [2.2, 1.0, 1.0]) },
             ],
             ellipsoids: [cell0, block].concat(),
+            lines: vec![
+                line([2.5, 1.0, 1.0], [5.0, 1.0, 1.0], e2, f32::INFINITY, (0, 2)),
+                line([2.5, 1.0, 1.0], [3.5, 1.5, 1.0], 0.0, e2, (0, 1)),
+                line([3.5, 1.5, 1.0], [5.0, 1.0, 1.0], 0.0, e2, (1, 1)),
+            ],
             ..ContainerData::default()
         };
         let container = Container::from_bytes(&data.to_bytes(Compression::None).unwrap()).unwrap();
@@ -358,5 +345,61 @@ mod tests {
         };
         let empty = Container::from_bytes(&empty.to_bytes(Compression::None).unwrap()).unwrap();
         assert!(EllipsoidLod::from_container(&empty).is_none());
+    }
+
+    #[test]
+    fn lines_take_the_ellipsoids_tau_per_cell_and_their_own_levels() {
+        let container = container();
+        let lines = LineLod::from_container(&container).unwrap();
+        let ellipsoids = EllipsoidLod::from_container(&container).unwrap();
+        assert_eq!(lines.cells().iter().map(|c| c.cell).collect::<Vec<_>>(), [1]);
+        let c1 = lines.cells()[0];
+        assert!(!c1.block_cell);
+        assert_eq!(c1.records, Range { first: 0, count: 3 });
+        assert_eq!(c1.anchor, Vec3::new(3.75, 1.0, 1.0));
+        assert_eq!((lines.prefix(&c1, 0.0049), lines.prefix(&c1, 0.005)), (3, 1));
+        // The sphere holds the lines' radii past the block's bounds (x up to 5.05).
+        let (centre, radius) = lines.sphere();
+        assert!(centre.x + radius >= 5.05 && centre.x - radius <= 0.0, "{centre} {radius}");
+        assert!(ellipsoids.sphere().1 < radius, "the ellipsoids stay inside the block");
+
+        let select = |lod: &SptLod, distance: f32, quality: f32| {
+            let target = Vec3::new(2.0, 1.0, 1.0);
+            let camera = Camera::look_at(target + Vec3::new(0.0, 0.0, distance), target, 0.8, 512, 512);
+            let mut out = Vec::new();
+            let frustum = Frustum::from_view_proj(camera.view_proj);
+            assert!(lod.select_per_pixel(
+                Mat4::IDENTITY,
+                &camera,
+                &frustum,
+                &LodSettings::default(),
+                quality,
+                &mut out
+            ));
+            out
+        };
+        let drawn = |range: &LineRange| {
+            container.lines()[range.first as usize..(range.first + range.count) as usize]
+                .iter()
+                .filter(|l| line_drawn(l, range.tau))
+                .count()
+        };
+        // 2 m: τ ≈ 0.0044 at cell 1's anchor (2.7 m away): both fine lines. 4 m: the coarse one.
+        let near = select(&lines, 2.0, 1.0);
+        assert_eq!((near.len(), near[0].cell, drawn(&near[0])), (1, 1, 2), "{near:?}");
+        let far = select(&lines, 4.0, 1.0);
+        assert_eq!((far[0].count, drawn(&far[0])), (1, 1), "{far:?}");
+        assert_eq!(drawn(&select(&lines, 4.0, 2.0)[0]), 2, "quality 2 halves τ");
+        // Both kinds' τ: the metres per pixel at the cell's anchor (spec §10.1).
+        let per_metre = 2.0 * 0.4f32.tan() / 512.0;
+        let d = Vec3::new(3.75, 1.0, 1.0).distance(Vec3::new(2.0, 1.0, 5.0));
+        assert!((far[0].tau - d * per_metre).abs() < 1e-6, "{far:?}");
+        let e = select(&ellipsoids, 4.0, 1.0);
+        let d0 = Vec3::new(1.0, 1.0, 1.0).distance(Vec3::new(2.0, 1.0, 5.0));
+        assert!((e[0].tau - d0 * per_metre).abs() < 1e-6, "{e:?}");
+        // The records' own interval tests.
+        let l = container.lines()[1];
+        assert!(line_drawn(&l, 0.0) && line_drawn(&l, 0.0049) && !line_drawn(&l, 0.005));
+        assert!(ellipsoid_drawn(&container.ellipsoids()[0], 0.01));
     }
 }

@@ -8,15 +8,18 @@
 //! points (§10.1), and passes on the leading planes with `hi > τ`; the vertex shader then drops
 //! those failing [`plane_drawn`] (`lo ≤ τ < hi`), so exactly one level covers each leaf.
 
+use std::ops::Deref;
+
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, PlaneRecord, Range};
 
-use crate::frame::{Camera, CellPrefix, Frustum, prefix_above, tau_per_metre};
+use crate::frame::{Camera, CellPrefix, Frustum};
+use crate::spt_lod::{SptCell, SptLod, spt_drawn};
 
 /// Whether a plane is drawn at `τ` (spec §10): its interval holds `τ`.
 #[must_use]
 pub fn plane_drawn(plane: &PlaneRecord, tau: f32) -> bool {
-    plane.lo <= tau && tau < plane.hi
+    spt_drawn(plane, tau)
 }
 
 /// No parent plane ([`plane_parents`]): a root of its cell's hierarchy.
@@ -114,30 +117,16 @@ pub fn morph_corner(corner: Vec3, parent: &PlaneRecord, share: f32) -> Vec3 {
 }
 
 /// One cell holding planes.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PlaneCell {
-    /// Index of the cell in the container's `CELLS`.
-    pub cell: u32,
-    /// Its planes in the container's `PLANES`.
-    pub planes: Range,
-    /// Where `τ` is measured from, model space: the block centre for the block cell, else the
-    /// centre of the cell's bounds.
-    pub anchor: Vec3,
-    /// Where the cell's `hi` values start in [`PlaneLod`]'s compact array.
-    hi_at: u32,
-}
+pub type PlaneCell = SptCell;
 
 /// One prefix of a cell's planes to draw.
 pub type PlaneRange = CellPrefix;
 
-/// What drawing a model's planes needs of its container, made once.
+/// What drawing a model's planes needs of its container, made once: its [`SptLod`] over
+/// `PLANES`, and the image the planes sample.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlaneLod {
-    cells: Vec<PlaneCell>,
-    hi: Vec<f32>,
-    /// A sphere, model space, holding the block and every plane cell's bounds: culling.
-    centre: Vec3,
-    radius: f32,
+    spt: SptLod,
     /// The image of the first plane: the atlas.
     image: u32,
 }
@@ -146,35 +135,9 @@ impl PlaneLod {
     /// The planes of an open container; `None` if it has none.
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        let planes = container.planes();
-        let first = planes.first()?;
-        let block = container.block();
-        let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
-        let block_cell = block.grid_cell_count();
-        let (mut lo, mut hi) = (min, max);
-        let mut lod = Self { cells: Vec::new(), hi: Vec::new(), centre: Vec3::ZERO, radius: 0.0, image: first.image };
-        for (index, cell) in container.cells().iter().enumerate() {
-            // Ranges were checked when the container was opened (spec §9.1).
-            let Some(records) = planes.get(cell.planes.as_usize()).filter(|r| !r.is_empty()) else { continue };
-            let (Ok(index_u32), Ok(hi_at)) = (u32::try_from(index), u32::try_from(lod.hi.len())) else { break };
-            let (cmin, cmax) = (Vec3::from_array(cell.bounds_min), Vec3::from_array(cell.bounds_max));
-            if cmin.is_finite() && cmax.is_finite() {
-                lo = lo.min(cmin);
-                hi = hi.max(cmax);
-            }
-            let anchor = if index == block_cell { 0.5 * (min + max) } else { 0.5 * (cmin + cmax) };
-            lod.cells.push(PlaneCell { cell: index_u32, planes: cell.planes, anchor, hi_at });
-            lod.hi.extend(records.iter().map(|p| p.hi));
-        }
-        lod.centre = 0.5 * (lo + hi);
-        lod.radius = 0.5 * (hi - lo).length();
-        Some(lod)
-    }
-
-    /// The cells holding planes, in container order.
-    #[must_use]
-    pub fn cells(&self) -> &[PlaneCell] {
-        &self.cells
+        let image = container.planes().first()?.image;
+        let spt = SptLod::from_container(container, container.planes(), |cell| cell.planes)?;
+        Some(Self { spt, image })
     }
 
     /// The image the first plane samples: the atlas a renderer binds (builders write one).
@@ -183,24 +146,11 @@ impl PlaneLod {
         self.image
     }
 
-    /// A sphere, model space, holding the block bounds and every plane cell's bounds:
-    /// `(centre, radius)`.
-    #[must_use]
-    pub fn sphere(&self) -> (Vec3, f32) {
-        (self.centre, self.radius)
-    }
-
-    /// Number of leading planes of `cell` with `hi > τ` (spec §10).
-    #[must_use]
-    pub fn prefix(&self, cell: &PlaneCell, tau: f32) -> u32 {
-        prefix_above(&self.hi, cell.hi_at, cell.planes.count, tau)
-    }
-
     /// The planes an instance with world-from-model `transform` draws for `camera`, at `s_min`
     /// pixels (spec §10.1: `τ = s_min · d · 2·tan(fovy/2) / H`, divided by the transform's
-    /// largest axis scale, `d` the distance to each cell's anchor), appended to `out`. Returns
-    /// `false`, appending nothing, if the instance's sphere lies outside `frustum` or the
-    /// transform is degenerate.
+    /// largest axis scale, `d` the distance to each cell's anchor), appended to `out`
+    /// ([`SptLod::select_at_pixels`]). Returns `false`, appending nothing, if the instance's
+    /// sphere lies outside `frustum` or the transform is degenerate.
     pub fn select(
         &self,
         transform: Mat4,
@@ -209,18 +159,15 @@ impl PlaneLod {
         s_min: f32,
         out: &mut Vec<PlaneRange>,
     ) -> bool {
-        let Some(per_metre) = tau_per_metre(transform, camera, frustum, s_min, (self.centre, self.radius)) else {
-            return false;
-        };
-        for cell in &self.cells {
-            let distance = transform.transform_point3(cell.anchor).distance(camera.position);
-            let tau = distance * per_metre;
-            let count = self.prefix(cell, tau);
-            if count > 0 {
-                out.push(PlaneRange { cell: cell.cell, first: cell.planes.first, count, tau });
-            }
-        }
-        true
+        self.spt.select_at_pixels(transform, camera, frustum, s_min, out)
+    }
+}
+
+impl Deref for PlaneLod {
+    type Target = SptLod;
+
+    fn deref(&self) -> &SptLod {
+        &self.spt
     }
 }
 

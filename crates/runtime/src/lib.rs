@@ -7,7 +7,8 @@
 //! [`frame`] applies it to a whole frame: frustum culling of instances and cells, Gilet's depth
 //! bias per cell, a reusable draw list, and a controller that keeps the primitive count on budget.
 //! [`impostor`] selects the level of impostor planes of an instance the same way, [`ellipsoid`] the
-//! level of Clasen's leaf ellipsoids, and [`baseline`] the level of a baseline LoD chain.
+//! level of Clasen's leaf ellipsoids and branch lines (all three through one per-cell prefix
+//! selector, [`spt_lod`]), and [`baseline`] the level of a baseline LoD chain.
 
 pub mod baseline;
 pub mod ellipsoid;
@@ -15,9 +16,12 @@ pub mod frame;
 pub mod impostor;
 pub mod prune;
 pub mod select;
+pub mod spt_lod;
 
 pub use baseline::{BillboardKind, Billboards, ChainLevel, LodChain, instance_tau};
-pub use ellipsoid::{EllipsoidCell, EllipsoidLod, EllipsoidRange, ellipsoid_drawn};
+pub use ellipsoid::{
+    EllipsoidCell, EllipsoidLod, EllipsoidRange, LineCell, LineLod, LineRange, ellipsoid_drawn, line_drawn,
+};
 pub use frame::{
     BudgetController, Camera, CellLod, CellPrefix, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind,
     LodSettings, ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
@@ -28,3 +32,4 @@ pub use impostor::{
 };
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
+pub use spt_lod::{SptCell, SptLod, SptRecord, spt_drawn};

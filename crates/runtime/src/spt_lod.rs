@@ -1,0 +1,230 @@
+//! Per-cell selection of the kinds drawn as whole prefixes of a cell's sequential point tree
+//! (spec §10): Clasen's ellipsoids and lines ([`crate::ellipsoid`]) and impostor planes
+//! ([`crate::impostor`]).
+//!
+//! Each such kind is a flat array whose records carry an interval `[lo, hi)` and are sorted by
+//! `hi`, largest first, within each cell, so for one `τ` a cell draws a prefix found by binary
+//! search ([`SptLod::prefix`]) and the vertex shader drops the few records of it with `lo > τ`
+//! ([`spt_drawn`]). [`SptLod`] holds what that needs of a container for one kind — the cells
+//! holding records, their anchors (where `τ` is measured from) and a compact copy of the `hi`
+//! values — and selects an instance's prefixes in one of two units: metres per pixel
+//! ([`SptLod::select_per_pixel`]: ellipsoids, lines) or metres at a pixel threshold
+//! ([`SptLod::select_at_pixels`]: planes).
+
+use glam::{Mat4, Vec3};
+use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, PlaneRecord, Range};
+
+use crate::frame::{Camera, CellPrefix, Frustum, LodSettings, prefix_above, tau_per_metre};
+
+/// A record of a kind drawn by prefixes ([`SptLod`]).
+pub trait SptRecord {
+    /// The record's threshold interval `[lo, hi)` (spec §10).
+    fn interval(&self) -> (f32, f32);
+
+    /// A box, model space, holding everything the record draws beyond its reference positions
+    /// (which its cell's bounds hold, spec §6.2), for culling: `None` if those suffice.
+    fn reach(&self) -> Option<(Vec3, Vec3)> {
+        None
+    }
+}
+
+impl SptRecord for EllipsoidRecord {
+    fn interval(&self) -> (f32, f32) {
+        (self.lo, self.hi)
+    }
+
+    /// The centre's cube of half-side the largest radius.
+    fn reach(&self) -> Option<(Vec3, Vec3)> {
+        let (c, r) = (Vec3::from_array(self.center), Vec3::from_array(self.radii).max_element());
+        (c.is_finite() && r.is_finite()).then(|| (c - r, c + r))
+    }
+}
+
+impl SptRecord for LineRecord {
+    fn interval(&self) -> (f32, f32) {
+        (self.lo, self.hi)
+    }
+
+    /// The endpoints' box grown by the larger radius.
+    fn reach(&self) -> Option<(Vec3, Vec3)> {
+        let (a, b, r) = (Vec3::from_array(self.p0), Vec3::from_array(self.p1), self.r0.max(self.r1));
+        (a.is_finite() && b.is_finite() && r.is_finite()).then(|| (a.min(b) - r, a.max(b) + r))
+    }
+}
+
+impl SptRecord for PlaneRecord {
+    fn interval(&self) -> (f32, f32) {
+        (self.lo, self.hi)
+    }
+}
+
+/// Whether a record is drawn at `τ` (spec §10): its interval holds `τ`.
+#[must_use]
+pub fn spt_drawn(record: &impl SptRecord, tau: f32) -> bool {
+    let (lo, hi) = record.interval();
+    lo <= tau && tau < hi
+}
+
+/// One cell holding records of the kind.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SptCell {
+    /// Index of the cell in the container's `CELLS`.
+    pub cell: u32,
+    /// Its records in the kind's array.
+    pub records: Range,
+    /// Where `τ` is measured from, model space: the block centre for the block cell, else the
+    /// centre of the cell's bounds.
+    pub anchor: Vec3,
+    /// Whether this is the block cell (`Z_i = 0` for the depth bias).
+    pub block_cell: bool,
+    /// Where the cell's `hi` values start in [`SptLod`]'s compact array.
+    hi_at: u32,
+}
+
+/// What drawing one kind of a model's records by prefixes needs of its container, made once.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SptLod {
+    cells: Vec<SptCell>,
+    hi: Vec<f32>,
+    /// A sphere, model space, holding the block, every cell's bounds and every record's reach:
+    /// culling.
+    centre: Vec3,
+    radius: f32,
+    /// The block's centre and half diagonal, model space: `d_block` and `R` of Gilet's `Z_i`.
+    block_centre: Vec3,
+    block_radius: f32,
+}
+
+impl SptLod {
+    /// The kind of `container` whose array is `records` and whose range in each cell `range`
+    /// gives (`|cell| cell.lines` for `container.lines()`); `None` if the array is empty.
+    #[must_use]
+    pub fn from_container<T: SptRecord>(
+        container: &Container,
+        records: &[T],
+        range: impl Fn(&CellRecord) -> Range,
+    ) -> Option<Self> {
+        if records.is_empty() {
+            return None;
+        }
+        let block = container.block();
+        let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+        let block_cell = block.grid_cell_count();
+        let (mut lo, mut hi) = (min, max);
+        let mut lod = Self {
+            cells: Vec::new(),
+            hi: Vec::new(),
+            centre: Vec3::ZERO,
+            radius: 0.0,
+            block_centre: 0.5 * (min + max),
+            block_radius: 0.5 * (max - min).length(),
+        };
+        for (index, cell) in container.cells().iter().enumerate() {
+            let cell_range = range(cell);
+            // Ranges were checked when the container was opened (spec §9.1).
+            let Some(cell_records) = records.get(cell_range.as_usize()).filter(|r| !r.is_empty()) else {
+                continue;
+            };
+            let (Ok(index_u32), Ok(hi_at)) = (u32::try_from(index), u32::try_from(lod.hi.len())) else { break };
+            let (cmin, cmax) = (Vec3::from_array(cell.bounds_min), Vec3::from_array(cell.bounds_max));
+            if cmin.is_finite() && cmax.is_finite() {
+                lo = lo.min(cmin);
+                hi = hi.max(cmax);
+            }
+            for (a, b) in cell_records.iter().filter_map(SptRecord::reach) {
+                lo = lo.min(a);
+                hi = hi.max(b);
+            }
+            let is_block = index == block_cell;
+            let anchor = if is_block { lod.block_centre } else { 0.5 * (cmin + cmax) };
+            lod.cells.push(SptCell { cell: index_u32, records: cell_range, anchor, block_cell: is_block, hi_at });
+            lod.hi.extend(cell_records.iter().map(|r| r.interval().1));
+        }
+        lod.centre = 0.5 * (lo + hi);
+        lod.radius = 0.5 * (hi - lo).length();
+        Some(lod)
+    }
+
+    /// The cells holding records, in container order.
+    #[must_use]
+    pub fn cells(&self) -> &[SptCell] {
+        &self.cells
+    }
+
+    /// A sphere, model space, holding the block bounds, every cell's bounds and every record's
+    /// reach: `(centre, radius)`.
+    #[must_use]
+    pub fn sphere(&self) -> (Vec3, f32) {
+        (self.centre, self.radius)
+    }
+
+    /// Number of leading records of `cell` with `hi > τ` (spec §10).
+    #[must_use]
+    pub fn prefix(&self, cell: &SptCell, tau: f32) -> u32 {
+        prefix_above(&self.hi, cell.hi_at, cell.records.count, tau)
+    }
+
+    /// The prefixes an instance with world-from-model `transform` draws for `camera` with `τ` in
+    /// metres per pixel, appended to `out`: per cell, `τ = mpp / quality` with `mpp = d · 2·tan
+    /// (fovy/2) / H` (spec §10.1; `d` the distance to the cell's anchor, divided by the
+    /// transform's largest axis scale) times Gilet's depth bias `s_min_i / s_min` of `settings`
+    /// (the point threshold's, so `mpp = τ_p / s_min`; `Z_i = clamp((d_cell − d_block) / R, −1,
+    /// 1)`, 0 for the block cell), and the leading records with `hi > τ`. Returns `false`,
+    /// appending nothing, if the instance's sphere lies outside `frustum` or the transform is
+    /// degenerate.
+    pub fn select_per_pixel(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        quality: f32,
+        out: &mut Vec<CellPrefix>,
+    ) -> bool {
+        let Some(per_metre) = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius)) else {
+            return false;
+        };
+        let quality = if quality > 0.0 && quality.is_finite() { quality } else { 1.0 };
+        let scale = camera.world_per_pixel() / per_metre;
+        let d_block = transform.transform_point3(self.block_centre).distance(camera.position);
+        let inv_radius = if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 };
+        for cell in &self.cells {
+            let d_cell = transform.transform_point3(cell.anchor).distance(camera.position);
+            let z = if cell.block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
+            let bias = if settings.s_min > 0.0 { settings.biased_pixels(z).0 / settings.s_min } else { 1.0 };
+            let tau = d_cell * per_metre * bias / quality;
+            let count = self.prefix(cell, tau);
+            if count > 0 {
+                out.push(CellPrefix { cell: cell.cell, first: cell.records.first, count, tau });
+            }
+        }
+        true
+    }
+
+    /// The prefixes an instance with world-from-model `transform` draws for `camera` with `τ` in
+    /// metres at `s_min` pixels (spec §10.1: `τ = s_min · d · 2·tan(fovy/2) / H`, divided by the
+    /// transform's largest axis scale, `d` the distance to each cell's anchor; no depth bias),
+    /// appended to `out`. Returns `false`, appending nothing, if the instance's sphere lies
+    /// outside `frustum` or the transform is degenerate.
+    pub fn select_at_pixels(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        s_min: f32,
+        out: &mut Vec<CellPrefix>,
+    ) -> bool {
+        let Some(per_metre) = tau_per_metre(transform, camera, frustum, s_min, (self.centre, self.radius)) else {
+            return false;
+        };
+        for cell in &self.cells {
+            let distance = transform.transform_point3(cell.anchor).distance(camera.position);
+            let tau = distance * per_metre;
+            let count = self.prefix(cell, tau);
+            if count > 0 {
+                out.push(CellPrefix { cell: cell.cell, first: cell.records.first, count, tau });
+            }
+        }
+        true
+    }
+}
