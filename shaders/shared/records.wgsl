@@ -138,3 +138,9 @@ fn plane_drawn(p: PlaneRecord, tau: f32) -> bool {
 fn ellipsoid_drawn(e: EllipsoidRecord, tau: f32) -> bool {
     return e.lo <= tau && tau < e.hi;
 }
+
+// The line rule of spec §10: inside [lo, hi) at tau (metres per pixel, as ellipsoids).
+// Rust twin: treelod_runtime::line_drawn.
+fn line_drawn(l: LineRecord, tau: f32) -> bool {
+    return l.lo <= tau && tau < l.hi;
+}

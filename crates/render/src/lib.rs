@@ -70,7 +70,13 @@
 //! `s_min` at the block centre's distance, sliding each plane onto its parent's and cross-fading
 //! the two before a level change ([`Settings::impostor_morph`]); its bark is the bark of the container's LoD chain at
 //! the level `s_min` allows where it has one ([`ImpostorBark`]), else all its bark triangles.
-
+//!
+//! **Ellipsoids and lines.** With [`Settings::ellipsoids`], a tree whose container has Clasen's
+//! leaf ellipsoids (spec §6.8) draws them ray-cast per pixel (`vs_ellipsoid`/`fs_ellipsoid`), per
+//! cell the level whose interval holds `τ`, the metres per pixel at the cell's distance; its bark
+//! is its branch lines (spec §6.9, [`Settings::lines`]) at the level the same `τ` selects, each a
+//! round cone ray-cast exactly (`vs_line`/`fs_line`), lines thinner than a pixel drawn one pixel
+//! wide with their width as coverage; without lines, its bark triangles.
 //!
 //! **Shadows.** With [`Settings::shadows`], `prepare` fits cascaded shadow maps of the sun to the
 //! camera ([`fit_cascades`]: practical splits, a sphere per slice, centres snapped to whole texels

@@ -9,8 +9,8 @@ use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleR
 use treelod_runtime::prune::{MIN_VISIBLE_FRACTION, leaf_scale, leaves_drawn, projected_height, size_factor};
 use treelod_runtime::{
     BillboardKind, Billboards, CellPrefix, DrawList, DrawRange, EllipsoidLod, EllipsoidRange, Frustum, Hysteresis,
-    Kind, LodChain, LodSettings, ModelLod, PlaneLod, PlaneRange, PruneLod, PruneScale, ROOTS_CELL, instance_tau,
-    select_frame,
+    Kind, LineLod, LineRange, LodChain, LodSettings, ModelLod, PlaneLod, PlaneRange, PruneLod, PruneScale, ROOTS_CELL,
+    instance_tau, select_frame,
 };
 
 use crate::camera::Camera;
@@ -111,10 +111,11 @@ pub struct Settings {
     /// With [`Self::impostors`]: the bark drawn beside the planes.
     pub impostor_bark: ImpostorBark,
     /// Draw the leaves of every tree whose container has Clasen's ellipsoids (spec §6.8) as those
-    /// ellipsoids, ray-cast per pixel with their noise, and its bark as triangles (every bark
-    /// triangle, as [`ImpostorBark::All`]). Per cell, the level drawn is the one whose interval
-    /// holds `τ`, the metres per pixel at the cell's distance (the point threshold's `τ_p / s_min`,
-    /// Gilet's depth bias included) divided by [`Self::ellipsoid_quality`]. Takes precedence over
+    /// ellipsoids, ray-cast per pixel with their noise, and its bark as Clasen's lines (spec §6.9,
+    /// [`Self::lines`]) where the container has them, else as triangles (every bark triangle, as
+    /// [`ImpostorBark::All`]). Per cell, the level drawn is the one whose interval holds `τ`, the
+    /// metres per pixel at the cell's distance (the point threshold's `τ_p / s_min`, Gilet's depth
+    /// bias included) divided by [`Self::ellipsoid_quality`]; lines use the same `τ`. Takes precedence over
     /// [`Self::impostors`] (a tree with both is drawn with ellipsoids, one with planes only with
     /// planes) and [`Self::pruning`]; [`Self::baseline`] takes precedence over it. Selected on the
     /// CPU (GPU selection is not used for such frames).
@@ -122,6 +123,14 @@ pub struct Settings {
     /// With [`Self::ellipsoids`]: the user's quality factor `q`, `τ = mpp / q` (1: the level the
     /// build chose for the pixel size; 2: the level for pixels half as large, finer).
     pub ellipsoid_quality: f32,
+    /// With [`Self::ellipsoids`]: draw the bark of ellipsoid trees as Clasen's lines when the
+    /// container has them (spec §6.9); `false`: bark triangles. Each line is a round cone (a
+    /// capsule whose radius goes linearly from `r0` to `r1`), ray-cast per pixel with its exact
+    /// depth. Lines thinner than a pixel (Clasen's build aims at a mean width of one) are drawn
+    /// one pixel wide, which leaves no gaps along them, covering the share of each pixel their
+    /// true width `w < 1` px asks for: `w` of the samples with MSAA, else of the pixels (a hash of
+    /// pixel and depth), at the depth of their axis.
+    pub lines: bool,
     /// Draw every tree whose container has this baseline (spec §6.12, §6.13) with it instead of
     /// treelod's representations, for comparisons; trees without it are drawn with the sequential
     /// point trees. Takes precedence over [`Self::impostors`] and [`Self::pruning`].
@@ -224,6 +233,7 @@ impl Default for Settings {
             impostor_bark: ImpostorBark::default(),
             ellipsoids: false,
             ellipsoid_quality: 1.0,
+            lines: true,
             baseline: None,
             shadows: None,
         }
@@ -274,6 +284,9 @@ pub struct FrameStats {
     pub instances_ellipsoids: u32,
     /// Ellipsoids submitted (the prefixes; the vertex shader drops those outside the level).
     pub ellipsoids: u64,
+    /// Branch lines submitted by ellipsoid trees ([`Settings::lines`]; the prefixes; the vertex
+    /// shader drops those outside the level).
+    pub lines: u64,
     /// Visible instances drawn with a baseline ([`Settings::baseline`]).
     pub instances_baseline: u32,
     /// Billboard quads submitted (their triangles are not counted in [`Self::triangles`]; LoD
@@ -315,6 +328,8 @@ pub struct ShadowStats {
     pub billboards: u64,
     /// Ellipsoids submitted.
     pub ellipsoids: u64,
+    /// Branch lines submitted.
+    pub lines: u64,
 }
 
 /// Why a model could not be added.
@@ -437,6 +452,18 @@ fn gpu_ellipsoids(container: &Container) -> Vec<treelod_format::EllipsoidRecord>
         .collect()
 }
 
+/// The lines of `container` as the GPU holds them: each one's `flags` (reserved in the file, spec
+/// §6.9, and not read) replaced by its ambient-occlusion byte (§6.14), 0 without `LINE_AO`.
+fn gpu_lines(container: &Container) -> Vec<treelod_format::LineRecord> {
+    let ao = container.line_ao();
+    container
+        .lines()
+        .iter()
+        .enumerate()
+        .map(|(i, &l)| treelod_format::LineRecord { flags: ao.get(i).copied().map_or(0, u32::from), ..l })
+        .collect()
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct MaterialGpu {
@@ -470,6 +497,8 @@ struct Model {
     planes: Option<PlaneLod>,
     /// Clasen's ellipsoids, if the container has them (uploaded whole).
     ellipsoids: Option<EllipsoidLod>,
+    /// Clasen's branch lines, if the container has them (uploaded whole).
+    lines: Option<LineLod>,
     /// The hull samples of the occlusion test: first and count in the sample buffer.
     samples: (u32, u32),
     /// The baseline LoD chain, if the container has one: levels, and where the full mesh and each
@@ -530,6 +559,10 @@ pub enum DrawSource {
     /// [`Renderer::add_model`]); `tau_points` is the `τ` (metres per pixel) the shader tests them
     /// with.
     Ellipsoids,
+    /// The leading `count` branch lines of the cell's range (uploaded whole at
+    /// [`Renderer::add_model`]); `tau_points` is the `τ` (metres per pixel) the shader tests them
+    /// with.
+    Lines,
 }
 
 /// One draw of the last [`Renderer::prepare`], as the GPU will execute it, for tests and tools.
@@ -573,8 +606,10 @@ pub struct Renderer {
     billboard_pipeline: wgpu::RenderPipeline,
     /// Clasen's ellipsoids, ray-cast, from each model's ellipsoid buffer and the noise cube.
     ellipsoid_pipeline: wgpu::RenderPipeline,
+    /// Clasen's branch lines, ray-cast round cones, from each model's line buffer.
+    line_pipeline: wgpu::RenderPipeline,
     /// The shadow pass's depth-only pipelines, in bucket order (triangles, points, pruned,
-    /// planes, billboards, ellipsoids).
+    /// planes, billboards, ellipsoids, lines).
     shadow_pipelines: [wgpu::RenderPipeline; BUCKETS],
     /// The receivers' bind group layout (group 2) and the maps.
     shadow_layout: wgpu::BindGroupLayout,
@@ -611,6 +646,7 @@ pub struct Renderer {
     visible_fraction: Vec<f32>,
     plane_ranges: Vec<PlaneRange>,
     ellipsoid_ranges: Vec<EllipsoidRange>,
+    line_ranges: Vec<LineRange>,
     /// The occlusion measurement, and the trees to measure after this frame.
     occlusion: Occlusion,
     occlusion_jobs: Vec<Job>,
@@ -651,6 +687,8 @@ struct View {
     plane_draws: Vec<PrefixDraw>,
     /// Ellipsoid draws: per instance and ellipsoid cell, the prefix and its `τ`.
     ellipsoid_draws: Vec<PrefixDraw>,
+    /// Line draws: per instance and line cell, the prefix and its `τ`.
+    line_draws: Vec<PrefixDraw>,
     /// Baseline billboard draws: (instance, model, first quad, quads).
     billboard_draws: Vec<(u32, u32, u32, u32)>,
     /// Per model, per bucket: the view's range of the indirect buffer.
@@ -691,8 +729,8 @@ const FRAME_UNIFORM_STRIDE: u64 = 256;
 const INITIAL_POOL_UNITS: u32 = 1 << 15;
 
 /// Draw buckets per model: triangles, points, pruned (leaves and bark, and LoD chain levels),
-/// impostor planes, billboards, ellipsoids.
-const BUCKETS: usize = 6;
+/// impostor planes, billboards, ellipsoids, lines.
+const BUCKETS: usize = 7;
 
 /// [`ImpostorBark::Chain`] draws only levels whose bark keeps this share of the full bark's area.
 const BARK_AREA_KEPT: f64 = 0.9;
@@ -715,7 +753,7 @@ fn area(container: &Container, triangles: &[TriangleRecord]) -> f64 {
 /// keeps the branches wider than about a pixel.
 const BARK_ERROR_SHARE: f32 = 0.5;
 
-/// One draw of impostor planes or ellipsoids: a prefix of one cell's elements for one instance.
+/// One draw of impostor planes, ellipsoids or lines: a prefix of one cell's elements for one instance.
 #[derive(Clone, Copy, Debug)]
 struct PrefixDraw {
     instance: u32,
@@ -886,6 +924,8 @@ impl Renderer {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
                     count: None,
                 },
+                // Branch lines.
+                storage(14, wgpu::ShaderStages::VERTEX_FRAGMENT),
             ],
         });
         let shadow_layout = ShadowMaps::layout(device);
@@ -966,6 +1006,7 @@ impl Renderer {
         let plane_pipeline = pipeline("treelod impostor planes", "vs_plane", "fs_plane", false);
         let billboard_pipeline = pipeline("treelod baseline billboards", "vs_billboard", "fs_plane", false);
         let ellipsoid_pipeline = pipeline("treelod ellipsoids", "vs_ellipsoid", "fs_ellipsoid", false);
+        let line_pipeline = pipeline("treelod lines", "vs_line", "fs_line", false);
         let shadow_pipelines = [
             pipeline("treelod shadow triangles", "vs_triangle", "fs_shadow_triangle", true),
             pipeline("treelod shadow points", "vs_point", "fs_shadow_point", true),
@@ -973,6 +1014,7 @@ impl Renderer {
             pipeline("treelod shadow impostor planes", "vs_plane", "fs_shadow_plane", true),
             pipeline("treelod shadow billboards", "vs_billboard", "fs_shadow_plane", true),
             pipeline("treelod shadow ellipsoids", "vs_ellipsoid", "fs_shadow_ellipsoid", true),
+            pipeline("treelod shadow lines", "vs_line", "fs_shadow_line", true),
         ];
         let shadow_maps = ShadowMaps::new(device, &shadow_layout, 1, 1);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -1024,6 +1066,7 @@ impl Renderer {
             plane_pipeline,
             billboard_pipeline,
             ellipsoid_pipeline,
+            line_pipeline,
             shadow_pipelines,
             shadow_layout,
             shadow_maps,
@@ -1045,6 +1088,7 @@ impl Renderer {
             visible_fraction: Vec::new(),
             plane_ranges: Vec::new(),
             ellipsoid_ranges: Vec::new(),
+            line_ranges: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1)),
             occlusion_jobs: Vec::new(),
             last_camera: None,
@@ -1275,6 +1319,11 @@ impl Renderer {
         let gpu_ellipsoids = gpu_ellipsoids(&container);
         let ellipsoid_buffer = upload("ELLIPSOIDS", bytemuck::cast_slice(&gpu_ellipsoids))?;
         drop(gpu_ellipsoids);
+        // Lines likewise: each one's `flags` holds its `LINE_AO` byte, never the file's flags.
+        let lines = LineLod::from_container(&container);
+        let gpu_lines = gpu_lines(&container);
+        let line_buffer = upload("LINES", bytemuck::cast_slice(&gpu_lines))?;
+        drop(gpu_lines);
         if self.noise_view.is_none() {
             let (view, noise_bytes) = crate::noise::upload(device, queue);
             self.noise_view = Some(view);
@@ -1401,6 +1450,7 @@ impl Renderer {
                     wgpu::BindGroupEntry { binding: 11, resource: ellipsoid_buffer.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 12, resource: wgpu::BindingResource::TextureView(noise_view) },
                     wgpu::BindGroupEntry { binding: 13, resource: wgpu::BindingResource::Sampler(&self.noise_sampler) },
+                    wgpu::BindGroupEntry { binding: 14, resource: line_buffer.as_entire_binding() },
                 ],
             })
         };
@@ -1450,6 +1500,7 @@ impl Renderer {
             bark,
             planes,
             ellipsoids,
+            lines,
             chain,
             billboards,
         });
@@ -1633,10 +1684,11 @@ impl Renderer {
     }
 
     /// Which instances are drawn with ellipsoids this frame ([`Settings::ellipsoids`]): appends to
-    /// `view`'s `ellipsoid_draws`, and `pruned` with their bark (all of it), for instances whose
-    /// model has ellipsoids, and `spt_instances`/`spt_map` with the others, except those
-    /// [`Self::select_impostors`] draws (`impostors` on and the model has planes). Returns the
-    /// ellipsoid instances inside the frustum.
+    /// `view`'s `ellipsoid_draws`, and its `line_draws` with their bark's lines (with
+    /// [`Settings::lines`] and where the model has lines; else `pruned` with all their bark
+    /// triangles), for instances whose model has ellipsoids, and `spt_instances`/`spt_map` with
+    /// the others, except those [`Self::select_impostors`] draws (`impostors` on and the model has
+    /// planes). Returns the ellipsoid instances inside the frustum.
     fn select_ellipsoids(
         &mut self,
         view: &mut View,
@@ -1646,6 +1698,7 @@ impl Renderer {
     ) -> u32 {
         let frustum = Frustum::from_view_proj(camera.view_proj);
         let quality = self.settings.ellipsoid_quality;
+        let draw_lines = self.settings.lines;
         let mut visible = 0;
         for (i, instance) in self.instances.iter().enumerate() {
             let index = u32::try_from(i).unwrap_or(u32::MAX);
@@ -1658,21 +1711,33 @@ impl Renderer {
                 continue;
             };
             self.ellipsoid_ranges.clear();
-            if !ellipsoids.select(
+            let leaves_seen = ellipsoids.select(
                 instance.transform,
                 camera,
                 &frustum,
                 lod_settings,
                 quality,
                 &mut self.ellipsoid_ranges,
-            ) {
+            );
+            // The lines' sphere holds their radii: they may be in view where the leaves are not.
+            let lines = model.lines.as_ref().filter(|_| draw_lines);
+            self.line_ranges.clear();
+            let lines_seen = lines.is_some_and(|lines| {
+                lines.select(instance.transform, camera, &frustum, lod_settings, quality, &mut self.line_ranges)
+            });
+            if !(leaves_seen || lines_seen) {
                 continue;
             }
             visible += 1;
             for range in &self.ellipsoid_ranges {
                 view.ellipsoid_draws.push(PrefixDraw { instance: index, model: instance.model, range: *range });
             }
-            view.pruned.extend(model.bark_draw(index, instance.model, 1.0));
+            for range in &self.line_ranges {
+                view.line_draws.push(PrefixDraw { instance: index, model: instance.model, range: *range });
+            }
+            if lines.is_none() {
+                view.pruned.extend(model.bark_draw(index, instance.model, 1.0));
+            }
         }
         visible
     }
@@ -1882,7 +1947,8 @@ impl Renderer {
                 | DrawSource::Planes
                 | DrawSource::LodLevel
                 | DrawSource::Billboards
-                | DrawSource::Ellipsoids => 0,
+                | DrawSource::Ellipsoids
+                | DrawSource::Lines => 0,
             } as u64;
         }
         drawn
@@ -2043,6 +2109,7 @@ impl Renderer {
             shadow.planes += counted.planes;
             shadow.billboards += counted.billboards;
             shadow.ellipsoids += counted.ellipsoids;
+            shadow.lines += counted.lines;
         }
         stats.shadow = shadow;
         self.main = main;
@@ -2085,6 +2152,7 @@ impl Renderer {
         view.billboard_draws.clear();
         view.plane_draws.clear();
         view.ellipsoid_draws.clear();
+        view.line_draws.clear();
         view.spt_instances.clear();
         view.spt_map.clear();
         if let Some(pruning) = &modes.pruning {
@@ -2174,6 +2242,7 @@ impl Renderer {
                     DrawSource::Planes => stats.planes += u64::from(draw.count),
                     DrawSource::Billboards => stats.billboards += u64::from(draw.count),
                     DrawSource::Ellipsoids => stats.ellipsoids += u64::from(draw.count),
+                    DrawSource::Lines => stats.lines += u64::from(draw.count),
                 }
                 let transform = self.instances[draw.instance as usize].transform;
                 let info = DrawInfo {
@@ -2208,12 +2277,14 @@ impl Renderer {
             let vertices = (3 * draw.first, 3 * draw.count);
             record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, 2, vertices, draw.leaf_scale);
         }
-        // Impostor planes (bucket 3) and ellipsoids (bucket 5): a prefix of one cell's elements,
-        // six corners each, the level chosen in the shader by `τ`.
+        // Impostor planes (bucket 3), ellipsoids (bucket 5) and lines (bucket 6): a prefix of one
+        // cell's elements, six corners each, the level chosen in the shader by `τ`.
         stats.planes += view.plane_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
         stats.ellipsoids += view.ellipsoid_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        stats.lines += view.line_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
         let prefixes = (view.plane_draws.iter().map(|d| (d, DrawSource::Planes, 3)))
-            .chain(view.ellipsoid_draws.iter().map(|d| (d, DrawSource::Ellipsoids, 5)));
+            .chain(view.ellipsoid_draws.iter().map(|d| (d, DrawSource::Ellipsoids, 5)))
+            .chain(view.line_draws.iter().map(|d| (d, DrawSource::Lines, 6)));
         for (draw, source, bucket) in prefixes {
             let range = draw.range;
             let record = RecordedDraw {
@@ -2431,6 +2502,7 @@ impl Renderer {
             DrawSource::Planes => (BUCKETS * m + 3, 0, 6),
             DrawSource::Billboards => (BUCKETS * m + 4, 0, 6),
             DrawSource::Ellipsoids => (BUCKETS * m + 5, 0, 6),
+            DrawSource::Lines => (BUCKETS * m + 6, 0, 6),
         }
     }
 
@@ -2477,6 +2549,7 @@ impl Renderer {
             &self.plane_pipeline,
             &self.billboard_pipeline,
             &self.ellipsoid_pipeline,
+            &self.line_pipeline,
         ];
         self.draw_view(pass, &self.main, pipelines);
     }
@@ -2515,6 +2588,7 @@ impl Renderer {
             &self.shadow_pipelines[3],
             &self.shadow_pipelines[4],
             &self.shadow_pipelines[5],
+            &self.shadow_pipelines[6],
         ];
         for (k, view) in self.shadow_views.iter().enumerate().take(self.cascades.len()) {
             let Some(layer) = self.shadow_maps.layers.get(k) else { continue };

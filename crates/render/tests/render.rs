@@ -141,7 +141,8 @@ fn check_draws(renderer: &Renderer, container: &Container) {
                 | DrawSource::Planes
                 | DrawSource::LodLevel
                 | DrawSource::Billboards
-                | DrawSource::Ellipsoids => {
+                | DrawSource::Ellipsoids
+                | DrawSource::Lines => {
                     panic!("{draw:?} without pruning, impostors, ellipsoids or baselines")
                 }
             };
