@@ -120,14 +120,19 @@ pub struct EllipsoidArgs {
     /// Draw the leaves of trees whose containers have ellipsoids (Clasen 2011) as those
     /// ellipsoids, ray-cast per pixel with their noise, per cell the level whose interval holds the
     /// metres per pixel at the cell's distance (divided by `--ellipsoid-quality`), and their bark
-    /// as triangles; other trees as usual. Takes precedence over `--impostors` (a tree with both
-    /// is drawn with ellipsoids) and `--prune`; `--baseline` takes precedence over it.
+    /// as their containers' branch lines (ray-cast round cones, the same level rule) where they
+    /// have them, else as triangles; other trees as usual. Takes precedence over `--impostors` (a
+    /// tree with both is drawn with ellipsoids) and `--prune`; `--baseline` takes precedence over
+    /// it.
     #[arg(long)]
     pub ellipsoids: bool,
     /// With ellipsoids: the quality factor `q`; the level drawn is the one for pixels `q` times
     /// smaller (2: finer, 0.5: coarser).
     #[arg(long, value_name = "Q", default_value_t = 1.0, value_parser = parse_quality)]
     pub ellipsoid_quality: f32,
+    /// With ellipsoids: draw the bark as triangles even where the container has branch lines.
+    #[arg(long)]
+    pub no_lines: bool,
 }
 
 impl EllipsoidArgs {
@@ -135,6 +140,7 @@ impl EllipsoidArgs {
     pub fn apply(&self, settings: &mut Settings) {
         settings.ellipsoids = self.ellipsoids;
         settings.ellipsoid_quality = self.ellipsoid_quality;
+        settings.lines = !self.no_lines;
     }
 
     /// With `--ellipsoids`, warns about each model of `models` that has no ellipsoids (its trees

@@ -109,7 +109,7 @@ pub struct Args {
     #[arg(long)]
     pub impostors: bool,
     // `--ellipsoids` starts with Clasen's ellipsoids on (key `C`) for trees whose containers
-    // have them.
+    // have them; `--no-lines` with their bark as triangles instead of lines (key `N`).
     #[command(flatten)]
     pub ellipsoid: EllipsoidArgs,
     /// Start with a baseline on (key `B` cycles none, lod-chain, billboard, crossed) for trees
@@ -447,6 +447,7 @@ impl Viewer {
             KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then(Pruning::default),
             KeyCode::KeyI => settings.impostors = !settings.impostors,
             KeyCode::KeyC => settings.ellipsoids = !settings.ellipsoids,
+            KeyCode::KeyN => settings.lines = !settings.lines,
             KeyCode::KeyM => settings.impostor_morph = !settings.impostor_morph,
             KeyCode::KeyH => toggle_shadows(&mut settings.shadows, &mut self.last_shadows),
             KeyCode::KeyY => settings.ambient_occlusion = !settings.ambient_occlusion,
@@ -601,8 +602,11 @@ impl Viewer {
             ));
         } else if settings.ellipsoids && !settings.full_mesh {
             mode.push_str(&format!(
-                " | ellipsoids (quality {}): {} trees, {} ellipsoids",
-                settings.ellipsoid_quality, self.stats.instances_ellipsoids, self.stats.ellipsoids
+                " | ellipsoids (quality {}): {} trees, {} ellipsoids, {}",
+                settings.ellipsoid_quality,
+                self.stats.instances_ellipsoids,
+                self.stats.ellipsoids,
+                if settings.lines { format!("{} lines", self.stats.lines) } else { "bark triangles".to_owned() }
             ));
             if settings.impostors {
                 mode.push_str(&format!(

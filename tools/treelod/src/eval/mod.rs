@@ -89,6 +89,10 @@ pub struct Args {
     // How the `impostors` technique changes level and draws its bark, as `render`'s options.
     #[command(flatten)]
     pub impostor: ImpostorArgs,
+    /// The `ellipsoids` technique draws the bark as triangles even where the container has
+    /// branch lines (by default as those lines).
+    #[arg(long)]
+    pub no_lines: bool,
     /// Triangle threshold `s_max` in pixels of the `spt` technique.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_max: Option<f32>,
@@ -483,8 +487,9 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 settings.impostors = *name == TechniqueName::Impostors;
                 args.impostor.apply(&mut settings);
                 // Ellipsoids: the leaves of every tree with ellipsoids as ellipsoids, its bark as
-                // triangles (lines are not drawn yet).
+                // its branch lines where it has them (unless `--no-lines`), else as triangles.
                 settings.ellipsoids = *name == TechniqueName::Ellipsoids;
+                settings.lines = !args.no_lines;
                 // Baselines: every tree with the baseline drawn with it.
                 settings.baseline = match name {
                     TechniqueName::LodChain => Some(Baseline::LodChain),
