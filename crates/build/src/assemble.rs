@@ -22,6 +22,7 @@ use crate::ellipsoid::{CellEllipsoids, EllipsoidConfig, EllipsoidMesh, Ellipsoid
 use crate::error::BuildError;
 use crate::gilet::{CellPoint, GiletConfig, LeafPoint, build_cell};
 use crate::impostor::{Atlas, ImpostorConfig, ImpostorMesh, Impostors, LeafTriangle, Surface, build_impostors};
+use crate::lines::{CellLines, LineConfig, LineMesh, Lines, build_lines};
 use crate::lod_chain::{ChainTriangle, LodChainConfig, build_lod_chain};
 use crate::precision::Precision;
 use crate::prune::{MeshTriangle, PruneConfig, PruneMesh, PruneReport, Pruned};
@@ -56,6 +57,10 @@ pub struct BuildConfig {
     /// [`crate::ellipsoid`]). Default `None`: opt-in, the clustering and calibration take a few
     /// seconds per 100k leaf triangles.
     pub ellipsoids: Option<EllipsoidConfig>,
+    /// Branch lines (Clasen et al. 2011, spec §6.9): a skeleton of line segments from the bark
+    /// mesh, simplified per grid cell by straighten and combine merges chosen by image error (see
+    /// [`crate::lines`]); drawn with the ellipsoids. Default `None`: opt-in.
+    pub lines: Option<LineConfig>,
     /// Baselines (spec §6.12, §6.13) for comparisons: each tree's discrete LoD chain from
     /// meshoptimizer's simplifiers ([`crate::lod_chain`]), and, when [`Self::impostors`] is set
     /// too, facing and crossed billboards each baked at the texel budget of the tree's impostor
@@ -103,6 +108,9 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
     }
     if let Some(ellipsoids) = &config.ellipsoids {
         settings.extend(ellipsoids.settings());
+    }
+    if let Some(lines) = &config.lines {
+        settings.extend(lines.settings());
     }
     if let Some(ao) = &config.ao {
         settings.extend(ao.settings());
@@ -176,6 +184,16 @@ pub struct BuildStats {
     pub ellipsoids_per_level: Vec<u32>,
     /// Wall-clock time of the ellipsoid stage, milliseconds (0 without).
     pub ellipsoid_millis: u64,
+    /// Branch lines written (0 without).
+    pub lines: u64,
+    /// Source segments of the bark skeleton (level 0 of the lines; 0 without).
+    pub line_segments: u64,
+    /// Branch lines drawn at each level of the cells' hierarchies, level 0 (the source segments)
+    /// first, summed over the cells (empty without). A line unchanged over several levels is one
+    /// record, counted at each of them.
+    pub lines_per_level: Vec<u32>,
+    /// Wall-clock time of the line stage, milliseconds (0 without).
+    pub line_millis: u64,
 }
 
 /// What a build returns.
@@ -276,6 +294,9 @@ fn gather(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<Gath
     }
     if let Some(ellipsoids) = &config.ellipsoids {
         ellipsoids.validate()?;
+    }
+    if let Some(lines) = &config.lines {
+        lines.validate()?;
     }
     let mut stats = BuildStats::default();
     let mut warnings: Vec<String> = Vec::new();
@@ -598,6 +619,25 @@ fn assemble(
         }
         None => None,
     };
+    // Stage: branch lines (Clasen 2011): the bark skeleton, per cell; here for the same reason.
+    let lines: Option<Lines> = match &config.lines {
+        Some(line_config) => {
+            let start = std::time::Instant::now();
+            let built = block_lines(
+                &material_keys,
+                &tris,
+                &vertices,
+                &parts,
+                trees,
+                |p| block_grid.cell_of(p),
+                cell_count,
+                line_config,
+            )?;
+            stats.line_millis = u64::try_from(start.elapsed().as_millis()).unwrap_or(u64::MAX);
+            Some(built)
+        }
+        None => None,
+    };
 
     // Stage: per cell, the leaf points, the point hierarchy as point records, and the triangles in
     // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
@@ -754,6 +794,30 @@ fn assemble(
             cell.ellipsoids = range(first, ellipsoid_records.len());
         }
     }
+    // Stage: the line records of each grid cell; cell bounds grow to hold their endpoints.
+    let mut line_records = Vec::new();
+    let mut line_ao = Vec::new();
+    if let Some(built) = lines {
+        stats.lines_per_level = built.per_level();
+        stats.line_segments = built.source_segments;
+        for (cell, cell_lines) in cells.iter_mut().zip(built.cells) {
+            if let Some(vertex_ao) = &vertex_ao {
+                line_ao.extend(line_occlusion(&cell_lines, &tris, vertex_ao));
+            }
+            let first = line_records.len();
+            if let Some((lmin, lmax)) = cell_lines.bounds {
+                let (bmin, bmax) = if cell.is_empty() {
+                    (lmin, lmax)
+                } else {
+                    (lmin.min(Vec3::from_array(cell.bounds_min)), lmax.max(Vec3::from_array(cell.bounds_max)))
+                };
+                cell.bounds_min = bmin.to_array();
+                cell.bounds_max = bmax.to_array();
+            }
+            line_records.extend(cell_lines.records);
+            cell.lines = range(first, line_records.len());
+        }
+    }
     // Stage: impostors (Garcia 2005): nested planes per tree and their atlas, in the block cell.
     let impostors = match &config.impostors {
         Some(impostor_config) => {
@@ -807,6 +871,7 @@ fn assemble(
         triangles: range(triangles.len(), triangles.len()),
         points: range(points.len(), points.len()),
         ellipsoids: range(ellipsoid_records.len(), ellipsoid_records.len()),
+        lines: range(line_records.len(), line_records.len()),
         planes: range(0, plane_count),
         prune_leaves: range(prune_leaves.len(), prune_leaves.len()),
         ..CellRecord::default()
@@ -932,6 +997,7 @@ fn assemble(
     stats.lod_triangles = lod_triangles.len() as u64;
     stats.billboards = billboard_records.len() as u64;
     stats.ellipsoids = ellipsoid_records.len() as u64;
+    stats.lines = line_records.len() as u64;
     let data = ContainerData {
         metadata: Metadata {
             generator: generator.to_owned(),
@@ -955,6 +1021,7 @@ fn assemble(
         triangles,
         points,
         ellipsoids: ellipsoid_records,
+        lines: line_records,
         materials,
         images,
         image_data,
@@ -971,6 +1038,7 @@ fn assemble(
         point_ao,
         plane_ao,
         ellipsoid_ao,
+        line_ao,
         ..ContainerData::default()
     };
     let mut data = data;
@@ -1032,6 +1100,63 @@ fn block_ellipsoids(
         }
     }
     Ok(built)
+}
+
+/// The branch lines of a block's bark ([`crate::lines`]): every triangle not of the leaf class,
+/// with its colour as Gilet's points take it (texture × factor × vertex colour). The cells'
+/// `segment_triangles` are returned as indices into `tris`.
+#[expect(clippy::too_many_arguments, reason = "the stage reads the build's arrays")]
+fn block_lines(
+    material_keys: &[(usize, usize, Class)],
+    tris: &[Tri],
+    vertices: &[VertexRecord],
+    parts: &[PartRef],
+    trees: &[Placed<'_>],
+    cell_of: impl Fn(Vec3) -> usize + Sync,
+    cell_count: usize,
+    config: &LineConfig,
+) -> Result<Lines, BuildError> {
+    #[expect(clippy::cast_possible_truncation, reason = "fewer than 2^32 triangles (checked via vertex count)")]
+    let bark: Vec<u32> = (0..tris.len() as u32)
+        .filter(|&i| material_keys[tris[i as usize].material as usize].2 != Class::Leaf)
+        .collect();
+    let triangles: Vec<[u32; 3]> = bark.iter().map(|&i| tris[i as usize].v).collect();
+    let colours: Vec<Vec4> =
+        bark.par_iter().map(|&i| leaf_point(&tris[i as usize], vertices, parts, trees).color).collect();
+    let mesh = LineMesh { vertices, triangles: &triangles, colours: &colours };
+    let mut built = build_lines(&mesh, cell_of, cell_count, config)?;
+    for cell in &mut built.cells {
+        for t in cell.segment_triangles.iter_mut().flatten() {
+            *t = bark[*t as usize];
+        }
+    }
+    Ok(built)
+}
+
+/// The ambient occlusion of one cell's line records, encoded (spec §6.14): the mean of the
+/// occlusion of the bark triangles of the line's source segments (each its corners' mean),
+/// weighted by area. `vertex_ao` is indexed by the written vertex ids that `tris` hold by now.
+fn line_occlusion(cell: &CellLines, tris: &[Tri], vertex_ao: &[f32]) -> Vec<u8> {
+    let items = |segments: &[Vec<u32>]| -> Vec<(f32, f32)> {
+        segments
+            .iter()
+            .flatten()
+            .map(|&id| {
+                let t = &tris[id as usize];
+                (triangle_occlusion(vertex_ao, t.v), t.size * t.size)
+            })
+            .collect()
+    };
+    cell.records
+        .iter()
+        .map(|l| {
+            let run = l.leaf_first as usize..(l.leaf_first + l.leaf_count) as usize;
+            let items = items(cell.segment_triangles.get(run).unwrap_or_default());
+            // Degenerate triangles only: each counts equally.
+            let weightless = items.iter().all(|&(_, w)| w == 0.0);
+            encode_ao(mean_occlusion(items.into_iter().map(|(ao, w)| (ao, if weightless { 1.0 } else { w }))))
+        })
+        .collect()
 }
 
 /// The ambient occlusion of the written vertices ([`crate::ambient`]), and of each point, encoded:

@@ -100,6 +100,23 @@ pub struct BuildOptions {
     /// With --ellipsoids: seed of the clusterings' random starts.
     #[arg(long, value_name = "N", default_value_t = 1, requires = "ellipsoids")]
     pub ellipsoid_seed: u64,
+    /// Branch lines (Clasen et al. 2011, spec §6.9): a skeleton of line segments from the bark
+    /// mesh, simplified per grid cell by straighten and combine merges of least image error, each
+    /// level drawn while its mean line is about --line-pixels wide. With --ellipsoids this is
+    /// Clasen's whole representation (`render --ellipsoids` draws the bark as these lines).
+    #[arg(long)]
+    pub lines: bool,
+    /// With --lines: mean line width on screen, pixels, at which the next coarser level takes
+    /// over (Clasen: 1), in (0, 1000].
+    #[arg(long, value_name = "PIXELS", default_value_t = 1.0, value_parser = parse_ellipsoid_pixels, requires = "lines")]
+    pub line_pixels: f32,
+    /// With --lines: random merge candidates whose image error is compared at each step
+    /// (more: better merges, slower), in 1..=256.
+    #[arg(long, value_name = "N", default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=256), requires = "lines")]
+    pub line_candidates: u32,
+    /// With --lines: seed of the merge candidates' sampling.
+    #[arg(long, value_name = "N", default_value_t = 1, requires = "lines")]
+    pub line_seed: u64,
     /// Baselines to compare treelod with (spec §6.12, §6.13; `treelod eval --technique
     /// lod-chain,billboard,crossed`): each tree's discrete LoD chain from meshoptimizer's
     /// simplifiers (the regular one for bark, with the sloppy one as fallback for foliage, as
@@ -160,6 +177,12 @@ impl BuildOptions {
                     EllipsoidClustering::Kmeans => treelod_build::Clustering::KMeans,
                 },
                 ..treelod_build::EllipsoidConfig::default()
+            }),
+            lines: self.lines.then(|| treelod_build::LineConfig {
+                pixels: self.line_pixels,
+                candidates: self.line_candidates,
+                seed: self.line_seed,
+                ..treelod_build::LineConfig::default()
             }),
             ao: (self.ao_rays > 0)
                 .then(|| treelod_build::AoConfig { rays: self.ao_rays, ..treelod_build::AoConfig::default() }),
@@ -230,7 +253,7 @@ pub enum EllipsoidClustering {
     Kmeans,
 }
 
-/// `--ellipsoid-pixels`: a number in (0, 1000], the range the build accepts.
+/// `--ellipsoid-pixels`, `--line-pixels`: a number in (0, 1000], the range the build accepts.
 fn parse_ellipsoid_pixels(s: &str) -> Result<f32, String> {
     s.trim()
         .parse::<f32>()
@@ -701,6 +724,7 @@ impl Summary<'_> {
         ) + &self.prune_text()
             + &self.impostor_text()
             + &self.ellipsoid_text()
+            + &self.line_text()
             + &self.baseline_text()
     }
 
@@ -728,6 +752,22 @@ impl Summary<'_> {
             s.ellipsoids,
             levels.join(", "),
             s.ellipsoid_millis as f64 / 1000.0
+        )
+    }
+
+    /// The branch-line line of the text summary (none without lines).
+    fn line_text(&self) -> String {
+        let s = &self.built.stats;
+        if s.lines == 0 {
+            return String::new();
+        }
+        let levels: Vec<String> = s.lines_per_level.iter().map(u32::to_string).collect();
+        format!(
+            "  lines         {} from {} skeleton segments (per level {}), built in {:.2} s\n",
+            s.lines,
+            s.line_segments,
+            levels.join(", "),
+            s.line_millis as f64 / 1000.0
         )
     }
 
@@ -794,6 +834,10 @@ impl Summary<'_> {
             "ellipsoids": s.ellipsoids,
             "ellipsoids_per_level": s.ellipsoids_per_level,
             "ellipsoid_seconds": s.ellipsoid_millis as f64 / 1000.0,
+            "lines": s.lines,
+            "line_segments": s.line_segments,
+            "lines_per_level": s.lines_per_level,
+            "line_seconds": s.line_millis as f64 / 1000.0,
             "atlas": s.atlas,
             "lod_levels": s.lod_levels,
             "lod_triangles": s.lod_triangles,
