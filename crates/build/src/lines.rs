@@ -11,7 +11,8 @@
 //!   component has its surface area `A`. Components are ranked by area, largest first (ties: the
 //!   first met).
 //! - **Roots**: the largest component starts at its lowest vertex (least `y`, glTF is Y-up) and
-//!   has no parent. Every other component is tried from each of its open boundary loops (the cut
+//!   has no parent: at the open end there (a tube's base), or else at every vertex within 1 % of
+//!   its height of the lowest (a closed or flared base). Every other component is tried from each of its open boundary loops (the cut
 //!   ends of a tube; a closed component: its vertex nearest to a larger component's), taking the
 //!   one whose centroid lies deepest in the skeleton already built: for each loop, the vertex of a
 //!   larger component nearest to its centroid (a uniform grid over the vertices, filled in rank
@@ -23,19 +24,23 @@
 //!   parent if the depth is at most `2h + r` (`h` the component's slice width, below; `r` the
 //!   node's radius: generators put branch bases on or near the parent's surface, which the cone
 //!   only approximates). Otherwise the component is a separate tree of the block or a floating
-//!   piece, and no line may join it to its neighbour across the gap: it starts at its lowest
-//!   vertex as a root of its own. Small pieces, under [`SMALL_PIECE`] (1 %) of the largest
+//!   piece, and no line may join it to its neighbour across the gap: it starts at its base as the largest does
+//!   as a root of its own. Small pieces, under [`SMALL_PIECE`] (1 %) of the largest
 //!   component's area (flowers, knots, caps, stray bark triangles: no tree of their own), are
 //!   attached within twice the largest component's slice width instead, so that they merge into
 //!   the tree's hierarchy rather than each staying a line of its own up to the coarsest level.
 //! - **Geodesic slices**: Dijkstra distances over the welded edges (ties: lower vertex id) from
 //!   the chosen loop, or from the lowest vertex's loop (the vertex alone when it is on no
 //!   boundary), so that the slices of a tube are perpendicular to it instead of slanted from a
-//!   point of its rim. With `L` the largest distance, `r_est = A/(2πL)` (the radius of an open
-//!   cylinder of that area and length) and the slice width `h = max(2·r_est, L/24)`: slices no
-//!   narrower than the branch is thick (finer ones add nothing visible and fragment at bends), and
-//!   about [`MAX_SLICES`] (24) slices per component, so long thin branches do not flood the
-//!   hierarchy.
+//!   point of its rim. With `L` the largest distance, `r_est` the median radius of the connected
+//!   pieces of [`FINE_SLICES`] (96) slices of width `L/96` (each piece's mean distance of its
+//!   vertices to their centroid: about a ring of the tube), the slice width is
+//!   `h = max(2·r_est, L/24)`: slices no narrower than the branch is thick (finer ones add nothing
+//!   visible and fragment at bends), and about [`MAX_SLICES`] (24) slices per component, so long
+//!   thin branches do not flood the hierarchy. (The radius of an open cylinder of the component's
+//!   area and length, `A/(2πL)`, is right for one tube but counts every limb of a merged mesh,
+//!   such as the jacaranda's forked trunk, into one radius several times too large, whose wide
+//!   slices join the stems of a fork into one fat node.)
 //! - **Nodes**: vertices are binned by `⌊d/h⌋`; the connected pieces of a bin (edges inside it)
 //!   are the skeleton nodes (numbered by component rank, bin, least vertex). A node's centroid is
 //!   its vertices' mean; its radius the mean distance of its vertices to the axis through the
@@ -109,6 +114,10 @@ pub const WELD: f64 = 1e-5;
 
 /// Most segments per component: the slice width is at least `1/MAX_SLICES` of its length.
 pub const MAX_SLICES: f64 = 24.0;
+
+/// Fine slices per component for estimating its branches' thickness: the slice width is twice
+/// the median radius of the pieces of `FINE_SLICES` slices.
+pub const FINE_SLICES: f64 = 96.0;
 
 /// Least half-width of a line in the image-error views, pixels.
 pub const MIN_HALF_WIDTH: f64 = 0.5;
@@ -555,7 +564,18 @@ fn skeleton(mesh: &LineMesh<'_>) -> Skeleton {
         let (slicing, attach) = match chosen {
             Some((s, node)) => (s, Some(node)),
             None => {
-                let sources = boundary_loop(&graph, lowest(vertices));
+                // The open end at the lowest vertex (a tube's base); without one (a closed or
+                // flared base: the jacaranda's roots), every vertex within 1 % of the component's
+                // height of its lowest, so that the first slices lie level instead of climbing
+                // from one root tip.
+                let mut sources = boundary_loop(&graph, lowest(vertices));
+                if sources.len() == 1 {
+                    let y = |v: u32| graph.positions[v as usize].y;
+                    let (y0, y1) = vertices
+                        .iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(y(v)), b.max(y(v))));
+                    sources = vertices.iter().copied().filter(|&v| y(v) <= y0 + 0.01 * (y1 - y0)).collect();
+                }
                 (slice(&graph, vertices, &sources, area[c], min_radius, &mut dist), None)
             }
         };
@@ -734,35 +754,41 @@ fn slice(graph: &Graph, vertices: &[u32], sources: &[u32], area: f64, min_radius
         }
     }
     let length = vertices.iter().map(|&v| dist[v as usize]).fold(0.0, f64::max);
-    let r_est = if length > 0.0 { area / (std::f64::consts::TAU * length) } else { 0.0 };
-    let h = (2.0 * r_est).max(length / MAX_SLICES).max(min_radius);
-    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "at most MAX_SLICES + 1 bins")]
-    let bin_of = |v: u32| (dist[v as usize] / h).floor().min(f64::from(u32::MAX)) as u32;
-
-    // Pieces: union–find over the edges inside a bin, on the component's own indices.
     let local: HashMap<u32, u32> =
         vertices.iter().enumerate().map(|(i, &v)| (v, u32::try_from(i).unwrap_or(u32::MAX))).collect();
-    #[expect(clippy::cast_possible_truncation, reason = "fewer vertices than 2^32")]
-    let mut uf: Vec<u32> = (0..vertices.len() as u32).collect();
-    for &v in vertices {
-        for &(w, _, _) in graph.edges(v) {
-            if bin_of(v) == bin_of(w) {
-                union(&mut uf, local[&v], local[&w]);
-            }
-        }
-    }
-    // Pieces ordered by (bin, least vertex).
-    let mut pieces: BTreeMap<(u32, u32), Vec<u32>> = BTreeMap::new();
-    let mut least: HashMap<u32, u32> = HashMap::new();
-    for &v in vertices {
-        let root = find(&mut uf, local[&v]);
-        let entry = least.entry(root).or_insert(v);
-        *entry = (*entry).min(v);
-    }
-    for &v in vertices {
-        let root = find(&mut uf, local[&v]);
-        pieces.entry((bin_of(v), least[&root])).or_default().push(v);
-    }
+    // No narrower than the mesh's long edges either (the 90th percentile of its edge lengths),
+    // or a coarse mesh's rings fall apart into single vertices, each a spike of a node.
+    let mut edges: Vec<f64> = vertices.iter().flat_map(|&v| graph.edges(v).iter().map(|&(_, len, _)| len)).collect();
+    let long_edge = if edges.is_empty() {
+        0.0
+    } else {
+        let k = (edges.len() * 9 / 10).min(edges.len() - 1);
+        *edges.select_nth_unstable_by(k, f64::total_cmp).1
+    };
+    // The branches' thickness: the median radius (largest distance of a piece's vertices to its
+    // centroid: a ring's radius, a little more for a ring and a half, where a mean would shrink
+    // for a piece that is an arc of a ring) of the pieces of fine slices. A component's area over its length, the radius of
+    // a cylinder, is right for one tube but counts every branch of a merged mesh (a trunk with
+    // its forks and limbs) into one radius several times too large, whose slices then join the
+    // stems of a fork into one fat node.
+    let fine = (length / FINE_SLICES).max(long_edge).max(min_radius);
+    let fine_pieces = pieces(graph, vertices, &local, |v| bin(dist[v as usize], fine));
+    let mut radii: Vec<f64> = fine_pieces
+        .values()
+        .map(|vs| {
+            let c = centroid_of(vs);
+            vs.iter().map(|&v| graph.positions[v as usize].distance(c)).fold(0.0, f64::max)
+        })
+        .collect();
+    radii.sort_unstable_by(f64::total_cmp);
+    let r_est = match radii.get(radii.len() / 2) {
+        Some(&r) => r,
+        None if length > 0.0 => area / (std::f64::consts::TAU * length),
+        None => 0.0,
+    };
+    let h = (2.0 * r_est).max(long_edge).max(length / MAX_SLICES).max(min_radius);
+    let bin_of = |v: u32| bin(dist[v as usize], h);
+    let pieces = pieces(graph, vertices, &local, bin_of);
     let mut piece_of: HashMap<u32, u32> = HashMap::new();
     let mut nodes: Vec<Node> = Vec::with_capacity(pieces.len());
     for ((bin, _), mut vs) in pieces {
@@ -792,6 +818,39 @@ fn slice(graph: &Graph, vertices: &[u32], sources: &[u32], area: f64, min_radius
         }
         node.parent = best.map(|b| b.1);
     }
+    // Tip crumbs: a piece of fewer than 3 vertices with a parent and no children (the last few
+    // vertices of a tube's end, cut off by the last bin) joins its parent instead of becoming a
+    // node: its segment would point anywhere, with no thickness.
+    let mut has_child = vec![false; nodes.len()];
+    for node in &nodes {
+        if let Some(p) = node.parent {
+            has_child[p as usize] = true;
+        }
+    }
+    let crumb = |i: usize, node: &Node| node.vertices.len() < 3 && node.parent.is_some() && !has_child[i];
+    if nodes.iter().enumerate().any(|(i, n)| crumb(i, n)) {
+        let mut new_id = vec![u32::MAX; nodes.len()];
+        let mut kept: Vec<Node> = Vec::with_capacity(nodes.len());
+        let mut folded: Vec<(u32, Vec<u32>)> = Vec::new();
+        for (i, node) in nodes.into_iter().enumerate() {
+            if crumb(i, &node) {
+                folded.push((node.parent.unwrap_or(0), node.vertices));
+            } else {
+                new_id[i] = u32::try_from(kept.len()).unwrap_or(u32::MAX);
+                kept.push(node);
+            }
+        }
+        for node in &mut kept {
+            // A crumb has no children, so every parent is kept.
+            node.parent = node.parent.map(|p| new_id[p as usize]);
+        }
+        for (parent, vs) in folded {
+            let target = &mut kept[new_id[parent as usize] as usize];
+            target.vertices.extend(vs);
+            target.vertices.sort_unstable();
+        }
+        nodes = kept;
+    }
     // Radii: mean distance to the axis through the centroid.
     let mut first_child = vec![None::<u32>; nodes.len()];
     for i in (0..nodes.len()).rev() {
@@ -820,8 +879,49 @@ fn slice(graph: &Graph, vertices: &[u32], sources: &[u32], area: f64, min_radius
     for &v in vertices {
         dist[v as usize] = f64::INFINITY;
     }
-    let base_radius = if sources.len() > 1 { base_radius.max(min_radius) } else { nodes[0].radius };
+    // The base's radius: the sources' spread about their centroid (a tube's open end), but no
+    // more than the first node's (a flared base's sources spread over its roots).
+    let base_radius =
+        if sources.len() > 1 { base_radius.min(nodes[0].radius).max(min_radius) } else { nodes[0].radius };
     Slicing { h, nodes, base: (base_centre, base_radius) }
+}
+
+/// The bin of distance `d` in slices of width `h`.
+fn bin(d: f64, h: f64) -> u32 {
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to u32")]
+    let b = (d / h).floor().clamp(0.0, f64::from(u32::MAX)) as u32;
+    b
+}
+
+/// The connected pieces of each bin of `vertices` (union–find over the edges inside a bin, on the
+/// component's own indices `local`), keyed and ordered by (bin, least vertex).
+fn pieces(
+    graph: &Graph,
+    vertices: &[u32],
+    local: &HashMap<u32, u32>,
+    bin_of: impl Fn(u32) -> u32,
+) -> BTreeMap<(u32, u32), Vec<u32>> {
+    #[expect(clippy::cast_possible_truncation, reason = "fewer vertices than 2^32")]
+    let mut uf: Vec<u32> = (0..vertices.len() as u32).collect();
+    for &v in vertices {
+        for &(w, _, _) in graph.edges(v) {
+            if bin_of(v) == bin_of(w) {
+                union(&mut uf, local[&v], local[&w]);
+            }
+        }
+    }
+    let mut pieces: BTreeMap<(u32, u32), Vec<u32>> = BTreeMap::new();
+    let mut least: HashMap<u32, u32> = HashMap::new();
+    for &v in vertices {
+        let root = find(&mut uf, local[&v]);
+        let entry = least.entry(root).or_insert(v);
+        *entry = (*entry).min(v);
+    }
+    for &v in vertices {
+        let root = find(&mut uf, local[&v]);
+        pieces.entry((bin_of(v), least[&root])).or_default().push(v);
+    }
+    pieces
 }
 
 /// A uniform grid over the welded vertices for nearest-vertex queries, filled as components are

@@ -51,14 +51,14 @@ fn the_demo_tree_s_skeleton_follows_its_tubes_and_its_cells_verify() {
     let segments: Vec<&LineRecord> = lines.iter().filter(|l| l.lo == 0.0 && l.leaf_count == 1).collect();
     assert_eq!(segments.len() as u64, out.stats.line_segments);
     assert!(segments.len() >= 66, "{} segments for 66 tubes", segments.len());
-    // The trunk: the thickest segment stands at the base, on the y axis, about 0.2 m thick (the
-    // demo's base radius 0.05 · 4 m, tapering to 0.08 at 4 m).
+    // The trunk: the thickest segment stands upright at the base, on the y axis, about 0.2 m
+    // thick (the demo's base radius 0.05 · 4 m, tapering to 0.08 at 4 m, bending a little).
     let trunk = segments.iter().max_by(|a, b| a.r0.max(a.r1).total_cmp(&b.r0.max(b.r1))).expect("segments");
     let (a, b) = ends(trunk);
-    assert!(a.y.min(b.y) < 1.0, "trunk segment {a}–{b}");
-    for p in [a, b] {
-        assert!(Vec3::new(p.x, 0.0, p.z).length() < 0.15, "trunk segment {a}–{b} off the axis");
-    }
+    let low = if a.y < b.y { a } else { b };
+    assert!(low.y < 1.0, "trunk segment {a}–{b}");
+    assert!(Vec3::new(low.x, 0.0, low.z).length() < 0.1, "trunk segment {a}–{b} off the axis");
+    assert!((b - a).normalize().y.abs() > 0.9, "trunk segment {a}–{b} not upright");
     let r = trunk.r0.max(trunk.r1);
     assert!((0.12..=0.22).contains(&r), "trunk radius {r}");
     // Connected: every segment starts on (within its parent's radius of) another segment, except
