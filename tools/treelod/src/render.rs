@@ -496,8 +496,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     }
     if renderer.settings().ellipsoids && args.baseline.is_none() {
         line.push_str(&format!(
-            ", {} tree(s) with ellipsoids submitting {} ellipsoids",
-            stats.instances_ellipsoids, stats.ellipsoids
+            ", {} tree(s) with ellipsoids submitting {} ellipsoids and {} lines",
+            stats.instances_ellipsoids, stats.ellipsoids, stats.lines
         ));
     }
     if renderer.settings().shadows.is_some() {
