@@ -333,6 +333,8 @@ struct Skeleton {
 /// The welded bark: positions, triangles and a CSR adjacency with edge lengths and boundary flags.
 struct Graph {
     positions: Vec<DVec3>,
+    /// Per welded vertex, a third of the area of the triangles around it.
+    vertex_area: Vec<f64>,
     /// Per welded vertex, its neighbours `start[v] .. start[v + 1]` in `neighbours`.
     start: Vec<usize>,
     neighbours: Vec<(u32, f64, bool)>,
@@ -459,8 +461,13 @@ fn skeleton(mesh: &LineMesh<'_>) -> Skeleton {
         let [a, b, c] = mesh.triangles[t as usize].map(position);
         0.5 * (b - a).cross(c - a).length()
     };
+    let mut vertex_area = vec![0.0f64; n];
     for (&t, w) in triangles.iter().zip(&welded_tris) {
-        area[component_of[w[0] as usize] as usize] += tri_area(t);
+        let a = tri_area(t);
+        area[component_of[w[0] as usize] as usize] += a;
+        for &v in w {
+            vertex_area[v as usize] += a / 3.0;
+        }
     }
 
     // Step: the welded edges with lengths and boundary flags (used by one triangle).
@@ -506,7 +513,7 @@ fn skeleton(mesh: &LineMesh<'_>) -> Skeleton {
     for v in 0..n {
         neighbours[start[v]..start[v + 1]].sort_by_key(|x| x.0);
     }
-    let graph = Graph { positions, start, neighbours };
+    let graph = Graph { positions, vertex_area, start, neighbours };
 
     // Step: rank components by area, largest first.
     let mut rank: Vec<usize> = (0..components).collect();
@@ -537,7 +544,10 @@ fn skeleton(mesh: &LineMesh<'_>) -> Skeleton {
         // closed component at its vertex nearest to a larger component.
         let mut chosen = None;
         if r > 0 {
+            // A loop holding half the component's vertices is the outline of a flat piece (a
+            // strip, a card), not the cut end of a tube.
             let mut starts = boundary_loops(&graph, vertices);
+            starts.retain(|l| 2 * l.len() <= vertices.len());
             if starts.is_empty()
                 && let Some((own, _, _)) = grid.nearest(vertices.iter().map(|&v| (v, graph.positions[v as usize])))
             {
@@ -569,7 +579,7 @@ fn skeleton(mesh: &LineMesh<'_>) -> Skeleton {
                 // height of its lowest, so that the first slices lie level instead of climbing
                 // from one root tip.
                 let mut sources = boundary_loop(&graph, lowest(vertices));
-                if sources.len() == 1 {
+                if sources.len() == 1 || 2 * sources.len() > vertices.len() {
                     let y = |v: u32| graph.positions[v as usize].y;
                     let (y0, y1) = vertices
                         .iter()
@@ -771,7 +781,7 @@ fn slice(graph: &Graph, vertices: &[u32], sources: &[u32], area: f64, min_radius
     // a cylinder, is right for one tube but counts every branch of a merged mesh (a trunk with
     // its forks and limbs) into one radius several times too large, whose slices then join the
     // stems of a fork into one fat node.
-    let fine = (length / FINE_SLICES).max(long_edge).max(min_radius);
+    let fine = (length / FINE_SLICES).max(min_radius);
     let fine_pieces = pieces(graph, vertices, &local, |v| bin(dist[v as usize], fine));
     let mut radii: Vec<f64> = fine_pieces
         .values()
@@ -874,7 +884,19 @@ fn slice(graph: &Graph, vertices: &[u32], sources: &[u32], area: f64, min_radius
                 (d - d.dot(axis) * axis).length()
             })
             .sum();
-        nodes[i].radius = (sum / nodes[i].vertices.len() as f64).max(min_radius);
+        // No more than a tube of the piece's area and geodesic length would have: a piece that
+        // is not a ring (a whole twig in one slice of a coarse mesh, a flat strip, the stems of
+        // a fork) has no single axis, and its distances from one overstate its thickness.
+        let (d0, d1) = nodes[i]
+            .vertices
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(dist[v as usize]), b.max(dist[v as usize])));
+        let piece_area: f64 = nodes[i].vertices.iter().map(|&v| graph.vertex_area[v as usize]).sum();
+        let mut radius = sum / nodes[i].vertices.len() as f64;
+        if d1 > d0 && piece_area > 0.0 {
+            radius = radius.min(piece_area / (std::f64::consts::TAU * (d1 - d0)));
+        }
+        nodes[i].radius = radius.max(min_radius);
     }
     for &v in vertices {
         dist[v as usize] = f64::INFINITY;
@@ -1625,6 +1647,36 @@ mod tests {
         let mut all: Vec<u32> = s.segments.iter().flat_map(|s| s.triangles.iter().copied()).collect();
         all.sort_unstable();
         assert_eq!(all, (0..t.len() as u32).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn coarse_twigs_and_flat_strips_are_no_thicker_than_they_are() {
+        // A trunk with a twig of three rings (edges longer than the slices), hanging from it.
+        let trunk = [Vec3::ZERO, Vec3::new(0.0, 2.0, 0.0)];
+        let twig = [Vec3::new(0.0, 1.5, 0.0), Vec3::new(0.9, 1.2, 0.0), Vec3::new(1.0, 0.4, 0.0)];
+        let (v, t) = tubes(&[(&trunk, 0.1, 41, 12), (&twig, 0.01, 3, 6)]);
+        let s = skeleton_of(&v, &t);
+        let thickest = |segments: &[Segment]| segments.iter().map(|g| g.r0.max(g.r1)).fold(0.0, f64::max);
+        let twig_segments: Vec<Segment> = s.segments.iter().filter(|g| g.p1.x > 0.2).cloned().collect();
+        assert!(!twig_segments.is_empty());
+        assert!(thickest(&twig_segments) < 0.02, "twig radius {}", thickest(&twig_segments));
+        // A flat strip 0.1 wide and 1 long, standing: its outline is one boundary loop, which
+        // is no tube's end; sliced from its lower edge, its line is as wide as the strip.
+        let mut strip = Vec::new();
+        for i in 0..=10 {
+            let y = i as f32 / 10.0;
+            for x in [0.0, 0.1] {
+                strip.push(VertexRecord { position: [x, y, 0.0], ..VertexRecord::default() });
+            }
+        }
+        let quads: Vec<[u32; 3]> =
+            (0..10u32).flat_map(|i| [[2 * i, 2 * i + 1, 2 * i + 3], [2 * i, 2 * i + 3, 2 * i + 2]]).collect();
+        let s = skeleton_of(&strip, &quads);
+        let r = thickest(&s.segments);
+        assert!(r <= 0.0505, "strip radius {r}");
+        assert!(s.segments.iter().all(|g| g.p0.y.min(g.p1.y) > -1e-6 && (g.p1 - g.p0).y.abs() >= 0.0));
+        let top = s.segments.iter().map(|g| g.p1.y.max(g.p0.y)).fold(0.0, f64::max);
+        assert!(top > 0.85, "the strip's line reaches its top: {top}");
     }
 
     #[test]
