@@ -601,43 +601,14 @@ fn assemble(
 
     // Stage: leaf ellipsoids (Clasen 2011), per cell; before the per-cell stage, which overwrites
     // the triangles' parts (the ellipsoids' colours need them).
-    let ellipsoids: Option<Ellipsoids> = match &config.ellipsoids {
-        Some(ellipsoid_config) => {
-            let start = std::time::Instant::now();
-            let built = block_ellipsoids(
-                &material_keys,
-                &tris,
-                &vertices,
-                &parts,
-                trees,
-                |p| block_grid.cell_of(p),
-                cell_count,
-                ellipsoid_config,
-            )?;
-            stats.ellipsoid_millis = u64::try_from(start.elapsed().as_millis()).unwrap_or(u64::MAX);
-            Some(built)
-        }
-        None => None,
-    };
+    let cell_of = |p: Vec3| block_grid.cell_of(p);
+    let ellipsoids: Option<Ellipsoids> = timed(&mut stats.ellipsoid_millis, config.ellipsoids.as_ref(), |c| {
+        block_ellipsoids(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)
+    })?;
     // Stage: branch lines (Clasen 2011): the bark skeleton, per cell; here for the same reason.
-    let lines: Option<Lines> = match &config.lines {
-        Some(line_config) => {
-            let start = std::time::Instant::now();
-            let built = block_lines(
-                &material_keys,
-                &tris,
-                &vertices,
-                &parts,
-                trees,
-                |p| block_grid.cell_of(p),
-                cell_count,
-                line_config,
-            )?;
-            stats.line_millis = u64::try_from(start.elapsed().as_millis()).unwrap_or(u64::MAX);
-            Some(built)
-        }
-        None => None,
-    };
+    let lines: Option<Lines> = timed(&mut stats.line_millis, config.lines.as_ref(), |c| {
+        block_lines(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)
+    })?;
 
     // Stage: per cell, the leaf points, the point hierarchy as point records, and the triangles in
     // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
@@ -781,15 +752,7 @@ fn assemble(
                 ellipsoid_ao.extend(ellipsoid_occlusion(&cell_ellipsoids, &tris, vertex_ao, &coverage));
             }
             let first = ellipsoid_records.len();
-            if let Some((emin, emax)) = cell_ellipsoids.bounds {
-                let (bmin, bmax) = if cell.is_empty() {
-                    (emin, emax)
-                } else {
-                    (emin.min(Vec3::from_array(cell.bounds_min)), emax.max(Vec3::from_array(cell.bounds_max)))
-                };
-                cell.bounds_min = bmin.to_array();
-                cell.bounds_max = bmax.to_array();
-            }
+            grow_bounds(cell, cell_ellipsoids.bounds);
             ellipsoid_records.extend(cell_ellipsoids.records);
             cell.ellipsoids = range(first, ellipsoid_records.len());
         }
@@ -805,15 +768,7 @@ fn assemble(
                 line_ao.extend(line_occlusion(&cell_lines, &tris, vertex_ao));
             }
             let first = line_records.len();
-            if let Some((lmin, lmax)) = cell_lines.bounds {
-                let (bmin, bmax) = if cell.is_empty() {
-                    (lmin, lmax)
-                } else {
-                    (lmin.min(Vec3::from_array(cell.bounds_min)), lmax.max(Vec3::from_array(cell.bounds_max)))
-                };
-                cell.bounds_min = bmin.to_array();
-                cell.bounds_max = bmax.to_array();
-            }
+            grow_bounds(cell, cell_lines.bounds);
             line_records.extend(cell_lines.records);
             cell.lines = range(first, line_records.len());
         }
@@ -1100,6 +1055,34 @@ fn block_ellipsoids(
         }
     }
     Ok(built)
+}
+
+/// Grows `cell`'s bounds to hold `bounds` (those of records about to be added; nothing for
+/// `None`); a cell with no records yet takes them as they are.
+fn grow_bounds(cell: &mut CellRecord, bounds: Option<(Vec3, Vec3)>) {
+    if let Some((lo, hi)) = bounds {
+        let (lo, hi) = if cell.is_empty() {
+            (lo, hi)
+        } else {
+            (lo.min(Vec3::from_array(cell.bounds_min)), hi.max(Vec3::from_array(cell.bounds_max)))
+        };
+        cell.bounds_min = lo.to_array();
+        cell.bounds_max = hi.to_array();
+    }
+}
+
+/// Runs an optional stage with its `config` (nothing without one), writing its wall-clock time
+/// to `millis`.
+fn timed<C, T>(
+    millis: &mut u64,
+    config: Option<&C>,
+    stage: impl FnOnce(&C) -> Result<T, BuildError>,
+) -> Result<Option<T>, BuildError> {
+    let Some(config) = config else { return Ok(None) };
+    let start = std::time::Instant::now();
+    let built = stage(config)?;
+    *millis = u64::try_from(start.elapsed().as_millis()).unwrap_or(u64::MAX);
+    Ok(Some(built))
 }
 
 /// The branch lines of a block's bark ([`crate::lines`]): every triangle not of the leaf class,

@@ -7,12 +7,9 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, covered, gpu, keep};
+use common::{BACKGROUND, count, covered, gpu, iou, keep};
 use glam::{Mat3, Quat, Vec3, Vec4, vec3};
-use treelod_format::{
-    BlockRecord, CellRecord, Compression, Container, ContainerData, EllipsoidRecord, MaterialInfo, MaterialRecord,
-    Metadata, NO_IMAGE, PointRecord, Range, Source, Tree, TriangleRecord, VertexRecord, pack,
-};
+use treelod_format::{CellRecord, Container, EllipsoidRecord, Range};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
 use treelod_render::{Camera, DrawSource, Ground, Renderer, Settings, Shadows};
 
@@ -38,71 +35,7 @@ fn ellipsoid(center: Vec3, radii: Vec3, rotation: Quat, color: u32, (lo, hi): (f
 /// given), and whose grid cell holds `triangle` if any: one opaque bark triangle of colour
 /// `[0.8, 0.1, 0.1]` (with its point, as the sequential point tree needs); verified.
 fn container(ellipsoids: Vec<EllipsoidRecord>, triangle: Option<[Vec3; 3]>) -> Arc<Container> {
-    let mut data = ContainerData {
-        metadata: Metadata {
-            generator: "test".into(),
-            name: "ellipsoids".into(),
-            sources: vec![Source::default()],
-            trees: vec![Tree::default()],
-            materials: vec![MaterialInfo { name: "bark".into(), classified_by: "name".into() }],
-            ..Metadata::default()
-        },
-        block: BlockRecord {
-            bounds_min: [-10.0; 3],
-            bounds_max: [10.0; 3],
-            grid: [1, 1, 1],
-            tree_count: 1,
-            ..BlockRecord::default()
-        },
-        materials: vec![MaterialRecord {
-            base_color: [0.8, 0.1, 0.1, 1.0],
-            image: NO_IMAGE,
-            alpha_mode: 0,
-            alpha_cutoff: 0.5,
-            class: treelod_format::material_class::BARK,
-            flags: 1,
-            _pad: 0,
-        }],
-        ..ContainerData::default()
-    };
-    let mut grid_cell = CellRecord::default();
-    if let Some(corners) = triangle {
-        let normal = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
-        data.vertices = corners
-            .iter()
-            .map(|c| VertexRecord {
-                position: c.to_array(),
-                normal: pack::oct_encode(normal.to_array()),
-                uv: [0.0; 2],
-                color: u32::MAX,
-            })
-            .collect();
-        let size = 1.0;
-        data.triangles = vec![TriangleRecord { indices: [0, 1, 2], size, leaf: 0, material: 0 }];
-        let centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
-        data.points = vec![PointRecord {
-            position: centroid.to_array(),
-            radius: 0.5,
-            normal: pack::oct_encode(normal.to_array()),
-            color: 0xFF19_19CC,
-            size,
-            lo: 0.0,
-            hi: f32::INFINITY,
-            leaf_first: 0,
-            leaf_count: 1,
-            flags: 0,
-        }];
-        // Bounds with a margin: the point's position is the rounded centroid.
-        let (lo, hi) =
-            (corners[0].min(corners[1]).min(corners[2]) - 1e-3, corners[0].max(corners[1]).max(corners[2]) + 1e-3);
-        grid_cell = CellRecord {
-            bounds_min: lo.to_array(),
-            bounds_max: hi.to_array(),
-            triangles: Range { first: 0, count: 1 },
-            points: Range { first: 0, count: 1 },
-            ..CellRecord::default()
-        };
-    }
+    let mut data = common::one_cell_block("ellipsoids", triangle);
     let n = ellipsoids.len() as u32;
     let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
     for e in &ellipsoids {
@@ -118,11 +51,9 @@ fn container(ellipsoids: Vec<EllipsoidRecord>, triangle: Option<[Vec3; 3]>) -> A
         ellipsoids: Range { first: 0, count: n },
         ..CellRecord::default()
     };
-    data.cells = vec![grid_cell, block_cell];
+    data.cells.push(block_cell);
     data.ellipsoids = ellipsoids;
-    let container = Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens");
-    treelod_format::verify(&container).expect("a valid container");
-    Arc::new(container)
+    common::open_verified(&data)
 }
 
 /// A renderer drawing ellipsoids (no shadows, default sun) with one instance of `container`.
@@ -164,16 +95,6 @@ fn exact_silhouette(camera: &Camera, e: &EllipsoidRecord) -> Vec<bool> {
         }
     }
     mask
-}
-
-fn iou(a: &[bool], b: &[bool]) -> f64 {
-    let both = a.iter().zip(b).filter(|(x, y)| **x && **y).count() as f64;
-    let either = a.iter().zip(b).filter(|(x, y)| **x || **y).count() as f64;
-    both / either.max(1.0)
-}
-
-fn count(mask: &[bool]) -> usize {
-    mask.iter().filter(|m| **m).count()
 }
 
 /// A turned, stretched ellipsoid near the origin.

@@ -13,12 +13,9 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, covered, gpu, keep};
+use common::{BACKGROUND, count, covered, gpu, iou, keep};
 use glam::{DVec3, Mat4, Vec3, Vec4, vec3};
-use treelod_format::{
-    BlockRecord, CellRecord, Compression, Container, ContainerData, EllipsoidRecord, LineRecord, MaterialInfo,
-    MaterialRecord, Metadata, NO_IMAGE, PointRecord, Range, Source, Tree, TriangleRecord, VertexRecord, pack,
-};
+use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, Range};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
 use treelod_render::{Camera, DrawSource, Ground, Instance, Renderer, Settings, Shadows};
 
@@ -54,69 +51,7 @@ fn solid(p0: Vec3, r0: f32, p1: Vec3, r1: f32, color: u32, segment: u32) -> Line
 /// that shows no leaf. Its grid cell holds `triangle` if any: one opaque bark triangle of colour
 /// `[0.8, 0.1, 0.1]` (with its point, as the sequential point tree needs). Verified.
 fn container(lines: Vec<LineRecord>, ao: Vec<u8>, triangle: Option<[Vec3; 3]>) -> Arc<Container> {
-    let mut data = ContainerData {
-        metadata: Metadata {
-            generator: "test".into(),
-            name: "lines".into(),
-            sources: vec![Source::default()],
-            trees: vec![Tree::default()],
-            materials: vec![MaterialInfo { name: "bark".into(), classified_by: "name".into() }],
-            ..Metadata::default()
-        },
-        block: BlockRecord {
-            bounds_min: [-10.0; 3],
-            bounds_max: [10.0; 3],
-            grid: [1, 1, 1],
-            tree_count: 1,
-            ..BlockRecord::default()
-        },
-        materials: vec![MaterialRecord {
-            base_color: [0.8, 0.1, 0.1, 1.0],
-            image: NO_IMAGE,
-            alpha_mode: 0,
-            alpha_cutoff: 0.5,
-            class: treelod_format::material_class::BARK,
-            flags: 1,
-            _pad: 0,
-        }],
-        ..ContainerData::default()
-    };
-    let mut grid_cell = CellRecord::default();
-    if let Some(corners) = triangle {
-        let normal = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
-        data.vertices = corners
-            .iter()
-            .map(|c| VertexRecord {
-                position: c.to_array(),
-                normal: pack::oct_encode(normal.to_array()),
-                uv: [0.0; 2],
-                color: u32::MAX,
-            })
-            .collect();
-        data.triangles = vec![TriangleRecord { indices: [0, 1, 2], size: 1.0, leaf: 0, material: 0 }];
-        let centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
-        data.points = vec![PointRecord {
-            position: centroid.to_array(),
-            radius: 0.5,
-            normal: pack::oct_encode(normal.to_array()),
-            color: RED,
-            size: 1.0,
-            lo: 0.0,
-            hi: f32::INFINITY,
-            leaf_first: 0,
-            leaf_count: 1,
-            flags: 0,
-        }];
-        let (lo, hi) =
-            (corners[0].min(corners[1]).min(corners[2]) - 1e-3, corners[0].max(corners[1]).max(corners[2]) + 1e-3);
-        grid_cell = CellRecord {
-            bounds_min: lo.to_array(),
-            bounds_max: hi.to_array(),
-            triangles: Range { first: 0, count: 1 },
-            points: Range { first: 0, count: 1 },
-            ..CellRecord::default()
-        };
-    }
+    let mut data = common::one_cell_block("lines", triangle);
     let triangles = data.triangles.len() as u32;
     let mut block_cell = CellRecord {
         triangles: Range { first: triangles, count: 0 },
@@ -142,12 +77,10 @@ fn container(lines: Vec<LineRecord>, ao: Vec<u8>, triangle: Option<[Vec3; 3]>) -
             ..EllipsoidRecord::default()
         }];
     }
-    data.cells = vec![grid_cell, block_cell];
+    data.cells.push(block_cell);
     data.lines = lines;
     data.line_ao = ao;
-    let container = Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens");
-    treelod_format::verify(&container).expect("a valid container");
-    Arc::new(container)
+    common::open_verified(&data)
 }
 
 /// A renderer drawing ellipsoid trees (no shadows, default sun) with one instance of each of
@@ -268,16 +201,6 @@ fn exact_silhouette(camera: &Camera, lines: &[LineRecord]) -> Vec<bool> {
         }
     }
     mask
-}
-
-fn iou(a: &[bool], b: &[bool]) -> f64 {
-    let both = a.iter().zip(b).filter(|(x, y)| **x && **y).count() as f64;
-    let either = a.iter().zip(b).filter(|(x, y)| **x || **y).count() as f64;
-    both / either.max(1.0)
-}
-
-fn count(mask: &[bool]) -> usize {
-    mask.iter().filter(|m| **m).count()
 }
 
 /// A straight, a tapered and an oblique line about the origin.

@@ -7,7 +7,10 @@ use std::sync::Arc;
 
 use glam::{Mat4, Vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
-use treelod_format::{Compression, Container};
+use treelod_format::{
+    BlockRecord, CellRecord, Compression, Container, ContainerData, MaterialInfo, MaterialRecord, Metadata, NO_IMAGE,
+    PointRecord, Range, Source, Tree, TriangleRecord, VertexRecord, pack,
+};
 use treelod_render::offscreen::{Gpu, Image};
 use treelod_render::{Instance, Renderer, Settings};
 
@@ -29,6 +32,18 @@ pub fn covered(image: &Image) -> Vec<bool> {
 /// Precision and recall of `test`'s covered pixels against `reference`'s.
 pub fn precision_recall(test: &Image, reference: &Image) -> (f64, f64) {
     mask_precision_recall(&covered(test), &covered(reference))
+}
+
+/// Intersection over union of two pixel masks.
+pub fn iou(a: &[bool], b: &[bool]) -> f64 {
+    let both = a.iter().zip(b).filter(|(x, y)| **x && **y).count() as f64;
+    let either = a.iter().zip(b).filter(|(x, y)| **x || **y).count() as f64;
+    both / either.max(1.0)
+}
+
+/// The set pixels of a mask.
+pub fn count(mask: &[bool]) -> usize {
+    mask.iter().filter(|m| **m).count()
 }
 
 /// Precision and recall of the pixel mask `test` against `reference`.
@@ -68,11 +83,90 @@ pub fn one_tree(gpu: &Gpu, container: &Arc<Container>, settings: Settings) -> Re
     renderer
 }
 
+/// A 1×1×1 block over `[-10, 10]³` named `name`, with one opaque bark material of colour
+/// `[0.8, 0.1, 0.1]`, and `cells` holding its grid cell: with `triangle`, one bark triangle (and
+/// its point, as the sequential point tree needs) with bounds a little larger than it (the
+/// point's position is the rounded centroid), else empty. The caller adds the block cell and its
+/// records, then [`open_verified`].
+pub fn one_cell_block(name: &str, triangle: Option<[Vec3; 3]>) -> ContainerData {
+    let mut data = ContainerData {
+        metadata: Metadata {
+            generator: "test".into(),
+            name: name.into(),
+            sources: vec![Source::default()],
+            trees: vec![Tree::default()],
+            materials: vec![MaterialInfo { name: "bark".into(), classified_by: "name".into() }],
+            ..Metadata::default()
+        },
+        block: BlockRecord {
+            bounds_min: [-10.0; 3],
+            bounds_max: [10.0; 3],
+            grid: [1, 1, 1],
+            tree_count: 1,
+            ..BlockRecord::default()
+        },
+        materials: vec![MaterialRecord {
+            base_color: [0.8, 0.1, 0.1, 1.0],
+            image: NO_IMAGE,
+            alpha_mode: 0,
+            alpha_cutoff: 0.5,
+            class: treelod_format::material_class::BARK,
+            flags: 1,
+            _pad: 0,
+        }],
+        ..ContainerData::default()
+    };
+    let mut grid_cell = CellRecord::default();
+    if let Some(corners) = triangle {
+        let normal = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize();
+        data.vertices = corners
+            .iter()
+            .map(|c| VertexRecord {
+                position: c.to_array(),
+                normal: pack::oct_encode(normal.to_array()),
+                uv: [0.0; 2],
+                color: u32::MAX,
+            })
+            .collect();
+        data.triangles = vec![TriangleRecord { indices: [0, 1, 2], size: 1.0, leaf: 0, material: 0 }];
+        let centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
+        data.points = vec![PointRecord {
+            position: centroid.to_array(),
+            radius: 0.5,
+            normal: pack::oct_encode(normal.to_array()),
+            color: 0xFF19_19CC,
+            size: 1.0,
+            lo: 0.0,
+            hi: f32::INFINITY,
+            leaf_first: 0,
+            leaf_count: 1,
+            flags: 0,
+        }];
+        let (lo, hi) =
+            (corners[0].min(corners[1]).min(corners[2]) - 1e-3, corners[0].max(corners[1]).max(corners[2]) + 1e-3);
+        grid_cell = CellRecord {
+            bounds_min: lo.to_array(),
+            bounds_max: hi.to_array(),
+            triangles: Range { first: 0, count: 1 },
+            points: Range { first: 0, count: 1 },
+            ..CellRecord::default()
+        };
+    }
+    data.cells = vec![grid_cell];
+    data
+}
+
+/// `data` written uncompressed and opened; it must verify.
+pub fn open_verified(data: &ContainerData) -> Arc<Container> {
+    let container = Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens");
+    treelod_format::verify(&container).expect("a valid container");
+    Arc::new(container)
+}
+
 /// The bark (non-leaf) triangles of `container`'s full mesh.
 pub fn bark_triangles(container: &Container) -> u64 {
-    let leaf = |t: &&treelod_format::TriangleRecord| {
-        container.materials()[t.material as usize].class == treelod_format::material_class::LEAF
-    };
+    let leaf =
+        |t: &&TriangleRecord| container.materials()[t.material as usize].class == treelod_format::material_class::LEAF;
     container.triangles().iter().filter(|t| !leaf(t)).count() as u64
 }
 
