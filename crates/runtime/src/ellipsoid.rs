@@ -17,6 +17,11 @@
 //! Clasen's branch lines (spec §6.9) are selected the same way with the same `τ` ([`LineLod`],
 //! [`line_drawn`]); both are [`SptLod`]s, the per-cell prefix selector they share with impostor
 //! planes.
+//!
+//! A switch of level can be blended ([`SptLod::select_per_pixel_blended`], [`level_keep`]): over
+//! `β` octaves of `τ` about each boundary the finer level fades out and the coarser one fades in
+//! on complementary dithered pixels, so the prefix then also holds the finer level a little past
+//! its `hi`.
 
 use std::ops::Deref;
 
@@ -24,17 +29,19 @@ use glam::Mat4;
 use treelod_format::{Container, EllipsoidRecord, LineRecord};
 
 use crate::frame::{Camera, CellPrefix, Frustum, LodSettings};
+#[cfg(doc)]
+use crate::spt_lod::level_keep;
 use crate::spt_lod::{SptCell, SptLod, spt_drawn};
 
-/// Whether an ellipsoid is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is in
-/// `vs_ellipsoid`.
+/// Whether an ellipsoid is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is
+/// `ellipsoid_drawn`; `vs_ellipsoid` tests [`level_keep`], the same rule without a level blend.
 #[must_use]
 pub fn ellipsoid_drawn(ellipsoid: &EllipsoidRecord, tau: f32) -> bool {
     spt_drawn(ellipsoid, tau)
 }
 
-/// Whether a line is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is in
-/// `vs_line`.
+/// Whether a line is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is
+/// `line_drawn`; `vs_line` tests [`level_keep`], the same rule without a level blend.
 #[must_use]
 pub fn line_drawn(line: &LineRecord, tau: f32) -> bool {
     spt_drawn(line, tau)
@@ -130,6 +137,7 @@ impl Deref for LineLod {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::spt_lod::{PixelLevel, level_keep};
     use glam::Vec3;
     use treelod_format::{BlockRecord, CellRecord, Compression, ContainerData, Metadata, Range, Source, Tree};
 
@@ -401,5 +409,63 @@ mod tests {
         let l = container.lines()[1];
         assert!(line_drawn(&l, 0.0) && line_drawn(&l, 0.0049) && !line_drawn(&l, 0.005));
         assert!(ellipsoid_drawn(&container.ellipsoids()[0], 0.01));
+    }
+
+    #[test]
+    fn a_level_blend_widens_the_prefix_to_the_records_fading_out_and_their_dithers_complement() {
+        let container = container();
+        let lod = EllipsoidLod::from_container(&container).unwrap();
+        let settings = LodSettings::default();
+        let camera = |distance: f32| {
+            Camera::look_at(Vec3::new(2.0, 1.0, 1.0 + distance), Vec3::new(2.0, 1.0, 1.0), 0.8, 512, 512)
+        };
+        let select = |distance: f32, blend: f32| {
+            let camera = camera(distance);
+            let mut out = Vec::new();
+            let frustum = Frustum::from_view_proj(camera.view_proj);
+            let level = PixelLevel { quality: 1.0, blend };
+            assert!(lod.select_per_pixel_blended(Mat4::IDENTITY, &camera, &frustum, &settings, level, &mut out));
+            out
+        };
+        // No blend is the hard switch, exactly.
+        for distance in [2.0, 6.5, 8.0, 20.0] {
+            assert_eq!(select(distance, 0.0), select_at(&lod, distance, &settings, 1.0));
+        }
+        // 6.5 m: cell 0's τ ≈ 0.0109, just past e1 = 0.01: without a blend the root alone, with
+        // β = 0.5 also the 4 fine ones (hi = 0.01 > τ · 2^(−1/4) ≈ 0.0092), at the same τ.
+        let (hard, soft) = (select(6.5, 0.0), select(6.5, 0.5));
+        let tau = hard[0].tau;
+        assert!(tau > 0.01 && tau * (-0.25f32).exp2() < 0.01, "{hard:?}");
+        assert_eq!((hard[0].count, soft[0].count, soft[0].tau), (1, 5, tau), "{soft:?}");
+        // Far past the band (τ ≈ 0.033 at 20 m): the root alone either way; near: all five.
+        assert_eq!(select(20.0, 0.5)[0].count, 1);
+        assert_eq!(select(2.0, 0.5)[0].count, 5);
+        // A blend beyond 2 octaves is clamped, a non-finite one is none.
+        assert_eq!(select(6.5, 9.0), select(6.5, 2.0));
+        assert_eq!(select(6.5, f32::NAN), hard);
+
+        // The dither ranges at τ: the fine level keeps [0, w), the coarse one [w, 1), the same w
+        // (0.5 − log2(τ / e1) / β ≈ 0.26 here): every pixel shows exactly one of them.
+        let records = &container.ellipsoids()[..5];
+        let keep: Vec<_> = records.iter().map(|e| level_keep(e.lo, e.hi, tau, 0.5)).collect();
+        let w = 0.5 - (tau.log2() - 0.01f32.log2()) / 0.5;
+        assert_eq!(keep[0], Some((w, 2.0)), "{keep:?}");
+        assert!(keep[1..].iter().all(|k| *k == Some((0.0, w))), "{keep:?}");
+        assert!(w > 0.2 && w < 0.3, "{w}");
+        // Centred on the boundary: half each; a quarter octave away (the band's edge): one level.
+        assert_eq!(level_keep(0.0, 0.01, 0.01, 0.5), Some((0.0, 0.5)));
+        assert_eq!(level_keep(0.01, f32::INFINITY, 0.01, 0.5), Some((0.5, 2.0)));
+        assert_eq!(level_keep(0.0, 0.01, 0.01 * 0.25f32.exp2(), 0.5), None);
+        let (from, to) = level_keep(0.01, f32::INFINITY, 0.01 * (-0.25f32).exp2(), 0.5).unwrap();
+        assert!((from - 1.0).abs() < 1e-5 && to == 2.0, "{from} {to}");
+        // A level between two boundaries a quarter octave from each: fades on both sides.
+        let (from, to) = level_keep(0.01, 0.02, 0.01 * 0.5f32.exp2(), 0.5).unwrap();
+        assert!((from - 0.0).abs() < 1e-6 && (to - 1.0).abs() < 1e-6, "{from} {to}");
+        let (from, to) = level_keep(0.01, 0.012, 0.011, 1.0).unwrap();
+        assert!(from > 0.0 && to < 1.0 && from < to, "{from} {to}");
+        // No blend: the interval itself.
+        assert_eq!(level_keep(0.01, 0.02, 0.01, 0.0), Some((0.0, 2.0)));
+        assert_eq!(level_keep(0.01, 0.02, 0.02, 0.0), None);
+        assert_eq!(level_keep(0.01, 0.02, 0.0099, 0.0), None);
     }
 }

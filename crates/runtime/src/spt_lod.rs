@@ -10,6 +10,11 @@
 //! values — and selects an instance's prefixes in one of two units: metres per pixel
 //! ([`SptLod::select_per_pixel`]: ellipsoids, lines) or metres at a pixel threshold
 //! ([`SptLod::select_at_pixels`]: planes).
+//!
+//! Ellipsoids and lines may blend their levels ([`PixelLevel::blend`]): an element then fades in
+//! over `β` octaves of `τ` centred on its `lo` and out over `β` octaves centred on its `hi`, on
+//! complementary dithered pixels ([`level_keep`]), so the prefix also holds the records still
+//! fading out ([`SptLod::select_per_pixel_blended`]).
 
 use glam::{Mat4, Vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, PlaneRecord, Range};
@@ -63,6 +68,54 @@ impl SptRecord for PlaneRecord {
 pub fn spt_drawn(record: &impl SptRecord, tau: f32) -> bool {
     let (lo, hi) = record.interval();
     lo <= tau && tau < hi
+}
+
+/// The most octaves of `τ` a level blend may span ([`PixelLevel::blend`] is clamped to it).
+pub const MAX_LEVEL_BLEND: f32 = 2.0;
+
+/// How a kind measured in metres per pixel (ellipsoids, lines) picks its levels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelLevel {
+    /// The user's quality factor `q`: `τ = mpp / q` (non-positive or non-finite: 1).
+    pub quality: f32,
+    /// `β`, octaves of `τ` over which one level gives way to the next (Clasen 2011 §5: the steps
+    /// are close enough for image-space blending). 0 switches levels at once; clamped to
+    /// `[0, MAX_LEVEL_BLEND]`, non-finite: 0. See [`level_keep`].
+    pub blend: f32,
+}
+
+impl PixelLevel {
+    /// [`Self::blend`] clamped to `[0, MAX_LEVEL_BLEND]`, 0 if not finite.
+    #[must_use]
+    pub fn clamped_blend(&self) -> f32 {
+        if self.blend.is_finite() { self.blend.clamp(0.0, MAX_LEVEL_BLEND) } else { 0.0 }
+    }
+}
+
+/// Where an element of interval `[lo, hi)` is drawn at `τ` with a level blend of `blend` (`β`,
+/// octaves, clamped as [`PixelLevel::blend`]): `None` outside `lo · 2^(−β/2) ≤ τ < hi · 2^(β/2)`,
+/// else `Some((from, to))`, the fragments whose per-pixel dither value `h ∈ [0, 1)` satisfies
+/// `from ≤ h < to`. `from = 1 − w_in` with the fade-in `w_in = clamp(log2(τ/lo)/β + ½, 0, 1)` (0
+/// for `lo = 0`), `to = w_out`, the fade-out `clamp(log2(hi/τ)/β + ½, 0, 1)` (2 for `hi = ∞`); so
+/// the element covers `w_in · w_out` of its pixels where its fades do not overlap. At a level
+/// boundary `e` the finer level's `to` and the coarser level's `from` are the same number
+/// (computed as `½ ± (log2 e − log2 τ)/β`, exact negatives): with one `h` per pixel for both,
+/// each pixel shows exactly one of them. With `β = 0`: `[lo, hi)` and `(0, 2)`, the hard switch
+/// of [`spt_drawn`]. The WGSL twin is `level_keep` in `shaders/shared/records.wgsl`.
+#[must_use]
+pub fn level_keep(lo: f32, hi: f32, tau: f32, blend: f32) -> Option<(f32, f32)> {
+    let blend = PixelLevel { quality: 1.0, blend }.clamped_blend();
+    if blend == 0.0 {
+        return (lo <= tau && tau < hi).then_some((0.0, 2.0));
+    }
+    let (shrink, reach) = ((-0.5 * blend).exp2(), (0.5 * blend).exp2());
+    if !(lo * shrink <= tau && tau < hi * reach) {
+        return None;
+    }
+    let from = if lo > 0.0 { (0.5 - (tau.log2() - lo.log2()) / blend).clamp(0.0, 1.0) } else { 0.0 };
+    // As the WGSL twin tests it: an infinite `hi` (or one as large) has no fade-out.
+    let to = if hi < 3.0e38 { (0.5 + (hi.log2() - tau.log2()) / blend).clamp(0.0, 1.0) } else { 2.0 };
+    Some((from, to))
 }
 
 /// One cell holding records of the kind.
@@ -181,6 +234,24 @@ impl SptLod {
         quality: f32,
         out: &mut Vec<CellPrefix>,
     ) -> bool {
+        self.select_per_pixel_blended(transform, camera, frustum, settings, PixelLevel { quality, blend: 0.0 }, out)
+    }
+
+    /// [`Self::select_per_pixel`] with `level.quality` and a level blend of `β = level.blend`
+    /// octaves ([`level_keep`]): each cell's prefix also holds the records still fading out, the
+    /// leading ones with `hi > τ · 2^(−β/2)`. `CellPrefix::tau` is `τ` itself.
+    pub fn select_per_pixel_blended(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        level: PixelLevel,
+        out: &mut Vec<CellPrefix>,
+    ) -> bool {
+        let quality = level.quality;
+        // 1 exactly for no blend: the prefix of `hi > τ`.
+        let widen = (-0.5 * level.clamped_blend()).exp2();
         let Some(per_metre) = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius)) else {
             return false;
         };
@@ -193,7 +264,7 @@ impl SptLod {
             let z = if cell.block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
             let bias = if settings.s_min > 0.0 { settings.biased_pixels(z).0 / settings.s_min } else { 1.0 };
             let tau = d_cell * per_metre * bias / quality;
-            let count = self.prefix(cell, tau);
+            let count = self.prefix(cell, tau * widen);
             if count > 0 {
                 out.push(CellPrefix { cell: cell.cell, first: cell.records.first, count, tau });
             }
