@@ -29,7 +29,9 @@ struct Frame {
     // 1: the ambient share is scaled by the precomputed ambient occlusion
     // (Settings::ambient_occlusion).
     ambient_occlusion: u32,
-    _pad: u32,
+    // β, octaves of tau over which ellipsoids and lines blend from one level to the next
+    // (Settings::level_blend, clamped to [0, 2]; 0: switch at once). See `level_keep`.
+    level_blend: f32,
 }
 
 // A vertex as uploaded: the record, then its ambient occlusion (spec §6.14; 0 without).
@@ -399,6 +401,52 @@ fn dither(fragment: vec4<f32>) -> f32 {
     return fract(52.9829189 * fract(dot(floor(fragment.xy), vec2<f32>(0.06711056, 0.00583715))));
 }
 
+// The level blend's dither value of a fragment of draw `draw_index`, in [0, 1): a hash of the
+// pixel and the draw's cell and instance, not of the depth, so the levels of one cell over a pixel
+// get the same value and their dither ranges (`level_keep`) split the pixels between them, while
+// other cells and trees get other patterns. Seeded apart from `pixel_depth_hash`, so it does not
+// correlate with the coverage of thin lines and minified leaves.
+fn level_dither(fragment: vec4<f32>, draw_index: u32) -> f32 {
+    let draw = draws[draw_index];
+    let p = vec2<u32>(fragment.xy);
+    let h = mix_bits(p.x ^ mix_bits(p.y ^ mix_bits(draw.cell ^ mix_bits(draw.instance ^ 0x9e3779b9u))));
+    return f32(h >> 8u) / 16777216.0;
+}
+
+// A 32-bit integer hash (Wellons' lowbias32): every input bit flips each output bit about half the
+// time.
+fn mix_bits(x: u32) -> u32 {
+    var h = x;
+    h ^= h >> 16u;
+    h *= 0x7feb352du;
+    h ^= h >> 15u;
+    h *= 0x846ca68bu;
+    h ^= h >> 16u;
+    return h;
+}
+
+// The samples a fragment of an element with the level blend's dither range `keep` covers (0:
+// discard it): all where the range holds [0, 1). Else, with one sample, all or none as the range
+// holds the fragment's `level_dither` h; with MSAA, sample s where it holds fract(h + s / n), so
+// a pixel's samples take the range's share (to a sample) and complementary ranges split them.
+fn level_mask(keep: vec2<f32>, fragment: vec4<f32>, draw_index: u32) -> u32 {
+    if keep.x <= 0.0 && keep.y >= 1.0 {
+        return 0xFFFFFFFFu;
+    }
+    let h = level_dither(fragment, draw_index);
+    if sample_count == 1u {
+        return select(0u, 0xFFFFFFFFu, keep.x <= h && h < keep.y);
+    }
+    var mask = 0u;
+    for (var s = 0u; s < sample_count; s++) {
+        let hs = fract(h + f32(s) / f32(sample_count));
+        if keep.x <= hs && hs < keep.y {
+            mask |= 1u << s;
+        }
+    }
+    return mask;
+}
+
 // A triangle's albedo: its material's colour, times its vertex colour and its texture if it has
 // one. Call it in uniform control flow (the texture is sampled with implicit derivatives).
 fn triangle_albedo(material: MaterialGpu, in: Varyings) -> vec4<f32> {
@@ -613,6 +661,8 @@ struct EllipsoidVaryings {
     @location(2) @interpolate(flat) draw: u32,
     // The cell's shading or the debug views' colour.
     @location(3) @interpolate(flat) tint: vec3<f32>,
+    // The level blend's dither range (`level_keep`): drawn where keep.x <= h < keep.y.
+    @location(4) @interpolate(flat) keep: vec2<f32>,
 }
 
 // An ellipsoid of an instance, world space: centre, and the linear map from its local frame
@@ -686,7 +736,8 @@ fn offscreen_ellipsoid() -> EllipsoidVaryings {
 }
 
 // One corner of the quad of an ellipsoid (spec §6.8). `first_vertex` is 6 × the range's first
-// ellipsoid; those outside the level τ (`draw.tau_p`, metres per pixel) selects are dropped. The
+// ellipsoid; those outside the level τ (`draw.tau_p`, metres per pixel) selects, widened by the
+// level blend (`level_keep`), are dropped. The
 // quad lies across the view ray through the centre, along the axes of the ellipse that the
 // ellipsoid projects to in parallel along that ray, its half-extents the ellipsoid's support along
 // them, widened by D / (D − h) (D the eye's distance, h the support towards the eye): every point
@@ -697,7 +748,8 @@ fn vs_ellipsoid(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
     let draw = draws[draw_index];
     let index = vertex_index / 6u;
     let e = ellipsoids[index];
-    if !ellipsoid_drawn(e, draw.tau_p) {
+    let keep = level_keep(e.lo, e.hi, draw.tau_p, frame.level_blend);
+    if keep.x < 0.0 {
         return offscreen_ellipsoid();
     }
     let f = ellipsoid_frame(draw, e);
@@ -732,6 +784,7 @@ fn vs_ellipsoid(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
     out.world = world;
     out.ellipsoid = index;
     out.draw = draw_index;
+    out.keep = keep;
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.2, 0.8, 0.8); }
@@ -786,18 +839,20 @@ fn ellipsoid_hit(in: EllipsoidVaryings, push: f32) -> EllipsoidHit {
 struct EllipsoidOut {
     @location(0) color: vec4<f32>,
     @builtin(frag_depth) depth: f32,
+    @builtin(sample_mask) mask: u32,
 }
 
 @fragment
 fn fs_ellipsoid(in: EllipsoidVaryings) -> EllipsoidOut {
     let hit = ellipsoid_hit(in, 0.0);
     let noise_texel = textureSampleLevel(noise, noise_sampler, hit.local, hit.level);
+    let mask = level_mask(in.keep, in.clip, in.draw);
     // Holes where the grey noise is below the threshold (Clasen §3.1).
-    if !hit.hit || noise_texel.a < hit.record.alpha_threshold {
+    if !hit.hit || noise_texel.a < hit.record.alpha_threshold || mask == 0u {
         discard;
     }
     if frame.debug != 0u {
-        return EllipsoidOut(vec4<f32>(in.tint, 1.0), hit.depth);
+        return EllipsoidOut(vec4<f32>(in.tint, 1.0), hit.depth, mask);
     }
     // The normal turned towards the noise's random vector (on the normal's side), in the local
     // frame, then to the world by the inverse transpose.
@@ -807,18 +862,18 @@ fn fs_ellipsoid(in: EllipsoidVaryings) -> EllipsoidOut {
     let normal = normalize(transpose(hit.frame.inverse) * local_normal);
     let albedo = decode_color(hit.record.color).rgb;
     // As uploaded, `flags` holds the ellipsoid's ambient-occlusion byte (spec §6.14; 0 without).
-    return EllipsoidOut(vec4<f32>(shade(albedo, normal, hit.world, decode_ao(hit.record.flags)) * in.tint, 1.0), hit.depth);
+    return EllipsoidOut(vec4<f32>(shade(albedo, normal, hit.world, decode_ao(hit.record.flags)) * in.tint, 1.0), hit.depth, mask);
 }
 
 // The shadow pass: the ray-cast depth (pushed ELLIPSOID_SHADOW_BIAS_TEXELS texels away from the
-// sun against self-shadowing) with the same holes.
+// sun against self-shadowing) with the same holes and the same level blend.
 @fragment
 fn fs_shadow_ellipsoid(in: EllipsoidVaryings) -> @builtin(frag_depth) f32 {
     // A cascade's frame holds its resolution in eye.w and 1 / its half-width in right.w.
     let texel = 2.0 / max(frame.right.w * frame.eye.w, 1e-12);
     let hit = ellipsoid_hit(in, ELLIPSOID_SHADOW_BIAS_TEXELS * texel);
     let alpha = textureSampleLevel(noise, noise_sampler, hit.local, hit.level).a;
-    if !hit.hit || alpha < hit.record.alpha_threshold {
+    if !hit.hit || alpha < hit.record.alpha_threshold || level_mask(in.keep, in.clip, in.draw) == 0u {
         discard;
     }
     return hit.depth;
@@ -846,6 +901,8 @@ struct LineVaryings {
     @location(2) @interpolate(flat) draw: u32,
     // The cell's shading or the debug views' colour.
     @location(3) @interpolate(flat) tint: vec3<f32>,
+    // The level blend's dither range (`level_keep`): drawn where keep.x <= h < keep.y.
+    @location(4) @interpolate(flat) keep: vec2<f32>,
 }
 
 // A line of an instance, world space: the axis from a to b, the radii there (instances scale
@@ -901,7 +958,8 @@ fn sphere_pixels(p: vec3<f32>, r: f32, w: f32) -> f32 {
 }
 
 // One corner of the quad of a line (spec §6.9). `first_vertex` is 6 × the range's first line;
-// those outside the level τ (`draw.tau_p`, metres per pixel) selects are dropped. In pixels, the
+// those outside the level τ (`draw.tau_p`, metres per pixel) selects, widened by the level blend
+// (`level_keep`), are dropped. In pixels, the
 // round cone's projection lies in the hull of the circles that hold its end spheres' projections
 // (`sphere_pixels`, at least 0.75 px so thin lines get their one-pixel band, plus a margin); the
 // quad is the trapezoid of that hull's two outer tangents, closed beyond each circle. Each end's
@@ -913,7 +971,8 @@ fn vs_line(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) dr
     let draw = draws[draw_index];
     let index = vertex_index / 6u;
     let l = lines[index];
-    if !line_drawn(l, draw.tau_p) {
+    let keep = level_keep(l.lo, l.hi, draw.tau_p, frame.level_blend);
+    if keep.x < 0.0 {
         return offscreen_line();
     }
     let f = line_frame(draw, l);
@@ -985,6 +1044,7 @@ fn vs_line(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) dr
     out.world = world;
     out.line = index;
     out.draw = draw_index;
+    out.keep = keep;
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.55, 0.35, 0.15); }
@@ -1136,6 +1196,8 @@ fn fs_line(in: LineVaryings) -> LineOut {
     if sample_count == 1u {
         mask = select(0u, 0xFFFFFFFFu, hit.coverage >= 1.0 || hit.coverage > layered_dither(in.clip));
     }
+    // And the level blend's share, independent of it.
+    mask &= level_mask(in.keep, in.clip, in.draw);
     if !hit.hit || mask == 0u {
         discard;
     }
@@ -1149,11 +1211,13 @@ fn fs_line(in: LineVaryings) -> LineOut {
 }
 
 // The shadow pass: the same hit (pushed ELLIPSOID_SHADOW_BIAS_TEXELS texels away from the sun),
-// lines thinner than a texel kept on the share of texels their width covers.
+// lines thinner than a texel kept on the share of texels their width covers, and the same level
+// blend.
 @fragment
 fn fs_shadow_line(in: LineVaryings) -> @builtin(frag_depth) f32 {
     let hit = line_hit(in, ELLIPSOID_SHADOW_BIAS_TEXELS * pixel_size(1.0));
-    if !hit.hit || !(hit.coverage >= 1.0 || hit.coverage > layered_dither(in.clip)) {
+    let covered = hit.coverage >= 1.0 || hit.coverage > layered_dither(in.clip);
+    if !hit.hit || !covered || level_mask(in.keep, in.clip, in.draw) == 0u {
         discard;
     }
     return hit.depth;

@@ -133,14 +133,40 @@ fn plane_drawn(p: PlaneRecord, tau: f32) -> bool {
     return p.lo <= tau && tau < p.hi;
 }
 
-// The ellipsoid rule of spec §10: inside [lo, hi) at tau (metres per pixel).
-// Rust twin: treelod_runtime::ellipsoid_drawn.
+// The ellipsoid rule of spec §10: inside [lo, hi) at tau (metres per pixel); `level_keep` with no
+// blend. Rust twin: treelod_runtime::ellipsoid_drawn.
 fn ellipsoid_drawn(e: EllipsoidRecord, tau: f32) -> bool {
     return e.lo <= tau && tau < e.hi;
 }
 
-// The line rule of spec §10: inside [lo, hi) at tau (metres per pixel, as ellipsoids).
-// Rust twin: treelod_runtime::line_drawn.
+// The line rule of spec §10: inside [lo, hi) at tau (metres per pixel, as ellipsoids);
+// `level_keep` with no blend. Rust twin: treelod_runtime::line_drawn.
 fn line_drawn(l: LineRecord, tau: f32) -> bool {
     return l.lo <= tau && tau < l.hi;
+}
+
+// Level blending of ellipsoids and lines (Settings::level_blend, `blend` = β octaves of tau,
+// at most 2): whether an element of interval [lo, hi) is drawn at tau, inside
+// [lo · 2^(−β/2), hi · 2^(β/2)), and on which fragments: vec2(from, to), drawn where the pixel's
+// dither value h satisfies from <= h < to; from = −1 where the element is not drawn at all.
+// `from` is 1 − the fade-in clamp(log2(tau/lo)/β + ½, 0, 1) (0 for lo = 0), `to` the fade-out
+// clamp(log2(hi/tau)/β + ½, 0, 1) (2 for hi = ∞). At a boundary e the finer level's `to` and the
+// coarser level's `from` are ½ ± (log2 e − log2 tau)/β, the same number, so with one h per pixel
+// each pixel shows one level. β = 0: the hard rule [lo, hi) everywhere.
+// Rust twin: treelod_runtime::spt_lod::level_keep.
+fn level_keep(lo: f32, hi: f32, tau: f32, blend: f32) -> vec2<f32> {
+    if blend <= 0.0 {
+        return select(vec2<f32>(-1.0), vec2<f32>(0.0, 2.0), lo <= tau && tau < hi);
+    }
+    if !(lo * exp2(-0.5 * blend) <= tau && tau < hi * exp2(0.5 * blend)) {
+        return vec2<f32>(-1.0);
+    }
+    var keep = vec2<f32>(0.0, 2.0);
+    if lo > 0.0 {
+        keep.x = clamp(0.5 - (log2(tau) - log2(lo)) / blend, 0.0, 1.0);
+    }
+    if hi < 3.0e38 {
+        keep.y = clamp(0.5 + (log2(hi) - log2(tau)) / blend, 0.0, 1.0);
+    }
+    return keep;
 }

@@ -7,6 +7,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleRecord, material_class};
 use treelod_runtime::prune::{MIN_VISIBLE_FRACTION, leaf_scale, leaves_drawn, projected_height, size_factor};
+use treelod_runtime::spt_lod::PixelLevel;
 use treelod_runtime::{
     BillboardKind, Billboards, CellPrefix, DrawList, DrawRange, EllipsoidLod, EllipsoidRange, Frustum, Hysteresis,
     Kind, LineLod, LineRange, LodChain, LodSettings, ModelLod, PlaneLod, PlaneRange, PruneLod, PruneScale, ROOTS_CELL,
@@ -115,7 +116,8 @@ pub struct Settings {
     /// [`Self::lines`]) where the container has them, else as triangles (every bark triangle, as
     /// [`ImpostorBark::All`]). Per cell, the level drawn is the one whose interval holds `τ`, the
     /// metres per pixel at the cell's distance (the point threshold's `τ_p / s_min`, Gilet's depth
-    /// bias included) divided by [`Self::ellipsoid_quality`]; lines use the same `τ`. Takes precedence over
+    /// bias included) divided by [`Self::ellipsoid_quality`], blended with the next over
+    /// [`Self::level_blend`]; lines use the same `τ`. Takes precedence over
     /// [`Self::impostors`] (a tree with both is drawn with ellipsoids, one with planes only with
     /// planes) and [`Self::pruning`]; [`Self::baseline`] takes precedence over it. Selected on the
     /// CPU (GPU selection is not used for such frames).
@@ -123,6 +125,18 @@ pub struct Settings {
     /// With [`Self::ellipsoids`]: the user's quality factor `q`, `τ = mpp / q` (1: the level the
     /// build chose for the pixel size; 2: the level for pixels half as large, finer).
     pub ellipsoid_quality: f32,
+    /// With [`Self::ellipsoids`]: `β`, octaves of `τ` over which ellipsoids and lines blend from
+    /// one level to the next instead of switching at once (Clasen 2011 §5: the levels are close
+    /// enough for image-space blending). An element of interval `[lo, hi)` fades in over `β`
+    /// octaves centred on `lo` and out over `β` octaves centred on `hi`: it is drawn on the share
+    /// `clamp(log2(τ/lo)/β + ½, 0, 1) · clamp(log2(hi/τ)/β + ½, 0, 1)` of its pixels (no fade at
+    /// `lo = 0` or `hi = ∞`), chosen by a per-pixel dither of the cell and instance that is the
+    /// same for both levels at a boundary (the samples of each pixel with MSAA), so each pixel
+    /// shows exactly one of them: no doubled density, no holes
+    /// ([`treelod_runtime::spt_lod::level_keep`]). Exact where adjacent boundaries are at least
+    /// `β` octaves apart. The prefix drawn holds the records with `hi > τ · 2^(−β/2)`. Colour and
+    /// shadow passes alike. 0 switches at once; clamped to `[0, 2]` (not finite: 0). Default 0.5.
+    pub level_blend: f32,
     /// With [`Self::ellipsoids`]: draw the bark of ellipsoid trees as Clasen's lines when the
     /// container has them (spec §6.9); `false`: bark triangles. Each line is a round cone (a
     /// capsule whose radius goes linearly from `r0` to `r1`), ray-cast per pixel with its exact
@@ -210,6 +224,14 @@ impl Default for Pruning {
     }
 }
 
+impl Settings {
+    /// How ellipsoids and lines pick their levels: [`Self::ellipsoid_quality`] and
+    /// [`Self::level_blend`].
+    fn pixel_level(&self) -> PixelLevel {
+        PixelLevel { quality: self.ellipsoid_quality, blend: self.level_blend }
+    }
+}
+
 impl Default for Settings {
     /// One-pixel points, triangles above two pixels, light from above and the side.
     fn default() -> Self {
@@ -233,6 +255,7 @@ impl Default for Settings {
             impostor_bark: ImpostorBark::default(),
             ellipsoids: false,
             ellipsoid_quality: 1.0,
+            level_blend: 0.5,
             lines: true,
             baseline: None,
             shadows: None,
@@ -385,7 +408,8 @@ struct FrameUniform {
     morph: u32,
     /// 1 with [`Settings::ambient_occlusion`].
     ambient_occlusion: u32,
-    _pad: u32,
+    /// [`Settings::level_blend`], clamped.
+    level_blend: f32,
 }
 
 /// One draw's constants. WGSL twin: `DrawInfo` in `shaders/tree.wgsl` and `shaders/select.wgsl`.
@@ -400,7 +424,8 @@ pub(crate) struct DrawInfo {
     pub(crate) shading: f32,
     /// Size factor of pruned leaves about their centres (1 for everything else).
     pub(crate) leaf_scale: f32,
-    /// Index of the instance in [`Renderer::set_instances`]' list (not read by the shaders).
+    /// Index of the instance in [`Renderer::set_instances`]' list (read by the shaders only to
+    /// seed the level blend's dither, `level_dither`).
     pub(crate) instance: u32,
     pub(crate) _pad: u32,
 }
@@ -1697,7 +1722,7 @@ impl Renderer {
         impostors: bool,
     ) -> u32 {
         let frustum = Frustum::from_view_proj(camera.view_proj);
-        let quality = self.settings.ellipsoid_quality;
+        let level = self.settings.pixel_level();
         let draw_lines = self.settings.lines;
         let mut visible = 0;
         for (i, instance) in self.instances.iter().enumerate() {
@@ -1711,19 +1736,20 @@ impl Renderer {
                 continue;
             };
             self.ellipsoid_ranges.clear();
-            let leaves_seen = ellipsoids.select(
+            let leaves_seen = ellipsoids.select_per_pixel_blended(
                 instance.transform,
                 camera,
                 &frustum,
                 lod_settings,
-                quality,
+                level,
                 &mut self.ellipsoid_ranges,
             );
             // The lines' sphere holds their radii: they may be in view where the leaves are not.
             let lines = model.lines.as_ref().filter(|_| draw_lines);
             self.line_ranges.clear();
             let lines_seen = lines.is_some_and(|lines| {
-                lines.select(instance.transform, camera, &frustum, lod_settings, quality, &mut self.line_ranges)
+                let ranges = &mut self.line_ranges;
+                lines.select_per_pixel_blended(instance.transform, camera, &frustum, lod_settings, level, ranges)
             });
             if !(leaves_seen || lines_seen) {
                 continue;
@@ -2382,7 +2408,7 @@ impl Renderer {
             },
             morph: u32::from(settings.impostor_morph),
             ambient_occlusion: u32::from(settings.ambient_occlusion),
-            _pad: 0,
+            level_blend: settings.pixel_level().clamped_blend(),
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
         for (k, cascade) in self.cascades.iter().enumerate() {
