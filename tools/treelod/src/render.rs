@@ -130,6 +130,11 @@ pub struct EllipsoidArgs {
     /// smaller (2: finer, 0.5: coarser).
     #[arg(long, value_name = "Q", default_value_t = 1.0, value_parser = parse_quality)]
     pub ellipsoid_quality: f32,
+    /// With ellipsoids: blend ellipsoids and lines from one level to the next over this many
+    /// octaves of the metres per pixel (on complementary dithered pixels) instead of switching
+    /// at once; 0 switches at once, at most 2.
+    #[arg(long, value_name = "OCTAVES", default_value_t = 0.5, value_parser = parse_level_blend)]
+    pub level_blend: f32,
     /// With ellipsoids: draw the bark as triangles even where the container has branch lines.
     #[arg(long)]
     pub no_lines: bool,
@@ -140,6 +145,7 @@ impl EllipsoidArgs {
     pub fn apply(&self, settings: &mut Settings) {
         settings.ellipsoids = self.ellipsoids;
         settings.ellipsoid_quality = self.ellipsoid_quality;
+        settings.level_blend = self.level_blend;
         settings.lines = !self.no_lines;
     }
 
@@ -164,6 +170,14 @@ pub fn parse_quality(s: &str) -> Result<f32, String> {
     match s.trim().parse::<f32>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
         _ => Err(format!("expected a quality factor, a finite number > 0, got {s:?}")),
+    }
+}
+
+/// A level blend in octaves: finite, in `0..=2`.
+pub fn parse_level_blend(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (0.0..=2.0).contains(&v) => Ok(v),
+        _ => Err(format!("expected a level blend in octaves, a number in 0..=2, got {s:?}")),
     }
 }
 

@@ -602,8 +602,9 @@ impl Viewer {
             ));
         } else if settings.ellipsoids && !settings.full_mesh {
             mode.push_str(&format!(
-                " | ellipsoids (quality {}): {} trees, {} ellipsoids, {}",
+                " | ellipsoids (quality {}, blend {}): {} trees, {} ellipsoids, {}",
                 settings.ellipsoid_quality,
+                settings.level_blend,
                 self.stats.instances_ellipsoids,
                 self.stats.ellipsoids,
                 if settings.lines { format!("{} lines", self.stats.lines) } else { "bark triangles".to_owned() }

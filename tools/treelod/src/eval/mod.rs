@@ -93,6 +93,10 @@ pub struct Args {
     /// branch lines (by default as those lines).
     #[arg(long)]
     pub no_lines: bool,
+    /// The `ellipsoids` technique blends ellipsoids and lines from one level to the next over
+    /// this many octaves of the metres per pixel, as `render`'s option; 0 switches at once.
+    #[arg(long, value_name = "OCTAVES", default_value_t = 0.5, value_parser = crate::render::parse_level_blend)]
+    pub level_blend: f32,
     /// Triangle threshold `s_max` in pixels of the `spt` technique.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_max: Option<f32>,
@@ -490,6 +494,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 // its branch lines where it has them (unless `--no-lines`), else as triangles.
                 settings.ellipsoids = *name == TechniqueName::Ellipsoids;
                 settings.lines = !args.no_lines;
+                settings.level_blend = args.level_blend;
                 // Baselines: every tree with the baseline drawn with it.
                 settings.baseline = match name {
                     TechniqueName::LodChain => Some(Baseline::LodChain),
