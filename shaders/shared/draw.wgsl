@@ -15,7 +15,7 @@ struct DrawInfo {
     shading: f32,
     // Size factor of pruned leaves about their centres (1 for everything else).
     leaf_scale: f32,
-    // Index of the instance in the renderer's list (for read-backs; not read here).
+    // Index of the instance in the renderer's list (read-backs, and the level blend's dither in tree.wgsl).
     instance: u32,
     _pad1: u32,
 }

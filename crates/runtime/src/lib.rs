@@ -32,4 +32,4 @@ pub use impostor::{
 };
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
-pub use spt_lod::{SptCell, SptLod, SptRecord, spt_drawn};
+pub use spt_lod::{PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};

@@ -86,8 +86,9 @@ enum Command {
     ///
     /// The reference is the full mesh drawn --supersample times larger and box-filtered down.
     /// Techniques: full (the full mesh drawn as the reference is: reads perfect), full-1x (the
-    /// full mesh at the image size), spt (triangles + points, the default renderer); ellipsoids,
-    /// impostors, prune-opt, prune-cook and policy are reported as absent or not implemented yet.
+    /// full mesh at the image size), spt (triangles + points, the default renderer), ellipsoids
+    /// (Clasen's ellipsoids and branch lines), impostors, prune-opt and prune-cook where the
+    /// containers hold them (reported as absent otherwise); policy is reported as not implemented.
     #[command(after_help = EXIT_CODES)]
     Eval(eval::Args),
     /// The fly-through benchmark (Clasen 2011 §7): a forest of 10,000 trees in groups and a camera
