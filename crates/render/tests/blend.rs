@@ -69,17 +69,8 @@ fn two_levels_of_ellipsoids(e: f32) -> Vec<EllipsoidRecord> {
 /// Two levels of lines switching at `e`: one red straight line, two blue ones bent up through
 /// a point above it (and in front of it).
 fn two_levels_of_lines(e: f32) -> Vec<LineRecord> {
-    let line = |p0: Vec3, p1: Vec3, r: f32, color: u32, (lo, hi): (f32, f32), segments: (u32, u32)| LineRecord {
-        p0: p0.to_array(),
-        r0: r,
-        p1: p1.to_array(),
-        r1: r,
-        color,
-        lo,
-        hi,
-        leaf_first: segments.0,
-        leaf_count: segments.1,
-        flags: 0,
+    let line = |p0: Vec3, p1: Vec3, r: f32, color: u32, interval: (f32, f32), segments: (u32, u32)| {
+        common::line_record(p0, r, p1, r, color, interval, segments)
     };
     let (a, m, b) = (vec3(-2.2, -0.6, 0.0), vec3(0.0, 0.7, 0.4), vec3(2.2, -0.3, 0.0));
     vec![
@@ -338,7 +329,7 @@ fn the_shadow_pass_blends_the_levels_alike() {
         let lod = EllipsoidLod::from_container(container).expect("ellipsoids");
         let mut ranges = Vec::new();
         let frustum = Frustum::from_view_proj(light.view_proj);
-        assert!(lod.select(lift, &light, &frustum, &LodSettings::default(), 1.0, &mut ranges));
+        assert!(lod.select_per_pixel(lift, &light, &frustum, &LodSettings::default(), 1.0, &mut ranges));
         (light_taken(&shadowed, &lit), ranges[0].tau, stats.shadow.ellipsoids, shadowed)
     };
     // The shadow's τ does not depend on the levels' intervals: find it, then put the boundary on it.

@@ -207,17 +207,6 @@ fn near_draws_the_fine_level_far_the_coarse_one_and_quality_refines() {
     coarse.leaf_count = 2;
     let container = container(vec![coarse, a, b], None);
     let mut renderer = renderer(&gpu, &container, Settings::default());
-    let colours = |image: &Image| {
-        let (mut reds, mut blues) = (0, 0);
-        for p in image.rgba.chunks_exact(4) {
-            if p[0] > p[1].saturating_add(20) && p[0] > p[2].saturating_add(20) {
-                reds += 1;
-            } else if p[2] > p[0].saturating_add(20) && p[2] > p[1].saturating_add(20) {
-                blues += 1;
-            }
-        }
-        (reds, blues)
-    };
     for (distance, quality, fine_level) in
         [(10.0, 1.0, true), (40.0, 1.0, false), (40.0, 4.0, true), (15.0, 0.5, false)]
     {
@@ -225,7 +214,7 @@ fn near_draws_the_fine_level_far_the_coarse_one_and_quality_refines() {
         let camera = Camera::look_at(vec3(0.0, 0.0, distance), Vec3::ZERO, fovy, height, height);
         let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         keep(&image, &format!("ellipsoid-level-{distance}-{quality}"));
-        let (reds, blues) = colours(&image);
+        let (reds, blues) = common::reds_and_blues(&image);
         let draw = renderer.draws().iter().find(|d| d.source == DrawSource::Ellipsoids).copied().expect("a draw");
         eprintln!(
             "{distance} m, quality {quality}: τ {:.5} (switch {e1:.5}), {reds} red, {blues} blue",

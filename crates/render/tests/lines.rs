@@ -13,7 +13,7 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, count, covered, gpu, iou, keep};
+use common::{BACKGROUND, count, covered, gpu, iou, keep, line_record as line};
 use glam::{DVec3, Mat4, Vec3, Vec4, vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, Range};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
@@ -23,23 +23,6 @@ const GREEN: u32 = 0xFF30_A040;
 const RED: u32 = 0xFF19_19CC;
 const BLUE: u32 = 0xFFCC_3319;
 const WHITE: u32 = 0xFFFF_FFFF;
-
-/// A line of colour `color` (RGBA8, sRGB), interval `[lo, hi)` and source segments
-/// `segments` (first, count).
-fn line(p0: Vec3, r0: f32, p1: Vec3, r1: f32, color: u32, (lo, hi): (f32, f32), segments: (u32, u32)) -> LineRecord {
-    LineRecord {
-        p0: p0.to_array(),
-        r0,
-        p1: p1.to_array(),
-        r1,
-        color,
-        lo,
-        hi,
-        leaf_first: segments.0,
-        leaf_count: segments.1,
-        flags: 0,
-    }
-}
 
 /// A line drawn at every `τ`, standing for segment `segment`.
 fn solid(p0: Vec3, r0: f32, p1: Vec3, r1: f32, color: u32, segment: u32) -> LineRecord {
@@ -290,17 +273,6 @@ fn near_draws_the_fine_lines_far_the_coarse_one_and_quality_refines() {
     ];
     let container = container(lines, Vec::new(), None);
     let mut renderer = renderer(&gpu, &[&container], Settings::default());
-    let colours = |image: &Image| {
-        let (mut reds, mut blues) = (0, 0);
-        for p in image.rgba.chunks_exact(4) {
-            if p[0] > p[1].saturating_add(20) && p[0] > p[2].saturating_add(20) {
-                reds += 1;
-            } else if p[2] > p[0].saturating_add(20) && p[2] > p[1].saturating_add(20) {
-                blues += 1;
-            }
-        }
-        (reds, blues)
-    };
     for (distance, quality, fine_level) in
         [(10.0, 1.0, true), (40.0, 1.0, false), (40.0, 4.0, true), (15.0, 0.5, false)]
     {
@@ -308,7 +280,7 @@ fn near_draws_the_fine_lines_far_the_coarse_one_and_quality_refines() {
         let camera = Camera::look_at(vec3(0.0, 0.0, distance), Vec3::ZERO, fovy, height, height);
         let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         keep(&image, &format!("line-level-{distance}-{quality}"));
-        let (reds, blues) = colours(&image);
+        let (reds, blues) = common::reds_and_blues(&image);
         let draw = renderer.draws().iter().find(|d| d.source == DrawSource::Lines).copied().expect("a draw");
         eprintln!(
             "{distance} m, quality {quality}: τ {:.5} (switch {e1:.5}), {reds} red, {blues} blue",

@@ -25,10 +25,9 @@
 
 use std::ops::Deref;
 
-use glam::Mat4;
 use treelod_format::{Container, EllipsoidRecord, LineRecord};
 
-use crate::frame::{Camera, CellPrefix, Frustum, LodSettings};
+use crate::frame::CellPrefix;
 #[cfg(doc)]
 use crate::spt_lod::level_keep;
 use crate::spt_lod::{SptCell, SptLod, spt_drawn};
@@ -60,7 +59,8 @@ pub type EllipsoidRange = CellPrefix;
 pub type LineRange = CellPrefix;
 
 /// What drawing a model's ellipsoids needs of its container, made once: its [`SptLod`] over
-/// `ELLIPSOIDS`.
+/// `ELLIPSOIDS`, which selects (through `Deref`: [`SptLod::select_per_pixel`],
+/// [`SptLod::select_per_pixel_blended`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EllipsoidLod(SptLod);
 
@@ -75,22 +75,6 @@ impl EllipsoidLod {
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
         SptLod::from_container(container, container.ellipsoids(), |cell| cell.ellipsoids).map(Self)
-    }
-
-    /// The ellipsoids an instance with world-from-model `transform` draws for `camera`, appended
-    /// to `out` ([`SptLod::select_per_pixel`]: `τ` the metres per pixel at each cell's distance,
-    /// with Gilet's depth bias of `settings`, divided by `quality`). Returns `false`, appending
-    /// nothing, if the instance's sphere lies outside `frustum` or the transform is degenerate.
-    pub fn select(
-        &self,
-        transform: Mat4,
-        camera: &Camera,
-        frustum: &Frustum,
-        settings: &LodSettings,
-        quality: f32,
-        out: &mut Vec<EllipsoidRange>,
-    ) -> bool {
-        self.0.select_per_pixel(transform, camera, frustum, settings, quality, out)
     }
 }
 
@@ -108,22 +92,6 @@ impl LineLod {
     pub fn from_container(container: &Container) -> Option<Self> {
         SptLod::from_container(container, container.lines(), |cell| cell.lines).map(Self)
     }
-
-    /// The lines an instance with world-from-model `transform` draws for `camera`, appended to
-    /// `out`, with the same `τ` per cell as [`EllipsoidLod::select`]. Returns `false`, appending
-    /// nothing, if the instance's sphere (of the block and the lines) lies outside `frustum` or
-    /// the transform is degenerate.
-    pub fn select(
-        &self,
-        transform: Mat4,
-        camera: &Camera,
-        frustum: &Frustum,
-        settings: &LodSettings,
-        quality: f32,
-        out: &mut Vec<LineRange>,
-    ) -> bool {
-        self.0.select_per_pixel(transform, camera, frustum, settings, quality, out)
-    }
 }
 
 impl Deref for LineLod {
@@ -137,8 +105,9 @@ impl Deref for LineLod {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frame::{Camera, Frustum, LodSettings};
     use crate::spt_lod::{PixelLevel, level_keep};
-    use glam::Vec3;
+    use glam::{Mat4, Vec3};
     use treelod_format::{BlockRecord, CellRecord, Compression, ContainerData, Metadata, Range, Source, Tree};
 
     /// An ellipsoid at `center` of level interval `[lo, hi)` with leaves `leaves`.
@@ -253,7 +222,7 @@ mod tests {
     fn select_at(lod: &EllipsoidLod, distance: f32, settings: &LodSettings, quality: f32) -> Vec<EllipsoidRange> {
         let camera = Camera::look_at(Vec3::new(2.0, 1.0, 1.0 + distance), Vec3::new(2.0, 1.0, 1.0), 0.8, 512, 512);
         let mut out = Vec::new();
-        assert!(lod.select(
+        assert!(lod.select_per_pixel(
             Mat4::IDENTITY,
             &camera,
             &Frustum::from_view_proj(camera.view_proj),
@@ -317,7 +286,14 @@ mod tests {
         let s = LodSettings { s_min: 2.0, depth_bias_k: 1.0, ..LodSettings::default() };
         let camera = Camera::look_at(Vec3::new(2.0, 1.0, 9.0), Vec3::new(2.0, 1.0, 1.0), 0.8, 512, 512);
         let mut out = Vec::new();
-        assert!(lod.select(Mat4::IDENTITY, &camera, &Frustum::from_view_proj(camera.view_proj), &s, 1.0, &mut out));
+        assert!(lod.select_per_pixel(
+            Mat4::IDENTITY,
+            &camera,
+            &Frustum::from_view_proj(camera.view_proj),
+            &s,
+            1.0,
+            &mut out
+        ));
         let d_cell = Vec3::new(1.0, 1.0, 1.0).distance(camera.position);
         let d_block = Vec3::new(2.0, 1.0, 1.0).distance(camera.position);
         let z = ((d_cell - d_block) / (0.5 * Vec3::new(4.0, 2.0, 2.0).length())).clamp(-1.0, 1.0);
@@ -333,17 +309,17 @@ mod tests {
         let frustum = Frustum::from_view_proj(camera.view_proj);
         let settings = LodSettings::default();
         let (mut one, mut two) = (Vec::new(), Vec::new());
-        assert!(lod.select(Mat4::IDENTITY, &camera, &frustum, &settings, 1.0, &mut one));
+        assert!(lod.select_per_pixel(Mat4::IDENTITY, &camera, &frustum, &settings, 1.0, &mut one));
         // Twice as large about the block centre: same distance, half the τ in model units.
         let about = Vec3::new(2.0, 1.0, 1.0);
         let scaled =
             Mat4::from_translation(about) * Mat4::from_scale(Vec3::splat(2.0)) * Mat4::from_translation(-about);
-        assert!(lod.select(scaled, &camera, &frustum, &settings, 1.0, &mut two));
+        assert!(lod.select_per_pixel(scaled, &camera, &frustum, &settings, 1.0, &mut two));
         assert!((two[1].tau - 0.5 * one[1].tau).abs() < 1e-6, "{one:?} {two:?}");
         // Behind the camera.
         let mut out = Vec::new();
         let away = Mat4::from_translation(Vec3::new(0.0, 0.0, 100.0));
-        assert!(!lod.select(away, &camera, &frustum, &settings, 1.0, &mut out));
+        assert!(!lod.select_per_pixel(away, &camera, &frustum, &settings, 1.0, &mut out));
         assert!(out.is_empty());
         // No ellipsoids: no lod.
         let empty = ContainerData {

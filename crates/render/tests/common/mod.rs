@@ -34,6 +34,45 @@ pub fn precision_recall(test: &Image, reference: &Image) -> (f64, f64) {
     mask_precision_recall(&covered(test), &covered(reference))
 }
 
+/// The pixels of `image` that are clearly red and clearly blue (one channel 20 levels above the
+/// other two): which of two levels coloured red and blue shows.
+pub fn reds_and_blues(image: &Image) -> (usize, usize) {
+    let (mut reds, mut blues) = (0, 0);
+    for p in image.rgba.chunks_exact(4) {
+        if p[0] > p[1].saturating_add(20) && p[0] > p[2].saturating_add(20) {
+            reds += 1;
+        } else if p[2] > p[0].saturating_add(20) && p[2] > p[1].saturating_add(20) {
+            blues += 1;
+        }
+    }
+    (reds, blues)
+}
+
+/// A branch line from `p0` (radius `r0`) to `p1` (radius `r1`) drawn for `τ ∈ [lo, hi)`, standing
+/// for the source segments `segments` (first, count).
+pub fn line_record(
+    p0: Vec3,
+    r0: f32,
+    p1: Vec3,
+    r1: f32,
+    color: u32,
+    (lo, hi): (f32, f32),
+    segments: (u32, u32),
+) -> treelod_format::LineRecord {
+    treelod_format::LineRecord {
+        p0: p0.to_array(),
+        r0,
+        p1: p1.to_array(),
+        r1,
+        color,
+        lo,
+        hi,
+        leaf_first: segments.0,
+        leaf_count: segments.1,
+        flags: 0,
+    }
+}
+
 /// Intersection over union of two pixel masks.
 pub fn iou(a: &[bool], b: &[bool]) -> f64 {
     let both = a.iter().zip(b).filter(|(x, y)| **x && **y).count() as f64;
