@@ -22,7 +22,7 @@ fn bench_ok(args: &[&OsStr]) -> String {
 
 const COLUMNS: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads,shadow_primitives";
+precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines";
 
 #[test]
 fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
@@ -221,6 +221,90 @@ fn pruning_techniques_fly_where_the_models_hold_priority_lists() {
         r,
         "instances_pruned"
     ) == 0.0));
+}
+
+#[test]
+fn ellipsoids_fly_where_the_models_hold_them_and_are_absent_elsewhere() {
+    let dir = scratch("ellipsoids");
+    let model = dir.join("ellipsoids.treelod");
+    let out = run([
+        "demo".as_ref(),
+        "--leaf-count".as_ref(),
+        "300".as_ref(),
+        "--ellipsoids".as_ref(),
+        "--ellipsoid-tries".as_ref(),
+        "1".as_ref(),
+        "--lines".as_ref(),
+        "--ao-rays".as_ref(),
+        "0".as_ref(),
+        "-o".as_ref(),
+        model.as_os_str(),
+    ]);
+    assert!(out.status.success(), "demo --ellipsoids --lines: {}", text(&out.stderr));
+    let (csv, json) = (dir.join("e.csv"), dir.join("e.json"));
+    let stdout = bench_ok(&[
+        model.as_os_str(),
+        "--trees".as_ref(),
+        "100".as_ref(),
+        "--frames".as_ref(),
+        "4".as_ref(),
+        "--size".as_ref(),
+        "160x90".as_ref(),
+        "--technique".as_ref(),
+        "spt,ellipsoids".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
+    assert!(!stdout.contains("absent"), "{stdout}");
+    assert!(stdout.lines().any(|l| l.contains(" ellipsoids ") && l.contains(" lines ")), "table columns: {stdout}");
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 4 * 2);
+    let of = |technique: &str| -> Vec<&Vec<String>> {
+        rows.iter().filter(|r| field(&header, r, "technique") == technique).collect()
+    };
+    for row in of("ellipsoids") {
+        let count = |column: &str| number(&header, row, column);
+        // Leaves as ellipsoids, bark as lines: no triangles or points where every tree has both.
+        assert!(count("ellipsoids") > 0.0 && count("lines") > 0.0, "{row:?}");
+        assert_eq!((count("triangles"), count("points")), (0.0, 0.0), "{row:?}");
+        assert_eq!(count("primitives"), count("ellipsoids") + count("lines"), "{row:?}");
+        assert!(count("selection_ms") > 0.0 && count("gpu_ms") > 0.0, "{row:?}");
+    }
+    for row in of("spt") {
+        assert_eq!((number(&header, row, "ellipsoids"), number(&header, row, "lines")), (0.0, 0.0), "{row:?}");
+    }
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).expect("json")).expect("parses");
+    let technique =
+        json["techniques"].as_array().expect("techniques").iter().find(|t| t["name"] == "ellipsoids").expect("listed");
+    assert_eq!(technique["status"], "measured");
+    let summary = &technique["summary"];
+    assert!(summary["ellipsoids"].as_f64().is_some_and(|n| n > 0.0), "{summary}");
+    assert!(summary["lines"].as_f64().is_some_and(|n| n > 0.0), "{summary}");
+    assert!(summary["selection_ms"]["mean"].as_f64().is_some_and(|ms| ms > 0.0), "{summary}");
+    let total = summary["primitives"].as_f64().expect("primitives");
+    assert!((total - summary["ellipsoids"].as_f64().unwrap() - summary["lines"].as_f64().unwrap()).abs() < 1e-6);
+
+    // Models without ellipsoids: reported absent, and alone nothing can be measured (exit 4).
+    let csv = dir.join("absent.csv");
+    let args = ["--trees", "20", "--frames", "1", "--no-render", "--technique"];
+    let stdout = bench_ok(
+        &[demo().as_os_str()]
+            .into_iter()
+            .chain(args.iter().map(OsStr::new))
+            .chain(["spt,ellipsoids".as_ref(), "--csv".as_ref(), csv.as_os_str()])
+            .collect::<Vec<_>>(),
+    );
+    assert!(stdout.contains("technique ellipsoids: absent: no model of the forest holds ellipsoids"), "{stdout}");
+    let (header, rows) = read_csv(&csv);
+    assert!(rows.iter().all(|r| field(&header, r, "technique") == "spt"), "ellipsoids has no rows");
+    let out = run(["bench".as_ref(), demo().as_os_str()]
+        .into_iter()
+        .chain(args.iter().map(OsStr::new))
+        .chain(["ellipsoids".as_ref()]));
+    assert_eq!(out.status.code(), Some(4), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).contains("technique ellipsoids: absent"), "{}", text(&out.stdout));
 }
 
 #[test]

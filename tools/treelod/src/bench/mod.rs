@@ -130,6 +130,9 @@ pub enum Technique {
     /// Pruning with the optimised scale `s_opt` (Neubert 2011).
     #[value(name = "prune-opt")]
     PruneOpt,
+    /// Clasen 2011's representation: leaves as ellipsoids, bark as branch lines (spec §6.8, §6.9).
+    #[value(name = "ellipsoids")]
+    Ellipsoids,
     /// Baseline: a discrete LoD chain from meshoptimizer's simplifiers (spec §6.12).
     #[value(name = "lod-chain")]
     LodChain,
@@ -150,6 +153,7 @@ impl Technique {
             Self::Spt => "spt",
             Self::PruneCook => "prune-cook",
             Self::PruneOpt => "prune-opt",
+            Self::Ellipsoids => "ellipsoids",
             Self::LodChain => "lod-chain",
             Self::Billboard => "billboard",
             Self::Crossed => "crossed",
@@ -164,6 +168,7 @@ impl Technique {
             Self::Spt => "triangles and points (Gilet 2005, sequential point trees): the default renderer",
             Self::PruneCook => "pruning with s_Cook = 1/lambda (uniform stochastic baseline, Neubert 2011)",
             Self::PruneOpt => "pruning with s_opt (Neubert 2011)",
+            Self::Ellipsoids => "leaf ellipsoids and branch lines (Clasen 2011)",
             Self::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
             Self::Billboard => "baseline: one camera-facing billboard per tree",
             Self::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
@@ -178,6 +183,11 @@ impl Technique {
             Self::PruneCook | Self::PruneOpt => Availability::Absent(
                 "no model of the forest holds pruning priority lists (build them with --prune)".to_owned(),
             ),
+            Self::Ellipsoids if data.ellipsoids > 0 => Availability::Measured,
+            Self::Ellipsoids => Availability::Absent(
+                "no model of the forest holds ellipsoids (build them with --ellipsoids, and --lines for the bark)"
+                    .to_owned(),
+            ),
             Self::LodChain if data.lod_levels > 0 => Availability::Measured,
             Self::Billboard | Self::Crossed if data.billboards > 0 => Availability::Measured,
             Self::LodChain | Self::Billboard | Self::Crossed => {
@@ -190,11 +200,13 @@ impl Technique {
     ///
     /// The pruning techniques fly the renderer's pruning policy ([`Pruning`]'s defaults: trees
     /// at least 64 pixels high pruned to the container's `λ(h)` times their visible fraction, with
-    /// hysteresis; smaller ones by the point tree) with the optimal or Cook's scale.
+    /// hysteresis; smaller ones by the point tree) with the optimal or Cook's scale. `ellipsoids`
+    /// flies [`Settings::ellipsoids`] with the bark as lines where a model has them, at the
+    /// default quality and level blend; trees without ellipsoids draw with the point tree.
     fn settings(self, args: &Args) -> Option<Settings> {
         let scale = match self {
             Self::Full => return None,
-            Self::Spt | Self::LodChain | Self::Billboard | Self::Crossed => None,
+            Self::Spt | Self::Ellipsoids | Self::LodChain | Self::Billboard | Self::Crossed => None,
             Self::PruneCook => Some(PruneScale::Cook),
             Self::PruneOpt => Some(PruneScale::Optimal),
         };
@@ -203,6 +215,8 @@ impl Technique {
         settings.s_max = args.s_max.unwrap_or(settings.s_max);
         settings.pruning = scale.map(|scale| Pruning { scale, ..Pruning::default() });
         settings.shadows = args.shadows.then(treelod_render::Shadows::default);
+        settings.ellipsoids = self == Self::Ellipsoids;
+        settings.lines = true;
         settings.baseline = match self {
             Self::LodChain => Some(Baseline::LodChain),
             Self::Billboard => Some(Baseline::Billboard(BillboardKind::Facing)),
@@ -231,6 +245,10 @@ pub struct Row {
     pub points_in_cut: Option<u64>,
     /// Impostor planes and billboard quads submitted (one primitive each, as a splat is).
     pub quads: u64,
+    /// Ellipsoids submitted (the prefixes; the vertex shader drops those outside the level).
+    pub ellipsoids: u64,
+    /// Branch lines submitted by ellipsoid trees (the prefixes, as for ellipsoids).
+    pub lines: u64,
     /// Visible instances drawn with pruned leaves (`None` for the counted full mesh).
     pub instances_pruned: Option<u32>,
     /// Leaves drawn by pruned instances (their triangles count in `triangles`).
@@ -249,8 +267,8 @@ pub struct Row {
     /// GPU milliseconds of the render pass (timestamp queries); `None` when not drawn or not
     /// measurable.
     pub gpu_ms: Option<f64>,
-    /// With `--shadows`: triangles, points and quads the shadow pass submitted, all cascades
-    /// together (`None` without, and for the counted full mesh).
+    /// With `--shadows`: triangles, points, quads, ellipsoids and lines the shadow pass
+    /// submitted, all cascades together (`None` without, and for the counted full mesh).
     pub shadow_primitives: Option<u64>,
     /// Coverage against the reference (with `--quality`, not for the reference itself).
     pub coverage: Option<Coverage>,
@@ -259,17 +277,18 @@ pub struct Row {
 }
 
 impl Row {
-    /// Triangles, points and quads.
+    /// Triangles, points, quads, ellipsoids and lines.
     #[must_use]
     pub fn primitives(&self) -> u64 {
-        self.triangles + self.points + self.quads
+        self.triangles + self.points + self.quads + self.ellipsoids + self.lines
     }
 
     /// Triangles and the points in the cut: what is rasterised (the submitted count where the
-    /// cut was not counted).
+    /// cut was not counted, and for quads, ellipsoids and lines, whose levels the vertex shader
+    /// picks).
     #[must_use]
     pub fn primitives_in_cut(&self) -> u64 {
-        self.triangles + self.points_in_cut.unwrap_or(self.points) + self.quads
+        self.triangles + self.points_in_cut.unwrap_or(self.points) + self.quads + self.ellipsoids + self.lines
     }
 }
 
@@ -538,6 +557,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                     triangles,
                     points: 0,
                     quads: 0,
+                    ellipsoids: 0,
+                    lines: 0,
                     points_in_cut: Some(0),
                     instances_pruned: None,
                     leaves_pruned: None,
@@ -569,6 +590,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 triangles: stats.triangles,
                 points: stats.points,
                 quads: crate::eval::quads(&stats),
+                ellipsoids: stats.ellipsoids,
+                lines: stats.lines,
                 // Counted on the CPU after the timed selection.
                 points_in_cut: (!stats.gpu_selection).then(|| f.renderer.points_in_cut()),
                 instances_pruned: Some(stats.instances_pruned),
@@ -580,8 +603,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 selection_ms,
                 gpu_ms: None,
                 shadow_primitives: args.shadows.then(|| {
-                    let shadow = stats.shadow;
-                    shadow.triangles + shadow.points + shadow.planes + shadow.billboards
+                    let s = stats.shadow;
+                    [s.triangles, s.points, s.planes, s.billboards, s.ellipsoids, s.lines].iter().sum()
                 }),
                 coverage: None,
                 rmse: None,
@@ -698,15 +721,21 @@ fn demo_prune(order: treelod_build::PruneOrder) -> treelod_build::PruneConfig {
 /// The built-in models: [`DEMO_TREES`] built in memory (no file written), in parallel. With
 /// `prune-opt` asked for they hold density-ordered priority lists (the order that saved most
 /// geometry on the shared models); with `prune-cook` a second set holds stochastic lists; with a
-/// baseline asked for they hold baselines (and the impostors that set the billboards' budget).
+/// baseline asked for they hold baselines (and the impostors that set the billboards' budget); with
+/// `ellipsoids` they hold Clasen's ellipsoids and lines (the build's defaults: about a second per
+/// tree on 2 cores, so only when asked for).
 fn demo_models(techniques: &[Technique]) -> Result<Models, Failed> {
     use treelod_build::PruneOrder;
     let opt = techniques.contains(&Technique::PruneOpt).then(|| demo_prune(PruneOrder::Density));
-    let baselines =
-        techniques.iter().any(|t| matches!(t, Technique::LodChain | Technique::Billboard | Technique::Crossed));
-    let containers = demo_containers(opt.as_ref(), baselines)?;
+    let extras = Extras {
+        baselines: techniques
+            .iter()
+            .any(|t| matches!(t, Technique::LodChain | Technique::Billboard | Technique::Crossed)),
+        ellipsoids: techniques.contains(&Technique::Ellipsoids),
+    };
+    let containers = demo_containers(opt.as_ref(), extras)?;
     let stochastic = match techniques.contains(&Technique::PruneCook) {
-        true => Some(demo_containers(Some(&demo_prune(PruneOrder::Stochastic)), false)?),
+        true => Some(demo_containers(Some(&demo_prune(PruneOrder::Stochastic)), Extras::default())?),
         false => None,
     };
     let labels: Vec<String> = DEMO_TREES
@@ -717,12 +746,23 @@ fn demo_models(techniques: &[Technique]) -> Result<Models, Failed> {
     Ok(Models { source, labels, containers, stochastic })
 }
 
-/// [`DEMO_TREES`] built with `prune`, and with `baselines` their baselines and impostors.
-fn demo_containers(prune: Option<&treelod_build::PruneConfig>, baselines: bool) -> Result<Vec<Arc<Container>>, Failed> {
+/// The optional representations a set of demo trees is built with, besides pruning lists.
+#[derive(Clone, Copy, Debug, Default)]
+struct Extras {
+    /// Baselines and impostors.
+    baselines: bool,
+    /// Clasen's ellipsoids and lines.
+    ellipsoids: bool,
+}
+
+/// [`DEMO_TREES`] built with `prune` and `extras`.
+fn demo_containers(prune: Option<&treelod_build::PruneConfig>, extras: Extras) -> Result<Vec<Arc<Container>>, Failed> {
     let build = treelod_build::BuildConfig {
         prune: prune.cloned(),
-        impostors: baselines.then(treelod_build::ImpostorConfig::default),
-        baselines: baselines.then(treelod_build::LodChainConfig::default),
+        impostors: extras.baselines.then(treelod_build::ImpostorConfig::default),
+        baselines: extras.baselines.then(treelod_build::LodChainConfig::default),
+        ellipsoids: extras.ellipsoids.then(treelod_build::EllipsoidConfig::default),
+        lines: extras.ellipsoids.then(treelod_build::LineConfig::default),
         ..treelod_build::BuildConfig::default()
     };
     let built: Result<Vec<Container>, Failed> = DEMO_TREES
@@ -746,7 +786,8 @@ fn demo_containers(prune: Option<&treelod_build::PruneConfig>, baselines: bool) 
 fn optional_data(containers: &[Arc<Container>]) -> OptionalData {
     let mut data = OptionalData::default();
     for container in containers {
-        data.ellipsoids += (container.ellipsoids().len() + container.lines().len()) as u64;
+        // Ellipsoids only: lines are drawn only for the bark of trees with ellipsoids.
+        data.ellipsoids += container.ellipsoids().len() as u64;
         data.planes += container.planes().len() as u64;
         data.prune_leaves += container.prune_leaves().len() as u64;
         data.lod_levels += container.lod_levels().len() as u64;
@@ -766,6 +807,8 @@ fn progress_bar(len: u64) -> indicatif::ProgressBar {
 
 #[cfg(test)]
 mod tests {
+    use clap::Parser as _;
+
     use super::*;
 
     #[test]
@@ -778,5 +821,26 @@ mod tests {
         assert!(cook.reason().is_some_and(|r| r.contains("pruning priority lists")), "{cook:?}");
         let some = OptionalData { prune_leaves: 4, ..OptionalData::default() };
         assert_eq!(Technique::PruneOpt.availability(some), Availability::Measured);
+    }
+
+    #[derive(Debug, clap::Parser)]
+    struct BenchCli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    #[test]
+    fn ellipsoids_need_ellipsoids_and_draw_them_with_lines() {
+        let none = OptionalData { prune_leaves: 4, lod_levels: 3, billboards: 2, ..OptionalData::default() };
+        let absent = Technique::Ellipsoids.availability(none);
+        assert_eq!(absent.status(), "absent");
+        assert!(absent.reason().is_some_and(|r| r.contains("ellipsoids")), "{absent:?}");
+        let some = OptionalData { ellipsoids: 1, ..OptionalData::default() };
+        assert_eq!(Technique::Ellipsoids.availability(some), Availability::Measured);
+        let args = BenchCli::try_parse_from(["bench", "--technique", "ellipsoids"]).expect("parses").args;
+        assert_eq!(args.technique, [Technique::Ellipsoids]);
+        let settings = Technique::Ellipsoids.settings(&args).expect("drawn");
+        assert!(settings.ellipsoids && settings.lines && settings.baseline.is_none() && settings.pruning.is_none());
+        assert!(!Technique::Spt.settings(&args).expect("drawn").ellipsoids);
     }
 }

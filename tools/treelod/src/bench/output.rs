@@ -71,11 +71,15 @@ pub struct Summary {
     pub triangles: f64,
     /// Mean points submitted.
     pub points: f64,
-    /// Mean primitives (triangles + points + quads).
+    /// Mean ellipsoids submitted.
+    pub ellipsoids: f64,
+    /// Mean branch lines submitted.
+    pub lines: f64,
+    /// Mean primitives (triangles + points + quads + ellipsoids + lines).
     pub primitives: f64,
     /// Most primitives in a frame.
     pub primitives_max: u64,
-    /// Mean triangles and points in the cut (what is rasterised).
+    /// Mean primitives in the cut (what is rasterised: the points outside the cut left out).
     pub primitives_in_cut: f64,
     /// The full mesh's mean primitives over this technique's in the cut.
     pub full_ratio_in_cut: Option<f64>,
@@ -129,6 +133,8 @@ pub fn summarise(report: &Report, technique: Technique) -> Summary {
         instances_visible: mean(&|r| f64::from(r.instances_visible)),
         triangles: mean(&|r| r.triangles as f64),
         points: mean(&|r| r.points as f64),
+        ellipsoids: mean(&|r| r.ellipsoids as f64),
+        lines: mean(&|r| r.lines as f64),
         primitives,
         primitives_max: rows.iter().map(|r| r.primitives()).max().unwrap_or(0),
         full_ratio: full_mean.filter(|_| primitives > 0.0).map(|f| f / primitives),
@@ -233,12 +239,19 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
     let _ = writeln!(out, "times: {}", timing(report));
     out.push_str(&unavailable(&report.techniques));
     let shadows = report.rows.iter().any(|r| r.shadow_primitives.is_some());
+    // Only where a technique drew them, as the shadow columns.
+    let ellipsoids = report.rows.iter().any(|r| r.ellipsoids + r.lines > 0);
     let mut columns = vec![
         ("technique", Align::Left),
         ("frames", Align::Right),
         ("visible", Align::Right),
         ("triangles", Align::Right),
         ("points", Align::Right),
+    ];
+    if ellipsoids {
+        columns.extend([("ellipsoids", Align::Right), ("lines", Align::Right)]);
+    }
+    columns.extend([
         ("primitives", Align::Right),
         ("full/this", Align::Right),
         ("in cut", Align::Right),
@@ -253,7 +266,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
         ("R", Align::Right),
         ("Q", Align::Right),
         ("RMSE", Align::Right),
-    ];
+    ]);
     if shadows {
         columns.extend([("shadow", Align::Right), ("shadow/this", Align::Right)]);
     }
@@ -269,6 +282,11 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
             format!("{:.0}", s.instances_visible),
             format!("{:.0}", s.triangles),
             format!("{:.0}", s.points),
+        ];
+        if ellipsoids {
+            cells.extend([format!("{:.0}", s.ellipsoids), format!("{:.0}", s.lines)]);
+        }
+        cells.extend([
             format!("{:.0}", s.primitives),
             opt(s.full_ratio, 1),
             format!("{:.0}", s.primitives_in_cut),
@@ -283,7 +301,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
             opt(s.recall, 4),
             opt(s.q, 4),
             opt(s.rmse, 5),
-        ];
+        ]);
         if shadows {
             cells.extend([opt(s.shadow_primitives, 0), opt(s.shadow_ratio, 2)]);
         }
@@ -302,7 +320,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
 /// The CSV header.
 pub const CSV_HEADER: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads,shadow_primitives";
+precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -315,7 +333,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -345,6 +363,8 @@ pub fn csv(report: &Report) -> String {
             row.primitives_in_cut(),
             row.quads,
             text(row.shadow_primitives.map(|v| v.to_string())),
+            row.ellipsoids,
+            row.lines,
         );
     }
     out
@@ -415,13 +435,13 @@ pub fn plot(report: &Report) -> Image {
     // times' zero).
     let mut panels: Vec<(&str, Metric, bool, f64)> = vec![
         (
-            "primitives submitted per frame: triangles + points + quads (log)",
+            "primitives submitted per frame: triangles + points + quads + ellipsoids + lines (log)",
             |r| Some(r.primitives() as f64),
             true,
             0.0,
         ),
         (
-            "primitives in the cut per frame: triangles + points kept + quads (log)",
+            "primitives in the cut per frame: triangles + points kept + quads + ellipsoids + lines (log)",
             |r| Some(r.primitives_in_cut() as f64),
             true,
             0.0,
