@@ -133,18 +133,6 @@ fn plane_drawn(p: PlaneRecord, tau: f32) -> bool {
     return p.lo <= tau && tau < p.hi;
 }
 
-// The ellipsoid rule of spec §10: inside [lo, hi) at tau (metres per pixel); `level_keep` with no
-// blend. Rust twin: treelod_runtime::ellipsoid_drawn.
-fn ellipsoid_drawn(e: EllipsoidRecord, tau: f32) -> bool {
-    return e.lo <= tau && tau < e.hi;
-}
-
-// The line rule of spec §10: inside [lo, hi) at tau (metres per pixel, as ellipsoids);
-// `level_keep` with no blend. Rust twin: treelod_runtime::line_drawn.
-fn line_drawn(l: LineRecord, tau: f32) -> bool {
-    return l.lo <= tau && tau < l.hi;
-}
-
 // Level blending of ellipsoids and lines (Settings::level_blend, `blend` = β octaves of tau,
 // at most 2): whether an element of interval [lo, hi) is drawn at tau, inside
 // [lo · 2^(−β/2), hi · 2^(β/2)), and on which fragments: vec2(from, to), drawn where the pixel's

@@ -464,29 +464,11 @@ pub(crate) fn gpu_points<'a>(
     scratch
 }
 
-/// The ellipsoids of `container` as the GPU holds them: each one's `flags` (reserved in the file,
-/// spec §6.8, and not read) replaced by its ambient-occlusion byte (§6.14), 0 without
-/// `ELLIPSOID_AO`.
-fn gpu_ellipsoids(container: &Container) -> Vec<treelod_format::EllipsoidRecord> {
-    let ao = container.ellipsoid_ao();
-    container
-        .ellipsoids()
-        .iter()
-        .enumerate()
-        .map(|(i, &e)| treelod_format::EllipsoidRecord { flags: ao.get(i).copied().map_or(0, u32::from), ..e })
-        .collect()
-}
-
-/// The lines of `container` as the GPU holds them: each one's `flags` (reserved in the file, spec
-/// §6.9, and not read) replaced by its ambient-occlusion byte (§6.14), 0 without `LINE_AO`.
-fn gpu_lines(container: &Container) -> Vec<treelod_format::LineRecord> {
-    let ao = container.line_ao();
-    container
-        .lines()
-        .iter()
-        .enumerate()
-        .map(|(i, &l)| treelod_format::LineRecord { flags: ao.get(i).copied().map_or(0, u32::from), ..l })
-        .collect()
+/// Records as the GPU holds them: each one's `flags` (reserved in the file, spec §6.8, §6.9, and
+/// not read) replaced by its ambient-occlusion byte `ao[i]` (§6.14), 0 where `ao` is empty (no
+/// `ELLIPSOID_AO`, `LINE_AO`).
+fn with_ao_in_flags<T: Copy>(records: &[T], ao: &[u8], with_flags: fn(T, u32) -> T) -> Vec<T> {
+    records.iter().enumerate().map(|(i, &r)| with_flags(r, ao.get(i).copied().map_or(0, u32::from))).collect()
 }
 
 #[repr(C)]
@@ -1341,12 +1323,16 @@ impl Renderer {
         let plane_leaves = upload("PLANE_LEAVES", bytemuck::cast_slice(container.plane_leaves()))?;
         // As uploaded, each ellipsoid's `flags` (reserved in the file, spec §6.8) holds its ambient
         // occlusion byte (§6.14), 0 without `ELLIPSOID_AO`: never the file's own flags.
-        let gpu_ellipsoids = gpu_ellipsoids(&container);
+        let gpu_ellipsoids = with_ao_in_flags(container.ellipsoids(), container.ellipsoid_ao(), |e, flags| {
+            treelod_format::EllipsoidRecord { flags, ..e }
+        });
         let ellipsoid_buffer = upload("ELLIPSOIDS", bytemuck::cast_slice(&gpu_ellipsoids))?;
         drop(gpu_ellipsoids);
         // Lines likewise: each one's `flags` holds its `LINE_AO` byte, never the file's flags.
         let lines = LineLod::from_container(&container);
-        let gpu_lines = gpu_lines(&container);
+        let gpu_lines = with_ao_in_flags(container.lines(), container.line_ao(), |l, flags| {
+            treelod_format::LineRecord { flags, ..l }
+        });
         let line_buffer = upload("LINES", bytemuck::cast_slice(&gpu_lines))?;
         drop(gpu_lines);
         if self.noise_view.is_none() {

@@ -273,28 +273,7 @@ fn near_draws_the_fine_lines_far_the_coarse_one_and_quality_refines() {
     ];
     let container = container(lines, Vec::new(), None);
     let mut renderer = renderer(&gpu, &[&container], Settings::default());
-    for (distance, quality, fine_level) in
-        [(10.0, 1.0, true), (40.0, 1.0, false), (40.0, 4.0, true), (15.0, 0.5, false)]
-    {
-        renderer.settings_mut().ellipsoid_quality = quality;
-        let camera = Camera::look_at(vec3(0.0, 0.0, distance), Vec3::ZERO, fovy, height, height);
-        let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
-        keep(&image, &format!("line-level-{distance}-{quality}"));
-        let (reds, blues) = common::reds_and_blues(&image);
-        let draw = renderer.draws().iter().find(|d| d.source == DrawSource::Lines).copied().expect("a draw");
-        eprintln!(
-            "{distance} m, quality {quality}: τ {:.5} (switch {e1:.5}), {reds} red, {blues} blue",
-            draw.tau_points
-        );
-        assert!((draw.tau_points - mpp(distance) / quality).abs() < 1e-3 * draw.tau_points);
-        if fine_level {
-            assert_eq!(stats.lines, 3, "the prefix holds both levels");
-            assert!(blues > 100 && reds == 0, "the fine level: {reds} red, {blues} blue");
-        } else {
-            assert_eq!(stats.lines, 1, "the prefix is the coarse level");
-            assert!(reds > 50 && blues == 0, "the coarse level: {reds} red, {blues} blue");
-        }
-    }
+    common::check_level_switch(&gpu, &mut renderer, (fovy, height), DrawSource::Lines, |s| s.lines, 50, "line");
 }
 
 #[test]

@@ -32,15 +32,15 @@ use crate::frame::CellPrefix;
 use crate::spt_lod::level_keep;
 use crate::spt_lod::{SptCell, SptLod, spt_drawn};
 
-/// Whether an ellipsoid is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is
-/// `ellipsoid_drawn`; `vs_ellipsoid` tests [`level_keep`], the same rule without a level blend.
+/// Whether an ellipsoid is drawn at `τ` (spec §10): its interval holds `τ`. `vs_ellipsoid` tests
+/// [`level_keep`], which is this rule without a level blend.
 #[must_use]
 pub fn ellipsoid_drawn(ellipsoid: &EllipsoidRecord, tau: f32) -> bool {
     spt_drawn(ellipsoid, tau)
 }
 
-/// Whether a line is drawn at `τ` (spec §10): its interval holds `τ`. The WGSL twin is
-/// `line_drawn`; `vs_line` tests [`level_keep`], the same rule without a level blend.
+/// Whether a line is drawn at `τ` (spec §10): its interval holds `τ`. `vs_line` tests
+/// [`level_keep`], which is this rule without a level blend.
 #[must_use]
 pub fn line_drawn(line: &LineRecord, tau: f32) -> bool {
     spt_drawn(line, tau)

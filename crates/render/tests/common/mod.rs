@@ -11,8 +11,8 @@ use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, MaterialInfo, MaterialRecord, Metadata, NO_IMAGE,
     PointRecord, Range, Source, Tree, TriangleRecord, VertexRecord, pack,
 };
-use treelod_render::offscreen::{Gpu, Image};
-use treelod_render::{Instance, Renderer, Settings};
+use treelod_render::offscreen::{Gpu, Image, render_image};
+use treelod_render::{Camera, DrawSource, FrameStats, Instance, Renderer, Settings};
 
 /// White: a pixel of another colour is covered.
 pub const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
@@ -70,6 +70,48 @@ pub fn line_record(
         leaf_first: segments.0,
         leaf_count: segments.1,
         flags: 0,
+    }
+}
+
+/// Renders `renderer`'s one tree, which holds a fine level in blue below `τ = e1` and a coarse
+/// one in red above it (`e1` the metres per pixel at 20 m of a `fovy`, `height`² camera), from
+/// 10 m, 40 m, 40 m at quality 4 and 15 m at quality 0.5, and checks each frame: the `source`
+/// draw's `τ` is the metres per pixel over the quality; the fine level shows (all 3 records in
+/// the prefix, blue only) where `τ < e1`, the coarse one (1 record, at least `min_reds` red
+/// pixels, no blue) where not. `submitted` reads the kind's count from the frame's stats; `name`
+/// names the kept images.
+pub fn check_level_switch(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    (fovy, height): (f32, u32),
+    source: DrawSource,
+    submitted: impl Fn(&FrameStats) -> u64,
+    min_reds: usize,
+    name: &str,
+) {
+    let mpp = |d: f32| d * 2.0 * (0.5 * fovy).tan() / height as f32;
+    let e1 = mpp(20.0);
+    for (distance, quality, fine_level) in
+        [(10.0, 1.0, true), (40.0, 1.0, false), (40.0, 4.0, true), (15.0, 0.5, false)]
+    {
+        renderer.settings_mut().ellipsoid_quality = quality;
+        let camera = Camera::look_at(Vec3::new(0.0, 0.0, distance), Vec3::ZERO, fovy, height, height);
+        let (image, stats) = render_image(gpu, renderer, &camera, BACKGROUND).expect("renders");
+        keep(&image, &format!("{name}-level-{distance}-{quality}"));
+        let (reds, blues) = reds_and_blues(&image);
+        let draw = renderer.draws().iter().find(|d| d.source == source).copied().expect("a draw");
+        eprintln!(
+            "{distance} m, quality {quality}: τ {:.5} (switch {e1:.5}), {reds} red, {blues} blue",
+            draw.tau_points
+        );
+        assert!((draw.tau_points - mpp(distance) / quality).abs() < 1e-3 * draw.tau_points);
+        if fine_level {
+            assert_eq!(submitted(&stats), 3, "the prefix holds both levels");
+            assert!(blues > 100 && reds == 0, "the fine level: {reds} red, {blues} blue");
+        } else {
+            assert_eq!(submitted(&stats), 1, "the prefix is the coarse level");
+            assert!(reds > min_reds && blues == 0, "the coarse level: {reds} red, {blues} blue");
+        }
     }
 }
 
