@@ -8,7 +8,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{model, read_png, run_on, scratch, succeeded, text};
+use common::{assert_build_usage_errors, model, read_png, run_on, scratch, succeeded, text};
 use treelod_format::{Container, image_format};
 
 const AREA: &str = "treelod-indirect";
@@ -83,21 +83,11 @@ fn untextured_leaves_get_the_rgba_atlas_and_a_warning() {
 #[test]
 fn bad_indirect_texturing_options_are_usage_errors_naming_the_option() {
     let dir = scratch(AREA, "usage");
-    let out_path = dir.join("never.treelod");
-    let tree = model("quaternius-common-tree-1-3k.glb");
-    for (bad, option) in [
+    let cases: &[(&[&str], &str)] = &[
         (&["--impostor-slots-per-leaf", "0"][..], "--impostor-slots-per-leaf"),
         (&["--impostor-slots-per-leaf", "65"], "--impostor-slots-per-leaf"),
         (&["--impostor-slots-per-leaf", "many"], "--impostor-slots-per-leaf"),
         (&["--impostor-texturing", "sideways"], "--impostor-texturing"),
-    ] {
-        let mut args = vec!["build", "--impostors"];
-        args.extend(bad);
-        args.push("-o");
-        let out = run_on(&args, &[&out_path, &tree]);
-        let stderr = text(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{bad:?}: {stderr}");
-        assert!(stderr.contains(option), "{bad:?}: {stderr}");
-        assert!(!out_path.exists(), "{bad:?}: nothing written");
-    }
+    ];
+    assert_build_usage_errors(&dir, &["--impostors"], cases);
 }

@@ -98,3 +98,22 @@ pub fn number(header: &[String], row: &[String], column: &str) -> f64 {
     let value = field(header, row, column);
     value.parse().unwrap_or_else(|_| panic!("{column} = {value:?} is not a number"))
 }
+
+/// Runs `treelod build` on the small Quaternius tree with `before`, then each case's arguments,
+/// writing to `dir/never.treelod`, and checks each is a usage error (exit 2) whose message names
+/// the case's option and that nothing is written.
+pub fn assert_build_usage_errors(dir: &Path, before: &[&str], cases: &[(&[&str], &str)]) {
+    let out_path = dir.join("never.treelod");
+    let tree = model("quaternius-common-tree-1-3k.glb");
+    for &(bad, option) in cases {
+        let mut args = vec!["build"];
+        args.extend(before);
+        args.extend(bad);
+        args.push("-o");
+        let out = run_on(&args, &[&out_path, &tree]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{bad:?}: {stderr}");
+        assert!(stderr.contains(option), "{bad:?}: {stderr}");
+        assert!(!out_path.exists(), "{bad:?}: nothing written");
+    }
+}
