@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{model, run_on, scratch, succeeded, text};
+use common::{assert_build_usage_errors, model, run_on, scratch, succeeded};
 use treelod_format::Container;
 
 const AREA: &str = "treelod-ellipsoids";
@@ -65,9 +65,7 @@ fn demo_takes_the_option_and_without_it_nothing_is_written() {
 #[test]
 fn bad_ellipsoid_options_are_usage_errors_naming_the_option() {
     let dir = scratch(AREA, "usage");
-    let out_path = dir.join("never.treelod");
-    let tree = model("quaternius-common-tree-1-3k.glb");
-    for (bad, option) in [
+    let cases: &[(&[&str], &str)] = &[
         (&["--ellipsoids", "--ellipsoid-pixels", "0"][..], "--ellipsoid-pixels"),
         (&["--ellipsoids", "--ellipsoid-pixels", "1001"], "--ellipsoid-pixels"),
         (&["--ellipsoids", "--ellipsoid-pixels", "big"], "--ellipsoid-pixels"),
@@ -77,14 +75,21 @@ fn bad_ellipsoid_options_are_usage_errors_naming_the_option() {
         (&["--ellipsoids", "--ellipsoid-seed", "x"], "--ellipsoid-seed"),
         // The tunables need the option itself.
         (&["--ellipsoid-tries", "2"], "--ellipsoids"),
-    ] {
-        let mut args = vec!["build"];
-        args.extend(bad);
-        args.push("-o");
-        let out = run_on(&args, &[&out_path, &tree]);
-        let stderr = text(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{bad:?}: {stderr}");
-        assert!(stderr.contains(option), "{bad:?}: {stderr}");
-        assert!(!out_path.exists(), "{bad:?}: nothing written");
-    }
+    ];
+    assert_build_usage_errors(&dir, &[], cases);
+}
+
+#[test]
+fn bad_line_options_are_usage_errors_naming_the_option() {
+    let dir = scratch(AREA, "line-usage");
+    let cases: &[(&[&str], &str)] = &[
+        (&["--lines", "--line-pixels", "0"], "--line-pixels"),
+        (&["--lines", "--line-pixels", "1001"], "--line-pixels"),
+        (&["--lines", "--line-candidates", "0"], "--line-candidates"),
+        (&["--lines", "--line-candidates", "257"], "--line-candidates"),
+        (&["--lines", "--line-seed", "x"], "--line-seed"),
+        // The tunables need the option itself.
+        (&["--line-candidates", "4"], "--lines"),
+    ];
+    assert_build_usage_errors(&dir, &[], cases);
 }
