@@ -1,5 +1,6 @@
 //! Test data for treelod: a generator of synthetic, valid `.treelod` containers, byte-level
-//! patching helpers for hostile-input tests, the golden-file recipes and the spec's hex dump.
+//! patching helpers for hostile-input tests, the golden-file recipes and the spec's hex dump; a
+//! generator of valid and hostile glTF files ([`gltf`]) and a counting allocator ([`alloc`]).
 //!
 //! [`synthetic`] is the test data source of every crate: given a seed and [`SyntheticOptions`] it
 //! builds a [`ContainerData`](treelod_format::ContainerData) that follows `format-spec/treelod.md` in every rule `verify` checks
@@ -19,6 +20,8 @@
 //! # Ok::<(), treelod_format::Error>(())
 //! ```
 
+pub mod alloc;
+pub mod gltf;
 mod hexdump;
 pub mod raw;
 mod rng;

@@ -146,6 +146,31 @@ impl SyntheticOptions {
             name: Some("everything".into()),
         }
     }
+
+    /// A small valid file (a few KiB) with every kind of section, for tests that take a file
+    /// apart (hostile input, mutation fuzzing): two cells, one tree, one material and texture,
+    /// no PNG image, and one unknown section kind (`0x0001_0000`).
+    #[must_use]
+    pub fn small() -> Self {
+        Self {
+            grid: [2, 1, 1],
+            triangles_per_cell: 1..=3,
+            ellipsoids_per_cell: 1..=2,
+            lines_per_cell: 1..=1,
+            planes_per_cell: 1..=1,
+            prune_leaves_per_cell: 1..=1,
+            block_ellipsoids: 2,
+            curve_samples: 2,
+            lod_levels: 2,
+            materials: 1,
+            textures: 1,
+            png_image: false,
+            tree_count: 1,
+            extension_kinds: vec![0x0001_0000],
+            name: Some("small".into()),
+            ..Self::everything()
+        }
+    }
 }
 
 impl Default for SyntheticOptions {

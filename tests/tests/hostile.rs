@@ -7,82 +7,26 @@
 //! a small constant, so a lying length can never make the reader allocate what the file does not
 //! back.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 use treelod_format::{
     Compression, Container, ContainerData, Error, ErrorClass, FLAG_SHUFFLE, FLAG_ZSTD, OpenOptions, PlaneLeafRecord,
     SectionKind, image_format, verify,
 };
+use treelod_tests::alloc::{self, CountingAllocator};
 use treelod_tests::raw::{Part, RawFile, layout};
 use treelod_tests::{SyntheticOptions, synthetic};
 
 // ---------------------------------------------------------------------------------------------
 // Allocation accounting
 
-struct Counting;
-
-thread_local! {
-    static LIVE: Cell<isize> = const { Cell::new(0) };
-    static PEAK: Cell<isize> = const { Cell::new(0) };
-}
-
-fn note(delta: isize) {
-    let _ = LIVE.try_with(|live| {
-        let now = live.get() + delta;
-        live.set(now);
-        let _ = PEAK.try_with(|peak| peak.set(peak.get().max(now)));
-    });
-}
-
-// SAFETY: every method forwards to the system allocator with the caller's arguments unchanged and
-// only updates thread-local counters (const-initialised `Cell`s, which never allocate).
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: forwarded with the caller's guarantees.
-        let p = unsafe { System.alloc(layout) };
-        if !p.is_null() {
-            note(layout.size() as isize);
-        }
-        p
-    }
-
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: forwarded with the caller's guarantees.
-        let p = unsafe { System.alloc_zeroed(layout) };
-        if !p.is_null() {
-            note(layout.size() as isize);
-        }
-        p
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded with the caller's guarantees.
-        unsafe { System.dealloc(ptr, layout) };
-        note(-(layout.size() as isize));
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        // SAFETY: forwarded with the caller's guarantees.
-        let p = unsafe { System.realloc(ptr, layout, new_size) };
-        if !p.is_null() {
-            note(new_size as isize - layout.size() as isize);
-        }
-        p
-    }
-}
-
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
+static ALLOCATOR: CountingAllocator = CountingAllocator;
 
 /// Runs `f` and returns its result with the peak of extra live heap bytes on this thread meanwhile.
 fn peak_during<R>(f: impl FnOnce() -> R) -> (R, usize) {
-    let base = LIVE.with(Cell::get);
-    PEAK.with(|p| p.set(base));
-    let result = f();
-    let peak = PEAK.with(Cell::get) - base;
-    (result, peak.max(0) as usize)
+    let (result, peak) = alloc::peak_during(f);
+    (result, peak.thread)
 }
 
 /// Heap a reader may use beyond 64 × the file size: error messages, the section list, metadata.
@@ -91,30 +35,9 @@ const SLACK: usize = 64 << 10;
 // ---------------------------------------------------------------------------------------------
 // Fixtures and checks
 
-/// A small valid file (a few KiB) with every kind of section.
+/// A small valid file (a few KiB) with every kind of section, named "hostile".
 fn small_options() -> SyntheticOptions {
-    SyntheticOptions {
-        grid: [2, 1, 1],
-        triangles_per_cell: 1..=3,
-        ellipsoids_per_cell: 1..=2,
-        lines_per_cell: 1..=1,
-        planes_per_cell: 1..=1,
-        prune_leaves_per_cell: 1..=1,
-        block_ellipsoids: 2,
-        curve_samples: 2,
-        lod_levels: 2,
-        billboards: true,
-        materials: 1,
-        textures: 1,
-        png_image: false,
-        tree_count: 1,
-        extension_kinds: vec![0x0001_0000],
-        ao: true,
-        indirect_planes: true,
-        ellipsoid_ao: true,
-        line_ao: true,
-        name: Some("hostile".into()),
-    }
+    SyntheticOptions { name: Some("hostile".into()), ..SyntheticOptions::small() }
 }
 
 fn small_data() -> ContainerData {

@@ -7,6 +7,8 @@
 //! per cell; with impostors, their planes and atlas; with baselines, each tree's LoD chain and
 //! billboards; materials, images and metadata.
 
+use std::sync::Arc;
+
 use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use treelod_format::{
@@ -33,6 +35,12 @@ use crate::texture::{TriangleSurface, integrate, linear_to_srgb};
 
 /// Triangles with less area than this (m²) are degenerate and dropped.
 const MIN_AREA: f32 = 1e-12;
+
+/// Triangles with a corner farther than this from the block's origin along an axis, metres, are
+/// dropped with the non-finite ones: nothing a tree needs lies 1,000 km out, and the stages'
+/// squared distances and covariances of coordinates near `f32::MAX` overflow to infinities that
+/// the container may not hold.
+const MAX_COORDINATE: f32 = 1e6;
 
 /// Everything that controls a build. Recorded in the container's settings (spec §7.1).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -74,6 +82,48 @@ pub struct BuildConfig {
     /// that zstd compresses the container about a third smaller; [`Precision::FULL`] keeps every
     /// bit.
     pub precision: Precision,
+    /// Told how far the long stages are (ambient occlusion); default none. Not a setting: it
+    /// never changes what is built.
+    pub progress: Progress,
+}
+
+/// Receives the progress of a long build stage: `(stage, done, total)`, `done` rising to
+/// `total` (for [`Progress::AMBIENT_OCCLUSION`], vertices). It is called from the build's worker
+/// threads a few hundred times per stage, so it should be cheap; it never changes what is built.
+#[derive(Clone, Default)]
+pub struct Progress(Option<Arc<ProgressFn>>);
+
+/// What a [`Progress`] calls: `(stage, done, total)`.
+type ProgressFn = dyn Fn(&'static str, u64, u64) + Send + Sync;
+
+impl Progress {
+    /// The ambient-occlusion stage's name.
+    pub const AMBIENT_OCCLUSION: &'static str = "ambient occlusion";
+
+    /// A hook calling `report`.
+    pub fn new(report: impl Fn(&'static str, u64, u64) + Send + Sync + 'static) -> Self {
+        Self(Some(Arc::new(report)))
+    }
+
+    /// Reports `done` of `total` for `stage` (nothing without a hook).
+    pub fn report(&self, stage: &'static str, done: u64, total: u64) {
+        if let Some(report) = &self.0 {
+            report(stage, done, total);
+        }
+    }
+}
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() { "Progress(hook)" } else { "Progress(none)" })
+    }
+}
+
+/// Any two are equal: a hook does not change what is built.
+impl PartialEq for Progress {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 /// The build settings a build with `config` records in the container's metadata (spec §7.1), sorted
@@ -194,6 +244,8 @@ pub struct BuildStats {
     pub lines_per_level: Vec<u32>,
     /// Wall-clock time of the line stage, milliseconds (0 without).
     pub line_millis: u64,
+    /// Wall-clock time of the ambient-occlusion stage, milliseconds (0 without).
+    pub ao_millis: u64,
 }
 
 /// What a build returns.
@@ -362,7 +414,8 @@ fn gather(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<Gath
                 }
                 let [a, b, c] = tri.map(|i| Vec3::from_array(vertices[(base + i) as usize].position));
                 let area: f32 = 0.5 * (b - a).cross(c - a).length();
-                if !(a.is_finite() && b.is_finite() && c.is_finite() && area.is_finite() && area > MIN_AREA) {
+                let in_range = [a, b, c].iter().all(|p| p.is_finite() && p.abs().max_element() <= MAX_COORDINATE);
+                if !(in_range && area.is_finite() && area > MIN_AREA) {
                     dropped += 1;
                     continue;
                 }
@@ -376,7 +429,7 @@ fn gather(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<Gath
             }
             if dropped > 0 {
                 warnings.push(format!(
-                    "{}: {}: dropped {dropped} degenerate or non-finite triangles",
+                    "{}: {}: dropped {dropped} degenerate or non-finite triangles (or beyond 1,000 km)",
                     scene.name,
                     part.label()
                 ));
@@ -679,10 +732,13 @@ fn assemble(
     vertices.shrink_to_fit();
     // Stage: ambient occlusion of the vertices, then of each point (its leaves' mean); each
     // triangle's coverage is kept for the ellipsoids' occlusion.
+    let ao_start = std::time::Instant::now();
     let (vertex_ao, point_ao, coverage) = match &config.ao {
         Some(ao) => {
+            let progress = |done, total| config.progress.report(Progress::AMBIENT_OCCLUSION, done, total);
             let (vertex_ao, point_ao, coverage) =
-                block_occlusion(&tris, &order, &vertices, &points, &cells, &material_keys, trees, ao);
+                block_occlusion(&tris, &order, &vertices, &points, &cells, &material_keys, trees, ao, &progress);
+            stats.ao_millis = u64::try_from(ao_start.elapsed().as_millis()).unwrap_or(u64::MAX);
             (Some(vertex_ao), point_ao, coverage)
         }
         None => (None, Vec::new(), Vec::new()),
@@ -1145,7 +1201,7 @@ fn line_occlusion(cell: &CellLines, tris: &[Tri], vertex_ao: &[f32]) -> Vec<u8> 
 /// The ambient occlusion of the written vertices ([`crate::ambient`]), and of each point, encoded:
 /// the mean of its leaves' (their triangles' corners' mean), weighted by their opaque area. A
 /// triangle stops rays by the coverage of its leaf point (spec §6.5's alpha), returned third (per
-/// triangle of `tris`).
+/// triangle of `tris`). `progress` is told the vertices done.
 #[expect(clippy::too_many_arguments, reason = "the stage reads the build's arrays")]
 fn block_occlusion(
     tris: &[Tri],
@@ -1156,6 +1212,7 @@ fn block_occlusion(
     material_keys: &[(usize, usize, Class)],
     trees: &[Placed<'_>],
     config: &AoConfig,
+    progress: &(dyn Fn(u64, u64) + Sync),
 ) -> (Vec<f32>, Vec<u8>, Vec<f32>) {
     // Each written triangle's coverage (its leaf point's alpha) and whether it is two-sided; a
     // cell's triangles are `order[cell.triangles]`, each with its leaf id in `part`.
@@ -1181,7 +1238,7 @@ fn block_occlusion(
         .zip(&coverage)
         .map(|(t, &opacity)| AoTriangle { v: t.v, opacity, two_sided: two_sided(t) })
         .collect();
-    let vertex_ao = vertex_occlusion(vertices, &rays, config);
+    let vertex_ao = vertex_occlusion(vertices, &rays, config, progress);
     drop(rays);
     // Per cell, each leaf's (occlusion × weight, weight) in leaf order, then each point's run.
     let mut point_ao = vec![0u8; points.len()];

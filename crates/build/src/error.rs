@@ -31,8 +31,9 @@ pub enum BuildError {
         /// What is unsupported, naming the extension, primitive or image.
         what: String,
     },
-    /// A buffer the file refers to cannot be found or read.
-    #[error("{path}: buffer {index} ({uri}) is missing: {reason}")]
+    /// A buffer the file refers to cannot be found or read (missing, not a regular file, shorter
+    /// than declared).
+    #[error("{path}: buffer {index} ({uri}) cannot be read: {reason}")]
     MissingBuffer {
         /// The file.
         path: PathBuf,
@@ -68,6 +69,22 @@ pub enum BuildError {
         name: String,
         /// Why, e.g. how many triangles were dropped.
         reason: String,
+    },
+    /// The input needs more than a resource limit of the import allows
+    /// ([`crate::ImportLimits`]); the file may be valid, but this build refuses it.
+    #[error("{path}: {what}: {amount} {limit} exceed the limit of {max} (raise it with {})", limit.option())]
+    Limit {
+        /// The file.
+        path: PathBuf,
+        /// What needs it, naming the glTF object (`images[0]`, `meshes[2].primitives[0]`, …).
+        what: String,
+        /// The limit exceeded.
+        limit: crate::import::Limit,
+        /// How much the import needs with it: a total for bytes, instances and triangles, the
+        /// image's own pixels for an image (counting stops at the first refusal).
+        amount: u64,
+        /// The limit's value.
+        max: u64,
     },
     /// A setting is out of range.
     #[error("invalid setting: {0}")]

@@ -27,13 +27,16 @@ pub mod texture;
 
 pub use ambient::AoConfig;
 pub use assemble::{
-    BuildConfig, BuildOutput, BuildStats, Placed, auto_grid, build_block, build_scenes, ellipsoid_report, prune_report,
-    recorded_settings,
+    BuildConfig, BuildOutput, BuildStats, Placed, Progress, auto_grid, build_block, build_scenes, ellipsoid_report,
+    prune_report, recorded_settings,
 };
 pub use demo::{DemoTreeConfig, cards_on_planes, demo_tree, leaf_material};
 pub use ellipsoid::{Clustering, EllipsoidConfig, Ellipsoids};
 pub use error::BuildError;
-pub use import::{content_hash, import_gltf, import_gltf_bytes, scene_name};
+pub use import::{
+    ImportLimits, content_hash, import_gltf, import_gltf_bytes, import_gltf_bytes_with, import_gltf_with, read_source,
+    scene_name,
+};
 pub use impostor::{ImpostorConfig, Impostors, Texturing};
 pub use lines::{LineConfig, Lines};
 pub use lod_chain::LodChainConfig;

@@ -50,9 +50,11 @@ pub fn integrate(material: &Material, image: Option<&Image>, surface: &TriangleS
             let e1 = surface.uv[1] - surface.uv[0];
             let e2 = surface.uv[2] - surface.uv[0];
             let texels = 0.5 * e1.perp_dot(e2).abs() * img.width as f32 * img.height as f32;
-            // About two texels per sample: finer sampling would not change the mean.
+            // About two texels per sample: finer sampling would not change the mean. Texture
+            // coordinates so far apart that the area overflows (NaN) sample once.
+            let k = (texels * 0.5).sqrt().ceil();
             #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 1..=8")]
-            let k = (texels * 0.5).sqrt().ceil().clamp(1.0, MAX_SPLITS as f32) as u32;
+            let k = if k.is_nan() { 1 } else { k.clamp(1.0, MAX_SPLITS as f32) as u32 };
             k
         }
         None => 1,
@@ -154,6 +156,19 @@ mod tests {
         let surface = TriangleSurface { uv: [Vec2::ZERO; 3], color: [Vec4::new(1.0, 0.5, 1.0, 1.0); 3] };
         let c = integrate(&m, None, &surface);
         assert_eq!(c, Vec4::new(0.5, 0.5, 1.0, 1.0));
+    }
+
+    #[test]
+    fn texture_coordinates_far_apart_still_give_a_finite_coverage() {
+        let img = Image { width: 64, height: 64, ..checker_image() };
+        let img = Image { rgba: vec![255; 64 * 64 * 4], ..img };
+        let huge = 3e38;
+        let surface = TriangleSurface {
+            uv: [Vec2::new(-huge, 0.0), Vec2::new(huge, 0.0), Vec2::new(0.0, huge)],
+            color: [Vec4::ONE; 3],
+        };
+        let c = integrate(&material(AlphaMode::Mask), Some(&img), &surface);
+        assert!(c.is_finite(), "{c}");
     }
 
     #[test]

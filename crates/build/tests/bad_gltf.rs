@@ -43,7 +43,7 @@ fn a_valid_triangle_imports() {
 fn a_missing_buffer_file_names_the_buffer() {
     let err = import(&gltf_json("tree.bin", "", 4, true)).unwrap_err();
     assert!(matches!(err, BuildError::MissingBuffer { index: 0, .. }), "{err}");
-    assert!(err.to_string().starts_with("bad.gltf: buffer 0 (tree.bin) is missing"), "{err}");
+    assert!(err.to_string().starts_with("bad.gltf: buffer 0 (tree.bin) cannot be read"), "{err}");
 }
 
 #[test]
@@ -108,4 +108,16 @@ fn a_position_accessor_that_does_not_exist_is_an_error_not_a_panic() {
     assert!(matches!(err, BuildError::Gltf { .. }), "{err:?}");
     let message = err.to_string();
     assert!(message.contains("bad.gltf") && message.contains("POSITION: accessor 7 does not exist"), "{message}");
+}
+
+#[test]
+fn a_glb_header_shorter_than_itself_is_an_error() {
+    for length in [0u32, 8, 11] {
+        let mut glb = b"glTF".to_vec();
+        glb.extend(2u32.to_le_bytes());
+        glb.extend(length.to_le_bytes());
+        let err = import_gltf_bytes(&glb, Path::new("bad.glb"), None).unwrap_err();
+        assert!(matches!(err, BuildError::Gltf { .. }), "{err}");
+        assert!(err.to_string().contains("GLB header declares"), "{err}");
+    }
 }

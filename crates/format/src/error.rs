@@ -151,6 +151,17 @@ pub enum Error {
     /// The writer was given data that would make an invalid file.
     #[error("cannot write: {0}")]
     Write(String),
+    /// A written file failed the check made before renaming it over `path`
+    /// ([`crate::ContainerData::into_path_verified`]): it was removed, and `path` is as it was.
+    #[error("{path}: {source} (the new file fails verification and was not written{})", kept_note(*.kept))]
+    NotReplaced {
+        /// The file that was to be written.
+        path: PathBuf,
+        /// Whether a file exists at `path`: the old one, kept.
+        kept: bool,
+        /// Why the written file was refused.
+        source: Box<Error>,
+    },
     /// Any error, with the file it happened in.
     #[error("{path}: {source}")]
     InFile {
@@ -168,7 +179,7 @@ impl Error {
         match self {
             Self::Io { .. } => ErrorClass::Io,
             Self::UnsupportedVersion { .. } | Self::UnsupportedFeature { .. } => ErrorClass::Unsupported,
-            Self::InFile { source, .. } => source.class(),
+            Self::InFile { source, .. } | Self::NotReplaced { source, .. } => source.class(),
             _ => ErrorClass::Invalid,
         }
     }
@@ -177,10 +188,15 @@ impl Error {
     #[must_use]
     pub fn in_file(self, path: impl Into<PathBuf>) -> Self {
         match self {
-            Self::Io { .. } | Self::InFile { .. } => self,
+            Self::Io { .. } | Self::InFile { .. } | Self::NotReplaced { .. } => self,
             other => Self::InFile { path: path.into(), source: Box::new(other) },
         }
     }
+}
+
+/// The end of [`Error::NotReplaced`]'s message: what became of the old file.
+fn kept_note(kept: bool) -> &'static str {
+    if kept { "; the old file is kept" } else { "" }
 }
 
 /// Result alias of the format crate.

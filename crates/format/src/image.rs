@@ -44,6 +44,45 @@ pub fn decode(record: &ImageRecord, data: &[u8]) -> Result<Rgba8, String> {
     Ok(Rgba8 { width, height, texels })
 }
 
+/// The width and height an encoded PNG or JPEG declares in its header, read without decoding
+/// any pixel, so that a caller can refuse an image too large before allocating for it (a small
+/// file may declare billions of pixels). `None` for bytes that are neither PNG nor JPEG.
+///
+/// # Errors
+/// A sentence saying why the header does not read.
+pub fn encoded_size(bytes: &[u8]) -> Option<Result<(u32, u32), String>> {
+    if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+        return Some(decoder.read_info().map(|r| (r.info().width, r.info().height)).map_err(|e| png_message(&e)));
+    }
+    if bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {
+        let mut decoder = jpeg_decoder::Decoder::new(std::io::Cursor::new(bytes));
+        return Some(match decoder.read_info() {
+            Ok(()) => decoder
+                .info()
+                .map(|i| (u32::from(i.width), u32::from(i.height)))
+                .ok_or_else(|| "not a valid JPEG: no frame header".to_owned()),
+            Err(e) => Err(format!("not a valid JPEG: {e}")),
+        });
+    }
+    None
+}
+
+/// A PNG decoder's error as one readable sentence: the decoder writes chunk types as Rust debug
+/// structs (`ChunkType { type: IHDR, critical: true, … }`), which become their four letters.
+fn png_message(error: &png::DecodingError) -> String {
+    const MARK: &str = "ChunkType { type: ";
+    let mut text = error.to_string();
+    while let Some(start) = text.find(MARK) {
+        let rest = &text[start + MARK.len()..];
+        let (Some(comma), Some(close)) = (rest.find(','), rest.find('}')) else { break };
+        let name = rest[..comma.min(close)].to_owned();
+        let end = start + MARK.len() + close + 1;
+        text.replace_range(start..end, &name);
+    }
+    format!("not a valid PNG: {text}")
+}
+
 /// Decodes a PNG file to RGBA8 texels (16-bit channels stripped, palettes and grey expanded).
 ///
 /// # Errors
@@ -51,10 +90,10 @@ pub fn decode(record: &ImageRecord, data: &[u8]) -> Result<Rgba8, String> {
 pub fn decode_png(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
     let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
-    let mut reader = decoder.read_info().map_err(|e| e.to_string())?;
+    let mut reader = decoder.read_info().map_err(|e| png_message(&e))?;
     let size = reader.output_buffer_size().ok_or("image too large")?;
     let mut buf = vec![0; size];
-    let info = reader.next_frame(&mut buf).map_err(|e| e.to_string())?;
+    let info = reader.next_frame(&mut buf).map_err(|e| png_message(&e))?;
     let pixels = &buf[..info.buffer_size()];
     let rgba: Vec<u8> = match info.color_type {
         png::ColorType::Rgba => pixels.to_vec(),
@@ -72,7 +111,7 @@ pub fn decode_png(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
 /// A sentence saying why the bytes are not a JPEG this decoder reads.
 pub fn decode_jpeg(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
     let mut decoder = jpeg_decoder::Decoder::new(std::io::Cursor::new(bytes));
-    let pixels = decoder.decode().map_err(|e| e.to_string())?;
+    let pixels = decoder.decode().map_err(|e| format!("not a valid JPEG: {e}"))?;
     let info = decoder.info().ok_or("no image information")?;
     let rgba: Vec<u8> = match info.pixel_format {
         jpeg_decoder::PixelFormat::RGB24 => pixels.chunks_exact(3).flat_map(|p| [p[0], p[1], p[2], 255]).collect(),
@@ -88,4 +127,44 @@ pub fn decode_jpeg(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
             .collect(),
     };
     Ok((u32::from(info.width), u32::from(info.height), rgba))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn png_2x1() -> Vec<u8> {
+        let mut out = Vec::new();
+        let mut encoder = png::Encoder::new(&mut out, 2, 1);
+        encoder.set_color(png::ColorType::Rgba);
+        let mut writer = encoder.write_header().expect("header");
+        writer.write_image_data(&[1, 2, 3, 4, 5, 6, 7, 8]).expect("data");
+        writer.finish().expect("finish");
+        out
+    }
+
+    #[test]
+    fn the_header_gives_the_size_without_decoding() {
+        let png = png_2x1();
+        assert_eq!(encoded_size(&png), Some(Ok((2, 1))));
+        assert_eq!(encoded_size(b"GIF89a"), None);
+        // A PNG declaring 30000 x 30000 pixels over 2 pixels of data: its size reads.
+        let mut huge = png.clone();
+        huge[16..20].copy_from_slice(&30_000u32.to_be_bytes());
+        huge[20..24].copy_from_slice(&30_000u32.to_be_bytes());
+        let crc = crc32fast::hash(&huge[12..29]);
+        huge[29..33].copy_from_slice(&crc.to_be_bytes());
+        assert_eq!(encoded_size(&huge), Some(Ok((30_000, 30_000))));
+    }
+
+    #[test]
+    fn a_corrupt_png_is_one_readable_sentence() {
+        let mut png = png_2x1();
+        png[17] ^= 0xFF; // the IHDR width: its CRC no longer matches
+        for message in [decode_png(&png).unwrap_err(), encoded_size(&png).and_then(Result::err).unwrap_or_default()] {
+            assert!(message.starts_with("not a valid PNG: "), "{message}");
+            assert!(message.contains("IHDR"), "{message}");
+            assert!(!message.contains('{'), "{message}");
+        }
+    }
 }

@@ -496,6 +496,9 @@ pub mod material_class {
 /// Material flag bit 0: draw both faces.
 pub const MATERIAL_DOUBLE_SIDED: u32 = 1;
 
+/// The largest width or height of an image in a container, texels (spec §6.7).
+pub const MAX_IMAGE_SIDE: u32 = 16_384;
+
 /// An image: a texture or an impostor atlas (spec §6.7).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]

@@ -18,7 +18,7 @@ use crate::records::{
 };
 
 /// Largest image side in texels (spec §6.7, §12).
-const MAX_IMAGE_SIDE: u32 = 16_384;
+use crate::records::MAX_IMAGE_SIDE;
 /// The PNG file signature (spec §6.7).
 const PNG_SIGNATURE: [u8; 8] = [0x89, 0x50, 0x4E, 0x47, 0x0D, 0x0A, 0x1A, 0x0A];
 /// The start of every JPEG file (spec §6.7).

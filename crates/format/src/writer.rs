@@ -255,7 +255,7 @@ impl ContainerData {
     /// # Errors
     /// [`Error::Write`] as [`Self::to_bytes`]; [`Error::Io`] naming the path if writing fails.
     pub fn write_to_path(&self, path: impl AsRef<Path>, compression: Compression) -> Result<u64> {
-        write_sections_to_path(self.sections()?, path.as_ref(), compression)
+        write_sections_to_path(self.sections()?, path.as_ref(), compression, |_| Ok(()))
     }
 
     /// As [`Self::write_to_path`], consuming the data: each array is freed as soon as its section
@@ -264,9 +264,38 @@ impl ContainerData {
     /// # Errors
     /// As [`Self::write_to_path`].
     pub fn into_path(self, path: impl AsRef<Path>, compression: Compression) -> Result<u64> {
+        self.into_path_checked(path, compression, |_| Ok(()))
+    }
+
+    /// As [`Self::into_path`], but the temporary file is opened and fully verified
+    /// ([`Container::open`] and [`crate::verify`]) before it is renamed over `path`: a file that
+    /// fails is removed and never replaces what was at `path`.
+    ///
+    /// # Errors
+    /// As [`Self::into_path`]; [`Error::NotReplaced`] with the verification's error if the written
+    /// file fails it (`path` is then untouched).
+    pub fn into_path_verified(self, path: impl AsRef<Path>, compression: Compression) -> Result<u64> {
+        self.into_path_checked(path, compression, |written| {
+            let container = Container::open(written)?;
+            crate::verify(&container).map(drop)
+        })
+    }
+
+    /// As [`Self::into_path`], calling `check` on the complete, flushed temporary file before it
+    /// is renamed over `path`. If `check` fails the temporary file is removed and `path` is left as
+    /// it was (an existing file there is kept byte for byte).
+    ///
+    /// # Errors
+    /// As [`Self::into_path`]; [`Error::NotReplaced`] holding the error of `check`.
+    pub fn into_path_checked(
+        self,
+        path: impl AsRef<Path>,
+        compression: Compression,
+        check: impl FnOnce(&Path) -> Result<()>,
+    ) -> Result<u64> {
         let path = path.as_ref();
         let sections = self.into_sections()?;
-        write_sections_to_path(sections, path, compression)
+        write_sections_to_path(sections, path, compression, check)
     }
 
     /// Writes the file to `sink`: a zeroed header and table, each section's payload as it is
@@ -281,8 +310,14 @@ impl ContainerData {
 }
 
 /// Writes `sections` to `path` atomically: to a temporary file in the same directory, flushed,
-/// then renamed over `path`.
-fn write_sections_to_path(sections: Vec<SectionBytes<'_>>, path: &Path, compression: Compression) -> Result<u64> {
+/// checked by `check`, then renamed over `path`. On any failure the temporary file is removed
+/// (dropping it does) and `path` is untouched.
+fn write_sections_to_path(
+    sections: Vec<SectionBytes<'_>>,
+    path: &Path,
+    compression: Compression,
+    check: impl FnOnce(&Path) -> Result<()>,
+) -> Result<u64> {
     let io = |source| Error::Io { path: path.to_owned(), source };
     let mut tmp = temporary_beside(path)?;
     let mut sink = std::io::BufWriter::new(tmp.as_file_mut());
@@ -293,8 +328,23 @@ fn write_sections_to_path(sections: Vec<SectionBytes<'_>>, path: &Path, compress
     sink.flush().map_err(io)?;
     drop(sink);
     tmp.as_file().sync_all().map_err(io)?;
+    // Whatever `check` opened (a memory map) is closed when it returns, before the rename.
+    check(tmp.path()).map_err(|source| Error::NotReplaced {
+        path: path.to_owned(),
+        kept: path.exists(),
+        source: Box::new(strip_file(source)),
+    })?;
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(size)
+}
+
+/// The error without the [`Error::InFile`] wrapper naming the temporary file, whose name means
+/// nothing to the user (the error is reported for the output).
+fn strip_file(error: Error) -> Error {
+    match error {
+        Error::InFile { source, .. } => strip_file(*source),
+        other => other,
+    }
 }
 
 /// Writes the file to `sink` ([`ContainerData::encode`]); each section's bytes are dropped once
@@ -536,8 +586,87 @@ fn align(offset: u64) -> u64 {
 
 #[cfg(test)]
 mod tests {
-    use super::{compress_shuffled, temporary_beside, temporary_target};
+    use super::{Compression, ContainerData, compress_shuffled, temporary_beside, temporary_target};
+    use crate::error::{Error, ErrorClass};
+    use crate::metadata::{Metadata, Setting, Source, Tree};
     use crate::pack::shuffle;
+    use crate::records::{BlockRecord, CellRecord};
+
+    /// A one-cell container with no geometry that verifies; with `unsorted`, its settings are out
+    /// of order, which it still writes and opens but `verify` refuses.
+    fn empty(unsorted: bool) -> ContainerData {
+        let mut settings =
+            vec![Setting { key: "a".into(), value: "1".into() }, Setting { key: "b".into(), value: "2".into() }];
+        if unsorted {
+            settings.reverse();
+        }
+        ContainerData {
+            metadata: Metadata {
+                generator: "test".into(),
+                name: "empty".into(),
+                trees: vec![Tree::default()],
+                sources: vec![Source::default()],
+                settings,
+                ..Metadata::default()
+            },
+            block: BlockRecord { bounds_max: [1.0; 3], grid: [1, 1, 1], tree_count: 1, ..BlockRecord::default() },
+            cells: vec![CellRecord::default(); 2],
+            ..ContainerData::default()
+        }
+    }
+
+    /// The names in `dir`, sorted.
+    fn names(dir: &std::path::Path) -> Vec<String> {
+        let mut names: Vec<String> =
+            std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn a_failed_check_keeps_the_old_file_and_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("tree.treelod");
+        empty(false).into_path_verified(&path, Compression::default()).unwrap();
+        let old = std::fs::read(&path).unwrap();
+        crate::verify(&crate::Container::open(&path).unwrap()).unwrap();
+
+        // A check that fails: the file is not replaced, the temporary file is gone.
+        let mut checked = None;
+        let err = empty(false)
+            .into_path_checked(&path, Compression::None, |written| {
+                checked = Some(written.to_owned());
+                assert!(written.exists() && written != path);
+                Err(Error::Write("refused by the test".into()))
+            })
+            .unwrap_err();
+        assert!(matches!(&err, Error::NotReplaced { path: p, kept: true, .. } if *p == path), "{err:?}");
+        assert!(err.to_string().contains("refused by the test"), "{err}");
+        assert!(err.to_string().ends_with("the old file is kept)"), "{err}");
+        assert!(checked.is_some_and(|t| !t.exists()), "the temporary file is removed");
+        assert_eq!(std::fs::read(&path).unwrap(), old, "the old file is byte-identical");
+        assert_eq!(names(dir.path()), ["tree.treelod"]);
+
+        // A file that writes and opens but fails verification does not replace the old one.
+        let err = empty(true).into_path_verified(&path, Compression::default()).unwrap_err();
+        assert_eq!(err.class(), ErrorClass::Invalid);
+        let Error::NotReplaced { source, kept: true, .. } = &err else { panic!("{err:?}") };
+        assert!(!matches!(**source, Error::InFile { .. }), "the temporary file is not named: {err}");
+        assert!(err.to_string().contains("not sorted"), "{err}");
+        assert_eq!(std::fs::read(&path).unwrap(), old);
+        assert_eq!(names(dir.path()), ["tree.treelod"]);
+
+        // Nothing at the path: nothing is written, and the message says nothing was kept.
+        let fresh = dir.path().join("fresh.treelod");
+        let err = empty(true).into_path_verified(&fresh, Compression::None).unwrap_err();
+        assert!(matches!(err, Error::NotReplaced { kept: false, .. }));
+        assert!(!err.to_string().contains("kept"), "{err}");
+        assert_eq!(names(dir.path()), ["tree.treelod"]);
+
+        // Without a check the same data is written (and replaces the old file).
+        empty(true).into_path(&path, Compression::None).unwrap();
+        assert_ne!(std::fs::read(&path).unwrap(), old);
+    }
 
     #[test]
     fn streamed_shuffling_compresses_the_shuffled_bytes() {

@@ -10,8 +10,10 @@
 //!
 //! An output is up to date when it opens and records this tool's version, one source with the
 //! input's relative path and content hash, and the settings these options record. Outputs are
-//! written atomically by the format crate (temporary file beside the output, then rename); a run
-//! removes the temporary files that a killed run left beside the outputs it is responsible for.
+//! written atomically by the format crate (temporary file beside the output, verified, then
+//! renamed: a file that fails verification never replaces the old output); a run removes the
+//! temporary files that a killed run left beside the outputs it is responsible for. A file whose
+//! conversion panics is that file's failure, and the run goes on.
 
 use std::ffi::OsString;
 use std::io;
@@ -140,10 +142,11 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             stdout_failed.store(true, Ordering::Relaxed);
         }
     };
-    let removed = remove_leftovers(&jobs);
-    if removed > 0 && !json {
-        print(format!("removed {removed} temporary file(s) left beside outputs by an interrupted run\n"));
+    let removed = build::remove_leftovers(jobs.iter().map(|job| job.output.as_path()));
+    if let Some(text) = build::leftovers_line(removed).filter(|_| !json) {
+        print(text);
     }
+    quiet_caught_panics();
 
     let outcomes: Vec<Mutex<Option<Outcome>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
     for (job, slot) in jobs.iter().zip(&outcomes) {
@@ -260,15 +263,61 @@ fn line(job: &Job, outcome: &Outcome, json: bool) -> String {
     format!("{status:<10}  {} from {} in {:.2} s{sizes}\n", job.output.display(), job.input.display(), outcome.seconds)
 }
 
-/// Converts one file, or finds its output up to date. Errors are printed to stderr.
+/// Converts one file, or finds its output up to date. Errors are printed to stderr; a panic is
+/// this file's failure ([`unless_panic`]).
 fn convert(job: &Job, options: &BuildOptions, force: bool) -> Outcome {
     let start = Instant::now();
     let mut source_bytes = None;
-    let status = match convert_file(job, options, force, &mut source_bytes) {
+    let status = match unless_panic(&job.input, || convert_file(job, options, force, &mut source_bytes)) {
         Ok(status) => status,
         Err(failed) => Status::Failed(failed),
     };
     Outcome { status, seconds: start.elapsed().as_secs_f64(), source_bytes }
+}
+
+/// Conversions running inside [`unless_panic`] now; while there are any, the panic hook that
+/// [`quiet_caught_panics`] installs prints nothing.
+static CONVERTING: AtomicUsize = AtomicUsize::new(0);
+
+/// Runs `convert` (one file's conversion), turning a panic into that file's failure: `error: FILE:
+/// internal error: MESSAGE (please report this file)`, class [`ErrorClass::Invalid`]. A last
+/// resort, so that one file that trips a bug costs that file and not the run: inputs are meant to
+/// be refused with a reason before anything can panic. What the conversion held is dropped while
+/// unwinding (a temporary output file is removed).
+fn unless_panic<T>(input: &Path, convert: impl FnOnce() -> Result<T, Failed>) -> Result<T, Failed> {
+    CONVERTING.fetch_add(1, Ordering::SeqCst);
+    let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(convert));
+    CONVERTING.fetch_sub(1, Ordering::SeqCst);
+    caught.unwrap_or_else(|payload| {
+        let message = panic_message(payload.as_ref());
+        report::message_error(input, &format!("internal error: {message} (please report this file)"));
+        Err(Failed { class: ErrorClass::Invalid })
+    })
+}
+
+/// A panic's message on one line (as every error line), from its payload.
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    let message = payload
+        .downcast_ref::<&str>()
+        .copied()
+        .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
+        .unwrap_or("a panic without a message");
+    message.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// Installs (once) a panic hook that prints nothing for a panic while a conversion runs, which
+/// [`unless_panic`] reports as one error line, and defers to the previous hook otherwise and when
+/// `RUST_BACKTRACE` is set (to see where it happened).
+fn quiet_caught_panics() {
+    static INSTALLED: std::sync::Once = std::sync::Once::new();
+    INSTALLED.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if CONVERTING.load(Ordering::SeqCst) == 0 || std::env::var_os("RUST_BACKTRACE").is_some() {
+                previous(info);
+            }
+        }));
+    });
 }
 
 fn convert_file(
@@ -278,7 +327,8 @@ fn convert_file(
     source_bytes: &mut Option<u64>,
 ) -> Result<Status, Failed> {
     let input = job.input.as_path();
-    let bytes = std::fs::read(input).map_err(|e| report::io_error(input, &e))?;
+    let limits = options.import_limits();
+    let bytes = treelod_build::read_source(input, &limits).map_err(|e| report::build_error(input, &e))?;
     *source_bytes = Some(bytes.len() as u64);
     if !force {
         let hash = treelod_build::content_hash(&bytes);
@@ -288,29 +338,18 @@ fn convert_file(
     }
     // The same import as `treelod build INPUT` (the glTF's relative URIs resolve beside it), with the
     // relative path recorded as the source path.
-    let mut scene =
-        treelod_build::import_gltf_bytes(&bytes, input, input.parent()).map_err(|e| report::build_error(input, &e))?;
+    let mut scene = treelod_build::import_gltf_bytes_with(&bytes, input, input.parent(), &limits)
+        .map_err(|e| report::build_error(input, &e))?;
     drop(bytes);
     scene.source.path.clone_from(&job.relative);
     if let Some(dir) = job.output.parent() {
         std::fs::create_dir_all(dir).map_err(|e| report::io_error(dir, &e))?;
     }
     let name = scene.name.clone();
-    // Verified here rather than by `build_container`, so a file that fails verification can be
-    // removed: left in place it would look up to date to the next run.
-    let unverified = BuildOptions { no_verify: true, ..options.clone() };
-    let built = build::build_container(&name, vec![(scene, Vec3::ZERO)], &[input], &job.output, &unverified)?;
-    if !options.no_verify {
-        let checked = Container::open(&job.output).and_then(|container| treelod_format::verify(&container).map(drop));
-        if let Err(e) = checked {
-            let failed = report::file_error(&job.output, &e);
-            if let Err(e) = std::fs::remove_file(&job.output) {
-                report::io_error(&job.output, &e);
-            }
-            return Err(failed);
-        }
-    }
-    Ok(Status::Built { file_bytes: built.file_bytes, verified: !options.no_verify })
+    // Verified before the rename (unless --no-verify): a file that fails verification is never
+    // written, and the old output, which is not up to date (or --force), stays as it was.
+    let built = build::build_container(&name, vec![(scene, Vec3::ZERO)], &[input], &job.output, options)?;
+    Ok(Status::Built { file_bytes: built.file_bytes, verified: built.verified })
 }
 
 /// The size of `output` if it is up to date: it opens (spec §9.1) and its metadata records this
@@ -332,37 +371,6 @@ fn up_to_date(output: &Path, relative: &str, content_hash: &str, options: &Build
         && source.content_hash == content_hash
         && meta.settings == options.recorded_settings(grid);
     same.then(|| container.header().file_size)
-}
-
-/// Removes the temporary files (`treelod_format::temporary_target`) that a killed run left beside
-/// the outputs of `jobs`, and only those: other shards writing into the same directories at the
-/// same time own the others. Returns how many were removed; failures are ignored (the file stays,
-/// harmless: it never has an output's name).
-fn remove_leftovers(jobs: &[Job]) -> usize {
-    let mut by_dir: std::collections::BTreeMap<&Path, std::collections::BTreeSet<OsString>> =
-        std::collections::BTreeMap::new();
-    for job in jobs {
-        if let (Some(dir), Some(name)) = (job.output.parent(), job.output.file_name()) {
-            by_dir.entry(dir).or_default().insert(name.to_owned());
-        }
-    }
-    let mut removed = 0;
-    for (dir, names) in by_dir {
-        let Ok(entries) = std::fs::read_dir(dir) else {
-            continue;
-        };
-        for entry in entries.flatten() {
-            let file_name = entry.file_name();
-            let ours = file_name
-                .to_str()
-                .and_then(treelod_format::temporary_target)
-                .is_some_and(|target| names.contains(std::ffi::OsStr::new(target)));
-            if ours && entry.file_type().is_ok_and(|t| t.is_file()) && std::fs::remove_file(entry.path()).is_ok() {
-                removed += 1;
-            }
-        }
-    }
-    removed
 }
 
 /// The jobs of `inputs` in order, each directory's files in sorted order. Errors (an unreadable
@@ -562,7 +570,28 @@ fn progress_bar(len: u64) -> indicatif::ProgressBar {
 mod tests {
     use std::path::Path;
 
-    use super::{Shard, glob_pattern, match_name, matches_glob, parse_shard, shard_of, slash_path};
+    use super::{Shard, glob_pattern, match_name, matches_glob, parse_shard, shard_of, slash_path, unless_panic};
+    use crate::report::Failed;
+    use treelod_format::ErrorClass;
+
+    #[test]
+    fn a_panic_is_the_files_failure() {
+        let input = Path::new("lib/tree.glb");
+        assert_eq!(unless_panic(input, || Ok::<_, Failed>(7)), Ok(7));
+        let failed = Failed { class: ErrorClass::Io };
+        assert_eq!(unless_panic(input, || Err::<u8, _>(failed)), Err(failed));
+        let invalid = Err(Failed { class: ErrorClass::Invalid });
+        assert_eq!(unless_panic(input, || -> Result<u8, Failed> { panic!("index out of bounds") }), invalid);
+        let owned = String::from("a formatted\nmessage");
+        assert_eq!(unless_panic(input, || -> Result<u8, Failed> { panic!("{owned}") }), invalid);
+        let message = |f: fn()| super::panic_message(std::panic::catch_unwind(f).unwrap_err().as_ref());
+        assert_eq!(message(|| panic!("plain")), "plain");
+        assert_eq!(message(|| panic!("left: {}\n right: {}", 1, 2)), "left: 1 right: 2");
+        assert_eq!(message(|| std::panic::panic_any(7u8)), "a panic without a message");
+        // Nothing is left counted as converting, and the run goes on with the next file.
+        assert_eq!(super::CONVERTING.load(std::sync::atomic::Ordering::SeqCst), 0);
+        assert_eq!(unless_panic(input, || Ok::<_, Failed>("next")), Ok("next"));
+    }
 
     #[test]
     fn shards_are_fixed_and_cover_every_path_once() {

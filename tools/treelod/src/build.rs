@@ -1,12 +1,16 @@
 //! `treelod build` and `treelod demo`: trees in, verified containers out, with a summary.
 
+use std::collections::{BTreeMap, BTreeSet};
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
 use treelod_build::scene::Scene;
-use treelod_build::{BuildConfig, BuildOutput, BuildStats, Placed, PruneConfig, PruneOrder, PruneReport, build_scenes};
-use treelod_format::{Compression, Container, CurveSample, ErrorClass, Setting};
+use treelod_build::{
+    BuildConfig, BuildOutput, BuildStats, ImportLimits, Placed, PruneConfig, PruneOrder, PruneReport, build_scenes,
+};
+use treelod_format::{Compression, CurveSample, ErrorClass, Setting};
 
 use crate::report::{self, Failed};
 use crate::table::{Align, Table};
@@ -138,12 +142,39 @@ pub struct BuildOptions {
     /// zstd compresses about a third smaller.
     #[arg(long)]
     pub full_precision: bool,
-    /// Skip the full verification of each written file.
+    /// Refuse a glTF input that makes the import read or decode more than SIZE bytes in all (the
+    /// file, its buffers, decoded images at 4 bytes per pixel, accessors read, counted per
+    /// instance). Bytes, or with a binary suffix K, M or G (e.g. 512M). Not recorded: it changes
+    /// no output that builds.
+    #[arg(long, value_name = "SIZE", default_value_t = ByteSize(ImportLimits::default().max_decoded_bytes), value_parser = parse_size)]
+    pub max_decoded_bytes: ByteSize,
+    /// Refuse a glTF input with an image of more than N pixels (width × height, read from its
+    /// header before decoding).
+    #[arg(long, value_name = "N", default_value_t = ImportLimits::default().max_image_pixels, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_image_pixels: u64,
+    /// Refuse a glTF input whose node hierarchy expands to more than N mesh instances (a node
+    /// reached by several paths from the scene's roots counts once per path).
+    #[arg(long, value_name = "N", default_value_t = ImportLimits::default().max_instances, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_instances: u64,
+    /// Refuse a glTF input of more than N triangles, all instances together.
+    #[arg(long, value_name = "N", default_value_t = ImportLimits::default().max_triangles, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_triangles: u64,
+    /// Follow buffer and image URIs that lead outside the glTF file's directory (absolute
+    /// paths, `..`, symbolic links pointing out). By default they are refused (exit 4), so a
+    /// model can only read the files beside it.
+    #[arg(long)]
+    pub allow_external_uris: bool,
+    /// Skip the full verification of each written file. By default the file is verified before
+    /// it is renamed over the output, and one that fails is removed (the old output is kept).
     #[arg(long)]
     pub no_verify: bool,
     /// Print one JSON object per container instead of the text summary.
     #[arg(long)]
     pub json: bool,
+    /// Told how far the build's long stages are (not an option: `build` and `demo` set it to
+    /// draw a bar when stderr is a terminal).
+    #[arg(skip)]
+    pub progress: treelod_build::Progress,
 }
 
 impl BuildOptions {
@@ -191,6 +222,7 @@ impl BuildOptions {
             } else {
                 treelod_build::precision::Precision::default()
             },
+            progress: self.progress.clone(),
         }
     }
 
@@ -202,6 +234,18 @@ impl BuildOptions {
             resolution: self.prune_resolution,
             views: self.prune_views,
             ..PruneConfig::default()
+        }
+    }
+
+    /// The resource limits of a glTF import (`--max-*`, `--allow-external-uris`). Not recorded
+    /// in the metadata: an input within them builds the same container whatever they are.
+    pub(crate) fn import_limits(&self) -> ImportLimits {
+        ImportLimits {
+            max_decoded_bytes: self.max_decoded_bytes.0,
+            max_image_pixels: self.max_image_pixels,
+            max_instances: self.max_instances,
+            max_triangles: self.max_triangles,
+            allow_external_uris: self.allow_external_uris,
         }
     }
 
@@ -233,6 +277,42 @@ impl BuildOptions {
 /// The `generator` recorded in the metadata of every container this tool writes.
 pub(crate) fn generator() -> String {
     format!("treelod {}", env!("CARGO_PKG_VERSION"))
+}
+
+/// A size in bytes (`--max-decoded-bytes`), shown with the largest binary suffix that divides it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ByteSize(pub u64);
+
+impl std::fmt::Display for ByteSize {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let suffix = [("G", 30), ("M", 20), ("K", 10)]
+            .into_iter()
+            .find(|&(_, shift)| self.0 != 0 && self.0.trailing_zeros() >= shift);
+        match suffix {
+            Some((suffix, shift)) => write!(f, "{}{suffix}", self.0 >> shift),
+            None => write!(f, "{}", self.0),
+        }
+    }
+}
+
+/// Parses `--max-decoded-bytes`: a positive number of bytes, optionally followed by a binary
+/// suffix `K`, `M` or `G` (any case; 2^10, 2^20, 2^30).
+fn parse_size(s: &str) -> Result<ByteSize, String> {
+    let text = s.trim();
+    let (digits, shift) = match text.char_indices().last() {
+        Some((i, 'k' | 'K')) => (&text[..i], 10),
+        Some((i, 'm' | 'M')) => (&text[..i], 20),
+        Some((i, 'g' | 'G')) => (&text[..i], 30),
+        _ => (text, 0),
+    };
+    digits
+        .parse::<u64>()
+        .ok()
+        .filter(|&n| n > 0 && n.leading_zeros() >= shift)
+        .map(|n| ByteSize(n << shift))
+        .ok_or_else(|| {
+            format!("{s:?} is not a size: a positive number of bytes, optionally with K, M or G (e.g. 512M)")
+        })
 }
 
 /// `--impostor-texturing`.
@@ -394,16 +474,23 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     if to_directory {
         std::fs::create_dir_all(&args.output).map_err(|e| report::io_error(&args.output, &e))?;
     }
+    let outputs: Vec<PathBuf> = args
+        .inputs
+        .iter()
+        .map(|input| {
+            if to_directory {
+                args.output.join(format!("{}.treelod", treelod_build::scene_name(input)))
+            } else {
+                args.output.clone()
+            }
+        })
+        .collect();
+    report_leftovers(outputs.iter().map(PathBuf::as_path), args.options.json)?;
     // One input at a time: import, build, write, then drop it before the next, so a batch takes the
     // memory of its largest tree, and one bad file does not stop the others.
     let mut first_failure = None;
     let mut seen: Vec<PathBuf> = Vec::new();
-    for input in &args.inputs {
-        let output = if to_directory {
-            args.output.join(format!("{}.treelod", treelod_build::scene_name(input)))
-        } else {
-            args.output.clone()
-        };
+    for (input, output) in args.inputs.iter().zip(outputs) {
         if seen.contains(&output) {
             report::message_error(
                 input,
@@ -413,7 +500,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             continue;
         }
         seen.push(output.clone());
-        let result = import(input).and_then(|scene| {
+        let result = import(input, &args.options).and_then(|scene| {
             let name = scene.name.clone();
             if args.prune_report {
                 let plot = args.prune_plot.as_deref().map(|dir| prune_plot_path(dir, &output));
@@ -430,13 +517,14 @@ pub fn run(args: &Args) -> Result<(), Failed> {
 
 /// `--block`: every input (and every tree of the placement file) in one block.
 fn run_block(args: &Args) -> Result<(), Failed> {
+    report_leftovers([args.output.as_path()], args.options.json)?;
     let mut paths: Vec<PathBuf> = Vec::new();
     let mut x = 0.0f32;
     let mut scenes: Vec<(Scene, Vec3)> = Vec::new();
     let progress = progress_bar(args.inputs.len() as u64);
     for input in &args.inputs {
         progress.set_message(format!("importing {}", input.display()));
-        let scene = import(input)?;
+        let scene = import(input, &args.options)?;
         // Side by side along x with a 10 % gap, each tree's own x extent apart.
         let (lo, hi) = scene_x_range(&scene);
         let offset = x - lo;
@@ -448,7 +536,7 @@ fn run_block(args: &Args) -> Result<(), Failed> {
     if let Some(placement) = &args.placement {
         for (path, at) in read_placement(placement)? {
             progress.set_message(format!("importing {}", path.display()));
-            scenes.push((import(&path)?, at));
+            scenes.push((import(&path, &args.options)?, at));
             paths.push(path);
         }
     }
@@ -595,6 +683,7 @@ pub fn run_demo(args: &DemoArgs) -> Result<(), Failed> {
         leaves: args.leaf_count,
         ..treelod_build::DemoTreeConfig::default()
     };
+    report_leftovers([args.output.as_path()], args.options.json)?;
     let scene = treelod_build::demo_tree(&config);
     let name = scene.name.clone();
     build_one(&name, vec![(scene, Vec3::ZERO)], &[], &args.output, &args.options)?;
@@ -602,6 +691,51 @@ pub fn run_demo(args: &DemoArgs) -> Result<(), Failed> {
         report::write_stdout(&format!("next: treelod dump {}\n", args.output.display()))?;
     }
     Ok(())
+}
+
+/// Removes the temporary files a killed run left beside `outputs` ([`remove_leftovers`]) and, unless
+/// `json`, says how many on stdout if there were any.
+fn report_leftovers<'a>(outputs: impl IntoIterator<Item = &'a Path>, json: bool) -> Result<(), Failed> {
+    match leftovers_line(remove_leftovers(outputs)) {
+        Some(line) if !json => report::write_stdout(&line),
+        _ => Ok(()),
+    }
+}
+
+/// The line saying that `removed` leftover temporary files were removed; none for 0.
+pub(crate) fn leftovers_line(removed: usize) -> Option<String> {
+    (removed > 0).then(|| format!("removed {removed} temporary file(s) left beside outputs by an interrupted run\n"))
+}
+
+/// Removes the temporary files ([`treelod_format::temporary_target`]) that a killed run left beside
+/// `outputs`, and only those: other processes writing other outputs into the same directories at
+/// the same time (other shards of a batch) own the others. Returns how many were removed; failures
+/// are ignored (such a file stays, harmless: it never has an output's name).
+pub(crate) fn remove_leftovers<'a>(outputs: impl IntoIterator<Item = &'a Path>) -> usize {
+    let mut by_dir: BTreeMap<&Path, BTreeSet<&OsStr>> = BTreeMap::new();
+    for output in outputs {
+        if let Some(name) = output.file_name() {
+            let dir = output.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            by_dir.entry(dir).or_default().insert(name);
+        }
+    }
+    let mut removed = 0;
+    for (dir, names) in by_dir {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let file_name = entry.file_name();
+            let ours = file_name
+                .to_str()
+                .and_then(treelod_format::temporary_target)
+                .is_some_and(|target| names.contains(OsStr::new(target)));
+            if ours && entry.file_type().is_ok_and(|t| t.is_file()) && std::fs::remove_file(entry.path()).is_ok() {
+                removed += 1;
+            }
+        }
+    }
+    removed
 }
 
 /// Builds, writes atomically, reopens and verifies one container, then prints its summary.
@@ -612,7 +746,24 @@ fn build_one(
     output: &Path,
     options: &BuildOptions,
 ) -> Result<(), Failed> {
-    let built = build_container(name, scenes, sources, output, options)?;
+    // A bar for the long stages, only on a terminal: nothing else is printed differently.
+    let bar = std::io::IsTerminal::is_terminal(&std::io::stderr()).then(stage_bar);
+    let mut options = options.clone();
+    if let Some(bar) = &bar {
+        let shown = bar.clone();
+        options.progress = treelod_build::Progress::new(move |stage, done, total| {
+            shown.set_length(total);
+            shown.set_position(done);
+            shown.set_message(stage);
+        });
+        report::set_progress_bar(Some(bar.clone()));
+    }
+    let built = build_container(name, scenes, sources, output, &options);
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+        report::set_progress_bar(None);
+    }
+    let built = built?;
     let summary = Summary { output, sources, built: &built };
     report::write_stdout(&if options.json { summary.to_json() } else { summary.to_text() })
 }
@@ -639,8 +790,9 @@ pub(crate) struct Built {
     pub prune_curves: (Vec<CurveSample>, Vec<CurveSample>),
 }
 
-/// Builds one container, writes it atomically (temporary file, then rename), reopens and verifies
-/// it unless `--no-verify`, and returns what was built; prints warnings and errors (naming the
+/// Builds one container, writes it atomically (temporary file, then rename), opening and fully
+/// verifying the temporary file before the rename unless `--no-verify` (a file that fails is
+/// removed and the old file at `output` kept), and returns what was built; prints warnings and errors (naming the
 /// first source, or `output` without one) to stderr, nothing to stdout. The metadata records the
 /// tool as generator and [`BuildOptions::recorded_settings`].
 ///
@@ -667,15 +819,15 @@ pub(crate) fn build_container(
     data.metadata.settings.sort();
     let (materials, images) = (data.materials.len(), data.images.len());
     let prune_curves = (data.prune_scale.clone(), data.prune_lambda.clone());
-    // Consumed: each array is freed once its section is written.
-    let file_bytes = data.into_path(output, options.compression()).map_err(|e| report::file_error(output, &e))?;
-    let verified = if options.no_verify {
-        false
+    // Consumed: each array is freed once its section is written. Verified before the rename, so a
+    // file that fails verification never replaces what was at `output`.
+    let written = if options.no_verify {
+        data.into_path(output, options.compression())
     } else {
-        let container = Container::open(output).map_err(|e| report::file_error(output, &e))?;
-        treelod_format::verify(&container).map_err(|e| report::file_error(output, &e))?;
-        true
+        data.into_path_verified(output, options.compression())
     };
+    let file_bytes = written.map_err(|e| report::file_error(output, &e))?;
+    let verified = !options.no_verify;
     let seconds = start.elapsed().as_secs_f64();
     let source_bytes: u64 = sources.iter().filter_map(|p| std::fs::metadata(p).ok()).map(|m| m.len()).sum();
     Ok(Built { stats, warnings, materials, images, file_bytes, source_bytes, seconds, verified, prune_curves })
@@ -838,6 +990,7 @@ impl Summary<'_> {
             "line_segments": s.line_segments,
             "lines_per_level": s.lines_per_level,
             "line_seconds": s.line_millis as f64 / 1000.0,
+            "ao_seconds": s.ao_millis as f64 / 1000.0,
             "atlas": s.atlas,
             "lod_levels": s.lod_levels,
             "lod_triangles": s.lod_triangles,
@@ -849,8 +1002,9 @@ impl Summary<'_> {
     }
 }
 
-fn import(path: &Path) -> Result<Scene, Failed> {
-    treelod_build::import_gltf(path).map_err(|e| report::build_error(path, &e))
+/// Imports the glTF at `path` within the options' limits.
+fn import(path: &Path, options: &BuildOptions) -> Result<Scene, Failed> {
+    treelod_build::import_gltf_with(path, &options.import_limits()).map_err(|e| report::build_error(path, &e))
 }
 
 fn scene_x_range(scene: &Scene) -> (f32, f32) {
@@ -897,10 +1051,40 @@ fn read_placement(path: &Path) -> Result<Vec<(PathBuf, Vec3)>, Failed> {
     Ok(out)
 }
 
+/// The bar of a build's long stages ([`treelod_build::Progress`]): drawn from its first report.
+fn stage_bar() -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::stderr());
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {percent}% ({eta} left)") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
 fn progress_bar(len: u64) -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(len);
     if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} [{pos}/{len}] {msg}") {
         bar.set_style(style);
     }
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{ByteSize, parse_size};
+
+    #[test]
+    fn sizes_take_binary_suffixes_and_show_the_largest() {
+        assert_eq!(parse_size("1024"), Ok(ByteSize(1024)));
+        assert_eq!(parse_size("64K"), Ok(ByteSize(64 << 10)));
+        assert_eq!(parse_size("512m"), Ok(ByteSize(512 << 20)));
+        assert_eq!(parse_size(" 2G "), Ok(ByteSize(2 << 30)));
+        assert_eq!(parse_size("17179869183G"), Ok(ByteSize(17_179_869_183 << 30)));
+        for bad in ["0", "0K", "", "G", "-1", "1.5G", "2GB", "2 G", "12X", "17179869184G", "18446744073709551616"] {
+            assert!(parse_size(bad).is_err(), "{bad:?}");
+        }
+        let shown: Vec<String> =
+            [2 << 30, 512 << 20, 64 << 10, 1000, 1536, 3072, 3 << 29].map(|n| ByteSize(n).to_string()).to_vec();
+        assert_eq!(shown, ["2G", "512M", "64K", "1000", "1536", "3K", "1536M"]);
+        assert_eq!(ByteSize(treelod_build::ImportLimits::default().max_decoded_bytes).to_string(), "2G");
+    }
 }

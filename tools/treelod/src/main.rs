@@ -30,8 +30,10 @@ Exit codes:
   3  invalid input: not a valid .treelod container, a glTF file that does not parse or holds
      nothing drawable, a bad placement or scene file
   4  unsupported: a newer format version, a feature this build of treelod lacks (e.g. a glTF
-     compression extension), no Vulkan adapter for render or view, no display for view
-  5  I/O error: a file cannot be read or written (missing, a directory, no permission)
+     compression extension), a glTF input over a --max-* limit or with a URI outside its
+     directory, no Vulkan adapter for render or view, no display for view
+  5  I/O error: a file cannot be read or written (missing, a directory, not a regular file,
+     no permission)
 With several files every file is processed and the exit code is that of the first failure.
 Errors go to stderr as `error: FILE: reason`, warnings as `warning: FILE: message`.";
 

@@ -82,6 +82,11 @@ fn reason(error: &Error) -> String {
     match error {
         Error::InFile { source, .. } => reason(source),
         Error::Io { source, .. } => source.to_string(),
+        Error::NotReplaced { path, .. } => {
+            let text = error.to_string();
+            let shown = format!("{}: ", path.display());
+            text.strip_prefix(&shown).map_or_else(|| text.clone(), str::to_owned)
+        }
         other => other.to_string(),
     }
 }
@@ -131,13 +136,13 @@ pub fn print_warning(path: &Path, message: &str) {
 }
 
 /// Prints a build error as `error: PATH: reason` and returns its class: I/O errors are
-/// [`ErrorClass::Io`], unsupported glTF features [`ErrorClass::Unsupported`], the rest
-/// [`ErrorClass::Invalid`].
+/// [`ErrorClass::Io`], unsupported glTF features and inputs over a resource limit
+/// ([`treelod_build::ImportLimits`]) [`ErrorClass::Unsupported`], the rest [`ErrorClass::Invalid`].
 pub fn build_error(path: &Path, error: &treelod_build::BuildError) -> Failed {
     use treelod_build::BuildError;
     let class = match error {
         BuildError::Io { .. } => ErrorClass::Io,
-        BuildError::Unsupported { .. } => ErrorClass::Unsupported,
+        BuildError::Unsupported { .. } | BuildError::Limit { .. } => ErrorClass::Unsupported,
         BuildError::Format(e) => e.class(),
         _ => ErrorClass::Invalid,
     };

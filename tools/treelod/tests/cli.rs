@@ -5,6 +5,7 @@
 mod common;
 use common::read_png;
 use std::f64::consts::PI;
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -803,6 +804,343 @@ fn build_with_pruning_writes_the_lists_dump_shows_them_and_the_report_compares_o
 }
 
 // ---------------------------------------------------------------------------------------------
+// Untrusted input: resource limits, files that are not regular, outputs that fail verification,
+// stale temporary files (issue 28). The import's own refusals are tested in the build crate; these
+// check that the command maps them to its exit codes and one `error: FILE: reason` line.
+
+/// The small shared tree (2888 triangles, 158 kB).
+fn small_tree() -> PathBuf {
+    common::model("quaternius-common-tree-1-3k.glb")
+}
+
+/// Asserts that `out` failed with `code` and printed exactly one line to stderr, an error naming
+/// `path` first; returns that line.
+fn one_error_line(out: &Output, code: i32, path: &Path) -> String {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(code), "stderr: {err}");
+    assert_eq!(err.lines().count(), 1, "one line: {err}");
+    assert!(err.starts_with(&format!("error: {}: ", path.display())), "stderr: {err}");
+    assert!(!err.contains("panicked"), "stderr: {err}");
+    err
+}
+
+/// A GLB of one triangle with texture coordinates, textured with `png` (embedded in the binary
+/// chunk) when given.
+fn triangle_glb(png: Option<&[u8]>) -> Vec<u8> {
+    let (json, bin) = triangle(png);
+    glb_of(&json, &bin)
+}
+
+/// A GLB of `json` with `bin` as its binary chunk (padded to 4 bytes, as its buffer declares).
+fn glb_of(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
+    let mut text = serde_json::to_vec(json).expect("serialises");
+    while !text.len().is_multiple_of(4) {
+        text.push(b' ');
+    }
+    let total = 12 + 8 + text.len() + 8 + bin.len();
+    let mut glb = Vec::with_capacity(total);
+    let u32_le = |n: usize| u32::try_from(n).expect("small").to_le_bytes();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&u32_le(total));
+    glb.extend_from_slice(&u32_le(text.len()));
+    glb.extend_from_slice(b"JSON");
+    glb.extend_from_slice(&text);
+    glb.extend_from_slice(&u32_le(bin.len()));
+    glb.extend_from_slice(b"BIN\0");
+    glb.extend_from_slice(bin);
+    glb
+}
+
+/// The glTF JSON and binary buffer of [`triangle_glb`] (the buffer without a URI).
+fn triangle(png: Option<&[u8]>) -> (serde_json::Value, Vec<u8>) {
+    let mut bin: Vec<u8> = Vec::new();
+    for v in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+        bin.extend(v.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    for uv in [[0.0f32, 1.0], [1.0, 1.0], [0.0, 0.0]] {
+        bin.extend(uv.iter().flat_map(|c| c.to_le_bytes()));
+    }
+    let mut json = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "name": "leaf"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "material": 0}]}],
+        "materials": [{"name": "leaves", "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.6, 0.1, 1.0]}}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"}
+        ],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 24}],
+    });
+    if let Some(png) = png {
+        let offset = bin.len();
+        bin.extend_from_slice(png);
+        json["bufferViews"].as_array_mut().expect("an array").push(serde_json::json!(
+            {"buffer": 0, "byteOffset": offset, "byteLength": png.len()}
+        ));
+        json["images"] = serde_json::json!([{"bufferView": 2, "mimeType": "image/png"}]);
+        json["textures"] = serde_json::json!([{"source": 0}]);
+        json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = serde_json::json!({"index": 0});
+    }
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    json["buffers"] = serde_json::json!([{"byteLength": bin.len()}]);
+    (json, bin)
+}
+
+/// An opaque green RGBA PNG of `width` × `height` pixels.
+fn png_image(width: u32, height: u32) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    let mut encoder = png::Encoder::new(&mut bytes, width, height);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().expect("a header");
+    let pixels: Vec<u8> = (0..width * height).flat_map(|_| [40u8, 160, 30, 255]).collect();
+    writer.write_image_data(&pixels).expect("encodes");
+    writer.finish().expect("finishes");
+    bytes
+}
+
+/// The names of the files in `dir`, sorted.
+fn dir_names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .expect("lists")
+        .map(|e| e.expect("an entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn an_input_over_a_limit_is_unsupported_and_names_the_option() {
+    let dir = scratch("over_a_limit");
+    let tree = small_tree();
+    let out_path = dir.join("tree.treelod");
+    // The file itself is over the decoded-bytes limit (the build and batch read it within it).
+    let out = run_os(
+        [OsStr::new("build"), tree.as_os_str(), OsStr::new("-o"), out_path.as_os_str()]
+            .into_iter()
+            .chain(["--max-decoded-bytes", "64K"].map(OsStr::new)),
+    );
+    let line = one_error_line(&out, 4, &tree);
+    assert!(line.contains("--max-decoded-bytes"), "{line}");
+    assert!(!out_path.exists(), "nothing written");
+    // Its 2888 triangles are over a triangle limit of 1000.
+    let out = run_os(
+        [OsStr::new("build"), tree.as_os_str(), OsStr::new("-o"), out_path.as_os_str()]
+            .into_iter()
+            .chain(["--max-triangles", "1000"].map(OsStr::new)),
+    );
+    let line = one_error_line(&out, 4, &tree);
+    assert!(line.contains("--max-triangles"), "{line}");
+    assert!(!out_path.exists(), "nothing written");
+    // Within the limits the options change nothing: they are not recorded settings.
+    let plain = dir.join("plain.treelod");
+    let out = run_os([OsStr::new("build"), tree.as_os_str(), OsStr::new("-o"), plain.as_os_str()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let limited = ["--max-decoded-bytes", "4M", "--max-triangles", "3000", "--max-instances", "1000"];
+    let limited = limited.iter().chain(&["--max-image-pixels", "1", "--allow-external-uris"]).map(OsStr::new);
+    let out = run_os(
+        [OsStr::new("build"), tree.as_os_str(), OsStr::new("-o"), out_path.as_os_str()].into_iter().chain(limited),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(std::fs::read(&plain).expect("reads") == std::fs::read(&out_path).expect("reads"), "same bytes");
+
+    // In a batch: the file's failed line, the summary, exit 4.
+    let lib = dir.join("lib");
+    std::fs::create_dir_all(&lib).expect("creates");
+    std::fs::copy(&tree, lib.join("tree.glb")).expect("copies");
+    let out = treelod_in(&dir, &["batch", "lib", "-o", "converted", "--max-decoded-bytes", "64K", "--jobs", "1"]);
+    let line = one_error_line(&out, 4, Path::new("lib/tree.glb"));
+    assert!(line.contains("--max-decoded-bytes"), "{line}");
+    let text = stdout(&out);
+    assert!(text.contains("failed      converted/tree.treelod from lib/tree.glb"), "{text}");
+    assert!(text.contains("1 file(s) in ") && text.contains(": 0 built, 0 up to date, 1 failed"), "{text}");
+}
+
+#[cfg(unix)]
+#[test]
+fn a_fifo_as_input_fails_at_once_as_not_a_regular_file() {
+    let dir = scratch("fifo_input");
+    let fifo = dir.join("tree.glb");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
+    assert!(made.success());
+    // Nothing ever writes to the FIFO: opening it to read would block forever.
+    let start = std::time::Instant::now();
+    let out = run_os([OsStr::new("build"), fifo.as_os_str(), OsStr::new("-o"), dir.join("out.treelod").as_os_str()]);
+    let line = one_error_line(&out, 5, &fifo);
+    assert!(line.contains("not a regular file"), "{line}");
+    let out = treelod_in(&dir, &["batch", "tree.glb", "-o", "converted"]);
+    let line = one_error_line(&out, 5, Path::new("tree.glb"));
+    assert!(line.contains("not a regular file"), "{line}");
+    assert!(stdout(&out).contains(": 0 built, 0 up to date, 1 failed"), "{}", stdout(&out));
+    assert!(start.elapsed().as_secs() < 30, "no wait for a writer");
+}
+
+#[test]
+fn uris_outside_the_models_directory_are_unsupported_unless_allowed() {
+    let dir = scratch("external_uris");
+    let models = dir.join("models");
+    std::fs::create_dir_all(&models).expect("creates");
+    let (mut json, bin) = triangle(None);
+    std::fs::write(dir.join("outside.bin"), &bin).expect("writes");
+    std::fs::write(models.join("inside.bin"), &bin).expect("writes");
+    let cases = [("inside", "inside.bin".to_owned()), ("up", "../outside.bin".to_owned())];
+    let absolute = ("absolute", dir.join("outside.bin").to_str().expect("UTF-8").to_owned());
+    for (name, uri) in cases.into_iter().chain([absolute]) {
+        json["buffers"][0]["uri"] = serde_json::json!(uri);
+        let model = models.join(format!("{name}.gltf"));
+        std::fs::write(&model, serde_json::to_vec(&json).expect("serialises")).expect("writes");
+        let out_path = dir.join(format!("{name}.treelod"));
+        let out = run_os([OsStr::new("build"), model.as_os_str(), OsStr::new("-o"), out_path.as_os_str()]);
+        if name == "inside" {
+            assert!(out.status.success(), "{uri}: {}", stderr(&out));
+            continue;
+        }
+        let line = one_error_line(&out, 4, &model);
+        assert!(line.contains("outside the model's directory") && line.contains("--allow-external-uris"), "{line}");
+        assert!(!out_path.exists(), "{uri}: nothing written");
+        let allowed = [OsStr::new("--allow-external-uris")];
+        let out = run_os(
+            [OsStr::new("build"), model.as_os_str(), OsStr::new("-o"), out_path.as_os_str()].into_iter().chain(allowed),
+        );
+        assert!(out.status.success(), "{uri} allowed: {}", stderr(&out));
+    }
+    // In a batch too: the model's line fails with exit 4, the others are built.
+    let out = treelod_in(&dir, &["batch", "models", "-o", "converted", "--jobs", "1"]);
+    assert_eq!(out.status.code(), Some(4), "{}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.contains(": 1 built, 0 up to date, 2 failed"), "{text}");
+}
+
+#[test]
+fn unsupported_required_extensions_exit_4_and_read_ones_build() {
+    let dir = scratch("required_extensions");
+    let cases: [(&[&str], bool); 4] = [
+        (&["KHR_texture_transform", "KHR_mesh_quantization"], true),
+        (&["KHR_draco_mesh_compression"], false),
+        (&["EXT_meshopt_compression"], false),
+        (&["VENDOR_unknown_extension"], false),
+    ];
+    for (i, (required, builds)) in cases.into_iter().enumerate() {
+        let (mut json, bin) = triangle(None);
+        json["extensionsUsed"] = serde_json::json!(required);
+        json["extensionsRequired"] = serde_json::json!(required);
+        let model = dir.join(format!("model{i}.glb"));
+        std::fs::write(&model, glb_of(&json, &bin)).expect("writes");
+        let out_path = dir.join(format!("model{i}.treelod"));
+        let out = run_os([OsStr::new("build"), model.as_os_str(), OsStr::new("-o"), out_path.as_os_str()]);
+        if builds {
+            assert!(out.status.success(), "{required:?}: {}", stderr(&out));
+        } else {
+            let line = one_error_line(&out, 4, &model);
+            assert!(line.contains(required[0]), "{line}");
+            assert!(!out_path.exists());
+        }
+    }
+}
+
+#[test]
+fn a_failed_build_keeps_the_valid_output_of_the_same_name() {
+    let dir = scratch("keeps_output");
+    let out_path = dir.join("tree.treelod");
+    let out = run_os([OsStr::new("build"), small_tree().as_os_str(), OsStr::new("-o"), out_path.as_os_str()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let valid = std::fs::read(&out_path).expect("reads");
+    // An image wider than the container allows (16384): refused by the import, or written and
+    // failing verification; either way the valid file stays and no temporary file is left.
+    let wide = dir.join("wide.glb");
+    std::fs::write(&wide, triangle_glb(Some(&png_image(20_000, 1)))).expect("writes");
+    // And an input that is not glTF at all.
+    let garbage = dir.join("garbage.glb");
+    std::fs::write(&garbage, b"glTF garbage").expect("writes");
+    for input in [&wide, &garbage] {
+        for batch in [false, true] {
+            let out = if batch {
+                let lib = dir.join("lib");
+                let _ = std::fs::remove_dir_all(&lib);
+                std::fs::create_dir_all(&lib).expect("creates");
+                std::fs::copy(input, lib.join("tree.glb")).expect("copies");
+                run_os([OsStr::new("batch"), lib.as_os_str(), OsStr::new("-o"), dir.as_os_str(), OsStr::new("--force")])
+            } else {
+                run_os([OsStr::new("build"), input.as_os_str(), OsStr::new("-o"), out_path.as_os_str()])
+            };
+            let err = stderr(&out);
+            assert!(matches!(out.status.code(), Some(3 | 4)), "{}: {err}", input.display());
+            assert_eq!(err.lines().filter(|l| l.starts_with("error: ")).count(), 1, "{err}");
+            assert!(!err.contains("panicked"), "{err}");
+            if err.starts_with(&format!("error: {}: ", out_path.display())) {
+                assert!(err.contains("the old file is kept"), "{err}");
+            }
+            assert!(std::fs::read(&out_path).expect("reads") == valid, "{}: the valid output is kept", input.display());
+            let names: Vec<String> = dir_names(&dir).into_iter().filter(|n| n.ends_with(".tmp")).collect();
+            assert!(names.is_empty(), "no temporary file left: {names:?}");
+        }
+    }
+}
+
+#[test]
+fn build_removes_stale_temporary_files_beside_its_outputs() {
+    let dir = scratch("stale_temporaries");
+    // Left by killed runs: two of tree.treelod's, and others that are not its.
+    let theirs = [".tree.treelod.Ab12Cd.tmp", ".tree.treelod.x9Y8z7.tmp"];
+    let others = [".other.treelod.Ab12Cd.tmp", ".tree.treelod.tmp", "tree.treelod.Ab12Cd.tmp"];
+    for name in theirs.iter().chain(&others) {
+        std::fs::write(dir.join(name), b"partial").expect("writes");
+    }
+    let out_path = dir.join("tree.treelod");
+    let out = run_os([OsStr::new("build"), small_tree().as_os_str(), OsStr::new("-o"), out_path.as_os_str()]);
+    let text = stdout(&out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(text.starts_with("removed 2 temporary file(s) left beside outputs by an interrupted run\n"), "{text}");
+    let mut expected: Vec<String> = others.iter().map(|n| (*n).to_owned()).collect();
+    expected.push("tree.treelod".to_owned());
+    expected.sort();
+    assert_eq!(dir_names(&dir), expected);
+    // Into a directory, with --json: removed too, and stdout stays JSON.
+    std::fs::write(dir.join(".quaternius-common-tree-1-3k.treelod.Ab12Cd.tmp"), b"partial").expect("writes");
+    let out = run_os([
+        OsStr::new("build"),
+        small_tree().as_os_str(),
+        OsStr::new("-o"),
+        dir.as_os_str(),
+        OsStr::new("--json"),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let _: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert!(!dir.join(".quaternius-common-tree-1-3k.treelod.Ab12Cd.tmp").exists());
+    assert!(dir.join("quaternius-common-tree-1-3k.treelod").exists());
+}
+
+#[test]
+fn bad_limit_options_are_usage_errors() {
+    let dir = scratch("bad_limits");
+    common::assert_build_usage_errors(
+        &dir,
+        &[],
+        &[
+            (&["--max-decoded-bytes", "0"], "--max-decoded-bytes"),
+            (&["--max-decoded-bytes", "12X"], "--max-decoded-bytes"),
+            (&["--max-decoded-bytes=-1"], "--max-decoded-bytes"),
+            (&["--max-decoded-bytes", "99999999999G"], "--max-decoded-bytes"),
+            (&["--max-decoded-bytes", "G"], "--max-decoded-bytes"),
+            (&["--max-image-pixels", "0"], "--max-image-pixels"),
+            (&["--max-image-pixels", "8192x8192"], "--max-image-pixels"),
+            (&["--max-instances", "0"], "--max-instances"),
+            (&["--max-triangles", "1.5"], "--max-triangles"),
+            (&["--allow-external-uris=yes"], "--allow-external-uris"),
+        ],
+    );
+    let help = stdout(&treelod(&["build", "--help"]));
+    for default in ["[default: 2G]", "[default: 67108864]", "[default: 1048576]", "[default: 16777216]"] {
+        assert!(help.contains(default), "{default} in {help}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Scene files, `scatter` and `render`.
 
 /// A demo container (500 leaf quads) built once per test process by the binary and shared by the
@@ -827,7 +1165,7 @@ fn shared_demo() -> &'static Path {
 fn run_os<I, S>(args: I) -> Output
 where
     I: IntoIterator<Item = S>,
-    S: AsRef<std::ffi::OsStr>,
+    S: AsRef<OsStr>,
 {
     Command::new(env!("CARGO_BIN_EXE_treelod")).args(args).output().expect("the binary runs")
 }
@@ -1225,7 +1563,7 @@ fn view_screenshot_with_shadows_draws_the_ground_and_reports_the_shadow_pass() {
 #[test]
 fn view_fails_with_a_message_without_a_display_or_with_a_bad_file() {
     let dir = scratch("view-errors");
-    let no_display = |args: &[&std::ffi::OsStr]| {
+    let no_display = |args: &[&OsStr]| {
         Command::new(env!("CARGO_BIN_EXE_treelod"))
             .arg("view")
             .args(args)
