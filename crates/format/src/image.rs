@@ -111,6 +111,10 @@ pub fn decode_png(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
 /// A sentence saying why the bytes are not a JPEG this decoder reads.
 pub fn decode_jpeg(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
     let mut decoder = jpeg_decoder::Decoder::new(std::io::Cursor::new(bytes));
+    // The decoder's own bound, beside the callers' check of the header (`encoded_size`): no
+    // image a container may hold needs more (4 bytes per texel at the largest side).
+    let side = crate::records::MAX_IMAGE_SIDE as usize;
+    decoder.set_max_decoding_buffer_size(side * side * 4);
     let pixels = decoder.decode().map_err(|e| format!("not a valid JPEG: {e}"))?;
     let info = decoder.info().ok_or("no image information")?;
     let rgba: Vec<u8> = match info.pixel_format {
