@@ -54,6 +54,7 @@ use treelod_format::{Setting, VertexRecord, pack::oct_decode};
 
 use crate::BuildError;
 use crate::rng::SplitMix64;
+use crate::union_find::{find, singletons, union};
 
 /// A ray stops once less than this share of it is left.
 const STOP: f32 = 1.0 / 512.0;
@@ -312,23 +313,12 @@ impl Groups {
     /// normals within [`PIECE_FLAT`] of their first's and a bounding box no more than `size`
     /// across; every other used vertex on its own.
     fn pieces(vertices: &[VertexRecord], triangles: &[AoTriangle], used: &[u8], size: f32) -> Self {
-        // Union-find over the vertices by the triangles, the smaller root winning, so that a
-        // set's root is its smallest vertex whatever the order of the unions.
-        #[expect(clippy::cast_possible_truncation, reason = "vertex ids fit u32")]
-        let mut root: Vec<u32> = (0..vertices.len() as u32).collect();
-        let find = |root: &mut [u32], mut v: u32| {
-            while root[v as usize] != v {
-                let up = root[root[v as usize] as usize];
-                root[v as usize] = up;
-                v = up;
-            }
-            v
-        };
+        // Union-find over the vertices by the triangles: a set's root is its smallest vertex
+        // whatever the order of the unions.
+        let mut root = singletons(vertices.len());
         for t in triangles {
-            for k in 1..3 {
-                let (a, b) = (find(&mut root, t.v[0]), find(&mut root, t.v[k]));
-                root[a.max(b) as usize] = a.min(b);
-            }
+            union(&mut root, t.v[0], t.v[1]);
+            union(&mut root, t.v[0], t.v[2]);
         }
         let mut count = vec![0u32; vertices.len()];
         for v in 0..vertices.len() {

@@ -18,6 +18,7 @@
 use glam::Vec3;
 
 use crate::scene::{AlphaMode, Class, Part, Scene};
+use crate::union_find::{find, singletons, union};
 
 /// Leaf words matched in names (lowercase).
 const LEAF_WORDS: [&str; 7] = ["leaf", "leaves", "foliage", "needle", "canopy", "crown", "frond"];
@@ -144,22 +145,22 @@ fn small_flat_pieces(part: &Part, tree_extent: f32) -> bool {
     if part.triangles.is_empty() || n == 0 || tree_extent <= 0.0 {
         return false;
     }
-    let mut uf = UnionFind::new(n);
+    let mut uf = singletons(n);
     for t in &part.triangles {
         if t.iter().all(|&i| (i as usize) < n) {
-            uf.union(t[0] as usize, t[1] as usize);
-            uf.union(t[0] as usize, t[2] as usize);
+            union(&mut uf, t[0], t[1]);
+            union(&mut uf, t[0], t[2]);
         }
     }
     // Per piece: bounds and the sum of area-weighted normals vs the sum of areas.
-    let mut pieces: std::collections::BTreeMap<usize, (Vec3, Vec3, Vec3, f32)> = std::collections::BTreeMap::new();
+    let mut pieces: std::collections::BTreeMap<u32, (Vec3, Vec3, Vec3, f32)> = std::collections::BTreeMap::new();
     for t in &part.triangles {
         if t.iter().any(|&i| (i as usize) >= n) {
             continue;
         }
         let [a, b, c] = t.map(|i| Vec3::from_array(part.positions[i as usize]));
         let cross = (b - a).cross(c - a);
-        let entry = pieces.entry(uf.find(t[0] as usize)).or_insert((a, a, Vec3::ZERO, 0.0));
+        let entry = pieces.entry(find(&mut uf, t[0])).or_insert((a, a, Vec3::ZERO, 0.0));
         for v in [a, b, c] {
             entry.0 = entry.0.min(v);
             entry.1 = entry.1.max(v);
@@ -172,29 +173,6 @@ fn small_flat_pieces(part: &Part, tree_extent: f32) -> bool {
     let mean_extent = pieces.values().map(|(lo, hi, _, _)| (*hi - *lo).max_element()).sum::<f32>() / count;
     let flat = pieces.values().filter(|(_, _, sum, area)| *area > 0.0 && sum.length() >= 0.9 * area).count() as f32;
     mean_extent < 0.05 * tree_extent && flat >= 0.8 * count
-}
-
-struct UnionFind(Vec<usize>);
-
-impl UnionFind {
-    fn new(n: usize) -> Self {
-        Self((0..n).collect())
-    }
-    fn find(&mut self, mut x: usize) -> usize {
-        while self.0[x] != x {
-            self.0[x] = self.0[self.0[x]];
-            x = self.0[x];
-        }
-        x
-    }
-    fn union(&mut self, a: usize, b: usize) {
-        let (ra, rb) = (self.find(a), self.find(b));
-        // Smaller root wins: the result does not depend on call order.
-        if ra != rb {
-            let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
-            self.0[hi] = lo;
-        }
-    }
 }
 
 /// Case-insensitive glob match: `*` matches any run of characters, `?` one character.

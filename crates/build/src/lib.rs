@@ -24,6 +24,7 @@ pub mod rng;
 pub mod scene;
 pub mod spt;
 pub mod texture;
+mod union_find;
 
 pub use ambient::AoConfig;
 pub use assemble::{

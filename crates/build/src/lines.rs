@@ -111,6 +111,7 @@ use crate::raster::{Mask, bounding_sphere, fill_ellipse, fill_triangle, multisca
 use crate::rng::SplitMix64;
 use crate::spt::flatten;
 use crate::texture::linear_to_srgb;
+use crate::union_find::{find, singletons, union};
 
 /// Welding tolerance, a share of the bark box's diagonal.
 pub const WELD: f64 = 1e-5;
@@ -354,25 +355,6 @@ impl Graph {
     }
 }
 
-fn find(parent: &mut [u32], mut v: u32) -> u32 {
-    while parent[v as usize] != v {
-        let p = parent[v as usize];
-        parent[v as usize] = parent[p as usize];
-        v = p;
-    }
-    v
-}
-
-fn union(parent: &mut [u32], a: u32, b: u32) {
-    let (a, b) = (find(parent, a), find(parent, b));
-    // The lower id is the representative, so the result does not depend on the order of unions.
-    if a < b {
-        parent[b as usize] = a;
-    } else if b < a {
-        parent[a as usize] = b;
-    }
-}
-
 /// A skeleton node: a connected piece of one geodesic slice of one component.
 #[derive(Clone, Debug)]
 struct Node {
@@ -439,8 +421,7 @@ fn skeleton(mesh: &LineMesh<'_>) -> Skeleton {
     let n = positions.len();
 
     // Step: components (union–find over the triangles' corners) and their areas.
-    #[expect(clippy::cast_possible_truncation, reason = "fewer welded vertices than 3 × triangles < 2^32")]
-    let mut uf: Vec<u32> = (0..n as u32).collect();
+    let mut uf = singletons(n);
     for t in &welded_tris {
         union(&mut uf, t[0], t[1]);
         union(&mut uf, t[0], t[2]);
@@ -926,8 +907,7 @@ fn pieces(
     local: &HashMap<u32, u32>,
     bin_of: impl Fn(u32) -> u32,
 ) -> BTreeMap<(u32, u32), Vec<u32>> {
-    #[expect(clippy::cast_possible_truncation, reason = "fewer vertices than 2^32")]
-    let mut uf: Vec<u32> = (0..vertices.len() as u32).collect();
+    let mut uf = singletons(vertices.len());
     for &v in vertices {
         for &(w, _, _) in graph.edges(v) {
             if bin_of(v) == bin_of(w) {

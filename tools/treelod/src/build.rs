@@ -152,7 +152,7 @@ pub struct BuildOptions {
     /// header before decoding).
     #[arg(long, value_name = "N", default_value_t = ImportLimits::default().max_image_pixels, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_image_pixels: u64,
-    /// Refuse a glTF input whose node hierarchy expands to more than N mesh instances (a node
+    /// Refuse a glTF input whose node hierarchy expands to more than N node instances (a node
     /// reached by several paths from the scene's roots counts once per path).
     #[arg(long, value_name = "N", default_value_t = ImportLimits::default().max_instances, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_instances: u64,

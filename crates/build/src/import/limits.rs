@@ -93,8 +93,7 @@ impl std::fmt::Display for Limit {
 /// [`BuildError::Io`] if it cannot be read or is not a regular file, [`BuildError::Limit`] if it
 /// is larger than the limit.
 pub fn read_source(path: &Path, limits: &ImportLimits) -> Result<Vec<u8>, BuildError> {
-    super::read_regular_file(path, limits.max_decoded_bytes)
-        .map_err(|e| e.into_build_error(path, path, "the file", Limit::DecodedBytes, limits.max_decoded_bytes))
+    super::read_regular_file(path, limits.max_decoded_bytes).map_err(|e| e.into_build_error(path, limits))
 }
 
 /// What an import has used of its [`ImportLimits`] so far; each `take_*` charges an amount
@@ -158,11 +157,23 @@ impl<'a> Budget<'a> {
         Ok(())
     }
 
+    /// Checks that one item, `what`, needs no more than `limit` allows on its own, charging
+    /// nothing: an image's pixels, one primitive's triangles (named before the total is).
+    pub(super) fn check(&self, limit: Limit, what: &str, amount: u64) -> Result<(), BuildError> {
+        let max = match limit {
+            Limit::DecodedBytes => self.limits.max_decoded_bytes,
+            Limit::ImagePixels => self.limits.max_image_pixels,
+            Limit::Instances => self.limits.max_instances,
+            Limit::Triangles => self.limits.max_triangles,
+        };
+        self.charge(0, amount, max, limit, what).map(drop)
+    }
+
     /// Checks an image's pixel count (from its header, before decoding) and charges its RGBA8
     /// texels.
     pub(super) fn take_image(&mut self, what: &str, width: u32, height: u32) -> Result<(), BuildError> {
         let pixels = u64::from(width) * u64::from(height);
-        self.charge(0, pixels, self.limits.max_image_pixels, Limit::ImagePixels, what)?;
+        self.check(Limit::ImagePixels, what, pixels)?;
         self.take_bytes(what, pixels * 4)
     }
 }

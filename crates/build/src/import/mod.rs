@@ -215,12 +215,10 @@ pub fn import_gltf_bytes_with(
     // Each primitive is read once, in its mesh's space, and placed at each of its instances.
     let mut primitives: BTreeMap<(usize, usize), Option<Rc<LocalPrimitive>>> = BTreeMap::new();
     let mut names: BTreeMap<(&'static str, usize), String> = BTreeMap::new();
-    let mut stack: Vec<(gltf::Node, Mat4, usize)> = roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY, 0)).collect();
-    while let Some((node, parent, depth)) = stack.pop() {
-        if depth > MAX_DEPTH {
-            // Refused by `count_instances` already.
-            return Err(gltf_error(format!("node hierarchy deeper than {MAX_DEPTH} levels")));
-        }
+    // Bounded: `count_instances` refused cycles, depths over `MAX_DEPTH` and instances over the
+    // limit.
+    let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY)).collect();
+    while let Some((node, parent)) = stack.pop() {
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if let Some(mesh) = node.mesh() {
             let mut name = |kind: &'static str, index: usize, name: Option<&str>, warnings: &mut Vec<String>| {
@@ -261,7 +259,7 @@ pub fn import_gltf_bytes_with(
                 scene.parts.push(part);
             }
         }
-        stack.extend(node.children().collect::<Vec<_>>().into_iter().rev().map(|c| (c, world, depth + 1)));
+        stack.extend(node.children().collect::<Vec<_>>().into_iter().rev().map(|c| (c, world)));
     }
     if scene.parts.iter().any(|p| p.material == default_material) {
         scene.materials.push(Material { base_color: [1.0; 4], alpha_cutoff: 0.5, ..Material::default() });
@@ -543,7 +541,7 @@ fn count_instances(
         states: Vec<State>,
         mesh_triangles: Vec<Option<u64>>,
         source: accessor::Source<'d, 'd>,
-        limits: &'d ImportLimits,
+        budget: &'d Budget<'d>,
     }
     impl Counter<'_> {
         fn mesh(&mut self, mesh: &gltf::Mesh<'_>) -> Result<u64, BuildError> {
@@ -555,7 +553,7 @@ fn count_instances(
                 let label = format!("meshes[{}].primitives[{}]", mesh.index(), primitive.index());
                 let triangles = triangle_count(&primitive, &self.source, &label)?;
                 // One primitive over the limit is named as the cause.
-                Budget::new(self.limits, self.source.path).take_triangles(&label, triangles)?;
+                self.budget.check(Limit::Triangles, &label, triangles)?;
                 total = total.saturating_add(triangles);
             }
             self.mesh_triangles[mesh.index()] = Some(total);
@@ -597,7 +595,7 @@ fn count_instances(
         states: vec![State::Unseen; document.nodes().len()],
         mesh_triangles: vec![None; document.meshes().len()],
         source: accessor::Source { buffers: &[], quantization, path },
-        limits: budget.limits(),
+        budget,
     };
     let (mut instances, mut triangles) = (0u64, 0u64);
     for root in roots {
@@ -605,6 +603,7 @@ fn count_instances(
         instances = instances.saturating_add(i);
         triangles = triangles.saturating_add(t);
     }
+    drop(counter);
     budget.take_instances("the node hierarchy", instances)?;
     budget.take_triangles("the node hierarchy's primitives", triangles)
 }
@@ -814,17 +813,22 @@ enum ReadError {
 }
 
 impl ReadError {
-    /// The error of reading `file` for `input`: [`BuildError::Io`] or [`BuildError::Limit`].
-    fn into_build_error(self, input: &Path, file: &Path, what: &str, limit: Limit, max: u64) -> BuildError {
+    /// The error of reading the source file `path` ([`read_source`]): [`BuildError::Io`], or
+    /// [`BuildError::Limit`] for a file larger than the decoded-byte limit.
+    fn into_build_error(self, path: &Path, limits: &ImportLimits) -> BuildError {
         match self {
-            Self::Io(source) => BuildError::Io { path: file.to_owned(), source },
+            Self::Io(source) => BuildError::Io { path: path.to_owned(), source },
             Self::NotRegular(kind) => BuildError::Io {
-                path: file.to_owned(),
+                path: path.to_owned(),
                 source: std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("not a regular file ({kind})")),
             },
-            Self::TooLarge(amount) => {
-                BuildError::Limit { path: input.to_owned(), what: what.to_owned(), limit, amount, max }
-            }
+            Self::TooLarge(amount) => BuildError::Limit {
+                path: path.to_owned(),
+                what: "the file".to_owned(),
+                limit: Limit::DecodedBytes,
+                amount,
+                max: limits.max_decoded_bytes,
+            },
         }
     }
 }
