@@ -59,6 +59,10 @@ fn mean_abs_diff(a: &[f32], b: &[f32]) -> f64 {
     a.iter().zip(b).map(|(x, y)| f64::from((x - y).abs())).sum::<f64>() / a.len().max(1) as f64
 }
 
+fn mean_diff(a: &[f32], b: &[f32]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| f64::from(x - y)).sum::<f64>() / a.len().max(1) as f64
+}
+
 fn reference(path: &Path, vertices: &[VertexRecord], triangles: &[AoTriangle]) -> Vec<f32> {
     let cache = PathBuf::from(format!("{}.ao256", path.display()));
     if let Ok(bytes) = std::fs::read(&cache)
@@ -97,8 +101,9 @@ fn main() {
                 continue;
             }
             let (ao, seconds) = timed(&vertices, &triangles, &config);
-            let error =
-                reference.as_ref().map_or(String::new(), |r| format!(", mean |Δ| {:.4}", mean_abs_diff(&ao, r)));
+            let error = reference.as_ref().map_or(String::new(), |r| {
+                format!(", mean |Δ| {:.4}, mean Δ {:+.4}", mean_abs_diff(&ao, r), mean_diff(&ao, r))
+            });
             println!("  {name:28} {seconds:7.2} s{error}");
         }
     }

@@ -1,5 +1,6 @@
 //! Build throughput: the built-in demo tree and the shared models, from glTF bytes in memory to an
-//! encoded container (import, classification, grid, point hierarchies, zstd at the default level).
+//! encoded container (import, classification, grid, point hierarchies, ambient occlusion, zstd at the
+//! default level), each reported as source triangles per second (criterion's throughput).
 //!
 //! Run with `cargo bench -p treelod-build --bench build`. The shared models are read from
 //! `../shared/assets/trees/` (set `TREELOD_TREES` to another directory); the 669k-triangle maple is
@@ -9,7 +10,7 @@
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree, import_gltf_bytes};
 use treelod_format::Compression;
 
@@ -22,6 +23,7 @@ fn build(c: &mut Criterion) {
     let mut group = c.benchmark_group("build");
     group.sample_size(10);
     let demo = demo_tree(&DemoTreeConfig::default());
+    group.throughput(Throughput::Elements(demo.parts.iter().map(|p| p.triangles.len() as u64).sum()));
     group.bench_function("demo tree", |b| {
         b.iter(|| {
             let placed = [Placed { scene: &demo, translation: glam::Vec3::ZERO }];
@@ -44,6 +46,9 @@ fn build(c: &mut Criterion) {
             eprintln!("skipping {model}: {} not readable", path.display());
             continue;
         };
+        let scene = import_gltf_bytes(&bytes, &path, path.parent()).expect("shared model imports");
+        group.throughput(Throughput::Elements(scene.parts.iter().map(|p| p.triangles.len() as u64).sum()));
+        drop(scene);
         group.bench_function(model, |b| {
             b.iter(|| {
                 let scene = import_gltf_bytes(&bytes, &path, path.parent()).expect("shared model imports");

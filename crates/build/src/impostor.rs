@@ -1564,29 +1564,24 @@ fn preserve_coverage(levels: &mut [Vec<[f32; 4]>], width: usize, height: usize) 
                     .any(|ny| (x.saturating_sub(1)..(x + 2).min(w)).any(|nx| level[ny * w + nx][3] > 0.0))
             })
             .collect();
+        // The 4 samples of a texel, at (¼, ¼) … (¾, ¾) of it, read the alpha bilinearly between
+        // texel centres with edges clamped: a sample at ¼ lies ¾ of the way from the centre
+        // before to its own (weights ¼, ¾), one at ¾ ¼ of the way to the next (¾, ¼). The texels
+        // and weights do not depend on the scale, so they are found once per texel here.
+        let taps = |i: usize| {
+            let (x, y) = (i % w, i / w);
+            let (left, right) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
+            // (first texel, second texel, weight of the second) along each axis, per offset.
+            let along_x = [(left, x, 0.75f32), (x, right, 0.25f32)];
+            let along_y = [(up, y, 0.75f32), (y, down, 0.25f32)];
+            [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(ox, oy)| (along_x[ox], along_y[oy]))
+        };
         let covered = |scale: f32| {
             let alpha = |x: usize, y: usize| (level[y * w + x][3] * scale).min(1.0);
             let mut kept = 0usize;
             for &i in &near {
-                let (x, y) = (i % w, i / w);
-                for (ox, oy) in [(0.25f32, 0.25f32), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)] {
-                    // Bilinear between texel centres, edges clamped.
-                    let (u, v) = (x as f32 + ox - 0.5, y as f32 + oy - 0.5);
-                    let (x0, y0) = (u.floor(), v.floor());
-                    let (fx, fy) = (u - x0, v - y0);
-                    #[expect(
-                        clippy::cast_possible_truncation,
-                        clippy::cast_sign_loss,
-                        reason = "clamped into the level"
-                    )]
-                    let clampx = |c: f32| c.clamp(0.0, (w - 1) as f32) as usize;
-                    #[expect(
-                        clippy::cast_possible_truncation,
-                        clippy::cast_sign_loss,
-                        reason = "clamped into the level"
-                    )]
-                    let clampy = |c: f32| c.clamp(0.0, (h - 1) as f32) as usize;
-                    let (xa, xb, ya, yb) = (clampx(x0), clampx(x0 + 1.0), clampy(y0), clampy(y0 + 1.0));
+                for ((xa, xb, fx), (ya, yb, fy)) in taps(i) {
                     let top = alpha(xa, ya) * (1.0 - fx) + alpha(xb, ya) * fx;
                     let bottom = alpha(xa, yb) * (1.0 - fx) + alpha(xb, yb) * fx;
                     kept += usize::from(top * (1.0 - fy) + bottom * fy >= 0.5);
