@@ -1202,10 +1202,14 @@ pub(crate) fn bake(
     let band_samples = BAND_ROWS * SAMPLES;
     let mut depth = vec![f32::INFINITY; sw * band_samples.min(sh)];
     let mut colour = vec![[0.0f32; 3]; sw * band_samples.min(sh)];
+    let rows = covered_rows(triangles.clone().map(|(_, local)| local), quad, (sw, sh));
     for band_start in (0..sh).step_by(band_samples.max(1)) {
         let band_end = (band_start + band_samples).min(sh);
         depth.fill(f32::INFINITY);
-        for (t, local) in triangles.clone() {
+        for ((t, local), &(y0, y1)) in triangles.clone().zip(&rows) {
+            if y1 as usize <= band_start || y0 as usize >= band_end {
+                continue;
+            }
             let tri = &mesh.triangles[t as usize];
             let surface = &mesh.surfaces[tri.material as usize];
             let corners = tri.v.map(|v| &mesh.vertices[v as usize]);
@@ -1295,6 +1299,54 @@ pub(crate) fn bake(
         .collect()
 }
 
+/// A triangle projected onto a quad's sample grid: its corners in sample coordinates, twice its
+/// signed area, and the samples its bounding box holds (`x0..x1`, `y0..y1`).
+struct Projected {
+    xy: [DVec2; 3],
+    area: f64,
+    x0: usize,
+    x1: usize,
+    y0: usize,
+    y1: usize,
+}
+
+/// `local` projected onto `quad`'s `sw × sh` samples; `None` if it is degenerate.
+fn project(local: &[DVec3; 3], quad: &Quad, (sw, sh): (usize, usize)) -> Option<Projected> {
+    let (hu2, hv2) = (quad.u.length_squared(), quad.v.length_squared());
+    // Sample coordinates: s = −1 ↦ 0, s = +1 ↦ sw (likewise t and sh).
+    let xy = local.map(|p| {
+        let d = p - quad.centre;
+        DVec2::new((d.dot(quad.u) / hu2 + 1.0) * 0.5 * sw as f64, (d.dot(quad.v) / hv2 + 1.0) * 0.5 * sh as f64)
+    });
+    let area = (xy[1] - xy[0]).perp_dot(xy[2] - xy[0]);
+    if area.abs() < 1e-12 || !area.is_finite() {
+        return None;
+    }
+    let (min, max) = (xy[0].min(xy[1]).min(xy[2]), xy[0].max(xy[1]).max(xy[2]));
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
+    let (x0, x1, y0, y1) = (
+        (min.x - 0.5).ceil().max(0.0) as usize,
+        ((max.x - 0.5).floor() + 1.0).clamp(0.0, sw as f64) as usize,
+        (min.y - 0.5).ceil().max(0.0) as usize,
+        ((max.y - 0.5).floor() + 1.0).clamp(0.0, sh as f64) as usize,
+    );
+    Some(Projected { xy, area, x0, x1, y0, y1 })
+}
+
+/// The sample rows `y0..y1` each triangle of `triangles` covers on `quad` (an empty range for
+/// one that covers none), found once so that a band skips the triangles outside it without
+/// projecting them again: a quad of many bands (a whole-tree billboard) otherwise projects every
+/// triangle once per band.
+fn covered_rows(triangles: impl Iterator<Item = [DVec3; 3]>, quad: &Quad, samples: (usize, usize)) -> Vec<(u32, u32)> {
+    triangles
+        .map(|local| match project(&local, quad, samples) {
+            #[expect(clippy::cast_possible_truncation, reason = "sample rows of a region fit u32")]
+            Some(p) if p.x0 < p.x1 && p.y0 < p.y1 => (p.y0 as u32, p.y1 as u32),
+            _ => (0, 0),
+        })
+        .collect()
+}
+
 /// Calls `f(sample index in the band, barycentric weights, signed distance from plane)` for
 /// every sample centre of rows `band_start .. band_end` of a `sw × sh` grid over `quad` that the
 /// triangle `local` (relative to the origin of work) covers. The sample at `quad.centre + s·u +
@@ -1307,24 +1359,9 @@ fn raster_band(
     (band_start, band_end): (usize, usize),
     mut f: impl FnMut(usize, [f64; 3], f64),
 ) {
-    let (hu2, hv2) = (quad.u.length_squared(), quad.v.length_squared());
-    // Sample coordinates: s = −1 ↦ 0, s = +1 ↦ sw (likewise t and sh).
-    let xy = local.map(|p| {
-        let d = p - quad.centre;
-        DVec2::new((d.dot(quad.u) / hu2 + 1.0) * 0.5 * sw as f64, (d.dot(quad.v) / hv2 + 1.0) * 0.5 * sh as f64)
-    });
-    let area = (xy[1] - xy[0]).perp_dot(xy[2] - xy[0]);
-    if area.abs() < 1e-12 || !area.is_finite() {
+    let Some(Projected { xy, area, x0, x1, y0, y1 }) = project(local, quad, (sw, sh)) else {
         return;
-    }
-    let (min, max) = (xy[0].min(xy[1]).min(xy[2]), xy[0].max(xy[1]).max(xy[2]));
-    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the grid")]
-    let (x0, x1, y0, y1) = (
-        (min.x - 0.5).ceil().max(0.0) as usize,
-        ((max.x - 0.5).floor() + 1.0).clamp(0.0, sw as f64) as usize,
-        (min.y - 0.5).ceil().max(0.0) as usize,
-        ((max.y - 0.5).floor() + 1.0).clamp(0.0, sh as f64) as usize,
-    );
+    };
     let (y0, y1) = (y0.max(band_start), y1.min(band_end));
     if y0 >= y1 || x0 >= x1 {
         return;
@@ -1363,11 +1400,15 @@ fn bake_slots(
     let band_samples = BAND_ROWS * SAMPLES;
     let mut depth = vec![f32::INFINITY; sw * band_samples.min(sh)];
     let mut slot = vec![0u16; sw * band_samples.min(sh)];
+    let rows = covered_rows(leaves.clone().map(|(_, _, local)| local), quad, (sw, sh));
     for band_start in (0..sh).step_by(band_samples.max(1)) {
         let band_end = (band_start + band_samples).min(sh);
         depth.fill(f32::INFINITY);
         slot.fill(0);
-        for (k, t, local) in leaves.clone() {
+        for ((k, t, local), &(y0, y1)) in leaves.clone().zip(&rows) {
+            if y1 as usize <= band_start || y0 as usize >= band_end {
+                continue;
+            }
             let tri = &mesh.triangles[t as usize];
             let surface = &mesh.surfaces[tri.material as usize];
             let corners = tri.v.map(|v| &mesh.vertices[v as usize]);
