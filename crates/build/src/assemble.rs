@@ -5,9 +5,11 @@
 //! ([`crate::prune`]); per cell (in parallel, results kept in cell order) leaf points, point
 //! hierarchy and size-sorted triangles; vertices renumbered in first-use order; the pruned leaves
 //! per cell; with impostors, their planes and atlas; with baselines, each tree's LoD chain and
-//! billboards; materials, images and metadata.
+//! billboards; materials, images and metadata. Each stage's wall-clock time is recorded in
+//! [`BuildStats::stages`].
 
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
@@ -246,6 +248,59 @@ pub struct BuildStats {
     pub line_millis: u64,
     /// Wall-clock time of the ambient-occlusion stage, milliseconds (0 without).
     pub ao_millis: u64,
+    /// Wall-clock time of each stage that ran, in the order they ran; together they tile the
+    /// build from the gathering to the finished [`ContainerData`]. Not part of the container
+    /// (a build's bytes never depend on its timing).
+    pub stages: Vec<StageTime>,
+}
+
+/// One stage of a build and how long it took ([`BuildStats::stages`]).
+///
+/// The build's stages, in order (those not asked for do not run and are not listed):
+/// `gather` (classify parts, gather and filter triangles, free the scenes' geometry), `grid`
+/// (bounds, grid, triangles assigned to cells), `prune` ([`crate::prune`]: the leaves' priority
+/// list and curves), `ellipsoids` ([`crate::ellipsoid`]), `lines` ([`crate::lines`]), `cells`
+/// (per cell the leaf points, point hierarchy and sorted triangles; vertices renumbered), `ao`
+/// ([`crate::ambient`]: vertices and points), `records` (with any of those three, the cells'
+/// pruned leaves, ellipsoids and lines, with the ellipsoids' and lines' occlusion), `impostors`
+/// ([`crate::impostor`]: planes and atlas), `lod_chain` and `billboards` (the baselines,
+/// [`crate::lod_chain`], [`crate::billboard`]), `triangles` (the triangle records in written
+/// order), `images` (materials, images and atlases), `metadata`, and `precision` (the floats
+/// rounded, [`crate::precision`]). Tools add their own around them (the `treelod` tool: `import`
+/// before, `write` and `verify` after).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StageTime {
+    /// The stage's name, a lower-case identifier.
+    pub name: &'static str,
+    /// Wall-clock time of the stage.
+    pub time: Duration,
+}
+
+/// Times the stages of a build one after another: each [`Self::lap`] records the time since the
+/// previous lap under a stage's name, so the stages tile the build. Time before a stage that does
+/// not run (microseconds of bookkeeping) counts to the next one.
+struct StageClock {
+    last: Instant,
+}
+
+impl StageClock {
+    fn start() -> Self {
+        Self { last: Instant::now() }
+    }
+
+    /// Ends the stage `name`: records its time in `stats` and returns it.
+    fn lap(&mut self, stats: &mut BuildStats, name: &'static str) -> Duration {
+        let now = Instant::now();
+        let time = now.duration_since(self.last);
+        self.last = now;
+        stats.stages.push(StageTime { name, time });
+        time
+    }
+}
+
+/// `time` in whole milliseconds (the stats' `*_millis` fields).
+fn millis(time: Duration) -> u64 {
+    u64::try_from(time.as_millis()).unwrap_or(u64::MAX)
 }
 
 /// What a build returns.
@@ -589,8 +644,10 @@ pub fn build_block(
     config: &BuildConfig,
     generator: &str,
 ) -> Result<BuildOutput, BuildError> {
-    let gathered = gather(name, trees, config)?;
-    assemble(name, trees, gathered, config, generator)
+    let mut clock = StageClock::start();
+    let mut gathered = gather(name, trees, config)?;
+    clock.lap(&mut gathered.stats, "gather");
+    assemble(name, trees, gathered, config, generator, clock)
 }
 
 /// As [`build_block`] on owned scenes (each with its translation), giving the same output; each
@@ -606,26 +663,29 @@ pub fn build_scenes(
     config: &BuildConfig,
     generator: &str,
 ) -> Result<BuildOutput, BuildError> {
+    let mut clock = StageClock::start();
     let placed: Vec<Placed<'_>> =
         scenes.iter().map(|(scene, translation)| Placed { scene, translation: *translation }).collect();
-    let gathered = gather(name, &placed, config)?;
+    let mut gathered = gather(name, &placed, config)?;
     drop(placed);
     for (scene, _) in &mut scenes {
         scene.parts = Vec::new();
     }
+    clock.lap(&mut gathered.stats, "gather");
     let placed: Vec<Placed<'_>> =
         scenes.iter().map(|(scene, translation)| Placed { scene, translation: *translation }).collect();
-    assemble(name, &placed, gathered, config, generator)
+    assemble(name, &placed, gathered, config, generator, clock)
 }
 
 /// The stages of [`build_block`] after the gathering; reads only the scenes' materials, images,
-/// names and sources (not their parts).
+/// names and sources (not their parts). `clock` times the stages from the end of the gathering.
 fn assemble(
     name: &str,
     trees: &[Placed<'_>],
     gathered: Gathered,
     config: &BuildConfig,
     generator: &str,
+    mut clock: StageClock,
 ) -> Result<BuildOutput, BuildError> {
     let Gathered { material_keys, material_info, vertices, mut tris, parts, tree_bounds, mut stats, mut warnings } =
         gathered;
@@ -641,12 +701,14 @@ fn assemble(
         #[expect(clippy::cast_possible_truncation, reason = "fewer than 2^32 triangles (checked via vertex count)")]
         per_cell[block_grid.cell_of(centroid(&vertices, t))].push(i as u32);
     }
+    clock.lap(&mut stats, "grid");
 
     // Stage: pruning (Neubert 2011): leaves, their priority list, s_opt(λ) and λ(h).
     let pruned: Option<(Pruned, PruneInput)> = match &config.prune {
         Some(prune) => {
             let input = PruneInput::new(&material_keys, &tris, trees);
             let pruned = crate::prune::prune(input.mesh(&vertices), |p| block_grid.cell_id(p), hi.y - lo.y, prune)?;
+            clock.lap(&mut stats, "prune");
             Some((pruned, input))
         }
         None => None,
@@ -655,13 +717,23 @@ fn assemble(
     // Stage: leaf ellipsoids (Clasen 2011), per cell; before the per-cell stage, which overwrites
     // the triangles' parts (the ellipsoids' colours need them).
     let cell_of = |p: Vec3| block_grid.cell_of(p);
-    let ellipsoids: Option<Ellipsoids> = timed(&mut stats.ellipsoid_millis, config.ellipsoids.as_ref(), |c| {
-        block_ellipsoids(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)
-    })?;
+    let ellipsoids: Option<Ellipsoids> = match &config.ellipsoids {
+        Some(c) => {
+            let built = block_ellipsoids(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)?;
+            stats.ellipsoid_millis = millis(clock.lap(&mut stats, "ellipsoids"));
+            Some(built)
+        }
+        None => None,
+    };
     // Stage: branch lines (Clasen 2011): the bark skeleton, per cell; here for the same reason.
-    let lines: Option<Lines> = timed(&mut stats.line_millis, config.lines.as_ref(), |c| {
-        block_lines(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)
-    })?;
+    let lines: Option<Lines> = match &config.lines {
+        Some(c) => {
+            let built = block_lines(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)?;
+            stats.line_millis = millis(clock.lap(&mut stats, "lines"));
+            Some(built)
+        }
+        None => None,
+    };
 
     // Stage: per cell, the leaf points, the point hierarchy as point records, and the triangles in
     // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
@@ -730,15 +802,15 @@ fn assemble(
     scatter_in_place(&mut vertices, remap);
     vertices.truncate(written_vertices);
     vertices.shrink_to_fit();
+    clock.lap(&mut stats, "cells");
     // Stage: ambient occlusion of the vertices, then of each point (its leaves' mean); each
     // triangle's coverage is kept for the ellipsoids' occlusion.
-    let ao_start = std::time::Instant::now();
     let (vertex_ao, point_ao, coverage) = match &config.ao {
         Some(ao) => {
             let progress = |done, total| config.progress.report(Progress::AMBIENT_OCCLUSION, done, total);
             let (vertex_ao, point_ao, coverage) =
                 block_occlusion(&tris, &order, &vertices, &points, &cells, &material_keys, trees, ao, &progress);
-            stats.ao_millis = u64::try_from(ao_start.elapsed().as_millis()).unwrap_or(u64::MAX);
+            stats.ao_millis = millis(clock.lap(&mut stats, "ao"));
             (Some(vertex_ao), point_ao, coverage)
         }
         None => (None, Vec::new(), Vec::new()),
@@ -829,10 +901,16 @@ fn assemble(
             cell.lines = range(first, line_records.len());
         }
     }
+    if config.prune.is_some() || config.ellipsoids.is_some() || config.lines.is_some() {
+        clock.lap(&mut stats, "records");
+    }
     // Stage: impostors (Garcia 2005): nested planes per tree and their atlas, in the block cell.
     let impostors = match &config.impostors {
         Some(impostor_config) => {
-            block_impostors(&material_keys, &tris, &vertices, vertex_ao.as_deref(), trees, impostor_config)?
+            let built =
+                block_impostors(&material_keys, &tris, &vertices, vertex_ao.as_deref(), trees, impostor_config)?;
+            clock.lap(&mut stats, "impostors");
+            built
         }
         None => None,
     };
@@ -865,13 +943,16 @@ fn assemble(
                 fraction: level.fraction,
             });
         }
+        clock.lap(&mut stats, "lod_chain");
         if let Some(impostors) = &impostors {
             billboards = block_billboards(&material_keys, &tris, &vertices, trees, &impostors.texels_per_tree)?;
+            clock.lap(&mut stats, "billboards");
         }
     }
     drop((per_cell, parts));
     let triangles = triangle_records(tris, &order);
     drop(order);
+    clock.lap(&mut stats, "triangles");
     // The block cell: Gilet's representation and the pruned leaves live in the grid cells only;
     // the impostor planes of the whole block live here.
     let plane_count = impostors.as_ref().map_or(0, |i| i.planes.len());
@@ -967,6 +1048,7 @@ fn assemble(
         billboard_records = billboards.records.into_iter().map(|b| BillboardRecord { image: index, ..b }).collect();
         stats.billboard_atlas = [atlas.width, atlas.height];
     }
+    clock.lap(&mut stats, "images");
 
     // Stage: metadata.
     let mut sources: Vec<Source> = Vec::new();
@@ -1052,8 +1134,10 @@ fn assemble(
         line_ao,
         ..ContainerData::default()
     };
+    clock.lap(&mut stats, "metadata");
     let mut data = data;
     crate::precision::trim(&mut data, &config.precision);
+    clock.lap(&mut stats, "precision");
     Ok(BuildOutput { data, stats, warnings })
 }
 
@@ -1125,20 +1209,6 @@ fn grow_bounds(cell: &mut CellRecord, bounds: Option<(Vec3, Vec3)>) {
         cell.bounds_min = lo.to_array();
         cell.bounds_max = hi.to_array();
     }
-}
-
-/// Runs an optional stage with its `config` (nothing without one), writing its wall-clock time
-/// to `millis`.
-fn timed<C, T>(
-    millis: &mut u64,
-    config: Option<&C>,
-    stage: impl FnOnce(&C) -> Result<T, BuildError>,
-) -> Result<Option<T>, BuildError> {
-    let Some(config) = config else { return Ok(None) };
-    let start = std::time::Instant::now();
-    let built = stage(config)?;
-    *millis = u64::try_from(start.elapsed().as_millis()).unwrap_or(u64::MAX);
-    Ok(Some(built))
 }
 
 /// The branch lines of a block's bark ([`crate::lines`]): every triangle not of the leaf class,

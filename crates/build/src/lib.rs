@@ -28,8 +28,8 @@ mod union_find;
 
 pub use ambient::AoConfig;
 pub use assemble::{
-    BuildConfig, BuildOutput, BuildStats, Placed, Progress, auto_grid, build_block, build_scenes, ellipsoid_report,
-    prune_report, recorded_settings,
+    BuildConfig, BuildOutput, BuildStats, Placed, Progress, StageTime, auto_grid, build_block, build_scenes,
+    ellipsoid_report, prune_report, recorded_settings,
 };
 pub use demo::{DemoTreeConfig, cards_on_planes, demo_tree, leaf_material};
 pub use ellipsoid::{Clustering, EllipsoidConfig, Ellipsoids};

@@ -3,14 +3,15 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use treelod_build::scene::Scene;
 use treelod_build::{
-    BuildConfig, BuildOutput, BuildStats, ImportLimits, Placed, PruneConfig, PruneOrder, PruneReport, build_scenes,
+    BuildConfig, BuildOutput, BuildStats, ImportLimits, Placed, PruneConfig, PruneOrder, PruneReport, StageTime,
+    build_scenes,
 };
-use treelod_format::{Compression, CurveSample, ErrorClass, Setting};
+use treelod_format::{Compression, Container, CurveSample, ErrorClass, Setting};
 
 use crate::report::{self, Failed};
 use crate::table::{Align, Table};
@@ -36,8 +37,9 @@ pub struct BuildOptions {
     /// from a memory map).
     #[arg(long, default_value = "zstd", value_parser = ["zstd", "none"])]
     pub compression: String,
-    /// zstd level, 1..=22.
-    #[arg(long, default_value_t = 9, value_parser = clap::value_parser!(i32).range(1..=22))]
+    /// zstd level, 1..=22, of sections over 256 KiB (smaller ones are compressed at 19 or above,
+    /// which costs milliseconds).
+    #[arg(long, default_value_t = treelod_format::DEFAULT_LEVEL, value_parser = clap::value_parser!(i32).range(1..=22))]
     pub level: i32,
     /// Pruning (Neubert et al. 2011): write each cell's leaves as a priority list in this order,
     /// with the optimal scale s_opt(λ) and the fraction λ(h) per projected height (spec §6.11).
@@ -442,6 +444,10 @@ pub struct Args {
     /// 1/λ and the quality each reaches, as DIR/STEM.prune.png (STEM the output's file stem).
     #[arg(long, value_name = "DIR", requires = "prune_report")]
     pub prune_plot: Option<PathBuf>,
+    /// After each build, print to stderr how long each stage took (import, the build's stages,
+    /// write, verify): seconds and share of the total. `--json` holds the same as `stages`.
+    #[arg(long)]
+    pub timings: bool,
     /// Build settings.
     #[command(flatten)]
     pub options: BuildOptions,
@@ -500,13 +506,15 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             continue;
         }
         seen.push(output.clone());
+        let start = Instant::now();
         let result = import(input, &args.options).and_then(|scene| {
+            let timing = Timing { import: Some(start.elapsed()), table: args.timings };
             let name = scene.name.clone();
             if args.prune_report {
                 let plot = args.prune_plot.as_deref().map(|dir| prune_plot_path(dir, &output));
                 print_prune_report(&name, &scene, input, &args.options, plot.as_deref())?;
             }
-            build_one(&name, vec![(scene, Vec3::ZERO)], &[input.as_path()], &output, &args.options)
+            build_one(&name, vec![(scene, Vec3::ZERO)], &[input.as_path()], &output, &args.options, timing)
         });
         if let Err(failed) = result {
             first_failure.get_or_insert(failed);
@@ -521,6 +529,7 @@ fn run_block(args: &Args) -> Result<(), Failed> {
     let mut paths: Vec<PathBuf> = Vec::new();
     let mut x = 0.0f32;
     let mut scenes: Vec<(Scene, Vec3)> = Vec::new();
+    let start = Instant::now();
     let progress = progress_bar(args.inputs.len() as u64);
     for input in &args.inputs {
         progress.set_message(format!("importing {}", input.display()));
@@ -541,6 +550,7 @@ fn run_block(args: &Args) -> Result<(), Failed> {
         }
     }
     progress.finish_and_clear();
+    let timing = Timing { import: Some(start.elapsed()), table: args.timings };
     let name = args.output.file_stem().map_or_else(|| "block".to_owned(), |s| s.to_string_lossy().into_owned());
     let sources: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
     if args.prune_report {
@@ -554,7 +564,7 @@ fn run_block(args: &Args) -> Result<(), Failed> {
             write_prune_plot(&prune_plot_path(dir, &args.output), &name, &report)?;
         }
     }
-    build_one(&name, scenes, &sources, &args.output, &args.options)
+    build_one(&name, scenes, &sources, &args.output, &args.options, timing)
 }
 
 /// Compares the pruning orders on one tree and prints the table (`--prune-report`).
@@ -686,7 +696,7 @@ pub fn run_demo(args: &DemoArgs) -> Result<(), Failed> {
     report_leftovers([args.output.as_path()], args.options.json)?;
     let scene = treelod_build::demo_tree(&config);
     let name = scene.name.clone();
-    build_one(&name, vec![(scene, Vec3::ZERO)], &[], &args.output, &args.options)?;
+    build_one(&name, vec![(scene, Vec3::ZERO)], &[], &args.output, &args.options, Timing::default())?;
     if !args.options.json {
         report::write_stdout(&format!("next: treelod dump {}\n", args.output.display()))?;
     }
@@ -738,13 +748,24 @@ pub(crate) fn remove_leftovers<'a>(outputs: impl IntoIterator<Item = &'a Path>) 
     removed
 }
 
-/// Builds, writes atomically, reopens and verifies one container, then prints its summary.
+/// What [`build_one`] adds to a build's stages and prints of them.
+#[derive(Clone, Copy, Debug, Default)]
+struct Timing {
+    /// How long the import of the scenes took (none for the demo tree, which is not imported).
+    import: Option<Duration>,
+    /// `--timings`: print the stages' table to stderr.
+    table: bool,
+}
+
+/// Builds, writes atomically, reopens and verifies one container, then prints its summary (and
+/// with `timing.table` the stages' times to stderr).
 fn build_one(
     name: &str,
     scenes: Vec<(Scene, Vec3)>,
     sources: &[&Path],
     output: &Path,
     options: &BuildOptions,
+    timing: Timing,
 ) -> Result<(), Failed> {
     // A bar for the long stages, only on a terminal: nothing else is printed differently.
     let bar = std::io::IsTerminal::is_terminal(&std::io::stderr()).then(stage_bar);
@@ -763,7 +784,15 @@ fn build_one(
         bar.finish_and_clear();
         report::set_progress_bar(None);
     }
-    let built = built?;
+    let mut built = built?;
+    if let Some(import) = timing.import {
+        built.stages.insert(0, StageTime { name: "import", time: import });
+        built.seconds += import.as_secs_f64();
+    }
+    if timing.table {
+        // After the bar is cleared; a failure to write to stderr is ignored, as warnings' are.
+        let _ = std::io::Write::write_all(&mut std::io::stderr().lock(), timings_text(output, &built).as_bytes());
+    }
     let summary = Summary { output, sources, built: &built };
     report::write_stdout(&if options.json { summary.to_json() } else { summary.to_text() })
 }
@@ -782,8 +811,14 @@ pub(crate) struct Built {
     pub file_bytes: u64,
     /// Total size of the source files.
     pub source_bytes: u64,
-    /// Wall-clock seconds from build to verification.
+    /// Wall-clock seconds from build to verification (with the import, once [`build_one`] adds
+    /// it).
     pub seconds: f64,
+    /// Wall-clock time of each stage, in order: the build's ([`BuildStats::stages`]), then `write`
+    /// (encode, compress and write the sections, flushed to disk) and `verify` (open and fully
+    /// check the written file, then rename it; not with `--no-verify`). They sum to at most
+    /// `seconds`.
+    pub stages: Vec<StageTime>,
     /// Whether the written file was fully verified (not with `--no-verify`).
     pub verified: bool,
     /// The pruning curves written: `s_opt(λ)` and `λ(h)` (empty without pruning).
@@ -797,8 +832,8 @@ pub(crate) struct Built {
 /// tool as generator and [`BuildOptions::recorded_settings`].
 ///
 /// The scenes' geometry is freed once gathered and the rest of them once built, and each built
-/// array once its section is written, before verification reads the file back, so the stages do
-/// not hold each other's memory.
+/// array once its section is compressed (or written), before verification reads the file back, so
+/// the stages do not hold each other's memory.
 pub(crate) fn build_container(
     name: &str,
     scenes: Vec<(Scene, Vec3)>,
@@ -819,18 +854,47 @@ pub(crate) fn build_container(
     data.metadata.settings.sort();
     let (materials, images) = (data.materials.len(), data.images.len());
     let prune_curves = (data.prune_scale.clone(), data.prune_lambda.clone());
-    // Consumed: each array is freed once its section is written. Verified before the rename, so a
-    // file that fails verification never replaces what was at `output`.
+    // Consumed: each array is freed once its section is compressed (or, stored raw, written).
+    // Verified before the rename, so a file that fails verification never replaces what was at
+    // `output`.
+    let write_start = Instant::now();
+    let mut verify_start = None;
     let written = if options.no_verify {
         data.into_path(output, options.compression())
     } else {
-        data.into_path_verified(output, options.compression())
+        // As `into_path_verified`, noting when the writing ends and the verification begins.
+        data.into_path_checked(output, options.compression(), |written| {
+            verify_start = Some(Instant::now());
+            let container = Container::open(written)?;
+            treelod_format::verify(&container).map(drop)
+        })
     };
     let file_bytes = written.map_err(|e| report::file_error(output, &e))?;
+    let end = Instant::now();
     let verified = !options.no_verify;
-    let seconds = start.elapsed().as_secs_f64();
+    let mut stages = stats.stages.clone();
+    let verify_start = verify_start.unwrap_or(end);
+    stages.push(StageTime { name: "write", time: verify_start - write_start });
+    if verified {
+        stages.push(StageTime { name: "verify", time: end - verify_start });
+    }
+    let seconds = (end - start).as_secs_f64();
     let source_bytes: u64 = sources.iter().filter_map(|p| std::fs::metadata(p).ok()).map(|m| m.len()).sum();
-    Ok(Built { stats, warnings, materials, images, file_bytes, source_bytes, seconds, verified, prune_curves })
+    Ok(Built { stats, warnings, materials, images, file_bytes, source_bytes, seconds, stages, verified, prune_curves })
+}
+
+/// The `--timings` table of a finished build: each stage's seconds and share of the total, then
+/// the total (the stages' sum falls short of it by the bookkeeping between them).
+fn timings_text(output: &Path, built: &Built) -> String {
+    let mut table = Table::new(&[("stage", Align::Left), ("seconds", Align::Right), ("share", Align::Right)]);
+    let total = built.seconds;
+    let share = |seconds: f64| if total > 0.0 { format!("{:.1} %", 100.0 * seconds / total) } else { "–".to_owned() };
+    for stage in &built.stages {
+        let seconds = stage.time.as_secs_f64();
+        table.row(vec![stage.name.to_owned(), format!("{seconds:.3}"), share(seconds)]);
+    }
+    table.row(vec!["total".to_owned(), format!("{total:.3}"), share(total)]);
+    format!("timings of {}:\n{}", output.display(), table.render("  "))
 }
 
 /// What a finished build prints.
@@ -991,6 +1055,11 @@ impl Summary<'_> {
             "lines_per_level": s.lines_per_level,
             "line_seconds": s.line_millis as f64 / 1000.0,
             "ao_seconds": s.ao_millis as f64 / 1000.0,
+            "stages": b
+                .stages
+                .iter()
+                .map(|stage| serde_json::json!({ "name": stage.name, "seconds": stage.time.as_secs_f64() }))
+                .collect::<Vec<_>>(),
             "atlas": s.atlas,
             "lod_levels": s.lod_levels,
             "lod_triangles": s.lod_triangles,
