@@ -7,23 +7,19 @@
 //! only measured when `TREELOD_BENCH_LARGE=1`, as it takes seconds per iteration. Peak memory is
 //! not measured here: `/usr/bin/time -v treelod build …` reports it (see `docs/cli.md`).
 
+mod common;
+
 use std::hint::black_box;
-use std::path::{Path, PathBuf};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree, import_gltf_bytes};
 use treelod_format::Compression;
 
-fn trees_dir() -> PathBuf {
-    std::env::var_os("TREELOD_TREES")
-        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/trees"), PathBuf::from)
-}
-
 fn build(c: &mut Criterion) {
     let mut group = c.benchmark_group("build");
     group.sample_size(10);
     let demo = demo_tree(&DemoTreeConfig::default());
-    group.throughput(Throughput::Elements(demo.parts.iter().map(|p| p.triangles.len() as u64).sum()));
+    group.throughput(Throughput::Elements(common::triangles(&demo)));
     group.bench_function("demo tree", |b| {
         b.iter(|| {
             let placed = [Placed { scene: &demo, translation: glam::Vec3::ZERO }];
@@ -31,23 +27,15 @@ fn build(c: &mut Criterion) {
             black_box(out.data.to_bytes(Compression::default()).expect("encodes"))
         });
     });
-    let mut models = vec![
+    let models = [
         "quaternius-common-tree-1-3k.glb",
         "ez-tree-oak-large-23k.glb",
         "plantcatalog-hk-orchid-tree-31k.glb",
         "polyhaven-jacaranda-tree-55k.glb",
     ];
-    if std::env::var_os("TREELOD_BENCH_LARGE").is_some() {
-        models.push("sapling-japanese-maple-669k.glb");
-    }
-    for model in models {
-        let path = trees_dir().join(model);
-        let Ok(bytes) = std::fs::read(&path) else {
-            eprintln!("skipping {model}: {} not readable", path.display());
-            continue;
-        };
+    for (model, path, bytes) in common::read_models(&models) {
         let scene = import_gltf_bytes(&bytes, &path, path.parent()).expect("shared model imports");
-        group.throughput(Throughput::Elements(scene.parts.iter().map(|p| p.triangles.len() as u64).sum()));
+        group.throughput(Throughput::Elements(common::triangles(&scene)));
         drop(scene);
         group.bench_function(model, |b| {
             b.iter(|| {

@@ -8,8 +8,10 @@
 //! `../shared/assets/trees/` (or `TREELOD_TREES`); without them, the built-in demo tree. One
 //! build's stage times are also printed by `treelod build --timings`.
 
+mod common;
+
 use std::hint::black_box;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use treelod_build::scene::Scene;
@@ -18,11 +20,6 @@ use treelod_build::{
     PruneConfig, build_block, demo_tree, import_gltf_bytes,
 };
 use treelod_format::Compression;
-
-fn trees_dir() -> PathBuf {
-    std::env::var_os("TREELOD_TREES")
-        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/assets/trees"), PathBuf::from)
-}
 
 /// The core build: every stage that always runs, nothing optional.
 fn core() -> BuildConfig {
@@ -42,14 +39,10 @@ fn stages() -> Vec<(&'static str, BuildConfig)> {
     ]
 }
 
-fn triangles(scene: &Scene) -> u64 {
-    scene.parts.iter().map(|p| p.triangles.len() as u64).sum()
-}
-
 fn bench_model(c: &mut Criterion, name: &str, bytes: Option<(&[u8], &Path)>, scene: &Scene) {
     let mut group = c.benchmark_group(format!("stages/{name}"));
     group.sample_size(10);
-    group.throughput(Throughput::Elements(triangles(scene)));
+    group.throughput(Throughput::Elements(common::triangles(scene)));
     if let Some((bytes, path)) = bytes {
         group.bench_function("import", |b| {
             b.iter(|| black_box(import_gltf_bytes(bytes, path, path.parent()).expect("the model imports")));
@@ -75,17 +68,8 @@ fn bench_model(c: &mut Criterion, name: &str, bytes: Option<(&[u8], &Path)>, sce
 }
 
 fn stages_bench(c: &mut Criterion) {
-    let mut models = vec!["ez-tree-oak-large-23k.glb"];
-    if std::env::var_os("TREELOD_BENCH_LARGE").is_some() {
-        models.push("sapling-japanese-maple-669k.glb");
-    }
     let mut measured = false;
-    for model in models {
-        let path = trees_dir().join(model);
-        let Ok(bytes) = std::fs::read(&path) else {
-            eprintln!("skipping {model}: {} not readable", path.display());
-            continue;
-        };
+    for (model, path, bytes) in common::read_models(&["ez-tree-oak-large-23k.glb"]) {
         let scene = import_gltf_bytes(&bytes, &path, path.parent()).expect("the shared model imports");
         bench_model(c, model, Some((&bytes, &path)), &scene);
         measured = true;

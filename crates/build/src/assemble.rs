@@ -234,8 +234,6 @@ pub struct BuildStats {
     /// Leaf ellipsoids written per level of the cells' hierarchies, level 0 (the leaves) first,
     /// summed over the cells (empty without).
     pub ellipsoids_per_level: Vec<u32>,
-    /// Wall-clock time of the ellipsoid stage, milliseconds (0 without).
-    pub ellipsoid_millis: u64,
     /// Branch lines written (0 without).
     pub lines: u64,
     /// Source segments of the bark skeleton (level 0 of the lines; 0 without).
@@ -244,14 +242,22 @@ pub struct BuildStats {
     /// first, summed over the cells (empty without). A line unchanged over several levels is one
     /// record, counted at each of them.
     pub lines_per_level: Vec<u32>,
-    /// Wall-clock time of the line stage, milliseconds (0 without).
-    pub line_millis: u64,
-    /// Wall-clock time of the ambient-occlusion stage, milliseconds (0 without).
-    pub ao_millis: u64,
     /// Wall-clock time of each stage that ran, in the order they ran; together they tile the
     /// build from the gathering to the finished [`ContainerData`]. Not part of the container
     /// (a build's bytes never depend on its timing).
     pub stages: Vec<StageTime>,
+}
+
+impl BuildStats {
+    /// Wall-clock time of the stage `name` ([`StageTime`]), whole milliseconds; 0 if it did not
+    /// run (e.g. `"ellipsoids"`, `"lines"`, `"ao"`).
+    #[must_use]
+    pub fn stage_millis(&self, name: &str) -> u64 {
+        self.stages
+            .iter()
+            .find(|stage| stage.name == name)
+            .map_or(0, |stage| u64::try_from(stage.time.as_millis()).unwrap_or(u64::MAX))
+    }
 }
 
 /// One stage of a build and how long it took ([`BuildStats::stages`]).
@@ -288,19 +294,26 @@ impl StageClock {
         Self { last: Instant::now() }
     }
 
-    /// Ends the stage `name`: records its time in `stats` and returns it.
-    fn lap(&mut self, stats: &mut BuildStats, name: &'static str) -> Duration {
+    /// Ends the stage `name`: records its time in `stats`.
+    fn lap(&mut self, stats: &mut BuildStats, name: &'static str) {
         let now = Instant::now();
-        let time = now.duration_since(self.last);
+        stats.stages.push(StageTime { name, time: now.duration_since(self.last) });
         self.last = now;
-        stats.stages.push(StageTime { name, time });
-        time
     }
-}
 
-/// `time` in whole milliseconds (the stats' `*_millis` fields).
-fn millis(time: Duration) -> u64 {
-    u64::try_from(time.as_millis()).unwrap_or(u64::MAX)
+    /// Runs the optional stage `name` with its `config` (nothing without one) and ends it.
+    fn optional<C, T>(
+        &mut self,
+        stats: &mut BuildStats,
+        name: &'static str,
+        config: Option<&C>,
+        stage: impl FnOnce(&C) -> Result<T, BuildError>,
+    ) -> Result<Option<T>, BuildError> {
+        let Some(config) = config else { return Ok(None) };
+        let built = stage(config)?;
+        self.lap(stats, name);
+        Ok(Some(built))
+    }
 }
 
 /// What a build returns.
@@ -717,23 +730,13 @@ fn assemble(
     // Stage: leaf ellipsoids (Clasen 2011), per cell; before the per-cell stage, which overwrites
     // the triangles' parts (the ellipsoids' colours need them).
     let cell_of = |p: Vec3| block_grid.cell_of(p);
-    let ellipsoids: Option<Ellipsoids> = match &config.ellipsoids {
-        Some(c) => {
-            let built = block_ellipsoids(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)?;
-            stats.ellipsoid_millis = millis(clock.lap(&mut stats, "ellipsoids"));
-            Some(built)
-        }
-        None => None,
-    };
+    let ellipsoids: Option<Ellipsoids> = clock.optional(&mut stats, "ellipsoids", config.ellipsoids.as_ref(), |c| {
+        block_ellipsoids(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)
+    })?;
     // Stage: branch lines (Clasen 2011): the bark skeleton, per cell; here for the same reason.
-    let lines: Option<Lines> = match &config.lines {
-        Some(c) => {
-            let built = block_lines(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)?;
-            stats.line_millis = millis(clock.lap(&mut stats, "lines"));
-            Some(built)
-        }
-        None => None,
-    };
+    let lines: Option<Lines> = clock.optional(&mut stats, "lines", config.lines.as_ref(), |c| {
+        block_lines(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)
+    })?;
 
     // Stage: per cell, the leaf points, the point hierarchy as point records, and the triangles in
     // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
@@ -810,7 +813,7 @@ fn assemble(
             let progress = |done, total| config.progress.report(Progress::AMBIENT_OCCLUSION, done, total);
             let (vertex_ao, point_ao, coverage) =
                 block_occlusion(&tris, &order, &vertices, &points, &cells, &material_keys, trees, ao, &progress);
-            stats.ao_millis = millis(clock.lap(&mut stats, "ao"));
+            clock.lap(&mut stats, "ao");
             (Some(vertex_ao), point_ao, coverage)
         }
         None => (None, Vec::new(), Vec::new()),

@@ -188,7 +188,7 @@ fn build_model(name: &str) {
         s.line_segments,
         s.lines,
         s.lines_per_level,
-        s.line_millis as f64 / 1000.0
+        s.stage_millis("lines") as f64 / 1000.0
     );
     assert!(s.line_segments > 0 && s.lines >= s.line_segments);
 }

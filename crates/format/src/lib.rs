@@ -33,5 +33,6 @@ pub use reader::{
 pub use records::*;
 pub use verify::{SptSummary, VerifyReport, check_point_cut, check_spt, triangle_leaf_sizes, verify};
 pub use writer::{
-    Compression, ContainerData, DEFAULT_LEVEL, SMALL_SECTION, section_level, temporary_target, write_atomically,
+    Compression, ContainerData, DEFAULT_LEVEL, SMALL_SECTION, section_level, temporary_target, verify_written,
+    write_atomically,
 };

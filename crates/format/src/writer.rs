@@ -312,10 +312,7 @@ impl ContainerData {
     /// As [`Self::into_path`]; [`Error::NotReplaced`] with the verification's error if the written
     /// file fails it (`path` is then untouched).
     pub fn into_path_verified(self, path: impl AsRef<Path>, compression: Compression) -> Result<u64> {
-        self.into_path_checked(path, compression, |written| {
-            let container = Container::open(written)?;
-            crate::verify(&container).map(drop)
-        })
+        self.into_path_checked(path, compression, verify_written)
     }
 
     /// As [`Self::into_path`], calling `check` on the complete, flushed temporary file before it
@@ -585,6 +582,15 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
     tmp.as_file().sync_all().map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
+}
+
+/// The check [`ContainerData::into_path_verified`] runs on the written file before renaming it:
+/// it opens and fully verifies ([`crate::verify`]).
+///
+/// # Errors
+/// Any error of [`Container::open`] or [`crate::verify`].
+pub fn verify_written(path: &Path) -> Result<()> {
+    crate::verify(&Container::open(path)?).map(drop)
 }
 
 /// Sections of at most this many bytes are compressed at level 19 or more, whatever the level

@@ -11,7 +11,7 @@ use treelod_build::{
     BuildConfig, BuildOutput, BuildStats, ImportLimits, Placed, PruneConfig, PruneOrder, PruneReport, StageTime,
     build_scenes,
 };
-use treelod_format::{Compression, Container, CurveSample, ErrorClass, Setting};
+use treelod_format::{Compression, CurveSample, ErrorClass, Setting};
 
 use crate::report::{self, Failed};
 use crate::table::{Align, Table};
@@ -865,8 +865,7 @@ pub(crate) fn build_container(
         // As `into_path_verified`, noting when the writing ends and the verification begins.
         data.into_path_checked(output, options.compression(), |written| {
             verify_start = Some(Instant::now());
-            let container = Container::open(written)?;
-            treelod_format::verify(&container).map(drop)
+            treelod_format::verify_written(written)
         })
     };
     let file_bytes = written.map_err(|e| report::file_error(output, &e))?;
@@ -967,7 +966,7 @@ impl Summary<'_> {
             "  ellipsoids    {} (per level {}), built in {:.2} s\n",
             s.ellipsoids,
             levels.join(", "),
-            s.ellipsoid_millis as f64 / 1000.0
+            s.stage_millis("ellipsoids") as f64 / 1000.0
         )
     }
 
@@ -983,7 +982,7 @@ impl Summary<'_> {
             s.lines,
             s.line_segments,
             levels.join(", "),
-            s.line_millis as f64 / 1000.0
+            s.stage_millis("lines") as f64 / 1000.0
         )
     }
 
@@ -1049,12 +1048,12 @@ impl Summary<'_> {
             "planes_per_level": s.planes_per_level,
             "ellipsoids": s.ellipsoids,
             "ellipsoids_per_level": s.ellipsoids_per_level,
-            "ellipsoid_seconds": s.ellipsoid_millis as f64 / 1000.0,
+            "ellipsoid_seconds": s.stage_millis("ellipsoids") as f64 / 1000.0,
             "lines": s.lines,
             "line_segments": s.line_segments,
             "lines_per_level": s.lines_per_level,
-            "line_seconds": s.line_millis as f64 / 1000.0,
-            "ao_seconds": s.ao_millis as f64 / 1000.0,
+            "line_seconds": s.stage_millis("lines") as f64 / 1000.0,
+            "ao_seconds": s.stage_millis("ao") as f64 / 1000.0,
             "stages": b
                 .stages
                 .iter()
