@@ -101,6 +101,7 @@ mod occlusion;
 pub mod offscreen;
 mod renderer;
 mod shadows;
+mod sky;
 mod streaming;
 mod textures;
 
@@ -111,6 +112,7 @@ pub use renderer::{
     Renderer, RendererFormats, Settings, ShadowStats,
 };
 pub use shadows::{Cascade, MAX_CASCADES, Shadows, cascade_splits, fit_cascades};
+pub use sky::Sky;
 
 /// WGSL for receiving the renderer's shadows in a host's own pipeline: declares group 2
 /// ([`Renderer::shadow_bind_group`]) and `fn sunlit(world: vec3<f32>, normal: vec3<f32>, sun:

@@ -180,6 +180,18 @@ pub struct BuildOptions {
 }
 
 impl BuildOptions {
+    /// The options `treelod build` takes without any flag (what the viewer builds a dropped file
+    /// with).
+    pub(crate) fn defaults() -> Self {
+        #[derive(clap::Parser)]
+        struct Defaults {
+            #[command(flatten)]
+            options: BuildOptions,
+        }
+        // No arguments: every option at its default (no option is required; a unit test checks).
+        <Defaults as clap::Parser>::try_parse_from(["treelod"]).expect("every build option has a default").options
+    }
+
     /// The build crate's configuration of these options.
     pub(crate) fn config(&self) -> BuildConfig {
         BuildConfig {
@@ -1071,7 +1083,8 @@ impl Summary<'_> {
 }
 
 /// Imports the glTF at `path` within the options' limits.
-fn import(path: &Path, options: &BuildOptions) -> Result<Scene, Failed> {
+/// Imports a glTF file within `options`' limits, printing a failure as `error: PATH: reason`.
+pub(crate) fn import(path: &Path, options: &BuildOptions) -> Result<Scene, Failed> {
     treelod_build::import_gltf_with(path, &options.import_limits()).map_err(|e| report::build_error(path, &e))
 }
 
@@ -1138,7 +1151,14 @@ fn progress_bar(len: u64) -> indicatif::ProgressBar {
 
 #[cfg(test)]
 mod tests {
-    use super::{ByteSize, parse_size};
+    use super::{BuildOptions, ByteSize, parse_size};
+
+    #[test]
+    fn the_default_options_parse_from_no_arguments() {
+        let options = BuildOptions::defaults();
+        assert!(!options.impostors && !options.ellipsoids && !options.baselines);
+        assert!(options.ao_rays > 0, "ambient occlusion is on by default");
+    }
 
     #[test]
     fn sizes_take_binary_suffixes_and_show_the_largest() {

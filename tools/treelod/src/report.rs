@@ -4,6 +4,7 @@
 //! writes to stdout turn a closed pipe into a quiet stop and other failures into an I/O error.
 //! While a progress bar is registered ([`set_progress_bar`]), every line is printed above it.
 
+use std::cell::RefCell;
 use std::io::{self, Write as _};
 use std::path::Path;
 use std::sync::{Mutex, PoisonError};
@@ -91,8 +92,33 @@ fn reason(error: &Error) -> String {
     }
 }
 
+thread_local! {
+    /// The lines printed by this thread while [`capturing`] runs.
+    static CAPTURED: RefCell<Option<Vec<String>>> = const { RefCell::new(None) };
+}
+
+/// Runs `f` and returns, beside its result, the error and warning lines this thread printed
+/// meanwhile (`error: …` and `warning: …`): for a window that shows what the
+/// terminal shows (the viewer's build of a dropped file). The lines are still printed.
+pub fn capturing<R>(f: impl FnOnce() -> R) -> (R, Vec<String>) {
+    let outer = CAPTURED.with(|c| c.replace(Some(Vec::new())));
+    let result = f();
+    let lines = CAPTURED.with(|c| c.replace(outer)).unwrap_or_default();
+    (result, lines)
+}
+
+/// Keeps `line` for [`capturing`], if this thread is capturing.
+fn capture(line: String) {
+    CAPTURED.with(|c| {
+        if let Some(lines) = c.borrow_mut().as_mut() {
+            lines.push(line);
+        }
+    });
+}
+
 /// Writes `error: MESSAGE` to stderr, ignoring a failure to do so.
 pub fn print_error(message: &str) {
+    capture(format!("error: {message}"));
     above_progress(|| {
         let _ = writeln!(io::stderr().lock(), "error: {message}");
     });
@@ -130,6 +156,7 @@ pub fn message_error(path: &Path, message: &str) {
 
 /// Prints `warning: PATH: message`, ignoring a failure to do so.
 pub fn print_warning(path: &Path, message: &str) {
+    capture(format!("warning: {}: {message}", path.display()));
     above_progress(|| {
         let _ = writeln!(io::stderr().lock(), "warning: {}: {message}", path.display());
     });
@@ -165,4 +192,22 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), Failed> {
         return Err(Failed { class: ErrorClass::Io });
     }
     treelod_format::write_atomically(path, bytes).map_err(|e| file_error(path, &e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn capturing_keeps_this_threads_errors_and_warnings_and_nests() {
+        let ((), outer) = capturing(|| {
+            message_error(Path::new("a.glb"), "bad");
+            let ((), inner) = capturing(|| print_warning(Path::new("b.glb"), "odd"));
+            assert_eq!(inner, ["warning: b.glb: odd"]);
+            // Another thread's lines are not this capture's.
+            std::thread::spawn(|| print_error("elsewhere")).join().expect("joins");
+        });
+        assert_eq!(outer, ["error: a.glb: bad"]);
+        message_error(Path::new("c.glb"), "not captured");
+    }
 }

@@ -1512,21 +1512,44 @@ fn render_refuses_bad_shadow_options_naming_them() {
 // ---------------------------------------------------------------------------------------------
 // `view`: a window, under Xvfb (xvfb-run and xauth are required: .ci/run installs them).
 
-/// `treelod view INPUT --screenshot PNG --frames 3 --size 160x120 EXTRA...` under Xvfb.
+/// `treelod view INPUT --screenshot PNG --frames 3 EXTRA...` under Xvfb, with `--size 160x120`
+/// unless `extra` gives a size.
 fn view_screenshot(input: &Path, png: &Path, extra: &[&str]) -> Output {
+    let size: &[&str] = if extra.contains(&"--size") { &[] } else { &["--size", "160x120"] };
     Command::new("xvfb-run")
         .args(["-a", env!("CARGO_BIN_EXE_treelod"), "view"])
         .arg(input)
         .arg("--screenshot")
         .arg(png)
-        .args(["--frames", "3", "--size", "160x120"])
+        .args(["--frames", "3"])
+        .args(size)
         .args(extra)
         .output()
         .expect("xvfb-run runs (install xvfb and xauth, as .ci/run does)")
 }
 
+/// A pixel of the viewer's sky: bluer than it is green or red.
+fn sky_like(p: [u8; 4]) -> bool {
+    p[2] > p[0].saturating_add(20) && p[2] >= p[1]
+}
+
+/// A pixel of a leaf: green above blue and red, and darker than the lit ground.
+fn leaf_like(p: [u8; 4]) -> bool {
+    p[1] > p[2].saturating_add(20) && p[1] > p[0] && p[0] < 150
+}
+
+/// A pixel of the panel (egui's dark theme): dark and grey.
+fn panel_like(p: [u8; 4]) -> bool {
+    p[0].max(p[1]).max(p[2]) < 80 && p[0].abs_diff(p[2]) < 12 && p[0].abs_diff(p[1]) < 12
+}
+
+/// Pixels of `pixels` (`width` wide) in columns `columns` that satisfy `test`.
+fn count_in(pixels: &[[u8; 4]], width: u32, columns: std::ops::Range<u32>, test: fn([u8; 4]) -> bool) -> usize {
+    pixels.iter().enumerate().filter(|(i, p)| columns.contains(&((*i as u32) % width)) && test(**p)).count()
+}
+
 #[test]
-fn view_screenshot_under_xvfb_is_window_sized_and_shows_the_tree() {
+fn view_screenshot_under_xvfb_is_window_sized_and_shows_the_tree_under_a_sky() {
     let demo = shared_demo();
     let dir = scratch("view");
     let png = dir.join("view.png");
@@ -1536,28 +1559,93 @@ fn view_screenshot_under_xvfb_is_window_sized_and_shows_the_tree() {
     assert!(!err.contains("panicked"), "{err}");
     let stdout = stdout(&out);
     assert!(stdout.starts_with(&format!("{}: 160x120, 1 of 1 instance(s) visible, ", png.display())), "{stdout}");
+    // 160 pixels is less than twice the panel's width: it starts hidden.
+    assert!(!stdout.contains("with the panel"), "{stdout}");
     let (width, height, pixels) = read_png(&png);
     assert_eq!((width, height), (160, 120));
     assert!(pixels.iter().all(|p| p[3] == 255), "opaque");
-    assert!(close_to(pixels[0], [255, 255, 255]), "the corner is the white background: {:?}", pixels[0]);
-    let drawn = pixels.iter().filter(|p| !close_to(**p, [255, 255, 255])).count();
-    assert!(drawn > 100, "the tree covers pixels: {drawn}");
+    assert!(sky_like(pixels[0]), "the top corner is sky: {:?}", pixels[0]);
+    let leaves = count_in(&pixels, width, 0..width, leaf_like);
+    assert!(leaves > 100, "the tree covers pixels: {leaves}");
+
+    // With MSAA (a multisampled target resolved into the window).
+    let out = view_screenshot(demo, &png, &["--msaa", "4"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (_, _, pixels) = read_png(&png);
+    let leaves = count_in(&pixels, width, 0..width, leaf_like);
+    assert!(leaves > 100, "the tree covers pixels with MSAA: {leaves}");
 }
 
 #[test]
-fn view_screenshot_with_shadows_draws_the_ground_and_reports_the_shadow_pass() {
+fn view_screenshot_with_shadows_shades_the_ground_and_reports_the_shadow_pass() {
     let demo = shared_demo();
     let dir = scratch("view-shadows");
-    let png = dir.join("view.png");
-    let out = view_screenshot(demo, &png, &["--shadows", "--shadow-cascades", "2"]);
+    let (lit, shadowed) = (dir.join("lit.png"), dir.join("shadowed.png"));
+    let out = view_screenshot(demo, &lit, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = view_screenshot(demo, &shadowed, &["--shadows", "--shadow-cascades", "2"]);
     let err = stderr(&out);
     assert!(out.status.success(), "view failed (needs Xvfb and a Vulkan adapter, e.g. mesa-vulkan-drivers): {err}");
     assert!(!err.contains("panicked"), "{err}");
     let stdout = stdout(&out);
     assert_eq!(count_after(&stdout, "; shadow pass: "), Some(2), "{stdout}");
-    let (_, _, pixels) = read_png(&png);
-    let drawn = pixels.iter().filter(|p| !close_to(**p, [255, 255, 255])).count();
-    assert!(drawn > pixels.len() / 3, "the ground covers much of the window: {drawn} of {}", pixels.len());
+    // The ground is drawn either way; with shadows some of it is darker.
+    let (_, _, lit) = read_png(&lit);
+    let (_, _, shadowed) = read_png(&shadowed);
+    let brightness = |p: &[u8; 4]| u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]);
+    let ground = lit.iter().filter(|p| !sky_like(**p) && brightness(p) > 450).count();
+    assert!(ground > lit.len() / 4, "the ground covers much of the window: {ground} of {}", lit.len());
+    let darker = lit.iter().zip(&shadowed).filter(|(a, b)| brightness(b) + 60 < brightness(a)).count();
+    assert!(darker > 100, "the trees shadow the ground: {darker} pixels darker");
+}
+
+#[test]
+fn view_shows_the_panel_beside_the_tree_and_hides_it_on_request() {
+    let demo = shared_demo();
+    let dir = scratch("view-panel");
+    let (with, without) = (dir.join("panel.png"), dir.join("no-panel.png"));
+    let out = view_screenshot(demo, &with, &["--size", "640x400"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "view failed (needs Xvfb and a Vulkan adapter, e.g. mesa-vulkan-drivers): {err}");
+    assert!(stdout(&out).contains(", with the panel"), "{}", stdout(&out));
+    let (width, height, pixels) = read_png(&with);
+    assert_eq!((width, height), (640, 400));
+    // The panel fills the right 300 pixels (its text and widgets aside); the tree is left of it.
+    let panel_area = (300 * height) as usize;
+    let panel = count_in(&pixels, width, 340..640, panel_like);
+    assert!(panel > panel_area / 2, "the panel is drawn: {panel} of {panel_area} pixels");
+    assert!(count_in(&pixels, width, 0..330, panel_like) < 200, "and only on the right");
+    let leaves = count_in(&pixels, width, 0..330, leaf_like);
+    assert!(leaves > 1000, "the tree is drawn beside it: {leaves}");
+
+    let out = view_screenshot(demo, &without, &["--size", "640x400", "--no-panel"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stdout(&out).contains("with the panel"));
+    let (_, _, pixels) = read_png(&without);
+    let panel = count_in(&pixels, width, 340..640, panel_like);
+    assert!(panel < panel_area / 20, "no panel: {panel} dark grey pixels");
+}
+
+#[test]
+fn view_builds_a_gltf_input_first_and_reports_a_bad_one() {
+    let dir = scratch("view-gltf");
+    let png = dir.join("built.png");
+    let out = view_screenshot(&small_tree(), &png, &["--distance", "2"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "view failed (needs Xvfb and a Vulkan adapter, e.g. mesa-vulkan-drivers): {err}");
+    assert!(stdout(&out).contains(": 160x120, 1 of 1 instance(s) visible, "), "{}", stdout(&out));
+    let (width, _, pixels) = read_png(&png);
+    let leaves = count_in(&pixels, width, 0..width, leaf_like);
+    assert!(leaves > 100, "the built tree is drawn: {leaves}");
+
+    let broken = dir.join("broken.glb");
+    std::fs::write(&broken, b"glTF, but only the magic").expect("writes");
+    let shot = dir.join("never.png");
+    let out = view_screenshot(&broken, &shot, &[]);
+    assert_eq!(out.status.code(), Some(3), "{}", stderr(&out));
+    assert!(stderr(&out).contains(&format!("error: {}", broken.display())), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("panicked"));
+    assert!(!shot.exists(), "no screenshot of a build that failed");
 }
 
 #[test]

@@ -1,0 +1,539 @@
+//! The viewer's panel (egui, on the right of the window): what is drawn and how, the camera, and
+//! live counts with a graph of the last seconds. Every setting here is also a key (the panel shows
+//! which); the panel adds what keys cannot say well: values, ranges, and the counts.
+
+use std::collections::VecDeque;
+
+use egui::{Color32, RichText, Ui};
+use treelod_render::{Baseline, BillboardKind, DebugView, FrameStats, MAX_CASCADES, Pruning, Settings, Shadows};
+
+use super::rig::{Animation, DISTANCE_RANGE, Mode, Rig};
+use super::{SELF_SHADOW, sun_angles, sun_from_angles, toggle_shadows};
+use crate::render::shadow_primitives;
+
+/// Width of the panel, points.
+pub const WIDTH: f32 = 300.0;
+/// Seconds of history the graph shows.
+const HISTORY_SECONDS: f64 = 10.0;
+
+/// How the leaves (and the bark beside them) of every tree are drawn; trees whose containers lack
+/// the representation are drawn with the point tree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Representation {
+    PointTree,
+    Pruned,
+    Impostors,
+    Ellipsoids,
+    LodChain,
+    Billboard,
+    Crossed,
+    FullMesh,
+}
+
+impl Representation {
+    pub const ALL: [Self; 8] = [
+        Self::PointTree,
+        Self::Pruned,
+        Self::Impostors,
+        Self::Ellipsoids,
+        Self::LodChain,
+        Self::Billboard,
+        Self::Crossed,
+        Self::FullMesh,
+    ];
+
+    /// The name shown, with the paper or tool it comes from.
+    #[must_use]
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::PointTree => "triangles + points (Gilet)",
+            Self::Pruned => "pruned leaves (Neubert)",
+            Self::Impostors => "impostor planes (Garcia)",
+            Self::Ellipsoids => "ellipsoids + lines (Clasen)",
+            Self::LodChain => "LoD chain (meshoptimizer)",
+            Self::Billboard => "billboard",
+            Self::Crossed => "crossed billboards",
+            Self::FullMesh => "full mesh",
+        }
+    }
+
+    /// The representation `settings` draw with, by the renderer's precedence (full mesh, then a
+    /// baseline, ellipsoids, impostors, pruning, the point tree).
+    #[must_use]
+    pub fn of(settings: &Settings) -> Self {
+        if settings.full_mesh {
+            return Self::FullMesh;
+        }
+        match settings.baseline {
+            Some(Baseline::LodChain) => return Self::LodChain,
+            Some(Baseline::Billboard(BillboardKind::Facing)) => return Self::Billboard,
+            Some(Baseline::Billboard(BillboardKind::Crossed)) => return Self::Crossed,
+            None => {}
+        }
+        if settings.ellipsoids {
+            Self::Ellipsoids
+        } else if settings.impostors {
+            Self::Impostors
+        } else if settings.pruning.is_some() {
+            Self::Pruned
+        } else {
+            Self::PointTree
+        }
+    }
+
+    /// Sets `settings` to draw with this representation alone; pruning comes back with `pruning`
+    /// (the last pruning settings used).
+    pub fn apply(self, settings: &mut Settings, pruning: Pruning) {
+        settings.full_mesh = self == Self::FullMesh;
+        settings.baseline = match self {
+            Self::LodChain => Some(Baseline::LodChain),
+            Self::Billboard => Some(Baseline::Billboard(BillboardKind::Facing)),
+            Self::Crossed => Some(Baseline::Billboard(BillboardKind::Crossed)),
+            _ => None,
+        };
+        settings.ellipsoids = self == Self::Ellipsoids;
+        settings.impostors = self == Self::Impostors;
+        settings.pruning = (self == Self::Pruned).then_some(pruning);
+    }
+}
+
+/// How many of the scene's models hold each representation (all hold the point tree and the full
+/// mesh).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Holds {
+    pub models: usize,
+    pub pruned: usize,
+    pub impostors: usize,
+    pub ellipsoids: usize,
+    pub lines: usize,
+    pub lod_chain: usize,
+    pub billboards: usize,
+}
+
+impl Holds {
+    /// Counts what `containers` hold.
+    #[must_use]
+    pub fn of<'a>(containers: impl IntoIterator<Item = &'a treelod_format::Container>) -> Self {
+        let mut holds = Self::default();
+        for c in containers {
+            holds.models += 1;
+            holds.pruned += usize::from(!c.prune_leaves().is_empty());
+            holds.impostors += usize::from(!c.planes().is_empty());
+            holds.ellipsoids += usize::from(!c.ellipsoids().is_empty());
+            holds.lines += usize::from(!c.lines().is_empty());
+            holds.lod_chain += usize::from(!c.lod_levels().is_empty());
+            holds.billboards += usize::from(!c.billboards().is_empty());
+        }
+        holds
+    }
+
+    /// Models holding `representation`.
+    #[must_use]
+    pub fn count(&self, representation: Representation) -> usize {
+        match representation {
+            Representation::PointTree | Representation::FullMesh => self.models,
+            Representation::Pruned => self.pruned,
+            Representation::Impostors => self.impostors,
+            Representation::Ellipsoids => self.ellipsoids,
+            Representation::LodChain => self.lod_chain,
+            Representation::Billboard | Representation::Crossed => self.billboards,
+        }
+    }
+}
+
+/// Primitives a frame submits, every kind together (pruned leaves are among the triangles).
+#[must_use]
+pub fn primitives(stats: &FrameStats) -> u64 {
+    stats.triangles + stats.points + stats.planes + stats.ellipsoids + stats.lines + stats.billboards
+}
+
+/// One frame of the graph.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Sample {
+    /// Seconds since the viewer started.
+    time: f64,
+    frame_ms: f32,
+    primitives: u64,
+}
+
+/// Frame times and primitive counts of the last [`HISTORY_SECONDS`].
+#[derive(Debug, Default)]
+pub struct History(VecDeque<Sample>);
+
+impl History {
+    /// Adds a frame at `time` seconds, forgetting those older than the graph shows.
+    pub fn push(&mut self, time: f64, frame_ms: f32, primitives: u64) {
+        self.0.push_back(Sample { time, frame_ms, primitives });
+        while self.0.front().is_some_and(|s| s.time < time - HISTORY_SECONDS) {
+            self.0.pop_front();
+        }
+    }
+
+    /// Frames per second over the history (0 with fewer than two frames).
+    #[must_use]
+    pub fn fps(&self) -> f64 {
+        match (self.0.front(), self.0.back()) {
+            (Some(first), Some(last)) if last.time > first.time => (self.0.len() - 1) as f64 / (last.time - first.time),
+            _ => 0.0,
+        }
+    }
+
+    /// The largest frame time and primitive count held.
+    fn maxima(&self) -> (f32, u64) {
+        self.0.iter().fold((0.0f32, 0u64), |(ms, p), s| (ms.max(s.frame_ms), p.max(s.primitives)))
+    }
+}
+
+/// What the panel shows of a build started by a dropped file.
+pub struct BuildView<'a> {
+    pub source: &'a str,
+    pub stage: &'a str,
+    pub fraction: Option<f32>,
+    pub seconds: f32,
+}
+
+/// Everything the panel reads and changes in one frame.
+pub struct Inputs<'a> {
+    pub name: &'a str,
+    pub settings: &'a mut Settings,
+    /// The shadow settings turned back on.
+    pub last_shadows: &'a mut Shadows,
+    /// The pruning settings turned back on.
+    pub last_pruning: &'a mut Pruning,
+    pub rig: &'a mut Rig,
+    pub stats: &'a FrameStats,
+    pub holds: Holds,
+    pub instances: usize,
+    pub history: &'a History,
+    /// CPU milliseconds of the last frame's selection ([`treelod_render::Renderer::prepare`]).
+    pub select_ms: f64,
+    /// GPU milliseconds of the main pass, where the device has timestamp queries.
+    pub gpu_ms: Option<f64>,
+    pub gpu_selection: bool,
+    /// Sample counts the window's formats allow, and the one in use.
+    pub msaa_choices: &'a [u32],
+    pub msaa: u32,
+    pub build: Option<BuildView<'a>>,
+    /// Errors and warnings of the last dropped file.
+    pub messages: &'a [String],
+}
+
+/// What the panel asks of the viewer beyond its settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Action {
+    ToggleGpuSelection,
+    /// Draw with this many samples per pixel (the renderer is rebuilt).
+    Msaa(u32),
+}
+
+/// Draws the panel's contents into `ui`; returns what the viewer must do beyond the settings.
+pub fn show(ui: &mut Ui, inputs: Inputs<'_>) -> Vec<Action> {
+    let mut actions = Vec::new();
+    let Inputs { name, settings, last_shadows, last_pruning, rig, stats, holds, .. } = inputs;
+    ui.heading(name);
+    ui.label(format!(
+        "{:.1} fps · selection {:.2} ms · GPU {}",
+        inputs.history.fps(),
+        inputs.select_ms,
+        inputs.gpu_ms.map_or_else(|| "n/a".to_owned(), |ms| format!("{ms:.2} ms"))
+    ));
+    if let Some(build) = &inputs.build {
+        ui.separator();
+        ui.label(format!("building {} ({:.0} s)", build.source, build.seconds));
+        match build.fraction {
+            Some(f) => ui.add(egui::ProgressBar::new(f).show_percentage().text(build.stage)),
+            None => {
+                ui.horizontal(|ui| {
+                    ui.spinner();
+                    ui.label(build.stage);
+                })
+                .response
+            }
+        };
+    }
+    for message in inputs.messages {
+        let colour =
+            if message.starts_with("error") { Color32::from_rgb(230, 90, 80) } else { Color32::from_rgb(220, 180, 60) };
+        ui.label(RichText::new(message).color(colour).small());
+    }
+    graph(ui, inputs.history);
+    ui.separator();
+    egui::ScrollArea::vertical().show(ui, |ui| {
+        ui.spacing_mut().slider_width = 120.0;
+        egui::CollapsingHeader::new("Representation").default_open(true).show(ui, |ui| {
+            representation(ui, settings, *last_pruning, holds);
+            detail(ui, settings, last_pruning);
+        });
+        egui::CollapsingHeader::new("Counts").default_open(true).show(ui, |ui| counts(ui, stats, inputs.instances));
+        egui::CollapsingHeader::new("Level of detail").default_open(true).show(ui, |ui| {
+            lod(ui, settings, inputs.gpu_selection, &mut actions);
+        });
+        egui::CollapsingHeader::new("View").default_open(true).show(ui, |ui| {
+            view(ui, settings, inputs.msaa_choices, inputs.msaa, &mut actions);
+            camera(ui, rig);
+        });
+        egui::CollapsingHeader::new("Light").default_open(false).show(ui, |ui| light(ui, settings, last_shadows));
+    });
+    actions
+}
+
+fn representation(ui: &mut Ui, settings: &mut Settings, pruning: Pruning, holds: Holds) {
+    let current = Representation::of(settings);
+    let mut chosen = current;
+    egui::ComboBox::from_id_salt("representation").width(ui.available_width()).selected_text(current.label()).show_ui(
+        ui,
+        |ui| {
+            for r in Representation::ALL {
+                let held = holds.count(r);
+                let label = if held == holds.models {
+                    r.label().to_owned()
+                } else {
+                    format!("{} ({held} of {} models)", r.label(), holds.models)
+                };
+                ui.selectable_value(&mut chosen, r, label);
+            }
+        },
+    );
+    if chosen != current {
+        chosen.apply(settings, pruning);
+    }
+    if holds.count(chosen) < holds.models {
+        ui.label(
+            RichText::new("models without it draw with triangles + points (build with --prune, --impostors, --ellipsoids or --baselines)")
+                .small()
+                .weak(),
+        );
+    }
+}
+
+/// The chosen representation's own settings.
+fn detail(ui: &mut Ui, settings: &mut Settings, last_pruning: &mut Pruning) {
+    match Representation::of(settings) {
+        Representation::Pruned => {
+            if let Some(pruning) = &mut settings.pruning {
+                ui.checkbox(&mut pruning.occlusion, "occlusion lowers hidden trees' leaves").on_hover_text("key O");
+                ui.add(egui::Slider::new(&mut pruning.spt_below_pixels, 0.0..=512.0).text("point tree below, px"))
+                    .on_hover_text("trees shorter than this on screen draw with triangles + points");
+                *last_pruning = *pruning;
+            }
+        }
+        Representation::Impostors => {
+            ui.checkbox(&mut settings.impostor_morph, "morph and cross-fade levels").on_hover_text("key M");
+        }
+        Representation::Ellipsoids => {
+            ui.checkbox(&mut settings.lines, "bark as lines").on_hover_text("key N");
+            ui.add(egui::Slider::new(&mut settings.ellipsoid_quality, 0.25..=8.0).logarithmic(true).text("quality"))
+                .on_hover_text("2: the level for pixels half as large");
+            ui.add(egui::Slider::new(&mut settings.level_blend, 0.0..=2.0).text("level blend, octaves"))
+                .on_hover_text("levels dither into each other over this range; 0 switches at once");
+        }
+        _ => {}
+    }
+}
+
+fn lod(ui: &mut Ui, settings: &mut Settings, gpu_selection: bool, actions: &mut Vec<Action>) {
+    let range = 1.0 / 64.0..=1024.0;
+    ui.add(egui::Slider::new(&mut settings.s_min, range.clone()).logarithmic(true).text("s_min, px"))
+        .on_hover_text("points are drawn down to this size (keys [ and ])");
+    ui.add(egui::Slider::new(&mut settings.s_max, range).logarithmic(true).text("s_max, px"))
+        .on_hover_text("triangles larger than this stay triangles (keys - and =)");
+    settings.s_max = settings.s_max.max(settings.s_min);
+    ui.add(egui::Slider::new(&mut settings.depth_bias_k, 0.0..=16.0).text("depth bias k, px"))
+        .on_hover_text("Gilet's depth bias: finer in front, coarser behind (keys J and K)");
+    ui.add(egui::Slider::new(&mut settings.point_scale, 0.25..=4.0).logarithmic(true).text("point scale"));
+    let mut on = gpu_selection;
+    if ui.checkbox(&mut on, "select on the GPU").on_hover_text("compute-shader selection (key G)").changed() {
+        actions.push(Action::ToggleGpuSelection);
+    }
+}
+
+fn light(ui: &mut Ui, settings: &mut Settings, last_shadows: &mut Shadows) {
+    let (azimuth, elevation) = sun_angles(settings.sun);
+    let (mut az, mut el) = (azimuth.to_degrees(), elevation.to_degrees());
+    let a = ui.add(egui::Slider::new(&mut az, -180.0..=180.0).text("sun azimuth, °")).on_hover_text("keys ← and →");
+    let e = ui.add(egui::Slider::new(&mut el, -85.0..=85.0).text("sun elevation, °")).on_hover_text("keys ↑ and ↓");
+    if a.changed() || e.changed() {
+        settings.sun = sun_from_angles(az.to_radians(), el.to_radians());
+    }
+    ui.add(egui::Slider::new(&mut settings.ambient, 0.0..=1.0).text("ambient share"));
+    ui.checkbox(&mut settings.ambient_occlusion, "ambient occlusion").on_hover_text("key Y");
+    let mut self_shadow = settings.shading.is_some();
+    if ui.checkbox(&mut self_shadow, "Gilet's self-shadowing").on_hover_text("key L").changed() {
+        settings.shading = self_shadow.then_some(SELF_SHADOW);
+    }
+    let mut shadows = settings.shadows.is_some();
+    if ui.checkbox(&mut shadows, "shadow maps").on_hover_text("key H").changed() {
+        toggle_shadows(&mut settings.shadows, last_shadows);
+    }
+    if let Some(shadows) = &mut settings.shadows {
+        let before = *shadows;
+        ui.add(egui::Slider::new(&mut shadows.cascades, 1..=MAX_CASCADES as u32).text("cascades"));
+        egui::ComboBox::from_label("resolution").selected_text(format!("{}²", shadows.resolution)).show_ui(ui, |ui| {
+            for r in [512, 1024, 2048, 4096] {
+                ui.selectable_value(&mut shadows.resolution, r, format!("{r}²"));
+            }
+        });
+        ui.add(egui::Slider::new(&mut shadows.distance, 5.0..=2000.0).logarithmic(true).text("distance, m"));
+        if *shadows != before {
+            *last_shadows = *shadows;
+        }
+    }
+}
+
+fn view(ui: &mut Ui, settings: &mut Settings, msaa_choices: &[u32], msaa: u32, actions: &mut Vec<Action>) {
+    ui.horizontal(|ui| {
+        ui.label("colour by");
+        ui.radio_value(&mut settings.debug, DebugView::Shaded, "shading").on_hover_text("key 1");
+        ui.radio_value(&mut settings.debug, DebugView::Cells, "cell").on_hover_text("key 2");
+        ui.radio_value(&mut settings.debug, DebugView::Kinds, "kind")
+            .on_hover_text("triangles red, points blue (key 3)");
+    });
+    ui.horizontal(|ui| {
+        ui.label("MSAA");
+        for &n in msaa_choices {
+            if ui.selectable_label(n == msaa, format!("{n}×")).clicked() && n != msaa {
+                actions.push(Action::Msaa(n));
+            }
+        }
+    });
+}
+
+fn camera(ui: &mut Ui, rig: &mut Rig) {
+    ui.horizontal(|ui| {
+        ui.label("camera");
+        let mut mode = rig.mode;
+        ui.radio_value(&mut mode, Mode::Fly, "fly").on_hover_text("keys W A S D Q E, Shift faster; drag to look");
+        ui.radio_value(&mut mode, Mode::Orbit, "orbit").on_hover_text("drag to turn about the scene's centre");
+        rig.set_mode(mode);
+    });
+    let mut distance = rig.distance;
+    let slider = egui::Slider::new(&mut distance, DISTANCE_RANGE.0..=DISTANCE_RANGE.1).logarithmic(true);
+    let response = ui.add(slider.text("distance, radii")).on_hover_text(format!(
+        "from the centre, in bounding radii of the scene ({:.2} m): eval reports 2, 8 and 32",
+        rig.radius
+    ));
+    if response.changed() {
+        rig.set_mode(Mode::Orbit);
+        if rig.animation == Animation::Approach {
+            rig.animation = Animation::Still;
+        }
+        rig.distance = distance;
+    }
+    ui.horizontal(|ui| {
+        ui.label("animate");
+        let mut animation = if rig.mode == Mode::Orbit { rig.animation } else { Animation::Still };
+        let before = animation;
+        ui.radio_value(&mut animation, Animation::Still, "still");
+        ui.radio_value(&mut animation, Animation::Turn, "orbit").on_hover_text("turn about the scene");
+        ui.radio_value(&mut animation, Animation::Approach, "approach")
+            .on_hover_text("come in from 48 radii to 1.5 and back out, evenly per octave");
+        if animation != before {
+            rig.animate(animation);
+        }
+    });
+}
+
+fn counts(ui: &mut Ui, stats: &FrameStats, instances: usize) {
+    let mb = |bytes: u64| format!("{:.1} MB", bytes as f64 / 1e6);
+    egui::Grid::new("counts").num_columns(2).striped(true).show(ui, |ui| {
+        let mut row = |label: &str, value: String| {
+            ui.label(label);
+            ui.label(value);
+            ui.end_row();
+        };
+        row("instances visible", format!("{} of {instances}", stats.instances_visible));
+        row("primitives", primitives(stats).to_string());
+        row("  triangles", stats.triangles.to_string());
+        row("  points", stats.points.to_string());
+        if stats.instances_pruned > 0 {
+            row("  pruned leaves", format!("{} ({} trees)", stats.leaves_pruned, stats.instances_pruned));
+        }
+        if stats.instances_impostors > 0 {
+            row("  planes", format!("{} ({} trees)", stats.planes, stats.instances_impostors));
+        }
+        if stats.instances_ellipsoids > 0 {
+            row("  ellipsoids", format!("{} ({} trees)", stats.ellipsoids, stats.instances_ellipsoids));
+            row("  lines", stats.lines.to_string());
+        }
+        if stats.instances_baseline > 0 {
+            row("  billboard quads", format!("{} ({} trees)", stats.billboards, stats.instances_baseline));
+        }
+        if stats.shadow.cascades > 0 {
+            row("shadow primitives", shadow_primitives(&stats.shadow).to_string());
+        }
+        row("draws", stats.ranges.to_string());
+        row("resident", mb(stats.bytes_resident));
+        row("uploaded", mb(stats.bytes_uploaded));
+    });
+}
+
+/// Frame time (orange) and primitives (blue) over the last seconds, each scaled to its maximum.
+fn graph(ui: &mut Ui, history: &History) {
+    const MS: Color32 = Color32::from_rgb(240, 150, 40);
+    const PRIMITIVES: Color32 = Color32::from_rgb(80, 150, 240);
+    let (max_ms, max_primitives) = history.maxima();
+    ui.horizontal(|ui| {
+        ui.label(RichText::new(format!("frame ms ≤ {max_ms:.1}")).color(MS).small());
+        ui.label(RichText::new(format!("primitives ≤ {max_primitives}")).color(PRIMITIVES).small());
+    });
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), 44.0), egui::Sense::hover());
+    let painter = ui.painter_at(rect);
+    painter.rect_filled(rect, 2.0, ui.visuals().extreme_bg_color);
+    let Some(last) = history.0.back() else { return };
+    let x = |time: f64| rect.right() - ((last.time - time) / HISTORY_SECONDS) as f32 * rect.width();
+    let y = |share: f32| rect.bottom() - 2.0 - share.clamp(0.0, 1.0) * (rect.height() - 4.0);
+    let ms: Vec<egui::Pos2> =
+        history.0.iter().map(|s| egui::pos2(x(s.time), y(s.frame_ms / max_ms.max(1e-6)))).collect();
+    let primitives: Vec<egui::Pos2> = history
+        .0
+        .iter()
+        .map(|s| egui::pos2(x(s.time), y(s.primitives as f32 / max_primitives.max(1) as f32)))
+        .collect();
+    painter.add(egui::Shape::line(primitives, egui::Stroke::new(1.5, PRIMITIVES)));
+    painter.add(egui::Shape::line(ms, egui::Stroke::new(1.5, MS)));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_representation_applied_reads_back_as_itself() {
+        for r in Representation::ALL {
+            let mut settings = Settings { ellipsoids: true, impostors: true, ..Settings::default() };
+            r.apply(&mut settings, Pruning::default());
+            assert_eq!(Representation::of(&settings), r, "{settings:?}");
+        }
+        // Pruning comes back with the settings last used.
+        let mut settings = Settings::default();
+        let pruning = Pruning { occlusion: false, ..Pruning::default() };
+        Representation::Pruned.apply(&mut settings, pruning);
+        assert_eq!(settings.pruning, Some(pruning));
+    }
+
+    #[test]
+    fn the_history_keeps_ten_seconds_and_measures_the_rate() {
+        let mut history = History::default();
+        for frame in 0..=300 {
+            history.push(f64::from(frame) / 20.0, 5.0 + f32::from(u8::try_from(frame % 7).unwrap_or(0)), frame as u64);
+        }
+        // 20 frames per second over the 10 s kept (frames 100..=300).
+        assert_eq!(history.0.len(), 201);
+        assert!((history.fps() - 20.0).abs() < 1e-9, "{}", history.fps());
+        assert_eq!(history.maxima(), (11.0, 300));
+    }
+
+    #[test]
+    fn primitives_add_every_kind() {
+        let stats = FrameStats {
+            triangles: 1,
+            points: 2,
+            planes: 4,
+            ellipsoids: 8,
+            lines: 16,
+            billboards: 32,
+            ..FrameStats::default()
+        };
+        assert_eq!(primitives(&stats), 63);
+    }
+}
