@@ -1627,6 +1627,31 @@ fn view_shows_the_panel_beside_the_tree_and_hides_it_on_request() {
 }
 
 #[test]
+fn view_error_view_darkens_what_matches_the_full_mesh_and_colours_what_does_not() {
+    // No error: the reference's luminance, dimmed, grey; an error: the ramp's colours.
+    fn coloured(p: [u8; 4]) -> bool {
+        p[0].max(p[1]).max(p[2]) - p[0].min(p[1]).min(p[2]) > 30
+    }
+    let demo = shared_demo();
+    let dir = scratch("view-error");
+    let png = dir.join("error.png");
+    let out = view_screenshot(demo, &png, &["--debug", "error"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "view failed (needs Xvfb and a Vulkan adapter, e.g. mesa-vulkan-drivers): {err}");
+    let (width, _, pixels) = read_png(&png);
+    // The sky is the same in both frames: dark grey.
+    assert!(!coloured(pixels[0]) && pixels[0][0] < 80, "no error in the sky: {:?}", pixels[0]);
+    // The point tree differs from the full mesh somewhere in the canopy.
+    let differ = count_in(&pixels, width, 0..width, coloured);
+    assert!(differ > 10, "differences are coloured: {differ} pixels");
+    // The full mesh against itself shows no error at all.
+    let out = view_screenshot(demo, &png, &["--debug", "error", "--full-mesh"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (_, _, pixels) = read_png(&png);
+    assert_eq!(count_in(&pixels, width, 0..width, coloured), 0, "the full mesh matches itself");
+}
+
+#[test]
 fn view_builds_a_gltf_input_first_and_reports_a_bad_one() {
     let dir = scratch("view-gltf");
     let png = dir.join("built.png");

@@ -7,6 +7,7 @@
 
 mod dropped;
 mod gpu_timer;
+mod heat;
 mod panel;
 mod rig;
 
@@ -117,6 +118,10 @@ pub struct Args {
     /// Start orbiting the scene's centre at this many bounding radii (the panel's distance).
     #[arg(long, value_name = "RADII", value_parser = parse_distance, conflicts_with = "eye")]
     pub distance: Option<f32>,
+    /// Start coloured by grid cell (`cells`), by kind (`kinds`, as `render --debug`), or with the
+    /// error view (`error`: the difference from the full mesh as a heat map; key 4).
+    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "error"])]
+    pub debug: Option<String>,
     /// Start without the panel (key Tab shows it). Windows narrower than twice the panel start
     /// without it anyway.
     #[arg(long)]
@@ -140,6 +145,9 @@ pub struct Args {
     pub shadow: ShadowArgs,
     #[command(flatten)]
     pub impostor: ImpostorArgs,
+    /// Start drawing the full mesh (key `F`): every triangle, no point.
+    #[arg(long)]
+    pub full_mesh: bool,
     /// Start with impostor planes on (key `I`) for trees whose containers have them.
     #[arg(long)]
     pub impostors: bool,
@@ -426,6 +434,9 @@ struct Viewer {
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
     panel_shown: bool,
+    /// The error view (key 4): on, and its reference renderer and targets once made.
+    heat_on: bool,
+    heat: Option<heat::Heat>,
     /// A glTF file being built, the directory builds are written to, and how many were started.
     build: Option<DroppedBuild>,
     build_dir: Option<tempfile::TempDir>,
@@ -531,7 +542,13 @@ impl Viewer {
         let mut settings = Settings {
             pruning: args.prune.settings(),
             impostors: args.impostors,
+            full_mesh: args.full_mesh,
             baseline: crate::render::parse_baseline(args.baseline.as_deref()),
+            debug: match args.debug.as_deref() {
+                Some("cells") => DebugView::Cells,
+                Some("kinds") => DebugView::Kinds,
+                _ => DebugView::Shaded,
+            },
             ..Settings::default()
         };
         args.light.apply(&mut settings);
@@ -586,6 +603,8 @@ impl Viewer {
             egui_state,
             egui_renderer,
             panel_shown,
+            heat_on: args.debug.as_deref() == Some("error"),
+            heat: None,
             build: None,
             build_dir: None,
             builds: 0,
@@ -609,7 +628,11 @@ impl Viewer {
     fn shown(&mut self, bounds: (Vec3, Vec3)) {
         let containers: Vec<Container> = self.scene.models.iter().filter_map(|p| Container::open(p).ok()).collect();
         self.holds = Holds::of(&containers);
-        let (eye, target, distance) = std::mem::take(&mut self.start_view);
+        // The view asked for at the start is for the first scene with trees (a glTF input's
+        // once built).
+        let asked =
+            if self.scene.instances.is_empty() { (None, None, None) } else { std::mem::take(&mut self.start_view) };
+        let (eye, target, distance) = asked;
         let fovy = FOVY_DEGREES.to_radians();
         let start = frame_camera(bounds, eye, target, fovy, self.view_width(), self.config.height);
         let target = target.unwrap_or(0.5 * (bounds.0 + bounds.1));
@@ -669,6 +692,7 @@ impl Viewer {
         let (stage, bounds) =
             Stage::new(&self.device, &self.queue, formats, settings, &scene, size).map_err(|e| e.to_string())?;
         self.stage = stage;
+        self.heat = None;
         self.scene = scene;
         path.clone_into(&mut self.input);
         self.window.set_title(&format!("treelod view {}", path.display()));
@@ -706,7 +730,10 @@ impl Viewer {
         let settings = *self.stage.renderer.settings();
         let size = (self.config.width, self.config.height);
         match Stage::new(&self.device, &self.queue, formats, settings, &self.scene, size) {
-            Ok((stage, _)) => self.stage = stage,
+            Ok((stage, _)) => {
+                self.stage = stage;
+                self.heat = None;
+            }
             Err(e) => self.messages.push(format!("error: {e}")),
         }
     }
@@ -727,6 +754,7 @@ impl Viewer {
             (self.config.width, self.config.height) = (size.width.min(limit), size.height.min(limit));
             self.surface.configure(&self.device, &self.config);
             self.stage.resize(&self.device, (self.config.width, self.config.height));
+            self.heat = None;
         }
     }
 
@@ -761,6 +789,11 @@ impl Viewer {
             }
             KeyCode::Tab => {
                 self.panel_shown = !self.panel_shown;
+                return Some(code);
+            }
+            KeyCode::Digit4 => {
+                self.heat_on = !self.heat_on;
+                self.stage.renderer.settings_mut().debug = DebugView::Shaded;
                 return Some(code);
             }
             _ => {}
@@ -802,9 +835,14 @@ impl Viewer {
                     self.last_pruning = *pruning;
                 }
             }
-            KeyCode::Digit1 => settings.debug = DebugView::Shaded,
-            KeyCode::Digit2 => settings.debug = DebugView::Cells,
-            KeyCode::Digit3 => settings.debug = DebugView::Kinds,
+            KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 => {
+                settings.debug = match code {
+                    KeyCode::Digit1 => DebugView::Shaded,
+                    KeyCode::Digit2 => DebugView::Cells,
+                    _ => DebugView::Kinds,
+                };
+                self.heat_on = false;
+            }
             _ => return Some(code),
         }
         // Keep s_min ≤ s_max (selection would raise s_max anyway): the title shows what is used.
@@ -871,6 +909,7 @@ impl Viewer {
                 select_ms: self.select_ms,
                 gpu_ms: self.gpu_timer.as_ref().and_then(|t| t.last_ms),
                 gpu_selection,
+                heat: &mut self.heat_on,
                 msaa_choices: &self.msaa_choices,
                 msaa,
                 build,
@@ -948,7 +987,25 @@ impl Viewer {
         // The shadow maps, drawn before (and sampled by) the passes below.
         self.stage.renderer.render_shadows(&mut encoder);
         let timestamps = self.gpu_timer.as_ref().and_then(GpuTimer::writes);
-        draw_scene(&mut encoder, &view, &self.stage, &self.queue, &camera, timestamps);
+        if self.heat_on && self.heat.is_none() {
+            let formats = self.stage.renderer.formats();
+            let settings = self.stage.renderer.settings();
+            match heat::Heat::new(&self.device, &self.queue, formats, settings, &self.scene, (width, height)) {
+                Ok(heat) => self.heat = Some(heat),
+                Err(e) => {
+                    self.heat_on = false;
+                    self.messages.push(format!("error: cannot draw the error view: {e}"));
+                }
+            }
+        }
+        match self.heat.as_mut().filter(|_| self.heat_on) {
+            Some(heat) => {
+                let settings = *self.stage.renderer.settings();
+                heat.record(&self.device, &self.queue, &mut encoder, &self.stage, &settings, &camera, timestamps);
+                heat.draw(&mut encoder, &view, &camera);
+            }
+            None => draw_scene(&mut encoder, &view, &self.stage, &self.queue, &camera, timestamps),
+        }
         if let Some(timer) = &self.gpu_timer {
             timer.resolve(&mut encoder);
         }
@@ -1185,7 +1242,11 @@ impl Capture {
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        draw_scene(encoder, &view, &viewer.stage, &viewer.queue, camera, None);
+        match viewer.heat.as_ref().filter(|_| viewer.heat_on) {
+            // The frames compared were drawn for the window already.
+            Some(heat) => heat.draw(encoder, &view, camera),
+            None => draw_scene(encoder, &view, &viewer.stage, &viewer.queue, camera, None),
+        }
         draw_panel(encoder, &view, &viewer.egui_renderer, jobs, screen);
         let readback = Readback::record(&viewer.device, encoder, &texture);
         // The format was chosen readable when a screenshot is asked for.

@@ -210,6 +210,8 @@ pub struct Inputs<'a> {
     /// GPU milliseconds of the main pass, where the device has timestamp queries.
     pub gpu_ms: Option<f64>,
     pub gpu_selection: bool,
+    /// The error view: the difference from the full mesh as a heat map.
+    pub heat: &'a mut bool,
     /// Sample counts the window's formats allow, and the one in use.
     pub msaa_choices: &'a [u32],
     pub msaa: u32,
@@ -269,7 +271,7 @@ pub fn show(ui: &mut Ui, inputs: Inputs<'_>) -> Vec<Action> {
             lod(ui, settings, inputs.gpu_selection, &mut actions);
         });
         egui::CollapsingHeader::new("View").default_open(true).show(ui, |ui| {
-            view(ui, settings, inputs.msaa_choices, inputs.msaa, &mut actions);
+            view(ui, settings, inputs.heat, inputs.msaa_choices, inputs.msaa, &mut actions);
             camera(ui, rig);
         });
         egui::CollapsingHeader::new("Light").default_open(false).show(ui, |ui| light(ui, settings, last_shadows));
@@ -380,13 +382,31 @@ fn light(ui: &mut Ui, settings: &mut Settings, last_shadows: &mut Shadows) {
     }
 }
 
-fn view(ui: &mut Ui, settings: &mut Settings, msaa_choices: &[u32], msaa: u32, actions: &mut Vec<Action>) {
-    ui.horizontal(|ui| {
+fn view(
+    ui: &mut Ui,
+    settings: &mut Settings,
+    heat: &mut bool,
+    msaa_choices: &[u32],
+    msaa: u32,
+    actions: &mut Vec<Action>,
+) {
+    ui.horizontal_wrapped(|ui| {
         ui.label("colour by");
-        ui.radio_value(&mut settings.debug, DebugView::Shaded, "shading").on_hover_text("key 1");
-        ui.radio_value(&mut settings.debug, DebugView::Cells, "cell").on_hover_text("key 2");
-        ui.radio_value(&mut settings.debug, DebugView::Kinds, "kind")
-            .on_hover_text("triangles red, points blue (key 3)");
+        // The error view compares shaded frames: it is a fourth choice, not a debug colour.
+        let mut choice = if *heat { None } else { Some(settings.debug) };
+        ui.radio_value(&mut choice, Some(DebugView::Shaded), "shading").on_hover_text("key 1");
+        ui.radio_value(&mut choice, Some(DebugView::Cells), "cell").on_hover_text("key 2");
+        ui.radio_value(&mut choice, Some(DebugView::Kinds), "kind").on_hover_text(
+            "the representation: triangles red, points blue, pruned leaves green, impostor planes \
+             yellow, billboards magenta, ellipsoids cyan, lines brown (key 3)",
+        );
+        ui.radio_value(&mut choice, None, "error").on_hover_text(format!(
+            "the difference from the full mesh drawn at this resolution, per pixel: blue, yellow, \
+             red at {} (RMS of linear RGB) (key 4)",
+            super::heat::FULL_SCALE
+        ));
+        *heat = choice.is_none();
+        settings.debug = choice.unwrap_or(DebugView::Shaded);
     });
     ui.horizontal(|ui| {
         ui.label("MSAA");
