@@ -110,6 +110,25 @@ fn cell_tint(cell: u32) -> vec3<f32> {
     return vec3<f32>(f32(h & 255u), f32((h >> 8u) & 255u), f32((h >> 16u) & 255u)) / 255.0 * 0.8 + 0.2;
 }
 
+// Colours of `debug = 3`, one per octave of an element's interval end, cycling: neighbouring
+// levels always differ.
+const LEVEL_PALETTE = array<vec3<f32>, 6>(
+    vec3<f32>(0.9, 0.25, 0.2), vec3<f32>(0.95, 0.75, 0.15), vec3<f32>(0.3, 0.8, 0.3),
+    vec3<f32>(0.2, 0.75, 0.85), vec3<f32>(0.3, 0.35, 0.95), vec3<f32>(0.8, 0.35, 0.85),
+);
+
+// The level view's colour of an element whose interval of tau ends at `hi` (model units): one per
+// octave of `hi`, so a tree's levels read as bands that move as the camera does; dark grey for an
+// unbounded interval (the coarsest level, drawn however far). Triangles, the finest level, are
+// light grey.
+fn level_tint(hi: f32) -> vec3<f32> {
+    if !(hi < 1e30) {
+        return vec3<f32>(0.3);
+    }
+    let octave = i32(floor(log2(max(hi, 1e-30))));
+    return LEVEL_PALETTE[u32(octave + 600) % 6u];
+}
+
 fn offscreen() -> Varyings {
     var out: Varyings;
     out.clip = vec4<f32>(0.0, 0.0, -2.0, 1.0);
@@ -132,6 +151,7 @@ fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, vertex: VertexGpu, p: ve
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.9, 0.3, 0.2); }
+        case 3u: { out.tint = vec3<f32>(0.9); }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;
@@ -205,6 +225,7 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.2, 0.5, 0.95); }
+        case 3u: { out.tint = level_tint(point.hi); }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;
@@ -256,6 +277,9 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     let world = (draw.model * vec4<f32>(p, 1.0)).xyz;
     let normal = normalize((draw.model * vec4<f32>(cross(u, v), 0.0)).xyz);
     var out = quad_corner(draw, world, normal, plane.uv_min, plane.uv_max, corner, vec3<f32>(0.95, 0.75, 0.15));
+    if frame.debug == 3u {
+        out.tint = level_tint(plane.hi);
+    }
     out.keep = keep;
     out.material = plane.image;
     // As uploaded, `leaf_count` holds the plane's ambient-occlusion byte.
@@ -287,7 +311,7 @@ fn quad_corner(
     out.ao = 0.0;
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
-        case 2u: { out.tint = kinds; }
+        case 2u, 3u: { out.tint = kinds; }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;
@@ -788,6 +812,7 @@ fn vs_ellipsoid(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.2, 0.8, 0.8); }
+        case 3u: { out.tint = level_tint(e.hi); }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;
@@ -1048,6 +1073,7 @@ fn vs_line(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) dr
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.55, 0.35, 0.15); }
+        case 3u: { out.tint = level_tint(l.hi); }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

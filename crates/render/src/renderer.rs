@@ -52,6 +52,10 @@ pub enum DebugView {
     Cells,
     /// Triangles red, points blue.
     Kinds,
+    /// A colour per level: per octave of the end of each point's, plane's, ellipsoid's or line's
+    /// interval of `τ` (neighbouring levels differ), triangles light grey, billboards as in
+    /// [`Self::Kinds`].
+    Levels,
 }
 
 /// Level-of-detail and shading settings; change them between frames with [`Renderer::settings_mut`].
@@ -2391,6 +2395,7 @@ impl Renderer {
                 DebugView::Shaded => 0,
                 DebugView::Cells => 1,
                 DebugView::Kinds => 2,
+                DebugView::Levels => 3,
             },
             morph: u32::from(settings.impostor_morph),
             ambient_occlusion: u32::from(settings.ambient_occlusion),

@@ -45,9 +45,10 @@ pub struct Args {
     /// Write the level of detail (left) beside the full mesh (right), twice as wide.
     #[arg(long)]
     pub compare: bool,
-    /// Colour by grid cell (`cells`) or by kind (`kinds`: triangles red, points blue, pruned
-    /// leaves green, impostor planes yellow, ellipsoids cyan).
-    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds"])]
+    /// Colour by grid cell (`cells`), by kind (`kinds`: triangles red, points blue, pruned
+    /// leaves green, impostor planes yellow, ellipsoids cyan) or by level (`levels`: one colour per
+    /// octave of each point's, plane's, ellipsoid's or line's interval, triangles light grey).
+    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "levels"])]
     pub debug: Option<String>,
     /// MSAA samples, 1 or 4; with 4, alpha-tested leaves cover samples in proportion to their
     /// filtered alpha (alpha to coverage) instead of being tested against the cutoff.
@@ -438,6 +439,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     settings.debug = match args.debug.as_deref() {
         Some("cells") => DebugView::Cells,
         Some("kinds") => DebugView::Kinds,
+        Some("levels") => DebugView::Levels,
         _ => DebugView::Shaded,
     };
     settings.pruning = args.prune.settings();

@@ -1428,6 +1428,24 @@ fn render_debug_kinds_colours_triangles_red_and_points_blue() {
     assert_eq!(read_png(&cells).0, 64);
 }
 
+#[test]
+fn render_debug_levels_colours_points_by_the_octave_of_their_interval() {
+    let demo = shared_demo();
+    let dir = scratch("render-levels");
+    let png = dir.join("levels.png");
+    let stdout = render_ok(demo, &png, &["--size", "128x96", "--debug", "levels", "--s-min", "0.5", "--s-max", "1"]);
+    assert!(!stdout.contains(" 0 points"), "{stdout}");
+    let (_, _, pixels) = read_png(&png);
+    // The palette of shaders/tree.wgsl (`LEVEL_PALETTE`) in sRGB, and triangles' light grey.
+    let palette: [[u8; 3]; 6] =
+        [[243, 137, 124], [250, 225, 109], [149, 231, 149], [124, 225, 237], [149, 160, 250], [231, 160, 237]];
+    let near = |p: &[u8; 4], c: [u8; 3]| (0..3).all(|i| p[i].abs_diff(c[i]) <= 2);
+    let levels: Vec<usize> = palette.iter().map(|&c| pixels.iter().filter(|p| near(p, c)).count()).collect();
+    assert!(levels.iter().filter(|&&n| n > 5).count() >= 2, "points of several octaves: {levels:?}");
+    let grey = pixels.iter().filter(|p| near(p, [243, 243, 243])).count();
+    assert!(grey > 0, "triangles are light grey");
+}
+
 /// The number after `prefix` in `text` (e.g. `shadow pass: ` → the cascades).
 fn count_after(text: &str, prefix: &str) -> Option<u64> {
     let rest = &text[text.find(prefix)? + prefix.len()..];

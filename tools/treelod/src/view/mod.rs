@@ -118,9 +118,10 @@ pub struct Args {
     /// Start orbiting the scene's centre at this many bounding radii (the panel's distance).
     #[arg(long, value_name = "RADII", value_parser = parse_distance, conflicts_with = "eye")]
     pub distance: Option<f32>,
-    /// Start coloured by grid cell (`cells`), by kind (`kinds`, as `render --debug`), or with the
-    /// error view (`error`: the difference from the full mesh as a heat map; key 4).
-    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "error"])]
+    /// Start coloured by grid cell (`cells`), by kind (`kinds`) or by level (`levels`, as `render
+    /// --debug`), or with the error view (`error`: the difference from the full mesh as a heat
+    /// map; key 5).
+    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "levels", "error"])]
     pub debug: Option<String>,
     /// Start without the panel (key Tab shows it). Windows narrower than twice the panel start
     /// without it anyway.
@@ -434,7 +435,7 @@ struct Viewer {
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
     panel_shown: bool,
-    /// The error view (key 4): on, and its reference renderer and targets once made.
+    /// The error view (key 5): on, and its reference renderer and targets once made.
     heat_on: bool,
     heat: Option<heat::Heat>,
     /// A glTF file being built, the directory builds are written to, and how many were started.
@@ -547,6 +548,7 @@ impl Viewer {
             debug: match args.debug.as_deref() {
                 Some("cells") => DebugView::Cells,
                 Some("kinds") => DebugView::Kinds,
+                Some("levels") => DebugView::Levels,
                 _ => DebugView::Shaded,
             },
             ..Settings::default()
@@ -791,7 +793,7 @@ impl Viewer {
                 self.panel_shown = !self.panel_shown;
                 return Some(code);
             }
-            KeyCode::Digit4 => {
+            KeyCode::Digit5 => {
                 self.heat_on = !self.heat_on;
                 self.stage.renderer.settings_mut().debug = DebugView::Shaded;
                 return Some(code);
@@ -835,11 +837,12 @@ impl Viewer {
                     self.last_pruning = *pruning;
                 }
             }
-            KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 => {
+            KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 | KeyCode::Digit4 => {
                 settings.debug = match code {
                     KeyCode::Digit1 => DebugView::Shaded,
                     KeyCode::Digit2 => DebugView::Cells,
-                    _ => DebugView::Kinds,
+                    KeyCode::Digit3 => DebugView::Kinds,
+                    _ => DebugView::Levels,
                 };
                 self.heat_on = false;
             }
@@ -1079,6 +1082,7 @@ impl Viewer {
             (false, DebugView::Shaded) => "",
             (false, DebugView::Cells) => " | cells",
             (false, DebugView::Kinds) => " | kinds",
+            (false, DebugView::Levels) => " | levels",
         }
         .to_owned();
         if renderer.gpu_selection_enabled() {

@@ -400,9 +400,13 @@ fn view(
             "the representation: triangles red, points blue, pruned leaves green, impostor planes \
              yellow, billboards magenta, ellipsoids cyan, lines brown (key 3)",
         );
+        ui.radio_value(&mut choice, Some(DebugView::Levels), "level").on_hover_text(
+            "one colour per octave of each point's, plane's, ellipsoid's or line's interval of τ, \
+             cycling; triangles light grey (key 4)",
+        );
         ui.radio_value(&mut choice, None, "error").on_hover_text(format!(
             "the difference from the full mesh drawn at this resolution, per pixel: blue, yellow, \
-             red at {} (RMS of linear RGB) (key 4)",
+             red at {} (RMS of linear RGB) (key 5)",
             super::heat::FULL_SCALE
         ));
         *heat = choice.is_none();
