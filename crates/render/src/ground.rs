@@ -40,74 +40,17 @@ impl Ground {
     /// side, a light grey-green.
     #[must_use]
     pub fn new(device: &wgpu::Device, renderer: &Renderer, centre: Vec3, half_size: f32) -> Self {
-        let formats = renderer.formats();
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("treelod ground"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("treelod ground"),
-            bind_group_layouts: &[Some(&layout), None, Some(renderer.shadow_bind_group_layout())],
-            immediate_size: 0,
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("treelod ground.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("treelod ground"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_ground"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState { cull_mode: None, ..wgpu::PrimitiveState::default() },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: formats.depth,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: wgpu::StencilState::default(),
-                bias: wgpu::DepthBiasState::default(),
-            }),
-            multisample: wgpu::MultisampleState {
-                count: formats.sample_count.max(1),
-                ..wgpu::MultisampleState::default()
-            },
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_ground"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: formats.color,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("treelod ground"),
-            size: size_of::<GroundUniform>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("treelod ground"),
-            layout: &layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
-        });
+        let UniformPass { pipeline, uniform, bind_group } = UniformPass::new(
+            device,
+            renderer,
+            "treelod ground",
+            SHADER,
+            ("vs_ground", "fs_ground"),
+            size_of::<GroundUniform>() as u64,
+            // Group 2: the renderer's shadow maps.
+            &[None, Some(renderer.shadow_bind_group_layout())],
+            Some(wgpu::CompareFunction::Less),
+        );
         Self { centre, half_size, colour: Vec3::new(0.55, 0.6, 0.45), pipeline, uniform, bind_group }
     }
 
@@ -143,3 +86,100 @@ impl Ground {
 }
 
 const _: () = assert!(size_of::<GroundUniform>() == 128);
+
+/// A pipeline for a renderer's targets drawing a shader's vertices without buffers (a ground, a
+/// sky), one uniform buffer at group 0 (binding 0), and the buffer and its bind group.
+pub(crate) struct UniformPass {
+    pub pipeline: wgpu::RenderPipeline,
+    pub uniform: wgpu::Buffer,
+    pub bind_group: wgpu::BindGroup,
+}
+
+impl UniformPass {
+    /// `entries` (vertex, fragment) of `shader`; a uniform of `size` bytes; the layouts of groups
+    /// 1 and up in `groups`; depth tested with `depth` and written, or (`None`) neither.
+    #[expect(clippy::too_many_arguments, reason = "a pipeline's parts, each needed")]
+    pub fn new(
+        device: &wgpu::Device,
+        renderer: &Renderer,
+        label: &str,
+        shader: &str,
+        entries: (&str, &str),
+        size: u64,
+        groups: &[Option<&wgpu::BindGroupLayout>],
+        depth: Option<wgpu::CompareFunction>,
+    ) -> Self {
+        let formats = renderer.formats();
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }],
+        });
+        let mut layouts = vec![Some(&layout)];
+        layouts.extend_from_slice(groups);
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &layouts,
+            immediate_size: 0,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(shader.into()),
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(label),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some(entries.0),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..wgpu::PrimitiveState::default() },
+            // In the pass's depth attachment always; without a test, not written either.
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: formats.depth,
+                depth_write_enabled: Some(depth.is_some()),
+                depth_compare: Some(depth.unwrap_or(wgpu::CompareFunction::Always)),
+                stencil: wgpu::StencilState::default(),
+                bias: wgpu::DepthBiasState::default(),
+            }),
+            multisample: wgpu::MultisampleState {
+                count: formats.sample_count.max(1),
+                ..wgpu::MultisampleState::default()
+            },
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some(entries.1),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: formats.color,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
+        });
+        Self { pipeline, uniform, bind_group }
+    }
+}

@@ -5,6 +5,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
+use crate::ground::UniformPass;
 use crate::{Camera, Renderer};
 
 const SHADER: &str = include_str!("../../../shaders/sky.wgsl");
@@ -37,76 +38,17 @@ impl Sky {
     /// A sky for `renderer`'s target formats (colour, depth and samples), a clear day's colours.
     #[must_use]
     pub fn new(device: &wgpu::Device, renderer: &Renderer) -> Self {
-        let formats = renderer.formats();
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("treelod sky"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("treelod sky"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("treelod sky.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("treelod sky"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_sky"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            // In the pass's depth attachment, but neither tested nor written: what is drawn after
-            // covers it.
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: formats.depth,
-                depth_write_enabled: Some(false),
-                depth_compare: Some(wgpu::CompareFunction::Always),
-                stencil: wgpu::StencilState::default(),
-                bias: wgpu::DepthBiasState::default(),
-            }),
-            multisample: wgpu::MultisampleState {
-                count: formats.sample_count.max(1),
-                ..wgpu::MultisampleState::default()
-            },
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_sky"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: formats.color,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("treelod sky"),
-            size: size_of::<SkyUniform>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("treelod sky"),
-            layout: &layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }],
-        });
+        // Drawn first, neither depth-tested nor written: what is drawn after covers it.
+        let UniformPass { pipeline, uniform, bind_group } = UniformPass::new(
+            device,
+            renderer,
+            "treelod sky",
+            SHADER,
+            ("vs_sky", "fs_sky"),
+            size_of::<SkyUniform>() as u64,
+            &[],
+            None,
+        );
         Self {
             zenith: Vec3::new(0.16, 0.33, 0.72),
             horizon: Vec3::new(0.66, 0.78, 0.92),

@@ -6,7 +6,7 @@
 
 use treelod_render::{Camera, RendererFormats, Settings};
 
-use super::{Stage, draw_scene};
+use super::{Stage, draw_scene, overlay_pass};
 use crate::scene::{Scene, SceneError};
 
 /// The error (RMS over linear RGB channels) at which the ramp reaches red. Half of it is yellow,
@@ -147,16 +147,7 @@ impl Heat {
     /// Draws the heat map of the frames [`Self::record`] drew into the left `camera.width`
     /// pixels of `target`.
     pub fn draw(&self, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView, camera: &Camera) {
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("treelod view heat"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: target,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations { load: wgpu::LoadOp::Load, store: wgpu::StoreOp::Store },
-            })],
-            ..wgpu::RenderPassDescriptor::default()
-        });
+        let mut pass = overlay_pass(encoder, target, "treelod view heat");
         pass.set_viewport(0.0, 0.0, camera.width as f32, camera.height as f32, 0.0, 1.0);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);

@@ -1195,8 +1195,18 @@ fn draw_panel(
     jobs: &[egui::ClippedPrimitive],
     screen: &egui_wgpu::ScreenDescriptor,
 ) {
-    let pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-        label: Some("treelod view panel"),
+    let pass = overlay_pass(encoder, target, "treelod view panel");
+    renderer.render(&mut pass.forget_lifetime(), jobs, screen);
+}
+
+/// A pass drawing over what `target` holds, without depth: the panel, the error view.
+fn overlay_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    target: &wgpu::TextureView,
+    label: &str,
+) -> wgpu::RenderPass<'e> {
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
         color_attachments: &[Some(wgpu::RenderPassColorAttachment {
             view: target,
             depth_slice: None,
@@ -1204,8 +1214,7 @@ fn draw_panel(
             ops: wgpu::Operations { load: wgpu::LoadOp::Load, store: wgpu::StoreOp::Store },
         })],
         ..wgpu::RenderPassDescriptor::default()
-    });
-    renderer.render(&mut pass.forget_lifetime(), jobs, screen);
+    })
 }
 
 /// Whether pixels of `format` are stored blue first (`Some(true)`) or red first (`Some(false)`);
