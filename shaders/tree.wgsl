@@ -388,10 +388,16 @@ struct TriangleOut {
 // every layer of a quarter-covered canopy cover the same quarter).
 fn coverage_mask(coverage: f32, fragment: vec4<f32>) -> u32 {
     let n = u32(floor(clamp(coverage, 0.0, 1.0) * f32(sample_count) + 0.5));
+    return sample_run(n, pixel_depth_hash(fragment) >> 16u);
+}
+
+// `n` consecutive samples of the pixel's `sample_count`, starting at sample `start` (modulo the
+// count) and wrapping around: all of them from `n = sample_count` on.
+fn sample_run(n: u32, start: u32) -> u32 {
     if n >= sample_count {
         return 0xFFFFFFFFu;
     }
-    let shift = (pixel_depth_hash(fragment) >> 16u) % sample_count;
+    let shift = start % sample_count;
     let run = (1u << n) - 1u;
     let all = (1u << sample_count) - 1u;
     return ((run << shift) | (run >> (sample_count - shift))) & all;
@@ -631,14 +637,7 @@ fn splat_mask(coverage: f32, id: u32) -> u32 {
     if sample_count == 1u {
         return select(0u, 0xFFFFFFFFu, h < coverage);
     }
-    let n = u32(floor(coverage * f32(sample_count) + h));
-    if n >= sample_count {
-        return 0xFFFFFFFFu;
-    }
-    let shift = mix_bits(id) % sample_count;
-    let run = (1u << n) - 1u;
-    let all = (1u << sample_count) - 1u;
-    return ((run << shift) | (run >> (sample_count - shift))) & all;
+    return sample_run(u32(floor(coverage * f32(sample_count) + h)), mix_bits(id));
 }
 
 @fragment

@@ -433,13 +433,6 @@ fn plan(inputs: &[PathBuf], output: &Path, failures: &mut Vec<Failed>) -> Vec<Jo
     jobs
 }
 
-/// Whether a glTF file name extension: `.glb` or `.gltf`, any case.
-fn is_gltf(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
-}
-
 /// Appends the glTF files under `base/dir` to `found` as paths relative to `base`, depth first,
 /// each directory's entries in sorted order (by name, bytewise). Symbolic links to files are
 /// taken; symbolic links to directories are not followed (no cycles). Directories that cannot be
@@ -476,7 +469,7 @@ fn walk(base: &Path, dir: &Path, found: &mut Vec<PathBuf>, errors: &mut Vec<(Pat
         let relative = dir.join(&name);
         if is_dir {
             walk(base, &relative, found, errors);
-        } else if is_gltf(&relative) {
+        } else if crate::scene::is_gltf_path(&relative) {
             found.push(relative);
         }
     }

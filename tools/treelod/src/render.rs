@@ -321,6 +321,17 @@ pub fn parse_baseline(name: Option<&str>) -> Option<Baseline> {
     BASELINES.iter().find(|(n, _)| *n == name).map(|&(_, b)| b)
 }
 
+/// The renderer's debug view for a `--debug` value (checked by clap; anything else, `view`'s
+/// `error` among them, is the shaded view).
+pub fn parse_debug(name: Option<&str>) -> DebugView {
+    match name {
+        Some("cells") => DebugView::Cells,
+        Some("kinds") => DebugView::Kinds,
+        Some("levels") => DebugView::Levels,
+        _ => DebugView::Shaded,
+    }
+}
+
 /// The name of a baseline, as `--baseline` takes it.
 pub fn baseline_name(baseline: Baseline) -> &'static str {
     BASELINES.iter().find(|(_, b)| *b == baseline).map_or("?", |&(n, _)| n)
@@ -436,12 +447,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     if let Some(s_max) = args.s_max {
         settings.s_max = s_max;
     }
-    settings.debug = match args.debug.as_deref() {
-        Some("cells") => DebugView::Cells,
-        Some("kinds") => DebugView::Kinds,
-        Some("levels") => DebugView::Levels,
-        _ => DebugView::Shaded,
-    };
+    settings.debug = parse_debug(args.debug.as_deref());
     settings.pruning = args.prune.settings();
     args.light.apply(&mut settings);
     args.shadow.apply(&mut settings);

@@ -173,6 +173,22 @@ pub fn is_container_path(path: &Path) -> bool {
     path.extension().is_some_and(|e| e.eq_ignore_ascii_case("treelod"))
 }
 
+/// Whether `path` names a glTF file: extension `.glb` or `.gltf`, any case.
+#[must_use]
+pub fn is_gltf_path(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
+}
+
+impl Scene {
+    /// One model, `path`, drawn once at the origin.
+    #[must_use]
+    pub fn single(path: &Path) -> Self {
+        Self { models: vec![path.to_owned()], instances: vec![SceneInstance { model: 0, transform: Mat4::IDENTITY }] }
+    }
+}
+
 /// Loads a scene. A `.treelod` path gives one model with one identity instance; otherwise a JSON
 /// scene file (see the module documentation), whose model files must exist.
 ///
@@ -187,10 +203,7 @@ pub fn load(path: &Path) -> Result<Scene, SceneError> {
                 message: "is a directory, not a .treelod file".to_owned(),
             });
         }
-        return Ok(Scene {
-            models: vec![path.to_owned()],
-            instances: vec![SceneInstance { model: 0, transform: Mat4::IDENTITY }],
-        });
+        return Ok(Scene::single(path));
     }
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io { path: path.to_owned(), source })?;
     let scene = parse(&bytes, path)?;
@@ -355,17 +368,49 @@ pub fn add_to_renderer(
     queue: &wgpu::Queue,
     renderer: &mut Renderer,
 ) -> Result<(Vec3, Vec3), SceneError> {
-    let mut ids = Vec::with_capacity(scene.models.len());
-    for path in &scene.models {
-        if path.is_dir() {
-            return Err(SceneError::Invalid {
-                path: path.clone(),
-                message: "is a directory, not a .treelod file".to_owned(),
-            });
-        }
-        let container = Container::open(path).map_err(|source| SceneError::Container { path: path.clone(), source })?;
+    let models = open_models(scene)?;
+    add_opened(scene, &models, device, queue, renderer)
+}
+
+/// Opens every model of `scene` ([`Container::open`]), in order, to be added to one renderer or
+/// several ([`add_opened`]) without opening (and checking) the files again.
+///
+/// # Errors
+/// [`SceneError::Invalid`] for a directory, [`SceneError::Container`] if a model does not open.
+pub fn open_models(scene: &Scene) -> Result<Vec<Arc<Container>>, SceneError> {
+    scene
+        .models
+        .iter()
+        .map(|path| {
+            if path.is_dir() {
+                return Err(SceneError::Invalid {
+                    path: path.clone(),
+                    message: "is a directory, not a .treelod file".to_owned(),
+                });
+            }
+            let container =
+                Container::open(path).map_err(|source| SceneError::Container { path: path.clone(), source })?;
+            Ok(Arc::new(container))
+        })
+        .collect()
+}
+
+/// [`add_to_renderer`] with the models already opened by [`open_models`] (`models[i]` is
+/// `scene.models[i]`).
+///
+/// # Errors
+/// [`SceneError::Render`] if the renderer refuses a model.
+pub fn add_opened(
+    scene: &Scene,
+    models: &[Arc<Container>],
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    renderer: &mut Renderer,
+) -> Result<(Vec3, Vec3), SceneError> {
+    let mut ids = Vec::with_capacity(models.len());
+    for (path, container) in scene.models.iter().zip(models) {
         let id = renderer
-            .add_model(device, queue, Arc::new(container))
+            .add_model(device, queue, Arc::clone(container))
             .map_err(|source| SceneError::Render { path: path.clone(), source })?;
         ids.push(id);
     }
@@ -382,6 +427,16 @@ pub fn add_to_renderer(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn gltf_paths_are_told_from_containers_and_scenes() {
+        assert!(is_gltf_path(Path::new("a/tree.glb")) && is_gltf_path(Path::new("TREE.GLTF")));
+        assert!(!is_gltf_path(Path::new("tree.treelod")) && !is_gltf_path(Path::new("forest.json")));
+        assert!(!is_gltf_path(Path::new("glb")));
+        let single = Scene::single(Path::new("a/tree.treelod"));
+        assert_eq!(single.models, [PathBuf::from("a/tree.treelod")]);
+        assert_eq!(single.instances, [SceneInstance { model: 0, transform: Mat4::IDENTITY }]);
+    }
 
     fn parse_str(text: &str) -> Result<Scene, SceneError> {
         parse(text.as_bytes(), Path::new("scenes/forest.json"))

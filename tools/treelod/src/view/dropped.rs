@@ -13,14 +13,6 @@ use crate::build::{self, BuildOptions};
 use crate::report::{self, Failed};
 use treelod_format::ErrorClass;
 
-/// Whether `path` names a glTF file, which is built before it is shown.
-#[must_use]
-pub fn is_gltf(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
-}
-
 /// How far a build is: the stage, and the share of it done where the stage reports one.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Status {
@@ -109,11 +101,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn gltf_files_are_built_and_containers_are_not() {
-        assert!(is_gltf(Path::new("a/tree.glb")) && is_gltf(Path::new("TREE.GLTF")));
-        assert!(
-            !is_gltf(Path::new("tree.treelod")) && !is_gltf(Path::new("forest.json")) && !is_gltf(Path::new("glb"))
-        );
+    fn builds_are_numbered_so_a_second_drop_does_not_replace_a_container_in_use() {
         assert_eq!(output_path(Path::new("/tmp/x"), Path::new("lib/oak.glb"), 2), Path::new("/tmp/x/oak-2.treelod"));
     }
 

@@ -4,6 +4,9 @@
 //! resolution, as `eval`'s `full-1x` technique draws it, not `eval`'s supersampled reference: a
 //! representation that keeps a far canopy's density where the 1× mesh aliases shows there too.
 
+use std::sync::Arc;
+
+use treelod_format::Container;
 use treelod_render::{Camera, RendererFormats, Settings};
 
 use super::{Stage, draw_scene, overlay_pass};
@@ -39,13 +42,14 @@ pub fn reference_settings(settings: &Settings) -> Settings {
 }
 
 impl Heat {
-    /// A reference renderer for `scene` with `formats` and `settings`, and targets of `size`.
+    /// A reference renderer for `scene` and its opened models (shared with the viewer's
+    /// renderer) with `formats` and `settings`, and targets of `size`.
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         formats: RendererFormats,
         settings: &Settings,
-        scene: &Scene,
+        scene: (&Scene, &[Arc<Container>]),
         size: (u32, u32),
     ) -> Result<Self, SceneError> {
         let (reference, _) = Stage::new(device, queue, formats, reference_settings(settings), scene, size)?;

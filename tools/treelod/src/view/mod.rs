@@ -188,7 +188,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     }
     // A glTF input is built once the window is up (the panel shows the progress); anything else
     // is checked before a window is needed (and opened again once the device exists).
-    let scene = if dropped::is_gltf(&args.input) {
+    let scene = if scene::is_gltf_path(&args.input) {
         if let Err(e) = std::fs::metadata(&args.input) {
             return Err(report::io_error(&args.input, &e));
         }
@@ -342,17 +342,19 @@ struct Stage {
 }
 
 impl Stage {
-    /// A renderer for `formats` and `settings` holding `scene`; the scene's bounds.
+    /// A renderer for `formats` and `settings` holding `scene`, whose `models` are opened
+    /// ([`scene::open_models`]: once per scene, however many renderers draw it); the scene's
+    /// bounds.
     fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         formats: RendererFormats,
         settings: Settings,
-        scene: &Scene,
+        (scene, models): (&Scene, &[Arc<Container>]),
         size: (u32, u32),
     ) -> Result<(Self, (Vec3, Vec3)), scene::SceneError> {
         let mut renderer = Renderer::new(device, formats, settings);
-        let bounds = scene::add_to_renderer(scene, device, queue, &mut renderer)?;
+        let bounds = scene::add_opened(scene, models, device, queue, &mut renderer)?;
         let mut ground = Ground::under_instances(device, &renderer);
         // Out towards the horizon (the shadows reach `--shadow-distance`), its far part meeting
         // the sky's colour below the horizon.
@@ -409,6 +411,8 @@ struct Viewer {
     config: wgpu::SurfaceConfiguration,
     stage: Stage,
     scene: Scene,
+    /// The scene's models, opened once for the renderers that draw them.
+    models: Vec<Arc<Container>>,
     /// What the scene's containers hold, for the panel.
     holds: Holds,
     /// The shadow settings turned back on (the last ones on), and the pruning settings.
@@ -545,12 +549,8 @@ impl Viewer {
             impostors: args.impostors,
             full_mesh: args.full_mesh,
             baseline: crate::render::parse_baseline(args.baseline.as_deref()),
-            debug: match args.debug.as_deref() {
-                Some("cells") => DebugView::Cells,
-                Some("kinds") => DebugView::Kinds,
-                Some("levels") => DebugView::Levels,
-                _ => DebugView::Shaded,
-            },
+            // `error` is the shaded view compared with the full mesh (`heat_on`).
+            debug: crate::render::parse_debug(args.debug.as_deref()),
             ..Settings::default()
         };
         args.light.apply(&mut settings);
@@ -559,8 +559,10 @@ impl Viewer {
         args.ellipsoid.apply(&mut settings);
         let last_shadows = settings.shadows.unwrap_or_default();
         let last_pruning = settings.pruning.unwrap_or_default();
-        let (stage, bounds) = Stage::new(&device, &queue, formats, settings, &scene, (config.width, config.height))
-            .map_err(|e| scene_failed(&e))?;
+        let models = scene::open_models(&scene).map_err(|e| scene_failed(&e))?;
+        let (stage, bounds) =
+            Stage::new(&device, &queue, formats, settings, (&scene, &models), (config.width, config.height))
+                .map_err(|e| scene_failed(&e))?;
 
         let egui = egui::Context::default();
         let egui_state = egui_winit::State::new(
@@ -586,6 +588,7 @@ impl Viewer {
             stage,
             holds: Holds::default(),
             scene,
+            models,
             last_shadows,
             last_pruning,
             input: args.input.clone(),
@@ -619,7 +622,7 @@ impl Viewer {
             start_view: (args.eye, args.target, args.distance),
         };
         viewer.shown(bounds);
-        if dropped::is_gltf(input) {
+        if scene::is_gltf_path(input) {
             viewer.open(args.input.clone());
         }
         Ok(viewer)
@@ -628,8 +631,7 @@ impl Viewer {
     /// After a scene is added: counts what its containers hold, frames it (as asked at the start,
     /// the first time) and restarts the frame count.
     fn shown(&mut self, bounds: (Vec3, Vec3)) {
-        let containers: Vec<Container> = self.scene.models.iter().filter_map(|p| Container::open(p).ok()).collect();
-        self.holds = Holds::of(&containers);
+        self.holds = Holds::of(self.models.iter().map(|m| &**m));
         // The view asked for at the start is for the first scene with trees (a glTF input's
         // once built).
         let asked =
@@ -650,7 +652,7 @@ impl Viewer {
     /// Shows a container or scene file, or starts building a glTF file (one at a time).
     fn open(&mut self, path: PathBuf) {
         self.messages.clear();
-        if dropped::is_gltf(&path) {
+        if scene::is_gltf_path(&path) {
             if let Some(build) = &self.build {
                 let line = format!(
                     "error: {}: {} is still being built; drop it again after",
@@ -691,11 +693,13 @@ impl Viewer {
         let settings = *self.stage.renderer.settings();
         let formats = self.stage.renderer.formats();
         let size = (self.config.width, self.config.height);
-        let (stage, bounds) =
-            Stage::new(&self.device, &self.queue, formats, settings, &scene, size).map_err(|e| e.to_string())?;
+        let models = scene::open_models(&scene).map_err(|e| e.to_string())?;
+        let (stage, bounds) = Stage::new(&self.device, &self.queue, formats, settings, (&scene, &models), size)
+            .map_err(|e| e.to_string())?;
         self.stage = stage;
         self.heat = None;
         self.scene = scene;
+        self.models = models;
         path.clone_into(&mut self.input);
         self.window.set_title(&format!("treelod view {}", path.display()));
         self.shown(bounds);
@@ -709,10 +713,7 @@ impl Viewer {
         match outcome {
             Ok((container, warnings)) => {
                 self.messages = warnings;
-                let scene = Scene {
-                    models: vec![container],
-                    instances: vec![scene::SceneInstance { model: 0, transform: glam::Mat4::IDENTITY }],
-                };
+                let scene = Scene::single(&container);
                 if let Err(message) = self.show_scene(scene, &source) {
                     report::print_error(&message);
                     self.messages.push(format!("error: {message}"));
@@ -731,7 +732,7 @@ impl Viewer {
         formats.sample_count = samples;
         let settings = *self.stage.renderer.settings();
         let size = (self.config.width, self.config.height);
-        match Stage::new(&self.device, &self.queue, formats, settings, &self.scene, size) {
+        match Stage::new(&self.device, &self.queue, formats, settings, (&self.scene, &self.models), size) {
             Ok((stage, _)) => {
                 self.stage = stage;
                 self.heat = None;
@@ -993,7 +994,8 @@ impl Viewer {
         if self.heat_on && self.heat.is_none() {
             let formats = self.stage.renderer.formats();
             let settings = self.stage.renderer.settings();
-            match heat::Heat::new(&self.device, &self.queue, formats, settings, &self.scene, (width, height)) {
+            let scene = (&self.scene, self.models.as_slice());
+            match heat::Heat::new(&self.device, &self.queue, formats, settings, scene, (width, height)) {
                 Ok(heat) => self.heat = Some(heat),
                 Err(e) => {
                     self.heat_on = false;
@@ -1017,7 +1019,7 @@ impl Viewer {
         let mut commands = self.egui_renderer.update_buffers(&self.device, &self.queue, &mut encoder, &jobs, &screen);
         draw_panel(&mut encoder, &view, &self.egui_renderer, &jobs, &screen);
         // A glTF input is shown once built: the screenshot's frames count from then.
-        let shown = self.build.is_none() && !(self.scene.models.is_empty() && dropped::is_gltf(&self.input));
+        let shown = self.build.is_none() && !(self.scene.models.is_empty() && scene::is_gltf_path(&self.input));
         let capture = match screenshot {
             Some(_) if shown && self.frames + 1 >= frames => {
                 Some(Capture::record(self, &mut encoder, &camera, &jobs, &screen))
