@@ -30,6 +30,8 @@ struct OcclusionJob {
 // Per job: samples facing the camera, and of those the visible ones.
 @group(0) @binding(3) var<storage, read_write> counts: array<atomic<u32>>;
 @group(0) @binding(4) var depth: DEPTH_TEXTURE;
+// The depth buffer runs from 1 near to 0 far (renderer.rs `DepthConvention::Reverse`).
+override reverse_z: bool = false;
 
 @compute @workgroup_size(64)
 fn measure(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) i: u32) {
@@ -59,7 +61,8 @@ fn measure(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_in
         if all(abs(ndc.xy) <= vec2<f32>(1.0)) && ndc.z >= 0.0 && ndc.z <= 1.0 {
             let last = vec2<i32>(frame.size) - vec2<i32>(1);
             let pixel = clamp(vec2<i32>(vec2<f32>(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y) * frame.size), vec2<i32>(0), last);
-            visible = ndc.z <= textureLoad(depth, pixel, 0);
+            let buffer = textureLoad(depth, pixel, 0);
+            visible = select(ndc.z <= buffer, ndc.z >= buffer, reverse_z);
         }
     }
     if visible {

@@ -107,6 +107,7 @@ mod textures;
 
 pub use camera::Camera;
 pub use ground::Ground;
+pub use renderer::DepthConvention;
 pub use renderer::{
     Baseline, DebugView, DrawSource, FrameStats, ImpostorBark, Instance, ModelId, Pruning, RecordedDraw, RenderError,
     Renderer, RendererFormats, Settings, ShadowStats,

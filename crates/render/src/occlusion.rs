@@ -101,8 +101,9 @@ pub(crate) struct Occlusion {
 }
 
 impl Occlusion {
-    /// The measurement pipeline for a depth attachment of `sample_count` samples.
-    pub fn new(device: &wgpu::Device, sample_count: u32) -> Self {
+    /// The measurement pipeline for a depth attachment of `sample_count` samples that runs as
+    /// `depth` says.
+    pub fn new(device: &wgpu::Device, sample_count: u32, depth: crate::DepthConvention) -> Self {
         let multisampled = sample_count > 1;
         let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
             binding,
@@ -157,7 +158,10 @@ impl Occlusion {
             layout: Some(&pipeline_layout),
             module: &module,
             entry_point: Some("measure"),
-            compilation_options: wgpu::PipelineCompilationOptions::default(),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[("reverse_z", f64::from(u8::from(depth == crate::DepthConvention::Reverse)))],
+                ..wgpu::PipelineCompilationOptions::default()
+            },
             cache: None,
         });
         Self { layout, pipeline, samples: Vec::new(), sample_buffer: None, pending: None }

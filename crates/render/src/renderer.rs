@@ -42,6 +42,46 @@ pub struct RendererFormats {
     pub sample_count: u32,
 }
 
+/// Which way the host's depth buffer runs: the depth test of the pipelines drawing into it, fixed
+/// when the [`Renderer`] is made ([`Renderer::with_depth_convention`]).
+///
+/// The depth written is always the camera projection's `z / w`, so the projection decides the
+/// values ([`Camera::proj`](crate::Camera::proj)); the convention says which of two depths is
+/// nearer. Neither the shadow maps (the renderer's own) nor selection depend on it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum DepthConvention {
+    /// 0 at the near plane, 1 at the far plane: the host clears depth to 1, and a fragment is
+    /// kept where its depth is `Less` than the buffer's. What
+    /// [`Camera::look_at`](crate::Camera::look_at) projects to, and [`Renderer::new`]'s.
+    #[default]
+    Standard,
+    /// Reverse Z: 1 at the near plane, 0 at the far plane (or at infinity), for depth precision
+    /// far away, as Bevy and many engines draw: the host clears depth to 0, and a fragment is
+    /// kept where its depth is `Greater` than the buffer's. The camera's projection must map
+    /// near to 1.
+    Reverse,
+}
+
+impl DepthConvention {
+    /// The depth test that keeps the nearer of two fragments.
+    #[must_use]
+    pub fn compare(self) -> wgpu::CompareFunction {
+        match self {
+            Self::Standard => wgpu::CompareFunction::Less,
+            Self::Reverse => wgpu::CompareFunction::Greater,
+        }
+    }
+
+    /// The depth a buffer is cleared to: the far end of the range.
+    #[must_use]
+    pub fn far(self) -> f32 {
+        match self {
+            Self::Standard => 1.0,
+            Self::Reverse => 0.0,
+        }
+    }
+}
+
 /// What a frame shows.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum DebugView {
@@ -602,6 +642,7 @@ pub struct RecordedDraw {
 pub struct Renderer {
     settings: Settings,
     formats: RendererFormats,
+    depth_convention: DepthConvention,
     models: Vec<Model>,
     lods: Vec<ModelLod>,
     instances: Vec<treelod_runtime::Instance>,
@@ -849,13 +890,27 @@ impl Renderer {
         wgpu::Features::MULTI_DRAW_INDIRECT_COUNT
     }
 
-    /// Creates the pipelines for the host's target formats.
+    /// Creates the pipelines for the host's target formats, with a standard depth buffer
+    /// ([`DepthConvention::Standard`]: cleared to 1, nearer is less).
     ///
     /// The memory budget of `settings` is fixed here, capped by the device's largest storage
     /// binding (the pool is one binding): ask for larger `max_storage_buffer_binding_size` and
     /// `max_buffer_size` limits when creating the device to stream more.
     #[must_use]
     pub fn new(device: &wgpu::Device, formats: RendererFormats, settings: Settings) -> Self {
+        Self::with_depth_convention(device, formats, settings, DepthConvention::Standard)
+    }
+
+    /// As [`Self::new`], for a host's depth buffer that runs as `depth` says (reverse Z for
+    /// [`DepthConvention::Reverse`]; the cameras passed to [`Self::prepare`] must then project
+    /// near to 1). [`Self::measure_occlusion`] reads that buffer with the same convention.
+    #[must_use]
+    pub fn with_depth_convention(
+        device: &wgpu::Device,
+        formats: RendererFormats,
+        settings: Settings,
+        depth: DepthConvention,
+    ) -> Self {
         let storage = |binding: u32, visibility: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
             binding,
             visibility,
@@ -988,7 +1043,8 @@ impl Renderer {
                 depth_stencil: Some(wgpu::DepthStencilState {
                     format: if caster { SHADOW_FORMAT } else { formats.depth },
                     depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    // The shadow maps are the renderer's own, always standard.
+                    depth_compare: Some(if caster { wgpu::CompareFunction::Less } else { depth.compare() }),
                     stencil: wgpu::StencilState::default(),
                     bias: if caster {
                         wgpu::DepthBiasState { constant: 2, slope_scale: 2.0, clamp: 0.0 }
@@ -1066,6 +1122,7 @@ impl Renderer {
         Self {
             formats,
             settings,
+            depth_convention: depth,
             models: Vec::new(),
             lods: Vec::new(),
             instances: Vec::new(),
@@ -1100,7 +1157,7 @@ impl Renderer {
             plane_ranges: Vec::new(),
             ellipsoid_ranges: Vec::new(),
             line_ranges: Vec::new(),
-            occlusion: Occlusion::new(device, formats.sample_count.max(1)),
+            occlusion: Occlusion::new(device, formats.sample_count.max(1), depth),
             occlusion_jobs: Vec::new(),
             last_camera: None,
             gpu: None,
@@ -1119,6 +1176,12 @@ impl Renderer {
     #[must_use]
     pub fn formats(&self) -> RendererFormats {
         self.formats
+    }
+
+    /// Which way the host's depth buffer runs, as made.
+    #[must_use]
+    pub fn depth_convention(&self) -> DepthConvention {
+        self.depth_convention
     }
 
     /// The settings used by the next [`Self::prepare`].

@@ -1,0 +1,232 @@
+//! The render world: a treelod [`Renderer`] per 3D camera, made for that view's targets, which
+//! selects each frame (in `Render`'s `PrepareBindGroups`, after Bevy made the view's textures)
+//! and draws in the `Core3d` main pass, after the opaque and alpha-masked phases and before the
+//! transparent one, into the view's colour target and depth buffer.
+//!
+//! Bevy draws with reverse Z (depth cleared to 0, near at 1, an infinite far plane), so the
+//! renderers are made with [`DepthConvention::Reverse`] and the camera's own projection; colour
+//! format (HDR or not, or an image target's format), depth format and MSAA samples are read from
+//! the view's attachments.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use bevy_asset::AssetId;
+use bevy_camera::{Camera3d, MainPassResolutionOverride, Viewport};
+use bevy_color::ColorToComponents;
+use bevy_core_pipeline::core_3d::{main_opaque_pass_3d, main_transparent_pass_3d};
+use bevy_core_pipeline::{Core3dSystems, schedule::Core3d};
+use bevy_ecs::prelude::*;
+use bevy_light::DirectionalLight;
+use bevy_log::{error, warn};
+use bevy_render::camera::ExtractedCamera;
+use bevy_render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
+use bevy_render::sync_world::MainEntity;
+use bevy_render::view::{ExtractedView, ViewDepthStencilTexture, ViewTarget};
+use bevy_render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
+use bevy_transform::components::GlobalTransform;
+use treelod_format::Container;
+use treelod_render::{Camera, DepthConvention, Instance, ModelId, Renderer, RendererFormats, Settings};
+
+use crate::asset::TreelodContainer;
+use crate::forest::{TreelodScene, to_glam};
+use crate::{TreelodSettings, TreelodStats};
+
+/// Adds the render world's resources and systems (from [`crate::TreelodPlugin::finish`]).
+pub(crate) fn setup_render_app(app: &mut bevy_app::App) {
+    let stats = app.world().resource::<TreelodStats>().clone();
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else { return };
+    render_app
+        .insert_resource(stats)
+        .init_resource::<Extracted>()
+        .init_resource::<Views>()
+        .add_systems(ExtractSchedule, extract)
+        .add_systems(Render, prepare.in_set(RenderSystems::PrepareBindGroups))
+        .add_systems(
+            Core3d,
+            draw.after(main_opaque_pass_3d).before(main_transparent_pass_3d).in_set(Core3dSystems::MainPass),
+        );
+}
+
+/// What the main world says to draw: the scene (copied when it changed) and this frame's
+/// settings with the sun filled in.
+#[derive(Resource, Default)]
+struct Extracted {
+    scene: TreelodScene,
+    settings: Settings,
+}
+
+/// Copies the scene when its revision changed, and the settings, taking the sun from the
+/// brightest visible [`DirectionalLight`] when [`TreelodSettings::sun_from_directional_light`].
+fn extract(
+    scene: Extract<Res<TreelodScene>>,
+    settings: Extract<Res<TreelodSettings>>,
+    lights: Extract<Query<(&DirectionalLight, &GlobalTransform, &bevy_camera::visibility::InheritedVisibility)>>,
+    mut extracted: ResMut<Extracted>,
+) {
+    if extracted.scene.revision != scene.revision {
+        extracted.scene = scene.clone();
+    }
+    let mut render = settings.render;
+    if settings.sun_from_directional_light
+        && let Some((light, transform, _)) = lights
+            .iter()
+            .filter(|(_, _, visible)| visible.get())
+            .max_by(|a, b| a.0.illuminance.total_cmp(&b.0.illuminance))
+    {
+        // The light shines along its forward axis; the renderer wants the way towards the sun.
+        render.sun = glam::Vec3::from_array(transform.back().to_array());
+        render.sun_colour = glam::Vec3::from_array(light.color.to_linear().to_vec3().to_array());
+    }
+    extracted.settings = render;
+}
+
+/// One camera's renderer and what it holds.
+struct ViewRenderer {
+    renderer: Renderer,
+    /// Per container: the one it was added from, and its model (`None`: adding it failed, and
+    /// its instances are left out).
+    models: HashMap<AssetId<TreelodContainer>, (Arc<Container>, Option<ModelId>)>,
+    /// The scene revision whose instances are set.
+    revision: Option<u64>,
+    /// Instances set.
+    instances: usize,
+}
+
+/// The renderers, by render-world camera entity.
+#[derive(Resource, Default)]
+struct Views {
+    views: HashMap<Entity, ViewRenderer>,
+    /// The device lacks [`Renderer::required_features`]: said once, nothing drawn.
+    unsupported: bool,
+    /// An orthographic camera was skipped: said once.
+    orthographic_reported: bool,
+}
+
+/// Per 3D camera: makes (or remakes) its renderer for the view's formats and the scene's
+/// containers, sets the instances when the scene changed, the settings, and selects for the
+/// camera ([`Renderer::prepare`]), keeping the counts in [`TreelodStats`].
+fn prepare(
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    extracted: Res<Extracted>,
+    cameras: Query<(Entity, &MainEntity, &ExtractedView, &ViewTarget, &ViewDepthStencilTexture), With<Camera3d>>,
+    mut views: ResMut<Views>,
+    stats: Res<TreelodStats>,
+) {
+    if device.is_changed() {
+        // A new device (the first, or after a device loss): nothing made on the old one stays.
+        views.views.clear();
+    }
+    let missing = Renderer::required_features() - device.features();
+    if !missing.is_empty() {
+        if !views.unsupported {
+            error!("treelod: the render device lacks {missing:?}; trees are not drawn");
+            views.unsupported = true;
+        }
+        return;
+    }
+    let scene = &extracted.scene;
+    let views = &mut *views;
+    // A camera gone or switched off (not extracted) releases its renderer; its last counts stay.
+    views.views.retain(|entity, _| cameras.contains(*entity) && !scene.instances.is_empty());
+    if scene.instances.is_empty() {
+        return;
+    }
+    for (entity, main_entity, view, target, depth) in &cameras {
+        if view.clip_from_view.w_axis.w == 1.0 {
+            // Nothing drawn, not even a renderer's last selection from before the switch.
+            views.views.remove(&entity);
+            if !views.orthographic_reported {
+                warn!("treelod: trees are drawn for perspective cameras only; camera {main_entity:?} is orthographic");
+                views.orthographic_reported = true;
+            }
+            continue;
+        }
+        let formats = RendererFormats {
+            color: target.main_texture_format(),
+            depth: depth.texture().format(),
+            sample_count: depth.texture().sample_count(),
+        };
+        let stale = views.views.get(&entity).is_some_and(|v| {
+            v.renderer.formats() != formats
+                || v.models
+                    .iter()
+                    .any(|(id, (container, _))| !scene.models.iter().any(|(m, c)| m == id && Arc::ptr_eq(c, container)))
+        });
+        if stale {
+            // New formats, or a container replaced or gone: the renderer cannot drop a model.
+            views.views.remove(&entity);
+        }
+        let entry = views.views.entry(entity).or_insert_with(|| ViewRenderer {
+            renderer: Renderer::with_depth_convention(
+                device.wgpu_device(),
+                formats,
+                extracted.settings,
+                DepthConvention::Reverse,
+            ),
+            models: HashMap::new(),
+            revision: None,
+            instances: 0,
+        });
+        for (id, container) in &scene.models {
+            if !entry.models.contains_key(id) {
+                let model = entry
+                    .renderer
+                    .add_model(device.wgpu_device(), &queue, Arc::clone(container))
+                    .map_err(|e| error!("treelod: cannot draw container {id:?}: {e}"))
+                    .ok();
+                entry.models.insert(*id, (Arc::clone(container), model));
+            }
+        }
+        if entry.revision != Some(scene.revision) {
+            let ids: Vec<Option<ModelId>> =
+                scene.models.iter().map(|(id, _)| entry.models.get(id).and_then(|(_, model)| *model)).collect();
+            let instances: Vec<Instance> = scene
+                .instances
+                .iter()
+                .filter_map(|&(model, transform)| Some(Instance { model: (*ids.get(model as usize)?)?, transform }))
+                .collect();
+            entry.renderer.set_instances(&instances);
+            entry.instances = instances.len();
+            entry.revision = Some(scene.revision);
+        }
+        *entry.renderer.settings_mut() = extracted.settings;
+        let camera = Camera::from_matrices(
+            to_glam(view.world_from_view.to_matrix().inverse()),
+            to_glam(view.clip_from_view),
+            view.viewport.z,
+            view.viewport.w,
+        );
+        let frame = entry.renderer.prepare(device.wgpu_device(), &queue, &camera);
+        stats.insert(main_entity.id(), frame);
+    }
+}
+
+/// Draws the current view's trees: its cascades first when [`Settings::shadows`] is on, then a
+/// pass over the view's colour target and depth buffer, both loaded and stored.
+fn draw(
+    view: ViewQuery<(&ExtractedCamera, &ViewTarget, &ViewDepthStencilTexture, Option<&MainPassResolutionOverride>)>,
+    views: Res<Views>,
+    mut ctx: RenderContext,
+) {
+    let Some(entry) = views.views.get(&view.entity()) else { return };
+    if entry.instances == 0 {
+        return;
+    }
+    let (camera, target, depth, resolution_override) = view.into_inner();
+    entry.renderer.render_shadows(ctx.command_encoder());
+    let color_attachments = [Some(target.get_color_attachment())];
+    let mut pass = ctx.begin_tracked_render_pass(wgpu::RenderPassDescriptor {
+        label: Some("treelod"),
+        color_attachments: &color_attachments,
+        depth_stencil_attachment: Some(depth.get_attachment(wgpu::StoreOp::Store)),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    });
+    if let Some(viewport) = Viewport::from_viewport_and_override(camera.viewport.as_ref(), resolution_override) {
+        pass.set_camera_viewport(&viewport);
+    }
+    entry.renderer.render(pass.wgpu_pass());
+}

@@ -1,0 +1,271 @@
+//! Bevy draws the forest example's 3000 trees with treelod, headless on Vulkan (Mesa lavapipe in
+//! CI; no adapter is a failure): the container loads through Bevy's asset server, the frame is
+//! captured from an image target, and the image must hold leaves below the horizon and sky above
+//! it, a Bevy cube standing in front of the trees must hide them (Bevy's depth buffer is read with
+//! its reverse-Z convention), and the trees must hide part of a Bevy cube behind them (they write
+//! that depth buffer). A malformed `.treelod` asset fails to load with the container's error.
+
+#[path = "../examples/forest/scene.rs"]
+mod scene;
+
+use std::time::Instant;
+
+use bevy_app::{App, Startup, TaskPoolPlugin};
+use bevy_asset::{AssetPlugin, AssetServer, Assets, LoadState};
+use bevy_color::Color;
+use bevy_ecs::prelude::*;
+use bevy_math::Vec3;
+use bevy_mesh::{Mesh, Mesh3d};
+use bevy_pbr::{MeshMaterial3d, StandardMaterial};
+use bevy_render::renderer::RenderAdapterInfo;
+use bevy_shape::Cuboid;
+use bevy_transform::components::Transform;
+use scene::{Frame, IMAGE_SIZE, Output};
+use treelod_bevy::{TreelodContainer, TreelodPlugin, TreelodStats};
+
+/// Whether a pixel is a leaf: clearly greener than red and blue (the sky is blue, the ground
+/// brown, the cubes red and blue).
+fn leaf(p: [u8; 4]) -> bool {
+    p[1] > p[0].saturating_add(8) && p[1] > p[2].saturating_add(8)
+}
+
+/// The HDR camera's image.
+const SMALL: (u32, u32) = (160, 90);
+
+/// The cube colours, unlit: exactly these in the image (sRGB).
+const RED: [u8; 3] = [220, 30, 30];
+const BLUE: [u8; 3] = [30, 30, 220];
+
+fn is(p: [u8; 4], colour: [u8; 3]) -> bool {
+    p.iter().zip(colour).all(|(a, b)| a.abs_diff(b) <= 6)
+}
+
+/// The pixel rectangle (x0, y0, x1, y1) that a world-space box projects to with the scene's camera
+/// (Bevy's default perspective: 45° vertical field of view).
+fn projected(centre: Vec3, half: Vec3) -> (u32, u32, u32, u32) {
+    let (width, height) = IMAGE_SIZE;
+    let view = glam::Mat4::from_cols_array(&scene::camera_transform().to_matrix().inverse().to_cols_array());
+    let aspect = width as f32 / height as f32;
+    let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(std::f32::consts::FRAC_PI_4, aspect, 0.1);
+    let (mut x0, mut y0, mut x1, mut y1) = (f32::MAX, f32::MAX, f32::MIN, f32::MIN);
+    for corner in 0..8 {
+        let sign = |bit: u32| if corner & bit == 0 { -1.0 } else { 1.0 };
+        let p = centre + half * Vec3::new(sign(1), sign(2), sign(4));
+        let ndc = (proj * view).project_point3(glam::Vec3::from_array(p.to_array()));
+        let (x, y) = ((ndc.x + 1.0) * 0.5 * width as f32, (1.0 - ndc.y) * 0.5 * height as f32);
+        (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+    }
+    let clamp = |v: f32, max: u32| v.clamp(0.0, (max - 1) as f32) as u32;
+    (clamp(x0, width), clamp(y0, height), clamp(x1, width), clamp(y1, height))
+}
+
+/// The share of the pixels of `rect` for which `test` holds.
+fn share(frame: &Frame, (x0, y0, x1, y1): (u32, u32, u32, u32), test: impl Fn([u8; 4]) -> bool) -> f64 {
+    let (mut hits, mut all) = (0u32, 0u32);
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            all += 1;
+            hits += u32::from(test(frame.pixel(x, y)));
+        }
+    }
+    f64::from(hits) / f64::from(all.max(1))
+}
+
+/// The right edge of the blue cube on screen.
+fn blue_right((centre, half): (Vec3, Vec3)) -> u32 {
+    projected(centre, half).2
+}
+
+#[test]
+fn bevy_draws_the_forest_in_its_main_pass() {
+    let started = Instant::now();
+    let assets = tempfile::tempdir().expect("a temporary directory");
+    let bytes = scene::demo_container_bytes();
+    std::fs::write(assets.path().join("demo.treelod"), &bytes).expect("writes the container");
+    let block = *TreelodContainer::from_bytes(&bytes).expect("opens").container().block();
+    let mut app = App::new();
+    scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
+
+    // The camera and the forest as in the example; a red cube in front of the first trees; a blue
+    // cube behind the tree nearest the camera's view axis in the first row.
+    let camera = scene::camera_transform();
+    let red =
+        (camera.translation + camera.forward() * 4.0 + camera.left() * 2.0 + camera.down() * 0.9, Vec3::splat(0.7));
+    let trees = scene::forest_instances();
+    // Nothing of any tree reaches the red cube: it stands wholly in front of the forest.
+    let reach =
+        Vec3::from_array(block.bounds_min).abs().max(Vec3::from_array(block.bounds_max).abs()).with_y(0.0).length();
+    let forest_front = trees.iter().map(|t| t.translation.z + reach * t.scale.x).fold(f32::MIN, f32::max);
+    assert!(
+        red.0.z - red.1.z > forest_front,
+        "the red cube ({red:?}) is in front of the forest (z up to {forest_front})"
+    );
+    let axis_x = camera.translation.x;
+    let front = trees
+        .iter()
+        .take(scene::COLUMNS as usize)
+        .min_by(|a, b| (a.translation.x - axis_x).abs().total_cmp(&(b.translation.x - axis_x).abs()))
+        .expect("a first row");
+    let away = (front.translation - camera.translation).with_y(0.0).normalize();
+    // A little behind the tree, over the middle half of its height.
+    let (low, high) = (block.bounds_min[1] * front.scale.y, block.bounds_max[1] * front.scale.y);
+    let blue = (
+        front.translation + away * 3.0 + Vec3::Y * 0.5 * (low + high),
+        Vec3::new(0.25 * (high - low), 0.25 * (high - low), 0.5),
+    );
+    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
+    let forest = handle.clone();
+    app.add_systems(
+        Startup,
+        move |mut commands: Commands,
+              mut meshes: ResMut<Assets<Mesh>>,
+              mut materials: ResMut<Assets<StandardMaterial>>| {
+            scene::spawn_world(&mut commands, &mut meshes, &mut materials, forest.clone());
+            for ((centre, half), [r, g, b]) in [(red, RED), (blue, BLUE)] {
+                commands.spawn((
+                    Mesh3d(meshes.add(Cuboid::from_size(half * 2.0))),
+                    MeshMaterial3d(materials.add(StandardMaterial {
+                        base_color: Color::srgb_u8(r, g, b),
+                        unlit: true,
+                        ..StandardMaterial::default()
+                    })),
+                    Transform::from_translation(centre),
+                ));
+            }
+        },
+    );
+    let target = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(scene::target_image());
+    // A second camera, HDR (an `Rgba16Float` main texture) without MSAA, in the forest's first
+    // rows looking out of it: a renderer of its own for other formats, and only a few trees.
+    let mut small = bevy_image::Image::new_target_texture(
+        SMALL.0,
+        SMALL.1,
+        bevy_render::render_resource::TextureFormat::Rgba8UnormSrgb,
+        None,
+    );
+    small.asset_usage = bevy_asset::RenderAssetUsages::RENDER_WORLD;
+    let small = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(small);
+    scene::finish(&mut app);
+    let adapter =
+        app.world().get_resource::<RenderAdapterInfo>().expect("a render adapter (install mesa-vulkan-drivers)");
+    assert_eq!(adapter.backend, wgpu::Backend::Vulkan, "the test renders on Vulkan, got {:?}", **adapter);
+    let camera_entity =
+        app.world_mut().spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into()))).id();
+    let hdr_entity = app
+        .world_mut()
+        .spawn((
+            bevy_camera::Camera3d::default(),
+            bevy_camera::Hdr,
+            bevy_core_pipeline::tonemapping::Tonemapping::None,
+            bevy_core_pipeline::tonemapping::DebandDither::Disabled,
+            bevy_render::view::Msaa::Off,
+            Transform::from_xyz(3.0 * scene::SPACING, 3.0, -2.0 * scene::SPACING)
+                .looking_at(Vec3::new(3.0 * scene::SPACING, 3.0, 30.0), Vec3::Y),
+            bevy_camera::RenderTarget::Image(small.clone().into()),
+        ))
+        .id();
+    // Loading runs on the task pool; frames run meanwhile (with no trees).
+    for _ in 0..500 {
+        app.update();
+        match app.world().resource::<AssetServer>().load_state(&handle) {
+            LoadState::Loaded => break,
+            LoadState::Failed(e) => panic!("the demo container fails to load: {e}"),
+            _ => std::thread::sleep(std::time::Duration::from_millis(10)),
+        }
+    }
+    assert!(app.world().resource::<AssetServer>().is_loaded(&handle), "the demo container loads");
+    let loaded = started.elapsed();
+    // One frame with the trees before the captured one: their upload completes in the first
+    // (`Settings::upload_budget` exceeds the container).
+    let frames = scene::render_frames(&mut app, &[(camera_entity, target), (hdr_entity, small)], 1)
+        .expect("the frames are captured");
+    let (frame, hdr_frame) = (&frames[0], &frames[1]);
+    eprintln!("container built and loaded in {loaded:.1?}, frame captured at {:.1?}", started.elapsed());
+    if let Some(path) = std::env::var_os("TREELOD_BEVY_IMAGE") {
+        let path = std::path::Path::new(&path);
+        frame.write_png(path).expect("writes the image");
+        hdr_frame.write_png(&path.with_extension("hdr.png")).expect("writes the image");
+    }
+
+    let stats = app.world().resource::<TreelodStats>().get(camera_entity).expect("the camera drew trees");
+    eprintln!("{stats:?}");
+    assert!(
+        (300..3000).contains(&stats.instances_visible),
+        "{} of 3000 trees in view (the camera looks into the forest from its edge)",
+        stats.instances_visible
+    );
+    assert!(stats.triangles > 0 && stats.points > 0, "near trees are triangles, far ones points: {stats:?}");
+    assert_eq!(stats.ranges_clamped, 0, "every range is drawn at the detail selected (all of it resident)");
+    let hdr_stats = app.world().resource::<TreelodStats>().get(hdr_entity).expect("the HDR camera drew trees");
+    let hdr_leaves = share(hdr_frame, (0, 0, SMALL.0 - 1, SMALL.1 - 1), leaf);
+    eprintln!("HDR camera: {} trees in view, leaves {hdr_leaves:.3} of its image", hdr_stats.instances_visible);
+    assert!((1..60).contains(&hdr_stats.instances_visible), "the HDR camera sees a few trees: {hdr_stats:?}");
+    assert!(hdr_leaves > 0.05, "the HDR camera's image shows leaves: {hdr_leaves:.3}");
+
+    let (width, height) = IMAGE_SIZE;
+    // Sky above the forest; the far rows of the forest (200 m on, 2–5 m up: the crowns) a band
+    // of leaves beside the cubes; the near trees below it.
+    let sky = share(frame, (0, 0, width - 1, height / 10), |p| is(p, [scene::SKY[0], scene::SKY[1], scene::SKY[2]]));
+    let depth = scene::ROWS as f32 * scene::SPACING;
+    let far_rows = projected(
+        Vec3::new(camera.translation.x, 3.5, -0.5 * (200.0 + depth)),
+        Vec3::new(1.0, 1.5, 0.5 * (depth - 200.0)),
+    );
+    let far_band = (blue_right(blue) + 2, far_rows.1, width - 1, far_rows.3);
+    let far_leaves = share(frame, far_band, leaf);
+    let near_leaves = share(frame, (0, height / 2, width - 1, height - 1), leaf);
+    // The red cube, in front of the trees, is not drawn over: the rectangle a box of half its
+    // size projects to lies inside its silhouette.
+    let red_rect = projected(red.0, red.1 * 0.5);
+    let red_share = share(frame, red_rect, |p| is(p, RED));
+    // The blue cube, behind the first tree, is partly hidden by it.
+    let blue_rect = projected(blue.0, blue.1 * 0.5);
+    let blue_share = share(frame, blue_rect, |p| is(p, BLUE));
+    let blue_hidden = share(frame, blue_rect, |p| !is(p, BLUE));
+    eprintln!(
+        "sky {sky:.3} of the top tenth; leaves {far_leaves:.3} of the far rows {far_band:?}, {near_leaves:.3} of the \
+         lower half; red cube {red_rect:?}: {red_share:.3} red; blue cube {blue_rect:?}: {blue_share:.3} blue, \
+         {blue_hidden:.3} hidden"
+    );
+    assert!(sky > 0.95, "the top of the image is sky: {sky:.3}");
+    assert!(far_leaves > 0.6, "the far rows are a band of leaves: {far_leaves:.3} of {far_band:?}");
+    assert!(near_leaves > 0.12, "the lower half shows the near trees' leaves: {near_leaves:.3}");
+    assert!(red_share > 0.97, "the red cube hides the trees behind it: {red_share:.3} of {red_rect:?} is red");
+    assert!(blue_share > 0.1, "the blue cube shows beside the tree: {blue_share:.3} of {blue_rect:?}");
+    assert!(blue_hidden > 0.2, "the tree in front hides part of the blue cube: {blue_hidden:.3} of {blue_rect:?}");
+}
+
+#[test]
+fn a_malformed_container_fails_to_load_with_its_error() {
+    let assets = tempfile::tempdir().expect("a temporary directory");
+    let bytes = scene::demo_container_bytes();
+    // Truncated in its section table.
+    std::fs::write(assets.path().join("broken.treelod"), &bytes[..100]).expect("writes");
+    std::fs::write(assets.path().join("text.treelod"), b"not a container").expect("writes");
+    let mut app = App::new();
+    app.add_plugins((
+        TaskPoolPlugin::default(),
+        AssetPlugin { file_path: assets.path().to_string_lossy().into_owned(), ..AssetPlugin::default() },
+        TreelodPlugin,
+    ));
+    scene::finish(&mut app);
+    let server = app.world().resource::<AssetServer>().clone();
+    for (name, expected) in [("broken.treelod", "truncated"), ("text.treelod", "not a .treelod file")] {
+        let handle = server.load::<TreelodContainer>(name);
+        let mut state = LoadState::Loading;
+        for _ in 0..500 {
+            app.update();
+            state = server.load_state(&handle);
+            if !matches!(state, LoadState::Loading | LoadState::NotLoaded) {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let LoadState::Failed(error) = state else { panic!("{name}: expected a failure, got {state:?}") };
+        let message = error.to_string();
+        assert!(
+            message.contains("not a valid .treelod container") && message.contains(expected) && message.contains(name),
+            "{name}: {message}"
+        );
+    }
+}
