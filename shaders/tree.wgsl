@@ -32,6 +32,9 @@ struct Frame {
     // β, octaves of tau over which ellipsoids and lines blend from one level to the next
     // (Settings::level_blend, clamped to [0, 2]; 0: switch at once). See `level_keep`.
     level_blend: f32,
+    // 1: without MSAA, minified alpha-tested fragments cover their filtered alpha's share of the
+    // pixels (Settings::stochastic_alpha). See `alpha_mask`.
+    stochastic_alpha: u32,
 }
 
 // A vertex as uploaded: the record, then its ambient occlusion (spec §6.14; 0 without).
@@ -422,11 +425,16 @@ fn filtered_coverage(alpha: f32, cutoff: f32, footprint: f32) -> f32 {
 }
 
 // The samples an alpha-tested fragment covers (0: discard it): with one sample the test of
-// `alpha` against `cutoff` (a negative cutoff passes everything); with MSAA alpha to coverage.
-// `footprint` is texels per pixel.
+// `alpha` against `cutoff` (a negative cutoff passes everything), or with
+// `frame.stochastic_alpha` the shadow pass's test of its filtered coverage against a hash of the
+// pixel and depth; with MSAA alpha to coverage. `footprint` is texels per pixel.
 fn alpha_mask(alpha: f32, cutoff: f32, footprint: f32, clip: vec4<f32>) -> u32 {
     var mask = 0xFFFFFFFFu;
-    if sample_count == 1u || cutoff < 0.0 {
+    if sample_count == 1u && cutoff >= 0.0 && frame.stochastic_alpha != 0u {
+        if filtered_coverage(alpha, cutoff, footprint) <= layered_dither(clip) {
+            mask = 0u;
+        }
+    } else if sample_count == 1u || cutoff < 0.0 {
         if alpha < cutoff {
             mask = 0u;
         }

@@ -197,6 +197,16 @@ pub struct Settings {
     /// also selects every cascade from the light's view (on the CPU, also when GPU selection is
     /// on) and [`Renderer::render_shadows`] draws them before the host's pass.
     pub shadows: Option<Shadows>,
+    /// Without MSAA: an alpha-tested fragment whose texture is minified (a texel under a pixel)
+    /// is kept where its filtered alpha — the share of its footprint the leaf covers — exceeds a
+    /// hash of the pixel and depth, as the shadow pass keeps it, instead of where it passes the
+    /// material's cutoff. The plain test drops every texel less than half covered, so a canopy of
+    /// thin leaves thins out and vanishes with distance; this one keeps its density (expected
+    /// coverage exact; overlapping leaves at other depths independent) at the cost of noise that
+    /// changes as the camera moves, which a temporal anti-aliasing pass averages (with MSAA, alpha
+    /// to coverage does the same per sample without it). `eval` draws its reference so. Default
+    /// off.
+    pub stochastic_alpha: bool,
 }
 
 /// The bark of a tree drawn with impostor planes ([`Settings::impostor_bark`]).
@@ -303,6 +313,7 @@ impl Default for Settings {
             lines: true,
             baseline: None,
             shadows: None,
+            stochastic_alpha: false,
         }
     }
 }
@@ -454,6 +465,9 @@ struct FrameUniform {
     ambient_occlusion: u32,
     /// [`Settings::level_blend`], clamped.
     level_blend: f32,
+    /// 1 with [`Settings::stochastic_alpha`].
+    stochastic_alpha: u32,
+    pad: [u32; 3],
 }
 
 /// One draw's constants. WGSL twin: `DrawInfo` in `shaders/tree.wgsl` and `shaders/select.wgsl`.
@@ -2463,6 +2477,8 @@ impl Renderer {
             morph: u32::from(settings.impostor_morph),
             ambient_occlusion: u32::from(settings.ambient_occlusion),
             level_blend: settings.pixel_level().clamped_blend(),
+            stochastic_alpha: u32::from(settings.stochastic_alpha),
+            pad: [0; 3],
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
         for (k, cascade) in self.cascades.iter().enumerate() {

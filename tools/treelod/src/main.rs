@@ -86,7 +86,8 @@ enum Command {
     /// Measure techniques against the full mesh: primitives, Precision/Recall/Q, multi-scale RMSE,
     /// temporal noise and wall time per frame along a camera path (Vulkan; lavapipe works).
     ///
-    /// The reference is the full mesh drawn --supersample times larger and box-filtered down.
+    /// The reference is the full mesh drawn --supersample times larger and box-filtered down,
+    /// minified alpha-tested leaves covering the share of pixels their filtered alpha gives.
     /// Techniques: full (the full mesh drawn as the reference is: reads perfect), full-1x (the
     /// full mesh at the image size), spt (triangles + points, the default renderer), ellipsoids
     /// (Clasen's ellipsoids and branch lines), impostors, prune-opt and prune-cook where the
