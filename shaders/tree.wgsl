@@ -430,8 +430,8 @@ fn filtered_coverage(alpha: f32, cutoff: f32, footprint: f32) -> f32 {
 // pixel and depth; with MSAA alpha to coverage. `footprint` is texels per pixel.
 fn alpha_mask(alpha: f32, cutoff: f32, footprint: f32, clip: vec4<f32>) -> u32 {
     var mask = 0xFFFFFFFFu;
-    if sample_count == 1u && cutoff >= 0.0 && frame.stochastic_alpha != 0u {
-        if filtered_coverage(alpha, cutoff, footprint) <= layered_dither(clip) {
+    if sample_count == 1u && frame.stochastic_alpha != 0u {
+        if stochastic_alpha_drops(alpha, cutoff, footprint, clip) {
             mask = 0u;
         }
     } else if sample_count == 1u || cutoff < 0.0 {
@@ -443,6 +443,14 @@ fn alpha_mask(alpha: f32, cutoff: f32, footprint: f32, clip: vec4<f32>) -> u32 {
         mask = coverage_mask(filtered_coverage(alpha, cutoff, footprint), clip);
     }
     return mask;
+}
+
+// Whether an alpha-tested fragment (`footprint` texels per pixel) is dropped by the stochastic
+// test: kept where its filtered coverage exceeds the dither of its pixel and depth, so on average
+// minified leaves cover their share of the pixels (or shadow-map texels). A negative `cutoff`
+// (not alpha-tested) keeps everything.
+fn stochastic_alpha_drops(alpha: f32, cutoff: f32, footprint: f32, fragment: vec4<f32>) -> bool {
+    return cutoff >= 0.0 && filtered_coverage(alpha, cutoff, footprint) <= layered_dither(fragment);
 }
 
 // Interleaved gradient noise (Jimenez 2014) of the pixel, in [0, 1): the dither of the
@@ -677,8 +685,7 @@ fn layered_dither(fragment: vec4<f32>) -> f32 {
 fn fs_shadow_triangle(in: Varyings) {
     let material = materials[in.material];
     let alpha = triangle_albedo(material, in).a;
-    let cutoff = material_cutoff(material);
-    if cutoff >= 0.0 && filtered_coverage(alpha, cutoff, texel_footprint(in.uv)) <= layered_dither(in.clip) {
+    if stochastic_alpha_drops(alpha, material_cutoff(material), texel_footprint(in.uv), in.clip) {
         discard;
     }
 }

@@ -49,7 +49,8 @@ impl Ground {
             size_of::<GroundUniform>() as u64,
             // Group 2: the renderer's shadow maps.
             &[None, Some(renderer.shadow_bind_group_layout())],
-            Some(wgpu::CompareFunction::Less),
+            // Tested as the trees are, so it meets them right in either depth convention.
+            Some(renderer.depth_convention().compare()),
         );
         Self { centre, half_size, colour: Vec3::new(0.55, 0.6, 0.45), pipeline, uniform, bind_group }
     }
