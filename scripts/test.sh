@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 
 section() { printf '\n==== %s ====\n' "$1"; }
 
-# The Bevy plugin (crates/bevy, built by every `--workspace` command below) depends on Bevy 0.20,
+# The Bevy plugin (crates/treelod-bevy, built by every `--workspace` command below) depends on Bevy 0.20,
 # whose shader compiler `wesl` 0.6 declares Rust 1.97.1 as its minimum; it builds and passes with
 # the workspace's 1.95, and this flag lets cargo build it there. Our own crates declare 1.95.
 msrv=--ignore-rust-version

@@ -1,4 +1,4 @@
-// A flat ground square that receives the renderer's shadows (crates/render/src/ground.rs): how a
+// A flat ground square that receives the renderer's shadows (crates/treelod-render/src/ground.rs): how a
 // host's own surfaces use shared/shadow.wgsl, prepended to this file.
 
 struct GroundUniform {

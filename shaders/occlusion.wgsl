@@ -1,4 +1,4 @@
-// The occlusion factor of pruned trees (crates/render/src/occlusion.rs): per tree, how many of
+// The occlusion factor of pruned trees (crates/treelod-render/src/occlusion.rs): per tree, how many of
 // its hull samples face the camera and how many of those the depth buffer shows.
 //
 // One workgroup per tree (a 2D dispatch of rows of 65535), one invocation per sample.

@@ -1,5 +1,5 @@
-// GPU-driven selection: the compute twin of treelod_runtime::select_frame (crates/runtime/src/
-// frame.rs), run by crates/render/src/gpu_select.rs. Two entry points:
+// GPU-driven selection: the compute twin of treelod_runtime::select_frame (crates/treelod-runtime/src/
+// frame.rs), run by crates/treelod-render/src/gpu_select.rs. Two entry points:
 //
 // 1. `cull_blocks`, one invocation per instance block (64 instances in Morton order): a block
 //    whose bounding sphere lies outside a frustum plane is skipped; a visible one is appended to
@@ -19,7 +19,7 @@ const STRADDLES: u32 = 2u;
 const ROOTS_CELL: u32 = 0xFFFFFFFFu;
 const F32_MAX: f32 = 3.40282347e+38;
 
-// Rust twin: SelectFrameGpu (crates/render/src/gpu_select.rs).
+// Rust twin: SelectFrameGpu (crates/treelod-render/src/gpu_select.rs).
 struct SelectFrame {
     // Left, right, bottom, top, near, far: unit normal into the frustum (xyz), offset (w).
     planes: array<vec4<f32>, 6>,

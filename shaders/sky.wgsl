@@ -1,4 +1,4 @@
-// A sky gradient behind the trees (crates/render/src/sky.rs): one triangle over the whole target,
+// A sky gradient behind the trees (crates/treelod-render/src/sky.rs): one triangle over the whole target,
 // drawn first in the pass, without depth. Colours are linear RGB.
 
 struct SkyUniform {

@@ -38,7 +38,7 @@ struct Frame {
 }
 
 // A vertex as uploaded: the record, then its ambient occlusion (spec §6.14; 0 without).
-// Rust twin: VertexGpu in crates/render/src/renderer.rs.
+// Rust twin: VertexGpu in crates/treelod-render/src/renderer.rs.
 struct VertexGpu {
     record: VertexRecord,
     ao: f32,
@@ -67,7 +67,7 @@ struct VertexGpu {
 // (0xFFFFFFFF for a plane with an RGBA atlas).
 @group(1) @binding(9) var leaf_slots: texture_2d<u32>;
 @group(1) @binding(10) var<storage, read> plane_leaves: array<PlaneLeafRecord>;
-// Clasen's ellipsoids (spec §6.8), and the white-noise cube map they sample (crates/render/src/
+// Clasen's ellipsoids (spec §6.8), and the white-noise cube map they sample (crates/treelod-render/src/
 // noise.rs: alpha the grey noise, RGB a random unit vector; nearest texel of the nearest level).
 @group(1) @binding(11) var<storage, read> ellipsoids: array<EllipsoidRecord>;
 @group(1) @binding(12) var noise: texture_cube<f32>;
@@ -726,7 +726,7 @@ const ELLIPSOID_NORMAL_NOISE: f32 = 0.5;
 // spans π/2 radians, 32 texels per unit of face coordinate at its centre, 64 at its corners).
 const NOISE_TEXELS_PER_RADIAN: f32 = 40.0;
 
-// log2 of the noise cube's face size at level 0 (crates/render/src/noise.rs NOISE_SIZE): the
+// log2 of the noise cube's face size at level 0 (crates/treelod-render/src/noise.rs NOISE_SIZE): the
 // paper's level l (2^l × 2^l texels per face) is mip NOISE_TOP_LEVEL − l.
 const NOISE_TOP_LEVEL: f32 = 6.0;
 

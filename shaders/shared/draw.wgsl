@@ -1,6 +1,6 @@
-// One indirect draw's constants, written by the CPU path (crates/render/src/renderer.rs) or by
+// One indirect draw's constants, written by the CPU path (crates/treelod-render/src/renderer.rs) or by
 // the GPU selection (shaders/select.wgsl) and read by the tree shader (shaders/tree.wgsl).
-// Rust twin: `DrawInfo` in crates/render/src/renderer.rs (96 bytes).
+// Rust twin: `DrawInfo` in crates/treelod-render/src/renderer.rs (96 bytes).
 
 struct DrawInfo {
     // Column-major world-from-model transform.

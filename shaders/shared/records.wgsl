@@ -1,9 +1,9 @@
 // The container's records as the GPU reads them from storage buffers (vertex pulling).
 //
 // Each struct is the WGSL twin of the Rust record of the same name in
-// crates/format/src/records.rs and of the byte table in format-spec/treelod.md §6. Only
+// crates/treelod-format/src/records.rs and of the byte table in format-spec/treelod.md §6. Only
 // 4-byte scalars and arrays of them are used, so every struct has alignment 4 and its array
-// stride equals the record size; crates/runtime/tests/wgsl_layout.rs checks sizes and offsets.
+// stride equals the record size; crates/treelod-runtime/tests/wgsl_layout.rs checks sizes and offsets.
 
 // Rust twin: treelod_format::VertexRecord (28 bytes, spec §6.3).
 struct VertexRecord {

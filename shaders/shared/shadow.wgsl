@@ -1,4 +1,4 @@
-// Receiving the sun's cascaded shadow maps (crates/render/src/shadows.rs), bound as group 2 by
+// Receiving the sun's cascaded shadow maps (crates/treelod-render/src/shadows.rs), bound as group 2 by
 // the tree pipelines and by any host pipeline that includes this file (treelod_render::SHADOW_WGSL,
 // Renderer::shadow_bind_group). Rust twin of the uniform: `ShadowUniform` in shadows.rs.
 

@@ -588,10 +588,10 @@ fn ellipse_spans(size: u32, centre: Vec2, m: [f64; 3], mut span: impl FnMut(usiz
 }
 
 /// Texels along a side of a face of the renderer's noise cube at its finest level
-/// (`crates/render/src/noise.rs` `NOISE_SIZE`).
+/// (`crates/treelod-render/src/noise.rs` `NOISE_SIZE`).
 pub const NOISE_SIZE: u32 = 64;
 
-/// The renderer's noise cube (`crates/render/src/noise.rs`): the grey value, `0 ..= 255`, of
+/// The renderer's noise cube (`crates/treelod-render/src/noise.rs`): the grey value, `0 ..= 255`, of
 /// the texel of mip `level` (`NOISE_SIZE >> level` texels per side) that the direction `d`
 /// (need not be unit) samples with the nearest texel (the cube-map face and `(s, t)` rules of
 /// Vulkan and WebGPU: the face of `d`'s largest component, `+X −X +Y −Y +Z −Z` = 0..5). The same

@@ -138,7 +138,7 @@ impl Frustum {
 ///
 /// Gilet et al. give no default values for the pixel thresholds; the defaults here are one-pixel
 /// points and triangles from two pixels on (the renderer's defaults: at 1–2 px a point and the
-/// triangle it replaces cover the same pixels, see `crates/render/tests/render.rs`).
+/// triangle it replaces cover the same pixels, see `crates/treelod-render/tests/render.rs`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LodSettings {
     /// `s_m`, pixels: the smallest projected size of a drawn point; finer points give way to their
