@@ -30,7 +30,7 @@ struct OcclusionJob {
 // Per job: samples facing the camera, and of those the visible ones.
 @group(0) @binding(3) var<storage, read_write> counts: array<atomic<u32>>;
 @group(0) @binding(4) var depth: DEPTH_TEXTURE;
-// The depth buffer runs from 1 near to 0 far (renderer.rs `DepthConvention::Reverse`).
+// The depth buffer runs from 1 near to 0 far (settings.rs `DepthConvention::Reverse`).
 override reverse_z: bool = false;
 
 @compute @workgroup_size(64)

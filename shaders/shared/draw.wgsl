@@ -1,6 +1,6 @@
-// One indirect draw's constants, written by the CPU path (crates/treelod-render/src/renderer.rs) or by
-// the GPU selection (shaders/select.wgsl) and read by the tree shader (shaders/tree.wgsl).
-// Rust twin: `DrawInfo` in crates/treelod-render/src/renderer.rs (96 bytes).
+// One indirect draw's constants, written by the CPU path (crates/treelod-render/src/draws.rs) or by
+// the GPU selection (shaders/select.wgsl) and read by the tree shaders (shaders/tree/).
+// Rust twin: `DrawInfo` in crates/treelod-render/src/draws.rs (96 bytes).
 
 struct DrawInfo {
     // Column-major world-from-model transform.
@@ -15,7 +15,7 @@ struct DrawInfo {
     shading: f32,
     // Size factor of pruned leaves about their centres (1 for everything else).
     leaf_scale: f32,
-    // Index of the instance in the renderer's list (read-backs, and the level blend's dither in tree.wgsl).
+    // Index of the instance in the renderer's list (read-backs, and the level blend's dither in tree/common.wgsl).
     instance: u32,
     _pad1: u32,
 }

@@ -111,7 +111,7 @@ pub const SCALE_FACTORS: [f64; 12] = [0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.
 pub const THRESHOLDS: [f32; 4] = [0.0, 0.2, 0.4, 0.6];
 
 /// The renderer's noise texels per radian of the local hit direction at the cube's finest level
-/// (`shaders/tree.wgsl` `NOISE_TEXELS_PER_RADIAN`).
+/// (`shaders/tree/ellipsoids.wgsl` `NOISE_TEXELS_PER_RADIAN`).
 const NOISE_TEXELS_PER_RADIAN: f64 = 40.0;
 
 /// Thinnest semi-axis of an ellipsoid as a share of its largest.
@@ -468,7 +468,7 @@ fn noise_mip(leaves: f64) -> f64 {
 }
 
 /// The mip of the noise cube the renderer samples on each ellipsoid of a level (`ellipsoid_hit`
-/// in `shaders/tree.wgsl`): `max(log2 NOISE_SIZE − noise_mip, log2 footprint)`, the nearest mip
+/// in `shaders/tree/ellipsoids.wgsl`): `max(log2 NOISE_SIZE − noise_mip, log2 footprint)`, the nearest mip
 /// (Vulkan's rounding, `⌈x + ½⌉ − 1`). The footprint is the noise texels per pixel at the middle
 /// of the ellipsoid when the level is drawn: a level is drawn while its mean diameter is between
 /// `pixels` and about twice that on screen, so the mean ellipsoid is taken `√2·pixels` across

@@ -16,7 +16,7 @@ use glam::{Mat4, Quat, Vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, Image, render_image};
-use treelod_render::{Camera, Instance, Renderer, Settings};
+use treelod_render::{Camera, Instance, Renderer, Settings, Technique};
 
 const WIDTH: u32 = 480;
 const HEIGHT: u32 = 270;
@@ -62,7 +62,8 @@ fn main() {
     let full_triangles = container.triangles().len();
     let mut rng = SplitMix64(2005);
     let mut lod = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let mut full = Renderer::new(&gpu.device, Gpu::formats(), Settings { full_mesh: true, ..Settings::default() });
+    let mut full =
+        Renderer::new(&gpu.device, Gpu::formats(), Settings { technique: Technique::Full, ..Settings::default() });
     let container = std::sync::Arc::new(container);
     let (a, b) = (
         lod.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads"),

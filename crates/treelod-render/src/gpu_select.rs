@@ -42,7 +42,8 @@ use glam::Vec3;
 use treelod_format::{Container, PointRecord};
 use treelod_runtime::{DrawRange, Kind, ModelLod, ROOTS_CELL};
 
-use crate::renderer::{DrawInfo, RenderError};
+use crate::draws::DrawInfo;
+use crate::renderer::RenderError;
 use crate::streaming::UNIT;
 
 /// WGSL of the selection: the draw constants it writes, then the two compute entry points.
@@ -346,7 +347,7 @@ impl GpuSelection {
             // The points with their ambient occlusion in `flags`, as the streamed pool holds them.
             let mut scratch = Vec::new();
             let triangles = container.triangles();
-            let points = crate::renderer::gpu_points(container, 0, container.points(), &mut scratch);
+            let points = crate::upload::gpu_points(container, 0, container.points(), &mut scratch);
             let roots: Vec<PointRecord> = lod.roots().iter().map(|&i| points[i as usize]).collect();
             let triangles_at = at;
             let points_at = triangles_at + u64::try_from(triangles.len()).unwrap_or(0).div_ceil(2);

@@ -59,19 +59,19 @@
 //! CPU work per frame. GPU selection keeps every model's triangles and points resident whole
 //! (a model over [`Settings::memory_budget`] is refused with
 //! [`RenderError::GpuSelectionBudget`]) instead of streaming; its [`FrameStats`] counts come from a
-//! read-back one or two frames old ([`FrameStats::gpu_selection`]); frames with
-//! [`Settings::pruning`], [`Settings::impostors`], [`Settings::full_mesh`] or
-//! [`Settings::shadows`] are still selected on the CPU.
+//! read-back one or two frames old ([`FrameStats::gpu_selection`]); frames whose
+//! [`Settings::technique`] is not [`Technique::Spt`], or with [`Settings::shadows`], are still
+//! selected on the CPU.
 //!
-//! **Impostors.** With [`Settings::impostors`], a tree whose container has impostor planes (Garcia
+//! **Impostors.** With [`Technique::Impostors`], a tree whose container has impostor planes (Garcia
 //! et al. 2005, spec §6.10) draws its leaves as those fixed, alpha-tested, depth-writing quads
-//! (`vs_plane`/`fs_plane` in `shaders/tree.wgsl`, from the model's uploaded `PLANES` and its atlas
+//! (`vs_plane`/`fs_plane` in `shaders/tree/planes.wgsl`, from the model's uploaded `PLANES` and its atlas
 //! bound as a texture of its own, clamped, nearest mip) at the level whose interval holds `τ` from
 //! `s_min` at the block centre's distance, sliding each plane onto its parent's and cross-fading
 //! the two before a level change ([`Settings::impostor_morph`]); its bark is the bark of the container's LoD chain at
 //! the level `s_min` allows where it has one ([`ImpostorBark`]), else all its bark triangles.
 //!
-//! **Ellipsoids and lines.** With [`Settings::ellipsoids`], a tree whose container has Clasen's
+//! **Ellipsoids and lines.** With [`Technique::Ellipsoids`], a tree whose container has Clasen's
 //! leaf ellipsoids (spec §6.8) draws them ray-cast per pixel (`vs_ellipsoid`/`fs_ellipsoid`), per
 //! cell the level whose interval holds `τ`, the metres per pixel at the cell's distance; its bark
 //! is its branch lines (spec §6.9, [`Settings::lines`]) at the level the same `τ` selects, each a
@@ -94,29 +94,34 @@
 //! three 2048² cascades over 150 m, 0.78× the primitives of the main pass with the point trees.
 
 mod camera;
+mod draws;
 mod gpu_select;
 mod ground;
 mod noise;
 mod occlusion;
 pub mod offscreen;
+mod pipelines;
 mod renderer;
+mod settings;
 mod shadows;
 mod sky;
+mod stats;
 mod streaming;
+mod technique;
 mod textures;
+mod upload;
 
 pub use camera::Camera;
+pub use draws::{DrawSource, RecordedDraw};
 pub use ground::Ground;
-pub use renderer::DepthConvention;
-pub use renderer::{
-    Baseline, DebugView, DrawSource, FrameStats, ImpostorBark, Instance, ModelId, Pruning, RecordedDraw, RenderError,
-    Renderer, RendererFormats, Settings, ShadowStats,
-};
+pub use renderer::{Instance, ModelId, RenderError, Renderer};
+pub use settings::{DebugView, DepthConvention, ImpostorBark, Pruning, RendererFormats, Settings, prune_scale};
 pub use shadows::{Cascade, MAX_CASCADES, Shadows, cascade_splits, fit_cascades};
 pub use sky::Sky;
+pub use stats::{FrameStats, ShadowStats};
 
 /// WGSL for receiving the renderer's shadows in a host's own pipeline: declares group 2
 /// ([`Renderer::shadow_bind_group`]) and `fn sunlit(world: vec3<f32>, normal: vec3<f32>, sun:
 /// vec3<f32>) -> f32`, the share of the sun reaching a point (1 lit, 0 shadowed).
 pub const SHADOW_WGSL: &str = include_str!("../../../shaders/shared/shadow.wgsl");
-pub use treelod_runtime::{BillboardKind, Hysteresis, PruneScale};
+pub use treelod_runtime::{Hysteresis, PerTechnique, PruneScale, Technique};

@@ -17,7 +17,7 @@ use treelod_build::scene::{AlphaMode, Material, Part, Scene};
 use treelod_build::{AoConfig, BuildConfig, EllipsoidConfig, ImpostorConfig, Placed, build_block};
 use treelod_format::{Compression, Container, ContainerData, material_class};
 use treelod_render::offscreen::{Gpu, Image, render_image};
-use treelod_render::{Camera, Renderer, Settings};
+use treelod_render::{Camera, Renderer, Settings, Technique};
 
 /// Half the box's side, metres.
 const BOX: f32 = 1.0;
@@ -295,8 +295,8 @@ fn the_enclosed_quad_is_black_in_ambient_light_with_ao_and_lit_without() {
     // Ambient light alone: the sun's share is (1 − ambient) = 0.
     let lit = Settings { ambient: 1.0, ..Settings::default() };
     let points = Settings { s_min: 1.0, s_max: 1e9, ..lit };
-    let planes = Settings { impostors: true, ..lit };
-    let ellipsoids = Settings { ellipsoids: true, ..lit };
+    let planes = Settings { technique: Technique::Impostors, ..lit };
+    let ellipsoids = Settings { technique: Technique::Ellipsoids, ..lit };
     let cases = [
         ("triangles", &container, lit, false),
         ("points", &container, points, false),
@@ -321,8 +321,12 @@ fn the_enclosed_quad_is_black_in_ambient_light_with_ao_and_lit_without() {
         let (off, _) = frame(false);
         match name {
             "triangles" => assert!(stats.triangles >= 14 && renderer.points_in_cut() == 0, "{name}: {stats:?}"),
-            "planes" => assert!(stats.instances_impostors == 1 && stats.planes >= 1, "{name}: {stats:?}"),
-            "ellipsoids" => assert!(stats.instances_ellipsoids == 1 && stats.ellipsoids >= 1, "{name}: {stats:?}"),
+            "planes" => {
+                assert!(stats.instances.get(Technique::Impostors) == 1 && stats.planes >= 1, "{name}: {stats:?}");
+            }
+            "ellipsoids" => {
+                assert!(stats.instances.get(Technique::Ellipsoids) == 1 && stats.ellipsoids >= 1, "{name}: {stats:?}");
+            }
             _ => {
                 assert!(stats.triangles == 0, "{name}: every triangle is drawn as points: {stats:?}");
                 if !gpu_selection {
@@ -402,10 +406,10 @@ fn reserved_ellipsoid_flags_are_not_read_as_occlusion_without_ellipsoid_ao() {
     let container = open(&data);
     assert!(container.ellipsoid_ao().is_empty() && container.ellipsoids().iter().all(|e| e.flags == 0xFF));
     let camera = Camera::look_at(vec3(0.0, 0.0, 0.8), Vec3::ZERO, 0.8, SIZE, SIZE);
-    let settings = Settings { ambient: 1.0, ellipsoids: true, ..Settings::default() };
+    let settings = Settings { ambient: 1.0, technique: Technique::Ellipsoids, ..Settings::default() };
     let mut renderer = one_tree(&gpu, &container, settings);
     let (image, stats) = settled(&gpu, &mut renderer, &camera);
-    assert!(stats.instances_ellipsoids == 1 && stats.ellipsoids >= 1, "{stats:?}");
+    assert!(stats.instances.get(Technique::Ellipsoids) == 1 && stats.ellipsoids >= 1, "{stats:?}");
     let mean = centre_mean(&image, 2);
     eprintln!("reserved ellipsoid flags 0xFF, no ELLIPSOID_AO: centre {mean:.1?}");
     assert!(close(mean, LEAF, 6.0), "lit as without occlusion: {mean:?}");

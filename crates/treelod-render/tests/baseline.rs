@@ -10,7 +10,7 @@ use glam::{Vec3, vec3};
 use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig};
 use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, render_image};
-use treelod_render::{Baseline, BillboardKind, Camera, DrawSource, ImpostorBark, Renderer, Settings};
+use treelod_render::{Camera, DrawSource, ImpostorBark, Renderer, Settings, Technique};
 
 /// The demo tree built with its baselines (and the impostors that set the billboards' budget).
 fn demo_with_baselines() -> Arc<Container> {
@@ -26,8 +26,8 @@ fn centre(container: &Container) -> Vec3 {
     0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max))
 }
 
-fn renderer(gpu: &Gpu, container: &Arc<Container>, baseline: Baseline) -> Renderer {
-    one_tree(gpu, container, Settings { baseline: Some(baseline), ..Settings::default() })
+fn renderer(gpu: &Gpu, container: &Arc<Container>, technique: Technique) -> Renderer {
+    one_tree(gpu, container, Settings { technique, ..Settings::default() })
 }
 
 #[test]
@@ -36,7 +36,7 @@ fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
     let container = demo_with_baselines();
     let levels = container.lod_levels();
     assert_eq!(levels.len(), 5, "50, 25, 10, 5 and 1 %");
-    let mut renderer = renderer(&gpu, &container, Baseline::LodChain);
+    let mut renderer = renderer(&gpu, &container, Technique::LodChain);
     let centre = centre(&container);
     let total = container.triangles().len() as u64;
     let mut previous = u64::MAX;
@@ -44,7 +44,8 @@ fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
     for distance in [3.0f32, 30.0, 300.0, 3000.0] {
         let cam = Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, 0.8, 256, 256);
         let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!((stats.instances_baseline, stats.points, stats.planes), (1, 0, 0), "{stats:?}");
+        assert_eq!((stats.instances.get(Technique::LodChain), stats.points, stats.planes), (1, 0, 0), "{stats:?}");
+        assert_eq!(stats.instances_visible, 1, "{stats:?}");
         let [draw] = renderer.draws() else { panic!("one draw: {:?}", renderer.draws()) };
         assert_eq!(draw.source, DrawSource::LodLevel);
         // The level is the coarsest whose error is at most τ (`tau_points`); its error is reported.
@@ -59,9 +60,9 @@ fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
         counts.push(stats.triangles);
         if distance < 5.0 {
             // Nearer than the finest level's error allows: the full mesh, pixel for pixel.
-            renderer.settings_mut().full_mesh = true;
+            renderer.settings_mut().technique = Technique::Full;
             let (full, _) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-            renderer.settings_mut().full_mesh = false;
+            renderer.settings_mut().technique = Technique::LodChain;
             assert_eq!(stats.triangles, total);
             assert_eq!(precision_recall(&image, &full), (1.0, 1.0));
         }
@@ -76,18 +77,18 @@ fn billboards_cover_the_full_mesh_from_around_the_tree() {
     let billboards = container.billboards();
     assert_eq!(billboards.len(), 4, "one facing and three crossed quads");
     let centre = centre(&container);
-    let mut full_renderer = renderer(&gpu, &container, Baseline::LodChain);
-    full_renderer.settings_mut().full_mesh = true;
+    let mut full_renderer = renderer(&gpu, &container, Technique::Full);
     let mut rows = Vec::new();
-    for (name, kind) in [("facing", BillboardKind::Facing), ("crossed", BillboardKind::Crossed)] {
-        let mut renderer = renderer(&gpu, &container, Baseline::Billboard(kind));
+    for (name, technique) in [("facing", Technique::Billboard), ("crossed", Technique::Crossed)] {
+        let mut renderer = renderer(&gpu, &container, technique);
         for k in 0..8 {
             let a = k as f32 * std::f32::consts::FRAC_PI_4 + 0.2;
             let cam = Camera::look_at(centre + 40.0 * vec3(a.sin(), 0.15, a.cos()), centre, 0.8, 192, 192);
             let (full, _) = render_image(&gpu, &mut full_renderer, &cam, BACKGROUND).expect("renders");
             let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-            let quads = if kind == BillboardKind::Facing { 1 } else { 3 };
+            let quads = if technique == Technique::Billboard { 1 } else { 3 };
             assert_eq!((stats.triangles, stats.points, stats.billboards), (0, 0, quads), "{stats:?}");
+            assert_eq!((stats.instances.get(technique), stats.instances_visible), (1, 1), "{stats:?}");
             assert!(renderer.draws().iter().all(|d| d.source == DrawSource::Billboards));
             let (precision, recall) = precision_recall(&image, &full);
             eprintln!("{name} billboard, direction {k}: precision {precision:.3}, recall {recall:.3}");
@@ -111,7 +112,7 @@ fn impostor_trees_draw_the_chains_bark_at_the_level_their_distance_allows() {
     let bark = bark_triangles(&container);
     let levels = container.lod_levels();
     let full_area = bark_area(&container, container.triangles());
-    let settings = Settings { impostors: true, ..Settings::default() };
+    let settings = Settings { technique: Technique::Impostors, ..Settings::default() };
     let mut renderer = one_tree(&gpu, &container, settings);
     let centre = centre(&container);
     let mut drawn = Vec::new();
@@ -119,10 +120,10 @@ fn impostor_trees_draw_the_chains_bark_at_the_level_their_distance_allows() {
         let cam = Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, 0.8, 256, 256);
         renderer.settings_mut().impostor_bark = ImpostorBark::All;
         let (all, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!((stats.instances_impostors, stats.triangles), (1, bark), "{stats:?}");
+        assert_eq!((stats.instances.get(Technique::Impostors), stats.triangles), (1, bark), "{stats:?}");
         renderer.settings_mut().impostor_bark = ImpostorBark::Chain;
         let (chain, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!((stats.instances_impostors, stats.points), (1, 0), "{stats:?}");
+        assert_eq!((stats.instances.get(Technique::Impostors), stats.points), (1, 0), "{stats:?}");
         let bark_draw = renderer.draws().iter().find(|d| d.source == DrawSource::Bark).expect("a bark draw");
         // The level is the chain's coarsest within τ/2 among those keeping 90 % of the bark's
         // area; nearer, all bark.

@@ -18,7 +18,7 @@ use common::{BACKGROUND, count, gpu, keep, light_taken};
 use glam::{Mat4, Vec3, vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, Range};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
-use treelod_render::{Camera, DrawSource, Ground, Renderer, Settings, Shadows};
+use treelod_render::{Camera, DrawSource, Ground, Renderer, Settings, Shadows, Technique};
 use treelod_runtime::{EllipsoidLod, Frustum, LodSettings};
 
 const RED: u32 = 0xFF19_19CC;
@@ -146,7 +146,8 @@ fn fine_weight(octaves: f32, blend: f32) -> f64 {
 /// fine level's share of the pixels both levels cover.
 fn check_blend(gpu: &Gpu, name: &str, container: &Arc<Container>, source: DrawSource) -> Vec<f64> {
     let e = boundary();
-    let mut renderer = common::one_tree(gpu, container, Settings { ellipsoids: true, ..Settings::default() });
+    let mut renderer =
+        common::one_tree(gpu, container, Settings { technique: Technique::Ellipsoids, ..Settings::default() });
     let mut render = |octaves: f32, blend: f32, quality: f32| {
         let settings = renderer.settings_mut();
         settings.level_blend = blend;
@@ -234,7 +235,8 @@ fn the_prefix_holds_the_level_fading_out_and_drops_it_past_the_band() {
     let gpu = gpu();
     let e = boundary();
     let container = container(two_levels_of_ellipsoids(e), two_levels_of_lines(e));
-    let mut renderer = common::one_tree(&gpu, &container, Settings { ellipsoids: true, ..Settings::default() });
+    let mut renderer =
+        common::one_tree(&gpu, &container, Settings { technique: Technique::Ellipsoids, ..Settings::default() });
     // β = 0.5: the fine level is submitted up to a quarter octave past e.
     for (octaves, blend, submitted) in
         [(0.2, 0.5, (5, 3)), (0.2, 0.0, (1, 1)), (0.3, 0.5, (1, 1)), (-0.2, 0.0, (5, 3)), (0.2, 1.0, (5, 3))]
@@ -250,13 +252,14 @@ fn with_msaa_a_blended_pixel_covers_its_share_of_the_samples() {
     let gpu = gpu();
     let e = boundary();
     let container = container(two_levels_of_ellipsoids(e), Vec::new());
-    let settings = Settings { ellipsoids: true, ..Settings::default() };
+    let settings = Settings { technique: Technique::Ellipsoids, ..Settings::default() };
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(4), settings);
     let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("uploads");
     renderer.set_instances(&[treelod_render::Instance { model: tree, transform: Mat4::IDENTITY }]);
     let camera = camera_at(0.0);
     // The fine level alone, single-sampled, gives its silhouette.
-    let mut alone = common::one_tree(&gpu, &container, Settings { ellipsoids: true, ..Settings::default() });
+    let mut alone =
+        common::one_tree(&gpu, &container, Settings { technique: Technique::Ellipsoids, ..Settings::default() });
     alone.settings_mut().level_blend = 0.0;
     alone.settings_mut().ellipsoid_quality = 4.0;
     let fine = levels(&render_image(&gpu, &mut alone, &camera, BACKGROUND).expect("renders").0);
@@ -295,7 +298,7 @@ fn the_shadow_pass_blends_the_levels_alike() {
     let gpu = gpu();
     let sun = vec3(0.3, 0.9, 0.2).normalize();
     let shadows = Shadows { resolution: 1024, cascades: 1, distance: 40.0, ..Shadows::default() };
-    let settings = Settings { ellipsoids: true, sun, shadows: Some(shadows), ..Settings::default() };
+    let settings = Settings { technique: Technique::Ellipsoids, sun, shadows: Some(shadows), ..Settings::default() };
     // The trees float above the ground (the block's floor is at y = −10): lifted by 5 m.
     let lift = Mat4::from_translation(vec3(0.0, -5.0, 0.0));
     let centre = vec3(0.0, -5.0, 0.0) - sun * (5.0 / sun.y);

@@ -11,7 +11,7 @@ use common::{BACKGROUND, count, covered, gpu, iou, keep};
 use glam::{Mat3, Quat, Vec3, Vec4, vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, Range};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
-use treelod_render::{Camera, DrawSource, Ground, Renderer, Settings, Shadows};
+use treelod_render::{Camera, DrawSource, Ground, Renderer, Settings, Shadows, Technique};
 
 /// An ellipsoid of colour `color` (RGBA8, sRGB) and interval `[lo, hi)`.
 fn ellipsoid(center: Vec3, radii: Vec3, rotation: Quat, color: u32, (lo, hi): (f32, f32)) -> EllipsoidRecord {
@@ -58,7 +58,7 @@ fn container(ellipsoids: Vec<EllipsoidRecord>, triangle: Option<[Vec3; 3]>) -> A
 
 /// A renderer drawing ellipsoids (no shadows, default sun) with one instance of `container`.
 fn renderer(gpu: &Gpu, container: &Arc<Container>, settings: Settings) -> Renderer {
-    common::one_tree(gpu, container, Settings { ellipsoids: true, ..settings })
+    common::one_tree(gpu, container, Settings { technique: Technique::Ellipsoids, ..settings })
 }
 
 /// The world ray (origin, unit direction) through the centre of pixel `(x, y)` of `camera`.
@@ -121,7 +121,7 @@ fn an_ellipsoid_covers_the_pixels_of_its_exact_silhouette() {
     for (name, camera) in views {
         let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         keep(&image, &format!("ellipsoid-{name}"));
-        assert_eq!((stats.instances_ellipsoids, stats.ellipsoids), (1, 1), "{name}: {stats:?}");
+        assert_eq!((stats.instances.get(Technique::Ellipsoids), stats.ellipsoids), (1, 1), "{name}: {stats:?}");
         let drawn = covered(&image);
         let exact = exact_silhouette(&camera, &e);
         let overlap = iou(&drawn, &exact);

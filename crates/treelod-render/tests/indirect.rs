@@ -17,7 +17,7 @@ use treelod_build::scene::{Image as SourceImage, ImageEncoding, Part, Scene};
 use treelod_build::{BuildConfig, ImpostorConfig, Placed, Texturing, build_block, cards_on_planes, leaf_material};
 use treelod_format::{Compression, Container, ContainerData, image_format};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
-use treelod_render::{Camera, Ground, Instance, Renderer, Settings, Shadows};
+use treelod_render::{Camera, Ground, Instance, Renderer, Settings, Shadows, Technique};
 
 /// A 64 × 64 leaf texture: opaque inside a disc of radius 0.45 about the centre, in stripes
 /// across u 4 texels wide of a light and a dark green (8 stripes across a leaf).
@@ -135,7 +135,7 @@ fn green_spread(image: &Image) -> f64 {
 fn indirect_planes_cover_the_direct_ones_in_their_colour_and_show_the_leaf_texture_close_up() {
     let gpu = gpu();
     let (direct, indirect) = direct_and_indirect();
-    let settings = Settings { impostors: true, ..Settings::default() };
+    let settings = Settings { technique: Technique::Impostors, ..Settings::default() };
     let mut direct_renderer = one_tree(&gpu, &direct, settings);
     let mut indirect_renderer = one_tree(&gpu, &indirect, settings);
     let target = centre(&direct);
@@ -149,13 +149,13 @@ fn indirect_planes_cover_the_direct_ones_in_their_colour_and_show_the_leaf_textu
         let cam = Camera::look_at(eye, look_at, 0.8, 256, 256);
         let (a, a_stats) = render_image(&gpu, &mut direct_renderer, &cam, BACKGROUND).expect("renders");
         let (b, b_stats) = render_image(&gpu, &mut indirect_renderer, &cam, BACKGROUND).expect("renders");
-        indirect_renderer.settings_mut().full_mesh = true;
+        indirect_renderer.settings_mut().technique = Technique::Full;
         let (f, _) = render_image(&gpu, &mut indirect_renderer, &cam, BACKGROUND).expect("renders");
-        indirect_renderer.settings_mut().full_mesh = false;
+        indirect_renderer.settings_mut().technique = Technique::Impostors;
         keep(&a, &format!("indirect-{v}-direct"));
         keep(&b, &format!("indirect-{v}-indirect"));
         keep(&f, &format!("indirect-{v}-full"));
-        assert_eq!((a_stats.instances_impostors, b_stats.instances_impostors), (1, 1));
+        assert_eq!((a_stats.instances.get(Technique::Impostors), b_stats.instances.get(Technique::Impostors)), (1, 1));
         assert_eq!((a_stats.planes, b_stats.planes), (3, 3));
         let (precision, recall) = precision_recall(&b, &a);
         let (ca, cb, cf) = (mean_colour(&a), mean_colour(&b), mean_colour(&f));
@@ -196,7 +196,7 @@ fn indirect_planes_cover_the_direct_ones_in_their_colour_and_show_the_leaf_textu
     let (b, _) = render_image(&gpu, &mut indirect_renderer, &cam, BACKGROUND).expect("renders");
     keep(&a, "indirect-close-direct");
     keep(&b, "indirect-close-indirect");
-    indirect_renderer.settings_mut().full_mesh = true;
+    indirect_renderer.settings_mut().technique = Technique::Full;
     let (f, _) = render_image(&gpu, &mut indirect_renderer, &cam, BACKGROUND).expect("renders");
     keep(&f, "indirect-close-full");
     let (sa, sb, sf) = (green_spread(&a), green_spread(&b), green_spread(&f));
@@ -227,7 +227,7 @@ fn indirect_planes_cast_the_shadow_of_the_direct_ones() {
     let shadow_centre = vec3(0.5 * (min.x + max.x), min.y, 0.5 * (min.z + max.z)) - sun * (2.0 / sun.y);
     let camera = Camera::look_at(shadow_centre + vec3(0.0, 9.0, 0.3), shadow_centre, 0.8, 200, 200);
     let shadows = Shadows { resolution: 2048, cascades: 1, distance: 30.0, ..Shadows::default() };
-    let settings = Settings { sun, impostors: true, shadows: Some(shadows), ..Settings::default() };
+    let settings = Settings { sun, technique: Technique::Impostors, shadows: Some(shadows), ..Settings::default() };
     let shadow = |container: &Arc<Container>, settings: Settings| {
         let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
         let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(container)).expect("uploads");
@@ -271,7 +271,7 @@ fn plane_leaves_of_the_wrong_length_are_a_warning_not_a_panic() {
             data.plane_leaves.push(data.plane_leaves[0]);
         }
         let container = open(&data);
-        let settings = Settings { impostors: true, ..Settings::default() };
+        let settings = Settings { technique: Technique::Impostors, ..Settings::default() };
         let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
         let (tree, warnings) =
             renderer.add_model_with_warnings(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("uploads");
@@ -281,7 +281,7 @@ fn plane_leaves_of_the_wrong_length_are_a_warning_not_a_panic() {
         let target = centre(&container);
         let cam = Camera::look_at(target + vec3(0.5, 0.8, 1.0).normalize() * 7.0, target, 0.8, 128, 128);
         let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!(stats.instances_impostors, 1);
+        assert_eq!(stats.instances.get(Technique::Impostors), 1);
         // Its planes are not drawn (and there is nothing else).
         assert!(covered(&image).iter().all(|c| !c), "{records} records: the planes are not drawn");
     }

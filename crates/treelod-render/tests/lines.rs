@@ -17,7 +17,7 @@ use common::{BACKGROUND, count, covered, gpu, iou, keep, line_record as line};
 use glam::{DVec3, Mat4, Vec3, Vec4, vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, Range};
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
-use treelod_render::{Camera, DrawSource, Ground, Instance, Renderer, Settings, Shadows};
+use treelod_render::{Camera, DrawSource, Ground, Instance, Renderer, Settings, Shadows, Technique};
 
 const GREEN: u32 = 0xFF30_A040;
 const RED: u32 = 0xFF19_19CC;
@@ -69,7 +69,8 @@ fn container(lines: Vec<LineRecord>, ao: Vec<u8>, triangle: Option<[Vec3; 3]>) -
 /// A renderer drawing ellipsoid trees (no shadows, default sun) with one instance of each of
 /// `containers` at the origin.
 fn renderer(gpu: &Gpu, containers: &[&Arc<Container>], settings: Settings) -> Renderer {
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings { ellipsoids: true, ..settings });
+    let mut renderer =
+        Renderer::new(&gpu.device, Gpu::formats(), Settings { technique: Technique::Ellipsoids, ..settings });
     let instances: Vec<Instance> = containers
         .iter()
         .map(|c| Instance {
@@ -213,7 +214,11 @@ fn lines_cover_the_pixels_of_their_exact_round_cones() {
     for (name, camera) in views {
         let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         keep(&image, &format!("line-{name}"));
-        assert_eq!((stats.instances_ellipsoids, stats.lines, stats.triangles), (1, 3, 0), "{name}: {stats:?}");
+        assert_eq!(
+            (stats.instances.get(Technique::Ellipsoids), stats.lines, stats.triangles),
+            (1, 3, 0),
+            "{name}: {stats:?}"
+        );
         let drawn = covered(&image);
         let exact = exact_silhouette(&camera, &lines);
         let overlap = iou(&drawn, &exact);
@@ -450,7 +455,7 @@ fn without_lines_the_bark_is_drawn_as_its_triangles() {
         let greens = image.rgba.chunks_exact(4).filter(|p| p[1] > p[0].saturating_add(20)).count();
         let reds = image.rgba.chunks_exact(4).filter(|p| p[0] > p[1].saturating_add(20)).count();
         eprintln!("lines {lines}: {stats:?}; {greens} green, {reds} red pixels");
-        assert_eq!(stats.instances_ellipsoids, 1);
+        assert_eq!(stats.instances.get(Technique::Ellipsoids), 1);
         let bark = renderer.draws().iter().filter(|d| d.source == DrawSource::Bark).count();
         if lines {
             assert_eq!((stats.lines, stats.triangles, bark), (1, 0, 0), "the line, not the bark triangles");

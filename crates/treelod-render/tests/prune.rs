@@ -15,10 +15,20 @@ use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container, CurveSample, PruneLeafRecord, Range, material_class};
 use treelod_render::offscreen::{Gpu, render_image};
-use treelod_render::{Camera, DrawSource, Instance, PruneScale, Pruning, Renderer, Settings};
+use treelod_render::{Camera, DrawSource, Instance, Pruning, Renderer, Settings, Technique};
 
 /// The demo tree with a priority list per cell: every leaf triangle its own leaf, shuffled.
 fn pruned_demo() -> Container {
+    // s_opt(λ): a gentler growth than Cook's 1/λ.
+    pruned_demo_scaled(vec![
+        CurveSample { x: 0.1, y: 3.0 },
+        CurveSample { x: 0.5, y: 1.5 },
+        CurveSample { x: 1.0, y: 1.0 },
+    ])
+}
+
+/// [`pruned_demo`] (the same priority lists) with `s_opt(λ)` sampled by `prune_scale`.
+fn pruned_demo_scaled(prune_scale: Vec<CurveSample>) -> Container {
     let scene = demo_tree(&DemoTreeConfig::default());
     let built =
         build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "test")
@@ -49,9 +59,7 @@ fn pruned_demo() -> Container {
         }
         cell.prune_leaves = Range { first, count: data.prune_leaves.len() as u32 - first };
     }
-    // s_opt(λ): a gentler growth than Cook's 1/λ.
-    data.prune_scale =
-        vec![CurveSample { x: 0.1, y: 3.0 }, CurveSample { x: 0.5, y: 1.5 }, CurveSample { x: 1.0, y: 1.0 }];
+    data.prune_scale = prune_scale;
     data.prune_lambda = vec![CurveSample { x: 20.0, y: 0.2 }, CurveSample { x: 400.0, y: 1.0 }];
     let container = Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens");
     treelod_format::verify(&container).expect("the synthetic priority lists follow the spec");
@@ -64,8 +72,9 @@ fn camera_at(container: &Container, offset: Vec3, size: u32) -> Camera {
     Camera::look_at(centre + offset, centre, 0.8, size, size)
 }
 
-fn pruning(lambda: f32, scale: PruneScale) -> Pruning {
-    Pruning { lambda: Some(lambda), scale, occlusion: false, spt_below_pixels: 0.0, ..Pruning::default() }
+/// A fixed `λ` for the tree, no occlusion, no point tree.
+fn pruning(lambda: f32) -> Pruning {
+    Pruning { lambda: Some(lambda), occlusion: false, spt_below_pixels: 0.0, ..Pruning::default() }
 }
 
 #[test]
@@ -78,13 +87,16 @@ fn all_leaves_unscaled_draw_the_full_mesh_and_a_prefix_draws_fewer() {
     let leaves = container.prune_leaves().len() as u64;
     let bark = total - leaves;
 
-    renderer.settings_mut().full_mesh = true;
+    renderer.settings_mut().technique = Technique::Full;
     let (full, _) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-    renderer.settings_mut().full_mesh = false;
-    renderer.settings_mut().pruning = Some(pruning(1.0, PruneScale::Optimal));
+    renderer.settings_mut().technique = Technique::PruneOpt;
+    renderer.settings_mut().pruning = pruning(1.0);
     let (all, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
     assert_eq!((stats.triangles, stats.points), (total, 0), "λ = 1 draws every triangle and no point");
-    assert_eq!((stats.instances_pruned, stats.leaves_pruned), (1, leaves));
+    assert_eq!(
+        (stats.instances.get(Technique::PruneOpt), stats.instances_visible, stats.leaves_pruned),
+        (1, 1, leaves)
+    );
     let (p, r) = precision_recall(&all, &full);
     assert!(p > 0.995 && r > 0.995, "λ = 1 covers what the full mesh covers: P {p:.4}, R {r:.4}");
     let bark_draws: Vec<_> = renderer.draws().iter().filter(|d| d.source == DrawSource::Bark).collect();
@@ -92,18 +104,36 @@ fn all_leaves_unscaled_draw_the_full_mesh_and_a_prefix_draws_fewer() {
     assert_eq!(u64::from(bark_draws[0].count), bark);
 
     // A quarter of the leaves: each cell draws ceil(λ·count) leaves, one run of triangles each.
+    // Survivors unscaled (no technique leaves them so: the same priority lists with s_opt ≡ 1,
+    // drawn with `PruneOpt`), scaled by s_opt (`PruneOpt`), and by Cook's 1/λ (`PruneCook`).
+    let unscaled = Arc::new(pruned_demo_scaled(vec![CurveSample { x: 0.1, y: 1.0 }, CurveSample { x: 1.0, y: 1.0 }]));
+    assert!(
+        unscaled.prune_leaves() == container.prune_leaves()
+            && unscaled.prune_triangles() == container.prune_triangles()
+            && unscaled.cells() == container.cells(),
+        "the same priority lists"
+    );
+    let mut unscaled_renderer = one_tree(&gpu, &unscaled, Settings::default());
     let mut recalls = Vec::new();
-    for scale in [PruneScale::None, PruneScale::Optimal, PruneScale::Cook] {
-        renderer.settings_mut().pruning = Some(pruning(0.25, scale));
-        let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+    for (name, technique, flat) in [
+        ("unscaled", Technique::PruneOpt, true),
+        ("s_opt", Technique::PruneOpt, false),
+        ("Cook", Technique::PruneCook, false),
+    ] {
+        let (renderer, container) =
+            if flat { (&mut unscaled_renderer, &unscaled) } else { (&mut renderer, &container) };
+        renderer.settings_mut().technique = technique;
+        renderer.settings_mut().pruning = pruning(0.25);
+        let (image, stats) = render_image(&gpu, renderer, &cam, BACKGROUND).expect("renders");
         let expected: u64 = container.cells().iter().map(|c| u64::from(c.prune_leaves.count.div_ceil(4))).sum();
+        assert_eq!(stats.instances.get(technique), 1, "{name}: {stats:?}");
         assert_eq!(stats.leaves_pruned, expected);
-        assert_eq!(stats.triangles, bark + expected, "{scale:?}");
+        assert_eq!(stats.triangles, bark + expected, "{name}");
         for draw in renderer.draws().iter().filter(|d| d.source == DrawSource::PrunedLeaves) {
             assert_eq!(draw.count, container.cells()[draw.cell as usize].prune_leaves.count.div_ceil(4));
         }
         let (p, r) = precision_recall(&image, &full);
-        eprintln!("λ = 0.25, {scale:?}: P {p:.3}, R {r:.3}");
+        eprintln!("λ = 0.25, {name}: P {p:.3}, R {r:.3}");
         recalls.push(r);
     }
     // Pruning loses coverage; growing the survivors wins it back, Cook's 1/λ (4× the area) most.
@@ -117,18 +147,18 @@ fn lambda_follows_the_projected_height_and_far_trees_take_the_point_tree() {
     let gpu = gpu();
     let container = Arc::new(pruned_demo());
     let mut renderer = one_tree(&gpu, &container, Settings::default());
-    renderer.settings_mut().pruning = Some(Pruning {
+    renderer.settings_mut().technique = Technique::PruneOpt;
+    renderer.settings_mut().pruning = Pruning {
         lambda: None,
         occlusion: false,
         spt_below_pixels: 30.0,
         hysteresis: treelod_render::Hysteresis { band: 0.0 },
-        ..Pruning::default()
-    });
+    };
     let mut lambdas = Vec::new();
     for distance in [8.0, 20.0, 40.0] {
         let cam = camera_at(&container, vec3(0.0, 0.0, distance), 256);
         let (_, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!(stats.instances_pruned, 1, "pruned at {distance} m");
+        assert_eq!(stats.instances.get(Technique::PruneOpt), 1, "pruned at {distance} m");
         let lambda = renderer.draws().iter().find(|d| d.source == DrawSource::PrunedLeaves).expect("leaves").tau_points;
         lambdas.push(lambda);
     }
@@ -136,7 +166,8 @@ fn lambda_follows_the_projected_height_and_far_trees_take_the_point_tree() {
     // Below 30 pixels high the tree is drawn by its point tree.
     let cam = camera_at(&container, vec3(0.0, 0.0, 600.0), 256);
     let (_, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-    assert_eq!((stats.instances_pruned, stats.instances_visible), (0, 1));
+    assert_eq!((stats.instances.get(Technique::PruneOpt), stats.instances_visible), (0, 1));
+    assert_eq!(stats.instances.get(Technique::FALLBACK), 1, "counted under the point tree: {stats:?}");
     assert!(stats.points > 0 && renderer.draws().iter().all(|d| d.source != DrawSource::PrunedLeaves));
 }
 
@@ -152,8 +183,9 @@ fn a_tree_hidden_behind_another_draws_fewer_leaves_until_the_camera_jumps() {
         Instance { model: tree, transform: Mat4::from_translation(vec3(0.0, 0.0, -25.0)) },
         Instance { model: tree, transform: Mat4::from_translation(vec3(30.0, 0.0, -25.0)) },
     ]);
+    renderer.settings_mut().technique = Technique::PruneOpt;
     renderer.settings_mut().pruning =
-        Some(Pruning { lambda: Some(1.0), occlusion: true, spt_below_pixels: 0.0, ..Pruning::default() });
+        Pruning { lambda: Some(1.0), occlusion: true, spt_below_pixels: 0.0, ..Pruning::default() };
     let cam = camera_at(&container, vec3(0.0, 0.0, 10.0), 256);
     // Frame 1 measures; frame 2 uses the measurement.
     render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");

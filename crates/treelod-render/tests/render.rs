@@ -8,7 +8,7 @@ use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, Image, render_image};
-use treelod_render::{Camera, DebugView, DrawSource, Instance, RecordedDraw, Renderer, Settings};
+use treelod_render::{Camera, DebugView, DrawSource, Instance, RecordedDraw, Renderer, Settings, Technique};
 use treelod_runtime::{Kind, Thresholds, point_drawn};
 
 fn demo_container() -> Container {
@@ -36,11 +36,12 @@ fn lod_covers_the_pixels_of_the_full_mesh_at_every_distance() {
     let mut rows = Vec::new();
     for distance in [15.0, 45.0, 120.0] {
         let cam = camera(&container, distance, 256);
-        renderer.settings_mut().full_mesh = true;
+        renderer.settings_mut().technique = Technique::Full;
         let (full, full_stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
         assert_eq!(full_stats.triangles, total, "the full mesh draws every triangle");
         assert_eq!(full_stats.points, 0);
-        renderer.settings_mut().full_mesh = false;
+        assert_eq!(full_stats.instances.get(Technique::Full), 1, "{full_stats:?}");
+        renderer.settings_mut().technique = Technique::Spt;
         let (lod, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
         keep(&full, &format!("full-{distance}"));
         keep(&lod, &format!("lod-{distance}"));
@@ -383,8 +384,11 @@ fn msaa_draws_the_full_mesh_closer_to_the_supersampled_image() {
     let gpu = gpu();
     let container = std::sync::Arc::new(demo_container());
     let render = |samples: u32, size: u32, distance: f32| {
-        let mut renderer =
-            Renderer::new(&gpu.device, Gpu::formats_msaa(samples), Settings { full_mesh: true, ..Settings::default() });
+        let mut renderer = Renderer::new(
+            &gpu.device,
+            Gpu::formats_msaa(samples),
+            Settings { technique: Technique::Full, ..Settings::default() },
+        );
         let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
         renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
         render_image(&gpu, &mut renderer, &camera(&container, distance, size), BACKGROUND).expect("renders").0
@@ -421,7 +425,7 @@ fn stochastic_alpha_keeps_the_coverage_of_minified_leaves() {
     let gpu = gpu();
     let container = std::sync::Arc::new(demo_container());
     let render = |samples: u32, stochastic_alpha: bool, distance: f32| {
-        let settings = Settings { full_mesh: true, stochastic_alpha, ..Settings::default() };
+        let settings = Settings { technique: Technique::Full, stochastic_alpha, ..Settings::default() };
         let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(samples), settings);
         let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
         renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
@@ -453,7 +457,7 @@ fn impostor_planes_cover_the_full_mesh_from_every_direction() {
     let gpu = gpu();
     let container = demo_with_impostors();
     let bark = bark_triangles(&container);
-    let mut renderer = one_tree(&gpu, &container, Settings { impostors: true, ..Settings::default() });
+    let mut renderer = one_tree(&gpu, &container, Settings { technique: Technique::Impostors, ..Settings::default() });
     let block = container.block();
     let centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
     let mut rows = Vec::new();
@@ -467,12 +471,16 @@ fn impostor_planes_cover_the_full_mesh_from_every_direction() {
             .chain([vec3(0.0, 1.0, 1.0).normalize()]);
         for (d, direction) in directions.enumerate() {
             let cam = Camera::look_at(centre + direction * distance, centre, 0.8, 256, 256);
-            renderer.settings_mut().full_mesh = true;
+            renderer.settings_mut().technique = Technique::Full;
             let (full, _) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-            renderer.settings_mut().full_mesh = false;
+            renderer.settings_mut().technique = Technique::Impostors;
             let (planes, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
             keep(&planes, &format!("impostors-{distance}-{d}"));
-            assert_eq!((stats.triangles, stats.points, stats.instances_impostors), (bark, 0, 1), "{stats:?}");
+            assert_eq!(
+                (stats.triangles, stats.points, stats.instances.get(Technique::Impostors)),
+                (bark, 0, 1),
+                "{stats:?}"
+            );
             assert!(stats.planes > 0);
             assert!(renderer.draws().iter().all(|d| matches!(d.source, DrawSource::Planes | DrawSource::Bark)));
             let (precision, recall) = precision_recall(&planes, &full);
@@ -527,7 +535,7 @@ fn morphing_impostor_planes_change_level_without_moving_leaves() {
     let switch = planes[parent].lo;
     assert!(switch > 0.0 && score[parent] > 0.0, "a parent with children off its plane");
 
-    let mut renderer = one_tree(&gpu, &container, Settings { impostors: true, ..Settings::default() });
+    let mut renderer = one_tree(&gpu, &container, Settings { technique: Technique::Impostors, ..Settings::default() });
     let block = container.block();
     let centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
     let (distance, fovy, size) = (20.0f32, 0.8f32, 256u32);
@@ -548,7 +556,7 @@ fn morphing_impostor_planes_change_level_without_moving_leaves() {
                 renderer.settings_mut().s_min = s_min;
                 renderer.settings_mut().s_max = s_min.max(2.0);
                 let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-                assert_eq!(stats.instances_impostors, 1);
+                assert_eq!(stats.instances.get(Technique::Impostors), 1);
                 keep(&image, &format!("morph-{morph}-{d}-{step}"));
                 images.push(image);
             }

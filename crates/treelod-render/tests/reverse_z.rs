@@ -11,7 +11,7 @@ use common::{BACKGROUND, covered, demo_built, gpu, keep};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, PruneConfig};
 use treelod_render::offscreen::{Image, render_image};
-use treelod_render::{Camera, DepthConvention, Instance, Pruning, Renderer, Settings};
+use treelod_render::{Camera, DepthConvention, Instance, Pruning, Renderer, Settings, Technique};
 
 const SIZE: u32 = 256;
 const FOVY: f32 = 0.8;
@@ -115,8 +115,9 @@ fn occlusion_reads_the_depth_buffer_of_either_convention() {
             Instance { model: tree, transform: Mat4::IDENTITY },
             Instance { model: tree, transform: Mat4::from_translation(vec3(0.0, 0.0, -25.0)) },
         ]);
+        renderer.settings_mut().technique = Technique::PruneOpt;
         renderer.settings_mut().pruning =
-            Some(Pruning { lambda: Some(1.0), occlusion: true, spt_below_pixels: 0.0, ..Pruning::default() });
+            Pruning { lambda: Some(1.0), occlusion: true, spt_below_pixels: 0.0, ..Pruning::default() };
         // Frame 1 measures; frame 2 reads the measurement.
         render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");

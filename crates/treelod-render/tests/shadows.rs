@@ -11,9 +11,7 @@ use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig, PruneConfig};
 use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, Image, render_prepared_scene};
-use treelod_render::{
-    Baseline, BillboardKind, Camera, FrameStats, Ground, Instance, Pruning, Renderer, Settings, Shadows,
-};
+use treelod_render::{Camera, FrameStats, Ground, Instance, Pruning, Renderer, Settings, Shadows, Technique};
 
 /// The demo tree with every representation: points, pruning lists, impostors and baselines.
 fn demo_everything() -> Arc<Container> {
@@ -55,7 +53,7 @@ fn every_representation_casts_the_shadow_of_the_full_mesh() {
     let camera = Camera::look_at(eye, shadow_centre, 0.8, 200, 200);
     let shadows = Shadows { resolution: 512, cascades: 1, distance: 6.0 * height, ..Shadows::default() };
     let settings = Settings { sun, shadows: Some(shadows), ..Settings::default() };
-    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings { full_mesh: true, ..settings });
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings { technique: Technique::Full, ..settings });
     let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("uploads");
     renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
     let ground = Ground::under_instances(&gpu.device, &renderer);
@@ -91,14 +89,15 @@ fn every_representation_casts_the_shadow_of_the_full_mesh() {
         (
             "pruned",
             Settings {
-                pruning: Some(Pruning { occlusion: false, spt_below_pixels: 0.0, ..Pruning::default() }),
+                technique: Technique::PruneOpt,
+                pruning: Pruning { occlusion: false, spt_below_pixels: 0.0, ..Pruning::default() },
                 ..settings
             },
         ),
-        ("impostors", Settings { impostors: true, ..settings }),
-        ("lod-chain", Settings { baseline: Some(Baseline::LodChain), ..settings }),
-        ("crossed", Settings { baseline: Some(Baseline::Billboard(BillboardKind::Crossed)), ..settings }),
-        ("facing", Settings { baseline: Some(Baseline::Billboard(BillboardKind::Facing)), ..settings }),
+        ("impostors", Settings { technique: Technique::Impostors, ..settings }),
+        ("lod-chain", Settings { technique: Technique::LodChain, ..settings }),
+        ("crossed", Settings { technique: Technique::Crossed, ..settings }),
+        ("facing", Settings { technique: Technique::Billboard, ..settings }),
     ];
     for (name, case) in cases {
         *renderer.settings_mut() = case;

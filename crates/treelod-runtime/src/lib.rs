@@ -8,7 +8,8 @@
 //! bias per cell, a reusable draw list, and a controller that keeps the primitive count on budget.
 //! [`impostor`] selects the level of impostor planes of an instance the same way, [`ellipsoid`] the
 //! level of Clasen's leaf ellipsoids and branch lines (all three through one per-cell prefix
-//! selector, [`spt_lod`]), and [`baseline`] the level of a baseline LoD chain.
+//! selector, [`spt_lod`]), and [`baseline`] the level of a baseline LoD chain. [`technique`] is the one
+//! list of the ways a tree can be drawn, by the names every layer uses.
 
 pub mod baseline;
 pub mod ellipsoid;
@@ -17,6 +18,7 @@ pub mod impostor;
 pub mod prune;
 pub mod select;
 pub mod spt_lod;
+pub mod technique;
 
 pub use baseline::{BillboardKind, Billboards, ChainLevel, LodChain, instance_tau};
 pub use ellipsoid::{
@@ -33,3 +35,4 @@ pub use impostor::{
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
 pub use spt_lod::{PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};
+pub use technique::{Data, PerTechnique, Technique};

@@ -7,8 +7,7 @@ use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{Gpu, Image, render_prepared_scene};
 use treelod_render::{
-    Baseline, BillboardKind, Camera, DebugView, FrameStats, Ground, ImpostorBark, PruneScale, Pruning, Renderer,
-    Settings, ShadowStats, Shadows,
+    Camera, DebugView, FrameStats, Ground, ImpostorBark, Pruning, Renderer, Settings, Shadows, Technique,
 };
 
 use crate::report::{self, Failed};
@@ -64,30 +63,57 @@ pub struct Args {
     #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
     pub background: [u8; 3],
     #[command(flatten)]
+    pub technique: TechniqueArgs,
+    #[command(flatten)]
     pub prune: PruneArgs,
     #[command(flatten)]
     pub light: LightArgs,
     #[command(flatten)]
     pub shadow: ShadowArgs,
-    /// Draw the leaves of trees whose containers have impostor planes (Garcia 2005; build with
-    /// `--impostors`) as those planes, the level chosen by `--s-min` at the tree's distance, and
-    /// their bark as triangles; other trees as usual. Takes precedence over `--prune`.
-    #[arg(long)]
-    pub impostors: bool,
     #[command(flatten)]
     pub impostor: ImpostorArgs,
     #[command(flatten)]
     pub ellipsoid: EllipsoidArgs,
-    /// Draw trees whose containers have baselines (build with `--baselines`) with one of them
-    /// instead: `lod-chain` (meshoptimizer's levels, the coarsest whose error projects below
-    /// `--s-min` pixels), `billboard` (one camera-facing quad) or `crossed` (three fixed quads).
-    /// Takes precedence over `--impostors` and `--prune`.
-    #[arg(long, value_name = "BASELINE", value_parser = ["lod-chain", "billboard", "crossed"])]
-    pub baseline: Option<String>,
     /// Select on the GPU (compute shaders write the indirect draws; every model is kept resident
-    /// whole). Frames with pruning or the full mesh (`--compare`'s right half) select on the CPU.
+    /// whole). Techniques other than `spt`, shadows and the full mesh (`--compare`'s right half)
+    /// select on the CPU.
     #[arg(long)]
     pub gpu_selection: bool,
+}
+
+/// The technique trees are drawn with: shared by `render` and `view`.
+#[derive(Debug, clap::Args)]
+pub struct TechniqueArgs {
+    /// How trees are drawn: `spt` (triangles and points, Gilet 2005), `prune-opt` and
+    /// `prune-cook` (trees at least 64 pixels high with pruned leaves, Neubert 2011, scaled by the
+    /// container's s_opt(λ) or by Cook's 1/λ; build with `--prune`), `impostors` (leaf-cluster
+    /// planes, Garcia 2005; build with `--impostors`), `ellipsoids` (leaf ellipsoids and branch
+    /// lines, Clasen 2011; build with `--ellipsoids --lines`), the baselines `lod-chain`,
+    /// `billboard` and `crossed` (build with `--baselines`), or `full` (every triangle). Trees
+    /// whose containers lack the technique's data are drawn with `spt`.
+    #[arg(long, value_name = "TECHNIQUE", value_enum, default_value_t = Technique::Spt)]
+    pub technique: Technique,
+}
+
+impl TechniqueArgs {
+    /// Warns about each model of `models` that lacks the technique's data (its trees are drawn
+    /// with the point tree instead).
+    pub fn warn_without(&self, models: &[PathBuf]) {
+        let Some(data) = self.technique.needs() else { return };
+        for path in models {
+            if let Ok(container) = treelod_format::Container::open(path)
+                && !self.technique.held_by(&container)
+            {
+                let message = format!(
+                    "holds no {}; its trees are drawn with {} instead of {}",
+                    data.description(),
+                    Technique::FALLBACK,
+                    self.technique
+                );
+                report::print_warning(path, &message);
+            }
+        }
+    }
 }
 
 /// How trees drawn with impostor planes change level and draw their bark: options shared by
@@ -118,16 +144,9 @@ impl ImpostorArgs {
 /// Clasen's ellipsoids: options shared by `render` and `view`.
 #[derive(Debug, clap::Args)]
 pub struct EllipsoidArgs {
-    /// Draw the leaves of trees whose containers have ellipsoids (Clasen 2011) as those
-    /// ellipsoids, ray-cast per pixel with their noise, per cell the level whose interval holds the
-    /// metres per pixel at the cell's distance (divided by `--ellipsoid-quality`), and their bark
-    /// as their containers' branch lines (ray-cast round cones, the same level rule) where they
-    /// have them, else as triangles; other trees as usual. Takes precedence over `--impostors` (a
-    /// tree with both is drawn with ellipsoids) and `--prune`; `--baseline` takes precedence over
-    /// it.
-    #[arg(long)]
-    pub ellipsoids: bool,
-    /// With ellipsoids: the quality factor `q`; the level drawn is the one for pixels `q` times
+    /// With ellipsoids (leaves ray-cast per pixel with their noise, per cell the level whose
+    /// interval holds the metres per pixel at the cell's distance divided by this factor, bark as
+    /// the containers' branch lines where they have them): the quality factor `q`; the level drawn is the one for pixels `q` times
     /// smaller (2: finer, 0.5: coarser).
     #[arg(long, value_name = "Q", default_value_t = 1.0, value_parser = parse_quality)]
     pub ellipsoid_quality: f32,
@@ -144,25 +163,9 @@ pub struct EllipsoidArgs {
 impl EllipsoidArgs {
     /// Sets the renderer's ellipsoid options from these.
     pub fn apply(&self, settings: &mut Settings) {
-        settings.ellipsoids = self.ellipsoids;
         settings.ellipsoid_quality = self.ellipsoid_quality;
         settings.level_blend = self.level_blend;
         settings.lines = !self.no_lines;
-    }
-
-    /// With `--ellipsoids`, warns about each model of `models` that has no ellipsoids (its trees
-    /// are drawn as without the option).
-    pub fn warn_without(&self, models: &[PathBuf]) {
-        if !self.ellipsoids {
-            return;
-        }
-        for path in models {
-            if let Ok(container) = treelod_format::Container::open(path)
-                && container.ellipsoids().is_empty()
-            {
-                report::print_warning(path, "holds no ellipsoids; its trees are drawn without them");
-            }
-        }
     }
 }
 
@@ -283,42 +286,27 @@ impl ShadowArgs {
 /// Pruning options shared by `render` and `view`.
 #[derive(Debug, clap::Args)]
 pub struct PruneArgs {
-    /// Draw trees at least 64 pixels high with pruned leaves where their containers have
-    /// priority lists (Neubert 2011; build with `--prune`): a fraction λ of each cell's leaves,
-    /// most important first, scaled by `opt` (the container's s_opt(λ)), `cook` (1/λ, the
-    /// stochastic-pruning baseline) or `none`; bark whole. λ is the container's λ(h) for the
-    /// tree's projected height, times the visible fraction of the tree measured on the previous
-    /// frame.
-    #[arg(long, value_name = "SCALE", value_parser = ["opt", "cook", "none"])]
-    pub prune: Option<String>,
-    /// A fixed fraction of leaves, in (0, 1], for pruned trees instead of the container's λ(h).
-    #[arg(long, value_name = "LAMBDA", value_parser = parse_fraction, requires = "prune")]
+    /// With `--technique prune-opt` or `prune-cook` (a fraction λ of each cell's leaves, most
+    /// important first, scaled; bark whole; λ the container's λ(h) for the tree's projected
+    /// height, times the visible fraction of the tree measured on the previous frame): a fixed
+    /// fraction of leaves in (0, 1] instead of λ(h).
+    #[arg(long, value_name = "LAMBDA", value_parser = parse_fraction)]
     pub prune_lambda: Option<f32>,
 }
 
 impl PruneArgs {
-    /// The renderer's pruning settings these options ask for.
-    pub fn settings(&self) -> Option<Pruning> {
-        let scale = match self.prune.as_deref()? {
-            "cook" => PruneScale::Cook,
-            "none" => PruneScale::None,
-            _ => PruneScale::Optimal,
-        };
-        Some(Pruning { scale, lambda: self.prune_lambda, ..Pruning::default() })
+    /// The renderer's pruning settings these options ask for; exits with a usage error if they
+    /// are given with a technique that does not prune.
+    pub fn settings(&self, technique: Technique) -> Pruning {
+        if self.prune_lambda.is_some() && treelod_render::prune_scale(technique).is_none() {
+            clap::Error::raw(
+                clap::error::ErrorKind::ArgumentConflict,
+                format!("--prune-lambda needs --technique prune-opt or prune-cook, not {technique}\n"),
+            )
+            .exit();
+        }
+        Pruning { lambda: self.prune_lambda, ..Pruning::default() }
     }
-}
-
-/// The baselines by the names `--baseline` takes, in the order `view`'s key B cycles them.
-pub const BASELINES: [(&str, Baseline); 3] = [
-    ("lod-chain", Baseline::LodChain),
-    ("billboard", Baseline::Billboard(BillboardKind::Facing)),
-    ("crossed", Baseline::Billboard(BillboardKind::Crossed)),
-];
-
-/// The renderer's baseline for a `--baseline` value (checked by clap).
-pub fn parse_baseline(name: Option<&str>) -> Option<Baseline> {
-    let name = name?;
-    BASELINES.iter().find(|(n, _)| *n == name).map(|&(_, b)| b)
 }
 
 /// The renderer's debug view for a `--debug` value (checked by clap; anything else, `view`'s
@@ -330,11 +318,6 @@ pub fn parse_debug(name: Option<&str>) -> DebugView {
         Some("levels") => DebugView::Levels,
         _ => DebugView::Shaded,
     }
-}
-
-/// The name of a baseline, as `--baseline` takes it.
-pub fn baseline_name(baseline: Baseline) -> &'static str {
-    BASELINES.iter().find(|(_, b)| *b == baseline).map_or("?", |&(n, _)| n)
 }
 
 /// Parses a fraction in (0, 1].
@@ -448,17 +431,16 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         settings.s_max = s_max;
     }
     settings.debug = parse_debug(args.debug.as_deref());
-    settings.pruning = args.prune.settings();
+    settings.technique = args.technique.technique;
+    settings.pruning = args.prune.settings(settings.technique);
     args.light.apply(&mut settings);
     args.shadow.apply(&mut settings);
-    settings.impostors = args.impostors;
     args.impostor.apply(&mut settings);
     args.ellipsoid.apply(&mut settings);
-    settings.baseline = parse_baseline(args.baseline.as_deref());
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
     let bounds =
         scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
-    args.ellipsoid.warn_without(&scene.models);
+    args.technique.warn_without(&scene.models);
     // With shadows, a ground under the trees receives them.
     let ground = renderer.settings().shadows.is_some().then(|| Ground::under_instances(&gpu.device, &renderer));
     if args.gpu_selection {
@@ -485,8 +467,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                     Failed { class: ErrorClass::Io }
                 })
         };
-        let s = renderer.settings();
-        if s.pruning.is_some() && !s.impostors && !s.ellipsoids && s.baseline.is_none() && !s.full_mesh {
+        if treelod_render::prune_scale(renderer.settings().technique).is_some() {
             // The occlusion factor of pruned trees is measured on the frame before.
             frame(renderer)?;
         }
@@ -501,35 +482,33 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         stats.triangles,
         stats.points
     );
-    if let Some(baseline) = &args.baseline {
-        line.push_str(&format!(
-            ", {} tree(s) drawn with the {baseline} baseline ({} billboard quads)",
-            stats.instances_baseline, stats.billboards
-        ));
-    } else if renderer.settings().pruning.is_some() && !renderer.settings().impostors && !renderer.settings().ellipsoids
-    {
-        line.push_str(&format!(", {} pruned tree(s) drawing {} leaves", stats.instances_pruned, stats.leaves_pruned));
-    }
-    if renderer.settings().impostors && args.baseline.is_none() {
-        line.push_str(&format!(
-            ", {} tree(s) with impostors submitting {} planes",
-            stats.instances_impostors, stats.planes
-        ));
-    }
-    if renderer.settings().ellipsoids && args.baseline.is_none() {
-        line.push_str(&format!(
-            ", {} tree(s) with ellipsoids submitting {} ellipsoids and {} lines",
-            stats.instances_ellipsoids, stats.ellipsoids, stats.lines
-        ));
+    let technique = renderer.settings().technique;
+    let drawn = stats.instances.get(technique);
+    match technique {
+        Technique::Full | Technique::Spt => {}
+        Technique::PruneOpt | Technique::PruneCook => {
+            line.push_str(&format!(", {drawn} pruned tree(s) drawing {} leaves", stats.leaves_pruned));
+        }
+        Technique::Impostors => {
+            line.push_str(&format!(", {drawn} tree(s) with impostors submitting {} planes", stats.planes));
+        }
+        Technique::Ellipsoids => line.push_str(&format!(
+            ", {drawn} tree(s) with ellipsoids submitting {} ellipsoids and {} lines",
+            stats.ellipsoids, stats.lines
+        )),
+        Technique::LodChain | Technique::Billboard | Technique::Crossed => line.push_str(&format!(
+            ", {drawn} tree(s) drawn with the {technique} baseline ({} billboard quads)",
+            stats.billboards
+        )),
     }
     if renderer.settings().shadows.is_some() {
         line.push_str("; ");
         line.push_str(&shadow_summary(&stats));
     }
     let image = if args.compare {
-        renderer.settings_mut().full_mesh = true;
+        renderer.settings_mut().technique = Technique::Full;
         let (full, full_stats) = render(&mut renderer)?;
-        let ratio = (stats.triangles + stats.points) as f64 / full_stats.triangles.max(1) as f64;
+        let ratio = stats.primitives() as f64 / full_stats.triangles.max(1) as f64;
         line.push_str(&format!(
             "; full mesh {} triangles; LoD/full {ratio:.3} (left LoD, right full mesh)",
             full_stats.triangles
@@ -551,28 +530,25 @@ pub fn parse_distance(s: &str) -> Result<f32, String> {
     }
 }
 
-/// Triangles, points, impostor planes, billboard quads and ellipsoids the shadow pass submitted.
-pub fn shadow_primitives(shadow: &ShadowStats) -> u64 {
-    shadow.triangles + shadow.points + shadow.planes + shadow.billboards + shadow.ellipsoids
-}
-
-/// Triangles, points, impostor planes, billboard quads and ellipsoids the camera's pass submitted.
-pub fn main_primitives(stats: &FrameStats) -> u64 {
-    stats.triangles + stats.points + stats.planes + stats.billboards + stats.ellipsoids
-}
-
 /// What the shadow pass of a frame drew, and its primitives over the main pass's.
 pub fn shadow_summary(stats: &FrameStats) -> String {
     let shadow = &stats.shadow;
-    let main = main_primitives(stats);
+    let main = stats.primitives();
     let ratio = if main == 0 {
         "(the main pass draws nothing)".to_owned()
     } else {
-        format!("({:.2}× the main pass's primitives)", shadow_primitives(shadow) as f64 / main as f64)
+        format!("({:.2}× the main pass's primitives)", shadow.primitives() as f64 / main as f64)
     };
     format!(
-        "shadow pass: {} cascade(s), {} triangles, {} points, {} planes, {} billboards, {} ellipsoids {ratio}",
-        shadow.cascades, shadow.triangles, shadow.points, shadow.planes, shadow.billboards, shadow.ellipsoids
+        "shadow pass: {} cascade(s), {} triangles, {} points, {} planes, {} billboards, {} ellipsoids, {} lines \
+         {ratio}",
+        shadow.cascades,
+        shadow.triangles,
+        shadow.points,
+        shadow.planes,
+        shadow.billboards,
+        shadow.ellipsoids,
+        shadow.lines
     )
 }
 
@@ -743,19 +719,22 @@ mod tests {
 
     #[test]
     fn the_shadow_summary_compares_the_shadow_pass_with_the_main_pass() {
-        let mut stats = FrameStats { triangles: 100, points: 200, planes: 50, billboards: 50, ..FrameStats::default() };
-        stats.shadow = ShadowStats {
+        // Lines count as primitives on both sides.
+        let mut stats =
+            FrameStats { triangles: 100, points: 200, planes: 50, billboards: 50, lines: 100, ..FrameStats::default() };
+        stats.shadow = treelod_render::ShadowStats {
             cascades: 3,
             triangles: 300,
             points: 400,
             planes: 100,
             billboards: 0,
-            ..ShadowStats::default()
+            lines: 100,
+            ..treelod_render::ShadowStats::default()
         };
         assert_eq!(
             shadow_summary(&stats),
-            "shadow pass: 3 cascade(s), 300 triangles, 400 points, 100 planes, 0 billboards, 0 ellipsoids (2.00× the main \
-             pass's primitives)"
+            "shadow pass: 3 cascade(s), 300 triangles, 400 points, 100 planes, 0 billboards, 0 ellipsoids, 100 lines \
+             (1.80× the main pass's primitives)"
         );
         let nothing = FrameStats { shadow: stats.shadow, ..FrameStats::default() };
         assert!(shadow_summary(&nothing).ends_with("(the main pass draws nothing)"));

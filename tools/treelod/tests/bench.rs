@@ -308,6 +308,54 @@ fn ellipsoids_fly_where_the_models_hold_them_and_are_absent_elsewhere() {
 }
 
 #[test]
+fn impostors_fly_where_the_models_hold_planes_and_count_them_as_primitives() {
+    let dir = scratch("impostors");
+    let model = dir.join("planes.treelod");
+    let out = run([
+        "demo".as_ref(),
+        "--leaf-count".as_ref(),
+        "300".as_ref(),
+        "--impostors".as_ref(),
+        "--ao-rays".as_ref(),
+        "0".as_ref(),
+        "-o".as_ref(),
+        model.as_os_str(),
+    ]);
+    assert!(out.status.success(), "demo --impostors: {}", text(&out.stderr));
+    let csv = dir.join("i.csv");
+    let stdout = bench_ok(&[
+        model.as_os_str(),
+        "--trees".as_ref(),
+        "100".as_ref(),
+        "--frames".as_ref(),
+        "4".as_ref(),
+        "--size".as_ref(),
+        "160x90".as_ref(),
+        "--technique".as_ref(),
+        "spt,impostors".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+    ]);
+    assert!(!stdout.contains("absent"), "{stdout}");
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 4 * 2);
+    let impostors: Vec<&Vec<String>> = rows.iter().filter(|r| field(&header, r, "technique") == "impostors").collect();
+    assert_eq!(impostors.len(), 4);
+    for row in impostors {
+        let count = |column: &str| number(&header, row, column);
+        // Leaves as planes (quads), bark as triangles; no points where every tree has planes.
+        assert!(count("quads") > 0.0 && count("triangles") > 0.0, "{row:?}");
+        assert_eq!(count("points"), 0.0, "{row:?}");
+        assert_eq!(count("primitives"), count("triangles") + count("quads"), "{row:?}");
+        assert!(count("gpu_ms") > 0.0, "{row:?}");
+    }
+    // The demo tree without planes: impostors absent, named as such.
+    let args = ["--trees", "20", "--frames", "1", "--no-render", "--technique", "spt,impostors"];
+    let stdout = bench_ok(&[demo().as_os_str()].into_iter().chain(args.iter().map(OsStr::new)).collect::<Vec<_>>());
+    assert!(stdout.contains("technique impostors: absent: no model of the forest holds impostor planes"), "{stdout}");
+}
+
+#[test]
 fn without_rendering_only_selection_is_measured() {
     let dir = scratch("no-render");
     let csv = dir.join("n.csv");

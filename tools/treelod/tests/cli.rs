@@ -775,11 +775,21 @@ fn build_with_pruning_writes_the_lists_dump_shows_them_and_the_report_compares_o
     let png = dir.join("pruned.png");
     let out_str = out.to_str().expect("UTF-8 path");
     let png_str = png.to_str().expect("UTF-8 path");
-    let drawn = treelod(&["render", out_str, "-o", png_str, "--size", "200x200", "--prune", "opt"]);
+    let drawn = treelod(&["render", out_str, "-o", png_str, "--size", "200x200", "--technique", "prune-opt"]);
     let line = stdout(&drawn);
     assert!(line.contains(", 1 pruned tree(s) drawing "), "{line}");
-    let all =
-        treelod(&["render", out_str, "-o", png_str, "--size", "200x200", "--prune", "none", "--prune-lambda", "1"]);
+    let all = treelod(&[
+        "render",
+        out_str,
+        "-o",
+        png_str,
+        "--size",
+        "200x200",
+        "--technique",
+        "prune-cook",
+        "--prune-lambda",
+        "1",
+    ]);
     let leaves = |line: &str| -> u64 {
         line.split(" drawing ").nth(1).and_then(|t| t.split(' ').next()).and_then(|n| n.parse().ok()).expect("a count")
     };
@@ -1436,7 +1446,7 @@ fn render_debug_levels_colours_points_by_the_octave_of_their_interval() {
     let stdout = render_ok(demo, &png, &["--size", "128x96", "--debug", "levels", "--s-min", "0.5", "--s-max", "1"]);
     assert!(!stdout.contains(" 0 points"), "{stdout}");
     let (_, _, pixels) = read_png(&png);
-    // The palette of shaders/tree.wgsl (`LEVEL_PALETTE`) in sRGB, and triangles' light grey.
+    // The palette of shaders/tree/common.wgsl (`LEVEL_PALETTE`) in sRGB, and triangles' light grey.
     let palette: [[u8; 3]; 6] =
         [[243, 137, 124], [250, 225, 109], [149, 231, 149], [124, 225, 237], [149, 160, 250], [231, 160, 237]];
     let near = |p: &[u8; 4], c: [u8; 3]| (0..3).all(|i| p[i].abs_diff(c[i]) <= 2);
@@ -1663,7 +1673,7 @@ fn view_error_view_darkens_what_matches_the_full_mesh_and_colours_what_does_not(
     let differ = count_in(&pixels, width, 0..width, coloured);
     assert!(differ > 10, "differences are coloured: {differ} pixels");
     // The full mesh against itself shows no error at all.
-    let out = view_screenshot(demo, &png, &["--debug", "error", "--full-mesh"]);
+    let out = view_screenshot(demo, &png, &["--debug", "error", "--technique", "full"]);
     assert!(out.status.success(), "{}", stderr(&out));
     let (_, _, pixels) = read_png(&png);
     assert_eq!(count_in(&pixels, width, 0..width, coloured), 0, "the full mesh matches itself");

@@ -91,9 +91,10 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
     let dir = scratch("spt");
     let (csv, json, sheet) = (dir.join("spt.csv"), dir.join("spt.json"), dir.join("spt.png"));
     let (quality_plot, frame_plot) = (dir.join("quality.png"), dir.join("frames.png"));
+    let band_plot = dir.join("bands.png");
     let stdout = eval_ok(&[
         "--technique".as_ref(),
-        "spt,ellipsoids,policy".as_ref(),
+        "spt,ellipsoids,impostors".as_ref(),
         "--views".as_ref(),
         "2".as_ref(),
         "--csv".as_ref(),
@@ -106,16 +107,21 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
         quality_plot.as_os_str(),
         "--frame-plot".as_ref(),
         frame_plot.as_os_str(),
+        "--band-plot".as_ref(),
+        band_plot.as_os_str(),
     ]);
-    assert!(stdout.contains("technique ellipsoids: absent: this container holds no ellipsoids or lines"), "{stdout}");
-    assert!(stdout.contains("technique policy: not implemented yet: "), "{stdout}");
-    let table: Vec<&str> = stdout.lines().filter(|l| l.contains(" spt ")).collect();
+    assert!(stdout.contains("technique ellipsoids: absent: this container holds no ellipsoids"), "{stdout}");
+    assert!(stdout.contains("technique impostors: absent: this container holds no impostor planes"), "{stdout}");
+    // The per-frame table (the summary by band of projected height follows it, its rows labelled in px).
+    let table: Vec<&str> = stdout.lines().filter(|l| l.contains(" spt ") && !l.contains(" px ")).collect();
     assert_eq!(table.len(), 3, "two frames and the mean: {stdout}");
     assert!(table[2].trim_start().starts_with("mean"), "{stdout}");
+    let bands: Vec<&str> = stdout.lines().filter(|l| l.contains(" spt ") && l.contains(" px ")).collect();
+    assert!(!bands.is_empty(), "a summary by band: {stdout}");
 
     let json = read_json(&json);
     assert_eq!(technique(&json, "ellipsoids")["status"], "absent");
-    assert_eq!(technique(&json, "policy")["status"], "not implemented yet");
+    assert_eq!(technique(&json, "impostors")["status"], "absent");
     assert!(technique(&json, "ellipsoids")["summary"].is_null());
     let spt = &technique(&json, "spt")["summary"];
     // Measured (500-leaf demo, 128×96, supersample 2): P 0.70, R 0.54, Q 0.45, RMSE 0.028; the full
@@ -146,14 +152,19 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
     let info = decoder.read_info().expect("a PNG").info().clone();
     assert_eq!((info.width, info.height), (3 * 128 + 2 * 2, 2 * 96 + 2), "reference | spt | difference, two frames");
 
-    // The plots: the first measured technique's colour (spt, blue) marks its frames and mean.
-    for (plot, size) in [(&quality_plot, (720, 480)), (&frame_plot, (720, 800))] {
+    // The plots: spt's own colour (orange, the same in every plot) marks its frames and mean. Both
+    // views are at the same distance: the band plot has one panel.
+    // Legends sit in a 170-pixel margin right of the panels.
+    for (plot, size) in
+        [(&quality_plot, (720 + 170, 480)), (&frame_plot, (720, 800)), (&band_plot, (64 + 324 + 170, 420))]
+    {
         let (width, height, pixels) = read_png(plot);
         assert_eq!((width, height), size, "{}", plot.display());
-        let blue = pixels.iter().filter(|p| p[..3] == [31, 119, 180]).count();
-        assert!(blue > 50, "{}: {blue} pixels of the technique's colour", plot.display());
+        let orange = pixels.iter().filter(|p| p[..3] == [255, 127, 14]).count();
+        assert!(orange > 50, "{}: {orange} pixels of the technique's colour", plot.display());
     }
     assert!(stdout.contains("quality plot: ") && stdout.contains("frame plot: "), "{stdout}");
+    assert!(stdout.contains("band plot: "), "{stdout}");
     // GPU time is a number where the adapter has timestamp queries, and said to be absent otherwise.
     let timed = json["timing"].as_str().expect("timing").contains("from GPU timestamp queries");
     assert_eq!(spt["mean"]["gpu_ms"].is_number(), timed, "{spt}");
@@ -217,7 +228,7 @@ fn bad_input_fails_with_a_message_naming_the_file() {
         2,
         "",
     );
-    // Only techniques that do not exist yet: they are reported, and nothing can be measured.
+    // Only techniques whose data the container lacks: they are reported, and nothing can be measured.
     let stdout = fails(
         &["eval".as_ref(), demo().as_os_str(), "--technique".as_ref(), "impostors,prune-cook".as_ref()],
         4,
@@ -225,7 +236,7 @@ fn bad_input_fails_with_a_message_naming_the_file() {
     );
     assert_eq!(
         stdout,
-        "technique impostors: absent: this container holds no impostor planes\n\
-         technique prune-cook: absent: this container holds no pruning priority lists\n"
+        "technique impostors: absent: this container holds no impostor planes (build with --impostors)\n\
+         technique prune-cook: absent: this container holds no pruning priority lists (build with --prune)\n"
     );
 }

@@ -49,8 +49,8 @@ fn an_oak_of_leaf_cards_builds_indirect_planes_that_verify_dump_and_render() {
     // 2427 and 1722 with the points).
     let (planes_png, points_png) = (dir.join("planes.png"), dir.join("points.png"));
     let stdout = succeeded(
-        &run_on(&["render", "--impostors", "--size", "160x160", "-o"], &[&planes_png, &out_path]),
-        "render --impostors",
+        &run_on(&["render", "--technique", "impostors", "--size", "160x160", "-o"], &[&planes_png, &out_path]),
+        "render --technique impostors",
     );
     assert!(stdout.contains("1 tree(s) with impostors submitting"), "{stdout}");
     succeeded(&run_on(&["render", "--size", "160x160", "-o"], &[&points_png, &out_path]), "render");

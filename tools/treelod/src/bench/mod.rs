@@ -8,7 +8,7 @@
 //!
 //! The full mesh of 10^4 trees takes minutes a frame on a software rasteriser, so `full` is
 //! counted, not drawn, unless `--quality` needs it as the reference: its primitives come from the
-//! runtime's selection with both thresholds at zero (what `Settings::full_mesh` draws), run over
+//! runtime's selection with both thresholds at zero (what `Technique::Full` draws), run over
 //! the forest in chunks so that even 10^6 instances need little memory.
 //!
 //! The tables, CSV, JSON and plot are in [`output`].
@@ -25,12 +25,12 @@ use glam::Vec3;
 use rayon::prelude::*;
 use treelod_format::{Compression, Container, ErrorClass};
 use treelod_render::offscreen::{Gpu, render_image_timed, render_prepared_timed};
-use treelod_render::{Baseline, BillboardKind, Camera, Instance, ModelId, PruneScale, Pruning, Renderer, Settings};
+use treelod_render::{Camera, Instance, ModelId, PerTechnique, Pruning, Renderer, Settings, Technique};
 
 use self::forest::{Forest, Shape};
 use self::path::Frame;
 use crate::eval::metrics::{Coverage, LinearImage, Mask, multiscale_rmse};
-use crate::eval::{Adapter, Availability, OptionalData};
+use crate::eval::{Adapter, Availability};
 use crate::render::{clear_colour, parse_colour, parse_fov, parse_pixels, parse_size};
 use crate::report::{self, Failed};
 use crate::scene;
@@ -115,116 +115,40 @@ pub struct Args {
     pub plot: Option<PathBuf>,
 }
 
-/// The techniques `--technique` names, available or not.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
-pub enum Technique {
-    /// The full mesh: every triangle of every visible instance (counted; drawn with --quality).
-    #[value(name = "full")]
-    Full,
-    /// Triangles and points (Gilet 2005 in sequential point trees): the default treelod policy.
-    #[value(name = "spt")]
-    Spt,
-    /// Uniform stochastic pruning with Cook's `1/λ` scale (Neubert 2011's baseline).
-    #[value(name = "prune-cook")]
-    PruneCook,
-    /// Pruning with the optimised scale `s_opt` (Neubert 2011).
-    #[value(name = "prune-opt")]
-    PruneOpt,
-    /// Clasen 2011's representation: leaves as ellipsoids, bark as branch lines (spec §6.8, §6.9).
-    #[value(name = "ellipsoids")]
-    Ellipsoids,
-    /// Baseline: a discrete LoD chain from meshoptimizer's simplifiers (spec §6.12).
-    #[value(name = "lod-chain")]
-    LodChain,
-    /// Baseline: one camera-facing billboard per tree (spec §6.13).
-    #[value(name = "billboard")]
-    Billboard,
-    /// Baseline: crossed billboards, three fixed quads per tree (spec §6.13).
-    #[value(name = "crossed")]
-    Crossed,
+/// What `technique` draws, for the JSON summary.
+#[must_use]
+pub fn description(technique: Technique) -> &'static str {
+    match technique {
+        Technique::Full => "the full mesh: every triangle of every visible instance",
+        t => crate::eval::output::description(crate::eval::TechniqueName::Technique(t)),
+    }
 }
 
-impl Technique {
-    /// The name as `--technique` takes it.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Full => "full",
-            Self::Spt => "spt",
-            Self::PruneCook => "prune-cook",
-            Self::PruneOpt => "prune-opt",
-            Self::Ellipsoids => "ellipsoids",
-            Self::LodChain => "lod-chain",
-            Self::Billboard => "billboard",
-            Self::Crossed => "crossed",
-        }
-    }
+/// Whether `technique` can be flown over models holding each technique's data as `held` counts
+/// them.
+fn availability(technique: Technique, held: PerTechnique<usize>) -> Availability {
+    crate::eval::availability(crate::eval::TechniqueName::Technique(technique), held, "no model of the forest holds")
+}
 
-    /// What it draws, for the JSON summary.
-    #[must_use]
-    pub fn description(self) -> &'static str {
-        match self {
-            Self::Full => "the full mesh: every triangle of every visible instance",
-            Self::Spt => "triangles and points (Gilet 2005, sequential point trees): the default renderer",
-            Self::PruneCook => "pruning with s_Cook = 1/lambda (uniform stochastic baseline, Neubert 2011)",
-            Self::PruneOpt => "pruning with s_opt (Neubert 2011)",
-            Self::Ellipsoids => "leaf ellipsoids and branch lines (Clasen 2011)",
-            Self::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
-            Self::Billboard => "baseline: one camera-facing billboard per tree",
-            Self::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
-        }
+/// The renderer settings `technique` flies with; `None` for `full`, which is counted apart.
+///
+/// The pruning techniques fly the renderer's pruning policy ([`Pruning`]'s defaults: trees at
+/// least 64 pixels high pruned to the container's `λ(h)` times their visible fraction, with
+/// hysteresis; smaller ones by the point tree) with the optimal or Cook's scale. `ellipsoids` flies
+/// with the bark as lines where a model has them, at the default quality and level blend;
+/// `impostors` with the defaults of `render` (morphing levels, the chain's bark where a model has a
+/// chain). Trees whose models lack a technique's data draw with the point tree.
+fn settings(technique: Technique, args: &Args) -> Option<Settings> {
+    if technique == Technique::Full {
+        return None;
     }
-
-    /// Whether it can be measured on models holding `data`.
-    fn availability(self, data: OptionalData) -> Availability {
-        match self {
-            Self::Full | Self::Spt => Availability::Measured,
-            Self::PruneCook | Self::PruneOpt if data.prune_leaves > 0 => Availability::Measured,
-            Self::PruneCook | Self::PruneOpt => Availability::Absent(
-                "no model of the forest holds pruning priority lists (build them with --prune)".to_owned(),
-            ),
-            Self::Ellipsoids if data.ellipsoids > 0 => Availability::Measured,
-            Self::Ellipsoids => Availability::Absent(
-                "no model of the forest holds ellipsoids (build them with --ellipsoids, and --lines for the bark)"
-                    .to_owned(),
-            ),
-            Self::LodChain if data.lod_levels > 0 => Availability::Measured,
-            Self::Billboard | Self::Crossed if data.billboards > 0 => Availability::Measured,
-            Self::LodChain | Self::Billboard | Self::Crossed => {
-                Availability::Absent("no model of the forest holds baselines (build them with --baselines)".to_owned())
-            }
-        }
-    }
-
-    /// The renderer settings it flies with; `None` for `full`, which is counted apart.
-    ///
-    /// The pruning techniques fly the renderer's pruning policy ([`Pruning`]'s defaults: trees
-    /// at least 64 pixels high pruned to the container's `λ(h)` times their visible fraction, with
-    /// hysteresis; smaller ones by the point tree) with the optimal or Cook's scale. `ellipsoids`
-    /// flies [`Settings::ellipsoids`] with the bark as lines where a model has them, at the
-    /// default quality and level blend; trees without ellipsoids draw with the point tree.
-    fn settings(self, args: &Args) -> Option<Settings> {
-        let scale = match self {
-            Self::Full => return None,
-            Self::Spt | Self::Ellipsoids | Self::LodChain | Self::Billboard | Self::Crossed => None,
-            Self::PruneCook => Some(PruneScale::Cook),
-            Self::PruneOpt => Some(PruneScale::Optimal),
-        };
-        let mut settings = Settings::default();
-        settings.s_min = args.s_min.unwrap_or(settings.s_min);
-        settings.s_max = args.s_max.unwrap_or(settings.s_max);
-        settings.pruning = scale.map(|scale| Pruning { scale, ..Pruning::default() });
-        settings.shadows = args.shadows.then(treelod_render::Shadows::default);
-        settings.ellipsoids = self == Self::Ellipsoids;
-        settings.lines = true;
-        settings.baseline = match self {
-            Self::LodChain => Some(Baseline::LodChain),
-            Self::Billboard => Some(Baseline::Billboard(BillboardKind::Facing)),
-            Self::Crossed => Some(Baseline::Billboard(BillboardKind::Crossed)),
-            _ => None,
-        };
-        Some(settings)
-    }
+    let mut settings = Settings { technique, ..Settings::default() };
+    settings.s_min = args.s_min.unwrap_or(settings.s_min);
+    settings.s_max = args.s_max.unwrap_or(settings.s_max);
+    settings.pruning = Pruning::default();
+    settings.shadows = args.shadows.then(treelod_render::Shadows::default);
+    settings.lines = true;
+    Some(settings)
 }
 
 /// One frame of one technique.
@@ -392,14 +316,14 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         }
     }
     let models = load_models(&args.inputs, &args.technique)?;
-    let mut data = optional_data(&models.containers);
+    let mut held = held_by_models(&models.containers);
     if let Some(stochastic) = &models.stochastic {
-        data.prune_leaves += optional_data(stochastic).prune_leaves;
+        *held.get_mut(Technique::PruneCook) += held_by_models(stochastic).get(Technique::PruneCook);
     }
     let mut techniques: Vec<(Technique, Availability)> = Vec::new();
     for &technique in &args.technique {
         if !techniques.iter().any(|(t, _)| *t == technique) {
-            techniques.push((technique, technique.availability(data)));
+            techniques.push((technique, availability(technique, held)));
         }
     }
     if techniques.iter().all(|(_, a)| *a != Availability::Measured) {
@@ -429,7 +353,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let frames = path::fly_through(&forest, args.frames as usize, fovy, aspect);
 
     // A device only when something is drawn or prepared: the full mesh alone is counted on the CPU.
-    let needs_gpu = args.quality || measured.iter().any(|t| t.settings(args).is_some());
+    let needs_gpu = args.quality || measured.iter().any(|&t| settings(t, args).is_some());
     let gpu = if needs_gpu {
         Some(Gpu::new().map_err(|e| {
             report::message_error(&input_label(args), &format!("cannot render: {e}"));
@@ -485,12 +409,12 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let mut reference = None;
     if let Some(gpu) = &gpu {
         for &technique in &measured {
-            if let Some(settings) = technique.settings(args) {
+            if let Some(settings) = settings(technique, args) {
                 flown.push(Flown { technique, renderer: add(gpu, settings, Some(technique))? });
             }
         }
         if args.quality {
-            reference = Some(add(gpu, Settings { full_mesh: true, ..Settings::default() }, None)?);
+            reference = Some(add(gpu, Settings { technique: Technique::Full, ..Settings::default() }, None)?);
         }
     }
     drop(instances);
@@ -594,7 +518,9 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 lines: stats.lines,
                 // Counted on the CPU after the timed selection.
                 points_in_cut: (!stats.gpu_selection).then(|| f.renderer.points_in_cut()),
-                instances_pruned: Some(stats.instances_pruned),
+                instances_pruned: Some(
+                    stats.instances.get(Technique::PruneOpt) + stats.instances.get(Technique::PruneCook),
+                ),
                 leaves_pruned: Some(stats.leaves_pruned),
                 ranges: Some(stats.ranges),
                 ranges_clamped: Some(stats.ranges_clamped),
@@ -602,10 +528,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 bytes_resident: Some(stats.bytes_resident),
                 selection_ms,
                 gpu_ms: None,
-                shadow_primitives: args.shadows.then(|| {
-                    let s = stats.shadow;
-                    [s.triangles, s.points, s.planes, s.billboards, s.ellipsoids, s.lines].iter().sum()
-                }),
+                shadow_primitives: args.shadows.then(|| stats.shadow.primitives()),
                 coverage: None,
                 rmse: None,
             };
@@ -721,16 +644,17 @@ fn demo_prune(order: treelod_build::PruneOrder) -> treelod_build::PruneConfig {
 /// The built-in models: [`DEMO_TREES`] built in memory (no file written), in parallel. With
 /// `prune-opt` asked for they hold density-ordered priority lists (the order that saved most
 /// geometry on the shared models); with `prune-cook` a second set holds stochastic lists; with a
-/// baseline asked for they hold baselines (and the impostors that set the billboards' budget); with
+/// baseline or `impostors` asked for they hold baselines and impostors (the impostors set the
+/// billboards' budget, and the chain gives the impostor trees' bark); with
 /// `ellipsoids` they hold Clasen's ellipsoids and lines (the build's defaults: about a second per
 /// tree on 2 cores, so only when asked for).
 fn demo_models(techniques: &[Technique]) -> Result<Models, Failed> {
     use treelod_build::PruneOrder;
     let opt = techniques.contains(&Technique::PruneOpt).then(|| demo_prune(PruneOrder::Density));
     let extras = Extras {
-        baselines: techniques
-            .iter()
-            .any(|t| matches!(t, Technique::LodChain | Technique::Billboard | Technique::Crossed)),
+        baselines: techniques.iter().any(|t| {
+            matches!(t, Technique::LodChain | Technique::Billboard | Technique::Crossed | Technique::Impostors)
+        }),
         ellipsoids: techniques.contains(&Technique::Ellipsoids),
     };
     let containers = demo_containers(opt.as_ref(), extras)?;
@@ -749,7 +673,8 @@ fn demo_models(techniques: &[Technique]) -> Result<Models, Failed> {
 /// The optional representations a set of demo trees is built with, besides pruning lists.
 #[derive(Clone, Copy, Debug, Default)]
 struct Extras {
-    /// Baselines and impostors.
+    /// Baselines and impostors (each needs the other: the impostors' texture budget sets the
+    /// billboards', the chain gives the impostor trees' coarse bark).
     baselines: bool,
     /// Clasen's ellipsoids and lines.
     ellipsoids: bool,
@@ -782,18 +707,15 @@ fn demo_containers(prune: Option<&treelod_build::PruneConfig>, extras: Extras) -
     Ok(built?.into_iter().map(Arc::new).collect())
 }
 
-/// Sums the optional record kinds over the models.
-fn optional_data(containers: &[Arc<Container>]) -> OptionalData {
-    let mut data = OptionalData::default();
+/// How many of the models hold each technique's data.
+fn held_by_models(containers: &[Arc<Container>]) -> PerTechnique<usize> {
+    let mut held = PerTechnique::default();
     for container in containers {
-        // Ellipsoids only: lines are drawn only for the bark of trees with ellipsoids.
-        data.ellipsoids += container.ellipsoids().len() as u64;
-        data.planes += container.planes().len() as u64;
-        data.prune_leaves += container.prune_leaves().len() as u64;
-        data.lod_levels += container.lod_levels().len() as u64;
-        data.billboards += container.billboards().len() as u64;
+        for technique in Technique::ALL {
+            *held.get_mut(technique) += usize::from(technique.held_by(container));
+        }
     }
-    data
+    held
 }
 
 /// A progress bar on stderr (drawn only on a terminal).
@@ -813,14 +735,15 @@ mod tests {
 
     #[test]
     fn pruning_needs_priority_lists() {
-        let none = OptionalData::default();
-        assert_eq!(Technique::Spt.availability(none), Availability::Measured);
-        assert_eq!(Technique::Full.availability(none), Availability::Measured);
-        let cook = Technique::PruneCook.availability(none);
+        let none = PerTechnique::<usize>::default();
+        assert_eq!(availability(Technique::Spt, none), Availability::Measured);
+        assert_eq!(availability(Technique::Full, none), Availability::Measured);
+        let cook = availability(Technique::PruneCook, none);
         assert_eq!(cook.status(), "absent");
         assert!(cook.reason().is_some_and(|r| r.contains("pruning priority lists")), "{cook:?}");
-        let some = OptionalData { prune_leaves: 4, ..OptionalData::default() };
-        assert_eq!(Technique::PruneOpt.availability(some), Availability::Measured);
+        let mut some = PerTechnique::<usize>::default();
+        *some.get_mut(Technique::PruneOpt) = 4;
+        assert_eq!(availability(Technique::PruneOpt, some), Availability::Measured);
     }
 
     #[derive(Debug, clap::Parser)]
@@ -830,17 +753,17 @@ mod tests {
     }
 
     #[test]
-    fn ellipsoids_need_ellipsoids_and_draw_them_with_lines() {
-        let none = OptionalData { prune_leaves: 4, lod_levels: 3, billboards: 2, ..OptionalData::default() };
-        let absent = Technique::Ellipsoids.availability(none);
-        assert_eq!(absent.status(), "absent");
-        assert!(absent.reason().is_some_and(|r| r.contains("ellipsoids")), "{absent:?}");
-        let some = OptionalData { ellipsoids: 1, ..OptionalData::default() };
-        assert_eq!(Technique::Ellipsoids.availability(some), Availability::Measured);
-        let args = BenchCli::try_parse_from(["bench", "--technique", "ellipsoids"]).expect("parses").args;
-        assert_eq!(args.technique, [Technique::Ellipsoids]);
-        let settings = Technique::Ellipsoids.settings(&args).expect("drawn");
-        assert!(settings.ellipsoids && settings.lines && settings.baseline.is_none() && settings.pruning.is_none());
-        assert!(!Technique::Spt.settings(&args).expect("drawn").ellipsoids);
+    fn every_technique_of_the_one_list_flies_with_itself() {
+        let names: Vec<&str> = Technique::ALL.iter().map(|t| t.name()).collect();
+        let args = BenchCli::try_parse_from(["bench", "--technique", &names.join(",")]).expect("parses").args;
+        assert_eq!(args.technique, Technique::ALL);
+        for t in Technique::ALL {
+            let settings = settings(t, &args);
+            assert_eq!(settings.map(|s| s.technique), (t != Technique::Full).then_some(t), "{t}");
+        }
+        let none = PerTechnique::<usize>::default();
+        let absent = availability(Technique::Impostors, none);
+        assert!(absent.reason().is_some_and(|r| r.contains("impostor planes")), "{absent:?}");
+        assert!(settings(Technique::Ellipsoids, &args).is_some_and(|s| s.lines));
     }
 }

@@ -14,7 +14,7 @@ use treelod_render::offscreen::Image;
 use super::path::Phase;
 use super::{Report, Row, Technique};
 use crate::eval::Availability;
-use crate::eval::plot::{self, Axis, BLACK, Canvas, PALETTE, Panel, REFERENCE};
+use crate::eval::plot::{self, Axis, BLACK, Canvas, Panel, REFERENCE};
 use crate::table::{Align, Table};
 
 /// What the time columns measure, said wherever they appear.
@@ -383,7 +383,7 @@ pub fn json(report: &Report) -> Result<String, serde_json::Error> {
         .map(|(technique, availability)| {
             serde_json::json!({
                 "name": technique.name(),
-                "description": technique.description(),
+                "description": super::description(*technique),
                 "status": availability.status(),
                 "reason": availability.reason(),
                 "summary": (*availability == Availability::Measured).then(|| summarise(report, *technique)),
@@ -461,8 +461,7 @@ pub fn plot(report: &Report) -> Image {
         .techniques
         .iter()
         .filter(|(_, a)| *a == Availability::Measured)
-        .enumerate()
-        .map(|(i, (t, _))| (*t, PALETTE[i % PALETTE.len()]))
+        .map(|(t, _)| (*t, plot::style(*t, false).0))
         .collect();
     let frames = report.frames.len().max(1);
     let x = Axis { lo: 0.0, hi: (frames - 1).max(1) as f64, log: false };

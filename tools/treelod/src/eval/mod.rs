@@ -7,7 +7,7 @@
 //! table, CSV, JSON and contact sheet in [`output`].
 
 pub mod metrics;
-mod output;
+pub(crate) mod output;
 pub mod path;
 pub(crate) mod plot;
 
@@ -17,7 +17,7 @@ use std::time::Instant;
 use glam::Vec3;
 use treelod_format::{Container, ErrorClass};
 use treelod_render::offscreen::{Gpu, render_prepared_timed};
-use treelod_render::{Baseline, BillboardKind, Camera, FrameStats, PruneScale, Pruning, Renderer, Settings};
+use treelod_render::{Camera, FrameStats, PerTechnique, Pruning, Renderer, Settings, Technique};
 
 use crate::render::ImpostorArgs;
 
@@ -118,6 +118,11 @@ pub struct Args {
     /// and temporal noise (the reference's beside it).
     #[arg(long, value_name = "PATH")]
     pub frame_plot: Option<PathBuf>,
+    /// Write a PNG plot of multi-scale RMSE against primitives drawn, one panel per band of the
+    /// scene's projected height in pixels (as the table's summary by band): the picture a
+    /// representation is chosen from at each size on screen.
+    #[arg(long, value_name = "PATH")]
+    pub band_plot: Option<PathBuf>,
 }
 
 /// `--orbit`'s distances, in bounding radii.
@@ -128,63 +133,69 @@ fn parse_orbit(s: &str) -> Result<Distances, String> {
     path::parse_distances(s).map(Distances)
 }
 
-/// The techniques `--technique` names, available or not.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum)]
+/// What a row measures, by the name `--technique` takes: a technique of the one list
+/// ([`Technique`], drawn at the image size; `full` is drawn as the reference is, supersampled and
+/// box-filtered, the instrument's check), or `full-1x`, the full mesh drawn at the image size with no
+/// supersampling: the aliasing floor of every technique drawn at the image size.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum TechniqueName {
-    /// The full mesh drawn exactly as the reference is (supersampled and box-filtered): the
-    /// instrument's check (it must read perfect) and the full mesh's cost.
-    #[value(name = "full")]
-    Full,
-    /// The full mesh drawn at the image size, no supersampling: the aliasing floor of every
-    /// technique drawn at the image size.
-    #[value(name = "full-1x")]
+    /// A technique of the one list.
+    Technique(Technique),
+    /// The full mesh at the image size.
     Full1x,
-    /// Triangles and points (Gilet 2005 in sequential point trees): the default renderer.
-    #[value(name = "spt")]
-    Spt,
-    /// Clustered ellipsoids and lines (Clasen 2011).
-    #[value(name = "ellipsoids")]
-    Ellipsoids,
-    /// Leaf-cluster impostor planes (Garcia 2005).
-    #[value(name = "impostors")]
-    Impostors,
-    /// Pruning with the optimised scale `s_opt` (Neubert 2011).
-    #[value(name = "prune-opt")]
-    PruneOpt,
-    /// Pruning with `s_Cook = 1/λ`, the stochastic baseline.
-    #[value(name = "prune-cook")]
-    PruneCook,
-    /// The default distance policy choosing among techniques.
-    #[value(name = "policy")]
-    Policy,
-    /// Baseline: a discrete LoD chain from meshoptimizer's simplifiers (spec §6.12).
-    #[value(name = "lod-chain")]
-    LodChain,
-    /// Baseline: one camera-facing billboard per tree (spec §6.13).
-    #[value(name = "billboard")]
-    Billboard,
-    /// Baseline: crossed billboards, three fixed quads per tree (spec §6.13).
-    #[value(name = "crossed")]
-    Crossed,
 }
 
+/// Every name `--technique` takes: the full mesh at the image size after the full mesh, then the
+/// rest of [`Technique::ALL`].
+const NAMES: [TechniqueName; Technique::COUNT + 1] = {
+    let mut names = [TechniqueName::Full1x; Technique::COUNT + 1];
+    let (mut i, mut k) = (0, 0);
+    while i < Technique::COUNT {
+        names[k] = TechniqueName::Technique(Technique::ALL[i]);
+        k += 1;
+        if matches!(Technique::ALL[i], Technique::Full) {
+            k += 1;
+        }
+        i += 1;
+    }
+    names
+};
+
 impl TechniqueName {
+    /// The full mesh drawn as the reference is.
+    pub const FULL: Self = Self::Technique(Technique::Full);
+
     /// The name as `--technique` takes it.
     #[must_use]
     pub fn name(self) -> &'static str {
         match self {
-            Self::Full => "full",
+            Self::Technique(t) => t.name(),
             Self::Full1x => "full-1x",
-            Self::Spt => "spt",
-            Self::Ellipsoids => "ellipsoids",
-            Self::Impostors => "impostors",
-            Self::PruneOpt => "prune-opt",
-            Self::PruneCook => "prune-cook",
-            Self::Policy => "policy",
-            Self::LodChain => "lod-chain",
-            Self::Billboard => "billboard",
-            Self::Crossed => "crossed",
         }
+    }
+
+    /// The technique drawn ([`Technique::Full`] for `full-1x`).
+    #[must_use]
+    pub fn technique(self) -> Technique {
+        match self {
+            Self::Technique(t) => t,
+            Self::Full1x => Technique::Full,
+        }
+    }
+}
+
+impl clap::ValueEnum for TechniqueName {
+    fn value_variants<'a>() -> &'a [Self] {
+        &NAMES
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        let help = match self {
+            Self::Technique(Technique::Full) => "the full mesh drawn as the reference is (supersampled)",
+            Self::Technique(t) => t.label(),
+            Self::Full1x => "the full mesh at the image size (the aliasing floor)",
+        };
+        Some(clap::builder::PossibleValue::new(self.name()).help(help))
     }
 }
 
@@ -195,18 +206,15 @@ pub enum Availability {
     Measured,
     /// The input holds none of the data it draws.
     Absent(String),
-    /// The data is there (or not needed) but treelod cannot draw it yet.
-    NotImplemented(String),
 }
 
 impl Availability {
-    /// `measured`, `absent` or `not implemented yet`.
+    /// `measured` or `absent`.
     #[must_use]
     pub fn status(&self) -> &'static str {
         match self {
             Self::Measured => "measured",
             Self::Absent(_) => "absent",
-            Self::NotImplemented(_) => "not implemented yet",
         }
     }
 
@@ -215,52 +223,20 @@ impl Availability {
     pub fn reason(&self) -> Option<&str> {
         match self {
             Self::Measured => None,
-            Self::Absent(r) | Self::NotImplemented(r) => Some(r),
+            Self::Absent(r) => Some(r),
         }
     }
 }
 
-/// Records of the optional kinds summed over the input's models.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct OptionalData {
-    /// Ellipsoids and lines.
-    pub ellipsoids: u64,
-    /// Impostor planes.
-    pub planes: u64,
-    /// Pruned leaves.
-    pub prune_leaves: u64,
-    /// Baseline LoD chain levels.
-    pub lod_levels: u64,
-    /// Baseline billboard quads.
-    pub billboards: u64,
-}
-
-/// Whether `technique` can be measured on an input holding `data`; `scene` words the reason for a
-/// scene file rather than one container.
+/// Whether `technique` can be measured on an input whose models hold each technique's data as
+/// `held` counts them; `holder` begins the reason (`this container holds no`, `no model of the
+/// scene holds`).
 #[must_use]
-pub fn availability(technique: TechniqueName, data: OptionalData, scene: bool) -> Availability {
-    let holder = if scene { "no model of the scene holds" } else { "this container holds no" };
-    match technique {
-        TechniqueName::Full | TechniqueName::Full1x | TechniqueName::Spt => Availability::Measured,
-        TechniqueName::Ellipsoids if data.ellipsoids > 0 => Availability::Measured,
-        TechniqueName::Ellipsoids => Availability::Absent(format!("{holder} ellipsoids or lines")),
-        TechniqueName::Impostors if data.planes > 0 => Availability::Measured,
-        TechniqueName::Impostors => Availability::Absent(format!("{holder} impostor planes")),
-        TechniqueName::PruneOpt | TechniqueName::PruneCook if data.prune_leaves > 0 => Availability::Measured,
-        TechniqueName::PruneOpt | TechniqueName::PruneCook => {
-            Availability::Absent(format!("{holder} pruning priority lists"))
-        }
-        TechniqueName::Policy => {
-            Availability::NotImplemented("there is no distance policy choosing among techniques".to_owned())
-        }
-        TechniqueName::LodChain if data.lod_levels > 0 => Availability::Measured,
-        TechniqueName::LodChain => {
-            Availability::Absent(format!("{holder} baseline LoD chain (build with --baselines)"))
-        }
-        TechniqueName::Billboard | TechniqueName::Crossed if data.billboards > 0 => Availability::Measured,
-        TechniqueName::Billboard | TechniqueName::Crossed => {
-            Availability::Absent(format!("{holder} baseline billboards (build with --baselines)"))
-        }
+pub fn availability(technique: TechniqueName, held: PerTechnique<usize>, holder: &str) -> Availability {
+    let technique = technique.technique();
+    match technique.needs() {
+        Some(data) if held.get(technique) == 0 => Availability::Absent(format!("{holder} {}", data.description())),
+        _ => Availability::Measured,
     }
 }
 
@@ -326,13 +302,16 @@ impl Row {
     }
 }
 
-/// Bytes of triangle, point, impostor plane and billboard records submitted in a frame.
+/// Bytes of triangle, point, impostor plane, billboard, ellipsoid and line records submitted in a
+/// frame.
 #[must_use]
 pub fn geometry_bytes(stats: &FrameStats) -> u64 {
     stats.triangles * size_of::<treelod_format::TriangleRecord>() as u64
         + stats.points * size_of::<treelod_format::PointRecord>() as u64
         + stats.planes * size_of::<treelod_format::PlaneRecord>() as u64
         + stats.billboards * size_of::<treelod_format::BillboardRecord>() as u64
+        + stats.ellipsoids * size_of::<treelod_format::EllipsoidRecord>() as u64
+        + stats.lines * size_of::<treelod_format::LineRecord>() as u64
 }
 
 /// Quads submitted in a frame: impostor planes and billboard quads.
@@ -341,10 +320,11 @@ pub fn quads(stats: &FrameStats) -> u64 {
     stats.planes + stats.billboards
 }
 
-/// Primitives submitted in a frame: triangles, points and [`quads`].
+/// Primitives submitted in a frame, every kind ([`FrameStats::primitives`]): triangles, points,
+/// [`quads`], ellipsoids and lines.
 #[must_use]
 pub fn primitives(stats: &FrameStats) -> u64 {
-    stats.triangles + stats.points + quads(stats)
+    stats.primitives()
 }
 
 /// Everything a run measured, for the outputs.
@@ -355,6 +335,8 @@ pub struct Report {
     pub camera_source: String,
     /// The cameras.
     pub poses: Vec<Pose>,
+    /// Per camera: the scene's height on screen, pixels ([`projected_height`]).
+    pub heights: Vec<f64>,
     /// Image size.
     pub size: (u32, u32),
     /// Supersampling factor of the reference.
@@ -416,7 +398,10 @@ pub struct SheetFrame {
 
 /// Runs `treelod eval`.
 pub fn run(args: &Args) -> Result<(), Failed> {
-    for output in [&args.csv, &args.json, &args.sheet, &args.quality_plot, &args.frame_plot].into_iter().flatten() {
+    for output in [&args.csv, &args.json, &args.sheet, &args.quality_plot, &args.frame_plot, &args.band_plot]
+        .into_iter()
+        .flatten()
+    {
         if output.is_dir() {
             report::message_error(output, "is a directory; name the file to write");
             return Err(Failed { class: ErrorClass::Io });
@@ -430,11 +415,16 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         })?),
         None => None,
     };
-    let data = optional_data(&scene)?;
+    let held = held_by_models(&scene)?;
     let mut techniques: Vec<(TechniqueName, Availability)> = Vec::new();
     for &name in &args.technique {
         if !techniques.iter().any(|(n, _)| *n == name) {
-            techniques.push((name, availability(name, data, !scene::is_container_path(&args.input))));
+            let holder = if scene::is_container_path(&args.input) {
+                "this container holds no"
+            } else {
+                "no model of the scene holds"
+            };
+            techniques.push((name, availability(name, held, holder)));
         }
     }
     if techniques.iter().all(|(_, a)| *a != Availability::Measured) {
@@ -465,7 +455,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             .map_err(|e| crate::render::scene_failed(&e))?;
         Ok((renderer, bounds))
     };
-    let full_settings = Settings { full_mesh: true, ..Settings::default() };
+    let full_settings = Settings { technique: Technique::Full, ..Settings::default() };
     // The reference keeps the leaves' coverage where their textures are minified: the plain alpha
     // test drops every texel less than half covered, so thin leaves vanish from a distant crown
     // even at 4× (the maple at 32 bounding radii kept 60 % of the darkening that alpha to
@@ -479,39 +469,25 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             continue;
         }
         let (settings, supersample) = match name {
-            TechniqueName::Full => (reference_settings, k),
+            &TechniqueName::FULL => (reference_settings, k),
             TechniqueName::Full1x => (full_settings, 1),
-            _ => {
-                let mut settings = Settings::default();
+            TechniqueName::Technique(technique) => {
+                let mut settings = Settings { technique: *technique, ..Settings::default() };
                 settings.s_min = args.s_min.unwrap_or(settings.s_min);
                 settings.s_max = args.s_max.unwrap_or(settings.s_max);
                 // The pruning techniques prune every tree at every distance (no point tree for
                 // small ones), with the container's λ(h), the occlusion factor and hysteresis.
-                let scale = match name {
-                    TechniqueName::PruneOpt => Some(PruneScale::Optimal),
-                    TechniqueName::PruneCook => Some(PruneScale::Cook),
-                    _ => None,
-                };
-                settings.pruning = scale.map(|scale| Pruning { scale, spt_below_pixels: 0.0, ..Pruning::default() });
+                settings.pruning = Pruning { spt_below_pixels: 0.0, ..Pruning::default() };
                 // Impostors: the leaves of every tree with planes as planes, its bark as triangles.
-                settings.impostors = *name == TechniqueName::Impostors;
                 args.impostor.apply(&mut settings);
                 // Ellipsoids: the leaves of every tree with ellipsoids as ellipsoids, its bark as
                 // its branch lines where it has them (unless `--no-lines`), else as triangles.
-                settings.ellipsoids = *name == TechniqueName::Ellipsoids;
                 settings.lines = !args.no_lines;
                 settings.level_blend = args.level_blend;
-                // Baselines: every tree with the baseline drawn with it.
-                settings.baseline = match name {
-                    TechniqueName::LodChain => Some(Baseline::LodChain),
-                    TechniqueName::Billboard => Some(Baseline::Billboard(BillboardKind::Facing)),
-                    TechniqueName::Crossed => Some(Baseline::Billboard(BillboardKind::Crossed)),
-                    _ => None,
-                };
                 (settings, 1)
             }
         };
-        let samples = if *name == TechniqueName::Full { 1 } else { args.msaa };
+        let samples = if *name == TechniqueName::FULL { 1 } else { args.msaa };
         measured.push(Measured { name: *name, renderer: add(settings, samples)?.0, supersample, previous: None });
     }
 
@@ -600,10 +576,12 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     }
     progress.finish_and_clear();
 
+    let heights = poses.iter().map(|pose| projected_height(bounds, pose, fovy, height)).collect();
     let report = Report {
         input: args.input.clone(),
         camera_source,
         poses,
+        heights,
         size: args.size,
         supersample: k,
         msaa: args.msaa,
@@ -627,6 +605,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     for (file, draw) in [
         (&args.quality_plot, plot::quality_vs_primitives as fn(&Report) -> treelod_render::offscreen::Image),
         (&args.frame_plot, plot::per_frame),
+        (&args.band_plot, plot::by_band),
     ] {
         if let Some(file) = file {
             crate::render::write_png(file, &draw(&report))?;
@@ -634,7 +613,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     }
     report::write_stdout(&output::text(
         &report,
-        [&args.csv, &args.json, &args.sheet, &args.quality_plot, &args.frame_plot],
+        [&args.csv, &args.json, &args.sheet, &args.quality_plot, &args.frame_plot, &args.band_plot],
     ))
 }
 
@@ -653,19 +632,29 @@ pub(crate) fn measurable(
     Ok((linear.box_filter(k)?, mask.reduce_majority(k)?))
 }
 
-/// Sums the optional record kinds over the scene's models (each opened and checked as every
+/// How many of the scene's models hold each technique's data (each opened and checked as every
 /// reader does).
-fn optional_data(scene: &Scene) -> Result<OptionalData, Failed> {
-    let mut data = OptionalData::default();
+fn held_by_models(scene: &Scene) -> Result<PerTechnique<usize>, Failed> {
+    let mut held = PerTechnique::default();
     for model in &scene.models {
         let container = Container::open(model).map_err(|e| report::file_error(model, &e))?;
-        data.ellipsoids += (container.ellipsoids().len() + container.lines().len()) as u64;
-        data.planes += container.planes().len() as u64;
-        data.prune_leaves += container.prune_leaves().len() as u64;
-        data.lod_levels += container.lod_levels().len() as u64;
-        data.billboards += container.billboards().len() as u64;
+        for technique in Technique::ALL {
+            *held.get_mut(technique) += usize::from(technique.held_by(&container));
+        }
     }
-    Ok(data)
+    Ok(held)
+}
+
+/// The height on screen, pixels, of the scene's bounds seen from `pose` in an image `image_height`
+/// pixels high with a vertical field of view of `fovy` radians: the bounds' vertical extent over
+/// the distance from the eye to their centre, times the focal length in pixels. For one tree this
+/// is the tree's projected height, the size the bands of eval's summary (and a level-of-detail
+/// policy) are measured in.
+#[must_use]
+pub fn projected_height(bounds: (Vec3, Vec3), pose: &Pose, fovy: f32, image_height: u32) -> f64 {
+    let focal = f64::from(image_height) / (2.0 * f64::from((0.5 * fovy).tan()).max(1e-9));
+    let distance = f64::from(pose.eye.distance(0.5 * (bounds.0 + bounds.1))).max(1e-6);
+    f64::from(bounds.1.y - bounds.0.y) * focal / distance
 }
 
 /// The cameras the arguments ask for, and how to say where they came from.
@@ -720,37 +709,59 @@ fn progress_bar(len: u64) -> indicatif::ProgressBar {
 mod tests {
     use super::*;
 
+    const CONTAINER: &str = "this container holds no";
+    const SCENE: &str = "no model of the scene holds";
+
     #[test]
-    fn techniques_that_do_not_exist_yet_are_reported_not_skipped() {
-        let none = OptionalData::default();
-        assert_eq!(availability(TechniqueName::Spt, none, false), Availability::Measured);
+    fn techniques_whose_data_is_missing_are_reported_not_skipped() {
+        let none = PerTechnique::<usize>::default();
+        assert_eq!(availability(TechniqueName::Technique(Technique::Spt), none, CONTAINER), Availability::Measured);
+        assert_eq!(availability(TechniqueName::Full1x, none, CONTAINER), Availability::Measured);
         assert_eq!(
-            availability(TechniqueName::Ellipsoids, none, false),
-            Availability::Absent("this container holds no ellipsoids or lines".to_owned())
+            availability(TechniqueName::Technique(Technique::Ellipsoids), none, CONTAINER),
+            Availability::Absent(
+                "this container holds no ellipsoids (build with --ellipsoids, and --lines for the bark)".to_owned()
+            )
         );
         assert_eq!(
-            availability(TechniqueName::Impostors, none, true).reason(),
-            Some("no model of the scene holds impostor planes")
+            availability(TechniqueName::Technique(Technique::Impostors), none, SCENE).reason(),
+            Some("no model of the scene holds impostor planes (build with --impostors)")
         );
         assert_eq!(
-            availability(TechniqueName::Crossed, none, false).reason(),
+            availability(TechniqueName::Technique(Technique::Crossed), none, CONTAINER).reason(),
             Some("this container holds no baseline billboards (build with --baselines)")
         );
-        let some = OptionalData { ellipsoids: 3, planes: 1, prune_leaves: 2, lod_levels: 5, billboards: 4 };
-        for t in [
-            TechniqueName::Ellipsoids,
-            TechniqueName::PruneOpt,
-            TechniqueName::PruneCook,
-            TechniqueName::Impostors,
-            TechniqueName::LodChain,
-            TechniqueName::Billboard,
-            TechniqueName::Crossed,
-        ] {
-            assert_eq!(availability(t, some, false), Availability::Measured);
-            assert_eq!(availability(t, none, false).status(), "absent");
+        let some = PerTechnique([1; Technique::COUNT]);
+        for t in Technique::ALL {
+            assert_eq!(availability(TechniqueName::Technique(t), some, CONTAINER), Availability::Measured);
+            let expected = if t.needs().is_some() { "absent" } else { "measured" };
+            assert_eq!(availability(TechniqueName::Technique(t), none, CONTAINER).status(), expected);
         }
-        let a = availability(TechniqueName::Policy, some, false);
-        assert_eq!(a.status(), "not implemented yet");
+    }
+
+    #[test]
+    fn every_technique_of_the_one_list_is_a_name_and_full_1x_follows_full() {
+        use clap::ValueEnum as _;
+        let names: Vec<&str> = TechniqueName::value_variants().iter().map(|n| n.name()).collect();
+        assert_eq!(names.len(), Technique::COUNT + 1);
+        assert_eq!(&names[..3], ["full", "full-1x", "spt"]);
+        for t in Technique::ALL {
+            assert!(names.contains(&t.name()), "{t}");
+            assert_eq!(TechniqueName::from_str(t.name(), false), Ok(TechniqueName::Technique(t)));
+        }
+        assert_eq!(TechniqueName::from_str("full-1x", false), Ok(TechniqueName::Full1x));
+        assert!(TechniqueName::from_str("policy", false).is_err());
+    }
+
+    #[test]
+    fn the_projected_height_halves_with_twice_the_distance() {
+        let bounds = (Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 10.0, 1.0));
+        let at = |d: f32| Pose { eye: Vec3::new(0.0, 5.0, d), target: Vec3::new(0.0, 5.0, 0.0) };
+        // 90° field of view: the focal length is half the image height, 240 px for 480.
+        let fovy = std::f32::consts::FRAC_PI_2;
+        let h = projected_height(bounds, &at(20.0), fovy, 480);
+        assert!((h - 10.0 * 240.0 / 20.0).abs() < 1e-3, "{h}");
+        assert!((projected_height(bounds, &at(40.0), fovy, 480) - h / 2.0).abs() < 1e-3);
     }
 
     #[test]

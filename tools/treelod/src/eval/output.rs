@@ -10,6 +10,7 @@ use treelod_render::offscreen::Image;
 use super::metrics::{self, Coverage, LinearImage, Mask};
 use super::{Adapter, Availability, Report, Row, TechniqueName};
 use crate::table::{Align, Table};
+use treelod_render::Technique;
 
 /// What the time columns measure, said wherever they appear.
 fn timing(timestamps: bool) -> &'static str {
@@ -42,11 +43,13 @@ pub struct Summary {
 /// Means per frame of one technique.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Means {
+    /// Primitives submitted, every kind ([`Row::primitives`]).
+    pub primitives: f64,
     /// Triangles submitted.
     pub triangles: f64,
     /// Points submitted.
     pub points: f64,
-    /// Bytes of triangle and point records submitted.
+    /// Bytes of the records submitted, every kind ([`Row::geometry_bytes`]).
     pub geometry_bytes: f64,
     /// Bytes of model data resident on the GPU.
     pub bytes_resident: f64,
@@ -82,11 +85,13 @@ pub struct Means {
 /// Sums over the frames of one technique.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Totals {
+    /// Primitives submitted, every kind.
+    pub primitives: u64,
     /// Triangles submitted.
     pub triangles: u64,
     /// Points submitted.
     pub points: u64,
-    /// Bytes of triangle and point records submitted.
+    /// Bytes of the records submitted, every kind.
     pub geometry_bytes: u64,
     /// True positive pixels.
     pub tp: u64,
@@ -117,6 +122,7 @@ pub fn summarise(rows: &[Row], technique: TechniqueName) -> Summary {
     let mean_of = |values: Vec<f64>| (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64);
     let levels = rows.first().map_or(0, |r| r.rmse.levels.len());
     let total = Totals {
+        primitives: rows.iter().map(|r| r.primitives()).sum(),
         triangles: rows.iter().map(|r| r.stats.triangles).sum(),
         points: rows.iter().map(|r| r.stats.points).sum(),
         geometry_bytes: rows.iter().map(|r| r.geometry_bytes()).sum(),
@@ -128,6 +134,7 @@ pub fn summarise(rows: &[Row], technique: TechniqueName) -> Summary {
     Summary {
         frames: rows.len(),
         mean: Means {
+            primitives: mean(&|r| r.primitives() as f64),
             triangles: mean(&|r| r.stats.triangles as f64),
             points: mean(&|r| r.stats.points as f64),
             geometry_bytes: mean(&|r| r.geometry_bytes() as f64),
@@ -151,22 +158,93 @@ pub fn summarise(rows: &[Row], technique: TechniqueName) -> Summary {
     }
 }
 
-/// The description of a technique, for the JSON summary.
-fn description(technique: TechniqueName) -> &'static str {
-    match technique {
-        TechniqueName::Full => {
-            "the full mesh drawn as the reference is (supersampled, box-filtered): must read perfect"
+/// Bands of the scene's projected height, pixels ([`super::projected_height`]), largest first:
+/// `(lowest, label)`, each band from its lowest height up to the previous band's. The sizes on
+/// screen at which a tree's look changes class: a close-up, a near tree, the mid field, the far
+/// field, and a few pixels.
+pub const BANDS: [(f64, &str); 5] =
+    [(512.0, ">= 512 px"), (128.0, "128-512 px"), (32.0, "32-128 px"), (8.0, "8-32 px"), (0.0, "< 8 px")];
+
+/// The index in [`BANDS`] of a projected height.
+#[must_use]
+pub fn band_of(height: f64) -> usize {
+    BANDS.iter().position(|&(lowest, _)| height >= lowest).unwrap_or(BANDS.len() - 1)
+}
+
+/// One technique's figures over the frames of one band of projected height.
+#[derive(Clone, Debug, Serialize)]
+pub struct BandSummary {
+    /// The band's label ([`BANDS`]).
+    pub band: &'static str,
+    /// The technique's name.
+    pub technique: &'static str,
+    /// Frames of the band.
+    pub frames: usize,
+    /// Mean primitives per frame, every kind.
+    pub primitives: f64,
+    /// Mean precision, recall and Q.
+    pub precision: f64,
+    /// Mean recall.
+    pub recall: f64,
+    /// Mean Q.
+    pub q: f64,
+    /// Mean multi-scale RMSE.
+    pub rmse: f64,
+}
+
+/// Per band of projected height (largest first) and measured technique (in order), the means of
+/// its frames; bands without frames are left out.
+#[must_use]
+pub fn by_band(report: &Report) -> Vec<BandSummary> {
+    let mut out = Vec::new();
+    for (band, &(_, label)) in BANDS.iter().enumerate() {
+        for (name, availability) in &report.techniques {
+            if *availability != Availability::Measured {
+                continue;
+            }
+            let rows: Vec<&Row> = report
+                .rows
+                .iter()
+                .filter(|r| r.technique == *name)
+                .filter(|r| report.heights.get(r.frame).is_some_and(|&h| band_of(h) == band))
+                .collect();
+            if rows.is_empty() {
+                continue;
+            }
+            let n = rows.len() as f64;
+            let mean = |f: &dyn Fn(&Row) -> f64| rows.iter().map(|r| f(r)).sum::<f64>() / n;
+            out.push(BandSummary {
+                band: label,
+                technique: name.name(),
+                frames: rows.len(),
+                primitives: mean(&|r| r.primitives() as f64),
+                precision: mean(&|r| r.coverage.precision()),
+                recall: mean(&|r| r.coverage.recall()),
+                q: mean(&|r| r.coverage.quality()),
+                rmse: mean(&|r| r.rmse.summary()),
+            });
         }
+    }
+    out
+}
+
+/// The description of a technique, for the JSON summary.
+pub(crate) fn description(technique: TechniqueName) -> &'static str {
+    match technique {
         TechniqueName::Full1x => "the full mesh drawn at the image size (no supersampling): the aliasing floor",
-        TechniqueName::Spt => "triangles and points (Gilet 2005, sequential point trees): the default renderer",
-        TechniqueName::Ellipsoids => "clustered ellipsoids and lines (Clasen 2011)",
-        TechniqueName::Impostors => "leaf-cluster impostor planes (Garcia 2005)",
-        TechniqueName::PruneOpt => "pruning with s_opt (Neubert 2011)",
-        TechniqueName::PruneCook => "pruning with s_Cook = 1/lambda (stochastic baseline)",
-        TechniqueName::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
-        TechniqueName::Billboard => "baseline: one camera-facing billboard per tree",
-        TechniqueName::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
-        TechniqueName::Policy => "the default distance policy",
+        TechniqueName::Technique(t) => match t {
+            Technique::Full => {
+                "the full mesh drawn as the reference is (supersampled, box-filtered): must read perfect"
+            }
+            Technique::Spt => "triangles and points (Gilet 2005, sequential point trees): the default renderer",
+            Technique::Ellipsoids => "clustered ellipsoids and lines (Clasen 2011)",
+            Technique::Impostors => "leaf-cluster impostor planes (Garcia 2005)",
+            Technique::PruneOpt => "pruning with s_opt (Neubert 2011)",
+            Technique::PruneCook => "pruning with s_Cook = 1/lambda (stochastic baseline)",
+            Technique::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
+            Technique::Billboard => "baseline: one camera-facing billboard per tree",
+            Technique::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
+        },
     }
 }
 
@@ -189,7 +267,7 @@ pub fn unavailable(techniques: &[(TechniqueName, Availability)]) -> String {
 
 /// The report as text: a heading, absent techniques, the table, the files written.
 #[must_use]
-pub fn text(report: &Report, files: [&Option<PathBuf>; 5]) -> String {
+pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
     let (w, h) = report.size;
     let k = report.supersample;
     let mut out = String::new();
@@ -219,6 +297,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 5]) -> String {
     let mut table = Table::new(&[
         ("frame", Align::Right),
         ("technique", Align::Left),
+        ("primitives", Align::Right),
         ("triangles", Align::Right),
         ("points", Align::Right),
         ("geometry KiB", Align::Right),
@@ -239,6 +318,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 5]) -> String {
         table.row(vec![
             row.frame.to_string(),
             row.technique.name().to_owned(),
+            row.primitives().to_string(),
             row.stats.triangles.to_string(),
             row.stats.points.to_string(),
             format!("{:.1}", row.geometry_bytes() as f64 / 1024.0),
@@ -265,6 +345,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 5]) -> String {
         table.row(vec![
             "mean".to_owned(),
             name.name().to_owned(),
+            format!("{:.0}", m.primitives),
             format!("{:.0}", m.triangles),
             format!("{:.0}", m.points),
             format!("{:.1}", m.geometry_bytes / 1024.0),
@@ -283,7 +364,37 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 5]) -> String {
         ]);
     }
     out.push_str(&table.render(""));
-    for (what, file) in ["csv", "json", "sheet", "quality plot", "frame plot"].into_iter().zip(files) {
+    let bands = by_band(report);
+    if !bands.is_empty() {
+        let _ = writeln!(
+            out,
+            "by projected height (the scene's bounds on screen at their centre's distance, pixels; means per frame):"
+        );
+        let mut table = Table::new(&[
+            ("height", Align::Left),
+            ("technique", Align::Left),
+            ("frames", Align::Right),
+            ("primitives", Align::Right),
+            ("P", Align::Right),
+            ("R", Align::Right),
+            ("Q", Align::Right),
+            ("RMSE", Align::Right),
+        ]);
+        for b in &bands {
+            table.row(vec![
+                b.band.to_owned(),
+                b.technique.to_owned(),
+                b.frames.to_string(),
+                format!("{:.0}", b.primitives),
+                format!("{:.4}", b.precision),
+                format!("{:.4}", b.recall),
+                format!("{:.4}", b.q),
+                format!("{:.5}", b.rmse),
+            ]);
+        }
+        out.push_str(&table.render(""));
+    }
+    for (what, file) in ["csv", "json", "sheet", "quality plot", "frame plot", "band plot"].into_iter().zip(files) {
         if let Some(file) = file {
             let _ = write!(out, "{what}: {}", file.display());
             if what == "sheet" {
@@ -311,7 +422,9 @@ pub fn csv(report: &Report) -> String {
     for l in 0..levels {
         let _ = write!(out, ",rmse_{}px", 1u64 << l);
     }
-    out.push_str(",temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms,quads,primitives\n");
+    out.push_str(
+        ",temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms,quads,primitives,ellipsoids,lines\n",
+    );
     let optional = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
     for row in &report.rows {
         let pose = report
@@ -348,7 +461,7 @@ pub fn csv(report: &Report) -> String {
         }
         let _ = writeln!(
             out,
-            ",{},{},{:.3},{},{:.3},{},{}",
+            ",{},{},{:.3},{},{:.3},{},{},{},{}",
             optional(row.noise),
             optional(row.reference_noise),
             row.prepare_ms,
@@ -356,6 +469,8 @@ pub fn csv(report: &Report) -> String {
             row.wall_ms,
             super::quads(&row.stats),
             row.primitives(),
+            row.stats.ellipsoids,
+            row.stats.lines,
         );
     }
     out
@@ -379,6 +494,7 @@ struct JsonReport<'a> {
     adapter: &'a Adapter,
     timing: &'static str,
     techniques: Vec<JsonTechnique>,
+    bands: Vec<BandSummary>,
     poses: Vec<JsonPose>,
 }
 
@@ -395,6 +511,8 @@ struct JsonTechnique {
 struct JsonPose {
     eye: [f32; 3],
     target: [f32; 3],
+    /// The scene's height on screen, pixels.
+    projected_height: f64,
 }
 
 /// The JSON summary, pretty-printed, with a final newline.
@@ -431,7 +549,13 @@ pub fn json(report: &Report) -> Result<String, serde_json::Error> {
                 summary: (*availability == Availability::Measured).then(|| summarise(&report.rows, *name)),
             })
             .collect(),
-        poses: report.poses.iter().map(|p| JsonPose { eye: p.eye.to_array(), target: p.target.to_array() }).collect(),
+        bands: by_band(report),
+        poses: report
+            .poses
+            .iter()
+            .zip(&report.heights)
+            .map(|(p, &h)| JsonPose { eye: p.eye.to_array(), target: p.target.to_array(), projected_height: h })
+            .collect(),
     };
     let mut text = serde_json::to_string_pretty(&value)?;
     text.push('\n');
@@ -508,7 +632,7 @@ pub(super) mod tests {
         Row {
             frame,
             technique,
-            stats: FrameStats { triangles: 10, points: 4, ..FrameStats::default() },
+            stats: FrameStats { triangles: 10, points: 4, ellipsoids: 3, lines: 2, ..FrameStats::default() },
             coverage: Coverage { tp, fp: 1, fn_: 2 },
             rmse: MultiScaleRmse { levels: vec![0.2, 0.1, 0.0] },
             noise,
@@ -532,6 +656,7 @@ pub(super) mod tests {
                 Pose { eye: glam::Vec3::new(0.0, 1.0, 5.0), target: glam::Vec3::ZERO },
                 Pose { eye: glam::Vec3::new(5.0, 1.0, 0.0), target: glam::Vec3::ZERO },
             ],
+            heights: vec![600.0, 20.0],
             size: (3, 2),
             supersample: 2,
             msaa: 1,
@@ -545,23 +670,36 @@ pub(super) mod tests {
             },
             timestamps: true,
             techniques: vec![
-                (TechniqueName::Spt, Availability::Measured),
-                (TechniqueName::Ellipsoids, Availability::Absent("this container holds no ellipsoids".to_owned())),
+                (TechniqueName::Technique(Technique::Spt), Availability::Measured),
+                (
+                    TechniqueName::Technique(Technique::Ellipsoids),
+                    Availability::Absent("this container holds no ellipsoids".to_owned()),
+                ),
             ],
-            rows: vec![row(0, TechniqueName::Spt, 5, None), row(1, TechniqueName::Spt, 7, Some(0.1))],
+            rows: vec![
+                row(0, TechniqueName::Technique(Technique::Spt), 5, None),
+                row(1, TechniqueName::Technique(Technique::Spt), 7, Some(0.1)),
+            ],
             sheet: vec![SheetFrame {
                 frame: 0,
                 reference: (image.clone(), mask),
-                techniques: vec![(TechniqueName::Spt, image, other)],
+                techniques: vec![(TechniqueName::Technique(Technique::Spt), image, other)],
             }],
         }
     }
 
     #[test]
     fn the_summary_averages_frames_and_pools_counts() {
-        let s = summarise(&report().rows, TechniqueName::Spt);
+        let s = summarise(&report().rows, TechniqueName::Technique(Technique::Spt));
         assert_eq!(s.frames, 2);
-        assert_eq!((s.total.tp, s.total.fp, s.total.fn_, s.total.geometry_bytes), (12, 2, 4, 2 * (240 + 192)));
+        let ellipsoid_and_line_bytes = 3 * size_of::<treelod_format::EllipsoidRecord>() as u64
+            + 2 * size_of::<treelod_format::LineRecord>() as u64;
+        assert_eq!(
+            (s.total.tp, s.total.fp, s.total.fn_, s.total.geometry_bytes),
+            (12, 2, 4, 2 * (240 + 192 + ellipsoid_and_line_bytes))
+        );
+        // Ellipsoids and lines are primitives: 10 + 4 + 3 + 2 per frame.
+        assert_eq!((s.total.primitives, s.mean.primitives), (38, 19.0));
         assert!((s.mean.precision - (5.0 / 6.0 + 7.0 / 8.0) / 2.0).abs() < 1e-12);
         assert!((s.pooled.precision - 12.0 / 14.0).abs() < 1e-12 && (s.pooled.recall - 12.0 / 16.0).abs() < 1e-12);
         assert_eq!(s.mean.temporal_noise, Some(0.1), "frame 0 has no previous frame");
@@ -572,13 +710,14 @@ pub(super) mod tests {
     #[test]
     fn text_csv_and_json_hold_every_row_and_the_absent_technique() {
         let report = report();
-        let text = text(&report, [&Some("e.csv".into()), &None, &None, &None, &None]);
+        let text = text(&report, [&Some("e.csv".into()), &None, &None, &None, &None, &None]);
         assert!(text.contains("technique ellipsoids: absent: this container holds no ellipsoids"), "{text}");
         assert!(
             text.contains("wall ms") && text.contains("GPU ms: the render pass from GPU timestamp queries"),
             "{text}"
         );
-        assert_eq!(text.lines().filter(|l| l.contains(" spt ")).count(), 3, "two frames and the mean: {text}");
+        let frames = text.lines().filter(|l| l.contains(" spt ") && !l.contains(" px ")).count();
+        assert_eq!(frames, 3, "two frames and the mean: {text}");
         assert!(text.ends_with("csv: e.csv\n"), "{text}");
         let csv = csv(&report);
         let lines: Vec<&str> = csv.lines().collect();
@@ -592,6 +731,29 @@ pub(super) mod tests {
         assert!(json["techniques"][1]["summary"].is_null());
         assert_eq!(json["adapter"]["backend"], "Vulkan");
         assert_eq!(json["rmse_levels"], 3);
+        // One band per frame here: frame 0 at 600 px, frame 1 at 20 px.
+        assert_eq!(json["bands"].as_array().map(Vec::len), Some(2));
+        assert_eq!(json["bands"][0]["band"], ">= 512 px");
+        assert_eq!(json["bands"][1]["band"], "8-32 px");
+        assert_eq!(json["poses"][1]["projected_height"], 20.0);
+        assert!(text.contains("by projected height") && text.contains("8-32 px"), "{text}");
+    }
+
+    #[test]
+    fn heights_fall_into_the_bands_from_the_largest_down() {
+        assert_eq!(band_of(4000.0), 0);
+        assert_eq!(band_of(512.0), 0);
+        assert_eq!(band_of(511.9), 1);
+        assert_eq!(band_of(32.0), 2);
+        assert_eq!(band_of(8.0), 3);
+        assert_eq!(band_of(7.9), 4);
+        assert_eq!(band_of(0.0), 4);
+        let report = report();
+        let bands = by_band(&report);
+        assert_eq!(bands.len(), 2);
+        assert_eq!((bands[0].frames, bands[1].frames), (1, 1));
+        // Frame 0 has 5 true positives, frame 1 has 7.
+        assert!((bands[0].precision - 5.0 / 6.0).abs() < 1e-12 && (bands[1].precision - 7.0 / 8.0).abs() < 1e-12);
     }
 
     #[test]

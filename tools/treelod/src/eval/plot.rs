@@ -6,14 +6,15 @@ use embedded_graphics::mono_font::MonoTextStyle;
 use embedded_graphics::mono_font::ascii::FONT_6X10;
 use embedded_graphics::pixelcolor::Rgb888;
 use embedded_graphics::prelude::*;
-use embedded_graphics::primitives::{Circle, Line, PrimitiveStyle, Rectangle};
+use embedded_graphics::primitives::{Circle, Line, PrimitiveStyle, Rectangle, Triangle};
 use embedded_graphics::text::{Alignment, Baseline, Text, TextStyleBuilder};
 use treelod_render::offscreen::Image;
 
 use super::{Availability, Report, Row, TechniqueName};
+use treelod_render::Technique;
 
-/// Colours of the techniques, in the order they are measured (Tableau 10).
-pub(crate) const PALETTE: [Rgb888; 8] = [
+/// Colours of series in the order they are drawn, where a series is not a technique (Tableau 10).
+pub(crate) const PALETTE: [Rgb888; 10] = [
     Rgb888::new(31, 119, 180),
     Rgb888::new(255, 127, 14),
     Rgb888::new(44, 160, 44),
@@ -22,7 +23,85 @@ pub(crate) const PALETTE: [Rgb888; 8] = [
     Rgb888::new(140, 86, 75),
     Rgb888::new(227, 119, 194),
     Rgb888::new(127, 127, 127),
+    Rgb888::new(188, 189, 34),
+    Rgb888::new(23, 190, 207),
 ];
+
+/// The shape of a technique's dots, so techniques stay apart where colours are hard to tell.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Marker {
+    Circle,
+    Square,
+    Triangle,
+    TriangleDown,
+    Diamond,
+    Cross,
+    Plus,
+}
+
+/// The colour and marker of a technique in every plot: fixed per technique (not per position in
+/// a run), each colour of [`PALETTE`] used once, so the same technique looks the same in every
+/// plot and no two techniques share a look.
+pub(crate) fn style(technique: Technique, full_1x: bool) -> (Rgb888, Marker) {
+    let index = if full_1x { Technique::COUNT } else { technique.index() };
+    // The techniques compared most often (the point tree, pruning, impostors, ellipsoids, the
+    // chain, the full mesh at 1×) all differ in shape as well as colour.
+    let marker = match (technique, full_1x) {
+        (_, true) => Marker::Plus,
+        (Technique::Full | Technique::Ellipsoids, _) => Marker::Circle,
+        (Technique::Spt | Technique::Billboard, _) => Marker::Square,
+        (Technique::PruneOpt, _) => Marker::Triangle,
+        (Technique::PruneCook, _) => Marker::TriangleDown,
+        (Technique::Impostors | Technique::Crossed, _) => Marker::Diamond,
+        (Technique::LodChain, _) => Marker::Cross,
+    };
+    (PALETTE[index % PALETTE.len()], marker)
+}
+
+/// The look of what a row measures.
+pub(crate) fn style_of(name: TechniqueName) -> (Rgb888, Marker) {
+    style(name.technique(), name == TechniqueName::Full1x)
+}
+
+/// A marker of `diameter` pixels at `centre`.
+pub(crate) fn marker(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888, shape: Marker) {
+    let fill = PrimitiveStyle::with_fill(colour);
+    let r = diameter as i32 / 2;
+    let Ok(()) = match shape {
+        Marker::Circle => Circle::with_center(centre, diameter).into_styled(fill).draw(canvas),
+        Marker::Square => {
+            let side = (diameter * 4 / 5).max(1);
+            Rectangle::with_center(centre, Size::new(side, side)).into_styled(fill).draw(canvas)
+        }
+        Marker::Triangle => {
+            Triangle::new(centre + Point::new(0, -r), centre + Point::new(r, r), centre + Point::new(-r, r))
+                .into_styled(fill)
+                .draw(canvas)
+        }
+        Marker::TriangleDown => {
+            Triangle::new(centre + Point::new(0, r), centre + Point::new(r, -r), centre + Point::new(-r, -r))
+                .into_styled(fill)
+                .draw(canvas)
+        }
+        Marker::Cross | Marker::Plus => {
+            let width = (diameter / 4).max(2);
+            let (a, b) = if shape == Marker::Cross {
+                ((Point::new(-r, -r), Point::new(r, r)), (Point::new(-r, r), Point::new(r, -r)))
+            } else {
+                ((Point::new(-r, 0), Point::new(r, 0)), (Point::new(0, -r), Point::new(0, r)))
+            };
+            let stroke = PrimitiveStyle::with_stroke(colour, width);
+            let _ = Line::new(centre + a.0, centre + a.1).into_styled(stroke).draw(canvas);
+            Line::new(centre + b.0, centre + b.1).into_styled(stroke).draw(canvas)
+        }
+        Marker::Diamond => {
+            let (top, bottom) = (centre + Point::new(0, -r), centre + Point::new(0, r));
+            let _ = Triangle::new(top, centre + Point::new(r, 0), bottom).into_styled(fill).draw(canvas);
+            Triangle::new(top, centre + Point::new(-r, 0), bottom).into_styled(fill).draw(canvas)
+        }
+    };
+}
+
 pub(crate) const BLACK: Rgb888 = Rgb888::new(0, 0, 0);
 pub(crate) const GRID: Rgb888 = Rgb888::new(225, 225, 225);
 pub(crate) const REFERENCE: Rgb888 = Rgb888::new(110, 110, 110);
@@ -241,14 +320,16 @@ impl Panel {
     }
 }
 
-/// The measured techniques with their colours.
-fn measured(report: &Report) -> Vec<(TechniqueName, Rgb888)> {
+/// The measured techniques with their colours and markers ([`style_of`]).
+fn measured(report: &Report) -> Vec<(TechniqueName, Rgb888, Marker)> {
     report
         .techniques
         .iter()
         .filter(|(_, a)| *a == Availability::Measured)
-        .enumerate()
-        .map(|(i, (name, _))| (*name, PALETTE[i % PALETTE.len()]))
+        .map(|(name, _)| {
+            let (colour, shape) = style_of(*name);
+            (*name, colour, shape)
+        })
         .collect()
 }
 
@@ -259,6 +340,27 @@ fn rows_of(report: &Report, technique: TechniqueName) -> impl Iterator<Item = &R
 /// Primitives a frame drew ([`Row::primitives`]).
 fn primitives(row: &Row) -> f64 {
     row.primitives() as f64
+}
+
+/// A legend box at the top right of `area` whose entries show each series' marker beside its line.
+/// Width of the margin right of a plot's panels that holds its legend ([`legend_with_markers`]),
+/// so the legend hides no data: the top right of a quality plot is where the full mesh sits.
+pub(crate) const LEGEND_MARGIN: u32 = 170;
+
+/// The margin of [`LEGEND_MARGIN`] at the right of a canvas `width` wide, from `top` down.
+fn legend_margin(width: u32, top: i32, height: u32) -> Rectangle {
+    Rectangle::new(Point::new(width as i32 - LEGEND_MARGIN as i32, top), Size::new(LEGEND_MARGIN, height))
+}
+
+pub(crate) fn legend_with_markers(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, Rgb888, Marker)]) {
+    let plain: Vec<(String, Rgb888)> = entries.iter().map(|(t, c, _)| (t.clone(), *c)).collect();
+    legend(canvas, area, &plain);
+    let width = 28 + 6 * entries.iter().map(|(t, _, _)| t.chars().count()).max().unwrap_or(0) as i32;
+    let right = area.top_left.x + area.size.width as i32 - 6;
+    for (i, (_, colour, shape)) in entries.iter().enumerate() {
+        let centre = Point::new(right - width + 12, area.top_left.y + 6 + 9 + 12 * i as i32);
+        marker(canvas, centre, 9, *colour, *shape);
+    }
 }
 
 /// A legend box at the top right of `area`.
@@ -281,35 +383,80 @@ pub(crate) fn legend(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, 
 /// each technique's mean; the better technique sits higher and further left.
 #[must_use]
 pub fn quality_vs_primitives(report: &Report) -> Image {
-    let (width, height) = (720u32, 480u32);
+    let (width, height) = (720u32 + LEGEND_MARGIN, 480u32);
     let mut canvas = Canvas::new(width, height);
     let techniques = measured(report);
     let x = Axis::log(report.rows.iter().map(primitives));
     let y = Axis::linear(report.rows.iter().map(|r| r.coverage.quality()).chain([1.0]), 0.1);
-    let area = Rectangle::new(Point::new(64, 36), Size::new(width - 64 - 24, height - 36 - 48));
+    let area = Rectangle::new(Point::new(64, 36), Size::new(720 - 64 - 24, height - 36 - 48));
     let panel = Panel { area, x, y };
     panel.draw_axes(
         &mut canvas,
         "quality Q = 1 - |(1 - P, 1 - R)| against primitives drawn per frame",
-        Some("primitives: triangles + points + quads (log)"),
+        Some("primitives: triangles + points + quads + ellipsoids + lines (log)"),
     );
-    for (name, colour) in &techniques {
-        for row in rows_of(report, *name) {
-            dot(&mut canvas, panel.point(primitives(row), row.coverage.quality()), 5, *colour);
+    for &(name, colour, shape) in &techniques {
+        for row in rows_of(report, name) {
+            marker(&mut canvas, panel.point(primitives(row), row.coverage.quality()), 6, colour, shape);
         }
-        let rows: Vec<&Row> = rows_of(report, *name).collect();
+        let rows: Vec<&Row> = rows_of(report, name).collect();
         if !rows.is_empty() {
             let n = rows.len() as f64;
             let mean_x = rows.iter().map(|r| primitives(r)).sum::<f64>() / n;
             let mean_q = rows.iter().map(|r| r.coverage.quality()).sum::<f64>() / n;
             let centre = panel.point(mean_x, mean_q);
-            dot(&mut canvas, centre, 13, BLACK);
-            dot(&mut canvas, centre, 9, *colour);
+            marker(&mut canvas, centre, 15, BLACK, shape);
+            marker(&mut canvas, centre, 11, colour, shape);
         }
     }
-    let entries: Vec<(String, Rgb888)> =
-        techniques.iter().map(|(n, c)| (format!("{} (large: mean)", n.name()), *c)).collect();
-    legend(&mut canvas, &area, &entries);
+    let entries: Vec<(String, Rgb888, Marker)> =
+        techniques.iter().map(|(n, c, m)| (format!("{} (large: mean)", n.name()), *c, *m)).collect();
+    legend_with_markers(&mut canvas, &legend_margin(width, 36, height - 84), &entries);
+    canvas.into_image()
+}
+
+/// Multi-scale RMSE against primitives drawn (log), one panel per band of projected height that
+/// has frames (largest first): a small marker per frame and a large one at each technique's mean
+/// in the band, so the cheapest technique of acceptable error at each size on screen sits lowest
+/// and furthest left. The panels share their axes.
+#[must_use]
+pub fn by_band(report: &Report) -> Image {
+    use super::output::{BANDS, band_of};
+    let techniques = measured(report);
+    let band_of_row = |r: &Row| report.heights.get(r.frame).map(|&h| band_of(h));
+    let bands: Vec<usize> =
+        (0..BANDS.len()).filter(|&b| report.rows.iter().any(|r| band_of_row(r) == Some(b))).collect();
+    let (panel_width, height) = (300u32, 420u32);
+    let width = 64 + bands.len().max(1) as u32 * (panel_width + 24) + LEGEND_MARGIN;
+    let mut canvas = Canvas::new(width, height);
+    let x = Axis::log(report.rows.iter().map(primitives));
+    let y = Axis::linear(report.rows.iter().map(|r| r.rmse.summary()).chain([0.0]), 1e-3);
+    for (i, &band) in bands.iter().enumerate() {
+        let left = 64 + i as i32 * (panel_width + 24) as i32;
+        let area = Rectangle::new(Point::new(left, 36), Size::new(panel_width, height - 36 - 48));
+        let panel = Panel { area, x, y };
+        let title = format!("RMSE against primitives, {}", BANDS[band].1);
+        panel.draw_axes(&mut canvas, &title, Some("primitives, every kind (log)"));
+        for &(name, colour, shape) in &techniques {
+            let rows: Vec<&Row> = rows_of(report, name).filter(|r| band_of_row(r) == Some(band)).collect();
+            for row in &rows {
+                marker(&mut canvas, panel.point(primitives(row), row.rmse.summary()), 5, colour, shape);
+            }
+            if !rows.is_empty() {
+                let n = rows.len() as f64;
+                let mean_x = rows.iter().map(|r| primitives(r)).sum::<f64>() / n;
+                let mean_y = rows.iter().map(|r| r.rmse.summary()).sum::<f64>() / n;
+                let centre = panel.point(mean_x, mean_y);
+                marker(&mut canvas, centre, 15, BLACK, shape);
+                marker(&mut canvas, centre, 11, colour, shape);
+            }
+        }
+        if i == 0 {
+            let entries: Vec<(String, Rgb888, Marker)> =
+                techniques.iter().map(|(n, c, m)| (n.name().to_owned(), *c, *m)).collect();
+            legend_with_markers(&mut canvas, &legend_margin(width, 36, height - 84), &entries);
+        }
+    }
     canvas.into_image()
 }
 
@@ -330,7 +477,7 @@ pub fn per_frame(report: &Report) -> Image {
     let metrics: [(&str, Metric, bool, f64); 4] = [
         ("quality Q", |r| Some(r.coverage.quality()), false, 1.0),
         ("multi-scale RMSE (linear colour, mean over scales)", |r| Some(r.rmse.summary()), false, 0.0),
-        ("primitives drawn: triangles + points + quads (log)", |r| Some(primitives(r)), true, 0.0),
+        ("primitives drawn, every kind (log)", |r| Some(primitives(r)), true, 0.0),
         ("temporal noise: multi-scale RMSE against the previous frame", |r| r.noise, false, 0.0),
     ];
     for (i, (title, metric, log, anchor)) in metrics.iter().enumerate() {
@@ -348,20 +495,21 @@ pub fn per_frame(report: &Report) -> Image {
         panel.draw_axes(&mut canvas, title, last.then_some("frame"));
         if noise_panel {
             // The reference's noise, once (every technique's rows carry the same figure).
-            if let Some((first, _)) = techniques.first() {
+            if let Some((first, _, _)) = techniques.first() {
                 let points: Vec<(f64, f64)> =
                     rows_of(report, *first).filter_map(|r| r.reference_noise.map(|n| (r.frame as f64, n))).collect();
                 panel.polyline(&mut canvas, &points, REFERENCE, true);
             }
         }
-        for (name, colour) in &techniques {
+        for (name, colour, _) in &techniques {
             let points: Vec<(f64, f64)> =
                 rows_of(report, *name).filter_map(|r| metric(r).map(|v| (r.frame as f64, v))).collect();
             panel.polyline(&mut canvas, &points, *colour, false);
         }
         if i == 0 {
-            let entries: Vec<(String, Rgb888)> = techniques.iter().map(|(n, c)| (n.name().to_owned(), *c)).collect();
-            legend(&mut canvas, &area, &entries);
+            let entries: Vec<(String, Rgb888, Marker)> =
+                techniques.iter().map(|(n, c, m)| (n.name().to_owned(), *c, *m)).collect();
+            legend_with_markers(&mut canvas, &area, &entries);
         }
         if noise_panel {
             legend(&mut canvas, &area, &[("reference (full mesh)".to_owned(), REFERENCE)]);
@@ -399,9 +547,15 @@ mod tests {
 
     /// The mean x and y of the pixels of `colour`.
     fn centroid(image: &Image, colour: Rgb888) -> (f64, f64) {
+        centroid_left_of(image, colour, image.width)
+    }
+
+    /// The mean x and y of the pixels of `colour` left of `x_end` (the panels, not the legend's
+    /// margin).
+    fn centroid_left_of(image: &Image, colour: Rgb888, x_end: u32) -> (f64, f64) {
         let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0);
         for y in 0..image.height {
-            for x in 0..image.width {
+            for x in 0..x_end.min(image.width) {
                 if image.pixel(x, y)[..3] == [colour.r(), colour.g(), colour.b()] {
                     (sx, sy, n) = (sx + f64::from(x), sy + f64::from(y), n + 1.0);
                 }
@@ -414,12 +568,14 @@ mod tests {
     #[test]
     fn the_quality_plot_puts_fewer_primitives_left_and_better_quality_higher() {
         let mut report = super::super::output::tests::report();
-        report.techniques =
-            vec![(TechniqueName::Full, Availability::Measured), (TechniqueName::Spt, Availability::Measured)];
+        report.techniques = vec![
+            (TechniqueName::FULL, Availability::Measured),
+            (TechniqueName::Technique(Technique::Spt), Availability::Measured),
+        ];
         let mut rows = Vec::new();
         for frame in 0..2 {
             let mut full = report.rows[frame].clone();
-            full.technique = TechniqueName::Full;
+            full.technique = TechniqueName::FULL;
             full.stats.triangles = 100_000;
             full.coverage = super::super::metrics::Coverage { tp: 100, fp: 0, fn_: 0 };
             let mut spt = report.rows[frame].clone();
@@ -429,14 +585,68 @@ mod tests {
         }
         report.rows = rows;
         let plot = quality_vs_primitives(&report);
-        let (full, spt) = (centroid(&plot, PALETTE[0]), centroid(&plot, PALETTE[1]));
+        let (full_colour, spt_colour) =
+            (style_of(TechniqueName::FULL).0, style_of(TechniqueName::Technique(Technique::Spt)).0);
+        let panels = plot.width - LEGEND_MARGIN;
+        let (full, spt) = (centroid_left_of(&plot, full_colour, panels), centroid_left_of(&plot, spt_colour, panels));
+        // Both are in the legend too.
+        assert!(centroid(&plot, full_colour).0 > full.0 && centroid(&plot, spt_colour).0 > spt.0);
         assert!(spt.0 < full.0 - 200.0, "fewer primitives to the left: {spt:?} {full:?}");
         assert!(full.1 < spt.1 - 100.0, "higher Q higher up: {spt:?} {full:?}");
         let frames = per_frame(&report);
         assert_eq!((frames.width, frames.height), (720, 800));
-        centroid(&frames, PALETTE[0]);
-        centroid(&frames, PALETTE[1]);
+        centroid(&frames, full_colour);
+        centroid(&frames, spt_colour);
         centroid(&frames, REFERENCE);
+    }
+
+    #[test]
+    fn every_technique_has_its_own_colour_and_every_shape_is_drawn() {
+        use clap::ValueEnum as _;
+        let looks: Vec<_> = TechniqueName::value_variants().iter().map(|&n| style_of(n)).collect();
+        for (i, a) in looks.iter().enumerate() {
+            for b in &looks[i + 1..] {
+                assert_ne!(a.0, b.0, "two techniques share a colour");
+            }
+        }
+        // The techniques compared most often differ in shape too.
+        let shapes: Vec<Marker> = [Technique::Spt, Technique::PruneOpt, Technique::Impostors, Technique::Ellipsoids]
+            .into_iter()
+            .map(|t| style(t, false).1)
+            .chain([style(Technique::LodChain, false).1, style(Technique::Full, true).1])
+            .collect();
+        for (i, a) in shapes.iter().enumerate() {
+            assert!(!shapes[i + 1..].contains(a), "{a:?} is shared: {shapes:?}");
+        }
+        for shape in [
+            Marker::Circle,
+            Marker::Square,
+            Marker::Triangle,
+            Marker::TriangleDown,
+            Marker::Diamond,
+            Marker::Cross,
+            Marker::Plus,
+        ] {
+            let mut canvas = Canvas::new(21, 21);
+            marker(&mut canvas, Point::new(10, 10), 13, BLACK, shape);
+            let image = canvas.into_image();
+            let dark = (0..21).flat_map(|y| (0..21).map(move |x| (x, y))).filter(|&(x, y)| image.pixel(x, y)[0] == 0);
+            let n = dark.count();
+            assert!((40..=169).contains(&n), "{shape:?} covers {n} pixels");
+            assert_eq!(image.pixel(10, 10)[0], 0, "{shape:?} covers its centre");
+        }
+    }
+
+    #[test]
+    fn the_band_plot_has_a_panel_per_band_with_frames() {
+        let report = super::super::output::tests::report();
+        // Two frames, 600 px and 20 px high: two panels.
+        let plot = by_band(&report);
+        assert_eq!((plot.width, plot.height), (64 + 2 * (300 + 24) + LEGEND_MARGIN, 420));
+        let spt = style_of(TechniqueName::Technique(Technique::Spt)).0;
+        let (x, _) = centroid(&plot, spt);
+        // Markers in both panels: their mean lies between the panels' centres.
+        assert!(x > 64.0 + 150.0 && x < 64.0 + 324.0 + 150.0, "{x}");
     }
 
     #[test]

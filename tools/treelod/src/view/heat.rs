@@ -30,15 +30,7 @@ pub struct Heat {
 /// `settings` for the reference: the full mesh, shaded, with the same light.
 #[must_use]
 pub fn reference_settings(settings: &Settings) -> Settings {
-    Settings {
-        full_mesh: true,
-        baseline: None,
-        ellipsoids: false,
-        impostors: false,
-        pruning: None,
-        debug: treelod_render::DebugView::Shaded,
-        ..*settings
-    }
+    Settings { technique: treelod_render::Technique::Full, debug: treelod_render::DebugView::Shaded, ..*settings }
 }
 
 impl Heat {
@@ -166,15 +158,13 @@ mod tests {
     #[test]
     fn the_reference_is_the_shaded_full_mesh_under_the_same_light() {
         let settings = Settings {
-            impostors: true,
-            ellipsoids: true,
-            pruning: Some(treelod_render::Pruning::default()),
+            technique: treelod_render::Technique::Impostors,
             debug: treelod_render::DebugView::Cells,
             ambient: 0.42,
             ..Settings::default()
         };
         let reference = reference_settings(&settings);
-        assert!(reference.full_mesh && !reference.impostors && !reference.ellipsoids && reference.pruning.is_none());
+        assert_eq!(reference.technique, treelod_render::Technique::Full);
         assert_eq!(reference.debug, treelod_render::DebugView::Shaded);
         assert_eq!((reference.ambient, reference.sun, reference.shadows), (0.42, settings.sun, settings.shadows));
     }

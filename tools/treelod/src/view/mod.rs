@@ -20,7 +20,7 @@ use glam::Vec3;
 use treelod_format::{Container, ErrorClass};
 use treelod_render::offscreen::{GpuError, Image, Readback};
 use treelod_render::{
-    Camera, DebugView, FrameStats, Ground, Pruning, Renderer, RendererFormats, Settings, Shadows, Sky,
+    Camera, DebugView, FrameStats, Ground, Renderer, RendererFormats, Settings, Shadows, Sky, Technique,
 };
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
@@ -34,8 +34,8 @@ use self::gpu_timer::GpuTimer;
 use self::panel::{Action, History, Holds};
 use self::rig::{Mode, Rig};
 use crate::render::{
-    BASELINES, EllipsoidArgs, ImpostorArgs, LightArgs, PruneArgs, ShadowArgs, baseline_name, frame_camera, parse_size,
-    parse_vec3, scene_failed, shadow_primitives, shadow_summary, write_png,
+    EllipsoidArgs, ImpostorArgs, LightArgs, PruneArgs, ShadowArgs, TechniqueArgs, frame_camera, parse_size, parse_vec3,
+    scene_failed, shadow_summary, write_png,
 };
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
@@ -72,6 +72,15 @@ fn turn_sun(sun: Vec3, key: KeyCode) -> Vec3 {
         _ => {}
     }
     sun_from_angles(azimuth, elevation.clamp(-85f32.to_radians(), 85f32.to_radians()))
+}
+
+/// Keys `F`, `P`, `I`, `C` and `B`: from a technique outside `group` to its first, through the
+/// group in turn, and after its last back to the point tree.
+fn toggle_technique(current: Technique, group: &[Technique]) -> Technique {
+    match group.iter().position(|&t| t == current) {
+        None => group.first().copied().unwrap_or(Technique::Spt),
+        Some(i) => group.get(i + 1).copied().unwrap_or(Technique::Spt),
+    }
 }
 
 /// Key `H`: shadows off, keeping their settings in `last`, or back on with `last`.
@@ -138,6 +147,10 @@ pub struct Args {
     #[arg(long, value_name = "N", default_value_t = 10, requires = "screenshot",
           value_parser = clap::value_parser!(u32).range(1..))]
     pub frames: u32,
+    // `--technique` starts with that technique (the panel chooses; keys F, P, I, C and B switch
+    // to the full mesh, pruning, impostors, ellipsoids and the baselines and back to spt).
+    #[command(flatten)]
+    pub technique: TechniqueArgs,
     #[command(flatten)]
     pub prune: PruneArgs,
     #[command(flatten)]
@@ -146,20 +159,9 @@ pub struct Args {
     pub shadow: ShadowArgs,
     #[command(flatten)]
     pub impostor: ImpostorArgs,
-    /// Start drawing the full mesh (key `F`): every triangle, no point.
-    #[arg(long)]
-    pub full_mesh: bool,
-    /// Start with impostor planes on (key `I`) for trees whose containers have them.
-    #[arg(long)]
-    pub impostors: bool,
-    // `--ellipsoids` starts with Clasen's ellipsoids on (key `C`) for trees whose containers
-    // have them; `--no-lines` with their bark as triangles instead of lines (key `N`).
+    // `--no-lines` starts ellipsoid trees with their bark as triangles instead of lines (key `N`).
     #[command(flatten)]
     pub ellipsoid: EllipsoidArgs,
-    /// Start with a baseline on (key `B` cycles none, lod-chain, billboard, crossed) for trees
-    /// whose containers have baselines (build with `--baselines`).
-    #[arg(long, value_name = "BASELINE", value_parser = ["lod-chain", "billboard", "crossed"])]
-    pub baseline: Option<String>,
 }
 
 /// Parses `--distance`: a positive number of bounding radii within the panel's range.
@@ -198,7 +200,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         for model in &scene.models {
             report::open(model)?;
         }
-        args.ellipsoid.warn_without(&scene.models);
+        args.technique.warn_without(&scene.models);
         scene
     };
     if let Some(path) = args.screenshot.as_deref().filter(|p| p.is_dir()) {
@@ -415,9 +417,8 @@ struct Viewer {
     models: Vec<Arc<Container>>,
     /// What the scene's containers hold, for the panel.
     holds: Holds,
-    /// The shadow settings turned back on (the last ones on), and the pruning settings.
+    /// The shadow settings turned back on (the last ones on).
     last_shadows: Shadows,
-    last_pruning: Pruning,
     /// The shown input's path (a dropped file's once one is shown).
     input: PathBuf,
     rig: Rig,
@@ -544,11 +545,10 @@ impl Viewer {
         }
 
         let formats = RendererFormats { color: format, depth: DEPTH_FORMAT, sample_count: args.msaa };
+        let technique = args.technique.technique;
         let mut settings = Settings {
-            pruning: args.prune.settings(),
-            impostors: args.impostors,
-            full_mesh: args.full_mesh,
-            baseline: crate::render::parse_baseline(args.baseline.as_deref()),
+            technique,
+            pruning: args.prune.settings(technique),
             // `error` is the shaded view compared with the full mesh (`heat_on`).
             debug: crate::render::parse_debug(args.debug.as_deref()),
             ..Settings::default()
@@ -558,7 +558,6 @@ impl Viewer {
         args.impostor.apply(&mut settings);
         args.ellipsoid.apply(&mut settings);
         let last_shadows = settings.shadows.unwrap_or_default();
-        let last_pruning = settings.pruning.unwrap_or_default();
         let models = scene::open_models(&scene).map_err(|e| scene_failed(&e))?;
         let (stage, bounds) =
             Stage::new(&device, &queue, formats, settings, (&scene, &models), (config.width, config.height))
@@ -590,7 +589,6 @@ impl Viewer {
             scene,
             models,
             last_shadows,
-            last_pruning,
             input: args.input.clone(),
             rig: Rig::new((Vec3::splat(-1.0), Vec3::splat(1.0)), Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO),
             keys: HashSet::new(),
@@ -809,10 +807,12 @@ impl Viewer {
             KeyCode::Equal => settings.s_max = (settings.s_max * 2.0).min(1024.0),
             KeyCode::KeyK => settings.depth_bias_k += 0.5,
             KeyCode::KeyJ => settings.depth_bias_k = (settings.depth_bias_k - 0.5).max(0.0),
-            KeyCode::KeyF => settings.full_mesh = !settings.full_mesh,
-            KeyCode::KeyP => settings.pruning = settings.pruning.is_none().then_some(self.last_pruning),
-            KeyCode::KeyI => settings.impostors = !settings.impostors,
-            KeyCode::KeyC => settings.ellipsoids = !settings.ellipsoids,
+            KeyCode::KeyF => settings.technique = toggle_technique(settings.technique, &[Technique::Full]),
+            KeyCode::KeyP => {
+                settings.technique = toggle_technique(settings.technique, &[Technique::PruneOpt, Technique::PruneCook]);
+            }
+            KeyCode::KeyI => settings.technique = toggle_technique(settings.technique, &[Technique::Impostors]),
+            KeyCode::KeyC => settings.technique = toggle_technique(settings.technique, &[Technique::Ellipsoids]),
             KeyCode::KeyN => settings.lines = !settings.lines,
             KeyCode::KeyM => settings.impostor_morph = !settings.impostor_morph,
             KeyCode::KeyH => toggle_shadows(&mut settings.shadows, &mut self.last_shadows),
@@ -827,17 +827,12 @@ impl Viewer {
                 };
             }
             KeyCode::KeyB => {
-                // None, then each of `BASELINES` in turn, then none again.
-                let at = settings.baseline.and_then(|b| BASELINES.iter().position(|&(_, x)| x == b));
-                let next = at.map_or(0, |i| i + 1);
-                settings.baseline = BASELINES.get(next).map(|&(_, b)| b);
+                settings.technique = toggle_technique(
+                    settings.technique,
+                    &[Technique::LodChain, Technique::Billboard, Technique::Crossed],
+                );
             }
-            KeyCode::KeyO => {
-                if let Some(pruning) = &mut settings.pruning {
-                    pruning.occlusion = !pruning.occlusion;
-                    self.last_pruning = *pruning;
-                }
-            }
+            KeyCode::KeyO => settings.pruning.occlusion = !settings.pruning.occlusion,
             KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 | KeyCode::Digit4 => {
                 settings.debug = match code {
                     KeyCode::Digit1 => DebugView::Shaded,
@@ -904,7 +899,6 @@ impl Viewer {
                 name: &name,
                 settings: self.stage.renderer.settings_mut(),
                 last_shadows: &mut self.last_shadows,
-                last_pruning: &mut self.last_pruning,
                 rig: &mut self.rig,
                 stats: &self.stats,
                 holds: self.holds,
@@ -1037,7 +1031,7 @@ impl Viewer {
         if shown {
             self.frames += 1;
         }
-        self.history.push(self.started.elapsed().as_secs_f64(), dt * 1e3, panel::primitives(&self.stats));
+        self.history.push(self.started.elapsed().as_secs_f64(), dt * 1e3, self.stats.primitives());
         self.update_title();
 
         match (capture, screenshot) {
@@ -1079,7 +1073,8 @@ impl Viewer {
         let renderer = &self.stage.renderer;
         let settings = renderer.settings();
         let stats = &self.stats;
-        let mut mode = match (settings.full_mesh, settings.debug) {
+        let full_mesh = settings.technique == Technique::Full;
+        let mut mode = match (full_mesh, settings.debug) {
             (true, _) => " | full mesh",
             (false, DebugView::Shaded) => "",
             (false, DebugView::Cells) => " | cells",
@@ -1090,32 +1085,28 @@ impl Viewer {
         if renderer.gpu_selection_enabled() {
             mode.push_str(" | GPU selection");
         }
-        if let Some(baseline) = settings.baseline.filter(|_| !settings.full_mesh) {
-            let name = baseline_name(baseline);
-            mode.push_str(&format!(
-                " | baseline {name}: {} trees, {} triangles, {} quads",
-                stats.instances_baseline, stats.triangles, stats.billboards
-            ));
-        } else if settings.ellipsoids && !settings.full_mesh {
-            mode.push_str(&format!(
-                " | ellipsoids (quality {}, blend {}): {} trees, {} ellipsoids, {}",
+        let technique = settings.technique;
+        let drawn = stats.instances.get(technique);
+        match technique {
+            Technique::Full | Technique::Spt => {}
+            Technique::LodChain | Technique::Billboard | Technique::Crossed => mode.push_str(&format!(
+                " | baseline {technique}: {drawn} trees, {} triangles, {} quads",
+                stats.triangles, stats.billboards
+            )),
+            Technique::Ellipsoids => mode.push_str(&format!(
+                " | ellipsoids (quality {}, blend {}): {drawn} trees, {} ellipsoids, {}",
                 settings.ellipsoid_quality,
                 settings.level_blend,
-                stats.instances_ellipsoids,
                 stats.ellipsoids,
                 if settings.lines { format!("{} lines", stats.lines) } else { "bark triangles".to_owned() }
-            ));
-            if settings.impostors {
-                mode.push_str(&format!(", impostors: {} trees, {} planes", stats.instances_impostors, stats.planes));
+            )),
+            Technique::Impostors => {
+                mode.push_str(&format!(" | impostors: {drawn} trees, {} planes", stats.planes));
             }
-        } else if settings.impostors && !settings.full_mesh {
-            mode.push_str(&format!(" | impostors: {} trees, {} planes", stats.instances_impostors, stats.planes));
-        } else if let Some(pruning) = settings.pruning.filter(|_| !settings.full_mesh) {
-            let occlusion = if pruning.occlusion { ", occlusion" } else { "" };
-            mode.push_str(&format!(
-                " | pruning{occlusion}: {} trees, {} leaves",
-                stats.instances_pruned, stats.leaves_pruned
-            ));
+            Technique::PruneOpt | Technique::PruneCook => {
+                let occlusion = if settings.pruning.occlusion { ", occlusion" } else { "" };
+                mode.push_str(&format!(" | {technique}{occlusion}: {drawn} trees, {} leaves", stats.leaves_pruned));
+            }
         }
         let (azimuth, elevation) = sun_angles(settings.sun);
         mode.push_str(&format!(" | sun az {:.0} el {:.0}", azimuth.to_degrees(), elevation.to_degrees()));
@@ -1129,7 +1120,7 @@ impl Viewer {
                 stats.shadow.cascades,
                 shadows.resolution,
                 shadows.distance,
-                shadow_primitives(&stats.shadow)
+                stats.shadow.primitives()
             )),
             None => mode.push_str(" | shadows off"),
         }
@@ -1281,6 +1272,20 @@ impl Capture {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn technique_keys_step_through_their_group_and_back_to_the_point_tree() {
+        let baselines = [Technique::LodChain, Technique::Billboard, Technique::Crossed];
+        let mut t = Technique::Impostors;
+        let mut seen = Vec::new();
+        for _ in 0..4 {
+            t = toggle_technique(t, &baselines);
+            seen.push(t);
+        }
+        assert_eq!(seen, [Technique::LodChain, Technique::Billboard, Technique::Crossed, Technique::Spt]);
+        assert_eq!(toggle_technique(Technique::Full, &[Technique::Full]), Technique::Spt);
+        assert_eq!(toggle_technique(Technique::Spt, &[Technique::Full]), Technique::Full);
+    }
 
     #[test]
     fn winit_messages_lose_their_source_location() {

@@ -5,109 +5,22 @@
 use std::collections::VecDeque;
 
 use egui::{Color32, RichText, Ui};
-use treelod_render::{Baseline, BillboardKind, DebugView, FrameStats, MAX_CASCADES, Pruning, Settings, Shadows};
+use treelod_render::{DebugView, FrameStats, MAX_CASCADES, PerTechnique, Settings, Shadows, Technique};
 
 use super::rig::{Animation, DISTANCE_RANGE, Mode, Rig};
 use super::{SELF_SHADOW, sun_angles, sun_from_angles, toggle_shadows};
-use crate::render::shadow_primitives;
 
 /// Width of the panel, points.
 pub const WIDTH: f32 = 300.0;
 /// Seconds of history the graph shows.
 const HISTORY_SECONDS: f64 = 10.0;
 
-/// How the leaves (and the bark beside them) of every tree are drawn; trees whose containers lack
-/// the representation are drawn with the point tree.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Representation {
-    PointTree,
-    Pruned,
-    Impostors,
-    Ellipsoids,
-    LodChain,
-    Billboard,
-    Crossed,
-    FullMesh,
-}
-
-impl Representation {
-    pub const ALL: [Self; 8] = [
-        Self::PointTree,
-        Self::Pruned,
-        Self::Impostors,
-        Self::Ellipsoids,
-        Self::LodChain,
-        Self::Billboard,
-        Self::Crossed,
-        Self::FullMesh,
-    ];
-
-    /// The name shown, with the paper or tool it comes from.
-    #[must_use]
-    pub fn label(self) -> &'static str {
-        match self {
-            Self::PointTree => "triangles + points (Gilet)",
-            Self::Pruned => "pruned leaves (Neubert)",
-            Self::Impostors => "impostor planes (Garcia)",
-            Self::Ellipsoids => "ellipsoids + lines (Clasen)",
-            Self::LodChain => "LoD chain (meshoptimizer)",
-            Self::Billboard => "billboard",
-            Self::Crossed => "crossed billboards",
-            Self::FullMesh => "full mesh",
-        }
-    }
-
-    /// The representation `settings` draw with, by the renderer's precedence (full mesh, then a
-    /// baseline, ellipsoids, impostors, pruning, the point tree).
-    #[must_use]
-    pub fn of(settings: &Settings) -> Self {
-        if settings.full_mesh {
-            return Self::FullMesh;
-        }
-        match settings.baseline {
-            Some(Baseline::LodChain) => return Self::LodChain,
-            Some(Baseline::Billboard(BillboardKind::Facing)) => return Self::Billboard,
-            Some(Baseline::Billboard(BillboardKind::Crossed)) => return Self::Crossed,
-            None => {}
-        }
-        if settings.ellipsoids {
-            Self::Ellipsoids
-        } else if settings.impostors {
-            Self::Impostors
-        } else if settings.pruning.is_some() {
-            Self::Pruned
-        } else {
-            Self::PointTree
-        }
-    }
-
-    /// Sets `settings` to draw with this representation alone; pruning comes back with `pruning`
-    /// (the last pruning settings used).
-    pub fn apply(self, settings: &mut Settings, pruning: Pruning) {
-        settings.full_mesh = self == Self::FullMesh;
-        settings.baseline = match self {
-            Self::LodChain => Some(Baseline::LodChain),
-            Self::Billboard => Some(Baseline::Billboard(BillboardKind::Facing)),
-            Self::Crossed => Some(Baseline::Billboard(BillboardKind::Crossed)),
-            _ => None,
-        };
-        settings.ellipsoids = self == Self::Ellipsoids;
-        settings.impostors = self == Self::Impostors;
-        settings.pruning = (self == Self::Pruned).then_some(pruning);
-    }
-}
-
-/// How many of the scene's models hold each representation (all hold the point tree and the full
-/// mesh).
+/// How many of the scene's models hold each technique's data (all hold the point tree and the
+/// full mesh).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Holds {
     pub models: usize,
-    pub pruned: usize,
-    pub impostors: usize,
-    pub ellipsoids: usize,
-    pub lines: usize,
-    pub lod_chain: usize,
-    pub billboards: usize,
+    pub by_technique: PerTechnique<usize>,
 }
 
 impl Holds {
@@ -117,34 +30,18 @@ impl Holds {
         let mut holds = Self::default();
         for c in containers {
             holds.models += 1;
-            holds.pruned += usize::from(!c.prune_leaves().is_empty());
-            holds.impostors += usize::from(!c.planes().is_empty());
-            holds.ellipsoids += usize::from(!c.ellipsoids().is_empty());
-            holds.lines += usize::from(!c.lines().is_empty());
-            holds.lod_chain += usize::from(!c.lod_levels().is_empty());
-            holds.billboards += usize::from(!c.billboards().is_empty());
+            for t in Technique::ALL {
+                *holds.by_technique.get_mut(t) += usize::from(t.held_by(c));
+            }
         }
         holds
     }
 
-    /// Models holding `representation`.
+    /// Models holding `technique`'s data.
     #[must_use]
-    pub fn count(&self, representation: Representation) -> usize {
-        match representation {
-            Representation::PointTree | Representation::FullMesh => self.models,
-            Representation::Pruned => self.pruned,
-            Representation::Impostors => self.impostors,
-            Representation::Ellipsoids => self.ellipsoids,
-            Representation::LodChain => self.lod_chain,
-            Representation::Billboard | Representation::Crossed => self.billboards,
-        }
+    pub fn count(&self, technique: Technique) -> usize {
+        self.by_technique.get(technique)
     }
-}
-
-/// Primitives a frame submits, every kind together (pruned leaves are among the triangles).
-#[must_use]
-pub fn primitives(stats: &FrameStats) -> u64 {
-    stats.triangles + stats.points + stats.planes + stats.ellipsoids + stats.lines + stats.billboards
 }
 
 /// One frame of the graph.
@@ -198,8 +95,6 @@ pub struct Inputs<'a> {
     pub settings: &'a mut Settings,
     /// The shadow settings turned back on.
     pub last_shadows: &'a mut Shadows,
-    /// The pruning settings turned back on.
-    pub last_pruning: &'a mut Pruning,
     pub rig: &'a mut Rig,
     pub stats: &'a FrameStats,
     pub holds: Holds,
@@ -231,7 +126,7 @@ pub enum Action {
 /// Draws the panel's contents into `ui`; returns what the viewer must do beyond the settings.
 pub fn show(ui: &mut Ui, inputs: Inputs<'_>) -> Vec<Action> {
     let mut actions = Vec::new();
-    let Inputs { name, settings, last_shadows, last_pruning, rig, stats, holds, .. } = inputs;
+    let Inputs { name, settings, last_shadows, rig, stats, holds, .. } = inputs;
     ui.heading(name);
     ui.label(format!(
         "{:.1} fps · selection {:.2} ms · GPU {}",
@@ -263,8 +158,8 @@ pub fn show(ui: &mut Ui, inputs: Inputs<'_>) -> Vec<Action> {
     egui::ScrollArea::vertical().show(ui, |ui| {
         ui.spacing_mut().slider_width = 120.0;
         egui::CollapsingHeader::new("Representation").default_open(true).show(ui, |ui| {
-            representation(ui, settings, *last_pruning, holds);
-            detail(ui, settings, last_pruning);
+            representation(ui, settings, holds);
+            detail(ui, settings);
         });
         egui::CollapsingHeader::new("Counts").default_open(true).show(ui, |ui| counts(ui, stats, inputs.instances));
         egui::CollapsingHeader::new("Level of detail").default_open(true).show(ui, |ui| {
@@ -279,27 +174,23 @@ pub fn show(ui: &mut Ui, inputs: Inputs<'_>) -> Vec<Action> {
     actions
 }
 
-fn representation(ui: &mut Ui, settings: &mut Settings, pruning: Pruning, holds: Holds) {
-    let current = Representation::of(settings);
-    let mut chosen = current;
+fn representation(ui: &mut Ui, settings: &mut Settings, holds: Holds) {
+    let current = settings.technique;
     egui::ComboBox::from_id_salt("representation").width(ui.available_width()).selected_text(current.label()).show_ui(
         ui,
         |ui| {
-            for r in Representation::ALL {
-                let held = holds.count(r);
+            for t in Technique::ALL {
+                let held = holds.count(t);
                 let label = if held == holds.models {
-                    r.label().to_owned()
+                    t.label().to_owned()
                 } else {
-                    format!("{} ({held} of {} models)", r.label(), holds.models)
+                    format!("{} ({held} of {} models)", t.label(), holds.models)
                 };
-                ui.selectable_value(&mut chosen, r, label);
+                ui.selectable_value(&mut settings.technique, t, label);
             }
         },
     );
-    if chosen != current {
-        chosen.apply(settings, pruning);
-    }
-    if holds.count(chosen) < holds.models {
+    if holds.count(settings.technique) < holds.models {
         ui.label(
             RichText::new("models without it draw with triangles + points (build with --prune, --impostors, --ellipsoids or --baselines)")
                 .small()
@@ -309,20 +200,18 @@ fn representation(ui: &mut Ui, settings: &mut Settings, pruning: Pruning, holds:
 }
 
 /// The chosen representation's own settings.
-fn detail(ui: &mut Ui, settings: &mut Settings, last_pruning: &mut Pruning) {
-    match Representation::of(settings) {
-        Representation::Pruned => {
-            if let Some(pruning) = &mut settings.pruning {
-                ui.checkbox(&mut pruning.occlusion, "occlusion lowers hidden trees' leaves").on_hover_text("key O");
-                ui.add(egui::Slider::new(&mut pruning.spt_below_pixels, 0.0..=512.0).text("point tree below, px"))
-                    .on_hover_text("trees shorter than this on screen draw with triangles + points");
-                *last_pruning = *pruning;
-            }
+fn detail(ui: &mut Ui, settings: &mut Settings) {
+    match settings.technique {
+        Technique::PruneOpt | Technique::PruneCook => {
+            let pruning = &mut settings.pruning;
+            ui.checkbox(&mut pruning.occlusion, "occlusion lowers hidden trees' leaves").on_hover_text("key O");
+            ui.add(egui::Slider::new(&mut pruning.spt_below_pixels, 0.0..=512.0).text("point tree below, px"))
+                .on_hover_text("trees shorter than this on screen draw with triangles + points");
         }
-        Representation::Impostors => {
+        Technique::Impostors => {
             ui.checkbox(&mut settings.impostor_morph, "morph and cross-fade levels").on_hover_text("key M");
         }
-        Representation::Ellipsoids => {
+        Technique::Ellipsoids => {
             ui.checkbox(&mut settings.lines, "bark as lines").on_hover_text("key N");
             ui.add(egui::Slider::new(&mut settings.ellipsoid_quality, 0.25..=8.0).logarithmic(true).text("quality"))
                 .on_hover_text("2: the level for pixels half as large");
@@ -466,24 +355,27 @@ fn counts(ui: &mut Ui, stats: &FrameStats, instances: usize) {
             ui.end_row();
         };
         row("instances visible", format!("{} of {instances}", stats.instances_visible));
-        row("primitives", primitives(stats).to_string());
+        for (technique, trees) in stats.instances.iter().filter(|&(_, n)| n > 0) {
+            row(&format!("  trees, {}", technique.label()), trees.to_string());
+        }
+        row("primitives", stats.primitives().to_string());
         row("  triangles", stats.triangles.to_string());
         row("  points", stats.points.to_string());
-        if stats.instances_pruned > 0 {
-            row("  pruned leaves", format!("{} ({} trees)", stats.leaves_pruned, stats.instances_pruned));
+        if stats.leaves_pruned > 0 {
+            row("  pruned leaves", stats.leaves_pruned.to_string());
         }
-        if stats.instances_impostors > 0 {
-            row("  planes", format!("{} ({} trees)", stats.planes, stats.instances_impostors));
-        }
-        if stats.instances_ellipsoids > 0 {
-            row("  ellipsoids", format!("{} ({} trees)", stats.ellipsoids, stats.instances_ellipsoids));
-            row("  lines", stats.lines.to_string());
-        }
-        if stats.instances_baseline > 0 {
-            row("  billboard quads", format!("{} ({} trees)", stats.billboards, stats.instances_baseline));
+        for (label, count) in [
+            ("  planes", stats.planes),
+            ("  ellipsoids", stats.ellipsoids),
+            ("  lines", stats.lines),
+            ("  billboard quads", stats.billboards),
+        ] {
+            if count > 0 {
+                row(label, count.to_string());
+            }
         }
         if stats.shadow.cascades > 0 {
-            row("shadow primitives", shadow_primitives(&stats.shadow).to_string());
+            row("shadow primitives", stats.shadow.primitives().to_string());
         }
         row("draws", stats.ranges.to_string());
         row("resident", mb(stats.bytes_resident));
@@ -522,20 +414,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn each_representation_applied_reads_back_as_itself() {
-        for r in Representation::ALL {
-            let mut settings = Settings { ellipsoids: true, impostors: true, ..Settings::default() };
-            r.apply(&mut settings, Pruning::default());
-            assert_eq!(Representation::of(&settings), r, "{settings:?}");
-        }
-        // Pruning comes back with the settings last used.
-        let mut settings = Settings::default();
-        let pruning = Pruning { occlusion: false, ..Pruning::default() };
-        Representation::Pruned.apply(&mut settings, pruning);
-        assert_eq!(settings.pruning, Some(pruning));
-    }
-
-    #[test]
     fn the_history_keeps_ten_seconds_and_measures_the_rate() {
         let mut history = History::default();
         for frame in 0..=300 {
@@ -558,6 +436,13 @@ mod tests {
             billboards: 32,
             ..FrameStats::default()
         };
-        assert_eq!(primitives(&stats), 63);
+        assert_eq!(stats.primitives(), 63);
+    }
+
+    #[test]
+    fn holds_counts_the_models_holding_each_technique() {
+        let holds = Holds { models: 3, by_technique: PerTechnique([3, 3, 1, 1, 0, 2, 0, 0, 0]) };
+        assert_eq!(holds.count(Technique::Ellipsoids), 2);
+        assert_eq!(holds.count(Technique::Spt), holds.models);
     }
 }

@@ -1,0 +1,484 @@
+//! The draw lists: what one view of a frame (the camera, or a shadow cascade) selected and draws,
+//! the buckets (model × [`Bucket`], one pipeline each) its draws are recorded into, clamped to
+//! what is resident, and the indirect draws of each bucket.
+
+use bytemuck::{Pod, Zeroable};
+use treelod_runtime::{CellPrefix, DrawList, DrawRange, Kind, ROOTS_CELL};
+
+use crate::renderer::{ModelId, Renderer, max_axis_scale};
+use crate::stats::FrameStats;
+use crate::streaming::Array;
+use crate::technique::pruned::PrunedDraw;
+
+/// One draw's constants. WGSL twin: `DrawInfo` in `shaders/shared/draw.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct DrawInfo {
+    pub(crate) model: [[f32; 4]; 4],
+    pub(crate) tau_p: f32,
+    pub(crate) tau_t: f32,
+    pub(crate) cell: u32,
+    pub(crate) scale: f32,
+    pub(crate) shading: f32,
+    /// Size factor of pruned leaves about their centres (1 for everything else).
+    pub(crate) leaf_scale: f32,
+    /// Index of the instance in [`Renderer::set_instances`]' list (read by the shaders only to
+    /// seed the level blend's dither, `level_dither`).
+    pub(crate) instance: u32,
+    pub(crate) _pad: u32,
+}
+
+const _: () = assert!(size_of::<DrawInfo>() == 96);
+
+/// Where a recorded draw reads its elements.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DrawSource {
+    /// The leading `count` triangles of the cell's range (resident in the pool).
+    Triangles,
+    /// The leading `count` points of the cell's range (resident in the pool).
+    Points,
+    /// The cell's roots, from the model's pinned copy of the roots: the cell's points are not
+    /// resident yet, or (for [`treelod_runtime::ROOTS_CELL`]) a far tree drawn with one range.
+    Roots,
+    /// The leading `count` triangles of the cell's pruned leaves (a pruned tree, uploaded whole
+    /// at [`Renderer::add_model`]).
+    PrunedLeaves,
+    /// All `count` bark triangles of the model (a pruned tree or one drawn with impostors;
+    /// `cell` is [`treelod_runtime::ROOTS_CELL`]).
+    Bark,
+    /// The leading `count` impostor planes of the cell's range (uploaded whole at
+    /// [`Renderer::add_model`]); `tau_points` is the `τ` the shader tests them with.
+    Planes,
+    /// A baseline LoD chain level (or the full mesh) of the whole block (`cell` is
+    /// [`treelod_runtime::ROOTS_CELL`]); `tau_points` is the instance's `τ`, `tau_triangles` the
+    /// level's error (0 for the full mesh).
+    LodLevel,
+    /// Baseline billboard quads of the block (`cell` is [`treelod_runtime::ROOTS_CELL`]).
+    Billboards,
+    /// The leading `count` ellipsoids of the cell's range (uploaded whole at
+    /// [`Renderer::add_model`]); `tau_points` is the `τ` (metres per pixel) the shader tests them
+    /// with.
+    Ellipsoids,
+    /// The leading `count` branch lines of the cell's range (uploaded whole at
+    /// [`Renderer::add_model`]); `tau_points` is the `τ` (metres per pixel) the shader tests them
+    /// with.
+    Lines,
+}
+
+/// One draw of the last [`Renderer::prepare`], as the GPU will execute it, for tests and tools.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecordedDraw {
+    /// Index of the instance in [`Renderer::set_instances`]'s list.
+    pub instance: u32,
+    /// The instance's model.
+    pub model: ModelId,
+    /// The container cell, or [`treelod_runtime::ROOTS_CELL`] for a far tree's roots.
+    pub cell: u32,
+    /// What is drawn.
+    pub source: DrawSource,
+    /// Elements drawn: a prefix of the cell's range (or all the roots it stands for).
+    pub count: u32,
+    /// `τ_p` the shader tests points with, model units (raised above the selection's when the
+    /// resident prefix is shorter than the selection asked for); for pruned leaves, `λ`.
+    pub tau_points: f32,
+    /// `τ_t`, model units, likewise; for pruned leaves, their size factor.
+    pub tau_triangles: f32,
+    /// Whether residency made this draw coarser than the selection.
+    pub clamped: bool,
+}
+
+/// What one view of a frame (the camera, or a shadow cascade) selected and draws.
+#[derive(Default)]
+pub(crate) struct View {
+    pub(crate) selection: DrawList,
+    /// The draws, as recorded for the GPU.
+    pub(crate) recorded: Vec<RecordedDraw>,
+    /// Instances drawn with the sequential point tree when pruning, impostors or a baseline are
+    /// on, and their indices in `instances` (see `spt_remapped`).
+    pub(crate) spt_instances: Vec<treelod_runtime::Instance>,
+    pub(crate) spt_map: Vec<u32>,
+    /// Whether the selection ran over `spt_instances`, so its instance indices go through
+    /// `spt_map`.
+    pub(crate) spt_remapped: bool,
+    /// Pruned draws (pruned leaves, bark, LoD chain levels).
+    pub(crate) pruned: Vec<PrunedDraw>,
+    /// Impostor draws: per instance and plane cell, the prefix and its `τ`.
+    pub(crate) plane_draws: Vec<PrefixDraw>,
+    /// Ellipsoid draws: per instance and ellipsoid cell, the prefix and its `τ`.
+    pub(crate) ellipsoid_draws: Vec<PrefixDraw>,
+    /// Line draws: per instance and line cell, the prefix and its `τ`.
+    pub(crate) line_draws: Vec<PrefixDraw>,
+    /// Baseline billboard draws: (instance, model, first quad, quads).
+    pub(crate) billboard_draws: Vec<(u32, u32, u32, u32)>,
+    /// Per model, per bucket: the view's range of the indirect buffer.
+    pub(crate) model_draws: Vec<[(u32, u32); Bucket::COUNT]>,
+}
+
+impl View {
+    /// The index in the renderer's instances of an instance of this view's selection.
+    pub(crate) fn instance_index(&self, selected: u32) -> u32 {
+        if self.spt_remapped { self.spt_map.get(selected as usize).copied().unwrap_or(selected) } else { selected }
+    }
+}
+
+/// One draw of impostor planes, ellipsoids or lines: a prefix of one cell's elements for one instance.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PrefixDraw {
+    pub(crate) instance: u32,
+    pub(crate) model: u32,
+    pub(crate) range: CellPrefix,
+}
+
+/// A draw bucket of a model: one pipeline's draws, drawn in this order. A frame's buckets are
+/// listed per model, [`Bucket::COUNT`] each ([`Bucket::of_model`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Bucket {
+    /// Streamed triangles, from the pool.
+    Triangles,
+    /// Streamed points and the pinned roots, from the pool.
+    Points,
+    /// Pruned leaves and bark, and LoD chain levels, from each model's extra triangle buffer.
+    Pruned,
+    /// Impostor planes, from each model's plane buffer and atlas.
+    Planes,
+    /// Baseline billboards, from each model's billboard bind group.
+    Billboards,
+    /// Clasen's ellipsoids, ray-cast, from each model's ellipsoid buffer and the noise cube.
+    Ellipsoids,
+    /// Clasen's branch lines, ray-cast round cones, from each model's line buffer.
+    Lines,
+}
+
+impl Bucket {
+    /// Draw buckets per model.
+    pub(crate) const COUNT: usize = 7;
+
+    /// Every bucket, in drawing order (`ALL[b as usize] == b`).
+    pub(crate) const ALL: [Self; Self::COUNT] =
+        [Self::Triangles, Self::Points, Self::Pruned, Self::Planes, Self::Billboards, Self::Ellipsoids, Self::Lines];
+
+    /// The index of model `model`'s bucket in a frame's list of buckets.
+    pub(crate) fn of_model(self, model: usize) -> usize {
+        Self::COUNT * model + self as usize
+    }
+}
+
+impl Renderer {
+    /// Records `view`'s draws, clamped to what is resident, after the draw infos and indirect
+    /// draws of the views before it; counts them into `stats`.
+    pub(crate) fn record_view(&mut self, view: &mut View, full_mesh: bool, stats: &mut FrameStats) {
+        view.recorded.clear();
+        self.buckets.resize_with(Bucket::COUNT * self.models.len(), Vec::new);
+        for bucket in &mut self.buckets {
+            bucket.clear();
+        }
+        let ranges = view.selection.ranges();
+        let mut i = 0;
+        while i < ranges.len() {
+            let range = ranges[i];
+            // A cell's triangle range is followed by its point range, if any.
+            let points = ranges
+                .get(i + 1)
+                .filter(|next| {
+                    range.kind == Kind::Triangles
+                        && next.kind == Kind::Points
+                        && (next.instance, next.cell) == (range.instance, range.cell)
+                })
+                .copied();
+            i += 1 + usize::from(points.is_some());
+            let (triangles, points) = match range.kind {
+                Kind::Triangles => (Some(range), points),
+                Kind::Points | Kind::Roots => (None, Some(range)),
+            };
+            let instance = view.instance_index(range.instance);
+            for draw in self.clamp(instance, range, triangles, points, full_mesh) {
+                let Some(draw) = draw else { continue };
+                stats.ranges_clamped += u32::from(draw.clamped);
+                let (bucket, first_vertex, corners) = self.gpu_first(&draw);
+                match draw.source {
+                    DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::LodLevel => {
+                        stats.triangles += u64::from(draw.count);
+                    }
+                    DrawSource::Points | DrawSource::Roots => stats.points += u64::from(draw.count),
+                    DrawSource::Planes => stats.planes += u64::from(draw.count),
+                    DrawSource::Billboards => stats.billboards += u64::from(draw.count),
+                    DrawSource::Ellipsoids => stats.ellipsoids += u64::from(draw.count),
+                    DrawSource::Lines => stats.lines += u64::from(draw.count),
+                }
+                let transform = self.instances[draw.instance as usize].transform;
+                let info = DrawInfo {
+                    model: transform.to_cols_array_2d(),
+                    tau_p: draw.tau_points,
+                    tau_t: draw.tau_triangles,
+                    cell: draw.cell,
+                    scale: max_axis_scale(transform),
+                    shading: range.shading,
+                    leaf_scale: 1.0,
+                    instance: draw.instance,
+                    _pad: 0,
+                };
+                self.buckets[bucket].push((info, first_vertex, draw.count * corners));
+                view.recorded.push(draw);
+            }
+        }
+        // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
+        // per-cell estimate (it is a property of the point hierarchy's cells).
+        for draw in &view.pruned {
+            stats.triangles += u64::from(draw.count);
+            let record = RecordedDraw {
+                instance: draw.instance,
+                model: ModelId(draw.model),
+                cell: draw.cell,
+                source: draw.source,
+                count: draw.count,
+                tau_points: draw.lambda,
+                tau_triangles: draw.tau_triangles,
+                clamped: false,
+            };
+            let vertices = (3 * draw.first, 3 * draw.count);
+            record_direct(
+                &self.instances,
+                &mut self.buckets,
+                &mut view.recorded,
+                record,
+                Bucket::Pruned,
+                vertices,
+                draw.leaf_scale,
+            );
+        }
+        // Impostor planes, ellipsoids and lines, each in its bucket: a prefix of one cell's
+        // elements, six corners each, the level chosen in the shader by `τ`.
+        stats.planes += view.plane_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        stats.ellipsoids += view.ellipsoid_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        stats.lines += view.line_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        let prefixes = (view.plane_draws.iter().map(|d| (d, DrawSource::Planes, Bucket::Planes)))
+            .chain(view.ellipsoid_draws.iter().map(|d| (d, DrawSource::Ellipsoids, Bucket::Ellipsoids)))
+            .chain(view.line_draws.iter().map(|d| (d, DrawSource::Lines, Bucket::Lines)));
+        for (draw, source, bucket) in prefixes {
+            let range = draw.range;
+            let record = RecordedDraw {
+                instance: draw.instance,
+                model: ModelId(draw.model),
+                cell: range.cell,
+                source,
+                count: range.count,
+                tau_points: range.tau,
+                tau_triangles: range.tau,
+                clamped: false,
+            };
+            let vertices = (6 * range.first, 6 * range.count);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, bucket, vertices, 1.0);
+        }
+        // Baseline billboards: every quad of the chosen kind.
+        for &(instance, model, first, count) in &view.billboard_draws {
+            stats.billboards += u64::from(count);
+            let record = RecordedDraw {
+                instance,
+                model: ModelId(model),
+                cell: ROOTS_CELL,
+                source: DrawSource::Billboards,
+                count,
+                tau_points: 0.0,
+                tau_triangles: 0.0,
+                clamped: false,
+            };
+            record_direct(
+                &self.instances,
+                &mut self.buckets,
+                &mut view.recorded,
+                record,
+                Bucket::Billboards,
+                (6 * first, 6 * count),
+                1.0,
+            );
+        }
+        view.model_draws.clear();
+        let before = self.indirect.len();
+        for pair in self.buckets.chunks(Bucket::COUNT) {
+            let mut draws = [(0, 0); Bucket::COUNT];
+            for (kind, bucket) in pair.iter().enumerate() {
+                let start = u32::try_from(self.indirect.len()).unwrap_or(u32::MAX);
+                for &(info, first_vertex, vertex_count) in bucket {
+                    let index = u32::try_from(self.draw_infos.len()).unwrap_or(u32::MAX);
+                    self.draw_infos.push(info);
+                    self.indirect.push(wgpu::util::DrawIndirectArgs {
+                        vertex_count,
+                        instance_count: 1,
+                        first_vertex,
+                        first_instance: index,
+                    });
+                }
+                draws[kind] = (start, u32::try_from(self.indirect.len()).unwrap_or(u32::MAX) - start);
+            }
+            view.model_draws.push(draws);
+        }
+        stats.ranges += u32::try_from(self.indirect.len() - before).unwrap_or(u32::MAX);
+    }
+
+    /// The draws of one selected cell (or one roots range), clamped to what is resident so that
+    /// a missing prefix shows coarser data, never a hole:
+    ///
+    /// - **Points**: if only `r` leading points are resident, `τ_p` rises to the `hi` of the first
+    ///   missing one, so every point the cut needs lies in the resident prefix; with nothing (or
+    ///   less than the roots) resident, the cell draws its roots from the pinned copy.
+    /// - **Triangles**: `τ_t` rises to at least `τ_p` (the rule needs `τ_p ≤ τ_t`) and, if only `r`
+    ///   leading triangles are resident, to the size of the first missing one; the smaller
+    ///   triangles are then drawn through their points.
+    ///
+    /// For any `τ_p ≤ τ_t` the drawn elements are an exact cut (spec §10), so a clamped cell is a
+    /// valid coarser level of detail.
+    fn clamp(
+        &self,
+        instance: u32,
+        range: DrawRange,
+        triangles: Option<DrawRange>,
+        points: Option<DrawRange>,
+        full_mesh: bool,
+    ) -> [Option<RecordedDraw>; 2] {
+        let base = RecordedDraw {
+            instance,
+            model: ModelId(range.model),
+            cell: range.cell,
+            source: DrawSource::Roots,
+            count: 0,
+            tau_points: range.tau_points,
+            tau_triangles: range.tau_triangles,
+            clamped: false,
+        };
+        let (m, c) = (range.model as usize, range.cell as usize);
+        let (Some(model), Some(lod)) = (self.models.get(m), self.lods.get(m)) else { return [None, None] };
+        if range.kind == Kind::Roots {
+            return [None, Some(RecordedDraw { count: range.count, ..base })];
+        }
+        let Some(cell) = model.cell_lod.get(c).and_then(|&i| lod.cells().get(i as usize)) else {
+            return [None, None];
+        };
+        let (sizes, his) = (lod.triangle_sizes(cell), lod.point_hi(cell));
+        let (mut tau_p, mut tau_t) = (range.tau_points, range.tau_triangles);
+        let resident_t = self.residency.slot(m, c, Array::Triangles).resident as usize;
+        let resident_p = self.residency.slot(m, c, Array::Points).resident as usize;
+        let roots = model.cell_roots.get(c).map_or(0, |r| r.1) as usize;
+        let triangles_complete = triangles.is_none_or(|t| resident_t >= t.count as usize);
+        let mut point_draw = None;
+        let mut clamped = false;
+        if let Some(p) = points.filter(|_| !(full_mesh && triangles_complete)) {
+            let wanted = p.count as usize;
+            let (source, count) = if resident_p >= wanted {
+                (DrawSource::Points, wanted)
+            } else if resident_p >= roots.max(1) {
+                tau_p = tau_p.max(his[resident_p]);
+                (DrawSource::Points, leading_above(his, tau_p))
+            } else {
+                tau_p = tau_p.max(his.get(roots).copied().unwrap_or(tau_p));
+                (DrawSource::Roots, roots)
+            };
+            clamped |= count < wanted || source == DrawSource::Roots;
+            if count > 0 {
+                point_draw = Some((source, count));
+            }
+        }
+        tau_t = tau_t.max(tau_p);
+        let mut count_t = leading_above(sizes, tau_t);
+        if count_t > resident_t {
+            tau_t = tau_t.max(sizes[resident_t]);
+            count_t = leading_above(sizes, tau_t);
+        }
+        clamped |= triangles.is_some_and(|t| count_t < t.count as usize);
+        let base = RecordedDraw { tau_points: tau_p, tau_triangles: tau_t, clamped, ..base };
+        let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+        [
+            (count_t > 0).then(|| RecordedDraw { source: DrawSource::Triangles, count: count(count_t), ..base }),
+            point_draw.map(|(source, n)| RecordedDraw { source, count: count(n), ..base }),
+        ]
+    }
+
+    /// The bucket (model × [`Bucket`], [`Bucket::of_model`]), first vertex and vertices per element
+    /// of a recorded draw.
+    fn gpu_first(&self, draw: &RecordedDraw) -> (usize, u32, u32) {
+        let m = draw.model.0 as usize;
+        let model = &self.models[m];
+        match draw.source {
+            DrawSource::Triangles => {
+                let slot = self.residency.slot(m, draw.cell as usize, Array::Triangles);
+                (Bucket::Triangles.of_model(m), 2 * slot.start * 3, 3)
+            }
+            DrawSource::Points => {
+                let slot = self.residency.slot(m, draw.cell as usize, Array::Points);
+                (Bucket::Points.of_model(m), slot.start * 6, 6)
+            }
+            DrawSource::Roots => {
+                let at = if draw.cell == ROOTS_CELL {
+                    0
+                } else {
+                    model.cell_roots.get(draw.cell as usize).map_or(0, |r| r.0)
+                };
+                (Bucket::Points.of_model(m), (model.roots_start + at) * 6, 6)
+            }
+            // Recorded directly by `prepare`, never clamped.
+            DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::LodLevel => (Bucket::Pruned.of_model(m), 0, 3),
+            DrawSource::Planes => (Bucket::Planes.of_model(m), 0, 6),
+            DrawSource::Billboards => (Bucket::Billboards.of_model(m), 0, 6),
+            DrawSource::Ellipsoids => (Bucket::Ellipsoids.of_model(m), 0, 6),
+            DrawSource::Lines => (Bucket::Lines.of_model(m), 0, 6),
+        }
+    }
+
+    /// Draws `view`'s buckets with `pipelines` (in bucket order) into `pass`, whose frame bind
+    /// group is set.
+    pub(crate) fn draw_view(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        view: &View,
+        pipelines: &[wgpu::RenderPipeline; Bucket::COUNT],
+    ) {
+        let stride = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
+        for (bucket, pipeline) in Bucket::ALL.into_iter().zip(pipelines) {
+            pass.set_pipeline(pipeline);
+            for (model, draws) in self.models.iter().zip(&view.model_draws) {
+                let (first, count) = draws[bucket as usize];
+                if count == 0 {
+                    continue;
+                }
+                let group = match (bucket, &model.billboards) {
+                    (Bucket::Billboards, Some(billboards)) => &billboards.bind_group,
+                    _ => &model.bind_group,
+                };
+                pass.set_bind_group(1, group, &[]);
+                pass.multi_draw_indirect(&self.indirect_buffer, u64::from(first) * stride, count);
+            }
+        }
+    }
+}
+
+/// Records a draw that streaming does not clamp (pruned leaves, bark, impostor planes: uploaded
+/// whole): its `DrawInfo` (thresholds from `record`, unshaded) into the model's bucket `bucket` with
+/// `(first vertex, vertex count)`, and `record` itself.
+fn record_direct(
+    instances: &[treelod_runtime::Instance],
+    buckets: &mut [Vec<(DrawInfo, u32, u32)>],
+    recorded: &mut Vec<RecordedDraw>,
+    record: RecordedDraw,
+    bucket: Bucket,
+    (first_vertex, vertices): (u32, u32),
+    leaf_scale: f32,
+) {
+    let transform = instances[record.instance as usize].transform;
+    let info = DrawInfo {
+        model: transform.to_cols_array_2d(),
+        tau_p: record.tau_points,
+        tau_t: record.tau_triangles,
+        cell: record.cell,
+        scale: max_axis_scale(transform),
+        shading: 1.0,
+        leaf_scale,
+        instance: record.instance,
+        _pad: 0,
+    };
+    buckets[bucket.of_model(record.model.0 as usize)].push((info, first_vertex, vertices));
+    recorded.push(record);
+}
+
+/// Number of leading `values` (sorted largest first) above `tau`.
+fn leading_above(values: &[f32], tau: f32) -> usize {
+    values.partition_point(|&v| v > tau)
+}

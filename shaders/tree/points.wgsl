@@ -1,0 +1,92 @@
+// Sequential point tree splats (spec §6.5): screen-facing discs, those under a pixel drawn as
+// one-pixel squares that carry their coverage.
+
+@vertex
+fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
+    let draw = draws[draw_index];
+    let point = points[vertex_index / 6u];
+    // The prefix holds points whose interval lies below tau_p: they are not part of the cut.
+    if !point_drawn(point, draw.tau_p, draw.tau_t) {
+        return offscreen();
+    }
+    let corner = CORNERS[vertex_index % 6u];
+    let centre = draw.model * vec4<f32>(point.position[0], point.position[1], point.position[2], 1.0);
+    // A drawn point is at most tau_p (about a pixel) across. A disc under a pixel would fall
+    // between pixel centres and thin the canopy, and drawn a whole pixel wide it would cover more
+    // than it stands for and fatten a far tree: it is drawn as a one-pixel square that carries
+    // the disc's coverage, pi r^2 of the pixel (`splat_mask`).
+    let depth = max((frame.view_proj * centre).w, 1e-6);
+    let pixel = 2.0 * depth / (frame.right.w * frame.eye.w);
+    let disc_r = point.radius * draw.scale * frame.up.w;
+    let r = max(disc_r, 0.5 * pixel);
+    let world = centre.xyz + (corner.x * frame.right.xyz + corner.y * frame.up.xyz) * r;
+    var out: Varyings;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.world = centre.xyz;
+    out.normal = normalize((draw.model * vec4<f32>(decode_normal(point.normal), 0.0)).xyz);
+    out.uv = vec2<f32>(0.0);
+    out.color = decode_color(point.color);
+    // As uploaded, `flags` holds the point's ambient-occlusion byte.
+    out.ao = decode_ao(point.flags);
+    out.material = 0xFFFFFFFFu;
+    // A splat at the one-pixel minimum is a square: a disc inscribed in one pixel misses its centre
+    // a fifth of the time.
+    out.disc = select(corner, corner * 0.70710677, disc_r < 0.5 * pixel);
+    // The share of that pixel its disc covers (1 for a disc drawn at its size): the colour pass
+    // covers it (`splat_mask`) and the shadow pass keeps the splat with this probability, so
+    // sub-pixel points cover the image, and sub-texel points shade the ground, by their area, not
+    // by whole pixels or texels.
+    let coverage = select(1.0, 3.14159265 * disc_r * disc_r / (pixel * pixel), disc_r < 0.5 * pixel);
+    out.keep = vec2<f32>(0.0, min(coverage, 1.0));
+    // Of the point's position and the instance, not of where its prefix was streamed to in the
+    // pool: the same every frame and on the CPU and GPU selection paths.
+    let bits = bitcast<vec3<u32>>(vec3<f32>(point.position[0], point.position[1], point.position[2]));
+    out.id = mix_bits(bits.x ^ mix_bits(bits.y ^ mix_bits(bits.z ^ mix_bits(draw.instance ^ 0x68e31da4u))));
+    switch frame.debug {
+        case 1u: { out.tint = cell_tint(draw.cell); }
+        case 2u: { out.tint = vec3<f32>(0.2, 0.5, 0.95); }
+        case 3u: { out.tint = level_tint(point.hi); }
+        default: { out.tint = vec3<f32>(draw.shading); }
+    }
+    return out;
+}
+
+// The samples a splat of `coverage` (the share of its one-pixel square its disc covers) covers,
+// `id` its hash (0: discard it). With one sample, the whole square in a share `coverage` of the
+// splats, chosen by their hash: a splat is kept or dropped the same way every frame while its
+// coverage stays, so a far canopy keeps its density (the expected coverage is the discs') without
+// growing fat or shimmering; as the camera approaches, coverage grows and more splats appear, in
+// a fixed order. With MSAA, `coverage · sample_count` samples rounded up or down by the hash (so
+// the expected count is exact, down to splats of less than a sample), in a run starting at a
+// sample the hash picks: splats over one pixel cover different samples and add up.
+fn splat_mask(coverage: f32, id: u32) -> u32 {
+    if coverage >= 1.0 {
+        return 0xFFFFFFFFu;
+    }
+    let h = f32(id >> 8u) / 16777216.0;
+    if sample_count == 1u {
+        return select(0u, 0xFFFFFFFFu, h < coverage);
+    }
+    return sample_run(u32(floor(coverage * f32(sample_count) + h)), mix_bits(id));
+}
+
+@fragment
+fn fs_point(in: Varyings) -> TriangleOut {
+    let mask = splat_mask(in.keep.y, in.id);
+    if dot(in.disc, in.disc) > 1.0 || mask == 0u {
+        discard;
+    }
+    if frame.debug != 0u {
+        return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
+    }
+    return TriangleOut(vec4<f32>(shade(in.color.rgb, in.normal, in.world, in.ao) * in.tint, 1.0), mask);
+}
+
+// The shadow pass (see fs_shadow_triangle): a splat is kept with the probability of its
+// coverage.
+@fragment
+fn fs_shadow_point(in: Varyings) {
+    if dot(in.disc, in.disc) > 1.0 || layered_dither(in.clip) >= in.keep.y {
+        discard;
+    }
+}
