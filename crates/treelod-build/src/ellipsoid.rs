@@ -19,7 +19,9 @@
 //! - **Image error** ([`crate::raster::multiscale_error`], Clasen §4): coverage of the cell's
 //!   leaves (alpha-tested triangles) and of a set of ellipsoids in [`EllipsoidConfig::views`]
 //!   orthographic views of [`EllipsoidConfig::resolution`]² pixels fitted to the cell's leaves
-//!   ([`crate::raster::view_directions`]), the mean over bands and views of the multi-scale RMSE.
+//!   ([`crate::raster::view_directions`]), the mean over views of the multi-scale RMSE summary
+//!   (the mean over its levels, from single pixels to the whole view, as `treelod_eval::metrics`
+//!   defines it).
 //!   The ellipsoids are drawn as the renderer draws them ([`crate::raster::fill_ellipsoid_noise`]):
 //!   each pixel of an ellipsoid's projection is hit on its front surface only (a hole shows what
 //!   lies behind it, other ellipsoids, never its own back: `ellipsoid_hit` takes the nearer

@@ -1713,7 +1713,7 @@ fn dilate(texels: &mut [[f32; 4]], w: usize, h: usize) {
 mod tests {
     use super::*;
     use crate::raster::{
-        AlphaMask, Mask, RasterTriangle, View, bounding_sphere, precision_recall, render_views, view_directions,
+        AlphaMask, Mask, RasterTriangle, View, bounding_sphere, coverage, render_views, view_directions,
     };
     use crate::scene::ImageEncoding;
     use glam::Vec2;
@@ -1975,7 +1975,7 @@ mod tests {
             let (quads, atlas_mask) = impostor_triangles(&out, tau);
             let test = render_views(&views, &quads, &[atlas_mask]);
             for (v, (t, r)) in test.iter().zip(&reference).enumerate() {
-                let (p, rec) = precision_recall(t, r);
+                let (p, rec) = coverage(t, r).precision_recall();
                 assert!(p >= min_p && rec >= min_r, "τ {tau}, view {v}: precision {p:.3}, recall {rec:.3}");
             }
         }

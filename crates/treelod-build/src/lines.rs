@@ -79,9 +79,9 @@
 //!   ([`view_directions`]) at one pixel size for the whole block: the diameter of the bark's
 //!   bounding sphere over [`LineConfig::resolution`], so errors of every cell and step compare.
 //!   It is computed locally: only the power-of-two square around the three lines is drawn, and
-//!   each band's sum of squares is normalised by the full `resolution²` view as if the rest of the
-//!   image were unchanged (bands coarser than the square see the difference of the pixel counts in
-//!   one block). Other lines are not drawn: the merge is measured on its own, as it changes the
+//!   each level's sum of squares is normalised by the full `resolution²` view as if the rest of
+//!   the image were unchanged (levels coarser than the square, up to the whole view, see the
+//!   difference of the pixel counts in one block). Other lines are not drawn: the merge is measured on its own, as it changes the
 //!   image where nothing else overlaps. Lines are drawn as the convex hull of their end discs
 //!   (the outline of a cone with round caps seen from the side), each at least
 //!   [`MIN_HALF_WIDTH`] (½) pixel wide, so that the shape of branches thinner than a pixel of
@@ -1068,9 +1068,10 @@ impl ErrorViews {
     }
 
     /// The image error of replacing `old` by `new` (module documentation): the mean over views
-    /// and over the `log2 resolution` bands of the RMSE, computed on the square around the lines.
+    /// and over the `log2 resolution + 1` levels of the RMSE, computed on the square around the
+    /// lines.
     fn error(&self, old: [&Line; 2], new: &Line) -> f64 {
-        let bands = self.resolution.trailing_zeros() as usize;
+        let bands = self.resolution.trailing_zeros() as usize + 1;
         let mut total = 0.0;
         for v in 0..self.axes.len() {
             let disc = |p: DVec3, r: f64| (self.project(v, p), (r * self.scale).max(MIN_HALF_WIDTH));
@@ -1090,7 +1091,7 @@ impl ErrorViews {
                     fill_line(mask, (*a - origin).as_vec2(), *ra, (*b - origin).as_vec2(), *rb);
                 }
             }
-            let local = multiscale_rmse(&test, &reference);
+            let local = multiscale_rmse(&test, &reference).levels;
             #[expect(clippy::cast_precision_loss, reason = "pixel counts")]
             let difference = test.count() as f64 - reference.count() as f64;
             let mut sum = 0.0;

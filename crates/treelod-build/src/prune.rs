@@ -33,7 +33,9 @@ use rayon::prelude::*;
 use treelod_format::{CurveSample, Setting, VertexRecord};
 
 use crate::error::BuildError;
-use crate::raster::{AlphaMask, Confusion, Mask, RasterTriangle, View, fill_triangle, quality, rasterize};
+use treelod_eval::metrics::quality;
+
+use crate::raster::{AlphaMask, Mask, RasterTriangle, View, coverage, fill_triangle, rasterize};
 use crate::rng::SplitMix64;
 
 /// The λ at which `s_opt` is sampled (`PRUNE_SCALE`'s `x`): steps of 0.05 up to 0.4, of 0.1 above
@@ -841,7 +843,7 @@ impl<'a> Scorer<'a> {
                         fill_triangle(&mut mask, p, t.uvs, self.mesh.alphas.get(t.alpha as usize));
                     }
                 }
-                Confusion::of(&mask, &images.reference[v]).precision_recall()
+                coverage(&mask, &images.reference[v]).precision_recall()
             })
             .collect();
         let n = per_view.len().max(1) as f64;

@@ -17,13 +17,18 @@
 //!   to the interpolated UV passes, as the renderer's `fs_triangle` tests the base-colour alpha
 //!   (texture alpha times the material's alpha factor) against the cutoff.
 //! - **Coverage** is a bit-packed [`Mask`], one `u64` per 64 pixels of a row; images are compared
-//!   with [`precision_recall`] and [`quality`].
+//!   by the metrics of `treelod_eval::metrics`, defined there once: [`coverage`] counts the
+//!   pixel classification (Precision, Recall, `Q`) a word at a time, [`multiscale_rmse`] and
+//!   [`multiscale_errors_of_grey`] compute the multi-scale RMSE of coverage in fast passes that
+//!   the tests check against that definition.
 //!
 //! Everything is sequential per image; [`render_views`] runs views in parallel (rayon), each into
 //! its own mask, so the result does not depend on the thread count.
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+
+use treelod_eval::metrics::{Coverage, Mask as CoverageMask, MultiScaleRmse};
 
 use crate::scene::{AlphaMode, Image, Material};
 
@@ -101,59 +106,31 @@ impl Mask {
     }
 }
 
-/// Pixel counts of a test mask against a reference (Neubert et al. 2011, Table 1).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Confusion {
-    /// Covered in both.
-    pub true_positives: u64,
-    /// Covered in the test only.
-    pub false_positives: u64,
-    /// Covered in the reference only.
-    pub false_negatives: u64,
-}
-
-impl Confusion {
-    /// Counts the pixels of `test` against `reference`.
-    ///
-    /// # Panics
-    /// If the masks differ in size.
-    #[must_use]
-    pub fn of(test: &Mask, reference: &Mask) -> Self {
-        assert_eq!(test.size, reference.size, "masks of different sizes");
-        let mut c = Self::default();
-        for (&t, &r) in test.words.iter().zip(&reference.words) {
-            c.true_positives += u64::from((t & r).count_ones());
-            c.false_positives += u64::from((t & !r).count_ones());
-            c.false_negatives += u64::from((!t & r).count_ones());
-        }
-        c
-    }
-
-    /// Precision `tp / (tp + fp)` and recall `tp / (tp + fn)` (Neubert et al. eq. 1). An empty
-    /// test image has precision 1 (it sets no wrong pixel), an empty reference recall 1 (there
-    /// is nothing to miss): two empty images score `(1, 1)`.
-    #[must_use]
-    pub fn precision_recall(&self) -> (f64, f64) {
-        let ratio = |tp: u64, other: u64| if tp + other == 0 { 1.0 } else { tp as f64 / (tp + other) as f64 };
-        (ratio(self.true_positives, self.false_positives), ratio(self.true_positives, self.false_negatives))
-    }
-}
-
-/// Precision and recall of `test` against `reference`; see [`Confusion::precision_recall`] for
-/// the empty cases.
+/// The pixel classification of coverage `test` against `reference` ([`Coverage`]: Precision,
+/// Recall and `Q` are defined once, in `treelod_eval::metrics`), counted a word of 64 pixels at a
+/// time.
 ///
 /// # Panics
 /// If the masks differ in size.
 #[must_use]
-pub fn precision_recall(test: &Mask, reference: &Mask) -> (f64, f64) {
-    Confusion::of(test, reference).precision_recall()
+pub fn coverage(test: &Mask, reference: &Mask) -> Coverage {
+    assert_eq!(test.size, reference.size, "masks of different sizes");
+    let mut c = Coverage::default();
+    for (&t, &r) in test.words.iter().zip(&reference.words) {
+        c.tp += u64::from((t & r).count_ones());
+        c.fp += u64::from((t & !r).count_ones());
+        c.fn_ += u64::from((!t & r).count_ones());
+    }
+    c
 }
 
-/// Neubert et al.'s quality `Q = 1 − ‖(1 − P, 1 − R)‖` (eq. 4): 1 for a perfect image, 0 at
-/// distance 1 from the corner `(1, 1)` of the PR diagram, down to `1 − √2` when nothing is right.
+/// The mask as `treelod_eval`'s [`CoverageMask`] of flags, for checking the fast paths here
+/// against the metrics' definitions.
 #[must_use]
-pub fn quality(precision: f64, recall: f64) -> f64 {
-    1.0 - (1.0 - precision).hypot(1.0 - recall)
+pub fn to_flags(mask: &Mask) -> CoverageMask {
+    let n = mask.size;
+    let covered = (0..n).flat_map(|y| (0..n).map(move |x| (x, y))).map(|(x, y)| mask.get(x, y)).collect();
+    CoverageMask { width: n, height: n, covered }
 }
 
 /// The alpha test of one material: a bit per texel of its base-colour image, set where the texel
@@ -732,22 +709,23 @@ pub fn threshold_into(mask: &mut Mask, grey: &[u16], cut: u16) {
     }
 }
 
-/// Clasen et al.'s multi-scale image error (2011 §4) of coverage `test` against `reference`: the
-/// root-mean-square of the difference image `test − reference` (covered = 1) at resolutions
-/// `n, n/2, …, 2` (`log2 n` bands, `n` the masks' side, a power of two), where a pixel of band
-/// `b` is the mean difference over a `2^b × 2^b` block. Computed in one pass along the Z-order
-/// (Morton) curve, on which every block of every band is a contiguous run: each band keeps one
-/// running sum, closed every `4^b` pixels. The first band comes from the bits directly (its
-/// squared differences are the XOR's population count), the pass runs over the 2 × 2 block sums.
+/// The multi-scale RMSE (Clasen et al. 2011 §4, defined in `treelod_eval::metrics`) of coverage
+/// `test` against `reference` as images of 0 and 1: levels `0..=L` (`L = log2 n`, `n` the masks'
+/// side, a power of two), level `l` the RMSE after each aligned `2^l × 2^l` block is replaced by
+/// its mean, the last level the whole image. Computed in one pass along the Z-order (Morton)
+/// curve, on which every block of every level is a contiguous run: each level keeps one running
+/// sum, closed every `4^l` pixels. The first level comes from the bits directly (its squared
+/// differences are the XOR's population count), the pass runs over the 2 × 2 block sums.
 ///
 /// # Panics
 /// If the masks differ in size or the size is not a power of two of at least 2.
 #[must_use]
-pub fn multiscale_rmse(test: &Mask, reference: &Mask) -> Vec<f64> {
+pub fn multiscale_rmse(test: &Mask, reference: &Mask) -> MultiScaleRmse {
     assert_eq!(test.size, reference.size, "masks of different sizes");
     let n = test.size as usize;
     assert!(n >= 2 && n.is_power_of_two(), "multi-scale RMSE needs a power-of-two side, got {n}");
-    let bands = n.trailing_zeros() as usize;
+    // Levels 0..=log2 n; the last is the whole image.
+    let bands = n.trailing_zeros() as usize + 1;
     let mut squares = vec![0.0f64; bands];
     let differ: u64 = test.words.iter().zip(&reference.words).map(|(t, r)| u64::from((t ^ r).count_ones())).sum();
     squares[0] = differ as f64;
@@ -766,9 +744,9 @@ pub fn multiscale_rmse(test: &Mask, reference: &Mask) -> Vec<f64> {
             }
         }
     }
-    // The pass along the Z-order curve of the block grid: sums[b] is the open block of band b.
+    // The pass along the Z-order curve of the block grid: sums[b] is the open block of level b.
     let mut sums = vec![0i64; bands + 1];
-    for m in 0..if bands > 1 { half * half } else { 0 } {
+    for m in 0..half * half {
         let (x, y) = morton_decode(m);
         sums[1] = i64::from(blocks[y * half + x]);
         let mut b = 1;
@@ -781,21 +759,22 @@ pub fn multiscale_rmse(test: &Mask, reference: &Mask) -> Vec<f64> {
             if b + 1 >= bands {
                 break;
             }
-            // Band b + 1's block closes after every 4^b blocks of the 2 × 2 grid.
+            // Level b + 1's block closes after every 4^b blocks of the 2 × 2 grid.
             if (m + 1) % (1 << (2 * b)) != 0 {
                 break;
             }
             b += 1;
         }
     }
-    squares
+    let levels = squares
         .iter()
         .enumerate()
         .map(|(b, &sq)| {
             let side = (n >> b) as f64;
             (sq / (side * side)).sqrt()
         })
-        .collect()
+        .collect();
+    MultiScaleRmse { levels }
 }
 
 /// A mask's pixels as 0 and 1, rows top to bottom (the reference of
@@ -803,12 +782,14 @@ pub fn multiscale_rmse(test: &Mask, reference: &Mask) -> Vec<f64> {
 #[must_use]
 pub fn coverage_values(mask: &Mask) -> Vec<i32> {
     let n = mask.size as usize;
-    (0..n * n).map(|p| i32::from(mask.words[(p / n) * mask.stride + (p % n) / 64] >> (p % 64) & 1 == 1)).collect()
+    // Bit `x % 64` of the row's word `x / 64` (for sides under 64, not `p % 64`).
+    (0..n * n).map(|p| i32::from(mask.words[(p / n) * mask.stride + (p % n) / 64] >> ((p % n) % 64) & 1 == 1)).collect()
 }
 
 /// [`multiscale_error`] of the coverage of the [`fill_ellipsoid_noise`] image `grey` under each
 /// cut of `cuts` ([`noise_cut`]) against the coverage `reference` ([`coverage_values`]), in one
-/// pass per cut over a pyramid of block sums (the same numbers up to rounding).
+/// pass per cut over a pyramid of block sums, levels `0..=log2 n` as [`multiscale_rmse`] (the
+/// same numbers up to rounding).
 ///
 /// # Panics
 /// If `grey` and `reference` differ in length or are not `n²` long for a power of two `n ≥ 2`.
@@ -817,7 +798,7 @@ pub fn multiscale_errors_of_grey(grey: &[u16], reference: &[i32], cuts: &[u16]) 
     assert_eq!(grey.len(), reference.len(), "images of different sizes");
     let n = grey.len().isqrt();
     assert!(n >= 2 && n.is_power_of_two() && n * n == grey.len(), "multi-scale RMSE needs a power-of-two side");
-    let bands = n.trailing_zeros() as usize;
+    let bands = n.trailing_zeros() as usize + 1;
     let mut level = vec![0i32; n * n];
     let mut next = vec![0i32; n * n / 4];
     cuts.iter()
@@ -827,10 +808,10 @@ pub fn multiscale_errors_of_grey(grey: &[u16], reference: &[i32], cuts: &[u16]) 
             }
             let (mut side, mut total) = (n, 0.0f64);
             for b in 0..bands {
-                // Squares of block sums fit in i32 up to 2^15 (a 2^b block sums to at most 4^b).
-                let squares: i64 =
-                    level[..side * side].chunks(1024).map(|c| i64::from(c.iter().map(|&v| v * v).sum::<i32>())).sum();
-                // A band-b pixel is the block sum over 4^b: its square is sum² / 16^b.
+                // A 2^b block sums to at most 4^b: the square of the whole image's (4^b = n²) needs
+                // 64 bits from n = 256 on.
+                let squares: i64 = level[..side * side].iter().map(|&v| i64::from(v) * i64::from(v)).sum();
+                // A level-b pixel is the block sum over 4^b: its square is sum² / 16^b.
                 #[expect(
                     clippy::cast_precision_loss,
                     clippy::cast_possible_wrap,
@@ -857,11 +838,10 @@ pub fn multiscale_errors_of_grey(grey: &[u16], reference: &[i32], cuts: &[u16]) 
         .collect()
 }
 
-/// The mean of the bands of [`multiscale_rmse`]: one number for comparing images.
+/// The summary of [`multiscale_rmse`], the mean of its levels: one number for comparing images.
 #[must_use]
 pub fn multiscale_error(test: &Mask, reference: &Mask) -> f64 {
-    let bands = multiscale_rmse(test, reference);
-    bands.iter().sum::<f64>() / bands.len() as f64
+    multiscale_rmse(test, reference).summary()
 }
 
 /// `(x, y)` of the `m`-th cell along the Z-order curve: the even bits of `m` are `x`, the odd `y`.
@@ -1001,7 +981,7 @@ mod tests {
     }
 
     #[test]
-    fn precision_and_recall_of_known_masks() {
+    fn coverage_counts_words_as_the_metrics_count_flags() {
         let mut reference = Mask::new(70);
         let mut test = Mask::new(70);
         for x in 0..10 {
@@ -1012,19 +992,17 @@ mod tests {
         }
         test.set(69, 69);
         // tp 5, fp 11, fn 5.
-        let c = Confusion::of(&test, &reference);
-        assert_eq!((c.true_positives, c.false_positives, c.false_negatives), (5, 11, 5));
-        let (p, r) = precision_recall(&test, &reference);
-        assert_eq!((p, r), (5.0 / 16.0, 0.5));
-        assert!((quality(p, r) - (1.0 - (11.0f64 / 16.0).hypot(0.5))).abs() < 1e-12);
-        assert_eq!(precision_recall(&reference, &reference), (1.0, 1.0));
-        assert_eq!(quality(1.0, 1.0), 1.0);
+        let c = coverage(&test, &reference);
+        assert_eq!(c, Coverage { tp: 5, fp: 11, fn_: 5 });
+        assert_eq!(c, Coverage::compare(&to_flags(&reference), &to_flags(&test)).expect("same size"));
+        assert_eq!(c.precision_recall(), (5.0 / 16.0, 0.5));
+        assert!((c.quality() - (1.0 - (11.0f64 / 16.0).hypot(0.5))).abs() < 1e-12);
+        assert_eq!(coverage(&reference, &reference).precision_recall(), (1.0, 1.0));
         // Empty cases.
         let empty = Mask::new(70);
-        assert_eq!(precision_recall(&empty, &empty), (1.0, 1.0));
-        assert_eq!(precision_recall(&empty, &reference), (1.0, 0.0));
-        assert_eq!(precision_recall(&reference, &empty), (0.0, 1.0));
-        assert_eq!(quality(1.0, 0.0), 0.0);
+        assert_eq!(coverage(&empty, &empty).precision_recall(), (1.0, 1.0));
+        assert_eq!(coverage(&empty, &reference).precision_recall(), (1.0, 0.0));
+        assert_eq!(coverage(&reference, &empty).precision_recall(), (0.0, 1.0));
     }
 
     #[test]
@@ -1128,21 +1106,21 @@ mod tests {
     fn multiscale_rmse_is_zero_for_equal_images_and_exact_for_known_differences() {
         let mut a = Mask::new(64);
         fill_ellipse(&mut a, Vec2::new(30.0, 20.0), [100.0, 20.0, 50.0]);
-        let bands = multiscale_rmse(&a, &a.clone());
-        assert_eq!(bands, vec![0.0; 6]);
+        let levels = multiscale_rmse(&a, &a.clone()).levels;
+        assert_eq!(levels, vec![0.0; 7]);
         assert_eq!(multiscale_error(&a, &a), 0.0);
-        // One pixel differs: band b has one block of mean 1/4^b among (n/2^b)² blocks, so its
-        // RMSE is 1/(2^b·n).
+        // One pixel differs: level l has one block of mean 1/4^l among (n/2^l)² blocks, so its
+        // RMSE is 1/(2^l·n), down to 1/n² for the whole image.
         let mut b = a.clone();
         let (x, y) = (37, 41);
         assert!(!b.get(x, y));
         b.set(x, y);
-        for (band, rmse) in multiscale_rmse(&b, &a).into_iter().enumerate() {
-            let expected = 1.0 / (f64::from(1u32 << band) * 64.0);
-            assert!((rmse - expected).abs() < 1e-12, "band {band}: {rmse} vs {expected}");
+        for (level, rmse) in multiscale_rmse(&b, &a).levels.into_iter().enumerate() {
+            let expected = 1.0 / (f64::from(1u32 << level) * 64.0);
+            assert!((rmse - expected).abs() < 1e-12, "level {level}: {rmse} vs {expected}");
         }
-        // A full image against an empty one: 1 at every band; a checkerboard: 1/√2 at the
-        // finest band, 1/2 at every coarser one (each block is half covered).
+        // A full image against an empty one: 1 at every level; a checkerboard: 1/√2 at the
+        // finest level, 1/2 at every coarser one (each block is half covered).
         let (mut full, empty, mut checker) = (Mask::new(32), Mask::new(32), Mask::new(32));
         for y in 0..32 {
             for x in 0..32 {
@@ -1152,21 +1130,68 @@ mod tests {
                 }
             }
         }
-        let bands = multiscale_rmse(&full, &empty);
-        assert!(bands.iter().all(|&r| (r - 1.0).abs() < 1e-12), "{bands:?}");
-        let bands = multiscale_rmse(&checker, &empty);
-        assert_eq!(bands.len(), 5);
-        assert!((bands[0] - 0.5f64.sqrt()).abs() < 1e-12);
-        assert!(bands[1..].iter().all(|&r| (r - 0.5).abs() < 1e-12), "{bands:?}");
-        // The sign of a difference counts at coarse bands: a block half too much and half too
+        let levels = multiscale_rmse(&full, &empty).levels;
+        assert!(levels.iter().all(|&r| (r - 1.0).abs() < 1e-12), "{levels:?}");
+        let levels = multiscale_rmse(&checker, &empty).levels;
+        assert_eq!(levels.len(), 6);
+        assert!((levels[0] - 0.5f64.sqrt()).abs() < 1e-12);
+        assert!(levels[1..].iter().all(|&r| (r - 0.5).abs() < 1e-12), "{levels:?}");
+        // The sign of a difference counts at coarse levels: a block half too much and half too
         // little cancels there.
         let (mut left, mut right) = (Mask::new(4), Mask::new(4));
         left.set(0, 0);
         right.set(1, 0);
-        let bands = multiscale_rmse(&left, &right);
-        assert!((bands[0] - (2.0f64 / 16.0).sqrt()).abs() < 1e-12 && bands[1] == 0.0, "{bands:?}");
-        // The smallest image: one band.
-        assert_eq!(multiscale_rmse(&Mask::new(2), &Mask::new(2)), vec![0.0]);
+        let levels = multiscale_rmse(&left, &right).levels;
+        assert!((levels[0] - (2.0f64 / 16.0).sqrt()).abs() < 1e-12 && levels[1..] == [0.0, 0.0], "{levels:?}");
+        // The smallest image: the pixels and the whole image.
+        assert_eq!(multiscale_rmse(&Mask::new(2), &Mask::new(2)).levels, vec![0.0, 0.0]);
+    }
+
+    /// A random square mask of side `2^k`, `k` in `1..=6`, and a second of the same side.
+    fn mask_pair() -> impl proptest::strategy::Strategy<Value = (Mask, Mask)> {
+        use proptest::prelude::*;
+        (1u32..=6).prop_flat_map(|k| {
+            let n = 1u32 << k;
+            let bits = proptest::collection::vec(any::<bool>(), (n * n) as usize);
+            (bits.clone(), bits).prop_map(move |(a, b)| {
+                let build = |bits: Vec<bool>| {
+                    let mut mask = Mask::new(n);
+                    for (i, bit) in bits.into_iter().enumerate() {
+                        if bit {
+                            #[expect(clippy::cast_possible_truncation, reason = "at most 4096 pixels")]
+                            mask.set(i as u32 % n, i as u32 / n);
+                        }
+                    }
+                    mask
+                };
+                (build(a), build(b))
+            })
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(96))]
+
+        /// The bit-mask pass, the grey-cut pass and the pixel counts compute the definitions of
+        /// `treelod_eval::metrics`, written out block by block there.
+        #[test]
+        fn the_fast_paths_compute_the_metrics_definitions((test, reference) in mask_pair()) {
+            let n = test.size();
+            let (t, r) = (to_flags(&test), to_flags(&reference));
+            let definition =
+                treelod_eval::metrics::multiscale_rmse_by_blocks(n, n, 1, &t.values(), &r.values()).expect("same size");
+            let fast = multiscale_rmse(&test, &reference);
+            proptest::prop_assert_eq!(fast.levels.len(), definition.levels.len());
+            for (f, d) in fast.levels.iter().zip(&definition.levels) {
+                proptest::prop_assert!((f - d).abs() < 1e-12, "{:?} vs {:?}", fast.levels, definition.levels);
+            }
+            // The grey-cut pass: grey 2 where `test` covers, 0 elsewhere, cut at 1.
+            let grey: Vec<u16> = t.covered.iter().map(|&c| if c { 2 } else { 0 }).collect();
+            let of_grey = multiscale_errors_of_grey(&grey, &coverage_values(&reference), &[1])[0];
+            proptest::prop_assert!((of_grey - definition.summary()).abs() < 1e-12, "{} vs {:?}", of_grey, definition);
+            proptest::prop_assert!((multiscale_error(&test, &reference) - definition.summary()).abs() < 1e-12);
+            proptest::prop_assert_eq!(coverage(&test, &reference), Coverage::compare(&r, &t).expect("same size"));
+        }
     }
 
     #[test]

@@ -6,6 +6,7 @@ mod common;
 use common::{BACKGROUND, bark_triangles, covered, demo_built, gpu, keep, one_tree, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
+use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, DebugView, DrawSource, Instance, RecordedDraw, Renderer, Settings, Technique};
@@ -347,32 +348,15 @@ fn the_demo_tree_matches_its_golden_images_at_three_distances() {
     }
 }
 
-/// The linear RGB of every pixel, box-filtered by `k` per side.
-fn linear_box(image: &Image, k: u32) -> Vec<[f64; 3]> {
-    let decode = |c: u8| {
-        let c = f64::from(c) / 255.0;
-        if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
-    };
-    let (w, h) = (image.width / k, image.height / k);
-    let mut out = Vec::with_capacity((w * h) as usize);
-    for y in 0..h {
-        for x in 0..w {
-            let mut sum = [0.0; 3];
-            for sy in 0..k {
-                for sx in 0..k {
-                    let p = image.pixel(x * k + sx, y * k + sy);
-                    (0..3).for_each(|c| sum[c] += decode(p[c]));
-                }
-            }
-            out.push(sum.map(|s| s / f64::from(k * k)));
-        }
-    }
-    out
+/// The image in linear light, box-filtered by `k` per side (as `treelod eval` resolves its
+/// reference).
+fn linear_box(image: &Image, k: u32) -> LinearImage {
+    LinearImage::from_srgba8(image.width, image.height, &image.rgba).expect("RGBA8").box_filter(k).expect("divides")
 }
 
-fn rmse(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    let sum: f64 = a.iter().zip(b).map(|(p, q)| (0..3).map(|c| (p[c] - q[c]).powi(2)).sum::<f64>()).sum();
-    (sum / (3 * a.len()) as f64).sqrt()
+/// The per-pixel RMSE of linear colour: level 0 of the multi-scale RMSE.
+fn rmse(a: &LinearImage, b: &LinearImage) -> f64 {
+    multiscale_rmse(a, b).expect("same size").levels[0]
 }
 
 /// 4x MSAA (with alpha to coverage for the leaves) against the full mesh drawn 4 times larger
@@ -407,8 +391,8 @@ fn msaa_draws_the_full_mesh_closer_to_the_supersampled_image() {
 
 /// How much an image darkens a white background: the sum over pixels of one minus the mean
 /// linear channel (a pixel wholly covered by black counts 1).
-fn ink(pixels: &[[f64; 3]]) -> f64 {
-    pixels.iter().map(|p| 1.0 - (p[0] + p[1] + p[2]) / 3.0).sum()
+fn ink(image: &LinearImage) -> f64 {
+    image.pixels.iter().map(|p| 1.0 - (f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2])) / 3.0).sum()
 }
 
 /// Far away, where the leaves' textures are minified, the plain alpha test at one sample keeps

@@ -22,7 +22,7 @@ fn bench_ok(args: &[&OsStr]) -> String {
 
 const COLUMNS: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines";
+precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines";
 
 #[test]
 fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
@@ -153,7 +153,11 @@ fn quality_is_measured_against_the_full_mesh_and_missing_techniques_are_reported
         stdout.contains("technique prune-cook: absent: no model of the forest holds pruning priority lists"),
         "{stdout}"
     );
-    assert!(stdout.contains("the full mesh as the reference at 160x90"), "{stdout}");
+    assert!(
+        stdout
+            .contains("the full mesh as the reference at 640x360 (supersample 4, box-filtered, stochastic alpha test)"),
+        "{stdout}"
+    );
     let (header, rows) = read_csv(&csv);
     assert_eq!(rows.len(), 3 * 2, "prune-cook has no rows");
     for row in &rows {
@@ -164,9 +168,12 @@ fn quality_is_measured_against_the_full_mesh_and_missing_techniques_are_reported
                     assert!((0.0..=1.0).contains(&v), "{column} {v}");
                 }
                 assert!(number(&header, row, "rmse") >= 0.0);
+                let flip = number(&header, row, "flip");
+                assert!(flip > 0.0 && flip <= 1.0, "spt's image differs from the full mesh's: {flip}");
             }
             "full" => {
                 assert_eq!(field(&header, row, "q"), "", "the reference is not measured against itself");
+                assert_eq!(field(&header, row, "flip"), "");
                 assert!(number(&header, row, "gpu_ms") > 0.0, "the reference's pass is timed");
             }
             other => panic!("unexpected technique {other}"),
@@ -399,6 +406,8 @@ fn bad_arguments_and_inputs_are_clear_errors() {
         vec!["--technique", "bogus"],
         vec!["--no-render", "--quality"],
         vec!["--supersample", "2"],
+        vec!["--reference-1x"],
+        vec!["--quality", "--reference-1x", "--supersample", "2"],
         vec!["--fov", "200"],
     ];
     for args in usage {

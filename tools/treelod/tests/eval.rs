@@ -63,6 +63,7 @@ fn the_full_mesh_against_the_reference_is_exactly_perfect() {
         assert_eq!(summary["pooled"][key], 1.0, "{key}: {summary}");
     }
     assert_eq!(summary["mean"]["rmse"], 0.0, "{summary}");
+    assert_eq!(summary["mean"]["flip"], 0.0, "FLIP of identical images: {summary}");
     let levels = summary["mean"]["rmse_levels"].as_array().expect("levels");
     assert_eq!(levels.len(), 8, "128 pixels: 1, 2, 4, … 128-pixel blocks");
     assert!(levels.iter().all(|l| *l == 0.0), "{levels:?}");
@@ -80,7 +81,7 @@ fn the_full_mesh_against_the_reference_is_exactly_perfect() {
         for column in ["precision", "recall", "q"] {
             assert_eq!(number(&header, row, column), 1.0, "{column}");
         }
-        for column in ["rmse", "rmse_1px", "rmse_128px", "fp", "fn"] {
+        for column in ["rmse", "rmse_1px", "rmse_128px", "flip", "fp", "fn"] {
             assert_eq!(number(&header, row, column), 0.0, "{column}");
         }
     }
@@ -132,6 +133,9 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
     }
     let rmse = spt["mean"]["rmse"].as_f64().expect("a number");
     assert!(rmse > 0.0 && rmse < 0.2, "{spt}");
+    // FLIP of a visibly different image (points for leaves) is above 0 and at most 1.
+    let flip = spt["mean"]["flip"].as_f64().expect("a number");
+    assert!(flip > 0.0 && flip < 1.0, "{spt}");
     assert!(spt["mean"]["points"].as_f64().is_some_and(|p| p > 0.0), "spt draws points: {spt}");
     assert!(spt["mean"]["temporal_noise"].as_f64().is_some() && spt["mean"]["wall_ms"].as_f64().is_some());
 
@@ -144,6 +148,7 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
         assert!((number(&header, row, "precision") - tp / (tp + fp)).abs() < 1e-12);
         assert!((number(&header, row, "recall") - tp / (tp + fn_)).abs() < 1e-12);
         assert!(number(&header, row, "geometry_bytes") > 0.0 && number(&header, row, "wall_ms") > 0.0);
+        assert!((0.0..=1.0).contains(&number(&header, row, "flip")) && number(&header, row, "flip") > 0.0, "{row:?}");
     }
     assert_eq!(rows[0][header.iter().position(|h| h == "temporal_noise").expect("column")], "", "no frame before 0");
     assert!(number(&header, &rows[1], "temporal_noise") > 0.0);
@@ -156,7 +161,7 @@ fn spt_reads_sensibly_and_its_csv_json_and_sheet_are_written() {
     // views are at the same distance: the band plot has one panel.
     // Legends sit in a 170-pixel margin right of the panels.
     for (plot, size) in
-        [(&quality_plot, (720 + 170, 480)), (&frame_plot, (720, 800)), (&band_plot, (64 + 324 + 170, 420))]
+        [(&quality_plot, (720 + 170, 744)), (&frame_plot, (720, 994)), (&band_plot, (64 + 324 + 170, 420))]
     {
         let (width, height, pixels) = read_png(plot);
         assert_eq!((width, height), size, "{}", plot.display());

@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use glam::{Mat4, Vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
+use treelod_eval::metrics::Coverage;
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, MaterialInfo, MaterialRecord, Metadata, NO_IMAGE,
     PointRecord, Range, Source, Tree, TriangleRecord, VertexRecord, pack,
@@ -127,12 +128,11 @@ pub fn count(mask: &[bool]) -> usize {
     mask.iter().filter(|m| **m).count()
 }
 
-/// Precision and recall of the pixel mask `test` against `reference`.
+/// Precision and recall of the pixel mask `test` against `reference`, as `treelod_eval` defines
+/// them.
 pub fn mask_precision_recall(test: &[bool], reference: &[bool]) -> (f64, f64) {
-    let both = test.iter().zip(reference).filter(|(a, b)| **a && **b).count() as f64;
-    let n_test = test.iter().filter(|a| **a).count() as f64;
-    let n_reference = reference.iter().filter(|a| **a).count() as f64;
-    (both / n_test.max(1.0), both / n_reference.max(1.0))
+    assert_eq!(test.len(), reference.len(), "masks of different sizes");
+    Coverage::of_flags(reference, test).precision_recall()
 }
 
 /// Pixels of `shadowed` darker than 0.85 of the same pixel of `lit` (the ground without

@@ -3,8 +3,10 @@
 //! height inside the main forest, heads to a smaller separate group and turns back ([`path`]).
 //! Every technique flies the same path; per frame it records the CPU time of the selection
 //! (`Renderer::prepare`), the primitives drawn by kind, the bytes streamed, the instances in view,
-//! the GPU time of the render pass (timestamp queries) and, with `--quality`, the P/R/Q and
-//! multi-scale RMSE of `treelod eval`'s metrics against the full mesh at the same frame.
+//! the GPU time of the render pass (timestamp queries) and, with `--quality`, the P/R/Q,
+//! multi-scale RMSE and mean FLIP error (`treelod_eval`'s metrics) against the full mesh at the
+//! same frame, drawn as `treelod eval`'s reference is (supersampled, box-filtered, with the
+//! stochastic alpha test) unless `--reference-1x` asks for the plain full mesh at the image size.
 //!
 //! The full mesh of 10^4 trees takes minutes a frame on a software rasteriser, so `full` is
 //! counted, not drawn, unless `--quality` needs it as the reference: its primitives come from the
@@ -29,7 +31,9 @@ use treelod_render::{Camera, Instance, ModelId, PerTechnique, Pruning, Renderer,
 
 use self::forest::{Forest, Shape};
 use self::path::Frame;
-use crate::eval::metrics::{Coverage, LinearImage, Mask, multiscale_rmse};
+use treelod_eval::MetricError;
+
+use crate::eval::metrics::{Coverage, LinearImage, Mask, flip::mean_flip, multiscale_rmse};
 use crate::eval::{Adapter, Availability};
 use crate::render::{clear_colour, parse_colour, parse_fov, parse_pixels, parse_size};
 use crate::report::{self, Failed};
@@ -87,13 +91,19 @@ pub struct Args {
     #[arg(long)]
     pub shadows: bool,
     /// Also draw the full mesh as the reference at every frame and measure each technique's
-    /// image against it: P, R, Q and multi-scale RMSE (slow: the full mesh of every tree in view).
+    /// image against it: P, R, Q, multi-scale RMSE and mean FLIP error (slow: the full mesh of
+    /// every tree in view). The reference is `treelod eval`'s: supersampled, box-filtered, with
+    /// the stochastic alpha test that keeps minified leaves' coverage.
     #[arg(long)]
     pub quality: bool,
     /// With --quality, the reference is drawn K times larger per side and box-filtered down.
-    #[arg(long, value_name = "K", default_value_t = 1, requires = "quality",
+    #[arg(long, value_name = "K", default_value_t = 4, requires = "quality",
           value_parser = clap::value_parser!(u32).range(1..=16))]
     pub supersample: u32,
+    /// With --quality, the reference of earlier versions instead: the full mesh drawn at the image
+    /// size with the plain alpha test (aliased: thin leaves drop out of it).
+    #[arg(long, requires = "quality", conflicts_with = "supersample")]
+    pub reference_1x: bool,
     /// Point threshold `s_min` in pixels of `spt`.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_min: Option<f32>,
@@ -198,6 +208,8 @@ pub struct Row {
     pub coverage: Option<Coverage>,
     /// Multi-scale RMSE summary against the reference.
     pub rmse: Option<f64>,
+    /// Mean FLIP error against the reference.
+    pub flip: Option<f64>,
 }
 
 impl Row {
@@ -228,6 +240,16 @@ pub struct Models {
     stochastic: Option<Vec<Arc<Container>>>,
 }
 
+/// How `--quality`'s reference is drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Reference {
+    /// Drawn this many times larger per side, then box-filtered down.
+    pub supersample: u32,
+    /// Whether with the stochastic alpha test (`treelod eval`'s reference) or the plain one
+    /// (`--reference-1x`).
+    pub stochastic_alpha: bool,
+}
+
 /// Everything a run measured, for the outputs.
 pub struct Report {
     /// The models.
@@ -244,8 +266,8 @@ pub struct Report {
     pub seed: u64,
     /// Whether images were drawn.
     pub rendered: bool,
-    /// Whether quality was measured, and the reference's supersampling.
-    pub quality: Option<u32>,
+    /// Whether quality was measured, and how the reference was drawn.
+    pub quality: Option<Reference>,
     /// The adapter, if one was opened.
     pub adapter: Option<Adapter>,
     /// Whether the device has timestamp queries.
@@ -259,7 +281,7 @@ pub struct Report {
 }
 
 /// The full mesh's primitives, counted by the runtime's selection with both thresholds 0 (what
-/// `Settings::full_mesh` selects: every triangle of every non-culled cell of every visible
+/// `Technique::Full` selects: every triangle of every non-culled cell of every visible
 /// instance), over chunks of instances made from the trees as needed, with one reused draw list.
 struct FullCounter {
     models: Vec<treelod_runtime::ModelLod>,
@@ -362,7 +384,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     } else {
         None
     };
-    let k = if args.quality { args.supersample } else { 1 };
+    let k = if args.quality && !args.reference_1x { args.supersample } else { 1 };
     if let Some(gpu) = &gpu {
         let limit = gpu.device.limits().max_texture_dimension_2d;
         if u64::from(width) * u64::from(k) > u64::from(limit) || u64::from(height) * u64::from(k) > u64::from(limit) {
@@ -414,7 +436,12 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             }
         }
         if args.quality {
-            reference = Some(add(gpu, Settings { technique: Technique::Full, ..Settings::default() }, None)?);
+            let settings = if args.reference_1x {
+                Settings { technique: Technique::Full, ..Settings::default() }
+            } else {
+                crate::eval::reference_settings()
+            };
+            reference = Some(add(gpu, settings, None)?);
         }
     }
     drop(instances);
@@ -423,7 +450,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let background = clear_colour(args.background);
     let camera =
         |frame: &Frame, k: u32| Camera::look_at(frame.pose.eye, frame.pose.target, fovy, width * k, height * k);
-    let internal = |e: crate::eval::metrics::SizeMismatch| {
+    let internal = |e: MetricError| {
         report::message_error(&input_label(args), &format!("internal error: {e}"));
         Failed { class: ErrorClass::Io }
     };
@@ -495,6 +522,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                     shadow_primitives: None,
                     coverage: None,
                     rmse: None,
+                    flip: None,
                 });
                 continue;
             }
@@ -531,6 +559,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 shadow_primitives: args.shadows.then(|| stats.shadow.primitives()),
                 coverage: None,
                 rmse: None,
+                flip: None,
             };
             if !args.no_render {
                 let (image, gpu_ms) = guarded(gpu, &input_label(args), || {
@@ -541,6 +570,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                     let (image, mask) = crate::eval::measurable(&image, 1, args.background).map_err(internal)?;
                     row.coverage = Some(Coverage::compare(reference_mask, &mask).map_err(internal)?);
                     row.rmse = Some(multiscale_rmse(&image, reference_image).map_err(internal)?.summary());
+                    row.flip = Some(mean_flip(&image, reference_image).map_err(internal)?);
                 }
             }
             rows.push(row);
@@ -557,7 +587,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         fov_degrees: args.fov,
         seed: args.seed,
         rendered: !args.no_render,
-        quality: args.quality.then_some(k),
+        quality: args.quality.then_some(Reference { supersample: k, stochastic_alpha: !args.reference_1x }),
         adapter: gpu.as_ref().map(|g| Adapter::new(&g.info)),
         timestamps: gpu.as_ref().is_some_and(|g| g.device.features().contains(wgpu::Features::TIMESTAMP_QUERY)),
         techniques,

@@ -105,6 +105,8 @@ pub struct Summary {
     pub q: Option<f64>,
     /// Mean multi-scale RMSE.
     pub rmse: Option<f64>,
+    /// Mean FLIP error.
+    pub flip: Option<f64>,
 }
 
 fn rows_of(report: &Report, technique: Technique) -> impl Iterator<Item = &Row> {
@@ -148,6 +150,7 @@ pub fn summarise(report: &Report, technique: Technique) -> Summary {
         recall: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.recall()).collect()),
         q: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.quality()).collect()),
         rmse: mean_of(rows.iter().filter_map(|r| r.rmse).collect()),
+        flip: mean_of(rows.iter().filter_map(|r| r.flip).collect()),
     }
 }
 
@@ -222,11 +225,19 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
     let drawn = match (report.rendered, report.quality) {
         (false, _) => "nothing drawn (--no-render)".to_owned(),
         (true, None) => "every frame drawn once; full counted".to_owned(),
-        (true, Some(k)) => format!(
-            "every frame drawn once, and the full mesh as the reference at {}x{} (supersample {k})",
-            w * k,
-            h * k
-        ),
+        (true, Some(reference)) => {
+            let k = reference.supersample;
+            format!(
+                "every frame drawn once, and the full mesh as the reference at {}x{} ({})",
+                w * k,
+                h * k,
+                if reference.stochastic_alpha {
+                    format!("supersample {k}, box-filtered, stochastic alpha test")
+                } else {
+                    "--reference-1x: plain alpha test".to_owned()
+                }
+            )
+        }
     };
     match &report.adapter {
         Some(a) => {
@@ -266,6 +277,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
         ("R", Align::Right),
         ("Q", Align::Right),
         ("RMSE", Align::Right),
+        ("FLIP", Align::Right),
     ]);
     if shadows {
         columns.extend([("shadow", Align::Right), ("shadow/this", Align::Right)]);
@@ -301,6 +313,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
             opt(s.recall, 4),
             opt(s.q, 4),
             opt(s.rmse, 5),
+            opt(s.flip, 5),
         ]);
         if shadows {
             cells.extend([opt(s.shadow_primitives, 0), opt(s.shadow_ratio, 2)]);
@@ -320,7 +333,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
 /// The CSV header.
 pub const CSV_HEADER: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines";
+precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -333,7 +346,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -359,6 +372,7 @@ pub fn csv(report: &Report) -> String {
             text(row.coverage.map(|c| c.recall().to_string())),
             text(row.coverage.map(|c| c.quality().to_string())),
             text(row.rmse.map(|v| v.to_string())),
+            text(row.flip.map(|v| v.to_string())),
             text(row.points_in_cut.map(|v| v.to_string())),
             row.primitives_in_cut(),
             row.quads,
@@ -412,7 +426,11 @@ pub fn json(report: &Report) -> Result<String, serde_json::Error> {
         "size": [report.size.0, report.size.1],
         "fov_degrees": report.fov_degrees,
         "rendered": report.rendered,
-        "quality": report.quality.map(|k| serde_json::json!({"supersample": k})),
+        "quality": report.quality.map(|r| serde_json::json!({
+            "supersample": r.supersample,
+            "stochastic_alpha": r.stochastic_alpha,
+            "flip": "mean of the LDR-FLIP error map against the reference, both 8-bit sRGB, at 67 pixels per degree",
+        })),
         "adapter": report.adapter,
         "times": timing(report),
         "seconds": report.seconds,

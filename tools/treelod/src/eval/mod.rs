@@ -1,12 +1,13 @@
 //! `treelod eval`: the measuring instrument. Renders the full mesh as the reference (supersampled,
 //! box-filtered down) and every chosen technique at the same cameras, and reports per frame and in
 //! total what each drew and how close its image is to the reference (pixel Precision and Recall,
-//! Neubert's `Q`, multi-scale RMSE, temporal noise) and what it cost (wall time).
+//! Neubert's `Q`, multi-scale RMSE, FLIP, temporal noise) and what it cost (wall time).
 //!
-//! The metrics themselves are in [`metrics`] (no GPU types), camera paths in [`path`], the
+//! The metrics themselves are `treelod_eval`'s ([`metrics`], defined there once), camera paths in
+//! [`path`], the
 //! table, CSV, JSON and contact sheet in [`output`].
 
-pub mod metrics;
+pub use treelod_eval::metrics;
 pub(crate) mod output;
 pub mod path;
 pub(crate) mod plot;
@@ -21,11 +22,12 @@ use treelod_render::{Camera, FrameStats, PerTechnique, Pruning, Renderer, Settin
 
 use crate::render::ImpostorArgs;
 
-use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse};
+use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse, temporal_noise};
 use self::path::Pose;
 use crate::render::{FRAMING_DIRECTION, clear_colour, frame_camera, parse_colour, parse_fov, parse_pixels, parse_size};
 use crate::report::{self, Failed};
 use crate::scene::{self, Scene};
+use treelod_eval::MetricError;
 
 /// Frames of the contact sheet at most.
 const SHEET_FRAMES: usize = 4;
@@ -274,7 +276,10 @@ pub struct Row {
     pub coverage: Coverage,
     /// Multi-scale RMSE against the reference.
     pub rmse: MultiScaleRmse,
-    /// Multi-scale RMSE summary against this technique's previous frame (`None` for frame 0).
+    /// Mean FLIP error against the reference (both as 8-bit sRGB), 0 for identical images.
+    pub flip: f64,
+    /// Temporal noise: the multi-scale RMSE summary against this technique's previous frame
+    /// (`None` for frame 0).
     pub noise: Option<f64>,
     /// The same for the reference.
     pub reference_noise: Option<f64>,
@@ -456,12 +461,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         Ok((renderer, bounds))
     };
     let full_settings = Settings { technique: Technique::Full, ..Settings::default() };
-    // The reference keeps the leaves' coverage where their textures are minified: the plain alpha
-    // test drops every texel less than half covered, so thin leaves vanish from a distant crown
-    // even at 4× (the maple at 32 bounding radii kept 60 % of the darkening that alpha to
-    // coverage keeps). Each of its pixels is still leaf or background (a stochastic test), so the
-    // box filter averages the coverage and the majority mask stays binary.
-    let reference_settings = Settings { stochastic_alpha: true, ..full_settings };
+    let reference_settings = reference_settings();
     let (mut reference, bounds) = add(reference_settings, 1)?;
     let mut measured = Vec::new();
     for (name, availability) in &techniques {
@@ -496,7 +496,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let background = clear_colour(args.background);
     let camera = |pose: &Pose, k: u32| Camera::look_at(pose.eye, pose.target, fovy, width * k, height * k);
     // Images and masks of one run always match in size; a mismatch is a bug, reported as such.
-    let internal = |e: metrics::SizeMismatch| {
+    let internal = |e: MetricError| {
         report::message_error(&args.input, &format!("internal error: {e}"));
         Failed { class: ErrorClass::Io }
     };
@@ -517,7 +517,6 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         let (image, mask) = measurable(&image, k, args.background).map_err(internal)?;
         Ok(Shot { image, mask, stats, prepare_ms, gpu_ms, wall_ms })
     };
-    let compare = |a: &LinearImage, b: &LinearImage| multiscale_rmse(a, b).map_err(internal);
 
     // Warm up every renderer once (shader compilation happens at the first draw) so the first
     // frame's time is not the compiler's.
@@ -536,16 +535,17 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         progress.set_position(frame as u64);
         let reference_shot = shoot(&mut reference, pose, k)?;
         let reference_noise = match &previous_reference {
-            Some(previous) => Some(compare(&reference_shot.image, previous)?.summary()),
+            Some(previous) => Some(temporal_noise(&reference_shot.image, previous).map_err(internal)?),
             None => None,
         };
         let mut sheet_techniques = Vec::new();
         for m in &mut measured {
             let shot = shoot(&mut m.renderer, pose, m.supersample)?;
             let coverage = Coverage::compare(&reference_shot.mask, &shot.mask).map_err(internal)?;
-            let rmse = compare(&shot.image, &reference_shot.image)?;
+            let rmse = multiscale_rmse(&shot.image, &reference_shot.image).map_err(internal)?;
+            let flip = metrics::flip::mean_flip(&shot.image, &reference_shot.image).map_err(internal)?;
             let noise = match &m.previous {
-                Some(previous) => Some(compare(&shot.image, previous)?.summary()),
+                Some(previous) => Some(temporal_noise(&shot.image, previous).map_err(internal)?),
                 None => None,
             };
             rows.push(Row {
@@ -554,6 +554,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 stats: shot.stats,
                 coverage,
                 rmse,
+                flip,
                 noise,
                 reference_noise,
                 prepare_ms: shot.prepare_ms,
@@ -617,16 +618,26 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     ))
 }
 
+/// The reference's renderer settings, for `eval` and `bench --quality`: the full mesh, keeping
+/// the leaves' coverage where their textures are minified. The plain alpha test drops every texel
+/// less than half covered, so thin leaves vanish from a distant crown even at 4× (the maple at 32
+/// bounding radii kept 60 % of the darkening that alpha to coverage keeps). Each of its pixels is
+/// still leaf or background (a stochastic test), so the box filter of [`measurable`] averages the
+/// coverage and the majority mask stays binary.
+pub(crate) fn reference_settings() -> Settings {
+    Settings { technique: Technique::Full, stochastic_alpha: true, ..Settings::default() }
+}
+
 /// A read-back image as the metrics take it: linear colour box-filtered over `k`×`k` blocks, and
 /// coverage (pixels not exactly `background`) by the majority of each block.
 ///
 /// # Errors
-/// [`metrics::SizeMismatch`] if the image's pixels do not match its size or `k` does not divide it.
+/// [`MetricError`] if the image's pixels do not match its size or `k` does not divide it.
 pub(crate) fn measurable(
     image: &treelod_render::offscreen::Image,
     k: u32,
     background: [u8; 3],
-) -> Result<(LinearImage, Mask), metrics::SizeMismatch> {
+) -> Result<(LinearImage, Mask), MetricError> {
     let linear = LinearImage::from_srgba8(image.width, image.height, &image.rgba)?;
     let mask = Mask::from_srgba8(image.width, image.height, &image.rgba, background)?;
     Ok((linear.box_filter(k)?, mask.reduce_majority(k)?))

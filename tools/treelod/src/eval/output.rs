@@ -70,6 +70,8 @@ pub struct Means {
     pub rmse: f64,
     /// Multi-scale RMSE per level, finest first.
     pub rmse_levels: Vec<f64>,
+    /// Mean FLIP error against the reference.
+    pub flip: f64,
     /// Temporal noise over frames 1.. (`None` with fewer than two frames).
     pub temporal_noise: Option<f64>,
     /// The reference's temporal noise over the same frames.
@@ -147,6 +149,7 @@ pub fn summarise(rows: &[Row], technique: TechniqueName) -> Summary {
             q: mean(&|r| r.coverage.quality()),
             rmse: mean(&|r| r.rmse.summary()),
             rmse_levels: (0..levels).map(|l| mean(&|r| r.rmse.levels.get(l).copied().unwrap_or(0.0))).collect(),
+            flip: mean(&|r| r.flip),
             temporal_noise: mean_of(rows.iter().filter_map(|r| r.noise).collect()),
             reference_temporal_noise: mean_of(rows.iter().filter_map(|r| r.reference_noise).collect()),
             prepare_ms: mean(&|r| r.prepare_ms),
@@ -190,6 +193,8 @@ pub struct BandSummary {
     pub q: f64,
     /// Mean multi-scale RMSE.
     pub rmse: f64,
+    /// Mean FLIP.
+    pub flip: f64,
 }
 
 /// Per band of projected height (largest first) and measured technique (in order), the means of
@@ -222,6 +227,7 @@ pub fn by_band(report: &Report) -> Vec<BandSummary> {
                 recall: mean(&|r| r.coverage.recall()),
                 q: mean(&|r| r.coverage.quality()),
                 rmse: mean(&|r| r.rmse.summary()),
+                flip: mean(&|r| r.flip),
             });
         }
     }
@@ -308,6 +314,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
         ("R", Align::Right),
         ("Q", Align::Right),
         ("RMSE", Align::Right),
+        ("FLIP", Align::Right),
         ("noise", Align::Right),
         ("ref noise", Align::Right),
         ("prepare ms", Align::Right),
@@ -329,6 +336,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
             format!("{:.4}", row.coverage.recall()),
             format!("{:.4}", row.coverage.quality()),
             format!("{:.5}", row.rmse.summary()),
+            format!("{:.5}", row.flip),
             opt(row.noise, 5),
             opt(row.reference_noise, 5),
             format!("{:.1}", row.prepare_ms),
@@ -356,6 +364,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
             format!("{:.4}", m.recall),
             format!("{:.4}", m.q),
             format!("{:.5}", m.rmse),
+            format!("{:.5}", m.flip),
             opt(m.temporal_noise, 5),
             opt(m.reference_temporal_noise, 5),
             format!("{:.1}", m.prepare_ms),
@@ -379,6 +388,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
             ("R", Align::Right),
             ("Q", Align::Right),
             ("RMSE", Align::Right),
+            ("FLIP", Align::Right),
         ]);
         for b in &bands {
             table.row(vec![
@@ -390,6 +400,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
                 format!("{:.4}", b.recall),
                 format!("{:.4}", b.q),
                 format!("{:.5}", b.rmse),
+                format!("{:.5}", b.flip),
             ]);
         }
         out.push_str(&table.render(""));
@@ -423,7 +434,7 @@ pub fn csv(report: &Report) -> String {
         let _ = write!(out, ",rmse_{}px", 1u64 << l);
     }
     out.push_str(
-        ",temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms,quads,primitives,ellipsoids,lines\n",
+        ",flip,temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms,quads,primitives,ellipsoids,lines\n",
     );
     let optional = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
     for row in &report.rows {
@@ -461,7 +472,8 @@ pub fn csv(report: &Report) -> String {
         }
         let _ = writeln!(
             out,
-            ",{},{},{:.3},{},{:.3},{},{},{},{}",
+            ",{},{},{},{:.3},{},{:.3},{},{},{},{}",
+            row.flip,
             optional(row.noise),
             optional(row.reference_noise),
             row.prepare_ms,
@@ -491,6 +503,7 @@ struct JsonReport<'a> {
     colour_space: &'static str,
     rmse_levels: usize,
     rmse_summary: &'static str,
+    flip: &'static str,
     adapter: &'a Adapter,
     timing: &'static str,
     techniques: Vec<JsonTechnique>,
@@ -536,6 +549,7 @@ pub fn json(report: &Report) -> Result<String, serde_json::Error> {
         colour_space: "linear",
         rmse_levels: metrics::level_count(w, h),
         rmse_summary: "mean over levels",
+        flip: "mean of the LDR-FLIP error map against the reference, both 8-bit sRGB, at 67 pixels per degree",
         adapter: &report.adapter,
         timing: timing(report.timestamps),
         techniques: report
@@ -635,6 +649,7 @@ pub(super) mod tests {
             stats: FrameStats { triangles: 10, points: 4, ellipsoids: 3, lines: 2, ..FrameStats::default() },
             coverage: Coverage { tp, fp: 1, fn_: 2 },
             rmse: MultiScaleRmse { levels: vec![0.2, 0.1, 0.0] },
+            flip: 0.01 * tp as f64,
             noise,
             reference_noise: noise.map(|n| n / 2.0),
             prepare_ms: 1.0,
@@ -705,6 +720,7 @@ pub(super) mod tests {
         assert_eq!(s.mean.temporal_noise, Some(0.1), "frame 0 has no previous frame");
         assert_eq!(s.mean.reference_temporal_noise, Some(0.05));
         assert!((s.mean.rmse - 0.1).abs() < 1e-12 && s.mean.rmse_levels == [0.2, 0.1, 0.0]);
+        assert!((s.mean.flip - 0.06).abs() < 1e-12, "{}", s.mean.flip);
     }
 
     #[test]
@@ -724,13 +740,21 @@ pub(super) mod tests {
         assert_eq!(lines.len(), 3);
         let columns = lines[0].split(',').count();
         assert!(lines.iter().all(|l| l.split(',').count() == columns), "{csv}");
-        assert!(lines[0].contains(",rmse_1px,rmse_2px,rmse_4px,") && lines[1].starts_with("0,spt,0,1,5,"), "{csv}");
+        assert!(
+            lines[0].contains(",rmse_1px,rmse_2px,rmse_4px,flip,") && lines[1].starts_with("0,spt,0,1,5,"),
+            "{csv}"
+        );
+        let flip = lines[0].split(',').position(|c| c == "flip").expect("a flip column");
+        assert_eq!(lines[2].split(',').nth(flip), Some("0.07"), "{csv}");
+        assert!(text.contains(" FLIP ") && text.contains("0.05000"), "{text}");
         let json: serde_json::Value = serde_json::from_str(&json(&report).expect("encodes")).expect("parses");
         assert_eq!(json["techniques"][0]["summary"]["frames"], 2);
         assert_eq!(json["techniques"][1]["status"], "absent");
         assert!(json["techniques"][1]["summary"].is_null());
         assert_eq!(json["adapter"]["backend"], "Vulkan");
         assert_eq!(json["rmse_levels"], 3);
+        let flip = json["techniques"][0]["summary"]["mean"]["flip"].as_f64().expect("a mean FLIP");
+        assert!((flip - 0.06).abs() < 1e-12, "{flip}");
         // One band per frame here: frame 0 at 600 px, frame 1 at 20 px.
         assert_eq!(json["bands"].as_array().map(Vec::len), Some(2));
         assert_eq!(json["bands"][0]["band"], ">= 512 px");

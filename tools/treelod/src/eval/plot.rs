@@ -379,34 +379,42 @@ pub(crate) fn legend(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, 
     }
 }
 
-/// Quality `Q` against primitives drawn (log scale): a small dot per frame and a large one at
-/// each technique's mean; the better technique sits higher and further left.
+/// Quality `Q` (top) and mean FLIP error (bottom) against primitives drawn (log scale): a small
+/// dot per frame and a large one at each technique's mean; the better technique sits further left
+/// and higher in `Q`, lower in FLIP.
 #[must_use]
 pub fn quality_vs_primitives(report: &Report) -> Image {
-    let (width, height) = (720u32 + LEGEND_MARGIN, 480u32);
+    let (panel_height, gap) = (300u32, 60u32);
+    let (width, height) = (720u32 + LEGEND_MARGIN, 36 + 2 * panel_height + gap + 48);
     let mut canvas = Canvas::new(width, height);
     let techniques = measured(report);
-    let x = Axis::log(report.rows.iter().map(primitives));
-    let y = Axis::linear(report.rows.iter().map(|r| r.coverage.quality()).chain([1.0]), 0.1);
-    let area = Rectangle::new(Point::new(64, 36), Size::new(720 - 64 - 24, height - 36 - 48));
-    let panel = Panel { area, x, y };
-    panel.draw_axes(
-        &mut canvas,
-        "quality Q = 1 - |(1 - P, 1 - R)| against primitives drawn per frame",
-        Some("primitives: triangles + points + quads + ellipsoids + lines (log)"),
-    );
-    for &(name, colour, shape) in &techniques {
-        for row in rows_of(report, name) {
-            marker(&mut canvas, panel.point(primitives(row), row.coverage.quality()), 6, colour, shape);
-        }
-        let rows: Vec<&Row> = rows_of(report, name).collect();
-        if !rows.is_empty() {
-            let n = rows.len() as f64;
-            let mean_x = rows.iter().map(|r| primitives(r)).sum::<f64>() / n;
-            let mean_q = rows.iter().map(|r| r.coverage.quality()).sum::<f64>() / n;
-            let centre = panel.point(mean_x, mean_q);
-            marker(&mut canvas, centre, 15, BLACK, shape);
-            marker(&mut canvas, centre, 11, colour, shape);
+    type Metric = fn(&Row) -> f64;
+    // Per panel: title, value, and the value its axis always shows (Q's best, FLIP's zero).
+    let panels: [(&str, Metric, f64); 2] = [
+        ("quality Q = 1 - |(1 - P, 1 - R)| against primitives drawn per frame", |r| r.coverage.quality(), 1.0),
+        ("mean FLIP error against the reference, against primitives drawn per frame", |r| r.flip, 0.0),
+    ];
+    for (i, (title, metric, anchor)) in panels.iter().enumerate() {
+        let x = Axis::log(report.rows.iter().map(primitives));
+        let y = Axis::linear(report.rows.iter().map(metric).chain([*anchor]), 0.1);
+        let top = 36 + i as i32 * (panel_height + gap) as i32;
+        let area = Rectangle::new(Point::new(64, top), Size::new(720 - 64 - 24, panel_height));
+        let panel = Panel { area, x, y };
+        let last = i + 1 == panels.len();
+        panel.draw_axes(&mut canvas, title, last.then_some("primitives, every kind (log)"));
+        for &(name, colour, shape) in &techniques {
+            for row in rows_of(report, name) {
+                marker(&mut canvas, panel.point(primitives(row), metric(row)), 6, colour, shape);
+            }
+            let rows: Vec<&Row> = rows_of(report, name).collect();
+            if !rows.is_empty() {
+                let n = rows.len() as f64;
+                let mean_x = rows.iter().map(|r| primitives(r)).sum::<f64>() / n;
+                let mean_y = rows.iter().map(|r| metric(r)).sum::<f64>() / n;
+                let centre = panel.point(mean_x, mean_y);
+                marker(&mut canvas, centre, 15, BLACK, shape);
+                marker(&mut canvas, centre, 11, colour, shape);
+            }
         }
     }
     let entries: Vec<(String, Rgb888, Marker)> =
@@ -460,12 +468,12 @@ pub fn by_band(report: &Report) -> Image {
     canvas.into_image()
 }
 
-/// Per-frame curves along the path, one panel each: Q, multi-scale RMSE, primitives drawn (log)
-/// and temporal noise (the reference's dashed in grey).
+/// Per-frame curves along the path, one panel each: Q, multi-scale RMSE, mean FLIP error,
+/// primitives drawn (log) and temporal noise (the reference's dashed in grey).
 #[must_use]
 pub fn per_frame(report: &Report) -> Image {
     let (width, panel_height, gap) = (720u32, 150u32, 44u32);
-    let panels = 4u32;
+    let panels = 5u32;
     let height = 24 + panels * (panel_height + gap);
     let mut canvas = Canvas::new(width, height);
     let techniques = measured(report);
@@ -474,9 +482,10 @@ pub fn per_frame(report: &Report) -> Image {
     type Metric = fn(&Row) -> Option<f64>;
     // Per panel: title, value, log axis, and the value a linear axis always shows (Q's best, the
     // other figures' zero).
-    let metrics: [(&str, Metric, bool, f64); 4] = [
+    let metrics: [(&str, Metric, bool, f64); 5] = [
         ("quality Q", |r| Some(r.coverage.quality()), false, 1.0),
         ("multi-scale RMSE (linear colour, mean over scales)", |r| Some(r.rmse.summary()), false, 0.0),
+        ("mean FLIP error against the reference", |r| Some(r.flip), false, 0.0),
         ("primitives drawn, every kind (log)", |r| Some(primitives(r)), true, 0.0),
         ("temporal noise: multi-scale RMSE against the previous frame", |r| r.noise, false, 0.0),
     ];
@@ -484,7 +493,7 @@ pub fn per_frame(report: &Report) -> Image {
         let top = 24 + i as i32 * (panel_height + gap) as i32;
         let area = Rectangle::new(Point::new(64, top), Size::new(width - 64 - 24, panel_height));
         let mut values: Vec<f64> = report.rows.iter().filter_map(metric).collect();
-        let noise_panel = i == 3;
+        let noise_panel = i + 1 == metrics.len();
         if noise_panel {
             values.extend(report.rows.iter().filter_map(|r| r.reference_noise));
         }
@@ -547,15 +556,9 @@ mod tests {
 
     /// The mean x and y of the pixels of `colour`.
     fn centroid(image: &Image, colour: Rgb888) -> (f64, f64) {
-        centroid_left_of(image, colour, image.width)
-    }
-
-    /// The mean x and y of the pixels of `colour` left of `x_end` (the panels, not the legend's
-    /// margin).
-    fn centroid_left_of(image: &Image, colour: Rgb888, x_end: u32) -> (f64, f64) {
         let (mut sx, mut sy, mut n) = (0.0, 0.0, 0.0);
         for y in 0..image.height {
-            for x in 0..x_end.min(image.width) {
+            for x in 0..image.width {
                 if image.pixel(x, y)[..3] == [colour.r(), colour.g(), colour.b()] {
                     (sx, sy, n) = (sx + f64::from(x), sy + f64::from(y), n + 1.0);
                 }
@@ -578,23 +581,34 @@ mod tests {
             full.technique = TechniqueName::FULL;
             full.stats.triangles = 100_000;
             full.coverage = super::super::metrics::Coverage { tp: 100, fp: 0, fn_: 0 };
+            full.flip = 0.0;
             let mut spt = report.rows[frame].clone();
             spt.stats.triangles = 500;
             spt.coverage = super::super::metrics::Coverage { tp: 80, fp: 20, fn_: 20 };
+            spt.flip = 0.2;
             rows.extend([full, spt]);
         }
         report.rows = rows;
         let plot = quality_vs_primitives(&report);
         let (full_colour, spt_colour) =
             (style_of(TechniqueName::FULL).0, style_of(TechniqueName::Technique(Technique::Spt)).0);
+        // The panels' halves, without the legend's margin (where both colours are too).
         let panels = plot.width - LEGEND_MARGIN;
-        let (full, spt) = (centroid_left_of(&plot, full_colour, panels), centroid_left_of(&plot, spt_colour, panels));
-        // Both are in the legend too.
-        assert!(centroid(&plot, full_colour).0 > full.0 && centroid(&plot, spt_colour).0 > spt.0);
+        let half = |top: bool| {
+            let rows = if top { 0..plot.height / 2 } else { plot.height / 2..plot.height };
+            let rgba =
+                rows.flat_map(|y| (0..panels).map(move |x| (x, y))).flat_map(|(x, y)| plot.pixel(x, y)).collect();
+            Image { width: panels, height: plot.height / 2, rgba }
+        };
+        let (q, flip) = (half(true), half(false));
+        let (full, spt) = (centroid(&q, full_colour), centroid(&q, spt_colour));
         assert!(spt.0 < full.0 - 200.0, "fewer primitives to the left: {spt:?} {full:?}");
         assert!(full.1 < spt.1 - 100.0, "higher Q higher up: {spt:?} {full:?}");
+        let (full, spt) = (centroid(&flip, full_colour), centroid(&flip, spt_colour));
+        assert!(spt.0 < full.0 - 200.0, "fewer primitives to the left: {spt:?} {full:?}");
+        assert!(full.1 > spt.1 + 100.0, "lower FLIP lower down: {spt:?} {full:?}");
         let frames = per_frame(&report);
-        assert_eq!((frames.width, frames.height), (720, 800));
+        assert_eq!((frames.width, frames.height), (720, 24 + 5 * (150 + 44)));
         centroid(&frames, full_colour);
         centroid(&frames, spt_colour);
         centroid(&frames, REFERENCE);
@@ -644,7 +658,9 @@ mod tests {
         let plot = by_band(&report);
         assert_eq!((plot.width, plot.height), (64 + 2 * (300 + 24) + LEGEND_MARGIN, 420));
         let spt = style_of(TechniqueName::Technique(Technique::Spt)).0;
-        let (x, _) = centroid(&plot, spt);
+        let width = plot.width - LEGEND_MARGIN;
+        let rgba = (0..plot.height).flat_map(|y| (0..width).map(move |x| (x, y))).flat_map(|(x, y)| plot.pixel(x, y));
+        let (x, _) = centroid(&Image { width, height: plot.height, rgba: rgba.collect() }, spt);
         // Markers in both panels: their mean lies between the panels' centres.
         assert!(x > 64.0 + 150.0 && x < 64.0 + 324.0 + 150.0, "{x}");
     }
