@@ -15,6 +15,19 @@ fn demo() -> &'static Path {
     common::demo("treelod-bench")
 }
 
+/// Builds a 300-leaf demo tree with `flags` into `dir/name`, asserts success, returns its path.
+fn demo_with(dir: &Path, name: &str, flags: &[&str]) -> PathBuf {
+    let model = dir.join(name);
+    let args = ["demo", "--leaf-count", "300"]
+        .iter()
+        .chain(flags)
+        .map(OsStr::new)
+        .chain([OsStr::new("-o"), model.as_os_str()]);
+    let out = run(args);
+    assert!(out.status.success(), "demo {flags:?}: {}", text(&out.stderr));
+    model
+}
+
 /// Runs `treelod bench ARGS…`, asserts success and no panic, returns stdout.
 fn bench_ok(args: &[&OsStr]) -> String {
     succeeded(&run(std::iter::once(OsStr::new("bench")).chain(args.iter().copied())), &format!("bench {args:?}"))
@@ -184,21 +197,8 @@ fn quality_is_measured_against_the_full_mesh_and_missing_techniques_are_reported
 #[test]
 fn pruning_techniques_fly_where_the_models_hold_priority_lists() {
     let dir = scratch("prune");
-    let pruned = dir.join("pruned.treelod");
-    let out = run([
-        "demo".as_ref(),
-        "--leaf-count".as_ref(),
-        "300".as_ref(),
-        "--prune".as_ref(),
-        "stochastic".as_ref(),
-        "--prune-views".as_ref(),
-        "2".as_ref(),
-        "--prune-resolution".as_ref(),
-        "64".as_ref(),
-        "-o".as_ref(),
-        pruned.as_os_str(),
-    ]);
-    assert!(out.status.success(), "demo --prune: {}", text(&out.stderr));
+    let flags = ["--prune", "stochastic", "--prune-views", "2", "--prune-resolution", "64"];
+    let pruned = demo_with(&dir, "pruned.treelod", &flags);
     let csv = dir.join("p.csv");
     let stdout = bench_ok(&[
         pruned.as_os_str(),
@@ -233,21 +233,8 @@ fn pruning_techniques_fly_where_the_models_hold_priority_lists() {
 #[test]
 fn ellipsoids_fly_where_the_models_hold_them_and_are_absent_elsewhere() {
     let dir = scratch("ellipsoids");
-    let model = dir.join("ellipsoids.treelod");
-    let out = run([
-        "demo".as_ref(),
-        "--leaf-count".as_ref(),
-        "300".as_ref(),
-        "--ellipsoids".as_ref(),
-        "--ellipsoid-tries".as_ref(),
-        "1".as_ref(),
-        "--lines".as_ref(),
-        "--ao-rays".as_ref(),
-        "0".as_ref(),
-        "-o".as_ref(),
-        model.as_os_str(),
-    ]);
-    assert!(out.status.success(), "demo --ellipsoids --lines: {}", text(&out.stderr));
+    let flags = ["--ellipsoids", "--ellipsoid-tries", "1", "--lines", "--ao-rays", "0"];
+    let model = demo_with(&dir, "ellipsoids.treelod", &flags);
     let (csv, json) = (dir.join("e.csv"), dir.join("e.json"));
     let stdout = bench_ok(&[
         model.as_os_str(),
@@ -317,18 +304,7 @@ fn ellipsoids_fly_where_the_models_hold_them_and_are_absent_elsewhere() {
 #[test]
 fn impostors_fly_where_the_models_hold_planes_and_count_them_as_primitives() {
     let dir = scratch("impostors");
-    let model = dir.join("planes.treelod");
-    let out = run([
-        "demo".as_ref(),
-        "--leaf-count".as_ref(),
-        "300".as_ref(),
-        "--impostors".as_ref(),
-        "--ao-rays".as_ref(),
-        "0".as_ref(),
-        "-o".as_ref(),
-        model.as_os_str(),
-    ]);
-    assert!(out.status.success(), "demo --impostors: {}", text(&out.stderr));
+    let model = demo_with(&dir, "planes.treelod", &["--impostors", "--ao-rays", "0"]);
     let csv = dir.join("i.csv");
     let stdout = bench_ok(&[
         model.as_os_str(),
