@@ -187,6 +187,20 @@ impl Data {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PerTechnique<T>(pub [T; Technique::COUNT]);
 
+impl PerTechnique<usize> {
+    /// How many of `containers` hold each technique's data ([`Technique::held_by`]).
+    #[must_use]
+    pub fn held_by<'a>(containers: impl IntoIterator<Item = &'a Container>) -> Self {
+        let mut held = Self::default();
+        for container in containers {
+            for technique in Technique::ALL {
+                *held.get_mut(technique) += usize::from(technique.held_by(container));
+            }
+        }
+        held
+    }
+}
+
 impl<T: Copy> PerTechnique<T> {
     /// The value of `technique`.
     #[must_use]

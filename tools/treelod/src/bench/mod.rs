@@ -739,13 +739,7 @@ fn demo_containers(prune: Option<&treelod_build::PruneConfig>, extras: Extras) -
 
 /// How many of the models hold each technique's data.
 fn held_by_models(containers: &[Arc<Container>]) -> PerTechnique<usize> {
-    let mut held = PerTechnique::default();
-    for container in containers {
-        for technique in Technique::ALL {
-            *held.get_mut(technique) += usize::from(technique.held_by(container));
-        }
-    }
-    held
+    PerTechnique::held_by(containers.iter().map(|c| &**c))
 }
 
 /// A progress bar on stderr (drawn only on a terminal).

@@ -646,14 +646,12 @@ pub(crate) fn measurable(
 /// How many of the scene's models hold each technique's data (each opened and checked as every
 /// reader does).
 fn held_by_models(scene: &Scene) -> Result<PerTechnique<usize>, Failed> {
-    let mut held = PerTechnique::default();
-    for model in &scene.models {
-        let container = Container::open(model).map_err(|e| report::file_error(model, &e))?;
-        for technique in Technique::ALL {
-            *held.get_mut(technique) += usize::from(technique.held_by(&container));
-        }
-    }
-    Ok(held)
+    let containers = scene
+        .models
+        .iter()
+        .map(|model| Container::open(model).map_err(|e| report::file_error(model, &e)))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(PerTechnique::held_by(&containers))
 }
 
 /// The height on screen, pixels, of the scene's bounds seen from `pose` in an image `image_height`

@@ -27,14 +27,8 @@ impl Holds {
     /// Counts what `containers` hold.
     #[must_use]
     pub fn of<'a>(containers: impl IntoIterator<Item = &'a treelod_format::Container>) -> Self {
-        let mut holds = Self::default();
-        for c in containers {
-            holds.models += 1;
-            for t in Technique::ALL {
-                *holds.by_technique.get_mut(t) += usize::from(t.held_by(c));
-            }
-        }
-        holds
+        let containers: Vec<&treelod_format::Container> = containers.into_iter().collect();
+        Self { models: containers.len(), by_technique: PerTechnique::held_by(containers) }
     }
 
     /// Models holding `technique`'s data.
