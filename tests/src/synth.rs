@@ -5,9 +5,10 @@ use core::ops::RangeInclusive;
 use treelod_build::{SptNode, flatten};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
-    BillboardRecord, BlockRecord, CellRecord, ContainerData, CurveSample, EllipsoidRecord, ImageRecord, LineRecord,
-    LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord,
-    Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, image_format,
+    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ContainerData, CurveSample, EllipsoidRecord,
+    ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord,
+    PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
+    billboard_kind, calibration_technique, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -69,6 +70,11 @@ pub struct SyntheticOptions {
     /// Ambient occlusion of the lines (spec §6.14, 1.4): a random byte per line, in `LINE_AO`.
     /// Drawn last, so the rest of the container is the same as without it.
     pub line_ao: bool,
+    /// Calibration tables (spec §6.15, 1.5): a random subset of the techniques (always `FULL`),
+    /// each with three or four samples of growing projected height, falling error in `[0, 1]`
+    /// and a whole number of primitives, in `CALIBRATION`. Drawn last, so the rest of the
+    /// container is the same as without it.
+    pub calibration: bool,
     /// Block name in the metadata; `None` gives `synthetic-<seed in hex>`.
     pub name: Option<String>,
 }
@@ -98,6 +104,7 @@ impl SyntheticOptions {
             indirect_planes: false,
             ellipsoid_ao: false,
             line_ao: false,
+            calibration: false,
             name: Some("minimal".into()),
         }
     }
@@ -116,11 +123,12 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.3: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.5: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
-    /// too), and indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`).
+    /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`) and
+    /// calibration tables (`CALIBRATION`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -143,6 +151,7 @@ impl SyntheticOptions {
             indirect_planes: true,
             ellipsoid_ao: true,
             line_ao: true,
+            calibration: true,
             name: Some("everything".into()),
         }
     }
@@ -1023,5 +1032,29 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     if options.line_ao {
         b.data.line_ao = rng.bytes(b.data.lines.len());
     }
+    if options.calibration {
+        b.data.calibration = calibration(&mut rng);
+    }
     b.data
+}
+
+/// Calibration tables (spec §6.15): `FULL` and each other technique with probability ½, in
+/// ascending order, each with three or four samples whose heights grow strictly from a few
+/// pixels, whose errors fall within `[0, 1]` and whose primitive counts are whole numbers.
+fn calibration(rng: &mut SplitMix64) -> Vec<CalibrationRecord> {
+    let mut records = Vec::new();
+    for technique in 0..calibration_technique::COUNT {
+        if technique != calibration_technique::FULL && !rng.chance(0.5) {
+            continue;
+        }
+        let mut height = rng.uniform(4.0, 16.0);
+        let mut error = rng.uniform(0.05, 1.0);
+        let primitives = rng.uniform(1.0, 4096.0).round();
+        for _ in 0..3 + rng.below(2) {
+            records.push(CalibrationRecord { technique, height, error, primitives });
+            height *= rng.uniform(1.5, 3.0);
+            error *= rng.uniform(0.2, 0.9);
+        }
+    }
+    records
 }

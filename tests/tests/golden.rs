@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.4 (`tests/data/v1_0` to `tests/data/v1_4`): every file
+//! Golden files of format versions 1.0 to 1.5 (`tests/data/v1_0` to `tests/data/v1_5`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -7,8 +7,8 @@ use std::path::PathBuf;
 
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, MaterialInfo, MaterialRecord, Metadata,
-    NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, image_format,
-    leaf_slots, plane_leaf_bases, verify,
+    NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
+    calibration_technique, image_format, leaf_slots, plane_leaf_bases, verify,
 };
 use treelod_tests::{
     SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
@@ -24,7 +24,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4] {
+    for minor in [0u16, 1, 2, 3, 4, 5] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -339,7 +339,7 @@ fn the_1_3_every_kind_file_has_every_kind_and_indirectly_textured_planes() {
 fn the_1_4_every_kind_file_has_every_kind_and_line_occlusion() {
     let c = Container::open(golden_dir_of(4).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 4, "{kind}");
     }
     assert_eq!(c.header().minor, 4);
     assert_eq!(c.line_ao().len(), c.lines().len(), "LINE_AO, one byte per line");
@@ -352,6 +352,33 @@ fn the_1_4_every_kind_file_has_every_kind_and_line_occlusion() {
     assert!(data == v1_3, "v1_4 is v1_3 with line occlusion");
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 3);
+}
+
+#[test]
+fn the_1_5_every_kind_file_has_every_kind_and_a_calibration() {
+    let c = Container::open(golden_dir_of(5).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 5);
+    // Calibration tables of several techniques, FULL first, three or four heights each.
+    let calibration = c.calibration();
+    assert_eq!(verify(&c).unwrap().calibration, calibration.len() as u64);
+    let mut techniques: Vec<u32> = calibration.iter().map(|r| r.technique).collect();
+    techniques.dedup();
+    assert!(techniques.len() > 1 && techniques[0] == calibration_technique::FULL, "{techniques:?}");
+    for t in &techniques {
+        let samples = calibration.iter().filter(|r| r.technique == *t).count();
+        assert!((3..=4).contains(&samples), "technique {t}: {samples} samples");
+    }
+    // Without CALIBRATION it is the 1.4 file, record for record, and the writer marks it 1.4.
+    let v1_4 =
+        ContainerData::from_container(&Container::open(golden_dir_of(4).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.calibration.clear();
+    assert!(data == v1_4, "v1_5 is v1_4 with a calibration");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 4);
 }
 
 #[test]

@@ -48,6 +48,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 ellipsoid_ao: grid[0] >= 2 && grid[2] >= 2,
                 // Line occlusion with another quarter.
                 line_ao: grid[0] >= 2 && grid[2] < 2,
+                // A calibration with half of the grids.
+                calibration: grid[1] >= 2,
                 name: None,
             }
         })
@@ -339,7 +341,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 4, "everything() holds the kinds of 1.4");
+    assert_eq!(container.header().minor, 5, "everything() holds the kinds of 1.5");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

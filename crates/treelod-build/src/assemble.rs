@@ -21,6 +21,7 @@ use treelod_format::{
 
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
 use crate::billboard::{Billboards, build_billboards};
+use crate::calibrate::CalibrationConfig;
 use crate::classify::{ClassifyOptions, classify};
 use crate::ellipsoid::{CellEllipsoids, EllipsoidConfig, EllipsoidMesh, Ellipsoids, build_ellipsoids};
 use crate::error::BuildError;
@@ -80,6 +81,10 @@ pub struct BuildConfig {
     /// through the block, per point and plane the mean of their leaves' ([`crate::ambient`]).
     /// `None` writes none; tools turn it on by default.
     pub ao: Option<AoConfig>,
+    /// Calibration (spec §6.15): every representation's image error and primitive count by
+    /// projected height, measured on the CPU rasteriser ([`crate::calibrate`]), which a runtime's
+    /// policy chooses with. `None` writes none; tools turn it on by default.
+    pub calibration: Option<CalibrationConfig>,
     /// Significant bits kept of the written floats ([`crate::precision`]): by default rounded so
     /// that zstd compresses the container about a third smaller; [`Precision::FULL`] keeps every
     /// bit.
@@ -166,6 +171,9 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
     }
     if let Some(ao) = &config.ao {
         settings.extend(ao.settings());
+    }
+    if let Some(calibration) = &config.calibration {
+        settings.extend(calibration.settings());
     }
     if let Some(chain) = &config.baselines {
         settings.extend(chain.settings());
@@ -1141,6 +1149,11 @@ fn assemble(
     let mut data = data;
     crate::precision::trim(&mut data, &config.precision);
     clock.lap(&mut stats, "precision");
+    // Stage: calibration, of what is written (after the precision trim).
+    if let Some(calibration) = &config.calibration {
+        data.calibration = crate::calibrate::calibrate(&data, calibration);
+        clock.lap(&mut stats, "calibration");
+    }
     Ok(BuildOutput { data, stats, warnings })
 }
 

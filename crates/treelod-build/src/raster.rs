@@ -648,6 +648,31 @@ fn noise_mix(mut x: u64) -> u64 {
 pub fn fill_ellipsoid_noise(grey: &mut [u16], view: &View, centre: Vec3, axes: [Vec3; 3], level: u32) {
     let size = view.size as usize;
     assert_eq!(grey.len(), size * size, "grey image of the wrong size");
+    ellipsoid_noise(view, centre, axes, level, |x, y, g| {
+        let slot = &mut grey[y * size + x];
+        *slot = (*slot).max(g);
+    });
+}
+
+/// Covers the pixels of `mask` where the ellipsoid of [`fill_ellipsoid_noise`] is hit on a noise
+/// texel that passes the cut `cut` ([`noise_cut`] of the ellipsoid's own alpha threshold): one
+/// ellipsoid of a set whose thresholds differ, drawn into the union of their coverage.
+pub fn fill_ellipsoid_cut(mask: &mut Mask, view: &View, centre: Vec3, axes: [Vec3; 3], level: u32, cut: u16) {
+    let size = mask.size;
+    if view.size != size {
+        return;
+    }
+    ellipsoid_noise(view, centre, axes, level, |x, y, g| {
+        if g >= cut {
+            #[expect(clippy::cast_possible_truncation, reason = "x, y < size ≤ MAX_SIZE")]
+            mask.set(x as u32, y as u32);
+        }
+    });
+}
+
+/// The pixels `(x, y)` of the ellipsoid's projection in `view` and the value `1 + g` of the noise
+/// texel its front surface shows there (see [`fill_ellipsoid_noise`]).
+fn ellipsoid_noise(view: &View, centre: Vec3, axes: [Vec3; 3], level: u32, mut pixel: impl FnMut(usize, usize, u16)) {
     let (c, m) = project_ellipsoid(view, centre, axes);
     // The local coordinates of a model-space offset: axes are orthogonal, so A⁻¹ = diag(1/r²)·Aᵀ.
     let inverse = axes.map(|a| {
@@ -673,14 +698,13 @@ pub fn fill_ellipsoid_noise(grey: &mut [u16], view: &View, centre: Vec3, axes: [
         #[expect(clippy::cast_precision_loss, reason = "a pixel row")]
         let py = (half - (y as f32 + 0.5)) * inv_scale;
         let row = local(base + view.up * py);
-        for (x, slot) in (x0..=x1).zip(&mut grey[y * size + x0..=y * size + x1]) {
+        for x in x0..=x1 {
             #[expect(clippy::cast_precision_loss, reason = "a pixel column")]
             let o = row + step * (x as f32 + 0.5 - half);
             let b = o.dot(d);
             let disc = (b * b - dd * (o.length_squared() - 1.0)).max(0.0);
             let t = (-b - disc.sqrt()) * inv_dd;
-            let g = 1 + u16::from(noise_lookup(texels, side, o + d * t));
-            *slot = (*slot).max(g);
+            pixel(x, y, 1 + u16::from(noise_lookup(texels, side, o + d * t)));
         }
     });
 }

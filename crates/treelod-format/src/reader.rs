@@ -8,10 +8,10 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
-    AO_KINDS, BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD,
-    HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneLeafRecord,
-    PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
-    TriangleRecord, VertexRecord,
+    AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE,
+    FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord,
+    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry,
+    SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -421,6 +421,12 @@ impl Container {
     #[must_use]
     pub fn prune_lambda(&self) -> &[CurveSample] {
         self.records(SectionKind::PRUNE_LAMBDA)
+    }
+
+    /// `CALIBRATION` records (spec §6.15; empty without the section).
+    #[must_use]
+    pub fn calibration(&self) -> &[CalibrationRecord] {
+        self.records(SectionKind::CALIBRATION)
     }
 
     /// Baseline level-of-detail chains: the levels of every tree (spec §6.12).

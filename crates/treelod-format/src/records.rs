@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 4;
+pub const MINOR: u16 = 5;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -161,9 +161,12 @@ impl SectionKind {
     pub const ELLIPSOID_AO: Self = Self(0x0063);
     /// Ambient occlusion of each `LINES` record, one `unorm8` (spec §6.14). Since 1.4.
     pub const LINE_AO: Self = Self(0x0064);
+    /// [`CalibrationRecord`]s: each representation's measured image error and cost by projected
+    /// height (spec §6.15). Since 1.5.
+    pub const CALIBRATION: Self = Self(0x0070);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 25] = [
+    pub const KNOWN: [Self; 26] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -189,6 +192,7 @@ impl SectionKind {
         Self::PLANE_AO,
         Self::ELLIPSOID_AO,
         Self::LINE_AO,
+        Self::CALIBRATION,
     ];
 
     /// The spec's name of a known kind.
@@ -220,6 +224,7 @@ impl SectionKind {
             Self::PLANE_AO => "PLANE_AO",
             Self::ELLIPSOID_AO => "ELLIPSOID_AO",
             Self::LINE_AO => "LINE_AO",
+            Self::CALIBRATION => "CALIBRATION",
             _ => return None,
         })
     }
@@ -250,6 +255,7 @@ impl SectionKind {
             Self::PRUNE_SCALE | Self::PRUNE_LAMBDA => size_of::<CurveSample>(),
             Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
             Self::BILLBOARDS => size_of::<BillboardRecord>(),
+            Self::CALIBRATION => size_of::<CalibrationRecord>(),
             _ => return None,
         };
         #[expect(clippy::cast_possible_truncation, reason = "record sizes are below 100")]
@@ -259,7 +265,8 @@ impl SectionKind {
     /// The minor version of major 1 that introduced this kind (spec §5): 1 for the baselines
     /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 2 for ambient occlusion (`VERTEX_AO`,
     /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`) and the ellipsoids'
-    /// ambient occlusion (`ELLIPSOID_AO`), 4 for the lines' ambient occlusion (`LINE_AO`), 0 for
+    /// ambient occlusion (`ELLIPSOID_AO`), 4 for the lines' ambient occlusion (`LINE_AO`), 5 for
+    /// the calibration tables (`CALIBRATION`), 0 for
     /// the other known kinds and for kinds this version does not know (private extensions do not
     /// raise a file's minor).
     #[must_use]
@@ -269,6 +276,7 @@ impl SectionKind {
             Self::VERTEX_AO | Self::POINT_AO | Self::PLANE_AO => 2,
             Self::PLANE_LEAVES | Self::ELLIPSOID_AO => 3,
             Self::LINE_AO => 4,
+            Self::CALIBRATION => 5,
             _ => 0,
         }
     }
@@ -713,6 +721,54 @@ pub struct CurveSample {
     pub y: f32,
 }
 const _: () = assert!(size_of::<CurveSample>() == 8);
+
+/// One sample of a representation's calibration (spec §6.15): the image error and the cost of
+/// drawing the block with `technique` when the block is `height` pixels high on screen.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct CalibrationRecord {
+    /// The representation, one of [`calibration_technique`].
+    pub technique: u32,
+    /// Projected height of the block's bounds, pixels; strictly increasing within a technique.
+    pub height: f32,
+    /// Mean multi-scale RMSE of coverage against the supersampled full mesh, `[0, 1]`.
+    pub error: f32,
+    /// Primitives drawn (triangles, points, ellipsoids, lines, planes, quads), `≥ 0`.
+    pub primitives: f32,
+}
+const _: () = assert!(size_of::<CalibrationRecord>() == 16);
+
+/// The representations a [`CalibrationRecord`] names (spec §6.15).
+pub mod calibration_technique {
+    /// Every triangle of `TRIANGLES`.
+    pub const FULL: u32 = 0;
+    /// Gilet's triangles and points (`TRIANGLES`, `POINTS`, §10).
+    pub const SPT: u32 = 1;
+    /// Pruned leaves scaled by `PRUNE_SCALE` (Neubert et al.).
+    pub const PRUNE_OPT: u32 = 2;
+    /// Pruned leaves scaled by `1/λ` (Cook et al.).
+    pub const PRUNE_COOK: u32 = 3;
+    /// Impostor planes and the bark (`PLANES`).
+    pub const IMPOSTORS: u32 = 4;
+    /// Ellipsoids and branch lines (`ELLIPSOIDS`, `LINES`).
+    pub const ELLIPSOIDS: u32 = 5;
+    /// The baseline LoD chain (`LOD_LEVELS`).
+    pub const LOD_CHAIN: u32 = 6;
+    /// The baseline facing billboard.
+    pub const BILLBOARD: u32 = 7;
+    /// The baseline crossed billboards.
+    pub const CROSSED: u32 = 8;
+    /// Number of defined values.
+    pub const COUNT: u32 = 9;
+
+    /// The name of a value, as the `treelod` tools spell the technique (`--technique`).
+    #[must_use]
+    pub fn name(code: u32) -> Option<&'static str> {
+        ["full", "spt", "prune-opt", "prune-cook", "impostors", "ellipsoids", "lod-chain", "billboard", "crossed"]
+            .get(code as usize)
+            .copied()
+    }
+}
 
 /// One level of a tree's baseline level-of-detail chain (spec §6.12): a general mesh
 /// simplifier's output, drawn instead of the whole tree when its error projects small enough.

@@ -12,9 +12,10 @@ use std::hash::{BuildHasherDefault, Hasher};
 use crate::error::{Error, Result};
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
-    AO_KINDS, BillboardRecord, CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord,
-    MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE,
-    SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, image_format, leaf_slots, plane_leaf_bases,
+    AO_KINDS, BillboardRecord, CalibrationRecord, CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord,
+    LodLevelRecord, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
+    SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
+    image_format, leaf_slots, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -73,6 +74,8 @@ pub struct VerifyReport {
     pub lod_triangles: u64,
     /// `BILLBOARDS` records checked (baseline).
     pub billboards: u64,
+    /// `CALIBRATION` records checked.
+    pub calibration: u64,
     /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO` and `LINE_AO` bytes (their counts are checked at
     /// open).
     pub ao: u64,
@@ -165,6 +168,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     let tree_count = c.block().tree_count;
     check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
     check_billboards(c.billboards(), image_count, tree_count)?;
+    check_calibration(c.calibration())?;
     check_slot_images_only_for_planes(c)?;
     check_metadata(c)?;
 
@@ -194,6 +198,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.lod_levels = c.lod_levels().len() as u64;
     report.lod_triangles = c.lod_triangles().len() as u64;
     report.billboards = c.billboards().len() as u64;
+    report.calibration = c.calibration().len() as u64;
     report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
     Ok(report)
 }
@@ -977,6 +982,43 @@ fn check_prune(leaves: &[PruneLeafRecord], triangles: &[TriangleRecord]) -> Resu
             next as usize,
             format!("belongs to no pruned leaf: the leaves' ranges end at {next}, the section has {}", triangles.len()),
         ));
+    }
+    Ok(())
+}
+
+/// Spec §6.15: known techniques in ascending order, heights finite, positive and strictly
+/// increasing within a technique, errors in `[0, 1]`, primitive counts finite and `≥ 0`.
+fn check_calibration(records: &[CalibrationRecord]) -> Result<()> {
+    let kind = SectionKind::CALIBRATION;
+    for (i, r) in records.iter().enumerate() {
+        if r.technique >= calibration_technique::COUNT {
+            return Err(bad(
+                kind,
+                i,
+                format!("technique {} is not defined (0..{})", r.technique, calibration_technique::COUNT),
+            ));
+        }
+        if !(r.height.is_finite() && r.height > 0.0) {
+            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
+        }
+        if !(0.0..=1.0).contains(&r.error) {
+            return Err(bad(kind, i, format!("error {} lies outside [0, 1]", r.error)));
+        }
+        if !(r.primitives.is_finite() && r.primitives >= 0.0) {
+            return Err(bad(kind, i, format!("primitive count {} is not a finite count", r.primitives)));
+        }
+        if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
+            if r.technique < prev.technique {
+                return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
+            }
+            if r.technique == prev.technique && r.height <= prev.height {
+                return Err(bad(
+                    kind,
+                    i,
+                    format!("height {} does not increase strictly after {}", r.height, prev.height),
+                ));
+            }
+        }
     }
     Ok(())
 }

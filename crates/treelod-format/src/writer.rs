@@ -16,10 +16,10 @@ use crate::metadata::MAX_META_BYTES;
 use crate::metadata::Metadata;
 use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
-    BillboardRecord, BlockRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE,
-    Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneLeafRecord, PlaneRecord,
-    PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord,
-    VertexRecord,
+    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD,
+    HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneLeafRecord,
+    PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
+    TriangleRecord, VertexRecord,
 };
 
 /// How sections are stored.
@@ -126,6 +126,9 @@ pub struct ContainerData {
     pub ellipsoid_ao: Vec<u8>,
     /// `LINE_AO`: empty, or one byte per line (since 1.4).
     pub line_ao: Vec<u8>,
+    /// `CALIBRATION`: empty, or each representation's error and cost by projected height (since
+    /// 1.5).
+    pub calibration: Vec<CalibrationRecord>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
     pub extra_sections: Vec<(u32, Vec<u8>)>,
@@ -161,6 +164,7 @@ impl ContainerData {
             plane_ao: c.plane_ao().to_vec(),
             ellipsoid_ao: c.ellipsoid_ao().to_vec(),
             line_ao: c.line_ao().to_vec(),
+            calibration: c.calibration().to_vec(),
             extra_sections: c
                 .sections()
                 .iter()
@@ -501,6 +505,7 @@ macro_rules! optional_sections {
             (SectionKind::PLANE_AO, $payload!(plane_ao)),
             (SectionKind::ELLIPSOID_AO, $payload!(ellipsoid_ao)),
             (SectionKind::LINE_AO, $payload!(line_ao)),
+            (SectionKind::CALIBRATION, $payload!(calibration)),
         ]
     };
 }

@@ -139,6 +139,12 @@ pub struct BuildOptions {
     /// planes get the mean of their leaves'. 0 writes no ambient occlusion.
     #[arg(long, value_name = "N", default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=4096))]
     pub ao_rays: u32,
+    /// Calibration views (spec §6.15): every representation built is drawn at 6 projected heights
+    /// (8 to 256 pixels) from N orthographic views on the CPU and its coverage error against the
+    /// supersampled full mesh and its primitive count are stored, for a policy to choose
+    /// representations with. 0 writes no calibration.
+    #[arg(long, value_name = "N", default_value_t = 4, value_parser = clap::value_parser!(u32).range(0..=64))]
+    pub calibration_views: u32,
     /// Keep every bit of the written floats. By default positions and texture coordinates keep
     /// 16 significant bits, sizes 12 and normals 10 per component (0.15 mm on a 10 m tree), which
     /// zstd compresses about a third smaller.
@@ -231,6 +237,10 @@ impl BuildOptions {
             }),
             ao: (self.ao_rays > 0)
                 .then(|| treelod_build::AoConfig { rays: self.ao_rays, ..treelod_build::AoConfig::default() }),
+            calibration: (self.calibration_views > 0).then(|| treelod_build::CalibrationConfig {
+                views: self.calibration_views as usize,
+                ..treelod_build::CalibrationConfig::default()
+            }),
             precision: if self.full_precision {
                 treelod_build::precision::Precision::FULL
             } else {
@@ -1158,6 +1168,7 @@ mod tests {
         let options = BuildOptions::defaults();
         assert!(!options.impostors && !options.ellipsoids && !options.baselines);
         assert!(options.ao_rays > 0, "ambient occlusion is on by default");
+        assert!(options.calibration_views > 0, "calibration is on by default");
     }
 
     #[test]

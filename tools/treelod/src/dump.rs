@@ -75,6 +75,9 @@ struct Dump<'a> {
     /// The baseline sections (spec §6.12, §6.13), when the container has any of their records.
     #[serde(skip_serializing_if = "Option::is_none")]
     baselines: Option<BaselineInfo>,
+    /// The calibration (spec §6.15), when the container has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    calibration: Option<CalibrationInfo>,
     /// Size histograms of the hierarchical kinds.
     histograms: Histograms,
 }
@@ -490,6 +493,72 @@ baselines
     }
 }
 
+/// The calibration of a container (spec §6.15): per representation, its error and primitive
+/// count at each projected height.
+#[derive(Debug, Serialize)]
+struct CalibrationInfo {
+    /// One entry per representation, in code order.
+    techniques: Vec<CalibrationRow>,
+}
+
+/// The samples of one representation.
+#[derive(Debug, Serialize)]
+struct CalibrationRow {
+    /// The technique's name (`--technique`), or `technique N` for an undefined code.
+    technique: String,
+    /// `[height in pixels, error, primitives]`, by increasing height.
+    samples: Vec<[f32; 3]>,
+}
+
+impl CalibrationInfo {
+    /// The calibration of `container`, `None` if it has none.
+    fn new(container: &Container) -> Option<Self> {
+        let records = container.calibration();
+        if records.is_empty() {
+            return None;
+        }
+        let mut techniques: Vec<(u32, CalibrationRow)> = Vec::new();
+        for r in records {
+            let sample = [r.height, r.error, r.primitives];
+            match techniques.last_mut() {
+                Some((code, row)) if *code == r.technique => row.samples.push(sample),
+                _ => {
+                    let technique = treelod_format::calibration_technique::name(r.technique)
+                        .map_or_else(|| format!("technique {}", r.technique), str::to_owned);
+                    techniques.push((r.technique, CalibrationRow { technique, samples: vec![sample] }));
+                }
+            }
+        }
+        Some(Self { techniques: techniques.into_iter().map(|(_, row)| row).collect() })
+    }
+
+    /// The text form: a row per representation, `error (primitives)` per height.
+    fn to_text(&self) -> String {
+        let mut heights: Vec<f32> = self.techniques.iter().flat_map(|t| t.samples.iter().map(|s| s[0])).collect();
+        heights.sort_by(f32::total_cmp);
+        heights.dedup();
+        let mut columns = vec![("technique".to_owned(), Align::Left)];
+        columns.extend(heights.iter().map(|h| (format!("{h} px"), Align::Right)));
+        let names: Vec<(&str, Align)> = columns.iter().map(|(n, a)| (n.as_str(), *a)).collect();
+        let mut table = Table::new(&names);
+        for t in &self.techniques {
+            let mut row = vec![t.technique.clone()];
+            row.extend(heights.iter().map(|h| {
+                t.samples
+                    .iter()
+                    .find(|s| s[0] == *h)
+                    .map_or_else(String::new, |s| format!("{:.4} ({})", s[1], s[2].round()))
+            }));
+            table.row(row);
+        }
+        format!(
+            "\ncalibration (multi-scale RMSE of coverage against the supersampled full mesh, and primitives drawn, \
+             by the block's projected height)\n{}",
+            table.render("  ")
+        )
+    }
+}
+
 /// One non-empty cell.
 #[derive(Debug, Serialize)]
 struct CellInfo {
@@ -677,6 +746,7 @@ impl<'a> Dump<'a> {
             pruning: PruningInfo::new(container),
             impostors: ImpostorInfo::new(container),
             baselines: BaselineInfo::new(container),
+            calibration: CalibrationInfo::new(container),
             histograms,
         }
     }
@@ -723,6 +793,9 @@ impl<'a> Dump<'a> {
         }
         if let Some(baselines) = &self.baselines {
             out.push_str(&baselines.to_text());
+        }
+        if let Some(calibration) = &self.calibration {
+            out.push_str(&calibration.to_text());
         }
         out.push_str(&self.histograms_text());
         out

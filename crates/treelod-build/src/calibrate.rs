@@ -1,0 +1,537 @@
+//! Calibration (spec §6.15): the image error and the cost of every representation a container
+//! holds, as functions of the block's projected height in pixels, measured by the build on each
+//! model so that a runtime policy can choose among them without tuned constants. Neubert et al.'s
+//! λ(h) measurement (2011 §2.2), generalised to every representation.
+//!
+//! **What is measured.** For each height `h` of [`HEIGHTS`] and each of `views` orthographic views
+//! ([`view_directions`]), the block is drawn `h` pixels high:
+//! - the *reference*: every triangle of `TRIANGLES` with the alpha test, rasterised at `k × k`
+//!   samples per pixel (`k` = `supersample`, lowered so a side stays within
+//!   [`MAX_REFERENCE_SIDE`]) and box-filtered to the pixel's covered fraction;
+//! - each representation at one sample per pixel, as the renderer draws it without MSAA, with
+//!   the runtime's own selection rules at the metres per pixel `p = H/h` of that height (`H` the
+//!   block's height): Gilet's cut at the default pixel thresholds (`s_min` 1, `s_max` 2, no depth
+//!   bias), point discs of their radius (a sub-pixel disc as the one-pixel splat of spec §10.1,
+//!   drawn when a hash of the point falls below its coverage), pruned leaves at `λ(h)` scaled by
+//!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test and every bark
+//!   triangle, ellipsoids at `τ = p` with the renderer's noise holes and the branch lines (or every
+//!   bark triangle without lines), the LoD chain's level for `τ = p`, the billboards.
+//!
+//! The error is the multi-scale RMSE of coverage (`treelod_eval::metrics`, Clasen §4: levels from
+//! single pixels to the whole image) against the reference, averaged over the views; the cost is
+//! the number of primitives drawn. Colour and shading are not measured: the table says how well a
+//! representation keeps the silhouette and the canopy's density, which is what its level of detail
+//! changes. Everything runs on the CPU rasteriser ([`crate::raster`]): the tables are the same on
+//! every machine and for any thread count (views run in parallel, results are summed in order).
+//!
+//! Impostor planes textured indirectly (`LEAF_SLOTS`, spec §6.10.1) are not drawn here: a
+//! container with them has no impostor rows, and a policy never picks a representation without
+//! rows.
+
+use glam::{Quat, Vec2, Vec3};
+use rayon::prelude::*;
+use treelod_eval::metrics::{LinearImage, multiscale_rmse};
+use treelod_format::{
+    CalibrationRecord, ContainerData, ImageRecord, NO_IMAGE, Setting, TriangleRecord, billboard_kind,
+    calibration_technique, image_format, material_class, pack::unpack_unorm16x2, prune_leaves_drawn,
+};
+use treelod_runtime::ellipsoid::{ellipsoid_drawn, line_drawn};
+use treelod_runtime::prune::{PruneScale, curve_at, leaf_scale, size_factor};
+use treelod_runtime::{LodSettings, Thresholds, point_drawn, triangle_drawn};
+
+use crate::raster::{
+    AlphaMask, Mask, NO_ALPHA, NOISE_SIZE, RasterTriangle, View, fill_ellipse, fill_ellipsoid_cut, fill_triangle,
+    noise_cut, rasterize, view_directions,
+};
+use crate::scene::{Image, ImageEncoding};
+
+/// Projected heights of the block at which every representation is measured, pixels: octaves
+/// from a tree a few pixels high to one a quarter of a 1080p screen high. Larger trees are few
+/// and near: a policy draws them with the representation that converges to the full mesh (the
+/// point tree), so the table stops here and the build spends its time where the choice is made
+/// (the images of 512 pixels would cost four times all the others).
+pub const HEIGHTS: [f32; 6] = [8.0, 16.0, 32.0, 64.0, 128.0, 256.0];
+
+/// The largest side of a supersampled reference image, samples: the supersampling is lowered
+/// where a view would be larger (a block much wider than high at 256 pixels).
+pub const MAX_REFERENCE_SIDE: u32 = 2048;
+
+/// Noise texels per radian of the renderer's ellipsoid noise (`shaders/tree/ellipsoids.wgsl`).
+const NOISE_TEXELS_PER_RADIAN: f32 = 40.0;
+
+/// Settings of the calibration (recorded in the metadata as `calibration.*`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CalibrationConfig {
+    /// Orthographic views per height ([`view_directions`]). Default 4: three around the tree and
+    /// one from 45° above.
+    pub views: usize,
+    /// Samples per pixel side of the reference. Default 4.
+    pub supersample: u32,
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        Self { views: 4, supersample: 4 }
+    }
+}
+
+impl CalibrationConfig {
+    /// The metadata settings recording this configuration (spec §7.1).
+    #[must_use]
+    pub fn settings(&self) -> Vec<Setting> {
+        vec![
+            Setting { key: "calibration.views".into(), value: self.views.to_string() },
+            Setting { key: "calibration.supersample".into(), value: self.supersample.to_string() },
+        ]
+    }
+}
+
+/// What the calibration draws, gathered once from the container's arrays.
+struct Scene<'a> {
+    data: &'a ContainerData,
+    /// Alpha masks: one per material (index = material), then one per image used by planes and
+    /// billboards (`image_alpha`).
+    alphas: Vec<AlphaMask>,
+    /// Per material, its index into `alphas` or [`NO_ALPHA`].
+    material_alpha: Vec<u32>,
+    /// Per image, its index into `alphas` as a plane's or billboard's texture, or [`NO_ALPHA`].
+    image_alpha: Vec<u32>,
+    /// Every triangle of `TRIANGLES`, ready to rasterise (the reference and the full mesh).
+    full: Vec<RasterTriangle>,
+    /// The triangles of `TRIANGLES` that are not of a leaf material (pruned and impostor trees
+    /// draw them all).
+    bark: Vec<RasterTriangle>,
+    /// Whether the impostor planes can be drawn (an RGBA atlas, not leaf slots).
+    planes_drawable: bool,
+}
+
+/// The calibration of `data` (spec §6.15): for every representation it holds, its error and
+/// primitive count at each of [`HEIGHTS`], sorted by technique, then height. Empty for a block
+/// without height or triangles.
+#[must_use]
+pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Vec<CalibrationRecord> {
+    let (lo, hi) = (Vec3::from_array(data.block.bounds_min), Vec3::from_array(data.block.bounds_max));
+    let height = hi.y - lo.y;
+    if !(height.is_finite() && height > 0.0) || data.triangles.is_empty() {
+        return Vec::new();
+    }
+    let scene = Scene::new(data);
+    let techniques = scene.techniques();
+    let (centre, radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
+    let directions = view_directions(config.views.max(1));
+    let jobs: Vec<(usize, usize)> =
+        (0..HEIGHTS.len()).flat_map(|h| (0..directions.len()).map(move |v| (h, v))).collect();
+    // Per job, per technique: (error, primitives).
+    let results: Vec<Vec<(f64, f64)>> = jobs
+        .par_iter()
+        .map(|&(h, v)| {
+            let pixels = HEIGHTS[h];
+            let metres_per_pixel = height / pixels;
+            let side = ((2.0 * radius / metres_per_pixel).ceil() as u32).max(4);
+            let k = config.supersample.max(1).min((MAX_REFERENCE_SIDE / side).max(1));
+            // The sphere fitted to exactly `side` pixels of `metres_per_pixel`.
+            let fitted = 0.5 * side as f32 * metres_per_pixel;
+            let view = View::fit(directions[v], centre, fitted, side);
+            let reference = scene.reference(&View::fit(directions[v], centre, fitted, side * k), k);
+            techniques
+                .iter()
+                .map(|&t| {
+                    let mut mask = Mask::new(side);
+                    let primitives = scene.draw(t, &view, metres_per_pixel, pixels, &mut mask);
+                    (error(&mask, &reference), primitives as f64)
+                })
+                .collect()
+        })
+        .collect();
+    let mut records = Vec::new();
+    for (ti, &technique) in techniques.iter().enumerate() {
+        for (h, &pixels) in HEIGHTS.iter().enumerate() {
+            let per_view: Vec<(f64, f64)> =
+                jobs.iter().zip(&results).filter(|((jh, _), _)| *jh == h).map(|(_, r)| r[ti]).collect();
+            let n = per_view.len().max(1) as f64;
+            let error = per_view.iter().map(|r| r.0).sum::<f64>() / n;
+            let primitives = per_view.iter().map(|r| r.1).sum::<f64>() / n;
+            records.push(CalibrationRecord {
+                technique,
+                height: pixels,
+                error: (error as f32).clamp(0.0, 1.0),
+                primitives: primitives as f32,
+            });
+        }
+    }
+    records
+}
+
+/// The multi-scale RMSE of the one-sample coverage `mask` against the reference's covered
+/// fractions (`side²` values, rows top to bottom).
+fn error(mask: &Mask, reference: &[f32]) -> f64 {
+    let side = mask.size();
+    let grey = |v: f32| [v, v, v];
+    let sample: Vec<[f32; 3]> = (0..side)
+        .flat_map(|y| (0..side).map(move |x| (x, y)))
+        .map(|(x, y)| grey(f32::from(u8::from(mask.get(x, y)))))
+        .collect();
+    let reference: Vec<[f32; 3]> = reference.iter().map(|&v| grey(v)).collect();
+    let a = LinearImage { width: side, height: side, pixels: sample };
+    let b = LinearImage { width: side, height: side, pixels: reference };
+    multiscale_rmse(&a, &b).map_or(1.0, |m| m.summary())
+}
+
+impl<'a> Scene<'a> {
+    fn new(data: &'a ContainerData) -> Self {
+        let decoded: Vec<Option<Image>> = data.images.iter().map(|record| decode(data, record)).collect();
+        let mut alphas = Vec::new();
+        let mut push = |mask: AlphaMask| {
+            alphas.push(mask);
+            u32::try_from(alphas.len() - 1).unwrap_or(NO_ALPHA)
+        };
+        let material_alpha: Vec<u32> = data
+            .materials
+            .iter()
+            .map(|m| {
+                let cutoff = match m.alpha_mode {
+                    1 => m.alpha_cutoff,
+                    2 => 0.5,
+                    _ => return NO_ALPHA,
+                };
+                let factor = m.base_color[3];
+                match (m.image != NO_IMAGE).then(|| decoded.get(m.image as usize)).flatten().and_then(Option::as_ref) {
+                    Some(image) => push(AlphaMask::from_image(image, factor, cutoff)),
+                    None if factor >= cutoff => NO_ALPHA,
+                    None => push(AlphaMask::from_image(&transparent(), 1.0, 0.5)),
+                }
+            })
+            .collect();
+        // Planes and billboards test their atlas' alpha at 0.5 (spec §6.10).
+        let textured: Vec<u32> =
+            data.planes.iter().map(|p| p.image).chain(data.billboards.iter().map(|b| b.image)).collect();
+        let image_alpha: Vec<u32> = decoded
+            .iter()
+            .enumerate()
+            .map(|(i, image)| match image {
+                Some(image) if textured.contains(&(i as u32)) => push(AlphaMask::from_image(image, 1.0, 0.5)),
+                _ => NO_ALPHA,
+            })
+            .collect();
+        let raster = |t: &TriangleRecord| raster_triangle(data, t, &material_alpha, 1.0, None);
+        let full: Vec<RasterTriangle> = data.triangles.iter().map(raster).collect();
+        let bark: Vec<RasterTriangle> = data
+            .triangles
+            .iter()
+            .filter(|t| data.materials.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF))
+            .map(raster)
+            .collect();
+        let planes_drawable = !data.planes.is_empty()
+            && data.planes.iter().all(|p| {
+                data.images.get(p.image as usize).is_some_and(|i| i.format != image_format::LEAF_SLOTS)
+                    && image_alpha.get(p.image as usize).is_some_and(|&a| a != NO_ALPHA)
+            });
+        Self { data, alphas, material_alpha, image_alpha, full, bark, planes_drawable }
+    }
+
+    /// The techniques the container holds data for, in code order.
+    fn techniques(&self) -> Vec<u32> {
+        use calibration_technique as t;
+        let d = self.data;
+        let has_billboard = |kind| d.billboards.iter().any(|b| b.kind == kind);
+        [
+            (t::FULL, true),
+            (t::SPT, true),
+            (t::PRUNE_OPT, !d.prune_leaves.is_empty() && !d.prune_lambda.is_empty()),
+            (t::PRUNE_COOK, !d.prune_leaves.is_empty() && !d.prune_lambda.is_empty()),
+            (t::IMPOSTORS, self.planes_drawable),
+            (t::ELLIPSOIDS, !d.ellipsoids.is_empty()),
+            (t::LOD_CHAIN, !d.lod_levels.is_empty()),
+            (t::BILLBOARD, has_billboard(billboard_kind::FACING)),
+            (t::CROSSED, has_billboard(billboard_kind::CROSSED)),
+        ]
+        .into_iter()
+        .filter_map(|(code, held)| held.then_some(code))
+        .collect()
+    }
+
+    /// The reference of `view` (`k` samples per pixel side): the covered fraction of each pixel.
+    fn reference(&self, view: &View, k: u32) -> Vec<f32> {
+        let mut fine = Mask::new(view.size);
+        rasterize(&mut fine, view, &self.full, &self.alphas);
+        let side = view.size / k;
+        let per_pixel = 1.0 / (k * k) as f32;
+        let mut out = vec![0.0f32; (side * side) as usize];
+        for y in 0..side {
+            for x in 0..side {
+                let mut n = 0u32;
+                for sy in 0..k {
+                    for sx in 0..k {
+                        n += u32::from(fine.get(x * k + sx, y * k + sy));
+                    }
+                }
+                out[(y * side + x) as usize] = n as f32 * per_pixel;
+            }
+        }
+        out
+    }
+
+    /// Draws `technique` as seen in `view` at `p` metres per pixel (`pixels` the block's height on
+    /// screen) into `mask`; returns the primitives drawn.
+    fn draw(&self, technique: u32, view: &View, p: f32, pixels: f32, mask: &mut Mask) -> u64 {
+        use calibration_technique as t;
+        let d = self.data;
+        let lod = LodSettings::default();
+        match technique {
+            t::FULL => {
+                rasterize(mask, view, &self.full, &self.alphas);
+                self.full.len() as u64
+            }
+            t::SPT => {
+                self.draw_spt(view, Thresholds { points: lod.s_min * p, triangles: lod.s_max.max(lod.s_min) * p }, mask)
+            }
+            t::PRUNE_OPT | t::PRUNE_COOK => {
+                let mode = if technique == t::PRUNE_OPT { PruneScale::Optimal } else { PruneScale::Cook };
+                let lambda = curve_at(&d.prune_lambda, pixels).unwrap_or(1.0).clamp(0.0, 1.0);
+                let grow = size_factor(leaf_scale(mode, &d.prune_scale, lambda));
+                rasterize(mask, view, &self.bark, &self.alphas);
+                let mut drawn = self.bark.len() as u64;
+                let mut leaves = Vec::new();
+                for cell in &d.cells {
+                    let list = d.prune_leaves.get(cell.prune_leaves.as_usize()).unwrap_or(&[]);
+                    let n = prune_leaves_drawn(u32::try_from(list.len()).unwrap_or(u32::MAX), lambda) as usize;
+                    for leaf in &list[..n.min(list.len())] {
+                        let first = leaf.first_triangle as usize;
+                        let tris = d.prune_triangles.get(first..first + leaf.triangle_count as usize).unwrap_or(&[]);
+                        let centre = Vec3::from_array(leaf.center);
+                        leaves.extend(
+                            tris.iter().map(|tri| raster_triangle(d, tri, &self.material_alpha, grow, Some(centre))),
+                        );
+                    }
+                }
+                rasterize(mask, view, &leaves, &self.alphas);
+                drawn += leaves.len() as u64;
+                drawn
+            }
+            t::IMPOSTORS => {
+                let tau = lod.s_min * p;
+                rasterize(mask, view, &self.bark, &self.alphas);
+                let mut drawn = self.bark.len() as u64;
+                for plane in d.planes.iter().filter(|pl| pl.lo <= tau && tau < pl.hi) {
+                    let alpha = self.image_alpha.get(plane.image as usize).copied().unwrap_or(NO_ALPHA);
+                    let (u, v) = (Vec3::from_array(plane.axis_u), Vec3::from_array(plane.axis_v));
+                    quad(
+                        mask,
+                        view,
+                        Vec3::from_array(plane.center),
+                        u,
+                        v,
+                        (plane.uv_min, plane.uv_max),
+                        self.alphas.get(alpha as usize),
+                    );
+                    drawn += 1;
+                }
+                drawn
+            }
+            t::ELLIPSOIDS => self.draw_ellipsoids(view, p, mask),
+            t::LOD_CHAIN => {
+                // Per tree, the coarsest level whose error is at most τ = s_min pixels; the full
+                // mesh where none is.
+                let tau = lod.s_min * p;
+                let mut chosen: Vec<Option<&treelod_format::LodLevelRecord>> = vec![None; d.block.tree_count as usize];
+                for level in &d.lod_levels {
+                    if level.error <= tau
+                        && let Some(slot) = chosen.get_mut(level.tree as usize)
+                        && slot.is_none_or(|s| s.level < level.level)
+                    {
+                        *slot = Some(level);
+                    }
+                }
+                if chosen.iter().any(Option::is_none) {
+                    rasterize(mask, view, &self.full, &self.alphas);
+                    return self.full.len() as u64;
+                }
+                let tris: Vec<RasterTriangle> = chosen
+                    .iter()
+                    .flatten()
+                    .flat_map(|l| d.lod_triangles.get(l.triangles.as_usize()).unwrap_or(&[]))
+                    .map(|tri| raster_triangle(d, tri, &self.material_alpha, 1.0, None))
+                    .collect();
+                rasterize(mask, view, &tris, &self.alphas);
+                tris.len() as u64
+            }
+            t::BILLBOARD | t::CROSSED => {
+                let kind = if technique == t::BILLBOARD { billboard_kind::FACING } else { billboard_kind::CROSSED };
+                let mut drawn = 0;
+                for b in d.billboards.iter().filter(|b| b.kind == kind) {
+                    let (mut u, v) = (Vec3::from_array(b.axis_u), Vec3::from_array(b.axis_v));
+                    if kind == billboard_kind::FACING {
+                        // Turned about axis_v towards the viewer (spec §6.13).
+                        let up = v.normalize_or_zero();
+                        let towards = (view.direction - up * view.direction.dot(up)).normalize_or_zero();
+                        let turned = up.cross(towards);
+                        if turned != Vec3::ZERO {
+                            u = turned * u.length();
+                        }
+                    }
+                    let alpha = self.image_alpha.get(b.image as usize).copied().unwrap_or(NO_ALPHA);
+                    quad(
+                        mask,
+                        view,
+                        Vec3::from_array(b.center),
+                        u,
+                        v,
+                        (b.uv_min, b.uv_max),
+                        self.alphas.get(alpha as usize),
+                    );
+                    drawn += 1;
+                }
+                drawn
+            }
+            _ => 0,
+        }
+    }
+
+    /// Gilet's cut at `thresholds`: the triangles above `τ_t`, the points of `τ_p`.
+    fn draw_spt(&self, view: &View, thresholds: Thresholds, mask: &mut Mask) -> u64 {
+        let d = self.data;
+        let mut tris = Vec::new();
+        let mut drawn = 0u64;
+        for cell in &d.cells {
+            for tri in d.triangles.get(cell.triangles.as_usize()).unwrap_or(&[]) {
+                if !triangle_drawn(tri, thresholds) {
+                    break;
+                }
+                tris.push(raster_triangle(d, tri, &self.material_alpha, 1.0, None));
+            }
+            let first = cell.points.first as usize;
+            for (i, point) in d.points.get(cell.points.as_usize()).unwrap_or(&[]).iter().enumerate() {
+                if point.hi <= thresholds.points {
+                    break;
+                }
+                if !point_drawn(point, thresholds) {
+                    continue;
+                }
+                drawn += 1;
+                disc(mask, view, Vec3::from_array(point.position), point.radius, (first + i) as u64);
+            }
+        }
+        rasterize(mask, view, &tris, &self.alphas);
+        drawn + tris.len() as u64
+    }
+
+    /// The ellipsoids of `τ = p` with the renderer's noise holes, and the lines of `τ` (or every
+    /// bark triangle where the container has no lines, as the renderer draws them).
+    fn draw_ellipsoids(&self, view: &View, p: f32, mask: &mut Mask) -> u64 {
+        let d = self.data;
+        let mut drawn = 0u64;
+        let top = NOISE_SIZE.ilog2() as f32;
+        for e in d.ellipsoids.iter().filter(|e| ellipsoid_drawn(e, p)) {
+            let q = Quat::from_array(e.orientation.map(|c| f32::from(c) / 32767.0)).normalize();
+            let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| q * a);
+            let axes = [axes[0] * e.radii[0], axes[1] * e.radii[1], axes[2] * e.radii[2]];
+            // The renderer's mip: the cluster's noise level, or coarser where the noise texels
+            // would be finer than the pixels (its footprint at the ellipsoid's middle).
+            let radius_px = (e.radii.iter().sum::<f32>() / 3.0 * view.scale).max(1e-6);
+            let footprint = (NOISE_TEXELS_PER_RADIAN / radius_px).log2();
+            let level = (top - e.noise_mip).max(footprint).clamp(0.0, top);
+            let level = ((level + 0.5).ceil() - 1.0).clamp(0.0, top) as u32;
+            fill_ellipsoid_cut(mask, view, Vec3::from_array(e.center), axes, level, noise_cut(e.alpha_threshold));
+            drawn += 1;
+        }
+        if d.lines.is_empty() {
+            rasterize(mask, view, &self.bark, &self.alphas);
+            return drawn + self.bark.len() as u64;
+        }
+        for line in d.lines.iter().filter(|l| line_drawn(l, p)) {
+            let (a, b) = (view.project(Vec3::from_array(line.p0)), view.project(Vec3::from_array(line.p1)));
+            let (ra, rb) = (line.r0 * view.scale, line.r1 * view.scale);
+            let across = (b - a).perp().normalize_or_zero();
+            let corners = [a + across * ra, a - across * ra, b - across * rb, b + across * rb];
+            fill_triangle(mask, [corners[0], corners[1], corners[2]], [Vec2::ZERO; 3], None);
+            fill_triangle(mask, [corners[0], corners[2], corners[3]], [Vec2::ZERO; 3], None);
+            for (c, r) in [(a, ra), (b, rb)] {
+                fill_ellipse(mask, c, [f64::from(r * r), 0.0, f64::from(r * r)]);
+            }
+            drawn += 1;
+        }
+        drawn
+    }
+}
+
+/// A point's disc of `radius` metres at `centre`, facing the viewer. A disc under half a pixel in
+/// radius is the renderer's one-pixel splat (spec §10.1): its pixel is covered when a hash of the
+/// point falls below the disc's coverage `π·r²`.
+fn disc(mask: &mut Mask, view: &View, centre: Vec3, radius: f32, id: u64) {
+    let c = view.project(centre);
+    let r = radius * view.scale;
+    if r >= 0.5 {
+        let r2 = f64::from(r * r);
+        fill_ellipse(mask, c, [r2, 0.0, r2]);
+        return;
+    }
+    let coverage = std::f32::consts::PI * r * r;
+    let hash = crate::rng::SplitMix64(id).next_u64();
+    if ((hash >> 40) as f32) / ((1u64 << 24) as f32) < coverage && c.x >= 0.0 && c.y >= 0.0 {
+        let (x, y) = (c.x as u32, c.y as u32);
+        if x < mask.size() && y < mask.size() {
+            mask.set(x, y);
+        }
+    }
+}
+
+/// The quad `centre ± u ± v` textured by the atlas rectangle `uv_min ..= uv_max` (spec §6.10:
+/// the corner `centre − u − v` at `uv_min`), alpha-tested with `alpha`.
+fn quad(
+    mask: &mut Mask,
+    view: &View,
+    centre: Vec3,
+    u: Vec3,
+    v: Vec3,
+    (uv_min, uv_max): (u32, u32),
+    alpha: Option<&AlphaMask>,
+) {
+    let (lo, hi) = (Vec2::from_array(unpack_unorm16x2(uv_min)), Vec2::from_array(unpack_unorm16x2(uv_max)));
+    let corner = |s: f32, t: f32| {
+        (view.project(centre + u * s + v * t), lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo))
+    };
+    let [a, b, c, e] = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
+    fill_triangle(mask, [a.0, b.0, c.0], [a.1, b.1, c.1], alpha);
+    fill_triangle(mask, [a.0, c.0, e.0], [a.1, c.1, e.1], alpha);
+}
+
+/// A triangle record as a rasteriser triangle, its corners moved to `c + sqrt(s)·(p − c)` when
+/// `centre` is given (a pruned leaf grown by `s`, spec §6.11; `grow` is `sqrt(s)`).
+fn raster_triangle(
+    data: &ContainerData,
+    t: &TriangleRecord,
+    material_alpha: &[u32],
+    grow: f32,
+    centre: Option<Vec3>,
+) -> RasterTriangle {
+    let vertex = |i: u32| data.vertices.get(i as usize).copied().unwrap_or_default();
+    let corners = t.indices.map(vertex);
+    let position = |p: [f32; 3]| {
+        let p = Vec3::from_array(p);
+        centre.map_or(p, |c| c + (p - c) * grow)
+    };
+    RasterTriangle {
+        positions: corners.map(|v| position(v.position)),
+        uvs: corners.map(|v| Vec2::from_array(v.uv)),
+        alpha: material_alpha.get(t.material as usize).copied().unwrap_or(NO_ALPHA),
+    }
+}
+
+/// An image of the container decoded for its alpha test; `None` for leaf slots and images that
+/// do not decode (their texels are not colours).
+fn decode(data: &ContainerData, record: &ImageRecord) -> Option<Image> {
+    let bytes = data.image_data.get(record.data_offset as usize..)?.get(..record.data_length as usize)?;
+    let image = treelod_format::image::decode(record, bytes).ok()?;
+    Some(Image {
+        width: image.width,
+        height: image.height,
+        rgba: image.texels,
+        encoded: Vec::new(),
+        encoding: ImageEncoding::Raw,
+    })
+}
+
+/// A 1 × 1 transparent image (a material whose alpha factor fails its own cutoff).
+fn transparent() -> Image {
+    Image { width: 1, height: 1, rgba: vec![0; 4], encoded: Vec::new(), encoding: ImageEncoding::Raw }
+}
