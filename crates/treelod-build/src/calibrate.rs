@@ -313,16 +313,15 @@ impl<'a> Scene<'a> {
                 rasterize(mask, view, &self.bark, &self.alphas);
                 let mut drawn = self.bark.len() as u64;
                 for plane in d.planes.iter().filter(|pl| pl.lo <= tau && tau < pl.hi) {
-                    let alpha = self.image_alpha.get(plane.image as usize).copied().unwrap_or(NO_ALPHA);
                     let (u, v) = (Vec3::from_array(plane.axis_u), Vec3::from_array(plane.axis_v));
-                    quad(
+                    self.quad(
                         mask,
                         view,
                         Vec3::from_array(plane.center),
                         u,
                         v,
+                        plane.image,
                         (plane.uv_min, plane.uv_max),
-                        self.alphas.get(alpha as usize),
                     );
                     drawn += 1;
                 }
@@ -369,22 +368,21 @@ impl<'a> Scene<'a> {
                             u = turned * u.length();
                         }
                     }
-                    let alpha = self.image_alpha.get(b.image as usize).copied().unwrap_or(NO_ALPHA);
-                    quad(
-                        mask,
-                        view,
-                        Vec3::from_array(b.center),
-                        u,
-                        v,
-                        (b.uv_min, b.uv_max),
-                        self.alphas.get(alpha as usize),
-                    );
+                    self.quad(mask, view, Vec3::from_array(b.center), u, v, b.image, (b.uv_min, b.uv_max));
                     drawn += 1;
                 }
                 drawn
             }
             _ => 0,
         }
+    }
+
+    /// A plane's or billboard's quad textured by the rectangle `uv` of `image`, alpha-tested at
+    /// 0.5 ([`quad`]).
+    #[expect(clippy::too_many_arguments, reason = "a quad's frame and its texture rectangle")]
+    fn quad(&self, mask: &mut Mask, view: &View, centre: Vec3, u: Vec3, v: Vec3, image: u32, uv: (u32, u32)) {
+        let alpha = self.image_alpha.get(image as usize).copied().unwrap_or(NO_ALPHA);
+        quad(mask, view, centre, u, v, uv, self.alphas.get(alpha as usize));
     }
 
     /// Gilet's cut at `thresholds`: the triangles above `τ_t`, the points of `τ_p`.

@@ -142,8 +142,9 @@ pub struct BuildOptions {
     /// Calibration views (spec §6.15): every representation built is drawn at 6 projected heights
     /// (8 to 256 pixels) from N orthographic views on the CPU and its coverage error against the
     /// supersampled full mesh and its primitive count are stored, for a policy to choose
-    /// representations with. 0 writes no calibration.
-    #[arg(long, value_name = "N", default_value_t = 4, value_parser = clap::value_parser!(u32).range(0..=64))]
+    /// representations with (4 is the calibration's own default). 0, the default until the
+    /// runtime's policy reads the tables, writes none.
+    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub calibration_views: u32,
     /// Keep every bit of the written floats. By default positions and texture coordinates keep
     /// 16 significant bits, sizes 12 and normals 10 per component (0.15 mm on a 10 m tree), which
@@ -1168,7 +1169,7 @@ mod tests {
         let options = BuildOptions::defaults();
         assert!(!options.impostors && !options.ellipsoids && !options.baselines);
         assert!(options.ao_rays > 0, "ambient occlusion is on by default");
-        assert!(options.calibration_views > 0, "calibration is on by default");
+        assert_eq!(options.calibration_views, 0, "calibration is opt-in until the policy reads it");
     }
 
     #[test]
