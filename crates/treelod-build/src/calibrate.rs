@@ -162,19 +162,20 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Vec<Calibr
     records
 }
 
-/// The multi-scale RMSE of the one-sample coverage `mask` against the reference's covered
-/// fractions (`side²` values, rows top to bottom).
-fn error(mask: &Mask, reference: &[f32]) -> f64 {
-    let side = mask.size();
-    let grey = |v: f32| [v, v, v];
-    let sample: Vec<[f32; 3]> = (0..side)
-        .flat_map(|y| (0..side).map(move |x| (x, y)))
-        .map(|(x, y)| grey(f32::from(u8::from(mask.get(x, y)))))
+/// The multi-scale RMSE of the one-sample coverage `mask` against `reference` (grey, the
+/// covered fraction of each pixel in every channel, as [`Scene::reference`] gives it).
+fn error(mask: &Mask, reference: &LinearImage) -> f64 {
+    multiscale_rmse(&coverage_image(mask), reference).map_or(1.0, |m| m.summary())
+}
+
+/// `mask` as a linear image: 1 in every channel where covered, 0 elsewhere.
+fn coverage_image(mask: &Mask) -> LinearImage {
+    let size = mask.size();
+    let pixels = (0..size)
+        .flat_map(|y| (0..size).map(move |x| (x, y)))
+        .map(|(x, y)| [f32::from(u8::from(mask.get(x, y))); 3])
         .collect();
-    let reference: Vec<[f32; 3]> = reference.iter().map(|&v| grey(v)).collect();
-    let a = LinearImage { width: side, height: side, pixels: sample };
-    let b = LinearImage { width: side, height: side, pixels: reference };
-    multiscale_rmse(&a, &b).map_or(1.0, |m| m.summary())
+    LinearImage { width: size, height: size, pixels }
 }
 
 impl<'a> Scene<'a> {
@@ -250,25 +251,14 @@ impl<'a> Scene<'a> {
         .collect()
     }
 
-    /// The reference of `view` (`k` samples per pixel side): the covered fraction of each pixel.
-    fn reference(&self, view: &View, k: u32) -> Vec<f32> {
+    /// The reference of `view` (`k` samples per pixel side): every triangle's coverage,
+    /// box-filtered to the covered fraction of each pixel (grey, in every channel).
+    fn reference(&self, view: &View, k: u32) -> LinearImage {
         let mut fine = Mask::new(view.size);
         rasterize(&mut fine, view, &self.full, &self.alphas);
-        let side = view.size / k;
-        let per_pixel = 1.0 / (k * k) as f32;
-        let mut out = vec![0.0f32; (side * side) as usize];
-        for y in 0..side {
-            for x in 0..side {
-                let mut n = 0u32;
-                for sy in 0..k {
-                    for sx in 0..k {
-                        n += u32::from(fine.get(x * k + sx, y * k + sy));
-                    }
-                }
-                out[(y * side + x) as usize] = n as f32 * per_pixel;
-            }
-        }
-        out
+        let fine = coverage_image(&fine);
+        // The view is `k` times the image's side, so the filter cannot fail.
+        fine.box_filter(k).unwrap_or(fine)
     }
 
     /// Draws `technique` as seen in `view` at `p` metres per pixel (`pixels` the block's height on

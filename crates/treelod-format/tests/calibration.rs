@@ -7,8 +7,7 @@
 mod common;
 
 use treelod_format::{
-    CalibrationRecord, Compression, Container, ContainerData, Error, MINOR, SectionKind, VerifyReport,
-    calibration_technique, verify,
+    CalibrationRecord, Compression, Container, ContainerData, Error, MINOR, SectionKind, calibration_technique, verify,
 };
 
 fn sample(technique: u32, height: f32, error: f32, primitives: f32) -> CalibrationRecord {
@@ -33,15 +32,7 @@ fn fixture() -> ContainerData {
     data
 }
 
-fn bytes_of(data: &ContainerData) -> Vec<u8> {
-    data.to_bytes(Compression::None).expect("invalid content still writes")
-}
-
-fn check(data: &ContainerData) -> Result<VerifyReport, Error> {
-    let bytes = bytes_of(data);
-    let c = Container::from_bytes(&bytes).expect("opens: only verify checks content");
-    verify(&c)
-}
+use common::{bytes_of, check};
 
 /// Asserts a `BadRecord` of `CALIBRATION` at `index` whose reason mentions every needle, and
 /// whose message names the kind and the record.

@@ -6,8 +6,8 @@ mod common;
 
 use treelod_format::{
     CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, MaterialInfo, MaterialRecord,
-    NO_IMAGE, PlaneLeafRecord, PlaneRecord, Range, SectionKind, VerifyReport, image_format, leaf_slots, pack,
-    plane_leaf_bases, verify,
+    NO_IMAGE, PlaneLeafRecord, PlaneRecord, Range, SectionKind, image_format, leaf_slots, pack, plane_leaf_bases,
+    verify,
 };
 
 const INF: f32 = f32::INFINITY;
@@ -124,15 +124,7 @@ fn fixture() -> ContainerData {
     data
 }
 
-fn bytes_of(data: &ContainerData) -> Vec<u8> {
-    data.to_bytes(Compression::None).expect("invalid content still writes")
-}
-
-fn check(data: &ContainerData) -> Result<VerifyReport, Error> {
-    let bytes = bytes_of(data);
-    let c = Container::from_bytes(&bytes).expect("opens: only verify checks content");
-    verify(&c)
-}
+use common::{bytes_of, check};
 
 /// Asserts a `BadRecord` of `kind` at `index` whose reason mentions every needle.
 #[track_caller]

@@ -88,3 +88,17 @@ pub fn reseal(bytes: &mut [u8]) {
     let sum = crc.finalize();
     bytes[60..64].copy_from_slice(&sum.to_le_bytes());
 }
+
+/// `data` written uncompressed; content that `verify` refuses still writes.
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+pub fn bytes_of(data: &ContainerData) -> Vec<u8> {
+    data.to_bytes(treelod_format::Compression::None).expect("invalid content still writes")
+}
+
+/// `verify` of `data` written and opened (opening checks only structure, not content).
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+pub fn check(data: &ContainerData) -> Result<treelod_format::VerifyReport, treelod_format::Error> {
+    let bytes = bytes_of(data);
+    let c = treelod_format::Container::from_bytes(&bytes).expect("opens: only verify checks content");
+    treelod_format::verify(&c)
+}
