@@ -499,12 +499,13 @@ mod tests {
                 )),
             })
             .collect();
-        let camera = Camera::look_at(Vec3::new(0.0, 20.0, 60.0), Vec3::new(0.0, 0.0, -100.0), 1.0, 640, 480);
+        let camera = Camera::look_at(Vec3::new(5.0, 2.0, -15.0), Vec3::new(5.0, 2.0, -200.0), 1.0, 640, 480);
         let scene = Scene { lods: &lods, models: &models, instances: &instances };
         let settings = TechniqueSettings {
             s_min: 1.0,
             lod: LodSettings::default(),
-            pruning: Pruning::default(),
+            // The far trees go to the point tree.
+            pruning: Pruning { spt_below_pixels: 16.0, ..Pruning::default() },
             impostor_bark: ImpostorBark::default(),
             pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
             lines: true,
