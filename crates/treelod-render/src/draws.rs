@@ -3,12 +3,11 @@
 //! what is resident, and the indirect draws of each bucket.
 
 use bytemuck::{Pod, Zeroable};
-use treelod_runtime::{CellPrefix, DrawList, DrawRange, Kind, ROOTS_CELL};
+use treelod_runtime::{DrawList, DrawRange, Kind, ROOTS_CELL, TreeDraws, TriangleSource};
 
 use crate::renderer::{ModelId, Renderer, max_axis_scale};
 use crate::stats::FrameStats;
 use crate::streaming::Array;
-use crate::technique::pruned::PrunedDraw;
 
 /// One draw's constants. WGSL twin: `DrawInfo` in `shaders/shared/draw.wgsl`.
 #[repr(C)]
@@ -93,23 +92,16 @@ pub(crate) struct View {
     pub(crate) selection: DrawList,
     /// The draws, as recorded for the GPU.
     pub(crate) recorded: Vec<RecordedDraw>,
-    /// Instances drawn with the sequential point tree when pruning, impostors or a baseline are
-    /// on, and their indices in `instances` (see `spt_remapped`).
+    /// Instances drawn with the sequential point tree when not every instance is (the
+    /// assignment's full-mesh and point-tree lists and what techniques handed back), and their
+    /// indices in `instances` (see `spt_remapped`).
     pub(crate) spt_instances: Vec<treelod_runtime::Instance>,
     pub(crate) spt_map: Vec<u32>,
     /// Whether the selection ran over `spt_instances`, so its instance indices go through
     /// `spt_map`.
     pub(crate) spt_remapped: bool,
-    /// Pruned draws (pruned leaves, bark, LoD chain levels).
-    pub(crate) pruned: Vec<PrunedDraw>,
-    /// Impostor draws: per instance and plane cell, the prefix and its `τ`.
-    pub(crate) plane_draws: Vec<PrefixDraw>,
-    /// Ellipsoid draws: per instance and ellipsoid cell, the prefix and its `τ`.
-    pub(crate) ellipsoid_draws: Vec<PrefixDraw>,
-    /// Line draws: per instance and line cell, the prefix and its `τ`.
-    pub(crate) line_draws: Vec<PrefixDraw>,
-    /// Baseline billboard draws: (instance, model, first quad, quads).
-    pub(crate) billboard_draws: Vec<(u32, u32, u32, u32)>,
+    /// The draws of the other representations, as their runtime selections listed them.
+    pub(crate) draws: TreeDraws,
     /// Per model, per bucket: the view's range of the indirect buffer.
     pub(crate) model_draws: Vec<[(u32, u32); Bucket::COUNT]>,
 }
@@ -119,14 +111,6 @@ impl View {
     pub(crate) fn instance_index(&self, selected: u32) -> u32 {
         if self.spt_remapped { self.spt_map.get(selected as usize).copied().unwrap_or(selected) } else { selected }
     }
-}
-
-/// One draw of impostor planes, ellipsoids or lines: a prefix of one cell's elements for one instance.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct PrefixDraw {
-    pub(crate) instance: u32,
-    pub(crate) model: u32,
-    pub(crate) range: CellPrefix,
 }
 
 /// A draw bucket of a model: one pipeline's draws, drawn in this order. A frame's buckets are
@@ -223,13 +207,17 @@ impl Renderer {
         }
         // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
         // per-cell estimate (it is a property of the point hierarchy's cells).
-        for draw in &view.pruned {
+        for draw in &view.draws.triangles {
             stats.triangles += u64::from(draw.count);
             let record = RecordedDraw {
                 instance: draw.instance,
                 model: ModelId(draw.model),
                 cell: draw.cell,
-                source: draw.source,
+                source: match draw.source {
+                    TriangleSource::PrunedLeaves => DrawSource::PrunedLeaves,
+                    TriangleSource::Bark => DrawSource::Bark,
+                    TriangleSource::LodLevel => DrawSource::LodLevel,
+                },
                 count: draw.count,
                 tau_points: draw.lambda,
                 tau_triangles: draw.tau_triangles,
@@ -248,12 +236,13 @@ impl Renderer {
         }
         // Impostor planes, ellipsoids and lines, each in its bucket: a prefix of one cell's
         // elements, six corners each, the level chosen in the shader by `τ`.
-        stats.planes += view.plane_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
-        stats.ellipsoids += view.ellipsoid_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
-        stats.lines += view.line_draws.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
-        let prefixes = (view.plane_draws.iter().map(|d| (d, DrawSource::Planes, Bucket::Planes)))
-            .chain(view.ellipsoid_draws.iter().map(|d| (d, DrawSource::Ellipsoids, Bucket::Ellipsoids)))
-            .chain(view.line_draws.iter().map(|d| (d, DrawSource::Lines, Bucket::Lines)));
+        let draws = &view.draws;
+        stats.planes += draws.planes.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        stats.ellipsoids += draws.ellipsoids.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        stats.lines += draws.lines.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
+        let prefixes = (draws.planes.iter().map(|d| (d, DrawSource::Planes, Bucket::Planes)))
+            .chain(draws.ellipsoids.iter().map(|d| (d, DrawSource::Ellipsoids, Bucket::Ellipsoids)))
+            .chain(draws.lines.iter().map(|d| (d, DrawSource::Lines, Bucket::Lines)));
         for (draw, source, bucket) in prefixes {
             let range = draw.range;
             let record = RecordedDraw {
@@ -270,7 +259,7 @@ impl Renderer {
             record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, bucket, vertices, 1.0);
         }
         // Baseline billboards: every quad of the chosen kind.
-        for &(instance, model, first, count) in &view.billboard_draws {
+        for &treelod_runtime::QuadDraw { instance, model, first, count } in &view.draws.billboards {
             stats.billboards += u64::from(count);
             let record = RecordedDraw {
                 instance,
@@ -440,7 +429,7 @@ impl Renderer {
                     continue;
                 }
                 let group = match (bucket, &model.billboards) {
-                    (Bucket::Billboards, Some(billboards)) => &billboards.bind_group,
+                    (Bucket::Billboards, Some(billboards)) => billboards,
                     _ => &model.bind_group,
                 };
                 pass.set_bind_group(1, group, &[]);

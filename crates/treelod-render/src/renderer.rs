@@ -10,8 +10,8 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
-    DrawList, DrawRange, EllipsoidRange, Kind, LineRange, LodSettings, ModelLod, PerTechnique, PlaneRange, ROOTS_CELL,
-    Technique, select_frame,
+    Assignment, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerTechnique, PruneState, ROOTS_CELL,
+    Representations, Scene, Technique, TechniqueSettings, merge_ascending, select_frame, select_techniques,
 };
 
 use crate::camera::Camera;
@@ -108,6 +108,9 @@ pub struct Renderer {
     depth_convention: DepthConvention,
     pub(crate) models: Vec<Model>,
     pub(crate) lods: Vec<ModelLod>,
+    /// Per model: what the selections of its representations read (beside its GPU resources in
+    /// `models`).
+    pub(crate) representations: Vec<Representations>,
     pub(crate) instances: Vec<treelod_runtime::Instance>,
     pub(crate) model_layout: wgpu::BindGroupLayout,
     frame_layout: wgpu::BindGroupLayout,
@@ -148,9 +151,10 @@ pub struct Renderer {
     pub(crate) prune_shown: Vec<Option<f32>>,
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     pub(crate) visible_fraction: Vec<f32>,
-    pub(crate) plane_ranges: Vec<PlaneRange>,
-    pub(crate) ellipsoid_ranges: Vec<EllipsoidRange>,
-    pub(crate) line_ranges: Vec<LineRange>,
+    /// This frame's trees per technique ([`Self::assign`]), shared by every view.
+    assignment: Assignment,
+    /// Scratch: the instance indices the point tree selects in a view.
+    spt_list: Vec<u32>,
     /// The occlusion measurement, and the trees to measure after this frame.
     pub(crate) occlusion: Occlusion,
     pub(crate) occlusion_jobs: Vec<Job>,
@@ -266,6 +270,7 @@ impl Renderer {
             depth_convention: depth,
             models: Vec::new(),
             lods: Vec::new(),
+            representations: Vec::new(),
             instances: Vec::new(),
             model_layout,
             frame_layout,
@@ -289,9 +294,8 @@ impl Renderer {
             shadow_views: Vec::new(),
             prune_shown: Vec::new(),
             visible_fraction: Vec::new(),
-            plane_ranges: Vec::new(),
-            ellipsoid_ranges: Vec::new(),
-            line_ranges: Vec::new(),
+            assignment: Assignment::default(),
+            spt_list: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1), depth),
             occlusion_jobs: Vec::new(),
             last_camera: None,
@@ -590,7 +594,8 @@ impl Renderer {
             };
         }
 
-        // The camera's selection, then each cascade's.
+        // The camera's selection, then each cascade's, of the same assignment.
+        self.assign();
         let mut main = std::mem::take(&mut self.main);
         let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true);
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
@@ -676,9 +681,23 @@ impl Renderer {
         stats
     }
 
-    /// Selects one view (its lists cleared first): the trees drawn with the settings' technique
-    /// where their models hold it, and the others with the sequential point trees. `main`: the
-    /// camera's view (see [`Self::select_pruned`]).
+    /// Assigns this frame's instances to techniques (the assignment every view then selects):
+    /// today every tree to [`Settings::technique`], or to [`Technique::FALLBACK`] where its model
+    /// lacks that technique's data. A policy choosing a technique per tree replaces the closure.
+    fn assign(&mut self) {
+        let technique = self.settings.technique;
+        self.assignment.assign(&self.instances, &self.representations, |_, _| technique);
+    }
+
+    /// Selects one view (its lists cleared first): each technique's runtime selection over the
+    /// trees the assignment gives it, then the point tree's ([`select_frame`]) over the full
+    /// mesh's and the point tree's trees and those a technique handed back (pruned trees below
+    /// their height). `main`: the camera's view, the only one that holds pruning's `λ` between
+    /// frames and lists trees for the occlusion test.
+    ///
+    /// The full mesh and the point tree share one [`select_frame`] pass with the frame's
+    /// thresholds (zero when [`Settings::technique`] is [`Technique::Full`]): a policy that mixes
+    /// them per tree would need a pass of its own for each.
     fn select_view(
         &mut self,
         view: &mut View,
@@ -686,37 +705,49 @@ impl Renderer {
         lod_settings: &LodSettings,
         main: bool,
     ) -> ViewCounts {
-        let mut counts = ViewCounts::default();
-        view.pruned.clear();
-        view.billboard_draws.clear();
-        view.plane_draws.clear();
-        view.ellipsoid_draws.clear();
-        view.line_draws.clear();
+        let settings = self.settings;
+        view.draws.clear();
+        let scene = Scene { lods: &self.lods, models: &self.representations, instances: &self.instances };
+        let technique_settings = TechniqueSettings {
+            s_min: settings.s_min,
+            lod: *lod_settings,
+            pruning: settings.pruning,
+            impostor_bark: settings.impostor_bark,
+            pixel_level: settings.pixel_level(),
+            lines: settings.lines,
+        };
+        let prune_state =
+            main.then_some(PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction });
+        select_techniques(&scene, &self.assignment, camera, &technique_settings, prune_state, &mut view.draws);
+        if main {
+            self.occlusion_jobs.clear();
+            for &index in &view.draws.occlusion {
+                let instance = self.instances[index as usize];
+                let m = instance.model as usize;
+                let (centre, radius) = self.lods[m].cull_sphere();
+                let (first, count) = self.models[m].samples;
+                let radius = radius * max_axis_scale(instance.transform);
+                let transform = instance.transform;
+                self.occlusion_jobs.push(Job { instance: index, transform, centre, radius, first, count });
+            }
+        }
+        // The point tree: over every instance where all are its (no remapping), else over its own.
+        let (full, spt) = (&self.assignment[Technique::Full], &self.assignment[Technique::Spt]);
+        merge_ascending(&[full, spt, &view.draws.point_tree], &mut self.spt_list);
+        view.spt_remapped = self.spt_list.len() != self.instances.len();
         view.spt_instances.clear();
         view.spt_map.clear();
-        let technique = self.settings.technique;
-        let drawn = match technique {
-            Technique::Full | Technique::Spt => None,
-            Technique::PruneOpt | Technique::PruneCook => {
-                let (pruning, scale) = (self.settings.pruning, prune_scale(technique).unwrap_or_default());
-                let (visible, leaves) = self.select_pruned(view, &pruning, scale, camera, main);
-                counts.leaves_pruned = leaves;
-                Some(visible)
-            }
-            Technique::Impostors => Some(self.select_impostors(view, camera)),
-            Technique::Ellipsoids => Some(self.select_ellipsoids(view, camera, lod_settings)),
-            Technique::LodChain | Technique::Billboard | Technique::Crossed => {
-                Some(self.select_baseline(view, technique, camera))
-            }
-        };
-        view.spt_remapped = drawn.is_some();
+        if view.spt_remapped {
+            view.spt_instances.extend(self.spt_list.iter().map(|&i| self.instances[i as usize]));
+            view.spt_map.extend_from_slice(&self.spt_list);
+        }
         let spt_instances = if view.spt_remapped { &view.spt_instances } else { &self.instances };
         let selected = select_frame(&self.lods, spt_instances, camera, lod_settings, &mut view.selection);
         // The full mesh is selected as the point tree with zero thresholds: its trees are drawn
         // as the full mesh; every other technique's fallback is the point tree.
-        let rest = if technique == Technique::Full { Technique::Full } else { Technique::FALLBACK };
+        let rest = if settings.technique == Technique::Full { Technique::Full } else { Technique::FALLBACK };
+        let mut counts = ViewCounts { instances: view.draws.visible, leaves_pruned: view.draws.leaves_pruned };
         *counts.instances.get_mut(rest) += selected.instances_visible;
-        *counts.instances.get_mut(technique) += drawn.unwrap_or(0);
         counts
     }
 
@@ -914,11 +945,7 @@ fn transformed_bounds(transform: Mat4, min: Vec3, max: Vec3) -> (Vec3, Vec3) {
     (lo, hi)
 }
 
-/// The largest axis scale of an affine transform (what selection converts sizes with).
-pub(crate) fn max_axis_scale(m: Mat4) -> f32 {
-    let (x, y, z) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
-    x.length_squared().max(y.length_squared()).max(z.length_squared()).sqrt().max(1e-12)
-}
+pub(crate) use treelod_runtime::max_axis_scale;
 
 fn indirect_buffer(device: &wgpu::Device, draws: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {

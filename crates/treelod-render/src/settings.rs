@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 use treelod_runtime::spt_lod::PixelLevel;
-use treelod_runtime::{Hysteresis, PruneScale, Technique};
+use treelod_runtime::{PruneScale, Technique};
 
 use crate::shadows::Shadows;
 #[cfg(doc)]
@@ -186,66 +186,20 @@ pub struct Settings {
     pub stochastic_alpha: bool,
 }
 
-/// The bark of a tree drawn with impostor planes ([`Settings::impostor_bark`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum ImpostorBark {
-    /// Every bark triangle (the paper keeps the trunk polygonal).
-    All,
-    /// Where the container has a LoD chain (spec §6.12, built with `--baselines`), the bark of
-    /// its coarsest level whose error projects below half of [`Settings::s_min`] pixels (`τ` as
-    /// for the planes' level, at the block centre) among the levels whose bark keeps 90 % of the
-    /// full bark's area; every bark triangle nearer than the finest level allows, or without a
-    /// chain. The chain's error is where the surface moves, not what it covers: thin branches
-    /// collapse into slivers at a small error, hence the area guard. Measured against the full
-    /// mesh at 320×240 (recall of the image, all bark → chain): the maple draws 247270 of its
-    /// 498464 bark triangles from 2 bounding radii on, 1.00 → 0.97 (2 radii), 0.96 (8); the oak
-    /// 2835 of 12006 from 32 radii on, unchanged. Without the guard the maple's coarsest level
-    /// (4963) would be drawn, at 0.77 and 0.83.
-    #[default]
-    Chain,
-}
-
-/// Pruning settings of [`Technique::PruneOpt`] and [`Technique::PruneCook`]: which trees are
-/// pruned and by how much; the technique says how survivors are scaled ([`prune_scale`]).
-///
-/// A pruned tree draws every bark triangle of its container and, of each cell's leaf priority
-/// list, the first `ceil(λ·count)` leaves, scaled about their centres (spec §6.11). `λ` is the
-/// container's `λ(h)` at the tree's projected height `h` (or [`Self::lambda`]), times
-/// `max(f, 0.1)` with `f` the visible fraction of the tree's hull samples measured by
-/// [`Renderer::measure_occlusion`] on an earlier frame, then held by [`Self::hysteresis`].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pruning {
-    /// A fixed `λ` for every pruned tree instead of the container's `λ(h)` (for comparisons).
-    pub lambda: Option<f32>,
-    /// Multiply `λ` by the trees' measured visible fraction (needs
-    /// [`Renderer::measure_occlusion`] each frame; without measurements every tree counts as
-    /// visible).
-    pub occlusion: bool,
-    /// Hold `λ` while its target stays within a band, so it does not flicker.
-    pub hysteresis: Hysteresis,
-    /// Trees projecting fewer pixels high than this are drawn with the sequential point tree
-    /// instead (pruning is the near-to-mid-field representation); 0 prunes every tree.
-    pub spt_below_pixels: f32,
-}
-
-impl Default for Pruning {
-    /// `λ(h)` from the container, occlusion on, ±10 % hysteresis, trees below 64 pixels high by
-    /// the sequential point tree.
-    fn default() -> Self {
-        Self { lambda: None, occlusion: true, hysteresis: Hysteresis::default(), spt_below_pixels: 64.0 }
-    }
-}
+/// The bark of a tree drawn with impostor planes ([`Settings::impostor_bark`]): defined by the
+/// runtime, whose impostor selection draws it.
+pub use treelod_runtime::ImpostorBark;
+/// Pruning settings of [`Technique::PruneOpt`] and [`Technique::PruneCook`]
+/// ([`Settings::pruning`]): defined by the runtime, whose pruned selection reads them; the
+/// visible fraction they use is measured by [`Renderer::measure_occlusion`].
+pub use treelod_runtime::Pruning;
 
 /// How the survivors of a pruned tree are scaled with `technique`: `s_opt(λ)` from the container
 /// for [`Technique::PruneOpt`], Cook's `1/λ` for [`Technique::PruneCook`]; `None` for techniques
 /// that do not prune.
 #[must_use]
 pub fn prune_scale(technique: Technique) -> Option<PruneScale> {
-    match technique {
-        Technique::PruneOpt => Some(PruneScale::Optimal),
-        Technique::PruneCook => Some(PruneScale::Cook),
-        _ => None,
-    }
+    PruneScale::of(technique)
 }
 
 impl Settings {

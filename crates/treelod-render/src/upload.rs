@@ -6,18 +6,15 @@
 use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
-use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord, TriangleRecord, material_class};
-use treelod_runtime::{Billboards, EllipsoidLod, LineLod, LodChain, ModelLod, PlaneLod, PruneLod, ROOTS_CELL};
+use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord};
+use treelod_runtime::{Billboards, ModelLod, PlaneLod, Representations};
 
-use crate::draws::DrawSource;
 use crate::gpu_select::GpuSelection;
 use crate::renderer::{ModelId, RenderError, Renderer};
 use crate::streaming::UNIT;
-use crate::technique::baselines::{BillboardModel, ChainModel, gpu_billboards};
+use crate::technique::baselines::gpu_billboards;
 use crate::technique::ellipsoids::{gpu_ellipsoids, gpu_lines};
-use crate::technique::impostors::{BARK_AREA_KEPT, area, gpu_planes};
-use crate::technique::pruned::PrunedDraw;
+use crate::technique::impostors::gpu_planes;
 use crate::textures;
 
 /// A vertex as the shaders read it: the record, then its ambient occlusion (0 without).
@@ -72,7 +69,8 @@ struct MaterialGpu {
     material_class: u32,
 }
 
-/// The GPU resources of one model and what drawing it needs of its container.
+/// The GPU resources of one model and what drawing it needs of its container (what its
+/// selections read is its [`Representations`], held beside it in `Renderer::representations`).
 pub(crate) struct Model {
     /// The mapped container: streamed ranges are uploaded from it.
     pub(crate) container: Arc<Container>,
@@ -86,62 +84,12 @@ pub(crate) struct Model {
     pub(crate) cell_roots: Vec<(u32, u32)>,
     /// Per container cell: its index in [`ModelLod::cells`], `u32::MAX` if empty.
     pub(crate) cell_lod: Vec<u32>,
-    /// The priority lists, if the container has them.
-    pub(crate) prune: Option<PruneLod>,
-    /// The bark triangles in the model's extra triangle buffer (after `PRUNE_TRIANGLES`): first
-    /// and count. Pruned trees and trees drawn with impostors draw them all.
-    pub(crate) bark: (u32, u32),
-    /// The impostor planes, if the container has them (uploaded whole with their atlas).
-    pub(crate) planes: Option<PlaneLod>,
-    /// Clasen's ellipsoids, if the container has them (uploaded whole).
-    pub(crate) ellipsoids: Option<EllipsoidLod>,
-    /// Clasen's branch lines, if the container has them (uploaded whole).
-    pub(crate) lines: Option<LineLod>,
     /// The hull samples of the occlusion test: first and count in the sample buffer.
     pub(crate) samples: (u32, u32),
-    /// The baseline LoD chain, if the container has one: levels, and where the full mesh and each
-    /// level lie in the extra triangle buffer.
-    pub(crate) chain: Option<ChainModel>,
-    /// The baseline billboards, if the container has them.
-    pub(crate) billboards: Option<BillboardModel>,
-}
-
-impl Model {
-    /// The draw of all this model's bark triangles for instance `instance` (a pruned tree or one
-    /// drawn with impostors; `lambda` is recorded with it), if it has any.
-    pub(crate) fn bark_draw(&self, instance: u32, model: u32, lambda: f32) -> Option<PrunedDraw> {
-        Self::whole_draw(instance, model, DrawSource::Bark, self.bark, lambda, 1.0)
-    }
-
-    /// A draw of the triangles `first, count` of the extra triangle buffer for the whole tree
-    /// (no cell: the bark, a LoD chain level), if there are any; `lambda` and `tau_triangles`
-    /// are recorded with it.
-    pub(crate) fn whole_draw(
-        instance: u32,
-        model: u32,
-        source: DrawSource,
-        (first, count): (u32, u32),
-        lambda: f32,
-        tau_triangles: f32,
-    ) -> Option<PrunedDraw> {
-        (count > 0).then_some(PrunedDraw {
-            instance,
-            model,
-            cell: ROOTS_CELL,
-            source,
-            first,
-            count,
-            lambda,
-            leaf_scale: 1.0,
-            tau_triangles,
-        })
-    }
-
-    /// The centre of the model's block: where `τ` is measured for its baselines and impostors.
-    pub(crate) fn block_centre(&self) -> Vec3 {
-        let block = self.container.block();
-        0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max))
-    }
+    /// The baseline billboards' bind group (the model's, with the billboards in place of the
+    /// planes and their atlas in place of the impostor atlas), if the container has billboards
+    /// and their atlas decodes.
+    pub(crate) billboards: Option<wgpu::BindGroup>,
 }
 
 impl Renderer {
@@ -225,66 +173,18 @@ impl Renderer {
             .collect();
         let vertices = upload("VERTICES", bytemuck::cast_slice(&vertices))?;
         let materials = upload("MATERIALS", bytemuck::cast_slice(&materials))?;
-        // Pruning: the leaves' triangles, then every bark (non-leaf) triangle, and the leaves.
-        // Impostors draw the bark triangles too.
-        let prune = PruneLod::from_container(&container);
-        let planes = PlaneLod::from_container(&container);
-        let ellipsoids = EllipsoidLod::from_container(&container);
-        let lod_chain = LodChain::from_container(&container);
-        let mut chain = None;
-        let (extra, prune_leaves, bark) = if prune.is_some()
-            || planes.is_some()
-            || ellipsoids.is_some()
-            || lod_chain.is_some()
-        {
-            let classes = container.materials();
-            let is_bark =
-                |t: &&TriangleRecord| classes.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF);
-            let mut extra: Vec<TriangleRecord> = container.prune_triangles().to_vec();
-            let at = |extra: &Vec<TriangleRecord>| u32::try_from(extra.len()).unwrap_or(u32::MAX);
-            let bark_first = at(&extra);
-            extra.extend(container.triangles().iter().filter(is_bark));
-            let bark_count = at(&extra) - bark_first;
-            // The baseline chain: the full mesh, then each level with every tree's triangles.
-            if let Some(lod_chain) = lod_chain {
-                let full_first = at(&extra);
-                extra.extend_from_slice(container.triangles());
-                let full = (full_first, at(&extra) - full_first);
-                let mut levels = Vec::new();
-                for level in lod_chain.levels() {
-                    let first = at(&extra);
-                    for range in &level.ranges {
-                        extra.extend_from_slice(container.lod_triangles().get(range.as_usize()).unwrap_or_default());
-                    }
-                    levels.push((first, at(&extra) - first));
-                }
-                let mut bark_levels = Vec::new();
-                if planes.is_some() {
-                    let full_area = area(&container, &extra[bark_first as usize..(bark_first + bark_count) as usize]);
-                    for level in lod_chain.levels() {
-                        let first = at(&extra);
-                        for range in &level.ranges {
-                            let triangles = container.lod_triangles().get(range.as_usize()).unwrap_or_default();
-                            extra.extend(triangles.iter().filter(is_bark));
-                        }
-                        // The levels that keep the bark's surface: a coarser one collapses
-                        // branches that its error does not count.
-                        let kept = area(&container, &extra[first as usize..]);
-                        if kept < BARK_AREA_KEPT * full_area {
-                            extra.truncate(first as usize);
-                            break;
-                        }
-                        bark_levels.push((first, at(&extra) - first));
-                    }
-                }
-                chain = Some(ChainModel { chain: lod_chain, full, levels, bark_levels });
-            }
-            let extra = upload("PRUNE_TRIANGLES, bark and LoD chain", bytemuck::cast_slice(&extra))?;
-            let leaves = upload("PRUNE_LEAVES", bytemuck::cast_slice(container.prune_leaves()))?;
-            (extra, leaves, (bark_first, bark_count))
-        } else {
-            (upload("no pruned triangles", &[])?, upload("no pruned leaves", &[])?, (0, 0))
-        };
+        // What the selections read, and the whole-triangle list (pruned leaves, bark, the LoD
+        // chain) they address.
+        let (mut representations, whole) = Representations::from_container(&container);
+        let r = &representations;
+        let (extra, prune_leaves) =
+            if r.prune.is_some() || r.planes.is_some() || r.ellipsoids.is_some() || r.chain.is_some() {
+                let extra = upload("PRUNE_TRIANGLES, bark and LoD chain", bytemuck::cast_slice(&whole))?;
+                (extra, upload("PRUNE_LEAVES", bytemuck::cast_slice(container.prune_leaves()))?)
+            } else {
+                (upload("no pruned triangles", &[])?, upload("no pruned leaves", &[])?)
+            };
+        drop(whole);
         // Baseline billboards: the facing quads, then the crossed ones.
         let billboard_kinds = Billboards::from_container(&container);
         let billboard_records = gpu_billboards(&container, billboard_kinds.as_ref());
@@ -298,7 +198,6 @@ impl Renderer {
         let gpu_ellipsoids = gpu_ellipsoids(&container);
         let ellipsoid_buffer = upload("ELLIPSOIDS", bytemuck::cast_slice(&gpu_ellipsoids))?;
         drop(gpu_ellipsoids);
-        let lines = LineLod::from_container(&container);
         let gpu_lines = gpu_lines(&container);
         let line_buffer = upload("LINES", bytemuck::cast_slice(&gpu_lines))?;
         drop(gpu_lines);
@@ -377,7 +276,7 @@ impl Renderer {
         // The impostor atlas, as stored with its mips; without planes (or if it does not decode,
         // then without impostors) one transparent texel.
         let blank = |slots| textures::Atlas { width: 1, height: 1, srgb: true, slots, levels: vec![vec![0; 4]] };
-        let (atlas, planes) = match planes {
+        let (atlas, planes) = match representations.planes.take() {
             Some(p) => match textures::atlas(&container, p.image()) {
                 Ok(atlas) if atlas.width.max(atlas.height) > device.limits().max_texture_dimension_2d => {
                     warnings.push(format!(
@@ -405,6 +304,7 @@ impl Renderer {
                 planes.as_ref().map_or(0, PlaneLod::image)
             ));
         }
+        representations.planes = planes;
         let (atlas_view, atlas_bytes) = upload_atlas(device, queue, &atlas, "treelod impostor atlas");
         let (slots_view, slot_bytes) = upload_atlas(device, queue, &slots, "treelod leaf slots");
         bytes += atlas_bytes + slot_bytes;
@@ -436,7 +336,7 @@ impl Renderer {
         // Billboards: their own atlas and bind group (the image of the first record; builders
         // write one), not drawn if it does not decode or fit.
         let billboards = match (billboard_kinds, billboard_buffer, billboard_records.first()) {
-            (Some(kinds), Some(buffer), Some(first)) => match textures::atlas(&container, first.image) {
+            (Some(_), Some(buffer), Some(first)) => match textures::atlas(&container, first.image) {
                 Ok(atlas) if atlas.width.max(atlas.height) > device.limits().max_texture_dimension_2d => {
                     warnings.push(format!(
                         "billboard atlas (image {}) is {}x{}, larger than the device's textures; billboards are not drawn",
@@ -447,12 +347,7 @@ impl Renderer {
                 Ok(atlas) => {
                     let (billboard_view, atlas_bytes) = upload_atlas(device, queue, &atlas, "treelod billboard atlas");
                     bytes += atlas_bytes;
-                    let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
-                    Some(BillboardModel {
-                        bind_group: model_group("treelod billboards", &buffer, &billboard_view),
-                        facing: (0, count(kinds.facing.len())),
-                        crossed: (count(kinds.facing.len()), count(kinds.crossed.len())),
-                    })
+                    Some(model_group("treelod billboards", &buffer, &billboard_view))
                 }
                 Err(e) => {
                     warnings.push(format!("billboard atlas (image {}): {e}; billboards are not drawn", first.image));
@@ -461,8 +356,11 @@ impl Renderer {
             },
             _ => None,
         };
+        if billboards.is_none() {
+            representations.billboards = None;
+        }
         let id = ModelId(u32::try_from(self.models.len()).unwrap_or(u32::MAX));
-        let samples = match &prune {
+        let samples = match &representations.prune {
             Some(p) => (self.occlusion.add_samples(p.samples()), u32::try_from(p.samples().len()).unwrap_or(0)),
             None => (0, 0),
         };
@@ -474,15 +372,10 @@ impl Renderer {
             roots_start,
             cell_roots,
             cell_lod,
-            prune,
-            bark,
-            planes,
-            ellipsoids,
-            lines,
-            chain,
             billboards,
         });
         self.lods.push(lod);
+        self.representations.push(representations);
         self.wanted.push(vec![[0; 2]; cells]);
         if self.gpu.is_some() {
             // Checked above, so it fits; should it not, GPU selection is turned off.

@@ -8,11 +8,20 @@
 //! of its trees together (at level `ℓ` it draws every tree's level `ℓ`, the block's error being
 //! the largest of theirs): the container's `TRIANGLES` are not split by tree, and the full mesh
 //! is the block's. Billboards need no choice: the instance draws its billboard quads.
+//!
+//! [`select`] is the baselines' per-frame selection: the draws of the trees assigned to one of
+//! them (see [`crate::draws`]).
 
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, Range, billboard_kind};
 
+#[cfg(doc)]
+use crate::draws::Representations;
+use crate::draws::{QuadDraw, Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
 use crate::frame::{Camera, Frustum, tau_per_metre};
+#[cfg(doc)]
+use crate::impostor::ImpostorBark;
+use crate::technique::Technique;
 
 /// One level of a block's chain: every tree's level of that number.
 #[derive(Clone, Debug, PartialEq)]
@@ -149,6 +158,102 @@ impl Billboards {
             BillboardKind::Facing => &self.facing,
             BillboardKind::Crossed => &self.crossed,
         }
+    }
+}
+
+/// Where a model's LoD chain lies in its whole-triangle list
+/// ([`Representations::from_container`]), with the chain itself.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChainRanges {
+    /// The chain's levels and errors.
+    pub chain: LodChain,
+    /// Every triangle of the container (the full mesh): first and count.
+    pub full: (u32, u32),
+    /// Per level, every tree's triangles of that level, contiguous: first and count.
+    pub levels: Vec<(u32, u32)>,
+    /// Per level, the bark (non-leaf) triangles of `levels`, for trees drawn with impostor
+    /// planes ([`ImpostorBark::Chain`]): the leading levels whose bark keeps
+    /// [`BARK_AREA_KEPT`](crate::impostor::BARK_AREA_KEPT) of the full bark's area; empty
+    /// without planes.
+    pub bark_levels: Vec<(u32, u32)>,
+}
+
+impl ChainRanges {
+    /// The error of level `level`, metres (0 past the chain).
+    #[must_use]
+    pub fn level_error(&self, level: usize) -> f32 {
+        self.chain.levels().get(level).map_or(0.0, |l| l.error)
+    }
+}
+
+/// Where a model's billboards lie in its billboard list: the facing quads ([`Billboards::facing`]
+/// in file order), then the crossed ones; first and count each.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BillboardRanges {
+    /// The facing quads.
+    pub facing: (u32, u32),
+    /// The crossed quads.
+    pub crossed: (u32, u32),
+}
+
+impl BillboardRanges {
+    /// The ranges of `billboards` in the list facing-then-crossed.
+    #[must_use]
+    pub fn of(billboards: &Billboards) -> Self {
+        let count = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+        Self {
+            facing: (0, count(billboards.facing.len())),
+            crossed: (count(billboards.facing.len()), count(billboards.crossed.len())),
+        }
+    }
+}
+
+/// The trees of `list` drawn with the baseline `baseline` ([`Technique::LodChain`],
+/// [`Technique::Billboard`] or [`Technique::Crossed`]; every model of `list` holds it, see
+/// [`Representations::holds`]): appends to `out` a LoD chain draw (the coarsest level whose error
+/// projects below `s_min` pixels at the block centre, [`LodChain::pick`], else the full mesh) or
+/// the billboard quads of each instance inside the frustum, and counts them visible.
+pub fn select(scene: &Scene<'_>, list: &[u32], baseline: Technique, camera: &Camera, s_min: f32, out: &mut TreeDraws) {
+    let frustum = Frustum::from_view_proj(camera.view_proj);
+    for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {
+        for &index in chunk {
+            let Some((instance, lod, model)) = scene.get(index) else { continue };
+            let Some(tau) =
+                instance_tau(instance.transform, camera, &frustum, s_min, lod.cull_sphere(), model.block_centre)
+            else {
+                continue;
+            };
+            *out.visible.get_mut(baseline) += 1;
+            match (baseline, &model.chain, &model.billboards) {
+                (Technique::LodChain, Some(chain), _) => {
+                    let (range, error) = match chain.chain.pick(tau) {
+                        Some(level) => (
+                            chain.levels.get(level as usize).copied().unwrap_or(chain.full),
+                            chain.level_error(level as usize),
+                        ),
+                        None => (chain.full, 0.0),
+                    };
+                    out.triangles.extend(TriangleDraw::whole(
+                        index,
+                        instance.model,
+                        TriangleSource::LodLevel,
+                        range,
+                        tau,
+                        error,
+                    ));
+                }
+                (Technique::Billboard | Technique::Crossed, _, Some(billboards)) => {
+                    let (first, count) =
+                        if baseline == Technique::Crossed { billboards.crossed } else { billboards.facing };
+                    if count > 0 {
+                        out.billboards.push(QuadDraw { instance: index, model: instance.model, first, count });
+                    }
+                }
+                _ => {}
+            }
+        }
+    }) {
+        out.append(&mut chunk);
     }
 }
 

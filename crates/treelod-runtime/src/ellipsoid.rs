@@ -22,15 +22,20 @@
 //! `β` octaves of `τ` about each boundary the finer level fades out and the coarser one fades in
 //! on complementary dithered pixels, so the prefix then also holds the finer level a little past
 //! its `hi`.
+//!
+//! [`select`] is the per-frame selection of the trees drawn with ellipsoids (see
+//! [`crate::draws`]), their lines or bark triangles included.
 
 use std::ops::Deref;
 
 use treelod_format::{Container, EllipsoidRecord, LineRecord};
 
-use crate::frame::CellPrefix;
+use crate::draws::{PrefixDraw, Scene, TreeDraws, by_chunks};
+use crate::frame::{Camera, CellPrefix, Frustum, LodSettings};
 #[cfg(doc)]
 use crate::spt_lod::level_keep;
-use crate::spt_lod::{SptCell, SptLod, spt_drawn};
+use crate::spt_lod::{PixelLevel, SptCell, SptLod, spt_drawn};
+use crate::technique::Technique;
 
 /// Whether an ellipsoid is drawn at `τ` (spec §10): its interval holds `τ`. `vs_ellipsoid` tests
 /// [`level_keep`], which is this rule without a level blend.
@@ -99,6 +104,59 @@ impl Deref for LineLod {
 
     fn deref(&self) -> &SptLod {
         &self.0
+    }
+}
+
+/// The trees of `list` drawn with ellipsoids ([`Technique::Ellipsoids`]; every model of `list`
+/// has ellipsoids): appends to `out` each visible instance's ellipsoid prefixes
+/// ([`SptLod::select_per_pixel_blended`] at `level`) and, with `lines` and where its model has
+/// them, its line prefixes (their sphere holds their radii: they may be in view where the leaves
+/// are not), else all its bark triangles; counts it visible.
+pub fn select(
+    scene: &Scene<'_>,
+    list: &[u32],
+    camera: &Camera,
+    settings: &LodSettings,
+    level: PixelLevel,
+    lines: bool,
+    out: &mut TreeDraws,
+) {
+    let frustum = Frustum::from_view_proj(camera.view_proj);
+    for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {
+        let (mut ellipsoid_ranges, mut line_ranges) = (Vec::new(), Vec::new());
+        for &index in chunk {
+            let Some((instance, _, model)) = scene.get(index) else { continue };
+            let Some(ellipsoids) = &model.ellipsoids else { continue };
+            ellipsoid_ranges.clear();
+            let leaves_seen = ellipsoids.select_per_pixel_blended(
+                instance.transform,
+                camera,
+                &frustum,
+                settings,
+                level,
+                &mut ellipsoid_ranges,
+            );
+            let model_lines = model.lines.as_ref().filter(|_| lines);
+            line_ranges.clear();
+            let lines_seen = model_lines.is_some_and(|l| {
+                l.select_per_pixel_blended(instance.transform, camera, &frustum, settings, level, &mut line_ranges)
+            });
+            if !(leaves_seen || lines_seen) {
+                continue;
+            }
+            *out.visible.get_mut(Technique::Ellipsoids) += 1;
+            for range in &ellipsoid_ranges {
+                out.ellipsoids.push(PrefixDraw { instance: index, model: instance.model, range: *range });
+            }
+            for range in &line_ranges {
+                out.lines.push(PrefixDraw { instance: index, model: instance.model, range: *range });
+            }
+            if model_lines.is_none() {
+                out.triangles.extend(model.bark_draw(index, instance.model, 1.0));
+            }
+        }
+    }) {
+        out.append(&mut chunk);
     }
 }
 

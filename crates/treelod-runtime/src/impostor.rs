@@ -7,14 +7,20 @@
 //! each cell holding planes (the block cell at the block centre's distance, spec §6.2) as for
 //! points (§10.1), and passes on the leading planes with `hi > τ`; the vertex shader then drops
 //! those failing [`plane_drawn`] (`lo ≤ τ < hi`), so exactly one level covers each leaf.
+//!
+//! [`select`] is the per-frame selection of the trees drawn with planes (see [`crate::draws`]),
+//! their bark included ([`ImpostorBark`]).
 
 use std::ops::Deref;
 
 use glam::{Mat4, Vec3};
-use treelod_format::{Container, PlaneRecord, Range};
+use treelod_format::{Container, PlaneRecord, Range, TriangleRecord};
 
+use crate::baseline::instance_tau;
+use crate::draws::{PrefixDraw, Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
 use crate::frame::{Camera, CellPrefix, Frustum};
 use crate::spt_lod::{SptCell, SptLod, spt_drawn};
+use crate::technique::Technique;
 
 /// Whether a plane is drawn at `τ` (spec §10): its interval holds `τ`.
 #[must_use]
@@ -168,6 +174,89 @@ impl Deref for PlaneLod {
 
     fn deref(&self) -> &SptLod {
         &self.spt
+    }
+}
+
+/// The bark of a tree drawn with impostor planes (a renderer's setting).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum ImpostorBark {
+    /// Every bark triangle (the paper keeps the trunk polygonal).
+    All,
+    /// Where the container has a LoD chain (spec §6.12, built with `--baselines`), the bark of
+    /// its coarsest level whose error projects below half of `s_min` pixels (`τ` as for the
+    /// planes' level, at the block centre) among the levels whose bark keeps 90 % of the full
+    /// bark's area ([`BARK_AREA_KEPT`]); every bark triangle nearer than the finest level allows,
+    /// or without a chain. The chain's error is where the surface moves, not what it covers: thin
+    /// branches collapse into slivers at a small error, hence the area guard. Measured against
+    /// the full mesh at 320×240 (recall of the image, all bark → chain): the maple draws 247270 of
+    /// its 498464 bark triangles from 2 bounding radii on, 1.00 → 0.97 (2 radii), 0.96 (8); the
+    /// oak 2835 of 12006 from 32 radii on, unchanged. Without the guard the maple's coarsest
+    /// level (4963) would be drawn, at 0.77 and 0.83.
+    #[default]
+    Chain,
+}
+
+/// [`ImpostorBark::Chain`] draws only levels whose bark keeps this share of the full bark's area.
+pub const BARK_AREA_KEPT: f64 = 0.9;
+
+/// [`ImpostorBark::Chain`] takes the coarsest level whose error is at most this share of `τ`:
+/// meshoptimizer's error of a tube collapsed to a sliver is about its radius, so half a pixel
+/// keeps the branches wider than about a pixel.
+const BARK_ERROR_SHARE: f32 = 0.5;
+
+/// The area of `triangles` of `container`, m² (model space).
+#[must_use]
+pub fn area(container: &Container, triangles: &[TriangleRecord]) -> f64 {
+    let vertices = container.vertices();
+    let position = |i: u32| vertices.get(i as usize).map_or(Vec3::ZERO, |v| Vec3::from_array(v.position));
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.indices.map(position);
+            f64::from(0.5 * (b - a).cross(c - a).length())
+        })
+        .sum()
+}
+
+/// The trees of `list` drawn with impostor planes ([`Technique::Impostors`]; every model of
+/// `list` has planes): appends to `out` each visible instance's plane prefixes at `s_min` pixels
+/// ([`PlaneLod::select`]) and its bark as `bark` says, and counts it visible.
+pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, s_min: f32, bark: ImpostorBark, out: &mut TreeDraws) {
+    let frustum = Frustum::from_view_proj(camera.view_proj);
+    for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {
+        let mut ranges = Vec::new();
+        for &index in chunk {
+            let Some((instance, lod, model)) = scene.get(index) else { continue };
+            let Some(planes) = &model.planes else { continue };
+            ranges.clear();
+            if !planes.select(instance.transform, camera, &frustum, s_min, &mut ranges) {
+                continue;
+            }
+            *out.visible.get_mut(Technique::Impostors) += 1;
+            for range in &ranges {
+                out.planes.push(PrefixDraw { instance: index, model: instance.model, range: *range });
+            }
+            // The chain's bark level (its triangles and error), if the policy and the model have one.
+            let chain_bark = match (bark, &model.chain) {
+                (ImpostorBark::Chain, Some(chain)) => {
+                    instance_tau(instance.transform, camera, &frustum, s_min, lod.cull_sphere(), model.block_centre)
+                        .and_then(|tau| chain.chain.pick(tau * BARK_ERROR_SHARE))
+                        .and_then(|level| {
+                            let level = (level as usize).min(chain.bark_levels.len().checked_sub(1)?);
+                            Some((chain.bark_levels[level], chain.level_error(level)))
+                        })
+                }
+                _ => None,
+            };
+            out.triangles.extend(match chain_bark {
+                Some((range, error)) => {
+                    TriangleDraw::whole(index, instance.model, TriangleSource::Bark, range, 1.0, error)
+                }
+                None => model.bark_draw(index, instance.model, 1.0),
+            });
+        }
+    }) {
+        out.append(&mut chunk);
     }
 }
 

@@ -10,8 +10,16 @@
 //! level of Clasen's leaf ellipsoids and branch lines (all three through one per-cell prefix
 //! selector, [`spt_lod`]), and [`baseline`] the level of a baseline LoD chain. [`technique`] is the one
 //! list of the ways a tree can be drawn, by the names every layer uses.
+//!
+//! Each representation's module also owns its per-frame selection over the trees assigned to it
+//! ([`prune::select`], [`impostor::select`], [`ellipsoid::select`], [`baseline::select`]); [`draws`]
+//! holds what they share: the assignment of a frame's trees to techniques ([`Assignment`]), what
+//! they read of a model ([`Representations`]) and the plain draw lists they produce
+//! ([`TreeDraws`]), which a renderer turns into GPU draws. An engine embedding the runtime alone
+//! selects every representation so.
 
 pub mod baseline;
+pub mod draws;
 pub mod ellipsoid;
 pub mod frame;
 pub mod impostor;
@@ -20,7 +28,11 @@ pub mod select;
 pub mod spt_lod;
 pub mod technique;
 
-pub use baseline::{BillboardKind, Billboards, ChainLevel, LodChain, instance_tau};
+pub use baseline::{BillboardKind, BillboardRanges, Billboards, ChainLevel, ChainRanges, LodChain, instance_tau};
+pub use draws::{
+    Assignment, PrefixDraw, QuadDraw, Representations, Scene, TechniqueSettings, TreeDraws, TriangleDraw,
+    TriangleSource, max_axis_scale, merge_ascending, select_techniques,
+};
 pub use ellipsoid::{
     EllipsoidCell, EllipsoidLod, EllipsoidRange, LineCell, LineLod, LineRange, ellipsoid_drawn, line_drawn,
 };
@@ -29,10 +41,10 @@ pub use frame::{
     LodSettings, ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
 };
 pub use impostor::{
-    CROSSFADE, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share, plane_drawn,
-    plane_parents,
+    CROSSFADE, ImpostorBark, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share,
+    plane_drawn, plane_parents,
 };
-pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale};
+pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
 pub use spt_lod::{PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};
 pub use technique::{Data, PerTechnique, Technique};

@@ -12,9 +12,16 @@
 //! height in pixels (the smallest `λ` that keeps the build's minimum quality there), times
 //! `max(f, 0.1)` where `f` is the fraction of the tree's sample points that were visible in the
 //! previous frame; [`Hysteresis`] keeps it from flickering. Bark is never pruned.
+//!
+//! [`select`] is the per-frame selection of the pruned trees (see [`crate::draws`]), tuned by
+//! [`Pruning`].
 
 use glam::Vec3;
 use treelod_format::{Container, CurveSample, PruneLeafRecord, Range, TriangleRecord};
+
+use crate::draws::{Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks, max_axis_scale};
+use crate::frame::{Camera, Frustum};
+use crate::technique::Technique;
 
 /// Lower bound of the occlusion factor: a hidden tree still draws a tenth of its `λ`, so it is
 /// there when it comes into view (Neubert et al. §5).
@@ -31,6 +38,20 @@ pub enum PruneScale {
     Cook,
     /// No scaling.
     None,
+}
+
+impl PruneScale {
+    /// How the survivors of a pruned tree are scaled with `technique`: `s_opt(λ)` for
+    /// [`Technique::PruneOpt`], Cook's `1/λ` for [`Technique::PruneCook`]; `None` for techniques
+    /// that do not prune.
+    #[must_use]
+    pub const fn of(technique: Technique) -> Option<Self> {
+        match technique {
+            Technique::PruneOpt => Some(Self::Optimal),
+            Technique::PruneCook => Some(Self::Cook),
+            _ => None,
+        }
+    }
 }
 
 /// The value of a piecewise-linear curve (spec §6.11: `x` strictly increasing, clamped outside the
@@ -275,6 +296,155 @@ fn hull_samples(centres: impl Iterator<Item = [f32; 3]> + Clone) -> Vec<Vec3> {
 #[must_use]
 pub fn projected_height(height: f32, scale: f32, distance: f32, world_per_pixel: f32) -> f32 {
     height * scale / (distance.max(1e-6) * world_per_pixel.max(1e-12))
+}
+
+/// Pruning settings of [`Technique::PruneOpt`] and [`Technique::PruneCook`]: which trees are
+/// pruned and by how much; the technique says how survivors are scaled ([`PruneScale`]).
+///
+/// A pruned tree draws every bark triangle of its container and, of each cell's leaf priority
+/// list, the first `ceil(λ·count)` leaves, scaled about their centres (spec §6.11). `λ` is the
+/// container's `λ(h)` at the tree's projected height `h` (or [`Self::lambda`]), times
+/// `max(f, 0.1)` with `f` the visible fraction of the tree's hull samples measured by the
+/// renderer's occlusion test on an earlier frame, then held by [`Self::hysteresis`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pruning {
+    /// A fixed `λ` for every pruned tree instead of the container's `λ(h)` (for comparisons).
+    pub lambda: Option<f32>,
+    /// Multiply `λ` by the trees' measured visible fraction (needs the renderer's occlusion
+    /// measurement each frame; without measurements every tree counts as visible).
+    pub occlusion: bool,
+    /// Hold `λ` while its target stays within a band, so it does not flicker.
+    pub hysteresis: Hysteresis,
+    /// Trees projecting fewer pixels high than this are drawn with the sequential point tree
+    /// instead (pruning is the near-to-mid-field representation); 0 prunes every tree.
+    pub spt_below_pixels: f32,
+}
+
+impl Default for Pruning {
+    /// `λ(h)` from the container, occlusion on, ±10 % hysteresis, trees below 64 pixels high by
+    /// the sequential point tree.
+    fn default() -> Self {
+        Self { lambda: None, occlusion: true, hysteresis: Hysteresis::default(), spt_below_pixels: 64.0 }
+    }
+}
+
+/// What pruning keeps per instance between the frames of the camera's view: the `λ` each
+/// instance was drawn with last frame (hysteresis; `None` if it was not pruned) and the visible
+/// fraction of its hull samples last measured (1 if never), both indexed like the instances.
+#[derive(Debug)]
+pub struct PruneState<'a> {
+    /// Per instance: the held `λ`, updated by [`select`].
+    pub shown: &'a mut [Option<f32>],
+    /// Per instance: the measured visible fraction.
+    pub visible_fraction: &'a [f32],
+}
+
+/// What one chunk of [`select`] produced: its draws, and the held `λ` of its instances.
+#[derive(Default)]
+struct PrunedChunk {
+    draws: TreeDraws,
+    shown: Vec<(u32, Option<f32>)>,
+}
+
+/// The trees of `list` drawn pruned (`technique`, [`Technique::PruneOpt`] or
+/// [`Technique::PruneCook`], survivors scaled as [`PruneScale::of`] it says; every model of `list` has priority
+/// lists): appends to `out` each visible tree's leaf prefixes and bark, and counts it and its
+/// leaves; trees below [`Pruning::spt_below_pixels`] go to [`TreeDraws::point_tree`]. With
+/// `state` (the camera's view) `λ` is multiplied by the visible fraction and held between frames,
+/// and trees to measure are listed in [`TreeDraws::occlusion`]; a shadow cascade (no `state`)
+/// prunes by the tree's height in texels, with no hysteresis and no occlusion: what the camera
+/// cannot see may still cast.
+pub fn select(
+    scene: &Scene<'_>,
+    list: &[u32],
+    technique: Technique,
+    pruning: &Pruning,
+    camera: &Camera,
+    state: Option<PruneState<'_>>,
+    out: &mut TreeDraws,
+) {
+    let frustum = Frustum::from_view_proj(camera.view_proj);
+    let world_per_pixel = camera.world_per_pixel();
+    let scale = PruneScale::of(technique).unwrap_or_default();
+    let main = state.is_some();
+    let (shown, visible_fraction) = match &state {
+        Some(s) => (&*s.shown, s.visible_fraction),
+        None => (&[][..], &[][..]),
+    };
+    let chunks = by_chunks(list, |chunk, out: &mut PrunedChunk| {
+        for &index in chunk {
+            let i = index as usize;
+            let Some((instance, lod, model)) = scene.get(index) else { continue };
+            let scale_of = max_axis_scale(instance.transform);
+            let (centre, radius) = lod.cull_sphere();
+            let world_centre = instance.transform.transform_point3(centre);
+            let height = model.prune.as_ref().map_or(0.0, |p| {
+                projected_height(p.height(), scale_of, world_centre.distance(camera.position), world_per_pixel)
+            });
+            let Some(prune) = model.prune.as_ref().filter(|_| height >= pruning.spt_below_pixels) else {
+                if main {
+                    out.shown.push((index, None));
+                }
+                out.draws.point_tree.push(index);
+                continue;
+            };
+            if !frustum.intersects_sphere(world_centre, radius * scale_of) {
+                if main {
+                    out.shown.push((index, None));
+                }
+                continue;
+            }
+            *out.draws.visible.get_mut(technique) += 1;
+            if main && pruning.occlusion && !prune.samples().is_empty() {
+                out.draws.occlusion.push(index);
+            }
+            let target = pruning.lambda.unwrap_or_else(|| prune.lambda_at(height));
+            let lambda = if main {
+                let seen = if pruning.occlusion {
+                    visible_fraction.get(i).copied().unwrap_or(1.0).max(MIN_VISIBLE_FRACTION)
+                } else {
+                    1.0
+                };
+                let lambda = pruning.hysteresis.update(shown.get(i).copied().flatten(), target * seen);
+                out.shown.push((index, Some(lambda)));
+                lambda
+            } else {
+                target
+            };
+            let factor = size_factor(leaf_scale(scale, prune.scale_curve(), lambda));
+            for cell in prune.cells() {
+                let drawn = leaves_drawn(cell.leaves.count, lambda);
+                let (first, count) = prune.prefix_triangles(cell, drawn);
+                out.draws.leaves_pruned += u64::from(drawn);
+                if count > 0 {
+                    out.draws.triangles.push(TriangleDraw {
+                        instance: index,
+                        model: instance.model,
+                        cell: cell.cell,
+                        source: TriangleSource::PrunedLeaves,
+                        first,
+                        count,
+                        lambda,
+                        leaf_scale: factor,
+                        tau_triangles: factor,
+                    });
+                }
+            }
+            out.draws.triangles.extend(model.bark_draw(index, instance.model, lambda));
+        }
+    });
+    // The held `λ` is written once every chunk has read it.
+    let mut state = state;
+    for mut chunk in chunks {
+        out.append(&mut chunk.draws);
+        if let Some(state) = &mut state {
+            for (index, lambda) in chunk.shown {
+                if let Some(slot) = state.shown.get_mut(index as usize) {
+                    *slot = lambda;
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -183,7 +183,8 @@ impl Data {
     }
 }
 
-/// A count per technique, indexed by [`Technique::index`].
+/// A value per technique (a count, or a list such as an [`Assignment`](crate::Assignment)),
+/// indexed by [`Technique::index`] or by the technique itself.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PerTechnique<T>(pub [T; Technique::COUNT]);
 
@@ -216,6 +217,20 @@ impl<T: Copy> PerTechnique<T> {
     /// Each technique with its value.
     pub fn iter(&self) -> impl Iterator<Item = (Technique, T)> + '_ {
         Technique::ALL.into_iter().zip(self.0.iter().copied())
+    }
+}
+
+impl<T> std::ops::Index<Technique> for PerTechnique<T> {
+    type Output = T;
+
+    fn index(&self, technique: Technique) -> &T {
+        &self.0[technique.index()]
+    }
+}
+
+impl<T> std::ops::IndexMut<Technique> for PerTechnique<T> {
+    fn index_mut(&mut self, technique: Technique) -> &mut T {
+        &mut self.0[technique.index()]
     }
 }
 

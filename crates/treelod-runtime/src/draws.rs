@@ -1,0 +1,538 @@
+//! The per-frame selection of every representation, as plain draw lists a renderer turns into
+//! GPU draws.
+//!
+//! A frame's trees are first assigned to techniques ([`Assignment`], one list of instance indices
+//! per [`Technique`]); then [`select_techniques`] runs each technique's selection over its own
+//! list, appending to one [`TreeDraws`]: [`prune::select`](crate::prune::select) (pruned trees),
+//! [`impostor::select`](crate::impostor::select) (impostor planes and their bark),
+//! [`ellipsoid::select`](crate::ellipsoid::select) (ellipsoids and lines, or bark triangles) and
+//! [`baseline::select`](crate::baseline::select) (the LoD chain, billboards). The sequential point
+//! tree and the full mesh are selected by [`select_frame`](crate::select_frame) over the
+//! instances the assignment gives them and those a technique hands back this frame
+//! ([`TreeDraws::point_tree`]).
+//!
+//! What these selections read of a model is a [`Representations`], made once from its container
+//! beside its [`ModelLod`]; triangles drawn whole (pruned leaves, bark, LoD chain levels) are
+//! addressed in the model's *whole-triangle list* ([`Representations::from_container`] returns
+//! it), which a renderer uploads as it is.
+//!
+//! **Determinism and threads.** Each selection splits its list into chunks of [`CHUNK`]
+//! instances, selects the chunks in parallel (rayon) and appends their draws in list order, so
+//! the draw lists are the same whatever the thread count; lists of one chunk or less run on the
+//! calling thread. Per-instance state a selection keeps between frames (the pruned trees' held
+//! `λ`) is read during the parallel part and written afterwards.
+
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+use treelod_format::{Container, TriangleRecord, material_class};
+
+use crate::baseline::{BillboardRanges, Billboards, ChainRanges, LodChain};
+use crate::ellipsoid::{EllipsoidLod, LineLod};
+use crate::frame::{Camera, CellPrefix, Instance, LodSettings, ModelLod, ROOTS_CELL};
+use crate::impostor::{BARK_AREA_KEPT, ImpostorBark, PlaneLod, area};
+use crate::prune::{PruneLod, PruneState, Pruning};
+use crate::spt_lod::PixelLevel;
+use crate::technique::{PerTechnique, Technique};
+
+/// What the selection of each representation reads of one model, made once from its container
+/// ([`Self::from_container`]). A renderer that cannot draw a representation it holds (an atlas
+/// that does not decode) sets its field to `None`: its trees then go to [`Technique::FALLBACK`]
+/// ([`Self::holds`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Representations {
+    /// The centre of the container's block: where `τ` is measured for baselines and impostors'
+    /// bark.
+    pub block_centre: Vec3,
+    /// The bark (non-leaf) triangles in the whole-triangle list: first and count. Pruned trees,
+    /// and trees drawn with impostors or ellipsoids without lines, draw them.
+    pub bark: (u32, u32),
+    /// The leaf priority lists (pruning), if the container has them; their triangles lead the
+    /// whole-triangle list.
+    pub prune: Option<PruneLod>,
+    /// The impostor planes, if the container has them.
+    pub planes: Option<PlaneLod>,
+    /// Clasen's ellipsoids, if the container has them.
+    pub ellipsoids: Option<EllipsoidLod>,
+    /// Clasen's branch lines, if the container has them.
+    pub lines: Option<LineLod>,
+    /// The baseline LoD chain and where its levels lie in the whole-triangle list, if the
+    /// container has one.
+    pub chain: Option<ChainRanges>,
+    /// The baseline billboards (the facing quads, then the crossed ones), if the container has
+    /// them.
+    pub billboards: Option<BillboardRanges>,
+}
+
+impl Representations {
+    /// What the selections need of `container`, and its whole-triangle list: `PRUNE_TRIANGLES`,
+    /// then every bark triangle, then (with a LoD chain) the full mesh and each chain level with
+    /// every tree's triangles, then (with a chain and impostor planes) the bark of the leading
+    /// chain levels whose bark keeps [`BARK_AREA_KEPT`] of the full bark's area. Empty when the
+    /// container has none of pruning, planes, ellipsoids or a chain.
+    #[must_use]
+    pub fn from_container(container: &Container) -> (Self, Vec<TriangleRecord>) {
+        let block = container.block();
+        let block_centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
+        let prune = PruneLod::from_container(container);
+        let planes = PlaneLod::from_container(container);
+        let ellipsoids = EllipsoidLod::from_container(container);
+        let lines = LineLod::from_container(container);
+        let lod_chain = LodChain::from_container(container);
+        let billboards = Billboards::from_container(container).as_ref().map(BillboardRanges::of);
+        let mut whole = Vec::new();
+        let mut chain = None;
+        let mut bark = (0, 0);
+        if prune.is_some() || planes.is_some() || ellipsoids.is_some() || lod_chain.is_some() {
+            let classes = container.materials();
+            let is_bark =
+                |t: &&TriangleRecord| classes.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF);
+            whole.extend_from_slice(container.prune_triangles());
+            let at = |whole: &Vec<TriangleRecord>| u32::try_from(whole.len()).unwrap_or(u32::MAX);
+            let bark_first = at(&whole);
+            whole.extend(container.triangles().iter().filter(is_bark));
+            bark = (bark_first, at(&whole) - bark_first);
+            if let Some(lod_chain) = lod_chain {
+                let full_first = at(&whole);
+                whole.extend_from_slice(container.triangles());
+                let full = (full_first, at(&whole) - full_first);
+                let mut levels = Vec::new();
+                for level in lod_chain.levels() {
+                    let first = at(&whole);
+                    for range in &level.ranges {
+                        whole.extend_from_slice(container.lod_triangles().get(range.as_usize()).unwrap_or_default());
+                    }
+                    levels.push((first, at(&whole) - first));
+                }
+                let mut bark_levels = Vec::new();
+                if planes.is_some() {
+                    let full_area = area(container, &whole[bark.0 as usize..(bark.0 + bark.1) as usize]);
+                    for level in lod_chain.levels() {
+                        let first = at(&whole);
+                        for range in &level.ranges {
+                            let triangles = container.lod_triangles().get(range.as_usize()).unwrap_or_default();
+                            whole.extend(triangles.iter().filter(is_bark));
+                        }
+                        // The levels that keep the bark's surface: a coarser one collapses
+                        // branches that its error does not count.
+                        let kept = area(container, &whole[first as usize..]);
+                        if kept < BARK_AREA_KEPT * full_area {
+                            whole.truncate(first as usize);
+                            break;
+                        }
+                        bark_levels.push((first, at(&whole) - first));
+                    }
+                }
+                chain = Some(ChainRanges { chain: lod_chain, full, levels, bark_levels });
+            }
+        }
+        let representations = Self { block_centre, bark, prune, planes, ellipsoids, lines, chain, billboards };
+        (representations, whole)
+    }
+
+    /// Whether this model can be drawn with `technique` (else its trees go to
+    /// [`Technique::FALLBACK`]): as [`Technique::held_by`] says of its container, less what the
+    /// renderer dropped.
+    #[must_use]
+    pub fn holds(&self, technique: Technique) -> bool {
+        match technique {
+            Technique::Full | Technique::Spt => true,
+            Technique::PruneOpt | Technique::PruneCook => self.prune.is_some(),
+            Technique::Impostors => self.planes.is_some(),
+            Technique::Ellipsoids => self.ellipsoids.is_some(),
+            Technique::LodChain => self.chain.is_some(),
+            Technique::Billboard => self.billboards.as_ref().is_some_and(|b| b.facing.1 > 0),
+            Technique::Crossed => self.billboards.as_ref().is_some_and(|b| b.crossed.1 > 0),
+        }
+    }
+
+    /// The draw of all this model's bark triangles for instance `instance` of model `model`
+    /// (`lambda` is recorded with it), if it has any.
+    #[must_use]
+    pub fn bark_draw(&self, instance: u32, model: u32, lambda: f32) -> Option<TriangleDraw> {
+        TriangleDraw::whole(instance, model, TriangleSource::Bark, self.bark, lambda, 1.0)
+    }
+}
+
+/// Which instances each technique draws this frame: per technique, indices into the frame's
+/// instance list, ascending, each instance in exactly one list.
+///
+/// This is where a choice of technique per tree plugs in: [`Self::assign`] asks a function for
+/// each instance's technique and checks that its model holds the data. Today the renderer fills
+/// it with its settings' one technique for every tree.
+pub type Assignment = PerTechnique<Vec<u32>>;
+
+impl PerTechnique<Vec<u32>> {
+    /// Refills the assignment: instance `i` goes to `choose(i, instance)` if its model
+    /// (`models[instance.model]`) holds that technique ([`Representations::holds`]), else to
+    /// [`Technique::FALLBACK`]; instances of unknown models go nowhere.
+    pub fn assign(
+        &mut self,
+        instances: &[Instance],
+        models: &[Representations],
+        mut choose: impl FnMut(usize, &Instance) -> Technique,
+    ) {
+        for list in &mut self.0 {
+            list.clear();
+        }
+        for (i, instance) in instances.iter().enumerate() {
+            let Some(model) = models.get(instance.model as usize) else { continue };
+            let chosen = choose(i, instance);
+            let technique = if model.holds(chosen) { chosen } else { Technique::FALLBACK };
+            self[technique].push(u32::try_from(i).unwrap_or(u32::MAX));
+        }
+    }
+
+    /// The assignment of every instance to one technique (or, where its model lacks it, to
+    /// [`Technique::FALLBACK`]).
+    #[must_use]
+    pub fn forced(technique: Technique, instances: &[Instance], models: &[Representations]) -> Self {
+        let mut assignment = Self::default();
+        assignment.assign(instances, models, |_, _| technique);
+        assignment
+    }
+}
+
+/// The models and instances a view's selections read.
+#[derive(Clone, Copy, Debug)]
+pub struct Scene<'a> {
+    /// Per model: its point tree (culling spheres).
+    pub lods: &'a [ModelLod],
+    /// Per model: its representations.
+    pub models: &'a [Representations],
+    /// The frame's instances; assignments index them.
+    pub instances: &'a [Instance],
+}
+
+impl Scene<'_> {
+    /// Instance `index` with its model's point tree and representations, if the model exists.
+    #[must_use]
+    pub fn get(&self, index: u32) -> Option<(&Instance, &ModelLod, &Representations)> {
+        let instance = self.instances.get(index as usize)?;
+        let m = instance.model as usize;
+        Some((instance, self.lods.get(m)?, self.models.get(m)?))
+    }
+}
+
+/// What a draw of whole-tree triangles holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TriangleSource {
+    /// A prefix of one cell's pruned leaves.
+    PrunedLeaves,
+    /// All bark triangles of the model (or those of a LoD chain level).
+    Bark,
+    /// A LoD chain level (or the full mesh) of the whole block.
+    LodLevel,
+}
+
+/// One draw of triangles of a model's whole-triangle list: one cell's pruned leaves, the bark,
+/// or a LoD chain level.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriangleDraw {
+    /// Index of the instance.
+    pub instance: u32,
+    /// Its model.
+    pub model: u32,
+    /// Container cell, or [`ROOTS_CELL`] for the whole tree.
+    pub cell: u32,
+    /// What is drawn.
+    pub source: TriangleSource,
+    /// Into the whole-triangle list.
+    pub first: u32,
+    /// Triangles drawn.
+    pub count: u32,
+    /// The pruned tree's `λ` (1 for the rest).
+    pub lambda: f32,
+    /// Size factor of pruned leaves about their centres (1 for the rest).
+    pub leaf_scale: f32,
+    /// What a renderer reports as the draw's triangle threshold: `leaf_scale`, or a chain
+    /// level's error (metres, model space).
+    pub tau_triangles: f32,
+}
+
+impl TriangleDraw {
+    /// A draw of the triangles `first, count` for the whole tree (cell [`ROOTS_CELL`]), if
+    /// there are any; `lambda` and `tau_triangles` are recorded with it.
+    #[must_use]
+    pub fn whole(
+        instance: u32,
+        model: u32,
+        source: TriangleSource,
+        (first, count): (u32, u32),
+        lambda: f32,
+        tau_triangles: f32,
+    ) -> Option<Self> {
+        (count > 0).then_some(Self {
+            instance,
+            model,
+            cell: ROOTS_CELL,
+            source,
+            first,
+            count,
+            lambda,
+            leaf_scale: 1.0,
+            tau_triangles,
+        })
+    }
+}
+
+/// One draw of impostor planes, ellipsoids or lines: a prefix of one cell's elements for one
+/// instance, and the `τ` the vertex stage tests them with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrefixDraw {
+    /// Index of the instance.
+    pub instance: u32,
+    /// Its model.
+    pub model: u32,
+    /// The cell's prefix.
+    pub range: CellPrefix,
+}
+
+/// One draw of billboard quads: `count` quads from `first` of the model's billboard list
+/// ([`BillboardRanges`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QuadDraw {
+    /// Index of the instance.
+    pub instance: u32,
+    /// Its model.
+    pub model: u32,
+    /// First quad.
+    pub first: u32,
+    /// Quads drawn.
+    pub count: u32,
+}
+
+/// The draw lists of one view's representations other than the point tree, and what their
+/// selections counted. Each list is in the order of the assignment's techniques, each
+/// technique's draws in instance order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TreeDraws {
+    /// Whole-tree triangles: pruned leaves, bark, LoD chain levels.
+    pub triangles: Vec<TriangleDraw>,
+    /// Impostor planes.
+    pub planes: Vec<PrefixDraw>,
+    /// Ellipsoids.
+    pub ellipsoids: Vec<PrefixDraw>,
+    /// Branch lines.
+    pub lines: Vec<PrefixDraw>,
+    /// Billboard quads.
+    pub billboards: Vec<QuadDraw>,
+    /// Instances a technique hands to the point tree this frame, ascending (pruned trees below
+    /// their projected height).
+    pub point_tree: Vec<u32>,
+    /// Pruned instances whose hull samples the occlusion test should measure (the camera's view
+    /// only, with occlusion on), ascending.
+    pub occlusion: Vec<u32>,
+    /// Instances inside the view frustum per technique.
+    pub visible: PerTechnique<u32>,
+    /// Leaves drawn by pruned instances.
+    pub leaves_pruned: u64,
+}
+
+impl TreeDraws {
+    /// Empties every list and count (keeping their allocations).
+    pub fn clear(&mut self) {
+        self.triangles.clear();
+        self.planes.clear();
+        self.ellipsoids.clear();
+        self.lines.clear();
+        self.billboards.clear();
+        self.point_tree.clear();
+        self.occlusion.clear();
+        self.visible = PerTechnique::default();
+        self.leaves_pruned = 0;
+    }
+
+    /// Appends `other`'s lists and adds its counts.
+    pub fn append(&mut self, other: &mut Self) {
+        self.triangles.append(&mut other.triangles);
+        self.planes.append(&mut other.planes);
+        self.ellipsoids.append(&mut other.ellipsoids);
+        self.lines.append(&mut other.lines);
+        self.billboards.append(&mut other.billboards);
+        self.point_tree.append(&mut other.point_tree);
+        self.occlusion.append(&mut other.occlusion);
+        self.visible += other.visible;
+        self.leaves_pruned += other.leaves_pruned;
+    }
+}
+
+/// Instances per parallel task of a selection: a tree costs these selections from a fraction of
+/// a microsecond (a baseline's one `τ`) to a few (a pruned tree's cells), so a task of a few
+/// hundred trees outweighs rayon's cost of a task, and a scene of a few hundred trees stays on
+/// the calling thread. Not tuned by measurement yet.
+pub const CHUNK: usize = 512;
+
+/// Runs `select` over `list` in chunks of [`CHUNK`] instances, in parallel when there is more
+/// than one, and returns each chunk's output in list order.
+pub(crate) fn by_chunks<O: Default + Send>(list: &[u32], select: impl Fn(&[u32], &mut O) + Sync) -> Vec<O> {
+    if list.len() <= CHUNK {
+        let mut out = O::default();
+        select(list, &mut out);
+        return vec![out];
+    }
+    list.par_chunks(CHUNK)
+        .map(|chunk| {
+            let mut out = O::default();
+            select(chunk, &mut out);
+            out
+        })
+        .collect()
+}
+
+/// The largest axis scale of an affine transform (what selection converts sizes with).
+#[must_use]
+pub fn max_axis_scale(m: Mat4) -> f32 {
+    let (x, y, z) = (m.x_axis.truncate(), m.y_axis.truncate(), m.z_axis.truncate());
+    x.length_squared().max(y.length_squared()).max(z.length_squared()).sqrt().max(1e-12)
+}
+
+/// Merges ascending lists of distinct instance indices into `out` (cleared first), ascending.
+pub fn merge_ascending(lists: &[&[u32]], out: &mut Vec<u32>) {
+    out.clear();
+    for list in lists {
+        out.extend_from_slice(list);
+    }
+    if lists.iter().filter(|l| !l.is_empty()).count() > 1 {
+        out.sort_unstable();
+    }
+}
+
+/// What the representations' selections read of a renderer's settings, per view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TechniqueSettings {
+    /// The pixel threshold of impostor planes and baselines.
+    pub s_min: f32,
+    /// The point tree's settings, which ellipsoids and lines select with (their `τ` and depth
+    /// bias).
+    pub lod: LodSettings,
+    /// Which trees are pruned and by how much.
+    pub pruning: Pruning,
+    /// The bark of trees drawn with impostor planes.
+    pub impostor_bark: ImpostorBark,
+    /// How ellipsoids and lines pick their levels.
+    pub pixel_level: PixelLevel,
+    /// Whether ellipsoid trees draw their bark as lines (where their models have lines).
+    pub lines: bool,
+}
+
+/// Selects one view of every technique but the point tree and the full mesh: appends to `out`
+/// (not cleared) the draws of each technique's selection over its list of `assignment`, in
+/// [`Technique::ALL`] order. `prune_state`: the camera's view's pruning state (see
+/// [`prune::select`](crate::prune::select)); `None` for other views (shadow cascades).
+///
+/// The point tree's trees are then `assignment`'s [`Technique::Full`] and [`Technique::Spt`]
+/// lists and `out`'s [`TreeDraws::point_tree`] ([`merge_ascending`]), for
+/// [`select_frame`](crate::select_frame).
+pub fn select_techniques(
+    scene: &Scene<'_>,
+    assignment: &Assignment,
+    camera: &Camera,
+    settings: &TechniqueSettings,
+    mut prune_state: Option<PruneState<'_>>,
+    out: &mut TreeDraws,
+) {
+    for technique in Technique::ALL {
+        let list = &assignment[technique];
+        if list.is_empty() {
+            continue;
+        }
+        match technique {
+            Technique::Full | Technique::Spt => {}
+            Technique::PruneOpt | Technique::PruneCook => {
+                let state = prune_state
+                    .as_mut()
+                    .map(|s| PruneState { shown: &mut *s.shown, visible_fraction: s.visible_fraction });
+                crate::prune::select(scene, list, technique, &settings.pruning, camera, state, out);
+            }
+            Technique::Impostors => {
+                crate::impostor::select(scene, list, camera, settings.s_min, settings.impostor_bark, out);
+            }
+            Technique::Ellipsoids => {
+                let (level, lines) = (settings.pixel_level, settings.lines);
+                crate::ellipsoid::select(scene, list, camera, &settings.lod, level, lines, out);
+            }
+            Technique::LodChain | Technique::Billboard | Technique::Crossed => {
+                crate::baseline::select(scene, list, technique, camera, settings.s_min, out);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use treelod_build::{
+        BuildConfig, DemoTreeConfig, EllipsoidConfig, ImpostorConfig, LineConfig, LodChainConfig, Placed, PruneConfig,
+        build_block, demo_tree,
+    };
+    use treelod_format::Compression;
+
+    fn demo(config: &BuildConfig) -> Container {
+        let scene = demo_tree(&DemoTreeConfig { leaves: 300, ..DemoTreeConfig::default() });
+        let built = build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], config, "t").unwrap();
+        Container::from_bytes(&built.data.to_bytes(Compression::None).unwrap()).unwrap()
+    }
+
+    /// Every technique over a forest of three chunks, a seventh of its trees of a model with no
+    /// optional data: the assignment sends those to the point tree, and the draw lists and the
+    /// held `λ` are the same on one thread and on four.
+    #[test]
+    fn every_technique_selects_the_same_draws_whatever_the_thread_count() {
+        let config = BuildConfig {
+            prune: Some(PruneConfig { resolution: 64, views: 2, ..PruneConfig::default() }),
+            impostors: Some(ImpostorConfig::default()),
+            ellipsoids: Some(EllipsoidConfig::default()),
+            lines: Some(LineConfig::default()),
+            baselines: Some(LodChainConfig::default()),
+            ..BuildConfig::default()
+        };
+        let containers = [demo(&config), demo(&BuildConfig::default())];
+        let models: Vec<Representations> = containers.iter().map(|c| Representations::from_container(c).0).collect();
+        let lods: Vec<ModelLod> = containers.iter().map(ModelLod::from_container).collect();
+        let instances: Vec<Instance> = (0..3 * CHUNK)
+            .map(|i| Instance {
+                model: u32::from(i % 7 == 0),
+                transform: Mat4::from_translation(Vec3::new(
+                    (i % 48) as f32 * 10.0 - 240.0,
+                    0.0,
+                    -((i / 48) as f32) * 10.0,
+                )),
+            })
+            .collect();
+        let camera = Camera::look_at(Vec3::new(5.0, 2.0, -15.0), Vec3::new(5.0, 2.0, -200.0), 1.0, 640, 480);
+        let scene = Scene { lods: &lods, models: &models, instances: &instances };
+        let settings = TechniqueSettings {
+            s_min: 1.0,
+            lod: LodSettings::default(),
+            // The far trees go to the point tree.
+            pruning: Pruning { spt_below_pixels: 16.0, ..Pruning::default() },
+            impostor_bark: ImpostorBark::default(),
+            pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
+            lines: true,
+        };
+        for technique in Technique::ALL {
+            let assignment = Assignment::forced(technique, &instances, &models);
+            assert_eq!(assignment.0.iter().map(Vec::len).sum::<usize>(), instances.len(), "{technique}");
+            if technique.needs().is_some() {
+                let bare = instances.iter().filter(|i| i.model == 1).count();
+                assert!(assignment[Technique::FALLBACK].len() >= bare, "{technique}");
+            }
+            let select = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                pool.install(|| {
+                    let mut shown = vec![None; instances.len()];
+                    let visible_fraction = vec![1.0; instances.len()];
+                    let state = PruneState { shown: &mut shown, visible_fraction: &visible_fraction };
+                    let mut out = TreeDraws::default();
+                    select_techniques(&scene, &assignment, &camera, &settings, Some(state), &mut out);
+                    (out, shown)
+                })
+            };
+            let (one, four) = (select(1), select(4));
+            assert_eq!(one, four, "{technique}");
+            if models[0].holds(technique) && technique.needs().is_some() {
+                assert!(one.0.visible.get(technique) > 0, "{technique}: {:?}", one.0.visible);
+            }
+        }
+    }
+}
