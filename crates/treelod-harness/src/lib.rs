@@ -6,7 +6,7 @@
 //!   temporal noise) and what it cost. [`eval::run`] takes an [`eval::Options`] and returns an
 //!   [`eval::Report`]; [`eval::output`] and [`eval::plot`] turn a report into the table, CSV,
 //!   JSON, contact sheet and plots, and [`eval::Report`]'s `write_*` methods write them.
-//! - [`bench`]: the fly-through benchmark (Clasen 2011 §7), [`bench::run`] with a
+//! - [`bench`](mod@bench): the fly-through benchmark (Clasen 2011 §7), [`bench::run`] with a
 //!   [`bench::Options`], returning a [`bench::Report`] (per frame and technique the selection
 //!   time, primitives, streaming, GPU time and optionally quality).
 //! - [`scene`]: scene files (which containers to draw and where), shared with `treelod render`

@@ -3,7 +3,7 @@
 //! report and writes the files asked for; the forest, the path, the measuring and the outputs are
 //! the harness's.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use treelod_harness::bench::{self, Options, Quality, Report};
 use treelod_render::Technique;
@@ -139,7 +139,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             return Err(failed(&e));
         }
     };
-    let written: [(&Option<PathBuf>, fn(&Report, &Path) -> Result<(), treelod_harness::Error>); 3] =
+    let written: [(&Option<PathBuf>, Writer); 3] =
         [(&args.csv, Report::write_csv), (&args.json, Report::write_json), (&args.plot, Report::write_plot)];
     for (file, write) in written {
         if let Some(file) = file {
@@ -148,6 +148,9 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     }
     report::write_stdout(&report.text(outputs))
 }
+
+/// Writes one of the report's files.
+type Writer = fn(&Report, &std::path::Path) -> Result<(), treelod_harness::Error>;
 
 /// A progress bar on stderr (drawn only on a terminal).
 fn progress_bar() -> indicatif::ProgressBar {

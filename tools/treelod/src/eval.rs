@@ -159,7 +159,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             return Err(failed(&e));
         }
     };
-    let written: [(&Option<PathBuf>, fn(&Report, &std::path::Path) -> Result<(), treelod_harness::Error>); 6] = [
+    let written: [(&Option<PathBuf>, Writer); 6] = [
         (&args.csv, Report::write_csv),
         (&args.json, Report::write_json),
         (&args.sheet, Report::write_sheet),
@@ -187,6 +187,9 @@ pub fn failed(error: &treelod_harness::Error) -> Failed {
         }
     }
 }
+
+/// Writes one of the report's files.
+type Writer = fn(&Report, &std::path::Path) -> Result<(), treelod_harness::Error>;
 
 /// A progress bar on stderr (drawn only on a terminal).
 fn progress_bar() -> indicatif::ProgressBar {
