@@ -14,7 +14,7 @@ use super::{Availability, Report, Row, TechniqueName};
 use treelod_render::Technique;
 
 /// Colours of series in the order they are drawn, where a series is not a technique (Tableau 10).
-pub(crate) const PALETTE: [Rgb888; 10] = [
+pub const PALETTE: [Rgb888; 10] = [
     Rgb888::new(31, 119, 180),
     Rgb888::new(255, 127, 14),
     Rgb888::new(44, 160, 44),
@@ -29,20 +29,27 @@ pub(crate) const PALETTE: [Rgb888; 10] = [
 
 /// The shape of a technique's dots, so techniques stay apart where colours are hard to tell.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Marker {
+pub enum Marker {
+    /// A filled circle.
     Circle,
+    /// A filled square.
     Square,
+    /// A filled triangle, point up.
     Triangle,
+    /// A filled triangle, point down.
     TriangleDown,
+    /// A filled diamond.
     Diamond,
+    /// An ×.
     Cross,
+    /// A +.
     Plus,
 }
 
 /// The colour and marker of a technique in every plot: fixed per technique (not per position in
 /// a run), each colour of [`PALETTE`] used once, so the same technique looks the same in every
 /// plot and no two techniques share a look.
-pub(crate) fn style(technique: Technique, full_1x: bool) -> (Rgb888, Marker) {
+pub fn style(technique: Technique, full_1x: bool) -> (Rgb888, Marker) {
     let index = if full_1x { Technique::COUNT } else { technique.index() };
     // The techniques compared most often (the point tree, pruning, impostors, ellipsoids, the
     // chain, the full mesh at 1×) all differ in shape as well as colour.
@@ -59,12 +66,12 @@ pub(crate) fn style(technique: Technique, full_1x: bool) -> (Rgb888, Marker) {
 }
 
 /// The look of what a row measures.
-pub(crate) fn style_of(name: TechniqueName) -> (Rgb888, Marker) {
+pub fn style_of(name: TechniqueName) -> (Rgb888, Marker) {
     style(name.technique(), name == TechniqueName::Full1x)
 }
 
 /// A marker of `diameter` pixels at `centre`.
-pub(crate) fn marker(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888, shape: Marker) {
+pub fn marker(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888, shape: Marker) {
     let fill = PrimitiveStyle::with_fill(colour);
     let r = diameter as i32 / 2;
     let Ok(()) = match shape {
@@ -102,23 +109,30 @@ pub(crate) fn marker(canvas: &mut Canvas, centre: Point, diameter: u32, colour: 
     };
 }
 
-pub(crate) const BLACK: Rgb888 = Rgb888::new(0, 0, 0);
-pub(crate) const GRID: Rgb888 = Rgb888::new(225, 225, 225);
-pub(crate) const REFERENCE: Rgb888 = Rgb888::new(110, 110, 110);
+/// Axes, ticks and text.
+pub const BLACK: Rgb888 = Rgb888::new(0, 0, 0);
+/// Grid lines.
+pub const GRID: Rgb888 = Rgb888::new(225, 225, 225);
+/// The reference's curves (dashed grey).
+pub const REFERENCE: Rgb888 = Rgb888::new(110, 110, 110);
 
 /// An RGB canvas, white when made.
-pub(crate) struct Canvas {
+pub struct Canvas {
     width: u32,
     height: u32,
     pixels: Vec<Rgb888>,
 }
 
 impl Canvas {
-    pub(crate) fn new(width: u32, height: u32) -> Self {
+    /// A white canvas of `width` × `height` pixels.
+    #[must_use]
+    pub fn new(width: u32, height: u32) -> Self {
         Self { width, height, pixels: vec![Rgb888::WHITE; width as usize * height as usize] }
     }
 
-    pub(crate) fn into_image(self) -> Image {
+    /// The canvas as an opaque RGBA image.
+    #[must_use]
+    pub fn into_image(self) -> Image {
         let rgba = self.pixels.iter().flat_map(|p| [p.r(), p.g(), p.b(), 255]).collect();
         Image { width: self.width, height: self.height, rgba }
     }
@@ -151,37 +165,35 @@ impl DrawTarget for Canvas {
 }
 
 /// Draws `text` at `at` (every drawing into a [`Canvas`] is infallible).
-pub(crate) fn label(
-    canvas: &mut Canvas,
-    text: &str,
-    at: Point,
-    alignment: Alignment,
-    baseline: Baseline,
-    colour: Rgb888,
-) {
+pub fn label(canvas: &mut Canvas, text: &str, at: Point, alignment: Alignment, baseline: Baseline, colour: Rgb888) {
     let style = TextStyleBuilder::new().alignment(alignment).baseline(baseline).build();
     let Ok(_) = Text::with_text_style(text, at, MonoTextStyle::new(&FONT_6X10, colour), style).draw(canvas);
 }
 
-pub(crate) fn line(canvas: &mut Canvas, from: Point, to: Point, colour: Rgb888, width: u32) {
+/// A line `width` pixels wide from `from` to `to`.
+pub fn line(canvas: &mut Canvas, from: Point, to: Point, colour: Rgb888, width: u32) {
     let Ok(()) = Line::new(from, to).into_styled(PrimitiveStyle::with_stroke(colour, width)).draw(canvas);
 }
 
-pub(crate) fn dot(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888) {
+/// A filled circle of `diameter` pixels at `centre`.
+pub fn dot(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888) {
     let Ok(()) = Circle::with_center(centre, diameter).into_styled(PrimitiveStyle::with_fill(colour)).draw(canvas);
 }
 
 /// A value axis: linear or base-10 logarithmic over `[lo, hi]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Axis {
-    pub(crate) lo: f64,
-    pub(crate) hi: f64,
-    pub(crate) log: bool,
+pub struct Axis {
+    /// The value at the axis's start.
+    pub lo: f64,
+    /// The value at its end.
+    pub hi: f64,
+    /// Whether base-10 logarithmic.
+    pub log: bool,
 }
 
 impl Axis {
     /// A linear axis over the values with a little room, widened to at least `min_span`.
-    pub(crate) fn linear(values: impl Iterator<Item = f64>, min_span: f64) -> Self {
+    pub fn linear(values: impl Iterator<Item = f64>, min_span: f64) -> Self {
         let (mut lo, mut hi) = min_max(values).unwrap_or((0.0, 1.0));
         let span = (hi - lo).max(min_span);
         let middle = 0.5 * (lo + hi);
@@ -193,7 +205,7 @@ impl Axis {
 
     /// A logarithmic axis from the power of ten at or below the smallest positive value to the
     /// one at or above the largest.
-    pub(crate) fn log(values: impl Iterator<Item = f64>) -> Self {
+    pub fn log(values: impl Iterator<Item = f64>) -> Self {
         let (lo, hi) = min_max(values.filter(|v| *v > 0.0)).unwrap_or((1.0, 10.0));
         let lo = 10f64.powf(lo.log10().floor());
         let hi = 10f64.powf(hi.log10().ceil()).max(lo * 10.0);
@@ -260,14 +272,19 @@ fn min_max(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 }
 
 /// A plot area on a canvas with its two axes.
-pub(crate) struct Panel {
-    pub(crate) area: Rectangle,
-    pub(crate) x: Axis,
-    pub(crate) y: Axis,
+pub struct Panel {
+    /// The plot area, pixels of the canvas.
+    pub area: Rectangle,
+    /// The horizontal axis.
+    pub x: Axis,
+    /// The vertical axis.
+    pub y: Axis,
 }
 
 impl Panel {
-    pub(crate) fn point(&self, x: f64, y: f64) -> Point {
+    /// The pixel of the value `(x, y)`.
+    #[must_use]
+    pub fn point(&self, x: f64, y: f64) -> Point {
         let (left, top) = (self.area.top_left.x, self.area.top_left.y);
         let (w, h) = (self.area.size.width as f64, self.area.size.height as f64);
         let fx = self.x.fraction(x).clamp(0.0, 1.0);
@@ -276,7 +293,7 @@ impl Panel {
     }
 
     /// Grid, frame, tick labels, the title above and the x label below.
-    pub(crate) fn draw_axes(&self, canvas: &mut Canvas, title: &str, x_label: Option<&str>) {
+    pub fn draw_axes(&self, canvas: &mut Canvas, title: &str, x_label: Option<&str>) {
         let (left, top) = (self.area.top_left.x, self.area.top_left.y);
         let (right, bottom) = (left + self.area.size.width as i32 - 1, top + self.area.size.height as i32 - 1);
         for v in self.y.ticks() {
@@ -307,7 +324,8 @@ impl Panel {
         }
     }
 
-    pub(crate) fn polyline(&self, canvas: &mut Canvas, points: &[(f64, f64)], colour: Rgb888, dashed: bool) {
+    /// A line through `points` (values), solid or dashed.
+    pub fn polyline(&self, canvas: &mut Canvas, points: &[(f64, f64)], colour: Rgb888, dashed: bool) {
         for (i, pair) in points.windows(2).enumerate() {
             if dashed && i % 2 == 1 {
                 continue;
@@ -345,14 +363,15 @@ fn primitives(row: &Row) -> f64 {
 /// A legend box at the top right of `area` whose entries show each series' marker beside its line.
 /// Width of the margin right of a plot's panels that holds its legend ([`legend_with_markers`]),
 /// so the legend hides no data: the top right of a quality plot is where the full mesh sits.
-pub(crate) const LEGEND_MARGIN: u32 = 170;
+pub const LEGEND_MARGIN: u32 = 170;
 
 /// The margin of [`LEGEND_MARGIN`] at the right of a canvas `width` wide, from `top` down.
 fn legend_margin(width: u32, top: i32, height: u32) -> Rectangle {
     Rectangle::new(Point::new(width as i32 - LEGEND_MARGIN as i32, top), Size::new(LEGEND_MARGIN, height))
 }
 
-pub(crate) fn legend_with_markers(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, Rgb888, Marker)]) {
+/// A legend in `area`: per entry its marker in its colour and its name.
+pub fn legend_with_markers(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, Rgb888, Marker)]) {
     let plain: Vec<(String, Rgb888)> = entries.iter().map(|(t, c, _)| (t.clone(), *c)).collect();
     legend(canvas, area, &plain);
     let width = 28 + 6 * entries.iter().map(|(t, _, _)| t.chars().count()).max().unwrap_or(0) as i32;
@@ -364,7 +383,7 @@ pub(crate) fn legend_with_markers(canvas: &mut Canvas, area: &Rectangle, entries
 }
 
 /// A legend box at the top right of `area`.
-pub(crate) fn legend(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, Rgb888)]) {
+pub fn legend(canvas: &mut Canvas, area: &Rectangle, entries: &[(String, Rgb888)]) {
     let width = 28 + 6 * entries.iter().map(|(t, _)| t.chars().count()).max().unwrap_or(0) as i32;
     let height = 6 + 12 * entries.len() as i32;
     let right = area.top_left.x + area.size.width as i32 - 6;
@@ -616,8 +635,7 @@ mod tests {
 
     #[test]
     fn every_technique_has_its_own_colour_and_every_shape_is_drawn() {
-        use clap::ValueEnum as _;
-        let looks: Vec<_> = TechniqueName::value_variants().iter().map(|&n| style_of(n)).collect();
+        let looks: Vec<_> = TechniqueName::ALL.iter().map(|&n| style_of(n)).collect();
         for (i, a) in looks.iter().enumerate() {
             for b in &looks[i + 1..] {
                 assert_ne!(a.0, b.0, "two techniques share a colour");

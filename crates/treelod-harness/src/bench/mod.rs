@@ -15,9 +15,9 @@
 //!
 //! The tables, CSV, JSON and plot are in [`output`].
 
-mod forest;
-mod output;
-mod path;
+pub mod forest;
+pub mod output;
+pub mod path;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
-use treelod_format::{Compression, Container, ErrorClass};
+use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, render_image_timed, render_prepared_timed};
 use treelod_render::{Camera, Instance, ModelId, PerTechnique, Pruning, Renderer, Settings, Technique};
 
@@ -33,10 +33,10 @@ use self::forest::{Forest, Shape};
 use self::path::Frame;
 use treelod_eval::MetricError;
 
+use crate::Error;
 use crate::eval::metrics::{Coverage, LinearImage, Mask, flip::mean_flip, multiscale_rmse};
 use crate::eval::{Adapter, Availability};
-use crate::render::{clear_colour, parse_colour, parse_fov, parse_pixels, parse_size};
-use crate::report::{self, Failed};
+use crate::offscreen::{clear_colour, settle_streaming};
 use crate::scene;
 
 /// Instances per call of the full mesh's counting selection: its draw list holds a range per
@@ -46,83 +46,108 @@ const FULL_COUNT_CHUNK: usize = 8192;
 /// The built-in forest's models: demo trees of different seeds, leaf counts and heights.
 const DEMO_TREES: [(u64, u32, f32); 4] = [(1, 4000, 4.0), (2, 2500, 3.0), (3, 5000, 5.0), (4, 3000, 4.5)];
 
-/// Arguments of `treelod bench`.
-#[derive(Debug, clap::Args)]
-pub struct Args {
+/// How `--quality`'s reference is drawn, asked for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Quality {
+    /// `treelod eval`'s reference: drawn this many times larger per side (1..=16) with the
+    /// stochastic alpha test, box-filtered down.
+    Supersampled(u32),
+    /// The reference of earlier versions: the full mesh at the image size with the plain alpha
+    /// test (aliased: thin leaves drop out of it).
+    Plain1x,
+}
+
+/// What to fly and how: the options of `treelod bench`, as plain values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
     /// Containers, or scene files whose models are used; the forest is made of these models.
     /// None: built-in demo trees of four shapes, built in memory.
-    #[arg(value_name = "FILE|SCENE")]
     pub inputs: Vec<PathBuf>,
-    /// Trees in the forest (the paper: 10,000; 1,000,000 measures selection at scale, best with
-    /// --no-render).
-    #[arg(long, value_name = "N", default_value_t = 10_000,
-          value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+    /// Trees in the forest (at least 1).
     pub trees: u64,
-    /// Frames along the path (the paper: 1440).
-    #[arg(long, value_name = "N", default_value_t = 360,
-          value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    /// Frames along the path (at least 1).
     pub frames: u32,
-    /// Image size in pixels, `WIDTHxHEIGHT`.
-    #[arg(long, value_name = "WxH", default_value = "1536x864", value_parser = parse_size)]
+    /// Image size in pixels.
     pub size: (u32, u32),
     /// Seed of the forest's layout.
-    #[arg(long, value_name = "S", default_value_t = 1)]
     pub seed: u64,
-    /// Vertical field of view in degrees.
-    #[arg(long, value_name = "DEGREES", default_value_t = 50.0, value_parser = parse_fov)]
-    pub fov: f32,
-    /// Techniques to fly, separated by commas; those not available are reported, not skipped.
-    #[arg(long, value_name = "NAMES", value_enum, value_delimiter = ',', default_values = ["full", "spt"])]
-    pub technique: Vec<Technique>,
-    /// Select and stream only: no image is drawn, so there is no GPU time (the figure for large
-    /// forests on a software rasteriser).
-    #[arg(long, conflicts_with = "quality")]
-    pub no_render: bool,
-    /// Select `spt` on the GPU (compute shaders write the draws: `Renderer::enable_gpu_selection`,
-    /// every model resident whole); its counts are then those of a frame read back one or two
-    /// frames earlier, and its selection time is that of `prepare` submitting the compute work.
-    #[arg(long)]
+    /// Vertical field of view, degrees.
+    pub fov_degrees: f32,
+    /// Techniques to fly, in order (a repeated one is flown once); those not available are
+    /// reported, not skipped.
+    pub techniques: Vec<Technique>,
+    /// Draw images (else select and stream only: no GPU time, no quality).
+    pub render: bool,
+    /// Select `spt` on the GPU (`Renderer::enable_gpu_selection`).
     pub gpu_selection: bool,
-    /// Cast shadows: every technique the renderer flies also selects and draws three 2048²
-    /// shadow cascades of the sun over the first 150 m (`Settings::shadows`, the defaults), and
-    /// each frame records the primitives of that shadow pass (CSV column `shadow_primitives`).
-    /// The full mesh is counted, not drawn, so it has none; `--gpu-selection` frames are then
-    /// selected on the CPU.
-    #[arg(long)]
+    /// Cast shadows (`Settings::shadows`, the defaults) with every technique the renderer flies.
     pub shadows: bool,
-    /// Also draw the full mesh as the reference at every frame and measure each technique's
-    /// image against it: P, R, Q, multi-scale RMSE and mean FLIP error (slow: the full mesh of
-    /// every tree in view). The reference is `treelod eval`'s: supersampled, box-filtered, with
-    /// the stochastic alpha test that keeps minified leaves' coverage.
-    #[arg(long)]
-    pub quality: bool,
-    /// With --quality, the reference is drawn K times larger per side and box-filtered down.
-    #[arg(long, value_name = "K", default_value_t = 4, requires = "quality",
-          value_parser = clap::value_parser!(u32).range(1..=16))]
-    pub supersample: u32,
-    /// With --quality, the reference of earlier versions instead: the full mesh drawn at the image
-    /// size with the plain alpha test (aliased: thin leaves drop out of it).
-    #[arg(long, requires = "quality", conflicts_with = "supersample")]
-    pub reference_1x: bool,
-    /// Point threshold `s_min` in pixels of `spt`.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    /// Draw the full mesh as the reference at every frame and measure every technique against
+    /// it (needs `render`).
+    pub quality: Option<Quality>,
+    /// Point threshold `s_min` of `spt` in pixels (`None`: the renderer's default).
     pub s_min: Option<f32>,
-    /// Triangle threshold `s_max` in pixels of `spt`.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    /// Triangle threshold `s_max` of `spt` in pixels (`None`: the renderer's default).
     pub s_max: Option<f32>,
-    /// Background colour, `RRGGBB` (sRGB hex): with --quality, pixels of it count as not covered.
-    #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
+    /// Background, sRGB: with `quality`, pixels of it count as not covered.
     pub background: [u8; 3],
-    /// Write one CSV row per frame and technique.
-    #[arg(long, value_name = "PATH")]
-    pub csv: Option<PathBuf>,
-    /// Write a JSON summary.
-    #[arg(long, value_name = "PATH")]
-    pub json: Option<PathBuf>,
-    /// Write a PNG plot: primitives per frame per technique (log scale), selection and GPU
-    /// milliseconds, and Q with --quality, along the path.
-    #[arg(long, value_name = "PATH")]
-    pub plot: Option<PathBuf>,
+}
+
+impl Default for Options {
+    /// The defaults of `treelod bench`: the built-in forest of 10,000 trees, 360 frames at
+    /// 1536×864, layout seed 1, a 50° field of view, `full` and `spt`, drawn, no GPU selection,
+    /// shadows or quality, the renderer's thresholds, a white background.
+    fn default() -> Self {
+        Self {
+            inputs: Vec::new(),
+            trees: 10_000,
+            frames: 360,
+            size: (1536, 864),
+            seed: 1,
+            fov_degrees: 50.0,
+            techniques: vec![Technique::Full, Technique::Spt],
+            render: true,
+            gpu_selection: false,
+            shadows: false,
+            quality: None,
+            s_min: None,
+            s_max: None,
+            background: [255; 3],
+        }
+    }
+}
+
+impl Options {
+    /// What error lines name when no file is to blame: the first input, or `bench` for the
+    /// built-in forest.
+    #[must_use]
+    pub fn input_label(&self) -> PathBuf {
+        match self.inputs.first() {
+            None => PathBuf::from("bench"),
+            Some(first) => first.clone(),
+        }
+    }
+
+    /// Refuses values no command line gives.
+    fn check(&self) -> Result<(), Error> {
+        let bad = |message: &str| Err(Error::Options { input: self.input_label(), message: message.to_owned() });
+        if self.trees == 0 || self.frames == 0 {
+            return bad("a forest needs at least 1 tree and a path 1 frame");
+        }
+        if self.size.0 == 0 || self.size.1 == 0 {
+            return bad("the image size must be at least 1x1");
+        }
+        if !(self.fov_degrees > 0.0 && self.fov_degrees < 180.0) {
+            return bad("the field of view must be between 0 and 180 degrees");
+        }
+        if self.quality.is_some() && !self.render {
+            return bad("quality needs images drawn");
+        }
+        if matches!(self.quality, Some(Quality::Supersampled(k)) if !(1..=16).contains(&k)) {
+            return bad("the supersampling factor must be 1 to 16");
+        }
+        Ok(())
+    }
 }
 
 /// What `technique` draws, for the JSON summary.
@@ -148,15 +173,15 @@ fn availability(technique: Technique, held: PerTechnique<usize>) -> Availability
 /// with the bark as lines where a model has them, at the default quality and level blend;
 /// `impostors` with the defaults of `render` (morphing levels, the chain's bark where a model has a
 /// chain). Trees whose models lack a technique's data draw with the point tree.
-fn settings(technique: Technique, args: &Args) -> Option<Settings> {
+pub fn settings(technique: Technique, options: &Options) -> Option<Settings> {
     if technique == Technique::Full {
         return None;
     }
     let mut settings = Settings { technique, ..Settings::default() };
-    settings.s_min = args.s_min.unwrap_or(settings.s_min);
-    settings.s_max = args.s_max.unwrap_or(settings.s_max);
+    settings.s_min = options.s_min.unwrap_or(settings.s_min);
+    settings.s_max = options.s_max.unwrap_or(settings.s_max);
     settings.pruning = Pruning::default();
-    settings.shadows = args.shadows.then(treelod_render::Shadows::default);
+    settings.shadows = options.shadows.then(treelod_render::Shadows::default);
     settings.lines = true;
     Some(settings)
 }
@@ -328,102 +353,146 @@ struct Flown {
     renderer: Renderer,
 }
 
-/// Runs `treelod bench`.
-pub fn run(args: &Args) -> Result<(), Failed> {
-    let started = Instant::now();
-    for output in [&args.csv, &args.json, &args.plot].into_iter().flatten() {
-        if output.is_dir() {
-            report::message_error(output, "is a directory; name the file to write");
-            return Err(Failed { class: ErrorClass::Io });
-        }
+impl Report {
+    /// The report as text: the heading, the techniques not measured, the table of means per
+    /// technique, the seconds the run took and, last, `written`: the files written, as
+    /// `treelod bench` prints it (in the order CSV, JSON, plot).
+    #[must_use]
+    pub fn text(&self, written: [&Option<PathBuf>; 3]) -> String {
+        output::text(self, written)
     }
-    let models = load_models(&args.inputs, &args.technique)?;
+
+    /// Writes one CSV row per frame and technique to `path`.
+    ///
+    /// # Errors
+    /// [`Error::OutputIsDirectory`] or [`Error::Write`] naming `path`.
+    pub fn write_csv(&self, path: &Path) -> Result<(), Error> {
+        crate::write::atomically(path, output::csv(self).as_bytes())
+    }
+
+    /// Writes the JSON summary to `path`.
+    ///
+    /// # Errors
+    /// As [`Report::write_csv`], or [`Error::Encode`].
+    pub fn write_json(&self, path: &Path) -> Result<(), Error> {
+        crate::write::json(path, output::json(self))
+    }
+
+    /// Writes the plot along the path ([`output::plot`]) to `path`.
+    ///
+    /// # Errors
+    /// As [`Report::write_json`].
+    pub fn write_plot(&self, path: &Path) -> Result<(), Error> {
+        crate::write::png(path, &output::plot(self))
+    }
+}
+
+/// Flies the benchmark; see [`run_with_progress`].
+///
+/// # Errors
+/// As [`run_with_progress`].
+pub fn run(options: &Options) -> Result<Report, Error> {
+    run_with_progress(options, &mut |_, _| {})
+}
+
+/// Flies every technique of `options` along the path over the forest and returns what was
+/// measured. Before the first frame every renderer settles its streaming at the first camera and
+/// draws once; neither is timed. `progress(frame, frames)` is called before each frame.
+///
+/// # Errors
+/// A bad container or scene file ([`Error::Container`], [`Error::Scene`], naming the file), bad
+/// options ([`Error::Options`]), no technique measurable ([`Error::NoneMeasurable`]), no device
+/// or one too small ([`Error::NoDevice`], [`Error::TooLarge`]), a model or frame the device
+/// refuses ([`Error::AddModel`], [`Error::GpuSelection`], [`Error::DeviceRefused`]), a frame that
+/// cannot be drawn ([`Error::Render`]).
+pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usize)) -> Result<Report, Error> {
+    let started = Instant::now();
+    options.check()?;
+    let label = options.input_label();
+    let models = load_models(&options.inputs, &options.techniques)?;
     let mut held = held_by_models(&models.containers);
     if let Some(stochastic) = &models.stochastic {
         *held.get_mut(Technique::PruneCook) += held_by_models(stochastic).get(Technique::PruneCook);
     }
     let mut techniques: Vec<(Technique, Availability)> = Vec::new();
-    for &technique in &args.technique {
+    for &technique in &options.techniques {
         if !techniques.iter().any(|(t, _)| *t == technique) {
             techniques.push((technique, availability(technique, held)));
         }
     }
     if techniques.iter().all(|(_, a)| *a != Availability::Measured) {
-        report::write_stdout(&output::unavailable(&techniques))?;
-        report::message_error(&input_label(args), "none of the techniques asked for can be measured");
-        return Err(Failed { class: ErrorClass::Unsupported });
+        return Err(Error::NoneMeasurable { input: label, absent: output::unavailable(&techniques) });
     }
     let measured: Vec<Technique> =
         techniques.iter().filter(|(_, a)| *a == Availability::Measured).map(|(t, _)| *t).collect();
 
-    let (width, height) = args.size;
-    let fovy = args.fov.to_radians();
+    let (width, height) = options.size;
+    let fovy = options.fov_degrees.to_radians();
     let aspect = width as f32 / height as f32;
     let shapes: Vec<Shape> = models
         .containers
         .iter()
         .map(|c| Shape::from_bounds(Vec3::from_array(c.block().bounds_min), Vec3::from_array(c.block().bounds_max)))
         .collect();
-    let trees = usize::try_from(args.trees).unwrap_or(usize::MAX);
-    let mut forest = forest::layout(trees, args.seed, &shapes);
+    let trees = usize::try_from(options.trees).unwrap_or(usize::MAX);
+    let mut forest = forest::layout(trees, options.seed, &shapes);
     // No trunk stands on the low part of the path (the clearance keeps the camera out of trunks,
     // not out of crowns).
     let clearance = 0.5 * forest.footprint;
     for track in path::ground_track(&forest, fovy, aspect, 1.5 * forest.tree_height) {
         forest::clear_track(&mut forest, &track, clearance);
     }
-    let frames = path::fly_through(&forest, args.frames as usize, fovy, aspect);
+    let frames = path::fly_through(&forest, options.frames as usize, fovy, aspect);
 
     // A device only when something is drawn or prepared: the full mesh alone is counted on the CPU.
-    let needs_gpu = args.quality || measured.iter().any(|&t| settings(t, args).is_some());
+    let needs_gpu = options.quality.is_some() || measured.iter().any(|&t| settings(t, options).is_some());
     let gpu = if needs_gpu {
-        Some(Gpu::new().map_err(|e| {
-            report::message_error(&input_label(args), &format!("cannot render: {e}"));
-            Failed { class: ErrorClass::Unsupported }
-        })?)
+        Some(Gpu::new().map_err(|source| Error::NoDevice { input: label.clone(), source })?)
     } else {
         None
     };
-    let k = if args.quality && !args.reference_1x { args.supersample } else { 1 };
+    let k = match options.quality {
+        Some(Quality::Supersampled(k)) => k,
+        Some(Quality::Plain1x) | None => 1,
+    };
     if let Some(gpu) = &gpu {
         let limit = gpu.device.limits().max_texture_dimension_2d;
         if u64::from(width) * u64::from(k) > u64::from(limit) || u64::from(height) * u64::from(k) > u64::from(limit) {
-            report::message_error(
-                &input_label(args),
-                &format!(
+            return Err(Error::TooLarge {
+                input: label,
+                message: format!(
                     "{width}x{height} (times {k}) is larger than the device draws ({limit} pixels per side at most)"
                 ),
-            );
-            return Err(Failed { class: ErrorClass::Unsupported });
+            });
         }
     }
 
     // The renderers share one list of instances (the same model order in each).
     let instances: Vec<Instance> =
         forest.trees.iter().map(|t| Instance { model: ModelId(t.model), transform: t.transform() }).collect();
-    let add = |gpu: &Gpu, settings: Settings, technique: Option<Technique>| -> Result<Renderer, Failed> {
+    let add = |gpu: &Gpu, settings: Settings, technique: Option<Technique>| -> Result<Renderer, Error> {
         let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
         let containers = match (&models.stochastic, technique) {
             (Some(stochastic), Some(Technique::PruneCook)) => stochastic,
             _ => &models.containers,
         };
         for (index, (container, label)) in containers.iter().zip(&models.labels).enumerate() {
-            let id = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(container)).map_err(|e| {
-                report::print_error(&format!("{label}: {e}"));
-                Failed { class: ErrorClass::Unsupported }
-            })?;
+            let id = renderer
+                .add_model(&gpu.device, &gpu.queue, Arc::clone(container))
+                .map_err(|source| Error::AddModel { label: label.clone(), source })?;
             // A fresh renderer numbers its models in order; the instances rely on it.
             if id.0 as usize != index {
-                report::print_error(&format!("{label}: internal error: model {index} got id {}", id.0));
-                return Err(Failed { class: ErrorClass::Io });
+                return Err(Error::Internal {
+                    input: PathBuf::from(label),
+                    message: format!("model {index} got id {}", id.0),
+                });
             }
         }
         renderer.set_instances(&instances);
-        if args.gpu_selection && technique == Some(Technique::Spt) {
-            renderer.enable_gpu_selection(&gpu.device, &gpu.queue).map_err(|e| {
-                report::message_error(&input_label(args), &format!("cannot select on the GPU: {e}"));
-                Failed { class: ErrorClass::Unsupported }
-            })?;
+        if options.gpu_selection && technique == Some(Technique::Spt) {
+            renderer
+                .enable_gpu_selection(&gpu.device, &gpu.queue)
+                .map_err(|source| Error::GpuSelection { input: options.input_label(), source })?;
         }
         Ok(renderer)
     };
@@ -431,12 +500,12 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let mut reference = None;
     if let Some(gpu) = &gpu {
         for &technique in &measured {
-            if let Some(settings) = settings(technique, args) {
+            if let Some(settings) = settings(technique, options) {
                 flown.push(Flown { technique, renderer: add(gpu, settings, Some(technique))? });
             }
         }
-        if args.quality {
-            let settings = if args.reference_1x {
+        if let Some(quality) = options.quality {
+            let settings = if quality == Quality::Plain1x {
                 Settings { technique: Technique::Full, ..Settings::default() }
             } else {
                 crate::eval::reference_settings()
@@ -447,31 +516,26 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     drop(instances);
     let mut full = measured.contains(&Technique::Full).then(|| FullCounter::new(&models.containers));
 
-    let background = clear_colour(args.background);
+    let background = clear_colour(options.background);
     let camera =
         |frame: &Frame, k: u32| Camera::look_at(frame.pose.eye, frame.pose.target, fovy, width * k, height * k);
-    let internal = |e: MetricError| {
-        report::message_error(&input_label(args), &format!("internal error: {e}"));
-        Failed { class: ErrorClass::Io }
-    };
-    let render_failed = |e: treelod_render::offscreen::GpuError| {
-        report::message_error(&input_label(args), &format!("cannot render: {e}"));
-        Failed { class: ErrorClass::Io }
-    };
+    let internal = |e: MetricError| Error::Internal { input: label.clone(), message: e.to_string() };
+    let render_failed =
+        |source: treelod_render::offscreen::GpuError| Error::Render { input: options.input_label(), source };
     // Warm-up at the first frame: streaming loads what it needs (a host's loading screen) and
     // the first draw compiles the shaders, so neither is timed as frame 0.
     if let (Some(gpu), Some(first)) = (&gpu, frames.first()) {
-        guarded(gpu, &input_label(args), || {
+        guarded(gpu, &label, || {
             for f in &mut flown {
                 let camera = camera(first, 1);
-                crate::render::settle_streaming(gpu, &mut f.renderer, &camera);
-                if !args.no_render {
+                settle_streaming(gpu, &mut f.renderer, &camera);
+                if options.render {
                     render_image_timed(gpu, &mut f.renderer, &camera, background).map_err(render_failed)?;
                 }
             }
             if let Some(reference) = &mut reference {
                 let camera = camera(first, k);
-                crate::render::settle_streaming(gpu, reference, &camera);
+                settle_streaming(gpu, reference, &camera);
                 render_image_timed(gpu, reference, &camera, background).map_err(render_failed)?;
             }
             Ok(())
@@ -481,21 +545,19 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         counter.count(&forest.trees, &camera(first, 1));
     }
 
-    let progress = progress_bar(frames.len() as u64);
-    report::set_progress_bar(Some(progress.clone()));
     let mut rows = Vec::with_capacity(frames.len() * measured.len());
     for (index, frame) in frames.iter().enumerate() {
-        progress.set_position(index as u64);
+        progress(index, frames.len());
         let view = camera(frame, 1);
         // The reference: the full mesh, streaming settled, drawn K times larger.
         let mut reference_shot: Option<((LinearImage, Mask), Option<f64>)> = None;
         if let (Some(gpu), Some(reference)) = (&gpu, &mut reference) {
             let camera = camera(frame, k);
-            let (image, _, gpu_ms) = guarded(gpu, &input_label(args), || {
-                crate::render::settle_streaming(gpu, reference, &camera);
+            let (image, _, gpu_ms) = guarded(gpu, &label, || {
+                settle_streaming(gpu, reference, &camera);
                 render_image_timed(gpu, reference, &camera, background).map_err(render_failed)
             })?;
-            reference_shot = Some((crate::eval::measurable(&image, k, args.background).map_err(internal)?, gpu_ms));
+            reference_shot = Some((crate::eval::measurable(&image, k, options.background).map_err(internal)?, gpu_ms));
         }
         for &technique in &measured {
             if technique == Technique::Full {
@@ -529,7 +591,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             let (Some(gpu), Some(f)) = (&gpu, flown.iter_mut().find(|f| f.technique == technique)) else { continue };
             // One prepare per frame, as a host makes it: streaming keeps up within its budget or
             // draws coarser stand-ins (counted in ranges_clamped).
-            let (stats, selection_ms) = guarded(gpu, &input_label(args), || {
+            let (stats, selection_ms) = guarded(gpu, &label, || {
                 let start = Instant::now();
                 let stats = f.renderer.prepare(&gpu.device, &gpu.queue, &view);
                 gpu.queue.submit([]);
@@ -556,18 +618,18 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 bytes_resident: Some(stats.bytes_resident),
                 selection_ms,
                 gpu_ms: None,
-                shadow_primitives: args.shadows.then(|| stats.shadow.primitives()),
+                shadow_primitives: options.shadows.then(|| stats.shadow.primitives()),
                 coverage: None,
                 rmse: None,
                 flip: None,
             };
-            if !args.no_render {
-                let (image, gpu_ms) = guarded(gpu, &input_label(args), || {
+            if options.render {
+                let (image, gpu_ms) = guarded(gpu, &label, || {
                     render_prepared_timed(gpu, &mut f.renderer, &view, background).map_err(render_failed)
                 })?;
                 row.gpu_ms = gpu_ms;
                 if let Some(((reference_image, reference_mask), _)) = &reference_shot {
-                    let (image, mask) = crate::eval::measurable(&image, 1, args.background).map_err(internal)?;
+                    let (image, mask) = crate::eval::measurable(&image, 1, options.background).map_err(internal)?;
                     row.coverage = Some(Coverage::compare(reference_mask, &mask).map_err(internal)?);
                     row.rmse = Some(multiscale_rmse(&image, reference_image).map_err(internal)?.summary());
                     row.flip = Some(mean_flip(&image, reference_image).map_err(internal)?);
@@ -576,68 +638,41 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             rows.push(row);
         }
     }
-    progress.finish_and_clear();
-    report::set_progress_bar(None);
 
     let report = Report {
         models,
         forest,
         frames,
-        size: args.size,
-        fov_degrees: args.fov,
-        seed: args.seed,
-        rendered: !args.no_render,
-        quality: args.quality.then_some(Reference { supersample: k, stochastic_alpha: !args.reference_1x }),
+        size: options.size,
+        fov_degrees: options.fov_degrees,
+        seed: options.seed,
+        rendered: options.render,
+        quality: options.quality.map(|q| Reference { supersample: k, stochastic_alpha: q != Quality::Plain1x }),
         adapter: gpu.as_ref().map(|g| Adapter::new(&g.info)),
         timestamps: gpu.as_ref().is_some_and(|g| g.device.features().contains(wgpu::Features::TIMESTAMP_QUERY)),
         techniques,
         rows,
         seconds: started.elapsed().as_secs_f64(),
     };
-    if let Some(csv) = &args.csv {
-        report::write_atomically(csv, output::csv(&report).as_bytes())?;
-    }
-    if let Some(json) = &args.json {
-        crate::render::write_json(json, output::json(&report))?;
-    }
-    if let Some(plot) = &args.plot {
-        crate::render::write_png(plot, &output::plot(&report))?;
-    }
-    report::write_stdout(&output::text(&report, [&args.csv, &args.json, &args.plot]))
+    Ok(report)
 }
 
 /// Runs `f` inside a validation error scope of the device, so that a frame the device refuses
 /// (the renderer's draw records of a huge forest outgrowing one storage binding, say) is an error
 /// line and exit code 4 rather than wgpu's panic.
-fn guarded<R>(gpu: &Gpu, label: &Path, f: impl FnOnce() -> Result<R, Failed>) -> Result<R, Failed> {
+fn guarded<R>(gpu: &Gpu, label: &Path, f: impl FnOnce() -> Result<R, Error>) -> Result<R, Error> {
     let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
     let result = f();
     if let Some(error) = pollster::block_on(scope.pop()) {
         let text = error.to_string().split_whitespace().collect::<Vec<_>>().join(" ");
-        report::message_error(
-            label,
-            &format!(
-                "the device refused a frame: {text} (a frame of this forest may need more draws than the device \
-                 binds in one buffer: try fewer --trees)"
-            ),
-        );
-        return Err(Failed { class: ErrorClass::Unsupported });
+        return Err(Error::DeviceRefused { input: label.to_owned(), message: text });
     }
     result
 }
 
-/// What error lines name when no file is to blame: the inputs, or `bench` for the built-in forest.
-fn input_label(args: &Args) -> PathBuf {
-    match args.inputs.as_slice() {
-        [] => PathBuf::from("bench"),
-        [one] => one.clone(),
-        [first, ..] => first.clone(),
-    }
-}
-
 /// Opens the models of the inputs (containers, or the models of scene files, each path once), or
 /// builds the demo trees when there are none.
-fn load_models(inputs: &[PathBuf], techniques: &[Technique]) -> Result<Models, Failed> {
+fn load_models(inputs: &[PathBuf], techniques: &[Technique]) -> Result<Models, Error> {
     if inputs.is_empty() {
         return demo_models(techniques);
     }
@@ -648,7 +683,7 @@ fn load_models(inputs: &[PathBuf], techniques: &[Technique]) -> Result<Models, F
                 paths.push(input.clone());
             }
         } else {
-            let scene = scene::load(input).map_err(|e| crate::render::scene_failed(&e))?;
+            let scene = scene::load(input)?;
             for model in scene.models {
                 if !paths.contains(&model) {
                     paths.push(model);
@@ -658,7 +693,11 @@ fn load_models(inputs: &[PathBuf], techniques: &[Technique]) -> Result<Models, F
     }
     let mut containers = Vec::with_capacity(paths.len());
     for path in &paths {
-        containers.push(Arc::new(report::open(path)?));
+        if path.is_dir() {
+            return Err(Error::ContainerIsDirectory { path: path.clone() });
+        }
+        let container = Container::open(path).map_err(|source| Error::Container { path: path.clone(), source })?;
+        containers.push(Arc::new(container));
     }
     let labels: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
     let source = format!("{} model(s): {}", labels.len(), labels.join(", "));
@@ -678,7 +717,7 @@ fn demo_prune(order: treelod_build::PruneOrder) -> treelod_build::PruneConfig {
 /// billboards' budget, and the chain gives the impostor trees' bark); with
 /// `ellipsoids` they hold Clasen's ellipsoids and lines (the build's defaults: about a second per
 /// tree on 2 cores, so only when asked for).
-fn demo_models(techniques: &[Technique]) -> Result<Models, Failed> {
+fn demo_models(techniques: &[Technique]) -> Result<Models, Error> {
     use treelod_build::PruneOrder;
     let opt = techniques.contains(&Technique::PruneOpt).then(|| demo_prune(PruneOrder::Density));
     let extras = Extras {
@@ -711,7 +750,7 @@ struct Extras {
 }
 
 /// [`DEMO_TREES`] built with `prune` and `extras`.
-fn demo_containers(prune: Option<&treelod_build::PruneConfig>, extras: Extras) -> Result<Vec<Arc<Container>>, Failed> {
+fn demo_containers(prune: Option<&treelod_build::PruneConfig>, extras: Extras) -> Result<Vec<Arc<Container>>, Error> {
     let build = treelod_build::BuildConfig {
         prune: prune.cloned(),
         impostors: extras.baselines.then(treelod_build::ImpostorConfig::default),
@@ -720,7 +759,7 @@ fn demo_containers(prune: Option<&treelod_build::PruneConfig>, extras: Extras) -
         lines: extras.ellipsoids.then(treelod_build::LineConfig::default),
         ..treelod_build::BuildConfig::default()
     };
-    let built: Result<Vec<Container>, Failed> = DEMO_TREES
+    let built: Result<Vec<Container>, Error> = DEMO_TREES
         .par_iter()
         .map(|&(seed, leaves, height)| {
             let config =
@@ -728,10 +767,11 @@ fn demo_containers(prune: Option<&treelod_build::PruneConfig>, extras: Extras) -
             let tree = treelod_build::demo_tree(&config);
             let label = Path::new("bench");
             let placed = [treelod_build::Placed { scene: &tree, translation: Vec3::ZERO }];
-            let output = treelod_build::build_block(&tree.name, &placed, &build, &crate::build::generator())
-                .map_err(|e| report::build_error(label, &e))?;
-            let bytes = output.data.to_bytes(Compression::None).map_err(|e| report::file_error(label, &e))?;
-            Container::from_bytes(&bytes).map_err(|e| report::file_error(label, &e))
+            let output = treelod_build::build_block(&tree.name, &placed, &build, &generator())
+                .map_err(|source| Error::Build { path: label.to_owned(), source })?;
+            let container = |source| Error::Container { path: label.to_owned(), source };
+            let bytes = output.data.to_bytes(Compression::None).map_err(container)?;
+            Container::from_bytes(&bytes).map_err(container)
         })
         .collect();
     Ok(built?.into_iter().map(Arc::new).collect())
@@ -742,19 +782,14 @@ fn held_by_models(containers: &[Arc<Container>]) -> PerTechnique<usize> {
     PerTechnique::held_by(containers.iter().map(|c| &**c))
 }
 
-/// A progress bar on stderr (drawn only on a terminal).
-fn progress_bar(len: u64) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} bench [frame {pos}/{len}] {elapsed}") {
-        bar.set_style(style);
-    }
-    bar
+/// The generator the built-in trees' containers record: the `treelod` tool's, whose version is
+/// the workspace's.
+fn generator() -> String {
+    format!("treelod {}", env!("CARGO_PKG_VERSION"))
 }
 
 #[cfg(test)]
 mod tests {
-    use clap::Parser as _;
-
     use super::*;
 
     #[test]
@@ -770,24 +805,16 @@ mod tests {
         assert_eq!(availability(Technique::PruneOpt, some), Availability::Measured);
     }
 
-    #[derive(Debug, clap::Parser)]
-    struct BenchCli {
-        #[command(flatten)]
-        args: Args,
-    }
-
     #[test]
     fn every_technique_of_the_one_list_flies_with_itself() {
-        let names: Vec<&str> = Technique::ALL.iter().map(|t| t.name()).collect();
-        let args = BenchCli::try_parse_from(["bench", "--technique", &names.join(",")]).expect("parses").args;
-        assert_eq!(args.technique, Technique::ALL);
+        let options = Options { techniques: Technique::ALL.to_vec(), ..Options::default() };
         for t in Technique::ALL {
-            let settings = settings(t, &args);
+            let settings = settings(t, &options);
             assert_eq!(settings.map(|s| s.technique), (t != Technique::Full).then_some(t), "{t}");
         }
         let none = PerTechnique::<usize>::default();
         let absent = availability(Technique::Impostors, none);
         assert!(absent.reason().is_some_and(|r| r.contains("impostor planes")), "{absent:?}");
-        assert!(settings(Technique::Ellipsoids, &args).is_some_and(|s| s.lines));
+        assert!(settings(Technique::Ellipsoids, &options).is_some_and(|s| s.lines));
     }
 }

@@ -8,24 +8,22 @@
 //! table, CSV, JSON and contact sheet in [`output`].
 
 pub use treelod_eval::metrics;
-pub(crate) mod output;
+pub mod output;
 pub mod path;
-pub(crate) mod plot;
+pub mod plot;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
-use treelod_format::{Container, ErrorClass};
+use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, render_prepared_timed};
-use treelod_render::{Camera, FrameStats, PerTechnique, Pruning, Renderer, Settings, Technique};
-
-use crate::render::ImpostorArgs;
+use treelod_render::{Camera, FrameStats, ImpostorBark, PerTechnique, Pruning, Renderer, Settings, Technique};
 
 use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse, temporal_noise};
 use self::path::Pose;
-use crate::render::{FRAMING_DIRECTION, clear_colour, frame_camera, parse_colour, parse_fov, parse_pixels, parse_size};
-use crate::report::{self, Failed};
+use crate::Error;
+use crate::offscreen::{FRAMING_DIRECTION, clear_colour, frame_camera, settle_streaming};
 use crate::scene::{self, Scene};
 use treelod_eval::MetricError;
 
@@ -43,96 +41,135 @@ const APPROACH_NEAR_RADII: f32 = 0.3;
 /// `--views` when no camera option is given.
 const DEFAULT_VIEWS: u32 = 8;
 
-/// Arguments of `treelod eval`.
-#[derive(Debug, clap::Args)]
-pub struct Args {
-    /// A `.treelod` container (drawn once at the origin) or a JSON scene file.
-    #[arg(value_name = "FILE|SCENE")]
-    pub input: PathBuf,
-    /// N directions around the model on a circle (at the framing elevation), each at the distance
-    /// that frames it [default: 8 when no camera option is given].
-    #[arg(long, value_name = "N", conflicts_with_all = ["orbit", "path"],
-          value_parser = clap::value_parser!(u32).range(1..=100_000))]
-    pub views: Option<u32>,
-    /// 8 views on a circle at each distance, in bounding radii of the scene (e.g. `2,6,20`).
-    #[arg(long, value_name = "D1,D2,…", conflicts_with = "path", value_parser = parse_orbit)]
-    pub orbit: Option<Distances>,
-    /// N cameras flying in from afar to inside the crown: along the framing direction towards the
-    /// centre of the bounds, from 1 km (or 100 bounding radii, if farther) to 0.3 bounding radii,
-    /// each frame the same fraction closer. Temporal noise along it shows pops.
-    #[arg(long, value_name = "N", conflicts_with_all = ["views", "orbit", "path"],
-          value_parser = clap::value_parser!(u32).range(2..=100_000))]
-    pub approach: Option<u32>,
-    /// A camera path file: a JSON array of `{"eye": [x, y, z], "target": [x, y, z]}`.
-    #[arg(long, value_name = "FILE")]
-    pub path: Option<PathBuf>,
-    /// Techniques to measure, separated by commas. Those not available are reported as absent.
-    #[arg(long, value_name = "NAMES", value_enum, value_delimiter = ',', default_values = ["full", "full-1x", "spt"])]
-    pub technique: Vec<TechniqueName>,
-    /// Image size in pixels, `WIDTHxHEIGHT`.
-    #[arg(long, value_name = "WxH", default_value = "640x480", value_parser = parse_size)]
-    pub size: (u32, u32),
-    /// The reference is drawn K times larger per side and box-filtered down.
-    #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=16))]
-    pub supersample: u32,
-    /// Vertical field of view in degrees.
-    #[arg(long, value_name = "DEGREES", default_value_t = 50.0, value_parser = parse_fov)]
-    pub fov: f32,
-    /// Background colour, `RRGGBB` (sRGB hex): pixels of this colour count as not covered.
-    #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
-    pub background: [u8; 3],
-    /// MSAA samples (1 or 4) of every technique but `full` (drawn as the reference is); with 4,
-    /// alpha-tested leaves cover samples in proportion to their filtered alpha (alpha to coverage).
-    #[arg(long, value_name = "N", default_value_t = 1, value_parser = crate::render::parse_msaa)]
-    pub msaa: u32,
-    /// Point threshold `s_min` in pixels of the `spt` technique.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
-    pub s_min: Option<f32>,
-    // How the `impostors` technique changes level and draws its bark, as `render`'s options.
-    #[command(flatten)]
-    pub impostor: ImpostorArgs,
-    /// The `ellipsoids` technique draws the bark as triangles even where the container has
-    /// branch lines (by default as those lines).
-    #[arg(long)]
-    pub no_lines: bool,
-    /// The `ellipsoids` technique blends ellipsoids and lines from one level to the next over
-    /// this many octaves of the metres per pixel, as `render`'s option; 0 switches at once.
-    #[arg(long, value_name = "OCTAVES", default_value_t = 0.5, value_parser = crate::render::parse_level_blend)]
-    pub level_blend: f32,
-    /// Triangle threshold `s_max` in pixels of the `spt` technique.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
-    pub s_max: Option<f32>,
-    /// Write one CSV row per frame and technique.
-    #[arg(long, value_name = "PATH")]
-    pub csv: Option<PathBuf>,
-    /// Write a JSON summary.
-    #[arg(long, value_name = "PATH")]
-    pub json: Option<PathBuf>,
-    /// Write a PNG contact sheet: per frame (up to 4), the reference, then each technique and its
-    /// difference.
-    #[arg(long, value_name = "PATH")]
-    pub sheet: Option<PathBuf>,
-    /// Write a PNG plot of quality Q against primitives drawn: a dot per frame and technique, a
-    /// large one at each technique's mean.
-    #[arg(long, value_name = "PATH")]
-    pub quality_plot: Option<PathBuf>,
-    /// Write a PNG plot of per-frame curves along the path: Q, multi-scale RMSE, primitives drawn
-    /// and temporal noise (the reference's beside it).
-    #[arg(long, value_name = "PATH")]
-    pub frame_plot: Option<PathBuf>,
-    /// Write a PNG plot of multi-scale RMSE against primitives drawn, one panel per band of the
-    /// scene's projected height in pixels (as the table's summary by band): the picture a
-    /// representation is chosen from at each size on screen.
-    #[arg(long, value_name = "PATH")]
-    pub band_plot: Option<PathBuf>,
+/// Where the cameras of a run stand.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Cameras {
+    /// N cameras on a circle around the scene (at the framing elevation), each at the distance
+    /// that frames it (`--views N`).
+    Views(u32),
+    /// 8 cameras on a circle at each distance, in bounding radii of the scene (half the diagonal
+    /// of its bounds; `--orbit D1,D2,…`).
+    Orbit(Vec<f32>),
+    /// N ≥ 2 cameras flying in along the framing direction towards the centre of the bounds, from
+    /// 1 km (or 100 bounding radii, if farther) to 0.3 bounding radii, each frame the same
+    /// fraction closer (`--approach N`).
+    Approach(u32),
+    /// The poses of a camera path file ([`path::load`]; `--path FILE`).
+    Path(PathBuf),
 }
 
-/// `--orbit`'s distances, in bounding radii.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Distances(pub Vec<f32>);
+impl Default for Cameras {
+    fn default() -> Self {
+        Self::Views(DEFAULT_VIEWS)
+    }
+}
 
-fn parse_orbit(s: &str) -> Result<Distances, String> {
-    path::parse_distances(s).map(Distances)
+/// What to measure and how: the options of `treelod eval`, as plain values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    /// A `.treelod` container (drawn once at the origin) or a JSON scene file.
+    pub input: PathBuf,
+    /// Where the cameras stand.
+    pub cameras: Cameras,
+    /// Techniques to measure, in order (a repeated one is measured once); those whose data the
+    /// input lacks are reported as absent.
+    pub techniques: Vec<TechniqueName>,
+    /// Image size in pixels.
+    pub size: (u32, u32),
+    /// The reference is drawn this many times larger per side and box-filtered down (1..=16).
+    pub supersample: u32,
+    /// Vertical field of view, degrees.
+    pub fov_degrees: f32,
+    /// Background, sRGB: pixels of exactly this colour count as not covered.
+    pub background: [u8; 3],
+    /// MSAA samples (1 or 4) of every technique but `full` (drawn as the reference is).
+    pub msaa: u32,
+    /// Point threshold `s_min` of `spt` in pixels (`None`: the renderer's default).
+    pub s_min: Option<f32>,
+    /// Triangle threshold `s_max` of `spt` in pixels (`None`: the renderer's default).
+    pub s_max: Option<f32>,
+    /// `impostors`: slide planes onto their parents' and cross-fade textures between levels.
+    pub impostor_morph: bool,
+    /// `impostors`: which bark is drawn beside the planes.
+    pub impostor_bark: ImpostorBark,
+    /// `ellipsoids`: the bark as branch lines where the container has them (else triangles).
+    pub lines: bool,
+    /// `ellipsoids`: octaves of metres per pixel over which levels blend (0: switch at once).
+    pub level_blend: f32,
+    /// Keep the images of up to 4 frames spread over the path for a contact sheet
+    /// ([`Report::sheet`], [`output::contact_sheet`]).
+    pub sheet: bool,
+}
+
+impl Options {
+    /// The defaults of `treelod eval` for `input`: 8 views, `full`, `full-1x` and `spt`,
+    /// 640×480, the reference supersampled 4 times, a 50° field of view, a white background, no
+    /// MSAA, the renderer's thresholds, impostors morphing with the chain's bark, ellipsoids with
+    /// lines blending over half an octave, no contact sheet.
+    #[must_use]
+    pub fn new(input: impl Into<PathBuf>) -> Self {
+        Self {
+            input: input.into(),
+            cameras: Cameras::default(),
+            techniques: vec![TechniqueName::FULL, TechniqueName::Full1x, TechniqueName::Technique(Technique::Spt)],
+            size: (640, 480),
+            supersample: 4,
+            fov_degrees: 50.0,
+            background: [255; 3],
+            msaa: 1,
+            s_min: None,
+            s_max: None,
+            impostor_morph: true,
+            impostor_bark: ImpostorBark::Chain,
+            lines: true,
+            level_blend: 0.5,
+            sheet: false,
+        }
+    }
+
+    /// The renderer settings `technique` is measured with (`full` is drawn as the reference).
+    fn settings(&self, technique: Technique) -> Settings {
+        let mut settings = Settings { technique, ..Settings::default() };
+        settings.s_min = self.s_min.unwrap_or(settings.s_min);
+        settings.s_max = self.s_max.unwrap_or(settings.s_max);
+        // The pruning techniques prune every tree at every distance (no point tree for
+        // small ones), with the container's λ(h), the occlusion factor and hysteresis.
+        settings.pruning = Pruning { spt_below_pixels: 0.0, ..Pruning::default() };
+        // Impostors: the leaves of every tree with planes as planes, its bark as triangles.
+        settings.impostor_morph = self.impostor_morph;
+        settings.impostor_bark = self.impostor_bark;
+        // Ellipsoids: the leaves of every tree with ellipsoids as ellipsoids, its bark as
+        // its branch lines where it has them (unless `lines` is off), else as triangles.
+        settings.lines = self.lines;
+        settings.level_blend = self.level_blend;
+        settings
+    }
+
+    /// Refuses values no command line gives.
+    fn check(&self) -> Result<(), Error> {
+        let bad = |message: &str| Err(Error::Options { input: self.input.clone(), message: message.to_owned() });
+        let (w, h) = self.size;
+        if w == 0 || h == 0 {
+            return bad("the image size must be at least 1x1");
+        }
+        if !(1..=16).contains(&self.supersample) {
+            return bad("the supersampling factor must be 1 to 16");
+        }
+        if !matches!(self.msaa, 1 | 4) {
+            return bad("MSAA samples must be 1 or 4");
+        }
+        if !(self.fov_degrees > 0.0 && self.fov_degrees < 180.0) {
+            return bad("the field of view must be between 0 and 180 degrees");
+        }
+        if matches!(&self.cameras, Cameras::Views(0) | Cameras::Approach(0 | 1)) {
+            return bad("views need at least 1 camera, an approach 2");
+        }
+        if matches!(&self.cameras, Cameras::Orbit(d) if d.is_empty() || d.iter().any(|d| !(*d > 0.0 && d.is_finite())))
+        {
+            return bad("orbit distances must be positive");
+        }
+        Ok(())
+    }
 }
 
 /// What a row measures, by the name `--technique` takes: a technique of the one list
@@ -166,6 +203,8 @@ const NAMES: [TechniqueName; Technique::COUNT + 1] = {
 impl TechniqueName {
     /// The full mesh drawn as the reference is.
     pub const FULL: Self = Self::Technique(Technique::Full);
+    /// Every name: `full`, `full-1x`, then the rest of [`Technique::ALL`].
+    pub const ALL: [Self; Technique::COUNT + 1] = NAMES;
 
     /// The name as `--technique` takes it.
     #[must_use]
@@ -186,6 +225,7 @@ impl TechniqueName {
     }
 }
 
+#[cfg(feature = "clap")]
 impl clap::ValueEnum for TechniqueName {
     fn value_variants<'a>() -> &'a [Self] {
         &NAMES
@@ -401,63 +441,125 @@ pub struct SheetFrame {
     pub techniques: Vec<(TechniqueName, LinearImage, Mask)>,
 }
 
-/// Runs `treelod eval`.
-pub fn run(args: &Args) -> Result<(), Failed> {
-    for output in [&args.csv, &args.json, &args.sheet, &args.quality_plot, &args.frame_plot, &args.band_plot]
-        .into_iter()
-        .flatten()
-    {
-        if output.is_dir() {
-            report::message_error(output, "is a directory; name the file to write");
-            return Err(Failed { class: ErrorClass::Io });
-        }
+impl Report {
+    /// The techniques measured, in the order asked for.
+    pub fn measured(&self) -> impl Iterator<Item = TechniqueName> + '_ {
+        self.techniques.iter().filter(|(_, a)| *a == Availability::Measured).map(|(n, _)| *n)
     }
-    let scene = scene::load(&args.input).map_err(|e| crate::render::scene_failed(&e))?;
-    let path_poses = match &args.path {
-        Some(file) => Some(path::load(file).map_err(|(io, message)| {
-            report::message_error(file, &message);
-            Failed { class: if io { ErrorClass::Io } else { ErrorClass::Invalid } }
-        })?),
-        None => None,
+
+    /// The report as text: the heading, the techniques not measured, the table, the summary by
+    /// band and, last, `written`: the files written, as `treelod eval` prints it (in the order
+    /// CSV, JSON, contact sheet, quality plot, frame plot, band plot).
+    #[must_use]
+    pub fn text(&self, written: [&Option<PathBuf>; 6]) -> String {
+        output::text(self, written)
+    }
+
+    /// Writes one CSV row per frame and technique to `path`.
+    ///
+    /// # Errors
+    /// [`Error::OutputIsDirectory`] or [`Error::Write`] naming `path`.
+    pub fn write_csv(&self, path: &Path) -> Result<(), Error> {
+        crate::write::atomically(path, output::csv(self).as_bytes())
+    }
+
+    /// Writes the JSON summary to `path`.
+    ///
+    /// # Errors
+    /// As [`Report::write_csv`], or [`Error::Encode`].
+    pub fn write_json(&self, path: &Path) -> Result<(), Error> {
+        crate::write::json(path, output::json(self))
+    }
+
+    /// Writes the contact sheet (a PNG; empty unless [`Options::sheet`] was set) to `path`.
+    ///
+    /// # Errors
+    /// As [`Report::write_json`].
+    pub fn write_sheet(&self, path: &Path) -> Result<(), Error> {
+        crate::write::png(path, &output::contact_sheet(self))
+    }
+
+    /// Writes the plot of Q against primitives drawn ([`plot::quality_vs_primitives`]) to `path`.
+    ///
+    /// # Errors
+    /// As [`Report::write_json`].
+    pub fn write_quality_plot(&self, path: &Path) -> Result<(), Error> {
+        crate::write::png(path, &plot::quality_vs_primitives(self))
+    }
+
+    /// Writes the per-frame curves along the path ([`plot::per_frame`]) to `path`.
+    ///
+    /// # Errors
+    /// As [`Report::write_json`].
+    pub fn write_frame_plot(&self, path: &Path) -> Result<(), Error> {
+        crate::write::png(path, &plot::per_frame(self))
+    }
+
+    /// Writes RMSE against primitives per band of projected height ([`plot::by_band`]) to `path`.
+    ///
+    /// # Errors
+    /// As [`Report::write_json`].
+    pub fn write_band_plot(&self, path: &Path) -> Result<(), Error> {
+        crate::write::png(path, &plot::by_band(self))
+    }
+}
+
+/// Measures `options.techniques` against the reference at every camera; see [`run_with_progress`].
+///
+/// # Errors
+/// As [`run_with_progress`].
+pub fn run(options: &Options) -> Result<Report, Error> {
+    run_with_progress(options, &mut |_, _| {})
+}
+
+/// Measures `options.techniques` against the reference at every camera and returns what was
+/// measured. Before the first frame every renderer draws once (shader compilation is not
+/// timed), and before each frame streaming settles. `progress(frame, frames)` is called before
+/// each frame is drawn.
+///
+/// # Errors
+/// A bad scene, container or camera path ([`Error::Scene`], [`Error::Container`],
+/// [`Error::CameraPath`], naming the file), bad options ([`Error::Options`]), no technique
+/// measurable ([`Error::NoneMeasurable`]), no device or one too small ([`Error::NoDevice`],
+/// [`Error::TooLarge`]), a frame that cannot be drawn ([`Error::Render`]).
+pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usize)) -> Result<Report, Error> {
+    options.check()?;
+    let input = &options.input;
+    let scene = scene::load(input)?;
+    let path_poses = match &options.cameras {
+        Cameras::Path(file) => {
+            Some(path::load(file).map_err(|(io, message)| Error::CameraPath { path: file.clone(), message, io })?)
+        }
+        _ => None,
     };
     let held = held_by_models(&scene)?;
     let mut techniques: Vec<(TechniqueName, Availability)> = Vec::new();
-    for &name in &args.technique {
+    for &name in &options.techniques {
         if !techniques.iter().any(|(n, _)| *n == name) {
-            let holder = if scene::is_container_path(&args.input) {
-                "this container holds no"
-            } else {
-                "no model of the scene holds"
-            };
+            let holder =
+                if scene::is_container_path(input) { "this container holds no" } else { "no model of the scene holds" };
             techniques.push((name, availability(name, held, holder)));
         }
     }
     if techniques.iter().all(|(_, a)| *a != Availability::Measured) {
-        report::write_stdout(&output::unavailable(&techniques))?;
-        report::message_error(&args.input, "none of the techniques asked for can be measured");
-        return Err(Failed { class: ErrorClass::Unsupported });
+        return Err(Error::NoneMeasurable { input: input.clone(), absent: output::unavailable(&techniques) });
     }
-    let gpu = Gpu::new().map_err(|e| {
-        report::message_error(&args.input, &format!("cannot render: {e}"));
-        Failed { class: ErrorClass::Unsupported }
-    })?;
-    let (width, height) = args.size;
-    let k = args.supersample;
+    let gpu = Gpu::new().map_err(|source| Error::NoDevice { input: input.clone(), source })?;
+    let (width, height) = options.size;
+    let k = options.supersample;
     let limit = gpu.device.limits().max_texture_dimension_2d;
     if u64::from(width) * u64::from(k) > u64::from(limit) || u64::from(height) * u64::from(k) > u64::from(limit) {
-        report::message_error(
-            &args.input,
-            &format!(
+        return Err(Error::TooLarge {
+            input: input.clone(),
+            message: format!(
                 "the reference, {width}x{height} supersampled {k} times, is larger than the device draws ({limit} pixels per side at most)"
             ),
-        );
-        return Err(Failed { class: ErrorClass::Unsupported });
+        });
     }
 
-    let add = |settings: Settings, samples: u32| -> Result<(Renderer, (Vec3, Vec3)), Failed> {
+    let add = |settings: Settings, samples: u32| -> Result<(Renderer, (Vec3, Vec3)), Error> {
         let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(samples), settings);
-        let bounds = scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer)
-            .map_err(|e| crate::render::scene_failed(&e))?;
+        let bounds = scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer)?;
         Ok((renderer, bounds))
     };
     let full_settings = Settings { technique: Technique::Full, ..Settings::default() };
@@ -471,50 +573,31 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         let (settings, supersample) = match name {
             &TechniqueName::FULL => (reference_settings, k),
             TechniqueName::Full1x => (full_settings, 1),
-            TechniqueName::Technique(technique) => {
-                let mut settings = Settings { technique: *technique, ..Settings::default() };
-                settings.s_min = args.s_min.unwrap_or(settings.s_min);
-                settings.s_max = args.s_max.unwrap_or(settings.s_max);
-                // The pruning techniques prune every tree at every distance (no point tree for
-                // small ones), with the container's λ(h), the occlusion factor and hysteresis.
-                settings.pruning = Pruning { spt_below_pixels: 0.0, ..Pruning::default() };
-                // Impostors: the leaves of every tree with planes as planes, its bark as triangles.
-                args.impostor.apply(&mut settings);
-                // Ellipsoids: the leaves of every tree with ellipsoids as ellipsoids, its bark as
-                // its branch lines where it has them (unless `--no-lines`), else as triangles.
-                settings.lines = !args.no_lines;
-                settings.level_blend = args.level_blend;
-                (settings, 1)
-            }
+            TechniqueName::Technique(technique) => (options.settings(*technique), 1),
         };
-        let samples = if *name == TechniqueName::FULL { 1 } else { args.msaa };
+        let samples = if *name == TechniqueName::FULL { 1 } else { options.msaa };
         measured.push(Measured { name: *name, renderer: add(settings, samples)?.0, supersample, previous: None });
     }
 
-    let fovy = args.fov.to_radians();
-    let (poses, camera_source) = cameras(args, path_poses, bounds, fovy);
-    let background = clear_colour(args.background);
+    let fovy = options.fov_degrees.to_radians();
+    let (poses, camera_source) = cameras(options, path_poses, bounds, fovy);
+    let background = clear_colour(options.background);
     let camera = |pose: &Pose, k: u32| Camera::look_at(pose.eye, pose.target, fovy, width * k, height * k);
     // Images and masks of one run always match in size; a mismatch is a bug, reported as such.
-    let internal = |e: MetricError| {
-        report::message_error(&args.input, &format!("internal error: {e}"));
-        Failed { class: ErrorClass::Io }
-    };
-    let shoot = |renderer: &mut Renderer, pose: &Pose, k: u32| -> Result<Shot, Failed> {
+    let internal = |e: MetricError| Error::Internal { input: input.clone(), message: e.to_string() };
+    let shoot = |renderer: &mut Renderer, pose: &Pose, k: u32| -> Result<Shot, Error> {
         let camera = camera(pose, k);
-        crate::render::settle_streaming(&gpu, renderer, &camera);
+        settle_streaming(&gpu, renderer, &camera);
         // One prepare per frame, as a host makes it; the wall clock runs over prepare, render and
         // read-back.
         let start = Instant::now();
         let stats = renderer.prepare(&gpu.device, &gpu.queue, &camera);
         gpu.queue.submit([]);
         let prepare_ms = start.elapsed().as_secs_f64() * 1e3;
-        let (image, gpu_ms) = render_prepared_timed(&gpu, renderer, &camera, background).map_err(|e| {
-            report::message_error(&args.input, &format!("cannot render: {e}"));
-            Failed { class: ErrorClass::Io }
-        })?;
+        let (image, gpu_ms) = render_prepared_timed(&gpu, renderer, &camera, background)
+            .map_err(|source| Error::Render { input: input.clone(), source })?;
         let wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        let (image, mask) = measurable(&image, k, args.background).map_err(internal)?;
+        let (image, mask) = measurable(&image, k, options.background).map_err(internal)?;
         Ok(Shot { image, mask, stats, prepare_ms, gpu_ms, wall_ms })
     };
 
@@ -527,12 +610,11 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         }
     }
     let sheet_frames = sheet_frames(poses.len());
-    let progress = progress_bar(poses.len() as u64);
     let mut rows = Vec::with_capacity(poses.len() * measured.len());
     let mut sheet = Vec::new();
     let mut previous_reference: Option<LinearImage> = None;
     for (frame, pose) in poses.iter().enumerate() {
-        progress.set_position(frame as u64);
+        progress(frame, poses.len());
         let reference_shot = shoot(&mut reference, pose, k)?;
         let reference_noise = match &previous_reference {
             Some(previous) => Some(temporal_noise(&reference_shot.image, previous).map_err(internal)?),
@@ -561,12 +643,12 @@ pub fn run(args: &Args) -> Result<(), Failed> {
                 gpu_ms: shot.gpu_ms,
                 wall_ms: shot.wall_ms,
             });
-            if args.sheet.is_some() && sheet_frames.contains(&frame) {
+            if options.sheet && sheet_frames.contains(&frame) {
                 sheet_techniques.push((m.name, shot.image.clone(), shot.mask));
             }
             m.previous = Some(shot.image);
         }
-        if args.sheet.is_some() && sheet_frames.contains(&frame) {
+        if options.sheet && sheet_frames.contains(&frame) {
             sheet.push(SheetFrame {
                 frame,
                 reference: (reference_shot.image.clone(), reference_shot.mask),
@@ -575,47 +657,24 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         }
         previous_reference = Some(reference_shot.image);
     }
-    progress.finish_and_clear();
 
     let heights = poses.iter().map(|pose| projected_height(bounds, pose, fovy, height)).collect();
-    let report = Report {
-        input: args.input.clone(),
+    Ok(Report {
+        input: input.clone(),
         camera_source,
         poses,
         heights,
-        size: args.size,
+        size: options.size,
         supersample: k,
-        msaa: args.msaa,
-        fov_degrees: args.fov,
-        background: args.background,
+        msaa: options.msaa,
+        fov_degrees: options.fov_degrees,
+        background: options.background,
         adapter: Adapter::new(&gpu.info),
         timestamps: gpu.device.features().contains(wgpu::Features::TIMESTAMP_QUERY),
         techniques,
         rows,
         sheet,
-    };
-    if let Some(csv) = &args.csv {
-        report::write_atomically(csv, output::csv(&report).as_bytes())?;
-    }
-    if let Some(json) = &args.json {
-        crate::render::write_json(json, output::json(&report))?;
-    }
-    if let Some(sheet) = &args.sheet {
-        crate::render::write_png(sheet, &output::contact_sheet(&report))?;
-    }
-    for (file, draw) in [
-        (&args.quality_plot, plot::quality_vs_primitives as fn(&Report) -> treelod_render::offscreen::Image),
-        (&args.frame_plot, plot::per_frame),
-        (&args.band_plot, plot::by_band),
-    ] {
-        if let Some(file) = file {
-            crate::render::write_png(file, &draw(&report))?;
-        }
-    }
-    report::write_stdout(&output::text(
-        &report,
-        [&args.csv, &args.json, &args.sheet, &args.quality_plot, &args.frame_plot, &args.band_plot],
-    ))
+    })
 }
 
 /// The reference's renderer settings, for `eval` and `bench --quality`: the full mesh, keeping
@@ -624,7 +683,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
 /// bounding radii kept 60 % of the darkening that alpha to coverage keeps). Each of its pixels is
 /// still leaf or background (a stochastic test), so the box filter of [`measurable`] averages the
 /// coverage and the majority mask stays binary.
-pub(crate) fn reference_settings() -> Settings {
+#[must_use]
+pub fn reference_settings() -> Settings {
     Settings { technique: Technique::Full, stochastic_alpha: true, ..Settings::default() }
 }
 
@@ -633,7 +693,7 @@ pub(crate) fn reference_settings() -> Settings {
 ///
 /// # Errors
 /// [`MetricError`] if the image's pixels do not match its size or `k` does not divide it.
-pub(crate) fn measurable(
+pub fn measurable(
     image: &treelod_render::offscreen::Image,
     k: u32,
     background: [u8; 3],
@@ -645,11 +705,11 @@ pub(crate) fn measurable(
 
 /// How many of the scene's models hold each technique's data (each opened and checked as every
 /// reader does).
-fn held_by_models(scene: &Scene) -> Result<PerTechnique<usize>, Failed> {
+fn held_by_models(scene: &Scene) -> Result<PerTechnique<usize>, Error> {
     let containers = scene
         .models
         .iter()
-        .map(|model| Container::open(model).map_err(|e| report::file_error(model, &e)))
+        .map(|model| Container::open(model).map_err(|source| Error::Container { path: model.clone(), source }))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(PerTechnique::held_by(&containers))
 }
@@ -666,31 +726,44 @@ pub fn projected_height(bounds: (Vec3, Vec3), pose: &Pose, fovy: f32, image_heig
     f64::from(bounds.1.y - bounds.0.y) * focal / distance
 }
 
-/// The cameras the arguments ask for, and how to say where they came from.
-fn cameras(args: &Args, path_poses: Option<Vec<Pose>>, bounds: (Vec3, Vec3), fovy: f32) -> (Vec<Pose>, String) {
-    let (width, height) = args.size;
+/// The cameras the options ask for, and how to say where they came from (as the command line
+/// says it).
+fn cameras(options: &Options, path_poses: Option<Vec<Pose>>, bounds: (Vec3, Vec3), fovy: f32) -> (Vec<Pose>, String) {
+    let (width, height) = options.size;
     let framing = frame_camera(bounds, None, None, fovy, width, height);
     let target = 0.5 * (bounds.0 + bounds.1);
     if let Some(poses) = path_poses {
-        let source = args.path.as_ref().map(|p| format!("--path {}", p.display())).unwrap_or_default();
+        let source = match &options.cameras {
+            Cameras::Path(p) => format!("--path {}", p.display()),
+            _ => String::new(),
+        };
         return (poses, source);
     }
     // The bounding radius as `render` frames it: the half diagonal of the bounds.
     let radius = (0.5 * (bounds.1 - bounds.0)).length().max(0.1);
-    if let Some(count) = args.approach {
-        let (far, near) = (APPROACH_FAR_METRES.max(APPROACH_FAR_RADII * radius), APPROACH_NEAR_RADII * radius);
-        let poses = path::approach(target, FRAMING_DIRECTION, far, near, count as usize);
-        return (poses, format!("--approach {count}: {far:.0} to {near:.2} from the centre"));
+    match &options.cameras {
+        Cameras::Approach(count) => {
+            let (far, near) = (APPROACH_FAR_METRES.max(APPROACH_FAR_RADII * radius), APPROACH_NEAR_RADII * radius);
+            let poses = path::approach(target, FRAMING_DIRECTION, far, near, *count as usize);
+            (poses, format!("--approach {count}: {far:.0} to {near:.2} from the centre"))
+        }
+        Cameras::Orbit(distances) => {
+            let poses = distances
+                .iter()
+                .flat_map(|d| path::circle(target, FRAMING_DIRECTION, d * radius, ORBIT_VIEWS))
+                .collect();
+            let list: Vec<String> = distances.iter().map(f32::to_string).collect();
+            (poses, format!("--orbit {}", list.join(",")))
+        }
+        Cameras::Views(_) | Cameras::Path(_) => {
+            let views = match &options.cameras {
+                Cameras::Views(views) => *views,
+                _ => DEFAULT_VIEWS,
+            };
+            let distance = framing.position.distance(target);
+            (path::circle(target, FRAMING_DIRECTION, distance, views as usize), format!("--views {views}"))
+        }
     }
-    if let Some(Distances(distances)) = &args.orbit {
-        let poses =
-            distances.iter().flat_map(|d| path::circle(target, FRAMING_DIRECTION, d * radius, ORBIT_VIEWS)).collect();
-        let list: Vec<String> = distances.iter().map(f32::to_string).collect();
-        return (poses, format!("--orbit {}", list.join(",")));
-    }
-    let views = args.views.unwrap_or(DEFAULT_VIEWS);
-    let distance = framing.position.distance(target);
-    (path::circle(target, FRAMING_DIRECTION, distance, views as usize), format!("--views {views}"))
 }
 
 /// Up to [`SHEET_FRAMES`] frames spread evenly over `count`, first and last included.
@@ -703,15 +776,6 @@ fn sheet_frames(count: usize) -> Vec<usize> {
     let mut frames: Vec<usize> = (0..SHEET_FRAMES).map(|i| (2 * i * (count - 1) + steps) / (2 * steps)).collect();
     frames.dedup();
     frames
-}
-
-/// A progress bar on stderr (drawn only on a terminal).
-fn progress_bar(len: u64) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} eval [frame {pos}/{len}] {elapsed}") {
-        bar.set_style(style);
-    }
-    bar
 }
 
 #[cfg(test)]
@@ -746,20 +810,6 @@ mod tests {
             let expected = if t.needs().is_some() { "absent" } else { "measured" };
             assert_eq!(availability(TechniqueName::Technique(t), none, CONTAINER).status(), expected);
         }
-    }
-
-    #[test]
-    fn every_technique_of_the_one_list_is_a_name_and_full_1x_follows_full() {
-        use clap::ValueEnum as _;
-        let names: Vec<&str> = TechniqueName::value_variants().iter().map(|n| n.name()).collect();
-        assert_eq!(names.len(), Technique::COUNT + 1);
-        assert_eq!(&names[..3], ["full", "full-1x", "spt"]);
-        for t in Technique::ALL {
-            assert!(names.contains(&t.name()), "{t}");
-            assert_eq!(TechniqueName::from_str(t.name(), false), Ok(TechniqueName::Technique(t)));
-        }
-        assert_eq!(TechniqueName::from_str("full-1x", false), Ok(TechniqueName::Full1x));
-        assert!(TechniqueName::from_str("policy", false).is_err());
     }
 
     #[test]

@@ -235,7 +235,7 @@ pub fn by_band(report: &Report) -> Vec<BandSummary> {
 }
 
 /// The description of a technique, for the JSON summary.
-pub(crate) fn description(technique: TechniqueName) -> &'static str {
+pub fn description(technique: TechniqueName) -> &'static str {
     match technique {
         TechniqueName::Full1x => "the full mesh drawn at the image size (no supersampling): the aliasing floor",
         TechniqueName::Technique(t) => match t {

@@ -1,0 +1,187 @@
+//! `treelod bench`: the command line of the fly-through benchmark, [`treelod_harness::bench`].
+//! This module turns the arguments into [`bench::Options`], shows a progress bar, prints the
+//! report and writes the files asked for; the forest, the path, the measuring and the outputs are
+//! the harness's.
+
+use std::path::PathBuf;
+
+use treelod_harness::bench::{self, Options, Quality, Report};
+use treelod_render::Technique;
+
+use crate::eval::{failed, none_measurable};
+use crate::render::{parse_colour, parse_fov, parse_pixels, parse_size};
+use crate::report::{self, Failed};
+
+/// Arguments of `treelod bench`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Containers, or scene files whose models are used; the forest is made of these models.
+    /// None: built-in demo trees of four shapes, built in memory.
+    #[arg(value_name = "FILE|SCENE")]
+    pub inputs: Vec<PathBuf>,
+    /// Trees in the forest (the paper: 10,000; 1,000,000 measures selection at scale, best with
+    /// --no-render).
+    #[arg(long, value_name = "N", default_value_t = 10_000,
+          value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+    pub trees: u64,
+    /// Frames along the path (the paper: 1440).
+    #[arg(long, value_name = "N", default_value_t = 360,
+          value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub frames: u32,
+    /// Image size in pixels, `WIDTHxHEIGHT`.
+    #[arg(long, value_name = "WxH", default_value = "1536x864", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Seed of the forest's layout.
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    pub seed: u64,
+    /// Vertical field of view in degrees.
+    #[arg(long, value_name = "DEGREES", default_value_t = 50.0, value_parser = parse_fov)]
+    pub fov: f32,
+    /// Techniques to fly, separated by commas; those not available are reported, not skipped.
+    #[arg(long, value_name = "NAMES", value_enum, value_delimiter = ',', default_values = ["full", "spt"])]
+    pub technique: Vec<Technique>,
+    /// Select and stream only: no image is drawn, so there is no GPU time (the figure for large
+    /// forests on a software rasteriser).
+    #[arg(long, conflicts_with = "quality")]
+    pub no_render: bool,
+    /// Select `spt` on the GPU (compute shaders write the draws: `Renderer::enable_gpu_selection`,
+    /// every model resident whole); its counts are then those of a frame read back one or two
+    /// frames earlier, and its selection time is that of `prepare` submitting the compute work.
+    #[arg(long)]
+    pub gpu_selection: bool,
+    /// Cast shadows: every technique the renderer flies also selects and draws three 2048²
+    /// shadow cascades of the sun over the first 150 m (`Settings::shadows`, the defaults), and
+    /// each frame records the primitives of that shadow pass (CSV column `shadow_primitives`).
+    /// The full mesh is counted, not drawn, so it has none; `--gpu-selection` frames are then
+    /// selected on the CPU.
+    #[arg(long)]
+    pub shadows: bool,
+    /// Also draw the full mesh as the reference at every frame and measure each technique's
+    /// image against it: P, R, Q, multi-scale RMSE and mean FLIP error (slow: the full mesh of
+    /// every tree in view). The reference is `treelod eval`'s: supersampled, box-filtered, with
+    /// the stochastic alpha test that keeps minified leaves' coverage.
+    #[arg(long)]
+    pub quality: bool,
+    /// With --quality, the reference is drawn K times larger per side and box-filtered down.
+    #[arg(long, value_name = "K", default_value_t = 4, requires = "quality",
+          value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub supersample: u32,
+    /// With --quality, the reference of earlier versions instead: the full mesh drawn at the image
+    /// size with the plain alpha test (aliased: thin leaves drop out of it).
+    #[arg(long, requires = "quality", conflicts_with = "supersample")]
+    pub reference_1x: bool,
+    /// Point threshold `s_min` in pixels of `spt`.
+    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    pub s_min: Option<f32>,
+    /// Triangle threshold `s_max` in pixels of `spt`.
+    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    pub s_max: Option<f32>,
+    /// Background colour, `RRGGBB` (sRGB hex): with --quality, pixels of it count as not covered.
+    #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
+    pub background: [u8; 3],
+    /// Write one CSV row per frame and technique.
+    #[arg(long, value_name = "PATH")]
+    pub csv: Option<PathBuf>,
+    /// Write a JSON summary.
+    #[arg(long, value_name = "PATH")]
+    pub json: Option<PathBuf>,
+    /// Write a PNG plot: primitives per frame per technique (log scale), selection and GPU
+    /// milliseconds, and Q with --quality, along the path.
+    #[arg(long, value_name = "PATH")]
+    pub plot: Option<PathBuf>,
+}
+
+impl Args {
+    /// The harness's options for these arguments.
+    #[must_use]
+    pub fn options(&self) -> Options {
+        let quality = match (self.quality, self.reference_1x) {
+            (false, _) => None,
+            (true, true) => Some(Quality::Plain1x),
+            (true, false) => Some(Quality::Supersampled(self.supersample)),
+        };
+        Options {
+            inputs: self.inputs.clone(),
+            trees: self.trees,
+            frames: self.frames,
+            size: self.size,
+            seed: self.seed,
+            fov_degrees: self.fov,
+            techniques: self.technique.clone(),
+            render: !self.no_render,
+            gpu_selection: self.gpu_selection,
+            shadows: self.shadows,
+            quality,
+            s_min: self.s_min,
+            s_max: self.s_max,
+            background: self.background,
+        }
+    }
+}
+
+/// Runs `treelod bench`.
+pub fn run(args: &Args) -> Result<(), Failed> {
+    let outputs = [&args.csv, &args.json, &args.plot];
+    treelod_harness::write::check_outputs(outputs.into_iter().flatten().map(PathBuf::as_path))
+        .map_err(|e| failed(&e))?;
+    let progress = progress_bar();
+    report::set_progress_bar(Some(progress.clone()));
+    let result = bench::run_with_progress(&args.options(), &mut |frame, frames| {
+        progress.set_length(frames as u64);
+        progress.set_position(frame as u64);
+    });
+    progress.finish_and_clear();
+    report::set_progress_bar(None);
+    let report = match result {
+        Ok(report) => report,
+        Err(e) => {
+            none_measurable(&e)?;
+            return Err(failed(&e));
+        }
+    };
+    let written: [(&Option<PathBuf>, Writer); 3] =
+        [(&args.csv, Report::write_csv), (&args.json, Report::write_json), (&args.plot, Report::write_plot)];
+    for (file, write) in written {
+        if let Some(file) = file {
+            write(&report, file).map_err(|e| failed(&e))?;
+        }
+    }
+    report::write_stdout(&report.text(outputs))
+}
+
+/// Writes one of the report's files.
+type Writer = fn(&Report, &std::path::Path) -> Result<(), treelod_harness::Error>;
+
+/// A progress bar on stderr (drawn only on a terminal).
+fn progress_bar() -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(0);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} bench [frame {pos}/{len}] {elapsed}") {
+        bar.set_style(style);
+    }
+    bar
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser as _;
+
+    use super::*;
+
+    #[derive(Debug, clap::Parser)]
+    struct BenchCli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    #[test]
+    fn every_technique_of_the_one_list_is_a_name_and_the_options_follow_the_arguments() {
+        let names: Vec<&str> = Technique::ALL.iter().map(|t| t.name()).collect();
+        let args = BenchCli::try_parse_from(["bench", "--technique", &names.join(",")]).expect("parses").args;
+        assert_eq!(args.technique, Technique::ALL);
+        assert_eq!(args.options(), Options { techniques: Technique::ALL.to_vec(), ..Options::default() });
+        let args = BenchCli::try_parse_from(["bench", "--quality", "--reference-1x", "--no-render"]);
+        assert!(args.is_err(), "--no-render conflicts with --quality");
+        let args = BenchCli::try_parse_from(["bench", "--quality", "--supersample", "2"]).expect("parses").args;
+        assert_eq!(args.options().quality, Some(Quality::Supersampled(2)));
+    }
+}
