@@ -62,8 +62,7 @@ fn main() {
     let full_triangles = container.triangles().len();
     let mut rng = SplitMix64(2005);
     let mut lod = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
-    let mut full =
-        Renderer::new(&gpu.device, Gpu::formats(), Settings { technique: Technique::Full, ..Settings::default() });
+    let mut full = Renderer::new(&gpu.device, Gpu::formats(), Settings::forced(Technique::Full));
     let container = std::sync::Arc::new(container);
     let (a, b) = (
         lod.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads"),

@@ -10,8 +10,9 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
-    Assignment, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerTechnique, PruneState, ROOTS_CELL,
-    Representations, Scene, Technique, TechniqueSettings, merge_ascending, select_frame, select_techniques,
+    Assignment, Calibration, Choices, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerTechnique, Policy,
+    PolicyState, PruneState, ROOTS_CELL, Representations, Scene, Technique, TechniqueSettings, choose_instances,
+    merge_ascending, select_frame, select_techniques,
 };
 
 use crate::camera::Camera;
@@ -153,6 +154,8 @@ pub struct Renderer {
     pub(crate) visible_fraction: Vec<f32>,
     /// This frame's trees per technique ([`Self::assign`]), shared by every view.
     assignment: Assignment,
+    /// The policy's per-model tables and per-instance state ([`Settings::policy`]).
+    pub(crate) policy: PolicyModels,
     /// Scratch: the instance indices the point tree selects in a view.
     spt_list: Vec<u32>,
     /// The occlusion measurement, and the trees to measure after this frame.
@@ -174,6 +177,33 @@ pub struct Renderer {
     pub(crate) buckets: Vec<Vec<(DrawInfo, u32, u32)>>,
     pub(crate) draw_infos: Vec<DrawInfo>,
     pub(crate) indirect: Vec<wgpu::util::DrawIndirectArgs>,
+}
+
+/// What the policy ([`Settings::policy`]) reads per model, and keeps per instance.
+#[derive(Default)]
+pub(crate) struct PolicyModels {
+    /// Per model: its calibration tables, if its container has them.
+    pub(crate) calibrations: Vec<Option<Calibration>>,
+    /// Per model: its choices under [`Self::made_for`] (`None` without tables).
+    choices: Vec<Option<Choices>>,
+    /// The policy the choices were made for; `None`: to be made.
+    made_for: Option<Policy>,
+    /// Per instance: last frame's choice (hysteresis).
+    state: PolicyState,
+    /// Scratch: this frame's choice per instance.
+    chosen: Vec<Technique>,
+}
+
+impl PolicyModels {
+    /// Whether `policy` chooses any tree's technique: some model has calibration tables.
+    fn chooses(&self, policy: Option<&Policy>) -> bool {
+        policy.is_some() && self.calibrations.iter().any(Option::is_some)
+    }
+
+    /// Forgets the choices (a model was added) so the next frame makes them again.
+    pub(crate) fn models_changed(&mut self) {
+        self.made_for = None;
+    }
 }
 
 /// What [`Renderer::select_view`] counted.
@@ -271,6 +301,7 @@ impl Renderer {
             models: Vec::new(),
             lods: Vec::new(),
             representations: Vec::new(),
+            policy: PolicyModels::default(),
             instances: Vec::new(),
             model_layout,
             frame_layout,
@@ -441,6 +472,7 @@ impl Renderer {
         if self.instances.len() != before {
             self.prune_shown = vec![None; self.instances.len()];
             self.visible_fraction = vec![1.0; self.instances.len()];
+            self.policy.state.reset();
         }
         // The union of the instances' transformed blocks (their container's bounds).
         let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
@@ -567,6 +599,7 @@ impl Renderer {
         self.gpu_instances_stale = false;
         self.gpu_frame = false;
         if technique == Technique::Spt
+            && !self.policy.chooses(settings.policy.as_ref())
             && self.cascades.is_empty()
             && let Some(gpu) = self.gpu.as_mut().filter(|g| g.usable())
         {
@@ -595,7 +628,7 @@ impl Renderer {
         }
 
         // The camera's selection, then each cascade's, of the same assignment.
-        self.assign();
+        self.assign(&runtime_camera);
         let mut main = std::mem::take(&mut self.main);
         let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true);
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
@@ -681,12 +714,38 @@ impl Renderer {
         stats
     }
 
-    /// Assigns this frame's instances to techniques (the assignment every view then selects):
-    /// today every tree to [`Settings::technique`], or to [`Technique::FALLBACK`] where its model
-    /// lacks that technique's data. A policy choosing a technique per tree replaces the closure.
-    fn assign(&mut self) {
+    /// Assigns this frame's instances to techniques (the assignment every view then selects,
+    /// the shadow cascades included, so a tree casts the shadow of what is drawn): with a
+    /// [`Settings::policy`], each tree of a model with calibration tables to the policy's choice
+    /// at its projected height for `camera`, every other tree to [`Settings::technique`]; a tree
+    /// whose model lacks its technique's data to [`Technique::FALLBACK`].
+    fn assign(&mut self, camera: &treelod_runtime::Camera) {
         let technique = self.settings.technique;
-        self.assignment.assign(&self.instances, &self.representations, |_, _| technique);
+        let Some(policy) = self.settings.policy.filter(|p| self.policy.chooses(Some(p))) else {
+            self.assignment.assign(&self.instances, &self.representations, |_, _| technique);
+            return;
+        };
+        let tables = &mut self.policy;
+        if tables.made_for != Some(policy) {
+            tables.choices = tables
+                .calibrations
+                .iter()
+                .zip(&self.representations)
+                .map(|(calibration, models)| calibration.as_ref().map(|c| Choices::new(c, &policy, models)))
+                .collect();
+            tables.made_for = Some(policy);
+        }
+        choose_instances(
+            &self.instances,
+            &self.lods,
+            &tables.choices,
+            camera,
+            technique,
+            &mut tables.state,
+            &mut tables.chosen,
+        );
+        let chosen = &tables.chosen;
+        self.assignment.assign(&self.instances, &self.representations, |i, _| chosen[i]);
     }
 
     /// Selects one view (its lists cleared first): each technique's runtime selection over the

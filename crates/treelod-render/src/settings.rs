@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 use treelod_runtime::spt_lod::PixelLevel;
-use treelod_runtime::{PruneScale, Technique};
+use treelod_runtime::{Policy, PruneScale, Technique};
 
 use crate::shadows::Shadows;
 #[cfg(doc)]
@@ -97,14 +97,22 @@ pub struct Settings {
     pub shading: Option<(f32, f32)>,
     /// Scale of the splat radii: 1 draws each point as a disc of the opaque area it stands for.
     pub point_scale: f32,
-    /// How trees are drawn: one of treelod's representations, a baseline, or the full mesh
-    /// ([`Technique::Full`]: every triangle and no point, for comparison). A tree whose container
-    /// lacks the technique's data ([`Technique::held_by`]) is drawn with the sequential point
-    /// tree ([`Technique::FALLBACK`]); [`FrameStats::instances`] counts each tree under the
-    /// technique it was drawn with. Default: [`Technique::Spt`]. Selected on the GPU
-    /// ([`Renderer::enable_gpu_selection`]) for [`Technique::Spt`] only; every other technique
-    /// selects on the CPU.
+    /// How trees are drawn where [`Self::policy`] does not choose (no policy, or a container
+    /// without calibration tables): one of treelod's representations, a baseline, or the full
+    /// mesh ([`Technique::Full`]: every triangle and no point, for comparison). A tree whose
+    /// container lacks the technique's data ([`Technique::held_by`]) is drawn with the
+    /// sequential point tree ([`Technique::FALLBACK`]); [`FrameStats::instances`] counts each
+    /// tree under the technique it was drawn with. Default: [`Technique::Spt`]. Selected on the
+    /// GPU ([`Renderer::enable_gpu_selection`]) for [`Technique::Spt`] only, and only when the
+    /// policy chooses no tree; every other frame selects on the CPU.
     pub technique: Technique,
+    /// The policy (`treelod_runtime::policy`, spec §10.2): each tree whose container has
+    /// calibration tables (spec §6.15, `treelod build` writes them by default) is drawn with the
+    /// cheapest representation whose calibrated error at its projected height is within
+    /// [`Policy::target`] of the full mesh's, with hysteresis; the shadow cascades draw each tree
+    /// with the camera's choice. `None` draws every tree with [`Self::technique`] (to force one).
+    /// Default: [`Policy::default`].
+    pub policy: Option<Policy>,
     /// What to colour by.
     pub debug: DebugView,
     /// Direction towards the sun, world space.
@@ -210,6 +218,15 @@ impl Settings {
     }
 }
 
+impl Settings {
+    /// The default settings drawing every tree with `technique`, without the policy (for
+    /// comparisons and tools that force one).
+    #[must_use]
+    pub fn forced(technique: Technique) -> Self {
+        Self { technique, policy: None, ..Self::default() }
+    }
+}
+
 impl Default for Settings {
     /// One-pixel points, triangles above two pixels, light from above and the side.
     fn default() -> Self {
@@ -220,6 +237,7 @@ impl Default for Settings {
             shading: None,
             point_scale: 1.0,
             technique: Technique::Spt,
+            policy: Some(Policy::default()),
             debug: DebugView::Shaded,
             sun: Vec3::new(0.4, 0.8, 0.45),
             sun_colour: Vec3::ONE,

@@ -376,6 +376,10 @@ impl Renderer {
         });
         self.lods.push(lod);
         self.representations.push(representations);
+        self.policy
+            .calibrations
+            .push(treelod_runtime::Calibration::from_container(&self.models[id.0 as usize].container));
+        self.policy.models_changed();
         self.wanted.push(vec![[0; 2]; cells]);
         if self.gpu.is_some() {
             // Checked above, so it fits; should it not, GPU selection is turned off.

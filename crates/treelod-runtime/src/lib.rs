@@ -9,7 +9,8 @@
 //! [`impostor`] selects the level of impostor planes of an instance the same way, [`ellipsoid`] the
 //! level of Clasen's leaf ellipsoids and branch lines (all three through one per-cell prefix
 //! selector, [`spt_lod`]), and [`baseline`] the level of a baseline LoD chain. [`technique`] is the one
-//! list of the ways a tree can be drawn, by the names every layer uses.
+//! list of the ways a tree can be drawn, by the names every layer uses, and [`policy`] chooses
+//! among them per tree from the calibration tables the build measured.
 //!
 //! Each representation's module also owns its per-frame selection over the trees assigned to it
 //! ([`prune::select`], [`impostor::select`], [`ellipsoid::select`], [`baseline::select`]); [`draws`]
@@ -23,6 +24,7 @@ pub mod draws;
 pub mod ellipsoid;
 pub mod frame;
 pub mod impostor;
+pub mod policy;
 pub mod prune;
 pub mod select;
 pub mod spt_lod;
@@ -44,6 +46,7 @@ pub use impostor::{
     CROSSFADE, ImpostorBark, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share,
     plane_drawn, plane_parents,
 };
+pub use policy::{Calibration, Choices, Policy, PolicyState, choose_instances, projected_height};
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
 pub use spt_lod::{PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};

@@ -69,6 +69,11 @@ pub struct Args {
     /// Triangle threshold `s_max` in pixels of the `spt` technique.
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_max: Option<f32>,
+    /// The `policy` technique's target: the image error (multi-scale RMSE of coverage) it allows
+    /// over the full mesh's at each tree's projected size, as the containers' calibration tables
+    /// measured it; 0 keeps the full mesh's image.
+    #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = crate::render::parse_target)]
+    pub policy_target: f32,
     /// Write one CSV row per frame and technique.
     #[arg(long, value_name = "PATH")]
     pub csv: Option<PathBuf>,
@@ -132,6 +137,7 @@ impl Args {
             impostor_bark: settings.impostor_bark,
             lines: !self.no_lines,
             level_blend: self.level_blend,
+            policy: treelod_render::Policy { target: self.policy_target, ..treelod_render::Policy::default() },
             sheet: self.sheet.is_some(),
         }
     }
@@ -218,13 +224,13 @@ mod tests {
     fn every_technique_of_the_one_list_is_a_name_and_full_1x_follows_full() {
         use clap::ValueEnum as _;
         let names: Vec<&str> = TechniqueName::value_variants().iter().map(|n| n.name()).collect();
-        assert_eq!(names.len(), Technique::COUNT + 1);
+        assert_eq!(names.len(), Technique::COUNT + 2);
         assert_eq!(&names[..3], ["full", "full-1x", "spt"]);
         for t in Technique::ALL {
             assert!(names.contains(&t.name()), "{t}");
             assert_eq!(TechniqueName::from_str(t.name(), false), Ok(TechniqueName::Technique(t)));
         }
         assert_eq!(TechniqueName::from_str("full-1x", false), Ok(TechniqueName::Full1x));
-        assert!(TechniqueName::from_str("policy", false).is_err());
+        assert_eq!(TechniqueName::from_str("policy", false), Ok(TechniqueName::Policy));
     }
 }

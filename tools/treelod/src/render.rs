@@ -76,36 +76,74 @@ pub struct Args {
 /// The technique trees are drawn with: shared by `render` and `view`.
 #[derive(Debug, clap::Args)]
 pub struct TechniqueArgs {
-    /// How trees are drawn: `spt` (triangles and points, Gilet 2005), `prune-opt` and
-    /// `prune-cook` (trees at least 64 pixels high with pruned leaves, Neubert 2011, scaled by the
-    /// container's s_opt(λ) or by Cook's 1/λ; build with `--prune`), `impostors` (leaf-cluster
-    /// planes, Garcia 2005; build with `--impostors`), `ellipsoids` (leaf ellipsoids and branch
-    /// lines, Clasen 2011; build with `--ellipsoids --lines`), the baselines `lod-chain`,
-    /// `billboard` and `crossed` (build with `--baselines`), or `full` (every triangle). Trees
-    /// whose containers lack the technique's data are drawn with `spt`.
-    #[arg(long, value_name = "TECHNIQUE", value_enum, default_value_t = Technique::Spt)]
-    pub technique: Technique,
+    /// Draw every tree with one technique: `spt` (triangles and points, Gilet 2005), `prune-opt`
+    /// and `prune-cook` (trees at least 64 pixels high with pruned leaves, Neubert 2011, scaled by
+    /// the container's s_opt(λ) or by Cook's 1/λ; build with `--prune`), `impostors`
+    /// (leaf-cluster planes, Garcia 2005; build with `--impostors`), `ellipsoids` (leaf
+    /// ellipsoids and branch lines, Clasen 2011; build with `--ellipsoids --lines`), the
+    /// baselines `lod-chain`, `billboard` and `crossed` (build with `--baselines`), or `full`
+    /// (every triangle). Trees whose containers lack the technique's data are drawn with `spt`.
+    /// Without it, the policy chooses per tree: the cheapest representation whose calibrated
+    /// error at the tree's size on screen is within `--policy-target` of the full mesh's (the
+    /// point tree for containers without calibration tables).
+    #[arg(long, value_name = "TECHNIQUE", value_enum)]
+    pub technique: Option<Technique>,
+    /// The policy's target: image error (multi-scale RMSE of coverage) allowed over the full
+    /// mesh's at each tree's projected size; 0 keeps the full mesh's image.
+    #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = parse_target, conflicts_with = "technique")]
+    pub policy_target: f32,
+}
+
+/// Parses the policy's target: a number in `0..=1`.
+pub fn parse_target(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("expected an error target, a number in 0..=1, got {s:?}")),
+    }
 }
 
 impl TechniqueArgs {
-    /// Warns about each model of `models` that lacks the technique's data (its trees are drawn
-    /// with the point tree instead).
+    /// The technique trees are drawn with where the policy does not choose.
+    #[must_use]
+    pub fn technique(&self) -> Technique {
+        self.technique.unwrap_or(Technique::FALLBACK)
+    }
+
+    /// Sets `settings` to the technique forced, or to the policy with its target.
+    pub fn apply(&self, settings: &mut Settings) {
+        settings.technique = self.technique();
+        settings.policy = match self.technique {
+            Some(_) => None,
+            None => Some(treelod_render::Policy { target: self.policy_target, ..treelod_render::Policy::default() }),
+        };
+    }
+
+    /// Warns about each model of `models` that lacks the forced technique's data (its trees are
+    /// drawn with the point tree instead).
     pub fn warn_without(&self, models: &[PathBuf]) {
-        let Some(data) = self.technique.needs() else { return };
+        let Some(technique) = self.technique else { return };
+        let Some(data) = technique.needs() else { return };
         for path in models {
             if let Ok(container) = treelod_format::Container::open(path)
-                && !self.technique.held_by(&container)
+                && !technique.held_by(&container)
             {
                 let message = format!(
                     "holds no {}; its trees are drawn with {} instead of {}",
                     data.description(),
                     Technique::FALLBACK,
-                    self.technique
+                    technique
                 );
                 report::print_warning(path, &message);
             }
         }
     }
+}
+
+/// The trees drawn with each technique, for summaries: `3 spt, 12 crossed`.
+#[must_use]
+pub fn technique_counts(instances: &treelod_render::PerTechnique<u32>) -> String {
+    let parts: Vec<String> = instances.iter().filter(|&(_, n)| n > 0).map(|(t, n)| format!("{n} {t}")).collect();
+    if parts.is_empty() { "none".to_owned() } else { parts.join(", ") }
 }
 
 /// How trees drawn with impostor planes change level and draw their bark: options shared by
@@ -423,7 +461,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         settings.s_max = s_max;
     }
     settings.debug = parse_debug(args.debug.as_deref());
-    settings.technique = args.technique.technique;
+    args.technique.apply(&mut settings);
     settings.pruning = args.prune.settings(settings.technique);
     args.light.apply(&mut settings);
     args.shadow.apply(&mut settings);
@@ -476,7 +514,11 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     );
     let technique = renderer.settings().technique;
     let drawn = stats.instances.get(technique);
+    if renderer.settings().policy.is_some() {
+        line.push_str(&format!(", policy: {}", technique_counts(&stats.instances)));
+    }
     match technique {
+        _ if renderer.settings().policy.is_some() => {}
         Technique::Full | Technique::Spt => {}
         Technique::PruneOpt | Technique::PruneCook => {
             line.push_str(&format!(", {drawn} pruned tree(s) drawing {} leaves", stats.leaves_pruned));
@@ -499,6 +541,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     }
     let image = if args.compare {
         renderer.settings_mut().technique = Technique::Full;
+        renderer.settings_mut().policy = None;
         let (full, full_stats) = render(&mut renderer)?;
         let ratio = stats.primitives() as f64 / full_stats.triangles.max(1) as f64;
         line.push_str(&format!(

@@ -177,7 +177,7 @@ pub fn settings(technique: Technique, options: &Options) -> Option<Settings> {
     if technique == Technique::Full {
         return None;
     }
-    let mut settings = Settings { technique, ..Settings::default() };
+    let mut settings = Settings::forced(technique);
     settings.s_min = options.s_min.unwrap_or(settings.s_min);
     settings.s_max = options.s_max.unwrap_or(settings.s_max);
     settings.pruning = Pruning::default();
@@ -506,7 +506,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
         }
         if let Some(quality) = options.quality {
             let settings = if quality == Quality::Plain1x {
-                Settings { technique: Technique::Full, ..Settings::default() }
+                Settings::forced(Technique::Full)
             } else {
                 crate::eval::reference_settings()
             };

@@ -18,7 +18,7 @@ use std::time::Instant;
 use glam::Vec3;
 use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, render_prepared_timed};
-use treelod_render::{Camera, FrameStats, ImpostorBark, PerTechnique, Pruning, Renderer, Settings, Technique};
+use treelod_render::{Camera, FrameStats, ImpostorBark, PerTechnique, Policy, Pruning, Renderer, Settings, Technique};
 
 use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse, temporal_noise};
 use self::path::Pose;
@@ -96,6 +96,8 @@ pub struct Options {
     pub lines: bool,
     /// `ellipsoids`: octaves of metres per pixel over which levels blend (0: switch at once).
     pub level_blend: f32,
+    /// `policy`: the policy the renderer chooses each tree's representation with (its target).
+    pub policy: Policy,
     /// Keep the images of up to 4 frames spread over the path for a contact sheet
     /// ([`Report::sheet`], [`output::contact_sheet`]).
     pub sheet: bool,
@@ -123,13 +125,14 @@ impl Options {
             impostor_bark: ImpostorBark::Chain,
             lines: true,
             level_blend: 0.5,
+            policy: Policy::default(),
             sheet: false,
         }
     }
 
     /// The renderer settings `technique` is measured with (`full` is drawn as the reference).
     fn settings(&self, technique: Technique) -> Settings {
-        let mut settings = Settings { technique, ..Settings::default() };
+        let mut settings = Settings::forced(technique);
         settings.s_min = self.s_min.unwrap_or(settings.s_min);
         settings.s_max = self.s_max.unwrap_or(settings.s_max);
         // The pruning techniques prune every tree at every distance (no point tree for
@@ -175,19 +178,24 @@ impl Options {
 /// What a row measures, by the name `--technique` takes: a technique of the one list
 /// ([`Technique`], drawn at the image size; `full` is drawn as the reference is, supersampled and
 /// box-filtered, the instrument's check), or `full-1x`, the full mesh drawn at the image size with no
-/// supersampling: the aliasing floor of every technique drawn at the image size.
+/// supersampling: the aliasing floor of every technique drawn at the image size; or `policy`,
+/// the renderer's default: each tree drawn with the representation the policy chooses from its
+/// container's calibration tables (the point tree where a container has none).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum TechniqueName {
     /// A technique of the one list.
     Technique(Technique),
     /// The full mesh at the image size.
     Full1x,
+    /// The policy's choice per tree.
+    Policy,
 }
 
 /// Every name `--technique` takes: the full mesh at the image size after the full mesh, then the
-/// rest of [`Technique::ALL`].
-const NAMES: [TechniqueName; Technique::COUNT + 1] = {
-    let mut names = [TechniqueName::Full1x; Technique::COUNT + 1];
+/// rest of [`Technique::ALL`], then the policy.
+const NAMES: [TechniqueName; Technique::COUNT + 2] = {
+    let mut names = [TechniqueName::Policy; Technique::COUNT + 2];
+    names[1] = TechniqueName::Full1x;
     let (mut i, mut k) = (0, 0);
     while i < Technique::COUNT {
         names[k] = TechniqueName::Technique(Technique::ALL[i]);
@@ -203,8 +211,8 @@ const NAMES: [TechniqueName; Technique::COUNT + 1] = {
 impl TechniqueName {
     /// The full mesh drawn as the reference is.
     pub const FULL: Self = Self::Technique(Technique::Full);
-    /// Every name: `full`, `full-1x`, then the rest of [`Technique::ALL`].
-    pub const ALL: [Self; Technique::COUNT + 1] = NAMES;
+    /// Every name: `full`, `full-1x`, then the rest of [`Technique::ALL`], then `policy`.
+    pub const ALL: [Self; Technique::COUNT + 2] = NAMES;
 
     /// The name as `--technique` takes it.
     #[must_use]
@@ -212,15 +220,18 @@ impl TechniqueName {
         match self {
             Self::Technique(t) => t.name(),
             Self::Full1x => "full-1x",
+            Self::Policy => "policy",
         }
     }
 
-    /// The technique drawn ([`Technique::Full`] for `full-1x`).
+    /// The technique drawn ([`Technique::Full`] for `full-1x`); `None` for the policy, which
+    /// chooses per tree.
     #[must_use]
-    pub fn technique(self) -> Technique {
+    pub fn technique(self) -> Option<Technique> {
         match self {
-            Self::Technique(t) => t,
-            Self::Full1x => Technique::Full,
+            Self::Technique(t) => Some(t),
+            Self::Full1x => Some(Technique::Full),
+            Self::Policy => None,
         }
     }
 }
@@ -236,6 +247,7 @@ impl clap::ValueEnum for TechniqueName {
             Self::Technique(Technique::Full) => "the full mesh drawn as the reference is (supersampled)",
             Self::Technique(t) => t.label(),
             Self::Full1x => "the full mesh at the image size (the aliasing floor)",
+            Self::Policy => "per tree, the cheapest representation the calibration finds within the target",
         };
         Some(clap::builder::PossibleValue::new(self.name()).help(help))
     }
@@ -275,7 +287,7 @@ impl Availability {
 /// scene holds`).
 #[must_use]
 pub fn availability(technique: TechniqueName, held: PerTechnique<usize>, holder: &str) -> Availability {
-    let technique = technique.technique();
+    let Some(technique) = technique.technique() else { return Availability::Measured };
     match technique.needs() {
         Some(data) if held.get(technique) == 0 => Availability::Absent(format!("{holder} {}", data.description())),
         _ => Availability::Measured,
@@ -562,7 +574,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
         let bounds = scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer)?;
         Ok((renderer, bounds))
     };
-    let full_settings = Settings { technique: Technique::Full, ..Settings::default() };
+    let full_settings = Settings::forced(Technique::Full);
     let reference_settings = reference_settings();
     let (mut reference, bounds) = add(reference_settings, 1)?;
     let mut measured = Vec::new();
@@ -574,6 +586,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
             &TechniqueName::FULL => (reference_settings, k),
             TechniqueName::Full1x => (full_settings, 1),
             TechniqueName::Technique(technique) => (options.settings(*technique), 1),
+            TechniqueName::Policy => (Settings { policy: Some(options.policy), ..options.settings(Technique::Spt) }, 1),
         };
         let samples = if *name == TechniqueName::FULL { 1 } else { options.msaa };
         measured.push(Measured { name: *name, renderer: add(settings, samples)?.0, supersample, previous: None });
@@ -685,7 +698,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
 /// coverage and the majority mask stays binary.
 #[must_use]
 pub fn reference_settings() -> Settings {
-    Settings { technique: Technique::Full, stochastic_alpha: true, ..Settings::default() }
+    Settings { stochastic_alpha: true, ..Settings::forced(Technique::Full) }
 }
 
 /// A read-back image as the metrics take it: linear colour box-filtered over `k`×`k` blocks, and

@@ -238,6 +238,9 @@ pub fn by_band(report: &Report) -> Vec<BandSummary> {
 pub fn description(technique: TechniqueName) -> &'static str {
     match technique {
         TechniqueName::Full1x => "the full mesh drawn at the image size (no supersampling): the aliasing floor",
+        TechniqueName::Policy => {
+            "the policy: per tree, the cheapest representation whose calibrated error is within the target (the default renderer)"
+        }
         TechniqueName::Technique(t) => match t {
             Technique::Full => {
                 "the full mesh drawn as the reference is (supersampled, box-filtered): must read perfect"

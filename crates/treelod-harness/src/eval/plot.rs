@@ -14,7 +14,7 @@ use super::{Availability, Report, Row, TechniqueName};
 use treelod_render::Technique;
 
 /// Colours of series in the order they are drawn, where a series is not a technique (Tableau 10).
-pub const PALETTE: [Rgb888; 10] = [
+pub const PALETTE: [Rgb888; 11] = [
     Rgb888::new(31, 119, 180),
     Rgb888::new(255, 127, 14),
     Rgb888::new(44, 160, 44),
@@ -25,6 +25,7 @@ pub const PALETTE: [Rgb888; 10] = [
     Rgb888::new(127, 127, 127),
     Rgb888::new(188, 189, 34),
     Rgb888::new(23, 190, 207),
+    Rgb888::new(120, 0, 60),
 ];
 
 /// The shape of a technique's dots, so techniques stay apart where colours are hard to tell.
@@ -44,6 +45,8 @@ pub enum Marker {
     Cross,
     /// A +.
     Plus,
+    /// An eight-pointed star (× over +).
+    Star,
 }
 
 /// The colour and marker of a technique in every plot: fixed per technique (not per position in
@@ -67,7 +70,11 @@ pub fn style(technique: Technique, full_1x: bool) -> (Rgb888, Marker) {
 
 /// The look of what a row measures.
 pub fn style_of(name: TechniqueName) -> (Rgb888, Marker) {
-    style(name.technique(), name == TechniqueName::Full1x)
+    match name.technique() {
+        Some(technique) => style(technique, name == TechniqueName::Full1x),
+        // The policy: the last colour, a star among the techniques it chooses from.
+        None => (PALETTE[Technique::COUNT + 1], Marker::Star),
+    }
 }
 
 /// A marker of `diameter` pixels at `centre`.
@@ -100,6 +107,14 @@ pub fn marker(canvas: &mut Canvas, centre: Point, diameter: u32, colour: Rgb888,
             let stroke = PrimitiveStyle::with_stroke(colour, width);
             let _ = Line::new(centre + a.0, centre + a.1).into_styled(stroke).draw(canvas);
             Line::new(centre + b.0, centre + b.1).into_styled(stroke).draw(canvas)
+        }
+        Marker::Star => {
+            marker(canvas, centre, diameter, colour, Marker::Plus);
+            let r = r * 3 / 4;
+            let width = (diameter / 5).max(2);
+            let stroke = PrimitiveStyle::with_stroke(colour, width);
+            let _ = Line::new(centre + Point::new(-r, -r), centre + Point::new(r, r)).into_styled(stroke).draw(canvas);
+            Line::new(centre + Point::new(-r, r), centre + Point::new(r, -r)).into_styled(stroke).draw(canvas)
         }
         Marker::Diamond => {
             let (top, bottom) = (centre + Point::new(0, -r), centre + Point::new(0, r));

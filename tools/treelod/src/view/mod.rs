@@ -20,7 +20,7 @@ use glam::Vec3;
 use treelod_format::{Container, ErrorClass};
 use treelod_render::offscreen::{GpuError, Image, Readback};
 use treelod_render::{
-    Camera, DebugView, FrameStats, Ground, Renderer, RendererFormats, Settings, Shadows, Sky, Technique,
+    Camera, DebugView, FrameStats, Ground, Policy, Renderer, RendererFormats, Settings, Shadows, Sky, Technique,
 };
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
@@ -80,6 +80,21 @@ fn toggle_technique(current: Technique, group: &[Technique]) -> Technique {
     match group.iter().position(|&t| t == current) {
         None => group.first().copied().unwrap_or(Technique::Spt),
         Some(i) => group.get(i + 1).copied().unwrap_or(Technique::Spt),
+    }
+}
+
+/// Keys `F`, `P`, `I`, `C` and `B`: the policy off and every tree drawn with the technique
+/// [`toggle_technique`] steps to.
+fn force_technique(settings: &mut Settings, group: &[Technique]) {
+    settings.technique = toggle_technique(settings.technique, group);
+    settings.policy = None;
+}
+
+/// Key `T`: the policy off, keeping it in `last`, or back on with `last`.
+fn toggle_policy(policy: &mut Option<Policy>, last: &mut Policy) {
+    match policy.take() {
+        Some(on) => *last = on,
+        None => *policy = Some(*last),
     }
 }
 
@@ -419,6 +434,8 @@ struct Viewer {
     holds: Holds,
     /// The shadow settings turned back on (the last ones on).
     last_shadows: Shadows,
+    /// The policy last on (key `T` turns it back on with these settings).
+    last_policy: Policy,
     /// The shown input's path (a dropped file's once one is shown).
     input: PathBuf,
     rig: Rig,
@@ -545,19 +562,22 @@ impl Viewer {
         }
 
         let formats = RendererFormats { color: format, depth: DEPTH_FORMAT, sample_count: args.msaa };
-        let technique = args.technique.technique;
+        let technique = args.technique.technique();
         let mut settings = Settings {
             technique,
+            policy: None,
             pruning: args.prune.settings(technique),
             // `error` is the shaded view compared with the full mesh (`heat_on`).
             debug: crate::render::parse_debug(args.debug.as_deref()),
             ..Settings::default()
         };
+        args.technique.apply(&mut settings);
         args.light.apply(&mut settings);
         args.shadow.apply(&mut settings);
         args.impostor.apply(&mut settings);
         args.ellipsoid.apply(&mut settings);
         let last_shadows = settings.shadows.unwrap_or_default();
+        let last_policy = settings.policy.unwrap_or_default();
         let models = scene::open_models(&scene).map_err(|e| scene_failed(&e))?;
         let (stage, bounds) =
             Stage::new(&device, &queue, formats, settings, (&scene, &models), (config.width, config.height))
@@ -589,6 +609,7 @@ impl Viewer {
             scene,
             models,
             last_shadows,
+            last_policy,
             input: args.input.clone(),
             rig: Rig::new((Vec3::splat(-1.0), Vec3::splat(1.0)), Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO),
             keys: HashSet::new(),
@@ -807,12 +828,11 @@ impl Viewer {
             KeyCode::Equal => settings.s_max = (settings.s_max * 2.0).min(1024.0),
             KeyCode::KeyK => settings.depth_bias_k += 0.5,
             KeyCode::KeyJ => settings.depth_bias_k = (settings.depth_bias_k - 0.5).max(0.0),
-            KeyCode::KeyF => settings.technique = toggle_technique(settings.technique, &[Technique::Full]),
-            KeyCode::KeyP => {
-                settings.technique = toggle_technique(settings.technique, &[Technique::PruneOpt, Technique::PruneCook]);
-            }
-            KeyCode::KeyI => settings.technique = toggle_technique(settings.technique, &[Technique::Impostors]),
-            KeyCode::KeyC => settings.technique = toggle_technique(settings.technique, &[Technique::Ellipsoids]),
+            KeyCode::KeyF => force_technique(settings, &[Technique::Full]),
+            KeyCode::KeyP => force_technique(settings, &[Technique::PruneOpt, Technique::PruneCook]),
+            KeyCode::KeyI => force_technique(settings, &[Technique::Impostors]),
+            KeyCode::KeyC => force_technique(settings, &[Technique::Ellipsoids]),
+            KeyCode::KeyT => toggle_policy(&mut settings.policy, &mut self.last_policy),
             KeyCode::KeyN => settings.lines = !settings.lines,
             KeyCode::KeyM => settings.impostor_morph = !settings.impostor_morph,
             KeyCode::KeyH => toggle_shadows(&mut settings.shadows, &mut self.last_shadows),
@@ -827,10 +847,7 @@ impl Viewer {
                 };
             }
             KeyCode::KeyB => {
-                settings.technique = toggle_technique(
-                    settings.technique,
-                    &[Technique::LodChain, Technique::Billboard, Technique::Crossed],
-                );
+                force_technique(settings, &[Technique::LodChain, Technique::Billboard, Technique::Crossed])
             }
             KeyCode::KeyO => settings.pruning.occlusion = !settings.pruning.occlusion,
             KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 | KeyCode::Digit4 => {
@@ -1087,7 +1104,15 @@ impl Viewer {
         }
         let technique = settings.technique;
         let drawn = stats.instances.get(technique);
+        if let Some(policy) = settings.policy {
+            mode.push_str(&format!(
+                " | policy (target {}): {}",
+                policy.target,
+                crate::render::technique_counts(&stats.instances)
+            ));
+        }
         match technique {
+            _ if settings.policy.is_some() => {}
             Technique::Full | Technique::Spt => {}
             Technique::LodChain | Technique::Billboard | Technique::Crossed => mode.push_str(&format!(
                 " | baseline {technique}: {drawn} trees, {} triangles, {} quads",

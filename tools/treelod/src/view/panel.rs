@@ -169,6 +169,16 @@ pub fn show(ui: &mut Ui, inputs: Inputs<'_>) -> Vec<Action> {
 }
 
 fn representation(ui: &mut Ui, settings: &mut Settings, holds: Holds) {
+    let mut on = settings.policy.is_some();
+    let policy = ui
+        .checkbox(&mut on, "policy: per tree, from the calibration")
+        .on_hover_text("T: the cheapest representation within the target of the full mesh's error; trees of containers without calibration tables draw with the representation below");
+    if policy.changed() {
+        settings.policy = on.then(treelod_render::Policy::default);
+    }
+    if let Some(policy) = &mut settings.policy {
+        ui.add(egui::Slider::new(&mut policy.target, 0.0..=0.05).text("target error"));
+    }
     let current = settings.technique;
     egui::ComboBox::from_id_salt("representation").width(ui.available_width()).selected_text(current.label()).show_ui(
         ui,

@@ -1,0 +1,126 @@
+//! The policy on the Vulkan backend (Mesa lavapipe in CI): trees of a calibrated container drawn
+//! with the representation its tables choose at each one's size on screen, per tree in one frame,
+//! and forced techniques still forceable.
+
+mod common;
+
+use std::sync::Arc;
+
+use common::{BACKGROUND, demo_built, gpu};
+use glam::{Mat4, Vec3, vec3};
+use treelod_build::{BuildConfig, CalibrationConfig, ImpostorConfig, LodChainConfig};
+use treelod_format::Container;
+use treelod_render::offscreen::render_image;
+use treelod_render::{Camera, Instance, Policy, Renderer, Settings, Technique};
+use treelod_runtime::{Calibration, Choices, ModelLod, Representations, projected_height};
+
+/// The demo tree with impostors and its baselines (planes, a chain and billboards to choose
+/// from; the impostors set the billboards' budget) and calibration.
+fn calibrated_demo() -> Arc<Container> {
+    demo_built(&BuildConfig {
+        impostors: Some(ImpostorConfig::default()),
+        baselines: Some(LodChainConfig::default()),
+        calibration: Some(CalibrationConfig { views: 2, supersample: 2 }),
+        ..BuildConfig::default()
+    })
+}
+
+/// A renderer drawing `container` at each of `positions`.
+fn forest(
+    gpu: &treelod_render::offscreen::Gpu,
+    container: &Arc<Container>,
+    settings: Settings,
+    positions: &[Vec3],
+) -> Renderer {
+    let mut renderer = Renderer::new(&gpu.device, treelod_render::offscreen::Gpu::formats(), settings);
+    let model = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(container)).expect("model");
+    let instances: Vec<Instance> =
+        positions.iter().map(|&p| Instance { model, transform: Mat4::from_translation(p) }).collect();
+    renderer.set_instances(&instances);
+    renderer
+}
+
+#[test]
+fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let calibration = Calibration::from_container(&container).expect("the build calibrated it");
+    let lod = ModelLod::from_container(&container);
+    let (representations, _) = Representations::from_container(&container);
+    let policy = Policy::default();
+    let choices = Choices::new(&calibration, &policy, &representations);
+    // The choices differ somewhere over the calibrated range, or this test shows nothing.
+    let first = choices.steps()[0];
+    assert!(choices.steps().iter().any(|&t| t != first), "one choice everywhere: {:?}", choices.steps());
+
+    // Trees in a row along the view, from a few pixels to a large part of the screen.
+    let (width, height) = (256, 256);
+    let eye = vec3(0.0, 0.0, 0.0);
+    let centre = lod.centre();
+    let distances: Vec<f32> = (0..8).map(|i| 4.0 * 1.9f32.powi(i)).collect();
+    let positions: Vec<Vec3> =
+        distances.iter().map(|&d| vec3(0.0, -centre.y, -d) - vec3(centre.x, 0.0, centre.z)).collect();
+    let camera = Camera::look_at(eye, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    let runtime_camera = treelod_runtime::Camera::look_at(eye, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+
+    let mut expected = treelod_render::PerTechnique::<u32>::default();
+    for &p in &positions {
+        let h = projected_height(&lod, Mat4::from_translation(p), &runtime_camera);
+        *expected.get_mut(choices.choose(h, None)) += 1;
+    }
+    assert!(expected.iter().filter(|&(_, n)| n > 0).count() >= 2, "the row spans two choices: {expected:?}");
+
+    let mut renderer = forest(&gpu, &container, Settings::default(), &positions);
+    let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+    assert_eq!(stats.instances_visible, 8, "{stats:?}");
+    assert_eq!(stats.instances, expected, "each tree by the policy's choice at its height");
+    assert!(common::covered(&image).iter().any(|&c| c), "something is drawn");
+
+    // The same trees forced to one technique: every tree with it.
+    let mut forced = forest(&gpu, &container, Settings::forced(Technique::Crossed), &positions);
+    let (_, stats) = render_image(&gpu, &mut forced, &camera, BACKGROUND).expect("renders");
+    assert_eq!(stats.instances.get(Technique::Crossed), 8, "{stats:?}");
+}
+
+#[test]
+fn without_tables_the_policy_draws_the_settings_technique() {
+    let gpu = gpu();
+    let container = demo_built(&BuildConfig { baselines: Some(LodChainConfig::default()), ..BuildConfig::default() });
+    assert!(Calibration::from_container(&container).is_none());
+    let positions = [vec3(0.0, -5.0, -30.0)];
+    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, 128, 128);
+    for technique in [Technique::Spt, Technique::LodChain] {
+        let settings = Settings { technique, ..Settings::default() };
+        assert!(settings.policy.is_some(), "the policy is the default");
+        let mut renderer = forest(&gpu, &container, settings, &positions);
+        let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+        assert_eq!(stats.instances.get(technique), stats.instances_visible, "{stats:?}");
+    }
+}
+
+#[test]
+fn hysteresis_holds_a_tree_at_a_boundary_until_it_moves_past_it() {
+    let container = calibrated_demo();
+    let calibration = Calibration::from_container(&container).expect("calibrated");
+    let (representations, _) = Representations::from_container(&container);
+    let choices = Choices::new(&calibration, &Policy::default(), &representations);
+    let steps = choices.steps();
+    let Some(boundary) = steps.windows(2).position(|w| w[0] != w[1]) else {
+        panic!("no boundary in {steps:?}");
+    };
+    let (below, above) = (steps[boundary], steps[boundary + 1]);
+    let (min, _) = calibration.heights();
+    let step_height = |i: f32| min * (i / treelod_runtime::policy::STEPS_PER_OCTAVE).exp2();
+    // Just above the boundary, a tree that was drawn with the smaller side's technique keeps it.
+    let h = step_height(boundary as f32 + 1.0);
+    assert_eq!(choices.choose(h, None), above);
+    assert_eq!(choices.choose(h, Some(below)), below, "held by hysteresis");
+    // Past the hysteresis (0.25 octaves: 2 steps), where `below` is not the choice within 2
+    // steps, it switches.
+    let far = (boundary + 1..steps.len()).find(|&j| {
+        steps[j.saturating_sub(2)..(j + 3).min(steps.len())].iter().all(|&t| t != below) && j + 2 < steps.len()
+    });
+    if let Some(j) = far {
+        assert_eq!(choices.choose(step_height(j as f32), Some(below)), steps[j], "switched at step {j}");
+    }
+}

@@ -1,0 +1,456 @@
+//! The policy: per tree and frame, the cheapest representation whose image error at the tree's
+//! projected size stays within a target of the full mesh's own — chosen from the calibration
+//! tables the build measured on each model (spec §6.15, §10.2), so nothing is tuned per model.
+//!
+//! **The rule** (spec §10.2). A tree `h` pixels high on screen (its block's height, scaled by its
+//! instance, over its block centre's distance times [`Camera::world_per_pixel`]) is drawn with
+//! the technique `t` of least primitives at `h` among those whose error satisfies
+//! `error_t(h) ≤ error_full(h) + target`. The full mesh's error is the floor: drawn at one sample
+//! per pixel it aliases against the supersampled reference too, and a representation is asked to
+//! keep *that* image, not a better one. Ties go to the lower error; when nothing qualifies, the
+//! lowest error wins. The full mesh itself is never chosen (the sequential point tree converges to
+//! it and costs less); above the largest calibrated height every tree is drawn with the point tree
+//! ([`Technique::FALLBACK`]), which converges to the full mesh as trees come near; below the
+//! smallest the smallest height's choice holds.
+//!
+//! **Hysteresis.** A tree keeps last frame's technique while that technique is still the choice
+//! somewhere within [`Policy::hysteresis`] octaves of its height (a tree crossing a boundary must
+//! move that much further before it switches back), so a tree hovering at a boundary does not
+//! flicker.
+//!
+//! **Cost per frame.** The rule is evaluated once per model and policy into a table of choices
+//! every [`STEPS_PER_OCTAVE`]-th of an octave ([`Choices`]); per tree the frame pays a distance, a
+//! `log2` and a lookup ([`Choices::choose`]).
+
+use glam::Mat4;
+use treelod_format::{CalibrationRecord, Container};
+
+use crate::draws::Representations;
+use crate::frame::{Camera, Instance, ModelLod};
+use crate::technique::{PerTechnique, Technique};
+
+/// Steps of the choice tables per octave of projected height.
+pub const STEPS_PER_OCTAVE: f32 = 8.0;
+
+/// What the policy keeps: one user-facing knob, the error allowed over the full mesh's, and the
+/// hysteresis against flicker.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Policy {
+    /// Error allowed above the full mesh's own at the same projected height, in units of the
+    /// calibration's error (multi-scale RMSE of coverage, `[0, 1]`). 0 asks for the full mesh's
+    /// image (only representations as good as it qualify); larger values trade image for
+    /// primitives. Default [`Policy::DEFAULT_TARGET`]. Not finite or negative: 0.
+    pub target: f32,
+    /// Octaves of projected height around a boundary within which a tree keeps last frame's
+    /// technique. Default 0.25 (a tree moves about 19 % of its distance past a boundary before
+    /// it switches back). Not finite or negative: 0.
+    pub hysteresis: f32,
+}
+
+impl Policy {
+    /// The default [`Policy::target`]: one hundredth of coverage RMSE over the full mesh's. At
+    /// a few pixels every representation's error is about 0.06 (the full mesh's aliasing
+    /// included), so 0.01 separates what keeps a small tree's silhouette and density from what
+    /// does not (a lone billboard loses about twice that on leafy trees); near, the full mesh's
+    /// own error is about 0.01, so the target allows differences as large as its aliasing.
+    pub const DEFAULT_TARGET: f32 = 0.01;
+
+    /// The target, sanitised (not finite or negative: 0).
+    #[must_use]
+    pub fn target(&self) -> f32 {
+        sanitise(self.target)
+    }
+
+    /// The hysteresis in octaves, sanitised (not finite or negative: 0).
+    #[must_use]
+    pub fn hysteresis(&self) -> f32 {
+        sanitise(self.hysteresis)
+    }
+}
+
+impl Default for Policy {
+    fn default() -> Self {
+        Self { target: Self::DEFAULT_TARGET, hysteresis: 0.25 }
+    }
+}
+
+fn sanitise(x: f32) -> f32 {
+    if x.is_finite() { x.max(0.0) } else { 0.0 }
+}
+
+/// One sample of a calibration curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Sample {
+    log2_height: f32,
+    error: f32,
+    primitives: f32,
+}
+
+/// A model's calibration tables (spec §6.15): per technique, its error and primitives as
+/// functions of the block's projected height, interpolated linearly in `log2(height)` and
+/// clamped outside the sampled range.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Calibration {
+    curves: PerTechnique<Vec<Sample>>,
+}
+
+impl Calibration {
+    /// The tables of `container`; `None` when it has none (built without calibration, or before
+    /// format 1.5).
+    #[must_use]
+    pub fn from_container(container: &Container) -> Option<Self> {
+        Self::from_records(container.calibration())
+    }
+
+    /// The tables of `records` (sorted as spec §6.15 asks; [`Container`] has verified that).
+    /// Records of unknown techniques or with non-finite values are skipped; `None` when no
+    /// technique is left.
+    #[must_use]
+    pub fn from_records(records: &[CalibrationRecord]) -> Option<Self> {
+        let mut curves = PerTechnique::<Vec<Sample>>::default();
+        for record in records {
+            let Some(technique) = Technique::ALL.get(record.technique as usize).copied() else { continue };
+            let valid = record.height.is_finite()
+                && record.height > 0.0
+                && record.error.is_finite()
+                && record.primitives.is_finite();
+            let curve = &mut curves[technique];
+            let log2_height = record.height.log2();
+            if valid && curve.last().is_none_or(|s| s.log2_height < log2_height) {
+                curve.push(Sample { log2_height, error: record.error, primitives: record.primitives });
+            }
+        }
+        curves.0.iter().any(|c| !c.is_empty()).then_some(Self { curves })
+    }
+
+    /// Whether the tables hold `technique`.
+    #[must_use]
+    pub fn holds(&self, technique: Technique) -> bool {
+        !self.curves[technique].is_empty()
+    }
+
+    /// `(error, primitives)` of `technique` at a projected height of `height` pixels, if the
+    /// tables hold it.
+    #[must_use]
+    pub fn at(&self, technique: Technique, height: f32) -> Option<(f32, f32)> {
+        let curve = &self.curves[technique];
+        let (first, last) = (curve.first()?, curve.last()?);
+        let x = height.max(f32::MIN_POSITIVE).log2();
+        if x <= first.log2_height {
+            return Some((first.error, first.primitives));
+        }
+        if x >= last.log2_height {
+            return Some((last.error, last.primitives));
+        }
+        let next = curve.partition_point(|s| s.log2_height <= x);
+        let (a, b) = (curve[next - 1], curve[next]);
+        let t = (x - a.log2_height) / (b.log2_height - a.log2_height);
+        Some((a.error + t * (b.error - a.error), a.primitives + t * (b.primitives - a.primitives)))
+    }
+
+    /// The smallest and largest calibrated heights over every technique, pixels.
+    #[must_use]
+    pub fn heights(&self) -> (f32, f32) {
+        let mut range = (f32::INFINITY, f32::NEG_INFINITY);
+        for curve in &self.curves.0 {
+            if let (Some(first), Some(last)) = (curve.first(), curve.last()) {
+                range = (range.0.min(first.log2_height.exp2()), range.1.max(last.log2_height.exp2()));
+            }
+        }
+        range
+    }
+
+    /// The policy's rule at one height (module docs): among the techniques the tables hold and
+    /// `usable` accepts, less the full mesh, the one of least primitives whose error is within
+    /// `target` of the full mesh's (ties: lower error; none within: least error).
+    /// [`Technique::FALLBACK`] when no technique is left.
+    #[must_use]
+    pub fn choose(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Technique {
+        let candidates = || {
+            Technique::ALL
+                .into_iter()
+                .filter(|&t| t != Technique::Full && usable(t))
+                .filter_map(|t| self.at(t, height).map(|(e, p)| (t, e, p)))
+        };
+        let floor = match self.at(Technique::Full, height) {
+            Some((error, _)) => error,
+            // Without the full mesh's row: the best any representation does.
+            None => candidates().map(|(_, e, _)| e).fold(f32::INFINITY, f32::min),
+        };
+        let limit = floor + sanitise(target);
+        let cheapest = candidates()
+            .filter(|&(_, e, _)| e <= limit)
+            .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.0.cmp(&b.0)));
+        let best = || candidates().min_by(|a, b| a.1.total_cmp(&b.1).then(a.2.total_cmp(&b.2)).then(a.0.cmp(&b.0)));
+        cheapest.or_else(best).map_or(Technique::FALLBACK, |(t, _, _)| t)
+    }
+}
+
+/// A model's choices under one policy, every [`STEPS_PER_OCTAVE`]-th of an octave of projected
+/// height over its calibrated range (module docs): what [`Choices::choose`] looks up per tree.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Choices {
+    /// `log2` of the smallest calibrated height.
+    log2_min: f32,
+    /// The choice at `log2_min + i / STEPS_PER_OCTAVE`, up to the largest calibrated height.
+    steps: Vec<Technique>,
+    /// Steps either side within which a tree keeps last frame's technique.
+    hysteresis_steps: usize,
+}
+
+impl Choices {
+    /// The choices of a model with `calibration` under `policy`, among the techniques
+    /// `representations` can draw ([`Representations::holds`]).
+    #[must_use]
+    pub fn new(calibration: &Calibration, policy: &Policy, representations: &Representations) -> Self {
+        let (min, max) = calibration.heights();
+        let (log2_min, log2_max) = (min.log2(), max.log2());
+        let octaves = if log2_max.is_finite() && log2_min.is_finite() { (log2_max - log2_min).max(0.0) } else { 0.0 };
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
+        let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
+        let target = policy.target();
+        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        let steps = (0..count)
+            .map(|i| {
+                let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
+                calibration.choose(height, target, |t| representations.holds(t))
+            })
+            .collect();
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
+        let hysteresis_steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
+        Self { log2_min: if log2_min.is_finite() { log2_min } else { 0.0 }, steps, hysteresis_steps }
+    }
+
+    /// The technique for a tree `height` pixels high whose technique last frame was `previous`
+    /// (`None`: none, a new tree): last frame's if it is the choice within the hysteresis of
+    /// `height`, else the choice at `height`; above the calibrated range the point tree
+    /// ([`Technique::FALLBACK`]).
+    #[must_use]
+    pub fn choose(&self, height: f32, previous: Option<Technique>) -> Technique {
+        let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
+        let last = self.steps.len() - 1;
+        // Above the range: one step per STEPS_PER_OCTAVE past its end reads as the fallback.
+        let above = |i: f32| i > last as f32 + 0.5;
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the table")]
+        let at = |i: f32| if above(i) { Technique::FALLBACK } else { self.steps[i.round().max(0.0) as usize] };
+        let now = at(x);
+        if let Some(previous) = previous
+            && previous != now
+        {
+            #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+            let within =
+                (1..=self.hysteresis_steps).any(|k| at(x - k as f32) == previous || at(x + k as f32) == previous);
+            if within {
+                return previous;
+            }
+        }
+        now
+    }
+
+    /// The choice at each step, smallest height first (for tests and panels).
+    #[must_use]
+    pub fn steps(&self) -> &[Technique] {
+        &self.steps
+    }
+}
+
+/// The projected height in pixels of a model's block drawn by `instance` (its block bounds'
+/// height scaled by the instance's y axis, over the distance of its transformed block centre
+/// times [`Camera::world_per_pixel`]): the height the calibration tables are indexed by.
+#[must_use]
+pub fn projected_height(lod: &ModelLod, transform: Mat4, camera: &Camera) -> f32 {
+    let (min, max) = lod.bounds();
+    let height = (max.y - min.y) * transform.y_axis.truncate().length();
+    let centre = transform.transform_point3(lod.centre());
+    let distance = centre.distance(camera.position).max(1e-6);
+    height / (distance * camera.world_per_pixel())
+}
+
+/// Per instance, the technique the policy gave it last frame, for hysteresis: reset when the
+/// instances change.
+#[derive(Clone, Debug, Default)]
+pub struct PolicyState {
+    previous: Vec<Option<Technique>>,
+}
+
+impl PolicyState {
+    /// Forgets every instance's previous technique (the instance list changed).
+    pub fn reset(&mut self) {
+        self.previous.clear();
+    }
+}
+
+/// Chooses each instance's technique for one frame: the policy's [`Choices`] of its model where
+/// the model has them (`choices[model]`, `None` for a model without calibration tables), else
+/// `otherwise`; `state` keeps the choices for the next frame's hysteresis. The result goes into
+/// [`Assignment::assign`](crate::Assignment), which still checks that each model holds its
+/// technique.
+pub fn choose_instances(
+    instances: &[Instance],
+    lods: &[ModelLod],
+    choices: &[Option<Choices>],
+    camera: &Camera,
+    otherwise: Technique,
+    state: &mut PolicyState,
+    out: &mut Vec<Technique>,
+) {
+    state.previous.resize(instances.len(), None);
+    out.clear();
+    for (instance, previous) in instances.iter().zip(&mut state.previous) {
+        let m = instance.model as usize;
+        let technique = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
+            (Some(lod), Some(choices)) => {
+                let chosen = choices.choose(projected_height(lod, instance.transform, camera), *previous);
+                *previous = Some(chosen);
+                chosen
+            }
+            _ => {
+                *previous = None;
+                otherwise
+            }
+        };
+        out.push(technique);
+    }
+}
+
+/// The eye distance at which a model's block is `height` pixels high for `camera` (unit instance
+/// scale): for tests and tools placing trees at a projected size.
+#[must_use]
+pub fn distance_for_height(lod: &ModelLod, height: f32, camera: &Camera) -> f32 {
+    let (min, max) = lod.bounds();
+    (max.y - min.y) / (height * camera.world_per_pixel())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use treelod_format::calibration_technique as code;
+
+    fn record(technique: u32, height: f32, error: f32, primitives: f32) -> CalibrationRecord {
+        CalibrationRecord { technique, height, error, primitives }
+    }
+
+    /// A table shaped like a measured leafy tree: the full mesh, the point tree converging to it,
+    /// crossed quads good only when small, the chain good only when large.
+    fn table() -> Calibration {
+        let mut records = Vec::new();
+        for (h, full, spt, spt_p, crossed, chain, chain_p) in [
+            (8.0, 0.060, 0.064, 130.0, 0.067, 0.190, 220.0),
+            (32.0, 0.030, 0.039, 11_000.0, 0.090, 0.032, 11_100.0),
+            (128.0, 0.017, 0.019, 18_700.0, 0.108, 0.017, 22_500.0),
+            (256.0, 0.012, 0.012, 21_000.0, 0.120, 0.012, 22_500.0),
+        ] {
+            records.push((code::FULL, record(code::FULL, h, full, 22_500.0)));
+            records.push((code::SPT, record(code::SPT, h, spt, spt_p)));
+            records.push((code::CROSSED, record(code::CROSSED, h, crossed, 3.0)));
+            records.push((code::LOD_CHAIN, record(code::LOD_CHAIN, h, chain, chain_p)));
+        }
+        records.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.height.total_cmp(&b.1.height)));
+        Calibration::from_records(&records.into_iter().map(|(_, r)| r).collect::<Vec<_>>()).expect("rows")
+    }
+
+    fn all(_: Technique) -> bool {
+        true
+    }
+
+    #[test]
+    fn interpolates_in_log2_height_and_clamps() {
+        let c = table();
+        let (e, p) = c.at(Technique::Spt, 16.0).expect("spt");
+        assert!((e - 0.5 * (0.064 + 0.039)).abs() < 1e-6, "{e}");
+        assert!((p - 0.5 * (130.0 + 11_000.0)).abs() < 1e-2, "{p}");
+        assert_eq!(c.at(Technique::Spt, 2.0), Some((0.064, 130.0)));
+        assert_eq!(c.at(Technique::Spt, 4096.0), Some((0.012, 21_000.0)));
+        assert_eq!(c.at(Technique::Impostors, 16.0), None);
+        assert_eq!(c.heights(), (8.0, 256.0));
+        assert!(Calibration::from_records(&[]).is_none());
+        assert!(Calibration::from_records(&[record(99, 8.0, 0.1, 1.0)]).is_none(), "unknown codes are skipped");
+    }
+
+    #[test]
+    fn chooses_the_cheapest_within_the_target_of_the_full_mesh() {
+        let c = table();
+        // 8 px: crossed (3) is within 0.01 of the full mesh's 0.060.
+        assert_eq!(c.choose(8.0, 0.01, all), Technique::Crossed);
+        // A tighter target: only the point tree qualifies.
+        assert_eq!(c.choose(8.0, 0.005, all), Technique::Spt);
+        // 32 px: the point tree (11,000) and the chain (11,100) qualify; the point tree is cheaper.
+        assert_eq!(c.choose(32.0, 0.01, all), Technique::Spt);
+        // Without the point tree's cut available, the chain.
+        assert_eq!(c.choose(32.0, 0.01, |t| t != Technique::Spt), Technique::LodChain);
+        // Nothing within the target: the least error (never the full mesh itself).
+        assert_eq!(c.choose(32.0, 0.0, |t| t != Technique::Spt), Technique::LodChain);
+        assert_eq!(c.choose(8.0, 0.0, all), Technique::Spt);
+        // Nothing usable at all: the fallback.
+        assert_eq!(c.choose(8.0, 0.01, |_| false), Technique::FALLBACK);
+    }
+
+    #[test]
+    fn a_negative_or_nan_target_asks_for_the_full_mesh_image() {
+        let c = table();
+        assert_eq!(c.choose(8.0, f32::NAN, all), c.choose(8.0, 0.0, all));
+        assert_eq!(c.choose(8.0, -1.0, all), c.choose(8.0, 0.0, all));
+        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0 };
+        assert_eq!((policy.target(), policy.hysteresis()), (0.0, 0.0));
+    }
+
+    fn representations_holding_everything() -> Representations {
+        // `holds` of the full mesh and the point tree is always true; the others need data this
+        // test's tables do not ask for, so a usable set of {Spt} is what a plain model gives.
+        Representations::default()
+    }
+
+    #[test]
+    fn choice_tables_follow_the_rule_and_fall_back_above_the_range() {
+        let c = table();
+        let policy = Policy { target: 0.01, hysteresis: 0.0 };
+        let choices = Choices::new(&c, &policy, &representations_holding_everything());
+        // A plain model draws only the point tree: every step is it.
+        assert!(choices.steps().iter().all(|&t| t == Technique::Spt));
+        assert_eq!(choices.steps().len(), 5 * STEPS_PER_OCTAVE as usize + 1);
+        assert_eq!(choices.choose(10_000.0, None), Technique::FALLBACK);
+    }
+
+    #[test]
+    fn hysteresis_keeps_last_frames_technique_near_a_boundary() {
+        let c = table();
+        let steps: Vec<Technique> =
+            (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
+        let choices = Choices { log2_min: 3.0, steps, hysteresis_steps: 2 };
+        // Find the boundary between crossed (small) and the point tree (larger).
+        let boundary = choices.steps().iter().position(|&t| t != Technique::Crossed).expect("a boundary");
+        assert!(boundary > 0);
+        let height_at = |step: f32| (3.0 + step / STEPS_PER_OCTAVE).exp2();
+        let after = choices.steps()[boundary];
+        // Just past the boundary a tree that was crossed stays crossed; one without a past does not.
+        assert_eq!(choices.choose(height_at(boundary as f32), Some(Technique::Crossed)), Technique::Crossed);
+        assert_eq!(choices.choose(height_at(boundary as f32), None), after);
+        // Three steps past it (beyond the two of hysteresis) it switches.
+        assert_eq!(choices.choose(height_at(boundary as f32 + 3.0), Some(Technique::Crossed)), after);
+        // A previous technique that is nowhere near is not kept.
+        assert_eq!(choices.choose(height_at(0.0), Some(Technique::LodChain)), Technique::Crossed);
+    }
+
+    #[test]
+    fn projected_height_matches_the_camera_and_distance_for_height_inverts_it() {
+        use treelod_format::BlockRecord;
+        let block = BlockRecord {
+            bounds_min: [-1.0, 0.0, -1.0],
+            bounds_max: [1.0, 10.0, 1.0],
+            grid: [1, 1, 1],
+            tree_count: 1,
+            flags: 0,
+            _pad: 0,
+        };
+        let lod = ModelLod::from_records(&block, &[], &[], &[]).expect("model");
+        let camera = Camera::look_at(Vec3::new(0.0, 5.0, 100.0), Vec3::new(0.0, 5.0, 0.0), 1.0, 640, 480);
+        let d = distance_for_height(&lod, 64.0, &camera);
+        let eye = Vec3::new(0.0, 5.0, d);
+        let camera = Camera::look_at(eye, Vec3::new(0.0, 5.0, 0.0), 1.0, 640, 480);
+        let h = projected_height(&lod, Mat4::IDENTITY, &camera);
+        assert!((h - 64.0).abs() < 1e-3, "{h}");
+        let scaled = projected_height(&lod, Mat4::from_scale(Vec3::splat(2.0)), &camera);
+        assert!(scaled > 100.0, "a tree twice as large at about the same distance: {scaled}");
+    }
+}
