@@ -103,10 +103,12 @@ impl Plugin for TreelodPlugin {
 /// each frame.
 #[derive(Resource, Clone, Copy, Debug, PartialEq)]
 pub struct TreelodSettings {
-    /// The renderer's settings: pixel thresholds (`s_min`, `s_max`), the technique trees are
-    /// drawn with ([`Settings::technique`], a [`treelod_render::Technique`]: the sequential point
-    /// trees by default, pruned leaves, impostor planes, ellipsoids, a baseline or the full mesh;
-    /// trees whose container lacks the technique's data are drawn with the point trees) and its
+    /// The renderer's settings: pixel thresholds (`s_min`, `s_max`), the policy choosing each
+    /// tree's representation from its container's calibration tables ([`Settings::policy`], on
+    /// by default), the technique trees are drawn with otherwise ([`Settings::technique`], a
+    /// [`treelod_render::Technique`]: the sequential point trees by default, pruned leaves,
+    /// impostor planes, ellipsoids, a baseline or the full mesh; trees whose container lacks the
+    /// technique's data are drawn with the point trees) and its
     /// tuning (`pruning`, `impostor_bark`, `ellipsoid_quality`, …), shading, debug colours,
     /// shadows and streaming budgets (see [`treelod_render::Settings`]). `memory_budget` is taken
     /// when a camera's renderer is made (when the camera first draws trees, or its formats or

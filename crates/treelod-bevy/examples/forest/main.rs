@@ -33,7 +33,7 @@ use bevy_render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use bevy_time::Time;
 use bevy_transform::components::Transform;
 use bevy_window::Window;
-use treelod_bevy::treelod_render::{DebugView, Shadows, Technique};
+use treelod_bevy::treelod_render::{DebugView, Policy, Shadows, Technique};
 use treelod_bevy::{TreelodContainer, TreelodSettings, TreelodStats};
 
 use scene::Output;
@@ -220,7 +220,10 @@ fn keys(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<TreelodSettings>) 
         render.debug = if render.debug == DebugView::Kinds { DebugView::Shaded } else { DebugView::Kinds };
     }
     if keys.just_pressed(KeyCode::KeyF) {
-        render.technique = if render.technique == Technique::Full { Technique::Spt } else { Technique::Full };
+        // Every tree the full mesh (the policy off), and back to the policy.
+        let full = render.technique == Technique::Full;
+        render.technique = if full { Technique::Spt } else { Technique::Full };
+        render.policy = if full { Some(Policy::default()) } else { None };
     }
     if keys.just_pressed(KeyCode::KeyL) {
         render.shadows = if render.shadows.is_some() { None } else { Some(Shadows::default()) };
