@@ -105,7 +105,11 @@ fn bench_flies_a_tiny_forest_through_the_library() {
         trees: 30,
         frames: 3,
         size: (96, 54),
-        techniques: vec![Technique::Full, Technique::Spt, Technique::Impostors],
+        techniques: vec![
+            TechniqueName::FULL,
+            TechniqueName::Technique(Technique::Spt),
+            TechniqueName::Technique(Technique::Impostors),
+        ],
         quality: Some(bench::Quality::Supersampled(2)),
         ..bench::Options::default()
     };
@@ -115,7 +119,7 @@ fn bench_flies_a_tiny_forest_through_the_library() {
     assert_eq!(report.techniques[2].1.status(), "absent", "the container holds no impostors");
     assert_eq!(report.techniques[1].1, Availability::Measured);
     assert_eq!(report.rows.len(), 3 * 2, "a row per frame and measured technique");
-    for row in report.rows.iter().filter(|r| r.technique == Technique::Spt) {
+    for row in report.rows.iter().filter(|r| r.technique == TechniqueName::Technique(Technique::Spt)) {
         assert!(row.rmse.is_some() && row.coverage.is_some(), "{row:?}");
     }
     let csv = dir.path().join("b.csv");

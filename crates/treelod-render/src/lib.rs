@@ -124,4 +124,4 @@ pub use stats::{FrameStats, ShadowStats};
 /// ([`Renderer::shadow_bind_group`]) and `fn sunlit(world: vec3<f32>, normal: vec3<f32>, sun:
 /// vec3<f32>) -> f32`, the share of the sun reaching a point (1 lit, 0 shadowed).
 pub const SHADOW_WGSL: &str = include_str!("../../../shaders/shared/shadow.wgsl");
-pub use treelod_runtime::{Hysteresis, PerTechnique, Policy, PruneScale, Technique};
+pub use treelod_runtime::{BudgetController, Hysteresis, PerTechnique, Policy, PruneScale, Technique};

@@ -10,9 +10,9 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
-    Assignment, Calibration, Choices, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerTechnique, Policy,
-    PolicyState, PruneState, ROOTS_CELL, Representations, Scene, Technique, TechniqueSettings, choose_instances,
-    merge_ascending, select_frame, select_techniques,
+    Assignment, BudgetController, Calibration, Choices, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerTechnique,
+    Policy, PolicyState, PruneState, ROOTS_CELL, Representations, Scene, Technique, TechniqueSettings,
+    choose_instances, merge_ascending, select_frame, select_techniques,
 };
 
 use crate::camera::Camera;
@@ -192,6 +192,9 @@ pub(crate) struct PolicyModels {
     state: PolicyState,
     /// Scratch: this frame's choice per instance.
     chosen: Vec<Technique>,
+    /// Budget mode ([`Policy::budget`]): what steers the target and `s_min` from frame to frame;
+    /// made when budget mode starts, dropped when it ends.
+    budget: Option<BudgetController>,
 }
 
 impl PolicyModels {
@@ -559,7 +562,44 @@ impl Renderer {
     /// and uploads the draws, clamped to what is resident. With [`Settings::shadows`], also fits
     /// the cascades to `camera` and selects each from the sun's view (sizes in texels), streaming
     /// what they need beside the camera's selection; [`Self::render_shadows`] draws them.
+    ///
+    /// In the policy's budget mode ([`Policy::budget`]) the frame is selected with the target and
+    /// `s_min` a [`BudgetController`] keeps (made from [`Settings::policy`]'s target and
+    /// [`Settings::s_min`] when budget mode starts; `s_max` keeps its ratio to `s_min`), which
+    /// then takes the frame's [`FrameStats::primitives`] for the next frame. The settings
+    /// themselves are not changed; [`Self::budget_steering`] reads what the controller holds.
     pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
+        let user = self.settings;
+        let Some((policy, budget)) = user.policy.and_then(|p| p.budget.map(|n| (p, n))) else {
+            self.policy.budget = None;
+            return self.prepare_frame(device, queue, camera);
+        };
+        let controller =
+            self.policy.budget.get_or_insert_with(|| BudgetController::for_policy(budget, user.s_min, policy.target()));
+        controller.target_primitives = budget;
+        let (s_min, target) = (controller.s_min(), controller.target());
+        self.settings.s_min = s_min;
+        if user.s_min > 0.0 {
+            self.settings.s_max = user.s_max * s_min / user.s_min;
+        }
+        self.settings.policy = Some(Policy { target, ..policy });
+        let stats = self.prepare_frame(device, queue, camera);
+        self.settings = user;
+        if let Some(controller) = &mut self.policy.budget {
+            controller.update_policy(stats.primitives());
+        }
+        stats
+    }
+
+    /// In the policy's budget mode, the `s_min` and the policy target the next frame is selected
+    /// with ([`Self::prepare`]); `None` outside it.
+    #[must_use]
+    pub fn budget_steering(&self) -> Option<(f32, f32)> {
+        self.policy.budget.as_ref().map(|c| (c.s_min(), c.target()))
+    }
+
+    /// [`Self::prepare`] with the settings as they are.
+    fn prepare_frame(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
         let settings = self.settings;
         let view_proj = camera.view_proj();
         let technique = settings.technique;

@@ -110,7 +110,9 @@ pub struct Settings {
     /// calibration tables (spec §6.15, `treelod build` writes them by default) is drawn with the
     /// cheapest representation whose calibrated error at its projected height is within
     /// [`Policy::target`] of the full mesh's, with hysteresis; the shadow cascades draw each tree
-    /// with the camera's choice. `None` draws every tree with [`Self::technique`] (to force one).
+    /// with the camera's choice. With [`Policy::budget`] the target and [`Self::s_min`] are
+    /// steered from frame to frame so the camera's view meets that many primitives
+    /// ([`Renderer::prepare`]). `None` draws every tree with [`Self::technique`] (to force one).
     /// Default: [`Policy::default`].
     pub policy: Option<Policy>,
     /// What to colour by.

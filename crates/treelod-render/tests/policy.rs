@@ -124,3 +124,47 @@ fn hysteresis_holds_a_tree_at_a_boundary_until_it_moves_past_it() {
         assert_eq!(choices.choose(step_height(j as f32), Some(below)), steps[j], "switched at step {j}");
     }
 }
+
+#[test]
+fn budget_mode_steers_the_frame_to_the_primitive_count() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let lod = ModelLod::from_container(&container);
+    let centre = lod.centre();
+    // A field of trees from near to far in front of the camera.
+    let positions: Vec<Vec3> = (0..6)
+        .flat_map(|row| (0..6).map(move |col| (row, col)))
+        .map(|(row, col)| {
+            vec3((col as f32 - 2.5) * 6.0, -centre.y, -8.0 - 9.0 * row as f32 * (1.0 + 0.3 * row as f32))
+                - vec3(centre.x, 0.0, centre.z)
+        })
+        .collect();
+    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, -0.1, -1.0), 0.9, 320, 240);
+    let mut free = forest(&gpu, &container, Settings::default(), &positions);
+    let unbudgeted = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+    assert!(free.budget_steering().is_none(), "no budget, no steering");
+    assert!(unbudgeted > 1000, "{unbudgeted}");
+
+    for budget in [unbudgeted / 4, unbudgeted * 2] {
+        let policy = Policy { budget: Some(budget), ..Policy::default() };
+        let settings = Settings { policy: Some(policy), ..Settings::default() };
+        let mut renderer = forest(&gpu, &container, settings, &positions);
+        let counts: Vec<u64> =
+            (0..80).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
+        assert_eq!(renderer.settings().policy, Some(policy), "the settings are not changed");
+        let (s_min, target) = renderer.budget_steering().expect("steering");
+        let last: Vec<f64> = counts[60..].iter().map(|&c| c as f64 / budget as f64).collect();
+        if budget < unbudgeted {
+            // Fewer primitives wanted: both knobs up, and the count settles under the budget
+            // (by at most the step its trees make switching together, here less than half).
+            assert!(s_min > Settings::default().s_min && target > Policy::DEFAULT_TARGET, "{s_min} {target}");
+            assert!(last.iter().all(|&r| (0.5..=1.05).contains(&r)), "budget {budget}: {counts:?}");
+            assert!(counts[60..].windows(2).all(|w| w[0] == w[1]), "settled: {counts:?}");
+        } else {
+            // More allowed: both knobs down, and more drawn than without a budget.
+            assert!(s_min < Settings::default().s_min && target < Policy::DEFAULT_TARGET, "{s_min} {target}");
+            assert!(counts[79] > unbudgeted, "budget {budget}: {counts:?}");
+            assert!(last.iter().all(|&r| r <= 1.1), "budget {budget}: {counts:?}");
+        }
+    }
+}

@@ -1322,7 +1322,8 @@ fn leading_above(values: &[f32], tau: f32) -> u32 {
     u32::try_from(count).unwrap_or(u32::MAX)
 }
 
-/// Keeps the primitive count near a target by adjusting `s_min` from frame to frame.
+/// Keeps the primitive count near a target by adjusting `s_min` from frame to frame, and with the
+/// policy ([`Policy::budget`](crate::Policy::budget)) its error target too.
 ///
 /// Gilet et al. note that `s_m` "allows the user to control the frame rate, or to keep the frame
 /// rate constant if required" (§5.1) without giving a rule; this is ours. With `r = last / target`:
@@ -1333,6 +1334,13 @@ fn leading_above(values: &[f32], tau: f32) -> u32 {
 ///   `s_min` to `[s_min_floor, s_min_ceiling]`. The count of a cut falls roughly as `1/s_min²` (the
 ///   elements are areas), so `r^(1/2)` would jump to the target; `gain < 1` damps it so a model
 ///   that reacts more steeply than that still converges without overshoot.
+/// - **With the policy** ([`Self::update_policy`], spec §10.2's budget mode): the same step moves
+///   `s_min` and, squared, the policy's error target (clamped to `[target_floor,
+///   target_ceiling]`). Every tree is then allowed the same error over the full mesh's, so the
+///   frame's error is spread evenly rather than spent on a few trees: near trees (drawn with the
+///   point tree above the calibrated heights) coarsen through `s_min`, calibrated ones through
+///   the target, by the same factor. The square: `s_min` is a length, the target an error read
+///   off tables whose cost falls in steps, so it needs the larger move to reach the next choice.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BudgetController {
     /// Primitives (triangles + points) per frame to aim for.
@@ -1347,9 +1355,43 @@ pub struct BudgetController {
     pub s_min_floor: f32,
     /// Largest `s_min`, pixels. Default 64.
     pub s_min_ceiling: f32,
+    /// Smallest policy target ([`Self::update_policy`]). Default 1/1024: below it the choices are
+    /// those of target 0 on measured tables (errors are stored to about that precision).
+    pub target_floor: f32,
+    /// Largest policy target. Default 1: every representation qualifies, the cheapest is drawn.
+    pub target_ceiling: f32,
     s_min: f32,
+    target: f32,
     adjusting: bool,
+    /// Budget mode of the policy: where it started and how far it has moved.
+    steering: Steering,
 }
+
+/// [`BudgetController::update_policy`]'s state: `s_min = start.0·e^p` and `target =
+/// start.1·e^(2p)` (each clamped) for the pressure `p`, and the pressures last seen over and under
+/// the budget. A policy frame's count falls in steps as the target grows (a model's trees switch
+/// representation together), so a plain step would jump back and forth across a step forever;
+/// the bracket halves the move each time the count crosses the budget, and settles on the least
+/// pressure seen under it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Steering {
+    start: (f32, f32),
+    pressure: f64,
+    /// Greatest pressure whose frame was over the budget.
+    over: Option<f64>,
+    /// Least pressure whose frame was under the budget.
+    under: Option<f64>,
+    /// Frames held just above `over` while under the budget by more than the dead band.
+    held: u32,
+}
+
+/// Pressures closer than this are one (2 % in `s_min`, 4 % in the target).
+const PRESSURE_RESOLUTION: f64 = 0.02;
+
+/// Frames the policy's budget mode holds under the budget, next to a pressure that was over it,
+/// before it forgets that pressure and tries again (the scene may have changed): about two
+/// seconds at 60 frames per second.
+const HOLD_FRAMES: u32 = 120;
 
 impl BudgetController {
     /// A controller aiming at `target_primitives`, starting from `s_min` pixels.
@@ -1362,9 +1404,36 @@ impl BudgetController {
             gain: 0.5,
             s_min_floor: 0.5,
             s_min_ceiling: 64.0,
+            target_floor: 1.0 / 1024.0,
+            target_ceiling: 1.0,
             s_min,
+            target: crate::Policy::DEFAULT_TARGET,
             adjusting: false,
+            steering: Steering {
+                start: (s_min, crate::Policy::DEFAULT_TARGET),
+                pressure: 0.0,
+                over: None,
+                under: None,
+                held: 0,
+            },
         }
+    }
+
+    /// A controller for the policy's budget mode ([`Self::update_policy`]): aiming at
+    /// `target_primitives`, starting from `s_min` pixels and the policy target `target` (raised
+    /// to [`Self::target_floor`] if below it).
+    #[must_use]
+    pub fn for_policy(target_primitives: u64, s_min: f32, target: f32) -> Self {
+        let mut controller = Self::new(target_primitives, s_min);
+        controller.target = if target.is_finite() { target.max(controller.target_floor) } else { 1.0 };
+        controller.steering.start = (s_min, controller.target);
+        controller
+    }
+
+    /// The current policy target ([`Self::update_policy`]).
+    #[must_use]
+    pub fn target(&self) -> f32 {
+        self.target
     }
 
     /// The current `s_min`, pixels.
@@ -1376,20 +1445,93 @@ impl BudgetController {
     /// Takes the primitive count of the last frame ([`FrameStats::primitives`]) and returns the
     /// `s_min` for the next one (see the type's documentation for the rule).
     pub fn update(&mut self, last_frame_primitives: u64) -> f32 {
+        if let Some(factor) = self.step(last_frame_primitives) {
+            self.scale_s_min(factor);
+        }
+        self.s_min
+    }
+
+    /// Budget mode of the policy: takes the primitive count of the last frame (every kind,
+    /// as the renderer counts them) and returns the `s_min` and the policy target for the next
+    /// one: [`Self::update`]'s step applied to `s_min`, and squared to the target (the type's
+    /// documentation).
+    ///
+    /// Where the count falls in steps (a target at which many trees switch representation at
+    /// once), the move halves each time the count crosses the budget, and the controller settles
+    /// on the least pressure it has seen under the budget: the frame then stays under the
+    /// budget, by up to one such step, rather than flickering across it. Held there for
+    /// [`HOLD_FRAMES`] frames while under by more than the dead band, it tries again.
+    pub fn update_policy(&mut self, last_frame_primitives: u64) -> (f32, f32) {
+        let over_budget = last_frame_primitives > self.target_primitives;
+        let steering = &mut self.steering;
+        let p = steering.pressure;
+        // A bound the frame contradicts is stale: the scene changed under it.
+        if over_budget && steering.under.is_some_and(|u| p >= u) {
+            steering.under = None;
+        }
+        if !over_budget && steering.over.is_some_and(|o| p <= o) {
+            steering.over = None;
+        }
+        let Some(factor) = self.step(last_frame_primitives) else {
+            self.steering.held = 0;
+            return (self.s_min, self.target);
+        };
+        let steering = &mut self.steering;
+        let mut next = p + factor.ln();
+        if over_budget {
+            steering.over = Some(steering.over.map_or(p, |o| o.max(p)));
+            if let Some(u) = steering.under {
+                next = if u - p <= PRESSURE_RESOLUTION { u } else { next.min(0.5 * (p + u)) };
+            }
+            steering.held = 0;
+        } else {
+            steering.under = Some(steering.under.map_or(p, |u| u.min(p)));
+            if let Some(o) = steering.over {
+                if p - o <= PRESSURE_RESOLUTION {
+                    next = p;
+                    steering.held += 1;
+                    if steering.held > HOLD_FRAMES {
+                        (steering.over, steering.held) = (None, 0);
+                    }
+                } else {
+                    next = next.max(0.5 * (p + o));
+                }
+            }
+        }
+        let (s0, t0) = (f64::from(steering.start.0.max(f32::MIN_POSITIVE)), f64::from(steering.start.1));
+        let t_floor = f64::from(self.target_floor.max(f32::MIN_POSITIVE));
+        let t_ceiling = f64::from(self.target_ceiling).max(t_floor);
+        let s_floor = f64::from(self.s_min_floor.max(f32::MIN_POSITIVE));
+        let s_ceiling = f64::from(self.s_min_ceiling).max(s_floor);
+        // Past both clamps a pressure changes nothing: keep it where it still acts.
+        let lowest = (s_floor / s0).ln().min(0.5 * (t_floor / t0).ln());
+        let highest = (s_ceiling / s0).ln().max(0.5 * (t_ceiling / t0).ln());
+        steering.pressure = next.clamp(lowest.min(highest), highest);
+        let p = steering.pressure;
+        #[expect(clippy::cast_possible_truncation, reason = "s_min in pixels and the target in [0, 1]")]
+        {
+            self.s_min = (s0 * p.exp()).clamp(s_floor, s_ceiling) as f32;
+            self.target = (t0 * (2.0 * p).exp()).clamp(t_floor, t_ceiling) as f32;
+        }
+        (self.s_min, self.target)
+    }
+
+    /// The factor of this frame's step (the type's documentation), `None` while idle.
+    fn step(&mut self, last_frame_primitives: u64) -> Option<f64> {
         #[expect(clippy::cast_precision_loss, reason = "a ratio of counts needs no integer precision")]
         let ratio = last_frame_primitives as f64 / self.target_primitives.max(1) as f64;
         let error = (ratio - 1.0).abs();
         let band = f64::from(self.dead_band.max(0.0));
         self.adjusting = if self.adjusting { error > 0.5 * band } else { error > band };
-        if self.adjusting {
-            let max_step = f64::from(self.max_step.max(1.0));
-            let factor =
-                ratio.max(0.0).powf(0.5 * f64::from(self.gain.clamp(0.0, 1.0))).clamp(max_step.recip(), max_step);
-            #[expect(clippy::cast_possible_truncation, reason = "s_min is a small number of pixels")]
-            let next = (f64::from(self.s_min) * factor) as f32;
-            self.s_min = next.clamp(self.s_min_floor, self.s_min_ceiling.max(self.s_min_floor));
-        }
-        self.s_min
+        let max_step = f64::from(self.max_step.max(1.0));
+        self.adjusting
+            .then(|| ratio.max(0.0).powf(0.5 * f64::from(self.gain.clamp(0.0, 1.0))).clamp(max_step.recip(), max_step))
+    }
+
+    fn scale_s_min(&mut self, factor: f64) {
+        #[expect(clippy::cast_possible_truncation, reason = "s_min is a small number of pixels")]
+        let next = (f64::from(self.s_min) * factor) as f32;
+        self.s_min = next.clamp(self.s_min_floor, self.s_min_ceiling.max(self.s_min_floor));
     }
 
     /// [`Self::update`], then writes the new `s_min` into `settings` and scales `s_max` by the same
@@ -1407,6 +1549,7 @@ impl BudgetController {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Policy;
     use proptest::prelude::*;
 
     proptest! {
@@ -1618,6 +1761,85 @@ mod tests {
             assert_eq!(changes, 0, "exponent {exponent}: turned back: {trace:?}");
             assert!(trace[100..].iter().all(|&s| s == last));
         }
+    }
+
+    /// A policy scene: 100 far trees whose cost falls in steps as the target grows (the point
+    /// tree, then ellipsoids, then crossed quads), and near trees whose cut falls as `1/s_min²`.
+    fn policy_scene(s_min: f32, target: f32) -> u64 {
+        let far = if target < 0.004 {
+            20_000.0
+        } else if target < 0.02 {
+            600.0
+        } else {
+            3.0
+        };
+        (100.0 * far + 3e6 / f64::from(s_min).powi(2)).round() as u64
+    }
+
+    #[test]
+    fn policy_budget_meets_the_count_by_moving_the_target_and_s_min_together() {
+        for budget in [200_000u64, 1_000_000, 6_000_000] {
+            let mut controller = BudgetController::for_policy(budget, 1.0, Policy::DEFAULT_TARGET);
+            let (mut s, mut t) = (1.0, controller.target());
+            let mut trace = Vec::new();
+            for _ in 0..200 {
+                (s, t) = controller.update_policy(policy_scene(s, t));
+                trace.push((s, t));
+            }
+            let primitives = policy_scene(s, t);
+            let ratio = primitives as f64 / budget as f64;
+            assert!((ratio - 1.0).abs() <= 0.05, "budget {budget}: {primitives} after {trace:?}");
+            // Settled: the last 100 frames do not move.
+            assert!(trace[100..].iter().all(|&p| p == (s, t)), "budget {budget}: {trace:?}");
+            // Over the starting count both knobs went up, under it both went down.
+            let start = policy_scene(1.0, Policy::DEFAULT_TARGET);
+            if budget < start {
+                assert!(s > 1.0 && t > Policy::DEFAULT_TARGET, "budget {budget}: {s} {t}");
+            } else {
+                assert!(s < 1.0 && t < Policy::DEFAULT_TARGET, "budget {budget}: {s} {t}");
+            }
+        }
+    }
+
+    #[test]
+    fn policy_budget_settles_under_the_budget_where_the_count_jumps_across_it() {
+        // Every tree switches at one target: 65k primitives below it, 37k above; a budget
+        // between them cannot be met, and must not be flickered across.
+        let scene = |t: f32| if t < 0.02 { 65_000 } else { 37_000 };
+        let mut controller = BudgetController::for_policy(45_000, 1.0, Policy::DEFAULT_TARGET);
+        let mut t = controller.target();
+        let mut counts = Vec::new();
+        for _ in 0..100 {
+            counts.push(scene(t));
+            t = controller.update_policy(scene(t)).1;
+        }
+        assert!(counts[40..].iter().all(|&c| c == 37_000), "settled under the budget: {counts:?}");
+        assert!(t < 0.021, "at the least target seen under the budget: {t}");
+        // The scene gets cheaper: held, then tried again, and the new cheap count is met.
+        let scene = |t: f32| if t < 0.005 { 44_000 } else { 20_000 };
+        let mut counts = Vec::new();
+        for _ in 0..HOLD_FRAMES as usize + 100 {
+            counts.push(scene(t));
+            t = controller.update_policy(scene(t)).1;
+        }
+        assert_eq!(*counts.last().unwrap(), 44_000, "{counts:?}");
+    }
+
+    #[test]
+    fn policy_budget_clamps_the_target() {
+        let mut controller = BudgetController::for_policy(10, 1.0, 0.0);
+        assert_eq!(controller.target(), controller.target_floor, "a target of 0 starts at the floor");
+        let (_, t) = controller.update_policy(1_000);
+        assert!((t / controller.target_floor - 1.5625).abs() < 1e-4, "one step, squared: {t}");
+        for _ in 0..200 {
+            controller.update_policy(1_000_000);
+        }
+        assert_eq!(controller.target(), 1.0);
+        for _ in 0..200 {
+            controller.update_policy(0);
+        }
+        assert_eq!(controller.target(), 1.0 / 1024.0);
+        assert_eq!(BudgetController::for_policy(10, 1.0, f32::NAN).target(), 1.0);
     }
 
     #[test]

@@ -45,6 +45,16 @@ pub struct Policy {
     /// technique. Default 0.25 (a tree moves about 19 % of its distance past a boundary before
     /// it switches back). Not finite or negative: 0.
     pub hysteresis: f32,
+    /// Budget mode: primitives per frame to aim for (every kind, as the renderer counts them in
+    /// the camera's view; shadow passes are not counted). `Some`: a [`BudgetController`]
+    /// (created with [`BudgetController::for_policy`]) moves the target and `s_min` together
+    /// from frame to frame so the frame meets the count, starting from [`Self::target`] and
+    /// the renderer's `s_min`; the error is then the same allowance over the full mesh's on
+    /// every tree (spec §10.2). Default `None`: the target holds.
+    ///
+    /// [`BudgetController`]: crate::BudgetController
+    /// [`BudgetController::for_policy`]: crate::BudgetController::for_policy
+    pub budget: Option<u64>,
 }
 
 impl Policy {
@@ -70,7 +80,7 @@ impl Policy {
 
 impl Default for Policy {
     fn default() -> Self {
-        Self { target: Self::DEFAULT_TARGET, hysteresis: 0.25 }
+        Self { target: Self::DEFAULT_TARGET, hysteresis: 0.25, budget: None }
     }
 }
 
@@ -391,7 +401,7 @@ mod tests {
         let c = table();
         assert_eq!(c.choose(8.0, f32::NAN, all), c.choose(8.0, 0.0, all));
         assert_eq!(c.choose(8.0, -1.0, all), c.choose(8.0, 0.0, all));
-        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0 };
+        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0, budget: None };
         assert_eq!((policy.target(), policy.hysteresis()), (0.0, 0.0));
     }
 
@@ -404,7 +414,7 @@ mod tests {
     #[test]
     fn choice_tables_follow_the_rule_and_fall_back_above_the_range() {
         let c = table();
-        let policy = Policy { target: 0.01, hysteresis: 0.0 };
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None };
         let choices = Choices::new(&c, &policy, &representations_holding_everything());
         // A plain model draws only the point tree: every step is it.
         assert!(choices.steps().iter().all(|&t| t == Technique::Spt));

@@ -6,7 +6,8 @@
 use std::path::PathBuf;
 
 use treelod_harness::bench::{self, Options, Quality, Report};
-use treelod_render::Technique;
+use treelod_harness::eval::TechniqueName;
+use treelod_render::Policy;
 
 use crate::eval::{failed, none_measurable};
 use crate::render::{parse_colour, parse_fov, parse_pixels, parse_size};
@@ -38,8 +39,20 @@ pub struct Args {
     #[arg(long, value_name = "DEGREES", default_value_t = 50.0, value_parser = parse_fov)]
     pub fov: f32,
     /// Techniques to fly, separated by commas; those not available are reported, not skipped.
+    /// full is counted, not drawn; full-1x draws the full mesh at the image size; policy flies
+    /// the renderer's default (per tree the cheapest representation within --policy-target,
+    /// from the containers' calibration tables).
     #[arg(long, value_name = "NAMES", value_enum, value_delimiter = ',', default_values = ["full", "spt"])]
-    pub technique: Vec<Technique>,
+    pub technique: Vec<TechniqueName>,
+    /// The policy's target: image error (multi-scale RMSE of coverage) allowed over the full
+    /// mesh's at each tree's projected height, 0 to 1; with --budget, where the steering starts.
+    #[arg(long, value_name = "ERROR", default_value_t = Policy::DEFAULT_TARGET, value_parser = crate::render::parse_target)]
+    pub policy_target: f32,
+    /// The policy's budget mode: primitives per frame to aim for (the camera's view). The
+    /// target and s_min are steered together from frame to frame to meet it (the same error
+    /// allowance over the full mesh's on every tree); applies to `policy` only.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub budget: Option<u64>,
     /// Select and stream only: no image is drawn, so there is no GPU time (the figure for large
     /// forests on a software rasteriser).
     #[arg(long, conflicts_with = "quality")]
@@ -108,6 +121,7 @@ impl Args {
             seed: self.seed,
             fov_degrees: self.fov,
             techniques: self.technique.clone(),
+            policy: Policy { target: self.policy_target, budget: self.budget, ..Policy::default() },
             render: !self.no_render,
             gpu_selection: self.gpu_selection,
             shadows: self.shadows,
@@ -175,10 +189,17 @@ mod tests {
 
     #[test]
     fn every_technique_of_the_one_list_is_a_name_and_the_options_follow_the_arguments() {
-        let names: Vec<&str> = Technique::ALL.iter().map(|t| t.name()).collect();
+        let names: Vec<&str> = TechniqueName::ALL.iter().map(|t| t.name()).collect();
         let args = BenchCli::try_parse_from(["bench", "--technique", &names.join(",")]).expect("parses").args;
-        assert_eq!(args.technique, Technique::ALL);
-        assert_eq!(args.options(), Options { techniques: Technique::ALL.to_vec(), ..Options::default() });
+        assert_eq!(args.technique, TechniqueName::ALL);
+        assert_eq!(args.options(), Options { techniques: TechniqueName::ALL.to_vec(), ..Options::default() });
+        let args =
+            BenchCli::try_parse_from(["bench", "--technique", "policy", "--policy-target", "0.02", "--budget", "9000"])
+                .expect("parses")
+                .args;
+        let policy = Policy { target: 0.02, budget: Some(9000), ..Policy::default() };
+        assert_eq!(args.options().policy, policy);
+        assert!(BenchCli::try_parse_from(["bench", "--budget", "0"]).is_err(), "a budget of 0 primitives");
         let args = BenchCli::try_parse_from(["bench", "--quality", "--reference-1x", "--no-render"]);
         assert!(args.is_err(), "--no-render conflicts with --quality");
         let args = BenchCli::try_parse_from(["bench", "--quality", "--supersample", "2"]).expect("parses").args;

@@ -91,7 +91,8 @@ enum Command {
     /// Techniques: full (the full mesh drawn as the reference is: reads perfect), full-1x (the
     /// full mesh at the image size), spt (triangles + points, the default renderer), ellipsoids
     /// (Clasen's ellipsoids and branch lines), impostors, prune-opt and prune-cook where the
-    /// containers hold them (reported as absent otherwise); policy is reported as not implemented.
+    /// containers hold them (reported as absent otherwise); policy (per tree the representation the
+    /// calibration tables choose).
     #[command(after_help = EXIT_CODES)]
     Eval(eval::Args),
     /// The fly-through benchmark (Clasen 2011 §7): a forest of 10,000 trees in groups and a camera
@@ -101,7 +102,8 @@ enum Command {
     /// Without inputs the forest is made of built-in demo trees. full (the full mesh) is counted
     /// from the selection, not drawn, unless --quality draws it as the reference; spt is the
     /// default renderer; prune-cook and prune-opt fly the renderer's pruning policy with Cook's or
-    /// the optimal scale where the models hold priority lists (reported as absent otherwise).
+    /// the optimal scale where the models hold priority lists (reported as absent otherwise);
+    /// policy flies the renderer's default choice per tree, with --budget its budget mode.
     #[command(after_help = EXIT_CODES)]
     Bench(bench::Args),
 }

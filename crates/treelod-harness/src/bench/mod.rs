@@ -27,7 +27,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, render_image_timed, render_prepared_timed};
-use treelod_render::{Camera, Instance, ModelId, PerTechnique, Pruning, Renderer, Settings, Technique};
+use treelod_render::{Camera, Instance, ModelId, PerTechnique, Policy, Pruning, Renderer, Settings, Technique};
 
 use self::forest::{Forest, Shape};
 use self::path::Frame;
@@ -35,7 +35,7 @@ use treelod_eval::MetricError;
 
 use crate::Error;
 use crate::eval::metrics::{Coverage, LinearImage, Mask, flip::mean_flip, multiscale_rmse};
-use crate::eval::{Adapter, Availability};
+use crate::eval::{Adapter, Availability, TechniqueName};
 use crate::offscreen::{clear_colour, settle_streaming};
 use crate::scene;
 
@@ -74,8 +74,13 @@ pub struct Options {
     /// Vertical field of view, degrees.
     pub fov_degrees: f32,
     /// Techniques to fly, in order (a repeated one is flown once); those not available are
-    /// reported, not skipped.
-    pub techniques: Vec<Technique>,
+    /// reported, not skipped. `full` is counted from the selection (drawn only as `quality`'s
+    /// reference); `full-1x` draws the full mesh at the image size; `policy` flies the renderer's
+    /// default, [`Self::policy`].
+    pub techniques: Vec<TechniqueName>,
+    /// The policy `policy` flies with: its target, and with [`Policy::budget`] the primitives
+    /// per frame its budget mode aims for.
+    pub policy: Policy,
     /// Draw images (else select and stream only: no GPU time, no quality).
     pub render: bool,
     /// Select `spt` on the GPU (`Renderer::enable_gpu_selection`).
@@ -96,7 +101,7 @@ pub struct Options {
 impl Default for Options {
     /// The defaults of `treelod bench`: the built-in forest of 10,000 trees, 360 frames at
     /// 1536×864, layout seed 1, a 50° field of view, `full` and `spt`, drawn, no GPU selection,
-    /// shadows or quality, the renderer's thresholds, a white background.
+    /// shadows or quality, the renderer's thresholds and policy, a white background.
     fn default() -> Self {
         Self {
             inputs: Vec::new(),
@@ -105,7 +110,8 @@ impl Default for Options {
             size: (1536, 864),
             seed: 1,
             fov_degrees: 50.0,
-            techniques: vec![Technique::Full, Technique::Spt],
+            techniques: vec![TechniqueName::FULL, TechniqueName::Technique(Technique::Spt)],
+            policy: Policy::default(),
             render: true,
             gpu_selection: false,
             shadows: false,
@@ -140,6 +146,9 @@ impl Options {
         if !(self.fov_degrees > 0.0 && self.fov_degrees < 180.0) {
             return bad("the field of view must be between 0 and 180 degrees");
         }
+        if self.policy.budget == Some(0) {
+            return bad("a primitive budget must be at least 1");
+        }
         if self.quality.is_some() && !self.render {
             return bad("quality needs images drawn");
         }
@@ -152,17 +161,17 @@ impl Options {
 
 /// What `technique` draws, for the JSON summary.
 #[must_use]
-pub fn description(technique: Technique) -> &'static str {
+pub fn description(technique: TechniqueName) -> &'static str {
     match technique {
-        Technique::Full => "the full mesh: every triangle of every visible instance",
-        t => crate::eval::output::description(crate::eval::TechniqueName::Technique(t)),
+        TechniqueName::FULL => "the full mesh: every triangle of every visible instance",
+        t => crate::eval::output::description(t),
     }
 }
 
 /// Whether `technique` can be flown over models holding each technique's data as `held` counts
 /// them.
-fn availability(technique: Technique, held: PerTechnique<usize>) -> Availability {
-    crate::eval::availability(crate::eval::TechniqueName::Technique(technique), held, "no model of the forest holds")
+fn availability(technique: TechniqueName, held: PerTechnique<usize>) -> Availability {
+    crate::eval::availability(technique, held, "no model of the forest holds")
 }
 
 /// The renderer settings `technique` flies with; `None` for `full`, which is counted apart.
@@ -172,12 +181,16 @@ fn availability(technique: Technique, held: PerTechnique<usize>) -> Availability
 /// hysteresis; smaller ones by the point tree) with the optimal or Cook's scale. `ellipsoids` flies
 /// with the bark as lines where a model has them, at the default quality and level blend;
 /// `impostors` with the defaults of `render` (morphing levels, the chain's bark where a model has a
-/// chain). Trees whose models lack a technique's data draw with the point tree.
-pub fn settings(technique: Technique, options: &Options) -> Option<Settings> {
-    if technique == Technique::Full {
-        return None;
-    }
-    let mut settings = Settings::forced(technique);
+/// chain). Trees whose models lack a technique's data draw with the point tree. `full-1x` draws
+/// every triangle at the image size; `policy` is the renderer's default with [`Options::policy`]
+/// (the point tree for models without calibration tables).
+pub fn settings(technique: TechniqueName, options: &Options) -> Option<Settings> {
+    let mut settings = match technique {
+        TechniqueName::FULL => return None,
+        TechniqueName::Technique(t) => Settings::forced(t),
+        TechniqueName::Full1x => Settings::forced(Technique::Full),
+        TechniqueName::Policy => Settings { policy: Some(options.policy), ..Settings::forced(Technique::Spt) },
+    };
     settings.s_min = options.s_min.unwrap_or(settings.s_min);
     settings.s_max = options.s_max.unwrap_or(settings.s_max);
     settings.pruning = Pruning::default();
@@ -192,7 +205,7 @@ pub struct Row {
     /// Frame index.
     pub frame: usize,
     /// The technique.
-    pub technique: Technique,
+    pub technique: TechniqueName,
     /// Instances inside the view frustum.
     pub instances_visible: u32,
     /// Triangles submitted.
@@ -298,7 +311,7 @@ pub struct Report {
     /// Whether the device has timestamp queries.
     pub timestamps: bool,
     /// Every technique asked for, in order, and whether it was measured.
-    pub techniques: Vec<(Technique, Availability)>,
+    pub techniques: Vec<(TechniqueName, Availability)>,
     /// One row per frame and measured technique, frame by frame.
     pub rows: Vec<Row>,
     /// Seconds the whole run took (models, layout, warm-up and frames).
@@ -349,7 +362,7 @@ impl FullCounter {
 
 /// A technique flown with a renderer.
 struct Flown {
-    technique: Technique,
+    technique: TechniqueName,
     renderer: Renderer,
 }
 
@@ -414,7 +427,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
     if let Some(stochastic) = &models.stochastic {
         *held.get_mut(Technique::PruneCook) += held_by_models(stochastic).get(Technique::PruneCook);
     }
-    let mut techniques: Vec<(Technique, Availability)> = Vec::new();
+    let mut techniques: Vec<(TechniqueName, Availability)> = Vec::new();
     for &technique in &options.techniques {
         if !techniques.iter().any(|(t, _)| *t == technique) {
             techniques.push((technique, availability(technique, held)));
@@ -423,7 +436,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
     if techniques.iter().all(|(_, a)| *a != Availability::Measured) {
         return Err(Error::NoneMeasurable { input: label, absent: output::unavailable(&techniques) });
     }
-    let measured: Vec<Technique> =
+    let measured: Vec<TechniqueName> =
         techniques.iter().filter(|(_, a)| *a == Availability::Measured).map(|(t, _)| *t).collect();
 
     let (width, height) = options.size;
@@ -470,10 +483,10 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
     // The renderers share one list of instances (the same model order in each).
     let instances: Vec<Instance> =
         forest.trees.iter().map(|t| Instance { model: ModelId(t.model), transform: t.transform() }).collect();
-    let add = |gpu: &Gpu, settings: Settings, technique: Option<Technique>| -> Result<Renderer, Error> {
+    let add = |gpu: &Gpu, settings: Settings, technique: Option<TechniqueName>| -> Result<Renderer, Error> {
         let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
         let containers = match (&models.stochastic, technique) {
-            (Some(stochastic), Some(Technique::PruneCook)) => stochastic,
+            (Some(stochastic), Some(TechniqueName::Technique(Technique::PruneCook))) => stochastic,
             _ => &models.containers,
         };
         for (index, (container, label)) in containers.iter().zip(&models.labels).enumerate() {
@@ -489,7 +502,10 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
             }
         }
         renderer.set_instances(&instances);
-        if options.gpu_selection && technique == Some(Technique::Spt) {
+        // The policy's frames select on the GPU where it chooses no tree (no calibration tables).
+        if options.gpu_selection
+            && matches!(technique, Some(TechniqueName::Technique(Technique::Spt) | TechniqueName::Policy))
+        {
             renderer
                 .enable_gpu_selection(&gpu.device, &gpu.queue)
                 .map_err(|source| Error::GpuSelection { input: options.input_label(), source })?;
@@ -514,7 +530,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
         }
     }
     drop(instances);
-    let mut full = measured.contains(&Technique::Full).then(|| FullCounter::new(&models.containers));
+    let mut full = measured.contains(&TechniqueName::FULL).then(|| FullCounter::new(&models.containers));
 
     let background = clear_colour(options.background);
     let camera =
@@ -560,7 +576,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
             reference_shot = Some((crate::eval::measurable(&image, k, options.background).map_err(internal)?, gpu_ms));
         }
         for &technique in &measured {
-            if technique == Technique::Full {
+            if technique == TechniqueName::FULL {
                 let Some(counter) = &mut full else { continue };
                 let (visible, triangles, ms) = counter.count(&forest.trees, &view);
                 rows.push(Row {
@@ -672,7 +688,7 @@ fn guarded<R>(gpu: &Gpu, label: &Path, f: impl FnOnce() -> Result<R, Error>) -> 
 
 /// Opens the models of the inputs (containers, or the models of scene files, each path once), or
 /// builds the demo trees when there are none.
-fn load_models(inputs: &[PathBuf], techniques: &[Technique]) -> Result<Models, Error> {
+fn load_models(inputs: &[PathBuf], techniques: &[TechniqueName]) -> Result<Models, Error> {
     if inputs.is_empty() {
         return demo_models(techniques);
     }
@@ -716,15 +732,20 @@ fn demo_prune(order: treelod_build::PruneOrder) -> treelod_build::PruneConfig {
 /// baseline or `impostors` asked for they hold baselines and impostors (the impostors set the
 /// billboards' budget, and the chain gives the impostor trees' bark); with
 /// `ellipsoids` they hold Clasen's ellipsoids and lines (the build's defaults: about a second per
-/// tree on 2 cores, so only when asked for).
-fn demo_models(techniques: &[Technique]) -> Result<Models, Error> {
+/// tree on 2 cores, so only when asked for); with `policy`, baselines, impostors, ellipsoids and
+/// lines, so that the policy chooses among them (every container holds calibration tables, the
+/// build's default).
+fn demo_models(names: &[TechniqueName]) -> Result<Models, Error> {
     use treelod_build::PruneOrder;
+    let policy = names.contains(&TechniqueName::Policy);
+    let techniques: Vec<Technique> = names.iter().filter_map(|n| n.technique()).collect();
     let opt = techniques.contains(&Technique::PruneOpt).then(|| demo_prune(PruneOrder::Density));
     let extras = Extras {
-        baselines: techniques.iter().any(|t| {
-            matches!(t, Technique::LodChain | Technique::Billboard | Technique::Crossed | Technique::Impostors)
-        }),
-        ellipsoids: techniques.contains(&Technique::Ellipsoids),
+        baselines: policy
+            || techniques.iter().any(|t| {
+                matches!(t, Technique::LodChain | Technique::Billboard | Technique::Crossed | Technique::Impostors)
+            }),
+        ellipsoids: policy || techniques.contains(&Technique::Ellipsoids),
     };
     let containers = demo_containers(opt.as_ref(), extras)?;
     let stochastic = match techniques.contains(&Technique::PruneCook) {
@@ -795,26 +816,42 @@ mod tests {
     #[test]
     fn pruning_needs_priority_lists() {
         let none = PerTechnique::<usize>::default();
-        assert_eq!(availability(Technique::Spt, none), Availability::Measured);
-        assert_eq!(availability(Technique::Full, none), Availability::Measured);
-        let cook = availability(Technique::PruneCook, none);
+        let name = TechniqueName::Technique;
+        assert_eq!(availability(name(Technique::Spt), none), Availability::Measured);
+        assert_eq!(availability(TechniqueName::FULL, none), Availability::Measured);
+        assert_eq!(availability(TechniqueName::Policy, none), Availability::Measured);
+        let cook = availability(name(Technique::PruneCook), none);
         assert_eq!(cook.status(), "absent");
         assert!(cook.reason().is_some_and(|r| r.contains("pruning priority lists")), "{cook:?}");
         let mut some = PerTechnique::<usize>::default();
         *some.get_mut(Technique::PruneOpt) = 4;
-        assert_eq!(availability(Technique::PruneOpt, some), Availability::Measured);
+        assert_eq!(availability(name(Technique::PruneOpt), some), Availability::Measured);
     }
 
     #[test]
     fn every_technique_of_the_one_list_flies_with_itself() {
-        let options = Options { techniques: Technique::ALL.to_vec(), ..Options::default() };
+        let options = Options { techniques: TechniqueName::ALL.to_vec(), ..Options::default() };
         for t in Technique::ALL {
-            let settings = settings(t, &options);
+            let settings = settings(TechniqueName::Technique(t), &options);
             assert_eq!(settings.map(|s| s.technique), (t != Technique::Full).then_some(t), "{t}");
+            assert!(settings.is_none_or(|s| s.policy.is_none()), "{t} is forced");
         }
+        let full_1x = settings(TechniqueName::Full1x, &options).expect("drawn");
+        assert_eq!((full_1x.technique, full_1x.policy), (Technique::Full, None));
         let none = PerTechnique::<usize>::default();
-        let absent = availability(Technique::Impostors, none);
+        let absent = availability(TechniqueName::Technique(Technique::Impostors), none);
         assert!(absent.reason().is_some_and(|r| r.contains("impostor planes")), "{absent:?}");
-        assert!(settings(Technique::Ellipsoids, &options).is_some_and(|s| s.lines));
+        assert!(settings(TechniqueName::Technique(Technique::Ellipsoids), &options).is_some_and(|s| s.lines));
+    }
+
+    #[test]
+    fn the_policy_flies_with_its_target_and_budget() {
+        let policy = Policy { target: 0.03, budget: Some(50_000), ..Policy::default() };
+        let options = Options { policy, ..Options::default() };
+        let flown = settings(TechniqueName::Policy, &options).expect("drawn");
+        assert_eq!(flown.policy, Some(policy));
+        assert_eq!(flown.technique, Technique::Spt, "models without tables draw the point tree");
+        let none = Options { policy: Policy { budget: Some(0), ..Policy::default() }, ..Options::default() };
+        assert!(matches!(none.check(), Err(Error::Options { .. })));
     }
 }

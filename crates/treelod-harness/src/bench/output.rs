@@ -12,9 +12,9 @@ use serde::Serialize;
 use treelod_render::offscreen::Image;
 
 use super::path::Phase;
-use super::{Report, Row, Technique};
-use crate::eval::Availability;
+use super::{Report, Row};
 use crate::eval::plot::{self, Axis, BLACK, Canvas, Panel, REFERENCE};
+use crate::eval::{Availability, TechniqueName};
 use crate::table::{Align, Table};
 
 /// What the time columns measure, said wherever they appear.
@@ -109,20 +109,20 @@ pub struct Summary {
     pub flip: Option<f64>,
 }
 
-fn rows_of(report: &Report, technique: Technique) -> impl Iterator<Item = &Row> {
+fn rows_of(report: &Report, technique: TechniqueName) -> impl Iterator<Item = &Row> {
     report.rows.iter().filter(move |r| r.technique == technique)
 }
 
 /// The summary of `technique`'s rows.
 #[must_use]
-pub fn summarise(report: &Report, technique: Technique) -> Summary {
+pub fn summarise(report: &Report, technique: TechniqueName) -> Summary {
     let rows: Vec<&Row> = rows_of(report, technique).collect();
     let n = rows.len().max(1) as f64;
     let mean = |f: &dyn Fn(&Row) -> f64| rows.iter().map(|r| f(r)).sum::<f64>() / n;
     let mean_of = |values: Vec<f64>| (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64);
     let primitives = mean(&|r| r.primitives() as f64);
     let in_cut = mean(&|r| r.primitives_in_cut() as f64);
-    let full: Vec<f64> = rows_of(report, Technique::Full).map(|r| r.primitives() as f64).collect();
+    let full: Vec<f64> = rows_of(report, TechniqueName::FULL).map(|r| r.primitives() as f64).collect();
     let full_mean = mean_of(full);
     let selection: Vec<f64> = rows.iter().map(|r| r.selection_ms).collect();
     let gpu: Vec<f64> = rows.iter().filter_map(|r| r.gpu_ms).collect();
@@ -174,7 +174,7 @@ fn opt(value: Option<f64>, digits: usize) -> String {
 
 /// One line per technique that is not measured: `technique NAME: STATUS: REASON`.
 #[must_use]
-pub fn unavailable(techniques: &[(Technique, Availability)]) -> String {
+pub fn unavailable(techniques: &[(TechniqueName, Availability)]) -> String {
     let mut out = String::new();
     for (technique, availability) in techniques {
         if let Some(reason) = availability.reason() {
@@ -475,11 +475,11 @@ pub fn plot(report: &Report) -> Image {
     let (width, panel_height, gap) = (960u32, 170u32, 44u32);
     let height = 24 + panels.len() as u32 * (panel_height + gap);
     let mut canvas = Canvas::new(width, height);
-    let techniques: Vec<(Technique, Rgb888)> = report
+    let techniques: Vec<(TechniqueName, Rgb888)> = report
         .techniques
         .iter()
         .filter(|(_, a)| *a == Availability::Measured)
-        .map(|(t, _)| (*t, plot::style(*t, false).0))
+        .map(|(t, _)| (*t, plot::style_of(*t).0))
         .collect();
     let frames = report.frames.len().max(1);
     let x = Axis { lo: 0.0, hi: (frames - 1).max(1) as f64, log: false };

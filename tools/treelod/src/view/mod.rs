@@ -1105,11 +1105,13 @@ impl Viewer {
         let technique = settings.technique;
         let drawn = stats.instances.get(technique);
         if let Some(policy) = settings.policy {
-            mode.push_str(&format!(
-                " | policy (target {}): {}",
-                policy.target,
-                crate::render::technique_counts(&stats.instances)
-            ));
+            let target = match (policy.budget, renderer.budget_steering()) {
+                (Some(budget), Some((s_min, target))) => {
+                    format!("budget {budget}: target {target:.4}, s_min {s_min:.2}")
+                }
+                _ => format!("target {}", policy.target),
+            };
+            mode.push_str(&format!(" | policy ({target}): {}", crate::render::technique_counts(&stats.instances)));
         }
         match technique {
             _ if settings.policy.is_some() => {}

@@ -168,6 +168,10 @@ pub fn show(ui: &mut Ui, inputs: Inputs<'_>) -> Vec<Action> {
     actions
 }
 
+/// The panel's primitive budget when budget mode is first turned on: a million primitives, what a
+/// current GPU draws in well under a millisecond.
+const DEFAULT_BUDGET: u64 = 1_000_000;
+
 fn representation(ui: &mut Ui, settings: &mut Settings, holds: Holds) {
     let mut on = settings.policy.is_some();
     let policy = ui
@@ -178,6 +182,19 @@ fn representation(ui: &mut Ui, settings: &mut Settings, holds: Holds) {
     }
     if let Some(policy) = &mut settings.policy {
         ui.add(egui::Slider::new(&mut policy.target, 0.0..=0.05).text("target error"));
+        // Budget mode: the renderer steers the target and s_min so a frame meets the count.
+        let mut budgeted = policy.budget.is_some();
+        ui.checkbox(&mut budgeted, "primitive budget").on_hover_text(
+            "the target and s_min steered from frame to frame so the view draws about this many primitives",
+        );
+        match (budgeted, policy.budget) {
+            (false, _) => policy.budget = None,
+            (true, None) => policy.budget = Some(DEFAULT_BUDGET),
+            (true, Some(mut budget)) => {
+                ui.add(egui::Slider::new(&mut budget, 1_000..=10_000_000).logarithmic(true).text("primitives"));
+                policy.budget = Some(budget.max(1));
+            }
+        }
     }
     let current = settings.technique;
     egui::ComboBox::from_id_salt("representation").width(ui.available_width()).selected_text(current.label()).show_ui(
