@@ -1383,6 +1383,9 @@ struct Steering {
     under: Option<f64>,
     /// Frames held just above `over` while under the budget by more than the dead band.
     held: u32,
+    /// The last frame's pressure and count: a count that changes while the pressure holds
+    /// means the scene changed (the camera moved), and the bounds no longer hold.
+    last: Option<(f64, u64)>,
 }
 
 /// Pressures closer than this are one (2 % in `s_min`, 4 % in the target).
@@ -1415,6 +1418,7 @@ impl BudgetController {
                 over: None,
                 under: None,
                 held: 0,
+                last: None,
             },
         }
     }
@@ -1459,13 +1463,24 @@ impl BudgetController {
     /// Where the count falls in steps (a target at which many trees switch representation at
     /// once), the move halves each time the count crosses the budget, and the controller settles
     /// on the least pressure it has seen under the budget: the frame then stays under the
-    /// budget, by up to one such step, rather than flickering across it. Held there for
-    /// [`HOLD_FRAMES`] frames while under by more than the dead band, it tries again.
+    /// budget, by up to one such step, rather than flickering across it. When the count changes
+    /// while the steering holds (the camera moved), or after 120 frames held under the budget by
+    /// more than the dead band, it tries again.
     pub fn update_policy(&mut self, last_frame_primitives: u64) -> (f32, f32) {
         let over_budget = last_frame_primitives > self.target_primitives;
         let steering = &mut self.steering;
         let p = steering.pressure;
-        // A bound the frame contradicts is stale: the scene changed under it.
+        // Bounds are stale once the scene changes under them: the count moved while the pressure
+        // held, or the frame contradicts one of them.
+        let band = f64::from(self.dead_band.max(0.0));
+        #[expect(clippy::cast_precision_loss, reason = "a ratio of counts needs no integer precision")]
+        let moved = steering.last.is_some_and(|(q, count)| {
+            q == p && (last_frame_primitives as f64 / count.max(1) as f64 - 1.0).abs() > band
+        });
+        steering.last = Some((p, last_frame_primitives));
+        if moved {
+            (steering.over, steering.under, steering.held) = (None, None, 0);
+        }
         if over_budget && steering.under.is_some_and(|u| p >= u) {
             steering.under = None;
         }
@@ -1815,10 +1830,11 @@ mod tests {
         }
         assert!(counts[40..].iter().all(|&c| c == 37_000), "settled under the budget: {counts:?}");
         assert!(t < 0.021, "at the least target seen under the budget: {t}");
-        // The scene gets cheaper: held, then tried again, and the new cheap count is met.
+        // The scene gets cheaper (the camera moved): the count changes while the steering holds,
+        // so the bounds are dropped at once and the new cheap count is met.
         let scene = |t: f32| if t < 0.005 { 44_000 } else { 20_000 };
         let mut counts = Vec::new();
-        for _ in 0..HOLD_FRAMES as usize + 100 {
+        for _ in 0..60 {
             counts.push(scene(t));
             t = controller.update_policy(scene(t)).1;
         }
