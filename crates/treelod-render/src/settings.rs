@@ -107,7 +107,8 @@ pub struct Settings {
     /// policy chooses no tree; every other frame selects on the CPU.
     pub technique: Technique,
     /// The policy (`treelod_runtime::policy`, spec §10.2): each tree whose container has
-    /// calibration tables (spec §6.15, `treelod build` writes them by default) is drawn with the
+    /// calibration tables (spec §6.15; `treelod build` writes them whenever it builds a representation
+    /// besides the point tree) is drawn with the
     /// cheapest representation whose calibrated error at its projected height is within
     /// [`Policy::target`] of the full mesh's, with hysteresis; the shadow cascades draw each tree
     /// with the camera's choice. With [`Policy::budget`] the target and [`Self::s_min`] are

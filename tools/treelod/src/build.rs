@@ -141,11 +141,12 @@ pub struct BuildOptions {
     pub ao_rays: u32,
     /// Calibration views (spec §6.15): every representation built is drawn at 6 projected heights
     /// (8 to 256 pixels) from N orthographic views on the CPU and its coverage error against the
-    /// supersampled full mesh and its primitive count are stored, for a policy to choose
-    /// representations with (4 is the calibration's own default). 0, the default until the
-    /// runtime's policy reads the tables, writes none.
-    #[arg(long, value_name = "N", default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=64))]
-    pub calibration_views: u32,
+    /// supersampled full mesh and its primitive count are stored, for the renderer's policy to
+    /// choose representations with. Default: 4 when the build holds a representation to choose
+    /// besides the point tree (--prune, --impostors, --ellipsoids or --baselines; a few percent
+    /// of such a build's time), else 0. 0 writes none.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=64))]
+    pub calibration_views: Option<u32>,
     /// Keep every bit of the written floats. By default positions and texture coordinates keep
     /// 16 significant bits, sizes 12 and normals 10 per component (0.15 mm on a 10 m tree), which
     /// zstd compresses about a third smaller.
@@ -199,6 +200,18 @@ impl BuildOptions {
         <Defaults as clap::Parser>::try_parse_from(["treelod"]).expect("every build option has a default").options
     }
 
+    /// The calibration's views: `--calibration-views`, else 4 where the build holds more than the
+    /// point tree to choose from and 0 where it does not (the policy would always draw the point
+    /// tree, and the tables would only cost time and bytes).
+    pub(crate) fn calibration_views(&self) -> u32 {
+        let choice = self.impostors || self.ellipsoids || self.baselines || PruneOrder::parse(&self.prune).is_some();
+        self.calibration_views.unwrap_or(if choice {
+            treelod_build::CalibrationConfig::default().views as u32
+        } else {
+            0
+        })
+    }
+
     /// The build crate's configuration of these options.
     pub(crate) fn config(&self) -> BuildConfig {
         BuildConfig {
@@ -238,8 +251,8 @@ impl BuildOptions {
             }),
             ao: (self.ao_rays > 0)
                 .then(|| treelod_build::AoConfig { rays: self.ao_rays, ..treelod_build::AoConfig::default() }),
-            calibration: (self.calibration_views > 0).then(|| treelod_build::CalibrationConfig {
-                views: self.calibration_views as usize,
+            calibration: (self.calibration_views() > 0).then(|| treelod_build::CalibrationConfig {
+                views: self.calibration_views() as usize,
                 ..treelod_build::CalibrationConfig::default()
             }),
             precision: if self.full_precision {
@@ -1169,7 +1182,22 @@ mod tests {
         let options = BuildOptions::defaults();
         assert!(!options.impostors && !options.ellipsoids && !options.baselines);
         assert!(options.ao_rays > 0, "ambient occlusion is on by default");
-        assert_eq!(options.calibration_views, 0, "calibration is opt-in until the policy reads it");
+        assert_eq!(options.calibration_views(), 0, "nothing to choose from: no tables");
+        let with = |flag: &str| {
+            #[derive(clap::Parser)]
+            struct Cli {
+                #[command(flatten)]
+                options: BuildOptions,
+            }
+            <Cli as clap::Parser>::try_parse_from(["treelod", flag]).expect("parses").options
+        };
+        assert_eq!(with("--baselines").calibration_views(), 4, "a choice: calibrated by default");
+        assert_eq!(with("--ellipsoids").calibration_views(), 4);
+        assert_eq!(with("--calibration-views=0").calibration_views(), 0);
+        let mut options = with("--impostors");
+        assert_eq!(options.calibration_views(), 4);
+        options.calibration_views = Some(2);
+        assert_eq!(options.calibration_views(), 2);
     }
 
     #[test]

@@ -73,6 +73,7 @@ fn build_times_every_stage_that_ran_in_the_table_and_the_json() {
         "images",
         "metadata",
         "precision",
+        "calibration",
         "write",
         "verify",
     ];
