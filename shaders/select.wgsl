@@ -228,8 +228,9 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
         return;
     }
     let slot = cur_model.bucket_first[kind] + s;
+    // Technique 1: the point tree, the only one GPU selection draws.
     draws[slot] = DrawInfo(current.transform, taus.x, max(taus.y, taus.x), cell, draw_scale, shading, 1.0,
-                           current.index, 0u);
+                           current.index, 1u);
     let corners = select(6u, 3u, kind == 0u);
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
 }

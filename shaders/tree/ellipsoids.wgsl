@@ -133,6 +133,7 @@ fn vs_ellipsoid(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.2, 0.8, 0.8); }
         case 3u: { out.tint = level_tint(e.hi); }
+        case 4u: { out.tint = technique_tint(draw.technique); }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

@@ -170,6 +170,7 @@ fn vs_line(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) dr
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.55, 0.35, 0.15); }
         case 3u: { out.tint = level_tint(l.hi); }
+        case 4u: { out.tint = technique_tint(draw.technique); }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

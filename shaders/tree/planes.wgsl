@@ -94,6 +94,7 @@ fn quad_corner(
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u, 3u: { out.tint = kinds; }
+        case 4u: { out.tint = technique_tint(draw.technique); }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

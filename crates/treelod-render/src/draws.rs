@@ -24,10 +24,16 @@ pub(crate) struct DrawInfo {
     /// Index of the instance in [`Renderer::set_instances`]' list (read by the shaders only to
     /// seed the level blend's dither, `level_dither`).
     pub(crate) instance: u32,
-    pub(crate) _pad: u32,
+    /// [`Technique::index`](treelod_runtime::Technique::index) of the technique the instance is
+    /// drawn with this frame (the debug colours of [`DebugView::Techniques`](crate::DebugView)).
+    pub(crate) technique: u32,
 }
 
 const _: () = assert!(size_of::<DrawInfo>() == 96);
+
+/// [`DrawInfo::technique`] of the point tree, which GPU selection writes (`shaders/select.wgsl`).
+pub(crate) const SPT_INDEX: u32 = treelod_runtime::Technique::Spt.index() as u32;
+const _: () = assert!(SPT_INDEX == 1, "shaders/select.wgsl writes 1 for the point tree");
 
 /// Where a recorded draw reads its elements.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -199,7 +205,7 @@ impl Renderer {
                     shading: range.shading,
                     leaf_scale: 1.0,
                     instance: draw.instance,
-                    _pad: 0,
+                    technique: 0,
                 };
                 self.buckets[bucket].push((info, first_vertex, draw.count * corners));
                 view.recorded.push(draw);
@@ -280,6 +286,10 @@ impl Renderer {
                 (6 * first, 6 * count),
                 1.0,
             );
+        }
+        // The technique each draw's tree is drawn with, for the debug colours.
+        for (info, _, _) in self.buckets.iter_mut().flatten() {
+            info.technique = self.drawn_with.get(info.instance as usize).copied().unwrap_or(SPT_INDEX);
         }
         view.model_draws.clear();
         let before = self.indirect.len();
@@ -461,7 +471,7 @@ fn record_direct(
         shading: 1.0,
         leaf_scale,
         instance: record.instance,
-        _pad: 0,
+        technique: 0,
     };
     buckets[bucket.of_model(record.model.0 as usize)].push((info, first_vertex, vertices));
     recorded.push(record);

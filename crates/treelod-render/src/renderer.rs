@@ -156,6 +156,9 @@ pub struct Renderer {
     assignment: Assignment,
     /// The policy's per-model tables and per-instance state ([`Settings::policy`]).
     pub(crate) policy: PolicyModels,
+    /// Per instance, the index of the technique it is drawn with this frame, for
+    /// [`DebugView::Techniques`] (empty in the other views).
+    pub(crate) drawn_with: Vec<u32>,
     /// Scratch: the instance indices the point tree selects in a view.
     spt_list: Vec<u32>,
     /// The occlusion measurement, and the trees to measure after this frame.
@@ -305,6 +308,7 @@ impl Renderer {
             lods: Vec::new(),
             representations: Vec::new(),
             policy: PolicyModels::default(),
+            drawn_with: Vec::new(),
             instances: Vec::new(),
             model_layout,
             frame_layout,
@@ -763,6 +767,7 @@ impl Renderer {
         let technique = self.settings.technique;
         let Some(policy) = self.settings.policy.filter(|p| self.policy.chooses(Some(p))) else {
             self.assignment.assign(&self.instances, &self.representations, |_, _| technique);
+            self.note_drawn_with();
             return;
         };
         let tables = &mut self.policy;
@@ -786,6 +791,24 @@ impl Renderer {
         );
         let chosen = &tables.chosen;
         self.assignment.assign(&self.instances, &self.representations, |i, _| chosen[i]);
+        self.note_drawn_with();
+    }
+
+    /// For [`DebugView::Techniques`], each instance's technique from this frame's assignment
+    /// (read when the draws are recorded); nothing otherwise.
+    fn note_drawn_with(&mut self) {
+        self.drawn_with.clear();
+        if self.settings.debug != DebugView::Techniques {
+            return;
+        }
+        self.drawn_with.resize(self.instances.len(), crate::draws::SPT_INDEX);
+        for technique in Technique::ALL {
+            for &i in &self.assignment[technique] {
+                if let Some(slot) = self.drawn_with.get_mut(i as usize) {
+                    *slot = technique.index() as u32;
+                }
+            }
+        }
     }
 
     /// Selects one view (its lists cleared first): each technique's runtime selection over the
@@ -909,6 +932,7 @@ impl Renderer {
                 DebugView::Cells => 1,
                 DebugView::Kinds => 2,
                 DebugView::Levels => 3,
+                DebugView::Techniques => 4,
             },
             morph: u32::from(settings.impostor_morph),
             ambient_occlusion: u32::from(settings.ambient_occlusion),

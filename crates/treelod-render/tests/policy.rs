@@ -11,7 +11,7 @@ use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, CalibrationConfig, ImpostorConfig, LodChainConfig};
 use treelod_format::Container;
 use treelod_render::offscreen::render_image;
-use treelod_render::{Camera, Instance, Policy, Renderer, Settings, Technique};
+use treelod_render::{Camera, DebugView, Instance, Policy, Renderer, Settings, Technique};
 use treelod_runtime::{Calibration, Choices, ModelLod, Representations, projected_height};
 
 /// The demo tree with impostors and its baselines (planes, a chain and billboards to choose
@@ -53,13 +53,17 @@ fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
     let first = choices.steps()[0];
     assert!(choices.steps().iter().any(|&t| t != first), "one choice everywhere: {:?}", choices.steps());
 
-    // Trees in a row along the view, from a few pixels to a large part of the screen.
+    // Trees along the view, from a few pixels to a large part of the screen.
     let (width, height) = (256, 256);
     let eye = vec3(0.0, 0.0, 0.0);
     let centre = lod.centre();
     let distances: Vec<f32> = (0..8).map(|i| 4.0 * 1.9f32.powi(i)).collect();
-    let positions: Vec<Vec3> =
-        distances.iter().map(|&d| vec3(0.0, -centre.y, -d) - vec3(centre.x, 0.0, centre.z)).collect();
+    // Spread sideways so that no tree hides another (the colours by technique are counted).
+    let positions: Vec<Vec3> = distances
+        .iter()
+        .enumerate()
+        .map(|(i, &d)| vec3(d * (0.3 - 0.085 * i as f32), -centre.y, -d) - vec3(centre.x, 0.0, centre.z))
+        .collect();
     let camera = Camera::look_at(eye, vec3(0.0, 0.0, -1.0), 0.9, width, height);
     let runtime_camera = treelod_runtime::Camera::look_at(eye, vec3(0.0, 0.0, -1.0), 0.9, width, height);
 
@@ -75,6 +79,22 @@ fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
     assert_eq!(stats.instances_visible, 8, "{stats:?}");
     assert_eq!(stats.instances, expected, "each tree by the policy's choice at its height");
     assert!(common::covered(&image).iter().any(|&c| c), "something is drawn");
+
+    // Coloured by technique: each chosen technique's colour is on screen.
+    let debug = Settings { debug: DebugView::Techniques, ..Settings::default() };
+    let mut coloured = forest(&gpu, &container, debug, &positions);
+    let (image, stats) = render_image(&gpu, &mut coloured, &camera, BACKGROUND).expect("renders");
+    assert_eq!(stats.instances, expected);
+    let encode = |c: f32| {
+        let s = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+        (s * 255.0).round() as i32
+    };
+    for (technique, n) in expected.iter() {
+        let colour = DebugView::technique_colour(technique).map(encode);
+        let pixels =
+            image.rgba.chunks_exact(4).filter(|p| (0..3).all(|k| (i32::from(p[k]) - colour[k]).abs() <= 6)).count();
+        assert_eq!(pixels > 0, n > 0, "{technique}: {n} trees, {pixels} pixels of {colour:?}");
+    }
 
     // The same trees forced to one technique: every tree with it.
     let mut forced = forest(&gpu, &container, Settings::forced(Technique::Crossed), &positions);

@@ -37,9 +37,12 @@ pub struct Args {
     #[arg(long)]
     pub compare: bool,
     /// Colour by grid cell (`cells`), by kind (`kinds`: triangles red, points blue, pruned
-    /// leaves green, impostor planes yellow, ellipsoids cyan) or by level (`levels`: one colour per
-    /// octave of each point's, plane's, ellipsoid's or line's interval, triangles light grey).
-    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "levels"])]
+    /// leaves green, impostor planes yellow, ellipsoids cyan), by level (`levels`: one colour per
+    /// octave of each point's, plane's, ellipsoid's or line's interval, triangles light grey) or
+    /// by the technique each tree is drawn with (`techniques`: what the policy chose; full grey,
+    /// spt blue, prune-opt green, prune-cook dark green, impostors yellow, ellipsoids cyan,
+    /// lod-chain red, billboard magenta, crossed violet).
+    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "levels", "techniques"])]
     pub debug: Option<String>,
     /// MSAA samples, 1 or 4; with 4, alpha-tested leaves cover samples in proportion to their
     /// filtered alpha (alpha to coverage) instead of being tested against the cutoff.
@@ -346,6 +349,7 @@ pub fn parse_debug(name: Option<&str>) -> DebugView {
         Some("cells") => DebugView::Cells,
         Some("kinds") => DebugView::Kinds,
         Some("levels") => DebugView::Levels,
+        Some("techniques") => DebugView::Techniques,
         _ => DebugView::Shaded,
     }
 }

@@ -142,10 +142,10 @@ pub struct Args {
     /// Start orbiting the scene's centre at this many bounding radii (the panel's distance).
     #[arg(long, value_name = "RADII", value_parser = parse_distance, conflicts_with = "eye")]
     pub distance: Option<f32>,
-    /// Start coloured by grid cell (`cells`), by kind (`kinds`) or by level (`levels`, as `render
-    /// --debug`), or with the error view (`error`: the difference from the full mesh as a heat
-    /// map; key 5).
-    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "levels", "error"])]
+    /// Start coloured by grid cell (`cells`), by kind (`kinds`), by level (`levels`) or by the
+    /// technique each tree is drawn with (`techniques`, key 6; as `render --debug`), or with the
+    /// error view (`error`: the difference from the full mesh as a heat map; key 5).
+    #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "levels", "techniques", "error"])]
     pub debug: Option<String>,
     /// Start without the panel (key Tab shows it). Windows narrower than twice the panel start
     /// without it anyway.
@@ -850,12 +850,13 @@ impl Viewer {
                 force_technique(settings, &[Technique::LodChain, Technique::Billboard, Technique::Crossed])
             }
             KeyCode::KeyO => settings.pruning.occlusion = !settings.pruning.occlusion,
-            KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 | KeyCode::Digit4 => {
+            KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 | KeyCode::Digit4 | KeyCode::Digit6 => {
                 settings.debug = match code {
                     KeyCode::Digit1 => DebugView::Shaded,
                     KeyCode::Digit2 => DebugView::Cells,
                     KeyCode::Digit3 => DebugView::Kinds,
-                    _ => DebugView::Levels,
+                    KeyCode::Digit4 => DebugView::Levels,
+                    _ => DebugView::Techniques,
                 };
                 self.heat_on = false;
             }
@@ -1097,6 +1098,7 @@ impl Viewer {
             (false, DebugView::Cells) => " | cells",
             (false, DebugView::Kinds) => " | kinds",
             (false, DebugView::Levels) => " | levels",
+            (false, DebugView::Techniques) => " | techniques",
         }
         .to_owned();
         if renderer.gpu_selection_enabled() {

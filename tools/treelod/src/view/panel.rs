@@ -314,6 +314,11 @@ fn view(
             "one colour per octave of each point's, plane's, ellipsoid's or line's interval of τ, \
              cycling; triangles light grey (key 4)",
         );
+        ui.radio_value(&mut choice, Some(DebugView::Techniques), "technique").on_hover_text(
+            "the technique each tree is drawn with, what the policy chose: full grey, spt blue, \
+             prune-opt green, prune-cook dark green, impostors yellow, ellipsoids cyan, lod-chain \
+             red, billboard magenta, crossed violet (key 6)",
+        );
         ui.radio_value(&mut choice, None, "error").on_hover_text(format!(
             "the difference from the full mesh drawn at this resolution, per pixel: blue, yellow, \
              red at {} (RMS of linear RGB) (key 5)",
