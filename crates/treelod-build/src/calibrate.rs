@@ -13,8 +13,9 @@
 //!   block's height): Gilet's cut at the default pixel thresholds (`s_min` 1, `s_max` 2, no depth
 //!   bias), point discs of their radius (a sub-pixel disc as the one-pixel splat of spec §10.1,
 //!   drawn when a hash of the point falls below its coverage), pruned leaves at `λ(h)` scaled by
-//!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test and every bark
-//!   triangle, ellipsoids at `τ = p` with the renderer's noise holes and the branch lines (or every
+//!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test, the bark of both
+//!   as the runtime draws it by default (the LoD chain's bark level for `τ_p` where the container
+//!   has a chain, else every bark triangle), ellipsoids at `τ = p` with the renderer's noise holes and the branch lines (or every
 //!   bark triangle without lines), the LoD chain's level for `τ = p`, the billboards.
 //!
 //! The error is the multi-scale RMSE of coverage (`treelod_eval::metrics`, Clasen §4: levels from
@@ -36,6 +37,7 @@ use treelod_format::{
     calibration_technique, image_format, material_class, pack::unpack_unorm16x2, prune_leaves_drawn,
 };
 use treelod_runtime::ellipsoid::{ellipsoid_drawn, line_drawn};
+use treelod_runtime::impostor::{BARK_AREA_KEPT, BARK_ERROR_SHARE};
 use treelod_runtime::prune::{PruneScale, curve_at, leaf_scale, size_factor};
 use treelod_runtime::{LodSettings, Thresholds, point_drawn, triangle_drawn};
 
@@ -99,8 +101,13 @@ struct Scene<'a> {
     /// Every triangle of `TRIANGLES`, ready to rasterise (the reference and the full mesh).
     full: Vec<RasterTriangle>,
     /// The triangles of `TRIANGLES` that are not of a leaf material (pruned and impostor trees
-    /// draw them all).
+    /// draw them all where the container has no chain, and near).
     bark: Vec<RasterTriangle>,
+    /// The LoD chain's bark levels as the runtime keeps them for pruned and impostor trees
+    /// (`treelod_runtime::ChainRanges::bark_levels`): per level, finest first, its block error
+    /// (the largest of its trees', kept non-decreasing) and its bark triangles, while they keep
+    /// [`BARK_AREA_KEPT`] of the full bark's area; empty without a chain, planes or pruning.
+    chain_bark: Vec<(f32, Vec<RasterTriangle>)>,
     /// Whether the impostor planes can be drawn (an RGBA atlas, not leaf slots).
     planes_drawable: bool,
 }
@@ -227,7 +234,25 @@ impl<'a> Scene<'a> {
                 data.images.get(p.image as usize).is_some_and(|i| i.format != image_format::LEAF_SLOTS)
                     && image_alpha.get(p.image as usize).is_some_and(|&a| a != NO_ALPHA)
             });
-        Self { data, alphas, material_alpha, image_alpha, full, bark, planes_drawable }
+        let chain_bark = if data.planes.is_empty() && data.prune_leaves.is_empty() {
+            Vec::new()
+        } else {
+            chain_bark_levels(data, &material_alpha)
+        };
+        Self { data, alphas, material_alpha, image_alpha, full, bark, chain_bark, planes_drawable }
+    }
+
+    /// Draws the bark of a pruned or impostor tree at `τ = tau` (metres) as the runtime's
+    /// `ImpostorBark::Chain` does: the chain's coarsest bark level whose error is at most
+    /// [`BARK_ERROR_SHARE`] of `τ`, else every bark triangle. Returns the triangles drawn.
+    fn draw_bark(&self, view: &View, tau: f32, mask: &mut Mask) -> u64 {
+        let usable = self.chain_bark.partition_point(|(error, _)| *error <= tau * BARK_ERROR_SHARE);
+        let triangles = match usable.checked_sub(1) {
+            Some(level) => &self.chain_bark[level].1,
+            None => &self.bark,
+        };
+        rasterize(mask, view, triangles, &self.alphas);
+        triangles.len() as u64
     }
 
     /// The techniques the container holds data for, in code order.
@@ -279,8 +304,7 @@ impl<'a> Scene<'a> {
                 let mode = if technique == t::PRUNE_OPT { PruneScale::Optimal } else { PruneScale::Cook };
                 let lambda = curve_at(&d.prune_lambda, pixels).unwrap_or(1.0).clamp(0.0, 1.0);
                 let grow = size_factor(leaf_scale(mode, &d.prune_scale, lambda));
-                rasterize(mask, view, &self.bark, &self.alphas);
-                let mut drawn = self.bark.len() as u64;
+                let mut drawn = self.draw_bark(view, lod.s_min * p, mask);
                 let mut leaves = Vec::new();
                 for cell in &d.cells {
                     let list = d.prune_leaves.get(cell.prune_leaves.as_usize()).unwrap_or(&[]);
@@ -300,8 +324,7 @@ impl<'a> Scene<'a> {
             }
             t::IMPOSTORS => {
                 let tau = lod.s_min * p;
-                rasterize(mask, view, &self.bark, &self.alphas);
-                let mut drawn = self.bark.len() as u64;
+                let mut drawn = self.draw_bark(view, tau, mask);
                 for plane in d.planes.iter().filter(|pl| pl.lo <= tau && tau < pl.hi) {
                     let (u, v) = (Vec3::from_array(plane.axis_u), Vec3::from_array(plane.axis_v));
                     self.quad(
@@ -481,6 +504,51 @@ fn quad(
     let [a, b, c, e] = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
     fill_triangle(mask, [a.0, b.0, c.0], [a.1, b.1, c.1], alpha);
     fill_triangle(mask, [a.0, c.0, e.0], [a.1, c.1, e.1], alpha);
+}
+
+/// The chain's bark levels as the runtime builds them (`Representations::from_container`): levels
+/// `0, 1, …` while every tree with a chain has that level, each level's error the running maximum
+/// of its trees' errors, its bark the non-leaf triangles of its trees' ranges; the levels stop at
+/// the first whose bark keeps less than [`BARK_AREA_KEPT`] of the full bark's area.
+fn chain_bark_levels(data: &ContainerData, material_alpha: &[u32]) -> Vec<(f32, Vec<RasterTriangle>)> {
+    let is_bark =
+        |t: &&TriangleRecord| data.materials.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF);
+    let position = |i: u32| data.vertices.get(i as usize).map_or(Vec3::ZERO, |v| Vec3::from_array(v.position));
+    let area = |tris: &[&TriangleRecord]| -> f64 {
+        tris.iter()
+            .map(|t| {
+                let [a, b, c] = t.indices.map(position);
+                f64::from(0.5 * (b - a).cross(c - a).length())
+            })
+            .sum()
+    };
+    let full_bark: Vec<&TriangleRecord> = data.triangles.iter().filter(is_bark).collect();
+    let full_area = area(&full_bark);
+    let Some(depth) = data.lod_levels.iter().map(|l| l.level.saturating_add(1)).max() else { return Vec::new() };
+    let trees = {
+        let mut trees: Vec<u32> = data.lod_levels.iter().map(|l| l.tree).collect();
+        trees.dedup();
+        trees.len()
+    };
+    let mut levels = Vec::new();
+    let mut running = 0.0f32;
+    for level in 0..depth {
+        let of_level: Vec<_> = data.lod_levels.iter().filter(|l| l.level == level).collect();
+        if of_level.len() != trees {
+            break;
+        }
+        running = running.max(of_level.iter().map(|l| l.error).fold(0.0f32, f32::max));
+        let bark: Vec<&TriangleRecord> = of_level
+            .iter()
+            .flat_map(|l| data.lod_triangles.get(l.triangles.as_usize()).unwrap_or(&[]))
+            .filter(is_bark)
+            .collect();
+        if area(&bark) < BARK_AREA_KEPT * full_area {
+            break;
+        }
+        levels.push((running, bark.iter().map(|t| raster_triangle(data, t, material_alpha, 1.0, None)).collect()));
+    }
+    levels
 }
 
 /// A triangle record as a rasteriser triangle, its corners moved to `c + sqrt(s)·(p − c)` when

@@ -7,10 +7,10 @@ use std::sync::Arc;
 
 use common::{BACKGROUND, bark_triangles, demo_built, gpu, one_tree, precision_recall};
 use glam::{Vec3, vec3};
-use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig};
+use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig, PruneConfig};
 use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, render_image};
-use treelod_render::{Camera, DrawSource, ImpostorBark, Renderer, Settings, Technique};
+use treelod_render::{Camera, DrawSource, ImpostorBark, Pruning, Renderer, Settings, Technique};
 
 /// The demo tree built with its baselines (and the impostors that set the billboards' budget).
 fn demo_with_baselines() -> Arc<Container> {
@@ -156,6 +156,42 @@ fn impostor_trees_draw_the_chains_bark_at_the_level_their_distance_allows() {
     }
     assert!(drawn.windows(2).all(|w| w[1] <= w[0]), "fewer bark triangles farther away: {drawn:?}");
     assert!(drawn[5] * 3 < bark, "far away a fraction of the bark: {drawn:?} of {bark}");
+}
+
+#[test]
+fn pruned_trees_draw_the_chains_bark_far_away_as_impostor_trees_do() {
+    let gpu = gpu();
+    let container = demo_built(&BuildConfig {
+        prune: Some(PruneConfig { resolution: 64, views: 2, ..PruneConfig::default() }),
+        impostors: Some(ImpostorConfig::default()),
+        baselines: Some(LodChainConfig::default()),
+        ..BuildConfig::default()
+    });
+    let bark = bark_triangles(&container);
+    let centre = centre(&container);
+    let pruning =
+        |bark| Pruning { lambda: Some(0.5), occlusion: false, spt_below_pixels: 0.0, bark, ..Pruning::default() };
+    let mut renderer = one_tree(&gpu, &container, Settings::forced(Technique::PruneOpt));
+    let mut saved = Vec::new();
+    for distance in [3.0f32, 300.0, 1000.0] {
+        let cam = Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, 0.8, 256, 256);
+        renderer.settings_mut().pruning = pruning(ImpostorBark::All);
+        let (all, every) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+        renderer.settings_mut().pruning = pruning(ImpostorBark::Chain);
+        let (chain, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+        assert_eq!(stats.instances.get(Technique::PruneOpt), 1, "{stats:?}");
+        assert_eq!(stats.leaves_pruned, every.leaves_pruned, "the same leaves either way");
+        let bark_drawn = |d: &treelod_render::RecordedDraw| d.source == DrawSource::Bark;
+        let chain_bark: u64 = renderer.draws().iter().filter(|d| bark_drawn(d)).map(|d| u64::from(d.count)).sum();
+        let (precision, recall) = precision_recall(&chain, &all);
+        eprintln!(
+            "{distance} m: bark {chain_bark} of {bark} triangles; coverage against all bark P {precision:.3} R {recall:.3}"
+        );
+        assert!(precision > 0.97 && recall > 0.97, "{distance} m: P {precision:.3} R {recall:.3}");
+        saved.push(every.triangles - stats.triangles);
+    }
+    assert_eq!(saved[0], 0, "near, every bark triangle");
+    assert!(saved[2] > 0 && saved[2] >= saved[1], "far, fewer: {saved:?} of {bark}");
 }
 
 /// The area of the bark (non-leaf) triangles among `triangles` of `container`.

@@ -153,6 +153,7 @@ fn lambda_follows_the_projected_height_and_far_trees_take_the_point_tree() {
         occlusion: false,
         spt_below_pixels: 30.0,
         hysteresis: treelod_render::Hysteresis { band: 0.0 },
+        ..Pruning::default()
     };
     let mut lambdas = Vec::new();
     for distance in [8.0, 20.0, 40.0] {

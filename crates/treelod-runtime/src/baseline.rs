@@ -172,9 +172,9 @@ pub struct ChainRanges {
     /// Per level, every tree's triangles of that level, contiguous: first and count.
     pub levels: Vec<(u32, u32)>,
     /// Per level, the bark (non-leaf) triangles of `levels`, for trees drawn with impostor
-    /// planes ([`ImpostorBark::Chain`]): the leading levels whose bark keeps
+    /// planes or pruned ([`ImpostorBark::Chain`]): the leading levels whose bark keeps
     /// [`BARK_AREA_KEPT`](crate::impostor::BARK_AREA_KEPT) of the full bark's area; empty
-    /// without planes.
+    /// without planes and priority lists.
     pub bark_levels: Vec<(u32, u32)>,
 }
 

@@ -104,7 +104,7 @@ impl Representations {
                     levels.push((first, at(&whole) - first));
                 }
                 let mut bark_levels = Vec::new();
-                if planes.is_some() {
+                if planes.is_some() || prune.is_some() {
                     let full_area = area(container, &whole[bark.0 as usize..(bark.0 + bark.1) as usize]);
                     for level in lod_chain.levels() {
                         let first = at(&whole);
@@ -442,7 +442,7 @@ pub fn select_techniques(
                 let state = prune_state
                     .as_mut()
                     .map(|s| PruneState { shown: &mut *s.shown, visible_fraction: s.visible_fraction });
-                crate::prune::select(scene, list, technique, &settings.pruning, camera, state, out);
+                crate::prune::select(scene, list, technique, settings, camera, state, out);
             }
             Technique::Impostors => {
                 crate::impostor::select(scene, list, camera, settings.s_min, settings.impostor_bark, out);

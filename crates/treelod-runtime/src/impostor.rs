@@ -17,8 +17,8 @@ use glam::{Mat4, Vec3};
 use treelod_format::{Container, PlaneRecord, Range, TriangleRecord};
 
 use crate::baseline::instance_tau;
-use crate::draws::{PrefixDraw, Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
-use crate::frame::{Camera, CellPrefix, Frustum};
+use crate::draws::{PrefixDraw, Representations, Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
+use crate::frame::{Camera, CellPrefix, Frustum, Instance, ModelLod};
 use crate::spt_lod::{SptCell, SptLod, spt_drawn};
 use crate::technique::Technique;
 
@@ -177,7 +177,11 @@ impl Deref for PlaneLod {
     }
 }
 
-/// The bark of a tree drawn with impostor planes (a renderer's setting).
+/// The bark of a tree drawn with impostor planes ([`TechniqueSettings::impostor_bark`]) or pruned
+/// ([`Pruning::bark`]): a renderer's setting.
+///
+/// [`TechniqueSettings::impostor_bark`]: crate::TechniqueSettings::impostor_bark
+/// [`Pruning::bark`]: crate::Pruning::bark
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum ImpostorBark {
     /// Every bark triangle (the paper keeps the trunk polygonal).
@@ -202,7 +206,7 @@ pub const BARK_AREA_KEPT: f64 = 0.9;
 /// [`ImpostorBark::Chain`] takes the coarsest level whose error is at most this share of `τ`:
 /// meshoptimizer's error of a tube collapsed to a sliver is about its radius, so half a pixel
 /// keeps the branches wider than about a pixel.
-const BARK_ERROR_SHARE: f32 = 0.5;
+pub const BARK_ERROR_SHARE: f32 = 0.5;
 
 /// The area of `triangles` of `container`, m² (model space).
 #[must_use]
@@ -236,27 +240,41 @@ pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, s_min: f32, bark
             for range in &ranges {
                 out.planes.push(PrefixDraw { instance: index, model: instance.model, range: *range });
             }
-            // The chain's bark level (its triangles and error), if the policy and the model have one.
-            let chain_bark = match (bark, &model.chain) {
-                (ImpostorBark::Chain, Some(chain)) => {
-                    instance_tau(instance.transform, camera, &frustum, s_min, lod.cull_sphere(), model.block_centre)
-                        .and_then(|tau| chain.chain.pick(tau * BARK_ERROR_SHARE))
-                        .and_then(|level| {
-                            let level = (level as usize).min(chain.bark_levels.len().checked_sub(1)?);
-                            Some((chain.bark_levels[level], chain.level_error(level)))
-                        })
-                }
-                _ => None,
-            };
-            out.triangles.extend(match chain_bark {
-                Some((range, error)) => {
-                    TriangleDraw::whole(index, instance.model, TriangleSource::Bark, range, 1.0, error)
-                }
-                None => model.bark_draw(index, instance.model, 1.0),
-            });
+            out.triangles.extend(bark_draw((index, instance, lod, model), camera, &frustum, s_min, bark, 1.0));
         }
     }) {
         out.append(&mut chunk);
+    }
+}
+
+/// The bark of instance `index` (with its model's point tree and representations) drawn as
+/// `bark` says, at `s_min` pixels for `camera`: with [`ImpostorBark::Chain`] and a chain that has
+/// bark levels, the bark of its coarsest level whose error is at most [`BARK_ERROR_SHARE`] of
+/// `τ` at the block centre (the trees drawn with impostor planes or pruned); else every bark
+/// triangle. `lambda` is recorded with the draw.
+pub(crate) fn bark_draw(
+    (index, instance, lod, model): (u32, &Instance, &ModelLod, &Representations),
+    camera: &Camera,
+    frustum: &Frustum,
+    s_min: f32,
+    bark: ImpostorBark,
+    lambda: f32,
+) -> Option<TriangleDraw> {
+    // The chain's bark level (its triangles and error), if the setting and the model have one.
+    let chain_bark = match (bark, &model.chain) {
+        (ImpostorBark::Chain, Some(chain)) => {
+            instance_tau(instance.transform, camera, frustum, s_min, lod.cull_sphere(), model.block_centre)
+                .and_then(|tau| chain.chain.pick(tau * BARK_ERROR_SHARE))
+                .and_then(|level| {
+                    let level = (level as usize).min(chain.bark_levels.len().checked_sub(1)?);
+                    Some((chain.bark_levels[level], chain.level_error(level)))
+                })
+        }
+        _ => None,
+    };
+    match chain_bark {
+        Some((range, error)) => TriangleDraw::whole(index, instance.model, TriangleSource::Bark, range, lambda, error),
+        None => model.bark_draw(index, instance.model, lambda),
     }
 }
 

@@ -19,8 +19,9 @@
 use glam::Vec3;
 use treelod_format::{Container, CurveSample, PruneLeafRecord, Range, TriangleRecord};
 
-use crate::draws::{Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks, max_axis_scale};
+use crate::draws::{Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, by_chunks, max_axis_scale};
 use crate::frame::{Camera, Frustum};
+use crate::impostor::{ImpostorBark, bark_draw};
 use crate::technique::Technique;
 
 /// Lower bound of the occlusion factor: a hidden tree still draws a tenth of its `λ`, so it is
@@ -301,8 +302,9 @@ pub fn projected_height(height: f32, scale: f32, distance: f32, world_per_pixel:
 /// Pruning settings of [`Technique::PruneOpt`] and [`Technique::PruneCook`]: which trees are
 /// pruned and by how much; the technique says how survivors are scaled ([`PruneScale`]).
 ///
-/// A pruned tree draws every bark triangle of its container and, of each cell's leaf priority
-/// list, the first `ceil(λ·count)` leaves, scaled about their centres (spec §6.11). `λ` is the
+/// A pruned tree draws its bark as [`Self::bark`] says (by default, where the container has a
+/// LoD chain, the chain's bark level for `s_min` as impostor trees do; else every bark triangle)
+/// and, of each cell's leaf priority list, the first `ceil(λ·count)` leaves, scaled about their centres (spec §6.11). `λ` is the
 /// container's `λ(h)` at the tree's projected height `h` (or [`Self::lambda`]), times
 /// `max(f, 0.1)` with `f` the visible fraction of the tree's hull samples measured by the
 /// renderer's occlusion test on an earlier frame, then held by [`Self::hysteresis`].
@@ -318,13 +320,22 @@ pub struct Pruning {
     /// Trees projecting fewer pixels high than this are drawn with the sequential point tree
     /// instead (pruning is the near-to-mid-field representation); 0 prunes every tree.
     pub spt_below_pixels: f32,
+    /// The bark of pruned trees (issue: pruning alone never reduced bark, most of the
+    /// primitives of a tree whose triangles are mostly bark): [`ImpostorBark::Chain`] by default.
+    pub bark: ImpostorBark,
 }
 
 impl Default for Pruning {
     /// `λ(h)` from the container, occlusion on, ±10 % hysteresis, trees below 64 pixels high by
-    /// the sequential point tree.
+    /// the sequential point tree, the chain's bark where the container has a chain.
     fn default() -> Self {
-        Self { lambda: None, occlusion: true, hysteresis: Hysteresis::default(), spt_below_pixels: 64.0 }
+        Self {
+            lambda: None,
+            occlusion: true,
+            hysteresis: Hysteresis::default(),
+            spt_below_pixels: 64.0,
+            bark: ImpostorBark::Chain,
+        }
     }
 }
 
@@ -358,11 +369,12 @@ pub fn select(
     scene: &Scene<'_>,
     list: &[u32],
     technique: Technique,
-    pruning: &Pruning,
+    settings: &TechniqueSettings,
     camera: &Camera,
     state: Option<PruneState<'_>>,
     out: &mut TreeDraws,
 ) {
+    let pruning = &settings.pruning;
     let frustum = Frustum::from_view_proj(camera.view_proj);
     let world_per_pixel = camera.world_per_pixel();
     let scale = PruneScale::of(technique).unwrap_or_default();
@@ -430,7 +442,9 @@ pub fn select(
                     });
                 }
             }
-            out.draws.triangles.extend(model.bark_draw(index, instance.model, lambda));
+            let tree = (index, instance, lod, model);
+            let bark = bark_draw(tree, camera, &frustum, settings.s_min, pruning.bark, lambda);
+            out.draws.triangles.extend(bark);
         }
     });
     // The held `λ` is written once every chunk has read it.
