@@ -178,8 +178,9 @@ pub fn build_billboards(
                 .map(|&t| (corners(t).iter().map(|p| p.dot(normal)).fold(f64::NEG_INFINITY, f64::max), t))
                 .collect();
             order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-            let triangles = order.into_iter().map(|(_, t)| (t, corners(t)));
-            bake(mesh, triangles, &plane, Winner::Front, &job.quad, region)
+            // Placed once: `bake` goes over the triangles once per band of rows.
+            let triangles: Vec<(u32, [DVec3; 3])> = order.into_iter().map(|(_, t)| (t, corners(t))).collect();
+            bake(mesh, triangles.iter().copied(), &plane, Winner::Front, &job.quad, region)
         })
         .collect();
     let texels = compose(&regions, &baked, width, height);

@@ -93,6 +93,9 @@ const SAMPLES: usize = 4;
 /// Texel rows baked at a time: 64 rows of a 2048-texel-wide quad hold 33 MB of samples.
 const BAND_ROWS: usize = 64;
 
+/// Samples [`row_span`] adds on each side of a row's crossing with a triangle.
+const SPAN_MARGIN: f64 = 2.0;
+
 /// Transparent texels around each region's content.
 const GUTTER: u32 = 4;
 
@@ -1203,6 +1206,15 @@ pub(crate) fn bake(
     let mut depth = vec![f32::INFINITY; sw * band_samples.min(sh)];
     let mut colour = vec![[0.0f32; 3]; sw * band_samples.min(sh)];
     let rows = covered_rows(triangles.clone().map(|(_, local)| local), quad, (sw, sh));
+    // One triangle's samples (index in the band, key, weights) and their texels.
+    let mut pending: Vec<(usize, f32, [f32; 3])> = Vec::new();
+    let (mut located, mut alphas): (Vec<Option<usize>>, Vec<u8>) = (Vec::new(), Vec::new());
+    // Alpha planes of the images, where a quad has more samples than the image has texels.
+    let planes: Vec<Option<Vec<u8>>> = mesh
+        .surfaces
+        .iter()
+        .map(|surface| surface.image.filter(|img| sw * sh >= img.rgba.len() / 4).map(alpha_plane))
+        .collect();
     for band_start in (0..sh).step_by(band_samples.max(1)) {
         let band_end = (band_start + band_samples).min(sh);
         depth.fill(f32::INFINITY);
@@ -1211,8 +1223,16 @@ pub(crate) fn bake(
                 continue;
             }
             let tri = &mesh.triangles[t as usize];
-            let surface = &mesh.surfaces[tri.material as usize];
-            let corners = tri.v.map(|v| &mesh.vertices[v as usize]);
+            let shading = Shading::new(
+                &mesh.surfaces[tri.material as usize],
+                planes[tri.material as usize].as_deref(),
+                tri.v.map(|v| &mesh.vertices[v as usize]),
+                lut,
+            );
+            // The samples that pass the depth test, then their texels, then their shading: a
+            // triangle covers each sample once, so this is the order of shading each in turn,
+            // and the texel loads, with no branch between them, overlap their cache misses.
+            pending.clear();
             raster_band(&local, quad, plane, (sw, sh), (band_start, band_end), |i, w, signed| {
                 // The sample's key: the least wins (ties: the first triangle).
                 #[expect(clippy::cast_possible_truncation, reason = "a distance in metres")]
@@ -1220,13 +1240,20 @@ pub(crate) fn bake(
                     Winner::Nearest => signed.abs() as f32,
                     Winner::Front => -signed as f32,
                 };
-                if z < depth[i]
-                    && let Some(rgb) = shade(surface, corners, w, lut)
-                {
-                    depth[i] = z;
-                    colour[i] = rgb;
+                if z < depth[i] {
+                    pending.push((i, z, weights(w)));
                 }
             });
+            located.clear();
+            located.extend(pending.iter().map(|&(_, _, w)| shading.locate(w)));
+            alphas.clear();
+            alphas.extend(located.iter().map(|&n| shading.alpha(n)));
+            for ((&(i, z, w), &n), &alpha) in pending.iter().zip(&located).zip(&alphas) {
+                if shading.passes(w, alpha) {
+                    depth[i] = z;
+                    colour[i] = shading.colour(w, shading.texel(n), lut);
+                }
+            }
         }
 
         // Resolve the band's samples into the region's content.
@@ -1368,6 +1395,7 @@ fn raster_band(
     }
     let dist = local.map(|p| p.dot(plane.normal) + plane.offset);
     for sy in y0..y1 {
+        let (x0, x1) = row_span(&xy, area, sy as f64 + 0.5, (x0, x1));
         for sx in x0..x1 {
             let p = DVec2::new(sx as f64 + 0.5, sy as f64 + 0.5);
             let w1 = (p - xy[0]).perp_dot(xy[2] - xy[0]) / area;
@@ -1379,6 +1407,40 @@ fn raster_band(
             f((sy - band_start) * sw + sx, [w0, w1, w2], w0 * dist[0] + w1 * dist[1] + w2 * dist[2]);
         }
     }
+}
+
+/// The samples `x0..x1` of a row, of centre height `y` on the sample grid, that can lie in the
+/// triangle `xy` (twice its signed area `area`): the row's crossing with each edge's inner side,
+/// widened by [`SPAN_MARGIN`] samples, within `x0..x1`. [`raster_band`] still tests each sample of
+/// the span as it tests every sample of the bounding box, so it takes the same ones; the margin
+/// covers the rounding of that test and of this crossing many times over. An edge too near to
+/// horizontal for its crossing to be found to much better than a sample bounds nothing.
+fn row_span(xy: &[DVec2; 3], area: f64, y: f64, (x0, x1): (usize, usize)) -> (usize, usize) {
+    let scale = xy.iter().map(|p| p.abs().max_element()).fold(1.0f64, f64::max);
+    let flat = 1e-12 * scale * scale;
+    #[expect(clippy::cast_precision_loss, reason = "sample counts of a region")]
+    let (mut lo, mut hi) = (x0 as f64, x1 as f64);
+    for (a, b) in [(xy[0], xy[1]), (xy[1], xy[2]), (xy[2], xy[0])] {
+        let dy = b.y - a.y;
+        if dy.abs() <= flat {
+            continue;
+        }
+        // Where the edge's line meets the row; the triangle lies left of it if the edge rises
+        // in a counter-clockwise triangle (positive area) or falls in a clockwise one.
+        let cross = a.x + (y - a.y) * (b.x - a.x) / dy;
+        if (dy > 0.0) == (area > 0.0) {
+            hi = hi.min(cross + SPAN_MARGIN);
+        } else {
+            lo = lo.max(cross - SPAN_MARGIN - 1.0);
+        }
+    }
+    if lo >= hi {
+        return (x0, x0);
+    }
+    // Sample `sx` has its centre at `sx + 0.5`.
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "within x0..=x1")]
+    let span = (lo.floor().max(x0 as f64) as usize, (hi.ceil() as usize).min(x1));
+    span
 }
 
 /// The leaf slots (spec §6.10.1) of one plane's region: `leaves` are (the leaf's place in the
@@ -1410,14 +1472,18 @@ fn bake_slots(
                 continue;
             }
             let tri = &mesh.triangles[t as usize];
-            let surface = &mesh.surfaces[tri.material as usize];
-            let corners = tri.v.map(|v| &mesh.vertices[v as usize]);
+            let shading = Shading::new(
+                &mesh.surfaces[tri.material as usize],
+                None,
+                tri.v.map(|v| &mesh.vertices[v as usize]),
+                lut,
+            );
             #[expect(clippy::cast_possible_truncation, reason = "indirect_applies checked the leaf count")]
             let k = k as u16 + 1;
             raster_band(&local, quad, plane, (sw, sh), (band_start, band_end), |i, w, signed| {
                 #[expect(clippy::cast_possible_truncation, reason = "a distance in metres")]
                 let z = signed.abs() as f32;
-                if z < depth[i] && shade(surface, corners, w, lut).is_some() {
+                if z < depth[i] && shade(&shading, w, lut).is_some() {
                     depth[i] = z;
                     slot[i] = k;
                 }
@@ -1597,46 +1663,71 @@ fn preserve_coverage(levels: &mut [Vec<[f32; 4]>], width: usize, height: usize) 
         if target <= 0.0 {
             continue;
         }
-        // Texels with something non-zero within one texel: only their points can pass.
-        let near: Vec<usize> = (0..w * h)
-            .filter(|&i| {
-                let (x, y) = (i % w, i / w);
-                (y.saturating_sub(1)..(y + 2).min(h))
-                    .any(|ny| (x.saturating_sub(1)..(x + 2).min(w)).any(|nx| level[ny * w + nx][3] > 0.0))
-            })
-            .collect();
         // The 4 samples of a texel, at (¼, ¼) … (¾, ¾) of it, read the alpha bilinearly between
         // texel centres with edges clamped: a sample at ¼ lies ¾ of the way from the centre
-        // before to its own (weights ¼, ¾), one at ¾ ¼ of the way to the next (¾, ¼). The texels
-        // and weights do not depend on the scale, so they are found once per texel here.
-        let taps = |i: usize| {
-            let (x, y) = (i % w, i / w);
-            let (left, right) = (x.saturating_sub(1), (x + 1).min(w - 1));
-            let (up, down) = (y.saturating_sub(1), (y + 1).min(h - 1));
-            // (first texel, second texel, weight of the second) along each axis, per offset.
-            let along_x = [(left, x, 0.75f32), (x, right, 0.25f32)];
-            let along_y = [(up, y, 0.75f32), (y, down, 0.25f32)];
-            [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(ox, oy)| (along_x[ox], along_y[oy]))
-        };
-        let covered = |scale: f32| {
+        // before to its own (weights ¼, ¾), one at ¾ ¼ of the way to the next (¾, ¼). Sample
+        // `k` of the texel at `(x, y)`, `k = ox + 2·oy`, whether it passes at `scale`.
+        let passes = |x: usize, y: usize, k: usize, scale: f32| {
+            // (first texel, second texel, weight of the second) along each axis.
+            let (xa, xb, fx) =
+                if k & 1 == 0 { (x.saturating_sub(1), x, 0.75f32) } else { (x, (x + 1).min(w - 1), 0.25f32) };
+            let (ya, yb, fy) =
+                if k & 2 == 0 { (y.saturating_sub(1), y, 0.75f32) } else { (y, (y + 1).min(h - 1), 0.25f32) };
             let alpha = |x: usize, y: usize| (level[y * w + x][3] * scale).min(1.0);
-            let mut kept = 0usize;
-            for &i in &near {
-                for ((xa, xb, fx), (ya, yb, fy)) in taps(i) {
-                    let top = alpha(xa, ya) * (1.0 - fx) + alpha(xb, ya) * fx;
-                    let bottom = alpha(xa, yb) * (1.0 - fx) + alpha(xb, yb) * fx;
-                    kept += usize::from(top * (1.0 - fy) + bottom * fy >= 0.5);
-                }
-            }
-            kept as f64 / (4 * w * h) as f64
+            let top = alpha(xa, ya) * (1.0 - fx) + alpha(xb, ya) * fx;
+            let bottom = alpha(xa, yb) * (1.0 - fx) + alpha(xb, yb) * fx;
+            top * (1.0 - fy) + bottom * fy >= 0.5
         };
+        // The samples of `mask` (bit `k`: sample `k`) of the texel `i` that pass at `scale`.
+        let passing = |i: usize, mask: u8, scale: f32| {
+            let (x, y) = (i % w, i / w);
+            (0..4).filter(|&k| mask & (1 << k) != 0 && passes(x, y, k, scale)).fold(0u8, |m, k| m | 1 << k)
+        };
+        let count = |samples: &[(u32, u8)]| samples.iter().map(|&(_, mask)| mask.count_ones() as usize).sum::<usize>();
+        let fraction = |kept: usize| kept as f64 / (4 * w * h) as f64;
+        // Every operation of `passes` is monotone in `scale` (products by non-negative numbers,
+        // `min`, sums), rounding included: a sample that passes at one scale passes at every
+        // larger one. So of the samples the bisection counts at each scale it tries, only those
+        // that passed at the least scale found too large (`hi`) and failed at the largest found
+        // too small (`lo`) can change, and only they are tested again: the counts, hence the
+        // scale, are those of testing every sample each time. A texel whose neighbours and
+        // itself have alpha 0 never passes.
         let (mut lo, mut hi) = ((1.0f32 / 64.0).ln(), 64.0f32.ln());
-        if covered(hi.exp()) < target {
+        let (mut lo_scale, mut hi_scale) = (0.0f32, hi.exp());
+        // The texels (index, samples) that pass at `hi_scale` but not at `lo_scale`, and the
+        // samples that pass at `lo_scale`.
+        #[expect(clippy::cast_possible_truncation, reason = "a region's texels fit u32")]
+        let mut open: Vec<(u32, u8)> =
+            (0..w * h).map(|i| (i as u32, passing(i, 0b1111, hi_scale))).filter(|&(_, mask)| mask != 0).collect();
+        let mut kept = 0usize;
+        // False once `exp` is found not monotone (never seen): then every sample is counted.
+        let mut sets = true;
+        if fraction(count(&open)) < target {
             lo = hi;
         } else {
             for _ in 0..16 {
                 let mid = 0.5 * (lo + hi);
-                if covered(mid.exp()) >= target { hi = mid } else { lo = mid }
+                let scale = mid.exp();
+                sets &= (lo_scale..=hi_scale).contains(&scale);
+                if sets {
+                    let tested: Vec<(u32, u8, u8)> =
+                        open.iter().map(|&(i, mask)| (i, mask, passing(i as usize, mask, scale))).collect();
+                    let pass = tested.iter().map(|&(_, _, p)| p.count_ones() as usize).sum::<usize>();
+                    let keep = |f: fn(u8, u8) -> u8| {
+                        tested.iter().map(|&(i, mask, p)| (i, f(mask, p))).filter(|&(_, m)| m != 0).collect()
+                    };
+                    if fraction(kept + pass) >= target {
+                        (hi, hi_scale, open) = (mid, scale, keep(|_, p| p));
+                    } else {
+                        kept += pass;
+                        (lo, lo_scale, open) = (mid, scale, keep(|mask, p| mask & !p));
+                    }
+                } else if fraction((0..w * h).map(|i| passing(i, 0b1111, scale).count_ones() as usize).sum()) >= target
+                {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
             }
         }
         let scale = hi.max(lo).exp();
@@ -1646,38 +1737,146 @@ fn preserve_coverage(levels: &mut [Vec<[f32; 4]>], width: usize, height: usize) 
     }
 }
 
+/// One triangle's inputs to [`shade`], looked up once per triangle rather than once per sample:
+/// its surface, its image's alpha plane if the caller made one ([`alpha_plane`]), and its
+/// corners' vertex colours (RGB linear through the table, alpha in `[0, 1]`) and texture
+/// coordinates.
+struct Shading<'a> {
+    surface: &'a Surface<'a>,
+    alpha: Option<&'a [u8]>,
+    colour: [[f32; 4]; 3],
+    uv: [[f32; 2]; 3],
+}
+
+impl<'a> Shading<'a> {
+    fn new(surface: &'a Surface<'a>, alpha: Option<&'a [u8]>, corners: [&VertexRecord; 3], lut: &[f32; 256]) -> Self {
+        let colour = corners.map(|corner| {
+            let bytes = corner.color.to_le_bytes();
+            std::array::from_fn(|i| if i < 3 { lut[bytes[i] as usize] } else { f32::from(bytes[3]) / 255.0 })
+        });
+        Self { surface, alpha, colour, uv: corners.map(|corner| corner.uv) }
+    }
+}
+
+/// The alpha bytes of `img`'s texels, a quarter of its bytes: the alpha test, which most samples
+/// of a dense canopy fail or are hidden behind, reads only these, and they stay in cache where
+/// the texels do not.
+fn alpha_plane(img: &Image) -> Vec<u8> {
+    img.rgba.chunks_exact(4).map(|t| t[3]).collect()
+}
+
+/// `x.floor() as i64`, without a call to `floorf` (which the baseline x86-64 target makes of
+/// `floor`): the truncation, less one where it rounded up. Equal for every `f32`, NaN and the
+/// infinities included (`as` saturates).
+fn floor_i64(x: f32) -> i64 {
+    #[expect(clippy::cast_possible_truncation, reason = "saturating, as floor() as i64 is")]
+    let i = x as i64;
+    #[expect(clippy::cast_precision_loss, reason = "exact where it decides: |x| < 2^23 or x integral")]
+    let above = i as f32 > x;
+    if above { i.saturating_sub(1) } else { i }
+}
+
+/// The number of the texel [`Image::texel`] reads at `(x, y)` (wrapped), if `img.rgba` holds it
+/// (else that reads `[255; 4]`); without its integer divisions where the coordinates are at most
+/// one image size outside it (a tiled bark texture).
+fn texel_number(img: &Image, x: i64, y: i64) -> Option<usize> {
+    let wrap = |c: i64, size: u32| {
+        let size = i64::from(size.max(1));
+        if (0..size).contains(&c) {
+            c
+        } else if (size..2 * size).contains(&c) {
+            c - size
+        } else if (-size..0).contains(&c) {
+            c + size
+        } else {
+            c.rem_euclid(size)
+        }
+    };
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "rem_euclid is in 0..w·h")]
+    let n = (wrap(y, img.height) * i64::from(img.width.max(1)) + wrap(x, img.width)) as usize;
+    (n < img.rgba.len() / 4).then_some(n)
+}
+
 /// The linear colour of a leaf at barycentric `w`, if it passes the alpha test as the renderer
 /// applies it: texture × factor × vertex colour; `MASK` against the cutoff, `BLEND` at 0.5.
-fn shade(surface: &Surface<'_>, corners: [&VertexRecord; 3], w: [f64; 3], lut: &[f32; 256]) -> Option<[f32; 3]> {
+fn shade(shading: &Shading<'_>, w: [f64; 3], lut: &[f32; 256]) -> Option<[f32; 3]> {
+    let w = weights(w);
+    let texel = shading.locate(w);
+    shading.passes(w, shading.alpha(texel)).then(|| shading.colour(w, shading.texel(texel), lut))
+}
+
+/// Barycentric weights as [`shade`] interpolates with them.
+fn weights(w: [f64; 3]) -> [f32; 3] {
     #[expect(clippy::cast_possible_truncation, reason = "barycentric weights")]
     let w = w.map(|w| w as f32);
-    let mut c = [0.0f32; 4];
-    let (mut u, mut v) = (0.0f32, 0.0f32);
-    for (k, corner) in corners.iter().enumerate() {
-        let bytes = corner.color.to_le_bytes();
-        for (i, slot) in c.iter_mut().enumerate() {
-            let value = if i < 3 { lut[bytes[i] as usize] } else { f32::from(bytes[3]) / 255.0 };
-            *slot += w[k] * value;
+    w
+}
+
+/// [`shade`] in steps, so that a caller can look up many samples' texels before it tests them.
+impl Shading<'_> {
+    /// The texel number ([`texel_number`]) of the image at weights `w`; `None` without an image.
+    fn locate(&self, w: [f32; 3]) -> Option<usize> {
+        let img = self.surface.image?;
+        let (mut u, mut v) = (0.0f32, 0.0f32);
+        for (k, uv) in self.uv.iter().enumerate() {
+            u += w[k] * uv[0];
+            v += w[k] * uv[1];
         }
-        u += w[k] * corner.uv[0];
-        v += w[k] * corner.uv[1];
+        texel_number(img, floor_i64(u * img.width as f32), floor_i64(v * img.height as f32))
     }
-    let texel = match surface.image {
-        Some(img) => {
-            #[expect(clippy::cast_possible_truncation, reason = "floor of a finite coordinate, wrapped by texel()")]
-            let t = img.texel((u * img.width as f32).floor() as i64, (v * img.height as f32).floor() as i64);
-            [lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize], f32::from(t[3]) / 255.0]
+
+    /// The texel's bytes as stored: `[255; 4]` outside the image's texels (as [`Image::texel`]
+    /// reads), unused without an image.
+    fn texel(&self, n: Option<usize>) -> [u8; 4] {
+        match (self.surface.image, n) {
+            (Some(img), Some(n)) => {
+                let t = &img.rgba[n * 4..n * 4 + 4];
+                [t[0], t[1], t[2], t[3]]
+            }
+            _ => [255; 4],
         }
-        None => [1.0; 4],
-    };
-    let factor = surface.material.base_color;
-    let rgba: [f32; 4] = std::array::from_fn(|i| c[i] * texel[i] * factor[i]);
-    let passes = match surface.material.alpha_mode {
-        AlphaMode::Opaque => true,
-        AlphaMode::Mask => rgba[3] >= surface.material.alpha_cutoff,
-        AlphaMode::Blend => rgba[3] >= 0.5,
-    };
-    passes.then_some([rgba[0], rgba[1], rgba[2]])
+    }
+
+    /// The texel's alpha byte, from the alpha plane if there is one.
+    fn alpha(&self, n: Option<usize>) -> u8 {
+        match (self.alpha, n) {
+            (Some(plane), Some(n)) => plane[n],
+            _ => self.texel(n)[3],
+        }
+    }
+
+    /// Whether the sample at weights `w`, where the texel's alpha is `alpha`, passes the alpha
+    /// test.
+    fn passes(&self, w: [f32; 3], alpha: u8) -> bool {
+        let mut c = 0.0f32;
+        for (k, colour) in self.colour.iter().enumerate() {
+            c += w[k] * colour[3];
+        }
+        let surface = self.surface;
+        let texel = if surface.image.is_some() { f32::from(alpha) / 255.0 } else { 1.0 };
+        let a = c * texel * surface.material.base_color[3];
+        match surface.material.alpha_mode {
+            AlphaMode::Opaque => true,
+            AlphaMode::Mask => a >= surface.material.alpha_cutoff,
+            AlphaMode::Blend => a >= 0.5,
+        }
+    }
+
+    /// The linear colour at weights `w`, where the texel is `t`.
+    fn colour(&self, w: [f32; 3], t: [u8; 4], lut: &[f32; 256]) -> [f32; 3] {
+        let mut c = [0.0f32; 3];
+        for (k, colour) in self.colour.iter().enumerate() {
+            for (slot, value) in c.iter_mut().zip(colour) {
+                *slot += w[k] * value;
+            }
+        }
+        let surface = self.surface;
+        let factor = surface.material.base_color;
+        std::array::from_fn(|i| {
+            let texel = if surface.image.is_some() { lut[t[i] as usize] } else { 1.0 };
+            c[i] * texel * factor[i]
+        })
+    }
 }
 
 /// Gives the transparent texels within [`DILATION`] texels of a covered one the colour of the
