@@ -733,7 +733,8 @@ pub struct CalibrationRecord {
     pub height: f32,
     /// Mean multi-scale RMSE of coverage against the supersampled full mesh, `[0, 1]`.
     pub error: f32,
-    /// Primitives drawn (triangles, points, ellipsoids, lines, planes, quads), `≥ 0`.
+    /// Primitives submitted (triangles, points, ellipsoids, lines, planes, quads; spec §6.15),
+    /// `≥ 0`.
     pub primitives: f32,
 }
 const _: () = assert!(size_of::<CalibrationRecord>() == 16);
