@@ -1381,20 +1381,14 @@ struct Steering {
     over: Option<f64>,
     /// Least pressure whose frame was under the budget.
     under: Option<f64>,
-    /// Frames held just above `over` while under the budget by more than the dead band.
-    held: u32,
-    /// The last frame's pressure and count: a count that changes while the pressure holds
-    /// means the scene changed (the camera moved), and the bounds no longer hold.
+    /// The pressure and the count of the first frame at it: a count that moves away from it
+    /// while the pressure holds means the scene changed (the camera moved), and the bounds no
+    /// longer hold.
     last: Option<(f64, u64)>,
 }
 
 /// Pressures closer than this are one (2 % in `s_min`, 4 % in the target).
 const PRESSURE_RESOLUTION: f64 = 0.02;
-
-/// Frames the policy's budget mode holds under the budget, next to a pressure that was over it,
-/// before it forgets that pressure and tries again (the scene may have changed): about two
-/// seconds at 60 frames per second.
-const HOLD_FRAMES: u32 = 120;
 
 impl BudgetController {
     /// A controller aiming at `target_primitives`, starting from `s_min` pixels.
@@ -1417,7 +1411,6 @@ impl BudgetController {
                 pressure: 0.0,
                 over: None,
                 under: None,
-                held: 0,
                 last: None,
             },
         }
@@ -1463,23 +1456,28 @@ impl BudgetController {
     /// Where the count falls in steps (a target at which many trees switch representation at
     /// once), the move halves each time the count crosses the budget, and the controller settles
     /// on the least pressure it has seen under the budget: the frame then stays under the
-    /// budget, by up to one such step, rather than flickering across it. When the count changes
-    /// while the steering holds (the camera moved), or after 120 frames held under the budget by
-    /// more than the dead band, it tries again.
+    /// budget, by up to one such step, rather than flickering across it. When the count falls by
+    /// more than the dead band while the steering holds (the scene got cheaper: the camera moved),
+    /// it tries again; a count that rises over the budget raises the pressure as any frame over
+    /// it does.
     pub fn update_policy(&mut self, last_frame_primitives: u64) -> (f32, f32) {
         let over_budget = last_frame_primitives > self.target_primitives;
         let steering = &mut self.steering;
         let p = steering.pressure;
-        // Bounds are stale once the scene changes under them: the count moved while the pressure
-        // held, or the frame contradicts one of them.
+        // Bounds are stale once the scene changes under them: the count fell while the pressure
+        // held (compared with the first frame at this pressure, so that a slow drift counts
+        // too), or the frame contradicts one of them. Only a fall releases a hold under the
+        // budget: trying again costs a frame over it, worth it only where the scene got cheaper.
         let band = f64::from(self.dead_band.max(0.0));
         #[expect(clippy::cast_precision_loss, reason = "a ratio of counts needs no integer precision")]
-        let moved = steering.last.is_some_and(|(q, count)| {
-            q == p && (last_frame_primitives as f64 / count.max(1) as f64 - 1.0).abs() > band
-        });
-        steering.last = Some((p, last_frame_primitives));
-        if moved {
-            (steering.over, steering.under, steering.held) = (None, None, 0);
+        let fell = steering
+            .last
+            .is_some_and(|(q, count)| q == p && (last_frame_primitives as f64) < count as f64 * (1.0 - band));
+        if fell || steering.last.is_none_or(|(q, _)| q != p) {
+            steering.last = Some((p, last_frame_primitives));
+        }
+        if fell {
+            (steering.over, steering.under) = (None, None);
         }
         if over_budget && steering.under.is_some_and(|u| p >= u) {
             steering.under = None;
@@ -1488,7 +1486,6 @@ impl BudgetController {
             steering.over = None;
         }
         let Some(factor) = self.step(last_frame_primitives) else {
-            self.steering.held = 0;
             return (self.s_min, self.target);
         };
         let steering = &mut self.steering;
@@ -1498,16 +1495,11 @@ impl BudgetController {
             if let Some(u) = steering.under {
                 next = if u - p <= PRESSURE_RESOLUTION { u } else { next.min(0.5 * (p + u)) };
             }
-            steering.held = 0;
         } else {
             steering.under = Some(steering.under.map_or(p, |u| u.min(p)));
             if let Some(o) = steering.over {
                 if p - o <= PRESSURE_RESOLUTION {
                     next = p;
-                    steering.held += 1;
-                    if steering.held > HOLD_FRAMES {
-                        (steering.over, steering.held) = (None, 0);
-                    }
                 } else {
                     next = next.max(0.5 * (p + o));
                 }
@@ -1830,8 +1822,8 @@ mod tests {
         }
         assert!(counts[40..].iter().all(|&c| c == 37_000), "settled under the budget: {counts:?}");
         assert!(t < 0.021, "at the least target seen under the budget: {t}");
-        // The scene gets cheaper (the camera moved): the count changes while the steering holds,
-        // so the bounds are dropped at once and the new cheap count is met.
+        // The scene gets cheaper (the camera moved): the count falls while the steering holds,
+        // so the bounds are dropped and the new cheap count is met.
         let scene = |t: f32| if t < 0.005 { 44_000 } else { 20_000 };
         let mut counts = Vec::new();
         for _ in 0..60 {
