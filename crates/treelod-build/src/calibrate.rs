@@ -98,6 +98,9 @@ struct Scene<'a> {
     /// Alpha masks: one per material (index = material), then one per image used by planes and
     /// billboards (`image_alpha`).
     alphas: Vec<AlphaMask>,
+    /// Per index into `alphas` of a textured material's mask: the indices of its mip levels
+    /// ([`AlphaMask::mip_chain`]), level 0 first; empty for the other masks.
+    alpha_mips: Vec<Vec<u32>>,
     /// Per material, its index into `alphas` or [`NO_ALPHA`].
     material_alpha: Vec<u32>,
     /// Per image, its index into `alphas` as a plane's or billboard's texture, or [`NO_ALPHA`].
@@ -193,6 +196,7 @@ impl<'a> Scene<'a> {
     fn new(data: &'a ContainerData) -> Self {
         let decoded: Vec<Option<Image>> = data.images.iter().map(|record| decode(data, record)).collect();
         let mut alphas = Vec::new();
+        let mut cutoffs = Vec::new();
         let mut push = |mask: AlphaMask| {
             alphas.push(mask);
             u32::try_from(alphas.len() - 1).unwrap_or(NO_ALPHA)
@@ -208,7 +212,11 @@ impl<'a> Scene<'a> {
                 };
                 let factor = m.base_color[3];
                 match (m.image != NO_IMAGE).then(|| decoded.get(m.image as usize)).flatten().and_then(Option::as_ref) {
-                    Some(image) => push(AlphaMask::from_image(image, factor, cutoff)),
+                    Some(image) => {
+                        let index = push(AlphaMask::from_image(image, factor, cutoff));
+                        cutoffs.push((index, cutoff));
+                        index
+                    }
                     None if factor >= cutoff => NO_ALPHA,
                     None => push(AlphaMask::from_image(&transparent(), 1.0, 0.5)),
                 }
@@ -225,6 +233,18 @@ impl<'a> Scene<'a> {
                 _ => NO_ALPHA,
             })
             .collect();
+        // Each textured material's mips, as the renderer alpha-tests them (`rasterize_1x`).
+        let mut alpha_mips = vec![Vec::new(); alphas.len()];
+        for (index, cutoff) in cutoffs {
+            let Some(mask) = alphas.get(index as usize) else { continue };
+            let chain = mask.mip_chain(cutoff);
+            let mut levels = vec![index];
+            for level in chain.into_iter().skip(1) {
+                alphas.push(level);
+                levels.push(u32::try_from(alphas.len() - 1).unwrap_or(NO_ALPHA));
+            }
+            alpha_mips[index as usize] = levels;
+        }
         let raster = |t: &TriangleRecord| raster_triangle(data, t, &material_alpha, 1.0, None);
         let full: Vec<RasterTriangle> = data.triangles.iter().map(raster).collect();
         let bark: Vec<RasterTriangle> = data
@@ -243,7 +263,7 @@ impl<'a> Scene<'a> {
         } else {
             chain_bark_levels(data, &material_alpha)
         };
-        Self { data, alphas, material_alpha, image_alpha, full, bark, chain_bark, planes_drawable }
+        Self { data, alphas, alpha_mips, material_alpha, image_alpha, full, bark, chain_bark, planes_drawable }
     }
 
     /// Draws the bark of a pruned or impostor tree at `τ = tau` (metres) as the runtime's
@@ -255,8 +275,39 @@ impl<'a> Scene<'a> {
             Some(level) => &self.chain_bark[level].1,
             None => &self.bark,
         };
-        rasterize(mask, view, triangles, &self.alphas);
+        self.rasterize_1x(mask, view, triangles);
         triangles.len() as u64
+    }
+
+    /// Rasterises `triangles` at one sample per pixel as the renderer alpha-tests them: each
+    /// textured triangle against the mip level its texel footprint selects (texels per pixel
+    /// along the screen axis that stretches them most, as `textureSample` chooses, rounded to a
+    /// level), so that leaves thinner than a pixel drop out far away as they do on the GPU. The
+    /// supersampled reference keeps testing the full resolution: it stands for the image the
+    /// stochastic alpha keeps.
+    fn rasterize_1x(&self, mask: &mut Mask, view: &View, triangles: &[RasterTriangle]) {
+        for t in triangles {
+            let p = t.positions.map(|q| view.project(q));
+            let alpha = self.alpha_mips.get(t.alpha as usize).filter(|l| l.len() > 1).map_or(t.alpha, |levels| {
+                let (w, h) = self.alphas.get(t.alpha as usize).map_or((1, 1), AlphaMask::size);
+                #[expect(clippy::cast_precision_loss, reason = "texture sides")]
+                let texels = Vec2::new(w as f32, h as f32);
+                let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+                let (u1, u2) = ((t.uvs[1] - t.uvs[0]) * texels, (t.uvs[2] - t.uvs[0]) * texels);
+                let det = e1.perp_dot(e2);
+                if det.abs() < 1e-12 {
+                    return t.alpha;
+                }
+                // d(texel)/d(screen x) and d(texel)/d(screen y).
+                let along_x = (u1 * e2.y - u2 * e1.y) / det;
+                let along_y = (u2 * e1.x - u1 * e2.x) / det;
+                let footprint = along_x.length().max(along_y.length());
+                #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a mip level")]
+                let level = if footprint > 1.0 { footprint.log2().round() as usize } else { 0 };
+                levels[level.min(levels.len() - 1)]
+            });
+            fill_triangle(mask, p, t.uvs, self.alphas.get(alpha as usize));
+        }
     }
 
     /// The techniques the container holds data for, in code order.
@@ -298,7 +349,7 @@ impl<'a> Scene<'a> {
         let lod = LodSettings::default();
         match technique {
             t::FULL => {
-                rasterize(mask, view, &self.full, &self.alphas);
+                self.rasterize_1x(mask, view, &self.full);
                 self.full.len() as u64
             }
             t::SPT => {
@@ -322,7 +373,7 @@ impl<'a> Scene<'a> {
                         );
                     }
                 }
-                rasterize(mask, view, &leaves, &self.alphas);
+                self.rasterize_1x(mask, view, &leaves);
                 drawn += leaves.len() as u64;
                 drawn
             }
@@ -361,7 +412,7 @@ impl<'a> Scene<'a> {
                     }
                 }
                 if chosen.iter().any(Option::is_none) {
-                    rasterize(mask, view, &self.full, &self.alphas);
+                    self.rasterize_1x(mask, view, &self.full);
                     return self.full.len() as u64;
                 }
                 let tris: Vec<RasterTriangle> = chosen
@@ -370,7 +421,7 @@ impl<'a> Scene<'a> {
                     .flat_map(|l| d.lod_triangles.get(l.triangles.as_usize()).unwrap_or(&[]))
                     .map(|tri| raster_triangle(d, tri, &self.material_alpha, 1.0, None))
                     .collect();
-                rasterize(mask, view, &tris, &self.alphas);
+                self.rasterize_1x(mask, view, &tris);
                 tris.len() as u64
             }
             t::BILLBOARD | t::CROSSED => {
@@ -429,7 +480,7 @@ impl<'a> Scene<'a> {
                 disc(mask, view, Vec3::from_array(point.position), point.radius, (first + i) as u64);
             }
         }
-        rasterize(mask, view, &tris, &self.alphas);
+        self.rasterize_1x(mask, view, &tris);
         drawn + tris.len() as u64
     }
 
@@ -456,7 +507,7 @@ impl<'a> Scene<'a> {
             drawn += 1;
         }
         if d.lines.is_empty() {
-            rasterize(mask, view, &self.bark, &self.alphas);
+            self.rasterize_1x(mask, view, &self.bark);
             return drawn + self.bark.len() as u64;
         }
         drawn += d.lines.iter().map(|l| above(l.interval())).sum::<u64>();

@@ -197,6 +197,48 @@ impl AlphaMask {
         self.bits[t / 64] >> (t % 64) & 1 == 1
     }
 
+    /// Texels across and down.
+    #[must_use]
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// The mask's mip chain as a renderer tests it (`treelod-render`'s textures): the passing
+    /// texels as opaque (1) or transparent (0), box-filtered 2 × 2 per level down to 1 × 1 so that
+    /// a level holds the passing fraction of the texels below it, each level then tested against
+    /// `cutoff` again. Level 0 is the mask itself. Far away a leaf's thin parts fall under the
+    /// cutoff in the coarser levels and drop out, as they do on the GPU.
+    #[must_use]
+    pub fn mip_chain(&self, cutoff: f32) -> Vec<AlphaMask> {
+        let (mut w, mut h) = (self.width as usize, self.height as usize);
+        let mut fractions: Vec<f32> =
+            (0..w * h).map(|t| f32::from(u8::from(self.bits[t / 64] >> (t % 64) & 1 == 1))).collect();
+        let mut levels = vec![self.clone()];
+        while w > 1 || h > 1 {
+            let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+            let mut next = vec![0.0f32; nw * nh];
+            for (i, value) in next.iter_mut().enumerate() {
+                let (x, y) = (2 * (i % nw), 2 * (i / nw));
+                let taps = [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)];
+                let inside: Vec<f32> =
+                    taps.iter().filter(|&&(a, b)| a < w && b < h).map(|&(a, b)| fractions[b * w + a]).collect();
+                #[expect(clippy::cast_precision_loss, reason = "at most 4 taps")]
+                let n = inside.len().max(1) as f32;
+                *value = inside.iter().sum::<f32>() / n;
+            }
+            let mut bits = vec![0u64; (nw * nh).div_ceil(64)];
+            for (t, &f) in next.iter().enumerate() {
+                if f >= cutoff {
+                    bits[t / 64] |= 1 << (t % 64);
+                }
+            }
+            #[expect(clippy::cast_possible_truncation, reason = "no larger than the mask")]
+            levels.push(AlphaMask { width: nw as u32, height: nh as u32, bits });
+            (w, h, fractions) = (nw, nh, next);
+        }
+        levels
+    }
+
     /// The fraction of texels that pass.
     #[must_use]
     pub fn opaque_fraction(&self) -> f32 {

@@ -5,9 +5,11 @@
 //! **The rule** (spec §10.2). A tree `h` pixels high on screen (its block's height, scaled by its
 //! instance, over its block centre's distance times [`Camera::world_per_pixel`]) is drawn with
 //! the technique `t` of least primitives at `h` among those whose error satisfies
-//! `error_t(h) ≤ error_full(h) + target`. The full mesh's error is the floor: drawn at one sample
-//! per pixel it aliases against the supersampled reference too, and a representation is asked to
-//! keep *that* image, not a better one. Ties go to the lower error; when nothing qualifies, the
+//! `error_t(h) ≤ floor(h) + target`, the floor the least error at `h` of the full mesh and every
+//! representation: drawn at one sample per pixel the full mesh aliases against the supersampled
+//! reference too (near, a representation is asked to keep *that* image, not a better one), and
+//! far away, where its thin leaves drop out of the mip-filtered alpha test, the representation
+//! that keeps them sets the image to keep. Ties go to the lower error; when nothing qualifies, the
 //! lowest error wins. The full mesh itself is never chosen (the sequential point tree and the LoD
 //! chain converge to it). Above the largest calibrated height the choice at that height holds if
 //! it converges to the full mesh as trees come near ([`converges`]: the point tree, the LoD chain,
@@ -175,7 +177,8 @@ impl Calibration {
 
     /// The policy's rule at one height (module docs): among the techniques the tables hold and
     /// `usable` accepts, less the full mesh, the one of least primitives whose error is within
-    /// `target` of the full mesh's (ties: lower error; none within: least error).
+    /// `target` of the least error of the full mesh and of them (ties: lower error; none
+    /// within: least error).
     /// [`Technique::FALLBACK`] when no technique is left.
     #[must_use]
     pub fn choose(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Technique {
@@ -185,11 +188,9 @@ impl Calibration {
                 .filter(|&t| t != Technique::Full && usable(t))
                 .filter_map(|t| self.at(t, height).map(|(e, p)| (t, e, p)))
         };
-        let floor = match self.at(Technique::Full, height) {
-            Some((error, _)) => error,
-            // Without the full mesh's row: the best any representation does.
-            None => candidates().map(|(_, e, _)| e).fold(f32::INFINITY, f32::min),
-        };
+        // The best image any representation (the full mesh included) gives at this height.
+        let best_candidate = candidates().map(|(_, e, _)| e).fold(f32::INFINITY, f32::min);
+        let floor = self.at(Technique::Full, height).map_or(best_candidate, |(error, _)| error.min(best_candidate));
         let limit = floor + sanitise(target);
         let cheapest = candidates()
             .filter(|&(_, e, _)| e <= limit)
