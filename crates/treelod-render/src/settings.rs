@@ -134,7 +134,7 @@ pub struct Settings {
     /// calibration tables (spec §6.15; `treelod build` writes them whenever it builds a representation
     /// besides the point tree) is drawn with the
     /// cheapest representation whose calibrated error at its projected height is within
-    /// [`Policy::target`] of the full mesh's, with hysteresis; the shadow cascades draw each tree
+    /// [`Policy::target`] of the least error there (spec §10.2), with hysteresis; the shadow cascades draw each tree
     /// with the camera's choice. With [`Policy::budget`] the target and [`Self::s_min`] are
     /// steered from frame to frame so the camera's view meets that many primitives
     /// ([`Renderer::prepare`]). `None` draws every tree with [`Self::technique`] (to force one).

@@ -1336,7 +1336,7 @@ fn leading_above(values: &[f32], tau: f32) -> u32 {
 ///   that reacts more steeply than that still converges without overshoot.
 /// - **With the policy** ([`Self::update_policy`], spec §10.2's budget mode): the same step moves
 ///   `s_min` and, squared, the policy's error target (clamped to `[target_floor,
-///   target_ceiling]`). Every tree is then allowed the same error over the full mesh's, so the
+///   target_ceiling]`). Every tree is then allowed the same error over the floor, so the
 ///   frame's error is spread evenly rather than spent on a few trees: near trees (drawn with the
 ///   point tree above the calibrated heights) coarsen through `s_min`, calibrated ones through
 ///   the target, by the same factor. The square: `s_min` is a length, the target an error read

@@ -1,5 +1,5 @@
 //! The policy: per tree and frame, the cheapest representation whose image error at the tree's
-//! projected size stays within a target of the full mesh's own — chosen from the calibration
+//! projected size stays within a target of the best the tables know there — chosen from the calibration
 //! tables the build measured on each model (spec §6.15, §10.2), so nothing is tuned per model.
 //!
 //! **The rule** (spec §10.2). A tree `h` pixels high on screen (its block's height, scaled by its
@@ -37,14 +37,14 @@ use crate::technique::{PerTechnique, Technique};
 /// Steps of the choice tables per octave of projected height.
 pub const STEPS_PER_OCTAVE: f32 = 8.0;
 
-/// What the policy keeps: one user-facing knob, the error allowed over the full mesh's, and the
+/// What the policy keeps: one user-facing knob, the error allowed over the floor, and the
 /// hysteresis against flicker.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Policy {
-    /// Error allowed above the full mesh's own at the same projected height, in units of the
-    /// calibration's error (multi-scale RMSE of coverage, `[0, 1]`). 0 asks for the full mesh's
-    /// image (only representations as good as it qualify); larger values trade image for
-    /// primitives. Default [`Policy::DEFAULT_TARGET`]. Not finite or negative: 0.
+    /// Error allowed above the floor (the least error of the full mesh and every representation
+    /// at the same projected height, module docs), in units of the calibration's error
+    /// (multi-scale RMSE of coverage, `[0, 1]`). 0 asks for the best image the tables know (only
+    /// representations as good as it qualify); larger values trade image for primitives. Default [`Policy::DEFAULT_TARGET`]. Not finite or negative: 0.
     pub target: f32,
     /// Octaves of projected height around a boundary within which a tree keeps last frame's
     /// technique. Default 0.25 (a tree moves about 19 % of its distance past a boundary before
@@ -54,7 +54,7 @@ pub struct Policy {
     /// the camera's view; shadow passes are not counted). `Some`: a [`BudgetController`]
     /// (created with [`BudgetController::for_policy`]) moves the target and `s_min` together
     /// from frame to frame so the frame meets the count, starting from [`Self::target`] and
-    /// the renderer's `s_min`; the error is then the same allowance over the full mesh's on
+    /// the renderer's `s_min`; the error is then the same allowance over the floor on
     /// every tree (spec §10.2). Default `None`: the target holds.
     ///
     /// [`BudgetController`]: crate::BudgetController
@@ -63,7 +63,7 @@ pub struct Policy {
 }
 
 impl Policy {
-    /// The default [`Policy::target`]: one hundredth of coverage RMSE over the full mesh's. At
+    /// The default [`Policy::target`]: one hundredth of coverage RMSE over the floor. At
     /// a few pixels every representation's error is about 0.06 (the full mesh's aliasing
     /// included), so 0.01 separates what keeps a small tree's silhouette and density from what
     /// does not (a lone billboard loses about twice that on leafy trees); near, the full mesh's

@@ -50,7 +50,7 @@ pub struct Args {
     pub policy_target: f32,
     /// The policy's budget mode: primitives per frame to aim for (the camera's view). The
     /// target and s_min are steered together from frame to frame to meet it (the same error
-    /// allowance over the full mesh's on every tree); applies to `policy` only.
+    /// allowance over the floor on every tree); applies to `policy` only.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub budget: Option<u64>,
     /// Select and stream only: no image is drawn, so there is no GPU time (the figure for large

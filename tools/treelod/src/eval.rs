@@ -70,8 +70,9 @@ pub struct Args {
     #[arg(long, value_name = "PX", value_parser = parse_pixels)]
     pub s_max: Option<f32>,
     /// The `policy` technique's target: the image error (multi-scale RMSE of coverage) it allows
-    /// over the full mesh's at each tree's projected size, as the containers' calibration tables
-    /// measured it; 0 keeps the full mesh's image.
+    /// over the floor (the least error of the full mesh and every representation) at each tree's
+    /// projected size, as the containers' calibration tables measured it; 0 keeps the best image
+    /// the tables know.
     #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = crate::render::parse_target)]
     pub policy_target: f32,
     /// Write one CSV row per frame and technique.

@@ -87,12 +87,14 @@ pub struct TechniqueArgs {
     /// baselines `lod-chain`, `billboard` and `crossed` (build with `--baselines`), or `full`
     /// (every triangle). Trees whose containers lack the technique's data are drawn with `spt`.
     /// Without it, the policy chooses per tree: the cheapest representation whose calibrated
-    /// error at the tree's size on screen is within `--policy-target` of the full mesh's (the
-    /// point tree for containers without calibration tables).
+    /// error at the tree's size on screen is within `--policy-target` of the least error there
+    /// of the full mesh and every representation (the point tree for containers without
+    /// calibration tables).
     #[arg(long, value_name = "TECHNIQUE", value_enum)]
     pub technique: Option<Technique>,
-    /// The policy's target: image error (multi-scale RMSE of coverage) allowed over the full
-    /// mesh's at each tree's projected size; 0 keeps the full mesh's image.
+    /// The policy's target: image error (multi-scale RMSE of coverage) allowed over the least
+    /// error of the full mesh and every representation at each tree's projected size; 0 keeps
+    /// the best image the tables know.
     #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = parse_target, conflicts_with = "technique")]
     pub policy_target: f32,
 }
