@@ -41,9 +41,9 @@ use treelod_format::{
     calibration_technique, image_format, material_class, pack::unpack_unorm16x2, prune_leaves_drawn,
 };
 use treelod_runtime::ellipsoid::{ellipsoid_drawn, line_drawn};
-use treelod_runtime::impostor::{BARK_AREA_KEPT, BARK_ERROR_SHARE};
+use treelod_runtime::impostor::{BARK_AREA_KEPT, BARK_ERROR_SHARE, area};
 use treelod_runtime::prune::{PruneScale, curve_at, leaf_scale, size_factor};
-use treelod_runtime::{LodSettings, SptRecord, Thresholds, point_drawn, triangle_drawn};
+use treelod_runtime::{LodChain, LodSettings, SptRecord, Thresholds, point_drawn, triangle_drawn};
 
 use crate::raster::{
     AlphaMask, Mask, NO_ALPHA, NOISE_SIZE, RasterTriangle, View, fill_ellipse, fill_ellipsoid_cut, fill_triangle,
@@ -568,47 +568,29 @@ fn quad(
     fill_triangle(mask, [a.0, c.0, e.0], [a.1, c.1, e.1], alpha);
 }
 
-/// The chain's bark levels as the runtime builds them (`Representations::from_container`): levels
-/// `0, 1, …` while every tree with a chain has that level, each level's error the running maximum
-/// of its trees' errors, its bark the non-leaf triangles of its trees' ranges; the levels stop at
-/// the first whose bark keeps less than [`BARK_AREA_KEPT`] of the full bark's area.
+/// The chain's bark levels as the runtime builds them (`Representations::from_container`): the
+/// levels of [`LodChain::from_records`], each with its error and the non-leaf triangles of its
+/// trees' ranges, up to the first whose bark keeps less than [`BARK_AREA_KEPT`] of the full
+/// bark's area ([`area`]).
 fn chain_bark_levels(data: &ContainerData, material_alpha: &[u32]) -> Vec<(f32, Vec<RasterTriangle>)> {
     let is_bark =
         |t: &&TriangleRecord| data.materials.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF);
-    let position = |i: u32| data.vertices.get(i as usize).map_or(Vec3::ZERO, |v| Vec3::from_array(v.position));
-    let area = |tris: &[&TriangleRecord]| -> f64 {
-        tris.iter()
-            .map(|t| {
-                let [a, b, c] = t.indices.map(position);
-                f64::from(0.5 * (b - a).cross(c - a).length())
-            })
-            .sum()
-    };
-    let full_bark: Vec<&TriangleRecord> = data.triangles.iter().filter(is_bark).collect();
-    let full_area = area(&full_bark);
-    let Some(depth) = data.lod_levels.iter().map(|l| l.level.saturating_add(1)).max() else { return Vec::new() };
-    let trees = {
-        let mut trees: Vec<u32> = data.lod_levels.iter().map(|l| l.tree).collect();
-        trees.dedup();
-        trees.len()
-    };
+    let Some(chain) = LodChain::from_records(&data.lod_levels) else { return Vec::new() };
+    let full_bark: Vec<TriangleRecord> = data.triangles.iter().filter(is_bark).copied().collect();
+    let full_area = area(&data.vertices, &full_bark);
     let mut levels = Vec::new();
-    let mut running = 0.0f32;
-    for level in 0..depth {
-        let of_level: Vec<_> = data.lod_levels.iter().filter(|l| l.level == level).collect();
-        if of_level.len() != trees {
-            break;
-        }
-        running = running.max(of_level.iter().map(|l| l.error).fold(0.0f32, f32::max));
-        let bark: Vec<&TriangleRecord> = of_level
+    for level in chain.levels() {
+        let bark: Vec<TriangleRecord> = level
+            .ranges
             .iter()
-            .flat_map(|l| data.lod_triangles.get(l.triangles.as_usize()).unwrap_or(&[]))
+            .flat_map(|range| data.lod_triangles.get(range.as_usize()).unwrap_or(&[]))
             .filter(is_bark)
+            .copied()
             .collect();
-        if area(&bark) < BARK_AREA_KEPT * full_area {
+        if area(&data.vertices, &bark) < BARK_AREA_KEPT * full_area {
             break;
         }
-        levels.push((running, bark.iter().map(|t| raster_triangle(data, t, material_alpha, 1.0, None)).collect()));
+        levels.push((level.error, bark.iter().map(|t| raster_triangle(data, t, material_alpha, 1.0, None)).collect()));
     }
     levels
 }

@@ -13,7 +13,7 @@
 //! them (see [`crate::draws`]).
 
 use glam::{Mat4, Vec3};
-use treelod_format::{Container, Range, billboard_kind};
+use treelod_format::{Container, LodLevelRecord, Range, billboard_kind};
 
 #[cfg(doc)]
 use crate::draws::Representations;
@@ -45,7 +45,12 @@ impl LodChain {
     /// every level covers every tree that has a chain.
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        let records = container.lod_levels();
+        Self::from_records(container.lod_levels())
+    }
+
+    /// The chain of `records` (a container's `LOD_LEVELS`), as [`Self::from_container`] makes it.
+    #[must_use]
+    pub fn from_records(records: &[LodLevelRecord]) -> Option<Self> {
         let depth = records.iter().map(|l| l.level.saturating_add(1)).max()?;
         let trees = {
             let mut trees: Vec<u32> = records.iter().map(|l| l.tree).collect();

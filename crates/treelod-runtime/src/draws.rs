@@ -105,7 +105,7 @@ impl Representations {
                 }
                 let mut bark_levels = Vec::new();
                 if planes.is_some() || prune.is_some() {
-                    let full_area = area(container, &whole[bark.0 as usize..(bark.0 + bark.1) as usize]);
+                    let full_area = area(container.vertices(), &whole[bark.0 as usize..(bark.0 + bark.1) as usize]);
                     for level in lod_chain.levels() {
                         let first = at(&whole);
                         for range in &level.ranges {
@@ -114,7 +114,7 @@ impl Representations {
                         }
                         // The levels that keep the bark's surface: a coarser one collapses
                         // branches that its error does not count.
-                        let kept = area(container, &whole[first as usize..]);
+                        let kept = area(container.vertices(), &whole[first as usize..]);
                         if kept < BARK_AREA_KEPT * full_area {
                             whole.truncate(first as usize);
                             break;

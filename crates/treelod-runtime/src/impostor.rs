@@ -14,7 +14,7 @@
 use std::ops::Deref;
 
 use glam::{Mat4, Vec3};
-use treelod_format::{Container, PlaneRecord, Range, TriangleRecord};
+use treelod_format::{Container, PlaneRecord, Range, TriangleRecord, VertexRecord};
 
 use crate::baseline::instance_tau;
 use crate::draws::{PrefixDraw, Representations, Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
@@ -208,10 +208,9 @@ pub const BARK_AREA_KEPT: f64 = 0.9;
 /// keeps the branches wider than about a pixel.
 pub const BARK_ERROR_SHARE: f32 = 0.5;
 
-/// The area of `triangles` of `container`, m² (model space).
+/// The area of `triangles` over `vertices`, m² (model space).
 #[must_use]
-pub fn area(container: &Container, triangles: &[TriangleRecord]) -> f64 {
-    let vertices = container.vertices();
+pub fn area(vertices: &[VertexRecord], triangles: &[TriangleRecord]) -> f64 {
     let position = |i: u32| vertices.get(i as usize).map_or(Vec3::ZERO, |v| Vec3::from_array(v.position));
     triangles
         .iter()
