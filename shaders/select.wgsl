@@ -15,6 +15,10 @@
 
 const OUTSIDE: u32 = 0u;
 const INSIDE: u32 = 1u;
+
+// `DrawInfo::tint` of the point tree (crates/treelod-render/src/draws.rs, `tint`), set when the
+// pipelines are made.
+override spt_tint: u32;
 const STRADDLES: u32 = 2u;
 const ROOTS_CELL: u32 = 0xFFFFFFFFu;
 const F32_MAX: f32 = 3.40282347e+38;
@@ -228,9 +232,9 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
         return;
     }
     let slot = cur_model.bucket_first[kind] + s;
-    // Technique 1: the point tree, the only one GPU selection draws.
+    // The point tree's debug colour: the only technique GPU selection draws.
     draws[slot] = DrawInfo(current.transform, taus.x, max(taus.y, taus.x), cell, draw_scale, shading, 1.0,
-                           current.index, 1u);
+                           current.index, spt_tint);
     let corners = select(6u, 3u, kind == 0u);
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
 }

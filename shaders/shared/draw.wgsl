@@ -17,7 +17,7 @@ struct DrawInfo {
     leaf_scale: f32,
     // Index of the instance in the renderer's list (read-backs, and the level blend's dither in tree/common.wgsl).
     instance: u32,
-    // Index in `Technique::ALL` of the technique the instance is drawn with (1: the point tree),
-    // for the debug colours by technique (tree/common.wgsl, `technique_tint`).
-    technique: u32,
+    // The debug colour of the technique the instance is drawn with (`debug = 4`), linear RGB as
+    // `pack4x8unorm` packs it (crates/treelod-render/src/draws.rs, `tint`).
+    tint: u32,
 }

@@ -4,6 +4,8 @@
 // crates/treelod-format/src/records.rs and of the byte table in format-spec/treelod.md §6. Only
 // 4-byte scalars and arrays of them are used, so every struct has alignment 4 and its array
 // stride equals the record size; crates/treelod-runtime/tests/wgsl_layout.rs checks sizes and offsets.
+// The records every representation or the selection reads are here; a representation's own
+// records are twinned at the top of its file in shaders/tree/ (planes, ellipsoids, lines).
 
 // Rust twin: treelod_format::VertexRecord (28 bytes, spec §6.3).
 struct VertexRecord {
@@ -33,61 +35,6 @@ struct PointRecord {
     leaf_first: u32,
     leaf_count: u32,
     flags: u32,
-}
-
-// Rust twin: treelod_format::EllipsoidRecord (64 bytes, spec §6.8). `orientation` holds the
-// quaternion's snorm16 pairs (x, y) and (z, w).
-struct EllipsoidRecord {
-    center: array<f32, 3>,
-    radii: array<f32, 3>,
-    orientation: array<u32, 2>,
-    color: u32,
-    alpha_threshold: f32,
-    noise_mip: f32,
-    lo: f32,
-    hi: f32,
-    leaf_first: u32,
-    leaf_count: u32,
-    flags: u32,
-}
-
-// Rust twin: treelod_format::LineRecord (56 bytes, spec §6.9).
-struct LineRecord {
-    p0: array<f32, 3>,
-    r0: f32,
-    p1: array<f32, 3>,
-    r1: f32,
-    color: u32,
-    lo: f32,
-    hi: f32,
-    leaf_first: u32,
-    leaf_count: u32,
-    flags: u32,
-}
-
-// Rust twin: treelod_format::PlaneRecord (64 bytes, spec §6.10).
-struct PlaneRecord {
-    center: array<f32, 3>,
-    axis_u: array<f32, 3>,
-    axis_v: array<f32, 3>,
-    image: u32,
-    uv_min: u32,
-    uv_max: u32,
-    lo: f32,
-    hi: f32,
-    leaf_first: u32,
-    leaf_count: u32,
-}
-
-// Rust twin: treelod_format::PlaneLeafRecord (40 bytes, spec §6.10.1).
-struct PlaneLeafRecord {
-    uv0: array<f32, 2>,
-    du: array<f32, 2>,
-    dv: array<f32, 2>,
-    uv_min: u32,
-    uv_max: u32,
-    material: u32,
-    color: u32,
 }
 
 // Rust twin: treelod_format::PruneLeafRecord (24 bytes, spec §6.11).
@@ -126,11 +73,6 @@ fn decode_ao(packed: u32) -> f32 {
 // The point rule of spec §10: inside [lo, hi) at tau_p and not larger than tau_t.
 fn point_drawn(p: PointRecord, tau_p: f32, tau_t: f32) -> bool {
     return p.lo <= tau_p && tau_p < p.hi && p.size <= tau_t;
-}
-
-// The plane rule of spec §10: inside [lo, hi) at tau.
-fn plane_drawn(p: PlaneRecord, tau: f32) -> bool {
-    return p.lo <= tau && tau < p.hi;
 }
 
 // Level blending of ellipsoids and lines (Settings::level_blend, `blend` = β octaves of tau,

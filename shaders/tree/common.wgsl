@@ -6,7 +6,8 @@
 // leaf ellipsoids (ellipsoids.wgsl) and branch lines (lines.wgsl) after Clasen and Prohaska 2011.
 //
 // Each pipeline's module is shared/records.wgsl, shared/draw.wgsl and shared/shadow.wgsl, then
-// this file, then its representation's files (composed in crates/treelod-render/src/pipelines.rs).
+// this file, then its representation's files (composed in crates/treelod-render/src/technique/mod.rs,
+// `tree_wgsl!`; a representation's own bindings are in group 3).
 // One indirect draw per selected range: `first_instance` is
 // the index of the range's `DrawInfo`, `first_vertex` is 3 × its first triangle (or 6 × its first
 // point) in the pool, so the vertex index names the element and its corner. The pool holds the
@@ -99,19 +100,6 @@ struct Varyings {
 fn cell_tint(cell: u32) -> vec3<f32> {
     let h = cell * 2654435761u;
     return vec3<f32>(f32(h & 255u), f32((h >> 8u) & 255u), f32((h >> 16u) & 255u)) / 255.0 * 0.8 + 0.2;
-}
-
-// Colours of `debug = 4`, one per technique in `Technique::ALL`'s order (full, spt, prune-opt,
-// prune-cook, impostors, ellipsoids, lod-chain, billboard, crossed); Rust twin:
-// `DebugView::technique_colour`.
-const TECHNIQUE_PALETTE = array<vec3<f32>, 9>(
-    vec3<f32>(0.6, 0.6, 0.6), vec3<f32>(0.2, 0.5, 0.95), vec3<f32>(0.3, 0.8, 0.3),
-    vec3<f32>(0.1, 0.5, 0.2), vec3<f32>(0.95, 0.75, 0.15), vec3<f32>(0.2, 0.8, 0.8),
-    vec3<f32>(0.9, 0.3, 0.2), vec3<f32>(0.85, 0.35, 0.85), vec3<f32>(0.5, 0.3, 0.9),
-);
-
-fn technique_tint(technique: u32) -> vec3<f32> {
-    return TECHNIQUE_PALETTE[min(technique, 8u)];
 }
 
 // Colours of `debug = 3`, one per octave of an element's interval end, cycling: neighbouring

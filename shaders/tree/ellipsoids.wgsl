@@ -3,11 +3,27 @@
 // ray with the ellipsoid in the ellipsoid's local frame, where it is the unit sphere. The hit
 // writes its own depth, so ellipsoids meet triangles and planes where their surfaces do.
 
+// Rust twin: treelod_format::EllipsoidRecord (64 bytes, spec §6.8). `orientation` holds the
+// quaternion's snorm16 pairs (x, y) and (z, w).
+struct EllipsoidRecord {
+    center: array<f32, 3>,
+    radii: array<f32, 3>,
+    orientation: array<u32, 2>,
+    color: u32,
+    alpha_threshold: f32,
+    noise_mip: f32,
+    lo: f32,
+    hi: f32,
+    leaf_first: u32,
+    leaf_count: u32,
+    flags: u32,
+}
+
 // Clasen's ellipsoids (spec §6.8), and the white-noise cube map they sample (crates/treelod-render/src/
 // noise.rs: alpha the grey noise, RGB a random unit vector; nearest texel of the nearest level).
-@group(1) @binding(11) var<storage, read> ellipsoids: array<EllipsoidRecord>;
-@group(1) @binding(12) var noise: texture_cube<f32>;
-@group(1) @binding(13) var noise_sampler: sampler;
+@group(3) @binding(0) var<storage, read> ellipsoids: array<EllipsoidRecord>;
+@group(3) @binding(1) var noise: texture_cube<f32>;
+@group(3) @binding(2) var noise_sampler: sampler;
 
 // How far the shading normal turns towards the noise's random unit vector (Clasen §3.1 calibrates
 // it per level; the record has no field for it, so one constant).
@@ -133,7 +149,7 @@ fn vs_ellipsoid(@builtin(vertex_index) vertex_index: u32, @builtin(instance_inde
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.2, 0.8, 0.8); }
         case 3u: { out.tint = level_tint(e.hi); }
-        case 4u: { out.tint = technique_tint(draw.technique); }
+        case 4u: { out.tint = unpack4x8unorm(draw.tint).rgb; }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

@@ -11,8 +11,22 @@
 // point of the ray nearest the axis. On average a line so covers w pixels per pixel of length, as
 // much as its true width.
 
+// Rust twin: treelod_format::LineRecord (56 bytes, spec §6.9).
+struct LineRecord {
+    p0: array<f32, 3>,
+    r0: f32,
+    p1: array<f32, 3>,
+    r1: f32,
+    color: u32,
+    lo: f32,
+    hi: f32,
+    leaf_first: u32,
+    leaf_count: u32,
+    flags: u32,
+}
+
 // Clasen's branch lines (spec §6.9). As uploaded, a line's `flags` holds its LINE_AO byte.
-@group(1) @binding(14) var<storage, read> lines: array<LineRecord>;
+@group(3) @binding(0) var<storage, read> lines: array<LineRecord>;
 
 struct LineVaryings {
     @builtin(position) clip: vec4<f32>,
@@ -170,7 +184,7 @@ fn vs_line(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) dr
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.55, 0.35, 0.15); }
         case 3u: { out.tint = level_tint(l.hi); }
-        case 4u: { out.tint = technique_tint(draw.technique); }
+        case 4u: { out.tint = unpack4x8unorm(draw.tint).rgb; }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

@@ -2,16 +2,46 @@
 // or indirectly from its leaf-slot image and the leaves' own textures. The baseline billboards
 // (billboards.wgsl) share the quads' corner and fragment stages.
 
+// Rust twin: treelod_format::PlaneRecord (64 bytes, spec §6.10).
+struct PlaneRecord {
+    center: array<f32, 3>,
+    axis_u: array<f32, 3>,
+    axis_v: array<f32, 3>,
+    image: u32,
+    uv_min: u32,
+    uv_max: u32,
+    lo: f32,
+    hi: f32,
+    leaf_first: u32,
+    leaf_count: u32,
+}
+
+// Rust twin: treelod_format::PlaneLeafRecord (40 bytes, spec §6.10.1).
+struct PlaneLeafRecord {
+    uv0: array<f32, 2>,
+    du: array<f32, 2>,
+    dv: array<f32, 2>,
+    uv_min: u32,
+    uv_max: u32,
+    material: u32,
+    color: u32,
+}
+
+// The plane rule of spec §10: inside [lo, hi) at tau.
+fn plane_drawn(p: PlaneRecord, tau: f32) -> bool {
+    return p.lo <= tau && tau < p.hi;
+}
+
 // Impostors: the container's planes, and the atlas they sample (clamped, with its stored mips).
 // As uploaded, a plane's `leaf_first` holds the index of its parent plane (0xFFFFFFFF for none).
-@group(1) @binding(6) var<storage, read> planes: array<PlaneRecord>;
-@group(1) @binding(7) var atlas: texture_2d<f32>;
-@group(1) @binding(8) var atlas_sampler: sampler;
+@group(3) @binding(0) var<storage, read> planes: array<PlaneRecord>;
+@group(3) @binding(1) var atlas: texture_2d<f32>;
+@group(3) @binding(2) var atlas_sampler: sampler;
 // Indirect texturing (spec §6.10.1): the leaf-slot image and the planes' leaves. As uploaded, an
 // indirectly textured plane's `image` holds where its leaves start in `plane_leaves`
 // (0xFFFFFFFF for a plane with an RGBA atlas).
-@group(1) @binding(9) var leaf_slots: texture_2d<u32>;
-@group(1) @binding(10) var<storage, read> plane_leaves: array<PlaneLeafRecord>;
+@group(3) @binding(3) var leaf_slots: texture_2d<u32>;
+@group(3) @binding(4) var<storage, read> plane_leaves: array<PlaneLeafRecord>;
 
 // One corner of an impostor plane (spec §6.10): `center ± axis_u ± axis_v`, never turned to the
 // camera, the corner `center − axis_u − axis_v` at `uv_min`. `first_vertex` is 6 × the range's
@@ -94,7 +124,7 @@ fn quad_corner(
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u, 3u: { out.tint = kinds; }
-        case 4u: { out.tint = technique_tint(draw.technique); }
+        case 4u: { out.tint = unpack4x8unorm(draw.tint).rgb; }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

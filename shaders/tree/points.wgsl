@@ -46,7 +46,7 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.2, 0.5, 0.95); }
         case 3u: { out.tint = level_tint(point.hi); }
-        case 4u: { out.tint = technique_tint(draw.technique); }
+        case 4u: { out.tint = unpack4x8unorm(draw.tint).rgb; }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

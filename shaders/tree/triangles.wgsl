@@ -18,7 +18,7 @@ fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, vertex: VertexGpu, p: ve
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.9, 0.3, 0.2); }
         case 3u: { out.tint = vec3<f32>(0.9); }
-        case 4u: { out.tint = technique_tint(draw.technique); }
+        case 4u: { out.tint = unpack4x8unorm(draw.tint).rgb; }
         default: { out.tint = vec3<f32>(draw.shading); }
     }
     return out;

@@ -21,6 +21,7 @@ use bevy_render::renderer::RenderAdapterInfo;
 use bevy_shape::Cuboid;
 use bevy_transform::components::Transform;
 use scene::{Frame, IMAGE_SIZE, Output};
+use treelod_bevy::treelod_render::Primitive;
 use treelod_bevy::{TreelodContainer, TreelodPlugin, TreelodStats};
 
 /// Whether a pixel is a leaf: clearly greener than red and blue (the sky is blue, the ground
@@ -194,7 +195,10 @@ fn bevy_draws_the_forest_in_its_main_pass() {
         "{} of 3000 trees in view (the camera looks into the forest from its edge)",
         stats.instances_visible
     );
-    assert!(stats.triangles > 0 && stats.points > 0, "near trees are triangles, far ones points: {stats:?}");
+    assert!(
+        stats.submitted[Primitive::Triangle] > 0 && stats.submitted[Primitive::Point] > 0,
+        "near trees are triangles, far ones points: {stats:?}"
+    );
     assert_eq!(stats.ranges_clamped, 0, "every range is drawn at the detail selected (all of it resident)");
     let hdr_stats = app.world().resource::<TreelodStats>().get(hdr_entity).expect("the HDR camera drew trees");
     let hdr_leaves = share(hdr_frame, (0, 0, SMALL.0 - 1, SMALL.1 - 1), leaf);

@@ -15,6 +15,7 @@ use std::time::Instant;
 use glam::{Mat4, Quat, Vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, Instance, Renderer, Settings, Technique};
 
@@ -106,10 +107,11 @@ fn main() {
         println!(
             "| {i} | {kind} | {} | {} | {} | {} | {:.4} | {:.3} | {:.3} | {lod_ms:.1} | {full_ms:.1} |",
             s.instances_visible,
-            s.triangles,
-            s.points,
-            f.triangles,
-            (s.triangles + s.points) as f64 / f.triangles.max(1) as f64,
+            s.submitted[Primitive::Triangle],
+            s.submitted[Primitive::Point],
+            f.submitted[Primitive::Triangle],
+            (s.submitted[Primitive::Triangle] + s.submitted[Primitive::Point]) as f64
+                / f.submitted[Primitive::Triangle].max(1) as f64,
             both / nx.max(1.0),
             both / ny.max(1.0),
         );

@@ -21,6 +21,7 @@ use std::time::{Duration, Instant};
 use glam::{Mat4, Quat, Vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container};
+use treelod_render::Primitive;
 use treelod_render::offscreen::Gpu;
 use treelod_render::{Camera, FrameStats, Instance, Renderer, Settings};
 
@@ -115,8 +116,8 @@ fn main() {
                     s.instances_visible,
                     s.ranges,
                     s.ranges_dropped,
-                    s.triangles,
-                    s.points
+                    s.submitted[Primitive::Triangle],
+                    s.submitted[Primitive::Point]
                 );
             }
         }

@@ -3,11 +3,12 @@
 //! what is resident, and the indirect draws of each bucket.
 
 use bytemuck::{Pod, Zeroable};
-use treelod_runtime::{DrawList, DrawRange, Kind, ROOTS_CELL, TreeDraws, TriangleSource};
+use treelod_runtime::{DrawList, DrawRange, Kind, ROOTS_CELL, Technique, TreeDraws, TriangleSource};
 
 use crate::renderer::{ModelId, Renderer, max_axis_scale};
 use crate::stats::FrameStats;
 use crate::streaming::Array;
+use crate::technique::{Bucket, DrawSource, prefix_lists};
 
 /// One draw's constants. WGSL twin: `DrawInfo` in `shaders/shared/draw.wgsl`.
 #[repr(C)]
@@ -24,50 +25,22 @@ pub(crate) struct DrawInfo {
     /// Index of the instance in [`Renderer::set_instances`]' list (read by the shaders only to
     /// seed the level blend's dither, `level_dither`).
     pub(crate) instance: u32,
-    /// [`Technique::index`](treelod_runtime::Technique::index) of the technique the instance is
-    /// drawn with this frame (the debug colours of [`DebugView::Techniques`](crate::DebugView)).
-    pub(crate) technique: u32,
+    /// The colour of [`DebugView::Techniques`](crate::DebugView) for the technique the instance is
+    /// drawn with this frame ([`tint`]).
+    pub(crate) tint: u32,
 }
 
 const _: () = assert!(size_of::<DrawInfo>() == 96);
 
-/// [`DrawInfo::technique`] of the point tree, which GPU selection writes (`shaders/select.wgsl`).
-pub(crate) const SPT_INDEX: u32 = treelod_runtime::Technique::Spt.index() as u32;
-const _: () = assert!(SPT_INDEX == 1, "shaders/select.wgsl writes 1 for the point tree");
-
-/// Where a recorded draw reads its elements.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DrawSource {
-    /// The leading `count` triangles of the cell's range (resident in the pool).
-    Triangles,
-    /// The leading `count` points of the cell's range (resident in the pool).
-    Points,
-    /// The cell's roots, from the model's pinned copy of the roots: the cell's points are not
-    /// resident yet, or (for [`treelod_runtime::ROOTS_CELL`]) a far tree drawn with one range.
-    Roots,
-    /// The leading `count` triangles of the cell's pruned leaves (a pruned tree, uploaded whole
-    /// at [`Renderer::add_model`]).
-    PrunedLeaves,
-    /// All `count` bark triangles of the model (a pruned tree or one drawn with impostors;
-    /// `cell` is [`treelod_runtime::ROOTS_CELL`]).
-    Bark,
-    /// The leading `count` impostor planes of the cell's range (uploaded whole at
-    /// [`Renderer::add_model`]); `tau_points` is the `τ` the shader tests them with.
-    Planes,
-    /// A baseline LoD chain level (or the full mesh) of the whole block (`cell` is
-    /// [`treelod_runtime::ROOTS_CELL`]); `tau_points` is the instance's `τ`, `tau_triangles` the
-    /// level's error (0 for the full mesh).
-    LodLevel,
-    /// Baseline billboard quads of the block (`cell` is [`treelod_runtime::ROOTS_CELL`]).
-    Billboards,
-    /// The leading `count` ellipsoids of the cell's range (uploaded whole at
-    /// [`Renderer::add_model`]); `tau_points` is the `τ` (metres per pixel) the shader tests them
-    /// with.
-    Ellipsoids,
-    /// The leading `count` branch lines of the cell's range (uploaded whole at
-    /// [`Renderer::add_model`]); `tau_points` is the `τ` (metres per pixel) the shader tests them
-    /// with.
-    Lines,
+/// [`DrawInfo::tint`] of `technique`: its debug colour ([`Technique::colour`], linear RGB) as
+/// WGSL's `pack4x8unorm` packs it, red in the low byte (alpha 1).
+pub(crate) fn tint(technique: Technique) -> u32 {
+    let [r, g, b] = technique.colour().map(|c| {
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 0..=255 first")]
+        let byte = (c.clamp(0.0, 1.0) * 255.0).round() as u32;
+        byte
+    });
+    r | (g << 8) | (b << 16) | (255 << 24)
 }
 
 /// One draw of the last [`Renderer::prepare`], as the GPU will execute it, for tests and tools.
@@ -119,40 +92,6 @@ impl View {
     }
 }
 
-/// A draw bucket of a model: one pipeline's draws, drawn in this order. A frame's buckets are
-/// listed per model, [`Bucket::COUNT`] each ([`Bucket::of_model`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Bucket {
-    /// Streamed triangles, from the pool.
-    Triangles,
-    /// Streamed points and the pinned roots, from the pool.
-    Points,
-    /// Pruned leaves and bark, and LoD chain levels, from each model's extra triangle buffer.
-    Pruned,
-    /// Impostor planes, from each model's plane buffer and atlas.
-    Planes,
-    /// Baseline billboards, from each model's billboard bind group.
-    Billboards,
-    /// Clasen's ellipsoids, ray-cast, from each model's ellipsoid buffer and the noise cube.
-    Ellipsoids,
-    /// Clasen's branch lines, ray-cast round cones, from each model's line buffer.
-    Lines,
-}
-
-impl Bucket {
-    /// Draw buckets per model.
-    pub(crate) const COUNT: usize = 7;
-
-    /// Every bucket, in drawing order (`ALL[b as usize] == b`).
-    pub(crate) const ALL: [Self; Self::COUNT] =
-        [Self::Triangles, Self::Points, Self::Pruned, Self::Planes, Self::Billboards, Self::Ellipsoids, Self::Lines];
-
-    /// The index of model `model`'s bucket in a frame's list of buckets.
-    pub(crate) fn of_model(self, model: usize) -> usize {
-        Self::COUNT * model + self as usize
-    }
-}
-
 impl Renderer {
     /// Records `view`'s draws, clamped to what is resident, after the draw infos and indirect
     /// draws of the views before it; counts them into `stats`.
@@ -185,16 +124,6 @@ impl Renderer {
                 let Some(draw) = draw else { continue };
                 stats.ranges_clamped += u32::from(draw.clamped);
                 let (bucket, first_vertex, corners) = self.gpu_first(&draw);
-                match draw.source {
-                    DrawSource::Triangles | DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::LodLevel => {
-                        stats.triangles += u64::from(draw.count);
-                    }
-                    DrawSource::Points | DrawSource::Roots => stats.points += u64::from(draw.count),
-                    DrawSource::Planes => stats.planes += u64::from(draw.count),
-                    DrawSource::Billboards => stats.billboards += u64::from(draw.count),
-                    DrawSource::Ellipsoids => stats.ellipsoids += u64::from(draw.count),
-                    DrawSource::Lines => stats.lines += u64::from(draw.count),
-                }
                 let transform = self.instances[draw.instance as usize].transform;
                 let info = DrawInfo {
                     model: transform.to_cols_array_2d(),
@@ -205,7 +134,7 @@ impl Renderer {
                     shading: range.shading,
                     leaf_scale: 1.0,
                     instance: draw.instance,
-                    technique: 0,
+                    tint: 0,
                 };
                 self.buckets[bucket].push((info, first_vertex, draw.count * corners));
                 view.recorded.push(draw);
@@ -214,7 +143,6 @@ impl Renderer {
         // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
         // per-cell estimate (it is a property of the point hierarchy's cells).
         for draw in &view.draws.triangles {
-            stats.triangles += u64::from(draw.count);
             let record = RecordedDraw {
                 instance: draw.instance,
                 model: ModelId(draw.model),
@@ -230,26 +158,13 @@ impl Renderer {
                 clamped: false,
             };
             let vertices = (3 * draw.first, 3 * draw.count);
-            record_direct(
-                &self.instances,
-                &mut self.buckets,
-                &mut view.recorded,
-                record,
-                Bucket::Pruned,
-                vertices,
-                draw.leaf_scale,
-            );
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, vertices, draw.leaf_scale);
         }
-        // Impostor planes, ellipsoids and lines, each in its bucket: a prefix of one cell's
-        // elements, six corners each, the level chosen in the shader by `τ`.
-        let draws = &view.draws;
-        stats.planes += draws.planes.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
-        stats.ellipsoids += draws.ellipsoids.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
-        stats.lines += draws.lines.iter().map(|d| u64::from(d.range.count)).sum::<u64>();
-        let prefixes = (draws.planes.iter().map(|d| (d, DrawSource::Planes, Bucket::Planes)))
-            .chain(draws.ellipsoids.iter().map(|d| (d, DrawSource::Ellipsoids, Bucket::Ellipsoids)))
-            .chain(draws.lines.iter().map(|d| (d, DrawSource::Lines, Bucket::Lines)));
-        for (draw, source, bucket) in prefixes {
+        // Prefixes of one cell's elements uploaded whole (impostor planes, ellipsoids, lines),
+        // each in its bucket, the level chosen in the shader by `τ`.
+        let prefixes =
+            prefix_lists(&view.draws).into_iter().flat_map(|(list, source)| list.iter().map(move |d| (d, source)));
+        for (draw, source) in prefixes {
             let range = draw.range;
             let record = RecordedDraw {
                 instance: draw.instance,
@@ -261,12 +176,11 @@ impl Renderer {
                 tau_triangles: range.tau,
                 clamped: false,
             };
-            let vertices = (6 * range.first, 6 * range.count);
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, bucket, vertices, 1.0);
+            let vertices = (source.corners() * range.first, source.corners() * range.count);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, vertices, 1.0);
         }
         // Baseline billboards: every quad of the chosen kind.
         for &treelod_runtime::QuadDraw { instance, model, first, count } in &view.draws.billboards {
-            stats.billboards += u64::from(count);
             let record = RecordedDraw {
                 instance,
                 model: ModelId(model),
@@ -277,19 +191,17 @@ impl Renderer {
                 tau_triangles: 0.0,
                 clamped: false,
             };
-            record_direct(
-                &self.instances,
-                &mut self.buckets,
-                &mut view.recorded,
-                record,
-                Bucket::Billboards,
-                (6 * first, 6 * count),
-                1.0,
-            );
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, (6 * first, 6 * count), 1.0);
         }
-        // The technique each draw's tree is drawn with, for the debug colours.
+        // The technique each draw's tree is drawn with, for the debug colours, and what each
+        // kind of primitive and each technique submitted.
+        let drawn_with = &self.drawn_with;
         for (info, _, _) in self.buckets.iter_mut().flatten() {
-            info.technique = self.drawn_with.get(info.instance as usize).copied().unwrap_or(SPT_INDEX);
+            info.tint = tint(drawn_with.get(info.instance as usize).copied().unwrap_or(Technique::FALLBACK));
+        }
+        for draw in &view.recorded {
+            stats.submitted[draw.source.primitive()] += u64::from(draw.count);
+            stats.by_technique[self.technique_of(draw.instance)] += u64::from(draw.count);
         }
         view.model_draws.clear();
         let before = self.indirect.len();
@@ -413,12 +325,8 @@ impl Renderer {
                 };
                 (Bucket::Points.of_model(m), (model.roots_start + at) * 6, 6)
             }
-            // Recorded directly by `prepare`, never clamped.
-            DrawSource::PrunedLeaves | DrawSource::Bark | DrawSource::LodLevel => (Bucket::Pruned.of_model(m), 0, 3),
-            DrawSource::Planes => (Bucket::Planes.of_model(m), 0, 6),
-            DrawSource::Billboards => (Bucket::Billboards.of_model(m), 0, 6),
-            DrawSource::Ellipsoids => (Bucket::Ellipsoids.of_model(m), 0, 6),
-            DrawSource::Lines => (Bucket::Lines.of_model(m), 0, 6),
+            // Recorded directly (`record_direct`), never clamped.
+            source => (source.bucket().of_model(m), 0, source.corners()),
         }
     }
 
@@ -438,11 +346,12 @@ impl Renderer {
                 if count == 0 {
                     continue;
                 }
-                let group = match (bucket, &model.billboards) {
-                    (Bucket::Billboards, Some(billboards)) => billboards,
-                    _ => &model.bind_group,
-                };
-                pass.set_bind_group(1, group, &[]);
+                pass.set_bind_group(1, &model.bind_group, &[]);
+                if bucket.group_entries().is_some() {
+                    // A bucket with draws has its group: the model's upload made it.
+                    let Some(group) = &model.groups[bucket as usize] else { continue };
+                    pass.set_bind_group(3, group, &[]);
+                }
                 pass.multi_draw_indirect(&self.indirect_buffer, u64::from(first) * stride, count);
             }
         }
@@ -450,14 +359,13 @@ impl Renderer {
 }
 
 /// Records a draw that streaming does not clamp (pruned leaves, bark, impostor planes: uploaded
-/// whole): its `DrawInfo` (thresholds from `record`, unshaded) into the model's bucket `bucket` with
-/// `(first vertex, vertex count)`, and `record` itself.
+/// whole): its `DrawInfo` (thresholds from `record`, unshaded) into the model's bucket of its
+/// source with `(first vertex, vertex count)`, and `record` itself.
 fn record_direct(
     instances: &[treelod_runtime::Instance],
     buckets: &mut [Vec<(DrawInfo, u32, u32)>],
     recorded: &mut Vec<RecordedDraw>,
     record: RecordedDraw,
-    bucket: Bucket,
     (first_vertex, vertices): (u32, u32),
     leaf_scale: f32,
 ) {
@@ -471,9 +379,9 @@ fn record_direct(
         shading: 1.0,
         leaf_scale,
         instance: record.instance,
-        technique: 0,
+        tint: 0,
     };
-    buckets[bucket.of_model(record.model.0 as usize)].push((info, first_vertex, vertices));
+    buckets[record.source.bucket().of_model(record.model.0 as usize)].push((info, first_vertex, vertices));
     recorded.push(record);
 }
 

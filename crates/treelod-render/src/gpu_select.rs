@@ -40,7 +40,7 @@ use std::sync::atomic::{AtomicU8, Ordering};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use treelod_format::{Container, PointRecord};
-use treelod_runtime::{DrawRange, Kind, ModelLod, ROOTS_CELL};
+use treelod_runtime::{DrawRange, Kind, ModelLod, ROOTS_CELL, Technique};
 
 use crate::draws::DrawInfo;
 use crate::renderer::RenderError;
@@ -261,7 +261,10 @@ impl GpuSelection {
                 layout: None,
                 module: &module,
                 entry_point: Some(entry),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[("spt_tint", f64::from(crate::draws::tint(Technique::Spt)))],
+                    ..wgpu::PipelineCompilationOptions::default()
+                },
                 cache: None,
             })
         };

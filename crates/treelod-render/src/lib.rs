@@ -40,7 +40,8 @@
 //!     renderer.render(&mut pass);
 //! }
 //! queue.submit([encoder.finish()]);
-//! println!("{} triangles, {} points", stats.triangles, stats.points);
+//! let triangles = stats.submitted[treelod_render::Primitive::Triangle];
+//! println!("{} primitives, {triangles} of them triangles", stats.primitives());
 //! # Ok(()) }
 //! ```
 //!
@@ -112,16 +113,19 @@ mod textures;
 mod upload;
 
 pub use camera::Camera;
-pub use draws::{DrawSource, RecordedDraw};
+pub use draws::RecordedDraw;
 pub use ground::Ground;
 pub use renderer::{Instance, ModelId, RenderError, Renderer};
 pub use settings::{DebugView, DepthConvention, ImpostorBark, Pruning, RendererFormats, Settings, prune_scale};
 pub use shadows::{Cascade, MAX_CASCADES, Shadows, cascade_splits, fit_cascades};
 pub use sky::Sky;
 pub use stats::{FrameStats, ShadowStats};
+pub use technique::DrawSource;
 
 /// WGSL for receiving the renderer's shadows in a host's own pipeline: declares group 2
 /// ([`Renderer::shadow_bind_group`]) and `fn sunlit(world: vec3<f32>, normal: vec3<f32>, sun:
 /// vec3<f32>) -> f32`, the share of the sun reaching a point (1 lit, 0 shadowed).
 pub const SHADOW_WGSL: &str = include_str!("../../../shaders/shared/shadow.wgsl");
-pub use treelod_runtime::{BudgetController, Hysteresis, PerTechnique, Policy, PruneScale, Technique};
+pub use treelod_runtime::{
+    BudgetController, Hysteresis, PerPrimitive, PerTechnique, Policy, Primitive, PruneScale, Technique,
+};

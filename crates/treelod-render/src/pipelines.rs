@@ -1,32 +1,22 @@
 //! The tree pipelines and their bind group layouts: per draw bucket ([`Bucket`]) one shader
-//! module composed from `shaders/tree/` (the common part, then the representation's files), a
-//! pipeline of the host's pass and a depth-only pipeline of the shadow pass; the frame (group 0)
-//! and model (group 1) layouts they bind, beside the shadow receivers' (group 2).
+//! module of its stages (`Bucket::stages`, composed from `shaders/tree/`: the common part, then
+//! the representation's files), a pipeline of the host's pass and a depth-only pipeline of the
+//! shadow pass; the frame (group 0) and model (group 1) layouts every bucket binds, beside the
+//! shadow receivers' (group 2) and the bucket's own (group 3, `Bucket::group_entries`).
 
-use crate::draws::Bucket;
 use crate::settings::{DepthConvention, RendererFormats};
 use crate::shadows::{SHADOW_FORMAT, ShadowMaps};
-
-/// The WGSL of a tree pipeline: the record structs, the draw constants and the shadow receivers
-/// (`shaders/shared/`), the tree shaders' common part, then the named files of `shaders/tree/`.
-macro_rules! tree_wgsl {
-    ($($file:literal),+) => {
-        concat!(
-            include_str!("../../../shaders/shared/records.wgsl"),
-            include_str!("../../../shaders/shared/draw.wgsl"),
-            include_str!("../../../shaders/shared/shadow.wgsl"),
-            include_str!("../../../shaders/tree/common.wgsl"),
-            $(include_str!(concat!("../../../shaders/tree/", $file))),+
-        )
-    };
-}
+use crate::technique::{Bucket, sampler, storage, texture};
 
 /// The tree pipelines, in bucket order, and the layouts of their bind groups.
 pub(crate) struct Pipelines {
     /// Group 0: the view's frame uniform, the draw infos, and the pool as triangles and points.
     pub(crate) frame_layout: wgpu::BindGroupLayout,
-    /// Group 1: a model's vertices, materials, textures and per-representation buffers.
+    /// Group 1: a model's vertices, materials, textures, and its whole-triangle list with the
+    /// pruned leaves.
     pub(crate) model_layout: wgpu::BindGroupLayout,
+    /// Group 3 per bucket: its representation's buffers and textures, if it has any.
+    pub(crate) group_layouts: [Option<wgpu::BindGroupLayout>; Bucket::COUNT],
     /// Group 2: the shadow receivers' cascades and maps.
     pub(crate) shadow_layout: wgpu::BindGroupLayout,
     /// The host's pass's pipelines.
@@ -38,16 +28,6 @@ pub(crate) struct Pipelines {
 impl Pipelines {
     /// Creates the layouts and the pipelines for the host's target formats and depth convention.
     pub(crate) fn new(device: &wgpu::Device, formats: RendererFormats, depth: DepthConvention) -> Self {
-        let storage = |binding: u32, visibility: wgpu::ShaderStages| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("treelod frame"),
             entries: &[
@@ -67,74 +47,53 @@ impl Pipelines {
                 storage(3, wgpu::ShaderStages::VERTEX),
             ],
         });
-        let texture = |binding: u32, view_dimension| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                view_dimension,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let sampler = |binding: u32| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-            count: None,
-        };
+        let float = wgpu::TextureSampleType::Float { filterable: true };
         let model_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("treelod model"),
             entries: &[
                 storage(0, wgpu::ShaderStages::VERTEX),
                 storage(1, wgpu::ShaderStages::FRAGMENT),
-                texture(2, wgpu::TextureViewDimension::D2Array),
-                sampler(3),
+                texture(2, float, wgpu::TextureViewDimension::D2Array),
+                sampler(3, wgpu::SamplerBindingType::Filtering),
+                // The whole-triangle list and the pruned leaves.
                 storage(4, wgpu::ShaderStages::VERTEX),
                 storage(5, wgpu::ShaderStages::VERTEX),
-                // Impostor planes and their atlas.
-                storage(6, wgpu::ShaderStages::VERTEX),
-                texture(7, wgpu::TextureViewDimension::D2),
-                sampler(8),
-                // Indirect texturing: the leaf-slot image and the planes' leaves.
-                wgpu::BindGroupLayoutEntry {
-                    binding: 9,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                storage(10, wgpu::ShaderStages::FRAGMENT),
-                // Ellipsoids, and the white-noise cube map they sample.
-                storage(11, wgpu::ShaderStages::VERTEX_FRAGMENT),
-                texture(12, wgpu::TextureViewDimension::Cube),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 13,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
-                    count: None,
-                },
-                // Branch lines.
-                storage(14, wgpu::ShaderStages::VERTEX_FRAGMENT),
             ],
         });
+        let group_layouts = Bucket::ALL.map(|bucket| {
+            bucket.group_entries().map(|entries| {
+                device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some(bucket.stages().label),
+                    entries,
+                })
+            })
+        });
         let shadow_layout = ShadowMaps::layout(device);
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("treelod"),
-            bind_group_layouts: &[Some(&frame_layout), Some(&model_layout), Some(&shadow_layout)],
-            immediate_size: 0,
-        });
-        let caster_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("treelod shadow casters"),
-            bind_group_layouts: &[Some(&frame_layout), Some(&model_layout)],
-            immediate_size: 0,
-        });
+        // Per bucket, the layouts of its colour pipeline (the receivers in group 2) and of its
+        // shadow caster (group 2 unused), each with the bucket's own group 3 if it has one.
+        let layouts = |caster: bool| {
+            Bucket::ALL.map(|bucket| {
+                let own = group_layouts[bucket as usize].as_ref();
+                let receivers = if caster { None } else { Some(&shadow_layout) };
+                let groups = [Some(&frame_layout), Some(&model_layout), receivers, own];
+                let count = if own.is_some() {
+                    4
+                } else if caster {
+                    2
+                } else {
+                    3
+                };
+                device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some(if caster { "treelod shadow casters" } else { "treelod" }),
+                    bind_group_layouts: &groups[..count],
+                    immediate_size: 0,
+                })
+            })
+        };
+        let (colour_layouts, caster_layouts) = (layouts(false), layouts(true));
         // One module per bucket, shared by its colour and shadow pipelines.
         let modules = Bucket::ALL.map(|bucket| {
-            let stages = stages(bucket);
+            let stages = bucket.stages();
             device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some(stages.module),
                 source: wgpu::ShaderSource::Wgsl(stages.wgsl.into()),
@@ -151,14 +110,15 @@ impl Pipelines {
         let colour_target =
             [Some(wgpu::ColorTargetState { format: formats.color, blend: None, write_mask: wgpu::ColorWrites::ALL })];
         // A pipeline of the host's pass, or (`caster`) of the shadow pass.
-        let pipeline = |module: &wgpu::ShaderModule, label: &str, vs: &str, fs: &str, caster: bool| {
+        let pipeline = |bucket: Bucket, label: &str, fs: &str, caster: bool| {
+            let (module, vs) = (&modules[bucket as usize], bucket.stages().vs);
             let constants = || wgpu::PipelineCompilationOptions {
                 constants: if caster { &caster_overrides } else { &overrides },
                 ..wgpu::PipelineCompilationOptions::default()
             };
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
-                layout: Some(if caster { &caster_layout } else { &layout }),
+                layout: Some(if caster { &caster_layouts[bucket as usize] } else { &colour_layouts[bucket as usize] }),
                 vertex: wgpu::VertexState {
                     module,
                     entry_point: Some(vs),
@@ -198,100 +158,9 @@ impl Pipelines {
                 cache: None,
             })
         };
-        let colour = Bucket::ALL.map(|bucket| {
-            let stages = stages(bucket);
-            pipeline(&modules[bucket as usize], stages.label, stages.vs, stages.fs, false)
-        });
-        let shadow = Bucket::ALL.map(|bucket| {
-            let stages = stages(bucket);
-            pipeline(&modules[bucket as usize], stages.shadow_label, stages.vs, stages.shadow_fs, true)
-        });
-        Self { frame_layout, model_layout, shadow_layout, colour, shadow }
-    }
-}
-
-/// The shader stages of one bucket's pipelines and the WGSL they come from.
-struct Stages {
-    /// The shader module's label.
-    module: &'static str,
-    /// The module's WGSL (`tree_wgsl!`).
-    wgsl: &'static str,
-    /// The vertex stage, shared by the colour and shadow pipelines.
-    vs: &'static str,
-    /// The colour pass's fragment stage and pipeline label.
-    fs: &'static str,
-    label: &'static str,
-    /// The shadow pass's fragment stage and pipeline label.
-    shadow_fs: &'static str,
-    shadow_label: &'static str,
-}
-
-/// What `bucket` is drawn with. Pruned leaves share the triangles' fragment stages, billboards
-/// the impostor planes'.
-fn stages(bucket: Bucket) -> Stages {
-    match bucket {
-        Bucket::Triangles => Stages {
-            module: "treelod tree/triangles.wgsl",
-            wgsl: tree_wgsl!("triangles.wgsl"),
-            vs: "vs_triangle",
-            fs: "fs_triangle",
-            label: "treelod triangles",
-            shadow_fs: "fs_shadow_triangle",
-            shadow_label: "treelod shadow triangles",
-        },
-        Bucket::Points => Stages {
-            module: "treelod tree/points.wgsl",
-            wgsl: tree_wgsl!("points.wgsl"),
-            vs: "vs_point",
-            fs: "fs_point",
-            label: "treelod points",
-            shadow_fs: "fs_shadow_point",
-            shadow_label: "treelod shadow points",
-        },
-        Bucket::Pruned => Stages {
-            module: "treelod tree/pruned.wgsl",
-            wgsl: tree_wgsl!("triangles.wgsl", "pruned.wgsl"),
-            vs: "vs_pruned",
-            fs: "fs_triangle",
-            label: "treelod pruned leaves and bark",
-            shadow_fs: "fs_shadow_triangle",
-            shadow_label: "treelod shadow pruned leaves and bark",
-        },
-        Bucket::Planes => Stages {
-            module: "treelod tree/planes.wgsl",
-            wgsl: tree_wgsl!("planes.wgsl"),
-            vs: "vs_plane",
-            fs: "fs_plane",
-            label: "treelod impostor planes",
-            shadow_fs: "fs_shadow_plane",
-            shadow_label: "treelod shadow impostor planes",
-        },
-        Bucket::Billboards => Stages {
-            module: "treelod tree/billboards.wgsl",
-            wgsl: tree_wgsl!("planes.wgsl", "billboards.wgsl"),
-            vs: "vs_billboard",
-            fs: "fs_plane",
-            label: "treelod baseline billboards",
-            shadow_fs: "fs_shadow_plane",
-            shadow_label: "treelod shadow billboards",
-        },
-        Bucket::Ellipsoids => Stages {
-            module: "treelod tree/ellipsoids.wgsl",
-            wgsl: tree_wgsl!("ellipsoids.wgsl"),
-            vs: "vs_ellipsoid",
-            fs: "fs_ellipsoid",
-            label: "treelod ellipsoids",
-            shadow_fs: "fs_shadow_ellipsoid",
-            shadow_label: "treelod shadow ellipsoids",
-        },
-        Bucket::Lines => Stages {
-            module: "treelod tree/lines.wgsl",
-            wgsl: tree_wgsl!("lines.wgsl"),
-            vs: "vs_line",
-            fs: "fs_line",
-            label: "treelod lines",
-            shadow_fs: "fs_shadow_line",
-            shadow_label: "treelod shadow lines",
-        },
+        let colour = Bucket::ALL.map(|bucket| pipeline(bucket, bucket.stages().label, bucket.stages().fs, false));
+        let shadow =
+            Bucket::ALL.map(|bucket| pipeline(bucket, bucket.stages().shadow_label, bucket.stages().shadow_fs, true));
+        Self { frame_layout, model_layout, group_layouts, shadow_layout, colour, shadow }
     }
 }

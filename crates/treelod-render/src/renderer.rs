@@ -10,13 +10,13 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
-    Assignment, BudgetController, Calibration, Choices, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerTechnique,
-    Policy, PolicyState, PruneState, ROOTS_CELL, Representations, Scene, Technique, TechniqueSettings,
-    choose_instances, merge_ascending, select_frame, select_techniques,
+    Assignment, BudgetController, Calibration, Choices, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerPrimitive,
+    PerTechnique, Policy, PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique,
+    TechniqueSettings, choose_instances, merge_ascending, select_frame, select_techniques,
 };
 
 use crate::camera::Camera;
-use crate::draws::{Bucket, DrawInfo, DrawSource, RecordedDraw, View};
+use crate::draws::{DrawInfo, RecordedDraw, View};
 use crate::gpu_select::{GpuSelection, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
 use crate::pipelines::Pipelines;
@@ -26,6 +26,7 @@ use crate::settings::{DebugView, DepthConvention, RendererFormats, Settings, pru
 use crate::shadows::{Cascade, MAX_CASCADES, ShadowMaps, ShadowUniform, fit_cascades};
 use crate::stats::{FrameStats, ShadowStats};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
+use crate::technique::{Bucket, DrawSource};
 use crate::upload::{Model, gpu_points, storage_buffer};
 
 /// A model added with [`Renderer::add_model`].
@@ -114,6 +115,8 @@ pub struct Renderer {
     pub(crate) representations: Vec<Representations>,
     pub(crate) instances: Vec<treelod_runtime::Instance>,
     pub(crate) model_layout: wgpu::BindGroupLayout,
+    /// Per bucket, the layout of its own group (group 3), if it has one.
+    pub(crate) group_layouts: [Option<wgpu::BindGroupLayout>; Bucket::COUNT],
     frame_layout: wgpu::BindGroupLayout,
     /// The colour pass's pipelines, one per bucket, in bucket order ([`Bucket`]).
     pipelines: [wgpu::RenderPipeline; Bucket::COUNT],
@@ -156,9 +159,9 @@ pub struct Renderer {
     assignment: Assignment,
     /// The policy's per-model tables and per-instance state ([`Settings::policy`]).
     pub(crate) policy: PolicyModels,
-    /// Per instance, the index of the technique it is drawn with this frame, for
-    /// [`DebugView::Techniques`] (empty in the other views).
-    pub(crate) drawn_with: Vec<u32>,
+    /// Per instance, the technique it is drawn with this frame (this frame's assignment), for
+    /// [`DebugView::Techniques`] and [`FrameStats::by_technique`].
+    pub(crate) drawn_with: Vec<Technique>,
     /// Scratch: the instance indices the point tree selects in a view.
     spt_list: Vec<u32>,
     /// The occlusion measurement, and the trees to measure after this frame.
@@ -262,8 +265,14 @@ impl Renderer {
         settings: Settings,
         depth: DepthConvention,
     ) -> Self {
-        let Pipelines { frame_layout, model_layout, shadow_layout, colour: pipelines, shadow: shadow_pipelines } =
-            Pipelines::new(device, formats, depth);
+        let Pipelines {
+            frame_layout,
+            model_layout,
+            group_layouts,
+            shadow_layout,
+            colour: pipelines,
+            shadow: shadow_pipelines,
+        } = Pipelines::new(device, formats, depth);
         let shadow_maps = ShadowMaps::new(device, &shadow_layout, 1, 1);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("treelod textures"),
@@ -311,6 +320,7 @@ impl Renderer {
             drawn_with: Vec::new(),
             instances: Vec::new(),
             model_layout,
+            group_layouts,
             frame_layout,
             pipelines,
             shadow_pipelines,
@@ -506,9 +516,9 @@ impl Renderer {
     }
 
     /// The points of the last [`Self::prepare`]'s draws that the vertex shader keeps (those in the
-    /// cut: [`treelod_runtime::point_drawn`] at each draw's thresholds), as opposed to
-    /// [`FrameStats::points`], the prefixes submitted. A scan of the submitted points on the CPU,
-    /// for tools and reports, not for every frame of a host; 0 after a GPU-selected frame.
+    /// cut: [`treelod_runtime::point_drawn`] at each draw's thresholds), as opposed to the points
+    /// of [`FrameStats::submitted`], the prefixes submitted. A scan of the submitted points on the
+    /// CPU, for tools and reports, not for every frame of a host; 0 after a GPU-selected frame.
     #[must_use]
     pub fn points_in_cut(&self) -> u64 {
         let mut drawn = 0u64;
@@ -655,13 +665,18 @@ impl Renderer {
             self.gpu_frame = true;
             self.write_frame_uniform(queue, camera);
             let mut instances = PerTechnique::default();
-            *instances.get_mut(Technique::Spt) = counts.instances_visible;
+            instances[Technique::Spt] = counts.instances_visible;
+            let mut submitted = PerPrimitive::default();
+            submitted[Primitive::Triangle] = counts.triangles;
+            submitted[Primitive::Point] = counts.points;
+            let mut by_technique = PerTechnique::default();
+            by_technique[Technique::Spt] = submitted.total();
             return FrameStats {
                 instances_visible: counts.instances_visible,
                 instances,
                 ranges: counts.ranges,
-                triangles: counts.triangles,
-                points: counts.points,
+                submitted,
+                by_technique,
                 bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
                     + u64::from(self.residency.pool.used()) * UNIT
                     + pool_bytes,
@@ -794,21 +809,23 @@ impl Renderer {
         self.note_drawn_with();
     }
 
-    /// For [`DebugView::Techniques`], each instance's technique from this frame's assignment
-    /// (read when the draws are recorded); nothing otherwise.
+    /// Each instance's technique from this frame's assignment (read when the draws are
+    /// recorded).
     fn note_drawn_with(&mut self) {
         self.drawn_with.clear();
-        if self.settings.debug != DebugView::Techniques {
-            return;
-        }
-        self.drawn_with.resize(self.instances.len(), crate::draws::SPT_INDEX);
+        self.drawn_with.resize(self.instances.len(), Technique::FALLBACK);
         for technique in Technique::ALL {
             for &i in &self.assignment[technique] {
                 if let Some(slot) = self.drawn_with.get_mut(i as usize) {
-                    *slot = technique.index() as u32;
+                    *slot = technique;
                 }
             }
         }
+    }
+
+    /// The technique instance `instance` is drawn with this frame.
+    pub(crate) fn technique_of(&self, instance: u32) -> Technique {
+        self.drawn_with.get(instance as usize).copied().unwrap_or(Technique::FALLBACK)
     }
 
     /// Selects one view (its lists cleared first): each technique's runtime selection over the

@@ -86,22 +86,11 @@ pub enum DebugView {
 }
 
 impl DebugView {
-    /// The colour, linear RGB, [`Self::Techniques`] draws `technique`'s trees with (the shaders'
-    /// `TECHNIQUE_PALETTE`): full grey, spt blue, prune-opt green, prune-cook dark green,
-    /// impostors yellow, ellipsoids cyan, lod-chain red, billboard magenta, crossed violet.
+    /// The colour, linear RGB, [`Self::Techniques`] draws `technique`'s trees with
+    /// ([`Technique::colour`]).
     #[must_use]
     pub const fn technique_colour(technique: Technique) -> [f32; 3] {
-        match technique {
-            Technique::Full => [0.6, 0.6, 0.6],
-            Technique::Spt => [0.2, 0.5, 0.95],
-            Technique::PruneOpt => [0.3, 0.8, 0.3],
-            Technique::PruneCook => [0.1, 0.5, 0.2],
-            Technique::Impostors => [0.95, 0.75, 0.15],
-            Technique::Ellipsoids => [0.2, 0.8, 0.8],
-            Technique::LodChain => [0.9, 0.3, 0.2],
-            Technique::Billboard => [0.85, 0.35, 0.85],
-            Technique::Crossed => [0.5, 0.3, 0.9],
-        }
+        technique.colour()
     }
 }
 

@@ -1,10 +1,12 @@
 //! The public statistics of a frame: what [`Renderer::prepare`] selected and submitted
 //! ([`FrameStats`]), and what its shadow pass draws ([`ShadowStats`]).
 
-use treelod_runtime::PerTechnique;
+use treelod_runtime::{PerPrimitive, PerTechnique};
 
 #[cfg(doc)]
 use crate::{Renderer, Settings, Technique};
+#[cfg(doc)]
+use treelod_runtime::Primitive;
 
 /// What [`Renderer::prepare`] selected.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -19,32 +21,28 @@ pub struct FrameStats {
     pub ranges: u32,
     /// Draws made coarser than the selection because their prefix is not resident yet.
     pub ranges_clamped: u32,
-    /// Triangles submitted.
-    pub triangles: u64,
-    /// Points submitted (the prefix; the vertex shader drops those outside the cut).
-    pub points: u64,
+    /// Primitives submitted, per kind ([`Primitive`]): triangles (bark, leaves, pruned leaves,
+    /// LoD chain levels), points (the prefixes; the vertex shader drops those outside the cut),
+    /// impostor planes, billboard quads, ellipsoids and branch lines (the prefixes; the vertex
+    /// shader drops those outside the level).
+    pub submitted: PerPrimitive<u64>,
+    /// Primitives submitted, per technique the trees that submitted them are drawn with (a
+    /// pruned tree below its pruning height counts under pruning though the point tree draws it).
+    /// Sums to [`Self::primitives`].
+    pub by_technique: PerTechnique<u64>,
     /// Bytes of model data on the GPU: vertices, materials and images of every model, and the
     /// streamed prefixes and roots in use.
     pub bytes_resident: u64,
     /// Bytes of triangles and points uploaded by this frame.
     pub bytes_uploaded: u64,
-    /// Leaves drawn by pruned instances (their triangles count in [`Self::triangles`]).
+    /// Leaves drawn by pruned instances (their triangles count in [`Self::submitted`]).
     pub leaves_pruned: u64,
-    /// Impostor planes submitted (the prefixes; the vertex shader drops those outside the level).
-    pub planes: u64,
-    /// Ellipsoids submitted (the prefixes; the vertex shader drops those outside the level).
-    pub ellipsoids: u64,
-    /// Branch lines submitted by ellipsoid trees ([`Settings::lines`]; the prefixes; the vertex
-    /// shader drops those outside the level).
-    pub lines: u64,
-    /// Billboard quads submitted (their triangles are not counted in [`Self::triangles`]; LoD
-    /// chain triangles are).
-    pub billboards: u64,
     /// Whether this frame was selected on the GPU ([`Renderer::enable_gpu_selection`]). Then
-    /// [`Self::instances_visible`], [`Self::ranges`], [`Self::triangles`], [`Self::points`] and
-    /// [`Self::ranges_dropped`] are those of the latest earlier frame whose counters have been
-    /// read back (without waiting: usually one or two frames old, zero before the first),
-    /// [`Self::bytes_resident`] is current, and the other fields are zero.
+    /// [`Self::instances_visible`], [`Self::ranges`], the triangles and points of
+    /// [`Self::submitted`] and [`Self::by_technique`], and [`Self::ranges_dropped`] are those of
+    /// the latest earlier frame whose counters have been read back (without waiting: usually one
+    /// or two frames old, zero before the first), [`Self::bytes_resident`] is current, and the
+    /// other fields are zero.
     pub gpu_selection: bool,
     /// GPU selection: ranges selected but not drawn because their bucket was full (the buckets
     /// grow for later frames once the counters are read back).
@@ -54,12 +52,11 @@ pub struct FrameStats {
 }
 
 impl FrameStats {
-    /// Primitives submitted, every kind counted once: triangles, points, impostor planes,
-    /// billboard quads, ellipsoids and lines (a splat, a plane, a quad, an ellipsoid's and a
-    /// line's bounding quad are each one primitive).
+    /// Primitives submitted, every kind counted once (a splat, a plane, a quad, an ellipsoid's
+    /// and a line's bounding quad are each one primitive).
     #[must_use]
     pub fn primitives(&self) -> u64 {
-        self.triangles + self.points + self.planes + self.billboards + self.ellipsoids + self.lines
+        self.submitted.total()
     }
 }
 
@@ -76,36 +73,21 @@ pub struct ShadowStats {
     /// Draws made coarser than the cascades' selections because their prefixes are not resident
     /// yet (0 once the cascades' data has streamed in).
     pub ranges_clamped: u32,
-    /// Triangles submitted (bark, leaves, pruned leaves, LoD chain levels).
-    pub triangles: u64,
-    /// Points submitted.
-    pub points: u64,
-    /// Impostor planes submitted.
-    pub planes: u64,
-    /// Billboard quads submitted.
-    pub billboards: u64,
-    /// Ellipsoids submitted.
-    pub ellipsoids: u64,
-    /// Branch lines submitted.
-    pub lines: u64,
+    /// Primitives submitted, per kind (as [`FrameStats::submitted`]).
+    pub submitted: PerPrimitive<u64>,
 }
 
 impl ShadowStats {
     /// Primitives submitted, every kind counted once (as [`FrameStats::primitives`]).
     #[must_use]
     pub fn primitives(&self) -> u64 {
-        self.triangles + self.points + self.planes + self.billboards + self.ellipsoids + self.lines
+        self.submitted.total()
     }
 
     /// Adds what one cascade's view drew (counted as a frame's) to the pass's sums.
     pub(crate) fn add_view(&mut self, view: &FrameStats) {
         self.ranges += view.ranges;
         self.ranges_clamped += view.ranges_clamped;
-        self.triangles += view.triangles;
-        self.points += view.points;
-        self.planes += view.planes;
-        self.billboards += view.billboards;
-        self.ellipsoids += view.ellipsoids;
-        self.lines += view.lines;
+        self.submitted += view.submitted;
     }
 }

@@ -7,14 +7,12 @@ use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 use treelod_format::{Container, MaterialRecord, NO_IMAGE, PointRecord};
-use treelod_runtime::{Billboards, ModelLod, PlaneLod, Representations};
+use treelod_runtime::{ModelLod, Representations};
 
 use crate::gpu_select::GpuSelection;
 use crate::renderer::{ModelId, RenderError, Renderer};
 use crate::streaming::UNIT;
-use crate::technique::baselines::gpu_billboards;
-use crate::technique::ellipsoids::{gpu_ellipsoids, gpu_lines};
-use crate::technique::impostors::gpu_planes;
+use crate::technique::{Bucket, upload_groups};
 use crate::textures;
 
 /// A vertex as the shaders read it: the record, then its ambient occlusion (0 without).
@@ -69,13 +67,105 @@ struct MaterialGpu {
     material_class: u32,
 }
 
+/// What [`Renderer::add_model`] hands each representation's `upload` (`crate::technique`): the
+/// device, the container, the model's [`Representations`] (a representation that cannot be drawn
+/// takes itself out), the bucket's group layouts and the samplers they bind, and the warnings and
+/// bytes of the model so far.
+pub(crate) struct Upload<'a> {
+    pub(crate) device: &'a wgpu::Device,
+    pub(crate) queue: &'a wgpu::Queue,
+    pub(crate) container: &'a Container,
+    pub(crate) representations: &'a mut Representations,
+    /// Per bucket, the layout of its group 3 (`crate::technique::Bucket::group_entries`).
+    layouts: &'a [Option<wgpu::BindGroupLayout>; Bucket::COUNT],
+    /// The atlases' sampler: clamped, nearest mip level.
+    pub(crate) atlas_sampler: &'a wgpu::Sampler,
+    /// The ellipsoids' white-noise cube map, shared by every model (made by the first model
+    /// that draws ellipsoids), and its nearest-texel sampler.
+    pub(crate) noise: &'a mut Option<wgpu::TextureView>,
+    pub(crate) noise_sampler: &'a wgpu::Sampler,
+    /// One sentence per problem that leaves something undrawn.
+    pub(crate) warnings: Vec<String>,
+    /// Bytes uploaded so far.
+    pub(crate) bytes: u64,
+    /// The device's storage-buffer binding limit.
+    limit: u64,
+}
+
+impl Upload<'_> {
+    /// A storage buffer holding `data` (`what` names it in errors).
+    ///
+    /// # Errors
+    /// [`RenderError::TooLarge`] beyond the device's binding limit.
+    pub(crate) fn buffer(&mut self, what: &'static str, data: &[u8]) -> Result<wgpu::Buffer, RenderError> {
+        if data.len() as u64 > self.limit {
+            return Err(RenderError::TooLarge { what, bytes: data.len() as u64, limit: self.limit });
+        }
+        // Bindings may not be empty, nor smaller than one record of the array they hold: an
+        // empty array becomes 64 zero bytes (the largest record) no draw reads.
+        let padded = data.len().max(64).next_multiple_of(4) as u64;
+        let buffer = storage_buffer(self.device, what, padded, false);
+        self.queue.write_buffer(&buffer, 0, data);
+        self.bytes += padded;
+        Ok(buffer)
+    }
+
+    /// The atlas `image` of the container decoded with its mips, or `None` (and a warning that
+    /// `what` is not drawn) if it does not decode or is larger than the device's textures.
+    pub(crate) fn decode_atlas(&mut self, image: u32, what: &str) -> Option<textures::Atlas> {
+        match textures::atlas(self.container, image) {
+            Ok(atlas) if atlas.width.max(atlas.height) > self.device.limits().max_texture_dimension_2d => {
+                self.warnings.push(format!(
+                    "{what} atlas (image {image}) is {}x{}, larger than the device's textures; {what}s are not drawn",
+                    atlas.width, atlas.height
+                ));
+                None
+            }
+            Ok(atlas) => Some(atlas),
+            Err(e) => {
+                self.warnings.push(format!("{what} atlas (image {image}): {e}; {what}s are not drawn"));
+                None
+            }
+        }
+    }
+
+    /// Uploads an atlas with its mips; returns its view.
+    pub(crate) fn atlas(&mut self, atlas: &textures::Atlas, label: &str) -> wgpu::TextureView {
+        let (view, bytes) = upload_atlas(self.device, self.queue, atlas, label);
+        self.bytes += bytes;
+        view
+    }
+
+    /// `bucket`'s group 3 over `entries` (binding `i` at position `i`).
+    pub(crate) fn group(&self, bucket: Bucket, entries: &[wgpu::BindingResource<'_>]) -> wgpu::BindGroup {
+        let entries: Vec<_> = entries
+            .iter()
+            .enumerate()
+            .map(|(i, resource)| wgpu::BindGroupEntry {
+                binding: u32::try_from(i).unwrap_or(u32::MAX),
+                resource: resource.clone(),
+            })
+            .collect();
+        let Some(layout) = &self.layouts[bucket as usize] else { unreachable!("{bucket:?} has no group of its own") };
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(bucket.stages().label),
+            layout,
+            entries: &entries,
+        })
+    }
+}
+
 /// The GPU resources of one model and what drawing it needs of its container (what its
 /// selections read is its [`Representations`], held beside it in `Renderer::representations`).
 pub(crate) struct Model {
     /// The mapped container: streamed ranges are uploaded from it.
     pub(crate) container: Arc<Container>,
-    /// Vertices, materials, images and the sampler.
+    /// Group 1: vertices, materials, images and their sampler, and the whole-triangle list with
+    /// the pruned leaves.
     pub(crate) bind_group: wgpu::BindGroup,
+    /// Group 3 per bucket: the representations' own buffers and textures (`None` where the
+    /// bucket has none, or the model draws nothing in it).
+    pub(crate) groups: [Option<wgpu::BindGroup>; Bucket::COUNT],
     /// Bytes uploaded whole at [`Renderer::add_model`] (vertices, materials, images).
     pub(crate) static_bytes: u64,
     /// Pool unit (= point index) of the pinned copy of [`ModelLod::roots`].
@@ -86,10 +176,6 @@ pub(crate) struct Model {
     pub(crate) cell_lod: Vec<u32>,
     /// The hull samples of the occlusion test: first and count in the sample buffer.
     pub(crate) samples: (u32, u32),
-    /// The baseline billboards' bind group (the model's, with the billboards in place of the
-    /// planes and their atlas in place of the impostor atlas), if the container has billboards
-    /// and their atlas decodes.
-    pub(crate) billboards: Option<wgpu::BindGroup>,
 }
 
 impl Renderer {
@@ -131,21 +217,23 @@ impl Renderer {
                 return Err(RenderError::GpuSelectionBudget { model, bytes, budget });
             }
         }
-        let mut warnings = Vec::new();
-        let mut bytes = 0u64;
-        let mut upload = |what: &'static str, data: &[u8]| -> Result<wgpu::Buffer, RenderError> {
-            if data.len() as u64 > limit {
-                return Err(RenderError::TooLarge { what, bytes: data.len() as u64, limit });
-            }
-            // Bindings may not be empty, nor smaller than one record of the array they hold: an
-            // empty array becomes 64 zero bytes (the largest record) no draw reads.
-            let padded = data.len().max(64).next_multiple_of(4) as u64;
-            let buffer = storage_buffer(device, what, padded, false);
-            queue.write_buffer(&buffer, 0, data);
-            bytes += padded;
-            Ok(buffer)
+        // What the selections read, and the whole-triangle list (pruned leaves, bark, the LoD
+        // chain) they address.
+        let (mut representations, whole) = Representations::from_container(&container);
+        let mut up = Upload {
+            device,
+            queue,
+            container: &container,
+            representations: &mut representations,
+            layouts: &self.group_layouts,
+            atlas_sampler: &self.atlas_sampler,
+            noise: &mut self.noise_view,
+            noise_sampler: &self.noise_sampler,
+            warnings: Vec::new(),
+            bytes: 0,
+            limit,
         };
-        let layers = textures::layers(&container, &mut warnings);
+        let layers = textures::layers(&container, &mut up.warnings);
         let image_layer = |image: u32| -> i32 {
             if image == NO_IMAGE { -1 } else { layers.layer_of.get(image as usize).copied().unwrap_or(-1) }
         };
@@ -171,41 +259,19 @@ impl Renderer {
                 ao: vertex_ao.get(i).map_or(0.0, |&a| treelod_format::decode_ao(a)),
             })
             .collect();
-        let vertices = upload("VERTICES", bytemuck::cast_slice(&vertices))?;
-        let materials = upload("MATERIALS", bytemuck::cast_slice(&materials))?;
-        // What the selections read, and the whole-triangle list (pruned leaves, bark, the LoD
-        // chain) they address.
-        let (mut representations, whole) = Representations::from_container(&container);
-        let r = &representations;
-        let (extra, prune_leaves) =
-            if r.prune.is_some() || r.planes.is_some() || r.ellipsoids.is_some() || r.chain.is_some() {
-                let extra = upload("PRUNE_TRIANGLES, bark and LoD chain", bytemuck::cast_slice(&whole))?;
-                (extra, upload("PRUNE_LEAVES", bytemuck::cast_slice(container.prune_leaves()))?)
-            } else {
-                (upload("no pruned triangles", &[])?, upload("no pruned leaves", &[])?)
-            };
-        drop(whole);
-        // Baseline billboards: the facing quads, then the crossed ones.
-        let billboard_kinds = Billboards::from_container(&container);
-        let billboard_records = gpu_billboards(&container, billboard_kinds.as_ref());
-        let billboard_buffer = match &billboard_kinds {
-            Some(_) => Some(upload("BILLBOARDS", bytemuck::cast_slice(&billboard_records))?),
-            None => None,
+        let vertices = up.buffer("VERTICES", bytemuck::cast_slice(&vertices))?;
+        let materials = up.buffer("MATERIALS", bytemuck::cast_slice(&materials))?;
+        let r = &up.representations;
+        let whole_drawn = r.prune.is_some() || r.planes.is_some() || r.ellipsoids.is_some() || r.chain.is_some();
+        let (extra, prune_leaves) = if whole_drawn {
+            let extra = up.buffer("PRUNE_TRIANGLES, bark and LoD chain", bytemuck::cast_slice(&whole))?;
+            (extra, up.buffer("PRUNE_LEAVES", bytemuck::cast_slice(container.prune_leaves()))?)
+        } else {
+            (up.buffer("no pruned triangles", &[])?, up.buffer("no pruned leaves", &[])?)
         };
-        let gpu_planes = gpu_planes(&container, &mut warnings);
-        let plane_buffer = upload("PLANES", bytemuck::cast_slice(&gpu_planes))?;
-        let plane_leaves = upload("PLANE_LEAVES", bytemuck::cast_slice(container.plane_leaves()))?;
-        let gpu_ellipsoids = gpu_ellipsoids(&container);
-        let ellipsoid_buffer = upload("ELLIPSOIDS", bytemuck::cast_slice(&gpu_ellipsoids))?;
-        drop(gpu_ellipsoids);
-        let gpu_lines = gpu_lines(&container);
-        let line_buffer = upload("LINES", bytemuck::cast_slice(&gpu_lines))?;
-        drop(gpu_lines);
-        if self.noise_view.is_none() {
-            let (view, noise_bytes) = crate::noise::upload(device, queue);
-            self.noise_view = Some(view);
-            bytes += noise_bytes;
-        }
+        drop(whole);
+        let groups = upload_groups(&mut up)?;
+        let (warnings, mut bytes) = (up.warnings, up.bytes);
 
         // The roots, pinned in the pool: what a cell draws before its own points are resident.
         let lod = ModelLod::from_container(&container);
@@ -273,92 +339,18 @@ impl Renderer {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..wgpu::TextureViewDescriptor::default()
         });
-        // The impostor atlas, as stored with its mips; without planes (or if it does not decode,
-        // then without impostors) one transparent texel.
-        let blank = |slots| textures::Atlas { width: 1, height: 1, srgb: true, slots, levels: vec![vec![0; 4]] };
-        let (atlas, planes) = match representations.planes.take() {
-            Some(p) => match textures::atlas(&container, p.image()) {
-                Ok(atlas) if atlas.width.max(atlas.height) > device.limits().max_texture_dimension_2d => {
-                    warnings.push(format!(
-                        "impostor atlas (image {}) is {}x{}, larger than the device's textures; impostors are not drawn",
-                        p.image(),
-                        atlas.width,
-                        atlas.height
-                    ));
-                    (blank(false), None)
-                }
-                Ok(atlas) => (atlas, Some(p)),
-                Err(e) => {
-                    warnings.push(format!("impostor atlas (image {}): {e}; impostors are not drawn", p.image()));
-                    (blank(false), None)
-                }
-            },
-            None => (blank(false), None),
-        };
-        // A leaf-slot image (spec §6.10.1) is bound as such, with a blank atlas; otherwise a blank
-        // slot image.
-        let (atlas, slots) = if atlas.slots { (blank(false), atlas) } else { (atlas, blank(true)) };
-        if planes.as_ref().is_some_and(|p| container.planes().iter().any(|q| q.image != p.image())) {
-            warnings.push(format!(
-                "impostor planes sample several images; all are drawn from image {}",
-                planes.as_ref().map_or(0, PlaneLod::image)
-            ));
-        }
-        representations.planes = planes;
-        let (atlas_view, atlas_bytes) = upload_atlas(device, queue, &atlas, "treelod impostor atlas");
-        let (slots_view, slot_bytes) = upload_atlas(device, queue, &slots, "treelod leaf slots");
-        bytes += atlas_bytes + slot_bytes;
-        let Some(noise_view) = &self.noise_view else { unreachable!("uploaded above") };
-        let model_group = |label: &str, planes: &wgpu::Buffer, atlas: &wgpu::TextureView| {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(label),
-                layout: &self.model_layout,
-                entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: materials.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&view) },
-                    wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
-                    wgpu::BindGroupEntry { binding: 4, resource: extra.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 5, resource: prune_leaves.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 6, resource: planes.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::TextureView(atlas) },
-                    wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::Sampler(&self.atlas_sampler) },
-                    wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::TextureView(&slots_view) },
-                    wgpu::BindGroupEntry { binding: 10, resource: plane_leaves.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 11, resource: ellipsoid_buffer.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 12, resource: wgpu::BindingResource::TextureView(noise_view) },
-                    wgpu::BindGroupEntry { binding: 13, resource: wgpu::BindingResource::Sampler(&self.noise_sampler) },
-                    wgpu::BindGroupEntry { binding: 14, resource: line_buffer.as_entire_binding() },
-                ],
-            })
-        };
-        let bind_group = model_group("treelod model", &plane_buffer, &atlas_view);
-        // Billboards: their own atlas and bind group (the image of the first record; builders
-        // write one), not drawn if it does not decode or fit.
-        let billboards = match (billboard_kinds, billboard_buffer, billboard_records.first()) {
-            (Some(_), Some(buffer), Some(first)) => match textures::atlas(&container, first.image) {
-                Ok(atlas) if atlas.width.max(atlas.height) > device.limits().max_texture_dimension_2d => {
-                    warnings.push(format!(
-                        "billboard atlas (image {}) is {}x{}, larger than the device's textures; billboards are not drawn",
-                        first.image, atlas.width, atlas.height
-                    ));
-                    None
-                }
-                Ok(atlas) => {
-                    let (billboard_view, atlas_bytes) = upload_atlas(device, queue, &atlas, "treelod billboard atlas");
-                    bytes += atlas_bytes;
-                    Some(model_group("treelod billboards", &buffer, &billboard_view))
-                }
-                Err(e) => {
-                    warnings.push(format!("billboard atlas (image {}): {e}; billboards are not drawn", first.image));
-                    None
-                }
-            },
-            _ => None,
-        };
-        if billboards.is_none() {
-            representations.billboards = None;
-        }
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("treelod model"),
+            layout: &self.model_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: vertices.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&view) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::Sampler(&self.sampler) },
+                wgpu::BindGroupEntry { binding: 4, resource: extra.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: prune_leaves.as_entire_binding() },
+            ],
+        });
         let id = ModelId(u32::try_from(self.models.len()).unwrap_or(u32::MAX));
         let samples = match &representations.prune {
             Some(p) => (self.occlusion.add_samples(p.samples()), u32::try_from(p.samples().len()).unwrap_or(0)),
@@ -372,7 +364,7 @@ impl Renderer {
             roots_start,
             cell_roots,
             cell_lod,
-            billboards,
+            groups,
         });
         self.lods.push(lod);
         self.representations.push(representations);

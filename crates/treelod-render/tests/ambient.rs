@@ -16,6 +16,7 @@ use glam::{Vec3, vec3};
 use treelod_build::scene::{AlphaMode, Material, Part, Scene};
 use treelod_build::{AoConfig, BuildConfig, EllipsoidConfig, ImpostorConfig, Placed, build_block};
 use treelod_format::{Compression, Container, ContainerData, material_class};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, Renderer, Settings, Technique};
 
@@ -320,17 +321,32 @@ fn the_enclosed_quad_is_black_in_ambient_light_with_ao_and_lit_without() {
         let (on, stats) = frame(true);
         let (off, _) = frame(false);
         match name {
-            "triangles" => assert!(stats.triangles >= 14 && renderer.points_in_cut() == 0, "{name}: {stats:?}"),
+            "triangles" => assert!(
+                stats.submitted[Primitive::Triangle] >= 14 && renderer.points_in_cut() == 0,
+                "{name}: {stats:?}"
+            ),
             "planes" => {
-                assert!(stats.instances.get(Technique::Impostors) == 1 && stats.planes >= 1, "{name}: {stats:?}");
+                assert!(
+                    stats.instances.get(Technique::Impostors) == 1 && stats.submitted[Primitive::Plane] >= 1,
+                    "{name}: {stats:?}"
+                );
             }
             "ellipsoids" => {
-                assert!(stats.instances.get(Technique::Ellipsoids) == 1 && stats.ellipsoids >= 1, "{name}: {stats:?}");
+                assert!(
+                    stats.instances.get(Technique::Ellipsoids) == 1 && stats.submitted[Primitive::Ellipsoid] >= 1,
+                    "{name}: {stats:?}"
+                );
             }
             _ => {
-                assert!(stats.triangles == 0, "{name}: every triangle is drawn as points: {stats:?}");
+                assert!(
+                    stats.submitted[Primitive::Triangle] == 0,
+                    "{name}: every triangle is drawn as points: {stats:?}"
+                );
                 if !gpu_selection {
-                    assert!(stats.points >= 2 && renderer.points_in_cut() >= 2, "{name}: {stats:?}");
+                    assert!(
+                        stats.submitted[Primitive::Point] >= 2 && renderer.points_in_cut() >= 2,
+                        "{name}: {stats:?}"
+                    );
                 }
             }
         }
@@ -386,7 +402,7 @@ fn reserved_point_flags_are_not_read_as_occlusion_without_point_ao() {
             renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("fits");
         }
         let (image, stats) = settled(&gpu, &mut renderer, &camera);
-        assert!(stats.triangles == 0 && stats.gpu_selection == gpu_selection, "{stats:?}");
+        assert!(stats.submitted[Primitive::Triangle] == 0 && stats.gpu_selection == gpu_selection, "{stats:?}");
         let mean = centre_mean(&image, 2);
         eprintln!("reserved flags 0xFF, GPU selection {gpu_selection}: centre {mean:.1?}");
         assert!(close(mean, LEAF, 6.0), "GPU selection {gpu_selection}: lit as without occlusion: {mean:?}");
@@ -409,7 +425,7 @@ fn reserved_ellipsoid_flags_are_not_read_as_occlusion_without_ellipsoid_ao() {
     let settings = Settings { ambient: 1.0, technique: Technique::Ellipsoids, ..Settings::default() };
     let mut renderer = one_tree(&gpu, &container, settings);
     let (image, stats) = settled(&gpu, &mut renderer, &camera);
-    assert!(stats.instances.get(Technique::Ellipsoids) == 1 && stats.ellipsoids >= 1, "{stats:?}");
+    assert!(stats.instances.get(Technique::Ellipsoids) == 1 && stats.submitted[Primitive::Ellipsoid] >= 1, "{stats:?}");
     let mean = centre_mean(&image, 2);
     eprintln!("reserved ellipsoid flags 0xFF, no ELLIPSOID_AO: centre {mean:.1?}");
     assert!(close(mean, LEAF, 6.0), "lit as without occlusion: {mean:?}");

@@ -9,6 +9,7 @@ use common::{BACKGROUND, bark_triangles, demo_built, gpu, one_tree, precision_re
 use glam::{Vec3, vec3};
 use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig, PruneConfig};
 use treelod_format::Container;
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, render_image};
 use treelod_render::{Camera, DrawSource, ImpostorBark, Pruning, Renderer, Settings, Technique};
 
@@ -44,7 +45,15 @@ fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
     for distance in [3.0f32, 30.0, 300.0, 3000.0] {
         let cam = Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, 0.8, 256, 256);
         let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!((stats.instances.get(Technique::LodChain), stats.points, stats.planes), (1, 0, 0), "{stats:?}");
+        assert_eq!(
+            (
+                stats.instances.get(Technique::LodChain),
+                stats.submitted[Primitive::Point],
+                stats.submitted[Primitive::Plane]
+            ),
+            (1, 0, 0),
+            "{stats:?}"
+        );
         assert_eq!(stats.instances_visible, 1, "{stats:?}");
         let [draw] = renderer.draws() else { panic!("one draw: {:?}", renderer.draws()) };
         assert_eq!(draw.source, DrawSource::LodLevel);
@@ -52,18 +61,22 @@ fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
         let tau = draw.tau_points;
         let expected = levels.iter().filter(|l| l.error <= tau).map(|l| (l.triangles.count, l.error)).next_back();
         match expected {
-            Some((count, error)) => assert_eq!((stats.triangles, draw.tau_triangles), (u64::from(count), error)),
-            None => assert_eq!((stats.triangles, draw.tau_triangles), (total, 0.0), "the full mesh"),
+            Some((count, error)) => {
+                assert_eq!((stats.submitted[Primitive::Triangle], draw.tau_triangles), (u64::from(count), error))
+            }
+            None => {
+                assert_eq!((stats.submitted[Primitive::Triangle], draw.tau_triangles), (total, 0.0), "the full mesh")
+            }
         }
-        assert!(stats.triangles <= previous, "fewer triangles farther away: {counts:?}");
-        previous = stats.triangles;
-        counts.push(stats.triangles);
+        assert!(stats.submitted[Primitive::Triangle] <= previous, "fewer triangles farther away: {counts:?}");
+        previous = stats.submitted[Primitive::Triangle];
+        counts.push(stats.submitted[Primitive::Triangle]);
         if distance < 5.0 {
             // Nearer than the finest level's error allows: the full mesh, pixel for pixel.
             renderer.settings_mut().technique = Technique::Full;
             let (full, _) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
             renderer.settings_mut().technique = Technique::LodChain;
-            assert_eq!(stats.triangles, total);
+            assert_eq!(stats.submitted[Primitive::Triangle], total);
             assert_eq!(precision_recall(&image, &full), (1.0, 1.0));
         }
     }
@@ -87,7 +100,15 @@ fn billboards_cover_the_full_mesh_from_around_the_tree() {
             let (full, _) = render_image(&gpu, &mut full_renderer, &cam, BACKGROUND).expect("renders");
             let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
             let quads = if technique == Technique::Billboard { 1 } else { 3 };
-            assert_eq!((stats.triangles, stats.points, stats.billboards), (0, 0, quads), "{stats:?}");
+            assert_eq!(
+                (
+                    stats.submitted[Primitive::Triangle],
+                    stats.submitted[Primitive::Point],
+                    stats.submitted[Primitive::Billboard]
+                ),
+                (0, 0, quads),
+                "{stats:?}"
+            );
             assert_eq!((stats.instances.get(technique), stats.instances_visible), (1, 1), "{stats:?}");
             assert!(renderer.draws().iter().all(|d| d.source == DrawSource::Billboards));
             let (precision, recall) = precision_recall(&image, &full);
@@ -120,10 +141,14 @@ fn impostor_trees_draw_the_chains_bark_at_the_level_their_distance_allows() {
         let cam = Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, 0.8, 256, 256);
         renderer.settings_mut().impostor_bark = ImpostorBark::All;
         let (all, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!((stats.instances.get(Technique::Impostors), stats.triangles), (1, bark), "{stats:?}");
+        assert_eq!(
+            (stats.instances.get(Technique::Impostors), stats.submitted[Primitive::Triangle]),
+            (1, bark),
+            "{stats:?}"
+        );
         renderer.settings_mut().impostor_bark = ImpostorBark::Chain;
         let (chain, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!((stats.instances.get(Technique::Impostors), stats.points), (1, 0), "{stats:?}");
+        assert_eq!((stats.instances.get(Technique::Impostors), stats.submitted[Primitive::Point]), (1, 0), "{stats:?}");
         let bark_draw = renderer.draws().iter().find(|d| d.source == DrawSource::Bark).expect("a bark draw");
         // The level is the chain's coarsest within τ/2 among those keeping 90 % of the bark's
         // area; nearer, all bark.
@@ -136,23 +161,31 @@ fn impostor_trees_draw_the_chains_bark_at_the_level_their_distance_allows() {
             })
             .count();
         match within.map(|w| w.min(keeping.saturating_sub(1))).filter(|_| keeping > 0) {
-            None => assert_eq!(stats.triangles, bark, "at {distance} m (τ {tau}) no level is fine enough"),
+            None => assert_eq!(
+                stats.submitted[Primitive::Triangle],
+                bark,
+                "at {distance} m (τ {tau}) no level is fine enough"
+            ),
             Some(level) => {
-                assert!(stats.triangles < bark, "at {distance} m: {} of {bark}", stats.triangles);
+                assert!(
+                    stats.submitted[Primitive::Triangle] < bark,
+                    "at {distance} m: {} of {bark}",
+                    stats.submitted[Primitive::Triangle]
+                );
                 assert_eq!(bark_draw.tau_triangles, levels[level].error, "level {level} at {distance} m");
             }
         }
         let (precision, recall) = precision_recall(&chain, &all);
         eprintln!(
             "{distance} m: τ {tau:.4}, bark {} of {bark} triangles, coverage against all bark P {precision:.3} R {recall:.3}",
-            stats.triangles
+            stats.submitted[Primitive::Triangle]
         );
         // Measured on lavapipe: all bark up to 30 m; from 100 m the level keeping 90 % of the
         // bark's area (920 of 3696 triangles), P and R ≥ 0.99 (the coarsest level, 36 triangles,
         // would read R 0.942, 0.952, 0.889 at 100, 200, 300 m: its thin branches collapse at a
         // small error).
         assert!(precision > 0.98 && recall > 0.97, "{distance} m: P {precision:.3} R {recall:.3}");
-        drawn.push(stats.triangles);
+        drawn.push(stats.submitted[Primitive::Triangle]);
     }
     assert!(drawn.windows(2).all(|w| w[1] <= w[0]), "fewer bark triangles farther away: {drawn:?}");
     assert!(drawn[5] * 3 < bark, "far away a fraction of the bark: {drawn:?} of {bark}");
@@ -188,7 +221,7 @@ fn pruned_trees_draw_the_chains_bark_far_away_as_impostor_trees_do() {
             "{distance} m: bark {chain_bark} of {bark} triangles; coverage against all bark P {precision:.3} R {recall:.3}"
         );
         assert!(precision > 0.97 && recall > 0.97, "{distance} m: P {precision:.3} R {recall:.3}");
-        saved.push(every.triangles - stats.triangles);
+        saved.push(every.submitted[Primitive::Triangle] - stats.submitted[Primitive::Triangle]);
     }
     assert_eq!(saved[0], 0, "near, every bark triangle");
     assert!(saved[2] > 0 && saved[2] >= saved[1], "far, fewer: {saved:?} of {bark}");

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use common::{BACKGROUND, count, gpu, keep, light_taken};
 use glam::{Mat4, Vec3, vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, Range};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
 use treelod_render::{Camera, DrawSource, Ground, Renderer, Settings, Shadows, Technique};
 use treelod_runtime::{EllipsoidLod, Frustum, LodSettings};
@@ -188,7 +189,7 @@ fn check_blend(gpu: &Gpu, name: &str, container: &Arc<Container>, source: DrawSo
             "{name} at e·2^{octaves}: w_fine {w:.2}, fine-only shown {fine_only_shown:.3}, coarse-only shown \
              {coarse_only_shown:.3}, both: covered {both_covered:.3}, fine {both_fine:.3}; regions {regions:?}; \
              {} submitted",
-            stats.ellipsoids + stats.lines,
+            stats.submitted[Primitive::Ellipsoid] + stats.submitted[Primitive::Line],
         );
         let tolerance = 0.06;
         assert!((fine_only_shown - w).abs() < tolerance, "{name} {octaves}: fine-only {fine_only_shown:.3}");
@@ -243,7 +244,11 @@ fn the_prefix_holds_the_level_fading_out_and_drops_it_past_the_band() {
     {
         renderer.settings_mut().level_blend = blend;
         let (_, stats) = render_image(&gpu, &mut renderer, &camera_at(octaves), BACKGROUND).expect("renders");
-        assert_eq!((stats.ellipsoids, stats.lines), submitted, "e·2^{octaves}, β {blend}");
+        assert_eq!(
+            (stats.submitted[Primitive::Ellipsoid], stats.submitted[Primitive::Line]),
+            submitted,
+            "e·2^{octaves}, β {blend}"
+        );
     }
 }
 
@@ -333,7 +338,7 @@ fn the_shadow_pass_blends_the_levels_alike() {
         let mut ranges = Vec::new();
         let frustum = Frustum::from_view_proj(light.view_proj);
         assert!(lod.select_per_pixel(lift, &light, &frustum, &LodSettings::default(), 1.0, &mut ranges));
-        (light_taken(&shadowed, &lit), ranges[0].tau, stats.shadow.ellipsoids, shadowed)
+        (light_taken(&shadowed, &lit), ranges[0].tau, stats.shadow.submitted[Primitive::Ellipsoid], shadowed)
     };
     // The shadow's τ does not depend on the levels' intervals: find it, then put the boundary on it.
     let (_, tau, _, _) = shadow(vec![two_levels_of_ellipsoids(1.0)], 0.0);

@@ -10,6 +10,7 @@ use std::sync::Arc;
 use common::{BACKGROUND, count, covered, gpu, iou, keep};
 use glam::{Mat3, Quat, Vec3, Vec4, vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, Range};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
 use treelod_render::{Camera, DrawSource, Ground, Renderer, Settings, Shadows, Technique};
 
@@ -121,7 +122,11 @@ fn an_ellipsoid_covers_the_pixels_of_its_exact_silhouette() {
     for (name, camera) in views {
         let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         keep(&image, &format!("ellipsoid-{name}"));
-        assert_eq!((stats.instances.get(Technique::Ellipsoids), stats.ellipsoids), (1, 1), "{name}: {stats:?}");
+        assert_eq!(
+            (stats.instances.get(Technique::Ellipsoids), stats.submitted[Primitive::Ellipsoid]),
+            (1, 1),
+            "{name}: {stats:?}"
+        );
         let drawn = covered(&image);
         let exact = exact_silhouette(&camera, &e);
         let overlap = iou(&drawn, &exact);
@@ -157,7 +162,7 @@ fn the_written_depth_meets_a_triangle_through_the_centre_where_the_surfaces_cros
         let mut renderer = renderer(&gpu, &container, Settings::default());
         let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         keep(&image, &format!("ellipsoid-depth-{name}"));
-        assert_eq!(stats.triangles, 1, "the bark triangle: {stats:?}");
+        assert_eq!(stats.submitted[Primitive::Triangle], 1, "the bark triangle: {stats:?}");
         results.push((name, dx, classify(&image)));
     }
     for (name, dx, shown) in &results {
@@ -212,7 +217,7 @@ fn near_draws_the_fine_level_far_the_coarse_one_and_quality_refines() {
         &mut renderer,
         (fovy, height),
         DrawSource::Ellipsoids,
-        |s| s.ellipsoids,
+        |s| s.submitted[Primitive::Ellipsoid],
         20,
         "ellipsoid",
     );
@@ -280,7 +285,7 @@ fn an_ellipsoid_casts_the_shadow_of_its_shape_on_the_ground() {
     keep(&lit, "ellipsoid-shadow-lit");
     keep(&shadowed, "ellipsoid-shadow");
     assert_eq!(stats.shadow.cascades, 1);
-    assert!(stats.shadow.ellipsoids > 0, "{:?}", stats.shadow);
+    assert!(stats.shadow.submitted[Primitive::Ellipsoid] > 0, "{:?}", stats.shadow);
     // The exact shadow: ground points whose ray towards the sun meets the ellipsoid, over the
     // pixels that see the ground (not the ellipsoid itself).
     let (mut exact, mut drawn) = (Vec::new(), Vec::new());

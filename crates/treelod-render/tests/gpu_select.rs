@@ -9,6 +9,7 @@ use std::sync::Arc;
 use glam::{Mat4, Quat, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, Instance, ModelId, Renderer, Settings};
 use treelod_runtime::{DrawRange, Kind, ModelLod};
@@ -225,8 +226,8 @@ fn gpu_statistics_arrive_a_frame_or_two_later_and_match_the_cpu() {
     assert_eq!(stats.ranges_dropped, 0);
     if exact {
         assert_eq!(
-            (stats.ranges, stats.triangles, stats.points),
-            (expected.ranges, expected.triangles, expected.points)
+            (stats.ranges, stats.submitted[Primitive::Triangle], stats.submitted[Primitive::Point]),
+            (expected.ranges, expected.submitted[Primitive::Triangle], expected.submitted[Primitive::Point])
         );
     }
 }

@@ -16,6 +16,7 @@ use glam::{Mat4, Vec2, Vec3, vec3};
 use treelod_build::scene::{Image as SourceImage, ImageEncoding, Part, Scene};
 use treelod_build::{BuildConfig, ImpostorConfig, Placed, Texturing, build_block, cards_on_planes, leaf_material};
 use treelod_format::{Compression, Container, ContainerData, image_format};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
 use treelod_render::{Camera, Ground, Instance, Renderer, Settings, Shadows, Technique};
 
@@ -156,7 +157,7 @@ fn indirect_planes_cover_the_direct_ones_in_their_colour_and_show_the_leaf_textu
         keep(&b, &format!("indirect-{v}-indirect"));
         keep(&f, &format!("indirect-{v}-full"));
         assert_eq!((a_stats.instances.get(Technique::Impostors), b_stats.instances.get(Technique::Impostors)), (1, 1));
-        assert_eq!((a_stats.planes, b_stats.planes), (3, 3));
+        assert_eq!((a_stats.submitted[Primitive::Plane], b_stats.submitted[Primitive::Plane]), (3, 3));
         let (precision, recall) = precision_recall(&b, &a);
         let (ca, cb, cf) = (mean_colour(&a), mean_colour(&b), mean_colour(&f));
         let n = covered(&a).iter().filter(|c| **c).count();
@@ -244,7 +245,12 @@ fn indirect_planes_cast_the_shadow_of_the_direct_ones() {
     keep(&lit, "indirect-shadow-lit");
     keep(&a, "indirect-shadow-direct");
     keep(&b, "indirect-shadow-indirect");
-    assert!(a_stats.shadow.planes > 0 && b_stats.shadow.planes > 0, "{:?} {:?}", a_stats.shadow, b_stats.shadow);
+    assert!(
+        a_stats.shadow.submitted[Primitive::Plane] > 0 && b_stats.shadow.submitted[Primitive::Plane] > 0,
+        "{:?} {:?}",
+        a_stats.shadow,
+        b_stats.shadow
+    );
     let (ma, mb) = (shadow_mask(&a, &lit), shadow_mask(&b, &lit));
     let (na, nb) = (ma.iter().filter(|m| **m).count(), mb.iter().filter(|m| **m).count());
     let (precision, recall) = mask_precision_recall(&mb, &ma);

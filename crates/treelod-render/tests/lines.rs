@@ -16,6 +16,7 @@ use std::sync::Arc;
 use common::{BACKGROUND, count, covered, gpu, iou, keep, line_record as line};
 use glam::{DVec3, Mat4, Vec3, Vec4, vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, Range};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image, render_prepared_scene};
 use treelod_render::{Camera, DrawSource, Ground, Instance, Renderer, Settings, Shadows, Technique};
 
@@ -215,7 +216,11 @@ fn lines_cover_the_pixels_of_their_exact_round_cones() {
         let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         keep(&image, &format!("line-{name}"));
         assert_eq!(
-            (stats.instances.get(Technique::Ellipsoids), stats.lines, stats.triangles),
+            (
+                stats.instances.get(Technique::Ellipsoids),
+                stats.submitted[Primitive::Line],
+                stats.submitted[Primitive::Triangle]
+            ),
             (1, 3, 0),
             "{name}: {stats:?}"
         );
@@ -241,7 +246,7 @@ fn a_line_crossing_a_triangle_is_hidden_where_it_lies_behind_it() {
     let camera = Camera::look_at(vec3(6.0, 2.0, 7.0), Vec3::ZERO, 0.5, 256, 256);
     let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
     keep(&image, "line-depth");
-    assert_eq!((stats.lines, stats.triangles), (1, 1), "{stats:?}");
+    assert_eq!((stats.submitted[Primitive::Line], stats.submitted[Primitive::Triangle]), (1, 1), "{stats:?}");
     let cone = Cone::new(&l);
     let (mut inside, mut wrong, mut shown) = (0, 0, 0);
     for y in 0..camera.height {
@@ -278,7 +283,15 @@ fn near_draws_the_fine_lines_far_the_coarse_one_and_quality_refines() {
     ];
     let container = container(lines, Vec::new(), None);
     let mut renderer = renderer(&gpu, &[&container], Settings::default());
-    common::check_level_switch(&gpu, &mut renderer, (fovy, height), DrawSource::Lines, |s| s.lines, 50, "line");
+    common::check_level_switch(
+        &gpu,
+        &mut renderer,
+        (fovy, height),
+        DrawSource::Lines,
+        |s| s.submitted[Primitive::Line],
+        50,
+        "line",
+    );
 }
 
 #[test]
@@ -375,7 +388,7 @@ fn line_ao_darkens_ambient_light_and_reserved_flags_are_not_read() {
         let mut renderer = renderer(&gpu, &[&container], Settings { ambient_occlusion: occlusion, ..ambient });
         let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         keep(&image, &format!("line-{name}"));
-        assert_eq!(stats.lines, 2);
+        assert_eq!(stats.submitted[Primitive::Line], 2);
         let (open, occluded) = (brightness(&image, 0.8), brightness(&image, -0.8));
         eprintln!("{name}: the open line {open:.1?}, the occluded one {occluded:.1?}");
         results.push((name, open, occluded));
@@ -415,7 +428,7 @@ fn a_line_casts_the_shadow_of_its_round_cone_on_the_ground() {
     keep(&lit, "line-shadow-lit");
     keep(&shadowed, "line-shadow");
     assert_eq!(stats.shadow.cascades, 1);
-    assert_eq!(stats.shadow.lines, 1, "{:?}", stats.shadow);
+    assert_eq!(stats.shadow.submitted[Primitive::Line], 1, "{:?}", stats.shadow);
     // The exact shadow: ground points whose ray towards the sun meets the line, over the pixels
     // that see the ground (not the line itself).
     let cone = Cone::new(&l);
@@ -458,10 +471,18 @@ fn without_lines_the_bark_is_drawn_as_its_triangles() {
         assert_eq!(stats.instances.get(Technique::Ellipsoids), 1);
         let bark = renderer.draws().iter().filter(|d| d.source == DrawSource::Bark).count();
         if lines {
-            assert_eq!((stats.lines, stats.triangles, bark), (1, 0, 0), "the line, not the bark triangles");
+            assert_eq!(
+                (stats.submitted[Primitive::Line], stats.submitted[Primitive::Triangle], bark),
+                (1, 0, 0),
+                "the line, not the bark triangles"
+            );
             assert!(reds == 0 && greens.abs_diff(count(&exact)) < count(&exact) / 20, "{greens} of {}", count(&exact));
         } else {
-            assert_eq!((stats.lines, stats.triangles, bark), (0, 1, 1), "the bark triangles, not the line");
+            assert_eq!(
+                (stats.submitted[Primitive::Line], stats.submitted[Primitive::Triangle], bark),
+                (0, 1, 1),
+                "the bark triangles, not the line"
+            );
             assert!(greens == 0 && reds > 1000, "{reds} red");
         }
     }

@@ -79,6 +79,12 @@ fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
     assert_eq!(stats.instances_visible, 8, "{stats:?}");
     assert_eq!(stats.instances, expected, "each tree by the policy's choice at its height");
     assert!(common::covered(&image).iter().any(|&c| c), "something is drawn");
+    // Every primitive is counted under the technique its tree is drawn with, and each chosen
+    // technique submitted some.
+    assert_eq!(stats.by_technique.total(), stats.primitives(), "{stats:?}");
+    for (technique, n) in stats.by_technique.iter() {
+        assert_eq!(n > 0, expected[technique] > 0, "{technique}: {n} primitives, {} trees", expected[technique]);
+    }
 
     // Coloured by technique: each chosen technique's colour is on screen.
     let debug = Settings { debug: DebugView::Techniques, ..Settings::default() };

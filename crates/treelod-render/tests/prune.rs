@@ -14,6 +14,7 @@ use common::{BACKGROUND, gpu, one_tree, precision_recall};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
 use treelod_format::{Compression, Container, CurveSample, PruneLeafRecord, Range, material_class};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, render_image};
 use treelod_render::{Camera, DrawSource, Instance, Pruning, Renderer, Settings, Technique};
 
@@ -92,7 +93,11 @@ fn all_leaves_unscaled_draw_the_full_mesh_and_a_prefix_draws_fewer() {
     renderer.settings_mut().technique = Technique::PruneOpt;
     renderer.settings_mut().pruning = pruning(1.0);
     let (all, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-    assert_eq!((stats.triangles, stats.points), (total, 0), "λ = 1 draws every triangle and no point");
+    assert_eq!(
+        (stats.submitted[Primitive::Triangle], stats.submitted[Primitive::Point]),
+        (total, 0),
+        "λ = 1 draws every triangle and no point"
+    );
     assert_eq!(
         (stats.instances.get(Technique::PruneOpt), stats.instances_visible, stats.leaves_pruned),
         (1, 1, leaves)
@@ -128,7 +133,7 @@ fn all_leaves_unscaled_draw_the_full_mesh_and_a_prefix_draws_fewer() {
         let expected: u64 = container.cells().iter().map(|c| u64::from(c.prune_leaves.count.div_ceil(4))).sum();
         assert_eq!(stats.instances.get(technique), 1, "{name}: {stats:?}");
         assert_eq!(stats.leaves_pruned, expected);
-        assert_eq!(stats.triangles, bark + expected, "{name}");
+        assert_eq!(stats.submitted[Primitive::Triangle], bark + expected, "{name}");
         for draw in renderer.draws().iter().filter(|d| d.source == DrawSource::PrunedLeaves) {
             assert_eq!(draw.count, container.cells()[draw.cell as usize].prune_leaves.count.div_ceil(4));
         }
@@ -169,7 +174,9 @@ fn lambda_follows_the_projected_height_and_far_trees_take_the_point_tree() {
     let (_, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
     assert_eq!((stats.instances.get(Technique::PruneOpt), stats.instances_visible), (0, 1));
     assert_eq!(stats.instances.get(Technique::FALLBACK), 1, "counted under the point tree: {stats:?}");
-    assert!(stats.points > 0 && renderer.draws().iter().all(|d| d.source != DrawSource::PrunedLeaves));
+    assert!(
+        stats.submitted[Primitive::Point] > 0 && renderer.draws().iter().all(|d| d.source != DrawSource::PrunedLeaves)
+    );
 }
 
 #[test]

@@ -8,6 +8,7 @@ use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
 use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::{Compression, Container};
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, DebugView, DrawSource, Instance, RecordedDraw, Renderer, Settings, Technique};
 use treelod_runtime::{Kind, Thresholds, point_drawn};
@@ -39,8 +40,8 @@ fn lod_covers_the_pixels_of_the_full_mesh_at_every_distance() {
         let cam = camera(&container, distance, 256);
         renderer.settings_mut().technique = Technique::Full;
         let (full, full_stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-        assert_eq!(full_stats.triangles, total, "the full mesh draws every triangle");
-        assert_eq!(full_stats.points, 0);
+        assert_eq!(full_stats.submitted[Primitive::Triangle], total, "the full mesh draws every triangle");
+        assert_eq!(full_stats.submitted[Primitive::Point], 0);
         assert_eq!(full_stats.instances.get(Technique::Full), 1, "{full_stats:?}");
         renderer.settings_mut().technique = Technique::Spt;
         let (lod, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
@@ -49,11 +50,12 @@ fn lod_covers_the_pixels_of_the_full_mesh_at_every_distance() {
         let (precision, recall) = precision_recall(&lod, &full);
         eprintln!(
             "distance {distance} m: {} triangles + {} points of {total} triangles; precision {precision:.3}, recall {recall:.3}",
-            stats.triangles, stats.points
+            stats.submitted[Primitive::Triangle],
+            stats.submitted[Primitive::Point]
         );
         assert!(covered(&full).iter().any(|c| *c), "the tree is in view at {distance} m");
         rows.push((distance, precision, recall));
-        drawn.push(stats.triangles + stats.points);
+        drawn.push(stats.submitted[Primitive::Triangle] + stats.submitted[Primitive::Point]);
     }
     // Close up the LoD is the mesh. Farther away splats stand for leaves with the area they cover
     // on screen on average (half a flat leaf's, and overlapping leaves once). Measured on lavapipe:
@@ -84,7 +86,7 @@ fn an_instance_behind_the_camera_draws_nothing_and_debug_views_colour_by_kind() 
     renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
     renderer.settings_mut().debug = DebugView::Kinds;
     let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
-    assert!(stats.triangles > 0 && stats.points > 0, "{stats:?}");
+    assert!(stats.submitted[Primitive::Triangle] > 0 && stats.submitted[Primitive::Point] > 0, "{stats:?}");
     let red = image.rgba.chunks_exact(4).filter(|p| p[0] > 200 && p[2] < 150).count();
     let blue = image.rgba.chunks_exact(4).filter(|p| p[2] > 200 && p[0] < 150).count();
     assert!(red > 0 && blue > 0, "both kinds visible: {red} red, {blue} blue pixels");
@@ -213,7 +215,11 @@ fn with_unlimited_budgets_the_draws_are_the_cpu_selection() {
         })
         .sum();
     assert_eq!(renderer.points_in_cut(), in_cut);
-    assert!(in_cut > 0 && in_cut < stats.points, "{in_cut} of {} submitted points are in the cut", stats.points);
+    assert!(
+        in_cut > 0 && in_cut < stats.submitted[Primitive::Point],
+        "{in_cut} of {} submitted points are in the cut",
+        stats.submitted[Primitive::Point]
+    );
 }
 
 #[test]
@@ -243,7 +249,10 @@ fn streaming_with_a_tiny_budget_shows_coarser_data_never_holes_and_converges() {
         worst_recall = worst_recall.min(recall);
         keep(&image, &format!("streaming-{frames}"));
         if stats.ranges_clamped == 0 {
-            assert_eq!((stats.triangles, stats.points), (full_stats.triangles, full_stats.points));
+            assert_eq!(
+                (stats.submitted[Primitive::Triangle], stats.submitted[Primitive::Point]),
+                (full_stats.submitted[Primitive::Triangle], full_stats.submitted[Primitive::Point])
+            );
             assert_eq!(image.rgba, full.rgba, "converged to the full selection's image");
             break;
         }
@@ -289,7 +298,7 @@ fn a_small_memory_budget_is_never_exceeded_and_evicts_what_is_no_longer_needed()
             let stats = renderer.prepare(&gpu.device, &gpu.queue, &cam);
             assert!(stats.bytes_resident <= static_bytes + budget, "frame {frame}: {stats:?}");
             uploaded.push(stats.bytes_uploaded);
-            assert!(stats.triangles + stats.points > 0);
+            assert!(stats.submitted[Primitive::Triangle] + stats.submitted[Primitive::Point] > 0);
             check_draws(&renderer, &container);
         }
         // Each tree is uploaded when it comes into view (evicting the other), then stays.
@@ -461,11 +470,15 @@ fn impostor_planes_cover_the_full_mesh_from_every_direction() {
             let (planes, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
             keep(&planes, &format!("impostors-{distance}-{d}"));
             assert_eq!(
-                (stats.triangles, stats.points, stats.instances.get(Technique::Impostors)),
+                (
+                    stats.submitted[Primitive::Triangle],
+                    stats.submitted[Primitive::Point],
+                    stats.instances.get(Technique::Impostors)
+                ),
                 (bark, 0, 1),
                 "{stats:?}"
             );
-            assert!(stats.planes > 0);
+            assert!(stats.submitted[Primitive::Plane] > 0);
             assert!(renderer.draws().iter().all(|d| matches!(d.source, DrawSource::Planes | DrawSource::Bark)));
             let (precision, recall) = precision_recall(&planes, &full);
             eprintln!("impostors at {distance} m, direction {d}: precision {precision:.3}, recall {recall:.3}");

@@ -10,6 +10,7 @@ use common::{BACKGROUND, demo_built, gpu, light_taken, mask_precision_recall, sh
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig, PruneConfig};
 use treelod_format::Container;
+use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_prepared_scene};
 use treelod_render::{Camera, FrameStats, Ground, Instance, Pruning, Renderer, Settings, Shadows, Technique};
 
@@ -113,9 +114,15 @@ fn every_representation_casts_the_shadow_of_the_full_mesh() {
         );
         assert_eq!(stats.shadow.cascades, 1);
         match name {
-            "points" => assert!(stats.shadow.points > 0 && stats.shadow.triangles < full_stats.shadow.triangles / 10),
-            "pruned" => assert!(stats.shadow.triangles < full_stats.shadow.triangles),
-            "impostors" => assert!(stats.shadow.planes > 0),
+            "points" => assert!(
+                stats.shadow.submitted[Primitive::Point] > 0
+                    && stats.shadow.submitted[Primitive::Triangle]
+                        < full_stats.shadow.submitted[Primitive::Triangle] / 10
+            ),
+            "pruned" => {
+                assert!(stats.shadow.submitted[Primitive::Triangle] < full_stats.shadow.submitted[Primitive::Triangle])
+            }
+            "impostors" => assert!(stats.shadow.submitted[Primitive::Plane] > 0),
             "lod-chain" | "crossed" | "facing" => continue,
             _ => unreachable!(),
         }

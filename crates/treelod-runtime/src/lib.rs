@@ -50,4 +50,4 @@ pub use policy::{Calibration, Choices, Policy, PolicyState, choose_instances, pr
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
 pub use spt_lod::{PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};
-pub use technique::{Data, PerTechnique, Technique};
+pub use technique::{Data, PerPrimitive, PerTechnique, Primitive, Technique};

@@ -103,6 +103,40 @@ impl Technique {
         }
     }
 
+    /// What it is and where it comes from, for reports (eval's JSON summary).
+    #[must_use]
+    pub const fn description(self) -> &'static str {
+        match self {
+            Self::Full => "every triangle of the source mesh, no level of detail",
+            Self::Spt => "triangles and points (Gilet 2005, sequential point trees): what every container holds",
+            Self::PruneOpt => "pruning with s_opt (Neubert 2011)",
+            Self::PruneCook => "pruning with s_Cook = 1/lambda (stochastic baseline)",
+            Self::Impostors => "leaf-cluster impostor planes (Garcia 2005)",
+            Self::Ellipsoids => "clustered ellipsoids and lines (Clasen 2011)",
+            Self::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
+            Self::Billboard => "baseline: one camera-facing billboard per tree",
+            Self::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
+        }
+    }
+
+    /// The colour, linear RGB, debug views draw its trees with (the renderer's
+    /// `DebugView::Techniques`): full grey, spt blue, prune-opt green, prune-cook dark green,
+    /// impostors yellow, ellipsoids cyan, lod-chain red, billboard magenta, crossed violet.
+    #[must_use]
+    pub const fn colour(self) -> [f32; 3] {
+        match self {
+            Self::Full => [0.6, 0.6, 0.6],
+            Self::Spt => [0.2, 0.5, 0.95],
+            Self::PruneOpt => [0.3, 0.8, 0.3],
+            Self::PruneCook => [0.1, 0.5, 0.2],
+            Self::Impostors => [0.95, 0.75, 0.15],
+            Self::Ellipsoids => [0.2, 0.8, 0.8],
+            Self::LodChain => [0.9, 0.3, 0.2],
+            Self::Billboard => [0.85, 0.35, 0.85],
+            Self::Crossed => [0.5, 0.3, 0.9],
+        }
+    }
+
     /// The technique named `name` ([`Self::name`]).
     #[must_use]
     pub fn from_name(name: &str) -> Option<Self> {
@@ -183,10 +217,125 @@ impl Data {
     }
 }
 
-/// A value per technique (a count, or a list such as an [`Assignment`](crate::Assignment)),
-/// indexed by [`Technique::index`] or by the technique itself.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct PerTechnique<T>(pub [T; Technique::COUNT]);
+/// A kind of primitive a technique submits: what the frame statistics, the calibration tables
+/// and the reports count, each one primitive (a splat, a plane, a quad, an ellipsoid's and a
+/// line's bounding quad are each one).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Primitive {
+    /// Triangles: bark, leaves, pruned leaves, LoD chain levels.
+    Triangle,
+    /// Points of the sequential point tree, drawn as splats.
+    Point,
+    /// Impostor planes.
+    Plane,
+    /// Baseline billboard quads (facing or crossed).
+    Billboard,
+    /// Clasen's leaf ellipsoids.
+    Ellipsoid,
+    /// Clasen's branch lines.
+    Line,
+}
+
+impl Primitive {
+    /// Every kind, in the order tables list them.
+    pub const ALL: [Self; 6] = [Self::Triangle, Self::Point, Self::Plane, Self::Billboard, Self::Ellipsoid, Self::Line];
+
+    /// How many kinds there are: the length of per-kind arrays.
+    pub const COUNT: usize = Self::ALL.len();
+
+    /// The kind's index in [`Self::ALL`] (and in per-kind arrays).
+    #[must_use]
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The kind's plural name, as tables print it.
+    #[must_use]
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Triangle => "triangles",
+            Self::Point => "points",
+            Self::Plane => "planes",
+            Self::Billboard => "billboards",
+            Self::Ellipsoid => "ellipsoids",
+            Self::Line => "lines",
+        }
+    }
+}
+
+/// Defines an array with one value per member of a list (`$key`, with `ALL`, `COUNT` and
+/// `index`), indexed by the member.
+macro_rules! per_key {
+    ($(#[$doc:meta])* $name:ident, $key:ident, $what:literal) => {
+        $(#[$doc])*
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+        pub struct $name<T>(pub [T; $key::COUNT]);
+
+        impl<T: Copy> $name<T> {
+            #[doc = concat!("The value of `", $what, "`.")]
+            #[must_use]
+            pub fn get(&self, key: $key) -> T {
+                self.0[key.index()]
+            }
+
+            #[doc = concat!("The value of `", $what, "`, to change.")]
+            pub fn get_mut(&mut self, key: $key) -> &mut T {
+                &mut self.0[key.index()]
+            }
+
+            #[doc = concat!("Each ", $what, " with its value.")]
+            pub fn iter(&self) -> impl Iterator<Item = ($key, T)> + '_ {
+                $key::ALL.into_iter().zip(self.0.iter().copied())
+            }
+        }
+
+        impl<T> std::ops::Index<$key> for $name<T> {
+            type Output = T;
+
+            fn index(&self, key: $key) -> &T {
+                &self.0[key.index()]
+            }
+        }
+
+        impl<T> std::ops::IndexMut<$key> for $name<T> {
+            fn index_mut(&mut self, key: $key) -> &mut T {
+                &mut self.0[key.index()]
+            }
+        }
+
+        impl<T: Copy + std::ops::AddAssign> std::ops::AddAssign for $name<T> {
+            fn add_assign(&mut self, other: Self) {
+                for (a, b) in self.0.iter_mut().zip(other.0) {
+                    *a += b;
+                }
+            }
+        }
+
+        impl<T: Copy + std::iter::Sum<T>> $name<T> {
+            #[doc = concat!("The sum over every ", $what, ".")]
+            #[must_use]
+            pub fn total(&self) -> T {
+                self.0.iter().copied().sum()
+            }
+        }
+    };
+}
+
+per_key!(
+    /// A value per technique (a count, or a list such as an [`Assignment`](crate::Assignment)),
+    /// indexed by [`Technique::index`] or by the technique itself.
+    PerTechnique,
+    Technique,
+    "technique"
+);
+
+per_key!(
+    /// A value per kind of primitive (a count), indexed by [`Primitive::index`] or by the kind
+    /// itself.
+    PerPrimitive,
+    Primitive,
+    "kind"
+);
 
 impl PerTechnique<usize> {
     /// How many of `containers` hold each technique's data ([`Technique::held_by`]).
@@ -199,54 +348,6 @@ impl PerTechnique<usize> {
             }
         }
         held
-    }
-}
-
-impl<T: Copy> PerTechnique<T> {
-    /// The value of `technique`.
-    #[must_use]
-    pub fn get(&self, technique: Technique) -> T {
-        self.0[technique.index()]
-    }
-
-    /// The value of `technique`, to change.
-    pub fn get_mut(&mut self, technique: Technique) -> &mut T {
-        &mut self.0[technique.index()]
-    }
-
-    /// Each technique with its value.
-    pub fn iter(&self) -> impl Iterator<Item = (Technique, T)> + '_ {
-        Technique::ALL.into_iter().zip(self.0.iter().copied())
-    }
-}
-
-impl<T> std::ops::Index<Technique> for PerTechnique<T> {
-    type Output = T;
-
-    fn index(&self, technique: Technique) -> &T {
-        &self.0[technique.index()]
-    }
-}
-
-impl<T> std::ops::IndexMut<Technique> for PerTechnique<T> {
-    fn index_mut(&mut self, technique: Technique) -> &mut T {
-        &mut self.0[technique.index()]
-    }
-}
-
-impl<T: Copy + std::ops::AddAssign> std::ops::AddAssign for PerTechnique<T> {
-    fn add_assign(&mut self, other: Self) {
-        for (a, b) in self.0.iter_mut().zip(other.0) {
-            *a += b;
-        }
-    }
-}
-
-impl<T: Copy + std::iter::Sum<T>> PerTechnique<T> {
-    /// The sum over every technique.
-    #[must_use]
-    pub fn total(&self) -> T {
-        self.0.iter().copied().sum()
     }
 }
 

@@ -1,5 +1,6 @@
-//! The WGSL twins in `shaders/shared/records.wgsl` have the sizes and field offsets of the Rust
-//! records (and so of the spec's byte tables): a drift here would make the GPU read garbage.
+//! The WGSL twins of the records (`shaders/shared/records.wgsl`, and a representation's own at the
+//! top of its file in `shaders/tree/`) have the sizes and field offsets of the Rust records (and so
+//! of the spec's byte tables): a drift here would make the GPU read garbage.
 
 use std::mem::offset_of;
 
@@ -7,7 +8,26 @@ use treelod_format::{
     EllipsoidRecord, LineRecord, PlaneRecord, PointRecord, PruneLeafRecord, TriangleRecord, VertexRecord,
 };
 
-const SHADER: &str = include_str!("../../../shaders/shared/records.wgsl");
+/// The tree shaders' modules as the renderer composes them (`treelod_render`'s `tree_wgsl!`):
+/// the shared files, the common part, then the representation's files.
+fn modules() -> Vec<(&'static str, String)> {
+    let shared = concat!(
+        include_str!("../../../shaders/shared/records.wgsl"),
+        include_str!("../../../shaders/shared/draw.wgsl"),
+        include_str!("../../../shaders/shared/shadow.wgsl"),
+        include_str!("../../../shaders/tree/common.wgsl"),
+    );
+    [
+        ("triangles.wgsl", include_str!("../../../shaders/tree/triangles.wgsl")),
+        ("points.wgsl", include_str!("../../../shaders/tree/points.wgsl")),
+        ("planes.wgsl", include_str!("../../../shaders/tree/planes.wgsl")),
+        ("ellipsoids.wgsl", include_str!("../../../shaders/tree/ellipsoids.wgsl")),
+        ("lines.wgsl", include_str!("../../../shaders/tree/lines.wgsl")),
+    ]
+    .into_iter()
+    .map(|(name, file)| (name, format!("{shared}{file}")))
+    .collect()
+}
 
 /// (struct name, Rust size, Rust field offsets in declaration order).
 fn rust_layouts() -> Vec<(&'static str, usize, Vec<usize>)> {
@@ -112,24 +132,33 @@ fn rust_layouts() -> Vec<(&'static str, usize, Vec<usize>)> {
 
 #[test]
 fn wgsl_records_match_the_rust_records() {
-    let module = naga::front::wgsl::parse_str(SHADER).expect("records.wgsl parses");
-    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-        .validate(&module)
-        .expect("records.wgsl validates");
-    let mut layouter = naga::proc::Layouter::default();
-    layouter.update(module.to_ctx()).expect("layouts compute");
+    let parsed: Vec<(&str, naga::Module, naga::proc::Layouter)> = modules()
+        .into_iter()
+        .map(|(name, source)| {
+            let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name} parses: {e}"));
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+                .validate(&module)
+                .unwrap_or_else(|e| panic!("{name} validates: {e:?}"));
+            let mut layouter = naga::proc::Layouter::default();
+            layouter.update(module.to_ctx()).expect("layouts compute");
+            (name, module, layouter)
+        })
+        .collect();
     for (name, size, offsets) in rust_layouts() {
-        let (handle, ty) = module
-            .types
-            .iter()
-            .find(|(_, ty)| ty.name.as_deref() == Some(name))
-            .unwrap_or_else(|| panic!("{name} is missing from records.wgsl"));
-        let naga::TypeInner::Struct { members, span } = &ty.inner else {
-            panic!("{name} is not a struct");
-        };
-        assert_eq!(*span as usize, size, "{name}: WGSL size {span}, Rust {size}");
-        assert_eq!(layouter[handle].alignment, naga::proc::Alignment::FOUR, "{name}: stride must equal size");
-        let wgsl: Vec<usize> = members.iter().map(|m| m.offset as usize).collect();
-        assert_eq!(wgsl, offsets, "{name}: field offsets differ");
+        let mut found = 0;
+        for (file, module, layouter) in &parsed {
+            let Some((handle, ty)) = module.types.iter().find(|(_, ty)| ty.name.as_deref() == Some(name)) else {
+                continue;
+            };
+            found += 1;
+            let naga::TypeInner::Struct { members, span } = &ty.inner else {
+                panic!("{name} is not a struct in {file}");
+            };
+            assert_eq!(*span as usize, size, "{name} ({file}): WGSL size {span}, Rust {size}");
+            assert_eq!(layouter[handle].alignment, naga::proc::Alignment::FOUR, "{name}: stride must equal size");
+            let wgsl: Vec<usize> = members.iter().map(|m| m.offset as usize).collect();
+            assert_eq!(wgsl, offsets, "{name} ({file}): field offsets differ");
+        }
+        assert!(found > 0, "{name} is twinned in no tree shader");
     }
 }

@@ -6,7 +6,9 @@ use std::path::PathBuf;
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{Gpu, Image, render_prepared_scene};
-use treelod_render::{DebugView, FrameStats, Ground, ImpostorBark, Pruning, Renderer, Settings, Shadows, Technique};
+use treelod_render::{
+    DebugView, FrameStats, Ground, ImpostorBark, Primitive, Pruning, Renderer, Settings, Shadows, Technique,
+};
 
 use crate::report::{self, Failed};
 use crate::scene;
@@ -146,6 +148,18 @@ impl TechniqueArgs {
 
 /// The trees drawn with each technique, for summaries: `3 spt, 12 crossed`.
 #[must_use]
+/// What a frame submitted, by kind (those it submitted any of: "1200 triangles, 40 planes"), and
+/// the leaves pruned trees drew.
+pub fn submitted(stats: &FrameStats) -> String {
+    let mut parts: Vec<String> =
+        stats.submitted.iter().filter(|&(_, n)| n > 0).map(|(kind, n)| format!("{n} {}", kind.name())).collect();
+    if stats.leaves_pruned > 0 {
+        parts.push(format!("{} pruned leaves", stats.leaves_pruned));
+    }
+    if parts.is_empty() { "nothing".to_owned() } else { parts.join(", ") }
+}
+
+/// Trees per technique, for a summary line ("3 spt, 5 impostors").
 pub fn technique_counts(instances: &treelod_render::PerTechnique<u32>) -> String {
     let parts: Vec<String> = instances.iter().filter(|&(_, n)| n > 0).map(|(t, n)| format!("{n} {t}")).collect();
     if parts.is_empty() { "none".to_owned() } else { parts.join(", ") }
@@ -515,31 +529,16 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         args.output.display(),
         stats.instances_visible,
         scene.instances.len(),
-        stats.triangles,
-        stats.points
+        stats.submitted[Primitive::Triangle],
+        stats.submitted[Primitive::Point]
     );
     let technique = renderer.settings().technique;
     let drawn = stats.instances.get(technique);
     if renderer.settings().policy.is_some() {
         line.push_str(&format!(", policy: {}", technique_counts(&stats.instances)));
     }
-    match technique {
-        _ if renderer.settings().policy.is_some() => {}
-        Technique::Full | Technique::Spt => {}
-        Technique::PruneOpt | Technique::PruneCook => {
-            line.push_str(&format!(", {drawn} pruned tree(s) drawing {} leaves", stats.leaves_pruned));
-        }
-        Technique::Impostors => {
-            line.push_str(&format!(", {drawn} tree(s) with impostors submitting {} planes", stats.planes));
-        }
-        Technique::Ellipsoids => line.push_str(&format!(
-            ", {drawn} tree(s) with ellipsoids submitting {} ellipsoids and {} lines",
-            stats.ellipsoids, stats.lines
-        )),
-        Technique::LodChain | Technique::Billboard | Technique::Crossed => line.push_str(&format!(
-            ", {drawn} tree(s) drawn with the {technique} baseline ({} billboard quads)",
-            stats.billboards
-        )),
+    if renderer.settings().policy.is_none() && !matches!(technique, Technique::Full | Technique::Spt) {
+        line.push_str(&format!(", {drawn} tree(s) drawn with {technique} submitting {}", submitted(&stats)));
     }
     if renderer.settings().shadows.is_some() {
         line.push_str("; ");
@@ -549,10 +548,10 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         renderer.settings_mut().technique = Technique::Full;
         renderer.settings_mut().policy = None;
         let (full, full_stats) = render(&mut renderer)?;
-        let ratio = stats.primitives() as f64 / full_stats.triangles.max(1) as f64;
+        let ratio = stats.primitives() as f64 / full_stats.submitted[Primitive::Triangle].max(1) as f64;
         line.push_str(&format!(
             "; full mesh {} triangles; LoD/full {ratio:.3} (left LoD, right full mesh)",
-            full_stats.triangles
+            full_stats.submitted[Primitive::Triangle]
         ));
         side_by_side(&lod, &full)
     } else {
@@ -584,12 +583,12 @@ pub fn shadow_summary(stats: &FrameStats) -> String {
         "shadow pass: {} cascade(s), {} triangles, {} points, {} planes, {} billboards, {} ellipsoids, {} lines \
          {ratio}",
         shadow.cascades,
-        shadow.triangles,
-        shadow.points,
-        shadow.planes,
-        shadow.billboards,
-        shadow.ellipsoids,
-        shadow.lines
+        shadow.submitted[Primitive::Triangle],
+        shadow.submitted[Primitive::Point],
+        shadow.submitted[Primitive::Plane],
+        shadow.submitted[Primitive::Billboard],
+        shadow.submitted[Primitive::Ellipsoid],
+        shadow.submitted[Primitive::Line]
     )
 }
 
@@ -688,15 +687,12 @@ mod tests {
     #[test]
     fn the_shadow_summary_compares_the_shadow_pass_with_the_main_pass() {
         // Lines count as primitives on both sides.
+        // Triangles, points, planes, billboards, ellipsoids, lines.
         let mut stats =
-            FrameStats { triangles: 100, points: 200, planes: 50, billboards: 50, lines: 100, ..FrameStats::default() };
+            FrameStats { submitted: treelod_render::PerPrimitive([100, 200, 50, 50, 0, 100]), ..FrameStats::default() };
         stats.shadow = treelod_render::ShadowStats {
             cascades: 3,
-            triangles: 300,
-            points: 400,
-            planes: 100,
-            billboards: 0,
-            lines: 100,
+            submitted: treelod_render::PerPrimitive([300, 400, 100, 0, 0, 100]),
             ..treelod_render::ShadowStats::default()
         };
         assert_eq!(

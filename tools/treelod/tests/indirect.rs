@@ -53,7 +53,7 @@ fn an_oak_of_leaf_cards_builds_indirect_planes_that_verify_dump_and_render() {
         &run_on(&["render", "--technique", "impostors", "--size", "160x160", "-o"], &[&planes_png, &out_path]),
         "render --technique impostors",
     );
-    assert!(stdout.contains("1 tree(s) with impostors submitting"), "{stdout}");
+    assert!(stdout.contains("1 tree(s) drawn with impostors submitting"), "{stdout}");
     succeeded(&run_on(&["render", "--size", "160x160", "-o"], &[&points_png, &out_path]), "render");
     let ((planes, planes_green), (points, points_green)) = (drawn(&planes_png), drawn(&points_png));
     eprintln!("covered pixels: planes {planes} ({planes_green} green), points {points} ({points_green} green)");

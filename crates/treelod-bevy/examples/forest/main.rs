@@ -33,7 +33,7 @@ use bevy_render::view::screenshot::{Screenshot, ScreenshotCaptured};
 use bevy_time::Time;
 use bevy_transform::components::Transform;
 use bevy_window::Window;
-use treelod_bevy::treelod_render::{DebugView, Policy, Shadows, Technique};
+use treelod_bevy::treelod_render::{DebugView, Policy, Primitive, Shadows, Technique};
 use treelod_bevy::{TreelodContainer, TreelodSettings, TreelodStats};
 
 use scene::Output;
@@ -236,7 +236,9 @@ fn title(stats: Res<TreelodStats>, cameras: Query<Entity, With<Fly>>, mut window
     if let Some(frame) = stats.get(camera) {
         let title = format!(
             "treelod in Bevy: {} trees in view, {} triangles, {} points",
-            frame.instances_visible, frame.triangles, frame.points
+            frame.instances_visible,
+            frame.submitted[Primitive::Triangle],
+            frame.submitted[Primitive::Point]
         );
         // Only on a change: a changed `Window` is sent to the windowing system.
         if window.title != title {

@@ -27,7 +27,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, render_image_timed, render_prepared_timed};
-use treelod_render::{Camera, Instance, ModelId, PerTechnique, Policy, Pruning, Renderer, Settings, Technique};
+use treelod_render::{
+    Camera, Instance, ModelId, PerTechnique, Policy, Primitive, Pruning, Renderer, Settings, Technique,
+};
 
 use self::forest::{Forest, Shape};
 use self::path::Frame;
@@ -617,11 +619,11 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 frame: index,
                 technique,
                 instances_visible: stats.instances_visible,
-                triangles: stats.triangles,
-                points: stats.points,
+                triangles: stats.submitted[Primitive::Triangle],
+                points: stats.submitted[Primitive::Point],
                 quads: crate::eval::quads(&stats),
-                ellipsoids: stats.ellipsoids,
-                lines: stats.lines,
+                ellipsoids: stats.submitted[Primitive::Ellipsoid],
+                lines: stats.submitted[Primitive::Line],
                 // Counted on the CPU after the timed selection.
                 points_in_cut: (!stats.gpu_selection).then(|| f.renderer.points_in_cut()),
                 instances_pruned: Some(

@@ -18,7 +18,9 @@ use std::time::Instant;
 use glam::Vec3;
 use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, render_prepared_timed};
-use treelod_render::{Camera, FrameStats, ImpostorBark, PerTechnique, Policy, Pruning, Renderer, Settings, Technique};
+use treelod_render::{
+    Camera, FrameStats, ImpostorBark, PerTechnique, Policy, Primitive, Pruning, Renderer, Settings, Technique,
+};
 
 use self::metrics::{Coverage, LinearImage, Mask, MultiScaleRmse, multiscale_rmse, temporal_noise};
 use self::path::Pose;
@@ -363,18 +365,18 @@ impl Row {
 /// frame.
 #[must_use]
 pub fn geometry_bytes(stats: &FrameStats) -> u64 {
-    stats.triangles * size_of::<treelod_format::TriangleRecord>() as u64
-        + stats.points * size_of::<treelod_format::PointRecord>() as u64
-        + stats.planes * size_of::<treelod_format::PlaneRecord>() as u64
-        + stats.billboards * size_of::<treelod_format::BillboardRecord>() as u64
-        + stats.ellipsoids * size_of::<treelod_format::EllipsoidRecord>() as u64
-        + stats.lines * size_of::<treelod_format::LineRecord>() as u64
+    stats.submitted[Primitive::Triangle] * size_of::<treelod_format::TriangleRecord>() as u64
+        + stats.submitted[Primitive::Point] * size_of::<treelod_format::PointRecord>() as u64
+        + stats.submitted[Primitive::Plane] * size_of::<treelod_format::PlaneRecord>() as u64
+        + stats.submitted[Primitive::Billboard] * size_of::<treelod_format::BillboardRecord>() as u64
+        + stats.submitted[Primitive::Ellipsoid] * size_of::<treelod_format::EllipsoidRecord>() as u64
+        + stats.submitted[Primitive::Line] * size_of::<treelod_format::LineRecord>() as u64
 }
 
 /// Quads submitted in a frame: impostor planes and billboard quads.
 #[must_use]
 pub fn quads(stats: &FrameStats) -> u64 {
-    stats.planes + stats.billboards
+    stats.submitted[Primitive::Plane] + stats.submitted[Primitive::Billboard]
 }
 
 /// Primitives submitted in a frame, every kind ([`FrameStats::primitives`]): triangles, points,

@@ -10,7 +10,7 @@ use treelod_render::offscreen::Image;
 use super::metrics::{self, Coverage, LinearImage, Mask};
 use super::{Adapter, Availability, Report, Row, TechniqueName};
 use crate::table::{Align, Table};
-use treelod_render::Technique;
+use treelod_render::{Primitive, Technique};
 
 /// What the time columns measure, said wherever they appear.
 fn timing(timestamps: bool) -> &'static str {
@@ -125,8 +125,8 @@ pub fn summarise(rows: &[Row], technique: TechniqueName) -> Summary {
     let levels = rows.first().map_or(0, |r| r.rmse.levels.len());
     let total = Totals {
         primitives: rows.iter().map(|r| r.primitives()).sum(),
-        triangles: rows.iter().map(|r| r.stats.triangles).sum(),
-        points: rows.iter().map(|r| r.stats.points).sum(),
+        triangles: rows.iter().map(|r| r.stats.submitted[Primitive::Triangle]).sum(),
+        points: rows.iter().map(|r| r.stats.submitted[Primitive::Point]).sum(),
         geometry_bytes: rows.iter().map(|r| r.geometry_bytes()).sum(),
         tp: rows.iter().map(|r| r.coverage.tp).sum(),
         fp: rows.iter().map(|r| r.coverage.fp).sum(),
@@ -137,8 +137,8 @@ pub fn summarise(rows: &[Row], technique: TechniqueName) -> Summary {
         frames: rows.len(),
         mean: Means {
             primitives: mean(&|r| r.primitives() as f64),
-            triangles: mean(&|r| r.stats.triangles as f64),
-            points: mean(&|r| r.stats.points as f64),
+            triangles: mean(&|r| r.stats.submitted[Primitive::Triangle] as f64),
+            points: mean(&|r| r.stats.submitted[Primitive::Point] as f64),
             geometry_bytes: mean(&|r| r.geometry_bytes() as f64),
             bytes_resident: mean(&|r| r.stats.bytes_resident as f64),
             tp: mean(&|r| r.coverage.tp as f64),
@@ -241,19 +241,10 @@ pub fn description(technique: TechniqueName) -> &'static str {
         TechniqueName::Policy => {
             "the policy: per tree, the cheapest representation whose calibrated error is within the target (the default renderer)"
         }
-        TechniqueName::Technique(t) => match t {
-            Technique::Full => {
-                "the full mesh drawn as the reference is (supersampled, box-filtered): must read perfect"
-            }
-            Technique::Spt => "triangles and points (Gilet 2005, sequential point trees): the default renderer",
-            Technique::Ellipsoids => "clustered ellipsoids and lines (Clasen 2011)",
-            Technique::Impostors => "leaf-cluster impostor planes (Garcia 2005)",
-            Technique::PruneOpt => "pruning with s_opt (Neubert 2011)",
-            Technique::PruneCook => "pruning with s_Cook = 1/lambda (stochastic baseline)",
-            Technique::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
-            Technique::Billboard => "baseline: one camera-facing billboard per tree",
-            Technique::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
-        },
+        TechniqueName::Technique(Technique::Full) => {
+            "the full mesh drawn as the reference is (supersampled, box-filtered): must read perfect"
+        }
+        TechniqueName::Technique(t) => t.description(),
     }
 }
 
@@ -329,8 +320,8 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
             row.frame.to_string(),
             row.technique.name().to_owned(),
             row.primitives().to_string(),
-            row.stats.triangles.to_string(),
-            row.stats.points.to_string(),
+            row.stats.submitted[Primitive::Triangle].to_string(),
+            row.stats.submitted[Primitive::Point].to_string(),
             format!("{:.1}", row.geometry_bytes() as f64 / 1024.0),
             row.coverage.tp.to_string(),
             row.coverage.fp.to_string(),
@@ -458,8 +449,8 @@ pub fn csv(report: &Report) -> String {
             pose.target.y,
             pose.target.z,
             row.stats.instances_visible,
-            row.stats.triangles,
-            row.stats.points,
+            row.stats.submitted[Primitive::Triangle],
+            row.stats.submitted[Primitive::Point],
             row.geometry_bytes(),
             row.stats.bytes_resident,
             row.coverage.tp,
@@ -484,8 +475,8 @@ pub fn csv(report: &Report) -> String {
             row.wall_ms,
             super::quads(&row.stats),
             row.primitives(),
-            row.stats.ellipsoids,
-            row.stats.lines,
+            row.stats.submitted[Primitive::Ellipsoid],
+            row.stats.submitted[Primitive::Line],
         );
     }
     out
@@ -638,7 +629,7 @@ pub fn contact_sheet(report: &Report) -> Image {
 
 #[cfg(test)]
 pub(super) mod tests {
-    use treelod_render::FrameStats;
+    use treelod_render::{FrameStats, PerPrimitive};
 
     use super::super::metrics::MultiScaleRmse;
     use super::super::path::Pose;
@@ -649,7 +640,8 @@ pub(super) mod tests {
         Row {
             frame,
             technique,
-            stats: FrameStats { triangles: 10, points: 4, ellipsoids: 3, lines: 2, ..FrameStats::default() },
+            // Triangles, points, planes, billboards, ellipsoids, lines.
+            stats: FrameStats { submitted: PerPrimitive([10, 4, 0, 0, 3, 2]), ..FrameStats::default() },
             coverage: Coverage { tp, fp: 1, fn_: 2 },
             rmse: MultiScaleRmse { levels: vec![0.2, 0.1, 0.0] },
             flip: 0.01 * tp as f64,

@@ -49,22 +49,19 @@ pub enum Marker {
     Star,
 }
 
+/// The shapes techniques take, in the order of [`Technique::ALL`].
+const SHAPES: [Marker; 6] =
+    [Marker::Circle, Marker::Square, Marker::Triangle, Marker::TriangleDown, Marker::Diamond, Marker::Cross];
+
 /// The colour and marker of a technique in every plot: fixed per technique (not per position in
 /// a run), each colour of [`PALETTE`] used once, so the same technique looks the same in every
 /// plot and no two techniques share a look.
 pub fn style(technique: Technique, full_1x: bool) -> (Rgb888, Marker) {
     let index = if full_1x { Technique::COUNT } else { technique.index() };
-    // The techniques compared most often (the point tree, pruning, impostors, ellipsoids, the
-    // chain, the full mesh at 1×) all differ in shape as well as colour.
-    let marker = match (technique, full_1x) {
-        (_, true) => Marker::Plus,
-        (Technique::Full | Technique::Ellipsoids, _) => Marker::Circle,
-        (Technique::Spt | Technique::Billboard, _) => Marker::Square,
-        (Technique::PruneOpt, _) => Marker::Triangle,
-        (Technique::PruneCook, _) => Marker::TriangleDown,
-        (Technique::Impostors | Technique::Crossed, _) => Marker::Diamond,
-        (Technique::LodChain, _) => Marker::Cross,
-    };
+    // Shapes cycle through the list in its order, so neighbouring techniques (the point tree,
+    // pruning, impostors, ellipsoids, the chain) differ in shape as well as colour, and a new
+    // technique gets a look without a change here; the full mesh at 1x is the only +.
+    let marker = if full_1x { Marker::Plus } else { SHAPES[technique.index() % SHAPES.len()] };
     (PALETTE[index % PALETTE.len()], marker)
 }
 
@@ -613,11 +610,11 @@ mod tests {
         for frame in 0..2 {
             let mut full = report.rows[frame].clone();
             full.technique = TechniqueName::FULL;
-            full.stats.triangles = 100_000;
+            full.stats.submitted[treelod_render::Primitive::Triangle] = 100_000;
             full.coverage = super::super::metrics::Coverage { tp: 100, fp: 0, fn_: 0 };
             full.flip = 0.0;
             let mut spt = report.rows[frame].clone();
-            spt.stats.triangles = 500;
+            spt.stats.submitted[treelod_render::Primitive::Triangle] = 500;
             spt.coverage = super::super::metrics::Coverage { tp: 80, fp: 20, fn_: 20 };
             spt.flip = 0.2;
             rows.extend([full, spt]);

@@ -1,13 +1,82 @@
 //! Clasen's leaf ellipsoids and branch lines (Clasen and Prohaska 2011, spec §6.8, §6.9;
-//! [`Technique::Ellipsoids`]): their records as uploaded. The selection is
+//! [`Technique::Ellipsoids`]): their records as uploaded, their groups (the ellipsoids with the
+//! white-noise cube they sample, `crate::noise`; the lines) and their stages. The selection is
 //! `treelod_runtime::ellipsoid::select`. WGSL: `shaders/tree/ellipsoids.wgsl`,
 //! `shaders/tree/lines.wgsl`.
 
 use treelod_format::{Container, EllipsoidRecord, LineRecord};
 #[cfg(doc)]
 use treelod_runtime::Technique;
+use wgpu::{SamplerBindingType, ShaderStages, TextureSampleType, TextureViewDimension};
 
-use crate::upload::with_ao_in_flags;
+use super::{Bucket, Stages, sampler, storage, texture, tree_wgsl};
+use crate::renderer::RenderError;
+use crate::upload::{Upload, with_ao_in_flags};
+
+/// Group 3 of the ellipsoids' pipelines: the ellipsoids, and the noise cube with its
+/// nearest-texel sampler.
+pub(crate) const ELLIPSOID_GROUP: &[wgpu::BindGroupLayoutEntry] = &[
+    storage(0, ShaderStages::VERTEX_FRAGMENT),
+    texture(1, TextureSampleType::Float { filterable: true }, TextureViewDimension::Cube),
+    sampler(2, SamplerBindingType::NonFiltering),
+];
+
+/// Group 3 of the lines' pipelines: the lines.
+pub(crate) const LINE_GROUP: &[wgpu::BindGroupLayoutEntry] = &[storage(0, ShaderStages::VERTEX_FRAGMENT)];
+
+/// The ellipsoids' pipelines.
+pub(crate) const ELLIPSOID_STAGES: Stages = Stages {
+    module: "treelod tree/ellipsoids.wgsl",
+    wgsl: tree_wgsl!("ellipsoids.wgsl"),
+    vs: "vs_ellipsoid",
+    fs: "fs_ellipsoid",
+    label: "treelod ellipsoids",
+    shadow_fs: "fs_shadow_ellipsoid",
+    shadow_label: "treelod shadow ellipsoids",
+};
+
+/// The lines' pipelines.
+pub(crate) const LINE_STAGES: Stages = Stages {
+    module: "treelod tree/lines.wgsl",
+    wgsl: tree_wgsl!("lines.wgsl"),
+    vs: "vs_line",
+    fs: "fs_line",
+    label: "treelod lines",
+    shadow_fs: "fs_shadow_line",
+    shadow_label: "treelod shadow lines",
+};
+
+/// The ellipsoids' and the lines' groups of the model `up` uploads, each if it has them. The
+/// first model with ellipsoids uploads the noise cube every model shares.
+pub(crate) fn upload(up: &mut Upload<'_>) -> Result<(Option<wgpu::BindGroup>, Option<wgpu::BindGroup>), RenderError> {
+    let container = up.container;
+    let ellipsoids = if container.ellipsoids().is_empty() {
+        None
+    } else {
+        if up.noise.is_none() {
+            let (view, bytes) = crate::noise::upload(up.device, up.queue);
+            *up.noise = Some(view);
+            up.bytes += bytes;
+        }
+        let buffer = up.buffer("ELLIPSOIDS", bytemuck::cast_slice(&gpu_ellipsoids(container)))?;
+        let Some(noise) = up.noise.as_ref() else { unreachable!("uploaded above") };
+        Some(up.group(
+            Bucket::Ellipsoids,
+            &[
+                buffer.as_entire_binding(),
+                wgpu::BindingResource::TextureView(noise),
+                wgpu::BindingResource::Sampler(up.noise_sampler),
+            ],
+        ))
+    };
+    let lines = if container.lines().is_empty() {
+        None
+    } else {
+        let buffer = up.buffer("LINES", bytemuck::cast_slice(&gpu_lines(container)))?;
+        Some(up.group(Bucket::Lines, &[buffer.as_entire_binding()]))
+    };
+    Ok((ellipsoids, lines))
+}
 
 /// The ellipsoids of `container` as uploaded: each one's `flags` (reserved in the file, spec
 /// §6.8) holds its ambient occlusion byte (§6.14), 0 without `ELLIPSOID_AO`: never the file's own

@@ -1,10 +1,87 @@
 //! Impostor planes (Garcia et al. 2005, spec §6.10; [`Technique::Impostors`]): the planes as
-//! uploaded. The selection, with the bark drawn beside them (`ImpostorBark`), is
+//! uploaded, their group (the planes, the atlas and, for indirect texturing, the leaf-slot image
+//! and the planes' leaves; the baseline billboards bind the same layout) and their stages. The
+//! selection, with the bark drawn beside them (`ImpostorBark`), is
 //! `treelod_runtime::impostor::select`. WGSL: `shaders/tree/planes.wgsl`.
 
 use treelod_format::{Container, PlaneRecord};
 #[cfg(doc)]
 use treelod_runtime::Technique;
+use wgpu::{SamplerBindingType, ShaderStages, TextureSampleType, TextureViewDimension};
+
+use super::{Bucket, Stages, sampler, storage, texture, tree_wgsl};
+use crate::renderer::RenderError;
+use crate::textures::Atlas;
+use crate::upload::Upload;
+
+/// Group 3 of the planes' and the billboards' pipelines: the quads, their atlas and its sampler,
+/// the leaf-slot image and the planes' leaves (`shaders/tree/planes.wgsl`).
+pub(crate) const GROUP: &[wgpu::BindGroupLayoutEntry] = &[
+    storage(0, ShaderStages::VERTEX),
+    texture(1, TextureSampleType::Float { filterable: true }, TextureViewDimension::D2),
+    sampler(2, SamplerBindingType::Filtering),
+    texture(3, TextureSampleType::Uint, TextureViewDimension::D2),
+    storage(4, ShaderStages::FRAGMENT),
+];
+
+/// The planes' pipelines.
+pub(crate) const STAGES: Stages = Stages {
+    module: "treelod tree/planes.wgsl",
+    wgsl: tree_wgsl!("planes.wgsl"),
+    vs: "vs_plane",
+    fs: "fs_plane",
+    label: "treelod impostor planes",
+    shadow_fs: "fs_shadow_plane",
+    shadow_label: "treelod shadow impostor planes",
+};
+
+/// One transparent texel: the atlas of a group without one (`slots`: a blank leaf-slot image).
+pub(crate) fn blank(slots: bool) -> Atlas {
+    Atlas { width: 1, height: 1, srgb: true, slots, levels: vec![vec![0; 4]] }
+}
+
+/// The planes' group of the model `up` uploads, if it has planes and their atlas decodes and
+/// fits (else the planes are taken out of its representations, with a warning).
+pub(crate) fn upload(up: &mut Upload<'_>) -> Result<Option<wgpu::BindGroup>, RenderError> {
+    let Some(planes) = up.representations.planes.take() else { return Ok(None) };
+    let Some(atlas) = up.decode_atlas(planes.image(), "impostor") else { return Ok(None) };
+    let container = up.container;
+    let records = gpu_planes(container, &mut up.warnings);
+    let buffer = up.buffer("PLANES", bytemuck::cast_slice(&records))?;
+    drop(records);
+    let leaves = up.buffer("PLANE_LEAVES", bytemuck::cast_slice(container.plane_leaves()))?;
+    // A leaf-slot image (spec §6.10.1) is bound as such, with a blank atlas; otherwise a blank
+    // slot image.
+    let (atlas, slots) = if atlas.slots { (blank(false), atlas) } else { (atlas, blank(true)) };
+    if container.planes().iter().any(|q| q.image != planes.image()) {
+        up.warnings.push(format!("impostor planes sample several images; all are drawn from image {}", planes.image()));
+    }
+    up.representations.planes = Some(planes);
+    let atlas = up.atlas(&atlas, "treelod impostor atlas");
+    let slots = up.atlas(&slots, "treelod leaf slots");
+    Ok(Some(group(up, Bucket::Planes, &buffer, &atlas, &slots, &leaves)))
+}
+
+/// The group of `bucket` (planes or billboards) over its quads, atlas, leaf slots and leaves.
+pub(crate) fn group(
+    up: &Upload<'_>,
+    bucket: Bucket,
+    quads: &wgpu::Buffer,
+    atlas: &wgpu::TextureView,
+    slots: &wgpu::TextureView,
+    leaves: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    up.group(
+        bucket,
+        &[
+            quads.as_entire_binding(),
+            wgpu::BindingResource::TextureView(atlas),
+            wgpu::BindingResource::Sampler(up.atlas_sampler),
+            wgpu::BindingResource::TextureView(slots),
+            leaves.as_entire_binding(),
+        ],
+    )
+}
 
 /// The impostor planes of `container` as uploaded: each plane's `leaf_first` (which no shader
 /// reads) holds the index of its parent plane, for the morph between levels (`vs_plane`), its

@@ -20,7 +20,8 @@ use glam::Vec3;
 use treelod_format::{Container, ErrorClass};
 use treelod_render::offscreen::{GpuError, Image, Readback};
 use treelod_render::{
-    Camera, DebugView, FrameStats, Ground, Policy, Renderer, RendererFormats, Settings, Shadows, Sky, Technique,
+    Camera, DebugView, FrameStats, Ground, Policy, Primitive, Renderer, RendererFormats, Settings, Shadows, Sky,
+    Technique,
 };
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
@@ -248,8 +249,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         shot.image.height,
         stats.instances_visible,
         shot.instances,
-        stats.triangles,
-        stats.points
+        stats.submitted[Primitive::Triangle],
+        stats.submitted[Primitive::Point]
     );
     if shot.panel {
         line.push_str(", with the panel");
@@ -1115,27 +1116,8 @@ impl Viewer {
             };
             mode.push_str(&format!(" | policy ({target}): {}", crate::render::technique_counts(&stats.instances)));
         }
-        match technique {
-            _ if settings.policy.is_some() => {}
-            Technique::Full | Technique::Spt => {}
-            Technique::LodChain | Technique::Billboard | Technique::Crossed => mode.push_str(&format!(
-                " | baseline {technique}: {drawn} trees, {} triangles, {} quads",
-                stats.triangles, stats.billboards
-            )),
-            Technique::Ellipsoids => mode.push_str(&format!(
-                " | ellipsoids (quality {}, blend {}): {drawn} trees, {} ellipsoids, {}",
-                settings.ellipsoid_quality,
-                settings.level_blend,
-                stats.ellipsoids,
-                if settings.lines { format!("{} lines", stats.lines) } else { "bark triangles".to_owned() }
-            )),
-            Technique::Impostors => {
-                mode.push_str(&format!(" | impostors: {drawn} trees, {} planes", stats.planes));
-            }
-            Technique::PruneOpt | Technique::PruneCook => {
-                let occlusion = if settings.pruning.occlusion { ", occlusion" } else { "" };
-                mode.push_str(&format!(" | {technique}{occlusion}: {drawn} trees, {} leaves", stats.leaves_pruned));
-            }
+        if settings.policy.is_none() && !matches!(technique, Technique::Full | Technique::Spt) {
+            mode.push_str(&format!(" | {technique}: {drawn} trees, {}", crate::render::submitted(stats)));
         }
         let (azimuth, elevation) = sun_angles(settings.sun);
         mode.push_str(&format!(" | sun az {:.0} el {:.0}", azimuth.to_degrees(), elevation.to_degrees()));
@@ -1158,8 +1140,8 @@ impl Viewer {
             "{name} | {fps:.1} fps | {} of {} instances | {} triangles | {} points | s_min {} s_max {} k {}{mode}",
             stats.instances_visible,
             self.scene.instances.len(),
-            stats.triangles,
-            stats.points,
+            stats.submitted[Primitive::Triangle],
+            stats.submitted[Primitive::Point],
             settings.s_min,
             settings.s_max,
             settings.depth_bias_k,

@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 
 use egui::{Color32, RichText, Ui};
-use treelod_render::{DebugView, FrameStats, MAX_CASCADES, PerTechnique, Settings, Shadows, Technique};
+use treelod_render::{DebugView, FrameStats, MAX_CASCADES, PerTechnique, Primitive, Settings, Shadows, Technique};
 
 use super::rig::{Animation, DISTANCE_RANGE, Mode, Rig};
 use super::{SELF_SHADOW, sun_angles, sun_from_angles, toggle_shadows};
@@ -385,20 +385,14 @@ fn counts(ui: &mut Ui, stats: &FrameStats, instances: usize) {
             row(&format!("  trees, {}", technique.label()), trees.to_string());
         }
         row("primitives", stats.primitives().to_string());
-        row("  triangles", stats.triangles.to_string());
-        row("  points", stats.points.to_string());
+        for (kind, count) in stats.submitted.iter().filter(|&(kind, n)| n > 0 || kind <= Primitive::Point) {
+            row(&format!("  {}", kind.name()), count.to_string());
+        }
         if stats.leaves_pruned > 0 {
             row("  pruned leaves", stats.leaves_pruned.to_string());
         }
-        for (label, count) in [
-            ("  planes", stats.planes),
-            ("  ellipsoids", stats.ellipsoids),
-            ("  lines", stats.lines),
-            ("  billboard quads", stats.billboards),
-        ] {
-            if count > 0 {
-                row(label, count.to_string());
-            }
+        for (technique, count) in stats.by_technique.iter().filter(|&(_, n)| n > 0) {
+            row(&format!("  by {}", technique.label()), count.to_string());
         }
         if stats.shadow.cascades > 0 {
             row("shadow primitives", stats.shadow.primitives().to_string());
@@ -453,15 +447,9 @@ mod tests {
 
     #[test]
     fn primitives_add_every_kind() {
-        let stats = FrameStats {
-            triangles: 1,
-            points: 2,
-            planes: 4,
-            ellipsoids: 8,
-            lines: 16,
-            billboards: 32,
-            ..FrameStats::default()
-        };
+        // Triangles, points, planes, billboards, ellipsoids, lines.
+        let stats =
+            FrameStats { submitted: treelod_render::PerPrimitive([1, 2, 4, 32, 8, 16]), ..FrameStats::default() };
         assert_eq!(stats.primitives(), 63);
     }
 
