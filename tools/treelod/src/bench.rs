@@ -10,7 +10,7 @@ use treelod_harness::eval::TechniqueName;
 use treelod_render::Policy;
 
 use crate::eval::{failed, none_measurable};
-use crate::render::{parse_colour, parse_fov, parse_pixels, parse_size};
+use crate::render::{parse_colour, parse_fov, parse_size};
 use crate::report::{self, Failed};
 
 /// Arguments of `treelod bench`.
@@ -83,12 +83,8 @@ pub struct Args {
     /// size with the plain alpha test (aliased: thin leaves drop out of it).
     #[arg(long, requires = "quality", conflicts_with = "supersample")]
     pub reference_1x: bool,
-    /// Point threshold `s_min` in pixels of `spt`.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
-    pub s_min: Option<f32>,
-    /// Triangle threshold `s_max` in pixels of `spt`.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
-    pub s_max: Option<f32>,
+    #[command(flatten)]
+    pub thresholds: crate::render::ThresholdArgs,
     /// Background colour, `RRGGBB` (sRGB hex): with --quality, pixels of it count as not covered.
     #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
     pub background: [u8; 3],
@@ -126,8 +122,8 @@ impl Args {
             gpu_selection: self.gpu_selection,
             shadows: self.shadows,
             quality,
-            s_min: self.s_min,
-            s_max: self.s_max,
+            s_min: self.thresholds.s_min,
+            s_max: self.thresholds.s_max,
             background: self.background,
         }
     }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 pub use treelod_harness::eval::*;
 
 use crate::render::ImpostorArgs;
-use crate::render::{parse_colour, parse_fov, parse_pixels, parse_size};
+use crate::render::{parse_colour, parse_fov, parse_size};
 use crate::report::{self, Failed};
 
 /// Arguments of `treelod eval`.
@@ -52,9 +52,8 @@ pub struct Args {
     /// alpha-tested leaves cover samples in proportion to their filtered alpha (alpha to coverage).
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = crate::render::parse_msaa)]
     pub msaa: u32,
-    /// Point threshold `s_min` in pixels of the `spt` technique.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
-    pub s_min: Option<f32>,
+    #[command(flatten)]
+    pub thresholds: crate::render::ThresholdArgs,
     // How the `impostors` technique changes level and draws its bark, as `render`'s options.
     #[command(flatten)]
     pub impostor: ImpostorArgs,
@@ -66,9 +65,6 @@ pub struct Args {
     /// this many octaves of the metres per pixel, as `render`'s option; 0 switches at once.
     #[arg(long, value_name = "OCTAVES", default_value_t = 0.5, value_parser = crate::render::parse_level_blend)]
     pub level_blend: f32,
-    /// Triangle threshold `s_max` in pixels of the `spt` technique.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
-    pub s_max: Option<f32>,
     /// The `policy` technique's target: the image error (multi-scale RMSE of coverage) it allows
     /// over the floor (the least error of the full mesh and every representation) at each tree's
     /// projected size, as the containers' calibration tables measured it; 0 keeps the best image
@@ -132,8 +128,8 @@ impl Args {
             fov_degrees: self.fov,
             background: self.background,
             msaa: self.msaa,
-            s_min: self.s_min,
-            s_max: self.s_max,
+            s_min: self.thresholds.s_min,
+            s_max: self.thresholds.s_max,
             impostor_morph: settings.impostor_morph,
             impostor_bark: settings.impostor_bark,
             lines: !self.no_lines,

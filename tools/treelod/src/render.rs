@@ -50,12 +50,8 @@ pub struct Args {
     /// filtered alpha (alpha to coverage) instead of being tested against the cutoff.
     #[arg(long, value_name = "N", default_value_t = 1, value_parser = parse_msaa)]
     pub msaa: u32,
-    /// Point threshold `s_min` in pixels (Gilet 2005): points are drawn down to this size.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
-    pub s_min: Option<f32>,
-    /// Triangle threshold `s_max` in pixels: triangles larger than this are drawn as triangles.
-    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
-    pub s_max: Option<f32>,
+    #[command(flatten)]
+    pub thresholds: ThresholdArgs,
     /// Background colour, `RRGGBB` (sRGB hex, an optional leading `#`).
     #[arg(long, value_name = "RRGGBB", default_value = "ffffff", value_parser = parse_colour)]
     pub background: [u8; 3],
@@ -163,6 +159,30 @@ pub fn submitted(stats: &FrameStats) -> String {
 pub fn technique_counts(instances: &treelod_render::PerTechnique<u32>) -> String {
     let parts: Vec<String> = instances.iter().filter(|&(_, n)| n > 0).map(|(t, n)| format!("{n} {t}")).collect();
     if parts.is_empty() { "none".to_owned() } else { parts.join(", ") }
+}
+
+/// The point tree's thresholds in pixels: options shared by `render`, `eval` and `bench` (each
+/// keeps the settings' default where not given).
+#[derive(Debug, Clone, Copy, clap::Args)]
+pub struct ThresholdArgs {
+    /// Point threshold `s_min` in pixels (Gilet 2005): points are drawn down to this size.
+    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    pub s_min: Option<f32>,
+    /// Triangle threshold `s_max` in pixels: triangles larger than this are drawn as triangles.
+    #[arg(long, value_name = "PX", value_parser = parse_pixels)]
+    pub s_max: Option<f32>,
+}
+
+impl ThresholdArgs {
+    /// Sets the thresholds given in `settings`.
+    pub fn apply(self, settings: &mut Settings) {
+        if let Some(s_min) = self.s_min {
+            settings.s_min = s_min;
+        }
+        if let Some(s_max) = self.s_max {
+            settings.s_max = s_max;
+        }
+    }
 }
 
 /// How trees drawn with impostor planes change level and draw their bark: options shared by
@@ -474,12 +494,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         return Err(Failed { class: ErrorClass::Unsupported });
     }
     let mut settings = Settings::default();
-    if let Some(s_min) = args.s_min {
-        settings.s_min = s_min;
-    }
-    if let Some(s_max) = args.s_max {
-        settings.s_max = s_max;
-    }
+    args.thresholds.apply(&mut settings);
     settings.debug = parse_debug(args.debug.as_deref());
     args.technique.apply(&mut settings);
     settings.pruning = args.prune.settings(settings.technique);
