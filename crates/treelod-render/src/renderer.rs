@@ -155,8 +155,10 @@ pub struct Renderer {
     pub(crate) prune_shown: Vec<Option<f32>>,
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     pub(crate) visible_fraction: Vec<f32>,
-    /// This frame's trees per technique ([`Self::assign`]), shared by every view.
+    /// This frame's trees per technique ([`Self::assign`]) from the camera's view.
     assignment: Assignment,
+    /// Per shadow cascade, this frame's trees per technique from the light's view.
+    cascade_assignments: Vec<Assignment>,
     /// The policy's per-model tables and per-instance state ([`Settings::policy`]).
     pub(crate) policy: PolicyModels,
     /// Per instance, the technique it is drawn with this frame (this frame's assignment), for
@@ -198,6 +200,8 @@ pub(crate) struct PolicyModels {
     state: PolicyState,
     /// Scratch: this frame's choice per instance.
     chosen: Vec<Technique>,
+    /// Per shadow cascade: last frame's choice per instance from the light's view (hysteresis).
+    cascade_states: Vec<PolicyState>,
     /// Budget mode ([`Policy::budget`]): what steers the target and `s_min` from frame to frame;
     /// made when budget mode starts, dropped when it ends.
     budget: Option<BudgetController>,
@@ -343,6 +347,7 @@ impl Renderer {
             prune_shown: Vec::new(),
             visible_fraction: Vec::new(),
             assignment: Assignment::default(),
+            cascade_assignments: Vec::new(),
             spt_list: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1), depth),
             occlusion_jobs: Vec::new(),
@@ -490,6 +495,7 @@ impl Renderer {
             self.prune_shown = vec![None; self.instances.len()];
             self.visible_fraction = vec![1.0; self.instances.len()];
             self.policy.state.reset();
+            self.policy.cascade_states.iter_mut().for_each(PolicyState::reset);
         }
         // The union of the instances' transformed blocks (their container's bounds).
         let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
@@ -689,15 +695,23 @@ impl Renderer {
         // The camera's selection, then each cascade's, of the same assignment.
         self.assign(&runtime_camera);
         let mut main = std::mem::take(&mut self.main);
-        let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true);
+        let assignment = std::mem::take(&mut self.assignment);
+        let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true, &assignment);
+        self.assignment = assignment;
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
         shadow_views.resize_with(self.cascades.len(), View::default);
         let mut shadow =
             ShadowStats { cascades: u32::try_from(self.cascades.len()).unwrap_or(0), ..ShadowStats::default() };
-        for (k, view) in shadow_views.iter_mut().enumerate() {
+        let mut assignments = std::mem::take(&mut self.cascade_assignments);
+        assignments.resize_with(self.cascades.len(), Assignment::default);
+        for (k, (view, assignment)) in shadow_views.iter_mut().zip(&mut assignments).enumerate() {
             let light = self.cascades[k].selection_camera();
-            shadow.instances_visible += self.select_view(view, &light, &lod_settings, false).instances.total();
+            self.assign_view(&light, Some(k), assignment);
+            let counts = self.select_view(view, &light, &lod_settings, false, assignment);
+            shadow.instances_visible += counts.instances.total();
+            shadow.instances += counts.instances;
         }
+        self.cascade_assignments = assignments;
 
         // What each cell needs: the largest prefix any view asked for.
         self.residency.begin_frame();
@@ -773,16 +787,26 @@ impl Renderer {
         stats
     }
 
-    /// Assigns this frame's instances to techniques (the assignment every view then selects,
-    /// the shadow cascades included, so a tree casts the shadow of what is drawn): with a
+    /// Assigns this frame's instances to techniques for the camera's view (each shadow cascade
+    /// assigns its own, [`Self::assign_view`]): with a
     /// [`Settings::policy`], each tree of a model with calibration tables to the policy's choice
     /// at its projected height for `camera`, every other tree to [`Settings::technique`]; a tree
     /// whose model lacks its technique's data to [`Technique::FALLBACK`].
     fn assign(&mut self, camera: &treelod_runtime::Camera) {
+        let mut assignment = std::mem::take(&mut self.assignment);
+        self.assign_view(camera, None, &mut assignment);
+        self.assignment = assignment;
+        self.note_drawn_with();
+    }
+
+    /// Fills `out` with the trees per technique for one view: `cascade` `None` for the camera's,
+    /// else shadow cascade `cascade`'s, chosen from the light's view at the cascade's pixel (with
+    /// hysteresis of its own), so a far tree in a coarse cascade casts the shadow of a cheaper
+    /// representation.
+    fn assign_view(&mut self, camera: &treelod_runtime::Camera, cascade: Option<usize>, out: &mut Assignment) {
         let technique = self.settings.technique;
         let Some(policy) = self.settings.policy.filter(|p| self.policy.chooses(Some(p))) else {
-            self.assignment.assign(&self.instances, &self.representations, |_, _| technique);
-            self.note_drawn_with();
+            out.assign(&self.instances, &self.representations, |_, _| technique);
             return;
         };
         let tables = &mut self.policy;
@@ -795,18 +819,18 @@ impl Renderer {
                 .collect();
             tables.made_for = Some(policy);
         }
-        choose_instances(
-            &self.instances,
-            &self.lods,
-            &tables.choices,
-            camera,
-            technique,
-            &mut tables.state,
-            &mut tables.chosen,
-        );
+        let state = match cascade {
+            None => &mut tables.state,
+            Some(k) => {
+                if tables.cascade_states.len() <= k {
+                    tables.cascade_states.resize_with(k + 1, PolicyState::default);
+                }
+                &mut tables.cascade_states[k]
+            }
+        };
+        choose_instances(&self.instances, &self.lods, &tables.choices, camera, technique, state, &mut tables.chosen);
         let chosen = &tables.chosen;
-        self.assignment.assign(&self.instances, &self.representations, |i, _| chosen[i]);
-        self.note_drawn_with();
+        out.assign(&self.instances, &self.representations, |i, _| chosen[i]);
     }
 
     /// Each instance's technique from this frame's assignment (read when the draws are
@@ -843,6 +867,7 @@ impl Renderer {
         camera: &treelod_runtime::Camera,
         lod_settings: &LodSettings,
         main: bool,
+        assignment: &Assignment,
     ) -> ViewCounts {
         let settings = self.settings;
         view.draws.clear();
@@ -857,7 +882,7 @@ impl Renderer {
         };
         let prune_state =
             main.then_some(PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction });
-        select_techniques(&scene, &self.assignment, camera, &technique_settings, prune_state, &mut view.draws);
+        select_techniques(&scene, assignment, camera, &technique_settings, prune_state, &mut view.draws);
         if main {
             self.occlusion_jobs.clear();
             for &index in &view.draws.occlusion {
@@ -871,7 +896,7 @@ impl Renderer {
             }
         }
         // The point tree: over every instance where all are its (no remapping), else over its own.
-        let (full, spt) = (&self.assignment[Technique::Full], &self.assignment[Technique::Spt]);
+        let (full, spt) = (&assignment[Technique::Full], &assignment[Technique::Spt]);
         merge_ascending(&[full, spt, &view.draws.point_tree], &mut self.spt_list);
         view.spt_remapped = self.spt_list.len() != self.instances.len();
         view.spt_instances.clear();

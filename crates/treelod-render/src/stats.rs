@@ -68,6 +68,10 @@ pub struct ShadowStats {
     pub cascades: u32,
     /// Instances inside a cascade's frustum, per cascade.
     pub instances_visible: u32,
+    /// Instances inside a cascade's frustum by the technique the cascade drew each with (chosen
+    /// from the light's view, [`Settings::policy`]), per cascade; sums to
+    /// [`Self::instances_visible`].
+    pub instances: PerTechnique<u32>,
     /// Indirect draws.
     pub ranges: u32,
     /// Draws made coarser than the cascades' selections because their prefixes are not resident

@@ -11,7 +11,7 @@ use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, CalibrationConfig, ImpostorConfig, LodChainConfig};
 use treelod_format::Container;
 use treelod_render::offscreen::render_image;
-use treelod_render::{Camera, DebugView, Instance, Policy, Renderer, Settings, Technique};
+use treelod_render::{Camera, DebugView, Instance, Policy, Renderer, Settings, Shadows, Technique};
 use treelod_runtime::{Calibration, Choices, ModelLod, Representations, projected_height};
 
 /// The demo tree with impostors and its baselines (planes, a chain and billboards to choose
@@ -122,6 +122,42 @@ fn without_tables_the_policy_draws_the_settings_technique() {
         let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
         assert_eq!(stats.instances.get(technique), stats.instances_visible, "{stats:?}");
     }
+}
+
+#[test]
+fn a_shadow_cascade_chooses_from_the_light_s_view() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let calibration = Calibration::from_container(&container).expect("calibrated");
+    let lod = ModelLod::from_container(&container);
+    let (representations, _) = Representations::from_container(&container);
+    let choices = Choices::new(&calibration, &Policy::default(), &representations);
+    let (width, height) = (256, 256);
+    let (eye, ahead) = (vec3(0.0, 0.0, 0.0), vec3(0.0, 0.0, -1.0));
+    let runtime_camera = treelod_runtime::Camera::look_at(eye, ahead, 0.9, width, height);
+    // One tree 200 px high on screen; one cascade whose selection pixel is so coarse that the tree
+    // is a few of its pixels high.
+    let distance = treelod_runtime::policy::distance_for_height(&lod, 200.0, &runtime_camera);
+    let position = vec3(0.0, 0.0, -distance) - lod.centre();
+    let shadows = Shadows { cascades: 1, resolution: 256, lod_texels: 64.0, ..Shadows::default() };
+    let settings = Settings { shadows: Some(shadows), ..Settings::default() };
+    let mut renderer = forest(&gpu, &container, settings, &[position]);
+    let camera = Camera::look_at(eye, ahead, 0.9, width, height);
+    let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+    let transform = Mat4::from_translation(position);
+    let drawn = choices.choose(projected_height(&lod, transform, &runtime_camera), None);
+    let light = renderer.shadow_cascades()[0].selection_camera();
+    let in_shadow = projected_height(&lod, transform, &light);
+    let cast = choices.choose(in_shadow, None);
+    assert_ne!(drawn, cast, "the test needs two choices: {in_shadow} px in the cascade");
+    assert_eq!(stats.instances[drawn], 1, "{stats:?}");
+    assert_eq!(stats.shadow.instances[cast], 1, "the cascade chose at {in_shadow} px: {:?}", stats.shadow);
+    assert_eq!(stats.shadow.instances.total(), stats.shadow.instances_visible);
+    // Forced settings force the cascades too.
+    let forced = Settings { shadows: Some(shadows), ..Settings::forced(Technique::Impostors) };
+    let mut renderer = forest(&gpu, &container, forced, &[position]);
+    let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+    assert_eq!(stats.shadow.instances[Technique::Impostors], 1, "{:?}", stats.shadow);
 }
 
 #[test]
