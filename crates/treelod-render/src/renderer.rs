@@ -757,10 +757,10 @@ impl Renderer {
             ..FrameStats::default()
         };
         self.record_view(&mut main, full_mesh, &mut stats);
-        for view in &mut shadow_views {
+        for (k, view) in shadow_views.iter_mut().enumerate() {
             let mut counted = FrameStats::default();
             self.record_view(view, full_mesh, &mut counted);
-            shadow.add_view(&counted);
+            shadow.add_view(k, &counted);
         }
         stats.shadow = shadow;
         self.main = main;

@@ -79,6 +79,8 @@ pub struct ShadowStats {
     pub ranges_clamped: u32,
     /// Primitives submitted, per kind (as [`FrameStats::submitted`]).
     pub submitted: PerPrimitive<u64>,
+    /// Primitives submitted per cascade, finest first (zero past [`Self::cascades`]).
+    pub per_cascade: [u64; crate::MAX_CASCADES],
 }
 
 impl ShadowStats {
@@ -88,8 +90,11 @@ impl ShadowStats {
         self.submitted.total()
     }
 
-    /// Adds what one cascade's view drew (counted as a frame's) to the pass's sums.
-    pub(crate) fn add_view(&mut self, view: &FrameStats) {
+    /// Adds what cascade `k`'s view drew (counted as a frame's) to the pass's sums.
+    pub(crate) fn add_view(&mut self, k: usize, view: &FrameStats) {
+        if let Some(slot) = self.per_cascade.get_mut(k) {
+            *slot = view.primitives();
+        }
         self.ranges += view.ranges;
         self.ranges_clamped += view.ranges_clamped;
         self.submitted += view.submitted;

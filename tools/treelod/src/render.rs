@@ -594,16 +594,19 @@ pub fn shadow_summary(stats: &FrameStats) -> String {
     } else {
         format!("({:.2}× the main pass's primitives)", shadow.primitives() as f64 / main as f64)
     };
+    let cascades = shadow.cascades as usize;
+    let per_cascade: Vec<String> = shadow.per_cascade.iter().take(cascades).map(u64::to_string).collect();
     format!(
-        "shadow pass: {} cascade(s), {} triangles, {} points, {} planes, {} billboards, {} ellipsoids, {} lines \
-         {ratio}",
+        "shadow pass: {} cascade(s), {} triangles, {} points, {} planes, {} billboards, {} ellipsoids, {} lines, \
+         per cascade {} {ratio}",
         shadow.cascades,
         shadow.submitted[Primitive::Triangle],
         shadow.submitted[Primitive::Point],
         shadow.submitted[Primitive::Plane],
         shadow.submitted[Primitive::Billboard],
         shadow.submitted[Primitive::Ellipsoid],
-        shadow.submitted[Primitive::Line]
+        shadow.submitted[Primitive::Line],
+        per_cascade.join(" / ")
     )
 }
 
@@ -708,12 +711,13 @@ mod tests {
         stats.shadow = treelod_render::ShadowStats {
             cascades: 3,
             submitted: treelod_render::PerPrimitive([300, 400, 100, 0, 0, 100]),
+            per_cascade: [500, 250, 150, 0],
             ..treelod_render::ShadowStats::default()
         };
         assert_eq!(
             shadow_summary(&stats),
-            "shadow pass: 3 cascade(s), 300 triangles, 400 points, 100 planes, 0 billboards, 0 ellipsoids, 100 lines \
-             (1.80× the main pass's primitives)"
+            "shadow pass: 3 cascade(s), 300 triangles, 400 points, 100 planes, 0 billboards, 0 ellipsoids, 100 lines, \
+             per cascade 500 / 250 / 150 (1.80× the main pass's primitives)"
         );
         let nothing = FrameStats { shadow: stats.shadow, ..FrameStats::default() };
         assert!(shadow_summary(&nothing).ends_with("(the main pass draws nothing)"));
