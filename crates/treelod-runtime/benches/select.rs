@@ -4,15 +4,27 @@
 //!
 //! Run with `cargo bench -p treelod-runtime --bench select`. Before the criterion runs, a table of
 //! every pose is printed once: what it selects and its median time over a few repeats.
+//!
+//! The same fly-through is then selected with the policy (spec §10.2), as the renderer does it on
+//! the CPU every frame: the demo tree built with every representation the policy chooses among and
+//! its calibration tables, each tree's choice with its hysteresis, the assignment, each technique's
+//! selection ([`select_techniques`]) and the point tree's ([`select_frame`]) over its trees.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::{Mat4, Quat, Vec3};
-use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block, demo_tree};
+use treelod_build::{
+    BuildConfig, CalibrationConfig, DemoTreeConfig, EllipsoidConfig, ImpostorConfig, LineConfig, LodChainConfig,
+    Placed, PruneConfig, SplitMix64, build_block, demo_tree,
+};
 use treelod_format::{Compression, Container};
-use treelod_runtime::{Camera, DrawList, FrameStats, Instance, LodSettings, ModelLod, select_frame};
+use treelod_runtime::{
+    Assignment, Calibration, Camera, Choices, DrawList, FrameStats, ImpostorBark, Instance, LodSettings, ModelLod,
+    PerTechnique, PixelLevel, Policy, PolicyState, PruneState, Pruning, Representations, Scene, Technique,
+    TechniqueSettings, TreeDraws, choose_instances, merge_ascending, select_frame, select_techniques,
+};
 
 const INSTANCES: usize = 10_000;
 const HALF_SIDE: f32 = 1000.0;
@@ -27,6 +39,30 @@ fn demo_model() -> ModelLod {
             .expect("the demo tree builds");
     let container = Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens");
     ModelLod::from_container(&container)
+}
+
+/// The demo tree with every representation the policy chooses among (pruning, impostor planes,
+/// ellipsoids with lines, the LoD chain and billboards) and its calibration tables, as
+/// `treelod build --prune density --impostors --ellipsoids --lines --baselines --ao-rays 0` makes
+/// it, with fewer measuring views so the bench starts in seconds: pruning's curves from 4 views at
+/// 128 pixels (the tool's 8 at 256) and the calibration from 2 views (the tool's 4). The views
+/// change the tables' values, not the work a frame does with them.
+fn policy_model() -> (ModelLod, Representations, Calibration) {
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let config = BuildConfig {
+        prune: Some(PruneConfig { resolution: 128, views: 4, ..PruneConfig::default() }),
+        impostors: Some(ImpostorConfig::default()),
+        ellipsoids: Some(EllipsoidConfig::default()),
+        lines: Some(LineConfig::default()),
+        baselines: Some(LodChainConfig::default()),
+        calibration: Some(CalibrationConfig { views: 2, ..CalibrationConfig::default() }),
+        ..BuildConfig::default()
+    };
+    let built = build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "bench")
+        .expect("the demo tree builds");
+    let container = Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens");
+    let calibration = Calibration::from_container(&container).expect("the build calibrated");
+    (ModelLod::from_container(&container), Representations::from_container(&container).0, calibration)
 }
 
 fn forest() -> Vec<Instance> {
@@ -71,6 +107,172 @@ fn fly_through() -> Vec<(&'static str, Camera)> {
 fn median(mut samples: Vec<Duration>) -> Duration {
     samples.sort();
     samples[samples.len() / 2]
+}
+
+/// Prints, per phase of the fly-through, the median and the largest of its poses' median times.
+fn print_phases(poses: &[(&str, Camera)], medians: &[Duration]) {
+    for phase in ["overview", "descent", "inside"] {
+        let mut times: Vec<Duration> =
+            poses.iter().zip(medians).filter(|((p, _), _)| *p == phase).map(|(_, &m)| m).collect();
+        times.sort();
+        let max = times.last().copied().unwrap_or_default();
+        println!(
+            "  {phase:<8}  {:>2} poses: median {:>7.1} µs, max {:>7.1} µs",
+            times.len(),
+            median(times).as_secs_f64() * 1e6,
+            max.as_secs_f64() * 1e6
+        );
+    }
+}
+
+/// What the renderer keeps between frames to select them with the policy (its `assign` and
+/// `select_view` for the camera's view), and the frame's lists, reused.
+struct PolicyFrame<'a> {
+    lods: &'a [ModelLod],
+    models: &'a [Representations],
+    instances: &'a [Instance],
+    /// Per model, its choices under the policy (made once, as the renderer does per policy).
+    choices: Vec<Option<Choices>>,
+    state: PolicyState,
+    chosen: Vec<Technique>,
+    assignment: Assignment,
+    draws: TreeDraws,
+    /// Pruning's held `λ` per instance, and the visible fractions of the occlusion test (all 1:
+    /// no GPU measures them here).
+    prune_shown: Vec<Option<f32>>,
+    visible_fraction: Vec<f32>,
+    spt_list: Vec<u32>,
+    spt_instances: Vec<Instance>,
+    list: DrawList,
+    lod: LodSettings,
+    technique: TechniqueSettings,
+}
+
+impl<'a> PolicyFrame<'a> {
+    /// The renderer's default settings: the default policy, `s_min` 1 px, `s_max` 2 px, pruning,
+    /// impostor bark, ellipsoid levels and lines as `treelod_render::Settings::default()` sets them.
+    fn new(
+        lods: &'a [ModelLod],
+        models: &'a [Representations],
+        calibrations: &[Calibration],
+        instances: &'a [Instance],
+    ) -> Self {
+        let policy = Policy::default();
+        let lod = LodSettings::default();
+        Self {
+            lods,
+            models,
+            instances,
+            choices: calibrations.iter().zip(models).map(|(c, m)| Some(Choices::new(c, &policy, m))).collect(),
+            state: PolicyState::default(),
+            chosen: Vec::new(),
+            assignment: Assignment::default(),
+            draws: TreeDraws::default(),
+            prune_shown: vec![None; instances.len()],
+            visible_fraction: vec![1.0; instances.len()],
+            spt_list: Vec::new(),
+            spt_instances: Vec::new(),
+            list: DrawList::new(),
+            lod,
+            technique: TechniqueSettings {
+                s_min: lod.s_min,
+                lod,
+                pruning: Pruning::default(),
+                impostor_bark: ImpostorBark::default(),
+                pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
+                lines: true,
+            },
+        }
+    }
+
+    /// One frame for `camera`: each tree's technique, the assignment, every technique's selection
+    /// and the point tree's over its trees; returns the point tree's counts.
+    fn select(&mut self, camera: &Camera) -> FrameStats {
+        choose_instances(
+            self.instances,
+            self.lods,
+            &self.choices,
+            camera,
+            Technique::Spt,
+            &mut self.state,
+            &mut self.chosen,
+        );
+        let chosen = &self.chosen;
+        self.assignment.assign(self.instances, self.models, |i, _| chosen[i]);
+        self.draws.clear();
+        let scene = Scene { lods: self.lods, models: self.models, instances: self.instances };
+        let prune_state = PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction };
+        select_techniques(&scene, &self.assignment, camera, &self.technique, Some(prune_state), &mut self.draws);
+        let (full, spt) = (&self.assignment[Technique::Full], &self.assignment[Technique::Spt]);
+        merge_ascending(&[full, spt, &self.draws.point_tree], &mut self.spt_list);
+        let remapped = self.spt_list.len() != self.instances.len();
+        self.spt_instances.clear();
+        if remapped {
+            self.spt_instances.extend(self.spt_list.iter().map(|&i| self.instances[i as usize]));
+        }
+        let spt_instances = if remapped { &self.spt_instances[..] } else { self.instances };
+        select_frame(self.lods, spt_instances, camera, &self.lod, &mut self.list)
+    }
+}
+
+/// Prints, per pose selected with the policy, the visible trees by technique, the draws and the
+/// median time over 15 runs (the hysteresis state carried from pose to pose, as in a flight that
+/// pauses at each pose), then the per-phase summary.
+fn print_policy_table(frame: &mut PolicyFrame<'_>, poses: &[(&str, Camera)]) {
+    let shown = [
+        Technique::Spt,
+        Technique::PruneOpt,
+        Technique::Impostors,
+        Technique::Ellipsoids,
+        Technique::LodChain,
+        Technique::Billboard,
+        Technique::Crossed,
+    ];
+    println!(
+        "policy (target {}, hysteresis {} octaves): visible trees by technique, draws, median time",
+        Policy::default().target,
+        Policy::default().hysteresis
+    );
+    print!("frame  phase   ");
+    for technique in shown {
+        print!(" {:>10}", technique.name());
+    }
+    println!("  tri draws  prefixes    ranges  median µs");
+    let mut medians = Vec::new();
+    for (index, (phase, camera)) in poses.iter().enumerate() {
+        let mut stats = FrameStats::default();
+        let samples: Vec<Duration> = (0..15)
+            .map(|_| {
+                let start = Instant::now();
+                stats = frame.select(camera);
+                start.elapsed()
+            })
+            .collect();
+        let m = median(samples);
+        medians.push(m);
+        let mut visible: PerTechnique<u32> = frame.draws.visible;
+        *visible.get_mut(Technique::Spt) += stats.instances_visible;
+        print!("{index:>5}  {phase:<8}");
+        for technique in shown {
+            print!(" {:>10}", visible.get(technique));
+        }
+        let draws = &frame.draws;
+        println!(
+            " {:>10} {:>9} {:>9} {:>10.1}",
+            draws.triangles.len(),
+            draws.planes.len() + draws.ellipsoids.len() + draws.lines.len() + draws.billboards.len(),
+            stats.ranges,
+            m.as_secs_f64() * 1e6
+        );
+    }
+    let max = medians.iter().max().copied().unwrap_or_default();
+    println!(
+        "median of the per-frame medians {:.1} µs, slowest frame {:.1} µs",
+        median(medians.clone()).as_secs_f64() * 1e6,
+        max.as_secs_f64() * 1e6
+    );
+    print_phases(poses, &medians);
+    println!();
 }
 
 /// Prints what every pose selects with `settings` and its median time over 15 runs; every row if
@@ -128,10 +330,11 @@ fn print_table(
     let max = medians.iter().max().copied().unwrap_or_default();
     println!(
         "median of the per-frame medians {:.1} µs, slowest frame {:.1} µs, {:.0} primitives per frame on average\n",
-        median(medians).as_secs_f64() * 1e6,
+        median(medians.clone()).as_secs_f64() * 1e6,
         max.as_secs_f64() * 1e6,
         primitives as f64 / poses.len() as f64
     );
+    print_phases(poses, &medians);
 }
 
 fn select(c: &mut Criterion) {
@@ -142,6 +345,12 @@ fn select(c: &mut Criterion) {
     let biased = LodSettings { depth_bias_k: 1.0, shading: Some((0.5, 1.0)), ..settings };
     print_table(&models, &instances, &poses, &settings, true);
     print_table(&models, &instances, &poses, &biased, false);
+
+    let (policy_lod, representations, calibration) = policy_model();
+    let policy_lods = [policy_lod];
+    let policy_models = [representations];
+    let mut policy = PolicyFrame::new(&policy_lods, &policy_models, &[calibration], &instances);
+    print_policy_table(&mut policy, &poses);
 
     let mut group = c.benchmark_group("select_frame");
     let mut list = DrawList::new();
@@ -159,6 +368,14 @@ fn select(c: &mut Criterion) {
             let camera = &poses[next % poses.len()].1;
             next += 1;
             black_box(select_frame(&models, &instances, camera, &biased, &mut list))
+        });
+    });
+    let mut next = 0;
+    group.bench_function("fly-through, policy", |b| {
+        b.iter(|| {
+            let camera = &poses[next % poses.len()].1;
+            next += 1;
+            black_box(policy.select(camera))
         });
     });
     for (name, frame) in [("overview (frame 0)", 0), ("descent (frame 22)", 22), ("inside (frame 45)", 45)] {

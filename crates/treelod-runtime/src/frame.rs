@@ -921,10 +921,10 @@ pub struct CellPrefix {
 }
 
 /// How many of `count` thresholds `hi[first..]` (sorted largest first, spec §10) exceed `tau`:
-/// the leading elements a cell draws at `tau`.
+/// the leading elements a cell draws at `tau`, by galloping from the front ([`leading_above`]),
+/// since a far tree's prefix of each cell is short.
 pub(crate) fn prefix_above(hi: &[f32], first: u32, count: u32, tau: f32) -> u32 {
-    let his = hi.get(first as usize..first as usize + count as usize).unwrap_or_default();
-    u32::try_from(his.partition_point(|&h| h > tau)).unwrap_or(u32::MAX)
+    leading_above(hi.get(first as usize..first as usize + count as usize).unwrap_or_default(), tau)
 }
 
 /// `τ` per metre of distance for an instance drawn whole by one threshold (impostor planes,
@@ -1568,6 +1568,24 @@ mod tests {
             values.sort_by(|a, b| b.total_cmp(a));
             let expected = values.partition_point(|&v| v > tau);
             prop_assert_eq!(leading_above(&values, tau) as usize, expected);
+        }
+
+        /// `prefix_above` (the prefixes of planes, ellipsoids and lines) gallops over one cell's
+        /// run of a larger array: the same count as a binary search of that run.
+        #[test]
+        fn prefix_above_equals_partition_point_of_the_cell(
+            mut before in proptest::collection::vec(0.0f32..10.0, 0..50),
+            mut cell in proptest::collection::vec(0.0f32..10.0, 0..300),
+            mut after in proptest::collection::vec(0.0f32..10.0, 0..50),
+            tau in -1.0f32..11.0,
+        ) {
+            for run in [&mut before, &mut cell, &mut after] {
+                run.sort_by(|a, b| b.total_cmp(a));
+            }
+            let expected = cell.partition_point(|&v| v > tau);
+            let (first, count) = (before.len() as u32, cell.len() as u32);
+            let hi: Vec<f32> = before.into_iter().chain(cell).chain(after).collect();
+            prop_assert_eq!(prefix_above(&hi, first, count, tau) as usize, expected);
         }
     }
 

@@ -27,7 +27,8 @@
 //! every [`STEPS_PER_OCTAVE`]-th of an octave ([`Choices`]); per tree the frame pays a distance, a
 //! `log2` and a lookup ([`Choices::choose`]).
 
-use glam::Mat4;
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
 use treelod_format::{CalibrationRecord, Container};
 
 use crate::draws::Representations;
@@ -290,11 +291,17 @@ pub const fn converges(technique: Technique) -> bool {
 /// times [`Camera::world_per_pixel`]): the height the calibration tables are indexed by.
 #[must_use]
 pub fn projected_height(lod: &ModelLod, transform: Mat4, camera: &Camera) -> f32 {
+    projected_height_at(lod, transform, camera.position, camera.world_per_pixel())
+}
+
+/// [`projected_height`] with the camera's position and [`Camera::world_per_pixel`] given, so a
+/// frame computes the latter (a tangent) once rather than per tree.
+fn projected_height_at(lod: &ModelLod, transform: Mat4, eye: Vec3, world_per_pixel: f32) -> f32 {
     let (min, max) = lod.bounds();
     let height = (max.y - min.y) * transform.y_axis.truncate().length();
     let centre = transform.transform_point3(lod.centre());
-    let distance = centre.distance(camera.position).max(1e-6);
-    height / (distance * camera.world_per_pixel())
+    let distance = centre.distance(eye).max(1e-6);
+    height / (distance * world_per_pixel)
 }
 
 /// Per instance, the technique the policy gave it last frame, for hysteresis: reset when the
@@ -311,11 +318,20 @@ impl PolicyState {
     }
 }
 
+/// Instances per parallel task of [`choose_instances`]: a tree's choice costs a few tens of
+/// nanoseconds, so a task of a thousand outweighs rayon's cost of a task, and 10^4 trees still
+/// split into enough tasks to balance two to eight threads.
+pub const CHOOSE_CHUNK: usize = 1024;
+
 /// Chooses each instance's technique for one frame: the policy's [`Choices`] of its model where
 /// the model has them (`choices[model]`, `None` for a model without calibration tables), else
 /// `otherwise`; `state` keeps the choices for the next frame's hysteresis. The result goes into
 /// [`Assignment::assign`](crate::Assignment), which still checks that each model holds its
 /// technique.
+///
+/// Each instance's choice depends only on it and its own previous choice, so more than
+/// [`CHOOSE_CHUNK`] instances are chosen in chunks on rayon's pool, each writing its own slice:
+/// the result is the same whatever the thread count.
 pub fn choose_instances(
     instances: &[Instance],
     lods: &[ModelLod],
@@ -327,21 +343,34 @@ pub fn choose_instances(
 ) {
     state.previous.resize(instances.len(), None);
     out.clear();
-    for (instance, previous) in instances.iter().zip(&mut state.previous) {
-        let m = instance.model as usize;
-        let technique = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
-            (Some(lod), Some(choices)) => {
-                let chosen = choices.choose(projected_height(lod, instance.transform, camera), *previous);
-                *previous = Some(chosen);
-                chosen
-            }
-            _ => {
-                *previous = None;
-                otherwise
-            }
-        };
-        out.push(technique);
+    out.resize(instances.len(), otherwise);
+    let (eye, world_per_pixel) = (camera.position, camera.world_per_pixel());
+    let choose = |instances: &[Instance], previous: &mut [Option<Technique>], out: &mut [Technique]| {
+        for ((instance, previous), out) in instances.iter().zip(previous).zip(out) {
+            let m = instance.model as usize;
+            *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
+                (Some(lod), Some(choices)) => {
+                    let height = projected_height_at(lod, instance.transform, eye, world_per_pixel);
+                    let chosen = choices.choose(height, *previous);
+                    *previous = Some(chosen);
+                    chosen
+                }
+                _ => {
+                    *previous = None;
+                    otherwise
+                }
+            };
+        }
+    };
+    if instances.len() <= CHOOSE_CHUNK {
+        choose(instances, &mut state.previous, out);
+        return;
     }
+    instances
+        .par_chunks(CHOOSE_CHUNK)
+        .zip(state.previous.par_chunks_mut(CHOOSE_CHUNK))
+        .zip(out.par_chunks_mut(CHOOSE_CHUNK))
+        .for_each(|((instances, previous), out)| choose(instances, previous, out));
 }
 
 /// The eye distance at which a model's block is `height` pixels high for `camera` (unit instance
@@ -355,7 +384,6 @@ pub fn distance_for_height(lod: &ModelLod, height: f32, camera: &Camera) -> f32 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec3;
     use treelod_format::calibration_technique as code;
 
     fn record(technique: u32, height: f32, error: f32, primitives: f32) -> CalibrationRecord {
@@ -487,6 +515,104 @@ mod tests {
         assert_eq!(choices.choose(height_at(boundary as f32 + 3.0), Some(Technique::Crossed)), after);
         // A previous technique that is nowhere near is not kept.
         assert_eq!(choices.choose(height_at(0.0), Some(Technique::LodChain)), Technique::Crossed);
+    }
+
+    /// The choices of a frame, made one instance at a time with [`projected_height`] and
+    /// [`Choices::choose`]: what [`choose_instances`] must give.
+    fn choose_reference(
+        instances: &[Instance],
+        lods: &[ModelLod],
+        choices: &[Option<Choices>],
+        camera: &Camera,
+        otherwise: Technique,
+        previous: &mut Vec<Option<Technique>>,
+    ) -> Vec<Technique> {
+        previous.resize(instances.len(), None);
+        instances
+            .iter()
+            .zip(previous.iter_mut())
+            .map(|(instance, previous)| {
+                let m = instance.model as usize;
+                match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
+                    (Some(lod), Some(choices)) => {
+                        let chosen = choices.choose(projected_height(lod, instance.transform, camera), *previous);
+                        *previous = Some(chosen);
+                        chosen
+                    }
+                    _ => {
+                        *previous = None;
+                        otherwise
+                    }
+                }
+            })
+            .collect()
+    }
+
+    /// A random forest of several chunks (a model with choices, one without, an unknown model
+    /// index) seen along a path of cameras: the chunked, parallel choice equals the reference
+    /// frame after frame, hysteresis state included, on one thread and on four.
+    #[test]
+    fn choosing_in_parallel_chunks_equals_the_reference_frame_after_frame() {
+        use glam::Quat;
+        use treelod_build::SplitMix64;
+        use treelod_format::BlockRecord;
+        let block = BlockRecord {
+            bounds_min: [-2.0, 0.0, -2.0],
+            bounds_max: [2.0, 9.0, 2.0],
+            grid: [1, 1, 1],
+            tree_count: 1,
+            flags: 0,
+            _pad: 0,
+        };
+        let lod = ModelLod::from_records(&block, &[], &[], &[]).expect("model");
+        let lods = [lod.clone(), lod];
+        let c = table();
+        let steps: Vec<Technique> =
+            (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
+        assert!(steps.iter().any(|&t| t != steps[0]), "the table switches technique: {steps:?}");
+        let choices = [Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 2 }), None];
+        let mut rng = SplitMix64(24);
+        let instances: Vec<Instance> = (0..3 * CHOOSE_CHUNK + 77)
+            .map(|_| {
+                let position = Vec3::new(rng.range(-400.0, 400.0), 0.0, rng.range(-400.0, 400.0));
+                let rotation = Quat::from_rotation_y(rng.range(0.0, std::f32::consts::TAU));
+                let scale = Vec3::splat(rng.range(0.5, 1.5));
+                // Mostly the calibrated model, some without tables, a few of no model at all.
+                let model = match rng.range(0.0, 1.0) {
+                    x if x < 0.8 => 0,
+                    x if x < 0.95 => 1,
+                    _ => 7,
+                };
+                Instance { model, transform: Mat4::from_scale_rotation_translation(scale, rotation, position) }
+            })
+            .collect();
+        let cameras: Vec<Camera> = (0..12)
+            .map(|i| {
+                let eye = Vec3::new(-300.0 + 50.0 * i as f32, 1.5 + 20.0 * (i % 3) as f32, 10.0 * i as f32);
+                Camera::look_at(eye, eye + Vec3::new(1.0, -0.1, -0.5), 1.0, 1280, 720)
+            })
+            .collect();
+        let mut reference_previous = Vec::new();
+        let expected: Vec<Vec<Technique>> = cameras
+            .iter()
+            .map(|camera| {
+                choose_reference(&instances, &lods, &choices, camera, Technique::Spt, &mut reference_previous)
+            })
+            .collect();
+        let switches = expected.windows(2).flat_map(|w| w[0].iter().zip(&w[1])).filter(|(a, b)| a != b).count();
+        assert!(switches > 0, "trees change technique along the path");
+        for threads in [1, 4] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
+            let mut state = PolicyState::default();
+            let mut out = Vec::new();
+            for (camera, expected) in cameras.iter().zip(&expected) {
+                pool.install(|| {
+                    choose_instances(&instances, &lods, &choices, camera, Technique::Spt, &mut state, &mut out)
+                });
+                assert_eq!(&out, expected, "{threads} threads");
+            }
+            assert_eq!(state.previous, reference_previous, "{threads} threads");
+        }
     }
 
     #[test]
