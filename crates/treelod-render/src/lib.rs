@@ -117,7 +117,7 @@ pub use draws::RecordedDraw;
 pub use ground::Ground;
 pub use renderer::{Instance, ModelId, RenderError, Renderer};
 pub use settings::{DebugView, DepthConvention, ImpostorBark, Pruning, RendererFormats, Settings, prune_scale};
-pub use shadows::{Cascade, MAX_CASCADES, Shadows, cascade_splits, fit_cascades};
+pub use shadows::{Cascade, Casters, MAX_CASCADES, Shadows, cascade_splits, fit_cascades};
 pub use sky::Sky;
 pub use stats::{FrameStats, ShadowStats};
 pub use technique::DrawSource;

@@ -12,7 +12,7 @@ use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
     Assignment, BudgetController, Calibration, Choices, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerPrimitive,
     PerTechnique, Policy, PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique,
-    TechniqueSettings, choose_instances, merge_ascending, select_frame, select_techniques,
+    TechniqueSettings, choose_instances_coarsest, merge_ascending, select_frame, select_techniques,
 };
 
 use crate::camera::Camera;
@@ -23,7 +23,7 @@ use crate::pipelines::Pipelines;
 #[cfg(doc)]
 use crate::settings::Pruning;
 use crate::settings::{DebugView, DepthConvention, RendererFormats, Settings, prune_scale};
-use crate::shadows::{Cascade, MAX_CASCADES, ShadowMaps, ShadowUniform, fit_cascades};
+use crate::shadows::{Cascade, Casters, MAX_CASCADES, ShadowMaps, ShadowUniform, fit_cascades};
 use crate::stats::{FrameStats, ShadowStats};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::technique::{Bucket, DrawSource};
@@ -696,7 +696,7 @@ impl Renderer {
         self.assign(&runtime_camera);
         let mut main = std::mem::take(&mut self.main);
         let assignment = std::mem::take(&mut self.assignment);
-        let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true, &assignment);
+        let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true, &assignment, full_mesh);
         self.assignment = assignment;
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
         shadow_views.resize_with(self.cascades.len(), View::default);
@@ -704,10 +704,20 @@ impl Renderer {
             ShadowStats { cascades: u32::try_from(self.cascades.len()).unwrap_or(0), ..ShadowStats::default() };
         let mut assignments = std::mem::take(&mut self.cascade_assignments);
         assignments.resize_with(self.cascades.len(), Assignment::default);
+        // The cascades' casters: as the camera's trees, or forced (`Shadows::casters`).
+        let casters = settings.shadows.map_or(Casters::default(), |s| s.casters);
+        let cascade_full = match casters {
+            Casters::Forced(technique) => technique == Technique::Full,
+            Casters::Coarser | Casters::LightView | Casters::CameraView => full_mesh,
+        };
+        let cascade_lod =
+            if cascade_full { LodSettings { s_min: 0.0, s_max: 0.0, ..lod_settings } } else { lod_settings };
         for (k, (view, assignment)) in shadow_views.iter_mut().zip(&mut assignments).enumerate() {
             let light = self.cascades[k].selection_camera();
-            self.assign_view(&light, Some(k), assignment);
-            let counts = self.select_view(view, &light, &lod_settings, false, assignment);
+            let cameras = [runtime_camera, light];
+            let heights = if casters == Casters::Coarser { &cameras[..] } else { &cameras[1..] };
+            self.assign_view(heights, Some(k), assignment);
+            let counts = self.select_view(view, &light, &cascade_lod, false, assignment, cascade_full);
             shadow.instances_visible += counts.instances.total();
             shadow.instances += counts.instances;
         }
@@ -716,8 +726,9 @@ impl Renderer {
         // What each cell needs: the largest prefix any view asked for.
         self.residency.begin_frame();
         self.requests.clear();
-        for view in std::iter::once(&main).chain(&shadow_views) {
-            self.request(view, full_mesh);
+        self.request(&main, full_mesh);
+        for view in &shadow_views {
+            self.request(view, cascade_full);
         }
         for request in &mut self.requests {
             request.wanted = self.wanted[request.model][request.cell][request.array as usize];
@@ -759,7 +770,7 @@ impl Renderer {
         self.record_view(&mut main, full_mesh, &mut stats);
         for (k, view) in shadow_views.iter_mut().enumerate() {
             let mut counted = FrameStats::default();
-            self.record_view(view, full_mesh, &mut counted);
+            self.record_view(view, cascade_full, &mut counted);
             shadow.add_view(k, &counted);
         }
         stats.shadow = shadow;
@@ -794,7 +805,7 @@ impl Renderer {
     /// whose model lacks its technique's data to [`Technique::FALLBACK`].
     fn assign(&mut self, camera: &treelod_runtime::Camera) {
         let mut assignment = std::mem::take(&mut self.assignment);
-        self.assign_view(camera, None, &mut assignment);
+        self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
         self.assignment = assignment;
         self.note_drawn_with();
     }
@@ -803,7 +814,19 @@ impl Renderer {
     /// else shadow cascade `cascade`'s, chosen from the light's view at the cascade's pixel (with
     /// hysteresis of its own), so a far tree in a coarse cascade casts the shadow of a cheaper
     /// representation.
-    fn assign_view(&mut self, camera: &treelod_runtime::Camera, cascade: Option<usize>, out: &mut Assignment) {
+    fn assign_view(&mut self, cameras: &[treelod_runtime::Camera], cascade: Option<usize>, out: &mut Assignment) {
+        let casters = self.settings.shadows.map_or(Casters::default(), |s| s.casters);
+        match (cascade, casters) {
+            (None, _) | (Some(_), Casters::LightView | Casters::Coarser) => {}
+            (Some(_), Casters::CameraView) => {
+                out.clone_from(&self.assignment);
+                return;
+            }
+            (Some(_), Casters::Forced(technique)) => {
+                out.assign(&self.instances, &self.representations, |_, _| technique);
+                return;
+            }
+        }
         let technique = self.settings.technique;
         let Some(policy) = self.settings.policy.filter(|p| self.policy.chooses(Some(p))) else {
             out.assign(&self.instances, &self.representations, |_, _| technique);
@@ -828,7 +851,8 @@ impl Renderer {
                 &mut tables.cascade_states[k]
             }
         };
-        choose_instances(&self.instances, &self.lods, &tables.choices, camera, technique, state, &mut tables.chosen);
+        let chosen = &mut tables.chosen;
+        choose_instances_coarsest(&self.instances, &self.lods, &tables.choices, cameras, technique, state, chosen);
         let chosen = &tables.chosen;
         out.assign(&self.instances, &self.representations, |i, _| chosen[i]);
     }
@@ -868,6 +892,7 @@ impl Renderer {
         lod_settings: &LodSettings,
         main: bool,
         assignment: &Assignment,
+        full_mesh: bool,
     ) -> ViewCounts {
         let settings = self.settings;
         view.draws.clear();
@@ -909,7 +934,7 @@ impl Renderer {
         let selected = select_frame(&self.lods, spt_instances, camera, lod_settings, &mut view.selection);
         // The full mesh is selected as the point tree with zero thresholds: its trees are drawn
         // as the full mesh; every other technique's fallback is the point tree.
-        let rest = if settings.technique == Technique::Full { Technique::Full } else { Technique::FALLBACK };
+        let rest = if full_mesh { Technique::Full } else { Technique::FALLBACK };
         let mut counts = ViewCounts { instances: view.draws.visible, leaves_pruned: view.draws.leaves_pruned };
         *counts.instances.get_mut(rest) += selected.instances_visible;
         counts

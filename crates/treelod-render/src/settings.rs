@@ -123,9 +123,9 @@ pub struct Settings {
     /// calibration tables (spec §6.15; `treelod build` writes them whenever it builds a
     /// representation besides the point tree) is drawn with the cheapest representation whose
     /// calibrated error at its projected height is within [`Policy::target`] of the least error
-    /// there (spec §10.2), with hysteresis. Each shadow cascade chooses the same way from the
-    /// light's view, at its tree's height in the cascade's selection pixels ([`Shadows`]'s
-    /// `lod_texels`), so a far tree in a coarse cascade casts the shadow of a cheaper
+    /// there (spec §10.2), with hysteresis. Each shadow cascade chooses the same way, by default
+    /// at the smaller of the tree's heights on screen and in the cascade's selection pixels
+    /// ([`Shadows`]'s `casters`), so a far tree in a coarse cascade casts the shadow of a cheaper
     /// representation than it is drawn with. With [`Policy::budget`] the target and [`Self::s_min`] are
     /// steered from frame to frame so the camera's view meets that many primitives
     /// ([`Renderer::prepare`]). `None` draws every tree with [`Self::technique`] (to force one).

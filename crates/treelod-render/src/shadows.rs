@@ -18,6 +18,7 @@
 //!   screen pick them in texels.
 
 use glam::{Mat4, Vec3, Vec4};
+use treelod_runtime::Technique;
 
 use crate::camera::Camera;
 
@@ -53,13 +54,46 @@ pub struct Shadows {
     /// texels. The receivers' filter spans 4×4 texels, so detail under two texels is blurred away
     /// anyway; 1 selects as finely as the map resolves.
     pub lod_texels: f32,
+    /// What the cascades cast each tree with ([`Casters`]; default: chosen at the coarser of
+    /// the camera's and the light's view).
+    pub casters: Casters,
+}
+
+/// What the shadow cascades cast each tree with ([`Shadows::casters`]). The first three choose
+/// as the camera's trees are chosen ([`crate::Settings::policy`], else
+/// [`crate::Settings::technique`]), at different heights, each cascade with hysteresis of its own.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Casters {
+    /// At the smaller of the tree's heights on screen and in the cascade's selection pixels
+    /// ([`Shadows::lod_texels`] texels): a tree casts no more detail than the screen shows or
+    /// the map resolves.
+    #[default]
+    Coarser,
+    /// From the light's view alone, at the tree's height in the cascade's selection pixels: a
+    /// tree its cascade resolves more finely than the screen casts more detail than it is drawn
+    /// with, a far tree in a coarse cascade less.
+    LightView,
+    /// What the camera draws each tree with this frame: a tree casts the shadow of what is drawn.
+    CameraView,
+    /// One technique for every tree, for the shadow pass alone (e.g. [`Technique::Full`], the
+    /// reference a shadow's error is measured against).
+    Forced(Technique),
 }
 
 impl Default for Shadows {
     /// Three 2048² cascades over the first 150 m, splits weighted 0.75 towards logarithmic, a
-    /// normal offset of 1.5 texels, selection in pixels of 2 texels.
+    /// normal offset of 1.5 texels, selection in pixels of 2 texels, casters chosen at the
+    /// coarser of the camera's and the light's view.
     fn default() -> Self {
-        Self { resolution: 2048, cascades: 3, distance: 150.0, split_lambda: 0.75, normal_offset: 1.5, lod_texels: 2.0 }
+        Self {
+            resolution: 2048,
+            cascades: 3,
+            distance: 150.0,
+            split_lambda: 0.75,
+            normal_offset: 1.5,
+            lod_texels: 2.0,
+            casters: Casters::Coarser,
+        }
     }
 }
 

@@ -125,7 +125,7 @@ fn without_tables_the_policy_draws_the_settings_technique() {
 }
 
 #[test]
-fn a_shadow_cascade_chooses_from_the_light_s_view() {
+fn a_shadow_cascade_chooses_at_the_coarser_of_the_light_s_and_the_camera_s_view() {
     let gpu = gpu();
     let container = calibrated_demo();
     let calibration = Calibration::from_container(&container).expect("calibrated");
@@ -139,25 +139,53 @@ fn a_shadow_cascade_chooses_from_the_light_s_view() {
     // is a few of its pixels high.
     let distance = treelod_runtime::policy::distance_for_height(&lod, 200.0, &runtime_camera);
     let position = vec3(0.0, 0.0, -distance) - lod.centre();
-    let shadows = Shadows { cascades: 1, resolution: 256, lod_texels: 64.0, ..Shadows::default() };
-    let settings = Settings { shadows: Some(shadows), ..Settings::default() };
-    let mut renderer = forest(&gpu, &container, settings, &[position]);
-    let camera = Camera::look_at(eye, ahead, 0.9, width, height);
-    let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
     let transform = Mat4::from_translation(position);
     let drawn = choices.choose(projected_height(&lod, transform, &runtime_camera), None);
-    let light = renderer.shadow_cascades()[0].selection_camera();
-    let in_shadow = projected_height(&lod, transform, &light);
-    let cast = choices.choose(in_shadow, None);
-    assert_ne!(drawn, cast, "the test needs two choices: {in_shadow} px in the cascade");
-    assert_eq!(stats.instances[drawn], 1, "{stats:?}");
-    assert_eq!(stats.shadow.instances[cast], 1, "the cascade chose at {in_shadow} px: {:?}", stats.shadow);
-    assert_eq!(stats.shadow.instances.total(), stats.shadow.instances_visible);
+    let camera = Camera::look_at(eye, ahead, 0.9, width, height);
+    // A coarse cascade (the tree a few of its selection pixels high) and a fine one (more pixels
+    // than on screen): from the light's view alone, and at the coarser of both views.
+    let mut differ = false;
+    for (resolution, lod_texels) in [(256, 64.0), (4096, 0.1)] {
+        for casters in [treelod_render::Casters::LightView, treelod_render::Casters::Coarser] {
+            let shadows = Shadows { cascades: 1, resolution, lod_texels, casters, ..Shadows::default() };
+            let settings = Settings { shadows: Some(shadows), ..Settings::default() };
+            let mut renderer = forest(&gpu, &container, settings, &[position]);
+            let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+            let light = renderer.shadow_cascades()[0].selection_camera();
+            let in_shadow = projected_height(&lod, transform, &light);
+            let on_screen = projected_height(&lod, transform, &runtime_camera);
+            let at = if casters == treelod_render::Casters::Coarser { in_shadow.min(on_screen) } else { in_shadow };
+            let cast = choices.choose(at, None);
+            differ |= cast != drawn;
+            assert_eq!(stats.instances[drawn], 1, "{stats:?}");
+            assert_eq!(stats.shadow.instances[cast], 1, "{casters:?} at {at} px: {:?}", stats.shadow);
+            assert_eq!(stats.shadow.instances.total(), stats.shadow.instances_visible);
+            if lod_texels > 1.0 {
+                assert!(in_shadow < on_screen, "the coarse cascade: {in_shadow} px against {on_screen}");
+            } else {
+                assert!(in_shadow > on_screen, "the fine cascade: {in_shadow} px against {on_screen}");
+            }
+        }
+    }
+    assert!(differ, "the test needs a cascade that casts another choice than is drawn");
+    let shadows = Shadows { cascades: 1, resolution: 256, lod_texels: 64.0, ..Shadows::default() };
     // Forced settings force the cascades too.
     let forced = Settings { shadows: Some(shadows), ..Settings::forced(Technique::Impostors) };
     let mut renderer = forest(&gpu, &container, forced, &[position]);
     let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
     assert_eq!(stats.shadow.instances[Technique::Impostors], 1, "{:?}", stats.shadow);
+    // Casters forced for the shadow pass alone.
+    let casters = Shadows { casters: treelod_render::Casters::Forced(Technique::Crossed), ..shadows };
+    let mut renderer =
+        forest(&gpu, &container, Settings { shadows: Some(casters), ..Settings::default() }, &[position]);
+    let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+    assert_eq!((stats.instances[drawn], stats.shadow.instances[Technique::Crossed]), (1, 1), "{stats:?}");
+    // Or the camera's choice: the tree casts what it is drawn with.
+    let casters = Shadows { casters: treelod_render::Casters::CameraView, ..shadows };
+    let mut renderer =
+        forest(&gpu, &container, Settings { shadows: Some(casters), ..Settings::default() }, &[position]);
+    let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+    assert_eq!((stats.instances[drawn], stats.shadow.instances[drawn]), (1, 1), "{stats:?}");
 }
 
 #[test]

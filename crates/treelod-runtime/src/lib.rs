@@ -46,7 +46,9 @@ pub use impostor::{
     CROSSFADE, ImpostorBark, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share,
     plane_drawn, plane_parents,
 };
-pub use policy::{Calibration, Choices, Policy, PolicyState, choose_instances, projected_height};
+pub use policy::{
+    Calibration, Choices, Policy, PolicyState, choose_instances, choose_instances_coarsest, projected_height,
+};
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
 pub use spt_lod::{PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};

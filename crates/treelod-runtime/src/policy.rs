@@ -341,16 +341,37 @@ pub fn choose_instances(
     state: &mut PolicyState,
     out: &mut Vec<Technique>,
 ) {
+    choose_instances_coarsest(instances, lods, choices, std::slice::from_ref(camera), otherwise, state, out);
+}
+
+/// As [`choose_instances`], each tree at the smallest of its projected heights for `cameras`:
+/// for a shadow map, the camera's and the map's own, so a tree casts no more detail than the
+/// screen shows or the map resolves. No camera: every tree at height 0.
+pub fn choose_instances_coarsest(
+    instances: &[Instance],
+    lods: &[ModelLod],
+    choices: &[Option<Choices>],
+    cameras: &[Camera],
+    otherwise: Technique,
+    state: &mut PolicyState,
+    out: &mut Vec<Technique>,
+) {
     state.previous.resize(instances.len(), None);
     out.clear();
     out.resize(instances.len(), otherwise);
-    let (eye, world_per_pixel) = (camera.position, camera.world_per_pixel());
+    let eyes: Vec<(Vec3, f32)> = cameras.iter().map(|c| (c.position, c.world_per_pixel())).collect();
     let choose = |instances: &[Instance], previous: &mut [Option<Technique>], out: &mut [Technique]| {
         for ((instance, previous), out) in instances.iter().zip(previous).zip(out) {
             let m = instance.model as usize;
             *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                 (Some(lod), Some(choices)) => {
-                    let height = projected_height_at(lod, instance.transform, eye, world_per_pixel);
+                    let height = eyes
+                        .iter()
+                        .map(|&(eye, world_per_pixel)| {
+                            projected_height_at(lod, instance.transform, eye, world_per_pixel)
+                        })
+                        .reduce(f32::min)
+                        .unwrap_or(0.0);
                     let chosen = choices.choose(height, *previous);
                     *previous = Some(chosen);
                     chosen

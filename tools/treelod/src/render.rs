@@ -1,13 +1,13 @@
 //! `treelod render`: draws a container or a scene file offscreen (wgpu on Vulkan; Mesa lavapipe on
 //! machines without a GPU) and writes a PNG, optionally beside the full mesh for comparison.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use treelod_format::ErrorClass;
 use treelod_render::offscreen::{Gpu, Image, render_prepared_scene};
 use treelod_render::{
-    DebugView, FrameStats, Ground, ImpostorBark, Primitive, Pruning, Renderer, Settings, Shadows, Technique,
+    Casters, DebugView, FrameStats, Ground, ImpostorBark, Primitive, Pruning, Renderer, Settings, Shadows, Technique,
 };
 
 use crate::report::{self, Failed};
@@ -38,6 +38,11 @@ pub struct Args {
     /// Write the level of detail (left) beside the full mesh (right), twice as wide.
     #[arg(long)]
     pub compare: bool,
+    /// With shadows: render the image again with every tree casting its full mesh (the camera's
+    /// trees drawn as before) and print the image's error against it, multi-scale RMSE and FLIP:
+    /// what the shadow pass's choice of representations costs in the picture.
+    #[arg(long)]
+    pub shadow_error: bool,
     /// Colour by grid cell (`cells`), by kind (`kinds`: triangles red, points blue, pruned
     /// leaves green, impostor planes yellow, ellipsoids cyan), by level (`levels`: one colour per
     /// octave of each point's, plane's, ellipsoid's or line's interval, triangles light grey) or
@@ -322,6 +327,12 @@ pub struct ShadowArgs {
     /// `--shadows`) [default: 150].
     #[arg(long, value_name = "METRES", value_parser = parse_distance, allow_negative_numbers = true)]
     pub shadow_distance: Option<f32>,
+    /// What the cascades cast each tree with, chosen as the camera's trees are: `coarser`, at the
+    /// smaller of the tree's heights on screen and in the cascade's selection pixels; `light`, at
+    /// its height in the cascade alone; `camera`, what the camera draws it with (implies
+    /// `--shadows`) [default: coarser].
+    #[arg(long, value_name = "FROM", value_parser = ["coarser", "light", "camera"])]
+    pub shadow_casters: Option<String>,
 }
 
 impl ShadowArgs {
@@ -331,6 +342,7 @@ impl ShadowArgs {
             || self.shadow_resolution.is_some()
             || self.shadow_cascades.is_some()
             || self.shadow_distance.is_some()
+            || self.shadow_casters.is_some()
     }
 
     /// `base` with the values these options give.
@@ -339,6 +351,12 @@ impl ShadowArgs {
             resolution: self.shadow_resolution.unwrap_or(base.resolution),
             cascades: self.shadow_cascades.unwrap_or(base.cascades),
             distance: self.shadow_distance.unwrap_or(base.distance),
+            casters: match self.shadow_casters.as_deref() {
+                Some("camera") => Casters::CameraView,
+                Some("light") => Casters::LightView,
+                Some(_) => Casters::Coarser,
+                None => base.casters,
+            },
             ..base
         }
     }
@@ -559,6 +577,9 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         line.push_str("; ");
         line.push_str(&shadow_summary(&stats));
     }
+    if args.shadow_error {
+        line.push_str(&shadow_error(&mut renderer, &lod, render, &args.output)?);
+    }
     let image = if args.compare {
         renderer.settings_mut().technique = Technique::Full;
         renderer.settings_mut().policy = None;
@@ -610,6 +631,36 @@ pub fn shadow_summary(stats: &FrameStats) -> String {
     )
 }
 
+/// `; shadow error against full-mesh casters: RMSE …, FLIP …`: `image` (drawn by `renderer`)
+/// against the same frame with every tree casting its full mesh (`Shadows::casters`), measured
+/// with eval's metrics; the renderer's casters are restored. Without shadows, says so.
+fn shadow_error(
+    renderer: &mut Renderer,
+    image: &Image,
+    render: impl Fn(&mut Renderer) -> Result<(Image, FrameStats), Failed>,
+    output: &Path,
+) -> Result<String, Failed> {
+    let Some(shadows) = renderer.settings().shadows else {
+        return Ok("; no shadow error (no shadows)".to_owned());
+    };
+    renderer.settings_mut().shadows = Some(Shadows { casters: Casters::Forced(Technique::Full), ..shadows });
+    let (reference, full) = render(renderer)?;
+    renderer.settings_mut().shadows = Some(shadows);
+    let failed = |e: treelod_eval::MetricError| {
+        report::message_error(output, &format!("cannot measure the shadow error: {e}"));
+        Failed { class: ErrorClass::Io }
+    };
+    let linear =
+        |i: &Image| treelod_eval::metrics::LinearImage::from_srgba8(i.width, i.height, &i.rgba).map_err(failed);
+    let (sample, reference) = (linear(image)?, linear(&reference)?);
+    let rmse = treelod_eval::metrics::multiscale_rmse(&sample, &reference).map_err(failed)?.summary();
+    let flip = treelod_eval::metrics::flip::mean_flip(&sample, &reference).map_err(failed)?;
+    Ok(format!(
+        "; shadow error against full-mesh casters ({} shadow primitives): RMSE {rmse:.5}, FLIP {flip:.5}",
+        full.shadow.primitives()
+    ))
+}
+
 /// Prints a scene error (its message starts with the file) and returns its class.
 pub fn scene_failed(error: &scene::SceneError) -> Failed {
     report::print_error(&error.to_string());
@@ -633,7 +684,7 @@ fn side_by_side(left: &Image, right: &Image) -> Image {
 }
 
 /// Writes `image` as a PNG to `path`, atomically; errors are printed naming the file.
-pub fn write_png(path: &std::path::Path, image: &Image) -> Result<(), Failed> {
+pub fn write_png(path: &Path, image: &Image) -> Result<(), Failed> {
     let png = encode_png(image).map_err(|e| {
         report::message_error(path, &format!("cannot encode the PNG: {e}"));
         Failed { class: ErrorClass::Io }
@@ -684,6 +735,15 @@ mod tests {
         let all = ["--shadows", "--shadow-resolution", "512", "--shadow-cascades", "4", "--shadow-distance", "40.5"];
         let custom = Shadows { resolution: 512, cascades: 4, distance: 40.5, ..Shadows::default() };
         assert_eq!(shadow_settings(&all).ok(), Some(Some(custom)));
+        let camera = shadow_settings(&["--shadow-casters", "camera"]).ok().flatten();
+        assert_eq!(camera, Some(Shadows { casters: Casters::CameraView, ..Shadows::default() }));
+        let light = shadow_settings(&["--shadow-casters", "light"]).ok().flatten();
+        assert_eq!(light, Some(Shadows { casters: Casters::LightView, ..Shadows::default() }));
+        let coarser = shadow_settings(&["--shadow-casters", "coarser"]).ok().flatten();
+        assert_eq!(coarser, Some(Shadows::default()));
+        let error = shadow_settings(&["--shadow-casters", "sun"]).expect_err("refused");
+        assert_eq!(error.kind(), clap::error::ErrorKind::InvalidValue);
+        assert!(error.to_string().contains("--shadow-casters"), "{error}");
         let bad: [&[&str]; 9] = [
             &["--shadow-cascades", "0"],
             &["--shadow-cascades", "5"],

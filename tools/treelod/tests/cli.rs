@@ -1516,6 +1516,37 @@ fn render_shadows_draws_a_shadowed_ground_and_reports_the_shadow_pass() {
     assert!(!render_ok(demo, &plain, &["--size", "64x48"]).contains("shadow pass"));
 }
 
+/// The RMSE and FLIP of render's `--shadow-error`.
+fn shadow_error(line: &str) -> (f64, f64) {
+    let rest = &line[line.find("; shadow error against full-mesh casters").unwrap_or_else(|| panic!("{line}"))..];
+    let number = |key: &str| -> f64 {
+        let at = rest.find(key).unwrap_or_else(|| panic!("{key}: {rest}")) + key.len();
+        rest[at..]
+            .split(|c: char| c != '.' && !c.is_ascii_digit())
+            .next()
+            .and_then(|n| n.parse().ok())
+            .expect("a number")
+    };
+    (number("RMSE "), number("FLIP "))
+}
+
+#[test]
+fn render_shadow_error_measures_the_casters_against_the_full_mesh() {
+    let demo = shared_demo();
+    let dir = scratch("render-shadow-error");
+    let png = dir.join("error.png");
+    // The point tree casts its shadow: a small error against the full mesh's.
+    let stdout = render_ok(demo, &png, &["--size", "160x120", "--shadows", "--shadow-error"]);
+    let (rmse, flip) = shadow_error(&stdout);
+    assert!(rmse > 0.0 && rmse < 0.05 && flip > 0.0 && flip < 0.05, "{stdout}");
+    // Trees drawn and cast with the full mesh: the very same image.
+    let stdout = render_ok(demo, &png, &["--size", "160x120", "--shadows", "--shadow-error", "--technique", "full"]);
+    assert_eq!(shadow_error(&stdout), (0.0, 0.0), "{stdout}");
+    // Without shadows there is nothing to measure.
+    let stdout = render_ok(demo, &png, &["--size", "64x48", "--shadow-error"]);
+    assert!(stdout.contains("no shadow error (no shadows)"), "{stdout}");
+}
+
 #[test]
 fn render_refuses_bad_shadow_options_naming_them() {
     let demo = shared_demo();
