@@ -94,6 +94,7 @@
 //! draws: on the built-in 10,000-tree fly-through (`treelod bench --shadows`), with the default
 //! three 2048² cascades over 150 m, 0.78× the primitives of the main pass with the point trees.
 
+mod assign;
 mod camera;
 mod draws;
 mod gpu_select;

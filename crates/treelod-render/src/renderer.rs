@@ -10,11 +10,12 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
-    Assignment, BudgetController, Calibration, Choices, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerPrimitive,
-    PerTechnique, Policy, PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique,
-    TechniqueSettings, choose_instances_coarsest, merge_ascending, select_frame, select_techniques,
+    Assignment, BudgetController, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerPrimitive, PerTechnique, Policy,
+    PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique, TechniqueSettings,
+    merge_ascending, select_frame, select_techniques,
 };
 
+use crate::assign::PolicyModels;
 use crate::camera::Camera;
 use crate::draws::{DrawInfo, RecordedDraw, View};
 use crate::gpu_select::{GpuSelection, select_frame_gpu};
@@ -156,9 +157,9 @@ pub struct Renderer {
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     pub(crate) visible_fraction: Vec<f32>,
     /// This frame's trees per technique ([`Self::assign`]) from the camera's view.
-    assignment: Assignment,
+    pub(crate) assignment: Assignment,
     /// Per shadow cascade, this frame's trees per technique from the light's view.
-    cascade_assignments: Vec<Assignment>,
+    pub(crate) cascade_assignments: Vec<Assignment>,
     /// The policy's per-model tables and per-instance state ([`Settings::policy`]).
     pub(crate) policy: PolicyModels,
     /// Per instance, the technique it is drawn with this frame (this frame's assignment), for
@@ -185,38 +186,6 @@ pub struct Renderer {
     pub(crate) buckets: Vec<Vec<(DrawInfo, u32, u32)>>,
     pub(crate) draw_infos: Vec<DrawInfo>,
     pub(crate) indirect: Vec<wgpu::util::DrawIndirectArgs>,
-}
-
-/// What the policy ([`Settings::policy`]) reads per model, and keeps per instance.
-#[derive(Default)]
-pub(crate) struct PolicyModels {
-    /// Per model: its calibration tables, if its container has them.
-    pub(crate) calibrations: Vec<Option<Calibration>>,
-    /// Per model: its choices under [`Self::made_for`] (`None` without tables).
-    choices: Vec<Option<Choices>>,
-    /// The policy the choices were made for; `None`: to be made.
-    made_for: Option<Policy>,
-    /// Per instance: last frame's choice (hysteresis).
-    state: PolicyState,
-    /// Scratch: this frame's choice per instance.
-    chosen: Vec<Technique>,
-    /// Per shadow cascade: last frame's choice per instance from the light's view (hysteresis).
-    cascade_states: Vec<PolicyState>,
-    /// Budget mode ([`Policy::budget`]): what steers the target and `s_min` from frame to frame;
-    /// made when budget mode starts, dropped when it ends.
-    budget: Option<BudgetController>,
-}
-
-impl PolicyModels {
-    /// Whether `policy` chooses any tree's technique: some model has calibration tables.
-    fn chooses(&self, policy: Option<&Policy>) -> bool {
-        policy.is_some() && self.calibrations.iter().any(Option::is_some)
-    }
-
-    /// Forgets the choices (a model was added) so the next frame makes them again.
-    pub(crate) fn models_changed(&mut self) {
-        self.made_for = None;
-    }
 }
 
 /// What [`Renderer::select_view`] counted.
@@ -796,84 +765,6 @@ impl Renderer {
             queue.write_buffer(&self.indirect_buffer, 0, &bytes);
         }
         stats
-    }
-
-    /// Assigns this frame's instances to techniques for the camera's view (each shadow cascade
-    /// assigns its own, [`Self::assign_view`]): with a
-    /// [`Settings::policy`], each tree of a model with calibration tables to the policy's choice
-    /// at its projected height for `camera`, every other tree to [`Settings::technique`]; a tree
-    /// whose model lacks its technique's data to [`Technique::FALLBACK`].
-    fn assign(&mut self, camera: &treelod_runtime::Camera) {
-        let mut assignment = std::mem::take(&mut self.assignment);
-        self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
-        self.assignment = assignment;
-        self.note_drawn_with();
-    }
-
-    /// Fills `out` with the trees per technique for one view: `cascade` `None` for the camera's,
-    /// else shadow cascade `cascade`'s, chosen from the light's view at the cascade's pixel (with
-    /// hysteresis of its own), so a far tree in a coarse cascade casts the shadow of a cheaper
-    /// representation.
-    fn assign_view(&mut self, cameras: &[treelod_runtime::Camera], cascade: Option<usize>, out: &mut Assignment) {
-        let casters = self.settings.shadows.map_or(Casters::default(), |s| s.casters);
-        match (cascade, casters) {
-            (None, _) | (Some(_), Casters::LightView | Casters::Coarser) => {}
-            (Some(_), Casters::CameraView) => {
-                out.clone_from(&self.assignment);
-                return;
-            }
-            (Some(_), Casters::Forced(technique)) => {
-                out.assign(&self.instances, &self.representations, |_, _| technique);
-                return;
-            }
-        }
-        let technique = self.settings.technique;
-        let Some(policy) = self.settings.policy.filter(|p| self.policy.chooses(Some(p))) else {
-            out.assign(&self.instances, &self.representations, |_, _| technique);
-            return;
-        };
-        let tables = &mut self.policy;
-        if tables.made_for != Some(policy) {
-            tables.choices = tables
-                .calibrations
-                .iter()
-                .zip(&self.representations)
-                .map(|(calibration, models)| calibration.as_ref().map(|c| Choices::new(c, &policy, models)))
-                .collect();
-            tables.made_for = Some(policy);
-        }
-        let state = match cascade {
-            None => &mut tables.state,
-            Some(k) => {
-                if tables.cascade_states.len() <= k {
-                    tables.cascade_states.resize_with(k + 1, PolicyState::default);
-                }
-                &mut tables.cascade_states[k]
-            }
-        };
-        let chosen = &mut tables.chosen;
-        choose_instances_coarsest(&self.instances, &self.lods, &tables.choices, cameras, technique, state, chosen);
-        let chosen = &tables.chosen;
-        out.assign(&self.instances, &self.representations, |i, _| chosen[i]);
-    }
-
-    /// Each instance's technique from this frame's assignment (read when the draws are
-    /// recorded).
-    fn note_drawn_with(&mut self) {
-        self.drawn_with.clear();
-        self.drawn_with.resize(self.instances.len(), Technique::FALLBACK);
-        for technique in Technique::ALL {
-            for &i in &self.assignment[technique] {
-                if let Some(slot) = self.drawn_with.get_mut(i as usize) {
-                    *slot = technique;
-                }
-            }
-        }
-    }
-
-    /// The technique instance `instance` is drawn with this frame.
-    pub(crate) fn technique_of(&self, instance: u32) -> Technique {
-        self.drawn_with.get(instance as usize).copied().unwrap_or(Technique::FALLBACK)
     }
 
     /// Selects one view (its lists cleared first): each technique's runtime selection over the

@@ -1,0 +1,129 @@
+//! Which technique draws each tree, per view: the policy's per-model tables and per-instance
+//! state ([`PolicyModels`]), and the renderer's assignment of the frame's trees for the camera
+//! and for each shadow cascade ([`Settings::shadows`]' [`Casters`]).
+
+use treelod_runtime::{
+    Assignment, BudgetController, Calibration, Choices, Policy, PolicyState, Technique, choose_instances_coarsest,
+};
+
+#[cfg(doc)]
+use crate::Settings;
+use crate::renderer::Renderer;
+use crate::shadows::Casters;
+
+/// What the policy ([`Settings::policy`]) reads per model, and keeps per instance.
+#[derive(Default)]
+pub(crate) struct PolicyModels {
+    /// Per model: its calibration tables, if its container has them.
+    pub(crate) calibrations: Vec<Option<Calibration>>,
+    /// Per model: its choices under [`Self::made_for`] (`None` without tables).
+    pub(crate) choices: Vec<Option<Choices>>,
+    /// The policy the choices were made for; `None`: to be made.
+    pub(crate) made_for: Option<Policy>,
+    /// Per instance: last frame's choice (hysteresis).
+    pub(crate) state: PolicyState,
+    /// Scratch: this frame's choice per instance.
+    pub(crate) chosen: Vec<Technique>,
+    /// Per shadow cascade: last frame's choice per instance from the light's view (hysteresis).
+    pub(crate) cascade_states: Vec<PolicyState>,
+    /// Budget mode ([`Policy::budget`]): what steers the target and `s_min` from frame to frame;
+    /// made when budget mode starts, dropped when it ends.
+    pub(crate) budget: Option<BudgetController>,
+}
+
+impl PolicyModels {
+    /// Whether `policy` chooses any tree's technique: some model has calibration tables.
+    pub(crate) fn chooses(&self, policy: Option<&Policy>) -> bool {
+        policy.is_some() && self.calibrations.iter().any(Option::is_some)
+    }
+
+    /// Forgets the choices (a model was added) so the next frame makes them again.
+    pub(crate) fn models_changed(&mut self) {
+        self.made_for = None;
+    }
+}
+
+impl Renderer {
+    /// Assigns this frame's instances to techniques for the camera's view (each shadow cascade
+    /// assigns its own, [`Self::assign_view`]): with a
+    /// [`Settings::policy`], each tree of a model with calibration tables to the policy's choice
+    /// at its projected height for `camera`, every other tree to [`Settings::technique`]; a tree
+    /// whose model lacks its technique's data to [`Technique::FALLBACK`].
+    pub(crate) fn assign(&mut self, camera: &treelod_runtime::Camera) {
+        let mut assignment = std::mem::take(&mut self.assignment);
+        self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
+        self.assignment = assignment;
+        self.note_drawn_with();
+    }
+
+    /// Fills `out` with the trees per technique for one view: `cascade` `None` for the camera's,
+    /// else shadow cascade `cascade`'s, chosen from the light's view at the cascade's pixel (with
+    /// hysteresis of its own), so a far tree in a coarse cascade casts the shadow of a cheaper
+    /// representation.
+    pub(crate) fn assign_view(
+        &mut self,
+        cameras: &[treelod_runtime::Camera],
+        cascade: Option<usize>,
+        out: &mut Assignment,
+    ) {
+        let casters = self.settings.shadows.map_or(Casters::default(), |s| s.casters);
+        match (cascade, casters) {
+            (None, _) | (Some(_), Casters::LightView | Casters::Coarser) => {}
+            (Some(_), Casters::CameraView) => {
+                out.clone_from(&self.assignment);
+                return;
+            }
+            (Some(_), Casters::Forced(technique)) => {
+                out.assign(&self.instances, &self.representations, |_, _| technique);
+                return;
+            }
+        }
+        let technique = self.settings.technique;
+        let Some(policy) = self.settings.policy.filter(|p| self.policy.chooses(Some(p))) else {
+            out.assign(&self.instances, &self.representations, |_, _| technique);
+            return;
+        };
+        let tables = &mut self.policy;
+        if tables.made_for != Some(policy) {
+            tables.choices = tables
+                .calibrations
+                .iter()
+                .zip(&self.representations)
+                .map(|(calibration, models)| calibration.as_ref().map(|c| Choices::new(c, &policy, models)))
+                .collect();
+            tables.made_for = Some(policy);
+        }
+        let state = match cascade {
+            None => &mut tables.state,
+            Some(k) => {
+                if tables.cascade_states.len() <= k {
+                    tables.cascade_states.resize_with(k + 1, PolicyState::default);
+                }
+                &mut tables.cascade_states[k]
+            }
+        };
+        let chosen = &mut tables.chosen;
+        choose_instances_coarsest(&self.instances, &self.lods, &tables.choices, cameras, technique, state, chosen);
+        let chosen = &tables.chosen;
+        out.assign(&self.instances, &self.representations, |i, _| chosen[i]);
+    }
+
+    /// Each instance's technique from this frame's assignment (read when the draws are
+    /// recorded).
+    fn note_drawn_with(&mut self) {
+        self.drawn_with.clear();
+        self.drawn_with.resize(self.instances.len(), Technique::FALLBACK);
+        for technique in Technique::ALL {
+            for &i in &self.assignment[technique] {
+                if let Some(slot) = self.drawn_with.get_mut(i as usize) {
+                    *slot = technique;
+                }
+            }
+        }
+    }
+
+    /// The technique instance `instance` is drawn with this frame.
+    pub(crate) fn technique_of(&self, instance: u32) -> Technique {
+        self.drawn_with.get(instance as usize).copied().unwrap_or(Technique::FALLBACK)
+    }
+}
