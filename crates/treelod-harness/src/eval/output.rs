@@ -195,10 +195,22 @@ pub struct BandSummary {
     pub rmse: f64,
     /// Mean FLIP.
     pub flip: f64,
+    /// The first technique of the band (in order; the full mesh, drawn as the reference or at
+    /// 1×, not counted) with at least [`DOMINATED_ERROR`] less error and [`DOMINATED_COST`]
+    /// fewer primitives: one that is better and cheaper at this size on screen.
+    pub dominated_by: Option<&'static str>,
 }
 
+/// A technique is dominated in a band where another has at most this share of its mean RMSE
+/// (5 % less)...
+pub const DOMINATED_ERROR: f64 = 0.95;
+
+/// ...and at most this share of its mean primitives (10 % fewer).
+pub const DOMINATED_COST: f64 = 0.90;
+
 /// Per band of projected height (largest first) and measured technique (in order), the means of
-/// its frames; bands without frames are left out.
+/// its frames, and which technique dominates it there, if one does; bands without frames are
+/// left out.
 #[must_use]
 pub fn by_band(report: &Report) -> Vec<BandSummary> {
     let mut out = Vec::new();
@@ -228,10 +240,30 @@ pub fn by_band(report: &Report) -> Vec<BandSummary> {
                 q: mean(&|r| r.coverage.quality()),
                 rmse: mean(&|r| r.rmse.summary()),
                 flip: mean(&|r| r.flip),
+                dominated_by: None,
             });
         }
     }
+    mark_dominated(&mut out);
     out
+}
+
+/// Sets each summary's [`BandSummary::dominated_by`] from the others of its band.
+fn mark_dominated(bands: &mut [BandSummary]) {
+    let full = [TechniqueName::FULL.name(), TechniqueName::Full1x.name()];
+    let dominated: Vec<Option<&'static str>> = bands
+        .iter()
+        .map(|b| {
+            bands
+                .iter()
+                .filter(|o| o.band == b.band && o.technique != b.technique && !full.contains(&o.technique))
+                .find(|o| o.rmse <= DOMINATED_ERROR * b.rmse && o.primitives <= DOMINATED_COST * b.primitives)
+                .map(|o| o.technique)
+        })
+        .collect();
+    for (b, by) in bands.iter_mut().zip(dominated) {
+        b.dominated_by = by;
+    }
 }
 
 /// The description of a technique, for the JSON summary.
@@ -383,6 +415,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
             ("Q", Align::Right),
             ("RMSE", Align::Right),
             ("FLIP", Align::Right),
+            ("dominated by", Align::Left),
         ]);
         for b in &bands {
             table.row(vec![
@@ -395,6 +428,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
                 format!("{:.4}", b.q),
                 format!("{:.5}", b.rmse),
                 format!("{:.5}", b.flip),
+                b.dominated_by.unwrap_or("-").to_owned(),
             ]);
         }
         out.push_str(&table.render(""));
@@ -756,6 +790,36 @@ pub(super) mod tests {
         assert_eq!(json["bands"][1]["band"], "8-32 px");
         assert_eq!(json["poses"][1]["projected_height"], 20.0);
         assert!(text.contains("by projected height") && text.contains("8-32 px"), "{text}");
+    }
+
+    #[test]
+    fn a_technique_is_dominated_by_one_both_better_and_cheaper_in_its_band() {
+        let summary = |band, technique, primitives, rmse| BandSummary {
+            band,
+            technique,
+            frames: 1,
+            primitives,
+            precision: 1.0,
+            recall: 1.0,
+            q: 1.0,
+            rmse,
+            flip: 0.0,
+            dominated_by: None,
+        };
+        let mut bands = vec![
+            summary("8-32 px", "policy", 1000.0, 0.010),
+            // Better but not 10 % cheaper, then cheaper but not 5 % better: neither dominates.
+            summary("8-32 px", "spt", 901.0, 0.005),
+            summary("8-32 px", "impostors", 100.0, 0.0096),
+            // Both: dominates the policy.
+            summary("8-32 px", "crossed", 899.0, 0.0094),
+            // The full mesh never counts; another band does not either.
+            summary("8-32 px", "full", 10.0, 0.0),
+            summary("32-128 px", "billboard", 1.0, 0.001),
+        ];
+        mark_dominated(&mut bands);
+        let by: Vec<Option<&str>> = bands.iter().map(|b| b.dominated_by).collect();
+        assert_eq!(by, [Some("crossed"), None, None, None, None, None]);
     }
 
     #[test]
