@@ -56,28 +56,30 @@ impl Renderer {
         self.note_drawn_with();
     }
 
-    /// Fills `out` with the trees per technique for one view: `cascade` `None` for the camera's,
-    /// else shadow cascade `cascade`'s, chosen from the light's view at the cascade's pixel (with
-    /// hysteresis of its own), so a far tree in a coarse cascade casts the shadow of a cheaper
-    /// representation.
-    pub(crate) fn assign_view(
+    /// Fills `out` with shadow cascade `k`'s trees per technique as `casters` says: chosen at the
+    /// coarser of `camera`'s and `light`'s (the cascade's selection camera) views, at `light`'s
+    /// alone, the camera's assignment, or one technique.
+    pub(crate) fn assign_cascade(
         &mut self,
-        cameras: &[treelod_runtime::Camera],
-        cascade: Option<usize>,
+        k: usize,
+        casters: Casters,
+        camera: treelod_runtime::Camera,
+        light: treelod_runtime::Camera,
         out: &mut Assignment,
     ) {
-        let casters = self.settings.shadows.map_or(Casters::default(), |s| s.casters);
-        match (cascade, casters) {
-            (None, _) | (Some(_), Casters::LightView | Casters::Coarser) => {}
-            (Some(_), Casters::CameraView) => {
-                out.clone_from(&self.assignment);
-                return;
-            }
-            (Some(_), Casters::Forced(technique)) => {
-                out.assign(&self.instances, &self.representations, |_, _| technique);
-                return;
-            }
+        match casters {
+            Casters::Coarser => self.assign_view(&[camera, light], Some(k), out),
+            Casters::LightView => self.assign_view(&[light], Some(k), out),
+            Casters::CameraView => out.clone_from(&self.assignment),
+            Casters::Forced(technique) => out.assign(&self.instances, &self.representations, |_, _| technique),
         }
+    }
+
+    /// Fills `out` with the trees per technique for one view: with a policy, each at the smallest
+    /// of its projected heights for `cameras`, with the hysteresis of the camera's view
+    /// (`cascade` `None`) or of shadow cascade `cascade`; without, every tree with
+    /// [`Settings::technique`].
+    fn assign_view(&mut self, cameras: &[treelod_runtime::Camera], cascade: Option<usize>, out: &mut Assignment) {
         let technique = self.settings.technique;
         let Some(policy) = self.settings.policy.filter(|p| self.policy.chooses(Some(p))) else {
             out.assign(&self.instances, &self.representations, |_, _| technique);

@@ -157,8 +157,7 @@ impl Renderer {
                 tau_triangles: draw.tau_triangles,
                 clamped: false,
             };
-            let vertices = (3 * draw.first, 3 * draw.count);
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, vertices, draw.leaf_scale);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, draw.first, draw.leaf_scale);
         }
         // Prefixes of one cell's elements uploaded whole (impostor planes, ellipsoids, lines),
         // each in its bucket, the level chosen in the shader by `τ`.
@@ -176,8 +175,7 @@ impl Renderer {
                 tau_triangles: range.tau,
                 clamped: false,
             };
-            let vertices = (source.corners() * range.first, source.corners() * range.count);
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, vertices, 1.0);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, range.first, 1.0);
         }
         // Baseline billboards: every quad of the chosen kind.
         for &treelod_runtime::QuadDraw { instance, model, first, count } in &view.draws.billboards {
@@ -191,13 +189,14 @@ impl Renderer {
                 tau_triangles: 0.0,
                 clamped: false,
             };
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, (6 * first, 6 * count), 1.0);
+            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, first, 1.0);
         }
         // The technique each draw's tree is drawn with, for the debug colours, and what each
         // kind of primitive and each technique submitted.
-        let drawn_with = &self.drawn_with;
+        let (drawn_with, tints) = (&self.drawn_with, Technique::ALL.map(tint));
         for (info, _, _) in self.buckets.iter_mut().flatten() {
-            info.tint = tint(drawn_with.get(info.instance as usize).copied().unwrap_or(Technique::FALLBACK));
+            let technique = drawn_with.get(info.instance as usize).copied().unwrap_or(Technique::FALLBACK);
+            info.tint = tints[technique.index()];
         }
         for draw in &view.recorded {
             stats.submitted[draw.source.primitive()] += u64::from(draw.count);
@@ -360,15 +359,16 @@ impl Renderer {
 
 /// Records a draw that streaming does not clamp (pruned leaves, bark, impostor planes: uploaded
 /// whole): its `DrawInfo` (thresholds from `record`, unshaded) into the model's bucket of its
-/// source with `(first vertex, vertex count)`, and `record` itself.
+/// source, drawing `record.count` elements from element `first`, and `record` itself.
 fn record_direct(
     instances: &[treelod_runtime::Instance],
     buckets: &mut [Vec<(DrawInfo, u32, u32)>],
     recorded: &mut Vec<RecordedDraw>,
     record: RecordedDraw,
-    (first_vertex, vertices): (u32, u32),
+    first: u32,
     leaf_scale: f32,
 ) {
+    let corners = record.source.corners();
     let transform = instances[record.instance as usize].transform;
     let info = DrawInfo {
         model: transform.to_cols_array_2d(),
@@ -381,7 +381,8 @@ fn record_direct(
         instance: record.instance,
         tint: 0,
     };
-    buckets[record.source.bucket().of_model(record.model.0 as usize)].push((info, first_vertex, vertices));
+    let bucket = record.source.bucket().of_model(record.model.0 as usize);
+    buckets[bucket].push((info, corners * first, corners * record.count));
     recorded.push(record);
 }
 

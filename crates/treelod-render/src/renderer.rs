@@ -675,17 +675,12 @@ impl Renderer {
         assignments.resize_with(self.cascades.len(), Assignment::default);
         // The cascades' casters: as the camera's trees, or forced (`Shadows::casters`).
         let casters = settings.shadows.map_or(Casters::default(), |s| s.casters);
-        let cascade_full = match casters {
-            Casters::Forced(technique) => technique == Technique::Full,
-            Casters::Coarser | Casters::LightView | Casters::CameraView => full_mesh,
-        };
+        let cascade_full = casters.full_mesh(full_mesh);
         let cascade_lod =
             if cascade_full { LodSettings { s_min: 0.0, s_max: 0.0, ..lod_settings } } else { lod_settings };
         for (k, (view, assignment)) in shadow_views.iter_mut().zip(&mut assignments).enumerate() {
             let light = self.cascades[k].selection_camera();
-            let cameras = [runtime_camera, light];
-            let heights = if casters == Casters::Coarser { &cameras[..] } else { &cameras[1..] };
-            self.assign_view(heights, Some(k), assignment);
+            self.assign_cascade(k, casters, runtime_camera, light, assignment);
             let counts = self.select_view(view, &light, &cascade_lod, false, assignment, cascade_full);
             shadow.instances_visible += counts.instances.total();
             shadow.instances += counts.instances;

@@ -80,6 +80,17 @@ pub enum Casters {
     Forced(Technique),
 }
 
+impl Casters {
+    /// Whether the cascades draw the full mesh (selected with zero thresholds), given whether the
+    /// camera's view does.
+    pub(crate) fn full_mesh(self, camera_full_mesh: bool) -> bool {
+        match self {
+            Self::Forced(technique) => technique == Technique::Full,
+            Self::Coarser | Self::LightView | Self::CameraView => camera_full_mesh,
+        }
+    }
+}
+
 impl Default for Shadows {
     /// Three 2048² cascades over the first 150 m, splits weighted 0.75 towards logarithmic, a
     /// normal offset of 1.5 texels, selection in pixels of 2 texels, casters chosen at the

@@ -71,7 +71,7 @@ struct MaterialGpu {
 /// device, the container, the model's [`Representations`] (a representation that cannot be drawn
 /// takes itself out), the bucket's group layouts and the samplers they bind, and the warnings and
 /// bytes of the model so far.
-pub(crate) struct Upload<'a> {
+pub(crate) struct ModelUpload<'a> {
     pub(crate) device: &'a wgpu::Device,
     pub(crate) queue: &'a wgpu::Queue,
     pub(crate) container: &'a Container,
@@ -92,7 +92,7 @@ pub(crate) struct Upload<'a> {
     limit: u64,
 }
 
-impl Upload<'_> {
+impl ModelUpload<'_> {
     /// A storage buffer holding `data` (`what` names it in errors).
     ///
     /// # Errors
@@ -220,7 +220,7 @@ impl Renderer {
         // What the selections read, and the whole-triangle list (pruned leaves, bark, the LoD
         // chain) they address.
         let (mut representations, whole) = Representations::from_container(&container);
-        let mut up = Upload {
+        let mut up = ModelUpload {
             device,
             queue,
             container: &container,

@@ -11,7 +11,7 @@ use treelod_runtime::Technique;
 
 use super::{Bucket, Stages, impostors, tree_wgsl};
 use crate::renderer::RenderError;
-use crate::upload::Upload;
+use crate::upload::ModelUpload;
 
 /// The billboards' pipelines: their own vertex stage, the planes' fragment stages.
 pub(crate) const STAGES: Stages = Stages {
@@ -27,7 +27,7 @@ pub(crate) const STAGES: Stages = Stages {
 /// The billboards' group of the model `up` uploads, if it has billboards and their atlas (the
 /// image of the first record; builders write one) decodes and fits; else the billboards are taken
 /// out of its representations, with a warning where the atlas is at fault.
-pub(crate) fn upload(up: &mut Upload<'_>) -> Result<Option<wgpu::BindGroup>, RenderError> {
+pub(crate) fn upload(up: &mut ModelUpload<'_>) -> Result<Option<wgpu::BindGroup>, RenderError> {
     let kinds = Billboards::from_container(up.container);
     let records = gpu_billboards(up.container, kinds.as_ref());
     let atlas = match records.first() {

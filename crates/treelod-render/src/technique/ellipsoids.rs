@@ -11,7 +11,7 @@ use wgpu::{SamplerBindingType, ShaderStages, TextureSampleType, TextureViewDimen
 
 use super::{Bucket, Stages, sampler, storage, texture, tree_wgsl};
 use crate::renderer::RenderError;
-use crate::upload::{Upload, with_ao_in_flags};
+use crate::upload::{ModelUpload, with_ao_in_flags};
 
 /// Group 3 of the ellipsoids' pipelines: the ellipsoids, and the noise cube with its
 /// nearest-texel sampler.
@@ -48,7 +48,9 @@ pub(crate) const LINE_STAGES: Stages = Stages {
 
 /// The ellipsoids' and the lines' groups of the model `up` uploads, each if it has them. The
 /// first model with ellipsoids uploads the noise cube every model shares.
-pub(crate) fn upload(up: &mut Upload<'_>) -> Result<(Option<wgpu::BindGroup>, Option<wgpu::BindGroup>), RenderError> {
+pub(crate) fn upload(
+    up: &mut ModelUpload<'_>,
+) -> Result<(Option<wgpu::BindGroup>, Option<wgpu::BindGroup>), RenderError> {
     let container = up.container;
     let ellipsoids = if container.ellipsoids().is_empty() {
         None

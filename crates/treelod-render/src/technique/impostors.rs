@@ -12,7 +12,7 @@ use wgpu::{SamplerBindingType, ShaderStages, TextureSampleType, TextureViewDimen
 use super::{Bucket, Stages, sampler, storage, texture, tree_wgsl};
 use crate::renderer::RenderError;
 use crate::textures::Atlas;
-use crate::upload::Upload;
+use crate::upload::ModelUpload;
 
 /// Group 3 of the planes' and the billboards' pipelines: the quads, their atlas and its sampler,
 /// the leaf-slot image and the planes' leaves (`shaders/tree/planes.wgsl`).
@@ -42,7 +42,7 @@ pub(crate) fn blank(slots: bool) -> Atlas {
 
 /// The planes' group of the model `up` uploads, if it has planes and their atlas decodes and
 /// fits (else the planes are taken out of its representations, with a warning).
-pub(crate) fn upload(up: &mut Upload<'_>) -> Result<Option<wgpu::BindGroup>, RenderError> {
+pub(crate) fn upload(up: &mut ModelUpload<'_>) -> Result<Option<wgpu::BindGroup>, RenderError> {
     let Some(planes) = up.representations.planes.take() else { return Ok(None) };
     let Some(atlas) = up.decode_atlas(planes.image(), "impostor") else { return Ok(None) };
     let container = up.container;
@@ -64,7 +64,7 @@ pub(crate) fn upload(up: &mut Upload<'_>) -> Result<Option<wgpu::BindGroup>, Ren
 
 /// The group of `bucket` (planes or billboards) over its quads, atlas, leaf slots and leaves.
 pub(crate) fn group(
-    up: &Upload<'_>,
+    up: &ModelUpload<'_>,
     bucket: Bucket,
     quads: &wgpu::Buffer,
     atlas: &wgpu::TextureView,

@@ -22,7 +22,7 @@ pub(crate) mod impostors;
 use treelod_runtime::{PrefixDraw, Primitive, TreeDraws};
 
 use crate::renderer::RenderError;
-use crate::upload::Upload;
+use crate::upload::ModelUpload;
 
 /// Where a recorded draw reads its elements.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -170,7 +170,7 @@ impl Bucket {
 /// representation whose data cannot be drawn (an atlas that does not decode or fit) takes itself
 /// out of `up`'s [`Representations`](treelod_runtime::Representations) and says why in its
 /// warnings.
-pub(crate) fn upload_groups(up: &mut Upload<'_>) -> Result<[Option<wgpu::BindGroup>; Bucket::COUNT], RenderError> {
+pub(crate) fn upload_groups(up: &mut ModelUpload<'_>) -> Result<[Option<wgpu::BindGroup>; Bucket::COUNT], RenderError> {
     let mut groups = [const { None }; Bucket::COUNT];
     groups[Bucket::Planes as usize] = impostors::upload(up)?;
     groups[Bucket::Billboards as usize] = baselines::upload(up)?;
