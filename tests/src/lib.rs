@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.5, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.6, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -89,6 +89,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 ellipsoid_ao: false,
                 line_ao: false,
                 calibration: false,
+                chain_calibration: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -116,6 +117,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 ellipsoid_ao: false,
                 line_ao: false,
                 calibration: false,
+                chain_calibration: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -130,6 +132,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 ellipsoid_ao: false,
                 line_ao: false,
                 calibration: false,
+                chain_calibration: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -140,7 +143,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
             description: "every section kind of 1.3 (1.2's, indirectly textured planes: PLANE_LEAVES and a LEAF_SLOTS \
                           image, and ELLIPSOID_AO), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { line_ao: false, calibration: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                line_ao: false,
+                calibration: false,
+                chain_calibration: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -148,13 +156,26 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.4 (1.3's and LINE_AO), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { calibration: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                calibration: false,
+                chain_calibration: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
             minor: 5,
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.5 (1.4's and CALIBRATION), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { chain_calibration: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 6,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.6 (1.5's and CHAIN_CALIBRATION), zstd level 19 with byte shuffle where \
+                          it pays",
             seed: 3,
             options: SyntheticOptions::everything(),
             compression: Compression::Zstd { level: 19 },

@@ -5,9 +5,9 @@ use core::ops::RangeInclusive;
 use treelod_build::{SptNode, flatten};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
-    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ContainerData, CurveSample, EllipsoidRecord,
-    ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord,
-    PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
+    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
+    EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneLeafRecord,
+    PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
     billboard_kind, calibration_technique, image_format,
 };
 
@@ -75,6 +75,11 @@ pub struct SyntheticOptions {
     /// and a whole number of primitives, in `CALIBRATION`. Drawn last, so the rest of the
     /// container is the same as without it.
     pub calibration: bool,
+    /// The LoD chain's per-level calibration (spec §6.16, 1.6): for each level of the chain
+    /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
+    /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
+    /// container is the same as without it.
+    pub chain_calibration: bool,
     /// Block name in the metadata; `None` gives `synthetic-<seed in hex>`.
     pub name: Option<String>,
 }
@@ -105,6 +110,7 @@ impl SyntheticOptions {
             ellipsoid_ao: false,
             line_ao: false,
             calibration: false,
+            chain_calibration: false,
             name: Some("minimal".into()),
         }
     }
@@ -123,12 +129,12 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.5: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.6: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
     /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`) and
-    /// calibration tables (`CALIBRATION`).
+    /// calibration tables (`CALIBRATION`, and the chain's per level, `CHAIN_CALIBRATION`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -152,6 +158,7 @@ impl SyntheticOptions {
             ellipsoid_ao: true,
             line_ao: true,
             calibration: true,
+            chain_calibration: true,
             name: Some("everything".into()),
         }
     }
@@ -1035,7 +1042,37 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     if options.calibration {
         b.data.calibration = calibration(&mut rng);
     }
+    if options.chain_calibration {
+        b.data.chain_calibration = chain_calibration(&mut rng, &b.data.lod_levels);
+    }
     b.data
+}
+
+/// The LoD chain's per-level tables (spec §6.16): for each level every tree of `levels` has,
+/// three samples whose heights grow strictly from a few pixels, whose errors fall within
+/// `[0, 1]`, and whose primitive count is the level's triangles over every tree.
+fn chain_calibration(rng: &mut SplitMix64, levels: &[LodLevelRecord]) -> Vec<ChainCalibrationRecord> {
+    let mut trees: Vec<u32> = levels.iter().map(|l| l.tree).collect();
+    trees.sort_unstable();
+    trees.dedup();
+    let depth = trees
+        .iter()
+        .map(|&t| levels.iter().filter(|l| l.tree == t).map(|l| l.level + 1).max().unwrap_or(0))
+        .min()
+        .unwrap_or(0);
+    let mut records = Vec::new();
+    for level in 0..depth {
+        #[expect(clippy::cast_precision_loss, reason = "a few triangles")]
+        let primitives = levels.iter().filter(|l| l.level == level).map(|l| l.triangles.count).sum::<u32>() as f32;
+        let mut height = rng.uniform(4.0, 16.0);
+        let mut error = rng.uniform(0.05, 1.0);
+        for _ in 0..3 {
+            records.push(ChainCalibrationRecord { level, height, error, primitives });
+            height *= rng.uniform(1.5, 3.0);
+            error *= rng.uniform(0.2, 0.9);
+        }
+    }
+    records
 }
 
 /// Calibration tables (spec §6.15): `FULL` and each other technique with probability ½, in

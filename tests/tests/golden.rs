@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.5 (`tests/data/v1_0` to `tests/data/v1_5`): every file
+//! Golden files of format versions 1.0 to 1.6 (`tests/data/v1_0` to `tests/data/v1_6`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -24,7 +24,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -358,7 +358,7 @@ fn the_1_4_every_kind_file_has_every_kind_and_line_occlusion() {
 fn the_1_5_every_kind_file_has_every_kind_and_a_calibration() {
     let c = Container::open(golden_dir_of(5).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 5, "{kind}");
     }
     assert_eq!(c.header().minor, 5);
     // Calibration tables of several techniques, FULL first, three or four heights each.
@@ -379,6 +379,30 @@ fn the_1_5_every_kind_file_has_every_kind_and_a_calibration() {
     assert!(data == v1_4, "v1_5 is v1_4 with a calibration");
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 4);
+}
+
+#[test]
+fn the_1_6_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
+    let c = Container::open(golden_dir_of(6).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 6);
+    // Three samples per level of the chain, levels ascending from 0.
+    let levels = c.chain_calibration();
+    assert_eq!(verify(&c).unwrap().chain_calibration, levels.len() as u64);
+    let mut numbers: Vec<u32> = levels.iter().map(|r| r.level).collect();
+    numbers.dedup();
+    assert_eq!(numbers, (0..numbers.len() as u32).collect::<Vec<_>>());
+    assert!(!numbers.is_empty() && levels.len() == 3 * numbers.len(), "{levels:?}");
+    // Without CHAIN_CALIBRATION it is the 1.5 file, record for record, and the writer marks it 1.5.
+    let v1_5 =
+        ContainerData::from_container(&Container::open(golden_dir_of(5).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.chain_calibration.clear();
+    assert!(data == v1_5, "v1_6 is v1_5 with the chain's per-level calibration");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 5);
 }
 
 #[test]

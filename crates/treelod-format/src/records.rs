@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 5;
+pub const MINOR: u16 = 6;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -164,9 +164,12 @@ impl SectionKind {
     /// [`CalibrationRecord`]s: each representation's measured image error and cost by projected
     /// height (spec §6.15). Since 1.5.
     pub const CALIBRATION: Self = Self(0x0070);
+    /// [`ChainCalibrationRecord`]s: each level of the baseline LoD chain's measured image error
+    /// and cost by projected height (spec §6.16). Since 1.6.
+    pub const CHAIN_CALIBRATION: Self = Self(0x0071);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 26] = [
+    pub const KNOWN: [Self; 27] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -193,6 +196,7 @@ impl SectionKind {
         Self::ELLIPSOID_AO,
         Self::LINE_AO,
         Self::CALIBRATION,
+        Self::CHAIN_CALIBRATION,
     ];
 
     /// The spec's name of a known kind.
@@ -225,6 +229,7 @@ impl SectionKind {
             Self::ELLIPSOID_AO => "ELLIPSOID_AO",
             Self::LINE_AO => "LINE_AO",
             Self::CALIBRATION => "CALIBRATION",
+            Self::CHAIN_CALIBRATION => "CHAIN_CALIBRATION",
             _ => return None,
         })
     }
@@ -256,6 +261,7 @@ impl SectionKind {
             Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
             Self::BILLBOARDS => size_of::<BillboardRecord>(),
             Self::CALIBRATION => size_of::<CalibrationRecord>(),
+            Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
             _ => return None,
         };
         #[expect(clippy::cast_possible_truncation, reason = "record sizes are below 100")]
@@ -266,7 +272,8 @@ impl SectionKind {
     /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 2 for ambient occlusion (`VERTEX_AO`,
     /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`) and the ellipsoids'
     /// ambient occlusion (`ELLIPSOID_AO`), 4 for the lines' ambient occlusion (`LINE_AO`), 5 for
-    /// the calibration tables (`CALIBRATION`), 0 for
+    /// the calibration tables (`CALIBRATION`), 6 for the LoD chain's per-level tables
+    /// (`CHAIN_CALIBRATION`), 0 for
     /// the other known kinds and for kinds this version does not know (private extensions do not
     /// raise a file's minor).
     #[must_use]
@@ -277,6 +284,7 @@ impl SectionKind {
             Self::PLANE_LEAVES | Self::ELLIPSOID_AO => 3,
             Self::LINE_AO => 4,
             Self::CALIBRATION => 5,
+            Self::CHAIN_CALIBRATION => 6,
             _ => 0,
         }
     }
@@ -770,6 +778,24 @@ pub mod calibration_technique {
             .copied()
     }
 }
+
+/// One sample of a LoD chain level's calibration (spec §6.16): the image error and the cost of
+/// drawing the block at chain level `level` (every tree's level of that number, as the runtime
+/// switches a block's trees together) when the block is `height` pixels high on screen, measured
+/// as `CALIBRATION`'s records are (spec §6.15).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ChainCalibrationRecord {
+    /// The chain level, 0 the finest: the `level` of `LOD_LEVELS` records.
+    pub level: u32,
+    /// Projected height of the block's bounds, pixels; strictly increasing within a level.
+    pub height: f32,
+    /// Mean multi-scale RMSE of coverage against the supersampled full mesh, `[0, 1]`.
+    pub error: f32,
+    /// Triangles submitted (every tree's triangles of the level), `≥ 0`.
+    pub primitives: f32,
+}
+const _: () = assert!(size_of::<ChainCalibrationRecord>() == 16);
 
 /// One level of a tree's baseline level-of-detail chain (spec §6.12): a general mesh
 /// simplifier's output, drawn instead of the whole tree when its error projects small enough.

@@ -12,10 +12,10 @@ use std::hash::{BuildHasherDefault, Hasher};
 use crate::error::{Error, Result};
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
-    AO_KINDS, BillboardRecord, CalibrationRecord, CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord,
-    LodLevelRecord, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
-    SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
-    image_format, leaf_slots, plane_leaf_bases,
+    AO_KINDS, BillboardRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample, EllipsoidRecord,
+    ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind,
+    calibration_technique, image_format, leaf_slots, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -76,6 +76,8 @@ pub struct VerifyReport {
     pub billboards: u64,
     /// `CALIBRATION` records checked.
     pub calibration: u64,
+    /// `CHAIN_CALIBRATION` records checked (spec §6.16).
+    pub chain_calibration: u64,
     /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO` and `LINE_AO` bytes (their counts are checked at
     /// open).
     pub ao: u64,
@@ -169,6 +171,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
     check_billboards(c.billboards(), image_count, tree_count)?;
     check_calibration(c.calibration())?;
+    check_chain_calibration(c.chain_calibration(), c.lod_levels())?;
     check_slot_images_only_for_planes(c)?;
     check_metadata(c)?;
 
@@ -199,6 +202,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.lod_triangles = c.lod_triangles().len() as u64;
     report.billboards = c.billboards().len() as u64;
     report.calibration = c.calibration().len() as u64;
+    report.chain_calibration = c.chain_calibration().len() as u64;
     report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
     Ok(report)
 }
@@ -1012,6 +1016,56 @@ fn check_calibration(records: &[CalibrationRecord]) -> Result<()> {
                 return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
             }
             if r.technique == prev.technique && r.height <= prev.height {
+                return Err(bad(
+                    kind,
+                    i,
+                    format!("height {} does not increase strictly after {}", r.height, prev.height),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Spec §6.16: levels in ascending order, each a level every tree of `LOD_LEVELS` has (so the
+/// section needs a chain), heights finite, positive and strictly increasing within a level, errors
+/// in `[0, 1]`, primitive counts finite and `≥ 0`.
+fn check_chain_calibration(records: &[ChainCalibrationRecord], levels: &[LodLevelRecord]) -> Result<()> {
+    let kind = SectionKind::CHAIN_CALIBRATION;
+    if records.is_empty() {
+        return Ok(());
+    }
+    // The levels every tree of the chain has: 0 .. the least of the trees' level counts.
+    let mut per_tree: Vec<(u32, u32)> = Vec::new();
+    for l in levels {
+        match per_tree.iter_mut().find(|(tree, _)| *tree == l.tree) {
+            Some(entry) => entry.1 = entry.1.max(l.level.saturating_add(1)),
+            None => per_tree.push((l.tree, l.level.saturating_add(1))),
+        }
+    }
+    let depth = per_tree.iter().map(|&(_, n)| n).min().unwrap_or(0);
+    for (i, r) in records.iter().enumerate() {
+        if r.level >= depth {
+            return Err(bad(
+                kind,
+                i,
+                format!("level {} is not a level of every tree's LoD chain (0..{depth})", r.level),
+            ));
+        }
+        if !(r.height.is_finite() && r.height > 0.0) {
+            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
+        }
+        if !(0.0..=1.0).contains(&r.error) {
+            return Err(bad(kind, i, format!("error {} lies outside [0, 1]", r.error)));
+        }
+        if !(r.primitives.is_finite() && r.primitives >= 0.0) {
+            return Err(bad(kind, i, format!("primitive count {} is not a finite count", r.primitives)));
+        }
+        if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
+            if r.level < prev.level {
+                return Err(bad(kind, i, format!("level {} follows level {}", r.level, prev.level)));
+            }
+            if r.level == prev.level && r.height <= prev.height {
                 return Err(bad(
                     kind,
                     i,

@@ -75,7 +75,8 @@ struct Dump<'a> {
     /// The baseline sections (spec §6.12, §6.13), when the container has any of their records.
     #[serde(skip_serializing_if = "Option::is_none")]
     baselines: Option<BaselineInfo>,
-    /// The calibration (spec §6.15), when the container has one.
+    /// The calibration (spec §6.15) and the LoD chain's per-level tables (§6.16), when the
+    /// container has either.
     #[serde(skip_serializing_if = "Option::is_none")]
     calibration: Option<CalibrationInfo>,
     /// Size histograms of the hierarchical kinds.
@@ -493,12 +494,16 @@ baselines
     }
 }
 
-/// The calibration of a container (spec §6.15): per representation, its error and primitive
-/// count at each projected height.
+/// The calibration of a container (spec §6.15, §6.16): per representation, its error and
+/// primitive count at each projected height; then per LoD chain level, the same.
 #[derive(Debug, Serialize)]
 struct CalibrationInfo {
     /// One entry per representation, in code order.
     techniques: Vec<CalibrationRow>,
+    /// One entry per LoD chain level (`CHAIN_CALIBRATION`), finest first; absent when the
+    /// container has none (files before 1.6).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    chain_levels: Vec<ChainLevelRow>,
 }
 
 /// The samples of one representation.
@@ -510,11 +515,21 @@ struct CalibrationRow {
     samples: Vec<[f32; 3]>,
 }
 
+/// The samples of one LoD chain level.
+#[derive(Debug, Serialize)]
+struct ChainLevelRow {
+    /// The level, 0 the finest.
+    level: u32,
+    /// `[height in pixels, error, primitives]`, by increasing height.
+    samples: Vec<[f32; 3]>,
+}
+
 impl CalibrationInfo {
-    /// The calibration of `container`, `None` if it has none.
+    /// The calibration of `container`, `None` if it has neither table.
     fn new(container: &Container) -> Option<Self> {
         let records = container.calibration();
-        if records.is_empty() {
+        let chain = container.chain_calibration();
+        if records.is_empty() && chain.is_empty() {
             return None;
         }
         let mut techniques: Vec<(u32, CalibrationRow)> = Vec::new();
@@ -529,22 +544,37 @@ impl CalibrationInfo {
                 }
             }
         }
-        Some(Self { techniques: techniques.into_iter().map(|(_, row)| row).collect() })
+        let mut chain_levels: Vec<ChainLevelRow> = Vec::new();
+        for r in chain {
+            let sample = [r.height, r.error, r.primitives];
+            match chain_levels.last_mut() {
+                Some(row) if row.level == r.level => row.samples.push(sample),
+                _ => chain_levels.push(ChainLevelRow { level: r.level, samples: vec![sample] }),
+            }
+        }
+        Some(Self { techniques: techniques.into_iter().map(|(_, row)| row).collect(), chain_levels })
     }
 
-    /// The text form: a row per representation, `error (primitives)` per height.
+    /// The text form: a row per representation, then per chain level (`lod-chain level N`),
+    /// `error (primitives)` per height.
     fn to_text(&self) -> String {
-        let mut heights: Vec<f32> = self.techniques.iter().flat_map(|t| t.samples.iter().map(|s| s[0])).collect();
+        let rows: Vec<(String, &[[f32; 3]])> = self
+            .techniques
+            .iter()
+            .map(|t| (t.technique.clone(), t.samples.as_slice()))
+            .chain(self.chain_levels.iter().map(|l| (format!("lod-chain level {}", l.level), l.samples.as_slice())))
+            .collect();
+        let mut heights: Vec<f32> = rows.iter().flat_map(|(_, samples)| samples.iter().map(|s| s[0])).collect();
         heights.sort_by(f32::total_cmp);
         heights.dedup();
         let mut columns = vec![("technique".to_owned(), Align::Left)];
         columns.extend(heights.iter().map(|h| (format!("{h} px"), Align::Right)));
         let names: Vec<(&str, Align)> = columns.iter().map(|(n, a)| (n.as_str(), *a)).collect();
         let mut table = Table::new(&names);
-        for t in &self.techniques {
-            let mut row = vec![t.technique.clone()];
+        for (name, samples) in rows {
+            let mut row = vec![name];
             row.extend(heights.iter().map(|h| {
-                t.samples
+                samples
                     .iter()
                     .find(|s| s[0] == *h)
                     .map_or_else(String::new, |s| format!("{:.4} ({})", s[1], s[2].round()))
