@@ -1151,7 +1151,9 @@ fn assemble(
     clock.lap(&mut stats, "precision");
     // Stage: calibration, of what is written (after the precision trim).
     if let Some(calibration) = &config.calibration {
-        data.calibration = crate::calibrate::calibrate(&data, calibration);
+        let calibrated = crate::calibrate::calibrate(&data, calibration);
+        data.calibration = calibrated.records;
+        data.chain_calibration = calibrated.chain_levels;
         clock.lap(&mut stats, "calibration");
     }
     Ok(BuildOutput { data, stats, warnings })

@@ -16,7 +16,16 @@
 //!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test, the bark of both
 //!   as the runtime draws it by default (the LoD chain's bark level for `τ_p` where the container
 //!   has a chain, else every bark triangle), ellipsoids at `τ = p` with the renderer's noise holes and the branch lines (or every
-//!   bark triangle without lines), the LoD chain's level for `τ = p`, the billboards.
+//!   bark triangle without lines), the billboards;
+//! - each level of the LoD chain (spec §6.16), every tree's level of that number as the runtime
+//!   switches a block's trees together: the `CHAIN_CALIBRATION` table. The chain's own
+//!   `lod-chain` row is then not drawn but read from it: at each height, the full mesh's or the
+//!   level's measurement that the runtime's rule by image error picks with the default target
+//!   ([`Calibration::chain_level`], spec §10.2), so the row describes the chain as the runtime
+//!   draws it with these tables, and a policy compares the chain it will draw. (A chain whose
+//!   levels do not cover every tree, which verified files do not have, is drawn by the geometric
+//!   rule instead: the coarsest level whose error is at most `τ = p`.) The levels cost one more
+//!   drawing per level, height and view (`treelod build --timings`, stage `calibration`).
 //!
 //! The error is the multi-scale RMSE of coverage (`treelod_eval::metrics`, Clasen §4: levels from
 //! single pixels to the whole image) against the reference, averaged over the views; the cost is
@@ -37,13 +46,15 @@ use glam::{Quat, Vec2, Vec3};
 use rayon::prelude::*;
 use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::{
-    CalibrationRecord, ContainerData, ImageRecord, NO_IMAGE, Setting, TriangleRecord, billboard_kind,
-    calibration_technique, image_format, material_class, pack::unpack_unorm16x2, prune_leaves_drawn,
+    CalibrationRecord, ChainCalibrationRecord, ContainerData, ImageRecord, NO_IMAGE, Setting, TriangleRecord,
+    billboard_kind, calibration_technique, image_format, material_class, pack::unpack_unorm16x2, prune_leaves_drawn,
 };
 use treelod_runtime::ellipsoid::{ellipsoid_drawn, line_drawn};
 use treelod_runtime::impostor::{BARK_AREA_KEPT, BARK_ERROR_SHARE, area};
 use treelod_runtime::prune::{PruneScale, curve_at, leaf_scale, size_factor};
-use treelod_runtime::{LodChain, LodSettings, SptRecord, Thresholds, point_drawn, triangle_drawn};
+use treelod_runtime::{
+    Calibration, LodChain, LodSettings, Policy, SptRecord, Technique, Thresholds, point_drawn, triangle_drawn,
+};
 
 use crate::raster::{
     AlphaMask, Mask, NO_ALPHA, NOISE_SIZE, RasterTriangle, View, fill_ellipse, fill_ellipsoid_cut, fill_triangle,
@@ -115,27 +126,51 @@ struct Scene<'a> {
     /// (the largest of its trees', kept non-decreasing) and its bark triangles, while they keep
     /// [`BARK_AREA_KEPT`] of the full bark's area; empty without a chain, planes or pruning.
     chain_bark: Vec<(f32, Vec<RasterTriangle>)>,
+    /// The LoD chain's levels as the runtime switches a block's trees together
+    /// ([`LodChain::from_records`]): per level, finest first, every tree's triangles of that
+    /// level; empty without a chain.
+    chain_levels: Vec<Vec<RasterTriangle>>,
     /// Whether the impostor planes can be drawn (an RGBA atlas, not leaf slots).
     planes_drawable: bool,
 }
 
-/// The calibration of `data` (spec §6.15): for every representation it holds, its error and
-/// primitive count at each of [`HEIGHTS`], sorted by technique, then height. Empty for a block
-/// without height or triangles.
+/// What [`calibrate`] measures: the table of every representation (`CALIBRATION`, spec §6.15)
+/// and of every level of the LoD chain (`CHAIN_CALIBRATION`, §6.16).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Calibrated {
+    /// Per representation and height, sorted by technique, then height.
+    pub records: Vec<CalibrationRecord>,
+    /// Per LoD chain level and height, sorted by level, then height; empty without a chain.
+    pub chain_levels: Vec<ChainCalibrationRecord>,
+}
+
+/// The calibration of `data` (spec §6.15, §6.16): for every representation it holds, its error
+/// and primitive count at each of [`HEIGHTS`], sorted by technique, then height; and where it has
+/// a LoD chain, the same for each of the chain's levels. Empty for a block without height or
+/// triangles.
+///
+/// With a chain, its `lod-chain` row is not drawn by the geometric rule but describes the chain
+/// as the runtime draws it with per-level tables (spec §10.2): at each height, the full mesh's or
+/// the level's measurement that [`Calibration::chain_level`] picks with
+/// [`Policy::DEFAULT_TARGET`] among the representations measured here.
 #[must_use]
-pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Vec<CalibrationRecord> {
+pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated {
     let (lo, hi) = (Vec3::from_array(data.block.bounds_min), Vec3::from_array(data.block.bounds_max));
     let height = hi.y - lo.y;
     if !(height.is_finite() && height > 0.0) || data.triangles.is_empty() {
-        return Vec::new();
+        return Calibrated::default();
     }
     let scene = Scene::new(data);
-    let techniques = scene.techniques();
+    let held = scene.techniques();
+    // With per-level tables the chain's row follows from them: its levels are drawn instead.
+    let per_level = !scene.chain_levels.is_empty();
+    let techniques: Vec<u32> =
+        held.iter().copied().filter(|&t| !(per_level && t == calibration_technique::LOD_CHAIN)).collect();
     let (centre, radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
     let directions = view_directions(config.views.max(1));
     let jobs: Vec<(usize, usize)> =
         (0..HEIGHTS.len()).flat_map(|h| (0..directions.len()).map(move |v| (h, v))).collect();
-    // Per job, per technique: (error, primitives).
+    // Per job: per technique, then per chain level, (error, primitives).
     let results: Vec<Vec<(f64, f64)>> = jobs
         .par_iter()
         .map(|&(h, v)| {
@@ -147,33 +182,87 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Vec<Calibr
             let fitted = 0.5 * side as f32 * metres_per_pixel;
             let view = View::fit(directions[v], centre, fitted, side);
             let reference = scene.reference(&View::fit(directions[v], centre, fitted, side * k), k);
-            techniques
-                .iter()
-                .map(|&t| {
-                    let mut mask = Mask::new(side);
-                    let primitives = scene.draw(t, &view, metres_per_pixel, pixels, &mut mask);
-                    (error(&mask, &reference), primitives as f64)
-                })
-                .collect()
+            let measured = techniques.iter().map(|&t| {
+                let mut mask = Mask::new(side);
+                let primitives = scene.draw(t, &view, metres_per_pixel, pixels, &mut mask);
+                (error(&mask, &reference), primitives as f64)
+            });
+            let levels = scene.chain_levels.iter().map(|triangles| {
+                let mut mask = Mask::new(side);
+                scene.rasterize_1x(&mut mask, &view, triangles);
+                (error(&mask, &reference), triangles.len() as f64)
+            });
+            measured.chain(levels).collect()
         })
         .collect();
+    // The mean over the views of column `column` at height index `h`.
+    let mean = |h: usize, column: usize| {
+        let per_view: Vec<(f64, f64)> =
+            jobs.iter().zip(&results).filter(|((jh, _), _)| *jh == h).map(|(_, r)| r[column]).collect();
+        let n = per_view.len().max(1) as f64;
+        let error = per_view.iter().map(|r| r.0).sum::<f64>() / n;
+        let primitives = per_view.iter().map(|r| r.1).sum::<f64>() / n;
+        ((error as f32).clamp(0.0, 1.0), primitives as f32)
+    };
     let mut records = Vec::new();
     for (ti, &technique) in techniques.iter().enumerate() {
         for (h, &pixels) in HEIGHTS.iter().enumerate() {
-            let per_view: Vec<(f64, f64)> =
-                jobs.iter().zip(&results).filter(|((jh, _), _)| *jh == h).map(|(_, r)| r[ti]).collect();
-            let n = per_view.len().max(1) as f64;
-            let error = per_view.iter().map(|r| r.0).sum::<f64>() / n;
-            let primitives = per_view.iter().map(|r| r.1).sum::<f64>() / n;
-            records.push(CalibrationRecord {
-                technique,
-                height: pixels,
-                error: (error as f32).clamp(0.0, 1.0),
-                primitives: primitives as f32,
-            });
+            let (error, primitives) = mean(h, ti);
+            records.push(CalibrationRecord { technique, height: pixels, error, primitives });
         }
     }
-    records
+    let mut chain_levels = Vec::new();
+    for level in 0..scene.chain_levels.len() {
+        for (h, &pixels) in HEIGHTS.iter().enumerate() {
+            let (error, primitives) = mean(h, techniques.len() + level);
+            let level = u32::try_from(level).unwrap_or(u32::MAX);
+            chain_levels.push(ChainCalibrationRecord { level, height: pixels, error, primitives });
+        }
+    }
+    if per_level {
+        records.extend(chain_rows(&records, &chain_levels, &held));
+        records.sort_by(|a, b| a.technique.cmp(&b.technique).then(a.height.total_cmp(&b.height)));
+    }
+    Calibrated { records, chain_levels }
+}
+
+/// The `lod-chain` rows of a chain drawn by image error (spec §10.2): at each height of
+/// `chain_levels`, the measurement of the full mesh (in `records`) or of the level that
+/// [`Calibration::chain_level`] picks with the default target, the floor over the techniques
+/// `held`.
+fn chain_rows(
+    records: &[CalibrationRecord],
+    chain_levels: &[ChainCalibrationRecord],
+    held: &[u32],
+) -> Vec<CalibrationRecord> {
+    let Some(tables) = Calibration::from_records(records).map(|c| c.with_chain_levels(chain_levels)) else {
+        return Vec::new();
+    };
+    let usable = |t: Technique| u32::try_from(t.index()).is_ok_and(|code| held.contains(&code));
+    let full = |height: f32| {
+        records.iter().find(|r| r.technique == calibration_technique::FULL && r.height == height).copied()
+    };
+    let mut heights: Vec<f32> = chain_levels.iter().map(|r| r.height).collect();
+    heights.sort_by(f32::total_cmp);
+    heights.dedup();
+    heights
+        .into_iter()
+        .filter_map(|height| {
+            let measured = match tables.chain_level(height, Policy::DEFAULT_TARGET, usable)? {
+                Some(level) => chain_levels
+                    .iter()
+                    .find(|r| r.level == level && r.height == height)
+                    .map(|r| (r.error, r.primitives))?,
+                None => full(height).map(|r| (r.error, r.primitives))?,
+            };
+            Some(CalibrationRecord {
+                technique: calibration_technique::LOD_CHAIN,
+                height,
+                error: measured.0,
+                primitives: measured.1,
+            })
+        })
+        .collect()
 }
 
 /// The multi-scale RMSE of the one-sample coverage `mask` against `reference` (grey, the
@@ -263,7 +352,32 @@ impl<'a> Scene<'a> {
         } else {
             chain_bark_levels(data, &material_alpha)
         };
-        Self { data, alphas, alpha_mips, material_alpha, image_alpha, full, bark, chain_bark, planes_drawable }
+        let chain_levels = LodChain::from_records(&data.lod_levels).map_or_else(Vec::new, |chain| {
+            chain
+                .levels()
+                .iter()
+                .map(|level| {
+                    level
+                        .ranges
+                        .iter()
+                        .flat_map(|range| data.lod_triangles.get(range.as_usize()).unwrap_or(&[]))
+                        .map(|t| raster_triangle(data, t, &material_alpha, 1.0, None))
+                        .collect()
+                })
+                .collect()
+        });
+        Self {
+            data,
+            alphas,
+            alpha_mips,
+            material_alpha,
+            image_alpha,
+            full,
+            bark,
+            chain_bark,
+            chain_levels,
+            planes_drawable,
+        }
     }
 
     /// Draws the bark of a pruned or impostor tree at `τ = tau` (metres) as the runtime's
@@ -399,8 +513,9 @@ impl<'a> Scene<'a> {
             }
             t::ELLIPSOIDS => self.draw_ellipsoids(view, p, mask),
             t::LOD_CHAIN => {
-                // Per tree, the coarsest level whose error is at most τ = s_min pixels; the full
-                // mesh where none is.
+                // Only for a chain without per-level tables (levels missing for some tree): per
+                // tree, the coarsest level whose error is at most τ = s_min pixels; the full mesh
+                // where none is.
                 let tau = lod.s_min * p;
                 let mut chosen: Vec<Option<&treelod_format::LodLevelRecord>> = vec![None; d.block.tree_count as usize];
                 for level in &d.lod_levels {

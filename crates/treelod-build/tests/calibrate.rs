@@ -40,7 +40,8 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     let bytes = out.data.to_bytes(Compression::default()).expect("writes");
     let container = Container::from_bytes(&bytes).expect("opens");
     assert_eq!(container.calibration(), records.as_slice());
-    assert_eq!(container.header().minor, 5);
+    assert_eq!(container.header().minor, 6, "the chain's per-level tables are a kind of 1.6");
+    assert_eq!(container.chain_calibration(), out.data.chain_calibration.as_slice());
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.
@@ -70,9 +71,10 @@ fn calibration_is_the_same_whatever_the_thread_count() {
         pool.install(|| calibrate(&built.data, &CalibrationConfig { views: 2, ..CalibrationConfig::default() }))
     };
     let one = with(1);
-    assert!(!one.is_empty());
+    assert!(!one.records.is_empty() && !one.chain_levels.is_empty());
     assert_eq!(one, with(3));
-    assert_eq!(one, built.data.calibration, "the build's table is the calibration of what it wrote");
+    assert_eq!(one.records, built.data.calibration, "the build's table is the calibration of what it wrote");
+    assert_eq!(one.chain_levels, built.data.chain_calibration, "and so are the chain's levels");
 }
 
 #[test]
@@ -81,5 +83,6 @@ fn a_build_without_calibration_writes_none() {
     let config = BuildConfig::default();
     let out = build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "t").expect("builds");
     assert!(out.data.calibration.is_empty());
+    assert!(out.data.chain_calibration.is_empty());
     assert!(!out.data.metadata.settings.iter().any(|s| s.key.starts_with("calibration.")));
 }

@@ -10,9 +10,9 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
-    Assignment, BudgetController, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerPrimitive, PerTechnique, Policy,
-    PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique, TechniqueSettings,
-    merge_ascending, select_frame, select_techniques,
+    Assignment, BudgetController, ChainState, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerPrimitive,
+    PerTechnique, Policy, PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique,
+    TechniqueSettings, merge_ascending, select_frame, select_techniques,
 };
 
 use crate::assign::PolicyModels;
@@ -154,6 +154,8 @@ pub struct Renderer {
     shadow_views: Vec<View>,
     /// Per instance: the `λ` its pruned leaves were drawn with last frame (hysteresis).
     pub(crate) prune_shown: Vec<Option<f32>>,
+    /// Per instance: the LoD chain level it was drawn with last frame (hysteresis).
+    pub(crate) chain_levels: Vec<Option<treelod_runtime::ChainPick>>,
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     pub(crate) visible_fraction: Vec<f32>,
     /// This frame's trees per technique ([`Self::assign`]) from the camera's view.
@@ -314,6 +316,7 @@ impl Renderer {
             main: View::default(),
             shadow_views: Vec::new(),
             prune_shown: Vec::new(),
+            chain_levels: Vec::new(),
             visible_fraction: Vec::new(),
             assignment: Assignment::default(),
             cascade_assignments: Vec::new(),
@@ -462,6 +465,7 @@ impl Renderer {
         );
         if self.instances.len() != before {
             self.prune_shown = vec![None; self.instances.len()];
+            self.chain_levels = vec![None; self.instances.len()];
             self.visible_fraction = vec![1.0; self.instances.len()];
             self.policy.state.reset();
             self.policy.cascade_states.iter_mut().for_each(PolicyState::reset);
@@ -790,10 +794,12 @@ impl Renderer {
             impostor_bark: settings.impostor_bark,
             pixel_level: settings.pixel_level(),
             lines: settings.lines,
+            chain_policy: settings.policy.unwrap_or_default(),
         };
         let prune_state =
             main.then_some(PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction });
-        select_techniques(&scene, assignment, camera, &technique_settings, prune_state, &mut view.draws);
+        let chain_state = main.then_some(ChainState { previous: &mut self.chain_levels });
+        select_techniques(&scene, assignment, camera, &technique_settings, prune_state, chain_state, &mut view.draws);
         if main {
             self.occlusion_jobs.clear();
             for &index in &view.draws.occlusion {

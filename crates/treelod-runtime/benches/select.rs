@@ -140,6 +140,7 @@ struct PolicyFrame<'a> {
     /// Pruning's held `λ` per instance, and the visible fractions of the occlusion test (all 1:
     /// no GPU measures them here).
     prune_shown: Vec<Option<f32>>,
+    chain_levels: Vec<Option<treelod_runtime::ChainPick>>,
     visible_fraction: Vec<f32>,
     spt_list: Vec<u32>,
     spt_instances: Vec<Instance>,
@@ -169,6 +170,7 @@ impl<'a> PolicyFrame<'a> {
             assignment: Assignment::default(),
             draws: TreeDraws::default(),
             prune_shown: vec![None; instances.len()],
+            chain_levels: vec![None; instances.len()],
             visible_fraction: vec![1.0; instances.len()],
             spt_list: Vec::new(),
             spt_instances: Vec::new(),
@@ -181,6 +183,7 @@ impl<'a> PolicyFrame<'a> {
                 impostor_bark: ImpostorBark::default(),
                 pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
                 lines: true,
+                chain_policy: policy,
             },
         }
     }
@@ -202,7 +205,17 @@ impl<'a> PolicyFrame<'a> {
         self.draws.clear();
         let scene = Scene { lods: self.lods, models: self.models, instances: self.instances };
         let prune_state = PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction };
-        select_techniques(&scene, &self.assignment, camera, &self.technique, Some(prune_state), &mut self.draws);
+        let chain_state = treelod_runtime::ChainState { previous: &mut self.chain_levels };
+        let technique = &self.technique;
+        select_techniques(
+            &scene,
+            &self.assignment,
+            camera,
+            technique,
+            Some(prune_state),
+            Some(chain_state),
+            &mut self.draws,
+        );
         let (full, spt) = (&self.assignment[Technique::Full], &self.assignment[Technique::Spt]);
         merge_ascending(&[full, spt, &self.draws.point_tree], &mut self.spt_list);
         let remapped = self.spt_list.len() != self.instances.len();

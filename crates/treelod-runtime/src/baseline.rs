@@ -1,13 +1,30 @@
 //! Baselines at run time (spec §6.12, §6.13): what a user would draw instead of treelod, chosen
 //! by the same pixel threshold, so that tools can compare both on one file.
 //!
-//! A discrete level-of-detail chain switches per instance: [`LodChain::pick`] returns the
-//! coarsest level whose geometric error projects below `s_min` pixels at the block centre's
-//! distance (the `τ_p` of spec §10.1, the threshold that chooses treelod's own points), or the
-//! full mesh when even the finest level's error is larger. A block of several trees switches all
-//! of its trees together (at level `ℓ` it draws every tree's level `ℓ`, the block's error being
-//! the largest of theirs): the container's `TRIANGLES` are not split by tree, and the full mesh
-//! is the block's. Billboards need no choice: the instance draws its billboard quads.
+//! A discrete level-of-detail chain switches per instance. Where the container holds the chain's
+//! per-level calibration tables (`CHAIN_CALIBRATION`, spec §6.16), the level is chosen by image
+//! error, as the policy chooses representations (spec §10.2): at the tree's projected height
+//! `h`, the full mesh or the level of fewest primitives whose calibrated error is within the
+//! policy's target of the policy's floor ([`Calibration::chain_level`]), looked up in a table per
+//! model and policy ([`ChainChoices`]) with the policy's hysteresis on the camera's view (a tree
+//! keeps last frame's level while that level is still the choice within
+//! [`Policy::hysteresis`](crate::Policy::hysteresis) octaves of `h`). Below the calibrated range the smallest
+//! height's level holds; above it the finer of the largest height's level and the geometric
+//! rule's, so that near trees converge to the full mesh as the geometric rule makes them. This
+//! holds whether the policy chose the chain for the tree or the chain was forced.
+//!
+//! Without those tables (files before 1.6, or built without calibration) [`LodChain::pick`]
+//! returns the coarsest level whose geometric error projects below `s_min` pixels at the block
+//! centre's distance (the `τ_p` of spec §10.1, the threshold that chooses treelod's own points),
+//! or the full mesh when even the finest level's error is larger: meshoptimizer's error is
+//! one-sided (a removed leaf card counts for its own size, not for the hole it leaves), so the
+//! geometric rule keeps fine levels far longer than the image needs (the oak at 8 pixels drew the
+//! full mesh where a coarse level reached a lower image error).
+//!
+//! A block of several trees switches all of its trees together (at level `ℓ` it draws every
+//! tree's level `ℓ`, the block's error being the largest of theirs): the container's `TRIANGLES`
+//! are not split by tree, and the full mesh is the block's. Billboards need no choice: the
+//! instance draws its billboard quads.
 //!
 //! [`select`] is the baselines' per-frame selection: the draws of the trees assigned to one of
 //! them (see [`crate::draws`]).
@@ -17,10 +34,11 @@ use treelod_format::{Container, LodLevelRecord, Range, billboard_kind};
 
 #[cfg(doc)]
 use crate::draws::Representations;
-use crate::draws::{QuadDraw, Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
+use crate::draws::{QuadDraw, Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
 use crate::frame::{Camera, Frustum, tau_per_metre};
 #[cfg(doc)]
 use crate::impostor::ImpostorBark;
+use crate::policy::{Calibration, ChainChoices, ChainPick, projected_height_at};
 use crate::technique::Technique;
 
 /// One level of a block's chain: every tree's level of that number.
@@ -181,6 +199,10 @@ pub struct ChainRanges {
     /// [`BARK_AREA_KEPT`](crate::impostor::BARK_AREA_KEPT) of the full bark's area; empty
     /// without planes and priority lists.
     pub bark_levels: Vec<(u32, u32)>,
+    /// The model's calibration tables where they hold the chain's per-level tables
+    /// (`CHAIN_CALIBRATION`, spec §6.16): the chain's level is then chosen by image error
+    /// ([`select`]); `None`: by geometric error ([`LodChain::pick`]).
+    pub calibration: Option<Calibration>,
 }
 
 impl ChainRanges {
@@ -213,14 +235,56 @@ impl BillboardRanges {
     }
 }
 
+/// Per instance, the LoD chain's level it was drawn with last frame on the camera's view
+/// (`None`: not drawn with the chain by image error), for the hysteresis of [`select`].
+pub struct ChainState<'a> {
+    /// Per instance: last frame's level, updated by [`select`].
+    pub previous: &'a mut [Option<ChainPick>],
+}
+
+/// What one chunk of [`select`] produced: its draws, and the chain levels of its instances.
+#[derive(Default)]
+struct BaselineChunk {
+    draws: TreeDraws,
+    levels: Vec<(u32, Option<ChainPick>)>,
+}
+
 /// The trees of `list` drawn with the baseline `baseline` ([`Technique::LodChain`],
 /// [`Technique::Billboard`] or [`Technique::Crossed`]; every model of `list` holds it, see
-/// [`Representations::holds`]): appends to `out` a LoD chain draw (the coarsest level whose error
-/// projects below `s_min` pixels at the block centre, [`LodChain::pick`], else the full mesh) or
-/// the billboard quads of each instance inside the frustum, and counts them visible.
-pub fn select(scene: &Scene<'_>, list: &[u32], baseline: Technique, camera: &Camera, s_min: f32, out: &mut TreeDraws) {
+/// [`Representations::holds`]): appends to `out` a LoD chain draw (module docs: the level by image
+/// error where the model has per-level tables, with `settings.chain_policy`'s target and
+/// hysteresis and `state`'s last levels, else the coarsest level whose error projects below
+/// `settings.s_min` pixels at the block centre, [`LodChain::pick`], or the full mesh) or the
+/// billboard quads of each instance inside the frustum, and counts them visible. `state`: the
+/// camera's view's levels (`None` for shadow cascades: no hysteresis).
+pub fn select(
+    scene: &Scene<'_>,
+    list: &[u32],
+    baseline: Technique,
+    camera: &Camera,
+    settings: &TechniqueSettings,
+    state: Option<ChainState<'_>>,
+    out: &mut TreeDraws,
+) {
+    let s_min = settings.s_min;
     let frustum = Frustum::from_view_proj(camera.view_proj);
-    for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {
+    let world_per_pixel = camera.world_per_pixel();
+    // Per model, its levels by image error under the policy (a few dozen steps each).
+    let choices: Vec<Option<ChainChoices>> = if baseline == Technique::LodChain {
+        scene
+            .models
+            .iter()
+            .map(|m| {
+                let calibration = m.chain.as_ref()?.calibration.as_ref()?;
+                ChainChoices::new(calibration, &settings.chain_policy, |t| m.holds(t))
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let main = state.is_some();
+    let previous: &[Option<ChainPick>] = state.as_ref().map_or(&[], |s| &*s.previous);
+    let chunks = by_chunks(list, |chunk, out: &mut BaselineChunk| {
         for &index in chunk {
             let Some((instance, lod, model)) = scene.get(index) else { continue };
             let Some(tau) =
@@ -228,17 +292,35 @@ pub fn select(scene: &Scene<'_>, list: &[u32], baseline: Technique, camera: &Cam
             else {
                 continue;
             };
-            *out.visible.get_mut(baseline) += 1;
+            *out.draws.visible.get_mut(baseline) += 1;
             match (baseline, &model.chain, &model.billboards) {
                 (Technique::LodChain, Some(chain), _) => {
-                    let (range, error) = match chain.chain.pick(tau) {
+                    let by_image = choices.get(instance.model as usize).and_then(Option::as_ref);
+                    let pick = match by_image {
+                        Some(choices) => {
+                            let height = projected_height_at(lod, instance.transform, camera.position, world_per_pixel);
+                            let last = previous.get(index as usize).copied().flatten();
+                            let pick = choices.choose(height, last, || chain.chain.pick(tau));
+                            if main {
+                                out.levels.push((index, Some(pick)));
+                            }
+                            pick
+                        }
+                        None => {
+                            if main {
+                                out.levels.push((index, None));
+                            }
+                            chain.chain.pick(tau)
+                        }
+                    };
+                    let (range, error) = match pick {
                         Some(level) => (
                             chain.levels.get(level as usize).copied().unwrap_or(chain.full),
                             chain.level_error(level as usize),
                         ),
                         None => (chain.full, 0.0),
                     };
-                    out.triangles.extend(TriangleDraw::whole(
+                    out.draws.triangles.extend(TriangleDraw::whole(
                         index,
                         instance.model,
                         TriangleSource::LodLevel,
@@ -251,20 +333,32 @@ pub fn select(scene: &Scene<'_>, list: &[u32], baseline: Technique, camera: &Cam
                     let (first, count) =
                         if baseline == Technique::Crossed { billboards.crossed } else { billboards.facing };
                     if count > 0 {
-                        out.billboards.push(QuadDraw { instance: index, model: instance.model, first, count });
+                        out.draws.billboards.push(QuadDraw { instance: index, model: instance.model, first, count });
                     }
                 }
                 _ => {}
             }
         }
-    }) {
-        out.append(&mut chunk);
+    });
+    let mut state = state;
+    for mut chunk in chunks {
+        out.append(&mut chunk.draws);
+        if let Some(state) = state.as_mut() {
+            for (index, level) in chunk.levels {
+                if let Some(slot) = state.previous.get_mut(index as usize) {
+                    *slot = level;
+                }
+            }
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::draws::Representations;
+    use crate::impostor::ImpostorBark;
+    use crate::policy::Calibration;
     use treelod_format::{ContainerData, LodLevelRecord};
 
     fn chain(errors: &[&[f32]]) -> LodChain {
@@ -315,6 +409,117 @@ mod tests {
         assert_eq!(chain.levels()[1].ranges, [Range { first: 1, count: 1 }, Range { first: 3, count: 1 }]);
         assert_eq!(chain.pick(0.015), None);
         assert_eq!(chain.pick(0.02), Some(0));
+    }
+
+    /// `scene` built with a LoD chain and calibration (two views), its selection inputs.
+    fn built_chain(scene: &treelod_build::scene::Scene) -> (Container, Representations, crate::frame::ModelLod) {
+        use treelod_build::{BuildConfig, CalibrationConfig, LodChainConfig, Placed, build_block};
+        let config = BuildConfig {
+            baselines: Some(LodChainConfig::default()),
+            calibration: Some(CalibrationConfig { views: 2, ..CalibrationConfig::default() }),
+            ..BuildConfig::default()
+        };
+        let built = build_block("t", &[Placed { scene, translation: Vec3::ZERO }], &config, "t").expect("builds");
+        let container =
+            Container::from_bytes(&built.data.to_bytes(treelod_format::Compression::None).unwrap()).expect("opens");
+        let models = Representations::from_container(&container).0;
+        let lod = crate::frame::ModelLod::from_container(&container);
+        (container, models, lod)
+    }
+
+    /// The triangles the chain draws for one tree `height` pixels high (the camera's view, no
+    /// previous level) with `models`' per-level tables, or (`geometric`) without them.
+    fn chain_draw(models: &Representations, lod: &crate::frame::ModelLod, height: f32, geometric: bool) -> u32 {
+        let mut models = models.clone();
+        if geometric {
+            models.chain.as_mut().expect("a chain").calibration = None;
+        }
+        let probe = Camera::look_at(Vec3::new(0.0, 0.0, 10.0), Vec3::ZERO, 0.8, 640, 480);
+        let centre = lod.centre();
+        let distance = crate::policy::distance_for_height(lod, height, &probe);
+        let camera = Camera::look_at(centre + Vec3::new(0.0, 0.0, distance), centre, 0.8, 640, 480);
+        let instances = [crate::frame::Instance { model: 0, transform: Mat4::IDENTITY }];
+        let (lods, reps) = (std::slice::from_ref(lod), std::slice::from_ref(&models));
+        let scene = Scene { lods, models: reps, instances: &instances };
+        let settings = TechniqueSettings {
+            s_min: 1.0,
+            lod: crate::frame::LodSettings::default(),
+            pruning: crate::prune::Pruning::default(),
+            impostor_bark: ImpostorBark::default(),
+            pixel_level: crate::spt_lod::PixelLevel { quality: 1.0, blend: 0.5 },
+            lines: true,
+            chain_policy: crate::Policy::default(),
+        };
+        let mut out = TreeDraws::default();
+        let mut previous = vec![None];
+        let state = ChainState { previous: &mut previous };
+        select(&scene, &[0], Technique::LodChain, &camera, &settings, Some(state), &mut out);
+        assert_eq!(out.triangles.len(), 1, "one draw of the tree");
+        assert_eq!(previous[0].is_some(), !geometric, "the level by image error is held for the next frame");
+        out.triangles[0].count
+    }
+
+    /// At `height` pixels: the triangles the chain draws by image error and by geometric error,
+    /// after checking that the former are those of the level the tables pick, whose calibrated
+    /// error is within the default target of the floor (or of the chain's least error, where
+    /// that is above the floor).
+    fn by_image_and_by_geometry(models: &Representations, lod: &crate::frame::ModelLod, height: f32) -> (u32, u32) {
+        let calibration = models.chain.as_ref().and_then(|c| c.calibration.clone()).expect("per-level tables");
+        let pick = calibration.chain_level(height, crate::Policy::DEFAULT_TARGET, |_| true).expect("tables");
+        let (error, primitives) = match pick {
+            Some(level) => calibration.level_at(level, height).expect("level"),
+            None => calibration.at(Technique::Full, height).expect("full"),
+        };
+        // Within the target of the floor, or where nothing is, of the least error the chain has.
+        let floor = calibration.floor(height, |_| true);
+        let levels = (0..calibration.chain_levels() as u32).filter_map(|l| calibration.level_at(l, height));
+        let best = levels.chain(calibration.at(Technique::Full, height)).map(|(e, _)| e).fold(f32::INFINITY, f32::min);
+        assert!(error <= floor.max(best) + crate::Policy::DEFAULT_TARGET, "{height} px: {error} over {floor}, {best}");
+        let by_image = chain_draw(models, lod, height, false);
+        assert_eq!(by_image as f32, primitives, "{height} px: the tables count what is drawn");
+        (by_image, chain_draw(models, lod, height, true))
+    }
+
+    /// The demo tree's coarse chain levels lose its canopy (their image errors are two to three
+    /// times the floor at 8 pixels) although their geometric errors project under a pixel there:
+    /// by image error the chain keeps a finer level.
+    #[test]
+    fn the_chain_draws_the_level_its_tables_allow_on_the_demo_tree() {
+        let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
+        let (container, models, lod) = built_chain(&scene);
+        let levels = models.chain.as_ref().and_then(|c| c.calibration.as_ref()).map(Calibration::chain_levels);
+        assert_eq!(levels, Some(LodChain::from_container(&container).unwrap().levels().len()));
+        let (by_image, by_geometry) = by_image_and_by_geometry(&models, &lod, 8.0);
+        assert!(by_image > by_geometry, "8 px: {by_image} triangles by image error, {by_geometry} by geometry");
+        // Near, above the tables, the chain converges to the full mesh as the geometric rule does.
+        assert_eq!(chain_draw(&models, &lod, 4096.0, false), container.triangles().len() as u32);
+        assert_eq!(chain_draw(&models, &lod, 4096.0, true), container.triangles().len() as u32);
+    }
+
+    /// The shared oak (the tree at 8 bounding radii, about 100 pixels high in `eval`'s
+    /// view): from 64 pixels up its chain levels' geometric errors (3 to 5 m) project over a
+    /// pixel, so the geometric rule draws the full mesh, where level 0 (half the triangles)
+    /// is within the target of the floor; at 32 pixels it draws level 0 where level 1 is within
+    /// the target of the best image the chain has (nothing in the chain reaches the point tree's
+    /// floor there).
+    #[test]
+    fn far_away_the_oak_chain_by_image_error_draws_fewer_triangles_than_by_geometric_error() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../../shared/assets/trees/ez-tree-oak-large-23k.glb");
+        assert!(path.exists(), "{} is missing: the repository is checked out with ../shared beside it", path.display());
+        let scene = treelod_build::import_gltf(&path).expect("imports");
+        let (container, models, lod) = built_chain(&scene);
+        let full = container.triangles().len() as u32;
+        for height in [32.0, 64.0, 128.0, 256.0] {
+            let (by_image, by_geometry) = by_image_and_by_geometry(&models, &lod, height);
+            if height >= 64.0 {
+                assert_eq!(by_geometry, full, "{height} px: the geometric rule draws the full mesh");
+            }
+            assert!(
+                by_image < by_geometry,
+                "{height} px: {by_image} triangles by image error, {by_geometry} by geometry"
+            );
+        }
     }
 
     #[test]

@@ -26,10 +26,11 @@ use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 use treelod_format::{Container, TriangleRecord, material_class};
 
-use crate::baseline::{BillboardRanges, Billboards, ChainRanges, LodChain};
+use crate::baseline::{BillboardRanges, Billboards, ChainRanges, ChainState, LodChain};
 use crate::ellipsoid::{EllipsoidLod, LineLod};
 use crate::frame::{Camera, CellPrefix, Instance, LodSettings, ModelLod, ROOTS_CELL};
 use crate::impostor::{BARK_AREA_KEPT, ImpostorBark, PlaneLod, area};
+use crate::policy::{Calibration, Policy};
 use crate::prune::{PruneLod, PruneState, Pruning};
 use crate::spt_lod::PixelLevel;
 use crate::technique::{PerTechnique, Technique};
@@ -122,7 +123,9 @@ impl Representations {
                         bark_levels.push((first, at(&whole) - first));
                     }
                 }
-                chain = Some(ChainRanges { chain: lod_chain, full, levels, bark_levels });
+                // The per-level tables, where the build measured them (spec §6.16).
+                let calibration = Calibration::from_container(container).filter(|c| c.chain_levels() > 0);
+                chain = Some(ChainRanges { chain: lod_chain, full, levels, bark_levels, calibration });
             }
         }
         let representations = Self { block_centre, bark, prune, planes, ellipsoids, lines, chain, billboards };
@@ -413,12 +416,18 @@ pub struct TechniqueSettings {
     pub pixel_level: PixelLevel,
     /// Whether ellipsoid trees draw their bark as lines (where their models have lines).
     pub lines: bool,
+    /// The policy whose target and hysteresis choose the LoD chain's level by image error where
+    /// a model has per-level tables ([`crate::baseline::select`]); the renderer's policy, else
+    /// [`Policy::default`].
+    pub chain_policy: Policy,
 }
 
 /// Selects one view of every technique but the point tree and the full mesh: appends to `out`
 /// (not cleared) the draws of each technique's selection over its list of `assignment`, in
 /// [`Technique::ALL`] order. `prune_state`: the camera's view's pruning state (see
-/// [`prune::select`](crate::prune::select)); `None` for other views (shadow cascades).
+/// [`prune::select`](crate::prune::select)); `chain_state`: the camera's view's LoD chain levels
+/// (see [`baseline::select`](crate::baseline::select)); `None` for other views (shadow
+/// cascades).
 ///
 /// The point tree's trees are then `assignment`'s [`Technique::Full`] and [`Technique::Spt`]
 /// lists and `out`'s [`TreeDraws::point_tree`] ([`merge_ascending`]), for
@@ -429,6 +438,7 @@ pub fn select_techniques(
     camera: &Camera,
     settings: &TechniqueSettings,
     mut prune_state: Option<PruneState<'_>>,
+    mut chain_state: Option<ChainState<'_>>,
     out: &mut TreeDraws,
 ) {
     for technique in Technique::ALL {
@@ -452,7 +462,8 @@ pub fn select_techniques(
                 crate::ellipsoid::select(scene, list, camera, &settings.lod, level, lines, out);
             }
             Technique::LodChain | Technique::Billboard | Technique::Crossed => {
-                crate::baseline::select(scene, list, technique, camera, settings.s_min, out);
+                let state = chain_state.as_mut().map(|s| ChainState { previous: &mut *s.previous });
+                crate::baseline::select(scene, list, technique, camera, settings, state, out);
             }
         }
     }
@@ -509,6 +520,7 @@ mod tests {
             impostor_bark: ImpostorBark::default(),
             pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
             lines: true,
+            chain_policy: Policy::default(),
         };
         for technique in Technique::ALL {
             let assignment = Assignment::forced(technique, &instances, &models);
@@ -523,9 +535,11 @@ mod tests {
                     let mut shown = vec![None; instances.len()];
                     let visible_fraction = vec![1.0; instances.len()];
                     let state = PruneState { shown: &mut shown, visible_fraction: &visible_fraction };
+                    let mut levels = vec![None; instances.len()];
+                    let chain = ChainState { previous: &mut levels };
                     let mut out = TreeDraws::default();
-                    select_techniques(&scene, &assignment, &camera, &settings, Some(state), &mut out);
-                    (out, shown)
+                    select_techniques(&scene, &assignment, &camera, &settings, Some(state), Some(chain), &mut out);
+                    (out, shown, levels)
                 })
             };
             let (one, four) = (select(1), select(4));

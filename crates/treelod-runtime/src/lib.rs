@@ -30,7 +30,9 @@ pub mod select;
 pub mod spt_lod;
 pub mod technique;
 
-pub use baseline::{BillboardKind, BillboardRanges, Billboards, ChainLevel, ChainRanges, LodChain, instance_tau};
+pub use baseline::{
+    BillboardKind, BillboardRanges, Billboards, ChainLevel, ChainRanges, ChainState, LodChain, instance_tau,
+};
 pub use draws::{
     Assignment, PrefixDraw, QuadDraw, Representations, Scene, TechniqueSettings, TreeDraws, TriangleDraw,
     TriangleSource, max_axis_scale, merge_ascending, select_techniques,
@@ -47,7 +49,8 @@ pub use impostor::{
     plane_drawn, plane_parents,
 };
 pub use policy::{
-    Calibration, Choices, Policy, PolicyState, choose_instances, choose_instances_coarsest, projected_height,
+    Calibration, ChainChoices, ChainPick, Choices, Policy, PolicyState, choose_instances, choose_instances_coarsest,
+    projected_height,
 };
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};

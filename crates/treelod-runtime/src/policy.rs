@@ -29,7 +29,7 @@
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
-use treelod_format::{CalibrationRecord, Container};
+use treelod_format::{CalibrationRecord, ChainCalibrationRecord, Container};
 
 use crate::draws::Representations;
 use crate::frame::{Camera, Instance, ModelLod};
@@ -102,20 +102,62 @@ struct Sample {
     primitives: f32,
 }
 
-/// A model's calibration tables (spec §6.15): per technique, its error and primitives as
-/// functions of the block's projected height, interpolated linearly in `log2(height)` and
-/// clamped outside the sampled range.
+/// A model's calibration tables (spec §6.15, §6.16): per technique, and per level of its LoD
+/// chain where the container measured them, its error and primitives as functions of the
+/// block's projected height, interpolated linearly in `log2(height)` and clamped outside the
+/// sampled range.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Calibration {
     curves: PerTechnique<Vec<Sample>>,
+    /// Per LoD chain level, finest first (`CHAIN_CALIBRATION`); empty without them.
+    levels: Vec<Vec<Sample>>,
+}
+
+/// Appends `(height, error, primitives)` to `curve` if it is valid and its height increases.
+fn push_sample(curve: &mut Vec<Sample>, height: f32, error: f32, primitives: f32) {
+    let valid = height.is_finite() && height > 0.0 && error.is_finite() && primitives.is_finite();
+    let log2_height = height.log2();
+    if valid && curve.last().is_none_or(|s| s.log2_height < log2_height) {
+        curve.push(Sample { log2_height, error, primitives });
+    }
+}
+
+/// `(error, primitives)` of `curve` at `height` pixels: linear in `log2(height)` between samples,
+/// clamped outside them; `None` for an empty curve.
+fn interpolate(curve: &[Sample], height: f32) -> Option<(f32, f32)> {
+    let (first, last) = (curve.first()?, curve.last()?);
+    let x = height.max(f32::MIN_POSITIVE).log2();
+    if x <= first.log2_height {
+        return Some((first.error, first.primitives));
+    }
+    if x >= last.log2_height {
+        return Some((last.error, last.primitives));
+    }
+    let next = curve.partition_point(|s| s.log2_height <= x);
+    let (a, b) = (curve[next - 1], curve[next]);
+    let t = (x - a.log2_height) / (b.log2_height - a.log2_height);
+    Some((a.error + t * (b.error - a.error), a.primitives + t * (b.primitives - a.primitives)))
+}
+
+/// Which of a LoD chain's meshes draws a block: the full mesh (`TRIANGLES`), or the chain's level
+/// of this number (0 the finest), every tree's level of that number.
+pub type ChainPick = Option<u32>;
+
+/// The finer of two chain picks (the full mesh is the finest).
+fn finer(a: ChainPick, b: ChainPick) -> ChainPick {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        _ => None,
+    }
 }
 
 impl Calibration {
     /// The tables of `container`; `None` when it has none (built without calibration, or before
     /// format 1.5).
+    /// The per-level tables of the LoD chain (`CHAIN_CALIBRATION`, spec §6.16) are read too.
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        Self::from_records(container.calibration())
+        Self::from_records(container.calibration()).map(|c| c.with_chain_levels(container.chain_calibration()))
     }
 
     /// The tables of `records` (sorted as spec §6.15 asks; [`Container`] has verified that).
@@ -126,17 +168,47 @@ impl Calibration {
         let mut curves = PerTechnique::<Vec<Sample>>::default();
         for record in records {
             let Some(technique) = Technique::ALL.get(record.technique as usize).copied() else { continue };
-            let valid = record.height.is_finite()
-                && record.height > 0.0
-                && record.error.is_finite()
-                && record.primitives.is_finite();
-            let curve = &mut curves[technique];
-            let log2_height = record.height.log2();
-            if valid && curve.last().is_none_or(|s| s.log2_height < log2_height) {
-                curve.push(Sample { log2_height, error: record.error, primitives: record.primitives });
-            }
+            push_sample(&mut curves[technique], record.height, record.error, record.primitives);
         }
-        curves.0.iter().any(|c| !c.is_empty()).then_some(Self { curves })
+        curves.0.iter().any(|c| !c.is_empty()).then_some(Self { curves, levels: Vec::new() })
+    }
+
+    /// These tables with the LoD chain's per-level tables of `records` (sorted as spec §6.16
+    /// asks), replacing any it had. Samples with non-finite values are skipped; the levels end at
+    /// the first level number without a valid sample (verified files have every level from 0).
+    #[must_use]
+    pub fn with_chain_levels(mut self, records: &[ChainCalibrationRecord]) -> Self {
+        self.levels.clear();
+        for record in records {
+            let Ok(level) = usize::try_from(record.level) else { break };
+            if level > self.levels.len() {
+                break;
+            }
+            if level == self.levels.len() {
+                self.levels.push(Vec::new());
+            }
+            push_sample(&mut self.levels[level], record.height, record.error, record.primitives);
+        }
+        while self.levels.last().is_some_and(Vec::is_empty) {
+            self.levels.pop();
+        }
+        if let Some(gap) = self.levels.iter().position(Vec::is_empty) {
+            self.levels.truncate(gap);
+        }
+        self
+    }
+
+    /// The number of LoD chain levels with tables (0 without `CHAIN_CALIBRATION`).
+    #[must_use]
+    pub fn chain_levels(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// `(error, primitives)` of the LoD chain's level `level` at a projected height of `height`
+    /// pixels, if the tables hold it.
+    #[must_use]
+    pub fn level_at(&self, level: u32, height: f32) -> Option<(f32, f32)> {
+        interpolate(self.levels.get(usize::try_from(level).ok()?)?, height)
     }
 
     /// Whether the tables hold `technique`.
@@ -149,19 +221,7 @@ impl Calibration {
     /// tables hold it.
     #[must_use]
     pub fn at(&self, technique: Technique, height: f32) -> Option<(f32, f32)> {
-        let curve = &self.curves[technique];
-        let (first, last) = (curve.first()?, curve.last()?);
-        let x = height.max(f32::MIN_POSITIVE).log2();
-        if x <= first.log2_height {
-            return Some((first.error, first.primitives));
-        }
-        if x >= last.log2_height {
-            return Some((last.error, last.primitives));
-        }
-        let next = curve.partition_point(|s| s.log2_height <= x);
-        let (a, b) = (curve[next - 1], curve[next]);
-        let t = (x - a.log2_height) / (b.log2_height - a.log2_height);
-        Some((a.error + t * (b.error - a.error), a.primitives + t * (b.primitives - a.primitives)))
+        interpolate(&self.curves[technique], height)
     }
 
     /// The smallest and largest calibrated heights over every technique, pixels.
@@ -176,10 +236,28 @@ impl Calibration {
         range
     }
 
+    /// The floor at one height (module docs): the least error of the full mesh and of every
+    /// technique the tables hold and `usable` accepts, the LoD chain's levels standing for the
+    /// chain where the tables hold them (its own row then describes the level the chain draws,
+    /// [`Self::chain_level`], one of them); `+∞` when the tables hold none.
+    #[must_use]
+    pub fn floor(&self, height: f32, usable: impl Fn(Technique) -> bool) -> f32 {
+        let per_level = !self.levels.is_empty();
+        let techniques = Technique::ALL
+            .into_iter()
+            .filter(|&t| t == Technique::Full || (usable(t) && !(per_level && t == Technique::LodChain)))
+            .filter_map(|t| self.at(t, height).map(|(e, _)| e));
+        let levels = self
+            .levels
+            .iter()
+            .filter(|_| usable(Technique::LodChain))
+            .filter_map(|curve| interpolate(curve, height).map(|(e, _)| e));
+        techniques.chain(levels).fold(f32::INFINITY, f32::min)
+    }
+
     /// The policy's rule at one height (module docs): among the techniques the tables hold and
     /// `usable` accepts, less the full mesh, the one of least primitives whose error is within
-    /// `target` of the least error of the full mesh and of them (ties: lower error; none
-    /// within: least error).
+    /// `target` of the floor ([`Self::floor`]) (ties: lower error; none within: least error).
     /// [`Technique::FALLBACK`] when no technique is left.
     #[must_use]
     pub fn choose(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Technique {
@@ -189,15 +267,122 @@ impl Calibration {
                 .filter(|&t| t != Technique::Full && usable(t))
                 .filter_map(|t| self.at(t, height).map(|(e, p)| (t, e, p)))
         };
-        // The best image any representation (the full mesh included) gives at this height.
-        let best_candidate = candidates().map(|(_, e, _)| e).fold(f32::INFINITY, f32::min);
-        let floor = self.at(Technique::Full, height).map_or(best_candidate, |(error, _)| error.min(best_candidate));
-        let limit = floor + sanitise(target);
+        let limit = self.floor(height, &usable) + sanitise(target);
         let cheapest = candidates()
             .filter(|&(_, e, _)| e <= limit)
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.0.cmp(&b.0)));
         let best = || candidates().min_by(|a, b| a.1.total_cmp(&b.1).then(a.2.total_cmp(&b.2)).then(a.0.cmp(&b.0)));
         cheapest.or_else(best).map_or(Technique::FALLBACK, |(t, _, _)| t)
+    }
+
+    /// The LoD chain's level at one height by image error (spec §10.2, module docs): among the
+    /// full mesh and the chain's levels, the one of least primitives whose error is within
+    /// `target` of the policy's floor ([`Self::floor`] with `usable`), ties to the lower error,
+    /// then the finer. Where none is within (the floor is set by a representation the chain
+    /// cannot match, as the point tree keeps far leaves a mesh loses to the alpha test), the one
+    /// of least primitives within `target` of the least error among them: the policy would not
+    /// choose the chain there, and a chain drawn anyway keeps its best image for fewer
+    /// triangles. `None` when the tables hold no chain levels (the chain then picks by geometric
+    /// error, [`LodChain::pick`](crate::LodChain::pick)).
+    #[must_use]
+    pub fn chain_level(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Option<ChainPick> {
+        if self.levels.is_empty() {
+            return None;
+        }
+        let target = sanitise(target);
+        // (pick, error, primitives, order: the full mesh first, then finest to coarsest).
+        let full = self.at(Technique::Full, height).map(|(e, p)| (None, e, p, 0usize));
+        let levels = self.levels.iter().enumerate().filter_map(|(i, curve)| {
+            let (e, p) = interpolate(curve, height)?;
+            Some((u32::try_from(i).ok(), e, p, i + 1))
+        });
+        let candidates: Vec<(ChainPick, f32, f32, usize)> = full.into_iter().chain(levels).collect();
+        let cheapest_within = |limit: f32| {
+            candidates
+                .iter()
+                .filter(|c| c.1 <= limit)
+                .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.3.cmp(&b.3)))
+        };
+        let best = candidates.iter().map(|c| c.1).fold(f32::INFINITY, f32::min);
+        cheapest_within(self.floor(height, &usable) + target).or_else(|| cheapest_within(best + target)).map(|c| c.0)
+    }
+}
+
+/// A model's LoD chain levels under one policy, every [`STEPS_PER_OCTAVE`]-th of an octave of
+/// projected height over its calibrated range ([`Calibration::chain_level`] at each step): what
+/// [`ChainChoices::choose`] looks up per tree drawn with the chain.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChainChoices {
+    /// `log2` of the smallest calibrated height.
+    log2_min: f32,
+    /// The level at `log2_min + i / STEPS_PER_OCTAVE`, up to the largest calibrated height.
+    steps: Vec<ChainPick>,
+    /// Steps either side within which a tree keeps last frame's level.
+    hysteresis_steps: usize,
+}
+
+impl ChainChoices {
+    /// The chain's levels of a model with `calibration` under `policy` (its target and
+    /// hysteresis), the floor over the techniques `usable` accepts; `None` when the tables hold
+    /// no chain levels.
+    #[must_use]
+    pub fn new(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Option<Self> {
+        if calibration.levels.is_empty() {
+            return None;
+        }
+        let (min, max) = calibration.heights();
+        let (log2_min, log2_max) = (min.log2(), max.log2());
+        let octaves = if log2_max.is_finite() && log2_min.is_finite() { (log2_max - log2_min).max(0.0) } else { 0.0 };
+        let log2_min = if log2_min.is_finite() { log2_min } else { 0.0 };
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
+        let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
+        let target = policy.target();
+        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        let steps: Vec<ChainPick> = (0..count)
+            .map(|i| {
+                let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
+                calibration.chain_level(height, target, &usable).flatten()
+            })
+            .collect();
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
+        let hysteresis_steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
+        Some(Self { log2_min, steps, hysteresis_steps })
+    }
+
+    /// The level for a tree `height` pixels high whose level last frame was `previous` (`None`:
+    /// none, the tree was not drawn with the chain): last frame's if it is the level within the
+    /// hysteresis of `height`, else the level at `height`. Below the calibrated range the
+    /// smallest height's level holds; above it the finer of the largest height's level and
+    /// `geometric` (the level by geometric error, [`LodChain::pick`](crate::LodChain::pick)), so
+    /// that a tree coming nearer than the tables reach converges to the full mesh.
+    #[must_use]
+    pub fn choose(&self, height: f32, previous: Option<ChainPick>, geometric: impl FnOnce() -> ChainPick) -> ChainPick {
+        let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
+        let last = self.steps.len() - 1;
+        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        if x > last as f32 + 0.5 {
+            return finer(self.steps[last], geometric());
+        }
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the table")]
+        let at = |i: f32| self.steps[(i.round().max(0.0) as usize).min(last)];
+        let now = at(x);
+        if let Some(previous) = previous
+            && previous != now
+        {
+            #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+            let within =
+                (1..=self.hysteresis_steps).any(|k| at(x - k as f32) == previous || at(x + k as f32) == previous);
+            if within {
+                return previous;
+            }
+        }
+        now
+    }
+
+    /// The level at each step, smallest height first (for tests and panels).
+    #[must_use]
+    pub fn steps(&self) -> &[ChainPick] {
+        &self.steps
     }
 }
 
@@ -296,7 +481,7 @@ pub fn projected_height(lod: &ModelLod, transform: Mat4, camera: &Camera) -> f32
 
 /// [`projected_height`] with the camera's position and [`Camera::world_per_pixel`] given, so a
 /// frame computes the latter (a tangent) once rather than per tree.
-fn projected_height_at(lod: &ModelLod, transform: Mat4, eye: Vec3, world_per_pixel: f32) -> f32 {
+pub(crate) fn projected_height_at(lod: &ModelLod, transform: Mat4, eye: Vec3, world_per_pixel: f32) -> f32 {
     let (min, max) = lod.bounds();
     let height = (max.y - min.y) * transform.y_axis.truncate().length();
     let centre = transform.transform_point3(lod.centre());
@@ -432,6 +617,105 @@ mod tests {
 
     fn all(_: Technique) -> bool {
         true
+    }
+
+    /// A table with the full mesh, the point tree and three chain levels of 500, 250 and 100
+    /// triangles (the full mesh 1,000), at 8 to 64 pixels.
+    fn chain_table() -> Calibration {
+        let mut records = Vec::new();
+        let mut levels = Vec::new();
+        for (h, full, spt, l0, l1, l2) in [
+            (8.0, 0.060, 0.064, 0.058, 0.062, 0.065),
+            (16.0, 0.040, 0.045, 0.040, 0.048, 0.070),
+            (32.0, 0.030, 0.032, 0.031, 0.045, 0.090),
+            (64.0, 0.020, 0.021, 0.022, 0.040, 0.120),
+        ] {
+            records.push(record(code::FULL, h, full, 1000.0));
+            records.push(record(code::SPT, h, spt, 400.0));
+            for (level, (error, primitives)) in [(l0, 500.0), (l1, 250.0), (l2, 100.0)].into_iter().enumerate() {
+                levels.push(ChainCalibrationRecord { level: level as u32, height: h, error, primitives });
+            }
+        }
+        records.sort_by(|a, b| a.technique.cmp(&b.technique).then(a.height.total_cmp(&b.height)));
+        levels.sort_by(|a, b| a.level.cmp(&b.level).then(a.height.total_cmp(&b.height)));
+        Calibration::from_records(&records).expect("rows").with_chain_levels(&levels)
+    }
+
+    #[test]
+    fn the_chain_level_is_the_cheapest_within_the_target_of_the_floor() {
+        let c = chain_table();
+        assert_eq!(c.chain_levels(), 3);
+        // 8 px: the floor is level 0's 0.058; every level is within 0.01, the coarsest wins.
+        assert!((c.floor(8.0, all) - 0.058).abs() < 1e-6);
+        assert_eq!(c.chain_level(8.0, 0.01, all), Some(Some(2)));
+        // 16 px: floor 0.040, limit 0.050: level 1 (0.048) is the cheapest within.
+        assert_eq!(c.chain_level(16.0, 0.01, all), Some(Some(1)));
+        // 32 px: floor 0.030, limit 0.040: the full mesh and level 0; level 0 is cheaper.
+        assert_eq!(c.chain_level(32.0, 0.01, all), Some(Some(0)));
+        // No allowance at 64 px: only the full mesh is at the floor.
+        assert_eq!(c.chain_level(64.0, 0.0, all), Some(None));
+        // With the allowance, level 0 (0.022 against the full mesh's 0.020) is within.
+        assert_eq!(c.chain_level(64.0, 0.01, all), Some(Some(0)));
+        // Interpolated in log2(height) as the policy's tables are.
+        let (e, p) = c.level_at(1, 8.0 * std::f32::consts::SQRT_2).expect("level 1");
+        assert!((e - 0.5 * (0.062 + 0.048)).abs() < 1e-6 && (p - 250.0).abs() < 1e-3, "{e} {p}");
+        assert_eq!(c.level_at(3, 8.0), None);
+    }
+
+    #[test]
+    fn where_the_floor_is_out_of_the_chains_reach_the_chain_keeps_its_best_image_for_less() {
+        // The point tree keeps far leaves (0.03) that the full mesh and every level lose.
+        let records = [record(code::FULL, 8.0, 0.100, 1000.0), record(code::SPT, 8.0, 0.030, 100.0)];
+        let levels = [(0.098, 500.0), (0.104, 250.0), (0.130, 100.0)].map(|(error, primitives)| (error, primitives));
+        let levels: Vec<ChainCalibrationRecord> = levels
+            .iter()
+            .enumerate()
+            .map(|(l, &(error, primitives))| ChainCalibrationRecord { level: l as u32, height: 8.0, error, primitives })
+            .collect();
+        let c = Calibration::from_records(&records).expect("rows").with_chain_levels(&levels);
+        // Nothing is within 0.01 of 0.030: the cheapest within 0.01 of level 0's 0.098.
+        assert_eq!(c.chain_level(8.0, 0.01, all), Some(Some(1)));
+        // Without the point tree the floor is level 0's 0.098 and the rule is the same.
+        assert_eq!(c.chain_level(8.0, 0.01, |t| t != Technique::Spt), Some(Some(1)));
+        // No allowance: the least error.
+        assert_eq!(c.chain_level(8.0, 0.0, all), Some(Some(0)));
+    }
+
+    #[test]
+    fn without_chain_tables_the_chain_keeps_the_geometric_rule() {
+        let c = table();
+        assert_eq!(c.chain_levels(), 0);
+        assert_eq!(c.chain_level(8.0, 0.01, all), None);
+        assert!(ChainChoices::new(&c, &Policy::default(), all).is_none());
+        // A level missing at the start (level 1 without level 0) leaves no levels.
+        let c =
+            table().with_chain_levels(&[ChainCalibrationRecord { level: 1, height: 8.0, error: 0.1, primitives: 1.0 }]);
+        assert_eq!(c.chain_levels(), 0);
+    }
+
+    #[test]
+    fn chain_levels_hold_across_a_boundary_within_the_hysteresis() {
+        let c = chain_table();
+        let with = |hysteresis: f32| {
+            ChainChoices::new(&c, &Policy { target: 0.01, hysteresis, budget: None }, all).expect("levels")
+        };
+        let (held, plain) = (with(0.25), with(0.0));
+        assert_eq!(held.steps().len(), 3 * STEPS_PER_OCTAVE as usize + 1);
+        // Between 16 px (level 1) and 32 px (level 0) the choice crosses over once.
+        let boundary = plain.steps().iter().position(|&l| l == Some(0)).expect("level 0 somewhere");
+        assert!(plain.steps()[..boundary].ends_with(&[Some(1)]), "{:?}", plain.steps());
+        let height = |step: usize| (8.0f32.log2() + step as f32 / STEPS_PER_OCTAVE).exp2();
+        let just_past = height(boundary);
+        assert_eq!(plain.choose(just_past, Some(Some(1)), || None), Some(0), "no hysteresis: switches");
+        assert_eq!(held.choose(just_past, Some(Some(1)), || None), Some(1), "within 0.25 octaves: holds");
+        assert_eq!(held.choose(just_past, None, || None), Some(0), "a new tree takes the choice");
+        let far_past = height(boundary + 3);
+        assert_eq!(held.choose(far_past, Some(Some(1)), || None), Some(0), "past the hysteresis: switches");
+        // Below the range the smallest height's level; above it the finer of the top level and
+        // the geometric rule's, so near trees reach the full mesh.
+        assert_eq!(held.choose(1.0, None, || None), Some(2));
+        assert_eq!(held.choose(1000.0, None, || Some(3)), Some(0));
+        assert_eq!(held.choose(1000.0, None, || None), None);
     }
 
     #[test]
