@@ -18,9 +18,10 @@
 //! centre's distance (the `τ_p` of spec §10.1, the threshold that chooses treelod's own points),
 //! or the full mesh when even the finest level's error is larger. meshoptimizer's error says
 //! little about the image: it is one-sided (a removed leaf card counts for its own size, not for
-//! the hole it leaves), and on the shared oak and pine its levels' errors (metres) project over a
-//! pixel up to about 64 pixels of tree, so the geometric rule drew the full mesh there, then
-//! jumped to the coarsest level a few octaves further. Measured with `treelod eval --orbit
+//! the hole it leaves), and its scale is not the image's: the shared oak's finest level (3.1 m
+//! of its 102 m) projects over a pixel on a tree more than about 33 pixels high, so the
+//! geometric rule drew the full mesh there, and its coarsest (5.1 m) under a pixel below about
+//! 20 pixels. Measured with `treelod eval --orbit
 //! 2,8,32 --technique lod-chain` (640×480, means of 8 views): at 8 bounding radii the oak drew
 //! 22,566 triangles by geometric error and 11,113 by image error (RMSE 0.0117 and 0.0119), the
 //! pine 19,384 and 9,677 (0.0056 and 0.0059), the Quaternius tree 2,888 and 1,444 (0.0017 and
@@ -502,8 +503,8 @@ mod tests {
         assert_eq!(chain_draw(&models, &lod, 4096.0, true), container.triangles().len() as u32);
     }
 
-    /// The shared oak (the tree at 8 bounding radii, about 100 pixels high in `eval`'s
-    /// view): from 64 pixels up its chain levels' geometric errors (3 to 5 m) project over a
+    /// The shared oak (about 76 pixels high at 8 bounding radii in `eval`'s default 640×480
+    /// view, 50° field of view): from 64 pixels up its chain levels' geometric errors (3 to 5 m) project over a
     /// pixel, so the geometric rule draws the full mesh, where level 0 (half the triangles)
     /// is within the target of the floor; at 32 pixels it draws level 0 where level 1 is within
     /// the target of the best image the chain has (nothing in the chain reaches the point tree's

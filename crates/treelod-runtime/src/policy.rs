@@ -18,6 +18,18 @@
 //! full mesh's primitives where the chain, at the full mesh there, had the same error: the oak's
 //! 49,409 against 22,566, the Quaternius tree's 7,121 against 2,888.)
 //!
+//! **The LoD chain's level** (spec §6.16, §10.2). Where a container holds the chain's per-level
+//! tables, the chain's level at `h` follows the same rule among the full mesh and the chain's
+//! levels ([`Calibration::chain_level`]): the fewest triangles with `error ≤ floor(h) + target`,
+//! the floor now counting the levels (and not the chain's own row, which the build derives from
+//! them with the default target, so that the policy compares the chain it will draw). Where no
+//! level reaches the floor (far away the point tree keeps leaves every mesh loses to the alpha
+//! test), the fewest triangles within the target of the least error among them: the policy
+//! would not pick the chain there, and a chain drawn anyway keeps its best image for less.
+//! [`ChainChoices`] tables it per model and policy as [`Choices`] does, with the same
+//! hysteresis; `baseline::select` looks it up per tree, and keeps the geometric rule (levels by
+//! meshoptimizer's error alone) for containers without the tables.
+//!
 //! **Hysteresis.** A tree keeps last frame's technique while that technique is still the choice
 //! somewhere within [`Policy::hysteresis`] octaves of its height (a tree crossing a boundary must
 //! move that much further before it switches back), so a tree hovering at a boundary does not
