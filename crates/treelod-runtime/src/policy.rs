@@ -270,14 +270,20 @@ impl Calibration {
     /// The policy's rule at one height (module docs): among the techniques the tables hold and
     /// `usable` accepts, less the full mesh, the one of least primitives whose error is within
     /// `target` of the floor ([`Self::floor`]) (ties: lower error; none within: least error).
+    /// With per-level tables the LoD chain is the level it draws at `target`
+    /// ([`Self::chain_at`]), so a policy whose target moves (budget mode) sees the chain it
+    /// draws.
     /// [`Technique::FALLBACK`] when no technique is left.
     #[must_use]
     pub fn choose(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Technique {
+        // The chain as drawn at this target where its levels have tables (its stored row is
+        // the chain at the default target).
+        let chain = self.chain_at(height, target, &usable);
         let candidates = || {
-            Technique::ALL
-                .into_iter()
-                .filter(|&t| t != Technique::Full && usable(t))
-                .filter_map(|t| self.at(t, height).map(|(e, p)| (t, e, p)))
+            Technique::ALL.into_iter().filter(|&t| t != Technique::Full && usable(t)).filter_map(|t| {
+                let measured = if t == Technique::LodChain && chain.is_some() { chain } else { self.at(t, height) };
+                measured.map(|(e, p)| (t, e, p))
+            })
         };
         let limit = self.floor(height, &usable) + sanitise(target);
         let cheapest = candidates()
@@ -285,6 +291,16 @@ impl Calibration {
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.0.cmp(&b.0)));
         let best = || candidates().min_by(|a, b| a.1.total_cmp(&b.1).then(a.2.total_cmp(&b.2)).then(a.0.cmp(&b.0)));
         cheapest.or_else(best).map_or(Technique::FALLBACK, |(t, _, _)| t)
+    }
+
+    /// `(error, primitives)` of the LoD chain drawn at `target` ([`Self::chain_level`]) at a
+    /// projected height of `height` pixels; `None` without per-level tables.
+    #[must_use]
+    pub fn chain_at(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Option<(f32, f32)> {
+        match self.chain_level(height, target, usable)? {
+            Some(level) => self.level_at(level, height),
+            None => self.at(Technique::Full, height),
+        }
     }
 
     /// The LoD chain's level at one height by image error (spec §10.2, module docs): among the
