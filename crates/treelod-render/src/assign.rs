@@ -3,7 +3,8 @@
 //! and for each shadow cascade ([`Settings::shadows`]' [`Casters`]).
 
 use treelod_runtime::{
-    Assignment, BudgetController, Calibration, Choices, Policy, PolicyState, Technique, choose_instances_coarsest,
+    Assignment, BudgetController, Calibration, Choices, Policy, PolicyState, Technique, Transition,
+    choose_instances_coarsest,
 };
 
 #[cfg(doc)]
@@ -49,11 +50,38 @@ impl Renderer {
     /// [`Settings::policy`], each tree of a model with calibration tables to the policy's choice
     /// at its projected height for `camera`, every other tree to [`Settings::technique`]; a tree
     /// whose model lacks its technique's data to [`Technique::FALLBACK`].
+    ///
+    /// Trees in a transition ([`Policy::transition`]) are also listed in
+    /// [`Self::leaving_assignment`] under the technique they are leaving, and
+    /// [`Self::transition_of`] holds their transitions.
     pub(crate) fn assign(&mut self, camera: &treelod_runtime::Camera) {
         let mut assignment = std::mem::take(&mut self.assignment);
         self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
         self.assignment = assignment;
         self.note_drawn_with();
+        self.note_transitions();
+    }
+
+    /// Lists this frame's transitions of the camera's view ([`Self::transition_of`],
+    /// [`Self::transitions`]) and the techniques they leave ([`Self::leaving_assignment`]).
+    fn note_transitions(&mut self) {
+        for &(i, _) in &self.transitions {
+            if let Some(slot) = self.transition_of.get_mut(i as usize) {
+                *slot = None;
+            }
+        }
+        self.transitions.clear();
+        self.transition_of.resize(self.instances.len(), None);
+        if self.settings.policy.is_some_and(|p| self.policy.chooses(Some(&p))) {
+            self.transitions.extend(self.policy.state.transitions());
+        }
+        for &(i, t) in &self.transitions {
+            if let Some(slot) = self.transition_of.get_mut(i as usize) {
+                *slot = Some(t);
+            }
+        }
+        let leaving = self.transitions.iter().map(|&(i, t)| (i, t.from));
+        self.leaving_assignment.assign_listed(&self.instances, &self.representations, leaving);
     }
 
     /// Fills `out` with shadow cascade `k`'s trees per technique as `casters` says: chosen at the
@@ -96,7 +124,12 @@ impl Renderer {
             tables.made_for = Some(policy);
         }
         let state = match cascade {
-            None => &mut tables.state,
+            None => {
+                // Only the camera's view fades between techniques; a cascade switches at once
+                // (a dithered caster would shimmer in the filtered shadow).
+                tables.state.set_transition(policy.transition());
+                &mut tables.state
+            }
             Some(k) => {
                 if tables.cascade_states.len() <= k {
                     tables.cascade_states.resize_with(k + 1, PolicyState::default);
@@ -122,6 +155,11 @@ impl Renderer {
                 }
             }
         }
+    }
+
+    /// Instance `instance`'s transition this frame, if it is in one.
+    pub(crate) fn transition(&self, instance: u32) -> Option<Transition> {
+        self.transition_of.get(instance as usize).copied().flatten()
     }
 
     /// The technique instance `instance` is drawn with this frame.

@@ -11,7 +11,7 @@ use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
     Assignment, BudgetController, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerPrimitive, PerTechnique, Policy,
-    PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique, TechniqueSettings,
+    PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique, TechniqueSettings, Transition,
     merge_ascending, select_frame, select_techniques,
 };
 
@@ -160,6 +160,14 @@ pub struct Renderer {
     pub(crate) assignment: Assignment,
     /// Per shadow cascade, this frame's trees per technique from the light's view.
     pub(crate) cascade_assignments: Vec<Assignment>,
+    /// The trees in a transition ([`Policy::transition`]) under the technique each is leaving
+    /// (the camera's view), and what their selections draw.
+    pub(crate) leaving_assignment: Assignment,
+    leaving: View,
+    /// This frame's transitions of the camera's view, ascending by instance, and per instance
+    /// the same (`None` outside one).
+    pub(crate) transitions: Vec<(u32, Transition)>,
+    pub(crate) transition_of: Vec<Option<Transition>>,
     /// The policy's per-model tables and per-instance state ([`Settings::policy`]).
     pub(crate) policy: PolicyModels,
     /// Per instance, the technique it is drawn with this frame (this frame's assignment), for
@@ -317,6 +325,10 @@ impl Renderer {
             visible_fraction: Vec::new(),
             assignment: Assignment::default(),
             cascade_assignments: Vec::new(),
+            leaving_assignment: Assignment::default(),
+            leaving: View::default(),
+            transitions: Vec::new(),
+            transition_of: Vec::new(),
             spt_list: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1), depth),
             occlusion_jobs: Vec::new(),
@@ -667,6 +679,14 @@ impl Renderer {
         let assignment = std::mem::take(&mut self.assignment);
         let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true, &assignment, full_mesh);
         self.assignment = assignment;
+        // Trees in a transition: the same view of the techniques they are leaving.
+        let mut leaving = std::mem::take(&mut self.leaving);
+        let leaving_assignment = std::mem::take(&mut self.leaving_assignment);
+        let fading = !self.transitions.is_empty();
+        if fading {
+            self.select_view(&mut leaving, &runtime_camera, &lod_settings, false, &leaving_assignment, full_mesh);
+        }
+        self.leaving_assignment = leaving_assignment;
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
         shadow_views.resize_with(self.cascades.len(), View::default);
         let mut shadow =
@@ -691,6 +711,9 @@ impl Renderer {
         self.residency.begin_frame();
         self.requests.clear();
         self.request(&main, full_mesh);
+        if fading {
+            self.request(&leaving, full_mesh);
+        }
         for view in &shadow_views {
             self.request(view, cascade_full);
         }
@@ -729,16 +752,18 @@ impl Renderer {
             bytes_uploaded: streamed.bytes_uploaded,
             bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
                 + u64::from(self.residency.pool.used()) * UNIT,
+            transitions: u32::try_from(self.transitions.len()).unwrap_or(u32::MAX),
             ..FrameStats::default()
         };
-        self.record_view(&mut main, full_mesh, &mut stats);
+        self.record_view(&mut main, fading.then_some(&leaving), full_mesh, &mut stats);
         for (k, view) in shadow_views.iter_mut().enumerate() {
             let mut counted = FrameStats::default();
-            self.record_view(view, cascade_full, &mut counted);
+            self.record_view(view, None, cascade_full, &mut counted);
             shadow.add_view(k, &counted);
         }
         stats.shadow = shadow;
         self.main = main;
+        self.leaving = leaving;
         self.shadow_views = shadow_views;
 
         self.write_frame_uniform(queue, camera);

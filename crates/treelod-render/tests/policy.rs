@@ -258,3 +258,88 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
         }
     }
 }
+
+/// A tree that crosses a boundary of the tables is drawn with both techniques for the
+/// transition's frames, on complementary pixels: every pixel of a frame in the transition is the
+/// old technique's or the new one's (each drawn alone), the new one's share of the pixels where
+/// they differ grows by a step per frame, and then the new one alone draws.
+#[test]
+fn a_tree_changing_technique_fades_over_the_transition_s_frames() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let calibration = Calibration::from_container(&container).expect("calibrated");
+    let lod = ModelLod::from_container(&container);
+    let (representations, _) = Representations::from_container(&container);
+    let frames = 4;
+    let policy = Policy { hysteresis: 0.0, transition: frames, ..Policy::default() };
+    let choices = Choices::new(&calibration, &policy, &representations);
+    let steps = choices.steps();
+    let (min, _) = calibration.heights();
+    let step_height = |i: usize| min * (i as f32 / treelod_runtime::policy::STEPS_PER_OCTAVE).exp2();
+    // The largest boundary whose tree is a good size on a 128-pixel-high screen.
+    let (width, height) = (128, 128);
+    let boundary = (0..steps.len() - 1)
+        .rev()
+        .find(|&i| steps[i] != steps[i + 1] && step_height(i + 1) <= 100.0)
+        .unwrap_or_else(|| panic!("no boundary under 100 px in {steps:?}"));
+    let (old, new) = (steps[boundary], steps[boundary + 1]);
+    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    let runtime_camera = treelod_runtime::Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    let at = |h: f32| {
+        let d = treelod_runtime::policy::distance_for_height(&lod, h, &runtime_camera);
+        vec3(0.0, 0.0, -d) - lod.centre()
+    };
+    let (before, after) = (at(step_height(boundary)), at(step_height(boundary + 1)));
+    let chosen = |p: Vec3| choices.choose(projected_height(&lod, Mat4::from_translation(p), &runtime_camera), None);
+    assert_eq!((chosen(before), chosen(after)), (old, new), "the tree's choices either side");
+
+    // Each technique alone at the new place.
+    let alone = |technique: Technique| {
+        let mut renderer = forest(&gpu, &container, Settings::forced(technique), &[after]);
+        render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders").0
+    };
+    let (old_image, new_image) = (alone(old), alone(new));
+    let differ: Vec<usize> = (0..old_image.rgba.len() / 4)
+        .filter(|&p| old_image.rgba[4 * p..4 * p + 4] != new_image.rgba[4 * p..4 * p + 4])
+        .collect();
+    assert!(differ.len() > 200, "the two techniques differ on {} pixels only", differ.len());
+
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    let mut renderer = Renderer::new(&gpu.device, treelod_render::offscreen::Gpu::formats(), settings);
+    let model = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("model");
+    renderer.set_instances(&[Instance { model, transform: Mat4::from_translation(before) }]);
+    let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+    assert_eq!((stats.instances[old], stats.transitions), (1, 0), "{stats:?}");
+    renderer.set_instances(&[Instance { model, transform: Mat4::from_translation(after) }]);
+    for frame in 1..=frames {
+        let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+        assert_eq!(stats.instances[new], 1, "frame {frame}: counted under the new technique: {stats:?}");
+        let draws = renderer.draws();
+        if frame == frames {
+            assert_eq!(stats.transitions, 0, "the transition is over: {stats:?}");
+            assert!(draws.iter().all(|d| d.technique == new && d.dither == [0.0, 1.0]), "{draws:?}");
+            assert_eq!(image.rgba, new_image.rgba, "the new technique alone");
+            continue;
+        }
+        let shown = frame as f32 / frames as f32;
+        assert_eq!(stats.transitions, 1, "frame {frame}: {stats:?}");
+        assert!(stats.by_technique[old] > 0 && stats.by_technique[new] > 0, "frame {frame}: {stats:?}");
+        for d in draws {
+            let expected = if d.technique == new { [0.0, shown] } else { [shown, 1.0] };
+            assert!(d.technique == new || d.technique == old, "frame {frame}: {d:?}");
+            assert_eq!(d.dither, expected, "frame {frame}: {d:?}");
+        }
+        // Every pixel is one technique's; the new one's share where they differ is `shown`.
+        let pixel = |image: &treelod_render::offscreen::Image, p: usize| image.rgba[4 * p..4 * p + 4].to_vec();
+        let mut taken_new = 0;
+        for &p in &differ {
+            let here = pixel(&image, p);
+            assert!(here == pixel(&old_image, p) || here == pixel(&new_image, p), "frame {frame}, pixel {p}");
+            taken_new += usize::from(here == pixel(&new_image, p));
+        }
+        let share = taken_new as f32 / differ.len() as f32;
+        assert!((share - shown).abs() < 0.1, "frame {frame}: the new technique on {share} of the pixels, not {shown}");
+        let same = (0..image.rgba.len() / 4).filter(|p| !differ.contains(p));
+        assert!(same.into_iter().all(|p| pixel(&image, p) == pixel(&old_image, p)), "frame {frame}");
+    }
+}

@@ -47,7 +47,8 @@ pub use impostor::{
     plane_drawn, plane_parents,
 };
 pub use policy::{
-    Calibration, Choices, Policy, PolicyState, choose_instances, choose_instances_coarsest, projected_height,
+    Calibration, Choices, Policy, PolicyState, Transition, choose_instances, choose_instances_coarsest,
+    projected_height,
 };
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};

@@ -23,6 +23,16 @@
 //! move that much further before it switches back), so a tree hovering at a boundary does not
 //! flicker.
 //!
+//! **Transitions.** A tree that changes technique is not switched at once: for
+//! [`Policy::transition`] frames it is drawn with both, on complementary pixels of a screen-door
+//! dither whose share moves from the old technique to the new one a step per frame
+//! ([`PolicyState::transition`]), so the change reads as a short cross-fade rather than a pop
+//! (as the point tree's and the ellipsoids' levels blend, spec §10.2). A tree that switches back
+//! mid-way reverses from where it is; one that switches to a third technique starts a new
+//! transition from the one it was going to. Frames, not seconds: the renderer has no clock, and
+//! the same count gives the same images whatever the frame rate (a host at other than 60 frames
+//! per second scales it).
+//!
 //! **Cost per frame.** The rule is evaluated once per model and policy into a table of choices
 //! every [`STEPS_PER_OCTAVE`]-th of an octave ([`Choices`]); per tree the frame pays a distance, a
 //! `log2` and a lookup ([`Choices::choose`]).
@@ -61,9 +71,21 @@ pub struct Policy {
     /// [`BudgetController`]: crate::BudgetController
     /// [`BudgetController::for_policy`]: crate::BudgetController::for_policy
     pub budget: Option<u64>,
+    /// Frames over which a tree that changes technique fades from the old one to the new one
+    /// (module docs), both drawn on complementary dithered pixels meanwhile; 0 or 1: switch at
+    /// once. Default [`Policy::DEFAULT_TRANSITION`]; at most [`Policy::MAX_TRANSITION`].
+    pub transition: u32,
 }
 
 impl Policy {
+    /// The default [`Policy::transition`]: 15 frames, a quarter of a second at 60 frames per
+    /// second — long enough that the change is not seen as a pop, short enough that few trees are
+    /// drawn twice at once (the extra primitives of a fly-through are reported by `bench`).
+    pub const DEFAULT_TRANSITION: u32 = 15;
+
+    /// The largest [`Policy::transition`] (ten seconds at 60 frames per second).
+    pub const MAX_TRANSITION: u32 = 600;
+
     /// The default [`Policy::target`]: one hundredth of coverage RMSE over the floor. At
     /// a few pixels every representation's error is about 0.06 (the full mesh's aliasing
     /// included), so 0.01 separates what keeps a small tree's silhouette and density from what
@@ -82,11 +104,17 @@ impl Policy {
     pub fn hysteresis(&self) -> f32 {
         sanitise(self.hysteresis)
     }
+
+    /// The transition in frames, at most [`Self::MAX_TRANSITION`].
+    #[must_use]
+    pub fn transition(&self) -> u32 {
+        self.transition.min(Self::MAX_TRANSITION)
+    }
 }
 
 impl Default for Policy {
     fn default() -> Self {
-        Self { target: Self::DEFAULT_TARGET, hysteresis: 0.25, budget: None }
+        Self { target: Self::DEFAULT_TARGET, hysteresis: 0.25, budget: None, transition: Self::DEFAULT_TRANSITION }
     }
 }
 
@@ -304,18 +332,90 @@ fn projected_height_at(lod: &ModelLod, transform: Mat4, eye: Vec3, world_per_pix
     height / (distance * world_per_pixel)
 }
 
-/// Per instance, the technique the policy gave it last frame, for hysteresis: reset when the
-/// instances change.
+/// Per instance, the technique the policy gave it last frame, for hysteresis, and the transition
+/// it is in, if any: reset when the instances change.
 #[derive(Clone, Debug, Default)]
 pub struct PolicyState {
     previous: Vec<Option<Technique>>,
+    /// Per instance: the technique it is leaving and the frames of the transition gone.
+    transitions: Vec<Option<(Technique, u16)>>,
+    /// Frames of a transition ([`Policy::transition`]); 0: none (switch at once).
+    frames: u16,
+}
+
+/// A tree's transition from one technique to another this frame ([`PolicyState::transition`]):
+/// it is drawn with both, the new technique on the pixels whose transition dither `h ∈ [0, 1)`
+/// is below [`Self::shown`], the old one on the rest.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transition {
+    /// The technique the tree is leaving.
+    pub from: Technique,
+    /// The share of the pixels the new technique covers, in `(0, 1)`; it grows by one
+    /// [`Policy::transition`]-th per frame.
+    pub shown: f32,
 }
 
 impl PolicyState {
-    /// Forgets every instance's previous technique (the instance list changed).
+    /// A state whose trees fade over `frames` frames when they change technique (at most
+    /// [`Policy::MAX_TRANSITION`]; 0 or 1: switch at once). The default state switches at once.
+    #[must_use]
+    pub fn with_transition(frames: u32) -> Self {
+        let mut state = Self::default();
+        state.set_transition(frames);
+        state
+    }
+
+    /// Sets the frames of later transitions ([`Self::with_transition`]); transitions under way
+    /// longer than that end now.
+    pub fn set_transition(&mut self, frames: u32) {
+        let frames = u16::try_from(frames.min(Policy::MAX_TRANSITION)).unwrap_or(u16::MAX);
+        self.frames = if frames <= 1 { 0 } else { frames };
+        let limit = self.frames;
+        for t in &mut self.transitions {
+            *t = t.filter(|&(_, k)| k < limit);
+        }
+    }
+
+    /// Forgets every instance's previous technique and transition (the instance list changed).
     pub fn reset(&mut self) {
         self.previous.clear();
+        self.transitions.clear();
     }
+
+    /// Instance `index`'s transition this frame, if it is changing technique: the technique it
+    /// leaves and the share the new one covers.
+    #[must_use]
+    pub fn transition(&self, index: usize) -> Option<Transition> {
+        let (from, k) = (*self.transitions.get(index)?)?;
+        Some(Transition { from, shown: f32::from(k) / f32::from(self.frames.max(1)) })
+    }
+
+    /// Every instance in a transition this frame, ascending: its index and [`Self::transition`].
+    pub fn transitions(&self) -> impl Iterator<Item = (u32, Transition)> + '_ {
+        (0..self.transitions.len()).filter_map(|i| Some((u32::try_from(i).ok()?, self.transition(i)?)))
+    }
+}
+
+/// The transition after one frame of a tree that was `previous` (`None`: a new tree) and is now
+/// `chosen`, in transition `current` before the frame, with transitions of `frames` frames (0:
+/// none): a change starts one (reversing one under way back to where it was), every frame moves
+/// it a step, and it ends after `frames` steps.
+fn advance(
+    previous: Option<Technique>,
+    chosen: Technique,
+    current: Option<(Technique, u16)>,
+    frames: u16,
+) -> Option<(Technique, u16)> {
+    if frames == 0 {
+        return None;
+    }
+    let started = match (previous, current) {
+        // Back to the technique it was leaving: the other way from where it is.
+        (Some(p), Some((from, k))) if p != chosen && from == chosen => Some((p, frames - k)),
+        (Some(p), _) if p != chosen => Some((p, 0)),
+        _ => current,
+    };
+    started.and_then(|(from, k)| (k + 1 < frames).then_some((from, k + 1)))
 }
 
 /// Instances per parallel task of [`choose_instances`]: a tree's choice costs a few tens of
@@ -327,7 +427,8 @@ pub const CHOOSE_CHUNK: usize = 1024;
 /// the model has them (`choices[model]`, `None` for a model without calibration tables), else
 /// `otherwise`; `state` keeps the choices for the next frame's hysteresis. The result goes into
 /// [`Assignment::assign`](crate::Assignment), which still checks that each model holds its
-/// technique.
+/// technique. `state` also moves each tree's transition on ([`PolicyState::transition`]; none
+/// unless it was made [`PolicyState::with_transition`]).
 ///
 /// Each instance's choice depends only on it and its own previous choice, so more than
 /// [`CHOOSE_CHUNK`] instances are chosen in chunks on rayon's pool, each writing its own slice:
@@ -357,11 +458,16 @@ pub fn choose_instances_coarsest(
     out: &mut Vec<Technique>,
 ) {
     state.previous.resize(instances.len(), None);
+    state.transitions.resize(instances.len(), None);
     out.clear();
     out.resize(instances.len(), otherwise);
+    let frames = state.frames;
     let eyes: Vec<(Vec3, f32)> = cameras.iter().map(|c| (c.position, c.world_per_pixel())).collect();
-    let choose = |instances: &[Instance], previous: &mut [Option<Technique>], out: &mut [Technique]| {
-        for ((instance, previous), out) in instances.iter().zip(previous).zip(out) {
+    let choose = |instances: &[Instance],
+                  previous: &mut [Option<Technique>],
+                  transitions: &mut [Option<(Technique, u16)>],
+                  out: &mut [Technique]| {
+        for (((instance, previous), transition), out) in instances.iter().zip(previous).zip(transitions).zip(out) {
             let m = instance.model as usize;
             *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                 (Some(lod), Some(choices)) => {
@@ -373,25 +479,28 @@ pub fn choose_instances_coarsest(
                         .reduce(f32::min)
                         .unwrap_or(0.0);
                     let chosen = choices.choose(height, *previous);
+                    *transition = advance(*previous, chosen, *transition, frames);
                     *previous = Some(chosen);
                     chosen
                 }
                 _ => {
                     *previous = None;
+                    *transition = None;
                     otherwise
                 }
             };
         }
     };
     if instances.len() <= CHOOSE_CHUNK {
-        choose(instances, &mut state.previous, out);
+        choose(instances, &mut state.previous, &mut state.transitions, out);
         return;
     }
     instances
         .par_chunks(CHOOSE_CHUNK)
         .zip(state.previous.par_chunks_mut(CHOOSE_CHUNK))
+        .zip(state.transitions.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
-        .for_each(|((instances, previous), out)| choose(instances, previous, out));
+        .for_each(|(((instances, previous), transitions), out)| choose(instances, previous, transitions, out));
 }
 
 /// The eye distance at which a model's block is `height` pixels high for `camera` (unit instance
@@ -471,7 +580,7 @@ mod tests {
         let c = table();
         assert_eq!(c.choose(8.0, f32::NAN, all), c.choose(8.0, 0.0, all));
         assert_eq!(c.choose(8.0, -1.0, all), c.choose(8.0, 0.0, all));
-        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0, budget: None };
+        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0, budget: None, transition: 0 };
         assert_eq!((policy.target(), policy.hysteresis()), (0.0, 0.0));
     }
 
@@ -484,7 +593,7 @@ mod tests {
     #[test]
     fn choice_tables_follow_the_rule_and_fall_back_above_the_range() {
         let c = table();
-        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None };
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0 };
         let choices = Choices::new(&c, &policy, &representations_holding_everything());
         // A plain model draws only the point tree: every step is it.
         assert!(choices.steps().iter().all(|&t| t == Technique::Spt));
@@ -496,7 +605,7 @@ mod tests {
     fn above_the_range_the_top_choice_holds_only_if_it_converges_to_the_full_mesh() {
         let c = table();
         let top = |steps: Vec<Technique>| {
-            let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None };
+            let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0 };
             let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
             choices.above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
             choices.steps = steps;
@@ -509,7 +618,7 @@ mod tests {
         assert!(converges(Technique::PruneOpt) && !converges(Technique::Impostors));
         // Without the point tree's cut available, the rule's table keeps the chain at 256 px
         // (the table's chain equals the full mesh there) and it holds above.
-        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None };
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0 };
         let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
         choices.steps = (0..=40)
             .map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, |t| t != Technique::Spt))
@@ -536,6 +645,114 @@ mod tests {
         assert_eq!(choices.choose(height_at(boundary as f32 + 3.0), Some(Technique::Crossed)), after);
         // A previous technique that is nowhere near is not kept.
         assert_eq!(choices.choose(height_at(0.0), Some(Technique::LodChain)), Technique::Crossed);
+    }
+
+    #[test]
+    fn a_change_of_technique_moves_a_step_per_frame_reverses_and_ends() {
+        use Technique::{Crossed, Impostors, Spt};
+        let run = |frames: u16, path: &[Technique]| -> Vec<Option<(Technique, u16)>> {
+            let (mut previous, mut current) = (None, None);
+            path.iter()
+                .map(|&chosen| {
+                    current = advance(previous, chosen, current, frames);
+                    previous = Some(chosen);
+                    current
+                })
+                .collect()
+        };
+        // A new tree starts without a transition; a change starts one that ends after 4 frames.
+        assert_eq!(
+            run(4, &[Spt, Crossed, Crossed, Crossed, Crossed]),
+            [None, Some((Spt, 1)), Some((Spt, 2)), Some((Spt, 3)), None]
+        );
+        // Back mid-way: the other way from where it was (the crossed quads showed 2 of 4, the
+        // point tree now shows 2 of 4, then 3).
+        assert_eq!(
+            run(4, &[Spt, Crossed, Crossed, Spt, Spt, Spt]),
+            [None, Some((Spt, 1)), Some((Spt, 2)), Some((Crossed, 3)), None, None]
+        );
+        // On to a third technique: a new transition from the one it was going to.
+        assert_eq!(run(4, &[Spt, Crossed, Impostors]), [None, Some((Spt, 1)), Some((Crossed, 1))]);
+        // Without transitions, none.
+        assert!(run(0, &[Spt, Crossed, Spt]).iter().all(Option::is_none));
+        // The shares a state reports, and a shorter setting ends longer transitions.
+        let mut state = PolicyState::with_transition(4);
+        state.transitions = vec![Some((Spt, 1)), None, Some((Crossed, 3))];
+        assert_eq!(state.transition(0), Some(Transition { from: Spt, shown: 0.25 }));
+        assert_eq!(state.transition(1), None);
+        assert_eq!(state.transitions().map(|(i, _)| i).collect::<Vec<_>>(), [0, 2]);
+        state.set_transition(3);
+        assert_eq!(state.transitions, [Some((Spt, 1)), None, None]);
+        assert_eq!(state.transition(0).map(|t| t.shown), Some(1.0 / 3.0));
+        state.set_transition(1);
+        assert_eq!(state.transitions().count(), 0, "one frame: switch at once");
+        assert_eq!(PolicyState::with_transition(10_000).frames, Policy::MAX_TRANSITION as u16);
+    }
+
+    /// Trees chosen frame after frame along a path: those that change technique are in a
+    /// transition for the policy's frames, on one thread as on several.
+    #[test]
+    fn chosen_trees_that_change_technique_are_in_transition_for_its_frames() {
+        use treelod_format::BlockRecord;
+        let block = BlockRecord {
+            bounds_min: [-2.0, 0.0, -2.0],
+            bounds_max: [2.0, 9.0, 2.0],
+            grid: [1, 1, 1],
+            tree_count: 1,
+            flags: 0,
+            _pad: 0,
+        };
+        let lods = [ModelLod::from_records(&block, &[], &[], &[]).expect("model")];
+        let c = table();
+        let steps: Vec<Technique> =
+            (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
+        let choices = [Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 0 })];
+        // Two thousand trees in a row, the camera walking along it.
+        let instances: Vec<Instance> = (0..2 * CHOOSE_CHUNK)
+            .map(|i| Instance { model: 0, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0 * i as f32)) })
+            .collect();
+        let cameras: Vec<Camera> = (0..30)
+            .map(|f| {
+                let eye = Vec3::new(0.0, 4.0, 40.0 - 3.0 * f as f32);
+                Camera::look_at(eye, eye - Vec3::Z, 1.0, 640, 480)
+            })
+            .collect();
+        let frames = 5u32;
+        let mut results = Vec::new();
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
+            let mut state = PolicyState::with_transition(frames);
+            let mut out = Vec::new();
+            let mut last: Vec<Technique> = Vec::new();
+            // Per tree, the frame it last changed technique, and what it left.
+            let mut changed: Vec<Option<(usize, Technique)>> = vec![None; instances.len()];
+            let mut seen = 0;
+            let mut per_frame = Vec::new();
+            for (f, camera) in cameras.iter().enumerate() {
+                pool.install(|| {
+                    choose_instances(&instances, &lods, &choices, camera, Technique::Spt, &mut state, &mut out)
+                });
+                for (i, &t) in out.iter().enumerate() {
+                    if let Some(&before) = last.get(i)
+                        && before != t
+                    {
+                        changed[i] = Some((f, before));
+                    }
+                    let expected = changed[i]
+                        .filter(|&(at, _)| f - at < frames as usize - 1)
+                        .map(|(at, from)| Transition { from, shown: (f - at + 1) as f32 / frames as f32 });
+                    // A tree switching again mid-way reverses or restarts: checked in the unit
+                    // test above; here only clean changes are compared.
+                    assert_eq!(state.transition(i), expected, "{threads} threads, frame {f}, tree {i}");
+                    seen += usize::from(expected.is_some());
+                }
+                per_frame.push(state.transitions().collect::<Vec<_>>());
+                last.clone_from(&out);
+            }
+            assert!(seen > 100, "trees in transition along the path: {seen}");
+            results.push(per_frame);
+        }
+        assert_eq!(results[0], results[1], "the same on 1 and 3 threads");
     }
 
     /// The choices of a frame, made one instance at a time with [`projected_height`] and

@@ -53,6 +53,12 @@ pub struct Args {
     /// allowance over the floor on every tree); applies to `policy` only.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub budget: Option<u64>,
+    /// Frames over which a tree that changes technique fades from the old one to the new one
+    /// on complementary dithered pixels (drawn with both meanwhile: CSV column `transitions`);
+    /// 0: switch at once. Applies to `policy` only.
+    #[arg(long, value_name = "FRAMES", default_value_t = Policy::DEFAULT_TRANSITION,
+          value_parser = clap::value_parser!(u32).range(0..=i64::from(Policy::MAX_TRANSITION)))]
+    pub transition: u32,
     /// Select and stream only: no image is drawn, so there is no GPU time (the figure for large
     /// forests on a software rasteriser).
     #[arg(long, conflicts_with = "quality")]
@@ -117,7 +123,12 @@ impl Args {
             seed: self.seed,
             fov_degrees: self.fov,
             techniques: self.technique.clone(),
-            policy: Policy { target: self.policy_target, budget: self.budget, ..Policy::default() },
+            policy: Policy {
+                target: self.policy_target,
+                budget: self.budget,
+                transition: self.transition,
+                ..Policy::default()
+            },
             render: !self.no_render,
             gpu_selection: self.gpu_selection,
             shadows: self.shadows,
