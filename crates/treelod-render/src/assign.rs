@@ -126,8 +126,11 @@ impl Renderer {
         let state = match cascade {
             None => {
                 // Only the camera's view fades between techniques; a cascade switches at once
-                // (a dithered caster would shimmer in the filtered shadow).
+                // (a dithered caster would shimmer in the filtered shadow). Only the camera's
+                // view reads the visible fractions: a tree hidden from the camera still casts
+                // its whole shadow.
                 tables.state.set_transition(policy.transition());
+                tables.state.set_visible(if policy.occlusion { &self.visible_fraction } else { &[] });
                 &mut tables.state
             }
             Some(k) => {

@@ -621,7 +621,7 @@ impl Renderer {
         };
         let forward = -camera.view.row(2).truncate().normalize_or(Vec3::NEG_Z);
         self.last_camera = Some((view_proj, camera.position, forward, (camera.width, camera.height)));
-        if prune_scale(technique).is_some() && settings.pruning.occlusion {
+        if self.measures_occlusion() {
             self.occlusion.collect(device, camera.position, forward, &mut self.visible_fraction);
         }
         self.cascades = match settings.shadows {
@@ -756,6 +756,21 @@ impl Renderer {
             ..FrameStats::default()
         };
         self.record_view(&mut main, fading.then_some(&leaving), full_mesh, &mut stats);
+        if self.policy_occlusion() {
+            // Every tree the camera draws is measured (pruned ones included, once).
+            self.occlusion_jobs.clear();
+            let mut last = None;
+            let mut drawn: Vec<u32> = main.recorded.iter().map(|d| d.instance).collect();
+            drawn.sort_unstable();
+            for index in drawn {
+                if last != Some(index)
+                    && let Some(job) = self.occlusion_job(index)
+                {
+                    self.occlusion_jobs.push(job);
+                }
+                last = Some(index);
+            }
+        }
         for (k, view) in shadow_views.iter_mut().enumerate() {
             let mut counted = FrameStats::default();
             self.record_view(view, None, cascade_full, &mut counted);
@@ -822,13 +837,9 @@ impl Renderer {
         if main {
             self.occlusion_jobs.clear();
             for &index in &view.draws.occlusion {
-                let instance = self.instances[index as usize];
-                let m = instance.model as usize;
-                let (centre, radius) = self.lods[m].cull_sphere();
-                let (first, count) = self.models[m].samples;
-                let radius = radius * max_axis_scale(instance.transform);
-                let transform = instance.transform;
-                self.occlusion_jobs.push(Job { instance: index, transform, centre, radius, first, count });
+                if let Some(job) = self.occlusion_job(index) {
+                    self.occlusion_jobs.push(job);
+                }
             }
         }
         // The point tree: over every instance where all are its (no remapping), else over its own.
@@ -933,21 +944,45 @@ impl Renderer {
         }
     }
 
-    /// Measures which of the trees drawn pruned this frame are hidden, for the occlusion factor
-    /// of later frames ([`Pruning::occlusion`]): call it after the pass that drew this frame,
-    /// in the same or a later encoder, with that pass's depth attachment (`depth_view`, which
-    /// needs [`wgpu::TextureUsages::TEXTURE_BINDING`]). It records a small compute pass; the
-    /// result is read by a later [`Self::prepare`] without waiting for the GPU. Does nothing when
-    /// pruning or its occlusion factor is off, or while an earlier measurement is in flight.
+    /// Measures which of the trees drawn this frame are hidden, for the occlusion factor of later
+    /// frames: of the trees drawn pruned when pruning is forced ([`Pruning::occlusion`]), of
+    /// every tree drawn when the policy chooses with occlusion ([`Policy::occlusion`]). Call it
+    /// after the pass that drew this frame, in the same or a later encoder, with that pass's
+    /// depth attachment (`depth_view`, which needs [`wgpu::TextureUsages::TEXTURE_BINDING`]). It
+    /// records a small compute pass; the result is read by a later [`Self::prepare`] without
+    /// waiting for the GPU. Does nothing when neither is on, or while an earlier measurement is
+    /// in flight.
     pub fn measure_occlusion(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         depth_view: &wgpu::TextureView,
     ) {
-        let on = prune_scale(self.settings.technique).is_some() && self.settings.pruning.occlusion;
+        let on = self.measures_occlusion();
         let Some((view_proj, eye, forward, size)) = self.last_camera.filter(|_| on) else { return };
         self.occlusion.record(device, encoder, depth_view, size, view_proj, eye, forward, &self.occlusion_jobs);
+    }
+
+    /// Whether this frame's trees are measured for occlusion ([`Self::measure_occlusion`]):
+    /// forced pruning with its occlusion factor, or a policy that chooses with occlusion.
+    fn measures_occlusion(&self) -> bool {
+        let settings = &self.settings;
+        (prune_scale(settings.technique).is_some() && settings.pruning.occlusion) || self.policy_occlusion()
+    }
+
+    /// Whether the policy chooses trees with occlusion this frame ([`Policy::occlusion`]).
+    pub(crate) fn policy_occlusion(&self) -> bool {
+        self.settings.policy.is_some_and(|p| p.occlusion && self.policy.chooses(Some(&p)))
+    }
+
+    /// The occlusion test of instance `index` with its model's hull samples, if it has any.
+    fn occlusion_job(&self, index: u32) -> Option<Job> {
+        let instance = self.instances.get(index as usize)?;
+        let m = instance.model as usize;
+        let (first, count) = self.models.get(m)?.samples;
+        let (centre, radius) = self.lods.get(m)?.cull_sphere();
+        let radius = radius * max_axis_scale(instance.transform);
+        (count > 0).then_some(Job { instance: index, transform: instance.transform, centre, radius, first, count })
     }
 
     /// The visible fraction of each instance's hull samples last measured by

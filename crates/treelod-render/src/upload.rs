@@ -15,6 +15,11 @@ use crate::streaming::UNIT;
 use crate::technique::{Bucket, upload_groups};
 use crate::textures;
 
+/// The most points of a model without pruning data its occlusion hull samples are chosen from
+/// (every n-th point): the outermost of 64 directions over all of a 10⁶-point tree would cost
+/// 64 passes over it when the model is added, and a sparser set reaches the same hull.
+const HULL_CANDIDATES: usize = 16_384;
+
 /// A vertex as the shaders read it: the record, then its ambient occlusion (0 without).
 /// WGSL twin: `VertexGpu` in `shaders/tree/common.wgsl`.
 #[repr(C)]
@@ -352,10 +357,17 @@ impl Renderer {
             ],
         });
         let id = ModelId(u32::try_from(self.models.len()).unwrap_or(u32::MAX));
+        // The occlusion test's hull samples: the pruned leaves' where the model has them, else the
+        // outermost of (at most `HULL_CANDIDATES` of) the point tree's points.
         let samples = match &representations.prune {
-            Some(p) => (self.occlusion.add_samples(p.samples()), u32::try_from(p.samples().len()).unwrap_or(0)),
-            None => (0, 0),
+            Some(p) => p.samples().to_vec(),
+            None => {
+                let points = container.points();
+                let stride = points.len().div_ceil(HULL_CANDIDATES).max(1);
+                treelod_runtime::hull_samples(points.iter().step_by(stride).map(|p| p.position))
+            }
         };
+        let samples = (self.occlusion.add_samples(&samples), u32::try_from(samples.len()).unwrap_or(0));
         self.models.push(Model {
             samples,
             container,

@@ -343,3 +343,61 @@ fn a_tree_changing_technique_fades_over_the_transition_s_frames() {
         assert!(same.into_iter().all(|p| pixel(&image, p) == pixel(&old_image, p)), "frame {frame}");
     }
 }
+
+/// Trees hidden behind a near one are measured (`Renderer::measure_occlusion` after each pass)
+/// and chosen at their visible fraction: each drawn with the choice of its visibility class,
+/// some of them with a cheaper technique than a visible tree of their size gets; without
+/// `Policy::occlusion` nothing is measured.
+#[test]
+fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let calibration = Calibration::from_container(&container).expect("calibrated");
+    let lod = ModelLod::from_container(&container);
+    let (representations, _) = Representations::from_container(&container);
+    let policy = Policy { hysteresis: 0.0, transition: 0, ..Policy::default() };
+    assert!(policy.occlusion, "on by default");
+    let choices = Choices::new(&calibration, &policy, &representations);
+    let centre = lod.centre();
+    // One tree 12 m in front of the camera, a row straight behind it.
+    let eye = vec3(0.0, centre.y, 12.0);
+    let distances = [0.0, 20.0, 30.0, 45.0, 65.0, 95.0, 140.0];
+    let positions: Vec<Vec3> = distances.iter().map(|&d| vec3(-centre.x, 0.0, -d - centre.z)).collect();
+    let (width, height) = (256, 256);
+    let camera = Camera::look_at(eye, eye - Vec3::Z, 0.9, width, height);
+    let runtime_camera = treelod_runtime::Camera::look_at(eye, eye - Vec3::Z, 0.9, width, height);
+
+    let drawn_with = |renderer: &Renderer, i: u32| {
+        let techniques: Vec<Technique> =
+            renderer.draws().iter().filter(|d| d.instance == i).map(|d| d.technique).collect();
+        assert!(techniques.windows(2).all(|w| w[0] == w[1]), "tree {i}: {techniques:?}");
+        techniques.first().copied()
+    };
+    for occlusion in [true, false] {
+        let settings = Settings { policy: Some(Policy { occlusion, ..policy }), ..Settings::default() };
+        let mut renderer = forest(&gpu, &container, settings, &positions);
+        // The first frame measures; a later one reads the measurement (mapped without waiting).
+        for _ in 0..4 {
+            render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+        }
+        let fractions = renderer.visible_fractions().to_vec();
+        if !occlusion {
+            assert!(fractions.iter().all(|&f| f == 1.0), "nothing measured: {fractions:?}");
+            continue;
+        }
+        assert!(fractions[0] > 0.9, "the front tree is visible: {fractions:?}");
+        assert!(fractions[1..].iter().all(|&f| f < 0.7), "the row behind it is hidden: {fractions:?}");
+        let mut cheaper = 0;
+        for (i, &p) in positions.iter().enumerate() {
+            let h = projected_height(&lod, Mat4::from_translation(p), &runtime_camera);
+            // The class the tree moved to from fully visible (a quarter class of hysteresis).
+            let class = treelod_runtime::policy::visibility_class_after(0, fractions[i]);
+            let seen = choices.choose_seen(h, (-(class as f32)).exp2(), None);
+            let i = i as u32;
+            assert_eq!(drawn_with(&renderer, i), Some(seen), "tree {i}, {h} px, {} visible", fractions[i as usize]);
+            let primitives = |t: Technique| calibration.at(t, h).map_or(0.0, |(_, p)| p);
+            cheaper += usize::from(primitives(seen) < primitives(choices.choose(h, None)));
+        }
+        assert!(cheaper > 0, "some hidden tree is drawn cheaper than a visible one of its size");
+    }
+}

@@ -33,6 +33,14 @@
 //! the same count gives the same images whatever the frame rate (a host at other than 60 frames
 //! per second scales it).
 //!
+//! **Occlusion.** A tree partly hidden behind others shows only part of its error: with
+//! [`Policy::occlusion`] and a measured visible fraction `v` (the share of its hull samples the
+//! depth of an earlier frame shows, Neubert et al. 2011 §5), the errors above the floor are
+//! scaled by `√v` — the squared error of the pixels it covers falls with their number — so it
+//! is chosen with the target raised to `target / √v`. `v` is rounded to one of
+//! [`VISIBILITY_CLASSES`] classes (1, ½, ¼, ⅛; geometric midpoints between), each with its own
+//! table of choices, so a frame still pays a lookup per tree.
+//!
 //! **Cost per frame.** The rule is evaluated once per model and policy into a table of choices
 //! every [`STEPS_PER_OCTAVE`]-th of an octave ([`Choices`]); per tree the frame pays a distance, a
 //! `log2` and a lookup ([`Choices::choose`]).
@@ -75,6 +83,11 @@ pub struct Policy {
     /// (module docs), both drawn on complementary dithered pixels meanwhile; 0 or 1: switch at
     /// once. Default [`Policy::DEFAULT_TRANSITION`]; at most [`Policy::MAX_TRANSITION`].
     pub transition: u32,
+    /// Trees partly hidden behind others are chosen with the target raised to `target / √v`,
+    /// `v` their measured visible fraction (module docs; the renderer measures it where the host
+    /// calls `Renderer::measure_occlusion` after its pass, else every tree counts as visible).
+    /// Default `true`.
+    pub occlusion: bool,
 }
 
 impl Policy {
@@ -114,7 +127,13 @@ impl Policy {
 
 impl Default for Policy {
     fn default() -> Self {
-        Self { target: Self::DEFAULT_TARGET, hysteresis: 0.25, budget: None, transition: Self::DEFAULT_TRANSITION }
+        Self {
+            target: Self::DEFAULT_TARGET,
+            hysteresis: 0.25,
+            budget: None,
+            transition: Self::DEFAULT_TRANSITION,
+            occlusion: true,
+        }
     }
 }
 
@@ -241,6 +260,42 @@ pub struct Choices {
     steps: Vec<Technique>,
     /// Steps either side within which a tree keeps last frame's technique.
     hysteresis_steps: usize,
+    /// With [`Policy::occlusion`]: per visibility class after the first (visible fraction about
+    /// ½, ¼, ⅛), its choice above the range and its steps, made with the target raised to
+    /// `target / √v`; empty without.
+    hidden: Vec<(Technique, Vec<Technique>)>,
+}
+
+/// Classes of the visible fraction `v` the policy chooses by ([`Policy::occlusion`]): about 1,
+/// ½, ¼ and ⅛, split at their geometric midpoints.
+pub const VISIBILITY_CLASSES: usize = 4;
+
+/// The visibility class of a visible fraction (0 for fully visible; not finite: 0).
+#[must_use]
+pub fn visibility_class(visible: f32) -> usize {
+    let v = if visible.is_finite() { visible } else { 1.0 };
+    // Class k stands for v = 2^-k; its lower bound is 2^-(k + 1/2).
+    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+    let class = (0..VISIBILITY_CLASSES - 1).find(|&k| v >= (-(k as f32) - 0.5).exp2());
+    class.unwrap_or(VISIBILITY_CLASSES - 1)
+}
+
+/// The visibility class of a tree of class `previous` last frame whose visible fraction is now
+/// `visible`: it changes only once `visible` lies a quarter of a class (an eighth of an octave
+/// of `v`) past the bound it crosses, so a measurement that wavers at a bound (the samples of a
+/// tree moving behind leaves) does not switch the tree back and forth.
+#[must_use]
+pub fn visibility_class_after(previous: usize, visible: f32) -> usize {
+    let now = visibility_class(visible);
+    let v = if visible.is_finite() { visible } else { 1.0 };
+    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+    let k = previous as f32;
+    let far_enough = match now.cmp(&previous) {
+        std::cmp::Ordering::Greater => v < (-k - 0.75).exp2(),
+        std::cmp::Ordering::Less => v >= (-k + 0.75).exp2(),
+        std::cmp::Ordering::Equal => true,
+    };
+    if far_enough { now } else { previous }
 }
 
 impl Choices {
@@ -248,23 +303,40 @@ impl Choices {
     /// `representations` can draw ([`Representations::holds`]).
     #[must_use]
     pub fn new(calibration: &Calibration, policy: &Policy, representations: &Representations) -> Self {
+        Self::among(calibration, policy, |t| representations.holds(t))
+    }
+
+    /// [`Self::new`] among the techniques `usable` accepts.
+    #[must_use]
+    pub fn among(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Self {
         let (min, max) = calibration.heights();
         let (log2_min, log2_max) = (min.log2(), max.log2());
         let octaves = if log2_max.is_finite() && log2_min.is_finite() { (log2_max - log2_min).max(0.0) } else { 0.0 };
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
-        let target = policy.target();
         #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-        let steps: Vec<Technique> = (0..count)
-            .map(|i| {
-                let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
-                calibration.choose(height, target, |t| representations.holds(t))
-            })
-            .collect();
+        let table = |target: f32| -> (Technique, Vec<Technique>) {
+            let steps: Vec<Technique> = (0..count)
+                .map(|i| {
+                    let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
+                    calibration.choose(height, target, &usable)
+                })
+                .collect();
+            let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
+            (above, steps)
+        };
+        let target = policy.target();
+        let (above, steps) = table(target);
+        // Class k stands for a visible fraction 2^-k: the target over its square root.
+        #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+        let hidden = if policy.occlusion {
+            (1..VISIBILITY_CLASSES).map(|k| table(target * (k as f32 * 0.5).exp2())).collect()
+        } else {
+            Vec::new()
+        };
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let hysteresis_steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
-        let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
-        Self { above, log2_min: if log2_min.is_finite() { log2_min } else { 0.0 }, steps, hysteresis_steps }
+        Self { above, log2_min: if log2_min.is_finite() { log2_min } else { 0.0 }, steps, hysteresis_steps, hidden }
     }
 
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`
@@ -274,12 +346,25 @@ impl Choices {
     /// ([`Technique::FALLBACK`]).
     #[must_use]
     pub fn choose(&self, height: f32, previous: Option<Technique>) -> Technique {
+        self.choose_seen(height, 1.0, previous)
+    }
+
+    /// [`Self::choose`] for a tree of which the visible fraction `visible` is seen: by the table
+    /// of its visibility class ([`visibility_class`]) where the choices were made with
+    /// [`Policy::occlusion`], else as fully visible.
+    #[must_use]
+    pub fn choose_seen(&self, height: f32, visible: f32, previous: Option<Technique>) -> Technique {
+        let hidden = visibility_class(visible).checked_sub(1).and_then(|k| self.hidden.get(k));
+        let (above_range, steps) = match hidden {
+            Some((above, steps)) => (*above, steps.as_slice()),
+            None => (self.above, self.steps.as_slice()),
+        };
         let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
-        let last = self.steps.len() - 1;
+        let last = steps.len() - 1;
         // Above the range: one step per STEPS_PER_OCTAVE past its end reads as the fallback.
         let above = |i: f32| i > last as f32 + 0.5;
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the table")]
-        let at = |i: f32| if above(i) { self.above } else { self.steps[i.round().max(0.0) as usize] };
+        let at = |i: f32| if above(i) { above_range } else { steps[i.round().max(0.0) as usize] };
         let now = at(x);
         if let Some(previous) = previous
             && previous != now
@@ -341,6 +426,10 @@ pub struct PolicyState {
     transitions: Vec<Option<(Technique, u16)>>,
     /// Frames of a transition ([`Policy::transition`]); 0: none (switch at once).
     frames: u16,
+    /// Per instance: its visible fraction ([`Policy::occlusion`]); empty or short: 1.
+    visible: Vec<f32>,
+    /// Per instance: the visibility class it was chosen by last frame ([`visibility_class_after`]).
+    classes: Vec<u8>,
 }
 
 /// A tree's transition from one technique to another this frame ([`PolicyState::transition`]):
@@ -376,10 +465,21 @@ impl PolicyState {
         }
     }
 
-    /// Forgets every instance's previous technique and transition (the instance list changed).
+    /// Forgets every instance's previous technique, transition and visible fraction (the
+    /// instance list changed).
     pub fn reset(&mut self) {
         self.previous.clear();
         self.transitions.clear();
+        self.visible.clear();
+        self.classes.clear();
+    }
+
+    /// Sets the instances' visible fractions the next choices read (per instance, 1 = fully
+    /// visible; instances past the end count as visible), for choices made with
+    /// [`Policy::occlusion`].
+    pub fn set_visible(&mut self, visible: &[f32]) {
+        self.visible.clear();
+        self.visible.extend_from_slice(visible);
     }
 
     /// Instance `index`'s transition this frame, if it is changing technique: the technique it
@@ -459,6 +559,8 @@ pub fn choose_instances_coarsest(
 ) {
     state.previous.resize(instances.len(), None);
     state.transitions.resize(instances.len(), None);
+    state.visible.resize(instances.len(), 1.0);
+    state.classes.resize(instances.len(), 0);
     out.clear();
     out.resize(instances.len(), otherwise);
     let frames = state.frames;
@@ -466,8 +568,11 @@ pub fn choose_instances_coarsest(
     let choose = |instances: &[Instance],
                   previous: &mut [Option<Technique>],
                   transitions: &mut [Option<(Technique, u16)>],
+                  visible: &[f32],
+                  classes: &mut [u8],
                   out: &mut [Technique]| {
-        for (((instance, previous), transition), out) in instances.iter().zip(previous).zip(transitions).zip(out) {
+        let per_instance = instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(out);
+        for (((((instance, previous), transition), &visible), class), out) in per_instance {
             let m = instance.model as usize;
             *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                 (Some(lod), Some(choices)) => {
@@ -478,7 +583,10 @@ pub fn choose_instances_coarsest(
                         })
                         .reduce(f32::min)
                         .unwrap_or(0.0);
-                    let chosen = choices.choose(height, *previous);
+                    let seen = visibility_class_after(usize::from(*class), visible);
+                    *class = u8::try_from(seen).unwrap_or(0);
+                    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+                    let chosen = choices.choose_seen(height, (-(seen as f32)).exp2(), *previous);
                     *transition = advance(*previous, chosen, *transition, frames);
                     *previous = Some(chosen);
                     chosen
@@ -492,15 +600,19 @@ pub fn choose_instances_coarsest(
         }
     };
     if instances.len() <= CHOOSE_CHUNK {
-        choose(instances, &mut state.previous, &mut state.transitions, out);
+        choose(instances, &mut state.previous, &mut state.transitions, &state.visible, &mut state.classes, out);
         return;
     }
     instances
         .par_chunks(CHOOSE_CHUNK)
         .zip(state.previous.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.transitions.par_chunks_mut(CHOOSE_CHUNK))
+        .zip(state.visible.par_chunks(CHOOSE_CHUNK))
+        .zip(state.classes.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
-        .for_each(|(((instances, previous), transitions), out)| choose(instances, previous, transitions, out));
+        .for_each(|(((((instances, previous), transitions), visible), classes), out)| {
+            choose(instances, previous, transitions, visible, classes, out);
+        });
 }
 
 /// The eye distance at which a model's block is `height` pixels high for `camera` (unit instance
@@ -580,7 +692,7 @@ mod tests {
         let c = table();
         assert_eq!(c.choose(8.0, f32::NAN, all), c.choose(8.0, 0.0, all));
         assert_eq!(c.choose(8.0, -1.0, all), c.choose(8.0, 0.0, all));
-        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0, budget: None, transition: 0 };
+        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0, budget: None, transition: 0, occlusion: false };
         assert_eq!((policy.target(), policy.hysteresis()), (0.0, 0.0));
     }
 
@@ -593,7 +705,7 @@ mod tests {
     #[test]
     fn choice_tables_follow_the_rule_and_fall_back_above_the_range() {
         let c = table();
-        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0 };
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
         let choices = Choices::new(&c, &policy, &representations_holding_everything());
         // A plain model draws only the point tree: every step is it.
         assert!(choices.steps().iter().all(|&t| t == Technique::Spt));
@@ -605,7 +717,7 @@ mod tests {
     fn above_the_range_the_top_choice_holds_only_if_it_converges_to_the_full_mesh() {
         let c = table();
         let top = |steps: Vec<Technique>| {
-            let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0 };
+            let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
             let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
             choices.above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
             choices.steps = steps;
@@ -618,7 +730,7 @@ mod tests {
         assert!(converges(Technique::PruneOpt) && !converges(Technique::Impostors));
         // Without the point tree's cut available, the rule's table keeps the chain at 256 px
         // (the table's chain equals the full mesh there) and it holds above.
-        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0 };
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
         let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
         choices.steps = (0..=40)
             .map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, |t| t != Technique::Spt))
@@ -632,7 +744,7 @@ mod tests {
         let c = table();
         let steps: Vec<Technique> =
             (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
-        let choices = Choices { above: Technique::Spt, log2_min: 3.0, steps, hysteresis_steps: 2 };
+        let choices = Choices { above: Technique::Spt, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() };
         // Find the boundary between crossed (small) and the point tree (larger).
         let boundary = choices.steps().iter().position(|&t| t != Technique::Crossed).expect("a boundary");
         assert!(boundary > 0);
@@ -645,6 +757,40 @@ mod tests {
         assert_eq!(choices.choose(height_at(boundary as f32 + 3.0), Some(Technique::Crossed)), after);
         // A previous technique that is nowhere near is not kept.
         assert_eq!(choices.choose(height_at(0.0), Some(Technique::LodChain)), Technique::Crossed);
+    }
+
+    #[test]
+    fn a_partly_hidden_tree_is_chosen_with_the_target_over_the_root_of_its_visible_fraction() {
+        assert_eq!(
+            [1.0, 0.8, 0.7, 0.5, 0.36, 0.35, 0.2, 0.17, 0.0, f32::NAN].map(visibility_class),
+            [0, 0, 1, 1, 1, 2, 2, 3, 3, 0]
+        );
+        // A class changes a quarter of a class past its bound: 2^-0.75 = 0.59 from class 0,
+        // 2^-1.75 = 0.30 from class 1 down, 2^-0.25 = 0.84 from class 1 up.
+        assert_eq!([0.65, 0.55].map(|v| visibility_class_after(0, v)), [0, 1]);
+        assert_eq!([0.32, 0.28, 0.8, 0.85, 1.0].map(|v| visibility_class_after(1, v)), [1, 2, 1, 0, 0]);
+        assert_eq!(visibility_class_after(3, 0.2), 3, "0.2 is class 2, not a quarter past the bound 0.177");
+        assert_eq!(visibility_class_after(0, 0.0), 3);
+        let c = table();
+        let policy = Policy { target: 0.005, hysteresis: 0.0, budget: None, transition: 0, occlusion: true };
+        let choices = Choices::among(&c, &policy, all);
+        let blind = Choices::among(&c, &Policy { occlusion: false, ..policy }, all);
+        let mut cheaper = 0;
+        for i in 0..choices.steps().len() {
+            let height = (3.0 + i as f32 / STEPS_PER_OCTAVE).exp2();
+            let visible_choice = choices.choose(height, None);
+            for k in 0..VISIBILITY_CLASSES {
+                let visible = (-(k as f32)).exp2();
+                let expected = c.choose(height, 0.005 * (k as f32 * 0.5).exp2(), all);
+                assert_eq!(choices.choose_seen(height, visible, None), expected, "{height} px, {visible} visible");
+                // Without occlusion every tree counts as fully visible.
+                assert_eq!(blind.choose_seen(height, visible, None), visible_choice);
+                let primitives = |t: Technique| c.at(t, height).map_or(0.0, |(_, p)| p);
+                assert!(primitives(expected) <= primitives(visible_choice), "{height} px: never dearer hidden");
+                cheaper += usize::from(primitives(expected) < primitives(visible_choice));
+            }
+        }
+        assert!(cheaper > 0, "a hidden tree gets a cheaper choice somewhere");
     }
 
     #[test]
@@ -706,7 +852,13 @@ mod tests {
         let c = table();
         let steps: Vec<Technique> =
             (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
-        let choices = [Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 0 })];
+        let choices = [Some(Choices {
+            above: Technique::LodChain,
+            log2_min: 3.0,
+            steps,
+            hysteresis_steps: 0,
+            hidden: Vec::new(),
+        })];
         // Two thousand trees in a row, the camera walking along it.
         let instances: Vec<Instance> = (0..2 * CHOOSE_CHUNK)
             .map(|i| Instance { model: 0, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0 * i as f32)) })
@@ -808,7 +960,10 @@ mod tests {
         let steps: Vec<Technique> =
             (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
         assert!(steps.iter().any(|&t| t != steps[0]), "the table switches technique: {steps:?}");
-        let choices = [Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 2 }), None];
+        let choices = [
+            Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() }),
+            None,
+        ];
         let mut rng = SplitMix64(24);
         let instances: Vec<Instance> = (0..3 * CHOOSE_CHUNK + 77)
             .map(|_| {

@@ -59,6 +59,11 @@ pub struct Args {
     #[arg(long, value_name = "FRAMES", default_value_t = Policy::DEFAULT_TRANSITION,
           value_parser = clap::value_parser!(u32).range(0..=i64::from(Policy::MAX_TRANSITION)))]
     pub transition: u32,
+    /// The policy chooses every tree as fully visible: no occlusion measurement (by default each
+    /// drawn tree's visible fraction is measured from the frame's depth and a partly hidden tree
+    /// is chosen with the target over the square root of it). Applies to `policy` only.
+    #[arg(long)]
+    pub no_occlusion: bool,
     /// Select and stream only: no image is drawn, so there is no GPU time (the figure for large
     /// forests on a software rasteriser).
     #[arg(long, conflicts_with = "quality")]
@@ -127,6 +132,7 @@ impl Args {
                 target: self.policy_target,
                 budget: self.budget,
                 transition: self.transition,
+                occlusion: !self.no_occlusion,
                 ..Policy::default()
             },
             render: !self.no_render,
