@@ -655,6 +655,25 @@ mod tests {
         true
     }
 
+    /// The rule's choices of [`table`] at the default target every step from 8 pixels: five
+    /// octaves, as [`Choices`] makes them.
+    fn steps_of(c: &Calibration) -> Vec<Technique> {
+        (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect()
+    }
+
+    /// A model 9 m high and 4 m wide with no cells: all a choice reads of it is its bounds.
+    fn tall_lod() -> ModelLod {
+        let block = treelod_format::BlockRecord {
+            bounds_min: [-2.0, 0.0, -2.0],
+            bounds_max: [2.0, 9.0, 2.0],
+            grid: [1, 1, 1],
+            tree_count: 1,
+            flags: 0,
+            _pad: 0,
+        };
+        ModelLod::from_records(&block, &[], &[], &[]).expect("model")
+    }
+
     #[test]
     fn interpolates_in_log2_height_and_clamps() {
         let c = table();
@@ -742,8 +761,7 @@ mod tests {
     #[test]
     fn hysteresis_keeps_last_frames_technique_near_a_boundary() {
         let c = table();
-        let steps: Vec<Technique> =
-            (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
+        let steps = steps_of(&c);
         let choices = Choices { above: Technique::Spt, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() };
         // Find the boundary between crossed (small) and the point tree (larger).
         let boundary = choices.steps().iter().position(|&t| t != Technique::Crossed).expect("a boundary");
@@ -839,19 +857,9 @@ mod tests {
     /// transition for the policy's frames, on one thread as on several.
     #[test]
     fn chosen_trees_that_change_technique_are_in_transition_for_its_frames() {
-        use treelod_format::BlockRecord;
-        let block = BlockRecord {
-            bounds_min: [-2.0, 0.0, -2.0],
-            bounds_max: [2.0, 9.0, 2.0],
-            grid: [1, 1, 1],
-            tree_count: 1,
-            flags: 0,
-            _pad: 0,
-        };
-        let lods = [ModelLod::from_records(&block, &[], &[], &[]).expect("model")];
+        let lods = [tall_lod()];
         let c = table();
-        let steps: Vec<Technique> =
-            (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
+        let steps = steps_of(&c);
         let choices = [Some(Choices {
             above: Technique::LodChain,
             log2_min: 3.0,
@@ -945,20 +953,9 @@ mod tests {
     fn choosing_in_parallel_chunks_equals_the_reference_frame_after_frame() {
         use glam::Quat;
         use treelod_build::SplitMix64;
-        use treelod_format::BlockRecord;
-        let block = BlockRecord {
-            bounds_min: [-2.0, 0.0, -2.0],
-            bounds_max: [2.0, 9.0, 2.0],
-            grid: [1, 1, 1],
-            tree_count: 1,
-            flags: 0,
-            _pad: 0,
-        };
-        let lod = ModelLod::from_records(&block, &[], &[], &[]).expect("model");
-        let lods = [lod.clone(), lod];
+        let lods = [tall_lod(), tall_lod()];
         let c = table();
-        let steps: Vec<Technique> =
-            (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
+        let steps = steps_of(&c);
         assert!(steps.iter().any(|&t| t != steps[0]), "the table switches technique: {steps:?}");
         let choices = [
             Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() }),
