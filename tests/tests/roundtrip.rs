@@ -50,6 +50,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 line_ao: grid[0] >= 2 && grid[2] < 2,
                 // A calibration with half of the grids.
                 calibration: grid[1] >= 2,
+                // A BC7 atlas with a third of the grids (those with an atlas: planes).
+                bc7_atlas: grid[1] == 3,
                 name: None,
             }
         })

@@ -69,7 +69,7 @@ pub fn store(atlas: Atlas, format: AtlasFormat) -> Atlas {
         image_format::RGBA8_LINEAR => image_format::BC7_LINEAR,
         _ => return atlas,
     };
-    if format == AtlasFormat::Rgba8 || atlas.width % 4 != 0 || atlas.height % 4 != 0 {
+    if format == AtlasFormat::Rgba8 || !atlas.width.is_multiple_of(4) || !atlas.height.is_multiple_of(4) {
         return atlas;
     }
     let mut blocks = Vec::new();

@@ -440,7 +440,7 @@ fn check_images(images: &[ImageRecord], data: &[u8]) -> Result<()> {
                 }
             }
             _ => {
-                if image_format::is_bc7(img.format) && (img.width % 4 != 0 || img.height % 4 != 0) {
+                if image_format::is_bc7(img.format) && (!img.width.is_multiple_of(4) || !img.height.is_multiple_of(4)) {
                     return Err(bad(
                         kind,
                         i,

@@ -110,7 +110,7 @@ pub(crate) fn atlas(container: &Container, index: u32, bc_textures: bool) -> Res
     let srgb = image_format::is_srgb(record.format);
     match record.format {
         image_format::BC7_SRGB | image_format::BC7_LINEAR if bc_textures => {
-            if width % 4 != 0 || height % 4 != 0 {
+            if !width.is_multiple_of(4) || !height.is_multiple_of(4) {
                 return Err(format!("a BC7 image of {width}x{height}: its sides must be multiples of 4"));
             }
             let mut levels = Vec::new();
