@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.5, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.6, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -157,6 +157,15 @@ pub fn golden_files() -> Vec<GoldenFile> {
             description: "every section kind of 1.5 (1.4's and CALIBRATION), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions::everything(),
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 6,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.5 and a BC7 impostor atlas (format 7 BC7_LINEAR, 1.6), zstd level 19 \
+                          with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },
         },
     ]

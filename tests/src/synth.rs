@@ -75,6 +75,11 @@ pub struct SyntheticOptions {
     /// and a whole number of primitives, in `CALIBRATION`. Drawn last, so the rest of the
     /// container is the same as without it.
     pub calibration: bool,
+    /// The impostor atlas stored as BC7 (spec §6.7 format 7, 1.6): its RGBA8 levels encoded by
+    /// the build's encoder into blocks appended to `IMAGE_DATA`, the record pointing at them (the
+    /// RGBA8 bytes stay, unreferenced). Done last, so the rest of the container is the same as
+    /// without it.
+    pub bc7_atlas: bool,
     /// Block name in the metadata; `None` gives `synthetic-<seed in hex>`.
     pub name: Option<String>,
 }
@@ -105,6 +110,7 @@ impl SyntheticOptions {
             ellipsoid_ao: false,
             line_ao: false,
             calibration: false,
+            bc7_atlas: false,
             name: Some("minimal".into()),
         }
     }
@@ -152,6 +158,7 @@ impl SyntheticOptions {
             ellipsoid_ao: true,
             line_ao: true,
             calibration: true,
+            bc7_atlas: false,
             name: Some("everything".into()),
         }
     }
@@ -1034,6 +1041,28 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     }
     if options.calibration {
         b.data.calibration = calibration(&mut rng);
+    }
+    if options.bc7_atlas
+        && let Some(atlas) = b.atlas
+    {
+        let record = b.data.images[atlas as usize];
+        let start = record.data_offset as usize;
+        let levels = treelod_format::image::decode_levels(&record, &b.data.image_data[start..])
+            .expect("the synthetic atlas has its levels");
+        let mut blocks = Vec::new();
+        for (level, texels) in levels.iter().enumerate() {
+            let (w, h) = record.level_size(level as u32);
+            blocks.extend(treelod_build::atlas_format::encode_bc7(texels, w, h));
+        }
+        let offset = b.data.image_data.len().div_ceil(16) * 16;
+        b.data.image_data.resize(offset, 0);
+        b.data.image_data.extend_from_slice(&blocks);
+        b.data.images[atlas as usize] = ImageRecord {
+            format: image_format::BC7_LINEAR,
+            data_offset: offset as u64,
+            data_length: blocks.len() as u64,
+            ..record
+        };
     }
     b.data
 }

@@ -50,6 +50,9 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 line_ao: grid[0] >= 2 && grid[2] < 2,
                 // A calibration with half of the grids.
                 calibration: grid[1] >= 2,
+                // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
+                // the generator check below refuses (the golden 1.6 file covers it).
+                bc7_atlas: false,
                 name: None,
             }
         })

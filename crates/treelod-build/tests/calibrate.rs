@@ -40,7 +40,8 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     let bytes = out.data.to_bytes(Compression::default()).expect("writes");
     let container = Container::from_bytes(&bytes).expect("opens");
     assert_eq!(container.calibration(), records.as_slice());
-    assert_eq!(container.header().minor, 5);
+    // CALIBRATION is a kind of 1.5; the impostors' BC7 atlas (the default) makes the file 1.6.
+    assert_eq!(container.header().minor, 6);
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.
