@@ -663,9 +663,14 @@ mod tests {
 
     /// A model 9 m high and 4 m wide with no cells: all a choice reads of it is its bounds.
     fn tall_lod() -> ModelLod {
+        block_lod(2.0, 9.0)
+    }
+
+    /// A model `height` metres high and `2 · half` wide, standing on the origin, with no cells.
+    fn block_lod(half: f32, height: f32) -> ModelLod {
         let block = treelod_format::BlockRecord {
-            bounds_min: [-2.0, 0.0, -2.0],
-            bounds_max: [2.0, 9.0, 2.0],
+            bounds_min: [-half, 0.0, -half],
+            bounds_max: [half, height, half],
             grid: [1, 1, 1],
             tree_count: 1,
             flags: 0,
@@ -1007,16 +1012,7 @@ mod tests {
 
     #[test]
     fn projected_height_matches_the_camera_and_distance_for_height_inverts_it() {
-        use treelod_format::BlockRecord;
-        let block = BlockRecord {
-            bounds_min: [-1.0, 0.0, -1.0],
-            bounds_max: [1.0, 10.0, 1.0],
-            grid: [1, 1, 1],
-            tree_count: 1,
-            flags: 0,
-            _pad: 0,
-        };
-        let lod = ModelLod::from_records(&block, &[], &[], &[]).expect("model");
+        let lod = block_lod(1.0, 10.0);
         let camera = Camera::look_at(Vec3::new(0.0, 5.0, 100.0), Vec3::new(0.0, 5.0, 0.0), 1.0, 640, 480);
         let d = distance_for_height(&lod, 64.0, &camera);
         let eye = Vec3::new(0.0, 5.0, d);
