@@ -52,8 +52,8 @@ impl Renderer {
     /// whose model lacks its technique's data to [`Technique::FALLBACK`].
     ///
     /// Trees in a transition ([`Policy::transition`]) are also listed in
-    /// [`Self::leaving_assignment`] under the technique they are leaving, and
-    /// [`Self::transition_of`] holds their transitions.
+    /// [`Self::leaving_assignment`] under the technique they are leaving, and in
+    /// [`Self::transitions`].
     pub(crate) fn assign(&mut self, camera: &treelod_runtime::Camera) {
         let mut assignment = std::mem::take(&mut self.assignment);
         self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
@@ -62,23 +62,12 @@ impl Renderer {
         self.note_transitions();
     }
 
-    /// Lists this frame's transitions of the camera's view ([`Self::transition_of`],
-    /// [`Self::transitions`]) and the techniques they leave ([`Self::leaving_assignment`]).
+    /// Lists this frame's transitions of the camera's view ([`Self::transitions`]) and the
+    /// techniques they leave ([`Self::leaving_assignment`]).
     fn note_transitions(&mut self) {
-        for &(i, _) in &self.transitions {
-            if let Some(slot) = self.transition_of.get_mut(i as usize) {
-                *slot = None;
-            }
-        }
         self.transitions.clear();
-        self.transition_of.resize(self.instances.len(), None);
         if self.settings.policy.is_some_and(|p| self.policy.chooses(Some(&p))) {
             self.transitions.extend(self.policy.state.transitions());
-        }
-        for &(i, t) in &self.transitions {
-            if let Some(slot) = self.transition_of.get_mut(i as usize) {
-                *slot = Some(t);
-            }
         }
         let leaving = self.transitions.iter().map(|&(i, t)| (i, t.from));
         self.leaving_assignment.assign_listed(&self.instances, &self.representations, leaving);
@@ -160,9 +149,11 @@ impl Renderer {
         }
     }
 
-    /// Instance `instance`'s transition this frame, if it is in one.
+    /// Instance `instance`'s transition this frame, if it is in one: the policy's state, read only
+    /// in a frame whose choice listed transitions (a state the policy did not move this frame
+    /// may hold old ones).
     pub(crate) fn transition(&self, instance: u32) -> Option<Transition> {
-        self.transition_of.get(instance as usize).copied().flatten()
+        if self.transitions.is_empty() { None } else { self.policy.state.transition(instance as usize) }
     }
 
     /// The technique instance `instance` is drawn with this frame.

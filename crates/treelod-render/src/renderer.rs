@@ -164,10 +164,8 @@ pub struct Renderer {
     /// (the camera's view), and what their selections draw.
     pub(crate) leaving_assignment: Assignment,
     leaving: View,
-    /// This frame's transitions of the camera's view, ascending by instance, and per instance
-    /// the same (`None` outside one).
+    /// This frame's transitions of the camera's view, ascending by instance.
     pub(crate) transitions: Vec<(u32, Transition)>,
-    pub(crate) transition_of: Vec<Option<Transition>>,
     /// The policy's per-model tables and per-instance state ([`Settings::policy`]).
     pub(crate) policy: PolicyModels,
     /// Per instance, the technique it is drawn with this frame (this frame's assignment), for
@@ -328,7 +326,6 @@ impl Renderer {
             leaving_assignment: Assignment::default(),
             leaving: View::default(),
             transitions: Vec::new(),
-            transition_of: Vec::new(),
             spt_list: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1), depth),
             occlusion_jobs: Vec::new(),

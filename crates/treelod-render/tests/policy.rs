@@ -25,6 +25,13 @@ fn calibrated_demo() -> Arc<Container> {
     })
 }
 
+/// What the runtime reads of a calibrated container: its tables, point tree and representations.
+fn read_back(container: &Container) -> (Calibration, ModelLod, Representations) {
+    let calibration = Calibration::from_container(container).expect("the build calibrated it");
+    let (representations, _) = Representations::from_container(container);
+    (calibration, ModelLod::from_container(container), representations)
+}
+
 /// A renderer drawing `container` at each of `positions`.
 fn forest(
     gpu: &treelod_render::offscreen::Gpu,
@@ -44,9 +51,7 @@ fn forest(
 fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
     let gpu = gpu();
     let container = calibrated_demo();
-    let calibration = Calibration::from_container(&container).expect("the build calibrated it");
-    let lod = ModelLod::from_container(&container);
-    let (representations, _) = Representations::from_container(&container);
+    let (calibration, lod, representations) = read_back(&container);
     let policy = Policy::default();
     let choices = Choices::new(&calibration, &policy, &representations);
     // The choices differ somewhere over the calibrated range, or this test shows nothing.
@@ -128,9 +133,7 @@ fn without_tables_the_policy_draws_the_settings_technique() {
 fn a_shadow_cascade_chooses_at_the_coarser_of_the_light_s_and_the_camera_s_view() {
     let gpu = gpu();
     let container = calibrated_demo();
-    let calibration = Calibration::from_container(&container).expect("calibrated");
-    let lod = ModelLod::from_container(&container);
-    let (representations, _) = Representations::from_container(&container);
+    let (calibration, lod, representations) = read_back(&container);
     let choices = Choices::new(&calibration, &Policy::default(), &representations);
     let (width, height) = (256, 256);
     let (eye, ahead) = (vec3(0.0, 0.0, 0.0), vec3(0.0, 0.0, -1.0));
@@ -267,9 +270,7 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
 fn a_tree_changing_technique_fades_over_the_transition_s_frames() {
     let gpu = gpu();
     let container = calibrated_demo();
-    let calibration = Calibration::from_container(&container).expect("calibrated");
-    let lod = ModelLod::from_container(&container);
-    let (representations, _) = Representations::from_container(&container);
+    let (calibration, lod, representations) = read_back(&container);
     let frames = 4;
     let policy = Policy { hysteresis: 0.0, transition: frames, ..Policy::default() };
     let choices = Choices::new(&calibration, &policy, &representations);
@@ -352,9 +353,7 @@ fn a_tree_changing_technique_fades_over_the_transition_s_frames() {
 fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
     let gpu = gpu();
     let container = calibrated_demo();
-    let calibration = Calibration::from_container(&container).expect("calibrated");
-    let lod = ModelLod::from_container(&container);
-    let (representations, _) = Representations::from_container(&container);
+    let (calibration, lod, representations) = read_back(&container);
     let policy = Policy { hysteresis: 0.0, transition: 0, ..Policy::default() };
     assert!(policy.occlusion, "on by default");
     let choices = Choices::new(&calibration, &policy, &representations);
