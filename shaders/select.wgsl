@@ -234,7 +234,7 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
     let slot = cur_model.bucket_first[kind] + s;
     // The point tree's debug colour: the only technique GPU selection draws.
     draws[slot] = DrawInfo(current.transform, taus.x, max(taus.y, taus.x), cell, draw_scale, shading, 1.0,
-                           current.index, spt_tint);
+                           current.index, spt_tint, 0xFFFF0000u);
     let corners = select(6u, 3u, kind == 0u);
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
 }

@@ -1,6 +1,6 @@
 // One indirect draw's constants, written by the CPU path (crates/treelod-render/src/draws.rs) or by
 // the GPU selection (shaders/select.wgsl) and read by the tree shaders (shaders/tree/).
-// Rust twin: `DrawInfo` in crates/treelod-render/src/draws.rs (96 bytes).
+// Rust twin: `DrawInfo` in crates/treelod-render/src/draws.rs (112 bytes).
 
 struct DrawInfo {
     // Column-major world-from-model transform.
@@ -20,4 +20,8 @@ struct DrawInfo {
     // The debug colour of the technique the instance is drawn with (`debug = 4`), linear RGB as
     // `pack4x8unorm` packs it (crates/treelod-render/src/draws.rs, `tint`).
     tint: u32,
+    // The share [lo, hi) of the transition dither the draw keeps, as `pack2x16unorm` packs it:
+    // [0, 1) (0xFFFF0000) outside a transition between techniques; see `fade_mask` in
+    // tree/common.wgsl.
+    fade: u32,
 }

@@ -94,6 +94,9 @@ struct Varyings {
     // Points: a hash of the point's position and the instance, the splat's coverage test
     // (`splat_mask`); 0 for the rest.
     @location(9) @interpolate(flat) id: u32,
+    // The draw's `DrawInfo::fade` and instance, for the transition between techniques
+    // (`fade_mask`).
+    @location(10) @interpolate(flat) fade: vec2<u32>,
 }
 
 // A colour per cell index, for `debug = 1`.
@@ -216,6 +219,29 @@ fn level_dither(fragment: vec4<f32>, draw_index: u32) -> f32 {
     return f32(h >> 8u) / 16777216.0;
 }
 
+// The transition dither of a fragment of instance `instance`, in [0, 1): a hash of the pixel and
+// the instance alone, so every draw of a tree in a transition between techniques (whatever its
+// cell) gets the same value over a pixel and their ranges split the tree's pixels between the two
+// techniques; seeded apart from `level_dither` and the coverage tests, so the split does not
+// correlate with which pixels a technique's own levels and coverage keep.
+fn transition_dither(fragment: vec4<f32>, instance: u32) -> f32 {
+    let p = vec2<u32>(fragment.xy);
+    let h = mix_bits(p.x ^ mix_bits(p.y ^ mix_bits(instance ^ 0x2545f491u)));
+    return f32(h >> 8u) / 16777216.0;
+}
+
+// The samples a fragment of a draw with `DrawInfo::fade` `fade` and instance `instance` covers
+// on account of a transition between techniques (0: discard it): all outside one, else those whose
+// transition dither its range holds (`range_mask`). The colour pass only: shadow cascades switch
+// at once.
+fn fade_mask(fade: u32, instance: u32, fragment: vec4<f32>) -> u32 {
+    let keep = unpack2x16unorm(fade);
+    if keep.x <= 0.0 && keep.y >= 1.0 {
+        return 0xFFFFFFFFu;
+    }
+    return range_mask(keep, transition_dither(fragment, instance));
+}
+
 // A 32-bit integer hash (Wellons' lowbias32): every input bit flips each output bit about half the
 // time.
 fn mix_bits(x: u32) -> u32 {
@@ -229,14 +255,19 @@ fn mix_bits(x: u32) -> u32 {
 }
 
 // The samples a fragment of an element with the level blend's dither range `keep` covers (0:
-// discard it): all where the range holds [0, 1). Else, with one sample, all or none as the range
-// holds the fragment's `level_dither` h; with MSAA, sample s where it holds fract(h + s / n), so
-// a pixel's samples take the range's share (to a sample) and complementary ranges split them.
+// discard it): all where the range holds [0, 1), else those the range holds of the fragment's
+// `level_dither` (`range_mask`).
 fn level_mask(keep: vec2<f32>, fragment: vec4<f32>, draw_index: u32) -> u32 {
     if keep.x <= 0.0 && keep.y >= 1.0 {
         return 0xFFFFFFFFu;
     }
-    let h = level_dither(fragment, draw_index);
+    return range_mask(keep, level_dither(fragment, draw_index));
+}
+
+// The samples of a pixel whose dither value is `h` that the range `keep` holds: with one
+// sample, all or none as it holds h; with MSAA, sample s where it holds fract(h + s / n), so a
+// pixel's samples take the range's share (to a sample) and complementary ranges split them.
+fn range_mask(keep: vec2<f32>, h: f32) -> u32 {
     if sample_count == 1u {
         return select(0u, 0xFFFFFFFFu, keep.x <= h && h < keep.y);
     }

@@ -208,7 +208,8 @@ struct EllipsoidOut {
 fn fs_ellipsoid(in: EllipsoidVaryings) -> EllipsoidOut {
     let hit = ellipsoid_hit(in, 0.0);
     let noise_texel = textureSampleLevel(noise, noise_sampler, hit.local, hit.level);
-    let mask = level_mask(in.keep, in.clip, in.draw);
+    let draw = draws[in.draw];
+    let mask = level_mask(in.keep, in.clip, in.draw) & fade_mask(draw.fade, draw.instance, in.clip);
     // Holes where the grey noise is below the threshold (Clasen §3.1).
     if !hit.hit || noise_texel.a < hit.record.alpha_threshold || mask == 0u {
         discard;

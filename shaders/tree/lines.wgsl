@@ -335,6 +335,9 @@ fn fs_line(in: LineVaryings) -> LineOut {
     }
     // And the level blend's share, independent of it.
     mask &= level_mask(in.keep, in.clip, in.draw);
+    // And the transition's between techniques.
+    let draw = draws[in.draw];
+    mask &= fade_mask(draw.fade, draw.instance, in.clip);
     if !hit.hit || mask == 0u {
         discard;
     }

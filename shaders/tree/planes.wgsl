@@ -121,6 +121,7 @@ fn quad_corner(
     out.disc = corner;
     out.keep = vec2<f32>(0.0, 2.0);
     out.ao = 0.0;
+    out.fade = vec2<u32>(draw.fade, draw.instance);
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u, 3u: { out.tint = kinds; }
@@ -220,6 +221,7 @@ fn fs_plane(in: Varyings) -> TriangleOut {
     if sample_count == 1u {
         mask = select(0u, 0xFFFFFFFFu, texel.coverage >= 1.0 || texel.coverage > layered_dither(in.clip));
     }
+    mask &= fade_mask(in.fade.x, in.fade.y, in.clip);
     if mask == 0u || h < in.keep.x || h >= in.keep.y {
         discard;
     }

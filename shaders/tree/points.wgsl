@@ -29,6 +29,7 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     // As uploaded, `flags` holds the point's ambient-occlusion byte.
     out.ao = decode_ao(point.flags);
     out.material = 0xFFFFFFFFu;
+    out.fade = vec2<u32>(draw.fade, draw.instance);
     // A splat at the one-pixel minimum is a square: a disc inscribed in one pixel misses its centre
     // a fifth of the time.
     out.disc = select(corner, corner * 0.70710677, disc_r < 0.5 * pixel);
@@ -73,7 +74,7 @@ fn splat_mask(coverage: f32, id: u32) -> u32 {
 
 @fragment
 fn fs_point(in: Varyings) -> TriangleOut {
-    let mask = splat_mask(in.keep.y, in.id);
+    let mask = splat_mask(in.keep.y, in.id) & fade_mask(in.fade.x, in.fade.y, in.clip);
     if dot(in.disc, in.disc) > 1.0 || mask == 0u {
         discard;
     }

@@ -14,6 +14,7 @@ fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, vertex: VertexGpu, p: ve
     out.color = decode_color(v.color);
     out.material = tri.material;
     out.disc = vec2<f32>(0.0);
+    out.fade = vec2<u32>(draw.fade, draw.instance);
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
         case 2u: { out.tint = vec3<f32>(0.9, 0.3, 0.2); }
@@ -77,7 +78,8 @@ fn texel_footprint(uv: vec2<f32>) -> f32 {
 fn fs_triangle(in: Varyings) -> TriangleOut {
     let material = materials[in.material];
     let albedo = triangle_albedo(material, in);
-    let mask = alpha_mask(albedo.a, material_cutoff(material), texel_footprint(in.uv), in.clip);
+    let mask = alpha_mask(albedo.a, material_cutoff(material), texel_footprint(in.uv), in.clip)
+        & fade_mask(in.fade.x, in.fade.y, in.clip);
     if mask == 0u {
         discard;
     }

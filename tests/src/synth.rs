@@ -75,11 +75,16 @@ pub struct SyntheticOptions {
     /// and a whole number of primitives, in `CALIBRATION`. Drawn last, so the rest of the
     /// container is the same as without it.
     pub calibration: bool,
-    /// The LoD chain's per-level calibration (spec §6.16, 1.6): for each level of the chain
+    /// The LoD chain's per-level calibration (spec §6.16, 1.7): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
     /// container is the same as without it.
     pub chain_calibration: bool,
+    /// The impostor atlas stored as BC7 (spec §6.7 format 7, 1.6): its RGBA8 levels encoded by
+    /// the build's encoder into blocks appended to `IMAGE_DATA`, the record pointing at them (the
+    /// RGBA8 bytes stay, unreferenced). Done last, so the rest of the container is the same as
+    /// without it.
+    pub bc7_atlas: bool,
     /// Block name in the metadata; `None` gives `synthetic-<seed in hex>`.
     pub name: Option<String>,
 }
@@ -111,6 +116,7 @@ impl SyntheticOptions {
             line_ao: false,
             calibration: false,
             chain_calibration: false,
+            bc7_atlas: false,
             name: Some("minimal".into()),
         }
     }
@@ -129,7 +135,7 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.6: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.7: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
@@ -159,6 +165,7 @@ impl SyntheticOptions {
             line_ao: true,
             calibration: true,
             chain_calibration: true,
+            bc7_atlas: false,
             name: Some("everything".into()),
         }
     }
@@ -1044,6 +1051,28 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     }
     if options.chain_calibration {
         b.data.chain_calibration = chain_calibration(&mut rng, &b.data.lod_levels);
+    }
+    if options.bc7_atlas
+        && let Some(atlas) = b.atlas
+    {
+        let record = b.data.images[atlas as usize];
+        let start = record.data_offset as usize;
+        let levels = treelod_format::image::decode_levels(&record, &b.data.image_data[start..])
+            .expect("the synthetic atlas has its levels");
+        let mut blocks = Vec::new();
+        for (level, texels) in levels.iter().enumerate() {
+            let (w, h) = record.level_size(level as u32);
+            blocks.extend(treelod_build::atlas_format::encode_bc7(texels, w, h));
+        }
+        let offset = b.data.image_data.len().div_ceil(16) * 16;
+        b.data.image_data.resize(offset, 0);
+        b.data.image_data.extend_from_slice(&blocks);
+        b.data.images[atlas as usize] = ImageRecord {
+            format: image_format::BC7_LINEAR,
+            data_offset: offset as u64,
+            data_length: blocks.len() as u64,
+            ..record
+        };
     }
     b.data
 }

@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.6 (`tests/data/v1_0` to `tests/data/v1_6`): every file
+//! Golden files of format versions 1.0 to 1.7 (`tests/data/v1_0` to `tests/data/v1_7`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -24,7 +24,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -382,12 +382,46 @@ fn the_1_5_every_kind_file_has_every_kind_and_a_calibration() {
 }
 
 #[test]
-fn the_1_6_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
+fn the_1_6_every_kind_file_has_a_bc7_atlas() {
     let c = Container::open(golden_dir_of(6).join("every-kind-zstd.treelod")).unwrap();
+    assert_eq!(c.header().minor, 6);
+    let v1_5 =
+        ContainerData::from_container(&Container::open(golden_dir_of(5).join("every-kind-zstd.treelod")).unwrap());
+    let data = ContainerData::from_container(&c);
+    // The planes' atlas is BC7 (format 7), 8 x 4 with 4 levels: 2 + 1 + 1 + 1 blocks.
+    let atlas = c.planes().iter().map(|p| p.image).find(|&i| c.images()[i as usize].format != image_format::LEAF_SLOTS);
+    let atlas = atlas.or_else(|| c.billboards().first().map(|b| b.image)).unwrap() as usize;
+    let record = c.images()[atlas];
+    assert_eq!((record.format, record.width, record.height, record.data_length), (image_format::BC7_LINEAR, 8, 4, 80));
+    // Decoded, it is the 1.5 file's RGBA8 atlas within BC7's error (random texels: a loose bound).
+    let old = v1_5.images[atlas];
+    let old_levels = treelod_format::image::decode_levels(&old, &v1_5.image_data[old.data_offset as usize..]).unwrap();
+    let new_levels =
+        treelod_format::image::decode_levels(&record, &data.image_data[record.data_offset as usize..]).unwrap();
+    assert_eq!(old_levels.len(), new_levels.len());
+    let (sum, n) = old_levels
+        .iter()
+        .flatten()
+        .zip(new_levels.iter().flatten())
+        .fold((0.0f64, 0usize), |(s, n), (a, b)| (s + f64::from(a.abs_diff(*b)).powi(2), n + 1));
+    let rmse = (sum / n as f64).sqrt();
+    assert!(rmse < 64.0, "RMSE {rmse:.1} of 255 on random texels");
+    // Everything else is the 1.5 file's: the same records, the RGBA8 bytes still in IMAGE_DATA.
+    let mut same = data.clone();
+    same.images[atlas] = old;
+    same.image_data.truncate(v1_5.image_data.len());
+    assert!(same == v1_5, "v1_6 is v1_5 with the atlas as BC7");
+    let bytes = same.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 5);
+}
+
+#[test]
+fn the_1_7_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
+    let c = Container::open(golden_dir_of(7).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
         assert!(c.section(kind).is_some(), "{kind} missing");
     }
-    assert_eq!(c.header().minor, 6);
+    assert_eq!(c.header().minor, 7);
     // Three samples per level of the chain, levels ascending from 0.
     let levels = c.chain_calibration();
     assert_eq!(verify(&c).unwrap().chain_calibration, levels.len() as u64);
@@ -395,14 +429,22 @@ fn the_1_6_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
     numbers.dedup();
     assert_eq!(numbers, (0..numbers.len() as u32).collect::<Vec<_>>());
     assert!(!numbers.is_empty() && levels.len() == 3 * numbers.len(), "{levels:?}");
-    // Without CHAIN_CALIBRATION it is the 1.5 file, record for record, and the writer marks it 1.5.
-    let v1_5 =
-        ContainerData::from_container(&Container::open(golden_dir_of(5).join("every-kind-zstd.treelod")).unwrap());
+    // Without CHAIN_CALIBRATION it is the 1.6 file (1.5's kinds and a BC7 atlas), record for
+    // record, and the writer marks it 1.6. The atlas's BC7 blocks are the encoder's of today:
+    // the 1.6 file was written before the build's encoder moved to its ultrafast setting, so
+    // only their bytes may differ (same place, same length).
+    let v1_6 =
+        ContainerData::from_container(&Container::open(golden_dir_of(6).join("every-kind-zstd.treelod")).unwrap());
     let mut data = ContainerData::from_container(&c);
     data.chain_calibration.clear();
-    assert!(data == v1_5, "v1_6 is v1_5 with the chain's per-level calibration");
+    let bc7: Vec<_> = v1_6.images.iter().filter(|r| r.format == image_format::BC7_LINEAR).copied().collect();
+    assert_eq!(bc7.len(), 1, "{:?}", v1_6.images);
+    let blocks = bc7[0].data_offset as usize..(bc7[0].data_offset + bc7[0].data_length) as usize;
+    assert_eq!(data.image_data.len(), v1_6.image_data.len());
+    data.image_data[blocks.clone()].copy_from_slice(&v1_6.image_data[blocks]);
+    assert!(data == v1_6, "v1_7 is v1_6 with the chain's per-level calibration");
     let bytes = data.to_bytes(Compression::None).unwrap();
-    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 5);
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 6);
 }
 
 #[test]

@@ -52,6 +52,9 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 calibration: grid[1] >= 2,
                 // The chain's per-level tables with a quarter (they need a chain).
                 chain_calibration: grid[1] >= 2 && curve_samples > 0,
+                // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
+                // the generator check below refuses (the golden 1.6 and 1.7 files cover it).
+                bc7_atlas: false,
                 name: None,
             }
         })
@@ -343,7 +346,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 6, "everything() holds the kinds of 1.6");
+    assert_eq!(container.header().minor, 7, "everything() holds the kinds of 1.7");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

@@ -20,6 +20,7 @@ use treelod_format::{
 };
 
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
+use crate::atlas_format::AtlasFormat;
 use crate::billboard::{Billboards, build_billboards};
 use crate::calibrate::CalibrationConfig;
 use crate::classify::{ClassifyOptions, classify};
@@ -85,6 +86,9 @@ pub struct BuildConfig {
     /// projected height, measured on the CPU rasteriser ([`crate::calibrate`]), which a runtime's
     /// policy chooses with. `None` writes none; tools turn it on by default.
     pub calibration: Option<CalibrationConfig>,
+    /// How the atlases of impostors and billboards are stored (spec §6.7): BC7 by default, or
+    /// RGBA8 as baked ([`crate::atlas_format`]).
+    pub atlas_format: AtlasFormat,
     /// Significant bits kept of the written floats ([`crate::precision`]): by default rounded so
     /// that zstd compresses the container about a third smaller; [`Precision::FULL`] keeps every
     /// bit.
@@ -162,6 +166,7 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
     }
     if let Some(impostors) = &config.impostors {
         settings.extend(impostors.settings());
+        settings.push(Setting { key: "atlas.format".into(), value: config.atlas_format.name().into() });
     }
     if let Some(ellipsoids) = &config.ellipsoids {
         settings.extend(ellipsoids.settings());
@@ -980,6 +985,18 @@ fn assemble(
         ..CellRecord::default()
     });
     stats.nonempty_cells = cells[..cell_count].iter().filter(|c| !c.is_empty()).count() as u64;
+
+    // Stage: the atlases in their stored format (BC7 blocks by default).
+    let (mut impostors, mut billboards) = (impostors, billboards);
+    if impostors.is_some() || billboards.is_some() {
+        if let Some(i) = impostors.as_mut() {
+            i.atlas = crate::atlas_format::store(std::mem::take(&mut i.atlas), config.atlas_format);
+        }
+        if let Some(b) = billboards.as_mut() {
+            b.atlas = crate::atlas_format::store(std::mem::take(&mut b.atlas), config.atlas_format);
+        }
+        clock.lap(&mut stats, "atlas_format");
+    }
 
     // Stage: materials and images (only those used, in first-use order).
     let mut images: Vec<ImageRecord> = Vec::new();

@@ -275,14 +275,16 @@ pub struct ImpostorMesh<'a> {
 }
 
 /// The planes' image: an RGBA8 atlas, RGB sRGB-encoded, alpha linear (spec §6.7 format 1), or
-/// with indirect texturing a leaf-slot image (format 5, §6.10.1).
-#[derive(Clone, Debug, PartialEq, Eq)]
+/// with indirect texturing a leaf-slot image (format 5, §6.10.1). The build then stores an RGBA8
+/// atlas as BC7 (format 6) unless told otherwise ([`crate::atlas_format`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Atlas {
     /// Texels across (an RGBA atlas: a multiple of 16).
     pub width: u32,
     /// Texels down (an RGBA atlas: a multiple of 16).
     pub height: u32,
-    /// [`treelod_format::image_format`]: `RGBA8_SRGB` or `LEAF_SLOTS`.
+    /// [`treelod_format::image_format`]: `RGBA8_SRGB` or `LEAF_SLOTS` as baked; `BC7_SRGB` once
+    /// stored as BC7.
     pub format: u32,
     /// Mip levels stored.
     pub mip_count: u32,

@@ -7,6 +7,7 @@
 
 pub mod ambient;
 pub mod assemble;
+pub mod atlas_format;
 pub mod billboard;
 pub mod calibrate;
 pub mod classify;
@@ -32,6 +33,7 @@ pub use assemble::{
     BuildConfig, BuildOutput, BuildStats, Placed, Progress, StageTime, auto_grid, build_block, build_scenes,
     ellipsoid_report, prune_report, recorded_settings,
 };
+pub use atlas_format::AtlasFormat;
 pub use calibrate::CalibrationConfig;
 pub use demo::{DemoTreeConfig, cards_on_planes, demo_tree, leaf_material};
 pub use ellipsoid::{Clustering, EllipsoidConfig, Ellipsoids};

@@ -27,6 +27,11 @@ pub fn decode(record: &ImageRecord, data: &[u8]) -> Result<Rgba8, String> {
             let level0 = data.get(..len).ok_or_else(|| format!("{} bytes, level 0 needs {len}", data.len()))?;
             (record.width, record.height, level0.to_vec())
         }
+        image_format::BC7_SRGB | image_format::BC7_LINEAR => {
+            let len = usize::try_from(record.level_length(0).unwrap_or(u64::MAX)).unwrap_or(usize::MAX);
+            let level0 = data.get(..len).ok_or_else(|| format!("{} bytes, level 0 needs {len}", data.len()))?;
+            (record.width, record.height, decode_bc7(record.width, record.height, level0)?)
+        }
         image_format::PNG => decode_png(data)?,
         image_format::JPEG => decode_jpeg(data)?,
         image_format::LEAF_SLOTS => {
@@ -42,6 +47,57 @@ pub fn decode(record: &ImageRecord, data: &[u8]) -> Result<Rgba8, String> {
         return Err(format!("decodes to {width}x{height}, the record says {}x{}", record.width, record.height));
     }
     Ok(Rgba8 { width, height, texels })
+}
+
+/// Every mip level of a raw (formats 1, 2) or BC7 (formats 6, 7) image as RGBA8 texels, largest
+/// first, each `max(1, width >> i) · max(1, height >> i) · 4` bytes.
+///
+/// # Errors
+/// A sentence naming what is wrong: another format, or data shorter than its levels.
+pub fn decode_levels(record: &ImageRecord, data: &[u8]) -> Result<Vec<Vec<u8>>, String> {
+    let bc7 = image_format::is_bc7(record.format);
+    if !bc7 && !matches!(record.format, image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR) {
+        return Err(format!("image format {} has no stored mip levels", record.format));
+    }
+    let mut levels = Vec::new();
+    let mut at = 0usize;
+    for level in 0..record.mip_count.max(1) {
+        let len = record.level_length(level).and_then(|l| usize::try_from(l).ok()).ok_or("a level too large")?;
+        let bytes = at.checked_add(len).and_then(|end| data.get(at..end)).ok_or_else(|| {
+            format!("mip {level} is cut short: {} bytes of data, the levels up to it need {}", data.len(), at + len)
+        })?;
+        let (w, h) = record.level_size(level);
+        levels.push(if bc7 { decode_bc7(w, h, bytes)? } else { bytes.to_vec() });
+        at += len;
+    }
+    Ok(levels)
+}
+
+/// Decodes one BC7 level of `width × height` texels (any size: the blocks at the right and bottom
+/// edges are partly outside it) to RGBA8, `width · height · 4` bytes.
+///
+/// # Errors
+/// A sentence saying that `blocks` is not `ceil(width / 4) · ceil(height / 4)` blocks of 16 bytes.
+pub fn decode_bc7(width: u32, height: u32, blocks: &[u8]) -> Result<Vec<u8>, String> {
+    let (bw, bh) = (width.div_ceil(4) as usize, height.div_ceil(4) as usize);
+    let expected = bw * bh * 16;
+    if blocks.len() != expected {
+        return Err(format!(
+            "{} bytes of BC7 blocks, a {width}x{height} level needs {expected} ({bw}x{bh} blocks of 16 bytes)",
+            blocks.len()
+        ));
+    }
+    // Decoded at whole blocks, then cropped: the decoder writes full 4x4 blocks.
+    let (pw, ph) = (bw * 4, bh * 4);
+    let mut padded = vec![0u8; pw * ph * 4];
+    let variant = block_compression::CompressionVariant::BC7(block_compression::BC7Settings::alpha_basic());
+    #[expect(clippy::cast_possible_truncation, reason = "sides at most 16384 + 3")]
+    block_compression::decode::decompress_blocks_as_rgba8(variant, pw as u32, ph as u32, blocks, &mut padded);
+    if (pw, ph) == (width as usize, height as usize) {
+        return Ok(padded);
+    }
+    let row = width as usize * 4;
+    Ok((0..height as usize).flat_map(|y| &padded[y * pw * 4..y * pw * 4 + row]).copied().collect())
 }
 
 /// The width and height an encoded PNG or JPEG declares in its header, read without decoding

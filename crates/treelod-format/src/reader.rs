@@ -430,7 +430,7 @@ impl Container {
     }
 
     /// `CHAIN_CALIBRATION` records (spec §6.16; empty without the section, as in every file
-    /// before 1.6).
+    /// before 1.7).
     #[must_use]
     pub fn chain_calibration(&self) -> &[ChainCalibrationRecord] {
         self.records(SectionKind::CHAIN_CALIBRATION)

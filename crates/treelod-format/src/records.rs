@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 6;
+pub const MINOR: u16 = 7;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -165,7 +165,7 @@ impl SectionKind {
     /// height (spec §6.15). Since 1.5.
     pub const CALIBRATION: Self = Self(0x0070);
     /// [`ChainCalibrationRecord`]s: each level of the baseline LoD chain's measured image error
-    /// and cost by projected height (spec §6.16). Since 1.6.
+    /// and cost by projected height (spec §6.16). Since 1.7.
     pub const CHAIN_CALIBRATION: Self = Self(0x0071);
 
     /// Every kind this version knows, in ascending order.
@@ -284,7 +284,7 @@ impl SectionKind {
             Self::PLANE_LEAVES | Self::ELLIPSOID_AO => 3,
             Self::LINE_AO => 4,
             Self::CALIBRATION => 5,
-            Self::CHAIN_CALIBRATION => 6,
+            Self::CHAIN_CALIBRATION => 7,
             _ => 0,
         }
     }
@@ -547,19 +547,83 @@ pub mod image_format {
     /// A leaf-distribution image of indirectly textured planes (spec §6.10.1): per texel two
     /// little-endian `u16` leaf slots, one mip level. Since 1.3.
     pub const LEAF_SLOTS: u32 = 5;
+    /// BC7 blocks (BPTC), RGB sRGB-encoded, alpha linear: each mip level as `4 × 4`-texel blocks of
+    /// 16 bytes. Since 1.6.
+    pub const BC7_SRGB: u32 = 6;
+    /// BC7 blocks, all channels linear. Since 1.6.
+    pub const BC7_LINEAR: u32 = 7;
+
+    /// Whether `format` is one of the BC7 formats (6, 7).
+    #[must_use]
+    pub const fn is_bc7(format: u32) -> bool {
+        matches!(format, BC7_SRGB | BC7_LINEAR)
+    }
+
+    /// Whether `format` holds sRGB-encoded colour (1, 3, 4, 6).
+    #[must_use]
+    pub const fn is_srgb(format: u32) -> bool {
+        matches!(format, RGBA8_SRGB | PNG | JPEG | BC7_SRGB)
+    }
+
+    /// The minor version a file holding an image of `format` is marked with at least (spec §11):
+    /// 6 for BC7, 0 for the others (`LEAF_SLOTS`, of 1.3, marks its files through the kind
+    /// `PLANE_LEAVES` that goes with it; the image alone does not).
+    #[must_use]
+    pub const fn marks_minor(format: u32) -> u16 {
+        match format {
+            BC7_SRGB | BC7_LINEAR => 6,
+            _ => 0,
+        }
+    }
+
+    /// The format's name as the spec writes it, `None` for a value this version does not define.
+    #[must_use]
+    pub const fn name(format: u32) -> Option<&'static str> {
+        Some(match format {
+            RGBA8_SRGB => "RGBA8_SRGB",
+            RGBA8_LINEAR => "RGBA8_LINEAR",
+            PNG => "PNG",
+            JPEG => "JPEG",
+            LEAF_SLOTS => "LEAF_SLOTS",
+            BC7_SRGB => "BC7_SRGB",
+            BC7_LINEAR => "BC7_LINEAR",
+            _ => return None,
+        })
+    }
 }
 
+/// Bytes of one BC7 block (`4 × 4` texels, spec §6.7).
+pub const BC7_BLOCK_BYTES: u64 = 16;
+
 impl ImageRecord {
-    /// Bytes the raw mip chain of formats 1 and 2 needs (spec §6.7), `None` on overflow.
+    /// Bytes the mip chain of formats 1 and 2 (raw texels) or 6 and 7 (BC7 blocks) needs (spec
+    /// §6.7), `None` on overflow.
     #[must_use]
     pub fn expected_data_length(&self) -> Option<u64> {
         let mut total = 0u64;
         for level in 0..self.mip_count.min(32) {
-            let w = u64::from((self.width >> level).max(1));
-            let h = u64::from((self.height >> level).max(1));
-            total = total.checked_add(w.checked_mul(h)?.checked_mul(4)?)?;
+            total = total.checked_add(self.level_length(level)?)?;
         }
         Some(total)
+    }
+
+    /// Texels across and down of mip `level`: `max(1, width >> level)` × `max(1, height >> level)`.
+    #[must_use]
+    pub fn level_size(&self, level: u32) -> (u32, u32) {
+        (self.width.checked_shr(level).unwrap_or(0).max(1), self.height.checked_shr(level).unwrap_or(0).max(1))
+    }
+
+    /// Bytes of mip `level` of a raw (4 bytes a texel) or BC7 (16 bytes a block of `4 × 4`
+    /// texels, a partial block at the right and bottom edges counting whole) image.
+    #[must_use]
+    pub fn level_length(&self, level: u32) -> Option<u64> {
+        let (w, h) = self.level_size(level);
+        let (w, h) = (u64::from(w), u64::from(h));
+        if image_format::is_bc7(self.format) {
+            w.div_ceil(4).checked_mul(h.div_ceil(4))?.checked_mul(BC7_BLOCK_BYTES)
+        } else {
+            w.checked_mul(h)?.checked_mul(4)
+        }
     }
 }
 

@@ -365,7 +365,7 @@ fn check_materials(materials: &[MaterialRecord], image_count: usize) -> Result<(
 
 /// Spec §6.7: sizes, mip counts and data ranges; the data of PNG and JPEG images starts with the
 /// format's signature; a `LEAF_SLOTS` image has one level of `width · height` texels of 4 bytes
-/// (§6.10.1). Images of formats this version does not define are checked only for their data range.
+/// (§6.10.1); a BC7 image's sides are multiples of 4 and its data is exactly its levels' blocks. Images of formats this version does not define are checked only for their data range.
 fn check_images(images: &[ImageRecord], data: &[u8]) -> Result<()> {
     let kind = SectionKind::IMAGES;
     let data_len = data.len() as u64;
@@ -391,6 +391,8 @@ fn check_images(images: &[ImageRecord], data: &[u8]) -> Result<()> {
                 | image_format::PNG
                 | image_format::JPEG
                 | image_format::LEAF_SLOTS
+                | image_format::BC7_SRGB
+                | image_format::BC7_LINEAR
         );
         if !known {
             continue;
@@ -442,6 +444,17 @@ fn check_images(images: &[ImageRecord], data: &[u8]) -> Result<()> {
                 }
             }
             _ => {
+                if image_format::is_bc7(img.format) && (!img.width.is_multiple_of(4) || !img.height.is_multiple_of(4)) {
+                    return Err(bad(
+                        kind,
+                        i,
+                        format!(
+                            "a BC7 image is {}x{}; its width and height must be multiples of 4 (whole 4x4 blocks at \
+                             level 0, §6.7)",
+                            img.width, img.height
+                        ),
+                    ));
+                }
                 let max_mips = 32 - img.width.max(img.height).leading_zeros();
                 if !(1..=max_mips).contains(&img.mip_count) {
                     return Err(bad(

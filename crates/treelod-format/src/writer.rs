@@ -19,7 +19,7 @@ use crate::records::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample, EllipsoidRecord,
     FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR,
     MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE,
-    SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    SectionEntry, SectionKind, TriangleRecord, VertexRecord, image_format,
 };
 
 /// How sections are stored.
@@ -130,7 +130,7 @@ pub struct ContainerData {
     /// 1.5).
     pub calibration: Vec<CalibrationRecord>,
     /// `CHAIN_CALIBRATION`: empty, or each LoD chain level's error and cost by projected height
-    /// (since 1.6).
+    /// (since 1.7).
     pub chain_calibration: Vec<ChainCalibrationRecord>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
@@ -408,6 +408,14 @@ fn encode_sections<W: std::io::Write + std::io::Seek>(
     // as it is compressed, so the build's arrays and their compressed sections are never both
     // whole in memory: the frames replace the arrays they come from, each array is freed once
     // written, and what the writing adds is the frames in flight (at most the file's size).
+    // Image formats of later minors mark the file too (spec §11): BC7 images are 1.6.
+    let image_minor = sections
+        .iter()
+        .filter(|(kind, _, _)| *kind == SectionKind::IMAGES)
+        .flat_map(|(_, payload, _)| payload.bytes().chunks_exact(size_of::<ImageRecord>()))
+        .map(|bytes| image_format::marks_minor(bytemuck::pod_read_unaligned::<ImageRecord>(bytes).format))
+        .max()
+        .unwrap_or(0);
     let stored: Vec<Stored<'_>> = sections
         .into_par_iter()
         .map(|(kind, payload, record_size)| {
@@ -442,7 +450,7 @@ fn encode_sections<W: std::io::Write + std::io::Seek>(
         magic: MAGIC,
         major: MAJOR,
         // The smallest minor whose kinds the file holds (spec §11).
-        minor: entries.iter().map(|e| SectionKind(e.kind).since_minor()).max().unwrap_or(0).min(MINOR),
+        minor: entries.iter().map(|e| SectionKind(e.kind).since_minor()).max().unwrap_or(0).max(image_minor).min(MINOR),
         header_size: HEADER_SIZE as u32,
         section_count: u32::try_from(entries.len()).map_err(|_| Error::Write("too many sections".into()))?,
         table_offset,

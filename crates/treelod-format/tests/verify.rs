@@ -503,6 +503,55 @@ fn image_rules() {
 }
 
 #[test]
+fn bc7_image_rules() {
+    // Image 1 as one BC7 block of 4x4 texels: 16 bytes at 32.
+    let bc7 = |data: &mut ContainerData| {
+        data.images[1] = ImageRecord {
+            width: 4,
+            height: 4,
+            mip_count: 1,
+            format: image_format::BC7_SRGB,
+            data_offset: 32,
+            data_length: 16,
+        };
+    };
+    let mut data = valid();
+    bc7(&mut data);
+    check(&data).expect("one 4x4 block verifies");
+    // A file with a BC7 image is a 1.6 file; without, it keeps the minor of its kinds.
+    assert_eq!(Container::from_bytes(&bytes_of(&data)).expect("opens").header().minor, 6);
+    assert!(Container::from_bytes(&bytes_of(&valid())).expect("opens").header().minor < 6);
+    // Its byte length must match its dimensions and levels.
+    data.images[1].width = 8;
+    expect_record(&data, SectionKind::IMAGES, 1, "needs Some(32)");
+    let mut data = valid();
+    bc7(&mut data);
+    data.images[1].mip_count = 2; // 4x4 and 2x2: a block each
+    expect_record(&data, SectionKind::IMAGES, 1, "needs Some(32)");
+    let mut data = valid();
+    bc7(&mut data);
+    data.images[1].data_length = 8;
+    expect_record(&data, SectionKind::IMAGES, 1, "data_length 8");
+    // Sides are whole blocks.
+    let mut data = valid();
+    bc7(&mut data);
+    data.images[1].height = 3;
+    expect_record(&data, SectionKind::IMAGES, 1, "multiples of 4");
+    // A level smaller than a block is one whole block: 8x8 with 4 levels is 4 + 1 + 1 + 1 blocks.
+    let mut data = valid();
+    data.image_data.resize(32 + 7 * 16, 0);
+    data.images[1] = ImageRecord {
+        width: 8,
+        height: 8,
+        mip_count: 4,
+        format: image_format::BC7_LINEAR,
+        data_offset: 32,
+        data_length: 7 * 16,
+    };
+    check(&data).expect("partial blocks of small levels count whole");
+}
+
+#[test]
 fn point_rules() {
     let mut data = valid();
     data.points[2].radius = -1.0;

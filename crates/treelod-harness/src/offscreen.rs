@@ -17,11 +17,14 @@ const MAX_STREAMING_FRAMES: u32 = 1000;
 /// points within a per-frame upload budget), so the image shows the selection rather than the
 /// coarser stand-ins of a first frame.
 /// With shadows, the cascades' draws too ([`treelod_render::ShadowStats::ranges_clamped`]).
+/// Trees in a transition between techniques ([`treelod_render::Policy::transition`]) finish it
+/// too, so a still measures the policy's choice at the pose, not a blend with the last pose's.
 pub fn settle_streaming(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) {
     for _ in 0..MAX_STREAMING_FRAMES {
         let stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
         gpu.queue.submit([]);
-        if (stats.ranges_clamped == 0 && stats.shadow.ranges_clamped == 0) || stats.bytes_uploaded == 0 {
+        let streamed = (stats.ranges_clamped == 0 && stats.shadow.ranges_clamped == 0) || stats.bytes_uploaded == 0;
+        if streamed && stats.transitions == 0 {
             break;
         }
     }

@@ -3,7 +3,8 @@
 //! and for each shadow cascade ([`Settings::shadows`]' [`Casters`]).
 
 use treelod_runtime::{
-    Assignment, BudgetController, Calibration, Choices, Policy, PolicyState, Technique, choose_instances_coarsest,
+    Assignment, BudgetController, Calibration, Choices, Policy, PolicyState, Technique, Transition,
+    choose_instances_coarsest,
 };
 
 #[cfg(doc)]
@@ -49,11 +50,27 @@ impl Renderer {
     /// [`Settings::policy`], each tree of a model with calibration tables to the policy's choice
     /// at its projected height for `camera`, every other tree to [`Settings::technique`]; a tree
     /// whose model lacks its technique's data to [`Technique::FALLBACK`].
+    ///
+    /// Trees in a transition ([`Policy::transition`]) are also listed in
+    /// [`Self::leaving_assignment`] under the technique they are leaving, and in
+    /// [`Self::transitions`].
     pub(crate) fn assign(&mut self, camera: &treelod_runtime::Camera) {
         let mut assignment = std::mem::take(&mut self.assignment);
         self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
         self.assignment = assignment;
         self.note_drawn_with();
+        self.note_transitions();
+    }
+
+    /// Lists this frame's transitions of the camera's view ([`Self::transitions`]) and the
+    /// techniques they leave ([`Self::leaving_assignment`]).
+    fn note_transitions(&mut self) {
+        self.transitions.clear();
+        if self.settings.policy.is_some_and(|p| self.policy.chooses(Some(&p))) {
+            self.transitions.extend(self.policy.state.transitions());
+        }
+        let leaving = self.transitions.iter().map(|&(i, t)| (i, t.from));
+        self.leaving_assignment.assign_listed(&self.instances, &self.representations, leaving);
     }
 
     /// Fills `out` with shadow cascade `k`'s trees per technique as `casters` says: chosen at the
@@ -96,7 +113,15 @@ impl Renderer {
             tables.made_for = Some(policy);
         }
         let state = match cascade {
-            None => &mut tables.state,
+            None => {
+                // Only the camera's view fades between techniques; a cascade switches at once
+                // (a dithered caster would shimmer in the filtered shadow). Only the camera's
+                // view reads the visible fractions: a tree hidden from the camera still casts
+                // its whole shadow.
+                tables.state.set_transition(policy.transition());
+                tables.state.set_visible(if policy.occlusion { &self.visible_fraction } else { &[] });
+                &mut tables.state
+            }
             Some(k) => {
                 if tables.cascade_states.len() <= k {
                     tables.cascade_states.resize_with(k + 1, PolicyState::default);
@@ -122,6 +147,13 @@ impl Renderer {
                 }
             }
         }
+    }
+
+    /// Instance `instance`'s transition this frame, if it is in one: the policy's state, read only
+    /// in a frame whose choice listed transitions (a state the policy did not move this frame
+    /// may hold old ones).
+    pub(crate) fn transition(&self, instance: u32) -> Option<Transition> {
+        if self.transitions.is_empty() { None } else { self.policy.state.transition(instance as usize) }
     }
 
     /// The technique instance `instance` is drawn with this frame.

@@ -25,12 +25,26 @@ pub(crate) struct DrawInfo {
     /// Index of the instance in [`Renderer::set_instances`]' list (read by the shaders only to
     /// seed the level blend's dither, `level_dither`).
     pub(crate) instance: u32,
-    /// The colour of [`DebugView::Techniques`](crate::DebugView) for the technique the instance is
-    /// drawn with this frame ([`tint`]).
+    /// The colour of [`DebugView::Techniques`](crate::DebugView) for the technique that made the
+    /// draw ([`tint`]).
     pub(crate) tint: u32,
+    /// The share of the transition dither the draw keeps ([`RecordedDraw::dither`]), as WGSL's
+    /// `pack2x16unorm` packs `[lo, hi)`: `0xFFFF0000` (`[0, 1)`) outside a transition.
+    pub(crate) fade: u32,
+    pub(crate) pad: [u32; 3],
 }
 
-const _: () = assert!(size_of::<DrawInfo>() == 96);
+const _: () = assert!(size_of::<DrawInfo>() == 112);
+
+/// [`DrawInfo::fade`] of a dither range `[lo, hi)` (clamped to `[0, 1]`), as `pack2x16unorm`.
+pub(crate) fn pack_fade([lo, hi]: [f32; 2]) -> u32 {
+    let unorm = |x: f32| {
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 0..=65535 first")]
+        let v = (x.clamp(0.0, 1.0) * 65535.0).round() as u32;
+        v
+    };
+    unorm(lo) | (unorm(hi) << 16)
+}
 
 /// [`DrawInfo::tint`] of `technique`: its debug colour ([`Technique::colour`], linear RGB) as
 /// WGSL's `pack4x8unorm` packs it, red in the low byte (alpha 1).
@@ -63,7 +77,17 @@ pub struct RecordedDraw {
     pub tau_triangles: f32,
     /// Whether residency made this draw coarser than the selection.
     pub clamped: bool,
+    /// The technique that made the draw: the one its tree is drawn with, or, for a tree in a
+    /// transition ([`treelod_runtime::Policy::transition`]), also the one it is leaving.
+    pub technique: Technique,
+    /// The pixels the draw covers, `[lo, hi)` of the transition dither (`[0, 1)`: all of them):
+    /// for a tree in a transition the new technique's draws keep `[0, shown)` and the old one's
+    /// `[shown, 1)` ([`treelod_runtime::Transition`]).
+    pub dither: [f32; 2],
 }
+
+/// [`RecordedDraw::dither`] outside a transition.
+const EVERY_PIXEL: [f32; 2] = [0.0, 1.0];
 
 /// What one view of a frame (the camera, or a shadow cascade) selected and draws.
 #[derive(Default)]
@@ -94,113 +118,31 @@ impl View {
 
 impl Renderer {
     /// Records `view`'s draws, clamped to what is resident, after the draw infos and indirect
-    /// draws of the views before it; counts them into `stats`.
-    pub(crate) fn record_view(&mut self, view: &mut View, full_mesh: bool, stats: &mut FrameStats) {
+    /// draws of the views before it; counts them into `stats`. `leaving`: the draws, for the
+    /// same view, of the techniques the trees in a transition are leaving (the camera's view
+    /// only), recorded into the same buckets on their share of the pixels.
+    pub(crate) fn record_view(
+        &mut self,
+        view: &mut View,
+        leaving: Option<&View>,
+        full_mesh: bool,
+        stats: &mut FrameStats,
+    ) {
         view.recorded.clear();
         self.buckets.resize_with(Bucket::COUNT * self.models.len(), Vec::new);
         for bucket in &mut self.buckets {
             bucket.clear();
         }
-        let ranges = view.selection.ranges();
-        let mut i = 0;
-        while i < ranges.len() {
-            let range = ranges[i];
-            // A cell's triangle range is followed by its point range, if any.
-            let points = ranges
-                .get(i + 1)
-                .filter(|next| {
-                    range.kind == Kind::Triangles
-                        && next.kind == Kind::Points
-                        && (next.instance, next.cell) == (range.instance, range.cell)
-                })
-                .copied();
-            i += 1 + usize::from(points.is_some());
-            let (triangles, points) = match range.kind {
-                Kind::Triangles => (Some(range), points),
-                Kind::Points | Kind::Roots => (None, Some(range)),
-            };
-            let instance = view.instance_index(range.instance);
-            for draw in self.clamp(instance, range, triangles, points, full_mesh) {
-                let Some(draw) = draw else { continue };
-                stats.ranges_clamped += u32::from(draw.clamped);
-                let (bucket, first_vertex, corners) = self.gpu_first(&draw);
-                let transform = self.instances[draw.instance as usize].transform;
-                let info = DrawInfo {
-                    model: transform.to_cols_array_2d(),
-                    tau_p: draw.tau_points,
-                    tau_t: draw.tau_triangles,
-                    cell: draw.cell,
-                    scale: max_axis_scale(transform),
-                    shading: range.shading,
-                    leaf_scale: 1.0,
-                    instance: draw.instance,
-                    tint: 0,
-                };
-                self.buckets[bucket].push((info, first_vertex, draw.count * corners));
-                view.recorded.push(draw);
-            }
+        let mut recorded = std::mem::take(&mut view.recorded);
+        self.record_selection(view, false, full_mesh, &mut recorded, stats);
+        if let Some(leaving) = leaving {
+            self.record_selection(leaving, true, full_mesh, &mut recorded, stats);
         }
-        // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
-        // per-cell estimate (it is a property of the point hierarchy's cells).
-        for draw in &view.draws.triangles {
-            let record = RecordedDraw {
-                instance: draw.instance,
-                model: ModelId(draw.model),
-                cell: draw.cell,
-                source: match draw.source {
-                    TriangleSource::PrunedLeaves => DrawSource::PrunedLeaves,
-                    TriangleSource::Bark => DrawSource::Bark,
-                    TriangleSource::LodLevel => DrawSource::LodLevel,
-                },
-                count: draw.count,
-                tau_points: draw.lambda,
-                tau_triangles: draw.tau_triangles,
-                clamped: false,
-            };
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, draw.first, draw.leaf_scale);
-        }
-        // Prefixes of one cell's elements uploaded whole (impostor planes, ellipsoids, lines),
-        // each in its bucket, the level chosen in the shader by `τ`.
-        let prefixes =
-            prefix_lists(&view.draws).into_iter().flat_map(|(list, source)| list.iter().map(move |d| (d, source)));
-        for (draw, source) in prefixes {
-            let range = draw.range;
-            let record = RecordedDraw {
-                instance: draw.instance,
-                model: ModelId(draw.model),
-                cell: range.cell,
-                source,
-                count: range.count,
-                tau_points: range.tau,
-                tau_triangles: range.tau,
-                clamped: false,
-            };
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, range.first, 1.0);
-        }
-        // Baseline billboards: every quad of the chosen kind.
-        for &treelod_runtime::QuadDraw { instance, model, first, count } in &view.draws.billboards {
-            let record = RecordedDraw {
-                instance,
-                model: ModelId(model),
-                cell: ROOTS_CELL,
-                source: DrawSource::Billboards,
-                count,
-                tau_points: 0.0,
-                tau_triangles: 0.0,
-                clamped: false,
-            };
-            record_direct(&self.instances, &mut self.buckets, &mut view.recorded, record, first, 1.0);
-        }
-        // The technique each draw's tree is drawn with, for the debug colours, and what each
-        // kind of primitive and each technique submitted.
-        let (drawn_with, tints) = (&self.drawn_with, Technique::ALL.map(tint));
-        for (info, _, _) in self.buckets.iter_mut().flatten() {
-            let technique = drawn_with.get(info.instance as usize).copied().unwrap_or(Technique::FALLBACK);
-            info.tint = tints[technique.index()];
-        }
+        view.recorded = recorded;
+        // What each kind of primitive and each technique submitted.
         for draw in &view.recorded {
             stats.submitted[draw.source.primitive()] += u64::from(draw.count);
-            stats.by_technique[self.technique_of(draw.instance)] += u64::from(draw.count);
+            stats.by_technique[draw.technique] += u64::from(draw.count);
         }
         view.model_draws.clear();
         let before = self.indirect.len();
@@ -223,6 +165,133 @@ impl Renderer {
             view.model_draws.push(draws);
         }
         stats.ranges += u32::try_from(self.indirect.len() - before).unwrap_or(u32::MAX);
+    }
+
+    /// The technique a draw of instance `instance` in a view's (`leaving` false) or in its
+    /// leaving draws' selection was made by, and the share of the transition dither it keeps.
+    fn drawn_by(&self, instance: u32, leaving: bool) -> (Technique, [f32; 2]) {
+        let technique = self.technique_of(instance);
+        match self.transition(instance) {
+            Some(t) if leaving => (t.from, [t.shown, 1.0]),
+            Some(t) => (technique, [0.0, t.shown]),
+            None => (technique, EVERY_PIXEL),
+        }
+    }
+
+    /// Records the draws of `view`'s selections (or, `leaving`, those of the techniques trees in
+    /// a transition leave) into the buckets and `recorded`.
+    fn record_selection(
+        &mut self,
+        view: &View,
+        leaving: bool,
+        full_mesh: bool,
+        recorded: &mut Vec<RecordedDraw>,
+        stats: &mut FrameStats,
+    ) {
+        let tints = Technique::ALL.map(tint);
+        let ranges = view.selection.ranges();
+        let mut i = 0;
+        while i < ranges.len() {
+            let range = ranges[i];
+            // A cell's triangle range is followed by its point range, if any.
+            let points = ranges
+                .get(i + 1)
+                .filter(|next| {
+                    range.kind == Kind::Triangles
+                        && next.kind == Kind::Points
+                        && (next.instance, next.cell) == (range.instance, range.cell)
+                })
+                .copied();
+            i += 1 + usize::from(points.is_some());
+            let (triangles, points) = match range.kind {
+                Kind::Triangles => (Some(range), points),
+                Kind::Points | Kind::Roots => (None, Some(range)),
+            };
+            let instance = view.instance_index(range.instance);
+            let (technique, dither) = self.drawn_by(instance, leaving);
+            for draw in self.clamp(instance, range, triangles, points, full_mesh) {
+                let Some(draw) = draw else { continue };
+                let draw = RecordedDraw { technique, dither, ..draw };
+                stats.ranges_clamped += u32::from(draw.clamped);
+                let (bucket, first_vertex, corners) = self.gpu_first(&draw);
+                let transform = self.instances[draw.instance as usize].transform;
+                let info = DrawInfo {
+                    model: transform.to_cols_array_2d(),
+                    tau_p: draw.tau_points,
+                    tau_t: draw.tau_triangles,
+                    cell: draw.cell,
+                    scale: max_axis_scale(transform),
+                    shading: range.shading,
+                    leaf_scale: 1.0,
+                    instance: draw.instance,
+                    tint: tints[technique.index()],
+                    fade: pack_fade(dither),
+                    pad: [0; 3],
+                };
+                self.buckets[bucket].push((info, first_vertex, draw.count * corners));
+                recorded.push(draw);
+            }
+        }
+        // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
+        // per-cell estimate (it is a property of the point hierarchy's cells).
+        for draw in &view.draws.triangles {
+            let (technique, dither) = self.drawn_by(draw.instance, leaving);
+            let record = RecordedDraw {
+                instance: draw.instance,
+                model: ModelId(draw.model),
+                cell: draw.cell,
+                source: match draw.source {
+                    TriangleSource::PrunedLeaves => DrawSource::PrunedLeaves,
+                    TriangleSource::Bark => DrawSource::Bark,
+                    TriangleSource::LodLevel => DrawSource::LodLevel,
+                },
+                count: draw.count,
+                tau_points: draw.lambda,
+                tau_triangles: draw.tau_triangles,
+                clamped: false,
+                technique,
+                dither,
+            };
+            record_direct(&self.instances, &mut self.buckets, recorded, record, draw.first, draw.leaf_scale);
+        }
+        // Prefixes of one cell's elements uploaded whole (impostor planes, ellipsoids, lines),
+        // each in its bucket, the level chosen in the shader by `τ`.
+        let prefixes =
+            prefix_lists(&view.draws).into_iter().flat_map(|(list, source)| list.iter().map(move |d| (d, source)));
+        for (draw, source) in prefixes {
+            let range = draw.range;
+            let (technique, dither) = self.drawn_by(draw.instance, leaving);
+            let record = RecordedDraw {
+                instance: draw.instance,
+                model: ModelId(draw.model),
+                cell: range.cell,
+                source,
+                count: range.count,
+                tau_points: range.tau,
+                tau_triangles: range.tau,
+                clamped: false,
+                technique,
+                dither,
+            };
+            record_direct(&self.instances, &mut self.buckets, recorded, record, range.first, 1.0);
+        }
+        // Baseline billboards: every quad of the chosen kind.
+        for &treelod_runtime::QuadDraw { instance, model, first, count } in &view.draws.billboards {
+            let (technique, dither) = self.drawn_by(instance, leaving);
+            let record = RecordedDraw {
+                instance,
+                model: ModelId(model),
+                cell: ROOTS_CELL,
+                source: DrawSource::Billboards,
+                count,
+                tau_points: 0.0,
+                tau_triangles: 0.0,
+                clamped: false,
+                technique,
+                dither,
+            };
+            record_direct(&self.instances, &mut self.buckets, recorded, record, first, 1.0);
+        }
     }
 
     /// The draws of one selected cell (or one roots range), clamped to what is resident so that
@@ -254,6 +323,8 @@ impl Renderer {
             tau_points: range.tau_points,
             tau_triangles: range.tau_triangles,
             clamped: false,
+            technique: Technique::FALLBACK,
+            dither: EVERY_PIXEL,
         };
         let (m, c) = (range.model as usize, range.cell as usize);
         let (Some(model), Some(lod)) = (self.models.get(m), self.lods.get(m)) else { return [None, None] };
@@ -358,8 +429,9 @@ impl Renderer {
 }
 
 /// Records a draw that streaming does not clamp (pruned leaves, bark, impostor planes: uploaded
-/// whole): its `DrawInfo` (thresholds from `record`, unshaded) into the model's bucket of its
-/// source, drawing `record.count` elements from element `first`, and `record` itself.
+/// whole): its `DrawInfo` (thresholds, technique and dither from `record`, unshaded) into the
+/// model's bucket of its source, drawing `record.count` elements from element `first`, and
+/// `record` itself.
 fn record_direct(
     instances: &[treelod_runtime::Instance],
     buckets: &mut [Vec<(DrawInfo, u32, u32)>],
@@ -379,7 +451,9 @@ fn record_direct(
         shading: 1.0,
         leaf_scale,
         instance: record.instance,
-        tint: 0,
+        tint: tint(record.technique),
+        fade: pack_fade(record.dither),
+        pad: [0; 3],
     };
     let bucket = record.source.bucket().of_model(record.model.0 as usize);
     buckets[bucket].push((info, corners * first, corners * record.count));

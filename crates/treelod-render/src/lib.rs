@@ -46,6 +46,9 @@
 //! ```
 //!
 //! The device must have [`Renderer::required_features`] (indirect draws with a first instance).
+//! Ask for `wgpu::Features::TEXTURE_COMPRESSION_BC` where the adapter offers it: BC7 atlases
+//! (spec §6.7) are then uploaded as stored; without it they are decoded to RGBA8 on upload
+//! (four times the texture memory, same image).
 //! [`offscreen`] renders to an image with no window, for tools and tests.
 //!
 //! **Selection on the CPU or the GPU.** By default `prepare` selects with

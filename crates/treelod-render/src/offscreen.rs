@@ -42,11 +42,22 @@ pub struct Gpu {
 impl Gpu {
     /// Opens the first adapter the environment allows (`WGPU_BACKEND` may restrict it) with the
     /// features [`Renderer::required_features`] names, and where the adapter offers them
-    /// timestamp queries (for [`render_image_timed`]) and [`Renderer::gpu_selection_features`].
+    /// timestamp queries (for [`render_image_timed`]), `TEXTURE_COMPRESSION_BC` (BC7 atlases are then
+    /// uploaded as stored) and [`Renderer::gpu_selection_features`].
     ///
     /// # Errors
     /// [`GpuError`] if there is no adapter or it lacks the features.
     pub fn new() -> Result<Self, GpuError> {
+        Self::without(wgpu::Features::empty())
+    }
+
+    /// As [`Self::new`], but the device is made without the optional features in `excluded`, as
+    /// on an adapter that lacks them: `TEXTURE_COMPRESSION_BC` makes the renderer decode BC7
+    /// atlases on the CPU.
+    ///
+    /// # Errors
+    /// [`GpuError`] if there is no adapter or it lacks the required features.
+    pub fn without(excluded: wgpu::Features) -> Result<Self, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
@@ -60,8 +71,13 @@ impl Gpu {
         if !missing.is_empty() {
             return Err(GpuError::MissingFeatures { adapter: info.name, missing });
         }
-        // Timestamps for the timed renders, the indirect count for GPU selection, where offered.
-        let optional = adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | Renderer::gpu_selection_features());
+        // Timestamps for the timed renders, the indirect count for GPU selection, where offered;
+        // BC textures for BC7 atlases (else they are decoded to RGBA8 on upload).
+        let optional = adapter.features()
+            & (wgpu::Features::TIMESTAMP_QUERY
+                | wgpu::Features::TEXTURE_COMPRESSION_BC
+                | Renderer::gpu_selection_features())
+            & !excluded;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("treelod offscreen"),
             required_features: Renderer::required_features() | optional,

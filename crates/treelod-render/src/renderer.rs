@@ -12,7 +12,7 @@ use treelod_format::{Container, PointRecord};
 use treelod_runtime::{
     Assignment, BudgetController, ChainState, DrawList, DrawRange, Kind, LodSettings, ModelLod, PerPrimitive,
     PerTechnique, Policy, PolicyState, Primitive, PruneState, ROOTS_CELL, Representations, Scene, Technique,
-    TechniqueSettings, merge_ascending, select_frame, select_techniques,
+    TechniqueSettings, Transition, merge_ascending, select_frame, select_techniques,
 };
 
 use crate::assign::PolicyModels;
@@ -162,6 +162,12 @@ pub struct Renderer {
     pub(crate) assignment: Assignment,
     /// Per shadow cascade, this frame's trees per technique from the light's view.
     pub(crate) cascade_assignments: Vec<Assignment>,
+    /// The trees in a transition ([`Policy::transition`]) under the technique each is leaving
+    /// (the camera's view), and what their selections draw.
+    pub(crate) leaving_assignment: Assignment,
+    leaving: View,
+    /// This frame's transitions of the camera's view, ascending by instance.
+    pub(crate) transitions: Vec<(u32, Transition)>,
     /// The policy's per-model tables and per-instance state ([`Settings::policy`]).
     pub(crate) policy: PolicyModels,
     /// Per instance, the technique it is drawn with this frame (this frame's assignment), for
@@ -320,6 +326,9 @@ impl Renderer {
             visible_fraction: Vec::new(),
             assignment: Assignment::default(),
             cascade_assignments: Vec::new(),
+            leaving_assignment: Assignment::default(),
+            leaving: View::default(),
+            transitions: Vec::new(),
             spt_list: Vec::new(),
             occlusion: Occlusion::new(device, formats.sample_count.max(1), depth),
             occlusion_jobs: Vec::new(),
@@ -613,7 +622,7 @@ impl Renderer {
         };
         let forward = -camera.view.row(2).truncate().normalize_or(Vec3::NEG_Z);
         self.last_camera = Some((view_proj, camera.position, forward, (camera.width, camera.height)));
-        if prune_scale(technique).is_some() && settings.pruning.occlusion {
+        if self.measures_occlusion() {
             self.occlusion.collect(device, camera.position, forward, &mut self.visible_fraction);
         }
         self.cascades = match settings.shadows {
@@ -671,6 +680,14 @@ impl Renderer {
         let assignment = std::mem::take(&mut self.assignment);
         let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true, &assignment, full_mesh);
         self.assignment = assignment;
+        // Trees in a transition: the same view of the techniques they are leaving.
+        let mut leaving = std::mem::take(&mut self.leaving);
+        let leaving_assignment = std::mem::take(&mut self.leaving_assignment);
+        let fading = !self.transitions.is_empty();
+        if fading {
+            self.select_view(&mut leaving, &runtime_camera, &lod_settings, false, &leaving_assignment, full_mesh);
+        }
+        self.leaving_assignment = leaving_assignment;
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
         shadow_views.resize_with(self.cascades.len(), View::default);
         let mut shadow =
@@ -695,6 +712,9 @@ impl Renderer {
         self.residency.begin_frame();
         self.requests.clear();
         self.request(&main, full_mesh);
+        if fading {
+            self.request(&leaving, full_mesh);
+        }
         for view in &shadow_views {
             self.request(view, cascade_full);
         }
@@ -733,16 +753,33 @@ impl Renderer {
             bytes_uploaded: streamed.bytes_uploaded,
             bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
                 + u64::from(self.residency.pool.used()) * UNIT,
+            transitions: u32::try_from(self.transitions.len()).unwrap_or(u32::MAX),
             ..FrameStats::default()
         };
-        self.record_view(&mut main, full_mesh, &mut stats);
+        self.record_view(&mut main, fading.then_some(&leaving), full_mesh, &mut stats);
+        if self.policy_occlusion() {
+            // Every tree the camera draws is measured (pruned ones included, once).
+            self.occlusion_jobs.clear();
+            let mut last = None;
+            let mut drawn: Vec<u32> = main.recorded.iter().map(|d| d.instance).collect();
+            drawn.sort_unstable();
+            for index in drawn {
+                if last != Some(index)
+                    && let Some(job) = self.occlusion_job(index)
+                {
+                    self.occlusion_jobs.push(job);
+                }
+                last = Some(index);
+            }
+        }
         for (k, view) in shadow_views.iter_mut().enumerate() {
             let mut counted = FrameStats::default();
-            self.record_view(view, cascade_full, &mut counted);
+            self.record_view(view, None, cascade_full, &mut counted);
             shadow.add_view(k, &counted);
         }
         stats.shadow = shadow;
         self.main = main;
+        self.leaving = leaving;
         self.shadow_views = shadow_views;
 
         self.write_frame_uniform(queue, camera);
@@ -803,13 +840,9 @@ impl Renderer {
         if main {
             self.occlusion_jobs.clear();
             for &index in &view.draws.occlusion {
-                let instance = self.instances[index as usize];
-                let m = instance.model as usize;
-                let (centre, radius) = self.lods[m].cull_sphere();
-                let (first, count) = self.models[m].samples;
-                let radius = radius * max_axis_scale(instance.transform);
-                let transform = instance.transform;
-                self.occlusion_jobs.push(Job { instance: index, transform, centre, radius, first, count });
+                if let Some(job) = self.occlusion_job(index) {
+                    self.occlusion_jobs.push(job);
+                }
             }
         }
         // The point tree: over every instance where all are its (no remapping), else over its own.
@@ -914,21 +947,45 @@ impl Renderer {
         }
     }
 
-    /// Measures which of the trees drawn pruned this frame are hidden, for the occlusion factor
-    /// of later frames ([`Pruning::occlusion`]): call it after the pass that drew this frame,
-    /// in the same or a later encoder, with that pass's depth attachment (`depth_view`, which
-    /// needs [`wgpu::TextureUsages::TEXTURE_BINDING`]). It records a small compute pass; the
-    /// result is read by a later [`Self::prepare`] without waiting for the GPU. Does nothing when
-    /// pruning or its occlusion factor is off, or while an earlier measurement is in flight.
+    /// Measures which of the trees drawn this frame are hidden, for the occlusion factor of later
+    /// frames: of the trees drawn pruned when pruning is forced ([`Pruning::occlusion`]), of
+    /// every tree drawn when the policy chooses with occlusion ([`Policy::occlusion`]). Call it
+    /// after the pass that drew this frame, in the same or a later encoder, with that pass's
+    /// depth attachment (`depth_view`, which needs [`wgpu::TextureUsages::TEXTURE_BINDING`]). It
+    /// records a small compute pass; the result is read by a later [`Self::prepare`] without
+    /// waiting for the GPU. Does nothing when neither is on, or while an earlier measurement is
+    /// in flight.
     pub fn measure_occlusion(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         depth_view: &wgpu::TextureView,
     ) {
-        let on = prune_scale(self.settings.technique).is_some() && self.settings.pruning.occlusion;
+        let on = self.measures_occlusion();
         let Some((view_proj, eye, forward, size)) = self.last_camera.filter(|_| on) else { return };
         self.occlusion.record(device, encoder, depth_view, size, view_proj, eye, forward, &self.occlusion_jobs);
+    }
+
+    /// Whether this frame's trees are measured for occlusion ([`Self::measure_occlusion`]):
+    /// forced pruning with its occlusion factor, or a policy that chooses with occlusion.
+    fn measures_occlusion(&self) -> bool {
+        let settings = &self.settings;
+        (prune_scale(settings.technique).is_some() && settings.pruning.occlusion) || self.policy_occlusion()
+    }
+
+    /// Whether the policy chooses trees with occlusion this frame ([`Policy::occlusion`]).
+    pub(crate) fn policy_occlusion(&self) -> bool {
+        self.settings.policy.is_some_and(|p| p.occlusion && self.policy.chooses(Some(&p)))
+    }
+
+    /// The occlusion test of instance `index` with its model's hull samples, if it has any.
+    fn occlusion_job(&self, index: u32) -> Option<Job> {
+        let instance = self.instances.get(index as usize)?;
+        let m = instance.model as usize;
+        let (first, count) = self.models.get(m)?.samples;
+        let (centre, radius) = self.lods.get(m)?.cull_sphere();
+        let radius = radius * max_axis_scale(instance.transform);
+        (count > 0).then_some(Job { instance: index, transform: instance.transform, centre, radius, first, count })
     }
 
     /// The visible fraction of each instance's hull samples last measured by

@@ -123,7 +123,12 @@ pub struct Settings {
     /// calibration tables (spec §6.15; `treelod build` writes them whenever it builds a
     /// representation besides the point tree) is drawn with the cheapest representation whose
     /// calibrated error at its projected height is within [`Policy::target`] of the least error
-    /// there (spec §10.2), with hysteresis. Each shadow cascade chooses the same way, by default
+    /// there (spec §10.2), with hysteresis; a tree that changes representation fades from the
+    /// old one to the new over [`Policy::transition`] frames, both drawn on complementary
+    /// dithered pixels meanwhile ([`FrameStats::transitions`](crate::FrameStats)); a tree partly
+    /// hidden behind others, as [`Renderer::measure_occlusion`] measured it after an earlier
+    /// pass, is chosen with the target over the square root of its visible fraction
+    /// ([`Policy::occlusion`]). Each shadow cascade chooses the same way, by default
     /// at the smaller of the tree's heights on screen and in the cascade's selection pixels
     /// ([`Shadows`]'s `casters`), so a far tree in a coarse cascade casts the shadow of a cheaper
     /// representation than it is drawn with. With [`Policy::budget`] the target and [`Self::s_min`] are

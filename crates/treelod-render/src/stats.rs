@@ -30,6 +30,11 @@ pub struct FrameStats {
     /// pruned tree below its pruning height counts under pruning though the point tree draws it).
     /// Sums to [`Self::primitives`].
     pub by_technique: PerTechnique<u64>,
+    /// Trees drawn with two techniques this frame, in a transition from one to the other
+    /// ([`Policy::transition`](crate::Policy)): each counts once in [`Self::instances`], under
+    /// the technique it goes to; the draws of the one it leaves count in [`Self::submitted`] and,
+    /// under that technique, in [`Self::by_technique`].
+    pub transitions: u32,
     /// Bytes of model data on the GPU: vertices, materials and images of every model, and the
     /// streamed prefixes and roots in use.
     pub bytes_resident: u64,

@@ -91,37 +91,60 @@ pub(crate) struct Atlas {
     pub srgb: bool,
     /// A leaf-slot image (spec §6.10.1): each texel two `u16` slots, uploaded as `Rg16Uint`.
     pub slots: bool,
-    /// Level by level, largest first, RGBA8 texels.
+    /// BC7 blocks (spec §6.7 formats 6, 7), uploaded as they are (the device has
+    /// `TEXTURE_COMPRESSION_BC`); else the levels are RGBA8 texels.
+    pub bc7: bool,
+    /// Level by level, largest first: RGBA8 texels, or with [`Self::bc7`] rows of 16-byte blocks.
     pub levels: Vec<Vec<u8>>,
 }
 
-/// The image `index` of `container` with its stored mips (raw RGBA8 formats), or decoded with one
-/// level (PNG, JPEG).
-pub(crate) fn atlas(container: &Container, index: u32) -> Result<Atlas, String> {
+/// The image `index` of `container` with its stored mips (raw RGBA8 and BC7 formats), or decoded
+/// with one level (PNG, JPEG). A BC7 image keeps its blocks when `bc_textures` (the device samples
+/// BC formats), else it is decoded to RGBA8 on the CPU, level by level.
+pub(crate) fn atlas(container: &Container, index: u32, bc_textures: bool) -> Result<Atlas, String> {
     let record = container.images().get(index as usize).ok_or_else(|| format!("image {index} does not exist"))?;
     let start = usize::try_from(record.data_offset).unwrap_or(usize::MAX);
     let end = start.saturating_add(usize::try_from(record.data_length).unwrap_or(usize::MAX));
     let data = container.image_data().get(start..end).ok_or("its bytes lie outside IMAGE_DATA")?;
     let (width, height) = (record.width.max(1), record.height.max(1));
+    let srgb = image_format::is_srgb(record.format);
     match record.format {
-        image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR => {
+        image_format::BC7_SRGB | image_format::BC7_LINEAR if bc_textures => {
+            if !width.is_multiple_of(4) || !height.is_multiple_of(4) {
+                return Err(format!("a BC7 image of {width}x{height}: its sides must be multiples of 4"));
+            }
             let mut levels = Vec::new();
             let mut at = 0usize;
             for level in 0..record.mip_count.max(1) {
-                let (w, h) = ((width >> level).max(1) as usize, (height >> level).max(1) as usize);
-                let texels = data.get(at..at + w * h * 4).ok_or_else(|| format!("mip {level} is cut short"))?;
-                levels.push(texels.to_vec());
-                at += w * h * 4;
+                let len =
+                    record.level_length(level).and_then(|l| usize::try_from(l).ok()).ok_or("a level too large")?;
+                let blocks = at
+                    .checked_add(len)
+                    .and_then(|e| data.get(at..e))
+                    .ok_or_else(|| format!("mip {level} is cut short"))?;
+                levels.push(blocks.to_vec());
+                at += len;
             }
-            Ok(Atlas { width, height, srgb: record.format == image_format::RGBA8_SRGB, slots: false, levels })
+            Ok(Atlas { width, height, srgb, slots: false, bc7: true, levels })
+        }
+        image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR | image_format::BC7_SRGB | image_format::BC7_LINEAR => {
+            let levels = treelod_format::image::decode_levels(record, data)?;
+            Ok(Atlas { width, height, srgb, slots: false, bc7: false, levels })
         }
         image_format::LEAF_SLOTS => {
             let texels = data.get(..width as usize * height as usize * 4).ok_or("the leaf slots are cut short")?;
-            Ok(Atlas { width, height, srgb: false, slots: true, levels: vec![texels.to_vec()] })
+            Ok(Atlas { width, height, srgb: false, slots: true, bc7: false, levels: vec![texels.to_vec()] })
         }
         _ => {
             let image = treelod_format::image::decode(record, data)?;
-            Ok(Atlas { width: image.width, height: image.height, srgb: true, slots: false, levels: vec![image.texels] })
+            Ok(Atlas {
+                width: image.width,
+                height: image.height,
+                srgb: true,
+                slots: false,
+                bc7: false,
+                levels: vec![image.texels],
+            })
         }
     }
 }

@@ -15,6 +15,11 @@ use crate::streaming::UNIT;
 use crate::technique::{Bucket, upload_groups};
 use crate::textures;
 
+/// The most points of a model without pruning data its occlusion hull samples are chosen from
+/// (every n-th point): the outermost of 64 directions over all of a 10⁶-point tree would cost
+/// 64 passes over it when the model is added, and a sparser set reaches the same hull.
+const HULL_CANDIDATES: usize = 16_384;
+
 /// A vertex as the shaders read it: the record, then its ambient occlusion (0 without).
 /// WGSL twin: `VertexGpu` in `shaders/tree/common.wgsl`.
 #[repr(C)]
@@ -113,7 +118,8 @@ impl ModelUpload<'_> {
     /// The atlas `image` of the container decoded with its mips, or `None` (and a warning that
     /// `what` is not drawn) if it does not decode or is larger than the device's textures.
     pub(crate) fn decode_atlas(&mut self, image: u32, what: &str) -> Option<textures::Atlas> {
-        match textures::atlas(self.container, image) {
+        let bc = self.device.features().contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
+        match textures::atlas(self.container, image, bc) {
             Ok(atlas) if atlas.width.max(atlas.height) > self.device.limits().max_texture_dimension_2d => {
                 self.warnings.push(format!(
                     "{what} atlas (image {image}) is {}x{}, larger than the device's textures; {what}s are not drawn",
@@ -352,10 +358,17 @@ impl Renderer {
             ],
         });
         let id = ModelId(u32::try_from(self.models.len()).unwrap_or(u32::MAX));
+        // The occlusion test's hull samples: the pruned leaves' where the model has them, else the
+        // outermost of (at most `HULL_CANDIDATES` of) the point tree's points.
         let samples = match &representations.prune {
-            Some(p) => (self.occlusion.add_samples(p.samples()), u32::try_from(p.samples().len()).unwrap_or(0)),
-            None => (0, 0),
+            Some(p) => p.samples().to_vec(),
+            None => {
+                let points = container.points();
+                let stride = points.len().div_ceil(HULL_CANDIDATES).max(1);
+                treelod_runtime::hull_samples(points.iter().step_by(stride).map(|p| p.position))
+            }
         };
+        let samples = (self.occlusion.add_samples(&samples), u32::try_from(samples.len()).unwrap_or(0));
         self.models.push(Model {
             samples,
             container,
@@ -383,7 +396,8 @@ impl Renderer {
     }
 }
 
-/// Uploads an atlas with its mips; returns its view and the bytes uploaded.
+/// Uploads an atlas with its mips; returns its view and the bytes uploaded. BC7 blocks are
+/// uploaded as they are (a level smaller than a block is one block: its physical size).
 fn upload_atlas(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -396,10 +410,12 @@ fn upload_atlas(
         mip_level_count: u32::try_from(atlas.levels.len()).unwrap_or(1),
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
-        format: match (atlas.slots, atlas.srgb) {
-            (true, _) => wgpu::TextureFormat::Rg16Uint,
-            (false, true) => wgpu::TextureFormat::Rgba8UnormSrgb,
-            (false, false) => wgpu::TextureFormat::Rgba8Unorm,
+        format: match (atlas.slots, atlas.bc7, atlas.srgb) {
+            (true, _, _) => wgpu::TextureFormat::Rg16Uint,
+            (false, true, true) => wgpu::TextureFormat::Bc7RgbaUnormSrgb,
+            (false, true, false) => wgpu::TextureFormat::Bc7RgbaUnorm,
+            (false, false, true) => wgpu::TextureFormat::Rgba8UnormSrgb,
+            (false, false, false) => wgpu::TextureFormat::Rgba8Unorm,
         },
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         view_formats: &[],
@@ -408,6 +424,11 @@ fn upload_atlas(
     for (level, texels) in atlas.levels.iter().enumerate() {
         let level = u32::try_from(level).unwrap_or(0);
         let (w, h) = ((atlas.width >> level).max(1), (atlas.height >> level).max(1));
+        let (extent, bytes_per_row, rows) = if atlas.bc7 {
+            ((w.next_multiple_of(4), h.next_multiple_of(4)), w.div_ceil(4) * 16, h.div_ceil(4))
+        } else {
+            ((w, h), w * 4, h)
+        };
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &texture,
@@ -416,8 +437,8 @@ fn upload_atlas(
                 aspect: wgpu::TextureAspect::All,
             },
             texels,
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(w * 4), rows_per_image: Some(h) },
-            wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(bytes_per_row), rows_per_image: Some(rows) },
+            wgpu::Extent3d { width: extent.0, height: extent.1, depth_or_array_layers: 1 },
         );
         bytes += texels.len() as u64;
     }

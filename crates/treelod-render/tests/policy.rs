@@ -25,6 +25,13 @@ fn calibrated_demo() -> Arc<Container> {
     })
 }
 
+/// What the runtime reads of a calibrated container: its tables, point tree and representations.
+fn read_back(container: &Container) -> (Calibration, ModelLod, Representations) {
+    let calibration = Calibration::from_container(container).expect("the build calibrated it");
+    let (representations, _) = Representations::from_container(container);
+    (calibration, ModelLod::from_container(container), representations)
+}
+
 /// A renderer drawing `container` at each of `positions`.
 fn forest(
     gpu: &treelod_render::offscreen::Gpu,
@@ -44,9 +51,7 @@ fn forest(
 fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
     let gpu = gpu();
     let container = calibrated_demo();
-    let calibration = Calibration::from_container(&container).expect("the build calibrated it");
-    let lod = ModelLod::from_container(&container);
-    let (representations, _) = Representations::from_container(&container);
+    let (calibration, lod, representations) = read_back(&container);
     let policy = Policy::default();
     let choices = Choices::new(&calibration, &policy, &representations);
     // The choices differ somewhere over the calibrated range, or this test shows nothing.
@@ -128,9 +133,7 @@ fn without_tables_the_policy_draws_the_settings_technique() {
 fn a_shadow_cascade_chooses_at_the_coarser_of_the_light_s_and_the_camera_s_view() {
     let gpu = gpu();
     let container = calibrated_demo();
-    let calibration = Calibration::from_container(&container).expect("calibrated");
-    let lod = ModelLod::from_container(&container);
-    let (representations, _) = Representations::from_container(&container);
+    let (calibration, lod, representations) = read_back(&container);
     let choices = Choices::new(&calibration, &Policy::default(), &representations);
     let (width, height) = (256, 256);
     let (eye, ahead) = (vec3(0.0, 0.0, 0.0), vec3(0.0, 0.0, -1.0));
@@ -256,5 +259,144 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
             assert!(counts[79] > unbudgeted, "budget {budget}: {counts:?}");
             assert!(last.iter().all(|&r| r <= 1.1), "budget {budget}: {counts:?}");
         }
+    }
+}
+
+/// A tree that crosses a boundary of the tables is drawn with both techniques for the
+/// transition's frames, on complementary pixels: every pixel of a frame in the transition is the
+/// old technique's or the new one's (each drawn alone), the new one's share of the pixels where
+/// they differ grows by a step per frame, and then the new one alone draws.
+#[test]
+fn a_tree_changing_technique_fades_over_the_transition_s_frames() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let (calibration, lod, representations) = read_back(&container);
+    let frames = 4;
+    let policy = Policy { hysteresis: 0.0, transition: frames, ..Policy::default() };
+    let choices = Choices::new(&calibration, &policy, &representations);
+    let steps = choices.steps();
+    let (min, _) = calibration.heights();
+    let step_height = |i: usize| min * (i as f32 / treelod_runtime::policy::STEPS_PER_OCTAVE).exp2();
+    // The largest boundary whose tree is a good size on a 128-pixel-high screen.
+    let (width, height) = (128, 128);
+    let boundary = (0..steps.len() - 1)
+        .rev()
+        .find(|&i| steps[i] != steps[i + 1] && step_height(i + 1) <= 100.0)
+        .unwrap_or_else(|| panic!("no boundary under 100 px in {steps:?}"));
+    let (old, new) = (steps[boundary], steps[boundary + 1]);
+    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    let runtime_camera = treelod_runtime::Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    let at = |h: f32| {
+        let d = treelod_runtime::policy::distance_for_height(&lod, h, &runtime_camera);
+        vec3(0.0, 0.0, -d) - lod.centre()
+    };
+    let (before, after) = (at(step_height(boundary)), at(step_height(boundary + 1)));
+    let chosen = |p: Vec3| choices.choose(projected_height(&lod, Mat4::from_translation(p), &runtime_camera), None);
+    assert_eq!((chosen(before), chosen(after)), (old, new), "the tree's choices either side");
+
+    // Each technique alone at the new place.
+    let alone = |technique: Technique| {
+        let mut renderer = forest(&gpu, &container, Settings::forced(technique), &[after]);
+        render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders").0
+    };
+    let (old_image, new_image) = (alone(old), alone(new));
+    let differ: Vec<usize> = (0..old_image.rgba.len() / 4)
+        .filter(|&p| old_image.rgba[4 * p..4 * p + 4] != new_image.rgba[4 * p..4 * p + 4])
+        .collect();
+    assert!(differ.len() > 200, "the two techniques differ on {} pixels only", differ.len());
+
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    let mut renderer = Renderer::new(&gpu.device, treelod_render::offscreen::Gpu::formats(), settings);
+    let model = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("model");
+    renderer.set_instances(&[Instance { model, transform: Mat4::from_translation(before) }]);
+    let (_, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+    assert_eq!((stats.instances[old], stats.transitions), (1, 0), "{stats:?}");
+    renderer.set_instances(&[Instance { model, transform: Mat4::from_translation(after) }]);
+    for frame in 1..=frames {
+        let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+        assert_eq!(stats.instances[new], 1, "frame {frame}: counted under the new technique: {stats:?}");
+        let draws = renderer.draws();
+        if frame == frames {
+            assert_eq!(stats.transitions, 0, "the transition is over: {stats:?}");
+            assert!(draws.iter().all(|d| d.technique == new && d.dither == [0.0, 1.0]), "{draws:?}");
+            assert_eq!(image.rgba, new_image.rgba, "the new technique alone");
+            continue;
+        }
+        let shown = frame as f32 / frames as f32;
+        assert_eq!(stats.transitions, 1, "frame {frame}: {stats:?}");
+        assert!(stats.by_technique[old] > 0 && stats.by_technique[new] > 0, "frame {frame}: {stats:?}");
+        for d in draws {
+            let expected = if d.technique == new { [0.0, shown] } else { [shown, 1.0] };
+            assert!(d.technique == new || d.technique == old, "frame {frame}: {d:?}");
+            assert_eq!(d.dither, expected, "frame {frame}: {d:?}");
+        }
+        // Every pixel is one technique's; the new one's share where they differ is `shown`.
+        let pixel = |image: &treelod_render::offscreen::Image, p: usize| image.rgba[4 * p..4 * p + 4].to_vec();
+        let mut taken_new = 0;
+        for &p in &differ {
+            let here = pixel(&image, p);
+            assert!(here == pixel(&old_image, p) || here == pixel(&new_image, p), "frame {frame}, pixel {p}");
+            taken_new += usize::from(here == pixel(&new_image, p));
+        }
+        let share = taken_new as f32 / differ.len() as f32;
+        assert!((share - shown).abs() < 0.1, "frame {frame}: the new technique on {share} of the pixels, not {shown}");
+        let same = (0..image.rgba.len() / 4).filter(|p| !differ.contains(p));
+        assert!(same.into_iter().all(|p| pixel(&image, p) == pixel(&old_image, p)), "frame {frame}");
+    }
+}
+
+/// Trees hidden behind a near one are measured (`Renderer::measure_occlusion` after each pass)
+/// and chosen at their visible fraction: each drawn with the choice of its visibility class,
+/// some of them with a cheaper technique than a visible tree of their size gets; without
+/// `Policy::occlusion` nothing is measured.
+#[test]
+fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let (calibration, lod, representations) = read_back(&container);
+    let policy = Policy { hysteresis: 0.0, transition: 0, ..Policy::default() };
+    assert!(policy.occlusion, "on by default");
+    let choices = Choices::new(&calibration, &policy, &representations);
+    let centre = lod.centre();
+    // One tree 12 m in front of the camera, a row straight behind it.
+    let eye = vec3(0.0, centre.y, 12.0);
+    let distances = [0.0, 20.0, 30.0, 45.0, 65.0, 95.0, 140.0];
+    let positions: Vec<Vec3> = distances.iter().map(|&d| vec3(-centre.x, 0.0, -d - centre.z)).collect();
+    let (width, height) = (256, 256);
+    let camera = Camera::look_at(eye, eye - Vec3::Z, 0.9, width, height);
+    let runtime_camera = treelod_runtime::Camera::look_at(eye, eye - Vec3::Z, 0.9, width, height);
+
+    let drawn_with = |renderer: &Renderer, i: u32| {
+        let techniques: Vec<Technique> =
+            renderer.draws().iter().filter(|d| d.instance == i).map(|d| d.technique).collect();
+        assert!(techniques.windows(2).all(|w| w[0] == w[1]), "tree {i}: {techniques:?}");
+        techniques.first().copied()
+    };
+    for occlusion in [true, false] {
+        let settings = Settings { policy: Some(Policy { occlusion, ..policy }), ..Settings::default() };
+        let mut renderer = forest(&gpu, &container, settings, &positions);
+        // The first frame measures; a later one reads the measurement (mapped without waiting).
+        for _ in 0..4 {
+            render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+        }
+        let fractions = renderer.visible_fractions().to_vec();
+        if !occlusion {
+            assert!(fractions.iter().all(|&f| f == 1.0), "nothing measured: {fractions:?}");
+            continue;
+        }
+        assert!(fractions[0] > 0.9, "the front tree is visible: {fractions:?}");
+        assert!(fractions[1..].iter().all(|&f| f < 0.7), "the row behind it is hidden: {fractions:?}");
+        let mut cheaper = 0;
+        for (i, &p) in positions.iter().enumerate() {
+            let h = projected_height(&lod, Mat4::from_translation(p), &runtime_camera);
+            // The class the tree moved to from fully visible (a quarter class of hysteresis).
+            let class = treelod_runtime::policy::visibility_class_after(0, fractions[i]);
+            let seen = choices.choose_seen(h, (-(class as f32)).exp2(), None);
+            let i = i as u32;
+            assert_eq!(drawn_with(&renderer, i), Some(seen), "tree {i}, {h} px, {} visible", fractions[i as usize]);
+            let primitives = |t: Technique| calibration.at(t, h).map_or(0.0, |(_, p)| p);
+            cheaper += usize::from(primitives(seen) < primitives(choices.choose(h, None)));
+        }
+        assert!(cheaper > 0, "some hidden tree is drawn cheaper than a visible one of its size");
     }
 }

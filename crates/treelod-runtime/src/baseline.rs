@@ -13,7 +13,7 @@
 //! rule's, so that near trees converge to the full mesh as the geometric rule makes them. This
 //! holds whether the policy chose the chain for the tree or the chain was forced.
 //!
-//! Without those tables (files before 1.6, or built without calibration) [`LodChain::pick`]
+//! Without those tables (files before 1.7, or built without calibration) [`LodChain::pick`]
 //! returns the coarsest level whose geometric error projects below `s_min` pixels at the block
 //! centre's distance (the `τ_p` of spec §10.1, the threshold that chooses treelod's own points),
 //! or the full mesh when even the finest level's error is larger. meshoptimizer's error says

@@ -174,14 +174,35 @@ impl PerTechnique<Vec<u32>> {
         models: &[Representations],
         mut choose: impl FnMut(usize, &Instance) -> Technique,
     ) {
+        self.assign_listed(
+            instances,
+            models,
+            instances
+                .iter()
+                .enumerate()
+                .map(|(i, instance)| (u32::try_from(i).unwrap_or(u32::MAX), choose(i, instance))),
+        );
+    }
+
+    /// Refills the assignment with only the `listed` instances, each `(index, technique)`: to
+    /// that technique if its model holds it, else to [`Technique::FALLBACK`]; unknown instances
+    /// and models go nowhere. Ascending indices give ascending lists (the renderer lists the
+    /// techniques trees in a transition are leaving this way).
+    pub fn assign_listed(
+        &mut self,
+        instances: &[Instance],
+        models: &[Representations],
+        listed: impl IntoIterator<Item = (u32, Technique)>,
+    ) {
         for list in &mut self.0 {
             list.clear();
         }
-        for (i, instance) in instances.iter().enumerate() {
-            let Some(model) = models.get(instance.model as usize) else { continue };
-            let chosen = choose(i, instance);
+        for (i, chosen) in listed {
+            let Some(model) = instances.get(i as usize).and_then(|instance| models.get(instance.model as usize)) else {
+                continue;
+            };
             let technique = if model.holds(chosen) { chosen } else { Technique::FALLBACK };
-            self[technique].push(u32::try_from(i).unwrap_or(u32::MAX));
+            self[technique].push(i);
         }
     }
 

@@ -49,10 +49,10 @@ pub use impostor::{
     plane_drawn, plane_parents,
 };
 pub use policy::{
-    Calibration, ChainChoices, ChainPick, Choices, Policy, PolicyState, choose_instances, choose_instances_coarsest,
-    projected_height,
+    Calibration, ChainChoices, ChainPick, Choices, Policy, PolicyState, Transition, VISIBILITY_CLASSES,
+    choose_instances, choose_instances_coarsest, projected_height, visibility_class, visibility_class_after,
 };
-pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning};
+pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning, hull_samples};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
 pub use spt_lod::{PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};
 pub use technique::{Data, PerPrimitive, PerTechnique, Primitive, Technique};

@@ -35,6 +35,24 @@
 //! move that much further before it switches back), so a tree hovering at a boundary does not
 //! flicker.
 //!
+//! **Transitions.** A tree that changes technique is not switched at once: for
+//! [`Policy::transition`] frames it is drawn with both, on complementary pixels of a screen-door
+//! dither whose share moves from the old technique to the new one a step per frame
+//! ([`PolicyState::transition`]), so the change reads as a short cross-fade rather than a pop
+//! (as the point tree's and the ellipsoids' levels blend, spec §10.2). A tree that switches back
+//! mid-way reverses from where it is; one that switches to a third technique starts a new
+//! transition from the one it was going to. Frames, not seconds: the renderer has no clock, and
+//! the same count gives the same images whatever the frame rate (a host at other than 60 frames
+//! per second scales it).
+//!
+//! **Occlusion.** A tree partly hidden behind others shows only part of its error: with
+//! [`Policy::occlusion`] and a measured visible fraction `v` (the share of its hull samples the
+//! depth of an earlier frame shows, Neubert et al. 2011 §5), the errors above the floor are
+//! scaled by `√v` — the squared error of the pixels it covers falls with their number — so it
+//! is chosen with the target raised to `target / √v`. `v` is rounded to one of
+//! [`VISIBILITY_CLASSES`] classes (1, ½, ¼, ⅛; geometric midpoints between), each with its own
+//! table of choices, so a frame still pays a lookup per tree.
+//!
 //! **Cost per frame.** The rule is evaluated once per model and policy into a table of choices
 //! every [`STEPS_PER_OCTAVE`]-th of an octave ([`Choices`]); per tree the frame pays a distance, a
 //! `log2` and a lookup ([`Choices::choose`]).
@@ -73,9 +91,26 @@ pub struct Policy {
     /// [`BudgetController`]: crate::BudgetController
     /// [`BudgetController::for_policy`]: crate::BudgetController::for_policy
     pub budget: Option<u64>,
+    /// Frames over which a tree that changes technique fades from the old one to the new one
+    /// (module docs), both drawn on complementary dithered pixels meanwhile; 0 or 1: switch at
+    /// once. Default [`Policy::DEFAULT_TRANSITION`]; at most [`Policy::MAX_TRANSITION`].
+    pub transition: u32,
+    /// Trees partly hidden behind others are chosen with the target raised to `target / √v`,
+    /// `v` their measured visible fraction (module docs; the renderer measures it where the host
+    /// calls `Renderer::measure_occlusion` after its pass, else every tree counts as visible).
+    /// Default `true`.
+    pub occlusion: bool,
 }
 
 impl Policy {
+    /// The default [`Policy::transition`]: 15 frames, a quarter of a second at 60 frames per
+    /// second — long enough that the change is not seen as a pop, short enough that few trees are
+    /// drawn twice at once (the extra primitives of a fly-through are reported by `bench`).
+    pub const DEFAULT_TRANSITION: u32 = 15;
+
+    /// The largest [`Policy::transition`] (ten seconds at 60 frames per second).
+    pub const MAX_TRANSITION: u32 = 600;
+
     /// The default [`Policy::target`]: one hundredth of coverage RMSE over the floor. At
     /// a few pixels every representation's error is about 0.06 (the full mesh's aliasing
     /// included), so 0.01 separates what keeps a small tree's silhouette and density from what
@@ -94,11 +129,23 @@ impl Policy {
     pub fn hysteresis(&self) -> f32 {
         sanitise(self.hysteresis)
     }
+
+    /// The transition in frames, at most [`Self::MAX_TRANSITION`].
+    #[must_use]
+    pub fn transition(&self) -> u32 {
+        self.transition.min(Self::MAX_TRANSITION)
+    }
 }
 
 impl Default for Policy {
     fn default() -> Self {
-        Self { target: Self::DEFAULT_TARGET, hysteresis: 0.25, budget: None }
+        Self {
+            target: Self::DEFAULT_TARGET,
+            hysteresis: 0.25,
+            budget: None,
+            transition: Self::DEFAULT_TRANSITION,
+            occlusion: true,
+        }
     }
 }
 
@@ -426,6 +473,42 @@ pub struct Choices {
     steps: Vec<Technique>,
     /// Steps either side within which a tree keeps last frame's technique.
     hysteresis_steps: usize,
+    /// With [`Policy::occlusion`]: per visibility class after the first (visible fraction about
+    /// ½, ¼, ⅛), its choice above the range and its steps, made with the target raised to
+    /// `target / √v`; empty without.
+    hidden: Vec<(Technique, Vec<Technique>)>,
+}
+
+/// Classes of the visible fraction `v` the policy chooses by ([`Policy::occlusion`]): about 1,
+/// ½, ¼ and ⅛, split at their geometric midpoints.
+pub const VISIBILITY_CLASSES: usize = 4;
+
+/// The visibility class of a visible fraction (0 for fully visible; not finite: 0).
+#[must_use]
+pub fn visibility_class(visible: f32) -> usize {
+    let v = if visible.is_finite() { visible } else { 1.0 };
+    // Class k stands for v = 2^-k; its lower bound is 2^-(k + 1/2).
+    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+    let class = (0..VISIBILITY_CLASSES - 1).find(|&k| v >= (-(k as f32) - 0.5).exp2());
+    class.unwrap_or(VISIBILITY_CLASSES - 1)
+}
+
+/// The visibility class of a tree of class `previous` last frame whose visible fraction is now
+/// `visible`: it changes only once `visible` lies a quarter of a class (an eighth of an octave
+/// of `v`) past the bound it crosses, so a measurement that wavers at a bound (the samples of a
+/// tree moving behind leaves) does not switch the tree back and forth.
+#[must_use]
+pub fn visibility_class_after(previous: usize, visible: f32) -> usize {
+    let now = visibility_class(visible);
+    let v = if visible.is_finite() { visible } else { 1.0 };
+    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+    let k = previous as f32;
+    let far_enough = match now.cmp(&previous) {
+        std::cmp::Ordering::Greater => v < (-k - 0.75).exp2(),
+        std::cmp::Ordering::Less => v >= (-k + 0.75).exp2(),
+        std::cmp::Ordering::Equal => true,
+    };
+    if far_enough { now } else { previous }
 }
 
 impl Choices {
@@ -433,23 +516,40 @@ impl Choices {
     /// `representations` can draw ([`Representations::holds`]).
     #[must_use]
     pub fn new(calibration: &Calibration, policy: &Policy, representations: &Representations) -> Self {
+        Self::among(calibration, policy, |t| representations.holds(t))
+    }
+
+    /// [`Self::new`] among the techniques `usable` accepts.
+    #[must_use]
+    pub fn among(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Self {
         let (min, max) = calibration.heights();
         let (log2_min, log2_max) = (min.log2(), max.log2());
         let octaves = if log2_max.is_finite() && log2_min.is_finite() { (log2_max - log2_min).max(0.0) } else { 0.0 };
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
-        let target = policy.target();
         #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-        let steps: Vec<Technique> = (0..count)
-            .map(|i| {
-                let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
-                calibration.choose(height, target, |t| representations.holds(t))
-            })
-            .collect();
+        let table = |target: f32| -> (Technique, Vec<Technique>) {
+            let steps: Vec<Technique> = (0..count)
+                .map(|i| {
+                    let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
+                    calibration.choose(height, target, &usable)
+                })
+                .collect();
+            let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
+            (above, steps)
+        };
+        let target = policy.target();
+        let (above, steps) = table(target);
+        // Class k stands for a visible fraction 2^-k: the target over its square root.
+        #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+        let hidden = if policy.occlusion {
+            (1..VISIBILITY_CLASSES).map(|k| table(target * (k as f32 * 0.5).exp2())).collect()
+        } else {
+            Vec::new()
+        };
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let hysteresis_steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
-        let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
-        Self { above, log2_min: if log2_min.is_finite() { log2_min } else { 0.0 }, steps, hysteresis_steps }
+        Self { above, log2_min: if log2_min.is_finite() { log2_min } else { 0.0 }, steps, hysteresis_steps, hidden }
     }
 
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`
@@ -459,12 +559,25 @@ impl Choices {
     /// ([`Technique::FALLBACK`]).
     #[must_use]
     pub fn choose(&self, height: f32, previous: Option<Technique>) -> Technique {
+        self.choose_seen(height, 1.0, previous)
+    }
+
+    /// [`Self::choose`] for a tree of which the visible fraction `visible` is seen: by the table
+    /// of its visibility class ([`visibility_class`]) where the choices were made with
+    /// [`Policy::occlusion`], else as fully visible.
+    #[must_use]
+    pub fn choose_seen(&self, height: f32, visible: f32, previous: Option<Technique>) -> Technique {
+        let hidden = visibility_class(visible).checked_sub(1).and_then(|k| self.hidden.get(k));
+        let (above_range, steps) = match hidden {
+            Some((above, steps)) => (*above, steps.as_slice()),
+            None => (self.above, self.steps.as_slice()),
+        };
         let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
-        let last = self.steps.len() - 1;
+        let last = steps.len() - 1;
         // Above the range: one step per STEPS_PER_OCTAVE past its end reads as the fallback.
         let above = |i: f32| i > last as f32 + 0.5;
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the table")]
-        let at = |i: f32| if above(i) { self.above } else { self.steps[i.round().max(0.0) as usize] };
+        let at = |i: f32| if above(i) { above_range } else { steps[i.round().max(0.0) as usize] };
         let now = at(x);
         if let Some(previous) = previous
             && previous != now
@@ -517,18 +630,105 @@ pub(crate) fn projected_height_at(lod: &ModelLod, transform: Mat4, eye: Vec3, wo
     height / (distance * world_per_pixel)
 }
 
-/// Per instance, the technique the policy gave it last frame, for hysteresis: reset when the
-/// instances change.
+/// Per instance, the technique the policy gave it last frame, for hysteresis, and the transition
+/// it is in, if any: reset when the instances change.
 #[derive(Clone, Debug, Default)]
 pub struct PolicyState {
     previous: Vec<Option<Technique>>,
+    /// Per instance: the technique it is leaving and the frames of the transition gone.
+    transitions: Vec<Option<(Technique, u16)>>,
+    /// Frames of a transition ([`Policy::transition`]); 0: none (switch at once).
+    frames: u16,
+    /// Per instance: its visible fraction ([`Policy::occlusion`]); empty or short: 1.
+    visible: Vec<f32>,
+    /// Per instance: the visibility class it was chosen by last frame ([`visibility_class_after`]).
+    classes: Vec<u8>,
+}
+
+/// A tree's transition from one technique to another this frame ([`PolicyState::transition`]):
+/// it is drawn with both, the new technique on the pixels whose transition dither `h ∈ [0, 1)`
+/// is below [`Self::shown`], the old one on the rest.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transition {
+    /// The technique the tree is leaving.
+    pub from: Technique,
+    /// The share of the pixels the new technique covers, in `(0, 1)`; it grows by one
+    /// [`Policy::transition`]-th per frame.
+    pub shown: f32,
 }
 
 impl PolicyState {
-    /// Forgets every instance's previous technique (the instance list changed).
+    /// A state whose trees fade over `frames` frames when they change technique (at most
+    /// [`Policy::MAX_TRANSITION`]; 0 or 1: switch at once). The default state switches at once.
+    #[must_use]
+    pub fn with_transition(frames: u32) -> Self {
+        let mut state = Self::default();
+        state.set_transition(frames);
+        state
+    }
+
+    /// Sets the frames of later transitions ([`Self::with_transition`]); transitions under way
+    /// longer than that end now.
+    pub fn set_transition(&mut self, frames: u32) {
+        let frames = u16::try_from(frames.min(Policy::MAX_TRANSITION)).unwrap_or(u16::MAX);
+        self.frames = if frames <= 1 { 0 } else { frames };
+        let limit = self.frames;
+        for t in &mut self.transitions {
+            *t = t.filter(|&(_, k)| k < limit);
+        }
+    }
+
+    /// Forgets every instance's previous technique, transition and visible fraction (the
+    /// instance list changed).
     pub fn reset(&mut self) {
         self.previous.clear();
+        self.transitions.clear();
+        self.visible.clear();
+        self.classes.clear();
     }
+
+    /// Sets the instances' visible fractions the next choices read (per instance, 1 = fully
+    /// visible; instances past the end count as visible), for choices made with
+    /// [`Policy::occlusion`].
+    pub fn set_visible(&mut self, visible: &[f32]) {
+        self.visible.clear();
+        self.visible.extend_from_slice(visible);
+    }
+
+    /// Instance `index`'s transition this frame, if it is changing technique: the technique it
+    /// leaves and the share the new one covers.
+    #[must_use]
+    pub fn transition(&self, index: usize) -> Option<Transition> {
+        let (from, k) = (*self.transitions.get(index)?)?;
+        Some(Transition { from, shown: f32::from(k) / f32::from(self.frames.max(1)) })
+    }
+
+    /// Every instance in a transition this frame, ascending: its index and [`Self::transition`].
+    pub fn transitions(&self) -> impl Iterator<Item = (u32, Transition)> + '_ {
+        (0..self.transitions.len()).filter_map(|i| Some((u32::try_from(i).ok()?, self.transition(i)?)))
+    }
+}
+
+/// The transition after one frame of a tree that was `previous` (`None`: a new tree) and is now
+/// `chosen`, in transition `current` before the frame, with transitions of `frames` frames (0:
+/// none): a change starts one (reversing one under way back to where it was), every frame moves
+/// it a step, and it ends after `frames` steps.
+fn advance(
+    previous: Option<Technique>,
+    chosen: Technique,
+    current: Option<(Technique, u16)>,
+    frames: u16,
+) -> Option<(Technique, u16)> {
+    if frames == 0 {
+        return None;
+    }
+    let started = match (previous, current) {
+        // Back to the technique it was leaving: the other way from where it is.
+        (Some(p), Some((from, k))) if p != chosen && from == chosen => Some((p, frames - k)),
+        (Some(p), _) if p != chosen => Some((p, 0)),
+        _ => current,
+    };
+    started.and_then(|(from, k)| (k + 1 < frames).then_some((from, k + 1)))
 }
 
 /// Instances per parallel task of [`choose_instances`]: a tree's choice costs a few tens of
@@ -540,7 +740,8 @@ pub const CHOOSE_CHUNK: usize = 1024;
 /// the model has them (`choices[model]`, `None` for a model without calibration tables), else
 /// `otherwise`; `state` keeps the choices for the next frame's hysteresis. The result goes into
 /// [`Assignment::assign`](crate::Assignment), which still checks that each model holds its
-/// technique.
+/// technique. `state` also moves each tree's transition on ([`PolicyState::transition`]; none
+/// unless it was made [`PolicyState::with_transition`]).
 ///
 /// Each instance's choice depends only on it and its own previous choice, so more than
 /// [`CHOOSE_CHUNK`] instances are chosen in chunks on rayon's pool, each writing its own slice:
@@ -570,11 +771,21 @@ pub fn choose_instances_coarsest(
     out: &mut Vec<Technique>,
 ) {
     state.previous.resize(instances.len(), None);
+    state.transitions.resize(instances.len(), None);
+    state.visible.resize(instances.len(), 1.0);
+    state.classes.resize(instances.len(), 0);
     out.clear();
     out.resize(instances.len(), otherwise);
+    let frames = state.frames;
     let eyes: Vec<(Vec3, f32)> = cameras.iter().map(|c| (c.position, c.world_per_pixel())).collect();
-    let choose = |instances: &[Instance], previous: &mut [Option<Technique>], out: &mut [Technique]| {
-        for ((instance, previous), out) in instances.iter().zip(previous).zip(out) {
+    let choose = |instances: &[Instance],
+                  previous: &mut [Option<Technique>],
+                  transitions: &mut [Option<(Technique, u16)>],
+                  visible: &[f32],
+                  classes: &mut [u8],
+                  out: &mut [Technique]| {
+        let per_instance = instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(out);
+        for (((((instance, previous), transition), &visible), class), out) in per_instance {
             let m = instance.model as usize;
             *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                 (Some(lod), Some(choices)) => {
@@ -585,26 +796,36 @@ pub fn choose_instances_coarsest(
                         })
                         .reduce(f32::min)
                         .unwrap_or(0.0);
-                    let chosen = choices.choose(height, *previous);
+                    let seen = visibility_class_after(usize::from(*class), visible);
+                    *class = u8::try_from(seen).unwrap_or(0);
+                    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+                    let chosen = choices.choose_seen(height, (-(seen as f32)).exp2(), *previous);
+                    *transition = advance(*previous, chosen, *transition, frames);
                     *previous = Some(chosen);
                     chosen
                 }
                 _ => {
                     *previous = None;
+                    *transition = None;
                     otherwise
                 }
             };
         }
     };
     if instances.len() <= CHOOSE_CHUNK {
-        choose(instances, &mut state.previous, out);
+        choose(instances, &mut state.previous, &mut state.transitions, &state.visible, &mut state.classes, out);
         return;
     }
     instances
         .par_chunks(CHOOSE_CHUNK)
         .zip(state.previous.par_chunks_mut(CHOOSE_CHUNK))
+        .zip(state.transitions.par_chunks_mut(CHOOSE_CHUNK))
+        .zip(state.visible.par_chunks(CHOOSE_CHUNK))
+        .zip(state.classes.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
-        .for_each(|((instances, previous), out)| choose(instances, previous, out));
+        .for_each(|(((((instances, previous), transitions), visible), classes), out)| {
+            choose(instances, previous, transitions, visible, classes, out);
+        });
 }
 
 /// The eye distance at which a model's block is `height` pixels high for `camera` (unit instance
@@ -725,7 +946,7 @@ mod tests {
     fn chain_levels_hold_across_a_boundary_within_the_hysteresis() {
         let c = chain_table();
         let with = |hysteresis: f32| {
-            ChainChoices::new(&c, &Policy { target: 0.01, hysteresis, budget: None }, all).expect("levels")
+            ChainChoices::new(&c, &Policy { target: 0.01, hysteresis, ..Policy::default() }, all).expect("levels")
         };
         let (held, plain) = (with(0.25), with(0.0));
         assert_eq!(held.steps().len(), 3 * STEPS_PER_OCTAVE as usize + 1);
@@ -744,6 +965,30 @@ mod tests {
         assert_eq!(held.choose(1.0, None, || None), Some(2));
         assert_eq!(held.choose(1000.0, None, || Some(3)), Some(0));
         assert_eq!(held.choose(1000.0, None, || None), None);
+    }
+
+    /// The rule's choices of [`table`] at the default target every step from 8 pixels: five
+    /// octaves, as [`Choices`] makes them.
+    fn steps_of(c: &Calibration) -> Vec<Technique> {
+        (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect()
+    }
+
+    /// A model 9 m high and 4 m wide with no cells: all a choice reads of it is its bounds.
+    fn tall_lod() -> ModelLod {
+        block_lod(2.0, 9.0)
+    }
+
+    /// A model `height` metres high and `2 · half` wide, standing on the origin, with no cells.
+    fn block_lod(half: f32, height: f32) -> ModelLod {
+        let block = treelod_format::BlockRecord {
+            bounds_min: [-half, 0.0, -half],
+            bounds_max: [half, height, half],
+            grid: [1, 1, 1],
+            tree_count: 1,
+            flags: 0,
+            _pad: 0,
+        };
+        ModelLod::from_records(&block, &[], &[], &[]).expect("model")
     }
 
     #[test]
@@ -783,7 +1028,7 @@ mod tests {
         let c = table();
         assert_eq!(c.choose(8.0, f32::NAN, all), c.choose(8.0, 0.0, all));
         assert_eq!(c.choose(8.0, -1.0, all), c.choose(8.0, 0.0, all));
-        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0, budget: None };
+        let policy = Policy { target: f32::INFINITY, hysteresis: -2.0, budget: None, transition: 0, occlusion: false };
         assert_eq!((policy.target(), policy.hysteresis()), (0.0, 0.0));
     }
 
@@ -796,7 +1041,7 @@ mod tests {
     #[test]
     fn choice_tables_follow_the_rule_and_fall_back_above_the_range() {
         let c = table();
-        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None };
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
         let choices = Choices::new(&c, &policy, &representations_holding_everything());
         // A plain model draws only the point tree: every step is it.
         assert!(choices.steps().iter().all(|&t| t == Technique::Spt));
@@ -808,7 +1053,7 @@ mod tests {
     fn above_the_range_the_top_choice_holds_only_if_it_converges_to_the_full_mesh() {
         let c = table();
         let top = |steps: Vec<Technique>| {
-            let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None };
+            let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
             let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
             choices.above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
             choices.steps = steps;
@@ -821,7 +1066,7 @@ mod tests {
         assert!(converges(Technique::PruneOpt) && !converges(Technique::Impostors));
         // Without the point tree's cut available, the rule's table keeps the chain at 256 px
         // (the table's chain equals the full mesh there) and it holds above.
-        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None };
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
         let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
         choices.steps = (0..=40)
             .map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, |t| t != Technique::Spt))
@@ -833,9 +1078,8 @@ mod tests {
     #[test]
     fn hysteresis_keeps_last_frames_technique_near_a_boundary() {
         let c = table();
-        let steps: Vec<Technique> =
-            (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
-        let choices = Choices { above: Technique::Spt, log2_min: 3.0, steps, hysteresis_steps: 2 };
+        let steps = steps_of(&c);
+        let choices = Choices { above: Technique::Spt, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() };
         // Find the boundary between crossed (small) and the point tree (larger).
         let boundary = choices.steps().iter().position(|&t| t != Technique::Crossed).expect("a boundary");
         assert!(boundary > 0);
@@ -848,6 +1092,144 @@ mod tests {
         assert_eq!(choices.choose(height_at(boundary as f32 + 3.0), Some(Technique::Crossed)), after);
         // A previous technique that is nowhere near is not kept.
         assert_eq!(choices.choose(height_at(0.0), Some(Technique::LodChain)), Technique::Crossed);
+    }
+
+    #[test]
+    fn a_partly_hidden_tree_is_chosen_with_the_target_over_the_root_of_its_visible_fraction() {
+        assert_eq!(
+            [1.0, 0.8, 0.7, 0.5, 0.36, 0.35, 0.2, 0.17, 0.0, f32::NAN].map(visibility_class),
+            [0, 0, 1, 1, 1, 2, 2, 3, 3, 0]
+        );
+        // A class changes a quarter of a class past its bound: 2^-0.75 = 0.59 from class 0,
+        // 2^-1.75 = 0.30 from class 1 down, 2^-0.25 = 0.84 from class 1 up.
+        assert_eq!([0.65, 0.55].map(|v| visibility_class_after(0, v)), [0, 1]);
+        assert_eq!([0.32, 0.28, 0.8, 0.85, 1.0].map(|v| visibility_class_after(1, v)), [1, 2, 1, 0, 0]);
+        assert_eq!(visibility_class_after(3, 0.2), 3, "0.2 is class 2, not a quarter past the bound 0.177");
+        assert_eq!(visibility_class_after(0, 0.0), 3);
+        let c = table();
+        let policy = Policy { target: 0.005, hysteresis: 0.0, budget: None, transition: 0, occlusion: true };
+        let choices = Choices::among(&c, &policy, all);
+        let blind = Choices::among(&c, &Policy { occlusion: false, ..policy }, all);
+        let mut cheaper = 0;
+        for i in 0..choices.steps().len() {
+            let height = (3.0 + i as f32 / STEPS_PER_OCTAVE).exp2();
+            let visible_choice = choices.choose(height, None);
+            for k in 0..VISIBILITY_CLASSES {
+                let visible = (-(k as f32)).exp2();
+                let expected = c.choose(height, 0.005 * (k as f32 * 0.5).exp2(), all);
+                assert_eq!(choices.choose_seen(height, visible, None), expected, "{height} px, {visible} visible");
+                // Without occlusion every tree counts as fully visible.
+                assert_eq!(blind.choose_seen(height, visible, None), visible_choice);
+                let primitives = |t: Technique| c.at(t, height).map_or(0.0, |(_, p)| p);
+                assert!(primitives(expected) <= primitives(visible_choice), "{height} px: never dearer hidden");
+                cheaper += usize::from(primitives(expected) < primitives(visible_choice));
+            }
+        }
+        assert!(cheaper > 0, "a hidden tree gets a cheaper choice somewhere");
+    }
+
+    #[test]
+    fn a_change_of_technique_moves_a_step_per_frame_reverses_and_ends() {
+        use Technique::{Crossed, Impostors, Spt};
+        let run = |frames: u16, path: &[Technique]| -> Vec<Option<(Technique, u16)>> {
+            let (mut previous, mut current) = (None, None);
+            path.iter()
+                .map(|&chosen| {
+                    current = advance(previous, chosen, current, frames);
+                    previous = Some(chosen);
+                    current
+                })
+                .collect()
+        };
+        // A new tree starts without a transition; a change starts one that ends after 4 frames.
+        assert_eq!(
+            run(4, &[Spt, Crossed, Crossed, Crossed, Crossed]),
+            [None, Some((Spt, 1)), Some((Spt, 2)), Some((Spt, 3)), None]
+        );
+        // Back mid-way: the other way from where it was (the crossed quads showed 2 of 4, the
+        // point tree now shows 2 of 4, then 3).
+        assert_eq!(
+            run(4, &[Spt, Crossed, Crossed, Spt, Spt, Spt]),
+            [None, Some((Spt, 1)), Some((Spt, 2)), Some((Crossed, 3)), None, None]
+        );
+        // On to a third technique: a new transition from the one it was going to.
+        assert_eq!(run(4, &[Spt, Crossed, Impostors]), [None, Some((Spt, 1)), Some((Crossed, 1))]);
+        // Without transitions, none.
+        assert!(run(0, &[Spt, Crossed, Spt]).iter().all(Option::is_none));
+        // The shares a state reports, and a shorter setting ends longer transitions.
+        let mut state = PolicyState::with_transition(4);
+        state.transitions = vec![Some((Spt, 1)), None, Some((Crossed, 3))];
+        assert_eq!(state.transition(0), Some(Transition { from: Spt, shown: 0.25 }));
+        assert_eq!(state.transition(1), None);
+        assert_eq!(state.transitions().map(|(i, _)| i).collect::<Vec<_>>(), [0, 2]);
+        state.set_transition(3);
+        assert_eq!(state.transitions, [Some((Spt, 1)), None, None]);
+        assert_eq!(state.transition(0).map(|t| t.shown), Some(1.0 / 3.0));
+        state.set_transition(1);
+        assert_eq!(state.transitions().count(), 0, "one frame: switch at once");
+        assert_eq!(PolicyState::with_transition(10_000).frames, Policy::MAX_TRANSITION as u16);
+    }
+
+    /// Trees chosen frame after frame along a path: those that change technique are in a
+    /// transition for the policy's frames, on one thread as on several.
+    #[test]
+    fn chosen_trees_that_change_technique_are_in_transition_for_its_frames() {
+        let lods = [tall_lod()];
+        let c = table();
+        let steps = steps_of(&c);
+        let choices = [Some(Choices {
+            above: Technique::LodChain,
+            log2_min: 3.0,
+            steps,
+            hysteresis_steps: 0,
+            hidden: Vec::new(),
+        })];
+        // Two thousand trees in a row, the camera walking along it.
+        let instances: Vec<Instance> = (0..2 * CHOOSE_CHUNK)
+            .map(|i| Instance { model: 0, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0 * i as f32)) })
+            .collect();
+        let cameras: Vec<Camera> = (0..30)
+            .map(|f| {
+                let eye = Vec3::new(0.0, 4.0, 40.0 - 3.0 * f as f32);
+                Camera::look_at(eye, eye - Vec3::Z, 1.0, 640, 480)
+            })
+            .collect();
+        let frames = 5u32;
+        let mut results = Vec::new();
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
+            let mut state = PolicyState::with_transition(frames);
+            let mut out = Vec::new();
+            let mut last: Vec<Technique> = Vec::new();
+            // Per tree, the frame it last changed technique, and what it left.
+            let mut changed: Vec<Option<(usize, Technique)>> = vec![None; instances.len()];
+            let mut seen = 0;
+            let mut per_frame = Vec::new();
+            for (f, camera) in cameras.iter().enumerate() {
+                pool.install(|| {
+                    choose_instances(&instances, &lods, &choices, camera, Technique::Spt, &mut state, &mut out)
+                });
+                for (i, &t) in out.iter().enumerate() {
+                    if let Some(&before) = last.get(i)
+                        && before != t
+                    {
+                        changed[i] = Some((f, before));
+                    }
+                    let expected = changed[i]
+                        .filter(|&(at, _)| f - at < frames as usize - 1)
+                        .map(|(at, from)| Transition { from, shown: (f - at + 1) as f32 / frames as f32 });
+                    // A tree switching again mid-way reverses or restarts: checked in the unit
+                    // test above; here only clean changes are compared.
+                    assert_eq!(state.transition(i), expected, "{threads} threads, frame {f}, tree {i}");
+                    seen += usize::from(expected.is_some());
+                }
+                per_frame.push(state.transitions().collect::<Vec<_>>());
+                last.clone_from(&out);
+            }
+            assert!(seen > 100, "trees in transition along the path: {seen}");
+            results.push(per_frame);
+        }
+        assert_eq!(results[0], results[1], "the same on 1 and 3 threads");
     }
 
     /// The choices of a frame, made one instance at a time with [`projected_height`] and
@@ -888,22 +1270,14 @@ mod tests {
     fn choosing_in_parallel_chunks_equals_the_reference_frame_after_frame() {
         use glam::Quat;
         use treelod_build::SplitMix64;
-        use treelod_format::BlockRecord;
-        let block = BlockRecord {
-            bounds_min: [-2.0, 0.0, -2.0],
-            bounds_max: [2.0, 9.0, 2.0],
-            grid: [1, 1, 1],
-            tree_count: 1,
-            flags: 0,
-            _pad: 0,
-        };
-        let lod = ModelLod::from_records(&block, &[], &[], &[]).expect("model");
-        let lods = [lod.clone(), lod];
+        let lods = [tall_lod(), tall_lod()];
         let c = table();
-        let steps: Vec<Technique> =
-            (0..=40).map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, all)).collect();
+        let steps = steps_of(&c);
         assert!(steps.iter().any(|&t| t != steps[0]), "the table switches technique: {steps:?}");
-        let choices = [Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 2 }), None];
+        let choices = [
+            Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() }),
+            None,
+        ];
         let mut rng = SplitMix64(24);
         let instances: Vec<Instance> = (0..3 * CHOOSE_CHUNK + 77)
             .map(|_| {
@@ -950,16 +1324,7 @@ mod tests {
 
     #[test]
     fn projected_height_matches_the_camera_and_distance_for_height_inverts_it() {
-        use treelod_format::BlockRecord;
-        let block = BlockRecord {
-            bounds_min: [-1.0, 0.0, -1.0],
-            bounds_max: [1.0, 10.0, 1.0],
-            grid: [1, 1, 1],
-            tree_count: 1,
-            flags: 0,
-            _pad: 0,
-        };
-        let lod = ModelLod::from_records(&block, &[], &[], &[]).expect("model");
+        let lod = block_lod(1.0, 10.0);
         let camera = Camera::look_at(Vec3::new(0.0, 5.0, 100.0), Vec3::new(0.0, 5.0, 0.0), 1.0, 640, 480);
         let d = distance_for_height(&lod, 64.0, &camera);
         let eye = Vec3::new(0.0, 5.0, d);

@@ -260,9 +260,12 @@ impl PruneLod {
     }
 }
 
-/// The centres of the outermost leaves in [`OCCLUSION_SAMPLES`] directions (see
-/// [`PruneLod::samples`]).
-fn hull_samples(centres: impl Iterator<Item = [f32; 3]> + Clone) -> Vec<Vec3> {
+/// The outermost of `centres` (model space) in [`OCCLUSION_SAMPLES`] directions of a Fibonacci
+/// sphere about their centroid, without repeats: the hull samples of the occlusion test, of the
+/// leaves' centres for pruned trees ([`PruneLod::samples`]), of the point tree's points for the
+/// policy's trees (`Renderer::measure_occlusion`).
+#[must_use]
+pub fn hull_samples(centres: impl Iterator<Item = [f32; 3]> + Clone) -> Vec<Vec3> {
     let (sum, n) = centres.clone().fold((Vec3::ZERO, 0u32), |(s, n), c| (s + Vec3::from_array(c), n + 1));
     if n == 0 {
         return Vec::new();

@@ -53,6 +53,20 @@ pub struct Args {
     /// allowance over the floor on every tree); applies to `policy` only.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub budget: Option<u64>,
+    /// Frames over which a tree that changes technique fades from the old one to the new one
+    /// on complementary dithered pixels (drawn with both meanwhile: CSV column `transitions`);
+    /// 0 or 1: switch at once. Default: the renderer's 15 frames scaled by --frames / 1440, the
+    /// same share of the path as a quarter of a second of the paper's one-minute 1440-frame
+    /// flight (4 frames at the default 360, 15 at 1440; below 144 trees switch at once), since fewer frames sample the same
+    /// path more coarsely. Applies to `policy` only.
+    #[arg(long, value_name = "FRAMES",
+          value_parser = clap::value_parser!(u32).range(0..=i64::from(Policy::MAX_TRANSITION)))]
+    pub transition: Option<u32>,
+    /// The policy chooses every tree as fully visible: no occlusion measurement (by default each
+    /// drawn tree's visible fraction is measured from the frame's depth and a partly hidden tree
+    /// is chosen with the target over the square root of it). Applies to `policy` only.
+    #[arg(long)]
+    pub no_occlusion: bool,
     /// Select and stream only: no image is drawn, so there is no GPU time (the figure for large
     /// forests on a software rasteriser).
     #[arg(long, conflicts_with = "quality")]
@@ -117,7 +131,13 @@ impl Args {
             seed: self.seed,
             fov_degrees: self.fov,
             techniques: self.technique.clone(),
-            policy: Policy { target: self.policy_target, budget: self.budget, ..Policy::default() },
+            policy: Policy {
+                target: self.policy_target,
+                budget: self.budget,
+                transition: self.transition.unwrap_or_else(|| path_transition(self.frames)),
+                occlusion: !self.no_occlusion,
+                ..Policy::default()
+            },
             render: !self.no_render,
             gpu_selection: self.gpu_selection,
             shadows: self.shadows,
@@ -171,6 +191,13 @@ fn progress_bar() -> indicatif::ProgressBar {
     bar
 }
 
+/// The default `--transition` of a path flown in `frames` frames: the renderer's
+/// [`Policy::DEFAULT_TRANSITION`] frames scaled to the paper's 1440-frame path, rounded.
+fn path_transition(frames: u32) -> u32 {
+    let scaled = (u64::from(Policy::DEFAULT_TRANSITION) * u64::from(frames) + 720) / 1440;
+    u32::try_from(scaled).unwrap_or(u32::MAX).min(Policy::MAX_TRANSITION)
+}
+
 #[cfg(test)]
 mod tests {
     use clap::Parser as _;
@@ -188,12 +215,17 @@ mod tests {
         let names: Vec<&str> = TechniqueName::ALL.iter().map(|t| t.name()).collect();
         let args = BenchCli::try_parse_from(["bench", "--technique", &names.join(",")]).expect("parses").args;
         assert_eq!(args.technique, TechniqueName::ALL);
-        assert_eq!(args.options(), Options { techniques: TechniqueName::ALL.to_vec(), ..Options::default() });
+        // The renderer's transition scaled to the path: 4 frames of the default 360.
+        let policy = Policy { transition: 4, ..Policy::default() };
+        assert_eq!(args.options(), Options { techniques: TechniqueName::ALL.to_vec(), policy, ..Options::default() });
+        assert_eq!([143, 144, 360, 1440, 100_000].map(path_transition), [1, 2, 4, 15, 600]);
+        let args = BenchCli::try_parse_from(["bench", "--transition", "0"]).expect("parses").args;
+        assert_eq!(args.options().policy.transition, 0);
         let args =
             BenchCli::try_parse_from(["bench", "--technique", "policy", "--policy-target", "0.02", "--budget", "9000"])
                 .expect("parses")
                 .args;
-        let policy = Policy { target: 0.02, budget: Some(9000), ..Policy::default() };
+        let policy = Policy { target: 0.02, budget: Some(9000), transition: 4, ..Policy::default() };
         assert_eq!(args.options().policy, policy);
         assert!(BenchCli::try_parse_from(["bench", "--budget", "0"]).is_err(), "a budget of 0 primitives");
         let args = BenchCli::try_parse_from(["bench", "--quality", "--reference-1x", "--no-render"]);

@@ -85,6 +85,11 @@ pub struct BuildOptions {
     /// square root), in (0, 64].
     #[arg(long, value_name = "N", default_value_t = 2.0, value_parser = parse_slots_per_leaf, requires = "impostors")]
     pub impostor_slots_per_leaf: f32,
+    /// How the atlases of impostor planes and billboards are stored (spec §6.7): `bc7` (BC7
+    /// blocks, a quarter of the bytes, decoded by the GPU) or `rgba8` (the texels as baked).
+    /// Recorded as the setting `atlas.format`.
+    #[arg(long, value_enum, value_name = "FORMAT", default_value_t = AtlasFormatArg::Bc7)]
+    pub atlas_format: AtlasFormatArg,
     /// Leaf ellipsoids (Clasen et al. 2011, spec §6.8): per grid cell one ellipsoid per leaf (PCA
     /// of its surface) and nested levels of EM clusters of them, each level's size calibrated
     /// against the leaves' coverage and drawn while its mean ellipsoid is about
@@ -255,6 +260,10 @@ impl BuildOptions {
                 views: self.calibration_views() as usize,
                 ..treelod_build::CalibrationConfig::default()
             }),
+            atlas_format: match self.atlas_format {
+                AtlasFormatArg::Bc7 => treelod_build::AtlasFormat::Bc7,
+                AtlasFormatArg::Rgba8 => treelod_build::AtlasFormat::Rgba8,
+            },
             precision: if self.full_precision {
                 treelod_build::precision::Precision::FULL
             } else {
@@ -351,6 +360,15 @@ fn parse_size(s: &str) -> Result<ByteSize, String> {
         .ok_or_else(|| {
             format!("{s:?} is not a size: a positive number of bytes, optionally with K, M or G (e.g. 512M)")
         })
+}
+
+/// `--atlas-format`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AtlasFormatArg {
+    /// BC7 blocks (spec §6.7 formats 6, 7).
+    Bc7,
+    /// RGBA8 texels (formats 1, 2).
+    Rgba8,
 }
 
 /// `--impostor-texturing`.

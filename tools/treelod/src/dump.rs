@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 use treelod_format::{
-    CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, Section, SectionKind, Setting, Source, Tree, material_class,
+    CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, ImageRecord, Section, SectionKind, Setting, Source, Tree,
+    material_class,
 };
 
 use crate::report::{self, Failed};
@@ -79,6 +80,9 @@ struct Dump<'a> {
     /// container has either.
     #[serde(skip_serializing_if = "Option::is_none")]
     calibration: Option<CalibrationInfo>,
+    /// Texture bytes per representation (spec §6.7), when the container has images.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    textures: Vec<TextureUse>,
     /// Size histograms of the hierarchical kinds.
     histograms: Histograms,
 }
@@ -501,7 +505,7 @@ struct CalibrationInfo {
     /// One entry per representation, in code order.
     techniques: Vec<CalibrationRow>,
     /// One entry per LoD chain level (`CHAIN_CALIBRATION`), finest first; absent when the
-    /// container has none (files before 1.6).
+    /// container has none (files before 1.7).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     chain_levels: Vec<ChainLevelRow>,
 }
@@ -777,6 +781,7 @@ impl<'a> Dump<'a> {
             impostors: ImpostorInfo::new(container),
             baselines: BaselineInfo::new(container),
             calibration: CalibrationInfo::new(container),
+            textures: TextureUse::of(container),
             histograms,
         }
     }
@@ -827,6 +832,7 @@ impl<'a> Dump<'a> {
         if let Some(calibration) = &self.calibration {
             out.push_str(&calibration.to_text());
         }
+        out.push_str(&TextureUse::text(&self.textures));
         out.push_str(&self.histograms_text());
         out
     }
@@ -1054,6 +1060,89 @@ fn section_info(section: &Section) -> SectionInfo {
     }
 }
 
+/// The images one representation samples and their bytes in `IMAGE_DATA` (spec §6.7).
+#[derive(Debug, Serialize)]
+struct TextureUse {
+    /// `materials` (the sources' images: triangles, points, LoD chain), `planes` (impostor
+    /// atlases and leaf slots), `billboards`, or `unused`.
+    representation: &'static str,
+    /// The images, by index.
+    images: Vec<u32>,
+    /// Their formats' names, each once, in image order.
+    formats: Vec<String>,
+    /// Their data bytes (each image once).
+    bytes: u64,
+}
+
+impl TextureUse {
+    /// Per representation that samples images, its images and bytes; an image no record names is
+    /// `unused`. Empty without images.
+    fn of(container: &Container) -> Vec<Self> {
+        let images = container.images();
+        let mut used = vec![false; images.len()];
+        let mut uses = Vec::new();
+        let named: [(&'static str, Vec<u32>); 3] = [
+            ("materials", container.materials().iter().map(|m| m.image).collect()),
+            ("planes", container.planes().iter().map(|p| p.image).collect()),
+            ("billboards", container.billboards().iter().map(|b| b.image).collect()),
+        ];
+        for (representation, mut list) in named {
+            list.sort_unstable();
+            list.dedup();
+            list.retain(|&i| (i as usize) < images.len());
+            for &i in &list {
+                used[i as usize] = true;
+            }
+            if !list.is_empty() {
+                uses.push(Self::new(representation, list, images));
+            }
+        }
+        #[expect(clippy::cast_possible_truncation, reason = "image indices are u32")]
+        let unused: Vec<u32> = (0..images.len()).filter(|&i| !used[i]).map(|i| i as u32).collect();
+        if !unused.is_empty() {
+            uses.push(Self::new("unused", unused, images));
+        }
+        uses
+    }
+
+    fn new(representation: &'static str, list: Vec<u32>, images: &[ImageRecord]) -> Self {
+        let mut formats: Vec<String> = Vec::new();
+        let mut bytes = 0;
+        for &i in &list {
+            let record = &images[i as usize];
+            bytes += record.data_length;
+            let name = image_format_name(record.format);
+            if !formats.contains(&name) {
+                formats.push(name);
+            }
+        }
+        Self { representation, images: list, formats, bytes }
+    }
+
+    /// The text form: a `textures` block, empty without images.
+    fn text(uses: &[Self]) -> String {
+        if uses.is_empty() {
+            return String::new();
+        }
+        let mut out = String::from(
+            "
+textures (bytes of IMAGE_DATA per representation)
+",
+        );
+        for u in uses {
+            out.push_str(&format!(
+                "  {:<11}{:>12} bytes, {} image(s), {}
+",
+                u.representation,
+                u.bytes,
+                u.images.len(),
+                u.formats.join(", ")
+            ));
+        }
+        out
+    }
+}
+
 /// The spec's name of an image `format` value (spec §6.7), or `format N` for values this version
 /// does not define.
 fn image_format_name(format: u32) -> String {
@@ -1064,6 +1153,8 @@ fn image_format_name(format: u32) -> String {
         image_format::PNG => "PNG".to_owned(),
         image_format::JPEG => "JPEG".to_owned(),
         image_format::LEAF_SLOTS => "LEAF_SLOTS".to_owned(),
+        image_format::BC7_SRGB => "BC7_SRGB".to_owned(),
+        image_format::BC7_LINEAR => "BC7_LINEAR".to_owned(),
         other => format!("format {other}"),
     }
 }

@@ -35,7 +35,7 @@ fn bench_ok(args: &[&OsStr]) -> String {
 
 const COLUMNS: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines";
+precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines,transitions";
 
 #[test]
 fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
@@ -89,6 +89,8 @@ fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
         assert!(number(&header, spt, "bytes_resident") > 0.0);
         assert_eq!(field(&header, spt, "q"), "", "no quality without --quality");
         assert_eq!(field(&header, spt, "shadow_primitives"), "", "no shadow pass without --shadows");
+        // A forced technique changes no tree's technique; the counted full mesh has no draws.
+        assert_eq!((field(&header, spt, "transitions"), field(&header, full, "transitions")), ("0", ""));
     }
     let phases: Vec<&str> = rows.iter().step_by(2).map(|r| field(&header, r, "phase")).collect();
     assert_eq!(phases.first(), Some(&"overview"));

@@ -244,6 +244,9 @@ pub struct Row {
     /// With `--shadows`: triangles, points, quads, ellipsoids and lines the shadow pass
     /// submitted, all cascades together (`None` without, and for the counted full mesh).
     pub shadow_primitives: Option<u64>,
+    /// Trees drawn with two techniques, in a transition from one to the other
+    /// (`FrameStats::transitions`; `None` for the counted full mesh).
+    pub transitions: Option<u32>,
     /// Coverage against the reference (with `--quality`, not for the reference itself).
     pub coverage: Option<Coverage>,
     /// Multi-scale RMSE summary against the reference.
@@ -600,6 +603,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                     selection_ms: ms,
                     gpu_ms: reference_shot.as_ref().and_then(|(_, ms)| *ms),
                     shadow_primitives: None,
+                    transitions: None,
                     coverage: None,
                     rmse: None,
                     flip: None,
@@ -637,6 +641,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 selection_ms,
                 gpu_ms: None,
                 shadow_primitives: options.shadows.then(|| stats.shadow.primitives()),
+                transitions: Some(stats.transitions),
                 coverage: None,
                 rmse: None,
                 flip: None,

@@ -97,6 +97,8 @@ pub struct Summary {
     pub shadow_primitives: Option<f64>,
     /// Those over the main pass's mean primitives.
     pub shadow_ratio: Option<f64>,
+    /// Mean trees in a transition between techniques, drawn with both.
+    pub transitions: Option<f64>,
     /// Mean precision against the reference.
     pub precision: Option<f64>,
     /// Mean recall.
@@ -145,6 +147,7 @@ pub fn summarise(report: &Report, technique: TechniqueName) -> Summary {
         instances_pruned: mean_of(rows.iter().filter_map(|r| r.instances_pruned).map(f64::from).collect()),
         bytes_uploaded: mean_of(rows.iter().filter_map(|r| r.bytes_uploaded).map(|b| b as f64).collect()),
         ranges_clamped: mean_of(rows.iter().filter_map(|r| r.ranges_clamped).map(f64::from).collect()),
+        transitions: mean_of(rows.iter().filter_map(|r| r.transitions).map(f64::from).collect()),
         gpu_ms: spread(&gpu),
         precision: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.precision()).collect()),
         recall: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.recall()).collect()),
@@ -250,6 +253,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
     let _ = writeln!(out, "times: {}", timing(report));
     out.push_str(&unavailable(&report.techniques));
     let shadows = report.rows.iter().any(|r| r.shadow_primitives.is_some());
+    let transitions = report.rows.iter().any(|r| r.transitions.is_some_and(|n| n > 0));
     // Only where a technique drew them, as the shadow columns.
     let ellipsoids = report.rows.iter().any(|r| r.ellipsoids + r.lines > 0);
     let mut columns = vec![
@@ -281,6 +285,9 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
     ]);
     if shadows {
         columns.extend([("shadow", Align::Right), ("shadow/this", Align::Right)]);
+    }
+    if transitions {
+        columns.push(("fading", Align::Right));
     }
     let mut table = Table::new(&columns);
     for (technique, availability) in &report.techniques {
@@ -318,6 +325,9 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
         if shadows {
             cells.extend([opt(s.shadow_primitives, 0), opt(s.shadow_ratio, 2)]);
         }
+        if transitions {
+            cells.push(opt(s.transitions, 1));
+        }
         table.row(cells);
     }
     out.push_str(&table.render(""));
@@ -333,7 +343,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
 /// The CSV header.
 pub const CSV_HEADER: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines";
+precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines,transitions";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -346,7 +356,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -379,6 +389,7 @@ pub fn csv(report: &Report) -> String {
             text(row.shadow_primitives.map(|v| v.to_string())),
             row.ellipsoids,
             row.lines,
+            text(row.transitions.map(|v| v.to_string())),
         );
     }
     out

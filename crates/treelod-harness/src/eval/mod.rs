@@ -417,6 +417,71 @@ pub struct Report {
     /// Contact-sheet frames: the frame, the reference, and per measured technique its image and
     /// mask, with the reference's mask.
     pub sheet: Vec<SheetFrame>,
+    /// Per technique asked for (in [`Self::techniques`]' order), the texture bytes it samples.
+    pub textures: Vec<TextureBytes>,
+}
+
+/// The container images a technique samples, bytes as stored (spec §6.7), over the scene's models
+/// (each model once, not per instance).
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct TextureBytes {
+    /// The sources' images, which the materials name: every technique that draws triangles or
+    /// points samples them.
+    pub source_bytes: u64,
+    /// The technique's own atlases: impostor planes' for `impostors`, the billboards' for
+    /// `billboard` and `crossed`, both for the policy, none for the others.
+    pub atlas_bytes: u64,
+    /// The formats of those atlases (spec names, each once), empty without.
+    pub atlas_formats: Vec<String>,
+}
+
+impl TextureBytes {
+    /// Source and atlas bytes together.
+    #[must_use]
+    pub fn total(&self) -> u64 {
+        self.source_bytes + self.atlas_bytes
+    }
+
+    /// What `technique` samples of `containers`.
+    #[must_use]
+    pub fn of(containers: &[Container], technique: TechniqueName) -> Self {
+        let (planes, billboards) = match technique {
+            TechniqueName::Technique(Technique::Impostors) => (true, false),
+            TechniqueName::Technique(Technique::Billboard | Technique::Crossed) => (false, true),
+            TechniqueName::Policy => (true, true),
+            _ => (false, false),
+        };
+        let mut out = Self::default();
+        for c in containers {
+            let images = c.images();
+            let named = |list: Vec<u32>| -> Vec<u32> {
+                let mut list: Vec<u32> = list.into_iter().filter(|&i| (i as usize) < images.len()).collect();
+                list.sort_unstable();
+                list.dedup();
+                list
+            };
+            let sources = named(c.materials().iter().map(|m| m.image).collect());
+            let mut atlases = Vec::new();
+            if planes {
+                atlases.extend(c.planes().iter().map(|p| p.image));
+            }
+            if billboards {
+                atlases.extend(c.billboards().iter().map(|b| b.image));
+            }
+            let atlases = named(atlases);
+            out.source_bytes += sources.iter().map(|&i| images[i as usize].data_length).sum::<u64>();
+            for &i in atlases.iter().filter(|i| !sources.contains(i)) {
+                let record = &images[i as usize];
+                out.atlas_bytes += record.data_length;
+                let name = treelod_format::image_format::name(record.format)
+                    .map_or_else(|| format!("format {}", record.format), str::to_owned);
+                if !out.atlas_formats.contains(&name) {
+                    out.atlas_formats.push(name);
+                }
+            }
+        }
+        out
+    }
 }
 
 /// What the adapter says of itself.
@@ -546,7 +611,8 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
         }
         _ => None,
     };
-    let held = held_by_models(&scene)?;
+    let containers = open_models(&scene)?;
+    let held = PerTechnique::held_by(&containers);
     let mut techniques: Vec<(TechniqueName, Availability)> = Vec::new();
     for &name in &options.techniques {
         if !techniques.iter().any(|(n, _)| *n == name) {
@@ -686,6 +752,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
         background: options.background,
         adapter: Adapter::new(&gpu.info),
         timestamps: gpu.device.features().contains(wgpu::Features::TIMESTAMP_QUERY),
+        textures: techniques.iter().map(|&(name, _)| TextureBytes::of(&containers, name)).collect(),
         techniques,
         rows,
         sheet,
@@ -718,15 +785,13 @@ pub fn measurable(
     Ok((linear.box_filter(k)?, mask.reduce_majority(k)?))
 }
 
-/// How many of the scene's models hold each technique's data (each opened and checked as every
-/// reader does).
-fn held_by_models(scene: &Scene) -> Result<PerTechnique<usize>, Error> {
-    let containers = scene
+/// The scene's models, each opened and checked as every reader does.
+fn open_models(scene: &Scene) -> Result<Vec<Container>, Error> {
+    scene
         .models
         .iter()
         .map(|model| Container::open(model).map_err(|source| Error::Container { path: model.clone(), source }))
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok(PerTechnique::held_by(&containers))
+        .collect()
 }
 
 /// The height on screen, pixels, of the scene's bounds seen from `pose` in an image `image_height`

@@ -8,7 +8,7 @@ use serde::Serialize;
 use treelod_render::offscreen::Image;
 
 use super::metrics::{self, Coverage, LinearImage, Mask};
-use super::{Adapter, Availability, Report, Row, TechniqueName};
+use super::{Adapter, Availability, Report, Row, TechniqueName, TextureBytes};
 use crate::table::{Align, Table};
 use treelod_render::{Primitive, Technique};
 
@@ -333,6 +333,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
         ("triangles", Align::Right),
         ("points", Align::Right),
         ("geometry KiB", Align::Right),
+        ("texture KiB", Align::Right),
         ("TP", Align::Right),
         ("FP", Align::Right),
         ("FN", Align::Right),
@@ -355,6 +356,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
             row.stats.submitted[Primitive::Triangle].to_string(),
             row.stats.submitted[Primitive::Point].to_string(),
             format!("{:.1}", row.geometry_bytes() as f64 / 1024.0),
+            format!("{:.1}", textures_of(report, row.technique).total() as f64 / 1024.0),
             row.coverage.tp.to_string(),
             row.coverage.fp.to_string(),
             row.coverage.fn_.to_string(),
@@ -383,6 +385,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
             format!("{:.0}", m.triangles),
             format!("{:.0}", m.points),
             format!("{:.1}", m.geometry_bytes / 1024.0),
+            format!("{:.1}", textures_of(report, *name).total() as f64 / 1024.0),
             format!("{:.0}", m.tp),
             format!("{:.0}", m.fp),
             format!("{:.0}", m.fn_),
@@ -399,6 +402,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
         ]);
     }
     out.push_str(&table.render(""));
+    let _ = writeln!(out, "{}", textures_text(report));
     let bands = by_band(report);
     if !bands.is_empty() {
         let _ = writeln!(
@@ -450,6 +454,36 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
     out
 }
 
+/// The texture bytes `technique` samples ([`TextureBytes`]); none for a technique the report
+/// does not list.
+fn textures_of(report: &Report, technique: TechniqueName) -> TextureBytes {
+    report
+        .techniques
+        .iter()
+        .position(|(name, _)| *name == technique)
+        .and_then(|i| report.textures.get(i))
+        .cloned()
+        .unwrap_or_default()
+}
+
+/// The line saying what the texture column counts, with each measured technique's atlas bytes and
+/// format.
+fn textures_text(report: &Report) -> String {
+    let atlases: Vec<String> = report
+        .techniques
+        .iter()
+        .filter(|(_, a)| *a == Availability::Measured)
+        .map(|(name, _)| (name, textures_of(report, *name)))
+        .filter(|(_, t)| t.atlas_bytes > 0)
+        .map(|(name, t)| format!("{} {} bytes {}", name.name(), t.atlas_bytes, t.atlas_formats.join("+")))
+        .collect();
+    format!(
+        "texture KiB: the container images a technique samples, as stored (the sources' images{}){}",
+        if atlases.is_empty() { "" } else { ", and its atlases" },
+        if atlases.is_empty() { String::new() } else { format!("; atlases: {}", atlases.join(", ")) }
+    )
+}
+
 /// One CSV row per frame and technique, with a header line.
 #[must_use]
 pub fn csv(report: &Report) -> String {
@@ -462,7 +496,8 @@ pub fn csv(report: &Report) -> String {
         let _ = write!(out, ",rmse_{}px", 1u64 << l);
     }
     out.push_str(
-        ",flip,temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms,quads,primitives,ellipsoids,lines\n",
+        ",flip,temporal_noise,reference_temporal_noise,prepare_ms,gpu_ms,wall_ms,quads,primitives,ellipsoids,lines,\
+         texture_bytes,atlas_bytes\n",
     );
     let optional = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
     for row in &report.rows {
@@ -498,9 +533,10 @@ pub fn csv(report: &Report) -> String {
         for level in &row.rmse.levels {
             let _ = write!(out, ",{level}");
         }
+        let textures = textures_of(report, row.technique);
         let _ = writeln!(
             out,
-            ",{},{},{},{:.3},{},{:.3},{},{},{},{}",
+            ",{},{},{},{:.3},{},{:.3},{},{},{},{},{},{}",
             row.flip,
             optional(row.noise),
             optional(row.reference_noise),
@@ -511,6 +547,8 @@ pub fn csv(report: &Report) -> String {
             row.primitives(),
             row.stats.submitted[Primitive::Ellipsoid],
             row.stats.submitted[Primitive::Line],
+            textures.total(),
+            textures.atlas_bytes,
         );
     }
     out
@@ -545,6 +583,8 @@ struct JsonTechnique {
     status: &'static str,
     reason: Option<String>,
     description: &'static str,
+    /// The container images it samples, bytes as stored.
+    textures: TextureBytes,
     summary: Option<Summary>,
 }
 
@@ -588,6 +628,7 @@ pub fn json(report: &Report) -> Result<String, serde_json::Error> {
                 status: availability.status(),
                 reason: availability.reason().map(str::to_owned),
                 description: description(*name),
+                textures: textures_of(report, *name),
                 summary: (*availability == Availability::Measured).then(|| summarise(&report.rows, *name)),
             })
             .collect(),
@@ -729,6 +770,10 @@ pub(super) mod tests {
                 reference: (image.clone(), mask),
                 techniques: vec![(TechniqueName::Technique(Technique::Spt), image, other)],
             }],
+            textures: vec![
+                TextureBytes { source_bytes: 2048, atlas_bytes: 0, atlas_formats: Vec::new() },
+                TextureBytes::default(),
+            ],
         }
     }
 

@@ -37,7 +37,7 @@ pub(crate) const STAGES: Stages = Stages {
 
 /// One transparent texel: the atlas of a group without one (`slots`: a blank leaf-slot image).
 pub(crate) fn blank(slots: bool) -> Atlas {
-    Atlas { width: 1, height: 1, srgb: true, slots, levels: vec![vec![0; 4]] }
+    Atlas { width: 1, height: 1, srgb: true, slots, bc7: false, levels: vec![vec![0; 4]] }
 }
 
 /// The planes' group of the model `up` uploads, if it has planes and their atlas decodes and

@@ -513,8 +513,12 @@ impl Viewer {
         if !missing.is_empty() {
             return Err(gpu_error(GpuError::MissingFeatures { adapter: adapter.get_info().name, missing }));
         }
-        // Timestamps for the panel's GPU time and GPU selection's counted draws, where offered.
-        let optional = adapter.features() & (wgpu::Features::TIMESTAMP_QUERY | Renderer::gpu_selection_features());
+        // Timestamps for the panel's GPU time, GPU selection's counted draws, and BC textures
+        // (BC7 atlases uploaded as stored), where offered.
+        let optional = adapter.features()
+            & (wgpu::Features::TIMESTAMP_QUERY
+                | wgpu::Features::TEXTURE_COMPRESSION_BC
+                | Renderer::gpu_selection_features());
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("treelod view"),
             required_features: Renderer::required_features() | optional,

@@ -384,6 +384,9 @@ fn counts(ui: &mut Ui, stats: &FrameStats, instances: usize) {
         for (technique, trees) in stats.instances.iter().filter(|&(_, n)| n > 0) {
             row(&format!("  trees, {}", technique.label()), trees.to_string());
         }
+        if stats.transitions > 0 {
+            row("  changing technique", stats.transitions.to_string());
+        }
         row("primitives", stats.primitives().to_string());
         for (kind, count) in stats.submitted.iter().filter(|&(kind, n)| n > 0 || kind <= Primitive::Point) {
             row(&format!("  {}", kind.name()), count.to_string());
