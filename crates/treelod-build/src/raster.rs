@@ -203,42 +203,6 @@ impl AlphaMask {
         (self.width, self.height)
     }
 
-    /// The mask's mip chain as a renderer tests it (`treelod-render`'s textures): the passing
-    /// texels as opaque (1) or transparent (0), box-filtered 2 × 2 per level down to 1 × 1 so that
-    /// a level holds the passing fraction of the texels below it, each level then tested against
-    /// `cutoff` again. Level 0 is the mask itself. Far away a leaf's thin parts fall under the
-    /// cutoff in the coarser levels and drop out, as they do on the GPU.
-    #[must_use]
-    pub fn mip_chain(&self, cutoff: f32) -> Vec<AlphaMask> {
-        let (mut w, mut h) = (self.width as usize, self.height as usize);
-        let mut fractions: Vec<f32> =
-            (0..w * h).map(|t| f32::from(u8::from(self.bits[t / 64] >> (t % 64) & 1 == 1))).collect();
-        let mut levels = vec![self.clone()];
-        while w > 1 || h > 1 {
-            let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
-            let mut next = vec![0.0f32; nw * nh];
-            for (i, value) in next.iter_mut().enumerate() {
-                let (x, y) = (2 * (i % nw), 2 * (i / nw));
-                let taps = [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)];
-                let inside: Vec<f32> =
-                    taps.iter().filter(|&&(a, b)| a < w && b < h).map(|&(a, b)| fractions[b * w + a]).collect();
-                #[expect(clippy::cast_precision_loss, reason = "at most 4 taps")]
-                let n = inside.len().max(1) as f32;
-                *value = inside.iter().sum::<f32>() / n;
-            }
-            let mut bits = vec![0u64; (nw * nh).div_ceil(64)];
-            for (t, &f) in next.iter().enumerate() {
-                if f >= cutoff {
-                    bits[t / 64] |= 1 << (t % 64);
-                }
-            }
-            #[expect(clippy::cast_possible_truncation, reason = "no larger than the mask")]
-            levels.push(AlphaMask { width: nw as u32, height: nh as u32, bits });
-            (w, h, fractions) = (nw, nh, next);
-        }
-        levels
-    }
-
     /// The fraction of texels that pass.
     #[must_use]
     pub fn opaque_fraction(&self) -> f32 {
@@ -463,6 +427,70 @@ pub fn fill_triangle(mask: &mut Mask, p: [Vec2; 3], uv: [Vec2; 3], alpha: Option
     }
 }
 
+/// Calls `pixel(x, y, b)` for every pixel of a `size × size` image whose centre the triangle
+/// with corners `p` (pixel coordinates) holds, by [`fill_triangle`]'s rule (corners snapped to
+/// 1/256 pixel, exact edge functions, the top-left rule), so it visits the pixels that
+/// `fill_triangle` without alpha test covers; `b` holds the barycentric weights of `p[0]`,
+/// `p[1]` and `p[2]` at the centre. Rows top to bottom, left to right.
+pub fn triangle_pixels(size: u32, p: [Vec2; 3], mut pixel: impl FnMut(usize, usize, [f32; 3])) {
+    let side = size as f32;
+    let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+    if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= side && min.y <= side) {
+        return;
+    }
+    let mut v = p.map(|q| (snap(q.x), snap(q.y)));
+    let half = SUBPIXEL / 2;
+    let last = i64::from(size) - 1;
+    let (x0, x1) = (
+        (-((half - v[0].0.min(v[1].0).min(v[2].0)) >> SUBPIXEL_BITS)).max(0),
+        ((v[0].0.max(v[1].0).max(v[2].0) - half) >> SUBPIXEL_BITS).min(last),
+    );
+    let (y0, y1) = (
+        (-((half - v[0].1.min(v[1].1).min(v[2].1)) >> SUBPIXEL_BITS)).max(0),
+        ((v[0].1.max(v[1].1).max(v[2].1) - half) >> SUBPIXEL_BITS).min(last),
+    );
+    if x0 > x1 || y0 > y1 {
+        return;
+    }
+    let mut area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[1].1 - v[0].1) * (v[2].0 - v[0].0);
+    if area == 0 {
+        return;
+    }
+    // Corner order after making the winding positive: `order[k]` is the input corner at `v[k]`.
+    let mut order = [0, 1, 2];
+    if area < 0 {
+        v.swap(1, 2);
+        order.swap(1, 2);
+        area = -area;
+    }
+    let edges: [Edge; 3] = core::array::from_fn(|k| {
+        let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
+        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+        let top_left = dy < 0 || (dy == 0 && dx > 0);
+        Edge { a, dx, dy, bias: if top_left { 0 } else { -1 } }
+    });
+    #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
+    let inv_area = 1.0 / area as f32;
+    for y in y0..=y1 {
+        let mut w = edges.map(|e| e.at(x0, y));
+        for x in x0..=x1 {
+            if w[0] >= 0 && w[1] >= 0 && w[2] >= 0 {
+                let mut b = [0.0; 3];
+                for k in 0..3 {
+                    #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
+                    let weight = w[k] as f32 * inv_area;
+                    b[order[k]] = weight;
+                }
+                #[expect(clippy::cast_sign_loss, clippy::cast_possible_truncation, reason = "0 <= x, y < size")]
+                pixel(x as usize, y as usize, b);
+            }
+            for k in 0..3 {
+                w[k] -= edges[k].dy * SUBPIXEL;
+            }
+        }
+    }
+}
+
 /// A pixel coordinate in fixed point: the nearest multiple of 1/256 pixel, clamped to ±2^24.
 fn snap(v: f32) -> i64 {
     floor_i64((v * SUBPIXEL as f32).clamp(-COORD_LIMIT, COORD_LIMIT) + 0.5)
@@ -572,7 +600,7 @@ pub fn fill_ellipse(mask: &mut Mask, centre: Vec2, m: [f64; 3]) {
 
 /// The spans `(y, x0, x1)` (inclusive) of the pixels of a `size × size` image whose centres lie
 /// in the ellipse of [`fill_ellipse`], row by row.
-fn ellipse_spans(size: u32, centre: Vec2, m: [f64; 3], mut span: impl FnMut(usize, usize, usize)) {
+pub fn ellipse_spans(size: u32, centre: Vec2, m: [f64; 3], mut span: impl FnMut(usize, usize, usize)) {
     let [a, b, c] = m;
     let det = a * c - b * b;
     if !(c > 0.0 && a > 0.0 && det.is_finite() && centre.is_finite()) {
@@ -690,7 +718,7 @@ fn noise_mix(mut x: u64) -> u64 {
 pub fn fill_ellipsoid_noise(grey: &mut [u16], view: &View, centre: Vec3, axes: [Vec3; 3], level: u32) {
     let size = view.size as usize;
     assert_eq!(grey.len(), size * size, "grey image of the wrong size");
-    ellipsoid_noise(view, centre, axes, level, |x, y, g| {
+    ellipsoid_hits(view, centre, axes, level, |x, y, g, _| {
         let slot = &mut grey[y * size + x];
         *slot = (*slot).max(g);
     });
@@ -704,7 +732,7 @@ pub fn fill_ellipsoid_cut(mask: &mut Mask, view: &View, centre: Vec3, axes: [Vec
     if view.size != size {
         return;
     }
-    ellipsoid_noise(view, centre, axes, level, |x, y, g| {
+    ellipsoid_hits(view, centre, axes, level, |x, y, g, _| {
         if g >= cut {
             #[expect(clippy::cast_possible_truncation, reason = "x, y < size ≤ MAX_SIZE")]
             mask.set(x as u32, y as u32);
@@ -712,9 +740,16 @@ pub fn fill_ellipsoid_cut(mask: &mut Mask, view: &View, centre: Vec3, axes: [Vec
     });
 }
 
-/// The pixels `(x, y)` of the ellipsoid's projection in `view` and the value `1 + g` of the noise
-/// texel its front surface shows there (see [`fill_ellipsoid_noise`]).
-fn ellipsoid_noise(view: &View, centre: Vec3, axes: [Vec3; 3], level: u32, mut pixel: impl FnMut(usize, usize, u16)) {
+/// The pixels `(x, y)` of the ellipsoid's projection in `view`, the value `1 + g` of the noise
+/// texel its front surface shows there (see [`fill_ellipsoid_noise`]) and the hit in the
+/// ellipsoid's local coordinates `u` (the point `centre + Σ u_i·axes[i]`, `|u| = 1`).
+pub fn ellipsoid_hits(
+    view: &View,
+    centre: Vec3,
+    axes: [Vec3; 3],
+    level: u32,
+    mut pixel: impl FnMut(usize, usize, u16, Vec3),
+) {
     let (c, m) = project_ellipsoid(view, centre, axes);
     // The local coordinates of a model-space offset: axes are orthogonal, so A⁻¹ = diag(1/r²)·Aᵀ.
     let inverse = axes.map(|a| {
@@ -746,7 +781,8 @@ fn ellipsoid_noise(view: &View, centre: Vec3, axes: [Vec3; 3], level: u32, mut p
             let b = o.dot(d);
             let disc = (b * b - dd * (o.length_squared() - 1.0)).max(0.0);
             let t = (-b - disc.sqrt()) * inv_dd;
-            pixel(x, y, 1 + u16::from(noise_lookup(texels, side, o + d * t)));
+            let hit = o + d * t;
+            pixel(x, y, 1 + u16::from(noise_lookup(texels, side, hit)), hit);
         }
     });
 }

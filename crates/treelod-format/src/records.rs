@@ -795,7 +795,8 @@ pub struct CalibrationRecord {
     pub technique: u32,
     /// Projected height of the block's bounds, pixels; strictly increasing within a technique.
     pub height: f32,
-    /// Mean multi-scale RMSE of coverage against the supersampled full mesh, `[0, 1]`.
+    /// Mean multi-scale RMSE against the supersampled full mesh (of shaded colour, or of coverage
+    /// in files whose metadata lacks `calibration.error`; spec §6.15), `[0, 1]`.
     pub error: f32,
     /// Primitives submitted (triangles, points, ellipsoids, lines, planes, quads; spec §6.15),
     /// `≥ 0`.

@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 use treelod_runtime::spt_lod::PixelLevel;
-use treelod_runtime::{Policy, PruneScale, Technique};
+use treelod_runtime::{Light, Policy, PruneScale, Technique};
 
 use crate::shadows::Shadows;
 #[cfg(doc)]
@@ -262,9 +262,9 @@ impl Default for Settings {
             technique: Technique::Spt,
             policy: Some(Policy::default()),
             debug: DebugView::Shaded,
-            sun: Vec3::new(0.4, 0.8, 0.45),
-            sun_colour: Vec3::ONE,
-            ambient: 0.35,
+            sun: Light::DEFAULT.sun,
+            sun_colour: Light::DEFAULT.sun_colour,
+            ambient: Light::DEFAULT.ambient,
             ambient_occlusion: true,
             upload_budget: 64 << 20,
             memory_budget: 1 << 30,

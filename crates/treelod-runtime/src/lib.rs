@@ -24,11 +24,13 @@ pub mod draws;
 pub mod ellipsoid;
 pub mod frame;
 pub mod impostor;
+pub mod light;
 pub mod policy;
 pub mod prune;
 pub mod select;
 pub mod spt_lod;
 pub mod technique;
+pub mod texels;
 
 pub use baseline::{BillboardKind, BillboardRanges, Billboards, ChainLevel, ChainRanges, LodChain, instance_tau};
 pub use draws::{
@@ -46,6 +48,7 @@ pub use impostor::{
     CROSSFADE, ImpostorBark, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share,
     plane_drawn, plane_parents,
 };
+pub use light::Light;
 pub use policy::{
     Calibration, Choices, Policy, PolicyState, Transition, VISIBILITY_CLASSES, choose_instances,
     choose_instances_coarsest, projected_height, visibility_class, visibility_class_after,

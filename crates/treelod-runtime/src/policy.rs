@@ -62,7 +62,7 @@ pub const STEPS_PER_OCTAVE: f32 = 8.0;
 pub struct Policy {
     /// Error allowed above the floor (the least error of the full mesh and every representation
     /// at the same projected height, module docs), in units of the calibration's error
-    /// (multi-scale RMSE of coverage, `[0, 1]`). 0 asks for the best image the tables know (only
+    /// (multi-scale RMSE of the shaded image, `[0, 1]`, spec §6.15). 0 asks for the best image the tables know (only
     /// representations as good as it qualify); larger values trade image for primitives. Default [`Policy::DEFAULT_TARGET`]. Not finite or negative: 0.
     pub target: f32,
     /// Octaves of projected height around a boundary within which a tree keeps last frame's
@@ -99,11 +99,13 @@ impl Policy {
     /// The largest [`Policy::transition`] (ten seconds at 60 frames per second).
     pub const MAX_TRANSITION: u32 = 600;
 
-    /// The default [`Policy::target`]: one hundredth of coverage RMSE over the floor. At
-    /// a few pixels every representation's error is about 0.06 (the full mesh's aliasing
-    /// included), so 0.01 separates what keeps a small tree's silhouette and density from what
-    /// does not (a lone billboard loses about twice that on leafy trees); near, the full mesh's
-    /// own error is about 0.01, so the target allows differences as large as its aliasing.
+    /// The default [`Policy::target`]: one hundredth of RMSE over the floor (the tables' error is
+    /// of the shaded image on a white background, where a missing leaf pixel costs about 0.9 and
+    /// a wrong shade of green a few hundredths). At a few pixels every representation's error is
+    /// 0.05–0.1 (the full mesh's aliasing included), so 0.01 separates what keeps a small tree's
+    /// silhouette, density and shade from what does not (a lone billboard loses two to five times
+    /// that on the shared trees); near, the full mesh's own error is 0.005–0.035, so the target
+    /// allows differences as large as its aliasing.
     pub const DEFAULT_TARGET: f32 = 0.01;
 
     /// The target, sanitised (not finite or negative: 0).

@@ -503,6 +503,10 @@ baselines
 struct CalibrationInfo {
     /// One entry per representation, in code order.
     techniques: Vec<CalibrationRow>,
+    /// Whether the errors are of shaded colour (metadata `calibration.error = "colour"`, spec
+    /// §6.15), else of coverage (earlier builds). The metadata block of the JSON says it too.
+    #[serde(skip)]
+    colour: bool,
 }
 
 /// The samples of one representation.
@@ -533,7 +537,8 @@ impl CalibrationInfo {
                 }
             }
         }
-        Some(Self { techniques: techniques.into_iter().map(|(_, row)| row).collect() })
+        let colour = container.metadata().settings.iter().any(|s| s.key == "calibration.error" && s.value == "colour");
+        Some(Self { techniques: techniques.into_iter().map(|(_, row)| row).collect(), colour })
     }
 
     /// The text form: a row per representation, `error (primitives)` per height.
@@ -555,8 +560,9 @@ impl CalibrationInfo {
             }));
             table.row(row);
         }
+        let measure = if self.colour { "shaded colour" } else { "coverage" };
         format!(
-            "\ncalibration (multi-scale RMSE of coverage against the supersampled full mesh, and primitives drawn, \
+            "\ncalibration (multi-scale RMSE of {measure} against the supersampled full mesh, and primitives drawn, \
              by the block's projected height)\n{}",
             table.render("  ")
         )

@@ -95,7 +95,7 @@ pub struct TechniqueArgs {
     /// calibration tables).
     #[arg(long, value_name = "TECHNIQUE", value_enum)]
     pub technique: Option<Technique>,
-    /// The policy's target: image error (multi-scale RMSE of coverage) allowed over the least
+    /// The policy's target: image error (multi-scale RMSE, as the calibration measures it) allowed over the least
     /// error of the full mesh and every representation at each tree's projected size; 0 keeps
     /// the best image the tables know.
     #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = parse_target, conflicts_with = "technique")]
