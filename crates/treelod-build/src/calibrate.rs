@@ -83,6 +83,10 @@ pub const HEIGHTS: [f32; 6] = [8.0, 16.0, 32.0, 64.0, 128.0, 256.0];
 /// where a view would be larger (a block much wider than high at 256 pixels).
 pub const MAX_REFERENCE_SIDE: u32 = 2048;
 
+/// How far the renderer turns an ellipsoid's normal towards its noise texel's random vector
+/// (`ELLIPSOID_NORMAL_NOISE` in `shaders/tree/ellipsoids.wgsl`).
+const ELLIPSOID_NORMAL_NOISE: f32 = 0.5;
+
 /// Noise texels per radian of the renderer's ellipsoid noise (`shaders/tree/ellipsoids.wgsl`).
 const NOISE_TEXELS_PER_RADIAN: f32 = 40.0;
 
@@ -616,12 +620,19 @@ impl<'a> Scene<'a> {
                 let r2 = a.length_squared();
                 if r2 > 0.0 { a / r2 } else { Vec3::ZERO }
             });
-            ellipsoid_hits(view, centre, axes, level, |x, y, grey, u| {
+            ellipsoid_hits(view, centre, axes, level, |x, y, grey, u, random| {
                 if grey < cut {
                     return;
                 }
                 let hit = centre + axes[0] * u.x + axes[1] * u.y + axes[2] * u.z;
-                let normal = inverse[0] * u.x + inverse[1] * u.y + inverse[2] * u.z;
+                // `fs_ellipsoid`: the normal turned half-way towards the texel's random vector
+                // (on the normal's side), in the local frame.
+                let random = if random.dot(u) >= 0.0 { random } else { -random };
+                let local = u
+                    .normalize_or(Vec3::Z)
+                    .lerp((random + Vec3::splat(1e-6)).normalize_or(Vec3::Z), ELLIPSOID_NORMAL_NOISE);
+                let local = local.normalize_or(Vec3::Z);
+                let normal = inverse[0] * local.x + inverse[1] * local.y + inverse[2] * local.z;
                 canvas.put(x, y, depth(view, hit), Surface { albedo, normal, ao }.shaded());
             });
             drawn += 1;

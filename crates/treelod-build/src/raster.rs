@@ -650,9 +650,24 @@ pub fn noise_grey(d: Vec3, level: u32) -> u8 {
     noise_lookup(&table[offsets[level as usize]..], NOISE_SIZE >> level, d)
 }
 
+/// The random unit vector of the noise cube's texel that `d` samples at mip `level`, as the
+/// renderer reads it from the texel's RGB ([`noise_grey`]'s texel).
+#[must_use]
+pub fn noise_vector(d: Vec3, level: u32) -> Vec3 {
+    let (_, offsets) = noise_table();
+    let level = level.min(NOISE_SIZE.ilog2());
+    noise_vectors()[offsets[level as usize] + noise_index(NOISE_SIZE >> level, d)]
+}
+
 /// [`noise_grey`] in one level's texels (`side` per face side).
 #[inline]
 fn noise_lookup(texels: &[u8], side: u32, d: Vec3) -> u8 {
+    texels[noise_index(side, d)]
+}
+
+/// The index within a level of the texel the direction `d` samples ([`noise_grey`]).
+#[inline]
+fn noise_index(side: u32, d: Vec3) -> usize {
     let (ax, ay, az) = (d.x.abs(), d.y.abs(), d.z.abs());
     let (face, sc, tc, ma) = if ax >= ay && ax >= az {
         if d.x >= 0.0 { (0u32, -d.z, -d.y, ax) } else { (1, d.z, -d.y, ax) }
@@ -669,7 +684,36 @@ fn noise_lookup(texels: &[u8], side: u32, d: Vec3) -> u8 {
     // Truncation is the floor here (negative values saturate to 0).
     #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the face")]
     let texel = |v: f32| (((v + ma) * half) as u32).min(side - 1);
-    texels[(face * side * side + texel(tc) * side + texel(sc)) as usize]
+    (face * side * side + texel(tc) * side + texel(sc)) as usize
+}
+
+/// The random unit vectors of the noise cube's texels as the renderer stores them (RGB bytes
+/// `(n + 1) / 2`, read back as `2·byte/255 − 1`), in the order of [`noise_table`]'s grey values.
+fn noise_vectors() -> &'static [Vec3] {
+    static TABLE: std::sync::OnceLock<Vec<Vec3>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let mut vectors = Vec::new();
+        for level in 0..=NOISE_SIZE.ilog2() {
+            let side = NOISE_SIZE >> level;
+            for face in 0..6u32 {
+                for i in 0..side * side {
+                    let mut h = noise_mix((u64::from(level) << 40) ^ (u64::from(face) << 32) ^ u64::from(i));
+                    let mut unit = || {
+                        h = noise_mix(h);
+                        (h >> 40) as f32 / (1u64 << 24) as f32
+                    };
+                    let z = 2.0 * unit() - 1.0;
+                    let angle = std::f32::consts::TAU * unit();
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "rounded into 0..=255")]
+                    let byte = |v: f32| f32::from(((v * 0.5 + 0.5) * 255.0).round().clamp(0.0, 255.0) as u8);
+                    let n = Vec3::new(byte(r * angle.cos()), byte(r * angle.sin()), byte(z));
+                    vectors.push(n / 255.0 * 2.0 - Vec3::ONE);
+                }
+            }
+        }
+        vectors
+    })
 }
 
 /// The grey values of the noise cube, level by level, face by face, row by row (texel `i` of
@@ -718,7 +762,7 @@ fn noise_mix(mut x: u64) -> u64 {
 pub fn fill_ellipsoid_noise(grey: &mut [u16], view: &View, centre: Vec3, axes: [Vec3; 3], level: u32) {
     let size = view.size as usize;
     assert_eq!(grey.len(), size * size, "grey image of the wrong size");
-    ellipsoid_hits(view, centre, axes, level, |x, y, g, _| {
+    ellipsoid_hits(view, centre, axes, level, |x, y, g, _, _| {
         let slot = &mut grey[y * size + x];
         *slot = (*slot).max(g);
     });
@@ -732,7 +776,7 @@ pub fn fill_ellipsoid_cut(mask: &mut Mask, view: &View, centre: Vec3, axes: [Vec
     if view.size != size {
         return;
     }
-    ellipsoid_hits(view, centre, axes, level, |x, y, g, _| {
+    ellipsoid_hits(view, centre, axes, level, |x, y, g, _, _| {
         if g >= cut {
             #[expect(clippy::cast_possible_truncation, reason = "x, y < size ≤ MAX_SIZE")]
             mask.set(x as u32, y as u32);
@@ -741,14 +785,15 @@ pub fn fill_ellipsoid_cut(mask: &mut Mask, view: &View, centre: Vec3, axes: [Vec
 }
 
 /// The pixels `(x, y)` of the ellipsoid's projection in `view`, the value `1 + g` of the noise
-/// texel its front surface shows there (see [`fill_ellipsoid_noise`]) and the hit in the
-/// ellipsoid's local coordinates `u` (the point `centre + Σ u_i·axes[i]`, `|u| = 1`).
+/// texel its front surface shows there (see [`fill_ellipsoid_noise`]), the hit in the
+/// ellipsoid's local coordinates `u` (the point `centre + Σ u_i·axes[i]`, `|u| = 1`) and the
+/// texel's random vector (the renderer turns the normal towards it).
 pub fn ellipsoid_hits(
     view: &View,
     centre: Vec3,
     axes: [Vec3; 3],
     level: u32,
-    mut pixel: impl FnMut(usize, usize, u16, Vec3),
+    mut pixel: impl FnMut(usize, usize, u16, Vec3, Vec3),
 ) {
     let (c, m) = project_ellipsoid(view, centre, axes);
     // The local coordinates of a model-space offset: axes are orthogonal, so A⁻¹ = diag(1/r²)·Aᵀ.
@@ -769,6 +814,7 @@ pub fn ellipsoid_hits(
     let (table, offsets) = noise_table();
     let level = level.min(NOISE_SIZE.ilog2());
     let (texels, side) = (&table[offsets[level as usize]..], NOISE_SIZE >> level);
+    let vectors = &noise_vectors()[offsets[level as usize]..];
     let inv_scale = 1.0 / view.scale;
     let (step, inv_dd) = (local(view.right * inv_scale), 1.0 / dd);
     ellipse_spans(view.size, c, m, |y, x0, x1| {
@@ -782,7 +828,8 @@ pub fn ellipsoid_hits(
             let disc = (b * b - dd * (o.length_squared() - 1.0)).max(0.0);
             let t = (-b - disc.sqrt()) * inv_dd;
             let hit = o + d * t;
-            pixel(x, y, 1 + u16::from(noise_lookup(texels, side, hit)), hit);
+            let i = noise_index(side, hit);
+            pixel(x, y, 1 + u16::from(texels[i]), hit, vectors[i]);
         }
     });
 }
