@@ -349,21 +349,24 @@ impl<'a> Scene<'a> {
                     return;
                 }
                 let uv = uvs[0] * b[0] + uvs[1] * b[1] + uvs[2] * b[2];
-                let texel = levels.map_or(Vec4::ONE, |levels| {
-                    Vec4::from_array(texels::sample(levels, (size, size), uv.to_array(), lod, Sampler::MATERIALS))
-                });
                 let colour = corners[0].1 * b[0] + corners[1].1 * b[1] + corners[2].1 * b[2];
-                let albedo = base * colour * texel;
                 if let Some(cutoff) = cutoff {
+                    let texel = levels
+                        .map_or(1.0, |l| texels::sample_alpha(l, (size, size), uv.to_array(), lod, Sampler::MATERIALS));
+                    let alpha = base.w * colour.w * texel;
                     let kept = if reference {
-                        filtered_coverage(albedo.w, cutoff, footprint) > pixel_depth_hash(x, y, z)
+                        filtered_coverage(alpha, cutoff, footprint) > pixel_depth_hash(x, y, z)
                     } else {
-                        albedo.w >= cutoff
+                        alpha >= cutoff
                     };
                     if !kept {
                         return;
                     }
                 }
+                let texel = levels.map_or(Vec4::ONE, |levels| {
+                    Vec4::from_array(texels::sample(levels, (size, size), uv.to_array(), lod, Sampler::MATERIALS))
+                });
+                let albedo = base * colour * texel;
                 let surface = Surface {
                     albedo: albedo.truncate(),
                     normal: corners[0].0 * b[0] + corners[1].0 * b[1] + corners[2].0 * b[2],

@@ -89,6 +89,26 @@ impl Sampler {
 /// `lod` or in the nearest level (`sampler`). Linear RGBA.
 #[must_use]
 pub fn sample(levels: &[Vec<u8>], size: (u32, u32), uv: [f32; 2], lod: f32, sampler: Sampler) -> [f32; 4] {
+    let lut = srgb_table();
+    let decode = |b: u8| if sampler.srgb { lut[usize::from(b)] } else { f32::from(b) / 255.0 };
+    filtered(levels, size, uv, lod, sampler, |t| [decode(t[0]), decode(t[1]), decode(t[2]), f32::from(t[3]) / 255.0])
+}
+
+/// The alpha of [`sample`] alone (a quarter of its work: an alpha test needs no colour).
+#[must_use]
+pub fn sample_alpha(levels: &[Vec<u8>], size: (u32, u32), uv: [f32; 2], lod: f32, sampler: Sampler) -> f32 {
+    filtered(levels, size, uv, lod, sampler, |t| [f32::from(t[3]) / 255.0])[0]
+}
+
+/// [`sample`] of the values `texel` reads from each RGBA8 texel.
+fn filtered<const N: usize>(
+    levels: &[Vec<u8>],
+    size: (u32, u32),
+    uv: [f32; 2],
+    lod: f32,
+    sampler: Sampler,
+    texel: impl Fn(&[u8]) -> [f32; N],
+) -> [f32; N] {
     let last = levels.len().saturating_sub(1);
     #[expect(clippy::cast_precision_loss, reason = "a mip count")]
     let lod = if lod.is_finite() { lod.clamp(0.0, last as f32) } else { 0.0 };
@@ -96,11 +116,11 @@ pub fn sample(levels: &[Vec<u8>], size: (u32, u32), uv: [f32; 2], lod: f32, samp
     #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the chain")]
     let fine = lod.floor() as usize;
     let t = lod - lod.floor();
-    let a = bilinear(levels, size, uv, fine, sampler);
+    let a = bilinear(levels, size, uv, fine, sampler, &texel);
     if t <= 0.0 || fine >= last {
         return a;
     }
-    let b = bilinear(levels, size, uv, fine + 1, sampler);
+    let b = bilinear(levels, size, uv, fine + 1, sampler, &texel);
     core::array::from_fn(|c| a[c] + (b[c] - a[c]) * t)
 }
 
@@ -110,9 +130,16 @@ fn srgb_table() -> &'static [f32; 256] {
     TABLE.get_or_init(|| core::array::from_fn(|b| srgb_to_linear(f32::from(u8::try_from(b).unwrap_or(255)) / 255.0)))
 }
 
-/// The bilinear sample of level `level` (texel centres at `+½`).
-fn bilinear(levels: &[Vec<u8>], size: (u32, u32), uv: [f32; 2], level: usize, sampler: Sampler) -> [f32; 4] {
-    let Some(texels) = levels.get(level) else { return [1.0; 4] };
+/// The bilinear sample of level `level` (texel centres at `+½`) of the values `texel` reads.
+fn bilinear<const N: usize>(
+    levels: &[Vec<u8>],
+    size: (u32, u32),
+    uv: [f32; 2],
+    level: usize,
+    sampler: Sampler,
+    texel: &impl Fn(&[u8]) -> [f32; N],
+) -> [f32; N] {
+    let Some(texels) = levels.get(level) else { return [1.0; N] };
     let shift = u32::try_from(level).unwrap_or(31).min(31);
     let (w, h) = ((size.0 >> shift).max(1) as usize, (size.1 >> shift).max(1) as usize);
     #[expect(clippy::cast_precision_loss, reason = "texture sides")]
@@ -123,13 +150,10 @@ fn bilinear(levels: &[Vec<u8>], size: (u32, u32), uv: [f32; 2], level: usize, sa
     #[expect(clippy::cast_possible_wrap, reason = "texture sides")]
     let (nw, nh) = (w as i64, h as i64);
     let wrap = |v: i64, n: i64| if sampler.repeat { v.rem_euclid(n) } else { v.clamp(0, n - 1) };
-    let lut = srgb_table();
-    let decode = |b: u8| if sampler.srgb { lut[usize::from(b)] } else { f32::from(b) / 255.0 };
     #[expect(clippy::cast_sign_loss, clippy::cast_possible_truncation, reason = "wrapped into the level")]
-    let at = |x: i64, y: i64| -> [f32; 4] {
+    let at = |x: i64, y: i64| -> [f32; N] {
         let i = (wrap(y, nh) as usize * w + wrap(x, nw) as usize) * 4;
-        let t = texels.get(i..i + 4).unwrap_or(&[255; 4]);
-        [decode(t[0]), decode(t[1]), decode(t[2]), f32::from(t[3]) / 255.0]
+        texel(texels.get(i..i + 4).unwrap_or(&[255; 4]))
     };
     let (a, b, c, d) = (at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1));
     core::array::from_fn(|k| {
@@ -315,6 +339,11 @@ mod tests {
         assert!((sample(&levels, (2, 2), [0.25, 0.25], 0.6, Sampler::ATLASES)[3] - 0.5).abs() < 1e-2);
         assert_eq!(sample(&levels, (2, 2), [-3.0, 0.1], 0.0, Sampler::ATLASES), [1.0; 4]);
         assert_eq!(sample(&levels, (2, 2), [1.25, -0.75], 0.0, Sampler::ATLASES)[3], 0.0);
+        // The alpha alone is the sample's.
+        for (uv, lod) in [([0.3, 0.6], 0.0), ([0.5, 0.5], 0.3), ([-0.2, 1.7], 0.8)] {
+            let full = sample(&levels, (2, 2), uv, lod, Sampler::MATERIALS)[3];
+            assert_eq!(sample_alpha(&levels, (2, 2), uv, lod, Sampler::MATERIALS), full);
+        }
     }
 
     #[test]
