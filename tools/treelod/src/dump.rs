@@ -562,7 +562,7 @@ impl CalibrationInfo {
         }
         let measure = if self.colour { "shaded colour" } else { "coverage" };
         format!(
-            "\ncalibration (multi-scale RMSE of {measure} against the supersampled full mesh, and primitives drawn, \
+            "\ncalibration (multi-scale RMSE of {measure} against the supersampled full mesh, and primitives submitted, \
              by the block's projected height)\n{}",
             table.render("  ")
         )
