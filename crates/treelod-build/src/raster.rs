@@ -304,47 +304,11 @@ pub fn bounding_sphere(points: impl Iterator<Item = Vec3> + Clone) -> (Vec3, f32
 /// whose centres it holds, after the alpha test with `alpha` at the interpolated `uv`. Pixels
 /// already covered are not tested again.
 pub fn fill_triangle(mask: &mut Mask, p: [Vec2; 3], uv: [Vec2; 3], alpha: Option<&AlphaMask>) {
-    let size = mask.size as f32;
-    // Entirely outside the image, or not finite: nothing to do.
-    let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-    if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= size && min.y <= size) {
-        return;
-    }
-    let mut v = p.map(|q| (snap(q.x), snap(q.y)));
-    // Pixel centres inside the snapped box: x·256 + 128 ∈ [min, max] (shifts divide by 256,
-    // rounding down).
-    let half = SUBPIXEL / 2;
-    let last = i64::from(mask.size) - 1;
-    let (x0, x1) = (
-        (-((half - v[0].0.min(v[1].0).min(v[2].0)) >> SUBPIXEL_BITS)).max(0),
-        ((v[0].0.max(v[1].0).max(v[2].0) - half) >> SUBPIXEL_BITS).min(last),
-    );
-    let (y0, y1) = (
-        (-((half - v[0].1.min(v[1].1).min(v[2].1)) >> SUBPIXEL_BITS)).max(0),
-        ((v[0].1.max(v[1].1).max(v[2].1) - half) >> SUBPIXEL_BITS).min(last),
-    );
-    if x0 > x1 || y0 > y1 {
-        return;
-    }
+    let Some(Setup { x0, x1, y0, y1, area, swapped, edges }) = Setup::new(mask.size, p) else { return };
     let mut uv = uv;
-    let mut area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[1].1 - v[0].1) * (v[2].0 - v[0].0);
-    if area == 0 {
-        return;
-    }
-    if area < 0 {
-        v.swap(1, 2);
+    if swapped {
         uv.swap(1, 2);
-        area = -area;
     }
-    // Edge k runs from v[k+1] to v[k+2], opposite corner k; inside where all edge functions are
-    // positive, or zero on a top or left edge (y down: an edge going up, or a horizontal edge
-    // going right), which the bias of −1 on the other edges turns into "≥ 0" everywhere.
-    let edges: [Edge; 3] = core::array::from_fn(|k| {
-        let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
-        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-        let top_left = dy < 0 || (dy == 0 && dx > 0);
-        Edge { a, dx, dy, bias: if top_left { 0 } else { -1 } }
-    });
     // Along a row each edge function changes by `slope` per pixel; `inverse` estimates where it
     // crosses zero without an integer division, and the estimate is corrected exactly below.
     let slope = edges.map(|e| -e.dy * SUBPIXEL);
@@ -433,42 +397,9 @@ pub fn fill_triangle(mask: &mut Mask, p: [Vec2; 3], uv: [Vec2; 3], alpha: Option
 /// `fill_triangle` without alpha test covers; `b` holds the barycentric weights of `p[0]`,
 /// `p[1]` and `p[2]` at the centre. Rows top to bottom, left to right.
 pub fn triangle_pixels(size: u32, p: [Vec2; 3], mut pixel: impl FnMut(usize, usize, [f32; 3])) {
-    let side = size as f32;
-    let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-    if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= side && min.y <= side) {
-        return;
-    }
-    let mut v = p.map(|q| (snap(q.x), snap(q.y)));
-    let half = SUBPIXEL / 2;
-    let last = i64::from(size) - 1;
-    let (x0, x1) = (
-        (-((half - v[0].0.min(v[1].0).min(v[2].0)) >> SUBPIXEL_BITS)).max(0),
-        ((v[0].0.max(v[1].0).max(v[2].0) - half) >> SUBPIXEL_BITS).min(last),
-    );
-    let (y0, y1) = (
-        (-((half - v[0].1.min(v[1].1).min(v[2].1)) >> SUBPIXEL_BITS)).max(0),
-        ((v[0].1.max(v[1].1).max(v[2].1) - half) >> SUBPIXEL_BITS).min(last),
-    );
-    if x0 > x1 || y0 > y1 {
-        return;
-    }
-    let mut area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[1].1 - v[0].1) * (v[2].0 - v[0].0);
-    if area == 0 {
-        return;
-    }
-    // Corner order after making the winding positive: `order[k]` is the input corner at `v[k]`.
-    let mut order = [0, 1, 2];
-    if area < 0 {
-        v.swap(1, 2);
-        order.swap(1, 2);
-        area = -area;
-    }
-    let edges: [Edge; 3] = core::array::from_fn(|k| {
-        let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
-        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-        let top_left = dy < 0 || (dy == 0 && dx > 0);
-        Edge { a, dx, dy, bias: if top_left { 0 } else { -1 } }
-    });
+    let Some(Setup { x0, x1, y0, y1, area, swapped, edges }) = Setup::new(size, p) else { return };
+    // `order[k]`: the input corner at snapped corner `k`.
+    let order = if swapped { [0, 2, 1] } else { [0, 1, 2] };
     #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
     let inv_area = 1.0 / area as f32;
     for y in y0..=y1 {
@@ -488,6 +419,66 @@ pub fn triangle_pixels(size: u32, p: [Vec2; 3], mut pixel: impl FnMut(usize, usi
                 w[k] -= edges[k].dy * SUBPIXEL;
             }
         }
+    }
+}
+
+/// A triangle snapped for rasterising into a `size × size` image: the pixel box whose centres
+/// it may hold, its doubled area in fixed point (positive), whether corners 1 and 2 were swapped
+/// to make it so, and its edges with the top-left rule.
+struct Setup {
+    x0: i64,
+    x1: i64,
+    y0: i64,
+    y1: i64,
+    area: i64,
+    swapped: bool,
+    edges: [Edge; 3],
+}
+
+impl Setup {
+    /// `None` for a triangle entirely outside the image, not finite, or without area.
+    fn new(size: u32, p: [Vec2; 3]) -> Option<Self> {
+        let side = size as f32;
+        // Entirely outside the image, or not finite: nothing to do.
+        let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= side && min.y <= side) {
+            return None;
+        }
+        let mut v = p.map(|q| (snap(q.x), snap(q.y)));
+        // Pixel centres inside the snapped box: x·256 + 128 ∈ [min, max] (shifts divide by 256,
+        // rounding down).
+        let half = SUBPIXEL / 2;
+        let last = i64::from(size) - 1;
+        let (x0, x1) = (
+            (-((half - v[0].0.min(v[1].0).min(v[2].0)) >> SUBPIXEL_BITS)).max(0),
+            ((v[0].0.max(v[1].0).max(v[2].0) - half) >> SUBPIXEL_BITS).min(last),
+        );
+        let (y0, y1) = (
+            (-((half - v[0].1.min(v[1].1).min(v[2].1)) >> SUBPIXEL_BITS)).max(0),
+            ((v[0].1.max(v[1].1).max(v[2].1) - half) >> SUBPIXEL_BITS).min(last),
+        );
+        if x0 > x1 || y0 > y1 {
+            return None;
+        }
+        let mut area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[1].1 - v[0].1) * (v[2].0 - v[0].0);
+        if area == 0 {
+            return None;
+        }
+        let swapped = area < 0;
+        if swapped {
+            v.swap(1, 2);
+            area = -area;
+        }
+        // Edge k runs from v[k+1] to v[k+2], opposite corner k; inside where all edge functions
+        // are positive, or zero on a top or left edge (y down: an edge going up, or a horizontal
+        // edge going right), which the bias of −1 on the other edges turns into "≥ 0" everywhere.
+        let edges: [Edge; 3] = core::array::from_fn(|k| {
+            let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
+            let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+            let top_left = dy < 0 || (dy == 0 && dx > 0);
+            Edge { a, dx, dy, bias: if top_left { 0 } else { -1 } }
+        });
+        Some(Self { x0, x1, y0, y1, area, swapped, edges })
     }
 }
 

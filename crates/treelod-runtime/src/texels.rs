@@ -301,11 +301,14 @@ mod tests {
         assert_eq!(chain[2][1], 200, "colour averages as before");
     }
 
+    /// A 2 × 2 image: `diagonal` at texels 0 and 3, `other` at 1 and 2.
+    fn checker(diagonal: [u8; 4], other: [u8; 4]) -> Vec<u8> {
+        (0..4).flat_map(|i| if i % 3 == 0 { diagonal } else { other }).collect()
+    }
+
     #[test]
     fn mips_average_a_checkerboard() {
-        let base: Vec<u8> =
-            (0..4).flat_map(|i| if i % 3 == 0 { [0u8, 0, 0, 0] } else { [255, 255, 255, 255] }).collect();
-        let chain = mip_chain(base, 2);
+        let chain = mip_chain(checker([0, 0, 0, 0], [255; 4]), 2);
         // The transparent black texels do not darken the opaque white ones.
         assert_eq!(chain[1], [255, 255, 255, 128]);
     }
@@ -313,17 +316,14 @@ mod tests {
     #[test]
     fn mips_average_in_linear_light() {
         // Opaque black and white: half the light, sRGB 188, not the bytes' mean 128.
-        let base: Vec<u8> =
-            (0..4).flat_map(|i| if i % 3 == 0 { [0u8, 0, 0, 255] } else { [255, 255, 255, 255] }).collect();
-        let chain = mip_chain(base, 2);
+        let chain = mip_chain(checker([0, 0, 0, 255], [255; 4]), 2);
         assert_eq!(chain[1], [188, 188, 188, 255]);
     }
+
     #[test]
     fn trilinear_samples_blend_levels_and_repeat() {
         // 2×2: opaque white on the diagonal, transparent black elsewhere; level 1 is half covered.
-        let base: Vec<u8> =
-            (0..4).flat_map(|i| if i % 3 == 0 { [255u8, 255, 255, 255] } else { [0, 0, 0, 0] }).collect();
-        let levels = mip_chain(base, 2);
+        let levels = mip_chain(checker([255; 4], [0; 4]), 2);
         // At a texel centre of level 0, that texel.
         assert_eq!(sample(&levels, (2, 2), [0.25, 0.25], 0.0, Sampler::MATERIALS), [1.0; 4]);
         assert_eq!(sample(&levels, (2, 2), [0.75, 0.25], 0.0, Sampler::MATERIALS)[3], 0.0);
