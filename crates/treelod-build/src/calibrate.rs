@@ -59,7 +59,7 @@ use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
     CalibrationRecord, ContainerData, ImageRecord, NO_IMAGE, Setting, TriangleRecord, billboard_kind,
-    calibration_technique, decode_ao, image_format, material_class, prune_leaves_drawn,
+    calibration_technique, decode_ao, image, image_format, material_class, prune_leaves_drawn,
 };
 use treelod_runtime::ellipsoid::{ellipsoid_drawn, line_drawn};
 use treelod_runtime::impostor::{BARK_AREA_KEPT, BARK_ERROR_SHARE, area};
@@ -69,7 +69,6 @@ use treelod_runtime::{LodChain, LodSettings, SptRecord, Thresholds, point_drawn,
 use treelod_runtime::texels::{self, Sampler, Texels};
 
 use crate::raster::{NOISE_SIZE, View, ellipse_spans, ellipsoid_hits, noise_cut, view_directions};
-use crate::scene::{Image, ImageEncoding};
 use crate::shade::{Canvas, Surface, depth, triangle_pixels};
 
 /// Projected heights of the block at which every representation is measured, pixels: octaves
@@ -231,7 +230,6 @@ fn error(canvas: &Canvas, reference: &LinearImage) -> f64 {
 
 impl<'a> Scene<'a> {
     fn new(data: &'a ContainerData) -> Self {
-        let decoded: Vec<Option<Image>> = data.images.iter().map(|record| decode(data, record)).collect();
         // Planes and billboards sample their atlas with its stored mips (spec §6.10).
         let textured: Vec<u32> =
             data.planes.iter().map(|p| p.image).chain(data.billboards.iter().map(|b| b.image)).collect();
@@ -243,37 +241,26 @@ impl<'a> Scene<'a> {
             .collect();
         // The renderer's texture array (`treelod-render`'s textures): every image but those only
         // planes sample (their atlases are textures of their own).
-        let mut atlas = vec![false; data.images.len()];
-        for plane in &data.planes {
-            if let Some(slot) = atlas.get_mut(plane.image as usize) {
-                *slot = true;
-            }
-        }
-        for material in &data.materials {
-            if let Some(slot) = atlas.get_mut(material.image as usize) {
-                *slot = false;
-            }
-        }
+        let atlas_only = texels::atlas_only(data.images.len(), &data.materials, &data.planes);
         let by_image = texels::alpha_cutoffs(&data.materials, data.images.len());
         let mut layer_of = vec![None; data.images.len()];
-        let (mut images, mut cutoffs) = (Vec::new(), Vec::new());
-        for (i, image) in decoded.iter().enumerate().filter(|&(i, _)| !atlas[i]) {
-            layer_of[i] = Some(images.len());
-            images.push(image.as_ref().map(|i| Texels { width: i.width, height: i.height, rgba: &i.rgba }));
+        let (mut decoded, mut cutoffs) = (Vec::new(), Vec::new());
+        for (i, record) in data.images.iter().enumerate().filter(|&(i, _)| !atlas_only[i]) {
+            layer_of[i] = Some(decoded.len());
+            decoded.push(record.bytes(&data.image_data).and_then(|bytes| image::decode(record, bytes).ok()));
             cutoffs.push(by_image[i]);
         }
+        let images: Vec<Option<Texels<'_>>> = decoded
+            .iter()
+            .map(|image| image.as_ref().map(|i| Texels { width: i.width, height: i.height, rgba: &i.texels }))
+            .collect();
         let layers = texels::Layers::new(&images, &cutoffs);
         let materials = data
             .materials
             .iter()
             .map(|m| {
                 let layer = (m.image != NO_IMAGE).then(|| layer_of.get(m.image as usize).copied().flatten()).flatten();
-                let cutoff = match m.alpha_mode {
-                    1 => Some(m.alpha_cutoff),
-                    2 => Some(0.5),
-                    _ => None,
-                };
-                (Vec4::from_array(m.base_color), layer, cutoff)
+                (Vec4::from_array(m.base_color), layer, texels::material_cutoff(m))
             })
             .collect();
         let vertices = data
@@ -281,11 +268,8 @@ impl<'a> Scene<'a> {
             .iter()
             .enumerate()
             .map(|(i, v)| {
-                let [r, g, b, a] = unpack_rgba8(v.color);
-                let colour =
-                    Vec4::new(texels::srgb_to_linear(r), texels::srgb_to_linear(g), texels::srgb_to_linear(b), a);
                 let ao = data.vertex_ao.get(i).map_or(0.0, |&a| decode_ao(a));
-                (Vec3::from_array(oct_decode(v.normal)), colour, ao)
+                (Vec3::from_array(oct_decode(v.normal)), linear_colour(v.color), ao)
             })
             .collect();
         let raster = |t: &TriangleRecord| tri(data, t, 1.0, None);
@@ -581,9 +565,8 @@ impl<'a> Scene<'a> {
                 if !point_drawn(point, thresholds) {
                     continue;
                 }
-                let [r, g, b, _] = unpack_rgba8(point.color);
                 let surface = Surface {
-                    albedo: Vec3::new(r, g, b).map(texels::srgb_to_linear),
+                    albedo: linear_colour(point.color).truncate(),
                     normal: Vec3::from_array(oct_decode(point.normal)),
                     ao: d.point_ao.get(first + i).map_or(0.0, |&a| decode_ao(a)),
                 };
@@ -614,8 +597,7 @@ impl<'a> Scene<'a> {
             let level = (top - e.noise_mip).max(footprint).clamp(0.0, top);
             let level = ((level + 0.5).ceil() - 1.0).clamp(0.0, top) as u32;
             let cut = noise_cut(e.alpha_threshold);
-            let [r, g, b, _] = unpack_rgba8(e.color);
-            let albedo = Vec3::new(r, g, b).map(texels::srgb_to_linear);
+            let albedo = linear_colour(e.color).truncate();
             let ao = d.ellipsoid_ao.get(i).map_or(0.0, |&a| decode_ao(a));
             let centre = Vec3::from_array(e.center);
             // The normal at local `u` is `A⁻ᵀ u` = Σ u_i · axes[i] / r_i².
@@ -646,8 +628,7 @@ impl<'a> Scene<'a> {
         }
         drawn += d.lines.iter().map(|l| above(l.interval())).sum::<u64>();
         for (i, line) in d.lines.iter().enumerate().filter(|(_, l)| line_drawn(l, p)) {
-            let [r, g, b, _] = unpack_rgba8(line.color);
-            let albedo = Vec3::new(r, g, b).map(texels::srgb_to_linear);
+            let albedo = linear_colour(line.color).truncate();
             let ao = d.line_ao.get(i).map_or(0.0, |&a| decode_ao(a));
             capsule(
                 canvas,
@@ -803,34 +784,20 @@ fn pixel_depth_hash(x: usize, y: usize, depth: f32) -> f32 {
     ((crate::rng::SplitMix64(key).next_u64() >> 40) as f32) / ((1u64 << 24) as f32)
 }
 
-/// An atlas image with its stored levels (raw and BC7 formats; other formats decoded to one
-/// level); `None` for leaf slots and images that do not decode.
+/// An atlas image with its stored levels as the renderer samples it without BC textures
+/// ([`image::decode_mips`]); `None` for leaf slots and images that do not decode.
 fn atlas(data: &ContainerData, record: &ImageRecord) -> Option<Atlas> {
-    let bytes = data.image_data.get(record.data_offset as usize..)?.get(..record.data_length as usize)?;
-    let sampler = Sampler { srgb: image_format::is_srgb(record.format), ..Sampler::ATLASES };
-    match record.format {
-        image_format::LEAF_SLOTS => None,
-        image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR | image_format::BC7_SRGB | image_format::BC7_LINEAR => {
-            let levels = treelod_format::image::decode_levels(record, bytes).ok()?;
-            Some(Atlas { levels, size: (record.width.max(1), record.height.max(1)), sampler })
-        }
-        _ => {
-            let image = treelod_format::image::decode(record, bytes).ok()?;
-            Some(Atlas { levels: vec![image.texels], size: (image.width, image.height), sampler: Sampler::ATLASES })
-        }
+    if record.format == image_format::LEAF_SLOTS {
+        return None;
     }
+    let mips = image::decode_mips(record, record.bytes(&data.image_data)?).ok()?;
+    let sampler = Sampler { srgb: image_format::is_srgb(record.format), ..Sampler::ATLASES };
+    Some(Atlas { levels: mips.levels, size: (mips.width, mips.height), sampler })
 }
 
-/// An image of the container decoded for its alpha test; `None` for leaf slots and images that
-/// do not decode (their texels are not colours).
-fn decode(data: &ContainerData, record: &ImageRecord) -> Option<Image> {
-    let bytes = data.image_data.get(record.data_offset as usize..)?.get(..record.data_length as usize)?;
-    let image = treelod_format::image::decode(record, bytes).ok()?;
-    Some(Image {
-        width: image.width,
-        height: image.height,
-        rgba: image.texels,
-        encoded: Vec::new(),
-        encoding: ImageEncoding::Raw,
-    })
+/// A colour as records store it (RGBA8, RGB sRGB-encoded) in linear light, as `decode_color`
+/// in the shaders reads it.
+fn linear_colour(packed: u32) -> Vec4 {
+    let [r, g, b, a] = unpack_rgba8(packed);
+    Vec4::new(texels::srgb_to_linear(r), texels::srgb_to_linear(g), texels::srgb_to_linear(b), a)
 }

@@ -588,6 +588,14 @@ pub mod image_format {
 pub const BC7_BLOCK_BYTES: u64 = 16;
 
 impl ImageRecord {
+    /// The image's slice of `image_data` (the `IMAGE_DATA` section), `None` where it lies outside.
+    #[must_use]
+    pub fn bytes<'a>(&self, image_data: &'a [u8]) -> Option<&'a [u8]> {
+        let start = usize::try_from(self.data_offset).ok()?;
+        let end = start.checked_add(usize::try_from(self.data_length).ok()?)?;
+        image_data.get(start..end)
+    }
+
     /// Bytes the mip chain of formats 1 and 2 (raw texels) or 6 and 7 (BC7 blocks) needs (spec
     /// §6.7), `None` on overflow.
     #[must_use]

@@ -7,8 +7,9 @@
 //! Images only impostor planes sample (an atlas, spec §6.10) get no layer: they are uploaded as
 //! they are stored, with their own mips, by the renderer ([`atlas`]).
 
+use treelod_format::image::Rgba8Levels;
 use treelod_format::{Container, image_format};
-use treelod_runtime::texels::{self, Texels, alpha_cutoffs};
+use treelod_runtime::texels::{self, Texels, alpha_cutoffs, atlas_only};
 
 /// The texel layers of one model: `layers` images of `size`×`size`, each with `mips` levels,
 /// level-major per layer (level 0 of layer 0, level 1 of layer 0, …).
@@ -25,17 +26,7 @@ pub(crate) struct Layers {
 /// warning, so one bad texture does not stop a forest from drawing.
 pub(crate) fn layers(container: &Container, warnings: &mut Vec<String>) -> Layers {
     // Images sampled by planes and by no material are atlases: no layer.
-    let mut atlas = vec![false; container.images().len()];
-    for plane in container.planes() {
-        if let Some(slot) = atlas.get_mut(plane.image as usize) {
-            *slot = true;
-        }
-    }
-    for material in container.materials() {
-        if let Some(slot) = atlas.get_mut(material.image as usize) {
-            *slot = false;
-        }
-    }
+    let atlas = atlas_only(container.images().len(), container.materials(), container.planes());
     let mut decoded = Vec::new();
     let mut layer_of = Vec::with_capacity(atlas.len());
     for (index, record) in container.images().iter().enumerate() {
@@ -44,11 +35,8 @@ pub(crate) fn layers(container: &Container, warnings: &mut Vec<String>) -> Layer
             continue;
         }
         layer_of.push(i32::try_from(decoded.len()).unwrap_or(-1));
-        let start = usize::try_from(record.data_offset).unwrap_or(usize::MAX);
-        let end = start.saturating_add(usize::try_from(record.data_length).unwrap_or(usize::MAX));
-        let result = container
-            .image_data()
-            .get(start..end)
+        let result = record
+            .bytes(container.image_data())
             .ok_or_else(|| "its bytes lie outside IMAGE_DATA".to_owned())
             .and_then(|data| treelod_format::image::decode(record, data));
         match result {
@@ -89,9 +77,7 @@ pub(crate) struct Atlas {
 /// BC formats), else it is decoded to RGBA8 on the CPU, level by level.
 pub(crate) fn atlas(container: &Container, index: u32, bc_textures: bool) -> Result<Atlas, String> {
     let record = container.images().get(index as usize).ok_or_else(|| format!("image {index} does not exist"))?;
-    let start = usize::try_from(record.data_offset).unwrap_or(usize::MAX);
-    let end = start.saturating_add(usize::try_from(record.data_length).unwrap_or(usize::MAX));
-    let data = container.image_data().get(start..end).ok_or("its bytes lie outside IMAGE_DATA")?;
+    let data = record.bytes(container.image_data()).ok_or("its bytes lie outside IMAGE_DATA")?;
     let (width, height) = (record.width.max(1), record.height.max(1));
     let srgb = image_format::is_srgb(record.format);
     match record.format {
@@ -113,24 +99,14 @@ pub(crate) fn atlas(container: &Container, index: u32, bc_textures: bool) -> Res
             }
             Ok(Atlas { width, height, srgb, slots: false, bc7: true, levels })
         }
-        image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR | image_format::BC7_SRGB | image_format::BC7_LINEAR => {
-            let levels = treelod_format::image::decode_levels(record, data)?;
-            Ok(Atlas { width, height, srgb, slots: false, bc7: false, levels })
-        }
         image_format::LEAF_SLOTS => {
             let texels = data.get(..width as usize * height as usize * 4).ok_or("the leaf slots are cut short")?;
             Ok(Atlas { width, height, srgb: false, slots: true, bc7: false, levels: vec![texels.to_vec()] })
         }
+        // The stored levels, or the one level a PNG or JPEG decodes to.
         _ => {
-            let image = treelod_format::image::decode(record, data)?;
-            Ok(Atlas {
-                width: image.width,
-                height: image.height,
-                srgb: true,
-                slots: false,
-                bc7: false,
-                levels: vec![image.texels],
-            })
+            let Rgba8Levels { width, height, levels } = treelod_format::image::decode_mips(record, data)?;
+            Ok(Atlas { width, height, srgb, slots: false, bc7: false, levels })
         }
     }
 }

@@ -5,7 +5,7 @@
 //! (`treelod-render`'s texture array); the build's calibration samples the same texels, so the
 //! leaves it measures thin out or keep their density with distance exactly as drawn.
 
-use treelod_format::MaterialRecord;
+use treelod_format::{MaterialRecord, PlaneRecord};
 
 /// Largest layer size; leaf textures seldom need more at the distances where triangles are drawn.
 pub const MAX_LAYER: u32 = 512;
@@ -189,18 +189,43 @@ pub fn resample(texels: &[u8], width: u32, height: u32, size: u32) -> Vec<u8> {
     out
 }
 
+/// Per image of a container, whether it is an atlas of its own rather than a layer: sampled by
+/// planes and by no material (spec §6.10).
+#[must_use]
+pub fn atlas_only(images: usize, materials: &[MaterialRecord], planes: &[PlaneRecord]) -> Vec<bool> {
+    let mut atlas = vec![false; images];
+    for plane in planes {
+        if let Some(slot) = atlas.get_mut(plane.image as usize) {
+            *slot = true;
+        }
+    }
+    for material in materials {
+        if let Some(slot) = atlas.get_mut(material.image as usize) {
+            *slot = false;
+        }
+    }
+    atlas
+}
+
+/// The alpha a material's fragments are tested against: `alpha_cutoff` for mask, 0.5 for blend
+/// (the shaders draw blend as a mask), `None` for opaque (`material_cutoff` in the shaders).
+#[must_use]
+pub fn material_cutoff(material: &MaterialRecord) -> Option<f32> {
+    match material.alpha_mode {
+        1 => Some(material.alpha_cutoff),
+        2 => Some(0.5),
+        _ => None,
+    }
+}
+
 /// Per image, the texel alpha below which the first material that alpha-tests it discards
-/// (`alpha_cutoff` for mask, 0.5 for blend — the shader draws blend as a mask — divided by the
-/// material's base-colour alpha, which multiplies the texel's); `None` for images no material
-/// alpha-tests.
+/// ([`material_cutoff`] divided by the material's base-colour alpha, which multiplies the
+/// texel's); `None` for images no material alpha-tests.
+#[must_use]
 pub fn alpha_cutoffs(materials: &[MaterialRecord], images: usize) -> Vec<Option<f32>> {
     let mut cutoffs = vec![None; images];
     for material in materials {
-        let cutoff = match material.alpha_mode {
-            1 => material.alpha_cutoff,
-            2 => 0.5,
-            _ => continue,
-        };
+        let Some(cutoff) = material_cutoff(material) else { continue };
         let factor = material.base_color[3];
         let Some(slot) = usize::try_from(material.image).ok().and_then(|i| cutoffs.get_mut(i)) else { continue };
         if slot.is_none() && factor > 0.0 && cutoff.is_finite() {
