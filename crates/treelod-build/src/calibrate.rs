@@ -17,8 +17,10 @@
 //!   bias), point discs of their radius (a sub-pixel disc as the one-pixel splat of spec §10.1,
 //!   drawn when a hash of the point falls below its coverage), pruned leaves at `λ(h)` scaled by
 //!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test, the bark of both
-//!   as the runtime draws it by default (the LoD chain's bark level for `τ_p` where the container
-//!   has a chain, else every bark triangle), ellipsoids at `τ = p` with the renderer's noise holes
+//!   as the runtime draws it by default (impostor trees: the branch lines of `τ = p` where the
+//!   container has lines; pruned trees, and impostor trees without lines: the LoD chain's bark
+//!   level for `τ_p` where the container has a chain, else every bark triangle), ellipsoids at
+//!   `τ = p` with the renderer's noise holes
 //!   and the branch lines (or every bark triangle without lines), the LoD chain's level for
 //!   `τ = p`, the billboards. Alpha-tested triangles are tested against their cutoff at the
 //!   trilinear sample of the renderer's own texture layers ([`treelod_runtime::texels`]: every
@@ -290,10 +292,17 @@ impl<'a> Scene<'a> {
         Self { data, atlases, layers, materials, vertices, full, bark, chain_bark, planes_drawable }
     }
 
-    /// Draws the bark of a pruned or impostor tree at `τ = tau` (metres) as the runtime's
-    /// `ImpostorBark::Chain` does: the chain's coarsest bark level whose error is at most
-    /// [`BARK_ERROR_SHARE`] of `τ`, else every bark triangle. Returns the triangles drawn.
-    fn draw_bark(&self, view: &View, tau: f32, canvas: &mut Canvas) -> u64 {
+    /// Draws the bark of a pruned or impostor tree at `p` metres per pixel as the runtime's
+    /// `ImpostorBark` does: with `lines` (`ImpostorBark::Lines`, the impostor trees' default) and
+    /// a container with branch lines, the lines of `τ = p` ([`Self::draw_lines`]); else as
+    /// `ImpostorBark::Chain` (pruned trees' default), the chain's coarsest bark level whose error
+    /// is at most [`BARK_ERROR_SHARE`] of `τ = s_min · p`, else every bark triangle. Returns the
+    /// primitives submitted.
+    fn draw_bark(&self, view: &View, p: f32, lines: bool, canvas: &mut Canvas) -> u64 {
+        if lines && !self.data.lines.is_empty() {
+            return self.draw_lines(view, p, canvas);
+        }
+        let tau = LodSettings::default().s_min * p;
         let usable = self.chain_bark.partition_point(|(error, _)| *error <= tau * BARK_ERROR_SHARE);
         let triangles = match usable.checked_sub(1) {
             Some(level) => &self.chain_bark[level].1,
@@ -412,7 +421,7 @@ impl<'a> Scene<'a> {
                 let mode = if technique == t::PRUNE_OPT { PruneScale::Optimal } else { PruneScale::Cook };
                 let lambda = curve_at(&d.prune_lambda, pixels).unwrap_or(1.0).clamp(0.0, 1.0);
                 let grow = size_factor(leaf_scale(mode, &d.prune_scale, lambda));
-                let mut drawn = self.draw_bark(view, lod.s_min * p, canvas);
+                let mut drawn = self.draw_bark(view, p, false, canvas);
                 let mut leaves = Vec::new();
                 for cell in &d.cells {
                     let list = d.prune_leaves.get(cell.prune_leaves.as_usize()).unwrap_or(&[]);
@@ -430,7 +439,7 @@ impl<'a> Scene<'a> {
             }
             t::IMPOSTORS => {
                 let tau = lod.s_min * p;
-                let mut drawn = self.draw_bark(view, tau, canvas);
+                let mut drawn = self.draw_bark(view, p, true, canvas);
                 // The prefix `hi > τ` is submitted; the vertex shader drops the coarser planes.
                 drawn += d.planes.iter().filter(|pl| tau < pl.hi && pl.lo > tau).count() as u64;
                 for (i, plane) in d.planes.iter().enumerate().filter(|(_, pl)| pl.lo <= tau && tau < pl.hi) {
@@ -626,7 +635,15 @@ impl<'a> Scene<'a> {
             self.draw_triangles(canvas, view, &self.bark, false);
             return drawn + self.bark.len() as u64;
         }
-        drawn += d.lines.iter().map(|l| above(l.interval())).sum::<u64>();
+        drawn + self.draw_lines(view, p, canvas)
+    }
+
+    /// The branch lines of `τ = p` (each cell's prefix `hi > τ` submitted, those of `lo ≤ τ`
+    /// drawn as capsules of their radii). Returns the primitives submitted.
+    fn draw_lines(&self, view: &View, p: f32, canvas: &mut Canvas) -> u64 {
+        let d = self.data;
+        let above = |interval: (f32, f32)| u64::from(interval.0 > p && interval.1 > p);
+        let mut drawn = d.lines.iter().map(|l| above(l.interval())).sum::<u64>();
         for (i, line) in d.lines.iter().enumerate().filter(|(_, l)| line_drawn(l, p)) {
             let albedo = linear_colour(line.color).truncate();
             let ao = d.line_ao.get(i).map_or(0.0, |&a| decode_ao(a));

@@ -170,7 +170,9 @@ pub struct Settings {
     /// the interval the plane and its parent are drawn on complementary dithered pixels
     /// ([`treelod_runtime::crossfade`]). `false` switches levels at once.
     pub impostor_morph: bool,
-    /// With [`Technique::Impostors`]: the bark drawn beside the planes.
+    /// With [`Technique::Impostors`]: the bark drawn beside the planes. Default
+    /// [`ImpostorBark::Lines`]: the branch lines where the container has them, else the LoD
+    /// chain's bark at the level `s_min` allows, else every bark triangle.
     pub impostor_bark: ImpostorBark,
     /// With [`Technique::Ellipsoids`] (the leaves of every tree whose container has Clasen's
     /// ellipsoids, spec §6.8, ray-cast per pixel with their noise, its bark as Clasen's lines,

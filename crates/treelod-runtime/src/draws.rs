@@ -466,7 +466,7 @@ pub fn select_techniques(
                 crate::prune::select(scene, list, technique, settings, camera, state, out);
             }
             Technique::Impostors => {
-                crate::impostor::select(scene, list, camera, settings.s_min, settings.impostor_bark, out);
+                crate::impostor::select(scene, list, camera, settings, out);
             }
             Technique::Ellipsoids => {
                 let (level, lines) = (settings.pixel_level, settings.lines);
