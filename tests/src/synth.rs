@@ -5,10 +5,10 @@ use core::ops::RangeInclusive;
 use treelod_build::{SptNode, flatten};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
-    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ContainerData, CurveSample, EllipsoidRecord,
-    ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord,
-    PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
-    billboard_kind, calibration_technique, image_format,
+    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ContainerData, CurveSample,
+    ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord,
+    NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree,
+    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -75,6 +75,12 @@ pub struct SyntheticOptions {
     /// and a whole number of primitives, in `CALIBRATION`. Drawn last, so the rest of the
     /// container is the same as without it.
     pub calibration: bool,
+    /// Calibration tables per elevation (spec §6.16, 1.7): `CALIBRATION`'s pairs of technique and
+    /// height at the elevations 0, 30, 60 and 90 degrees, each error the mean's scaled by a
+    /// random factor of `[0.5, 1.5]` (clamped to `[0, 1]`), the primitives the mean's, in
+    /// `CALIBRATION_ELEVATIONS`. Needs `calibration`; drawn last, so the rest of the container is
+    /// the same as without it.
+    pub calibration_elevations: bool,
     /// The impostor atlas stored as BC7 (spec §6.7 format 7, 1.6): its RGBA8 levels encoded by
     /// the build's encoder into blocks appended to `IMAGE_DATA`, the record pointing at them (the
     /// RGBA8 bytes stay, unreferenced). Done last, so the rest of the container is the same as
@@ -110,6 +116,7 @@ impl SyntheticOptions {
             ellipsoid_ao: false,
             line_ao: false,
             calibration: false,
+            calibration_elevations: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -129,12 +136,12 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.5: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.7: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
     /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`) and
-    /// calibration tables (`CALIBRATION`).
+    /// calibration tables (`CALIBRATION`, and per elevation, `CALIBRATION_ELEVATIONS`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -158,6 +165,7 @@ impl SyntheticOptions {
             ellipsoid_ao: true,
             line_ao: true,
             calibration: true,
+            calibration_elevations: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1042,6 +1050,9 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     if options.calibration {
         b.data.calibration = calibration(&mut rng);
     }
+    if options.calibration_elevations {
+        b.data.calibration_elevations = calibration_elevations(&mut rng, &b.data.calibration);
+    }
     if options.bc7_atlas
         && let Some(atlas) = b.atlas
     {
@@ -1065,6 +1076,26 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
         };
     }
     b.data
+}
+
+/// Calibration tables per elevation (spec §6.16): `calibration`'s pairs of technique and height
+/// at the build's elevations, each error the mean's times a random factor in `[0.5, 1.5]` clamped
+/// to `[0, 1]`, the primitives the mean's (the same views' distance at each elevation).
+fn calibration_elevations(rng: &mut SplitMix64, calibration: &[CalibrationRecord]) -> Vec<ElevationCalibrationRecord> {
+    let mut records = Vec::new();
+    for elevation in [0.0, 30.0, 60.0, 90.0] {
+        for c in calibration {
+            let error = (c.error * rng.uniform(0.5, 1.5)).clamp(0.0, 1.0);
+            records.push(ElevationCalibrationRecord {
+                elevation,
+                technique: c.technique,
+                height: c.height,
+                error,
+                primitives: c.primitives,
+            });
+        }
+    }
+    records
 }
 
 /// Calibration tables (spec §6.15): `FULL` and each other technique with probability ½, in

@@ -225,9 +225,9 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds a calibration (CALIBRATION), so it is a 1.5 file.
+    // The fixture holds a calibration per elevation (CALIBRATION_ELEVATIONS), so it is a 1.7 file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 5);
+    assert_eq!(minor, 7);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());

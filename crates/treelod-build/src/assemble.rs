@@ -1168,7 +1168,9 @@ fn assemble(
     clock.lap(&mut stats, "precision");
     // Stage: calibration, of what is written (after the precision trim).
     if let Some(calibration) = &config.calibration {
-        data.calibration = crate::calibrate::calibrate(&data, calibration);
+        let calibrated = crate::calibrate::calibrate(&data, calibration);
+        data.calibration = calibrated.mean;
+        data.calibration_elevations = calibrated.elevations;
         clock.lap(&mut stats, "calibration");
     }
     Ok(BuildOutput { data, stats, warnings })

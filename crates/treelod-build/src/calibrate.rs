@@ -3,8 +3,9 @@
 //! model so that a runtime policy can choose among them without tuned constants. Neubert et al.'s
 //! λ(h) measurement (2011 §2.2), generalised to every representation.
 //!
-//! **What is measured.** For each height `h` of [`HEIGHTS`] and each of `views` orthographic views
-//! ([`view_directions`]), the block is drawn `h` pixels high:
+//! **What is measured.** For each height `h` of [`HEIGHTS`] and each orthographic view of
+//! [`calibration_views`] (`views` around the tree at each elevation of [`ELEVATIONS`] below 90°,
+//! and one straight down), the block is drawn `h` pixels high:
 //! - the *reference*: every triangle of `TRIANGLES`, rasterised at `k × k` samples per pixel
 //!   (`k` = `supersample`, lowered so a side stays within [`MAX_REFERENCE_SIDE`]) and
 //!   box-filtered to the pixel's mean colour, its alpha-tested leaves kept as `treelod eval`'s
@@ -35,8 +36,9 @@
 //! occlusion, lit by the renderer's default light ([`treelod_runtime::Light::DEFAULT`]) without
 //! shadows, nearest fragment in front, on a white background as `treelod eval` draws it. The
 //! error is the multi-scale RMSE of that linear colour (`treelod_eval::metrics`, Clasen §4:
-//! levels from single pixels to the whole image) against the reference, averaged over the views
-//! — the measure `eval` reports, so a representation that keeps a tree's silhouette but darkens
+//! levels from single pixels to the whole image) against the reference, averaged over every view
+//! (`CALIBRATION`, spec §6.15) and over the views of each elevation (`CALIBRATION_ELEVATIONS`,
+//! §6.16: a policy chooses a tree by the views nearest to its own) — the measure `eval` reports, so a representation that keeps a tree's silhouette but darkens
 //! it, or lights a clump of leaves as one flat card, pays for it in the table. The metadata
 //! records it as `calibration.error = "colour"`. (Earlier builds, whose metadata lacks the key,
 //! measured coverage alone, against a reference and with leaves tested at the source texture's
@@ -60,8 +62,8 @@ use rayon::prelude::*;
 use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
-    CalibrationRecord, ContainerData, ImageRecord, NO_IMAGE, Setting, TriangleRecord, billboard_kind,
-    calibration_technique, decode_ao, image, image_format, material_class, prune_leaves_drawn,
+    CalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE, Setting, TriangleRecord,
+    billboard_kind, calibration_technique, decode_ao, image, image_format, material_class, prune_leaves_drawn,
 };
 use treelod_runtime::ellipsoid::{ellipsoid_drawn, line_drawn};
 use treelod_runtime::impostor::{BARK_AREA_KEPT, BARK_ERROR_SHARE, area};
@@ -70,7 +72,7 @@ use treelod_runtime::{LodChain, LodSettings, SptRecord, Thresholds, point_drawn,
 
 use treelod_runtime::texels::{self, Sampler, Texels};
 
-use crate::raster::{NOISE_SIZE, View, ellipse_spans, ellipsoid_hits, noise_cut, view_directions};
+use crate::raster::{NOISE_SIZE, View, ellipse_spans, ellipsoid_hits, noise_cut};
 use crate::shade::{Canvas, Surface, depth, triangle_pixels};
 
 /// Projected heights of the block at which every representation is measured, pixels: octaves
@@ -91,11 +93,19 @@ const ELLIPSOID_NORMAL_NOISE: f32 = 0.5;
 /// Noise texels per radian of the renderer's ellipsoid noise (`shaders/tree/ellipsoids.wgsl`).
 const NOISE_TEXELS_PER_RADIAN: f32 = 40.0;
 
+/// Elevations of the calibration's views above the block's horizontal plane, degrees (spec
+/// §6.16): from the side, as a walker sees a tree far away, to straight down, as a flight over a
+/// forest sees it. Representations differ most in how they take elevation: measured on the
+/// shared oak at 8 pixels, its crossed billboards read 0.049, 0.077, 0.147 and 0.229 from 0°,
+/// 45°, 75° and 89°, where its point tree reads 0.058 to 0.072 — so a policy choosing by one
+/// table made mostly of side views drew forests seen from above with billboards.
+pub const ELEVATIONS: [f32; 4] = [0.0, 30.0, 60.0, 90.0];
+
 /// Settings of the calibration (recorded in the metadata as `calibration.*`).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CalibrationConfig {
-    /// Orthographic views per height ([`view_directions`]). Default 4: three around the tree and
-    /// one from 45° above.
+    /// Orthographic views per elevation of [`ELEVATIONS`] below 90° ([`calibration_views`]); one
+    /// view straight down. Default 2: 7 views in all.
     pub views: usize,
     /// Samples per pixel side of the reference. Default 4.
     pub supersample: u32,
@@ -103,20 +113,66 @@ pub struct CalibrationConfig {
 
 impl Default for CalibrationConfig {
     fn default() -> Self {
-        Self { views: 4, supersample: 4 }
+        Self { views: 2, supersample: 4 }
     }
 }
 
 impl CalibrationConfig {
-    /// The metadata settings recording this configuration (spec §7.1).
+    /// The metadata settings recording this configuration (spec §7.1): `calibration.views`, the
+    /// views per elevation, and `calibration.elevations`, the elevations in degrees (files of
+    /// format 1.5 and 1.6, without the latter, counted every view in `calibration.views`).
     #[must_use]
     pub fn settings(&self) -> Vec<Setting> {
+        let elevations: Vec<String> = ELEVATIONS.iter().map(ToString::to_string).collect();
         vec![
             Setting { key: "calibration.views".into(), value: self.views.to_string() },
+            Setting { key: "calibration.elevations".into(), value: elevations.join(",") },
             Setting { key: "calibration.supersample".into(), value: self.supersample.to_string() },
             Setting { key: "calibration.error".into(), value: "colour".into() },
         ]
     }
+}
+
+/// The calibration's views (unit directions towards the viewer) with the index of their
+/// elevation in [`ELEVATIONS`]: per elevation below 90°, `per_elevation` views (at least one)
+/// spread evenly around the vertical axis — over half a turn from the side (an orthographic view
+/// from the opposite side sees the mirror image), over a full turn from above — half a step off
+/// the axes, and each ring a quarter step further round than the one below it; and one view
+/// straight down. No view lies along the axes the build bakes billboards from (`+Z` for the
+/// facing quad, 0°, 60° and 120° for the crossed ones): a billboard seen exactly from its bake
+/// direction shows its best image, which a camera almost never sees. Measured on the shared
+/// orchid from the side: with views at 0° and 90° azimuth its facing billboard read 0.057, 0.061
+/// and 0.059 at 32, 64 and 128 pixels, close enough to its impostor planes for a policy to draw
+/// far trees with it; with views at 45° and 135°, 0.068, 0.075 and 0.080.
+#[must_use]
+pub fn calibration_views(per_elevation: usize) -> Vec<(usize, Vec3)> {
+    let n = per_elevation.max(1);
+    let mut views = Vec::new();
+    for (e, &degrees) in ELEVATIONS.iter().enumerate() {
+        if degrees >= 90.0 {
+            views.push((e, Vec3::Y));
+            continue;
+        }
+        let elevation = degrees.to_radians();
+        let turn = if degrees == 0.0 { std::f32::consts::PI } else { std::f32::consts::TAU };
+        #[expect(clippy::cast_precision_loss, reason = "a few views")]
+        for k in 0..n {
+            let azimuth = turn * (k as f32 + 0.5 + 0.25 * e as f32) / n as f32;
+            let (s, c) = azimuth.sin_cos();
+            views.push((e, Vec3::new(elevation.cos() * s, elevation.sin(), elevation.cos() * c)));
+        }
+    }
+    views
+}
+
+/// What [`calibrate`] measured: the tables over every view (`CALIBRATION`, spec §6.15) and per
+/// elevation (`CALIBRATION_ELEVATIONS`, spec §6.16).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Calibrated {
+    /// Per technique and height, the mean over every view.
+    pub mean: Vec<CalibrationRecord>,
+    /// Per elevation of [`ELEVATIONS`], technique and height, the mean over that elevation's views.
+    pub elevations: Vec<ElevationCalibrationRecord>,
 }
 
 /// What the calibration draws, gathered once from the container's arrays.
@@ -165,20 +221,21 @@ struct Tri {
     material: u32,
 }
 
-/// The calibration of `data` (spec §6.15): for every representation it holds, its error and
-/// primitive count at each of [`HEIGHTS`], sorted by technique, then height. Empty for a block
+/// The calibration of `data` (spec §6.15, §6.16): for every representation it holds, its error
+/// and primitive count at each of [`HEIGHTS`] over every view, sorted by technique, then height,
+/// and the same per elevation of [`ELEVATIONS`], sorted by elevation first. Empty for a block
 /// without height or triangles.
 #[must_use]
-pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Vec<CalibrationRecord> {
+pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated {
     let (lo, hi) = (Vec3::from_array(data.block.bounds_min), Vec3::from_array(data.block.bounds_max));
     let height = hi.y - lo.y;
     if !(height.is_finite() && height > 0.0) || data.triangles.is_empty() {
-        return Vec::new();
+        return Calibrated::default();
     }
     let scene = Scene::new(data);
     let techniques = scene.techniques();
     let (centre, radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
-    let directions = view_directions(config.views.max(1));
+    let directions = calibration_views(config.views);
     let jobs: Vec<(usize, usize)> =
         (0..HEIGHTS.len()).flat_map(|h| (0..directions.len()).map(move |v| (h, v))).collect();
     // Per job, per technique: (error, primitives).
@@ -191,8 +248,9 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Vec<Calibr
             let k = config.supersample.max(1).min((MAX_REFERENCE_SIDE / side).max(1));
             // The sphere fitted to exactly `side` pixels of `metres_per_pixel`.
             let fitted = 0.5 * side as f32 * metres_per_pixel;
-            let view = View::fit(directions[v], centre, fitted, side);
-            let reference = scene.reference(&View::fit(directions[v], centre, fitted, side * k), k);
+            let direction = directions[v].1;
+            let view = View::fit(direction, centre, fitted, side);
+            let reference = scene.reference(&View::fit(direction, centre, fitted, side * k), k);
             techniques
                 .iter()
                 .map(|&t| {
@@ -203,23 +261,37 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Vec<Calibr
                 .collect()
         })
         .collect();
-    let mut records = Vec::new();
+    // The mean of technique `ti` at height `h` over the views `keep` accepts, in view order.
+    let mean = |ti: usize, h: usize, keep: &dyn Fn(usize) -> bool| -> (f32, f32) {
+        let per_view: Vec<(f64, f64)> =
+            jobs.iter().zip(&results).filter(|((jh, v), _)| *jh == h && keep(*v)).map(|(_, r)| r[ti]).collect();
+        let n = per_view.len().max(1) as f64;
+        let error = per_view.iter().map(|r| r.0).sum::<f64>() / n;
+        let primitives = per_view.iter().map(|r| r.1).sum::<f64>() / n;
+        ((error as f32).clamp(0.0, 1.0), primitives as f32)
+    };
+    let mut calibrated = Calibrated::default();
     for (ti, &technique) in techniques.iter().enumerate() {
         for (h, &pixels) in HEIGHTS.iter().enumerate() {
-            let per_view: Vec<(f64, f64)> =
-                jobs.iter().zip(&results).filter(|((jh, _), _)| *jh == h).map(|(_, r)| r[ti]).collect();
-            let n = per_view.len().max(1) as f64;
-            let error = per_view.iter().map(|r| r.0).sum::<f64>() / n;
-            let primitives = per_view.iter().map(|r| r.1).sum::<f64>() / n;
-            records.push(CalibrationRecord {
-                technique,
-                height: pixels,
-                error: (error as f32).clamp(0.0, 1.0),
-                primitives: primitives as f32,
-            });
+            let (error, primitives) = mean(ti, h, &|_| true);
+            calibrated.mean.push(CalibrationRecord { technique, height: pixels, error, primitives });
         }
     }
-    records
+    for (e, &elevation) in ELEVATIONS.iter().enumerate() {
+        for (ti, &technique) in techniques.iter().enumerate() {
+            for (h, &pixels) in HEIGHTS.iter().enumerate() {
+                let (error, primitives) = mean(ti, h, &|v| directions[v].0 == e);
+                calibrated.elevations.push(ElevationCalibrationRecord {
+                    elevation,
+                    technique,
+                    height: pixels,
+                    error,
+                    primitives,
+                });
+            }
+        }
+    }
+    calibrated
 }
 
 /// The background of every image: white, as `treelod eval` draws it.

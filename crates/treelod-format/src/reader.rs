@@ -8,10 +8,10 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
-    AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, CurveSample, EllipsoidRecord, FLAG_SHUFFLE,
-    FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord,
-    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry,
-    SectionKind, TriangleRecord, VertexRecord,
+    AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, CurveSample, ElevationCalibrationRecord,
+    EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC,
+    MAJOR, MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
+    SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -427,6 +427,13 @@ impl Container {
     #[must_use]
     pub fn calibration(&self) -> &[CalibrationRecord] {
         self.records(SectionKind::CALIBRATION)
+    }
+
+    /// `CALIBRATION_ELEVATIONS` records (spec §6.16; empty without the section, as in every file
+    /// before 1.7).
+    #[must_use]
+    pub fn calibration_elevations(&self) -> &[ElevationCalibrationRecord] {
+        self.records(SectionKind::CALIBRATION_ELEVATIONS)
     }
 
     /// Baseline level-of-detail chains: the levels of every tree (spec §6.12).

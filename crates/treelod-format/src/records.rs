@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 6;
+pub const MINOR: u16 = 7;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -164,9 +164,12 @@ impl SectionKind {
     /// [`CalibrationRecord`]s: each representation's measured image error and cost by projected
     /// height (spec §6.15). Since 1.5.
     pub const CALIBRATION: Self = Self(0x0070);
+    /// [`ElevationCalibrationRecord`]s: the calibration of `CALIBRATION` per elevation of the
+    /// views (spec §6.16). Since 1.7.
+    pub const CALIBRATION_ELEVATIONS: Self = Self(0x0072);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 26] = [
+    pub const KNOWN: [Self; 27] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -193,6 +196,7 @@ impl SectionKind {
         Self::ELLIPSOID_AO,
         Self::LINE_AO,
         Self::CALIBRATION,
+        Self::CALIBRATION_ELEVATIONS,
     ];
 
     /// The spec's name of a known kind.
@@ -225,6 +229,7 @@ impl SectionKind {
             Self::ELLIPSOID_AO => "ELLIPSOID_AO",
             Self::LINE_AO => "LINE_AO",
             Self::CALIBRATION => "CALIBRATION",
+            Self::CALIBRATION_ELEVATIONS => "CALIBRATION_ELEVATIONS",
             _ => return None,
         })
     }
@@ -256,6 +261,7 @@ impl SectionKind {
             Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
             Self::BILLBOARDS => size_of::<BillboardRecord>(),
             Self::CALIBRATION => size_of::<CalibrationRecord>(),
+            Self::CALIBRATION_ELEVATIONS => size_of::<ElevationCalibrationRecord>(),
             _ => return None,
         };
         #[expect(clippy::cast_possible_truncation, reason = "record sizes are below 100")]
@@ -266,7 +272,8 @@ impl SectionKind {
     /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 2 for ambient occlusion (`VERTEX_AO`,
     /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`) and the ellipsoids'
     /// ambient occlusion (`ELLIPSOID_AO`), 4 for the lines' ambient occlusion (`LINE_AO`), 5 for
-    /// the calibration tables (`CALIBRATION`), 0 for
+    /// the calibration tables (`CALIBRATION`), 7 for the tables per elevation
+    /// (`CALIBRATION_ELEVATIONS`), 0 for
     /// the other known kinds and for kinds this version does not know (private extensions do not
     /// raise a file's minor).
     #[must_use]
@@ -277,6 +284,7 @@ impl SectionKind {
             Self::PLANE_LEAVES | Self::ELLIPSOID_AO => 3,
             Self::LINE_AO => 4,
             Self::CALIBRATION => 5,
+            Self::CALIBRATION_ELEVATIONS => 7,
             _ => 0,
         }
     }
@@ -811,6 +819,28 @@ pub struct CalibrationRecord {
     pub primitives: f32,
 }
 const _: () = assert!(size_of::<CalibrationRecord>() == 16);
+
+/// One sample of a representation's calibration seen from one elevation (spec §6.16): as a
+/// [`CalibrationRecord`], measured only from the views at `elevation` degrees above the block's
+/// horizontal plane.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ElevationCalibrationRecord {
+    /// Elevation of the views above the horizontal plane, degrees, `[0, 90]`; non-decreasing
+    /// over the section.
+    pub elevation: f32,
+    /// The representation, one of [`calibration_technique`]; non-decreasing within an elevation.
+    pub technique: u32,
+    /// Projected height of the block's bounds, pixels; strictly increasing within an elevation
+    /// and technique.
+    pub height: f32,
+    /// Mean multi-scale RMSE against the supersampled full mesh over the views at `elevation`,
+    /// of shaded colour as `CALIBRATION`'s (spec §6.15), `[0, 1]`.
+    pub error: f32,
+    /// Primitives submitted, as `CALIBRATION`'s, `≥ 0`.
+    pub primitives: f32,
+}
+const _: () = assert!(size_of::<ElevationCalibrationRecord>() == 20);
 
 /// The representations a [`CalibrationRecord`] names (spec §6.15).
 pub mod calibration_technique {

@@ -12,10 +12,10 @@ use std::hash::{BuildHasherDefault, Hasher};
 use crate::error::{Error, Result};
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
-    AO_KINDS, BillboardRecord, CalibrationRecord, CellRecord, CurveSample, EllipsoidRecord, ImageRecord, LineRecord,
-    LodLevelRecord, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
-    SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
-    image_format, leaf_slots, plane_leaf_bases,
+    AO_KINDS, BillboardRecord, CalibrationRecord, CellRecord, CurveSample, ElevationCalibrationRecord, EllipsoidRecord,
+    ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind,
+    calibration_technique, image_format, leaf_slots, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -76,6 +76,8 @@ pub struct VerifyReport {
     pub billboards: u64,
     /// `CALIBRATION` records checked.
     pub calibration: u64,
+    /// `CALIBRATION_ELEVATIONS` records checked (spec §6.16).
+    pub calibration_elevations: u64,
     /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO` and `LINE_AO` bytes (their counts are checked at
     /// open).
     pub ao: u64,
@@ -169,6 +171,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
     check_billboards(c.billboards(), image_count, tree_count)?;
     check_calibration(c.calibration())?;
+    check_calibration_elevations(c.calibration_elevations(), c.calibration())?;
     check_slot_images_only_for_planes(c)?;
     check_metadata(c)?;
 
@@ -199,6 +202,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.lod_triangles = c.lod_triangles().len() as u64;
     report.billboards = c.billboards().len() as u64;
     report.calibration = c.calibration().len() as u64;
+    report.calibration_elevations = c.calibration_elevations().len() as u64;
     report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
     Ok(report)
 }
@@ -1034,6 +1038,114 @@ fn check_calibration(records: &[CalibrationRecord]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Spec §6.16: elevations finite in `[0, 90]` and non-decreasing, known techniques
+/// non-decreasing within an elevation, heights finite, positive and strictly increasing within an
+/// elevation and technique, errors in `[0, 1]`, primitive counts finite and `≥ 0`; and each
+/// elevation holds exactly the `(technique, height)` pairs of `calibration`, so a file with
+/// records also has `CALIBRATION`.
+///
+/// Runs after [`check_calibration`]: `calibration` is sorted by technique and strictly by height
+/// within one, so a pair is found by binary search, and an elevation whose records are sorted the
+/// same way, each a pair of `calibration`, holds them all exactly when it has as many records.
+fn check_calibration_elevations(
+    records: &[ElevationCalibrationRecord],
+    calibration: &[CalibrationRecord],
+) -> Result<()> {
+    let kind = SectionKind::CALIBRATION_ELEVATIONS;
+    if records.is_empty() {
+        return Ok(());
+    }
+    if calibration.is_empty() {
+        return Err(bad(
+            kind,
+            0,
+            "the file has no CALIBRATION, whose (technique, height) pairs each elevation holds".into(),
+        ));
+    }
+    let pair = |technique: u32, height: f32| {
+        calibration.binary_search_by(|c| c.technique.cmp(&technique).then(c.height.total_cmp(&height)))
+    };
+    // The first record of the elevation being read.
+    let mut start = 0;
+    for (i, r) in records.iter().enumerate() {
+        if !(r.elevation.is_finite() && (0.0..=90.0).contains(&r.elevation)) {
+            return Err(bad(kind, i, format!("elevation {} lies outside [0, 90] degrees", r.elevation)));
+        }
+        if r.technique >= calibration_technique::COUNT {
+            return Err(bad(
+                kind,
+                i,
+                format!("technique {} is not defined (0..{})", r.technique, calibration_technique::COUNT),
+            ));
+        }
+        if !(r.height.is_finite() && r.height > 0.0) {
+            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
+        }
+        if !unit(r.error) {
+            return Err(bad(kind, i, format!("error {} lies outside [0, 1]", r.error)));
+        }
+        if !non_negative(r.primitives) {
+            return Err(bad(kind, i, format!("primitive count {} is not a finite count", r.primitives)));
+        }
+        if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
+            if r.elevation < prev.elevation {
+                return Err(bad(kind, i, format!("elevation {} follows elevation {}", r.elevation, prev.elevation)));
+            }
+            if r.elevation > prev.elevation {
+                check_elevation_pairs(&records[start..i], start, calibration)?;
+                start = i;
+            } else if r.technique < prev.technique {
+                return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
+            } else if r.technique == prev.technique && r.height <= prev.height {
+                return Err(bad(
+                    kind,
+                    i,
+                    format!("height {} does not increase strictly after {}", r.height, prev.height),
+                ));
+            }
+        }
+        if pair(r.technique, r.height).is_err() {
+            return Err(bad(
+                kind,
+                i,
+                format!("technique {} at height {} has no CALIBRATION record", r.technique, r.height),
+            ));
+        }
+    }
+    check_elevation_pairs(&records[start..], start, calibration)
+}
+
+/// Spec §6.16: the records of one elevation, from record `start`, hold every `(technique, height)`
+/// pair of `calibration`. They are sorted as `calibration` is and each is one of its pairs, so
+/// they hold all exactly when they are as many; otherwise the first place the two differ names a
+/// pair the elevation lacks, reported at its first record.
+fn check_elevation_pairs(
+    elevation: &[ElevationCalibrationRecord],
+    start: usize,
+    calibration: &[CalibrationRecord],
+) -> Result<()> {
+    if elevation.len() == calibration.len() {
+        return Ok(());
+    }
+    let at = elevation.first().map_or(0.0, |r| r.elevation);
+    let missing = calibration
+        .iter()
+        .enumerate()
+        .find(|&(k, c)| {
+            elevation.get(k).is_none_or(|r| r.technique != c.technique || r.height.to_bits() != c.height.to_bits())
+        })
+        .map_or_else(String::new, |(_, c)| format!(", not technique {} at height {}", c.technique, c.height));
+    Err(bad(
+        SectionKind::CALIBRATION_ELEVATIONS,
+        start,
+        format!(
+            "elevation {at} holds {} of the {} (technique, height) pairs of CALIBRATION{missing}",
+            elevation.len(),
+            calibration.len()
+        ),
+    ))
 }
 
 fn check_curve(kind: SectionKind, samples: &[CurveSample]) -> Result<()> {

@@ -246,7 +246,7 @@ pub fn area(vertices: &[VertexRecord], triangles: &[TriangleRecord]) -> f64 {
 /// The trees of `list` drawn with impostor planes ([`Technique::Impostors`]; every model of
 /// `list` has planes): appends to `out` each visible instance's plane prefixes at
 /// `settings.s_min` pixels ([`PlaneLod::select`]) and its bark as `settings.impostor_bark` says
-/// ([`push_bark`]), and counts it visible.
+/// ([`ImpostorBark`]), and counts it visible.
 pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, settings: &TechniqueSettings, out: &mut TreeDraws) {
     let frustum = Frustum::from_view_proj(camera.view_proj);
     for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {

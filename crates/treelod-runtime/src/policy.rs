@@ -14,9 +14,13 @@
 //! chain converge to it). Above the largest calibrated height the choice at that height holds if
 //! it converges to the full mesh as trees come near ([`converges`]: the point tree, the LoD chain,
 //! pruning), else the point tree draws ([`Technique::FALLBACK`]); below the smallest the smallest
-//! height's choice holds. (The point tree alone above the range drew near trees with 2.2–2.5× the
-//! full mesh's primitives where the chain, at the full mesh there, had the same error: the oak's
-//! 49,409 against 22,566, the Quaternius tree's 7,121 against 2,888.)
+//! height's choice holds. (Where the top choice is the chain it holds: the point tree above the
+//! range drew whole near trees with 2.2–2.5× the full mesh's primitives at the same error, the
+//! oak's 49,409 against 22,566 in `eval`, the Quaternius tree's 7,121 against 2,888. Where it is
+//! another representation the point tree takes over rather than the chain: it culls per cell, so
+//! a tree the camera stands in draws only what it sees; the chain's full mesh there drew the
+//! pine's forest bench, `bench --quality` over 200 trees, with 64,115 primitives per frame against
+//! the point tree's 44,272, at the same RMSE.)
 //!
 //! **Hysteresis.** A tree keeps last frame's technique while that technique is still the choice
 //! somewhere within [`Policy::hysteresis`] octaves of its height (a tree crossing a boundary must
@@ -33,6 +37,19 @@
 //! the same count gives the same images whatever the frame rate (a host at other than 60 frames
 //! per second scales it).
 //!
+//! **Elevation.** A representation's error depends on where it is seen from, and most for the
+//! cheapest: three crossed quads are a tree from the side and three lines from above (the shared
+//! oak's crossed billboards read 0.049 at 8 pixels from the side, 0.229 from straight above, where
+//! its point tree reads 0.058 to 0.072). Where the container has tables per elevation of the
+//! calibration's views (spec §6.16, format 1.7), the choices are made per elevation class
+//! ([`Calibration::elevations`]: 0°, 30°, 60°, 90°), and each tree is chosen by the class of its
+//! view: the elevation of the eye above the tree's horizontal plane at the block centre
+//! ([`view_elevation`]; views from below count as from the side), with a hysteresis of a quarter of
+//! the classes' spacing ([`elevation_class_after`]), so a camera climbing over a forest hands its
+//! far trees from billboards to planes or points while a walker keeps them billboards. Without
+//! those tables every tree is chosen by the tables over every view. A shadow cascade's trees are
+//! chosen by the view that sets their height (the light's, for the coarser of the two).
+//!
 //! **Occlusion.** A tree partly hidden behind others shows only part of its error: with
 //! [`Policy::occlusion`] and a measured visible fraction `v` (the share of its hull samples the
 //! depth of an earlier frame shows, Neubert et al. 2011 §5), the errors above the floor are
@@ -42,12 +59,13 @@
 //! table of choices, so a frame still pays a lookup per tree.
 //!
 //! **Cost per frame.** The rule is evaluated once per model and policy into a table of choices
-//! every [`STEPS_PER_OCTAVE`]-th of an octave ([`Choices`]); per tree the frame pays a distance, a
-//! `log2` and a lookup ([`Choices::choose`]).
+//! every [`STEPS_PER_OCTAVE`]-th of an octave per elevation and visibility class ([`Choices`]);
+//! per tree the frame pays a distance, a `log2`, an `asin` (with tables per elevation) and a
+//! lookup ([`Choices::choose_viewed`]).
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
-use treelod_format::{CalibrationRecord, Container};
+use treelod_format::{CalibrationRecord, Container, ElevationCalibrationRecord};
 
 use crate::draws::Representations;
 use crate::frame::{Camera, Instance, ModelLod};
@@ -151,20 +169,50 @@ struct Sample {
     primitives: f32,
 }
 
-/// A model's calibration tables (spec §6.15): per technique, its error and primitives as
+/// A model's calibration tables (spec §6.15, §6.16): per technique, its error and primitives as
 /// functions of the block's projected height, interpolated linearly in `log2(height)` and
-/// clamped outside the sampled range.
+/// clamped outside the sampled range — over every view (`CALIBRATION`) and, where the container
+/// has them (format 1.7), per elevation of the views (`CALIBRATION_ELEVATIONS`).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Calibration {
     curves: PerTechnique<Vec<Sample>>,
+    /// Per elevation of the views, ascending: its degrees and its curves.
+    elevations: Vec<(f32, PerTechnique<Vec<Sample>>)>,
+}
+
+/// Appends `record`'s sample to `curves` if its technique is known, its values finite and its
+/// height above the curve's last (records are sorted, spec §6.15).
+fn push_sample(curves: &mut PerTechnique<Vec<Sample>>, technique: u32, height: f32, error: f32, primitives: f32) {
+    let Some(technique) = Technique::ALL.get(technique as usize).copied() else { return };
+    let valid = height.is_finite() && height > 0.0 && error.is_finite() && primitives.is_finite();
+    let curve = &mut curves[technique];
+    let log2_height = height.log2();
+    if valid && curve.last().is_none_or(|s| s.log2_height < log2_height) {
+        curve.push(Sample { log2_height, error, primitives });
+    }
+}
+
+/// `(error, primitives)` of `curve` at `log2(height) = x`.
+fn curve_at(curve: &[Sample], x: f32) -> Option<(f32, f32)> {
+    let (first, last) = (curve.first()?, curve.last()?);
+    if x <= first.log2_height {
+        return Some((first.error, first.primitives));
+    }
+    if x >= last.log2_height {
+        return Some((last.error, last.primitives));
+    }
+    let next = curve.partition_point(|s| s.log2_height <= x);
+    let (a, b) = (curve[next - 1], curve[next]);
+    let t = (x - a.log2_height) / (b.log2_height - a.log2_height);
+    Some((a.error + t * (b.error - a.error), a.primitives + t * (b.primitives - a.primitives)))
 }
 
 impl Calibration {
-    /// The tables of `container`; `None` when it has none (built without calibration, or before
-    /// format 1.5).
+    /// The tables of `container`, with its tables per elevation where it has them; `None` when
+    /// it has none (built without calibration, or before format 1.5).
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        Self::from_records(container.calibration())
+        Self::from_records(container.calibration()).map(|c| c.with_elevations(container.calibration_elevations()))
     }
 
     /// The tables of `records` (sorted as spec §6.15 asks; [`Container`] has verified that).
@@ -173,19 +221,47 @@ impl Calibration {
     #[must_use]
     pub fn from_records(records: &[CalibrationRecord]) -> Option<Self> {
         let mut curves = PerTechnique::<Vec<Sample>>::default();
-        for record in records {
-            let Some(technique) = Technique::ALL.get(record.technique as usize).copied() else { continue };
-            let valid = record.height.is_finite()
-                && record.height > 0.0
-                && record.error.is_finite()
-                && record.primitives.is_finite();
-            let curve = &mut curves[technique];
-            let log2_height = record.height.log2();
-            if valid && curve.last().is_none_or(|s| s.log2_height < log2_height) {
-                curve.push(Sample { log2_height, error: record.error, primitives: record.primitives });
+        for r in records {
+            push_sample(&mut curves, r.technique, r.height, r.error, r.primitives);
+        }
+        curves.0.iter().any(|c| !c.is_empty()).then_some(Self { curves, elevations: Vec::new() })
+    }
+
+    /// These tables with the tables per elevation of `records` (sorted as spec §6.16 asks),
+    /// replacing any before; elevations that are not finite, not ascending or whose tables hold
+    /// no technique are skipped.
+    #[must_use]
+    pub fn with_elevations(mut self, records: &[ElevationCalibrationRecord]) -> Self {
+        self.elevations.clear();
+        for r in records {
+            if !r.elevation.is_finite() {
+                continue;
+            }
+            let same = self.elevations.last().is_some_and(|(e, _)| *e == r.elevation);
+            if !same {
+                if self.elevations.last().is_some_and(|(e, _)| *e > r.elevation) {
+                    continue;
+                }
+                self.elevations.push((r.elevation, PerTechnique::default()));
+            }
+            if let Some((_, curves)) = self.elevations.last_mut() {
+                push_sample(curves, r.technique, r.height, r.error, r.primitives);
             }
         }
-        curves.0.iter().any(|c| !c.is_empty()).then_some(Self { curves })
+        self.elevations.retain(|(_, curves)| curves.0.iter().any(|c| !c.is_empty()));
+        self
+    }
+
+    /// The elevations of the tables per elevation, degrees, ascending (empty without them).
+    #[must_use]
+    pub fn elevations(&self) -> Vec<f32> {
+        self.elevations.iter().map(|(e, _)| *e).collect()
+    }
+
+    /// The curves of elevation class `elevation` (an index into [`Self::elevations`]), or the
+    /// mean ones for `None` or a class the tables lack.
+    fn curves(&self, elevation: Option<usize>) -> &PerTechnique<Vec<Sample>> {
+        elevation.and_then(|e| self.elevations.get(e)).map_or(&self.curves, |(_, curves)| curves)
     }
 
     /// Whether the tables hold `technique`.
@@ -194,23 +270,18 @@ impl Calibration {
         !self.curves[technique].is_empty()
     }
 
-    /// `(error, primitives)` of `technique` at a projected height of `height` pixels, if the
-    /// tables hold it.
+    /// `(error, primitives)` of `technique` at a projected height of `height` pixels over every
+    /// view, if the tables hold it.
     #[must_use]
     pub fn at(&self, technique: Technique, height: f32) -> Option<(f32, f32)> {
-        let curve = &self.curves[technique];
-        let (first, last) = (curve.first()?, curve.last()?);
-        let x = height.max(f32::MIN_POSITIVE).log2();
-        if x <= first.log2_height {
-            return Some((first.error, first.primitives));
-        }
-        if x >= last.log2_height {
-            return Some((last.error, last.primitives));
-        }
-        let next = curve.partition_point(|s| s.log2_height <= x);
-        let (a, b) = (curve[next - 1], curve[next]);
-        let t = (x - a.log2_height) / (b.log2_height - a.log2_height);
-        Some((a.error + t * (b.error - a.error), a.primitives + t * (b.primitives - a.primitives)))
+        self.at_elevation(None, technique, height)
+    }
+
+    /// [`Self::at`] from the views of elevation class `elevation` (an index into
+    /// [`Self::elevations`]; `None`, or a class the tables lack: over every view).
+    #[must_use]
+    pub fn at_elevation(&self, elevation: Option<usize>, technique: Technique, height: f32) -> Option<(f32, f32)> {
+        curve_at(&self.curves(elevation)[technique], height.max(f32::MIN_POSITIVE).log2())
     }
 
     /// The smallest and largest calibrated heights over every technique, pixels.
@@ -228,19 +299,33 @@ impl Calibration {
     /// The policy's rule at one height (module docs): among the techniques the tables hold and
     /// `usable` accepts, less the full mesh, the one of least primitives whose error is within
     /// `target` of the least error of the full mesh and of them (ties: lower error; none
-    /// within: least error).
+    /// within: least error), by the tables over every view.
     /// [`Technique::FALLBACK`] when no technique is left.
     #[must_use]
     pub fn choose(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Technique {
+        self.choose_at_elevation(None, height, target, usable)
+    }
+
+    /// [`Self::choose`] by the tables of elevation class `elevation` (as [`Self::at_elevation`]).
+    #[must_use]
+    pub fn choose_at_elevation(
+        &self,
+        elevation: Option<usize>,
+        height: f32,
+        target: f32,
+        usable: impl Fn(Technique) -> bool,
+    ) -> Technique {
         let candidates = || {
             Technique::ALL
                 .into_iter()
                 .filter(|&t| t != Technique::Full && usable(t))
-                .filter_map(|t| self.at(t, height).map(|(e, p)| (t, e, p)))
+                .filter_map(|t| self.at_elevation(elevation, t, height).map(|(e, p)| (t, e, p)))
         };
         // The best image any representation (the full mesh included) gives at this height.
         let best_candidate = candidates().map(|(_, e, _)| e).fold(f32::INFINITY, f32::min);
-        let floor = self.at(Technique::Full, height).map_or(best_candidate, |(error, _)| error.min(best_candidate));
+        let floor = self
+            .at_elevation(elevation, Technique::Full, height)
+            .map_or(best_candidate, |(error, _)| error.min(best_candidate));
         let limit = floor + sanitise(target);
         let cheapest = candidates()
             .filter(|&(_, e, _)| e <= limit)
@@ -251,21 +336,49 @@ impl Calibration {
 }
 
 /// A model's choices under one policy, every [`STEPS_PER_OCTAVE`]-th of an octave of projected
-/// height over its calibrated range (module docs): what [`Choices::choose`] looks up per tree.
+/// height over its calibrated range (module docs): what [`Choices::choose`] looks up per tree —
+/// one table per elevation class of the calibration's views (one over every view without tables
+/// per elevation) and per visibility class (one without [`Policy::occlusion`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Choices {
-    /// The choice above the calibrated range ([`converges`]).
-    above: Technique,
     /// `log2` of the smallest calibrated height.
     log2_min: f32,
-    /// The choice at `log2_min + i / STEPS_PER_OCTAVE`, up to the largest calibrated height.
-    steps: Vec<Technique>,
+    /// Per elevation class, then visibility class (`e · visibility + k`): the choice above the
+    /// calibrated range ([`converges`]) and the choice at `log2_min + i / STEPS_PER_OCTAVE`, up
+    /// to the largest calibrated height. Visibility class `k` (a visible fraction about `2^-k`)
+    /// is chosen with the target raised to `target / √(2^-k)`.
+    tables: Vec<(Technique, Vec<Technique>)>,
+    /// The elevations of the classes' views, degrees, ascending; empty: one class, every view.
+    elevations: Vec<f32>,
+    /// Visibility classes per elevation class: [`VISIBILITY_CLASSES`] with
+    /// [`Policy::occlusion`], else 1.
+    visibility: usize,
     /// Steps either side within which a tree keeps last frame's technique.
     hysteresis_steps: usize,
-    /// With [`Policy::occlusion`]: per visibility class after the first (visible fraction about
-    /// ½, ¼, ⅛), its choice above the range and its steps, made with the target raised to
-    /// `target / √v`; empty without.
-    hidden: Vec<(Technique, Vec<Technique>)>,
+}
+
+/// The elevation class of a view `elevation` degrees above a tree's horizontal plane among
+/// classes whose views are at `centres` degrees (ascending, at least one) for a tree of class
+/// `previous` last frame (`None`: a new tree): the nearest centre for a new tree (a view from
+/// below counts as from the side); else the class changes only once `elevation` lies a quarter of
+/// the spacing of two classes past the midpoint between them, so a camera hovering at a bound
+/// does not switch trees back and forth.
+#[must_use]
+pub fn elevation_class_after(previous: Option<usize>, elevation: f32, centres: &[f32]) -> usize {
+    let last = centres.len().saturating_sub(1);
+    let elevation = if elevation.is_finite() { elevation } else { 0.0 };
+    let bound = |lower: usize, sign: f32| {
+        let (a, b) = (centres[lower], centres[lower + 1]);
+        0.5 * (a + b) + sign * 0.25 * (b - a)
+    };
+    match previous.map(|p| p.min(last)) {
+        None => (0..last).take_while(|&c| elevation >= bound(c, 0.0)).count(),
+        Some(p) => {
+            let up = (p..last).take_while(|&c| elevation >= bound(c, 1.0)).count();
+            let down = (0..p).rev().take_while(|&c| elevation <= bound(c, -1.0)).count();
+            p + up - down
+        }
+    }
 }
 
 /// Classes of the visible fraction `v` the policy chooses by ([`Policy::occlusion`]): about 1,
@@ -317,50 +430,61 @@ impl Choices {
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
         #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-        let table = |target: f32| -> (Technique, Vec<Technique>) {
+        let table = |elevation: Option<usize>, target: f32| -> (Technique, Vec<Technique>) {
             let steps: Vec<Technique> = (0..count)
                 .map(|i| {
                     let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
-                    calibration.choose(height, target, &usable)
+                    calibration.choose_at_elevation(elevation, height, target, &usable)
                 })
                 .collect();
             let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
             (above, steps)
         };
         let target = policy.target();
-        let (above, steps) = table(target);
+        let elevations = calibration.elevations();
+        let classes: Vec<Option<usize>> =
+            if elevations.is_empty() { vec![None] } else { (0..elevations.len()).map(Some).collect() };
+        let visibility = if policy.occlusion { VISIBILITY_CLASSES } else { 1 };
         // Class k stands for a visible fraction 2^-k: the target over its square root.
         #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-        let hidden = if policy.occlusion {
-            (1..VISIBILITY_CLASSES).map(|k| table(target * (k as f32 * 0.5).exp2())).collect()
-        } else {
-            Vec::new()
-        };
+        let tables = classes
+            .iter()
+            .flat_map(|&e| (0..visibility).map(move |k| (e, target * (k as f32 * 0.5).exp2())))
+            .map(|(e, target)| table(e, target))
+            .collect();
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let hysteresis_steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
-        Self { above, log2_min: if log2_min.is_finite() { log2_min } else { 0.0 }, steps, hysteresis_steps, hidden }
+        let log2_min = if log2_min.is_finite() { log2_min } else { 0.0 };
+        Self { log2_min, tables, elevations, visibility, hysteresis_steps }
     }
 
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`
     /// (`None`: none, a new tree): last frame's if it is the choice within the hysteresis of
     /// `height`, else the choice at `height`; above the calibrated range the choice at its top if
     /// that converges to the full mesh as trees come nearer ([`converges`]), else the point tree
-    /// ([`Technique::FALLBACK`]).
+    /// ([`Technique::FALLBACK`]). Seen from the side (elevation class 0) and fully visible.
     #[must_use]
     pub fn choose(&self, height: f32, previous: Option<Technique>) -> Technique {
-        self.choose_seen(height, 1.0, previous)
+        self.choose_viewed(height, 0, 1.0, previous)
     }
 
     /// [`Self::choose`] for a tree of which the visible fraction `visible` is seen: by the table
     /// of its visibility class ([`visibility_class`]) where the choices were made with
-    /// [`Policy::occlusion`], else as fully visible.
+    /// [`Policy::occlusion`], else as fully visible. Seen from the side (elevation class 0).
     #[must_use]
     pub fn choose_seen(&self, height: f32, visible: f32, previous: Option<Technique>) -> Technique {
-        let hidden = visibility_class(visible).checked_sub(1).and_then(|k| self.hidden.get(k));
-        let (above_range, steps) = match hidden {
-            Some((above, steps)) => (*above, steps.as_slice()),
-            None => (self.above, self.steps.as_slice()),
-        };
+        self.choose_viewed(height, 0, visible, previous)
+    }
+
+    /// [`Self::choose_seen`] for a tree seen from elevation class `elevation` (an index into
+    /// [`Self::elevations`], [`elevation_class_after`]; past the last: the last; without tables
+    /// per elevation every class reads the tables over every view).
+    #[must_use]
+    pub fn choose_viewed(&self, height: f32, elevation: usize, visible: f32, previous: Option<Technique>) -> Technique {
+        let e = elevation.min(self.elevations.len().saturating_sub(1));
+        let k = visibility_class(visible).min(self.visibility - 1);
+        let (above_range, steps) = &self.tables[e * self.visibility + k];
+        let above_range = *above_range;
         let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
         let last = steps.len() - 1;
         // Above the range: one step per STEPS_PER_OCTAVE past its end reads as the fallback.
@@ -381,10 +505,25 @@ impl Choices {
         now
     }
 
-    /// The choice at each step, smallest height first (for tests and panels).
+    /// The elevations of the classes' views, degrees, ascending (empty: one class, the tables
+    /// over every view).
+    #[must_use]
+    pub fn elevations(&self) -> &[f32] {
+        &self.elevations
+    }
+
+    /// The choice at each step seen from the side and fully visible, smallest height first (for
+    /// tests and panels).
     #[must_use]
     pub fn steps(&self) -> &[Technique] {
-        &self.steps
+        self.steps_at(0)
+    }
+
+    /// [`Self::steps`] seen from elevation class `elevation` (past the last: the last).
+    #[must_use]
+    pub fn steps_at(&self, elevation: usize) -> &[Technique] {
+        let e = elevation.min(self.elevations.len().saturating_sub(1));
+        &self.tables[e * self.visibility].1
     }
 }
 
@@ -432,7 +571,13 @@ pub struct PolicyState {
     visible: Vec<f32>,
     /// Per instance: the visibility class it was chosen by last frame ([`visibility_class_after`]).
     classes: Vec<u8>,
+    /// Per instance: the elevation class it was chosen by last frame ([`elevation_class_after`]),
+    /// [`NO_CLASS`] for none.
+    elevations: Vec<u8>,
 }
+
+/// [`PolicyState`]'s elevation class of a tree not chosen by elevation last frame.
+const NO_CLASS: u8 = u8::MAX;
 
 /// A tree's transition from one technique to another this frame ([`PolicyState::transition`]):
 /// it is drawn with both, the new technique on the pixels whose transition dither `h ∈ [0, 1)`
@@ -474,6 +619,7 @@ impl PolicyState {
         self.transitions.clear();
         self.visible.clear();
         self.classes.clear();
+        self.elevations.clear();
     }
 
     /// Sets the instances' visible fractions the next choices read (per instance, 1 = fully
@@ -563,6 +709,7 @@ pub fn choose_instances_coarsest(
     state.transitions.resize(instances.len(), None);
     state.visible.resize(instances.len(), 1.0);
     state.classes.resize(instances.len(), 0);
+    state.elevations.resize(instances.len(), NO_CLASS);
     out.clear();
     out.resize(instances.len(), otherwise);
     let frames = state.frames;
@@ -571,24 +718,38 @@ pub fn choose_instances_coarsest(
                   previous: &mut [Option<Technique>],
                   transitions: &mut [Option<(Technique, u16)>],
                   visible: &[f32],
-                  classes: &mut [u8],
+                  (classes, elevations): (&mut [u8], &mut [u8]),
                   out: &mut [Technique]| {
-        let per_instance = instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(out);
-        for (((((instance, previous), transition), &visible), class), out) in per_instance {
+        let per_instance =
+            instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(elevations).zip(out);
+        for ((((((instance, previous), transition), &visible), class), elevation), out) in per_instance {
             let m = instance.model as usize;
             *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                 (Some(lod), Some(choices)) => {
-                    let height = eyes
+                    // The smallest height and the eye that sees it.
+                    let (height, eye) = eyes
                         .iter()
                         .map(|&(eye, world_per_pixel)| {
-                            projected_height_at(lod, instance.transform, eye, world_per_pixel)
+                            (projected_height_at(lod, instance.transform, eye, world_per_pixel), eye)
                         })
-                        .reduce(f32::min)
-                        .unwrap_or(0.0);
+                        .reduce(|a, b| if b.0 < a.0 { b } else { a })
+                        .unwrap_or((0.0, Vec3::ZERO));
                     let seen = visibility_class_after(usize::from(*class), visible);
                     *class = u8::try_from(seen).unwrap_or(0);
+                    let elevation_class = if choices.elevations().is_empty() {
+                        0
+                    } else {
+                        let before = (*elevation != NO_CLASS).then_some(usize::from(*elevation));
+                        let now = elevation_class_after(
+                            before,
+                            view_elevation(lod, instance.transform, eye),
+                            choices.elevations(),
+                        );
+                        *elevation = u8::try_from(now).unwrap_or(0);
+                        now
+                    };
                     #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-                    let chosen = choices.choose_seen(height, (-(seen as f32)).exp2(), *previous);
+                    let chosen = choices.choose_viewed(height, elevation_class, (-(seen as f32)).exp2(), *previous);
                     *transition = advance(*previous, chosen, *transition, frames);
                     *previous = Some(chosen);
                     chosen
@@ -596,13 +757,15 @@ pub fn choose_instances_coarsest(
                 _ => {
                     *previous = None;
                     *transition = None;
+                    *elevation = NO_CLASS;
                     otherwise
                 }
             };
         }
     };
     if instances.len() <= CHOOSE_CHUNK {
-        choose(instances, &mut state.previous, &mut state.transitions, &state.visible, &mut state.classes, out);
+        let classes = (&mut state.classes[..], &mut state.elevations[..]);
+        choose(instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out);
         return;
     }
     instances
@@ -611,10 +774,21 @@ pub fn choose_instances_coarsest(
         .zip(state.transitions.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.visible.par_chunks(CHOOSE_CHUNK))
         .zip(state.classes.par_chunks_mut(CHOOSE_CHUNK))
+        .zip(state.elevations.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
-        .for_each(|(((((instances, previous), transitions), visible), classes), out)| {
-            choose(instances, previous, transitions, visible, classes, out);
+        .for_each(|((((((instances, previous), transitions), visible), classes), elevations), out)| {
+            choose(instances, previous, transitions, visible, (classes, elevations), out);
         });
+}
+
+/// The elevation of `eye` above the horizontal plane of a model's block drawn by `transform`,
+/// degrees: the angle between the direction from the block's transformed centre to the eye and
+/// that plane, whose normal is the transform's y axis (`[-90, 90]`; 0 for an eye at the centre).
+#[must_use]
+pub fn view_elevation(lod: &ModelLod, transform: Mat4, eye: Vec3) -> f32 {
+    let up = transform.y_axis.truncate().normalize_or(Vec3::Y);
+    let towards = (eye - transform.transform_point3(lod.centre())).normalize_or_zero();
+    towards.dot(up).clamp(-1.0, 1.0).asin().to_degrees()
 }
 
 /// The eye distance at which a model's block is `height` pixels high for `camera` (unit instance
@@ -728,6 +902,86 @@ mod tests {
         Representations::default()
     }
 
+    /// [`table`] with tables per elevation: from the side (0°) as over every view; from above
+    /// (90°) the crossed quads read 0.2 at every height (seen from above they are three lines).
+    fn table_with_elevations() -> Calibration {
+        let mean = table();
+        let mut records = Vec::new();
+        for (elevation, crossed) in [(0.0, None), (90.0, Some(0.2))] {
+            for technique in [Technique::Full, Technique::Spt, Technique::LodChain, Technique::Crossed] {
+                for h in [8.0, 32.0, 128.0, 256.0] {
+                    let (error, primitives) = mean.at(technique, h).unwrap();
+                    let error = if technique == Technique::Crossed { crossed.unwrap_or(error) } else { error };
+                    records.push(ElevationCalibrationRecord {
+                        elevation,
+                        technique: technique.index() as u32,
+                        height: h,
+                        error,
+                        primitives,
+                    });
+                }
+            }
+        }
+        records.sort_by(|a, b| a.elevation.total_cmp(&b.elevation).then(a.technique.cmp(&b.technique)));
+        mean.with_elevations(&records)
+    }
+
+    #[test]
+    fn elevation_classes_are_the_nearest_for_a_new_tree_and_change_a_quarter_past_the_midpoint() {
+        let centres = [0.0, 30.0, 60.0, 90.0];
+        for (elevation, class) in [(-40.0, 0), (0.0, 0), (14.9, 0), (15.0, 1), (50.0, 2), (80.0, 3), (f32::NAN, 0)] {
+            assert_eq!(elevation_class_after(None, elevation, &centres), class, "{elevation}°");
+        }
+        // From class 0 upwards: past 15° + 7.5°; and straight to the class the view reaches.
+        assert_eq!(elevation_class_after(Some(0), 22.0, &centres), 0);
+        assert_eq!(elevation_class_after(Some(0), 23.0, &centres), 1);
+        assert_eq!(elevation_class_after(Some(0), 50.0, &centres), 1, "not yet past 45° + 7.5°");
+        assert_eq!(elevation_class_after(Some(0), 53.0, &centres), 2);
+        assert_eq!(elevation_class_after(Some(0), 89.0, &centres), 3);
+        // Downwards: under 45° - 7.5°.
+        assert_eq!(elevation_class_after(Some(2), 38.0, &centres), 2);
+        assert_eq!(elevation_class_after(Some(2), 37.0, &centres), 1);
+        assert_eq!(elevation_class_after(Some(2), -5.0, &centres), 0);
+        // One class: always it.
+        assert_eq!(elevation_class_after(Some(0), 80.0, &[0.0]), 0);
+    }
+
+    #[test]
+    fn trees_seen_from_above_are_chosen_by_the_tables_of_views_from_above() {
+        let c = table_with_elevations();
+        assert_eq!(c.elevations(), [0.0, 90.0]);
+        assert_eq!(c.at_elevation(Some(1), Technique::Crossed, 8.0), Some((0.2, 3.0)));
+        assert_eq!(c.at_elevation(None, Technique::Crossed, 8.0), c.at(Technique::Crossed, 8.0));
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
+        let choices = Choices::among(&c, &policy, all);
+        assert_eq!(choices.elevations(), [0.0, 90.0]);
+        // Small trees: crossed quads from the side, the point tree from above.
+        assert_eq!(choices.choose_viewed(8.0, 0, 1.0, None), Technique::Crossed);
+        assert_eq!(choices.choose_viewed(8.0, 1, 1.0, None), Technique::Spt);
+        assert_eq!(choices.steps_at(0), steps_of(&c).as_slice(), "from the side as over every view");
+        assert!(choices.steps_at(1).iter().all(|&t| t != Technique::Crossed), "{:?}", choices.steps_at(1));
+        // Per instance: a tree 8 px high seen from the side and one seen from straight above.
+        let lods = [tall_lod()];
+        let camera = Camera::look_at(Vec3::new(0.0, 4.5, 100.0), Vec3::new(0.0, 4.5, 0.0), 0.8, 256, 256);
+        let distance = distance_for_height(&lods[0], 8.0, &camera);
+        let side = Camera::look_at(Vec3::new(0.0, 4.5, distance), Vec3::new(0.0, 4.5, 0.0), 0.8, 256, 256);
+        let above = Camera::look_at(Vec3::new(0.0, 4.5 + distance, 0.01), Vec3::new(0.0, 4.5, 0.0), 0.8, 256, 256);
+        assert!((view_elevation(&lods[0], Mat4::IDENTITY, above.position) - 89.9).abs() < 0.1);
+        let instances = [Instance { model: 0, transform: Mat4::IDENTITY }];
+        let choices = [Some(choices)];
+        let mut out = Vec::new();
+        for (camera, expected) in [(side, Technique::Crossed), (above, Technique::Spt)] {
+            let mut state = PolicyState::default();
+            choose_instances(&instances, &lods, &choices, &camera, Technique::Spt, &mut state, &mut out);
+            assert_eq!(out, [expected]);
+        }
+        // Without tables per elevation every view reads the tables over every view.
+        let mean = Choices::among(&table(), &policy, all);
+        let mut state = PolicyState::default();
+        choose_instances(&instances, &lods, &[Some(mean)], &above, Technique::Spt, &mut state, &mut out);
+        assert_eq!(out, [Technique::Crossed]);
+    }
+
     #[test]
     fn choice_tables_follow_the_rule_and_fall_back_above_the_range() {
         let c = table();
@@ -745,8 +999,7 @@ mod tests {
         let top = |steps: Vec<Technique>| {
             let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
             let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
-            choices.above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
-            choices.steps = steps;
+            choices.tables[0] = (steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK), steps);
             choices.choose(10_000.0, None)
         };
         // The chain at the top (the full mesh there): it holds nearer.
@@ -758,10 +1011,10 @@ mod tests {
         // (the table's chain equals the full mesh there) and it holds above.
         let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
         let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
-        choices.steps = (0..=40)
+        let steps: Vec<Technique> = (0..=40)
             .map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, |t| t != Technique::Spt))
             .collect();
-        choices.above = choices.steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
+        choices.tables[0] = (steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK), steps);
         assert_eq!(choices.choose(10_000.0, None), Technique::LodChain);
     }
 
@@ -769,7 +1022,13 @@ mod tests {
     fn hysteresis_keeps_last_frames_technique_near_a_boundary() {
         let c = table();
         let steps = steps_of(&c);
-        let choices = Choices { above: Technique::Spt, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() };
+        let choices = Choices {
+            log2_min: 3.0,
+            tables: vec![(Technique::Spt, steps)],
+            elevations: Vec::new(),
+            visibility: 1,
+            hysteresis_steps: 2,
+        };
         // Find the boundary between crossed (small) and the point tree (larger).
         let boundary = choices.steps().iter().position(|&t| t != Technique::Crossed).expect("a boundary");
         assert!(boundary > 0);
@@ -868,11 +1127,11 @@ mod tests {
         let c = table();
         let steps = steps_of(&c);
         let choices = [Some(Choices {
-            above: Technique::LodChain,
             log2_min: 3.0,
-            steps,
+            tables: vec![(Technique::LodChain, steps)],
+            elevations: Vec::new(),
+            visibility: 1,
             hysteresis_steps: 0,
-            hidden: Vec::new(),
         })];
         // Two thousand trees in a row, the camera walking along it.
         let instances: Vec<Instance> = (0..2 * CHOOSE_CHUNK)
@@ -965,7 +1224,13 @@ mod tests {
         let steps = steps_of(&c);
         assert!(steps.iter().any(|&t| t != steps[0]), "the table switches technique: {steps:?}");
         let choices = [
-            Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() }),
+            Some(Choices {
+                log2_min: 3.0,
+                tables: vec![(Technique::LodChain, steps)],
+                elevations: Vec::new(),
+                visibility: 1,
+                hysteresis_steps: 2,
+            }),
             None,
         ];
         let mut rng = SplitMix64(24);

@@ -76,7 +76,8 @@ struct Dump<'a> {
     /// The baseline sections (spec §6.12, §6.13), when the container has any of their records.
     #[serde(skip_serializing_if = "Option::is_none")]
     baselines: Option<BaselineInfo>,
-    /// The calibration (spec §6.15), when the container has one.
+    /// The calibration (spec §6.15) and its tables per elevation (§6.16), when the container has
+    /// either.
     #[serde(skip_serializing_if = "Option::is_none")]
     calibration: Option<CalibrationInfo>,
     /// Texture bytes per representation (spec §6.7), when the container has images.
@@ -498,11 +499,15 @@ baselines
 }
 
 /// The calibration of a container (spec §6.15): per representation, its error and primitive
-/// count at each projected height.
+/// count at each projected height; then the same per elevation of the views (§6.16).
 #[derive(Debug, Serialize)]
 struct CalibrationInfo {
     /// One entry per representation, in code order.
     techniques: Vec<CalibrationRow>,
+    /// One entry per elevation (`CALIBRATION_ELEVATIONS`), in file order (ascending); absent when
+    /// the container has none (files before 1.7).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    elevations: Vec<ElevationCalibration>,
     /// Whether the errors are of shaded colour (metadata `calibration.error = "colour"`, spec
     /// §6.15), else of coverage (earlier builds). The metadata block of the JSON says it too.
     #[serde(skip)]
@@ -518,55 +523,95 @@ struct CalibrationRow {
     samples: Vec<[f32; 3]>,
 }
 
+/// The tables measured from the views at one elevation.
+#[derive(Debug, Serialize)]
+struct ElevationCalibration {
+    /// Degrees above the block's horizontal plane.
+    elevation: f32,
+    /// One entry per representation, in code order.
+    techniques: Vec<CalibrationRow>,
+}
+
 impl CalibrationInfo {
-    /// The calibration of `container`, `None` if it has none.
+    /// The calibration of `container`, `None` if it has neither table.
     fn new(container: &Container) -> Option<Self> {
         let records = container.calibration();
-        if records.is_empty() {
+        let per_elevation = container.calibration_elevations();
+        if records.is_empty() && per_elevation.is_empty() {
             return None;
         }
-        let mut techniques: Vec<(u32, CalibrationRow)> = Vec::new();
-        for r in records {
-            let sample = [r.height, r.error, r.primitives];
-            match techniques.last_mut() {
-                Some((code, row)) if *code == r.technique => row.samples.push(sample),
-                _ => {
-                    let technique = treelod_format::calibration_technique::name(r.technique)
-                        .map_or_else(|| format!("technique {}", r.technique), str::to_owned);
-                    techniques.push((r.technique, CalibrationRow { technique, samples: vec![sample] }));
-                }
-            }
+        let techniques = rows(records.iter().map(|r| (r.technique, [r.height, r.error, r.primitives])));
+        let mut elevations: Vec<ElevationCalibration> = Vec::new();
+        // The records of each run of one elevation, in file order.
+        let mut rest = per_elevation;
+        while let Some(first) = rest.first() {
+            let n = rest.iter().take_while(|r| r.elevation == first.elevation).count().max(1);
+            let (run, tail) = rest.split_at(n);
+            let techniques = rows(run.iter().map(|r| (r.technique, [r.height, r.error, r.primitives])));
+            elevations.push(ElevationCalibration { elevation: first.elevation, techniques });
+            rest = tail;
         }
         let colour = container.metadata().settings.iter().any(|s| s.key == "calibration.error" && s.value == "colour");
-        Some(Self { techniques: techniques.into_iter().map(|(_, row)| row).collect(), colour })
+        Some(Self { techniques, elevations, colour })
     }
 
-    /// The text form: a row per representation, `error (primitives)` per height.
+    /// The text form: a table of a row per representation, `error (primitives)` per height; then
+    /// one such table per elevation.
     fn to_text(&self) -> String {
-        let mut heights: Vec<f32> = self.techniques.iter().flat_map(|t| t.samples.iter().map(|s| s[0])).collect();
-        heights.sort_by(f32::total_cmp);
-        heights.dedup();
-        let mut columns = vec![("technique".to_owned(), Align::Left)];
-        columns.extend(heights.iter().map(|h| (format!("{h} px"), Align::Right)));
-        let names: Vec<(&str, Align)> = columns.iter().map(|(n, a)| (n.as_str(), *a)).collect();
-        let mut table = Table::new(&names);
-        for t in &self.techniques {
-            let mut row = vec![t.technique.clone()];
-            row.extend(heights.iter().map(|h| {
-                t.samples
-                    .iter()
-                    .find(|s| s[0] == *h)
-                    .map_or_else(String::new, |s| format!("{:.4} ({})", s[1], s[2].round()))
-            }));
-            table.row(row);
-        }
         let measure = if self.colour { "shaded colour" } else { "coverage" };
-        format!(
+        let mut out = format!(
             "\ncalibration (multi-scale RMSE of {measure} against the supersampled full mesh, and primitives submitted, \
              by the block's projected height)\n{}",
-            table.render("  ")
-        )
+            table(&self.techniques).render("  ")
+        );
+        for e in &self.elevations {
+            out.push_str(&format!(
+                "\ncalibration at {}° elevation (the same, from the views at that elevation)\n{}",
+                e.elevation,
+                table(&e.techniques).render("  ")
+            ));
+        }
+        out
     }
+}
+
+/// Groups `(technique, [height, error, primitives])` samples into one row per run of one
+/// technique.
+fn rows(samples: impl Iterator<Item = (u32, [f32; 3])>) -> Vec<CalibrationRow> {
+    let mut techniques: Vec<(u32, CalibrationRow)> = Vec::new();
+    for (code, sample) in samples {
+        match techniques.last_mut() {
+            Some((last, row)) if *last == code => row.samples.push(sample),
+            _ => {
+                let technique = treelod_format::calibration_technique::name(code)
+                    .map_or_else(|| format!("technique {code}"), str::to_owned);
+                techniques.push((code, CalibrationRow { technique, samples: vec![sample] }));
+            }
+        }
+    }
+    techniques.into_iter().map(|(_, row)| row).collect()
+}
+
+/// A calibration table: a row per representation, a column per height, `error (primitives)`.
+fn table(techniques: &[CalibrationRow]) -> Table {
+    let mut heights: Vec<f32> = techniques.iter().flat_map(|t| t.samples.iter().map(|s| s[0])).collect();
+    heights.sort_by(f32::total_cmp);
+    heights.dedup();
+    let mut columns = vec![("technique".to_owned(), Align::Left)];
+    columns.extend(heights.iter().map(|h| (format!("{h} px"), Align::Right)));
+    let names: Vec<(&str, Align)> = columns.iter().map(|(n, a)| (n.as_str(), *a)).collect();
+    let mut table = Table::new(&names);
+    for t in techniques {
+        let mut row = vec![t.technique.clone()];
+        row.extend(heights.iter().map(|h| {
+            t.samples
+                .iter()
+                .find(|s| s[0] == *h)
+                .map_or_else(String::new, |s| format!("{:.4} ({})", s[1], s[2].round()))
+        }));
+        table.row(row);
+    }
+    table
 }
 
 /// One non-empty cell.
