@@ -1003,27 +1003,39 @@ fn check_prune(leaves: &[PruneLeafRecord], triangles: &[TriangleRecord]) -> Resu
     Ok(())
 }
 
+/// Spec §6.15, §6.16: record `i` of `kind`, a calibration sample `(technique, height, error,
+/// primitives)`, names a known technique at a finite, positive height, with an error in `[0, 1]`
+/// and a finite primitive count `≥ 0`.
+fn check_calibration_sample(
+    kind: SectionKind,
+    i: usize,
+    (technique, height, error, primitives): (u32, f32, f32, f32),
+) -> Result<()> {
+    if technique >= calibration_technique::COUNT {
+        return Err(bad(
+            kind,
+            i,
+            format!("technique {technique} is not defined (0..{})", calibration_technique::COUNT),
+        ));
+    }
+    if !(height.is_finite() && height > 0.0) {
+        return Err(bad(kind, i, format!("height {height} is not a positive number of pixels")));
+    }
+    if !unit(error) {
+        return Err(bad(kind, i, format!("error {error} lies outside [0, 1]")));
+    }
+    if !non_negative(primitives) {
+        return Err(bad(kind, i, format!("primitive count {primitives} is not a finite count")));
+    }
+    Ok(())
+}
+
 /// Spec §6.15: known techniques in ascending order, heights finite, positive and strictly
 /// increasing within a technique, errors in `[0, 1]`, primitive counts finite and `≥ 0`.
 fn check_calibration(records: &[CalibrationRecord]) -> Result<()> {
     let kind = SectionKind::CALIBRATION;
     for (i, r) in records.iter().enumerate() {
-        if r.technique >= calibration_technique::COUNT {
-            return Err(bad(
-                kind,
-                i,
-                format!("technique {} is not defined (0..{})", r.technique, calibration_technique::COUNT),
-            ));
-        }
-        if !(r.height.is_finite() && r.height > 0.0) {
-            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
-        }
-        if !(0.0..=1.0).contains(&r.error) {
-            return Err(bad(kind, i, format!("error {} lies outside [0, 1]", r.error)));
-        }
-        if !(r.primitives.is_finite() && r.primitives >= 0.0) {
-            return Err(bad(kind, i, format!("primitive count {} is not a finite count", r.primitives)));
-        }
+        check_calibration_sample(kind, i, (r.technique, r.height, r.error, r.primitives))?;
         if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
             if r.technique < prev.technique {
                 return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
@@ -1073,22 +1085,7 @@ fn check_calibration_elevations(
         if !(r.elevation.is_finite() && (0.0..=90.0).contains(&r.elevation)) {
             return Err(bad(kind, i, format!("elevation {} lies outside [0, 90] degrees", r.elevation)));
         }
-        if r.technique >= calibration_technique::COUNT {
-            return Err(bad(
-                kind,
-                i,
-                format!("technique {} is not defined (0..{})", r.technique, calibration_technique::COUNT),
-            ));
-        }
-        if !(r.height.is_finite() && r.height > 0.0) {
-            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
-        }
-        if !unit(r.error) {
-            return Err(bad(kind, i, format!("error {} lies outside [0, 1]", r.error)));
-        }
-        if !non_negative(r.primitives) {
-            return Err(bad(kind, i, format!("primitive count {} is not a finite count", r.primitives)));
-        }
+        check_calibration_sample(kind, i, (r.technique, r.height, r.error, r.primitives))?;
         if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
             if r.elevation < prev.elevation {
                 return Err(bad(kind, i, format!("elevation {} follows elevation {}", r.elevation, prev.elevation)));
