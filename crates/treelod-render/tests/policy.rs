@@ -13,7 +13,8 @@ use treelod_format::Container;
 use treelod_render::offscreen::render_image;
 use treelod_render::{Camera, DebugView, Instance, Policy, Renderer, Settings, Shadows, Technique};
 use treelod_runtime::{
-    Calibration, Choices, ModelLod, Representations, elevation_class_after, projected_height, view_elevation,
+    Calibration, Choices, ModelLod, Representations, elevation_class_after, in_view_share, projected_height,
+    view_elevation,
 };
 
 /// The demo tree with impostors and its baselines (planes, a chain and billboards to choose
@@ -74,10 +75,16 @@ fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
     let camera = Camera::look_at(eye, vec3(0.0, 0.0, -1.0), 0.9, width, height);
     let runtime_camera = treelod_runtime::Camera::look_at(eye, vec3(0.0, 0.0, -1.0), 0.9, width, height);
 
+    // Each tree's choice at its height, by the elevation class of its view, and (above the
+    // calibrated range) the share of it in view (spec §10.2).
+    let frustum = treelod_runtime::Frustum::from_view_proj(runtime_camera.view_proj);
     let mut expected = treelod_render::PerTechnique::<u32>::default();
     for &p in &positions {
-        let h = projected_height(&lod, Mat4::from_translation(p), &runtime_camera);
-        *expected.get_mut(choices.choose(h, None)) += 1;
+        let transform = Mat4::from_translation(p);
+        let h = projected_height(&lod, transform, &runtime_camera);
+        let class = elevation_class_after(None, view_elevation(&lod, transform, eye), choices.elevations());
+        let in_view = if choices.above_range(h) { in_view_share(&lod, transform, &frustum) } else { 1.0 };
+        *expected.get_mut(choices.choose_framed(h, class, 1.0, in_view, None)) += 1;
     }
     assert!(expected.iter().filter(|&(_, n)| n > 0).count() >= 2, "the row spans two choices: {expected:?}");
 

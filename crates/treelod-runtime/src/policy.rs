@@ -13,14 +13,18 @@
 //! lowest error wins. The full mesh itself is never chosen (the sequential point tree and the LoD
 //! chain converge to it). Above the largest calibrated height the choice at that height holds if
 //! it converges to the full mesh as trees come near ([`converges`]: the point tree, the LoD chain,
-//! pruning), else the point tree draws ([`Technique::FALLBACK`]); below the smallest the smallest
-//! height's choice holds. (Where the top choice is the chain it holds: the point tree above the
-//! range drew whole near trees with 2.2–2.5× the full mesh's primitives at the same error, the
-//! oak's 49,409 against 22,566 in `eval`, the Quaternius tree's 7,121 against 2,888. Where it is
-//! another representation the point tree takes over rather than the chain: it culls per cell, so
-//! a tree the camera stands in draws only what it sees; the chain's full mesh there drew the
-//! pine's forest bench, `bench --quality` over 200 trees, with 64,115 primitives per frame against
-//! the point tree's 44,272, at the same RMSE.)
+//! pruning), else the rule's choice there among the techniques that converge; and the point tree
+//! ([`Technique::FALLBACK`]) stands in for that choice where it costs less for what is in view:
+//! it culls per cell, so a near tree the view cuts draws only the share `s` of its triangles in
+//! cells the view holds ([`in_view_share`]), while the chain draws the whole tree. The tables
+//! count whole trees, so the point tree is drawn where its primitives at the largest height
+//! times `s` are fewer than the choice's there (and its image is within the target there), with
+//! a quarter of hysteresis either way against last frame's technique. Below the smallest height
+//! the smallest height's choice holds. (Measured: the point tree for every tree above the range
+//! drew whole near trees with 2.2–2.5× the full mesh's primitives at the same error, the oak's
+//! 49,409 against the chain's 22,566 in `eval` at 2 radii, the Quaternius tree's 7,121 against
+//! 2,888; the chain for every one drew the pine's forest bench, `bench --quality` over 200 trees,
+//! with 64,115 primitives per frame against 44,272 with the point tree for trees the view cuts.)
 //!
 //! **Hysteresis.** A tree keeps last frame's technique while that technique is still the choice
 //! somewhere within [`Policy::hysteresis`] octaves of its height (a tree crossing a boundary must
@@ -68,7 +72,7 @@ use rayon::prelude::*;
 use treelod_format::{CalibrationRecord, Container, ElevationCalibrationRecord};
 
 use crate::draws::Representations;
-use crate::frame::{Camera, Instance, ModelLod};
+use crate::frame::{Camera, Frustum, Instance, ModelLod};
 use crate::technique::{PerTechnique, Technique};
 
 /// Steps of the choice tables per octave of projected height.
@@ -306,6 +310,16 @@ impl Calibration {
         self.choose_at_elevation(None, height, target, usable)
     }
 
+    /// The best image any technique `usable` accepts, the full mesh included, gives at `height`
+    /// by the tables of elevation class `elevation`: the floor of the rule (module docs).
+    fn floor(&self, elevation: Option<usize>, height: f32, usable: impl Fn(Technique) -> bool) -> f32 {
+        Technique::ALL
+            .into_iter()
+            .filter(|&t| t == Technique::Full || usable(t))
+            .filter_map(|t| self.at_elevation(elevation, t, height).map(|(e, _)| e))
+            .fold(f32::INFINITY, f32::min)
+    }
+
     /// [`Self::choose`] by the tables of elevation class `elevation` (as [`Self::at_elevation`]).
     #[must_use]
     pub fn choose_at_elevation(
@@ -321,12 +335,7 @@ impl Calibration {
                 .filter(|&t| t != Technique::Full && usable(t))
                 .filter_map(|t| self.at_elevation(elevation, t, height).map(|(e, p)| (t, e, p)))
         };
-        // The best image any representation (the full mesh included) gives at this height.
-        let best_candidate = candidates().map(|(_, e, _)| e).fold(f32::INFINITY, f32::min);
-        let floor = self
-            .at_elevation(elevation, Technique::Full, height)
-            .map_or(best_candidate, |(error, _)| error.min(best_candidate));
-        let limit = floor + sanitise(target);
+        let limit = self.floor(elevation, height, &usable) + sanitise(target);
         let cheapest = candidates()
             .filter(|&(_, e, _)| e <= limit)
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.0.cmp(&b.0)));
@@ -343,11 +352,9 @@ impl Calibration {
 pub struct Choices {
     /// `log2` of the smallest calibrated height.
     log2_min: f32,
-    /// Per elevation class, then visibility class (`e · visibility + k`): the choice above the
-    /// calibrated range ([`converges`]) and the choice at `log2_min + i / STEPS_PER_OCTAVE`, up
-    /// to the largest calibrated height. Visibility class `k` (a visible fraction about `2^-k`)
-    /// is chosen with the target raised to `target / √(2^-k)`.
-    tables: Vec<(Technique, Vec<Technique>)>,
+    /// Per elevation class, then visibility class (`e · visibility + k`). Visibility class `k`
+    /// (a visible fraction about `2^-k`) is chosen with the target raised to `target / √(2^-k)`.
+    tables: Vec<Table>,
     /// The elevations of the classes' views, degrees, ascending; empty: one class, every view.
     elevations: Vec<f32>,
     /// Visibility classes per elevation class: [`VISIBILITY_CLASSES`] with
@@ -355,6 +362,20 @@ pub struct Choices {
     visibility: usize,
     /// Steps either side within which a tree keeps last frame's technique.
     hysteresis_steps: usize,
+}
+
+/// One table of [`Choices`].
+#[derive(Clone, Debug, PartialEq)]
+struct Table {
+    /// Above the calibrated range, for a tree wholly in view: the choice at the largest height if
+    /// it converges to the full mesh ([`converges`]), else the rule's choice there among those
+    /// that do (module docs).
+    above: Technique,
+    /// The primitives of [`Self::above`] and of the point tree at the largest height (whole
+    /// trees), for trees partly in view.
+    above_cost: (f32, f32),
+    /// The choice at `log2_min + i / STEPS_PER_OCTAVE`, up to the largest calibrated height.
+    steps: Vec<Technique>,
 }
 
 /// The elevation class of a view `elevation` degrees above a tree's horizontal plane among
@@ -430,15 +451,26 @@ impl Choices {
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
         #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-        let table = |elevation: Option<usize>, target: f32| -> (Technique, Vec<Technique>) {
+        let table = |elevation: Option<usize>, target: f32| -> Table {
             let steps: Vec<Technique> = (0..count)
                 .map(|i| {
                     let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
                     calibration.choose_at_elevation(elevation, height, target, &usable)
                 })
                 .collect();
-            let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
-            (above, steps)
+            let top = (log2_min + (count - 1) as f32 / STEPS_PER_OCTAVE).exp2();
+            let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
+                let converging = calibration.choose_at_elevation(elevation, top, target, |t| converges(t) && usable(t));
+                if converges(converging) { converging } else { Technique::FALLBACK }
+            });
+            let at = |t: Technique| calibration.at_elevation(elevation, t, top);
+            // The point tree may stand in for a tree partly in view only where its image at the
+            // top is within the target, as any choice there.
+            let limit = calibration.floor(elevation, top, &usable) + sanitise(target);
+            let point_tree = at(Technique::FALLBACK)
+                .filter(|&(e, _)| usable(Technique::FALLBACK) && e <= limit)
+                .map_or(f32::INFINITY, |(_, p)| p);
+            Table { above, above_cost: (at(above).map_or(f32::INFINITY, |(_, p)| p), point_tree), steps }
         };
         let target = policy.target();
         let elevations = calibration.elevations();
@@ -461,8 +493,9 @@ impl Choices {
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`
     /// (`None`: none, a new tree): last frame's if it is the choice within the hysteresis of
     /// `height`, else the choice at `height`; above the calibrated range the choice at its top if
-    /// that converges to the full mesh as trees come nearer ([`converges`]), else the point tree
-    /// ([`Technique::FALLBACK`]). Seen from the side (elevation class 0) and fully visible.
+    /// that converges to the full mesh as trees come nearer ([`converges`]), else the rule's
+    /// choice there among those that converge (module docs). Seen from the side (elevation class
+    /// 0), fully visible and wholly in view.
     #[must_use]
     pub fn choose(&self, height: f32, previous: Option<Technique>) -> Technique {
         self.choose_viewed(height, 0, 1.0, previous)
@@ -478,13 +511,38 @@ impl Choices {
 
     /// [`Self::choose_seen`] for a tree seen from elevation class `elevation` (an index into
     /// [`Self::elevations`], [`elevation_class_after`]; past the last: the last; without tables
-    /// per elevation every class reads the tables over every view).
+    /// per elevation every class reads the tables over every view), wholly in view.
     #[must_use]
     pub fn choose_viewed(&self, height: f32, elevation: usize, visible: f32, previous: Option<Technique>) -> Technique {
+        self.choose_framed(height, elevation, visible, 1.0, previous)
+    }
+
+    /// [`Self::choose_viewed`] for a tree of which the share `in_view` of its triangles lies in
+    /// cells the view holds ([`in_view_share`]; 1: wholly in view): above the calibrated range
+    /// the point tree, which culls per cell, where its primitives at the largest height times
+    /// that share are fewer than the whole tree of the table's choice there (with a quarter of
+    /// hysteresis either way against last frame's technique); module docs.
+    #[must_use]
+    pub fn choose_framed(
+        &self,
+        height: f32,
+        elevation: usize,
+        visible: f32,
+        in_view: f32,
+        previous: Option<Technique>,
+    ) -> Technique {
         let e = elevation.min(self.elevations.len().saturating_sub(1));
         let k = visibility_class(visible).min(self.visibility - 1);
-        let (above_range, steps) = &self.tables[e * self.visibility + k];
-        let above_range = *above_range;
+        let table = &self.tables[e * self.visibility + k];
+        let (whole, culled) = (table.above_cost.0, table.above_cost.1 * in_view.clamp(0.0, 1.0));
+        let bias = match previous {
+            Some(Technique::FALLBACK) => 1.25,
+            Some(p) if p == table.above => 0.8,
+            _ => 1.0,
+        };
+        let above_range =
+            if table.above != Technique::FALLBACK && culled < whole * bias { Technique::FALLBACK } else { table.above };
+        let steps = &table.steps;
         let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
         let last = steps.len() - 1;
         // Above the range: one step per STEPS_PER_OCTAVE past its end reads as the fallback.
@@ -505,6 +563,16 @@ impl Choices {
         now
     }
 
+    /// Whether a tree `height` pixels high lies above the calibrated range (where
+    /// [`Self::choose_framed`] reads its share in view).
+    #[must_use]
+    pub fn above_range(&self, height: f32) -> bool {
+        let last = self.tables.first().map_or(0, |t| t.steps.len().saturating_sub(1));
+        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        let top = last as f32 + 0.5;
+        (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE > top
+    }
+
     /// The elevations of the classes' views, degrees, ascending (empty: one class, the tables
     /// over every view).
     #[must_use]
@@ -523,7 +591,7 @@ impl Choices {
     #[must_use]
     pub fn steps_at(&self, elevation: usize) -> &[Technique] {
         let e = elevation.min(self.elevations.len().saturating_sub(1));
-        &self.tables[e * self.visibility].1
+        &self.tables[e * self.visibility].steps
     }
 }
 
@@ -713,7 +781,8 @@ pub fn choose_instances_coarsest(
     out.clear();
     out.resize(instances.len(), otherwise);
     let frames = state.frames;
-    let eyes: Vec<(Vec3, f32)> = cameras.iter().map(|c| (c.position, c.world_per_pixel())).collect();
+    let eyes: Vec<(Vec3, f32, Frustum)> =
+        cameras.iter().map(|c| (c.position, c.world_per_pixel(), Frustum::from_view_proj(c.view_proj))).collect();
     let choose = |instances: &[Instance],
                   previous: &mut [Option<Technique>],
                   transitions: &mut [Option<(Technique, u16)>],
@@ -726,14 +795,18 @@ pub fn choose_instances_coarsest(
             let m = instance.model as usize;
             *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                 (Some(lod), Some(choices)) => {
-                    // The smallest height and the eye that sees it.
-                    let (height, eye) = eyes
+                    // The smallest height and the view that sees it.
+                    let (height, eye, frustum) = eyes
                         .iter()
-                        .map(|&(eye, world_per_pixel)| {
-                            (projected_height_at(lod, instance.transform, eye, world_per_pixel), eye)
+                        .map(|(eye, world_per_pixel, frustum)| {
+                            (projected_height_at(lod, instance.transform, *eye, *world_per_pixel), *eye, Some(frustum))
                         })
                         .reduce(|a, b| if b.0 < a.0 { b } else { a })
-                        .unwrap_or((0.0, Vec3::ZERO));
+                        .unwrap_or((0.0, Vec3::ZERO, None));
+                    let in_view = match frustum {
+                        Some(f) if choices.above_range(height) => in_view_share(lod, instance.transform, f),
+                        _ => 1.0,
+                    };
                     let seen = visibility_class_after(usize::from(*class), visible);
                     *class = u8::try_from(seen).unwrap_or(0);
                     let elevation_class = if choices.elevations().is_empty() {
@@ -749,7 +822,8 @@ pub fn choose_instances_coarsest(
                         now
                     };
                     #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-                    let chosen = choices.choose_viewed(height, elevation_class, (-(seen as f32)).exp2(), *previous);
+                    let chosen =
+                        choices.choose_framed(height, elevation_class, (-(seen as f32)).exp2(), in_view, *previous);
                     *transition = advance(*previous, chosen, *transition, frames);
                     *previous = Some(chosen);
                     chosen
@@ -779,6 +853,27 @@ pub fn choose_instances_coarsest(
         .for_each(|((((((instances, previous), transitions), visible), classes), elevations), out)| {
             choose(instances, previous, transitions, visible, (classes, elevations), out);
         });
+}
+
+/// The share of a model's triangles drawn by `transform` that lie in cells whose bounds
+/// intersect `frustum` (1 where the model has no triangles): what the point tree, which culls per
+/// cell, draws of a near tree.
+#[must_use]
+pub fn in_view_share(lod: &ModelLod, transform: Mat4, frustum: &Frustum) -> f32 {
+    let linear = glam::Mat3::from_mat4(transform);
+    let abs = glam::Mat3::from_cols(linear.x_axis.abs(), linear.y_axis.abs(), linear.z_axis.abs());
+    let (mut total, mut seen) = (0u64, 0u64);
+    for cell in lod.cells() {
+        let count = u64::from(cell.triangles().count);
+        let (centre, half) = cell.centre_half();
+        let (c, h) = (transform.transform_point3(centre), abs * half);
+        total += count;
+        if frustum.intersects_aabb(c - h, c + h) {
+            seen += count;
+        }
+    }
+    #[expect(clippy::cast_precision_loss, reason = "a share")]
+    if total == 0 { 1.0 } else { seen as f32 / total as f32 }
 }
 
 /// The elevation of `eye` above the horizontal plane of a model's block drawn by `transform`,
@@ -995,27 +1090,43 @@ mod tests {
 
     #[test]
     fn above_the_range_the_top_choice_holds_only_if_it_converges_to_the_full_mesh() {
-        let c = table();
-        let top = |steps: Vec<Technique>| {
-            let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
-            let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
-            choices.tables[0] = (steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK), steps);
-            choices.choose(10_000.0, None)
-        };
-        // The chain at the top (the full mesh there): it holds nearer.
-        assert_eq!(top(vec![Technique::Spt, Technique::LodChain]), Technique::LodChain);
-        // Crossed quads at the top keep their error near: the point tree takes over.
-        assert_eq!(top(vec![Technique::Spt, Technique::Crossed]), Technique::FALLBACK);
-        assert!(converges(Technique::PruneOpt) && !converges(Technique::Impostors));
-        // Without the point tree's cut available, the rule's table keeps the chain at 256 px
-        // (the table's chain equals the full mesh there) and it holds above.
+        assert!(converges(Technique::PruneOpt) && converges(Technique::LodChain) && !converges(Technique::Impostors));
         let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
-        let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
-        let steps: Vec<Technique> = (0..=40)
-            .map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, |t| t != Technique::Spt))
-            .collect();
-        choices.tables[0] = (steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK), steps);
+        // The point tree cheapest at the top: it holds nearer.
+        let choices = Choices::among(&table(), &policy, all);
+        assert_eq!(choices.steps().last(), Some(&Technique::Spt));
+        assert_eq!(choices.choose(10_000.0, None), Technique::Spt);
+        // Without the point tree the chain (the full mesh there) is the top choice and holds.
+        let choices = Choices::among(&table(), &policy, |t| t != Technique::Spt);
+        assert_eq!(choices.steps().last(), Some(&Technique::LodChain));
         assert_eq!(choices.choose(10_000.0, None), Technique::LodChain);
+        // Crossed quads that win the top height keep their error near: above, the rule chooses
+        // among the techniques that converge, the chain here (fewer primitives than the point
+        // tree at the same error) for a tree wholly in view, the point tree (which culls per
+        // cell) for one partly in view.
+        let mut records = Vec::new();
+        for (h, crossed, spt, chain) in [(8.0, 0.05, 0.06, 0.2), (256.0, 0.011, 0.012, 0.012)] {
+            records.push(record(code::FULL, h, 0.012, 22_500.0));
+            records.push(record(code::SPT, h, spt, 21_000.0));
+            records.push(record(code::LOD_CHAIN, h, chain, 20_000.0));
+            records.push(record(code::CROSSED, h, crossed, 3.0));
+        }
+        records.sort_by_key(|r| r.technique);
+        let c = Calibration::from_records(&records).unwrap();
+        let choices = Choices::among(&c, &policy, all);
+        assert_eq!(choices.steps().last(), Some(&Technique::Crossed));
+        assert_eq!(choices.choose(10_000.0, None), Technique::LodChain);
+        // Partly in view: the point tree where its whole-tree primitives (21,000) times the share
+        // in view are fewer than the chain's (20,000), with a quarter of hysteresis.
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.99, None), Technique::LodChain);
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.9, None), Technique::FALLBACK);
+        let spt = Some(Technique::FALLBACK);
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.99, spt), Technique::FALLBACK, "held");
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.8, Some(Technique::LodChain)), Technique::LodChain);
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.7, Some(Technique::LodChain)), Technique::FALLBACK);
+        // Within the range the share in view does not matter.
+        assert_eq!(choices.choose_framed(100.0, 0, 1.0, 0.1, None), choices.choose(100.0, None));
+        assert!(choices.above_range(10_000.0) && !choices.above_range(100.0));
     }
 
     #[test]
@@ -1024,7 +1135,7 @@ mod tests {
         let steps = steps_of(&c);
         let choices = Choices {
             log2_min: 3.0,
-            tables: vec![(Technique::Spt, steps)],
+            tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
             elevations: Vec::new(),
             visibility: 1,
             hysteresis_steps: 2,
@@ -1126,9 +1237,11 @@ mod tests {
         let lods = [tall_lod()];
         let c = table();
         let steps = steps_of(&c);
+        // The point tree above the range whether a tree is wholly in view or not: the trees the
+        // camera walks past change technique once on the way.
         let choices = [Some(Choices {
             log2_min: 3.0,
-            tables: vec![(Technique::LodChain, steps)],
+            tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
             elevations: Vec::new(),
             visibility: 1,
             hysteresis_steps: 0,
@@ -1199,7 +1312,14 @@ mod tests {
                 let m = instance.model as usize;
                 match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                     (Some(lod), Some(choices)) => {
-                        let chosen = choices.choose(projected_height(lod, instance.transform, camera), *previous);
+                        let height = projected_height(lod, instance.transform, camera);
+                        let frustum = Frustum::from_view_proj(camera.view_proj);
+                        let in_view = if choices.above_range(height) {
+                            in_view_share(lod, instance.transform, &frustum)
+                        } else {
+                            1.0
+                        };
+                        let chosen = choices.choose_framed(height, 0, 1.0, in_view, *previous);
                         *previous = Some(chosen);
                         chosen
                     }
@@ -1226,7 +1346,7 @@ mod tests {
         let choices = [
             Some(Choices {
                 log2_min: 3.0,
-                tables: vec![(Technique::LodChain, steps)],
+                tables: vec![Table { above: Technique::LodChain, above_cost: (22_500.0, 21_000.0), steps }],
                 elevations: Vec::new(),
                 visibility: 1,
                 hysteresis_steps: 2,
