@@ -52,7 +52,8 @@
 //! the classes' spacing ([`elevation_class_after`]), so a camera climbing over a forest hands its
 //! far trees from billboards to planes or points while a walker keeps them billboards. Without
 //! those tables every tree is chosen by the tables over every view. A shadow cascade's trees are
-//! chosen by the view that sets their height (the light's, for the coarser of the two).
+//! chosen by the view that sets their height (the camera's or the cascade's, whichever sees the
+//! tree smaller).
 //!
 //! **Occlusion.** A tree partly hidden behind others shows only part of its error: with
 //! [`Policy::occlusion`] and a measured visible fraction `v` (the share of its hull samples the
@@ -65,7 +66,8 @@
 //! **Cost per frame.** The rule is evaluated once per model and policy into a table of choices
 //! every [`STEPS_PER_OCTAVE`]-th of an octave per elevation and visibility class ([`Choices`]);
 //! per tree the frame pays a distance, a `log2`, an `asin` (with tables per elevation) and a
-//! lookup ([`Choices::choose_viewed`]).
+//! lookup ([`Choices::choose_framed`]); a tree above the calibrated range also a box test per
+//! cell ([`in_view_share`]).
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
