@@ -541,16 +541,14 @@ impl CalibrationInfo {
             return None;
         }
         let techniques = rows(records.iter().map(|r| (r.technique, [r.height, r.error, r.primitives])));
-        let mut elevations: Vec<ElevationCalibration> = Vec::new();
-        // The records of each run of one elevation, in file order.
-        let mut rest = per_elevation;
-        while let Some(first) = rest.first() {
-            let n = rest.iter().take_while(|r| r.elevation == first.elevation).count().max(1);
-            let (run, tail) = rest.split_at(n);
-            let techniques = rows(run.iter().map(|r| (r.technique, [r.height, r.error, r.primitives])));
-            elevations.push(ElevationCalibration { elevation: first.elevation, techniques });
-            rest = tail;
-        }
+        // One table per run of records of one elevation, in file order.
+        let elevations = per_elevation
+            .chunk_by(|a, b| a.elevation == b.elevation)
+            .map(|run| ElevationCalibration {
+                elevation: run[0].elevation,
+                techniques: rows(run.iter().map(|r| (r.technique, [r.height, r.error, r.primitives]))),
+            })
+            .collect();
         let colour = container.metadata().settings.iter().any(|s| s.key == "calibration.error" && s.value == "colour");
         Some(Self { techniques, elevations, colour })
     }
