@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.7, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.8, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -168,7 +168,11 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.5 (1.4's and CALIBRATION), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { chain_calibration: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                calibration_elevations: false,
+                chain_calibration: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -177,14 +181,28 @@ pub fn golden_files() -> Vec<GoldenFile> {
             description: "every section kind of 1.5 and a BC7 impostor atlas (format 7 BC7_LINEAR, 1.6), zstd level 19 \
                           with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, chain_calibration: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                calibration_elevations: false,
+                chain_calibration: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
             minor: 7,
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.7 (1.6's: the 1.5 kinds and a BC7 impostor atlas, and \
-                          CHAIN_CALIBRATION), zstd level 19 with byte shuffle where it pays",
+                          CALIBRATION_ELEVATIONS), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, chain_calibration: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 8,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.8 (1.7's: the 1.5 kinds, a BC7 impostor atlas and \
+                          CALIBRATION_ELEVATIONS, and CHAIN_CALIBRATION), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -6,9 +6,9 @@ use treelod_build::{SptNode, flatten};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
-    EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, PlaneLeafRecord,
-    PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
-    billboard_kind, calibration_technique, image_format,
+    ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord,
+    NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree,
+    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -75,7 +75,13 @@ pub struct SyntheticOptions {
     /// and a whole number of primitives, in `CALIBRATION`. Drawn last, so the rest of the
     /// container is the same as without it.
     pub calibration: bool,
-    /// The LoD chain's per-level calibration (spec §6.16, 1.7): for each level of the chain
+    /// Calibration tables per elevation (spec §6.16, 1.7): `CALIBRATION`'s pairs of technique and
+    /// height at the elevations 0, 30, 60 and 90 degrees, each error the mean's scaled by a
+    /// random factor of `[0.5, 1.5]` (clamped to `[0, 1]`), the primitives the mean's, in
+    /// `CALIBRATION_ELEVATIONS`. Needs `calibration`; drawn last, so the rest of the container is
+    /// the same as without it.
+    pub calibration_elevations: bool,
+    /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
     /// container is the same as without it.
@@ -115,6 +121,7 @@ impl SyntheticOptions {
             ellipsoid_ao: false,
             line_ao: false,
             calibration: false,
+            calibration_elevations: false,
             chain_calibration: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
@@ -135,12 +142,13 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.7: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.8: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
     /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`) and
-    /// calibration tables (`CALIBRATION`, and the chain's per level, `CHAIN_CALIBRATION`).
+    /// calibration tables (`CALIBRATION`, per elevation, `CALIBRATION_ELEVATIONS`, and the chain's
+    /// per level, `CHAIN_CALIBRATION`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -164,6 +172,7 @@ impl SyntheticOptions {
             ellipsoid_ao: true,
             line_ao: true,
             calibration: true,
+            calibration_elevations: true,
             chain_calibration: true,
             bc7_atlas: false,
             name: Some("everything".into()),
@@ -1049,6 +1058,9 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     if options.calibration {
         b.data.calibration = calibration(&mut rng);
     }
+    if options.calibration_elevations {
+        b.data.calibration_elevations = calibration_elevations(&mut rng, &b.data.calibration);
+    }
     if options.chain_calibration {
         b.data.chain_calibration = chain_calibration(&mut rng, &b.data.lod_levels);
     }
@@ -1077,7 +1089,27 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     b.data
 }
 
-/// The LoD chain's per-level tables (spec §6.16): for each level every tree of `levels` has,
+/// Calibration tables per elevation (spec §6.16): `calibration`'s pairs of technique and height
+/// at the build's elevations, each error the mean's times a random factor in `[0.5, 1.5]` clamped
+/// to `[0, 1]`, the primitives the mean's (the same views' distance at each elevation).
+fn calibration_elevations(rng: &mut SplitMix64, calibration: &[CalibrationRecord]) -> Vec<ElevationCalibrationRecord> {
+    let mut records = Vec::new();
+    for elevation in [0.0, 30.0, 60.0, 90.0] {
+        for c in calibration {
+            let error = (c.error * rng.uniform(0.5, 1.5)).clamp(0.0, 1.0);
+            records.push(ElevationCalibrationRecord {
+                elevation,
+                technique: c.technique,
+                height: c.height,
+                error,
+                primitives: c.primitives,
+            });
+        }
+    }
+    records
+}
+
+/// The LoD chain's per-level tables (spec §6.17): for each level every tree of `levels` has,
 /// three samples whose heights grow strictly from a few pixels, whose errors fall within
 /// `[0, 1]`, and whose primitive count is the level's triangles over every tree.
 fn chain_calibration(rng: &mut SplitMix64, levels: &[LodLevelRecord]) -> Vec<ChainCalibrationRecord> {

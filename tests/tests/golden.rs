@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.7 (`tests/data/v1_0` to `tests/data/v1_7`): every file
+//! Golden files of format versions 1.0 to 1.8 (`tests/data/v1_0` to `tests/data/v1_8`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -24,7 +24,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -416,12 +416,52 @@ fn the_1_6_every_kind_file_has_a_bc7_atlas() {
 }
 
 #[test]
-fn the_1_7_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
+fn the_1_7_every_kind_file_has_every_kind_and_the_calibration_per_elevation() {
     let c = Container::open(golden_dir_of(7).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 7, "{kind}");
+    }
+    assert_eq!(c.header().minor, 7);
+    let report = verify(&c).unwrap();
+    let per_elevation = c.calibration_elevations();
+    assert_eq!(report.calibration_elevations, per_elevation.len() as u64);
+    // The elevations 0, 30, 60 and 90 degrees, each with CALIBRATION's techniques at its heights,
+    // the same primitives and an error of its own.
+    let calibration = c.calibration();
+    assert_eq!(per_elevation.len(), 4 * calibration.len());
+    for (elevation, records) in [0.0, 30.0, 60.0, 90.0].into_iter().zip(per_elevation.chunks(calibration.len())) {
+        for (r, mean) in records.iter().zip(calibration) {
+            assert_eq!(
+                (r.elevation, r.technique, r.height, r.primitives),
+                (elevation, mean.technique, mean.height, mean.primitives)
+            );
+        }
+    }
+    assert!(per_elevation.iter().zip(calibration.iter().cycle()).any(|(r, mean)| r.error != mean.error));
+    // Without CALIBRATION_ELEVATIONS it is the 1.6 file (1.5's kinds and a BC7 atlas), record for
+    // record, and the writer marks it 1.6. The atlas's BC7 blocks are those of the build's encoder
+    // of the day, so only their bytes may differ (same place, same length).
+    let v1_6 =
+        ContainerData::from_container(&Container::open(golden_dir_of(6).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.calibration_elevations.clear();
+    let bc7: Vec<_> = v1_6.images.iter().filter(|r| r.format == image_format::BC7_LINEAR).copied().collect();
+    assert_eq!(bc7.len(), 1, "{:?}", v1_6.images);
+    let blocks = bc7[0].data_offset as usize..(bc7[0].data_offset + bc7[0].data_length) as usize;
+    assert_eq!(data.image_data.len(), v1_6.image_data.len());
+    data.image_data[blocks.clone()].copy_from_slice(&v1_6.image_data[blocks]);
+    assert!(data == v1_6, "v1_7 is v1_6 with the calibration per elevation");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 6);
+}
+
+#[test]
+fn the_1_8_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
+    let c = Container::open(golden_dir_of(8).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
         assert!(c.section(kind).is_some(), "{kind} missing");
     }
-    assert_eq!(c.header().minor, 7);
+    assert_eq!(c.header().minor, 8);
     // Three samples per level of the chain, levels ascending from 0.
     let levels = c.chain_calibration();
     assert_eq!(verify(&c).unwrap().chain_calibration, levels.len() as u64);
@@ -429,22 +469,15 @@ fn the_1_7_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
     numbers.dedup();
     assert_eq!(numbers, (0..numbers.len() as u32).collect::<Vec<_>>());
     assert!(!numbers.is_empty() && levels.len() == 3 * numbers.len(), "{levels:?}");
-    // Without CHAIN_CALIBRATION it is the 1.6 file (1.5's kinds and a BC7 atlas), record for
-    // record, and the writer marks it 1.6. The atlas's BC7 blocks are the encoder's of today:
-    // the 1.6 file was written before the build's encoder moved to its ultrafast setting, so
-    // only their bytes may differ (same place, same length).
-    let v1_6 =
-        ContainerData::from_container(&Container::open(golden_dir_of(6).join("every-kind-zstd.treelod")).unwrap());
+    // Without CHAIN_CALIBRATION it is the 1.7 file (1.6's kinds and the calibration per
+    // elevation), record for record, and the writer marks it 1.7.
+    let v1_7 =
+        ContainerData::from_container(&Container::open(golden_dir_of(7).join("every-kind-zstd.treelod")).unwrap());
     let mut data = ContainerData::from_container(&c);
     data.chain_calibration.clear();
-    let bc7: Vec<_> = v1_6.images.iter().filter(|r| r.format == image_format::BC7_LINEAR).copied().collect();
-    assert_eq!(bc7.len(), 1, "{:?}", v1_6.images);
-    let blocks = bc7[0].data_offset as usize..(bc7[0].data_offset + bc7[0].data_length) as usize;
-    assert_eq!(data.image_data.len(), v1_6.image_data.len());
-    data.image_data[blocks.clone()].copy_from_slice(&v1_6.image_data[blocks]);
-    assert!(data == v1_6, "v1_7 is v1_6 with the chain's per-level calibration");
+    assert!(data == v1_7, "v1_8 is v1_7 with the chain's per-level calibration");
     let bytes = data.to_bytes(Compression::None).unwrap();
-    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 6);
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 7);
 }
 
 #[test]

@@ -225,9 +225,10 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds the chain's per-level calibration (CHAIN_CALIBRATION), so it is a 1.7 file.
+    // The fixture holds the LoD chain's per-level calibration (CHAIN_CALIBRATION), so it is a 1.8
+    // file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 7);
+    assert_eq!(minor, 8);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());

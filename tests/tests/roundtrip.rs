@@ -50,10 +50,12 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 line_ao: grid[0] >= 2 && grid[2] < 2,
                 // A calibration with half of the grids.
                 calibration: grid[1] >= 2,
+                // Its tables per elevation with a quarter (they need a calibration).
+                calibration_elevations: grid[1] >= 2 && grid[0] >= 2,
                 // The chain's per-level tables with a quarter (they need a chain).
                 chain_calibration: grid[1] >= 2 && curve_samples > 0,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
-                // the generator check below refuses (the golden 1.6 and 1.7 files cover it).
+                // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
                 name: None,
             }
@@ -346,7 +348,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 7, "everything() holds the kinds of 1.7");
+    assert_eq!(container.header().minor, 8, "everything() holds the kinds of 1.8");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

@@ -1169,7 +1169,8 @@ fn assemble(
     // Stage: calibration, of what is written (after the precision trim).
     if let Some(calibration) = &config.calibration {
         let calibrated = crate::calibrate::calibrate(&data, calibration);
-        data.calibration = calibrated.records;
+        data.calibration = calibrated.mean;
+        data.calibration_elevations = calibrated.elevations;
         data.chain_calibration = calibrated.chain_levels;
         clock.lap(&mut stats, "calibration");
     }

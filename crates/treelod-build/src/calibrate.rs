@@ -3,67 +3,95 @@
 //! model so that a runtime policy can choose among them without tuned constants. Neubert et al.'s
 //! λ(h) measurement (2011 §2.2), generalised to every representation.
 //!
-//! **What is measured.** For each height `h` of [`HEIGHTS`] and each of `views` orthographic views
-//! ([`view_directions`]), the block is drawn `h` pixels high:
-//! - the *reference*: every triangle of `TRIANGLES` with the alpha test, rasterised at `k × k`
-//!   samples per pixel (`k` = `supersample`, lowered so a side stays within
-//!   [`MAX_REFERENCE_SIDE`]) and box-filtered to the pixel's covered fraction;
+//! **What is measured.** For each height `h` of [`HEIGHTS`] and each orthographic view of
+//! [`calibration_views`] (`views` around the tree at each elevation of [`ELEVATIONS`] below 90°,
+//! and one straight down), the block is drawn `h` pixels high:
+//! - the *reference*: every triangle of `TRIANGLES`, rasterised at `k × k` samples per pixel
+//!   (`k` = `supersample`, lowered so a side stays within [`MAX_REFERENCE_SIDE`]) and
+//!   box-filtered to the pixel's mean colour, its alpha-tested leaves kept as `treelod eval`'s
+//!   reference keeps them (the renderer's stochastic alpha: a minified fragment where its
+//!   filtered coverage exceeds a hash of its sample and depth), so on average they cover what
+//!   their texels cover at any distance;
 //! - each representation at one sample per pixel, as the renderer draws it without MSAA, with
 //!   the runtime's own selection rules at the metres per pixel `p = H/h` of that height (`H` the
 //!   block's height): Gilet's cut at the default pixel thresholds (`s_min` 1, `s_max` 2, no depth
 //!   bias), point discs of their radius (a sub-pixel disc as the one-pixel splat of spec §10.1,
 //!   drawn when a hash of the point falls below its coverage), pruned leaves at `λ(h)` scaled by
 //!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test, the bark of both
-//!   as the runtime draws it by default (the LoD chain's bark level for `τ_p` where the container
-//!   has a chain, else every bark triangle), ellipsoids at `τ = p` with the renderer's noise holes and the branch lines (or every
-//!   bark triangle without lines), the billboards;
-//! - each level of the LoD chain (spec §6.16), every tree's level of that number as the runtime
-//!   switches a block's trees together: the `CHAIN_CALIBRATION` table. The chain's own
-//!   `lod-chain` row is then not drawn but read from it: at each height, the full mesh's or the
-//!   level's measurement that the runtime's rule by image error picks with the default target
-//!   ([`Calibration::chain_level`], spec §10.2), so the row describes the chain as the runtime
-//!   draws it with these tables, and a policy compares the chain it will draw. (A chain whose
-//!   levels do not cover every tree, which verified files do not have, is drawn by the geometric
-//!   rule instead: the coarsest level whose error is at most `τ = p`.) The levels cost one more
-//!   drawing per level, height and view, in place of the chain's one: `treelod build --baselines
-//!   --timings`, stage `calibration`, two runs each on a shared two-core machine, the oak
-//!   0.78–0.94 s before and 1.05–1.11 s with them, the pine 0.61–0.65 and 0.66–0.75 s, the
-//!   Quaternius tree 0.29–0.39 and 0.46–0.48 s (of builds of 11–17, 11–12 and 0.5–0.8 s).
+//!   as the runtime draws it by default (impostor trees: the branch lines of `τ = p` where the
+//!   container has lines; pruned trees, and impostor trees without lines: the LoD chain's bark
+//!   level for `τ_p` where the container has a chain, else every bark triangle), ellipsoids at
+//!   `τ = p` with the renderer's noise holes
+//!   and the branch lines (or every bark triangle without lines), the billboards; and each
+//!   level of the LoD chain, every tree's level of that number as the runtime switches a block's
+//!   trees together (spec §6.17; the chain's `lod-chain` rows follow from them, below). Alpha-tested triangles are tested against their cutoff at the
+//!   trilinear sample of the renderer's own texture layers ([`treelod_runtime::texels`]: every
+//!   material image resampled to one side of at most 512 texels, binary alpha, mips of the
+//!   covered fraction), so thin leaves thin out far away exactly as on the GPU (measured on the
+//!   shared orchid tree, whose 1024-texel leaf atlas the source-resolution test with nearest mips
+//!   of earlier builds drew 1.7× as dark as the reference at 64–256 pixels, where the renderer
+//!   draws it 1.15× as dark); planes and billboards sample their atlases' stored mips.
 //!
-//! The error is the multi-scale RMSE of coverage (`treelod_eval::metrics`, Clasen §4: levels from
-//! single pixels to the whole image) against the reference, averaged over the views; the cost is
+//! Every image is shaded ([`crate::shade`]): each surface's albedo (material colour, vertex or
+//! record colour, texture at the mip level the renderer samples), its normal and its ambient
+//! occlusion, lit by the renderer's default light ([`treelod_runtime::Light::DEFAULT`]) without
+//! shadows, nearest fragment in front, on a white background as `treelod eval` draws it. The
+//! error is the multi-scale RMSE of that linear colour (`treelod_eval::metrics`, Clasen §4:
+//! levels from single pixels to the whole image) against the reference, averaged over every view
+//! (`CALIBRATION`, spec §6.15) and over the views of each elevation (`CALIBRATION_ELEVATIONS`,
+//! §6.16: a policy chooses a tree by the views nearest to its own) — the measure `eval` reports, so a representation that keeps a tree's silhouette but darkens
+//! it, or lights a clump of leaves as one flat card, pays for it in the table. The metadata
+//! records it as `calibration.error = "colour"`. (Earlier builds, whose metadata lacks the key,
+//! measured coverage alone, against a reference and with leaves tested at the source texture's
+//! resolution: on the shared orchid tree the impostors then read as the best image at 128–256
+//! pixels, 0.054 against the full mesh's 0.077, where `eval` measures them at 0.054 against
+//! 0.037; these tables read 0.050 and 0.057 against 0.035 and 0.034.) The cost is
 //! the number of primitives submitted: the prefixes of points, planes, ellipsoids and lines a
 //! renderer submits per cell, the coarser records its vertex shader drops included, so that the
 //! tables count what the renderer's frame statistics, `eval` and the policy's budget count (the
 //! point tree's cut alone undercounted it about twofold: the Quaternius tree at 32–128 pixels
-//! submits 4013 primitives where its cut holds about 1900). Colour and shading are not measured: the table says how well a
-//! representation keeps the silhouette and the canopy's density, which is what its level of detail
-//! changes. Everything runs on the CPU rasteriser ([`crate::raster`]): the tables are the same on
-//! every machine and for any thread count (views run in parallel, results are summed in order).
+//! submits 4013 primitives where its cut holds about 1900). Everything runs on the CPU
+//! rasteriser ([`crate::raster`]): the tables are the same on every machine and for any thread
+//! count (views run in parallel, results are summed in order).
+//!
+//! **The LoD chain** (spec §6.17, §10.2). The chain's levels are measured from the same views as
+//! every representation and their table, `CHAIN_CALIBRATION`, is the mean over every view, as
+//! `CALIBRATION` is: the runtime picks the chain's level by those means whatever the elevation a
+//! tree is seen from, so one table per level is all it reads, and the build's cost stays one
+//! drawing per level, height and view. The chain's own `lod-chain` rows are then not drawn by the
+//! geometric rule but describe the chain as the runtime draws it with these tables: at each
+//! height the full mesh or the level that [`Calibration::chain_level`] picks with
+//! [`Policy::DEFAULT_TARGET`] (among the representations measured here), measured over every view
+//! for `CALIBRATION` and over each elevation's views for `CALIBRATION_ELEVATIONS`, so a policy
+//! compares the chain it will draw from where it is seen. (A chain whose levels do not cover
+//! every tree, which verified files do not have, is drawn by the geometric rule instead: per
+//! tree the coarsest level whose error is at most `τ = p`.)
 //!
 //! Impostor planes textured indirectly (`LEAF_SLOTS`, spec §6.10.1) are not drawn here: a
 //! container with them has no impostor rows, and a policy never picks a representation without
 //! rows.
 
-use glam::{Quat, Vec2, Vec3};
+use glam::{Quat, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use treelod_eval::metrics::{LinearImage, multiscale_rmse};
+use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
-    CalibrationRecord, ChainCalibrationRecord, ContainerData, ImageRecord, NO_IMAGE, Setting, TriangleRecord,
-    billboard_kind, calibration_technique, image_format, material_class, pack::unpack_unorm16x2, prune_leaves_drawn,
+    CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE,
+    Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao, image, image_format, material_class,
+    prune_leaves_drawn,
 };
 use treelod_runtime::ellipsoid::{ellipsoid_drawn, line_drawn};
 use treelod_runtime::impostor::{BARK_AREA_KEPT, BARK_ERROR_SHARE, area};
 use treelod_runtime::prune::{PruneScale, curve_at, leaf_scale, size_factor};
 use treelod_runtime::{
-    Calibration, LodChain, LodSettings, Policy, SptRecord, Technique, Thresholds, point_drawn, triangle_drawn,
+    Calibration, ChainPick, LodChain, LodSettings, Policy, SptRecord, Technique, Thresholds, point_drawn,
+    triangle_drawn,
 };
 
-use crate::raster::{
-    AlphaMask, Mask, NO_ALPHA, NOISE_SIZE, RasterTriangle, View, fill_ellipse, fill_ellipsoid_cut, fill_triangle,
-    noise_cut, rasterize, view_directions,
-};
-use crate::scene::{Image, ImageEncoding};
+use treelod_runtime::texels::{self, Sampler, Texels};
+
+use crate::raster::{NOISE_SIZE, View, ellipse_spans, ellipsoid_hits, noise_cut};
+use crate::shade::{Canvas, Surface, depth, triangle_pixels};
 
 /// Projected heights of the block at which every representation is measured, pixels: octaves
 /// from a tree a few pixels high to one a quarter of a 1080p screen high. Larger trees are few
@@ -76,14 +104,26 @@ pub const HEIGHTS: [f32; 6] = [8.0, 16.0, 32.0, 64.0, 128.0, 256.0];
 /// where a view would be larger (a block much wider than high at 256 pixels).
 pub const MAX_REFERENCE_SIDE: u32 = 2048;
 
+/// How far the renderer turns an ellipsoid's normal towards its noise texel's random vector
+/// (`ELLIPSOID_NORMAL_NOISE` in `shaders/tree/ellipsoids.wgsl`).
+const ELLIPSOID_NORMAL_NOISE: f32 = 0.5;
+
 /// Noise texels per radian of the renderer's ellipsoid noise (`shaders/tree/ellipsoids.wgsl`).
 const NOISE_TEXELS_PER_RADIAN: f32 = 40.0;
+
+/// Elevations of the calibration's views above the block's horizontal plane, degrees (spec
+/// §6.16): from the side, as a walker sees a tree far away, to straight down, as a flight over a
+/// forest sees it. Representations differ most in how they take elevation: measured on the
+/// shared oak at 8 pixels, its crossed billboards read 0.049, 0.077, 0.147 and 0.229 from 0°,
+/// 45°, 75° and 89°, where its point tree reads 0.058 to 0.072 — so a policy choosing by one
+/// table made mostly of side views drew forests seen from above with billboards.
+pub const ELEVATIONS: [f32; 4] = [0.0, 30.0, 60.0, 90.0];
 
 /// Settings of the calibration (recorded in the metadata as `calibration.*`).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CalibrationConfig {
-    /// Orthographic views per height ([`view_directions`]). Default 4: three around the tree and
-    /// one from 45° above.
+    /// Orthographic views per elevation of [`ELEVATIONS`] below 90° ([`calibration_views`]); one
+    /// view straight down. Default 2: 7 views in all.
     pub views: usize,
     /// Samples per pixel side of the reference. Default 4.
     pub supersample: u32,
@@ -91,70 +131,131 @@ pub struct CalibrationConfig {
 
 impl Default for CalibrationConfig {
     fn default() -> Self {
-        Self { views: 4, supersample: 4 }
+        Self { views: 2, supersample: 4 }
     }
 }
 
 impl CalibrationConfig {
-    /// The metadata settings recording this configuration (spec §7.1).
+    /// The metadata settings recording this configuration (spec §7.1): `calibration.views`, the
+    /// views per elevation, and `calibration.elevations`, the elevations in degrees (files of
+    /// format 1.5 and 1.6, without the latter, counted every view in `calibration.views`).
     #[must_use]
     pub fn settings(&self) -> Vec<Setting> {
+        let elevations: Vec<String> = ELEVATIONS.iter().map(ToString::to_string).collect();
         vec![
             Setting { key: "calibration.views".into(), value: self.views.to_string() },
+            Setting { key: "calibration.elevations".into(), value: elevations.join(",") },
             Setting { key: "calibration.supersample".into(), value: self.supersample.to_string() },
+            Setting { key: "calibration.error".into(), value: "colour".into() },
         ]
     }
+}
+
+/// The calibration's views (unit directions towards the viewer) with the index of their
+/// elevation in [`ELEVATIONS`]: per elevation below 90°, `per_elevation` views (at least one)
+/// spread evenly around the vertical axis — over half a turn from the side (an orthographic view
+/// from the opposite side sees the mirror image), over a full turn from above — half a step off
+/// the axes, and each ring a quarter step further round than the one below it; and one view
+/// straight down. No view lies along the axes the build bakes billboards from (`+Z` for the
+/// facing quad, 0°, 60° and 120° for the crossed ones): a billboard seen exactly from its bake
+/// direction shows its best image, which a camera almost never sees. Measured on the shared
+/// orchid from the side: with views at 0° and 90° azimuth its facing billboard read 0.057, 0.061
+/// and 0.059 at 32, 64 and 128 pixels, close enough to its impostor planes for a policy to draw
+/// far trees with it; with views at 45° and 135°, 0.068, 0.075 and 0.080.
+#[must_use]
+pub fn calibration_views(per_elevation: usize) -> Vec<(usize, Vec3)> {
+    let n = per_elevation.max(1);
+    let mut views = Vec::new();
+    for (e, &degrees) in ELEVATIONS.iter().enumerate() {
+        if degrees >= 90.0 {
+            views.push((e, Vec3::Y));
+            continue;
+        }
+        let elevation = degrees.to_radians();
+        let turn = if degrees == 0.0 { std::f32::consts::PI } else { std::f32::consts::TAU };
+        #[expect(clippy::cast_precision_loss, reason = "a few views")]
+        for k in 0..n {
+            let azimuth = turn * (k as f32 + 0.5 + 0.25 * e as f32) / n as f32;
+            let (s, c) = azimuth.sin_cos();
+            views.push((e, Vec3::new(elevation.cos() * s, elevation.sin(), elevation.cos() * c)));
+        }
+    }
+    views
+}
+
+/// What [`calibrate`] measured: the tables over every view (`CALIBRATION`, spec §6.15), per
+/// elevation (`CALIBRATION_ELEVATIONS`, spec §6.16) and per level of the LoD chain
+/// (`CHAIN_CALIBRATION`, spec §6.17).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Calibrated {
+    /// Per technique and height, the mean over every view.
+    pub mean: Vec<CalibrationRecord>,
+    /// Per elevation of [`ELEVATIONS`], technique and height, the mean over that elevation's views.
+    pub elevations: Vec<ElevationCalibrationRecord>,
+    /// Per LoD chain level and height, sorted by level, then height, the mean over every view;
+    /// empty without a chain.
+    pub chain_levels: Vec<ChainCalibrationRecord>,
 }
 
 /// What the calibration draws, gathered once from the container's arrays.
 struct Scene<'a> {
     data: &'a ContainerData,
-    /// Alpha masks: one per material (index = material), then one per image used by planes and
-    /// billboards (`image_alpha`).
-    alphas: Vec<AlphaMask>,
-    /// Per index into `alphas` of a textured material's mask: the indices of its mip levels
-    /// ([`AlphaMask::mip_chain`]), level 0 first; empty for the other masks.
-    alpha_mips: Vec<Vec<u32>>,
-    /// Per material, its index into `alphas` or [`NO_ALPHA`].
-    material_alpha: Vec<u32>,
-    /// Per image, its index into `alphas` as a plane's or billboard's texture, or [`NO_ALPHA`].
-    image_alpha: Vec<u32>,
+    /// Per image a plane or billboard samples: its stored mip levels (RGBA8), its size and how
+    /// it is sampled; `None` for other images, leaf slots and images that do not decode.
+    atlases: Vec<Option<Atlas>>,
+    /// The materials' textures as the renderer's texture array holds them ([`texels::Layers`]).
+    layers: texels::Layers,
+    /// Per material: its base colour (linear RGBA), its image's layer, if any, and its alpha
+    /// cutoff (`None`: opaque), as `fs_triangle` reads them.
+    materials: Vec<(Vec4, Option<usize>, Option<f32>)>,
+    /// Per vertex: its normal, its colour (linear RGBA) and its ambient occlusion.
+    vertices: Vec<(Vec3, Vec4, f32)>,
     /// Every triangle of `TRIANGLES`, ready to rasterise (the reference and the full mesh).
-    full: Vec<RasterTriangle>,
+    full: Vec<Tri>,
     /// The triangles of `TRIANGLES` that are not of a leaf material (pruned and impostor trees
     /// draw them all where the container has no chain, and near).
-    bark: Vec<RasterTriangle>,
+    bark: Vec<Tri>,
     /// The LoD chain's bark levels as the runtime keeps them for pruned and impostor trees
     /// (`treelod_runtime::ChainRanges::bark_levels`): per level, finest first, its block error
     /// (the largest of its trees', kept non-decreasing) and its bark triangles, while they keep
     /// [`BARK_AREA_KEPT`] of the full bark's area; empty without a chain, planes or pruning.
-    chain_bark: Vec<(f32, Vec<RasterTriangle>)>,
+    chain_bark: Vec<(f32, Vec<Tri>)>,
     /// The LoD chain's levels as the runtime switches a block's trees together
     /// ([`LodChain::from_records`]): per level, finest first, every tree's triangles of that
     /// level; empty without a chain.
-    chain_levels: Vec<Vec<RasterTriangle>>,
+    chain_levels: Vec<Vec<Tri>>,
     /// Whether the impostor planes can be drawn (an RGBA atlas, not leaf slots).
     planes_drawable: bool,
 }
 
-/// What [`calibrate`] measures: the table of every representation (`CALIBRATION`, spec §6.15)
-/// and of every level of the LoD chain (`CHAIN_CALIBRATION`, §6.16).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Calibrated {
-    /// Per representation and height, sorted by technique, then height.
-    pub records: Vec<CalibrationRecord>,
-    /// Per LoD chain level and height, sorted by level, then height; empty without a chain.
-    pub chain_levels: Vec<ChainCalibrationRecord>,
+/// An atlas as the renderer samples it: its stored levels, largest first, as RGBA8 texels.
+struct Atlas {
+    levels: Vec<Vec<u8>>,
+    size: (u32, u32),
+    sampler: Sampler,
 }
 
-/// The calibration of `data` (spec §6.15, §6.16): for every representation it holds, its error
-/// and primitive count at each of [`HEIGHTS`], sorted by technique, then height; and where it has
-/// a LoD chain, the same for each of the chain's levels. Empty for a block without height or
-/// triangles.
+/// A triangle to draw: its corners and what it is made of.
+#[derive(Clone, Copy, Debug)]
+struct Tri {
+    /// Corners, metres.
+    positions: [Vec3; 3],
+    /// Texture coordinates of the corners.
+    uvs: [Vec2; 3],
+    /// Its corners' vertices (their normals, colours and ambient occlusion).
+    indices: [u32; 3],
+    material: u32,
+}
+
+/// The calibration of `data` (spec §6.15–§6.17): for every representation it holds, its error
+/// and primitive count at each of [`HEIGHTS`] over every view, sorted by technique, then height,
+/// the same per elevation of [`ELEVATIONS`], sorted by elevation first, and where it has a LoD
+/// chain, the same for each of the chain's levels over every view. Empty for a block without
+/// height or triangles.
 ///
-/// With a chain, its `lod-chain` row is not drawn by the geometric rule but describes the chain
-/// as the runtime draws it with per-level tables (spec §10.2): at each height, the full mesh's or
-/// the level's measurement that [`Calibration::chain_level`] picks with
+/// With a chain, its `lod-chain` rows are not drawn by the geometric rule but describe the chain
+/// as the runtime draws it with per-level tables (module docs): at each height, the full mesh's
+/// or the level's measurement that [`Calibration::chain_level`] picks with
 /// [`Policy::DEFAULT_TARGET`] among the representations measured here.
 #[must_use]
 pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated {
@@ -165,12 +266,12 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
     }
     let scene = Scene::new(data);
     let held = scene.techniques();
-    // With per-level tables the chain's row follows from them: its levels are drawn instead.
+    // With per-level tables the chain's rows follow from them: its levels are drawn instead.
     let per_level = !scene.chain_levels.is_empty();
     let techniques: Vec<u32> =
         held.iter().copied().filter(|&t| !(per_level && t == calibration_technique::LOD_CHAIN)).collect();
     let (centre, radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
-    let directions = view_directions(config.views.max(1));
+    let directions = calibration_views(config.views);
     let jobs: Vec<(usize, usize)> =
         (0..HEIGHTS.len()).flat_map(|h| (0..directions.len()).map(move |v| (h, v))).collect();
     // Per job: per technique, then per chain level, (error, primitives).
@@ -183,163 +284,167 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
             let k = config.supersample.max(1).min((MAX_REFERENCE_SIDE / side).max(1));
             // The sphere fitted to exactly `side` pixels of `metres_per_pixel`.
             let fitted = 0.5 * side as f32 * metres_per_pixel;
-            let view = View::fit(directions[v], centre, fitted, side);
-            let reference = scene.reference(&View::fit(directions[v], centre, fitted, side * k), k);
+            let direction = directions[v].1;
+            let view = View::fit(direction, centre, fitted, side);
+            let reference = scene.reference(&View::fit(direction, centre, fitted, side * k), k);
             let measured = techniques.iter().map(|&t| {
-                let mut mask = Mask::new(side);
-                let primitives = scene.draw(t, &view, metres_per_pixel, pixels, &mut mask);
-                (error(&mask, &reference), primitives as f64)
+                let mut canvas = Canvas::new(side, BACKGROUND);
+                let primitives = scene.draw(t, &view, metres_per_pixel, pixels, &mut canvas);
+                (error(&canvas, &reference), primitives as f64)
             });
             let levels = scene.chain_levels.iter().map(|triangles| {
-                let mut mask = Mask::new(side);
-                scene.rasterize_1x(&mut mask, &view, triangles);
-                (error(&mask, &reference), triangles.len() as f64)
+                let mut canvas = Canvas::new(side, BACKGROUND);
+                scene.draw_triangles(&mut canvas, &view, triangles, false);
+                (error(&canvas, &reference), triangles.len() as f64)
             });
             measured.chain(levels).collect()
         })
         .collect();
-    // The mean over the views of column `column` at height index `h`.
-    let mean = |h: usize, column: usize| {
+    // The mean of column `column` of the results at height `h` over the views `keep` accepts, in
+    // view order.
+    let mean = |column: usize, h: usize, keep: &dyn Fn(usize) -> bool| -> (f32, f32) {
         let per_view: Vec<(f64, f64)> =
-            jobs.iter().zip(&results).filter(|((jh, _), _)| *jh == h).map(|(_, r)| r[column]).collect();
+            jobs.iter().zip(&results).filter(|((jh, v), _)| *jh == h && keep(*v)).map(|(_, r)| r[column]).collect();
         let n = per_view.len().max(1) as f64;
         let error = per_view.iter().map(|r| r.0).sum::<f64>() / n;
         let primitives = per_view.iter().map(|r| r.1).sum::<f64>() / n;
         ((error as f32).clamp(0.0, 1.0), primitives as f32)
     };
-    let mut records = Vec::new();
-    for (ti, &technique) in techniques.iter().enumerate() {
-        for (h, &pixels) in HEIGHTS.iter().enumerate() {
-            let (error, primitives) = mean(h, ti);
-            records.push(CalibrationRecord { technique, height: pixels, error, primitives });
-        }
-    }
-    let mut chain_levels = Vec::new();
+    let every = |_: usize| true;
+    let mut calibrated = Calibrated::default();
     for level in 0..scene.chain_levels.len() {
         for (h, &pixels) in HEIGHTS.iter().enumerate() {
-            let (error, primitives) = mean(h, techniques.len() + level);
+            let (error, primitives) = mean(techniques.len() + level, h, &every);
             let level = u32::try_from(level).unwrap_or(u32::MAX);
-            chain_levels.push(ChainCalibrationRecord { level, height: pixels, error, primitives });
+            calibrated.chain_levels.push(ChainCalibrationRecord { level, height: pixels, error, primitives });
         }
     }
-    if per_level {
-        records.extend(chain_rows(&records, &chain_levels, &held));
-        records.sort_by(|a, b| a.technique.cmp(&b.technique).then(a.height.total_cmp(&b.height)));
+    // Per height, the chain's pick by image error over every view (the runtime's, at the default
+    // target); empty without per-level tables.
+    let picks: Vec<Option<ChainPick>> = if per_level {
+        let drawn: Vec<CalibrationRecord> = techniques
+            .iter()
+            .enumerate()
+            .flat_map(|(ti, &technique)| HEIGHTS.iter().enumerate().map(move |(h, &pixels)| (ti, technique, h, pixels)))
+            .map(|(ti, technique, h, pixels)| {
+                let (error, primitives) = mean(ti, h, &every);
+                CalibrationRecord { technique, height: pixels, error, primitives }
+            })
+            .collect();
+        chain_picks(&drawn, &calibrated.chain_levels, &held)
+    } else {
+        Vec::new()
+    };
+    // The column of the results that measures `technique` at height `h`: its own, or for a chain
+    // with per-level tables the full mesh's or the level's it picks there (none: no row).
+    let column = |technique: u32, h: usize| -> Option<usize> {
+        if per_level && technique == calibration_technique::LOD_CHAIN {
+            match picks.get(h).copied().flatten()? {
+                Some(level) => Some(techniques.len() + level as usize),
+                None => techniques.iter().position(|&t| t == calibration_technique::FULL),
+            }
+        } else {
+            techniques.iter().position(|&t| t == technique)
+        }
+    };
+    for &technique in &held {
+        for (h, &pixels) in HEIGHTS.iter().enumerate() {
+            if let Some(c) = column(technique, h) {
+                let (error, primitives) = mean(c, h, &every);
+                calibrated.mean.push(CalibrationRecord { technique, height: pixels, error, primitives });
+            }
+        }
     }
-    Calibrated { records, chain_levels }
+    for (e, &elevation) in ELEVATIONS.iter().enumerate() {
+        for &technique in &held {
+            for (h, &pixels) in HEIGHTS.iter().enumerate() {
+                if let Some(c) = column(technique, h) {
+                    let (error, primitives) = mean(c, h, &|v| directions[v].0 == e);
+                    calibrated.elevations.push(ElevationCalibrationRecord {
+                        elevation,
+                        technique,
+                        height: pixels,
+                        error,
+                        primitives,
+                    });
+                }
+            }
+        }
+    }
+    calibrated
 }
 
-/// The `lod-chain` rows of a chain drawn by image error (spec §10.2): at each height of
-/// `chain_levels`, the measurement of the full mesh (in `records`) or of the level that
-/// [`Calibration::chain_level`] picks with the default target, the floor over the techniques
-/// `held`.
-fn chain_rows(
+/// The LoD chain's pick at each of [`HEIGHTS`] by image error (spec §10.2): the full mesh or the
+/// level [`Calibration::chain_level`] picks with the default target from the tables over every
+/// view of the techniques `records` measures and the levels of `chain_levels`, the floor over
+/// the techniques `held`; `None` at a height where the tables hold no pick.
+fn chain_picks(
     records: &[CalibrationRecord],
     chain_levels: &[ChainCalibrationRecord],
     held: &[u32],
-) -> Vec<CalibrationRecord> {
+) -> Vec<Option<ChainPick>> {
     let Some(tables) = Calibration::from_records(records).map(|c| c.with_chain_levels(chain_levels)) else {
-        return Vec::new();
+        return vec![None; HEIGHTS.len()];
     };
     let usable = |t: Technique| u32::try_from(t.index()).is_ok_and(|code| held.contains(&code));
-    let full = |height: f32| {
-        records.iter().find(|r| r.technique == calibration_technique::FULL && r.height == height).copied()
-    };
-    let mut heights: Vec<f32> = chain_levels.iter().map(|r| r.height).collect();
-    heights.sort_by(f32::total_cmp);
-    heights.dedup();
-    heights
-        .into_iter()
-        .filter_map(|height| {
-            let measured = match tables.chain_level(height, Policy::DEFAULT_TARGET, usable)? {
-                Some(level) => chain_levels
-                    .iter()
-                    .find(|r| r.level == level && r.height == height)
-                    .map(|r| (r.error, r.primitives))?,
-                None => full(height).map(|r| (r.error, r.primitives))?,
-            };
-            Some(CalibrationRecord {
-                technique: calibration_technique::LOD_CHAIN,
-                height,
-                error: measured.0,
-                primitives: measured.1,
-            })
-        })
-        .collect()
+    HEIGHTS.iter().map(|&height| tables.chain_level(height, Policy::DEFAULT_TARGET, usable)).collect()
 }
 
-/// The multi-scale RMSE of the one-sample coverage `mask` against `reference` (grey, the
-/// covered fraction of each pixel in every channel, as [`Scene::reference`] gives it).
-fn error(mask: &Mask, reference: &LinearImage) -> f64 {
-    multiscale_rmse(&coverage_image(mask), reference).map_or(1.0, |m| m.summary())
-}
+/// The background of every image: white, as `treelod eval` draws it.
+const BACKGROUND: Vec3 = Vec3::ONE;
 
-/// `mask` as a linear image: 1 in every channel where covered, 0 elsewhere.
-fn coverage_image(mask: &Mask) -> LinearImage {
-    let size = mask.size();
-    let pixels = (0..size)
-        .flat_map(|y| (0..size).map(move |x| (x, y)))
-        .map(|(x, y)| [f32::from(u8::from(mask.get(x, y))); 3])
-        .collect();
-    LinearImage { width: size, height: size, pixels }
+/// The multi-scale RMSE of `canvas` against `reference` (linear colour).
+fn error(canvas: &Canvas, reference: &LinearImage) -> f64 {
+    multiscale_rmse(&canvas.image(), reference).map_or(1.0, |m| m.summary())
 }
 
 impl<'a> Scene<'a> {
     fn new(data: &'a ContainerData) -> Self {
-        let decoded: Vec<Option<Image>> = data.images.iter().map(|record| decode(data, record)).collect();
-        let mut alphas = Vec::new();
-        let mut cutoffs = Vec::new();
-        let mut push = |mask: AlphaMask| {
-            alphas.push(mask);
-            u32::try_from(alphas.len() - 1).unwrap_or(NO_ALPHA)
-        };
-        let material_alpha: Vec<u32> = data
+        // Planes and billboards sample their atlas with its stored mips (spec §6.10).
+        let textured: Vec<u32> =
+            data.planes.iter().map(|p| p.image).chain(data.billboards.iter().map(|b| b.image)).collect();
+        let atlases: Vec<Option<Atlas>> = data
+            .images
+            .iter()
+            .enumerate()
+            .map(|(i, record)| textured.contains(&(i as u32)).then(|| atlas(data, record)).flatten())
+            .collect();
+        // The renderer's texture array (`treelod-render`'s textures): every image but those only
+        // planes sample (their atlases are textures of their own).
+        let atlas_only = texels::atlas_only(data.images.len(), &data.materials, &data.planes);
+        let by_image = texels::alpha_cutoffs(&data.materials, data.images.len());
+        let mut layer_of = vec![None; data.images.len()];
+        let (mut decoded, mut cutoffs) = (Vec::new(), Vec::new());
+        for (i, record) in data.images.iter().enumerate().filter(|&(i, _)| !atlas_only[i]) {
+            layer_of[i] = Some(decoded.len());
+            decoded.push(record.bytes(&data.image_data).and_then(|bytes| image::decode(record, bytes).ok()));
+            cutoffs.push(by_image[i]);
+        }
+        let images: Vec<Option<Texels<'_>>> = decoded
+            .iter()
+            .map(|image| image.as_ref().map(|i| Texels { width: i.width, height: i.height, rgba: &i.texels }))
+            .collect();
+        let layers = texels::Layers::new(&images, &cutoffs);
+        let materials = data
             .materials
             .iter()
             .map(|m| {
-                let cutoff = match m.alpha_mode {
-                    1 => m.alpha_cutoff,
-                    2 => 0.5,
-                    _ => return NO_ALPHA,
-                };
-                let factor = m.base_color[3];
-                match (m.image != NO_IMAGE).then(|| decoded.get(m.image as usize)).flatten().and_then(Option::as_ref) {
-                    Some(image) => {
-                        let index = push(AlphaMask::from_image(image, factor, cutoff));
-                        cutoffs.push((index, cutoff));
-                        index
-                    }
-                    None if factor >= cutoff => NO_ALPHA,
-                    None => push(AlphaMask::from_image(&transparent(), 1.0, 0.5)),
-                }
+                let layer = (m.image != NO_IMAGE).then(|| layer_of.get(m.image as usize).copied().flatten()).flatten();
+                (Vec4::from_array(m.base_color), layer, texels::material_cutoff(m))
             })
             .collect();
-        // Planes and billboards test their atlas' alpha at 0.5 (spec §6.10).
-        let textured: Vec<u32> =
-            data.planes.iter().map(|p| p.image).chain(data.billboards.iter().map(|b| b.image)).collect();
-        let image_alpha: Vec<u32> = decoded
+        let vertices = data
+            .vertices
             .iter()
             .enumerate()
-            .map(|(i, image)| match image {
-                Some(image) if textured.contains(&(i as u32)) => push(AlphaMask::from_image(image, 1.0, 0.5)),
-                _ => NO_ALPHA,
+            .map(|(i, v)| {
+                let ao = data.vertex_ao.get(i).map_or(0.0, |&a| decode_ao(a));
+                (Vec3::from_array(oct_decode(v.normal)), linear_colour(v.color), ao)
             })
             .collect();
-        // Each textured material's mips, as the renderer alpha-tests them (`rasterize_1x`).
-        let mut alpha_mips = vec![Vec::new(); alphas.len()];
-        for (index, cutoff) in cutoffs {
-            let Some(mask) = alphas.get(index as usize) else { continue };
-            let chain = mask.mip_chain(cutoff);
-            let mut levels = vec![index];
-            for level in chain.into_iter().skip(1) {
-                alphas.push(level);
-                levels.push(u32::try_from(alphas.len() - 1).unwrap_or(NO_ALPHA));
-            }
-            alpha_mips[index as usize] = levels;
-        }
-        let raster = |t: &TriangleRecord| raster_triangle(data, t, &material_alpha, 1.0, None);
-        let full: Vec<RasterTriangle> = data.triangles.iter().map(raster).collect();
-        let bark: Vec<RasterTriangle> = data
+        let raster = |t: &TriangleRecord| tri(data, t, 1.0, None);
+        let full: Vec<Tri> = data.triangles.iter().map(raster).collect();
+        let bark: Vec<Tri> = data
             .triangles
             .iter()
             .filter(|t| data.materials.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF))
@@ -348,13 +453,10 @@ impl<'a> Scene<'a> {
         let planes_drawable = !data.planes.is_empty()
             && data.planes.iter().all(|p| {
                 data.images.get(p.image as usize).is_some_and(|i| i.format != image_format::LEAF_SLOTS)
-                    && image_alpha.get(p.image as usize).is_some_and(|&a| a != NO_ALPHA)
+                    && atlases.get(p.image as usize).is_some_and(Option::is_some)
             });
-        let chain_bark = if data.planes.is_empty() && data.prune_leaves.is_empty() {
-            Vec::new()
-        } else {
-            chain_bark_levels(data, &material_alpha)
-        };
+        let chain_bark =
+            if data.planes.is_empty() && data.prune_leaves.is_empty() { Vec::new() } else { chain_bark_levels(data) };
         let chain_levels = LodChain::from_records(&data.lod_levels).map_or_else(Vec::new, |chain| {
             chain
                 .levels()
@@ -364,66 +466,89 @@ impl<'a> Scene<'a> {
                         .ranges
                         .iter()
                         .flat_map(|range| data.lod_triangles.get(range.as_usize()).unwrap_or(&[]))
-                        .map(|t| raster_triangle(data, t, &material_alpha, 1.0, None))
+                        .map(raster)
                         .collect()
                 })
                 .collect()
         });
-        Self {
-            data,
-            alphas,
-            alpha_mips,
-            material_alpha,
-            image_alpha,
-            full,
-            bark,
-            chain_bark,
-            chain_levels,
-            planes_drawable,
-        }
+        Self { data, atlases, layers, materials, vertices, full, bark, chain_bark, chain_levels, planes_drawable }
     }
 
-    /// Draws the bark of a pruned or impostor tree at `τ = tau` (metres) as the runtime's
-    /// `ImpostorBark::Chain` does: the chain's coarsest bark level whose error is at most
-    /// [`BARK_ERROR_SHARE`] of `τ`, else every bark triangle. Returns the triangles drawn.
-    fn draw_bark(&self, view: &View, tau: f32, mask: &mut Mask) -> u64 {
+    /// Draws the bark of a pruned or impostor tree at `p` metres per pixel as the runtime's
+    /// `ImpostorBark` does: with `lines` (`ImpostorBark::Lines`, the impostor trees' default) and
+    /// a container with branch lines, the lines of `τ = p` ([`Self::draw_lines`]); else as
+    /// `ImpostorBark::Chain` (pruned trees' default), the chain's coarsest bark level whose error
+    /// is at most [`BARK_ERROR_SHARE`] of `τ = s_min · p`, else every bark triangle. Returns the
+    /// primitives submitted.
+    fn draw_bark(&self, view: &View, p: f32, lines: bool, canvas: &mut Canvas) -> u64 {
+        if lines && !self.data.lines.is_empty() {
+            return self.draw_lines(view, p, canvas);
+        }
+        let tau = LodSettings::default().s_min * p;
         let usable = self.chain_bark.partition_point(|(error, _)| *error <= tau * BARK_ERROR_SHARE);
         let triangles = match usable.checked_sub(1) {
             Some(level) => &self.chain_bark[level].1,
             None => &self.bark,
         };
-        self.rasterize_1x(mask, view, triangles);
+        self.draw_triangles(canvas, view, triangles, false);
         triangles.len() as u64
     }
 
-    /// Rasterises `triangles` at one sample per pixel as the renderer alpha-tests them: each
-    /// textured triangle against the mip level its texel footprint selects (texels per pixel
-    /// along the screen axis that stretches them most, as `textureSample` chooses, rounded to a
-    /// level), so that leaves thinner than a pixel drop out far away as they do on the GPU. The
-    /// supersampled reference keeps testing the full resolution: it stands for the image the
-    /// stochastic alpha keeps.
-    fn rasterize_1x(&self, mask: &mut Mask, view: &View, triangles: &[RasterTriangle]) {
+    /// Draws `triangles` shaded as `fs_triangle` draws them without MSAA: albedo the material's
+    /// colour times the vertex colour times the trilinear sample of its layer ([`texels::sample`]
+    /// at the level of detail of the triangle's texel footprint), alpha-tested against the
+    /// material's cutoff — so leaves thinner than a pixel thin out or keep their density far away
+    /// as they do on the GPU. For the supersampled `reference`, the test is `eval`'s reference's
+    /// (its renderer settings' stochastic alpha): a minified fragment is kept where its filtered
+    /// coverage exceeds a hash of its pixel and depth, so on average the leaves cover what their
+    /// texels cover.
+    fn draw_triangles(&self, canvas: &mut Canvas, view: &View, triangles: &[Tri], reference: bool) {
+        let size = self.layers.size;
+        #[expect(clippy::cast_precision_loss, reason = "a texture side")]
+        let side = Vec2::splat(size as f32);
         for t in triangles {
             let p = t.positions.map(|q| view.project(q));
-            let alpha = self.alpha_mips.get(t.alpha as usize).filter(|l| l.len() > 1).map_or(t.alpha, |levels| {
-                let (w, h) = self.alphas.get(t.alpha as usize).map_or((1, 1), AlphaMask::size);
-                #[expect(clippy::cast_precision_loss, reason = "texture sides")]
-                let texels = Vec2::new(w as f32, h as f32);
-                let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
-                let (u1, u2) = ((t.uvs[1] - t.uvs[0]) * texels, (t.uvs[2] - t.uvs[0]) * texels);
-                let det = e1.perp_dot(e2);
-                if det.abs() < 1e-12 {
-                    return t.alpha;
+            let uvs = t.uvs;
+            let (base, layer, cutoff) =
+                self.materials.get(t.material as usize).copied().unwrap_or((Vec4::ONE, None, None));
+            let levels = layer.and_then(|l| self.layers.levels.get(l));
+            // Texels per pixel (constant over an orthographic triangle) and the level of detail.
+            let footprint = texel_footprint(p, uvs, side);
+            let lod = footprint.max(1e-6).log2();
+            let corners =
+                t.indices.map(|i| self.vertices.get(i as usize).copied().unwrap_or((Vec3::Y, Vec4::ONE, 0.0)));
+            let depths = t.positions.map(|q| depth(view, q));
+            triangle_pixels(canvas.size(), p, |x, y, b| {
+                let z = depths[0] * b[0] + depths[1] * b[1] + depths[2] * b[2];
+                if !canvas.nearer(x, y, z) {
+                    return;
                 }
-                // d(texel)/d(screen x) and d(texel)/d(screen y).
-                let along_x = (u1 * e2.y - u2 * e1.y) / det;
-                let along_y = (u2 * e1.x - u1 * e2.x) / det;
-                let footprint = along_x.length().max(along_y.length());
-                #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a mip level")]
-                let level = if footprint > 1.0 { footprint.log2().round() as usize } else { 0 };
-                levels[level.min(levels.len() - 1)]
+                let uv = uvs[0] * b[0] + uvs[1] * b[1] + uvs[2] * b[2];
+                let colour = corners[0].1 * b[0] + corners[1].1 * b[1] + corners[2].1 * b[2];
+                if let Some(cutoff) = cutoff {
+                    let texel = levels
+                        .map_or(1.0, |l| texels::sample_alpha(l, (size, size), uv.to_array(), lod, Sampler::MATERIALS));
+                    let alpha = base.w * colour.w * texel;
+                    let kept = if reference {
+                        filtered_coverage(alpha, cutoff, footprint) > pixel_depth_hash(x, y, z)
+                    } else {
+                        alpha >= cutoff
+                    };
+                    if !kept {
+                        return;
+                    }
+                }
+                let texel = levels.map_or(Vec4::ONE, |levels| {
+                    Vec4::from_array(texels::sample(levels, (size, size), uv.to_array(), lod, Sampler::MATERIALS))
+                });
+                let albedo = base * colour * texel;
+                let surface = Surface {
+                    albedo: albedo.truncate(),
+                    normal: corners[0].0 * b[0] + corners[1].0 * b[1] + corners[2].0 * b[2],
+                    ao: corners[0].2 * b[0] + corners[1].2 * b[1] + corners[2].2 * b[2],
+                };
+                canvas.put(x, y, z, surface.shaded());
             });
-            fill_triangle(mask, p, t.uvs, self.alphas.get(alpha as usize));
         }
     }
 
@@ -448,35 +573,37 @@ impl<'a> Scene<'a> {
         .collect()
     }
 
-    /// The reference of `view` (`k` samples per pixel side): every triangle's coverage,
-    /// box-filtered to the covered fraction of each pixel (grey, in every channel).
+    /// The reference of `view` (`k` samples per pixel side): every triangle shaded at full
+    /// texture resolution, box-filtered to the pixel's mean colour.
     fn reference(&self, view: &View, k: u32) -> LinearImage {
-        let mut fine = Mask::new(view.size);
-        rasterize(&mut fine, view, &self.full, &self.alphas);
-        let fine = coverage_image(&fine);
+        let mut fine = Canvas::new(view.size, BACKGROUND);
+        self.draw_triangles(&mut fine, view, &self.full, true);
+        let fine = fine.image();
         // The view is `k` times the image's side, so the filter cannot fail.
         fine.box_filter(k).unwrap_or(fine)
     }
 
     /// Draws `technique` as seen in `view` at `p` metres per pixel (`pixels` the block's height on
-    /// screen) into `mask`; returns the primitives drawn.
-    fn draw(&self, technique: u32, view: &View, p: f32, pixels: f32, mask: &mut Mask) -> u64 {
+    /// screen) into `canvas`; returns the primitives drawn.
+    fn draw(&self, technique: u32, view: &View, p: f32, pixels: f32, canvas: &mut Canvas) -> u64 {
         use calibration_technique as t;
         let d = self.data;
         let lod = LodSettings::default();
         match technique {
             t::FULL => {
-                self.rasterize_1x(mask, view, &self.full);
+                self.draw_triangles(canvas, view, &self.full, false);
                 self.full.len() as u64
             }
-            t::SPT => {
-                self.draw_spt(view, Thresholds { points: lod.s_min * p, triangles: lod.s_max.max(lod.s_min) * p }, mask)
-            }
+            t::SPT => self.draw_spt(
+                view,
+                Thresholds { points: lod.s_min * p, triangles: lod.s_max.max(lod.s_min) * p },
+                canvas,
+            ),
             t::PRUNE_OPT | t::PRUNE_COOK => {
                 let mode = if technique == t::PRUNE_OPT { PruneScale::Optimal } else { PruneScale::Cook };
                 let lambda = curve_at(&d.prune_lambda, pixels).unwrap_or(1.0).clamp(0.0, 1.0);
                 let grow = size_factor(leaf_scale(mode, &d.prune_scale, lambda));
-                let mut drawn = self.draw_bark(view, lod.s_min * p, mask);
+                let mut drawn = self.draw_bark(view, p, false, canvas);
                 let mut leaves = Vec::new();
                 for cell in &d.cells {
                     let list = d.prune_leaves.get(cell.prune_leaves.as_usize()).unwrap_or(&[]);
@@ -485,36 +612,35 @@ impl<'a> Scene<'a> {
                         let first = leaf.first_triangle as usize;
                         let tris = d.prune_triangles.get(first..first + leaf.triangle_count as usize).unwrap_or(&[]);
                         let centre = Vec3::from_array(leaf.center);
-                        leaves.extend(
-                            tris.iter().map(|tri| raster_triangle(d, tri, &self.material_alpha, grow, Some(centre))),
-                        );
+                        leaves.extend(tris.iter().map(|t| tri(d, t, grow, Some(centre))));
                     }
                 }
-                self.rasterize_1x(mask, view, &leaves);
+                self.draw_triangles(canvas, view, &leaves, false);
                 drawn += leaves.len() as u64;
                 drawn
             }
             t::IMPOSTORS => {
                 let tau = lod.s_min * p;
-                let mut drawn = self.draw_bark(view, tau, mask);
+                let mut drawn = self.draw_bark(view, p, true, canvas);
                 // The prefix `hi > τ` is submitted; the vertex shader drops the coarser planes.
                 drawn += d.planes.iter().filter(|pl| tau < pl.hi && pl.lo > tau).count() as u64;
-                for plane in d.planes.iter().filter(|pl| pl.lo <= tau && tau < pl.hi) {
+                for (i, plane) in d.planes.iter().enumerate().filter(|(_, pl)| pl.lo <= tau && tau < pl.hi) {
                     let (u, v) = (Vec3::from_array(plane.axis_u), Vec3::from_array(plane.axis_v));
+                    let ao = d.plane_ao.get(i).map_or(0.0, |&a| decode_ao(a));
                     self.quad(
-                        mask,
+                        canvas,
                         view,
                         Vec3::from_array(plane.center),
-                        u,
-                        v,
+                        (u, v),
                         plane.image,
                         (plane.uv_min, plane.uv_max),
+                        ao,
                     );
                     drawn += 1;
                 }
                 drawn
             }
-            t::ELLIPSOIDS => self.draw_ellipsoids(view, p, mask),
+            t::ELLIPSOIDS => self.draw_ellipsoids(view, p, canvas),
             t::LOD_CHAIN => {
                 // Only for a chain without per-level tables (levels missing for some tree): per
                 // tree, the coarsest level whose error is at most τ = s_min pixels; the full mesh
@@ -530,16 +656,16 @@ impl<'a> Scene<'a> {
                     }
                 }
                 if chosen.iter().any(Option::is_none) {
-                    self.rasterize_1x(mask, view, &self.full);
+                    self.draw_triangles(canvas, view, &self.full, false);
                     return self.full.len() as u64;
                 }
-                let tris: Vec<RasterTriangle> = chosen
+                let tris: Vec<Tri> = chosen
                     .iter()
                     .flatten()
                     .flat_map(|l| d.lod_triangles.get(l.triangles.as_usize()).unwrap_or(&[]))
-                    .map(|tri| raster_triangle(d, tri, &self.material_alpha, 1.0, None))
+                    .map(|t| tri(d, t, 1.0, None))
                     .collect();
-                self.rasterize_1x(mask, view, &tris);
+                self.draw_triangles(canvas, view, &tris, false);
                 tris.len() as u64
             }
             t::BILLBOARD | t::CROSSED => {
@@ -556,7 +682,8 @@ impl<'a> Scene<'a> {
                             u = turned * u.length();
                         }
                     }
-                    self.quad(mask, view, Vec3::from_array(b.center), u, v, b.image, (b.uv_min, b.uv_max));
+                    // Billboards carry no ambient occlusion (their atlas bakes the tree's shading).
+                    self.quad(canvas, view, Vec3::from_array(b.center), (u, v), b.image, (b.uv_min, b.uv_max), 0.0);
                     drawn += 1;
                 }
                 drawn
@@ -565,25 +692,60 @@ impl<'a> Scene<'a> {
         }
     }
 
-    /// A plane's or billboard's quad textured by the rectangle `uv` of `image`, alpha-tested at
-    /// 0.5 ([`quad`]).
-    #[expect(clippy::too_many_arguments, reason = "a quad's frame and its texture rectangle")]
-    fn quad(&self, mask: &mut Mask, view: &View, centre: Vec3, u: Vec3, v: Vec3, image: u32, uv: (u32, u32)) {
-        let alpha = self.image_alpha.get(image as usize).copied().unwrap_or(NO_ALPHA);
-        quad(mask, view, centre, u, v, uv, self.alphas.get(alpha as usize));
+    /// The quad `centre ± u ± v` textured by the atlas rectangle `uv_min ..= uv_max` of `image`
+    /// (spec §6.10: the corner `centre − u − v` at `uv_min`) as `quad_texel` in
+    /// `shaders/tree/planes.wgsl` samples it (bilinear in the stored mip level nearest to its
+    /// footprint, alpha tested at one half: the atlas's mips keep the covered fraction), lit with
+    /// the quad's normal `u × v` and ambient occlusion `ao`.
+    #[expect(clippy::too_many_arguments, reason = "a quad's frame, its texture rectangle and its occlusion")]
+    fn quad(
+        &self,
+        canvas: &mut Canvas,
+        view: &View,
+        centre: Vec3,
+        (u, v): (Vec3, Vec3),
+        image: u32,
+        (uv_min, uv_max): (u32, u32),
+        ao: f32,
+    ) {
+        let Some(atlas) = self.atlases.get(image as usize).and_then(Option::as_ref) else { return };
+        let (lo, hi) = (Vec2::from_array(unpack_unorm16x2(uv_min)), Vec2::from_array(unpack_unorm16x2(uv_max)));
+        let corner = |s: f32, t: f32| {
+            let q = centre + u * s + v * t;
+            (view.project(q), lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo), depth(view, q))
+        };
+        let normal = u.cross(v);
+        #[expect(clippy::cast_precision_loss, reason = "texture sides")]
+        let texels = Vec2::new(atlas.size.0 as f32, atlas.size.1 as f32);
+        let [a, b, c, e] = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
+        for [a, b, c] in [[a, b, c], [a, c, e]] {
+            let (p, uvs, depths) = ([a.0, b.0, c.0], [a.1, b.1, c.1], [a.2, b.2, c.2]);
+            let lod = texel_footprint(p, uvs, texels).max(1e-6).log2();
+            triangle_pixels(canvas.size(), p, |x, y, w| {
+                let z = depths[0] * w[0] + depths[1] * w[1] + depths[2] * w[2];
+                if !canvas.nearer(x, y, z) {
+                    return;
+                }
+                let uv = uvs[0] * w[0] + uvs[1] * w[1] + uvs[2] * w[2];
+                let [r, g, b, alpha] = texels::sample(&atlas.levels, atlas.size, uv.to_array(), lod, atlas.sampler);
+                if alpha >= 0.5 {
+                    canvas.put(x, y, z, Surface { albedo: Vec3::new(r, g, b), normal, ao }.shaded());
+                }
+            });
+        }
     }
 
     /// Gilet's cut at `thresholds`: the triangles above `τ_t`, the points of `τ_p`.
-    fn draw_spt(&self, view: &View, thresholds: Thresholds, mask: &mut Mask) -> u64 {
+    fn draw_spt(&self, view: &View, thresholds: Thresholds, canvas: &mut Canvas) -> u64 {
         let d = self.data;
         let mut tris = Vec::new();
         let mut drawn = 0u64;
         for cell in &d.cells {
-            for tri in d.triangles.get(cell.triangles.as_usize()).unwrap_or(&[]) {
-                if !triangle_drawn(tri, thresholds) {
+            for t in d.triangles.get(cell.triangles.as_usize()).unwrap_or(&[]) {
+                if !triangle_drawn(t, thresholds) {
                     break;
                 }
-                tris.push(raster_triangle(d, tri, &self.material_alpha, 1.0, None));
+                tris.push(tri(d, t, 1.0, None));
             }
             let first = cell.points.first as usize;
             for (i, point) in d.points.get(cell.points.as_usize()).unwrap_or(&[]).iter().enumerate() {
@@ -595,23 +757,28 @@ impl<'a> Scene<'a> {
                 if !point_drawn(point, thresholds) {
                     continue;
                 }
-                disc(mask, view, Vec3::from_array(point.position), point.radius, (first + i) as u64);
+                let surface = Surface {
+                    albedo: linear_colour(point.color).truncate(),
+                    normal: Vec3::from_array(oct_decode(point.normal)),
+                    ao: d.point_ao.get(first + i).map_or(0.0, |&a| decode_ao(a)),
+                };
+                disc(canvas, view, Vec3::from_array(point.position), point.radius, (first + i) as u64, surface);
             }
         }
-        self.rasterize_1x(mask, view, &tris);
+        self.draw_triangles(canvas, view, &tris, false);
         drawn + tris.len() as u64
     }
 
     /// The ellipsoids of `τ = p` with the renderer's noise holes, and the lines of `τ` (or every
     /// bark triangle where the container has no lines, as the renderer draws them).
-    fn draw_ellipsoids(&self, view: &View, p: f32, mask: &mut Mask) -> u64 {
+    fn draw_ellipsoids(&self, view: &View, p: f32, canvas: &mut Canvas) -> u64 {
         let d = self.data;
         let mut drawn = 0u64;
         let top = NOISE_SIZE.ilog2() as f32;
         // Each cell's prefix `hi > τ` is submitted; the vertex shader drops the coarser levels.
         let above = |interval: (f32, f32)| u64::from(interval.0 > p && interval.1 > p);
         drawn += d.ellipsoids.iter().map(|e| above(e.interval())).sum::<u64>();
-        for e in d.ellipsoids.iter().filter(|e| ellipsoid_drawn(e, p)) {
+        for (i, e) in d.ellipsoids.iter().enumerate().filter(|(_, e)| ellipsoid_drawn(e, p)) {
             let q = Quat::from_array(e.orientation.map(|c| f32::from(c) / 32767.0)).normalize();
             let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| q * a);
             let axes = [axes[0] * e.radii[0], axes[1] * e.radii[1], axes[2] * e.radii[2]];
@@ -621,76 +788,130 @@ impl<'a> Scene<'a> {
             let footprint = (NOISE_TEXELS_PER_RADIAN / radius_px).log2();
             let level = (top - e.noise_mip).max(footprint).clamp(0.0, top);
             let level = ((level + 0.5).ceil() - 1.0).clamp(0.0, top) as u32;
-            fill_ellipsoid_cut(mask, view, Vec3::from_array(e.center), axes, level, noise_cut(e.alpha_threshold));
+            let cut = noise_cut(e.alpha_threshold);
+            let albedo = linear_colour(e.color).truncate();
+            let ao = d.ellipsoid_ao.get(i).map_or(0.0, |&a| decode_ao(a));
+            let centre = Vec3::from_array(e.center);
+            // The normal at local `u` is `A⁻ᵀ u` = Σ u_i · axes[i] / r_i².
+            let inverse = axes.map(|a| {
+                let r2 = a.length_squared();
+                if r2 > 0.0 { a / r2 } else { Vec3::ZERO }
+            });
+            ellipsoid_hits(view, centre, axes, level, |x, y, grey, u, random| {
+                if grey < cut {
+                    return;
+                }
+                let hit = centre + axes[0] * u.x + axes[1] * u.y + axes[2] * u.z;
+                // `fs_ellipsoid`: the normal turned half-way towards the texel's random vector
+                // (on the normal's side), in the local frame.
+                let random = if random.dot(u) >= 0.0 { random } else { -random };
+                let local = u
+                    .normalize_or(Vec3::Z)
+                    .lerp((random + Vec3::splat(1e-6)).normalize_or(Vec3::Z), ELLIPSOID_NORMAL_NOISE);
+                let local = local.normalize_or(Vec3::Z);
+                let normal = inverse[0] * local.x + inverse[1] * local.y + inverse[2] * local.z;
+                canvas.put(x, y, depth(view, hit), Surface { albedo, normal, ao }.shaded());
+            });
             drawn += 1;
         }
         if d.lines.is_empty() {
-            self.rasterize_1x(mask, view, &self.bark);
+            self.draw_triangles(canvas, view, &self.bark, false);
             return drawn + self.bark.len() as u64;
         }
-        drawn += d.lines.iter().map(|l| above(l.interval())).sum::<u64>();
-        for line in d.lines.iter().filter(|l| line_drawn(l, p)) {
-            let (a, b) = (view.project(Vec3::from_array(line.p0)), view.project(Vec3::from_array(line.p1)));
-            let (ra, rb) = (line.r0 * view.scale, line.r1 * view.scale);
-            let across = (b - a).perp().normalize_or_zero();
-            let corners = [a + across * ra, a - across * ra, b - across * rb, b + across * rb];
-            fill_triangle(mask, [corners[0], corners[1], corners[2]], [Vec2::ZERO; 3], None);
-            fill_triangle(mask, [corners[0], corners[2], corners[3]], [Vec2::ZERO; 3], None);
-            for (c, r) in [(a, ra), (b, rb)] {
-                fill_ellipse(mask, c, [f64::from(r * r), 0.0, f64::from(r * r)]);
-            }
+        drawn + self.draw_lines(view, p, canvas)
+    }
+
+    /// The branch lines of `τ = p` (each cell's prefix `hi > τ` submitted, those of `lo ≤ τ`
+    /// drawn as capsules of their radii). Returns the primitives submitted.
+    fn draw_lines(&self, view: &View, p: f32, canvas: &mut Canvas) -> u64 {
+        let d = self.data;
+        let above = |interval: (f32, f32)| u64::from(interval.0 > p && interval.1 > p);
+        let mut drawn = d.lines.iter().map(|l| above(l.interval())).sum::<u64>();
+        for (i, line) in d.lines.iter().enumerate().filter(|(_, l)| line_drawn(l, p)) {
+            let albedo = linear_colour(line.color).truncate();
+            let ao = d.line_ao.get(i).map_or(0.0, |&a| decode_ao(a));
+            capsule(
+                canvas,
+                view,
+                (Vec3::from_array(line.p0), line.r0),
+                (Vec3::from_array(line.p1), line.r1),
+                albedo,
+                ao,
+            );
             drawn += 1;
         }
         drawn
     }
 }
 
-/// A point's disc of `radius` metres at `centre`, facing the viewer. A disc under half a pixel in
-/// radius is the renderer's one-pixel splat (spec §10.1): its pixel is covered when a hash of the
-/// point falls below the disc's coverage `π·r²`.
-fn disc(mask: &mut Mask, view: &View, centre: Vec3, radius: f32, id: u64) {
+/// A point's disc of `radius` metres at `centre`, facing the viewer, shaded as `surface` at the
+/// depth of its centre. A disc under half a pixel in radius is the renderer's one-pixel splat
+/// (spec §10.1): its pixel is drawn when a hash of the point falls below the disc's coverage
+/// `π·r²`.
+fn disc(canvas: &mut Canvas, view: &View, centre: Vec3, radius: f32, id: u64, surface: Surface) {
     let c = view.project(centre);
     let r = radius * view.scale;
+    let (z, colour) = (depth(view, centre), surface.shaded());
     if r >= 0.5 {
         let r2 = f64::from(r * r);
-        fill_ellipse(mask, c, [r2, 0.0, r2]);
+        ellipse_spans(canvas.size(), c, [r2, 0.0, r2], |y, x0, x1| {
+            for x in x0..=x1 {
+                canvas.put(x, y, z, colour);
+            }
+        });
         return;
     }
     let coverage = std::f32::consts::PI * r * r;
     let hash = crate::rng::SplitMix64(id).next_u64();
     if ((hash >> 40) as f32) / ((1u64 << 24) as f32) < coverage && c.x >= 0.0 && c.y >= 0.0 {
-        let (x, y) = (c.x as u32, c.y as u32);
-        if x < mask.size() && y < mask.size() {
-            mask.set(x, y);
+        let (x, y) = (c.x as usize, c.y as usize);
+        if x < canvas.size() as usize && y < canvas.size() as usize {
+            canvas.put(x, y, z, colour);
         }
     }
 }
 
-/// The quad `centre ± u ± v` textured by the atlas rectangle `uv_min ..= uv_max` (spec §6.10:
-/// the corner `centre − u − v` at `uv_min`), alpha-tested with `alpha`.
-fn quad(
-    mask: &mut Mask,
-    view: &View,
-    centre: Vec3,
-    u: Vec3,
-    v: Vec3,
-    (uv_min, uv_max): (u32, u32),
-    alpha: Option<&AlphaMask>,
-) {
-    let (lo, hi) = (Vec2::from_array(unpack_unorm16x2(uv_min)), Vec2::from_array(unpack_unorm16x2(uv_max)));
-    let corner = |s: f32, t: f32| {
-        (view.project(centre + u * s + v * t), lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo))
+/// A branch line from `p0` (radius `r0`) to `p1` (radius `r1`), metres, as a capsule of its
+/// projection (a quad along the axis and a disc at each end, the pixels the coverage rasteriser
+/// covers), shaded with the normal and depth of the cone's front surface at each pixel: the
+/// nearest point of the axis in the image, offset across it and towards the viewer.
+fn capsule(canvas: &mut Canvas, view: &View, (p0, r0): (Vec3, f32), (p1, r1): (Vec3, f32), albedo: Vec3, ao: f32) {
+    let (a, b) = (view.project(p0), view.project(p1));
+    let (ra, rb) = (r0 * view.scale, r1 * view.scale);
+    let axis = b - a;
+    let length2 = axis.length_squared();
+    let size = canvas.size();
+    let mut shade = |x: usize, y: usize| {
+        let pixel = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+        let s = if length2 > 0.0 { ((pixel - a).dot(axis) / length2).clamp(0.0, 1.0) } else { 0.0 };
+        let (on_axis, r) = (a + axis * s, (ra + (rb - ra) * s).max(1e-6));
+        let off = pixel - on_axis;
+        let d = off.length().min(r);
+        let h = (r * r - d * d).max(0.0).sqrt();
+        let across = (view.right * off.x - view.up * off.y).normalize_or_zero();
+        let normal = across * (d / r) + view.direction * (h / r);
+        let z = depth(view, p0.lerp(p1, s)) - h / view.scale;
+        canvas.put(x, y, z, Surface { albedo, normal, ao }.shaded());
     };
-    let [a, b, c, e] = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
-    fill_triangle(mask, [a.0, b.0, c.0], [a.1, b.1, c.1], alpha);
-    fill_triangle(mask, [a.0, c.0, e.0], [a.1, c.1, e.1], alpha);
+    let across = axis.perp().normalize_or_zero();
+    let corners = [a + across * ra, a - across * ra, b - across * rb, b + across * rb];
+    for triangle in [[corners[0], corners[1], corners[2]], [corners[0], corners[2], corners[3]]] {
+        triangle_pixels(size, triangle, |x, y, _| shade(x, y));
+    }
+    for (c, r) in [(a, ra), (b, rb)] {
+        ellipse_spans(size, c, [f64::from(r * r), 0.0, f64::from(r * r)], |y, x0, x1| {
+            for x in x0..=x1 {
+                shade(x, y);
+            }
+        });
+    }
 }
 
 /// The chain's bark levels as the runtime builds them (`Representations::from_container`): the
 /// levels of [`LodChain::from_records`], each with its error and the non-leaf triangles of its
 /// trees' ranges, up to the first whose bark keeps less than [`BARK_AREA_KEPT`] of the full
 /// bark's area ([`area`]).
-fn chain_bark_levels(data: &ContainerData, material_alpha: &[u32]) -> Vec<(f32, Vec<RasterTriangle>)> {
+fn chain_bark_levels(data: &ContainerData) -> Vec<(f32, Vec<Tri>)> {
     let is_bark =
         |t: &&TriangleRecord| data.materials.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF);
     let Some(chain) = LodChain::from_records(&data.lod_levels) else { return Vec::new() };
@@ -708,48 +929,75 @@ fn chain_bark_levels(data: &ContainerData, material_alpha: &[u32]) -> Vec<(f32, 
         if area(&data.vertices, &bark) < BARK_AREA_KEPT * full_area {
             break;
         }
-        levels.push((level.error, bark.iter().map(|t| raster_triangle(data, t, material_alpha, 1.0, None)).collect()));
+        levels.push((level.error, bark.iter().map(|t| tri(data, t, 1.0, None)).collect()));
     }
     levels
 }
 
-/// A triangle record as a rasteriser triangle, its corners moved to `c + sqrt(s)·(p − c)` when
-/// `centre` is given (a pruned leaf grown by `s`, spec §6.11; `grow` is `sqrt(s)`).
-fn raster_triangle(
-    data: &ContainerData,
-    t: &TriangleRecord,
-    material_alpha: &[u32],
-    grow: f32,
-    centre: Option<Vec3>,
-) -> RasterTriangle {
+/// A triangle record to draw, its corners moved to `c + sqrt(s)·(p − c)` when `centre` is given
+/// (a pruned leaf grown by `s`, spec §6.11; `grow` is `sqrt(s)`).
+fn tri(data: &ContainerData, t: &TriangleRecord, grow: f32, centre: Option<Vec3>) -> Tri {
     let vertex = |i: u32| data.vertices.get(i as usize).copied().unwrap_or_default();
     let corners = t.indices.map(vertex);
     let position = |p: [f32; 3]| {
         let p = Vec3::from_array(p);
         centre.map_or(p, |c| c + (p - c) * grow)
     };
-    RasterTriangle {
+    Tri {
         positions: corners.map(|v| position(v.position)),
         uvs: corners.map(|v| Vec2::from_array(v.uv)),
-        alpha: material_alpha.get(t.material as usize).copied().unwrap_or(NO_ALPHA),
+        indices: t.indices,
+        material: t.material,
     }
 }
 
-/// An image of the container decoded for its alpha test; `None` for leaf slots and images that
-/// do not decode (their texels are not colours).
-fn decode(data: &ContainerData, record: &ImageRecord) -> Option<Image> {
-    let bytes = data.image_data.get(record.data_offset as usize..)?.get(..record.data_length as usize)?;
-    let image = treelod_format::image::decode(record, bytes).ok()?;
-    Some(Image {
-        width: image.width,
-        height: image.height,
-        rgba: image.texels,
-        encoded: Vec::new(),
-        encoding: ImageEncoding::Raw,
-    })
+/// Texels per pixel of a triangle of pixel corners `p` and texture coordinates `uv` on a texture
+/// of `texels` (across, down): along the screen axis that stretches them most, as
+/// `texel_footprint` in `shaders/tree/triangles.wgsl` (0 for a degenerate triangle).
+fn texel_footprint(p: [Vec2; 3], uv: [Vec2; 3], texels: Vec2) -> f32 {
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    let (u1, u2) = ((uv[1] - uv[0]) * texels, (uv[2] - uv[0]) * texels);
+    let det = e1.perp_dot(e2);
+    if det.abs() < 1e-12 {
+        return 0.0;
+    }
+    let along_x = (u1 * e2.y - u2 * e1.y) / det;
+    let along_y = (u2 * e1.x - u1 * e2.x) / det;
+    along_x.length().max(along_y.length())
 }
 
-/// A 1 × 1 transparent image (a material whose alpha factor fails its own cutoff).
-fn transparent() -> Image {
-    Image { width: 1, height: 1, rgba: vec![0; 4], encoded: Vec::new(), encoding: ImageEncoding::Raw }
+/// `filtered_coverage` of `shaders/tree/common.wgsl`: the share of the pixel an alpha-tested
+/// fragment of `alpha` stands for at `footprint` texels per pixel — the test against `cutoff`
+/// where magnified, the filtered alpha (the covered fraction) from a texel per pixel on, blended
+/// over the octave between.
+fn filtered_coverage(alpha: f32, cutoff: f32, footprint: f32) -> f32 {
+    let minified = footprint.max(1e-6).log2().clamp(0.0, 1.0);
+    let tested = if alpha >= cutoff { 1.0 } else { 0.0 };
+    tested + (alpha - tested) * minified
+}
+
+/// A value in `[0, 1)` per pixel and depth (the stochastic test's threshold, as
+/// `layered_dither` in `shaders/tree/common.wgsl`): surfaces at different depths over one pixel
+/// get independent values, so overlapping leaves add up.
+fn pixel_depth_hash(x: usize, y: usize, depth: f32) -> f32 {
+    let key = (x as u64) << 40 ^ (y as u64) << 16 ^ u64::from(depth.to_bits()).rotate_left(24);
+    ((crate::rng::SplitMix64(key).next_u64() >> 40) as f32) / ((1u64 << 24) as f32)
+}
+
+/// An atlas image with its stored levels as the renderer samples it without BC textures
+/// ([`image::decode_mips`]); `None` for leaf slots and images that do not decode.
+fn atlas(data: &ContainerData, record: &ImageRecord) -> Option<Atlas> {
+    if record.format == image_format::LEAF_SLOTS {
+        return None;
+    }
+    let mips = image::decode_mips(record, record.bytes(&data.image_data)?).ok()?;
+    let sampler = Sampler { srgb: image_format::is_srgb(record.format), ..Sampler::ATLASES };
+    Some(Atlas { levels: mips.levels, size: (mips.width, mips.height), sampler })
+}
+
+/// A colour as records store it (RGBA8, RGB sRGB-encoded) in linear light, as `decode_color`
+/// in the shaders reads it.
+fn linear_colour(packed: u32) -> Vec4 {
+    let [r, g, b, a] = unpack_rgba8(packed);
+    Vec4::new(texels::srgb_to_linear(r), texels::srgb_to_linear(g), texels::srgb_to_linear(b), a)
 }

@@ -24,6 +24,7 @@ pub mod prune;
 pub mod raster;
 pub mod rng;
 pub mod scene;
+pub mod shade;
 pub mod spt;
 pub mod texture;
 mod union_find;

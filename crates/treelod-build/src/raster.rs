@@ -203,42 +203,6 @@ impl AlphaMask {
         (self.width, self.height)
     }
 
-    /// The mask's mip chain as a renderer tests it (`treelod-render`'s textures): the passing
-    /// texels as opaque (1) or transparent (0), box-filtered 2 × 2 per level down to 1 × 1 so that
-    /// a level holds the passing fraction of the texels below it, each level then tested against
-    /// `cutoff` again. Level 0 is the mask itself. Far away a leaf's thin parts fall under the
-    /// cutoff in the coarser levels and drop out, as they do on the GPU.
-    #[must_use]
-    pub fn mip_chain(&self, cutoff: f32) -> Vec<AlphaMask> {
-        let (mut w, mut h) = (self.width as usize, self.height as usize);
-        let mut fractions: Vec<f32> =
-            (0..w * h).map(|t| f32::from(u8::from(self.bits[t / 64] >> (t % 64) & 1 == 1))).collect();
-        let mut levels = vec![self.clone()];
-        while w > 1 || h > 1 {
-            let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
-            let mut next = vec![0.0f32; nw * nh];
-            for (i, value) in next.iter_mut().enumerate() {
-                let (x, y) = (2 * (i % nw), 2 * (i / nw));
-                let taps = [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)];
-                let inside: Vec<f32> =
-                    taps.iter().filter(|&&(a, b)| a < w && b < h).map(|&(a, b)| fractions[b * w + a]).collect();
-                #[expect(clippy::cast_precision_loss, reason = "at most 4 taps")]
-                let n = inside.len().max(1) as f32;
-                *value = inside.iter().sum::<f32>() / n;
-            }
-            let mut bits = vec![0u64; (nw * nh).div_ceil(64)];
-            for (t, &f) in next.iter().enumerate() {
-                if f >= cutoff {
-                    bits[t / 64] |= 1 << (t % 64);
-                }
-            }
-            #[expect(clippy::cast_possible_truncation, reason = "no larger than the mask")]
-            levels.push(AlphaMask { width: nw as u32, height: nh as u32, bits });
-            (w, h, fractions) = (nw, nh, next);
-        }
-        levels
-    }
-
     /// The fraction of texels that pass.
     #[must_use]
     pub fn opaque_fraction(&self) -> f32 {
@@ -340,47 +304,11 @@ pub fn bounding_sphere(points: impl Iterator<Item = Vec3> + Clone) -> (Vec3, f32
 /// whose centres it holds, after the alpha test with `alpha` at the interpolated `uv`. Pixels
 /// already covered are not tested again.
 pub fn fill_triangle(mask: &mut Mask, p: [Vec2; 3], uv: [Vec2; 3], alpha: Option<&AlphaMask>) {
-    let size = mask.size as f32;
-    // Entirely outside the image, or not finite: nothing to do.
-    let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-    if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= size && min.y <= size) {
-        return;
-    }
-    let mut v = p.map(|q| (snap(q.x), snap(q.y)));
-    // Pixel centres inside the snapped box: x·256 + 128 ∈ [min, max] (shifts divide by 256,
-    // rounding down).
-    let half = SUBPIXEL / 2;
-    let last = i64::from(mask.size) - 1;
-    let (x0, x1) = (
-        (-((half - v[0].0.min(v[1].0).min(v[2].0)) >> SUBPIXEL_BITS)).max(0),
-        ((v[0].0.max(v[1].0).max(v[2].0) - half) >> SUBPIXEL_BITS).min(last),
-    );
-    let (y0, y1) = (
-        (-((half - v[0].1.min(v[1].1).min(v[2].1)) >> SUBPIXEL_BITS)).max(0),
-        ((v[0].1.max(v[1].1).max(v[2].1) - half) >> SUBPIXEL_BITS).min(last),
-    );
-    if x0 > x1 || y0 > y1 {
-        return;
-    }
+    let Some(Setup { x0, x1, y0, y1, area, swapped, edges }) = Setup::new(mask.size, p) else { return };
     let mut uv = uv;
-    let mut area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[1].1 - v[0].1) * (v[2].0 - v[0].0);
-    if area == 0 {
-        return;
-    }
-    if area < 0 {
-        v.swap(1, 2);
+    if swapped {
         uv.swap(1, 2);
-        area = -area;
     }
-    // Edge k runs from v[k+1] to v[k+2], opposite corner k; inside where all edge functions are
-    // positive, or zero on a top or left edge (y down: an edge going up, or a horizontal edge
-    // going right), which the bias of −1 on the other edges turns into "≥ 0" everywhere.
-    let edges: [Edge; 3] = core::array::from_fn(|k| {
-        let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
-        let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-        let top_left = dy < 0 || (dy == 0 && dx > 0);
-        Edge { a, dx, dy, bias: if top_left { 0 } else { -1 } }
-    });
     // Along a row each edge function changes by `slope` per pixel; `inverse` estimates where it
     // crosses zero without an integer division, and the estimate is corrected exactly below.
     let slope = edges.map(|e| -e.dy * SUBPIXEL);
@@ -460,6 +388,97 @@ pub fn fill_triangle(mask: &mut Mask, p: [Vec2; 3], uv: [Vec2; 3], alpha: Option
                 }
             }
         }
+    }
+}
+
+/// Calls `pixel(x, y, b)` for every pixel of a `size × size` image whose centre the triangle
+/// with corners `p` (pixel coordinates) holds, by [`fill_triangle`]'s rule (corners snapped to
+/// 1/256 pixel, exact edge functions, the top-left rule), so it visits the pixels that
+/// `fill_triangle` without alpha test covers; `b` holds the barycentric weights of `p[0]`,
+/// `p[1]` and `p[2]` at the centre. Rows top to bottom, left to right.
+pub fn triangle_pixels(size: u32, p: [Vec2; 3], mut pixel: impl FnMut(usize, usize, [f32; 3])) {
+    let Some(Setup { x0, x1, y0, y1, area, swapped, edges }) = Setup::new(size, p) else { return };
+    // `order[k]`: the input corner at snapped corner `k`.
+    let order = if swapped { [0, 2, 1] } else { [0, 1, 2] };
+    #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
+    let inv_area = 1.0 / area as f32;
+    for y in y0..=y1 {
+        let mut w = edges.map(|e| e.at(x0, y));
+        for x in x0..=x1 {
+            if w[0] >= 0 && w[1] >= 0 && w[2] >= 0 {
+                let mut b = [0.0; 3];
+                for k in 0..3 {
+                    #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
+                    let weight = w[k] as f32 * inv_area;
+                    b[order[k]] = weight;
+                }
+                #[expect(clippy::cast_sign_loss, clippy::cast_possible_truncation, reason = "0 <= x, y < size")]
+                pixel(x as usize, y as usize, b);
+            }
+            for k in 0..3 {
+                w[k] -= edges[k].dy * SUBPIXEL;
+            }
+        }
+    }
+}
+
+/// A triangle snapped for rasterising into a `size × size` image: the pixel box whose centres
+/// it may hold, its doubled area in fixed point (positive), whether corners 1 and 2 were swapped
+/// to make it so, and its edges with the top-left rule.
+struct Setup {
+    x0: i64,
+    x1: i64,
+    y0: i64,
+    y1: i64,
+    area: i64,
+    swapped: bool,
+    edges: [Edge; 3],
+}
+
+impl Setup {
+    /// `None` for a triangle entirely outside the image, not finite, or without area.
+    fn new(size: u32, p: [Vec2; 3]) -> Option<Self> {
+        let side = size as f32;
+        // Entirely outside the image, or not finite: nothing to do.
+        let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= side && min.y <= side) {
+            return None;
+        }
+        let mut v = p.map(|q| (snap(q.x), snap(q.y)));
+        // Pixel centres inside the snapped box: x·256 + 128 ∈ [min, max] (shifts divide by 256,
+        // rounding down).
+        let half = SUBPIXEL / 2;
+        let last = i64::from(size) - 1;
+        let (x0, x1) = (
+            (-((half - v[0].0.min(v[1].0).min(v[2].0)) >> SUBPIXEL_BITS)).max(0),
+            ((v[0].0.max(v[1].0).max(v[2].0) - half) >> SUBPIXEL_BITS).min(last),
+        );
+        let (y0, y1) = (
+            (-((half - v[0].1.min(v[1].1).min(v[2].1)) >> SUBPIXEL_BITS)).max(0),
+            ((v[0].1.max(v[1].1).max(v[2].1) - half) >> SUBPIXEL_BITS).min(last),
+        );
+        if x0 > x1 || y0 > y1 {
+            return None;
+        }
+        let mut area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[1].1 - v[0].1) * (v[2].0 - v[0].0);
+        if area == 0 {
+            return None;
+        }
+        let swapped = area < 0;
+        if swapped {
+            v.swap(1, 2);
+            area = -area;
+        }
+        // Edge k runs from v[k+1] to v[k+2], opposite corner k; inside where all edge functions
+        // are positive, or zero on a top or left edge (y down: an edge going up, or a horizontal
+        // edge going right), which the bias of −1 on the other edges turns into "≥ 0" everywhere.
+        let edges: [Edge; 3] = core::array::from_fn(|k| {
+            let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
+            let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+            let top_left = dy < 0 || (dy == 0 && dx > 0);
+            Edge { a, dx, dy, bias: if top_left { 0 } else { -1 } }
+        });
+        Some(Self { x0, x1, y0, y1, area, swapped, edges })
     }
 }
 
@@ -572,7 +591,7 @@ pub fn fill_ellipse(mask: &mut Mask, centre: Vec2, m: [f64; 3]) {
 
 /// The spans `(y, x0, x1)` (inclusive) of the pixels of a `size × size` image whose centres lie
 /// in the ellipse of [`fill_ellipse`], row by row.
-fn ellipse_spans(size: u32, centre: Vec2, m: [f64; 3], mut span: impl FnMut(usize, usize, usize)) {
+pub fn ellipse_spans(size: u32, centre: Vec2, m: [f64; 3], mut span: impl FnMut(usize, usize, usize)) {
     let [a, b, c] = m;
     let det = a * c - b * b;
     if !(c > 0.0 && a > 0.0 && det.is_finite() && centre.is_finite()) {
@@ -622,9 +641,24 @@ pub fn noise_grey(d: Vec3, level: u32) -> u8 {
     noise_lookup(&table[offsets[level as usize]..], NOISE_SIZE >> level, d)
 }
 
+/// The random unit vector of the noise cube's texel that `d` samples at mip `level`, as the
+/// renderer reads it from the texel's RGB ([`noise_grey`]'s texel).
+#[must_use]
+pub fn noise_vector(d: Vec3, level: u32) -> Vec3 {
+    let (_, offsets) = noise_table();
+    let level = level.min(NOISE_SIZE.ilog2());
+    noise_vectors()[offsets[level as usize] + noise_index(NOISE_SIZE >> level, d)]
+}
+
 /// [`noise_grey`] in one level's texels (`side` per face side).
 #[inline]
 fn noise_lookup(texels: &[u8], side: u32, d: Vec3) -> u8 {
+    texels[noise_index(side, d)]
+}
+
+/// The index within a level of the texel the direction `d` samples ([`noise_grey`]).
+#[inline]
+fn noise_index(side: u32, d: Vec3) -> usize {
     let (ax, ay, az) = (d.x.abs(), d.y.abs(), d.z.abs());
     let (face, sc, tc, ma) = if ax >= ay && ax >= az {
         if d.x >= 0.0 { (0u32, -d.z, -d.y, ax) } else { (1, d.z, -d.y, ax) }
@@ -641,7 +675,36 @@ fn noise_lookup(texels: &[u8], side: u32, d: Vec3) -> u8 {
     // Truncation is the floor here (negative values saturate to 0).
     #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped into the face")]
     let texel = |v: f32| (((v + ma) * half) as u32).min(side - 1);
-    texels[(face * side * side + texel(tc) * side + texel(sc)) as usize]
+    (face * side * side + texel(tc) * side + texel(sc)) as usize
+}
+
+/// The random unit vectors of the noise cube's texels as the renderer stores them (RGB bytes
+/// `(n + 1) / 2`, read back as `2·byte/255 − 1`), in the order of [`noise_table`]'s grey values.
+fn noise_vectors() -> &'static [Vec3] {
+    static TABLE: std::sync::OnceLock<Vec<Vec3>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let mut vectors = Vec::new();
+        for level in 0..=NOISE_SIZE.ilog2() {
+            let side = NOISE_SIZE >> level;
+            for face in 0..6u32 {
+                for i in 0..side * side {
+                    let mut h = noise_mix((u64::from(level) << 40) ^ (u64::from(face) << 32) ^ u64::from(i));
+                    let mut unit = || {
+                        h = noise_mix(h);
+                        (h >> 40) as f32 / (1u64 << 24) as f32
+                    };
+                    let z = 2.0 * unit() - 1.0;
+                    let angle = std::f32::consts::TAU * unit();
+                    let r = (1.0 - z * z).max(0.0).sqrt();
+                    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "rounded into 0..=255")]
+                    let byte = |v: f32| f32::from(((v * 0.5 + 0.5) * 255.0).round().clamp(0.0, 255.0) as u8);
+                    let n = Vec3::new(byte(r * angle.cos()), byte(r * angle.sin()), byte(z));
+                    vectors.push(n / 255.0 * 2.0 - Vec3::ONE);
+                }
+            }
+        }
+        vectors
+    })
 }
 
 /// The grey values of the noise cube, level by level, face by face, row by row (texel `i` of
@@ -690,7 +753,7 @@ fn noise_mix(mut x: u64) -> u64 {
 pub fn fill_ellipsoid_noise(grey: &mut [u16], view: &View, centre: Vec3, axes: [Vec3; 3], level: u32) {
     let size = view.size as usize;
     assert_eq!(grey.len(), size * size, "grey image of the wrong size");
-    ellipsoid_noise(view, centre, axes, level, |x, y, g| {
+    ellipsoid_hits(view, centre, axes, level, |x, y, g, _, _| {
         let slot = &mut grey[y * size + x];
         *slot = (*slot).max(g);
     });
@@ -704,7 +767,7 @@ pub fn fill_ellipsoid_cut(mask: &mut Mask, view: &View, centre: Vec3, axes: [Vec
     if view.size != size {
         return;
     }
-    ellipsoid_noise(view, centre, axes, level, |x, y, g| {
+    ellipsoid_hits(view, centre, axes, level, |x, y, g, _, _| {
         if g >= cut {
             #[expect(clippy::cast_possible_truncation, reason = "x, y < size ≤ MAX_SIZE")]
             mask.set(x as u32, y as u32);
@@ -712,9 +775,17 @@ pub fn fill_ellipsoid_cut(mask: &mut Mask, view: &View, centre: Vec3, axes: [Vec
     });
 }
 
-/// The pixels `(x, y)` of the ellipsoid's projection in `view` and the value `1 + g` of the noise
-/// texel its front surface shows there (see [`fill_ellipsoid_noise`]).
-fn ellipsoid_noise(view: &View, centre: Vec3, axes: [Vec3; 3], level: u32, mut pixel: impl FnMut(usize, usize, u16)) {
+/// The pixels `(x, y)` of the ellipsoid's projection in `view`, the value `1 + g` of the noise
+/// texel its front surface shows there (see [`fill_ellipsoid_noise`]), the hit in the
+/// ellipsoid's local coordinates `u` (the point `centre + Σ u_i·axes[i]`, `|u| = 1`) and the
+/// texel's random vector (the renderer turns the normal towards it).
+pub fn ellipsoid_hits(
+    view: &View,
+    centre: Vec3,
+    axes: [Vec3; 3],
+    level: u32,
+    mut pixel: impl FnMut(usize, usize, u16, Vec3, Vec3),
+) {
     let (c, m) = project_ellipsoid(view, centre, axes);
     // The local coordinates of a model-space offset: axes are orthogonal, so A⁻¹ = diag(1/r²)·Aᵀ.
     let inverse = axes.map(|a| {
@@ -734,6 +805,7 @@ fn ellipsoid_noise(view: &View, centre: Vec3, axes: [Vec3; 3], level: u32, mut p
     let (table, offsets) = noise_table();
     let level = level.min(NOISE_SIZE.ilog2());
     let (texels, side) = (&table[offsets[level as usize]..], NOISE_SIZE >> level);
+    let vectors = &noise_vectors()[offsets[level as usize]..];
     let inv_scale = 1.0 / view.scale;
     let (step, inv_dd) = (local(view.right * inv_scale), 1.0 / dd);
     ellipse_spans(view.size, c, m, |y, x0, x1| {
@@ -746,7 +818,9 @@ fn ellipsoid_noise(view: &View, centre: Vec3, axes: [Vec3; 3], level: u32, mut p
             let b = o.dot(d);
             let disc = (b * b - dd * (o.length_squared() - 1.0)).max(0.0);
             let t = (-b - disc.sqrt()) * inv_dd;
-            pixel(x, y, 1 + u16::from(noise_lookup(texels, side, o + d * t)));
+            let hit = o + d * t;
+            let i = noise_index(side, hit);
+            pixel(x, y, 1 + u16::from(texels[i]), hit, vectors[i]);
         }
     });
 }

@@ -49,6 +49,33 @@ pub fn decode(record: &ImageRecord, data: &[u8]) -> Result<Rgba8, String> {
     Ok(Rgba8 { width, height, texels })
 }
 
+/// An image's mip levels as RGBA8 texels, largest first.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Rgba8Levels {
+    /// Texels across at level 0.
+    pub width: u32,
+    /// Texels down at level 0.
+    pub height: u32,
+    /// Level by level, each `max(1, width >> i) · max(1, height >> i) · 4` bytes.
+    pub levels: Vec<Vec<u8>>,
+}
+
+/// The mip levels an image stores ([`decode_levels`] for raw and BC7 formats), or its one decoded
+/// level (PNG, JPEG): what a renderer samples it with when the image is a texture of its own.
+///
+/// # Errors
+/// As [`decode_levels`] and [`decode`].
+pub fn decode_mips(record: &ImageRecord, data: &[u8]) -> Result<Rgba8Levels, String> {
+    if image_format::is_bc7(record.format)
+        || matches!(record.format, image_format::RGBA8_SRGB | image_format::RGBA8_LINEAR)
+    {
+        let levels = decode_levels(record, data)?;
+        return Ok(Rgba8Levels { width: record.width.max(1), height: record.height.max(1), levels });
+    }
+    let image = decode(record, data)?;
+    Ok(Rgba8Levels { width: image.width, height: image.height, levels: vec![image.texels] })
+}
+
 /// Every mip level of a raw (formats 1, 2) or BC7 (formats 6, 7) image as RGBA8 texels, largest
 /// first, each `max(1, width >> i) · max(1, height >> i) · 4` bytes.
 ///

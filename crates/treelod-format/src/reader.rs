@@ -9,9 +9,9 @@ use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
-    EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC,
-    MAJOR, MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
-    SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
+    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord,
+    SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -429,8 +429,15 @@ impl Container {
         self.records(SectionKind::CALIBRATION)
     }
 
-    /// `CHAIN_CALIBRATION` records (spec §6.16; empty without the section, as in every file
+    /// `CALIBRATION_ELEVATIONS` records (spec §6.16; empty without the section, as in every file
     /// before 1.7).
+    #[must_use]
+    pub fn calibration_elevations(&self) -> &[ElevationCalibrationRecord] {
+        self.records(SectionKind::CALIBRATION_ELEVATIONS)
+    }
+
+    /// `CHAIN_CALIBRATION` records (spec §6.17; empty without the section, as in every file
+    /// before 1.8).
     #[must_use]
     pub fn chain_calibration(&self) -> &[ChainCalibrationRecord] {
         self.records(SectionKind::CHAIN_CALIBRATION)

@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 7;
+pub const MINOR: u16 = 8;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -165,11 +165,14 @@ impl SectionKind {
     /// height (spec §6.15). Since 1.5.
     pub const CALIBRATION: Self = Self(0x0070);
     /// [`ChainCalibrationRecord`]s: each level of the baseline LoD chain's measured image error
-    /// and cost by projected height (spec §6.16). Since 1.7.
+    /// and cost by projected height (spec §6.17). Since 1.8.
     pub const CHAIN_CALIBRATION: Self = Self(0x0071);
+    /// [`ElevationCalibrationRecord`]s: the calibration of `CALIBRATION` per elevation of the
+    /// views (spec §6.16). Since 1.7.
+    pub const CALIBRATION_ELEVATIONS: Self = Self(0x0072);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 27] = [
+    pub const KNOWN: [Self; 28] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -197,6 +200,7 @@ impl SectionKind {
         Self::LINE_AO,
         Self::CALIBRATION,
         Self::CHAIN_CALIBRATION,
+        Self::CALIBRATION_ELEVATIONS,
     ];
 
     /// The spec's name of a known kind.
@@ -230,6 +234,7 @@ impl SectionKind {
             Self::LINE_AO => "LINE_AO",
             Self::CALIBRATION => "CALIBRATION",
             Self::CHAIN_CALIBRATION => "CHAIN_CALIBRATION",
+            Self::CALIBRATION_ELEVATIONS => "CALIBRATION_ELEVATIONS",
             _ => return None,
         })
     }
@@ -262,6 +267,7 @@ impl SectionKind {
             Self::BILLBOARDS => size_of::<BillboardRecord>(),
             Self::CALIBRATION => size_of::<CalibrationRecord>(),
             Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
+            Self::CALIBRATION_ELEVATIONS => size_of::<ElevationCalibrationRecord>(),
             _ => return None,
         };
         #[expect(clippy::cast_possible_truncation, reason = "record sizes are below 100")]
@@ -272,8 +278,8 @@ impl SectionKind {
     /// (`LOD_LEVELS`, `LOD_TRIANGLES`, `BILLBOARDS`), 2 for ambient occlusion (`VERTEX_AO`,
     /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`) and the ellipsoids'
     /// ambient occlusion (`ELLIPSOID_AO`), 4 for the lines' ambient occlusion (`LINE_AO`), 5 for
-    /// the calibration tables (`CALIBRATION`), 6 for the LoD chain's per-level tables
-    /// (`CHAIN_CALIBRATION`), 0 for
+    /// the calibration tables (`CALIBRATION`), 7 for the tables per elevation
+    /// (`CALIBRATION_ELEVATIONS`), 8 for the LoD chain's per-level tables (`CHAIN_CALIBRATION`), 0 for
     /// the other known kinds and for kinds this version does not know (private extensions do not
     /// raise a file's minor).
     #[must_use]
@@ -284,7 +290,8 @@ impl SectionKind {
             Self::PLANE_LEAVES | Self::ELLIPSOID_AO => 3,
             Self::LINE_AO => 4,
             Self::CALIBRATION => 5,
-            Self::CHAIN_CALIBRATION => 7,
+            Self::CALIBRATION_ELEVATIONS => 7,
+            Self::CHAIN_CALIBRATION => 8,
             _ => 0,
         }
     }
@@ -596,6 +603,14 @@ pub mod image_format {
 pub const BC7_BLOCK_BYTES: u64 = 16;
 
 impl ImageRecord {
+    /// The image's slice of `image_data` (the `IMAGE_DATA` section), `None` where it lies outside.
+    #[must_use]
+    pub fn bytes<'a>(&self, image_data: &'a [u8]) -> Option<&'a [u8]> {
+        let start = usize::try_from(self.data_offset).ok()?;
+        let end = start.checked_add(usize::try_from(self.data_length).ok()?)?;
+        image_data.get(start..end)
+    }
+
     /// Bytes the mip chain of formats 1 and 2 (raw texels) or 6 and 7 (BC7 blocks) needs (spec
     /// §6.7), `None` on overflow.
     #[must_use]
@@ -803,13 +818,36 @@ pub struct CalibrationRecord {
     pub technique: u32,
     /// Projected height of the block's bounds, pixels; strictly increasing within a technique.
     pub height: f32,
-    /// Mean multi-scale RMSE of coverage against the supersampled full mesh, `[0, 1]`.
+    /// Mean multi-scale RMSE against the supersampled full mesh (of shaded colour, or of coverage
+    /// in files whose metadata lacks `calibration.error`; spec §6.15), `[0, 1]`.
     pub error: f32,
     /// Primitives submitted (triangles, points, ellipsoids, lines, planes, quads; spec §6.15),
     /// `≥ 0`.
     pub primitives: f32,
 }
 const _: () = assert!(size_of::<CalibrationRecord>() == 16);
+
+/// One sample of a representation's calibration seen from one elevation (spec §6.16): as a
+/// [`CalibrationRecord`], measured only from the views at `elevation` degrees above the block's
+/// horizontal plane.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ElevationCalibrationRecord {
+    /// Elevation of the views above the horizontal plane, degrees, `[0, 90]`; non-decreasing
+    /// over the section.
+    pub elevation: f32,
+    /// The representation, one of [`calibration_technique`]; non-decreasing within an elevation.
+    pub technique: u32,
+    /// Projected height of the block's bounds, pixels; strictly increasing within an elevation
+    /// and technique.
+    pub height: f32,
+    /// Mean multi-scale RMSE against the supersampled full mesh over the views at `elevation`,
+    /// of shaded colour as `CALIBRATION`'s (spec §6.15), `[0, 1]`.
+    pub error: f32,
+    /// Primitives submitted, as `CALIBRATION`'s, `≥ 0`.
+    pub primitives: f32,
+}
+const _: () = assert!(size_of::<ElevationCalibrationRecord>() == 20);
 
 /// The representations a [`CalibrationRecord`] names (spec §6.15).
 pub mod calibration_technique {
@@ -843,7 +881,7 @@ pub mod calibration_technique {
     }
 }
 
-/// One sample of a LoD chain level's calibration (spec §6.16): the image error and the cost of
+/// One sample of a LoD chain level's calibration (spec §6.17): the image error and the cost of
 /// drawing the block at chain level `level` (every tree's level of that number, as the runtime
 /// switches a block's trees together) when the block is `height` pixels high on screen, measured
 /// as `CALIBRATION`'s records are (spec §6.15).

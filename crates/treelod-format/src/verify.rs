@@ -12,10 +12,10 @@ use std::hash::{BuildHasherDefault, Hasher};
 use crate::error::{Error, Result};
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
-    AO_KINDS, BillboardRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample, EllipsoidRecord,
-    ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord,
-    PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind,
-    calibration_technique, image_format, leaf_slots, plane_leaf_bases,
+    AO_KINDS, BillboardRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
+    ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
+    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement,
+    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format, leaf_slots, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -76,7 +76,9 @@ pub struct VerifyReport {
     pub billboards: u64,
     /// `CALIBRATION` records checked.
     pub calibration: u64,
-    /// `CHAIN_CALIBRATION` records checked (spec §6.16).
+    /// `CALIBRATION_ELEVATIONS` records checked (spec §6.16).
+    pub calibration_elevations: u64,
+    /// `CHAIN_CALIBRATION` records checked (spec §6.17).
     pub chain_calibration: u64,
     /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO` and `LINE_AO` bytes (their counts are checked at
     /// open).
@@ -171,6 +173,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
     check_billboards(c.billboards(), image_count, tree_count)?;
     check_calibration(c.calibration())?;
+    check_calibration_elevations(c.calibration_elevations(), c.calibration())?;
     check_chain_calibration(c.chain_calibration(), c.lod_levels())?;
     check_slot_images_only_for_planes(c)?;
     check_metadata(c)?;
@@ -202,6 +205,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.lod_triangles = c.lod_triangles().len() as u64;
     report.billboards = c.billboards().len() as u64;
     report.calibration = c.calibration().len() as u64;
+    report.calibration_elevations = c.calibration_elevations().len() as u64;
     report.chain_calibration = c.chain_calibration().len() as u64;
     report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
     Ok(report)
@@ -1003,27 +1007,45 @@ fn check_prune(leaves: &[PruneLeafRecord], triangles: &[TriangleRecord]) -> Resu
     Ok(())
 }
 
+/// Spec §6.15, §6.16: record `i` of `kind`, a calibration sample `(technique, height, error,
+/// primitives)`, names a known technique at a finite, positive height, with an error in `[0, 1]`
+/// and a finite primitive count `≥ 0`.
+fn check_calibration_sample(
+    kind: SectionKind,
+    i: usize,
+    (technique, height, error, primitives): (u32, f32, f32, f32),
+) -> Result<()> {
+    if technique >= calibration_technique::COUNT {
+        return Err(bad(
+            kind,
+            i,
+            format!("technique {technique} is not defined (0..{})", calibration_technique::COUNT),
+        ));
+    }
+    check_measurement(kind, i, (height, error, primitives))
+}
+
+/// Spec §6.15–§6.17: record `i` of `kind` measures a positive, finite `height` in pixels, an
+/// `error` in `[0, 1]` and a finite, non-negative count of `primitives`.
+fn check_measurement(kind: SectionKind, i: usize, (height, error, primitives): (f32, f32, f32)) -> Result<()> {
+    if !(height.is_finite() && height > 0.0) {
+        return Err(bad(kind, i, format!("height {height} is not a positive number of pixels")));
+    }
+    if !unit(error) {
+        return Err(bad(kind, i, format!("error {error} lies outside [0, 1]")));
+    }
+    if !non_negative(primitives) {
+        return Err(bad(kind, i, format!("primitive count {primitives} is not a finite count")));
+    }
+    Ok(())
+}
+
 /// Spec §6.15: known techniques in ascending order, heights finite, positive and strictly
 /// increasing within a technique, errors in `[0, 1]`, primitive counts finite and `≥ 0`.
 fn check_calibration(records: &[CalibrationRecord]) -> Result<()> {
     let kind = SectionKind::CALIBRATION;
     for (i, r) in records.iter().enumerate() {
-        if r.technique >= calibration_technique::COUNT {
-            return Err(bad(
-                kind,
-                i,
-                format!("technique {} is not defined (0..{})", r.technique, calibration_technique::COUNT),
-            ));
-        }
-        if !(r.height.is_finite() && r.height > 0.0) {
-            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
-        }
-        if !(0.0..=1.0).contains(&r.error) {
-            return Err(bad(kind, i, format!("error {} lies outside [0, 1]", r.error)));
-        }
-        if !(r.primitives.is_finite() && r.primitives >= 0.0) {
-            return Err(bad(kind, i, format!("primitive count {} is not a finite count", r.primitives)));
-        }
+        check_calibration_sample(kind, i, (r.technique, r.height, r.error, r.primitives))?;
         if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
             if r.technique < prev.technique {
                 return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
@@ -1040,7 +1062,100 @@ fn check_calibration(records: &[CalibrationRecord]) -> Result<()> {
     Ok(())
 }
 
-/// Spec §6.16: levels in ascending order, each a level every tree of `LOD_LEVELS` has (so the
+/// Spec §6.16: elevations finite in `[0, 90]` and non-decreasing, known techniques
+/// non-decreasing within an elevation, heights finite, positive and strictly increasing within an
+/// elevation and technique, errors in `[0, 1]`, primitive counts finite and `≥ 0`; and each
+/// elevation holds exactly the `(technique, height)` pairs of `calibration`, so a file with
+/// records also has `CALIBRATION`.
+///
+/// Runs after [`check_calibration`]: `calibration` is sorted by technique and strictly by height
+/// within one, so a pair is found by binary search, and an elevation whose records are sorted the
+/// same way, each a pair of `calibration`, holds them all exactly when it has as many records.
+fn check_calibration_elevations(
+    records: &[ElevationCalibrationRecord],
+    calibration: &[CalibrationRecord],
+) -> Result<()> {
+    let kind = SectionKind::CALIBRATION_ELEVATIONS;
+    if records.is_empty() {
+        return Ok(());
+    }
+    if calibration.is_empty() {
+        return Err(bad(
+            kind,
+            0,
+            "the file has no CALIBRATION, whose (technique, height) pairs each elevation holds".into(),
+        ));
+    }
+    let pair = |technique: u32, height: f32| {
+        calibration.binary_search_by(|c| c.technique.cmp(&technique).then(c.height.total_cmp(&height)))
+    };
+    // The first record of the elevation being read.
+    let mut start = 0;
+    for (i, r) in records.iter().enumerate() {
+        if !(r.elevation.is_finite() && (0.0..=90.0).contains(&r.elevation)) {
+            return Err(bad(kind, i, format!("elevation {} lies outside [0, 90] degrees", r.elevation)));
+        }
+        check_calibration_sample(kind, i, (r.technique, r.height, r.error, r.primitives))?;
+        if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
+            if r.elevation < prev.elevation {
+                return Err(bad(kind, i, format!("elevation {} follows elevation {}", r.elevation, prev.elevation)));
+            }
+            if r.elevation > prev.elevation {
+                check_elevation_pairs(&records[start..i], start, calibration)?;
+                start = i;
+            } else if r.technique < prev.technique {
+                return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
+            } else if r.technique == prev.technique && r.height <= prev.height {
+                return Err(bad(
+                    kind,
+                    i,
+                    format!("height {} does not increase strictly after {}", r.height, prev.height),
+                ));
+            }
+        }
+        if pair(r.technique, r.height).is_err() {
+            return Err(bad(
+                kind,
+                i,
+                format!("technique {} at height {} has no CALIBRATION record", r.technique, r.height),
+            ));
+        }
+    }
+    check_elevation_pairs(&records[start..], start, calibration)
+}
+
+/// Spec §6.16: the records of one elevation, from record `start`, hold every `(technique, height)`
+/// pair of `calibration`. They are sorted as `calibration` is and each is one of its pairs, so
+/// they hold all exactly when they are as many; otherwise the first place the two differ names a
+/// pair the elevation lacks, reported at its first record.
+fn check_elevation_pairs(
+    elevation: &[ElevationCalibrationRecord],
+    start: usize,
+    calibration: &[CalibrationRecord],
+) -> Result<()> {
+    if elevation.len() == calibration.len() {
+        return Ok(());
+    }
+    let at = elevation.first().map_or(0.0, |r| r.elevation);
+    let missing = calibration
+        .iter()
+        .enumerate()
+        .find(|&(k, c)| {
+            elevation.get(k).is_none_or(|r| r.technique != c.technique || r.height.to_bits() != c.height.to_bits())
+        })
+        .map_or_else(String::new, |(_, c)| format!(", not technique {} at height {}", c.technique, c.height));
+    Err(bad(
+        SectionKind::CALIBRATION_ELEVATIONS,
+        start,
+        format!(
+            "elevation {at} holds {} of the {} (technique, height) pairs of CALIBRATION{missing}",
+            elevation.len(),
+            calibration.len()
+        ),
+    ))
+}
+
+/// Spec §6.17: levels in ascending order, each a level every tree of `LOD_LEVELS` has (so the
 /// section needs a chain), heights finite, positive and strictly increasing within a level, errors
 /// in `[0, 1]`, primitive counts finite and `≥ 0`.
 fn check_chain_calibration(records: &[ChainCalibrationRecord], levels: &[LodLevelRecord]) -> Result<()> {
@@ -1065,15 +1180,7 @@ fn check_chain_calibration(records: &[ChainCalibrationRecord], levels: &[LodLeve
                 format!("level {} is not a level of every tree's LoD chain (0..{depth})", r.level),
             ));
         }
-        if !(r.height.is_finite() && r.height > 0.0) {
-            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
-        }
-        if !(0.0..=1.0).contains(&r.error) {
-            return Err(bad(kind, i, format!("error {} lies outside [0, 1]", r.error)));
-        }
-        if !(r.primitives.is_finite() && r.primitives >= 0.0) {
-            return Err(bad(kind, i, format!("primitive count {} is not a finite count", r.primitives)));
-        }
+        check_measurement(kind, i, (r.height, r.error, r.primitives))?;
         if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
             if r.level < prev.level {
                 return Err(bad(kind, i, format!("level {} follows level {}", r.level, prev.level)));

@@ -16,10 +16,10 @@ use crate::metadata::MAX_META_BYTES;
 use crate::metadata::Metadata;
 use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
-    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample, EllipsoidRecord,
-    FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR,
-    MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE,
-    SectionEntry, SectionKind, TriangleRecord, VertexRecord, image_format,
+    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
+    ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
+    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord,
+    SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord, image_format,
 };
 
 /// How sections are stored.
@@ -129,8 +129,11 @@ pub struct ContainerData {
     /// `CALIBRATION`: empty, or each representation's error and cost by projected height (since
     /// 1.5).
     pub calibration: Vec<CalibrationRecord>,
+    /// `CALIBRATION_ELEVATIONS`: empty, or the calibration per elevation of the views (since
+    /// 1.7).
+    pub calibration_elevations: Vec<ElevationCalibrationRecord>,
     /// `CHAIN_CALIBRATION`: empty, or each LoD chain level's error and cost by projected height
-    /// (since 1.7).
+    /// (since 1.8).
     pub chain_calibration: Vec<ChainCalibrationRecord>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
@@ -168,6 +171,7 @@ impl ContainerData {
             ellipsoid_ao: c.ellipsoid_ao().to_vec(),
             line_ao: c.line_ao().to_vec(),
             calibration: c.calibration().to_vec(),
+            calibration_elevations: c.calibration_elevations().to_vec(),
             chain_calibration: c.chain_calibration().to_vec(),
             extra_sections: c
                 .sections()
@@ -519,6 +523,7 @@ macro_rules! optional_sections {
             (SectionKind::LINE_AO, $payload!(line_ao)),
             (SectionKind::CALIBRATION, $payload!(calibration)),
             (SectionKind::CHAIN_CALIBRATION, $payload!(chain_calibration)),
+            (SectionKind::CALIBRATION_ELEVATIONS, $payload!(calibration_elevations)),
         ]
     };
 }

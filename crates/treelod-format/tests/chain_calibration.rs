@@ -1,5 +1,5 @@
-//! The LoD chain's per-level calibration in the container (spec §6.16): the `CHAIN_CALIBRATION`
-//! kind (1.7) round-trips and makes a file 1.7, a file without it reads as before (no records);
+//! The LoD chain's per-level calibration in the container (spec §6.17): the `CHAIN_CALIBRATION`
+//! kind (1.8) round-trips and makes a file 1.8, a file without it reads as before (no records);
 //! `verify` checks each record (a level every tree's chain has, levels in ascending order, heights
 //! finite, positive and strictly increasing within a level, errors in `[0, 1]`, primitive counts
 //! finite and `≥ 0`). Each rule is broken once and refused with an error naming
@@ -62,7 +62,7 @@ fn edited(index: usize, edit: impl FnOnce(&mut ChainCalibrationRecord)) -> Conta
 
 #[test]
 fn the_kind_is_numbered_named_and_sized_as_the_spec_says() {
-    const { assert!(MINOR >= 7, "the chain's per-level calibration is format 1.7") };
+    const { assert!(MINOR >= 8, "the chain's per-level calibration is format 1.8") };
     let kind = SectionKind::CHAIN_CALIBRATION;
     assert_eq!(
         (kind.0, kind.name(), kind.to_string().as_str()),
@@ -70,18 +70,18 @@ fn the_kind_is_numbered_named_and_sized_as_the_spec_says() {
     );
     assert_eq!(kind.record_size(), Some(16));
     assert_eq!(size_of::<ChainCalibrationRecord>(), 16);
-    assert_eq!(kind.since_minor(), 7);
+    assert_eq!(kind.since_minor(), 8);
     assert!(SectionKind::KNOWN.contains(&kind));
     assert!(SectionKind::KNOWN.windows(2).all(|w| w[0] < w[1]));
 }
 
 #[test]
-fn a_valid_table_round_trips_as_a_1_7_file_and_verifies() {
+fn a_valid_table_round_trips_as_a_1_8_file_and_verifies() {
     let data = fixture();
     for compression in [Compression::None, Compression::Zstd { level: 19 }] {
         let bytes = data.to_bytes(compression).expect("writes");
         let c = Container::from_bytes(&bytes).expect("opens");
-        assert_eq!(c.header().minor, 7, "CHAIN_CALIBRATION is a kind of 1.7");
+        assert_eq!(c.header().minor, 8, "CHAIN_CALIBRATION is a kind of 1.8");
         assert_eq!(c.chain_calibration(), data.chain_calibration.as_slice());
         assert_eq!(ContainerData::from_container(&c), data);
         let report = treelod_format::verify(&c).expect("valid");
@@ -93,7 +93,7 @@ fn a_valid_table_round_trips_as_a_1_7_file_and_verifies() {
 fn without_the_kind_a_file_is_what_it_was_and_has_no_records() {
     let minor = |data: &ContainerData| Container::from_bytes(&bytes_of(data)).expect("opens").header().minor;
     let mut data = fixture();
-    assert_eq!(minor(&data), 7);
+    assert_eq!(minor(&data), 8);
     data.chain_calibration.clear();
     assert_eq!(minor(&data), 5, "a calibration alone is 1.5");
     let report = check(&data).expect("no per-level tables is valid");

@@ -135,9 +135,11 @@ impl Renderer {
         }
         let mut recorded = std::mem::take(&mut view.recorded);
         self.record_selection(view, false, full_mesh, &mut recorded, stats);
+        let assigned = recorded.len();
         if let Some(leaving) = leaving {
             self.record_selection(leaving, true, full_mesh, &mut recorded, stats);
         }
+        stats.leaving = recorded[assigned..].iter().map(|d| u64::from(d.count)).sum();
         view.recorded = recorded;
         // What each kind of primitive and each technique submitted.
         for draw in &view.recorded {

@@ -72,8 +72,10 @@
 //! (`vs_plane`/`fs_plane` in `shaders/tree/planes.wgsl`, from the model's uploaded `PLANES` and its atlas
 //! bound as a texture of its own, clamped, nearest mip) at the level whose interval holds `τ` from
 //! `s_min` at the block centre's distance, sliding each plane onto its parent's and cross-fading
-//! the two before a level change ([`Settings::impostor_morph`]); its bark is the bark of the container's LoD chain at
-//! the level `s_min` allows where it has one ([`ImpostorBark`]), else all its bark triangles.
+//! the two before a level change ([`Settings::impostor_morph`]); its bark is, by default, its
+//! container's branch lines where it has them, as ellipsoid trees draw them, else the bark of its
+//! LoD chain at the level `s_min` allows where it has one, else all its bark triangles
+//! ([`ImpostorBark`]).
 //!
 //! **Ellipsoids and lines.** With [`Technique::Ellipsoids`], a tree whose container has Clasen's
 //! leaf ellipsoids (spec §6.8) draws them ray-cast per pixel (`vs_ellipsoid`/`fs_ellipsoid`), per

@@ -110,6 +110,35 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_build_reads_the_same_grey_and_random_vector_at_every_texel() {
+        use glam::Vec3;
+        use treelod_build::raster::{noise_grey, noise_vector};
+        for level in 0..=NOISE_SIZE.ilog2() {
+            let side = (NOISE_SIZE >> level).max(1);
+            for face in 0..6u32 {
+                let texels = face_texels(face, level);
+                for (i, texel) in texels.chunks_exact(4).enumerate() {
+                    // The texel's centre on the face, then the direction that samples it.
+                    let (row, column) = (i as u32 / side, i as u32 % side);
+                    let sc = 2.0 * (column as f32 + 0.5) / side as f32 - 1.0;
+                    let tc = 2.0 * (row as f32 + 0.5) / side as f32 - 1.0;
+                    let d = match face {
+                        0 => Vec3::new(1.0, -tc, -sc),
+                        1 => Vec3::new(-1.0, -tc, sc),
+                        2 => Vec3::new(sc, 1.0, tc),
+                        3 => Vec3::new(sc, -1.0, -tc),
+                        4 => Vec3::new(sc, -tc, 1.0),
+                        _ => Vec3::new(-sc, -tc, -1.0),
+                    };
+                    assert_eq!(noise_grey(d, level), texel[3], "level {level} face {face} texel {i}");
+                    let rgb = Vec3::new(f32::from(texel[0]), f32::from(texel[1]), f32::from(texel[2])) / 255.0;
+                    assert_eq!(noise_vector(d, level), rgb * 2.0 - Vec3::ONE, "level {level} face {face} texel {i}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn every_level_is_uniform_white_noise_of_its_own() {
         for level in 0..NOISE_LEVELS - 2 {
             let texels: Vec<u8> = (0..6).flat_map(|face| face_texels(face, level)).collect();

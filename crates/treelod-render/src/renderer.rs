@@ -568,8 +568,13 @@ impl Renderer {
     /// In the policy's budget mode ([`Policy::budget`]) the frame is selected with the target and
     /// `s_min` a [`BudgetController`] keeps (made from [`Settings::policy`]'s target and
     /// [`Settings::s_min`] when budget mode starts; `s_max` keeps its ratio to `s_min`), which
-    /// then takes the frame's [`FrameStats::primitives`] for the next frame. The settings
-    /// themselves are not changed; [`Self::budget_steering`] reads what the controller holds.
+    /// then takes the frame's [`FrameStats::primitives`] less [`FrameStats::leaving`] for the
+    /// next frame: what the frame's choices cost, without the draws of the techniques trees in a
+    /// transition leave. Those last a transition's frames and then stop on their own, so the
+    /// controller counting them saw the frame's cost fall while its steering held, took it for a
+    /// cheaper scene, released the bounds it had found, and switched trees again, which started
+    /// new transitions: a frame that never settled. The settings themselves are not changed;
+    /// [`Self::budget_steering`] reads what the controller holds.
     pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
         let user = self.settings;
         let Some((policy, budget)) = user.policy.and_then(|p| p.budget.map(|n| (p, n))) else {
@@ -588,7 +593,7 @@ impl Renderer {
         let stats = self.prepare_frame(device, queue, camera);
         self.settings = user;
         if let Some(controller) = &mut self.policy.budget {
-            controller.update_policy(stats.primitives());
+            controller.update_policy(stats.primitives() - stats.leaving);
         }
         stats
     }

@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 use treelod_runtime::spt_lod::PixelLevel;
-use treelod_runtime::{Policy, PruneScale, Technique};
+use treelod_runtime::{Light, Policy, PruneScale, Technique};
 
 use crate::shadows::Shadows;
 #[cfg(doc)]
@@ -170,7 +170,9 @@ pub struct Settings {
     /// the interval the plane and its parent are drawn on complementary dithered pixels
     /// ([`treelod_runtime::crossfade`]). `false` switches levels at once.
     pub impostor_morph: bool,
-    /// With [`Technique::Impostors`]: the bark drawn beside the planes.
+    /// With [`Technique::Impostors`]: the bark drawn beside the planes. Default
+    /// [`ImpostorBark::Lines`]: the branch lines where the container has them, else the LoD
+    /// chain's bark at the level `s_min` allows, else every bark triangle.
     pub impostor_bark: ImpostorBark,
     /// With [`Technique::Ellipsoids`] (the leaves of every tree whose container has Clasen's
     /// ellipsoids, spec §6.8, ray-cast per pixel with their noise, its bark as Clasen's lines,
@@ -262,9 +264,9 @@ impl Default for Settings {
             technique: Technique::Spt,
             policy: Some(Policy::default()),
             debug: DebugView::Shaded,
-            sun: Vec3::new(0.4, 0.8, 0.45),
-            sun_colour: Vec3::ONE,
-            ambient: 0.35,
+            sun: Light::DEFAULT.sun,
+            sun_colour: Light::DEFAULT.sun_colour,
+            ambient: Light::DEFAULT.ambient,
             ambient_occlusion: true,
             upload_budget: 64 << 20,
             memory_budget: 1 << 30,

@@ -35,6 +35,10 @@ pub struct FrameStats {
     /// the technique it goes to; the draws of the one it leaves count in [`Self::submitted`] and,
     /// under that technique, in [`Self::by_technique`].
     pub transitions: u32,
+    /// Primitives of the draws of the techniques the trees in a transition leave (counted in
+    /// [`Self::submitted`] and [`Self::by_technique`] too): what the frame submits beyond its
+    /// assignment, for the few frames a transition lasts.
+    pub leaving: u64,
     /// Bytes of model data on the GPU: vertices, materials and images of every model, and the
     /// streamed prefixes and roots in use.
     pub bytes_resident: u64,

@@ -12,7 +12,10 @@ use treelod_build::{BuildConfig, CalibrationConfig, ImpostorConfig, LodChainConf
 use treelod_format::Container;
 use treelod_render::offscreen::render_image;
 use treelod_render::{Camera, DebugView, Instance, Policy, Renderer, Settings, Shadows, Technique};
-use treelod_runtime::{Calibration, Choices, ModelLod, Representations, projected_height};
+use treelod_runtime::{
+    Calibration, Choices, ModelLod, Representations, elevation_class_after, in_view_share, projected_height,
+    view_elevation,
+};
 
 /// The demo tree with impostors and its baselines (planes, a chain and billboards to choose
 /// from; the impostors set the billboards' budget) and calibration.
@@ -20,7 +23,7 @@ fn calibrated_demo() -> Arc<Container> {
     demo_built(&BuildConfig {
         impostors: Some(ImpostorConfig::default()),
         baselines: Some(LodChainConfig::default()),
-        calibration: Some(CalibrationConfig { views: 2, supersample: 2 }),
+        calibration: Some(CalibrationConfig { views: 1, supersample: 2 }),
         ..BuildConfig::default()
     })
 }
@@ -72,10 +75,16 @@ fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
     let camera = Camera::look_at(eye, vec3(0.0, 0.0, -1.0), 0.9, width, height);
     let runtime_camera = treelod_runtime::Camera::look_at(eye, vec3(0.0, 0.0, -1.0), 0.9, width, height);
 
+    // Each tree's choice at its height, by the elevation class of its view, and (above the
+    // calibrated range) the share of it in view (spec §10.2).
+    let frustum = treelod_runtime::Frustum::from_view_proj(runtime_camera.view_proj);
     let mut expected = treelod_render::PerTechnique::<u32>::default();
     for &p in &positions {
-        let h = projected_height(&lod, Mat4::from_translation(p), &runtime_camera);
-        *expected.get_mut(choices.choose(h, None)) += 1;
+        let transform = Mat4::from_translation(p);
+        let h = projected_height(&lod, transform, &runtime_camera);
+        let class = elevation_class_after(None, view_elevation(&lod, transform, eye), choices.elevations());
+        let in_view = if choices.above_range(h) { in_view_share(&lod, transform, &frustum) } else { 1.0 };
+        *expected.get_mut(choices.choose_framed(h, class, 1.0, in_view, None)) += 1;
     }
     assert!(expected.iter().filter(|&(_, n)| n > 0).count() >= 2, "the row spans two choices: {expected:?}");
 
@@ -143,7 +152,12 @@ fn a_shadow_cascade_chooses_at_the_coarser_of_the_light_s_and_the_camera_s_view(
     let distance = treelod_runtime::policy::distance_for_height(&lod, 200.0, &runtime_camera);
     let position = vec3(0.0, 0.0, -distance) - lod.centre();
     let transform = Mat4::from_translation(position);
-    let drawn = choices.choose(projected_height(&lod, transform, &runtime_camera), None);
+    // The choice for a tree `height` px high seen from `eye` (by its elevation class, spec §10.2).
+    let choice = |eye: Vec3, height: f32| {
+        let class = elevation_class_after(None, view_elevation(&lod, transform, eye), choices.elevations());
+        choices.choose_viewed(height, class, 1.0, None)
+    };
+    let drawn = choice(eye, projected_height(&lod, transform, &runtime_camera));
     let camera = Camera::look_at(eye, ahead, 0.9, width, height);
     // A coarse cascade (the tree a few of its selection pixels high) and a fine one (more pixels
     // than on screen): from the light's view alone, and at the coarser of both views.
@@ -157,8 +171,9 @@ fn a_shadow_cascade_chooses_at_the_coarser_of_the_light_s_and_the_camera_s_view(
             let light = renderer.shadow_cascades()[0].selection_camera();
             let in_shadow = projected_height(&lod, transform, &light);
             let on_screen = projected_height(&lod, transform, &runtime_camera);
-            let at = if casters == treelod_render::Casters::Coarser { in_shadow.min(on_screen) } else { in_shadow };
-            let cast = choices.choose(at, None);
+            let coarser = casters == treelod_render::Casters::Coarser && on_screen < in_shadow;
+            let (at, seen_from) = if coarser { (on_screen, eye) } else { (in_shadow, light.position) };
+            let cast = choice(seen_from, at);
             differ |= cast != drawn;
             assert_eq!(stats.instances[drawn], 1, "{stats:?}");
             assert_eq!(stats.shadow.instances[cast], 1, "{casters:?} at {at} px: {:?}", stats.shadow);

@@ -123,7 +123,7 @@ impl Representations {
                         bark_levels.push((first, at(&whole) - first));
                     }
                 }
-                // The per-level tables, where the build measured them (spec §6.16).
+                // The per-level tables, where the build measured them (spec §6.17).
                 let calibration = Calibration::from_container(container).filter(|c| c.chain_levels() > 0);
                 chain = Some(ChainRanges { chain: lod_chain, full, levels, bark_levels, calibration });
             }
@@ -476,7 +476,7 @@ pub fn select_techniques(
                 crate::prune::select(scene, list, technique, settings, camera, state, out);
             }
             Technique::Impostors => {
-                crate::impostor::select(scene, list, camera, settings.s_min, settings.impostor_bark, out);
+                crate::impostor::select(scene, list, camera, settings, out);
             }
             Technique::Ellipsoids => {
                 let (level, lines) = (settings.pixel_level, settings.lines);

@@ -17,7 +17,9 @@ use glam::{Mat4, Vec3};
 use treelod_format::{Container, PlaneRecord, Range, TriangleRecord, VertexRecord};
 
 use crate::baseline::instance_tau;
-use crate::draws::{PrefixDraw, Representations, Scene, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
+use crate::draws::{
+    PrefixDraw, Representations, Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, by_chunks,
+};
 use crate::frame::{Camera, CellPrefix, Frustum, Instance, ModelLod};
 use crate::spt_lod::{SptCell, SptLod, spt_drawn};
 use crate::technique::Technique;
@@ -196,8 +198,28 @@ pub enum ImpostorBark {
     /// its 498464 bark triangles from 2 bounding radii on, 1.00 → 0.97 (2 radii), 0.96 (8); the
     /// oak 2835 of 12006 from 32 radii on, unchanged. Without the guard the maple's coarsest
     /// level (4963) would be drawn, at 0.77 and 0.83.
-    #[default]
     Chain,
+    /// Where the model has branch lines (spec §6.9, built with `--lines`), the lines the
+    /// ellipsoid technique draws, with the same `τ`, level blend and depth bias (Clasen's
+    /// skeleton of the branches, radii included), in place of every bark triangle; else as
+    /// [`Self::Chain`]. The default for impostor trees: the planes stand for the leaves at any
+    /// distance, and the bark drawn as thousands of triangles beside a few dozen planes made
+    /// impostor trees cost about as much as the full mesh — the reason a policy chose them
+    /// rarely, and the forests' largest cost where it did. Measured by the build's calibration
+    /// (§6.15, 4 views, RMSE of the shaded image at 8/32/128/256 pixels, primitives submitted):
+    /// the oak 0.0563/0.0363/0.0393/0.0466 with 157/207/800/1687 primitives against
+    /// 0.0537/0.0366/0.0382/0.0454 with 2843/12052/12052/12052 for the chain's bark; the pine
+    /// 0.0670/0.0418/0.0346/0.0411 (209/247/287/611) against 0.0625/0.0406/0.0342/0.0404
+    /// (6085/12228/12230/12230); the orchid 0.0655/0.0515/0.0532/0.0584 (212/257/259/276)
+    /// against 0.0637/0.0514/0.0501/0.0545 (4744/4785); the Quaternius tree
+    /// 0.0556/0.0447/0.0414/0.0471 (36/91/185/185) against 0.0558/0.0429/0.0315/0.0357
+    /// (244/2373/2406/2406) — within 5 % up to 64 pixels on every model, up to a third worse
+    /// near on the tree whose few bark triangles are large, where a policy draws the mesh anyway.
+    /// Pruned trees keep [`Self::Chain`] ([`Pruning::bark`]): pruning draws near trees.
+    ///
+    /// [`Pruning::bark`]: crate::Pruning::bark
+    #[default]
+    Lines,
 }
 
 /// [`ImpostorBark::Chain`] draws only levels whose bark keeps this share of the full bark's area.
@@ -222,9 +244,10 @@ pub fn area(vertices: &[VertexRecord], triangles: &[TriangleRecord]) -> f64 {
 }
 
 /// The trees of `list` drawn with impostor planes ([`Technique::Impostors`]; every model of
-/// `list` has planes): appends to `out` each visible instance's plane prefixes at `s_min` pixels
-/// ([`PlaneLod::select`]) and its bark as `bark` says, and counts it visible.
-pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, s_min: f32, bark: ImpostorBark, out: &mut TreeDraws) {
+/// `list` has planes): appends to `out` each visible instance's plane prefixes at
+/// `settings.s_min` pixels ([`PlaneLod::select`]) and its bark as `settings.impostor_bark` says
+/// ([`ImpostorBark`]), and counts it visible.
+pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, settings: &TechniqueSettings, out: &mut TreeDraws) {
     let frustum = Frustum::from_view_proj(camera.view_proj);
     for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {
         let mut ranges = Vec::new();
@@ -232,37 +255,59 @@ pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, s_min: f32, bark
             let Some((instance, lod, model)) = scene.get(index) else { continue };
             let Some(planes) = &model.planes else { continue };
             ranges.clear();
-            if !planes.select(instance.transform, camera, &frustum, s_min, &mut ranges) {
+            if !planes.select(instance.transform, camera, &frustum, settings.s_min, &mut ranges) {
                 continue;
             }
             *out.visible.get_mut(Technique::Impostors) += 1;
             for range in &ranges {
                 out.planes.push(PrefixDraw { instance: index, model: instance.model, range: *range });
             }
-            out.triangles.extend(bark_draw((index, instance, lod, model), camera, &frustum, s_min, bark, 1.0));
+            let tree = (index, instance, lod, model);
+            push_bark(tree, camera, &frustum, settings, settings.impostor_bark, 1.0, out);
         }
     }) {
         out.append(&mut chunk);
     }
 }
 
-/// The bark of instance `index` (with its model's point tree and representations) drawn as
-/// `bark` says, at `s_min` pixels for `camera`: with [`ImpostorBark::Chain`] and a chain that has
-/// bark levels, the bark of its coarsest level whose error is at most [`BARK_ERROR_SHARE`] of
-/// `τ` at the block centre (the trees drawn with impostor planes or pruned); else every bark
-/// triangle. `lambda` is recorded with the draw.
-pub(crate) fn bark_draw(
+/// Appends to `out` the bark of instance `index` (with its model's point tree and
+/// representations) drawn as `bark` says for `camera` (the trees drawn with impostor planes or
+/// pruned): with [`ImpostorBark::Lines`] and a model with lines, its line prefixes as the
+/// ellipsoid technique selects them (`settings.lod`, `settings.pixel_level`); with
+/// [`ImpostorBark::Chain`] (or `Lines` without lines) and a chain that has bark levels, the bark
+/// of its coarsest level whose error is at most [`BARK_ERROR_SHARE`] of `τ` at `settings.s_min`
+/// pixels at the block centre; else every bark triangle. `lambda` is recorded with a triangle
+/// draw.
+pub(crate) fn push_bark(
     (index, instance, lod, model): (u32, &Instance, &ModelLod, &Representations),
     camera: &Camera,
     frustum: &Frustum,
-    s_min: f32,
+    settings: &TechniqueSettings,
     bark: ImpostorBark,
     lambda: f32,
-) -> Option<TriangleDraw> {
+    out: &mut TreeDraws,
+) {
+    if let (ImpostorBark::Lines, Some(lines)) = (bark, &model.lines) {
+        let mut ranges = Vec::new();
+        lines.select_per_pixel_blended(
+            instance.transform,
+            camera,
+            frustum,
+            &settings.lod,
+            settings.pixel_level,
+            &mut ranges,
+        );
+        out.lines.extend(ranges.iter().map(|range| PrefixDraw {
+            instance: index,
+            model: instance.model,
+            range: *range,
+        }));
+        return;
+    }
     // The chain's bark level (its triangles and error), if the setting and the model have one.
     let chain_bark = match (bark, &model.chain) {
-        (ImpostorBark::Chain, Some(chain)) => {
-            instance_tau(instance.transform, camera, frustum, s_min, lod.cull_sphere(), model.block_centre)
+        (ImpostorBark::Chain | ImpostorBark::Lines, Some(chain)) => {
+            instance_tau(instance.transform, camera, frustum, settings.s_min, lod.cull_sphere(), model.block_centre)
                 .and_then(|tau| chain.chain.pick(tau * BARK_ERROR_SHARE))
                 .and_then(|level| {
                     let level = (level as usize).min(chain.bark_levels.len().checked_sub(1)?);
@@ -271,10 +316,11 @@ pub(crate) fn bark_draw(
         }
         _ => None,
     };
-    match chain_bark {
+    let draw = match chain_bark {
         Some((range, error)) => TriangleDraw::whole(index, instance.model, TriangleSource::Bark, range, lambda, error),
         None => model.bark_draw(index, instance.model, lambda),
-    }
+    };
+    out.triangles.extend(draw);
 }
 
 #[cfg(test)]

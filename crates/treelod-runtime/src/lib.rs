@@ -24,11 +24,13 @@ pub mod draws;
 pub mod ellipsoid;
 pub mod frame;
 pub mod impostor;
+pub mod light;
 pub mod policy;
 pub mod prune;
 pub mod select;
 pub mod spt_lod;
 pub mod technique;
+pub mod texels;
 
 pub use baseline::{
     BillboardKind, BillboardRanges, Billboards, ChainLevel, ChainRanges, ChainState, LodChain, instance_tau,
@@ -48,9 +50,11 @@ pub use impostor::{
     CROSSFADE, ImpostorBark, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share,
     plane_drawn, plane_parents,
 };
+pub use light::Light;
 pub use policy::{
     Calibration, ChainChoices, ChainPick, Choices, Policy, PolicyState, Transition, VISIBILITY_CLASSES,
-    choose_instances, choose_instances_coarsest, projected_height, visibility_class, visibility_class_after,
+    choose_instances, choose_instances_coarsest, elevation_class_after, in_view_share, projected_height,
+    view_elevation, visibility_class, visibility_class_after,
 };
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning, hull_samples};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};

@@ -13,12 +13,20 @@
 //! lowest error wins. The full mesh itself is never chosen (the sequential point tree and the LoD
 //! chain converge to it). Above the largest calibrated height the choice at that height holds if
 //! it converges to the full mesh as trees come near ([`converges`]: the point tree, the LoD chain,
-//! pruning), else the point tree draws ([`Technique::FALLBACK`]); below the smallest the smallest
-//! height's choice holds. (The point tree alone above the range drew near trees with 2.2–2.5× the
-//! full mesh's primitives where the chain, at the full mesh there, had the same error: the oak's
-//! 49,409 against 22,566, the Quaternius tree's 7,121 against 2,888.)
+//! pruning), else the rule's choice there among the techniques that converge; and the point tree
+//! ([`Technique::FALLBACK`]) stands in for that choice where it costs less for what is in view:
+//! it culls per cell, so a near tree the view cuts draws only the share `s` of its triangles in
+//! cells the view holds ([`in_view_share`]), while the chain draws the whole tree. The tables
+//! count whole trees, so the point tree is drawn where its primitives at the largest height
+//! times `s` are fewer than the choice's there (and its image is within the target there), with
+//! a quarter of hysteresis either way against last frame's technique. Below the smallest height
+//! the smallest height's choice holds. (Measured: the point tree for every tree above the range
+//! drew whole near trees with 2.2–2.5× the full mesh's primitives at the same error, the oak's
+//! 49,409 against the chain's 22,566 in `eval` at 2 radii, the Quaternius tree's 7,121 against
+//! 2,888; the chain for every one drew the pine's forest bench, `bench --quality` over 200 trees,
+//! with 64,115 primitives per frame against 44,272 with the point tree for trees the view cuts.)
 //!
-//! **The LoD chain's level** (spec §6.16, §10.2). Where a container holds the chain's per-level
+//! **The LoD chain's level** (spec §6.17, §10.2). Where a container holds the chain's per-level
 //! tables, the chain's level at `h` follows the same rule among the full mesh and the chain's
 //! levels ([`Calibration::chain_level`]): the fewest triangles with `error ≤ floor(h) + target`,
 //! the floor now counting the levels (and not the chain's own row, which the build derives from
@@ -45,6 +53,20 @@
 //! the same count gives the same images whatever the frame rate (a host at other than 60 frames
 //! per second scales it).
 //!
+//! **Elevation.** A representation's error depends on where it is seen from, and most for the
+//! cheapest: three crossed quads are a tree from the side and three lines from above (the shared
+//! oak's crossed billboards read 0.049 at 8 pixels from the side, 0.229 from straight above, where
+//! its point tree reads 0.058 to 0.072). Where the container has tables per elevation of the
+//! calibration's views (spec §6.16, format 1.7), the choices are made per elevation class
+//! ([`Calibration::elevations`]: 0°, 30°, 60°, 90°), and each tree is chosen by the class of its
+//! view: the elevation of the eye above the tree's horizontal plane at the block centre
+//! ([`view_elevation`]; views from below count as from the side), with a hysteresis of a quarter of
+//! the classes' spacing ([`elevation_class_after`]), so a camera climbing over a forest hands its
+//! far trees from billboards to planes or points while a walker keeps them billboards. Without
+//! those tables every tree is chosen by the tables over every view. A shadow cascade's trees are
+//! chosen by the view that sets their height (the camera's or the cascade's, whichever sees the
+//! tree smaller).
+//!
 //! **Occlusion.** A tree partly hidden behind others shows only part of its error: with
 //! [`Policy::occlusion`] and a measured visible fraction `v` (the share of its hull samples the
 //! depth of an earlier frame shows, Neubert et al. 2011 §5), the errors above the floor are
@@ -54,15 +76,17 @@
 //! table of choices, so a frame still pays a lookup per tree.
 //!
 //! **Cost per frame.** The rule is evaluated once per model and policy into a table of choices
-//! every [`STEPS_PER_OCTAVE`]-th of an octave ([`Choices`]); per tree the frame pays a distance, a
-//! `log2` and a lookup ([`Choices::choose`]).
+//! every [`STEPS_PER_OCTAVE`]-th of an octave per elevation and visibility class ([`Choices`]);
+//! per tree the frame pays a distance, a `log2`, an `asin` (with tables per elevation) and a
+//! lookup ([`Choices::choose_framed`]); a tree above the calibrated range also a box test per
+//! cell ([`in_view_share`]).
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
-use treelod_format::{CalibrationRecord, ChainCalibrationRecord, Container};
+use treelod_format::{CalibrationRecord, ChainCalibrationRecord, Container, ElevationCalibrationRecord};
 
 use crate::draws::Representations;
-use crate::frame::{Camera, Instance, ModelLod};
+use crate::frame::{Camera, Frustum, Instance, ModelLod};
 use crate::technique::{PerTechnique, Technique};
 
 /// Steps of the choice tables per octave of projected height.
@@ -74,7 +98,7 @@ pub const STEPS_PER_OCTAVE: f32 = 8.0;
 pub struct Policy {
     /// Error allowed above the floor (the least error of the full mesh and every representation
     /// at the same projected height, module docs), in units of the calibration's error
-    /// (multi-scale RMSE of coverage, `[0, 1]`). 0 asks for the best image the tables know (only
+    /// (multi-scale RMSE of the shaded image, `[0, 1]`, spec §6.15). 0 asks for the best image the tables know (only
     /// representations as good as it qualify); larger values trade image for primitives. Default [`Policy::DEFAULT_TARGET`]. Not finite or negative: 0.
     pub target: f32,
     /// Octaves of projected height around a boundary within which a tree keeps last frame's
@@ -82,7 +106,8 @@ pub struct Policy {
     /// it switches back). Not finite or negative: 0.
     pub hysteresis: f32,
     /// Budget mode: primitives per frame to aim for (every kind, as the renderer counts them in
-    /// the camera's view; shadow passes are not counted). `Some`: a [`BudgetController`]
+    /// the camera's view, less the draws of the techniques trees in a transition leave, which
+    /// come on top for the transition's frames; shadow passes are not counted). `Some`: a [`BudgetController`]
     /// (created with [`BudgetController::for_policy`]) moves the target and `s_min` together
     /// from frame to frame so the frame meets the count, starting from [`Self::target`] and
     /// the renderer's `s_min`; the error is then the same allowance over the floor on
@@ -111,11 +136,13 @@ impl Policy {
     /// The largest [`Policy::transition`] (ten seconds at 60 frames per second).
     pub const MAX_TRANSITION: u32 = 600;
 
-    /// The default [`Policy::target`]: one hundredth of coverage RMSE over the floor. At
-    /// a few pixels every representation's error is about 0.06 (the full mesh's aliasing
-    /// included), so 0.01 separates what keeps a small tree's silhouette and density from what
-    /// does not (a lone billboard loses about twice that on leafy trees); near, the full mesh's
-    /// own error is about 0.01, so the target allows differences as large as its aliasing.
+    /// The default [`Policy::target`]: one hundredth of RMSE over the floor (the tables' error is
+    /// of the shaded image on a white background, where a missing leaf pixel costs about 0.9 and
+    /// a wrong shade of green a few hundredths). At a few pixels every representation's error is
+    /// 0.05–0.1 (the full mesh's aliasing included), so 0.01 separates what keeps a small tree's
+    /// silhouette, density and shade from what does not (a lone billboard loses two to five times
+    /// that on the shared trees); near, the full mesh's own error is 0.005–0.035, so the target
+    /// allows differences as large as its aliasing.
     pub const DEFAULT_TARGET: f32 = 0.01;
 
     /// The target, sanitised (not finite or negative: 0).
@@ -161,19 +188,31 @@ struct Sample {
     primitives: f32,
 }
 
-/// A model's calibration tables (spec §6.15, §6.16): per technique, and per level of its LoD
-/// chain where the container measured them, its error and primitives as functions of the
-/// block's projected height, interpolated linearly in `log2(height)` and clamped outside the
-/// sampled range.
+/// A model's calibration tables (spec §6.15, §6.16, §6.17): per technique, its error and
+/// primitives as functions of the block's projected height, interpolated linearly in
+/// `log2(height)` and clamped outside the sampled range — over every view (`CALIBRATION`) and,
+/// where the container has them, per elevation of the views (`CALIBRATION_ELEVATIONS`, format
+/// 1.7) and per level of its LoD chain over every view (`CHAIN_CALIBRATION`, format 1.8).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Calibration {
     curves: PerTechnique<Vec<Sample>>,
-    /// Per LoD chain level, finest first (`CHAIN_CALIBRATION`); empty without them.
+    /// Per elevation of the views, ascending: its degrees and its curves.
+    elevations: Vec<(f32, PerTechnique<Vec<Sample>>)>,
+    /// Per LoD chain level, finest first, over every view (`CHAIN_CALIBRATION`); empty without
+    /// them.
     levels: Vec<Vec<Sample>>,
 }
 
-/// Appends `(height, error, primitives)` to `curve` if it is valid and its height increases.
-fn push_sample(curve: &mut Vec<Sample>, height: f32, error: f32, primitives: f32) {
+/// Appends `record`'s sample to `curves` if its technique is known, its values finite and its
+/// height above the curve's last (records are sorted, spec §6.15).
+fn push_sample(curves: &mut PerTechnique<Vec<Sample>>, technique: u32, height: f32, error: f32, primitives: f32) {
+    let Some(technique) = Technique::ALL.get(technique as usize).copied() else { return };
+    push_to_curve(&mut curves[technique], height, error, primitives);
+}
+
+/// Appends `(height, error, primitives)` to `curve` if its values are finite and its height
+/// above the curve's last.
+fn push_to_curve(curve: &mut Vec<Sample>, height: f32, error: f32, primitives: f32) {
     let valid = height.is_finite() && height > 0.0 && error.is_finite() && primitives.is_finite();
     let log2_height = height.log2();
     if valid && curve.last().is_none_or(|s| s.log2_height < log2_height) {
@@ -181,11 +220,9 @@ fn push_sample(curve: &mut Vec<Sample>, height: f32, error: f32, primitives: f32
     }
 }
 
-/// `(error, primitives)` of `curve` at `height` pixels: linear in `log2(height)` between samples,
-/// clamped outside them; `None` for an empty curve.
-fn interpolate(curve: &[Sample], height: f32) -> Option<(f32, f32)> {
+/// `(error, primitives)` of `curve` at `log2(height) = x`.
+fn curve_at(curve: &[Sample], x: f32) -> Option<(f32, f32)> {
     let (first, last) = (curve.first()?, curve.last()?);
-    let x = height.max(f32::MIN_POSITIVE).log2();
     if x <= first.log2_height {
         return Some((first.error, first.primitives));
     }
@@ -211,12 +248,14 @@ fn finer(a: ChainPick, b: ChainPick) -> ChainPick {
 }
 
 impl Calibration {
-    /// The tables of `container`; `None` when it has none (built without calibration, or before
+    /// The tables of `container`, with its tables per elevation and its LoD chain's per-level
+    /// tables where it has them; `None` when it has none (built without calibration, or before
     /// format 1.5).
-    /// The per-level tables of the LoD chain (`CHAIN_CALIBRATION`, spec §6.16) are read too.
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        Self::from_records(container.calibration()).map(|c| c.with_chain_levels(container.chain_calibration()))
+        Self::from_records(container.calibration()).map(|c| {
+            c.with_elevations(container.calibration_elevations()).with_chain_levels(container.chain_calibration())
+        })
     }
 
     /// The tables of `records` (sorted as spec §6.15 asks; [`Container`] has verified that).
@@ -225,14 +264,38 @@ impl Calibration {
     #[must_use]
     pub fn from_records(records: &[CalibrationRecord]) -> Option<Self> {
         let mut curves = PerTechnique::<Vec<Sample>>::default();
-        for record in records {
-            let Some(technique) = Technique::ALL.get(record.technique as usize).copied() else { continue };
-            push_sample(&mut curves[technique], record.height, record.error, record.primitives);
+        for r in records {
+            push_sample(&mut curves, r.technique, r.height, r.error, r.primitives);
         }
-        curves.0.iter().any(|c| !c.is_empty()).then_some(Self { curves, levels: Vec::new() })
+        curves.0.iter().any(|c| !c.is_empty()).then_some(Self { curves, elevations: Vec::new(), levels: Vec::new() })
     }
 
-    /// These tables with the LoD chain's per-level tables of `records` (sorted as spec §6.16
+    /// These tables with the tables per elevation of `records` (sorted as spec §6.16 asks),
+    /// replacing any before; elevations that are not finite, not ascending or whose tables hold
+    /// no technique are skipped.
+    #[must_use]
+    pub fn with_elevations(mut self, records: &[ElevationCalibrationRecord]) -> Self {
+        self.elevations.clear();
+        for r in records {
+            if !r.elevation.is_finite() {
+                continue;
+            }
+            let same = self.elevations.last().is_some_and(|(e, _)| *e == r.elevation);
+            if !same {
+                if self.elevations.last().is_some_and(|(e, _)| *e > r.elevation) {
+                    continue;
+                }
+                self.elevations.push((r.elevation, PerTechnique::default()));
+            }
+            if let Some((_, curves)) = self.elevations.last_mut() {
+                push_sample(curves, r.technique, r.height, r.error, r.primitives);
+            }
+        }
+        self.elevations.retain(|(_, curves)| curves.0.iter().any(|c| !c.is_empty()));
+        self
+    }
+
+    /// These tables with the LoD chain's per-level tables of `records` (sorted as spec §6.17
     /// asks), replacing any it had. Samples with non-finite values are skipped; the levels end at
     /// the first level number without a valid sample (verified files have every level from 0).
     #[must_use]
@@ -246,7 +309,7 @@ impl Calibration {
             if level == self.levels.len() {
                 self.levels.push(Vec::new());
             }
-            push_sample(&mut self.levels[level], record.height, record.error, record.primitives);
+            push_to_curve(&mut self.levels[level], record.height, record.error, record.primitives);
         }
         while self.levels.last().is_some_and(Vec::is_empty) {
             self.levels.pop();
@@ -257,17 +320,16 @@ impl Calibration {
         self
     }
 
-    /// The number of LoD chain levels with tables (0 without `CHAIN_CALIBRATION`).
+    /// The elevations of the tables per elevation, degrees, ascending (empty without them).
     #[must_use]
-    pub fn chain_levels(&self) -> usize {
-        self.levels.len()
+    pub fn elevations(&self) -> Vec<f32> {
+        self.elevations.iter().map(|(e, _)| *e).collect()
     }
 
-    /// `(error, primitives)` of the LoD chain's level `level` at a projected height of `height`
-    /// pixels, if the tables hold it.
-    #[must_use]
-    pub fn level_at(&self, level: u32, height: f32) -> Option<(f32, f32)> {
-        interpolate(self.levels.get(usize::try_from(level).ok()?)?, height)
+    /// The curves of elevation class `elevation` (an index into [`Self::elevations`]), or the
+    /// mean ones for `None` or a class the tables lack.
+    fn curves(&self, elevation: Option<usize>) -> &PerTechnique<Vec<Sample>> {
+        elevation.and_then(|e| self.elevations.get(e)).map_or(&self.curves, |(_, curves)| curves)
     }
 
     /// Whether the tables hold `technique`.
@@ -276,11 +338,55 @@ impl Calibration {
         !self.curves[technique].is_empty()
     }
 
-    /// `(error, primitives)` of `technique` at a projected height of `height` pixels, if the
-    /// tables hold it.
+    /// `(error, primitives)` of `technique` at a projected height of `height` pixels over every
+    /// view, if the tables hold it.
     #[must_use]
     pub fn at(&self, technique: Technique, height: f32) -> Option<(f32, f32)> {
-        interpolate(&self.curves[technique], height)
+        self.at_elevation(None, technique, height)
+    }
+
+    /// [`Self::at`] from the views of elevation class `elevation` (an index into
+    /// [`Self::elevations`]; `None`, or a class the tables lack: over every view).
+    #[must_use]
+    pub fn at_elevation(&self, elevation: Option<usize>, technique: Technique, height: f32) -> Option<(f32, f32)> {
+        curve_at(&self.curves(elevation)[technique], height.max(f32::MIN_POSITIVE).log2())
+    }
+
+    /// The number of LoD chain levels with tables (0 without `CHAIN_CALIBRATION`).
+    #[must_use]
+    pub fn chain_levels(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// `(error, primitives)` of the LoD chain's level `level` at a projected height of `height`
+    /// pixels over every view, if the tables hold it.
+    #[must_use]
+    pub fn level_at(&self, level: u32, height: f32) -> Option<(f32, f32)> {
+        curve_at(self.levels.get(usize::try_from(level).ok()?)?, height.max(f32::MIN_POSITIVE).log2())
+    }
+
+    /// [`Self::level_at`] as seen from elevation class `elevation` (`None`: over every view).
+    /// The per-level tables are means over every view (spec §6.17), so a level's error from one
+    /// elevation is its mean error plus the chain's own offset there: the elevation's `lod-chain`
+    /// row less the row over every view at the same height (the build derives both from the
+    /// levels, the level picked at the default target measured from that elevation's views and
+    /// from every view). Exact for the level the default target picks; for the others it assumes
+    /// the chain's levels differ from one elevation to another as its picked level does. The
+    /// primitives are the level's (a mesh submits its triangles from every view).
+    #[must_use]
+    pub fn level_at_elevation(&self, elevation: Option<usize>, level: u32, height: f32) -> Option<(f32, f32)> {
+        let (error, primitives) = self.level_at(level, height)?;
+        Some((error + self.chain_offset(elevation, height), primitives))
+    }
+
+    /// The `lod-chain` row of elevation class `elevation` less the row over every view at
+    /// `height` (0 for `None`, or where either row is missing).
+    fn chain_offset(&self, elevation: Option<usize>, height: f32) -> f32 {
+        let Some(e) = elevation.filter(|&e| e < self.elevations.len()) else { return 0.0 };
+        match (self.at_elevation(Some(e), Technique::LodChain, height), self.at(Technique::LodChain, height)) {
+            (Some((seen, _)), Some((mean, _))) => seen - mean,
+            _ => 0.0,
+        }
     }
 
     /// The smallest and largest calibrated heights over every technique, pixels.
@@ -295,44 +401,55 @@ impl Calibration {
         range
     }
 
-    /// The floor at one height (module docs): the least error of the full mesh and of every
-    /// technique the tables hold and `usable` accepts, the LoD chain's levels standing for the
-    /// chain where the tables hold them (its own row then describes the level the chain draws,
-    /// [`Self::chain_level`], one of them); `+∞` when the tables hold none.
+    /// The floor at one height by the tables of elevation class `elevation` (module docs;
+    /// `None`: over every view): the least error of the full mesh and of every technique the
+    /// tables hold and `usable` accepts, the LoD chain's levels standing for the chain where the
+    /// tables hold them ([`Self::level_at_elevation`]; its own row then describes the level the
+    /// chain draws at the default target, one of them); `+∞` when the tables hold none.
     #[must_use]
-    pub fn floor(&self, height: f32, usable: impl Fn(Technique) -> bool) -> f32 {
+    pub fn floor(&self, elevation: Option<usize>, height: f32, usable: impl Fn(Technique) -> bool) -> f32 {
         let per_level = !self.levels.is_empty();
         let techniques = Technique::ALL
             .into_iter()
             .filter(|&t| t == Technique::Full || (usable(t) && !(per_level && t == Technique::LodChain)))
-            .filter_map(|t| self.at(t, height).map(|(e, _)| e));
-        let levels = self
-            .levels
-            .iter()
-            .filter(|_| usable(Technique::LodChain))
-            .filter_map(|curve| interpolate(curve, height).map(|(e, _)| e));
+            .filter_map(|t| self.at_elevation(elevation, t, height).map(|(e, _)| e));
+        let chain = usable(Technique::LodChain);
+        #[expect(clippy::cast_possible_truncation, reason = "a chain has a few levels")]
+        let levels = (0..self.levels.len() as u32)
+            .filter(|_| chain)
+            .filter_map(|l| self.level_at_elevation(elevation, l, height).map(|(e, _)| e));
         techniques.chain(levels).fold(f32::INFINITY, f32::min)
     }
 
     /// The policy's rule at one height (module docs): among the techniques the tables hold and
     /// `usable` accepts, less the full mesh, the one of least primitives whose error is within
-    /// `target` of the floor ([`Self::floor`]) (ties: lower error; none within: least error).
-    /// With per-level tables the LoD chain is the level it draws at `target`
-    /// ([`Self::chain_at`]), so a policy whose target moves (budget mode) sees the chain it
-    /// draws.
+    /// `target` of the floor ([`Self::floor`]) (ties: lower error; none within: least error), by
+    /// the tables over every view. With per-level tables the LoD chain is the level it draws at
+    /// `target` ([`Self::chain_at`]), so a policy whose target moves (budget mode) sees the
+    /// chain it draws.
     /// [`Technique::FALLBACK`] when no technique is left.
     #[must_use]
     pub fn choose(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Technique {
-        // The chain as drawn at this target where its levels have tables (its stored row is
-        // the chain at the default target).
-        let chain = self.chain_at(height, target, &usable);
+        self.choose_at_elevation(None, height, target, usable)
+    }
+
+    /// [`Self::choose`] by the tables of elevation class `elevation` (as [`Self::at_elevation`];
+    /// the chain as [`Self::chain_at`] sees it from there).
+    #[must_use]
+    pub fn choose_at_elevation(
+        &self,
+        elevation: Option<usize>,
+        height: f32,
+        target: f32,
+        usable: impl Fn(Technique) -> bool,
+    ) -> Technique {
         let candidates = || {
-            Technique::ALL.into_iter().filter(|&t| t != Technique::Full && usable(t)).filter_map(|t| {
-                let measured = if t == Technique::LodChain && chain.is_some() { chain } else { self.at(t, height) };
-                measured.map(|(e, p)| (t, e, p))
-            })
+            Technique::ALL
+                .into_iter()
+                .filter(|&t| t != Technique::Full && usable(t))
+                .filter_map(|t| self.measured(elevation, t, height, target, &usable).map(|(e, p)| (t, e, p)))
         };
-        let limit = self.floor(height, &usable) + sanitise(target);
+        let limit = self.floor(elevation, height, &usable) + sanitise(target);
         let cheapest = candidates()
             .filter(|&(_, e, _)| e <= limit)
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.0.cmp(&b.0)));
@@ -340,25 +457,50 @@ impl Calibration {
         cheapest.or_else(best).map_or(Technique::FALLBACK, |(t, _, _)| t)
     }
 
-    /// `(error, primitives)` of the LoD chain drawn at `target` ([`Self::chain_level`]) at a
-    /// projected height of `height` pixels; `None` without per-level tables.
+    /// `(error, primitives)` of `technique` drawn under a policy of `target` seen from elevation
+    /// class `elevation`: its row, or for the LoD chain with per-level tables the chain as drawn
+    /// at `target` ([`Self::chain_at`]; its stored row is the chain at the default target).
+    fn measured(
+        &self,
+        elevation: Option<usize>,
+        technique: Technique,
+        height: f32,
+        target: f32,
+        usable: impl Fn(Technique) -> bool,
+    ) -> Option<(f32, f32)> {
+        let chain = (technique == Technique::LodChain).then(|| self.chain_at(elevation, height, target, usable));
+        chain.flatten().or_else(|| self.at_elevation(elevation, technique, height))
+    }
+
+    /// `(error, primitives)` of the LoD chain drawn at `target` ([`Self::chain_level`], which
+    /// picks by the tables over every view) at a projected height of `height` pixels, seen from
+    /// elevation class `elevation` ([`Self::level_at_elevation`]; `None`: over every view);
+    /// `None` without per-level tables.
     #[must_use]
-    pub fn chain_at(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Option<(f32, f32)> {
+    pub fn chain_at(
+        &self,
+        elevation: Option<usize>,
+        height: f32,
+        target: f32,
+        usable: impl Fn(Technique) -> bool,
+    ) -> Option<(f32, f32)> {
         match self.chain_level(height, target, usable)? {
-            Some(level) => self.level_at(level, height),
-            None => self.at(Technique::Full, height),
+            Some(level) => self.level_at_elevation(elevation, level, height),
+            None => self.at_elevation(elevation, Technique::Full, height),
         }
     }
 
     /// The LoD chain's level at one height by image error (spec §10.2, module docs): among the
     /// full mesh and the chain's levels, the one of least primitives whose error is within
-    /// `target` of the policy's floor ([`Self::floor`] with `usable`), ties to the lower error,
-    /// then the finer. Where none is within (the floor is set by a representation the chain
-    /// cannot match, as the point tree keeps far leaves a mesh loses to the alpha test), the one
-    /// of least primitives within `target` of the least error among them: the policy would not
-    /// choose the chain there, and a chain drawn anyway keeps its best image for fewer
-    /// triangles. `None` when the tables hold no chain levels (the chain then picks by geometric
-    /// error, [`LodChain::pick`](crate::LodChain::pick)).
+    /// `target` of the policy's floor over every view ([`Self::floor`] with `usable`), ties to
+    /// the lower error, then the finer. Where none is within (the floor is set by a
+    /// representation the chain cannot match, as the point tree keeps far leaves a mesh loses to
+    /// the alpha test), the one of least primitives within `target` of the least error among
+    /// them: the policy would not choose the chain there, and a chain drawn anyway keeps its best
+    /// image for fewer triangles. By the tables over every view whatever the elevation a tree is
+    /// seen from: the per-level tables are means over every view (spec §6.17). `None` when the
+    /// tables hold no chain levels (the chain then picks by geometric error,
+    /// [`LodChain::pick`](crate::LodChain::pick)).
     #[must_use]
     pub fn chain_level(&self, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Option<ChainPick> {
         if self.levels.is_empty() {
@@ -367,9 +509,10 @@ impl Calibration {
         let target = sanitise(target);
         // (pick, error, primitives, order: the full mesh first, then finest to coarsest).
         let full = self.at(Technique::Full, height).map(|(e, p)| (None, e, p, 0usize));
-        let levels = self.levels.iter().enumerate().filter_map(|(i, curve)| {
-            let (e, p) = interpolate(curve, height)?;
-            Some((u32::try_from(i).ok(), e, p, i + 1))
+        let levels = (0..self.levels.len()).filter_map(|i| {
+            let level = u32::try_from(i).ok()?;
+            let (e, p) = self.level_at(level, height)?;
+            Some((Some(level), e, p, i + 1))
         });
         let candidates: Vec<(ChainPick, f32, f32, usize)> = full.into_iter().chain(levels).collect();
         let cheapest_within = |limit: f32| {
@@ -379,7 +522,9 @@ impl Calibration {
                 .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.3.cmp(&b.3)))
         };
         let best = candidates.iter().map(|c| c.1).fold(f32::INFINITY, f32::min);
-        cheapest_within(self.floor(height, &usable) + target).or_else(|| cheapest_within(best + target)).map(|c| c.0)
+        cheapest_within(self.floor(None, height, &usable) + target)
+            .or_else(|| cheapest_within(best + target))
+            .map(|c| c.0)
     }
 }
 
@@ -462,21 +607,61 @@ impl ChainChoices {
 }
 
 /// A model's choices under one policy, every [`STEPS_PER_OCTAVE`]-th of an octave of projected
-/// height over its calibrated range (module docs): what [`Choices::choose`] looks up per tree.
+/// height over its calibrated range (module docs): what [`Choices::choose`] looks up per tree —
+/// one table per elevation class of the calibration's views (one over every view without tables
+/// per elevation) and per visibility class (one without [`Policy::occlusion`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Choices {
-    /// The choice above the calibrated range ([`converges`]).
-    above: Technique,
     /// `log2` of the smallest calibrated height.
     log2_min: f32,
-    /// The choice at `log2_min + i / STEPS_PER_OCTAVE`, up to the largest calibrated height.
-    steps: Vec<Technique>,
+    /// Per elevation class, then visibility class (`e · visibility + k`). Visibility class `k`
+    /// (a visible fraction about `2^-k`) is chosen with the target raised to `target / √(2^-k)`.
+    tables: Vec<Table>,
+    /// The elevations of the classes' views, degrees, ascending; empty: one class, every view.
+    elevations: Vec<f32>,
+    /// Visibility classes per elevation class: [`VISIBILITY_CLASSES`] with
+    /// [`Policy::occlusion`], else 1.
+    visibility: usize,
     /// Steps either side within which a tree keeps last frame's technique.
     hysteresis_steps: usize,
-    /// With [`Policy::occlusion`]: per visibility class after the first (visible fraction about
-    /// ½, ¼, ⅛), its choice above the range and its steps, made with the target raised to
-    /// `target / √v`; empty without.
-    hidden: Vec<(Technique, Vec<Technique>)>,
+}
+
+/// One table of [`Choices`].
+#[derive(Clone, Debug, PartialEq)]
+struct Table {
+    /// Above the calibrated range, for a tree wholly in view: the choice at the largest height if
+    /// it converges to the full mesh ([`converges`]), else the rule's choice there among those
+    /// that do (module docs).
+    above: Technique,
+    /// The primitives of [`Self::above`] and of the point tree at the largest height (whole
+    /// trees), for trees partly in view.
+    above_cost: (f32, f32),
+    /// The choice at `log2_min + i / STEPS_PER_OCTAVE`, up to the largest calibrated height.
+    steps: Vec<Technique>,
+}
+
+/// The elevation class of a view `elevation` degrees above a tree's horizontal plane among
+/// classes whose views are at `centres` degrees (ascending, at least one) for a tree of class
+/// `previous` last frame (`None`: a new tree): the nearest centre for a new tree (a view from
+/// below counts as from the side); else the class changes only once `elevation` lies a quarter of
+/// the spacing of two classes past the midpoint between them, so a camera hovering at a bound
+/// does not switch trees back and forth.
+#[must_use]
+pub fn elevation_class_after(previous: Option<usize>, elevation: f32, centres: &[f32]) -> usize {
+    let last = centres.len().saturating_sub(1);
+    let elevation = if elevation.is_finite() { elevation } else { 0.0 };
+    let bound = |lower: usize, sign: f32| {
+        let (a, b) = (centres[lower], centres[lower + 1]);
+        0.5 * (a + b) + sign * 0.25 * (b - a)
+    };
+    match previous.map(|p| p.min(last)) {
+        None => (0..last).take_while(|&c| elevation >= bound(c, 0.0)).count(),
+        Some(p) => {
+            let up = (p..last).take_while(|&c| elevation >= bound(c, 1.0)).count();
+            let down = (0..p).rev().take_while(|&c| elevation <= bound(c, -1.0)).count();
+            p + up - down
+        }
+    }
 }
 
 /// Classes of the visible fraction `v` the policy chooses by ([`Policy::occlusion`]): about 1,
@@ -528,50 +713,98 @@ impl Choices {
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
         #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-        let table = |target: f32| -> (Technique, Vec<Technique>) {
+        let table = |elevation: Option<usize>, target: f32| -> Table {
             let steps: Vec<Technique> = (0..count)
                 .map(|i| {
                     let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
-                    calibration.choose(height, target, &usable)
+                    calibration.choose_at_elevation(elevation, height, target, &usable)
                 })
                 .collect();
-            let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
-            (above, steps)
+            let top = (log2_min + (count - 1) as f32 / STEPS_PER_OCTAVE).exp2();
+            let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
+                let converging = calibration.choose_at_elevation(elevation, top, target, |t| converges(t) && usable(t));
+                if converges(converging) { converging } else { Technique::FALLBACK }
+            });
+            let at = |t: Technique| calibration.measured(elevation, t, top, target, &usable);
+            // The point tree may stand in for a tree partly in view only where its image at the
+            // top is within the target, as any choice there.
+            let limit = calibration.floor(elevation, top, &usable) + sanitise(target);
+            let point_tree = at(Technique::FALLBACK)
+                .filter(|&(e, _)| usable(Technique::FALLBACK) && e <= limit)
+                .map_or(f32::INFINITY, |(_, p)| p);
+            Table { above, above_cost: (at(above).map_or(f32::INFINITY, |(_, p)| p), point_tree), steps }
         };
         let target = policy.target();
-        let (above, steps) = table(target);
+        let elevations = calibration.elevations();
+        let classes: Vec<Option<usize>> =
+            if elevations.is_empty() { vec![None] } else { (0..elevations.len()).map(Some).collect() };
+        let visibility = if policy.occlusion { VISIBILITY_CLASSES } else { 1 };
         // Class k stands for a visible fraction 2^-k: the target over its square root.
         #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-        let hidden = if policy.occlusion {
-            (1..VISIBILITY_CLASSES).map(|k| table(target * (k as f32 * 0.5).exp2())).collect()
-        } else {
-            Vec::new()
-        };
+        let tables = classes
+            .iter()
+            .flat_map(|&e| (0..visibility).map(move |k| (e, target * (k as f32 * 0.5).exp2())))
+            .map(|(e, target)| table(e, target))
+            .collect();
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
         let hysteresis_steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
-        Self { above, log2_min: if log2_min.is_finite() { log2_min } else { 0.0 }, steps, hysteresis_steps, hidden }
+        let log2_min = if log2_min.is_finite() { log2_min } else { 0.0 };
+        Self { log2_min, tables, elevations, visibility, hysteresis_steps }
     }
 
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`
     /// (`None`: none, a new tree): last frame's if it is the choice within the hysteresis of
     /// `height`, else the choice at `height`; above the calibrated range the choice at its top if
-    /// that converges to the full mesh as trees come nearer ([`converges`]), else the point tree
-    /// ([`Technique::FALLBACK`]).
+    /// that converges to the full mesh as trees come nearer ([`converges`]), else the rule's
+    /// choice there among those that converge (module docs). Seen from the side (elevation class
+    /// 0), fully visible and wholly in view.
     #[must_use]
     pub fn choose(&self, height: f32, previous: Option<Technique>) -> Technique {
-        self.choose_seen(height, 1.0, previous)
+        self.choose_viewed(height, 0, 1.0, previous)
     }
 
     /// [`Self::choose`] for a tree of which the visible fraction `visible` is seen: by the table
     /// of its visibility class ([`visibility_class`]) where the choices were made with
-    /// [`Policy::occlusion`], else as fully visible.
+    /// [`Policy::occlusion`], else as fully visible. Seen from the side (elevation class 0).
     #[must_use]
     pub fn choose_seen(&self, height: f32, visible: f32, previous: Option<Technique>) -> Technique {
-        let hidden = visibility_class(visible).checked_sub(1).and_then(|k| self.hidden.get(k));
-        let (above_range, steps) = match hidden {
-            Some((above, steps)) => (*above, steps.as_slice()),
-            None => (self.above, self.steps.as_slice()),
+        self.choose_viewed(height, 0, visible, previous)
+    }
+
+    /// [`Self::choose_seen`] for a tree seen from elevation class `elevation` (an index into
+    /// [`Self::elevations`], [`elevation_class_after`]; past the last: the last; without tables
+    /// per elevation every class reads the tables over every view), wholly in view.
+    #[must_use]
+    pub fn choose_viewed(&self, height: f32, elevation: usize, visible: f32, previous: Option<Technique>) -> Technique {
+        self.choose_framed(height, elevation, visible, 1.0, previous)
+    }
+
+    /// [`Self::choose_viewed`] for a tree of which the share `in_view` of its triangles lies in
+    /// cells the view holds ([`in_view_share`]; 1: wholly in view): above the calibrated range
+    /// the point tree, which culls per cell, where its primitives at the largest height times
+    /// that share are fewer than the whole tree of the table's choice there (with a quarter of
+    /// hysteresis either way against last frame's technique); module docs.
+    #[must_use]
+    pub fn choose_framed(
+        &self,
+        height: f32,
+        elevation: usize,
+        visible: f32,
+        in_view: f32,
+        previous: Option<Technique>,
+    ) -> Technique {
+        let e = elevation.min(self.elevations.len().saturating_sub(1));
+        let k = visibility_class(visible).min(self.visibility - 1);
+        let table = &self.tables[e * self.visibility + k];
+        let (whole, culled) = (table.above_cost.0, table.above_cost.1 * in_view.clamp(0.0, 1.0));
+        let bias = match previous {
+            Some(Technique::FALLBACK) => 1.25,
+            Some(p) if p == table.above => 0.8,
+            _ => 1.0,
         };
+        let above_range =
+            if table.above != Technique::FALLBACK && culled < whole * bias { Technique::FALLBACK } else { table.above };
+        let steps = &table.steps;
         let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
         let last = steps.len() - 1;
         // Above the range: one step per STEPS_PER_OCTAVE past its end reads as the fallback.
@@ -592,10 +825,35 @@ impl Choices {
         now
     }
 
-    /// The choice at each step, smallest height first (for tests and panels).
+    /// Whether a tree `height` pixels high lies above the calibrated range (where
+    /// [`Self::choose_framed`] reads its share in view).
+    #[must_use]
+    pub fn above_range(&self, height: f32) -> bool {
+        let last = self.tables.first().map_or(0, |t| t.steps.len().saturating_sub(1));
+        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        let top = last as f32 + 0.5;
+        (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE > top
+    }
+
+    /// The elevations of the classes' views, degrees, ascending (empty: one class, the tables
+    /// over every view).
+    #[must_use]
+    pub fn elevations(&self) -> &[f32] {
+        &self.elevations
+    }
+
+    /// The choice at each step seen from the side and fully visible, smallest height first (for
+    /// tests and panels).
     #[must_use]
     pub fn steps(&self) -> &[Technique] {
-        &self.steps
+        self.steps_at(0)
+    }
+
+    /// [`Self::steps`] seen from elevation class `elevation` (past the last: the last).
+    #[must_use]
+    pub fn steps_at(&self, elevation: usize) -> &[Technique] {
+        let e = elevation.min(self.elevations.len().saturating_sub(1));
+        &self.tables[e * self.visibility].steps
     }
 }
 
@@ -643,7 +901,13 @@ pub struct PolicyState {
     visible: Vec<f32>,
     /// Per instance: the visibility class it was chosen by last frame ([`visibility_class_after`]).
     classes: Vec<u8>,
+    /// Per instance: the elevation class it was chosen by last frame ([`elevation_class_after`]),
+    /// [`NO_CLASS`] for none.
+    elevations: Vec<u8>,
 }
+
+/// [`PolicyState`]'s elevation class of a tree not chosen by elevation last frame.
+const NO_CLASS: u8 = u8::MAX;
 
 /// A tree's transition from one technique to another this frame ([`PolicyState::transition`]):
 /// it is drawn with both, the new technique on the pixels whose transition dither `h ∈ [0, 1)`
@@ -685,6 +949,7 @@ impl PolicyState {
         self.transitions.clear();
         self.visible.clear();
         self.classes.clear();
+        self.elevations.clear();
     }
 
     /// Sets the instances' visible fractions the next choices read (per instance, 1 = fully
@@ -774,32 +1039,53 @@ pub fn choose_instances_coarsest(
     state.transitions.resize(instances.len(), None);
     state.visible.resize(instances.len(), 1.0);
     state.classes.resize(instances.len(), 0);
+    state.elevations.resize(instances.len(), NO_CLASS);
     out.clear();
     out.resize(instances.len(), otherwise);
     let frames = state.frames;
-    let eyes: Vec<(Vec3, f32)> = cameras.iter().map(|c| (c.position, c.world_per_pixel())).collect();
+    let eyes: Vec<(Vec3, f32, Frustum)> =
+        cameras.iter().map(|c| (c.position, c.world_per_pixel(), Frustum::from_view_proj(c.view_proj))).collect();
     let choose = |instances: &[Instance],
                   previous: &mut [Option<Technique>],
                   transitions: &mut [Option<(Technique, u16)>],
                   visible: &[f32],
-                  classes: &mut [u8],
+                  (classes, elevations): (&mut [u8], &mut [u8]),
                   out: &mut [Technique]| {
-        let per_instance = instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(out);
-        for (((((instance, previous), transition), &visible), class), out) in per_instance {
+        let per_instance =
+            instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(elevations).zip(out);
+        for ((((((instance, previous), transition), &visible), class), elevation), out) in per_instance {
             let m = instance.model as usize;
             *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                 (Some(lod), Some(choices)) => {
-                    let height = eyes
+                    // The smallest height and the view that sees it.
+                    let (height, eye, frustum) = eyes
                         .iter()
-                        .map(|&(eye, world_per_pixel)| {
-                            projected_height_at(lod, instance.transform, eye, world_per_pixel)
+                        .map(|(eye, world_per_pixel, frustum)| {
+                            (projected_height_at(lod, instance.transform, *eye, *world_per_pixel), *eye, Some(frustum))
                         })
-                        .reduce(f32::min)
-                        .unwrap_or(0.0);
+                        .reduce(|a, b| if b.0 < a.0 { b } else { a })
+                        .unwrap_or((0.0, Vec3::ZERO, None));
+                    let in_view = match frustum {
+                        Some(f) if choices.above_range(height) => in_view_share(lod, instance.transform, f),
+                        _ => 1.0,
+                    };
                     let seen = visibility_class_after(usize::from(*class), visible);
                     *class = u8::try_from(seen).unwrap_or(0);
+                    let elevation_class = if choices.elevations().is_empty() {
+                        0
+                    } else {
+                        let before = (*elevation != NO_CLASS).then_some(usize::from(*elevation));
+                        let now = elevation_class_after(
+                            before,
+                            view_elevation(lod, instance.transform, eye),
+                            choices.elevations(),
+                        );
+                        *elevation = u8::try_from(now).unwrap_or(0);
+                        now
+                    };
                     #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-                    let chosen = choices.choose_seen(height, (-(seen as f32)).exp2(), *previous);
+                    let chosen =
+                        choices.choose_framed(height, elevation_class, (-(seen as f32)).exp2(), in_view, *previous);
                     *transition = advance(*previous, chosen, *transition, frames);
                     *previous = Some(chosen);
                     chosen
@@ -807,13 +1093,15 @@ pub fn choose_instances_coarsest(
                 _ => {
                     *previous = None;
                     *transition = None;
+                    *elevation = NO_CLASS;
                     otherwise
                 }
             };
         }
     };
     if instances.len() <= CHOOSE_CHUNK {
-        choose(instances, &mut state.previous, &mut state.transitions, &state.visible, &mut state.classes, out);
+        let classes = (&mut state.classes[..], &mut state.elevations[..]);
+        choose(instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out);
         return;
     }
     instances
@@ -822,10 +1110,42 @@ pub fn choose_instances_coarsest(
         .zip(state.transitions.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.visible.par_chunks(CHOOSE_CHUNK))
         .zip(state.classes.par_chunks_mut(CHOOSE_CHUNK))
+        .zip(state.elevations.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
-        .for_each(|(((((instances, previous), transitions), visible), classes), out)| {
-            choose(instances, previous, transitions, visible, classes, out);
+        .for_each(|((((((instances, previous), transitions), visible), classes), elevations), out)| {
+            choose(instances, previous, transitions, visible, (classes, elevations), out);
         });
+}
+
+/// The share of a model's triangles drawn by `transform` that lie in cells whose bounds
+/// intersect `frustum` (1 where the model has no triangles): what the point tree, which culls per
+/// cell, draws of a near tree.
+#[must_use]
+pub fn in_view_share(lod: &ModelLod, transform: Mat4, frustum: &Frustum) -> f32 {
+    let linear = glam::Mat3::from_mat4(transform);
+    let abs = glam::Mat3::from_cols(linear.x_axis.abs(), linear.y_axis.abs(), linear.z_axis.abs());
+    let (mut total, mut seen) = (0u64, 0u64);
+    for cell in lod.cells() {
+        let count = u64::from(cell.triangles().count);
+        let (centre, half) = cell.centre_half();
+        let (c, h) = (transform.transform_point3(centre), abs * half);
+        total += count;
+        if frustum.intersects_aabb(c - h, c + h) {
+            seen += count;
+        }
+    }
+    #[expect(clippy::cast_precision_loss, reason = "a share")]
+    if total == 0 { 1.0 } else { seen as f32 / total as f32 }
+}
+
+/// The elevation of `eye` above the horizontal plane of a model's block drawn by `transform`,
+/// degrees: the angle between the direction from the block's transformed centre to the eye and
+/// that plane, whose normal is the transform's y axis (`[-90, 90]`; 0 for an eye at the centre).
+#[must_use]
+pub fn view_elevation(lod: &ModelLod, transform: Mat4, eye: Vec3) -> f32 {
+    let up = transform.y_axis.truncate().normalize_or(Vec3::Y);
+    let towards = (eye - transform.transform_point3(lod.centre())).normalize_or_zero();
+    towards.dot(up).clamp(-1.0, 1.0).asin().to_degrees()
 }
 
 /// The eye distance at which a model's block is `height` pixels high for `camera` (unit instance
@@ -895,7 +1215,7 @@ mod tests {
         let c = chain_table();
         assert_eq!(c.chain_levels(), 3);
         // 8 px: the floor is level 0's 0.058; every level is within 0.01, the coarsest wins.
-        assert!((c.floor(8.0, all) - 0.058).abs() < 1e-6);
+        assert!((c.floor(None, 8.0, all) - 0.058).abs() < 1e-6);
         assert_eq!(c.chain_level(8.0, 0.01, all), Some(Some(2)));
         // 16 px: floor 0.040, limit 0.050: level 1 (0.048) is the cheapest within.
         assert_eq!(c.chain_level(16.0, 0.01, all), Some(Some(1)));
@@ -928,6 +1248,75 @@ mod tests {
         assert_eq!(c.chain_level(8.0, 0.01, |t| t != Technique::Spt), Some(Some(1)));
         // No allowance: the least error.
         assert_eq!(c.chain_level(8.0, 0.0, all), Some(Some(0)));
+    }
+
+    /// [`chain_table`] with its `lod-chain` rows as the build derives them (the level of the
+    /// default target at each height) and tables per elevation: from the side (0°) as over every
+    /// view; from above (90°) the full mesh and the point tree 0.01 worse, the chain 0.03 worse.
+    fn chain_table_with_elevations() -> Calibration {
+        let mean = chain_table();
+        let heights = [8.0, 16.0, 32.0, 64.0];
+        let chain = |h: f32| mean.chain_at(None, h, Policy::DEFAULT_TARGET, all).expect("levels");
+        let mut records: Vec<CalibrationRecord> = [code::FULL, code::SPT]
+            .into_iter()
+            .flat_map(|t| heights.map(|h| (t, h)))
+            .map(|(t, h)| {
+                let (error, primitives) = mean.at(Technique::ALL[t as usize], h).expect("row");
+                record(t, h, error, primitives)
+            })
+            .collect();
+        records.extend(heights.map(|h| record(code::LOD_CHAIN, h, chain(h).0, chain(h).1)));
+        let mut per_elevation = Vec::new();
+        for (elevation, worse, chain_worse) in [(0.0, 0.0, 0.0), (90.0, 0.01, 0.03)] {
+            for r in &records {
+                let extra = if r.technique == code::LOD_CHAIN { chain_worse } else { worse };
+                per_elevation.push(ElevationCalibrationRecord {
+                    elevation,
+                    technique: r.technique,
+                    height: r.height,
+                    error: r.error + extra,
+                    primitives: r.primitives,
+                });
+            }
+        }
+        let levels: Vec<ChainCalibrationRecord> = (0..3u32)
+            .flat_map(|l| heights.map(|h| (l, h)))
+            .map(|(level, height)| {
+                let (error, primitives) = mean.level_at(level, height).expect("level");
+                ChainCalibrationRecord { level, height, error, primitives }
+            })
+            .collect();
+        Calibration::from_records(&records).expect("rows").with_elevations(&per_elevation).with_chain_levels(&levels)
+    }
+
+    #[test]
+    fn from_an_elevation_the_chain_s_levels_read_its_own_offset_there() {
+        let c = chain_table_with_elevations();
+        assert_eq!((c.elevations(), c.chain_levels()), (vec![0.0, 90.0], 3));
+        for h in [8.0, 12.0, 32.0, 64.0] {
+            for level in 0..3 {
+                let mean = c.level_at(level, h).expect("level");
+                assert_eq!(c.level_at_elevation(None, level, h), Some(mean));
+                assert_eq!(c.level_at_elevation(Some(0), level, h), Some(mean));
+                let above = c.level_at_elevation(Some(1), level, h).expect("level");
+                assert!((above.0 - mean.0 - 0.03).abs() < 1e-6 && above.1 == mean.1, "{h} px level {level}");
+            }
+        }
+        for h in [8.0, 16.0, 32.0, 64.0] {
+            // The level is picked by the tables over every view whatever the elevation; seen from
+            // above, the chain at the default target reads the elevation's own row at its heights.
+            let (row, _) = c.at_elevation(Some(1), Technique::LodChain, h).expect("row");
+            let (seen, _) = c.chain_at(Some(1), h, Policy::DEFAULT_TARGET, all).expect("levels");
+            assert!((seen - row).abs() < 1e-6, "{h} px: {seen} against the row's {row}");
+        }
+        // At 8 px the chain's coarsest level (100 triangles, 0.065) is within 0.01 of the floor
+        // over every view and from the side, and cheaper than the point tree (400); from above
+        // it reads 0.095 against a floor of 0.070 and the point tree's 0.074: the point tree.
+        assert!((c.floor(None, 8.0, all) - 0.058).abs() < 1e-6);
+        assert!((c.floor(Some(1), 8.0, all) - 0.070).abs() < 1e-6);
+        assert_eq!(c.choose_at_elevation(None, 8.0, 0.01, all), Technique::LodChain);
+        assert_eq!(c.choose_at_elevation(Some(0), 8.0, 0.01, all), Technique::LodChain);
+        assert_eq!(c.choose_at_elevation(Some(1), 8.0, 0.01, all), Technique::Spt);
     }
 
     #[test]
@@ -1038,6 +1427,86 @@ mod tests {
         Representations::default()
     }
 
+    /// [`table`] with tables per elevation: from the side (0°) as over every view; from above
+    /// (90°) the crossed quads read 0.2 at every height (seen from above they are three lines).
+    fn table_with_elevations() -> Calibration {
+        let mean = table();
+        let mut records = Vec::new();
+        for (elevation, crossed) in [(0.0, None), (90.0, Some(0.2))] {
+            for technique in [Technique::Full, Technique::Spt, Technique::LodChain, Technique::Crossed] {
+                for h in [8.0, 32.0, 128.0, 256.0] {
+                    let (error, primitives) = mean.at(technique, h).unwrap();
+                    let error = if technique == Technique::Crossed { crossed.unwrap_or(error) } else { error };
+                    records.push(ElevationCalibrationRecord {
+                        elevation,
+                        technique: technique.index() as u32,
+                        height: h,
+                        error,
+                        primitives,
+                    });
+                }
+            }
+        }
+        records.sort_by(|a, b| a.elevation.total_cmp(&b.elevation).then(a.technique.cmp(&b.technique)));
+        mean.with_elevations(&records)
+    }
+
+    #[test]
+    fn elevation_classes_are_the_nearest_for_a_new_tree_and_change_a_quarter_past_the_midpoint() {
+        let centres = [0.0, 30.0, 60.0, 90.0];
+        for (elevation, class) in [(-40.0, 0), (0.0, 0), (14.9, 0), (15.0, 1), (50.0, 2), (80.0, 3), (f32::NAN, 0)] {
+            assert_eq!(elevation_class_after(None, elevation, &centres), class, "{elevation}°");
+        }
+        // From class 0 upwards: past 15° + 7.5°; and straight to the class the view reaches.
+        assert_eq!(elevation_class_after(Some(0), 22.0, &centres), 0);
+        assert_eq!(elevation_class_after(Some(0), 23.0, &centres), 1);
+        assert_eq!(elevation_class_after(Some(0), 50.0, &centres), 1, "not yet past 45° + 7.5°");
+        assert_eq!(elevation_class_after(Some(0), 53.0, &centres), 2);
+        assert_eq!(elevation_class_after(Some(0), 89.0, &centres), 3);
+        // Downwards: under 45° - 7.5°.
+        assert_eq!(elevation_class_after(Some(2), 38.0, &centres), 2);
+        assert_eq!(elevation_class_after(Some(2), 37.0, &centres), 1);
+        assert_eq!(elevation_class_after(Some(2), -5.0, &centres), 0);
+        // One class: always it.
+        assert_eq!(elevation_class_after(Some(0), 80.0, &[0.0]), 0);
+    }
+
+    #[test]
+    fn trees_seen_from_above_are_chosen_by_the_tables_of_views_from_above() {
+        let c = table_with_elevations();
+        assert_eq!(c.elevations(), [0.0, 90.0]);
+        assert_eq!(c.at_elevation(Some(1), Technique::Crossed, 8.0), Some((0.2, 3.0)));
+        assert_eq!(c.at_elevation(None, Technique::Crossed, 8.0), c.at(Technique::Crossed, 8.0));
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
+        let choices = Choices::among(&c, &policy, all);
+        assert_eq!(choices.elevations(), [0.0, 90.0]);
+        // Small trees: crossed quads from the side, the point tree from above.
+        assert_eq!(choices.choose_viewed(8.0, 0, 1.0, None), Technique::Crossed);
+        assert_eq!(choices.choose_viewed(8.0, 1, 1.0, None), Technique::Spt);
+        assert_eq!(choices.steps_at(0), steps_of(&c).as_slice(), "from the side as over every view");
+        assert!(choices.steps_at(1).iter().all(|&t| t != Technique::Crossed), "{:?}", choices.steps_at(1));
+        // Per instance: a tree 8 px high seen from the side and one seen from straight above.
+        let lods = [tall_lod()];
+        let camera = Camera::look_at(Vec3::new(0.0, 4.5, 100.0), Vec3::new(0.0, 4.5, 0.0), 0.8, 256, 256);
+        let distance = distance_for_height(&lods[0], 8.0, &camera);
+        let side = Camera::look_at(Vec3::new(0.0, 4.5, distance), Vec3::new(0.0, 4.5, 0.0), 0.8, 256, 256);
+        let above = Camera::look_at(Vec3::new(0.0, 4.5 + distance, 0.01), Vec3::new(0.0, 4.5, 0.0), 0.8, 256, 256);
+        assert!((view_elevation(&lods[0], Mat4::IDENTITY, above.position) - 89.9).abs() < 0.1);
+        let instances = [Instance { model: 0, transform: Mat4::IDENTITY }];
+        let choices = [Some(choices)];
+        let mut out = Vec::new();
+        for (camera, expected) in [(side, Technique::Crossed), (above, Technique::Spt)] {
+            let mut state = PolicyState::default();
+            choose_instances(&instances, &lods, &choices, &camera, Technique::Spt, &mut state, &mut out);
+            assert_eq!(out, [expected]);
+        }
+        // Without tables per elevation every view reads the tables over every view.
+        let mean = Choices::among(&table(), &policy, all);
+        let mut state = PolicyState::default();
+        choose_instances(&instances, &lods, &[Some(mean)], &above, Technique::Spt, &mut state, &mut out);
+        assert_eq!(out, [Technique::Crossed]);
+    }
+
     #[test]
     fn choice_tables_follow_the_rule_and_fall_back_above_the_range() {
         let c = table();
@@ -1051,35 +1520,56 @@ mod tests {
 
     #[test]
     fn above_the_range_the_top_choice_holds_only_if_it_converges_to_the_full_mesh() {
-        let c = table();
-        let top = |steps: Vec<Technique>| {
-            let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
-            let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
-            choices.above = steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
-            choices.steps = steps;
-            choices.choose(10_000.0, None)
-        };
-        // The chain at the top (the full mesh there): it holds nearer.
-        assert_eq!(top(vec![Technique::Spt, Technique::LodChain]), Technique::LodChain);
-        // Crossed quads at the top keep their error near: the point tree takes over.
-        assert_eq!(top(vec![Technique::Spt, Technique::Crossed]), Technique::FALLBACK);
-        assert!(converges(Technique::PruneOpt) && !converges(Technique::Impostors));
-        // Without the point tree's cut available, the rule's table keeps the chain at 256 px
-        // (the table's chain equals the full mesh there) and it holds above.
+        assert!(converges(Technique::PruneOpt) && converges(Technique::LodChain) && !converges(Technique::Impostors));
         let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
-        let mut choices = Choices::new(&c, &policy, &representations_holding_everything());
-        choices.steps = (0..=40)
-            .map(|i| c.choose((3.0 + i as f32 / STEPS_PER_OCTAVE).exp2(), 0.01, |t| t != Technique::Spt))
-            .collect();
-        choices.above = choices.steps.last().copied().filter(|&t| converges(t)).unwrap_or(Technique::FALLBACK);
+        // The point tree cheapest at the top: it holds nearer.
+        let choices = Choices::among(&table(), &policy, all);
+        assert_eq!(choices.steps().last(), Some(&Technique::Spt));
+        assert_eq!(choices.choose(10_000.0, None), Technique::Spt);
+        // Without the point tree the chain (the full mesh there) is the top choice and holds.
+        let choices = Choices::among(&table(), &policy, |t| t != Technique::Spt);
+        assert_eq!(choices.steps().last(), Some(&Technique::LodChain));
         assert_eq!(choices.choose(10_000.0, None), Technique::LodChain);
+        // Crossed quads that win the top height keep their error near: above, the rule chooses
+        // among the techniques that converge, the chain here (fewer primitives than the point
+        // tree at the same error) for a tree wholly in view, the point tree (which culls per
+        // cell) for one partly in view.
+        let mut records = Vec::new();
+        for (h, crossed, spt, chain) in [(8.0, 0.05, 0.06, 0.2), (256.0, 0.011, 0.012, 0.012)] {
+            records.push(record(code::FULL, h, 0.012, 22_500.0));
+            records.push(record(code::SPT, h, spt, 21_000.0));
+            records.push(record(code::LOD_CHAIN, h, chain, 20_000.0));
+            records.push(record(code::CROSSED, h, crossed, 3.0));
+        }
+        records.sort_by_key(|r| r.technique);
+        let c = Calibration::from_records(&records).unwrap();
+        let choices = Choices::among(&c, &policy, all);
+        assert_eq!(choices.steps().last(), Some(&Technique::Crossed));
+        assert_eq!(choices.choose(10_000.0, None), Technique::LodChain);
+        // Partly in view: the point tree where its whole-tree primitives (21,000) times the share
+        // in view are fewer than the chain's (20,000), with a quarter of hysteresis.
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.99, None), Technique::LodChain);
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.9, None), Technique::FALLBACK);
+        let spt = Some(Technique::FALLBACK);
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.99, spt), Technique::FALLBACK, "held");
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.8, Some(Technique::LodChain)), Technique::LodChain);
+        assert_eq!(choices.choose_framed(10_000.0, 0, 1.0, 0.7, Some(Technique::LodChain)), Technique::FALLBACK);
+        // Within the range the share in view does not matter.
+        assert_eq!(choices.choose_framed(100.0, 0, 1.0, 0.1, None), choices.choose(100.0, None));
+        assert!(choices.above_range(10_000.0) && !choices.above_range(100.0));
     }
 
     #[test]
     fn hysteresis_keeps_last_frames_technique_near_a_boundary() {
         let c = table();
         let steps = steps_of(&c);
-        let choices = Choices { above: Technique::Spt, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() };
+        let choices = Choices {
+            log2_min: 3.0,
+            tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
+            elevations: Vec::new(),
+            visibility: 1,
+            hysteresis_steps: 2,
+        };
         // Find the boundary between crossed (small) and the point tree (larger).
         let boundary = choices.steps().iter().position(|&t| t != Technique::Crossed).expect("a boundary");
         assert!(boundary > 0);
@@ -1177,12 +1667,14 @@ mod tests {
         let lods = [tall_lod()];
         let c = table();
         let steps = steps_of(&c);
+        // The point tree above the range whether a tree is wholly in view or not: the trees the
+        // camera walks past change technique once on the way.
         let choices = [Some(Choices {
-            above: Technique::LodChain,
             log2_min: 3.0,
-            steps,
+            tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
+            elevations: Vec::new(),
+            visibility: 1,
             hysteresis_steps: 0,
-            hidden: Vec::new(),
         })];
         // Two thousand trees in a row, the camera walking along it.
         let instances: Vec<Instance> = (0..2 * CHOOSE_CHUNK)
@@ -1250,7 +1742,14 @@ mod tests {
                 let m = instance.model as usize;
                 match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                     (Some(lod), Some(choices)) => {
-                        let chosen = choices.choose(projected_height(lod, instance.transform, camera), *previous);
+                        let height = projected_height(lod, instance.transform, camera);
+                        let frustum = Frustum::from_view_proj(camera.view_proj);
+                        let in_view = if choices.above_range(height) {
+                            in_view_share(lod, instance.transform, &frustum)
+                        } else {
+                            1.0
+                        };
+                        let chosen = choices.choose_framed(height, 0, 1.0, in_view, *previous);
                         *previous = Some(chosen);
                         chosen
                     }
@@ -1275,7 +1774,13 @@ mod tests {
         let steps = steps_of(&c);
         assert!(steps.iter().any(|&t| t != steps[0]), "the table switches technique: {steps:?}");
         let choices = [
-            Some(Choices { above: Technique::LodChain, log2_min: 3.0, steps, hysteresis_steps: 2, hidden: Vec::new() }),
+            Some(Choices {
+                log2_min: 3.0,
+                tables: vec![Table { above: Technique::LodChain, above_cost: (22_500.0, 21_000.0), steps }],
+                elevations: Vec::new(),
+                visibility: 1,
+                hysteresis_steps: 2,
+            }),
             None,
         ];
         let mut rng = SplitMix64(24);

@@ -21,7 +21,7 @@ use treelod_format::{Container, CurveSample, PruneLeafRecord, Range, TriangleRec
 
 use crate::draws::{Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, by_chunks, max_axis_scale};
 use crate::frame::{Camera, Frustum};
-use crate::impostor::{ImpostorBark, bark_draw};
+use crate::impostor::{ImpostorBark, push_bark};
 use crate::technique::Technique;
 
 /// Lower bound of the occlusion factor: a hidden tree still draws a tenth of its `λ`, so it is
@@ -446,8 +446,7 @@ pub fn select(
                 }
             }
             let tree = (index, instance, lod, model);
-            let bark = bark_draw(tree, camera, &frustum, settings.s_min, pruning.bark, lambda);
-            out.draws.triangles.extend(bark);
+            push_bark(tree, camera, &frustum, settings, pruning.bark, lambda, &mut out.draws);
         }
     });
     // The held `λ` is written once every chunk has read it.

@@ -44,7 +44,7 @@ pub struct Args {
     /// from the containers' calibration tables).
     #[arg(long, value_name = "NAMES", value_enum, value_delimiter = ',', default_values = ["full", "spt"])]
     pub technique: Vec<TechniqueName>,
-    /// The policy's target: image error (multi-scale RMSE of coverage) allowed over the full
+    /// The policy's target: image error (multi-scale RMSE, as the calibration measures it) allowed over the full
     /// mesh's at each tree's projected height, 0 to 1; with --budget, where the steering starts.
     #[arg(long, value_name = "ERROR", default_value_t = Policy::DEFAULT_TARGET, value_parser = crate::render::parse_target)]
     pub policy_target: f32,

@@ -144,12 +144,13 @@ pub struct BuildOptions {
     /// planes get the mean of their leaves'. 0 writes no ambient occlusion.
     #[arg(long, value_name = "N", default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=4096))]
     pub ao_rays: u32,
-    /// Calibration views (spec §6.15): every representation built is drawn at 6 projected heights
-    /// (8 to 256 pixels) from N orthographic views on the CPU and its coverage error against the
-    /// supersampled full mesh and its primitive count are stored, for the renderer's policy to
-    /// choose representations with. Default: 4 when the build holds a representation to choose
-    /// besides the point tree (--prune, --impostors, --ellipsoids or --baselines; a few percent
-    /// of such a build's time), else 0. 0 writes none.
+    /// Calibration views per elevation (spec §6.15, §6.16): every representation built is drawn
+    /// at 6 projected heights (8 to 256 pixels) on the CPU, from N orthographic views around the
+    /// tree at each of 0°, 30° and 60° elevation and one straight down, and its image error
+    /// against the supersampled full mesh and its primitive count are stored, over every view and
+    /// per elevation, for the renderer's policy to choose representations with. Default: 2 when
+    /// the build holds a representation to choose besides the point tree (--prune, --impostors,
+    /// --ellipsoids or --baselines), else 0. 0 writes none.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=64))]
     pub calibration_views: Option<u32>,
     /// Keep every bit of the written floats. By default positions and texture coordinates keep
@@ -205,7 +206,7 @@ impl BuildOptions {
         <Defaults as clap::Parser>::try_parse_from(["treelod"]).expect("every build option has a default").options
     }
 
-    /// The calibration's views: `--calibration-views`, else 4 where the build holds more than the
+    /// The calibration's views per elevation: `--calibration-views`, else 2 where the build holds more than the
     /// point tree to choose from and 0 where it does not (the policy would always draw the point
     /// tree, and the tables would only cost time and bytes).
     pub(crate) fn calibration_views(&self) -> u32 {
@@ -1209,13 +1210,13 @@ mod tests {
             }
             <Cli as clap::Parser>::try_parse_from(["treelod", flag]).expect("parses").options
         };
-        assert_eq!(with("--baselines").calibration_views(), 4, "a choice: calibrated by default");
-        assert_eq!(with("--ellipsoids").calibration_views(), 4);
+        assert_eq!(with("--baselines").calibration_views(), 2, "a choice: calibrated by default");
+        assert_eq!(with("--ellipsoids").calibration_views(), 2);
         assert_eq!(with("--calibration-views=0").calibration_views(), 0);
         let mut options = with("--impostors");
-        assert_eq!(options.calibration_views(), 4);
-        options.calibration_views = Some(2);
         assert_eq!(options.calibration_views(), 2);
+        options.calibration_views = Some(3);
+        assert_eq!(options.calibration_views(), 3);
     }
 
     #[test]

@@ -76,8 +76,8 @@ struct Dump<'a> {
     /// The baseline sections (spec §6.12, §6.13), when the container has any of their records.
     #[serde(skip_serializing_if = "Option::is_none")]
     baselines: Option<BaselineInfo>,
-    /// The calibration (spec §6.15) and the LoD chain's per-level tables (§6.16), when the
-    /// container has either.
+    /// The calibration (spec §6.15), its tables per elevation (§6.16) and the LoD chain's per-level
+    /// tables (§6.17), when the container has any of them.
     #[serde(skip_serializing_if = "Option::is_none")]
     calibration: Option<CalibrationInfo>,
     /// Texture bytes per representation (spec §6.7), when the container has images.
@@ -498,20 +498,29 @@ baselines
     }
 }
 
-/// The calibration of a container (spec §6.15, §6.16): per representation, its error and
-/// primitive count at each projected height; then per LoD chain level, the same.
+/// The calibration of a container (spec §6.15): per representation, its error and primitive
+/// count at each projected height; then the same per elevation of the views (§6.16) and per LoD
+/// chain level over every view (§6.17).
 #[derive(Debug, Serialize)]
 struct CalibrationInfo {
     /// One entry per representation, in code order.
     techniques: Vec<CalibrationRow>,
+    /// One entry per elevation (`CALIBRATION_ELEVATIONS`), in file order (ascending); absent when
+    /// the container has none (files before 1.7).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    elevations: Vec<ElevationCalibration>,
     /// One entry per LoD chain level (`CHAIN_CALIBRATION`), finest first; absent when the
-    /// container has none (files before 1.7).
+    /// container has none (files before 1.8).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     chain_levels: Vec<ChainLevelRow>,
+    /// Whether the errors are of shaded colour (metadata `calibration.error = "colour"`, spec
+    /// §6.15), else of coverage (earlier builds). The metadata block of the JSON says it too.
+    #[serde(skip)]
+    colour: bool,
 }
 
 /// The samples of one representation.
-#[derive(Debug, Serialize)]
+#[derive(Clone, Debug, Serialize)]
 struct CalibrationRow {
     /// The technique's name (`--technique`), or `technique N` for an undefined code.
     technique: String,
@@ -528,69 +537,107 @@ struct ChainLevelRow {
     samples: Vec<[f32; 3]>,
 }
 
+/// The tables measured from the views at one elevation.
+#[derive(Debug, Serialize)]
+struct ElevationCalibration {
+    /// Degrees above the block's horizontal plane.
+    elevation: f32,
+    /// One entry per representation, in code order.
+    techniques: Vec<CalibrationRow>,
+}
+
 impl CalibrationInfo {
-    /// The calibration of `container`, `None` if it has neither table.
+    /// The calibration of `container`, `None` if it has none of the tables.
     fn new(container: &Container) -> Option<Self> {
         let records = container.calibration();
+        let per_elevation = container.calibration_elevations();
         let chain = container.chain_calibration();
-        if records.is_empty() && chain.is_empty() {
+        if records.is_empty() && per_elevation.is_empty() && chain.is_empty() {
             return None;
         }
-        let mut techniques: Vec<(u32, CalibrationRow)> = Vec::new();
-        for r in records {
-            let sample = [r.height, r.error, r.primitives];
-            match techniques.last_mut() {
-                Some((code, row)) if *code == r.technique => row.samples.push(sample),
-                _ => {
-                    let technique = treelod_format::calibration_technique::name(r.technique)
-                        .map_or_else(|| format!("technique {}", r.technique), str::to_owned);
-                    techniques.push((r.technique, CalibrationRow { technique, samples: vec![sample] }));
-                }
-            }
-        }
-        let mut chain_levels: Vec<ChainLevelRow> = Vec::new();
-        for r in chain {
-            let sample = [r.height, r.error, r.primitives];
-            match chain_levels.last_mut() {
-                Some(row) if row.level == r.level => row.samples.push(sample),
-                _ => chain_levels.push(ChainLevelRow { level: r.level, samples: vec![sample] }),
-            }
-        }
-        Some(Self { techniques: techniques.into_iter().map(|(_, row)| row).collect(), chain_levels })
+        let techniques = rows(records.iter().map(|r| (r.technique, [r.height, r.error, r.primitives])));
+        // One table per run of records of one elevation, in file order.
+        let elevations = per_elevation
+            .chunk_by(|a, b| a.elevation == b.elevation)
+            .map(|run| ElevationCalibration {
+                elevation: run[0].elevation,
+                techniques: rows(run.iter().map(|r| (r.technique, [r.height, r.error, r.primitives]))),
+            })
+            .collect();
+        let chain_levels = chain
+            .chunk_by(|a, b| a.level == b.level)
+            .map(|run| ChainLevelRow {
+                level: run[0].level,
+                samples: run.iter().map(|r| [r.height, r.error, r.primitives]).collect(),
+            })
+            .collect();
+        let colour = container.metadata().settings.iter().any(|s| s.key == "calibration.error" && s.value == "colour");
+        Some(Self { techniques, elevations, chain_levels, colour })
     }
 
-    /// The text form: a row per representation, then per chain level (`lod-chain level N`),
-    /// `error (primitives)` per height.
+    /// The text form: a table of a row per representation and then per LoD chain level
+    /// (`lod-chain level N`), `error (primitives)` per height; then one table of the
+    /// representations per elevation.
     fn to_text(&self) -> String {
-        let rows: Vec<(String, &[[f32; 3]])> = self
-            .techniques
+        let measure = if self.colour { "shaded colour" } else { "coverage" };
+        let levels = self
+            .chain_levels
             .iter()
-            .map(|t| (t.technique.clone(), t.samples.as_slice()))
-            .chain(self.chain_levels.iter().map(|l| (format!("lod-chain level {}", l.level), l.samples.as_slice())))
-            .collect();
-        let mut heights: Vec<f32> = rows.iter().flat_map(|(_, samples)| samples.iter().map(|s| s[0])).collect();
-        heights.sort_by(f32::total_cmp);
-        heights.dedup();
-        let mut columns = vec![("technique".to_owned(), Align::Left)];
-        columns.extend(heights.iter().map(|h| (format!("{h} px"), Align::Right)));
-        let names: Vec<(&str, Align)> = columns.iter().map(|(n, a)| (n.as_str(), *a)).collect();
-        let mut table = Table::new(&names);
-        for (name, samples) in rows {
-            let mut row = vec![name];
-            row.extend(heights.iter().map(|h| {
-                samples
-                    .iter()
-                    .find(|s| s[0] == *h)
-                    .map_or_else(String::new, |s| format!("{:.4} ({})", s[1], s[2].round()))
-            }));
-            table.row(row);
-        }
-        format!(
-            "\ncalibration (multi-scale RMSE of coverage against the supersampled full mesh, and primitives drawn, \
+            .map(|l| CalibrationRow { technique: format!("lod-chain level {}", l.level), samples: l.samples.clone() });
+        let mean: Vec<CalibrationRow> = self.techniques.iter().cloned().chain(levels).collect();
+        let mut out = format!(
+            "\ncalibration (multi-scale RMSE of {measure} against the supersampled full mesh, and primitives submitted, \
              by the block's projected height)\n{}",
-            table.render("  ")
-        )
+            table(&mean).render("  ")
+        );
+        for e in &self.elevations {
+            out.push_str(&format!(
+                "\ncalibration at {}° elevation (the same, from the views at that elevation)\n{}",
+                e.elevation,
+                table(&e.techniques).render("  ")
+            ));
+        }
+        out
     }
+}
+
+/// Groups `(technique, [height, error, primitives])` samples into one row per run of one
+/// technique.
+fn rows(samples: impl Iterator<Item = (u32, [f32; 3])>) -> Vec<CalibrationRow> {
+    let mut techniques: Vec<(u32, CalibrationRow)> = Vec::new();
+    for (code, sample) in samples {
+        match techniques.last_mut() {
+            Some((last, row)) if *last == code => row.samples.push(sample),
+            _ => {
+                let technique = treelod_format::calibration_technique::name(code)
+                    .map_or_else(|| format!("technique {code}"), str::to_owned);
+                techniques.push((code, CalibrationRow { technique, samples: vec![sample] }));
+            }
+        }
+    }
+    techniques.into_iter().map(|(_, row)| row).collect()
+}
+
+/// A calibration table: a row per representation, a column per height, `error (primitives)`.
+fn table(techniques: &[CalibrationRow]) -> Table {
+    let mut heights: Vec<f32> = techniques.iter().flat_map(|t| t.samples.iter().map(|s| s[0])).collect();
+    heights.sort_by(f32::total_cmp);
+    heights.dedup();
+    let mut columns = vec![("technique".to_owned(), Align::Left)];
+    columns.extend(heights.iter().map(|h| (format!("{h} px"), Align::Right)));
+    let names: Vec<(&str, Align)> = columns.iter().map(|(n, a)| (n.as_str(), *a)).collect();
+    let mut table = Table::new(&names);
+    for t in techniques {
+        let mut row = vec![t.technique.clone()];
+        row.extend(heights.iter().map(|h| {
+            t.samples
+                .iter()
+                .find(|s| s[0] == *h)
+                .map_or_else(String::new, |s| format!("{:.4} ({})", s[1], s[2].round()))
+        }));
+        table.row(row);
+    }
+    table
 }
 
 /// One non-empty cell.

@@ -65,7 +65,7 @@ pub struct Args {
     /// this many octaves of the metres per pixel, as `render`'s option; 0 switches at once.
     #[arg(long, value_name = "OCTAVES", default_value_t = 0.5, value_parser = crate::render::parse_level_blend)]
     pub level_blend: f32,
-    /// The `policy` technique's target: the image error (multi-scale RMSE of coverage) it allows
+    /// The `policy` technique's target: the image error (multi-scale RMSE, as the calibration measures it) it allows
     /// over the floor (the least error of the full mesh and every representation) at each tree's
     /// projected size, as the containers' calibration tables measured it; 0 keeps the best image
     /// the tables know.

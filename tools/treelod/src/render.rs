@@ -95,7 +95,7 @@ pub struct TechniqueArgs {
     /// calibration tables).
     #[arg(long, value_name = "TECHNIQUE", value_enum)]
     pub technique: Option<Technique>,
-    /// The policy's target: image error (multi-scale RMSE of coverage) allowed over the least
+    /// The policy's target: image error (multi-scale RMSE, as the calibration measures it) allowed over the least
     /// error of the full mesh and every representation at each tree's projected size; 0 keeps
     /// the best image the tables know.
     #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = parse_target, conflicts_with = "technique")]
@@ -199,11 +199,12 @@ pub struct ImpostorArgs {
     /// cross-fading their textures over the last quarter (both on by default).
     #[arg(long)]
     pub no_impostor_morph: bool,
-    /// With impostors: the bark beside the planes. `chain` (the default): where the container has
-    /// a LoD chain (built with `--baselines`), the chain's bark at the coarsest level whose error
-    /// projects below half of `--s-min` pixels among those keeping 90 % of the bark's area, else
-    /// all bark; `all`: every bark triangle.
-    #[arg(long, value_name = "BARK", default_value = "chain", value_parser = ["chain", "all"])]
+    /// With impostors: the bark beside the planes. `lines` (the default): the branch lines where
+    /// the container has them (built with `--lines`), as ellipsoid trees draw them, else as
+    /// `chain`; `chain`: where the container has a LoD chain (built with `--baselines`), the
+    /// chain's bark at the coarsest level whose error projects below half of `--s-min` pixels
+    /// among those keeping 90 % of the bark's area, else all bark; `all`: every bark triangle.
+    #[arg(long, value_name = "BARK", default_value = "lines", value_parser = ["lines", "chain", "all"])]
     pub impostor_bark: String,
 }
 
@@ -211,7 +212,11 @@ impl ImpostorArgs {
     /// Sets the renderer's impostor morph and bark from these options.
     pub fn apply(&self, settings: &mut Settings) {
         settings.impostor_morph = !self.no_impostor_morph;
-        settings.impostor_bark = if self.impostor_bark == "all" { ImpostorBark::All } else { ImpostorBark::Chain };
+        settings.impostor_bark = match self.impostor_bark.as_str() {
+            "all" => ImpostorBark::All,
+            "lines" => ImpostorBark::Lines,
+            _ => ImpostorBark::Chain,
+        };
     }
 }
 

@@ -124,7 +124,7 @@ impl Options {
             s_min: None,
             s_max: None,
             impostor_morph: true,
-            impostor_bark: ImpostorBark::Chain,
+            impostor_bark: ImpostorBark::default(),
             lines: true,
             level_blend: 0.5,
             policy: Policy::default(),

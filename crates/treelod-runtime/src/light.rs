@@ -1,0 +1,51 @@
+//! The light trees are shaded with: one sun and an ambient share, both faces of a
+//! surface lit (leaves are cards). The renderer's default light, and the light the build's
+//! calibration shades its images with (spec §6.15), so the tables measure the image a renderer
+//! with its defaults shows.
+
+use glam::Vec3;
+
+/// A sun and an ambient share.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Light {
+    /// Direction towards the sun (need not be unit: [`Light::shade`] normalises it).
+    pub sun: Vec3,
+    /// Colour of the sunlight, linear RGB.
+    pub sun_colour: Vec3,
+    /// Ambient share of the light, `0..1`.
+    pub ambient: f32,
+}
+
+impl Light {
+    /// The renderer's default light: a sun from above and to one side, white, with 35 % ambient.
+    pub const DEFAULT: Self = Self { sun: Vec3::new(0.4, 0.8, 0.45), sun_colour: Vec3::ONE, ambient: 0.35 };
+
+    /// What a surface of linear `albedo`, `normal` (need not be unit) and ambient occlusion `ao`
+    /// reflects without shadows: `albedo · (ambient · (1 − ao) + (1 − ambient) · |n·l| ·
+    /// sun_colour)`, the twin of `shade` in `shaders/tree/common.wgsl` with the sun's share fully
+    /// lit. A zero normal takes the sun's share as lit from the front.
+    #[must_use]
+    pub fn shade(&self, albedo: Vec3, normal: Vec3, ao: f32) -> Vec3 {
+        let sun = self.sun.normalize_or(Vec3::Y);
+        let diffuse = normal.try_normalize().map_or(1.0, |n| n.dot(sun).abs());
+        albedo * (self.ambient * (1.0 - ao) + (1.0 - self.ambient) * diffuse * self.sun_colour)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_sun_lights_both_faces_and_ambient_occlusion_darkens_only_the_ambient_share() {
+        let light = Light::DEFAULT;
+        let albedo = Vec3::new(0.2, 0.5, 0.1);
+        let sun = light.sun.normalize();
+        assert!((light.shade(albedo, sun, 0.0) - albedo).abs().max_element() < 1e-6);
+        assert_eq!(light.shade(albedo, sun, 0.0), light.shade(albedo, -sun, 0.0));
+        let edge_on = sun.any_orthogonal_vector();
+        assert!((light.shade(albedo, edge_on, 0.0) - albedo * 0.35).abs().max_element() < 1e-6);
+        assert!((light.shade(albedo, edge_on, 1.0)).abs().max_element() < 1e-6);
+        assert!((light.shade(albedo, sun, 1.0) - albedo * 0.65).abs().max_element() < 1e-6);
+    }
+}
