@@ -30,7 +30,7 @@ use crate::baseline::{BillboardRanges, Billboards, ChainRanges, ChainState, LodC
 use crate::ellipsoid::{EllipsoidLod, LineLod};
 use crate::frame::{Camera, CellPrefix, Instance, LodSettings, ModelLod, ROOTS_CELL};
 use crate::impostor::{BARK_AREA_KEPT, ImpostorBark, PlaneLod, area};
-use crate::policy::{Calibration, Policy};
+use crate::policy::{Calibration, ChainPick, Policy};
 use crate::prune::{PruneLod, PruneState, Pruning};
 use crate::spt_lod::PixelLevel;
 use crate::technique::{PerTechnique, Technique};
@@ -462,6 +462,20 @@ pub fn select_techniques(
     mut chain_state: Option<ChainState<'_>>,
     out: &mut TreeDraws,
 ) {
+    // A tree not drawn with the chain this frame forgets its level (`ChainState`: `None`), so
+    // one that comes back picks afresh rather than holding a level from frames ago.
+    if let Some(state) = chain_state.as_mut() {
+        let kept: Vec<(usize, Option<ChainPick>)> = assignment[Technique::LodChain]
+            .iter()
+            .map(|&i| (i as usize, state.previous.get(i as usize).copied().flatten()))
+            .collect();
+        state.previous.fill(None);
+        for (i, level) in kept {
+            if let Some(slot) = state.previous.get_mut(i) {
+                *slot = level;
+            }
+        }
+    }
     for technique in Technique::ALL {
         let list = &assignment[technique];
         if list.is_empty() {
@@ -503,6 +517,37 @@ mod tests {
         let scene = demo_tree(&DemoTreeConfig { leaves: 300, ..DemoTreeConfig::default() });
         let built = build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], config, "t").unwrap();
         Container::from_bytes(&built.data.to_bytes(Compression::None).unwrap()).unwrap()
+    }
+
+    /// The camera's view keeps a LoD chain level only for the trees drawn with the chain: one
+    /// drawn with another technique forgets its level, so coming back it picks afresh instead of
+    /// holding, by hysteresis, a level from frames ago.
+    #[test]
+    fn a_tree_not_drawn_with_the_chain_forgets_its_level() {
+        let container = demo(&BuildConfig { baselines: Some(LodChainConfig::default()), ..BuildConfig::default() });
+        let models = [Representations::from_container(&container).0];
+        let lods = [ModelLod::from_container(&container)];
+        let instances: Vec<Instance> = (0..2)
+            .map(|i| Instance { model: 0, transform: Mat4::from_translation(Vec3::new(i as f32 * 10.0, 0.0, -30.0)) })
+            .collect();
+        let camera = Camera::look_at(Vec3::ZERO, Vec3::new(0.0, 0.0, -1.0), 1.0, 640, 480);
+        let scene = Scene { lods: &lods, models: &models, instances: &instances };
+        let settings = TechniqueSettings {
+            s_min: 1.0,
+            lod: LodSettings::default(),
+            pruning: Pruning::default(),
+            impostor_bark: ImpostorBark::default(),
+            pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
+            lines: true,
+            chain_policy: Policy::default(),
+        };
+        let mut assignment = Assignment::default();
+        assignment.assign(&instances, &models, |i, _| if i == 0 { Technique::LodChain } else { Technique::Spt });
+        let mut previous = vec![Some(Some(1)), Some(Some(1))];
+        let state = ChainState { previous: &mut previous };
+        select_techniques(&scene, &assignment, &camera, &settings, None, Some(state), &mut TreeDraws::default());
+        assert_eq!(previous[1], None, "tree 1 went to the point tree: its level is forgotten");
+        assert_eq!(previous[0].is_some(), models[0].chain.as_ref().is_some_and(|c| c.calibration.is_some()));
     }
 
     /// Every technique over a forest of three chunks, a seventh of its trees of a model with no
