@@ -93,6 +93,7 @@ use treelod_runtime::{
     triangle_drawn,
 };
 
+use treelod_runtime::policy::target_at;
 use treelod_runtime::texels::{self, Sampler, Texels};
 
 use crate::raster::{NOISE_SIZE, View, ellipse_spans, ellipsoid_hits, noise_cut};
@@ -380,7 +381,8 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
 }
 
 /// The LoD chain's pick at each of [`HEIGHTS`] by image error (spec §10.2): the full mesh or the
-/// level [`Calibration::chain_level`] picks with the default target from the tables over every
+/// level [`Calibration::chain_level`] picks with the default target (allowed at each height as
+/// [`target_at`] says, as the runtime allows it) from the tables over every
 /// view of the techniques `records` measures and the levels of `chain_levels`, the floor over
 /// the techniques `held`; `None` at a height where the tables hold no pick.
 fn chain_picks(
@@ -392,7 +394,10 @@ fn chain_picks(
         return vec![None; HEIGHTS.len()];
     };
     let usable = |t: Technique| u32::try_from(t.index()).is_ok_and(|code| held.contains(&code));
-    HEIGHTS.iter().map(|&height| tables.chain_level(height, Policy::DEFAULT_TARGET, usable)).collect()
+    HEIGHTS
+        .iter()
+        .map(|&height| tables.chain_level(height, target_at(Policy::DEFAULT_TARGET, height), usable))
+        .collect()
 }
 
 /// The background of every image: white, as `treelod eval` draws it.

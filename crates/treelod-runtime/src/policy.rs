@@ -5,7 +5,7 @@
 //! **The rule** (spec §10.2). A tree `h` pixels high on screen (its block's height, scaled by its
 //! instance, over its block centre's distance times [`Camera::world_per_pixel`]) is drawn with
 //! the technique `t` of least primitives at `h` among those whose error satisfies
-//! `error_t(h) ≤ floor(h) + target`, the floor the least error at `h` of the full mesh and every
+//! `error_t(h) ≤ floor(h) + target_h`, the floor the least error at `h` of the full mesh and every
 //! representation: drawn at one sample per pixel the full mesh aliases against the supersampled
 //! reference too (near, a representation is asked to keep *that* image, not a better one), and
 //! far away, where its thin leaves drop out of the mip-filtered alpha test, the representation
@@ -26,13 +26,34 @@
 //! 2,888; the chain for every one drew the pine's forest bench, `bench --quality` over 200 trees,
 //! with 64,115 primitives per frame against 44,272 with the point tree for trees the view cuts.)
 //!
+//! **The allowance by size.** `target_h` is [`Policy::target`] for a tree up to
+//! [`TARGET_HEIGHT`] (64) pixels high and `target · 64 / h` above ([`target_at`]): an error over
+//! the floor costs the frame in proportion to the pixels that carry it, so a tree `h` pixels high
+//! adds `∝ h² · target_h²` to the frame's squared error, and no tree adds more than a 64-pixel
+//! tree at the target — the argument the occlusion classes make for a tree partly hidden. Small
+//! trees keep the whole target rather than more: there the floor is the full mesh's own aliasing,
+//! and a forest holds many of them. (Measured with `bench --quality` over 200 trees, 30 frames,
+//! 480×270, primitives per frame / RMSE / FLIP, the same target 0.01 everywhere against this: the
+//! oak 26,874 / 0.0193 / 0.0415 against 40,384 / 0.0179 / 0.0379, the pine 43,454 / 0.0201 /
+//! 0.0421 against 44,947 / 0.0198 / 0.0415, the orchid 77,268 / 0.0334 / 0.0692 against 87,909 /
+//! 0.0332 / 0.0683; the point tree 784,488 / 0.0214 / 0.0367, 591,782 / 0.0181 / 0.0378 and
+//! 378,200 / 0.0401 / 0.0688. With the same target everywhere, the descent into the oak's forest
+//! drew its nearest trees, about 250 pixels high and seen from 19° above, as ellipsoids, which
+//! the tables put within 0.01 of the full mesh's 0.0153 there: frame RMSE 0.039 and FLIP 0.150
+//! where the point tree's read 0.026 and 0.093. The reference height, measured at 32, 64 and 128:
+//! 43,867 / 0.0175 / 0.0370, 40,384 / 0.0179 / 0.0379 and 35,502 / 0.0185 / 0.0393 on the oak,
+//! 138,570 / 0.0189 / 0.0390, 44,947 / 0.0198 / 0.0415 and 44,043 / 0.0198 / 0.0416 on the pine.
+//! And loosening small trees too, `target · 64 / h` at every height: the oak 35,294 / 0.0212 /
+//! 0.0403, the pine 22,245 / 0.0225 / 0.0434, the orchid 65,856 / 0.0390 / 0.0710.)
+//!
 //! **The LoD chain's level** (spec §6.17, §10.2). Where a container holds the chain's per-level
 //! tables, the chain's level at `h` follows the same rule among the full mesh and the chain's
-//! levels ([`Calibration::chain_level`]): the fewest triangles with `error ≤ floor(h) + target`,
-//! the floor now counting the levels (and not the chain's own row, which the build derives from
-//! them with the default target, so that the policy compares the chain it will draw). Where no
-//! level reaches the floor (far away the point tree keeps leaves every mesh loses to the alpha
-//! test), the fewest triangles within the target of the least error among them: the policy
+//! levels ([`Calibration::chain_level`]): the fewest triangles with
+//! `error ≤ floor(h) + target_h`, the floor now counting the levels (and not the chain's own row,
+//! which the build derives from them with the default target, so that the policy compares the
+//! chain it will draw). Where no level reaches the floor (far away the point tree keeps leaves
+//! every mesh loses to the alpha test), the fewest triangles within `target_h` of the least error
+//! among them: the policy
 //! would not pick the chain there, and a chain drawn anyway keeps its best image for less.
 //! [`ChainChoices`] tables it per model and policy as [`Choices`] does, with the same
 //! hysteresis; `baseline::select` looks it up per tree, and keeps the geometric rule (levels by
@@ -82,7 +103,7 @@
 //! [`Policy::occlusion`] and a measured visible fraction `v` (the share of its hull samples the
 //! depth of an earlier frame shows, Neubert et al. 2011 §5), the errors above the floor are
 //! scaled by `√v` — the squared error of the pixels it covers falls with their number — so it
-//! is chosen with the target raised to `target / √v`. `v` is rounded to one of
+//! is chosen with the allowance raised to `target_h / √v`. `v` is rounded to one of
 //! [`VISIBILITY_CLASSES`] classes (1, ½, ¼, ⅛; geometric midpoints between), each with its own
 //! table of choices, so a frame still pays a lookup per tree.
 //!
@@ -109,7 +130,9 @@ pub const STEPS_PER_OCTAVE: f32 = 8.0;
 pub struct Policy {
     /// Error allowed above the floor (the least error of the full mesh and every representation
     /// at the same projected height, module docs), in units of the calibration's error
-    /// (multi-scale RMSE of the shaded image, `[0, 1]`, spec §6.15). 0 asks for the best image the tables know (only
+    /// (multi-scale RMSE of the shaded image, `[0, 1]`, spec §6.15), for a tree up to
+    /// [`TARGET_HEIGHT`] pixels high; a larger one is allowed less, in proportion to its height
+    /// ([`target_at`]). 0 asks for the best image the tables know (only
     /// representations as good as it qualify); larger values trade image for primitives. Default [`Policy::DEFAULT_TARGET`]. Not finite or negative: 0.
     pub target: f32,
     /// Octaves of projected height around a boundary within which a tree keeps last frame's
@@ -553,9 +576,9 @@ pub struct ChainChoices {
 }
 
 impl ChainChoices {
-    /// The chain's levels of a model with `calibration` under `policy` (its target and
-    /// hysteresis), the floor over the techniques `usable` accepts; `None` when the tables hold
-    /// no chain levels.
+    /// The chain's levels of a model with `calibration` under `policy` (its target, allowed at
+    /// each height as [`target_at`] says, and its hysteresis), the floor over the techniques
+    /// `usable` accepts; `None` when the tables hold no chain levels.
     #[must_use]
     pub fn new(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Option<Self> {
         if calibration.levels.is_empty() {
@@ -572,7 +595,7 @@ impl ChainChoices {
         let steps: Vec<ChainPick> = (0..count)
             .map(|i| {
                 let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
-                calibration.chain_level(height, target, &usable).flatten()
+                calibration.chain_level(height, target_at(target, height), &usable).flatten()
             })
             .collect();
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
@@ -675,6 +698,19 @@ pub fn elevation_class_after(previous: Option<usize>, elevation: f32, centres: &
     }
 }
 
+/// The projected height, pixels, up to which a tree is allowed the whole [`Policy::target`] over
+/// the floor; a larger tree is allowed `target · TARGET_HEIGHT / h` ([`target_at`], module docs).
+pub const TARGET_HEIGHT: f32 = 64.0;
+
+/// The error a tree `height` pixels high is allowed over the floor under `target` (module docs):
+/// `target` up to [`TARGET_HEIGHT`], then `target · TARGET_HEIGHT / height`, so no tree adds more
+/// squared error to the frame than a tree [`TARGET_HEIGHT`] pixels high at the target. Not
+/// finite or not positive `height`: `target`.
+#[must_use]
+pub fn target_at(target: f32, height: f32) -> f32 {
+    if height.is_finite() && height > TARGET_HEIGHT { target * (TARGET_HEIGHT / height) } else { target }
+}
+
 /// Classes of the visible fraction `v` the policy chooses by ([`Policy::occlusion`]): about 1,
 /// ½, ¼ and ⅛, split at their geometric midpoints.
 pub const VISIBILITY_CLASSES: usize = 4;
@@ -728,18 +764,19 @@ impl Choices {
             let steps: Vec<Technique> = (0..count)
                 .map(|i| {
                     let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
-                    calibration.choose_at_elevation(elevation, height, target, &usable)
+                    calibration.choose_at_elevation(elevation, height, target_at(target, height), &usable)
                 })
                 .collect();
             let top = (log2_min + (count - 1) as f32 / STEPS_PER_OCTAVE).exp2();
             let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
-                let converging = calibration.choose_at_elevation(elevation, top, target, |t| converges(t) && usable(t));
+                let converging = calibration
+                    .choose_at_elevation(elevation, top, target_at(target, top), |t| converges(t) && usable(t));
                 if converges(converging) { converging } else { Technique::FALLBACK }
             });
-            let at = |t: Technique| calibration.measured(elevation, t, top, target, &usable);
+            let at = |t: Technique| calibration.measured(elevation, t, top, target_at(target, top), &usable);
             // The point tree may stand in for a tree partly in view only where its image at the
             // top is within the target, as any choice there.
-            let limit = calibration.floor(elevation, top, &usable) + sanitise(target);
+            let limit = calibration.floor(elevation, top, &usable) + sanitise(target_at(target, top));
             let point_tree = at(Technique::FALLBACK)
                 .filter(|&(e, _)| usable(Technique::FALLBACK) && e <= limit)
                 .map_or(f32::INFINITY, |(_, p)| p);
@@ -1596,6 +1633,40 @@ mod tests {
     }
 
     #[test]
+    fn a_tree_above_the_target_height_is_allowed_less_in_proportion_to_its_height() {
+        assert_eq!(
+            [8.0, 64.0, 128.0, 256.0, f32::NAN, -1.0].map(|h| target_at(0.01, h)),
+            [0.01, 0.01, 0.005, 0.0025, 0.01, 0.01]
+        );
+        // Ellipsoids 0.008 over the full mesh at every height, a tenth of the point tree's cost.
+        let mut records = Vec::new();
+        for (h, full) in [(8.0, 0.060), (32.0, 0.030), (64.0, 0.020), (128.0, 0.017), (256.0, 0.012)] {
+            records.push(record(code::FULL, h, full, 22_500.0));
+            records.push(record(code::SPT, h, full + 0.001, 20_000.0));
+            records.push(record(code::ELLIPSOIDS, h, full + 0.008, 2_000.0));
+        }
+        records.sort_by(|a, b| a.technique.cmp(&b.technique).then(a.height.total_cmp(&b.height)));
+        let c = Calibration::from_records(&records).expect("rows");
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
+        let choices = Choices::among(&c, &policy, all);
+        // Within the target up to 64 pixels; above, the allowance falls under 0.008 at 80 pixels.
+        for (height, expected) in [
+            (8.0, Technique::Ellipsoids),
+            (32.0, Technique::Ellipsoids),
+            (64.0, Technique::Ellipsoids),
+            (76.0, Technique::Ellipsoids),
+            (84.0, Technique::Spt),
+            (128.0, Technique::Spt),
+            (256.0, Technique::Spt),
+        ] {
+            assert_eq!(choices.choose(height, None), expected, "{height} px");
+        }
+        // Twice the target moves the bound to twice the height.
+        let loose = Choices::among(&c, &Policy { target: 0.02, ..policy }, all);
+        assert_eq!([152.0, 168.0].map(|h| loose.choose(h, None)), [Technique::Ellipsoids, Technique::Spt]);
+    }
+
+    #[test]
     fn a_partly_hidden_tree_is_chosen_with_the_target_over_the_root_of_its_visible_fraction() {
         assert_eq!(
             [1.0, 0.8, 0.7, 0.5, 0.36, 0.35, 0.2, 0.17, 0.0, f32::NAN].map(visibility_class),
@@ -1617,7 +1688,7 @@ mod tests {
             let visible_choice = choices.choose(height, None);
             for k in 0..VISIBILITY_CLASSES {
                 let visible = (-(k as f32)).exp2();
-                let expected = c.choose(height, 0.005 * (k as f32 * 0.5).exp2(), all);
+                let expected = c.choose(height, target_at(0.005 * (k as f32 * 0.5).exp2(), height), all);
                 assert_eq!(choices.choose_seen(height, visible, None), expected, "{height} px, {visible} visible");
                 // Without occlusion every tree counts as fully visible.
                 assert_eq!(blind.choose_seen(height, visible, None), visible_choice);
