@@ -28,7 +28,8 @@ pub enum Technique {
     /// improve on).
     #[cfg_attr(feature = "clap", value(name = "prune-cook"))]
     PruneCook,
-    /// Leaf-cluster impostor planes (Garcia et al. 2005, spec §6.10), bark as triangles.
+    /// Leaf-cluster impostor planes (Garcia et al. 2005, spec §6.10), bark as the branch lines
+    /// where the container has them, else the LoD chain's bark level or every bark triangle.
     #[cfg_attr(feature = "clap", value(name = "impostors"))]
     Impostors,
     /// Clustered leaf ellipsoids and branch lines (Clasen et al. 2011, spec §6.8, §6.9).

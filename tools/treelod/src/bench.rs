@@ -45,7 +45,8 @@ pub struct Args {
     #[arg(long, value_name = "NAMES", value_enum, value_delimiter = ',', default_values = ["full", "spt"])]
     pub technique: Vec<TechniqueName>,
     /// The policy's target: image error (multi-scale RMSE, as the calibration measures it) allowed over the full
-    /// mesh's at each tree's projected height, 0 to 1; with --budget, where the steering starts.
+    /// mesh's at each tree's projected height (up to 64 pixels; a taller tree `h` pixels high:
+    /// `target · 64 / h`), 0 to 1; with --budget, where the steering starts.
     #[arg(long, value_name = "ERROR", default_value_t = Policy::DEFAULT_TARGET, value_parser = crate::render::parse_target)]
     pub policy_target: f32,
     /// The policy's budget mode: primitives per frame to aim for (the camera's view). The

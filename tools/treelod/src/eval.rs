@@ -67,8 +67,8 @@ pub struct Args {
     pub level_blend: f32,
     /// The `policy` technique's target: the image error (multi-scale RMSE, as the calibration measures it) it allows
     /// over the floor (the least error of the full mesh and every representation) at each tree's
-    /// projected size, as the containers' calibration tables measured it; 0 keeps the best image
-    /// the tables know.
+    /// projected size (up to 64 pixels; a taller tree `h` pixels high: `target · 64 / h`), as the
+    /// containers' calibration tables measured it; 0 keeps the best image the tables know.
     #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = crate::render::parse_target)]
     pub policy_target: f32,
     /// Write one CSV row per frame and technique.

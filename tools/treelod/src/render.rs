@@ -96,8 +96,9 @@ pub struct TechniqueArgs {
     #[arg(long, value_name = "TECHNIQUE", value_enum)]
     pub technique: Option<Technique>,
     /// The policy's target: image error (multi-scale RMSE, as the calibration measures it) allowed over the least
-    /// error of the full mesh and every representation at each tree's projected size; 0 keeps
-    /// the best image the tables know.
+    /// error of the full mesh and every representation at each tree's projected size, for a tree up
+    /// to 64 pixels high (a taller one `h` pixels high: `target · 64 / h`); 0 keeps the best image
+    /// the tables know.
     #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = parse_target, conflicts_with = "technique")]
     pub policy_target: f32,
 }

@@ -140,7 +140,8 @@ impl Options {
         // The pruning techniques prune every tree at every distance (no point tree for
         // small ones), with the container's λ(h), the occlusion factor and hysteresis.
         settings.pruning = Pruning { spt_below_pixels: 0.0, ..Pruning::default() };
-        // Impostors: the leaves of every tree with planes as planes, its bark as triangles.
+        // Impostors: the leaves of every tree with planes as planes, its bark as the renderer's
+        // default draws it (branch lines where the container has them) unless asked otherwise.
         settings.impostor_morph = self.impostor_morph;
         settings.impostor_bark = self.impostor_bark;
         // Ellipsoids: the leaves of every tree with ellipsoids as ellipsoids, its bark as
