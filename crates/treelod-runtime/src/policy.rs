@@ -768,15 +768,16 @@ impl Choices {
                 })
                 .collect();
             let top = (log2_min + (count - 1) as f32 / STEPS_PER_OCTAVE).exp2();
+            let top_target = target_at(target, top);
             let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
-                let converging = calibration
-                    .choose_at_elevation(elevation, top, target_at(target, top), |t| converges(t) && usable(t));
+                let converging =
+                    calibration.choose_at_elevation(elevation, top, top_target, |t| converges(t) && usable(t));
                 if converges(converging) { converging } else { Technique::FALLBACK }
             });
             let at = |t: Technique| calibration.measured(elevation, t, top, target_at(target, top), &usable);
             // The point tree may stand in for a tree partly in view only where its image at the
             // top is within the target, as any choice there.
-            let limit = calibration.floor(elevation, top, &usable) + sanitise(target_at(target, top));
+            let limit = calibration.floor(elevation, top, &usable) + sanitise(top_target);
             let point_tree = at(Technique::FALLBACK)
                 .filter(|&(e, _)| usable(Technique::FALLBACK) && e <= limit)
                 .map_or(f32::INFINITY, |(_, p)| p);
@@ -853,7 +854,7 @@ impl Choices {
         let above_range =
             if table.above != Technique::FALLBACK && culled < whole * bias { Technique::FALLBACK } else { table.above };
         let steps = &table.steps;
-        let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
+        let x = self.step(height);
         let last = steps.len() - 1;
         // Above the range: one step per STEPS_PER_OCTAVE past its end reads as the fallback.
         let above = |i: f32| i > last as f32 + 0.5;
@@ -880,7 +881,12 @@ impl Choices {
         let last = self.tables.first().map_or(0, |t| t.steps.len().saturating_sub(1));
         #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
         let top = last as f32 + 0.5;
-        (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE > top
+        self.step(height) > top
+    }
+
+    /// Where `height` falls on the tables' steps, fractional: 0 at the smallest calibrated height.
+    fn step(&self, height: f32) -> f32 {
+        (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE
     }
 
     /// The elevations of the classes' views, degrees, ascending (empty: one class, the tables
