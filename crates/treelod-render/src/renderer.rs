@@ -593,7 +593,7 @@ impl Renderer {
         let stats = self.prepare_frame(device, queue, camera);
         self.settings = user;
         if let Some(controller) = &mut self.policy.budget {
-            controller.update_policy(stats.primitives() - stats.leaving);
+            controller.update_policy(stats.primitives().saturating_sub(stats.leaving));
         }
         stats
     }
