@@ -124,6 +124,23 @@ impl Frustum {
         if inside { Containment::Inside } else { Containment::Straddles }
     }
 
+    /// The frustum's planes in the model space of an instance drawn by `transform`: per plane,
+    /// `n·p + w` as a function of the model-space point, and the reach of a unit half-extent
+    /// along each model axis (for [`cell_in_view`]).
+    pub(crate) fn model_planes(&self, transform: Mat4) -> [(Vec4, Vec3); 6] {
+        let (ax, ay, az, t) = (
+            transform.x_axis.truncate(),
+            transform.y_axis.truncate(),
+            transform.z_axis.truncate(),
+            transform.w_axis.truncate(),
+        );
+        self.planes.map(|p| {
+            let n = p.truncate();
+            let along = Vec3::new(n.dot(ax), n.dot(ay), n.dot(az));
+            (along.extend(n.dot(t) + p.w), along.abs())
+        })
+    }
+
     /// Whether the oriented box with world centre `centre` and half-axis vectors `axes` may be visible.
     fn intersects_box(&self, centre: Vec3, axes: [Vec3; 3]) -> bool {
         self.planes.iter().all(|p| {
@@ -1102,6 +1119,13 @@ impl<'a, I: Iterator<Item = &'a usize>> Iterator for SplitAt<'a, I> {
     }
 }
 
+/// Whether a cell may be in view by `planes` ([`Frustum::model_planes`] of its instance): its
+/// oriented box is not wholly outside a plane. The block cell (the roots and whatever no grid
+/// cell holds) is always in view of a visible instance: [`select_instance`] never culls it.
+pub(crate) fn cell_in_view(planes: &[(Vec4, Vec3); 6], cell: &CellLod) -> bool {
+    cell.block_cell || planes.iter().all(|(p, reach)| p.truncate().dot(cell.centre) + p.w >= -reach.dot(cell.half))
+}
+
 /// Selects the cells of a visible instance (steps 2–4 of [`select_frame`]); `straddles` if it
 /// crosses a frustum plane, so its cells may be culled.
 fn select_instance<S: Sink>(
@@ -1163,19 +1187,13 @@ fn select_instance<S: Sink>(
     } else {
         // Near path: exact per-cell distances; cells culled on their own if the block straddles.
         let cull = straddles;
-        // Per plane: n·p + w as a function of the model-space point, and the reach of a unit
-        // half-extent along each model axis.
-        let planes: [(Vec4, Vec3); 6] = frame.frustum.planes.map(|p| {
-            let n = p.truncate();
-            let along = Vec3::new(n.dot(ax), n.dot(ay), n.dot(az));
-            (along.extend(n.dot(t) + p.w), along.abs())
-        });
+        let planes = frame.frustum.model_planes(m);
         for cell in &model.cells {
             if cell.block_cell {
                 cells.emit(cell, 0.0, d_block);
                 continue;
             }
-            if cull && planes.iter().any(|(p, reach)| p.truncate().dot(cell.centre) + p.w < -reach.dot(cell.half)) {
+            if cull && !cell_in_view(&planes, cell) {
                 tally.stats.cells_culled += 1;
                 continue;
             }
@@ -1336,8 +1354,10 @@ fn leading_above(values: &[f32], tau: f32) -> u32 {
 ///   that reacts more steeply than that still converges without overshoot.
 /// - **With the policy** ([`Self::update_policy`], spec §10.2's budget mode): the same step moves
 ///   `s_min` and, squared, the policy's error target (clamped to `[target_floor,
-///   target_ceiling]`). Every tree is then allowed the same error over the floor, so the
-///   frame's error is spread evenly rather than spent on a few trees: near trees (drawn with the
+///   target_ceiling]`). Every tree is then allowed that target over its floor, scaled by its
+///   size on screen as the policy's target is ([`target_at`](crate::policy::target_at): no tree
+///   adds more squared error to the frame than a 64-pixel tree at the target), so the frame's
+///   error is spread evenly rather than spent on a few trees: near trees (drawn with the
 ///   point tree above the calibrated heights) coarsen through `s_min`, calibrated ones through
 ///   the target, by the same factor. The square: `s_min` is a length, the target an error read
 ///   off tables whose cost falls in steps, so it needs the larger move to reach the next choice.

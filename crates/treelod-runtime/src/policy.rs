@@ -144,8 +144,9 @@ pub struct Policy {
     /// come on top for the transition's frames; shadow passes are not counted). `Some`: a [`BudgetController`]
     /// (created with [`BudgetController::for_policy`]) moves the target and `s_min` together
     /// from frame to frame so the frame meets the count, starting from [`Self::target`] and
-    /// the renderer's `s_min`; the error is then the same allowance over the floor on
-    /// every tree (spec §10.2). Default `None`: the target holds.
+    /// the renderer's `s_min`; the error is then spread as the target spreads it: every tree
+    /// gets the controller's target over its floor, scaled by its size on screen as
+    /// [`target_at`] says (spec §10.2). Default `None`: the target holds.
     ///
     /// [`BudgetController`]: crate::BudgetController
     /// [`BudgetController::for_policy`]: crate::BudgetController::for_policy
@@ -1171,20 +1172,19 @@ pub fn choose_instances_coarsest(
         });
 }
 
-/// The share of a model's triangles drawn by `transform` that lie in cells whose bounds
-/// intersect `frustum` (1 where the model has no triangles): what the point tree, which culls per
-/// cell, draws of a near tree.
+/// The share of a model's triangles drawn by `transform` that lie in cells the point tree's
+/// selection keeps in `frustum` (1 where the model has no triangles): what the point tree, which
+/// culls per cell, draws of a near tree. The test is the selection's own
+/// ([`cell_in_view`](crate::frame::cell_in_view): each cell's oriented box against the planes,
+/// the block cell always kept), so the policy counts what is drawn.
 #[must_use]
 pub fn in_view_share(lod: &ModelLod, transform: Mat4, frustum: &Frustum) -> f32 {
-    let linear = glam::Mat3::from_mat4(transform);
-    let abs = glam::Mat3::from_cols(linear.x_axis.abs(), linear.y_axis.abs(), linear.z_axis.abs());
+    let planes = frustum.model_planes(transform);
     let (mut total, mut seen) = (0u64, 0u64);
     for cell in lod.cells() {
         let count = u64::from(cell.triangles().count);
-        let (centre, half) = cell.centre_half();
-        let (c, h) = (transform.transform_point3(centre), abs * half);
         total += count;
-        if frustum.intersects_aabb(c - h, c + h) {
+        if crate::frame::cell_in_view(&planes, cell) {
             seen += count;
         }
     }

@@ -8,7 +8,7 @@ use treelod_build::{BuildConfig, DemoTreeConfig, Placed, SplitMix64, build_block
 use treelod_format::{BlockRecord, CellRecord, Compression, Container, PointRecord, Range, TriangleRecord};
 use treelod_runtime::{
     Camera, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind, LodSettings, ModelError, ModelLod, ROOTS_CELL,
-    Thresholds, point_drawn, select_cell, select_frame,
+    Thresholds, in_view_share, point_drawn, select_cell, select_frame,
 };
 
 const WIDTH: u32 = 1280;
@@ -252,6 +252,49 @@ fn cells_outside_the_view_are_culled_near_a_large_instance() {
             .collect();
         let outside = frustum.planes().iter().any(|p| corners.iter().all(|&q| p.truncate().dot(q) + p.w < 0.0));
         assert_eq!(!drawn.contains(&cell.index()), outside, "cell {}", cell.index());
+    }
+}
+
+/// The policy's share of a near tree in view (`in_view_share`, what the point tree draws of it)
+/// counts the cells the selection keeps: each cell's oriented box against the planes, the block
+/// cell always kept, for a turned and scaled instance as for one drawn as built.
+#[test]
+fn the_policys_share_in_view_counts_the_cells_the_selection_keeps() {
+    let c = demo_container();
+    let models = [ModelLod::from_container(&c)];
+    let centre = block_centre(&c);
+    let eye = centre + Vec3::new(0.0, 0.0, 3.0);
+    let camera = Camera::look_at(eye, eye + Vec3::new(1.0, 0.2, -0.3), 0.8, WIDTH, HEIGHT);
+    let frustum = Frustum::from_view_proj(camera.view_proj);
+    let turned = Mat4::from_translation(centre)
+        * Mat4::from_rotation_y(0.7)
+        * Mat4::from_scale(Vec3::new(1.3, 0.9, 1.1))
+        * Mat4::from_translation(-centre);
+    for transform in [Mat4::IDENTITY, turned] {
+        let (mut total, mut kept, mut culled) = (0u64, 0u64, 0);
+        for cell in models[0].cells() {
+            let (lo, hi) = cell.bounds();
+            let corners: Vec<Vec3> = (0..8)
+                .map(|i| {
+                    transform.transform_point3(Vec3::new(
+                        if i & 1 == 0 { lo.x } else { hi.x },
+                        if i & 2 == 0 { lo.y } else { hi.y },
+                        if i & 4 == 0 { lo.z } else { hi.z },
+                    ))
+                })
+                .collect();
+            let outside = frustum.planes().iter().any(|p| corners.iter().all(|&q| p.truncate().dot(q) + p.w < 0.0));
+            let count = u64::from(cell.triangles().count);
+            total += count;
+            if cell.is_block_cell() || !outside {
+                kept += count;
+            } else {
+                culled += 1;
+            }
+        }
+        assert!(culled > 0 && kept > 0 && kept < total, "{culled} cells culled, {kept} of {total} triangles kept");
+        let share = in_view_share(&models[0], transform, &frustum);
+        assert!((share - kept as f32 / total as f32).abs() < 1e-6, "{share} against {kept} of {total}");
     }
 }
 
