@@ -89,15 +89,27 @@
 //! cheapest: three crossed quads are a tree from the side and three lines from above (the shared
 //! oak's crossed billboards read 0.049 at 8 pixels from the side, 0.229 from straight above, where
 //! its point tree reads 0.058 to 0.072). Where the container has tables per elevation of the
-//! calibration's views (spec §6.16, format 1.7), the choices are made per elevation class
-//! ([`Calibration::elevations`]: 0°, 30°, 60°, 90°), and each tree is chosen by the class of its
+//! calibration's views (spec §6.16, format 1.7: 0°, 30°, 60°, 90°), the choices are made per
+//! elevation class: every 10°, [`ELEVATION_SUBDIVISIONS`] classes per span between two measured
+//! elevations, each class's tables blended linearly in elevation from the two measured ones
+//! ([`Calibration::with_elevations_between`]). Each tree is chosen by the class of its
 //! view: the elevation of the eye above the tree's horizontal plane at the block centre
 //! ([`view_elevation`]; views from below count as from the side), with a hysteresis of a quarter of
 //! the classes' spacing ([`elevation_class_after`]), so a camera climbing over a forest hands its
 //! far trees from billboards to planes or points while a walker keeps them billboards. Without
 //! those tables every tree is chosen by the tables over every view. A shadow cascade's trees are
 //! chosen by the view that sets their height (the camera's or the cascade's, whichever sees the
-//! tree smaller).
+//! tree smaller). The classes between measured elevations: with the nearest measured class
+//! alone, `eval --orbit 8` (640×480, views 21° up) read the shared orchid from the 30° tables,
+//! where its point tree is the floor (0.038 at 58 pixels against the full mesh's 0.057 and the
+//! impostors' 0.051; from 0° it reads 0.075 against 0.063 and 0.052), and drew it with the
+//! chain's full mesh (31,004 triangles, RMSE 0.0074, FLIP 0.0028); at 20° the blend puts the
+//! impostors within the target and draws them (257 primitives, 0.0097, 0.0043). `bench --quality`
+//! over 200 trees (30 frames, 480×270, primitives per frame / RMSE / FLIP), nearest measured
+//! class against classes every 10°: the oak 40,384 / 0.0179 / 0.0379 against 44,057 / 0.0176 /
+//! 0.0376, the pine 44,374 / 0.0198 / 0.0415 against 42,459 / 0.0198 / 0.0419, the orchid
+//! 81,602 / 0.0333 / 0.0683 against 68,180 / 0.0334 / 0.0686 (the point tree 784,488 / 0.0214 /
+//! 0.0367, 591,782 / 0.0181 / 0.0378, 378,200 / 0.0401 / 0.0688).
 //!
 //! **Occlusion.** A tree partly hidden behind others shows only part of its error: with
 //! [`Policy::occlusion`] and a measured visible fraction `v` (the share of its hull samples the
@@ -270,6 +282,24 @@ fn curve_at(curve: &[Sample], x: f32) -> Option<(f32, f32)> {
     Some((a.error + t * (b.error - a.error), a.primitives + t * (b.primitives - a.primitives)))
 }
 
+/// `(1 − t)·a + t·b` at every height `a` or `b` samples (each read as [`curve_at`] reads it,
+/// clamped outside its range); empty if either is.
+fn blend_curves(a: &[Sample], b: &[Sample], t: f32) -> Vec<Sample> {
+    if a.is_empty() || b.is_empty() {
+        return Vec::new();
+    }
+    let mut heights: Vec<f32> = a.iter().chain(b).map(|s| s.log2_height).collect();
+    heights.sort_by(f32::total_cmp);
+    heights.dedup();
+    heights
+        .into_iter()
+        .filter_map(|x| {
+            let ((ea, pa), (eb, pb)) = (curve_at(a, x)?, curve_at(b, x)?);
+            Some(Sample { log2_height: x, error: ea + t * (eb - ea), primitives: pa + t * (pb - pa) })
+        })
+        .collect()
+}
+
 /// Which of a LoD chain's meshes draws a block: the full mesh (`TRIANGLES`), or the chain's level
 /// of this number (0 the finest), every tree's level of that number.
 pub type ChainPick = Option<u32>;
@@ -353,6 +383,37 @@ impl Calibration {
             self.levels.truncate(gap);
         }
         self
+    }
+
+    /// These tables with `subdivisions − 1` tables blended between each two neighbouring
+    /// elevations of the tables per elevation, at even steps of elevation: each technique's
+    /// error and primitives interpolated linearly in elevation at every height either table
+    /// samples (a technique one of the two lacks has no curve there). The policy chooses by
+    /// these ([`Choices::among`] with [`ELEVATION_SUBDIVISIONS`]), so a tree seen from 20° reads
+    /// two thirds of the 30° tables and a third of the 0° ones rather than all of the nearer.
+    /// `subdivisions` 0 or 1, or fewer than two elevations: the tables as they are.
+    #[must_use]
+    pub fn with_elevations_between(&self, subdivisions: usize) -> Self {
+        let mut fine = self.clone();
+        if subdivisions < 2 || self.elevations.len() < 2 {
+            return fine;
+        }
+        fine.elevations.clear();
+        for pair in self.elevations.windows(2) {
+            let ((a, lower), (b, upper)) = (&pair[0], &pair[1]);
+            fine.elevations.push((*a, lower.clone()));
+            for k in 1..subdivisions {
+                #[expect(clippy::cast_precision_loss, reason = "a few subdivisions")]
+                let t = k as f32 / subdivisions as f32;
+                let mut curves = PerTechnique::<Vec<Sample>>::default();
+                for technique in Technique::ALL {
+                    curves[technique] = blend_curves(&lower[technique], &upper[technique], t);
+                }
+                fine.elevations.push((a + t * (b - a), curves));
+            }
+        }
+        fine.elevations.extend(self.elevations.last().cloned());
+        fine
     }
 
     /// The elevations of the tables per elevation, degrees, ascending (empty without them).
@@ -699,6 +760,12 @@ pub fn elevation_class_after(previous: Option<usize>, elevation: f32, centres: &
     }
 }
 
+/// Classes of elevation the policy chooses by per span between two calibrated elevations
+/// ([`Calibration::with_elevations_between`]): with the build's 0°, 30°, 60° and 90°, classes
+/// every 10°, so a view is at most 5° from its class's tables and blends the measured ones by
+/// its elevation.
+pub const ELEVATION_SUBDIVISIONS: usize = 3;
+
 /// The projected height, pixels, up to which a tree is allowed the whole [`Policy::target`] over
 /// the floor; a larger tree is allowed `target · TARGET_HEIGHT / h` ([`target_at`], module docs).
 pub const TARGET_HEIGHT: f32 = 64.0;
@@ -752,9 +819,12 @@ impl Choices {
         Self::among(calibration, policy, |t| representations.holds(t))
     }
 
-    /// [`Self::new`] among the techniques `usable` accepts.
+    /// [`Self::new`] among the techniques `usable` accepts. With tables per elevation, one
+    /// class per elevation of [`Calibration::with_elevations_between`] with
+    /// [`ELEVATION_SUBDIVISIONS`] (module docs).
     #[must_use]
     pub fn among(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Self {
+        let calibration = &calibration.with_elevations_between(ELEVATION_SUBDIVISIONS);
         let (min, max) = calibration.heights();
         let (log2_min, log2_max) = (min.log2(), max.log2());
         let octaves = if log2_max.is_finite() && log2_min.is_finite() { (log2_max - log2_min).max(0.0) } else { 0.0 };
@@ -1175,8 +1245,8 @@ pub fn choose_instances_coarsest(
 /// The share of a model's triangles drawn by `transform` that lie in cells the point tree's
 /// selection keeps in `frustum` (1 where the model has no triangles): what the point tree, which
 /// culls per cell, draws of a near tree. The test is the selection's own
-/// ([`cell_in_view`](crate::frame::cell_in_view): each cell's oriented box against the planes,
-/// the block cell always kept), so the policy counts what is drawn.
+/// ([`select_frame`](crate::select_frame)'s: each cell's oriented box against the planes, the
+/// block cell always kept), so the policy counts what is drawn.
 #[must_use]
 pub fn in_view_share(lod: &ModelLod, transform: Mat4, frustum: &Frustum) -> f32 {
     let planes = frustum.model_planes(transform);
@@ -1533,12 +1603,13 @@ mod tests {
         assert_eq!(c.at_elevation(None, Technique::Crossed, 8.0), c.at(Technique::Crossed, 8.0));
         let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
         let choices = Choices::among(&c, &policy, all);
-        assert_eq!(choices.elevations(), [0.0, 90.0]);
+        // Classes every 30° between the measured 0° and 90° (ELEVATION_SUBDIVISIONS).
+        assert_eq!(choices.elevations(), [0.0, 30.0, 60.0, 90.0]);
         // Small trees: crossed quads from the side, the point tree from above.
         assert_eq!(choices.choose_viewed(8.0, 0, 1.0, None), Technique::Crossed);
-        assert_eq!(choices.choose_viewed(8.0, 1, 1.0, None), Technique::Spt);
+        assert_eq!(choices.choose_viewed(8.0, 3, 1.0, None), Technique::Spt);
         assert_eq!(choices.steps_at(0), steps_of(&c).as_slice(), "from the side as over every view");
-        assert!(choices.steps_at(1).iter().all(|&t| t != Technique::Crossed), "{:?}", choices.steps_at(1));
+        assert!(choices.steps_at(3).iter().all(|&t| t != Technique::Crossed), "{:?}", choices.steps_at(3));
         // Per instance: a tree 8 px high seen from the side and one seen from straight above.
         let lods = [tall_lod()];
         let camera = Camera::look_at(Vec3::new(0.0, 4.5, 100.0), Vec3::new(0.0, 4.5, 0.0), 0.8, 256, 256);
@@ -1559,6 +1630,53 @@ mod tests {
         let mut state = PolicyState::default();
         choose_instances(&instances, &lods, &[Some(mean)], &above, Technique::Spt, &mut state, &mut out);
         assert_eq!(out, [Technique::Crossed]);
+    }
+
+    /// Between two measured elevations the classes' tables blend them linearly in elevation, at
+    /// every height either samples, and a class between them chooses by the blend.
+    #[test]
+    fn elevation_classes_between_measured_ones_blend_their_tables() {
+        let c = table_with_elevations();
+        let fine = c.with_elevations_between(ELEVATION_SUBDIVISIONS);
+        assert_eq!(fine.elevations(), [0.0, 30.0, 60.0, 90.0]);
+        assert_eq!(c.with_elevations_between(1), c, "one subdivision: the tables as they are");
+        assert_eq!(table().with_elevations_between(3), table(), "no tables per elevation: unchanged");
+        for technique in Technique::ALL {
+            for h in [4.0, 8.0, 11.3, 16.0, 64.0, 300.0] {
+                let (Some(side), Some(above)) =
+                    (c.at_elevation(Some(0), technique, h), c.at_elevation(Some(1), technique, h))
+                else {
+                    assert_eq!(fine.at_elevation(Some(1), technique, h), None, "{technique:?}");
+                    continue;
+                };
+                assert_eq!(fine.at_elevation(Some(0), technique, h), Some(side));
+                assert_eq!(fine.at_elevation(Some(3), technique, h), Some(above));
+                for (class, t) in [(1, 1.0 / 3.0), (2, 2.0 / 3.0)] {
+                    let (e, p) = fine.at_elevation(Some(class), technique, h).expect("blended");
+                    let expected = (side.0 + t * (above.0 - side.0), side.1 + t * (above.1 - side.1));
+                    assert!(
+                        (e - expected.0).abs() < 1e-6,
+                        "{technique:?} {h} px class {class}: {e} against {expected:?}"
+                    );
+                    assert!((p - expected.1).abs() < 1e-3 * expected.1.max(1.0), "{p} against {expected:?}");
+                }
+            }
+        }
+        // The tables over every view and the chain's levels are kept.
+        assert_eq!(fine.at(Technique::Crossed, 8.0), c.at(Technique::Crossed, 8.0));
+        // Crossed quads read 0.2 from above, `table`'s value from the side: a class whose blend
+        // puts them out of the target of the floor chooses otherwise.
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
+        let choices = Choices::among(&c, &policy, all);
+        for class in 0..4 {
+            let expected = fine.choose_at_elevation(Some(class), 8.0, 0.01, all);
+            assert_eq!(choices.choose_viewed(8.0, class, 1.0, None), expected, "class {class}");
+        }
+        // At 8 px the floor is the full mesh's 0.060: crossed quads (0.067 from the side) are
+        // within 0.01 of it only at 0°; at 30° they read 0.067 + (0.2 − 0.067)/3 = 0.111, and the
+        // point tree (0.064) is chosen, where the nearer measured class (0°) chose the quads.
+        let chosen: Vec<Technique> = (0..4).map(|class| choices.choose_viewed(8.0, class, 1.0, None)).collect();
+        assert_eq!(chosen, [Technique::Crossed, Technique::Spt, Technique::Spt, Technique::Spt]);
     }
 
     #[test]
