@@ -892,7 +892,9 @@ pub struct ChainCalibrationRecord {
     pub level: u32,
     /// Projected height of the block's bounds, pixels; strictly increasing within a level.
     pub height: f32,
-    /// Mean multi-scale RMSE of coverage against the supersampled full mesh, `[0, 1]`.
+    /// Mean multi-scale RMSE against the supersampled full mesh, of the same image as the file's
+    /// `CALIBRATION` records (shaded colour where the metadata's `calibration.error` says so;
+    /// spec §6.15), `[0, 1]`.
     pub error: f32,
     /// Triangles submitted (every tree's triangles of the level), `≥ 0`.
     pub primitives: f32,
