@@ -23,6 +23,21 @@
 //! `MULTI_DRAW_INDIRECT_COUNT`, with `multi_draw_indirect` over the whole bucket after the
 //! indirect buffer was cleared (unused slots are empty draws).
 //!
+//! **Which trees** ([`InstanceDrawGpu`], one per instance of the renderer's list, indexed by the
+//! index each instance record carries). A frame without a policy that chooses (no
+//! [`Settings::policy`](crate::Settings::policy), or no model with calibration tables) draws every
+//! instance with the point tree on every pixel; that buffer is written once and kept until a
+//! policy frame changes it. In a policy frame the CPU assigns the trees as in a CPU frame
+//! (transitions included), selects and records every technique but the point tree itself, and
+//! gives the GPU the trees it would draw through the point tree's selection — the trees assigned
+//! [`Technique::Spt`] or [`Technique::Full`] (which a policy frame draws through the point tree's
+//! selection at the frame's thresholds) and those a technique hands back (pruned trees below their
+//! height) — each with the technique it is tinted with and counted under and the share of the
+//! transition dither its draws keep, the CPU path's `DrawInfo::fade` (`pack_fade` of the same
+//! share: `[0, shown)` entering, `[shown, 1)` leaving, every pixel outside a transition, and every
+//! pixel for a tree both entering and leaving the point tree's selection, whose two selections
+//! are one). Every other instance is skipped. Frames with shadows select wholly on the CPU.
+//!
 //! **Capacity.** Each bucket's slots are fixed on the CPU (the bind group and the render pass
 //! need them): `min(upper bound, max(2^16, what earlier frames needed × 1.25))`, the upper bound
 //! being the model's instances times its cells with triangles (points). Ranges past a bucket's

@@ -386,9 +386,26 @@ impl Renderer {
     /// selection may ask for is resident); models added later are uploaded when added. Calling
     /// it again re-uploads.
     ///
-    /// The CPU path is still used for frames whose [`Settings::technique`] is not
-    /// [`Technique::Spt`] or with [`Settings::shadows`], and when there are more than about 4.19 M instances
-    /// (`64 × 65535`, one dispatch of instance blocks). Needs a device with
+    /// Which frames it selects:
+    ///
+    /// - **Without a policy** that chooses (no [`Settings::policy`], or no model with calibration
+    ///   tables) and with [`Settings::technique`] the point tree ([`Technique::Spt`]): every tree,
+    ///   with O(models) CPU work.
+    /// - **With the policy**: the CPU assigns every tree a technique as in a CPU frame
+    ///   (hysteresis, occlusion and transitions included), and selects and records the trees of
+    ///   every technique but the point tree; the GPU selects the trees the CPU path draws through
+    ///   the point tree's selection ([`Technique::Spt`], [`Technique::Full`] where the policy
+    ///   chose it, pruned trees handed back), told per instance which, with which technique and
+    ///   on which share of a transition's dither, so trees fading into or out of the point tree
+    ///   fade as on the CPU path. The render pass draws both. The CPU's work is then O(instances)
+    ///   for the assignment, but the point tree's per-cell selection, usually most of a frame's
+    ///   selection, and its streaming are the GPU's. [`FrameStats`] adds the CPU's counts of this
+    ///   frame's other techniques to the GPU's read back from an earlier frame.
+    ///
+    /// Frames with [`Settings::shadows`] (each cascade selects its own trees), frames of another
+    /// forced technique without a policy, with [`Technique::Full`] as [`Settings::technique`]
+    /// (the full mesh's zero thresholds), and more than about 4.19 M instances (`64 × 65535`, one
+    /// dispatch of instance blocks) are selected on the CPU. Needs a device with
     /// [`wgpu::Features::MULTI_DRAW_INDIRECT_COUNT`] for best results; without it every bucket
     /// is drawn at its full capacity with unused slots as empty draws.
     ///
