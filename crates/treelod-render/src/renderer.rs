@@ -1213,13 +1213,15 @@ impl Renderer {
         {
             let group = |m: usize| self.models.get(m).map(|model| &model.bind_group);
             pass.set_bind_group(2, &self.shadow_maps.bind_group, &[]);
-            let spt = [&self.pipelines[Bucket::Triangles as usize], &self.pipelines[Bucket::Points as usize]];
-            gpu.render(pass, spt, group);
             if !self.main.model_draws.is_empty() {
-                // A policy frame: the other techniques' draws, recorded on the CPU.
+                // A policy frame: the other techniques' draws, recorded on the CPU. Drawn before
+                // the GPU's buckets: on lavapipe, draws recorded after a `multi_draw_indirect_count`
+                // whose count was 0 (the GPU drew no tree) did not show.
                 pass.set_bind_group(0, &self.frame_bind_groups[0], &[]);
                 self.draw_view(pass, &self.main, &self.pipelines);
             }
+            let spt = [&self.pipelines[Bucket::Triangles as usize], &self.pipelines[Bucket::Points as usize]];
+            gpu.render(pass, spt, group);
             return;
         }
         pass.set_bind_group(0, &self.frame_bind_groups[0], &[]);

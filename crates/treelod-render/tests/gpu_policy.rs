@@ -161,6 +161,36 @@ fn policy_frames_select_the_point_tree_s_trees_on_the_gpu() {
     assert!(others_seen.iter().any(|&t| !point_tree(t)), "the CPU drew other techniques: {others_seen:?}");
 }
 
+/// A tree the policy draws with another technique, alone: the GPU draws nothing (its buckets'
+/// counts are 0) and the CPU's draws still show, as in the CPU path's image.
+#[test]
+fn a_frame_the_gpu_draws_nothing_of_shows_the_cpu_s_draws() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let lod = ModelLod::from_container(&container);
+    let positions = positions(&lod);
+    let camera = Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 128, 128);
+    let mut forest = renderer(&gpu, &container, Settings::default(), &positions, false);
+    forest.prepare(&gpu.device, &gpu.queue, &camera);
+    let (i, technique) = forest
+        .instance_techniques()
+        .iter()
+        .enumerate()
+        .find(|&(i, &t)| !point_tree(t) && i >= 6)
+        .map(|(i, &t)| (i, t))
+        .expect("a tree drawn with another technique");
+    let one = [positions[i]];
+    let mut cpu = renderer(&gpu, &container, Settings::default(), &one, false);
+    let mut hybrid = renderer(&gpu, &container, Settings::default(), &one, true);
+    let (a, _) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+    let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+    assert!(stats.gpu_selection && hybrid.instance_techniques() == [technique], "{stats:?}");
+    assert!(gpu_draws(&gpu, &hybrid).is_empty(), "the GPU draws nothing");
+    let (diff, covered) = differing(&a, &b);
+    assert!(covered > 50, "tree {i} ({technique}) is drawn: {covered} pixels");
+    assert_eq!(diff, 0, "tree {i} ({technique}): {diff} of {covered} pixels differ");
+}
+
 /// Per instance, the (technique, dither) of its point-tree draws.
 type Fades = BTreeMap<u32, BTreeSet<(Technique, [u32; 2])>>;
 
