@@ -16,9 +16,8 @@
 const OUTSIDE: u32 = 0u;
 const INSIDE: u32 = 1u;
 
-// `DrawInfo::tint` of the point tree (crates/treelod-render/src/draws.rs, `tint`), set when the
-// pipelines are made.
-override spt_tint: u32;
+// `TECHNIQUE_COUNT` and `TECHNIQUE_TINTS` (each technique's `DrawInfo::tint` by `Technique::index`)
+// are prepended by crates/treelod-render/src/gpu_select.rs (`shader`).
 const STRADDLES: u32 = 2u;
 const ROOTS_CELL: u32 = 0xFFFFFFFFu;
 const F32_MAX: f32 = 3.40282347e+38;
@@ -57,6 +56,19 @@ struct InstanceGpu {
     index: u32,
     _pad0: u32,
     _pad1: u32,
+}
+
+// Rust twin: InstanceDrawGpu. What the selection draws of one instance this frame, indexed by
+// `InstanceGpu::index`:
+//   fade       0: skipped (drawn by the CPU with another technique, or not at all); else the
+//              DrawInfo::fade of its draws, pack2x16unorm of the dither share [lo, hi) it keeps
+//              (0xFFFF0000: every pixel). lo == 0: the technique it is assigned (counted as a
+//              visible instance); lo > 0: only the draws of the point tree it leaves in a
+//              transition (counted as leaving primitives).
+//   technique  Technique::index of the technique its draws are tinted with and counted under.
+struct InstanceDraw {
+    fade: u32,
+    technique: u32,
 }
 
 // Rust twin: ModelGpu. Pool indices: `triangle_base + i` is container triangle `i` in the pool
@@ -130,10 +142,12 @@ struct DispatchArgs {
 @group(0) @binding(7) var<storage, read> cells: array<CellGpu>;
 @group(0) @binding(8) var<storage, read> keys: array<f32>;
 // Per bucket (2 × model + kind) the ranges appended, then the statistics: instances visible,
-// far, cells selected, cells culled, triangles, points.
+// far, cells selected, cells culled, triangles, points, primitives of leaving draws, then
+// primitives per technique (Technique::index).
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 @group(0) @binding(10) var<storage, read_write> draws: array<DrawInfo>;
 @group(0) @binding(11) var<storage, read_write> indirect: array<DrawIndirect>;
+@group(0) @binding(12) var<storage, read> instance_draws: array<InstanceDraw>;
 
 fn v3(a: array<f32, 3>) -> vec3<f32> {
     return vec3<f32>(a[0], a[1], a[2]);
@@ -183,6 +197,7 @@ fn cull_blocks(@builtin(global_invocation_id) id: vec3<u32>) {
 // The instance being selected by this invocation.
 var<private> current: InstanceGpu;
 var<private> cur_model: ModelGpu;
+var<private> cur_draw: InstanceDraw;
 var<private> model_index: u32;
 // World size per pixel per metre, divided by the instance's scale.
 var<private> per_metre: f32;
@@ -232,9 +247,8 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
         return;
     }
     let slot = cur_model.bucket_first[kind] + s;
-    // The point tree's debug colour: the only technique GPU selection draws.
     draws[slot] = DrawInfo(current.transform, taus.x, max(taus.y, taus.x), cell, draw_scale, shading, 1.0,
-                           current.index, spt_tint, 0xFFFF0000u);
+                           current.index, TECHNIQUE_TINTS[cur_draw.technique], cur_draw.fade);
     let corners = select(6u, 3u, kind == 0u);
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
 }
@@ -275,6 +289,11 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
         return;
     }
     current = instances[block.x + lane];
+    cur_draw = instance_draws[current.index];
+    if cur_draw.fade == 0u {
+        return;
+    }
+    cur_draw.technique = min(cur_draw.technique, TECHNIQUE_COUNT - 1u);
     model_index = current.model;
     cur_model = models[model_index];
     let m = current.transform;
@@ -384,8 +403,14 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
         }
     }
     let at = frame.stats_at;
-    atomicAdd(&counters[at], 1u);
-    atomicAdd(&counters[at + 1u], far);
+    let primitives = tally_triangles + tally_points;
+    if (cur_draw.fade & 0xFFFFu) == 0u {
+        atomicAdd(&counters[at], 1u);
+        atomicAdd(&counters[at + 1u], far);
+    } else {
+        atomicAdd(&counters[at + 6u], primitives);
+    }
+    atomicAdd(&counters[at + 7u + cur_draw.technique], primitives);
     atomicAdd(&counters[at + 2u], tally_cells);
     atomicAdd(&counters[at + 3u], culled);
     atomicAdd(&counters[at + 4u], tally_triangles);

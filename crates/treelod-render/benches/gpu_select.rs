@@ -11,6 +11,11 @@
 //! - **CPU**: wall clock of `Renderer::prepare` on the CPU path (`select_frame` on rayon's pool,
 //!   streaming, building and uploading the indirect draws), median likewise.
 //!
+//! The demo tree has no calibration tables, so the default policy chooses no tree and the GPU
+//! selects every tree; a calibrated container's policy frames are shared between the CPU (the
+//! assignment and the other techniques) and the GPU (the point tree's trees): `treelod bench
+//! --technique policy --gpu-selection` measures those.
+//!
 //! Nothing is rendered: this measures selection only, on whatever Vulkan adapter is present (on
 //! lavapipe the "GPU" is the same CPU cores, so the numbers compare algorithms, not hardware).
 //! A hand-rolled loop rather than criterion: a 10^6-instance frame on lavapipe takes long enough

@@ -87,7 +87,7 @@ pub struct RecordedDraw {
 }
 
 /// [`RecordedDraw::dither`] outside a transition.
-const EVERY_PIXEL: [f32; 2] = [0.0, 1.0];
+pub(crate) const EVERY_PIXEL: [f32; 2] = [0.0, 1.0];
 
 /// What one view of a frame (the camera, or a shadow cascade) selected and draws.
 #[derive(Default)]
@@ -171,7 +171,7 @@ impl Renderer {
 
     /// The technique a draw of instance `instance` in a view's (`leaving` false) or in its
     /// leaving draws' selection was made by, and the share of the transition dither it keeps.
-    fn drawn_by(&self, instance: u32, leaving: bool) -> (Technique, [f32; 2]) {
+    pub(crate) fn drawn_by(&self, instance: u32, leaving: bool) -> (Technique, [f32; 2]) {
         let technique = self.technique_of(instance);
         match self.transition(instance) {
             Some(t) if leaving => (t.from, [t.shown, 1.0]),

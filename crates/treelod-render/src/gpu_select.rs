@@ -23,6 +23,21 @@
 //! `MULTI_DRAW_INDIRECT_COUNT`, with `multi_draw_indirect` over the whole bucket after the
 //! indirect buffer was cleared (unused slots are empty draws).
 //!
+//! **Which trees** ([`InstanceDrawGpu`], one per instance of the renderer's list, indexed by the
+//! index each instance record carries). A frame without a policy that chooses (no
+//! [`Settings::policy`](crate::Settings::policy), or no model with calibration tables) draws every
+//! instance with the point tree on every pixel; that buffer is written once and kept until a
+//! policy frame changes it. In a policy frame the CPU assigns the trees as in a CPU frame
+//! (transitions included), selects and records every technique but the point tree itself, and
+//! gives the GPU the trees it would draw through the point tree's selection — the trees assigned
+//! [`Technique::Spt`] or [`Technique::Full`] (which a policy frame draws through the point tree's
+//! selection at the frame's thresholds) and those a technique hands back (pruned trees below their
+//! height) — each with the technique it is tinted with and counted under and the share of the
+//! transition dither its draws keep, the CPU path's `DrawInfo::fade` (`pack_fade` of the same
+//! share: `[0, shown)` entering, `[shown, 1)` leaving, every pixel outside a transition, and every
+//! pixel for a tree both entering and leaving the point tree's selection, whose two selections
+//! are one). Every other instance is skipped. Frames with shadows select wholly on the CPU.
+//!
 //! **Capacity.** Each bucket's slots are fixed on the CPU (the bind group and the render pass
 //! need them): `min(upper bound, max(2^16, what earlier frames needed × 1.25))`, the upper bound
 //! being the model's instances times its cells with triangles (points). Ranges past a bucket's
@@ -40,15 +55,28 @@ use std::sync::atomic::{AtomicU8, Ordering};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use treelod_format::{Container, PointRecord};
-use treelod_runtime::{DrawRange, Kind, ModelLod, ROOTS_CELL, Technique};
+use treelod_runtime::{DrawRange, Kind, ModelLod, PerTechnique, ROOTS_CELL, Technique};
 
 use crate::draws::DrawInfo;
 use crate::renderer::RenderError;
 use crate::streaming::UNIT;
 
-/// WGSL of the selection: the draw constants it writes, then the two compute entry points.
+/// WGSL of the selection: the draw constants it writes, then the two compute entry points (after
+/// the table of technique tints, [`shader`]).
 const SHADER: &str =
     concat!(include_str!("../../../shaders/shared/draw.wgsl"), include_str!("../../../shaders/select.wgsl"));
+
+/// The selection's WGSL: `TECHNIQUE_TINTS`, each technique's [`DrawInfo::tint`] by
+/// [`Technique::index`], then [`SHADER`].
+fn shader() -> String {
+    let tints: Vec<String> = Technique::ALL.map(|t| format!("{}u", crate::draws::tint(t))).to_vec();
+    let n = Technique::COUNT;
+    format!(
+        "// DrawInfo::tint of each technique by Technique::index (crates/treelod-render/src/draws.rs, `tint`).\n\
+         const TECHNIQUE_COUNT: u32 = {n}u;\nconst TECHNIQUE_TINTS = array<u32, {n}>({});\n{SHADER}",
+        tints.join(", ")
+    )
+}
 
 /// Instances per block: one workgroup of `select_instances`.
 pub const BLOCK_INSTANCES: usize = 64;
@@ -60,8 +88,9 @@ pub const MAX_BLOCKS: usize = 65_535;
 /// Slots a bucket starts with (if its upper bound is not smaller).
 const INITIAL_BUCKET_DRAWS: u32 = 1 << 16;
 
-/// Statistics counters after the bucket counters.
-const STATS: usize = 6;
+/// Statistics counters after the bucket counters: instances visible, far, cells selected, cells
+/// culled, triangles, points, primitives of leaving draws, then primitives per technique.
+const STATS: usize = 7 + Technique::COUNT;
 
 /// Bytes of one indirect draw.
 const INDIRECT_BYTES: u64 = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
@@ -148,6 +177,35 @@ struct CellGpu {
     _pad: [u32; 2],
 }
 
+/// What the selection draws of one instance this frame, indexed by the instance's index in the
+/// renderer's list. WGSL twin: `InstanceDraw` in `shaders/select.wgsl`.
+///
+/// ```text
+/// fade       0: the GPU skips the instance (the CPU draws it, or nothing does);
+///            else the DrawInfo::fade its draws carry: bits 0..16 lo, 16..32 hi of the
+///            transition dither's share [lo, hi) (draws::pack_fade), 0xFFFF0000 = every pixel
+/// technique  Technique::index of the technique the draws count under and are tinted with
+/// ```
+///
+/// `lo == 0` marks the technique the instance is assigned this frame (it counts as a visible
+/// instance); `lo > 0` only the draws of a technique it leaves in a transition (its primitives
+/// count as leaving).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+pub(crate) struct InstanceDrawGpu {
+    pub fade: u32,
+    pub technique: u32,
+}
+
+impl InstanceDrawGpu {
+    /// Skipped by the GPU.
+    pub const SKIP: Self = Self { fade: 0, technique: 0 };
+
+    /// Drawn with the point tree on every pixel: every instance of a frame without a policy.
+    pub const POINT_TREE: Self = Self { fade: 0xFFFF_0000, technique: Technique::Spt.index() as u32 };
+}
+
+const _: () = assert!(size_of::<InstanceDrawGpu>() == 8);
 const _: () = assert!(size_of::<SelectFrameGpu>() == 160);
 const _: () = assert!(size_of::<BlockGpu>() == 32);
 const _: () = assert!(size_of::<InstanceGpu>() == 80);
@@ -163,14 +221,35 @@ fn key(v: f32) -> f32 {
 /// What the counters of a finished frame said.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct GpuCounts {
+    /// Instances visible, of those drawn with their assigned technique (`InstanceDrawGpu`'s
+    /// `lo == 0`).
     pub instances_visible: u32,
     pub instances_far: u32,
     pub cells_visible: u32,
     pub cells_culled: u32,
     pub triangles: u64,
     pub points: u64,
+    /// Primitives of the draws of instances only leaving the point tree (`lo > 0`).
+    pub leaving: u64,
+    /// Primitives per technique the instances' draws count under.
+    pub by_technique: PerTechnique<u64>,
     pub ranges: u32,
     pub dropped: u32,
+}
+
+/// One draw the GPU selection appended, read back ([`crate::Renderer::read_gpu_draws`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuDraw {
+    /// The range, as [`treelod_runtime::select_frame`] lists it, `instance` the index in
+    /// [`crate::Renderer::set_instances`]' list.
+    pub range: DrawRange,
+    /// The technique the draw is tinted with and counted under: the one its tree is drawn with,
+    /// or for a tree leaving the point tree in a transition, the one it leaves
+    /// ([`crate::RecordedDraw::technique`]).
+    pub technique: Technique,
+    /// The share `[lo, hi)` of the transition dither the draw keeps, as the shader unpacks it
+    /// (16-bit unorm): as [`crate::RecordedDraw::dither`] to within 1/65535.
+    pub dither: [f32; 2],
 }
 
 /// A counter read-back in flight.
@@ -208,6 +287,12 @@ pub(crate) struct GpuSelection {
     /// More blocks than one dispatch holds: the CPU selects.
     too_many: bool,
     instances: wgpu::Buffer,
+    /// Per instance of the renderer's list, what the selection draws of it ([`InstanceDrawGpu`]).
+    instance_draws: wgpu::Buffer,
+    /// Instances `instance_draws` holds.
+    instance_draws_len: usize,
+    /// `instance_draws` holds [`InstanceDrawGpu::POINT_TREE`] for every instance.
+    every_instance_point_tree: bool,
     /// Per model, its valid instances.
     per_model: Vec<u32>,
     visible: wgpu::Buffer,
@@ -253,7 +338,7 @@ impl GpuSelection {
     ) -> Result<Self, RenderError> {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("treelod select.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+            source: wgpu::ShaderSource::Wgsl(shader().into()),
         });
         let pipeline = |entry: &str| {
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -261,10 +346,7 @@ impl GpuSelection {
                 layout: None,
                 module: &module,
                 entry_point: Some(entry),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("spt_tint", f64::from(crate::draws::tint(Technique::Spt)))],
-                    ..wgpu::PipelineCompilationOptions::default()
-                },
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
                 cache: None,
             })
         };
@@ -289,6 +371,9 @@ impl GpuSelection {
             block_count: 0,
             too_many: false,
             instances: empty("treelod select instances"),
+            instance_draws: empty("treelod select instance draws"),
+            instance_draws_len: 0,
+            every_instance_point_tree: false,
             per_model: Vec::new(),
             visible: empty("treelod select visible blocks"),
             dispatch: buffer(device, "treelod select dispatch", 16, STORAGE | wgpu::BufferUsages::INDIRECT),
@@ -520,6 +605,15 @@ impl GpuSelection {
             b
         };
         self.instances = upload("treelod select instances", bytemuck::cast_slice(&gpu_instances));
+        self.instance_draws_len = instances.len();
+        self.instance_draws = buffer(
+            device,
+            "treelod select instance draws",
+            (instances.len() * size_of::<InstanceDrawGpu>()) as u64,
+            STORAGE,
+        );
+        self.every_instance_point_tree = false;
+        self.point_tree_everywhere(queue);
         self.blocks = upload("treelod select blocks", bytemuck::cast_slice(&blocks));
         self.visible = buffer(device, "treelod select visible blocks", 8 * blocks.len() as u64, STORAGE);
         self.cull_group = None;
@@ -579,6 +673,26 @@ impl GpuSelection {
         self.select_group = None;
     }
 
+    /// Makes every instance drawn with the point tree on every pixel (a frame without a policy);
+    /// written only when the buffer holds something else.
+    pub fn point_tree_everywhere(&mut self, queue: &wgpu::Queue) {
+        if !self.every_instance_point_tree {
+            let draws = vec![InstanceDrawGpu::POINT_TREE; self.instance_draws_len];
+            queue.write_buffer(&self.instance_draws, 0, bytemuck::cast_slice(&draws));
+            self.every_instance_point_tree = true;
+        }
+    }
+
+    /// Sets what the next [`Self::prepare`] draws of each instance (one per instance of the
+    /// renderer's list, as [`Self::set_instances`] was given it; extra entries are ignored).
+    pub fn set_instance_draws(&mut self, queue: &wgpu::Queue, draws: &[InstanceDrawGpu]) {
+        let n = draws.len().min(self.instance_draws_len);
+        if n > 0 {
+            queue.write_buffer(&self.instance_draws, 0, bytemuck::cast_slice(&draws[..n]));
+        }
+        self.every_instance_point_tree = false;
+    }
+
     /// Makes the render pass's frame bind group (uniform, draws, pool twice) if it is missing.
     pub fn ensure_frame_group(&mut self, device: &wgpu::Device, layout: &wgpu::BindGroupLayout, frame: &wgpu::Buffer) {
         if self.frame_group.is_some() {
@@ -634,6 +748,7 @@ impl GpuSelection {
                     wgpu::BindGroupEntry { binding: 9, resource: self.counters.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 10, resource: self.draws.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 11, resource: self.indirect.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 12, resource: self.instance_draws.as_entire_binding() },
                 ],
             })
         });
@@ -715,6 +830,10 @@ impl GpuSelection {
                 counts.cells_culled = s[3];
                 counts.triangles = u64::from(s[4]);
                 counts.points = u64::from(s[5]);
+                counts.leaving = u64::from(s[6]);
+                for technique in Technique::ALL {
+                    counts.by_technique[technique] = u64::from(s[7 + technique.index()]);
+                }
                 self.last = counts;
             }
         }
@@ -754,12 +873,13 @@ impl GpuSelection {
     }
 
     /// Reads the draws of the last [`Self::prepare`] back, blocking until the GPU is done: the
-    /// ranges as the CPU selection would list them (in bucket order, not the CPU's), for tests
-    /// and tools. Ranges dropped for lack of capacity are missing.
+    /// ranges as the CPU selection would list them (in bucket order, not the CPU's), with the
+    /// technique and dither of each, for tests and tools. Ranges dropped for lack of capacity are
+    /// missing.
     ///
     /// # Errors
     /// [`RenderError::Readback`] if mapping fails.
-    pub fn read_ranges(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<DrawRange>, RenderError> {
+    pub fn read_draws(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<GpuDraw>, RenderError> {
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod select read") });
         let copy = |encoder: &mut wgpu::CommandEncoder, source: &wgpu::Buffer| {
@@ -794,6 +914,8 @@ impl GpuSelection {
         let draws: &[DrawInfo] =
             bytemuck::cast_slice(&draws[..draws.len() / size_of::<DrawInfo>() * size_of::<DrawInfo>()]);
         let indirect: &[[u32; 4]] = bytemuck::cast_slice(&indirect[..indirect.len() / 16 * 16]);
+        let tints = Technique::ALL.map(crate::draws::tint);
+        let unorm = |v: u32| f32::from(u16::try_from(v & 0xFFFF).unwrap_or(u16::MAX)) / 65535.0;
         let mut ranges = Vec::new();
         for (m, model) in self.models_cpu.iter().enumerate() {
             for kind in 0..2 {
@@ -806,7 +928,7 @@ impl GpuSelection {
                         _ if info.cell == ROOTS_CELL => (Kind::Roots, args[2] / 6 - model.roots_at, args[0] / 6),
                         _ => (Kind::Points, args[2] / 6 - model.point_base, args[0] / 6),
                     };
-                    ranges.push(DrawRange {
+                    let range = DrawRange {
                         instance: info.instance,
                         model: u32::try_from(m).unwrap_or(u32::MAX),
                         cell: info.cell,
@@ -816,7 +938,13 @@ impl GpuSelection {
                         tau_points: info.tau_p,
                         tau_triangles: info.tau_t,
                         shading: info.shading,
-                    });
+                    };
+                    let technique = Technique::ALL
+                        .into_iter()
+                        .zip(tints)
+                        .find(|&(_, t)| t == info.tint)
+                        .map_or(Technique::Spt, |p| p.0);
+                    ranges.push(GpuDraw { range, technique, dither: [unorm(info.fade), unorm(info.fade >> 16)] });
                 }
             }
         }

@@ -63,9 +63,11 @@
 //! CPU work per frame. GPU selection keeps every model's triangles and points resident whole
 //! (a model over [`Settings::memory_budget`] is refused with
 //! [`RenderError::GpuSelectionBudget`]) instead of streaming; its [`FrameStats`] counts come from a
-//! read-back one or two frames old ([`FrameStats::gpu_selection`]); frames whose
-//! [`Settings::technique`] is not [`Technique::Spt`], or with [`Settings::shadows`], are still
-//! selected on the CPU.
+//! read-back one or two frames old ([`FrameStats::gpu_selection`]). With the policy
+//! ([`Settings::policy`]) the CPU assigns the trees and selects every technique but the point
+//! tree, and the GPU selects the point tree's trees (a per-instance mask of which, and on which
+//! share of a transition's dither). Frames with [`Settings::shadows`], and frames of a forced
+//! technique other than [`Technique::Spt`], are still selected on the CPU.
 //!
 //! **Impostors.** With [`Technique::Impostors`], a tree whose container has impostor planes (Garcia
 //! et al. 2005, spec §6.10) draws its leaves as those fixed, alpha-tested, depth-writing quads
@@ -120,6 +122,7 @@ mod upload;
 
 pub use camera::Camera;
 pub use draws::RecordedDraw;
+pub use gpu_select::GpuDraw;
 pub use ground::Ground;
 pub use renderer::{Instance, ModelId, RenderError, Renderer};
 pub use settings::{DebugView, DepthConvention, ImpostorBark, Pruning, RendererFormats, Settings, prune_scale};

@@ -17,8 +17,8 @@ use treelod_runtime::{
 
 use crate::assign::PolicyModels;
 use crate::camera::Camera;
-use crate::draws::{DrawInfo, RecordedDraw, View};
-use crate::gpu_select::{GpuSelection, select_frame_gpu};
+use crate::draws::{DrawInfo, EVERY_PIXEL, RecordedDraw, View, pack_fade};
+use crate::gpu_select::{GpuDraw, GpuSelection, InstanceDrawGpu, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
 use crate::pipelines::Pipelines;
 #[cfg(doc)]
@@ -186,6 +186,8 @@ pub struct Renderer {
     gpu_frame: bool,
     /// The instances changed since GPU selection last sorted them into blocks.
     gpu_instances_stale: bool,
+    /// Scratch: per instance, what GPU selection draws of it in a policy frame.
+    gpu_instance_draws: Vec<InstanceDrawGpu>,
     // Scratch reused between frames.
     requests: Vec<Request>,
     uploads: Vec<Upload>,
@@ -336,6 +338,7 @@ impl Renderer {
             gpu: None,
             gpu_frame: false,
             gpu_instances_stale: false,
+            gpu_instance_draws: Vec::new(),
             requests: Vec::new(),
             uploads: Vec::new(),
             wanted: Vec::new(),
@@ -383,9 +386,26 @@ impl Renderer {
     /// selection may ask for is resident); models added later are uploaded when added. Calling
     /// it again re-uploads.
     ///
-    /// The CPU path is still used for frames whose [`Settings::technique`] is not
-    /// [`Technique::Spt`] or with [`Settings::shadows`], and when there are more than about 4.19 M instances
-    /// (`64 × 65535`, one dispatch of instance blocks). Needs a device with
+    /// Which frames it selects:
+    ///
+    /// - **Without a policy** that chooses (no [`Settings::policy`], or no model with calibration
+    ///   tables) and with [`Settings::technique`] the point tree ([`Technique::Spt`]): every tree,
+    ///   with O(models) CPU work.
+    /// - **With the policy**: the CPU assigns every tree a technique as in a CPU frame
+    ///   (hysteresis, occlusion and transitions included), and selects and records the trees of
+    ///   every technique but the point tree; the GPU selects the trees the CPU path draws through
+    ///   the point tree's selection ([`Technique::Spt`], [`Technique::Full`] where the policy
+    ///   chose it, pruned trees handed back), told per instance which, with which technique and
+    ///   on which share of a transition's dither, so trees fading into or out of the point tree
+    ///   fade as on the CPU path. The render pass draws both. The CPU's work is then O(instances)
+    ///   for the assignment, but the point tree's per-cell selection, usually most of a frame's
+    ///   selection, and its streaming are the GPU's. [`FrameStats`] adds the CPU's counts of this
+    ///   frame's other techniques to the GPU's read back from an earlier frame.
+    ///
+    /// Frames with [`Settings::shadows`] (each cascade selects its own trees), frames of another
+    /// forced technique without a policy, with [`Technique::Full`] as [`Settings::technique`]
+    /// (the full mesh's zero thresholds), and more than about 4.19 M instances (`64 × 65535`, one
+    /// dispatch of instance blocks) are selected on the CPU. Needs a device with
     /// [`wgpu::Features::MULTI_DRAW_INDIRECT_COUNT`] for best results; without it every bucket
     /// is drawn at its full capacity with unused slots as empty draws.
     ///
@@ -430,10 +450,36 @@ impl Renderer {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<Option<Vec<DrawRange>>, RenderError> {
+        Ok(self.read_gpu_draws(device, queue)?.map(|draws| draws.into_iter().map(|d| d.range).collect()))
+    }
+
+    /// The draws the GPU selected in the last [`Self::prepare`], read back (this blocks until the
+    /// GPU has finished): [`Self::read_gpu_selection`]'s ranges, each with the technique it is
+    /// tinted with and counted under and the share of the transition dither it keeps (as
+    /// [`RecordedDraw::technique`] and [`RecordedDraw::dither`] of the CPU path's draws). `None`
+    /// if the last frame was selected on the CPU. For tests and tools.
+    ///
+    /// # Errors
+    /// [`RenderError::Readback`] if mapping the buffers fails.
+    pub fn read_gpu_draws(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Option<Vec<GpuDraw>>, RenderError> {
         match &self.gpu {
-            Some(gpu) if self.gpu_frame => gpu.read_ranges(device, queue).map(Some),
+            Some(gpu) if self.gpu_frame => gpu.read_draws(device, queue).map(Some),
             _ => Ok(None),
         }
+    }
+
+    /// Per instance of [`Self::set_instances`]' list, the technique it was drawn with in the last
+    /// frame that assigned techniques: every frame but those GPU selection selects whole (no
+    /// policy, [`Settings::technique`] the point tree), which draw every tree with the point
+    /// tree and leave this as it was. A tree in a transition is listed under the technique it
+    /// goes to.
+    #[must_use]
+    pub fn instance_techniques(&self) -> &[Technique] {
+        &self.drawn_with
     }
 
     /// The largest pool, bytes (the memory budget as capped by the device).
@@ -645,13 +691,22 @@ impl Renderer {
         }
         self.gpu_instances_stale = false;
         self.gpu_frame = false;
-        if technique == Technique::Spt
-            && !self.policy.chooses(settings.policy.as_ref())
-            && self.cascades.is_empty()
-            && let Some(gpu) = self.gpu.as_mut().filter(|g| g.usable())
+        // GPU selection takes the point tree's part of frames without shadows (see
+        // `enable_gpu_selection`): the whole frame without a policy, the trees the policy draws
+        // through the point tree's selection with one.
+        let gpu_usable = self.cascades.is_empty() && self.gpu.as_ref().is_some_and(GpuSelection::usable);
+        let policy_chooses = self.policy.chooses(settings.policy.as_ref());
+        if gpu_usable && policy_chooses && !full_mesh {
+            return self.prepare_hybrid(device, queue, camera, &runtime_camera, &lod_settings);
+        }
+        if gpu_usable
+            && technique == Technique::Spt
+            && !policy_chooses
+            && let Some(gpu) = self.gpu.as_mut()
         {
             // GPU selection: one compute submission writes the draws; nothing per instance here.
             self.main = View::default();
+            gpu.point_tree_everywhere(queue);
             let counts = gpu.prepare(device, queue, select_frame_gpu(&runtime_camera, &lod_settings));
             gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer);
             let pool_bytes = gpu.pool_bytes();
@@ -788,6 +843,13 @@ impl Renderer {
         self.shadow_views = shadow_views;
 
         self.write_frame_uniform(queue, camera);
+        self.upload_draws(device, queue);
+        stats
+    }
+
+    /// Uploads the recorded draw infos and indirect draws of the frame, growing their buffers
+    /// (and the frame bind groups that name the draw infos) as needed.
+    fn upload_draws(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
         let draw_bytes = (self.draw_infos.len().max(1) * size_of::<DrawInfo>()) as u64;
         if draw_bytes > self.draw_buffer.size() {
             self.draw_buffer = storage_buffer(device, "treelod draws", draw_bytes.next_power_of_two(), false);
@@ -805,7 +867,137 @@ impl Renderer {
             let bytes: Vec<u8> = self.indirect.iter().flat_map(|a| a.as_bytes().iter().copied()).collect();
             queue.write_buffer(&self.indirect_buffer, 0, &bytes);
         }
+    }
+
+    /// A frame of the policy with GPU selection ([`Self::enable_gpu_selection`]): the CPU
+    /// assigns the trees ([`Self::assign`], transitions included) and selects and records those of
+    /// every technique but the point tree, as a CPU frame does; the GPU selects the trees the CPU
+    /// would draw through the point tree's selection, told per instance which ones and on which
+    /// share of the transition dither ([`InstanceDrawGpu`]).
+    ///
+    /// - The point tree's trees are the assignment's [`Technique::Full`] and [`Technique::Spt`]
+    ///   lists and those the other techniques hand back ([`point_tree_list`]), drawn on the
+    ///   dither share [`Self::drawn_by`] gives them; of the trees in a transition, those whose
+    ///   leaving view lists them so, on the share of the technique they leave. A tree in both
+    ///   lists (a pruned tree below its height going to the point tree, say) has the same
+    ///   selection in both, so the GPU draws it once on every pixel, under the technique it goes
+    ///   to, where the CPU path draws it twice on complementary pixels: the same image.
+    /// - Nothing the CPU records here is streamed: the other techniques' data is uploaded whole
+    ///   by `add_model`, and the point tree's is resident whole for GPU selection.
+    /// - Statistics: the CPU's counts of this frame's other techniques plus the GPU's of the
+    ///   point tree read back from an earlier frame ([`FrameStats::gpu_selection`]).
+    fn prepare_hybrid(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        camera: &Camera,
+        runtime_camera: &treelod_runtime::Camera,
+        lod_settings: &LodSettings,
+    ) -> FrameStats {
+        self.assign(runtime_camera);
+        let mut draws = std::mem::take(&mut self.gpu_instance_draws);
+        draws.clear();
+        draws.resize(self.instances.len(), InstanceDrawGpu::SKIP);
+        let technique_index = |t: Technique| u32::try_from(t.index()).unwrap_or(0);
+
+        let mut main = std::mem::take(&mut self.main);
+        let assignment = std::mem::take(&mut self.assignment);
+        self.select_techniques_of(&mut main, runtime_camera, lod_settings, true, &assignment);
+        point_tree_list(&assignment, &main, &mut self.spt_list);
+        self.assignment = assignment;
+        for &i in &self.spt_list {
+            let (technique, dither) = self.drawn_by(i, false);
+            if let Some(slot) = draws.get_mut(i as usize) {
+                *slot = InstanceDrawGpu { fade: pack_fade(dither), technique: technique_index(technique) };
+            }
+        }
+        let mut leaving = std::mem::take(&mut self.leaving);
+        let leaving_assignment = std::mem::take(&mut self.leaving_assignment);
+        let fading = !self.transitions.is_empty();
+        if fading {
+            self.select_techniques_of(&mut leaving, runtime_camera, lod_settings, false, &leaving_assignment);
+            point_tree_list(&leaving_assignment, &leaving, &mut self.spt_list);
+            for &i in &self.spt_list {
+                let (technique, dither) = self.drawn_by(i, true);
+                let Some(slot) = draws.get_mut(i as usize) else { continue };
+                *slot = if *slot == InstanceDrawGpu::SKIP {
+                    InstanceDrawGpu { fade: pack_fade(dither), technique: technique_index(technique) }
+                } else {
+                    InstanceDrawGpu { fade: pack_fade(EVERY_PIXEL), ..*slot }
+                };
+            }
+        }
+        self.leaving_assignment = leaving_assignment;
+        // The point tree's ranges are the GPU's: the CPU records none.
+        for view in [&mut main, &mut leaving] {
+            view.selection.clear();
+            view.spt_remapped = false;
+        }
+
+        let Some(gpu) = self.gpu.as_mut() else { unreachable!("prepare_hybrid runs with GPU selection") };
+        gpu.set_instance_draws(queue, &draws);
+        let gpu_counts = gpu.prepare(device, queue, select_frame_gpu(runtime_camera, lod_settings));
+        gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer);
+        let pool_bytes = gpu.pool_bytes();
+        self.gpu_frame = true;
+
+        self.draw_infos.clear();
+        self.indirect.clear();
+        let mut instances = main.draws.visible;
+        instances[Technique::FALLBACK] += gpu_counts.instances_visible;
+        let mut stats = FrameStats {
+            instances_visible: instances.total(),
+            instances,
+            leaves_pruned: main.draws.leaves_pruned,
+            bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
+                + u64::from(self.residency.pool.used()) * UNIT
+                + pool_bytes,
+            transitions: u32::try_from(self.transitions.len()).unwrap_or(u32::MAX),
+            gpu_selection: true,
+            ranges_dropped: gpu_counts.dropped,
+            ..FrameStats::default()
+        };
+        self.record_view(&mut main, fading.then_some(&leaving), false, &mut stats);
+        stats.ranges += gpu_counts.ranges;
+        stats.submitted[Primitive::Triangle] += gpu_counts.triangles;
+        stats.submitted[Primitive::Point] += gpu_counts.points;
+        stats.by_technique += gpu_counts.by_technique;
+        stats.leaving += gpu_counts.leaving;
+        if self.policy_occlusion() {
+            // Every tree drawn is measured: the CPU's recorded ones, and those the GPU draws
+            // that lie in the view (the GPU culls them further; an extra job costs only time).
+            let frustum = treelod_runtime::Frustum::from_view_proj(runtime_camera.view_proj);
+            let mut drawn: Vec<u32> = main.recorded.iter().map(|d| d.instance).collect();
+            for (i, draw) in draws.iter().enumerate() {
+                let Ok(index) = u32::try_from(i) else { break };
+                if *draw != InstanceDrawGpu::SKIP && self.in_view(&frustum, index) {
+                    drawn.push(index);
+                }
+            }
+            drawn.sort_unstable();
+            drawn.dedup();
+            self.occlusion_jobs.clear();
+            for index in drawn {
+                if let Some(job) = self.occlusion_job(index) {
+                    self.occlusion_jobs.push(job);
+                }
+            }
+        }
+        self.gpu_instance_draws = draws;
+        self.main = main;
+        self.leaving = leaving;
+        self.write_frame_uniform(queue, camera);
+        self.upload_draws(device, queue);
         stats
+    }
+
+    /// Whether instance `index`'s culling sphere meets `frustum`.
+    fn in_view(&self, frustum: &treelod_runtime::Frustum, index: u32) -> bool {
+        let Some(instance) = self.instances.get(index as usize) else { return false };
+        let Some(lod) = self.lods.get(instance.model as usize) else { return false };
+        let (centre, radius) = lod.cull_sphere();
+        let transform = instance.transform;
+        frustum.intersects_sphere(transform.transform_point3(centre), radius * max_axis_scale(transform))
     }
 
     /// Selects one view (its lists cleared first): each technique's runtime selection over the
@@ -826,6 +1018,38 @@ impl Renderer {
         assignment: &Assignment,
         full_mesh: bool,
     ) -> ViewCounts {
+        self.select_techniques_of(view, camera, lod_settings, main, assignment);
+        // The point tree: over every instance where all are its (no remapping), else over its own.
+        point_tree_list(assignment, view, &mut self.spt_list);
+        view.spt_remapped = self.spt_list.len() != self.instances.len();
+        view.spt_instances.clear();
+        view.spt_map.clear();
+        if view.spt_remapped {
+            view.spt_instances.extend(self.spt_list.iter().map(|&i| self.instances[i as usize]));
+            view.spt_map.extend_from_slice(&self.spt_list);
+        }
+        let spt_instances = if view.spt_remapped { &view.spt_instances } else { &self.instances };
+        let selected = select_frame(&self.lods, spt_instances, camera, lod_settings, &mut view.selection);
+        // The full mesh is selected as the point tree with zero thresholds: its trees are drawn
+        // as the full mesh; every other technique's fallback is the point tree.
+        let rest = if full_mesh { Technique::Full } else { Technique::FALLBACK };
+        let mut counts = ViewCounts { instances: view.draws.visible, leaves_pruned: view.draws.leaves_pruned };
+        *counts.instances.get_mut(rest) += selected.instances_visible;
+        counts
+    }
+
+    /// The part of [`Self::select_view`] before the point tree: `view`'s draws cleared, then each
+    /// technique's runtime selection but the point tree's over the trees `assignment` gives it
+    /// ([`select_techniques`], which lists the trees they hand back to the point tree), and, for
+    /// the camera's view (`main`), the pruned trees to measure for occlusion.
+    fn select_techniques_of(
+        &mut self,
+        view: &mut View,
+        camera: &treelod_runtime::Camera,
+        lod_settings: &LodSettings,
+        main: bool,
+        assignment: &Assignment,
+    ) {
         let settings = self.settings;
         view.draws.clear();
         let scene = Scene { lods: &self.lods, models: &self.representations, instances: &self.instances };
@@ -850,24 +1074,6 @@ impl Renderer {
                 }
             }
         }
-        // The point tree: over every instance where all are its (no remapping), else over its own.
-        let (full, spt) = (&assignment[Technique::Full], &assignment[Technique::Spt]);
-        merge_ascending(&[full, spt, &view.draws.point_tree], &mut self.spt_list);
-        view.spt_remapped = self.spt_list.len() != self.instances.len();
-        view.spt_instances.clear();
-        view.spt_map.clear();
-        if view.spt_remapped {
-            view.spt_instances.extend(self.spt_list.iter().map(|&i| self.instances[i as usize]));
-            view.spt_map.extend_from_slice(&self.spt_list);
-        }
-        let spt_instances = if view.spt_remapped { &view.spt_instances } else { &self.instances };
-        let selected = select_frame(&self.lods, spt_instances, camera, lod_settings, &mut view.selection);
-        // The full mesh is selected as the point tree with zero thresholds: its trees are drawn
-        // as the full mesh; every other technique's fallback is the point tree.
-        let rest = if full_mesh { Technique::Full } else { Technique::FALLBACK };
-        let mut counts = ViewCounts { instances: view.draws.visible, leaves_pruned: view.draws.leaves_pruned };
-        *counts.instances.get_mut(rest) += selected.instances_visible;
-        counts
     }
 
     /// Adds the prefixes `view`'s selection needs to this frame's requests (`wanted` holds the
@@ -1007,6 +1213,13 @@ impl Renderer {
         {
             let group = |m: usize| self.models.get(m).map(|model| &model.bind_group);
             pass.set_bind_group(2, &self.shadow_maps.bind_group, &[]);
+            if !self.main.model_draws.is_empty() {
+                // A policy frame: the other techniques' draws, recorded on the CPU. Drawn before
+                // the GPU's buckets: on lavapipe, draws recorded after a `multi_draw_indirect_count`
+                // whose count was 0 (the GPU drew no tree) did not show.
+                pass.set_bind_group(0, &self.frame_bind_groups[0], &[]);
+                self.draw_view(pass, &self.main, &self.pipelines);
+            }
             let spt = [&self.pipelines[Bucket::Triangles as usize], &self.pipelines[Bucket::Points as usize]];
             gpu.render(pass, spt, group);
             return;
@@ -1067,6 +1280,14 @@ impl Renderer {
     pub fn shadow_bind_group(&self) -> &wgpu::BindGroup {
         &self.shadow_maps.bind_group
     }
+}
+
+/// The trees a view draws through the point tree's selection ([`select_frame`]), ascending into
+/// `out`: `assignment`'s full-mesh and point-tree trees and those `view`'s other techniques handed
+/// back ([`treelod_runtime::TreeDraws::point_tree`]: pruned trees below their height).
+fn point_tree_list(assignment: &Assignment, view: &View, out: &mut Vec<u32>) {
+    let (full, spt) = (&assignment[Technique::Full], &assignment[Technique::Spt]);
+    merge_ascending(&[full, spt, &view.draws.point_tree], out);
 }
 
 /// The axis-aligned bounds of the box `min..max` transformed by `transform`; an empty or

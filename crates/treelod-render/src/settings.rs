@@ -115,9 +115,10 @@ pub struct Settings {
     /// mesh ([`Technique::Full`]: every triangle and no point, for comparison). A tree whose
     /// container lacks the technique's data ([`Technique::held_by`]) is drawn with the
     /// sequential point tree ([`Technique::FALLBACK`]); [`FrameStats::instances`] counts each
-    /// tree under the technique it was drawn with. Default: [`Technique::Spt`]. Selected on the
-    /// GPU ([`Renderer::enable_gpu_selection`]) for [`Technique::Spt`] only, and only when the
-    /// policy chooses no tree; every other frame selects on the CPU.
+    /// tree under the technique it was drawn with. Default: [`Technique::Spt`]. GPU selection
+    /// ([`Renderer::enable_gpu_selection`]) selects the point tree's trees: every tree of a frame
+    /// of [`Technique::Spt`] when the policy chooses none, the point tree's share of a policy
+    /// frame; a frame without a policy of any other technique selects on the CPU.
     pub technique: Technique,
     /// The policy (`treelod_runtime::policy`, spec §10.2): each tree whose container has
     /// calibration tables (spec §6.15; `treelod build` writes them whenever it builds a

@@ -46,12 +46,19 @@ pub struct FrameStats {
     pub bytes_uploaded: u64,
     /// Leaves drawn by pruned instances (their triangles count in [`Self::submitted`]).
     pub leaves_pruned: u64,
-    /// Whether this frame was selected on the GPU ([`Renderer::enable_gpu_selection`]). Then
-    /// [`Self::instances_visible`], [`Self::ranges`], the triangles and points of
-    /// [`Self::submitted`] and [`Self::by_technique`], and [`Self::ranges_dropped`] are those of
-    /// the latest earlier frame whose counters have been read back (without waiting: usually one
-    /// or two frames old, zero before the first), [`Self::bytes_resident`] is current, and the
-    /// other fields are zero.
+    /// Whether this frame's point tree was selected on the GPU ([`Renderer::enable_gpu_selection`]).
+    /// Then what the GPU selected — the visible instances it drew with their assigned technique
+    /// (counted in [`Self::instances`] under the point tree, as the CPU path counts them), its
+    /// ranges, triangles and points in [`Self::submitted`] and [`Self::by_technique`] (under the
+    /// technique each tree is drawn with), the primitives of trees only leaving the point tree
+    /// in a transition in [`Self::leaving`], and [`Self::ranges_dropped`] — are those of the
+    /// latest earlier frame whose counters have been read back (without waiting: usually one or
+    /// two frames old, zero before the first). In a policy frame the counts of the other
+    /// techniques, selected on the CPU, are this frame's and are added to them, as are
+    /// [`Self::transitions`] and [`Self::leaves_pruned`]; [`Self::bytes_resident`] is current;
+    /// nothing is streamed ([`Self::bytes_uploaded`] and [`Self::ranges_clamped`] are zero). A
+    /// tree both entering and leaving the point tree's selection in a transition is one GPU draw
+    /// on every pixel, where the CPU path counts two draws and their primitives twice.
     pub gpu_selection: bool,
     /// GPU selection: ranges selected but not drawn because their bucket was full (the buckets
     /// grow for later frames once the counters are read back).

@@ -72,9 +72,11 @@ pub struct Args {
     /// forests on a software rasteriser).
     #[arg(long, conflicts_with = "quality")]
     pub no_render: bool,
-    /// Select `spt` on the GPU (compute shaders write the draws: `Renderer::enable_gpu_selection`,
-    /// every model resident whole); its counts are then those of a frame read back one or two
-    /// frames earlier, and its selection time is that of `prepare` submitting the compute work.
+    /// Select the point tree on the GPU for `spt` and `policy` (compute shaders write the draws:
+    /// `Renderer::enable_gpu_selection`, every model resident whole; with `policy` the CPU still
+    /// chooses every tree's technique and selects the other techniques' trees); the GPU's counts
+    /// are then those of a frame read back one or two frames earlier, and the selection time is
+    /// that of `prepare`'s CPU work and submitting the compute work.
     #[arg(long)]
     pub gpu_selection: bool,
     /// Cast shadows: every technique the renderer flies also selects and draws three 2048²

@@ -73,8 +73,9 @@ pub struct Args {
     #[command(flatten)]
     pub ellipsoid: EllipsoidArgs,
     /// Select on the GPU (compute shaders write the indirect draws; every model is kept resident
-    /// whole). Techniques other than `spt`, shadows and the full mesh (`--compare`'s right half)
-    /// select on the CPU.
+    /// whole): every tree with `spt`, the trees drawn with the point tree with the policy (the
+    /// CPU chooses and selects the others). Other forced techniques, shadows and the full mesh
+    /// (`--compare`'s right half) select on the CPU.
     #[arg(long)]
     pub gpu_selection: bool,
 }

@@ -85,7 +85,8 @@ pub struct Options {
     pub policy: Policy,
     /// Draw images (else select and stream only: no GPU time, no quality).
     pub render: bool,
-    /// Select `spt` on the GPU (`Renderer::enable_gpu_selection`).
+    /// Select the point tree on the GPU (`Renderer::enable_gpu_selection`) for `spt` and
+    /// `policy` (whose other techniques the CPU selects).
     pub gpu_selection: bool,
     /// Cast shadows (`Settings::shadows`, the defaults) with every technique the renderer flies.
     pub shadows: bool,
@@ -507,7 +508,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
             }
         }
         renderer.set_instances(&instances);
-        // The policy's frames select on the GPU where it chooses no tree (no calibration tables).
+        // `spt` selects every tree on the GPU; the policy the trees it draws with the point tree.
         if options.gpu_selection
             && matches!(technique, Some(TechniqueName::Technique(Technique::Spt) | TechniqueName::Policy))
         {

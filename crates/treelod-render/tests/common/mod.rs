@@ -3,6 +3,7 @@
 
 #![allow(dead_code, reason = "each test file uses part of it")]
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3};
@@ -14,6 +15,7 @@ use treelod_format::{
 };
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, DrawSource, FrameStats, Instance, Renderer, Settings};
+use treelod_runtime::{DrawRange, Kind, ModelLod};
 
 /// White: a pixel of another colour is covered.
 pub const BACKGROUND: wgpu::Color = wgpu::Color { r: 1.0, g: 1.0, b: 1.0, a: 1.0 };
@@ -266,4 +268,91 @@ pub fn keep(image: &Image, name: &str) {
         ppm.extend(image.rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]));
         std::fs::write(std::path::Path::new(&dir).join(format!("{name}.ppm")), ppm).expect("writes");
     }
+}
+
+// GPU selection against the CPU's (gpu_select.rs, gpu_policy.rs).
+
+/// The relative distance from a threshold within which `f32` rounding may put a key on the other
+/// side.
+pub const ROUNDING: f32 = 1e-5;
+
+/// One range per (instance, cell, kind), a roots range spread over the cells it stands for.
+pub type Key = (u32, u32, Kind);
+/// First, count, τ_p, τ_t, and whether it came from a roots range.
+pub type Entry = (u32, u32, f32, f32, bool);
+
+pub fn by_cell(ranges: &[DrawRange], lod: &ModelLod) -> BTreeMap<Key, Entry> {
+    let mut map = BTreeMap::new();
+    for r in ranges {
+        if r.kind == Kind::Roots {
+            assert_eq!(r.count as usize, lod.roots().len(), "{r:?}");
+            for cell in lod.cells().iter().filter(|c| c.root_count() > 0) {
+                let entry = (cell.points().first, cell.root_count(), r.tau_points, r.tau_triangles, true);
+                assert!(map.insert((r.instance, cell.index(), Kind::Points), entry).is_none(), "{r:?}");
+            }
+        } else {
+            let entry = (r.first, r.count, r.tau_points, r.tau_triangles, false);
+            assert!(map.insert((r.instance, r.cell, r.kind), entry).is_none(), "two ranges for one cell: {r:?}");
+        }
+    }
+    map
+}
+
+/// Asserts that the GPU's ranges are the CPU's: the same (instance, cell, kind, first, count),
+/// except where every element between the two counts has its key (triangle size, point `hi`)
+/// within [`ROUNDING`] of the threshold. Returns how many ranges differed that way.
+pub fn assert_same_selection(what: &str, cpu: &[DrawRange], gpu: &[DrawRange], lod: &ModelLod) -> usize {
+    let (a, b) = (by_cell(cpu, lod), by_cell(gpu, lod));
+    let roots = |ranges: &[DrawRange]| -> BTreeSet<u32> {
+        ranges.iter().filter(|r| r.kind == Kind::Roots).map(|r| r.instance).collect()
+    };
+    let cells: BTreeMap<u32, &treelod_runtime::CellLod> = lod.cells().iter().map(|c| (c.index(), c)).collect();
+    let mut tolerated = 0;
+    for key in a.keys().chain(b.keys()).collect::<BTreeSet<_>>() {
+        let (x, y) = (a.get(key), b.get(key));
+        if let (Some(x), Some(y)) = (x, y) {
+            assert_eq!(x.0, y.0, "{what}: {key:?}: first differs: cpu {x:?}, gpu {y:?}");
+            if !x.4 && !y.4 {
+                for (s, t) in [(x.2, y.2), (x.3, y.3)] {
+                    assert!((s - t).abs() <= ROUNDING * s.abs().max(t.abs()), "{what}: {key:?}: cpu {x:?}, gpu {y:?}");
+                }
+            }
+            if x.1 == y.1 {
+                continue;
+            }
+        }
+        // Counts differ: only keys at the threshold may lie between them.
+        let count = |e: Option<&Entry>| e.map_or(0, |e| e.1) as usize;
+        let (lo, hi) = (count(x).min(count(y)), count(x).max(count(y)));
+        let cell = cells.get(&key.1).unwrap_or_else(|| panic!("{what}: {key:?}: no such cell"));
+        let keys = match key.2 {
+            Kind::Triangles => lod.triangle_sizes(cell),
+            _ => lod.point_hi(cell),
+        };
+        let taus: Vec<f32> =
+            [x, y].into_iter().flatten().map(|e| if key.2 == Kind::Triangles { e.3 } else { e.2 }).collect();
+        for &k in &keys[lo..hi] {
+            assert!(
+                taus.iter().any(|&tau| (k - tau).abs() <= ROUNDING * tau.abs()),
+                "{what}: {key:?}: cpu {x:?}, gpu {y:?}: key {k} is not at a threshold {taus:?}"
+            );
+        }
+        tolerated += 1;
+    }
+    if tolerated == 0 {
+        assert_eq!(roots(cpu), roots(gpu), "{what}: roots ranges");
+    }
+    tolerated
+}
+
+/// Pixels of `a` and `b` that differ by more than 48 in a channel, and pixels covered in either.
+pub fn differing(a: &Image, b: &Image) -> (usize, usize) {
+    let covered = |p: &[u8]| p[0] < 250 || p[1] < 250 || p[2] < 250;
+    let mut diff = 0;
+    let mut any = 0;
+    for (p, q) in a.rgba.chunks_exact(4).zip(b.rgba.chunks_exact(4)) {
+        any += usize::from(covered(p) || covered(q));
+        diff += usize::from(p.iter().zip(q).any(|(x, y)| x.abs_diff(*y) > 48));
+    }
+    (diff, any)
 }

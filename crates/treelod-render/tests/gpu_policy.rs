@@ -1,0 +1,323 @@
+//! GPU selection with the policy on the Vulkan backend (Mesa lavapipe in CI): in a forest of a
+//! calibrated container, the CPU assigns the trees and draws every technique but the point tree,
+//! the GPU selects the point tree's trees and nothing else, on the same share of the transition
+//! dither as the CPU path, and the image is the CPU path's.
+
+mod common;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+
+use common::{BACKGROUND, assert_same_selection, demo_built, differing};
+use glam::{Mat4, Vec3, vec3};
+use treelod_build::{BuildConfig, CalibrationConfig, ImpostorConfig, LodChainConfig};
+use treelod_format::Container;
+use treelod_render::offscreen::{Gpu, render_image};
+use treelod_render::{Camera, DrawSource, GpuDraw, Instance, Policy, Renderer, Settings, Technique};
+use treelod_runtime::{DrawRange, ModelLod};
+
+/// The adapter, with the count feature the GPU selection tests expect of lavapipe.
+fn gpu() -> Gpu {
+    let gpu = common::gpu();
+    assert!(gpu.device.features().contains(wgpu::Features::MULTI_DRAW_INDIRECT_COUNT));
+    gpu
+}
+
+/// The demo tree with impostors, its baselines and calibration (as `policy.rs` builds it).
+fn calibrated_demo() -> Arc<Container> {
+    demo_built(&BuildConfig {
+        impostors: Some(ImpostorConfig::default()),
+        baselines: Some(LodChainConfig::default()),
+        calibration: Some(CalibrationConfig { views: 1, supersample: 2 }),
+        ..BuildConfig::default()
+    })
+}
+
+/// 48 trees: 8 rows from 6 m to about 250 m ahead, 6 across each, spread with the distance so
+/// that each row spans the view; from a few pixels to most of the screen.
+fn positions(lod: &ModelLod) -> Vec<Vec3> {
+    let centre = lod.centre();
+    let mut positions = Vec::new();
+    for row in 0..8 {
+        let d = 6.0 * 1.7f32.powi(row);
+        for column in 0..6 {
+            let x = (column as f32 - 2.5) * 0.16 * d + if row % 2 == 0 { 0.0 } else { 0.05 * d };
+            positions.push(vec3(x, -centre.y, -d) - vec3(centre.x, 0.0, centre.z));
+        }
+    }
+    positions
+}
+
+/// A renderer of `container` at `positions`, selecting on the GPU if `on_gpu`.
+fn renderer(gpu: &Gpu, container: &Arc<Container>, settings: Settings, positions: &[Vec3], on_gpu: bool) -> Renderer {
+    // Everything streams in the first frame, so the CPU path draws its selection unclamped.
+    let settings = Settings { upload_budget: 1 << 30, ..settings };
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), settings);
+    let model = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(container)).expect("model");
+    if on_gpu {
+        renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("fits");
+    }
+    let instances: Vec<Instance> =
+        positions.iter().map(|&p| Instance { model, transform: Mat4::from_translation(p) }).collect();
+    renderer.set_instances(&instances);
+    renderer
+}
+
+/// The techniques drawn through the point tree's selection (no pruning in these containers).
+fn point_tree(technique: Technique) -> bool {
+    matches!(technique, Technique::Spt | Technique::Full)
+}
+
+/// The CPU path's point-tree ranges with the instance indices of the renderer's list: the
+/// selection runs over the point tree's trees in ascending order (all of them: no remapping).
+fn cpu_point_tree_ranges(cpu: &Renderer) -> Vec<DrawRange> {
+    let list: Vec<u32> =
+        (0u32..).zip(cpu.instance_techniques()).filter(|&(_, &t)| point_tree(t)).map(|(i, _)| i).collect();
+    cpu.selection().ranges().iter().map(|r| DrawRange { instance: list[r.instance as usize], ..*r }).collect()
+}
+
+fn gpu_draws(gpu: &Gpu, renderer: &Renderer) -> Vec<GpuDraw> {
+    renderer.read_gpu_draws(&gpu.device, &gpu.queue).expect("reads back").expect("the GPU selected")
+}
+
+/// With the policy, the hybrid frame assigns the trees as the CPU frame does, the GPU selects
+/// exactly the CPU's point-tree ranges (as sets, up to rounding at thresholds) and no range of a
+/// tree assigned another technique, the CPU records the other techniques' draws, the image is
+/// the CPU path's, and the statistics, once the GPU's counts are read back, are the CPU's.
+#[test]
+fn policy_frames_select_the_point_tree_s_trees_on_the_gpu() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let lod = ModelLod::from_container(&container);
+    let positions = positions(&lod);
+    // No transition, no occlusion: the frames repeat (the GPU's counts arrive a frame or two
+    // later).
+    let policy = Policy { transition: 0, occlusion: false, ..Policy::default() };
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    let mut cpu = renderer(&gpu, &container, settings, &positions, false);
+    let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+    let cameras = [
+        ("ahead", Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 256, 256)),
+        ("above", Camera::look_at(vec3(-20.0, 40.0, 30.0), vec3(5.0, 0.0, -120.0), 0.9, 256, 256)),
+    ];
+    let mut others_seen = BTreeSet::new();
+    for (name, camera) in cameras {
+        let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+        let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+        assert!(!cpu_stats.gpu_selection && stats.gpu_selection, "{name}: {stats:?}");
+        assert_eq!(cpu_stats.ranges_clamped, 0, "{name}: everything streamed");
+        let techniques = cpu.instance_techniques().to_vec();
+        assert_eq!(hybrid.instance_techniques(), techniques, "{name}: the same assignment");
+        eprintln!("{name}: {:?}", cpu_stats.instances);
+
+        // The GPU's ranges are the CPU's point-tree ranges, of exactly the point tree's trees.
+        let draws = gpu_draws(&gpu, &hybrid);
+        let ranges: Vec<DrawRange> = draws.iter().map(|d| d.range).collect();
+        let reference = cpu_point_tree_ranges(&cpu);
+        assert!(!reference.is_empty(), "{name}: some tree is drawn with the point tree");
+        let tolerated = assert_same_selection(name, &reference, &ranges, &lod);
+        assert!(tolerated * 100 <= reference.len(), "{name}: {tolerated} ranges at a threshold");
+        let on_gpu: BTreeSet<u32> = ranges.iter().map(|r| r.instance).collect();
+        let in_cpu: BTreeSet<u32> = reference.iter().map(|r| r.instance).collect();
+        assert_eq!(on_gpu, in_cpu, "{name}: the trees the GPU draws");
+        for d in &draws {
+            let t = techniques[d.range.instance as usize];
+            assert!(point_tree(t), "{name}: the GPU drew tree {} assigned {t}: {d:?}", d.range.instance);
+            assert_eq!((d.technique, d.dither), (t, [0.0, 1.0]), "{name}: {d:?}");
+        }
+        // The other techniques are the CPU's draws, the same in both paths.
+        let others = |r: &Renderer| -> Vec<_> {
+            r.draws().iter().map(|d| (d.instance, d.source, d.count, d.technique, d.tau_points)).collect()
+        };
+        assert_eq!(others(&hybrid), others(&cpu).into_iter().filter(|d| !point_tree(d.3)).collect::<Vec<_>>());
+        assert!(hybrid.draws().iter().all(|d| !matches!(d.source, DrawSource::Points | DrawSource::Roots)));
+        others_seen.extend(hybrid.draws().iter().map(|d| d.technique));
+
+        let (diff, covered) = differing(&a, &b);
+        common::keep(&a, &format!("gpu-policy-{name}-cpu"));
+        common::keep(&b, &format!("gpu-policy-{name}-hybrid"));
+        eprintln!("{name}: {diff} of {covered} covered pixels differ, {tolerated} ranges at a threshold");
+        assert!(covered > 500, "{name}: the forest is in view");
+        assert!(diff * 200 <= covered, "{name}: {diff} of {covered} pixels differ");
+
+        // The same frame again, until the GPU's counts of it are read back: the CPU's.
+        let mut again = stats;
+        for _ in 0..10 {
+            gpu.device.poll(wgpu::PollType::wait_indefinitely()).expect("polls");
+            again = hybrid.prepare(&gpu.device, &gpu.queue, &camera);
+            if again.instances_visible == cpu_stats.instances_visible {
+                break;
+            }
+        }
+        assert_eq!(hybrid.instance_techniques(), techniques, "{name}: the assignment holds");
+        assert_eq!(again.instances, cpu_stats.instances, "{name}: {again:?}");
+        assert_eq!(again.leaving, 0);
+        if tolerated == 0 {
+            assert_eq!(again.submitted, cpu_stats.submitted, "{name}");
+            assert_eq!(again.by_technique, cpu_stats.by_technique, "{name}");
+            assert_eq!(again.ranges, cpu_stats.ranges, "{name}");
+        }
+    }
+    assert!(others_seen.iter().any(|&t| !point_tree(t)), "the CPU drew other techniques: {others_seen:?}");
+}
+
+/// A tree the policy draws with another technique, alone: the GPU draws nothing (its buckets'
+/// counts are 0) and the CPU's draws still show, as in the CPU path's image.
+#[test]
+fn a_frame_the_gpu_draws_nothing_of_shows_the_cpu_s_draws() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let lod = ModelLod::from_container(&container);
+    let positions = positions(&lod);
+    let camera = Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 128, 128);
+    let mut forest = renderer(&gpu, &container, Settings::default(), &positions, false);
+    forest.prepare(&gpu.device, &gpu.queue, &camera);
+    let (i, technique) = forest
+        .instance_techniques()
+        .iter()
+        .enumerate()
+        .find(|&(i, &t)| !point_tree(t) && i >= 6)
+        .map(|(i, &t)| (i, t))
+        .expect("a tree drawn with another technique");
+    let one = [positions[i]];
+    let mut cpu = renderer(&gpu, &container, Settings::default(), &one, false);
+    let mut hybrid = renderer(&gpu, &container, Settings::default(), &one, true);
+    let (a, _) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+    let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+    assert!(stats.gpu_selection && hybrid.instance_techniques() == [technique], "{stats:?}");
+    assert!(gpu_draws(&gpu, &hybrid).is_empty(), "the GPU draws nothing");
+    let (diff, covered) = differing(&a, &b);
+    assert!(covered > 50, "tree {i} ({technique}) is drawn: {covered} pixels");
+    assert_eq!(diff, 0, "tree {i} ({technique}): {diff} of {covered} pixels differ");
+}
+
+/// Per instance, the (technique, dither) of its point-tree draws.
+type Fades = BTreeMap<u32, BTreeSet<(Technique, [u32; 2])>>;
+
+/// A dither range in 1/65535ths, as the shader holds it.
+fn unorm([lo, hi]: [f32; 2]) -> [u32; 2] {
+    [(lo * 65535.0).round() as u32, (hi * 65535.0).round() as u32]
+}
+
+/// The camera flies into the forest with transitions of 4 frames: the point-tree draws of the
+/// trees in a transition into or out of the point tree carry the same technique and share of
+/// the dither on the GPU as on the CPU (a tree both entering and leaving the point tree, from the
+/// full mesh to the point tree say, is drawn once on every pixel), and the images match.
+#[test]
+fn trees_fading_into_and_out_of_the_point_tree_fade_on_the_gpu_as_on_the_cpu() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let lod = ModelLod::from_container(&container);
+    let positions = positions(&lod);
+    let policy = Policy { hysteresis: 0.0, transition: 4, occlusion: false, ..Policy::default() };
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    let mut cpu = renderer(&gpu, &container, settings, &positions, false);
+    let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+    let (mut fading_in, mut fading_out, mut max_diff) = (0, 0, 0.0f64);
+    for frame in 0..16 {
+        let z = 10.0 - 6.0 * frame as f32;
+        let camera = Camera::look_at(vec3(1.0, 2.0, z), vec3(1.0, 2.0, z - 100.0), 0.9, 192, 192);
+        let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+        let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+        assert_eq!(stats.transitions, cpu_stats.transitions, "frame {frame}");
+        assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "frame {frame}");
+
+        let mut expected = Fades::new();
+        for d in cpu.draws() {
+            if matches!(d.source, DrawSource::Triangles | DrawSource::Points | DrawSource::Roots) {
+                expected.entry(d.instance).or_default().insert((d.technique, unorm(d.dither)));
+            }
+        }
+        for (&i, set) in &mut expected {
+            // Entering and leaving the point tree's selection: one draw on every pixel.
+            if set.len() > 1 {
+                let mut shares: Vec<[u32; 2]> = set.iter().map(|s| s.1).collect();
+                shares.sort_unstable();
+                assert!(shares.len() == 2 && shares[0][1] == shares[1][0], "frame {frame}, tree {i}: {set:?}");
+                let goes_to = cpu.instance_techniques()[i as usize];
+                *set = BTreeSet::from([(goes_to, [0, 65535])]);
+            }
+            let &(technique, share) = set.iter().next().expect("one");
+            if share != [0, 65535] {
+                if share[0] == 0 {
+                    fading_in += 1;
+                } else {
+                    fading_out += 1;
+                    assert!(!point_tree(cpu.instance_techniques()[i as usize]), "{technique}");
+                }
+            }
+        }
+        let mut got = Fades::new();
+        for d in gpu_draws(&gpu, &hybrid) {
+            got.entry(d.range.instance).or_default().insert((d.technique, unorm(d.dither)));
+        }
+        assert_eq!(got, expected, "frame {frame}: the point tree's trees, techniques and dither shares");
+
+        let (diff, covered) = differing(&a, &b);
+        max_diff = max_diff.max(diff as f64 / covered.max(1) as f64);
+        assert!(diff * 100 <= covered, "frame {frame}: {diff} of {covered} pixels differ");
+    }
+    eprintln!("{fading_in} point-tree draws fading in, {fading_out} fading out, pixels differing ≤ {max_diff}");
+    assert!(fading_in > 0 && fading_out > 0, "the flight has trees fading into and out of the point tree");
+}
+
+/// With the policy's occlusion (the default), the trees the GPU draws are measured as the CPU
+/// path measures them: after a few frames every tree has the CPU path's visible fraction and
+/// technique, some of the point tree's trees partly hidden.
+#[test]
+fn the_gpu_s_trees_are_measured_for_occlusion() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let lod = ModelLod::from_container(&container);
+    let positions = positions(&lod);
+    assert!(Settings::default().policy.is_some_and(|p| p.occlusion), "the default");
+    let mut cpu = renderer(&gpu, &container, Settings::default(), &positions, false);
+    let mut hybrid = renderer(&gpu, &container, Settings::default(), &positions, true);
+    let camera = Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 192, 192);
+    for _ in 0..4 {
+        render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+        render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+    }
+    let (a, b) = (cpu.visible_fractions(), hybrid.visible_fractions());
+    let techniques = cpu.instance_techniques();
+    let hidden_point_trees = (0..a.len()).filter(|&i| point_tree(techniques[i]) && a[i] < 0.9).count();
+    eprintln!("{hidden_point_trees} point-tree trees partly hidden: {a:?}");
+    assert!(hidden_point_trees > 0, "some tree the GPU draws is partly hidden");
+    for i in 0..a.len() {
+        assert!((a[i] - b[i]).abs() < 0.05, "tree {i} ({}): cpu {}, hybrid {}", techniques[i], a[i], b[i]);
+    }
+    assert_eq!(hybrid.instance_techniques(), techniques);
+}
+
+/// Without a policy (the point tree forced) GPU selection selects every tree as before: the CPU
+/// records nothing, every GPU draw covers every pixel under the point tree; a policy frame in
+/// between does not leave its per-instance draws behind.
+#[test]
+fn frames_without_a_policy_select_every_tree_on_the_gpu() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let lod = ModelLod::from_container(&container);
+    let positions = positions(&lod);
+    let camera = Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 128, 128);
+    let forced = Settings::forced(Technique::Spt);
+    let mut cpu = renderer(&gpu, &container, forced, &positions, false);
+    let mut hybrid = renderer(&gpu, &container, forced, &positions, true);
+    let check = |hybrid: &mut Renderer, cpu: &mut Renderer, what: &str| {
+        cpu.prepare(&gpu.device, &gpu.queue, &camera);
+        let stats = hybrid.prepare(&gpu.device, &gpu.queue, &camera);
+        assert!(stats.gpu_selection && hybrid.draws().is_empty(), "{what}: {stats:?}");
+        let draws = gpu_draws(&gpu, hybrid);
+        assert!(draws.iter().all(|d| d.technique == Technique::Spt && d.dither == [0.0, 1.0]), "{what}");
+        let ranges: Vec<DrawRange> = draws.iter().map(|d| d.range).collect();
+        assert_same_selection(what, cpu.selection().ranges(), &ranges, &lod);
+        ranges.iter().map(|r| r.instance).collect::<BTreeSet<u32>>().len()
+    };
+    let all = check(&mut hybrid, &mut cpu, "forced");
+    // A policy frame draws fewer trees on the GPU; forced again, every tree is back.
+    hybrid.settings_mut().policy = Some(Policy::default());
+    hybrid.prepare(&gpu.device, &gpu.queue, &camera);
+    let policy_trees = gpu_draws(&gpu, &hybrid).iter().map(|d| d.range.instance).collect::<BTreeSet<u32>>().len();
+    assert!(policy_trees < all, "the policy draws some trees with other techniques ({policy_trees} of {all})");
+    hybrid.settings_mut().policy = None;
+    assert_eq!(check(&mut hybrid, &mut cpu, "forced again"), all);
+}
