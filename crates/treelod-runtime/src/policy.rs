@@ -624,6 +624,29 @@ impl Calibration {
     }
 }
 
+/// Where `height` falls on a table of choices whose step 0 is at `log2_min` (`log2` of the
+/// smallest calibrated height), fractional, [`STEPS_PER_OCTAVE`] steps per octave.
+fn step_of(log2_min: f32, height: f32) -> f32 {
+    (height.max(f32::MIN_POSITIVE).log2() - log2_min) * STEPS_PER_OCTAVE
+}
+
+/// The hysteresis of a table of choices read at step `x` by `at` (module docs): `previous`
+/// (last frame's choice) where it is the choice within `hysteresis_steps` steps either side of
+/// `x`, else the choice at `x`.
+fn held<T: Copy + PartialEq>(at: impl Fn(f32) -> T, x: f32, hysteresis_steps: usize, previous: Option<T>) -> T {
+    let now = at(x);
+    if let Some(previous) = previous
+        && previous != now
+    {
+        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        let within = (1..=hysteresis_steps).any(|k| at(x - k as f32) == previous || at(x + k as f32) == previous);
+        if within {
+            return previous;
+        }
+    }
+    now
+}
+
 /// A model's LoD chain levels under one policy, every [`STEPS_PER_OCTAVE`]-th of an octave of
 /// projected height over its calibrated range ([`Calibration::chain_level`] at each step): what
 /// [`ChainChoices::choose`] looks up per tree drawn with the chain.
@@ -673,7 +696,7 @@ impl ChainChoices {
     /// that a tree coming nearer than the tables reach converges to the full mesh.
     #[must_use]
     pub fn choose(&self, height: f32, previous: Option<ChainPick>, geometric: impl FnOnce() -> ChainPick) -> ChainPick {
-        let x = (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE;
+        let x = step_of(self.log2_min, height);
         let last = self.steps.len() - 1;
         #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
         if x > last as f32 + 0.5 {
@@ -681,18 +704,7 @@ impl ChainChoices {
         }
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the table")]
         let at = |i: f32| self.steps[(i.round().max(0.0) as usize).min(last)];
-        let now = at(x);
-        if let Some(previous) = previous
-            && previous != now
-        {
-            #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-            let within =
-                (1..=self.hysteresis_steps).any(|k| at(x - k as f32) == previous || at(x + k as f32) == previous);
-            if within {
-                return previous;
-            }
-        }
-        now
+        held(at, x, self.hysteresis_steps, previous)
     }
 
     /// The level at each step, smallest height first (for tests and panels).
@@ -931,18 +943,7 @@ impl Choices {
         let above = |i: f32| i > last as f32 + 0.5;
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the table")]
         let at = |i: f32| if above(i) { above_range } else { steps[i.round().max(0.0) as usize] };
-        let now = at(x);
-        if let Some(previous) = previous
-            && previous != now
-        {
-            #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-            let within =
-                (1..=self.hysteresis_steps).any(|k| at(x - k as f32) == previous || at(x + k as f32) == previous);
-            if within {
-                return previous;
-            }
-        }
-        now
+        held(at, x, self.hysteresis_steps, previous)
     }
 
     /// Whether a tree `height` pixels high lies above the calibrated range (where
@@ -957,7 +958,7 @@ impl Choices {
 
     /// Where `height` falls on the tables' steps, fractional: 0 at the smallest calibrated height.
     fn step(&self, height: f32) -> f32 {
-        (height.max(f32::MIN_POSITIVE).log2() - self.log2_min) * STEPS_PER_OCTAVE
+        step_of(self.log2_min, height)
     }
 
     /// The elevations of the classes' views, degrees, ascending (empty: one class, the tables
