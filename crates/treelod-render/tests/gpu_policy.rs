@@ -8,9 +8,8 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
-use common::{BACKGROUND, assert_same_selection, demo_built, differing};
+use common::{BACKGROUND, assert_same_selection, calibrated_demo, differing};
 use glam::{Mat4, Vec3, vec3};
-use treelod_build::{BuildConfig, CalibrationConfig, ImpostorConfig, LodChainConfig};
 use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, render_image};
 use treelod_render::{Camera, DrawSource, GpuDraw, Instance, Policy, Renderer, Settings, Technique};
@@ -21,16 +20,6 @@ fn gpu() -> Gpu {
     let gpu = common::gpu();
     assert!(gpu.device.features().contains(wgpu::Features::MULTI_DRAW_INDIRECT_COUNT));
     gpu
-}
-
-/// The demo tree with impostors, its baselines and calibration (as `policy.rs` builds it).
-fn calibrated_demo() -> Arc<Container> {
-    demo_built(&BuildConfig {
-        impostors: Some(ImpostorConfig::default()),
-        baselines: Some(LodChainConfig::default()),
-        calibration: Some(CalibrationConfig { views: 1, supersample: 2 }),
-        ..BuildConfig::default()
-    })
 }
 
 /// 48 trees: 8 rows from 6 m to about 250 m ahead, 6 across each, spread with the distance so

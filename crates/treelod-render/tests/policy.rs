@@ -6,9 +6,9 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, demo_built, gpu};
+use common::{BACKGROUND, calibrated_demo, demo_built, gpu};
 use glam::{Mat4, Vec3, vec3};
-use treelod_build::{BuildConfig, CalibrationConfig, ImpostorConfig, LodChainConfig};
+use treelod_build::{BuildConfig, LodChainConfig};
 use treelod_format::Container;
 use treelod_render::offscreen::render_image;
 use treelod_render::{Camera, DebugView, Instance, Policy, Renderer, Settings, Shadows, Technique};
@@ -16,17 +16,6 @@ use treelod_runtime::{
     Calibration, Choices, ModelLod, Representations, elevation_class_after, in_view_share, projected_height,
     view_elevation,
 };
-
-/// The demo tree with impostors and its baselines (planes, a chain and billboards to choose
-/// from; the impostors set the billboards' budget) and calibration.
-fn calibrated_demo() -> Arc<Container> {
-    demo_built(&BuildConfig {
-        impostors: Some(ImpostorConfig::default()),
-        baselines: Some(LodChainConfig::default()),
-        calibration: Some(CalibrationConfig { views: 1, supersample: 2 }),
-        ..BuildConfig::default()
-    })
-}
 
 /// What the runtime reads of a calibrated container: its tables, point tree and representations.
 fn read_back(container: &Container) -> (Calibration, ModelLod, Representations) {

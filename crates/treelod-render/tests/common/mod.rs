@@ -261,6 +261,17 @@ pub fn demo_built(config: &BuildConfig) -> Arc<Container> {
     Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
 }
 
+/// The demo tree with impostors and its baselines (planes, a chain and billboards for the policy
+/// to choose from; the impostors set the billboards' budget) and calibration.
+pub fn calibrated_demo() -> Arc<Container> {
+    demo_built(&BuildConfig {
+        impostors: Some(treelod_build::ImpostorConfig::default()),
+        baselines: Some(treelod_build::LodChainConfig::default()),
+        calibration: Some(treelod_build::CalibrationConfig { views: 1, supersample: 2 }),
+        ..BuildConfig::default()
+    })
+}
+
 /// Writes `image` as a PPM under `$TREELOD_TEST_IMAGES` when that is set, for looking at failures.
 pub fn keep(image: &Image, name: &str) {
     if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
