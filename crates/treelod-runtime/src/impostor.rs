@@ -250,7 +250,7 @@ pub fn area(vertices: &[VertexRecord], triangles: &[TriangleRecord]) -> f64 {
 pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, settings: &TechniqueSettings, out: &mut TreeDraws) {
     let frustum = Frustum::from_view_proj(camera.view_proj);
     for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {
-        let mut ranges = Vec::new();
+        let (mut ranges, mut bark_ranges) = (Vec::new(), Vec::new());
         for &index in chunk {
             let Some((instance, lod, model)) = scene.get(index) else { continue };
             let Some(planes) = &model.planes else { continue };
@@ -263,7 +263,7 @@ pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, settings: &Techn
                 out.planes.push(PrefixDraw { instance: index, model: instance.model, range: *range });
             }
             let tree = (index, instance, lod, model);
-            push_bark(tree, camera, &frustum, settings, settings.impostor_bark, 1.0, out);
+            push_bark(tree, camera, &frustum, settings, settings.impostor_bark, 1.0, &mut bark_ranges, out);
         }
     }) {
         out.append(&mut chunk);
@@ -277,7 +277,9 @@ pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, settings: &Techn
 /// [`ImpostorBark::Chain`] (or `Lines` without lines) and a chain that has bark levels, the bark
 /// of its coarsest level whose error is at most [`BARK_ERROR_SHARE`] of `τ` at `settings.s_min`
 /// pixels at the block centre; else every bark triangle. `lambda` is recorded with a triangle
-/// draw.
+/// draw. `scratch`: reused for the line prefixes (its contents are replaced), so a chunk of
+/// trees allocates once.
+#[expect(clippy::too_many_arguments, reason = "the tree, its view, its bark, and scratch")]
 pub(crate) fn push_bark(
     (index, instance, lod, model): (u32, &Instance, &ModelLod, &Representations),
     camera: &Camera,
@@ -285,17 +287,19 @@ pub(crate) fn push_bark(
     settings: &TechniqueSettings,
     bark: ImpostorBark,
     lambda: f32,
+    scratch: &mut Vec<CellPrefix>,
     out: &mut TreeDraws,
 ) {
     if let (ImpostorBark::Lines, Some(lines)) = (bark, &model.lines) {
-        let mut ranges = Vec::new();
+        let ranges = scratch;
+        ranges.clear();
         lines.select_per_pixel_blended(
             instance.transform,
             camera,
             frustum,
             &settings.lod,
             settings.pixel_level,
-            &mut ranges,
+            ranges,
         );
         out.lines.extend(ranges.iter().map(|range| PrefixDraw {
             instance: index,

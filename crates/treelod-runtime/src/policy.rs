@@ -123,7 +123,12 @@
 //! every [`STEPS_PER_OCTAVE`]-th of an octave per elevation and visibility class ([`Choices`]);
 //! per tree the frame pays a distance, a `log2`, an `asin` (with tables per elevation) and a
 //! lookup ([`Choices::choose_framed`]); a tree above the calibrated range also a box test per
-//! cell ([`in_view_share`]).
+//! cell ([`in_view_share`]). Measured with `cargo bench -p treelod-runtime --bench select`
+//! (10,000 demo trees with every representation, 60 poses, 1920×1080, 2 cores): the whole frame
+//! with the policy, choice, assignment and every technique's selection, takes a median of
+//! 0.87–1.10 ms over the poses; the overview, 6,000 impostor trees drawing 220,000 plane and
+//! line prefixes, 1.89–1.97 ms (2.42–2.45 ms while each impostor tree's bark allocated its own
+//! list of line prefixes); the point tree alone for every tree, 0.68 ms.
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;

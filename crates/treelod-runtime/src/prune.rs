@@ -387,6 +387,7 @@ pub fn select(
         None => (&[][..], &[][..]),
     };
     let chunks = by_chunks(list, |chunk, out: &mut PrunedChunk| {
+        let mut bark_ranges = Vec::new();
         for &index in chunk {
             let i = index as usize;
             let Some((instance, lod, model)) = scene.get(index) else { continue };
@@ -446,7 +447,7 @@ pub fn select(
                 }
             }
             let tree = (index, instance, lod, model);
-            push_bark(tree, camera, &frustum, settings, pruning.bark, lambda, &mut out.draws);
+            push_bark(tree, camera, &frustum, settings, pruning.bark, lambda, &mut bark_ranges, &mut out.draws);
         }
     });
     // The held `λ` is written once every chunk has read it.
