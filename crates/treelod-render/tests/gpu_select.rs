@@ -231,3 +231,35 @@ fn a_model_that_does_not_fit_the_budget_is_refused() {
     assert!(matches!(error, treelod_render::RenderError::GpuSelectionBudget { model: 0, .. }), "{error}");
     assert!(renderer.gpu_selection_enabled());
 }
+
+/// A model none of whose trees is in view, added before one whose trees are: the first model's
+/// buckets count no draw, and the second model's draws after them show as on the CPU path.
+#[test]
+fn a_model_with_no_tree_in_view_does_not_hide_the_next_models_trees() {
+    let gpu = gpu();
+    let container = demo_container();
+    let mut cpu = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+    let mut on_gpu = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+    on_gpu.enable_gpu_selection(&gpu.device, &gpu.queue).expect("an empty scene fits");
+    for renderer in [&mut cpu, &mut on_gpu] {
+        let hidden = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+        let shown = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+        let row = |model: ModelId, z: f32| {
+            (0..5).map(move |i| Instance {
+                model,
+                transform: Mat4::from_translation(vec3(i as f32 * 12.0 - 24.0, 0.0, z)),
+            })
+        };
+        let instances: Vec<Instance> = row(hidden, 40.0).chain(row(shown, -40.0)).collect();
+        renderer.set_instances(&instances);
+    }
+    let cam = Camera::look_at(vec3(0.0, 4.0, 0.0), vec3(0.0, 4.0, -100.0), 0.9, 160, 120);
+    let (a, sa) = render_image(&gpu, &mut cpu, &cam, BACKGROUND).expect("renders");
+    let (b, sb) = render_image(&gpu, &mut on_gpu, &cam, BACKGROUND).expect("renders");
+    assert!(!sa.gpu_selection && sb.gpu_selection);
+    let ranges = gpu_ranges(&gpu, &on_gpu);
+    assert!(!ranges.is_empty() && ranges.iter().all(|r| r.model == 1), "only the second model is selected");
+    let (diff, covered) = differing(&a, &b);
+    assert!(covered > 100, "the second model's trees are in view: {covered} pixels");
+    assert!(diff * 200 <= covered, "{diff} of {covered} pixels differ");
+}
