@@ -629,6 +629,49 @@ impl Calibration {
     }
 }
 
+/// The steps of a model's tables of choices ([`Choices`], [`ChainChoices`]): every
+/// [`STEPS_PER_OCTAVE`]-th of an octave of projected height from the smallest calibrated height
+/// to the largest.
+struct StepGrid {
+    /// `log2` of the smallest calibrated height.
+    log2_min: f32,
+    /// Steps, the first at the smallest height and the last at the largest.
+    count: usize,
+}
+
+impl StepGrid {
+    /// The steps over `calibration`'s heights ([`Calibration::heights`]; one step where they do
+    /// not span a range).
+    fn of(calibration: &Calibration) -> Self {
+        let (min, max) = calibration.heights();
+        let (log2_min, log2_max) = (min.log2(), max.log2());
+        let octaves = if log2_max.is_finite() && log2_min.is_finite() { (log2_max - log2_min).max(0.0) } else { 0.0 };
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
+        let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
+        Self { log2_min, count }
+    }
+
+    /// The projected height of step `i`, pixels.
+    fn height(&self, i: usize) -> f32 {
+        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        let octaves = i as f32 / STEPS_PER_OCTAVE;
+        (self.log2_min + octaves).exp2()
+    }
+
+    /// Where [`step_of`] measures from: `log2` of the smallest height, 0 where that is not finite.
+    fn origin(&self) -> f32 {
+        if self.log2_min.is_finite() { self.log2_min } else { 0.0 }
+    }
+}
+
+/// Steps either side of a tree's height within which it keeps last frame's choice under
+/// `policy` ([`Policy::hysteresis`], at most 8 octaves).
+fn hysteresis_steps(policy: &Policy) -> usize {
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
+    let steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
+    steps
+}
+
 /// Where `height` falls on a table of choices whose step 0 is at `log2_min` (`log2` of the
 /// smallest calibrated height), fractional, [`STEPS_PER_OCTAVE`] steps per octave.
 fn step_of(log2_min: f32, height: f32) -> f32 {
@@ -674,23 +717,15 @@ impl ChainChoices {
         if calibration.levels.is_empty() {
             return None;
         }
-        let (min, max) = calibration.heights();
-        let (log2_min, log2_max) = (min.log2(), max.log2());
-        let octaves = if log2_max.is_finite() && log2_min.is_finite() { (log2_max - log2_min).max(0.0) } else { 0.0 };
-        let log2_min = if log2_min.is_finite() { log2_min } else { 0.0 };
-        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
-        let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
+        let grid = StepGrid::of(calibration);
         let target = policy.target();
-        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-        let steps: Vec<ChainPick> = (0..count)
+        let steps: Vec<ChainPick> = (0..grid.count)
             .map(|i| {
-                let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
+                let height = grid.height(i);
                 calibration.chain_level(height, target_at(target, height), &usable).flatten()
             })
             .collect();
-        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
-        let hysteresis_steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
-        Some(Self { log2_min, steps, hysteresis_steps })
+        Some(Self { log2_min: grid.origin(), steps, hysteresis_steps: hysteresis_steps(policy) })
     }
 
     /// The level for a tree `height` pixels high whose level last frame was `previous` (`None`:
@@ -842,27 +877,22 @@ impl Choices {
     #[must_use]
     pub fn among(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Self {
         let calibration = &calibration.with_elevations_between(ELEVATION_SUBDIVISIONS);
-        let (min, max) = calibration.heights();
-        let (log2_min, log2_max) = (min.log2(), max.log2());
-        let octaves = if log2_max.is_finite() && log2_min.is_finite() { (log2_max - log2_min).max(0.0) } else { 0.0 };
-        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
-        let count = (octaves * STEPS_PER_OCTAVE).round() as usize + 1;
-        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        let grid = StepGrid::of(calibration);
         let table = |elevation: Option<usize>, target: f32| -> Table {
-            let steps: Vec<Technique> = (0..count)
+            let steps: Vec<Technique> = (0..grid.count)
                 .map(|i| {
-                    let height = (log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
+                    let height = grid.height(i);
                     calibration.choose_at_elevation(elevation, height, target_at(target, height), &usable)
                 })
                 .collect();
-            let top = (log2_min + (count - 1) as f32 / STEPS_PER_OCTAVE).exp2();
+            let top = grid.height(grid.count - 1);
             let top_target = target_at(target, top);
             let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
                 let converging =
                     calibration.choose_at_elevation(elevation, top, top_target, |t| converges(t) && usable(t));
                 if converges(converging) { converging } else { Technique::FALLBACK }
             });
-            let at = |t: Technique| calibration.measured(elevation, t, top, target_at(target, top), &usable);
+            let at = |t: Technique| calibration.measured(elevation, t, top, top_target, &usable);
             // The point tree may stand in for a tree partly in view only where its image at the
             // top is within the target, as any choice there.
             let limit = calibration.floor(elevation, top, &usable) + sanitise(top_target);
@@ -883,10 +913,7 @@ impl Choices {
             .flat_map(|&e| (0..visibility).map(move |k| (e, target * (k as f32 * 0.5).exp2())))
             .map(|(e, target)| table(e, target))
             .collect();
-        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few octaves")]
-        let hysteresis_steps = (policy.hysteresis().min(8.0) * STEPS_PER_OCTAVE).round() as usize;
-        let log2_min = if log2_min.is_finite() { log2_min } else { 0.0 };
-        Self { log2_min, tables, elevations, visibility, hysteresis_steps }
+        Self { log2_min: grid.origin(), tables, elevations, visibility, hysteresis_steps: hysteresis_steps(policy) }
     }
 
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`

@@ -240,19 +240,24 @@ fn cells_outside_the_view_are_culled_near_a_large_instance() {
     let frustum = Frustum::from_view_proj(camera.view_proj);
     let drawn: std::collections::BTreeSet<u32> = list.ranges().iter().map(|r| r.cell).collect();
     for cell in models[0].cells() {
-        let (lo, hi) = cell.bounds();
-        let corners: Vec<Vec3> = (0..8)
-            .map(|i| {
-                Vec3::new(
-                    if i & 1 == 0 { lo.x } else { hi.x },
-                    if i & 2 == 0 { lo.y } else { hi.y },
-                    if i & 4 == 0 { lo.z } else { hi.z },
-                )
-            })
-            .collect();
-        let outside = frustum.planes().iter().any(|p| corners.iter().all(|&q| p.truncate().dot(q) + p.w < 0.0));
+        let outside = box_outside(&frustum, cell.bounds(), Mat4::IDENTITY);
         assert_eq!(!drawn.contains(&cell.index()), outside, "cell {}", cell.index());
     }
+}
+
+/// Whether the box `lo..hi` drawn by `transform` lies wholly outside one of `frustum`'s planes
+/// (all eight corners behind it): the reference for the selection's per-cell culling.
+fn box_outside(frustum: &Frustum, (lo, hi): (Vec3, Vec3), transform: Mat4) -> bool {
+    let corners: Vec<Vec3> = (0..8)
+        .map(|i| {
+            transform.transform_point3(Vec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            ))
+        })
+        .collect();
+    frustum.planes().iter().any(|p| corners.iter().all(|&q| p.truncate().dot(q) + p.w < 0.0))
 }
 
 /// The policy's share of a near tree in view (`in_view_share`, what the point tree draws of it)
@@ -273,17 +278,7 @@ fn the_policys_share_in_view_counts_the_cells_the_selection_keeps() {
     for transform in [Mat4::IDENTITY, turned] {
         let (mut total, mut kept, mut culled) = (0u64, 0u64, 0);
         for cell in models[0].cells() {
-            let (lo, hi) = cell.bounds();
-            let corners: Vec<Vec3> = (0..8)
-                .map(|i| {
-                    transform.transform_point3(Vec3::new(
-                        if i & 1 == 0 { lo.x } else { hi.x },
-                        if i & 2 == 0 { lo.y } else { hi.y },
-                        if i & 4 == 0 { lo.z } else { hi.z },
-                    ))
-                })
-                .collect();
-            let outside = frustum.planes().iter().any(|p| corners.iter().all(|&q| p.truncate().dot(q) + p.w < 0.0));
+            let outside = box_outside(&frustum, cell.bounds(), transform);
             let count = u64::from(cell.triangles().count);
             total += count;
             if cell.is_block_cell() || !outside {
