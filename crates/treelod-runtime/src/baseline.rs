@@ -38,6 +38,8 @@
 //! [`select`] is the baselines' per-frame selection: the draws of the trees assigned to one of
 //! them (see [`crate::draws`]).
 
+use std::sync::{Arc, Mutex, PoisonError};
+
 use glam::{Mat4, Vec3};
 use treelod_format::{Container, LodLevelRecord, Range, billboard_kind};
 
@@ -47,7 +49,7 @@ use crate::draws::{QuadDraw, Scene, TechniqueSettings, TreeDraws, TriangleDraw, 
 use crate::frame::{Camera, Frustum, tau_per_metre};
 #[cfg(doc)]
 use crate::impostor::ImpostorBark;
-use crate::policy::{Calibration, ChainChoices, ChainPick, projected_height_at};
+use crate::policy::{Calibration, ChainChoices, ChainPick, Policy, projected_height_at};
 use crate::technique::Technique;
 
 /// One level of a block's chain: every tree's level of that number.
@@ -210,8 +212,43 @@ pub struct ChainRanges {
     pub bark_levels: Vec<(u32, u32)>,
     /// The model's calibration tables where they hold the chain's per-level tables
     /// (`CHAIN_CALIBRATION`, spec §6.17): the chain's level is then chosen by image error
-    /// ([`select`]); `None`: by geometric error ([`LodChain::pick`]).
+    /// ([`select`]); `None`: by geometric error ([`LodChain::pick`]). Set it before the chain
+    /// is selected with: [`Self::choices`] keeps what it made from it.
     pub calibration: Option<Calibration>,
+    /// The last levels by image error made from `calibration` ([`Self::choices`]).
+    pub(crate) choices: ChoicesCache,
+}
+
+/// A chain's levels by image error under the policy they were last made for: [`select`] runs
+/// every frame and for every shadow cascade, and the table (a few dozen steps of
+/// [`Calibration::chain_level`]) changes only with the policy. A cache, not state: two chains
+/// compare equal whatever it holds.
+#[derive(Default)]
+pub(crate) struct ChoicesCache(Mutex<Option<(Policy, Option<Arc<ChainChoices>>)>>);
+
+impl ChoicesCache {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<(Policy, Option<Arc<ChainChoices>>)>> {
+        self.0.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+impl Clone for ChoicesCache {
+    /// An empty cache: the clone's calibration may be changed before it is read.
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl PartialEq for ChoicesCache {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl std::fmt::Debug for ChoicesCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ChoicesCache")
+    }
 }
 
 impl ChainRanges {
@@ -219,6 +256,23 @@ impl ChainRanges {
     #[must_use]
     pub fn level_error(&self, level: usize) -> f32 {
         self.chain.levels().get(level).map_or(0.0, |l| l.error)
+    }
+
+    /// The chain's levels by image error under `policy` ([`ChainChoices::new`] over the
+    /// techniques `usable` accepts, which must not change between calls: the model's), made on
+    /// the first call with that policy and kept until a call with another; `None` without
+    /// per-level tables.
+    pub fn choices(&self, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Option<Arc<ChainChoices>> {
+        let calibration = self.calibration.as_ref()?;
+        let mut cache = self.choices.lock();
+        match &*cache {
+            Some((made_for, choices)) if made_for == policy => choices.clone(),
+            _ => {
+                let choices = ChainChoices::new(calibration, policy, usable).map(Arc::new);
+                *cache = Some((*policy, choices.clone()));
+                choices
+            }
+        }
     }
 }
 
@@ -278,16 +332,9 @@ pub fn select(
     let s_min = settings.s_min;
     let frustum = Frustum::from_view_proj(camera.view_proj);
     let world_per_pixel = camera.world_per_pixel();
-    // Per model, its levels by image error under the policy (a few dozen steps each).
-    let choices: Vec<Option<ChainChoices>> = if baseline == Technique::LodChain {
-        scene
-            .models
-            .iter()
-            .map(|m| {
-                let calibration = m.chain.as_ref()?.calibration.as_ref()?;
-                ChainChoices::new(calibration, &settings.chain_policy, |t| m.holds(t))
-            })
-            .collect()
+    // Per model, its levels by image error under the policy (made once per policy).
+    let choices: Vec<Option<Arc<ChainChoices>>> = if baseline == Technique::LodChain {
+        scene.models.iter().map(|m| m.chain.as_ref()?.choices(&settings.chain_policy, |t| m.holds(t))).collect()
     } else {
         Vec::new()
     };
@@ -304,7 +351,7 @@ pub fn select(
             *out.draws.visible.get_mut(baseline) += 1;
             match (baseline, &model.chain, &model.billboards) {
                 (Technique::LodChain, Some(chain), _) => {
-                    let by_image = choices.get(instance.model as usize).and_then(Option::as_ref);
+                    let by_image = choices.get(instance.model as usize).and_then(Option::as_deref);
                     let pick = match by_image {
                         Some(choices) => {
                             let height = projected_height_at(lod, instance.transform, camera.position, world_per_pixel);
@@ -457,7 +504,7 @@ mod tests {
             impostor_bark: ImpostorBark::default(),
             pixel_level: crate::spt_lod::PixelLevel { quality: 1.0, blend: 0.5 },
             lines: true,
-            chain_policy: crate::Policy::default(),
+            chain_policy: Policy::default(),
         };
         let mut out = TreeDraws::default();
         let mut previous = vec![None];
@@ -474,7 +521,7 @@ mod tests {
     /// chain's least error, where that is above the floor).
     fn by_image_and_by_geometry(models: &Representations, lod: &crate::frame::ModelLod, height: f32) -> (u32, u32) {
         let calibration = models.chain.as_ref().and_then(|c| c.calibration.clone()).expect("per-level tables");
-        let allowed = crate::policy::target_at(crate::Policy::DEFAULT_TARGET, height);
+        let allowed = crate::policy::target_at(Policy::DEFAULT_TARGET, height);
         let pick = calibration.chain_level(height, allowed, |_| true).expect("tables");
         let (error, primitives) = match pick {
             Some(level) => calibration.level_at(level, height).expect("level"),
@@ -504,6 +551,27 @@ mod tests {
         // Near, above the tables, the chain converges to the full mesh as the geometric rule does.
         assert_eq!(chain_draw(&models, &lod, 4096.0, false), container.triangles().len() as u32);
         assert_eq!(chain_draw(&models, &lod, 4096.0, true), container.triangles().len() as u32);
+    }
+
+    /// The chain's levels by image error are made once per policy and kept: the next frame
+    /// (and each shadow cascade) reads the same table, another policy makes its own.
+    #[test]
+    fn the_chain_s_levels_by_image_error_are_made_once_per_policy() {
+        let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
+        let (_, models, _) = built_chain(&scene);
+        let chain = models.chain.as_ref().expect("a chain");
+        let calibration = chain.calibration.as_ref().expect("per-level tables");
+        let all = |_: Technique| true;
+        let policy = Policy::default();
+        let first = chain.choices(&policy, all).expect("levels");
+        assert_eq!(*first, ChainChoices::new(calibration, &policy, all).expect("levels"));
+        assert!(Arc::ptr_eq(&first, &chain.choices(&policy, all).expect("levels")), "kept");
+        let loose = Policy { target: 0.05, ..policy };
+        let other = chain.choices(&loose, all).expect("levels");
+        assert!(!Arc::ptr_eq(&first, &other), "made again for another policy");
+        assert_eq!(*other, ChainChoices::new(calibration, &loose, all).expect("levels"));
+        assert_ne!(other.steps(), first.steps(), "a looser target picks coarser levels somewhere");
+        assert!(chain.clone().choices(&loose, all).is_some_and(|c| !Arc::ptr_eq(&c, &other)), "a clone makes its own");
     }
 
     /// The shared oak (about 76 pixels high at 8 bounding radii in `eval`'s default 640×480

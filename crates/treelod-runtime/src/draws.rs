@@ -26,7 +26,7 @@ use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 use treelod_format::{Container, TriangleRecord, material_class};
 
-use crate::baseline::{BillboardRanges, Billboards, ChainRanges, ChainState, LodChain};
+use crate::baseline::{BillboardRanges, Billboards, ChainRanges, ChainState, ChoicesCache, LodChain};
 use crate::ellipsoid::{EllipsoidLod, LineLod};
 use crate::frame::{Camera, CellPrefix, Instance, LodSettings, ModelLod, ROOTS_CELL};
 use crate::impostor::{BARK_AREA_KEPT, ImpostorBark, PlaneLod, area};
@@ -125,7 +125,14 @@ impl Representations {
                 }
                 // The per-level tables, where the build measured them (spec §6.17).
                 let calibration = Calibration::from_container(container).filter(|c| c.chain_levels() > 0);
-                chain = Some(ChainRanges { chain: lod_chain, full, levels, bark_levels, calibration });
+                chain = Some(ChainRanges {
+                    chain: lod_chain,
+                    full,
+                    levels,
+                    bark_levels,
+                    calibration,
+                    choices: ChoicesCache::default(),
+                });
             }
         }
         let representations = Self { block_centre, bark, prune, planes, ellipsoids, lines, chain, billboards };
