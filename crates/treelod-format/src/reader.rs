@@ -385,6 +385,13 @@ impl Container {
         self.records(SectionKind::LINES)
     }
 
+    /// The block's far lines (spec §6.9.1), one hierarchy in SPT order; empty in files without
+    /// them (before 1.9, or built without lines). Since 1.9.
+    #[must_use]
+    pub fn far_lines(&self) -> &[LineRecord] {
+        self.records(SectionKind::FAR_LINES)
+    }
+
     /// All impostor planes, in SPT order per cell.
     #[must_use]
     pub fn planes(&self) -> &[PlaneRecord] {
@@ -491,6 +498,13 @@ impl Container {
     #[must_use]
     pub fn line_ao(&self) -> &[u8] {
         self.raw_bytes(SectionKind::LINE_AO)
+    }
+
+    /// Ambient occlusion of each far line, empty or as long as [`Container::far_lines`]. Since
+    /// 1.9.
+    #[must_use]
+    pub fn far_line_ao(&self) -> &[u8] {
+        self.raw_bytes(SectionKind::FAR_LINE_AO)
     }
 }
 

@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 8;
+pub const MINOR: u16 = 9;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -132,6 +132,9 @@ impl SectionKind {
     pub const ELLIPSOIDS: Self = Self(0x0020);
     /// [`LineRecord`]s in SPT order per cell.
     pub const LINES: Self = Self(0x0021);
+    /// [`LineRecord`]s of the block's far lines: one hierarchy over the grid cells' coarsest
+    /// lines, merged across cells, in SPT order (spec §6.9.1). Since 1.9.
+    pub const FAR_LINES: Self = Self(0x0022);
     /// [`PlaneRecord`]s in SPT order per cell.
     pub const PLANES: Self = Self(0x0030);
     /// [`PlaneLeafRecord`]s of planes with indirect texturing, per `PLANES` record in order,
@@ -161,6 +164,8 @@ impl SectionKind {
     pub const ELLIPSOID_AO: Self = Self(0x0063);
     /// Ambient occlusion of each `LINES` record, one `unorm8` (spec §6.14). Since 1.4.
     pub const LINE_AO: Self = Self(0x0064);
+    /// Ambient occlusion of each `FAR_LINES` record, one `unorm8` (spec §6.14). Since 1.9.
+    pub const FAR_LINE_AO: Self = Self(0x0065);
     /// [`CalibrationRecord`]s: each representation's measured image error and cost by projected
     /// height (spec §6.15). Since 1.5.
     pub const CALIBRATION: Self = Self(0x0070);
@@ -172,7 +177,7 @@ impl SectionKind {
     pub const CALIBRATION_ELEVATIONS: Self = Self(0x0072);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 28] = [
+    pub const KNOWN: [Self; 30] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -184,6 +189,7 @@ impl SectionKind {
         Self::IMAGE_DATA,
         Self::ELLIPSOIDS,
         Self::LINES,
+        Self::FAR_LINES,
         Self::PLANES,
         Self::PLANE_LEAVES,
         Self::PRUNE_LEAVES,
@@ -198,6 +204,7 @@ impl SectionKind {
         Self::PLANE_AO,
         Self::ELLIPSOID_AO,
         Self::LINE_AO,
+        Self::FAR_LINE_AO,
         Self::CALIBRATION,
         Self::CHAIN_CALIBRATION,
         Self::CALIBRATION_ELEVATIONS,
@@ -218,6 +225,7 @@ impl SectionKind {
             Self::IMAGE_DATA => "IMAGE_DATA",
             Self::ELLIPSOIDS => "ELLIPSOIDS",
             Self::LINES => "LINES",
+            Self::FAR_LINES => "FAR_LINES",
             Self::PLANES => "PLANES",
             Self::PLANE_LEAVES => "PLANE_LEAVES",
             Self::PRUNE_LEAVES => "PRUNE_LEAVES",
@@ -232,6 +240,7 @@ impl SectionKind {
             Self::PLANE_AO => "PLANE_AO",
             Self::ELLIPSOID_AO => "ELLIPSOID_AO",
             Self::LINE_AO => "LINE_AO",
+            Self::FAR_LINE_AO => "FAR_LINE_AO",
             Self::CALIBRATION => "CALIBRATION",
             Self::CHAIN_CALIBRATION => "CHAIN_CALIBRATION",
             Self::CALIBRATION_ELEVATIONS => "CALIBRATION_ELEVATIONS",
@@ -249,7 +258,8 @@ impl SectionKind {
             | Self::POINT_AO
             | Self::PLANE_AO
             | Self::ELLIPSOID_AO
-            | Self::LINE_AO => 1,
+            | Self::LINE_AO
+            | Self::FAR_LINE_AO => 1,
             Self::BLOCK => size_of::<BlockRecord>(),
             Self::CELLS => size_of::<CellRecord>(),
             Self::VERTICES => size_of::<VertexRecord>(),
@@ -258,7 +268,7 @@ impl SectionKind {
             Self::MATERIALS => size_of::<MaterialRecord>(),
             Self::IMAGES => size_of::<ImageRecord>(),
             Self::ELLIPSOIDS => size_of::<EllipsoidRecord>(),
-            Self::LINES => size_of::<LineRecord>(),
+            Self::LINES | Self::FAR_LINES => size_of::<LineRecord>(),
             Self::PLANES => size_of::<PlaneRecord>(),
             Self::PLANE_LEAVES => size_of::<PlaneLeafRecord>(),
             Self::PRUNE_LEAVES => size_of::<PruneLeafRecord>(),
@@ -279,7 +289,8 @@ impl SectionKind {
     /// `POINT_AO`, `PLANE_AO`), 3 for indirect texturing (`PLANE_LEAVES`) and the ellipsoids'
     /// ambient occlusion (`ELLIPSOID_AO`), 4 for the lines' ambient occlusion (`LINE_AO`), 5 for
     /// the calibration tables (`CALIBRATION`), 7 for the tables per elevation
-    /// (`CALIBRATION_ELEVATIONS`), 8 for the LoD chain's per-level tables (`CHAIN_CALIBRATION`), 0 for
+    /// (`CALIBRATION_ELEVATIONS`), 8 for the LoD chain's per-level tables (`CHAIN_CALIBRATION`), 9
+    /// for the block's far lines (`FAR_LINES`, `FAR_LINE_AO`), 0 for
     /// the other known kinds and for kinds this version does not know (private extensions do not
     /// raise a file's minor).
     #[must_use]
@@ -292,6 +303,7 @@ impl SectionKind {
             Self::CALIBRATION => 5,
             Self::CALIBRATION_ELEVATIONS => 7,
             Self::CHAIN_CALIBRATION => 8,
+            Self::FAR_LINES | Self::FAR_LINE_AO => 9,
             _ => 0,
         }
     }
@@ -304,12 +316,13 @@ impl SectionKind {
 }
 
 /// The ambient-occlusion kinds and the array each one parallels (spec §6.14).
-pub const AO_KINDS: [(SectionKind, SectionKind); 5] = [
+pub const AO_KINDS: [(SectionKind, SectionKind); 6] = [
     (SectionKind::VERTEX_AO, SectionKind::VERTICES),
     (SectionKind::POINT_AO, SectionKind::POINTS),
     (SectionKind::PLANE_AO, SectionKind::PLANES),
     (SectionKind::ELLIPSOID_AO, SectionKind::ELLIPSOIDS),
     (SectionKind::LINE_AO, SectionKind::LINES),
+    (SectionKind::FAR_LINE_AO, SectionKind::FAR_LINES),
 ];
 
 /// Decodes a stored ambient-occlusion byte (spec §6.14) to the share of ambient light that is

@@ -98,6 +98,8 @@ pub struct ContainerData {
     pub ellipsoids: Vec<EllipsoidRecord>,
     /// `LINES`.
     pub lines: Vec<LineRecord>,
+    /// `FAR_LINES`: empty, or the block's far lines (spec §6.9.1; since 1.9).
+    pub far_lines: Vec<LineRecord>,
     /// `PLANES`.
     pub planes: Vec<PlaneRecord>,
     /// `PLANE_LEAVES`: empty, or `leaf_count` records per plane (spec §6.10.1).
@@ -126,6 +128,8 @@ pub struct ContainerData {
     pub ellipsoid_ao: Vec<u8>,
     /// `LINE_AO`: empty, or one byte per line (since 1.4).
     pub line_ao: Vec<u8>,
+    /// `FAR_LINE_AO`: empty, or one byte per far line (since 1.9).
+    pub far_line_ao: Vec<u8>,
     /// `CALIBRATION`: empty, or each representation's error and cost by projected height (since
     /// 1.5).
     pub calibration: Vec<CalibrationRecord>,
@@ -156,6 +160,7 @@ impl ContainerData {
             image_data: c.image_data().to_vec(),
             ellipsoids: c.ellipsoids().to_vec(),
             lines: c.lines().to_vec(),
+            far_lines: c.far_lines().to_vec(),
             planes: c.planes().to_vec(),
             plane_leaves: c.plane_leaves().to_vec(),
             prune_leaves: c.prune_leaves().to_vec(),
@@ -170,6 +175,7 @@ impl ContainerData {
             plane_ao: c.plane_ao().to_vec(),
             ellipsoid_ao: c.ellipsoid_ao().to_vec(),
             line_ao: c.line_ao().to_vec(),
+            far_line_ao: c.far_line_ao().to_vec(),
             calibration: c.calibration().to_vec(),
             calibration_elevations: c.calibration_elevations().to_vec(),
             chain_calibration: c.chain_calibration().to_vec(),
@@ -507,6 +513,7 @@ macro_rules! optional_sections {
             (SectionKind::IMAGE_DATA, $payload!(image_data)),
             (SectionKind::ELLIPSOIDS, $payload!(ellipsoids)),
             (SectionKind::LINES, $payload!(lines)),
+            (SectionKind::FAR_LINES, $payload!(far_lines)),
             (SectionKind::PLANES, $payload!(planes)),
             (SectionKind::PLANE_LEAVES, $payload!(plane_leaves)),
             (SectionKind::PRUNE_LEAVES, $payload!(prune_leaves)),
@@ -521,6 +528,7 @@ macro_rules! optional_sections {
             (SectionKind::PLANE_AO, $payload!(plane_ao)),
             (SectionKind::ELLIPSOID_AO, $payload!(ellipsoid_ao)),
             (SectionKind::LINE_AO, $payload!(line_ao)),
+            (SectionKind::FAR_LINE_AO, $payload!(far_line_ao)),
             (SectionKind::CALIBRATION, $payload!(calibration)),
             (SectionKind::CHAIN_CALIBRATION, $payload!(chain_calibration)),
             (SectionKind::CALIBRATION_ELEVATIONS, $payload!(calibration_elevations)),
