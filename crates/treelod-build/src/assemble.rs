@@ -255,6 +255,9 @@ pub struct BuildStats {
     /// first, summed over the cells (empty without). A line unchanged over several levels is one
     /// record, counted at each of them.
     pub lines_per_level: Vec<u32>,
+    /// The block's far lines at each level of their hierarchy (spec §6.9.1), level 0 (the
+    /// cells' coarsest lines) first (empty without lines, or where none merge across cells).
+    pub far_lines_per_level: Vec<u32>,
     /// Wall-clock time of each stage that ran, in the order they ran; together they tile the
     /// build from the gathering to the finished [`ContainerData`]. Not part of the container
     /// (a build's bytes never depend on its timing).
@@ -904,9 +907,15 @@ fn assemble(
     // Stage: the line records of each grid cell; cell bounds grow to hold their endpoints.
     let mut line_records = Vec::new();
     let mut line_ao = Vec::new();
+    let (mut far_lines, mut far_line_ao) = (Vec::new(), Vec::new());
     if let Some(built) = lines {
         stats.lines_per_level = built.per_level();
         stats.line_segments = built.source_segments;
+        stats.far_lines_per_level = built.far.levels.iter().map(|l| l.count).collect();
+        if let Some(vertex_ao) = &vertex_ao {
+            far_line_ao = line_occlusion(&built.far, &tris, vertex_ao);
+        }
+        far_lines = built.far.records;
         for (cell, cell_lines) in cells.iter_mut().zip(built.cells) {
             if let Some(vertex_ao) = &vertex_ao {
                 line_ao.extend(line_occlusion(&cell_lines, &tris, vertex_ao));
@@ -1143,6 +1152,8 @@ fn assemble(
         points,
         ellipsoids: ellipsoid_records,
         lines: line_records,
+        far_lines,
+        far_line_ao,
         materials,
         images,
         image_data,
@@ -1270,7 +1281,7 @@ fn block_lines(
         bark.par_iter().map(|&i| leaf_point(&tris[i as usize], vertices, parts, trees).color).collect();
     let mesh = LineMesh { vertices, triangles: &triangles, colours: &colours };
     let mut built = build_lines(&mesh, cell_of, cell_count, config)?;
-    for cell in &mut built.cells {
+    for cell in built.cells.iter_mut().chain(std::iter::once(&mut built.far)) {
         for t in cell.segment_triangles.iter_mut().flatten() {
             *t = bark[*t as usize];
         }

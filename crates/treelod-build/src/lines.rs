@@ -239,6 +239,9 @@ pub struct CellLines {
 pub struct Lines {
     /// Per grid cell, in cell order.
     pub cells: Vec<CellLines>,
+    /// The block's far lines (`FAR_LINES`, spec §6.9.1): the cells' coarsest lines merged across
+    /// cells, one hierarchy; empty where nothing merges (one coarsest line in all).
+    pub far: CellLines,
     /// Source segments of the skeleton, all cells.
     pub source_segments: u64,
     /// Connected components of the welded bark.
@@ -290,12 +293,145 @@ pub fn build_lines(
         per_cell[cell_of((0.5 * (s.p0 + s.p1)).as_vec3())].push(i as u32);
     }
     let context = ErrorViews::new(&skeleton.points, config);
-    let cells: Vec<CellLines> = per_cell
+    let built: Vec<(CellLines, Option<History>)> = per_cell
         .par_iter()
         .enumerate()
         .map(|(cell, ids)| build_cell(&skeleton.segments, ids, &context, config, cell as u64))
         .collect::<Result<_, BuildError>>()?;
-    Ok(Lines { cells, source_segments: skeleton.segments.len() as u64, components: skeleton.components as u64 })
+    let (cells, histories): (Vec<CellLines>, Vec<Option<History>>) = built.into_iter().unzip();
+    let far = far_lines(&skeleton.segments, &per_cell, &cells, &histories, &context, config)?;
+    Ok(Lines { cells, far, source_segments: skeleton.segments.len() as u64, components: skeleton.components as u64 })
+}
+
+/// The level blend, octaves, that the far lines' switch is placed for: the renderer's default
+/// (spec §6.9.1). A cell's level boundary `e` fades over `[e·2^(−β/2), e·2^(β/2))`.
+pub const FAR_BLEND: f32 = 0.5;
+
+/// The far lines take over where the cells draw at most this many times the lines of their
+/// coarsest levels (spec §6.9.1): where the cells have all but finished merging, so a tree drawn
+/// near enough to be cut by the view or biased in depth per cell still draws the cells' lines.
+pub const FAR_TAKEOVER: f32 = 1.125;
+
+/// A far leaf's source lines: the line `line` of cell `cell`'s merge forest.
+struct FarLeaf {
+    cell: usize,
+    line: u32,
+}
+
+/// The block's far lines (spec §6.9.1): the lines every cell draws at the switch `τ_s`
+/// ([`far_switch`]) as source lines, each hanging from the one that holds its out-of-cell
+/// parent segment, merged by the cells' rule (straighten, combine; module documentation) down
+/// to one line per tree of the block. Their levels keep the ratios of their mean widths, level 0
+/// ending at `τ_s · 2^(FAR_BLEND/2)`: there a runtime with the default level blend switches to
+/// them and finds them drawing exactly the cells' lines. Empty where no merge is possible.
+fn far_lines(
+    segments: &[Segment],
+    per_cell: &[Vec<u32>],
+    cells: &[CellLines],
+    histories: &[Option<History>],
+    views: &ErrorViews,
+    config: &LineConfig,
+) -> Result<CellLines, BuildError> {
+    let Some(switch) = far_switch(cells) else { return Ok(CellLines::default()) };
+    // The lines each cell draws at the switch, in cell order.
+    let mut leaves: Vec<FarLeaf> = Vec::new();
+    for (cell, (lines, history)) in cells.iter().zip(histories).enumerate() {
+        let Some(history) = history else { continue };
+        let k = lines.levels.iter().position(|l| switch < l.threshold).unwrap_or(lines.levels.len() - 1);
+        leaves.extend(history.snapshots[k].iter().map(|&line| FarLeaf { cell, line }));
+    }
+    if leaves.len() < 2 {
+        return Ok(CellLines::default());
+    }
+    // Each leaf's source segments (global ids), and the leaf of each segment.
+    let sources: Vec<Vec<u32>> = leaves
+        .iter()
+        .map(|leaf| {
+            let history = histories[leaf.cell].as_ref().map_or(&[][..], |h| &h.forest.lines[..]);
+            let ids = &per_cell[leaf.cell];
+            // Source lines are the first `ids.len()` of a cell's forest, in `ids` order.
+            let mut out = Vec::new();
+            let mut stack = vec![leaf.line];
+            while let Some(l) = stack.pop() {
+                match history[l as usize].merged {
+                    Some([a, b]) => stack.extend([b, a]),
+                    None => out.push(ids[l as usize]),
+                }
+            }
+            out.sort_unstable();
+            out
+        })
+        .collect();
+    let mut leaf_of: HashMap<u32, u32> = HashMap::new();
+    for (i, leaf_sources) in sources.iter().enumerate() {
+        for &g in leaf_sources {
+            leaf_of.insert(g, u32::try_from(i).unwrap_or(u32::MAX));
+        }
+    }
+    let far: Vec<Segment> = leaves
+        .iter()
+        .zip(&sources)
+        .enumerate()
+        .map(|(i, (leaf, leaf_sources))| {
+            let line = histories[leaf.cell].as_ref().map(|h| &h.forest.lines[leaf.line as usize]);
+            let Some(line) = line else { unreachable!("leaves come from cells with a history") };
+            // Its segments hang together, or (combined siblings) from one parent segment: the
+            // parent of the first whose parent is not its own.
+            let here = u32::try_from(i).unwrap_or(u32::MAX);
+            let parent = leaf_sources
+                .iter()
+                .filter_map(|&g| segments[g as usize].parent)
+                .filter_map(|p| leaf_of.get(&p).copied())
+                .find(|&l| l != here);
+            let mut triangles: Vec<u32> =
+                leaf_sources.iter().flat_map(|&g| segments[g as usize].triangles.iter().copied()).collect();
+            triangles.sort_unstable();
+            Segment {
+                p0: line.p0,
+                r0: line.r0,
+                p1: line.p1,
+                r1: line.r1,
+                weight: line.weight,
+                colour: line.colour,
+                parent,
+                triangles,
+            }
+        })
+        .collect();
+    let ids: Vec<u32> = (0..u32::try_from(far.len()).unwrap_or(u32::MAX)).collect();
+    let history = simplify(&far, &ids, views, config, per_cell.len() as u64);
+    if history.snapshots.len() < 2 {
+        return Ok(CellLines::default());
+    }
+    records(&far, &ids, &history, config.pixels, switch * (0.5 * FAR_BLEND).exp2())
+}
+
+/// Where a runtime with the default level blend ([`FAR_BLEND`]) switches a tree from the cells'
+/// lines to the far lines: from the least `τ` at which the cells draw no more than
+/// [`FAR_TAKEOVER`] times the lines of their coarsest levels, the first stretch of `τ` where no
+/// cell is fading between two levels (outside `[e·2^(−β/2), e·2^(β/2))` of every cell's level
+/// boundary `e`), and within it the geometric middle (a quarter octave into it where it has no
+/// end), so that cells a little nearer or farther than the one measured (a perspective view,
+/// the depth bias) draw the same lines; `None` without a boundary.
+fn far_switch(cells: &[CellLines]) -> Option<f32> {
+    let records = || cells.iter().flat_map(|c| &c.records);
+    let mut boundaries: Vec<f32> = records().map(|l| l.lo).filter(|&lo| lo > 0.0 && lo.is_finite()).collect();
+    boundaries.sort_by(f32::total_cmp);
+    boundaries.dedup();
+    let coarsest = records().filter(|l| l.hi == f32::INFINITY).count();
+    #[expect(clippy::cast_precision_loss, reason = "line counts")]
+    let takeover =
+        |tau: f32| records().filter(|l| l.lo <= tau && tau < l.hi).count() as f32 <= FAR_TAKEOVER * coarsest as f32;
+    let half = (0.5 * FAR_BLEND).exp2();
+    // Counts change only at boundaries: the first boundary from which the cells are few enough.
+    let mut start = *boundaries.iter().find(|&&e| takeover(e))? * half;
+    while let Some(&e) = boundaries.iter().find(|&&e| e / half <= start && start < e * half) {
+        start = e * half;
+    }
+    Some(match boundaries.iter().map(|&e| e / half).find(|&fade| fade > start) {
+        Some(end) => (start * end).sqrt(),
+        None => start * half,
+    })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1444,30 +1580,50 @@ fn simplify(segments: &[Segment], ids: &[u32], views: &ErrorViews, config: &Line
     History { forest, snapshots, merges }
 }
 
-/// One cell's lines: the hierarchy and its records in SPT order (module documentation).
+/// One cell's lines: the hierarchy and its records in SPT order (module documentation), and its
+/// merge history (`None` for an empty cell), which the far lines start from.
 fn build_cell(
     segments: &[Segment],
     ids: &[u32],
     views: &ErrorViews,
     config: &LineConfig,
     cell: u64,
-) -> Result<CellLines, BuildError> {
+) -> Result<(CellLines, Option<History>), BuildError> {
     if ids.is_empty() {
-        return Ok(CellLines::default());
+        return Ok((CellLines::default(), None));
     }
     let history = simplify(segments, ids, views, config, cell);
-    records(segments, ids, &history, config.pixels)
+    Ok((records(segments, ids, &history, config.pixels, 0.0)?, Some(history)))
 }
 
-/// Turns a cell's history into records with their intervals.
-fn records(segments: &[Segment], ids: &[u32], history: &History, pixels: f32) -> Result<CellLines, BuildError> {
+/// Turns a cell's history into records with their intervals; with `first > 0` (the far lines)
+/// the levels' thresholds are scaled together so that level 0 ends at `first` (0: as they are).
+fn records(
+    segments: &[Segment],
+    ids: &[u32],
+    history: &History,
+    pixels: f32,
+    first: f32,
+) -> Result<CellLines, BuildError> {
     let lines = &history.forest.lines;
-    // Thresholds, strictly increasing.
-    let mut thresholds: Vec<f32> = Vec::with_capacity(history.snapshots.len());
-    for snapshot in &history.snapshots {
-        let width: f64 = snapshot.iter().map(|&l| lines[l as usize].r0 + lines[l as usize].r1).sum();
-        #[expect(clippy::cast_possible_truncation, reason = "metres per pixel")]
-        let mut e = (width / snapshot.len().max(1) as f64 / f64::from(pixels)) as f32;
+    // Thresholds: each level's mean width over `pixels`, scaled, then strictly increasing.
+    let widths: Vec<f32> = history
+        .snapshots
+        .iter()
+        .map(|snapshot| {
+            let width: f64 = snapshot.iter().map(|&l| lines[l as usize].r0 + lines[l as usize].r1).sum();
+            #[expect(clippy::cast_possible_truncation, reason = "metres per pixel")]
+            let e = (width / snapshot.len().max(1) as f64 / f64::from(pixels)) as f32;
+            e
+        })
+        .collect();
+    let scale = match widths.first() {
+        Some(&e0) if e0 > 0.0 && first > 0.0 => first / e0,
+        _ => 1.0,
+    };
+    let mut thresholds: Vec<f32> = Vec::with_capacity(widths.len());
+    for (k, &w) in widths.iter().enumerate() {
+        let mut e = if k == 0 && first > 0.0 { first } else { w * scale };
         if let Some(&prev) = thresholds.last() {
             e = e.max(prev.next_up());
         }

@@ -95,6 +95,55 @@ fn the_demo_tree_s_skeleton_follows_its_tubes_and_its_cells_verify() {
     assert!(plain.data.lines.is_empty() && plain.stats.lines == 0 && plain.data.line_ao.is_empty());
 }
 
+/// The far lines (spec §6.9.1) merge the cells' lines across cells down to one line per tree,
+/// and take over where they draw exactly the lines the cells draw, with no cell fading between
+/// levels: the switch does not show.
+#[test]
+fn the_far_lines_take_over_where_they_draw_the_cells_lines() {
+    use treelod_build::lines::{FAR_BLEND, FAR_TAKEOVER};
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let (out, bytes) = build(&scene, &with_lines());
+    let container = Container::from_bytes(&bytes).expect("opens");
+    let (lines, far) = (container.lines(), container.far_lines());
+    assert!(!far.is_empty(), "the demo tree's lines merge across cells");
+    treelod_format::check_spt(treelod_format::SectionKind::FAR_LINES, 0, 0, far).expect("one exact-cut hierarchy");
+    let levels = &out.stats.far_lines_per_level;
+    assert!(levels.windows(2).all(|w| w[1] < w[0]) && levels.last() == Some(&1), "one line for one tree: {levels:?}");
+    let coarsest = lines.iter().filter(|l| l.hi == f32::INFINITY).count();
+    assert!(*levels.last().unwrap() < coarsest as u32, "fewer far lines than the cells' coarsest {coarsest}");
+
+    // τ_far: where far level 0 ends; a runtime with the default blend switches half a blend
+    // before it.
+    let tau_far = far.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min);
+    let switch = tau_far * (-0.5 * FAR_BLEND).exp2();
+    let half = (0.5 * FAR_BLEND).exp2();
+    for l in lines.iter().filter(|l| l.lo > 0.0) {
+        assert!(!(l.lo / half <= switch && switch < l.lo * half), "a cell fades at the switch {switch}: {l:?}");
+    }
+    let drawn = |records: &[LineRecord]| {
+        let mut v: Vec<[u32; 9]> = records
+            .iter()
+            .filter(|l| l.lo <= switch && switch < l.hi)
+            .map(|l| {
+                let f = |x: f32| x.to_bits();
+                [f(l.p0[0]), f(l.p0[1]), f(l.p0[2]), f(l.r0), f(l.p1[0]), f(l.p1[1]), f(l.p1[2]), f(l.r1), l.color]
+            })
+            .collect();
+        v.sort_unstable();
+        v
+    };
+    let (cells, far_drawn) = (drawn(lines), drawn(far));
+    assert_eq!(cells, far_drawn, "at the switch the far lines are the cells' lines");
+    assert_eq!(far_drawn.len() as u32, levels[0], "far level 0");
+    assert!(far_drawn.len() as f32 <= FAR_TAKEOVER * coarsest as f32, "taken over once the cells are nearly merged");
+    // Inside the block's bounds.
+    let (min, max) = (Vec3::from_array(container.block().bounds_min), Vec3::from_array(container.block().bounds_max));
+    for l in far {
+        let (a, b) = ends(l);
+        assert!(a.cmpge(min).all() && a.cmple(max).all() && b.cmpge(min).all() && b.cmple(max).all(), "{l:?}");
+    }
+}
+
 #[test]
 fn a_line_s_occlusion_lies_between_its_segments() {
     let scene = demo_tree(&DemoTreeConfig { leaves: 1500, ..DemoTreeConfig::default() });
@@ -102,7 +151,8 @@ fn a_line_s_occlusion_lies_between_its_segments() {
     let (_, bytes) = build(&scene, &config);
     let container = Container::from_bytes(&bytes).expect("opens");
     treelod_format::verify(&container).expect("verifies");
-    assert_eq!(container.header().minor, 4, "LINE_AO is a kind of 1.4");
+    assert_eq!(container.header().minor, 9, "FAR_LINES and FAR_LINE_AO are kinds of 1.9");
+    assert_eq!(container.far_line_ao().len(), container.far_lines().len(), "one byte per far line");
     let (lines, ao) = (container.lines(), container.line_ao());
     assert_eq!(ao.len(), lines.len(), "one byte per line");
     let mut merged = 0;

@@ -28,6 +28,7 @@
 
 use std::ops::Deref;
 
+use glam::Mat4;
 use treelod_format::{Container, EllipsoidRecord, LineRecord};
 
 use crate::draws::{PrefixDraw, Scene, TreeDraws, by_chunks};
@@ -70,10 +71,32 @@ pub type LineRange = CellPrefix;
 pub struct EllipsoidLod(SptLod);
 
 /// What drawing a model's branch lines (spec §6.9) needs of its container, made once: its
-/// [`SptLod`] over `LINES`. Lines share the ellipsoids' unit of `τ` (metres per pixel; their
-/// build targets one pixel of width), so one `τ` per cell serves both.
+/// [`SptLod`] over `LINES` (through `Deref`), and over `FAR_LINES` where the container has them.
+/// Lines share the ellipsoids' unit of `τ` (metres per pixel; their build targets one pixel of
+/// width), so one `τ` per cell serves both.
+///
+/// Far lines (spec §6.9.1): each grid cell's hierarchy ends at one line per connected piece of
+/// the cell (the shared oak: 149 lines in all, drawn by every tree under about 60 pixels high).
+/// `FAR_LINES` merges the lines the cells draw once they have nearly finished merging across
+/// cells, down to one line per tree. An instance whose nearest cell's `τ` is at least
+/// `τ_far · 2^(−β/2)` ([`Self::far_from`], `β` the level blend) draws the far lines' prefix of
+/// that `τ` instead of the cells' prefixes: there the far lines' level 0, copies of what the
+/// cells draw at that `τ` (the build puts it where no cell is fading between levels), is still
+/// drawn whole, so the switch does not show. Their draws index the lines as uploaded: `LINES`
+/// then `FAR_LINES` ([`Self::far_first`]).
 #[derive(Clone, Debug, PartialEq)]
-pub struct LineLod(SptLod);
+pub struct LineLod {
+    cells: SptLod,
+    far: Option<FarLines>,
+}
+
+/// A model's far lines: their one hierarchy, and the least `τ` of its level 1.
+#[derive(Clone, Debug, PartialEq)]
+struct FarLines {
+    lod: SptLod,
+    /// `τ_far`: the least positive `lo` of the far lines (spec §6.9.1).
+    tau_far: f32,
+}
 
 impl EllipsoidLod {
     /// The ellipsoids of an open container; `None` if it has none.
@@ -92,18 +115,90 @@ impl Deref for EllipsoidLod {
 }
 
 impl LineLod {
-    /// The lines of an open container; `None` if it has none.
+    /// The lines of an open container, with its far lines where it has them; `None` if it has
+    /// no lines.
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        SptLod::from_container(container, container.lines(), |cell| cell.lines).map(Self)
+        let cells = SptLod::from_container(container, container.lines(), |cell| cell.lines)?;
+        let records = container.far_lines();
+        let tau_far = records.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min);
+        let far = u32::try_from(container.lines().len())
+            .ok()
+            .filter(|_| tau_far.is_finite())
+            .and_then(|first| SptLod::whole(container, records, first))
+            .map(|lod| FarLines { lod, tau_far });
+        Some(Self { cells, far })
+    }
+
+    /// Where the far lines start in the lines as uploaded (`LINES` then `FAR_LINES`): the count
+    /// of `LINES`; `None` without far lines.
+    #[must_use]
+    pub fn far_first(&self) -> Option<u32> {
+        self.far.as_ref().map(|f| f.lod.cells()[0].records.first)
+    }
+
+    /// The least `τ` at the block centre from which an instance draws the far lines with a level
+    /// blend of `blend` octaves: `τ_far · 2^(−β/2)` (`β` clamped as [`PixelLevel::blend`]);
+    /// `None` without far lines.
+    #[must_use]
+    pub fn far_from(&self, blend: f32) -> Option<f32> {
+        let blend = PixelLevel { quality: 1.0, blend }.clamped_blend();
+        self.far.as_ref().map(|f| f.tau_far * (-0.5 * blend).exp2())
+    }
+
+    /// The line prefixes an instance draws ([`SptLod::select_per_pixel_blended`]): each cell's,
+    /// or, where the least of the cells' `τ` (`τ_near`, the nearest cell's, depth bias
+    /// included) is at least [`Self::far_from`], the far lines' prefix of `τ_near` instead. At
+    /// that `τ` every cell draws the far lines' level 0 or (farther cells, under a wide view
+    /// of a near tree) a level the far lines' level 0 refines; measured at the nearest cell, the
+    /// far lines are never coarser than any cell was.
+    pub fn select_per_pixel_blended(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        level: PixelLevel,
+        out: &mut Vec<CellPrefix>,
+    ) -> bool {
+        let start = out.len();
+        if !self.cells.select_per_pixel_blended(transform, camera, frustum, settings, level, out) {
+            return false;
+        }
+        if let (Some(far), Some(from)) = (&self.far, self.far_from(level.blend)) {
+            let tau_near = out[start..].iter().map(|p| p.tau).fold(f32::INFINITY, f32::min);
+            if tau_near >= from && tau_near.is_finite() {
+                out.truncate(start);
+                let cell = far.lod.cells()[0];
+                let count = far.lod.prefix(&cell, tau_near * (-0.5 * level.clamped_blend()).exp2());
+                if count > 0 {
+                    out.push(CellPrefix { cell: cell.cell, first: cell.records.first, count, tau: tau_near });
+                }
+            }
+        }
+        true
+    }
+
+    /// [`Self::select_per_pixel_blended`] without a level blend.
+    pub fn select_per_pixel(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        quality: f32,
+        out: &mut Vec<CellPrefix>,
+    ) -> bool {
+        self.select_per_pixel_blended(transform, camera, frustum, settings, PixelLevel { quality, blend: 0.0 }, out)
     }
 }
 
 impl Deref for LineLod {
     type Target = SptLod;
 
+    /// The cells' lines (`LINES`).
     fn deref(&self) -> &SptLod {
-        &self.0
+        &self.cells
     }
 }
 
@@ -328,6 +423,78 @@ mod tests {
         let per_metre = 2.0 * 0.4f32.tan() / 512.0;
         let d_block = Vec3::new(2.0, 1.0, 21.0).distance(Vec3::new(2.0, 1.0, 1.0));
         assert!((far[1].tau - d_block * per_metre).abs() < 1e-6 * far[1].tau.max(1.0), "{far:?}");
+    }
+
+    /// A tree whose nearest cell's `τ` is at least `τ_far · 2^(−β/2)` draws one prefix of the far
+    /// lines (numbered after the cells' lines, as uploaded), a nearer one the cells'; where it
+    /// switches, seen from afar through a narrow view (every cell at about one `τ`), the far
+    /// prefix draws whole exactly the cells' lines of just before.
+    #[test]
+    fn far_trees_draw_the_far_lines_and_near_trees_the_cells() {
+        use treelod_build::{BuildConfig, LineConfig, Placed, build_block};
+        let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
+        let config = BuildConfig { lines: Some(LineConfig::default()), ..BuildConfig::default() };
+        let built =
+            build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "t").expect("builds");
+        let container = Container::from_bytes(&built.data.to_bytes(Compression::None).unwrap()).expect("opens");
+        let lines = LineLod::from_container(&container).expect("lines");
+        let far_first = lines.far_first().expect("far lines");
+        assert_eq!(far_first as usize, container.lines().len());
+        let blend = 0.5;
+        let from = lines.far_from(blend).expect("far lines");
+        let level = PixelLevel { quality: 1.0, blend };
+        let (min, max) =
+            (Vec3::from_array(container.block().bounds_min), Vec3::from_array(container.block().bounds_max));
+        let centre = 0.5 * (min + max);
+        let at_fov = |tau: f32, fovy: f32| {
+            let probe = Camera::look_at(Vec3::Z, Vec3::ZERO, fovy, 512, 512);
+            let camera = Camera::look_at(centre + Vec3::Z * (tau / probe.world_per_pixel()), centre, fovy, 512, 512);
+            let mut out = Vec::new();
+            let frustum = Frustum::from_view_proj(camera.view_proj);
+            assert!(lines.select_per_pixel_blended(
+                Mat4::IDENTITY,
+                &camera,
+                &frustum,
+                &LodSettings::default(),
+                level,
+                &mut out
+            ));
+            out
+        };
+        let at = |tau: f32| at_fov(tau, 0.02);
+        let cells = at(from * 0.99);
+        assert!(cells.len() > 1 && cells.iter().all(|p| p.first + p.count <= far_first), "{cells:?}");
+        let far = at(from * 1.01);
+        assert_eq!(far.len(), 1, "{far:?}");
+        assert!(far[0].tau >= from && far[0].tau < from * 1.01, "the nearest cell's τ: {far:?}");
+        assert_eq!((far[0].first, far[0].cell as usize), (far_first, container.block().grid_cell_count()));
+        // What each draws whole at `τ` (level_keep's range covering every dither value; `None`:
+        // the prefix's own).
+        let whole = |prefixes: &[CellPrefix], tau: Option<f32>| {
+            let all: Vec<LineRecord> = container.lines().iter().chain(container.far_lines()).copied().collect();
+            let mut v: Vec<[u32; 4]> = prefixes
+                .iter()
+                .flat_map(|p| {
+                    all[p.first as usize..(p.first + p.count) as usize]
+                        .iter()
+                        .filter(|l| {
+                            level_keep(l.lo, l.hi, tau.unwrap_or(p.tau), blend)
+                                .is_some_and(|(a, b)| a < 1e-4 && b > 0.9999)
+                        })
+                        .map(|l| [l.p0[0].to_bits(), l.p1[0].to_bits(), l.r0.to_bits(), l.color])
+                        .collect::<Vec<_>>()
+                })
+                .collect();
+            v.sort_unstable();
+            v
+        };
+        // The far prefix holds what it draws whole at the switch: the cells' lines of just before.
+        assert_eq!(whole(&cells, None), whole(&far, Some(from)), "the switch does not show");
+        // Far away, fewer lines than the cells' coarsest.
+        let coarsest = container.lines().iter().filter(|l| l.hi == f32::INFINITY).count() as u32;
+        let distant = at_fov(from * 64.0, 0.8);
+        assert_eq!(distant.len(), 1);
+        assert!(distant[0].count < coarsest, "{} far lines against {coarsest}", distant[0].count);
     }
 
     #[test]

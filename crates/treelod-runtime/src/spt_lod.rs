@@ -198,6 +198,39 @@ impl SptLod {
         Some(lod)
     }
 
+    /// A kind held as one hierarchy for the whole block rather than per cell (`FAR_LINES`,
+    /// spec §6.9.1): `records` as the block cell's, numbered from `first` (where they follow
+    /// another array in one buffer), `τ` measured from the block centre; `None` if empty or
+    /// `first` plus their count overflows.
+    #[must_use]
+    pub fn whole<T: SptRecord>(container: &Container, records: &[T], first: u32) -> Option<Self> {
+        let count = u32::try_from(records.len()).ok().filter(|&n| n > 0)?;
+        first.checked_add(count)?;
+        let block = container.block();
+        let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+        let (mut lo, mut hi) = (min, max);
+        for (a, b) in records.iter().filter_map(SptRecord::reach) {
+            lo = lo.min(a);
+            hi = hi.max(b);
+        }
+        let block_centre = 0.5 * (min + max);
+        let cell = SptCell {
+            cell: u32::try_from(block.grid_cell_count()).ok()?,
+            records: Range { first, count },
+            anchor: block_centre,
+            block_cell: true,
+            hi_at: 0,
+        };
+        Some(Self {
+            cells: vec![cell],
+            hi: records.iter().map(|r| r.interval().1).collect(),
+            centre: 0.5 * (lo + hi),
+            radius: 0.5 * (hi - lo).length(),
+            block_centre,
+            block_radius: 0.5 * (max - min).length(),
+        })
+    }
+
     /// The cells holding records, in container order.
     #[must_use]
     pub fn cells(&self) -> &[SptCell] {

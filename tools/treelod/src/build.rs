@@ -1032,8 +1032,10 @@ impl Summary<'_> {
             return String::new();
         }
         let levels: Vec<String> = s.lines_per_level.iter().map(u32::to_string).collect();
+        let far: Vec<String> = s.far_lines_per_level.iter().map(u32::to_string).collect();
+        let far = if far.is_empty() { String::new() } else { format!("; far lines per level {}", far.join(", ")) };
         format!(
-            "  lines         {} from {} skeleton segments (per level {}), built in {:.2} s\n",
+            "  lines         {} from {} skeleton segments (per level {}{far}), built in {:.2} s\n",
             s.lines,
             s.line_segments,
             levels.join(", "),
@@ -1107,6 +1109,7 @@ impl Summary<'_> {
             "lines": s.lines,
             "line_segments": s.line_segments,
             "lines_per_level": s.lines_per_level,
+            "far_lines_per_level": s.far_lines_per_level,
             "line_seconds": s.stage_millis("lines") as f64 / 1000.0,
             "ao_seconds": s.stage_millis("ao") as f64 / 1000.0,
             "stages": b

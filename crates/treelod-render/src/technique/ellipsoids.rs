@@ -87,8 +87,12 @@ pub(crate) fn gpu_ellipsoids(container: &Container) -> Vec<EllipsoidRecord> {
     with_ao_in_flags(container.ellipsoids(), container.ellipsoid_ao(), |e, flags| EllipsoidRecord { flags, ..e })
 }
 
-/// The branch lines of `container` as uploaded, likewise: each one's `flags` holds its `LINE_AO`
-/// byte, never the file's flags.
+/// The branch lines of `container` as uploaded, likewise: `LINES` then `FAR_LINES` (spec
+/// §6.9.1; the runtime's far line draws index them so, `LineLod::far_first`), each one's `flags`
+/// holding its `LINE_AO` or `FAR_LINE_AO` byte, never the file's flags.
 pub(crate) fn gpu_lines(container: &Container) -> Vec<LineRecord> {
-    with_ao_in_flags(container.lines(), container.line_ao(), |l, flags| LineRecord { flags, ..l })
+    let with_ao = |l: LineRecord, flags| LineRecord { flags, ..l };
+    let mut lines = with_ao_in_flags(container.lines(), container.line_ao(), with_ao);
+    lines.extend(with_ao_in_flags(container.far_lines(), container.far_line_ao(), with_ao));
+    lines
 }
