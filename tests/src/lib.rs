@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.8, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.9, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -90,6 +90,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 line_ao: false,
                 calibration: false,
                 chain_calibration: false,
+                far_lines: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -118,6 +119,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 line_ao: false,
                 calibration: false,
                 chain_calibration: false,
+                far_lines: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -133,6 +135,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 line_ao: false,
                 calibration: false,
                 chain_calibration: false,
+                far_lines: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -147,6 +150,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 line_ao: false,
                 calibration: false,
                 chain_calibration: false,
+                far_lines: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -159,6 +163,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
             options: SyntheticOptions {
                 calibration: false,
                 chain_calibration: false,
+                far_lines: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -171,6 +176,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
             options: SyntheticOptions {
                 calibration_elevations: false,
                 chain_calibration: false,
+                far_lines: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -185,6 +191,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 calibration_elevations: false,
                 chain_calibration: false,
+                far_lines: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -195,7 +202,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
             description: "every section kind of 1.7 (1.6's: the 1.5 kinds and a BC7 impostor atlas, and \
                           CALIBRATION_ELEVATIONS), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, chain_calibration: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                chain_calibration: false,
+                far_lines: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -203,6 +215,16 @@ pub fn golden_files() -> Vec<GoldenFile> {
             name: "every-kind-zstd.treelod",
             description: "every section kind of 1.8 (1.7's: the 1.5 kinds, a BC7 impostor atlas and \
                           CALIBRATION_ELEVATIONS, and CHAIN_CALIBRATION), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, far_lines: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 9,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.9 (1.8's: the 1.5 kinds, a BC7 impostor atlas, \
+                          CALIBRATION_ELEVATIONS and CHAIN_CALIBRATION, and the block's far lines, FAR_LINES and \
+                          FAR_LINE_AO), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -81,6 +81,13 @@ pub struct SyntheticOptions {
     /// `CALIBRATION_ELEVATIONS`. Needs `calibration`; drawn last, so the rest of the container is
     /// the same as without it.
     pub calibration_elevations: bool,
+    /// The block's far lines (spec §6.9.1, 1.9): a random binary hierarchy over copies of the
+    /// cells' coarsest lines (the `LINES` records with `hi = +∞`), inner lines from the start of
+    /// their run's first leaf to the end of its last, in `FAR_LINES`, `τ_far` √2 times the coarsest
+    /// lines' largest `lo` (or the smallest cell edge when that is 0); with `line_ao`, a random byte
+    /// per far line in `FAR_LINE_AO`. Drawn last, so the rest of the container is the same as
+    /// without it.
+    pub far_lines: bool,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -123,6 +130,7 @@ impl SyntheticOptions {
             calibration: false,
             calibration_elevations: false,
             chain_calibration: false,
+            far_lines: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -142,13 +150,14 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.8: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.9: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
-    /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`) and
+    /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`),
     /// calibration tables (`CALIBRATION`, per elevation, `CALIBRATION_ELEVATIONS`, and the chain's
-    /// per level, `CHAIN_CALIBRATION`).
+    /// per level, `CHAIN_CALIBRATION`) and the block's far lines with their ambient occlusion
+    /// (`FAR_LINES`, `FAR_LINE_AO`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -174,6 +183,7 @@ impl SyntheticOptions {
             calibration: true,
             calibration_elevations: true,
             chain_calibration: true,
+            far_lines: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1064,6 +1074,12 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     if options.chain_calibration {
         b.data.chain_calibration = chain_calibration(&mut rng, &b.data.lod_levels);
     }
+    if options.far_lines {
+        b.data.far_lines = far_lines(&mut rng, &b.data.lines, b.grid.min_edge());
+        if options.line_ao {
+            b.data.far_line_ao = rng.bytes(b.data.far_lines.len());
+        }
+    }
     if options.bc7_atlas
         && let Some(atlas) = b.atlas
     {
@@ -1087,6 +1103,61 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
         };
     }
     b.data
+}
+
+/// The block's far lines (spec §6.9.1): copies of the coarsest `lines` (those with `hi = +∞`, in
+/// order) as the leaves of a random binary hierarchy, flattened; an inner line runs from the start
+/// of its run's first leaf to the end of its last (so it lies inside the block, as they do), and
+/// its `lo` is `τ_far = √2 ·` the coarsest lines' largest `lo` (`edge` when that is 0) plus its
+/// bounding diameter, so the least positive `lo` is at least `τ_far` (spec §6.9.1's rule).
+fn far_lines(rng: &mut SplitMix64, lines: &[LineRecord], edge: f32) -> Vec<LineRecord> {
+    let coarsest: Vec<LineRecord> = lines.iter().filter(|l| l.hi == f32::INFINITY).copied().collect();
+    if coarsest.is_empty() {
+        return Vec::new();
+    }
+    let largest_lo = coarsest.iter().map(|l| l.lo).fold(0.0, f32::max);
+    let tau_far = if largest_lo > 0.0 { core::f32::consts::SQRT_2 * largest_lo } else { edge };
+    let leaves: Vec<Sphere> = coarsest
+        .iter()
+        .map(|l| Sphere { center: mean(&[l.p0, l.p1]), radius: 0.5 * length(sub(l.p1, l.p0)) + l.r0.max(l.r1) })
+        .collect();
+    let centers: Vec<V3> = leaves.iter().map(|s| s.center).collect();
+    let children = binary_hierarchy(rng, &centers);
+    let spheres = bounding_spheres(&children, &leaves);
+    // Leaves 0 (their lo is 0 whatever the size), inner nodes τ_far and more.
+    let sizes: Vec<f32> = spheres
+        .iter()
+        .enumerate()
+        .map(|(i, s)| if i < leaves.len() { 0.0 } else { tau_far + 2.0 * s.radius })
+        .collect();
+    let spt = flatten(&children, &sizes).expect("a synthetic hierarchy is a forest with finite sizes");
+    let mut by_leaf = vec![0; leaves.len()];
+    for (input, id) in spt.leaf_id.iter().enumerate() {
+        if let Some(id) = id {
+            by_leaf[*id as usize] = input;
+        }
+    }
+    spt.order
+        .iter()
+        .map(|&node| {
+            let (n, flat) = (node as usize, spt.nodes[node as usize]);
+            let source = if n < leaves.len() {
+                coarsest[n]
+            } else {
+                let first = coarsest[by_leaf[flat.leaf_first as usize]];
+                let last = coarsest[by_leaf[(flat.leaf_first + flat.leaf_count - 1) as usize]];
+                LineRecord { p1: last.p1, r1: last.r1, color: random_color(rng), ..first }
+            };
+            LineRecord {
+                lo: flat.lo,
+                hi: flat.hi,
+                leaf_first: flat.leaf_first,
+                leaf_count: flat.leaf_count,
+                flags: 0,
+                ..source
+            }
+        })
+        .collect()
 }
 
 /// Calibration tables per elevation (spec §6.16): `calibration`'s pairs of technique and height

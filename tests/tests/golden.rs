@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.8 (`tests/data/v1_0` to `tests/data/v1_8`): every file
+//! Golden files of format versions 1.0 to 1.9 (`tests/data/v1_0` to `tests/data/v1_9`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -6,9 +6,10 @@
 use std::path::PathBuf;
 
 use treelod_format::{
-    BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, MaterialInfo, MaterialRecord, Metadata,
-    NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
-    calibration_technique, image_format, leaf_slots, plane_leaf_bases, verify,
+    BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, LineRecord, MaterialInfo,
+    MaterialRecord, Metadata, NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord,
+    VertexRecord, calibration_technique, coarsest_lines_lo, far_threshold, image_format, leaf_slots, plane_leaf_bases,
+    verify,
 };
 use treelod_tests::{
     SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
@@ -24,7 +25,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -459,7 +460,7 @@ fn the_1_7_every_kind_file_has_every_kind_and_the_calibration_per_elevation() {
 fn the_1_8_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
     let c = Container::open(golden_dir_of(8).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 8, "{kind}");
     }
     assert_eq!(c.header().minor, 8);
     // Three samples per level of the chain, levels ascending from 0.
@@ -478,6 +479,41 @@ fn the_1_8_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
     assert!(data == v1_7, "v1_8 is v1_7 with the chain's per-level calibration");
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 7);
+}
+
+#[test]
+fn the_1_9_every_kind_file_has_every_kind_and_the_far_lines() {
+    let c = Container::open(golden_dir_of(9).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 9);
+    // One hierarchy over copies of the cells' coarsest lines, merged across cells.
+    let (far, lines) = (c.far_lines(), c.lines());
+    let coarsest: Vec<_> = lines.iter().filter(|l| l.hi == f32::INFINITY).collect();
+    let report = verify(&c).unwrap();
+    assert_eq!((report.far_lines, report.far_line_leaves), (far.len() as u64, coarsest.len() as u64));
+    assert!(coarsest.len() > 1 && far.len() > coarsest.len(), "{} far lines over {}", far.len(), coarsest.len());
+    assert_eq!(c.far_line_ao().len(), far.len(), "FAR_LINE_AO, one byte per far line");
+    // Far level 0 is the coarsest lines themselves, and it lasts half an octave past their largest
+    // lo (the build's rule, more than the rule of the format).
+    let geometry = |l: &LineRecord| (l.p0.map(f32::to_bits), l.r0.to_bits(), l.p1.map(f32::to_bits), l.r1.to_bits());
+    let mut level_0: Vec<_> = far.iter().filter(|l| l.lo == 0.0).map(geometry).collect();
+    let mut sources: Vec<_> = coarsest.iter().map(|l| geometry(l)).collect();
+    level_0.sort_unstable();
+    sources.sort_unstable();
+    assert_eq!(level_0, sources);
+    assert!(far_threshold(far) >= std::f32::consts::SQRT_2 * coarsest_lines_lo(lines) * (1.0 - 1e-6));
+    // Without FAR_LINES and FAR_LINE_AO it is the 1.8 file, record for record, and the writer marks
+    // it 1.8: a 1.8 reader sees the same lines.
+    let v1_8 =
+        ContainerData::from_container(&Container::open(golden_dir_of(8).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.far_lines.clear();
+    data.far_line_ao.clear();
+    assert!(data == v1_8, "v1_9 is v1_8 with the far lines");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 8);
 }
 
 #[test]

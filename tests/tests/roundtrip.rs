@@ -4,8 +4,8 @@
 
 use proptest::prelude::*;
 use treelod_format::{
-    CellRecord, Compression, Container, ContainerData, Error, ErrorClass, NO_IMAGE, SectionKind, SptElement,
-    image_format, leaf_slots, verify,
+    CellRecord, Compression, Container, ContainerData, Error, ErrorClass, LineRecord, NO_IMAGE, SectionKind,
+    SptElement, image_format, leaf_slots, verify,
 };
 use treelod_tests::{SyntheticOptions, synthetic};
 
@@ -54,6 +54,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 calibration_elevations: grid[1] >= 2 && grid[0] >= 2,
                 // The chain's per-level tables with a quarter (they need a chain).
                 chain_calibration: grid[1] >= 2 && curve_samples > 0,
+                // Far lines with half of the grids (their occlusion where the lines have theirs).
+                far_lines: grid[1] < 2,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -114,6 +116,46 @@ fn check_exact_cut<T: SptElement>(what: &str, cell: usize, elements: &[T]) -> Re
         if cover.iter().any(|&c| c != 1) {
             return Err(format!("cell {cell}: {what} cover {cover:?} at tau {tau}"));
         }
+    }
+    Ok(())
+}
+
+/// The far lines (spec §6.9.1): none, or an exact cut over one leaf per coarsest line (the `LINES`
+/// records with `hi = +∞`), whose records with `lo = 0` are those lines' geometry, far level 0
+/// lasting at least to their largest `lo`, every endpoint inside the block.
+fn check_far_lines(data: &ContainerData) -> Result<(), String> {
+    let far = &data.far_lines;
+    if far.is_empty() {
+        return if data.far_line_ao.is_empty() { Ok(()) } else { Err("far line occlusion without far lines".into()) };
+    }
+    if !data.far_line_ao.is_empty() && data.far_line_ao.len() != far.len() {
+        return Err("far line occlusion of another length".into());
+    }
+    check_exact_cut("far lines", data.cells.len(), far)?;
+    let coarsest: Vec<&LineRecord> = data.lines.iter().filter(|l| l.hi == f32::INFINITY).collect();
+    let leaves = far.iter().map(|l| l.leaf_first + l.leaf_count).max().unwrap_or(0) as usize;
+    if leaves != coarsest.len() {
+        return Err(format!("{leaves} far leaves for {} coarsest lines", coarsest.len()));
+    }
+    let key = |l: &LineRecord| [l.p0, l.p1].map(|p| p.map(f32::to_bits));
+    let mut level_0: Vec<_> = far.iter().filter(|l| l.lo == 0.0).map(key).collect();
+    let mut sources: Vec<_> = coarsest.iter().map(|l| key(l)).collect();
+    level_0.sort_unstable();
+    sources.sort_unstable();
+    if level_0 != sources {
+        return Err("far level 0 is not the coarsest lines".into());
+    }
+    let tau_far = far.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min);
+    if coarsest.iter().any(|l| l.lo > tau_far) {
+        return Err(format!("tau_far {tau_far} below a coarsest line's lo"));
+    }
+    let b = &data.block;
+    if far
+        .iter()
+        .flat_map(|l| [l.p0, l.p1])
+        .any(|p| (0..3).any(|i| !(b.bounds_min[i] <= p[i] && p[i] <= b.bounds_max[i])))
+    {
+        return Err("a far line's endpoint lies outside the block".into());
     }
     Ok(())
 }
@@ -230,6 +272,7 @@ fn check_rules(data: &ContainerData) -> Result<(), String> {
         end = img.data_offset + img.data_length;
     }
     check_indirect_texturing(data)?;
+    check_far_lines(data)?;
     let mut next = 0;
     for (index, leaf) in data.prune_leaves.iter().enumerate() {
         if leaf.first_triangle != next || leaf.triangle_count == 0 {
@@ -348,7 +391,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 8, "everything() holds the kinds of 1.8");
+    assert_eq!(container.header().minor, 9, "everything() holds the kinds of 1.9");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

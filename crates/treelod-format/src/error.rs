@@ -148,6 +148,15 @@ pub enum Error {
         /// What is wrong, with the values involved.
         reason: String,
     },
+    /// A section that holds one hierarchy for the whole block rather than one per cell (`FAR_LINES`,
+    /// spec §6.9.1) breaks a rule of its own or the exact-cut invariant of §10.
+    #[error("{kind}: {reason}")]
+    BadHierarchy {
+        /// The section.
+        kind: SectionKind,
+        /// What is wrong, with the values involved.
+        reason: String,
+    },
     /// The writer was given data that would make an invalid file.
     #[error("cannot write: {0}")]
     Write(String),

@@ -31,7 +31,7 @@ pub use reader::{
     MAX_SECTIONS, OpenOptions, Section,
 };
 pub use records::*;
-pub use verify::{SptSummary, VerifyReport, check_point_cut, check_spt, triangle_leaf_sizes, verify};
+pub use verify::{SptSummary, VerifyReport, check_far_lines, check_point_cut, check_spt, triangle_leaf_sizes, verify};
 pub use writer::{
     Compression, ContainerData, DEFAULT_LEVEL, SMALL_SECTION, section_level, temporary_target, verify_written,
     write_atomically,

@@ -711,6 +711,22 @@ pub struct LineRecord {
 }
 const _: () = assert!(size_of::<LineRecord>() == 56);
 
+/// `τ_far` of a block's far lines (spec §6.9.1): the least positive `lo` among `far_lines`, the
+/// upper end of far level 0, in metres per pixel; `+∞` when no record has a positive `lo` (no far
+/// lines, or far lines that never merge). NaN values are skipped.
+#[must_use]
+pub fn far_threshold(far_lines: &[LineRecord]) -> f32 {
+    far_lines.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min)
+}
+
+/// The largest `lo` of the grid cells' coarsest lines, the `LINES` records whose `hi` is `+∞`
+/// (spec §6.9.1): at and above it every cell draws only those; `0` when there are none. A
+/// block's `τ_far` is at least this. NaN values are skipped.
+#[must_use]
+pub fn coarsest_lines_lo(lines: &[LineRecord]) -> f32 {
+    lines.iter().filter(|l| l.hi == f32::INFINITY).map(|l| l.lo).fold(0.0, f32::max)
+}
+
 /// A leaf-cluster impostor plane (Garcia 2005) with its SPT interval (spec §6.10).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]

@@ -1,5 +1,5 @@
 //! Full verification (spec §9.2): checksums, zero padding, every record rule of §6, the ordering
-//! rules and the exact-cut invariants of §10.
+//! rules and the exact-cut invariants of §10, per cell and for the block's far lines (§6.9.1).
 //!
 //! [`verify`] runs on an opened [`Container`], so everything §9.1 checks at open already holds:
 //! section bounds, record sizes, the cell count and the tiling of every per-cell kind. The exact-cut
@@ -12,10 +12,11 @@ use std::hash::{BuildHasherDefault, Hasher};
 use crate::error::{Error, Result};
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
-    AO_KINDS, BillboardRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
+    AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
     PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement,
-    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format, leaf_slots, plane_leaf_bases,
+    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, coarsest_lines_lo, far_threshold,
+    image_format, leaf_slots, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -55,6 +56,10 @@ pub struct VerifyReport {
     pub ellipsoids: u64,
     /// `LINES` records checked.
     pub lines: u64,
+    /// `FAR_LINES` records checked (spec §6.9.1).
+    pub far_lines: u64,
+    /// Leaves of the far lines' hierarchy: the `LINES` records with `hi = +∞` (spec §6.9.1).
+    pub far_line_leaves: u64,
     /// `PLANES` records checked.
     pub planes: u64,
     /// `PLANE_LEAVES` records checked (indirect texturing, spec §6.10.1).
@@ -80,11 +85,11 @@ pub struct VerifyReport {
     pub calibration_elevations: u64,
     /// `CHAIN_CALIBRATION` records checked (spec §6.17).
     pub chain_calibration: u64,
-    /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO` and `LINE_AO` bytes (their counts are checked at
-    /// open).
+    /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO`, `LINE_AO` and `FAR_LINE_AO` bytes (their
+    /// counts are checked at open).
     pub ao: u64,
     /// Leaves whose exact cut was verified, summed over cells and the point, ellipsoid, line and
-    /// plane hierarchies (spec §10 rule 2).
+    /// plane hierarchies, and the far lines' (spec §10 rule 2).
     pub cut_leaves: u64,
     /// Deepest nesting of leaf runs met in any hierarchy (1 for a flat list of roots).
     pub max_depth: usize,
@@ -114,6 +119,9 @@ impl core::fmt::Display for VerifyReport {
                 "baselines: {} LoD levels, {} LoD triangles, {} billboards",
                 self.lod_levels, self.lod_triangles, self.billboards
             )?;
+        }
+        if self.far_lines > 0 {
+            writeln!(f, "far lines: {} records over {} leaves", self.far_lines, self.far_line_leaves)?;
         }
         if self.ao > 0 {
             writeln!(f, "ambient occlusion: {} values", self.ao)?;
@@ -145,7 +153,8 @@ pub struct SptSummary {
 /// checksum; [`Error::BadSection`] (or [`Error::BadHeader`] before the table) for a nonzero padding
 /// byte; [`Error::BadRecord`] for a record that breaks a rule of its own (a field out of range, an
 /// index out of range, the sort order); [`Error::BadCell`] for a cell whose bounds or hierarchy
-/// break §6.2 or §10.
+/// break §6.2 or §10; [`Error::BadHierarchy`] for far lines whose hierarchy breaks §6.9.1 or §10
+/// (see [`check_far_lines`]).
 pub fn verify(c: &Container) -> Result<VerifyReport> {
     let mut report = VerifyReport::default();
     check_checksums(c, &mut report)?;
@@ -161,7 +170,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_triangle_fields(SectionKind::PRUNE_TRIANGLES, c.prune_triangles(), vertex_count, material_count)?;
     check_points(c.points())?;
     check_ellipsoids(c.ellipsoids())?;
-    check_lines(c.lines())?;
+    check_lines(SectionKind::LINES, c.lines())?;
     check_planes(c.planes(), image_count)?;
     report.indirect_planes =
         check_plane_leaves(c.plane_leaves(), c.planes(), c.images(), c.image_data(), material_count)?;
@@ -186,6 +195,11 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
         report.cut_leaves += spt.leaves;
         report.max_depth = report.max_depth.max(spt.max_depth);
     }
+    // After the cells: the coarsest lines it is compared with have passed their own rules.
+    let far = check_far_lines(c.far_lines(), c.lines(), c.block())?;
+    report.cut_leaves += far.leaves;
+    report.max_depth = report.max_depth.max(far.max_depth);
+    report.far_line_leaves = far.leaves;
 
     report.cells = c.cells().len();
     report.vertices = vertex_count as u64;
@@ -196,6 +210,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.image_data_bytes = c.image_data().len() as u64;
     report.ellipsoids = c.ellipsoids().len() as u64;
     report.lines = c.lines().len() as u64;
+    report.far_lines = c.far_lines().len() as u64;
     report.planes = c.planes().len() as u64;
     report.plane_leaves = c.plane_leaves().len() as u64;
     report.prune_leaves = c.prune_leaves().len() as u64;
@@ -559,8 +574,8 @@ fn check_ellipsoids(ellipsoids: &[EllipsoidRecord]) -> Result<()> {
     Ok(())
 }
 
-fn check_lines(lines: &[LineRecord]) -> Result<()> {
-    let kind = SectionKind::LINES;
+/// Spec §6.9: finite endpoints and radii `≥ 0`, for `LINES` and `FAR_LINES`.
+fn check_lines(kind: SectionKind, lines: &[LineRecord]) -> Result<()> {
     for (i, l) in lines.iter().enumerate() {
         if !finite3(l.p0) || !finite3(l.p1) {
             return Err(bad(kind, i, format!("endpoints {:?}, {:?} are not finite", l.p0, l.p1)));
@@ -1375,7 +1390,76 @@ pub fn triangle_leaf_sizes(cell: usize, first: usize, triangles: &[TriangleRecor
 /// # Errors
 /// [`Error::BadRecord`] for a record's own fields or order, [`Error::BadCell`] for the hierarchy.
 pub fn check_spt<T: SptElement>(kind: SectionKind, cell: usize, first: usize, records: &[T]) -> Result<SptSummary> {
-    sweep(kind, cell, first, records, None)
+    sweep(kind, Scope::Cell(cell), first, records, None)
+}
+
+/// Checks a block's far lines against its lines and bounds (spec §6.9.1).
+///
+/// `FAR_LINES` is empty, or: `LINES` is not empty; every record's endpoints are finite and lie
+/// inside the block bounds (§6.1), its radii finite and `≥ 0`; the records form one hierarchy
+/// that [`check_spt`] accepts (sorted by `hi`, largest first, §10 rules 1–2) over the leaves
+/// `0 .. n`, `n` the number of `LINES` records with `hi = +∞` (the cells' coarsest lines, of which
+/// the far leaves are copies); and `τ_far` ([`far_threshold`]) is at least the largest `lo` of
+/// those records ([`coarsest_lines_lo`]). Whether the leaves are bit-for-bit copies of those
+/// lines is not checked.
+///
+/// Cost: `O(m log m + l)` time for `m` far lines and `l` lines.
+///
+/// # Errors
+/// [`Error::BadRecord`] naming `FAR_LINES` for a record's own fields, its bounds or its order, and
+/// for far lines without lines; [`Error::BadHierarchy`] naming `FAR_LINES` for the hierarchy, its
+/// leaf count and `τ_far`.
+pub fn check_far_lines(far: &[LineRecord], lines: &[LineRecord], block: &BlockRecord) -> Result<SptSummary> {
+    let kind = SectionKind::FAR_LINES;
+    if far.is_empty() {
+        return Ok(SptSummary::default());
+    }
+    if lines.is_empty() {
+        return Err(bad(
+            kind,
+            0,
+            format!("{} records but LINES is empty: far lines merge the cells' coarsest lines (§6.9.1)", far.len()),
+        ));
+    }
+    check_lines(kind, far)?;
+    let (lo, hi) = (block.bounds_min, block.bounds_max);
+    let inside = |p: [f32; 3]| (0..3).all(|k| lo[k] <= p[k] && p[k] <= hi[k]);
+    for (i, l) in far.iter().enumerate() {
+        for (what, p) in [("p0", l.p0), ("p1", l.p1)] {
+            if !inside(p) {
+                return Err(bad(
+                    kind,
+                    i,
+                    format!("{what} {p:?} lies outside the block bounds {lo:?}..{hi:?} (§6.1, §6.9.1)"),
+                ));
+            }
+        }
+    }
+    let summary = sweep(kind, Scope::Section, 0, far, None)?;
+    let coarsest = lines.iter().filter(|l| l.hi == f32::INFINITY).count() as u64;
+    if summary.leaves != coarsest {
+        return Err(Error::BadHierarchy {
+            kind,
+            reason: format!(
+                "the runs cover leaves 0..{}, but LINES has {coarsest} records with hi = +inf (the cells' coarsest \
+                 lines, one far leaf each, §6.9.1)",
+                summary.leaves
+            ),
+        });
+    }
+    let (tau_far, floor) = (far_threshold(far), coarsest_lines_lo(lines));
+    if tau_far < floor {
+        let at = far.iter().position(|l| l.lo == tau_far).unwrap_or(0);
+        return Err(Error::BadHierarchy {
+            kind,
+            reason: format!(
+                "τ_far {tau_far} (the least positive lo, of record {at}: far level 0 ends there) is below {floor}, the \
+                 largest lo of the LINES records with hi = +inf: at τ_far every cell must draw only its coarsest \
+                 lines (§6.9.1)"
+            ),
+        });
+    }
+    Ok(summary)
 }
 
 /// Checks one cell's points against its triangles (spec §6.5, §10 rules 1–3).
@@ -1397,7 +1481,7 @@ pub fn check_point_cut(cell: usize, first: usize, points: &[PointRecord], leaf_s
             reason: format!("leaf {leaf} has size {:?}, not finite and >= 0", leaf_sizes.get(leaf)),
         });
     }
-    let summary = sweep(kind, cell, first, points, Some((leaf_sizes, |p: &PointRecord| p.size)))?;
+    let summary = sweep(kind, Scope::Cell(cell), first, points, Some((leaf_sizes, |p: &PointRecord| p.size)))?;
     Ok(summary)
 }
 
@@ -1443,8 +1527,32 @@ struct Open {
     max: f32,
 }
 
-fn spt_bad_cell(kind: SectionKind, cell: usize, reason: String) -> Error {
-    Error::BadCell { cell, reason: format!("{kind}: {reason}") }
+/// What a hierarchy the sweep checks belongs to: one cell's records of a per-cell kind, or a whole
+/// section that is one hierarchy for the block (`FAR_LINES`, spec §6.9.1).
+#[derive(Clone, Copy, Debug)]
+enum Scope {
+    /// Cell `index` (the block cell is the last).
+    Cell(usize),
+    /// The whole section.
+    Section,
+}
+
+impl core::fmt::Display for Scope {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Cell(cell) => write!(f, "cell {cell}"),
+            Self::Section => f.write_str("the section"),
+        }
+    }
+}
+
+/// The error of a hierarchy that breaks a rule of spec §10: [`Error::BadCell`] for a cell's,
+/// [`Error::BadHierarchy`] for a section's.
+fn spt_bad_cell(kind: SectionKind, scope: Scope, reason: String) -> Error {
+    match scope {
+        Scope::Cell(cell) => Error::BadCell { cell, reason: format!("{kind}: {reason}") },
+        Scope::Section => Error::BadHierarchy { kind, reason },
+    }
 }
 
 /// Rules 1–3 of spec §10 for one cell and kind.
@@ -1459,7 +1567,7 @@ fn spt_bad_cell(kind: SectionKind, cell: usize, reason: String) -> Error {
 /// each segment `O(1)`. For rule 3 each open run folds the min and max leaf size of its leaves.
 fn sweep<T: SptElement>(
     kind: SectionKind,
-    cell: usize,
+    scope: Scope,
     first: usize,
     records: &[T],
     gate: Gate<'_, T>,
@@ -1468,7 +1576,7 @@ fn sweep<T: SptElement>(
     let mut n = 0u64;
     let mut prev_hi = f32::INFINITY;
     if u32::try_from(records.len()).is_err() {
-        return Err(spt_bad_cell(kind, cell, format!("{} records, a section holds at most 2^32-1", records.len())));
+        return Err(spt_bad_cell(kind, scope, format!("{} records, a section holds at most 2^32-1", records.len())));
     }
     let mut items = Vec::with_capacity(records.len());
     for (index, r) in records.iter().enumerate() {
@@ -1486,9 +1594,7 @@ fn sweep<T: SptElement>(
             return Err(bad(
                 kind,
                 first + index,
-                format!(
-                    "hi {hi} is larger than {prev_hi} of the record before (cell {cell} sorts by hi, largest first)"
-                ),
+                format!("hi {hi} is larger than {prev_hi} of the record before ({scope} sorts by hi, largest first)"),
             ));
         }
         prev_hi = hi;
@@ -1502,12 +1608,12 @@ fn sweep<T: SptElement>(
     if let Some(sizes) = sizes {
         let t = sizes.len() as u64;
         if t == 0 && !records.is_empty() {
-            return Err(spt_bad_cell(kind, cell, format!("{} records but no triangles (§10 rule 3)", records.len())));
+            return Err(spt_bad_cell(kind, scope, format!("{} records but no triangles (§10 rule 3)", records.len())));
         }
         if n != t {
             return Err(spt_bad_cell(
                 kind,
-                cell,
+                scope,
                 format!("the runs cover leaves 0..{n}, the cell has {t} triangles (§10 rule 3)"),
             ));
         }
@@ -1517,7 +1623,7 @@ fn sweep<T: SptElement>(
     let items = sort_by_start(items, n);
 
     let mut state =
-        Sweep { kind, cell, first, sizes, stack: Vec::new(), balance: Balance::default(), cur: 0, depth: 0 };
+        Sweep { kind, scope, first, sizes, stack: Vec::new(), balance: Balance::default(), cur: 0, depth: 0 };
     for &item in &items {
         // Close the runs that end at or before this one's start, checking the segments on the way.
         loop {
@@ -1533,7 +1639,7 @@ fn sweep<T: SptElement>(
         {
             return Err(spt_bad_cell(
                 kind,
-                cell,
+                scope,
                 format!(
                     "the leaf runs of records {} (leaves {}..{}) and {} (leaves {}..{}) overlap without nesting (§10 rule 1)",
                     first + top.item.index(),
@@ -1599,7 +1705,7 @@ fn sort_by_start(mut items: Vec<Item>, n: u64) -> Vec<Item> {
 /// The state of [`sweep`].
 struct Sweep<'a> {
     kind: SectionKind,
-    cell: usize,
+    scope: Scope,
     first: usize,
     /// For points: the size of each leaf (rule 3).
     sizes: Option<&'a [f32]>,
@@ -1647,7 +1753,7 @@ impl Sweep<'_> {
                         .unwrap_or(start);
                     return Err(spt_bad_cell(
                         self.kind,
-                        self.cell,
+                        self.scope,
                         format!(
                             "record {} (leaves {start}..{end}, size {size}, interval [{lo}, {hi})): leaf {leaf} has triangle size \
                              {}; the sizes must be equal or both <= lo (§10 rule 3)",
@@ -1725,7 +1831,7 @@ impl Sweep<'_> {
                 }
             }
         };
-        spt_bad_cell(self.kind, self.cell, reason)
+        spt_bad_cell(self.kind, self.scope, reason)
     }
 }
 

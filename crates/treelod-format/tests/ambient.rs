@@ -1,7 +1,8 @@
 //! Ambient occlusion in the container (spec §6.14): the `VERTEX_AO`, `POINT_AO` and `PLANE_AO`
-//! kinds (1.2) and `ELLIPSOID_AO` (1.3), the byte encoding, the writer refusing arrays of the
-//! wrong length, the reader refusing such files at open, and files with ambient occlusion
-//! round-tripping as format 1.2 (1.3 with `ELLIPSOID_AO`).
+//! kinds (1.2), `ELLIPSOID_AO` (1.3), `LINE_AO` (1.4) and `FAR_LINE_AO` (1.9), the byte encoding,
+//! the writer refusing arrays of the wrong length, the reader refusing such files at open, and
+//! files with ambient occlusion round-tripping as format 1.2 (1.3 with `ELLIPSOID_AO`, 1.4 with
+//! `LINE_AO`).
 
 mod common;
 
@@ -88,6 +89,13 @@ fn with_all_ao() -> ContainerData {
     ContainerData { ellipsoid_ao: vec![33], line_ao: vec![44], ..with_ao() }
 }
 
+/// [`with_all_ao`] with one far line (a copy of the block's one coarsest line, spec §6.9.1) and a
+/// value for it (`FAR_LINE_AO`, 1.9).
+fn with_far_ao() -> ContainerData {
+    let data = with_all_ao();
+    ContainerData { far_lines: data.lines.clone(), far_line_ao: vec![55], ..data }
+}
+
 /// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,
 /// zeroing the bytes that leave or join it (growing the file past its last section), and reseals
 /// the file.
@@ -127,6 +135,7 @@ fn the_kinds_are_numbered_named_and_sized_as_the_spec_says() {
         (SectionKind::PLANE_AO, 0x0062, "PLANE_AO", SectionKind::PLANES),
         (SectionKind::ELLIPSOID_AO, 0x0063, "ELLIPSOID_AO", SectionKind::ELLIPSOIDS),
         (SectionKind::LINE_AO, 0x0064, "LINE_AO", SectionKind::LINES),
+        (SectionKind::FAR_LINE_AO, 0x0065, "FAR_LINE_AO", SectionKind::FAR_LINES),
     ];
     assert_eq!(AO_KINDS.len(), expected.len());
     for (i, (kind, value, name, of)) in expected.into_iter().enumerate() {
@@ -137,6 +146,7 @@ fn the_kinds_are_numbered_named_and_sized_as_the_spec_says() {
         let since = match kind {
             SectionKind::ELLIPSOID_AO => 3,
             SectionKind::LINE_AO => 4,
+            SectionKind::FAR_LINE_AO => 9,
             _ => 2,
         };
         assert_eq!(kind.since_minor(), since, "{name}");
@@ -225,22 +235,34 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
     }
 
     // Any one of the first three kinds makes a 1.2 file, `ELLIPSOID_AO` a 1.3 file, `LINE_AO` a 1.4
-    // file; the others read as empty.
+    // file, `FAR_LINE_AO` (with the far lines it needs, also 1.9) a 1.9 file; the others read as
+    // empty.
     for (i, (kind, _)) in AO_KINDS.into_iter().enumerate() {
         let mut data = fixture();
+        let mut sections = 1;
         match i {
             0 => data.vertex_ao = vec![1, 2, 3],
             1 => data.point_ao = vec![4],
             2 => data.plane_ao = vec![5],
             3 => data.ellipsoid_ao = vec![6],
-            _ => data.line_ao = vec![7],
+            4 => data.line_ao = vec![7],
+            _ => {
+                // One far line: a copy of the block's one coarsest line.
+                data.far_lines = data.lines.clone();
+                data.far_line_ao = vec![8];
+                sections = 2;
+            }
         }
         let bytes = data.to_bytes(Compression::None).expect("writes");
         let c = Container::from_bytes(&bytes).expect("opens");
-        assert_eq!(c.header().minor, if i >= 3 { i as u16 } else { 2 }, "{kind} alone");
-        assert_eq!(c.sections().iter().filter(|s| s.kind().since_minor() >= 2).count(), 1, "{kind} alone");
-        let lengths =
-            c.vertex_ao().len() + c.point_ao().len() + c.plane_ao().len() + c.ellipsoid_ao().len() + c.line_ao().len();
+        assert_eq!(c.header().minor, [2, 2, 2, 3, 4, 9][i], "{kind} alone");
+        assert_eq!(c.sections().iter().filter(|s| s.kind().since_minor() >= 2).count(), sections, "{kind} alone");
+        let lengths = c.vertex_ao().len()
+            + c.point_ao().len()
+            + c.plane_ao().len()
+            + c.ellipsoid_ao().len()
+            + c.line_ao().len()
+            + c.far_line_ao().len();
         assert_eq!(lengths, if i == 0 { 3 } else { 1 });
         assert_eq!(c.raw_bytes(kind).len(), lengths, "{kind}");
         verify(&c).expect("verifies");
@@ -307,18 +329,19 @@ fn a_container_with_line_ao_round_trips_as_format_1_4() {
 #[test]
 fn the_writer_refuses_ao_arrays_of_another_length_than_their_array() {
     type Field = fn(&mut ContainerData) -> &mut Vec<u8>;
-    let fields: [(SectionKind, &str, Field); 5] = [
+    let fields: [(SectionKind, &str, Field); 6] = [
         (SectionKind::VERTEX_AO, "VERTICES has 3", |d| &mut d.vertex_ao),
         (SectionKind::POINT_AO, "POINTS has 1", |d| &mut d.point_ao),
         (SectionKind::PLANE_AO, "PLANES has 1", |d| &mut d.plane_ao),
         (SectionKind::ELLIPSOID_AO, "ELLIPSOIDS has 1", |d| &mut d.ellipsoid_ao),
         (SectionKind::LINE_AO, "LINES has 1", |d| &mut d.line_ao),
+        (SectionKind::FAR_LINE_AO, "FAR_LINES has 1", |d| &mut d.far_line_ao),
     ];
     let dir = std::env::temp_dir().join(format!("treelod-format-ao-refused-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("creates");
     for (kind, array, field) in fields {
         for wrong in [1usize, 2, 4, 9] {
-            let mut data = with_all_ao();
+            let mut data = with_far_ao();
             let ao = field(&mut data);
             if ao.len() == wrong {
                 continue;
@@ -341,7 +364,7 @@ fn the_writer_refuses_ao_arrays_of_another_length_than_their_array() {
             assert!(!path.exists(), "{kind} × {wrong}: nothing written");
         }
         // Empty is always allowed: no ambient occlusion for that array.
-        let mut data = with_all_ao();
+        let mut data = with_far_ao();
         field(&mut data).clear();
         let bytes = data.to_bytes(Compression::None).expect("writes");
         assert!(Container::from_bytes(&bytes).expect("opens").section(kind).is_none());
@@ -373,7 +396,7 @@ fn the_writer_refuses_ao_arrays_of_another_length_than_their_array() {
 
 #[test]
 fn a_file_whose_ao_section_is_shorter_or_longer_than_its_array_is_refused_at_open() {
-    let bytes = with_all_ao().to_bytes(Compression::None).expect("writes");
+    let bytes = with_far_ao().to_bytes(Compression::None).expect("writes");
     Container::from_bytes(&resize_section(&bytes, SectionKind::VERTEX_AO, 0)).expect("the untouched file opens");
     let cases = [
         (SectionKind::VERTEX_AO, -1, "2 records, VERTICES has 3"),
@@ -383,6 +406,8 @@ fn a_file_whose_ao_section_is_shorter_or_longer_than_its_array_is_refused_at_ope
         (SectionKind::ELLIPSOID_AO, 2, "3 records, ELLIPSOIDS has 1"),
         (SectionKind::ELLIPSOID_AO, 15, "16 records, ELLIPSOIDS has 1"),
         (SectionKind::LINE_AO, 1, "2 records, LINES has 1"),
+        (SectionKind::FAR_LINE_AO, 1, "2 records, FAR_LINES has 1"),
+        (SectionKind::FAR_LINE_AO, 7, "8 records, FAR_LINES has 1"),
     ];
     for (kind, delta, needle) in cases {
         let edited = resize_section(&bytes, kind, delta);
@@ -410,4 +435,7 @@ fn a_file_whose_ao_section_is_shorter_or_longer_than_its_array_is_refused_at_ope
     let c = Container::from_bytes(&emptied).expect("an empty ELLIPSOID_AO section opens");
     assert!(c.ellipsoid_ao().is_empty());
     assert_eq!(c.ellipsoid_ao().len() + 1, c.ellipsoids().len());
+    let emptied = resize_section(&bytes, SectionKind::FAR_LINE_AO, -1);
+    let c = Container::from_bytes(&emptied).expect("an empty FAR_LINE_AO section opens");
+    assert!(c.far_line_ao().is_empty() && c.far_lines().len() == 1);
 }

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 use treelod_format::{
     CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, ImageRecord, Section, SectionKind, Setting, Source, Tree,
-    material_class,
+    far_threshold, material_class,
 };
 
 use crate::report::{self, Failed};
@@ -67,6 +67,9 @@ struct Dump<'a> {
     metadata: MetadataInfo<'a>,
     /// Per-cell record counts.
     cells: CellsInfo,
+    /// The block's far lines (spec §6.9.1), when the container has any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    far_lines: Option<FarLinesInfo>,
     /// The pruning sections (spec §6.11), when the container has any of their records.
     #[serde(skip_serializing_if = "Option::is_none")]
     pruning: Option<PruningInfo>,
@@ -222,6 +225,36 @@ struct CellsInfo {
     list: Vec<CellInfo>,
     /// Sums over all cells.
     totals: Counts,
+}
+
+/// The block's far lines (spec §6.9.1): one hierarchy over the cells' coarsest lines.
+#[derive(Debug, Serialize)]
+struct FarLinesInfo {
+    /// `FAR_LINES` records.
+    records: u64,
+    /// Leaves of the hierarchy, the largest `leaf_first + leaf_count` (the number of `LINES`
+    /// records with `hi = +∞` in a file that verifies).
+    leaves: u64,
+    /// `τ_far`, metres per pixel: the least positive `lo`, the end of far level 0; `+∞` (`null`
+    /// in JSON) when no record has one.
+    tau_far: f32,
+}
+
+impl FarLinesInfo {
+    /// The far lines of `container`, `None` if it has none.
+    fn new(container: &Container) -> Option<Self> {
+        let far = container.far_lines();
+        (!far.is_empty()).then(|| Self {
+            records: far.len() as u64,
+            leaves: far.iter().map(|l| u64::from(l.leaf_first) + u64::from(l.leaf_count)).max().unwrap_or(0),
+            tau_far: far_threshold(far),
+        })
+    }
+
+    /// One line, after the cells' table.
+    fn to_text(&self) -> String {
+        format!("  far lines  {} records, leaves {}, τ_far {} m/px\n", self.records, self.leaves, self.tau_far)
+    }
 }
 
 /// The pruning sections: the leaves' lists per cell and the two curves (spec §6.11).
@@ -824,6 +857,7 @@ impl<'a> Dump<'a> {
                 settings: &meta.settings,
             },
             cells: CellsInfo { grid_cells, non_empty: list.len(), list, totals },
+            far_lines: FarLinesInfo::new(container),
             pruning: PruningInfo::new(container),
             impostors: ImpostorInfo::new(container),
             baselines: BaselineInfo::new(container),
@@ -867,6 +901,9 @@ impl<'a> Dump<'a> {
 
         out.push_str(&self.metadata_text());
         out.push_str(&self.cells_text());
+        if let Some(far_lines) = &self.far_lines {
+            out.push_str(&far_lines.to_text());
+        }
         if let Some(pruning) = &self.pruning {
             out.push_str(&pruning.to_text());
         }
