@@ -8,8 +8,7 @@ use std::path::PathBuf;
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, LineRecord, MaterialInfo,
     MaterialRecord, Metadata, NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord,
-    VertexRecord, calibration_technique, coarsest_lines_lo, far_threshold, image_format, leaf_slots, plane_leaf_bases,
-    verify,
+    VertexRecord, calibration_technique, far_switch, far_threshold, image_format, leaf_slots, plane_leaf_bases, verify,
 };
 use treelod_tests::{
     SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
@@ -503,7 +502,9 @@ fn the_1_9_every_kind_file_has_every_kind_and_the_far_lines() {
     level_0.sort_unstable();
     sources.sort_unstable();
     assert_eq!(level_0, sources);
-    assert!(far_threshold(far) >= std::f32::consts::SQRT_2 * coarsest_lines_lo(lines) * (1.0 - 1e-6));
+    let largest_lo = coarsest.iter().map(|l| l.lo).fold(0.0, f32::max);
+    assert!(far_threshold(far) >= std::f32::consts::SQRT_2 * largest_lo * (1.0 - 1e-6));
+    assert!(far_switch(far) >= largest_lo, "at the switch the cells draw their coarsest lines");
     // Without FAR_LINES and FAR_LINE_AO it is the 1.8 file, record for record, and the writer marks
     // it 1.8: a 1.8 reader sees the same lines.
     let v1_8 =

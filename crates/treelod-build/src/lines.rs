@@ -96,6 +96,17 @@
 //!   numbers the source segments (the leaves) depth-first in the merge forest, so every record's
 //!   run of leaves is contiguous and each `τ` draws an exact cut (spec §10).
 //!
+//! **Far lines** (spec §6.9.1): a cell's hierarchy ends at one line per connected piece of the
+//! cell, so a far tree drew the same lines whatever its size (the shared oak 149, from about 60
+//! pixels of height down). After the cells, `far_switch` finds the `τ` from which the cells
+//! draw no more than [`FAR_TAKEOVER`] times their coarsest lines' number, in the middle of a
+//! stretch where no cell fades between levels under the reference blend ([`FAR_BLEND`]); the
+//! lines each cell draws there become the far leaves, each hanging from the leaf that holds its
+//! out-of-cell parent segment, and the merge loop merges them on across cells, down to one line per
+//! tree. Their thresholds keep the ratios of the far levels' mean widths, scaled so that far
+//! level 0 ends a quarter octave above the switch: a runtime switching there finds the far lines
+//! drawing exactly the cells' lines.
+//!
 //! Cells are built in parallel and collected in order; every sum runs in a fixed order, so the
 //! output does not depend on the thread count.
 
@@ -303,9 +314,10 @@ pub fn build_lines(
     Ok(Lines { cells, far, source_segments: skeleton.segments.len() as u64, components: skeleton.components as u64 })
 }
 
-/// The level blend, octaves, that the far lines' switch is placed for: the renderer's default
-/// (spec §6.9.1). A cell's level boundary `e` fades over `[e·2^(−β/2), e·2^(β/2))`.
-pub const FAR_BLEND: f32 = 0.5;
+/// The level blend, octaves, that the far lines' switch is placed for: the reference blend of
+/// spec §6.9.1 (twice [`treelod_format::FAR_SWITCH_OCTAVES`]), the renderer's default. A cell's
+/// level boundary `e` fades over `[e·2^(−β/2), e·2^(β/2))`.
+pub const FAR_BLEND: f32 = 2.0 * treelod_format::FAR_SWITCH_OCTAVES;
 
 /// The far lines take over where the cells draw at most this many times the lines of their
 /// coarsest levels (spec §6.9.1): where the cells have all but finished merging, so a tree drawn

@@ -719,12 +719,23 @@ pub fn far_threshold(far_lines: &[LineRecord]) -> f32 {
     far_lines.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min)
 }
 
-/// The largest `lo` of the grid cells' coarsest lines, the `LINES` records whose `hi` is `+∞`
-/// (spec §6.9.1): at and above it every cell draws only those; `0` when there are none. A
-/// block's `τ_far` is at least this. NaN values are skipped.
+/// How far below `τ_far` the far lines take over, in octaves, for the reference level blend of
+/// half an octave (spec §6.9.1): a quarter octave, where far level 0 is still drawn whole.
+pub const FAR_SWITCH_OCTAVES: f32 = 0.25;
+
+/// `τ_s`, where a runtime with the reference level blend switches a tree from the cells' lines to
+/// the far lines (spec §6.9.1): `τ_far · 2^(−1/4)` ([`far_threshold`], [`FAR_SWITCH_OCTAVES`]);
+/// `+∞` without a `τ_far`.
 #[must_use]
-pub fn coarsest_lines_lo(lines: &[LineRecord]) -> f32 {
-    lines.iter().filter(|l| l.hi == f32::INFINITY).map(|l| l.lo).fold(0.0, f32::max)
+pub fn far_switch(far_lines: &[LineRecord]) -> f32 {
+    far_threshold(far_lines) * (-FAR_SWITCH_OCTAVES).exp2()
+}
+
+/// How many of `lines` are drawn at `tau` (`lo ≤ τ < hi`, spec §10): at [`far_switch`], the
+/// `LINES` records that far level 0 copies (spec §6.9.1).
+#[must_use]
+pub fn lines_drawn_at(lines: &[LineRecord], tau: f32) -> usize {
+    lines.iter().filter(|l| l.lo <= tau && tau < l.hi).count()
 }
 
 /// A leaf-cluster impostor plane (Garcia 2005) with its SPT interval (spec §6.10).

@@ -15,8 +15,8 @@ use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
     PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement,
-    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, coarsest_lines_lo, far_threshold,
-    image_format, leaf_slots, plane_leaf_bases,
+    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, far_switch, far_threshold, image_format,
+    leaf_slots, lines_drawn_at, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -1398,10 +1398,9 @@ pub fn check_spt<T: SptElement>(kind: SectionKind, cell: usize, first: usize, re
 /// `FAR_LINES` is empty, or: `LINES` is not empty; every record's endpoints are finite and lie
 /// inside the block bounds (§6.1), its radii finite and `≥ 0`; the records form one hierarchy
 /// that [`check_spt`] accepts (sorted by `hi`, largest first, §10 rules 1–2) over the leaves
-/// `0 .. n`, `n` the number of `LINES` records with `hi = +∞` (the cells' coarsest lines, of which
-/// the far leaves are copies); and `τ_far` ([`far_threshold`]) is at least the largest `lo` of
-/// those records ([`coarsest_lines_lo`]). Whether the leaves are bit-for-bit copies of those
-/// lines is not checked.
+/// `0 .. n`, `n` the number of `LINES` records drawn at the switch `τ_s` ([`far_switch`]:
+/// `τ_far · 2^(−1/4)`, [`far_threshold`]; [`lines_drawn_at`]), the cells' lines of which the far
+/// leaves are copies. Whether the leaves are bit-for-bit copies of those lines is not checked.
 ///
 /// Cost: `O(m log m + l)` time for `m` far lines and `l` lines.
 ///
@@ -1436,26 +1435,23 @@ pub fn check_far_lines(far: &[LineRecord], lines: &[LineRecord], block: &BlockRe
         }
     }
     let summary = sweep(kind, Scope::Section, 0, far, None)?;
-    let coarsest = lines.iter().filter(|l| l.hi == f32::INFINITY).count() as u64;
-    if summary.leaves != coarsest {
+    let (tau_far, switch) = (far_threshold(far), far_switch(far));
+    // Far lines that never merge (`τ_far = +∞`) copy the cells' coarsest lines.
+    let (drawn, at) = if switch.is_finite() {
+        (
+            lines_drawn_at(lines, switch),
+            format!("drawn at the switch τ_s = τ_far·2^(-1/4) = {switch} (τ_far {tau_far})"),
+        )
+    } else {
+        (lines.iter().filter(|l| l.hi == f32::INFINITY).count(), "with hi = +inf (τ_far is +inf)".to_owned())
+    };
+    if summary.leaves != drawn as u64 {
         return Err(Error::BadHierarchy {
             kind,
             reason: format!(
-                "the runs cover leaves 0..{}, but LINES has {coarsest} records with hi = +inf (the cells' coarsest \
-                 lines, one far leaf each, §6.9.1)",
+                "the runs cover leaves 0..{}, but LINES has {drawn} records {at}: far level 0 copies the lines the \
+                 cells draw there, one far leaf each (§6.9.1)",
                 summary.leaves
-            ),
-        });
-    }
-    let (tau_far, floor) = (far_threshold(far), coarsest_lines_lo(lines));
-    if tau_far < floor {
-        let at = far.iter().position(|l| l.lo == tau_far).unwrap_or(0);
-        return Err(Error::BadHierarchy {
-            kind,
-            reason: format!(
-                "τ_far {tau_far} (the least positive lo, of record {at}: far level 0 ends there) is below {floor}, the \
-                 largest lo of the LINES records with hi = +inf: at τ_far every cell must draw only its coarsest \
-                 lines (§6.9.1)"
             ),
         });
     }

@@ -1,8 +1,9 @@
 //! The block's far lines in the container (spec §6.9.1): the `FAR_LINES` and `FAR_LINE_AO` kinds
 //! (1.9) round-trip and make a file 1.9, a file without them reads as before (no records), and
 //! `verify` checks their rules: far lines need lines, their endpoints lie inside the block bounds,
-//! they form one hierarchy with the exact cut of §10 over as many leaves as `LINES` has records with
-//! `hi = +∞`, and `τ_far` is at least the largest `lo` of those. Each rule is broken once and
+//! they form one hierarchy with the exact cut of §10 over as many leaves as `LINES` has records
+//! drawn at the switch `τ_s = τ_far · 2^(−1/4)` (the cells' lines that far level 0 copies). Each
+//! rule is broken once and
 //! refused with a typed error naming `FAR_LINES` (or `FAR_LINE_AO`) and what is wrong.
 
 mod common;
@@ -10,7 +11,7 @@ mod common;
 use common::{bytes_of, check, reseal};
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, Error, LineRecord, MINOR, Range, SectionKind,
-    SptSummary, check_far_lines, coarsest_lines_lo, far_threshold, verify,
+    SptSummary, check_far_lines, far_switch, far_threshold, lines_drawn_at, verify,
 };
 
 const INF: f32 = f32::INFINITY;
@@ -124,7 +125,9 @@ fn a_container_with_far_lines_round_trips_as_format_1_9_and_verifies() {
         assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
     }
     assert_eq!(far_threshold(&data.far_lines), 1.5);
-    assert_eq!(coarsest_lines_lo(&data.lines), 1.0);
+    let switch = far_switch(&data.far_lines);
+    assert!((switch - 1.5 * 2f32.powf(-0.25)).abs() < 1e-6, "{switch}");
+    assert_eq!(lines_drawn_at(&data.lines, switch), 2, "cell 0's merge and cell 1's line");
 
     // Far lines without their occlusion: still 1.9. Without either: the lines' file of 1.0, with
     // nothing to read for them, as a 1.8 reader sees a 1.9 file.
@@ -151,12 +154,18 @@ fn far_lines_that_never_merge_and_equal_thresholds_verify() {
     data.far_line_ao.truncate(2);
     assert_eq!(far_threshold(&data.far_lines), INF);
     check(&data).expect("verifies");
-    // τ_far equal to the coarsest lines' largest lo is allowed (the rule is ≥).
+    // Far level 0 may copy finer lines than the cells' coarsest: with τ_far = 1 the switch is at
+    // 0.84, where cell 0 still draws its two leaves, so far level 0 holds three lines.
     let mut data = fixture();
-    data.far_lines[0].lo = 1.0;
-    data.far_lines[1].hi = 1.0;
-    data.far_lines[2].hi = 1.0;
-    check(&data).expect("τ_far = 1 verifies");
+    let (c0, c1, c3) = (data.lines[1], data.lines[2], data.lines[3]);
+    data.far_lines = vec![
+        LineRecord { lo: 1.0, leaf_count: 3, ..data.far_lines[0] },
+        LineRecord { hi: 1.0, leaf_first: 0, ..c0 },
+        LineRecord { hi: 1.0, leaf_first: 1, ..c1 },
+        LineRecord { hi: 1.0, leaf_first: 2, ..c3 },
+    ];
+    data.far_line_ao = vec![10, 20, 30, 40];
+    check(&data).expect("τ_far = 1 over the lines drawn at 0.84 verifies");
 }
 
 #[test]
@@ -175,12 +184,12 @@ fn far_lines_without_lines_are_refused() {
 }
 
 #[test]
-fn a_leaf_count_other_than_the_coarsest_lines_is_refused() {
-    // One far leaf too many: the merge covers three leaves, LINES has two coarsest lines.
+fn a_leaf_count_other_than_the_lines_drawn_at_the_switch_is_refused() {
+    // One far leaf too many: the merge covers three leaves, LINES draws two at the switch.
     let mut data = edited(0, |l| l.leaf_count = 3);
     data.far_lines.push(line([1.0, 0.5, 0.5], [1.1, 0.5, 0.5], 0.0, 1.5, 2, 1));
     data.far_line_ao.push(40);
-    expect_hierarchy(&data, &["leaves 0..3", "LINES has 2 records with hi = +inf"]);
+    expect_hierarchy(&data, &["leaves 0..3", "LINES has 2 records drawn at the switch"]);
     // One too few: a single leaf under the merge.
     let mut data = edited(0, |l| l.leaf_count = 1);
     data.far_lines.pop();
@@ -192,7 +201,7 @@ fn a_leaf_count_other_than_the_coarsest_lines_is_refused() {
     data.lines.push(line([1.25, 0.2, 0.5], [1.35, 0.7, 0.5], 0.0, INF, 1, 1));
     data.cells[1].lines = range(3, 2);
     data.cells[2].lines = range(5, 0);
-    expect_hierarchy(&data, &["leaves 0..2", "LINES has 3 records with hi = +inf"]);
+    expect_hierarchy(&data, &["leaves 0..2", "LINES has 3 records drawn at the switch"]);
 }
 
 #[test]
@@ -220,12 +229,13 @@ fn a_broken_exact_cut_is_refused() {
 }
 
 #[test]
-fn tau_far_below_the_coarsest_lines_is_refused() {
-    // Far level 0 ends at 0.8, but cell 0's coarsest line is drawn only from 1.
+fn a_switch_where_the_cells_draw_other_lines_is_refused() {
+    // Far level 0 ends at 0.8, so the switch is at 0.67, where cell 0 draws its two leaves, not
+    // the merge that far level 0 copies.
     let mut data = edited(0, |l| l.lo = 0.8);
     data.far_lines[1].hi = 0.8;
     data.far_lines[2].hi = 0.8;
-    expect_hierarchy(&data, &["τ_far 0.8", "of record 0", "below 1", "hi = +inf", "§6.9.1"]);
+    expect_hierarchy(&data, &["leaves 0..2", "LINES has 3 records drawn at the switch", "τ_far 0.8", "§6.9.1"]);
 }
 
 #[test]

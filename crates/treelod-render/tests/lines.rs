@@ -487,3 +487,58 @@ fn without_lines_the_bark_is_drawn_as_its_triangles() {
         }
     }
 }
+
+/// The demo tree's far lines (spec §6.9.1), its leaves hidden (every ellipsoid of zero radii), as
+/// drawn through the renderer: just past the switch the far lines draw what the cells' lines
+/// draw (the file without `FAR_LINES` draws the cells' lines at every distance), so the images
+/// agree; farther away they submit fewer lines than the cells and still cover the bark's pixels
+/// as the cells' lines do. A far draw indexing the wrong records (the lines are uploaded `LINES`
+/// then `FAR_LINES`) would draw other lines.
+#[test]
+fn far_trees_draw_the_far_lines_where_they_match_the_cells_lines() {
+    use treelod_format::ContainerData;
+    let gpu = gpu();
+    let built = common::demo_built(&treelod_build::BuildConfig {
+        lines: Some(treelod_build::LineConfig::default()),
+        ellipsoids: Some(treelod_build::EllipsoidConfig::default()),
+        ..treelod_build::BuildConfig::default()
+    });
+    let mut data = ContainerData::from_container(&built);
+    for e in &mut data.ellipsoids {
+        e.radii = [0.0; 3];
+    }
+    assert!(!data.far_lines.is_empty(), "the demo tree has far lines");
+    let with_far = common::open_verified(&data);
+    let cells_only =
+        common::open_verified(&ContainerData { far_lines: Vec::new(), far_line_ao: Vec::new(), ..data.clone() });
+    let lod = treelod_runtime::LineLod::from_container(&with_far).expect("lines");
+    // Quality 1/8: τ is 8 times the metres per pixel, so at the same τ the tree is 8 times larger
+    // on screen than with quality 1 (at the switch the demo tree is about 10 pixels high).
+    let settings = Settings { ellipsoid_quality: 0.125, ..Settings::default() };
+    let from = lod.far_from(settings.level_blend).expect("far lines");
+    let (min, max) = (Vec3::from_array(data.block.bounds_min), Vec3::from_array(data.block.bounds_max));
+    let (centre, radius) = (0.5 * (min + max), 0.5 * (max - min).length());
+    // A narrow view from afar, so every cell is at about one τ: the nearest cell's τ at `tau`.
+    let (fovy, size) = (0.05_f32, 160);
+    let per_metre = 2.0 * (0.5 * fovy).tan() / size as f32;
+    let draw = |container: &Arc<Container>, tau: f32| {
+        let mut renderer = renderer(&gpu, &[container], settings);
+        let eye = centre + Vec3::Z * (tau * settings.ellipsoid_quality / per_metre + radius);
+        let camera = Camera::look_at(eye, centre, fovy, size, size);
+        let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+        (image, stats.submitted[Primitive::Line])
+    };
+    // (Just past the switch the far prefix also holds the coarser far levels, culled by the
+    // vertex shader, as every prefix holds its coarser levels: it submits more than it draws.)
+    let (far, _) = draw(&with_far, from * 1.02);
+    let (cells, _) = draw(&cells_only, from * 1.02);
+    let (diff, any) = common::differing(&far, &cells);
+    assert!(any > 50, "the bark shows: {any} pixels");
+    assert!(diff * 20 <= any, "just past the switch {diff} of {any} pixels differ");
+    let (far, far_lines) = draw(&with_far, from * 3.0);
+    let (cells, cell_lines) = draw(&cells_only, from * 3.0);
+    assert!(2 * far_lines <= cell_lines, "{far_lines} far lines submitted against the cells' {cell_lines}");
+    let (p, r) = common::precision_recall(&far, &cells);
+    assert!(p > 0.5 && r > 0.5, "farther, the far lines cover the cells' lines' pixels: P {p:.2} R {r:.2}");
+    keep(&far, "far-lines");
+}
