@@ -832,14 +832,19 @@ impl<'a> Scene<'a> {
     }
 
     /// The branch lines of `τ = p` (each cell's prefix `hi > τ` submitted, those of `lo ≤ τ`
-    /// drawn as capsules of their radii; from `τ_far` on, the far lines' instead, as the runtime
-    /// draws them without a level blend, spec §6.9.1). Returns the primitives submitted.
+    /// drawn as capsules of their radii; from the switch `τ_s` on, the far lines' instead, as the runtime
+    /// draws them without a level blend, spec §6.9.1, their prefix submitted from its first
+    /// record that starts at or below `τ`). Returns the primitives submitted.
     fn draw_lines(&self, view: &View, p: f32, canvas: &mut Canvas) -> u64 {
         let d = self.data;
-        let tau_far = d.far_lines.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min);
-        let (lines, ao) = if p >= tau_far { (&d.far_lines, &d.far_line_ao) } else { (&d.lines, &d.line_ao) };
+        let far = p >= treelod_format::far_switch(&d.far_lines);
+        let (lines, ao) = if far { (&d.far_lines, &d.far_line_ao) } else { (&d.lines, &d.line_ao) };
         let above = |interval: (f32, f32)| u64::from(interval.0 > p && interval.1 > p);
         let mut drawn = lines.iter().map(|l| above(l.interval())).sum::<u64>();
+        // The far prefix is submitted without its head of coarser levels (`LineLod`).
+        if far {
+            drawn -= lines.iter().take_while(|l| l.lo > p).count() as u64;
+        }
         for (i, line) in lines.iter().enumerate().filter(|(_, l)| line_drawn(l, p)) {
             let albedo = linear_colour(line.color).truncate();
             let ao = ao.get(i).map_or(0.0, |&a| decode_ao(a));

@@ -104,7 +104,7 @@
 //! lines each cell draws there become the far leaves, each hanging from the leaf that holds its
 //! out-of-cell parent segment, and the merge loop merges them on across cells, down to one line per
 //! tree. Their thresholds keep the ratios of the far levels' mean widths, scaled so that far
-//! level 0 ends a quarter octave above the switch: a runtime switching there finds the far lines
+//! level 0 ends half an octave above the switch: a runtime switching there finds the far lines
 //! drawing exactly the cells' lines.
 //!
 //! Cells are built in parallel and collected in order; every sum runs in a fixed order, so the
@@ -314,10 +314,10 @@ pub fn build_lines(
     Ok(Lines { cells, far, source_segments: skeleton.segments.len() as u64, components: skeleton.components as u64 })
 }
 
-/// The level blend, octaves, that the far lines' switch is placed for: the reference blend of
-/// spec §6.9.1 (twice [`treelod_format::FAR_SWITCH_OCTAVES`]), the renderer's default. A cell's
-/// level boundary `e` fades over `[e·2^(−β/2), e·2^(β/2))`.
-pub const FAR_BLEND: f32 = 2.0 * treelod_format::FAR_SWITCH_OCTAVES;
+/// The level blend, octaves, whose fades the far lines' switch avoids: the reference blend of
+/// spec §6.9.1, the renderer's default. A cell's level boundary `e` fades over
+/// `[e·2^(−β/2), e·2^(β/2))`.
+pub const FAR_BLEND: f32 = 0.5;
 
 /// The far lines take over where the cells draw at most this many times the lines of their
 /// coarsest levels (spec §6.9.1): where the cells have all but finished merging, so a tree drawn
@@ -334,8 +334,10 @@ struct FarLeaf {
 /// ([`far_switch`]) as source lines, each hanging from the one that holds its out-of-cell
 /// parent segment, merged by the cells' rule (straighten, combine; module documentation) down
 /// to one line per tree of the block. Their levels keep the ratios of their mean widths, level 0
-/// ending at `τ_s · 2^(FAR_BLEND/2)`: there a runtime with the default level blend switches to
-/// them and finds them drawing exactly the cells' lines. Empty where no merge is possible.
+/// ending half an octave above the switch (`τ_far = τ_s·√2`, spec §6.9.1): a runtime switches at
+/// `τ_s` and finds them drawing exactly the cells' lines, level 1 not yet fading in. Empty where
+/// no merge is possible; records that span several levels are split per level
+/// (`split_by_level`).
 fn far_lines(
     segments: &[Segment],
     per_cell: &[Vec<u32>],
@@ -415,7 +417,30 @@ fn far_lines(
     if history.snapshots.len() < 2 {
         return Ok(CellLines::default());
     }
-    records(&far, &ids, &history, config.pixels, switch * (0.5 * FAR_BLEND).exp2())
+    let mut lines = records(&far, &ids, &history, config.pixels, switch * treelod_format::FAR_SWITCH_OCTAVES.exp2())?;
+    lines.records = split_by_level(&lines.records, &lines.levels);
+    Ok(lines)
+}
+
+/// `records` (SPT order) with every record that spans several levels (a line unchanged from
+/// level `j` to `k`, `[e_{j−1}, e_k)`) split into one record per level, then in SPT order again
+/// (by `hi`, largest first; stable). The exact cut still holds (a leaf's chain of intervals is
+/// the same, cut at the levels' boundaries), and now every level's records follow the coarser
+/// levels' in the array, so a runtime can skip the head of coarser levels that a prefix holds
+/// but does not draw (`LineLod`): just past the switch, far lines whose leaves persist over
+/// several levels would otherwise submit every level.
+fn split_by_level(records: &[LineRecord], levels: &[LineLevel]) -> Vec<LineRecord> {
+    let mut out = Vec::with_capacity(records.len());
+    for r in records {
+        let mut lo = r.lo;
+        for e in levels.iter().map(|l| l.threshold).filter(|&e| r.lo < e && e < r.hi) {
+            out.push(LineRecord { lo, hi: e, ..*r });
+            lo = e;
+        }
+        out.push(LineRecord { lo, ..*r });
+    }
+    out.sort_by(|a, b| b.hi.total_cmp(&a.hi));
+    out
 }
 
 /// Where a runtime with the default level blend ([`FAR_BLEND`]) switches a tree from the cells'

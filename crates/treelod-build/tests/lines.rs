@@ -112,10 +112,10 @@ fn the_far_lines_take_over_where_they_draw_the_cells_lines() {
     let coarsest = lines.iter().filter(|l| l.hi == f32::INFINITY).count();
     assert!(*levels.last().unwrap() < coarsest as u32, "fewer far lines than the cells' coarsest {coarsest}");
 
-    // τ_far: where far level 0 ends; a runtime with the default blend switches half a blend
-    // before it.
-    let tau_far = far.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min);
-    let switch = tau_far * (-0.5 * FAR_BLEND).exp2();
+    // The switch, half an octave below τ_far (where far level 0 ends): no cell fades there under
+    // the reference blend.
+    let switch = treelod_format::far_switch(far);
+    assert!(switch.is_finite());
     let half = (0.5 * FAR_BLEND).exp2();
     for l in lines.iter().filter(|l| l.lo > 0.0) {
         assert!(!(l.lo / half <= switch && switch < l.lo * half), "a cell fades at the switch {switch}: {l:?}");

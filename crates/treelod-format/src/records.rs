@@ -719,13 +719,13 @@ pub fn far_threshold(far_lines: &[LineRecord]) -> f32 {
     far_lines.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min)
 }
 
-/// How far below `τ_far` the far lines take over, in octaves, for the reference level blend of
-/// half an octave (spec §6.9.1): a quarter octave, where far level 0 is still drawn whole.
-pub const FAR_SWITCH_OCTAVES: f32 = 0.25;
+/// How far below `τ_far` the far lines take over, in octaves (spec §6.9.1): half an octave, so
+/// that with a level blend of up to an octave far level 0 is drawn whole there and level 1 has
+/// not begun to fade in.
+pub const FAR_SWITCH_OCTAVES: f32 = 0.5;
 
-/// `τ_s`, where a runtime with the reference level blend switches a tree from the cells' lines to
-/// the far lines (spec §6.9.1): `τ_far · 2^(−1/4)` ([`far_threshold`], [`FAR_SWITCH_OCTAVES`]);
-/// `+∞` without a `τ_far`.
+/// `τ_s`, where a runtime switches a tree from the cells' lines to the far lines (spec §6.9.1):
+/// `τ_far · 2^(−1/2)` ([`far_threshold`], [`FAR_SWITCH_OCTAVES`]); `+∞` without a `τ_far`.
 #[must_use]
 pub fn far_switch(far_lines: &[LineRecord]) -> f32 {
     far_threshold(far_lines) * (-FAR_SWITCH_OCTAVES).exp2()

@@ -1399,7 +1399,7 @@ pub fn check_spt<T: SptElement>(kind: SectionKind, cell: usize, first: usize, re
 /// inside the block bounds (§6.1), its radii finite and `≥ 0`; the records form one hierarchy
 /// that [`check_spt`] accepts (sorted by `hi`, largest first, §10 rules 1–2) over the leaves
 /// `0 .. n`, `n` the number of `LINES` records drawn at the switch `τ_s` ([`far_switch`]:
-/// `τ_far · 2^(−1/4)`, [`far_threshold`]; [`lines_drawn_at`]), the cells' lines of which the far
+/// `τ_far · 2^(−1/2)`, [`far_threshold`]; [`lines_drawn_at`]), the cells' lines of which the far
 /// leaves are copies. Whether the leaves are bit-for-bit copies of those lines is not checked.
 ///
 /// Cost: `O(m log m + l)` time for `m` far lines and `l` lines.
@@ -1440,7 +1440,7 @@ pub fn check_far_lines(far: &[LineRecord], lines: &[LineRecord], block: &BlockRe
     let (drawn, at) = if switch.is_finite() {
         (
             lines_drawn_at(lines, switch),
-            format!("drawn at the switch τ_s = τ_far·2^(-1/4) = {switch} (τ_far {tau_far})"),
+            format!("drawn at the switch τ_s = τ_far·2^(-1/2) = {switch} (τ_far {tau_far})"),
         )
     } else {
         (lines.iter().filter(|l| l.hi == f32::INFINITY).count(), "with hi = +inf (τ_far is +inf)".to_owned())

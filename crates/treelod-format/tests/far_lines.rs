@@ -2,7 +2,7 @@
 //! (1.9) round-trip and make a file 1.9, a file without them reads as before (no records), and
 //! `verify` checks their rules: far lines need lines, their endpoints lie inside the block bounds,
 //! they form one hierarchy with the exact cut of §10 over as many leaves as `LINES` has records
-//! drawn at the switch `τ_s = τ_far · 2^(−1/4)` (the cells' lines that far level 0 copies). Each
+//! drawn at the switch `τ_s = τ_far · 2^(−1/2)` (the cells' lines that far level 0 copies). Each
 //! rule is broken once and
 //! refused with a typed error naming `FAR_LINES` (or `FAR_LINE_AO`) and what is wrong.
 
@@ -126,7 +126,7 @@ fn a_container_with_far_lines_round_trips_as_format_1_9_and_verifies() {
     }
     assert_eq!(far_threshold(&data.far_lines), 1.5);
     let switch = far_switch(&data.far_lines);
-    assert!((switch - 1.5 * 2f32.powf(-0.25)).abs() < 1e-6, "{switch}");
+    assert!((switch - 1.5 * 2f32.powf(-0.5)).abs() < 1e-6, "{switch}");
     assert_eq!(lines_drawn_at(&data.lines, switch), 2, "cell 0's merge and cell 1's line");
 
     // Far lines without their occlusion: still 1.9. Without either: the lines' file of 1.0, with
@@ -155,7 +155,7 @@ fn far_lines_that_never_merge_and_equal_thresholds_verify() {
     assert_eq!(far_threshold(&data.far_lines), INF);
     check(&data).expect("verifies");
     // Far level 0 may copy finer lines than the cells' coarsest: with τ_far = 1 the switch is at
-    // 0.84, where cell 0 still draws its two leaves, so far level 0 holds three lines.
+    // 0.71, where cell 0 still draws its two leaves, so far level 0 holds three lines.
     let mut data = fixture();
     let (c0, c1, c3) = (data.lines[1], data.lines[2], data.lines[3]);
     data.far_lines = vec![
@@ -165,7 +165,7 @@ fn far_lines_that_never_merge_and_equal_thresholds_verify() {
         LineRecord { hi: 1.0, leaf_first: 2, ..c3 },
     ];
     data.far_line_ao = vec![10, 20, 30, 40];
-    check(&data).expect("τ_far = 1 over the lines drawn at 0.84 verifies");
+    check(&data).expect("τ_far = 1 over the lines drawn at 0.71 verifies");
 }
 
 #[test]
@@ -230,7 +230,7 @@ fn a_broken_exact_cut_is_refused() {
 
 #[test]
 fn a_switch_where_the_cells_draw_other_lines_is_refused() {
-    // Far level 0 ends at 0.8, so the switch is at 0.67, where cell 0 draws its two leaves, not
+    // Far level 0 ends at 0.8, so the switch is at 0.57, where cell 0 draws its two leaves, not
     // the merge that far level 0 copies.
     let mut data = edited(0, |l| l.lo = 0.8);
     data.far_lines[1].hi = 0.8;

@@ -515,7 +515,7 @@ fn far_trees_draw_the_far_lines_where_they_match_the_cells_lines() {
     // Quality 1/8: τ is 8 times the metres per pixel, so at the same τ the tree is 8 times larger
     // on screen than with quality 1 (at the switch the demo tree is about 10 pixels high).
     let settings = Settings { ellipsoid_quality: 0.125, ..Settings::default() };
-    let from = lod.far_from(settings.level_blend).expect("far lines");
+    let from = lod.far_from().expect("far lines");
     let (min, max) = (Vec3::from_array(data.block.bounds_min), Vec3::from_array(data.block.bounds_max));
     let (centre, radius) = (0.5 * (min + max), 0.5 * (max - min).length());
     // A narrow view from afar, so every cell is at about one τ: the nearest cell's τ at `tau`.

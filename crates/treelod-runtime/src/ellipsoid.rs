@@ -29,7 +29,7 @@
 use std::ops::Deref;
 
 use glam::Mat4;
-use treelod_format::{Container, EllipsoidRecord, LineRecord};
+use treelod_format::{Container, EllipsoidRecord, FAR_SWITCH_OCTAVES, LineRecord};
 
 use crate::draws::{PrefixDraw, Scene, TreeDraws, by_chunks};
 use crate::frame::{Camera, CellPrefix, Frustum, LodSettings};
@@ -78,11 +78,11 @@ pub struct EllipsoidLod(SptLod);
 /// Far lines (spec §6.9.1): each grid cell's hierarchy ends at one line per connected piece of
 /// the cell (the shared oak: 149 lines in all, drawn by every tree under about 60 pixels high).
 /// `FAR_LINES` merges the lines the cells draw once they have nearly finished merging across
-/// cells, down to one line per tree. An instance whose nearest cell's `τ` is at least
-/// `τ_far · 2^(−β/2)` ([`Self::far_from`], `β` the level blend) draws the far lines' prefix of
-/// that `τ` instead of the cells' prefixes: there the far lines' level 0, copies of what the
-/// cells draw at that `τ` (the build puts it where no cell is fading between levels), is still
-/// drawn whole, so the switch does not show. Their draws index the lines as uploaded: `LINES`
+/// cells, down to one line per tree. An instance whose nearest cell's `τ` is at least the
+/// switch `τ_s = τ_far · 2^(−1/2)` ([`Self::far_from`]) draws the far lines' prefix of that `τ`
+/// instead of the cells' prefixes: there the far lines' level 0, copies of what the cells draw
+/// at `τ_s` (the build puts it where no cell is fading between levels), is drawn whole and level
+/// 1 not yet faded in (with a level blend up to an octave), so the switch does not show. Their draws index the lines as uploaded: `LINES`
 /// then `FAR_LINES` ([`Self::far_first`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LineLod {
@@ -96,6 +96,9 @@ struct FarLines {
     lod: SptLod,
     /// `τ_far`: the least positive `lo` of the far lines (spec §6.9.1).
     tau_far: f32,
+    /// Per record, the least `lo` of it and the records before it (non-increasing): the records
+    /// before the first whose entry is at most `τ` all start above `τ`.
+    lo_before: Vec<f32>,
 }
 
 impl EllipsoidLod {
@@ -126,7 +129,16 @@ impl LineLod {
             .ok()
             .filter(|_| tau_far.is_finite())
             .and_then(|first| SptLod::whole(container, records, first))
-            .map(|lod| FarLines { lod, tau_far });
+            .map(|lod| {
+                let lo_before = records
+                    .iter()
+                    .scan(f32::INFINITY, |least, l| {
+                        *least = least.min(l.lo);
+                        Some(*least)
+                    })
+                    .collect();
+                FarLines { lod, tau_far, lo_before }
+            });
         Some(Self { cells, far })
     }
 
@@ -137,18 +149,17 @@ impl LineLod {
         self.far.as_ref().map(|f| f.lod.cells()[0].records.first)
     }
 
-    /// The least `τ` at the block centre from which an instance draws the far lines with a level
-    /// blend of `blend` octaves: `τ_far · 2^(−β/2)` (`β` clamped as [`PixelLevel::blend`]);
-    /// `None` without far lines.
+    /// The switch `τ_s` (spec §6.9.1): the least `τ` of an instance's nearest cell from which it
+    /// draws the far lines, half an octave below `τ_far`; `None` without far lines.
     #[must_use]
-    pub fn far_from(&self, blend: f32) -> Option<f32> {
-        let blend = PixelLevel { quality: 1.0, blend }.clamped_blend();
-        self.far.as_ref().map(|f| f.tau_far * (-0.5 * blend).exp2())
+    pub fn far_from(&self) -> Option<f32> {
+        self.far.as_ref().map(|f| f.tau_far * (-FAR_SWITCH_OCTAVES).exp2())
     }
 
     /// The line prefixes an instance draws ([`SptLod::select_per_pixel_blended`]): each cell's,
     /// or, where the least of the cells' `τ` (`τ_near`, the nearest cell's, depth bias
-    /// included) is at least [`Self::far_from`], the far lines' prefix of `τ_near` instead. At
+    /// included) is at least [`Self::far_from`], the far lines' prefix of `τ_near` instead, less
+    /// its leading records that start above `τ_near` even faded in (the coarser levels). At
     /// that `τ` every cell draws the far lines' level 0 or (farther cells, under a wide view
     /// of a near tree) a level the far lines' level 0 refines; measured at the nearest cell, the
     /// far lines are never coarser than any cell was.
@@ -165,14 +176,26 @@ impl LineLod {
         if !self.cells.select_per_pixel_blended(transform, camera, frustum, settings, level, out) {
             return false;
         }
-        if let (Some(far), Some(from)) = (&self.far, self.far_from(level.blend)) {
+        if let (Some(far), Some(from)) = (&self.far, self.far_from()) {
             let tau_near = out[start..].iter().map(|p| p.tau).fold(f32::INFINITY, f32::min);
             if tau_near >= from && tau_near.is_finite() {
                 out.truncate(start);
                 let cell = far.lod.cells()[0];
-                let count = far.lod.prefix(&cell, tau_near * (-0.5 * level.clamped_blend()).exp2());
-                if count > 0 {
-                    out.push(CellPrefix { cell: cell.cell, first: cell.records.first, count, tau: tau_near });
+                let blend = level.clamped_blend();
+                let count = far.lod.prefix(&cell, tau_near * (-0.5 * blend).exp2());
+                // The prefix's head of coarser levels, which start above `τ` even faded in: the
+                // far lines just past the switch would submit all their levels (about twice what
+                // they draw), where the cells submitted about what they drew.
+                let reach = tau_near * (0.5 * blend).exp2();
+                let head =
+                    u32::try_from(far.lo_before.partition_point(|&lo| lo > reach)).unwrap_or(u32::MAX).min(count);
+                if count > head {
+                    out.push(CellPrefix {
+                        cell: cell.cell,
+                        first: cell.records.first + head,
+                        count: count - head,
+                        tau: tau_near,
+                    });
                 }
             }
         }
@@ -441,7 +464,7 @@ mod tests {
         let far_first = lines.far_first().expect("far lines");
         assert_eq!(far_first as usize, container.lines().len());
         let blend = 0.5;
-        let from = lines.far_from(blend).expect("far lines");
+        let from = lines.far_from().expect("far lines");
         let level = PixelLevel { quality: 1.0, blend };
         let (min, max) =
             (Vec3::from_array(container.block().bounds_min), Vec3::from_array(container.block().bounds_max));
@@ -467,7 +490,20 @@ mod tests {
         let far = at(from * 1.01);
         assert_eq!(far.len(), 1, "{far:?}");
         assert!(far[0].tau >= from && far[0].tau < from * 1.01, "the nearest cell's τ: {far:?}");
-        assert_eq!((far[0].first, far[0].cell as usize), (far_first, container.block().grid_cell_count()));
+        assert_eq!(far[0].cell as usize, container.block().grid_cell_count());
+        let far_end = far_first as usize + container.far_lines().len();
+        assert!(far[0].first >= far_first && (far[0].first + far[0].count) as usize <= far_end, "{far:?}");
+        // Its head of coarser levels, which start above τ even faded in, is not submitted: just
+        // past the switch the far prefix submits about what it draws, as the cells' did.
+        let skipped = &container.far_lines()[..(far[0].first - far_first) as usize];
+        assert!(!skipped.is_empty() && skipped.iter().all(|l| l.lo > far[0].tau * (0.5 * blend).exp2()));
+        let submitted = |prefixes: &[CellPrefix]| prefixes.iter().map(|p| p.count).sum::<u32>();
+        assert!(
+            submitted(&far) <= submitted(&cells),
+            "{} far lines submitted, {} cells'",
+            submitted(&far),
+            submitted(&cells)
+        );
         // What each draws whole at `τ` (level_keep's range covering every dither value; `None`:
         // the prefix's own).
         let whole = |prefixes: &[CellPrefix], tau: Option<f32>| {
