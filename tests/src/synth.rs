@@ -511,12 +511,7 @@ impl Builder<'_> {
             .map(|(i, s)| sizes_of_leaves.get(i).copied().unwrap_or(2.0 * s.radius))
             .collect();
         let spt = flatten(&children, &sizes).expect("a synthetic hierarchy is a forest with finite sizes");
-        let mut by_leaf = vec![0; leaves.len()];
-        for (input, id) in spt.leaf_id.iter().enumerate() {
-            if let Some(id) = id {
-                by_leaf[*id as usize] = input;
-            }
-        }
+        let by_leaf = inputs_by_leaf(&spt.leaf_id, leaves.len());
         for &node in &spt.order {
             let n = node as usize;
             emit(self, &spheres[n], (n < leaves.len()).then_some(n), spt.nodes[n], &by_leaf);
@@ -1131,12 +1126,7 @@ fn far_lines(rng: &mut SplitMix64, lines: &[LineRecord], edge: f32) -> Vec<LineR
         .map(|(i, s)| if i < leaves.len() { 0.0 } else { tau_far + 2.0 * s.radius })
         .collect();
     let spt = flatten(&children, &sizes).expect("a synthetic hierarchy is a forest with finite sizes");
-    let mut by_leaf = vec![0; leaves.len()];
-    for (input, id) in spt.leaf_id.iter().enumerate() {
-        if let Some(id) = id {
-            by_leaf[*id as usize] = input;
-        }
-    }
+    let by_leaf = inputs_by_leaf(&spt.leaf_id, leaves.len());
     spt.order
         .iter()
         .map(|&node| {
@@ -1226,4 +1216,16 @@ fn calibration(rng: &mut SplitMix64) -> Vec<CalibrationRecord> {
         }
     }
     records
+}
+
+/// Per leaf id of a flattened hierarchy, the input node that is that leaf (`leaf_id`: per input
+/// node, its leaf id if it is a leaf), for `leaves` leaves.
+fn inputs_by_leaf(leaf_id: &[Option<u32>], leaves: usize) -> Vec<usize> {
+    let mut by_leaf = vec![0; leaves];
+    for (input, id) in leaf_id.iter().enumerate() {
+        if let Some(id) = id {
+            by_leaf[*id as usize] = input;
+        }
+    }
+    by_leaf
 }
