@@ -255,8 +255,9 @@ pub struct BuildStats {
     /// first, summed over the cells (empty without). A line unchanged over several levels is one
     /// record, counted at each of them.
     pub lines_per_level: Vec<u32>,
-    /// The block's far lines at each level of their hierarchy (spec §6.9.1), level 0 (the
-    /// cells' coarsest lines) first (empty without lines, or where none merge across cells).
+    /// The block's far lines at each level of their hierarchy (spec §6.9.1), level 0 (the lines
+    /// the cells draw at the switch) first (empty without lines, or where none merge across
+    /// cells).
     pub far_lines_per_level: Vec<u32>,
     /// Wall-clock time of each stage that ran, in the order they ran; together they tile the
     /// build from the gathering to the finished [`ContainerData`]. Not part of the container

@@ -832,9 +832,9 @@ impl<'a> Scene<'a> {
     }
 
     /// The branch lines of `τ = p` (each cell's prefix `hi > τ` submitted, those of `lo ≤ τ`
-    /// drawn as capsules of their radii; from the switch `τ_s` on, the far lines' instead, as the runtime
-    /// draws them without a level blend, spec §6.9.1, their prefix submitted from its first
-    /// record that starts at or below `τ`). Returns the primitives submitted.
+    /// drawn as capsules of their radii; from the switch `τ_s` on, the far lines' instead, as
+    /// the runtime draws them without a level blend, spec §6.9.1, their prefix submitted from
+    /// its first record that starts at or below `τ`). Returns the primitives submitted.
     fn draw_lines(&self, view: &View, p: f32, canvas: &mut Canvas) -> u64 {
         let d = self.data;
         let far = p >= treelod_format::far_switch(&d.far_lines);

@@ -82,8 +82,8 @@ pub struct EllipsoidLod(SptLod);
 /// switch `τ_s = τ_far · 2^(−1/2)` ([`Self::far_from`]) draws the far lines' prefix of that `τ`
 /// instead of the cells' prefixes: there the far lines' level 0, copies of what the cells draw
 /// at `τ_s` (the build puts it where no cell is fading between levels), is drawn whole and level
-/// 1 not yet faded in (with a level blend up to an octave), so the switch does not show. Their draws index the lines as uploaded: `LINES`
-/// then `FAR_LINES` ([`Self::far_first`]).
+/// 1 not yet faded in (with a level blend up to an octave), so the switch does not show. Their
+/// draws index the lines as uploaded: `LINES` then `FAR_LINES` ([`Self::far_first`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct LineLod {
     cells: SptLod,
@@ -124,7 +124,7 @@ impl LineLod {
     pub fn from_container(container: &Container) -> Option<Self> {
         let cells = SptLod::from_container(container, container.lines(), |cell| cell.lines)?;
         let records = container.far_lines();
-        let tau_far = records.iter().map(|l| l.lo).filter(|&lo| lo > 0.0).fold(f32::INFINITY, f32::min);
+        let tau_far = treelod_format::far_threshold(records);
         let far = u32::try_from(container.lines().len())
             .ok()
             .filter(|_| tau_far.is_finite())
