@@ -1417,7 +1417,7 @@ pub fn check_far_lines(far: &[LineRecord], lines: &[LineRecord], block: &BlockRe
         return Err(bad(
             kind,
             0,
-            format!("{} records but LINES is empty: far lines merge the cells' coarsest lines (§6.9.1)", far.len()),
+            format!("{} records but LINES is empty: far lines merge the cells' lines (§6.9.1)", far.len()),
         ));
     }
     check_lines(kind, far)?;
