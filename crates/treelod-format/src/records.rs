@@ -132,8 +132,8 @@ impl SectionKind {
     pub const ELLIPSOIDS: Self = Self(0x0020);
     /// [`LineRecord`]s in SPT order per cell.
     pub const LINES: Self = Self(0x0021);
-    /// [`LineRecord`]s of the block's far lines: one hierarchy over the grid cells' coarsest
-    /// lines, merged across cells, in SPT order (spec §6.9.1). Since 1.9.
+    /// [`LineRecord`]s of the block's far lines: one hierarchy over the lines the grid cells
+    /// draw at its switch, merged across cells, in SPT order (spec §6.9.1). Since 1.9.
     pub const FAR_LINES: Self = Self(0x0022);
     /// [`PlaneRecord`]s in SPT order per cell.
     pub const PLANES: Self = Self(0x0030);

@@ -227,7 +227,7 @@ struct CellsInfo {
     totals: Counts,
 }
 
-/// The block's far lines (spec §6.9.1): one hierarchy over the cells' coarsest lines.
+/// The block's far lines (spec §6.9.1): one hierarchy over the lines the cells draw at its switch.
 #[derive(Debug, Serialize)]
 struct FarLinesInfo {
     /// `FAR_LINES` records.
