@@ -9,8 +9,10 @@
 //! one minus the mean of what the rays keep: 0 in the open, 1 inside a closed opaque box.
 //!
 //! The level-of-detail primitives get the area-weighted mean of the occlusion of the leaves they
-//! stand for ([`mean_occlusion`]), like their colour: a point or plane drawn in place of its leaves
-//! keeps their brightness, so switching levels does not change the canopy's shading. (The paper
+//! stand for ([`mean_occlusion`]), like their colour: a point drawn in place of its leaves keeps
+//! their brightness, so switching levels does not change the canopy's shading. An impostor plane
+//! stands for a whole cluster, which a view sees mostly by its open leaves: it gets the mean
+//! weighted by how often a view from outside reaches each leaf ([`seen_occlusion`]). (The paper
 //! samples its ellipsoids' and lines' own surfaces instead; those are not points of the source
 //! surface, and their occlusion would differ from the mesh's they replace.)
 //!
@@ -438,9 +440,41 @@ pub fn mean_occlusion(items: impl IntoIterator<Item = (f32, f32)>) -> f32 {
     mean
 }
 
+/// The occlusion of a cluster of leaves as it is seen from outside: the mean of `(occlusion,
+/// area)` pairs weighted by area times `1 − occlusion`, the share of the directions about a leaf
+/// that leave the block (the rays of its occlusion), which is the chance that a view from outside
+/// along a random direction reaches it. An impostor plane stands for a whole cluster, the inner
+/// leaves with the outer ones, but a view of the cluster sees mostly its outer, open leaves: the
+/// plain area-weighted mean made the shared oak's impostor trees 3.8 % darker than the full mesh
+/// in mean luminance at its default framing (0.9 % without ambient occlusion). 0 if the weights
+/// sum to 0; 1 where every leaf of some area is wholly occluded (what the plain mean gives).
+#[must_use]
+pub fn seen_occlusion(items: &[(f32, f32)]) -> f32 {
+    let closed = items.iter().any(|&(_, area)| area > 0.0)
+        && items.iter().all(|&(ao, area)| area <= 0.0 || ao >= 1.0);
+    if closed {
+        return 1.0;
+    }
+    mean_occlusion(items.iter().map(|&(ao, area)| (ao, area * (1.0 - ao.clamp(0.0, 1.0)))))
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{AoConfig, AoTriangle, Groups, vertex_occlusion};
+    use super::{AoConfig, AoTriangle, Groups, seen_occlusion, vertex_occlusion};
+
+    /// A cluster seen from outside shows its open leaves: the mean weights each leaf by the share
+    /// of directions that leave it; equal occlusions give that occlusion; all closed gives 1.
+    #[test]
+    fn a_cluster_seen_from_outside_reads_its_open_leaves() {
+        // An open leaf (0.2) and a buried one (0.8) of equal area: weights 0.8 and 0.2.
+        let seen = seen_occlusion(&[(0.2, 1.0), (0.8, 1.0)]);
+        assert!((seen - (0.2 * 0.8 + 0.8 * 0.2) / 1.0).abs() < 1e-6, "{seen}");
+        assert!(seen < super::mean_occlusion([(0.2, 1.0), (0.8, 1.0)]), "brighter than the plain mean 0.5");
+        assert!((seen_occlusion(&[(0.4, 2.0), (0.4, 1.0)]) - 0.4).abs() < 1e-6);
+        assert_eq!(seen_occlusion(&[(1.0, 1.0), (1.0, 3.0)]), 1.0);
+        assert_eq!(seen_occlusion(&[]), 0.0);
+        assert_eq!(seen_occlusion(&[(0.5, 0.0)]), 0.0, "no area, no weight");
+    }
     use glam::Vec3;
     use treelod_format::{VertexRecord, pack::oct_encode};
 

@@ -943,11 +943,14 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
     let mut plane_leaves = Vec::new();
     for &i in &spt.order {
         if !mesh.occlusion.is_empty() {
-            plane_ao.push(crate::ambient::mean_occlusion(placed_triangles(i as usize).map(|(t, [a, b, c])| {
-                #[expect(clippy::cast_possible_truncation, reason = "an area as a weight")]
-                let area = (b - a).cross(c - a).length() as f32;
-                (mesh.occlusion.get(t as usize).copied().unwrap_or(0.0), area)
-            })));
+            let leaves: Vec<(f32, f32)> = placed_triangles(i as usize)
+                .map(|(t, [a, b, c])| {
+                    #[expect(clippy::cast_possible_truncation, reason = "an area as a weight")]
+                    let area = (b - a).cross(c - a).length() as f32;
+                    (mesh.occlusion.get(t as usize).copied().unwrap_or(0.0), area)
+                })
+                .collect();
+            plane_ao.push(crate::ambient::seen_occlusion(&leaves));
         }
         let (q, r, s) = (&quads[i as usize], &regions[i as usize], &spt.nodes[i as usize]);
         let centre = q.centre + origin;
