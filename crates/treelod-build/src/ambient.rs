@@ -450,8 +450,7 @@ pub fn mean_occlusion(items: impl IntoIterator<Item = (f32, f32)>) -> f32 {
 /// sum to 0; 1 where every leaf of some area is wholly occluded (what the plain mean gives).
 #[must_use]
 pub fn seen_occlusion(items: &[(f32, f32)]) -> f32 {
-    let closed = items.iter().any(|&(_, area)| area > 0.0)
-        && items.iter().all(|&(ao, area)| area <= 0.0 || ao >= 1.0);
+    let closed = items.iter().any(|&(_, area)| area > 0.0) && items.iter().all(|&(ao, area)| area <= 0.0 || ao >= 1.0);
     if closed {
         return 1.0;
     }
