@@ -324,9 +324,11 @@ pub const FAR_BLEND: f32 = 0.5;
 /// near enough to be cut by the view or biased in depth per cell still draws the cells' lines.
 pub const FAR_TAKEOVER: f32 = 1.125;
 
-/// A far leaf's source lines: the line `line` of cell `cell`'s merge forest.
-struct FarLeaf {
-    cell: usize,
+/// A far leaf: line `line` of a cell's merge forest `forest`, whose first `ids.len()` lines are
+/// the cell's source segments `ids` (global), in order.
+struct FarLeaf<'a> {
+    forest: &'a [Line],
+    ids: &'a [u32],
     line: u32,
 }
 
@@ -348,11 +350,12 @@ fn far_lines(
 ) -> Result<CellLines, BuildError> {
     let Some(switch) = far_switch(cells) else { return Ok(CellLines::default()) };
     // The lines each cell draws at the switch, in cell order.
-    let mut leaves: Vec<FarLeaf> = Vec::new();
-    for (cell, (lines, history)) in cells.iter().zip(histories).enumerate() {
+    let mut leaves: Vec<FarLeaf<'_>> = Vec::new();
+    for ((lines, history), ids) in cells.iter().zip(histories).zip(per_cell) {
         let Some(history) = history else { continue };
         let k = lines.levels.iter().position(|l| switch < l.threshold).unwrap_or(lines.levels.len() - 1);
-        leaves.extend(history.snapshots[k].iter().map(|&line| FarLeaf { cell, line }));
+        let forest = &history.forest.lines[..];
+        leaves.extend(history.snapshots[k].iter().map(|&line| FarLeaf { forest, ids, line }));
     }
     if leaves.len() < 2 {
         return Ok(CellLines::default());
@@ -361,15 +364,12 @@ fn far_lines(
     let sources: Vec<Vec<u32>> = leaves
         .iter()
         .map(|leaf| {
-            let history = histories[leaf.cell].as_ref().map_or(&[][..], |h| &h.forest.lines[..]);
-            let ids = &per_cell[leaf.cell];
-            // Source lines are the first `ids.len()` of a cell's forest, in `ids` order.
             let mut out = Vec::new();
             let mut stack = vec![leaf.line];
             while let Some(l) = stack.pop() {
-                match history[l as usize].merged {
+                match leaf.forest[l as usize].merged {
                     Some([a, b]) => stack.extend([b, a]),
-                    None => out.push(ids[l as usize]),
+                    None => out.push(leaf.ids[l as usize]),
                 }
             }
             out.sort_unstable();
@@ -387,8 +387,7 @@ fn far_lines(
         .zip(&sources)
         .enumerate()
         .map(|(i, (leaf, leaf_sources))| {
-            let line = histories[leaf.cell].as_ref().map(|h| &h.forest.lines[leaf.line as usize]);
-            let Some(line) = line else { unreachable!("leaves come from cells with a history") };
+            let line = &leaf.forest[leaf.line as usize];
             // Its segments hang together, or (combined siblings) from one parent segment: the
             // parent of the first whose parent is not its own.
             let here = u32::try_from(i).unwrap_or(u32::MAX);
