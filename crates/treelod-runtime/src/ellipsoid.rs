@@ -29,7 +29,7 @@
 use std::ops::Deref;
 
 use glam::Mat4;
-use treelod_format::{Container, EllipsoidRecord, FAR_SWITCH_OCTAVES, LineRecord};
+use treelod_format::{Container, EllipsoidRecord, LineRecord};
 
 use crate::draws::{PrefixDraw, Scene, TreeDraws, by_chunks};
 use crate::frame::{Camera, CellPrefix, Frustum, LodSettings};
@@ -90,12 +90,12 @@ pub struct LineLod {
     far: Option<FarLines>,
 }
 
-/// A model's far lines: their one hierarchy, and the least `τ` of its level 1.
+/// A model's far lines: their one hierarchy, and where an instance switches to them.
 #[derive(Clone, Debug, PartialEq)]
 struct FarLines {
     lod: SptLod,
-    /// `τ_far`: the least positive `lo` of the far lines (spec §6.9.1).
-    tau_far: f32,
+    /// The switch `τ_s` (spec §6.9.1, [`treelod_format::far_switch`]).
+    switch: f32,
     /// Per record, the least `lo` of it and the records before it (non-increasing): the records
     /// before the first whose entry is at most `τ` all start above `τ`.
     lo_before: Vec<f32>,
@@ -124,10 +124,10 @@ impl LineLod {
     pub fn from_container(container: &Container) -> Option<Self> {
         let cells = SptLod::from_container(container, container.lines(), |cell| cell.lines)?;
         let records = container.far_lines();
-        let tau_far = treelod_format::far_threshold(records);
+        let switch = treelod_format::far_switch(records);
         let far = u32::try_from(container.lines().len())
             .ok()
-            .filter(|_| tau_far.is_finite())
+            .filter(|_| switch.is_finite())
             .and_then(|first| SptLod::whole(container, records, first))
             .map(|lod| {
                 let lo_before = records
@@ -137,7 +137,7 @@ impl LineLod {
                         Some(*least)
                     })
                     .collect();
-                FarLines { lod, tau_far, lo_before }
+                FarLines { lod, switch, lo_before }
             });
         Some(Self { cells, far })
     }
@@ -153,7 +153,7 @@ impl LineLod {
     /// draws the far lines, half an octave below `τ_far`; `None` without far lines.
     #[must_use]
     pub fn far_from(&self) -> Option<f32> {
-        self.far.as_ref().map(|f| f.tau_far * (-FAR_SWITCH_OCTAVES).exp2())
+        self.far.as_ref().map(|f| f.switch)
     }
 
     /// The line prefixes an instance draws ([`SptLod::select_per_pixel_blended`]): each cell's,
@@ -172,14 +172,13 @@ impl LineLod {
         level: PixelLevel,
         out: &mut Vec<CellPrefix>,
     ) -> bool {
-        let start = out.len();
-        if !self.cells.select_per_pixel_blended(transform, camera, frustum, settings, level, out) {
-            return false;
-        }
-        if let (Some(far), Some(from)) = (&self.far, self.far_from()) {
-            let tau_near = out[start..].iter().map(|p| p.tau).fold(f32::INFINITY, f32::min);
-            if tau_near >= from && tau_near.is_finite() {
-                out.truncate(start);
+        if let Some(far) = &self.far {
+            // The nearest cell's τ alone first: a far tree need not select its cells' prefixes.
+            let Some(taus) = self.cells.cell_taus(transform, camera, frustum, settings, level.quality) else {
+                return false;
+            };
+            let tau_near = taus.map(|(_, tau)| tau).fold(f32::INFINITY, f32::min);
+            if tau_near >= far.switch && tau_near.is_finite() {
                 let cell = far.lod.cells()[0];
                 let blend = level.clamped_blend();
                 let count = far.lod.prefix(&cell, tau_near * (-0.5 * blend).exp2());
@@ -197,9 +196,10 @@ impl LineLod {
                         tau: tau_near,
                     });
                 }
+                return true;
             }
         }
-        true
+        self.cells.select_per_pixel_blended(transform, camera, frustum, settings, level, out)
     }
 
     /// [`Self::select_per_pixel_blended`] without a level blend.

@@ -282,27 +282,42 @@ impl SptLod {
         level: PixelLevel,
         out: &mut Vec<CellPrefix>,
     ) -> bool {
-        let quality = level.quality;
         // 1 exactly for no blend: the prefix of `hi > τ`.
         let widen = (-0.5 * level.clamped_blend()).exp2();
-        let Some(per_metre) = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius)) else {
+        let Some(taus) = self.cell_taus(transform, camera, frustum, settings, level.quality) else {
             return false;
         };
-        let quality = if quality > 0.0 && quality.is_finite() { quality } else { 1.0 };
-        let scale = camera.world_per_pixel() / per_metre;
-        let d_block = transform.transform_point3(self.block_centre).distance(camera.position);
-        let inv_radius = if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 };
-        for cell in &self.cells {
-            let d_cell = transform.transform_point3(cell.anchor).distance(camera.position);
-            let z = if cell.block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
-            let bias = if settings.s_min > 0.0 { settings.biased_pixels(z).0 / settings.s_min } else { 1.0 };
-            let tau = d_cell * per_metre * bias / quality;
+        for (cell, tau) in taus {
             let count = self.prefix(cell, tau * widen);
             if count > 0 {
                 out.push(CellPrefix { cell: cell.cell, first: cell.records.first, count, tau });
             }
         }
         true
+    }
+
+    /// Each cell's `τ` in metres per pixel as [`Self::select_per_pixel_blended`] measures it (the
+    /// anchor's distance, Gilet's depth bias, over `quality`); `None` if the instance's sphere
+    /// lies outside `frustum` or the transform is degenerate.
+    pub fn cell_taus<'a>(
+        &'a self,
+        transform: Mat4,
+        camera: &'a Camera,
+        frustum: &Frustum,
+        settings: &'a LodSettings,
+        quality: f32,
+    ) -> Option<impl Iterator<Item = (&'a SptCell, f32)> + 'a> {
+        let per_metre = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius))?;
+        let quality = if quality > 0.0 && quality.is_finite() { quality } else { 1.0 };
+        let scale = camera.world_per_pixel() / per_metre;
+        let d_block = transform.transform_point3(self.block_centre).distance(camera.position);
+        let inv_radius = if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 };
+        Some(self.cells.iter().map(move |cell| {
+            let d_cell = transform.transform_point3(cell.anchor).distance(camera.position);
+            let z = if cell.block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
+            let bias = if settings.s_min > 0.0 { settings.biased_pixels(z).0 / settings.s_min } else { 1.0 };
+            (cell, d_cell * per_metre * bias / quality)
+        }))
     }
 
     /// The prefixes an instance with world-from-model `transform` draws for `camera` with `τ` in
