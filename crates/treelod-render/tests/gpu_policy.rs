@@ -37,6 +37,14 @@ fn positions(lod: &ModelLod) -> Vec<Vec3> {
     positions
 }
 
+/// The calibrated demo tree, its point tree and the 48 trees' [`positions`].
+fn demo_forest() -> (Arc<Container>, ModelLod, Vec<Vec3>) {
+    let container = calibrated_demo();
+    let lod = ModelLod::from_container(&container);
+    let positions = positions(&lod);
+    (container, lod, positions)
+}
+
 /// A renderer of `container` at `positions`, selecting on the GPU if `on_gpu`.
 fn renderer(gpu: &Gpu, container: &Arc<Container>, settings: Settings, positions: &[Vec3], on_gpu: bool) -> Renderer {
     // Everything streams in the first frame, so the CPU path draws its selection unclamped.
@@ -76,9 +84,7 @@ fn gpu_draws(gpu: &Gpu, renderer: &Renderer) -> Vec<GpuDraw> {
 #[test]
 fn policy_frames_select_the_point_tree_s_trees_on_the_gpu() {
     let gpu = gpu();
-    let container = calibrated_demo();
-    let lod = ModelLod::from_container(&container);
-    let positions = positions(&lod);
+    let (container, lod, positions) = demo_forest();
     // No transition, no occlusion: the frames repeat (the GPU's counts arrive a frame or two
     // later).
     let policy = Policy { transition: 0, occlusion: false, ..Policy::default() };
@@ -155,9 +161,7 @@ fn policy_frames_select_the_point_tree_s_trees_on_the_gpu() {
 #[test]
 fn a_frame_the_gpu_draws_nothing_of_shows_the_cpu_s_draws() {
     let gpu = gpu();
-    let container = calibrated_demo();
-    let lod = ModelLod::from_container(&container);
-    let positions = positions(&lod);
+    let (container, _, positions) = demo_forest();
     let camera = Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 128, 128);
     let mut forest = renderer(&gpu, &container, Settings::default(), &positions, false);
     forest.prepare(&gpu.device, &gpu.queue, &camera);
@@ -195,9 +199,7 @@ fn unorm([lo, hi]: [f32; 2]) -> [u32; 2] {
 #[test]
 fn trees_fading_into_and_out_of_the_point_tree_fade_on_the_gpu_as_on_the_cpu() {
     let gpu = gpu();
-    let container = calibrated_demo();
-    let lod = ModelLod::from_container(&container);
-    let positions = positions(&lod);
+    let (container, _, positions) = demo_forest();
     let policy = Policy { hysteresis: 0.0, transition: 4, occlusion: false, ..Policy::default() };
     let settings = Settings { policy: Some(policy), ..Settings::default() };
     let mut cpu = renderer(&gpu, &container, settings, &positions, false);
@@ -256,9 +258,7 @@ fn trees_fading_into_and_out_of_the_point_tree_fade_on_the_gpu_as_on_the_cpu() {
 #[test]
 fn the_gpu_s_trees_are_measured_for_occlusion() {
     let gpu = gpu();
-    let container = calibrated_demo();
-    let lod = ModelLod::from_container(&container);
-    let positions = positions(&lod);
+    let (container, _, positions) = demo_forest();
     assert!(Settings::default().policy.is_some_and(|p| p.occlusion), "the default");
     let mut cpu = renderer(&gpu, &container, Settings::default(), &positions, false);
     let mut hybrid = renderer(&gpu, &container, Settings::default(), &positions, true);
@@ -284,9 +284,7 @@ fn the_gpu_s_trees_are_measured_for_occlusion() {
 #[test]
 fn frames_without_a_policy_select_every_tree_on_the_gpu() {
     let gpu = gpu();
-    let container = calibrated_demo();
-    let lod = ModelLod::from_container(&container);
-    let positions = positions(&lod);
+    let (container, lod, positions) = demo_forest();
     let camera = Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 128, 128);
     let forced = Settings::forced(Technique::Spt);
     let mut cpu = renderer(&gpu, &container, forced, &positions, false);
