@@ -5,17 +5,19 @@
 //! each container as the build gives it (written vertices, triangles, each triangle's coverage
 //! from its leaf point's alpha, two-sided materials); then, per container, the occlusion of
 //! every vertex with 256 rays traced from each vertex on its own (the reference, cached beside
-//! the container as `FILE.ao256`; another seed than the compared ones), and with the default 16
-//! rays both with every vertex on its own (`AoConfig::per_vertex`, the stage before small flat
-//! pieces were settled by their first rays) and as built (the default), each with its wall-clock
-//! and CPU time and its mean absolute difference per vertex from the reference.
-//! `TREELOD_AO_NO_REFERENCE=1` times only; `TREELOD_AO_ONLY=shared` (or `per vertex`) runs one.
+//! the container as `FILE.ao256`; another seed than the compared ones), and with 16 rays: traced
+//! through the BVH with every vertex on its own (`AoConfig::per_vertex`) and with small flat
+//! pieces settled by their first rays, and as parallel rays along 32 directions (the default),
+//! each with its wall-clock and CPU time and its mean absolute difference per vertex from the
+//! reference. `TREELOD_AO_NO_REFERENCE=1` times only; `TREELOD_AO_ONLY=parallel` (or any part of
+//! a row's name) runs the rows that name it; `TREELOD_AO_RAYS=12,16` the parallel method at
+//! those ray counts (`2N` directions).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use treelod_build::AoConfig;
 use treelod_build::ambient::{AoTriangle, vertex_occlusion};
+use treelod_build::{AoConfig, AoMethod};
 use treelod_format::{Container, MATERIAL_DOUBLE_SIDED, VertexRecord};
 
 /// The stage's input read back from a container.
@@ -70,7 +72,7 @@ fn reference(path: &Path, vertices: &[VertexRecord], triangles: &[AoTriangle]) -
     {
         return bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
     }
-    let config = AoConfig { rays: 256, seed: 0x5EED_0256, per_vertex: true };
+    let config = AoConfig { rays: 256, seed: 0x5EED_0256, per_vertex: true, method: AoMethod::Traced };
     let (ao, seconds) = timed(vertices, triangles, &config);
     eprintln!("  reference (256 rays per vertex): {seconds:.1} s");
     let bytes: Vec<u8> = ao.iter().flat_map(|x| x.to_le_bytes()).collect();
@@ -93,10 +95,19 @@ fn main() {
         println!("{}: {} vertices, {} triangles", path.display(), vertices.len(), triangles.len());
         let reference = with_reference.then(|| reference(&path, &vertices, &triangles));
         let only = std::env::var("TREELOD_AO_ONLY").unwrap_or_default();
-        for (name, config) in [
-            ("16 rays per vertex", AoConfig { per_vertex: true, ..AoConfig::default() }),
-            ("16 rays shared (default)", AoConfig::default()),
-        ] {
+        let traced = AoConfig { method: AoMethod::Traced, ..AoConfig::default() };
+        let mut configs = vec![
+            ("traced, 16 rays per vertex".to_string(), AoConfig { per_vertex: true, ..traced.clone() }),
+            ("traced, 16 rays shared".to_string(), traced),
+        ];
+        // `TREELOD_AO_RAYS=12,16,…`: the parallel method at those ray counts (default 16).
+        for rays in std::env::var("TREELOD_AO_RAYS").unwrap_or_else(|_| "16".into()).split(',') {
+            if let Ok(rays) = rays.trim().parse::<u32>() {
+                let name = format!("parallel, {} directions{}", 2 * rays, if rays == 16 { " (default)" } else { "" });
+                configs.push((name, AoConfig { rays, ..AoConfig::default() }));
+            }
+        }
+        for (name, config) in configs {
             if !only.is_empty() && !name.contains(&only) {
                 continue;
             }
@@ -104,7 +115,7 @@ fn main() {
             let error = reference.as_ref().map_or(String::new(), |r| {
                 format!(", mean |Δ| {:.4}, mean Δ {:+.4}", mean_abs_diff(&ao, r), mean_diff(&ao, r))
             });
-            println!("  {name:28} {seconds:7.2} s{error}");
+            println!("  {name:34} {seconds:7.2} s{error}");
         }
     }
 }

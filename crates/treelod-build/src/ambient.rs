@@ -16,8 +16,34 @@
 //! samples its ellipsoids' and lines' own surfaces instead; those are not points of the source
 //! surface, and their occlusion would differ from the mesh's they replace.)
 //!
-//! The rays run against a BVH (`obvhs`, an 8-wide compressed BVH), in parallel over batches of
-//! vertices. Directions come from a per-vertex rotated stratified spiral seeded by the vertex
+//! Two ways to trace the rays ([`AoMethod`]). The default, [`AoMethod::Parallel`]
+//! ([`crate::parallel_rays`]), gives every vertex the same `2 × rays` directions, evenly spread
+//! over the sphere, and traces each direction from all vertices at once through a grid of the
+//! triangles projected along it; each vertex weights the directions on its side by their cosine
+//! (about `rays` of them; both sides, all of them, for two-sided materials). The rest of this
+//! documentation is of [`AoMethod::Traced`], each vertex's own `rays` directions through a BVH,
+//! which the measurements take as their reference (256 rays per vertex). Measured
+//! (`benches/ao.rs`, release, 2 cores; mean |Δ| per vertex against the reference, wall clock of
+//! the stage):
+//!
+//! | model | vertices | traced, 16 rays | parallel, 32 directions (default) | parallel, 24 |
+//! |---|---|---|---|---|
+//! | Quaternius (3k triangles) | 5.8k | 0.0231, 0.02 s | 0.0215, 0.03 s | 0.0279, 0.03 s |
+//! | ez-tree pine (19k) | 22k | 0.0261, 0.48 s | 0.0207, 0.35 s | 0.0257, 0.26 s |
+//! | ez-tree oak (23k) | 30k | 0.0260, 0.65 s | 0.0203, 0.44 s | 0.0249, 0.32 s |
+//! | orchid (31k) | 62k | 0.0752, 0.36 s | 0.0589, 0.35 s | 0.0687, 0.26 s |
+//! | jacaranda (55k) | 102k | 0.0695, 0.75 s | 0.0532, 0.75 s | 0.0624, 0.56 s |
+//! | willow (154k) | 187k | 0.0590, 2.63 s | 0.0536, 2.24 s | 0.0624, 1.73 s |
+//! | maple (669k) | 717k | 0.0643, 14.2 s | 0.0628, 9.5 s | 0.0733, 7.3 s |
+//!
+//! The shared directions are evenly spread where a vertex's own random rays clump, and every
+//! ray of a direction reads the same short lists; with neither method biased (mean Δ within
+//! ±0.003 on every model), the parallel rays are closer to the reference on every model, and
+//! their stage takes 0.7–1.0× the time. Without the BVH the maple's build peaks at 209 MB
+//! instead of 319 MB.
+//!
+//! The traced rays run against a BVH (`obvhs`, an 8-wide compressed BVH), in parallel over
+//! batches of vertices. Directions come from a per-vertex rotated stratified spiral seeded by the vertex
 //! index, so the result is the same whatever the thread count.
 //!
 //! Cost. Where foliage is dense, most vertices are buried: every ray they cast is stopped. The
@@ -77,8 +103,8 @@
 //!   primitives to build on): 14–21 % more CPU on the willow, and 8 % less peak memory for
 //!   the bench.
 //!
-//! Memory. The stage is the build's peak: on the maple, 317 MB against 118 MB without it, the
-//! same with 1 ray as with 16, and the same with obvhs's fast and very fast presets (measured).
+//! Memory. Traced, the stage is the build's peak: on the maple, 317 MB against 118 MB without
+//! it, the same with 1 ray as with 16, and the same with obvhs's fast and very fast presets (measured).
 //! It is the BVH's construction: the triangles (24 MB), the binary BVH (2 nodes per triangle,
 //! 43 MB) and its conversion to the 8-wide tree, which keeps 7 decisions per binary node (75 MB).
 
@@ -99,28 +125,57 @@ use crate::union_find::{find, singletons, union};
 /// A ray stops once less than this share of it is left.
 const STOP: f32 = 1.0 / 512.0;
 
+/// How the rays are traced (module documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum AoMethod {
+    /// `2 × rays` directions shared by every vertex, each traced from all vertices at once
+    /// through a grid of the triangles projected along it ([`crate::parallel_rays`]); a vertex
+    /// traces those on its side of its normal, about `rays` (both sides for two-sided
+    /// materials). The default: against 256 rays per vertex, closer than `rays` random rays per
+    /// vertex on every shared model, in less time and without the BVH's memory.
+    #[default]
+    Parallel,
+    /// `rays` cosine-weighted rays per vertex through a BVH, each vertex its own directions; the
+    /// reference of measurements (with [`AoConfig::per_vertex`] and 256 rays).
+    Traced,
+}
+
+impl AoMethod {
+    /// The name in settings and on the command line: `parallel`, `traced`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Parallel => "parallel",
+            Self::Traced => "traced",
+        }
+    }
+}
+
 /// The ambient-occlusion stage's settings.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct AoConfig {
-    /// Rays per vertex, `1..=4096`. Default 16, stratified: against 256 rays, a mean absolute
-    /// difference per vertex of 0.009 (demo tree), 0.026 (oak) and 0.064 (maple), smoothed
-    /// further across each triangle. They cost about 0.4 s per ray per vertex on the
-    /// 669k-triangle maple (716k vertices) on 2 cores: 16 rays add 6.5 s to its 2.3 s build.
-    /// Where foliage is dense, leaf cards settled by their first half of rays cost half (module
-    /// documentation): the 10⁶-leaf demo tree (4M vertices) builds in 104 s, 96 s of it the
-    /// rays (169 s before).
+    /// Rays per vertex, `1..=4096`. Default 16. With [`AoMethod::Parallel`], `2 × rays`
+    /// directions shared by all vertices (a one-sided vertex traces the half on its side);
+    /// against 256 rays per vertex, a mean absolute difference per vertex of 0.020 (oak) and
+    /// 0.063 (maple), in 0.44 s and 9.5 s on 2 cores (module documentation). With
+    /// [`AoMethod::Traced`], each vertex's own stratified rays: 0.026 (oak), 0.064 (maple), 0.009
+    /// on the 10⁵-leaf demo tree; where foliage is dense, leaf cards settled by their first half
+    /// of rays cost half (the 10⁶-leaf demo tree, 4M vertices, builds in 104 s, 96 s of it the
+    /// rays; 169 s before).
     pub rays: u32,
     /// Seed of the directions' per-vertex rotations.
     pub seed: u64,
     /// Trace all rays of every vertex, as the stage did before small flat pieces were settled
     /// by their first rays (module documentation); the reference of measurements. Default
-    /// `false`.
+    /// `false`; [`AoMethod::Traced`] only.
     pub per_vertex: bool,
+    /// How the rays are traced. Default [`AoMethod::Parallel`].
+    pub method: AoMethod,
 }
 
 impl Default for AoConfig {
     fn default() -> Self {
-        Self { rays: 16, seed: 0, per_vertex: false }
+        Self { rays: 16, seed: 0, per_vertex: false, method: AoMethod::Parallel }
     }
 }
 
@@ -139,12 +194,13 @@ impl AoConfig {
         Ok(())
     }
 
-    /// The settings recorded in the container (spec §7.1): `ao.rays`, `ao.seed`.
+    /// The settings recorded in the container (spec §7.1): `ao.rays`, `ao.seed`, `ao.method`.
     #[must_use]
     pub fn settings(&self) -> Vec<Setting> {
         vec![
             Setting { key: "ao.rays".into(), value: self.rays.to_string() },
             Setting { key: "ao.seed".into(), value: self.seed.to_string() },
+            Setting { key: "ao.method".into(), value: self.method.name().into() },
         ]
     }
 }
@@ -169,6 +225,10 @@ pub fn vertex_occlusion(
     config: &AoConfig,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Vec<f32> {
+    if config.method == AoMethod::Parallel {
+        let directions = crate::parallel_rays::sphere_directions(2 * config.rays.max(1), config.seed);
+        return crate::parallel_rays::vertex_occlusion(vertices, triangles, &directions, progress);
+    }
     let position = |i: u32| Vec3A::from_array(vertices[i as usize].position);
     // Which vertices are used, and by a two-sided triangle.
     let mut used = vec![0u8; vertices.len()];
@@ -459,7 +519,14 @@ pub fn seen_occlusion(items: &[(f32, f32)]) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use super::{AoConfig, AoTriangle, Groups, seen_occlusion, vertex_occlusion};
+    use super::{AoConfig, AoMethod, AoTriangle, Groups, seen_occlusion, vertex_occlusion};
+
+    /// The default (parallel rays) and the traced method, 16 rays.
+    const METHODS: [AoMethod; 2] = [AoMethod::Parallel, AoMethod::Traced];
+
+    fn with(method: AoMethod) -> AoConfig {
+        AoConfig { method, ..AoConfig::default() }
+    }
 
     /// A cluster seen from outside shows its open leaves: the mean weights each leaf by the share
     /// of directions that leave it; equal occlusions give that occlusion; all closed gives 1.
@@ -518,15 +585,17 @@ mod tests {
         let inside = patch(&mut vertices, 0.0, true);
         let outside = patch(&mut vertices, 3.0, false);
         triangles.extend([inside, outside]);
-        let ao = vertex_occlusion(&vertices, &triangles, &AoConfig::default(), &|_, _| {});
-        for v in inside.v {
-            assert!((ao[v as usize] - 1.0).abs() < 1e-6, "inside the box: {}", ao[v as usize]);
+        for method in METHODS {
+            let ao = vertex_occlusion(&vertices, &triangles, &with(method), &|_, _| {});
+            for v in inside.v {
+                assert!((ao[v as usize] - 1.0).abs() < 1e-6, "{method:?}, inside the box: {}", ao[v as usize]);
+            }
+            for v in outside.v {
+                assert!(ao[v as usize] < 1e-6, "{method:?}, above the box, facing away: {}", ao[v as usize]);
+            }
+            // The box's own outer faces see nothing but sky (their rays leave it).
+            assert!(ao[0] < 1e-6, "{method:?}: {}", ao[0]);
         }
-        for v in outside.v {
-            assert!(ao[v as usize] < 1e-6, "above the box, facing away: {}", ao[v as usize]);
-        }
-        // The box's own outer faces see nothing but sky (their rays leave it).
-        assert!(ao[0] < 1e-6, "{}", ao[0]);
     }
 
     #[test]
@@ -535,9 +604,11 @@ mod tests {
         let mut triangles = closed_box(&mut vertices, 1.0, 0.5);
         let inside = patch(&mut vertices, 0.0, false);
         triangles.push(inside);
-        let ao = vertex_occlusion(&vertices, &triangles, &AoConfig::default(), &|_, _| {});
-        // Every ray crosses exactly one wall.
-        assert!((ao[inside.v[0] as usize] - 0.5).abs() < 1e-3, "{}", ao[inside.v[0] as usize]);
+        for method in METHODS {
+            let ao = vertex_occlusion(&vertices, &triangles, &with(method), &|_, _| {});
+            // Every ray crosses exactly one wall.
+            assert!((ao[inside.v[0] as usize] - 0.5).abs() < 1e-3, "{method:?}: {}", ao[inside.v[0] as usize]);
+        }
 
         // A two-sided leaf just above a wide opaque floor: its lower hemisphere is blocked.
         let mut vertices = Vec::new();
@@ -553,12 +624,14 @@ mod tests {
         });
         let mut triangles = vec![leaf];
         triangles.extend(floor);
-        let ao = vertex_occlusion(&vertices, &triangles, &AoConfig::default(), &|_, _| {});
-        let a = ao[leaf.v[0] as usize];
-        assert!((a - 0.5).abs() < 0.02, "two-sided leaf over a floor: {a}");
-        // One-sided and facing up, the same leaf is open.
-        let triangles = [AoTriangle { two_sided: false, ..leaf }, floor[0], floor[1]];
-        assert!(vertex_occlusion(&vertices, &triangles, &AoConfig::default(), &|_, _| {})[0] < 1e-6);
+        let one_sided = [AoTriangle { two_sided: false, ..leaf }, floor[0], floor[1]];
+        for method in METHODS {
+            let ao = vertex_occlusion(&vertices, &triangles, &with(method), &|_, _| {});
+            let a = ao[leaf.v[0] as usize];
+            assert!((a - 0.5).abs() < 0.02, "{method:?}, two-sided leaf over a floor: {a}");
+            // One-sided and facing up, the same leaf is open.
+            assert!(vertex_occlusion(&vertices, &one_sided, &with(method), &|_, _| {})[0] < 1e-6);
+        }
     }
 
     #[test]
@@ -570,17 +643,20 @@ mod tests {
             let y = -0.9 + 0.045 * k as f32;
             triangles.push(patch(&mut vertices, y, k % 2 == 0));
         }
-        let config = AoConfig { rays: 16, seed: 7, ..AoConfig::default() };
         let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
         let four = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
-        let a = one.install(|| vertex_occlusion(&vertices, &triangles, &config, &|_, _| {}));
-        let b = four.install(|| vertex_occlusion(&vertices, &triangles, &config, &|_, _| {}));
-        assert_eq!(
-            a.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
-            b.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
-        );
-        // Stacked leaves shade each other: the middle of the stack is darker than its top.
-        assert!(a[triangles[12 + 20].v[0] as usize] > a[triangles[12 + 39].v[0] as usize]);
+        for method in METHODS {
+            let config = AoConfig { rays: 16, seed: 7, method, ..AoConfig::default() };
+            let a = one.install(|| vertex_occlusion(&vertices, &triangles, &config, &|_, _| {}));
+            let b = four.install(|| vertex_occlusion(&vertices, &triangles, &config, &|_, _| {}));
+            assert_eq!(
+                a.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                b.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                "{method:?}"
+            );
+            // Stacked leaves shade each other: the middle of the stack is darker than its top.
+            assert!(a[triangles[12 + 20].v[0] as usize] > a[triangles[12 + 39].v[0] as usize], "{method:?}");
+        }
     }
 
     /// A square card of half-size `h` at `centre` facing up: 4 vertices, 2 triangles.
@@ -652,8 +728,8 @@ mod tests {
         let shifted = |t: AoTriangle| AoTriangle { v: t.v.map(|v| v + inside), ..t };
         vertices.extend(enclosed);
         triangles.extend(shell.into_iter().chain(shell_card).chain(above).map(shifted));
-        let shared = vertex_occlusion(&vertices, &triangles, &AoConfig::default(), &|_, _| {});
-        let alone = AoConfig { per_vertex: true, ..AoConfig::default() };
+        let shared = vertex_occlusion(&vertices, &triangles, &with(AoMethod::Traced), &|_, _| {});
+        let alone = AoConfig { per_vertex: true, ..with(AoMethod::Traced) };
         let alone = vertex_occlusion(&vertices, &triangles, &alone, &|_, _| {});
         let (buried, open) = (inside as usize + 24, inside as usize + 28);
         assert_eq!(&shared[buried..buried + 4], &[1.0; 4], "a card inside a closed opaque box");
@@ -675,16 +751,22 @@ mod tests {
     #[test]
     fn the_stage_is_as_close_to_a_256_ray_reference_as_every_vertex_on_its_own() {
         let (vertices, triangles) = canopy(300);
-        let reference = AoConfig { rays: 256, seed: 99, per_vertex: true };
+        let reference = AoConfig { rays: 256, seed: 99, per_vertex: true, method: AoMethod::Traced };
         let reference = vertex_occlusion(&vertices, &triangles, &reference, &|_, _| {});
         let error = |config: &AoConfig| {
             let ao = vertex_occlusion(&vertices, &triangles, config, &|_, _| {});
             ao.iter().zip(&reference).map(|(a, b)| (a - b).abs()).sum::<f32>() / ao.len() as f32
         };
-        let per_vertex = error(&AoConfig { per_vertex: true, ..AoConfig::default() });
-        let shared = error(&AoConfig::default());
+        let per_vertex = error(&AoConfig { per_vertex: true, ..with(AoMethod::Traced) });
+        let shared = error(&with(AoMethod::Traced));
+        let parallel = error(&AoConfig::default());
         assert!(per_vertex < 0.08, "16 rays per vertex: mean |Δ| {per_vertex}");
-        assert!(shared <= per_vertex * 1.1, "as built: mean |Δ| {shared}, per vertex {per_vertex}");
+        assert!(shared <= per_vertex * 1.1, "pieces settled: mean |Δ| {shared}, per vertex {per_vertex}");
+        assert!(parallel <= per_vertex, "parallel rays (default): mean |Δ| {parallel}, per vertex {per_vertex}");
+        // Not biased: the mean difference is well under the mean absolute difference.
+        let ao = vertex_occlusion(&vertices, &triangles, &AoConfig::default(), &|_, _| {});
+        let bias = ao.iter().zip(&reference).map(|(a, b)| a - b).sum::<f32>() / ao.len() as f32;
+        assert!(bias.abs() < parallel / 4.0, "parallel rays: mean Δ {bias}, mean |Δ| {parallel}");
         // The canopy is darker below than above, and the floor under it darker than its rim.
         assert!(reference.iter().any(|&a| a > 0.2));
     }
@@ -692,15 +774,17 @@ mod tests {
     #[test]
     fn progress_reaches_the_total() {
         let (vertices, triangles) = canopy(100);
-        let last = std::sync::Mutex::new((0, 0));
-        let _ = vertex_occlusion(&vertices, &triangles, &AoConfig::default(), &|done, total| {
-            let mut last = last.lock().unwrap();
-            assert!(done <= total);
-            last.0 = last.0.max(done);
-            last.1 = total;
-        });
-        let (done, total) = *last.lock().unwrap();
-        assert_eq!((done, total), (vertices.len() as u64, vertices.len() as u64));
+        for method in METHODS {
+            let last = std::sync::Mutex::new((0, 0));
+            let _ = vertex_occlusion(&vertices, &triangles, &with(method), &|done, total| {
+                let mut last = last.lock().unwrap();
+                assert!(done <= total);
+                last.0 = last.0.max(done);
+                last.1 = total;
+            });
+            let (done, total) = *last.lock().unwrap();
+            assert_eq!((done, total), (vertices.len() as u64, vertices.len() as u64), "{method:?}");
+        }
     }
 
     #[test]

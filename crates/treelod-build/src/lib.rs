@@ -19,6 +19,7 @@ pub mod import;
 pub mod impostor;
 pub mod lines;
 pub mod lod_chain;
+pub mod parallel_rays;
 pub mod precision;
 pub mod prune;
 pub mod raster;
@@ -29,7 +30,7 @@ pub mod spt;
 pub mod texture;
 mod union_find;
 
-pub use ambient::AoConfig;
+pub use ambient::{AoConfig, AoMethod};
 pub use assemble::{
     BuildConfig, BuildOutput, BuildStats, Placed, Progress, StageTime, auto_grid, build_block, build_scenes,
     ellipsoid_report, prune_report, recorded_settings,

@@ -144,6 +144,12 @@ pub struct BuildOptions {
     /// planes get the mean of their leaves'. 0 writes no ambient occlusion.
     #[arg(long, value_name = "N", default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=4096))]
     pub ao_rays: u32,
+    /// How the ambient-occlusion rays are traced: `parallel` (2N directions shared by every
+    /// vertex, each traced from all vertices at once; a vertex traces about N, those on its
+    /// side) or `traced` (N rays of its own per vertex through a BVH: slower, more memory, the
+    /// reference of measurements).
+    #[arg(long, value_enum, value_name = "METHOD", default_value_t = AoMethodArg::Parallel)]
+    pub ao_method: AoMethodArg,
     /// Calibration views per elevation (spec §6.15, §6.16): every representation built is drawn
     /// at 6 projected heights (8 to 256 pixels) on the CPU, from N orthographic views around the
     /// tree at each of 0°, 30° and 60° elevation and one straight down, and its image error
@@ -255,8 +261,14 @@ impl BuildOptions {
                 seed: self.line_seed,
                 ..treelod_build::LineConfig::default()
             }),
-            ao: (self.ao_rays > 0)
-                .then(|| treelod_build::AoConfig { rays: self.ao_rays, ..treelod_build::AoConfig::default() }),
+            ao: (self.ao_rays > 0).then(|| treelod_build::AoConfig {
+                rays: self.ao_rays,
+                method: match self.ao_method {
+                    AoMethodArg::Parallel => treelod_build::AoMethod::Parallel,
+                    AoMethodArg::Traced => treelod_build::AoMethod::Traced,
+                },
+                ..treelod_build::AoConfig::default()
+            }),
             calibration: (self.calibration_views() > 0).then(|| treelod_build::CalibrationConfig {
                 views: self.calibration_views() as usize,
                 ..treelod_build::CalibrationConfig::default()
@@ -370,6 +382,15 @@ pub enum AtlasFormatArg {
     Bc7,
     /// RGBA8 texels (formats 1, 2).
     Rgba8,
+}
+
+/// `--ao-method`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AoMethodArg {
+    /// Directions shared by every vertex, traced as parallel rays (spec §6.14).
+    Parallel,
+    /// Rays of its own per vertex through a BVH.
+    Traced,
 }
 
 /// `--impostor-texturing`.

@@ -41,6 +41,7 @@ fn assert_has_ao(path: &Path, rays: &str) -> f64 {
     assert!(c.section(SectionKind::VERTEX_AO).is_some() && c.section(SectionKind::POINT_AO).is_some());
     assert!(c.plane_ao().is_empty(), "no impostors, no PLANE_AO");
     assert_eq!((setting(&c, "ao.rays"), setting(&c, "ao.seed")), (Some(rays), Some("0")));
+    assert!(matches!(setting(&c, "ao.method"), Some("parallel" | "traced")), "{:?}", setting(&c, "ao.method"));
     // A tree shades itself somewhere, and no vertex of it is in a closed box.
     let max = c.vertex_ao().iter().copied().max().unwrap_or(0);
     let mean = c.vertex_ao().iter().map(|&a| f64::from(a)).sum::<f64>() / c.vertex_ao().len() as f64;
@@ -116,6 +117,22 @@ fn build_writes_ambient_occlusion_by_default_and_none_with_zero_rays() {
     assert_has_ao(&default, "16");
     ok(&["build", "--ao-rays", "0"], &[&model, Path::new("-o"), &none]);
     assert_has_no_ao(&none);
+    assert_eq!(setting(&Container::open(&default).expect("opens"), "ao.method"), Some("parallel"));
+
+    // `--ao-method traced`: the other method, recorded, with values near the default's.
+    let traced = dir.join("traced.treelod");
+    ok(&["build", "--ao-method", "traced"], &[&model, Path::new("-o"), &traced]);
+    assert_has_ao(&traced, "16");
+    let (a, b) = (Container::open(&default).expect("opens"), Container::open(&traced).expect("opens"));
+    assert_eq!(setting(&b, "ao.method"), Some("traced"));
+    assert_ne!(a.vertex_ao(), b.vertex_ao(), "the method is used");
+    let mean_abs = a.vertex_ao().iter().zip(b.vertex_ao()).map(|(&x, &y)| f64::from(x.abs_diff(y))).sum::<f64>()
+        / a.vertex_ao().len() as f64;
+    // Each is about 0.02 from a 256-ray reference on this tree (benches/ao.rs): well within 0.08.
+    assert!(mean_abs < 0.08 * 255.0, "mean |Δ| {mean_abs} of 255");
+    let out = common::run_on(&["build", "--ao-method", "bvh"], &[&model]);
+    assert_eq!(out.status.code(), Some(2), "an unknown method is a usage error");
+    assert!(text(&out.stderr).contains("--ao-method"), "{}", text(&out.stderr));
 }
 
 #[test]
