@@ -189,8 +189,9 @@ impl Grid {
             .collect();
         order.par_sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         // Counted and filled in chunks of the order, each chunk's entries of a cell after the
-        // previous chunk's: the lists do not depend on the chunks.
-        let chunk = order.len().div_ceil(rayon::current_num_threads().max(1) * 2).max(1);
+        // previous chunk's: the lists do not depend on the chunks. Each chunk counts into a
+        // histogram of every cell, so there are at most 8 of them whatever the thread count.
+        let chunk = order.len().div_ceil((rayon::current_num_threads() * 2).clamp(1, 8)).max(1);
         let cells_of = |r: [u16; 4]| {
             (usize::from(r[2])..=usize::from(r[3]))
                 .flat_map(move |y| (usize::from(r[0])..=usize::from(r[1])).map(move |x| y * width + x))
