@@ -123,7 +123,29 @@ use crate::rng::SplitMix64;
 use crate::union_find::{find, singletons, union};
 
 /// A ray stops once less than this share of it is left.
-const STOP: f32 = 1.0 / 512.0;
+pub(crate) const STOP: f32 = 1.0 / 512.0;
+
+/// Per vertex, whether a triangle uses it (bit 0) and whether a two-sided one does (bit 1).
+pub(crate) fn vertex_uses(vertex_count: usize, triangles: &[AoTriangle]) -> Vec<u8> {
+    let mut used = vec![0u8; vertex_count];
+    for t in triangles {
+        for &v in &t.v {
+            used[v as usize] |= 1 | (u8::from(t.two_sided) << 1);
+        }
+    }
+    used
+}
+
+/// The diagonal of the vertices' bounding box, and how far off the surface a ray starts (and how
+/// near a hit it ignores), against self-intersection: `10⁻⁴` of the diagonal.
+pub(crate) fn diagonal_and_offset(vertices: &[VertexRecord]) -> (f32, f32) {
+    let (lo, hi) = vertices.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| {
+        let p = Vec3::from_array(v.position);
+        (lo.min(p), hi.max(p))
+    });
+    let diagonal = (hi - lo).length();
+    (diagonal, (1e-4 * diagonal).max(1e-7))
+}
 
 /// How the rays are traced (module documentation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -230,13 +252,7 @@ pub fn vertex_occlusion(
         return crate::parallel_rays::vertex_occlusion(vertices, triangles, &directions, progress);
     }
     let position = |i: u32| Vec3A::from_array(vertices[i as usize].position);
-    // Which vertices are used, and by a two-sided triangle.
-    let mut used = vec![0u8; vertices.len()];
-    for t in triangles {
-        for &v in &t.v {
-            used[v as usize] |= 1 | (u8::from(t.two_sided) << 1);
-        }
-    }
+    let used = vertex_uses(vertices.len(), triangles);
     let (shapes, opacities): (Vec<Triangle>, Vec<f32>) = triangles
         .iter()
         .filter(|t| t.opacity > 0.0)
@@ -245,11 +261,7 @@ pub fn vertex_occlusion(
     if shapes.is_empty() {
         return vec![0.0; vertices.len()];
     }
-    let (lo, hi) = vertices.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| {
-        let p = Vec3::from_array(v.position);
-        (lo.min(p), hi.max(p))
-    });
-    let diagonal = (hi - lo).length();
+    let (diagonal, offset) = diagonal_and_offset(vertices);
     let groups = if config.per_vertex {
         Groups::singles(&used)
     } else {
@@ -260,8 +272,6 @@ pub fn vertex_occlusion(
     let ordered: Vec<(Triangle, f32)> =
         bvh.primitive_indices.iter().map(|&i| (shapes[i as usize], opacities[i as usize])).collect();
     drop((shapes, opacities));
-    // Rays start this far off the surface (and ignore hits nearer), against self-intersection.
-    let offset = (1e-4 * diagonal).max(1e-7);
     let transmitted = |origin: Vec3A, direction: Vec3A| -> f32 {
         let ray = Ray::new(origin, direction, offset, f32::INFINITY);
         let mut kept = 1.0f32;
@@ -700,12 +710,7 @@ mod tests {
         let mixed = card(&mut vertices, -Vec3::Z, 0.05, true); // 12..16: one- and two-sided
         triangles.extend([mixed[0], AoTriangle { two_sided: false, ..mixed[1] }]);
         vertices.push(vertex([5.0; 3], [0.0, 1.0, 0.0])); // 16: used by no triangle
-        let mut used = vec![0u8; vertices.len()];
-        for t in &triangles {
-            for &v in &t.v {
-                used[v as usize] |= 1 | (u8::from(t.two_sided) << 1);
-            }
-        }
+        let used = super::vertex_uses(vertices.len(), &triangles);
         let groups = Groups::pieces(&vertices, &triangles, &used, 0.5);
         let all: Vec<&[u32]> = (0..groups.len()).map(|g| groups.members(g)).collect();
         assert_eq!(all[0], &[0, 1, 2, 3]);

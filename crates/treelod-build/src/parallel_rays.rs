@@ -28,11 +28,8 @@ use glam::{Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
 use treelod_format::{VertexRecord, pack::oct_decode};
 
-use crate::ambient::AoTriangle;
+use crate::ambient::{AoTriangle, STOP, diagonal_and_offset, vertex_uses};
 use crate::rng::SplitMix64;
-
-/// A ray stops once less than this share of it is left (as [`crate::ambient`]'s).
-const STOP: f32 = 1.0 / 512.0;
 
 /// `n` directions spread evenly over the sphere (a Fibonacci lattice), turned by a rotation
 /// drawn from `seed`.
@@ -69,21 +66,13 @@ pub fn vertex_occlusion(
     directions: &[Vec3A],
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Vec<f32> {
-    let mut used = vec![0u8; vertices.len()];
-    for t in triangles {
-        for &v in &t.v {
-            used[v as usize] |= 1 | (u8::from(t.two_sided) << 1);
-        }
-    }
     if !triangles.iter().any(|t| t.opacity > 0.0) {
         return vec![0.0; vertices.len()];
     }
+    let used = vertex_uses(vertices.len(), triangles);
     let position = |v: usize| Vec3A::from_array(vertices[v].position);
     let normals: Vec<Vec3> = vertices.iter().map(|v| Vec3::from_array(oct_decode(v.normal))).collect();
-    let (lo, hi) = (0..vertices.len())
-        .fold((Vec3A::INFINITY, Vec3A::NEG_INFINITY), |(lo, hi), v| (lo.min(position(v)), hi.max(position(v))));
-    let diagonal = (hi - lo).length();
-    let offset = (1e-4 * diagonal).max(1e-7);
+    let (_, offset) = diagonal_and_offset(vertices);
     // Per vertex, the weighted sum of what its rays keep and the sum of the weights.
     let mut sums = vec![(0.0f32, 0.0f32); vertices.len()];
     let mut projected = vec![Vec3::ZERO; vertices.len()];
@@ -94,7 +83,7 @@ pub fn vertex_occlusion(
             let p = Vec3A::from_array(v.position);
             *q = Vec3::new(p.dot(u), p.dot(w), p.dot(d));
         });
-        let grid = Grid::new(&projected, triangles, CELLS_PER_TRIANGLE);
+        let grid = Grid::new(&projected, triangles);
         // The rays in the order of their cells (then vertex), so that a cell's list is read
         // once for all of its rays.
         let ray = |v: usize| -> Option<(f32, Vec3)> {
@@ -116,18 +105,17 @@ pub fn vertex_occlusion(
             .filter_map(|v| ray(v).map(|(_, origin)| (u64::from(grid.cell(origin)) << 32) | v as u64))
             .collect();
         rays.par_sort_unstable();
+        // Per ray, its weight times what it keeps, and its weight (every listed vertex has a ray).
         #[expect(clippy::cast_possible_truncation, reason = "the low half is the vertex id")]
-        let kept: Vec<f32> = rays
+        let weighted: Vec<(f32, f32)> = rays
             .par_iter()
-            .map(|&key| ray((key as u32) as usize).map_or(1.0, |(_, origin)| grid.transmitted(origin)))
+            .map(|&key| ray((key as u32) as usize).map_or((0.0, 0.0), |(w, origin)| (w * grid.transmitted(origin), w)))
             .collect();
-        for (&key, kept) in rays.iter().zip(kept) {
+        for (&key, (kept, weight)) in rays.iter().zip(weighted) {
             #[expect(clippy::cast_possible_truncation, reason = "the low half is the vertex id")]
-            let v = (key as u32) as usize;
-            if let Some((weight, _)) = ray(v) {
-                sums[v].0 += weight * kept;
-                sums[v].1 += weight;
-            }
+            let sum = &mut sums[(key as u32) as usize];
+            sum.0 += kept;
+            sum.1 += weight;
         }
         progress(total * (k as u64 + 1) / directions.len() as u64, total);
     }
@@ -151,13 +139,13 @@ struct Grid {
 
 impl Grid {
     /// The grid of the `triangles` that stop any light, projected as `projected`.
-    fn new(projected: &[Vec3], triangles: &[AoTriangle], cells_per_triangle: f32) -> Self {
+    fn new(projected: &[Vec3], triangles: &[AoTriangle]) -> Self {
         let (lo, hi) = projected
             .iter()
             .fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())));
         let extent = (hi - lo).max(Vec2::splat(1e-6));
         #[expect(clippy::cast_precision_loss, reason = "a cell count estimate")]
-        let cells = (triangles.len() as f32 * cells_per_triangle).clamp(1.0, 16.0e6);
+        let cells = (triangles.len() as f32 * CELLS_PER_TRIANGLE).clamp(1.0, 16.0e6);
         let cell = (extent.x * extent.y / cells).sqrt().max(extent.max_element() / 4096.0);
         let inverse_cell = 1.0 / cell;
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "at most 4097 cells a side")]
@@ -260,7 +248,6 @@ impl Grid {
     /// What a ray from `origin` (projected: across, across, along the direction) keeps; hits
     /// nearer than its depth `origin.z` are ignored.
     fn transmitted(&self, origin: Vec3) -> f32 {
-        let planes = &self.planes;
         let cell = self.cell(origin) as usize;
         if cell >= self.width * self.height {
             return 1.0;
@@ -270,7 +257,7 @@ impl Grid {
         let p = origin.truncate();
         let mut kept = 1.0f32;
         for &(_, position) in &list[first..] {
-            let plane = &planes[position as usize];
+            let plane = &self.planes[position as usize];
             let s = plane.s[0] * p.x + plane.s[1] * p.y + plane.s[2];
             let t = plane.t[0] * p.x + plane.t[1] * p.y + plane.t[2];
             if !(s >= 0.0 && t >= 0.0 && s + t <= 1.0) {
