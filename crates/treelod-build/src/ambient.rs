@@ -28,18 +28,19 @@
 //!
 //! | model | vertices | traced, 16 rays | parallel, 32 directions (default) | parallel, 24 |
 //! |---|---|---|---|---|
-//! | Quaternius (3k triangles) | 5.8k | 0.0231, 0.02 s | 0.0215, 0.03 s | 0.0279, 0.03 s |
-//! | ez-tree pine (19k) | 22k | 0.0261, 0.48 s | 0.0207, 0.35 s | 0.0257, 0.26 s |
-//! | ez-tree oak (23k) | 30k | 0.0260, 0.65 s | 0.0203, 0.44 s | 0.0249, 0.32 s |
-//! | orchid (31k) | 62k | 0.0752, 0.36 s | 0.0589, 0.35 s | 0.0687, 0.26 s |
-//! | jacaranda (55k) | 102k | 0.0695, 0.75 s | 0.0532, 0.75 s | 0.0624, 0.56 s |
-//! | willow (154k) | 187k | 0.0590, 2.63 s | 0.0536, 2.24 s | 0.0624, 1.73 s |
-//! | maple (669k) | 717k | 0.0643, 14.2 s | 0.0628, 9.5 s | 0.0733, 7.3 s |
+//! | Quaternius (3k triangles) | 5.8k | 0.0231, 0.02 s | 0.0215, 0.02 s | 0.0279, 0.02 s |
+//! | ez-tree pine (19k) | 22k | 0.0261, 0.44 s | 0.0207, 0.20 s | 0.0257, 0.15 s |
+//! | ez-tree oak (23k) | 30k | 0.0260, 0.59 s | 0.0203, 0.32 s | 0.0249, 0.22 s |
+//! | orchid (31k) | 62k | 0.0752, 0.35 s | 0.0589, 0.19 s | 0.0687, 0.14 s |
+//! | jacaranda (55k) | 102k | 0.0695, 0.65 s | 0.0532, 0.42 s | 0.0624, 0.32 s |
+//! | willow (154k) | 187k | 0.0590, 2.13 s | 0.0536, 1.38 s | 0.0624, 1.08 s |
+//! | maple (669k) | 717k | 0.0643, 11.0 s | 0.0628, 4.9 s | 0.0733, 3.6 s |
 //!
-//! The shared directions are evenly spread where a vertex's own random rays clump, and every
-//! ray of a direction reads the same short lists; with neither method biased (mean Δ within
-//! ±0.003 on every model), the parallel rays are closer to the reference on every model, and
-//! their stage takes 0.7–1.0× the time. Without the BVH the maple's build peaks at 209 MB
+//! The shared directions are evenly spread where a vertex's own random rays clump, and the rays
+//! of a direction that start in one cell of its grid share that cell's list; with neither
+//! method biased (mean Δ within ±0.003 on every model), the parallel rays are closer to the
+//! reference on every model, and their stage takes 0.45–0.65× the time on the six larger models
+//! (the Quaternius tree's 0.02 s either way). Without the BVH the maple's build peaks at 169 MB
 //! instead of 319 MB.
 //!
 //! The traced rays run against a BVH (`obvhs`, an 8-wide compressed BVH), in parallel over
@@ -179,7 +180,7 @@ pub struct AoConfig {
     /// Rays per vertex, `1..=4096`. Default 16. With [`AoMethod::Parallel`], `2 × rays`
     /// directions shared by all vertices (a one-sided vertex traces the half on its side);
     /// against 256 rays per vertex, a mean absolute difference per vertex of 0.020 (oak) and
-    /// 0.063 (maple), in 0.44 s and 9.5 s on 2 cores (module documentation). With
+    /// 0.063 (maple), in 0.32 s and 4.9 s on 2 cores (module documentation). With
     /// [`AoMethod::Traced`], each vertex's own stratified rays: 0.026 (oak), 0.064 (maple), 0.009
     /// on the 10⁵-leaf demo tree; where foliage is dense, leaf cards settled by their first half
     /// of rays cost half (the 10⁶-leaf demo tree, 4M vertices, builds in 104 s, 96 s of it the

@@ -12,17 +12,31 @@
 //! vertex (a Fibonacci sphere turned by the seed), each weighted by its cosine to the vertex
 //! normal on the side it faces (both sides of two-sided materials).
 //!
-//! Per direction the rays are sorted by their cell, so that a cell's list is read once for all
-//! the rays that start in it, and traced in parallel; each vertex adds what its ray keeps to its
-//! sums in the order of the directions, so the result does not depend on the thread count.
-//! Memory is one direction's grid at a time: on the 669k-triangle maple about 90 MB besides the
-//! build's arrays (the triangles' planes, their lists, the rays), against the BVH's 200 MB: the
-//! build peaks at 209 MB against 319 MB traced.
-//! Where the time goes on the maple (32 directions, 2 cores, about 0.28 s a direction): the grid
-//! 0.10 s (sorting the triangles by reach, listing them), the rays 0.13 s, of which reading the
-//! triangles' planes is the largest part (a cell holds about 20 triangles, of which a ray meets
-//! 2). Cells of a sixteenth to one per triangle cost the same within 10 %: finer cells cut the
-//! tests but list each triangle in more cells.
+//! Per direction the rays are ordered by their cell (a counting sort), so that a cell's list is
+//! gathered once for all the rays that start in it and the rays of a cell are traced side by
+//! side in memory; the cells are traced in parallel. Gathering a cell sorts its list (listed in
+//! the triangles' order, each list is short) and lays out the triangles' planes, computed from
+//! the projected corners there, [`LANES`] to a block, coefficient beside coefficient, so that a
+//! ray tests a block's triangles at once and takes its hits in the list's order. Each vertex
+//! adds what its ray keeps to its sums in the order of the directions, so the result does not
+//! depend on the thread count (nor on the grid: the hits and their order are the ray's own).
+//!
+//! Memory is one direction's grid and rays at a time: the triangles' ids in their cells (4 bytes
+//! each, about 4 per triangle; planes are computed where a cell is gathered) and the rays in the
+//! order of their cells (24 bytes each, written there from the vertices in their order, with
+//! each vertex's place): on the 669k-triangle maple the build peaks at 169 MB, against 209 MB
+//! before this layout and 319 MB with the BVH.
+//!
+//! Where the time goes on the maple (32 directions, 2 cores, 0.15 s a direction): listing the
+//! triangles a seventh, the rays (their cells, order and places) a quarter, tracing three fifths
+//! (gathering each cell's planes and sorting them, then the tests): the cell of a ray lists 110
+//! triangles on average, 57 beyond
+//! its origin, because long thin bark triangles cover many cells with their bounding boxes and
+//! the canopy's depth stacks them. Cells of a sixteenth to one per triangle were measured (one
+//! run each): an eighth is fastest, a sixteenth about 5 %, a quarter 15 %, a half 35 % and one
+//! per triangle 70 % slower (finer cells shorten the lists but list each triangle in more
+//! cells). Before the rays were laid out by cell, the loads of each ray's vertex, normal and
+//! sums at random were the largest cost in a profile.
 
 use glam::{Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
@@ -70,8 +84,6 @@ pub fn vertex_occlusion(
         return vec![0.0; vertices.len()];
     }
     let used = vertex_uses(vertices.len(), triangles);
-    let position = |v: usize| Vec3A::from_array(vertices[v].position);
-    let normals: Vec<Vec3> = vertices.iter().map(|v| Vec3::from_array(oct_decode(v.normal))).collect();
     let (_, offset) = diagonal_and_offset(vertices);
     // Per vertex, the weighted sum of what its rays keep and the sum of the weights.
     let mut sums = vec![(0.0f32, 0.0f32); vertices.len()];
@@ -84,62 +96,171 @@ pub fn vertex_occlusion(
             *q = Vec3::new(p.dot(u), p.dot(w), p.dot(d));
         });
         let grid = Grid::new(&projected, triangles);
-        // The rays in the order of their cells (then vertex), so that a cell's list is read
-        // once for all of its rays.
-        let ray = |v: usize| -> Option<(f32, Vec3)> {
+        // A vertex's ray along the direction: its weight and origin (projected: across, across,
+        // along), in its cell; none for a vertex that faces away or is in no triangle.
+        let ray = |v: usize| -> Option<Ray> {
             if used[v] == 0 {
                 return None;
             }
-            let normal = Vec3A::from(normals[v]);
+            let normal = Vec3A::from_array(oct_decode(vertices[v].normal));
             let c = normal.dot(d);
             let weight = if used[v] & 2 != 0 { c.abs() } else { c.max(0.0) };
             if weight <= 0.0 {
                 return None;
             }
             let side = if c >= 0.0 { normal } else { -normal };
-            let origin = position(v) + side * offset;
-            Some((weight, Vec3::new(origin.dot(u), origin.dot(w), origin.dot(d) + offset)))
+            let p = Vec3A::from_array(vertices[v].position) + side * offset;
+            let origin = Vec3::new(p.dot(u), p.dot(w), p.dot(d) + offset);
+            Some(Ray { cell: grid.cell(origin), weight, origin, kept: 0.0 })
         };
-        let mut rays: Vec<u64> = (0..vertices.len())
-            .into_par_iter()
-            .filter_map(|v| ray(v).map(|(_, origin)| (u64::from(grid.cell(origin)) << 32) | v as u64))
-            .collect();
-        rays.par_sort_unstable();
-        // Per ray, its weight times what it keeps, and its weight (every listed vertex has a ray).
-        #[expect(clippy::cast_possible_truncation, reason = "the low half is the vertex id")]
-        let weighted: Vec<(f32, f32)> = rays
-            .par_iter()
-            .map(|&key| ray((key as u32) as usize).map_or((0.0, 0.0), |(w, origin)| (w * grid.transmitted(origin), w)))
-            .collect();
-        for (&key, (kept, weight)) in rays.iter().zip(weighted) {
-            #[expect(clippy::cast_possible_truncation, reason = "the low half is the vertex id")]
-            let sum = &mut sums[(key as u32) as usize];
-            sum.0 += kept;
-            sum.1 += weight;
-        }
+        // The rays by their cell (then vertex), so that a cell's list is gathered once for all
+        // of its rays, each traced with its neighbours in memory; rays outside the grid last.
+        let cells: Vec<u32> = (0..vertices.len()).into_par_iter().map(|v| ray(v).map_or(NO_RAY, |r| r.cell)).collect();
+        let (rays, rank) = by_cell(&cells, grid.width * grid.height + 1);
+        drop(cells);
+        // Each ray written to its place, the vertices read in their order (a load at random
+        // waits, a store does not).
+        let mut sorted = vec![Ray { cell: NO_RAY, weight: 0.0, origin: Vec3::ZERO, kept: 0.0 }; rays];
+        let shared = SharedSlice(sorted.as_mut_ptr());
+        rank.par_iter().enumerate().filter(|(_, slot)| **slot != NO_RAY).for_each(|(v, &slot)| {
+            if let Some(ray) = ray(v) {
+                // SAFETY: the vertices' places are distinct and inside `sorted` (by_cell).
+                unsafe { shared.update(slot as usize, |_| ray) };
+            }
+        });
+        sorted.par_chunk_by_mut(|a, b| a.cell == b.cell).for_each_init(Gathered::default, |gathered, group| {
+            grid.gather(group[0].cell, gathered);
+            for ray in group {
+                ray.kept = ray.weight * transmitted(gathered, ray.origin);
+            }
+        });
+        // Each vertex adds its ray's share to its sums in the order of the directions.
+        sums.par_iter_mut().zip(&rank).filter(|(_, slot)| **slot != NO_RAY).for_each(|(sum, &slot)| {
+            let ray = &sorted[slot as usize];
+            *sum = (sum.0 + ray.kept, sum.1 + ray.weight);
+        });
         progress(total * (k as u64 + 1) / directions.len() as u64, total);
     }
     sums.iter().map(|&(kept, weight)| if weight > 0.0 { (1.0 - kept / weight).clamp(0.0, 1.0) } else { 0.0 }).collect()
 }
 
+/// The cell, and the position among the sorted rays, of a vertex without a ray: after every
+/// cell and the grid's outside.
+const NO_RAY: u32 = u32::MAX;
+
+/// A vertex's ray along a direction.
+#[derive(Clone, Copy)]
+struct Ray {
+    /// Its cell in the direction's grid; [`NO_RAY`] for a vertex that traces none.
+    cell: u32,
+    /// Its cosine weight.
+    weight: f32,
+    /// Where it starts, projected: across, across, along the direction.
+    origin: Vec3,
+    /// Its weight times what it keeps, once traced.
+    kept: f32,
+}
+
+/// The rays ordered by their vertices' `cells` (cells past `buckets - 1`, outside the grid, as
+/// the last; [`NO_RAY`] for a vertex without one), then vertex: their count, and per vertex its
+/// ray's place in that order ([`NO_RAY`] for none).
+fn by_cell(cells: &[u32], buckets: usize) -> (usize, Vec<u32>) {
+    let bucket = |cell: u32| (cell as usize).min(buckets - 1);
+    let mut starts = vec![0u32; buckets + 1];
+    for &cell in cells.iter().filter(|&&cell| cell != NO_RAY) {
+        starts[bucket(cell) + 1] += 1;
+    }
+    for b in 0..buckets {
+        starts[b + 1] += starts[b];
+    }
+    let rays = starts[buckets] as usize;
+    let rank = cells
+        .iter()
+        .map(|&cell| {
+            if cell == NO_RAY {
+                return NO_RAY;
+            }
+            let slot = &mut starts[bucket(cell)];
+            *slot += 1;
+            *slot - 1
+        })
+        .collect();
+    (rays, rank)
+}
+
+/// What a ray from `origin` (projected: across, across, along the direction) keeps through its
+/// cell's triangles as [`Grid::gather`] lays them out; hits nearer than its depth `origin.z` are
+/// ignored. Each block's triangles
+/// are tested for the origin's projection at once; the hits are then taken in the list's order.
+fn transmitted(Gathered { reach, blocks, .. }: &Gathered, origin: Vec3) -> f32 {
+    let first = reach.partition_point(|&r| r <= origin.z);
+    let p = origin.truncate();
+    let mut kept = 1.0f32;
+    for (b, block) in blocks.iter().enumerate().skip(first / LANES) {
+        let mut inside = [false; LANES];
+        for (i, inside) in inside.iter_mut().enumerate() {
+            let s = block.s[0][i] * p.x + block.s[1][i] * p.y + block.s[2][i];
+            let t = block.t[0][i] * p.x + block.t[1][i] * p.y + block.t[2][i];
+            *inside = s >= 0.0 && t >= 0.0 && s + t <= 1.0;
+        }
+        let mut mask = inside.iter().enumerate().fold(0u32, |m, (i, &inside)| m | (u32::from(inside) << i));
+        if b == first / LANES {
+            mask &= !0 << (first % LANES);
+        }
+        while mask != 0 {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let depth = block.z[0][i] * p.x + block.z[1][i] * p.y + block.z[2][i];
+            if depth > origin.z {
+                kept *= block.clear[i];
+                if kept < STOP {
+                    return 0.0;
+                }
+            }
+        }
+    }
+    kept
+}
+
+/// Triangles tested at once by [`transmitted`].
+const LANES: usize = 8;
+
+/// [`LANES`] planes, each coefficient of them side by side.
+#[derive(Clone, Copy)]
+struct Block {
+    s: [[f32; LANES]; 3],
+    t: [[f32; LANES]; 3],
+    z: [[f32; LANES]; 3],
+    clear: [f32; LANES],
+}
+
+impl Block {
+    /// Planes that no ray meets.
+    const EMPTY: Self = Self {
+        s: [[0.0; LANES], [0.0; LANES], [-1.0; LANES]],
+        t: [[0.0; LANES]; 3],
+        z: [[0.0; LANES]; 3],
+        clear: [1.0; LANES],
+    };
+}
+
 /// The triangles projected along one direction, listed per cell of a square grid.
-struct Grid {
+struct Grid<'a> {
+    projected: &'a [Vec3],
+    triangles: &'a [AoTriangle],
     origin: Vec2,
     inverse_cell: f32,
     width: usize,
     height: usize,
     /// Where each cell's entries start in `entries`, and the end.
     starts: Vec<u32>,
-    /// Per cell, `(reach, triangle)`: how far along the direction the triangle reaches (its
-    /// largest corner depth) and its position in `planes`, ascending.
-    entries: Vec<(f32, u32)>,
-    /// The triangles' planes, in the order of their reach.
-    planes: Vec<Plane>,
+    /// Per cell, the triangles whose projection's bounding box meets it, ascending.
+    entries: Vec<u32>,
 }
 
-impl Grid {
+impl<'a> Grid<'a> {
     /// The grid of the `triangles` that stop any light, projected as `projected`.
-    fn new(projected: &[Vec3], triangles: &[AoTriangle]) -> Self {
+    fn new(projected: &'a [Vec3], triangles: &'a [AoTriangle]) -> Self {
         let (lo, hi) = projected
             .iter()
             .fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())));
@@ -155,41 +276,37 @@ impl Grid {
             let c = (x * inverse_cell).max(0.0) as usize;
             c.min(max - 1)
         };
-        let range = |t: &[u32; 3]| {
-            let [a, b, c] = t.map(|i| projected[i as usize]);
-            let (lo_t, hi_t) = (a.min(b).min(c).truncate() - lo, a.max(b).max(c).truncate() - lo);
-            #[expect(clippy::cast_possible_truncation, reason = "at most 4097 cells a side")]
-            let r = [cell_of(lo_t.x, width), cell_of(hi_t.x, width), cell_of(lo_t.y, height), cell_of(hi_t.y, height)]
-                .map(|c| c as u16);
-            r
-        };
-        // The triangles by reach (then id: a total order), so that filling the cells in this
-        // order leaves every cell's list sorted.
-        #[expect(clippy::cast_possible_truncation, reason = "triangle ids fit u32")]
-        let mut order: Vec<(f32, u32, [u16; 4])> = triangles
+        // Per triangle, the cells its projection's bounding box covers (none for triangles that
+        // let all light through).
+        let covered: Vec<[u16; 4]> = triangles
             .par_iter()
-            .enumerate()
-            .filter(|(_, t)| t.opacity > 0.0)
-            .map(|(id, AoTriangle { v: t, .. })| {
-                let reach = t.iter().map(|&i| projected[i as usize].z).fold(f32::NEG_INFINITY, f32::max);
-                (reach, id as u32, range(t))
+            .map(|AoTriangle { v: t, opacity, .. }| {
+                if *opacity <= 0.0 {
+                    return [1, 0, 1, 0];
+                }
+                let [a, b, c] = t.map(|i| projected[i as usize]);
+                let (lo_t, hi_t) = (a.min(b).min(c).truncate() - lo, a.max(b).max(c).truncate() - lo);
+                #[expect(clippy::cast_possible_truncation, reason = "at most 4097 cells a side")]
+                let r =
+                    [cell_of(lo_t.x, width), cell_of(hi_t.x, width), cell_of(lo_t.y, height), cell_of(hi_t.y, height)]
+                        .map(|c| c as u16);
+                r
             })
             .collect();
-        order.par_sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        // Counted and filled in chunks of the order, each chunk's entries of a cell after the
+        // Counted and filled in chunks of the triangles, each chunk's entries of a cell after the
         // previous chunk's: the lists do not depend on the chunks. Each chunk counts into a
         // histogram of every cell, so there are at most 8 of them whatever the thread count.
-        let chunk = order.len().div_ceil((rayon::current_num_threads() * 2).clamp(1, 8)).max(1);
+        let chunk = covered.len().div_ceil((rayon::current_num_threads() * 2).clamp(1, 8)).max(1);
         let cells_of = |r: [u16; 4]| {
             (usize::from(r[2])..=usize::from(r[3]))
                 .flat_map(move |y| (usize::from(r[0])..=usize::from(r[1])).map(move |x| y * width + x))
         };
-        let mut counts: Vec<Vec<u32>> = order
+        let mut counts: Vec<Vec<u32>> = covered
             .par_chunks(chunk)
             .map(|part| {
                 let mut count = vec![0u32; width * height];
                 for e in part {
-                    for c in cells_of(e.2) {
+                    for c in cells_of(*e) {
                         count[c] += 1;
                     }
                 }
@@ -207,29 +324,21 @@ impl Grid {
             }
         }
         starts[width * height] = total;
-        // The triangles' planes in the order of their reach.
-        let planes: Vec<Plane> = order
-            .par_iter()
-            .map(|e| {
-                let t = &triangles[e.1 as usize];
-                Plane::new(t.v.map(|i| projected[i as usize]), t.opacity.min(1.0))
-            })
-            .collect();
-        let mut entries = vec![(0.0f32, 0u32); total as usize];
+        let mut entries = vec![0u32; total as usize];
         let shared = SharedSlice(entries.as_mut_ptr());
-        order.par_chunks(chunk).zip(counts.par_iter_mut()).enumerate().for_each(|(k, (part, next))| {
+        covered.par_chunks(chunk).zip(counts.par_iter_mut()).enumerate().for_each(|(k, (part, next))| {
             for (i, e) in part.iter().enumerate() {
-                #[expect(clippy::cast_possible_truncation, reason = "triangle counts fit u32")]
-                let position = (k * chunk + i) as u32;
-                for c in cells_of(e.2) {
+                #[expect(clippy::cast_possible_truncation, reason = "triangle ids fit u32")]
+                let id = (k * chunk + i) as u32;
+                for c in cells_of(*e) {
                     // SAFETY: the chunks' slots of a cell are disjoint ranges (prefix sums above),
                     // each written once, all inside `entries`.
-                    unsafe { shared.write(next[c] as usize, (e.0, position)) };
+                    unsafe { shared.update(next[c] as usize, |_| id) };
                     next[c] += 1;
                 }
             }
         });
-        Self { origin: lo, inverse_cell, width, height, starts, entries, planes }
+        Self { projected, triangles, origin: lo, inverse_cell, width, height, starts, entries }
     }
 
     /// The cell of a projected point; past the last cell for a point outside the grid.
@@ -238,57 +347,107 @@ impl Grid {
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "checked")]
         let (x, y) = ((q.x * self.inverse_cell) as usize, (q.y * self.inverse_cell) as usize);
         if q.x < 0.0 || q.y < 0.0 || x >= self.width || y >= self.height {
-            return u32::MAX;
+            #[expect(clippy::cast_possible_truncation, reason = "at most 4097² cells")]
+            let outside = (self.width * self.height) as u32;
+            return outside;
         }
         #[expect(clippy::cast_possible_truncation, reason = "at most 4097² cells")]
         let cell = (y * self.width + x) as u32;
         cell
     }
 
-    /// What a ray from `origin` (projected: across, across, along the direction) keeps; hits
-    /// nearer than its depth `origin.z` are ignored.
-    fn transmitted(&self, origin: Vec3) -> f32 {
-        let cell = self.cell(origin) as usize;
+    /// A cell's triangles ascending by reach (then id: a total order): their reaches and
+    /// planes, gathered so that its rays read them in place; none for the outside.
+    fn gather(&self, cell: u32, scratch: &mut Gathered) {
+        let Gathered { planes, keys, reach, blocks } = scratch;
+        planes.clear();
+        keys.clear();
+        reach.clear();
+        blocks.clear();
+        let cell = cell as usize;
         if cell >= self.width * self.height {
-            return 1.0;
+            return;
         }
-        let list = &self.entries[self.starts[cell] as usize..self.starts[cell + 1] as usize];
-        let first = list.partition_point(|e| e.0 <= origin.z);
-        let p = origin.truncate();
-        let mut kept = 1.0f32;
-        for &(_, position) in &list[first..] {
-            let plane = &self.planes[position as usize];
-            let s = plane.s[0] * p.x + plane.s[1] * p.y + plane.s[2];
-            let t = plane.t[0] * p.x + plane.t[1] * p.y + plane.t[2];
-            if !(s >= 0.0 && t >= 0.0 && s + t <= 1.0) {
-                continue;
-            }
-            let depth = plane.z[0] * p.x + plane.z[1] * p.y + plane.z[2];
-            if depth > origin.z {
-                kept *= plane.clear;
-                if kept < STOP {
-                    return 0.0;
+        // Listed in the order of the triangles, so a triangle's place in the list orders ties of
+        // reach as its id does.
+        for (place, &id) in self.entries[self.starts[cell] as usize..self.starts[cell + 1] as usize].iter().enumerate()
+        {
+            let t = &self.triangles[id as usize];
+            let corners = t.v.map(|i| self.projected[i as usize]);
+            planes.push(Plane::new(corners, t.opacity.min(1.0)));
+            #[expect(clippy::cast_possible_truncation, reason = "a list is shorter than the triangles")]
+            keys.push(entry(corners[0].z.max(corners[1].z).max(corners[2].z), place as u32));
+        }
+        keys.sort_unstable();
+        reach.extend(keys.iter().map(|&key| entry_reach(key)));
+        blocks.extend(keys.chunks(LANES).map(|part| {
+            let mut block = Block::EMPTY;
+            for (i, &key) in part.iter().enumerate() {
+                #[expect(clippy::cast_possible_truncation, reason = "the low half is the place")]
+                let plane = &planes[key as u32 as usize];
+                for j in 0..3 {
+                    block.s[j][i] = plane.s[j];
+                    block.t[j][i] = plane.t[j];
+                    block.z[j][i] = plane.z[j];
                 }
+                block.clear[i] = plane.clear;
             }
-        }
-        kept
+            block
+        }));
     }
 }
 
-/// Entries written from several threads into disjoint slots.
-#[derive(Clone, Copy)]
-struct SharedSlice(*mut (f32, u32));
-// SAFETY: only used to write disjoint slots (`Grid::new`).
-unsafe impl Send for SharedSlice {}
-// SAFETY: as above.
-unsafe impl Sync for SharedSlice {}
+/// A cell's triangles as its rays read them ([`Grid::gather`]).
+#[derive(Default)]
+struct Gathered {
+    /// Their planes in the order of the list.
+    planes: Vec<Plane>,
+    /// Their entries ([`entry`], of their place in the list), ascending.
+    keys: Vec<u64>,
+    /// Their reaches, ascending.
+    reach: Vec<f32>,
+    /// Their planes in that order.
+    blocks: Vec<Block>,
+}
 
-impl SharedSlice {
+/// A triangle's key in a cell's list: its reach's bits mapped so that unsigned order is
+/// [`f32::total_cmp`]'s, above its place in the list; ascending keys are by reach, then place.
+fn entry(reach: f32, id: u32) -> u64 {
+    let bits = reach.to_bits();
+    let ordered = if bits >> 31 == 1 { !bits } else { bits | 1 << 31 };
+    (u64::from(ordered) << 32) | u64::from(id)
+}
+
+/// The reach of an [`entry`].
+fn entry_reach(entry: u64) -> f32 {
+    let ordered = (entry >> 32) as u32;
+    f32::from_bits(if ordered >> 31 == 1 { ordered & !(1 << 31) } else { !ordered })
+}
+
+/// A slice written from several threads, each slot by one of them.
+struct SharedSlice<T>(*mut T);
+impl<T> Clone for SharedSlice<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<T> Copy for SharedSlice<T> {}
+// SAFETY: only used to write disjoint slots (`Grid::new`, `vertex_occlusion`).
+unsafe impl<T: Send> Send for SharedSlice<T> {}
+// SAFETY: as above.
+unsafe impl<T: Send> Sync for SharedSlice<T> {}
+
+impl<T> SharedSlice<T> {
+    /// Replaces slot `i` by `f` of it.
+    ///
     /// # Safety
     /// `i` is in bounds and no other thread writes or reads slot `i` meanwhile.
-    unsafe fn write(self, i: usize, value: (f32, u32)) {
+    unsafe fn update(self, i: usize, f: impl FnOnce(&T) -> T) {
         // SAFETY: the caller's contract.
-        unsafe { self.0.add(i).write(value) };
+        unsafe {
+            let slot = self.0.add(i);
+            slot.write(f(&*slot));
+        }
     }
 }
 
@@ -325,4 +484,32 @@ impl Plane {
 /// Twice the signed area of `(a, b, p)` in the plane across the direction.
 fn edge(a: Vec3, b: Vec3, p: Vec2) -> f32 {
     (b.x - a.x) * (p.y - a.y) - (b.y - a.y) * (p.x - a.x)
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    proptest! {
+        /// Entries ascend as their reaches do by `total_cmp`, then by id, and give their reach
+        /// back bit for bit: a cell's sorted list is the order the rays take their hits in.
+        #[test]
+        fn entries_order_by_reach_then_id(a in any::<u32>(), b in any::<u32>(), i in any::<u32>(), j in any::<u32>()) {
+            let (ra, rb) = (f32::from_bits(a), f32::from_bits(b));
+            prop_assert_eq!(entry_reach(entry(ra, i)).to_bits(), a);
+            prop_assert_eq!(entry(ra, i).cmp(&entry(rb, j)), ra.total_cmp(&rb).then(i.cmp(&j)));
+        }
+    }
+
+    /// The rays ordered by cell, then vertex, outside the grid last; vertices without one get
+    /// none.
+    #[test]
+    fn rays_by_cell_then_vertex() {
+        let cells = [2, NO_RAY, 0, 7, 2, 3, 0];
+        let (rays, rank) = by_cell(&cells, 5);
+        assert_eq!(rays, 6);
+        assert_eq!(rank, [2, NO_RAY, 0, 5, 3, 4, 1]);
+    }
 }
