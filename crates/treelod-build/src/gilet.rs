@@ -12,6 +12,7 @@
 
 use glam::{Vec3, Vec4};
 
+use crate::parallel_rays::{sort_key, sort_key_value};
 use crate::spt::{FlattenError, flatten};
 
 /// Tunables of the point hierarchy.
@@ -271,10 +272,16 @@ fn split_at_centroid(indices: &mut [u32], leaves: &[LeafPoint]) -> usize {
         }
     }
     let axis = principal_axis(cov);
-    let key = |i: u32| (leaves[i as usize].position - centroid).dot(axis);
-    // Stable order along the axis (ties by id) keeps the result deterministic.
-    indices.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
-    let split = indices.partition_point(|&i| key(i) < 0.0);
+    // Ordered along the axis (ties by id, a total order: the result is deterministic), each
+    // key computed once and sorted as an integer.
+    let mut keys: Vec<u64> =
+        indices.iter().map(|&i| sort_key((leaves[i as usize].position - centroid).dot(axis), i)).collect();
+    keys.sort_unstable();
+    #[expect(clippy::cast_possible_truncation, reason = "the low half is the id")]
+    for (slot, &key) in indices.iter_mut().zip(&keys) {
+        *slot = key as u32;
+    }
+    let split = keys.partition_point(|&key| sort_key_value(key) < 0.0);
     if split == 0 || split == indices.len() { indices.len() / 2 } else { split }
 }
 

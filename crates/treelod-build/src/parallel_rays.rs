@@ -376,10 +376,10 @@ impl<'a> Grid<'a> {
             let corners = t.v.map(|i| self.projected[i as usize]);
             planes.push(Plane::new(corners, t.opacity.min(1.0)));
             #[expect(clippy::cast_possible_truncation, reason = "a list is shorter than the triangles")]
-            keys.push(entry(corners[0].z.max(corners[1].z).max(corners[2].z), place as u32));
+            keys.push(sort_key(corners[0].z.max(corners[1].z).max(corners[2].z), place as u32));
         }
         keys.sort_unstable();
-        reach.extend(keys.iter().map(|&key| entry_reach(key)));
+        reach.extend(keys.iter().map(|&key| sort_key_value(key)));
         blocks.extend(keys.chunks(LANES).map(|part| {
             let mut block = Block::EMPTY;
             for (i, &key) in part.iter().enumerate() {
@@ -402,7 +402,7 @@ impl<'a> Grid<'a> {
 struct Gathered {
     /// Their planes in the order of the list.
     planes: Vec<Plane>,
-    /// Their entries ([`entry`], of their place in the list), ascending.
+    /// Their entries ([`sort_key`], of their place in the list), ascending.
     keys: Vec<u64>,
     /// Their reaches, ascending.
     reach: Vec<f32>,
@@ -410,17 +410,18 @@ struct Gathered {
     blocks: Vec<Block>,
 }
 
-/// A triangle's key in a cell's list: its reach's bits mapped so that unsigned order is
-/// [`f32::total_cmp`]'s, above its place in the list; ascending keys are by reach, then place.
-fn entry(reach: f32, id: u32) -> u64 {
-    let bits = reach.to_bits();
+/// A key that sorts by `value` as [`f32::total_cmp`] does, then by `id`: the value's bits mapped
+/// so that unsigned order is `total_cmp`'s, above the id. Sorting such keys is a plain integer
+/// sort (a cell's list here by reach, then place; points along an axis in [`crate::gilet`]).
+pub(crate) fn sort_key(value: f32, id: u32) -> u64 {
+    let bits = value.to_bits();
     let ordered = if bits >> 31 == 1 { !bits } else { bits | 1 << 31 };
     (u64::from(ordered) << 32) | u64::from(id)
 }
 
-/// The reach of an [`entry`].
-fn entry_reach(entry: u64) -> f32 {
-    let ordered = (entry >> 32) as u32;
+/// The value of a [`sort_key`].
+pub(crate) fn sort_key_value(key: u64) -> f32 {
+    let ordered = (key >> 32) as u32;
     f32::from_bits(if ordered >> 31 == 1 { ordered & !(1 << 31) } else { !ordered })
 }
 
@@ -498,8 +499,8 @@ mod tests {
         #[test]
         fn entries_order_by_reach_then_id(a in any::<u32>(), b in any::<u32>(), i in any::<u32>(), j in any::<u32>()) {
             let (ra, rb) = (f32::from_bits(a), f32::from_bits(b));
-            prop_assert_eq!(entry_reach(entry(ra, i)).to_bits(), a);
-            prop_assert_eq!(entry(ra, i).cmp(&entry(rb, j)), ra.total_cmp(&rb).then(i.cmp(&j)));
+            prop_assert_eq!(sort_key_value(sort_key(ra, i)).to_bits(), a);
+            prop_assert_eq!(sort_key(ra, i).cmp(&sort_key(rb, j)), ra.total_cmp(&rb).then(i.cmp(&j)));
         }
     }
 

@@ -135,8 +135,13 @@ impl Image {
     pub fn texel(&self, x: i64, y: i64) -> [u8; 4] {
         let w = i64::from(self.width.max(1));
         let h = i64::from(self.height.max(1));
+        // Most coordinates are in range already: no division for them.
+        let (x, y) = (
+            if (0..w).contains(&x) { x } else { x.rem_euclid(w) },
+            if (0..h).contains(&y) { y } else { y.rem_euclid(h) },
+        );
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "rem_euclid is in 0..w·h")]
-        let i = (y.rem_euclid(h) * w + x.rem_euclid(w)) as usize * 4;
+        let i = (y * w + x) as usize * 4;
         match self.rgba.get(i..i + 4) {
             Some(t) => [t[0], t[1], t[2], t[3]],
             None => [255; 4],

@@ -69,8 +69,7 @@ pub fn integrate(material: &Material, image: Option<&Image>, surface: &TriangleS
         let texel = match image {
             Some(img) => {
                 let uv = surface.uv[0] * w.x + surface.uv[1] * w.y + surface.uv[2] * w.z;
-                #[expect(clippy::cast_possible_truncation, reason = "floor of a finite coordinate, wrapped by texel()")]
-                let t = img.texel((uv.x * img.width as f32).floor() as i64, (uv.y * img.height as f32).floor() as i64);
+                let t = img.texel(floor(uv.x * img.width as f32), floor(uv.y * img.height as f32));
                 Vec4::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize], f32::from(t[3]) / 255.0)
             }
             None => Vec4::ONE,
@@ -108,9 +107,30 @@ pub fn integrate(material: &Material, image: Option<&Image>, surface: &TriangleS
     rgb.extend(coverage)
 }
 
+/// `x.floor() as i64` (saturating, NaN to 0) without a call to `floorf`, which this target
+/// does not inline: truncate, then step down where that rounded a negative value up.
+#[expect(clippy::cast_possible_truncation, clippy::cast_precision_loss, reason = "saturating casts, as floor() as i64")]
+fn floor(x: f32) -> i64 {
+    let t = x as i64;
+    if x < t as f32 { t.saturating_sub(1) } else { t }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The same integer as `floor() as i64` everywhere, the edges of i64 and NaN included.
+    #[test]
+    fn floor_is_floor_as_i64() {
+        let mut values = vec![0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2.999_999_8, -2.999_999_8, 1e30, -1e30, f32::NAN];
+        values.extend([f32::INFINITY, f32::NEG_INFINITY, 9.2e18, -9.2e18, 9.3e18, -9.3e18, f32::MIN_POSITIVE]);
+        values.extend((0..2000).map(|i| (i as f32 - 1000.0) * 0.37));
+        for x in values {
+            #[expect(clippy::cast_possible_truncation, reason = "the reference")]
+            let reference = x.floor() as i64;
+            assert_eq!(floor(x), reference, "{x}");
+        }
+    }
     use crate::scene::ImageEncoding;
 
     fn checker_image() -> Image {
