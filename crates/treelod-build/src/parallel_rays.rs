@@ -15,8 +15,8 @@
 //! Per direction the rays are ordered by their cell (a counting sort), so that a cell's list is
 //! gathered once for all the rays that start in it and the rays of a cell are traced side by
 //! side in memory; the cells are traced in parallel. Gathering a cell sorts its list (listed in
-//! the triangles' order, each list is short) and lays out the triangles' planes, computed from
-//! the projected corners there, [`LANES`] to a block, coefficient beside coefficient, so that a
+//! the triangles' order; tens to hundreds of them) and lays out the triangles' planes, computed from
+//! the projected corners there, eight to a block, coefficient beside coefficient, so that a
 //! ray tests a block's triangles at once and takes its hits in the list's order. Each vertex
 //! adds what its ray keeps to its sums in the order of the directions, so the result does not
 //! depend on the thread count (nor on the grid: the hits and their order are the ray's own).
