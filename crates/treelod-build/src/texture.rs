@@ -118,6 +118,7 @@ fn floor(x: f32) -> i64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::ImageEncoding;
 
     /// The same integer as `floor() as i64` everywhere, the edges of i64 and NaN included.
     #[test]
@@ -131,7 +132,6 @@ mod tests {
             assert_eq!(floor(x), reference, "{x}");
         }
     }
-    use crate::scene::ImageEncoding;
 
     fn checker_image() -> Image {
         // 2×1 texels: left opaque red, right transparent.
