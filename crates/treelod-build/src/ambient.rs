@@ -156,9 +156,9 @@ pub enum AoMethod {
     /// traces those on its side of its normal, about `rays` (both sides for two-sided
     /// materials). The default: against 256 rays per vertex, closer than `rays` random rays per
     /// vertex on every shared model, in less time and without the BVH's memory. A ray tests
-    /// every triangle of its cell that reaches past its origin, so the cost grows with the
-    /// depth complexity: on the 10⁶-leaf demo tree (2M overlapping leaf triangles) it takes
-    /// three times [`AoMethod::Traced`]'s time and twice its memory.
+    /// the triangles of its cell that reach past its origin until it is stopped, so the cost
+    /// grows with the depth complexity: on the 10⁶-leaf demo tree (2M overlapping leaf
+    /// triangles) it takes about [`AoMethod::Traced`]'s time, in two thirds of its memory.
     #[default]
     Parallel,
     /// `rays` cosine-weighted rays per vertex through a BVH, each vertex its own directions; the
@@ -187,7 +187,7 @@ pub struct AoConfig {
     /// [`AoMethod::Traced`], each vertex's own stratified rays: 0.026 (oak), 0.064 (maple), 0.009
     /// on the 10⁵-leaf demo tree; where foliage is dense, leaf cards settled by their first half
     /// of rays cost half (the 10⁶-leaf demo tree, 4M vertices, builds in 104 s, 96 s of it the
-    /// rays; 169 s before; 160 s and 149 s in a later run, against 465 s and 456 s parallel).
+    /// rays; 169 s before; 160 s and 149 s in a later run; parallel 172 s and 161 s).
     pub rays: u32,
     /// Seed of the directions' per-vertex rotations.
     pub seed: u64,

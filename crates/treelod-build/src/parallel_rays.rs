@@ -37,6 +37,19 @@
 //! per triangle 70 % slower (finer cells shorten the lists but list each triangle in more
 //! cells). Before the rays were laid out by cell, the loads of each ray's vertex, normal and
 //! sums at random were the largest cost in a profile.
+//!
+//! Cells sized by the count alone suit meshes, whose triangles shrink as there are more of them;
+//! leaf cards do not: the demo tree keeps its leaves' size whatever their number, and with 10⁶
+//! of them each leaf triangle's box covered 149 cells (21 with 10⁵, 51 with 3·10⁵), so listing them took 1.8 GB and the
+//! stage 456 s. Cells are therefore never smaller than those in which the triangles' projected
+//! boxes cover 8 cells on average (`smallest_cell`). Measured (`benches/ao`, 2 cores, one run
+//! each, bounds of 4, 8 and 16 against none): the 3·10⁵-leaf demo 48.8 s with none, 26.6, 27.0
+//! and 32.6 s (the traced method 38.5 s); the 10⁵-leaf demo 7.5 s, 6.6, 6.9 and 7.4 s; the
+//! 10⁶-leaf demo 157 s with 4 and 143 s with 8 (whole build 172 s and 629 MB, against 465 s and
+//! 1.8 GB). The shared models' boxes cover 2.5 (Quaternius) to 6 (oak, willow; maple 3.8) cells at the
+//! count's size, so their grids are unchanged (with 4 the oak's and willow's cells grow and their
+//! times do not change). A ray's hits and their order do not depend on its cell, so the
+//! occlusion is the same, bit for bit, with any cells (tested).
 
 use glam::{Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
@@ -70,6 +83,42 @@ pub fn sphere_directions(n: u32, seed: u64) -> Vec<Vec3A> {
 /// Cells of a direction's grid per triangle (module documentation).
 const CELLS_PER_TRIANGLE: f32 = 0.125;
 
+/// The most cells a triangle's projected bounding box covers on average: where triangles overlap
+/// (dense foliage), cells of [`CELLS_PER_TRIANGLE`] would be smaller than the triangles and list
+/// each in many of them (module documentation).
+const MEAN_CELLS_COVERED: f64 = 8.0;
+
+/// The side of the smallest square cells in which the projected bounding boxes of the
+/// `triangles` that stop any light cover at most `mean_covered` cells on average. A box `w × h`
+/// laid at random on cells of side `s` covers `(w/s + 1)(h/s + 1)` of them on average, so the
+/// mean over the boxes is `A/s² + B/s + 1`, with `A` their mean area and `B` their mean
+/// `w + h`. Summed in fixed chunks, so the same whatever the thread count. 0 where there is
+/// nothing to bound.
+fn smallest_cell(projected: &[Vec3], triangles: &[AoTriangle], mean_covered: f64) -> f32 {
+    let (area, sides, count) = triangles
+        .par_chunks(1 << 16)
+        .map(|part| {
+            part.iter().filter(|t| t.opacity > 0.0).fold((0.0f64, 0.0f64, 0u64), |(area, sides, count), t| {
+                let [a, b, c] = t.v.map(|i| projected[i as usize].truncate());
+                let size = a.max(b).max(c) - a.min(b).min(c);
+                (area + f64::from(size.x * size.y), sides + f64::from(size.x + size.y), count + 1)
+            })
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((0.0, 0.0, 0), |x, y| (x.0 + y.0, x.1 + y.1, x.2 + y.2));
+    if count == 0 || mean_covered <= 1.0 {
+        return 0.0;
+    }
+    #[expect(clippy::cast_precision_loss, reason = "a mean")]
+    let (a, b) = (area / count as f64, sides / count as f64);
+    // The positive root of a/s² + b/s + 1 = mean_covered.
+    let k = mean_covered - 1.0;
+    #[expect(clippy::cast_possible_truncation, reason = "a cell size")]
+    let side = ((b + (b * b + 4.0 * a * k).sqrt()) / (2.0 * k)) as f32;
+    side
+}
+
 /// The occlusion of every vertex, `[0, 1]`, along `directions` (module documentation). Vertices
 /// of no triangle get 0. `progress` is called after each direction with the vertices' share of
 /// the work done and their count.
@@ -78,6 +127,18 @@ pub fn vertex_occlusion(
     vertices: &[VertexRecord],
     triangles: &[AoTriangle],
     directions: &[Vec3A],
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Vec<f32> {
+    occlusion(vertices, triangles, directions, MEAN_CELLS_COVERED, progress)
+}
+
+/// [`vertex_occlusion`] with grids of cells that the triangles cover `mean_covered` times on
+/// average at most ([`smallest_cell`]; 0 for cells by the triangles' count alone).
+fn occlusion(
+    vertices: &[VertexRecord],
+    triangles: &[AoTriangle],
+    directions: &[Vec3A],
+    mean_covered: f64,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Vec<f32> {
     if !triangles.iter().any(|t| t.opacity > 0.0) {
@@ -91,11 +152,8 @@ pub fn vertex_occlusion(
     let total = vertices.len() as u64;
     for (k, &d) in directions.iter().enumerate() {
         let (u, w) = d.any_orthonormal_pair();
-        projected.par_iter_mut().zip(vertices).for_each(|(q, v)| {
-            let p = Vec3A::from_array(v.position);
-            *q = Vec3::new(p.dot(u), p.dot(w), p.dot(d));
-        });
-        let grid = Grid::new(&projected, triangles);
+        project(vertices, d, &mut projected);
+        let grid = Grid::new(&projected, triangles, mean_covered);
         // A vertex's ray along the direction: its weight and origin (projected: across, across,
         // along), in its cell; none for a vertex that faces away or is in no triangle.
         let ray = |v: usize| -> Option<Ray> {
@@ -142,6 +200,16 @@ pub fn vertex_occlusion(
         progress(total * (k as u64 + 1) / directions.len() as u64, total);
     }
     sums.iter().map(|&(kept, weight)| if weight > 0.0 { (1.0 - kept / weight).clamp(0.0, 1.0) } else { 0.0 }).collect()
+}
+
+/// The `vertices` projected along `d`: across (the two axes of `d.any_orthonormal_pair()`), and
+/// along.
+fn project(vertices: &[VertexRecord], d: Vec3A, projected: &mut [Vec3]) {
+    let (u, w) = d.any_orthonormal_pair();
+    projected.par_iter_mut().zip(vertices).for_each(|(q, v)| {
+        let p = Vec3A::from_array(v.position);
+        *q = Vec3::new(p.dot(u), p.dot(w), p.dot(d));
+    });
 }
 
 /// The cell, and the position among the sorted rays, of a vertex without a ray: after every
@@ -259,15 +327,20 @@ struct Grid<'a> {
 }
 
 impl<'a> Grid<'a> {
-    /// The grid of the `triangles` that stop any light, projected as `projected`.
-    fn new(projected: &'a [Vec3], triangles: &'a [AoTriangle]) -> Self {
+    /// The grid of the `triangles` that stop any light, projected as `projected`: cells of
+    /// [`CELLS_PER_TRIANGLE`], or larger where the triangles would cover more than `mean_covered`
+    /// of them on average ([`smallest_cell`]).
+    fn new(projected: &'a [Vec3], triangles: &'a [AoTriangle], mean_covered: f64) -> Self {
         let (lo, hi) = projected
             .iter()
             .fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())));
         let extent = (hi - lo).max(Vec2::splat(1e-6));
         #[expect(clippy::cast_precision_loss, reason = "a cell count estimate")]
         let cells = (triangles.len() as f32 * CELLS_PER_TRIANGLE).clamp(1.0, 16.0e6);
-        let cell = (extent.x * extent.y / cells).sqrt().max(extent.max_element() / 4096.0);
+        let cell = (extent.x * extent.y / cells)
+            .sqrt()
+            .max(smallest_cell(projected, triangles, mean_covered))
+            .max(extent.max_element() / 4096.0);
         let inverse_cell = 1.0 / cell;
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "at most 4097 cells a side")]
         let (width, height) = ((extent.x * inverse_cell) as usize + 1, (extent.y * inverse_cell) as usize + 1);
@@ -502,6 +575,84 @@ mod tests {
             prop_assert_eq!(sort_key_value(sort_key(ra, i)).to_bits(), a);
             prop_assert_eq!(sort_key(ra, i).cmp(&sort_key(rb, j)), ra.total_cmp(&rb).then(i.cmp(&j)));
         }
+    }
+
+    /// `n` semi-transparent two-sided square cards of half-size `h`, facing up, in the unit
+    /// cube: overlapping foliage.
+    fn cards(n: u32, h: f32) -> (Vec<VertexRecord>, Vec<AoTriangle>) {
+        let mut rng = SplitMix64(11);
+        let mut vertices = Vec::new();
+        let mut triangles = Vec::new();
+        for _ in 0..n {
+            let centre = Vec3::new(rng.range(0.0, 1.0), rng.range(0.0, 1.0), rng.range(0.0, 1.0));
+            #[expect(clippy::cast_possible_truncation, reason = "test sizes")]
+            let first = vertices.len() as u32;
+            for (x, z) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
+                vertices.push(VertexRecord {
+                    position: (centre + Vec3::new(x, 0.0, z)).to_array(),
+                    normal: treelod_format::pack::oct_encode([0.0, 1.0, 0.0]),
+                    uv: [0.0; 2],
+                    color: u32::MAX,
+                });
+            }
+            triangles.extend([[first, first + 2, first + 1], [first, first + 3, first + 2]].map(|v| AoTriangle {
+                v,
+                opacity: 0.6,
+                two_sided: true,
+            }));
+        }
+        (vertices, triangles)
+    }
+
+    /// Cells of any size give every vertex the same occlusion, bit for bit: a ray's hits and
+    /// their order are its own, whatever cell lists them. Larger cells than the triangles'
+    /// count gives are taken where the triangles overlap.
+    #[test]
+    fn the_result_does_not_depend_on_the_cells() {
+        let (vertices, triangles) = cards(1000, 0.3);
+        let directions = sphere_directions(12, 5);
+        let mut projected = vec![Vec3::ZERO; vertices.len()];
+        project(&vertices, directions[0], &mut projected);
+        let sides: Vec<f32> =
+            [0.0, 8.0, 3.0, 1.5].iter().map(|&m| 1.0 / Grid::new(&projected, &triangles, m).inverse_cell).collect();
+        assert!(sides.windows(2).all(|w| w[0] < w[1]), "each bound gives larger cells: {sides:?}");
+        // By the count alone (a cell per 8 triangles) the overlapping cards cover more than 8
+        // cells each; the default bound takes larger ones.
+        assert!(sides[1] > sides[0] * 1.5, "{sides:?}");
+        let reference = occlusion(&vertices, &triangles, &directions, 0.0, &|_, _| {});
+        assert!(reference.iter().any(|&a| a > 0.3 && a < 0.9), "partly occluded vertices");
+        for mean_covered in [8.0, 3.0, 1.5] {
+            let ao = occlusion(&vertices, &triangles, &directions, mean_covered, &|_, _| {});
+            assert!(ao.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "{mean_covered}");
+        }
+    }
+
+    /// Boxes `w × h` laid at random on cells of the side found cover the asked number of
+    /// cells on average.
+    #[test]
+    fn the_smallest_cell_is_covered_as_often_as_asked() {
+        // Right triangles with 1 × 1 and 3 × 1 bounding boxes, one transparent (left out).
+        let at = |x: f32, y: f32| Vec3::new(x, y, 0.0);
+        let projected = [at(0.0, 0.0), at(1.0, 0.0), at(0.0, 1.0), at(3.0, 0.0), at(20.0, 20.0)];
+        let triangle = |v: [u32; 3], opacity: f32| AoTriangle { v, opacity, two_sided: false };
+        let triangles = [triangle([0, 1, 2], 1.0), triangle([0, 3, 2], 0.5), triangle([0, 4, 2], 0.0)];
+        for mean_covered in [1.5f64, 4.0, 9.0] {
+            let side = smallest_cell(&projected, &triangles, mean_covered);
+            let mut rng = SplitMix64(2);
+            let samples = 20_000;
+            let mut covered = 0u64;
+            for _ in 0..samples {
+                for (w, h) in [(1.0f32, 1.0f32), (3.0, 1.0)] {
+                    let (x, y) = (rng.range(0.0, side), rng.range(0.0, side));
+                    let cells = |lo: f32, len: f32| ((lo + len) / side).floor() as u64 - (lo / side).floor() as u64 + 1;
+                    covered += cells(x, w) * cells(y, h);
+                }
+            }
+            #[expect(clippy::cast_precision_loss, reason = "a mean")]
+            let mean = covered as f64 / (2 * samples) as f64;
+            assert!((mean - mean_covered).abs() < 0.05 * mean_covered, "{mean_covered}: {mean} at {side}");
+        }
+        assert_eq!(smallest_cell(&projected, &triangles[2..], 8.0), 0.0, "nothing stops light");
     }
 
     /// The rays ordered by cell, then vertex, outside the grid last; vertices without one get
