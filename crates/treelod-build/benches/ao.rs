@@ -7,8 +7,8 @@
 //! every vertex with 256 rays traced from each vertex on its own (the reference, cached beside
 //! the container as `FILE.ao256`; another seed than the compared ones), and with 16 rays: traced
 //! through the BVH with every vertex on its own (`AoConfig::per_vertex`) and with small flat
-//! pieces settled by their first rays, and as parallel rays along 32 directions (the default),
-//! each with its wall-clock and CPU time and its mean absolute difference per vertex from the
+//! pieces settled by their first rays, and as parallel rays along 32 directions (the default,
+//! pieces settled by the even directions; and every vertex along all of them), each with its wall-clock and CPU time and its mean absolute difference per vertex from the
 //! reference. `TREELOD_AO_NO_REFERENCE=1` times only; `TREELOD_AO_ONLY=parallel` (or any part of
 //! a row's name) runs the rows that name it; `TREELOD_AO_RAYS=12,16` the parallel method at
 //! those ray counts (`2N` directions).
@@ -105,6 +105,10 @@ fn main() {
             if let Ok(rays) = rays.trim().parse::<u32>() {
                 let name = format!("parallel, {} directions{}", 2 * rays, if rays == 16 { " (default)" } else { "" });
                 configs.push((name, AoConfig { rays, ..AoConfig::default() }));
+                if rays == 16 {
+                    let name = "parallel, 32 directions, every vertex".to_string();
+                    configs.push((name, AoConfig { per_vertex: true, ..AoConfig::default() }));
+                }
             }
         }
         for (name, config) in configs {

@@ -157,8 +157,9 @@ pub enum AoMethod {
     /// materials). The default: against 256 rays per vertex, closer than `rays` random rays per
     /// vertex on every shared model, in less time and without the BVH's memory. A ray tests
     /// the triangles of its cell that reach past its origin until it is stopped, so the cost
-    /// grows with the depth complexity: on the 10⁶-leaf demo tree (2M overlapping leaf
-    /// triangles) it takes about [`AoMethod::Traced`]'s time, in two thirds of its memory.
+    /// grows with the depth complexity; with cells no smaller than the triangles and buried
+    /// leaf cards settled by half of the directions, the 10⁶-leaf demo tree (2M overlapping
+    /// leaf triangles) builds in 0.77× [`AoMethod::Traced`]'s time and 0.69× its memory.
     #[default]
     Parallel,
     /// `rays` cosine-weighted rays per vertex through a BVH, each vertex its own directions; the
@@ -187,13 +188,14 @@ pub struct AoConfig {
     /// [`AoMethod::Traced`], each vertex's own stratified rays: 0.026 (oak), 0.064 (maple), 0.009
     /// on the 10⁵-leaf demo tree; where foliage is dense, leaf cards settled by their first half
     /// of rays cost half (the 10⁶-leaf demo tree, 4M vertices, builds in 104 s, 96 s of it the
-    /// rays; 169 s before; 160 s and 149 s in a later run; parallel 172 s and 161 s).
+    /// rays; 169 s before; 184 s and 174 s in a later run, parallel 142 s and 130 s).
     pub rays: u32,
     /// Seed of the directions' per-vertex rotations.
     pub seed: u64,
     /// Trace all rays of every vertex, as the stage did before small flat pieces were settled
-    /// by their first rays (module documentation); the reference of measurements. Default
-    /// `false`; [`AoMethod::Traced`] only.
+    /// by their first rays (module documentation; with [`AoMethod::Parallel`], by every other
+    /// direction, [`crate::parallel_rays::vertex_occlusion`]); the reference of measurements.
+    /// Default `false`.
     pub per_vertex: bool,
     /// How the rays are traced. Default [`AoMethod::Parallel`].
     pub method: AoMethod,
@@ -253,7 +255,7 @@ pub fn vertex_occlusion(
 ) -> Vec<f32> {
     if config.method == AoMethod::Parallel {
         let directions = crate::parallel_rays::sphere_directions(2 * config.rays.max(1), config.seed);
-        return crate::parallel_rays::vertex_occlusion(vertices, triangles, &directions, progress);
+        return crate::parallel_rays::vertex_occlusion(vertices, triangles, &directions, !config.per_vertex, progress);
     }
     let position = |i: u32| Vec3A::from_array(vertices[i as usize].position);
     let used = vertex_uses(vertices.len(), triangles);
@@ -388,7 +390,7 @@ pub fn vertex_occlusion(
 const BATCH: usize = 64;
 
 /// The largest piece whose vertices share their rays, as a share of the block's diagonal.
-const PIECE_SIZE: f32 = 1.0 / 16.0;
+pub(crate) const PIECE_SIZE: f32 = 1.0 / 16.0;
 
 /// The most vertices of a piece whose vertices share their rays.
 const PIECE_VERTICES: usize = 16;
@@ -397,19 +399,19 @@ const PIECE_FLAT: f32 = 0.9;
 
 /// The used vertices in groups that share their rays: runs of [`Self::vertices`], each group's
 /// vertices ascending, the groups in the order of their first vertex.
-struct Groups {
+pub(crate) struct Groups {
     /// Every used vertex once.
-    vertices: Vec<u32>,
+    pub(crate) vertices: Vec<u32>,
     /// Where each group starts in `vertices`, and the end.
-    starts: Vec<u32>,
+    pub(crate) starts: Vec<u32>,
 }
 
 impl Groups {
-    fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.starts.len() - 1
     }
 
-    fn members(&self, group: usize) -> &[u32] {
+    pub(crate) fn members(&self, group: usize) -> &[u32] {
         &self.vertices[self.starts[group] as usize..self.starts[group + 1] as usize]
     }
 
@@ -426,7 +428,7 @@ impl Groups {
     /// ids) of at most [`PIECE_VERTICES`] vertices, all used alike (one- or two-sided), with
     /// normals within [`PIECE_FLAT`] of their first's and a bounding box no more than `size`
     /// across; every other used vertex on its own.
-    fn pieces(vertices: &[VertexRecord], triangles: &[AoTriangle], used: &[u8], size: f32) -> Self {
+    pub(crate) fn pieces(vertices: &[VertexRecord], triangles: &[AoTriangle], used: &[u8], size: f32) -> Self {
         // Union-find over the vertices by the triangles: a set's root is its smallest vertex
         // whatever the order of the unions.
         let mut root = singletons(vertices.len());
