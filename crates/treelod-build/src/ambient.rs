@@ -159,7 +159,7 @@ pub enum AoMethod {
     /// the triangles of its cell that reach past its origin until it is stopped, so the cost
     /// grows with the depth complexity; with cells no smaller than the triangles and buried
     /// leaf cards settled by half of the directions, the 10⁶-leaf demo tree (2M overlapping
-    /// leaf triangles) builds in 0.77× [`AoMethod::Traced`]'s time and 0.69× its memory.
+    /// leaf triangles) builds in 0.46× [`AoMethod::Traced`]'s time and 0.67× its memory.
     #[default]
     Parallel,
     /// `rays` cosine-weighted rays per vertex through a BVH, each vertex its own directions; the
@@ -188,7 +188,7 @@ pub struct AoConfig {
     /// [`AoMethod::Traced`], each vertex's own stratified rays: 0.026 (oak), 0.064 (maple), 0.009
     /// on the 10⁵-leaf demo tree; where foliage is dense, leaf cards settled by their first half
     /// of rays cost half (the 10⁶-leaf demo tree, 4M vertices, builds in 104 s, 96 s of it the
-    /// rays; 169 s before; 184 s and 174 s in a later run, parallel 142 s and 130 s).
+    /// rays; 169 s before; 164 s and 155 s in a later run, parallel 75 s and 64 s).
     pub rays: u32,
     /// Seed of the directions' per-vertex rotations.
     pub seed: u64,

@@ -65,9 +65,11 @@
 //! the odd ones, as the traced method settles a piece by its first half of rays. Measured
 //! (`benches/ao`, 2 cores, one run, settled against every vertex traced): 17 % of the
 //! 10⁵-leaf demo's vertices are settled (4.74 s against 4.98 s), 44 % of the 3·10⁵-leaf demo's
-//! (20.1 s against 27.0 s) and 65 % of the 10⁶-leaf demo's (110 s against 143 s); none of the
-//! oak's. Against 256 rays the error is unchanged on six shared models and on the 10⁵-leaf
-//! demo (0.0058) and 0.0220 against 0.0215 on the Quaternius tree (traced, 0.0231).
+//! (20.1 s against 27.0 s) and 65 % of the 10⁶-leaf demo's (110 s against 143 s, before the
+//! tests ran four lanes at a time; its whole build now takes 75 s and 634 MB, traced 164 s and
+//! 950 MB); none of the oak's. Against 256 rays the error is unchanged on six shared models
+//! and on the 10⁵-leaf demo (0.0058) and 0.0220 against 0.0215 on the Quaternius tree (traced,
+//! 0.0231).
 
 use glam::{Vec2, Vec3, Vec3A, Vec4};
 use rayon::prelude::*;
