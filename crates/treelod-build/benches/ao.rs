@@ -8,7 +8,8 @@
 //! the container as `FILE.ao256`; another seed than the compared ones), and with 16 rays: traced
 //! through the BVH with every vertex on its own (`AoConfig::per_vertex`) and with small flat
 //! pieces settled by their first rays, and as parallel rays along 32 directions (the default,
-//! pieces settled by the even directions; and every vertex along all of them), each with its wall-clock and CPU time and its mean absolute difference per vertex from the
+//! pieces settled by the even directions; and every vertex along all of them), each with its
+//! wall-clock and CPU time and its mean absolute difference per vertex from the
 //! reference. `TREELOD_AO_NO_REFERENCE=1` times only; `TREELOD_AO_ONLY=parallel` (or any part of
 //! a row's name) runs the rows that name it; `TREELOD_AO_RAYS=12,16` the parallel method at
 //! those ray counts (`2N` directions).

@@ -534,7 +534,7 @@ pub fn seen_occlusion(items: &[(f32, f32)]) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::{AoConfig, AoMethod, AoTriangle, Groups, seen_occlusion, vertex_occlusion};
 
     /// The default (parallel rays) and the traced method, 16 rays.
@@ -560,7 +560,7 @@ mod tests {
     use glam::Vec3;
     use treelod_format::{VertexRecord, pack::oct_encode};
 
-    fn vertex(p: [f32; 3], n: [f32; 3]) -> VertexRecord {
+    pub(crate) fn vertex(p: [f32; 3], n: [f32; 3]) -> VertexRecord {
         VertexRecord { position: p, normal: oct_encode(n), uv: [0.0; 2], color: u32::MAX }
     }
 
@@ -676,7 +676,7 @@ mod tests {
     }
 
     /// A square card of half-size `h` at `centre` facing up: 4 vertices, 2 triangles.
-    fn card(vertices: &mut Vec<VertexRecord>, centre: Vec3, h: f32, two_sided: bool) -> [AoTriangle; 2] {
+    pub(crate) fn card(vertices: &mut Vec<VertexRecord>, centre: Vec3, h: f32, two_sided: bool) -> [AoTriangle; 2] {
         #[expect(clippy::cast_possible_truncation, reason = "test sizes")]
         let first = vertices.len() as u32;
         for (x, z) in [(-h, -h), (h, -h), (h, h), (-h, h)] {

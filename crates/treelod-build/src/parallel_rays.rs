@@ -15,8 +15,8 @@
 //! Per direction the rays are ordered by their cell (a counting sort), so that a cell's list is
 //! gathered once for all the rays that start in it and the rays of a cell are traced side by
 //! side in memory; the cells are traced in parallel. Gathering a cell sorts its list (listed in
-//! the triangles' order; tens to hundreds of them) and lays out the triangles' planes, computed from
-//! the projected corners there, eight to a block, coefficient beside coefficient, so that a
+//! the triangles' order; tens to hundreds of them) and lays out the triangles' planes, computed
+//! from the projected corners there, eight to a block, coefficient beside coefficient, so that a
 //! ray tests a block's triangles at once, inside and beyond its origin, and takes its hits in the
 //! list's order. The tests run four lanes at a time in SSE2 registers, with the same arithmetic
 //! as one at a time, so the output is identical; alternating runs of the stage, one lane at a
@@ -47,16 +47,17 @@
 //!
 //! Cells sized by the count alone suit meshes, whose triangles shrink as there are more of them;
 //! leaf cards do not: the demo tree keeps its leaves' size whatever their number, and with 10⁶
-//! of them each leaf triangle's box covered 149 cells (21 with 10⁵, 51 with 3·10⁵), so listing them took 1.8 GB and the
-//! stage 456 s. Cells are therefore never smaller than those in which the triangles' projected
-//! boxes cover 8 cells on average (`smallest_cell`). Measured (`benches/ao`, 2 cores, one run
-//! each, bounds of 4, 8 and 16 against none): the 3·10⁵-leaf demo 48.8 s with none, 26.6, 27.0
-//! and 32.6 s (the traced method 38.5 s); the 10⁵-leaf demo 7.5 s, 6.6, 6.9 and 7.4 s; the
-//! 10⁶-leaf demo 157 s with 4 and 143 s with 8 (whole build 172 s and 629 MB, against 465 s and
-//! 1.8 GB). The shared models' boxes cover 2.5 (Quaternius) to 6 (oak, willow; maple 3.8) cells at the
-//! count's size, so their grids are unchanged (with 4 the oak's and willow's cells grow and their
-//! times do not change). A ray's hits and their order do not depend on its cell, so the
-//! occlusion is the same, bit for bit, with any cells (tested).
+//! of them each leaf triangle's box covered 149 cells (21 with 10⁵, 51 with 3·10⁵), so listing
+//! them took 1.8 GB and the stage 456 s. Cells are therefore never smaller than those in which
+//! the triangles' projected boxes cover 8 cells on average (`smallest_cell`). Measured
+//! (`benches/ao`, 2 cores, one run each, bounds of 4, 8 and 16 against none): the 3·10⁵-leaf
+//! demo 48.8 s with none, 26.6, 27.0 and 32.6 s (the traced method 38.5 s); the 10⁵-leaf demo
+//! 7.5 s, 6.6, 6.9 and 7.4 s; the 10⁶-leaf demo 157 s with 4 and 143 s with 8 (whole build
+//! 172 s and 629 MB, against 465 s and 1.8 GB). The shared models' boxes cover 2.5 (Quaternius)
+//! to 6 (oak, willow; maple 3.8) cells at the count's size, so their grids are unchanged (with
+//! 4 the oak's and willow's cells grow and their times do not change). A ray's hits and their
+//! order do not depend on its cell, so the occlusion is the same, bit for bit, with any cells
+//! (tested).
 //!
 //! Where foliage is dense most leaf cards are buried, and every ray they cast is stopped. With
 //! 16 directions or more, the even ones are traced first (a Fibonacci lattice's every other
@@ -184,18 +185,18 @@ fn occlusion(
     // Per vertex, over the first half of the directions, whether any of its rays was traced
     // (`TRACED`), kept less than all (`DIMMED`), kept anything (`LIT`); then whether its piece
     // was settled in the open (`OPEN`) or buried (`BURIED`).
-    let mut seen = vec![0u8; if settle { vertices.len() } else { 0 }];
+    let mut seen = vec![0u8; vertices.len()];
+    let half = directions.len().div_ceil(2);
     let mut projected = vec![Vec3::ZERO; vertices.len()];
     let total = vertices.len() as u64;
     for (done, &k) in order.iter().enumerate() {
-        if settle && done == directions.len().div_ceil(2) {
+        if settle && done == half {
             // The pieces only now, between two directions' grids and rays (the build's peak).
             let groups = Groups::pieces(vertices, triangles, &used, PIECE_SIZE * diagonal);
             settle_pieces(&groups, &mut seen, &mut used);
         }
         let d = directions[k];
-        let (u, w) = d.any_orthonormal_pair();
-        project(vertices, d, &mut projected);
+        let (u, w) = project(vertices, d, &mut projected);
         let grid = Grid::new(&projected, triangles, mean_covered);
         // A vertex's ray along the direction: its weight and origin (projected: across, across,
         // along), in its cell; none for a vertex that faces away or is in no triangle.
@@ -235,23 +236,24 @@ fn occlusion(
                 ray.kept = ray.weight * transmitted(gathered, ray.origin);
             }
         });
-        // Each vertex adds its ray's share to its sums in the order of the directions.
-        sums.par_iter_mut().zip(&rank).filter(|(_, slot)| **slot != NO_RAY).for_each(|(sum, &slot)| {
-            let ray = &sorted[slot as usize];
-            *sum = (sum.0 + ray.kept, sum.1 + ray.weight);
-        });
-        if !seen.is_empty() && done < directions.len().div_ceil(2) {
-            seen.par_iter_mut().zip(&rank).filter(|(_, slot)| **slot != NO_RAY).for_each(|(seen, &slot)| {
+        // Each vertex adds its ray's share to its sums in the order of the directions (and, to
+        // settle, notes in the first half what its rays kept).
+        let record = settle && done < half;
+        sums.par_iter_mut().zip(&mut seen).zip(&rank).filter(|(_, slot)| **slot != NO_RAY).for_each(
+            |((sum, seen), &slot)| {
                 let ray = &sorted[slot as usize];
-                *seen |= TRACED | if ray.kept < ray.weight { DIMMED } else { 0 } | if ray.kept > 0.0 { LIT } else { 0 };
-            });
-        }
+                *sum = (sum.0 + ray.kept, sum.1 + ray.weight);
+                if record {
+                    *seen |=
+                        TRACED | if ray.kept < ray.weight { DIMMED } else { 0 } | if ray.kept > 0.0 { LIT } else { 0 };
+                }
+            },
+        );
         progress(total * (done as u64 + 1) / directions.len() as u64, total);
     }
     sums.iter()
-        .enumerate()
-        .map(|(v, &(kept, weight))| {
-            let settled = seen.get(v).copied().unwrap_or(0);
+        .zip(&seen)
+        .map(|(&(kept, weight), &settled)| {
             if settled & OPEN != 0 {
                 0.0
             } else if settled & BURIED != 0 {
@@ -301,14 +303,14 @@ fn settle_pieces(groups: &Groups, seen: &mut [u8], used: &mut [u8]) {
     }
 }
 
-/// The `vertices` projected along `d`: across (the two axes of `d.any_orthonormal_pair()`), and
-/// along.
-fn project(vertices: &[VertexRecord], d: Vec3A, projected: &mut [Vec3]) {
+/// The `vertices` projected along `d`: across (along the two axes returned) and along.
+fn project(vertices: &[VertexRecord], d: Vec3A, projected: &mut [Vec3]) -> (Vec3A, Vec3A) {
     let (u, w) = d.any_orthonormal_pair();
     projected.par_iter_mut().zip(vertices).for_each(|(q, v)| {
         let p = Vec3A::from_array(v.position);
         *q = Vec3::new(p.dot(u), p.dot(w), p.dot(d));
     });
+    (u, w)
 }
 
 /// The cell, and the position among the sorted rays, of a vertex without a ray: after every
@@ -669,6 +671,7 @@ mod tests {
     use proptest::prelude::*;
 
     use super::*;
+    use crate::ambient::tests::{card, vertex};
 
     proptest! {
         /// Entries ascend as their reaches do by `total_cmp`, then by id, and give their reach
@@ -689,21 +692,7 @@ mod tests {
         let mut triangles = Vec::new();
         for _ in 0..n {
             let centre = Vec3::new(rng.range(0.0, 1.0), rng.range(0.0, 1.0), rng.range(0.0, 1.0));
-            #[expect(clippy::cast_possible_truncation, reason = "test sizes")]
-            let first = vertices.len() as u32;
-            for (x, z) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
-                vertices.push(VertexRecord {
-                    position: (centre + Vec3::new(x, 0.0, z)).to_array(),
-                    normal: treelod_format::pack::oct_encode([0.0, 1.0, 0.0]),
-                    uv: [0.0; 2],
-                    color: u32::MAX,
-                });
-            }
-            triangles.extend([[first, first + 2, first + 1], [first, first + 3, first + 2]].map(|v| AoTriangle {
-                v,
-                opacity: 0.6,
-                two_sided: true,
-            }));
+            triangles.extend(card(&mut vertices, centre, h, true).map(|t| AoTriangle { opacity: 0.6, ..t }));
         }
         (vertices, triangles)
     }
@@ -737,18 +726,12 @@ mod tests {
     #[test]
     fn a_card_buried_along_half_of_the_directions_is_settled() {
         let directions = sphere_directions(16, 5);
-        let vertex = |p: Vec3, n: Vec3| VertexRecord {
-            position: p.to_array(),
-            normal: treelod_format::pack::oct_encode(n.normalize().to_array()),
-            uv: [0.0; 2],
-            color: u32::MAX,
-        };
         let square = |vertices: &mut Vec<VertexRecord>, centre: Vec3, normal: Vec3, h: f32| {
             let (u, w) = normal.normalize().any_orthonormal_pair();
             #[expect(clippy::cast_possible_truncation, reason = "test sizes")]
             let first = vertices.len() as u32;
             for (a, b) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
-                vertices.push(vertex(centre + u * a + w * b, normal));
+                vertices.push(vertex((centre + u * a + w * b).to_array(), normal.normalize().to_array()));
             }
             [[first, first + 1, first + 2], [first, first + 2, first + 3]]
         };
