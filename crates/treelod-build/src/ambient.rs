@@ -40,8 +40,9 @@
 //! of a direction that start in one cell of its grid share that cell's list; with neither
 //! method biased (mean Δ within ±0.003 on every model), the parallel rays are closer to the
 //! reference on every model, and their stage takes 0.45–0.65× the time on the six larger models
-//! (the Quaternius tree's 0.02 s either way). Without the BVH the maple's build peaks at 169 MB
-//! instead of 319 MB.
+//! (the Quaternius tree's 0.02 s either way). Without the BVH the maple's build peaked at 169 MB
+//! instead of 319 MB (122.8 MB since the stage holds a band of a direction's rows at a time and
+//! runs before the build's per-cell stage, [`crate::parallel_rays`]).
 //!
 //! The traced rays run against a BVH (`obvhs`, an 8-wide compressed BVH), in parallel over
 //! batches of vertices. Directions come from a per-vertex rotated stratified spiral seeded by the vertex
@@ -137,13 +138,17 @@ pub(crate) fn vertex_uses(vertex_count: usize, triangles: &[AoTriangle]) -> Vec<
     used
 }
 
-/// The diagonal of the vertices' bounding box, and how far off the surface a ray starts (and how
-/// near a hit it ignores), against self-intersection: `10⁻⁴` of the diagonal.
-pub(crate) fn diagonal_and_offset(vertices: &[VertexRecord]) -> (f32, f32) {
-    let (lo, hi) = vertices.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| {
-        let p = Vec3::from_array(v.position);
-        (lo.min(p), hi.max(p))
-    });
+/// The diagonal of the bounding box of the vertices that `used` marks ([`vertex_uses`]: those
+/// of a triangle), and how far off the surface a ray starts (and how near a hit it ignores),
+/// against self-intersection: `10⁻⁴` of the diagonal.
+pub(crate) fn diagonal_and_offset(vertices: &[VertexRecord], used: &[u8]) -> (f32, f32) {
+    let (lo, hi) = vertices.iter().zip(used).filter(|(_, u)| **u != 0).fold(
+        (Vec3::INFINITY, Vec3::NEG_INFINITY),
+        |(lo, hi), (v, _)| {
+            let p = Vec3::from_array(v.position);
+            (lo.min(p), hi.max(p))
+        },
+    );
     let diagonal = (hi - lo).length();
     (diagonal, (1e-4 * diagonal).max(1e-7))
 }
@@ -267,7 +272,7 @@ pub fn vertex_occlusion(
     if shapes.is_empty() {
         return vec![0.0; vertices.len()];
     }
-    let (diagonal, offset) = diagonal_and_offset(vertices);
+    let (diagonal, offset) = diagonal_and_offset(vertices, &used);
     let groups = if config.per_vertex {
         Groups::singles(&used)
     } else {

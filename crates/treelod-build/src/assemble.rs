@@ -755,6 +755,19 @@ fn assemble(
         block_lines(&material_keys, &tris, &vertices, &parts, trees, cell_of, cell_count, c)
     })?;
 
+    // Stage: ambient occlusion of the vertices, in their gathered order (renumbered with them
+    // below), and each triangle's coverage; before the per-cell stage, so that the rays are not
+    // traced beside the points (49 MB of the maple's peak).
+    let occlusion = match &config.ao {
+        Some(ao) => {
+            let progress = |done, total| config.progress.report(Progress::AMBIENT_OCCLUSION, done, total);
+            let (vertex_ao, coverage) =
+                gathered_occlusion(&tris, &vertices, &parts, &material_keys, trees, ao, &progress);
+            clock.lap(&mut stats, "ao");
+            Some((vertex_ao, coverage))
+        }
+        None => None,
+    };
     // Stage: per cell, the leaf points, the point hierarchy as point records, and the triangles in
     // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
     // built in parallel a few at a time (results kept in cell order), and each batch is copied out
@@ -819,22 +832,26 @@ fn assemble(
     for t in &mut tris {
         t.v = t.v.map(|v| remap[v as usize]);
     }
-    scatter_in_place(&mut vertices, remap);
+    // The vertices (and their occlusion) in the written order, cut to the written ones; then
+    // each point's occlusion (its leaves' mean).
+    let mut occlusion = occlusion;
+    scatter_in_place(remap, |i, j| {
+        vertices.swap(i, j);
+        if let Some((vertex_ao, _)) = &mut occlusion {
+            vertex_ao.swap(i, j);
+        }
+    });
     vertices.truncate(written_vertices);
     vertices.shrink_to_fit();
-    clock.lap(&mut stats, "cells");
-    // Stage: ambient occlusion of the vertices, then of each point (its leaves' mean); each
-    // triangle's coverage is kept for the ellipsoids' occlusion.
-    let (vertex_ao, point_ao, coverage) = match &config.ao {
-        Some(ao) => {
-            let progress = |done, total| config.progress.report(Progress::AMBIENT_OCCLUSION, done, total);
-            let (vertex_ao, point_ao, coverage) =
-                block_occlusion(&tris, &order, &vertices, &points, &cells, &material_keys, trees, ao, &progress);
-            clock.lap(&mut stats, "ao");
+    let (vertex_ao, point_ao, coverage) = match occlusion {
+        Some((mut vertex_ao, coverage)) => {
+            vertex_ao.truncate(written_vertices);
+            let point_ao = point_occlusion(&tris, &order, &points, &cells, &vertex_ao, &coverage);
             (Some(vertex_ao), point_ao, coverage)
         }
         None => (None, Vec::new(), Vec::new()),
     };
+    clock.lap(&mut stats, "cells");
     // Stage: the pruned leaves of each cell in priority order, their triangles in leaf order with
     // the vertices written above (every leaf triangle is also in TRIANGLES).
     let (mut prune_leaves, mut prune_triangles) = (Vec::new(), Vec::new());
@@ -1316,57 +1333,72 @@ fn line_occlusion(cell: &CellLines, tris: &[Tri], vertex_ao: &[f32]) -> Vec<u8> 
         .collect()
 }
 
-/// The ambient occlusion of the written vertices ([`crate::ambient`]), and of each point, encoded:
-/// the mean of its leaves' (their triangles' corners' mean), weighted by their opaque area. A
-/// triangle stops rays by the coverage of its leaf point (spec §6.5's alpha), returned third (per
-/// triangle of `tris`). `progress` is told the vertices done.
-#[expect(clippy::too_many_arguments, reason = "the stage reads the build's arrays")]
-fn block_occlusion(
+/// Each triangle's coverage as its leaf point stores it (spec §6.5's alpha, a byte: the share
+/// of its area is [`opacity`] of it): the opaque share of its texture, what a ray through it
+/// loses. Taken before the per-cell stage builds the points, from the same integration
+/// ([`leaf_point`]); opaque materials cover all.
+fn triangle_coverage(tris: &[Tri], vertices: &[VertexRecord], parts: &[PartRef], trees: &[Placed<'_>]) -> Vec<u8> {
+    tris.par_iter()
+        .map(|t| {
+            if parts[t.part as usize].material.alpha_mode == AlphaMode::Opaque {
+                return u8::MAX;
+            }
+            let alpha = leaf_point(t, vertices, parts, trees).color.w;
+            (pack::rgba8([0.0, 0.0, 0.0, alpha]) >> 24) as u8
+        })
+        .collect()
+}
+
+/// The share of a triangle's area a coverage byte of [`triangle_coverage`] stands for.
+fn opacity(coverage: u8) -> f32 {
+    f32::from(coverage) / 255.0
+}
+
+/// The ambient occlusion of the gathered vertices ([`crate::ambient`]), and each triangle's
+/// coverage ([`triangle_coverage`]): what a ray through it loses. A triangle gathers light on
+/// both faces where its material is two-sided. `progress` is told the vertices done.
+fn gathered_occlusion(
     tris: &[Tri],
-    order: &[u32],
     vertices: &[VertexRecord],
-    points: &[PointRecord],
-    cells: &[CellRecord],
+    parts: &[PartRef],
     material_keys: &[(usize, usize, Class)],
     trees: &[Placed<'_>],
     config: &AoConfig,
     progress: &(dyn Fn(u64, u64) + Sync),
-) -> (Vec<f32>, Vec<u8>, Vec<f32>) {
-    // Each written triangle's coverage (its leaf point's alpha) and whether it is two-sided; a
-    // cell's triangles are `order[cell.triangles]`, each with its leaf id in `part`.
-    let mut coverage = vec![1.0f32; tris.len()];
-    for cell in cells {
-        let cell_points = &points[cell.points.as_usize()];
-        let mut alpha_of_leaf = vec![1.0f32; cell.triangles.count as usize];
-        for p in cell_points.iter().filter(|p| p.lo == 0.0 && p.leaf_count == 1) {
-            if let Some(slot) = alpha_of_leaf.get_mut(p.leaf_first as usize) {
-                *slot = f32::from((p.color >> 24) as u8) / 255.0;
-            }
-        }
-        for &id in &order[cell.triangles.as_usize()] {
-            coverage[id as usize] = alpha_of_leaf.get(tris[id as usize].part as usize).copied().unwrap_or(1.0);
-        }
-    }
+) -> (Vec<f32>, Vec<u8>) {
     let two_sided = |t: &Tri| {
         let (tree, material, _) = material_keys[t.material as usize];
         trees[tree].scene.materials.get(material).is_some_and(|m| m.double_sided)
     };
+    let coverage = triangle_coverage(tris, vertices, parts, trees);
     let rays: Vec<AoTriangle> = tris
         .iter()
         .zip(&coverage)
-        .map(|(t, &opacity)| AoTriangle { v: t.v, opacity, two_sided: two_sided(t) })
+        .map(|(t, &c)| AoTriangle { v: t.v, opacity: opacity(c), two_sided: two_sided(t) })
         .collect();
-    let vertex_ao = vertex_occlusion(vertices, &rays, config, progress);
-    drop(rays);
+    (vertex_occlusion(vertices, &rays, config, progress), coverage)
+}
+
+/// Each point's ambient occlusion, encoded: the mean of its leaves' (their triangles' corners'
+/// mean), weighted by their opaque area. A cell's triangles are `order[cell.triangles]`, each
+/// with its leaf id in `part` and the written vertex ids that `vertex_ao` is indexed by.
+fn point_occlusion(
+    tris: &[Tri],
+    order: &[u32],
+    points: &[PointRecord],
+    cells: &[CellRecord],
+    vertex_ao: &[f32],
+    coverage: &[u8],
+) -> Vec<u8> {
     // Per cell, each leaf's (occlusion × weight, weight) in leaf order, then each point's run.
     let mut point_ao = vec![0u8; points.len()];
     for cell in cells {
         let mut by_leaf = vec![(0.0f32, 0.0f32); cell.triangles.count as usize];
         for &id in &order[cell.triangles.as_usize()] {
             let t = &tris[id as usize];
-            let weight = t.size * t.size * coverage[id as usize];
+            let weight = t.size * t.size * opacity(coverage[id as usize]);
             if let Some(slot) = by_leaf.get_mut(t.part as usize) {
-                *slot = (triangle_occlusion(&vertex_ao, t.v), weight);
+                *slot = (triangle_occlusion(vertex_ao, t.v), weight);
             }
         }
         for (i, p) in cell.points.as_usize().zip(&points[cell.points.as_usize()]) {
@@ -1377,7 +1409,7 @@ fn block_occlusion(
                 encode_ao(mean_occlusion(leaves.iter().map(|&(ao, w)| (ao, if transparent { 1.0 } else { w }))));
         }
     }
-    (vertex_ao, point_ao, coverage)
+    point_ao
 }
 
 /// The ambient occlusion of one cell's ellipsoid records, encoded (spec §6.14): as for points,
@@ -1385,7 +1417,7 @@ fn block_occlusion(
 /// weighted by their opaque area (`size² · α`, `α` the triangle's `coverage`); a run of fully
 /// transparent leaves counts every triangle equally. `vertex_ao` is indexed by the written
 /// vertex ids that `tris` hold by now.
-fn ellipsoid_occlusion(cell: &CellEllipsoids, tris: &[Tri], vertex_ao: &[f32], coverage: &[f32]) -> Vec<u8> {
+fn ellipsoid_occlusion(cell: &CellEllipsoids, tris: &[Tri], vertex_ao: &[f32], coverage: &[u8]) -> Vec<u8> {
     // Per leaf id, its (occlusion, opaque area): the leaf's triangles' weighted mean and sum.
     let by_leaf: Vec<(f32, f32)> = cell
         .leaf_triangles
@@ -1396,7 +1428,7 @@ fn ellipsoid_occlusion(cell: &CellEllipsoids, tris: &[Tri], vertex_ao: &[f32], c
                     let t = &tris[id as usize];
                     (
                         triangle_occlusion(vertex_ao, t.v),
-                        t.size * t.size * coverage.get(id as usize).copied().unwrap_or(1.0),
+                        t.size * t.size * coverage.get(id as usize).copied().map_or(1.0, opacity),
                     )
                 })
             };
@@ -1516,17 +1548,17 @@ fn cell_output(
     Ok(CellOutput { order, points, bounds: (lo, hi) })
 }
 
-/// Moves `items[i]` to `items[dest[i]]` for every `i`, in place; `dest` is a permutation of the
-/// indices of `items`. Each swap puts one item in its place, so this takes at most `n` swaps.
-fn scatter_in_place<T>(items: &mut [T], mut dest: Vec<u32>) {
-    debug_assert_eq!(items.len(), dest.len());
-    for i in 0..items.len() {
+/// Moves item `i` to `dest[i]` for every `i`, in place, by `swap(i, j)` calls (of every array
+/// that holds the items, so that several are permuted alike); `dest` is a permutation of the
+/// indices. Each swap puts one item in its place, so this takes at most `n` swaps.
+fn scatter_in_place(mut dest: Vec<u32>, mut swap: impl FnMut(usize, usize)) {
+    for i in 0..dest.len() {
         loop {
             let j = dest[i] as usize;
             if j == i {
                 break;
             }
-            items.swap(i, j);
+            swap(i, j);
             dest.swap(i, j);
         }
     }
@@ -1542,7 +1574,7 @@ fn triangle_records(mut tris: Vec<Tri>, order: &[u32]) -> Vec<TriangleRecord> {
         let k = k as u32;
         dest[id as usize] = k;
     }
-    scatter_in_place(&mut tris, dest);
+    scatter_in_place(dest, |i, j| tris.swap(i, j));
     // Field by field the same layout: `v` becomes `indices`, `part` (holding the leaf) `leaf`.
     bytemuck::allocation::cast_vec(tris)
 }
@@ -1604,7 +1636,7 @@ mod tests {
         // A permutation of several cycles, a fixed point among them.
         let dest = vec![3u32, 0, 4, 1, 2, 5, 7, 6];
         let mut items: Vec<char> = "abcdefgh".chars().collect();
-        scatter_in_place(&mut items, dest.clone());
+        scatter_in_place(dest.clone(), |i, j| items.swap(i, j));
         for (i, &d) in dest.iter().enumerate() {
             assert_eq!(items[d as usize], "abcdefgh".as_bytes()[i] as char);
         }

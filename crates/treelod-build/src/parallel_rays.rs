@@ -28,11 +28,18 @@
 //! does not depend on the thread count (nor on the grid: the hits and their order are the ray's
 //! own).
 //!
-//! Memory is one direction's grid and rays at a time: the triangles' ids in their cells (4 bytes
-//! each, about 4 per triangle; planes are computed where a cell is gathered) and the rays in the
-//! order of their cells (24 bytes each, written there from the vertices in their order, with
-//! each vertex's place): on the 669k-triangle maple the build peaks at 169 MB, against 209 MB
-//! before this layout and 319 MB with the BVH.
+//! Memory is one direction at a time, and of it one band of the grid's rows at a time: per
+//! vertex its ray's place (4 bytes) and per triangle the cells its box covers (8 bytes) for the
+//! whole direction; per band its triangles' ids in its cells (4 bytes each, about 4 per
+//! triangle; planes are computed where a cell is gathered) and its rays in the order of their
+//! cells (24 bytes each, written there from the vertices in their order), the rows cut into
+//! bands of about 16 MiB of both (`BAND_BYTES`: the maple's grids take 2 bands, the willow's and
+//! smaller trees' 1, the 3·10⁵-leaf demo's 3 and the 10⁶-leaf demo's 11 or 12). Bands change
+//! nothing but what is held at once: a ray's hits and their order are its own. The maple's
+//! build peaked at 209 MB before the rays were laid out by cell, 319 MB with the BVH, and
+//! 169.8 MB with each direction whole and the stage after the build's per-cell stage (beside
+//! the points, 49 MB); run before it, 130 MB with each direction whole and 122.8 MB with bands
+//! (the same bytes written).
 //!
 //! Where the time goes on the maple (32 directions, 2 cores, 0.15 s a direction): listing the
 //! triangles a seventh, the rays (their cells, order and places) a quarter, tracing three fifths
@@ -109,6 +116,10 @@ const CELLS_PER_TRIANGLE: f32 = 0.125;
 /// each in many of them (module documentation).
 const MEAN_CELLS_COVERED: f64 = 8.0;
 
+/// The bytes of lists and rays a direction holds at once: its grid's rows are taken in bands of
+/// about this much (module documentation).
+const BAND_BYTES: usize = 16 << 20;
+
 /// The side of the smallest square cells in which the projected bounding boxes of the
 /// `triangles` that stop any light cover at most `mean_covered` cells on average. A box `w × h`
 /// laid at random on cells of side `s` covers `(w/s + 1)(h/s + 1)` of them on average, so the
@@ -154,24 +165,36 @@ pub fn vertex_occlusion(
     settle: bool,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Vec<f32> {
-    occlusion(vertices, triangles, directions, settle, MEAN_CELLS_COVERED, progress)
+    occlusion(vertices, triangles, directions, settle, Cells::DEFAULT, progress)
 }
 
-/// [`vertex_occlusion`] with grids of cells that the triangles cover `mean_covered` times on
-/// average at most ([`smallest_cell`]; 0 for cells by the triangles' count alone).
+/// How a direction's grid is cut: cells that the triangles' boxes cover at most `mean_covered`
+/// times on average ([`smallest_cell`]; 0 for cells by the triangles' count alone), lists and
+/// rays held in bands of rows of about `band_bytes` ([`Grid::bands`]).
+#[derive(Clone, Copy)]
+struct Cells {
+    mean_covered: f64,
+    band_bytes: usize,
+}
+
+impl Cells {
+    const DEFAULT: Self = Self { mean_covered: MEAN_CELLS_COVERED, band_bytes: BAND_BYTES };
+}
+
+/// [`vertex_occlusion`] with grids cut as `cells` says.
 fn occlusion(
     vertices: &[VertexRecord],
     triangles: &[AoTriangle],
     directions: &[Vec3A],
     settle: bool,
-    mean_covered: f64,
+    Cells { mean_covered, band_bytes }: Cells,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Vec<f32> {
     if !triangles.iter().any(|t| t.opacity > 0.0) {
         return vec![0.0; vertices.len()];
     }
     let mut used = vertex_uses(vertices.len(), triangles);
-    let (diagonal, offset) = diagonal_and_offset(vertices);
+    let (diagonal, offset) = diagonal_and_offset(vertices, &used);
     // Settling traces every other direction first (evenly spread over the sphere too), then,
     // for the pieces not settled by them, the rest.
     let settle = settle && directions.len() >= SETTLE_DIRECTIONS;
@@ -215,40 +238,51 @@ fn occlusion(
             let origin = Vec3::new(p.dot(u), p.dot(w), p.dot(d) + offset);
             Some(Ray { cell: grid.cell(origin), weight, origin, kept: 0.0 })
         };
-        // The rays by their cell (then vertex), so that a cell's list is gathered once for all
-        // of its rays, each traced with its neighbours in memory; rays outside the grid last.
+        // The rays' places in the order of their cells (then vertices), so that a cell's list is
+        // gathered once for all of its rays, each traced with its neighbours in memory; rays
+        // outside the grid last.
         let cells: Vec<u32> = (0..vertices.len()).into_par_iter().map(|v| ray(v).map_or(NO_RAY, |r| r.cell)).collect();
-        let (rays, rank) = by_cell(&cells, grid.width * grid.height + 1);
+        let (starts, rank) = by_cell(&cells, grid.width * grid.height + 1);
         drop(cells);
-        // Each ray written to its place, the vertices read in their order (a load at random
-        // waits, a store does not).
-        let mut sorted = vec![Ray { cell: NO_RAY, weight: 0.0, origin: Vec3::ZERO, kept: 0.0 }; rays];
-        let shared = SharedSlice(sorted.as_mut_ptr());
-        rank.par_iter().enumerate().filter(|(_, slot)| **slot != NO_RAY).for_each(|(v, &slot)| {
-            if let Some(ray) = ray(v) {
-                // SAFETY: the vertices' places are distinct and inside `sorted` (by_cell).
-                unsafe { shared.update(slot as usize, |_| ray) };
-            }
-        });
-        sorted.par_chunk_by_mut(|a, b| a.cell == b.cell).for_each_init(Gathered::default, |gathered, group| {
-            grid.gather(group[0].cell, gathered);
-            for ray in group {
-                ray.kept = ray.weight * transmitted(gathered, ray.origin);
-            }
-        });
-        // Each vertex adds its ray's share to its sums in the order of the directions (and, to
-        // settle, notes in the first half what its rays kept).
+        // A band of rows at a time (the rays outside the grid with the last): its triangles'
+        // lists, then its rays, each written to its place from the vertices in their order (a
+        // load at random waits, a store does not), traced, and added to its vertex's sums.
         let record = settle && done < half;
-        sums.par_iter_mut().zip(&mut seen).zip(&rank).filter(|(_, slot)| **slot != NO_RAY).for_each(
-            |((sum, seen), &slot)| {
-                let ray = &sorted[slot as usize];
-                *sum = (sum.0 + ray.kept, sum.1 + ray.weight);
-                if record {
-                    *seen |=
-                        TRACED | if ray.kept < ray.weight { DIMMED } else { 0 } | if ray.kept > 0.0 { LIT } else { 0 };
+        for rows in grid.bands(&starts, band_bytes) {
+            let band = grid.band(rows.clone());
+            let cell_end = if rows.end == grid.height { starts.len() - 1 } else { rows.end * grid.width };
+            let slots = starts[rows.start * grid.width]..starts[cell_end];
+            let in_band = |slot: u32| slots.contains(&slot);
+            let mut sorted = vec![Ray { cell: NO_RAY, weight: 0.0, origin: Vec3::ZERO, kept: 0.0 }; slots.len()];
+            let shared = SharedSlice(sorted.as_mut_ptr());
+            rank.par_iter().enumerate().filter(|(_, slot)| in_band(**slot)).for_each(|(v, &slot)| {
+                if let Some(ray) = ray(v) {
+                    // SAFETY: the vertices' places are distinct (by_cell), and those of the band's
+                    // rays are inside `sorted` once its first place is taken off.
+                    unsafe { shared.update((slot - slots.start) as usize, |_| ray) };
                 }
-            },
-        );
+            });
+            sorted.par_chunk_by_mut(|a, b| a.cell == b.cell).for_each_init(Gathered::default, |gathered, group| {
+                grid.gather(&band, group[0].cell, gathered);
+                for ray in group {
+                    ray.kept = ray.weight * transmitted(gathered, ray.origin);
+                }
+            });
+            drop(band);
+            // Each vertex adds its ray's share to its sums in the order of the directions (and,
+            // to settle, notes in the first half what its rays kept).
+            sums.par_iter_mut().zip(&mut seen).zip(&rank).filter(|(_, slot)| in_band(**slot)).for_each(
+                |((sum, seen), &slot)| {
+                    let ray = &sorted[(slot - slots.start) as usize];
+                    *sum = (sum.0 + ray.kept, sum.1 + ray.weight);
+                    if record {
+                        *seen |= TRACED
+                            | if ray.kept < ray.weight { DIMMED } else { 0 }
+                            | if ray.kept > 0.0 { LIT } else { 0 };
+                    }
+                },
+            );
+        }
         progress(total * (done as u64 + 1) / directions.len() as u64, total);
     }
     sums.iter()
@@ -331,9 +365,9 @@ struct Ray {
 }
 
 /// The rays ordered by their vertices' `cells` (cells past `buckets - 1`, outside the grid, as
-/// the last; [`NO_RAY`] for a vertex without one), then vertex: their count, and per vertex its
-/// ray's place in that order ([`NO_RAY`] for none).
-fn by_cell(cells: &[u32], buckets: usize) -> (usize, Vec<u32>) {
+/// the last; [`NO_RAY`] for a vertex without one), then vertex: where each bucket's rays start
+/// in that order (and, last, their count), and per vertex its ray's place ([`NO_RAY`] for none).
+fn by_cell(cells: &[u32], buckets: usize) -> (Vec<u32>, Vec<u32>) {
     let bucket = |cell: u32| (cell as usize).min(buckets - 1);
     let mut starts = vec![0u32; buckets + 1];
     for &cell in cells.iter().filter(|&&cell| cell != NO_RAY) {
@@ -342,19 +376,19 @@ fn by_cell(cells: &[u32], buckets: usize) -> (usize, Vec<u32>) {
     for b in 0..buckets {
         starts[b + 1] += starts[b];
     }
-    let rays = starts[buckets] as usize;
+    let mut next = starts.clone();
     let rank = cells
         .iter()
         .map(|&cell| {
             if cell == NO_RAY {
                 return NO_RAY;
             }
-            let slot = &mut starts[bucket(cell)];
+            let slot = &mut next[bucket(cell)];
             *slot += 1;
             *slot - 1
         })
         .collect();
-    (rays, rank)
+    (starts, rank)
 }
 
 /// What a ray from `origin` (projected: across, across, along the direction) keeps through its
@@ -418,7 +452,8 @@ impl Block {
     };
 }
 
-/// The triangles projected along one direction, listed per cell of a square grid.
+/// The triangles projected along one direction on a square grid: the cells each one's bounding
+/// box covers, listed a band of rows at a time ([`Grid::band`]).
 struct Grid<'a> {
     projected: &'a [Vec3],
     triangles: &'a [AoTriangle],
@@ -426,7 +461,16 @@ struct Grid<'a> {
     inverse_cell: f32,
     width: usize,
     height: usize,
-    /// Where each cell's entries start in `entries`, and the end.
+    /// Per triangle, the columns and rows of the cells its projection's bounding box covers,
+    /// `[x0, x1, y0, y1]` inclusive (none, `x0 > x1`, for triangles that let all light through).
+    covered: Vec<[u16; 4]>,
+}
+
+/// The lists of a band of a [`Grid`]'s rows.
+struct Band {
+    /// The band's first cell and the end of its cells.
+    cells: std::ops::Range<usize>,
+    /// Where each of its cells' entries start in `entries`, and the end.
     starts: Vec<u32>,
     /// Per cell, the triangles whose projection's bounding box meets it, ascending.
     entries: Vec<u32>,
@@ -455,9 +499,7 @@ impl<'a> Grid<'a> {
             let c = (x * inverse_cell).max(0.0) as usize;
             c.min(max - 1)
         };
-        // Per triangle, the cells its projection's bounding box covers (none for triangles that
-        // let all light through).
-        let covered: Vec<[u16; 4]> = triangles
+        let covered = triangles
             .par_iter()
             .map(|AoTriangle { v: t, opacity, .. }| {
                 if *opacity <= 0.0 {
@@ -472,29 +514,74 @@ impl<'a> Grid<'a> {
                 r
             })
             .collect();
-        // Counted and filled in chunks of the triangles, each chunk's entries of a cell after the
-        // previous chunk's: the lists do not depend on the chunks. Each chunk counts into a
-        // histogram of every cell, so there are at most 8 of them whatever the thread count.
+        Self { projected, triangles, origin: lo, inverse_cell, width, height, covered }
+    }
+
+    /// The grid's rows in bands of about `bytes` each of lists (4 bytes an entry) and rays (a
+    /// [`Ray`] each; `starts`, the rays' places by cell of [`by_cell`], the rays outside the
+    /// grid counted in the last row), a row at least: where the rays and lists of a direction
+    /// are held a band at a time, memory is the band's. Integer counts, so the same whatever the
+    /// thread count.
+    fn bands(&self, starts: &[u32], bytes: usize) -> Vec<std::ops::Range<usize>> {
+        // Entries per row: each box adds its width to the rows it spans (a difference array).
+        let mut diff = vec![0i64; self.height + 1];
+        for &[x0, x1, y0, y1] in self.covered.iter().filter(|r| r[0] <= r[1]) {
+            let n = i64::from(x1 - x0) + 1;
+            diff[usize::from(y0)] += n;
+            diff[usize::from(y1) + 1] -= n;
+        }
+        let mut bands = Vec::new();
+        let (mut first, mut held, mut entries) = (0, 0usize, 0i64);
+        for y in 0..self.height {
+            entries += diff[y];
+            let end = if y + 1 == self.height { starts.len() - 1 } else { (y + 1) * self.width };
+            let rays = (starts[end] - starts[y * self.width]) as usize;
+            #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a count")]
+            let row = 4 * entries as usize + size_of::<Ray>() * rays + 4 * self.width;
+            if held > 0 && held + row > bytes {
+                bands.push(first..y);
+                (first, held) = (y, 0);
+            }
+            held += row;
+        }
+        bands.push(first..self.height);
+        bands
+    }
+
+    /// The lists of the cells of `rows`: the triangles whose boxes meet each cell, in the order
+    /// of the triangles. Counted and filled in chunks of the triangles, each chunk's entries of a
+    /// cell after the previous chunk's, so the lists do not depend on the chunks; each chunk
+    /// counts into a histogram of the band's cells, at most 8 of them whatever the thread count.
+    fn band(&self, rows: std::ops::Range<usize>) -> Band {
+        let width = self.width;
+        let cells = rows.start * width..rows.end * width;
+        #[expect(clippy::cast_possible_truncation, reason = "at most 4097 rows")]
+        let (top, last) = (rows.start as u16, (rows.end - 1) as u16);
+        let first_row = rows.start;
+        let covered = &self.covered;
         let chunk = covered.len().div_ceil((rayon::current_num_threads() * 2).clamp(1, 8)).max(1);
-        let cells_of = |r: [u16; 4]| {
-            (usize::from(r[2])..=usize::from(r[3]))
-                .flat_map(move |y| (usize::from(r[0])..=usize::from(r[1])).map(move |x| y * width + x))
+        // A triangle's cells in the band, as indices among the band's cells (none for a box
+        // across no row of it, or for one of a triangle that lets all light through).
+        let cells_of = |[x0, x1, y0, y1]: [u16; 4]| {
+            let (x0, x1) = (usize::from(x0), usize::from(x1));
+            let ys = if x0 <= x1 { usize::from(y0.max(top))..usize::from(y1.min(last)) + 1 } else { 0..0 };
+            ys.flat_map(move |y| (x0..=x1).map(move |x| (y - first_row) * width + x))
         };
         let mut counts: Vec<Vec<u32>> = covered
             .par_chunks(chunk)
             .map(|part| {
-                let mut count = vec![0u32; width * height];
-                for e in part {
-                    for c in cells_of(*e) {
+                let mut count = vec![0u32; cells.len()];
+                for &e in part.iter().filter(|e| e[2] <= last && e[3] >= top) {
+                    for c in cells_of(e) {
                         count[c] += 1;
                     }
                 }
                 count
             })
             .collect();
-        let mut starts = vec![0u32; width * height + 1];
+        let mut starts = vec![0u32; cells.len() + 1];
         let mut total = 0u32;
-        for c in 0..width * height {
+        for c in 0..cells.len() {
             starts[c] = total;
             for count in &mut counts {
                 let n = count[c];
@@ -502,14 +589,14 @@ impl<'a> Grid<'a> {
                 total += n;
             }
         }
-        starts[width * height] = total;
+        starts[cells.len()] = total;
         let mut entries = vec![0u32; total as usize];
         let shared = SharedSlice(entries.as_mut_ptr());
         covered.par_chunks(chunk).zip(counts.par_iter_mut()).enumerate().for_each(|(k, (part, next))| {
-            for (i, e) in part.iter().enumerate() {
+            for (i, &e) in part.iter().enumerate().filter(|(_, e)| e[2] <= last && e[3] >= top) {
                 #[expect(clippy::cast_possible_truncation, reason = "triangle ids fit u32")]
                 let id = (k * chunk + i) as u32;
-                for c in cells_of(*e) {
+                for c in cells_of(e) {
                     // SAFETY: the chunks' slots of a cell are disjoint ranges (prefix sums above),
                     // each written once, all inside `entries`.
                     unsafe { shared.update(next[c] as usize, |_| id) };
@@ -517,7 +604,7 @@ impl<'a> Grid<'a> {
                 }
             }
         });
-        Self { projected, triangles, origin: lo, inverse_cell, width, height, starts, entries }
+        Band { cells, starts, entries }
     }
 
     /// The cell of a projected point; past the last cell for a point outside the grid.
@@ -536,20 +623,22 @@ impl<'a> Grid<'a> {
     }
 
     /// A cell's triangles ascending by reach (then id: a total order): their reaches and
-    /// planes, gathered so that its rays read them in place; none for the outside.
-    fn gather(&self, cell: u32, scratch: &mut Gathered) {
+    /// planes, gathered so that its rays read them in place; none for the outside, nor for a
+    /// cell out of `band` (the band holds its rays).
+    fn gather(&self, band: &Band, cell: u32, scratch: &mut Gathered) {
         let Gathered { planes, keys, reach, blocks } = scratch;
         planes.clear();
         keys.clear();
         reach.clear();
         blocks.clear();
         let cell = cell as usize;
-        if cell >= self.width * self.height {
+        if !band.cells.contains(&cell) {
             return;
         }
+        let cell = cell - band.cells.start;
         // Listed in the order of the triangles, so a triangle's place in the list orders ties of
         // reach as its id does.
-        for (place, &id) in self.entries[self.starts[cell] as usize..self.starts[cell + 1] as usize].iter().enumerate()
+        for (place, &id) in band.entries[band.starts[cell] as usize..band.starts[cell + 1] as usize].iter().enumerate()
         {
             let t = &self.triangles[id as usize];
             let corners = t.v.map(|i| self.projected[i as usize]);
@@ -712,11 +801,61 @@ mod tests {
         // By the count alone (a cell per 8 triangles) the overlapping cards cover more than 8
         // cells each; the default bound takes larger ones.
         assert!(sides[1] > sides[0] * 1.5, "{sides:?}");
-        let reference = occlusion(&vertices, &triangles, &directions, false, 0.0, &|_, _| {});
+        let run = |mean_covered, band_bytes| {
+            occlusion(&vertices, &triangles, &directions, false, Cells { mean_covered, band_bytes }, &|_, _| {})
+        };
+        let reference = run(0.0, usize::MAX);
         assert!(reference.iter().any(|&a| a > 0.3 && a < 0.9), "partly occluded vertices");
         for mean_covered in [8.0, 3.0, 1.5] {
-            let ao = occlusion(&vertices, &triangles, &directions, false, mean_covered, &|_, _| {});
+            let ao = run(mean_covered, usize::MAX);
             assert!(ao.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "{mean_covered}");
+        }
+        // Lists and rays a band of rows at a time, down to a row per band: the same, bit for bit.
+        for band_bytes in [BAND_BYTES, 20_000, 0] {
+            let ao = run(MEAN_CELLS_COVERED, band_bytes);
+            assert!(ao.iter().zip(&reference).all(|(a, b)| a.to_bits() == b.to_bits()), "{band_bytes}");
+        }
+    }
+
+    /// Bands hold about the bytes asked, a row at least, and cover the rows once, in order;
+    /// each band's lists are the grid's: a triangle is listed in every cell of the band its box
+    /// covers, in the order of the triangles.
+    #[test]
+    fn bands_cover_the_rows_and_list_what_the_boxes_cover() {
+        let (vertices, triangles) = cards(400, 0.2);
+        let mut projected = vec![Vec3::ZERO; vertices.len()];
+        project(&vertices, sphere_directions(4, 1)[1], &mut projected);
+        let grid = Grid::new(&projected, &triangles, MEAN_CELLS_COVERED);
+        assert!(grid.height > 4, "{} rows", grid.height);
+        // A ray per vertex in cell 0, as many outside the grid.
+        let cells: Vec<u32> = (0..vertices.len()).map(|v| if v % 2 == 0 { 0 } else { u32::MAX - 1 }).collect();
+        let (starts, _) = by_cell(&cells, grid.width * grid.height + 1);
+        let whole = grid.bands(&starts, usize::MAX);
+        assert_eq!(whole.len(), 1);
+        assert_eq!(whole[0], 0..grid.height);
+        let rows = grid.bands(&starts, 0);
+        assert_eq!(rows, (0..grid.height).map(|y| y..y + 1).collect::<Vec<_>>(), "a row each");
+        let some = grid.bands(&starts, 30_000);
+        assert!(some.len() > 1 && some.len() < grid.height, "{some:?}");
+        assert!(some.windows(2).all(|w| w[0].end == w[1].start) && some[0].start == 0);
+        assert_eq!(some.last().map(|b| b.end), Some(grid.height));
+        let all = grid.band(0..grid.height);
+        for rows in some {
+            let band = grid.band(rows.clone());
+            assert_eq!(band.cells, rows.start * grid.width..rows.end * grid.width);
+            for (local, cell) in band.cells.clone().enumerate() {
+                let list = &band.entries[band.starts[local] as usize..band.starts[local + 1] as usize];
+                assert_eq!(list, &all.entries[all.starts[cell] as usize..all.starts[cell + 1] as usize]);
+                assert!(list.windows(2).all(|w| w[0] < w[1]), "in the order of the triangles");
+                let (x, y) = (cell % grid.width, cell / grid.width);
+                for (id, r) in grid.covered.iter().enumerate() {
+                    let meets = (usize::from(r[0])..=usize::from(r[1])).contains(&x)
+                        && (usize::from(r[2])..=usize::from(r[3])).contains(&y);
+                    #[expect(clippy::cast_possible_truncation, reason = "test sizes")]
+                    let listed = list.contains(&(id as u32));
+                    assert_eq!(meets, listed, "triangle {id} in cell {cell}");
+                }
+            }
         }
     }
 
@@ -750,7 +889,7 @@ mod tests {
             triangles.extend(v.map(|v| AoTriangle { v, opacity: 1.0, two_sided: false }));
         }
         let run = |directions: &[Vec3A], settle: bool| {
-            occlusion(&vertices, &triangles, directions, settle, MEAN_CELLS_COVERED, &|_, _| {})
+            occlusion(&vertices, &triangles, directions, settle, Cells::DEFAULT, &|_, _| {})
         };
         let (alone, settled) = (run(&directions, false), run(&directions, true));
         for v in 0..4 {
@@ -767,8 +906,8 @@ mod tests {
     fn settling_a_canopy_changes_only_the_order_of_its_sums() {
         let (vertices, triangles) = cards(1500, 0.3);
         let directions = sphere_directions(16, 5);
-        let alone = occlusion(&vertices, &triangles, &directions, false, MEAN_CELLS_COVERED, &|_, _| {});
-        let settled = occlusion(&vertices, &triangles, &directions, true, MEAN_CELLS_COVERED, &|_, _| {});
+        let alone = occlusion(&vertices, &triangles, &directions, false, Cells::DEFAULT, &|_, _| {});
+        let settled = occlusion(&vertices, &triangles, &directions, true, Cells::DEFAULT, &|_, _| {});
         assert!(alone.iter().zip(&settled).all(|(a, b)| (a - b).abs() < 1e-5));
         assert!(settled.iter().filter(|&&a| a == 1.0).count() > vertices.len() / 4, "most of the canopy is buried");
     }
@@ -823,8 +962,8 @@ mod tests {
     #[test]
     fn rays_by_cell_then_vertex() {
         let cells = [2, NO_RAY, 0, 7, 2, 3, 0];
-        let (rays, rank) = by_cell(&cells, 5);
-        assert_eq!(rays, 6);
+        let (starts, rank) = by_cell(&cells, 5);
+        assert_eq!(starts, [0, 2, 2, 4, 5, 6]);
         assert_eq!(rank, [2, NO_RAY, 0, 5, 3, 4, 1]);
     }
 }

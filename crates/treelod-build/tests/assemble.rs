@@ -1,5 +1,6 @@
 //! The Gilet build end to end on small scenes made in code: counts, the exact cut at every
-//! threshold, determinism across thread counts, and typed errors for scenes with nothing to draw.
+//! threshold, determinism across thread counts, the ambient occlusion of the written vertices, and
+//! typed errors for scenes with nothing to draw.
 
 use glam::Vec3;
 use treelod_build::scene::{AlphaMode, Material, Part, Scene};
@@ -127,4 +128,50 @@ fn a_block_of_trees_spans_one_grid() {
         "a row of trees gets more cells along its length: {:?}",
         out.stats.grid
     );
+}
+
+/// The ambient occlusion is traced on the vertices in their gathered order, before the per-cell
+/// stage renumbers them: what the container holds is the occlusion of its written vertices as
+/// the stage gives it from the written vertices and triangles, each triangle stopping rays by
+/// its leaf point's alpha (as `benches/ao` reads a container back).
+#[test]
+fn the_written_occlusion_is_that_of_the_written_vertices() {
+    use treelod_build::ambient::{AoTriangle, vertex_occlusion};
+    use treelod_build::precision::Precision;
+    use treelod_build::{AoConfig, DemoTreeConfig, demo_tree};
+    use treelod_format::{MATERIAL_DOUBLE_SIDED, encode_ao};
+
+    let scene = demo_tree(&DemoTreeConfig { leaves: 300, ..DemoTreeConfig::default() });
+    // Full precision: rounded positions and normals would move the rays.
+    let config = BuildConfig { ao: Some(AoConfig::default()), precision: Precision::FULL, ..BuildConfig::default() };
+    let bytes = build(&scene, &config).data.to_bytes(Compression::default()).expect("writes");
+    let c = Container::from_bytes(&bytes).expect("opens");
+    let mut triangles = Vec::new();
+    for cell in c.cells() {
+        let cell_triangles = &c.triangles()[cell.triangles.as_usize()];
+        let mut alpha_of_leaf = vec![1.0f32; cell_triangles.len()];
+        for p in c.points()[cell.points.as_usize()].iter().filter(|p| p.lo == 0.0 && p.leaf_count == 1) {
+            alpha_of_leaf[p.leaf_first as usize] = f32::from((p.color >> 24) as u8) / 255.0;
+        }
+        triangles.extend(cell_triangles.iter().map(|t| AoTriangle {
+            v: t.indices,
+            opacity: alpha_of_leaf[t.leaf as usize],
+            two_sided: c.materials()[t.material as usize].flags & MATERIAL_DOUBLE_SIDED != 0,
+        }));
+    }
+    assert!(triangles.iter().any(|t| t.opacity > 0.0 && t.opacity < 1.0), "leaves let some light through");
+    let ao = config.ao.as_ref().expect("ambient occlusion by default");
+    let written: Vec<u8> =
+        vertex_occlusion(c.vertices(), &triangles, ao, &|_, _| {}).into_iter().map(encode_ao).collect();
+    assert_eq!(written.len(), c.vertex_ao().len());
+    let spread = written.iter().filter(|&&a| a > 20 && a < 235).count();
+    assert!(spread > written.len() / 10, "partly occluded vertices: {spread} of {}", written.len());
+    let differ: Vec<(usize, u8, u8)> = written
+        .iter()
+        .zip(c.vertex_ao())
+        .enumerate()
+        .filter(|(_, (a, b))| a != b)
+        .map(|(i, (a, b))| (i, *a, *b))
+        .collect();
+    assert!(differ.is_empty(), "{} differ: {:?}", differ.len(), &differ[..differ.len().min(20)]);
 }
