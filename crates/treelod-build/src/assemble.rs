@@ -758,7 +758,7 @@ fn assemble(
     // Stage: ambient occlusion of the vertices, in their gathered order (renumbered with them
     // below), and each triangle's coverage; before the per-cell stage, so that the rays are not
     // traced beside the points (49 MB of the maple's peak).
-    let occlusion = match &config.ao {
+    let mut occlusion = match &config.ao {
         Some(ao) => {
             let progress = |done, total| config.progress.report(Progress::AMBIENT_OCCLUSION, done, total);
             let (vertex_ao, coverage) =
@@ -834,7 +834,6 @@ fn assemble(
     }
     // The vertices (and their occlusion) in the written order, cut to the written ones; then
     // each point's occlusion (its leaves' mean).
-    let mut occlusion = occlusion;
     scatter_in_place(remap, |i, j| {
         vertices.swap(i, j);
         if let Some((vertex_ao, _)) = &mut occlusion {
@@ -1333,10 +1332,10 @@ fn line_occlusion(cell: &CellLines, tris: &[Tri], vertex_ao: &[f32]) -> Vec<u8> 
         .collect()
 }
 
-/// Each triangle's coverage as its leaf point stores it (spec §6.5's alpha, a byte: the share
-/// of its area is [`opacity`] of it): the opaque share of its texture, what a ray through it
-/// loses. Taken before the per-cell stage builds the points, from the same integration
-/// ([`leaf_point`]); opaque materials cover all.
+/// Each triangle's coverage, the byte its leaf point stores as its alpha (spec §6.5; [`opacity`]
+/// gives the share): the opaque share of its texture, what a ray through it loses. Taken before
+/// the per-cell stage builds the points, from the same integration ([`leaf_point`]); opaque
+/// materials cover all.
 fn triangle_coverage(tris: &[Tri], vertices: &[VertexRecord], parts: &[PartRef], trees: &[Placed<'_>]) -> Vec<u8> {
     tris.par_iter()
         .map(|t| {
