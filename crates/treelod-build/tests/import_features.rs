@@ -230,6 +230,53 @@ fn decoded_bytes_are_limited_before_allocation() {
     assert!(err.to_string().contains("images[0]"), "{err}");
 }
 
+/// Only base colour textures are drawn: another image (here a normal map that does not decode)
+/// is neither read nor refused, and keeps an empty place.
+#[test]
+fn images_that_are_no_base_colour_are_not_decoded() {
+    let buffer = triangle_buffer();
+    let png = one_pixel_png();
+    let mut huge = png.clone();
+    // The IHDR chunk's width and height.
+    huge[16..24].copy_from_slice(&[0, 1, 0x86, 0xA0, 0, 1, 0x86, 0xA0]);
+    let mut all = buffer.clone();
+    all.extend(&png);
+    all.extend(&huge);
+    let json = |normal: &str| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},
+            "buffers":[{{"byteLength":{len},"uri":"{uri}"}}],
+            "bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":36}},{{"buffer":0,"byteOffset":36,"byteLength":24}},
+                           {{"buffer":0,"byteOffset":60,"byteLength":{png_len}}},
+                           {{"buffer":0,"byteOffset":{huge_at},"byteLength":{png_len}}}],
+            "accessors":[
+              {{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
+              {{"bufferView":1,"componentType":5126,"count":3,"type":"VEC2"}}],
+            "images":[{{"bufferView":2,"mimeType":"image/png"}},{{"bufferView":3,"mimeType":"image/png"}}],
+            "textures":[{{"source":0}},{{"source":1}}],
+            "materials":[{{"name":"leaf","pbrMetallicRoughness":{{"baseColorTexture":{{"index":{base}}}}},
+              "normalTexture":{{"index":{normal}}}}}],
+            "meshes":[{{"name":"leaves","primitives":[{{"attributes":{{"POSITION":0,"TEXCOORD_0":1}},"material":0}}]}}],
+            "nodes":[{{"mesh":0}}],"scenes":[{{"nodes":[0]}}],"scene":0}}"#,
+            len = all.len(),
+            uri = data_uri(&all),
+            png_len = png.len(),
+            huge_at = 60 + png.len(),
+            base = if normal == "1" { "0" } else { "1" },
+        )
+    };
+    let limits = ImportLimits { max_image_pixels: 16, ..ImportLimits::default() };
+    let scene = import(&json("1"), &limits).expect("the normal map is not read");
+    assert_eq!((scene.images[0].width, scene.images[0].height), (1, 1));
+    assert_eq!(&scene.images[0].rgba, &[10, 200, 30, 255]);
+    assert!(scene.images[1].width == 0 && scene.images[1].rgba.is_empty() && scene.images[1].encoded.is_empty());
+    assert_eq!(scene.materials[0].image, Some(0));
+    assert!(!scene.warnings.iter().any(|w| w.contains("image")), "{:?}", scene.warnings);
+    // The same image as the base colour is read, and refused.
+    let err = import(&json("0"), &limits).unwrap_err();
+    assert!(err.to_string().contains("image 1"), "{err}");
+}
+
 #[test]
 fn long_names_are_cut_with_a_warning() {
     let long = "n".repeat(100_000);
