@@ -130,6 +130,11 @@ pub struct Image {
 }
 
 impl Image {
+    /// An image no material samples (one the import skips or cannot decode): no texels, so a
+    /// material with it is drawn untextured.
+    pub const NONE: Self =
+        Self { width: 0, height: 0, rgba: Vec::new(), encoded: Vec::new(), encoding: ImageEncoding::Raw };
+
     /// The texel at integer coordinates, wrapped (glTF's default `REPEAT` sampler).
     #[must_use]
     pub fn texel(&self, x: i64, y: i64) -> [u8; 4] {

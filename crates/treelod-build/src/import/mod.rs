@@ -468,13 +468,7 @@ fn load_images(
     for image in document.images() {
         let index = image.index();
         if !base_colour[index] {
-            images.push(Image {
-                width: 0,
-                height: 0,
-                rgba: Vec::new(),
-                encoded: Vec::new(),
-                encoding: ImageEncoding::Raw,
-            });
+            images.push(Image::NONE);
             continue;
         }
         let what = format!("images[{index}]");
@@ -502,13 +496,7 @@ fn load_images(
                 "image {index} ({}) is neither PNG nor JPEG; its materials are drawn untextured",
                 mime.unwrap_or_default()
             ));
-            images.push(Image {
-                width: 0,
-                height: 0,
-                rgba: Vec::new(),
-                encoded: Vec::new(),
-                encoding: ImageEncoding::Raw,
-            });
+            images.push(Image::NONE);
             continue;
         };
         let (w, h) = size.map_err(image_error)?;
