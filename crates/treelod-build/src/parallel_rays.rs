@@ -250,8 +250,7 @@ fn occlusion(
         let record = settle && done < half;
         for rows in grid.bands(&starts, band_bytes) {
             let band = grid.band(rows.clone());
-            let cell_end = if rows.end == grid.height { starts.len() - 1 } else { rows.end * grid.width };
-            let slots = starts[rows.start * grid.width]..starts[cell_end];
+            let slots = starts[rows.start * grid.width]..starts[grid.cells_end(rows.end, &starts)];
             let in_band = |slot: u32| slots.contains(&slot);
             let mut sorted = vec![Ray { cell: NO_RAY, weight: 0.0, origin: Vec3::ZERO, kept: 0.0 }; slots.len()];
             let shared = SharedSlice(sorted.as_mut_ptr());
@@ -534,8 +533,7 @@ impl<'a> Grid<'a> {
         let (mut first, mut held, mut entries) = (0, 0usize, 0i64);
         for y in 0..self.height {
             entries += diff[y];
-            let end = if y + 1 == self.height { starts.len() - 1 } else { (y + 1) * self.width };
-            let rays = (starts[end] - starts[y * self.width]) as usize;
+            let rays = (starts[self.cells_end(y + 1, starts)] - starts[y * self.width]) as usize;
             #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a count")]
             let row = 4 * entries as usize + size_of::<Ray>() * rays + 4 * self.width;
             if held > 0 && held + row > bytes {
@@ -546,6 +544,12 @@ impl<'a> Grid<'a> {
         }
         bands.push(first..self.height);
         bands
+    }
+
+    /// Where the rays of the rows before `row` end in `starts` ([`by_cell`]'s buckets): the
+    /// rays outside the grid count in the last row.
+    fn cells_end(&self, row: usize, starts: &[u32]) -> usize {
+        if row == self.height { starts.len() - 1 } else { row * self.width }
     }
 
     /// The lists of the cells of `rows`: the triangles whose boxes meet each cell, in the order
