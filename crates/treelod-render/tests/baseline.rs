@@ -36,7 +36,7 @@ fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
     let gpu = gpu();
     let container = demo_with_baselines();
     let levels = container.lod_levels();
-    assert_eq!(levels.len(), 5, "50, 25, 10, 5 and 1 %");
+    assert_eq!(levels.len(), 10, "50, 25, 10, 5 and 1 %, each also bark-first (the leaves kept)");
     let mut renderer = renderer(&gpu, &container, Technique::LodChain);
     let centre = centre(&container);
     let total = container.triangles().len() as u64;
@@ -72,7 +72,12 @@ fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
         previous = stats.submitted[Primitive::Triangle];
         counts.push(stats.submitted[Primitive::Triangle]);
         if distance < 5.0 {
-            // Nearer than the finest level's error allows: the full mesh, pixel for pixel.
+            // Nearer than the finest level's error allows (τ grows with the distance, and the
+            // finest level, bark-first, has only the bark's error): the full mesh, pixel for pixel.
+            let near = distance * 0.5 * levels[0].error / tau;
+            assert!(near > 0.0 && near < distance, "{near} m");
+            let cam = Camera::look_at(centre + vec3(0.0, 0.0, near), centre, 0.8, 256, 256);
+            let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
             renderer.settings_mut().technique = Technique::Full;
             let (full, _) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
             renderer.settings_mut().technique = Technique::LodChain;

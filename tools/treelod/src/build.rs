@@ -139,6 +139,11 @@ pub struct BuildOptions {
     /// first, strictly decreasing.
     #[arg(long, value_name = "F,F,…", default_value = "0.5,0.25,0.1,0.05,0.01", value_parser = parse_fractions, requires = "baselines")]
     pub lod_fractions: Fractions,
+    /// With --baselines: leave out the chain's bark-first levels (each tree's leaves as the
+    /// source has them with the bark of a level, placed among the levels by their share of the
+    /// triangles), so that every level simplifies leaves and bark alike, as gltfpack does.
+    #[arg(long, requires = "baselines")]
+    pub no_bark_first: bool,
     /// Ambient-occlusion rays per vertex (Clasen et al. 2011 §5, spec §6.14): each vertex's
     /// share of the sky that the tree hides, traced through the whole block; points and impostor
     /// planes get the mean of their leaves'. 0 writes no ambient occlusion.
@@ -231,9 +236,10 @@ impl BuildOptions {
             gilet: treelod_build::gilet::GiletConfig { cluster_max: self.cluster_max as usize },
             classify: treelod_build::classify::ClassifyOptions { leaves: self.leaves.clone(), bark: self.bark.clone() },
             prune: PruneOrder::parse(&self.prune).map(|order| self.prune_config(order)),
-            baselines: self
-                .baselines
-                .then(|| treelod_build::LodChainConfig { fractions: self.lod_fractions.0.clone() }),
+            baselines: self.baselines.then(|| treelod_build::LodChainConfig {
+                fractions: self.lod_fractions.0.clone(),
+                bark_first: !self.no_bark_first,
+            }),
             impostors: (self.impostors || self.baselines).then(|| treelod_build::ImpostorConfig {
                 levels: self.impostor_levels.0.clone(),
                 alpha_scale: self.impostor_alpha,
