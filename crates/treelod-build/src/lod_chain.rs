@@ -84,6 +84,7 @@ use std::collections::HashMap;
 use meshopt::{SimplifyOptions, VertexDataAdapter};
 use rayon::prelude::*;
 use treelod_format::{Setting, VertexRecord};
+use treelod_runtime::impostor::BARK_AREA_KEPT;
 
 use crate::error::BuildError;
 
@@ -277,6 +278,14 @@ fn tree_levels(
         && range.clone().any(|g| is_leaf(g) && !groups[g].is_empty())
         && range.clone().any(|g| !is_leaf(g) && locals[g].indices.len() > 3);
     let source: usize = range.clone().map(|g| groups[g].len()).sum();
+    // The bark's area in the source, and in the level being made: bark-first levels stop at the
+    // first whose bark keeps less than `BARK_AREA_KEPT` of it (branches collapsed).
+    let bark_area = |indices: &[u32], g: usize| -> f64 {
+        let p = |i: u32| glam::Vec3::from_array(locals[g].positions[i as usize]);
+        indices.chunks_exact(3).map(|c| f64::from((p(c[1]) - p(c[0])).cross(p(c[2]) - p(c[0])).length())).sum()
+    };
+    let source_bark: f64 = range.clone().filter(|&g| !is_leaf(g)).map(|g| bark_area(&locals[g].indices, g)).sum();
+    let mut bark_first = bark_first;
     let leaves: usize = range.clone().filter(|&g| is_leaf(g)).map(|g| groups[g].len()).sum();
     // Each group's latest level: its source before level 0.
     let mut kept: Vec<(&[u32], f32)> = locals[range.clone()].iter().map(|l| (l.indices.as_slice(), 0.0)).collect();
@@ -309,6 +318,13 @@ fn tree_levels(
                     .collect(),
             );
         }
+        let kept_bark: f64 = range
+            .clone()
+            .zip(&kept)
+            .filter(|&(g, _)| !is_leaf(g))
+            .map(|(g, &(indices, _))| bark_area(indices, g))
+            .sum();
+        bark_first &= kept_bark >= BARK_AREA_KEPT * source_bark;
         if bark_first {
             // Leaves as TRIANGLES holds them, bark as this level has it, the groups in order.
             let triangles = range
@@ -708,22 +724,19 @@ mod tests {
         assert!(levels[4].error > 0.0 && levels[4].error < 4.0, "{errors:?}");
     }
 
-    /// With bark-first levels, a tree of leaves and bark gets one per fraction besides the
-    /// chain's levels, all in the order of strictly decreasing shares with non-decreasing
-    /// errors: each holds every leaf triangle as the source has it and the bark of the chain's
-    /// level of the same fraction, and the chain's own levels are those of the chain without
-    /// them. A block whose trees would get different numbers of levels gets none.
+    /// With bark-first levels, a tree of leaves and bark gets one per leading fraction whose bark
+    /// keeps [`BARK_AREA_KEPT`] of its area, besides the chain's levels, all in the order of
+    /// strictly decreasing shares with non-decreasing errors: each holds every leaf triangle as
+    /// the source has it and the bark of the chain's level of the same fraction, and the chain's
+    /// own levels are those of the chain without them. A block whose trees would get different
+    /// numbers of levels gets none.
     #[test]
     fn bark_first_levels_keep_every_leaf_and_the_bark_of_a_level() {
         let block = demo_block();
         let plain = block.chain(&DEFAULT_FRACTIONS);
         let levels = block.chain_with(&DEFAULT_FRACTIONS, true);
-        assert_eq!(
-            levels.len(),
-            2 * DEFAULT_FRACTIONS.len(),
-            "{:?}",
-            levels.iter().map(|l| l.fraction).collect::<Vec<_>>()
-        );
+        let shares: Vec<f32> = levels.iter().map(|l| l.fraction).collect();
+        assert!(levels.len() > DEFAULT_FRACTIONS.len(), "{shares:?}");
         assert!(levels.iter().enumerate().all(|(i, l)| l.level as usize == i && l.tree == 0));
         assert!(levels.windows(2).all(|w| w[1].fraction < w[0].fraction && w[1].error >= w[0].error));
         // The demo tree's leaf and bark materials differ.
@@ -734,6 +747,19 @@ mod tests {
         let bark = |l: &ChainLevel| -> Vec<([u32; 3], u32)> {
             l.triangles.iter().copied().filter(|(_, m)| !leaf_materials.contains(m)).collect()
         };
+        let area = |l: &ChainLevel| -> f64 {
+            let p = |i: u32| glam::Vec3::from_array(block.vertices[i as usize].position);
+            bark(l).iter().map(|(v, _)| f64::from((p(v[1]) - p(v[0])).cross(p(v[2]) - p(v[0])).length())).sum()
+        };
+        let source_bark: f64 = block
+            .triangles
+            .iter()
+            .filter(|t| !t.leaf)
+            .map(|t| {
+                let p = |i: u32| glam::Vec3::from_array(block.vertices[i as usize].position);
+                f64::from((p(t.v[1]) - p(t.v[0])).cross(p(t.v[2]) - p(t.v[0])).length())
+            })
+            .sum();
         let mut bark_first = 0;
         for level in &levels {
             if let Some(same) = plain.iter().find(|p| p.fraction == level.fraction) {
@@ -747,10 +773,17 @@ mod tests {
             let mut expected = source_leaves.clone();
             expected.sort_unstable();
             assert_eq!(sorted, expected, "every leaf triangle once");
-            assert!(plain.iter().any(|p| bark(p) == bark(level)), "the bark of a chain level");
+            // The bark of the chain's level of the same rank among the bark-first ones: the
+            // leading fractions, while the bark keeps its area.
+            assert_eq!(bark(level), bark(&plain[bark_first - 1]), "the bark of the chain's level {}", bark_first - 1);
             assert!(bark(level).len() < block.triangles.len() - source_leaves.len(), "the bark simplified");
+            assert!(area(level) >= BARK_AREA_KEPT * source_bark, "{} of {source_bark}", area(level));
         }
-        assert_eq!(bark_first, DEFAULT_FRACTIONS.len());
+        assert_eq!(levels.len(), DEFAULT_FRACTIONS.len() + bark_first);
+        // The next fraction's bark collapses branches: no bark-first level for it or coarser.
+        if let Some(next) = plain.get(bark_first) {
+            assert!(area(next) < BARK_AREA_KEPT * source_bark, "{} of {source_bark}", area(next));
+        }
         // A second tree of bark alone would get fewer levels: the block gets none.
         let mut mixed = demo_block();
         let (p, t) = tube(12, 40);
@@ -762,8 +795,16 @@ mod tests {
         two.push(&p, &t, 1, 3, false);
         let (p, t) = leaf_quads(300, 1, 4);
         two.push(&p, &t, 1, 7, true);
+        let mut second = Block::default();
+        let (p, t) = tube(12, 40);
+        second.push(&p, &t, 1, 3, false);
+        let (p, t) = leaf_quads(300, 1, 4);
+        second.push(&p, &t, 1, 7, true);
+        let alone = second.chain_with(&DEFAULT_FRACTIONS, true).len();
+        assert!(alone > DEFAULT_FRACTIONS.len(), "the tube keeps its area at half its triangles: {alone}");
         let levels = two.chain_with(&DEFAULT_FRACTIONS, true);
-        assert_eq!(levels.len(), 4 * DEFAULT_FRACTIONS.len());
+        let each = if alone == DEFAULT_FRACTIONS.len() + bark_first { alone } else { DEFAULT_FRACTIONS.len() };
+        assert_eq!(levels.len(), 2 * each);
     }
 
     #[test]
