@@ -58,17 +58,20 @@
 //!   is a hole, a branch of fewer sides hardly shows. So each tree of leaves and bark also gets,
 //!   per fraction, a level of every leaf triangle as the source has it (the full mesh's) and
 //!   the bark of that fraction's level, with the bark's error; its fraction is what it keeps of
-//!   the tree. The levels of both kinds are ordered by that fraction, so they alternate. These
-//!   are the near levels that SpeedTree-like chains draw (branches reduced before leaves); the
-//!   policy picks among all levels by the image error the build measures for each (spec
-//!   §6.17), so a level that does not keep the image is not drawn. Measured (the build's
-//!   calibration, mean multi-scale RMSE over every view against the supersampled full mesh, at
-//!   256 pixels high): the shared oak's bark-first levels at 0.5, 0.25 and 0.1 of its bark read
-//!   0.0162 (16,393 triangles), 0.0169 (13,395) and 0.0183 (11,735) against the full mesh's
-//!   0.0160 (22,566), where the chain's own level 0 (11,113) reads 0.0270; the pine's 0.0269,
-//!   0.0267 and 0.0265 (13,277, 10,123, 8,314) against 0.0270 (19,384); the Quaternius tree's
-//!   0.0047 (1,708) and 0.0060 (1,118) against 0.0042 (2,888). A block whose trees would get
-//!   different numbers of levels gets none, as its trees switch levels together.
+//!   the tree. Only the leading fractions whose bark keeps [`BARK_AREA_KEPT`] (90 %) of the
+//!   bark's area get one (a coarser bark collapses branches, as the impostor trees' bark rule
+//!   says), so a tree gets none where even half its bark loses area (the shared orchid). The
+//!   levels of both kinds are ordered by that fraction, so they alternate. These are the near
+//!   levels that SpeedTree-like chains draw (branches reduced before leaves); the policy picks
+//!   among all levels by the image error the build measures for each (spec §6.17), so a level
+//!   that does not keep the image is not drawn. Measured (the build's calibration, mean
+//!   multi-scale RMSE over every view against the supersampled full mesh, at 256 pixels high):
+//!   the shared oak's bark-first levels at 0.5 and 0.25 of its bark read 0.0162 (16,393
+//!   triangles) and 0.0169 (13,395) against the full mesh's 0.0160 (22,566), where the chain's
+//!   own level 0 (11,113) reads 0.0270; the pine's at 0.5, 0.0269 (13,277) against 0.0270
+//!   (19,384); the Quaternius tree's at 0.5, 0.25 and 0.1, 0.0047 (1,708), 0.0060 (1,118) and
+//!   0.0123 (764) against 0.0042 (2,888). A block whose trees would get different numbers of
+//!   levels gets none, as its trees switch levels together.
 //! - **Guards.** Input triangles with a repeated vertex (after welding) or a non-finite corner
 //!   are ignored; degenerate output triangles are dropped. A group's level never has more
 //!   triangles than its previous level and is never empty: such a result is replaced by the

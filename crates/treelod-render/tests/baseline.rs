@@ -46,7 +46,7 @@ fn the_lod_chain_is_the_full_mesh_near_and_coarser_levels_farther_away() {
     let mut counts = Vec::new();
     for distance in [3.0f32, 30.0, 300.0, 3000.0] {
         let cam = Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, 0.8, 256, 256);
-        let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+        let (_, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
         assert_eq!(
             (
                 stats.instances.get(Technique::LodChain),
