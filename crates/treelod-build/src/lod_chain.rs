@@ -277,7 +277,7 @@ fn tree_levels(
 ) -> Vec<ChainLevel> {
     let tree = keys[range.start].0;
     let is_leaf = |g: usize| keys[g].2;
-    let bark_first = bark_first
+    let mut bark_first = bark_first
         && range.clone().any(|g| is_leaf(g) && !groups[g].is_empty())
         && range.clone().any(|g| !is_leaf(g) && locals[g].indices.len() > 3);
     let source: usize = range.clone().map(|g| groups[g].len()).sum();
@@ -288,7 +288,6 @@ fn tree_levels(
         indices.chunks_exact(3).map(|c| f64::from((p(c[1]) - p(c[0])).cross(p(c[2]) - p(c[0])).length())).sum()
     };
     let source_bark: f64 = range.clone().filter(|&g| !is_leaf(g)).map(|g| bark_area(&locals[g].indices, g)).sum();
-    let mut bark_first = bark_first;
     let leaves: usize = range.clone().filter(|&g| is_leaf(g)).map(|g| groups[g].len()).sum();
     // Each group's latest level: its source before level 0.
     let mut kept: Vec<(&[u32], f32)> = locals[range.clone()].iter().map(|l| (l.indices.as_slice(), 0.0)).collect();
@@ -330,15 +329,14 @@ fn tree_levels(
         bark_first &= kept_bark >= BARK_AREA_KEPT * source_bark;
         if bark_first {
             // Leaves as TRIANGLES holds them, bark as this level has it, the groups in order.
-            let triangles = range
-                .clone()
-                .zip(&per_group)
-                .flat_map(|(g, simplified)| {
-                    let source = is_leaf(g).then(|| groups[g].iter().map(move |&v| (v, keys[g].1)));
-                    let bark = (!is_leaf(g)).then(|| simplified.iter().copied());
-                    source.into_iter().flatten().chain(bark.into_iter().flatten())
-                })
-                .collect();
+            let mut triangles = Vec::new();
+            for (g, simplified) in range.clone().zip(&per_group) {
+                if is_leaf(g) {
+                    triangles.extend(groups[g].iter().map(|&v| (v, keys[g].1)));
+                } else {
+                    triangles.extend_from_slice(simplified);
+                }
+            }
             #[expect(clippy::cast_precision_loss, clippy::cast_possible_truncation, reason = "a share")]
             let share = ((leaves + bark_aimed) as f64 / source.max(1) as f64) as f32;
             levels.push(ChainLevel { tree, level: 0, fraction, error, triangles: per_group.concat() });

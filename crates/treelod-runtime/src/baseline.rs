@@ -578,11 +578,12 @@ mod tests {
     /// view, 50° field of view). At 32 and 64 pixels the chain by image error draws fewer
     /// triangles than by geometric error: the coarser levels whose leaves collapse are within the
     /// target of the best image the chain has there (nothing in it reaches the point tree's
-    /// floor), where the geometric rule (levels' errors of 0.1 to 5 m) draws a bark-first level.
+    /// floor), where the geometric rule (levels' errors of 0.1 to 5 m) draws a finer level.
     /// At 128 and 256 pixels the chain's own level 0 reads about 0.039 and 0.027 in shaded colour
     /// against a floor of 0.031 and 0.016, out of the allowance there (`target_at`: 0.005 and
     /// 0.0025), so before bark-first levels both rules drew the full mesh; now both draw a
-    /// bark-first level, every leaf triangle with a tenth of the bark: about half the triangles.
+    /// bark-first level, every leaf triangle with part of the bark (a quarter by image error):
+    /// fewer than half the bark's triangles.
     #[test]
     fn far_away_the_oak_chain_by_image_error_draws_fewer_triangles_than_by_geometric_error() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -625,12 +625,13 @@ impl Calibration {
             Some((Some(level), e, p, i + 1))
         });
         let candidates: Vec<(ChainPick, f32, f32, usize)> = full.into_iter().chain(levels).collect();
+        // Per elevation class, the limit there (the floor from that class plus the target).
+        let limits: Vec<f32> =
+            (0..self.elevations.len()).map(|e| self.floor(Some(e), height, &usable) + target).collect();
         let cheapest_within = |limit: f32, everywhere: bool| {
             candidates
                 .iter()
-                .filter(|c| {
-                    c.1 <= limit && (!everywhere || self.within_from_every_elevation(c.0, height, target, &usable))
-                })
+                .filter(|c| c.1 <= limit && (!everywhere || self.within_from_every_elevation(c.0, height, &limits)))
                 .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.3.cmp(&b.3)))
         };
         let best = candidates.iter().map(|c| c.1).fold(f32::INFINITY, f32::min);
@@ -641,27 +642,21 @@ impl Calibration {
             .map(|c| c.0)
     }
 
-    /// Whether the chain drawn as `pick` at `height` is within `target` of the floor from every
-    /// elevation class the tables hold ([`Self::level_at_elevation`], [`Self::floor`]); true
-    /// without tables per elevation. One level is drawn whatever the elevation a tree is seen
-    /// from, so it must keep the image from each: a level of every leaf and a tenth of the bark
-    /// (spec §6.12) can be within the target over every view yet not from the side, where the
-    /// trunk shows (the shared Quaternius tree at 256 pixels: 0.0060 over every view, 0.0095
-    /// from 0° against a floor of 0.0050 there), and the policy would then draw the point tree
-    /// where the full mesh keeps the image for less.
-    fn within_from_every_elevation(
-        &self,
-        pick: ChainPick,
-        height: f32,
-        target: f32,
-        usable: &impl Fn(Technique) -> bool,
-    ) -> bool {
-        (0..self.elevations.len()).all(|e| {
+    /// Whether the chain drawn as `pick` at `height` is within `limits` from every elevation
+    /// class the tables hold (per class, its floor plus the target; [`Self::level_at_elevation`],
+    /// [`Self::floor`]); true without tables per elevation. One level is drawn whatever the
+    /// elevation a tree is seen from, so it must keep the image from each: a level of every leaf
+    /// and a quarter of the bark (spec §6.12) can be within the target over every view yet not
+    /// from the side, where the trunk shows (the shared Quaternius tree at 256 pixels: 0.0060
+    /// over every view, 0.0095 from 0° against a floor of 0.0050 there), and the policy would
+    /// then draw the point tree where the full mesh keeps the image for less.
+    fn within_from_every_elevation(&self, pick: ChainPick, height: f32, limits: &[f32]) -> bool {
+        limits.iter().enumerate().all(|(e, &limit)| {
             let error = match pick {
                 Some(level) => self.level_at_elevation(Some(e), level, height),
                 None => self.at_elevation(Some(e), Technique::Full, height),
             };
-            error.is_none_or(|(error, _)| error <= self.floor(Some(e), height, usable) + target)
+            error.is_none_or(|(error, _)| error <= limit)
         })
     }
 }
