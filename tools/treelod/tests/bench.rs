@@ -35,7 +35,14 @@ fn bench_ok(args: &[&OsStr]) -> String {
 
 const COLUMNS: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines,transitions";
+precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines,transitions,\
+trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
+trees_crossed,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,primitives_impostors,\
+primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed";
+
+/// The techniques of the CSV's `trees_*` and `primitives_*` columns.
+const DRAWN_WITH: [&str; 9] =
+    ["full", "spt", "prune_opt", "prune_cook", "impostors", "ellipsoids", "lod_chain", "billboard", "crossed"];
 
 #[test]
 fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
@@ -91,6 +98,17 @@ fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
         assert_eq!(field(&header, spt, "shadow_primitives"), "", "no shadow pass without --shadows");
         // A forced technique changes no tree's technique; the counted full mesh has no draws.
         assert_eq!((field(&header, spt, "transitions"), field(&header, full, "transitions")), ("0", ""));
+        // Every tree is drawn with the point tree, and the counted full mesh draws nothing.
+        for technique in DRAWN_WITH {
+            let (trees, primitives) = (format!("trees_{technique}"), format!("primitives_{technique}"));
+            assert_eq!((field(&header, full, &trees), field(&header, full, &primitives)), ("", ""));
+            let expected = if technique == "spt" {
+                (number(&header, spt, "instances_visible"), number(&header, spt, "primitives"))
+            } else {
+                (0.0, 0.0)
+            };
+            assert_eq!((number(&header, spt, &trees), number(&header, spt, &primitives)), expected, "{technique}");
+        }
     }
     let phases: Vec<&str> = rows.iter().step_by(2).map(|r| field(&header, r, "phase")).collect();
     assert_eq!(phases.first(), Some(&"overview"));
@@ -338,6 +356,46 @@ fn impostors_fly_where_the_models_hold_planes_and_count_them_as_primitives() {
     let args = ["--trees", "20", "--frames", "1", "--no-render", "--technique", "spt,impostors"];
     let stdout = bench_ok(&[demo().as_os_str()].into_iter().chain(args.iter().map(OsStr::new)).collect::<Vec<_>>());
     assert!(stdout.contains("technique impostors: absent: no model of the forest holds impostor planes"), "{stdout}");
+}
+
+#[test]
+fn each_tree_counts_under_the_technique_it_was_drawn_with() {
+    let dir = scratch("drawn-with");
+    let planes = demo_with(&dir, "planes.treelod", &["--impostors", "--ao-rays", "0"]);
+    let csv = dir.join("d.csv");
+    // Impostors forced over a forest of a model with planes and one without: the latter's trees
+    // are drawn with the point tree.
+    let stdout = bench_ok(&[
+        planes.as_os_str(),
+        demo().as_os_str(),
+        "--trees".as_ref(),
+        "60".as_ref(),
+        "--frames".as_ref(),
+        "3".as_ref(),
+        "--no-render".as_ref(),
+        "--technique".as_ref(),
+        "impostors".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+    ]);
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 3);
+    let sum = |row: &Vec<String>, prefix: &str| -> f64 {
+        DRAWN_WITH.iter().map(|t| number(&header, row, &format!("{prefix}_{t}"))).sum()
+    };
+    for row in &rows {
+        assert_eq!(sum(row, "trees"), number(&header, row, "instances_visible"), "{row:?}");
+        assert_eq!(sum(row, "primitives"), number(&header, row, "primitives"), "{row:?}");
+        for technique in ["full", "prune_opt", "prune_cook", "ellipsoids", "lod_chain", "billboard", "crossed"] {
+            assert_eq!(number(&header, row, &format!("trees_{technique}")), 0.0, "{technique}: {row:?}");
+        }
+        // Planes are the impostor trees' only quads; the point tree's trees draw none.
+        assert!(number(&header, row, "primitives_impostors") >= number(&header, row, "quads"), "{row:?}");
+    }
+    let (spt, impostors) = ("trees_spt", "trees_impostors");
+    assert!(rows.iter().any(|r| number(&header, r, spt) > 0.0 && number(&header, r, impostors) > 0.0), "{rows:?}");
+    let line = stdout.lines().find(|l| l.starts_with("impostors drew its trees with: spt ")).expect(&stdout);
+    assert!(line.contains(" trees, ") && line.contains("; impostors "), "{line}");
 }
 
 #[test]

@@ -254,6 +254,12 @@ pub struct Row {
     pub rmse: Option<f64>,
     /// Mean FLIP error against the reference.
     pub flip: Option<f64>,
+    /// Visible trees by the technique each was drawn with (`FrameStats::instances`: the policy's
+    /// choice, or the point tree for trees whose model lacks the technique's data; a tree in a
+    /// transition under the one it goes to) and the primitives they submitted
+    /// (`FrameStats::by_technique`: a transition's leaving draws under the technique left).
+    /// `None` for the counted full mesh.
+    pub drawn_with: Option<(PerTechnique<u32>, PerTechnique<u64>)>,
 }
 
 impl Row {
@@ -608,6 +614,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                     coverage: None,
                     rmse: None,
                     flip: None,
+                    drawn_with: None,
                 });
                 continue;
             }
@@ -646,6 +653,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 coverage: None,
                 rmse: None,
                 flip: None,
+                drawn_with: Some((stats.instances, stats.by_technique)),
             };
             if options.render {
                 let (image, gpu_ms) = guarded(gpu, &label, || {

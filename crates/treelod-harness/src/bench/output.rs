@@ -9,6 +9,7 @@ use embedded_graphics::prelude::*;
 use embedded_graphics::primitives::Rectangle;
 use embedded_graphics::text::{Alignment, Baseline};
 use serde::Serialize;
+use treelod_render::Technique;
 use treelod_render::offscreen::Image;
 
 use super::path::Phase;
@@ -109,6 +110,46 @@ pub struct Summary {
     pub rmse: Option<f64>,
     /// Mean FLIP error.
     pub flip: Option<f64>,
+    /// The techniques its trees were drawn with, in [`Technique::ALL`]'s order, those with a
+    /// tree or a primitive in some frame: the policy's mix, or a forced technique and the point
+    /// tree drawing the trees whose models lack its data. Empty for the counted full mesh.
+    pub drawn_with: Vec<DrawnWith>,
+}
+
+/// Of a technique's frames, the trees drawn with one technique and what they submitted.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct DrawnWith {
+    /// The technique the trees were drawn with ([`Technique::name`]).
+    pub technique: &'static str,
+    /// Mean visible trees per frame drawn with it (`FrameStats::instances`).
+    pub trees: f64,
+    /// Mean primitives per frame they submitted (`FrameStats::by_technique`).
+    pub primitives: f64,
+    /// Those over all primitives submitted.
+    pub share: f64,
+}
+
+/// The mix of techniques of `rows` ([`Summary::drawn_with`]).
+fn drawn_with(rows: &[&Row]) -> Vec<DrawnWith> {
+    let mixes: Vec<_> = rows.iter().filter_map(|r| r.drawn_with).collect();
+    if mixes.is_empty() {
+        return Vec::new();
+    }
+    let n = mixes.len() as f64;
+    let total: u64 = mixes.iter().map(|(_, p)| p.total()).sum();
+    Technique::ALL
+        .into_iter()
+        .filter_map(|t| {
+            let trees: u64 = mixes.iter().map(|(i, _)| u64::from(i[t])).sum();
+            let primitives: u64 = mixes.iter().map(|(_, p)| p[t]).sum();
+            (trees + primitives > 0).then(|| DrawnWith {
+                technique: t.name(),
+                trees: trees as f64 / n,
+                primitives: primitives as f64 / n,
+                share: if total == 0 { 0.0 } else { primitives as f64 / total as f64 },
+            })
+        })
+        .collect()
 }
 
 fn rows_of(report: &Report, technique: TechniqueName) -> impl Iterator<Item = &Row> {
@@ -154,6 +195,7 @@ pub fn summarise(report: &Report, technique: TechniqueName) -> Summary {
         q: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.quality()).collect()),
         rmse: mean_of(rows.iter().filter_map(|r| r.rmse).collect()),
         flip: mean_of(rows.iter().filter_map(|r| r.flip).collect()),
+        drawn_with: drawn_with(&rows),
     }
 }
 
@@ -332,6 +374,27 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
     }
     out.push_str(&table.render(""));
     let _ = writeln!(out, "means per frame; {:.1} s in all", report.seconds);
+    // Where a technique's trees were drawn with more than one (the policy's mix; a forced
+    // technique and the point tree for models lacking its data): which, and what each cost.
+    for (technique, availability) in &report.techniques {
+        let mix = drawn_with(&rows_of(report, *technique).collect::<Vec<_>>());
+        if *availability != Availability::Measured || mix.len() < 2 {
+            continue;
+        }
+        let parts: Vec<String> = mix
+            .iter()
+            .map(|d| {
+                format!(
+                    "{} {:.1} trees, {:.0} primitives ({:.0} %)",
+                    d.technique,
+                    d.trees,
+                    d.primitives,
+                    100.0 * d.share
+                )
+            })
+            .collect();
+        let _ = writeln!(out, "{} drew its trees with: {}", technique.name(), parts.join("; "));
+    }
     for (what, file) in ["csv", "json", "plot"].into_iter().zip(files) {
         if let Some(file) = file {
             let _ = writeln!(out, "{what}: {}", file.display());
@@ -343,7 +406,10 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
 /// The CSV header.
 pub const CSV_HEADER: &str = "frame,phase,technique,eye_x,eye_y,eye_z,target_x,target_y,target_z,instances_visible,\
 triangles,points,primitives,instances_pruned,leaves_pruned,ranges,ranges_clamped,bytes_uploaded,bytes_resident,selection_ms,gpu_ms,\
-precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines,transitions";
+precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primitives,ellipsoids,lines,transitions,\
+trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
+trees_crossed,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,primitives_impostors,\
+primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -356,7 +422,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -390,9 +456,22 @@ pub fn csv(report: &Report) -> String {
             row.ellipsoids,
             row.lines,
             text(row.transitions.map(|v| v.to_string())),
+            by_technique(row),
         );
     }
     out
+}
+
+/// The CSV's `trees_*` and `primitives_*` fields of `row`, in [`Technique::ALL`]'s order (empty
+/// for the counted full mesh).
+fn by_technique(row: &Row) -> String {
+    let fields: Vec<String> = match row.drawn_with {
+        Some((trees, primitives)) => {
+            trees.iter().map(|(_, n)| n.to_string()).chain(primitives.iter().map(|(_, n)| n.to_string())).collect()
+        }
+        None => vec![String::new(); 2 * Technique::COUNT],
+    };
+    fields.join(",")
 }
 
 /// The JSON summary: models, forest, path, settings, adapter, and per technique its status and
