@@ -74,7 +74,11 @@
 //! those rows measure. Measured on the shared oak, pine and Quaternius tree (each level drawn
 //! from the 7 views, 6 heights), a level's error from one elevation is so predicted to within
 //! 0.0035–0.0044 on average (0.017–0.033 at worst), where its mean alone is off by
-//! 0.0050–0.0089 (0.021–0.032).
+//! 0.0050–0.0089 (0.021–0.032). Those estimates set no floor ([`Calibration::floor`]): from
+//! class `c` the floor is the least error measured there, the chain's own row among them. (When
+//! they did, the shared jacaranda's level 0, estimated at 0.0523 from straight above at 8
+//! pixels, under everything measured there, left no representation but the chain within the
+//! target: 6 of the 200 trees of `bench`'s overview drew 34,993 triangles each.)
 //!
 //! **Hysteresis.** A tree keeps last frame's technique while that technique is still the choice
 //! somewhere within [`Policy::hysteresis`] octaves of its height (a tree crossing a boundary must
@@ -510,17 +514,25 @@ impl Calibration {
 
     /// The floor at one height by the tables of elevation class `elevation` (module docs;
     /// `None`: over every view): the least error of the full mesh and of every technique the
-    /// tables hold and `usable` accepts, the LoD chain's levels standing for the chain where the
-    /// tables hold them ([`Self::level_at_elevation`]; its own row then describes the level the
-    /// chain draws at the default target, one of them); `+∞` when the tables hold none.
+    /// tables hold and `usable` accepts. Over every view the LoD chain's levels stand for the
+    /// chain where the tables hold them (its own row then describes the level the chain draws at
+    /// the default target, one of them); from an elevation class the tables hold, the chain's
+    /// own row there, the one level measured from it (the others' errors there are estimates,
+    /// [`Self::level_at_elevation`]). `+∞` when the tables hold none.
     #[must_use]
     pub fn floor(&self, elevation: Option<usize>, height: f32, usable: impl Fn(Technique) -> bool) -> f32 {
-        let per_level = !self.levels.is_empty();
+        // Only measured errors set the floor. Over every view the levels are measured, and the
+        // chain's own row is derived from them. From one elevation class only the chain's own
+        // row is measured there (the level the default target picks); the other levels' errors
+        // are estimates ([`Self::level_at_elevation`]), and a level that reads better there than
+        // anything measured would hold every representation to it (module docs).
+        let by_class = elevation.is_some_and(|e| e < self.elevations.len());
+        let per_level = !self.levels.is_empty() && !by_class;
         let techniques = Technique::ALL
             .into_iter()
             .filter(|&t| t == Technique::Full || (usable(t) && !(per_level && t == Technique::LodChain)))
             .filter_map(|t| self.at_elevation(elevation, t, height).map(|(e, _)| e));
-        let chain = usable(Technique::LodChain);
+        let chain = per_level && usable(Technique::LodChain);
         #[expect(clippy::cast_possible_truncation, reason = "a chain has a few levels")]
         let levels = (0..self.levels.len() as u32)
             .filter(|_| chain)
@@ -1539,6 +1551,57 @@ mod tests {
         let c = chain_table_seen_from_above(0.015);
         assert_eq!(mean.chain_level(16.0, Policy::DEFAULT_TARGET, all), Some(Some(1)));
         assert_eq!(c.chain_level(16.0, Policy::DEFAULT_TARGET, all), Some(Some(0)));
+    }
+
+    /// From one elevation class only measured errors set the floor: the chain's levels there are
+    /// estimates (their mean plus the chain's offset), and one that reads better than anything
+    /// measured would hold every representation to it. Here, as on a measured tree seen from
+    /// straight above at 8 pixels, the chain (its level 1, 700 triangles) reads 0.012 better from
+    /// above than over every view, so its level 0 is estimated at 0.048 there, under the chain's
+    /// own row (0.054) and the full mesh (0.060). Counted, the floor 0.048 would leave the point
+    /// tree (10 primitives, 0.062 from above) out of the target, and the chain would be drawn;
+    /// measured only, the floor is the chain's row, 0.054, and the point tree is within it.
+    #[test]
+    fn from_an_elevation_only_measured_errors_set_the_floor() {
+        let (full, spt, levels) = ((0.065, 1000.0), (0.070, 10.0), [(0.060, 900.0), (0.066, 700.0)]);
+        let mut records = vec![record(code::FULL, 8.0, full.0, full.1), record(code::SPT, 8.0, spt.0, spt.1)];
+        // The chain's row over every view: the level the default target picks, level 1.
+        records.push(record(code::LOD_CHAIN, 8.0, levels[1].0, levels[1].1));
+        records.sort_by_key(|r| r.technique);
+        let levels: Vec<ChainCalibrationRecord> = (0u32..)
+            .zip(levels)
+            .map(|(level, (error, primitives))| ChainCalibrationRecord { level, height: 8.0, error, primitives })
+            .collect();
+        let seen = |elevation: f32, technique: u32, error: f32, primitives: f32| ElevationCalibrationRecord {
+            elevation,
+            technique,
+            height: 8.0,
+            error,
+            primitives,
+        };
+        let mut per_elevation: Vec<ElevationCalibrationRecord> =
+            records.iter().map(|r| seen(0.0, r.technique, r.error, r.primitives)).collect();
+        per_elevation.extend([
+            seen(90.0, code::FULL, 0.060, full.1),
+            seen(90.0, code::SPT, 0.062, spt.1),
+            seen(90.0, code::LOD_CHAIN, 0.054, 700.0),
+        ]);
+        per_elevation.sort_by(|a, b| a.elevation.total_cmp(&b.elevation).then(a.technique.cmp(&b.technique)));
+        let c = Calibration::from_records(&records)
+            .expect("rows")
+            .with_elevations(&per_elevation)
+            .with_chain_levels(&levels);
+        let above = Some(1);
+        let (estimate, _) = c.level_at_elevation(above, 0, 8.0).expect("level 0");
+        assert!((estimate - 0.048).abs() < 1e-6, "{estimate}");
+        assert!((c.floor(above, 8.0, all) - 0.054).abs() < 1e-6, "the chain's row from above");
+        assert!((c.floor(None, 8.0, all) - 0.060).abs() < 1e-6, "level 0 over every view");
+        assert!((c.floor(Some(0), 8.0, all) - 0.065).abs() < 1e-6, "from the side as measured there");
+        assert_eq!(c.choose_at_elevation(above, 8.0, 0.01, all), Technique::Spt);
+        assert_eq!(c.choose_at_elevation(None, 8.0, 0.01, all), Technique::Spt);
+        // Without the chain the floor is the full mesh's.
+        let no_chain = |t: Technique| t != Technique::LodChain;
+        assert!((c.floor(above, 8.0, no_chain) - 0.060).abs() < 1e-6);
     }
 
     #[test]
