@@ -748,19 +748,13 @@ mod tests {
         let bark = |l: &ChainLevel| -> Vec<([u32; 3], u32)> {
             l.triangles.iter().copied().filter(|(_, m)| !leaf_materials.contains(m)).collect()
         };
-        let area = |l: &ChainLevel| -> f64 {
+        // Twice a triangle's area (the ratios below need no factor).
+        let doubled = |v: [u32; 3]| {
             let p = |i: u32| glam::Vec3::from_array(block.vertices[i as usize].position);
-            bark(l).iter().map(|(v, _)| f64::from((p(v[1]) - p(v[0])).cross(p(v[2]) - p(v[0])).length())).sum()
+            f64::from((p(v[1]) - p(v[0])).cross(p(v[2]) - p(v[0])).length())
         };
-        let source_bark: f64 = block
-            .triangles
-            .iter()
-            .filter(|t| !t.leaf)
-            .map(|t| {
-                let p = |i: u32| glam::Vec3::from_array(block.vertices[i as usize].position);
-                f64::from((p(t.v[1]) - p(t.v[0])).cross(p(t.v[2]) - p(t.v[0])).length())
-            })
-            .sum();
+        let area = |l: &ChainLevel| -> f64 { bark(l).iter().map(|&(v, _)| doubled(v)).sum() };
+        let source_bark: f64 = block.triangles.iter().filter(|t| !t.leaf).map(|t| doubled(t.v)).sum();
         let mut bark_first = 0;
         for level in &levels {
             if let Some(same) = plain.iter().find(|p| p.fraction == level.fraction) {

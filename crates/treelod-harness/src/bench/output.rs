@@ -332,6 +332,9 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
         columns.push(("fading", Align::Right));
     }
     let mut table = Table::new(&columns);
+    // Where a technique's trees were drawn with more than one (the policy's mix; a forced
+    // technique and the point tree for models lacking its data): which, and what each cost.
+    let mut mixes = Vec::new();
     for (technique, availability) in &report.techniques {
         if *availability != Availability::Measured {
             continue;
@@ -371,16 +374,13 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
             cells.push(opt(s.transitions, 1));
         }
         table.row(cells);
+        if s.drawn_with.len() > 1 {
+            mixes.push((technique.name(), s.drawn_with));
+        }
     }
     out.push_str(&table.render(""));
     let _ = writeln!(out, "means per frame; {:.1} s in all", report.seconds);
-    // Where a technique's trees were drawn with more than one (the policy's mix; a forced
-    // technique and the point tree for models lacking its data): which, and what each cost.
-    for (technique, availability) in &report.techniques {
-        let mix = drawn_with(&rows_of(report, *technique).collect::<Vec<_>>());
-        if *availability != Availability::Measured || mix.len() < 2 {
-            continue;
-        }
+    for (technique, mix) in mixes {
         let parts: Vec<String> = mix
             .iter()
             .map(|d| {
@@ -393,7 +393,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
                 )
             })
             .collect();
-        let _ = writeln!(out, "{} drew its trees with: {}", technique.name(), parts.join("; "));
+        let _ = writeln!(out, "{technique} drew its trees with: {}", parts.join("; "));
     }
     for (what, file) in ["csv", "json", "plot"].into_iter().zip(files) {
         if let Some(file) = file {
