@@ -184,10 +184,16 @@ fn sample_run(n: u32, start: u32) -> u32 {
 }
 
 // A hash of the fragment's pixel and depth: surfaces at different depths over one pixel get
-// independent values.
+// independent values. The depth is hashed as the depth buffer's `z` and as `w`, the reciprocal
+// of the view depth under a perspective projection: far from a perspective camera every surface
+// of a tree falls on one or a few values of `z` (at 1 km, 40 m of depth span a few steps of an
+// f32 near 1), and layers hashed by `z` alone would share their values and cover one pixel
+// share between them instead of adding up; `w` keeps its relative precision at any distance,
+// and `z` separates the layers of an orthographic view (a shadow cascade), where `w` is 1.
 fn pixel_depth_hash(fragment: vec4<f32>) -> u32 {
     let p = vec2<u32>(fragment.xy);
-    return ((p.x * 1973u) ^ (p.y * 9277u) ^ (bitcast<u32>(fragment.z) * 0x5bd1e995u)) * 2654435761u;
+    let depth = (bitcast<u32>(fragment.z) * 0x5bd1e995u) ^ (bitcast<u32>(fragment.w) * 0x27d4eb2du);
+    return ((p.x * 1973u) ^ (p.y * 9277u) ^ depth) * 2654435761u;
 }
 
 // The share of the pixel an alpha-tested fragment stands for, `footprint` texels per pixel.

@@ -440,6 +440,36 @@ fn stochastic_alpha_keeps_the_coverage_of_minified_leaves() {
     }
 }
 
+/// The stochastic test's hash of pixel and depth keeps the layers of a far tree apart: the same
+/// image of the tree, seen from 20 times farther through a field of view 20 times narrower,
+/// darkens the background as much. A hash of the depth buffer's `z` alone gave the layers of a
+/// far tree the same values (3 km away its 10 m of depth span about one step of an f32 near 1),
+/// so they covered one share of each pixel between them instead of adding up.
+#[test]
+fn stochastic_alpha_keeps_the_layers_of_a_far_tree_apart() {
+    let gpu = gpu();
+    let container = std::sync::Arc::new(demo_container());
+    let block = container.block();
+    let centre = 0.5 * (Vec3::from_array(block.bounds_min) + Vec3::from_array(block.bounds_max));
+    let render = |distance: f32| {
+        let settings = Settings { technique: Technique::Full, stochastic_alpha: true, ..Settings::default() };
+        let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(1), settings);
+        let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+        renderer.set_instances(&[Instance { model: tree, transform: Mat4::IDENTITY }]);
+        // The field of view that shows 40 m across at the tree's centre from any distance.
+        let fovy = 2.0 * (20.0 / distance).atan();
+        let camera = Camera::look_at(centre + vec3(0.0, 0.0, distance), centre, fovy, 128, 128);
+        let image = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders").0;
+        keep(&image, &format!("stochastic-alpha-far-{distance}"));
+        ink(&linear_box(&image, 1))
+    };
+    // Measured on lavapipe (ink in pixels from 150, 300, 600, 1500 and 3000 m): 118.7, 119.0,
+    // 116.3, 117.5 and 117.9; hashed by `z` alone, 123.7, 122.7, 116.0, 103.2 and 101.3.
+    let (near, far) = (render(150.0), render(3000.0));
+    eprintln!("ink {near:.1} from 150 m, {far:.1} from 3 km");
+    assert!((far - near).abs() < 0.05 * near, "{far} from 3 km against {near} from 150 m");
+}
+
 /// The demo tree built with impostor planes (the default levels and atlas).
 fn demo_with_impostors() -> std::sync::Arc<Container> {
     demo_built(&BuildConfig { impostors: Some(treelod_build::ImpostorConfig::default()), ..BuildConfig::default() })
