@@ -5,7 +5,14 @@
 //!
 //! **What is measured.** For each height `h` of [`HEIGHTS`] and each orthographic view of
 //! [`calibration_views`] (`views` around the tree at each elevation of [`ELEVATIONS`] below 90°,
-//! and one straight down), the block is drawn `h` pixels high:
+//! and one straight down), the block is drawn about `h` pixels high — each view at its own
+//! fraction of an octave around `h`, the views of one elevation spread evenly over the octave
+//! (with the default two, `h·2^(−1/4)` and `h·2^(1/4)`; the one straight down at `h`), so that a
+//! table holds the mean over the phases of the representations' level switches, as a forest's
+//! trees at every distance show them, not the one phase an exact octave falls on (measured on the
+//! shared pine, whose planes switch levels between 14 and 60 pixels: at exactly 32 pixels its
+//! impostors read 0.0473 against its point tree's 0.0331, mid-morph; over the octave, 0.0441
+//! against 0.0352):
 //! - the *reference*: every triangle of `TRIANGLES`, rasterised at `k × k` samples per pixel
 //!   (`k` = `supersample`, lowered so a side stays within [`MAX_REFERENCE_SIDE`]) and
 //!   box-filtered to the pixel's mean colour, its alpha-tested leaves kept as `treelod eval`'s
@@ -17,12 +24,17 @@
 //!   block's height): Gilet's cut at the default pixel thresholds (`s_min` 1, `s_max` 2, no depth
 //!   bias), point discs of their radius (a sub-pixel disc as the one-pixel splat of spec §10.1,
 //!   drawn when a hash of the point falls below its coverage), pruned leaves at `λ(h)` scaled by
-//!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test, the bark of both
+//!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test, each morphing
+//!   towards its parent over the last octave of its interval and cross-fading with it over the
+//!   last quarter as the renderer draws them by default (`vs_plane`), the bark of both
 //!   as the runtime draws it by default (impostor trees: the branch lines of `τ = p` where the
 //!   container has lines; pruned trees, and impostor trees without lines: the LoD chain's bark
 //!   level for `τ_p` where the container has a chain, else every bark triangle), ellipsoids at
 //!   `τ = p` with the renderer's noise holes
-//!   and the branch lines (or every bark triangle without lines), the billboards; and each
+//!   and the branch lines (or every bark triangle without lines), both with the renderer's
+//!   default level blend ([`DEFAULT_LEVEL_BLEND`]: the level fading out and the one fading in
+//!   each on its share of the pixels by a per-pixel dither, both submitted), the billboards; and
+//!   each
 //!   level of the LoD chain, every tree's level of that number as the runtime switches a block's
 //!   trees together (spec §6.17; the chain's `lod-chain` rows follow from them, below). Alpha-tested triangles are tested against their cutoff at the
 //!   trilinear sample of the renderer's own texture layers ([`treelod_runtime::texels`]: every
@@ -50,20 +62,18 @@
 //! renderer submits per cell, the coarser records its vertex shader drops included, so that the
 //! tables count what the renderer's frame statistics, `eval` and the policy's budget count (the
 //! point tree's cut alone undercounted it about twofold: the Quaternius tree at 32–128 pixels
-//! submits 4013 primitives where its cut holds about 1900). The rows of ellipsoids, lines and
-//! planes count and draw the level of `τ` alone: with its default level blend of half an octave
-//! the renderer also submits the level fading in below `τ` and draws it on a share of the pixels,
-//! and it morphs and cross-fades impostor planes, so it submits more than the rows say (the
-//! shared pine's impostor trees 87 primitives at 16 pixels where the table counts 36, 347 at 32
-//! where it counts 145). Drawing and counting them as the renderer does, each view at its own
-//! phase of the octave around the height, was measured and not kept: the policy's forests got no
-//! better and cost more (`bench --trees 200 --frames 30 --size 480x270 --quality`, policy
-//! primitives, RMSE, FLIP: the oak 29,671, 0.01749, 0.03712 against 35,448, 0.01836, 0.03794;
-//! the pine 42,772, 0.01965, 0.04163 against 59,270, 0.01962, 0.04171): these single-tree
-//! images then rank the point tree above the impostors at 16–32 pixels, and the oak's forest,
-//! drawing 18.7 trees per frame with the point tree instead of 0.4, read worse. Everything runs
-//! on the CPU rasteriser ([`crate::raster`]): the tables are the same on every machine and for
-//! any thread count (views run in parallel, results are summed in order).
+//! submits 4013 primitives where its cut holds about 1900; counting the level of `τ` alone, the
+//! ellipsoid, line and plane rows of earlier builds said the shared pine's impostor trees submit
+//! 36 primitives at 16 pixels where the renderer, with its level blend, submits 87, and 145 at 32
+//! where it submits 347). Drawn and counted as the renderer draws them, each view at its own
+//! phase, the tables moved the policy's forests as follows (`bench --trees 200 --frames 30 --size
+//! 480x270`, policy primitives, with `--quality` RMSE and FLIP against the reference whose
+//! pixel-depth hash keeps far layers apart; earlier tables, then these): the oak 29,669, 0.01828,
+//! 0.03641 and 35,448, 0.01781, 0.03662; the pine 42,786, 0.02042, 0.04172 and 59,270, 0.01986,
+//! 0.04153; primitives alone, the orchid 52,191 and 54,193, the Quaternius tree 51,457 and
+//! 46,515, the jacaranda 281,494 and 202,077. Everything runs on the CPU rasteriser
+//! ([`crate::raster`]): the tables are the same on every machine and for any thread count (views
+//! run in parallel, results are summed in order).
 //!
 //! **The LoD chain** (spec §6.17, §10.2). The chain's levels are drawn from the same views as
 //! every representation and their table, `CHAIN_CALIBRATION`, is the mean over every view, as
@@ -96,12 +106,13 @@ use treelod_format::{
     Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao, image, image_format, material_class,
     prune_leaves_drawn,
 };
-use treelod_runtime::ellipsoid::{ellipsoid_drawn, line_drawn};
-use treelod_runtime::impostor::{BARK_AREA_KEPT, BARK_ERROR_SHARE, area};
+use treelod_runtime::impostor::{
+    BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
+};
 use treelod_runtime::prune::{PruneScale, curve_at, leaf_scale, size_factor};
 use treelod_runtime::{
-    Calibration, ChainPick, LodChain, LodSettings, Policy, SptRecord, Technique, Thresholds, point_drawn,
-    triangle_drawn,
+    Calibration, ChainPick, DEFAULT_LEVEL_BLEND, LodChain, LodSettings, Policy, Technique, Thresholds, level_keep,
+    point_drawn, triangle_drawn,
 };
 
 use treelod_runtime::policy::target_at;
@@ -243,6 +254,21 @@ struct Scene<'a> {
     chain_levels: Vec<Vec<Tri>>,
     /// Whether the impostor planes can be drawn (an RGBA atlas, not leaf slots).
     planes_drawable: bool,
+    /// Per plane, its parent's index or [`NO_PARENT`] ([`plane_parents`]).
+    plane_parents: Vec<u32>,
+}
+
+/// A textured quad to draw: an impostor plane or a billboard.
+struct Quad {
+    /// Corners, metres: the corner at the atlas rectangle's `uv_min`, then counter-clockwise in
+    /// texture space (`(−1, −1)`, `(1, −1)`, `(1, 1)`, `(−1, 1)` of the quad's axes).
+    corners: [Vec3; 4],
+    /// The normal it is lit with (`axis_u × axis_v`).
+    normal: Vec3,
+    /// The atlas it samples.
+    image: u32,
+    /// Its rectangle of the atlas, packed (`uv_min`, `uv_max`).
+    uv: (u32, u32),
 }
 
 /// An atlas as the renderer samples it: its stored levels, largest first, as RGBA8 texels.
@@ -289,13 +315,26 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
         held.iter().copied().filter(|&t| !(per_level && t == calibration_technique::LOD_CHAIN)).collect();
     let (centre, radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
     let directions = calibration_views(config.views);
+    // Each view measures its own fraction of an octave off the nominal height, the views of an
+    // elevation spread evenly over the octave around it (module docs): a table then holds the
+    // mean over the phases of the representations' level switches, as trees at every distance
+    // in a forest show them, not the one phase an exact octave falls on.
+    #[expect(clippy::cast_precision_loss, reason = "a few views")]
+    let offsets: Vec<f32> = (0..directions.len())
+        .map(|v| {
+            let elevation = directions[v].0;
+            let same = directions.iter().filter(|d| d.0 == elevation).count();
+            let k = directions[..v].iter().filter(|d| d.0 == elevation).count();
+            ((k as f32 + 0.5) / same as f32 - 0.5).exp2()
+        })
+        .collect();
     let jobs: Vec<(usize, usize)> =
         (0..HEIGHTS.len()).flat_map(|h| (0..directions.len()).map(move |v| (h, v))).collect();
     // Per job: per technique, then per chain level, (error, primitives).
     let results: Vec<Vec<(f64, f64)>> = jobs
         .par_iter()
         .map(|&(h, v)| {
-            let pixels = HEIGHTS[h];
+            let pixels = HEIGHTS[h] * offsets[v];
             let metres_per_pixel = height / pixels;
             let side = ((2.0 * radius / metres_per_pixel).ceil() as u32).max(4);
             let k = config.supersample.max(1).min((MAX_REFERENCE_SIDE / side).max(1));
@@ -492,7 +531,20 @@ impl<'a> Scene<'a> {
                 })
                 .collect()
         });
-        Self { data, atlases, layers, materials, vertices, full, bark, chain_bark, chain_levels, planes_drawable }
+        let plane_parents = plane_parents(&data.planes, data.cells.iter().map(|c| c.planes));
+        Self {
+            data,
+            atlases,
+            layers,
+            materials,
+            vertices,
+            full,
+            bark,
+            chain_bark,
+            chain_levels,
+            planes_drawable,
+            plane_parents,
+        }
     }
 
     /// Draws the bark of a pruned or impostor tree at `p` metres per pixel as the runtime's
@@ -643,21 +695,25 @@ impl<'a> Scene<'a> {
             t::IMPOSTORS => {
                 let tau = lod.s_min * p;
                 let mut drawn = self.draw_bark(view, p, true, canvas);
-                // The prefix `hi > τ` is submitted; the vertex shader drops the coarser planes.
-                drawn += d.planes.iter().filter(|pl| tau < pl.hi && pl.lo > tau).count() as u64;
-                for (i, plane) in d.planes.iter().enumerate().filter(|(_, pl)| pl.lo <= tau && tau < pl.hi) {
+                // The prefix `hi > τ` is submitted (the planes fading in below their `lo` are in
+                // it); the vertex shader drops the others. As the renderer draws them by default,
+                // a plane morphs towards its parent over the last octave of its interval and
+                // cross-fades with it over the last quarter (`vs_plane`).
+                drawn += d.planes.iter().filter(|pl| tau < pl.hi).count() as u64;
+                for (i, plane) in d.planes.iter().enumerate() {
+                    let parent =
+                        self.plane_parents.get(i).filter(|&&j| j != NO_PARENT).and_then(|&j| d.planes.get(j as usize));
+                    let Some(keep) = crossfade(plane, parent.is_some(), tau) else { continue };
                     let (u, v) = (Vec3::from_array(plane.axis_u), Vec3::from_array(plane.axis_v));
                     let ao = d.plane_ao.get(i).map_or(0.0, |&a| decode_ao(a));
-                    self.quad(
-                        canvas,
-                        view,
-                        Vec3::from_array(plane.center),
-                        (u, v),
-                        plane.image,
-                        (plane.uv_min, plane.uv_max),
-                        ao,
-                    );
-                    drawn += 1;
+                    let centre = Vec3::from_array(plane.center);
+                    let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(s, t)| {
+                        let corner = centre + u * s + v * t;
+                        parent.map_or(corner, |parent| morph_corner(corner, parent, morph_share(plane, tau)))
+                    });
+                    let quad =
+                        Quad { corners, normal: u.cross(v), image: plane.image, uv: (plane.uv_min, plane.uv_max) };
+                    self.quad(canvas, view, &quad, ao, keep);
                 }
                 drawn
             }
@@ -703,8 +759,12 @@ impl<'a> Scene<'a> {
                             u = turned * u.length();
                         }
                     }
+                    let centre = Vec3::from_array(b.center);
+                    let corners =
+                        [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(s, t)| centre + u * s + v * t);
+                    let quad = Quad { corners, normal: u.cross(v), image: b.image, uv: (b.uv_min, b.uv_max) };
                     // Billboards carry no ambient occlusion (their atlas bakes the tree's shading).
-                    self.quad(canvas, view, Vec3::from_array(b.center), (u, v), b.image, (b.uv_min, b.uv_max), 0.0);
+                    self.quad(canvas, view, &quad, 0.0, EVERY_PIXEL);
                     drawn += 1;
                 }
                 drawn
@@ -713,38 +773,28 @@ impl<'a> Scene<'a> {
         }
     }
 
-    /// The quad `centre ± u ± v` textured by the atlas rectangle `uv_min ..= uv_max` of `image`
-    /// (spec §6.10: the corner `centre − u − v` at `uv_min`) as `quad_texel` in
-    /// `shaders/tree/planes.wgsl` samples it (bilinear in the stored mip level nearest to its
-    /// footprint, alpha tested at one half: the atlas's mips keep the covered fraction), lit with
-    /// the quad's normal `u × v` and ambient occlusion `ao`.
-    #[expect(clippy::too_many_arguments, reason = "a quad's frame, its texture rectangle and its occlusion")]
-    fn quad(
-        &self,
-        canvas: &mut Canvas,
-        view: &View,
-        centre: Vec3,
-        (u, v): (Vec3, Vec3),
-        image: u32,
-        (uv_min, uv_max): (u32, u32),
-        ao: f32,
-    ) {
-        let Some(atlas) = self.atlases.get(image as usize).and_then(Option::as_ref) else { return };
-        let (lo, hi) = (Vec2::from_array(unpack_unorm16x2(uv_min)), Vec2::from_array(unpack_unorm16x2(uv_max)));
-        let corner = |s: f32, t: f32| {
-            let q = centre + u * s + v * t;
+    /// `quad` textured by its atlas rectangle as `quad_texel` in `shaders/tree/planes.wgsl`
+    /// samples it (bilinear in the stored mip level nearest to its footprint, alpha tested at one
+    /// half: the atlas's mips keep the covered fraction), lit with the quad's normal and ambient
+    /// occlusion `ao`, on the pixels whose [`level_dither`] value lies in `keep` (`from ≤ h <
+    /// to`, the cross-fade of `vs_plane`; [`EVERY_PIXEL`] for all).
+    fn quad(&self, canvas: &mut Canvas, view: &View, quad: &Quad, ao: f32, keep: (f32, f32)) {
+        let Some(atlas) = self.atlases.get(quad.image as usize).and_then(Option::as_ref) else { return };
+        let (lo, hi) = (Vec2::from_array(unpack_unorm16x2(quad.uv.0)), Vec2::from_array(unpack_unorm16x2(quad.uv.1)));
+        let corner = |i: usize, s: f32, t: f32| {
+            let q = quad.corners[i];
             (view.project(q), lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo), depth(view, q))
         };
-        let normal = u.cross(v);
+        let normal = quad.normal;
         #[expect(clippy::cast_precision_loss, reason = "texture sides")]
         let texels = Vec2::new(atlas.size.0 as f32, atlas.size.1 as f32);
-        let [a, b, c, e] = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
+        let [a, b, c, e] = [corner(0, -1.0, -1.0), corner(1, 1.0, -1.0), corner(2, 1.0, 1.0), corner(3, -1.0, 1.0)];
         for [a, b, c] in [[a, b, c], [a, c, e]] {
             let (p, uvs, depths) = ([a.0, b.0, c.0], [a.1, b.1, c.1], [a.2, b.2, c.2]);
             let lod = texel_footprint(p, uvs, texels).max(1e-6).log2();
             triangle_pixels(canvas.size(), p, |x, y, w| {
                 let z = depths[0] * w[0] + depths[1] * w[1] + depths[2] * w[2];
-                if !canvas.nearer(x, y, z) {
+                if !canvas.nearer(x, y, z) || !kept(keep, x, y) {
                     return;
                 }
                 let uv = uvs[0] * w[0] + uvs[1] * w[1] + uvs[2] * w[2];
@@ -796,10 +846,11 @@ impl<'a> Scene<'a> {
         let d = self.data;
         let mut drawn = 0u64;
         let top = NOISE_SIZE.ilog2() as f32;
-        // Each cell's prefix `hi > τ` is submitted; the vertex shader drops the coarser levels.
-        let above = |interval: (f32, f32)| u64::from(interval.0 > p && interval.1 > p);
-        drawn += d.ellipsoids.iter().map(|e| above(e.interval())).sum::<u64>();
-        for (i, e) in d.ellipsoids.iter().enumerate().filter(|(_, e)| ellipsoid_drawn(e, p)) {
+        // Each cell's prefix `hi > τ·2^(−β/2)` is submitted (the level fading out included); the
+        // vertex shader drops the coarser levels.
+        drawn += d.ellipsoids.iter().filter(|e| e.hi > p * (-0.5 * DEFAULT_LEVEL_BLEND).exp2()).count() as u64;
+        for (i, e) in d.ellipsoids.iter().enumerate() {
+            let Some(keep) = level_keep(e.lo, e.hi, p, DEFAULT_LEVEL_BLEND) else { continue };
             let q = Quat::from_array(e.orientation.map(|c| f32::from(c) / 32767.0)).normalize();
             let axes = [Vec3::X, Vec3::Y, Vec3::Z].map(|a| q * a);
             let axes = [axes[0] * e.radii[0], axes[1] * e.radii[1], axes[2] * e.radii[2]];
@@ -819,7 +870,7 @@ impl<'a> Scene<'a> {
                 if r2 > 0.0 { a / r2 } else { Vec3::ZERO }
             });
             ellipsoid_hits(view, centre, axes, level, |x, y, grey, u, random| {
-                if grey < cut {
+                if grey < cut || !kept(keep, x, y) {
                     return;
                 }
                 let hit = centre + axes[0] * u.x + axes[1] * u.y + axes[2] * u.z;
@@ -833,7 +884,6 @@ impl<'a> Scene<'a> {
                 let normal = inverse[0] * local.x + inverse[1] * local.y + inverse[2] * local.z;
                 canvas.put(x, y, depth(view, hit), Surface { albedo, normal, ao }.shaded());
             });
-            drawn += 1;
         }
         if d.lines.is_empty() {
             self.draw_triangles(canvas, view, &self.bark, false);
@@ -842,21 +892,32 @@ impl<'a> Scene<'a> {
         drawn + self.draw_lines(view, p, canvas)
     }
 
-    /// The branch lines of `τ = p` (each cell's prefix `hi > τ` submitted, those of `lo ≤ τ`
-    /// drawn as capsules of their radii; from the switch `τ_s` on, the far lines' instead, as
-    /// the runtime draws them without a level blend, spec §6.9.1, their prefix submitted from
-    /// its first record that starts at or below `τ`). Returns the primitives submitted.
+    /// The branch lines of `τ = p` as the runtime draws them with its default level blend
+    /// ([`DEFAULT_LEVEL_BLEND`], `LineLod::select_per_pixel_blended`): each cell's prefix
+    /// `hi > τ·2^(−β/2)` submitted, those [`level_keep`] keeps drawn as capsules of their radii
+    /// on their share of the pixels; from the switch `τ_s` on, the far lines' instead (spec
+    /// §6.9.1), their prefix submitted without its head of records that start above
+    /// `τ·2^(β/2)`. Returns the primitives submitted.
     fn draw_lines(&self, view: &View, p: f32, canvas: &mut Canvas) -> u64 {
         let d = self.data;
         let far = p >= treelod_format::far_switch(&d.far_lines);
         let (lines, ao) = if far { (&d.far_lines, &d.far_line_ao) } else { (&d.lines, &d.line_ao) };
-        let above = |interval: (f32, f32)| u64::from(interval.0 > p && interval.1 > p);
-        let mut drawn = lines.iter().map(|l| above(l.interval())).sum::<u64>();
-        // The far prefix is submitted without its head of coarser levels (`LineLod`).
+        let (shrink, reach) = ((-0.5 * DEFAULT_LEVEL_BLEND).exp2(), (0.5 * DEFAULT_LEVEL_BLEND).exp2());
+        let mut drawn = lines.iter().filter(|l| l.hi > p * shrink).count() as u64;
         if far {
-            drawn -= lines.iter().take_while(|l| l.lo > p).count() as u64;
+            // The leading records whose least `lo` so far starts above `τ·2^(β/2)`.
+            let mut least = f32::INFINITY;
+            let head = lines
+                .iter()
+                .take_while(|l| {
+                    least = least.min(l.lo);
+                    least > p * reach
+                })
+                .count();
+            drawn = drawn.saturating_sub(head as u64);
         }
-        for (i, line) in lines.iter().enumerate().filter(|(_, l)| line_drawn(l, p)) {
+        for (i, line) in lines.iter().enumerate() {
+            let Some(keep) = level_keep(line.lo, line.hi, p, DEFAULT_LEVEL_BLEND) else { continue };
             let albedo = linear_colour(line.color).truncate();
             let ao = ao.get(i).map_or(0.0, |&a| decode_ao(a));
             capsule(
@@ -864,10 +925,9 @@ impl<'a> Scene<'a> {
                 view,
                 (Vec3::from_array(line.p0), line.r0),
                 (Vec3::from_array(line.p1), line.r1),
-                albedo,
-                ao,
+                Surface { albedo, normal: Vec3::ZERO, ao },
+                keep,
             );
-            drawn += 1;
         }
         drawn
     }
@@ -903,14 +963,26 @@ fn disc(canvas: &mut Canvas, view: &View, centre: Vec3, radius: f32, id: u64, su
 /// A branch line from `p0` (radius `r0`) to `p1` (radius `r1`), metres, as a capsule of its
 /// projection (a quad along the axis and a disc at each end, the pixels the coverage rasteriser
 /// covers), shaded with the normal and depth of the cone's front surface at each pixel: the
-/// nearest point of the axis in the image, offset across it and towards the viewer.
-fn capsule(canvas: &mut Canvas, view: &View, (p0, r0): (Vec3, f32), (p1, r1): (Vec3, f32), albedo: Vec3, ao: f32) {
+/// nearest point of the axis in the image, offset across it and towards the viewer; `surface`
+/// gives the albedo and occlusion. Only on the pixels whose [`level_dither`] value lies in `keep`.
+fn capsule(
+    canvas: &mut Canvas,
+    view: &View,
+    (p0, r0): (Vec3, f32),
+    (p1, r1): (Vec3, f32),
+    surface: Surface,
+    keep: (f32, f32),
+) {
+    let Surface { albedo, ao, .. } = surface;
     let (a, b) = (view.project(p0), view.project(p1));
     let (ra, rb) = (r0 * view.scale, r1 * view.scale);
     let axis = b - a;
     let length2 = axis.length_squared();
     let size = canvas.size();
     let mut shade = |x: usize, y: usize| {
+        if !kept(keep, x, y) {
+            return;
+        }
         let pixel = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
         let s = if length2 > 0.0 { ((pixel - a).dot(axis) / length2).clamp(0.0, 1.0) } else { 0.0 };
         let (on_axis, r) = (a + axis * s, (ra + (rb - ra) * s).max(1e-6));
@@ -1011,6 +1083,23 @@ fn filtered_coverage(alpha: f32, cutoff: f32, footprint: f32) -> f32 {
 fn pixel_depth_hash(x: usize, y: usize, depth: f32) -> f32 {
     let key = (x as u64) << 40 ^ (y as u64) << 16 ^ u64::from(depth.to_bits()).rotate_left(24);
     ((crate::rng::SplitMix64(key).next_u64() >> 40) as f32) / ((1u64 << 24) as f32)
+}
+
+/// A value in `[0, 1)` per pixel, the same for every surface over it: the dither of the level
+/// blend and of the planes' cross-fade (`level_dither` and `dither` in
+/// `shaders/tree/common.wgsl`), so the ranges two levels keep at a switch split the pixels
+/// between them. Seeded apart from [`pixel_depth_hash`].
+fn level_dither(x: usize, y: usize) -> f32 {
+    let key = (x as u64) << 40 ^ (y as u64) << 16 ^ 0x5eed_0f1e_7e15;
+    ((crate::rng::SplitMix64(key).next_u64() >> 40) as f32) / ((1u64 << 24) as f32)
+}
+
+/// The dither range of a surface drawn on every pixel.
+const EVERY_PIXEL: (f32, f32) = (0.0, 2.0);
+
+/// Whether the pixel `(x, y)` is among those the dither range `keep` draws (`from ≤ h < to`).
+fn kept(keep: (f32, f32), x: usize, y: usize) -> bool {
+    keep == EVERY_PIXEL || (keep.0..keep.1).contains(&level_dither(x, y))
 }
 
 /// An atlas image with its stored levels as the renderer samples it without BC textures

@@ -275,7 +275,7 @@ impl Default for Settings {
             impostor_morph: true,
             impostor_bark: ImpostorBark::default(),
             ellipsoid_quality: 1.0,
-            level_blend: 0.5,
+            level_blend: treelod_runtime::DEFAULT_LEVEL_BLEND,
             lines: true,
             shadows: None,
             stochastic_alpha: false,

@@ -58,5 +58,5 @@ pub use policy::{
 };
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning, hull_samples};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
-pub use spt_lod::{PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};
+pub use spt_lod::{DEFAULT_LEVEL_BLEND, PixelLevel, SptCell, SptLod, SptRecord, level_keep, spt_drawn};
 pub use technique::{Data, PerPrimitive, PerTechnique, Primitive, Technique};

@@ -73,6 +73,11 @@ pub fn spt_drawn(record: &impl SptRecord, tau: f32) -> bool {
 /// The most octaves of `τ` a level blend may span ([`PixelLevel::blend`] is clamped to it).
 pub const MAX_LEVEL_BLEND: f32 = 2.0;
 
+/// A renderer's default level blend `β`, octaves ([`PixelLevel::blend`]): half an octave, so
+/// that one level gives way to the next over a quarter of an octave on each side of its switch.
+/// The build's calibration draws ellipsoids and lines with it, as the renderer draws them.
+pub const DEFAULT_LEVEL_BLEND: f32 = 0.5;
+
 /// How a kind measured in metres per pixel (ellipsoids, lines) picks its levels.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PixelLevel {
