@@ -181,7 +181,7 @@ fn the_tables_per_elevation_split_the_mean_and_billboards_read_worse_from_above(
 #[test]
 fn impostor_and_ellipsoid_rows_count_what_the_runtime_submits_with_its_level_blend() {
     use treelod_runtime::{
-        Camera, DEFAULT_LEVEL_BLEND, EllipsoidLod, Frustum, LineLod, LodSettings, PixelLevel, PlaneLod,
+        Camera, CellPrefix, DEFAULT_LEVEL_BLEND, EllipsoidLod, Frustum, LineLod, LodSettings, PixelLevel, PlaneLod,
     };
     let scene = demo_tree(&DemoTreeConfig::default());
     let config = BuildConfig { lines: Some(LineConfig::default()), ..config() };
@@ -200,39 +200,24 @@ fn impostor_and_ellipsoid_rows_count_what_the_runtime_submits_with_its_level_ble
         .zip(row(&built.data.calibration, t::IMPOSTORS).iter().zip(&row(&built.data.calibration, t::ELLIPSOIDS)))
     {
         // Far enough that every cell's τ is the block centre's to a fraction of a percent, with
-        // the field of view that makes the block `h` pixels high (τ = p = H/h).
+        // the field of view that makes the block `h` pixels high (τ = p = H/h; with one view per
+        // elevation every view measures at `h` itself).
         let distance = 200.0 * radius;
         let fovy = 2.0 * (height * 1000.0 / (2.0 * h * distance)).atan();
         let eye = centre + Vec3::new(0.6, 0.3, 0.8).normalize() * distance;
         let camera = Camera::look_at(eye, centre, fovy, 1000, 1000);
         let frustum = Frustum::from_view_proj(camera.view_proj);
-        let mut plane_ranges = Vec::new();
-        assert!(planes.select(glam::Mat4::IDENTITY, &camera, &frustum, 1.0, &mut plane_ranges));
-        let mut line_ranges = Vec::new();
-        assert!(lines.select_per_pixel_blended(
-            glam::Mat4::IDENTITY,
-            &camera,
-            &frustum,
-            &settings,
-            level,
-            &mut line_ranges
-        ));
-        let mut ellipsoid_ranges = Vec::new();
-        assert!(ellipsoids.select_per_pixel_blended(
-            glam::Mat4::IDENTITY,
-            &camera,
-            &frustum,
-            &settings,
-            level,
-            &mut ellipsoid_ranges
-        ));
-        let count = |ranges: &[treelod_runtime::CellPrefix]| ranges.iter().map(|r| r.count).sum::<u32>() as f32;
-        let (p, l, e) = (count(&plane_ranges), count(&line_ranges), count(&ellipsoid_ranges));
-        let unblended = {
+        let model = glam::Mat4::IDENTITY;
+        // The primitives of the prefixes a selection appends (it must see the tree).
+        let submitted = |select: &dyn Fn(&mut Vec<CellPrefix>) -> bool| {
             let mut out = Vec::new();
-            lines.select_per_pixel(glam::Mat4::IDENTITY, &camera, &frustum, &settings, 1.0, &mut out);
-            count(&out)
+            assert!(select(&mut out), "in view");
+            out.iter().map(|r| r.count).sum::<u32>() as f32
         };
+        let p = submitted(&|out| planes.select(model, &camera, &frustum, 1.0, out));
+        let l = submitted(&|out| lines.select_per_pixel_blended(model, &camera, &frustum, &settings, level, out));
+        let e = submitted(&|out| ellipsoids.select_per_pixel_blended(model, &camera, &frustum, &settings, level, out));
+        let unblended = submitted(&|out| lines.select_per_pixel(model, &camera, &frustum, &settings, 1.0, out));
         blended_lines += u32::from(l > unblended);
         let close = |table: f32, runtime: f32| (table - runtime).abs() <= 0.02 * runtime + 1.0;
         assert!(close(impostors.primitives, p + l), "{h} px: impostors {impostors:?}, runtime {p} planes + {l} lines");
