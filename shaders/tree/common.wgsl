@@ -185,10 +185,10 @@ fn sample_run(n: u32, start: u32) -> u32 {
 
 // A hash of the fragment's pixel and depth: surfaces at different depths over one pixel get
 // independent values. The depth is hashed as the depth buffer's `z` and as `w`, the reciprocal
-// of the view depth under a perspective projection: far from a perspective camera every surface
-// of a tree falls on one or a few values of `z` (at 1 km, 40 m of depth span a few steps of an
-// f32 near 1), and layers hashed by `z` alone would share their values and cover one pixel
-// share between them instead of adding up; `w` keeps its relative precision at any distance,
+// of the view depth under a perspective projection: far from a perspective camera the surfaces
+// of a tree fall on few values of `z` (1 km away 40 m of depth span some thirty steps of an f32
+// near 1, 3 km away 10 m about one), and layers hashed by `z` alone would share their values and
+// cover one pixel share between them instead of adding up; `w` keeps its relative precision,
 // and `z` separates the layers of an orthographic view (a shadow cascade), where `w` is 1.
 fn pixel_depth_hash(fragment: vec4<f32>) -> u32 {
     let p = vec2<u32>(fragment.xy);
