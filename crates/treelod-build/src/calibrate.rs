@@ -260,8 +260,7 @@ struct Scene<'a> {
 
 /// A textured quad to draw: an impostor plane or a billboard.
 struct Quad {
-    /// Corners, metres: the corner at the atlas rectangle's `uv_min`, then counter-clockwise in
-    /// texture space (`(−1, −1)`, `(1, −1)`, `(1, 1)`, `(−1, 1)` of the quad's axes).
+    /// Corners, metres, at [`QUAD_CORNERS`] of the quad's axes.
     corners: [Vec3; 4],
     /// The normal it is lit with (`axis_u × axis_v`).
     normal: Vec3,
@@ -269,6 +268,17 @@ struct Quad {
     image: u32,
     /// Its rectangle of the atlas, packed (`uv_min`, `uv_max`).
     uv: (u32, u32),
+}
+
+/// A quad's corners in its axes, in [`Quad::corners`] order: `(−1, −1)` at `uv_min`, then
+/// counter-clockwise in texture space.
+const QUAD_CORNERS: [(f32, f32); 4] = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+
+impl Quad {
+    /// The flat quad `centre ± u ± v` (spec §6.10), lit with `u × v`.
+    fn flat(centre: Vec3, (u, v): (Vec3, Vec3), image: u32, uv: (u32, u32)) -> Self {
+        Self { corners: QUAD_CORNERS.map(|(s, t)| centre + u * s + v * t), normal: u.cross(v), image, uv }
+    }
 }
 
 /// An atlas as the renderer samples it: its stored levels, largest first, as RGBA8 texels.
@@ -706,13 +716,11 @@ impl<'a> Scene<'a> {
                     let Some(keep) = crossfade(plane, parent.is_some(), tau) else { continue };
                     let (u, v) = (Vec3::from_array(plane.axis_u), Vec3::from_array(plane.axis_v));
                     let ao = d.plane_ao.get(i).map_or(0.0, |&a| decode_ao(a));
-                    let centre = Vec3::from_array(plane.center);
-                    let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(s, t)| {
-                        let corner = centre + u * s + v * t;
-                        parent.map_or(corner, |parent| morph_corner(corner, parent, morph_share(plane, tau)))
-                    });
-                    let quad =
-                        Quad { corners, normal: u.cross(v), image: plane.image, uv: (plane.uv_min, plane.uv_max) };
+                    let mut quad =
+                        Quad::flat(Vec3::from_array(plane.center), (u, v), plane.image, (plane.uv_min, plane.uv_max));
+                    if let Some(parent) = parent {
+                        quad.corners = quad.corners.map(|corner| morph_corner(corner, parent, morph_share(plane, tau)));
+                    }
                     self.quad(canvas, view, &quad, ao, keep);
                 }
                 drawn
@@ -759,10 +767,7 @@ impl<'a> Scene<'a> {
                             u = turned * u.length();
                         }
                     }
-                    let centre = Vec3::from_array(b.center);
-                    let corners =
-                        [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(s, t)| centre + u * s + v * t);
-                    let quad = Quad { corners, normal: u.cross(v), image: b.image, uv: (b.uv_min, b.uv_max) };
+                    let quad = Quad::flat(Vec3::from_array(b.center), (u, v), b.image, (b.uv_min, b.uv_max));
                     // Billboards carry no ambient occlusion (their atlas bakes the tree's shading).
                     self.quad(canvas, view, &quad, 0.0, EVERY_PIXEL);
                     drawn += 1;
@@ -781,14 +786,13 @@ impl<'a> Scene<'a> {
     fn quad(&self, canvas: &mut Canvas, view: &View, quad: &Quad, ao: f32, keep: (f32, f32)) {
         let Some(atlas) = self.atlases.get(quad.image as usize).and_then(Option::as_ref) else { return };
         let (lo, hi) = (Vec2::from_array(unpack_unorm16x2(quad.uv.0)), Vec2::from_array(unpack_unorm16x2(quad.uv.1)));
-        let corner = |i: usize, s: f32, t: f32| {
-            let q = quad.corners[i];
+        let corner = |q: Vec3, (s, t): (f32, f32)| {
             (view.project(q), lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo), depth(view, q))
         };
         let normal = quad.normal;
         #[expect(clippy::cast_precision_loss, reason = "texture sides")]
         let texels = Vec2::new(atlas.size.0 as f32, atlas.size.1 as f32);
-        let [a, b, c, e] = [corner(0, -1.0, -1.0), corner(1, 1.0, -1.0), corner(2, 1.0, 1.0), corner(3, -1.0, 1.0)];
+        let [a, b, c, e] = [0, 1, 2, 3].map(|i| corner(quad.corners[i], QUAD_CORNERS[i]));
         for [a, b, c] in [[a, b, c], [a, c, e]] {
             let (p, uvs, depths) = ([a.0, b.0, c.0], [a.1, b.1, c.1], [a.2, b.2, c.2]);
             let lod = texel_footprint(p, uvs, texels).max(1e-6).log2();
@@ -925,7 +929,7 @@ impl<'a> Scene<'a> {
                 view,
                 (Vec3::from_array(line.p0), line.r0),
                 (Vec3::from_array(line.p1), line.r1),
-                Surface { albedo, normal: Vec3::ZERO, ao },
+                (albedo, ao),
                 keep,
             );
         }
@@ -963,17 +967,16 @@ fn disc(canvas: &mut Canvas, view: &View, centre: Vec3, radius: f32, id: u64, su
 /// A branch line from `p0` (radius `r0`) to `p1` (radius `r1`), metres, as a capsule of its
 /// projection (a quad along the axis and a disc at each end, the pixels the coverage rasteriser
 /// covers), shaded with the normal and depth of the cone's front surface at each pixel: the
-/// nearest point of the axis in the image, offset across it and towards the viewer; `surface`
-/// gives the albedo and occlusion. Only on the pixels whose [`level_dither`] value lies in `keep`.
+/// nearest point of the axis in the image, offset across it and towards the viewer, of `albedo`
+/// and ambient occlusion `ao`. Only on the pixels whose [`level_dither`] value lies in `keep`.
 fn capsule(
     canvas: &mut Canvas,
     view: &View,
     (p0, r0): (Vec3, f32),
     (p1, r1): (Vec3, f32),
-    surface: Surface,
+    (albedo, ao): (Vec3, f32),
     keep: (f32, f32),
 ) {
-    let Surface { albedo, ao, .. } = surface;
     let (a, b) = (view.project(p0), view.project(p1));
     let (ra, rb) = (r0 * view.scale, r1 * view.scale);
     let axis = b - a;
