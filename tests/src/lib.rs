@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.9, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.10, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -91,6 +91,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration: false,
                 chain_calibration: false,
                 far_lines: false,
+                plane_diffuse: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -120,6 +121,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration: false,
                 chain_calibration: false,
                 far_lines: false,
+                plane_diffuse: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -136,6 +138,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration: false,
                 chain_calibration: false,
                 far_lines: false,
+                plane_diffuse: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -151,6 +154,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration: false,
                 chain_calibration: false,
                 far_lines: false,
+                plane_diffuse: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -164,6 +168,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration: false,
                 chain_calibration: false,
                 far_lines: false,
+                plane_diffuse: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -177,6 +182,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_elevations: false,
                 chain_calibration: false,
                 far_lines: false,
+                plane_diffuse: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -192,6 +198,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_elevations: false,
                 chain_calibration: false,
                 far_lines: false,
+                plane_diffuse: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -206,6 +213,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 chain_calibration: false,
                 far_lines: false,
+                plane_diffuse: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -216,7 +224,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
             description: "every section kind of 1.8 (1.7's: the 1.5 kinds, a BC7 impostor atlas and \
                           CALIBRATION_ELEVATIONS, and CHAIN_CALIBRATION), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, far_lines: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                far_lines: false,
+                plane_diffuse: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -225,6 +238,16 @@ pub fn golden_files() -> Vec<GoldenFile> {
             description: "every section kind of 1.9 (1.8's: the 1.5 kinds, a BC7 impostor atlas, \
                           CALIBRATION_ELEVATIONS and CHAIN_CALIBRATION, and the block's far lines, FAR_LINES and \
                           FAR_LINE_AO), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, plane_diffuse: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 10,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.10 (1.9's: the 1.5 kinds, a BC7 impostor atlas, \
+                          CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES and FAR_LINE_AO, and the planes' \
+                          diffuse response, PLANE_DIFFUSE), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -7,8 +7,8 @@ use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord,
-    NO_IMAGE, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree,
-    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format,
+    NO_IMAGE, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind,
+    Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -88,6 +88,11 @@ pub struct SyntheticOptions {
     /// per far line in `FAR_LINE_AO`. Drawn last, so the rest of the container is the same as
     /// without it.
     pub far_lines: bool,
+    /// The planes' diffuse response (spec §6.10.2, 1.10): a `PlaneDiffuseRecord` per plane in
+    /// `PLANE_DIFFUSE`, `flat` a random `unorm16` and `scattered` a random one of at most
+    /// `65535 − flat` (shares summing to at most 1). Drawn last, so the rest of the container is
+    /// the same as without it.
+    pub plane_diffuse: bool,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -131,6 +136,7 @@ impl SyntheticOptions {
             calibration_elevations: false,
             chain_calibration: false,
             far_lines: false,
+            plane_diffuse: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -150,14 +156,14 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.9: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.10: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
     /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`),
     /// calibration tables (`CALIBRATION`, per elevation, `CALIBRATION_ELEVATIONS`, and the chain's
-    /// per level, `CHAIN_CALIBRATION`) and the block's far lines with their ambient occlusion
-    /// (`FAR_LINES`, `FAR_LINE_AO`).
+    /// per level, `CHAIN_CALIBRATION`), the block's far lines with their ambient occlusion
+    /// (`FAR_LINES`, `FAR_LINE_AO`) and the planes' diffuse response (`PLANE_DIFFUSE`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -184,6 +190,7 @@ impl SyntheticOptions {
             calibration_elevations: true,
             chain_calibration: true,
             far_lines: true,
+            plane_diffuse: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1074,6 +1081,18 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
         if options.line_ao {
             b.data.far_line_ao = rng.bytes(b.data.far_lines.len());
         }
+    }
+    if options.plane_diffuse {
+        b.data.plane_diffuse = b
+            .data
+            .planes
+            .iter()
+            .map(|_| {
+                let flat = rng.below(0x1_0000);
+                let scattered = rng.below(0x1_0000 - flat);
+                PlaneDiffuseRecord { flat: flat as u16, scattered: scattered as u16 }
+            })
+            .collect();
     }
     if options.bc7_atlas
         && let Some(atlas) = b.atlas

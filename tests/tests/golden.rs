@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.9 (`tests/data/v1_0` to `tests/data/v1_9`): every file
+//! Golden files of format versions 1.0 to 1.10 (`tests/data/v1_0` to `tests/data/v1_10`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -7,8 +7,9 @@ use std::path::PathBuf;
 
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, LineRecord, MaterialInfo,
-    MaterialRecord, Metadata, NO_IMAGE, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord,
-    VertexRecord, calibration_technique, far_switch, far_threshold, image_format, leaf_slots, plane_leaf_bases, verify,
+    MaterialRecord, Metadata, NO_IMAGE, PlaneDiffuseRecord, PointRecord, Range, SectionKind, Setting, Source, Tree,
+    TriangleRecord, VertexRecord, calibration_technique, far_switch, far_threshold, image_format, leaf_slots,
+    plane_leaf_bases, verify,
 };
 use treelod_tests::{
     SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
@@ -24,7 +25,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -484,7 +485,7 @@ fn the_1_8_every_kind_file_has_every_kind_and_the_chain_levels_calibration() {
 fn the_1_9_every_kind_file_has_every_kind_and_the_far_lines() {
     let c = Container::open(golden_dir_of(9).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 9, "{kind}");
     }
     assert_eq!(c.header().minor, 9);
     // One hierarchy over copies of the cells' coarsest lines, merged across cells.
@@ -515,6 +516,29 @@ fn the_1_9_every_kind_file_has_every_kind_and_the_far_lines() {
     assert!(data == v1_8, "v1_9 is v1_8 with the far lines");
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 8);
+}
+
+#[test]
+fn the_1_10_every_kind_file_has_every_kind_and_the_planes_diffuse_response() {
+    let c = Container::open(golden_dir_of(10).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 10);
+    // One record per plane, in the planes' order, with values of their own (not all FLAT).
+    let (diffuse, planes) = (c.plane_diffuse(), c.planes());
+    assert_eq!(diffuse.len(), planes.len(), "PLANE_DIFFUSE, one record per plane");
+    assert_eq!(verify(&c).unwrap().plane_diffuse, planes.len() as u64);
+    assert!(diffuse.iter().any(|r| *r != PlaneDiffuseRecord::FLAT) && diffuse.windows(2).any(|w| w[0] != w[1]));
+    // Without PLANE_DIFFUSE it is the 1.9 file, record for record, and the writer marks it 1.9: a
+    // 1.9 reader sees the same planes, lit as FLAT.
+    let v1_9 =
+        ContainerData::from_container(&Container::open(golden_dir_of(9).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.plane_diffuse.clear();
+    assert!(data == v1_9, "v1_10 is v1_9 with the planes' diffuse records");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 9);
 }
 
 #[test]

@@ -56,6 +56,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 chain_calibration: grid[1] >= 2 && curve_samples > 0,
                 // Far lines with half of the grids (their occlusion where the lines have theirs).
                 far_lines: grid[1] < 2,
+                // The planes' diffuse response with half of the grids.
+                plane_diffuse: grid[2] < 2,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -273,6 +275,13 @@ fn check_rules(data: &ContainerData) -> Result<(), String> {
     }
     check_indirect_texturing(data)?;
     check_far_lines(data)?;
+    // Spec §6.10.2: no diffuse records, or one per plane, each with shares summing to at most 1.
+    if !data.plane_diffuse.is_empty() && data.plane_diffuse.len() != data.planes.len() {
+        return Err(format!("{} diffuse records for {} planes", data.plane_diffuse.len(), data.planes.len()));
+    }
+    if let Some(r) = data.plane_diffuse.iter().find(|r| u32::from(r.flat) + u32::from(r.scattered) > 0xFFFF) {
+        return Err(format!("diffuse shares {} + {} above 65535", r.flat, r.scattered));
+    }
     let mut next = 0;
     for (index, leaf) in data.prune_leaves.iter().enumerate() {
         if leaf.first_triangle != next || leaf.triangle_count == 0 {
@@ -391,7 +400,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 9, "everything() holds the kinds of 1.9");
+    assert_eq!(container.header().minor, 10, "everything() holds the kinds of 1.10");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

@@ -10,8 +10,8 @@ use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord,
-    SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -404,6 +404,13 @@ impl Container {
     #[must_use]
     pub fn plane_leaves(&self) -> &[PlaneLeafRecord] {
         self.records(SectionKind::PLANE_LEAVES)
+    }
+
+    /// How the leaves of each plane take the sun (spec §6.10.2), empty or as long as
+    /// [`Container::planes`] (checked at open). Since 1.10.
+    #[must_use]
+    pub fn plane_diffuse(&self) -> &[PlaneDiffuseRecord] {
+        self.records(SectionKind::PLANE_DIFFUSE)
     }
 
     /// The pruning priority lists, per cell.
@@ -802,8 +809,9 @@ pub(crate) fn check_block_and_cells(
             format!("{} cell records, the grid {grid:?} needs {expected} (cells + block cell)", cells.len()),
         ));
     }
-    // Spec §6.14: an ambient-occlusion section holds one byte per record of its array.
-    for (kind, of) in AO_KINDS {
+    // Spec §6.14, §6.10.2: an ambient-occlusion section holds one byte per record of its array,
+    // `PLANE_DIFFUSE` one record per plane.
+    for (kind, of) in AO_KINDS.into_iter().chain([(SectionKind::PLANE_DIFFUSE, SectionKind::PLANES)]) {
         let (ao, records) = (count(kind), count(of));
         if ao != 0 && ao != records {
             return Err(bad_record(kind, 0, format!("{ao} records, {of} has {records}: one per record or none")));

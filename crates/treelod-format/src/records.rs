@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 9;
+pub const MINOR: u16 = 10;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -166,6 +166,9 @@ impl SectionKind {
     pub const LINE_AO: Self = Self(0x0064);
     /// Ambient occlusion of each `FAR_LINES` record, one `unorm8` (spec §6.14). Since 1.9.
     pub const FAR_LINE_AO: Self = Self(0x0065);
+    /// [`PlaneDiffuseRecord`]s: how the leaves of each `PLANES` record take the sun (spec
+    /// §6.10.2). Since 1.10.
+    pub const PLANE_DIFFUSE: Self = Self(0x0066);
     /// [`CalibrationRecord`]s: each representation's measured image error and cost by projected
     /// height (spec §6.15). Since 1.5.
     pub const CALIBRATION: Self = Self(0x0070);
@@ -177,7 +180,7 @@ impl SectionKind {
     pub const CALIBRATION_ELEVATIONS: Self = Self(0x0072);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 30] = [
+    pub const KNOWN: [Self; 31] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -205,6 +208,7 @@ impl SectionKind {
         Self::ELLIPSOID_AO,
         Self::LINE_AO,
         Self::FAR_LINE_AO,
+        Self::PLANE_DIFFUSE,
         Self::CALIBRATION,
         Self::CHAIN_CALIBRATION,
         Self::CALIBRATION_ELEVATIONS,
@@ -241,6 +245,7 @@ impl SectionKind {
             Self::ELLIPSOID_AO => "ELLIPSOID_AO",
             Self::LINE_AO => "LINE_AO",
             Self::FAR_LINE_AO => "FAR_LINE_AO",
+            Self::PLANE_DIFFUSE => "PLANE_DIFFUSE",
             Self::CALIBRATION => "CALIBRATION",
             Self::CHAIN_CALIBRATION => "CHAIN_CALIBRATION",
             Self::CALIBRATION_ELEVATIONS => "CALIBRATION_ELEVATIONS",
@@ -271,6 +276,7 @@ impl SectionKind {
             Self::LINES | Self::FAR_LINES => size_of::<LineRecord>(),
             Self::PLANES => size_of::<PlaneRecord>(),
             Self::PLANE_LEAVES => size_of::<PlaneLeafRecord>(),
+            Self::PLANE_DIFFUSE => size_of::<PlaneDiffuseRecord>(),
             Self::PRUNE_LEAVES => size_of::<PruneLeafRecord>(),
             Self::PRUNE_SCALE | Self::PRUNE_LAMBDA => size_of::<CurveSample>(),
             Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
@@ -290,7 +296,8 @@ impl SectionKind {
     /// ambient occlusion (`ELLIPSOID_AO`), 4 for the lines' ambient occlusion (`LINE_AO`), 5 for
     /// the calibration tables (`CALIBRATION`), 7 for the tables per elevation
     /// (`CALIBRATION_ELEVATIONS`), 8 for the LoD chain's per-level tables (`CHAIN_CALIBRATION`), 9
-    /// for the block's far lines (`FAR_LINES`, `FAR_LINE_AO`), 0 for
+    /// for the block's far lines (`FAR_LINES`, `FAR_LINE_AO`), 10 for the planes' diffuse response
+    /// (`PLANE_DIFFUSE`), 0 for
     /// the other known kinds and for kinds this version does not know (private extensions do not
     /// raise a file's minor).
     #[must_use]
@@ -304,6 +311,7 @@ impl SectionKind {
             Self::CALIBRATION_ELEVATIONS => 7,
             Self::CHAIN_CALIBRATION => 8,
             Self::FAR_LINES | Self::FAR_LINE_AO => 9,
+            Self::PLANE_DIFFUSE => 10,
             _ => 0,
         }
     }
@@ -788,6 +796,64 @@ pub struct PlaneLeafRecord {
     pub color: u32,
 }
 const _: () = assert!(size_of::<PlaneLeafRecord>() == 40);
+
+/// How the leaves an impostor plane stands for take the sun (spec §6.10.2), as a mixture of three
+/// ways their normals may lie about the plane's normal `N`: in the plane's normal (share `f`),
+/// turned every way (share `s`) and across it, every way about it (share `1 − f − s`). Seen
+/// along a unit direction `v` and lit from `l`, the leaves' diffuse factor is their mean `|n·l|`
+/// weighted by the area each shows, `|n·v|`: [`PlaneDiffuseRecord::diffuse`]. A reader without
+/// the record takes [`PlaneDiffuseRecord::FLAT`], the plane's own `|N·l|`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct PlaneDiffuseRecord {
+    /// `f` as `unorm16`: the share of leaves lying in the plane.
+    pub flat: u16,
+    /// `s` as `unorm16`: the share of leaves turned every way (`f + s ≤ 1`; a reader clamps).
+    pub scattered: u16,
+}
+const _: () = assert!(size_of::<PlaneDiffuseRecord>() == 4);
+
+impl PlaneDiffuseRecord {
+    /// What a reader without the record assumes: the leaves lie in the plane.
+    pub const FLAT: Self = Self { flat: u16::MAX, scattered: 0 };
+
+    /// The shares `(f, s, r)` of the three ways, `r = 1 − f − s`, each in `[0, 1]` and summing to
+    /// 1 (`s` clamped to `1 − f`).
+    #[must_use]
+    pub fn shares(self) -> (f32, f32, f32) {
+        let f = f32::from(self.flat) / 65535.0;
+        let s = (f32::from(self.scattered) / 65535.0).min(1.0 - f);
+        (f, s, (1.0 - f - s).max(0.0))
+    }
+
+    /// The diffuse factor of the plane of unit normal `normal` seen along unit `view` (towards the
+    /// viewer; its sign does not matter) and lit from unit `light` (spec §6.10.2):
+    /// `(f·|N·v||N·l| + s·S(v, l) + r·R(v, l)) / (f·|N·v| + s/2 + r·(2/π)·|v_p|)` with
+    /// `S = (2/3π)(sin γ + (π/2 − γ) cos γ)`, `cos γ = |v·l|`, and
+    /// `R = |v_p||l_p|(sin δ + (π/2 − δ) cos δ)/π`, `v_p`, `l_p` the parts of `v` and `l` in the
+    /// plane and `cos δ = |v_p·l_p| / (|v_p||l_p|)`; the plane's own `|N·l|` where the
+    /// denominator vanishes (a flat plane seen edge-on).
+    #[must_use]
+    pub fn diffuse(self, normal: [f32; 3], view: [f32; 3], light: [f32; 3]) -> f32 {
+        use core::f32::consts::{FRAC_PI_2, PI};
+        let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let (f, s, r) = self.shares();
+        let (nv, nl) = (dot(normal, view), dot(normal, light));
+        // The mean |cos| of two directions at angle x (cos x = c ≥ 0) over a circle of normals.
+        let lobe = |c: f32| {
+            let c = c.clamp(0.0, 1.0);
+            let x = c.acos();
+            x.sin() + (FRAC_PI_2 - x) * c
+        };
+        let vp = [view[0] - nv * normal[0], view[1] - nv * normal[1], view[2] - nv * normal[2]];
+        let lp = [light[0] - nl * normal[0], light[1] - nl * normal[1], light[2] - nl * normal[2]];
+        let (a, b) = (dot(vp, vp).max(0.0).sqrt(), dot(lp, lp).max(0.0).sqrt());
+        let ring = if a * b > 1e-6 { a * b * lobe(dot(vp, lp).abs() / (a * b)) / PI } else { 0.0 };
+        let num = f * nv.abs() * nl.abs() + s * 2.0 / (3.0 * PI) * lobe(dot(view, light).abs()) + r * ring;
+        let den = f * nv.abs() + 0.5 * s + r * 2.0 / PI * a;
+        if den > 1e-6 { (num / den).clamp(0.0, 1.0) } else { nl.abs() }
+    }
+}
 
 /// Where each plane's [`PlaneLeafRecord`]s start in `PLANE_LEAVES` (spec §6.10.1): `base(p) =
 /// Σ_{q < p} leaf_count(q)`, one entry per plane and then the total, the length `PLANE_LEAVES`

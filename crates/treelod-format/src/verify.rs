@@ -14,9 +14,9 @@ use crate::reader::{Container, check_section_checksum};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
-    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement,
-    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, far_switch, far_threshold, image_format,
-    leaf_slots, lines_drawn_at, plane_leaf_bases,
+    PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE,
+    SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique, far_switch,
+    far_threshold, image_format, leaf_slots, lines_drawn_at, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -67,6 +67,9 @@ pub struct VerifyReport {
     /// `PLANES` records textured indirectly: their image is a `LEAF_SLOTS` image, whose slots in
     /// their rectangle were checked against their `leaf_count` (spec §6.10.1).
     pub indirect_planes: u64,
+    /// `PLANE_DIFFUSE` records checked (spec §6.10.2): their count, one per `PLANES` record, at
+    /// open; here that each record's shares sum to at most 1.
+    pub plane_diffuse: u64,
     /// `PRUNE_LEAVES` records checked.
     pub prune_leaves: u64,
     /// `PRUNE_TRIANGLES` records checked.
@@ -129,6 +132,9 @@ impl core::fmt::Display for VerifyReport {
         if self.plane_leaves + self.indirect_planes > 0 {
             writeln!(f, "indirect texturing: {} planes, {} plane leaves", self.indirect_planes, self.plane_leaves)?;
         }
+        if self.plane_diffuse > 0 {
+            writeln!(f, "planes' diffuse response: {} records", self.plane_diffuse)?;
+        }
         write!(f, "exact cut: {} leaves, runs nested up to {} deep", self.cut_leaves, self.max_depth)
     }
 }
@@ -174,6 +180,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_planes(c.planes(), image_count)?;
     report.indirect_planes =
         check_plane_leaves(c.plane_leaves(), c.planes(), c.images(), c.image_data(), material_count)?;
+    check_plane_diffuse(c.plane_diffuse())?;
     check_prune(c.prune_leaves(), c.prune_triangles())?;
     check_curve(SectionKind::PRUNE_SCALE, c.prune_scale())?;
     check_curve(SectionKind::PRUNE_LAMBDA, c.prune_lambda())?;
@@ -213,6 +220,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.far_lines = c.far_lines().len() as u64;
     report.planes = c.planes().len() as u64;
     report.plane_leaves = c.plane_leaves().len() as u64;
+    report.plane_diffuse = c.plane_diffuse().len() as u64;
     report.prune_leaves = c.prune_leaves().len() as u64;
     report.prune_triangles = c.prune_triangles().len() as u64;
     report.curve_samples = (c.prune_scale().len() + c.prune_lambda().len()) as u64;
@@ -601,6 +609,26 @@ fn check_slot_images_only_for_planes(c: &Container) -> Result<()> {
             i,
             format!("image {image} is a LEAF_SLOTS image, not a colour image"),
         ));
+    }
+    Ok(())
+}
+
+/// Spec §6.10.2: each record's shares of leaves in the plane and turned every way sum to at most
+/// 1, `flat + scattered ≤ 65535` (their count, one per plane, was checked at open).
+fn check_plane_diffuse(records: &[PlaneDiffuseRecord]) -> Result<()> {
+    let kind = SectionKind::PLANE_DIFFUSE;
+    for (i, r) in records.iter().enumerate() {
+        if u32::from(r.flat) + u32::from(r.scattered) > u32::from(u16::MAX) {
+            return Err(bad(
+                kind,
+                i,
+                format!(
+                    "flat {} + scattered {} is above 65535: the shares of leaves in the plane and turned every \
+                     way sum to more than 1",
+                    r.flat, r.scattered
+                ),
+            ));
+        }
     }
     Ok(())
 }

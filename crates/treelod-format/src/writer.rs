@@ -18,8 +18,9 @@ use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord,
-    SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord, image_format,
+    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    image_format,
 };
 
 /// How sections are stored.
@@ -104,6 +105,8 @@ pub struct ContainerData {
     pub planes: Vec<PlaneRecord>,
     /// `PLANE_LEAVES`: empty, or `leaf_count` records per plane (spec §6.10.1).
     pub plane_leaves: Vec<PlaneLeafRecord>,
+    /// `PLANE_DIFFUSE`: empty, or one record per plane (spec §6.10.2; since 1.10).
+    pub plane_diffuse: Vec<PlaneDiffuseRecord>,
     /// `PRUNE_LEAVES`.
     pub prune_leaves: Vec<PruneLeafRecord>,
     /// `PRUNE_TRIANGLES`.
@@ -163,6 +166,7 @@ impl ContainerData {
             far_lines: c.far_lines().to_vec(),
             planes: c.planes().to_vec(),
             plane_leaves: c.plane_leaves().to_vec(),
+            plane_diffuse: c.plane_diffuse().to_vec(),
             prune_leaves: c.prune_leaves().to_vec(),
             prune_triangles: c.prune_triangles().to_vec(),
             prune_scale: c.prune_scale().to_vec(),
@@ -516,6 +520,7 @@ macro_rules! optional_sections {
             (SectionKind::FAR_LINES, $payload!(far_lines)),
             (SectionKind::PLANES, $payload!(planes)),
             (SectionKind::PLANE_LEAVES, $payload!(plane_leaves)),
+            (SectionKind::PLANE_DIFFUSE, $payload!(plane_diffuse)),
             (SectionKind::PRUNE_LEAVES, $payload!(prune_leaves)),
             (SectionKind::PRUNE_TRIANGLES, $payload!(prune_triangles)),
             (SectionKind::PRUNE_SCALE, $payload!(prune_scale)),

@@ -6,10 +6,10 @@
 
 mod common;
 
-use common::reseal;
+use common::resize_section;
 use treelod_format::{
-    AO_KINDS, CellRecord, Compression, Container, ContainerData, EllipsoidRecord, Error, ImageRecord, LineRecord,
-    MINOR, PlaneRecord, Range, SectionKind, decode_ao, encode_ao, image_format, pack, verify,
+    AO_KINDS, CellRecord, Compression, Container, ContainerData, EllipsoidRecord, Error, MINOR, PlaneRecord, Range,
+    SectionKind, decode_ao, encode_ao, pack, verify,
 };
 
 fn range(first: u32, count: u32) -> Range {
@@ -46,18 +46,7 @@ fn fixture() -> ContainerData {
         leaf_count: 1,
         flags: 0,
     }];
-    data.lines = vec![LineRecord {
-        p0: [0.3, 0.3, 0.5],
-        r0: 0.02,
-        p1: [0.7, 0.7, 0.5],
-        r1: 0.01,
-        color: 0xFF20_4060,
-        lo: 0.0,
-        hi: f32::INFINITY,
-        leaf_first: 0,
-        leaf_count: 1,
-        flags: 0,
-    }];
+    data.lines = vec![common::branch_line([0.3, 0.3, 0.5], [0.7, 0.7, 0.5])];
     data.cells[1] = CellRecord {
         bounds_min: [0.25, 0.25, 0.5],
         bounds_max: [0.75, 0.75, 0.5],
@@ -66,15 +55,7 @@ fn fixture() -> ContainerData {
         lines: range(0, 1),
         ..data.cells[1]
     };
-    data.images = vec![ImageRecord {
-        width: 2,
-        height: 2,
-        mip_count: 1,
-        format: image_format::RGBA8_SRGB,
-        data_offset: 0,
-        data_length: 16,
-    }];
-    data.image_data = vec![0x80; 16];
+    common::grey_image(&mut data);
     data
 }
 
@@ -94,36 +75,6 @@ fn with_all_ao() -> ContainerData {
 fn with_far_ao() -> ContainerData {
     let data = with_all_ao();
     ContainerData { far_lines: data.lines.clone(), far_line_ao: vec![55], ..data }
-}
-
-/// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,
-/// zeroing the bytes that leave or join it (growing the file past its last section), and reseals
-/// the file.
-fn resize_section(bytes: &[u8], kind: SectionKind, delta: i64) -> Vec<u8> {
-    let mut bytes = bytes.to_vec();
-    let count = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
-    let table = u64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes")) as usize;
-    let at = (0..count)
-        .map(|i| table + 48 * i)
-        .find(|&at| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes")) == kind.0)
-        .expect("the section is present");
-    assert_eq!(u32::from_le_bytes(bytes[at + 4..at + 8].try_into().expect("4 bytes")), 0, "stored uncompressed");
-    let offset = u64::from_le_bytes(bytes[at + 8..at + 16].try_into().expect("8 bytes"));
-    let length = u64::from_le_bytes(bytes[at + 16..at + 24].try_into().expect("8 bytes"));
-    let new_length = length.checked_add_signed(delta).expect("a length");
-    assert!(new_length <= length.next_multiple_of(16), "stays within the section's padding");
-    let changed = (offset + length.min(new_length)) as usize..(offset + length.max(new_length)) as usize;
-    if changed.end > bytes.len() {
-        // The file's last section: the file grows with it.
-        bytes.resize(changed.end, 0);
-        let file_size = bytes.len() as u64;
-        bytes[32..40].copy_from_slice(&file_size.to_le_bytes());
-    }
-    bytes[changed].fill(0);
-    bytes[at + 16..at + 24].copy_from_slice(&new_length.to_le_bytes());
-    bytes[at + 24..at + 32].copy_from_slice(&new_length.to_le_bytes());
-    reseal(&mut bytes);
-    bytes
 }
 
 #[test]

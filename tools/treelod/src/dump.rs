@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 use treelod_format::{
-    CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, ImageRecord, Section, SectionKind, Setting, Source, Tree,
-    far_threshold, material_class,
+    CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, ImageRecord, PlaneDiffuseRecord, Section, SectionKind, Setting,
+    Source, Tree, far_threshold, material_class,
 };
 
 use crate::report::{self, Failed};
@@ -327,8 +327,9 @@ impl PruningInfo {
     }
 }
 
-/// The impostor planes (spec §6.10): how many, where, the atlas images they sample, and for
-/// indirect texturing (§6.10.1) the `LEAF_SLOTS` images and the `PLANE_LEAVES` count.
+/// The impostor planes (spec §6.10): how many, where, the atlas images they sample, for indirect
+/// texturing (§6.10.1) the `LEAF_SLOTS` images and the `PLANE_LEAVES` count, and their diffuse
+/// response (§6.10.2).
 #[derive(Debug, Serialize)]
 struct ImpostorInfo {
     /// `PLANES` records.
@@ -345,6 +346,63 @@ struct ImpostorInfo {
     /// `LEAF_SLOTS` image.
     #[serde(skip_serializing_if = "Option::is_none")]
     plane_leaves: Option<u64>,
+    /// The `PLANE_DIFFUSE` records (spec §6.10.2, version 1.10), when the container has any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    plane_diffuse: Option<PlaneDiffuseInfo>,
+}
+
+/// The planes' diffuse response (spec §6.10.2): the spread of the three shares of leaves over the
+/// `PLANE_DIFFUSE` records, as a reader takes them ([`PlaneDiffuseRecord::shares`]: `s` clamped to
+/// `1 − f`).
+#[derive(Debug, Serialize)]
+struct PlaneDiffuseInfo {
+    /// `PLANE_DIFFUSE` records (one per plane: checked at open).
+    records: u64,
+    /// `f = flat / 65535`, the share of a plane's leaves lying in it: `[min, mean, max]`.
+    in_plane: [f32; 3],
+    /// `s = scattered / 65535`, the share turned every way: `[min, mean, max]`.
+    scattered: [f32; 3],
+    /// `r = 1 − f − s`, the share across the plane, every way about its normal: `[min, mean, max]`.
+    across: [f32; 3],
+    /// Records equal to `FLAT` (`f = 1`: the leaves lie in their plane, what a reader without the
+    /// section assumes).
+    flat: u64,
+}
+
+impl PlaneDiffuseInfo {
+    /// The diffuse records of `container`, `None` if it has none.
+    fn new(container: &Container) -> Option<Self> {
+        let records = container.plane_diffuse();
+        let shares: Vec<(f32, f32, f32)> = records.iter().map(|r| r.shares()).collect();
+        let spread = |share: fn(&(f32, f32, f32)) -> f32| -> [f32; 3] {
+            let values = shares.iter().map(|s| f64::from(share(s)));
+            let min = values.clone().fold(f64::INFINITY, f64::min);
+            let max = values.clone().fold(f64::NEG_INFINITY, f64::max);
+            let mean = values.sum::<f64>() / shares.len() as f64;
+            [min, mean, max].map(|v| v as f32)
+        };
+        (!records.is_empty()).then(|| Self {
+            records: records.len() as u64,
+            in_plane: spread(|s| s.0),
+            scattered: spread(|s| s.1),
+            across: spread(|s| s.2),
+            flat: records.iter().filter(|&&r| r == PlaneDiffuseRecord::FLAT).count() as u64,
+        })
+    }
+
+    /// One line, after the impostors' images: each share as `min .. max (mean)`, and how many
+    /// records are `FLAT`.
+    fn to_text(&self) -> String {
+        let share = |[min, mean, max]: [f32; 3]| format!("{min} .. {max} (mean {mean})");
+        format!(
+            "  diffuse    {} records, shares of leaves in the plane {}, turned every way {}, across {}; {} flat\n",
+            self.records,
+            share(self.in_plane),
+            share(self.scattered),
+            share(self.across),
+            self.flat
+        )
+    }
 }
 
 /// One image sampled by planes.
@@ -400,6 +458,7 @@ impl ImpostorInfo {
             roots: planes.iter().filter(|p| p.hi == f32::INFINITY).count() as u64,
             atlases,
             plane_leaves: (plane_leaves > 0 || leaf_slots).then_some(plane_leaves),
+            plane_diffuse: PlaneDiffuseInfo::new(container),
         })
     }
 
@@ -430,6 +489,9 @@ impl ImpostorInfo {
             out.push_str(&format!(
                 "  leaves     {plane_leaves} plane-leaf records, no plane samples a LEAF_SLOTS image\n"
             ));
+        }
+        if let Some(diffuse) = &self.plane_diffuse {
+            out.push_str(&diffuse.to_text());
         }
         out
     }

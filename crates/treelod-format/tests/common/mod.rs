@@ -69,6 +69,39 @@ pub fn one_leaf_cell(name: &str) -> ContainerData {
     }
 }
 
+/// A branch line from `p0` (radius 0.02) to `p1` (radius 0.01), drawn at every `τ`, standing for
+/// the cell's leaf 0.
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+pub fn branch_line(p0: [f32; 3], p1: [f32; 3]) -> treelod_format::LineRecord {
+    treelod_format::LineRecord {
+        p0,
+        r0: 0.02,
+        p1,
+        r1: 0.01,
+        color: 0xFF20_4060,
+        lo: 0.0,
+        hi: f32::INFINITY,
+        leaf_first: 0,
+        leaf_count: 1,
+        flags: 0,
+    }
+}
+
+/// A 2×2 mid-grey RGBA8 sRGB image, the only image of `data` (`IMAGES` index 0), for planes to
+/// sample.
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+pub fn grey_image(data: &mut ContainerData) {
+    data.images = vec![treelod_format::ImageRecord {
+        width: 2,
+        height: 2,
+        mip_count: 1,
+        format: treelod_format::image_format::RGBA8_SRGB,
+        data_offset: 0,
+        data_length: 16,
+    }];
+    data.image_data = vec![0x80; 16];
+}
+
 #[allow(dead_code, reason = "not every test binary uses every helper")]
 /// Recomputes every section checksum and the header checksum after a byte-level edit.
 pub fn reseal(bytes: &mut [u8]) {
@@ -101,4 +134,35 @@ pub fn check(data: &ContainerData) -> Result<treelod_format::VerifyReport, treel
     let bytes = bytes_of(data);
     let c = treelod_format::Container::from_bytes(&bytes).expect("opens: only verify checks content");
     treelod_format::verify(&c)
+}
+
+/// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,
+/// zeroing the bytes that leave or join it (growing the file past its last section), and reseals
+/// the file.
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+pub fn resize_section(bytes: &[u8], kind: treelod_format::SectionKind, delta: i64) -> Vec<u8> {
+    let mut bytes = bytes.to_vec();
+    let count = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
+    let table = u64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes")) as usize;
+    let at = (0..count)
+        .map(|i| table + 48 * i)
+        .find(|&at| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes")) == kind.0)
+        .expect("the section is present");
+    assert_eq!(u32::from_le_bytes(bytes[at + 4..at + 8].try_into().expect("4 bytes")), 0, "stored uncompressed");
+    let offset = u64::from_le_bytes(bytes[at + 8..at + 16].try_into().expect("8 bytes"));
+    let length = u64::from_le_bytes(bytes[at + 16..at + 24].try_into().expect("8 bytes"));
+    let new_length = length.checked_add_signed(delta).expect("a length");
+    assert!(new_length <= length.next_multiple_of(16), "stays within the section's padding");
+    let changed = (offset + length.min(new_length)) as usize..(offset + length.max(new_length)) as usize;
+    if changed.end > bytes.len() {
+        // The file's last section: the file grows with it.
+        bytes.resize(changed.end, 0);
+        let file_size = bytes.len() as u64;
+        bytes[32..40].copy_from_slice(&file_size.to_le_bytes());
+    }
+    bytes[changed].fill(0);
+    bytes[at + 16..at + 24].copy_from_slice(&new_length.to_le_bytes());
+    bytes[at + 24..at + 32].copy_from_slice(&new_length.to_le_bytes());
+    reseal(&mut bytes);
+    bytes
 }
