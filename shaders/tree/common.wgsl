@@ -139,7 +139,13 @@ const CORNERS = array<vec2<f32>, 6>(
 // shadow maps let through at `world` (shared/shadow.wgsl), the ambient share what the
 // precomputed ambient occlusion `ao` lets through.
 fn shade(albedo: vec3<f32>, normal: vec3<f32>, world: vec3<f32>, ao: f32) -> vec3<f32> {
-    let diffuse = abs(dot(normalize(normal), frame.sun.xyz));
+    return shade_diffuse(albedo, abs(dot(normalize(normal), frame.sun.xyz)), normal, world, ao);
+}
+
+// `shade` with the sun's diffuse factor given: an impostor plane's is its leaves' mean
+// (`plane_diffuse`, spec §6.10.2), not its own normal's. Rust twin:
+// treelod_runtime::Light::shade_diffuse.
+fn shade_diffuse(albedo: vec3<f32>, diffuse: f32, normal: vec3<f32>, world: vec3<f32>, ao: f32) -> vec3<f32> {
     var sun = 0.0;
     if diffuse > 0.0 {
         sun = diffuse * sunlit(world, normal, frame.sun.xyz);

@@ -94,9 +94,47 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     }
     out.keep = keep;
     out.material = plane.image;
-    // As uploaded, `leaf_count` holds the plane's ambient-occlusion byte.
+    // As uploaded, `leaf_count` holds the plane's ambient-occlusion byte and its diffuse response.
     out.ao = decode_ao(plane.leaf_count);
+    out.color.x = plane_diffuse(normal, normalize(frame.eye.xyz - world), plane.leaf_count);
     return out;
+}
+
+// `sin x + (π/2 − x) cos x` for `x = acos c`: π times the mean of |(n·a)(n·b)| over unit normals
+// n on the circle through two unit directions a, b at cosine `c` (spec §6.10.2).
+fn lobe(c: f32) -> f32 {
+    let k = clamp(c, 0.0, 1.0);
+    let x = acos(k);
+    return sin(x) + (1.5707964 - x) * k;
+}
+
+// The sun's diffuse factor of a plane of unit `normal` seen along unit `view` (world space): its
+// leaves' mean |n·l| weighted by the area each shows, |n·v|, for the mixture of leaves in the
+// plane (share f), turned every way (s) and across it (r = 1 − f − s) of spec §6.10.2. As
+// uploaded, bits 8–19 of `packed` hold f and bits 20–31 s (12-bit unorm). Rust twin:
+// treelod_format::PlaneDiffuseRecord::diffuse.
+fn plane_diffuse(normal: vec3<f32>, view: vec3<f32>, packed: u32) -> f32 {
+    let pi = 3.1415927;
+    let f = f32((packed >> 8u) & 4095u) / 4095.0;
+    let s = min(f32(packed >> 20u) / 4095.0, 1.0 - f);
+    let r = max(1.0 - f - s, 0.0);
+    let light = frame.sun.xyz;
+    let nv = dot(normal, view);
+    let nl = dot(normal, light);
+    let vp = view - nv * normal;
+    let lp = light - nl * normal;
+    let a = length(vp);
+    let b = length(lp);
+    var ring = 0.0;
+    if a * b > 1e-6 {
+        ring = a * b * lobe(abs(dot(vp, lp)) / (a * b)) / pi;
+    }
+    let num = f * abs(nv) * abs(nl) + s * 2.0 / (3.0 * pi) * lobe(abs(dot(view, light))) + r * ring;
+    let den = f * abs(nv) + 0.5 * s + r * 2.0 / pi * a;
+    if den > 1e-6 {
+        return clamp(num / den, 0.0, 1.0);
+    }
+    return abs(nl);
 }
 
 // The varyings of a textured quad's corner (impostor plane or billboard): texture coordinates
@@ -116,7 +154,9 @@ fn quad_corner(
     out.world = world;
     out.normal = normal;
     out.uv = mix(unpack2x16unorm(uv_min), unpack2x16unorm(uv_max), 0.5 * (corner + 1.0));
-    out.color = vec4<f32>(1.0);
+    // `x`: the sun's diffuse factor the fragment stage lights the quad with (`vs_plane` sets an
+    // impostor plane's leaves').
+    out.color = vec4<f32>(abs(dot(normal, frame.sun.xyz)), 1.0, 1.0, 1.0);
     out.material = 0xFFFFFFFFu;
     out.disc = corner;
     out.keep = vec2<f32>(0.0, 2.0);
@@ -228,7 +268,7 @@ fn fs_plane(in: Varyings) -> TriangleOut {
     if frame.debug != 0u {
         return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
     }
-    return TriangleOut(vec4<f32>(shade(texel.albedo.rgb, in.normal, in.world, in.ao) * in.tint, 1.0), mask);
+    return TriangleOut(vec4<f32>(shade_diffuse(texel.albedo.rgb, in.color.x, in.normal, in.world, in.ao) * in.tint, 1.0), mask);
 }
 
 // The shadow pass (see fs_shadow_triangle): the same coverage and cross-fade as the colour pass.

@@ -1081,9 +1081,11 @@ fn assemble(
     // Stage: the impostor atlas after the materials' images; the planes point at it.
     let mut planes: Vec<treelod_format::PlaneRecord> = Vec::new();
     let mut plane_ao = Vec::new();
+    let mut plane_diffuse = Vec::new();
     let mut plane_leaves = Vec::new();
     if let Some(impostors) = impostors {
         plane_ao = impostors.plane_ao.iter().map(|&a| encode_ao(a)).collect();
+        plane_diffuse = impostors.plane_diffuse;
         warnings.extend(impostors.note);
         let atlas = impostors.atlas;
         let index = push_atlas(&mut images, &mut image_data, &atlas);
@@ -1186,6 +1188,7 @@ fn assemble(
         vertex_ao: vertex_ao.map_or_else(Vec::new, |ao| ao.iter().map(|&a| encode_ao(a)).collect()),
         point_ao,
         plane_ao,
+        plane_diffuse,
         ellipsoid_ao,
         line_ao,
         ..ContainerData::default()

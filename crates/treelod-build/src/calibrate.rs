@@ -103,16 +103,16 @@ use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
     CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE,
-    Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao, image, image_format, material_class,
-    prune_leaves_drawn,
+    PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao, image, image_format,
+    material_class, prune_leaves_drawn,
 };
 use treelod_runtime::impostor::{
     BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
 };
 use treelod_runtime::prune::{PruneScale, curve_at, leaf_scale, size_factor};
 use treelod_runtime::{
-    Calibration, ChainPick, DEFAULT_LEVEL_BLEND, LodChain, LodSettings, Policy, Technique, Thresholds, level_keep,
-    point_drawn, triangle_drawn,
+    Calibration, ChainPick, DEFAULT_LEVEL_BLEND, Light, LodChain, LodSettings, Policy, Technique, Thresholds,
+    level_keep, point_drawn, triangle_drawn,
 };
 
 use treelod_runtime::policy::target_at;
@@ -264,6 +264,9 @@ struct Quad {
     corners: [Vec3; 4],
     /// The normal it is lit with (`axis_u × axis_v`).
     normal: Vec3,
+    /// How the leaves it stands for take the sun (spec §6.10.2; [`PlaneDiffuseRecord::FLAT`]
+    /// for a billboard or a plane without the record).
+    diffuse: PlaneDiffuseRecord,
     /// The atlas it samples.
     image: u32,
     /// Its rectangle of the atlas, packed (`uv_min`, `uv_max`).
@@ -277,7 +280,13 @@ const QUAD_CORNERS: [(f32, f32); 4] = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-
 impl Quad {
     /// The flat quad `centre ± u ± v` (spec §6.10), lit with `u × v`.
     fn flat(centre: Vec3, (u, v): (Vec3, Vec3), image: u32, uv: (u32, u32)) -> Self {
-        Self { corners: QUAD_CORNERS.map(|(s, t)| centre + u * s + v * t), normal: u.cross(v), image, uv }
+        Self {
+            corners: QUAD_CORNERS.map(|(s, t)| centre + u * s + v * t),
+            normal: u.cross(v),
+            diffuse: PlaneDiffuseRecord::FLAT,
+            image,
+            uv,
+        }
     }
 }
 
@@ -718,6 +727,7 @@ impl<'a> Scene<'a> {
                     let ao = d.plane_ao.get(i).map_or(0.0, |&a| decode_ao(a));
                     let mut quad =
                         Quad::flat(Vec3::from_array(plane.center), (u, v), plane.image, (plane.uv_min, plane.uv_max));
+                    quad.diffuse = d.plane_diffuse.get(i).copied().unwrap_or(PlaneDiffuseRecord::FLAT);
                     if let Some(parent) = parent {
                         quad.corners = quad.corners.map(|corner| morph_corner(corner, parent, morph_share(plane, tau)));
                     }
@@ -780,8 +790,8 @@ impl<'a> Scene<'a> {
 
     /// `quad` textured by its atlas rectangle as `quad_texel` in `shaders/tree/planes.wgsl`
     /// samples it (bilinear in the stored mip level nearest to its footprint, alpha tested at one
-    /// half: the atlas's mips keep the covered fraction), lit with the quad's normal and ambient
-    /// occlusion `ao`, on the pixels whose [`level_dither`] value lies in `keep` (`from ≤ h <
+    /// half: the atlas's mips keep the covered fraction), lit as `vs_plane` lights it (the quad's
+    /// normal and the diffuse response of its leaves) with ambient occlusion `ao`, on the pixels whose [`level_dither`] value lies in `keep` (`from ≤ h <
     /// to`, the cross-fade of `vs_plane`; [`EVERY_PIXEL`] for all).
     fn quad(&self, canvas: &mut Canvas, view: &View, quad: &Quad, ao: f32, keep: (f32, f32)) {
         let Some(atlas) = self.atlases.get(quad.image as usize).and_then(Option::as_ref) else { return };
@@ -789,7 +799,7 @@ impl<'a> Scene<'a> {
         let corner = |q: Vec3, (s, t): (f32, f32)| {
             (view.project(q), lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo), depth(view, q))
         };
-        let normal = quad.normal;
+        let diffuse = Light::DEFAULT.plane_diffuse(quad.normal, view.direction, quad.diffuse);
         #[expect(clippy::cast_precision_loss, reason = "texture sides")]
         let texels = Vec2::new(atlas.size.0 as f32, atlas.size.1 as f32);
         let [a, b, c, e] = [0, 1, 2, 3].map(|i| corner(quad.corners[i], QUAD_CORNERS[i]));
@@ -804,7 +814,7 @@ impl<'a> Scene<'a> {
                 let uv = uvs[0] * w[0] + uvs[1] * w[1] + uvs[2] * w[2];
                 let [r, g, b, alpha] = texels::sample(&atlas.levels, atlas.size, uv.to_array(), lod, atlas.sampler);
                 if alpha >= 0.5 {
-                    canvas.put(x, y, z, Surface { albedo: Vec3::new(r, g, b), normal, ao }.shaded());
+                    canvas.put(x, y, z, Light::DEFAULT.shade_diffuse(Vec3::new(r, g, b), diffuse, ao));
                 }
             });
         }

@@ -69,12 +69,22 @@
 //!   any place in a texture atlas. It needs leaves whose outline is in their texture (`MASK` or
 //!   `BLEND`, textured): otherwise the build writes the atlas and says why ([`Impostors::note`]).
 //!
+//! - **Diffuse response** (spec §6.10.2): a plane lit as one surface takes the sun by `|N·l|` of
+//!   its own normal, its leaves by theirs, and a view sees each leaf by the area it shows, `|n·v|`:
+//!   a cluster of leaves turned every way is as bright edge-on as face-on, where its plane would
+//!   be dark. Each plane gets the shares of a mixture of leaves in the plane, turned every way and
+//!   across the plane (every way about its normal), for which the renderer's diffuse factor has a
+//!   closed form in `v` and `l`; the shares match the mean and mean square of the leaves' `|c|`
+//!   (cosine to the plane's normal), each leaf triangle's shading normal (its vertices' normals
+//!   summed) weighted as the plane's occlusion weighs it, area times `1 − occlusion` (the leaves a
+//!   view from outside reaches) (`plane_diffuse`). Exact for each of the three alone.
+//!
 //! Everything is deterministic: fixed seeds, sums in a fixed order, rayon only over independent
 //! items collected in order.
 
 use glam::{DMat2, DMat3, DQuat, DVec2, DVec3, Vec3};
 use rayon::prelude::*;
-use treelod_format::{PlaneLeafRecord, PlaneRecord, Setting, VertexRecord, image_format, pack};
+use treelod_format::{PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, Setting, VertexRecord, image_format, pack};
 
 use crate::error::BuildError;
 use crate::prune::{MeshTriangle, PruneMesh, find_leaves};
@@ -317,6 +327,8 @@ pub struct Impostors {
     /// Ambient occlusion of each plane, in the order of [`Self::planes`]: the mean of its
     /// triangles' ([`ImpostorMesh::occlusion`]) weighted by area; empty if the mesh has none.
     pub plane_ao: Vec<f32>,
+    /// How each plane's leaves take the sun (spec §6.10.2), in the order of [`Self::planes`].
+    pub plane_diffuse: Vec<PlaneDiffuseRecord>,
     /// How the planes are textured: as configured, or [`Texturing::Direct`] where indirect
     /// texturing does not apply ([`Self::note`] says why).
     pub texturing: Texturing,
@@ -676,6 +688,48 @@ pub(crate) struct Quad {
     pub(crate) v: DVec3,
 }
 
+/// The diffuse response of leaves of `(unit normal, weight)` on a plane of unit `normal` (spec
+/// §6.10.2): the mixture of leaves in the plane (share `f`), turned every way (`s`) and across it
+/// (`r = 1 − f − s`) whose leaves' `|c|` (cosine to the plane's normal) has the same mean and
+/// mean square as theirs, `f + s/2 = E|c|` and `f + s/3 = E c²`; where no mixture of the three
+/// has both, the one of two of them with the same mean whose mean square is nearest. No leaves
+/// read as lying in the plane; if every leaf has weight 0, each counts alike.
+pub(crate) fn plane_diffuse(normal: DVec3, items: &[(DVec3, f64)]) -> PlaneDiffuseRecord {
+    if items.is_empty() {
+        return PlaneDiffuseRecord::FLAT;
+    }
+    let total: f64 = items.iter().map(|&(_, w)| w).sum();
+    let weight = |w: f64| if total > 0.0 { w } else { 1.0 };
+    let (mut m1, mut m2, mut sum) = (0.0, 0.0, 0.0);
+    for &(n, w) in items {
+        let c = n.dot(normal).abs().min(1.0);
+        m1 += weight(w) * c;
+        m2 += weight(w) * c * c;
+        sum += weight(w);
+    }
+    let (m1, m2) = (m1 / sum, m2 / sum);
+    let (f, s) = (3.0 * m2 - 2.0 * m1, 6.0 * (m1 - m2));
+    let (f, s) = if f >= 0.0 && s >= 0.0 && f + s <= 1.0 {
+        (f, s)
+    } else {
+        // Two of the three with the same mean: in the plane and turned every way (E|c| ≥ 1/2),
+        // turned every way and across (E|c| ≤ 1/2), in the plane and across (any).
+        let mut pairs = vec![(m1, 0.0)];
+        if m1 >= 0.5 {
+            pairs.push((2.0 * m1 - 1.0, 2.0 * (1.0 - m1)));
+        }
+        if m1 <= 0.5 {
+            pairs.push((0.0, 2.0 * m1));
+        }
+        let off = |&(f, s): &(f64, f64)| (f + s / 3.0 - m2).abs();
+        pairs.into_iter().min_by(|a, b| off(a).total_cmp(&off(b))).unwrap_or((1.0, 0.0))
+    };
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to [0, 1] first")]
+    let unorm = |v: f64| (v.clamp(0.0, 1.0) * 65535.0).round() as u16;
+    let flat = unorm(f);
+    PlaneDiffuseRecord { flat, scattered: unorm(s).min(u16::MAX - flat) }
+}
+
 /// One region of the atlas: the content's texels and the region's place and size.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Region {
@@ -936,6 +990,30 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
         }
     };
 
+    // Stage: each plane's diffuse response, over its leaves' shading normals.
+    let plane_diffuse: Vec<PlaneDiffuseRecord> = spt
+        .order
+        .par_iter()
+        .map(|&i| {
+            let q = &quads[i as usize];
+            let items: Vec<(DVec3, f64)> = placed_triangles(i as usize)
+                .map(|(t, [a, b, c])| {
+                    let tri = &mesh.triangles[t as usize];
+                    let face = (b - a).cross(c - a);
+                    let summed: DVec3 = tri
+                        .v
+                        .iter()
+                        .map(|&v| DVec3::from(pack::oct_decode(mesh.vertices[v as usize].normal).map(f64::from)))
+                        .sum();
+                    let normal = summed.try_normalize().or_else(|| face.try_normalize()).unwrap_or(DVec3::Y);
+                    let open = 1.0 - f64::from(mesh.occlusion.get(t as usize).copied().unwrap_or(0.0).clamp(0.0, 1.0));
+                    (normal, 0.5 * face.length() * open)
+                })
+                .collect();
+            plane_diffuse(q.u.cross(q.v).normalize_or(DVec3::Y), &items)
+        })
+        .collect();
+
     // Stage: the records in SPT order, and the bounds of the quads.
     let (mut bmin, mut bmax) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     let mut planes = Vec::with_capacity(nodes.len());
@@ -996,6 +1074,7 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
         texels_per_metre: density,
         texels_per_tree,
         plane_ao,
+        plane_diffuse,
         texturing,
         plane_leaves,
         note,
@@ -1921,6 +2000,85 @@ mod tests {
     };
     use crate::scene::ImageEncoding;
     use glam::Vec2;
+
+    /// What a view along `v` sees of leaves of weighted unit normals lit from `l`: their mean
+    /// `|n·l|` weighted by the area each shows, `|n·v|`.
+    fn seen_diffuse(items: &[(DVec3, f64)], v: DVec3, l: DVec3) -> f64 {
+        let shown: f64 = items.iter().map(|&(n, w)| w * n.dot(v).abs()).sum();
+        items.iter().map(|&(n, w)| w * n.dot(v).abs() * n.dot(l).abs()).sum::<f64>() / shown
+    }
+
+    /// Unit directions spread over the sphere, from `rng`.
+    fn directions(rng: &mut SplitMix64, n: usize) -> Vec<DVec3> {
+        (0..n)
+            .map(|_| {
+                let z = rng.range(-1.0, 1.0);
+                let phi = rng.range(0.0, 2.0 * std::f32::consts::PI);
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                DVec3::new(f64::from(r * phi.cos()), f64::from(z), f64::from(r * phi.sin()))
+            })
+            .collect()
+    }
+
+    /// Leaves whose normals lie `tilt` (degrees, drawn from `tilts`) off `normal`, every way round.
+    fn tilted(rng: &mut SplitMix64, normal: DVec3, tilts: (f32, f32), n: usize) -> Vec<(DVec3, f64)> {
+        let (t1, t2) = normal.any_orthonormal_pair();
+        (0..n)
+            .map(|_| {
+                let tilt = f64::from(rng.range(tilts.0, tilts.1)).to_radians();
+                let turn = f64::from(rng.range(0.0, 360.0)).to_radians();
+                let n = normal * tilt.cos() + (t1 * turn.cos() + t2 * turn.sin()) * tilt.sin();
+                (n, f64::from(rng.range(0.5, 2.0)))
+            })
+            .collect()
+    }
+
+    /// The mean error of the record's diffuse factor and of the plane's own `|N·l|` against what
+    /// a view sees of `items`, over random views and lights.
+    fn diffuse_errors(rng: &mut SplitMix64, normal: DVec3, items: &[(DVec3, f64)]) -> (f64, f64) {
+        let record = plane_diffuse(normal, items);
+        let (mut fitted, mut own) = (0.0, 0.0);
+        let pairs = directions(rng, 400);
+        for vl in pairs.chunks_exact(2) {
+            let (v, l) = (vl[0], vl[1]);
+            let seen = seen_diffuse(items, v, l);
+            let f = record.diffuse(normal.as_vec3().to_array(), v.as_vec3().to_array(), l.as_vec3().to_array());
+            fitted += (f64::from(f) - seen).abs() / 200.0;
+            own += (normal.dot(l).abs() - seen).abs() / 200.0;
+        }
+        (fitted, own)
+    }
+
+    #[test]
+    fn a_planes_diffuse_response_is_exact_for_flat_scattered_and_crossing_leaves_and_close_between() {
+        let normal = DVec3::new(0.3, 0.9, -0.2).normalize();
+        let mut rng = SplitMix64(11);
+        // Leaves in the plane, either face up: the plane's own |N·l|.
+        let flat: Vec<(DVec3, f64)> =
+            (0..9).map(|k| (if k % 2 == 0 { normal } else { -normal }, 1.0 + f64::from(k))).collect();
+        assert_eq!(plane_diffuse(normal, &flat), PlaneDiffuseRecord::FLAT);
+        // Leaves turned every way, and leaves across the plane, every way about its normal.
+        let scattered: Vec<(DVec3, f64)> = directions(&mut rng, 4000).into_iter().map(|n| (n, 1.0)).collect();
+        let across = tilted(&mut rng, normal, (90.0, 90.0), 4000);
+        for (name, items, share) in [("scattered", &scattered, 1), ("across", &across, 2)] {
+            let record = plane_diffuse(normal, items);
+            let shares = record.shares();
+            assert!([shares.0, shares.1, shares.2][share] > 0.97, "{name}: {shares:?}");
+            let (fitted, own) = diffuse_errors(&mut rng, normal, items);
+            assert!(fitted < 0.01 && own > 0.2, "{name}: off by {fitted:.3} on average, the plane's own by {own:.3}");
+        }
+        // Leaves tilted up to 50° or 80° off the plane's normal, or all at 60°: within about half
+        // the plane's own error.
+        for tilts in [(0.0, 50.0), (0.0, 80.0), (60.0, 60.0)] {
+            let items = tilted(&mut rng, normal, tilts, 3000);
+            let (fitted, own) = diffuse_errors(&mut rng, normal, &items);
+            assert!(fitted < 0.6 * own, "tilted {tilts:?}: off by {fitted:.3} on average, the plane's own by {own:.3}");
+        }
+        // No leaves, or none of any weight.
+        assert_eq!(plane_diffuse(normal, &[]), PlaneDiffuseRecord::FLAT);
+        let weightless: Vec<(DVec3, f64)> = scattered.iter().map(|&(n, _)| (n, 0.0)).collect();
+        assert_eq!(plane_diffuse(normal, &weightless), plane_diffuse(normal, &scattered));
+    }
 
     fn random_matrix(rng: &mut SplitMix64) -> DMat3 {
         let v = |rng: &mut SplitMix64| rng.next_f64() * 2.0 - 1.0;

@@ -44,9 +44,10 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     assert_eq!(container.calibration_elevations(), out.data.calibration_elevations.as_slice());
     assert_eq!(container.chain_calibration(), out.data.chain_calibration.as_slice());
     // CALIBRATION is a kind of 1.5, the impostors' BC7 atlas (the default) one of 1.6,
-    // CALIBRATION_ELEVATIONS one of 1.7, and the chain's per-level tables (CHAIN_CALIBRATION) make
-    // the file 1.8.
-    assert_eq!(container.header().minor, 8, "the chain's per-level tables are a kind of 1.8");
+    // CALIBRATION_ELEVATIONS one of 1.7, the chain's per-level tables (CHAIN_CALIBRATION) one of
+    // 1.8, and the planes' diffuse response (PLANE_DIFFUSE) makes the file 1.10.
+    assert!(!container.chain_calibration().is_empty() && !container.plane_diffuse().is_empty());
+    assert_eq!(container.header().minor, 10, "the planes' diffuse response is a kind of 1.10");
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.

@@ -126,7 +126,9 @@ fn indirect_planes_map_each_leaf_onto_its_texture_and_name_it_in_the_slot_image(
     assert!(out.warnings.is_empty(), "{:?}", out.warnings);
     let c = open(&out);
     treelod_format::verify(&c).expect("verifies");
-    assert_eq!((c.header().major, c.header().minor), (1, 3), "PLANE_LEAVES and LEAF_SLOTS are 1.3");
+    // PLANE_LEAVES and LEAF_SLOTS are 1.3, the planes' diffuse response (PLANE_DIFFUSE) 1.10.
+    assert_eq!((c.header().major, c.header().minor), (1, 10), "PLANE_DIFFUSE is 1.10");
+    assert_eq!(c.plane_diffuse().len(), c.planes().len());
     let planes = c.planes();
     assert_eq!(planes.len(), 3);
     let total: u64 = planes.iter().map(|p| u64::from(p.leaf_count)).sum();
@@ -260,7 +262,9 @@ fn leaves_whose_outline_is_geometry_get_the_rgba_atlas_and_a_warning() {
         let atlas = c.images().last().expect("an atlas");
         assert_eq!((atlas.format, atlas.mip_count), (image_format::RGBA8_SRGB, 5), "{name}");
         assert!(c.planes().iter().all(|p| p.image as usize == c.images().len() - 1));
-        assert!(c.header().minor < 3, "{name}: nothing of 1.3 is written");
+        // Nothing of 1.3 (no leaf-slot image); the planes' diffuse response makes the file 1.10.
+        assert!(c.images().iter().all(|i| i.format != image_format::LEAF_SLOTS), "{name}");
+        assert_eq!(c.header().minor, 10, "{name}: PLANE_DIFFUSE is 1.10");
     }
 }
 

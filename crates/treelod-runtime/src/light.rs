@@ -4,6 +4,7 @@
 //! with its defaults shows.
 
 use glam::Vec3;
+use treelod_format::PlaneDiffuseRecord;
 
 /// A sun and an ambient share.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -26,9 +27,29 @@ impl Light {
     /// lit. A zero normal takes the sun's share as lit from the front.
     #[must_use]
     pub fn shade(&self, albedo: Vec3, normal: Vec3, ao: f32) -> Vec3 {
-        let sun = self.sun.normalize_or(Vec3::Y);
-        let diffuse = normal.try_normalize().map_or(1.0, |n| n.dot(sun).abs());
+        let diffuse = normal.try_normalize().map_or(1.0, |n| n.dot(self.sun.normalize_or(Vec3::Y)).abs());
+        self.shade_diffuse(albedo, diffuse, ao)
+    }
+
+    /// As [`Light::shade`], with the sun's diffuse factor given: `|n·l|` for a surface, or what
+    /// [`Light::plane_diffuse`] gives an impostor plane.
+    #[must_use]
+    pub fn shade_diffuse(&self, albedo: Vec3, diffuse: f32, ao: f32) -> Vec3 {
         albedo * (self.ambient * (1.0 - ao) + (1.0 - self.ambient) * diffuse * self.sun_colour)
+    }
+
+    /// The sun's diffuse factor of an impostor plane of `normal` (need not be unit) seen along
+    /// `view` (towards the viewer or away, need not be unit) whose leaves take the sun as `record`
+    /// says (spec §6.10.2): the leaves' mean `|n·l|` weighted by the area each shows, not the
+    /// plane's own `|N·l|`. The twin of `plane_diffuse` in `shaders/tree/planes.wgsl`. A zero
+    /// normal or view takes the sun as lit from the front.
+    #[must_use]
+    pub fn plane_diffuse(&self, normal: Vec3, view: Vec3, record: PlaneDiffuseRecord) -> f32 {
+        let sun = self.sun.normalize_or(Vec3::Y);
+        match (normal.try_normalize(), view.try_normalize()) {
+            (Some(n), Some(v)) => record.diffuse(n.to_array(), v.to_array(), sun.to_array()),
+            _ => 1.0,
+        }
     }
 }
 

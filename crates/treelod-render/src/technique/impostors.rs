@@ -4,7 +4,7 @@
 //! selection, with the bark drawn beside them (`ImpostorBark`), is
 //! `treelod_runtime::impostor::select`. WGSL: `shaders/tree/planes.wgsl`.
 
-use treelod_format::{Container, PlaneRecord};
+use treelod_format::{Container, PlaneDiffuseRecord, PlaneRecord};
 #[cfg(doc)]
 use treelod_runtime::Technique;
 use wgpu::{SamplerBindingType, ShaderStages, TextureSampleType, TextureViewDimension};
@@ -85,12 +85,14 @@ pub(crate) fn group(
 
 /// The impostor planes of `container` as uploaded: each plane's `leaf_first` (which no shader
 /// reads) holds the index of its parent plane, for the morph between levels (`vs_plane`), its
-/// `leaf_count` its ambient occlusion byte (spec §6.14), and its `image` (bound separately) where
+/// `leaf_count` its ambient occlusion byte (spec §6.14) in bits 0–7 and its diffuse response
+/// (spec §6.10.2, [`pack_diffuse`]) above, and its `image` (bound separately) where
 /// its leaves start in `PLANE_LEAVES` if it is textured indirectly (spec §6.10.1), else
 /// 0xFFFFFFFF. Says in `warnings` when `PLANE_LEAVES` does not hold what the planes need.
 pub(crate) fn gpu_planes(container: &Container, warnings: &mut Vec<String>) -> Vec<PlaneRecord> {
     let parents = treelod_runtime::plane_parents(container.planes(), container.cells().iter().map(|c| c.planes));
     let plane_ao = container.plane_ao();
+    let plane_diffuse = container.plane_diffuse();
     let bases = treelod_format::plane_leaf_bases(container.planes());
     let is_slots = |image: u32| {
         container.images().get(image as usize).is_some_and(|i| i.format == treelod_format::image_format::LEAF_SLOTS)
@@ -118,8 +120,17 @@ pub(crate) fn gpu_planes(container: &Container, warnings: &mut Vec<String>) -> V
         .map(|(i, (plane, &parent))| PlaneRecord {
             image: leaf_base(i, plane),
             leaf_first: parent,
-            leaf_count: plane_ao.get(i).copied().map_or(0, u32::from),
+            leaf_count: plane_ao.get(i).copied().map_or(0, u32::from)
+                | pack_diffuse(plane_diffuse.get(i).copied().unwrap_or(PlaneDiffuseRecord::FLAT)),
             ..*plane
         })
         .collect()
+}
+
+/// A plane's diffuse response as `vs_plane` reads it from the uploaded `leaf_count`: the share of
+/// leaves in the plane in bits 8–19 and of leaves turned every way in bits 20–31, each a 12-bit
+/// unorm rounded from the record's 16 bits.
+pub(crate) fn pack_diffuse(record: PlaneDiffuseRecord) -> u32 {
+    let twelve = |v: u16| (u32::from(v) * 4095 + 32767) / 65535;
+    twelve(record.flat) << 8 | twelve(record.scattered) << 20
 }
