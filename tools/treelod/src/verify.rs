@@ -45,14 +45,20 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
         (report.images, "image", "images"),
         (report.ellipsoids, "ellipsoid", "ellipsoids"),
         (report.lines, "line", "lines"),
+        (report.far_lines, "far line", "far lines"),
         (report.planes, "plane", "planes"),
         (report.plane_leaves, "plane leaf", "plane leaves"),
+        (report.plane_diffuse, "plane diffuse record", "plane diffuse records"),
         (report.prune_leaves, "pruned leaf", "pruned leaves"),
         (report.prune_triangles, "pruned triangle", "pruned triangles"),
         (report.curve_samples, "curve sample", "curve samples"),
         (report.lod_levels, "LoD level", "LoD levels"),
         (report.lod_triangles, "LoD triangle", "LoD triangles"),
         (report.billboards, "billboard quad", "billboard quads"),
+        (report.calibration, "calibration record", "calibration records"),
+        (report.calibration_elevations, "calibration record per elevation", "calibration records per elevation"),
+        (report.chain_calibration, "chain calibration record", "chain calibration records"),
+        (report.ao, "ambient-occlusion byte", "ambient-occlusion bytes"),
     ]
     .into_iter()
     .filter(|&(n, _, _)| n > 0)
@@ -91,5 +97,16 @@ mod tests {
             "a.treelod: ok (4 sections, 512 bytes checksummed; 2 cells; 1 triangle, 3 points; exact cut of 1 leaf)\n"
         );
         assert!(ok_line("b", &VerifyReport::default()).contains("; no records;"));
+        // Every kind verify checks is counted, the far lines and the planes' diffuse records too.
+        report.far_lines = 2;
+        report.plane_diffuse = 1;
+        report.ao = 5;
+        let line = ok_line("c", &report);
+        assert!(
+            line.contains("2 far lines")
+                && line.contains("1 plane diffuse record,")
+                && line.contains("5 ambient-occlusion bytes"),
+            "{line}"
+        );
     }
 }
