@@ -142,6 +142,14 @@ fn shade(albedo: vec3<f32>, normal: vec3<f32>, world: vec3<f32>, ao: f32) -> vec
     return shade_diffuse(albedo, abs(dot(normalize(normal), frame.sun.xyz)), normal, world, ao);
 }
 
+// `sin x + (π/2 − x) cos x` for `x = acos c`: π times the mean of |(n·a)(n·b)| over unit normals
+// n on the circle through two unit directions a, b at cosine `c` (spec §6.10.2).
+fn lobe(c: f32) -> f32 {
+    let k = clamp(c, 0.0, 1.0);
+    let x = acos(k);
+    return sin(x) + (1.5707964 - x) * k;
+}
+
 // `shade` with the sun's diffuse factor given: an impostor plane's is its leaves' mean
 // (`plane_diffuse`, spec §6.10.2), not its own normal's. Rust twin:
 // treelod_runtime::Light::shade_diffuse.

@@ -100,14 +100,6 @@ fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     return out;
 }
 
-// `sin x + (π/2 − x) cos x` for `x = acos c`: π times the mean of |(n·a)(n·b)| over unit normals
-// n on the circle through two unit directions a, b at cosine `c` (spec §6.10.2).
-fn lobe(c: f32) -> f32 {
-    let k = clamp(c, 0.0, 1.0);
-    let x = acos(k);
-    return sin(x) + (1.5707964 - x) * k;
-}
-
 // The sun's diffuse factor of a plane of unit `normal` seen along unit `view` (world space): its
 // leaves' mean |n·l| weighted by the area each shows, |n·v|, for the mixture of leaves in the
 // plane (share f), turned every way (s) and across it (r = 1 − f − s) of spec §6.10.2. As

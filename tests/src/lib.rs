@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.10, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.11, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -92,6 +92,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 chain_calibration: false,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -122,6 +123,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 chain_calibration: false,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -139,6 +141,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 chain_calibration: false,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -155,6 +158,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 chain_calibration: false,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -169,6 +173,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 chain_calibration: false,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -183,6 +188,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 chain_calibration: false,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -199,6 +205,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 chain_calibration: false,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -214,6 +221,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 chain_calibration: false,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -228,6 +236,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 far_lines: false,
                 plane_diffuse: false,
+                octahedral: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -239,7 +248,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           CALIBRATION_ELEVATIONS and CHAIN_CALIBRATION, and the block's far lines, FAR_LINES and \
                           FAR_LINE_AO), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, plane_diffuse: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                plane_diffuse: false,
+                octahedral: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -248,6 +262,17 @@ pub fn golden_files() -> Vec<GoldenFile> {
             description: "every section kind of 1.10 (1.9's: the 1.5 kinds, a BC7 impostor atlas, \
                           CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES and FAR_LINE_AO, and the planes' \
                           diffuse response, PLANE_DIFFUSE), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, octahedral: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 11,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.11 (1.10's: the 1.5 kinds, a BC7 impostor atlas, \
+                          CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO and PLANE_DIFFUSE, and an \
+                          octahedral impostor per tree on the billboards' atlas, OCTAHEDRAL), zstd level 19 with byte \
+                          shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

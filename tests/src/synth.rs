@@ -7,8 +7,9 @@ use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord,
-    NO_IMAGE, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind,
-    Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format,
+    NO_IMAGE, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
+    SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
+    image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -93,6 +94,11 @@ pub struct SyntheticOptions {
     /// `65535 − flat` (shares summing to at most 1). Drawn last, so the rest of the container is
     /// the same as without it.
     pub plane_diffuse: bool,
+    /// An octahedral impostor per tree (spec §6.13.1, 1.11) in `OCTAHEDRAL`, on the impostor
+    /// atlas that the billboards sample (needs planes): its centre inside the block, a random
+    /// radius, 2 to 16 views per side, a random rectangle of the atlas and, with `ao`, a random
+    /// occlusion (0 without). Drawn last, so the rest of the container is the same as without it.
+    pub octahedral: bool,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -137,6 +143,7 @@ impl SyntheticOptions {
             chain_calibration: false,
             far_lines: false,
             plane_diffuse: false,
+            octahedral: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -156,14 +163,15 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.10: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.11: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
     /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`),
     /// calibration tables (`CALIBRATION`, per elevation, `CALIBRATION_ELEVATIONS`, and the chain's
     /// per level, `CHAIN_CALIBRATION`), the block's far lines with their ambient occlusion
-    /// (`FAR_LINES`, `FAR_LINE_AO`) and the planes' diffuse response (`PLANE_DIFFUSE`).
+    /// (`FAR_LINES`, `FAR_LINE_AO`), the planes' diffuse response (`PLANE_DIFFUSE`) and an
+    /// octahedral impostor per tree (`OCTAHEDRAL`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -191,6 +199,7 @@ impl SyntheticOptions {
             chain_calibration: true,
             far_lines: true,
             plane_diffuse: true,
+            octahedral: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1093,6 +1102,30 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
                 PlaneDiffuseRecord { flat: flat as u16, scattered: scattered as u16 }
             })
             .collect();
+    }
+    if let (true, Some(atlas)) = (options.octahedral, b.atlas) {
+        for tree in 0..tree_count {
+            let center = core::array::from_fn(|i| bounds_min[i] + rng.uniform(0.3, 0.7) * extent[i]);
+            let radius = rng.uniform(0.2, 1.5);
+            let frames = 2 + rng.below(15);
+            let (u0, v0) = (rng.uniform(0.0, 0.5), rng.uniform(0.0, 0.5));
+            let (u1, v1) = (u0 + rng.uniform(0.1, 0.5), v0 + rng.uniform(0.1, 0.5));
+            let occlusion = if options.ao { rng.unit() } else { 0.0 };
+            let flat = rng.below(0x1_0000);
+            let diffuse = PlaneDiffuseRecord { flat: flat as u16, scattered: rng.below(0x1_0000 - flat) as u16 };
+            b.data.octahedral.push(OctahedralRecord {
+                center,
+                radius,
+                image: atlas,
+                uv_min: unorm16x2(u0, v0),
+                uv_max: unorm16x2(u1, v1),
+                frames,
+                tree,
+                occlusion,
+                diffuse,
+                reserved: 0,
+            });
+        }
     }
     if options.bc7_atlas
         && let Some(atlas) = b.atlas

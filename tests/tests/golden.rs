@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.10 (`tests/data/v1_0` to `tests/data/v1_10`): every file
+//! Golden files of format versions 1.0 to 1.11 (`tests/data/v1_0` to `tests/data/v1_11`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -25,7 +25,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -522,7 +522,7 @@ fn the_1_9_every_kind_file_has_every_kind_and_the_far_lines() {
 fn the_1_10_every_kind_file_has_every_kind_and_the_planes_diffuse_response() {
     let c = Container::open(golden_dir_of(10).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 10, "{kind}");
     }
     assert_eq!(c.header().minor, 10);
     // One record per plane, in the planes' order, with values of their own (not all FLAT).
@@ -539,6 +539,33 @@ fn the_1_10_every_kind_file_has_every_kind_and_the_planes_diffuse_response() {
     assert!(data == v1_9, "v1_10 is v1_9 with the planes' diffuse records");
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 9);
+}
+
+#[test]
+fn the_1_11_every_kind_file_has_every_kind_and_the_octahedral_impostors() {
+    let c = Container::open(golden_dir_of(11).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 11);
+    // One impostor per tree, in tree order, on the atlas the billboards sample (a colour image).
+    let (octahedral, billboards) = (c.octahedral(), c.billboards());
+    let trees: Vec<u32> = octahedral.iter().map(|o| o.tree).collect();
+    assert_eq!(trees, (0..c.block().tree_count).collect::<Vec<_>>());
+    assert!(octahedral.iter().all(|o| billboards.iter().any(|b| b.image == o.image)));
+    assert!(octahedral.iter().all(|o| c.images()[o.image as usize].format == image_format::BC7_LINEAR));
+    assert!(octahedral.iter().all(|o| (2..=64).contains(&o.frames) && o.radius > 0.0));
+    assert!(octahedral.iter().all(|o| o.occlusion > 0.0 && o.occlusion < 1.0), "occlusion of their own");
+    assert_eq!(verify(&c).unwrap().octahedral, u64::from(c.block().tree_count));
+    // Without OCTAHEDRAL it is the 1.10 file, record for record, and the writer marks it 1.10: a
+    // 1.10 reader sees the same trees, drawn with their other representations.
+    let v1_10 =
+        ContainerData::from_container(&Container::open(golden_dir_of(10).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.octahedral.clear();
+    assert!(data == v1_10, "v1_11 is v1_10 with the octahedral impostors");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 10);
 }
 
 #[test]

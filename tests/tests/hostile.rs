@@ -225,9 +225,9 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds the planes' diffuse response (PLANE_DIFFUSE), so it is a 1.10 file.
+    // The fixture holds an octahedral impostor (OCTAHEDRAL), so it is a 1.11 file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 10);
+    assert_eq!(minor, 11);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());

@@ -58,6 +58,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 far_lines: grid[1] < 2,
                 // The planes' diffuse response with half of the grids.
                 plane_diffuse: grid[2] < 2,
+                // Octahedral impostors with half of the grids (on the atlas, with billboards or not).
+                octahedral: grid[0] < 2,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -118,6 +120,34 @@ fn check_exact_cut<T: SptElement>(what: &str, cell: usize, elements: &[T]) -> Re
         if cover.iter().any(|&c| c != 1) {
             return Err(format!("cell {cell}: {what} cover {cover:?} at tau {tau}"));
         }
+    }
+    Ok(())
+}
+
+/// The octahedral impostors (spec §6.13.1): each with 2 to 64 views per side, a finite centre, a
+/// finite radius above 0, an existing colour image, `uv_min ≤ uv_max`, a tree in range, its
+/// occlusion in `[0, 1]` and `reserved` 0; sorted by tree, at most one per tree.
+fn check_octahedral(data: &ContainerData) -> Result<(), String> {
+    let mut previous: Option<u32> = None;
+    for o in &data.octahedral {
+        let image = data.images.get(o.image as usize).ok_or_else(|| format!("octahedral image {o:?}"))?;
+        let [u0, v0] = treelod_format::pack::unpack_unorm16x2(o.uv_min);
+        let [u1, v1] = treelod_format::pack::unpack_unorm16x2(o.uv_max);
+        let valid = (2..=64).contains(&o.frames)
+            && o.center.iter().all(|c| c.is_finite())
+            && o.radius.is_finite()
+            && o.radius > 0.0
+            && image.format != image_format::LEAF_SLOTS
+            && u0 <= u1
+            && v0 <= v1
+            && o.tree < data.block.tree_count
+            && (0.0..=1.0).contains(&o.occlusion)
+            && u32::from(o.diffuse.flat) + u32::from(o.diffuse.scattered) <= 65535
+            && previous.is_none_or(|p| o.tree > p);
+        if !valid {
+            return Err(format!("octahedral impostor {o:?}"));
+        }
+        previous = Some(o.tree);
     }
     Ok(())
 }
@@ -282,6 +312,7 @@ fn check_rules(data: &ContainerData) -> Result<(), String> {
     if let Some(r) = data.plane_diffuse.iter().find(|r| u32::from(r.flat) + u32::from(r.scattered) > 0xFFFF) {
         return Err(format!("diffuse shares {} + {} above 65535", r.flat, r.scattered));
     }
+    check_octahedral(data)?;
     let mut next = 0;
     for (index, leaf) in data.prune_leaves.iter().enumerate() {
         if leaf.first_triangle != next || leaf.triangle_count == 0 {
@@ -400,7 +431,8 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 10, "everything() holds the kinds of 1.10");
+    assert_eq!(container.header().minor, 11, "everything() holds the kinds of 1.11");
+    assert_eq!(everything.octahedral.len(), everything.block.tree_count as usize, "an octahedral impostor per tree");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

@@ -15,8 +15,8 @@ use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use treelod_format::{
     BillboardRecord, BlockRecord, CellRecord, ContainerData, ImageRecord, LodLevelRecord, MATERIAL_DOUBLE_SIDED,
-    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, PointRecord, PruneLeafRecord, Range, Setting, Source, Tree,
-    TriangleRecord, VertexRecord, encode_ao, image_format, material_class, pack,
+    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralRecord, PointRecord, PruneLeafRecord, Range, Setting,
+    Source, Tree, TriangleRecord, VertexRecord, encode_ao, image_format, material_class, pack,
 };
 
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
@@ -183,7 +183,7 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
     if let Some(chain) = &config.baselines {
         settings.extend(chain.settings());
         if config.impostors.is_some() {
-            settings.push(Setting { key: "baselines.billboards".into(), value: "facing,crossed".into() });
+            settings.push(Setting { key: "baselines.billboards".into(), value: "facing,crossed,octahedral".into() });
         }
     }
     settings.push(Setting { key: "precision".into(), value: config.precision.setting() });
@@ -240,6 +240,8 @@ pub struct BuildStats {
     pub lod_triangles: u64,
     /// Baseline billboard quads written.
     pub billboards: u64,
+    /// Baseline octahedral impostors written (one per tree with billboards).
+    pub octahedral: u64,
     /// The billboard atlas, texels across and down (`[0, 0]` without).
     pub billboard_atlas: [u32; 2],
     /// Leaf ellipsoids written (0 without).
@@ -987,7 +989,14 @@ fn assemble(
         }
         clock.lap(&mut stats, "lod_chain");
         if let Some(impostors) = &impostors {
-            billboards = block_billboards(&material_keys, &tris, &vertices, trees, &impostors.texels_per_tree)?;
+            billboards = block_billboards(
+                &material_keys,
+                &tris,
+                &vertices,
+                vertex_ao.as_deref(),
+                trees,
+                &impostors.texels_per_tree,
+            )?;
             clock.lap(&mut stats, "billboards");
         }
     }
@@ -1098,10 +1107,13 @@ fn assemble(
     }
     // The billboard atlas after that.
     let mut billboard_records: Vec<BillboardRecord> = Vec::new();
+    let mut octahedral_records: Vec<OctahedralRecord> = Vec::new();
     if let Some(billboards) = billboards {
         let atlas = billboards.atlas;
         let index = push_atlas(&mut images, &mut image_data, &atlas);
         billboard_records = billboards.records.into_iter().map(|b| BillboardRecord { image: index, ..b }).collect();
+        octahedral_records =
+            billboards.octahedral.into_iter().map(|o| OctahedralRecord { image: index, ..o }).collect();
         stats.billboard_atlas = [atlas.width, atlas.height];
     }
     clock.lap(&mut stats, "images");
@@ -1145,6 +1157,7 @@ fn assemble(
     stats.lod_levels = lod_levels.len() as u64;
     stats.lod_triangles = lod_triangles.len() as u64;
     stats.billboards = billboard_records.len() as u64;
+    stats.octahedral = octahedral_records.len() as u64;
     stats.ellipsoids = ellipsoid_records.len() as u64;
     stats.lines = line_records.len() as u64;
     let data = ContainerData {
@@ -1185,6 +1198,7 @@ fn assemble(
         lod_levels,
         lod_triangles,
         billboards: billboard_records,
+        octahedral: octahedral_records,
         vertex_ao: vertex_ao.map_or_else(Vec::new, |ao| ao.iter().map(|&a| encode_ao(a)).collect()),
         point_ao,
         plane_ao,
@@ -1484,12 +1498,14 @@ fn surfaces<'a>(
         .collect()
 }
 
-/// The baseline billboards of a block ([`crate::billboard`]): every triangle of each tree, bark
-/// and leaves, baked with its source material, at `budget` texels per tree.
+/// The baseline billboards and octahedral impostors of a block ([`crate::billboard`]): every
+/// triangle of each tree, bark and leaves, baked with its source material, at `budget` texels per
+/// tree; the impostors' occlusion from `vertex_ao` where there is some.
 fn block_billboards(
     material_keys: &[(usize, usize, Class)],
     tris: &[Tri],
     vertices: &[VertexRecord],
+    vertex_ao: Option<&[f32]>,
     trees: &[Placed<'_>],
     budget: &[u64],
 ) -> Result<Option<Billboards>, BuildError> {
@@ -1505,10 +1521,13 @@ fn block_billboards(
         .collect();
     #[expect(clippy::cast_possible_truncation, reason = "a block holds few trees")]
     let tree_count = trees.len() as u32;
+    let occlusion: Vec<f32> =
+        vertex_ao.map_or_else(Vec::new, |ao| tris.iter().map(|t| triangle_occlusion(ao, t.v)).collect());
     build_billboards(
-        &ImpostorMesh { vertices, triangles: &all, surfaces: &surfaces, occlusion: &[] },
+        &ImpostorMesh { vertices, triangles: &all, surfaces: &surfaces, occlusion: &occlusion },
         tree_count,
         budget,
+        true,
     )
 }
 

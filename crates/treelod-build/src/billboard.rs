@@ -33,12 +33,33 @@
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use treelod_format::{BillboardRecord, billboard_kind};
+use treelod_format::{BillboardRecord, OctahedralRecord, PlaneDiffuseRecord, billboard_kind, pack};
 
+use crate::ambient::seen_occlusion;
 use crate::error::BuildError;
 use crate::impostor::{
-    ALIGN, Atlas, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, Winner, align, bake, compose, shelf_pack,
+    ALIGN, Atlas, GUTTER, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, SAMPLES, Winner, align, bake, compose,
+    diffuse_item, diffuse_mixture, diffuse_moments, shelf_pack,
 };
+
+/// Views per side of a tree's octahedral impostor (spec §6.13.1): 12 × 12 views over the upper
+/// hemisphere, 44 along the horizon (8.2° apart) and 5.5 steps from the horizon to straight
+/// above (16.4°).
+pub const OCTAHEDRAL_FRAMES: u32 = 12;
+
+/// Texels per side of an octahedral view's cell (a multiple of 16, the atlas's alignment; its
+/// content is the cell less a 4-texel gutter on each side), before any shrinking: a tree up to
+/// about 120 pixels high on screen keeps a texel per pixel. Where the atlas would exceed
+/// [`MAX_ATLAS`], cells shrink by 3/4 steps (to multiples of 16, 32 at least) as the billboards'
+/// budgets do.
+pub const OCTAHEDRAL_CELL: u32 = 128;
+
+/// Samples per texel side of an octahedral view (a billboard's 4): 144 views of a tree
+/// cost 144 passes over its triangles, and a view stands for a tree a few dozen pixels high.
+pub const OCTAHEDRAL_SAMPLES: usize = 2;
+
+/// `kind` of an octahedral view's bake job (not a [`billboard_kind`]: views are not billboards).
+const OCTAHEDRAL_VIEW: u32 = u32::MAX;
 
 /// Crossed quads per tree.
 pub const CROSSED_QUADS: u32 = 3;
@@ -66,6 +87,11 @@ pub struct Billboards {
     pub facing_texels: Vec<u64>,
     /// The same for each tree's crossed quads together.
     pub crossed_texels: Vec<u64>,
+    /// Per tree with triangles, in tree order, its octahedral impostor (with `octahedral`);
+    /// `image` 0: the caller sets the atlas's index.
+    pub octahedral: Vec<OctahedralRecord>,
+    /// The same for each tree's octahedral views together.
+    pub octahedral_texels: Vec<u64>,
 }
 
 /// One quad to bake.
@@ -80,7 +106,12 @@ struct Job {
 }
 
 /// Bakes the facing and crossed billboards of each of `trees` trees from `mesh`, whose triangles
-/// are all of the block's (bark and leaves) with their tree set (see the module documentation).
+/// are all of the block's (bark and leaves) with their tree set (see the module documentation),
+/// and with `octahedral` each tree's octahedral impostor: [`OCTAHEDRAL_FRAMES`]² views, each
+/// baked as a billboard is, along [`OctahedralRecord::view_direction`] onto a square of the
+/// tree's bounding sphere about the centre of its bounds, laid out in a grid of cells of the same
+/// atlas (spec §6.13.1); its `occlusion` is the tree's triangles' as seen from outside
+/// ([`seen_occlusion`]) where `mesh` has occlusion.
 /// `budget_texels[t]` is tree `t`'s texel budget (its impostors' texels, [`crate::Impostors`]'s
 /// `texels_per_tree`); a missing entry counts as 0. `None` when there are no triangles; a tree
 /// without triangles gets no records.
@@ -94,6 +125,7 @@ pub fn build_billboards(
     mesh: &ImpostorMesh<'_>,
     trees: u32,
     budget_texels: &[u64],
+    octahedral: bool,
 ) -> Result<Option<Billboards>, BuildError> {
     if mesh.triangles.is_empty() {
         return Ok(None);
@@ -108,8 +140,10 @@ pub fn build_billboards(
         by_tree[t.tree as usize].push(i as u32);
     }
 
-    // Stage: each tree's axis, extent and quads.
+    // Stage: each tree's axis, extent and quads; and its octahedral impostor's centre and the
+    // radius of its bounding sphere.
     let mut jobs: Vec<Job> = Vec::new();
+    let mut spheres: Vec<(u32, DVec3, f64)> = Vec::new();
     for (tree, tris) in by_tree.iter().enumerate() {
         if tris.is_empty() {
             continue;
@@ -121,6 +155,9 @@ pub fn build_billboards(
         let centre = 0.5 * (lo + hi);
         let radius = corners().map(|p| (p.x - centre.x).hypot(p.z - centre.z)).fold(0.0f64, f64::max).max(5e-4);
         let half_height = (0.5 * (hi.y - lo.y)).max(5e-4);
+        if octahedral {
+            spheres.push((tree, centre, corners().map(|p| (p - centre).length()).fold(0.0f64, f64::max).max(5e-4)));
+        }
         let v = DVec3::new(0.0, half_height, 0.0);
         let budget = budget_texels.get(tree as usize).copied().unwrap_or(0);
         jobs.push(Job {
@@ -143,9 +180,11 @@ pub fn build_billboards(
         }
     }
 
-    // Stage: region sizes from the budgets, and their packing, shrinking until it fits.
+    // Stage: region sizes from the budgets, and their packing, shrinking until it fits: the
+    // billboards' regions, then each octahedral impostor's grid as one region.
     let mut scale = 1.0f64;
-    let (regions, width, height) = loop {
+    let mut cell = OCTAHEDRAL_CELL;
+    let (mut regions, width, height) = loop {
         let mut regions: Vec<Region> = jobs
             .iter()
             .map(|job| {
@@ -155,12 +194,40 @@ pub fn build_billboards(
                 Region::new(tw, th)
             })
             .collect();
+        let grid = OCTAHEDRAL_FRAMES * cell;
+        regions.extend(spheres.iter().map(|_| Region::new(grid - 2 * GUTTER, grid - 2 * GUTTER)));
         let (width, height) = pack_tight(&mut regions);
         if (width <= MAX_ATLAS && height <= MAX_ATLAS) || scale < 1e-9 {
             break (regions, width, height);
         }
         scale *= 0.75;
+        cell = (cell * 3 / 4 / ALIGN * ALIGN).max(2 * ALIGN);
     };
+    // The grids' places, then each view as a job of its own in its cell: its content the cell
+    // less a gutter, a square of the tree's bounding sphere seen along the view's direction.
+    let grids: Vec<Region> = regions.split_off(jobs.len());
+    let view_content = cell - 2 * GUTTER;
+    for (&(tree, centre, radius), grid) in spheres.iter().zip(&grids) {
+        for j in 0..OCTAHEDRAL_FRAMES {
+            for i in 0..OCTAHEDRAL_FRAMES {
+                let d = OctahedralRecord::view_direction(OCTAHEDRAL_FRAMES, i, j);
+                let (right, up) = OctahedralRecord::view_basis(d);
+                let (right, up) = (Vec3::from_array(right).as_dvec3(), Vec3::from_array(up).as_dvec3());
+                jobs.push(Job {
+                    tree,
+                    kind: OCTAHEDRAL_VIEW,
+                    centre,
+                    quad: Quad { centre: DVec3::ZERO, u: right * radius, v: up * radius },
+                    budget: 0,
+                });
+                regions.push(Region {
+                    x: grid.x + i * cell,
+                    y: grid.y + j * cell,
+                    ..Region::new(view_content, view_content)
+                });
+            }
+        }
+    }
 
     // Stage: bake each quad: the tree's triangles about its centre, front-most from the normal's
     // side.
@@ -180,7 +247,8 @@ pub fn build_billboards(
             order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
             // Placed once: `bake` goes over the triangles once per band of rows.
             let triangles: Vec<(u32, [DVec3; 3])> = order.into_iter().map(|(_, t)| (t, corners(t))).collect();
-            bake(mesh, triangles.iter().copied(), &plane, Winner::Front, &job.quad, region)
+            let samples = if job.kind == OCTAHEDRAL_VIEW { OCTAHEDRAL_SAMPLES } else { SAMPLES };
+            bake(mesh, triangles.iter().copied(), &plane, Winner::Front, &job.quad, region, samples)
         })
         .collect();
     let texels = compose(&regions, &baked, width, height);
@@ -188,8 +256,13 @@ pub fn build_billboards(
     // Stage: the records and each tree's texels.
     let mut facing_texels = vec![0u64; trees as usize];
     let mut crossed_texels = vec![0u64; trees as usize];
+    let mut octahedral_texels = vec![0u64; trees as usize];
     let mut records = Vec::with_capacity(jobs.len());
     for (job, region) in jobs.iter().zip(&regions) {
+        if job.kind == OCTAHEDRAL_VIEW {
+            octahedral_texels[job.tree as usize] += region.texels();
+            continue;
+        }
         let share = if job.kind == billboard_kind::FACING { &mut facing_texels } else { &mut crossed_texels };
         share[job.tree as usize] += region.texels();
         let (uv_min, uv_max) = region.uv(width, height);
@@ -205,12 +278,74 @@ pub fn build_billboards(
             reserved: [0; 2],
         });
     }
+    // Each octahedral impostor: the whole grid as its rectangle, each view's cell (gutter
+    // included) as the square of `radius`.
+    let octahedral = spheres
+        .iter()
+        .zip(&grids)
+        .map(|(&(tree, centre, radius), grid)| {
+            let (w, h) = (f64::from(width), f64::from(height));
+            let side = f64::from(OCTAHEDRAL_FRAMES * cell);
+            let (x, y) = (f64::from(grid.x), f64::from(grid.y));
+            #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]; metres")]
+            let record = OctahedralRecord {
+                center: centre.as_vec3().to_array(),
+                radius: (radius * f64::from(cell) / f64::from(view_content)) as f32,
+                image: 0,
+                uv_min: pack::unorm16x2((x / w) as f32, (y / h) as f32),
+                uv_max: pack::unorm16x2(((x + side) / w) as f32, ((y + side) / h) as f32),
+                frames: OCTAHEDRAL_FRAMES,
+                tree,
+                occlusion: tree_occlusion(mesh, &by_tree[tree as usize]),
+                diffuse: tree_diffuse(mesh, &by_tree[tree as usize]),
+                reserved: 0,
+            };
+            record
+        })
+        .collect();
     Ok(Some(Billboards {
         records,
         atlas: Atlas { width, height, format: treelod_format::image_format::RGBA8_SRGB, mip_count: MIP_LEVELS, texels },
         facing_texels,
         crossed_texels,
+        octahedral,
+        octahedral_texels,
     }))
+}
+
+/// The occlusion of a tree's `triangles` as its views show them: their mean, each weighted by
+/// its area and its share of open directions ([`seen_occlusion`]); 0 where `mesh` has none.
+fn tree_occlusion(mesh: &ImpostorMesh<'_>, triangles: &[u32]) -> f32 {
+    if mesh.occlusion.is_empty() {
+        return 0.0;
+    }
+    let items: Vec<(f32, f32)> = triangles
+        .iter()
+        .map(|&t| {
+            let [a, b, c] = mesh.triangles[t as usize].v.map(|v| Vec3::from_array(mesh.vertices[v as usize].position));
+            (mesh.occlusion.get(t as usize).copied().unwrap_or(0.0), 0.5 * (b - a).cross(c - a).length())
+        })
+        .collect();
+    seen_occlusion(&items).clamp(0.0, 1.0)
+}
+
+/// How a tree's `triangles` take the sun as its octahedral views show them (spec §6.13.1): the
+/// mixture of [`diffuse_mixture`] whose `|n·d|` has the mean and mean square of the triangles'
+/// (each weighted as [`diffuse_item`] weighs it), averaged over the directions `d` of the views.
+fn tree_diffuse(mesh: &ImpostorMesh<'_>, triangles: &[u32]) -> PlaneDiffuseRecord {
+    let position = |v: u32| Vec3::from_array(mesh.vertices[v as usize].position).as_dvec3();
+    let items: Vec<(DVec3, f64)> =
+        triangles.iter().map(|&t| diffuse_item(mesh, t, mesh.triangles[t as usize].v.map(position))).collect();
+    let (mut m1, mut m2, mut views) = (0.0, 0.0, 0.0);
+    for j in 0..OCTAHEDRAL_FRAMES {
+        for i in 0..OCTAHEDRAL_FRAMES {
+            let d = Vec3::from_array(OctahedralRecord::view_direction(OCTAHEDRAL_FRAMES, i, j)).as_dvec3();
+            if let Some((a, b)) = diffuse_moments(d, &items) {
+                (m1, m2, views) = (m1 + a, m2 + b, views + 1.0);
+            }
+        }
+    }
+    if views > 0.0 { diffuse_mixture(m1 / views, m2 / views) } else { PlaneDiffuseRecord::FLAT }
 }
 
 /// Shelf-packs `regions` ([`shelf_pack`]) at the width, of up to 256 evenly spaced multiples of
@@ -308,7 +443,7 @@ mod tests {
         let materials = materials();
         let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
         let mesh = ImpostorMesh { vertices, triangles, surfaces: &surfaces, occlusion: &[] };
-        build_billboards(&mesh, trees, budget).unwrap().unwrap()
+        build_billboards(&mesh, trees, budget, false).unwrap().unwrap()
     }
 
     /// The content rectangle of a record in level 0: `(x0, y0, x1, y1)`, texels.
@@ -338,6 +473,80 @@ mod tests {
 
     const RED: [u8; 3] = [255, 0, 0];
     const BLUE: [u8; 3] = [0, 0, 255];
+
+    /// The level-0 texel of view `(i, j)` of `record`'s grid where the block-space point `p`
+    /// projects (spec §6.13.1).
+    fn view_texel_at(atlas: &Atlas, record: &OctahedralRecord, (i, j): (u32, u32), p: Vec3) -> [u8; 4] {
+        let d = OctahedralRecord::view_direction(record.frames, i, j);
+        let (right, up) = OctahedralRecord::view_basis(d);
+        let q = p - Vec3::from_array(record.center);
+        let (s, t) = (q.dot(Vec3::from_array(right)) / record.radius, q.dot(Vec3::from_array(up)) / record.radius);
+        let [u0, v0] = pack::unpack_unorm16x2(record.uv_min);
+        let [u1, v1] = pack::unpack_unorm16x2(record.uv_max);
+        let n = record.frames as f32;
+        let u = u0 + (i as f32 + (s + 1.0) * 0.5) / n * (u1 - u0);
+        let v = v0 + (j as f32 + (t + 1.0) * 0.5) / n * (v1 - v0);
+        texel(atlas, (u * atlas.width as f32).floor() as usize, (v * atlas.height as f32).floor() as usize)
+    }
+
+    /// Each tree's octahedral impostor: its grid of square cells in the atlas, the bounding
+    /// sphere's square in each cell's content, and the views as the spec maps them: from the
+    /// horizon at `+Z` the red card in front, from `−Z` the blue one, from `+X` both cards edge on
+    /// (nothing), the cells' borders transparent.
+    #[test]
+    fn octahedral_views_show_the_tree_from_their_directions() {
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        tree(&mut vertices, &mut triangles, 0.0, 0);
+        tree(&mut vertices, &mut triangles, 5.0, 1);
+        let materials = materials();
+        let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
+        let occlusion: Vec<f32> = (0..triangles.len()).map(|t| if t < 6 { 0.5 } else { 0.0 }).collect();
+        let mesh =
+            ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &occlusion };
+        let out = build_billboards(&mesh, 2, &[20_000, 20_000], true).unwrap().unwrap();
+        assert_eq!(out.records.len(), 8, "the billboards as without");
+        assert_eq!(out.octahedral.len(), 2);
+        let n = OCTAHEDRAL_FRAMES;
+        for (k, r) in out.octahedral.iter().enumerate() {
+            let dx = 5.0 * k as f32;
+            assert_eq!((r.tree, r.frames, r.image, r.reserved), (k as u32, n, 0, 0));
+            // Centre of the bounds; the farthest corner (±1, 0 or 4, −0.3) 2.0224 from it, and a
+            // gutter of 4 texels of 128 on each side.
+            let c = Vec3::new(dx, 2.0, 0.15);
+            assert!(Vec3::from_array(r.center).abs_diff_eq(c, 1e-6), "{r:?}");
+            let sphere = (1.0f32 + 4.0 + 0.45 * 0.45).sqrt();
+            assert!((r.radius - sphere * 128.0 / 120.0).abs() < 1e-4, "{r:?}");
+            // Tree 0's triangles are half occluded, tree 1's open.
+            assert!((r.occlusion - if k == 0 { 0.5 } else { 0.0 }).abs() < 1e-6, "{r:?}");
+            let (x0, y0, x1, y1) = {
+                let [u0, v0] = pack::unpack_unorm16x2(r.uv_min);
+                let [u1, v1] = pack::unpack_unorm16x2(r.uv_max);
+                let (w, h) = (out.atlas.width as f32, out.atlas.height as f32);
+                ((u0 * w).round() as u32, (v0 * h).round() as u32, (u1 * w).round() as u32, (v1 * h).round() as u32)
+            };
+            assert_eq!((x1 - x0, y1 - y0), (n * 128, n * 128), "{r:?}");
+            assert_eq!((x0 % ALIGN, y0 % ALIGN), (0, 0));
+            assert_eq!(out.octahedral_texels[k], u64::from(n * n * 128 * 128));
+            // The horizon at +Z is view (N − 1, 0), at −Z (0, N − 1), at +X (N − 1, N − 1).
+            let front = Vec3::new(dx - 0.5, 2.0, 0.6);
+            assert_eq!(view_texel_at(&out.atlas, r, (n - 1, 0), front)[..3], RED);
+            assert_eq!(view_texel_at(&out.atlas, r, (0, n - 1), front)[..3], BLUE);
+            assert_eq!(view_texel_at(&out.atlas, r, (n - 1, n - 1), front)[3], 0, "cards edge on");
+            // The invisible card's half is empty from the front.
+            assert_eq!(view_texel_at(&out.atlas, r, (n - 1, 0), Vec3::new(dx + 0.5, 2.0, 0.0))[3], 0);
+            // Every cell's border (its gutter) is transparent, in every view.
+            for j in 0..n {
+                for i in 0..n {
+                    let (cx, cy) = ((x0 + i * 128) as usize, (y0 + j * 128) as usize);
+                    for e in 0..128 {
+                        for (x, y) in [(cx + e, cy), (cx, cy + e), (cx + e, cy + 127), (cx + 127, cy + e)] {
+                            assert_eq!(texel(&out.atlas, x, y)[3], 0, "view ({i}, {j}) at ({x}, {y})");
+                        }
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn records_have_the_axis_extent_kind_and_order_of_the_module_documentation() {
@@ -467,6 +676,6 @@ mod tests {
         let materials = materials();
         let surfaces = [Surface { material: &materials[0], image: None }];
         let empty = ImpostorMesh { vertices: &vertices, triangles: &[], surfaces: &surfaces, occlusion: &[] };
-        assert_eq!(build_billboards(&empty, 1, &[100]).unwrap(), None);
+        assert_eq!(build_billboards(&empty, 1, &[100], true).unwrap(), None);
     }
 }

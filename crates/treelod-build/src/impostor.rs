@@ -98,7 +98,7 @@ use crate::texture::{linear_to_srgb, srgb_to_linear_table};
 pub const DEFAULT_LEVELS: [u32; 3] = [32, 16, 8];
 
 /// Samples per texel side when baking.
-const SAMPLES: usize = 4;
+pub(crate) const SAMPLES: usize = 4;
 
 /// Texel rows baked at a time: 64 rows of a 2048-texel-wide quad hold 33 MB of samples.
 const BAND_ROWS: usize = 64;
@@ -107,7 +107,7 @@ const BAND_ROWS: usize = 64;
 const SPAN_MARGIN: f64 = 2.0;
 
 /// Transparent texels around each region's content.
-const GUTTER: u32 = 4;
+pub(crate) const GUTTER: u32 = 4;
 
 /// Region sizes and places are multiples of this, `2^(MIP_LEVELS − 1)`: every mip texel of a
 /// region lies in that region.
@@ -695,8 +695,17 @@ pub(crate) struct Quad {
 /// has both, the one of two of them with the same mean whose mean square is nearest. No leaves
 /// read as lying in the plane; if every leaf has weight 0, each counts alike.
 pub(crate) fn plane_diffuse(normal: DVec3, items: &[(DVec3, f64)]) -> PlaneDiffuseRecord {
+    match diffuse_moments(normal, items) {
+        Some((m1, m2)) => diffuse_mixture(m1, m2),
+        None => PlaneDiffuseRecord::FLAT,
+    }
+}
+
+/// The weighted mean and mean square of `|c|`, the cosine of each of `items`' unit normals to
+/// `normal` ([`plane_diffuse`]); `None` without items. If every weight is 0, each counts alike.
+pub(crate) fn diffuse_moments(normal: DVec3, items: &[(DVec3, f64)]) -> Option<(f64, f64)> {
     if items.is_empty() {
-        return PlaneDiffuseRecord::FLAT;
+        return None;
     }
     let total: f64 = items.iter().map(|&(_, w)| w).sum();
     let weight = |w: f64| if total > 0.0 { w } else { 1.0 };
@@ -707,7 +716,11 @@ pub(crate) fn plane_diffuse(normal: DVec3, items: &[(DVec3, f64)]) -> PlaneDiffu
         m2 += weight(w) * c * c;
         sum += weight(w);
     }
-    let (m1, m2) = (m1 / sum, m2 / sum);
+    Some((m1 / sum, m2 / sum))
+}
+
+/// The mixture of [`plane_diffuse`] whose `|c|` has mean `m1` and mean square `m2`.
+pub(crate) fn diffuse_mixture(m1: f64, m2: f64) -> PlaneDiffuseRecord {
     let (f, s) = (3.0 * m2 - 2.0 * m1, 6.0 * (m1 - m2));
     let (f, s) = if f >= 0.0 && s >= 0.0 && f + s <= 1.0 {
         (f, s)
@@ -728,6 +741,19 @@ pub(crate) fn plane_diffuse(normal: DVec3, items: &[(DVec3, f64)]) -> PlaneDiffu
     let unorm = |v: f64| (v.clamp(0.0, 1.0) * 65535.0).round() as u16;
     let flat = unorm(f);
     PlaneDiffuseRecord { flat, scattered: unorm(s).min(u16::MAX - flat) }
+}
+
+/// Triangle `t` of `mesh` (placed at `[a, b, c]`) as [`plane_diffuse`] counts it: its shading
+/// normal (its vertex normals summed; its face's where they cancel) and its area times the share
+/// of its rays that leave, `1 − occlusion` (a view from outside sees it as often).
+pub(crate) fn diffuse_item(mesh: &ImpostorMesh<'_>, t: u32, [a, b, c]: [DVec3; 3]) -> (DVec3, f64) {
+    let tri = &mesh.triangles[t as usize];
+    let face = (b - a).cross(c - a);
+    let summed: DVec3 =
+        tri.v.iter().map(|&v| DVec3::from(pack::oct_decode(mesh.vertices[v as usize].normal).map(f64::from))).sum();
+    let normal = summed.try_normalize().or_else(|| face.try_normalize()).unwrap_or(DVec3::Y);
+    let open = 1.0 - f64::from(mesh.occlusion.get(t as usize).copied().unwrap_or(0.0).clamp(0.0, 1.0));
+    (normal, 0.5 * face.length() * open)
 }
 
 /// One region of the atlas: the content's texels and the region's place and size.
@@ -941,7 +967,9 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
             // Stage: bake each plane's leaves into its region, with mips, and compose the atlas.
             let baked: Vec<Vec<Vec<u8>>> = (0..nodes.len())
                 .into_par_iter()
-                .map(|i| bake(mesh, placed_triangles(i), &nodes[i].plane, Winner::Nearest, &quads[i], &regions[i]))
+                .map(|i| {
+                    bake(mesh, placed_triangles(i), &nodes[i].plane, Winner::Nearest, &quads[i], &regions[i], SAMPLES)
+                })
                 .collect();
             let texels = compose(&regions, &baked, width, height);
             Atlas { width, height, format: image_format::RGBA8_SRGB, mip_count: MIP_LEVELS, texels }
@@ -996,20 +1024,8 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
         .par_iter()
         .map(|&i| {
             let q = &quads[i as usize];
-            let items: Vec<(DVec3, f64)> = placed_triangles(i as usize)
-                .map(|(t, [a, b, c])| {
-                    let tri = &mesh.triangles[t as usize];
-                    let face = (b - a).cross(c - a);
-                    let summed: DVec3 = tri
-                        .v
-                        .iter()
-                        .map(|&v| DVec3::from(pack::oct_decode(mesh.vertices[v as usize].normal).map(f64::from)))
-                        .sum();
-                    let normal = summed.try_normalize().or_else(|| face.try_normalize()).unwrap_or(DVec3::Y);
-                    let open = 1.0 - f64::from(mesh.occlusion.get(t as usize).copied().unwrap_or(0.0).clamp(0.0, 1.0));
-                    (normal, 0.5 * face.length() * open)
-                })
-                .collect();
+            let items: Vec<(DVec3, f64)> =
+                placed_triangles(i as usize).map(|(t, corners)| diffuse_item(mesh, t, corners)).collect();
             plane_diffuse(q.u.cross(q.v).normalize_or(DVec3::Y), &items)
         })
         .collect();
@@ -1267,7 +1283,8 @@ pub(crate) fn compose(regions: &[Region], baked: &[Vec<Vec<u8>>], width: u32, he
 /// Draws the triangles `triangles` (index into `mesh.triangles` and placed corners, relative to
 /// the origin of work) onto `quad` (module documentation; `winner` keeps a sample where they
 /// overlap, by the distance from `plane`) and returns the region's levels, RGBA8 sRGB, each
-/// `(rw >> l) × (rh >> l)`. The sample at `quad.centre + s·u + t·v` lands at `((s + 1)/2,
+/// `(rw >> l) × (rh >> l)`, each texel the mean of `samples × samples` samples ([`SAMPLES`] for
+/// planes and billboards). The sample at `quad.centre + s·u + t·v` lands at `((s + 1)/2,
 /// (t + 1)/2)` of the content rectangle, rows top to bottom (spec §6.10's texture coordinates).
 pub(crate) fn bake(
     mesh: &ImpostorMesh<'_>,
@@ -1276,9 +1293,10 @@ pub(crate) fn bake(
     winner: Winner,
     quad: &Quad,
     region: &Region,
+    samples: usize,
 ) -> Vec<Vec<u8>> {
     let lut = srgb_to_linear_table();
-    let (sw, sh) = (region.tw as usize * SAMPLES, region.th as usize * SAMPLES);
+    let (sw, sh) = (region.tw as usize * samples, region.th as usize * samples);
     let (rw, rh) = (region.rw as usize, region.rh as usize);
     let mut texels = vec![[0.0f32; 4]; rw * rh];
     let g = GUTTER as usize;
@@ -1286,7 +1304,7 @@ pub(crate) fn bake(
     // sample sees the same triangles in the same order as in one pass, so the result is the
     // same, and the samples of a large quad (a whole-tree billboard of millions of texels) need
     // a band's memory, not the quad's.
-    let band_samples = BAND_ROWS * SAMPLES;
+    let band_samples = BAND_ROWS * samples;
     let mut depth = vec![f32::INFINITY; sw * band_samples.min(sh)];
     let mut colour = vec![[0.0f32; 3]; sw * band_samples.min(sh)];
     let rows = covered_rows(triangles.clone().map(|(_, local)| local), quad, (sw, sh));
@@ -1341,12 +1359,12 @@ pub(crate) fn bake(
         }
 
         // Resolve the band's samples into the region's content.
-        for ty in band_start / SAMPLES..band_end / SAMPLES {
+        for ty in band_start / samples..band_end / samples {
             for tx in 0..region.tw as usize {
                 let (mut sum, mut covered) = ([0.0f32; 3], 0u32);
-                for sy in 0..SAMPLES {
-                    let row = (ty * SAMPLES + sy - band_start) * sw + tx * SAMPLES;
-                    for i in row..row + SAMPLES {
+                for sy in 0..samples {
+                    let row = (ty * samples + sy - band_start) * sw + tx * samples;
+                    for i in row..row + samples {
                         if depth[i].is_finite() {
                             covered += 1;
                             for c in 0..3 {
@@ -1358,7 +1376,7 @@ pub(crate) fn bake(
                 if covered > 0 {
                     let n = covered as f32;
                     texels[(ty + g) * rw + tx + g] =
-                        [sum[0] / n, sum[1] / n, sum[2] / n, n / (SAMPLES * SAMPLES) as f32];
+                        [sum[0] / n, sum[1] / n, sum[2] / n, n / (samples * samples) as f32];
                 }
             }
         }

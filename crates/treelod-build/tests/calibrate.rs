@@ -45,9 +45,11 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     assert_eq!(container.chain_calibration(), out.data.chain_calibration.as_slice());
     // CALIBRATION is a kind of 1.5, the impostors' BC7 atlas (the default) one of 1.6,
     // CALIBRATION_ELEVATIONS one of 1.7, the chain's per-level tables (CHAIN_CALIBRATION) one of
-    // 1.8, and the planes' diffuse response (PLANE_DIFFUSE) makes the file 1.10.
+    // 1.8, the planes' diffuse response (PLANE_DIFFUSE) one of 1.10, and the octahedral
+    // impostors of the baselines (OCTAHEDRAL) make the file 1.11.
     assert!(!container.chain_calibration().is_empty() && !container.plane_diffuse().is_empty());
-    assert_eq!(container.header().minor, 10, "the planes' diffuse response is a kind of 1.10");
+    assert!(!container.octahedral().is_empty());
+    assert_eq!(container.header().minor, 11, "the octahedral impostors are a kind of 1.11");
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.

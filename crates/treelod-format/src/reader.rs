@@ -10,8 +10,9 @@ use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
-    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord,
+    PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord,
+    VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -473,6 +474,12 @@ impl Container {
     #[must_use]
     pub fn billboards(&self) -> &[BillboardRecord] {
         self.records(SectionKind::BILLBOARDS)
+    }
+
+    /// Baseline octahedral impostors, one per tree that has one (spec §6.13.1). Since 1.11.
+    #[must_use]
+    pub fn octahedral(&self) -> &[OctahedralRecord] {
+        self.records(SectionKind::OCTAHEDRAL)
     }
 
     /// Ambient occlusion of each vertex (spec §6.14; [`crate::decode_ao`]), empty if the file has

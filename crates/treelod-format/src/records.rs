@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 10;
+pub const MINOR: u16 = 11;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -154,6 +154,9 @@ impl SectionKind {
     pub const LOD_TRIANGLES: Self = Self(0x0051);
     /// Baseline: [`BillboardRecord`]s, camera-facing and crossed billboards per tree (spec §6.13).
     pub const BILLBOARDS: Self = Self(0x0052);
+    /// Baseline: [`OctahedralRecord`]s, one octahedral impostor per tree: the tree baked from
+    /// views over the upper hemisphere (spec §6.13.1). Since 1.11.
+    pub const OCTAHEDRAL: Self = Self(0x0053);
     /// Ambient occlusion of each `VERTICES` record, one `unorm8` (spec §6.14). Since 1.2.
     pub const VERTEX_AO: Self = Self(0x0060);
     /// Ambient occlusion of each `POINTS` record, one `unorm8` (spec §6.14). Since 1.2.
@@ -180,7 +183,7 @@ impl SectionKind {
     pub const CALIBRATION_ELEVATIONS: Self = Self(0x0072);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 31] = [
+    pub const KNOWN: [Self; 32] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -202,6 +205,7 @@ impl SectionKind {
         Self::LOD_LEVELS,
         Self::LOD_TRIANGLES,
         Self::BILLBOARDS,
+        Self::OCTAHEDRAL,
         Self::VERTEX_AO,
         Self::POINT_AO,
         Self::PLANE_AO,
@@ -239,6 +243,7 @@ impl SectionKind {
             Self::LOD_LEVELS => "LOD_LEVELS",
             Self::LOD_TRIANGLES => "LOD_TRIANGLES",
             Self::BILLBOARDS => "BILLBOARDS",
+            Self::OCTAHEDRAL => "OCTAHEDRAL",
             Self::VERTEX_AO => "VERTEX_AO",
             Self::POINT_AO => "POINT_AO",
             Self::PLANE_AO => "PLANE_AO",
@@ -281,6 +286,7 @@ impl SectionKind {
             Self::PRUNE_SCALE | Self::PRUNE_LAMBDA => size_of::<CurveSample>(),
             Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
             Self::BILLBOARDS => size_of::<BillboardRecord>(),
+            Self::OCTAHEDRAL => size_of::<OctahedralRecord>(),
             Self::CALIBRATION => size_of::<CalibrationRecord>(),
             Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
             Self::CALIBRATION_ELEVATIONS => size_of::<ElevationCalibrationRecord>(),
@@ -297,7 +303,7 @@ impl SectionKind {
     /// the calibration tables (`CALIBRATION`), 7 for the tables per elevation
     /// (`CALIBRATION_ELEVATIONS`), 8 for the LoD chain's per-level tables (`CHAIN_CALIBRATION`), 9
     /// for the block's far lines (`FAR_LINES`, `FAR_LINE_AO`), 10 for the planes' diffuse response
-    /// (`PLANE_DIFFUSE`), 0 for
+    /// (`PLANE_DIFFUSE`), 11 for the octahedral impostors (`OCTAHEDRAL`), 0 for
     /// the other known kinds and for kinds this version does not know (private extensions do not
     /// raise a file's minor).
     #[must_use]
@@ -312,6 +318,7 @@ impl SectionKind {
             Self::CHAIN_CALIBRATION => 8,
             Self::FAR_LINES | Self::FAR_LINE_AO => 9,
             Self::PLANE_DIFFUSE => 10,
+            Self::OCTAHEDRAL => 11,
             _ => 0,
         }
     }
@@ -1057,6 +1064,92 @@ pub struct BillboardRecord {
     pub reserved: [u32; 2],
 }
 const _: () = assert!(size_of::<BillboardRecord>() == 64);
+
+/// A baseline octahedral impostor (spec §6.13.1): one tree baked orthographically from
+/// `frames × frames` directions over the upper hemisphere (a hemi-octahedral map), each view in
+/// a square cell of an atlas rectangle; drawn as one quad facing the viewer, textured from the
+/// views nearest the direction it is seen from.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct OctahedralRecord {
+    /// Centre of the views, metres (block space).
+    pub center: [f32; 3],
+    /// Half the side of each view's square, metres: a view's cell shows
+    /// `center + radius·(s·right + t·up)`, `s, t ∈ [−1, 1]`.
+    pub radius: f32,
+    /// Index into `IMAGES`: the atlas.
+    pub image: u32,
+    /// Corner of the rectangle of the views' cells, two unorm16 (u low, v high).
+    pub uv_min: u32,
+    /// Opposite corner.
+    pub uv_max: u32,
+    /// Views per side of the grid, `N ≥ 2`: `N²` views.
+    pub frames: u32,
+    /// The tree of the block.
+    pub tree: u32,
+    /// Mean ambient occlusion of the surfaces the views show, `[0, 1]` (spec §6.14): the share
+    /// of the ambient light the impostor loses.
+    pub occlusion: f32,
+    /// How the tree's surfaces take the sun as a view shows them (spec §6.13.1): the shares of a
+    /// [`PlaneDiffuseRecord`] whose plane's normal is the direction of the view, lit with
+    /// [`PlaneDiffuseRecord::diffuse`] of `(d, d, light)`.
+    pub diffuse: PlaneDiffuseRecord,
+    /// Reserved, 0.
+    pub reserved: u32,
+}
+const _: () = assert!(size_of::<OctahedralRecord>() == 48);
+
+impl OctahedralRecord {
+    /// The direction, from the centre towards the viewer (unit, block space, `+Y` up), of view
+    /// `(i, j)` of a grid of `frames × frames` (spec §6.13.1): the hemi-octahedral map's point
+    /// `a = 2i/(N−1) − 1`, `b = 2j/(N−1) − 1`, `x = (a + b)/2`, `z = (a − b)/2`,
+    /// `y = 1 − |x| − |z|`, normalised.
+    #[must_use]
+    pub fn view_direction(frames: u32, i: u32, j: u32) -> [f32; 3] {
+        let last = frames.saturating_sub(1).max(1) as f32;
+        let (a, b) = (2.0 * i as f32 / last - 1.0, 2.0 * j as f32 / last - 1.0);
+        let (x, z) = (0.5 * (a + b), 0.5 * (a - b));
+        let y = (1.0 - x.abs() - z.abs()).max(0.0);
+        let length = (x * x + y * y + z * z).sqrt();
+        [x / length, y / length, z / length]
+    }
+
+    /// A view's basis (spec §6.13.1): `right = normalize(Y × d)`, or `+X` where that vanishes
+    /// (`d = +Y`), and `up = d × right`.
+    #[must_use]
+    pub fn view_basis(d: [f32; 3]) -> ([f32; 3], [f32; 3]) {
+        // Y × d = (d.z, 0, −d.x).
+        let length = d[2].hypot(d[0]);
+        let right = if length > 1e-6 { [d[2] / length, 0.0, -d[0] / length] } else { [1.0, 0.0, 0.0] };
+        let up =
+            [d[1] * right[2] - d[2] * right[1], d[2] * right[0] - d[0] * right[2], d[0] * right[1] - d[1] * right[0]];
+        (right, up)
+    }
+
+    /// The views a reader blends for a viewer in direction `d` from the centre (block space,
+    /// any length; below the horizon it takes the horizon's views): the three corners of the
+    /// grid triangle holding `d`'s point on the hemi-octahedral map, as `(i, j, weight)` with
+    /// barycentric weights summing to 1 (informative, spec §6.13.1).
+    #[must_use]
+    pub fn blend(frames: u32, d: [f32; 3]) -> [(u32, u32, f32); 3] {
+        let y = d[1].max(0.0);
+        let sum = d[0].abs() + y + d[2].abs();
+        let (x, z) = if sum > 0.0 { (d[0] / sum, d[2] / sum) } else { (0.0, 0.0) };
+        let last = frames.saturating_sub(1).max(1);
+        let scale = last as f32;
+        // The map's point in grid units, [0, N − 1]².
+        let (gx, gy) = (((x + z) + 1.0) * 0.5 * scale, ((x - z) + 1.0) * 0.5 * scale);
+        let (gx, gy) = (gx.clamp(0.0, scale), gy.clamp(0.0, scale));
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the grid")]
+        let (i0, j0) = ((gx.floor() as u32).min(last - 1), (gy.floor() as u32).min(last - 1));
+        let (fx, fy) = (gx - i0 as f32, gy - j0 as f32);
+        if fx + fy <= 1.0 {
+            [(i0, j0, 1.0 - fx - fy), (i0 + 1, j0, fx), (i0, j0 + 1, fy)]
+        } else {
+            [(i0 + 1, j0 + 1, fx + fy - 1.0), (i0, j0 + 1, 1.0 - fx), (i0 + 1, j0, 1.0 - fy)]
+        }
+    }
+}
 
 /// The SPT view of a hierarchical record: interval and leaf run (spec §10).
 pub trait SptElement: Pod {

@@ -14,9 +14,9 @@ use crate::reader::{Container, check_section_checksum};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
-    PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE,
-    SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique, far_switch,
-    far_threshold, image_format, leaf_slots, lines_drawn_at, plane_leaf_bases,
+    OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
+    SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
+    far_switch, far_threshold, image_format, leaf_slots, lines_drawn_at, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -82,6 +82,9 @@ pub struct VerifyReport {
     pub lod_triangles: u64,
     /// `BILLBOARDS` records checked (baseline).
     pub billboards: u64,
+    /// `OCTAHEDRAL` records checked (baseline, spec §6.13.1): one octahedral impostor per tree
+    /// that has one.
+    pub octahedral: u64,
     /// `CALIBRATION` records checked.
     pub calibration: u64,
     /// `CALIBRATION_ELEVATIONS` records checked (spec §6.16).
@@ -116,12 +119,16 @@ impl core::fmt::Display for VerifyReport {
             "         {} ellipsoids, {} lines, {} planes, {} pruned leaves, {} pruned triangles, {} curve samples",
             self.ellipsoids, self.lines, self.planes, self.prune_leaves, self.prune_triangles, self.curve_samples
         )?;
-        if self.lod_levels + self.billboards > 0 {
-            writeln!(
+        if self.lod_levels + self.billboards + self.octahedral > 0 {
+            write!(
                 f,
                 "baselines: {} LoD levels, {} LoD triangles, {} billboards",
                 self.lod_levels, self.lod_triangles, self.billboards
             )?;
+            if self.octahedral > 0 {
+                write!(f, ", {} octahedral impostors", self.octahedral)?;
+            }
+            writeln!(f)?;
         }
         if self.far_lines > 0 {
             writeln!(f, "far lines: {} records over {} leaves", self.far_lines, self.far_line_leaves)?;
@@ -188,6 +195,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     let tree_count = c.block().tree_count;
     check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
     check_billboards(c.billboards(), image_count, tree_count)?;
+    check_octahedral(c.octahedral(), image_count, tree_count)?;
     check_calibration(c.calibration())?;
     check_calibration_elevations(c.calibration_elevations(), c.calibration())?;
     check_chain_calibration(c.chain_calibration(), c.lod_levels())?;
@@ -227,6 +235,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.lod_levels = c.lod_levels().len() as u64;
     report.lod_triangles = c.lod_triangles().len() as u64;
     report.billboards = c.billboards().len() as u64;
+    report.octahedral = c.octahedral().len() as u64;
     report.calibration = c.calibration().len() as u64;
     report.calibration_elevations = c.calibration_elevations().len() as u64;
     report.chain_calibration = c.chain_calibration().len() as u64;
@@ -595,7 +604,8 @@ fn check_lines(kind: SectionKind, lines: &[LineRecord]) -> Result<()> {
     Ok(())
 }
 
-/// Spec §6.10.1: a `LEAF_SLOTS` image is no colour image; no material or billboard names one.
+/// Spec §6.10.1: a `LEAF_SLOTS` image is no colour image; no material, billboard or octahedral
+/// impostor (§6.13.1) names one.
 fn check_slot_images_only_for_planes(c: &Container) -> Result<()> {
     let is_slots = |image: u32| c.images().get(image as usize).is_some_and(|i| i.format == image_format::LEAF_SLOTS);
     if let Some(i) = c.materials().iter().position(|m| is_slots(m.image)) {
@@ -606,6 +616,14 @@ fn check_slot_images_only_for_planes(c: &Container) -> Result<()> {
         let image = c.billboards()[i].image;
         return Err(bad(
             SectionKind::BILLBOARDS,
+            i,
+            format!("image {image} is a LEAF_SLOTS image, not a colour image"),
+        ));
+    }
+    if let Some(i) = c.octahedral().iter().position(|o| is_slots(o.image)) {
+        let image = c.octahedral()[i].image;
+        return Err(bad(
+            SectionKind::OCTAHEDRAL,
             i,
             format!("image {image} is a LEAF_SLOTS image, not a colour image"),
         ));
@@ -658,6 +676,18 @@ fn check_quad(
             format!("center {center:?}, axis_u {axis_u:?}, axis_v {axis_v:?} are not all finite"),
         ));
     }
+    check_atlas_rectangle(kind, i, image, [uv_min, uv_max], image_count)
+}
+
+/// Spec §6.10, §6.13, §6.13.1: record `i` of `kind` samples an existing image, and its atlas
+/// rectangle's `uv_min ≤ uv_max` per component.
+fn check_atlas_rectangle(
+    kind: SectionKind,
+    i: usize,
+    image: u32,
+    [uv_min, uv_max]: [u32; 2],
+    image_count: usize,
+) -> Result<()> {
     if image as usize >= image_count {
         return Err(bad(kind, i, format!("image {image} is out of range ({image_count} images)")));
     }
@@ -985,6 +1015,54 @@ fn check_billboards(billboards: &[BillboardRecord], image_count: usize, tree_cou
             return Err(bad(kind, i, format!("(tree, kind) ({}, {}) after {previous:?}: not sorted", b.tree, b.kind)));
         }
         previous = (b.tree, b.kind);
+    }
+    Ok(())
+}
+
+/// Largest number of views per side of an octahedral impostor's grid (spec §6.13.1).
+const MAX_OCTAHEDRAL_FRAMES: u32 = 64;
+
+/// Spec §6.13.1: octahedral impostors' fields (`frames` in `2 ..= 64`, finite `center`, finite
+/// `radius > 0`, an existing image and an atlas rectangle with `uv_min ≤ uv_max`, `tree` in
+/// range, `occlusion` in `[0, 1]`, the diffuse shares at most 1 together), sorted by `tree` with at
+/// most one per tree.
+/// That the image is a colour image (not `LEAF_SLOTS`) is checked with the billboards'
+/// ([`check_slot_images_only_for_planes`]).
+fn check_octahedral(records: &[OctahedralRecord], image_count: usize, tree_count: u32) -> Result<()> {
+    let kind = SectionKind::OCTAHEDRAL;
+    let mut previous: Option<u32> = None;
+    for (i, o) in records.iter().enumerate() {
+        if !(2..=MAX_OCTAHEDRAL_FRAMES).contains(&o.frames) {
+            return Err(bad(
+                kind,
+                i,
+                format!("frames {} is outside 2 ..= {MAX_OCTAHEDRAL_FRAMES} (views per side of the grid)", o.frames),
+            ));
+        }
+        if !finite3(o.center) {
+            return Err(bad(kind, i, format!("center {:?} is not finite", o.center)));
+        }
+        if !(o.radius.is_finite() && o.radius > 0.0) {
+            return Err(bad(kind, i, format!("radius {} is not finite and > 0", o.radius)));
+        }
+        check_atlas_rectangle(kind, i, o.image, [o.uv_min, o.uv_max], image_count)?;
+        if o.tree >= tree_count {
+            return Err(bad(kind, i, format!("tree {} is out of range ({tree_count} trees)", o.tree)));
+        }
+        if !unit(o.occlusion) {
+            return Err(bad(kind, i, format!("occlusion {} is not in [0, 1]", o.occlusion)));
+        }
+        if u32::from(o.diffuse.flat) + u32::from(o.diffuse.scattered) > u32::from(u16::MAX) {
+            let (flat, scattered) = (o.diffuse.flat, o.diffuse.scattered);
+            return Err(bad(kind, i, format!("diffuse shares flat {flat} + scattered {scattered} exceed 65535")));
+        }
+        if let Some(before) = previous
+            && o.tree <= before
+        {
+            let why = if o.tree == before { "a second impostor of the tree" } else { "not sorted by tree" };
+            return Err(bad(kind, i, format!("tree {} after tree {before}: {why}", o.tree)));
+        }
+        previous = Some(o.tree);
     }
     Ok(())
 }

@@ -18,9 +18,9 @@ use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
-    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
-    image_format,
+    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
+    PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
+    TriangleRecord, VertexRecord, image_format,
 };
 
 /// How sections are stored.
@@ -121,6 +121,8 @@ pub struct ContainerData {
     pub lod_triangles: Vec<TriangleRecord>,
     /// `BILLBOARDS` (baseline).
     pub billboards: Vec<BillboardRecord>,
+    /// `OCTAHEDRAL` (baseline; since 1.11).
+    pub octahedral: Vec<OctahedralRecord>,
     /// `VERTEX_AO`: empty, or one byte per vertex ([`crate::encode_ao`]).
     pub vertex_ao: Vec<u8>,
     /// `POINT_AO`: empty, or one byte per point.
@@ -174,6 +176,7 @@ impl ContainerData {
             lod_levels: c.lod_levels().to_vec(),
             lod_triangles: c.lod_triangles().to_vec(),
             billboards: c.billboards().to_vec(),
+            octahedral: c.octahedral().to_vec(),
             vertex_ao: c.vertex_ao().to_vec(),
             point_ao: c.point_ao().to_vec(),
             plane_ao: c.plane_ao().to_vec(),
@@ -528,6 +531,7 @@ macro_rules! optional_sections {
             (SectionKind::LOD_LEVELS, $payload!(lod_levels)),
             (SectionKind::LOD_TRIANGLES, $payload!(lod_triangles)),
             (SectionKind::BILLBOARDS, $payload!(billboards)),
+            (SectionKind::OCTAHEDRAL, $payload!(octahedral)),
             (SectionKind::VERTEX_AO, $payload!(vertex_ao)),
             (SectionKind::POINT_AO, $payload!(point_ao)),
             (SectionKind::PLANE_AO, $payload!(plane_ao)),

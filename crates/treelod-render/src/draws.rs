@@ -277,14 +277,17 @@ impl Renderer {
             };
             record_direct(&self.instances, &mut self.buckets, recorded, record, range.first, 1.0);
         }
-        // Baseline billboards: every quad of the chosen kind.
-        for &treelod_runtime::QuadDraw { instance, model, first, count } in &view.draws.billboards {
+        // Baseline billboards: every quad of the chosen kind; and octahedral impostors.
+        let quads = view.draws.billboards.iter().map(|d| (d, DrawSource::Billboards));
+        for (&treelod_runtime::QuadDraw { instance, model, first, count }, source) in
+            quads.chain(view.draws.octahedral.iter().map(|d| (d, DrawSource::Octahedral)))
+        {
             let (technique, dither) = self.drawn_by(instance, leaving);
             let record = RecordedDraw {
                 instance,
                 model: ModelId(model),
                 cell: ROOTS_CELL,
-                source: DrawSource::Billboards,
+                source,
                 count,
                 tau_points: 0.0,
                 tau_triangles: 0.0,

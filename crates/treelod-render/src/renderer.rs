@@ -591,6 +591,7 @@ impl Renderer {
                 | DrawSource::Planes
                 | DrawSource::LodLevel
                 | DrawSource::Billboards
+                | DrawSource::Octahedral
                 | DrawSource::Ellipsoids
                 | DrawSource::Lines => 0,
             } as u64;

@@ -145,6 +145,7 @@ fn check_draws(renderer: &Renderer, container: &Container) {
                 | DrawSource::Planes
                 | DrawSource::LodLevel
                 | DrawSource::Billboards
+                | DrawSource::Octahedral
                 | DrawSource::Ellipsoids
                 | DrawSource::Lines => {
                     panic!("{draw:?} without pruning, impostors, ellipsoids or baselines")

@@ -313,12 +313,14 @@ struct BaselineChunk {
 }
 
 /// The trees of `list` drawn with the baseline `baseline` ([`Technique::LodChain`],
-/// [`Technique::Billboard`] or [`Technique::Crossed`]; every model of `list` holds it, see
+/// [`Technique::Billboard`], [`Technique::Crossed`] or [`Technique::Octahedral`]; every model of
+/// `list` holds it, see
 /// [`Representations::holds`]): appends to `out` a LoD chain draw (module docs: the level by image
 /// error where the model has per-level tables, with `settings.chain_policy`'s target and
 /// hysteresis and `state`'s last levels, else the coarsest level whose error projects below
-/// `settings.s_min` pixels at the block centre, [`LodChain::pick`], or the full mesh) or the
-/// billboard quads of each instance inside the frustum, and counts them visible. `state`: the
+/// `settings.s_min` pixels at the block centre, [`LodChain::pick`], or the full mesh), the
+/// billboard quads or the octahedral impostors of each instance inside the frustum, and counts
+/// them visible. `state`: the
 /// camera's view's levels (`None` for shadow cascades: no hysteresis).
 pub fn select(
     scene: &Scene<'_>,
@@ -384,6 +386,14 @@ pub fn select(
                         tau,
                         error,
                     ));
+                }
+                (Technique::Octahedral, _, _) if model.octahedral > 0 => {
+                    out.draws.octahedral.push(QuadDraw {
+                        instance: index,
+                        model: instance.model,
+                        first: 0,
+                        count: model.octahedral,
+                    });
                 }
                 (Technique::Billboard | Technique::Crossed, _, Some(billboards)) => {
                     let (first, count) =

@@ -62,6 +62,8 @@ pub struct Representations {
     /// The baseline billboards (the facing quads, then the crossed ones), if the container has
     /// them.
     pub billboards: Option<BillboardRanges>,
+    /// The baseline octahedral impostors (spec §6.13.1), one per tree: their count, 0 without.
+    pub octahedral: u32,
 }
 
 impl Representations {
@@ -80,6 +82,7 @@ impl Representations {
         let lines = LineLod::from_container(container);
         let lod_chain = LodChain::from_container(container);
         let billboards = Billboards::from_container(container).as_ref().map(BillboardRanges::of);
+        let octahedral = u32::try_from(container.octahedral().len()).unwrap_or(u32::MAX);
         let mut whole = Vec::new();
         let mut chain = None;
         let mut bark = (0, 0);
@@ -135,7 +138,8 @@ impl Representations {
                 });
             }
         }
-        let representations = Self { block_centre, bark, prune, planes, ellipsoids, lines, chain, billboards };
+        let representations =
+            Self { block_centre, bark, prune, planes, ellipsoids, lines, chain, billboards, octahedral };
         (representations, whole)
     }
 
@@ -152,6 +156,7 @@ impl Representations {
             Technique::LodChain => self.chain.is_some(),
             Technique::Billboard => self.billboards.as_ref().is_some_and(|b| b.facing.1 > 0),
             Technique::Crossed => self.billboards.as_ref().is_some_and(|b| b.crossed.1 > 0),
+            Technique::Octahedral => self.octahedral > 0,
         }
     }
 
@@ -347,6 +352,8 @@ pub struct TreeDraws {
     pub lines: Vec<PrefixDraw>,
     /// Billboard quads.
     pub billboards: Vec<QuadDraw>,
+    /// Octahedral impostors' quads.
+    pub octahedral: Vec<QuadDraw>,
     /// Instances a technique hands to the point tree this frame, ascending (pruned trees below
     /// their projected height).
     pub point_tree: Vec<u32>,
@@ -367,6 +374,7 @@ impl TreeDraws {
         self.ellipsoids.clear();
         self.lines.clear();
         self.billboards.clear();
+        self.octahedral.clear();
         self.point_tree.clear();
         self.occlusion.clear();
         self.visible = PerTechnique::default();
@@ -380,6 +388,7 @@ impl TreeDraws {
         self.ellipsoids.append(&mut other.ellipsoids);
         self.lines.append(&mut other.lines);
         self.billboards.append(&mut other.billboards);
+        self.octahedral.append(&mut other.octahedral);
         self.point_tree.append(&mut other.point_tree);
         self.occlusion.append(&mut other.occlusion);
         self.visible += other.visible;
@@ -503,7 +512,7 @@ pub fn select_techniques(
                 let (level, lines) = (settings.pixel_level, settings.lines);
                 crate::ellipsoid::select(scene, list, camera, &settings.lod, level, lines, out);
             }
-            Technique::LodChain | Technique::Billboard | Technique::Crossed => {
+            Technique::LodChain | Technique::Billboard | Technique::Crossed | Technique::Octahedral => {
                 let state = chain_state.as_mut().map(|s| ChainState { previous: &mut *s.previous });
                 crate::baseline::select(scene, list, technique, camera, settings, state, out);
             }

@@ -44,11 +44,16 @@ pub enum Technique {
     /// Baseline: crossed billboards, three fixed quads per tree (spec §6.13).
     #[cfg_attr(feature = "clap", value(name = "crossed"))]
     Crossed,
+    /// Baseline: an octahedral impostor, one quad facing the viewer textured from the tree baked
+    /// over the upper hemisphere, the three views nearest the view direction blended (spec
+    /// §6.13.1).
+    #[cfg_attr(feature = "clap", value(name = "octahedral"))]
+    Octahedral,
 }
 
 impl Technique {
     /// Every technique, in the order tables and plots list them.
-    pub const ALL: [Self; 9] = [
+    pub const ALL: [Self; 10] = [
         Self::Full,
         Self::Spt,
         Self::PruneOpt,
@@ -58,6 +63,7 @@ impl Technique {
         Self::LodChain,
         Self::Billboard,
         Self::Crossed,
+        Self::Octahedral,
     ];
 
     /// How many techniques there are: the length of per-technique arrays.
@@ -85,6 +91,7 @@ impl Technique {
             Self::LodChain => "lod-chain",
             Self::Billboard => "billboard",
             Self::Crossed => "crossed",
+            Self::Octahedral => "octahedral",
         }
     }
 
@@ -101,6 +108,7 @@ impl Technique {
             Self::LodChain => "LoD chain",
             Self::Billboard => "billboard",
             Self::Crossed => "crossed billboards",
+            Self::Octahedral => "octahedral impostor",
         }
     }
 
@@ -117,12 +125,16 @@ impl Technique {
             Self::LodChain => "baseline: meshoptimizer LoD chain switched at s_min pixels of error",
             Self::Billboard => "baseline: one camera-facing billboard per tree",
             Self::Crossed => "baseline: crossed billboards (3 fixed quads per tree)",
+            Self::Octahedral => {
+                "baseline: octahedral impostor (one quad, the tree baked from views over the hemisphere)"
+            }
         }
     }
 
     /// The colour, linear RGB, debug views draw its trees with (the renderer's
     /// `DebugView::Techniques`): full grey, spt blue, prune-opt green, prune-cook dark green,
-    /// impostors yellow, ellipsoids cyan, lod-chain red, billboard magenta, crossed violet.
+    /// impostors yellow, ellipsoids cyan, lod-chain red, billboard magenta, crossed violet,
+    /// octahedral pink.
     #[must_use]
     pub const fn colour(self) -> [f32; 3] {
         match self {
@@ -135,6 +147,7 @@ impl Technique {
             Self::LodChain => [0.9, 0.3, 0.2],
             Self::Billboard => [0.85, 0.35, 0.85],
             Self::Crossed => [0.5, 0.3, 0.9],
+            Self::Octahedral => [0.95, 0.5, 0.65],
         }
     }
 
@@ -154,7 +167,7 @@ impl Technique {
             Self::Impostors => Some(Data::Planes),
             Self::Ellipsoids => Some(Data::Ellipsoids),
             Self::LodChain => Some(Data::LodChain),
-            Self::Billboard | Self::Crossed => Some(Data::Billboards),
+            Self::Billboard | Self::Crossed | Self::Octahedral => Some(Data::Billboards),
         }
     }
 
@@ -172,13 +185,14 @@ impl Technique {
             Self::LodChain => !container.lod_levels().is_empty(),
             Self::Billboard => container.billboards().iter().any(|b| b.kind == billboard_kind::FACING),
             Self::Crossed => container.billboards().iter().any(|b| b.kind == billboard_kind::CROSSED),
+            Self::Octahedral => !container.octahedral().is_empty(),
         }
     }
 
     /// Whether this technique is one of the baselines users draw without treelod.
     #[must_use]
     pub const fn is_baseline(self) -> bool {
-        matches!(self, Self::LodChain | Self::Billboard | Self::Crossed)
+        matches!(self, Self::LodChain | Self::Billboard | Self::Crossed | Self::Octahedral)
     }
 }
 

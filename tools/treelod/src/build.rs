@@ -1032,8 +1032,9 @@ impl Summary<'_> {
             return String::new();
         }
         format!(
-            "  baselines     LoD chain {} levels, {} triangles; {} billboard quads, atlas {}x{}\n",
-            s.lod_levels, s.lod_triangles, s.billboards, s.billboard_atlas[0], s.billboard_atlas[1]
+            "  baselines     LoD chain {} levels, {} triangles; {} billboard quads, {} octahedral impostor(s), atlas \
+             {}x{}\n",
+            s.lod_levels, s.lod_triangles, s.billboards, s.octahedral, s.billboard_atlas[0], s.billboard_atlas[1]
         )
     }
 
@@ -1148,6 +1149,7 @@ impl Summary<'_> {
             "lod_levels": s.lod_levels,
             "lod_triangles": s.lod_triangles,
             "billboards": s.billboards,
+            "octahedral": s.octahedral,
             "billboard_atlas": s.billboard_atlas,
             "warnings": b.warnings,
         });

@@ -76,7 +76,8 @@ struct Dump<'a> {
     /// The impostor planes and the images they sample (spec §6.10), when the container has planes.
     #[serde(skip_serializing_if = "Option::is_none")]
     impostors: Option<ImpostorInfo>,
-    /// The baseline sections (spec §6.12, §6.13), when the container has any of their records.
+    /// The baseline sections (spec §6.12, §6.13, §6.13.1), when the container has any of their
+    /// records.
     #[serde(skip_serializing_if = "Option::is_none")]
     baselines: Option<BaselineInfo>,
     /// The calibration (spec §6.15), its tables per elevation (§6.16) and the LoD chain's per-level
@@ -497,13 +498,17 @@ impl ImpostorInfo {
     }
 }
 
-/// The baselines of a container (spec §6.12, §6.13): each tree's LoD chain and billboards.
+/// The baselines of a container (spec §6.12, §6.13, §6.13.1): each tree's LoD chain, billboards
+/// and octahedral impostor.
 #[derive(Debug, Serialize)]
 struct BaselineInfo {
     /// `LOD_LEVELS` records in file order.
     lod_levels: Vec<LodLevelInfo>,
     /// Billboard quads per (tree, kind name), in file order.
     billboards: Vec<BillboardInfo>,
+    /// `OCTAHEDRAL` records in file order (version 1.11), when the container has any.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    octahedral: Vec<OctahedralInfo>,
 }
 
 /// One level of a tree's chain.
@@ -528,11 +533,47 @@ struct BillboardInfo {
     texels: u64,
 }
 
+/// One tree's octahedral impostor (spec §6.13.1).
+#[derive(Debug, Serialize)]
+struct OctahedralInfo {
+    tree: u32,
+    /// Views per side of the grid, `N` (`N²` views).
+    frames: u32,
+    /// Centre of the views, metres.
+    center: [f32; 3],
+    /// Half the side of each view's square, metres.
+    radius: f32,
+    /// The atlas, by index into `IMAGES`.
+    image: u32,
+    /// The rectangle of the views' cells, `[u, v]` each.
+    uv_min: [f32; 2],
+    uv_max: [f32; 2],
+    /// Texels of the rectangle (mip 0), 0 when the image does not exist.
+    texels: u64,
+    /// Mean ambient occlusion of the surfaces the views show.
+    occlusion: f32,
+    /// How its surfaces take the sun (spec §6.13.1): the shares facing the viewer and turned
+    /// every way, `flat / 65535` and `scattered / 65535`.
+    diffuse: [f32; 2],
+}
+
+/// Texels at mip 0 of the rectangle `uv_min ..= uv_max` of image `image`, 0 when there is no such
+/// image (or the rectangle is reversed).
+fn rectangle_texels(container: &Container, image: u32, uv_min: u32, uv_max: u32) -> u64 {
+    container.images().get(image as usize).map_or(0, |image| {
+        let [u0, v0] = treelod_format::pack::unpack_unorm16x2(uv_min);
+        let [u1, v1] = treelod_format::pack::unpack_unorm16x2(uv_max);
+        let w = ((u1 - u0) * image.width as f32).round() as u64;
+        let h = ((v1 - v0) * image.height as f32).round() as u64;
+        w * h
+    })
+}
+
 impl BaselineInfo {
     /// The baselines of `container`, `None` if it has none.
     fn new(container: &Container) -> Option<Self> {
-        let (levels, billboards) = (container.lod_levels(), container.billboards());
-        if levels.is_empty() && billboards.is_empty() {
+        let (levels, billboards, octahedral) = (container.lod_levels(), container.billboards(), container.octahedral());
+        if levels.is_empty() && billboards.is_empty() && octahedral.is_empty() {
             return None;
         }
         let lod_levels = levels
@@ -547,13 +588,7 @@ impl BaselineInfo {
             .collect();
         let mut out: Vec<BillboardInfo> = Vec::new();
         for b in billboards {
-            let texels = container.images().get(b.image as usize).map_or(0, |image| {
-                let [u0, v0] = treelod_format::pack::unpack_unorm16x2(b.uv_min);
-                let [u1, v1] = treelod_format::pack::unpack_unorm16x2(b.uv_max);
-                let w = ((u1 - u0) * image.width as f32).round() as u64;
-                let h = ((v1 - v0) * image.height as f32).round() as u64;
-                w * h
-            });
+            let texels = rectangle_texels(container, b.image, b.uv_min, b.uv_max);
             let kind = match b.kind {
                 treelod_format::billboard_kind::FACING => "facing".to_owned(),
                 treelod_format::billboard_kind::CROSSED => "crossed".to_owned(),
@@ -567,7 +602,22 @@ impl BaselineInfo {
                 _ => out.push(BillboardInfo { tree: b.tree, kind, quads: 1, texels }),
             }
         }
-        Some(Self { lod_levels, billboards: out })
+        let octahedral = octahedral
+            .iter()
+            .map(|o| OctahedralInfo {
+                tree: o.tree,
+                frames: o.frames,
+                center: o.center,
+                radius: o.radius,
+                image: o.image,
+                uv_min: treelod_format::pack::unpack_unorm16x2(o.uv_min),
+                uv_max: treelod_format::pack::unpack_unorm16x2(o.uv_max),
+                texels: rectangle_texels(container, o.image, o.uv_min, o.uv_max),
+                occlusion: o.occlusion,
+                diffuse: [f32::from(o.diffuse.flat) / 65535.0, f32::from(o.diffuse.scattered) / 65535.0],
+            })
+            .collect();
+        Some(Self { lod_levels, billboards: out, octahedral })
     }
 
     /// The text form.
@@ -587,6 +637,26 @@ baselines
             out.push_str(&format!(
                 "  billboard  tree {} {}: {} quad(s), {} texels\n",
                 b.tree, b.kind, b.quads, b.texels
+            ));
+        }
+        for o in &self.octahedral {
+            out.push_str(&format!(
+                "  octahedral tree {}: {}x{} views, radius {} m at {}, image {} rectangle [{}, {}] .. [{}, {}] ({} \
+                 texels), occlusion {}, diffuse flat {:.4} scattered {:.4}\n",
+                o.tree,
+                o.frames,
+                o.frames,
+                o.radius,
+                vec3(o.center),
+                o.image,
+                o.uv_min[0],
+                o.uv_min[1],
+                o.uv_max[0],
+                o.uv_max[1],
+                o.texels,
+                o.occlusion,
+                o.diffuse[0],
+                o.diffuse[1]
             ));
         }
         out
@@ -1210,7 +1280,8 @@ fn section_info(section: &Section) -> SectionInfo {
 #[derive(Debug, Serialize)]
 struct TextureUse {
     /// `materials` (the sources' images: triangles, points, LoD chain), `planes` (impostor
-    /// atlases and leaf slots), `billboards`, or `unused`.
+    /// atlases and leaf slots), `billboards`, `octahedral` (octahedral impostors' images that no
+    /// billboard samples: the views share the billboards' atlas, spec §6.13.1), or `unused`.
     representation: &'static str,
     /// The images, by index.
     images: Vec<u32>,
@@ -1227,10 +1298,22 @@ impl TextureUse {
         let images = container.images();
         let mut used = vec![false; images.len()];
         let mut uses = Vec::new();
-        let named: [(&'static str, Vec<u32>); 3] = [
+        let mut billboard_images: Vec<u32> = container.billboards().iter().map(|b| b.image).collect();
+        billboard_images.sort_unstable();
+        billboard_images.dedup();
+        // The octahedral impostors' views lie in the billboards' atlas (spec §6.13.1), counted
+        // there; an image of theirs that no billboard samples is theirs.
+        let octahedral_images: Vec<u32> = container
+            .octahedral()
+            .iter()
+            .map(|o| o.image)
+            .filter(|i| billboard_images.binary_search(i).is_err())
+            .collect();
+        let named: [(&'static str, Vec<u32>); 4] = [
             ("materials", container.materials().iter().map(|m| m.image).collect()),
             ("planes", container.planes().iter().map(|p| p.image).collect()),
-            ("billboards", container.billboards().iter().map(|b| b.image).collect()),
+            ("billboards", billboard_images),
+            ("octahedral", octahedral_images),
         ];
         for (representation, mut list) in named {
             list.sort_unstable();

@@ -55,6 +55,7 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
         (report.lod_levels, "LoD level", "LoD levels"),
         (report.lod_triangles, "LoD triangle", "LoD triangles"),
         (report.billboards, "billboard quad", "billboard quads"),
+        (report.octahedral, "octahedral impostor", "octahedral impostors"),
         (report.calibration, "calibration record", "calibration records"),
         (report.calibration_elevations, "calibration record per elevation", "calibration records per elevation"),
         (report.chain_calibration, "chain calibration record", "chain calibration records"),
@@ -97,16 +98,22 @@ mod tests {
             "a.treelod: ok (4 sections, 512 bytes checksummed; 2 cells; 1 triangle, 3 points; exact cut of 1 leaf)\n"
         );
         assert!(ok_line("b", &VerifyReport::default()).contains("; no records;"));
-        // Every kind verify checks is counted, the far lines and the planes' diffuse records too.
+        // Every kind verify checks is counted, the far lines, the planes' diffuse records and the
+        // octahedral impostors too.
         report.far_lines = 2;
         report.plane_diffuse = 1;
+        report.billboards = 4;
+        report.octahedral = 2;
         report.ao = 5;
         let line = ok_line("c", &report);
         assert!(
             line.contains("2 far lines")
                 && line.contains("1 plane diffuse record,")
+                && line.contains("4 billboard quads, 2 octahedral impostors,")
                 && line.contains("5 ambient-occlusion bytes"),
             "{line}"
         );
+        report.octahedral = 1;
+        assert!(ok_line("d", &report).contains("4 billboard quads, 1 octahedral impostor,"));
     }
 }

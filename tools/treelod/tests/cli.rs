@@ -9,10 +9,11 @@ use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use treelod_format::pack::{oct_encode, rgba8};
+use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
-    BlockRecord, CellRecord, Compression, ContainerData, EllipsoidRecord, LineRecord, MaterialInfo, MaterialRecord,
-    Metadata, NO_IMAGE, PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, material_class,
+    BillboardRecord, BlockRecord, CellRecord, Compression, ContainerData, EllipsoidRecord, ImageRecord, LineRecord,
+    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralRecord, PlaneDiffuseRecord, PointRecord, Range,
+    Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, image_format, material_class,
 };
 
 /// Runs the binary with `args` in the current directory.
@@ -524,6 +525,94 @@ fn dump_shows_records_that_only_verify_would_refuse() {
 }
 
 #[test]
+fn dump_and_verify_show_the_octahedral_impostors() {
+    // [`tiny`] with a 4x4 RGBA8 atlas and the tree's octahedral impostor on its left half
+    // (spec §6.13.1, format 1.11).
+    let dir = scratch("octahedral");
+    let mut data = tiny();
+    data.images = vec![ImageRecord {
+        width: 4,
+        height: 4,
+        mip_count: 1,
+        format: image_format::RGBA8_SRGB,
+        data_offset: 0,
+        data_length: 64,
+    }];
+    data.image_data = vec![0x80; 64];
+    data.octahedral = vec![OctahedralRecord {
+        center: [1.0, 0.5, 0.5],
+        radius: 0.75,
+        image: 0,
+        uv_min: unorm16x2(0.0, 0.0),
+        uv_max: unorm16x2(0.5, 1.0),
+        frames: 8,
+        tree: 0,
+        occlusion: 0.25,
+        diffuse: PlaneDiffuseRecord { flat: 16384, scattered: 32768 },
+        reserved: 0,
+    }];
+    data.write_to_path(dir.join("octahedral.treelod"), Compression::None).expect("valid");
+
+    let out = treelod_in(&dir, &["dump", "octahedral.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.lines().any(|l| l.starts_with("version") && l.ends_with("1.11")), "{text}");
+    assert!(text.contains("\n  OCTAHEDRAL "), "the section is listed: {text}");
+    assert!(
+        text.contains(
+            "\nbaselines\n  octahedral tree 0: 8x8 views, radius 0.75 m at [1, 0.5, 0.5], image 0 rectangle [0, 0] \
+             .. [0.5000076, 1] (8 texels), occlusion 0.25, diffuse flat 0.2500 scattered 0.5000\n"
+        ),
+        "{text}"
+    );
+    // No billboard samples its image: its bytes are the octahedral impostors'.
+    assert!(text.contains("\n  octahedral           64 bytes, 1 image(s), RGBA8_SRGB\n"), "{text}");
+    let json = |name: &str| -> serde_json::Value {
+        let out = treelod_in(&dir, &["dump", "--json", name]);
+        assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+        serde_json::from_str(&stdout(&out)).expect("valid JSON")
+    };
+    let j = json("octahedral.treelod");
+    let o = &j["baselines"]["octahedral"][0];
+    assert_eq!((&o["tree"], &o["frames"], &o["image"], &o["texels"]), (&0.into(), &8.into(), &0.into(), &8.into()));
+    assert_eq!((o["radius"].as_f64(), o["occlusion"].as_f64()), (Some(0.75), Some(0.25)));
+    assert_eq!(o["diffuse"][0].as_f64().map(|f| (f * 1e4).round()), Some(2500.0));
+    assert_eq!(o["center"], serde_json::json!([1.0, 0.5, 0.5]));
+    assert_eq!((o["uv_min"][1].as_f64(), o["uv_max"][1].as_f64()), (Some(0.0), Some(1.0)));
+    assert_eq!(j["baselines"]["billboards"], serde_json::json!([]));
+    assert_eq!(j["textures"][0]["representation"], "octahedral");
+    let out = treelod_in(&dir, &["verify", "octahedral.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    assert!(stdout(&out).contains(", 1 octahedral impostor;"), "{}", stdout(&out));
+
+    // With a billboard on the same image, the views share the billboards' atlas and its bytes
+    // count as the billboards'.
+    data.billboards = vec![BillboardRecord {
+        center: [1.0, 0.5, 0.5],
+        axis_u: [0.75, 0.0, 0.0],
+        axis_v: [0.0, 0.5, 0.0],
+        image: 0,
+        uv_min: unorm16x2(0.5, 0.0),
+        uv_max: unorm16x2(1.0, 1.0),
+        tree: 0,
+        kind: billboard_kind::FACING,
+        reserved: [0; 2],
+    }];
+    data.write_to_path(dir.join("shared.treelod"), Compression::None).expect("valid");
+    let j = json("shared.treelod");
+    let uses: Vec<&str> =
+        j["textures"].as_array().unwrap().iter().map(|u| u["representation"].as_str().unwrap()).collect();
+    assert_eq!(uses, ["billboards"]);
+    assert_eq!(j["baselines"]["octahedral"][0]["texels"], 8);
+    // Without the impostor there is no `octahedral` key, as in the files of 1.10 and before.
+    data.octahedral.clear();
+    data.write_to_path(dir.join("without.treelod"), Compression::None).expect("valid");
+    let j = json("without.treelod");
+    assert!(j["baselines"].get("octahedral").is_none(), "{}", j["baselines"]);
+    assert!(!stdout(&treelod_in(&dir, &["dump", "without.treelod"])).contains("octahedral"));
+}
+
+#[test]
 fn verify_checks_every_file_and_exits_with_the_first_failure() {
     let dir = scratch("several");
     let good = write_tiny(&dir);
@@ -570,7 +659,7 @@ fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
 /// `TREELOD_BLESS=1 cargo test -p treelod --test cli golden` and review the diff.
 #[test]
 fn golden_dumps_match() {
-    for version in ["v1_0", "v1_1", "v1_2", "v1_3", "v1_4", "v1_5", "v1_6", "v1_7", "v1_8", "v1_9", "v1_10"] {
+    for version in ["v1_0", "v1_1", "v1_2", "v1_3", "v1_4", "v1_5", "v1_6", "v1_7", "v1_8", "v1_9", "v1_10", "v1_11"] {
         golden_dumps_match_in(version);
     }
 }

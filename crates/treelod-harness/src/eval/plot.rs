@@ -14,7 +14,7 @@ use super::{Availability, Report, Row, TechniqueName};
 use treelod_render::Technique;
 
 /// Colours of series in the order they are drawn, where a series is not a technique (Tableau 10).
-pub const PALETTE: [Rgb888; 11] = [
+pub const PALETTE: [Rgb888; 12] = [
     Rgb888::new(31, 119, 180),
     Rgb888::new(255, 127, 14),
     Rgb888::new(44, 160, 44),
@@ -26,6 +26,7 @@ pub const PALETTE: [Rgb888; 11] = [
     Rgb888::new(188, 189, 34),
     Rgb888::new(23, 190, 207),
     Rgb888::new(120, 0, 60),
+    Rgb888::new(0, 90, 70),
 ];
 
 /// The shape of a technique's dots, so techniques stay apart where colours are hard to tell.

@@ -1,8 +1,10 @@
-//! The baselines ([`Technique::LodChain`], [`Technique::Billboard`], [`Technique::Crossed`]): the
-//! billboard records as uploaded, their group (the planes' layout: the quads and their atlas) and
-//! their stages. The chain's levels are triangles of the model's whole-triangle list, drawn as
-//! pruned trees' are; the selection is `treelod_runtime::baseline::select`. WGSL:
-//! `shaders/tree/planes.wgsl` then `shaders/tree/billboards.wgsl`.
+//! The baselines ([`Technique::LodChain`], [`Technique::Billboard`], [`Technique::Crossed`],
+//! [`Technique::Octahedral`]): the billboard records as uploaded, their group (the planes' layout:
+//! the quads and their atlas) and their stages, and the octahedral impostors' (their records as
+//! stored, the same layout and atlas). The chain's levels are triangles of the model's
+//! whole-triangle list, drawn as pruned trees' are; the selection is
+//! `treelod_runtime::baseline::select`. WGSL: `shaders/tree/planes.wgsl` then
+//! `shaders/tree/billboards.wgsl`; `shaders/tree/octahedral.wgsl`.
 
 use treelod_format::{BillboardRecord, Container};
 use treelod_runtime::Billboards;
@@ -24,25 +26,68 @@ pub(crate) const STAGES: Stages = Stages {
     shadow_label: "treelod shadow billboards",
 };
 
-/// The billboards' group of the model `up` uploads, if it has billboards and their atlas (the
-/// image of the first record; builders write one) decodes and fits; else the billboards are taken
-/// out of its representations, with a warning where the atlas is at fault.
-pub(crate) fn upload(up: &mut ModelUpload<'_>) -> Result<Option<wgpu::BindGroup>, RenderError> {
+/// The octahedral impostors' pipelines (spec §6.13.1): their own stages, the planes' group
+/// layout (the records in place of the planes, the atlas).
+pub(crate) const OCTAHEDRAL_STAGES: Stages = Stages {
+    module: "treelod tree/octahedral.wgsl",
+    wgsl: tree_wgsl!("octahedral.wgsl"),
+    vs: "vs_octahedral",
+    fs: "fs_octahedral",
+    label: "treelod baseline octahedral impostors",
+    shadow_fs: "fs_shadow_octahedral",
+    shadow_label: "treelod shadow octahedral impostors",
+};
+
+/// The billboards' group and the octahedral impostors' of the model `up` uploads, each if it has
+/// them and their atlas (the image of the first record; builders write one, the billboards' and
+/// the impostors' the same, uploaded once then) decodes and fits; else they are taken out of its
+/// representations, with a warning where the atlas is at fault.
+pub(crate) fn upload(
+    up: &mut ModelUpload<'_>,
+) -> Result<(Option<wgpu::BindGroup>, Option<wgpu::BindGroup>), RenderError> {
     let kinds = Billboards::from_container(up.container);
     let records = gpu_billboards(up.container, kinds.as_ref());
-    let atlas = match records.first() {
-        Some(first) if kinds.is_some() => up.decode_atlas(first.image, "billboard"),
-        _ => None,
-    };
-    let Some(atlas) = atlas else {
-        up.representations.billboards = None;
-        return Ok(None);
-    };
-    let buffer = up.buffer("BILLBOARDS", bytemuck::cast_slice(&records))?;
+    let octahedral = up.container.octahedral();
+    let billboard_image = records.first().filter(|_| kinds.is_some()).map(|r| r.image);
+    let octahedral_image = octahedral.first().map(|r| r.image);
+    let mut atlases: Vec<(u32, Option<wgpu::TextureView>)> = Vec::new();
+    for image in billboard_image.into_iter().chain(octahedral_image) {
+        if atlases.iter().all(|(i, _)| *i != image) {
+            let what = if Some(image) == billboard_image { "billboard" } else { "octahedral impostor" };
+            let view = up.decode_atlas(image, what).map(|atlas| up.atlas(&atlas, "treelod billboard atlas"));
+            atlases.push((image, view));
+        }
+    }
+    let atlas_of = |image: Option<u32>| atlases.iter().find(|(i, _)| Some(*i) == image).and_then(|(_, v)| v.as_ref());
     let leaves = up.buffer("no plane leaves", &[])?;
-    let atlas = up.atlas(&atlas, "treelod billboard atlas");
     let slots = up.atlas(&impostors::blank(true), "treelod no leaf slots");
-    Ok(Some(impostors::group(up, Bucket::Billboards, &buffer, &atlas, &slots, &leaves)))
+    let billboards = match atlas_of(billboard_image) {
+        Some(atlas) => {
+            let buffer = up.buffer("BILLBOARDS", bytemuck::cast_slice(&records))?;
+            Some(impostors::group(up, Bucket::Billboards, &buffer, atlas, &slots, &leaves))
+        }
+        None => {
+            up.representations.billboards = None;
+            None
+        }
+    };
+    let octahedral = match atlas_of(octahedral_image) {
+        Some(atlas) => {
+            if octahedral.iter().any(|r| Some(r.image) != octahedral_image) {
+                up.warnings.push(format!(
+                    "octahedral impostors sample several images; all are drawn from image {}",
+                    octahedral_image.unwrap_or_default()
+                ));
+            }
+            let buffer = up.buffer("OCTAHEDRAL", bytemuck::cast_slice(octahedral))?;
+            Some(impostors::group(up, Bucket::Octahedral, &buffer, atlas, &slots, &leaves))
+        }
+        None => {
+            up.representations.octahedral = 0;
+            None
+        }
+    };
+    Ok((billboards, octahedral))
 }
 
 /// The billboards of `container` as uploaded: the facing quads (`kinds.facing`), then the

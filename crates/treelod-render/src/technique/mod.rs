@@ -50,6 +50,9 @@ pub enum DrawSource {
     LodLevel,
     /// Baseline billboard quads of the block (`cell` is [`treelod_runtime::ROOTS_CELL`]).
     Billboards,
+    /// Baseline octahedral impostors of the block, a quad each (`cell` is
+    /// [`treelod_runtime::ROOTS_CELL`]).
+    Octahedral,
     /// The leading `count` ellipsoids of the cell's range (uploaded whole at
     /// [`Renderer::add_model`](crate::Renderer::add_model)); `tau_points` is the `τ` (metres per
     /// pixel) the shader tests them with.
@@ -69,7 +72,7 @@ impl DrawSource {
             Self::Triangles | Self::PrunedLeaves | Self::Bark | Self::LodLevel => Primitive::Triangle,
             Self::Points | Self::Roots => Primitive::Point,
             Self::Planes => Primitive::Plane,
-            Self::Billboards => Primitive::Billboard,
+            Self::Billboards | Self::Octahedral => Primitive::Billboard,
             Self::Ellipsoids => Primitive::Ellipsoid,
             Self::Lines => Primitive::Line,
         }
@@ -83,6 +86,7 @@ impl DrawSource {
             Self::PrunedLeaves | Self::Bark | Self::LodLevel => Bucket::Pruned,
             Self::Planes => Bucket::Planes,
             Self::Billboards => Bucket::Billboards,
+            Self::Octahedral => Bucket::Octahedral,
             Self::Ellipsoids => Bucket::Ellipsoids,
             Self::Lines => Bucket::Lines,
         }
@@ -121,6 +125,8 @@ pub(crate) enum Bucket {
     Planes,
     /// Baseline billboards ([`baselines`]).
     Billboards,
+    /// Baseline octahedral impostors ([`baselines`]).
+    Octahedral,
     /// Clasen's ellipsoids, ray-cast ([`ellipsoids`]).
     Ellipsoids,
     /// Clasen's branch lines, ray-cast round cones ([`ellipsoids`]).
@@ -129,11 +135,19 @@ pub(crate) enum Bucket {
 
 impl Bucket {
     /// Draw buckets per model.
-    pub(crate) const COUNT: usize = 7;
+    pub(crate) const COUNT: usize = 8;
 
     /// Every bucket, in drawing order (`ALL[b as usize] == b`).
-    pub(crate) const ALL: [Self; Self::COUNT] =
-        [Self::Triangles, Self::Points, Self::Pruned, Self::Planes, Self::Billboards, Self::Ellipsoids, Self::Lines];
+    pub(crate) const ALL: [Self; Self::COUNT] = [
+        Self::Triangles,
+        Self::Points,
+        Self::Pruned,
+        Self::Planes,
+        Self::Billboards,
+        Self::Octahedral,
+        Self::Ellipsoids,
+        Self::Lines,
+    ];
 
     /// The index of model `model`'s bucket in a frame's list of buckets.
     pub(crate) fn of_model(self, model: usize) -> usize {
@@ -148,6 +162,7 @@ impl Bucket {
             Self::Pruned => PRUNED,
             Self::Planes => impostors::STAGES,
             Self::Billboards => baselines::STAGES,
+            Self::Octahedral => baselines::OCTAHEDRAL_STAGES,
             Self::Ellipsoids => ellipsoids::ELLIPSOID_STAGES,
             Self::Lines => ellipsoids::LINE_STAGES,
         }
@@ -158,7 +173,7 @@ impl Bucket {
     pub(crate) const fn group_entries(self) -> Option<&'static [wgpu::BindGroupLayoutEntry]> {
         match self {
             Self::Triangles | Self::Points | Self::Pruned => None,
-            Self::Planes | Self::Billboards => Some(impostors::GROUP),
+            Self::Planes | Self::Billboards | Self::Octahedral => Some(impostors::GROUP),
             Self::Ellipsoids => Some(ellipsoids::ELLIPSOID_GROUP),
             Self::Lines => Some(ellipsoids::LINE_GROUP),
         }
@@ -173,7 +188,9 @@ impl Bucket {
 pub(crate) fn upload_groups(up: &mut ModelUpload<'_>) -> Result<[Option<wgpu::BindGroup>; Bucket::COUNT], RenderError> {
     let mut groups = [const { None }; Bucket::COUNT];
     groups[Bucket::Planes as usize] = impostors::upload(up)?;
-    groups[Bucket::Billboards as usize] = baselines::upload(up)?;
+    let (billboards, octahedral) = baselines::upload(up)?;
+    groups[Bucket::Billboards as usize] = billboards;
+    groups[Bucket::Octahedral as usize] = octahedral;
     let (ellipsoids, lines) = ellipsoids::upload(up)?;
     groups[Bucket::Ellipsoids as usize] = ellipsoids;
     groups[Bucket::Lines as usize] = lines;

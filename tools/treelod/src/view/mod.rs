@@ -852,7 +852,8 @@ impl Viewer {
                 };
             }
             KeyCode::KeyB => {
-                force_technique(settings, &[Technique::LodChain, Technique::Billboard, Technique::Crossed])
+                let baselines = [Technique::LodChain, Technique::Billboard, Technique::Crossed, Technique::Octahedral];
+                force_technique(settings, &baselines)
             }
             KeyCode::KeyO => settings.pruning.occlusion = !settings.pruning.occlusion,
             KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 | KeyCode::Digit4 | KeyCode::Digit6 => {
@@ -1290,14 +1291,17 @@ mod tests {
 
     #[test]
     fn technique_keys_step_through_their_group_and_back_to_the_point_tree() {
-        let baselines = [Technique::LodChain, Technique::Billboard, Technique::Crossed];
+        let baselines = [Technique::LodChain, Technique::Billboard, Technique::Crossed, Technique::Octahedral];
         let mut t = Technique::Impostors;
         let mut seen = Vec::new();
-        for _ in 0..4 {
+        for _ in 0..5 {
             t = toggle_technique(t, &baselines);
             seen.push(t);
         }
-        assert_eq!(seen, [Technique::LodChain, Technique::Billboard, Technique::Crossed, Technique::Spt]);
+        assert_eq!(
+            seen,
+            [Technique::LodChain, Technique::Billboard, Technique::Crossed, Technique::Octahedral, Technique::Spt]
+        );
         assert_eq!(toggle_technique(Technique::Full, &[Technique::Full]), Technique::Spt);
         assert_eq!(toggle_technique(Technique::Spt, &[Technique::Full]), Technique::Full);
     }

@@ -458,7 +458,7 @@ mod tests {
 
     #[test]
     fn holds_counts_the_models_holding_each_technique() {
-        let holds = Holds { models: 3, by_technique: PerTechnique([3, 3, 1, 1, 0, 2, 0, 0, 0]) };
+        let holds = Holds { models: 3, by_technique: PerTechnique([3, 3, 1, 1, 0, 2, 0, 0, 0, 0]) };
         assert_eq!(holds.count(Technique::Ellipsoids), 2);
         assert_eq!(holds.count(Technique::Spt), holds.models);
     }

@@ -1,0 +1,195 @@
+// Baseline octahedral impostors (spec §6.13.1): one quad per tree facing the viewer, textured from
+// the tree baked orthographically over the upper hemisphere (a grid of N × N views on a
+// hemi-octahedral map), the three views of the grid triangle holding the view direction blended
+// with barycentric weights, as engines' impostor bakers draw far trees.
+
+// Rust twin: treelod_format::OctahedralRecord (48 bytes, spec §6.13.1).
+struct OctahedralRecord {
+    center: array<f32, 3>,
+    radius: f32,
+    image: u32,
+    uv_min: u32,
+    uv_max: u32,
+    frames: u32,
+    tree: u32,
+    occlusion: f32,
+    // PlaneDiffuseRecord's shares, flat in bits 0–15, scattered in bits 16–31 (unorm16).
+    diffuse: u32,
+    reserved: u32,
+}
+
+// The planes' group layout (technique/impostors.rs, `GROUP`): the records in place of the planes,
+// the atlas and its sampler; the leaf slots and plane leaves are bound blank and not read.
+@group(3) @binding(0) var<storage, read> impostors: array<OctahedralRecord>;
+@group(3) @binding(1) var atlas: texture_2d<f32>;
+@group(3) @binding(2) var atlas_sampler: sampler;
+
+struct OctahedralVaryings {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    // The fragment's (s, t) in each of the three views, [−1, 1]² inside its cell.
+    @location(1) st01: vec4<f32>,
+    @location(2) st2: vec2<f32>,
+    // Each view's cell corner in the atlas (uv) and the cells' size.
+    @location(3) @interpolate(flat) cell01: vec4<f32>,
+    @location(4) @interpolate(flat) cell2: vec2<f32>,
+    @location(5) @interpolate(flat) cell_size: vec2<f32>,
+    @location(6) @interpolate(flat) weights: vec3<f32>,
+    // The sun's diffuse factor (x) and the ambient occlusion (y).
+    @location(7) @interpolate(flat) light: vec2<f32>,
+    @location(8) @interpolate(flat) normal: vec3<f32>,
+    @location(9) @interpolate(flat) tint: vec3<f32>,
+    @location(10) @interpolate(flat) fade: vec2<u32>,
+}
+
+// The direction of view (i, j) of a grid of `n` a side, from the centre towards the viewer.
+// Rust twin: treelod_format::OctahedralRecord::view_direction.
+fn view_direction(n: u32, i: u32, j: u32) -> vec3<f32> {
+    let last = f32(max(n, 2u) - 1u);
+    let a = 2.0 * f32(i) / last - 1.0;
+    let b = 2.0 * f32(j) / last - 1.0;
+    let x = 0.5 * (a + b);
+    let z = 0.5 * (a - b);
+    return normalize(vec3<f32>(x, max(1.0 - abs(x) - abs(z), 0.0), z));
+}
+
+// A view's right vector: normalize(Y × d), +X straight above. Its up is d × right. Rust twin:
+// treelod_format::OctahedralRecord::view_basis.
+fn view_right(d: vec3<f32>) -> vec3<f32> {
+    let r = vec3<f32>(d.z, 0.0, -d.x);
+    let l = length(r);
+    return select(vec3<f32>(1.0, 0.0, 0.0), r / l, l > 1e-6);
+}
+
+// The sun's diffuse factor of an impostor seen along unit `view` (world space): spec §6.13.1's
+// mixture with the view's direction as the plane's normal, surfaces facing the viewer (share f)
+// and turned every way (s), each weighted by the area it shows; those seen edge on show none.
+// Rust twin: treelod_format::PlaneDiffuseRecord::diffuse(v, v, l).
+fn octahedral_diffuse(view: vec3<f32>, packed: u32) -> f32 {
+    let f = f32(packed & 0xFFFFu) / 65535.0;
+    let s = min(f32(packed >> 16u) / 65535.0, 1.0 - f);
+    let vl = abs(dot(view, frame.sun.xyz));
+    let den = f + 0.5 * s;
+    if den > 1e-6 {
+        return clamp((f * vl + s * 2.0 / (3.0 * 3.1415927) * lobe(vl)) / den, 0.0, 1.0);
+    }
+    return vl;
+}
+
+// One corner of an octahedral impostor's quad: a square of `radius` about its centre facing the
+// direction to the eye, with that direction's basis (so the views' images keep their up), and
+// the corner's place in the three views the direction lies between (block space: the instance's
+// transform is a rotation, a uniform scale and a translation).
+@vertex
+fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> OctahedralVaryings {
+    let draw = draws[draw_index];
+    let rec = impostors[vertex_index / 6u];
+    let corner = CORNERS[vertex_index % 6u];
+    let centre = vec3<f32>(rec.center[0], rec.center[1], rec.center[2]);
+    let centre_world = (draw.model * vec4<f32>(centre, 1.0)).xyz;
+    let to_eye = frame.eye.xyz - centre_world;
+    let rotation = mat3x3<f32>(draw.model[0].xyz, draw.model[1].xyz, draw.model[2].xyz);
+    var d = transpose(rotation) * to_eye;
+    // Below the horizon: the horizon's views.
+    d.y = max(d.y, 0.0);
+    d = select(vec3<f32>(0.0, 0.0, 1.0), normalize(d), dot(d, d) > 1e-20);
+    let right = view_right(d);
+    let up = cross(d, right);
+    let offset = rec.radius * (corner.x * right + corner.y * up);
+    // The grid triangle holding d's point on the map (treelod_format::OctahedralRecord::blend).
+    let n = max(rec.frames, 2u);
+    let last = n - 1u;
+    let sum = abs(d.x) + d.y + abs(d.z);
+    let x = d.x / sum;
+    let z = d.z / sum;
+    let g = clamp(vec2<f32>(x + z + 1.0, x - z + 1.0) * 0.5 * f32(last), vec2<f32>(0.0), vec2<f32>(f32(last)));
+    let c = min(vec2<u32>(floor(g)), vec2<u32>(last - 1u));
+    let f = g - vec2<f32>(c);
+    var views: array<vec2<u32>, 3>;
+    var weights: vec3<f32>;
+    if f.x + f.y <= 1.0 {
+        views = array<vec2<u32>, 3>(c, c + vec2<u32>(1u, 0u), c + vec2<u32>(0u, 1u));
+        weights = vec3<f32>(1.0 - f.x - f.y, f.x, f.y);
+    } else {
+        views = array<vec2<u32>, 3>(c + vec2<u32>(1u, 1u), c + vec2<u32>(0u, 1u), c + vec2<u32>(1u, 0u));
+        weights = vec3<f32>(f.x + f.y - 1.0, 1.0 - f.x, 1.0 - f.y);
+    }
+    let uv_min = unpack2x16unorm(rec.uv_min);
+    let uv_max = unpack2x16unorm(rec.uv_max);
+    let cell_size = (uv_max - uv_min) / f32(n);
+    var st: array<vec2<f32>, 3>;
+    var cells: array<vec2<f32>, 3>;
+    for (var k = 0u; k < 3u; k++) {
+        let dk = view_direction(n, views[k].x, views[k].y);
+        let rk = view_right(dk);
+        let uk = cross(dk, rk);
+        st[k] = vec2<f32>(dot(offset, rk), dot(offset, uk)) / rec.radius;
+        cells[k] = uv_min + vec2<f32>(views[k]) * cell_size;
+    }
+    var out: OctahedralVaryings;
+    let world = (draw.model * vec4<f32>(centre + offset, 1.0)).xyz;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.world = world;
+    out.st01 = vec4<f32>(st[0], st[1]);
+    out.st2 = st[2];
+    out.cell01 = vec4<f32>(cells[0], cells[1]);
+    out.cell2 = cells[2];
+    out.cell_size = cell_size;
+    out.weights = weights;
+    let view = normalize(to_eye);
+    out.light = vec2<f32>(octahedral_diffuse(view, rec.diffuse), rec.occlusion);
+    out.normal = view;
+    out.fade = vec2<u32>(draw.fade, draw.instance);
+    switch frame.debug {
+        case 1u: { out.tint = cell_tint(draw.cell); }
+        case 2u, 3u: { out.tint = vec3<f32>(0.95, 0.5, 0.65); }
+        case 4u: { out.tint = unpack4x8unorm(draw.tint).rgb; }
+        default: { out.tint = vec3<f32>(draw.shading); }
+    }
+    return out;
+}
+
+// The texel of one of the three views, each taken at a pixel with the probability of its
+// weight (by the pixel's dither value, `dither`): the views' silhouettes differ where thin
+// branches stand, and blending their alphas before the test at one half would erode what only
+// one or two of them cover; a pixel of one view keeps each view's coverage in expectation. A
+// view's texel outside its cell (a corner of the quad past the view's square) is empty. Its
+// alpha is the covered share, tested at one half as the billboards' (`quad_texel`). Sampled in
+// uniform control flow.
+fn octahedral_texel(in: OctahedralVaryings) -> vec4<f32> {
+    let st = array<vec2<f32>, 3>(in.st01.xy, in.st01.zw, in.st2);
+    let cells = array<vec2<f32>, 3>(in.cell01.xy, in.cell01.zw, in.cell2);
+    let h = dither(in.clip);
+    let chosen = select(select(2u, 1u, h < in.weights.x + in.weights.y), 0u, h < in.weights.x);
+    var out = vec4<f32>(0.0);
+    for (var k = 0u; k < 3u; k++) {
+        let uv = cells[k] + clamp(0.5 * (st[k] + 1.0), vec2<f32>(0.0), vec2<f32>(1.0)) * in.cell_size;
+        let texel = textureSampleGrad(atlas, atlas_sampler, uv, dpdx(uv), dpdy(uv));
+        if k == chosen && all(abs(st[k]) <= vec2<f32>(1.0)) {
+            out = texel;
+        }
+    }
+    return out;
+}
+
+@fragment
+fn fs_octahedral(in: OctahedralVaryings) -> TriangleOut {
+    let texel = octahedral_texel(in);
+    var mask = select(0u, 0xFFFFFFFFu, texel.a >= 0.5);
+    mask &= fade_mask(in.fade.x, in.fade.y, in.clip);
+    if mask == 0u {
+        discard;
+    }
+    if frame.debug != 0u {
+        return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
+    }
+    return TriangleOut(vec4<f32>(shade_diffuse(texel.rgb, in.light.x, in.normal, in.world, in.light.y) * in.tint, 1.0), mask);
+}
+
+// The shadow pass: the same coverage as the colour pass.
+@fragment
+fn fs_shadow_octahedral(in: OctahedralVaryings) {
+    if octahedral_texel(in).a < 0.5 {
+        discard;
+    }
+}
