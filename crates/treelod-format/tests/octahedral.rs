@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{reseal, resize_section};
+use common::{entry_offset, reseal, resize_section};
 use treelod_format::{
     CellRecord, Compression, Container, ContainerData, Error, ErrorClass, ImageRecord, MINOR, OctahedralRecord,
     PlaneDiffuseRecord, Range, SectionKind, image_format, pack, verify,
@@ -280,12 +280,7 @@ fn a_section_of_partial_records_is_refused_at_open() {
 /// `bytes` with the section-table entry of `from` relabelled `to`, resealed.
 fn relabel(bytes: &[u8], from: SectionKind, to: u32) -> Vec<u8> {
     let mut bytes = bytes.to_vec();
-    let count = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
-    let table = u64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes")) as usize;
-    let at = (0..count)
-        .map(|i| table + 48 * i)
-        .find(|&at| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes")) == from.0)
-        .expect("the section is present");
+    let at = entry_offset(&bytes, from);
     bytes[at..at + 4].copy_from_slice(&to.to_le_bytes());
     reseal(&mut bytes);
     bytes

@@ -136,18 +136,24 @@ pub fn check(data: &ContainerData) -> Result<treelod_format::VerifyReport, treel
     treelod_format::verify(&c)
 }
 
+/// Where the section-table entry of `kind` starts in the container `bytes` (spec §4).
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+pub fn entry_offset(bytes: &[u8], kind: treelod_format::SectionKind) -> usize {
+    let count = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
+    let table = u64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes")) as usize;
+    (0..count)
+        .map(|i| table + 48 * i)
+        .find(|&at| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes")) == kind.0)
+        .expect("the section is present")
+}
+
 /// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,
 /// zeroing the bytes that leave or join it (growing the file past its last section), and reseals
 /// the file.
 #[allow(dead_code, reason = "not every test binary uses every helper")]
 pub fn resize_section(bytes: &[u8], kind: treelod_format::SectionKind, delta: i64) -> Vec<u8> {
     let mut bytes = bytes.to_vec();
-    let count = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes")) as usize;
-    let table = u64::from_le_bytes(bytes[24..32].try_into().expect("8 bytes")) as usize;
-    let at = (0..count)
-        .map(|i| table + 48 * i)
-        .find(|&at| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes")) == kind.0)
-        .expect("the section is present");
+    let at = entry_offset(&bytes, kind);
     assert_eq!(u32::from_le_bytes(bytes[at + 4..at + 8].try_into().expect("4 bytes")), 0, "stored uncompressed");
     let offset = u64::from_le_bytes(bytes[at + 8..at + 16].try_into().expect("8 bytes"));
     let length = u64::from_le_bytes(bytes[at + 16..at + 24].try_into().expect("8 bytes"));
