@@ -233,25 +233,40 @@ pub fn build_billboards(
     }
 
     // Stage: bake each quad: the tree's triangles about its centre, front-most from the normal's
-    // side.
+    // side. Each tree's triangles are placed about its centre once, for all of its quads and
+    // views (a job's centre is its tree's).
+    let placed: Vec<Vec<(u32, [DVec3; 3])>> = by_tree
+        .par_iter()
+        .enumerate()
+        .map(|(tree, tris)| {
+            let Some(centre) = jobs.iter().find(|j| j.tree as usize == tree).map(|j| j.centre) else {
+                return Vec::new();
+            };
+            tris.iter().map(|&t| (t, mesh.triangles[t as usize].v.map(|v| position(v) - centre))).collect()
+        })
+        .collect();
     let baked: Vec<Vec<Vec<u8>>> = jobs
         .par_iter()
         .zip(&regions)
         .map(|(job, region)| {
             let normal = job.quad.u.cross(job.quad.v).normalize();
             let plane = PlaneFit { normal, offset: 0.0 };
-            let corners = |t: u32| mesh.triangles[t as usize].v.map(|v| position(v) - job.centre);
+            let triangles = &placed[job.tree as usize];
             // Front to back (by the nearest corner; ties in index order), so that the samples
             // of the triangles behind fail the depth test before they are shaded.
-            let mut order: Vec<(f64, u32)> = by_tree[job.tree as usize]
+            let mut order: Vec<(f64, u32)> = triangles
                 .iter()
-                .map(|&t| (corners(t).iter().map(|p| p.dot(normal)).fold(f64::NEG_INFINITY, f64::max), t))
+                .enumerate()
+                .map(|(k, (_, corners))| {
+                    #[expect(clippy::cast_possible_truncation, reason = "a tree's triangles fit u32")]
+                    let k = k as u32;
+                    (corners.iter().map(|p| p.dot(normal)).fold(f64::NEG_INFINITY, f64::max), k)
+                })
                 .collect();
             order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-            // Placed once: `bake` goes over the triangles once per band of rows.
-            let triangles: Vec<(u32, [DVec3; 3])> = order.into_iter().map(|(_, t)| (t, corners(t))).collect();
             let samples = if job.kind == OCTAHEDRAL_VIEW { OCTAHEDRAL_SAMPLES } else { SAMPLES };
-            bake(mesh, triangles.iter().copied(), &plane, Winner::Front, &job.quad, region, samples)
+            let in_order = order.iter().map(|&(_, k)| triangles[k as usize]);
+            bake(mesh, in_order, &plane, Winner::Front, &job.quad, region, samples)
         })
         .collect();
     let texels = compose(&regions, &baked, width, height);
