@@ -315,3 +315,70 @@ fn a_reader_that_does_not_know_the_kind_skips_it_and_reads_the_rest_as_before() 
     let c = Container::from_bytes(&without.to_bytes(Compression::None).expect("writes")).expect("opens");
     assert_eq!(c.header().minor, 0);
 }
+
+/// The views' directions as spec §6.13.1 maps them: unit, above the horizon, the grid's corners
+/// at −X, +Z, −Z and +X and its centre (odd `N`) straight above; each view's basis orthonormal
+/// with `right` horizontal and `d = right × up`.
+#[test]
+fn view_directions_and_bases_are_those_of_the_spec() {
+    let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-6);
+    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    for n in [2, 3, 12, 16, 64] {
+        let last = n - 1;
+        assert!(close(OctahedralRecord::view_direction(n, 0, 0), [-1.0, 0.0, 0.0]), "{n}");
+        assert!(close(OctahedralRecord::view_direction(n, last, 0), [0.0, 0.0, 1.0]), "{n}");
+        assert!(close(OctahedralRecord::view_direction(n, 0, last), [0.0, 0.0, -1.0]), "{n}");
+        assert!(close(OctahedralRecord::view_direction(n, last, last), [1.0, 0.0, 0.0]), "{n}");
+        if n % 2 == 1 {
+            assert!(close(OctahedralRecord::view_direction(n, last / 2, last / 2), [0.0, 1.0, 0.0]), "{n}");
+        }
+        for (i, j) in (0..n).flat_map(|j| (0..n).map(move |i| (i, j))) {
+            let d = OctahedralRecord::view_direction(n, i, j);
+            assert!((dot(d, d) - 1.0).abs() < 1e-5 && d[1] >= 0.0, "{n}: ({i}, {j}) {d:?}");
+            let (right, up) = OctahedralRecord::view_basis(d);
+            assert!((dot(right, right) - 1.0).abs() < 1e-5 && (dot(up, up) - 1.0).abs() < 1e-5, "{d:?}");
+            assert!(dot(right, up).abs() < 1e-5 && dot(right, d).abs() < 1e-5 && dot(up, d).abs() < 1e-5);
+            assert!(right[1] == 0.0 && up[1] >= 0.0, "right horizontal, up not down: {right:?} {up:?}");
+            let cross = [
+                right[1] * up[2] - right[2] * up[1],
+                right[2] * up[0] - right[0] * up[2],
+                right[0] * up[1] - right[1] * up[0],
+            ];
+            assert!(close(cross, d) || dot(cross, d) > 1.0 - 1e-5, "right × up is d: {cross:?} {d:?}");
+        }
+    }
+    // Straight above: right +X, up −Z.
+    assert_eq!(OctahedralRecord::view_basis([0.0, 1.0, 0.0]), ([1.0, 0.0, 0.0], [0.0, 0.0, -1.0]));
+}
+
+proptest::proptest! {
+    /// The three views a reader blends surround the direction: barycentric weights, at least 0,
+    /// summing to 1, of views inside the grid, reproducing the direction's point on the map; a
+    /// view's own direction gets it alone; below the horizon, the horizon's views.
+    #[test]
+    fn the_blend_weighs_the_three_views_around_the_direction(
+        n in 2u32..=64,
+        x in -1.0f32..1.0,
+        y in -1.0f32..1.0,
+        z in -1.0f32..1.0,
+    ) {
+        proptest::prop_assume!(x.abs() + y.abs() + z.abs() > 1e-3);
+        let views = OctahedralRecord::blend(n, [x, y, z]);
+        let total: f32 = views.iter().map(|v| v.2).sum();
+        proptest::prop_assert!((total - 1.0).abs() < 1e-5, "{views:?}");
+        proptest::prop_assert!(views.iter().all(|v| v.0 < n && v.1 < n && v.2 >= -1e-6), "{views:?}");
+        // The map's point (grid units) is the weighted mean of the views' grid points.
+        let yp = y.max(0.0);
+        let sum = x.abs() + yp + z.abs();
+        let last = (n - 1) as f32;
+        let (gx, gy) = (((x + z) / sum + 1.0) * 0.5 * last, ((x - z) / sum + 1.0) * 0.5 * last);
+        let mx: f32 = views.iter().map(|v| v.0 as f32 * v.2).sum();
+        let my: f32 = views.iter().map(|v| v.1 as f32 * v.2).sum();
+        proptest::prop_assert!((mx - gx).abs() < 1e-3 * last.max(1.0) && (my - gy).abs() < 1e-3 * last.max(1.0));
+        // A view's own direction: that view alone.
+        let (i, j) = (((x + 1.0) * 0.5 * last).round() as u32, ((z + 1.0) * 0.5 * last).round() as u32);
+        let own = OctahedralRecord::blend(n, OctahedralRecord::view_direction(n, i, j));
+        let weight: f32 = own.iter().filter(|v| (v.0, v.1) == (i, j)).map(|v| v.2).sum();
+        proptest::prop_assert!(weight > 1.0 - 1e-4, "({i}, {j}): {own:?}");
+    }
+}
