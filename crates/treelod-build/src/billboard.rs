@@ -35,11 +35,10 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use treelod_format::{BillboardRecord, OctahedralRecord, PlaneDiffuseRecord, billboard_kind, pack};
 
-use crate::ambient::seen_occlusion;
 use crate::error::BuildError;
 use crate::impostor::{
     ALIGN, Atlas, GUTTER, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, SAMPLES, Winner, align, bake, compose,
-    diffuse_item, diffuse_mixture, diffuse_moments, shelf_pack,
+    diffuse_item, diffuse_mixture, diffuse_moments, seen_triangle_occlusion, shelf_pack,
 };
 
 /// Views per side of a tree's octahedral impostor (spec §6.13.1): 16 × 16 views over the upper
@@ -314,8 +313,8 @@ pub fn build_billboards(
                 uv_max: pack::unorm16x2(((x + side) / w) as f32, ((y + side) / h) as f32),
                 frames: OCTAHEDRAL_FRAMES,
                 tree,
-                occlusion: tree_occlusion(mesh, &by_tree[tree as usize]),
-                diffuse: tree_diffuse(mesh, &by_tree[tree as usize]),
+                occlusion: tree_occlusion(mesh, &placed[tree as usize]),
+                diffuse: tree_diffuse(mesh, &placed[tree as usize]),
                 reserved: 0,
             };
             record
@@ -331,29 +330,21 @@ pub fn build_billboards(
     }))
 }
 
-/// The occlusion of a tree's `triangles` as its views show them: their mean, each weighted by
-/// its area and its share of open directions ([`seen_occlusion`]); 0 where `mesh` has none.
-fn tree_occlusion(mesh: &ImpostorMesh<'_>, triangles: &[u32]) -> f32 {
+/// The occlusion of a tree's `triangles` (placed) as its views show them: their mean, each
+/// weighted by its area and its share of open directions ([`seen_triangle_occlusion`]); 0 where
+/// `mesh` has none.
+fn tree_occlusion(mesh: &ImpostorMesh<'_>, triangles: &[(u32, [DVec3; 3])]) -> f32 {
     if mesh.occlusion.is_empty() {
         return 0.0;
     }
-    let items: Vec<(f32, f32)> = triangles
-        .iter()
-        .map(|&t| {
-            let [a, b, c] = mesh.triangles[t as usize].v.map(|v| Vec3::from_array(mesh.vertices[v as usize].position));
-            (mesh.occlusion.get(t as usize).copied().unwrap_or(0.0), 0.5 * (b - a).cross(c - a).length())
-        })
-        .collect();
-    seen_occlusion(&items).clamp(0.0, 1.0)
+    seen_triangle_occlusion(mesh, triangles.iter().copied()).clamp(0.0, 1.0)
 }
 
 /// How a tree's `triangles` take the sun as its octahedral views show them (spec §6.13.1): the
 /// mixture of [`diffuse_mixture`] whose `|n·d|` has the mean and mean square of the triangles'
 /// (each weighted as [`diffuse_item`] weighs it), averaged over the directions `d` of the views.
-fn tree_diffuse(mesh: &ImpostorMesh<'_>, triangles: &[u32]) -> PlaneDiffuseRecord {
-    let position = |v: u32| Vec3::from_array(mesh.vertices[v as usize].position).as_dvec3();
-    let items: Vec<(DVec3, f64)> =
-        triangles.iter().map(|&t| diffuse_item(mesh, t, mesh.triangles[t as usize].v.map(position))).collect();
+fn tree_diffuse(mesh: &ImpostorMesh<'_>, triangles: &[(u32, [DVec3; 3])]) -> PlaneDiffuseRecord {
+    let items: Vec<(DVec3, f64)> = triangles.iter().map(|&(t, corners)| diffuse_item(mesh, t, corners)).collect();
     let (mut m1, mut m2, mut views) = (0.0, 0.0, 0.0);
     for j in 0..OCTAHEDRAL_FRAMES {
         for i in 0..OCTAHEDRAL_FRAMES {

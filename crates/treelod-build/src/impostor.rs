@@ -756,6 +756,23 @@ pub(crate) fn diffuse_item(mesh: &ImpostorMesh<'_>, t: u32, [a, b, c]: [DVec3; 3
     (normal, 0.5 * face.length() * open)
 }
 
+/// The occlusion of `triangles` of `mesh` (index and placed corners) as a view from outside sees
+/// them ([`crate::ambient::seen_occlusion`], each weighted by its area): a plane's leaves, an
+/// octahedral impostor's tree.
+pub(crate) fn seen_triangle_occlusion(
+    mesh: &ImpostorMesh<'_>,
+    triangles: impl Iterator<Item = (u32, [DVec3; 3])>,
+) -> f32 {
+    let items: Vec<(f32, f32)> = triangles
+        .map(|(t, [a, b, c])| {
+            #[expect(clippy::cast_possible_truncation, reason = "an area as a weight")]
+            let area = (b - a).cross(c - a).length() as f32;
+            (mesh.occlusion.get(t as usize).copied().unwrap_or(0.0), area)
+        })
+        .collect();
+    crate::ambient::seen_occlusion(&items)
+}
+
 /// One region of the atlas: the content's texels and the region's place and size.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Region {
@@ -1037,14 +1054,7 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
     let mut plane_leaves = Vec::new();
     for &i in &spt.order {
         if !mesh.occlusion.is_empty() {
-            let leaves: Vec<(f32, f32)> = placed_triangles(i as usize)
-                .map(|(t, [a, b, c])| {
-                    #[expect(clippy::cast_possible_truncation, reason = "an area as a weight")]
-                    let area = (b - a).cross(c - a).length() as f32;
-                    (mesh.occlusion.get(t as usize).copied().unwrap_or(0.0), area)
-                })
-                .collect();
-            plane_ao.push(crate::ambient::seen_occlusion(&leaves));
+            plane_ao.push(seen_triangle_occlusion(mesh, placed_triangles(i as usize)));
         }
         let (q, r, s) = (&quads[i as usize], &regions[i as usize], &spt.nodes[i as usize]);
         let centre = q.centre + origin;
