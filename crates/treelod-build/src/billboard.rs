@@ -113,7 +113,7 @@ struct Job {
 /// baked as a billboard is, along [`OctahedralRecord::view_direction`] onto a square of the
 /// tree's bounding sphere about the centre of its bounds, laid out in a grid of cells of the same
 /// atlas (spec §6.13.1); its `occlusion` is the tree's triangles' as seen from outside
-/// ([`seen_occlusion`]) where `mesh` has occlusion.
+/// ([`seen_occlusion`](crate::ambient::seen_occlusion)) where `mesh` has occlusion.
 /// `budget_texels[t]` is tree `t`'s texel budget (its impostors' texels, [`crate::Impostors`]'s
 /// `texels_per_tree`); a missing entry counts as 0. `None` when there are no triangles; a tree
 /// without triangles gets no records.
