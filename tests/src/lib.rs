@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.11, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.12, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -93,6 +93,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -124,6 +125,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -142,6 +144,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -159,6 +162,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -174,6 +178,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -189,6 +194,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -206,6 +212,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -222,6 +229,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -237,6 +245,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 far_lines: false,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -252,6 +261,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 plane_diffuse: false,
                 octahedral: false,
+                calibration_added: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -263,7 +273,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES and FAR_LINE_AO, and the planes' \
                           diffuse response, PLANE_DIFFUSE), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, octahedral: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                octahedral: false,
+                calibration_added: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -273,6 +288,17 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO and PLANE_DIFFUSE, and an \
                           octahedral impostor per tree on the billboards' atlas, OCTAHEDRAL), zstd level 19 with byte \
                           shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, calibration_added: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 12,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.12 (1.11's: the 1.5 kinds, a BC7 impostor atlas, \
+                          CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE and \
+                          OCTAHEDRAL, and the calibration of the techniques added after 1.11, CALIBRATION_ADDED and \
+                          CALIBRATION_ELEVATIONS_ADDED), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -82,6 +82,14 @@ pub struct SyntheticOptions {
     /// `CALIBRATION_ELEVATIONS`. Needs `calibration`; drawn last, so the rest of the container is
     /// the same as without it.
     pub calibration_elevations: bool,
+    /// Calibration tables of the techniques added after 1.11 (spec §6.18, 1.12): a random
+    /// non-empty subset of the codes `FIRST_ADDED .. COUNT` (today `OCTAHEDRAL` alone), each with
+    /// three or four samples of growing projected height, falling error in `[0, 1]` and a whole
+    /// number of primitives, in `CALIBRATION_ADDED`; with `calibration_elevations`, their pairs
+    /// of technique and height at each elevation of `CALIBRATION_ELEVATIONS`, errors scaled as
+    /// there, in `CALIBRATION_ELEVATIONS_ADDED`. Needs `calibration`; drawn last, so the rest of
+    /// the container is the same as without it.
+    pub calibration_added: bool,
     /// The block's far lines (spec §6.9.1, 1.9): a random binary hierarchy over copies of the
     /// cells' coarsest lines (the `LINES` records with `hi = +∞`), inner lines from the start of
     /// their run's first leaf to the end of its last, in `FAR_LINES`, `τ_far` √2 times the coarsest
@@ -140,6 +148,7 @@ impl SyntheticOptions {
             line_ao: false,
             calibration: false,
             calibration_elevations: false,
+            calibration_added: false,
             chain_calibration: false,
             far_lines: false,
             plane_diffuse: false,
@@ -163,15 +172,16 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.11: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.12: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
     /// and lines too), indirectly textured planes (a `LEAF_SLOTS` image and `PLANE_LEAVES`),
     /// calibration tables (`CALIBRATION`, per elevation, `CALIBRATION_ELEVATIONS`, and the chain's
     /// per level, `CHAIN_CALIBRATION`), the block's far lines with their ambient occlusion
-    /// (`FAR_LINES`, `FAR_LINE_AO`), the planes' diffuse response (`PLANE_DIFFUSE`) and an
-    /// octahedral impostor per tree (`OCTAHEDRAL`).
+    /// (`FAR_LINES`, `FAR_LINE_AO`), the planes' diffuse response (`PLANE_DIFFUSE`), an
+    /// octahedral impostor per tree (`OCTAHEDRAL`) and the calibration of the techniques added
+    /// after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -196,6 +206,7 @@ impl SyntheticOptions {
             line_ao: true,
             calibration: true,
             calibration_elevations: true,
+            calibration_added: true,
             chain_calibration: true,
             far_lines: true,
             plane_diffuse: true,
@@ -1077,10 +1088,10 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
         b.data.line_ao = rng.bytes(b.data.lines.len());
     }
     if options.calibration {
-        b.data.calibration = calibration(&mut rng);
+        b.data.calibration = calibration(&mut rng, 0..calibration_technique::FIRST_ADDED);
     }
     if options.calibration_elevations {
-        b.data.calibration_elevations = calibration_elevations(&mut rng, &b.data.calibration);
+        b.data.calibration_elevations = calibration_elevations(&mut rng, &ELEVATIONS, &b.data.calibration);
     }
     if options.chain_calibration {
         b.data.chain_calibration = chain_calibration(&mut rng, &b.data.lod_levels);
@@ -1126,6 +1137,13 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
                 reserved: 0,
             });
         }
+    }
+    if options.calibration_added && !b.data.calibration.is_empty() {
+        b.data.calibration_added =
+            calibration(&mut rng, calibration_technique::FIRST_ADDED..calibration_technique::COUNT);
+        let mut elevations: Vec<f32> = b.data.calibration_elevations.iter().map(|r| r.elevation).collect();
+        elevations.dedup();
+        b.data.calibration_elevations_added = calibration_elevations(&mut rng, &elevations, &b.data.calibration_added);
     }
     if options.bc7_atlas
         && let Some(atlas) = b.atlas
@@ -1202,12 +1220,19 @@ fn far_lines(rng: &mut SplitMix64, lines: &[LineRecord], edge: f32) -> Vec<LineR
         .collect()
 }
 
-/// Calibration tables per elevation (spec §6.16): `calibration`'s pairs of technique and height
-/// at the build's elevations, each error the mean's times a random factor in `[0.5, 1.5]` clamped
-/// to `[0, 1]`, the primitives the mean's (the same views' distance at each elevation).
-fn calibration_elevations(rng: &mut SplitMix64, calibration: &[CalibrationRecord]) -> Vec<ElevationCalibrationRecord> {
+/// The elevations of the build's tables per elevation (spec §6.16), degrees.
+const ELEVATIONS: [f32; 4] = [0.0, 30.0, 60.0, 90.0];
+
+/// Calibration tables per elevation (spec §6.16, §6.18): `calibration`'s pairs of technique and
+/// height at `elevations`, each error the mean's times a random factor in `[0.5, 1.5]` clamped to
+/// `[0, 1]`, the primitives the mean's (the same views' distance at each elevation).
+fn calibration_elevations(
+    rng: &mut SplitMix64,
+    elevations: &[f32],
+    calibration: &[CalibrationRecord],
+) -> Vec<ElevationCalibrationRecord> {
     let mut records = Vec::new();
-    for elevation in [0.0, 30.0, 60.0, 90.0] {
+    for &elevation in elevations {
         for c in calibration {
             let error = (c.error * rng.uniform(0.5, 1.5)).clamp(0.0, 1.0);
             records.push(ElevationCalibrationRecord {
@@ -1249,13 +1274,15 @@ fn chain_calibration(rng: &mut SplitMix64, levels: &[LodLevelRecord]) -> Vec<Cha
     records
 }
 
-/// Calibration tables (spec §6.15): `FULL` and each other technique with probability ½, in
-/// ascending order, each with three or four samples whose heights grow strictly from a few
-/// pixels, whose errors fall within `[0, 1]` and whose primitive counts are whole numbers.
-fn calibration(rng: &mut SplitMix64) -> Vec<CalibrationRecord> {
+/// Calibration tables (spec §6.15, §6.18) of the codes `techniques`: the first (`FULL` for
+/// `CALIBRATION`) and each other with probability ½, in ascending order, each with three or four
+/// samples whose heights grow strictly from a few pixels, whose errors fall within `[0, 1]` and
+/// whose primitive counts are whole numbers.
+fn calibration(rng: &mut SplitMix64, techniques: core::ops::Range<u32>) -> Vec<CalibrationRecord> {
     let mut records = Vec::new();
-    for technique in 0..calibration_technique::COUNT {
-        if technique != calibration_technique::FULL && !rng.chance(0.5) {
+    let first = techniques.start;
+    for technique in techniques {
+        if technique != first && !rng.chance(0.5) {
             continue;
         }
         let mut height = rng.uniform(4.0, 16.0);

@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.11 (`tests/data/v1_0` to `tests/data/v1_11`): every file
+//! Golden files of format versions 1.0 to 1.12 (`tests/data/v1_0` to `tests/data/v1_12`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file decodes to literal values written out here (so a change in reading is caught even
 //! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
@@ -25,7 +25,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -545,7 +545,7 @@ fn the_1_10_every_kind_file_has_every_kind_and_the_planes_diffuse_response() {
 fn the_1_11_every_kind_file_has_every_kind_and_the_octahedral_impostors() {
     let c = Container::open(golden_dir_of(11).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 11, "{kind}");
     }
     assert_eq!(c.header().minor, 11);
     // One impostor per tree, in tree order, on the atlas the billboards sample (a colour image).
@@ -566,6 +566,54 @@ fn the_1_11_every_kind_file_has_every_kind_and_the_octahedral_impostors() {
     assert!(data == v1_10, "v1_11 is v1_10 with the octahedral impostors");
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 10);
+}
+
+#[test]
+fn the_1_12_every_kind_file_has_every_kind_and_the_added_techniques_calibration() {
+    let c = Container::open(golden_dir_of(12).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 12);
+    // The octahedral impostor's table: codes from FIRST_ADDED on, none of them in CALIBRATION.
+    let (added, calibration) = (c.calibration_added(), c.calibration());
+    assert!(!added.is_empty());
+    assert!(
+        added.iter().all(|r| (calibration_technique::FIRST_ADDED..calibration_technique::COUNT).contains(&r.technique))
+    );
+    assert!(added.iter().any(|r| r.technique == calibration_technique::OCTAHEDRAL));
+    assert!(calibration.iter().all(|r| r.technique < calibration_technique::FIRST_ADDED));
+    // At each elevation of CALIBRATION_ELEVATIONS, CALIBRATION_ADDED's techniques at its heights,
+    // the same primitives and an error of its own.
+    let per_elevation = c.calibration_elevations_added();
+    assert_eq!(per_elevation.len(), 4 * added.len());
+    for (elevation, records) in [0.0, 30.0, 60.0, 90.0].into_iter().zip(per_elevation.chunks(added.len())) {
+        for (r, mean) in records.iter().zip(added) {
+            assert_eq!(
+                (r.elevation, r.technique, r.height, r.primitives),
+                (elevation, mean.technique, mean.height, mean.primitives)
+            );
+        }
+    }
+    let mut elevations: Vec<f32> = c.calibration_elevations().iter().map(|r| r.elevation).collect();
+    elevations.dedup();
+    assert_eq!(elevations, [0.0, 30.0, 60.0, 90.0]);
+    let report = verify(&c).unwrap();
+    assert_eq!(
+        (report.calibration_added, report.calibration_elevations_added),
+        (added.len() as u64, per_elevation.len() as u64)
+    );
+    // Without CALIBRATION_ADDED and CALIBRATION_ELEVATIONS_ADDED it is the 1.11 file, record for
+    // record, and the writer marks it 1.11: a 1.11 reader sees the same tables, without the
+    // octahedral impostor's.
+    let v1_11 =
+        ContainerData::from_container(&Container::open(golden_dir_of(11).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.calibration_added.clear();
+    data.calibration_elevations_added.clear();
+    assert!(data == v1_11, "v1_12 is v1_11 with the added techniques' calibration");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 11);
 }
 
 #[test]

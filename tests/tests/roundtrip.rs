@@ -52,6 +52,9 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 calibration: grid[1] >= 2,
                 // Its tables per elevation with a quarter (they need a calibration).
                 calibration_elevations: grid[1] >= 2 && grid[0] >= 2,
+                // The added techniques' tables with a quarter (they need a calibration), per
+                // elevation where it has its tables per elevation.
+                calibration_added: grid[1] >= 2 && grid[2] >= 2,
                 // The chain's per-level tables with a quarter (they need a chain).
                 chain_calibration: grid[1] >= 2 && curve_samples > 0,
                 // Far lines with half of the grids (their occlusion where the lines have theirs).
@@ -431,7 +434,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 11, "everything() holds the kinds of 1.11");
+    assert_eq!(container.header().minor, 12, "everything() holds the kinds of 1.12");
     assert_eq!(everything.octahedral.len(), everything.block.tree_count as usize, "an octahedral impostor per tree");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),

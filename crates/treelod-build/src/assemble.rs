@@ -1216,6 +1216,8 @@ fn assemble(
         let calibrated = crate::calibrate::calibrate(&data, calibration);
         data.calibration = calibrated.mean;
         data.calibration_elevations = calibrated.elevations;
+        data.calibration_added = calibrated.added;
+        data.calibration_elevations_added = calibrated.elevations_added;
         data.chain_calibration = calibrated.chain_levels;
         clock.lap(&mut stats, "calibration");
     }

@@ -33,7 +33,11 @@
 //!   `τ = p` with the renderer's noise holes
 //!   and the branch lines (or every bark triangle without lines), both with the renderer's
 //!   default level blend ([`DEFAULT_LEVEL_BLEND`]: the level fading out and the one fading in
-//!   each on its share of the pixels by a per-pixel dither, both submitted), the billboards; and
+//!   each on its share of the pixels by a per-pixel dither, both submitted), the billboards, the
+//!   octahedral impostors (one quad per tree facing the view, each pixel textured by one of the
+//!   three baked views around the view direction with the probability of its weight, by the same
+//!   per-pixel dither, as `shaders/tree/octahedral.wgsl` draws it; their rows go to the sections
+//!   of format 1.12, spec §6.18); and
 //!   each
 //!   level of the LoD chain, every tree's level of that number as the runtime switches a block's
 //!   trees together (spec §6.17; the chain's `lod-chain` rows follow from them, below). Alpha-tested triangles are tested against their cutoff at the
@@ -103,8 +107,8 @@ use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
     CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE,
-    PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao, image, image_format,
-    material_class, prune_leaves_drawn,
+    OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao,
+    image, image_format, material_class, prune_leaves_drawn,
 };
 use treelod_runtime::impostor::{
     BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
@@ -216,10 +220,18 @@ pub fn calibration_views(per_elevation: usize) -> Vec<(usize, Vec3)> {
 /// (`CHAIN_CALIBRATION`, spec §6.17).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Calibrated {
-    /// Per technique and height, the mean over every view.
+    /// Per technique of `CALIBRATION` (codes below `FIRST_ADDED`) and height, the mean over every
+    /// view.
     pub mean: Vec<CalibrationRecord>,
-    /// Per elevation of [`ELEVATIONS`], technique and height, the mean over that elevation's views.
+    /// Per elevation of [`ELEVATIONS`], technique of `CALIBRATION` and height, the mean over that
+    /// elevation's views.
     pub elevations: Vec<ElevationCalibrationRecord>,
+    /// The same as `mean` for the techniques of format 1.12 on (`CALIBRATION_ADDED`, spec
+    /// §6.18), in sections of their own so that readers of 1.5 to 1.11 skip them rather than
+    /// refuse codes they do not know.
+    pub added: Vec<CalibrationRecord>,
+    /// The same as `elevations` for those techniques (`CALIBRATION_ELEVATIONS_ADDED`).
+    pub elevations_added: Vec<ElevationCalibrationRecord>,
     /// Per LoD chain level and height, sorted by level, then height, the mean over every view;
     /// empty without a chain.
     pub chain_levels: Vec<ChainCalibrationRecord>,
@@ -269,8 +281,11 @@ struct Quad {
     diffuse: PlaneDiffuseRecord,
     /// The atlas it samples.
     image: u32,
-    /// Its rectangle of the atlas, packed (`uv_min`, `uv_max`).
-    uv: (u32, u32),
+    /// The atlas coordinates of its corners (texture coordinates vary linearly over it).
+    uvs: [Vec2; 4],
+    /// The rectangle of the atlas (`min`, `max`) outside which it is empty (an octahedral
+    /// impostor's view past its cell); `None` for a quad textured all over.
+    window: Option<(Vec2, Vec2)>,
 }
 
 /// A quad's corners in its axes, in [`Quad::corners`] order: `(−1, −1)` at `uv_min`, then
@@ -280,12 +295,14 @@ const QUAD_CORNERS: [(f32, f32); 4] = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-
 impl Quad {
     /// The flat quad `centre ± u ± v` (spec §6.10), lit with `u × v`.
     fn flat(centre: Vec3, (u, v): (Vec3, Vec3), image: u32, uv: (u32, u32)) -> Self {
+        let (lo, hi) = (Vec2::from_array(unpack_unorm16x2(uv.0)), Vec2::from_array(unpack_unorm16x2(uv.1)));
         Self {
             corners: QUAD_CORNERS.map(|(s, t)| centre + u * s + v * t),
             normal: u.cross(v),
             diffuse: PlaneDiffuseRecord::FLAT,
             image,
-            uv,
+            uvs: QUAD_CORNERS.map(|(s, t)| lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo)),
+            window: None,
         }
     }
 }
@@ -426,7 +443,12 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
         for (h, &pixels) in HEIGHTS.iter().enumerate() {
             if let Some(c) = column(technique, h) {
                 let (error, primitives) = mean(c, h, &every);
-                calibrated.mean.push(CalibrationRecord { technique, height: pixels, error, primitives });
+                let record = CalibrationRecord { technique, height: pixels, error, primitives };
+                if technique >= calibration_technique::FIRST_ADDED {
+                    calibrated.added.push(record);
+                } else {
+                    calibrated.mean.push(record);
+                }
             }
         }
     }
@@ -435,13 +457,12 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
             for (h, &pixels) in HEIGHTS.iter().enumerate() {
                 if let Some(c) = column(technique, h) {
                     let (error, primitives) = mean(c, h, &|v| directions[v].0 == e);
-                    calibrated.elevations.push(ElevationCalibrationRecord {
-                        elevation,
-                        technique,
-                        height: pixels,
-                        error,
-                        primitives,
-                    });
+                    let record = ElevationCalibrationRecord { elevation, technique, height: pixels, error, primitives };
+                    if technique >= calibration_technique::FIRST_ADDED {
+                        calibrated.elevations_added.push(record);
+                    } else {
+                        calibrated.elevations.push(record);
+                    }
                 }
             }
         }
@@ -480,8 +501,13 @@ fn error(canvas: &Canvas, reference: &LinearImage) -> f64 {
 impl<'a> Scene<'a> {
     fn new(data: &'a ContainerData) -> Self {
         // Planes and billboards sample their atlas with its stored mips (spec §6.10).
-        let textured: Vec<u32> =
-            data.planes.iter().map(|p| p.image).chain(data.billboards.iter().map(|b| b.image)).collect();
+        let textured: Vec<u32> = data
+            .planes
+            .iter()
+            .map(|p| p.image)
+            .chain(data.billboards.iter().map(|b| b.image))
+            .chain(data.octahedral.iter().map(|o| o.image))
+            .collect();
         let atlases: Vec<Option<Atlas>> = data
             .images
             .iter()
@@ -659,6 +685,7 @@ impl<'a> Scene<'a> {
             (t::LOD_CHAIN, !d.lod_levels.is_empty()),
             (t::BILLBOARD, has_billboard(billboard_kind::FACING)),
             (t::CROSSED, has_billboard(billboard_kind::CROSSED)),
+            (t::OCTAHEDRAL, !d.octahedral.is_empty()),
         ]
         .into_iter()
         .filter_map(|(code, held)| held.then_some(code))
@@ -784,6 +811,12 @@ impl<'a> Scene<'a> {
                 }
                 drawn
             }
+            t::OCTAHEDRAL => {
+                for record in &d.octahedral {
+                    self.octahedral(canvas, view, record);
+                }
+                d.octahedral.len() as u64
+            }
             _ => 0,
         }
     }
@@ -795,14 +828,11 @@ impl<'a> Scene<'a> {
     /// to`, the cross-fade of `vs_plane`; [`EVERY_PIXEL`] for all).
     fn quad(&self, canvas: &mut Canvas, view: &View, quad: &Quad, ao: f32, keep: (f32, f32)) {
         let Some(atlas) = self.atlases.get(quad.image as usize).and_then(Option::as_ref) else { return };
-        let (lo, hi) = (Vec2::from_array(unpack_unorm16x2(quad.uv.0)), Vec2::from_array(unpack_unorm16x2(quad.uv.1)));
-        let corner = |q: Vec3, (s, t): (f32, f32)| {
-            (view.project(q), lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo), depth(view, q))
-        };
+        let corner = |q: Vec3, uv: Vec2| (view.project(q), uv, depth(view, q));
         let diffuse = Light::DEFAULT.plane_diffuse(quad.normal, view.direction, quad.diffuse);
         #[expect(clippy::cast_precision_loss, reason = "texture sides")]
         let texels = Vec2::new(atlas.size.0 as f32, atlas.size.1 as f32);
-        let [a, b, c, e] = [0, 1, 2, 3].map(|i| corner(quad.corners[i], QUAD_CORNERS[i]));
+        let [a, b, c, e] = [0, 1, 2, 3].map(|i| corner(quad.corners[i], quad.uvs[i]));
         for [a, b, c] in [[a, b, c], [a, c, e]] {
             let (p, uvs, depths) = ([a.0, b.0, c.0], [a.1, b.1, c.1], [a.2, b.2, c.2]);
             let lod = texel_footprint(p, uvs, texels).max(1e-6).log2();
@@ -812,11 +842,60 @@ impl<'a> Scene<'a> {
                     return;
                 }
                 let uv = uvs[0] * w[0] + uvs[1] * w[1] + uvs[2] * w[2];
+                if quad.window.is_some_and(|(lo, hi)| uv.cmplt(lo).any() || uv.cmpgt(hi).any()) {
+                    return;
+                }
                 let [r, g, b, alpha] = texels::sample(&atlas.levels, atlas.size, uv.to_array(), lod, atlas.sampler);
                 if alpha >= 0.5 {
                     canvas.put(x, y, z, Light::DEFAULT.shade_diffuse(Vec3::new(r, g, b), diffuse, ao));
                 }
             });
+        }
+    }
+
+    /// An octahedral impostor as `vs_octahedral` and `fs_octahedral` in
+    /// `shaders/tree/octahedral.wgsl` draw it (spec §6.13.1): a square of its radius about its
+    /// centre facing the viewer, in the basis of the view direction (below the horizon, the
+    /// horizon's), each pixel textured by one of the three views of the grid triangle around the
+    /// direction, the `k`-th where the pixel's [`level_dither`] value lies past the weights of
+    /// the views before it, at the fragment's place in that view's square (empty past it); lit
+    /// with the view as its normal by the record's diffuse mixture and its occlusion.
+    fn octahedral(&self, canvas: &mut Canvas, view: &View, record: &OctahedralRecord) {
+        let frames = record.frames.max(2);
+        let d = Vec3::new(view.direction.x, view.direction.y.max(0.0), view.direction.z);
+        let d = if d.length_squared() > 1e-20 { d.normalize() } else { Vec3::Z };
+        let basis = |d: Vec3| {
+            let (right, up) = OctahedralRecord::view_basis(d.to_array());
+            (Vec3::from_array(right), Vec3::from_array(up))
+        };
+        let (right, up) = basis(d);
+        let (centre, radius) = (Vec3::from_array(record.center), record.radius);
+        let offsets = QUAD_CORNERS.map(|(s, t)| radius * (s * right + t * up));
+        let (lo, hi) =
+            (Vec2::from_array(unpack_unorm16x2(record.uv_min)), Vec2::from_array(unpack_unorm16x2(record.uv_max)));
+        #[expect(clippy::cast_precision_loss, reason = "at most 64 frames")]
+        let cell = (hi - lo) / frames as f32;
+        let mut from = 0.0;
+        for (k, (i, j, weight)) in OctahedralRecord::blend(frames, d.to_array()).into_iter().enumerate() {
+            // The last view takes every pixel past the first two (the dither is below 1).
+            let to = if k == 2 { EVERY_PIXEL.1 } else { from + weight };
+            if weight > 0.0 {
+                let (right_k, up_k) = basis(Vec3::from_array(OctahedralRecord::view_direction(frames, i, j)));
+                #[expect(clippy::cast_precision_loss, reason = "at most 64 frames")]
+                let origin = lo + Vec2::new(i as f32, j as f32) * cell;
+                let uvs = offsets
+                    .map(|o| origin + 0.5 * (Vec2::new(o.dot(right_k), o.dot(up_k)) / radius + Vec2::ONE) * cell);
+                let quad = Quad {
+                    corners: offsets.map(|o| centre + o),
+                    normal: view.direction,
+                    diffuse: record.diffuse,
+                    image: record.image,
+                    uvs,
+                    window: Some((origin, origin + cell)),
+                };
+                self.quad(canvas, view, &quad, record.occlusion, (from, to));
+            }
+            from = to;
         }
     }
 

@@ -11,6 +11,7 @@ use treelod_build::{
     demo_tree,
 };
 use treelod_format::{CalibrationRecord, Compression, Container, calibration_technique as t, verify};
+use treelod_runtime::{Calibration, Technique};
 
 fn config() -> BuildConfig {
     BuildConfig {
@@ -45,11 +46,13 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     assert_eq!(container.chain_calibration(), out.data.chain_calibration.as_slice());
     // CALIBRATION is a kind of 1.5, the impostors' BC7 atlas (the default) one of 1.6,
     // CALIBRATION_ELEVATIONS one of 1.7, the chain's per-level tables (CHAIN_CALIBRATION) one of
-    // 1.8, the planes' diffuse response (PLANE_DIFFUSE) one of 1.10, and the octahedral
-    // impostors of the baselines (OCTAHEDRAL) make the file 1.11.
+    // 1.8, the planes' diffuse response (PLANE_DIFFUSE) one of 1.10, the octahedral impostors of
+    // the baselines (OCTAHEDRAL) one of 1.11, and their calibration (CALIBRATION_ADDED) makes the
+    // file 1.12.
     assert!(!container.chain_calibration().is_empty() && !container.plane_diffuse().is_empty());
     assert!(!container.octahedral().is_empty());
-    assert_eq!(container.header().minor, 11, "the octahedral impostors are a kind of 1.11");
+    assert_eq!(container.calibration_added(), out.data.calibration_added.as_slice());
+    assert_eq!(container.header().minor, 12, "the octahedral impostors' rows are a kind of 1.12");
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.
@@ -83,6 +86,9 @@ fn calibration_is_the_same_whatever_the_thread_count() {
     assert_eq!(one, with(3));
     assert_eq!(one.mean, built.data.calibration, "the build's table is the calibration of what it wrote");
     assert_eq!(one.elevations, built.data.calibration_elevations);
+    assert!(!one.added.is_empty(), "the octahedral impostors' rows");
+    assert_eq!(one.added, built.data.calibration_added);
+    assert_eq!(one.elevations_added, built.data.calibration_elevations_added);
     assert_eq!(one.chain_levels, built.data.chain_calibration, "and so are the chain's levels");
 }
 
@@ -231,4 +237,54 @@ fn impostor_and_ellipsoid_rows_count_what_the_runtime_submits_with_its_level_ble
     }
     // The blend's fading level is what the tables counted too little before.
     assert!(blended_lines >= 2, "the level blend submits more lines at some heights");
+}
+
+#[test]
+fn octahedral_impostors_are_calibrated_in_the_added_sections_and_hold_up_from_above() {
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let out = build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config(), "t").expect("builds");
+    // Codes a reader of 1.5 to 1.11 refuses stay out of CALIBRATION (spec §6.18).
+    assert!(out.data.calibration.iter().all(|r| r.technique < t::FIRST_ADDED));
+    assert!(out.data.calibration_elevations.iter().all(|r| r.technique < t::FIRST_ADDED));
+    let octahedral = row(&out.data.calibration_added, t::OCTAHEDRAL);
+    assert_eq!(octahedral.iter().map(|r| r.height).collect::<Vec<_>>(), HEIGHTS);
+    assert_eq!(octahedral.len(), out.data.calibration_added.len(), "nothing else is added");
+    // One quad per tree.
+    assert!(octahedral.iter().all(|r| r.primitives == 1.0), "{octahedral:?}");
+    assert_eq!(out.data.calibration_elevations_added.len(), ELEVATIONS.len() * octahedral.len());
+
+    // From straight above the crossed quads are three lines and the facing billboard a card seen
+    // edge on, while the octahedral impostor shows the crown as baked from there: it reads better
+    // than both at every height; from the side it reads within reach of the crossed quads.
+    let at = |elevation: f32, technique: u32| -> Vec<f32> {
+        let rows = if technique >= t::FIRST_ADDED {
+            &out.data.calibration_elevations_added
+        } else {
+            &out.data.calibration_elevations
+        };
+        rows.iter().filter(|r| r.elevation == elevation && r.technique == technique).map(|r| r.error).collect()
+    };
+    let (top, crossed, facing) = (at(90.0, t::OCTAHEDRAL), at(90.0, t::CROSSED), at(90.0, t::BILLBOARD));
+    eprintln!("from above: octahedral {top:?}, crossed {crossed:?}, billboard {facing:?}");
+    assert!(top.iter().zip(&crossed).all(|(o, c)| o < c), "{top:?} vs crossed {crossed:?}");
+    assert!(top.iter().zip(&facing).all(|(o, f)| o < f), "{top:?} vs billboard {facing:?}");
+    let (side, crossed_side) = (at(0.0, t::OCTAHEDRAL), at(0.0, t::CROSSED));
+    eprintln!("from the side: octahedral {side:?}, crossed {crossed_side:?}");
+    assert!(side.iter().zip(&crossed_side).all(|(o, c)| *o < 1.5 * c), "{side:?} vs crossed {crossed_side:?}");
+
+    // The runtime reads the added rows with the others, per elevation too.
+    let bytes = out.data.to_bytes(Compression::default()).expect("writes");
+    let container = Container::from_bytes(&bytes).expect("opens");
+    verify(&container).expect("verifies");
+    let tables = Calibration::from_container(&container).expect("tables");
+    assert!(tables.holds(Technique::Octahedral));
+    assert_eq!(tables.elevations(), ELEVATIONS);
+    for (e, &elevation) in ELEVATIONS.iter().enumerate() {
+        let errors: Vec<f32> =
+            HEIGHTS.iter().map(|&h| tables.at_elevation(Some(e), Technique::Octahedral, h).expect("a row").0).collect();
+        assert_eq!(errors, at(elevation, t::OCTAHEDRAL), "elevation {elevation}");
+        let crossed: Vec<f32> =
+            HEIGHTS.iter().map(|&h| tables.at_elevation(Some(e), Technique::Crossed, h).expect("a row").0).collect();
+        assert_eq!(crossed, at(elevation, t::CROSSED), "elevation {elevation}");
+    }
 }

@@ -451,6 +451,24 @@ impl Container {
         self.records(SectionKind::CALIBRATION_ELEVATIONS)
     }
 
+    /// `CALIBRATION_ADDED` records (spec §6.18): the calibration of the techniques added after
+    /// 1.11 (codes [`calibration_technique::FIRST_ADDED`](crate::calibration_technique::FIRST_ADDED)
+    /// and up), which `CALIBRATION` does not hold; with [`Self::calibration`] the file's tables.
+    /// Empty without the section, as in every file before 1.12.
+    #[must_use]
+    pub fn calibration_added(&self) -> &[CalibrationRecord] {
+        self.records(SectionKind::CALIBRATION_ADDED)
+    }
+
+    /// `CALIBRATION_ELEVATIONS_ADDED` records (spec §6.18): the calibration of the techniques of
+    /// [`Self::calibration_added`] per elevation of the views; with
+    /// [`Self::calibration_elevations`] the file's tables per elevation. Empty without the
+    /// section, as in every file before 1.12.
+    #[must_use]
+    pub fn calibration_elevations_added(&self) -> &[ElevationCalibrationRecord] {
+        self.records(SectionKind::CALIBRATION_ELEVATIONS_ADDED)
+    }
+
     /// `CHAIN_CALIBRATION` records (spec §6.17; empty without the section, as in every file
     /// before 1.8).
     #[must_use]

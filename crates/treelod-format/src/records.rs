@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 11;
+pub const MINOR: u16 = 12;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -181,9 +181,17 @@ impl SectionKind {
     /// [`ElevationCalibrationRecord`]s: the calibration of `CALIBRATION` per elevation of the
     /// views (spec §6.16). Since 1.7.
     pub const CALIBRATION_ELEVATIONS: Self = Self(0x0072);
+    /// [`CalibrationRecord`]s of the techniques added after 1.11 (codes
+    /// [`calibration_technique::FIRST_ADDED`] and up), which `CALIBRATION` does not hold: the same
+    /// tables as `CALIBRATION`'s (spec §6.18). Since 1.12.
+    pub const CALIBRATION_ADDED: Self = Self(0x0073);
+    /// [`ElevationCalibrationRecord`]s of the techniques added after 1.11: the calibration of
+    /// `CALIBRATION_ADDED` per elevation of the views, as `CALIBRATION_ELEVATIONS` is
+    /// `CALIBRATION`'s (spec §6.18). Since 1.12.
+    pub const CALIBRATION_ELEVATIONS_ADDED: Self = Self(0x0074);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 32] = [
+    pub const KNOWN: [Self; 34] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -216,6 +224,8 @@ impl SectionKind {
         Self::CALIBRATION,
         Self::CHAIN_CALIBRATION,
         Self::CALIBRATION_ELEVATIONS,
+        Self::CALIBRATION_ADDED,
+        Self::CALIBRATION_ELEVATIONS_ADDED,
     ];
 
     /// The spec's name of a known kind.
@@ -254,6 +264,8 @@ impl SectionKind {
             Self::CALIBRATION => "CALIBRATION",
             Self::CHAIN_CALIBRATION => "CHAIN_CALIBRATION",
             Self::CALIBRATION_ELEVATIONS => "CALIBRATION_ELEVATIONS",
+            Self::CALIBRATION_ADDED => "CALIBRATION_ADDED",
+            Self::CALIBRATION_ELEVATIONS_ADDED => "CALIBRATION_ELEVATIONS_ADDED",
             _ => return None,
         })
     }
@@ -287,9 +299,11 @@ impl SectionKind {
             Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
             Self::BILLBOARDS => size_of::<BillboardRecord>(),
             Self::OCTAHEDRAL => size_of::<OctahedralRecord>(),
-            Self::CALIBRATION => size_of::<CalibrationRecord>(),
+            Self::CALIBRATION | Self::CALIBRATION_ADDED => size_of::<CalibrationRecord>(),
             Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
-            Self::CALIBRATION_ELEVATIONS => size_of::<ElevationCalibrationRecord>(),
+            Self::CALIBRATION_ELEVATIONS | Self::CALIBRATION_ELEVATIONS_ADDED => {
+                size_of::<ElevationCalibrationRecord>()
+            }
             _ => return None,
         };
         #[expect(clippy::cast_possible_truncation, reason = "record sizes are below 100")]
@@ -303,8 +317,9 @@ impl SectionKind {
     /// the calibration tables (`CALIBRATION`), 7 for the tables per elevation
     /// (`CALIBRATION_ELEVATIONS`), 8 for the LoD chain's per-level tables (`CHAIN_CALIBRATION`), 9
     /// for the block's far lines (`FAR_LINES`, `FAR_LINE_AO`), 10 for the planes' diffuse response
-    /// (`PLANE_DIFFUSE`), 11 for the octahedral impostors (`OCTAHEDRAL`), 0 for
-    /// the other known kinds and for kinds this version does not know (private extensions do not
+    /// (`PLANE_DIFFUSE`), 11 for the octahedral impostors (`OCTAHEDRAL`), 12 for the calibration
+    /// of the techniques added after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), 0
+    /// for the other known kinds and for kinds this version does not know (private extensions do not
     /// raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
@@ -319,6 +334,7 @@ impl SectionKind {
             Self::FAR_LINES | Self::FAR_LINE_AO => 9,
             Self::PLANE_DIFFUSE => 10,
             Self::OCTAHEDRAL => 11,
+            Self::CALIBRATION_ADDED | Self::CALIBRATION_ELEVATIONS_ADDED => 12,
             _ => 0,
         }
     }
@@ -923,11 +939,14 @@ pub struct CurveSample {
 const _: () = assert!(size_of::<CurveSample>() == 8);
 
 /// One sample of a representation's calibration (spec §6.15): the image error and the cost of
-/// drawing the block with `technique` when the block is `height` pixels high on screen.
+/// drawing the block with `technique` when the block is `height` pixels high on screen. The
+/// record of `CALIBRATION` and, for the techniques added after 1.11, of `CALIBRATION_ADDED`
+/// (spec §6.18).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct CalibrationRecord {
-    /// The representation, one of [`calibration_technique`].
+    /// The representation, one of [`calibration_technique`]: below
+    /// [`calibration_technique::FIRST_ADDED`] in `CALIBRATION`, from it on in `CALIBRATION_ADDED`.
     pub technique: u32,
     /// Projected height of the block's bounds, pixels; strictly increasing within a technique.
     pub height: f32,
@@ -942,14 +961,17 @@ const _: () = assert!(size_of::<CalibrationRecord>() == 16);
 
 /// One sample of a representation's calibration seen from one elevation (spec §6.16): as a
 /// [`CalibrationRecord`], measured only from the views at `elevation` degrees above the block's
-/// horizontal plane.
+/// horizontal plane. The record of `CALIBRATION_ELEVATIONS` and, for the techniques added after
+/// 1.11, of `CALIBRATION_ELEVATIONS_ADDED` (spec §6.18).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct ElevationCalibrationRecord {
     /// Elevation of the views above the horizontal plane, degrees, `[0, 90]`; non-decreasing
     /// over the section.
     pub elevation: f32,
-    /// The representation, one of [`calibration_technique`]; non-decreasing within an elevation.
+    /// The representation, one of [`calibration_technique`] (below
+    /// [`calibration_technique::FIRST_ADDED`] in `CALIBRATION_ELEVATIONS`, from it on in
+    /// `CALIBRATION_ELEVATIONS_ADDED`); non-decreasing within an elevation.
     pub technique: u32,
     /// Projected height of the block's bounds, pixels; strictly increasing within an elevation
     /// and technique.
@@ -962,7 +984,7 @@ pub struct ElevationCalibrationRecord {
 }
 const _: () = assert!(size_of::<ElevationCalibrationRecord>() == 20);
 
-/// The representations a [`CalibrationRecord`] names (spec §6.15).
+/// The representations a [`CalibrationRecord`] names (spec §6.15, §6.18).
 pub mod calibration_technique {
     /// Every triangle of `TRIANGLES`.
     pub const FULL: u32 = 0;
@@ -982,15 +1004,34 @@ pub mod calibration_technique {
     pub const BILLBOARD: u32 = 7;
     /// The baseline crossed billboards.
     pub const CROSSED: u32 = 8;
+    /// The baseline octahedral impostor (`OCTAHEDRAL`, §6.13.1); only in the added sections
+    /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`, since 1.12).
+    pub const OCTAHEDRAL: u32 = 9;
+    /// The first code defined in the added sections (`CALIBRATION_ADDED`,
+    /// `CALIBRATION_ELEVATIONS_ADDED`, spec §6.18), which hold the codes `FIRST_ADDED .. COUNT`;
+    /// `CALIBRATION` and `CALIBRATION_ELEVATIONS` hold the codes below it, those a reader of 1.5
+    /// to 1.11 defines.
+    pub const FIRST_ADDED: u32 = 9;
     /// Number of defined values.
-    pub const COUNT: u32 = 9;
+    pub const COUNT: u32 = 10;
 
     /// The name of a value, as the `treelod` tools spell the technique (`--technique`).
     #[must_use]
     pub fn name(code: u32) -> Option<&'static str> {
-        ["full", "spt", "prune-opt", "prune-cook", "impostors", "ellipsoids", "lod-chain", "billboard", "crossed"]
-            .get(code as usize)
-            .copied()
+        [
+            "full",
+            "spt",
+            "prune-opt",
+            "prune-cook",
+            "impostors",
+            "ellipsoids",
+            "lod-chain",
+            "billboard",
+            "crossed",
+            "octahedral",
+        ]
+        .get(code as usize)
+        .copied()
     }
 }
 

@@ -91,6 +91,10 @@ pub struct VerifyReport {
     pub calibration_elevations: u64,
     /// `CHAIN_CALIBRATION` records checked (spec §6.17).
     pub chain_calibration: u64,
+    /// `CALIBRATION_ADDED` records checked (spec §6.18): the techniques added after 1.11.
+    pub calibration_added: u64,
+    /// `CALIBRATION_ELEVATIONS_ADDED` records checked (spec §6.18).
+    pub calibration_elevations_added: u64,
     /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO`, `LINE_AO` and `FAR_LINE_AO` bytes (their
     /// counts are checked at open).
     pub ao: u64,
@@ -196,8 +200,16 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
     check_billboards(c.billboards(), image_count, tree_count)?;
     check_octahedral(c.octahedral(), image_count, tree_count)?;
-    check_calibration(c.calibration())?;
-    check_calibration_elevations(c.calibration_elevations(), c.calibration())?;
+    check_calibration(&BASE_TABLES, c.calibration())?;
+    check_calibration_elevations(&BASE_TABLES, c.calibration_elevations(), c.calibration())?;
+    check_calibration(&ADDED_TABLES, c.calibration_added())?;
+    check_calibration_elevations(&ADDED_TABLES, c.calibration_elevations_added(), c.calibration_added())?;
+    check_added_calibration(
+        c.calibration(),
+        c.calibration_elevations(),
+        c.calibration_added(),
+        c.calibration_elevations_added(),
+    )?;
     check_chain_calibration(c.chain_calibration(), c.lod_levels())?;
     check_slot_images_only_for_planes(c)?;
     check_metadata(c)?;
@@ -239,6 +251,8 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.calibration = c.calibration().len() as u64;
     report.calibration_elevations = c.calibration_elevations().len() as u64;
     report.chain_calibration = c.chain_calibration().len() as u64;
+    report.calibration_added = c.calibration_added().len() as u64;
+    report.calibration_elevations_added = c.calibration_elevations_added().len() as u64;
     report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
     Ok(report)
 }
@@ -1128,20 +1142,57 @@ fn check_prune(leaves: &[PruneLeafRecord], triangles: &[TriangleRecord]) -> Resu
     Ok(())
 }
 
-/// Spec §6.15, §6.16: record `i` of `kind`, a calibration sample `(technique, height, error,
-/// primitives)`, names a known technique at a finite, positive height, with an error in `[0, 1]`
-/// and a finite primitive count `≥ 0`.
+/// One set of calibration tables (spec §6.15, §6.16, §6.18): the section of its means, the
+/// section of its tables per elevation, and the techniques their records may name.
+struct Tables {
+    /// `CALIBRATION` or `CALIBRATION_ADDED`.
+    mean: SectionKind,
+    /// `CALIBRATION_ELEVATIONS` or `CALIBRATION_ELEVATIONS_ADDED`.
+    per_elevation: SectionKind,
+    /// The codes its records name: `first .. end`, or from `first` on (`None`: codes a later
+    /// minor defines, which a reader skips).
+    techniques: (u32, Option<u32>),
+    /// The other set's sections (mean, per elevation), which hold the other defined codes.
+    other: (SectionKind, SectionKind),
+}
+
+/// `CALIBRATION` and `CALIBRATION_ELEVATIONS` (spec §6.15, §6.16): the techniques a reader of 1.5
+/// to 1.11 defines.
+const BASE_TABLES: Tables = Tables {
+    mean: SectionKind::CALIBRATION,
+    per_elevation: SectionKind::CALIBRATION_ELEVATIONS,
+    techniques: (0, Some(calibration_technique::FIRST_ADDED)),
+    other: (SectionKind::CALIBRATION_ADDED, SectionKind::CALIBRATION_ELEVATIONS_ADDED),
+};
+
+/// `CALIBRATION_ADDED` and `CALIBRATION_ELEVATIONS_ADDED` (spec §6.18): the techniques added
+/// after 1.11, and those later minors add (a reader skips the records of codes it does not
+/// define, so a file of a later minor stays readable).
+const ADDED_TABLES: Tables = Tables {
+    mean: SectionKind::CALIBRATION_ADDED,
+    per_elevation: SectionKind::CALIBRATION_ELEVATIONS_ADDED,
+    techniques: (calibration_technique::FIRST_ADDED, None),
+    other: (SectionKind::CALIBRATION, SectionKind::CALIBRATION_ELEVATIONS),
+};
+
+/// Spec §6.15, §6.16, §6.18: record `i` of `kind`, a calibration sample `(technique, height,
+/// error, primitives)` of `tables`, names one of the techniques `tables` holds, at a finite,
+/// positive height, with an error in `[0, 1]` and a finite primitive count `≥ 0`. A technique of
+/// the other set is named, with the section it belongs in.
 fn check_calibration_sample(
+    tables: &Tables,
     kind: SectionKind,
     i: usize,
     (technique, height, error, primitives): (u32, f32, f32, f32),
 ) -> Result<()> {
-    if technique >= calibration_technique::COUNT {
-        return Err(bad(
-            kind,
-            i,
-            format!("technique {technique} is not defined (0..{})", calibration_technique::COUNT),
-        ));
+    let (first, end) = tables.techniques;
+    if technique < first || end.is_some_and(|end| technique >= end) {
+        let elsewhere = calibration_technique::name(technique).map_or_else(String::new, |name| {
+            let other = if kind == tables.mean { tables.other.0 } else { tables.other.1 };
+            format!(": {name} belongs in {other}")
+        });
+        let range = end.map_or_else(|| format!("{first}.."), |end| format!("{first}..{end}"));
+        return Err(bad(kind, i, format!("technique {technique} is not defined here ({range}){elsewhere}")));
     }
     check_measurement(kind, i, (height, error, primitives))
 }
@@ -1161,12 +1212,13 @@ fn check_measurement(kind: SectionKind, i: usize, (height, error, primitives): (
     Ok(())
 }
 
-/// Spec §6.15: known techniques in ascending order, heights finite, positive and strictly
-/// increasing within a technique, errors in `[0, 1]`, primitive counts finite and `≥ 0`.
-fn check_calibration(records: &[CalibrationRecord]) -> Result<()> {
-    let kind = SectionKind::CALIBRATION;
+/// Spec §6.15, §6.18: the records of `tables.mean` name its techniques in ascending order,
+/// heights finite, positive and strictly increasing within a technique, errors in `[0, 1]`,
+/// primitive counts finite and `≥ 0`.
+fn check_calibration(tables: &Tables, records: &[CalibrationRecord]) -> Result<()> {
+    let kind = tables.mean;
     for (i, r) in records.iter().enumerate() {
-        check_calibration_sample(kind, i, (r.technique, r.height, r.error, r.primitives))?;
+        check_calibration_sample(tables, kind, i, (r.technique, r.height, r.error, r.primitives))?;
         if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
             if r.technique < prev.technique {
                 return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
@@ -1183,20 +1235,22 @@ fn check_calibration(records: &[CalibrationRecord]) -> Result<()> {
     Ok(())
 }
 
-/// Spec §6.16: elevations finite in `[0, 90]` and non-decreasing, known techniques
-/// non-decreasing within an elevation, heights finite, positive and strictly increasing within an
-/// elevation and technique, errors in `[0, 1]`, primitive counts finite and `≥ 0`; and each
-/// elevation holds exactly the `(technique, height)` pairs of `calibration`, so a file with
-/// records also has `CALIBRATION`.
+/// Spec §6.16, §6.18: the records of `tables.per_elevation` have elevations finite in `[0, 90]`
+/// and non-decreasing, techniques of `tables` non-decreasing within an elevation, heights finite,
+/// positive and strictly increasing within an elevation and technique, errors in `[0, 1]`,
+/// primitive counts finite and `≥ 0`; and each elevation holds exactly the `(technique, height)`
+/// pairs of `calibration` (the records of `tables.mean`), so a file with records also has those.
 ///
-/// Runs after [`check_calibration`]: `calibration` is sorted by technique and strictly by height
-/// within one, so a pair is found by binary search, and an elevation whose records are sorted the
-/// same way, each a pair of `calibration`, holds them all exactly when it has as many records.
+/// Runs after [`check_calibration`] of `calibration`: it is sorted by technique and strictly by
+/// height within one, so a pair is found by binary search, and an elevation whose records are
+/// sorted the same way, each a pair of `calibration`, holds them all exactly when it has as many
+/// records.
 fn check_calibration_elevations(
+    tables: &Tables,
     records: &[ElevationCalibrationRecord],
     calibration: &[CalibrationRecord],
 ) -> Result<()> {
-    let kind = SectionKind::CALIBRATION_ELEVATIONS;
+    let (kind, mean) = (tables.per_elevation, tables.mean);
     if records.is_empty() {
         return Ok(());
     }
@@ -1204,7 +1258,7 @@ fn check_calibration_elevations(
         return Err(bad(
             kind,
             0,
-            "the file has no CALIBRATION, whose (technique, height) pairs each elevation holds".into(),
+            format!("the file has no {mean}, whose (technique, height) pairs each elevation holds"),
         ));
     }
     let pair = |technique: u32, height: f32| {
@@ -1216,13 +1270,13 @@ fn check_calibration_elevations(
         if !(r.elevation.is_finite() && (0.0..=90.0).contains(&r.elevation)) {
             return Err(bad(kind, i, format!("elevation {} lies outside [0, 90] degrees", r.elevation)));
         }
-        check_calibration_sample(kind, i, (r.technique, r.height, r.error, r.primitives))?;
+        check_calibration_sample(tables, kind, i, (r.technique, r.height, r.error, r.primitives))?;
         if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
             if r.elevation < prev.elevation {
                 return Err(bad(kind, i, format!("elevation {} follows elevation {}", r.elevation, prev.elevation)));
             }
             if r.elevation > prev.elevation {
-                check_elevation_pairs(&records[start..i], start, calibration)?;
+                check_elevation_pairs(tables, &records[start..i], start, calibration)?;
                 start = i;
             } else if r.technique < prev.technique {
                 return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
@@ -1235,21 +1289,19 @@ fn check_calibration_elevations(
             }
         }
         if pair(r.technique, r.height).is_err() {
-            return Err(bad(
-                kind,
-                i,
-                format!("technique {} at height {} has no CALIBRATION record", r.technique, r.height),
-            ));
+            return Err(bad(kind, i, format!("technique {} at height {} has no {mean} record", r.technique, r.height)));
         }
     }
-    check_elevation_pairs(&records[start..], start, calibration)
+    check_elevation_pairs(tables, &records[start..], start, calibration)
 }
 
-/// Spec §6.16: the records of one elevation, from record `start`, hold every `(technique, height)`
-/// pair of `calibration`. They are sorted as `calibration` is and each is one of its pairs, so
-/// they hold all exactly when they are as many; otherwise the first place the two differ names a
-/// pair the elevation lacks, reported at its first record.
+/// Spec §6.16, §6.18: the records of one elevation of `tables.per_elevation`, from record
+/// `start`, hold every `(technique, height)` pair of `calibration` (`tables.mean`'s). They are
+/// sorted as `calibration` is and each is one of its pairs, so they hold all exactly when they
+/// are as many; otherwise the first place the two differ names a pair the elevation lacks,
+/// reported at its first record.
 fn check_elevation_pairs(
+    tables: &Tables,
     elevation: &[ElevationCalibrationRecord],
     start: usize,
     calibration: &[CalibrationRecord],
@@ -1266,14 +1318,82 @@ fn check_elevation_pairs(
         })
         .map_or_else(String::new, |(_, c)| format!(", not technique {} at height {}", c.technique, c.height));
     Err(bad(
-        SectionKind::CALIBRATION_ELEVATIONS,
+        tables.per_elevation,
         start,
         format!(
-            "elevation {at} holds {} of the {} (technique, height) pairs of CALIBRATION{missing}",
+            "elevation {at} holds {} of the {} (technique, height) pairs of {}{missing}",
             elevation.len(),
-            calibration.len()
+            calibration.len(),
+            tables.mean
         ),
     ))
+}
+
+/// Spec §6.18: the added tables complete the others. `CALIBRATION_ADDED` needs `CALIBRATION`;
+/// `CALIBRATION_ELEVATIONS_ADDED` needs `CALIBRATION_ELEVATIONS` and has exactly its elevations
+/// (equal as stored); and a file with `CALIBRATION_ELEVATIONS` and `CALIBRATION_ADDED` has
+/// `CALIBRATION_ELEVATIONS_ADDED`, so that every elevation has every technique.
+///
+/// Runs after [`check_calibration_elevations`] of both sets: `per_elevation` and
+/// `added_per_elevation` are sorted by elevation, and `added_per_elevation` is empty or
+/// `added` is not.
+fn check_added_calibration(
+    calibration: &[CalibrationRecord],
+    per_elevation: &[ElevationCalibrationRecord],
+    added: &[CalibrationRecord],
+    added_per_elevation: &[ElevationCalibrationRecord],
+) -> Result<()> {
+    let (mean, elevations) = (SectionKind::CALIBRATION_ADDED, SectionKind::CALIBRATION_ELEVATIONS_ADDED);
+    if !added.is_empty() && calibration.is_empty() {
+        return Err(bad(mean, 0, "the file has no CALIBRATION, whose tables these complete".into()));
+    }
+    if added_per_elevation.is_empty() {
+        if !added.is_empty() && !per_elevation.is_empty() {
+            return Err(bad(
+                mean,
+                0,
+                "the file has CALIBRATION_ELEVATIONS but no CALIBRATION_ELEVATIONS_ADDED, whose tables per \
+                 elevation these need"
+                    .into(),
+            ));
+        }
+        return Ok(());
+    }
+    if per_elevation.is_empty() {
+        return Err(bad(
+            elevations,
+            0,
+            "the file has no CALIBRATION_ELEVATIONS, whose elevations these complete".into(),
+        ));
+    }
+    // The elevations of each, as stored.
+    let set = |records: &[ElevationCalibrationRecord]| {
+        let mut bits: Vec<u32> = records.iter().map(|r| r.elevation.to_bits()).collect();
+        bits.sort_unstable();
+        bits.dedup();
+        bits
+    };
+    let (theirs, ours) = (set(per_elevation), set(added_per_elevation));
+    if let Some(i) = added_per_elevation.iter().position(|r| theirs.binary_search(&r.elevation.to_bits()).is_err()) {
+        return Err(bad(
+            elevations,
+            i,
+            format!("elevation {} is not an elevation of CALIBRATION_ELEVATIONS", added_per_elevation[i].elevation),
+        ));
+    }
+    if let Some(&missing) = theirs.iter().find(|b| ours.binary_search(b).is_err()) {
+        let missing = f32::from_bits(missing);
+        // Reported where its records would be.
+        let i = added_per_elevation
+            .partition_point(|r| r.elevation < missing)
+            .min(added_per_elevation.len().saturating_sub(1));
+        return Err(bad(
+            elevations,
+            i,
+            format!("has no records at elevation {missing}, an elevation of CALIBRATION_ELEVATIONS"),
+        ));
+    }
+    Ok(())
 }
 
 /// Spec §6.17: levels in ascending order, each a level every tree of `LOD_LEVELS` has (so the

@@ -144,6 +144,13 @@ pub struct ContainerData {
     /// `CHAIN_CALIBRATION`: empty, or each LoD chain level's error and cost by projected height
     /// (since 1.8).
     pub chain_calibration: Vec<ChainCalibrationRecord>,
+    /// `CALIBRATION_ADDED`: empty, or the error and cost by projected height of the techniques
+    /// added after 1.11, codes [`calibration_technique::FIRST_ADDED`](crate::calibration_technique::FIRST_ADDED)
+    /// and up (spec §6.18; since 1.12).
+    pub calibration_added: Vec<CalibrationRecord>,
+    /// `CALIBRATION_ELEVATIONS_ADDED`: empty, or the calibration of those techniques per elevation
+    /// of the views (spec §6.18; since 1.12).
+    pub calibration_elevations_added: Vec<ElevationCalibrationRecord>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
     pub extra_sections: Vec<(u32, Vec<u8>)>,
@@ -186,6 +193,8 @@ impl ContainerData {
             calibration: c.calibration().to_vec(),
             calibration_elevations: c.calibration_elevations().to_vec(),
             chain_calibration: c.chain_calibration().to_vec(),
+            calibration_added: c.calibration_added().to_vec(),
+            calibration_elevations_added: c.calibration_elevations_added().to_vec(),
             extra_sections: c
                 .sections()
                 .iter()
@@ -541,6 +550,8 @@ macro_rules! optional_sections {
             (SectionKind::CALIBRATION, $payload!(calibration)),
             (SectionKind::CHAIN_CALIBRATION, $payload!(chain_calibration)),
             (SectionKind::CALIBRATION_ELEVATIONS, $payload!(calibration_elevations)),
+            (SectionKind::CALIBRATION_ADDED, $payload!(calibration_added)),
+            (SectionKind::CALIBRATION_ELEVATIONS_ADDED, $payload!(calibration_elevations_added)),
         ]
     };
 }

@@ -1,5 +1,6 @@
 //! Calibration tables in the container (spec §6.15): the `CALIBRATION` kind (1.5) round-trips and
-//! makes a file 1.5; `verify` checks each record (a defined technique, techniques in ascending
+//! makes a file 1.5; `verify` checks each record (a technique of 1.5 to 1.11, below
+//! `FIRST_ADDED`, techniques in ascending
 //! order, heights finite, positive and strictly increasing within a technique, errors in
 //! `[0, 1]`, primitive counts finite and `≥ 0`). Each rule is broken once and refused with an
 //! error naming `CALIBRATION` and the record.
@@ -15,7 +16,7 @@ fn sample(technique: u32, height: f32, error: f32, primitives: f32) -> Calibrati
 }
 
 /// The one-leaf cell of `common` with a calibration of three techniques: `FULL` at three
-/// heights, `SPT` at four, `CROSSED` (the last code) at one. Verifies.
+/// heights, `SPT` at four, `CROSSED` (the last code of `CALIBRATION`) at one. Verifies.
 fn fixture() -> ContainerData {
     use calibration_technique::{CROSSED, FULL, SPT};
     let mut data = common::one_leaf_cell("calibration-fixture");
@@ -72,10 +73,23 @@ fn the_kind_and_the_techniques_are_numbered_named_and_sized_as_the_spec_says() {
     let names: Vec<&str> = (0..calibration_technique::COUNT).filter_map(calibration_technique::name).collect();
     assert_eq!(
         names,
-        ["full", "spt", "prune-opt", "prune-cook", "impostors", "ellipsoids", "lod-chain", "billboard", "crossed"]
+        [
+            "full",
+            "spt",
+            "prune-opt",
+            "prune-cook",
+            "impostors",
+            "ellipsoids",
+            "lod-chain",
+            "billboard",
+            "crossed",
+            "octahedral"
+        ]
     );
     assert_eq!(calibration_technique::name(calibration_technique::COUNT), None);
-    assert_eq!(calibration_technique::CROSSED + 1, calibration_technique::COUNT);
+    // CALIBRATION holds the codes up to CROSSED; the octahedral impostor's are in CALIBRATION_ADDED.
+    assert_eq!(calibration_technique::CROSSED + 1, calibration_technique::FIRST_ADDED);
+    assert_eq!(calibration_technique::OCTAHEDRAL + 1, calibration_technique::COUNT);
 }
 
 #[test]
@@ -107,10 +121,10 @@ fn the_minor_is_5_exactly_when_a_calibration_is_present() {
 #[test]
 fn a_single_record_of_each_technique_and_edge_values_pass() {
     let mut data = common::one_leaf_cell("edges");
-    data.calibration = (0..calibration_technique::COUNT)
+    data.calibration = (0..calibration_technique::FIRST_ADDED)
         .map(|t| sample(t, f32::MIN_POSITIVE, if t % 2 == 0 { 0.0 } else { 1.0 }, -0.0))
         .collect();
-    assert_eq!(check(&data).expect("valid").calibration, u64::from(calibration_technique::COUNT));
+    assert_eq!(check(&data).expect("valid").calibration, u64::from(calibration_technique::FIRST_ADDED));
     // Heights may fall from one technique to the next.
     data.calibration = vec![sample(0, 100.0, 0.5, 3.0), sample(1, 1.0, 0.5, 3.0)];
     check(&data).expect("heights restart with each technique");
@@ -121,8 +135,11 @@ fn a_single_record_of_each_technique_and_edge_values_pass() {
 
 #[test]
 fn an_undefined_technique_is_refused() {
+    // The octahedral impostor's code is defined, but only in CALIBRATION_ADDED (spec §6.18).
+    let data = edited(7, |r| r.technique = calibration_technique::OCTAHEDRAL);
+    expect_refused(&data, 7, &["technique 9 is not defined here (0..9): octahedral belongs in CALIBRATION_ADDED"]);
     let data = edited(7, |r| r.technique = calibration_technique::COUNT);
-    expect_refused(&data, 7, &["technique 9 is not defined"]);
+    expect_refused(&data, 7, &["technique 10 is not defined here (0..9)"]);
     let data = edited(0, |r| r.technique = u32::MAX);
     expect_refused(&data, 0, &["technique 4294967295 is not defined"]);
 }

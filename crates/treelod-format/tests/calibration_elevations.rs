@@ -165,8 +165,14 @@ fn a_decreasing_elevation_is_refused() {
 
 #[test]
 fn an_undefined_technique_is_refused() {
+    let data = edited(3, |r| r.technique = calibration_technique::FIRST_ADDED);
+    expect_refused(
+        &data,
+        3,
+        &["technique 9 is not defined here (0..9): octahedral belongs in CALIBRATION_ELEVATIONS_ADDED"],
+    );
     let data = edited(3, |r| r.technique = calibration_technique::COUNT);
-    expect_refused(&data, 3, &["technique 9 is not defined (0..9)"]);
+    expect_refused(&data, 3, &["technique 10 is not defined here (0..9)"]);
     let data = edited(8, |r| r.technique = u32::MAX);
     expect_refused(&data, 8, &["technique 4294967295 is not defined"]);
 }

@@ -8,7 +8,7 @@ mod common;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
-use common::{BACKGROUND, assert_same_selection, calibrated_demo, differing};
+use common::{BACKGROUND, assert_same_selection, calibrated_demo_without_octahedral, differing};
 use glam::{Mat4, Vec3, vec3};
 use treelod_format::Container;
 use treelod_render::offscreen::{Gpu, render_image};
@@ -39,7 +39,7 @@ fn positions(lod: &ModelLod) -> Vec<Vec3> {
 
 /// The calibrated demo tree, its point tree and the 48 trees' [`positions`].
 fn demo_forest() -> (Arc<Container>, ModelLod, Vec<Vec3>) {
-    let container = calibrated_demo();
+    let container = calibrated_demo_without_octahedral();
     let lod = ModelLod::from_container(&container);
     let positions = positions(&lod);
     (container, lod, positions)

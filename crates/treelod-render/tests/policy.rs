@@ -6,7 +6,7 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, calibrated_demo, demo_built, gpu};
+use common::{BACKGROUND, calibrated_demo, calibrated_demo_without_octahedral, demo_built, gpu};
 use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, LodChainConfig};
 use treelod_format::Container;
@@ -76,6 +76,9 @@ fn each_tree_is_drawn_with_what_the_tables_choose_at_its_size() {
         *expected.get_mut(choices.choose_framed(h, class, 1.0, in_view, None)) += 1;
     }
     assert!(expected.iter().filter(|&(_, n)| n > 0).count() >= 2, "the row spans two choices: {expected:?}");
+    // The far trees are drawn with their octahedral impostor, one quad each (its rows are in the
+    // sections of format 1.12, spec §6.18, which the runtime reads with the others).
+    assert!(expected[Technique::Octahedral] > 0, "{expected:?}");
 
     let mut renderer = forest(&gpu, &container, Settings::default(), &positions);
     let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
@@ -225,7 +228,7 @@ fn hysteresis_holds_a_tree_at_a_boundary_until_it_moves_past_it() {
 #[test]
 fn budget_mode_steers_the_frame_to_the_primitive_count() {
     let gpu = gpu();
-    let container = calibrated_demo();
+    let container = calibrated_demo_without_octahedral();
     let lod = ModelLod::from_container(&container);
     let centre = lod.centre();
     // A field of trees from near to far in front of the camera.
@@ -273,7 +276,7 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
 #[test]
 fn a_tree_changing_technique_fades_over_the_transition_s_frames() {
     let gpu = gpu();
-    let container = calibrated_demo();
+    let container = calibrated_demo_without_octahedral();
     let (calibration, lod, representations) = read_back(&container);
     let frames = 4;
     let policy = Policy { hysteresis: 0.0, transition: frames, ..Policy::default() };
@@ -356,7 +359,7 @@ fn a_tree_changing_technique_fades_over_the_transition_s_frames() {
 #[test]
 fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
     let gpu = gpu();
-    let container = calibrated_demo();
+    let container = calibrated_demo_without_octahedral();
     let (calibration, lod, representations) = read_back(&container);
     let policy = Policy { hysteresis: 0.0, transition: 0, ..Policy::default() };
     assert!(policy.occlusion, "on by default");

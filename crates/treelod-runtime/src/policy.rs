@@ -333,9 +333,22 @@ impl Calibration {
     /// format 1.5).
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        Self::from_records(container.calibration()).map(|c| {
-            c.with_elevations(container.calibration_elevations()).with_chain_levels(container.chain_calibration())
-        })
+        // The techniques of format 1.12 on (spec §6.18) are tabled in sections of their own; with
+        // `CALIBRATION`'s they are the file's tables. Their codes follow every code of
+        // `CALIBRATION`, so appended they keep the order §6.15 asks for, and per elevation they
+        // follow that elevation's records of `CALIBRATION_ELEVATIONS` (a stable sort by
+        // elevation).
+        let records: Vec<CalibrationRecord> =
+            container.calibration().iter().chain(container.calibration_added()).copied().collect();
+        let mut elevations: Vec<ElevationCalibrationRecord> = container
+            .calibration_elevations()
+            .iter()
+            .chain(container.calibration_elevations_added())
+            .copied()
+            .collect();
+        elevations.sort_by(|a, b| a.elevation.total_cmp(&b.elevation));
+        Self::from_records(&records)
+            .map(|c| c.with_elevations(&elevations).with_chain_levels(container.chain_calibration()))
     }
 
     /// The tables of `records` (sorted as spec §6.15 asks; [`Container`] has verified that).

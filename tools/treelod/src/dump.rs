@@ -80,8 +80,9 @@ struct Dump<'a> {
     /// records.
     #[serde(skip_serializing_if = "Option::is_none")]
     baselines: Option<BaselineInfo>,
-    /// The calibration (spec §6.15), its tables per elevation (§6.16) and the LoD chain's per-level
-    /// tables (§6.17), when the container has any of them.
+    /// The calibration (spec §6.15), its tables per elevation (§6.16), the LoD chain's per-level
+    /// tables (§6.17) and the tables of the techniques added after 1.11 (§6.18), when the
+    /// container has any of them.
     #[serde(skip_serializing_if = "Option::is_none")]
     calibration: Option<CalibrationInfo>,
     /// Texture bytes per representation (spec §6.7), when the container has images.
@@ -664,11 +665,12 @@ baselines
 }
 
 /// The calibration of a container (spec §6.15): per representation, its error and primitive
-/// count at each projected height; then the same per elevation of the views (§6.16) and per LoD
-/// chain level over every view (§6.17).
+/// count at each projected height; then the same per elevation of the views (§6.16), per LoD
+/// chain level over every view (§6.17), and for the techniques added after 1.11 over every view
+/// and per elevation (§6.18).
 #[derive(Debug, Serialize)]
 struct CalibrationInfo {
-    /// One entry per representation, in code order.
+    /// One entry per representation of `CALIBRATION`, in code order.
     techniques: Vec<CalibrationRow>,
     /// One entry per elevation (`CALIBRATION_ELEVATIONS`), in file order (ascending); absent when
     /// the container has none (files before 1.7).
@@ -678,6 +680,14 @@ struct CalibrationInfo {
     /// container has none (files before 1.8).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     chain_levels: Vec<ChainLevelRow>,
+    /// One entry per representation added after 1.11 (`CALIBRATION_ADDED`), in code order; absent
+    /// when the container has none (files before 1.12).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    added_techniques: Vec<CalibrationRow>,
+    /// One entry per elevation of those representations (`CALIBRATION_ELEVATIONS_ADDED`), in file
+    /// order (ascending); absent when the container has none (files before 1.12).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    added_elevations: Vec<ElevationCalibration>,
     /// Whether the errors are of shaded colour (metadata `calibration.error = "colour"`, spec
     /// §6.15), else of coverage (earlier builds). The metadata block of the JSON says it too.
     #[serde(skip)]
@@ -717,18 +727,20 @@ impl CalibrationInfo {
         let records = container.calibration();
         let per_elevation = container.calibration_elevations();
         let chain = container.chain_calibration();
-        if records.is_empty() && per_elevation.is_empty() && chain.is_empty() {
+        let added = container.calibration_added();
+        let added_per_elevation = container.calibration_elevations_added();
+        if records.is_empty()
+            && per_elevation.is_empty()
+            && chain.is_empty()
+            && added.is_empty()
+            && added_per_elevation.is_empty()
+        {
             return None;
         }
         let techniques = rows(records.iter().map(|r| (r.technique, [r.height, r.error, r.primitives])));
-        // One table per run of records of one elevation, in file order.
-        let elevations = per_elevation
-            .chunk_by(|a, b| a.elevation == b.elevation)
-            .map(|run| ElevationCalibration {
-                elevation: run[0].elevation,
-                techniques: rows(run.iter().map(|r| (r.technique, [r.height, r.error, r.primitives]))),
-            })
-            .collect();
+        let added_techniques = rows(added.iter().map(|r| (r.technique, [r.height, r.error, r.primitives])));
+        let elevations = elevation_tables(per_elevation);
+        let added_elevations = elevation_tables(added_per_elevation);
         let chain_levels = chain
             .chunk_by(|a, b| a.level == b.level)
             .map(|run| ChainLevelRow {
@@ -737,33 +749,54 @@ impl CalibrationInfo {
             })
             .collect();
         let colour = container.metadata().settings.iter().any(|s| s.key == "calibration.error" && s.value == "colour");
-        Some(Self { techniques, elevations, chain_levels, colour })
+        Some(Self { techniques, elevations, chain_levels, added_techniques, added_elevations, colour })
     }
 
-    /// The text form: a table of a row per representation and then per LoD chain level
-    /// (`lod-chain level N`), `error (primitives)` per height; then one table of the
-    /// representations per elevation.
+    /// The text form: a table of a row per representation (those of `CALIBRATION`, then those
+    /// added after 1.11, of `CALIBRATION_ADDED`: together the file's tables, spec §6.18) and then
+    /// per LoD chain level (`lod-chain level N`), `error (primitives)` per height; then one table of
+    /// the representations per elevation, the added ones' rows after the others'. An elevation of
+    /// the added tables that the others lack (an invalid file) gets a table of its own.
     fn to_text(&self) -> String {
         let measure = if self.colour { "shaded colour" } else { "coverage" };
         let levels = self
             .chain_levels
             .iter()
             .map(|l| CalibrationRow { technique: format!("lod-chain level {}", l.level), samples: l.samples.clone() });
-        let mean: Vec<CalibrationRow> = self.techniques.iter().cloned().chain(levels).collect();
+        let mean: Vec<CalibrationRow> =
+            self.techniques.iter().chain(&self.added_techniques).cloned().chain(levels).collect();
         let mut out = format!(
             "\ncalibration (multi-scale RMSE of {measure} against the supersampled full mesh, and primitives submitted, \
              by the block's projected height)\n{}",
             table(&mean).render("  ")
         );
-        for e in &self.elevations {
+        let added_at = |elevation: f32| self.added_elevations.iter().filter(move |a| a.elevation == elevation);
+        let unmatched =
+            self.added_elevations.iter().filter(|a| !self.elevations.iter().any(|e| e.elevation == a.elevation));
+        let per_elevation = self.elevations.iter().map(|e| {
+            let rows: Vec<CalibrationRow> =
+                e.techniques.iter().chain(added_at(e.elevation).flat_map(|a| &a.techniques)).cloned().collect();
+            (e.elevation, rows)
+        });
+        for (elevation, rows) in per_elevation.chain(unmatched.map(|a| (a.elevation, a.techniques.clone()))) {
             out.push_str(&format!(
-                "\ncalibration at {}° elevation (the same, from the views at that elevation)\n{}",
-                e.elevation,
-                table(&e.techniques).render("  ")
+                "\ncalibration at {elevation}° elevation (the same, from the views at that elevation)\n{}",
+                table(&rows).render("  ")
             ));
         }
         out
     }
+}
+
+/// One table per run of records of one elevation, in file order.
+fn elevation_tables(records: &[treelod_format::ElevationCalibrationRecord]) -> Vec<ElevationCalibration> {
+    records
+        .chunk_by(|a, b| a.elevation == b.elevation)
+        .map(|run| ElevationCalibration {
+            elevation: run[0].elevation,
+            techniques: rows(run.iter().map(|r| (r.technique, [r.height, r.error, r.primitives]))),
+        })
+        .collect()
 }
 
 /// Groups `(technique, [height, error, primitives])` samples into one row per run of one

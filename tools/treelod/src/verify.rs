@@ -59,6 +59,12 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
         (report.calibration, "calibration record", "calibration records"),
         (report.calibration_elevations, "calibration record per elevation", "calibration records per elevation"),
         (report.chain_calibration, "chain calibration record", "chain calibration records"),
+        (report.calibration_added, "added-technique calibration record", "added-technique calibration records"),
+        (
+            report.calibration_elevations_added,
+            "added-technique calibration record per elevation",
+            "added-technique calibration records per elevation",
+        ),
         (report.ao, "ambient-occlusion byte", "ambient-occlusion bytes"),
     ]
     .into_iter()
@@ -115,5 +121,17 @@ mod tests {
         );
         report.octahedral = 1;
         assert!(ok_line("d", &report).contains("4 billboard quads, 1 octahedral impostor,"));
+        // The calibration of the techniques added after 1.11, over every view and per elevation.
+        report.calibration = 9;
+        report.calibration_added = 3;
+        report.calibration_elevations_added = 12;
+        let line = ok_line("e", &report);
+        assert!(
+            line.contains(
+                "9 calibration records, 3 added-technique calibration records, 12 added-technique calibration \
+                           records per elevation, 5 ambient-occlusion bytes"
+            ),
+            "{line}"
+        );
     }
 }

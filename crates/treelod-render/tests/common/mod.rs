@@ -272,6 +272,20 @@ pub fn calibrated_demo() -> Arc<Container> {
     })
 }
 
+/// [`calibrated_demo`] without its octahedral impostor and the impostor's calibration rows
+/// (spec §6.13.1, §6.18), as a container of 1.11 reads to a runtime that skips them: the policy
+/// then draws the demo tree with the point tree over a range of heights (with the impostor it
+/// draws every tree below about 100 pixels with it, one quad each), which the tests of the
+/// policy's mechanisms on the point tree's trees (transitions, budget, occlusion, GPU selection)
+/// need.
+pub fn calibrated_demo_without_octahedral() -> Arc<Container> {
+    let mut data = ContainerData::from_container(&calibrated_demo());
+    data.octahedral.clear();
+    data.calibration_added.clear();
+    data.calibration_elevations_added.clear();
+    Arc::new(Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
+}
+
 /// Writes `image` as a PPM under `$TREELOD_TEST_IMAGES` when that is set, for looking at failures.
 pub fn keep(image: &Image, name: &str) {
     if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
