@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{bytes_of, check, entry_offset, reseal};
+use common::{bytes_of, check, relabel};
 use treelod_format::{
     CalibrationRecord, Compression, Container, ContainerData, ElevationCalibrationRecord, Error, MINOR, SectionKind,
     calibration_technique, verify,
@@ -377,15 +377,6 @@ fn an_elevation_without_exactly_the_pairs_of_calibration_added_is_refused() {
 
 // ----------------------------------------------------------------------------------------------
 // A reader of 1.11 and before.
-
-/// `bytes` with the section-table entry of `from` relabelled `to`, resealed.
-fn relabel(bytes: &[u8], from: SectionKind, to: u32) -> Vec<u8> {
-    let mut bytes = bytes.to_vec();
-    let at = entry_offset(&bytes, from);
-    bytes[at..at + 4].copy_from_slice(&to.to_le_bytes());
-    reseal(&mut bytes);
-    bytes
-}
 
 #[test]
 fn a_reader_that_does_not_know_the_kinds_skips_them_and_reads_the_rest_as_before() {

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{entry_offset, reseal, resize_section};
+use common::{relabel, resize_section};
 use treelod_format::{
     CellRecord, Compression, Container, ContainerData, Error, ErrorClass, ImageRecord, MINOR, OctahedralRecord,
     PlaneDiffuseRecord, Range, SectionKind, image_format, pack, verify,
@@ -275,15 +275,6 @@ fn a_section_of_partial_records_is_refused_at_open() {
     let emptied = resize_section(&bytes, SectionKind::OCTAHEDRAL, -96);
     let c = Container::from_bytes(&emptied).expect("an empty OCTAHEDRAL section opens");
     assert!(c.octahedral().is_empty());
-}
-
-/// `bytes` with the section-table entry of `from` relabelled `to`, resealed.
-fn relabel(bytes: &[u8], from: SectionKind, to: u32) -> Vec<u8> {
-    let mut bytes = bytes.to_vec();
-    let at = entry_offset(&bytes, from);
-    bytes[at..at + 4].copy_from_slice(&to.to_le_bytes());
-    reseal(&mut bytes);
-    bytes
 }
 
 #[test]

@@ -147,6 +147,17 @@ pub fn entry_offset(bytes: &[u8], kind: treelod_format::SectionKind) -> usize {
         .expect("the section is present")
 }
 
+/// `bytes` with the section-table entry of `from` relabelled `to` (a kind a reader may not know),
+/// resealed.
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+pub fn relabel(bytes: &[u8], from: treelod_format::SectionKind, to: u32) -> Vec<u8> {
+    let mut bytes = bytes.to_vec();
+    let at = entry_offset(&bytes, from);
+    bytes[at..at + 4].copy_from_slice(&to.to_le_bytes());
+    reseal(&mut bytes);
+    bytes
+}
+
 /// Changes the stored and decoded length of the (uncompressed) section `kind` by `delta` bytes,
 /// zeroing the bytes that leave or join it (growing the file past its last section), and reseals
 /// the file.
