@@ -44,11 +44,12 @@ pub struct Args {
     #[arg(long)]
     pub shadow_error: bool,
     /// Colour by grid cell (`cells`), by kind (`kinds`: triangles red, points blue, pruned
-    /// leaves green, impostor planes yellow, ellipsoids cyan), by level (`levels`: one colour per
-    /// octave of each point's, plane's, ellipsoid's or line's interval, triangles light grey) or
-    /// by the technique each tree is drawn with (`techniques`: what the policy chose; full grey,
-    /// spt blue, prune-opt green, prune-cook dark green, impostors yellow, ellipsoids cyan,
-    /// lod-chain red, billboard magenta, crossed violet).
+    /// leaves green, impostor planes yellow, billboards magenta, octahedral impostors pink,
+    /// ellipsoids cyan, lines brown), by level (`levels`: one colour per octave of each point's,
+    /// plane's, ellipsoid's or line's interval, triangles light grey) or by the technique each
+    /// tree is drawn with (`techniques`: what the policy chose; full grey, spt blue, prune-opt
+    /// green, prune-cook dark green, impostors yellow, ellipsoids cyan, lod-chain red, billboard
+    /// magenta, crossed violet, octahedral pink).
     #[arg(long, value_name = "VIEW", value_parser = ["cells", "kinds", "levels", "techniques"])]
     pub debug: Option<String>,
     /// MSAA samples, 1 or 4; with 4, alpha-tested leaves cover samples in proportion to their
