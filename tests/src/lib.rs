@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.12, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.13, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -94,6 +94,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -126,6 +127,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -145,6 +147,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -163,6 +166,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -179,6 +183,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -195,6 +200,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -213,6 +219,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -230,6 +237,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -246,6 +254,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -262,6 +271,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 plane_diffuse: false,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -277,6 +287,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 octahedral: false,
                 calibration_added: false,
+                octahedral_depth: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -289,7 +300,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           octahedral impostor per tree on the billboards' atlas, OCTAHEDRAL), zstd level 19 with byte \
                           shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, calibration_added: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                calibration_added: false,
+                octahedral_depth: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -300,8 +316,36 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           OCTAHEDRAL, and the calibration of the techniques added after 1.11, CALIBRATION_ADDED and \
                           CALIBRATION_ELEVATIONS_ADDED), zstd level 19 with byte shuffle where it pays",
             seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, octahedral_depth: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 13,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.13 (1.12's: the 1.5 kinds, a BC7 impostor atlas, \
+                          CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE, \
+                          OCTAHEDRAL, CALIBRATION_ADDED and CALIBRATION_ELEVATIONS_ADDED, and the octahedral views' \
+                          depth planes, OCTAHEDRAL_DEPTH), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 13,
+            name: "octahedral-depth.treelod",
+            description: "one grid cell with one triangle and one impostor plane on an RGBA8 atlas, the tree's \
+                          octahedral impostor of 2 x 2 views on that atlas (OCTAHEDRAL) and the views' 4 depth \
+                          planes (OCTAHEDRAL_DEPTH); uncompressed",
+            seed: 13,
+            options: SyntheticOptions {
+                planes_per_cell: 1..=1,
+                octahedral: true,
+                octahedral_frames: 2..=2,
+                octahedral_depth: true,
+                name: Some("octahedral-depth".into()),
+                ..SyntheticOptions::minimal()
+            },
+            compression: Compression::None,
         },
     ]
 }

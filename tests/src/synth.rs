@@ -7,9 +7,9 @@ use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord,
-    NO_IMAGE, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
-    SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
-    image_format,
+    NO_IMAGE, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind,
+    calibration_technique, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -104,9 +104,19 @@ pub struct SyntheticOptions {
     pub plane_diffuse: bool,
     /// An octahedral impostor per tree (spec §6.13.1, 1.11) in `OCTAHEDRAL`, on the impostor
     /// atlas that the billboards sample (needs planes): its centre inside the block, a random
-    /// radius, 2 to 16 views per side, a random rectangle of the atlas and, with `ao`, a random
-    /// occlusion (0 without). Drawn last, so the rest of the container is the same as without it.
+    /// radius, views per side drawn from `octahedral_frames`, a random rectangle of the atlas and,
+    /// with `ao`, a random occlusion (0 without). Drawn last, so the rest of the container is the
+    /// same as without it.
     pub octahedral: bool,
+    /// The range each octahedral impostor's views per side (`frames`) are drawn from, inclusive,
+    /// within `2 ..= 64`: `2 ..= 16` in the presets, `2 ..= 2` in [`SyntheticOptions::small`].
+    pub octahedral_frames: RangeInclusive<u32>,
+    /// The octahedral views' depth planes (spec §6.13.2, 1.13): for each `OCTAHEDRAL` record, in
+    /// order, its `frames²` views' planes in `OCTAHEDRAL_DEPTH` (view `(i, j)` at `j·frames + i`),
+    /// one in eight all zero (a view that shows nothing), the others with an offset in
+    /// `[−0.5, 0.5)` and slopes in `[−0.8, 0.8)`. Needs `octahedral`; drawn last, so the rest of the
+    /// container is the same as without it.
+    pub octahedral_depth: bool,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -153,6 +163,8 @@ impl SyntheticOptions {
             far_lines: false,
             plane_diffuse: false,
             octahedral: false,
+            octahedral_frames: 2..=16,
+            octahedral_depth: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -172,7 +184,7 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.12: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.13: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
@@ -180,8 +192,9 @@ impl SyntheticOptions {
     /// calibration tables (`CALIBRATION`, per elevation, `CALIBRATION_ELEVATIONS`, and the chain's
     /// per level, `CHAIN_CALIBRATION`), the block's far lines with their ambient occlusion
     /// (`FAR_LINES`, `FAR_LINE_AO`), the planes' diffuse response (`PLANE_DIFFUSE`), an
-    /// octahedral impostor per tree (`OCTAHEDRAL`) and the calibration of the techniques added
-    /// after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`).
+    /// octahedral impostor per tree (`OCTAHEDRAL`) with its views' depth planes
+    /// (`OCTAHEDRAL_DEPTH`) and the calibration of the techniques added after 1.11
+    /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -211,6 +224,8 @@ impl SyntheticOptions {
             far_lines: true,
             plane_diffuse: true,
             octahedral: true,
+            octahedral_frames: 2..=16,
+            octahedral_depth: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -218,7 +233,8 @@ impl SyntheticOptions {
 
     /// A small valid file (a few KiB) with every kind of section, for tests that take a file
     /// apart (hostile input, mutation fuzzing): two cells, one tree, one material and texture,
-    /// no PNG image, and one unknown section kind (`0x0001_0000`).
+    /// no PNG image, an octahedral impostor of 2 × 2 views (4 depth planes), and one unknown
+    /// section kind (`0x0001_0000`).
     #[must_use]
     pub fn small() -> Self {
         Self {
@@ -236,6 +252,7 @@ impl SyntheticOptions {
             png_image: false,
             tree_count: 1,
             extension_kinds: vec![0x0001_0000],
+            octahedral_frames: 2..=2,
             name: Some("small".into()),
             ..Self::everything()
         }
@@ -1118,7 +1135,8 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
         for tree in 0..tree_count {
             let center = core::array::from_fn(|i| bounds_min[i] + rng.uniform(0.3, 0.7) * extent[i]);
             let radius = rng.uniform(0.2, 1.5);
-            let frames = 2 + rng.below(15);
+            // 2 + below(15) for the presets' 2 ..= 16, as before the range was an option.
+            let frames = rng.in_range(&options.octahedral_frames);
             let (u0, v0) = (rng.uniform(0.0, 0.5), rng.uniform(0.0, 0.5));
             let (u1, v1) = (u0 + rng.uniform(0.1, 0.5), v0 + rng.uniform(0.1, 0.5));
             let occlusion = if options.ao { rng.unit() } else { 0.0 };
@@ -1144,6 +1162,22 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
         let mut elevations: Vec<f32> = b.data.calibration_elevations.iter().map(|r| r.elevation).collect();
         elevations.dedup();
         b.data.calibration_elevations_added = calibration_elevations(&mut rng, &elevations, &b.data.calibration_added);
+    }
+    if options.octahedral_depth {
+        let views: u32 = b.data.octahedral.iter().map(|o| o.frames * o.frames).sum();
+        b.data.octahedral_depth = (0..views)
+            .map(|_| {
+                if rng.chance(0.125) {
+                    OctahedralDepthRecord::default()
+                } else {
+                    OctahedralDepthRecord {
+                        offset: rng.uniform(-0.5, 0.5),
+                        slope_s: rng.uniform(-0.8, 0.8),
+                        slope_t: rng.uniform(-0.8, 0.8),
+                    }
+                }
+            })
+            .collect();
     }
     if options.bc7_atlas
         && let Some(atlas) = b.atlas

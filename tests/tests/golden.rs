@@ -1,15 +1,16 @@
-//! Golden files of format versions 1.0 to 1.12 (`tests/data/v1_0` to `tests/data/v1_12`): every file
+//! Golden files of format versions 1.0 to 1.13 (`tests/data/v1_0` to `tests/data/v1_13`): every file
 //! opens and verifies with its version in its header, the
-//! minimal file decodes to literal values written out here (so a change in reading is caught even
-//! if writing changed the same way), and spec §13.1 holds the minimal file's hex dump.
+//! minimal file (and 1.13's octahedral depth planes) decodes to literal values written out here (so
+//! a change in reading is caught even if writing changed the same way), and spec §13.1 holds the
+//! minimal file's hex dump.
 
 use std::path::PathBuf;
 
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, LineRecord, MaterialInfo,
-    MaterialRecord, Metadata, NO_IMAGE, PlaneDiffuseRecord, PointRecord, Range, SectionKind, Setting, Source, Tree,
-    TriangleRecord, VertexRecord, calibration_technique, far_switch, far_threshold, image_format, leaf_slots,
-    plane_leaf_bases, verify,
+    MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, PlaneDiffuseRecord, PointRecord, Range, SectionKind,
+    Setting, Source, Tree, TriangleRecord, VertexRecord, calibration_technique, far_switch, far_threshold,
+    image_format, leaf_slots, plane_leaf_bases, verify,
 };
 use treelod_tests::{
     SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
@@ -25,7 +26,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -572,7 +573,7 @@ fn the_1_11_every_kind_file_has_every_kind_and_the_octahedral_impostors() {
 fn the_1_12_every_kind_file_has_every_kind_and_the_added_techniques_calibration() {
     let c = Container::open(golden_dir_of(12).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 12, "{kind}");
     }
     assert_eq!(c.header().minor, 12);
     // The octahedral impostor's table: codes from FIRST_ADDED on, none of them in CALIBRATION.
@@ -614,6 +615,71 @@ fn the_1_12_every_kind_file_has_every_kind_and_the_added_techniques_calibration(
     assert!(data == v1_11, "v1_12 is v1_11 with the added techniques' calibration");
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 11);
+}
+
+#[test]
+fn the_1_13_every_kind_file_has_every_kind_and_the_octahedral_depth_planes() {
+    let c = Container::open(golden_dir_of(13).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 13);
+    // A plane per view of each impostor, in their order: frames² each.
+    let (octahedral, depth) = (c.octahedral(), c.octahedral_depth());
+    let views: u32 = octahedral.iter().map(|o| o.frames * o.frames).sum();
+    assert_eq!(depth.len(), views as usize);
+    assert!(octahedral.len() >= 2 && octahedral.iter().any(|o| o.frames > 2), "grids of several sizes");
+    let values = || depth.iter().flat_map(|p| [p.offset, p.slope_s, p.slope_t]);
+    assert!(values().all(|v| (-1.0..=1.0).contains(&v)));
+    assert!(depth.contains(&OctahedralDepthRecord::default()), "a view that shows nothing");
+    assert!(depth.iter().any(|p| p.offset < 0.0) && depth.iter().any(|p| p.offset > 0.0));
+    let report = verify(&c).unwrap();
+    assert_eq!((report.octahedral, report.octahedral_depth), (octahedral.len() as u64, u64::from(views)));
+    // Without OCTAHEDRAL_DEPTH it is the 1.12 file, record for record, and the writer marks it
+    // 1.12: a 1.12 reader draws the same impostors, each view the plane through its centre.
+    let v1_12 =
+        ContainerData::from_container(&Container::open(golden_dir_of(12).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.octahedral_depth.clear();
+    assert!(data == v1_12, "v1_13 is v1_12 with the octahedral views' depth planes");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 12);
+}
+
+/// The small 1.13 file: one octahedral impostor of 2 × 2 views and their four depth planes, view
+/// `(i, j)` at `2j + i`, decoded to the values written out here.
+#[test]
+fn the_1_13_octahedral_depth_file_decodes_to_these_planes() {
+    let path = golden_dir_of(13).join("octahedral-depth.treelod");
+    let c = Container::open(&path).unwrap();
+    assert_eq!(c.header().minor, 13);
+    let [o] = c.octahedral() else { panic!("one impostor: {:?}", c.octahedral()) };
+    assert_eq!((o.frames, o.tree, o.image), (2, 0, 0));
+    let section = c.section(SectionKind::OCTAHEDRAL_DEPTH).unwrap();
+    assert_eq!((section.entry.flags, section.entry.record_size, section.entry.raw_length), (0, 12, 48));
+    let plane = |bits: [u32; 3]| {
+        let [offset, slope_s, slope_t] = bits.map(f32::from_bits);
+        OctahedralDepthRecord { offset, slope_s, slope_t }
+    };
+    // Views (0, 0), (1, 0), (0, 1), (1, 1).
+    let expected = [
+        plane([0xBE3E_F040, 0x3F2E_D857, 0xBD50_A150]),
+        plane([0x3D87_A000, 0x3F3F_C5CF, 0x3DCF_92E8]),
+        plane([0xBE30_E3C4, 0xBEB8_B2DD, 0x3F46_5701]),
+        plane([0xBE6A_FB0C, 0x3E2A_B318, 0x3E94_2566]),
+    ];
+    assert_eq!(c.octahedral_depth(), expected);
+    assert_eq!(expected[0].offset, -0.186_463_36);
+    assert_eq!(expected[3].slope_t, 0.289_347_83);
+    // Four distinct planes, none of them flat.
+    for (a, p) in expected.iter().enumerate() {
+        assert_ne!(*p, OctahedralDepthRecord::default());
+        assert!(expected[a + 1..].iter().all(|q| q != p), "plane {a} is distinct");
+    }
+    assert_eq!(verify(&c).unwrap().octahedral_depth, 4);
+    // Uncompressed, the writer writes it as it is.
+    let bytes = std::fs::read(&path).unwrap();
+    assert!(ContainerData::from_container(&c).to_bytes(Compression::None).unwrap() == bytes);
 }
 
 #[test]

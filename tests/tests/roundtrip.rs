@@ -63,6 +63,10 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 plane_diffuse: grid[2] < 2,
                 // Octahedral impostors with half of the grids (on the atlas, with billboards or not).
                 octahedral: grid[0] < 2,
+                // Of 2 to 16 views per side, as the presets draw them.
+                octahedral_frames: 2..=16,
+                // Their views' depth planes with half of those.
+                octahedral_depth: grid[0] < 2 && grid[1] < 2,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -129,8 +133,20 @@ fn check_exact_cut<T: SptElement>(what: &str, cell: usize, elements: &[T]) -> Re
 
 /// The octahedral impostors (spec §6.13.1): each with 2 to 64 views per side, a finite centre, a
 /// finite radius above 0, an existing colour image, `uv_min ≤ uv_max`, a tree in range, its
-/// occlusion in `[0, 1]` and `reserved` 0; sorted by tree, at most one per tree.
+/// occlusion in `[0, 1]` and `reserved` 0; sorted by tree, at most one per tree. Their views' depth
+/// planes (spec §6.13.2): none, or `frames²` per impostor, every value in `[−1, 1]`.
 fn check_octahedral(data: &ContainerData) -> Result<(), String> {
+    let views: usize = data.octahedral.iter().map(|o| (o.frames as usize).pow(2)).sum();
+    if !data.octahedral_depth.is_empty() && data.octahedral_depth.len() != views {
+        return Err(format!("{} depth planes for {views} octahedral views", data.octahedral_depth.len()));
+    }
+    if let Some(p) = data
+        .octahedral_depth
+        .iter()
+        .find(|p| [p.offset, p.slope_s, p.slope_t].iter().any(|v| !(-1.0..=1.0).contains(v)))
+    {
+        return Err(format!("depth plane {p:?} outside [-1, 1]"));
+    }
     let mut previous: Option<u32> = None;
     for o in &data.octahedral {
         let image = data.images.get(o.image as usize).ok_or_else(|| format!("octahedral image {o:?}"))?;
@@ -434,8 +450,10 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 12, "everything() holds the kinds of 1.12");
+    assert_eq!(container.header().minor, 13, "everything() holds the kinds of 1.13");
     assert_eq!(everything.octahedral.len(), everything.block.tree_count as usize, "an octahedral impostor per tree");
+    let views: u32 = everything.octahedral.iter().map(|o| o.frames * o.frames).sum();
+    assert_eq!(everything.octahedral_depth.len(), views as usize, "a depth plane per octahedral view");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

@@ -10,9 +10,9 @@ use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord,
-    PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord,
-    VertexRecord,
+    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord,
+    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry,
+    SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -498,6 +498,16 @@ impl Container {
     #[must_use]
     pub fn octahedral(&self) -> &[OctahedralRecord] {
         self.records(SectionKind::OCTAHEDRAL)
+    }
+
+    /// The octahedral views' depth planes (spec §6.13.2): for each of [`Self::octahedral`] in
+    /// order, `frames²` records, view `(i, j)` at `j·frames + i`. Empty without the section, as in
+    /// every file before 1.13: every view is then the plane through the impostor's centre across
+    /// its direction (all three values zero). Its length is checked by [`crate::verify()`], not
+    /// at open. Since 1.13.
+    #[must_use]
+    pub fn octahedral_depth(&self) -> &[OctahedralDepthRecord] {
+        self.records(SectionKind::OCTAHEDRAL_DEPTH)
     }
 
     /// Ambient occlusion of each vertex (spec §6.14; [`crate::decode_ao`]), empty if the file has

@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 12;
+pub const MINOR: u16 = 13;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -157,6 +157,10 @@ impl SectionKind {
     /// Baseline: [`OctahedralRecord`]s, one octahedral impostor per tree: the tree baked from
     /// views over the upper hemisphere (spec §6.13.1). Since 1.11.
     pub const OCTAHEDRAL: Self = Self(0x0053);
+    /// Baseline: [`OctahedralDepthRecord`]s, each octahedral view's depth plane: for each
+    /// `OCTAHEDRAL` record in order, `frames²` records, view `(i, j)` at `j·frames + i` (spec
+    /// §6.13.2). Since 1.13.
+    pub const OCTAHEDRAL_DEPTH: Self = Self(0x0054);
     /// Ambient occlusion of each `VERTICES` record, one `unorm8` (spec §6.14). Since 1.2.
     pub const VERTEX_AO: Self = Self(0x0060);
     /// Ambient occlusion of each `POINTS` record, one `unorm8` (spec §6.14). Since 1.2.
@@ -191,7 +195,7 @@ impl SectionKind {
     pub const CALIBRATION_ELEVATIONS_ADDED: Self = Self(0x0074);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 34] = [
+    pub const KNOWN: [Self; 35] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -214,6 +218,7 @@ impl SectionKind {
         Self::LOD_TRIANGLES,
         Self::BILLBOARDS,
         Self::OCTAHEDRAL,
+        Self::OCTAHEDRAL_DEPTH,
         Self::VERTEX_AO,
         Self::POINT_AO,
         Self::PLANE_AO,
@@ -254,6 +259,7 @@ impl SectionKind {
             Self::LOD_TRIANGLES => "LOD_TRIANGLES",
             Self::BILLBOARDS => "BILLBOARDS",
             Self::OCTAHEDRAL => "OCTAHEDRAL",
+            Self::OCTAHEDRAL_DEPTH => "OCTAHEDRAL_DEPTH",
             Self::VERTEX_AO => "VERTEX_AO",
             Self::POINT_AO => "POINT_AO",
             Self::PLANE_AO => "PLANE_AO",
@@ -299,6 +305,7 @@ impl SectionKind {
             Self::LOD_LEVELS => size_of::<LodLevelRecord>(),
             Self::BILLBOARDS => size_of::<BillboardRecord>(),
             Self::OCTAHEDRAL => size_of::<OctahedralRecord>(),
+            Self::OCTAHEDRAL_DEPTH => size_of::<OctahedralDepthRecord>(),
             Self::CALIBRATION | Self::CALIBRATION_ADDED => size_of::<CalibrationRecord>(),
             Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
             Self::CALIBRATION_ELEVATIONS | Self::CALIBRATION_ELEVATIONS_ADDED => {
@@ -318,9 +325,9 @@ impl SectionKind {
     /// (`CALIBRATION_ELEVATIONS`), 8 for the LoD chain's per-level tables (`CHAIN_CALIBRATION`), 9
     /// for the block's far lines (`FAR_LINES`, `FAR_LINE_AO`), 10 for the planes' diffuse response
     /// (`PLANE_DIFFUSE`), 11 for the octahedral impostors (`OCTAHEDRAL`), 12 for the calibration
-    /// of the techniques added after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), 0
-    /// for the other known kinds and for kinds this version does not know (private extensions do not
-    /// raise a file's minor).
+    /// of the techniques added after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), 13
+    /// for the octahedral views' depth planes (`OCTAHEDRAL_DEPTH`), 0 for the other known kinds and
+    /// for kinds this version does not know (private extensions do not raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
         match self {
@@ -335,6 +342,7 @@ impl SectionKind {
             Self::PLANE_DIFFUSE => 10,
             Self::OCTAHEDRAL => 11,
             Self::CALIBRATION_ADDED | Self::CALIBRATION_ELEVATIONS_ADDED => 12,
+            Self::OCTAHEDRAL_DEPTH => 13,
             _ => 0,
         }
     }
@@ -1189,6 +1197,45 @@ impl OctahedralRecord {
         } else {
             [(i0 + 1, j0 + 1, fx + fy - 1.0), (i0, j0 + 1, 1.0 - fx), (i0 + 1, j0, 1.0 - fy)]
         }
+    }
+}
+
+/// One octahedral view's depth plane (spec §6.13.2): the front-most surfaces the view shows lie
+/// about `center + radius·(s·right + t·up + (offset + slope_s·s + slope_t·t)·d)`.
+///
+/// `OCTAHEDRAL_DEPTH` holds, for each [`OctahedralRecord`] in file order, `frames²` of them, view
+/// `(i, j)` (column `i`, row `j` of spec §6.13.1) at `j·frames + i`; `s, t ∈ [−1, 1]` and
+/// `right`, `up`, `d` are the view's ([`OctahedralRecord::view_basis`],
+/// [`OctahedralRecord::view_direction`]). Every value is finite and in `[−1, 1]`. All three zero
+/// (the [`Default`]) is the plane through `center` across `d`: what a reader takes for every view
+/// without the section.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct OctahedralDepthRecord {
+    /// Depth along `d` of the plane at the view's centre (`s = t = 0`), in units of `radius`;
+    /// positive towards the viewer.
+    pub offset: f32,
+    /// Change of that depth per unit of `s` (along `right`), in units of `radius`.
+    pub slope_s: f32,
+    /// Change of that depth per unit of `t` (along `up`), in units of `radius`.
+    pub slope_t: f32,
+}
+const _: () = assert!(size_of::<OctahedralDepthRecord>() == 12);
+
+impl OctahedralDepthRecord {
+    /// The depth along `d`, in units of `radius`, of the plane at the view's point `(s, t)`:
+    /// `offset + slope_s·s + slope_t·t` (spec §6.13.2).
+    #[must_use]
+    pub fn depth(&self, s: f32, t: f32) -> f32 {
+        self.offset + self.slope_s * s + self.slope_t * t
+    }
+
+    /// The plane's normal in block space, for the view's basis `right`, `up` and direction `d`
+    /// (spec §6.13.2): `n = d − slope_s·right − slope_t·up`, not normalised. The plane is
+    /// `n·(p − center) = offset·radius`.
+    #[must_use]
+    pub fn normal(&self, right: [f32; 3], up: [f32; 3], d: [f32; 3]) -> [f32; 3] {
+        core::array::from_fn(|k| d[k] - self.slope_s * right[k] - self.slope_t * up[k])
     }
 }
 

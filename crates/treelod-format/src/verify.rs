@@ -14,9 +14,9 @@ use crate::reader::{Container, check_section_checksum};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
-    OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
-    SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
-    far_switch, far_threshold, image_format, leaf_slots, lines_drawn_at, plane_leaf_bases,
+    OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind,
+    calibration_technique, far_switch, far_threshold, image_format, leaf_slots, lines_drawn_at, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -85,6 +85,9 @@ pub struct VerifyReport {
     /// `OCTAHEDRAL` records checked (baseline, spec §6.13.1): one octahedral impostor per tree
     /// that has one.
     pub octahedral: u64,
+    /// `OCTAHEDRAL_DEPTH` records checked (spec §6.13.2): one depth plane per view of the
+    /// `OCTAHEDRAL` records, each value finite and in `[−1, 1]`.
+    pub octahedral_depth: u64,
     /// `CALIBRATION` records checked.
     pub calibration: u64,
     /// `CALIBRATION_ELEVATIONS` records checked (spec §6.16).
@@ -131,6 +134,9 @@ impl core::fmt::Display for VerifyReport {
             )?;
             if self.octahedral > 0 {
                 write!(f, ", {} octahedral impostors", self.octahedral)?;
+            }
+            if self.octahedral_depth > 0 {
+                write!(f, ", {} octahedral depth planes", self.octahedral_depth)?;
             }
             writeln!(f)?;
         }
@@ -200,6 +206,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_lod_levels(c.lod_levels(), c.lod_triangles().len(), tree_count)?;
     check_billboards(c.billboards(), image_count, tree_count)?;
     check_octahedral(c.octahedral(), image_count, tree_count)?;
+    check_octahedral_depth(c.octahedral_depth(), c.octahedral())?;
     check_calibration(&BASE_TABLES, c.calibration())?;
     check_calibration_elevations(&BASE_TABLES, c.calibration_elevations(), c.calibration())?;
     check_calibration(&ADDED_TABLES, c.calibration_added())?;
@@ -248,6 +255,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.lod_triangles = c.lod_triangles().len() as u64;
     report.billboards = c.billboards().len() as u64;
     report.octahedral = c.octahedral().len() as u64;
+    report.octahedral_depth = c.octahedral_depth().len() as u64;
     report.calibration = c.calibration().len() as u64;
     report.calibration_elevations = c.calibration_elevations().len() as u64;
     report.chain_calibration = c.chain_calibration().len() as u64;
@@ -1077,6 +1085,52 @@ fn check_octahedral(records: &[OctahedralRecord], image_count: usize, tree_count
             return Err(bad(kind, i, format!("tree {} after tree {before}: {why}", o.tree)));
         }
         previous = Some(o.tree);
+    }
+    Ok(())
+}
+
+/// Spec §6.13.2: the octahedral views' depth planes belong to the `OCTAHEDRAL` records (the section
+/// needs them), `frames²` per record in their order, and every value is finite and in `[−1, 1]`.
+///
+/// Runs after [`check_octahedral`], so every `frames` is in `2 ..= 64`.
+fn check_octahedral_depth(records: &[OctahedralDepthRecord], octahedral: &[OctahedralRecord]) -> Result<()> {
+    let kind = SectionKind::OCTAHEDRAL_DEPTH;
+    if records.is_empty() {
+        return Ok(());
+    }
+    if octahedral.is_empty() {
+        return Err(bad(kind, 0, "the file has no OCTAHEDRAL, whose views these planes belong to".into()));
+    }
+    let views: u64 = octahedral.iter().map(|o| u64::from(o.frames) * u64::from(o.frames)).sum();
+    if records.len() as u64 != views {
+        return Err(bad(
+            kind,
+            0,
+            format!(
+                "{} records, the {} OCTAHEDRAL records have {views} views (frames² each): one plane per view",
+                records.len(),
+                octahedral.len()
+            ),
+        ));
+    }
+    let mut index = 0;
+    for (k, o) in octahedral.iter().enumerate() {
+        let n = o.frames as usize;
+        for (view, r) in records[index..index + n * n].iter().enumerate() {
+            let fields = [("offset", r.offset), ("slope_s", r.slope_s), ("slope_t", r.slope_t)];
+            if let Some((name, value)) = fields.into_iter().find(|(_, v)| !(-1.0..=1.0).contains(v)) {
+                return Err(bad(
+                    kind,
+                    index + view,
+                    format!(
+                        "{name} {value} is not finite and in [-1, 1] (view ({}, {}) of OCTAHEDRAL record {k})",
+                        view % n,
+                        view / n
+                    ),
+                ));
+            }
+        }
+        index += n * n;
     }
     Ok(())
 }

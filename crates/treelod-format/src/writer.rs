@@ -18,9 +18,9 @@ use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
-    PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
-    TriangleRecord, VertexRecord, image_format,
+    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord,
+    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry,
+    SectionKind, TriangleRecord, VertexRecord, image_format,
 };
 
 /// How sections are stored.
@@ -123,6 +123,9 @@ pub struct ContainerData {
     pub billboards: Vec<BillboardRecord>,
     /// `OCTAHEDRAL` (baseline; since 1.11).
     pub octahedral: Vec<OctahedralRecord>,
+    /// `OCTAHEDRAL_DEPTH`: empty, or each octahedral view's depth plane, `frames²` per `OCTAHEDRAL`
+    /// record in its order (spec §6.13.2; since 1.13).
+    pub octahedral_depth: Vec<OctahedralDepthRecord>,
     /// `VERTEX_AO`: empty, or one byte per vertex ([`crate::encode_ao`]).
     pub vertex_ao: Vec<u8>,
     /// `POINT_AO`: empty, or one byte per point.
@@ -184,6 +187,7 @@ impl ContainerData {
             lod_triangles: c.lod_triangles().to_vec(),
             billboards: c.billboards().to_vec(),
             octahedral: c.octahedral().to_vec(),
+            octahedral_depth: c.octahedral_depth().to_vec(),
             vertex_ao: c.vertex_ao().to_vec(),
             point_ao: c.point_ao().to_vec(),
             plane_ao: c.plane_ao().to_vec(),
@@ -541,6 +545,7 @@ macro_rules! optional_sections {
             (SectionKind::LOD_TRIANGLES, $payload!(lod_triangles)),
             (SectionKind::BILLBOARDS, $payload!(billboards)),
             (SectionKind::OCTAHEDRAL, $payload!(octahedral)),
+            (SectionKind::OCTAHEDRAL_DEPTH, $payload!(octahedral_depth)),
             (SectionKind::VERTEX_AO, $payload!(vertex_ao)),
             (SectionKind::POINT_AO, $payload!(point_ao)),
             (SectionKind::PLANE_AO, $payload!(plane_ao)),

@@ -76,8 +76,8 @@ struct Dump<'a> {
     /// The impostor planes and the images they sample (spec §6.10), when the container has planes.
     #[serde(skip_serializing_if = "Option::is_none")]
     impostors: Option<ImpostorInfo>,
-    /// The baseline sections (spec §6.12, §6.13, §6.13.1), when the container has any of their
-    /// records.
+    /// The baseline sections (spec §6.12, §6.13, §6.13.1, §6.13.2), when the container has any of
+    /// their records.
     #[serde(skip_serializing_if = "Option::is_none")]
     baselines: Option<BaselineInfo>,
     /// The calibration (spec §6.15), its tables per elevation (§6.16), the LoD chain's per-level
@@ -499,8 +499,8 @@ impl ImpostorInfo {
     }
 }
 
-/// The baselines of a container (spec §6.12, §6.13, §6.13.1): each tree's LoD chain, billboards
-/// and octahedral impostor.
+/// The baselines of a container (spec §6.12, §6.13, §6.13.1, §6.13.2): each tree's LoD chain,
+/// billboards and octahedral impostor, and the impostors' depth planes.
 #[derive(Debug, Serialize)]
 struct BaselineInfo {
     /// `LOD_LEVELS` records in file order.
@@ -510,6 +510,11 @@ struct BaselineInfo {
     /// `OCTAHEDRAL` records in file order (version 1.11), when the container has any.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     octahedral: Vec<OctahedralInfo>,
+    /// The `OCTAHEDRAL_DEPTH` records (spec §6.13.2, version 1.13), when the container has any;
+    /// absent, as in the files of 1.12 and before, the views are the planes through the
+    /// impostors' centres.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    octahedral_depth: Option<OctahedralDepthInfo>,
 }
 
 /// One level of a tree's chain.
@@ -558,6 +563,51 @@ struct OctahedralInfo {
     diffuse: [f32; 2],
 }
 
+/// The octahedral views' depth planes (spec §6.13.2): their spread over the `OCTAHEDRAL_DEPTH`
+/// records, in units of each impostor's `radius`.
+#[derive(Debug, Serialize)]
+struct OctahedralDepthInfo {
+    /// `OCTAHEDRAL_DEPTH` records: one per view (`frames²` per `OCTAHEDRAL` record, which
+    /// `verify` checks).
+    views: u64,
+    /// The least `offset`, the depth along the view's direction at its centre.
+    offset_min: f32,
+    /// The greatest `offset`.
+    offset_max: f32,
+    /// The mean `offset`.
+    offset_mean: f32,
+    /// The greatest `|slope_s|` or `|slope_t|`.
+    slope_max: f32,
+}
+
+impl OctahedralDepthInfo {
+    /// The depth planes of `container`, `None` if it has none.
+    fn new(container: &Container) -> Option<Self> {
+        let records = container.octahedral_depth();
+        if records.is_empty() {
+            return None;
+        }
+        let offsets = records.iter().map(|r| f64::from(r.offset));
+        let mean = offsets.clone().sum::<f64>() / records.len() as f64;
+        Some(Self {
+            views: records.len() as u64,
+            offset_min: offsets.clone().fold(f64::INFINITY, f64::min) as f32,
+            offset_max: offsets.fold(f64::NEG_INFINITY, f64::max) as f32,
+            offset_mean: mean as f32,
+            slope_max: records.iter().flat_map(|r| [r.slope_s.abs(), r.slope_t.abs()]).fold(0.0, f32::max),
+        })
+    }
+
+    /// One line, after the octahedral impostors': the views, the spread of the offsets and the
+    /// steepest slope.
+    fn to_text(&self) -> String {
+        format!(
+            "  depth planes  {} views, offset {} .. {} (mean {}), slopes up to {}\n",
+            self.views, self.offset_min, self.offset_max, self.offset_mean, self.slope_max
+        )
+    }
+}
+
 /// Texels at mip 0 of the rectangle `uv_min ..= uv_max` of image `image`, 0 when there is no such
 /// image (or the rectangle is reversed).
 fn rectangle_texels(container: &Container, image: u32, uv_min: u32, uv_max: u32) -> u64 {
@@ -574,7 +624,8 @@ impl BaselineInfo {
     /// The baselines of `container`, `None` if it has none.
     fn new(container: &Container) -> Option<Self> {
         let (levels, billboards, octahedral) = (container.lod_levels(), container.billboards(), container.octahedral());
-        if levels.is_empty() && billboards.is_empty() && octahedral.is_empty() {
+        let octahedral_depth = OctahedralDepthInfo::new(container);
+        if levels.is_empty() && billboards.is_empty() && octahedral.is_empty() && octahedral_depth.is_none() {
             return None;
         }
         let lod_levels = levels
@@ -618,7 +669,7 @@ impl BaselineInfo {
                 diffuse: [f32::from(o.diffuse.flat) / 65535.0, f32::from(o.diffuse.scattered) / 65535.0],
             })
             .collect();
-        Some(Self { lod_levels, billboards: out, octahedral })
+        Some(Self { lod_levels, billboards: out, octahedral, octahedral_depth })
     }
 
     /// The text form.
@@ -659,6 +710,9 @@ baselines
                 o.diffuse[0],
                 o.diffuse[1]
             ));
+        }
+        if let Some(depth) = &self.octahedral_depth {
+            out.push_str(&depth.to_text());
         }
         out
     }

@@ -56,6 +56,7 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
         (report.lod_triangles, "LoD triangle", "LoD triangles"),
         (report.billboards, "billboard quad", "billboard quads"),
         (report.octahedral, "octahedral impostor", "octahedral impostors"),
+        (report.octahedral_depth, "octahedral depth plane", "octahedral depth planes"),
         (report.calibration, "calibration record", "calibration records"),
         (report.calibration_elevations, "calibration record per elevation", "calibration records per elevation"),
         (report.chain_calibration, "chain calibration record", "chain calibration records"),
@@ -121,6 +122,12 @@ mod tests {
         );
         report.octahedral = 1;
         assert!(ok_line("d", &report).contains("4 billboard quads, 1 octahedral impostor,"));
+        // The octahedral views' depth planes (spec §6.13.2), after the impostors.
+        report.octahedral_depth = 4;
+        assert!(ok_line("d", &report).contains("1 octahedral impostor, 4 octahedral depth planes, 5 ambient"));
+        report.octahedral_depth = 1;
+        assert!(ok_line("d", &report).contains("1 octahedral impostor, 1 octahedral depth plane, 5 ambient"));
+        report.octahedral_depth = 0;
         // The calibration of the techniques added after 1.11, over every view and per elevation.
         report.calibration = 9;
         report.calibration_added = 3;
