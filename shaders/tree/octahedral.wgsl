@@ -15,7 +15,9 @@ struct OctahedralRecord {
     occlusion: f32,
     // PlaneDiffuseRecord's shares, flat in bits 0–15, scattered in bits 16–31 (unorm16).
     diffuse: u32,
-    reserved: u32,
+    // Reserved in the file; as uploaded, the index of the impostor's first view in
+    // `view_planes` (technique/baselines.rs, `gpu_octahedral`).
+    depth_first: u32,
 }
 
 // The planes' group layout (technique/impostors.rs, `GROUP`): the records in place of the planes,
@@ -23,23 +25,40 @@ struct OctahedralRecord {
 @group(3) @binding(0) var<storage, read> impostors: array<OctahedralRecord>;
 @group(3) @binding(1) var atlas: texture_2d<f32>;
 @group(3) @binding(2) var atlas_sampler: sampler;
+// The views' depth planes (spec §6.13.2), three floats per view (treelod_format::
+// OctahedralDepthRecord), each impostor's N² views in turn in the order of `impostors`, bound
+// in place of the planes' leaves; empty for a container without them.
+@group(3) @binding(4) var<storage, read> view_planes: array<f32>;
+
+// View (i, j)'s depth plane (offset, slope_s, slope_t) of an impostor whose first view's is
+// `first`, of a grid of `n` a side; the plane through the centre across the view (0, 0, 0)
+// where none is bound.
+fn view_plane(first: u32, n: u32, view: vec2<u32>) -> vec3<f32> {
+    let at = 3u * (first + view.y * n + view.x);
+    if at + 3u > arrayLength(&view_planes) {
+        return vec3<f32>(0.0);
+    }
+    return vec3<f32>(view_planes[at], view_planes[at + 1u], view_planes[at + 2u]);
+}
 
 struct OctahedralVaryings {
     @builtin(position) clip: vec4<f32>,
     @location(0) world: vec3<f32>,
-    // The fragment's (s, t) in each of the three views, [−1, 1]² inside its cell.
-    @location(1) st01: vec4<f32>,
-    @location(2) st2: vec2<f32>,
+    // The fragment's (s, t) in each of the three views, [−1, 1]² inside its cell, as
+    // homogeneous coordinates (s·w, t·w, w).
+    @location(1) st0: vec3<f32>,
+    @location(2) st1: vec3<f32>,
+    @location(3) st2: vec3<f32>,
     // Each view's cell corner in the atlas (uv) and the cells' size.
-    @location(3) @interpolate(flat) cell01: vec4<f32>,
-    @location(4) @interpolate(flat) cell2: vec2<f32>,
-    @location(5) @interpolate(flat) cell_size: vec2<f32>,
-    @location(6) @interpolate(flat) weights: vec3<f32>,
+    @location(4) @interpolate(flat) cell01: vec4<f32>,
+    @location(5) @interpolate(flat) cell2: vec2<f32>,
+    @location(6) @interpolate(flat) cell_size: vec2<f32>,
+    @location(7) @interpolate(flat) weights: vec3<f32>,
     // The sun's diffuse factor (x) and the ambient occlusion (y).
-    @location(7) @interpolate(flat) light: vec2<f32>,
-    @location(8) @interpolate(flat) normal: vec3<f32>,
-    @location(9) @interpolate(flat) tint: vec3<f32>,
-    @location(10) @interpolate(flat) fade: vec2<u32>,
+    @location(8) @interpolate(flat) light: vec2<f32>,
+    @location(9) @interpolate(flat) normal: vec3<f32>,
+    @location(10) @interpolate(flat) tint: vec3<f32>,
+    @location(11) @interpolate(flat) fade: vec2<u32>,
 }
 
 // The direction of view (i, j) of a grid of `n` a side, from the centre towards the viewer.
@@ -95,7 +114,9 @@ fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_ind
     d = select(vec3<f32>(0.0, 0.0, 1.0), normalize(d), dot(d, d) > 1e-20);
     let right = view_right(d);
     let up = cross(d, right);
-    let offset = rec.radius * (corner.x * right + corner.y * up);
+    // The eye from the centre, block space (the transform's scale is uniform).
+    let e = transpose(rotation) * to_eye / dot(rotation[0], rotation[0]);
+
     // The grid triangle holding d's point on the map (treelod_format::OctahedralRecord::blend).
     let n = max(rec.frames, 2u);
     let last = n - 1u;
@@ -114,23 +135,57 @@ fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_ind
         views = array<vec2<u32>, 3>(c + vec2<u32>(1u, 1u), c + vec2<u32>(0u, 1u), c + vec2<u32>(1u, 0u));
         weights = vec3<f32>(f.x + f.y - 1.0, 1.0 - f.x, 1.0 - f.y);
     }
-    let uv_min = unpack2x16unorm(rec.uv_min);
-    let uv_max = unpack2x16unorm(rec.uv_max);
-    let cell_size = (uv_max - uv_min) / f32(n);
-    var st: array<vec2<f32>, 3>;
-    var cells: array<vec2<f32>, 3>;
+    // Each view's basis and depth plane (spec §6.13.2): the view shows its image on the plane
+    // n·(p − centre) = offset·radius, n = d − slope_s·right − slope_t·up, seen through from the
+    // eye; and how far the quad must reach to hold every view's square on its plane as the eye
+    // sees it, the largest of its corners' places on the quad's plane (at least the radius).
+    var basis: array<mat3x3<f32>, 3>;
+    var planes: array<vec3<f32>, 3>;
+    var reach = 1.0;
     for (var k = 0u; k < 3u; k++) {
         let dk = view_direction(n, views[k].x, views[k].y);
         let rk = view_right(dk);
-        let uk = cross(dk, rk);
-        st[k] = vec2<f32>(dot(offset, rk), dot(offset, uk)) / rec.radius;
+        basis[k] = mat3x3<f32>(rk, cross(dk, rk), dk);
+        planes[k] = view_plane(rec.depth_first, n, views[k]);
+        for (var q = 0u; q < 4u; q++) {
+            let st = vec2<f32>(select(-1.0, 1.0, (q & 1u) != 0u), select(-1.0, 1.0, (q & 2u) != 0u));
+            let p = rec.radius * (basis[k] * vec3<f32>(st, planes[k].x + dot(planes[k].yz, st)));
+            // Where the eye's ray to p meets the quad's plane (through the centre, across d); a
+            // corner at or behind the eye's depth bounds nothing (the quad then reaches 4 radii).
+            let towards = dot(d, e - p);
+            let seen = select(4.0 * rec.radius, 0.0, towards > 1e-3 * rec.radius);
+            let on = e + (p - e) * (dot(d, e) / max(towards, 1e-3 * rec.radius));
+            reach = max(reach, max(seen, max(abs(dot(on, right)), abs(dot(on, up)))) / rec.radius);
+        }
+    }
+    let offset = min(reach, 4.0) * rec.radius * (corner.x * right + corner.y * up);
+    let uv_min = unpack2x16unorm(rec.uv_min);
+    let uv_max = unpack2x16unorm(rec.uv_max);
+    let cell_size = (uv_max - uv_min) / f32(n);
+    // The fragment's (s, t) in view k, where the eye's ray through it meets the view's plane,
+    // as homogeneous coordinates (numerators, denominator), each affine in the quad's point and
+    // so interpolated exactly: with w = n·(offset − e), the ray e + λ·(offset − e) meets the
+    // plane at λ = (offset_k·radius − n·e) / w.
+    var st: array<vec3<f32>, 3>;
+    var cells: array<vec2<f32>, 3>;
+    for (var k = 0u; k < 3u; k++) {
+        let nk = basis[k][2] - planes[k].y * basis[k][0] - planes[k].z * basis[k][1];
+        let ray = offset - e;
+        let w = dot(nk, ray);
+        let lead = planes[k].x * rec.radius - dot(nk, e);
+        st[k] = vec3<f32>(
+            dot(basis[k][0], e) * w + lead * dot(basis[k][0], ray),
+            dot(basis[k][1], e) * w + lead * dot(basis[k][1], ray),
+            rec.radius * w,
+        );
         cells[k] = uv_min + vec2<f32>(views[k]) * cell_size;
     }
     var out: OctahedralVaryings;
     let world = (draw.model * vec4<f32>(centre + offset, 1.0)).xyz;
     out.clip = frame.view_proj * vec4<f32>(world, 1.0);
     out.world = world;
-    out.st01 = vec4<f32>(st[0], st[1]);
+    out.st0 = st[0];
+    out.st1 = st[1];
     out.st2 = st[2];
     out.cell01 = vec4<f32>(cells[0], cells[1]);
     out.cell2 = cells[2];
@@ -157,7 +212,7 @@ fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_ind
 // alpha is the covered share, tested at one half as the billboards' (`quad_texel`). Sampled in
 // uniform control flow.
 fn octahedral_texel(in: OctahedralVaryings) -> vec4<f32> {
-    let st = array<vec2<f32>, 3>(in.st01.xy, in.st01.zw, in.st2);
+    let st = array<vec2<f32>, 3>(in.st0.xy / in.st0.z, in.st1.xy / in.st1.z, in.st2.xy / in.st2.z);
     let cells = array<vec2<f32>, 3>(in.cell01.xy, in.cell01.zw, in.cell2);
     let h = dither(in.clip);
     let chosen = select(select(2u, 1u, h < in.weights.x + in.weights.y), 0u, h < in.weights.x);

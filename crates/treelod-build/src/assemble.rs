@@ -15,8 +15,9 @@ use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use treelod_format::{
     BillboardRecord, BlockRecord, CellRecord, ContainerData, ImageRecord, LodLevelRecord, MATERIAL_DOUBLE_SIDED,
-    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralRecord, PointRecord, PruneLeafRecord, Range, Setting,
-    Source, Tree, TriangleRecord, VertexRecord, encode_ao, image_format, material_class, pack,
+    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, OctahedralRecord, PointRecord,
+    PruneLeafRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, encode_ao, image_format,
+    material_class, pack,
 };
 
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
@@ -1108,12 +1109,18 @@ fn assemble(
     // The billboard atlas after that.
     let mut billboard_records: Vec<BillboardRecord> = Vec::new();
     let mut octahedral_records: Vec<OctahedralRecord> = Vec::new();
+    let mut octahedral_depth: Vec<OctahedralDepthRecord> = Vec::new();
     if let Some(billboards) = billboards {
         let atlas = billboards.atlas;
         let index = push_atlas(&mut images, &mut image_data, &atlas);
         billboard_records = billboards.records.into_iter().map(|b| BillboardRecord { image: index, ..b }).collect();
         octahedral_records =
             billboards.octahedral.into_iter().map(|o| OctahedralRecord { image: index, ..o }).collect();
+        octahedral_depth = billboards
+            .octahedral_planes
+            .into_iter()
+            .map(|[offset, slope_s, slope_t]| OctahedralDepthRecord { offset, slope_s, slope_t })
+            .collect();
         stats.billboard_atlas = [atlas.width, atlas.height];
     }
     clock.lap(&mut stats, "images");
@@ -1199,6 +1206,7 @@ fn assemble(
         lod_triangles,
         billboards: billboard_records,
         octahedral: octahedral_records,
+        octahedral_depth,
         vertex_ao: vertex_ao.map_or_else(Vec::new, |ao| ao.iter().map(|&a| encode_ao(a)).collect()),
         point_ao,
         plane_ao,

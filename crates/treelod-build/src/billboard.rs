@@ -37,8 +37,8 @@ use treelod_format::{BillboardRecord, OctahedralRecord, PlaneDiffuseRecord, bill
 
 use crate::error::BuildError;
 use crate::impostor::{
-    ALIGN, Atlas, GUTTER, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, SAMPLES, Winner, align, bake, compose,
-    diffuse_item, diffuse_mixture, diffuse_moments, seen_triangle_occlusion, shelf_pack,
+    ALIGN, Atlas, DepthMoments, GUTTER, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, SAMPLES, Winner, align, bake,
+    compose, diffuse_item, diffuse_mixture, diffuse_moments, seen_triangle_occlusion, shelf_pack,
 };
 
 /// Views per side of a tree's octahedral impostor (spec §6.13.1): 16 × 16 views over the upper
@@ -94,6 +94,10 @@ pub struct Billboards {
     pub octahedral: Vec<OctahedralRecord>,
     /// The same for each tree's octahedral views together.
     pub octahedral_texels: Vec<u64>,
+    /// Each octahedral view's depth plane `[a, b, c]`, in the order of `octahedral` and of the
+    /// views in each (`j · frames + i`): the front-most surfaces it shows lie about
+    /// `center + radius·(s·right + t·up) + radius·(a + b·s + c·t)·d` (spec §6.13.1).
+    pub octahedral_planes: Vec<[f32; 3]>,
 }
 
 /// One quad to bake.
@@ -244,7 +248,7 @@ pub fn build_billboards(
             tris.iter().map(|&t| (t, mesh.triangles[t as usize].v.map(|v| position(v) - centre))).collect()
         })
         .collect();
-    let baked: Vec<Vec<Vec<u8>>> = jobs
+    let (baked, moments): (Vec<Vec<Vec<u8>>>, Vec<DepthMoments>) = jobs
         .par_iter()
         .zip(&regions)
         .map(|(job, region)| {
@@ -267,7 +271,7 @@ pub fn build_billboards(
             let in_order = order.iter().map(|&(_, k)| triangles[k as usize]);
             bake(mesh, in_order, &plane, Winner::Front, &job.quad, region, samples)
         })
-        .collect();
+        .unzip();
     let texels = compose(&regions, &baked, width, height);
 
     // Stage: the records and each tree's texels.
@@ -275,9 +279,20 @@ pub fn build_billboards(
     let mut crossed_texels = vec![0u64; trees as usize];
     let mut octahedral_texels = vec![0u64; trees as usize];
     let mut records = Vec::with_capacity(jobs.len());
-    for (job, region) in jobs.iter().zip(&regions) {
+    let mut planes: Vec<Vec<[f32; 3]>> = vec![Vec::new(); trees as usize];
+    for ((job, region), moments) in jobs.iter().zip(&regions).zip(&moments) {
         if job.kind == OCTAHEDRAL_VIEW {
             octahedral_texels[job.tree as usize] += region.texels();
+            // In the record's units: the offset over its radius (the view's cell, gutter
+            // included), the slopes as they are; none where the view shows nothing.
+            let radius = job.quad.u.length() * f64::from(cell) / f64::from(view_content);
+            let [a, b, c] = moments.plane().unwrap_or([0.0; 3]);
+            #[expect(clippy::cast_possible_truncation, reason = "bounded")]
+            planes[job.tree as usize].push([
+                (a / radius).clamp(-1.0, 1.0) as f32,
+                b.clamp(-MAX_SLOPE, MAX_SLOPE) as f32,
+                c.clamp(-MAX_SLOPE, MAX_SLOPE) as f32,
+            ]);
             continue;
         }
         let share = if job.kind == billboard_kind::FACING { &mut facing_texels } else { &mut crossed_texels };
@@ -320,15 +335,22 @@ pub fn build_billboards(
             record
         })
         .collect();
+    let octahedral_planes: Vec<[f32; 3]> =
+        spheres.iter().flat_map(|&(tree, _, _)| std::mem::take(&mut planes[tree as usize])).collect();
     Ok(Some(Billboards {
         records,
         atlas: Atlas { width, height, format: treelod_format::image_format::RGBA8_SRGB, mip_count: MIP_LEVELS, texels },
         facing_texels,
         crossed_texels,
+        octahedral_planes,
         octahedral,
         octahedral_texels,
     }))
 }
+
+/// The steepest depth plane an octahedral view keeps (spec §6.13.1): `|b|, |c| ≤ 1`, the
+/// plane at most 45° from facing its view.
+const MAX_SLOPE: f64 = 1.0;
 
 /// The occlusion of a tree's `triangles` (placed) as its views show them: their mean, each
 /// weighted by its area and its share of open directions ([`seen_triangle_occlusion`]); 0 where
@@ -496,6 +518,40 @@ mod tests {
         let u = u0 + (i as f32 + (s + 1.0) * 0.5) / n * (u1 - u0);
         let v = v0 + (j as f32 + (t + 1.0) * 0.5) / n * (v1 - v0);
         texel(atlas, (u * atlas.width as f32).floor() as usize, (v * atlas.height as f32).floor() as usize)
+    }
+
+    /// Each octahedral view's depth plane (spec §6.13.2) is fitted to the front-most surfaces
+    /// it shows: from the horizon at `+Z` the red card, 0.45 m in front of the centre, from `−Z`
+    /// the blue one, 0.45 m in front seen from there; edge on, nothing (the plane through the
+    /// centre). A card tilted about the vertical, `z = x/2`, reads slope 1/2 from `+Z`.
+    #[test]
+    fn octahedral_depth_planes_follow_the_front_surfaces() {
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        tree(&mut vertices, &mut triangles, 0.0, 0);
+        // Tree 1: one red card over x ∈ [4, 6], y ∈ [0, 2], tilted: z = (x − 5)/2.
+        for (x, y) in [(4.0f32, 0.0f32), (6.0, 0.0), (6.0, 2.0), (4.0, 2.0)] {
+            vertices.push(VertexRecord { position: [x, y, 0.5 * (x - 5.0)], normal: 0, uv: [0.0; 2], color: u32::MAX });
+        }
+        triangles.push(LeafTriangle { v: [12, 13, 14], material: 0, tree: 1 });
+        triangles.push(LeafTriangle { v: [12, 14, 15], material: 0, tree: 1 });
+        let materials = materials();
+        let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
+        let mesh = ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &[] };
+        let out = build_billboards(&mesh, 2, &[20_000, 20_000], true).unwrap().unwrap();
+        let n = OCTAHEDRAL_FRAMES as usize;
+        assert_eq!(out.octahedral_planes.len(), 2 * n * n, "every view of each impostor");
+        let plane = |tree: usize, i: usize, j: usize| out.octahedral_planes[tree * n * n + j * n + i];
+        let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 0.01);
+        let r0 = out.octahedral[0].radius;
+        assert!(close(plane(0, n - 1, 0), [0.45 / r0, 0.0, 0.0]), "{:?}", plane(0, n - 1, 0));
+        assert!(close(plane(0, 0, n - 1), [0.45 / r0, 0.0, 0.0]), "{:?}", plane(0, 0, n - 1));
+        assert_eq!(plane(0, n - 1, n - 1), [0.0; 3], "cards edge on: nothing seen");
+        // From +Z (right = +X, up = +Y) the tilted card's depth grows with s at 1/2.
+        assert!(close(plane(1, n - 1, 0), [0.0, 0.5, 0.0]), "{:?}", plane(1, n - 1, 0));
+        // From −Z (right = −X, up = +Y) its depth along −Z, (5 − x)/2, also grows with s at 1/2.
+        assert!(close(plane(1, 0, n - 1), [0.0, 0.5, 0.0]), "{:?}", plane(1, 0, n - 1));
+        // Every plane is within the spec's bounds.
+        assert!(out.octahedral_planes.iter().flatten().all(|v| v.is_finite() && v.abs() <= 1.0));
     }
 
     /// Each tree's octahedral impostor: its grid of square cells in the atlas, the bounding

@@ -107,8 +107,8 @@ use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
     CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE,
-    OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao,
-    image, image_format, material_class, prune_leaves_drawn,
+    OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind,
+    calibration_technique, decode_ao, image, image_format, material_class, prune_leaves_drawn,
 };
 use treelod_runtime::impostor::{
     BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
@@ -812,8 +812,16 @@ impl<'a> Scene<'a> {
                 drawn
             }
             t::OCTAHEDRAL => {
+                let mut first = 0usize;
                 for record in &d.octahedral {
-                    self.octahedral(canvas, view, record);
+                    let views = (record.frames as usize).pow(2);
+                    // The views' depth planes where the container has them all (spec §6.13.2).
+                    let planes = d.octahedral_depth.get(first..first + views).filter(|_| {
+                        d.octahedral_depth.len()
+                            == d.octahedral.iter().map(|o| (o.frames as usize).pow(2)).sum::<usize>()
+                    });
+                    self.octahedral(canvas, view, record, planes);
+                    first += views;
                 }
                 d.octahedral.len() as u64
             }
@@ -854,13 +862,22 @@ impl<'a> Scene<'a> {
     }
 
     /// An octahedral impostor as `vs_octahedral` and `fs_octahedral` in
-    /// `shaders/tree/octahedral.wgsl` draw it (spec §6.13.1): a square of its radius about its
+    /// `shaders/tree/octahedral.wgsl` draw it (spec §6.13.1, §6.13.2): a square about its
     /// centre facing the viewer, in the basis of the view direction (below the horizon, the
-    /// horizon's), each pixel textured by one of the three views of the grid triangle around the
-    /// direction, the `k`-th where the pixel's [`level_dither`] value lies past the weights of
-    /// the views before it, at the fragment's place in that view's square (empty past it); lit
-    /// with the view as its normal by the record's diffuse mixture and its occlusion.
-    fn octahedral(&self, canvas: &mut Canvas, view: &View, record: &OctahedralRecord) {
+    /// horizon's), reaching as far as the views' squares on their depth planes (`planes`, the
+    /// record's `frames²`; each view's plane across it through the centre without them) show,
+    /// each pixel textured by one of the three views of the grid triangle around the direction,
+    /// the `k`-th where the pixel's [`level_dither`] value lies past the weights of the views
+    /// before it, at the place where the pixel's ray meets that view's plane (empty past its
+    /// square); lit with the view as its normal by the record's diffuse mixture and its
+    /// occlusion. The view is orthographic: every ray runs along its direction.
+    fn octahedral(
+        &self,
+        canvas: &mut Canvas,
+        view: &View,
+        record: &OctahedralRecord,
+        planes: Option<&[OctahedralDepthRecord]>,
+    ) {
         let frames = record.frames.max(2);
         let d = Vec3::new(view.direction.x, view.direction.y.max(0.0), view.direction.z);
         let d = if d.length_squared() > 1e-20 { d.normalize() } else { Vec3::Z };
@@ -870,21 +887,51 @@ impl<'a> Scene<'a> {
         };
         let (right, up) = basis(d);
         let (centre, radius) = (Vec3::from_array(record.center), record.radius);
-        let offsets = QUAD_CORNERS.map(|(s, t)| radius * (s * right + t * up));
+        let ray = view.direction;
+        let blend = OctahedralRecord::blend(frames, d.to_array());
+        // Each view's basis (right, up, direction) and depth plane (offset, slopes).
+        let views = blend.map(|(i, j, _)| {
+            let dk = Vec3::from_array(OctahedralRecord::view_direction(frames, i, j));
+            let (rk, uk) = basis(dk);
+            let plane = planes
+                .and_then(|p| p.get((j * frames + i) as usize))
+                .map_or(Vec3::ZERO, |p| Vec3::new(p.offset, p.slope_s, p.slope_t));
+            ((rk, uk, dk), plane)
+        });
+        // How far the quad reaches: the views' squares on their planes, moved along the rays
+        // onto the quad's plane (through the centre, across `d`), at least the radius, at most
+        // 4 radii, as `vs_octahedral` finds it.
+        let mut reach = 1.0f32;
+        for ((rk, uk, dk), plane) in views {
+            for (s, t) in QUAD_CORNERS {
+                let p = radius * (s * rk + t * uk + (plane.x + plane.y * s + plane.z * t) * dk);
+                let along = ray.dot(d);
+                let on = if along.abs() > 1e-6 { p - ray * (p.dot(d) / along) } else { p };
+                reach = reach.max(on.dot(right).abs().max(on.dot(up).abs()) / radius);
+            }
+        }
+        let offsets = QUAD_CORNERS.map(|(s, t)| reach.min(4.0) * radius * (s * right + t * up));
         let (lo, hi) =
             (Vec2::from_array(unpack_unorm16x2(record.uv_min)), Vec2::from_array(unpack_unorm16x2(record.uv_max)));
         #[expect(clippy::cast_precision_loss, reason = "at most 64 frames")]
         let cell = (hi - lo) / frames as f32;
         let mut from = 0.0;
-        for (k, (i, j, weight)) in OctahedralRecord::blend(frames, d.to_array()).into_iter().enumerate() {
+        for (k, ((i, j, weight), ((rk, uk, dk), plane))) in blend.into_iter().zip(views).enumerate() {
             // The last view takes every pixel past the first two (the dither is below 1).
             let to = if k == 2 { EVERY_PIXEL.1 } else { from + weight };
             if weight > 0.0 {
-                let (right_k, up_k) = basis(Vec3::from_array(OctahedralRecord::view_direction(frames, i, j)));
                 #[expect(clippy::cast_precision_loss, reason = "at most 64 frames")]
                 let origin = lo + Vec2::new(i as f32, j as f32) * cell;
-                let uvs = offsets
-                    .map(|o| origin + 0.5 * (Vec2::new(o.dot(right_k), o.dot(up_k)) / radius + Vec2::ONE) * cell);
+                // Where the ray through a corner meets the view's plane `n·p = offset·radius`.
+                let n = dk - plane.y * rk - plane.z * uk;
+                let on_plane = |o: Vec3| {
+                    let across = n.dot(ray);
+                    if across.abs() > 1e-6 { o + ray * ((plane.x * radius - n.dot(o)) / across) } else { o }
+                };
+                let uvs = offsets.map(|o| {
+                    let p = on_plane(o);
+                    origin + 0.5 * (Vec2::new(p.dot(rk), p.dot(uk)) / radius + Vec2::ONE) * cell
+                });
                 let quad = Quad {
                     corners: offsets.map(|o| centre + o),
                     normal: view.direction,

@@ -985,7 +985,7 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
             let baked: Vec<Vec<Vec<u8>>> = (0..nodes.len())
                 .into_par_iter()
                 .map(|i| {
-                    bake(mesh, placed_triangles(i), &nodes[i].plane, Winner::Nearest, &quads[i], &regions[i], SAMPLES)
+                    bake(mesh, placed_triangles(i), &nodes[i].plane, Winner::Nearest, &quads[i], &regions[i], SAMPLES).0
                 })
                 .collect();
             let texels = compose(&regions, &baked, width, height);
@@ -1304,9 +1304,19 @@ pub(crate) fn bake(
     quad: &Quad,
     region: &Region,
     samples: usize,
-) -> Vec<Vec<u8>> {
+) -> (Vec<Vec<u8>>, DepthMoments) {
     let lut = srgb_to_linear_table();
+    let mut moments = DepthMoments::default();
     let (sw, sh) = (region.tw as usize * samples, region.th as usize * samples);
+    let (hu, hv) = (quad.u.length(), quad.v.length());
+    // Metres along the quad's u (v) of sample column (row) `x` (`y`), from its centre; a
+    // sample's depth: its signed distance to `plane` (only `Front` keeps its sign).
+    let along_u = |x: usize| ((x as f64 + 0.5) / sw as f64 * 2.0 - 1.0) * hu;
+    let along_v = |y: usize| ((y as f64 + 0.5) / sh as f64 * 2.0 - 1.0) * hv;
+    let signed_depth = |key: f32| match winner {
+        Winner::Nearest => f64::from(key),
+        Winner::Front => -f64::from(key),
+    };
     let (rw, rh) = (region.rw as usize, region.rh as usize);
     let mut texels = vec![[0.0f32; 4]; rw * rh];
     let g = GUTTER as usize;
@@ -1374,8 +1384,9 @@ pub(crate) fn bake(
                 let (mut sum, mut covered) = ([0.0f32; 3], 0u32);
                 for sy in 0..samples {
                     let row = (ty * samples + sy - band_start) * sw + tx * samples;
-                    for i in row..row + samples {
+                    for (sx, i) in (row..row + samples).enumerate() {
                         if depth[i].is_finite() {
+                            moments.add(along_u(tx * samples + sx), along_v(ty * samples + sy), signed_depth(depth[i]));
                             covered += 1;
                             for c in 0..3 {
                                 sum[c] += colour[i][c];
@@ -1420,7 +1431,7 @@ pub(crate) fn bake(
         dilate(level, rw >> l, rh >> l);
     }
     preserve_coverage(&mut levels, rw, rh);
-    levels
+    let bytes = levels
         .iter()
         .map(|level| {
             level
@@ -1435,7 +1446,60 @@ pub(crate) fn bake(
                 })
                 .collect()
         })
-        .collect()
+        .collect();
+    (bytes, moments)
+}
+
+/// The sums of a least-squares fit of a plane `z = a + b·x + c·y` to the depths `z` of a quad's
+/// covered samples at `(x, y)` in its plane (metres from its centre, along its u and v; `z`
+/// along its normal, towards the side baked from): what an octahedral view's depth plane is
+/// fitted from (spec §6.13.1).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct DepthMoments {
+    n: f64,
+    x: f64,
+    y: f64,
+    z: f64,
+    xx: f64,
+    xy: f64,
+    yy: f64,
+    xz: f64,
+    yz: f64,
+}
+
+impl DepthMoments {
+    fn add(&mut self, x: f64, y: f64, z: f64) {
+        self.n += 1.0;
+        self.x += x;
+        self.y += y;
+        self.z += z;
+        self.xx += x * x;
+        self.xy += x * y;
+        self.yy += y * y;
+        self.xz += x * z;
+        self.yz += y * z;
+    }
+
+    /// `[a, b, c]` of the plane of least squares (`a` in metres, the slopes `b`, `c` without
+    /// unit); `None` without samples. Where the samples do not span two directions (fewer
+    /// than 3, or on a line), the plane of their mean depth.
+    pub(crate) fn plane(&self) -> Option<[f64; 3]> {
+        if self.n < 1.0 {
+            return None;
+        }
+        let (mx, my, mz) = (self.x / self.n, self.y / self.n, self.z / self.n);
+        // Centred second moments.
+        let (sxx, sxy, syy) = (self.xx / self.n - mx * mx, self.xy / self.n - mx * my, self.yy / self.n - my * my);
+        let (sxz, syz) = (self.xz / self.n - mx * mz, self.yz / self.n - my * mz);
+        let det = sxx * syy - sxy * sxy;
+        // (`det` is never negative, up to rounding; NaN falls through to the mean too.)
+        if self.n < 3.0 || det.is_nan() || det <= 1e-12 * (sxx + syy).powi(2) {
+            return Some([mz, 0.0, 0.0]);
+        }
+        let b = (sxz * syy - syz * sxy) / det;
+        let c = (syz * sxx - sxz * sxy) / det;
+        Some([mz - b * mx - c * my, b, c])
+    }
 }
 
 /// A triangle projected onto a quad's sample grid: its corners in sample coordinates, twice its

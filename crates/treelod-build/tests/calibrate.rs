@@ -47,12 +47,12 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     // CALIBRATION is a kind of 1.5, the impostors' BC7 atlas (the default) one of 1.6,
     // CALIBRATION_ELEVATIONS one of 1.7, the chain's per-level tables (CHAIN_CALIBRATION) one of
     // 1.8, the planes' diffuse response (PLANE_DIFFUSE) one of 1.10, the octahedral impostors of
-    // the baselines (OCTAHEDRAL) one of 1.11, and their calibration (CALIBRATION_ADDED) makes the
-    // file 1.12.
+    // the baselines (OCTAHEDRAL) one of 1.11, their calibration (CALIBRATION_ADDED) one of 1.12,
+    // and their views' depth planes (OCTAHEDRAL_DEPTH) make the file 1.13.
     assert!(!container.chain_calibration().is_empty() && !container.plane_diffuse().is_empty());
-    assert!(!container.octahedral().is_empty());
+    assert!(!container.octahedral().is_empty() && !container.octahedral_depth().is_empty());
     assert_eq!(container.calibration_added(), out.data.calibration_added.as_slice());
-    assert_eq!(container.header().minor, 12, "the octahedral impostors' rows are a kind of 1.12");
+    assert_eq!(container.header().minor, 13, "the views' depth planes are a kind of 1.13");
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use common::{BACKGROUND, bark_triangles, demo_built, gpu, one_tree, precision_recall};
 use glam::{Vec3, vec3};
 use treelod_build::{BuildConfig, ImpostorConfig, LineConfig, LodChainConfig, PruneConfig};
-use treelod_format::Container;
+use treelod_format::{Compression, Container, ContainerData};
 use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, render_image};
 use treelod_render::{Camera, DrawSource, ImpostorBark, Pruning, Renderer, Settings, Technique};
@@ -187,6 +187,48 @@ fn the_octahedral_impostor_covers_the_full_mesh_from_every_direction_above_the_h
             assert!(ours > facing + 0.3, "elevation {elevation}, direction {k}: P + R {ours:.3} against {facing:.3}");
         }
     }
+}
+
+/// The views' depth planes (spec §6.13.2): seen in perspective from 3 radii, each view drawn on
+/// the plane of the surfaces it shows covers what the full mesh covers better than drawn on the
+/// plane through the centre (the same file without the section), from the side and from above.
+#[test]
+fn the_octahedral_views_depth_planes_keep_the_silhouette_in_perspective() {
+    let gpu = gpu();
+    let container = demo_with_baselines();
+    let [record] = container.octahedral() else { panic!("one tree") };
+    assert_eq!(container.octahedral_depth().len(), (record.frames * record.frames) as usize);
+    let flat = {
+        let mut data = ContainerData::from_container(&container);
+        data.octahedral_depth.clear();
+        Arc::new(Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
+    };
+    let centre = Vec3::from_array(record.center);
+    let mut full_renderer = renderer(&gpu, &container, Technique::Full);
+    let mut planes = renderer(&gpu, &container, Technique::Octahedral);
+    let mut through_centre = renderer(&gpu, &flat, Technique::Octahedral);
+    let mut rows = Vec::new();
+    for elevation in [0.15f32, 0.6, 1.05] {
+        for k in 0..4 {
+            let a = k as f32 * std::f32::consts::FRAC_PI_2 + 0.3;
+            let towards = vec3(a.sin() * elevation.cos(), elevation.sin(), a.cos() * elevation.cos());
+            let cam = Camera::look_at(centre + 3.0 * record.radius * towards, centre, 0.8, 192, 192);
+            let (full, _) = render_image(&gpu, &mut full_renderer, &cam, BACKGROUND).expect("renders");
+            let (ours, _) = render_image(&gpu, &mut planes, &cam, BACKGROUND).expect("renders");
+            let (theirs, _) = render_image(&gpu, &mut through_centre, &cam, BACKGROUND).expect("renders");
+            let (p, r) = precision_recall(&ours, &full);
+            let (p_flat, r_flat) = precision_recall(&theirs, &full);
+            eprintln!(
+                "elevation {elevation}, direction {k}: depth planes P {p:.3} R {r:.3}, through the centre P {p_flat:.3} R {r_flat:.3}"
+            );
+            rows.push((p + r, p_flat + r_flat));
+        }
+    }
+    let mean = |f: fn(&(f64, f64)) -> f64| rows.iter().map(f).sum::<f64>() / rows.len() as f64;
+    // Measured on lavapipe: mean P + R 1.560 against 1.533 (R 0.71–0.79 against 0.66–0.75, P
+    // within 0.03 either way).
+    let (ours, flat) = (mean(|r| r.0), mean(|r| r.1));
+    assert!(ours > flat + 0.015, "mean P + R {ours:.3} with the depth planes, {flat:.3} through the centre");
 }
 
 #[test]

@@ -6,7 +6,7 @@
 //! `treelod_runtime::baseline::select`. WGSL: `shaders/tree/planes.wgsl` then
 //! `shaders/tree/billboards.wgsl`; `shaders/tree/octahedral.wgsl`.
 
-use treelod_format::{BillboardRecord, Container};
+use treelod_format::{BillboardRecord, Container, OctahedralDepthRecord, OctahedralRecord};
 use treelod_runtime::Billboards;
 #[cfg(doc)]
 use treelod_runtime::Technique;
@@ -79,8 +79,10 @@ pub(crate) fn upload(
                     octahedral_image.unwrap_or_default()
                 ));
             }
-            let buffer = up.buffer("OCTAHEDRAL", bytemuck::cast_slice(octahedral))?;
-            Some(impostors::group(up, Bucket::Octahedral, &buffer, atlas, &slots, &leaves))
+            let (records, depth) = gpu_octahedral(up.container);
+            let buffer = up.buffer("OCTAHEDRAL", bytemuck::cast_slice(&records))?;
+            let depth = up.buffer("OCTAHEDRAL_DEPTH", bytemuck::cast_slice(depth))?;
+            Some(impostors::group(up, Bucket::Octahedral, &buffer, atlas, &slots, &depth))
         }
         None => {
             up.representations.octahedral = 0;
@@ -88,6 +90,26 @@ pub(crate) fn upload(
         }
     };
     Ok((billboards, octahedral))
+}
+
+/// The octahedral impostors of `container` as uploaded, and their views' depth planes (spec
+/// §6.13.2): each record's `reserved` (which no shader reads as such) holds the index of its first
+/// view's plane in `OCTAHEDRAL_DEPTH`. Where the container has no planes, or not one per view of
+/// every impostor, none are bound and each view is drawn on the plane through the centre across
+/// it, as before 1.13.
+pub(crate) fn gpu_octahedral(container: &Container) -> (Vec<OctahedralRecord>, &[OctahedralDepthRecord]) {
+    let mut first = 0u32;
+    let records: Vec<OctahedralRecord> = container
+        .octahedral()
+        .iter()
+        .map(|&r| {
+            let record = OctahedralRecord { reserved: first, ..r };
+            first = first.saturating_add(r.frames.saturating_mul(r.frames));
+            record
+        })
+        .collect();
+    let depth = container.octahedral_depth();
+    (records, if depth.len() == first as usize { depth } else { &[] })
 }
 
 /// The billboards of `container` as uploaded: the facing quads (`kinds.facing`), then the

@@ -15,13 +15,15 @@ use crate::textures::Atlas;
 use crate::upload::ModelUpload;
 
 /// Group 3 of the planes' and the billboards' pipelines: the quads, their atlas and its sampler,
-/// the leaf-slot image and the planes' leaves (`shaders/tree/planes.wgsl`).
+/// the leaf-slot image and the planes' leaves (`shaders/tree/planes.wgsl`); the octahedral
+/// impostors bind their views' depth planes in place of the leaves, which their vertex stage
+/// reads (`shaders/tree/octahedral.wgsl`).
 pub(crate) const GROUP: &[wgpu::BindGroupLayoutEntry] = &[
     storage(0, ShaderStages::VERTEX),
     texture(1, TextureSampleType::Float { filterable: true }, TextureViewDimension::D2),
     sampler(2, SamplerBindingType::Filtering),
     texture(3, TextureSampleType::Uint, TextureViewDimension::D2),
-    storage(4, ShaderStages::FRAGMENT),
+    storage(4, ShaderStages::VERTEX_FRAGMENT),
 ];
 
 /// The planes' pipelines.
