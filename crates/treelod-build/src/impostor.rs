@@ -1386,7 +1386,8 @@ pub(crate) fn bake(
                     let row = (ty * samples + sy - band_start) * sw + tx * samples;
                     for (sx, i) in (row..row + samples).enumerate() {
                         if depth[i].is_finite() {
-                            moments.add(along_u(tx * samples + sx), along_v(ty * samples + sy), signed_depth(depth[i]));
+                            let (x, y) = (along_u(tx * samples + sx), along_v(ty * samples + sy));
+                            moments.add(x, y, signed_depth(depth[i]), (x * x + y * y) / (hu * hv));
                             covered += 1;
                             for c in 0..3 {
                                 sum[c] += colour[i][c];
@@ -1450,13 +1451,23 @@ pub(crate) fn bake(
     (bytes, moments)
 }
 
-/// The sums of a least-squares fit of a plane `z = a + b·x + c·y` to the depths `z` of a quad's
-/// covered samples at `(x, y)` in its plane (metres from its centre, along its u and v; `z`
-/// along its normal, towards the side baked from): what an octahedral view's depth plane is
-/// fitted from (spec §6.13.1).
+/// The sums of a weighted least-squares fit of a plane `z = a + b·x + c·y` to the depths `z`
+/// of a quad's covered samples at `(x, y)` in its plane (metres from its centre, along its u and
+/// v; `z` along its normal, towards the side baked from): what an octahedral view's depth plane
+/// is fitted from (spec §6.13.2). Each sample weighs `x² + y²` (over the quad's `|u|·|v|`): a
+/// surface `ρ` from the view's centre drawn `Δz` off its depth moves on screen by about
+/// `ρ·Δz/D` seen in perspective from `D`, so the fit keeps the silhouette, where the samples
+/// are far from the centre, rather than the middle of the crown, which a wrong depth barely
+/// moves. (Measured with `eval --orbit 2,8,32`, octahedral RMSE at 128–512, 32–128 and 8–32 px:
+/// the Quaternius tree, whose dense round crown fits a plane badly, .0909, .00705 and .00118
+/// against .1138, .00826 and .00129 with every sample weighing alike, and .0994, .00746 and
+/// .00123 with weights `x² + y²` plus a quarter; the oak and the pine within 2 % of either.)
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct DepthMoments {
-    n: f64,
+    /// Samples added.
+    count: u64,
+    /// Their weights' sum; the other fields are the weighted sums their names say.
+    weight: f64,
     x: f64,
     y: f64,
     z: f64,
@@ -1468,32 +1479,35 @@ pub(crate) struct DepthMoments {
 }
 
 impl DepthMoments {
-    fn add(&mut self, x: f64, y: f64, z: f64) {
-        self.n += 1.0;
-        self.x += x;
-        self.y += y;
-        self.z += z;
-        self.xx += x * x;
-        self.xy += x * y;
-        self.yy += y * y;
-        self.xz += x * z;
-        self.yz += y * z;
+    /// A sample at `(x, y)` of depth `z` and weight `w`.
+    fn add(&mut self, x: f64, y: f64, z: f64, w: f64) {
+        self.count += 1;
+        self.weight += w;
+        self.x += w * x;
+        self.y += w * y;
+        self.z += w * z;
+        self.xx += w * x * x;
+        self.xy += w * x * y;
+        self.yy += w * y * y;
+        self.xz += w * x * z;
+        self.yz += w * y * z;
     }
 
     /// `[a, b, c]` of the plane of least squares (`a` in metres, the slopes `b`, `c` without
     /// unit); `None` without samples. Where the samples do not span two directions (fewer
     /// than 3, or on a line), the plane of their mean depth.
     pub(crate) fn plane(&self) -> Option<[f64; 3]> {
-        if self.n < 1.0 {
+        if self.count == 0 || self.weight <= 0.0 {
             return None;
         }
-        let (mx, my, mz) = (self.x / self.n, self.y / self.n, self.z / self.n);
+        let (mx, my, mz) = (self.x / self.weight, self.y / self.weight, self.z / self.weight);
         // Centred second moments.
-        let (sxx, sxy, syy) = (self.xx / self.n - mx * mx, self.xy / self.n - mx * my, self.yy / self.n - my * my);
-        let (sxz, syz) = (self.xz / self.n - mx * mz, self.yz / self.n - my * mz);
+        let (sxx, sxy, syy) =
+            (self.xx / self.weight - mx * mx, self.xy / self.weight - mx * my, self.yy / self.weight - my * my);
+        let (sxz, syz) = (self.xz / self.weight - mx * mz, self.yz / self.weight - my * mz);
         let det = sxx * syy - sxy * sxy;
         // (`det` is never negative, up to rounding; NaN falls through to the mean too.)
-        if self.n < 3.0 || det.is_nan() || det <= 1e-12 * (sxx + syy).powi(2) {
+        if self.count < 3 || det.is_nan() || det <= 1e-12 * (sxx + syy).powi(2) {
             return Some([mz, 0.0, 0.0]);
         }
         let b = (sxz * syy - syz * sxy) / det;
