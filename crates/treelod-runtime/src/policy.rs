@@ -106,7 +106,15 @@
 //! view: the elevation of the eye above the tree's horizontal plane at the block centre
 //! ([`view_elevation`]; views from below count as from the side), with a hysteresis of a quarter of
 //! the classes' spacing ([`elevation_class_after`]), so a camera climbing over a forest hands its
-//! far trees from billboards to planes or points while a walker keeps them billboards. Without
+//! far trees from billboards to planes or points while a walker keeps them billboards. A tree
+//! seen from below the tables (more than half the classes' spacing below the lowest, −5° with
+//! the build's classes; [`Choices::below_horizon`], with a quarter of the spacing of hysteresis)
+//! is chosen by the lowest class's tables among the techniques whose representations do not
+//! hold only views from above ([`upper_hemisphere_only`]: the octahedral impostor, which draws a
+//! tree seen from below with its horizon's views); the tables do not look from below, and the
+//! other representations are the tree's own geometry, as near from below as from the side
+//! (measured on the shared pine's forest, `bench --quality`, where the eye walks 3.4 m above
+//! the ground under trees whose centres are 34 m up, see `docs/cli.md`). Without
 //! those tables every tree is chosen by the tables over every view. A shadow cascade's trees are
 //! chosen by the view that sets their height (the camera's or the cascade's, whichever sees the
 //! tree smaller). The classes between measured elevations: with the nearest measured class
@@ -827,8 +835,30 @@ pub struct Choices {
     /// Visibility classes per elevation class: [`VISIBILITY_CLASSES`] with
     /// [`Policy::occlusion`], else 1.
     visibility: usize,
+    /// Per visibility class, the tables of the lowest elevation class among the techniques that
+    /// are not [`upper_hemisphere_only`], for a tree seen from below the tables
+    /// ([`Self::below_horizon`]); empty where that changes nothing (no such technique usable, or
+    /// fewer than two elevation classes).
+    below: Vec<Table>,
     /// Steps either side within which a tree keeps last frame's technique.
     hysteresis_steps: usize,
+}
+
+/// The elevation class (an index for [`Choices::choose_framed`]) of a tree seen from below the
+/// calibration's views by more than half the classes' spacing ([`Choices::below_horizon`]): the
+/// lowest class's tables without the techniques whose representations hold only the upper
+/// hemisphere ([`upper_hemisphere_only`]).
+pub const BELOW_HORIZON: usize = usize::MAX;
+
+/// Whether technique `t`'s representation shows a tree only from the upper hemisphere: the
+/// octahedral impostor, whose views (spec §6.13.1) are all taken from above the horizon and which
+/// draws a tree seen from below with the horizon's views. Seen from below, the lowest
+/// elevation's tables (0° for the build's) do not describe it: measured with `eval --path` on
+/// the shared pine at 8 radii (640×480), its RMSE against the point tree's is ×0.99 from the
+/// side, ×1.64 from 12° below and ×2.19 from 25° below (at 3 radii ×1.94, ×2.09 and ×3.10).
+#[must_use]
+pub fn upper_hemisphere_only(t: Technique) -> bool {
+    t == Technique::Octahedral
 }
 
 /// One table of [`Choices`].
@@ -935,11 +965,11 @@ impl Choices {
     pub fn among(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Self {
         let calibration = &calibration.with_elevations_between(ELEVATION_SUBDIVISIONS);
         let grid = StepGrid::of(calibration);
-        let table = |elevation: Option<usize>, target: f32| -> Table {
+        let table = |elevation: Option<usize>, target: f32, usable: &dyn Fn(Technique) -> bool| -> Table {
             let steps: Vec<Technique> = (0..grid.count)
                 .map(|i| {
                     let height = grid.height(i);
-                    calibration.choose_at_elevation(elevation, height, target_at(target, height), &usable)
+                    calibration.choose_at_elevation(elevation, height, target_at(target, height), usable)
                 })
                 .collect();
             let top = grid.height(grid.count - 1);
@@ -949,10 +979,10 @@ impl Choices {
                     calibration.choose_at_elevation(elevation, top, top_target, |t| converges(t) && usable(t));
                 if converges(converging) { converging } else { Technique::FALLBACK }
             });
-            let at = |t: Technique| calibration.measured(elevation, t, top, top_target, &usable);
+            let at = |t: Technique| calibration.measured(elevation, t, top, top_target, usable);
             // The point tree may stand in for a tree partly in view only where its image at the
             // top is within the target, as any choice there.
-            let limit = calibration.floor(elevation, top, &usable) + sanitise(top_target);
+            let limit = calibration.floor(elevation, top, usable) + sanitise(top_target);
             let point_tree = at(Technique::FALLBACK)
                 .filter(|&(e, _)| usable(Technique::FALLBACK) && e <= limit)
                 .map_or(f32::INFINITY, |(_, p)| p);
@@ -968,9 +998,47 @@ impl Choices {
         let tables = classes
             .iter()
             .flat_map(|&e| (0..visibility).map(move |k| (e, target * (k as f32 * 0.5).exp2())))
-            .map(|(e, target)| table(e, target))
+            .map(|(e, target)| table(e, target, &usable))
             .collect();
-        Self { log2_min: grid.origin(), tables, elevations, visibility, hysteresis_steps: hysteresis_steps(policy) }
+        let below = if elevations.len() >= 2
+            && Technique::ALL.into_iter().any(|t| upper_hemisphere_only(t) && usable(t))
+        {
+            #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+            (0..visibility)
+                .map(|k| table(Some(0), target * (k as f32 * 0.5).exp2(), &|t| usable(t) && !upper_hemisphere_only(t)))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Self {
+            log2_min: grid.origin(),
+            tables,
+            elevations,
+            visibility,
+            below,
+            hysteresis_steps: hysteresis_steps(policy),
+        }
+    }
+
+    /// Whether a tree seen from `elevation` degrees (its [`view_elevation`]) is below the
+    /// tables: more than half the spacing of the two lowest classes below the lowest class (with
+    /// the build's classes every 10° from 0°, below −5°: a view is then farther from any table
+    /// than the classes let a view be anywhere else), with a quarter of that spacing of
+    /// hysteresis as [`elevation_class_after`] keeps: a tree not below last frame (`was_below`)
+    /// goes below past −7.5°, one below comes back past −2.5°. Always `false` where nothing
+    /// changes below (no usable technique is [`upper_hemisphere_only`], or fewer than two
+    /// classes).
+    #[must_use]
+    pub fn below_horizon(&self, elevation: f32, was_below: bool) -> bool {
+        let (Some(&lowest), Some(&next), false) =
+            (self.elevations.first(), self.elevations.get(1), self.below.is_empty())
+        else {
+            return false;
+        };
+        let spacing = next - lowest;
+        let bound = lowest.min(0.0) - 0.5 * spacing;
+        let margin = if was_below { 0.25 * spacing } else { -0.25 * spacing };
+        elevation.is_finite() && elevation < bound + margin
     }
 
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`
@@ -1014,9 +1082,15 @@ impl Choices {
         in_view: f32,
         previous: Option<Technique>,
     ) -> Technique {
-        let e = elevation.min(self.elevations.len().saturating_sub(1));
         let k = visibility_class(visible).min(self.visibility - 1);
-        let table = &self.tables[e * self.visibility + k];
+        let table = match self.below.get(k) {
+            Some(below) if elevation == BELOW_HORIZON => below,
+            _ => {
+                let e =
+                    if elevation == BELOW_HORIZON { 0 } else { elevation.min(self.elevations.len().saturating_sub(1)) };
+                &self.tables[e * self.visibility + k]
+            }
+        };
         let (whole, culled) = (table.above_cost.0, table.above_cost.1 * in_view.clamp(0.0, 1.0));
         let bias = match previous {
             Some(Technique::FALLBACK) => 1.25,
@@ -1117,12 +1191,15 @@ pub struct PolicyState {
     /// Per instance: the visibility class it was chosen by last frame ([`visibility_class_after`]).
     classes: Vec<u8>,
     /// Per instance: the elevation class it was chosen by last frame ([`elevation_class_after`]),
-    /// [`NO_CLASS`] for none.
+    /// [`NO_CLASS`] for none, [`BELOW_CLASS`] for a view from below the tables.
     elevations: Vec<u8>,
 }
 
 /// [`PolicyState`]'s elevation class of a tree not chosen by elevation last frame.
 const NO_CLASS: u8 = u8::MAX;
+
+/// `PolicyState::elevations` of a tree seen from below the tables last frame ([`BELOW_HORIZON`]).
+const BELOW_CLASS: u8 = u8::MAX - 1;
 
 /// A tree's transition from one technique to another this frame ([`PolicyState::transition`]):
 /// it is drawn with both, the new technique on the pixels whose transition dither `h ∈ [0, 1)`
@@ -1289,14 +1366,18 @@ pub fn choose_instances_coarsest(
                     let elevation_class = if choices.elevations().is_empty() {
                         0
                     } else {
-                        let before = (*elevation != NO_CLASS).then_some(usize::from(*elevation));
-                        let now = elevation_class_after(
-                            before,
-                            view_elevation(lod, instance.transform, eye),
-                            choices.elevations(),
-                        );
-                        *elevation = u8::try_from(now).unwrap_or(0);
-                        now
+                        let degrees = view_elevation(lod, instance.transform, eye);
+                        if choices.below_horizon(degrees, *elevation == BELOW_CLASS) {
+                            *elevation = BELOW_CLASS;
+                            BELOW_HORIZON
+                        } else {
+                            // A tree coming up from below is new to the classes.
+                            let before = (*elevation != NO_CLASS && *elevation != BELOW_CLASS)
+                                .then_some(usize::from(*elevation));
+                            let now = elevation_class_after(before, degrees, choices.elevations());
+                            *elevation = u8::try_from(now).unwrap_or(0);
+                            now
+                        }
                     };
                     #[expect(clippy::cast_precision_loss, reason = "a few classes")]
                     let chosen =
@@ -1806,6 +1887,72 @@ mod tests {
         assert_eq!(out, [Technique::Crossed]);
     }
 
+    /// A tree seen from below the tables (more than half the classes' spacing below 0°) is not
+    /// drawn with a representation that holds only views from above (the octahedral impostor),
+    /// with a quarter of the spacing of hysteresis; from the side it is.
+    #[test]
+    fn trees_seen_from_below_are_not_drawn_with_views_from_above() {
+        let mean = table();
+        let mut records = Vec::new();
+        for elevation in [0.0, 90.0] {
+            for technique in [Technique::Full, Technique::Spt, Technique::LodChain, Technique::Crossed] {
+                for h in [8.0, 32.0, 128.0, 256.0] {
+                    let (error, primitives) = mean.at(technique, h).unwrap();
+                    let technique = technique.index() as u32;
+                    records.push(ElevationCalibrationRecord { elevation, technique, height: h, error, primitives });
+                }
+            }
+            // The octahedral impostor: one quad, the floor's error at 8 px.
+            for h in [8.0, 32.0, 128.0, 256.0] {
+                let technique = Technique::Octahedral.index() as u32;
+                records.push(ElevationCalibrationRecord {
+                    elevation,
+                    technique,
+                    height: h,
+                    error: 0.06,
+                    primitives: 1.0,
+                });
+            }
+        }
+        records.sort_by(|a, b| a.elevation.total_cmp(&b.elevation).then(a.technique.cmp(&b.technique)));
+        let mut rows: Vec<CalibrationRecord> = Vec::new();
+        for technique in [Technique::Full, Technique::Spt, Technique::Crossed, Technique::LodChain] {
+            for h in [8.0, 32.0, 128.0, 256.0] {
+                let (error, primitives) = mean.at(technique, h).unwrap();
+                rows.push(record(technique.index() as u32, h, error, primitives));
+            }
+        }
+        rows.extend([8.0, 32.0, 128.0, 256.0].map(|h| record(Technique::Octahedral.index() as u32, h, 0.06, 1.0)));
+        let c = Calibration::from_records(&rows).expect("rows").with_elevations(&records);
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
+        let choices = Choices::among(&c, &policy, all);
+        assert_eq!(choices.elevations(), [0.0, 30.0, 60.0, 90.0]);
+        assert_eq!(choices.choose_viewed(8.0, 0, 1.0, None), Technique::Octahedral, "from the side");
+        assert_eq!(choices.choose_viewed(8.0, BELOW_HORIZON, 1.0, None), Technique::Crossed, "from below");
+        // Classes 30° apart: below past −15°, back above −7.5° (−22.5° to go below again).
+        assert!(!choices.below_horizon(-14.0, false) && choices.below_horizon(-23.0, false));
+        assert!(choices.below_horizon(-8.0, true) && !choices.below_horizon(-7.0, true));
+        assert!(!choices.below_horizon(f32::NAN, true));
+        // Without a technique held only from above, nothing is below.
+        let without = Choices::among(&c, &policy, |t| t != Technique::Octahedral);
+        assert!(!without.below_horizon(-80.0, false));
+        assert_eq!(without.choose_viewed(8.0, BELOW_HORIZON, 1.0, None), without.choose_viewed(8.0, 0, 1.0, None));
+        // Per instance: a tree 8 px high seen from 40° below, then from the side.
+        let lods = [tall_lod()];
+        let camera = Camera::look_at(Vec3::new(0.0, 4.5, 100.0), Vec3::new(0.0, 4.5, 0.0), 0.8, 256, 256);
+        let distance = distance_for_height(&lods[0], 8.0, &camera);
+        let (sin, cos) = 40f32.to_radians().sin_cos();
+        let centre = lods[0].centre();
+        let below = Camera::look_at(centre + distance * Vec3::new(0.0, -sin, cos), centre, 0.8, 256, 256);
+        let side = Camera::look_at(centre + distance * Vec3::Z, centre, 0.8, 256, 256);
+        let instances = [Instance { model: 0, transform: Mat4::IDENTITY }];
+        let (choices, mut out, mut state) = ([Some(choices)], Vec::new(), PolicyState::default());
+        choose_instances(&instances, &lods, &choices, &below, Technique::Spt, &mut state, &mut out);
+        assert_eq!(out, [Technique::Crossed]);
+        choose_instances(&instances, &lods, &choices, &side, Technique::Spt, &mut state, &mut out);
+        assert_eq!(out, [Technique::Octahedral]);
+    }
+
     /// Between two measured elevations the classes' tables blend them linearly in elevation, at
     /// every height either samples, and a class between them chooses by the blend.
     #[test]
@@ -1914,6 +2061,7 @@ mod tests {
             tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
             elevations: Vec::new(),
             visibility: 1,
+            below: Vec::new(),
             hysteresis_steps: 2,
         };
         // Find the boundary between crossed (small) and the point tree (larger).
@@ -2054,6 +2202,7 @@ mod tests {
             tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
             elevations: Vec::new(),
             visibility: 1,
+            below: Vec::new(),
             hysteresis_steps: 0,
         })];
         // Two thousand trees in a row, the camera walking along it.
@@ -2159,6 +2308,7 @@ mod tests {
                 tables: vec![Table { above: Technique::LodChain, above_cost: (22_500.0, 21_000.0), steps }],
                 elevations: Vec::new(),
                 visibility: 1,
+                below: Vec::new(),
                 hysteresis_steps: 2,
             }),
             None,
