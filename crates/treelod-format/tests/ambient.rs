@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::resize_section;
+use common::{assert_reads_back, resize_section};
 use treelod_format::{
     AO_KINDS, CellRecord, Compression, Container, ContainerData, EllipsoidRecord, Error, MINOR, PlaneRecord, Range,
     SectionKind, decode_ao, encode_ao, pack, verify,
@@ -180,9 +180,7 @@ fn a_container_with_ao_round_trips_as_format_1_2() {
         assert_eq!(report.ao, 5);
         assert!(report.to_string().contains("ambient occlusion: 5 values"), "{report}");
         // Read back into data and written again: the same bytes.
-        let back = ContainerData::from_container(&c);
-        assert_eq!(back, data);
-        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+        assert_reads_back(&c, &data, &bytes, compression);
     }
 
     // Any one of the first three kinds makes a 1.2 file, `ELLIPSOID_AO` a 1.3 file, `LINE_AO` a 1.4
@@ -249,9 +247,7 @@ fn a_container_with_ellipsoid_ao_round_trips_as_format_1_3() {
         let report = verify(&c).expect("verifies");
         assert_eq!(report.ao, 6);
         assert!(report.to_string().contains("ambient occlusion: 6 values"), "{report}");
-        let back = ContainerData::from_container(&c);
-        assert_eq!(back, data);
-        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+        assert_reads_back(&c, &data, &bytes, compression);
     }
 }
 
@@ -271,9 +267,7 @@ fn a_container_with_line_ao_round_trips_as_format_1_4() {
         let report = verify(&c).expect("verifies");
         assert_eq!(report.ao, 7);
         assert!(report.to_string().contains("ambient occlusion: 7 values"), "{report}");
-        let back = ContainerData::from_container(&c);
-        assert_eq!(back, data);
-        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+        assert_reads_back(&c, &data, &bytes, compression);
     }
 }
 

@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::{bytes_of, check, relabel};
+use common::{assert_reads_back, bytes_of, check, relabel};
 use treelod_format::{
     CalibrationRecord, Compression, Container, ContainerData, ElevationCalibrationRecord, Error, MINOR, SectionKind,
     calibration_technique, verify,
@@ -141,9 +141,7 @@ fn valid_tables_round_trip_as_a_1_12_file_and_verify() {
             ),
             (4, 12, 3, 9)
         );
-        let back = ContainerData::from_container(&c);
-        assert_eq!(back, data);
-        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+        assert_reads_back(&c, &data, &bytes, compression);
     }
 }
 

@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{bytes_of, check, reseal};
+use common::{assert_reads_back, bytes_of, check, reseal};
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, Error, LineRecord, MINOR, Range, SectionKind,
     SptSummary, check_far_lines, far_switch, far_threshold, lines_drawn_at, verify,
@@ -120,9 +120,7 @@ fn a_container_with_far_lines_round_trips_as_format_1_9_and_verifies() {
         assert_eq!(report.ao, 3);
         let text = report.to_string();
         assert!(text.contains("far lines: 3 records over 2 leaves"), "{text}");
-        let back = ContainerData::from_container(&c);
-        assert_eq!(back, data);
-        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+        assert_reads_back(&c, &data, &bytes, compression);
     }
     assert_eq!(far_threshold(&data.far_lines), 1.5);
     let switch = far_switch(&data.far_lines);

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{relabel, resize_section};
+use common::{assert_reads_back, relabel, resize_section};
 use treelod_format::{
     CellRecord, Compression, Container, ContainerData, Error, ErrorClass, ImageRecord, MINOR, OctahedralRecord,
     PlaneDiffuseRecord, Range, SectionKind, image_format, pack, verify,
@@ -107,9 +107,7 @@ fn a_container_with_octahedral_impostors_round_trips_as_format_1_11_and_verifies
             text.contains("baselines: 0 LoD levels, 0 LoD triangles, 0 billboards, 2 octahedral impostors\n"),
             "{text}"
         );
-        let back = ContainerData::from_container(&c);
-        assert_eq!(back, data);
-        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+        assert_reads_back(&c, &data, &bytes, compression);
     }
 }
 

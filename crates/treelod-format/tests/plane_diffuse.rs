@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::resize_section;
+use common::{assert_reads_back, resize_section};
 use treelod_format::{
     AO_KINDS, CellRecord, Compression, Container, ContainerData, Error, ErrorClass, MINOR, PlaneDiffuseRecord,
     PlaneRecord, Range, SectionKind, pack, verify,
@@ -96,9 +96,7 @@ fn a_container_with_plane_diffuse_round_trips_as_format_1_10_and_verifies() {
         assert_eq!((report.planes, report.plane_diffuse, report.ao), (3, 3, 0));
         let text = report.to_string();
         assert!(text.contains("planes' diffuse response: 3 records"), "{text}");
-        let back = ContainerData::from_container(&c);
-        assert_eq!(back, data);
-        assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+        assert_reads_back(&c, &data, &bytes, compression);
     }
     // Any shares that sum to at most 1 verify.
     for (flat, scattered) in [(0, 0), (u16::MAX, 0), (0, u16::MAX), (1, 2), (40_000, 25_535)] {

@@ -183,3 +183,17 @@ pub fn resize_section(bytes: &[u8], kind: treelod_format::SectionKind, delta: i6
     reseal(&mut bytes);
     bytes
 }
+
+/// That `data`, written with `compression` as `bytes` and opened as `c`, reads back as itself and
+/// writes the same bytes again.
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+pub fn assert_reads_back(
+    c: &treelod_format::Container,
+    data: &ContainerData,
+    bytes: &[u8],
+    compression: treelod_format::Compression,
+) {
+    let back = ContainerData::from_container(c);
+    assert_eq!(&back, data);
+    assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
+}
