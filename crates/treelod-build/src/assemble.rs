@@ -1116,11 +1116,7 @@ fn assemble(
         billboard_records = billboards.records.into_iter().map(|b| BillboardRecord { image: index, ..b }).collect();
         octahedral_records =
             billboards.octahedral.into_iter().map(|o| OctahedralRecord { image: index, ..o }).collect();
-        octahedral_depth = billboards
-            .octahedral_planes
-            .into_iter()
-            .map(|[offset, slope_s, slope_t]| OctahedralDepthRecord { offset, slope_s, slope_t })
-            .collect();
+        octahedral_depth = billboards.octahedral_depth;
         stats.billboard_atlas = [atlas.width, atlas.height];
     }
     clock.lap(&mut stats, "images");

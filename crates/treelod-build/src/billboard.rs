@@ -33,7 +33,9 @@
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use treelod_format::{BillboardRecord, OctahedralRecord, PlaneDiffuseRecord, billboard_kind, pack};
+use treelod_format::{
+    BillboardRecord, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, billboard_kind, pack,
+};
 
 use crate::error::BuildError;
 use crate::impostor::{
@@ -94,10 +96,9 @@ pub struct Billboards {
     pub octahedral: Vec<OctahedralRecord>,
     /// The same for each tree's octahedral views together.
     pub octahedral_texels: Vec<u64>,
-    /// Each octahedral view's depth plane `[a, b, c]`, in the order of `octahedral` and of the
-    /// views in each (`j · frames + i`): the front-most surfaces it shows lie about
-    /// `center + radius·(s·right + t·up) + radius·(a + b·s + c·t)·d` (spec §6.13.1).
-    pub octahedral_planes: Vec<[f32; 3]>,
+    /// Each octahedral view's depth plane, in the order of `octahedral` and of the views in
+    /// each (`j · frames + i`): the `OCTAHEDRAL_DEPTH` section (spec §6.13.2).
+    pub octahedral_depth: Vec<OctahedralDepthRecord>,
 }
 
 /// One quad to bake.
@@ -279,7 +280,9 @@ pub fn build_billboards(
     let mut crossed_texels = vec![0u64; trees as usize];
     let mut octahedral_texels = vec![0u64; trees as usize];
     let mut records = Vec::with_capacity(jobs.len());
-    let mut planes: Vec<Vec<[f32; 3]>> = vec![Vec::new(); trees as usize];
+    // The views' jobs follow the billboards', each impostor's together in the order of
+    // `spheres` and of its views (`j · frames + i`): the section's order.
+    let mut octahedral_depth = Vec::new();
     for ((job, region), moments) in jobs.iter().zip(&regions).zip(&moments) {
         if job.kind == OCTAHEDRAL_VIEW {
             octahedral_texels[job.tree as usize] += region.texels();
@@ -288,11 +291,11 @@ pub fn build_billboards(
             let radius = job.quad.u.length() * f64::from(cell) / f64::from(view_content);
             let [a, b, c] = moments.plane().unwrap_or([0.0; 3]);
             #[expect(clippy::cast_possible_truncation, reason = "bounded")]
-            planes[job.tree as usize].push([
-                (a / radius).clamp(-1.0, 1.0) as f32,
-                b.clamp(-MAX_SLOPE, MAX_SLOPE) as f32,
-                c.clamp(-MAX_SLOPE, MAX_SLOPE) as f32,
-            ]);
+            octahedral_depth.push(OctahedralDepthRecord {
+                offset: (a / radius).clamp(-1.0, 1.0) as f32,
+                slope_s: b.clamp(-MAX_SLOPE, MAX_SLOPE) as f32,
+                slope_t: c.clamp(-MAX_SLOPE, MAX_SLOPE) as f32,
+            });
             continue;
         }
         let share = if job.kind == billboard_kind::FACING { &mut facing_texels } else { &mut crossed_texels };
@@ -335,14 +338,12 @@ pub fn build_billboards(
             record
         })
         .collect();
-    let octahedral_planes: Vec<[f32; 3]> =
-        spheres.iter().flat_map(|&(tree, _, _)| std::mem::take(&mut planes[tree as usize])).collect();
     Ok(Some(Billboards {
         records,
         atlas: Atlas { width, height, format: treelod_format::image_format::RGBA8_SRGB, mip_count: MIP_LEVELS, texels },
         facing_texels,
         crossed_texels,
-        octahedral_planes,
+        octahedral_depth,
         octahedral,
         octahedral_texels,
     }))
@@ -539,8 +540,11 @@ mod tests {
         let mesh = ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &[] };
         let out = build_billboards(&mesh, 2, &[20_000, 20_000], true).unwrap().unwrap();
         let n = OCTAHEDRAL_FRAMES as usize;
-        assert_eq!(out.octahedral_planes.len(), 2 * n * n, "every view of each impostor");
-        let plane = |tree: usize, i: usize, j: usize| out.octahedral_planes[tree * n * n + j * n + i];
+        assert_eq!(out.octahedral_depth.len(), 2 * n * n, "every view of each impostor");
+        let plane = |tree: usize, i: usize, j: usize| {
+            let p = out.octahedral_depth[tree * n * n + j * n + i];
+            [p.offset, p.slope_s, p.slope_t]
+        };
         let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 0.01);
         let r0 = out.octahedral[0].radius;
         assert!(close(plane(0, n - 1, 0), [0.45 / r0, 0.0, 0.0]), "{:?}", plane(0, n - 1, 0));
@@ -551,7 +555,8 @@ mod tests {
         // From −Z (right = −X, up = +Y) its depth along −Z, (5 − x)/2, also grows with s at 1/2.
         assert!(close(plane(1, 0, n - 1), [0.0, 0.5, 0.0]), "{:?}", plane(1, 0, n - 1));
         // Every plane is within the spec's bounds.
-        assert!(out.octahedral_planes.iter().flatten().all(|v| v.is_finite() && v.abs() <= 1.0));
+        let values = out.octahedral_depth.iter().flat_map(|p| [p.offset, p.slope_s, p.slope_t]);
+        assert!(values.into_iter().all(|v| v.is_finite() && v.abs() <= 1.0));
     }
 
     /// Each tree's octahedral impostor: its grid of square cells in the atlas, the bounding

@@ -108,7 +108,7 @@ use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
     CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE,
     OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind,
-    calibration_technique, decode_ao, image, image_format, material_class, prune_leaves_drawn,
+    calibration_technique, decode_ao, image, image_format, material_class, octahedral_depth_starts, prune_leaves_drawn,
 };
 use treelod_runtime::impostor::{
     BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
@@ -812,16 +812,13 @@ impl<'a> Scene<'a> {
                 drawn
             }
             t::OCTAHEDRAL => {
-                let mut first = 0usize;
-                for record in &d.octahedral {
-                    let views = (record.frames as usize).pow(2);
-                    // The views' depth planes where the container has them all (spec §6.13.2).
-                    let planes = d.octahedral_depth.get(first..first + views).filter(|_| {
-                        d.octahedral_depth.len()
-                            == d.octahedral.iter().map(|o| (o.frames as usize).pow(2)).sum::<usize>()
-                    });
+                // The views' depth planes where the container has them all (spec §6.13.2).
+                let starts = octahedral_depth_starts(&d.octahedral, d.octahedral_depth.len());
+                for (k, record) in d.octahedral.iter().enumerate() {
+                    let planes = starts
+                        .as_ref()
+                        .and_then(|s| d.octahedral_depth.get(s[k]..s[k] + (record.frames as usize).pow(2)));
                     self.octahedral(canvas, view, record, planes);
-                    first += views;
                 }
                 d.octahedral.len() as u64
             }
@@ -893,9 +890,7 @@ impl<'a> Scene<'a> {
         let views = blend.map(|(i, j, _)| {
             let dk = Vec3::from_array(OctahedralRecord::view_direction(frames, i, j));
             let (rk, uk) = basis(dk);
-            let plane = planes
-                .and_then(|p| p.get((j * frames + i) as usize))
-                .map_or(Vec3::ZERO, |p| Vec3::new(p.offset, p.slope_s, p.slope_t));
+            let plane = planes.and_then(|p| p.get((j * frames + i) as usize)).copied().unwrap_or_default();
             ((rk, uk, dk), plane)
         });
         // How far the quad reaches: the views' squares on their planes, moved along the rays
@@ -904,7 +899,7 @@ impl<'a> Scene<'a> {
         let mut reach = 1.0f32;
         for ((rk, uk, dk), plane) in views {
             for (s, t) in QUAD_CORNERS {
-                let p = radius * (s * rk + t * uk + (plane.x + plane.y * s + plane.z * t) * dk);
+                let p = radius * (s * rk + t * uk + plane.depth(s, t) * dk);
                 let along = ray.dot(d);
                 let on = if along.abs() > 1e-6 { p - ray * (p.dot(d) / along) } else { p };
                 reach = reach.max(on.dot(right).abs().max(on.dot(up).abs()) / radius);
@@ -923,10 +918,10 @@ impl<'a> Scene<'a> {
                 #[expect(clippy::cast_precision_loss, reason = "at most 64 frames")]
                 let origin = lo + Vec2::new(i as f32, j as f32) * cell;
                 // Where the ray through a corner meets the view's plane `n·p = offset·radius`.
-                let n = dk - plane.y * rk - plane.z * uk;
+                let n = Vec3::from_array(plane.normal(rk.to_array(), uk.to_array(), dk.to_array()));
                 let on_plane = |o: Vec3| {
                     let across = n.dot(ray);
-                    if across.abs() > 1e-6 { o + ray * ((plane.x * radius - n.dot(o)) / across) } else { o }
+                    if across.abs() > 1e-6 { o + ray * ((plane.offset * radius - n.dot(o)) / across) } else { o }
                 };
                 let uvs = offsets.map(|o| {
                     let p = on_plane(o);

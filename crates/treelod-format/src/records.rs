@@ -1239,6 +1239,24 @@ impl OctahedralDepthRecord {
     }
 }
 
+/// Where each of `octahedral`'s records' views start in an `OCTAHEDRAL_DEPTH` section of `planes`
+/// records (spec §6.13.2: `frames²` per record, in record order); `None` unless the section holds
+/// exactly one plane per view of every record, where a reader draws every view on the plane
+/// through the centre instead.
+#[must_use]
+pub fn octahedral_depth_starts(octahedral: &[OctahedralRecord], planes: usize) -> Option<Vec<usize>> {
+    let mut next = 0usize;
+    let starts = octahedral
+        .iter()
+        .map(|o| {
+            let start = next;
+            next = (o.frames as usize).checked_mul(o.frames as usize).and_then(|n| next.checked_add(n))?;
+            Some(start)
+        })
+        .collect::<Option<Vec<usize>>>()?;
+    (next == planes).then_some(starts)
+}
+
 /// The SPT view of a hierarchical record: interval and leaf run (spec §10).
 pub trait SptElement: Pod {
     /// Lower end of the threshold interval.

@@ -1035,10 +1035,11 @@ impl Choices {
         else {
             return false;
         };
-        let spacing = next - lowest;
-        let bound = lowest.min(0.0) - 0.5 * spacing;
-        let margin = if was_below { 0.25 * spacing } else { -0.25 * spacing };
-        elevation.is_finite() && elevation < bound + margin
+        // Below is a class of its own under the lowest (at or under the horizon), one spacing
+        // down: the classes' rule places its bounds.
+        let floor = lowest.min(0.0);
+        let classes = [floor - (next - lowest), floor];
+        elevation_class_after(Some(usize::from(!was_below)), elevation, &classes) == 0
     }
 
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`

@@ -6,7 +6,7 @@
 //! `treelod_runtime::baseline::select`. WGSL: `shaders/tree/planes.wgsl` then
 //! `shaders/tree/billboards.wgsl`; `shaders/tree/octahedral.wgsl`.
 
-use treelod_format::{BillboardRecord, Container, OctahedralDepthRecord, OctahedralRecord};
+use treelod_format::{BillboardRecord, Container, OctahedralDepthRecord, OctahedralRecord, octahedral_depth_starts};
 use treelod_runtime::Billboards;
 #[cfg(doc)]
 use treelod_runtime::Technique;
@@ -98,18 +98,13 @@ pub(crate) fn upload(
 /// every impostor, none are bound and each view is drawn on the plane through the centre across
 /// it, as before 1.13.
 pub(crate) fn gpu_octahedral(container: &Container) -> (Vec<OctahedralRecord>, &[OctahedralDepthRecord]) {
-    let mut first = 0u32;
-    let records: Vec<OctahedralRecord> = container
-        .octahedral()
-        .iter()
-        .map(|&r| {
-            let record = OctahedralRecord { reserved: first, ..r };
-            first = first.saturating_add(r.frames.saturating_mul(r.frames));
-            record
-        })
-        .collect();
-    let depth = container.octahedral_depth();
-    (records, if depth.len() == first as usize { depth } else { &[] })
+    let (records, depth) = (container.octahedral(), container.octahedral_depth());
+    let Some(starts) = octahedral_depth_starts(records, depth.len()) else {
+        return (records.to_vec(), &[]);
+    };
+    #[expect(clippy::cast_possible_truncation, reason = "a section's records fit u32")]
+    let uploaded = records.iter().zip(starts).map(|(&r, start)| OctahedralRecord { reserved: start as u32, ..r });
+    (uploaded.collect(), depth)
 }
 
 /// The billboards of `container` as uploaded: the facing quads (`kinds.facing`), then the
