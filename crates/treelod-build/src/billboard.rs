@@ -40,7 +40,7 @@ use treelod_format::{
 use crate::error::BuildError;
 use crate::impostor::{
     ALIGN, Atlas, DepthMoments, GUTTER, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, SAMPLES, Winner, align, bake,
-    compose, diffuse_item, diffuse_mixture, diffuse_moments, seen_triangle_occlusion, shelf_pack,
+    compose, diffuse_item, diffuse_mixture, diffuse_moments, may_cover, seen_triangle_occlusion, shelf_pack,
 };
 
 /// Views per side of a tree's octahedral impostor (spec §6.13.1): 16 × 16 views over the upper
@@ -256,11 +256,17 @@ pub fn build_billboards(
             let normal = job.quad.u.cross(job.quad.v).normalize();
             let plane = PlaneFit { normal, offset: 0.0 };
             let triangles = &placed[job.tree as usize];
+            let samples = if job.kind == OCTAHEDRAL_VIEW { OCTAHEDRAL_SAMPLES } else { SAMPLES };
+            let grid = (region.tw as usize * samples, region.th as usize * samples);
             // Front to back (by the nearest corner; ties in index order), so that the samples
-            // of the triangles behind fail the depth test before they are shaded.
+            // of the triangles behind fail the depth test before they are shaded; only those
+            // whose box holds a sample, which are all that draw, so the rest are not sorted
+            // (the maple's octahedral views, 176 samples across, keep 118k–154k of its 669k
+            // triangles; the bytes are the same, and the stage took 15.7 s instead of 27.4).
             let mut order: Vec<(f64, u32)> = triangles
                 .iter()
                 .enumerate()
+                .filter(|(_, (_, corners))| may_cover(corners, &job.quad, grid))
                 .map(|(k, (_, corners))| {
                     #[expect(clippy::cast_possible_truncation, reason = "a tree's triangles fit u32")]
                     let k = k as u32;
@@ -268,7 +274,6 @@ pub fn build_billboards(
                 })
                 .collect();
             order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-            let samples = if job.kind == OCTAHEDRAL_VIEW { OCTAHEDRAL_SAMPLES } else { SAMPLES };
             let in_order = order.iter().map(|&(_, k)| triangles[k as usize]);
             bake(mesh, in_order, &plane, Winner::Front, &job.quad, region, samples)
         })

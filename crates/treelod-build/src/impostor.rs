@@ -1344,13 +1344,6 @@ pub(crate) fn bake(
             if y1 as usize <= band_start || y0 as usize >= band_end {
                 continue;
             }
-            let tri = &mesh.triangles[t as usize];
-            let shading = Shading::new(
-                &mesh.surfaces[tri.material as usize],
-                planes[tri.material as usize].as_deref(),
-                tri.v.map(|v| &mesh.vertices[v as usize]),
-                lut,
-            );
             // The samples that pass the depth test, then their texels, then their shading: a
             // triangle covers each sample once, so this is the order of shading each in turn,
             // and the texel loads, with no branch between them, overlap their cache misses.
@@ -1366,6 +1359,18 @@ pub(crate) fn bake(
                     pending.push((i, z, weights(w)));
                 }
             });
+            // Most triangles of a large tree on a small view cover no sample, or only hidden
+            // ones: their corners are not loaded.
+            if pending.is_empty() {
+                continue;
+            }
+            let tri = &mesh.triangles[t as usize];
+            let shading = Shading::new(
+                &mesh.surfaces[tri.material as usize],
+                planes[tri.material as usize].as_deref(),
+                tri.v.map(|v| &mesh.vertices[v as usize]),
+                lut,
+            );
             located.clear();
             located.extend(pending.iter().map(|&(_, _, w)| shading.locate(w)));
             alphas.clear();
@@ -1548,6 +1553,12 @@ fn project(local: &[DVec3; 3], quad: &Quad, (sw, sh): (usize, usize)) -> Option<
         ((max.y - 0.5).floor() + 1.0).clamp(0.0, sh as f64) as usize,
     );
     Some(Projected { xy, area, x0, x1, y0, y1 })
+}
+
+/// Whether the bounding box of `local` projected onto `quad`'s `samples` (columns, rows) holds a
+/// sample centre: a triangle for which it does not draws nothing there ([`bake`] skips it).
+pub(crate) fn may_cover(local: &[DVec3; 3], quad: &Quad, samples: (usize, usize)) -> bool {
+    matches!(project(local, quad, samples), Some(p) if p.x0 < p.x1 && p.y0 < p.y1)
 }
 
 /// The sample rows `y0..y1` each triangle of `triangles` covers on `quad` (an empty range for
