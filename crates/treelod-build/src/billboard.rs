@@ -274,8 +274,9 @@ pub fn build_billboards(
                 })
                 .collect();
             order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-            let in_order = order.iter().map(|&(_, k)| triangles[k as usize]);
-            bake(mesh, in_order, &plane, Winner::Front, &job.quad, region, samples)
+            // Gathered once: `bake` goes over them once per band of rows and once before.
+            let in_order: Vec<(u32, [DVec3; 3])> = order.iter().map(|&(_, k)| triangles[k as usize]).collect();
+            bake(mesh, in_order.iter().copied(), &plane, Winner::Front, &job.quad, region, samples)
         })
         .unzip();
     let texels = compose(&regions, &baked, width, height);

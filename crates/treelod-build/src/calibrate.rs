@@ -630,17 +630,22 @@ impl<'a> Scene<'a> {
             let (base, layer, cutoff) =
                 self.materials.get(t.material as usize).copied().unwrap_or((Vec4::ONE, None, None));
             let levels = layer.and_then(|l| self.layers.levels.get(l));
-            // Texels per pixel (constant over an orthographic triangle) and the level of detail.
-            let footprint = texel_footprint(p, uvs, side);
-            let lod = footprint.max(1e-6).log2();
-            let corners =
-                t.indices.map(|i| self.vertices.get(i as usize).copied().unwrap_or((Vec3::Y, Vec4::ONE, 0.0)));
             let depths = t.positions.map(|q| depth(view, q));
+            // Texels per pixel (constant over an orthographic triangle), the level of detail and
+            // the corners, found at the first pixel that passes the depth test: most triangles
+            // of a large tree in a small view have none.
+            let mut shading = None;
             triangle_pixels(canvas.size(), p, |x, y, b| {
                 let z = depths[0] * b[0] + depths[1] * b[1] + depths[2] * b[2];
                 if !canvas.nearer(x, y, z) {
                     return;
                 }
+                let &mut (footprint, lod, corners) = shading.get_or_insert_with(|| {
+                    let footprint = texel_footprint(p, uvs, side);
+                    let corners =
+                        t.indices.map(|i| self.vertices.get(i as usize).copied().unwrap_or((Vec3::Y, Vec4::ONE, 0.0)));
+                    (footprint, footprint.max(1e-6).log2(), corners)
+                });
                 let uv = uvs[0] * b[0] + uvs[1] * b[1] + uvs[2] * b[2];
                 let colour = corners[0].1 * b[0] + corners[1].1 * b[1] + corners[2].1 * b[2];
                 if let Some(cutoff) = cutoff {
