@@ -256,7 +256,9 @@ pub fn build_billboards(
             let normal = job.quad.u.cross(job.quad.v).normalize();
             let plane = PlaneFit { normal, offset: 0.0 };
             let triangles = &placed[job.tree as usize];
-            let samples = if job.kind == OCTAHEDRAL_VIEW { OCTAHEDRAL_SAMPLES } else { SAMPLES };
+            // Only an octahedral view's depth plane is fitted (spec §6.13.2).
+            let octahedral_view = job.kind == OCTAHEDRAL_VIEW;
+            let samples = if octahedral_view { OCTAHEDRAL_SAMPLES } else { SAMPLES };
             let grid = (region.tw as usize * samples, region.th as usize * samples);
             // Front to back (by the nearest corner; ties in index order), so that the samples
             // of the triangles behind fail the depth test before they are shaded; only those
@@ -276,7 +278,7 @@ pub fn build_billboards(
             order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
             // Gathered once: `bake` goes over them once per band of rows and once before.
             let in_order: Vec<(u32, [DVec3; 3])> = order.iter().map(|&(_, k)| triangles[k as usize]).collect();
-            bake(mesh, in_order.iter().copied(), &plane, Winner::Front, &job.quad, region, samples)
+            bake(mesh, in_order.iter().copied(), &plane, Winner::Front, &job.quad, region, samples, octahedral_view)
         })
         .unzip();
     let texels = compose(&regions, &baked, width, height);

@@ -985,7 +985,17 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
             let baked: Vec<Vec<Vec<u8>>> = (0..nodes.len())
                 .into_par_iter()
                 .map(|i| {
-                    bake(mesh, placed_triangles(i), &nodes[i].plane, Winner::Nearest, &quads[i], &regions[i], SAMPLES).0
+                    bake(
+                        mesh,
+                        placed_triangles(i),
+                        &nodes[i].plane,
+                        Winner::Nearest,
+                        &quads[i],
+                        &regions[i],
+                        SAMPLES,
+                        false,
+                    )
+                    .0
                 })
                 .collect();
             let texels = compose(&regions, &baked, width, height);
@@ -1296,6 +1306,8 @@ pub(crate) fn compose(regions: &[Region], baked: &[Vec<Vec<u8>>], width: u32, he
 /// `(rw >> l) × (rh >> l)`, each texel the mean of `samples × samples` samples ([`SAMPLES`] for
 /// planes and billboards). The sample at `quad.centre + s·u + t·v` lands at `((s + 1)/2,
 /// (t + 1)/2)` of the content rectangle, rows top to bottom (spec §6.10's texture coordinates).
+/// With `fit_depth`, also the sums that fit a plane to the covered samples' depths
+/// ([`DepthMoments`]; empty without).
 pub(crate) fn bake(
     mesh: &ImpostorMesh<'_>,
     triangles: impl Iterator<Item = (u32, [DVec3; 3])> + Clone,
@@ -1304,6 +1316,7 @@ pub(crate) fn bake(
     quad: &Quad,
     region: &Region,
     samples: usize,
+    fit_depth: bool,
 ) -> (Vec<Vec<u8>>, DepthMoments) {
     let lut = srgb_to_linear_table();
     let mut moments = DepthMoments::default();
@@ -1391,8 +1404,10 @@ pub(crate) fn bake(
                     let row = (ty * samples + sy - band_start) * sw + tx * samples;
                     for (sx, i) in (row..row + samples).enumerate() {
                         if depth[i].is_finite() {
-                            let (x, y) = (along_u(tx * samples + sx), along_v(ty * samples + sy));
-                            moments.add(x, y, signed_depth(depth[i]), (x * x + y * y) / (hu * hv));
+                            if fit_depth {
+                                let (x, y) = (along_u(tx * samples + sx), along_v(ty * samples + sy));
+                                moments.add(x, y, signed_depth(depth[i]), (x * x + y * y) / (hu * hv));
+                            }
                             covered += 1;
                             for c in 0..3 {
                                 sum[c] += colour[i][c];
