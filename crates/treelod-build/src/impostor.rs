@@ -1308,6 +1308,7 @@ pub(crate) fn compose(regions: &[Region], baked: &[Vec<Vec<u8>>], width: u32, he
 /// (t + 1)/2)` of the content rectangle, rows top to bottom (spec §6.10's texture coordinates).
 /// With `fit_depth`, also the sums that fit a plane to the covered samples' depths
 /// ([`DepthMoments`]; empty without).
+#[expect(clippy::too_many_arguments, reason = "the triangles, the quad, its sampling and what else to measure")]
 pub(crate) fn bake(
     mesh: &ImpostorMesh<'_>,
     triangles: impl Iterator<Item = (u32, [DVec3; 3])> + Clone,
