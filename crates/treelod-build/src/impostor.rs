@@ -1311,7 +1311,7 @@ pub(crate) fn compose(regions: &[Region], baked: &[Vec<Vec<u8>>], width: u32, he
 #[expect(clippy::too_many_arguments, reason = "the triangles, the quad, its sampling and what else to measure")]
 pub(crate) fn bake(
     mesh: &ImpostorMesh<'_>,
-    triangles: impl Iterator<Item = (u32, [DVec3; 3])> + Clone,
+    triangles: impl Iterator<Item = (u32, [DVec3; 3])> + Clone + Sync,
     plane: &PlaneFit,
     winner: Winner,
     quad: &Quad,
@@ -1339,21 +1339,22 @@ pub(crate) fn bake(
     // same, and the samples of a large quad (a whole-tree billboard of millions of texels) need
     // a band's memory, not the quad's.
     let band_samples = BAND_ROWS * samples;
-    let mut depth = vec![f32::INFINITY; sw * band_samples.min(sh)];
-    let mut colour = vec![[0.0f32; 3]; sw * band_samples.min(sh)];
     let rows = covered_rows(triangles.clone().map(|(_, local)| local), quad, (sw, sh));
-    // One triangle's samples (index in the band, key, weights) and their texels.
-    let mut pending: Vec<(usize, f32, [f32; 3])> = Vec::new();
-    let (mut located, mut alphas): (Vec<Option<usize>>, Vec<u8>) = (Vec::new(), Vec::new());
     // Alpha planes of the images, where a quad has more samples than the image has texels.
     let planes: Vec<Option<Vec<u8>>> = mesh
         .surfaces
         .iter()
         .map(|surface| surface.image.filter(|img| sw * sh >= img.rgba.len() / 4).map(alpha_plane))
         .collect();
-    for band_start in (0..sh).step_by(band_samples.max(1)) {
+    // Band `b` of texel rows into `out`, its rows of the region (full width), with `scratch`'s
+    // buffers; adding the covered samples' depths to `moments` where given.
+    let band = |b: usize, out: &mut [[f32; 4]], scratch: &mut BandScratch, mut moments: Option<&mut DepthMoments>| {
+        let BandScratch { depth, colour, pending, located, alphas } = scratch;
+        let band_start = b * band_samples;
         let band_end = (band_start + band_samples).min(sh);
-        depth.fill(f32::INFINITY);
+        depth.clear();
+        depth.resize(sw * band_samples.min(sh), f32::INFINITY);
+        colour.resize(sw * band_samples.min(sh), [0.0; 3]);
         for ((t, local), &(y0, y1)) in triangles.clone().zip(&rows) {
             if y1 as usize <= band_start || y0 as usize >= band_end {
                 continue;
@@ -1389,7 +1390,7 @@ pub(crate) fn bake(
             located.extend(pending.iter().map(|&(_, _, w)| shading.locate(w)));
             alphas.clear();
             alphas.extend(located.iter().map(|&n| shading.alpha(n)));
-            for ((&(i, z, w), &n), &alpha) in pending.iter().zip(&located).zip(&alphas) {
+            for ((&(i, z, w), &n), &alpha) in pending.iter().zip(located.iter()).zip(alphas.iter()) {
                 if shading.passes(w, alpha) {
                     depth[i] = z;
                     colour[i] = shading.colour(w, shading.texel(n), lut);
@@ -1405,7 +1406,7 @@ pub(crate) fn bake(
                     let row = (ty * samples + sy - band_start) * sw + tx * samples;
                     for (sx, i) in (row..row + samples).enumerate() {
                         if depth[i].is_finite() {
-                            if fit_depth {
+                            if let Some(moments) = moments.as_deref_mut() {
                                 let (x, y) = (along_u(tx * samples + sx), along_v(ty * samples + sy));
                                 moments.add(x, y, signed_depth(depth[i]), (x * x + y * y) / (hu * hv));
                             }
@@ -1418,11 +1419,25 @@ pub(crate) fn bake(
                 }
                 if covered > 0 {
                     let n = covered as f32;
-                    texels[(ty + g) * rw + tx + g] =
+                    out[(ty - band_start / samples) * rw + tx + g] =
                         [sum[0] / n, sum[1] / n, sum[2] / n, n / (samples * samples) as f32];
                 }
             }
         }
+    };
+    // The bands write disjoint rows, so they are baked in parallel, each sample as in one pass;
+    // but the depth fit's sums are taken in the rows' order, one band after another.
+    let content = &mut texels[g * rw..(g + region.th as usize) * rw];
+    if fit_depth {
+        let mut scratch = BandScratch::default();
+        for (b, out) in content.chunks_mut(BAND_ROWS * rw).enumerate() {
+            band(b, out, &mut scratch, Some(&mut moments));
+        }
+    } else {
+        content
+            .par_chunks_mut(BAND_ROWS * rw)
+            .enumerate()
+            .for_each_init(BandScratch::default, |scratch, (b, out)| band(b, out, scratch, None));
     }
     // Then dilate colour into transparent texels (below, per level).
     let mut levels = vec![texels];
@@ -1470,6 +1485,17 @@ pub(crate) fn bake(
         })
         .collect();
     (bytes, moments)
+}
+
+/// A band's buffers in [`bake`]: per sample of the band its key and colour; one triangle's
+/// samples (index in the band, key, weights), their texels and alphas.
+#[derive(Default)]
+struct BandScratch {
+    depth: Vec<f32>,
+    colour: Vec<[f32; 3]>,
+    pending: Vec<(usize, f32, [f32; 3])>,
+    located: Vec<Option<usize>>,
+    alphas: Vec<u8>,
 }
 
 /// The sums of a weighted least-squares fit of a plane `z = a + b·x + c·y` to the depths `z`
