@@ -740,6 +740,47 @@ mod tests {
         }
     }
 
+    /// A quad of several bands of rows bakes its bands in parallel unless it fits a depth plane,
+    /// whose sums go in the rows' order: either way, each sample sees the triangles as in one
+    /// pass, so the images are the same, on one thread or several.
+    #[test]
+    fn bands_baked_in_parallel_give_the_images_of_bands_baked_in_turn() {
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        tree(&mut vertices, &mut triangles, 0.0, 0);
+        let materials = materials();
+        let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
+        let mesh = ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &[] };
+        let centre = DVec3::new(0.0, 2.0, 0.0);
+        let placed: Vec<(u32, [DVec3; 3])> = (0u32..)
+            .zip(&triangles)
+            .map(|(t, tri)| (t, tri.v.map(|v| Vec3::from_array(vertices[v as usize].position).as_dvec3() - centre)))
+            .collect();
+        let quad = Quad { centre: DVec3::ZERO, u: DVec3::X, v: DVec3::Y * 2.0 };
+        let plane = PlaneFit { normal: DVec3::Z, offset: 0.0 };
+        // 200 rows of content: four bands of 64 rows.
+        let region = Region::new(100, 200);
+        let bake_with = |threads: usize, fit_depth: bool| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                bake(&mesh, placed.iter().copied(), &plane, Winner::Front, &quad, &region, SAMPLES, fit_depth)
+            })
+        };
+        let (in_turn, moments) = bake_with(1, true);
+        assert!(moments.plane().is_some(), "the depth fit saw the red card");
+        let level0 = &in_turn[0];
+        // The red card covers the left half of every band's rows.
+        let at =
+            |x: usize, y: usize| &level0[((y + GUTTER as usize) * region.rw as usize + x + GUTTER as usize) * 4..][..4];
+        for y in [0, 63, 64, 130, 199] {
+            // (Alpha scaled by the coverage-preserving mips, passing the test at one half.)
+            assert!(at(10, y)[..3] == RED && at(10, y)[3] >= 128, "row {y}: {:?}", at(10, y));
+            assert_eq!(at(90, y)[3], 0, "row {y}");
+        }
+        for threads in [1, 3] {
+            assert!(bake_with(threads, false).0 == in_turn, "{threads} thread(s)");
+        }
+    }
+
     #[test]
     fn the_bake_is_the_same_on_any_number_of_threads_and_empty_input_gives_none() {
         let (mut vertices, mut triangles) = (Vec::new(), Vec::new());

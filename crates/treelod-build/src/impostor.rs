@@ -1337,7 +1337,7 @@ pub(crate) fn bake(
     // The samples of `BAND_ROWS` texel rows at a time, each band going over every triangle: a
     // sample sees the same triangles in the same order as in one pass, so the result is the
     // same, and the samples of a large quad (a whole-tree billboard of millions of texels) need
-    // a band's memory, not the quad's.
+    // a band's memory per thread baking one, not the quad's.
     let band_samples = BAND_ROWS * samples;
     let rows = covered_rows(triangles.clone().map(|(_, local)| local), quad, (sw, sh));
     // Alpha planes of the images, where a quad has more samples than the image has texels.
