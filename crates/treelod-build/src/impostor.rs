@@ -1600,7 +1600,13 @@ fn project(local: &[DVec3; 3], quad: &Quad, (sw, sh): (usize, usize)) -> Option<
 /// Whether the bounding box of `local` projected onto `quad`'s `samples` (columns, rows) holds a
 /// sample centre: a triangle for which it does not draws nothing there ([`bake`] skips it).
 pub(crate) fn may_cover(local: &[DVec3; 3], quad: &Quad, samples: (usize, usize)) -> bool {
-    matches!(project(local, quad, samples), Some(p) if p.x0 < p.x1 && p.y0 < p.y1)
+    boxed_rows(local, quad, samples).is_some()
+}
+
+/// The sample rows `y0..y1` of the bounding box of `local` projected onto `quad`'s `samples`,
+/// where that box holds a sample centre.
+fn boxed_rows(local: &[DVec3; 3], quad: &Quad, samples: (usize, usize)) -> Option<(usize, usize)> {
+    project(local, quad, samples).filter(|p| p.x0 < p.x1 && p.y0 < p.y1).map(|p| (p.y0, p.y1))
 }
 
 /// The sample rows `y0..y1` each triangle of `triangles` covers on `quad` (an empty range for
@@ -1609,10 +1615,10 @@ pub(crate) fn may_cover(local: &[DVec3; 3], quad: &Quad, samples: (usize, usize)
 /// triangle once per band.
 fn covered_rows(triangles: impl Iterator<Item = [DVec3; 3]>, quad: &Quad, samples: (usize, usize)) -> Vec<(u32, u32)> {
     triangles
-        .map(|local| match project(&local, quad, samples) {
+        .map(|local| match boxed_rows(&local, quad, samples) {
             #[expect(clippy::cast_possible_truncation, reason = "sample rows of a region fit u32")]
-            Some(p) if p.x0 < p.x1 && p.y0 < p.y1 => (p.y0 as u32, p.y1 as u32),
-            _ => (0, 0),
+            Some((y0, y1)) => (y0 as u32, y1 as u32),
+            None => (0, 0),
         })
         .collect()
 }
