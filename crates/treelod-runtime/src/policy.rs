@@ -12,8 +12,8 @@
 //! that keeps them sets the image to keep. Ties go to the lower error; when nothing qualifies, the
 //! lowest error wins. The full mesh itself is never chosen (the sequential point tree and the LoD
 //! chain converge to it). Above the largest calibrated height the choice at that height holds if
-//! it converges to the full mesh as trees come near ([`converges`]: the point tree, the LoD chain,
-//! pruning), else the rule's choice there among the techniques that converge; and the point tree
+//! it converges to the full mesh as trees come near ([`converges`]: the point tree, the LoD
+//! chain), else the rule's choice there among the techniques that converge; and the point tree
 //! ([`Technique::FALLBACK`]) stands in for that choice where it costs less for what is in view:
 //! it culls per cell, so a near tree the view cuts draws only the share `s` of its triangles in
 //! cells the view holds ([`in_view_share`]), while the chain draws the whole tree. The tables
@@ -1149,15 +1149,14 @@ impl Choices {
 
 /// Whether `technique` converges to the full mesh as a tree comes nearer, so that the choice at
 /// the largest calibrated height may hold above it: the point tree (its cut reaches every
-/// triangle), the LoD chain (its finest level is the full mesh) and pruning (`λ(h)` reaches 1).
-/// Impostor planes, ellipsoids and billboards keep their error near, and hand over to the point
-/// tree there.
+/// triangle) and the LoD chain (its finest level is the full mesh). Impostor planes, ellipsoids
+/// and billboards keep their error near, and hand over there. So does pruning: its `λ(h)` reaches
+/// 1 only where the tree is about as tall as the screen (spec §6.11), and between the tables' top
+/// and there it draws a share of the leaves that Neubert et al.'s schedule sets, which no table
+/// measures.
 #[must_use]
 pub const fn converges(technique: Technique) -> bool {
-    matches!(
-        technique,
-        Technique::Full | Technique::Spt | Technique::LodChain | Technique::PruneOpt | Technique::PruneCook
-    )
+    matches!(technique, Technique::Full | Technique::Spt | Technique::LodChain)
 }
 
 /// The projected height in pixels of a model's block drawn by `instance` (its block bounds'
@@ -2014,7 +2013,7 @@ mod tests {
 
     #[test]
     fn above_the_range_the_top_choice_holds_only_if_it_converges_to_the_full_mesh() {
-        assert!(converges(Technique::PruneOpt) && converges(Technique::LodChain) && !converges(Technique::Impostors));
+        assert!(!converges(Technique::PruneOpt) && converges(Technique::LodChain) && !converges(Technique::Impostors));
         let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
         // The point tree cheapest at the top: it holds nearer.
         let choices = Choices::among(&table(), &policy, all);
@@ -2051,6 +2050,24 @@ mod tests {
         // Within the range the share in view does not matter.
         assert_eq!(choices.choose_framed(100.0, 0, 1.0, 0.1, None), choices.choose(100.0, None));
         assert!(choices.above_range(10_000.0) && !choices.above_range(100.0));
+        // Pruning that wins the top height (the same error as the full mesh with half its
+        // primitives) holds there and hands over above it: nearer, its λ(h) draws shares of the
+        // leaves no table measured.
+        for prune in [code::PRUNE_OPT, code::PRUNE_COOK] {
+            let mut records = Vec::new();
+            for (h, spt, chain) in [(8.0, 0.06, 0.2), (256.0, 0.012, 0.012)] {
+                records.push(record(code::FULL, h, 0.012, 22_500.0));
+                records.push(record(code::SPT, h, spt, 21_000.0));
+                records.push(record(code::LOD_CHAIN, h, chain, 20_000.0));
+                records.push(record(prune, h, 0.012, 11_000.0));
+            }
+            records.sort_by_key(|r| r.technique);
+            let choices = Choices::among(&Calibration::from_records(&records).unwrap(), &policy, all);
+            let pruned = choices.steps().last().copied();
+            assert!(matches!(pruned, Some(Technique::PruneOpt | Technique::PruneCook)), "{pruned:?}");
+            assert_eq!(choices.choose(250.0, None), pruned.unwrap());
+            assert_eq!(choices.choose(10_000.0, None), Technique::LodChain);
+        }
     }
 
     #[test]
