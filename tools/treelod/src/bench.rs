@@ -87,9 +87,10 @@ pub struct Args {
     #[arg(long)]
     pub shadows: bool,
     /// Also draw the full mesh as the reference at every frame and measure each technique's
-    /// image against it: P, R, Q, multi-scale RMSE and mean FLIP error (slow: the full mesh of
-    /// every tree in view). The reference is `treelod eval`'s: supersampled, box-filtered, with
-    /// the stochastic alpha test that keeps minified leaves' coverage.
+    /// image against it: P, R, Q, multi-scale RMSE and mean FLIP error, and from the second frame
+    /// the temporal noise of each image and of the reference (slow: the full mesh of every tree
+    /// in view). The reference is `treelod eval`'s: supersampled, box-filtered, with the
+    /// stochastic alpha test that keeps minified leaves' coverage.
     #[arg(long)]
     pub quality: bool,
     /// With --quality, the reference is drawn K times larger per side and box-filtered down.

@@ -39,7 +39,7 @@ precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primit
 trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
 trees_crossed,trees_octahedral,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,\
 primitives_impostors,primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed,\
-primitives_octahedral";
+primitives_octahedral,noise,ref_noise";
 
 /// The techniques of the CSV's `trees_*` and `primitives_*` columns.
 const DRAWN_WITH: [&str; 10] = [
@@ -106,6 +106,7 @@ fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
         assert_eq!(field(&header, full, "gpu_ms"), "");
         assert!(number(&header, spt, "bytes_resident") > 0.0);
         assert_eq!(field(&header, spt, "q"), "", "no quality without --quality");
+        assert_eq!(field(&header, spt, "noise"), "", "no temporal noise without --quality");
         assert_eq!(field(&header, spt, "shadow_primitives"), "", "no shadow pass without --shadows");
         // A forced technique changes no tree's technique; the counted full mesh has no draws.
         assert_eq!((field(&header, spt, "transitions"), field(&header, full, "transitions")), ("0", ""));
@@ -214,10 +215,20 @@ fn quality_is_measured_against_the_full_mesh_and_missing_techniques_are_reported
                 assert!(number(&header, row, "rmse") >= 0.0);
                 let flip = number(&header, row, "flip");
                 assert!(flip > 0.0 && flip <= 1.0, "spt's image differs from the full mesh's: {flip}");
+                // Temporal noise from the second frame on, the technique's and the reference's:
+                // the camera moves between frames, so both images change.
+                if field(&header, row, "frame") == "0" {
+                    assert_eq!(field(&header, row, "noise"), "", "no previous frame");
+                    assert_eq!(field(&header, row, "ref_noise"), "");
+                } else {
+                    assert!(number(&header, row, "noise") > 0.0, "spt's frame did not change");
+                    assert!(number(&header, row, "ref_noise") > 0.0, "the reference did not change");
+                }
             }
             "full" => {
                 assert_eq!(field(&header, row, "q"), "", "the reference is not measured against itself");
                 assert_eq!(field(&header, row, "flip"), "");
+                assert_eq!(field(&header, row, "noise"), "");
                 assert!(number(&header, row, "gpu_ms") > 0.0, "the reference's pass is timed");
             }
             other => panic!("unexpected technique {other}"),

@@ -36,7 +36,7 @@ use self::path::Frame;
 use treelod_eval::MetricError;
 
 use crate::Error;
-use crate::eval::metrics::{Coverage, LinearImage, Mask, flip::mean_flip, multiscale_rmse};
+use crate::eval::metrics::{Coverage, LinearImage, Mask, flip::mean_flip, multiscale_rmse, temporal_noise};
 use crate::eval::{Adapter, Availability, TechniqueName};
 use crate::offscreen::{clear_colour, settle_streaming};
 use crate::scene;
@@ -254,6 +254,13 @@ pub struct Row {
     pub rmse: Option<f64>,
     /// Mean FLIP error against the reference.
     pub flip: Option<f64>,
+    /// Temporal noise (with `--quality`, from the second frame): the multi-scale RMSE summary of
+    /// this frame's image against this technique's previous frame's, as `treelod eval` measures
+    /// it. The path moves the camera between frames, so it holds the image's own change too.
+    pub noise: Option<f64>,
+    /// The reference's temporal noise over the same two frames: the change the scene itself
+    /// makes, which `noise` is compared with.
+    pub reference_noise: Option<f64>,
     /// Visible trees by the technique each was drawn with (`FrameStats::instances`: the policy's
     /// choice, or the point tree for trees whose model lacks the technique's data; a tree in a
     /// transition under the one it goes to) and the primitives they submitted
@@ -574,6 +581,10 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
     }
 
     let mut rows = Vec::with_capacity(frames.len() * measured.len());
+    // The last frame's measurable images, the reference's and each flown technique's (in
+    // `flown`'s order), for temporal noise.
+    let mut previous_reference: Option<LinearImage> = None;
+    let mut previous: Vec<Option<LinearImage>> = vec![None; flown.len()];
     for (index, frame) in frames.iter().enumerate() {
         progress(index, frames.len());
         let view = camera(frame, 1);
@@ -587,6 +598,10 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
             })?;
             reference_shot = Some((crate::eval::measurable(&image, k, options.background).map_err(internal)?, gpu_ms));
         }
+        let reference_noise = match (&reference_shot, &previous_reference) {
+            (Some(((image, _), _)), Some(previous)) => Some(temporal_noise(image, previous).map_err(internal)?),
+            _ => None,
+        };
         for &technique in &measured {
             if technique == TechniqueName::FULL {
                 let Some(counter) = &mut full else { continue };
@@ -614,11 +629,14 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                     coverage: None,
                     rmse: None,
                     flip: None,
+                    noise: None,
+                    reference_noise: None,
                     drawn_with: None,
                 });
                 continue;
             }
-            let (Some(gpu), Some(f)) = (&gpu, flown.iter_mut().find(|f| f.technique == technique)) else { continue };
+            let Some(slot) = flown.iter().position(|f| f.technique == technique) else { continue };
+            let (Some(gpu), f) = (&gpu, &mut flown[slot]) else { continue };
             // One prepare per frame, as a host makes it: streaming keeps up within its budget or
             // draws coarser stand-ins (counted in ranges_clamped).
             let (stats, selection_ms) = guarded(gpu, &label, || {
@@ -653,6 +671,8 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 coverage: None,
                 rmse: None,
                 flip: None,
+                noise: None,
+                reference_noise: None,
                 drawn_with: Some((stats.instances, stats.by_technique)),
             };
             if options.render {
@@ -665,10 +685,16 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                     row.coverage = Some(Coverage::compare(reference_mask, &mask).map_err(internal)?);
                     row.rmse = Some(multiscale_rmse(&image, reference_image).map_err(internal)?.summary());
                     row.flip = Some(mean_flip(&image, reference_image).map_err(internal)?);
+                    if let Some(last) = &previous[slot] {
+                        row.noise = Some(temporal_noise(&image, last).map_err(internal)?);
+                        row.reference_noise = reference_noise;
+                    }
+                    previous[slot] = Some(image);
                 }
             }
             rows.push(row);
         }
+        previous_reference = reference_shot.map(|((image, _), _)| image);
     }
 
     let report = Report {

@@ -110,6 +110,10 @@ pub struct Summary {
     pub rmse: Option<f64>,
     /// Mean FLIP error.
     pub flip: Option<f64>,
+    /// Mean temporal noise (frames 1..; `Row::noise`).
+    pub noise: Option<f64>,
+    /// The reference's mean temporal noise over the same frames.
+    pub reference_noise: Option<f64>,
     /// The techniques its trees were drawn with, in [`Technique::ALL`]'s order, those with a
     /// tree or a primitive in some frame: the policy's mix, or a forced technique and the point
     /// tree drawing the trees whose models lack its data. Empty for the counted full mesh.
@@ -195,6 +199,8 @@ pub fn summarise(report: &Report, technique: TechniqueName) -> Summary {
         q: mean_of(rows.iter().filter_map(|r| r.coverage).map(|c| c.quality()).collect()),
         rmse: mean_of(rows.iter().filter_map(|r| r.rmse).collect()),
         flip: mean_of(rows.iter().filter_map(|r| r.flip).collect()),
+        noise: mean_of(rows.iter().filter_map(|r| r.noise).collect()),
+        reference_noise: mean_of(rows.iter().filter_map(|r| r.noise.and(r.reference_noise)).collect()),
         drawn_with: drawn_with(&rows),
     }
 }
@@ -325,6 +331,11 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
         ("RMSE", Align::Right),
         ("FLIP", Align::Right),
     ]);
+    // Temporal noise where it was measured (`--quality`, two frames or more).
+    let noise = report.rows.iter().any(|r| r.noise.is_some());
+    if noise {
+        columns.extend([("noise", Align::Right), ("ref noise", Align::Right)]);
+    }
     if shadows {
         columns.extend([("shadow", Align::Right), ("shadow/this", Align::Right)]);
     }
@@ -367,6 +378,9 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
             opt(s.rmse, 5),
             opt(s.flip, 5),
         ]);
+        if noise {
+            cells.extend([opt(s.noise, 5), opt(s.reference_noise, 5)]);
+        }
         if shadows {
             cells.extend([opt(s.shadow_primitives, 0), opt(s.shadow_ratio, 2)]);
         }
@@ -410,7 +424,7 @@ precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primit
 trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
 trees_crossed,trees_octahedral,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,\
 primitives_impostors,primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed,\
-primitives_octahedral";
+primitives_octahedral,noise,ref_noise";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -423,7 +437,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -458,6 +472,8 @@ pub fn csv(report: &Report) -> String {
             row.lines,
             text(row.transitions.map(|v| v.to_string())),
             by_technique(row),
+            text(row.noise.map(|v| v.to_string())),
+            text(row.noise.and(row.reference_noise).map(|v| v.to_string())),
         );
     }
     out
