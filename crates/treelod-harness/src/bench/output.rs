@@ -200,7 +200,7 @@ pub fn summarise(report: &Report, technique: TechniqueName) -> Summary {
         rmse: mean_of(rows.iter().filter_map(|r| r.rmse).collect()),
         flip: mean_of(rows.iter().filter_map(|r| r.flip).collect()),
         noise: mean_of(rows.iter().filter_map(|r| r.noise).collect()),
-        reference_noise: mean_of(rows.iter().filter_map(|r| r.noise.and(r.reference_noise)).collect()),
+        reference_noise: mean_of(rows.iter().filter_map(|r| r.reference_noise).collect()),
         drawn_with: drawn_with(&rows),
     }
 }
@@ -473,7 +473,7 @@ pub fn csv(report: &Report) -> String {
             text(row.transitions.map(|v| v.to_string())),
             by_technique(row),
             text(row.noise.map(|v| v.to_string())),
-            text(row.noise.and(row.reference_noise).map(|v| v.to_string())),
+            text(row.reference_noise.map(|v| v.to_string())),
         );
     }
     out
