@@ -2023,20 +2023,24 @@ mod tests {
         let choices = Choices::among(&table(), &policy, |t| t != Technique::Spt);
         assert_eq!(choices.steps().last(), Some(&Technique::LodChain));
         assert_eq!(choices.choose(10_000.0, None), Technique::LodChain);
+        // The full mesh, the point tree and the chain at 8 and 256 pixels, and technique `other`
+        // with its errors there and its primitives.
+        let beside = |other: u32, errors: [f32; 2], primitives: f32| {
+            let mut records = Vec::new();
+            for ((h, spt, chain), error) in [(8.0, 0.06, 0.2), (256.0, 0.012, 0.012)].into_iter().zip(errors) {
+                records.push(record(code::FULL, h, 0.012, 22_500.0));
+                records.push(record(code::SPT, h, spt, 21_000.0));
+                records.push(record(code::LOD_CHAIN, h, chain, 20_000.0));
+                records.push(record(other, h, error, primitives));
+            }
+            records.sort_by_key(|r| r.technique);
+            Calibration::from_records(&records).unwrap()
+        };
         // Crossed quads that win the top height keep their error near: above, the rule chooses
         // among the techniques that converge, the chain here (fewer primitives than the point
         // tree at the same error) for a tree wholly in view, the point tree (which culls per
         // cell) for one partly in view.
-        let mut records = Vec::new();
-        for (h, crossed, spt, chain) in [(8.0, 0.05, 0.06, 0.2), (256.0, 0.011, 0.012, 0.012)] {
-            records.push(record(code::FULL, h, 0.012, 22_500.0));
-            records.push(record(code::SPT, h, spt, 21_000.0));
-            records.push(record(code::LOD_CHAIN, h, chain, 20_000.0));
-            records.push(record(code::CROSSED, h, crossed, 3.0));
-        }
-        records.sort_by_key(|r| r.technique);
-        let c = Calibration::from_records(&records).unwrap();
-        let choices = Choices::among(&c, &policy, all);
+        let choices = Choices::among(&beside(code::CROSSED, [0.05, 0.011], 3.0), &policy, all);
         assert_eq!(choices.steps().last(), Some(&Technique::Crossed));
         assert_eq!(choices.choose(10_000.0, None), Technique::LodChain);
         // Partly in view: the point tree where its whole-tree primitives (21,000) times the share
@@ -2054,15 +2058,7 @@ mod tests {
         // primitives) holds there and hands over above it: nearer, its λ(h) draws shares of the
         // leaves no table measured.
         for prune in [code::PRUNE_OPT, code::PRUNE_COOK] {
-            let mut records = Vec::new();
-            for (h, spt, chain) in [(8.0, 0.06, 0.2), (256.0, 0.012, 0.012)] {
-                records.push(record(code::FULL, h, 0.012, 22_500.0));
-                records.push(record(code::SPT, h, spt, 21_000.0));
-                records.push(record(code::LOD_CHAIN, h, chain, 20_000.0));
-                records.push(record(prune, h, 0.012, 11_000.0));
-            }
-            records.sort_by_key(|r| r.technique);
-            let choices = Choices::among(&Calibration::from_records(&records).unwrap(), &policy, all);
+            let choices = Choices::among(&beside(prune, [0.012, 0.012], 11_000.0), &policy, all);
             let pruned = choices.steps().last().copied();
             assert!(matches!(pruned, Some(Technique::PruneOpt | Technique::PruneCook)), "{pruned:?}");
             assert_eq!(choices.choose(250.0, None), pruned.unwrap());

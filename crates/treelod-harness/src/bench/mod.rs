@@ -635,8 +635,8 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 });
                 continue;
             }
-            let Some(slot) = flown.iter().position(|f| f.technique == technique) else { continue };
-            let (Some(gpu), f) = (&gpu, &mut flown[slot]) else { continue };
+            let (Some(gpu), Some(slot)) = (&gpu, flown.iter().position(|f| f.technique == technique)) else { continue };
+            let f = &mut flown[slot];
             // One prepare per frame, as a host makes it: streaming keeps up within its budget or
             // draws coarser stand-ins (counted in ranges_clamped).
             let (stats, selection_ms) = guarded(gpu, &label, || {
