@@ -95,6 +95,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -128,6 +129,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -148,6 +150,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -167,6 +170,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -184,6 +188,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -201,6 +206,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -220,6 +226,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -238,6 +245,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -255,6 +263,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -272,6 +281,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -288,6 +298,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral: false,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -304,6 +315,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 calibration_added: false,
                 octahedral_depth: false,
+                point_facing: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -316,7 +328,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           OCTAHEDRAL, and the calibration of the techniques added after 1.11, CALIBRATION_ADDED and \
                           CALIBRATION_ELEVATIONS_ADDED), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, octahedral_depth: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                octahedral_depth: false,
+                point_facing: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -326,6 +343,17 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE, \
                           OCTAHEDRAL, CALIBRATION_ADDED and CALIBRATION_ELEVATIONS_ADDED, and the octahedral views' \
                           depth planes, OCTAHEDRAL_DEPTH), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, point_facing: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 14,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.14 (1.13's: the 1.5 kinds, a BC7 impostor atlas, \
+                          CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE, \
+                          OCTAHEDRAL, CALIBRATION_ADDED, CALIBRATION_ELEVATIONS_ADDED and OCTAHEDRAL_DEPTH, and the \
+                          points' facing, POINT_FACING), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -117,6 +117,9 @@ pub struct SyntheticOptions {
     /// `[−0.5, 0.5)` and slopes in `[−0.8, 0.8)`. Needs `octahedral`; drawn last, so the rest of the
     /// container is the same as without it.
     pub octahedral_depth: bool,
+    /// The points' facing (spec §6.5.1, 1.14): a random byte per point in `POINT_FACING`. Drawn
+    /// last, so the rest of the container is the same as without it.
+    pub point_facing: bool,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -165,6 +168,7 @@ impl SyntheticOptions {
             octahedral: false,
             octahedral_frames: 2..=16,
             octahedral_depth: false,
+            point_facing: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -184,7 +188,7 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.13: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.14: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
@@ -193,8 +197,9 @@ impl SyntheticOptions {
     /// per level, `CHAIN_CALIBRATION`), the block's far lines with their ambient occlusion
     /// (`FAR_LINES`, `FAR_LINE_AO`), the planes' diffuse response (`PLANE_DIFFUSE`), an
     /// octahedral impostor per tree (`OCTAHEDRAL`) with its views' depth planes
-    /// (`OCTAHEDRAL_DEPTH`) and the calibration of the techniques added after 1.11
-    /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`).
+    /// (`OCTAHEDRAL_DEPTH`), the calibration of the techniques added after 1.11
+    /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`) and the points' facing
+    /// (`POINT_FACING`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -226,6 +231,7 @@ impl SyntheticOptions {
             octahedral: true,
             octahedral_frames: 2..=16,
             octahedral_depth: true,
+            point_facing: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1200,6 +1206,9 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
             data_length: blocks.len() as u64,
             ..record
         };
+    }
+    if options.point_facing {
+        b.data.point_facing = rng.bytes(b.data.points.len());
     }
     b.data
 }

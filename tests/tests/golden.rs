@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.13 (`tests/data/v1_0` to `tests/data/v1_13`): every file
+//! Golden files of format versions 1.0 to 1.14 (`tests/data/v1_0` to `tests/data/v1_14`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file (and 1.13's octahedral depth planes) decodes to literal values written out here (so
 //! a change in reading is caught even if writing changed the same way), and spec §13.1 holds the
@@ -26,7 +26,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -620,7 +620,7 @@ fn the_1_12_every_kind_file_has_every_kind_and_the_added_techniques_calibration(
 #[test]
 fn the_1_13_every_kind_file_has_every_kind_and_the_octahedral_depth_planes() {
     let c = Container::open(golden_dir_of(13).join("every-kind-zstd.treelod")).unwrap();
-    for kind in SectionKind::KNOWN {
+    for kind in SectionKind::KNOWN.into_iter().filter(|k| k.since_minor() <= 13) {
         assert!(c.section(kind).is_some(), "{kind} missing");
     }
     assert_eq!(c.header().minor, 13);
@@ -644,6 +644,29 @@ fn the_1_13_every_kind_file_has_every_kind_and_the_octahedral_depth_planes() {
     assert!(data == v1_12, "v1_13 is v1_12 with the octahedral views' depth planes");
     let bytes = data.to_bytes(Compression::None).unwrap();
     assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 12);
+}
+
+#[test]
+fn the_1_14_every_kind_file_has_every_kind_and_the_points_facing() {
+    let c = Container::open(golden_dir_of(14).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 14);
+    // A byte per point, of every kind: 0 (the mean coverage from every direction) to 255.
+    let (points, facing) = (c.points(), c.point_facing());
+    assert_eq!(facing.len(), points.len());
+    assert!(facing.iter().any(|&f| f < 128) && facing.iter().any(|&f| f >= 128), "{facing:?}");
+    assert_eq!(verify(&c).unwrap().point_facing, points.len() as u64);
+    // Without POINT_FACING it is the 1.13 file, record for record, and the writer marks it 1.13:
+    // a 1.13 reader draws the same points, each covering its mean share from every direction.
+    let v1_13 =
+        ContainerData::from_container(&Container::open(golden_dir_of(13).join("every-kind-zstd.treelod")).unwrap());
+    let mut data = ContainerData::from_container(&c);
+    data.point_facing.clear();
+    assert!(data == v1_13, "v1_14 is v1_13 with the points' facing");
+    let bytes = data.to_bytes(Compression::None).unwrap();
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 13);
 }
 
 /// The small 1.13 file: one octahedral impostor of 2 × 2 views and their four depth planes, view

@@ -227,10 +227,9 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds the octahedral views' depth planes (OCTAHEDRAL_DEPTH), so it is a 1.13
-    // file.
+    // The fixture holds the points' facing (POINT_FACING), so it is a 1.14 file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 13);
+    assert_eq!(minor, 14);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());

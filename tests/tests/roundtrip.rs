@@ -67,6 +67,8 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 octahedral_frames: 2..=16,
                 // Their views' depth planes with half of those.
                 octahedral_depth: grid[0] < 2 && grid[1] < 2,
+                // The points' facing with half of the grids.
+                point_facing: grid[2] >= 2,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -450,7 +452,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 13, "everything() holds the kinds of 1.13");
+    assert_eq!(container.header().minor, 14, "everything() holds the kinds of 1.14");
     assert_eq!(everything.octahedral.len(), everything.block.tree_count as usize, "an octahedral impostor per tree");
     let views: u32 = everything.octahedral.iter().map(|o| o.frames * o.frames).sum();
     assert_eq!(everything.octahedral_depth.len(), views as usize, "a depth plane per octahedral view");

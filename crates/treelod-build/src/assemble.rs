@@ -16,8 +16,8 @@ use rayon::prelude::*;
 use treelod_format::{
     BillboardRecord, BlockRecord, CellRecord, ContainerData, ImageRecord, LodLevelRecord, MATERIAL_DOUBLE_SIDED,
     MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, OctahedralRecord, PointRecord,
-    PruneLeafRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, encode_ao, image_format,
-    material_class, pack,
+    PruneLeafRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, encode_ao, encode_point_facing,
+    image_format, material_class, pack,
 };
 
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
@@ -787,6 +787,7 @@ fn assemble(
     // An upper bound (a hierarchy has fewer inner nodes than leaves): reserved address space, of
     // which only what is written becomes resident.
     let mut points: Vec<PointRecord> = Vec::with_capacity(2 * tris.len());
+    let mut point_facing: Vec<u8> = Vec::with_capacity(2 * tris.len());
     let mut cells: Vec<CellRecord> = Vec::with_capacity(cell_count + 1);
     let batch = 2 * rayon::current_num_threads().max(1);
     for cell_batch in per_cell.chunks_mut(batch) {
@@ -814,6 +815,7 @@ fn assemble(
             }
             let first_point = points.len();
             points.extend(cell.points);
+            point_facing.extend(cell.facing);
             let empty = first_triangle == order.len();
             cells.push(CellRecord {
                 bounds_min: if empty { [0.0; 3] } else { cmin.to_array() },
@@ -1205,6 +1207,7 @@ fn assemble(
         octahedral_depth,
         vertex_ao: vertex_ao.map_or_else(Vec::new, |ao| ao.iter().map(|&a| encode_ao(a)).collect()),
         point_ao,
+        point_facing,
         plane_ao,
         plane_diffuse,
         ellipsoid_ao,
@@ -1543,6 +1546,8 @@ struct CellOutput {
     order: Vec<(u32, u32)>,
     /// Its points in SPT order.
     points: Vec<PointRecord>,
+    /// Each point's `POINT_FACING` byte.
+    facing: Vec<u8>,
     /// Bounds of the points' discs.
     bounds: (Vec3, Vec3),
 }
@@ -1572,7 +1577,8 @@ fn cell_output(
             point_record(p)
         })
         .collect();
-    Ok(CellOutput { order, points, bounds: (lo, hi) })
+    let facing = hierarchy.points.iter().map(|p| encode_point_facing(p.facing)).collect();
+    Ok(CellOutput { order, points, facing, bounds: (lo, hi) })
 }
 
 /// Moves item `i` to `dest[i]` for every `i`, in place, by `swap(i, j)` calls (of every array

@@ -108,7 +108,8 @@ use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
     CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE,
     OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind,
-    calibration_technique, decode_ao, image, image_format, material_class, octahedral_depth_starts, prune_leaves_drawn,
+    calibration_technique, decode_ao, image, image_format, material_class, octahedral_depth_starts, point_facing_scale,
+    prune_leaves_drawn,
 };
 use treelod_runtime::impostor::{
     BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
@@ -968,12 +969,16 @@ impl<'a> Scene<'a> {
                 if !point_drawn(point, thresholds) {
                     continue;
                 }
+                let normal = Vec3::from_array(oct_decode(point.normal));
                 let surface = Surface {
                     albedo: linear_colour(point.color).truncate(),
-                    normal: Vec3::from_array(oct_decode(point.normal)),
+                    normal,
                     ao: d.point_ao.get(first + i).map_or(0.0, |&a| decode_ao(a)),
                 };
-                disc(canvas, view, Vec3::from_array(point.position), point.radius, (first + i) as u64, surface);
+                let facing =
+                    d.point_facing.get(first + i).map_or(1.0, |&f| point_facing_scale(f, normal.dot(view.direction)));
+                let splat = Splat { centre: Vec3::from_array(point.position), radius: point.radius, facing };
+                disc(canvas, view, splat, (first + i) as u64, surface);
             }
         }
         self.draw_triangles(canvas, view, &tris, false);
@@ -1073,11 +1078,18 @@ impl<'a> Scene<'a> {
     }
 }
 
-/// A point's disc of `radius` metres at `centre`, facing the viewer, shaded as `surface` at the
-/// depth of its centre. A disc under half a pixel in radius is the renderer's one-pixel splat
-/// (spec §10.1): its pixel is drawn when a hash of the point falls below the disc's coverage
-/// `π·r²`.
-fn disc(canvas: &mut Canvas, view: &View, centre: Vec3, radius: f32, id: u64, surface: Surface) {
+/// A point's disc as drawn: its centre and radius, metres, and the factor on a sub-pixel disc's
+/// coverage from its facing (spec §6.5.1; 1 without `POINT_FACING`).
+struct Splat {
+    centre: Vec3,
+    radius: f32,
+    facing: f32,
+}
+
+/// A point's disc, facing the viewer, shaded as `surface` at the depth of its centre. A disc
+/// under half a pixel in radius is the renderer's one-pixel splat (spec §10.1): its pixel is
+/// drawn when a hash of the point falls below the disc's coverage `π·r²` times its facing factor.
+fn disc(canvas: &mut Canvas, view: &View, Splat { centre, radius, facing }: Splat, id: u64, surface: Surface) {
     let c = view.project(centre);
     let r = radius * view.scale;
     let (z, colour) = (depth(view, centre), surface.shaded());
@@ -1090,7 +1102,7 @@ fn disc(canvas: &mut Canvas, view: &View, centre: Vec3, radius: f32, id: u64, su
         });
         return;
     }
-    let coverage = std::f32::consts::PI * r * r;
+    let coverage = std::f32::consts::PI * r * r * facing;
     let hash = crate::rng::SplitMix64(id).next_u64();
     if ((hash >> 40) as f32) / ((1u64 << 24) as f32) < coverage && c.x >= 0.0 && c.y >= 0.0 {
         let (x, y) = (c.x as usize, c.y as usize);

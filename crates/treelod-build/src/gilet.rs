@@ -7,8 +7,10 @@
 //! `R = 2/π · (R_m + α(R_M − R_m))` made monotone for the selection size. The disc drawn is sized
 //! for the area the leaves cover on screen instead: half a leaf's opaque area (the mean over view
 //! directions), and for a cluster the expected union of its children's discs (overlaps counted
-//! once); a cluster's selection size is never smaller than that disc's diameter. The hierarchy is
-//! flattened by [`crate::spt`].
+//! once); a cluster's selection size is never smaller than that disc's diameter. Each point also
+//! records how much of that coverage faces along its normal ([`CellPoint::facing`], spec §6.5.1),
+//! so that a renderer covers with a patch of a closed surface what it projects along the view.
+//! The hierarchy is flattened by [`crate::spt`].
 
 use glam::{Vec3, Vec4};
 
@@ -66,6 +68,10 @@ pub struct CellPoint {
     pub leaf_first: u32,
     /// Leaf run length.
     pub leaf_count: u32,
+    /// How flat the represented surface is, 0 (normals spread evenly) to 1 (one plane): `2m − 1`
+    /// clamped to `[0, 1]`, `m` the coverage-weighted mean `|n_i · n|` of its leaves' normals
+    /// `n_i` to the point's normal `n` (1 for a leaf); spec §6.5.1.
+    pub facing: f32,
 }
 
 /// The flattened hierarchy of one cell.
@@ -112,6 +118,7 @@ pub fn build_cell(leaves: &[LeafPoint], config: &GiletConfig) -> Result<CellHier
                 hi: flat.hi,
                 leaf_first: flat.leaf_first,
                 leaf_count: flat.leaf_count,
+                facing: node.facing,
             }
         })
         .collect();
@@ -135,6 +142,8 @@ struct Node {
     extent: f32,
     /// `2·radius`.
     size: f32,
+    /// See [`CellPoint::facing`]; set by [`cluster`] for inner nodes.
+    facing: f32,
 }
 
 impl Node {
@@ -149,6 +158,7 @@ impl Node {
             draw_radius: radius * (p.color.w.clamp(0.0, 1.0) * MEAN_PROJECTED_FRACTION).sqrt(),
             extent: radius,
             size: p.size,
+            facing: 1.0,
         }
     }
 
@@ -187,13 +197,16 @@ impl Node {
             // hierarchy while the union of their discs does) is drawn as one blob several pixels
             // wide.
             size: 2.0 * radius.max(draw_radius),
+            facing: 1.0,
         }
     }
 }
 
 /// The mean fraction of a flat leaf's area that it covers on screen, over directions:
 /// `E|cos θ| = 1/2` for a leaf seen from a uniformly random direction. Splats always face the
-/// camera, so a leaf point's disc gets this fraction of the leaf's opaque area.
+/// camera, so a leaf point's disc gets this fraction of the leaf's opaque area. The renderer
+/// spreads that mean over view directions by the point's [`facing`] (a leaf's disc covers
+/// `2|n · v|` of it along `v`), which leaves the mean as it is.
 ///
 /// Measured and not taken (`treelod eval --orbit 2,8,32`, spt's mean multi-scale RMSE at 2, 8 and
 /// 32 bounding radii):
@@ -224,6 +237,33 @@ fn union_radius(l: &Node, r: &Node, extent: f32) -> f32 {
     union.max(dl).max(dr)
 }
 
+/// How flat the leaves' surface is as seen along `normal`: `2m − 1` clamped to `[0, 1]`, where
+/// `m` is the mean `|n_i · normal|` of the leaves' normals weighted by their opaque area.
+///
+/// A disc's coverage is the mean over view directions of the area its leaves project,
+/// `½ Σ A_i` (`MEAN_PROJECTED_FRACTION`), whatever the view. The area they project along a view
+/// `v` is `Σ A_i |n_i · v|`; modelled as a mixture of a plane facing `normal` (projecting
+/// `2|normal · v|` times the mean) and an isotropic part (the mean), with the mixture's weight
+/// `f` of the plane set so that it projects `Σ A_i |n_i · normal|` along `normal`: `f = 2m − 1`.
+/// The renderer scales a sub-pixel splat's coverage by `1 − f + 2f |normal · v|` (spec §10.1),
+/// whose mean over directions is 1. A patch of a closed surface seen face on then covers the
+/// pixels behind it, and seen edge on no more than its sliver, where the mean made face-on
+/// patches of closed crowns half transparent and their rims too dense.
+fn facing<'a>(leaves: impl Iterator<Item = &'a LeafPoint>, normal: Vec3) -> f32 {
+    let (mut dot, mut weight) = (0.0f64, 0.0f64);
+    for leaf in leaves {
+        let w = f64::from(leaf.area * leaf.color.w.clamp(0.0, 1.0));
+        dot += w * f64::from(leaf.normal.dot(normal).abs().min(1.0));
+        weight += w;
+    }
+    if weight <= 0.0 {
+        return 0.0;
+    }
+    #[expect(clippy::cast_possible_truncation, reason = "a share in [0, 1]")]
+    let f = (2.0 * dot / weight - 1.0).clamp(0.0, 1.0) as f32;
+    f
+}
+
 /// Recursive PCA split of `indices` (leaf point ids); appends inner nodes and returns the id of
 /// the subtree's root.
 fn cluster(
@@ -249,6 +289,7 @@ fn cluster(
     for &k in &kids[1..] {
         node = Node::merge(&node, &nodes[k as usize]);
     }
+    node.facing = facing(indices.iter().map(|&i| &leaves[i as usize]), node.normal);
     #[expect(clippy::cast_possible_truncation, reason = "a cell holds fewer than 2^31 nodes")]
     let id = nodes.len() as u32;
     nodes.push(node);
@@ -401,6 +442,49 @@ mod tests {
         let p = h.points.iter().find(|p| p.leaf_count == 1 && p.size == 0.3).unwrap();
         assert!((p.radius - 0.15 * (0.25f32 * 0.5).sqrt()).abs() < 1e-6, "radius 0.15 scaled by sqrt(0.25 · 1/2)");
         assert_eq!(h.leaf_of_triangle.len(), 2);
+    }
+
+    #[test]
+    fn facing_is_one_for_a_plane_and_falls_as_the_normals_spread() {
+        // A leaf and a cluster of coplanar leaves face along their normal: the whole coverage.
+        let flat: Vec<LeafPoint> = (0..8).map(|i| leaf(i as f32, 0.0, 1.0)).collect();
+        let h = build_cell(&flat, &GiletConfig::default()).unwrap();
+        assert!(
+            h.points.iter().all(|p| p.facing == 1.0),
+            "{:?}",
+            h.points.iter().map(|p| p.facing).collect::<Vec<_>>()
+        );
+        // Normals evenly over three perpendicular axes: f = 2m − 1 for the mean |n_i · n| to the
+        // point's normal n (about (1, 1, 1)/√3, where m = 1/√3 and f = 0.155).
+        let spread: Vec<LeafPoint> = (0..6)
+            .map(|i| LeafPoint { normal: [Vec3::X, Vec3::Y, Vec3::Z][i % 3], ..leaf(i as f32, 0.0, 1.0) })
+            .collect();
+        let root = build_cell(&spread, &GiletConfig { cluster_max: 8 }).unwrap().points[0];
+        assert_eq!(root.leaf_count, 6);
+        let m = (root.normal.x.abs() + root.normal.y.abs() + root.normal.z.abs()) / 3.0;
+        assert!((root.facing - (2.0 * m - 1.0)).abs() < 1e-5, "{} for {}", root.facing, root.normal);
+        assert!((0.1..0.16).contains(&root.facing), "{}", root.facing);
+        // Leaves facing every way (a sphere's) give none: mean |cos| about 1/2.
+        let n = 400;
+        let sphere: Vec<LeafPoint> = (0..n)
+            .map(|i| {
+                // A Fibonacci sphere, each leaf at its normal.
+                let z = 1.0 - (2 * i + 1) as f32 / n as f32;
+                let (s, c) = (i as f32 * 2.399_963).sin_cos();
+                let r = (1.0 - z * z).sqrt();
+                let normal = Vec3::new(r * c, r * s, z);
+                LeafPoint { position: normal * 10.0, normal, ..leaf(0.0, 0.0, 0.1) }
+            })
+            .collect();
+        let root = build_cell(&sphere, &GiletConfig::default()).unwrap().points[0];
+        assert!(root.facing < 0.02, "{}", root.facing);
+        // The weight is the opaque area: a transparent leaf across the plane tilts the point's
+        // normal (averaged by area) but counts for nothing in m, which is the plane's |z · n|.
+        let mut mixed = flat.clone();
+        mixed.push(LeafPoint { normal: Vec3::X, color: Vec4::new(0.2, 0.5, 0.1, 0.0), ..leaf(9.0, 0.0, 1.0) });
+        let root = build_cell(&mixed, &GiletConfig { cluster_max: 16 }).unwrap().points[0];
+        assert!(root.normal.x > 0.05, "tilted: {}", root.normal);
+        assert!((root.facing - (2.0 * root.normal.z - 1.0)).abs() < 1e-5, "{} for {}", root.facing, root.normal);
     }
 
     #[test]

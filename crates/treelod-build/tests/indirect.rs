@@ -10,7 +10,7 @@ use treelod_build::{
     BuildConfig, BuildError, BuildOutput, ImpostorConfig, Placed, Texturing, build_block, cards_on_planes,
     leaf_material,
 };
-use treelod_format::{Compression, Container, PlaneRecord, image_format, material_class, pack};
+use treelod_format::{Compression, Container, PlaneRecord, SectionKind, image_format, material_class, pack};
 
 /// A leaf texture: opaque inside a disc of radius 0.45 about the centre, transparent outside,
 /// in two greens.
@@ -126,8 +126,10 @@ fn indirect_planes_map_each_leaf_onto_its_texture_and_name_it_in_the_slot_image(
     assert!(out.warnings.is_empty(), "{:?}", out.warnings);
     let c = open(&out);
     treelod_format::verify(&c).expect("verifies");
-    // PLANE_LEAVES and LEAF_SLOTS are 1.3, the planes' diffuse response (PLANE_DIFFUSE) 1.10.
-    assert_eq!((c.header().major, c.header().minor), (1, 10), "PLANE_DIFFUSE is 1.10");
+    // PLANE_LEAVES and LEAF_SLOTS are 1.3, the planes' diffuse response (PLANE_DIFFUSE) 1.10,
+    // the points' facing (POINT_FACING) 1.14.
+    assert_eq!(SectionKind::PLANE_LEAVES.since_minor(), 3);
+    assert_eq!((c.header().major, c.header().minor), (1, 14), "POINT_FACING is 1.14");
     assert_eq!(c.plane_diffuse().len(), c.planes().len());
     let planes = c.planes();
     assert_eq!(planes.len(), 3);
@@ -262,9 +264,11 @@ fn leaves_whose_outline_is_geometry_get_the_rgba_atlas_and_a_warning() {
         let atlas = c.images().last().expect("an atlas");
         assert_eq!((atlas.format, atlas.mip_count), (image_format::RGBA8_SRGB, 5), "{name}");
         assert!(c.planes().iter().all(|p| p.image as usize == c.images().len() - 1));
-        // Nothing of 1.3 (no leaf-slot image); the planes' diffuse response makes the file 1.10.
+        // Nothing of 1.3 (no leaf-slot image); the planes' diffuse response is 1.10, and the
+        // points' facing (POINT_FACING, which every build writes) makes the file 1.14.
         assert!(c.images().iter().all(|i| i.format != image_format::LEAF_SLOTS), "{name}");
-        assert_eq!(c.header().minor, 10, "{name}: PLANE_DIFFUSE is 1.10");
+        assert_eq!(SectionKind::PLANE_DIFFUSE.since_minor(), 10);
+        assert_eq!(c.header().minor, 14, "{name}: POINT_FACING is 1.14");
     }
 }
 

@@ -523,6 +523,14 @@ impl Container {
         self.raw_bytes(SectionKind::POINT_AO)
     }
 
+    /// How flat the surface of each point is (spec §6.5.1), empty or as long as
+    /// [`Container::points`]: `unorm8` of the share `f` of its disc's coverage that faces along
+    /// its normal. See [`crate::point_facing_scale`].
+    #[must_use]
+    pub fn point_facing(&self) -> &[u8] {
+        self.raw_bytes(SectionKind::POINT_FACING)
+    }
+
     /// Ambient occlusion of each plane, empty or as long as [`Container::planes`].
     #[must_use]
     pub fn plane_ao(&self) -> &[u8] {
@@ -844,9 +852,11 @@ pub(crate) fn check_block_and_cells(
             format!("{} cell records, the grid {grid:?} needs {expected} (cells + block cell)", cells.len()),
         ));
     }
-    // Spec §6.14, §6.10.2: an ambient-occlusion section holds one byte per record of its array,
-    // `PLANE_DIFFUSE` one record per plane.
-    for (kind, of) in AO_KINDS.into_iter().chain([(SectionKind::PLANE_DIFFUSE, SectionKind::PLANES)]) {
+    // Spec §6.14, §6.10.2, §6.5.1: an ambient-occlusion section holds one byte per record of its
+    // array, `PLANE_DIFFUSE` one record per plane, `POINT_FACING` one byte per point.
+    let parallel =
+        [(SectionKind::PLANE_DIFFUSE, SectionKind::PLANES), (SectionKind::POINT_FACING, SectionKind::POINTS)];
+    for (kind, of) in AO_KINDS.into_iter().chain(parallel) {
         let (ao, records) = (count(kind), count(of));
         if ao != 0 && ao != records {
             return Err(bad_record(kind, 0, format!("{ao} records, {of} has {records}: one per record or none")));

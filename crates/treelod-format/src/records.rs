@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 13;
+pub const MINOR: u16 = 14;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -176,6 +176,9 @@ impl SectionKind {
     /// [`PlaneDiffuseRecord`]s: how the leaves of each `PLANES` record take the sun (spec
     /// §6.10.2). Since 1.10.
     pub const PLANE_DIFFUSE: Self = Self(0x0066);
+    /// How flat the surface of each `POINTS` record is, one `unorm8`: the share of its coverage
+    /// that faces along its normal (spec §6.5.1). Since 1.14.
+    pub const POINT_FACING: Self = Self(0x0067);
     /// [`CalibrationRecord`]s: each representation's measured image error and cost by projected
     /// height (spec §6.15). Since 1.5.
     pub const CALIBRATION: Self = Self(0x0070);
@@ -195,7 +198,7 @@ impl SectionKind {
     pub const CALIBRATION_ELEVATIONS_ADDED: Self = Self(0x0074);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 35] = [
+    pub const KNOWN: [Self; 36] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -226,6 +229,7 @@ impl SectionKind {
         Self::LINE_AO,
         Self::FAR_LINE_AO,
         Self::PLANE_DIFFUSE,
+        Self::POINT_FACING,
         Self::CALIBRATION,
         Self::CHAIN_CALIBRATION,
         Self::CALIBRATION_ELEVATIONS,
@@ -267,6 +271,7 @@ impl SectionKind {
             Self::LINE_AO => "LINE_AO",
             Self::FAR_LINE_AO => "FAR_LINE_AO",
             Self::PLANE_DIFFUSE => "PLANE_DIFFUSE",
+            Self::POINT_FACING => "POINT_FACING",
             Self::CALIBRATION => "CALIBRATION",
             Self::CHAIN_CALIBRATION => "CHAIN_CALIBRATION",
             Self::CALIBRATION_ELEVATIONS => "CALIBRATION_ELEVATIONS",
@@ -287,7 +292,8 @@ impl SectionKind {
             | Self::PLANE_AO
             | Self::ELLIPSOID_AO
             | Self::LINE_AO
-            | Self::FAR_LINE_AO => 1,
+            | Self::FAR_LINE_AO
+            | Self::POINT_FACING => 1,
             Self::BLOCK => size_of::<BlockRecord>(),
             Self::CELLS => size_of::<CellRecord>(),
             Self::VERTICES => size_of::<VertexRecord>(),
@@ -326,7 +332,8 @@ impl SectionKind {
     /// for the block's far lines (`FAR_LINES`, `FAR_LINE_AO`), 10 for the planes' diffuse response
     /// (`PLANE_DIFFUSE`), 11 for the octahedral impostors (`OCTAHEDRAL`), 12 for the calibration
     /// of the techniques added after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), 13
-    /// for the octahedral views' depth planes (`OCTAHEDRAL_DEPTH`), 0 for the other known kinds and
+    /// for the octahedral views' depth planes (`OCTAHEDRAL_DEPTH`), 14 for the points' facing
+    /// (`POINT_FACING`), 0 for the other known kinds and
     /// for kinds this version does not know (private extensions do not raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
@@ -343,6 +350,7 @@ impl SectionKind {
             Self::OCTAHEDRAL => 11,
             Self::CALIBRATION_ADDED | Self::CALIBRATION_ELEVATIONS_ADDED => 12,
             Self::OCTAHEDRAL_DEPTH => 13,
+            Self::POINT_FACING => 14,
             _ => 0,
         }
     }
@@ -379,6 +387,23 @@ pub fn encode_ao(occlusion: f32) -> u8 {
     #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 0..=255")]
     let stored = (occlusion.clamp(0.0, 1.0) * 255.0).round() as u8;
     stored
+}
+
+/// Encodes the share `f` of a point's coverage that faces along its normal (clamped to `[0, 1]`,
+/// NaN as 0) as `POINT_FACING` stores it (spec §6.5.1): rounded to the nearest of 256 steps.
+#[must_use]
+pub fn encode_point_facing(f: f32) -> u8 {
+    encode_ao(f)
+}
+
+/// The factor on a point's disc coverage seen along a direction at cosine `cos` to its normal
+/// (spec §6.5.1): `1 − f + 2f·|cos|` for the stored facing byte `stored` (`f = stored/255`),
+/// whose mean over directions is 1; 1 for `f = 0` (no `POINT_FACING`: the disc covers its mean
+/// share from every direction).
+#[must_use]
+pub fn point_facing_scale(stored: u8, cos: f32) -> f32 {
+    let f = f32::from(stored) / 255.0;
+    1.0 - f + 2.0 * f * cos.abs().min(1.0)
 }
 
 impl core::fmt::Display for SectionKind {

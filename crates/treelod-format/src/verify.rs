@@ -101,6 +101,8 @@ pub struct VerifyReport {
     /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO`, `LINE_AO` and `FAR_LINE_AO` bytes (their
     /// counts are checked at open).
     pub ao: u64,
+    /// `POINT_FACING` bytes (spec §6.5.1; every value is valid, the count is checked at open).
+    pub point_facing: u64,
     /// Leaves whose exact cut was verified, summed over cells and the point, ellipsoid, line and
     /// plane hierarchies, and the far lines' (spec §10 rule 2).
     pub cut_leaves: u64,
@@ -151,6 +153,9 @@ impl core::fmt::Display for VerifyReport {
         }
         if self.plane_diffuse > 0 {
             writeln!(f, "planes' diffuse response: {} records", self.plane_diffuse)?;
+        }
+        if self.point_facing > 0 {
+            writeln!(f, "points' facing: {} values", self.point_facing)?;
         }
         write!(f, "exact cut: {} leaves, runs nested up to {} deep", self.cut_leaves, self.max_depth)
     }
@@ -262,6 +267,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.calibration_added = c.calibration_added().len() as u64;
     report.calibration_elevations_added = c.calibration_elevations_added().len() as u64;
     report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
+    report.point_facing = c.point_facing().len() as u64;
     Ok(report)
 }
 

@@ -138,6 +138,8 @@ pub struct ContainerData {
     pub line_ao: Vec<u8>,
     /// `FAR_LINE_AO`: empty, or one byte per far line (since 1.9).
     pub far_line_ao: Vec<u8>,
+    /// `POINT_FACING`: empty, or one byte per point (spec §6.5.1; since 1.14).
+    pub point_facing: Vec<u8>,
     /// `CALIBRATION`: empty, or each representation's error and cost by projected height (since
     /// 1.5).
     pub calibration: Vec<CalibrationRecord>,
@@ -194,6 +196,7 @@ impl ContainerData {
             ellipsoid_ao: c.ellipsoid_ao().to_vec(),
             line_ao: c.line_ao().to_vec(),
             far_line_ao: c.far_line_ao().to_vec(),
+            point_facing: c.point_facing().to_vec(),
             calibration: c.calibration().to_vec(),
             calibration_elevations: c.calibration_elevations().to_vec(),
             chain_calibration: c.chain_calibration().to_vec(),
@@ -552,6 +555,7 @@ macro_rules! optional_sections {
             (SectionKind::ELLIPSOID_AO, $payload!(ellipsoid_ao)),
             (SectionKind::LINE_AO, $payload!(line_ao)),
             (SectionKind::FAR_LINE_AO, $payload!(far_line_ao)),
+            (SectionKind::POINT_FACING, $payload!(point_facing)),
             (SectionKind::CALIBRATION, $payload!(calibration)),
             (SectionKind::CHAIN_CALIBRATION, $payload!(chain_calibration)),
             (SectionKind::CALIBRATION_ELEVATIONS, $payload!(calibration_elevations)),

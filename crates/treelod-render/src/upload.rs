@@ -30,21 +30,24 @@ struct VertexGpu {
 }
 
 /// Point `index` of `container` as the pool holds it: its `flags` (reserved in the file, spec
-/// §6.5) carry its ambient-occlusion byte (§6.14), 0 without.
+/// §6.5) carry its ambient-occlusion byte (§6.14) in bits 0–7 and its facing byte (§6.5.1) in
+/// bits 8–15, each 0 without.
 fn gpu_point(container: &Container, index: usize, point: PointRecord) -> PointRecord {
-    PointRecord { flags: container.point_ao().get(index).copied().map_or(0, u32::from), ..point }
+    let byte = |bytes: &[u8]| bytes.get(index).copied().map_or(0, u32::from);
+    PointRecord { flags: byte(container.point_ao()) | (byte(container.point_facing()) << 8), ..point }
 }
 
 /// Points `first..` of `container` (`records`) as the pools hold them ([`gpu_point`]): the
-/// file's records themselves where they already are (no `POINT_AO` and every reserved `flags` 0,
-/// which the shaders would otherwise read as occlusion), else rewritten into `scratch`.
+/// file's records themselves where they already are (no `POINT_AO`, no `POINT_FACING` and every
+/// reserved `flags` 0, which the shaders would otherwise read as occlusion and facing), else
+/// rewritten into `scratch`.
 pub(crate) fn gpu_points<'a>(
     container: &Container,
     first: usize,
     records: &'a [PointRecord],
     scratch: &'a mut Vec<PointRecord>,
 ) -> &'a [PointRecord] {
-    if container.point_ao().is_empty() && records.iter().all(|p| p.flags == 0) {
+    if container.point_ao().is_empty() && container.point_facing().is_empty() && records.iter().all(|p| p.flags == 0) {
         return records;
     }
     scratch.clear();

@@ -15,7 +15,7 @@ use common::{BACKGROUND, gpu, keep, one_tree};
 use glam::{Vec3, vec3};
 use treelod_build::scene::{AlphaMode, Material, Part, Scene};
 use treelod_build::{AoConfig, BuildConfig, EllipsoidConfig, ImpostorConfig, Placed, build_block};
-use treelod_format::{Compression, Container, ContainerData, material_class};
+use treelod_format::{Compression, Container, ContainerData, SectionKind, material_class};
 use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, Renderer, Settings, Technique};
@@ -150,7 +150,10 @@ fn a_quad_inside_a_closed_box_is_fully_occluded_in_the_container() {
     let data = built();
     let container = open(&data);
     treelod_format::verify(&container).expect("verifies");
-    assert_eq!(container.header().minor, 2, "a container with ambient occlusion is format 1.2");
+    // The ambient-occlusion kinds are of 1.2; the points' facing (POINT_FACING, which every build
+    // writes) makes the file 1.14.
+    assert_eq!(SectionKind::POINT_AO.since_minor(), 2);
+    assert_eq!(container.header().minor, 14, "a built container is format 1.14");
     let (vertex_ao, point_ao) = (container.vertex_ao(), container.point_ao());
     assert_eq!(vertex_ao.len(), container.vertices().len());
     assert_eq!(point_ao.len(), container.points().len());
@@ -214,18 +217,19 @@ fn a_quad_inside_a_closed_box_is_fully_occluded_in_the_container() {
     let ellipsoids = open(&built_with_ellipsoids());
     eprintln!("ellipsoids: {}, their AO {:?}", ellipsoids.ellipsoids().len(), ellipsoids.ellipsoid_ao());
     assert!(!ellipsoids.ellipsoids().is_empty());
-    assert_eq!(ellipsoids.header().minor, 3);
+    assert_eq!(ellipsoids.header().minor, 14, "ELLIPSOID_AO is of 1.3, POINT_FACING of 1.14");
     assert_eq!(ellipsoids.ellipsoid_ao().len(), ellipsoids.ellipsoids().len());
     assert!(ellipsoids.ellipsoid_ao().iter().all(|&a| a == 255), "{:?}", ellipsoids.ellipsoid_ao());
     assert!(ellipsoids.ellipsoids().iter().all(|e| e.flags == 0));
 
-    // Built without ambient occlusion: no sections, format 1.0.
+    // Built without ambient occlusion: no sections, nothing of 1.2 to 1.13 (the points' facing,
+    // which every build writes, is of 1.14).
     let scene = boxed_quad();
     let out = build_block("plain", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "t")
         .expect("builds");
     let plain = open(&out.data);
     assert!(plain.vertex_ao().is_empty() && plain.point_ao().is_empty());
-    assert!(plain.header().minor < 2);
+    assert!(plain.sections().iter().all(|s| s.kind().since_minor() < 2 || s.kind() == SectionKind::POINT_FACING));
 }
 
 /// Renders frames of `renderer` until every prefix it wants is resident (at most 4).

@@ -30,12 +30,14 @@ fn setting<'a>(c: &'a Container, key: &str) -> Option<&'a str> {
     c.metadata().settings.iter().find(|s| s.key == key).map(|s| s.value.as_str())
 }
 
-/// Asserts that `path` holds ambient occlusion for every vertex and point, as format 1.2 with
-/// `rays` recorded, and returns its vertices' mean occlusion byte.
+/// Asserts that `path` holds ambient occlusion for every vertex and point (kinds of format 1.2)
+/// with `rays` recorded, and returns its vertices' mean occlusion byte.
 fn assert_has_ao(path: &Path, rays: &str) -> f64 {
     let c = Container::open(path).expect("opens");
     treelod_format::verify(&c).expect("verifies");
-    assert_eq!((c.header().major, c.header().minor), (1, 2), "{}", path.display());
+    // Ambient occlusion is of 1.2; the points' facing (POINT_FACING), which every build writes,
+    // of 1.14.
+    assert_eq!((c.header().major, c.header().minor), (1, 14), "{}", path.display());
     assert_eq!(c.vertex_ao().len(), c.vertices().len());
     assert_eq!(c.point_ao().len(), c.points().len());
     assert!(c.section(SectionKind::VERTEX_AO).is_some() && c.section(SectionKind::POINT_AO).is_some());
@@ -51,13 +53,14 @@ fn assert_has_ao(path: &Path, rays: &str) -> f64 {
     mean
 }
 
-/// Asserts that `path` holds no ambient occlusion and stays below format 1.2.
+/// Asserts that `path` holds no ambient occlusion: no kind of format 1.2 or later but the points'
+/// facing (`POINT_FACING`, 1.14, which every build writes).
 fn assert_has_no_ao(path: &Path) {
     let c = Container::open(path).expect("opens");
     treelod_format::verify(&c).expect("verifies");
-    assert!(c.header().minor < 2, "{}: minor {}", path.display(), c.header().minor);
+    assert_eq!(c.header().minor, 14, "{}", path.display());
     assert!(c.vertex_ao().is_empty() && c.point_ao().is_empty() && c.plane_ao().is_empty());
-    assert!(c.sections().iter().all(|s| s.kind().since_minor() < 2));
+    assert!(c.sections().iter().all(|s| s.kind().since_minor() < 2 || s.kind() == SectionKind::POINT_FACING));
     assert_eq!(setting(&c, "ao.rays"), None);
 }
 
@@ -80,12 +83,12 @@ fn demo_writes_ambient_occlusion_by_default_and_none_with_zero_rays() {
     // The ray count is used: 4 rays give other values than 16.
     assert_ne!(a.vertex_ao(), Container::open(&few).expect("opens").vertex_ao());
 
-    // `dump` shows the sections and the version, in text and JSON.
+    // `dump` shows the sections and the version (1.14 for the points' facing), in text and JSON.
     let dump = ok(&["dump"], &[&default]);
-    assert!(dump.contains("version    1.2"), "{dump}");
+    assert!(dump.contains("version    1.14"), "{dump}");
     assert!(dump.contains("VERTEX_AO") && dump.contains("POINT_AO") && !dump.contains("PLANE_AO"), "{dump}");
     let json: serde_json::Value = serde_json::from_str(&ok(&["dump", "--json"], &[&default])).expect("JSON");
-    assert_eq!(json["version"], "1.2");
+    assert_eq!(json["version"], "1.14");
     let sections = json["sections"].as_array().expect("sections");
     let vertices = a.vertices().len() as u64;
     let points = a.points().len() as u64;
@@ -96,8 +99,7 @@ fn demo_writes_ambient_occlusion_by_default_and_none_with_zero_rays() {
         assert_eq!((s["record_size"].as_u64(), s["record_count"].as_u64()), (Some(1), Some(count)), "{name}");
     }
     let json: serde_json::Value = serde_json::from_str(&ok(&["dump", "--json"], &[&none])).expect("JSON");
-    let version = json["version"].as_str().expect("a version");
-    assert!(version == "1.0" || version == "1.1", "{version}");
+    assert_eq!(json["version"].as_str(), Some("1.14"), "the points' facing, without occlusion");
     assert!(
         json["sections"]
             .as_array()

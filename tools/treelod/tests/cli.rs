@@ -661,7 +661,7 @@ fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
 fn golden_dumps_match() {
     for version in [
         "v1_0", "v1_1", "v1_2", "v1_3", "v1_4", "v1_5", "v1_6", "v1_7", "v1_8", "v1_9", "v1_10", "v1_11", "v1_12",
-        "v1_13",
+        "v1_13", "v1_14",
     ] {
         golden_dumps_match_in(version);
     }

@@ -39,7 +39,8 @@ fn an_oak_of_leaf_cards_builds_indirect_planes_that_verify_dump_and_render() {
     assert_eq!((slots.format, slots.mip_count), (image_format::LEAF_SLOTS, 1));
 
     let dump = succeeded(&run_on(&["dump"], &[&out_path]), "dump");
-    assert!(dump.lines().any(|l| l.starts_with("version") && l.trim_end().ends_with("1.10")), "{dump}");
+    // PLANE_LEAVES is of 1.3, PLANE_DIFFUSE of 1.10, the points' facing (POINT_FACING) of 1.14.
+    assert!(dump.lines().any(|l| l.starts_with("version") && l.trim_end().ends_with("1.14")), "{dump}");
     assert!(dump.lines().any(|l| l.trim_start().starts_with("PLANE_LEAVES")), "{dump}");
     assert!(dump.contains("impostors.texturing = \"indirect\""), "{dump}");
     let verified = succeeded(&run_on(&["verify"], &[&out_path]), "verify");
@@ -90,9 +91,10 @@ fn untextured_leaves_get_the_rgba_atlas_and_a_warning() {
     assert!(c.plane_leaves().is_empty() && !c.planes().is_empty());
     let atlas = c.images()[c.planes()[0].image as usize];
     assert_eq!((atlas.format, atlas.mip_count), (image_format::RGBA8_SRGB, 5));
-    // Nothing of 1.3 (no leaf-slot image, checked above); the planes' diffuse response is 1.10.
+    // Nothing of 1.3 (no leaf-slot image, checked above); the planes' diffuse response is 1.10,
+    // the points' facing (POINT_FACING) 1.14.
     assert!(c.images().iter().all(|i| i.format != image_format::LEAF_SLOTS));
-    assert_eq!(c.header().minor, 10, "PLANE_DIFFUSE makes the file 1.10");
+    assert_eq!(c.header().minor, 14, "POINT_FACING makes the file 1.14");
 }
 
 #[test]
