@@ -67,6 +67,7 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
             "added-technique calibration records per elevation",
         ),
         (report.ao, "ambient-occlusion byte", "ambient-occlusion bytes"),
+        (report.point_facing, "point facing byte", "point facing bytes"),
     ]
     .into_iter()
     .filter(|&(n, _, _)| n > 0)
@@ -128,6 +129,10 @@ mod tests {
         report.octahedral_depth = 1;
         assert!(ok_line("d", &report).contains("1 octahedral impostor, 1 octahedral depth plane, 5 ambient"));
         report.octahedral_depth = 0;
+        // The points' facing (spec §6.5.1), after the ambient occlusion.
+        report.point_facing = 3;
+        assert!(ok_line("d", &report).contains("5 ambient-occlusion bytes, 3 point facing bytes;"));
+        report.point_facing = 0;
         // The calibration of the techniques added after 1.11, over every view and per elevation.
         report.calibration = 9;
         report.calibration_added = 3;
