@@ -17,13 +17,21 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     // the disc's coverage, pi r^2 of the pixel (`splat_mask`).
     let depth = max((frame.view_proj * centre).w, 1e-6);
     let pixel = 2.0 * depth / (frame.right.w * frame.eye.w);
-    let disc_r = point.radius * draw.scale * frame.up.w;
+    // The record's disc holds the mean over directions of the area its surface projects; the
+    // share `f` of it that faces along the normal (as uploaded, bits 8-15 of `flags`, spec
+    // §6.5.1) projects `2|n.v|` times that along the view `v`, the rest the mean. The disc drawn
+    // has that area: a patch of a closed crown seen face on covers what is behind it, seen edge
+    // on its sliver.
+    let normal = normalize((draw.model * vec4<f32>(decode_normal(point.normal), 0.0)).xyz);
+    let flat = f32((point.flags >> 8u) & 0xFFu) / 255.0;
+    let facing = 1.0 - flat + 2.0 * flat * abs(dot(normal, normalize(view_ray(centre.xyz))));
+    let disc_r = point.radius * draw.scale * frame.up.w * sqrt(facing);
     let r = max(disc_r, 0.5 * pixel);
     let world = centre.xyz + (corner.x * frame.right.xyz + corner.y * frame.up.xyz) * r;
     var out: Varyings;
     out.clip = frame.view_proj * vec4<f32>(world, 1.0);
     out.world = centre.xyz;
-    out.normal = normalize((draw.model * vec4<f32>(decode_normal(point.normal), 0.0)).xyz);
+    out.normal = normal;
     out.uv = vec2<f32>(0.0);
     out.color = decode_color(point.color);
     // As uploaded, bits 0-7 of `flags` hold the point's ambient-occlusion byte.
@@ -36,13 +44,8 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     // The share of that pixel its disc covers (1 for a disc drawn at its size): the colour pass
     // covers it (`splat_mask`) and the shadow pass keeps the splat with this probability, so
     // sub-pixel points cover the image, and sub-texel points shade the ground, by their area, not
-    // by whole pixels or texels. The disc holds the mean over directions of the area its surface
-    // projects; the share `f` of it that faces along the normal (as uploaded, bits 8-15 of
-    // `flags`, spec §6.5.1) projects `2|n.v|` times that along the view `v`, the rest the mean:
-    // a patch of a closed crown seen face on covers what is behind it, seen edge on its sliver.
-    let flat = f32((point.flags >> 8u) & 0xFFu) / 255.0;
-    let facing = 1.0 - flat + 2.0 * flat * abs(dot(out.normal, normalize(view_ray(centre.xyz))));
-    let coverage = select(1.0, facing * 3.14159265 * disc_r * disc_r / (pixel * pixel), disc_r < 0.5 * pixel);
+    // by whole pixels or texels.
+    let coverage = select(1.0, 3.14159265 * disc_r * disc_r / (pixel * pixel), disc_r < 0.5 * pixel);
     out.keep = vec2<f32>(0.0, min(coverage, 1.0));
     // Of the point's position and the instance, not of where its prefix was streamed to in the
     // pool: the same every frame and on the CPU and GPU selection paths.

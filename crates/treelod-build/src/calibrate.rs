@@ -975,10 +975,11 @@ impl<'a> Scene<'a> {
                     normal,
                     ao: d.point_ao.get(first + i).map_or(0.0, |&a| decode_ao(a)),
                 };
+                // The disc's area scaled by its facing along the view (spec §6.5.1).
                 let facing =
                     d.point_facing.get(first + i).map_or(1.0, |&f| point_facing_scale(f, normal.dot(view.direction)));
-                let splat = Splat { centre: Vec3::from_array(point.position), radius: point.radius, facing };
-                disc(canvas, view, splat, (first + i) as u64, surface);
+                let radius = point.radius * facing.sqrt();
+                disc(canvas, view, Vec3::from_array(point.position), radius, (first + i) as u64, surface);
             }
         }
         self.draw_triangles(canvas, view, &tris, false);
@@ -1078,18 +1079,11 @@ impl<'a> Scene<'a> {
     }
 }
 
-/// A point's disc as drawn: its centre and radius, metres, and the factor on a sub-pixel disc's
-/// coverage from its facing (spec §6.5.1; 1 without `POINT_FACING`).
-struct Splat {
-    centre: Vec3,
-    radius: f32,
-    facing: f32,
-}
-
-/// A point's disc, facing the viewer, shaded as `surface` at the depth of its centre. A disc
-/// under half a pixel in radius is the renderer's one-pixel splat (spec §10.1): its pixel is
-/// drawn when a hash of the point falls below the disc's coverage `π·r²` times its facing factor.
-fn disc(canvas: &mut Canvas, view: &View, Splat { centre, radius, facing }: Splat, id: u64, surface: Surface) {
+/// A point's disc of `radius` metres at `centre`, facing the viewer, shaded as `surface` at the
+/// depth of its centre. A disc under half a pixel in radius is the renderer's one-pixel splat
+/// (spec §10.1): its pixel is drawn when a hash of the point falls below the disc's coverage
+/// `π·r²`.
+fn disc(canvas: &mut Canvas, view: &View, centre: Vec3, radius: f32, id: u64, surface: Surface) {
     let c = view.project(centre);
     let r = radius * view.scale;
     let (z, colour) = (depth(view, centre), surface.shaded());
@@ -1102,7 +1096,7 @@ fn disc(canvas: &mut Canvas, view: &View, Splat { centre, radius, facing }: Spla
         });
         return;
     }
-    let coverage = std::f32::consts::PI * r * r * facing;
+    let coverage = std::f32::consts::PI * r * r;
     let hash = crate::rng::SplitMix64(id).next_u64();
     if ((hash >> 40) as f32) / ((1u64 << 24) as f32) < coverage && c.x >= 0.0 && c.y >= 0.0 {
         let (x, y) = (c.x as usize, c.y as usize);

@@ -81,7 +81,7 @@ fn lod_covers_the_pixels_of_the_full_mesh_at_every_distance() {
     // Close up the LoD is the mesh, and covers what it covers. Farther away splats stand for
     // leaves with the area they cover on screen (half a flat leaf's on average over directions,
     // spread by the points' facing; overlapping leaves once). Measured on lavapipe against the
-    // supersampled reference, precision/recall: 0.924/0.956 at 15 m, 0.915/0.794 at 45 m,
+    // supersampled reference, precision/recall: 0.925/0.957 at 15 m, 0.915/0.791 at 45 m,
     // 0.960/0.713 at 120 m (a 14-pixel-tall tree); the full mesh at 1x 0.922/0.967, 0.886/0.970
     // and 0.919/0.901 (its sub-pixel leaves are each all or nothing).
     for (distance, (precision, recall), (full_precision, full_recall)) in rows {
@@ -283,9 +283,10 @@ fn streaming_with_a_tiny_budget_shows_coarser_data_never_holes_and_converges() {
     // The selection needs about 1 MB: at 48 KiB a frame, many frames are clamped.
     assert!(frames > 10, "{frames} frames");
     // Clamped frames draw coarser data over the same canopy: no holes open. Coarse points carry the
-    // expected coverage of their leaves, so the canopy is thinner until the finer data arrives
-    // (0.745 of the pixels at worst, measured on lavapipe), never empty.
-    assert!(worst_recall > 0.7, "a clamped frame covers {worst_recall:.3} of the full image's pixels");
+    // expected coverage of their leaves along the view (their facing, spec §6.5.1), so the canopy
+    // is thinner until the finer data arrives (0.688 of the pixels at worst, measured on lavapipe;
+    // 0.745 with every disc its mean area), never empty.
+    assert!(worst_recall > 0.65, "a clamped frame covers {worst_recall:.3} of the full image's pixels");
     eprintln!("converged after {frames} frames; worst recall {worst_recall:.3}");
 }
 
