@@ -607,14 +607,23 @@ fn the_1_12_every_kind_file_has_every_kind_and_the_added_techniques_calibration(
     // Without CALIBRATION_ADDED and CALIBRATION_ELEVATIONS_ADDED it is the 1.11 file, record for
     // record, and the writer marks it 1.11: a 1.11 reader sees the same tables, without the
     // octahedral impostor's.
-    let v1_11 =
-        ContainerData::from_container(&Container::open(golden_dir_of(11).join("every-kind-zstd.treelod")).unwrap());
-    let mut data = ContainerData::from_container(&c);
-    data.calibration_added.clear();
-    data.calibration_elevations_added.clear();
-    assert!(data == v1_11, "v1_12 is v1_11 with the added techniques' calibration");
+    is_the_previous_file_with(&c, 12, |data| {
+        data.calibration_added.clear();
+        data.calibration_elevations_added.clear();
+    });
+}
+
+/// Asserts that `c`, the every-kind golden file of 1.`minor`, is that of 1.`minor − 1` record for
+/// record once `without` removes what `minor` added, and that the writer then marks it
+/// 1.`minor − 1`.
+fn is_the_previous_file_with(c: &Container, minor: u16, without: impl FnOnce(&mut ContainerData)) {
+    let name = "every-kind-zstd.treelod";
+    let previous = ContainerData::from_container(&Container::open(golden_dir_of(minor - 1).join(name)).unwrap());
+    let mut data = ContainerData::from_container(c);
+    without(&mut data);
+    assert!(data == previous, "v1_{minor} is v1_{} with what {minor} adds", minor - 1);
     let bytes = data.to_bytes(Compression::None).unwrap();
-    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 11);
+    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, minor - 1);
 }
 
 #[test]
@@ -637,13 +646,7 @@ fn the_1_13_every_kind_file_has_every_kind_and_the_octahedral_depth_planes() {
     assert_eq!((report.octahedral, report.octahedral_depth), (octahedral.len() as u64, u64::from(views)));
     // Without OCTAHEDRAL_DEPTH it is the 1.12 file, record for record, and the writer marks it
     // 1.12: a 1.12 reader draws the same impostors, each view the plane through its centre.
-    let v1_12 =
-        ContainerData::from_container(&Container::open(golden_dir_of(12).join("every-kind-zstd.treelod")).unwrap());
-    let mut data = ContainerData::from_container(&c);
-    data.octahedral_depth.clear();
-    assert!(data == v1_12, "v1_13 is v1_12 with the octahedral views' depth planes");
-    let bytes = data.to_bytes(Compression::None).unwrap();
-    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 12);
+    is_the_previous_file_with(&c, 13, |data| data.octahedral_depth.clear());
 }
 
 #[test]
@@ -660,13 +663,7 @@ fn the_1_14_every_kind_file_has_every_kind_and_the_points_facing() {
     assert_eq!(verify(&c).unwrap().point_facing, points.len() as u64);
     // Without POINT_FACING it is the 1.13 file, record for record, and the writer marks it 1.13:
     // a 1.13 reader draws the same points, each covering its mean share from every direction.
-    let v1_13 =
-        ContainerData::from_container(&Container::open(golden_dir_of(13).join("every-kind-zstd.treelod")).unwrap());
-    let mut data = ContainerData::from_container(&c);
-    data.point_facing.clear();
-    assert!(data == v1_13, "v1_14 is v1_13 with the points' facing");
-    let bytes = data.to_bytes(Compression::None).unwrap();
-    assert_eq!(Container::from_bytes(&bytes).unwrap().header().minor, 13);
+    is_the_previous_file_with(&c, 14, |data| data.point_facing.clear());
 }
 
 /// The small 1.13 file: one octahedral impostor of 2 × 2 views and their four depth planes, view
