@@ -245,7 +245,7 @@ fn union_radius(l: &Node, r: &Node, extent: f32) -> f32 {
 /// `v` is `Σ A_i |n_i · v|`; modelled as a mixture of a plane facing `normal` (projecting
 /// `2|normal · v|` times the mean) and an isotropic part (the mean), with the mixture's weight
 /// `f` of the plane set so that it projects `Σ A_i |n_i · normal|` along `normal`: `f = 2m − 1`.
-/// The renderer scales a sub-pixel splat's coverage by `1 − f + 2f |normal · v|` (spec §10.1),
+/// The renderer draws the disc with its area scaled by `1 − f + 2f |normal · v|` (spec §6.5.1),
 /// whose mean over directions is 1. A patch of a closed surface seen face on then covers the
 /// pixels behind it, and seen edge on no more than its sliver, where the mean made face-on
 /// patches of closed crowns half transparent and their rims too dense.

@@ -396,10 +396,10 @@ pub fn encode_point_facing(f: f32) -> u8 {
     encode_ao(f)
 }
 
-/// The factor on a point's disc coverage seen along a direction at cosine `cos` to its normal
-/// (spec §6.5.1): `1 − f + 2f·|cos|` for the stored facing byte `stored` (`f = stored/255`),
-/// whose mean over directions is 1; 1 for `f = 0` (no `POINT_FACING`: the disc covers its mean
-/// share from every direction).
+/// The factor on the area of a point's disc seen along a direction at cosine `cos` to its normal
+/// (spec §6.5.1; its radius takes the square root): `1 − f + 2f·|cos|` for the stored facing
+/// byte `stored` (`f = stored/255`), whose mean over directions is 1; 1 for `f = 0` (no
+/// `POINT_FACING`: the disc has its mean area from every direction).
 #[must_use]
 pub fn point_facing_scale(stored: u8, cos: f32) -> f32 {
     let f = f32::from(stored) / 255.0;
