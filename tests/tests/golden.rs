@@ -616,6 +616,7 @@ fn the_1_12_every_kind_file_has_every_kind_and_the_added_techniques_calibration(
 /// Asserts that `c`, the every-kind golden file of 1.`minor`, is that of 1.`minor − 1` record for
 /// record once `without` removes what `minor` added, and that the writer then marks it
 /// 1.`minor − 1`.
+#[expect(clippy::unwrap_used, reason = "a test helper")]
 fn is_the_previous_file_with(c: &Container, minor: u16, without: impl FnOnce(&mut ContainerData)) {
     let name = "every-kind-zstd.treelod";
     let previous = ContainerData::from_container(&Container::open(golden_dir_of(minor - 1).join(name)).unwrap());
