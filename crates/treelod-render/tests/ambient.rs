@@ -11,14 +11,14 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, gpu, keep, one_tree};
+use common::{gpu, keep, one_tree, settled};
 use glam::{Vec3, vec3};
 use treelod_build::scene::{AlphaMode, Material, Part, Scene};
 use treelod_build::{AoConfig, BuildConfig, EllipsoidConfig, ImpostorConfig, Placed, build_block};
 use treelod_format::{Compression, Container, ContainerData, SectionKind, material_class};
 use treelod_render::Primitive;
-use treelod_render::offscreen::{Gpu, Image, render_image};
-use treelod_render::{Camera, Renderer, Settings, Technique};
+use treelod_render::offscreen::Image;
+use treelod_render::{Camera, Settings, Technique};
 
 /// Half the box's side, metres.
 const BOX: f32 = 1.0;
@@ -230,19 +230,6 @@ fn a_quad_inside_a_closed_box_is_fully_occluded_in_the_container() {
     let plain = open(&out.data);
     assert!(plain.vertex_ao().is_empty() && plain.point_ao().is_empty());
     assert!(plain.sections().iter().all(|s| s.kind().since_minor() < 2 || s.kind() == SectionKind::POINT_FACING));
-}
-
-/// Renders frames of `renderer` until every prefix it wants is resident (at most 4).
-fn settled(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) -> (Image, treelod_render::FrameStats) {
-    let mut frame = render_image(gpu, renderer, camera, BACKGROUND).expect("renders");
-    for _ in 0..3 {
-        if frame.1.ranges_clamped == 0 {
-            break;
-        }
-        frame = render_image(gpu, renderer, camera, BACKGROUND).expect("renders");
-    }
-    assert_eq!(frame.1.ranges_clamped, 0, "everything is resident");
-    frame
 }
 
 /// The mean RGB of the pixels within `radius` of the image's centre.

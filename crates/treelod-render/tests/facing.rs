@@ -9,12 +9,12 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{BACKGROUND, count, covered, gpu};
+use common::{count, covered, gpu, one_tree, open_verified, settled};
 use glam::{Vec3, vec3};
 use treelod_build::scene::{AlphaMode, Material, Part, Scene};
 use treelod_build::{BuildConfig, Placed, build_block};
-use treelod_format::{Compression, Container, ContainerData};
-use treelod_render::offscreen::render_image;
+use treelod_format::{Container, ContainerData};
+use treelod_render::offscreen::Gpu;
 use treelod_render::{Camera, Primitive, Settings, Technique};
 
 /// Leaf quads along each side of the sheet.
@@ -54,27 +54,20 @@ fn sheet() -> Scene {
     }
 }
 
-fn open(data: &ContainerData) -> Arc<Container> {
-    Arc::new(Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
-}
-
 /// Pixels covered by the sheet seen from `eye`, drawn with `technique`.
-fn covered_pixels(container: &Arc<Container>, technique: Technique, gpu_selection: bool, eye: Vec3) -> usize {
-    let gpu = gpu();
-    let mut renderer = common::one_tree(&gpu, container, Settings { technique, ..Settings::default() });
+fn covered_pixels(
+    gpu: &Gpu,
+    container: &Arc<Container>,
+    technique: Technique,
+    gpu_selection: bool,
+    eye: Vec3,
+) -> usize {
+    let mut renderer = one_tree(gpu, container, Settings { technique, ..Settings::default() });
     if gpu_selection {
         renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("fits");
     }
     let camera = Camera::look_at(eye, Vec3::ZERO, 0.8, SIZE, SIZE);
-    let mut frame = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
-    for _ in 0..3 {
-        if frame.1.ranges_clamped == 0 {
-            break;
-        }
-        frame = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
-    }
-    let (image, stats) = frame;
-    assert_eq!(stats.ranges_clamped, 0, "everything is resident");
+    let (image, stats) = settled(gpu, &mut renderer, &camera);
     assert_eq!(stats.gpu_selection, gpu_selection);
     if technique == Technique::Spt && !gpu_selection {
         assert!(
@@ -95,18 +88,19 @@ fn sub_pixel_splats_cover_what_the_sheet_covers_from_every_direction() {
     // Every point of the flat sheet faces along its normal: f = 1.
     assert_eq!(data.point_facing.len(), data.points.len());
     assert!(data.point_facing.iter().all(|&f| f == 255), "{:?}", data.point_facing);
-    let with = open(&data);
-    let without = open(&ContainerData { point_facing: Vec::new(), ..data });
+    let with = open_verified(&data);
+    let without = open_verified(&ContainerData { point_facing: Vec::new(), ..data });
+    let gpu = gpu();
 
     let grazing = 75f32.to_radians();
     let views =
         [("face on", vec3(0.0, 0.0, DISTANCE)), ("75° off", DISTANCE * vec3(grazing.sin(), 0.0, grazing.cos()))];
     let mut ratios = Vec::new();
     for (name, eye) in views {
-        let mesh = covered_pixels(&with, Technique::Full, false, eye);
-        let facing = covered_pixels(&with, Technique::Spt, false, eye);
-        let facing_gpu = covered_pixels(&with, Technique::Spt, true, eye);
-        let mean = covered_pixels(&without, Technique::Spt, false, eye);
+        let mesh = covered_pixels(&gpu, &with, Technique::Full, false, eye);
+        let facing = covered_pixels(&gpu, &with, Technique::Spt, false, eye);
+        let facing_gpu = covered_pixels(&gpu, &with, Technique::Spt, true, eye);
+        let mean = covered_pixels(&gpu, &without, Technique::Spt, false, eye);
         eprintln!(
             "{name}: mesh {mesh} pixels, splats with facing {facing} (GPU selection {facing_gpu}), without {mean}"
         );

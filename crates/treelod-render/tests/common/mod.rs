@@ -239,6 +239,19 @@ pub fn one_cell_block(name: &str, triangle: Option<[Vec3; 3]>) -> ContainerData 
     data
 }
 
+/// Renders frames of `renderer` until every prefix it wants is resident (at most 4).
+pub fn settled(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) -> (Image, FrameStats) {
+    let mut frame = render_image(gpu, renderer, camera, BACKGROUND).expect("renders");
+    for _ in 0..3 {
+        if frame.1.ranges_clamped == 0 {
+            break;
+        }
+        frame = render_image(gpu, renderer, camera, BACKGROUND).expect("renders");
+    }
+    assert_eq!(frame.1.ranges_clamped, 0, "everything is resident");
+    frame
+}
+
 /// `data` written uncompressed and opened; it must verify.
 pub fn open_verified(data: &ContainerData) -> Arc<Container> {
     let container = Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens");
