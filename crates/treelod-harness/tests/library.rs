@@ -111,8 +111,12 @@ fn bench_flies_a_tiny_forest_through_the_library() {
             TechniqueName::Technique(Technique::Impostors),
         ],
         quality: Some(bench::Quality::Supersampled(2)),
+        sheet_frames: vec![2, 0],
         ..bench::Options::default()
     };
+    let past = bench::Options { sheet_frames: vec![3], ..options.clone() };
+    let error = bench::run(&past).err().expect("a sheet frame past the path");
+    assert!(error.to_string().contains("frame 3 of the contact sheet is past the path"), "{error}");
     let report = bench::run(&options).expect("flies");
     assert_eq!(report.frames.len(), 3);
     assert_eq!(report.forest.trees.len(), 30);
@@ -125,6 +129,20 @@ fn bench_flies_a_tiny_forest_through_the_library() {
     let csv = dir.path().join("b.csv");
     report.write_csv(&csv).expect("csv");
     report.write_plot(&dir.path().join("b.png")).expect("plot");
-    let text = report.text([&Some(csv), &None, &None]);
+    // The contact sheet keeps its frames in path order, each with the reference and spt (the
+    // full mesh is counted, not drawn): 2 rows of 3 panels.
+    let frames: Vec<usize> = report.sheet.iter().map(|f| f.frame).collect();
+    assert_eq!(frames, [0, 2]);
+    for frame in &report.sheet {
+        let drawn: Vec<TechniqueName> = frame.techniques.iter().map(|t| t.0).collect();
+        assert_eq!(drawn, [TechniqueName::Technique(Technique::Spt)]);
+        assert_eq!((frame.reference.0.width, frame.reference.0.height), (96, 54));
+    }
+    let image = eval::output::sheet(report.size, &report.sheet);
+    assert_eq!((image.width, image.height), (3 * 96 + 2 * 2, 2 * 54 + 2));
+    let sheet = dir.path().join("sheet.png");
+    report.write_sheet(&sheet).expect("sheet");
+    let text = report.text([&Some(csv), &None, &None, &Some(sheet)]);
     assert!(text.contains("technique impostors: absent"), "{text}");
+    assert!(text.contains("(frames 0, 2; columns: reference, then each technique drawn"), "{text}");
 }

@@ -116,6 +116,15 @@ pub struct Args {
     /// milliseconds, and Q with --quality, along the path.
     #[arg(long, value_name = "PATH")]
     pub plot: Option<PathBuf>,
+    /// With --quality, write a PNG contact sheet: per frame of --sheet-frames a row of the
+    /// reference, then each technique drawn and its difference (red: false positive pixels,
+    /// blue: false negatives, grey: colour error ×4), as `treelod eval --sheet` lays it out.
+    #[arg(long, value_name = "PATH", requires = "quality")]
+    pub sheet: Option<PathBuf>,
+    /// The contact sheet's frames, indices along the path separated by commas (the CSV's
+    /// `frame`), at most 8; default: 4 spread over the path, first and last included.
+    #[arg(long, value_name = "FRAMES", value_delimiter = ',', requires = "sheet")]
+    pub sheet_frames: Vec<usize>,
 }
 
 impl Args {
@@ -149,13 +158,18 @@ impl Args {
             s_min: self.thresholds.s_min,
             s_max: self.thresholds.s_max,
             background: self.background,
+            sheet_frames: match (&self.sheet, self.sheet_frames.is_empty()) {
+                (None, _) => Vec::new(),
+                (Some(_), true) => treelod_harness::eval::spread_frames(self.frames as usize, 4),
+                (Some(_), false) => self.sheet_frames.clone(),
+            },
         }
     }
 }
 
 /// Runs `treelod bench`.
 pub fn run(args: &Args) -> Result<(), Failed> {
-    let outputs = [&args.csv, &args.json, &args.plot];
+    let outputs = [&args.csv, &args.json, &args.plot, &args.sheet];
     treelod_harness::write::check_outputs(outputs.into_iter().flatten().map(PathBuf::as_path))
         .map_err(|e| failed(&e))?;
     let progress = progress_bar();
@@ -173,8 +187,12 @@ pub fn run(args: &Args) -> Result<(), Failed> {
             return Err(failed(&e));
         }
     };
-    let written: [(&Option<PathBuf>, Writer); 3] =
-        [(&args.csv, Report::write_csv), (&args.json, Report::write_json), (&args.plot, Report::write_plot)];
+    let written: [(&Option<PathBuf>, Writer); 4] = [
+        (&args.csv, Report::write_csv),
+        (&args.json, Report::write_json),
+        (&args.plot, Report::write_plot),
+        (&args.sheet, Report::write_sheet),
+    ];
     for (file, write) in written {
         if let Some(file) = file {
             write(&report, file).map_err(|e| failed(&e))?;
@@ -236,5 +254,12 @@ mod tests {
         assert!(args.is_err(), "--no-render conflicts with --quality");
         let args = BenchCli::try_parse_from(["bench", "--quality", "--supersample", "2"]).expect("parses").args;
         assert_eq!(args.options().quality, Some(Quality::Supersampled(2)));
+        // The contact sheet: 4 frames spread over the path unless named; it needs --quality.
+        let args = BenchCli::try_parse_from(["bench", "--frames", "30", "--quality", "--sheet", "s.png"]);
+        assert_eq!(args.expect("parses").args.options().sheet_frames, [0, 10, 19, 29]);
+        let args = ["bench", "--quality", "--sheet", "s.png", "--sheet-frames", "13,19"];
+        assert_eq!(BenchCli::try_parse_from(args).expect("parses").args.options().sheet_frames, [13, 19]);
+        assert!(BenchCli::try_parse_from(["bench", "--sheet", "s.png"]).is_err(), "--sheet without --quality");
+        assert!(BenchCli::try_parse_from(["bench", "--quality", "--sheet-frames", "1"]).is_err(), "no --sheet");
     }
 }

@@ -13,7 +13,7 @@
 //! runtime's selection with both thresholds at zero (what `Technique::Full` draws), run over
 //! the forest in chunks so that even 10^6 instances need little memory.
 //!
-//! The tables, CSV, JSON and plot are in [`output`].
+//! The tables, CSV, JSON, plot and contact sheet are in [`output`].
 
 pub mod forest;
 pub mod output;
@@ -37,7 +37,7 @@ use treelod_eval::MetricError;
 
 use crate::Error;
 use crate::eval::metrics::{Coverage, LinearImage, Mask, flip::mean_flip, multiscale_rmse, temporal_noise};
-use crate::eval::{Adapter, Availability, TechniqueName};
+use crate::eval::{Adapter, Availability, SheetFrame, TechniqueName};
 use crate::offscreen::{clear_colour, settle_streaming};
 use crate::scene;
 
@@ -99,12 +99,20 @@ pub struct Options {
     pub s_max: Option<f32>,
     /// Background, sRGB: with `quality`, pixels of it count as not covered.
     pub background: [u8; 3],
+    /// Frames (indices along the path) whose images to keep for a contact sheet
+    /// ([`Report::sheet`]): the reference's and each drawn technique's. Needs `quality`; at most
+    /// [`SHEET_FRAMES_MAX`], each less than `frames`.
+    pub sheet_frames: Vec<usize>,
 }
+
+/// Frames of a contact sheet at most ([`Options::sheet_frames`]).
+pub const SHEET_FRAMES_MAX: usize = 8;
 
 impl Default for Options {
     /// The defaults of `treelod bench`: the built-in forest of 10,000 trees, 360 frames at
     /// 1536×864, layout seed 1, a 50° field of view, `full` and `spt`, drawn, no GPU selection,
-    /// shadows or quality, the renderer's thresholds and policy, a white background.
+    /// shadows or quality, the renderer's thresholds and policy, a white background, no contact
+    /// sheet.
     fn default() -> Self {
         Self {
             inputs: Vec::new(),
@@ -122,6 +130,7 @@ impl Default for Options {
             s_min: None,
             s_max: None,
             background: [255; 3],
+            sheet_frames: Vec::new(),
         }
     }
 }
@@ -157,6 +166,18 @@ impl Options {
         }
         if matches!(self.quality, Some(Quality::Supersampled(k)) if !(1..=16).contains(&k)) {
             return bad("the supersampling factor must be 1 to 16");
+        }
+        if !self.sheet_frames.is_empty() && self.quality.is_none() {
+            return bad("a contact sheet needs --quality (its images are the reference and each technique's)");
+        }
+        if self.sheet_frames.len() > SHEET_FRAMES_MAX {
+            return bad(&format!("a contact sheet holds {SHEET_FRAMES_MAX} frames at most"));
+        }
+        if let Some(&frame) = self.sheet_frames.iter().find(|&&f| f >= self.frames as usize) {
+            return bad(&format!(
+                "frame {frame} of the contact sheet is past the path, whose frames are 0 to {}",
+                self.frames - 1
+            ));
         }
         Ok(())
     }
@@ -333,6 +354,9 @@ pub struct Report {
     pub techniques: Vec<(TechniqueName, Availability)>,
     /// One row per frame and measured technique, frame by frame.
     pub rows: Vec<Row>,
+    /// The contact sheet's frames ([`Options::sheet_frames`], in path order, each once): the
+    /// reference and every technique drawn (`full`, counted, is not).
+    pub sheet: Vec<SheetFrame>,
     /// Seconds the whole run took (models, layout, warm-up and frames).
     pub seconds: f64,
 }
@@ -388,9 +412,9 @@ struct Flown {
 impl Report {
     /// The report as text: the heading, the techniques not measured, the table of means per
     /// technique, the seconds the run took and, last, `written`: the files written, as
-    /// `treelod bench` prints it (in the order CSV, JSON, plot).
+    /// `treelod bench` prints it (in the order CSV, JSON, plot, contact sheet).
     #[must_use]
-    pub fn text(&self, written: [&Option<PathBuf>; 3]) -> String {
+    pub fn text(&self, written: [&Option<PathBuf>; 4]) -> String {
         output::text(self, written)
     }
 
@@ -416,6 +440,16 @@ impl Report {
     /// As [`Report::write_json`].
     pub fn write_plot(&self, path: &Path) -> Result<(), Error> {
         crate::write::png(path, &output::plot(self))
+    }
+
+    /// Writes the contact sheet (a PNG: per kept frame the reference, then each technique drawn
+    /// and its difference, as `treelod eval --sheet` lays it out; empty without
+    /// [`Options::sheet_frames`]) to `path`.
+    ///
+    /// # Errors
+    /// As [`Report::write_json`].
+    pub fn write_sheet(&self, path: &Path) -> Result<(), Error> {
+        crate::write::png(path, &crate::eval::output::sheet(self.size, &self.sheet))
     }
 }
 
@@ -585,8 +619,10 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
     // `flown`'s order), for temporal noise.
     let mut previous_reference: Option<LinearImage> = None;
     let mut previous: Vec<Option<LinearImage>> = vec![None; flown.len()];
+    let mut sheet = Vec::new();
     for (index, frame) in frames.iter().enumerate() {
         progress(index, frames.len());
+        let mut sheet_techniques = Vec::new();
         let view = camera(frame, 1);
         // The reference: the full mesh, streaming settled, drawn K times larger.
         let mut reference_shot: Option<((LinearImage, Mask), Option<f64>)> = None;
@@ -689,10 +725,22 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                         row.noise = Some(temporal_noise(&image, last).map_err(internal)?);
                         row.reference_noise = reference_noise;
                     }
+                    if options.sheet_frames.contains(&index) {
+                        sheet_techniques.push((technique, image.clone(), mask));
+                    }
                     previous[slot] = Some(image);
                 }
             }
             rows.push(row);
+        }
+        if let Some(((image, mask), _)) = &reference_shot
+            && options.sheet_frames.contains(&index)
+        {
+            sheet.push(SheetFrame {
+                frame: index,
+                reference: (image.clone(), mask.clone()),
+                techniques: sheet_techniques,
+            });
         }
         previous_reference = reference_shot.map(|((image, _), _)| image);
     }
@@ -710,6 +758,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
         timestamps: gpu.as_ref().is_some_and(|g| g.device.features().contains(wgpu::Features::TIMESTAMP_QUERY)),
         techniques,
         rows,
+        sheet,
         seconds: started.elapsed().as_secs_f64(),
     };
     Ok(report)

@@ -261,7 +261,7 @@ fn forest_line(report: &Report) -> String {
 /// The report as text: the forest, the path, the adapter and timing, absent techniques, the
 /// summary table, the files written.
 #[must_use]
-pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
+pub fn text(report: &Report, files: [&Option<PathBuf>; 4]) -> String {
     let (w, h) = report.size;
     let mut out = String::new();
     let _ = writeln!(out, "forest: {}", forest_line(report));
@@ -409,9 +409,18 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 3]) -> String {
             .collect();
         let _ = writeln!(out, "{technique} drew its trees with: {}", parts.join("; "));
     }
-    for (what, file) in ["csv", "json", "plot"].into_iter().zip(files) {
+    for (what, file) in ["csv", "json", "plot", "sheet"].into_iter().zip(files) {
         if let Some(file) = file {
-            let _ = writeln!(out, "{what}: {}", file.display());
+            let _ = write!(out, "{what}: {}", file.display());
+            if what == "sheet" {
+                let frames: Vec<String> = report.sheet.iter().map(|f| f.frame.to_string()).collect();
+                let _ = write!(
+                    out,
+                    " (frames {}; columns: reference, then each technique drawn and its difference)",
+                    frames.join(", ")
+                );
+            }
+            out.push('\n');
         }
     }
     out

@@ -849,12 +849,20 @@ fn cameras(options: &Options, path_poses: Option<Vec<Pose>>, bounds: (Vec3, Vec3
 
 /// Up to [`SHEET_FRAMES`] frames spread evenly over `count`, first and last included.
 fn sheet_frames(count: usize) -> Vec<usize> {
-    if count <= SHEET_FRAMES {
-        return (0..count).collect();
+    spread_frames(count, SHEET_FRAMES)
+}
+
+/// Up to `n` frames spread evenly over `count`, first and last included where `n` ≥ 2 (one
+/// frame: the first): the contact sheets' default frames (`treelod eval --sheet`, `treelod bench
+/// --sheet`).
+#[must_use]
+pub fn spread_frames(count: usize, n: usize) -> Vec<usize> {
+    if count <= n || n < 2 {
+        return (0..count.min(n)).collect();
     }
-    // round(i · (count − 1) / (SHEET_FRAMES − 1))
-    let steps = SHEET_FRAMES - 1;
-    let mut frames: Vec<usize> = (0..SHEET_FRAMES).map(|i| (2 * i * (count - 1) + steps) / (2 * steps)).collect();
+    // round(i · (count − 1) / (n − 1))
+    let steps = n - 1;
+    let mut frames: Vec<usize> = (0..=steps).map(|i| (2 * i * (count - 1) + steps) / (2 * steps)).collect();
     frames.dedup();
     frames
 }
@@ -910,5 +918,8 @@ mod tests {
         assert_eq!(sheet_frames(3), [0, 1, 2]);
         assert_eq!(sheet_frames(24), [0, 8, 15, 23]);
         assert_eq!(sheet_frames(5), [0, 1, 3, 4]);
+        assert_eq!(spread_frames(30, 4), [0, 10, 19, 29]);
+        assert_eq!(spread_frames(30, 1), [0]);
+        assert_eq!(spread_frames(30, 0), Vec::<usize>::new());
     }
 }

@@ -8,7 +8,7 @@ use serde::Serialize;
 use treelod_render::offscreen::Image;
 
 use super::metrics::{self, Coverage, LinearImage, Mask};
-use super::{Adapter, Availability, Report, Row, TechniqueName, TextureBytes};
+use super::{Adapter, Availability, Report, Row, SheetFrame, TechniqueName, TextureBytes};
 use crate::table::{Align, Table};
 use treelod_render::{Primitive, Technique};
 
@@ -673,9 +673,18 @@ pub fn difference(reference: (&LinearImage, &Mask), sample: (&LinearImage, &Mask
 /// image and its [`difference`]; panels separated by grey lines.
 #[must_use]
 pub fn contact_sheet(report: &Report) -> Image {
-    let (w, h) = report.size;
-    let columns = 1 + 2 * report.sheet.first().map_or(0, |f| f.techniques.len()) as u32;
-    let rows = report.sheet.len().max(1) as u32;
+    sheet(report.size, &report.sheet)
+}
+
+/// A contact sheet of `frames`, images of `size` pixels (also `treelod bench --sheet`'s): one row
+/// per frame; the reference, then per technique its image and its [`difference`]; panels
+/// separated by grey lines. A row with fewer techniques than the widest leaves its last panels
+/// grey.
+#[must_use]
+pub fn sheet(size: (u32, u32), frames: &[SheetFrame]) -> Image {
+    let (w, h) = size;
+    let columns = 1 + 2 * frames.iter().map(|f| f.techniques.len()).max().unwrap_or(0) as u32;
+    let rows = frames.len().max(1) as u32;
     let width = columns * w + (columns - 1) * GAP;
     let height = rows * h + (rows - 1) * GAP;
     let mut rgba: Vec<u8> = [GAP_GREY, GAP_GREY, GAP_GREY, 255].repeat(width as usize * height as usize);
@@ -689,7 +698,7 @@ pub fn contact_sheet(report: &Report) -> Image {
     };
     let srgb =
         |image: &LinearImage| -> Vec<[u8; 3]> { image.pixels.iter().map(|p| p.map(metrics::linear_to_srgb)).collect() };
-    for (row, frame) in report.sheet.iter().enumerate() {
+    for (row, frame) in frames.iter().enumerate() {
         let row = row as u32;
         let (reference, reference_mask) = (&frame.reference.0, &frame.reference.1);
         put(row, 0, &srgb(reference));
