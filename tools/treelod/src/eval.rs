@@ -71,6 +71,12 @@ pub struct Args {
     /// containers' calibration tables measured it; 0 keeps the best image the tables know.
     #[arg(long, value_name = "ERROR", default_value_t = treelod_render::Policy::DEFAULT_TARGET, value_parser = crate::render::parse_target)]
     pub policy_target: f32,
+    /// The `prune-opt` and `prune-cook` techniques keep this fixed fraction λ of each cell's
+    /// leaves (most important first, scaled by s_opt or 1/λ) on every tree at every distance,
+    /// instead of the container's λ(h): both at equal geometry, or, over several runs, the λ
+    /// each needs to reach a quality (Neubert et al.'s comparison).
+    #[arg(long, value_name = "LAMBDA", value_parser = crate::render::parse_fraction)]
+    pub prune_lambda: Option<f32>,
     /// Write one CSV row per frame and technique.
     #[arg(long, value_name = "PATH")]
     pub csv: Option<PathBuf>,
@@ -135,6 +141,7 @@ impl Args {
             lines: !self.no_lines,
             level_blend: self.level_blend,
             policy: treelod_render::Policy { target: self.policy_target, ..treelod_render::Policy::default() },
+            prune_lambda: self.prune_lambda,
             sheet: self.sheet.is_some(),
         }
     }
@@ -147,6 +154,19 @@ impl Args {
 
 /// Runs `treelod eval`.
 pub fn run(args: &Args) -> Result<(), Failed> {
+    let prunes = |t: &TechniqueName| {
+        matches!(
+            t,
+            TechniqueName::Technique(treelod_harness::Technique::PruneOpt | treelod_harness::Technique::PruneCook)
+        )
+    };
+    if args.prune_lambda.is_some() && !args.technique.iter().any(prunes) {
+        clap::Error::raw(
+            clap::error::ErrorKind::ArgumentConflict,
+            "--prune-lambda needs prune-opt or prune-cook among --technique\n",
+        )
+        .exit();
+    }
     treelod_harness::write::check_outputs(args.outputs().into_iter().flatten().map(PathBuf::as_path))
         .map_err(|e| failed(&e))?;
     let progress = progress_bar();

@@ -888,6 +888,28 @@ fn build_with_pruning_writes_the_lists_dump_shows_them_and_the_report_compares_o
     };
     assert_eq!(leaves(&stdout(&all)), container.prune_leaves().len() as u64, "λ = 1 draws every leaf");
     assert!(leaves(&line) < container.prune_leaves().len() as u64, "{line}");
+    // eval with a fixed λ: a quarter of the leaves draws fewer primitives than all of them, and
+    // a fixed λ without a pruning technique to apply it to is refused.
+    let eval_primitives = |lambda: &str| -> u64 {
+        let csv = dir.join(format!("eval-{lambda}.csv"));
+        let csv_str = csv.to_str().expect("UTF-8 path");
+        let args = ["eval", out_str, "--views", "1", "--size", "96x72", "--supersample", "1"];
+        let run =
+            treelod(&[&args[..], &["--technique", "prune-opt", "--prune-lambda", lambda, "--csv", csv_str]].concat());
+        assert!(run.status.success(), "stderr: {}", String::from_utf8_lossy(&run.stderr));
+        let text = std::fs::read_to_string(&csv).expect("the CSV");
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+        let column = header.iter().position(|&c| c == "primitives").expect("a primitives column");
+        let row = lines.find(|l| l.contains(",prune-opt,")).expect("a prune-opt row");
+        row.split(',').nth(column).and_then(|n| n.parse().ok()).expect("a count")
+    };
+    let (quarter, every) = (eval_primitives("0.25"), eval_primitives("1"));
+    assert!(quarter < every, "λ 0.25: {quarter} primitives, λ 1: {every}");
+    let refused = treelod(&["eval", out_str, "--views", "1", "--technique", "spt", "--prune-lambda", "0.5"]);
+    assert_eq!(refused.status.code(), Some(2), "a usage error");
+    let message = String::from_utf8_lossy(&refused.stderr);
+    assert!(message.contains("--prune-lambda needs prune-opt or prune-cook among --technique"), "{message}");
     // Without --prune nothing is pruned, and a quality outside [0, 1] is a usage error.
     let plain = dir.join("plain.treelod");
     let run = Command::new(env!("CARGO_BIN_EXE_treelod")).arg("build").arg(&model).arg("-o").arg(&plain).output();

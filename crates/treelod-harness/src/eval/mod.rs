@@ -100,6 +100,10 @@ pub struct Options {
     pub level_blend: f32,
     /// `policy`: the policy the renderer chooses each tree's representation with (its target).
     pub policy: Policy,
+    /// `prune-opt` and `prune-cook`: a fixed fraction `λ` of each cell's leaves, in (0, 1], on
+    /// every tree at every distance instead of the container's `λ(h)` (`Pruning::lambda`), so
+    /// that the two are compared at equal geometry or the `λ` each needs for a quality is found.
+    pub prune_lambda: Option<f32>,
     /// Keep the images of up to 4 frames spread over the path for a contact sheet
     /// ([`Report::sheet`], [`output::contact_sheet`]).
     pub sheet: bool,
@@ -109,7 +113,7 @@ impl Options {
     /// The defaults of `treelod eval` for `input`: 8 views, `full`, `full-1x` and `spt`,
     /// 640×480, the reference supersampled 4 times, a 50° field of view, a white background, no
     /// MSAA, the renderer's thresholds, impostors morphing with the chain's bark, ellipsoids with
-    /// lines blending over half an octave, no contact sheet.
+    /// lines blending over half an octave, pruning by the containers' `λ(h)`, no contact sheet.
     #[must_use]
     pub fn new(input: impl Into<PathBuf>) -> Self {
         Self {
@@ -128,6 +132,7 @@ impl Options {
             lines: true,
             level_blend: 0.5,
             policy: Policy::default(),
+            prune_lambda: None,
             sheet: false,
         }
     }
@@ -138,8 +143,9 @@ impl Options {
         settings.s_min = self.s_min.unwrap_or(settings.s_min);
         settings.s_max = self.s_max.unwrap_or(settings.s_max);
         // The pruning techniques prune every tree at every distance (no point tree for
-        // small ones), with the container's λ(h), the occlusion factor and hysteresis.
-        settings.pruning = Pruning { spt_below_pixels: 0.0, ..Pruning::default() };
+        // small ones), with the container's λ(h) (or the fixed λ asked for), the occlusion
+        // factor and hysteresis.
+        settings.pruning = Pruning { spt_below_pixels: 0.0, lambda: self.prune_lambda, ..Pruning::default() };
         // Impostors: the leaves of every tree with planes as planes, its bark as the renderer's
         // default draws it (branch lines where the container has them) unless asked otherwise.
         settings.impostor_morph = self.impostor_morph;
@@ -163,6 +169,16 @@ impl Options {
         }
         if !matches!(self.msaa, 1 | 4) {
             return bad("MSAA samples must be 1 or 4");
+        }
+        if let Some(lambda) = self.prune_lambda {
+            if !(lambda > 0.0 && lambda <= 1.0) {
+                return bad("a fixed λ of pruning must be a fraction in (0, 1]");
+            }
+            let prunes =
+                |t: &TechniqueName| matches!(t, TechniqueName::Technique(Technique::PruneOpt | Technique::PruneCook));
+            if !self.techniques.iter().any(prunes) {
+                return bad("a fixed λ of pruning needs prune-opt or prune-cook among the techniques");
+            }
         }
         if !(self.fov_degrees > 0.0 && self.fov_degrees < 180.0) {
             return bad("the field of view must be between 0 and 180 degrees");
