@@ -287,6 +287,9 @@ struct Quad {
     /// The rectangle of the atlas (`min`, `max`) outside which it is empty (an octahedral
     /// impostor's view past its cell); `None` for a quad textured all over.
     window: Option<(Vec2, Vec2)>,
+    /// Mip levels finer than the pixel's footprint it is sampled from: 1 for an octahedral
+    /// impostor's view (as `octahedral_texel` samples it), 0 for planes and billboards.
+    finer: f32,
 }
 
 /// A quad's corners in its axes, in [`Quad::corners`] order: `(−1, −1)` at `uv_min`, then
@@ -304,6 +307,7 @@ impl Quad {
             image,
             uvs: QUAD_CORNERS.map(|(s, t)| lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo)),
             window: None,
+            finer: 0.0,
         }
     }
 }
@@ -833,8 +837,8 @@ impl<'a> Scene<'a> {
     }
 
     /// `quad` textured by its atlas rectangle as `quad_texel` in `shaders/tree/planes.wgsl`
-    /// samples it (bilinear in the stored mip level nearest to its footprint, alpha tested at one
-    /// half: the atlas's mips keep the covered fraction), lit as `vs_plane` lights it (the quad's
+    /// samples it (bilinear in the stored mip level nearest to its footprint, or [`Quad::finer`]
+    /// levels finer, alpha tested at one half: the atlas's mips keep the covered fraction), lit as `vs_plane` lights it (the quad's
     /// normal and the diffuse response of its leaves) with ambient occlusion `ao`, on the pixels whose [`level_dither`] value lies in `keep` (`from ≤ h <
     /// to`, the cross-fade of `vs_plane`; [`EVERY_PIXEL`] for all).
     fn quad(&self, canvas: &mut Canvas, view: &View, quad: &Quad, ao: f32, keep: (f32, f32)) {
@@ -846,7 +850,7 @@ impl<'a> Scene<'a> {
         let [a, b, c, e] = [0, 1, 2, 3].map(|i| corner(quad.corners[i], quad.uvs[i]));
         for [a, b, c] in [[a, b, c], [a, c, e]] {
             let (p, uvs, depths) = ([a.0, b.0, c.0], [a.1, b.1, c.1], [a.2, b.2, c.2]);
-            let lod = texel_footprint(p, uvs, texels).max(1e-6).log2();
+            let lod = texel_footprint(p, uvs, texels).max(1e-6).log2() - quad.finer;
             triangle_pixels(canvas.size(), p, |x, y, w| {
                 let z = depths[0] * w[0] + depths[1] * w[1] + depths[2] * w[2];
                 if !canvas.nearer(x, y, z) || !kept(keep, x, y) {
@@ -940,6 +944,7 @@ impl<'a> Scene<'a> {
                     image: record.image,
                     uvs,
                     window: Some((origin, origin + cell)),
+                    finer: 1.0,
                 };
                 self.quad(canvas, view, &quad, record.occlusion, (from, to));
             }

@@ -189,6 +189,58 @@ fn the_octahedral_impostor_covers_the_full_mesh_from_every_direction_above_the_h
     }
 }
 
+/// The octahedral impostor filters its views from the mip level one finer than the pixel's
+/// footprint (spec §6.13.1, `octahedral_texel`): with every level of the atlas painted an opaque
+/// colour of its own, a tree seen from where the views' texels are 4 to a pixel (level 2) shows
+/// level 1's colour. (Sampled at the footprint's own level, as before, it showed level 2's.)
+#[test]
+fn the_octahedral_impostor_samples_its_views_one_level_finer_than_the_pixels() {
+    let gpu = gpu();
+    let container = demo_with_baselines();
+    let [record] = container.octahedral() else { panic!("one tree") };
+    let mut data = ContainerData::from_container(&container);
+    let index = record.image as usize;
+    let mut image = data.images[index];
+    assert!(image.mip_count >= 3, "{image:?}");
+    // Level 1 green, level 2 red, the others blue; raw RGBA8 appended to the image data.
+    let colour = |level: u32| match level {
+        1 => [0u8, 255, 0, 255],
+        2 => [255, 0, 0, 255],
+        _ => [0, 0, 255, 255],
+    };
+    let mut texels = Vec::new();
+    for level in 0..image.mip_count {
+        let (w, h) = image.level_size(level);
+        texels.extend(colour(level).repeat((w * h) as usize));
+    }
+    let offset = data.image_data.len().next_multiple_of(16);
+    data.image_data.resize(offset, 0);
+    data.image_data.extend_from_slice(&texels);
+    image.format = treelod_format::image_format::RGBA8_SRGB;
+    image.data_offset = offset as u64;
+    image.data_length = texels.len() as u64;
+    data.images[index] = image;
+    let painted = Arc::new(Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens"));
+    // A view's square spans 2·radius metres over its cell's texels; the distance that puts 4 of
+    // them on a pixel of a 192-pixel image with a 0.8 rad field of view.
+    let (lo, hi) =
+        (treelod_format::pack::unpack_unorm16x2(record.uv_min), treelod_format::pack::unpack_unorm16x2(record.uv_max));
+    let cell_texels = (hi[0] - lo[0]) / record.frames as f32 * image.width as f32;
+    let pixels = 192.0f32;
+    let distance = 4.0 * pixels * 2.0 * record.radius / (cell_texels * 2.0 * 0.4f32.tan());
+    let centre = Vec3::from_array(record.center);
+    let mut octahedral = renderer(&gpu, &painted, Technique::Octahedral);
+    let eye = centre + distance * vec3(0.3f32.sin(), 0.2, 0.3f32.cos()).normalize();
+    let cam = Camera::look_at(eye, centre, 0.8, pixels as u32, pixels as u32);
+    let (shot, _) = render_image(&gpu, &mut octahedral, &cam, BACKGROUND).expect("renders");
+    let covered: Vec<[u8; 4]> =
+        shot.rgba.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).filter(|p| p[..3] != [255, 255, 255]).collect();
+    assert!(covered.len() > 20, "the impostor covers {} pixels", covered.len());
+    let dominant = |c: usize| covered.iter().filter(|p| p[c] > p[(c + 1) % 3].max(p[(c + 2) % 3])).count();
+    let (red, green, blue) = (dominant(0), dominant(1), dominant(2));
+    assert!(green > 9 * (red + blue), "level 1 (green) {green} pixels, level 2 (red) {red}, others (blue) {blue}");
+}
+
 /// The views' depth planes (spec §6.13.2): seen in perspective from 3 radii, each view drawn on
 /// the plane of the surfaces it shows covers what the full mesh covers better than drawn on the
 /// plane through the centre (the same file without the section), from the side and from above.
