@@ -409,20 +409,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 4]) -> String {
             .collect();
         let _ = writeln!(out, "{technique} drew its trees with: {}", parts.join("; "));
     }
-    for (what, file) in ["csv", "json", "plot", "sheet"].into_iter().zip(files) {
-        if let Some(file) = file {
-            let _ = write!(out, "{what}: {}", file.display());
-            if what == "sheet" {
-                let frames: Vec<String> = report.sheet.iter().map(|f| f.frame.to_string()).collect();
-                let _ = write!(
-                    out,
-                    " (frames {}; columns: reference, then each technique drawn and its difference)",
-                    frames.join(", ")
-                );
-            }
-            out.push('\n');
-        }
-    }
+    crate::eval::output::files_written(&mut out, &["csv", "json", "plot", "sheet"], &files, &report.sheet);
     out
 }
 

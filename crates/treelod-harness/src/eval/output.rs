@@ -437,21 +437,29 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 6]) -> String {
         }
         out.push_str(&table.render(""));
     }
-    for (what, file) in ["csv", "json", "sheet", "quality plot", "frame plot", "band plot"].into_iter().zip(files) {
+    let names = ["csv", "json", "sheet", "quality plot", "frame plot", "band plot"];
+    files_written(&mut out, &names, &files, &report.sheet);
+    out
+}
+
+/// The lines naming the files written, `what: path`, in the order of `names` and `files` (those
+/// not asked for skipped); the `sheet` line adds the frames of `sheet` and its columns (also
+/// `treelod bench`'s).
+pub(crate) fn files_written(out: &mut String, names: &[&str], files: &[&Option<PathBuf>], sheet: &[SheetFrame]) {
+    for (what, file) in names.iter().zip(files) {
         if let Some(file) = file {
             let _ = write!(out, "{what}: {}", file.display());
-            if what == "sheet" {
-                let frames: Vec<String> = report.sheet.iter().map(|f| f.frame.to_string()).collect();
+            if *what == "sheet" {
+                let frames: Vec<String> = sheet.iter().map(|f| f.frame.to_string()).collect();
                 let _ = write!(
                     out,
-                    " (frames {}; columns: reference, then each technique and its difference)",
+                    " (frames {}; columns: reference, then each technique drawn and its difference)",
                     frames.join(", ")
                 );
             }
             out.push('\n');
         }
     }
-    out
 }
 
 /// The texture bytes `technique` samples ([`TextureBytes`]); none for a technique the report
