@@ -213,7 +213,7 @@ fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_ind
 // uniform control flow, from the mip level one finer than the pixel's footprint: the levels keep
 // the covered area (coverage-preserving alpha), but a level whose texels are as large as the
 // pixels or larger blurs the crown's gaps before the test, which then draws them as solid blobs
-// (a far tree lost 4-11 % of the reference's ink along `eval --orbit` from 16 to 64 radii); a
+// (a lone pine lost 3-11 % of the reference's ink, mean of 4 views, from 16 to 64 radii); a
 // level finer keeps the gaps, as the leaves' own stochastic coverage does. Measured: 200 oaks in
 // `bench --quality` RMSE .01816 -> .01763, FLIP .03550 -> .03372 (the point tree's .01847,
 // .03412), 200 pines .01923 -> .01818, .04063 -> .03852, 200 Quaternius trees .01235 ->
