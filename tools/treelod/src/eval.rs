@@ -154,13 +154,7 @@ impl Args {
 
 /// Runs `treelod eval`.
 pub fn run(args: &Args) -> Result<(), Failed> {
-    let prunes = |t: &TechniqueName| {
-        matches!(
-            t,
-            TechniqueName::Technique(treelod_harness::Technique::PruneOpt | treelod_harness::Technique::PruneCook)
-        )
-    };
-    if args.prune_lambda.is_some() && !args.technique.iter().any(prunes) {
+    if args.prune_lambda.is_some() && !args.technique.iter().any(|t| t.prunes()) {
         clap::Error::raw(
             clap::error::ErrorKind::ArgumentConflict,
             "--prune-lambda needs prune-opt or prune-cook among --technique\n",

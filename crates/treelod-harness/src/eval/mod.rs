@@ -174,9 +174,7 @@ impl Options {
             if !(lambda > 0.0 && lambda <= 1.0) {
                 return bad("a fixed λ of pruning must be a fraction in (0, 1]");
             }
-            let prunes =
-                |t: &TechniqueName| matches!(t, TechniqueName::Technique(Technique::PruneOpt | Technique::PruneCook));
-            if !self.techniques.iter().any(prunes) {
+            if !self.techniques.iter().any(|t| t.prunes()) {
                 return bad("a fixed λ of pruning needs prune-opt or prune-cook among the techniques");
             }
         }
@@ -252,6 +250,13 @@ impl TechniqueName {
             Self::Full1x => Some(Technique::Full),
             Self::Policy => None,
         }
+    }
+
+    /// Whether this name prunes leaves at run time ([`Technique::PruneOpt`],
+    /// [`Technique::PruneCook`]): those a fixed λ ([`Options::prune_lambda`]) applies to.
+    #[must_use]
+    pub fn prunes(self) -> bool {
+        matches!(self, Self::Technique(t) if treelod_render::prune_scale(t).is_some())
     }
 }
 
@@ -915,6 +920,19 @@ mod tests {
             let expected = if t.needs().is_some() { "absent" } else { "measured" };
             assert_eq!(availability(TechniqueName::Technique(t), none, CONTAINER).status(), expected);
         }
+    }
+
+    #[test]
+    fn a_fixed_lambda_applies_to_the_names_that_prune_and_needs_one_of_them() {
+        let pruning: Vec<&str> = TechniqueName::ALL.iter().filter(|t| t.prunes()).map(|t| t.name()).collect();
+        assert_eq!(pruning, ["prune-opt", "prune-cook"]);
+        let options = |techniques: Vec<TechniqueName>| Options {
+            techniques,
+            prune_lambda: Some(0.5),
+            ..Options::new("forest.treelod")
+        };
+        assert!(options(vec![TechniqueName::Technique(Technique::PruneCook)]).check().is_ok());
+        assert!(options(vec![TechniqueName::Technique(Technique::Spt), TechniqueName::Policy]).check().is_err());
     }
 
     #[test]
