@@ -22,7 +22,7 @@ use treelod_format::{
 
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
 use crate::atlas_format::AtlasFormat;
-use crate::billboard::{Billboards, build_billboards};
+use crate::billboard::{Billboards, OctahedralConfig, build_billboards};
 use crate::calibrate::CalibrationConfig;
 use crate::classify::{ClassifyOptions, classify};
 use crate::ellipsoid::{CellEllipsoids, EllipsoidConfig, EllipsoidMesh, Ellipsoids, build_ellipsoids};
@@ -185,6 +185,7 @@ pub fn recorded_settings(config: &BuildConfig, grid: [u32; 3]) -> Vec<Setting> {
         settings.extend(chain.settings());
         if config.impostors.is_some() {
             settings.push(Setting { key: "baselines.billboards".into(), value: "facing,crossed,octahedral".into() });
+            settings.extend(chain.octahedral.settings());
         }
     }
     settings.push(Setting { key: "precision".into(), value: config.precision.setting() });
@@ -999,6 +1000,7 @@ fn assemble(
                 vertex_ao.as_deref(),
                 trees,
                 &impostors.texels_per_tree,
+                &chain_config.octahedral,
             )?;
             clock.lap(&mut stats, "billboards");
         }
@@ -1509,7 +1511,8 @@ fn surfaces<'a>(
 
 /// The baseline billboards and octahedral impostors of a block ([`crate::billboard`]): every
 /// triangle of each tree, bark and leaves, baked with its source material, at `budget` texels per
-/// tree; the impostors' occlusion from `vertex_ao` where there is some.
+/// tree, the octahedral impostors as `octahedral` says; the impostors' occlusion from
+/// `vertex_ao` where there is some.
 fn block_billboards(
     material_keys: &[(usize, usize, Class)],
     tris: &[Tri],
@@ -1517,6 +1520,7 @@ fn block_billboards(
     vertex_ao: Option<&[f32]>,
     trees: &[Placed<'_>],
     budget: &[u64],
+    octahedral: &OctahedralConfig,
 ) -> Result<Option<Billboards>, BuildError> {
     let default_material = Material::default();
     let surfaces = surfaces(material_keys, trees, &default_material);
@@ -1536,7 +1540,7 @@ fn block_billboards(
         &ImpostorMesh { vertices, triangles: &all, surfaces: &surfaces, occlusion: &occlusion },
         tree_count,
         budget,
-        true,
+        Some(octahedral),
     )
 }
 

@@ -34,7 +34,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use treelod_format::{
-    BillboardRecord, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, billboard_kind, pack,
+    BillboardRecord, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, billboard_kind, pack,
 };
 
 use crate::error::BuildError;
@@ -43,7 +43,8 @@ use crate::impostor::{
     compose, diffuse_item, diffuse_mixture, diffuse_moments, may_cover, seen_triangle_occlusion, shelf_pack,
 };
 
-/// Views per side of a tree's octahedral impostor (spec §6.13.1): 16 × 16 views over the upper
+/// Views per side of a tree's octahedral impostor by default ([`OctahedralConfig::views`], spec
+/// §6.13.1): 16 × 16 views over the upper
 /// hemisphere, 60 along the horizon (6° apart) and 7.5 steps from the horizon to straight above
 /// (12°). Between views the silhouette differs (no view is the one seen), which is most of an
 /// impostor's error far away: measured with `eval --orbit 2,8,32` on the oak and the pine, 16 × 16
@@ -51,12 +52,66 @@ use crate::impostor::{
 /// texture memory (at 8–32 px, −9 % and +6 %).
 pub const OCTAHEDRAL_FRAMES: u32 = 16;
 
-/// Texels per side of an octahedral view's cell (a multiple of 16, the atlas's alignment; its
+/// Texels per side of an octahedral view's cell by default ([`OctahedralConfig::texels`]; a
+/// multiple of 16, the atlas's alignment; its
 /// content is the cell less a 4-texel gutter on each side), before any shrinking: a tree up to
 /// about 88 pixels high on screen keeps a texel per pixel, 2.36 M texels per tree before mips. Where the atlas would exceed
 /// [`MAX_ATLAS`], cells shrink by 3/4 steps (to multiples of 16, 32 at least) as the billboards'
 /// budgets do.
 pub const OCTAHEDRAL_CELL: u32 = 96;
+
+/// How each tree's octahedral impostor is baked (`treelod build --octahedral-views`,
+/// `--octahedral-texels`): what impostor bakers let an artist trade, the views' density against
+/// the atlas's texels. The atlas of one tree holds `(views · texels)²` texels before mips (2.36 M
+/// by default); where the block's atlas would pass [`MAX_ATLAS`] texels a side, cells shrink in
+/// 3/4 steps (to multiples of 16, 32 at least).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct OctahedralConfig {
+    /// Views per side of the hemi-octahedral grid (`frames`, spec §6.13.1), `2..=64`. Default
+    /// [`OCTAHEDRAL_FRAMES`].
+    pub views: u32,
+    /// Texels per side of a view's cell, a gutter of 4 on each side included: a multiple of 16
+    /// in `32..=256`. Default [`OCTAHEDRAL_CELL`].
+    pub texels: u32,
+}
+
+impl Default for OctahedralConfig {
+    fn default() -> Self {
+        Self { views: OCTAHEDRAL_FRAMES, texels: OCTAHEDRAL_CELL }
+    }
+}
+
+impl OctahedralConfig {
+    /// Checks the ranges documented on the fields.
+    ///
+    /// # Errors
+    /// [`BuildError::Setting`] naming the field.
+    pub fn validate(&self) -> Result<(), BuildError> {
+        if !(2..=64).contains(&self.views) {
+            return Err(BuildError::Setting(format!(
+                "octahedral views {}: 2 to 64 views per side of the grid",
+                self.views
+            )));
+        }
+        if !(32..=256).contains(&self.texels) || !self.texels.is_multiple_of(ALIGN) {
+            return Err(BuildError::Setting(format!(
+                "octahedral texels {}: a multiple of {ALIGN} from 32 to 256 texels per side of a view",
+                self.texels
+            )));
+        }
+        Ok(())
+    }
+
+    /// The settings to record in the container's metadata (spec §7.1):
+    /// `baselines.octahedral_views` and `baselines.octahedral_texels`.
+    #[must_use]
+    pub fn settings(&self) -> Vec<Setting> {
+        vec![
+            Setting { key: "baselines.octahedral_views".into(), value: self.views.to_string() },
+            Setting { key: "baselines.octahedral_texels".into(), value: self.texels.to_string() },
+        ]
+    }
+}
 
 /// Samples per texel side of an octahedral view (a billboard's 4): 144 views of a tree
 /// cost 144 passes over its triangles, and a view stands for a tree a few dozen pixels high.
@@ -114,7 +169,7 @@ struct Job {
 
 /// Bakes the facing and crossed billboards of each of `trees` trees from `mesh`, whose triangles
 /// are all of the block's (bark and leaves) with their tree set (see the module documentation),
-/// and with `octahedral` each tree's octahedral impostor: [`OCTAHEDRAL_FRAMES`]² views, each
+/// and with `octahedral` each tree's octahedral impostor: [`OctahedralConfig::views`]² views, each
 /// baked as a billboard is, along [`OctahedralRecord::view_direction`] onto a square of the
 /// tree's bounding sphere about the centre of its bounds, laid out in a grid of cells of the same
 /// atlas (spec §6.13.1); its `occlusion` is the tree's triangles' as seen from outside
@@ -132,8 +187,11 @@ pub fn build_billboards(
     mesh: &ImpostorMesh<'_>,
     trees: u32,
     budget_texels: &[u64],
-    octahedral: bool,
+    octahedral: Option<&OctahedralConfig>,
 ) -> Result<Option<Billboards>, BuildError> {
+    if let Some(config) = octahedral {
+        config.validate()?;
+    }
     if mesh.triangles.is_empty() {
         return Ok(None);
     }
@@ -162,7 +220,7 @@ pub fn build_billboards(
         let centre = 0.5 * (lo + hi);
         let radius = corners().map(|p| (p.x - centre.x).hypot(p.z - centre.z)).fold(0.0f64, f64::max).max(5e-4);
         let half_height = (0.5 * (hi.y - lo.y)).max(5e-4);
-        if octahedral {
+        if octahedral.is_some() {
             spheres.push((tree, centre, corners().map(|p| (p - centre).length()).fold(0.0f64, f64::max).max(5e-4)));
         }
         let v = DVec3::new(0.0, half_height, 0.0);
@@ -190,7 +248,7 @@ pub fn build_billboards(
     // Stage: region sizes from the budgets, and their packing, shrinking until it fits: the
     // billboards' regions, then each octahedral impostor's grid as one region.
     let mut scale = 1.0f64;
-    let mut cell = OCTAHEDRAL_CELL;
+    let OctahedralConfig { views, texels: mut cell } = octahedral.copied().unwrap_or_default();
     let (mut regions, width, height) = loop {
         let mut regions: Vec<Region> = jobs
             .iter()
@@ -201,7 +259,7 @@ pub fn build_billboards(
                 Region::new(tw, th)
             })
             .collect();
-        let grid = OCTAHEDRAL_FRAMES * cell;
+        let grid = views * cell;
         regions.extend(spheres.iter().map(|_| Region::new(grid - 2 * GUTTER, grid - 2 * GUTTER)));
         let (width, height) = pack_tight(&mut regions);
         if (width <= MAX_ATLAS && height <= MAX_ATLAS) || scale < 1e-9 {
@@ -215,9 +273,9 @@ pub fn build_billboards(
     let grids: Vec<Region> = regions.split_off(jobs.len());
     let view_content = cell - 2 * GUTTER;
     for (&(tree, centre, radius), grid) in spheres.iter().zip(&grids) {
-        for j in 0..OCTAHEDRAL_FRAMES {
-            for i in 0..OCTAHEDRAL_FRAMES {
-                let d = OctahedralRecord::view_direction(OCTAHEDRAL_FRAMES, i, j);
+        for j in 0..views {
+            for i in 0..views {
+                let d = OctahedralRecord::view_direction(views, i, j);
                 let (right, up) = OctahedralRecord::view_basis(d);
                 let (right, up) = (Vec3::from_array(right).as_dvec3(), Vec3::from_array(up).as_dvec3());
                 jobs.push(Job {
@@ -328,7 +386,7 @@ pub fn build_billboards(
         .zip(&grids)
         .map(|(&(tree, centre, radius), grid)| {
             let (w, h) = (f64::from(width), f64::from(height));
-            let side = f64::from(OCTAHEDRAL_FRAMES * cell);
+            let side = f64::from(views * cell);
             let (x, y) = (f64::from(grid.x), f64::from(grid.y));
             #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]; metres")]
             let record = OctahedralRecord {
@@ -337,10 +395,10 @@ pub fn build_billboards(
                 image: 0,
                 uv_min: pack::unorm16x2((x / w) as f32, (y / h) as f32),
                 uv_max: pack::unorm16x2(((x + side) / w) as f32, ((y + side) / h) as f32),
-                frames: OCTAHEDRAL_FRAMES,
+                frames: views,
                 tree,
                 occlusion: tree_occlusion(mesh, &placed[tree as usize]),
-                diffuse: tree_diffuse(mesh, &placed[tree as usize]),
+                diffuse: tree_diffuse(mesh, &placed[tree as usize], views),
                 reserved: 0,
             };
             record
@@ -373,13 +431,14 @@ fn tree_occlusion(mesh: &ImpostorMesh<'_>, triangles: &[(u32, [DVec3; 3])]) -> f
 
 /// How a tree's `triangles` take the sun as its octahedral views show them (spec §6.13.1): the
 /// mixture of [`diffuse_mixture`] whose `|n·d|` has the mean and mean square of the triangles'
-/// (each weighted as [`diffuse_item`] weighs it), averaged over the directions `d` of the views.
-fn tree_diffuse(mesh: &ImpostorMesh<'_>, triangles: &[(u32, [DVec3; 3])]) -> PlaneDiffuseRecord {
+/// (each weighted as [`diffuse_item`] weighs it), averaged over the directions `d` of the
+/// `frames × frames` views.
+fn tree_diffuse(mesh: &ImpostorMesh<'_>, triangles: &[(u32, [DVec3; 3])], frames: u32) -> PlaneDiffuseRecord {
     let items: Vec<(DVec3, f64)> = triangles.iter().map(|&(t, corners)| diffuse_item(mesh, t, corners)).collect();
     let (mut m1, mut m2, mut views) = (0.0, 0.0, 0.0);
-    for j in 0..OCTAHEDRAL_FRAMES {
-        for i in 0..OCTAHEDRAL_FRAMES {
-            let d = Vec3::from_array(OctahedralRecord::view_direction(OCTAHEDRAL_FRAMES, i, j)).as_dvec3();
+    for j in 0..frames {
+        for i in 0..frames {
+            let d = Vec3::from_array(OctahedralRecord::view_direction(frames, i, j)).as_dvec3();
             if let Some((a, b)) = diffuse_moments(d, &items) {
                 (m1, m2, views) = (m1 + a, m2 + b, views + 1.0);
             }
@@ -483,7 +542,7 @@ mod tests {
         let materials = materials();
         let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
         let mesh = ImpostorMesh { vertices, triangles, surfaces: &surfaces, occlusion: &[] };
-        build_billboards(&mesh, trees, budget, false).unwrap().unwrap()
+        build_billboards(&mesh, trees, budget, None).unwrap().unwrap()
     }
 
     /// The content rectangle of a record in level 0: `(x0, y0, x1, y1)`, texels.
@@ -546,7 +605,7 @@ mod tests {
         let materials = materials();
         let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
         let mesh = ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &[] };
-        let out = build_billboards(&mesh, 2, &[20_000, 20_000], true).unwrap().unwrap();
+        let out = build_billboards(&mesh, 2, &[20_000, 20_000], Some(&OctahedralConfig::default())).unwrap().unwrap();
         let n = OCTAHEDRAL_FRAMES as usize;
         assert_eq!(out.octahedral_depth.len(), 2 * n * n, "every view of each impostor");
         let plane = |tree: usize, i: usize, j: usize| {
@@ -570,9 +629,16 @@ mod tests {
     /// Each tree's octahedral impostor: its grid of square cells in the atlas, the bounding
     /// sphere's square in each cell's content, and the views as the spec maps them: from the
     /// horizon at `+Z` the red card in front, from `−Z` the blue one, from `+X` both cards edge on
-    /// (nothing), the cells' borders transparent.
+    /// (nothing), the cells' borders transparent; with the default views and texels and with
+    /// others (`--octahedral-views`, `--octahedral-texels`).
     #[test]
     fn octahedral_views_show_the_tree_from_their_directions() {
+        for config in [OctahedralConfig::default(), OctahedralConfig { views: 7, texels: 48 }] {
+            octahedral_views_as_configured(config);
+        }
+    }
+
+    fn octahedral_views_as_configured(config: OctahedralConfig) {
         let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
         tree(&mut vertices, &mut triangles, 0.0, 0);
         tree(&mut vertices, &mut triangles, 5.0, 1);
@@ -581,10 +647,10 @@ mod tests {
         let occlusion: Vec<f32> = (0..triangles.len()).map(|t| if t < 6 { 0.5 } else { 0.0 }).collect();
         let mesh =
             ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &occlusion };
-        let out = build_billboards(&mesh, 2, &[20_000, 20_000], true).unwrap().unwrap();
+        let out = build_billboards(&mesh, 2, &[20_000, 20_000], Some(&config)).unwrap().unwrap();
         assert_eq!(out.records.len(), 8, "the billboards as without");
         assert_eq!(out.octahedral.len(), 2);
-        let n = OCTAHEDRAL_FRAMES;
+        let n = config.views;
         for (k, r) in out.octahedral.iter().enumerate() {
             let dx = 5.0 * k as f32;
             assert_eq!((r.tree, r.frames, r.image, r.reserved), (k as u32, n, 0, 0));
@@ -593,7 +659,7 @@ mod tests {
             let c = Vec3::new(dx, 2.0, 0.15);
             assert!(Vec3::from_array(r.center).abs_diff_eq(c, 1e-6), "{r:?}");
             let sphere = (1.0f32 + 4.0 + 0.45 * 0.45).sqrt();
-            let (cell, content) = (OCTAHEDRAL_CELL as f32, (OCTAHEDRAL_CELL - 2 * GUTTER) as f32);
+            let (cell, content) = (config.texels as f32, (config.texels - 2 * GUTTER) as f32);
             assert!((r.radius - sphere * cell / content).abs() < 1e-4, "{r:?}");
             // Tree 0's triangles are half occluded, tree 1's open.
             assert!((r.occlusion - if k == 0 { 0.5 } else { 0.0 }).abs() < 1e-6, "{r:?}");
@@ -603,7 +669,7 @@ mod tests {
                 let (w, h) = (out.atlas.width as f32, out.atlas.height as f32);
                 ((u0 * w).round() as u32, (v0 * h).round() as u32, (u1 * w).round() as u32, (v1 * h).round() as u32)
             };
-            let c = OCTAHEDRAL_CELL;
+            let c = config.texels;
             assert_eq!((x1 - x0, y1 - y0), (n * c, n * c), "{r:?}");
             assert_eq!((x0 % ALIGN, y0 % ALIGN), (0, 0));
             assert_eq!(out.octahedral_texels[k], u64::from(n * n * c * c));
@@ -626,6 +692,25 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn octahedral_settings_out_of_range_are_refused() {
+        assert!(OctahedralConfig::default().validate().is_ok());
+        for (views, texels) in [(1, 96), (65, 96), (16, 16), (16, 100), (16, 272), (2, 32), (64, 256)] {
+            let config = OctahedralConfig { views, texels };
+            let valid = (2..=64).contains(&views) && (32..=256).contains(&texels) && texels.is_multiple_of(16);
+            assert_eq!(config.validate().is_ok(), valid, "{config:?}");
+        }
+        let pairs: Vec<(String, String)> =
+            OctahedralConfig::default().settings().into_iter().map(|s| (s.key, s.value)).collect();
+        assert_eq!(
+            pairs,
+            [("baselines.octahedral_views".into(), "16".into()), ("baselines.octahedral_texels".into(), "96".into())]
+        );
+        // The builder refuses a bad configuration before it bakes anything.
+        let empty = ImpostorMesh { vertices: &[], triangles: &[], surfaces: &[], occlusion: &[] };
+        assert!(build_billboards(&empty, 1, &[100], Some(&OctahedralConfig { views: 1, texels: 96 })).is_err());
     }
 
     #[test]
@@ -797,6 +882,6 @@ mod tests {
         let materials = materials();
         let surfaces = [Surface { material: &materials[0], image: None }];
         let empty = ImpostorMesh { vertices: &vertices, triangles: &[], surfaces: &surfaces, occlusion: &[] };
-        assert_eq!(build_billboards(&empty, 1, &[100], true).unwrap(), None);
+        assert_eq!(build_billboards(&empty, 1, &[100], Some(&OctahedralConfig::default())).unwrap(), None);
     }
 }

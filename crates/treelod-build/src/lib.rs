@@ -36,6 +36,7 @@ pub use assemble::{
     ellipsoid_report, prune_report, recorded_settings,
 };
 pub use atlas_format::AtlasFormat;
+pub use billboard::OctahedralConfig;
 pub use calibrate::CalibrationConfig;
 pub use demo::{DemoTreeConfig, cards_on_planes, demo_tree, leaf_material};
 pub use ellipsoid::{Clustering, EllipsoidConfig, Ellipsoids};

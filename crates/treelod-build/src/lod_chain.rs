@@ -101,6 +101,7 @@ use treelod_format::pack::oct_decode;
 use treelod_format::{Setting, VertexRecord};
 use treelod_runtime::impostor::BARK_AREA_KEPT;
 
+use crate::billboard::OctahedralConfig;
 use crate::error::BuildError;
 
 /// Default shares of a tree's source triangles, finest level first.
@@ -140,11 +141,15 @@ pub struct LodChainConfig {
     /// the source has it, and the bark simplified as that fraction's level simplifies it (module
     /// documentation). Default `true`; `false` gives the chain as gltfpack makes it.
     pub bark_first: bool,
+    /// How each tree's octahedral impostor is baked, where the billboards are (with impostors,
+    /// [`crate::BuildConfig::baselines`]): its views and their texels. Default 16 × 16 views of
+    /// 96 texels.
+    pub octahedral: OctahedralConfig,
 }
 
 impl Default for LodChainConfig {
     fn default() -> Self {
-        Self { fractions: DEFAULT_FRACTIONS.to_vec(), bark_first: true }
+        Self { fractions: DEFAULT_FRACTIONS.to_vec(), bark_first: true, octahedral: OctahedralConfig::default() }
     }
 }
 
@@ -164,7 +169,7 @@ impl LodChainConfig {
                 "LoD chain fractions {f:?}: 1 to {MAX_LEVELS} of them, strictly decreasing, each in (0, 1)"
             )));
         }
-        Ok(())
+        self.octahedral.validate()
     }
 
     /// The settings to record in the container's metadata (spec §7.1), e.g.
@@ -539,7 +544,7 @@ mod tests {
         }
 
         fn chain_with(&self, fractions: &[f32], bark_first: bool) -> Vec<ChainLevel> {
-            let config = LodChainConfig { fractions: fractions.to_vec(), bark_first };
+            let config = LodChainConfig { fractions: fractions.to_vec(), bark_first, ..LodChainConfig::default() };
             build_lod_chain(&self.vertices, &self.triangles, &config).expect("valid config")
         }
     }
@@ -792,7 +797,7 @@ mod tests {
             assert!(build_lod_chain(&[], &[], &config).is_err());
         }
         let sixteen: Vec<f32> = (0..16).map(|i| 0.9 / (i as f32 + 1.0)).collect();
-        assert!(LodChainConfig { fractions: sixteen, bark_first: true }.validate().is_ok());
+        assert!(LodChainConfig { fractions: sixteen, ..LodChainConfig::default() }.validate().is_ok());
         let settings = LodChainConfig::default().settings();
         let pairs: Vec<(&str, &str)> = settings.iter().map(|s| (s.key.as_str(), s.value.as_str())).collect();
         assert_eq!(pairs, [("baselines.lod_fractions", "0.5,0.25,0.1,0.05,0.01"), ("baselines.bark_first", "true")]);

@@ -131,8 +131,10 @@ pub struct BuildOptions {
     /// Baselines to compare treelod with (spec §6.12, §6.13; `treelod eval --technique
     /// lod-chain,billboard,crossed`): each tree's discrete LoD chain from meshoptimizer's
     /// simplifiers (the regular one for bark, with the sloppy one as fallback for foliage, as
-    /// gltfpack does) and a camera-facing and a crossed (3 quads) billboard, each baked at the
-    /// texel budget of the tree's impostor planes. Implies --impostors, which set that budget.
+    /// gltfpack does), a camera-facing and a crossed (3 quads) billboard, each baked at the
+    /// texel budget of the tree's impostor planes, and an octahedral impostor (views over the
+    /// upper hemisphere, --octahedral-views and --octahedral-texels). Implies --impostors, which
+    /// set that budget.
     #[arg(long)]
     pub baselines: bool,
     /// With --baselines: the chain's levels as shares of each tree's source triangles, finest
@@ -144,6 +146,16 @@ pub struct BuildOptions {
     /// triangles), so that every level simplifies leaves and bark alike, as gltfpack does.
     #[arg(long, requires = "baselines")]
     pub no_bark_first: bool,
+    /// With --baselines: views per side of each tree's octahedral impostor (spec §6.13.1), so
+    /// N × N views over the upper hemisphere. Denser views differ less from the one seen; the
+    /// atlas grows with N².
+    #[arg(long, value_name = "N", default_value_t = 16, value_parser = clap::value_parser!(u32).range(2..=64), requires = "baselines")]
+    pub octahedral_views: u32,
+    /// With --baselines: texels per side of each octahedral view's cell, a gutter of 4 on each
+    /// side included: a multiple of 16 from 32 to 256. The default keeps a texel per pixel for a
+    /// tree up to about 88 pixels high; the atlas grows with the square.
+    #[arg(long, value_name = "T", default_value_t = 96, value_parser = parse_octahedral_texels, requires = "baselines")]
+    pub octahedral_texels: u32,
     /// Ambient-occlusion rays per vertex (Clasen et al. 2011 §5, spec §6.14): each vertex's
     /// share of the sky that the tree hides, traced through the whole block; points and impostor
     /// planes get the mean of their leaves'. 0 writes no ambient occlusion.
@@ -239,6 +251,10 @@ impl BuildOptions {
             baselines: self.baselines.then(|| treelod_build::LodChainConfig {
                 fractions: self.lod_fractions.0.clone(),
                 bark_first: !self.no_bark_first,
+                octahedral: treelod_build::OctahedralConfig {
+                    views: self.octahedral_views,
+                    texels: self.octahedral_texels,
+                },
             }),
             impostors: (self.impostors || self.baselines).then(|| treelod_build::ImpostorConfig {
                 levels: self.impostor_levels.0.clone(),
@@ -461,6 +477,15 @@ fn parse_fractions(s: &str) -> Result<Fractions, String> {
         return Err(format!("{s:?}: at most 16 levels"));
     }
     Ok(Fractions(fractions))
+}
+
+/// `--octahedral-texels`: a multiple of 16 in 32..=256, the range the build accepts.
+fn parse_octahedral_texels(s: &str) -> Result<u32, String> {
+    s.trim()
+        .parse::<u32>()
+        .ok()
+        .filter(|t| (32..=256).contains(t) && t.is_multiple_of(16))
+        .ok_or_else(|| format!("{s:?} is not a multiple of 16 from 32 to 256"))
 }
 
 /// Parses a quality in [0, 1] (`--prune-quality`).
