@@ -44,20 +44,18 @@ use crate::impostor::{
 };
 
 /// Views per side of a tree's octahedral impostor by default ([`OctahedralConfig::views`], spec
-/// §6.13.1): 16 × 16 views over the upper
-/// hemisphere, 60 along the horizon (6° apart) and 7.5 steps from the horizon to straight above
-/// (12°). Between views the silhouette differs (no view is the one seen), which is most of an
+/// §6.13.1): 16 × 16 views over the upper hemisphere, 60 along the horizon (6° apart) and 7.5
+/// steps from the horizon to straight above (12°). Between views the silhouette differs (no view is the one seen), which is most of an
 /// impostor's error far away: measured with `eval --orbit 2,8,32` on the oak and the pine, 16 × 16
 /// views of 96 texels read 13–14 % less RMSE at 32–128 px than 12 × 12 of 128 texels, the same
 /// texture memory (at 8–32 px, −9 % and +6 %).
 pub const OCTAHEDRAL_FRAMES: u32 = 16;
 
 /// Texels per side of an octahedral view's cell by default ([`OctahedralConfig::texels`]; a
-/// multiple of 16, the atlas's alignment; its
-/// content is the cell less a 4-texel gutter on each side), before any shrinking: a tree up to
-/// about 88 pixels high on screen keeps a texel per pixel, 2.36 M texels per tree before mips. Where the atlas would exceed
-/// [`MAX_ATLAS`], cells shrink by 3/4 steps (to multiples of 16, 32 at least) as the billboards'
-/// budgets do.
+/// multiple of 16, the atlas's alignment; its content is the cell less a 4-texel gutter on each
+/// side), before any shrinking: a tree up to about 88 pixels high on screen keeps a texel per
+/// pixel, 2.36 M texels per tree before mips. Where the atlas would exceed [`MAX_ATLAS`], cells
+/// shrink by 3/4 steps (to multiples of 16, 32 at least) as the billboards' budgets do.
 pub const OCTAHEDRAL_CELL: u32 = 96;
 
 /// How each tree's octahedral impostor is baked (`treelod build --octahedral-views`,
@@ -113,8 +111,8 @@ impl OctahedralConfig {
     }
 }
 
-/// Samples per texel side of an octahedral view (a billboard's 4): 144 views of a tree
-/// cost 144 passes over its triangles, and a view stands for a tree a few dozen pixels high.
+/// Samples per texel side of an octahedral view (a billboard's 4): each view of a tree costs a
+/// pass over its triangles (256 by default), and a view stands for a tree a few dozen pixels high.
 pub const OCTAHEDRAL_SAMPLES: usize = 2;
 
 /// `kind` of an octahedral view's bake job (not a [`billboard_kind`]: views are not billboards).
