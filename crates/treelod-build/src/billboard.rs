@@ -65,11 +65,12 @@ pub const OCTAHEDRAL_CELL: u32 = 96;
 /// 3/4 steps (to multiples of 16, 32 at least).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct OctahedralConfig {
-    /// Views per side of the hemi-octahedral grid (`frames`, spec §6.13.1), `2..=64`. Default
+    /// Views per side of the hemi-octahedral grid (`frames`, spec §6.13.1), in
+    /// [`OctahedralRecord::MIN_FRAMES`]`..=`[`OctahedralRecord::MAX_FRAMES`] (`2..=64`). Default
     /// [`OCTAHEDRAL_FRAMES`].
     pub views: u32,
     /// Texels per side of a view's cell, a gutter of 4 on each side included: a multiple of 16
-    /// in `32..=256`. Default [`OCTAHEDRAL_CELL`].
+    /// in [`Self::MIN_TEXELS`]`..=`[`Self::MAX_TEXELS`] (`32..=256`). Default [`OCTAHEDRAL_CELL`].
     pub texels: u32,
 }
 
@@ -80,21 +81,29 @@ impl Default for OctahedralConfig {
 }
 
 impl OctahedralConfig {
+    /// The fewest texels per side of a view's cell: the least the atlas's shrinking leaves.
+    pub const MIN_TEXELS: u32 = 2 * ALIGN;
+    /// The most texels per side of a view's cell.
+    pub const MAX_TEXELS: u32 = 256;
+
     /// Checks the ranges documented on the fields.
     ///
     /// # Errors
     /// [`BuildError::Setting`] naming the field.
     pub fn validate(&self) -> Result<(), BuildError> {
-        if !(2..=64).contains(&self.views) {
+        let (min_views, max_views) = (OctahedralRecord::MIN_FRAMES, OctahedralRecord::MAX_FRAMES);
+        if !(min_views..=max_views).contains(&self.views) {
             return Err(BuildError::Setting(format!(
-                "octahedral views {}: 2 to 64 views per side of the grid",
+                "octahedral views {}: {min_views} to {max_views} views per side of the grid",
                 self.views
             )));
         }
-        if !(32..=256).contains(&self.texels) || !self.texels.is_multiple_of(ALIGN) {
+        if !(Self::MIN_TEXELS..=Self::MAX_TEXELS).contains(&self.texels) || !self.texels.is_multiple_of(ALIGN) {
             return Err(BuildError::Setting(format!(
-                "octahedral texels {}: a multiple of {ALIGN} from 32 to 256 texels per side of a view",
-                self.texels
+                "octahedral texels {}: a multiple of {ALIGN} from {} to {} texels per side of a view",
+                self.texels,
+                Self::MIN_TEXELS,
+                Self::MAX_TEXELS
             )));
         }
         Ok(())

@@ -1174,6 +1174,11 @@ pub struct OctahedralRecord {
 const _: () = assert!(size_of::<OctahedralRecord>() == 48);
 
 impl OctahedralRecord {
+    /// The fewest views per side of the grid, `frames` (spec §6.13.1).
+    pub const MIN_FRAMES: u32 = 2;
+    /// The most views per side of the grid, `frames` (spec §6.13.1).
+    pub const MAX_FRAMES: u32 = 64;
+
     /// The direction, from the centre towards the viewer (unit, block space, `+Y` up), of view
     /// `(i, j)` of a grid of `frames × frames` (spec §6.13.1): the hemi-octahedral map's point
     /// `a = 2i/(N−1) − 1`, `b = 2j/(N−1) − 1`, `x = (a + b)/2`, `z = (a − b)/2`,

@@ -1047,9 +1047,6 @@ fn check_billboards(billboards: &[BillboardRecord], image_count: usize, tree_cou
     Ok(())
 }
 
-/// Largest number of views per side of an octahedral impostor's grid (spec §6.13.1).
-const MAX_OCTAHEDRAL_FRAMES: u32 = 64;
-
 /// Spec §6.13.1: octahedral impostors' fields (`frames` in `2 ..= 64`, finite `center`, finite
 /// `radius > 0`, an existing image and an atlas rectangle with `uv_min ≤ uv_max`, `tree` in
 /// range, `occlusion` in `[0, 1]`, the diffuse shares at most 1 together), sorted by `tree` with at
@@ -1060,11 +1057,16 @@ fn check_octahedral(records: &[OctahedralRecord], image_count: usize, tree_count
     let kind = SectionKind::OCTAHEDRAL;
     let mut previous: Option<u32> = None;
     for (i, o) in records.iter().enumerate() {
-        if !(2..=MAX_OCTAHEDRAL_FRAMES).contains(&o.frames) {
+        if !(OctahedralRecord::MIN_FRAMES..=OctahedralRecord::MAX_FRAMES).contains(&o.frames) {
             return Err(bad(
                 kind,
                 i,
-                format!("frames {} is outside 2 ..= {MAX_OCTAHEDRAL_FRAMES} (views per side of the grid)", o.frames),
+                format!(
+                    "frames {} is outside {} ..= {} (views per side of the grid)",
+                    o.frames,
+                    OctahedralRecord::MIN_FRAMES,
+                    OctahedralRecord::MAX_FRAMES
+                ),
             ));
         }
         if !finite3(o.center) {

@@ -149,12 +149,12 @@ pub struct BuildOptions {
     /// With --baselines: views per side of each tree's octahedral impostor (spec §6.13.1), so
     /// N × N views over the upper hemisphere. Denser views differ less from the one seen; the
     /// atlas grows with N².
-    #[arg(long, value_name = "N", default_value_t = 16, value_parser = clap::value_parser!(u32).range(2..=64), requires = "baselines")]
+    #[arg(long, value_name = "N", default_value_t = treelod_build::billboard::OCTAHEDRAL_FRAMES, value_parser = parse_octahedral_views, requires = "baselines")]
     pub octahedral_views: u32,
     /// With --baselines: texels per side of each octahedral view's cell, a gutter of 4 on each
     /// side included: a multiple of 16 from 32 to 256. The default keeps a texel per pixel for a
     /// tree up to about 88 pixels high; the atlas grows with the square.
-    #[arg(long, value_name = "T", default_value_t = 96, value_parser = parse_octahedral_texels, requires = "baselines")]
+    #[arg(long, value_name = "T", default_value_t = treelod_build::billboard::OCTAHEDRAL_CELL, value_parser = parse_octahedral_texels, requires = "baselines")]
     pub octahedral_texels: u32,
     /// Ambient-occlusion rays per vertex (Clasen et al. 2011 §5, spec §6.14): each vertex's
     /// share of the sky that the tree hides, traced through the whole block; points and impostor
@@ -479,13 +479,18 @@ fn parse_fractions(s: &str) -> Result<Fractions, String> {
     Ok(Fractions(fractions))
 }
 
-/// `--octahedral-texels`: a multiple of 16 in 32..=256, the range the build accepts.
+/// `--octahedral-views`: in the range the build accepts ([`treelod_build::OctahedralConfig::validate`]).
+fn parse_octahedral_views(s: &str) -> Result<u32, String> {
+    let views = s.trim().parse::<u32>().map_err(|_| format!("{s:?} is not a whole number"))?;
+    treelod_build::OctahedralConfig { views, ..Default::default() }.validate().map_err(|e| e.to_string())?;
+    Ok(views)
+}
+
+/// `--octahedral-texels`: in the range the build accepts ([`treelod_build::OctahedralConfig::validate`]).
 fn parse_octahedral_texels(s: &str) -> Result<u32, String> {
-    s.trim()
-        .parse::<u32>()
-        .ok()
-        .filter(|t| (32..=256).contains(t) && t.is_multiple_of(16))
-        .ok_or_else(|| format!("{s:?} is not a multiple of 16 from 32 to 256"))
+    let texels = s.trim().parse::<u32>().map_err(|_| format!("{s:?} is not a whole number"))?;
+    treelod_build::OctahedralConfig { texels, ..Default::default() }.validate().map_err(|e| e.to_string())?;
+    Ok(texels)
 }
 
 /// Parses a quality in [0, 1] (`--prune-quality`).
