@@ -439,6 +439,9 @@ fn gather(name: &str, trees: &[Placed<'_>], config: &BuildConfig) -> Result<Gath
     if let Some(lines) = &config.lines {
         lines.validate()?;
     }
+    if let Some(baselines) = &config.baselines {
+        baselines.validate()?;
+    }
     let mut stats = BuildStats::default();
     let mut warnings: Vec<String> = Vec::new();
 

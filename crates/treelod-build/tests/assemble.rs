@@ -113,6 +113,16 @@ fn nothing_drawable_is_a_typed_error() {
     let scene = tiny_tree(5);
     let err = build_block("g", &[Placed { scene: &scene, translation: Vec3::ZERO }], &bad_grid, "t").unwrap_err();
     assert!(matches!(err, BuildError::Setting(_)), "{err}");
+    // Baselines whose octahedral impostor asks for one view are refused, naming the setting.
+    let bad_baselines = BuildConfig {
+        baselines: Some(treelod_build::LodChainConfig {
+            octahedral: treelod_build::OctahedralConfig { views: 1, ..Default::default() },
+            ..Default::default()
+        }),
+        ..BuildConfig::default()
+    };
+    let err = build_block("b", &[Placed { scene: &scene, translation: Vec3::ZERO }], &bad_baselines, "t").unwrap_err();
+    assert!(matches!(&err, BuildError::Setting(m) if m.contains("octahedral views 1")), "{err}");
 }
 
 #[test]
