@@ -23,8 +23,8 @@ pub(crate) struct PolicyModels {
     pub(crate) made_for: Option<Policy>,
     /// Per instance: last frame's choice (hysteresis).
     pub(crate) state: PolicyState,
-    /// Scratch: this frame's choice per instance.
-    pub(crate) chosen: Vec<Technique>,
+    /// Scratch: this frame's choice per instance (`None`: outside every view).
+    pub(crate) chosen: Vec<Option<Technique>>,
     /// Per shadow cascade: last frame's choice per instance from the light's view (hysteresis).
     pub(crate) cascade_states: Vec<PolicyState>,
     /// Budget mode ([`Policy::budget`]): what steers the target and `s_min` from frame to frame;
@@ -131,8 +131,9 @@ impl Renderer {
         };
         let chosen = &mut tables.chosen;
         choose_instances_coarsest(&self.instances, &self.lods, &tables.choices, cameras, technique, state, chosen);
-        let chosen = &tables.chosen;
-        out.assign(&self.instances, &self.representations, |i, _| chosen[i]);
+        // Trees outside every view are not chosen, nor listed.
+        let chosen = tables.chosen.iter().enumerate().filter_map(|(i, t)| Some((u32::try_from(i).ok()?, (*t)?)));
+        out.assign_listed(&self.instances, &self.representations, chosen);
     }
 
     /// Each instance's technique from this frame's assignment (read when the draws are

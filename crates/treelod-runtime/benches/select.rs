@@ -134,7 +134,7 @@ struct PolicyFrame<'a> {
     /// Per model, its choices under the policy (made once, as the renderer does per policy).
     choices: Vec<Option<Choices>>,
     state: PolicyState,
-    chosen: Vec<Technique>,
+    chosen: Vec<Option<Technique>>,
     assignment: Assignment,
     draws: TreeDraws,
     /// Pruning's held `λ` per instance, and the visible fractions of the occlusion test (all 1:
@@ -200,8 +200,8 @@ impl<'a> PolicyFrame<'a> {
             &mut self.state,
             &mut self.chosen,
         );
-        let chosen = &self.chosen;
-        self.assignment.assign(self.instances, self.models, |i, _| chosen[i]);
+        let chosen = self.chosen.iter().enumerate().filter_map(|(i, t)| Some((u32::try_from(i).ok()?, (*t)?)));
+        self.assignment.assign_listed(self.instances, self.models, chosen);
         self.draws.clear();
         let scene = Scene { lods: self.lods, models: self.models, instances: self.instances };
         let prune_state = PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction };

@@ -1296,9 +1296,18 @@ pub const CHOOSE_CHUNK: usize = 1024;
 /// Chooses each instance's technique for one frame: the policy's [`Choices`] of its model where
 /// the model has them (`choices[model]`, `None` for a model without calibration tables), else
 /// `otherwise`; `state` keeps the choices for the next frame's hysteresis. The result goes into
-/// [`Assignment::assign`](crate::Assignment), which still checks that each model holds its
-/// technique. `state` also moves each tree's transition on ([`PolicyState::transition`]; none
+/// [`Assignment::assign_listed`](crate::Assignment), which still checks that each model holds
+/// its technique. `state` also moves each tree's transition on ([`PolicyState::transition`]; none
 /// unless it was made [`PolicyState::with_transition`]).
+///
+/// A tree whose culling sphere ([`ModelLod::cull_sphere`], as every technique's selection culls)
+/// lies outside the camera's frustum is not chosen: its entry is `None` and it is forgotten, as
+/// a new tree (no previous technique, no transition, no elevation class), so it comes back into
+/// view with the plain choice at its height and without a transition. No technique would draw
+/// it, and a forest of 10^6 trees has about a tenth of them in view: the choice, the most costly
+/// work per tree of a policy frame, is then made for those alone. (Measured on the shared pine's
+/// container with every representation, `bench --trees 1000000 --no-render --technique policy`,
+/// see `docs/cli.md`.)
 ///
 /// Each instance's choice depends only on it and its own previous choice, so more than
 /// [`CHOOSE_CHUNK`] instances are chosen in chunks on rayon's pool, each writing its own slice:
@@ -1310,14 +1319,15 @@ pub fn choose_instances(
     camera: &Camera,
     otherwise: Technique,
     state: &mut PolicyState,
-    out: &mut Vec<Technique>,
+    out: &mut Vec<Option<Technique>>,
 ) {
     choose_instances_coarsest(instances, lods, choices, std::slice::from_ref(camera), otherwise, state, out);
 }
 
 /// As [`choose_instances`], each tree at the smallest of its projected heights for `cameras`:
 /// for a shadow map, the camera's and the map's own, so a tree casts no more detail than the
-/// screen shows or the map resolves. No camera: every tree at height 0.
+/// screen shows or the map resolves; a tree outside every camera's frustum is not chosen. No
+/// camera: every tree at height 0, none culled.
 pub fn choose_instances_coarsest(
     instances: &[Instance],
     lods: &[ModelLod],
@@ -1325,7 +1335,7 @@ pub fn choose_instances_coarsest(
     cameras: &[Camera],
     otherwise: Technique,
     state: &mut PolicyState,
-    out: &mut Vec<Technique>,
+    out: &mut Vec<Option<Technique>>,
 ) {
     state.previous.resize(instances.len(), None);
     state.transitions.resize(instances.len(), None);
@@ -1333,7 +1343,7 @@ pub fn choose_instances_coarsest(
     state.classes.resize(instances.len(), 0);
     state.elevations.resize(instances.len(), NO_CLASS);
     out.clear();
-    out.resize(instances.len(), otherwise);
+    out.resize(instances.len(), None);
     let frames = state.frames;
     let eyes: Vec<(Vec3, f32, Frustum)> =
         cameras.iter().map(|c| (c.position, c.world_per_pixel(), Frustum::from_view_proj(c.view_proj))).collect();
@@ -1342,12 +1352,21 @@ pub fn choose_instances_coarsest(
                   transitions: &mut [Option<(Technique, u16)>],
                   visible: &[f32],
                   (classes, elevations): (&mut [u8], &mut [u8]),
-                  out: &mut [Technique]| {
+                  out: &mut [Option<Technique>]| {
         let per_instance =
             instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(elevations).zip(out);
         for ((((((instance, previous), transition), &visible), class), elevation), out) in per_instance {
             let m = instance.model as usize;
-            *out = match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
+            if let Some(lod) = lods.get(m)
+                && !in_some_view(lod, instance.transform, &eyes)
+            {
+                *previous = None;
+                *transition = None;
+                *elevation = NO_CLASS;
+                *out = None;
+                continue;
+            }
+            *out = Some(match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                 (Some(lod), Some(choices)) => {
                     // The smallest height and the view that sees it.
                     let (height, eye, frustum) = eyes
@@ -1392,7 +1411,7 @@ pub fn choose_instances_coarsest(
                     *elevation = NO_CLASS;
                     otherwise
                 }
-            };
+            });
         }
     };
     if instances.len() <= CHOOSE_CHUNK {
@@ -1411,6 +1430,18 @@ pub fn choose_instances_coarsest(
         .for_each(|((((((instances, previous), transitions), visible), classes), elevations), out)| {
             choose(instances, previous, transitions, visible, (classes, elevations), out);
         });
+}
+
+/// Whether the culling sphere of a model's block drawn by `transform` meets one of the views'
+/// frustums (every sphere does when there is no view): [`choose_instances_coarsest`]'s cull, the
+/// test each technique's selection makes.
+fn in_some_view(lod: &ModelLod, transform: Mat4, views: &[(Vec3, f32, Frustum)]) -> bool {
+    if views.is_empty() {
+        return true;
+    }
+    let (centre, radius) = lod.cull_sphere();
+    let (centre, radius) = (transform.transform_point3(centre), radius * crate::max_axis_scale(transform));
+    views.iter().any(|(_, _, frustum)| frustum.intersects_sphere(centre, radius))
 }
 
 /// The share of a model's triangles drawn by `transform` that lie in cells the point tree's
@@ -1878,13 +1909,13 @@ mod tests {
         for (camera, expected) in [(side, Technique::Crossed), (above, Technique::Spt)] {
             let mut state = PolicyState::default();
             choose_instances(&instances, &lods, &choices, &camera, Technique::Spt, &mut state, &mut out);
-            assert_eq!(out, [expected]);
+            assert_eq!(out, [Some(expected)]);
         }
         // Without tables per elevation every view reads the tables over every view.
         let mean = Choices::among(&table(), &policy, all);
         let mut state = PolicyState::default();
         choose_instances(&instances, &lods, &[Some(mean)], &above, Technique::Spt, &mut state, &mut out);
-        assert_eq!(out, [Technique::Crossed]);
+        assert_eq!(out, [Some(Technique::Crossed)]);
     }
 
     /// A tree seen from below the tables (more than half the classes' spacing below 0°) is not
@@ -1948,9 +1979,9 @@ mod tests {
         let instances = [Instance { model: 0, transform: Mat4::IDENTITY }];
         let (choices, mut out, mut state) = ([Some(choices)], Vec::new(), PolicyState::default());
         choose_instances(&instances, &lods, &choices, &below, Technique::Spt, &mut state, &mut out);
-        assert_eq!(out, [Technique::Crossed]);
+        assert_eq!(out, [Some(Technique::Crossed)]);
         choose_instances(&instances, &lods, &choices, &side, Technique::Spt, &mut state, &mut out);
-        assert_eq!(out, [Technique::Octahedral]);
+        assert_eq!(out, [Some(Technique::Octahedral)]);
     }
 
     /// Between two measured elevations the classes' tables blend them linearly in elevation, at
@@ -2235,7 +2266,7 @@ mod tests {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
             let mut state = PolicyState::with_transition(frames);
             let mut out = Vec::new();
-            let mut last: Vec<Technique> = Vec::new();
+            let mut last: Vec<Option<Technique>> = Vec::new();
             // Per tree, the frame it last changed technique, and what it left.
             let mut changed: Vec<Option<(usize, Technique)>> = vec![None; instances.len()];
             let mut seen = 0;
@@ -2245,10 +2276,11 @@ mod tests {
                     choose_instances(&instances, &lods, &choices, camera, Technique::Spt, &mut state, &mut out)
                 });
                 for (i, &t) in out.iter().enumerate() {
-                    if let Some(&before) = last.get(i)
-                        && before != t
-                    {
-                        changed[i] = Some((f, before));
+                    match (last.get(i).copied().flatten(), t) {
+                        (Some(before), Some(now)) if before != now => changed[i] = Some((f, before)),
+                        // Out of view, or back as a new tree: no transition.
+                        (_, None) | (None, Some(_)) => changed[i] = None,
+                        _ => {}
                     }
                     let expected = changed[i]
                         .filter(|&(at, _)| f - at < frames as usize - 1)
@@ -2267,6 +2299,61 @@ mod tests {
         assert_eq!(results[0], results[1], "the same on 1 and 3 threads");
     }
 
+    /// A tree outside the view is not chosen and is forgotten: it comes back as a new tree, with
+    /// the plain choice at its height (no hysteresis) and no transition.
+    #[test]
+    fn trees_out_of_view_are_not_chosen_and_come_back_as_new() {
+        let lods = [tall_lod()];
+        let c = table();
+        let steps = steps_of(&c);
+        let choices = [Some(Choices {
+            log2_min: 3.0,
+            tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
+            elevations: Vec::new(),
+            visibility: 1,
+            below: Vec::new(),
+            hysteresis_steps: 0,
+        })];
+        // One tree ahead of the camera, one behind it.
+        let instances = [
+            Instance { model: 0, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, -200.0)) },
+            Instance { model: 0, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, 800.0)) },
+        ];
+        // 600 m away the tree ahead is about 7 pixels high: crossed quads; 10 m away, the point
+        // tree.
+        let eye = Vec3::new(0.0, 4.0, 400.0);
+        let ahead = Camera::look_at(eye, eye - Vec3::Z, 1.0, 640, 480);
+        let behind = Camera::look_at(eye, eye + Vec3::Z, 1.0, 640, 480);
+        let mut state = PolicyState::with_transition(4);
+        let mut out = Vec::new();
+        choose_instances(&instances, &lods, &choices, &ahead, Technique::Spt, &mut state, &mut out);
+        let far = out[0].expect("the tree ahead is chosen");
+        assert_eq!(far, Technique::Crossed);
+        assert_eq!(out[1], None, "the tree behind is not");
+        assert_eq!(state.previous[1], None);
+        // Nearer, the tree ahead changes technique and starts a transition; then the camera
+        // turns away, and back.
+        let near_eye = Vec3::new(0.0, 4.0, -190.0);
+        let near = Camera::look_at(near_eye, near_eye - Vec3::Z, 1.0, 640, 480);
+        choose_instances(&instances, &lods, &choices, &near, Technique::Spt, &mut state, &mut out);
+        let close = out[0].expect("chosen");
+        assert_eq!(close, Technique::Spt);
+        assert!(state.transition(0).is_some());
+        let away = Camera::look_at(near_eye, near_eye + Vec3::Z, 1.0, 640, 480);
+        choose_instances(&instances, &lods, &choices, &away, Technique::Spt, &mut state, &mut out);
+        assert_eq!(out[0], None);
+        assert_eq!((state.previous[0], state.transition(0)), (None, None), "forgotten out of view");
+        choose_instances(&instances, &lods, &choices, &near, Technique::Spt, &mut state, &mut out);
+        assert_eq!((out[0], state.transition(0)), (Some(close), None), "back as a new tree: no transition");
+        // Without a camera nothing is culled.
+        let mut all = Vec::new();
+        choose_instances_coarsest(&instances, &lods, &choices, &[], Technique::Spt, &mut state, &mut all);
+        assert!(all.iter().all(Option::is_some));
+        // A shadow cascade's two views: a tree in either is chosen.
+        choose_instances_coarsest(&instances, &lods, &choices, &[ahead, behind], Technique::Spt, &mut state, &mut all);
+        assert!(all.iter().all(Option::is_some), "{all:?}");
+    }
+
     /// The choices of a frame, made one instance at a time with [`projected_height`] and
     /// [`Choices::choose`]: what [`choose_instances`] must give.
     fn choose_reference(
@@ -2276,17 +2363,25 @@ mod tests {
         camera: &Camera,
         otherwise: Technique,
         previous: &mut Vec<Option<Technique>>,
-    ) -> Vec<Technique> {
+    ) -> Vec<Option<Technique>> {
         previous.resize(instances.len(), None);
+        let frustum = Frustum::from_view_proj(camera.view_proj);
         instances
             .iter()
             .zip(previous.iter_mut())
             .map(|(instance, previous)| {
                 let m = instance.model as usize;
-                match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
+                if let Some(lod) = lods.get(m) {
+                    let (centre, radius) = lod.cull_sphere();
+                    let scale = crate::max_axis_scale(instance.transform);
+                    if !frustum.intersects_sphere(instance.transform.transform_point3(centre), radius * scale) {
+                        *previous = None;
+                        return None;
+                    }
+                }
+                Some(match (lods.get(m), choices.get(m).and_then(Option::as_ref)) {
                     (Some(lod), Some(choices)) => {
                         let height = projected_height(lod, instance.transform, camera);
-                        let frustum = Frustum::from_view_proj(camera.view_proj);
                         let in_view = if choices.above_range(height) {
                             in_view_share(lod, instance.transform, &frustum)
                         } else {
@@ -2300,7 +2395,7 @@ mod tests {
                         *previous = None;
                         otherwise
                     }
-                }
+                })
             })
             .collect()
     }
@@ -2349,14 +2444,20 @@ mod tests {
             })
             .collect();
         let mut reference_previous = Vec::new();
-        let expected: Vec<Vec<Technique>> = cameras
+        let expected: Vec<Vec<Option<Technique>>> = cameras
             .iter()
             .map(|camera| {
                 choose_reference(&instances, &lods, &choices, camera, Technique::Spt, &mut reference_previous)
             })
             .collect();
-        let switches = expected.windows(2).flat_map(|w| w[0].iter().zip(&w[1])).filter(|(a, b)| a != b).count();
+        let switches = expected
+            .windows(2)
+            .flat_map(|w| w[0].iter().zip(&w[1]))
+            .filter(|(a, b)| a.is_some() && b.is_some() && a != b)
+            .count();
         assert!(switches > 0, "trees change technique along the path");
+        let culled = expected.iter().flatten().filter(|t| t.is_none()).count();
+        assert!(culled > 0 && culled < expected.len() * instances.len(), "some trees out of view, some in: {culled}");
         for threads in [1, 4] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
             let mut state = PolicyState::default();
