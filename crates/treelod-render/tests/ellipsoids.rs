@@ -307,3 +307,59 @@ fn an_ellipsoid_casts_the_shadow_of_its_shape_on_the_ground() {
     assert!(count(&exact) > 1000, "the shadow is in view");
     assert!(overlap >= 0.9, "IoU {overlap:.4}");
 }
+
+/// A far tree drawn with ellipsoids draws every cell's coarsest level as one range of the far
+/// ellipsoids (`EllipsoidLod::far_first`) where each cell drew its own: the same image from far
+/// fewer draws. The other path is the same tree with its coarsest levels' `hi` made finite
+/// (`f32::MAX`, which the shaders read as unbounded), which has no far ellipsoids (and which
+/// verify refuses: the tree's last intervals must be unbounded).
+#[test]
+fn a_far_tree_draws_its_cells_coarsest_ellipsoids_as_one_range_with_the_same_image() {
+    use treelod_build::{BuildConfig, DemoTreeConfig, EllipsoidConfig, Placed, build_block, demo_tree};
+    use treelod_runtime::{EllipsoidLod, far_ellipsoids};
+    let gpu = gpu();
+    let scene = demo_tree(&DemoTreeConfig::default());
+    let config = BuildConfig { ellipsoids: Some(EllipsoidConfig::default()), ..BuildConfig::default() };
+    let built =
+        build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
+    let with_far = common::open_verified(&built.data);
+    let mut data = built.data.clone();
+    for e in &mut data.ellipsoids {
+        if e.hi == f32::INFINITY {
+            e.hi = f32::MAX;
+        }
+    }
+    // Not a valid container (§10 rule 2 wants the last interval unbounded): opened unverified.
+    let bytes = data.to_bytes(treelod_format::Compression::None).expect("encodes");
+    let without = Arc::new(Container::from_bytes(&bytes).expect("opens"));
+    let (_, switch) = far_ellipsoids(&with_far).expect("far ellipsoids");
+    assert!(far_ellipsoids(&without).is_none());
+    let lod = EllipsoidLod::from_container(&with_far).expect("ellipsoids");
+    assert_eq!(lod.far_first(), Some(with_far.ellipsoids().len() as u32));
+    // A camera whose nearest cell's τ is a fifth past the switch (with the default level blend).
+    let block = with_far.block();
+    let (lo, hi) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+    let centre = 0.5 * (lo + hi);
+    let (fovy, size) = (0.5_f32, 256);
+    let world_per_pixel = 2.0 * (0.5 * fovy).tan() / size as f32;
+    let tau = 1.2 * switch * (0.5 * treelod_runtime::DEFAULT_LEVEL_BLEND).exp2();
+    let distance = tau / world_per_pixel + 0.5 * (hi - lo).length();
+    let camera = Camera::look_at(centre + Vec3::new(0.6, 0.3, 0.75).normalize() * distance, centre, fovy, size, size);
+    let draw = |container: &Arc<Container>| {
+        let mut renderer = renderer(&gpu, container, Settings::default());
+        let stats = renderer.prepare(&gpu.device, &gpu.queue, &camera);
+        let (image, _) = render_prepared_scene(&gpu, &mut renderer, &camera, BACKGROUND, None, true).expect("renders");
+        (image, stats)
+    };
+    let (far, far_stats) = draw(&with_far);
+    let (cells, cell_stats) = draw(&without);
+    keep(&far, "ellipsoids-far");
+    let submitted = |s: &treelod_render::FrameStats| s.submitted[Primitive::Ellipsoid];
+    assert_eq!(submitted(&far_stats), submitted(&cell_stats), "the same ellipsoids");
+    assert!(submitted(&far_stats) > 0);
+    let cell_ranges = cell_stats.ranges - far_stats.ranges + 1;
+    assert!(cell_ranges >= 4, "one range where the cells drew {cell_ranges}");
+    assert!(covered(&far).iter().filter(|&&c| c).count() > 100, "the tree is drawn");
+    let differing = far.rgba.chunks(4).zip(cells.rgba.chunks(4)).filter(|(a, b)| a != b).count();
+    assert_eq!(differing, 0, "pixels differing between the far range and the cells' ranges");
+}

@@ -65,10 +65,65 @@ pub type EllipsoidRange = CellPrefix;
 pub type LineRange = CellPrefix;
 
 /// What drawing a model's ellipsoids needs of its container, made once: its [`SptLod`] over
-/// `ELLIPSOIDS`, which selects (through `Deref`: [`SptLod::select_per_pixel`],
-/// [`SptLod::select_per_pixel_blended`]).
+/// `ELLIPSOIDS` (through `Deref`), and its far ellipsoids where it has them.
+///
+/// **Far ellipsoids.** A tree far enough that every cell draws its coarsest level whole (level 0:
+/// the records whose `hi` is infinite) draws the same ellipsoids as one range instead of a range
+/// per cell: the runtime's copy of every cell's level 0 in cell order ([`far_ellipsoids`]),
+/// uploaded after `ELLIPSOIDS` ([`Self::far_first`]). Nothing in the container changes: the
+/// copies are the cells' own records, so the image is the one the cells' prefixes draw. The
+/// switch is the `τ` at which the last cell's prefix shrinks to its level 0 (the next level's
+/// `hi`) and its level 0 is drawn whole with the level blend (`lo · 2^(β/2)`), measured at the
+/// nearest cell, whose `τ` is the least ([`Self::select_per_pixel_blended`]). A far tree's
+/// cells each drew one or a few ellipsoids in a draw of their own: a forest of 10^4 trees drawn
+/// with ellipsoids recorded and submitted about a hundred draws per tree (measured on the shared
+/// orchid, see `docs/cli.md`). The one draw names the block cell (the debug view's cell tint).
 #[derive(Clone, Debug, PartialEq)]
-pub struct EllipsoidLod(SptLod);
+pub struct EllipsoidLod {
+    cells: SptLod,
+    far: Option<FarEllipsoids>,
+}
+
+/// A model's far ellipsoids as uploaded, and where an instance switches to them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct FarEllipsoids {
+    /// The block cell's index in `CELLS`.
+    cell: u32,
+    /// The copies in the ellipsoids as uploaded (`ELLIPSOIDS` then the copies).
+    records: treelod_format::Range,
+    /// The least `τ · 2^(−β/2)` at which every cell draws its level 0 alone and whole.
+    switch: f32,
+}
+
+/// The far ellipsoids of a container ([`EllipsoidLod`]): the indices in `ELLIPSOIDS` of every
+/// cell's level 0 (its leading records with an infinite `hi`), in cell order, and the switch, the
+/// greatest over the cells of their level 0's `lo` and of the `hi` of the record after it.
+/// `None` where fewer than two cells hold ellipsoids (one range per tree already) or a cell's
+/// coarsest level has a finite `hi` (it leaves the tree at some distance, which one range
+/// measured at the nearest cell would not see).
+#[must_use]
+pub fn far_ellipsoids(container: &Container) -> Option<(Vec<u32>, f32)> {
+    let records = container.ellipsoids();
+    let (mut indices, mut switch, mut cells) = (Vec::new(), 0.0_f32, 0);
+    for cell in container.cells() {
+        let range = cell.ellipsoids;
+        // Ranges were checked when the container was opened (spec §9.1).
+        let Some(cell_records) = records.get(range.as_usize()).filter(|r| !r.is_empty()) else { continue };
+        let level0 = cell_records.iter().take_while(|e| e.hi == f32::INFINITY).count();
+        if level0 == 0 {
+            return None;
+        }
+        cells += 1;
+        for (k, e) in cell_records[..level0].iter().enumerate() {
+            switch = switch.max(e.lo);
+            indices.push(range.first.checked_add(u32::try_from(k).ok()?)?);
+        }
+        if let Some(next) = cell_records.get(level0) {
+            switch = switch.max(next.hi);
+        }
+    }
+    (cells >= 2 && switch.is_finite()).then_some((indices, switch))
+}
 
 /// What drawing a model's branch lines (spec §6.9) needs of its container, made once: its
 /// [`SptLod`] over `LINES` (through `Deref`), and over `FAR_LINES` where the container has them.
@@ -102,18 +157,81 @@ struct FarLines {
 }
 
 impl EllipsoidLod {
-    /// The ellipsoids of an open container; `None` if it has none.
+    /// The ellipsoids of an open container, with its far ellipsoids where it has them
+    /// ([`far_ellipsoids`]); `None` if it has none.
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        SptLod::from_container(container, container.ellipsoids(), |cell| cell.ellipsoids).map(Self)
+        let cells = SptLod::from_container(container, container.ellipsoids(), |cell| cell.ellipsoids)?;
+        let far = far_ellipsoids(container).and_then(|(indices, switch)| {
+            let first = u32::try_from(container.ellipsoids().len()).ok()?;
+            let count = u32::try_from(indices.len()).ok()?;
+            first.checked_add(count)?;
+            let cell = u32::try_from(container.block().grid_cell_count()).ok()?;
+            Some(FarEllipsoids { cell, records: treelod_format::Range { first, count }, switch })
+        });
+        Some(Self { cells, far })
+    }
+
+    /// Where the far ellipsoids start in the ellipsoids as uploaded (`ELLIPSOIDS` then the
+    /// copies [`far_ellipsoids`] lists): the count of `ELLIPSOIDS`; `None` without far
+    /// ellipsoids.
+    #[must_use]
+    pub fn far_first(&self) -> Option<u32> {
+        self.far.map(|f| f.records.first)
+    }
+
+    /// The ellipsoid prefixes an instance draws ([`SptLod::select_per_pixel_blended`]): each
+    /// cell's or, where the least of the cells' `τ` (`τ_near`, the nearest cell's, depth bias
+    /// included) times `2^(−β/2)` is at least the far switch, one range of the far ellipsoids,
+    /// every cell's level 0, at `τ_near`: what the cells' prefixes draw there.
+    pub fn select_per_pixel_blended(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        level: PixelLevel,
+        out: &mut Vec<CellPrefix>,
+    ) -> bool {
+        if let Some(far) = &self.far {
+            let Some(taus) = self.cells.cell_taus(transform, camera, frustum, settings, level.quality) else {
+                return false;
+            };
+            let tau_near = taus.map(|(_, tau)| tau).fold(f32::INFINITY, f32::min);
+            let widen = (-0.5 * level.clamped_blend()).exp2();
+            if tau_near.is_finite() && tau_near * widen >= far.switch {
+                out.push(CellPrefix {
+                    cell: far.cell,
+                    first: far.records.first,
+                    count: far.records.count,
+                    tau: tau_near,
+                });
+                return true;
+            }
+        }
+        self.cells.select_per_pixel_blended(transform, camera, frustum, settings, level, out)
+    }
+
+    /// [`Self::select_per_pixel_blended`] without a level blend.
+    pub fn select_per_pixel(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        quality: f32,
+        out: &mut Vec<CellPrefix>,
+    ) -> bool {
+        self.select_per_pixel_blended(transform, camera, frustum, settings, PixelLevel { quality, blend: 0.0 }, out)
     }
 }
 
 impl Deref for EllipsoidLod {
     type Target = SptLod;
 
+    /// The cells' ellipsoids (`ELLIPSOIDS`).
     fn deref(&self) -> &SptLod {
-        &self.0
+        &self.cells
     }
 }
 
@@ -395,10 +513,14 @@ mod tests {
             .collect()
     }
 
+    /// The cells' prefixes (`SptLod`'s selection, without the far ellipsoids, which
+    /// `far_trees_draw_every_cells_coarsest_level_as_one_range` tests) from `distance` in front
+    /// of the block centre.
     fn select_at(lod: &EllipsoidLod, distance: f32, settings: &LodSettings, quality: f32) -> Vec<EllipsoidRange> {
         let camera = Camera::look_at(Vec3::new(2.0, 1.0, 1.0 + distance), Vec3::new(2.0, 1.0, 1.0), 0.8, 512, 512);
         let mut out = Vec::new();
-        assert!(lod.select_per_pixel(
+        assert!(SptLod::select_per_pixel(
+            lod,
             Mat4::IDENTITY,
             &camera,
             &Frustum::from_view_proj(camera.view_proj),
@@ -407,6 +529,92 @@ mod tests {
             &mut out
         ));
         out
+    }
+
+    /// A tree whose nearest cell's `τ · 2^(−β/2)` reaches the far switch draws one range, the
+    /// copies of every cell's level 0 after `ELLIPSOIDS`, at that `τ`: the ellipsoids the cells'
+    /// prefixes draw there, each whole. Short of it, the cells' prefixes.
+    #[test]
+    fn far_trees_draw_every_cells_coarsest_level_as_one_range() {
+        let container = container();
+        // Cell 0's level 0 (record 0, from e1 = 0.01) and the block cell's (record 5, from
+        // 0.02): the switch is the block cell's.
+        assert_eq!(far_ellipsoids(&container), Some((vec![0, 5], 0.02)));
+        let lod = EllipsoidLod::from_container(&container).unwrap();
+        assert_eq!(lod.far_first(), Some(8));
+        let uploaded: Vec<EllipsoidRecord> = container
+            .ellipsoids()
+            .iter()
+            .chain([&container.ellipsoids()[0], &container.ellipsoids()[5]])
+            .copied()
+            .collect();
+        let settings = LodSettings::default();
+        // mpp at 512 px and fovy 0.8: 0.00165 per metre; the block cell is the nearest (its τ
+        // the least: no depth bias), at 0.02 from about 12.1 m.
+        for blend in [0.0, 0.5] {
+            let level = PixelLevel { quality: 1.0, blend };
+            let switch_distance = 0.02 * (0.5 * blend).exp2() / (2.0 * 0.4f32.tan() / 512.0);
+            let select = |distance: f32, cells_only: bool| {
+                let camera =
+                    Camera::look_at(Vec3::new(2.0, 1.0, 1.0 + distance), Vec3::new(2.0, 1.0, 1.0), 0.8, 512, 512);
+                let frustum = Frustum::from_view_proj(camera.view_proj);
+                let mut out = Vec::new();
+                let seen = if cells_only {
+                    SptLod::select_per_pixel_blended(
+                        &lod,
+                        Mat4::IDENTITY,
+                        &camera,
+                        &frustum,
+                        &settings,
+                        level,
+                        &mut out,
+                    )
+                } else {
+                    lod.select_per_pixel_blended(Mat4::IDENTITY, &camera, &frustum, &settings, level, &mut out)
+                };
+                assert!(seen);
+                out
+            };
+            let short = select(0.97 * switch_distance, false);
+            assert_eq!(short, select(0.97 * switch_distance, true), "β {blend}: the cells' prefixes short of it");
+            assert!(short.len() == 2 && short.iter().all(|p| p.first + p.count <= 8), "{short:?}");
+            for factor in [1.03, 3.0] {
+                let far = select(factor * switch_distance, false);
+                let cells = select(factor * switch_distance, true);
+                assert_eq!(far.len(), 1, "β {blend}: {far:?}");
+                assert_eq!((far[0].cell, far[0].first, far[0].count), (2, 8, 2));
+                let tau_near = cells.iter().map(|p| p.tau).fold(f32::INFINITY, f32::min);
+                assert_eq!(far[0].tau, tau_near);
+                // What each draws, whole (every dither value kept).
+                let whole = |prefixes: &[CellPrefix]| {
+                    let mut drawn: Vec<[u32; 3]> = prefixes
+                        .iter()
+                        .flat_map(|p| {
+                            uploaded[p.first as usize..(p.first + p.count) as usize].iter().filter_map(move |e| {
+                                let (from, to) = level_keep(e.lo, e.hi, p.tau, blend)?;
+                                assert!(from <= 0.0 && to >= 1.0, "drawn whole: {from} {to}");
+                                Some(e.center.map(f32::to_bits))
+                            })
+                        })
+                        .collect();
+                    drawn.sort_unstable();
+                    drawn
+                };
+                assert_eq!(whole(&far), whole(&cells), "β {blend}, {factor}× the switch's distance");
+                assert_eq!(whole(&far).len(), 2);
+            }
+        }
+        // One cell holding ellipsoids: no far ellipsoids (one range per tree already).
+        let mut data = ContainerData::from_container(&container);
+        data.cells[0].ellipsoids = Range { first: 0, count: 0 };
+        data.cells[0].bounds_min = [0.0; 3];
+        data.cells[0].bounds_max = [0.0; 3];
+        data.ellipsoids.drain(..5);
+        data.cells[1].ellipsoids.first = 0;
+        data.cells[2].ellipsoids.first = 0;
+        let one = Container::from_bytes(&data.to_bytes(Compression::None).unwrap()).unwrap();
+        assert_eq!(far_ellipsoids(&one), None);
+        assert_eq!(EllipsoidLod::from_container(&one).unwrap().far_first(), None);
     }
 
     #[test]
@@ -570,12 +778,14 @@ mod tests {
         let frustum = Frustum::from_view_proj(camera.view_proj);
         let settings = LodSettings::default();
         let (mut one, mut two) = (Vec::new(), Vec::new());
-        assert!(lod.select_per_pixel(Mat4::IDENTITY, &camera, &frustum, &settings, 1.0, &mut one));
+        // The cells' prefixes (at 20 m the tree draws the far ellipsoids, one range).
+        let cells: &SptLod = &lod;
+        assert!(cells.select_per_pixel(Mat4::IDENTITY, &camera, &frustum, &settings, 1.0, &mut one));
         // Twice as large about the block centre: same distance, half the τ in model units.
         let about = Vec3::new(2.0, 1.0, 1.0);
         let scaled =
             Mat4::from_translation(about) * Mat4::from_scale(Vec3::splat(2.0)) * Mat4::from_translation(-about);
-        assert!(lod.select_per_pixel(scaled, &camera, &frustum, &settings, 1.0, &mut two));
+        assert!(cells.select_per_pixel(scaled, &camera, &frustum, &settings, 1.0, &mut two));
         assert!((two[1].tau - 0.5 * one[1].tau).abs() < 1e-6, "{one:?} {two:?}");
         // Behind the camera.
         let mut out = Vec::new();
@@ -661,7 +871,9 @@ mod tests {
             let mut out = Vec::new();
             let frustum = Frustum::from_view_proj(camera.view_proj);
             let level = PixelLevel { quality: 1.0, blend };
-            assert!(lod.select_per_pixel_blended(Mat4::IDENTITY, &camera, &frustum, &settings, level, &mut out));
+            // The cells' prefixes (from 20 m the tree draws the far ellipsoids).
+            let cells: &SptLod = &lod;
+            assert!(cells.select_per_pixel_blended(Mat4::IDENTITY, &camera, &frustum, &settings, level, &mut out));
             out
         };
         // No blend is the hard switch, exactly.

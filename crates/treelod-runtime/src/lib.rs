@@ -40,7 +40,8 @@ pub use draws::{
     TriangleSource, max_axis_scale, merge_ascending, select_techniques,
 };
 pub use ellipsoid::{
-    EllipsoidCell, EllipsoidLod, EllipsoidRange, LineCell, LineLod, LineRange, ellipsoid_drawn, line_drawn,
+    EllipsoidCell, EllipsoidLod, EllipsoidRange, LineCell, LineLod, LineRange, ellipsoid_drawn, far_ellipsoids,
+    line_drawn,
 };
 pub use frame::{
     BudgetController, Camera, CellLod, CellPrefix, DrawList, DrawRange, FrameStats, Frustum, Instance, Kind,

@@ -80,11 +80,19 @@ pub(crate) fn upload(
     Ok((ellipsoids, lines))
 }
 
-/// The ellipsoids of `container` as uploaded: each one's `flags` (reserved in the file, spec
-/// §6.8) holds its ambient occlusion byte (§6.14), 0 without `ELLIPSOID_AO`: never the file's own
+/// The ellipsoids of `container` as uploaded: `ELLIPSOIDS` then the far ellipsoids, copies of
+/// every cell's coarsest level (`treelod_runtime::far_ellipsoids`; the runtime's far draws index
+/// them so, `EllipsoidLod::far_first`), each one's `flags` (reserved in the file, spec §6.8)
+/// holding its ambient occlusion byte (§6.14), 0 without `ELLIPSOID_AO`: never the file's own
 /// flags.
 pub(crate) fn gpu_ellipsoids(container: &Container) -> Vec<EllipsoidRecord> {
-    with_ao_in_flags(container.ellipsoids(), container.ellipsoid_ao(), |e, flags| EllipsoidRecord { flags, ..e })
+    let mut ellipsoids =
+        with_ao_in_flags(container.ellipsoids(), container.ellipsoid_ao(), |e, flags| EllipsoidRecord { flags, ..e });
+    if let Some((far, _)) = treelod_runtime::far_ellipsoids(container) {
+        let copies: Vec<EllipsoidRecord> = far.iter().filter_map(|&i| ellipsoids.get(i as usize).copied()).collect();
+        ellipsoids.extend(copies);
+    }
+    ellipsoids
 }
 
 /// The branch lines of `container` as uploaded, likewise: `LINES` then `FAR_LINES` (spec
