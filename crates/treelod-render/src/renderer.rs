@@ -196,6 +196,8 @@ pub struct Renderer {
     pub(crate) buckets: Vec<Vec<(DrawInfo, u32, u32)>>,
     pub(crate) draw_infos: Vec<DrawInfo>,
     pub(crate) indirect: Vec<wgpu::util::DrawIndirectArgs>,
+    /// Scratch: [`Self::indirect`] as bytes for the upload.
+    indirect_scratch: Vec<u8>,
 }
 
 /// What [`Renderer::select_view`] counted.
@@ -345,6 +347,7 @@ impl Renderer {
             buckets: Vec::new(),
             draw_infos: Vec::new(),
             indirect: Vec::new(),
+            indirect_scratch: Vec::new(),
         }
     }
 
@@ -865,8 +868,15 @@ impl Renderer {
             self.indirect_buffer = indirect_buffer(device, self.indirect.len().next_power_of_two() as u64);
         }
         if !self.indirect.is_empty() {
-            let bytes: Vec<u8> = self.indirect.iter().flat_map(|a| a.as_bytes().iter().copied()).collect();
+            // A draw's 16 bytes at a time into a buffer kept between frames (a frame of a forest
+            // drawn with ellipsoids or octahedral impostors records 10^5 draws and more).
+            let mut bytes = std::mem::take(&mut self.indirect_scratch);
+            bytes.clear();
+            for args in &self.indirect {
+                bytes.extend_from_slice(args.as_bytes());
+            }
             queue.write_buffer(&self.indirect_buffer, 0, &bytes);
+            self.indirect_scratch = bytes;
         }
     }
 
