@@ -183,7 +183,9 @@ impl EllipsoidLod {
     /// The ellipsoid prefixes an instance draws ([`SptLod::select_per_pixel_blended`]): each
     /// cell's or, where the least of the cells' `τ` (`τ_near`, the nearest cell's, depth bias
     /// included) times `2^(−β/2)` is at least the far switch, one range of the far ellipsoids,
-    /// every cell's level 0, at `τ_near`: what the cells' prefixes draw there.
+    /// every cell's level 0: what the cells' prefixes draw there. The range's `τ` is `τ_near`,
+    /// or the bound of it [`SptLod::least_tau_bound`] gives where that bound already reaches the
+    /// switch (every `τ` past the switch draws the range whole: the same image).
     pub fn select_per_pixel_blended(
         &self,
         transform: Mat4,
@@ -194,18 +196,23 @@ impl EllipsoidLod {
         out: &mut Vec<CellPrefix>,
     ) -> bool {
         if let Some(far) = &self.far {
-            let Some(taus) = self.cells.cell_taus(transform, camera, frustum, settings, level.quality) else {
+            let widen = (-0.5 * level.clamped_blend()).exp2();
+            let reaches = |tau: f32| tau.is_finite() && tau * widen >= far.switch;
+            // A bound of the cells' least τ from the sphere first: a far tree need not measure
+            // every cell's.
+            let Some(bound) = self.cells.least_tau_bound(transform, camera, frustum, settings, level.quality) else {
                 return false;
             };
-            let tau_near = taus.map(|(_, tau)| tau).fold(f32::INFINITY, f32::min);
-            let widen = (-0.5 * level.clamped_blend()).exp2();
-            if tau_near.is_finite() && tau_near * widen >= far.switch {
-                out.push(CellPrefix {
-                    cell: far.cell,
-                    first: far.records.first,
-                    count: far.records.count,
-                    tau: tau_near,
-                });
+            let tau = if reaches(bound) {
+                Some(bound)
+            } else {
+                let Some(taus) = self.cells.cell_taus(transform, camera, frustum, settings, level.quality) else {
+                    return false;
+                };
+                Some(taus.map(|(_, tau)| tau).fold(f32::INFINITY, f32::min)).filter(|&t| reaches(t))
+            };
+            if let Some(tau) = tau {
+                out.push(CellPrefix { cell: far.cell, first: far.records.first, count: far.records.count, tau });
                 return true;
             }
         }
@@ -584,7 +591,8 @@ mod tests {
                 assert_eq!(far.len(), 1, "β {blend}: {far:?}");
                 assert_eq!((far[0].cell, far[0].first, far[0].count), (2, 8, 2));
                 let tau_near = cells.iter().map(|p| p.tau).fold(f32::INFINITY, f32::min);
-                assert_eq!(far[0].tau, tau_near);
+                let widen = (-0.5 * blend).exp2();
+                assert!(far[0].tau <= tau_near && far[0].tau * widen >= 0.02, "{far:?}, τ_near {tau_near}");
                 // What each draws, whole (every dither value kept).
                 let whole = |prefixes: &[CellPrefix]| {
                     let mut drawn: Vec<[u32; 3]> = prefixes
@@ -615,6 +623,41 @@ mod tests {
         let one = Container::from_bytes(&data.to_bytes(Compression::None).unwrap()).unwrap();
         assert_eq!(far_ellipsoids(&one), None);
         assert_eq!(EllipsoidLod::from_container(&one).unwrap().far_first(), None);
+    }
+
+    /// The bound of the cells' least `τ` is at most every cell's, from near and far, turned,
+    /// scaled and with a strong depth bias, and close to it far away with the default bias.
+    #[test]
+    fn the_least_tau_bound_is_below_every_cells_tau() {
+        let container = container();
+        let lod = EllipsoidLod::from_container(&container).unwrap();
+        let cells: &SptLod = &lod;
+        let target = Vec3::new(2.0, 1.0, 1.0);
+        for settings in [LodSettings::default(), LodSettings { depth_bias_k: 0.8, ..LodSettings::default() }] {
+            for (i, distance) in [0.5, 3.0, 40.0, 900.0].into_iter().enumerate() {
+                let direction = Vec3::new(0.3 * i as f32 - 0.4, 0.5, 1.0).normalize();
+                let camera = Camera::look_at(target + direction * distance, target, 0.8, 512, 512);
+                let frustum = Frustum::from_view_proj(camera.view_proj);
+                for transform in [
+                    Mat4::IDENTITY,
+                    Mat4::from_scale_rotation_translation(
+                        Vec3::new(1.5, 0.7, 1.2),
+                        glam::Quat::from_rotation_y(0.9),
+                        Vec3::new(0.2, 0.0, -0.3),
+                    ),
+                ] {
+                    let Some(bound) = cells.least_tau_bound(transform, &camera, &frustum, &settings, 1.5) else {
+                        continue;
+                    };
+                    let taus = cells.cell_taus(transform, &camera, &frustum, &settings, 1.5).expect("in view");
+                    let least = taus.map(|(_, t)| t).fold(f32::INFINITY, f32::min);
+                    assert!(bound <= least, "{distance} m: bound {bound} over the least τ {least}");
+                    if distance > 100.0 && settings.depth_bias_k == LodSettings::default().depth_bias_k {
+                        assert!(bound > 0.9 * least, "{distance} m: bound {bound}, least τ {least}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

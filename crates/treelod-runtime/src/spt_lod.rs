@@ -151,6 +151,9 @@ pub struct SptLod {
     /// The block's centre and half diagonal, model space: `d_block` and `R` of Gilet's `Z_i`.
     block_centre: Vec3,
     block_radius: f32,
+    /// The greatest distance of a cell's anchor from the block centre, model space:
+    /// [`Self::least_tau_bound`].
+    anchor_reach: f32,
 }
 
 impl SptLod {
@@ -176,6 +179,7 @@ impl SptLod {
             radius: 0.0,
             block_centre: 0.5 * (min + max),
             block_radius: 0.5 * (max - min).length(),
+            anchor_reach: 0.0,
         };
         for (index, cell) in container.cells().iter().enumerate() {
             let cell_range = range(cell);
@@ -195,6 +199,7 @@ impl SptLod {
             }
             let is_block = index == block_cell;
             let anchor = if is_block { lod.block_centre } else { 0.5 * (cmin + cmax) };
+            lod.anchor_reach = lod.anchor_reach.max(anchor.distance(lod.block_centre));
             lod.cells.push(SptCell { cell: index_u32, records: cell_range, anchor, block_cell: is_block, hi_at });
             lod.hi.extend(cell_records.iter().map(|r| r.interval().1));
         }
@@ -233,6 +238,7 @@ impl SptLod {
             radius: 0.5 * (hi - lo).length(),
             block_centre,
             block_radius: 0.5 * (max - min).length(),
+            anchor_reach: 0.0,
         })
     }
 
@@ -299,6 +305,33 @@ impl SptLod {
             }
         }
         true
+    }
+
+    /// A lower bound of every cell's `τ` ([`Self::cell_taus`]) in `O(1)`: no anchor is nearer
+    /// than the block centre's distance less the farthest anchor's distance from it (times the
+    /// transform's largest axis scale), and the depth bias, monotone in `Z_i`, is least at one
+    /// end of the range of `Z_i` that reach allows (or at 0, the block cell's). `None` as
+    /// [`Self::cell_taus`].
+    pub fn least_tau_bound(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        quality: f32,
+    ) -> Option<f32> {
+        let per_metre = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius))?;
+        let quality = if quality > 0.0 && quality.is_finite() { quality } else { 1.0 };
+        let scale = camera.world_per_pixel() / per_metre;
+        let d_block = transform.transform_point3(self.block_centre).distance(camera.position);
+        let nearest = (d_block - self.anchor_reach * scale).max(0.0);
+        let z = if self.block_radius > 0.0 { (self.anchor_reach / self.block_radius).min(1.0) } else { 0.0 };
+        let bias = if settings.s_min > 0.0 {
+            [-z, 0.0, z].map(|z| settings.biased_pixels(z).0 / settings.s_min).into_iter().fold(f32::INFINITY, f32::min)
+        } else {
+            1.0
+        };
+        Some(nearest * per_metre * bias / quality)
     }
 
     /// Each cell's `τ` in metres per pixel as [`Self::select_per_pixel_blended`] measures it (the
