@@ -2233,23 +2233,26 @@ mod tests {
         assert_eq!(PolicyState::with_transition(10_000).frames, Policy::MAX_TRANSITION as u16);
     }
 
+    /// [`table`]'s choices without hysteresis, the point tree above its range.
+    fn spt_above_without_hysteresis() -> Choices {
+        Choices {
+            log2_min: 3.0,
+            tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps: steps_of(&table()) }],
+            elevations: Vec::new(),
+            visibility: 1,
+            below: Vec::new(),
+            hysteresis_steps: 0,
+        }
+    }
+
     /// Trees chosen frame after frame along a path: those that change technique are in a
     /// transition for the policy's frames, on one thread as on several.
     #[test]
     fn chosen_trees_that_change_technique_are_in_transition_for_its_frames() {
         let lods = [tall_lod()];
-        let c = table();
-        let steps = steps_of(&c);
         // The point tree above the range whether a tree is wholly in view or not: the trees the
         // camera walks past change technique once on the way.
-        let choices = [Some(Choices {
-            log2_min: 3.0,
-            tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
-            elevations: Vec::new(),
-            visibility: 1,
-            below: Vec::new(),
-            hysteresis_steps: 0,
-        })];
+        let choices = [Some(spt_above_without_hysteresis())];
         // Two thousand trees in a row, the camera walking along it.
         let instances: Vec<Instance> = (0..2 * CHOOSE_CHUNK)
             .map(|i| Instance { model: 0, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, -2.0 * i as f32)) })
@@ -2304,16 +2307,7 @@ mod tests {
     #[test]
     fn trees_out_of_view_are_not_chosen_and_come_back_as_new() {
         let lods = [tall_lod()];
-        let c = table();
-        let steps = steps_of(&c);
-        let choices = [Some(Choices {
-            log2_min: 3.0,
-            tables: vec![Table { above: Technique::Spt, above_cost: (21_000.0, 21_000.0), steps }],
-            elevations: Vec::new(),
-            visibility: 1,
-            below: Vec::new(),
-            hysteresis_steps: 0,
-        })];
+        let choices = [Some(spt_above_without_hysteresis())];
         // One tree ahead of the camera, one behind it.
         let instances = [
             Instance { model: 0, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, -200.0)) },

@@ -156,6 +156,26 @@ pub struct SptLod {
     anchor_reach: f32,
 }
 
+/// What every cell's `τ` of an instance is measured from ([`SptLod::cell_taus`]).
+#[derive(Clone, Copy)]
+struct TauBasis {
+    /// Metres per pixel per metre of distance, model units (the transform's largest axis scale
+    /// divided out).
+    per_metre: f32,
+    /// The quality factor, 1 where it is not a positive number.
+    quality: f32,
+    /// The transform's largest axis scale.
+    scale: f32,
+    /// The block centre's distance from the eye, world units.
+    d_block: f32,
+}
+
+/// Gilet's depth bias of a cell at depth `Z_i = z` as a factor of `τ`: `s_min_i / s_min` (1
+/// without a positive `s_min`).
+fn depth_bias(settings: &LodSettings, z: f32) -> f32 {
+    if settings.s_min > 0.0 { settings.biased_pixels(z).0 / settings.s_min } else { 1.0 }
+}
+
 impl SptLod {
     /// The kind of `container` whose array is `records` and whose range in each cell `range`
     /// gives (`|cell| cell.lines` for `container.lines()`); `None` if the array is empty.
@@ -320,18 +340,23 @@ impl SptLod {
         settings: &LodSettings,
         quality: f32,
     ) -> Option<f32> {
-        let per_metre = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius))?;
-        let quality = if quality > 0.0 && quality.is_finite() { quality } else { 1.0 };
-        let scale = camera.world_per_pixel() / per_metre;
-        let d_block = transform.transform_point3(self.block_centre).distance(camera.position);
+        let TauBasis { per_metre, quality, scale, d_block } = self.tau_basis(transform, camera, frustum, quality)?;
         let nearest = (d_block - self.anchor_reach * scale).max(0.0);
         let z = if self.block_radius > 0.0 { (self.anchor_reach / self.block_radius).min(1.0) } else { 0.0 };
-        let bias = if settings.s_min > 0.0 {
-            [-z, 0.0, z].map(|z| settings.biased_pixels(z).0 / settings.s_min).into_iter().fold(f32::INFINITY, f32::min)
-        } else {
-            1.0
-        };
+        let bias = [-z, 0.0, z].map(|z| depth_bias(settings, z)).into_iter().fold(f32::INFINITY, f32::min);
         Some(nearest * per_metre * bias / quality)
+    }
+
+    /// What every cell's `τ` is measured from ([`Self::cell_taus`], [`Self::least_tau_bound`]);
+    /// `None` if the instance's sphere lies outside `frustum` or the transform is degenerate.
+    fn tau_basis(&self, transform: Mat4, camera: &Camera, frustum: &Frustum, quality: f32) -> Option<TauBasis> {
+        let per_metre = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius))?;
+        Some(TauBasis {
+            per_metre,
+            quality: if quality > 0.0 && quality.is_finite() { quality } else { 1.0 },
+            scale: camera.world_per_pixel() / per_metre,
+            d_block: transform.transform_point3(self.block_centre).distance(camera.position),
+        })
     }
 
     /// Each cell's `τ` in metres per pixel as [`Self::select_per_pixel_blended`] measures it (the
@@ -345,16 +370,12 @@ impl SptLod {
         settings: &'a LodSettings,
         quality: f32,
     ) -> Option<impl Iterator<Item = (&'a SptCell, f32)> + 'a> {
-        let per_metre = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius))?;
-        let quality = if quality > 0.0 && quality.is_finite() { quality } else { 1.0 };
-        let scale = camera.world_per_pixel() / per_metre;
-        let d_block = transform.transform_point3(self.block_centre).distance(camera.position);
+        let TauBasis { per_metre, quality, scale, d_block } = self.tau_basis(transform, camera, frustum, quality)?;
         let inv_radius = if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 };
         Some(self.cells.iter().map(move |cell| {
             let d_cell = transform.transform_point3(cell.anchor).distance(camera.position);
             let z = if cell.block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
-            let bias = if settings.s_min > 0.0 { settings.biased_pixels(z).0 / settings.s_min } else { 1.0 };
-            (cell, d_cell * per_metre * bias / quality)
+            (cell, d_cell * per_metre * depth_bias(settings, z) / quality)
         }))
     }
 
