@@ -1300,8 +1300,10 @@ pub const CHOOSE_CHUNK: usize = 1024;
 /// its technique. `state` also moves each tree's transition on ([`PolicyState::transition`]; none
 /// unless it was made [`PolicyState::with_transition`]).
 ///
-/// A tree whose culling sphere ([`ModelLod::cull_sphere`], as every technique's selection culls)
-/// lies outside the camera's frustum is not chosen: its entry is `None` and it is forgotten, as
+/// A tree whose culling sphere ([`ModelLod::cull_sphere`], which the point tree's, the impostors'
+/// and the baselines' selections cull with; the cells' bounds it holds also hold their
+/// ellipsoids and lines as builders write them, spec §6.2) lies outside the camera's frustum is
+/// not chosen: its entry is `None` and it is forgotten, as
 /// a new tree (no previous technique, no transition, no elevation class), so it comes back into
 /// view with the plain choice at its height and without a transition. No technique would draw
 /// it, and a forest of 10^6 trees has about a tenth of them in view: the choice, the most costly
