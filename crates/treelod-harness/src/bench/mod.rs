@@ -820,25 +820,18 @@ fn demo_prune(order: treelod_build::PruneOrder) -> treelod_build::PruneConfig {
 /// The built-in models: [`DEMO_TREES`] built in memory (no file written), in parallel. With
 /// `prune-opt` asked for they hold density-ordered priority lists (the order that saved most
 /// geometry on the shared models); with `prune-cook` a second set holds stochastic lists; with a
-/// baseline or `impostors` asked for they hold baselines and impostors (the impostors set the
+/// baseline (the octahedral impostor among them) or `impostors` asked for they hold baselines and impostors (the impostors set the
 /// billboards' budget, and the chain gives the impostor trees' bark); with
 /// `ellipsoids` they hold Clasen's ellipsoids and lines (the build's defaults: about a second per
 /// tree on 2 cores, so only when asked for); with `policy`, baselines, impostors, ellipsoids and
-/// lines, so that the policy chooses among them (every container holds calibration tables, the
-/// build's default).
+/// lines and the calibration tables the policy chooses among them with (the build's default
+/// calibration, as `treelod build` writes it; without tables the policy would draw every tree
+/// with the point tree).
 fn demo_models(names: &[TechniqueName]) -> Result<Models, Error> {
     use treelod_build::PruneOrder;
-    let policy = names.contains(&TechniqueName::Policy);
     let techniques: Vec<Technique> = names.iter().filter_map(|n| n.technique()).collect();
     let opt = techniques.contains(&Technique::PruneOpt).then(|| demo_prune(PruneOrder::Density));
-    let extras = Extras {
-        baselines: policy
-            || techniques.iter().any(|t| {
-                matches!(t, Technique::LodChain | Technique::Billboard | Technique::Crossed | Technique::Impostors)
-            }),
-        ellipsoids: policy || techniques.contains(&Technique::Ellipsoids),
-    };
-    let containers = demo_containers(opt.as_ref(), extras)?;
+    let containers = demo_containers(opt.as_ref(), Extras::for_techniques(names))?;
     let stochastic = match techniques.contains(&Technique::PruneCook) {
         true => Some(demo_containers(Some(&demo_prune(PruneOrder::Stochastic)), Extras::default())?),
         false => None,
@@ -859,6 +852,31 @@ struct Extras {
     baselines: bool,
     /// Clasen's ellipsoids and lines.
     ellipsoids: bool,
+    /// Calibration tables (the build's default [`treelod_build::CalibrationConfig`]).
+    calibration: bool,
+}
+
+impl Extras {
+    /// What the demo trees hold for the techniques `names` ([`demo_models`]).
+    fn for_techniques(names: &[TechniqueName]) -> Self {
+        let policy = names.contains(&TechniqueName::Policy);
+        let techniques: Vec<Technique> = names.iter().filter_map(|n| n.technique()).collect();
+        Self {
+            baselines: policy
+                || techniques.iter().any(|t| {
+                    matches!(
+                        t,
+                        Technique::LodChain
+                            | Technique::Billboard
+                            | Technique::Crossed
+                            | Technique::Octahedral
+                            | Technique::Impostors
+                    )
+                }),
+            ellipsoids: policy || techniques.contains(&Technique::Ellipsoids),
+            calibration: policy,
+        }
+    }
 }
 
 /// [`DEMO_TREES`] built with `prune` and `extras`.
@@ -869,6 +887,7 @@ fn demo_containers(prune: Option<&treelod_build::PruneConfig>, extras: Extras) -
         baselines: extras.baselines.then(treelod_build::LodChainConfig::default),
         ellipsoids: extras.ellipsoids.then(treelod_build::EllipsoidConfig::default),
         lines: extras.ellipsoids.then(treelod_build::LineConfig::default),
+        calibration: extras.calibration.then(treelod_build::CalibrationConfig::default),
         ..treelod_build::BuildConfig::default()
     };
     let built: Result<Vec<Container>, Error> = DEMO_TREES
@@ -903,6 +922,22 @@ fn generator() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The built-in trees hold what each technique draws, and with `policy` every
+    /// representation and the calibration tables it chooses with.
+    #[test]
+    fn the_built_in_trees_hold_what_the_techniques_draw() {
+        let name = TechniqueName::Technique;
+        let of = |names: &[TechniqueName]| {
+            let e = Extras::for_techniques(names);
+            (e.baselines, e.ellipsoids, e.calibration)
+        };
+        assert_eq!(of(&[TechniqueName::Policy]), (true, true, true));
+        assert_eq!(of(&[name(Technique::Spt), TechniqueName::FULL]), (false, false, false));
+        assert_eq!(of(&[name(Technique::Ellipsoids)]), (false, true, false));
+        assert_eq!(of(&[name(Technique::Octahedral)]), (true, false, false));
+        assert_eq!(of(&[name(Technique::LodChain), name(Technique::Spt)]), (true, false, false));
+    }
 
     #[test]
     fn pruning_needs_priority_lists() {
