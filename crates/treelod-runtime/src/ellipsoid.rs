@@ -198,8 +198,8 @@ impl EllipsoidLod {
         if let Some(far) = &self.far {
             let widen = (-0.5 * level.clamped_blend()).exp2();
             let reaches = |tau: f32| tau.is_finite() && tau * widen >= far.switch;
-            // A bound of the cells' least τ from the sphere first: a far tree need not measure
-            // every cell's.
+            // An O(1) bound of the cells' least τ first: a far tree need not measure every
+            // cell's.
             let Some(bound) = self.cells.least_tau_bound(transform, camera, frustum, settings, level.quality) else {
                 return false;
             };
