@@ -206,10 +206,10 @@ impl EllipsoidLod {
             let tau = if reaches(bound) {
                 Some(bound)
             } else {
-                let Some(taus) = self.cells.cell_taus(transform, camera, frustum, settings, level.quality) else {
+                let Some(tau_near) = self.cells.least_tau(transform, camera, frustum, settings, level.quality) else {
                     return false;
                 };
-                Some(taus.map(|(_, tau)| tau).fold(f32::INFINITY, f32::min)).filter(|&t| reaches(t))
+                Some(tau_near).filter(|&t| reaches(t))
             };
             if let Some(tau) = tau {
                 out.push(CellPrefix { cell: far.cell, first: far.records.first, count: far.records.count, tau });
@@ -299,10 +299,9 @@ impl LineLod {
     ) -> bool {
         if let Some(far) = &self.far {
             // The nearest cell's τ alone first: a far tree need not select its cells' prefixes.
-            let Some(taus) = self.cells.cell_taus(transform, camera, frustum, settings, level.quality) else {
+            let Some(tau_near) = self.cells.least_tau(transform, camera, frustum, settings, level.quality) else {
                 return false;
             };
-            let tau_near = taus.map(|(_, tau)| tau).fold(f32::INFINITY, f32::min);
             if tau_near >= far.switch && tau_near.is_finite() {
                 let cell = far.lod.cells()[0];
                 let blend = level.clamped_blend();
@@ -628,12 +627,13 @@ mod tests {
     /// The bound of the cells' least `τ` is at most every cell's, from near and far, turned,
     /// scaled and with a strong depth bias, and close to it far away with the default bias.
     #[test]
-    fn the_least_tau_bound_is_below_every_cells_tau() {
+    fn the_least_tau_bound_is_below_every_cells_tau_and_the_least_tau_is_the_least() {
         let container = container();
         let lod = EllipsoidLod::from_container(&container).unwrap();
         let cells: &SptLod = &lod;
         let target = Vec3::new(2.0, 1.0, 1.0);
-        for settings in [LodSettings::default(), LodSettings { depth_bias_k: 0.8, ..LodSettings::default() }] {
+        let biased = |k: f32| LodSettings { depth_bias_k: k, ..LodSettings::default() };
+        for settings in [LodSettings::default(), biased(0.8), biased(-0.6)] {
             for (i, distance) in [0.5, 3.0, 40.0, 900.0].into_iter().enumerate() {
                 let direction = Vec3::new(0.3 * i as f32 - 0.4, 0.5, 1.0).normalize();
                 let camera = Camera::look_at(target + direction * distance, target, 0.8, 512, 512);
@@ -652,6 +652,9 @@ mod tests {
                     let taus = cells.cell_taus(transform, &camera, &frustum, &settings, 1.5).expect("in view");
                     let least = taus.map(|(_, t)| t).fold(f32::INFINITY, f32::min);
                     assert!(bound <= least, "{distance} m: bound {bound} over the least τ {least}");
+                    // The nearest anchor's τ alone is the least, to the bit.
+                    let tau_near = cells.least_tau(transform, &camera, &frustum, &settings, 1.5).expect("in view");
+                    assert_eq!(tau_near.to_bits(), least.to_bits(), "{distance} m, k {}", settings.depth_bias_k);
                     if distance > 100.0 && settings.depth_bias_k == LodSettings::default().depth_bias_k {
                         assert!(bound > 0.9 * least, "{distance} m: bound {bound}, least τ {least}");
                     }

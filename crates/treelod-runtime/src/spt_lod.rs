@@ -154,6 +154,20 @@ pub struct SptLod {
     /// The greatest distance of a cell's anchor from the block centre, model space:
     /// [`Self::least_tau_bound`].
     anchor_reach: f32,
+    /// The cells' anchors by coordinate (x, y, z), padded with copies of the first to a whole
+    /// number of [`LANES`]: [`Self::least_tau`]'s scan.
+    anchors: [Vec<f32>; 3],
+}
+
+/// Anchors measured at once by [`SptLod::least_tau`].
+const LANES: usize = 8;
+
+/// `anchors` ([`SptLod::anchors`]) of `cells`.
+fn anchor_lanes(cells: &[SptCell]) -> [Vec<f32>; 3] {
+    let padded = cells.len().div_ceil(LANES) * LANES;
+    let first = cells.first().map_or(Vec3::ZERO, |c| c.anchor);
+    let at = |i: usize| cells.get(i).map_or(first, |c| c.anchor);
+    [0, 1, 2].map(|axis| (0..padded).map(|i| at(i)[axis]).collect())
 }
 
 /// What every cell's `τ` of an instance is measured from ([`SptLod::cell_taus`]).
@@ -200,6 +214,7 @@ impl SptLod {
             block_centre: 0.5 * (min + max),
             block_radius: 0.5 * (max - min).length(),
             anchor_reach: 0.0,
+            anchors: [Vec::new(), Vec::new(), Vec::new()],
         };
         for (index, cell) in container.cells().iter().enumerate() {
             let cell_range = range(cell);
@@ -225,6 +240,7 @@ impl SptLod {
         }
         lod.centre = 0.5 * (lo + hi);
         lod.radius = 0.5 * (hi - lo).length();
+        lod.anchors = anchor_lanes(&lod.cells);
         Some(lod)
     }
 
@@ -259,6 +275,7 @@ impl SptLod {
             block_centre,
             block_radius: 0.5 * (max - min).length(),
             anchor_reach: 0.0,
+            anchors: anchor_lanes(&[cell]),
         })
     }
 
@@ -347,6 +364,58 @@ impl SptLod {
         Some(nearest * per_metre * bias / quality)
     }
 
+    /// The least of every cell's `τ` ([`Self::cell_taus`]), the nearest cell's: `τ_near`. With a
+    /// depth bias that does not fall with depth (`LodSettings::depth_bias_k ≥ 0`, the default 0),
+    /// a cell's `τ` never falls as its anchor's distance grows, so only the nearest anchor's `τ`
+    /// is measured (the anchors' squared distances compared, one square root and one depth bias
+    /// in all: the same number as the least of [`Self::cell_taus`], every step of it rounding
+    /// monotonically); else every cell's. `None` as [`Self::cell_taus`].
+    pub fn least_tau(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        quality: f32,
+    ) -> Option<f32> {
+        if settings.depth_bias_k.is_nan() || settings.depth_bias_k < 0.0 {
+            let taus = self.cell_taus(transform, camera, frustum, settings, quality)?;
+            return Some(taus.map(|(_, tau)| tau).fold(f32::INFINITY, f32::min));
+        }
+        let basis = self.tau_basis(transform, camera, frustum, quality)?;
+        if self.cells.is_empty() {
+            return Some(f32::INFINITY);
+        }
+        // `transform.transform_point3(anchor) - camera.position` and its `length_squared`, `LANES`
+        // anchors at a time, each product and sum in glam's order (`w + (z·a_z + (y·a_y + x·a_x))`,
+        // then `(x² + y²) + z²`; no fused multiply-add): the same numbers as `cell_taus` measures.
+        let [mx, my, mz, mw] = [transform.x_axis, transform.y_axis, transform.z_axis, transform.w_axis];
+        let eye = camera.position;
+        let mut least = [f32::INFINITY; LANES];
+        let [xs, ys, zs] = &self.anchors;
+        for ((x, y), z) in xs.chunks_exact(LANES).zip(ys.chunks_exact(LANES)).zip(zs.chunks_exact(LANES)) {
+            for lane in 0..LANES {
+                let (ax, ay, az) = (x[lane], y[lane], z[lane]);
+                let dx = (((mx.x * ax) + (my.x * ay)) + (mz.x * az)) + mw.x - eye.x;
+                let dy = (((mx.y * ax) + (my.y * ay)) + (mz.y * az)) + mw.y - eye.y;
+                let dz = (((mx.z * ax) + (my.z * ay)) + (mz.z * az)) + mw.z - eye.z;
+                least[lane] = least[lane].min((dx * dx + dy * dy) + dz * dz);
+            }
+        }
+        let nearest = least.into_iter().fold(f32::INFINITY, f32::min).sqrt();
+        Some(self.tau_at(&basis, settings, nearest, nearest == basis.d_block))
+    }
+
+    /// A cell's `τ` from its anchor's distance `d_cell` ([`Self::cell_taus`]); `block_cell` gives
+    /// it `Z_i = 0`.
+    #[inline]
+    fn tau_at(&self, basis: &TauBasis, settings: &LodSettings, d_cell: f32, block_cell: bool) -> f32 {
+        let TauBasis { per_metre, quality, scale, d_block } = *basis;
+        let inv_radius = if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 };
+        let z = if block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
+        d_cell * per_metre * depth_bias(settings, z) / quality
+    }
+
     /// What every cell's `τ` is measured from ([`Self::cell_taus`], [`Self::least_tau_bound`]);
     /// `None` if the instance's sphere lies outside `frustum` or the transform is degenerate.
     fn tau_basis(&self, transform: Mat4, camera: &Camera, frustum: &Frustum, quality: f32) -> Option<TauBasis> {
@@ -370,12 +439,10 @@ impl SptLod {
         settings: &'a LodSettings,
         quality: f32,
     ) -> Option<impl Iterator<Item = (&'a SptCell, f32)> + 'a> {
-        let TauBasis { per_metre, quality, scale, d_block } = self.tau_basis(transform, camera, frustum, quality)?;
-        let inv_radius = if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 };
+        let basis = self.tau_basis(transform, camera, frustum, quality)?;
         Some(self.cells.iter().map(move |cell| {
             let d_cell = transform.transform_point3(cell.anchor).distance(camera.position);
-            let z = if cell.block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
-            (cell, d_cell * per_metre * depth_bias(settings, z) / quality)
+            (cell, self.tau_at(&basis, settings, d_cell, cell.block_cell))
         }))
     }
 
