@@ -152,14 +152,27 @@ impl Renderer {
             stats.by_technique[draw.technique] += u64::from(draw.count);
         }
         view.model_draws.clear();
-        let before = self.indirect.len();
+        let (before, infos_before) = (self.indirect.len(), self.draw_infos.len());
         for pair in self.buckets.chunks(Bucket::COUNT) {
             let mut draws = [(0, 0); Bucket::COUNT];
             for (kind, bucket) in pair.iter().enumerate() {
-                let start = u32::try_from(self.indirect.len()).unwrap_or(u32::MAX);
+                let start = self.indirect.len();
                 for &(info, first_vertex, vertex_count) in bucket {
                     let index = u32::try_from(self.draw_infos.len()).unwrap_or(u32::MAX);
                     self.draw_infos.push(info);
+                    // A range that draws the same elements as the bucket's last draw (each tree's
+                    // octahedral or billboard quads, far ellipsoids, equal prefixes) joins it as
+                    // its next instance: the shaders read the range's `DrawInfo` at the
+                    // instance index, which runs on from the draw's first. One indirect draw then
+                    // stands for a run of trees, where the GPU would otherwise walk a command per
+                    // tree.
+                    if let Some(last) = self.indirect[start..].last_mut()
+                        && (last.first_vertex, last.vertex_count) == (first_vertex, vertex_count)
+                        && last.first_instance.checked_add(last.instance_count) == Some(index)
+                    {
+                        last.instance_count += 1;
+                        continue;
+                    }
                     self.indirect.push(wgpu::util::DrawIndirectArgs {
                         vertex_count,
                         instance_count: 1,
@@ -167,11 +180,13 @@ impl Renderer {
                         first_instance: index,
                     });
                 }
-                draws[kind] = (start, u32::try_from(self.indirect.len()).unwrap_or(u32::MAX) - start);
+                let [start, end] = [start, self.indirect.len()].map(|n| u32::try_from(n).unwrap_or(u32::MAX));
+                draws[kind] = (start, end - start);
             }
             view.model_draws.push(draws);
         }
-        stats.ranges += u32::try_from(self.indirect.len() - before).unwrap_or(u32::MAX);
+        stats.ranges += u32::try_from(self.draw_infos.len() - infos_before).unwrap_or(u32::MAX);
+        stats.draw_commands += u32::try_from(self.indirect.len() - before).unwrap_or(u32::MAX);
     }
 
     /// The technique a draw of instance `instance` in a view's (`leaving` false) or in its

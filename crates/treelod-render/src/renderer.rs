@@ -727,6 +727,7 @@ impl Renderer {
                 instances_visible: counts.instances_visible,
                 instances,
                 ranges: counts.ranges,
+                draw_commands: counts.ranges,
                 submitted,
                 by_technique,
                 bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
@@ -970,6 +971,7 @@ impl Renderer {
         };
         self.record_view(&mut main, fading.then_some(&leaving), false, &mut stats);
         stats.ranges += gpu_counts.ranges;
+        stats.draw_commands += gpu_counts.ranges;
         stats.submitted[Primitive::Triangle] += gpu_counts.triangles;
         stats.submitted[Primitive::Point] += gpu_counts.points;
         stats.by_technique += gpu_counts.by_technique;

@@ -17,8 +17,13 @@ pub struct FrameStats {
     /// [`Settings::technique`], or [`Technique::FALLBACK`] for trees whose containers lack its
     /// data. Sums to [`Self::instances_visible`].
     pub instances: PerTechnique<u32>,
-    /// Indirect draws recorded (one per non-empty range).
+    /// Ranges recorded (one per non-empty range, each with its `DrawInfo`).
     pub ranges: u32,
+    /// Indirect draw commands the GPU executes for [`Self::ranges`]: consecutive ranges of a
+    /// bucket that draw the same elements (every tree's octahedral or billboard quads of a
+    /// model, far ellipsoids, equal prefixes) are one instanced draw. With GPU selection, one
+    /// per range.
+    pub draw_commands: u32,
     /// Draws made coarser than the selection because their prefix is not resident yet.
     pub ranges_clamped: u32,
     /// Primitives submitted, per kind ([`Primitive`]): triangles (bark, leaves, pruned leaves,
@@ -88,8 +93,10 @@ pub struct ShadowStats {
     /// from the light's view, [`Settings::policy`]), per cascade; sums to
     /// [`Self::instances_visible`].
     pub instances: PerTechnique<u32>,
-    /// Indirect draws.
+    /// Ranges recorded (as [`FrameStats::ranges`]).
     pub ranges: u32,
+    /// Indirect draw commands (as [`FrameStats::draw_commands`]).
+    pub draw_commands: u32,
     /// Draws made coarser than the cascades' selections because their prefixes are not resident
     /// yet (0 once the cascades' data has streamed in).
     pub ranges_clamped: u32,
@@ -112,6 +119,7 @@ impl ShadowStats {
             *slot = view.primitives();
         }
         self.ranges += view.ranges;
+        self.draw_commands += view.draw_commands;
         self.ranges_clamped += view.ranges_clamped;
         self.submitted += view.submitted;
     }

@@ -6,12 +6,12 @@ mod common;
 use std::sync::Arc;
 
 use common::{BACKGROUND, bark_triangles, demo_built, gpu, one_tree, precision_recall};
-use glam::{Vec3, vec3};
+use glam::{Mat4, Vec3, vec3};
 use treelod_build::{BuildConfig, ImpostorConfig, LineConfig, LodChainConfig, PruneConfig};
 use treelod_format::{Compression, Container, ContainerData};
 use treelod_render::Primitive;
 use treelod_render::offscreen::{Gpu, render_image};
-use treelod_render::{Camera, DrawSource, ImpostorBark, Pruning, Renderer, Settings, Technique};
+use treelod_render::{Camera, DrawSource, ImpostorBark, Instance, Pruning, Renderer, Settings, Technique};
 
 /// The demo tree built with its baselines (and the impostors that set the billboards' budget).
 fn demo_with_baselines() -> Arc<Container> {
@@ -130,6 +130,54 @@ fn billboards_cover_the_full_mesh_from_around_the_tree() {
     for (name, k, precision, recall) in rows {
         let (p_min, r_min) = if name == "facing" { (0.52, 0.42) } else { (0.63, 0.63) };
         assert!(precision > p_min && recall > r_min, "{name}, direction {k}: P {precision:.3}, R {recall:.3}");
+    }
+}
+
+/// Each tree's octahedral or billboard quads are the same elements, so the trees of a model go
+/// to the GPU as one instanced indirect draw (`FrameStats::draw_commands`), each instance reading
+/// its own range's `DrawInfo`: a row of five trees is one draw command for five ranges, and each
+/// tree shows exactly the pixels it shows drawn alone (the others moved behind the camera, so
+/// every tree keeps its instance index).
+#[test]
+fn a_row_of_impostor_trees_is_one_instanced_draw_and_each_tree_looks_as_it_does_alone() {
+    let gpu = gpu();
+    let container = demo_with_baselines();
+    let block = container.block();
+    let radius = 0.5 * (Vec3::from_array(block.bounds_max) - Vec3::from_array(block.bounds_min)).length();
+    let centre = centre(&container);
+    let spacing = 2.2 * radius;
+    let at = |i: usize| Mat4::from_translation(vec3((i as f32 - 2.0) * spacing, 0.0, 0.0));
+    let camera = Camera::look_at(centre + vec3(0.0, 0.1 * radius, 7.0 * radius), centre, 0.8, 320, 120);
+    for technique in [Technique::Octahedral, Technique::Billboard] {
+        let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings { technique, ..Settings::default() });
+        let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("uploads");
+        let row: Vec<Instance> = (0..5).map(|i| Instance { model: tree, transform: at(i) }).collect();
+        renderer.set_instances(&row);
+        let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+        assert_eq!((stats.instances.get(technique), stats.ranges, stats.draw_commands), (5, 5, 1), "{stats:?}");
+        let alone: Vec<_> = (0..5)
+            .map(|i| {
+                let behind = Mat4::from_translation(vec3(0.0, 0.0, 100.0 * radius));
+                let one: Vec<Instance> =
+                    (0..5).map(|j| Instance { model: tree, transform: if j == i { at(i) } else { behind } }).collect();
+                renderer.set_instances(&one);
+                let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+                assert_eq!((stats.instances_visible, stats.draw_commands), (1, 1), "{stats:?}");
+                image
+            })
+            .collect();
+        let white = [255u8; 4];
+        let mut differing = 0;
+        for (p, pixel) in image.rgba.chunks_exact(4).enumerate() {
+            let drawn: Vec<&[u8]> =
+                alone.iter().map(|a| &a.rgba[4 * p..4 * p + 4]).filter(|&q| q != white.as_slice()).collect();
+            assert!(drawn.len() <= 1, "{technique:?}: trees overlap at pixel {p}");
+            differing += usize::from(pixel != drawn.first().copied().unwrap_or(white.as_slice()));
+        }
+        let seen: Vec<usize> = alone.iter().map(|a| common::count(&common::covered(a))).collect();
+        eprintln!("{technique:?}: covered pixels of each tree alone {seen:?}");
+        let trees_seen = seen.iter().filter(|&&n| n > 50).count();
+        assert_eq!((trees_seen, differing), (5, 0), "{technique:?}: trees seen alone, pixels of the row that differ");
     }
 }
 

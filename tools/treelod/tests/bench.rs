@@ -39,7 +39,7 @@ precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primit
 trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
 trees_crossed,trees_octahedral,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,\
 primitives_impostors,primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed,\
-primitives_octahedral,noise,ref_noise";
+primitives_octahedral,noise,ref_noise,draw_commands";
 
 /// The techniques of the CSV's `trees_*` and `primitives_*` columns.
 const DRAWN_WITH: [&str; 10] = [
@@ -108,6 +108,10 @@ fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
         assert_eq!(field(&header, spt, "q"), "", "no quality without --quality");
         assert_eq!(field(&header, spt, "noise"), "", "no temporal noise without --quality");
         assert_eq!(field(&header, spt, "shadow_primitives"), "", "no shadow pass without --shadows");
+        // Ranges drawing the same elements (a far tree's roots) share an indirect draw.
+        let (commands, ranges) = (number(&header, spt, "draw_commands"), number(&header, spt, "ranges"));
+        assert!(commands > 0.0 && commands <= ranges, "{commands} draw commands for {ranges} ranges");
+        assert_eq!(field(&header, full, "draw_commands"), "");
         // A forced technique changes no tree's technique; the counted full mesh has no draws.
         assert_eq!((field(&header, spt, "transitions"), field(&header, full, "transitions")), ("0", ""));
         // Every tree is drawn with the point tree, and the counted full mesh draws nothing.

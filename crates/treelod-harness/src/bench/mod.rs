@@ -249,8 +249,11 @@ pub struct Row {
     pub instances_pruned: Option<u32>,
     /// Leaves drawn by pruned instances (their triangles count in `triangles`).
     pub leaves_pruned: Option<u64>,
-    /// Indirect draws recorded (`None` for the counted full mesh).
+    /// Ranges recorded, one per drawn range (`None` for the counted full mesh).
     pub ranges: Option<u32>,
+    /// Indirect draw commands those ranges went to the GPU as (`FrameStats::draw_commands`;
+    /// `None` for the counted full mesh).
+    pub draw_commands: Option<u32>,
     /// Draws made coarser than the selection because their data was not resident yet.
     pub ranges_clamped: Option<u32>,
     /// Bytes of triangles and points streamed to the GPU by this frame.
@@ -655,6 +658,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                     instances_pruned: None,
                     leaves_pruned: None,
                     ranges: None,
+                    draw_commands: None,
                     ranges_clamped: None,
                     bytes_uploaded: None,
                     bytes_resident: None,
@@ -697,6 +701,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 ),
                 leaves_pruned: Some(stats.leaves_pruned),
                 ranges: Some(stats.ranges),
+                draw_commands: Some(stats.draw_commands),
                 ranges_clamped: Some(stats.ranges_clamped),
                 bytes_uploaded: Some(stats.bytes_uploaded),
                 bytes_resident: Some(stats.bytes_resident),

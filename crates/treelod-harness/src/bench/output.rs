@@ -420,7 +420,7 @@ precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primit
 trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
 trees_crossed,trees_octahedral,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,\
 primitives_impostors,primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed,\
-primitives_octahedral,noise,ref_noise";
+primitives_octahedral,noise,ref_noise,draw_commands";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -433,7 +433,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -470,6 +470,7 @@ pub fn csv(report: &Report) -> String {
             by_technique(row),
             text(row.noise.map(|v| v.to_string())),
             text(row.reference_noise.map(|v| v.to_string())),
+            text(row.draw_commands.map(|v| v.to_string())),
         );
     }
     out
