@@ -182,6 +182,9 @@ struct TauBasis {
     scale: f32,
     /// The block centre's distance from the eye, world units.
     d_block: f32,
+    /// One over the block's half diagonal in world units (0 without one): `Z_i` per unit of
+    /// distance.
+    inv_radius: f32,
 }
 
 /// Gilet's depth bias of a cell at depth `Z_i = z` as a factor of `τ`: `s_min_i / s_min` (1
@@ -357,7 +360,8 @@ impl SptLod {
         settings: &LodSettings,
         quality: f32,
     ) -> Option<f32> {
-        let TauBasis { per_metre, quality, scale, d_block } = self.tau_basis(transform, camera, frustum, quality)?;
+        let TauBasis { per_metre, quality, scale, d_block, .. } =
+            self.tau_basis(transform, camera, frustum, quality)?;
         let nearest = (d_block - self.anchor_reach * scale).max(0.0);
         let z = if self.block_radius > 0.0 { (self.anchor_reach / self.block_radius).min(1.0) } else { 0.0 };
         let bias = [-z, 0.0, z].map(|z| depth_bias(settings, z)).into_iter().fold(f32::INFINITY, f32::min);
@@ -410,8 +414,7 @@ impl SptLod {
     /// it `Z_i = 0`.
     #[inline]
     fn tau_at(&self, basis: &TauBasis, settings: &LodSettings, d_cell: f32, block_cell: bool) -> f32 {
-        let TauBasis { per_metre, quality, scale, d_block } = *basis;
-        let inv_radius = if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 };
+        let TauBasis { per_metre, quality, d_block, inv_radius, .. } = *basis;
         let z = if block_cell { 0.0 } else { ((d_cell - d_block) * inv_radius).clamp(-1.0, 1.0) };
         d_cell * per_metre * depth_bias(settings, z) / quality
     }
@@ -420,11 +423,13 @@ impl SptLod {
     /// `None` if the instance's sphere lies outside `frustum` or the transform is degenerate.
     fn tau_basis(&self, transform: Mat4, camera: &Camera, frustum: &Frustum, quality: f32) -> Option<TauBasis> {
         let per_metre = tau_per_metre(transform, camera, frustum, 1.0, (self.centre, self.radius))?;
+        let scale = camera.world_per_pixel() / per_metre;
         Some(TauBasis {
             per_metre,
             quality: if quality > 0.0 && quality.is_finite() { quality } else { 1.0 },
-            scale: camera.world_per_pixel() / per_metre,
+            scale,
             d_block: transform.transform_point3(self.block_centre).distance(camera.position),
+            inv_radius: if self.block_radius > 0.0 { (self.block_radius * scale).recip() } else { 0.0 },
         })
     }
 
