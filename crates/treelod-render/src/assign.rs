@@ -3,8 +3,8 @@
 //! and for each shadow cascade ([`Settings::shadows`]' [`Casters`]).
 
 use treelod_runtime::{
-    Assignment, BudgetController, Calibration, Choices, Policy, PolicyState, Technique, Transition,
-    choose_instances_coarsest,
+    Assignment, BudgetController, Calibration, Choices, ChunkBounds, Policy, PolicyState, Technique, Transition,
+    choose_instances_in_chunks,
 };
 
 #[cfg(doc)]
@@ -25,6 +25,9 @@ pub(crate) struct PolicyModels {
     pub(crate) state: PolicyState,
     /// Scratch: this frame's choice per instance (`None`: outside every view).
     pub(crate) chosen: Vec<Option<Technique>>,
+    /// The instances' chunks' spheres (made by `Renderer::set_instances`): whole chunks out of
+    /// every view are culled without reading their instances.
+    pub(crate) chunks: ChunkBounds,
     /// Per shadow cascade: last frame's choice per instance from the light's view (hysteresis).
     pub(crate) cascade_states: Vec<PolicyState>,
     /// Budget mode ([`Policy::budget`]): what steers the target and `s_min` from frame to frame;
@@ -130,7 +133,8 @@ impl Renderer {
             }
         };
         let chosen = &mut tables.chosen;
-        choose_instances_coarsest(&self.instances, &self.lods, &tables.choices, cameras, technique, state, chosen);
+        let (instances, lods, chunks) = (&self.instances, &self.lods, &tables.chunks);
+        choose_instances_in_chunks(instances, lods, chunks, &tables.choices, cameras, technique, state, chosen);
         // Trees outside every view are not chosen, nor listed.
         let chosen = tables.chosen.iter().enumerate().filter_map(|(i, t)| Some((u32::try_from(i).ok()?, (*t)?)));
         out.assign_listed(&self.instances, &self.representations, chosen);

@@ -528,6 +528,7 @@ impl Renderer {
             self.policy.state.reset();
             self.policy.cascade_states.iter_mut().for_each(PolicyState::reset);
         }
+        self.policy.chunks = treelod_runtime::ChunkBounds::new(&self.instances, &self.lods);
         // The union of the instances' transformed blocks (their container's bounds).
         let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
         for instance in &self.instances {

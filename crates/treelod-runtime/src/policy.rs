@@ -1339,6 +1339,75 @@ pub fn choose_instances_coarsest(
     state: &mut PolicyState,
     out: &mut Vec<Option<Technique>>,
 ) {
+    let bounds = ChunkBounds::default();
+    choose_instances_in_chunks(instances, lods, &bounds, choices, cameras, otherwise, state, out);
+}
+
+/// The bounding spheres of the instances' culling spheres ([`ModelLod::cull_sphere`]) in chunks
+/// of [`CHOOSE_CHUNK`] consecutive instances, world space, for [`choose_instances_in_chunks`]:
+/// a chunk outside every view is culled whole, without reading its instances. Made again
+/// whenever the instances change (a renderer makes it in its `set_instances`). A chunk helps
+/// where consecutive instances stand near each other (a host listing its trees by tile or
+/// group); scattered, its sphere holds most of the scene and culls nothing, at the cost of one
+/// sphere test.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ChunkBounds {
+    /// Per chunk, its sphere's centre and radius; a radius of infinity for a chunk holding an
+    /// instance whose model or transform is not usable (never culled whole).
+    spheres: Vec<(Vec3, f32)>,
+    /// The instances they were made of.
+    instances: usize,
+}
+
+impl ChunkBounds {
+    /// The chunks' spheres of `instances` drawing `lods`.
+    #[must_use]
+    pub fn new(instances: &[Instance], lods: &[ModelLod]) -> Self {
+        let spheres = instances
+            .chunks(CHOOSE_CHUNK)
+            .map(|chunk| {
+                let mut spheres = Vec::with_capacity(chunk.len());
+                for instance in chunk {
+                    let Some(lod) = lods.get(instance.model as usize) else { return (Vec3::ZERO, f32::INFINITY) };
+                    let (centre, radius) = lod.cull_sphere();
+                    let (centre, radius) = (
+                        instance.transform.transform_point3(centre),
+                        radius * crate::max_axis_scale(instance.transform),
+                    );
+                    if !(centre.is_finite() && radius.is_finite()) {
+                        return (Vec3::ZERO, f32::INFINITY);
+                    }
+                    spheres.push((centre, radius));
+                }
+                let (lo, hi) = spheres
+                    .iter()
+                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), (c, r)| (lo.min(*c - *r), hi.max(*c + *r)));
+                let centre = 0.5 * (lo + hi);
+                let radius = spheres.iter().map(|(c, r)| c.distance(centre) + r).fold(0.0f32, f32::max);
+                // A margin for rounding: a chunk is culled only where each of its spheres is
+                // clearly outside.
+                (centre, radius * (1.0 + 1e-4) + 1e-3)
+            })
+            .collect();
+        Self { spheres, instances: instances.len() }
+    }
+}
+
+/// [`choose_instances_coarsest`], culling first each chunk of [`CHOOSE_CHUNK`] instances whose
+/// sphere in `bounds` lies outside every camera's frustum: its trees get `None` and are
+/// forgotten, as each would be on its own (the same choices and state). `bounds` made of other
+/// instances than `instances` (another count) is ignored.
+#[expect(clippy::too_many_arguments, reason = "choose_instances_coarsest's, and the chunks' bounds")]
+pub fn choose_instances_in_chunks(
+    instances: &[Instance],
+    lods: &[ModelLod],
+    bounds: &ChunkBounds,
+    choices: &[Option<Choices>],
+    cameras: &[Camera],
+    otherwise: Technique,
+    state: &mut PolicyState,
+    out: &mut Vec<Option<Technique>>,
+) {
     state.previous.resize(instances.len(), None);
     state.transitions.resize(instances.len(), None);
     state.visible.resize(instances.len(), 1.0);
@@ -1349,12 +1418,25 @@ pub fn choose_instances_coarsest(
     let frames = state.frames;
     let eyes: Vec<(Vec3, f32, Frustum)> =
         cameras.iter().map(|c| (c.position, c.world_per_pixel(), Frustum::from_view_proj(c.view_proj))).collect();
-    let choose = |instances: &[Instance],
+    let spheres = (bounds.instances == instances.len() && !cameras.is_empty()).then_some(&bounds.spheres[..]);
+    let choose = |chunk: usize,
+                  instances: &[Instance],
                   previous: &mut [Option<Technique>],
                   transitions: &mut [Option<(Technique, u16)>],
                   visible: &[f32],
                   (classes, elevations): (&mut [u8], &mut [u8]),
                   out: &mut [Option<Technique>]| {
+        if let Some(&(centre, radius)) = spheres.and_then(|s| s.get(chunk))
+            && !eyes.iter().any(|(_, _, frustum)| frustum.intersects_sphere(centre, radius))
+        {
+            // Every tree of the chunk is out of view: forgotten, as `in_some_view` would have
+            // each (its model is usable, or the chunk's radius would be infinite).
+            previous.fill(None);
+            transitions.fill(None);
+            elevations.fill(NO_CLASS);
+            out.fill(None);
+            return;
+        }
         let per_instance =
             instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(elevations).zip(out);
         for ((((((instance, previous), transition), &visible), class), elevation), out) in per_instance {
@@ -1418,19 +1500,20 @@ pub fn choose_instances_coarsest(
     };
     if instances.len() <= CHOOSE_CHUNK {
         let classes = (&mut state.classes[..], &mut state.elevations[..]);
-        choose(instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out);
+        choose(0, instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out);
         return;
     }
     instances
         .par_chunks(CHOOSE_CHUNK)
+        .enumerate()
         .zip(state.previous.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.transitions.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.visible.par_chunks(CHOOSE_CHUNK))
         .zip(state.classes.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.elevations.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
-        .for_each(|((((((instances, previous), transitions), visible), classes), elevations), out)| {
-            choose(instances, previous, transitions, visible, (classes, elevations), out);
+        .for_each(|(((((((chunk, instances), previous), transitions), visible), classes), elevations), out)| {
+            choose(chunk, instances, previous, transitions, visible, (classes, elevations), out);
         });
 }
 
@@ -2348,6 +2431,82 @@ mod tests {
         // A shadow cascade's two views: a tree in either is chosen.
         choose_instances_coarsest(&instances, &lods, &choices, &[ahead, behind], Technique::Spt, &mut state, &mut all);
         assert!(all.iter().all(Option::is_some), "{all:?}");
+    }
+
+    #[test]
+    fn chunks_out_of_view_are_culled_whole_with_the_choices_and_state_of_each_tree_alone() {
+        let lods = [tall_lod()];
+        let choices = [Some(spt_above_without_hysteresis())];
+        // Four groups of trees a chunk and a half each, 400 m apart along x, each tree 4 m from
+        // the next; one tree of an unknown model in the last group (its chunk is never culled
+        // whole).
+        let mut instances: Vec<Instance> = (0..6 * CHOOSE_CHUNK)
+            .map(|i| {
+                let (group, k) = (i / (3 * CHOOSE_CHUNK / 2), i % (3 * CHOOSE_CHUNK / 2));
+                #[expect(clippy::cast_precision_loss, reason = "small numbers")]
+                let at = Vec3::new(400.0 * group as f32 + 4.0 * (k % 40) as f32, 0.0, -4.0 * (k / 40) as f32);
+                Instance { model: 0, transform: Mat4::from_translation(at) }
+            })
+            .collect();
+        instances[5 * CHOOSE_CHUNK].model = 7;
+        let bounds = ChunkBounds::new(&instances, &lods);
+        assert_eq!(bounds.spheres.len(), 6);
+        // The camera walks along the groups looking down -z, then turns round, with a transition
+        // so the state carries from frame to frame.
+        let (mut chunked, mut alone) = (PolicyState::with_transition(4), PolicyState::with_transition(4));
+        let (mut out, mut reference) = (Vec::new(), Vec::new());
+        let mut culled_whole = 0;
+        for frame in 0..14 {
+            #[expect(clippy::cast_precision_loss, reason = "small numbers")]
+            let eye = Vec3::new(-100.0 + 120.0 * frame as f32, 6.0, 60.0);
+            let look = if frame < 10 { -Vec3::Z } else { Vec3::Z };
+            let camera = Camera::look_at(eye, eye + look, 0.9, 640, 480);
+            let cameras = [camera];
+            choose_instances_in_chunks(
+                &instances,
+                &lods,
+                &bounds,
+                &choices,
+                &cameras,
+                Technique::Spt,
+                &mut chunked,
+                &mut out,
+            );
+            choose_instances_coarsest(
+                &instances,
+                &lods,
+                &choices,
+                &cameras,
+                Technique::Spt,
+                &mut alone,
+                &mut reference,
+            );
+            assert_eq!(out, reference, "frame {frame}");
+            assert_eq!(
+                (&chunked.previous, &chunked.transitions, &chunked.elevations),
+                (&alone.previous, &alone.transitions, &alone.elevations),
+                "frame {frame}"
+            );
+            let frustum = Frustum::from_view_proj(camera.view_proj);
+            culled_whole += bounds.spheres.iter().filter(|(c, r)| !frustum.intersects_sphere(*c, *r)).count();
+        }
+        assert!(culled_whole >= 20, "chunks culled whole: {culled_whole}");
+        assert!(out.iter().any(Option::is_some) && out[5 * CHOOSE_CHUNK] == Some(Technique::Spt));
+        // Bounds of other instances (one fewer) are not used: every tree is tested on its own.
+        let short = ChunkBounds::new(&instances[1..], &lods);
+        let behind = Camera::look_at(Vec3::new(0.0, 6.0, 60.0), Vec3::new(0.0, 6.0, 61.0), 0.9, 640, 480);
+        instances.iter_mut().for_each(|i| i.transform = Mat4::from_translation(Vec3::new(0.0, 0.0, 100.0)));
+        choose_instances_in_chunks(
+            &instances,
+            &lods,
+            &short,
+            &choices,
+            &[behind],
+            Technique::Spt,
+            &mut chunked,
+            &mut out,
+        );
+        assert!(out.iter().all(Option::is_some), "moved behind the camera, in its view");
     }
 
     /// The choices of a frame, made one instance at a time with [`projected_height`] and
