@@ -1311,6 +1311,9 @@ pub const CHOOSE_CHUNK: usize = 1024;
 /// container with every representation, `bench --trees 1000000 --no-render --technique policy`,
 /// see `docs/cli.md`.)
 ///
+/// [`choose_instances_in_chunks`] culls chunks of [`CHOOSE_CHUNK`] instances whole first, with
+/// the same result.
+///
 /// Each instance's choice depends only on it and its own previous choice, so more than
 /// [`CHOOSE_CHUNK`] instances are chosen in chunks on rayon's pool, each writing its own slice:
 /// the result is the same whatever the thread count.
