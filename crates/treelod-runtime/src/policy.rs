@@ -1372,11 +1372,7 @@ impl ChunkBounds {
                 let mut spheres = Vec::with_capacity(chunk.len());
                 for instance in chunk {
                     let Some(lod) = lods.get(instance.model as usize) else { return (Vec3::ZERO, f32::INFINITY) };
-                    let (centre, radius) = lod.cull_sphere();
-                    let (centre, radius) = (
-                        instance.transform.transform_point3(centre),
-                        radius * crate::max_axis_scale(instance.transform),
-                    );
+                    let (centre, radius) = world_cull_sphere(lod, instance.transform);
                     if !(centre.is_finite() && radius.is_finite()) {
                         return (Vec3::ZERO, f32::INFINITY);
                     }
@@ -1527,9 +1523,15 @@ fn in_some_view(lod: &ModelLod, transform: Mat4, views: &[(Vec3, f32, Frustum)])
     if views.is_empty() {
         return true;
     }
-    let (centre, radius) = lod.cull_sphere();
-    let (centre, radius) = (transform.transform_point3(centre), radius * crate::max_axis_scale(transform));
+    let (centre, radius) = world_cull_sphere(lod, transform);
     views.iter().any(|(_, _, frustum)| frustum.intersects_sphere(centre, radius))
+}
+
+/// A model's culling sphere ([`ModelLod::cull_sphere`]) drawn by `transform`, world space: what
+/// [`in_some_view`] tests and [`ChunkBounds`] holds.
+fn world_cull_sphere(lod: &ModelLod, transform: Mat4) -> (Vec3, f32) {
+    let (centre, radius) = lod.cull_sphere();
+    (transform.transform_point3(centre), radius * crate::max_axis_scale(transform))
 }
 
 /// The share of a model's triangles drawn by `transform` that lie in cells the point tree's
