@@ -3,6 +3,7 @@
 //! what is resident, and the indirect draws of each bucket.
 
 use bytemuck::{Pod, Zeroable};
+use rayon::prelude::*;
 use treelod_runtime::{DrawList, DrawRange, Kind, ROOTS_CELL, Technique, TreeDraws, TriangleSource};
 
 use crate::renderer::{ModelId, Renderer, max_axis_scale};
@@ -126,6 +127,12 @@ impl Renderer {
     /// draws of the views before it; counts them into `stats`. `leaving`: the draws, for the
     /// same view, of the techniques the trees in a transition are leaving (the camera's view
     /// only), recorded into the same buckets on their share of the pixels.
+    ///
+    /// The draws are recorded in pieces of at most [`Renderer::record_chunk`] of the selection's
+    /// lists, in parallel, each piece into buckets of its own ([`Recording`]); the buckets are
+    /// then read piece after piece, in the order of the lists, so the draw infos, indirect draws
+    /// and recorded draws are those one pass over the lists gives, whatever the pieces and the
+    /// thread count.
     pub(crate) fn record_view(
         &mut self,
         view: &mut View,
@@ -133,60 +140,119 @@ impl Renderer {
         full_mesh: bool,
         stats: &mut FrameStats,
     ) {
+        let mut recordings = std::mem::take(&mut self.recordings);
+        let buckets = Bucket::COUNT * self.models.len();
+        let first = self.recordings_used;
+        let pieces = {
+            let mut pieces = pieces_of(view, false, self.record_chunk);
+            if let Some(leaving) = leaving {
+                pieces.extend(pieces_of(leaving, true, self.record_chunk));
+            }
+            if recordings.len() < first + pieces.len() {
+                recordings.resize_with(first + pieces.len(), Recording::default);
+            }
+            let this = &*self;
+            let record = |(piece, out): (&Piece<'_>, &mut Recording)| {
+                out.clear(buckets);
+                this.record_piece(piece, full_mesh, out);
+            };
+            let outs = &mut recordings[first..first + pieces.len()];
+            if pieces.len() > 1 {
+                pieces.par_iter().zip(outs.par_iter_mut()).for_each(record);
+            } else {
+                pieces.iter().zip(outs.iter_mut()).for_each(record);
+            }
+            pieces.iter().map(|p| p.leaving).collect::<Vec<_>>()
+        };
+        let used = first..first + pieces.len();
+        self.recordings_used = used.end;
         view.recorded.clear();
-        self.buckets.resize_with(Bucket::COUNT * self.models.len(), Vec::new);
-        for bucket in &mut self.buckets {
-            bucket.clear();
+        stats.leaving = 0;
+        for (out, &leaving) in recordings[used.clone()].iter().zip(&pieces) {
+            view.recorded.extend_from_slice(&out.recorded);
+            stats.ranges_clamped += out.clamped;
+            if leaving {
+                stats.leaving += out.recorded.iter().map(|d| u64::from(d.count)).sum::<u64>();
+            }
         }
-        let mut recorded = std::mem::take(&mut view.recorded);
-        self.record_selection(view, false, full_mesh, &mut recorded, stats);
-        let assigned = recorded.len();
-        if let Some(leaving) = leaving {
-            self.record_selection(leaving, true, full_mesh, &mut recorded, stats);
-        }
-        stats.leaving = recorded[assigned..].iter().map(|d| u64::from(d.count)).sum();
-        view.recorded = recorded;
         // What each kind of primitive and each technique submitted.
         for draw in &view.recorded {
             stats.submitted[draw.source.primitive()] += u64::from(draw.count);
             stats.by_technique[draw.technique] += u64::from(draw.count);
         }
+        // The view's draw infos, bucket after bucket, each bucket's pieces in turn; their copy
+        // into the draw buffer waits for `upload_draws`. Here only their indirect draws.
         view.model_draws.clear();
-        let (before, infos_before) = (self.indirect.len(), self.draw_infos.len());
-        for pair in self.buckets.chunks(Bucket::COUNT) {
+        let (before, infos_before) = (self.indirect.len(), self.info_count);
+        let mut written: Vec<(usize, usize)> =
+            used.clone().flat_map(|r| recordings[r].written.iter().map(move |&b| (b, r))).collect();
+        written.sort_unstable();
+        let mut written = written.into_iter().peekable();
+        for m in 0..self.models.len() {
             let mut draws = [(0, 0); Bucket::COUNT];
-            for (kind, bucket) in pair.iter().enumerate() {
+            for (kind, draw) in draws.iter_mut().enumerate() {
                 let start = self.indirect.len();
-                for &(info, first_vertex, vertex_count) in bucket {
-                    let index = u32::try_from(self.draw_infos.len()).unwrap_or(u32::MAX);
-                    self.draw_infos.push(info);
-                    // A range that draws the same elements as the bucket's last draw (each tree's
-                    // octahedral or billboard quads, far ellipsoids, equal prefixes) joins it as
-                    // its next instance: the shaders read the range's `DrawInfo` at the
-                    // instance index, which runs on from the draw's first. One indirect draw then
-                    // stands for a run of trees, where the GPU would otherwise walk a command per
-                    // tree.
-                    if let Some(last) = self.indirect[start..].last_mut()
-                        && (last.first_vertex, last.vertex_count) == (first_vertex, vertex_count)
-                        && last.first_instance.checked_add(last.instance_count) == Some(index)
-                    {
-                        last.instance_count += 1;
-                        continue;
+                let bucket = m * Bucket::COUNT + kind;
+                while let Some((_, r)) = written.next_if(|&(b, _)| b == bucket) {
+                    let spans = &recordings[r].buckets[bucket].spans;
+                    self.info_segments.push((r, bucket));
+                    for &(first_vertex, vertex_count) in spans {
+                        let index = u32::try_from(self.info_count).unwrap_or(u32::MAX);
+                        self.info_count += 1;
+                        // A range that draws the same elements as the bucket's last draw (each
+                        // tree's octahedral or billboard quads, far ellipsoids, equal prefixes)
+                        // joins it as its next instance: the shaders read the range's `DrawInfo`
+                        // at the instance index, which runs on from the draw's first. One
+                        // indirect draw then stands for a run of trees, where the GPU would
+                        // otherwise walk a command per tree.
+                        if let Some(last) = self.indirect[start..].last_mut()
+                            && (last.first_vertex, last.vertex_count) == (first_vertex, vertex_count)
+                            && last.first_instance.checked_add(last.instance_count) == Some(index)
+                        {
+                            last.instance_count += 1;
+                            continue;
+                        }
+                        self.indirect.push(wgpu::util::DrawIndirectArgs {
+                            vertex_count,
+                            instance_count: 1,
+                            first_vertex,
+                            first_instance: index,
+                        });
                     }
-                    self.indirect.push(wgpu::util::DrawIndirectArgs {
-                        vertex_count,
-                        instance_count: 1,
-                        first_vertex,
-                        first_instance: index,
-                    });
                 }
                 let [start, end] = [start, self.indirect.len()].map(|n| u32::try_from(n).unwrap_or(u32::MAX));
-                draws[kind] = (start, end - start);
+                *draw = (start, end - start);
             }
             view.model_draws.push(draws);
         }
-        stats.ranges += u32::try_from(self.draw_infos.len() - infos_before).unwrap_or(u32::MAX);
+        stats.ranges += u32::try_from(self.info_count - infos_before).unwrap_or(u32::MAX);
         stats.draw_commands += u32::try_from(self.indirect.len() - before).unwrap_or(u32::MAX);
+        self.recordings = recordings;
+    }
+
+    /// Starts a frame's draws: no draw info, indirect draw or piece recorded yet.
+    pub(crate) fn begin_draws(&mut self) {
+        self.recordings_used = 0;
+        self.info_segments.clear();
+        self.info_count = 0;
+        self.indirect.clear();
+    }
+
+    /// Copies the frame's draw infos, in the order [`Self::record_view`] gave them their
+    /// indices, into `out` (their bytes, `info_count` of them: the queue's staging memory, so
+    /// that each info is copied once more after its piece wrote it). (`WriteOnly` of bytes is
+    /// not `Send`: the runs are copied one after another.)
+    pub(crate) fn write_draw_infos(&self, out: wgpu::WriteOnly<'_, [u8]>) {
+        let mut rest = out;
+        for &(r, bucket) in &self.info_segments {
+            let infos: &[u8] = bytemuck::cast_slice(&self.recordings[r].buckets[bucket].infos);
+            if infos.len() > rest.len() {
+                break;
+            }
+            let (mut head, tail) = rest.split_at(infos.len());
+            head.copy_from_slice(infos);
+            rest = tail;
+        }
     }
 
     /// The technique a draw of instance `instance` in a view's (`leaving` false) or in its
@@ -200,122 +266,113 @@ impl Renderer {
         }
     }
 
-    /// Records the draws of `view`'s selections (or, `leaving`, those of the techniques trees in
-    /// a transition leave) into the buckets and `recorded`.
-    fn record_selection(
-        &mut self,
-        view: &View,
-        leaving: bool,
-        full_mesh: bool,
-        recorded: &mut Vec<RecordedDraw>,
-        stats: &mut FrameStats,
-    ) {
-        let tints = Technique::ALL.map(tint);
-        let ranges = view.selection.ranges();
-        let mut i = 0;
-        while i < ranges.len() {
-            let range = ranges[i];
-            // A cell's triangle range is followed by its point range, if any.
-            let points = ranges
-                .get(i + 1)
-                .filter(|next| {
-                    range.kind == Kind::Triangles
-                        && next.kind == Kind::Points
-                        && (next.instance, next.cell) == (range.instance, range.cell)
-                })
-                .copied();
-            i += 1 + usize::from(points.is_some());
-            let (triangles, points) = match range.kind {
-                Kind::Triangles => (Some(range), points),
-                Kind::Points | Kind::Roots => (None, Some(range)),
-            };
-            let instance = view.instance_index(range.instance);
-            let (technique, dither) = self.drawn_by(instance, leaving);
-            for draw in self.clamp(instance, range, triangles, points, full_mesh) {
-                let Some(draw) = draw else { continue };
-                let draw = RecordedDraw { technique, dither, ..draw };
-                stats.ranges_clamped += u32::from(draw.clamped);
-                let (bucket, first_vertex, corners) = self.gpu_first(&draw);
-                let transform = self.instances[draw.instance as usize].transform;
-                let info = DrawInfo {
-                    model: transform.to_cols_array_2d(),
-                    tau_p: draw.tau_points,
-                    tau_t: draw.tau_triangles,
-                    cell: draw.cell,
-                    scale: max_axis_scale(transform),
-                    shading: range.shading,
-                    leaf_scale: 1.0,
-                    instance: draw.instance,
-                    tint: tints[technique.index()],
-                    fade: pack_fade(dither),
-                    pad: [0; 3],
-                };
-                self.buckets[bucket].push((info, first_vertex, draw.count * corners));
-                recorded.push(draw);
+    /// Records the draws of `piece` (of a view's selections or, `piece.leaving`, of those of the
+    /// techniques trees in a transition leave) into `out`.
+    fn record_piece(&self, piece: &Piece<'_>, full_mesh: bool, out: &mut Recording) {
+        let Piece { view, leaving, part } = *piece;
+        match part {
+            Part::Ranges(ranges) => {
+                let tints = Technique::ALL.map(tint);
+                let mut i = 0;
+                while i < ranges.len() {
+                    let range = ranges[i];
+                    // A cell's triangle range is followed by its point range, if any.
+                    let points = ranges.get(i + 1).filter(|next| pairs(&range, next)).copied();
+                    i += 1 + usize::from(points.is_some());
+                    let (triangles, points) = match range.kind {
+                        Kind::Triangles => (Some(range), points),
+                        Kind::Points | Kind::Roots => (None, Some(range)),
+                    };
+                    let instance = view.instance_index(range.instance);
+                    let (technique, dither) = self.drawn_by(instance, leaving);
+                    for draw in self.clamp(instance, range, triangles, points, full_mesh) {
+                        let Some(draw) = draw else { continue };
+                        let draw = RecordedDraw { technique, dither, ..draw };
+                        out.clamped += u32::from(draw.clamped);
+                        let (bucket, first_vertex, corners) = self.gpu_first(&draw);
+                        let transform = self.instances[draw.instance as usize].transform;
+                        let info = DrawInfo {
+                            model: transform.to_cols_array_2d(),
+                            tau_p: draw.tau_points,
+                            tau_t: draw.tau_triangles,
+                            cell: draw.cell,
+                            scale: max_axis_scale(transform),
+                            shading: range.shading,
+                            leaf_scale: 1.0,
+                            instance: draw.instance,
+                            tint: tints[technique.index()],
+                            fade: pack_fade(dither),
+                            pad: [0; 3],
+                        };
+                        out.push(bucket, info, first_vertex, draw.count * corners);
+                        out.recorded.push(draw);
+                    }
+                }
             }
-        }
-        // Pruned trees: leaves and bark from each model's extra triangles, unshaded by Gilet's
-        // per-cell estimate (it is a property of the point hierarchy's cells).
-        for draw in &view.draws.triangles {
-            let (technique, dither) = self.drawn_by(draw.instance, leaving);
-            let record = RecordedDraw {
-                instance: draw.instance,
-                model: ModelId(draw.model),
-                cell: draw.cell,
-                source: match draw.source {
-                    TriangleSource::PrunedLeaves => DrawSource::PrunedLeaves,
-                    TriangleSource::Bark => DrawSource::Bark,
-                    TriangleSource::LodLevel => DrawSource::LodLevel,
-                },
-                count: draw.count,
-                tau_points: draw.lambda,
-                tau_triangles: draw.tau_triangles,
-                clamped: false,
-                technique,
-                dither,
-            };
-            record_direct(&self.instances, &mut self.buckets, recorded, record, draw.first, draw.leaf_scale);
-        }
-        // Prefixes of one cell's elements uploaded whole (impostor planes, ellipsoids, lines),
-        // each in its bucket, the level chosen in the shader by `τ`.
-        let prefixes =
-            prefix_lists(&view.draws).into_iter().flat_map(|(list, source)| list.iter().map(move |d| (d, source)));
-        for (draw, source) in prefixes {
-            let range = draw.range;
-            let (technique, dither) = self.drawn_by(draw.instance, leaving);
-            let record = RecordedDraw {
-                instance: draw.instance,
-                model: ModelId(draw.model),
-                cell: range.cell,
-                source,
-                count: range.count,
-                tau_points: range.tau,
-                tau_triangles: range.tau,
-                clamped: false,
-                technique,
-                dither,
-            };
-            record_direct(&self.instances, &mut self.buckets, recorded, record, range.first, 1.0);
-        }
-        // Baseline billboards: every quad of the chosen kind; and octahedral impostors.
-        let quads = view.draws.billboards.iter().map(|d| (d, DrawSource::Billboards));
-        for (&treelod_runtime::QuadDraw { instance, model, first, count }, source) in
-            quads.chain(view.draws.octahedral.iter().map(|d| (d, DrawSource::Octahedral)))
-        {
-            let (technique, dither) = self.drawn_by(instance, leaving);
-            let record = RecordedDraw {
-                instance,
-                model: ModelId(model),
-                cell: ROOTS_CELL,
-                source,
-                count,
-                tau_points: 0.0,
-                tau_triangles: 0.0,
-                clamped: false,
-                technique,
-                dither,
-            };
-            record_direct(&self.instances, &mut self.buckets, recorded, record, first, 1.0);
+            // Pruned trees: leaves and bark from each model's extra triangles, unshaded by
+            // Gilet's per-cell estimate (it is a property of the point hierarchy's cells).
+            Part::Triangles(draws) => {
+                for draw in draws {
+                    let (technique, dither) = self.drawn_by(draw.instance, leaving);
+                    let record = RecordedDraw {
+                        instance: draw.instance,
+                        model: ModelId(draw.model),
+                        cell: draw.cell,
+                        source: match draw.source {
+                            TriangleSource::PrunedLeaves => DrawSource::PrunedLeaves,
+                            TriangleSource::Bark => DrawSource::Bark,
+                            TriangleSource::LodLevel => DrawSource::LodLevel,
+                        },
+                        count: draw.count,
+                        tau_points: draw.lambda,
+                        tau_triangles: draw.tau_triangles,
+                        clamped: false,
+                        technique,
+                        dither,
+                    };
+                    record_direct(&self.instances, out, record, draw.first, draw.leaf_scale);
+                }
+            }
+            // Prefixes of one cell's elements uploaded whole (impostor planes, ellipsoids,
+            // lines), each in its bucket, the level chosen in the shader by `τ`.
+            Part::Prefixes(draws, source) => {
+                for draw in draws {
+                    let range = draw.range;
+                    let (technique, dither) = self.drawn_by(draw.instance, leaving);
+                    let record = RecordedDraw {
+                        instance: draw.instance,
+                        model: ModelId(draw.model),
+                        cell: range.cell,
+                        source,
+                        count: range.count,
+                        tau_points: range.tau,
+                        tau_triangles: range.tau,
+                        clamped: false,
+                        technique,
+                        dither,
+                    };
+                    record_direct(&self.instances, out, record, range.first, 1.0);
+                }
+            }
+            // Baseline billboards: every quad of the chosen kind; and octahedral impostors.
+            Part::Quads(draws, source) => {
+                for &treelod_runtime::QuadDraw { instance, model, first, count } in draws {
+                    let (technique, dither) = self.drawn_by(instance, leaving);
+                    let record = RecordedDraw {
+                        instance,
+                        model: ModelId(model),
+                        cell: ROOTS_CELL,
+                        source,
+                        count,
+                        tau_points: 0.0,
+                        tau_triangles: 0.0,
+                        clamped: false,
+                        technique,
+                        dither,
+                    };
+                    record_direct(&self.instances, out, record, first, 1.0);
+                }
+            }
         }
     }
 
@@ -453,14 +510,117 @@ impl Renderer {
     }
 }
 
+/// Whether `next` is the point range of the cell whose triangle range is `range`: the two are
+/// recorded together ([`Renderer::clamp`]).
+fn pairs(range: &DrawRange, next: &DrawRange) -> bool {
+    range.kind == Kind::Triangles
+        && next.kind == Kind::Points
+        && (next.instance, next.cell) == (range.instance, range.cell)
+}
+
+/// The most entries of a view's lists one piece records by default ([`Renderer::record_view`]):
+/// pieces of a few microseconds' work, so that a forest's tens of thousands of draws spread over
+/// the threads while a small scene stays in one piece.
+pub(crate) const RECORD_CHUNK: usize = 512;
+
+/// A piece of a view's draws, recorded as one task of [`Renderer::record_view`].
+#[derive(Clone, Copy)]
+struct Piece<'a> {
+    view: &'a View,
+    /// Whether these are the draws of the techniques trees in a transition leave.
+    leaving: bool,
+    part: Part<'a>,
+}
+
+/// Consecutive entries of one of a view's lists.
+#[derive(Clone, Copy)]
+enum Part<'a> {
+    /// The point tree's ranges (a cell's triangle range beside its point range).
+    Ranges(&'a [DrawRange]),
+    /// Pruned leaves, bark and LoD chain levels.
+    Triangles(&'a [treelod_runtime::TriangleDraw]),
+    /// Prefixes of one cell's elements uploaded whole.
+    Prefixes(&'a [treelod_runtime::PrefixDraw], DrawSource),
+    /// Billboards' and octahedral impostors' quads.
+    Quads(&'a [treelod_runtime::QuadDraw], DrawSource),
+}
+
+/// `view`'s lists in the order they are recorded, in pieces of at most `chunk` entries (at least
+/// 1); a cell's triangle range and its point range stay in one piece.
+fn pieces_of(view: &View, leaving: bool, chunk: usize) -> Vec<Piece<'_>> {
+    let chunk = chunk.max(1);
+    let mut parts = Vec::new();
+    let mut ranges = view.selection.ranges();
+    while !ranges.is_empty() {
+        let mut end = chunk.min(ranges.len());
+        if end < ranges.len() && pairs(&ranges[end - 1], &ranges[end]) {
+            end += 1;
+        }
+        let (head, rest) = ranges.split_at(end);
+        parts.push(Part::Ranges(head));
+        ranges = rest;
+    }
+    parts.extend(view.draws.triangles.chunks(chunk).map(Part::Triangles));
+    for (list, source) in prefix_lists(&view.draws) {
+        parts.extend(list.chunks(chunk).map(|c| Part::Prefixes(c, source)));
+    }
+    parts.extend(view.draws.billboards.chunks(chunk).map(|c| Part::Quads(c, DrawSource::Billboards)));
+    parts.extend(view.draws.octahedral.chunks(chunk).map(|c| Part::Quads(c, DrawSource::Octahedral)));
+    parts.into_iter().map(|part| Piece { view, leaving, part }).collect()
+}
+
+/// What one piece recorded: per bucket (model × [`Bucket`]) its draw infos with their first
+/// vertex and vertex count, and the buckets it wrote, in the order it first wrote them (a piece
+/// writes a few of a scene's buckets, however many models it has); its draws, and how many of
+/// them streaming clamped.
+#[derive(Default)]
+pub(crate) struct Recording {
+    buckets: Vec<Bucketed>,
+    written: Vec<usize>,
+    recorded: Vec<RecordedDraw>,
+    clamped: u32,
+}
+
+impl Recording {
+    /// Empty, with `buckets` buckets (their storage kept for the next frame).
+    fn clear(&mut self, buckets: usize) {
+        for b in self.written.drain(..) {
+            if let Some(bucket) = self.buckets.get_mut(b) {
+                bucket.infos.clear();
+                bucket.spans.clear();
+            }
+        }
+        self.buckets.resize_with(buckets, Bucketed::default);
+        self.recorded.clear();
+        self.clamped = 0;
+    }
+
+    /// Adds a draw info to bucket `b`, drawing `vertex_count` vertices from `first_vertex`.
+    fn push(&mut self, b: usize, info: DrawInfo, first_vertex: u32, vertex_count: u32) {
+        let bucket = &mut self.buckets[b];
+        if bucket.infos.is_empty() {
+            self.written.push(b);
+        }
+        bucket.infos.push(info);
+        bucket.spans.push((first_vertex, vertex_count));
+    }
+}
+
+/// A piece's draws of one bucket: their draw infos, and each one's first vertex and vertex
+/// count (apart, so that the indirect draws are made without reading the infos).
+#[derive(Default)]
+struct Bucketed {
+    infos: Vec<DrawInfo>,
+    spans: Vec<(u32, u32)>,
+}
+
 /// Records a draw that streaming does not clamp (pruned leaves, bark, impostor planes: uploaded
 /// whole): its `DrawInfo` (thresholds, technique and dither from `record`, unshaded) into the
 /// model's bucket of its source, drawing `record.count` elements from element `first`, and
 /// `record` itself.
 fn record_direct(
     instances: &[treelod_runtime::Instance],
-    buckets: &mut [Vec<(DrawInfo, u32, u32)>],
-    recorded: &mut Vec<RecordedDraw>,
+    out: &mut Recording,
     record: RecordedDraw,
     first: u32,
     leaf_scale: f32,
@@ -481,8 +641,8 @@ fn record_direct(
         pad: [0; 3],
     };
     let bucket = record.source.bucket().of_model(record.model.0 as usize);
-    buckets[bucket].push((info, corners * first, corners * record.count));
-    recorded.push(record);
+    out.push(bucket, info, corners * first, corners * record.count);
+    out.recorded.push(record);
 }
 
 /// Number of leading `values` (sorted largest first) above `tau`.

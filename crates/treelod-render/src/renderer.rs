@@ -17,7 +17,7 @@ use treelod_runtime::{
 
 use crate::assign::PolicyModels;
 use crate::camera::Camera;
-use crate::draws::{DrawInfo, EVERY_PIXEL, RecordedDraw, View, pack_fade};
+use crate::draws::{DrawInfo, EVERY_PIXEL, RECORD_CHUNK, RecordedDraw, Recording, View, pack_fade};
 use crate::gpu_select::{GpuDraw, GpuSelection, InstanceDrawGpu, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
 use crate::pipelines::Pipelines;
@@ -196,8 +196,15 @@ pub struct Renderer {
     uploads: Vec<Upload>,
     /// Per model, per cell: the largest prefix asked for this frame (triangles, points).
     pub(crate) wanted: Vec<Vec<[u32; 2]>>,
-    pub(crate) buckets: Vec<Vec<(DrawInfo, u32, u32)>>,
-    pub(crate) draw_infos: Vec<DrawInfo>,
+    /// What each piece of a view's draws recorded ([`Self::record_view`]).
+    pub(crate) recordings: Vec<Recording>,
+    /// The most entries of a view's lists one piece records ([`RECORD_CHUNK`]).
+    pub(crate) record_chunk: usize,
+    /// How many of `recordings` this frame's views used, the runs of draw infos in the order
+    /// of their indices (recording, bucket), and their count ([`Self::record_view`]).
+    pub(crate) recordings_used: usize,
+    pub(crate) info_segments: Vec<(usize, usize)>,
+    pub(crate) info_count: usize,
     pub(crate) indirect: Vec<wgpu::util::DrawIndirectArgs>,
     /// Scratch: [`Self::indirect`] as bytes for the upload.
     indirect_scratch: Vec<u8>,
@@ -349,8 +356,11 @@ impl Renderer {
             requests: Vec::new(),
             uploads: Vec::new(),
             wanted: Vec::new(),
-            buckets: Vec::new(),
-            draw_infos: Vec::new(),
+            recordings: Vec::new(),
+            record_chunk: RECORD_CHUNK,
+            recordings_used: 0,
+            info_segments: Vec::new(),
+            info_count: 0,
             indirect: Vec::new(),
             indirect_scratch: Vec::new(),
         }
@@ -511,6 +521,14 @@ impl Renderer {
         self.pool_buffer = buffer;
         self.frame_bind_groups =
             frame_bind_groups(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
+    }
+
+    /// How many entries of a view's lists one task records at most (default 512; at least 1).
+    /// The draws, their order and the image do not depend on it; the tests set it to 1 and to
+    /// `usize::MAX` (one piece, recorded on the calling thread) to check that.
+    #[doc(hidden)]
+    pub fn set_record_chunk(&mut self, entries: usize) {
+        self.record_chunk = entries.max(1);
     }
 
     /// Replaces the instances drawn from the next frame on. Instances of unknown models are ignored.
@@ -815,8 +833,7 @@ impl Renderer {
         }
 
         // The draws of every view, clamped to what is resident, bucketed by model and kind.
-        self.draw_infos.clear();
-        self.indirect.clear();
+        self.begin_draws();
         let mut stats = FrameStats {
             instances_visible: counts.instances.total(),
             instances: counts.instances,
@@ -850,14 +867,17 @@ impl Renderer {
     /// Uploads the recorded draw infos and indirect draws of the frame, growing their buffers
     /// (and the frame bind groups that name the draw infos) as needed.
     fn upload_draws(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
-        let draw_bytes = (self.draw_infos.len().max(1) * size_of::<DrawInfo>()) as u64;
+        let draw_bytes = (self.info_count.max(1) * size_of::<DrawInfo>()) as u64;
         if draw_bytes > self.draw_buffer.size() {
             self.draw_buffer = storage_buffer(device, "treelod draws", draw_bytes.next_power_of_two(), false);
             self.frame_bind_groups =
                 frame_bind_groups(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
         }
-        if !self.draw_infos.is_empty() {
-            queue.write_buffer(&self.draw_buffer, 0, bytemuck::cast_slice(&self.draw_infos));
+        // The infos straight from the pieces' buckets into the queue's staging memory.
+        if let Some(size) = wgpu::BufferSize::new((self.info_count * size_of::<DrawInfo>()) as u64)
+            && let Some(mut staged) = queue.write_buffer_with(&self.draw_buffer, 0, size)
+        {
+            self.write_draw_infos(staged.slice(..));
         }
         let indirect_bytes = (self.indirect.len().max(1) * size_of::<wgpu::util::DrawIndirectArgs>()) as u64;
         if indirect_bytes > self.indirect_buffer.size() {
@@ -948,8 +968,7 @@ impl Renderer {
         let pool_bytes = gpu.pool_bytes();
         self.gpu_frame = true;
 
-        self.draw_infos.clear();
-        self.indirect.clear();
+        self.begin_draws();
         let mut instances = main.draws.visible;
         instances[Technique::FALLBACK] += gpu_counts.instances_visible;
         let mut stats = FrameStats {

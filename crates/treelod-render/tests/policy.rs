@@ -407,3 +407,78 @@ fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
         assert!(cheaper > 0, "some hidden tree is drawn cheaper than a visible one of its size");
     }
 }
+
+/// A frame's draws are recorded in pieces, in parallel: a forest whose trees the policy draws
+/// with several techniques, some of them in a transition, gives the same draws in the same
+/// order, the same counts and the same image whether each entry of the views' lists is a piece
+/// of its own, the lists are cut as by default, or all is one piece on the calling thread.
+#[test]
+fn a_frame_recorded_in_pieces_is_the_frame_recorded_in_one_pass() {
+    let gpu = gpu();
+    let container = calibrated_demo_without_octahedral();
+    let policy = Policy { hysteresis: 0.0, transition: 3, ..Policy::default() };
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    let (width, height) = (480, 360);
+    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    let runtime_camera = treelod_runtime::Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    let lod = ModelLod::from_container(&container);
+    // Rows of 8 trees from 320 pixels high down to 10, then the same rows half as far again
+    // (nearer): trees cross the policy's boundaries and fade from one technique to another.
+    let rows = |scale: f32| -> Vec<Vec3> {
+        (0..6)
+            .flat_map(|row| {
+                let h = scale * 320.0 / (1u32 << row) as f32;
+                let d = treelod_runtime::policy::distance_for_height(&lod, h, &runtime_camera);
+                (0..8).map(move |i| vec3((i as f32 - 3.5) * 0.15 * d, 0.0, -d))
+            })
+            .map(|p| p - lod.centre())
+            .collect()
+    };
+    let frames = [rows(1.0), rows(1.5), rows(1.5), rows(1.5)];
+    let run = |chunk: usize| {
+        let mut renderer = Renderer::new(&gpu.device, treelod_render::offscreen::Gpu::formats(), settings);
+        let model = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("model");
+        renderer.set_record_chunk(chunk);
+        frames
+            .iter()
+            .map(|positions| {
+                let instances: Vec<Instance> =
+                    positions.iter().map(|&p| Instance { model, transform: Mat4::from_translation(p) }).collect();
+                renderer.set_instances(&instances);
+                let (image, stats) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+                (image.rgba, stats, renderer.draws().to_vec())
+            })
+            .collect::<Vec<_>>()
+    };
+    let each = run(1);
+    let techniques =
+        |stats: &treelod_render::FrameStats| Technique::ALL.iter().filter(|&&t| stats.instances[t] > 0).count();
+    assert!(
+        each.iter().all(|(_, stats, _)| techniques(stats) >= 2)
+            && each.iter().any(|(_, stats, _)| techniques(stats) >= 4),
+        "{:?}",
+        each.iter().map(|f| f.1).collect::<Vec<_>>()
+    );
+    assert!(each.iter().any(|(_, stats, _)| stats.transitions > 0 && stats.leaving > 0), "no transition");
+    assert!(
+        each.iter().all(|(_, stats, _)| stats.ranges > 100),
+        "{:?}",
+        each.iter().map(|f| f.1.ranges).collect::<Vec<_>>()
+    );
+    let paired = |draws: &[treelod_render::RecordedDraw]| {
+        draws.windows(2).any(|w| {
+            w[0].source == treelod_render::DrawSource::Triangles
+                && w[1].source == treelod_render::DrawSource::Points
+                && (w[0].instance, w[0].cell) == (w[1].instance, w[1].cell)
+        })
+    };
+    assert!(each.iter().any(|(_, _, draws)| paired(draws)), "no cell drew both triangles and points");
+    for chunk in [usize::MAX, 512, 7] {
+        let other = run(chunk);
+        for (frame, (a, b)) in each.iter().zip(&other).enumerate() {
+            assert_eq!(a.2, b.2, "chunk {chunk}, frame {frame}: the draws");
+            assert_eq!(a.1, b.1, "chunk {chunk}, frame {frame}: the counts");
+            assert!(a.0 == b.0, "chunk {chunk}, frame {frame}: the image");
+        }
+    }
+}
