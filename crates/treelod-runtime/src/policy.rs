@@ -842,6 +842,9 @@ pub struct Choices {
     below: Vec<Table>,
     /// Steps either side within which a tree keeps last frame's technique.
     hysteresis_steps: usize,
+    /// The technique every elevation's tables choose below a height, and that height
+    /// ([`Self::uniform_below`]).
+    uniform: Option<(f32, Technique)>,
 }
 
 /// The elevation class (an index for [`Choices::choose_framed`]) of a tree seen from below the
@@ -1010,14 +1013,43 @@ impl Choices {
         } else {
             Vec::new()
         };
-        Self {
+        let mut choices = Self {
             log2_min: grid.origin(),
             tables,
             elevations,
             visibility,
             below,
             hysteresis_steps: hysteresis_steps(policy),
-        }
+            uniform: None,
+        };
+        choices.uniform = choices.uniform();
+        choices
+    }
+
+    /// The technique [`Self::choose_framed`] gives every tree under a height in every elevation
+    /// class but [`BELOW_HORIZON`], whatever its visibility, share in view and last frame's
+    /// technique, and that height: where every elevation's tables' first steps choose the same
+    /// technique, a tree lower than the hysteresis short of the first step where any of them
+    /// differs. The chooser takes it without looking the tree up (`choose_instances`): in a
+    /// large forest most trees are that small. (Seen from below, a tree whose smallest choice is
+    /// the octahedral impostor gets another: those are looked up.)
+    #[must_use]
+    pub fn uniform_below(&self) -> Option<(f32, Technique)> {
+        self.uniform
+    }
+
+    /// [`Self::uniform_below`] measured from the tables: the steps `i` that every elevation's
+    /// tables' first steps share, and the height whose step `x` keeps `x + hysteresis` under
+    /// `i − ½` (the steps [`Self::choose_framed`] reads round to the nearest), lowered by a
+    /// thousandth so that `log2`'s rounding never lifts a tree under it past that step.
+    fn uniform(&self) -> Option<(f32, Technique)> {
+        let first = self.tables.first()?.steps.first().copied()?;
+        let shared =
+            self.tables.iter().map(|t| t.steps.iter().take_while(|&&s| s == first).count()).min().filter(|&n| n > 0)?;
+        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+        let x = shared as f32 - 0.5 - self.hysteresis_steps as f32;
+        let height = (self.log2_min + x / STEPS_PER_OCTAVE).exp2() * 0.999;
+        (height > 0.0 && height.is_finite()).then_some((height, first))
     }
 
     /// Whether a tree seen from `elevation` degrees (its [`view_elevation`]) is below the
@@ -1459,10 +1491,6 @@ pub fn choose_instances_in_chunks(
                         })
                         .reduce(|a, b| if b.0 < a.0 { b } else { a })
                         .unwrap_or((0.0, Vec3::ZERO, None));
-                    let in_view = match frustum {
-                        Some(f) if choices.above_range(height) => in_view_share(lod, instance.transform, f),
-                        _ => 1.0,
-                    };
                     let seen = visibility_class_after(usize::from(*class), visible);
                     *class = u8::try_from(seen).unwrap_or(0);
                     let elevation_class = if choices.elevations().is_empty() {
@@ -1481,9 +1509,20 @@ pub fn choose_instances_in_chunks(
                             now
                         }
                     };
-                    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-                    let chosen =
-                        choices.choose_framed(height, elevation_class, (-(seen as f32)).exp2(), in_view, *previous);
+                    let chosen = match choices.uniform_below() {
+                        // Every elevation's tables choose the same under this height, whatever
+                        // the tree's classes and last frame's choice: not looked up.
+                        Some((below, uniform)) if height < below && elevation_class != BELOW_HORIZON => uniform,
+                        _ => {
+                            let in_view = match frustum {
+                                Some(f) if choices.above_range(height) => in_view_share(lod, instance.transform, f),
+                                _ => 1.0,
+                            };
+                            #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+                            let visible = (-(seen as f32)).exp2();
+                            choices.choose_framed(height, elevation_class, visible, in_view, *previous)
+                        }
+                    };
                     *transition = advance(*previous, chosen, *transition, frames);
                     *previous = Some(chosen);
                     chosen
@@ -1951,6 +1990,67 @@ mod tests {
         mean.with_elevations(&records)
     }
 
+    /// Under [`Choices::uniform_below`]'s height every elevation class (from below the horizon
+    /// too), visibility class, share in view and last frame's technique gives its technique; the
+    /// chooser, which takes it without those, chooses as it did.
+    #[test]
+    fn under_the_uniform_height_every_view_and_past_chooses_the_same() {
+        use treelod_build::SplitMix64;
+        let mut rows: Vec<CalibrationRecord> = Vec::new();
+        let mean = table();
+        for technique in [Technique::Full, Technique::Spt, Technique::Crossed, Technique::LodChain] {
+            for h in [8.0, 32.0, 128.0, 256.0] {
+                let (error, primitives) = mean.at(technique, h).unwrap();
+                rows.push(record(technique.index() as u32, h, error, primitives));
+            }
+        }
+        // From above, the crossed quads fail from 32 pixels up instead of from 64: the classes'
+        // tables differ, but all choose the quads for the smallest trees.
+        let mut records = Vec::new();
+        for elevation in [0.0, 90.0] {
+            for technique in [Technique::Full, Technique::Spt, Technique::LodChain, Technique::Crossed] {
+                for h in [8.0, 32.0, 128.0, 256.0] {
+                    let (error, primitives) = mean.at(technique, h).unwrap();
+                    let failing = technique == Technique::Crossed && elevation > 0.0 && h >= 32.0;
+                    let error = if failing { 0.2 } else { error };
+                    let technique = technique.index() as u32;
+                    records.push(ElevationCalibrationRecord { elevation, technique, height: h, error, primitives });
+                }
+            }
+        }
+        records.sort_by(|a, b| a.elevation.total_cmp(&b.elevation).then(a.technique.cmp(&b.technique)));
+        let c = Calibration::from_records(&rows).expect("rows").with_elevations(&records);
+        let mut rng = SplitMix64(5);
+        for (occlusion, hysteresis) in [(false, 0.0), (true, Policy::default().hysteresis), (true, 0.5)] {
+            let policy = Policy { target: 0.01, hysteresis, budget: None, transition: 0, occlusion };
+            let choices = Choices::among(&c, &policy, all);
+            let (below, uniform) = choices.uniform_below().expect("one technique for the smallest trees");
+            assert!(below > 4.0, "{below}: the tables share their first step");
+            let classes = choices.elevations().len().max(1);
+            for _ in 0..2000 {
+                let height = rng.range(0.0, 1.0) * below;
+                let elevation = rng.range(0.0, classes as f32) as usize;
+                let previous = Technique::ALL.get(rng.range(0.0, 12.0) as usize).copied();
+                let (visible, in_view) = (rng.range(0.0, 1.0), rng.range(0.0, 1.0));
+                let chosen = choices.choose_framed(height, elevation, visible, in_view, previous);
+                assert_eq!(chosen, uniform, "{height} px, class {elevation}, {visible}, {in_view}, after {previous:?}");
+            }
+            // The bound is the tables': a step or so above it, some view or past chooses otherwise.
+            let above = below * (3.0 / STEPS_PER_OCTAVE).exp2();
+            let differs = (0..classes).chain([BELOW_HORIZON]).any(|e| {
+                Technique::ALL.iter().any(|&p| choices.choose_framed(above, e, 1.0, 1.0, Some(p)) != uniform)
+                    || choices.choose_framed(above, e, 1.0, 1.0, None) != uniform
+            });
+            assert!(differs, "occlusion {occlusion}, hysteresis {hysteresis}: {below} is not the tables' bound");
+        }
+        // Where the classes differ at the smallest trees (the quads fail from above at every
+        // height), no height is uniform.
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
+        let differ = Choices::among(&table_with_elevations(), &policy, all);
+        assert_ne!(differ.choose_viewed(8.0, 0, 1.0, None), differ.choose_viewed(8.0, 3, 1.0, None));
+        assert_eq!(differ.uniform_below(), None);
+    }
+
     #[test]
     fn elevation_classes_are_the_nearest_for_a_new_tree_and_change_a_quarter_past_the_midpoint() {
         let centres = [0.0, 30.0, 60.0, 90.0];
@@ -2067,6 +2167,10 @@ mod tests {
         let below = Camera::look_at(centre + distance * Vec3::new(0.0, -sin, cos), centre, 0.8, 256, 256);
         let side = Camera::look_at(centre + distance * Vec3::Z, centre, 0.8, 256, 256);
         let instances = [Instance { model: 0, transform: Mat4::IDENTITY }];
+        // The smallest trees are all octahedral from above the horizon: the chooser takes that
+        // without looking them up, but not from below.
+        let (under, uniform) = choices.uniform_below().expect("octahedral for the smallest trees");
+        assert!(under > 8.0 && uniform == Technique::Octahedral, "{under} {uniform:?}");
         let (choices, mut out, mut state) = ([Some(choices)], Vec::new(), PolicyState::default());
         choose_instances(&instances, &lods, &choices, &below, Technique::Spt, &mut state, &mut out);
         assert_eq!(out, [Some(Technique::Crossed)]);
@@ -2198,6 +2302,7 @@ mod tests {
             visibility: 1,
             below: Vec::new(),
             hysteresis_steps: 2,
+            uniform: None,
         };
         // Find the boundary between crossed (small) and the point tree (larger).
         let boundary = choices.steps().iter().position(|&t| t != Technique::Crossed).expect("a boundary");
@@ -2211,6 +2316,18 @@ mod tests {
         assert_eq!(choices.choose(height_at(boundary as f32 + 3.0), Some(Technique::Crossed)), after);
         // A previous technique that is nowhere near is not kept.
         assert_eq!(choices.choose(height_at(0.0), Some(Technique::LodChain)), Technique::Crossed);
+        // Every tree under two and a half steps short of the boundary is crossed, whatever it was:
+        // the chooser takes that without looking the tree up. Half a step higher, a tree that
+        // was drawn with the point tree keeps it.
+        let (below, uniform) = choices.uniform().expect("one technique below the boundary");
+        assert_eq!(uniform, Technique::Crossed);
+        assert!((below / height_at(boundary as f32 - 2.5) - 0.999).abs() < 1e-5, "{below}");
+        for previous in [None, Some(after), Some(Technique::LodChain), Some(Technique::Crossed)] {
+            for h in [below * 0.999_99, below * 0.5, 1.0, f32::MIN_POSITIVE] {
+                assert_eq!(choices.choose(h, previous), Technique::Crossed, "{h} after {previous:?}");
+            }
+        }
+        assert_eq!(choices.choose(height_at(boundary as f32 - 2.0), Some(after)), after);
     }
 
     #[test]
@@ -2332,6 +2449,7 @@ mod tests {
             visibility: 1,
             below: Vec::new(),
             hysteresis_steps: 0,
+            uniform: None,
         }
     }
 
@@ -2572,13 +2690,21 @@ mod tests {
         let steps = steps_of(&c);
         assert!(steps.iter().any(|&t| t != steps[0]), "the table switches technique: {steps:?}");
         let choices = [
-            Some(Choices {
-                log2_min: 3.0,
-                tables: vec![Table { above: Technique::LodChain, above_cost: (22_500.0, 21_000.0), steps }],
-                elevations: Vec::new(),
-                visibility: 1,
-                below: Vec::new(),
-                hysteresis_steps: 2,
+            Some({
+                let mut choices = Choices {
+                    log2_min: 3.0,
+                    tables: vec![Table { above: Technique::LodChain, above_cost: (22_500.0, 21_000.0), steps }],
+                    elevations: Vec::new(),
+                    visibility: 1,
+                    below: Vec::new(),
+                    hysteresis_steps: 2,
+                    uniform: None,
+                };
+                // The chunks take the technique every table shares under its height without
+                // looking the tree up; the reference looks every tree up.
+                choices.uniform = choices.uniform();
+                assert!(choices.uniform_below().is_some(), "the table starts with one technique: {:?}", steps_of(&c));
+                choices
             }),
             None,
         ];
