@@ -1990,9 +1990,10 @@ mod tests {
         mean.with_elevations(&records)
     }
 
-    /// Under [`Choices::uniform_below`]'s height every elevation class (from below the horizon
-    /// too), visibility class, share in view and last frame's technique gives its technique; the
-    /// chooser, which takes it without those, chooses as it did.
+    /// Under [`Choices::uniform_below`]'s height every elevation class above the horizon,
+    /// visibility class, share in view and last frame's technique gives its technique; the
+    /// chooser, which takes it without those, chooses as it did. Where the classes' smallest
+    /// trees differ, there is no such height.
     #[test]
     fn under_the_uniform_height_every_view_and_past_chooses_the_same() {
         use treelod_build::SplitMix64;
