@@ -143,8 +143,10 @@ impl Renderer {
         let mut recordings = std::mem::take(&mut self.recordings);
         let buckets = Bucket::COUNT * self.models.len();
         let first = self.recordings_used;
-        let pieces = {
+        // The view's pieces, then those of the techniques trees in transition are leaving.
+        let (used, leaving_from) = {
             let mut pieces = pieces_of(view, false, self.record_chunk);
+            let leaving_from = first + pieces.len();
             if let Some(leaving) = leaving {
                 pieces.extend(pieces_of(leaving, true, self.record_chunk));
             }
@@ -162,16 +164,16 @@ impl Renderer {
             } else {
                 pieces.iter().zip(outs.iter_mut()).for_each(record);
             }
-            pieces.iter().map(|p| p.leaving).collect::<Vec<_>>()
+            (first..first + pieces.len(), leaving_from)
         };
-        let used = first..first + pieces.len();
         self.recordings_used = used.end;
         view.recorded.clear();
         stats.leaving = 0;
-        for (out, &leaving) in recordings[used.clone()].iter().zip(&pieces) {
+        for r in used.clone() {
+            let out = &recordings[r];
             view.recorded.extend_from_slice(&out.recorded);
             stats.ranges_clamped += out.clamped;
-            if leaving {
+            if r >= leaving_from {
                 stats.leaving += out.recorded.iter().map(|d| u64::from(d.count)).sum::<u64>();
             }
         }

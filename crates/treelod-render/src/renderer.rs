@@ -1206,9 +1206,7 @@ impl Renderer {
     }
 
     /// The occlusion tests of the instances `drawn` lists (in any order, each any number of
-    /// times): one per instance, in the order of the instances. The instances are marked in a
-    /// bitset and read back in order, which costs a bit per instance where sorting the list of
-    /// draws (about two per tree) cost a fifth of a millisecond over 10^4 trees.
+    /// times): one per instance, in the order of the instances ([`ascending_once`]).
     fn set_occlusion_jobs(&mut self, drawn: impl Iterator<Item = u32>) {
         let mut marks = std::mem::take(&mut self.occlusion_marks);
         let mut indices = std::mem::take(&mut self.occlusion_indices);
@@ -1388,8 +1386,8 @@ fn frame_bind_groups(
 
 /// The indices below `count` that `drawn` lists (in any order, each any number of times),
 /// ascending and each once, into `out`: marked in `marks`, a bit per index, then read back in
-/// order. Over 10^4 trees this costs a bit per tree where sorting the list of draws (about two
-/// per tree) cost about a tenth of a millisecond.
+/// order, a bit per instance where the list of draws (about two per tree) was sorted: the
+/// occlusion jobs of the orchid's 10^4 trees took 0.19 → 0.09 ms a frame.
 fn ascending_once(drawn: impl Iterator<Item = u32>, count: usize, marks: &mut Vec<u64>, out: &mut Vec<u32>) {
     marks.clear();
     marks.resize(count.div_ceil(64), 0);
