@@ -12,7 +12,7 @@
 //! wall-clock and CPU time and its mean absolute difference per vertex from the
 //! reference. `TREELOD_AO_NO_REFERENCE=1` times only; `TREELOD_AO_ONLY=parallel` (or any part of
 //! a row's name) runs the rows that name it; `TREELOD_AO_RAYS=12,16` the parallel method at
-//! those ray counts (`2N` directions).
+//! those ray counts (`2N` directions); `TREELOD_AO_SEEDS=1,2` each row with those seeds.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -111,6 +111,17 @@ fn main() {
                     configs.push((name, AoConfig { per_vertex: true, ..AoConfig::default() }));
                 }
             }
+        }
+        // `TREELOD_AO_SEEDS=1,2,…`: each row once per seed of its directions (default: the
+        // build's), for the spread of a method's error over direction sets.
+        if let Ok(seeds) = std::env::var("TREELOD_AO_SEEDS") {
+            let seeds: Vec<u64> = seeds.split(',').filter_map(|s| s.trim().parse().ok()).collect();
+            configs = configs
+                .into_iter()
+                .flat_map(|(name, config)| {
+                    seeds.iter().map(move |&seed| (format!("{name}, seed {seed}"), AoConfig { seed, ..config.clone() }))
+                })
+                .collect();
         }
         for (name, config) in configs {
             if !only.is_empty() && !name.contains(&only) {

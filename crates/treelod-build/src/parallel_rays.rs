@@ -60,6 +60,19 @@
 //! with every box spanned, 5.47 and 5.84 s with only boxes of 3 × 3 cells or more spanned
 //! against 4.80 and 4.82 s).
 //!
+//! Tracing each of 16 axes both ways through one grid, instead of 32 directions each through
+//! its own (the axes a hemisphere of the lattice: a triangle covers the same cells seen from
+//! either end, so the lists, the rays' order and the planes serve two directions, against the
+//! axis with the depths mirrored), was measured and not taken: on 2 cores, `benches/ao` with
+//! four seeds of the directions each (`TREELOD_AO_SEEDS`), the maple's stage took 3.96–4.13 s
+//! against 4.53–4.63 s (the willow 0.96–1.04 against 1.12–1.20 s, the jacaranda 0.36–0.39
+//! against 0.38–0.49 s), but the error against 256 traced rays rose on four of the seven shared
+//! models: maple 0.0627–0.0633 against 0.0625–0.0627, oak 0.0207–0.0210 against 0.0199–0.0205,
+//! pine 0.0214–0.0216 against 0.0206–0.0209, willow 0.0533–0.0546 against 0.0527–0.0539 (the
+//! orchid's, jacaranda's and Quaternius tree's within each other's spread). The stage's time
+//! grows with the axes, so winning the error back with more of them would take much of the 12 %
+//! saved; what makes the mirrored set worse was not isolated.
+//!
 //! Cells sized by the count alone suit meshes, whose triangles shrink as there are more of them;
 //! leaf cards do not: the demo tree keeps its leaves' size whatever their number, and with 10⁶
 //! of them each leaf triangle's box covered 149 cells (21 with 10⁵, 51 with 3·10⁵), so listing
