@@ -122,7 +122,9 @@ impl Renderer {
                 // view reads the visible fractions: a tree hidden from the camera still casts
                 // its whole shadow.
                 tables.state.set_transition(policy.transition());
-                tables.state.set_visible(if policy.occlusion { &self.visible_fraction } else { &[] });
+                if !policy.occlusion {
+                    tables.state.set_visible(&[]);
+                }
                 &mut tables.state
             }
             Some(k) => {
@@ -134,7 +136,15 @@ impl Renderer {
         };
         let chosen = &mut tables.chosen;
         let (instances, lods, chunks) = (&self.instances, &self.lods, &tables.chunks);
-        choose_instances_in_chunks(instances, lods, chunks, &tables.choices, cameras, technique, state, chosen);
+        let mut choose = |state: &mut PolicyState| {
+            choose_instances_in_chunks(instances, lods, chunks, &tables.choices, cameras, technique, state, chosen);
+        };
+        if cascade.is_none() && policy.occlusion {
+            // The camera's view reads the measured fractions, lent for the choice.
+            state.with_visible(&mut self.visible_fraction, choose);
+        } else {
+            choose(state);
+        }
         // Trees outside every view are not chosen, nor listed.
         let chosen = tables.chosen.iter().enumerate().filter_map(|(i, t)| Some((u32::try_from(i).ok()?, (*t)?)));
         out.assign_listed(&self.instances, &self.representations, chosen);

@@ -1234,6 +1234,10 @@ pub struct PolicyState {
     /// Per instance: the elevation class it was chosen by last frame ([`elevation_class_after`]),
     /// [`NO_CLASS`] for none, [`BELOW_CLASS`] for a view from below the tables.
     elevations: Vec<u8>,
+    /// Per chunk of [`CHOOSE_CHUNK`] instances, whether the last choice left any of them in a
+    /// transition (`false` only where none is), so that [`Self::transitions`] reads only those
+    /// chunks; of another length than the chunks, every chunk is read.
+    busy: Vec<bool>,
 }
 
 /// [`PolicyState`]'s elevation class of a tree not chosen by elevation last frame.
@@ -1268,10 +1272,14 @@ impl PolicyState {
     /// longer than that end now.
     pub fn set_transition(&mut self, frames: u32) {
         let frames = u16::try_from(frames.min(Policy::MAX_TRANSITION)).unwrap_or(u16::MAX);
-        self.frames = if frames <= 1 { 0 } else { frames };
-        let limit = self.frames;
-        for t in &mut self.transitions {
-            *t = t.filter(|&(_, k)| k < limit);
+        let frames = if frames <= 1 { 0 } else { frames };
+        // Every transition under way is shorter than the frames it was made with (`advance`),
+        // so the same frames end none: read every instance only when they change.
+        if frames != self.frames {
+            self.frames = frames;
+            for t in &mut self.transitions {
+                *t = t.filter(|&(_, k)| k < frames);
+            }
         }
     }
 
@@ -1283,6 +1291,7 @@ impl PolicyState {
         self.visible.clear();
         self.classes.clear();
         self.elevations.clear();
+        self.busy.clear();
     }
 
     /// Sets the instances' visible fractions the next choices read (per instance, 1 = fully
@@ -1291,6 +1300,17 @@ impl PolicyState {
     pub fn set_visible(&mut self, visible: &[f32]) {
         self.visible.clear();
         self.visible.extend_from_slice(visible);
+    }
+
+    /// Runs `choose` on this state with `visible` as the visible fractions it reads
+    /// ([`Self::set_visible`]), lent without copying them (10^6 instances: 4 MB a frame), and
+    /// gives them back, padded with 1 to the instances if the choice had more. The fractions the
+    /// state held before are kept for after.
+    pub fn with_visible<R>(&mut self, visible: &mut Vec<f32>, choose: impl FnOnce(&mut Self) -> R) -> R {
+        std::mem::swap(&mut self.visible, visible);
+        let result = choose(self);
+        std::mem::swap(&mut self.visible, visible);
+        result
     }
 
     /// Instance `index`'s transition this frame, if it is changing technique: the technique it
@@ -1302,8 +1322,15 @@ impl PolicyState {
     }
 
     /// Every instance in a transition this frame, ascending: its index and [`Self::transition`].
+    /// Only the chunks of instances the last choice left a transition in are read.
     pub fn transitions(&self) -> impl Iterator<Item = (u32, Transition)> + '_ {
-        (0..self.transitions.len()).filter_map(|i| Some((u32::try_from(i).ok()?, self.transition(i)?)))
+        let n = self.transitions.len();
+        let chunks = n.div_ceil(CHOOSE_CHUNK);
+        let known = self.busy.len() == chunks;
+        (0..chunks)
+            .filter(move |&c| !known || self.busy[c])
+            .flat_map(move |c| c * CHOOSE_CHUNK..n.min((c + 1) * CHOOSE_CHUNK))
+            .filter_map(|i| Some((u32::try_from(i).ok()?, self.transition(i)?)))
     }
 }
 
@@ -1522,6 +1549,8 @@ pub fn choose_instances_in_chunks(
     state.visible.resize(instances.len(), 1.0);
     state.classes.resize(instances.len(), 0);
     state.elevations.resize(instances.len(), NO_CLASS);
+    state.busy.clear();
+    state.busy.resize(instances.len().div_ceil(CHOOSE_CHUNK), false);
     out.clear();
     out.resize(instances.len(), None);
     let frames = state.frames;
@@ -1535,7 +1564,8 @@ pub fn choose_instances_in_chunks(
                   transitions: &mut [Option<(Technique, u16)>],
                   visible: &[f32],
                   (classes, elevations): (&mut [u8], &mut [u8]),
-                  out: &mut [Option<Technique>]| {
+                  out: &mut [Option<Technique>],
+                  busy: &mut bool| {
         if let Some(&(centre, radius)) = spheres.and_then(|s| s.get(chunk))
             && !eyes.iter().any(|(_, _, frustum)| frustum.intersects_sphere(centre, radius))
         {
@@ -1615,6 +1645,7 @@ pub fn choose_instances_in_chunks(
                         }
                     };
                     *transition = advance(*previous, chosen, *transition, frames);
+                    *busy |= transition.is_some();
                     *previous = Some(chosen);
                     chosen
                 }
@@ -1629,7 +1660,11 @@ pub fn choose_instances_in_chunks(
     };
     if instances.len() <= CHOOSE_CHUNK {
         let classes = (&mut state.classes[..], &mut state.elevations[..]);
-        choose(0, instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out);
+        let mut busy = false;
+        choose(0, instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out, &mut busy);
+        if let Some(slot) = state.busy.first_mut() {
+            *slot = busy;
+        }
         return;
     }
     instances
@@ -1641,9 +1676,12 @@ pub fn choose_instances_in_chunks(
         .zip(state.classes.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.elevations.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
-        .for_each(|(((((((chunk, instances), previous), transitions), visible), classes), elevations), out)| {
-            choose(chunk, instances, previous, transitions, visible, (classes, elevations), out);
-        });
+        .zip(state.busy.par_iter_mut())
+        .for_each(
+            |((((((((chunk, instances), previous), transitions), visible), classes), elevations), out), busy)| {
+                choose(chunk, instances, previous, transitions, visible, (classes, elevations), out, busy);
+            },
+        );
 }
 
 /// A model's culling sphere ([`ModelLod::cull_sphere`]) drawn by `transform`, world space: what
@@ -2520,6 +2558,8 @@ mod tests {
         assert_eq!(state.transitions().map(|(i, _)| i).collect::<Vec<_>>(), [0, 2]);
         state.set_transition(3);
         assert_eq!(state.transitions, [Some((Spt, 1)), None, None]);
+        state.set_transition(3);
+        assert_eq!(state.transitions, [Some((Spt, 1)), None, None], "the same frames end none");
         assert_eq!(state.transition(0).map(|t| t.shown), Some(1.0 / 3.0));
         state.set_transition(1);
         assert_eq!(state.transitions().count(), 0, "one frame: switch at once");
@@ -2830,11 +2870,13 @@ mod tests {
         assert!(switches > 0, "trees change technique along the path");
         let culled = expected.iter().flatten().filter(|t| t.is_none()).count();
         assert!(culled > 0 && culled < expected.len() * instances.len(), "some trees out of view, some in: {culled}");
-        // Each tree's placement computed every frame, and once by the chunks' bounds.
+        // Each tree's placement computed every frame, and once by the chunks' bounds (with
+        // transitions, which do not change the choices).
         let bounds = ChunkBounds::new(&instances, &lods);
+        let (mut in_transition, mut quiet_chunks) = (0, 0);
         for threads in [1, 4] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("pool");
-            let (mut state, mut placed) = (PolicyState::default(), PolicyState::default());
+            let (mut state, mut placed) = (PolicyState::default(), PolicyState::with_transition(3));
             let (mut out, mut out_placed) = (Vec::new(), Vec::new());
             for (camera, expected) in cameras.iter().zip(&expected) {
                 pool.install(|| {
@@ -2854,10 +2896,41 @@ mod tests {
                 });
                 assert_eq!(&out, expected, "{threads} threads");
                 assert_eq!(&out_placed, expected, "{threads} threads, placed once");
+                // The transitions listed read only the chunks left with one; every one is listed.
+                let listed: Vec<(u32, Transition)> = placed.transitions().collect();
+                #[expect(clippy::cast_possible_truncation, reason = "test sizes")]
+                let every: Vec<(u32, Transition)> =
+                    (0..instances.len()).filter_map(|i| Some((i as u32, placed.transition(i)?))).collect();
+                assert_eq!(listed, every, "{threads} threads");
+                in_transition += listed.len();
+                quiet_chunks += placed.busy.iter().filter(|&&b| !b).count();
             }
             assert_eq!(state.previous, reference_previous, "{threads} threads");
             assert_eq!(placed.previous, reference_previous, "{threads} threads, placed once");
         }
+        assert!(in_transition > 0 && quiet_chunks > 0, "{in_transition} transitions, {quiet_chunks} chunks without");
+    }
+
+    /// Fractions lent for a choice are read by it and given back; the state's own are kept.
+    #[test]
+    fn visible_fractions_lent_for_a_choice_come_back() {
+        let lods = [tall_lod()];
+        let choices = [Some(spt_above_without_hysteresis())];
+        let instances: Vec<Instance> = (0..3)
+            .map(|i| Instance { model: 0, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, -40.0 * i as f32)) })
+            .collect();
+        let camera = Camera::look_at(Vec3::new(0.0, 5.0, 30.0), Vec3::new(0.0, 5.0, 0.0), 0.9, 640, 480);
+        let mut state = PolicyState::default();
+        state.set_visible(&[0.5]);
+        let mut lent = vec![0.1, 0.9];
+        let mut out = Vec::new();
+        let read = state.with_visible(&mut lent, |state| {
+            choose_instances(&instances, &lods, &choices, &camera, Technique::Spt, state, &mut out);
+            state.visible.clone()
+        });
+        assert_eq!(read, [0.1, 0.9, 1.0], "the choice read the lent fractions, padded");
+        assert_eq!(lent, [0.1, 0.9, 1.0], "given back");
+        assert_eq!(state.visible, [0.5], "the state's own kept");
     }
 
     /// An instance's placement, made once, gives its culling sphere, projected height and view
