@@ -902,6 +902,12 @@ pub fn elevation_class_after(previous: Option<usize>, elevation: f32, centres: &
     }
 }
 
+/// How far inside a class's bounds, in the sine of the elevation, the chooser takes a tree's
+/// class from the sine alone (`Choices::stay_bands`): a ten-thousandth, over a hundred times the
+/// rounding of the arc sine and of the bounds' sines, so the class is the one the elevation in
+/// degrees gives.
+const STAY_MARGIN: f32 = 1e-4;
+
 /// Classes of elevation the policy chooses by per span between two calibrated elevations
 /// ([`Calibration::with_elevations_between`]): with the build's 0°, 30°, 60° and 90°, classes
 /// every 10°, so a view is at most 5° from its class's tables and blends the measured ones by
@@ -1072,6 +1078,39 @@ impl Choices {
         let floor = lowest.min(0.0);
         let classes = [floor - (next - lowest), floor];
         elevation_class_after(Some(usize::from(!was_below)), elevation, &classes) == 0
+    }
+
+    /// Per elevation class `c`, the sines `(lo, hi)` of the elevations between which a tree of
+    /// class `c` last frame, not below the horizon, stays in class `c` and above the horizon
+    /// ([`elevation_class_after`], [`Self::below_horizon`]) whatever the rounding of the
+    /// elevation: each bound's sine moved inwards by [`STAY_MARGIN`]. The chooser reads a tree's
+    /// class from its elevation's sine there, without the arc sine.
+    fn stay_bands(&self) -> Vec<(f32, f32)> {
+        let centres = &self.elevations;
+        let last = centres.len().saturating_sub(1);
+        let bound = |lower: usize, sign: f32| {
+            let (a, b) = (centres[lower], centres[lower + 1]);
+            0.5 * (a + b) + sign * 0.25 * (b - a)
+        };
+        // Below the horizon past this elevation (`below_horizon`'s classes' lower bound).
+        let below = match (centres.first(), centres.get(1), self.below.is_empty()) {
+            (Some(&lowest), Some(&next), false) => {
+                let floor = lowest.min(0.0);
+                let classes = [floor - (next - lowest), floor];
+                0.5 * (classes[0] + classes[1]) - 0.25 * (classes[1] - classes[0])
+            }
+            _ => f32::NEG_INFINITY,
+        };
+        let sine = |degrees: f32| degrees.to_radians().sin();
+        (0..centres.len())
+            .map(|c| {
+                let lo = if c > 0 { bound(c - 1, -1.0).max(below) } else { below };
+                let hi = if c < last { bound(c, 1.0) } else { f32::INFINITY };
+                let lo = if lo > -90.0 { sine(lo) + STAY_MARGIN } else { f32::NEG_INFINITY };
+                let hi = if hi < 90.0 { sine(hi) - STAY_MARGIN } else { f32::INFINITY };
+                (lo, hi)
+            })
+            .collect()
     }
 
     /// The technique for a tree `height` pixels high whose technique last frame was `previous`
@@ -1479,9 +1518,9 @@ impl Placement {
         height_from(self.height, self.centre, eye, world_per_pixel)
     }
 
-    /// [`view_elevation`] of the instance.
-    fn elevation(&self, eye: Vec3) -> f32 {
-        elevation_from(self.centre, self.up, eye)
+    /// The sine of the instance's [`view_elevation`].
+    fn sine(&self, eye: Vec3) -> f32 {
+        sine_from(self.centre, self.up, eye)
     }
 
     /// Whether the instance's culling sphere meets one of the views' frustums (every sphere
@@ -1558,6 +1597,9 @@ pub fn choose_instances_in_chunks(
         cameras.iter().map(|c| (c.position, c.world_per_pixel(), Frustum::from_view_proj(c.view_proj))).collect();
     let spheres = (bounds.instances == instances.len() && !cameras.is_empty()).then_some(&bounds.spheres[..]);
     let placements = (bounds.instances == instances.len()).then_some(&bounds.placements[..]);
+    // Per model, the sines within which a tree keeps its elevation class.
+    let bands: Vec<Vec<(f32, f32)>> =
+        choices.iter().map(|c| c.as_ref().map_or_else(Vec::new, Choices::stay_bands)).collect();
     let choose = |chunk: usize,
                   instances: &[Instance],
                   previous: &mut [Option<Technique>],
@@ -1614,10 +1656,18 @@ pub fn choose_instances_in_chunks(
                         .unwrap_or((0.0, Vec3::ZERO, None));
                     let seen = visibility_class_after(usize::from(*class), visible);
                     *class = u8::try_from(seen).unwrap_or(0);
+                    let sine = if choices.elevations().is_empty() { f32::NAN } else { place.sine(eye) };
+                    let stays = bands.get(m).and_then(|b| b.get(usize::from(*elevation)));
                     let elevation_class = if choices.elevations().is_empty() {
                         0
+                    } else if let Some(&(lo, hi)) = stays
+                        && sine > lo
+                        && sine < hi
+                    {
+                        // Inside its class's bounds, above the horizon: as the degrees give.
+                        usize::from(*elevation)
                     } else {
-                        let degrees = place.elevation(eye);
+                        let degrees = sine.asin().to_degrees();
                         if choices.below_horizon(degrees, *elevation == BELOW_CLASS) {
                             *elevation = BELOW_CLASS;
                             BELOW_HORIZON
@@ -1722,8 +1772,13 @@ pub fn view_elevation(lod: &ModelLod, transform: Mat4, eye: Vec3) -> f32 {
 /// [`view_elevation`] of a block centred at `centre` whose horizontal plane's normal is `up`
 /// (unit), world space.
 fn elevation_from(centre: Vec3, up: Vec3, eye: Vec3) -> f32 {
+    sine_from(centre, up, eye).asin().to_degrees()
+}
+
+/// The sine of [`elevation_from`]'s elevation, `[-1, 1]` (NaN where it is).
+fn sine_from(centre: Vec3, up: Vec3, eye: Vec3) -> f32 {
     let towards = (eye - centre).normalize_or_zero();
-    towards.dot(up).clamp(-1.0, 1.0).asin().to_degrees()
+    towards.dot(up).clamp(-1.0, 1.0)
 }
 
 /// The eye distance at which a model's block is `height` pixels high for `camera` (unit instance
@@ -2911,6 +2966,120 @@ mod tests {
         assert!(in_transition > 0 && quiet_chunks > 0, "{in_transition} transitions, {quiet_chunks} chunks without");
     }
 
+    /// Inside the sines of its class's band, a tree keeps its class and stays above the horizon
+    /// as the elevation in degrees says, for elevations swept across every bound (down to a
+    /// thousandth of a degree from each) and every class it may have had.
+    #[test]
+    fn a_tree_inside_its_class_band_keeps_the_class_the_degrees_give() {
+        let mut choices = spt_above_without_hysteresis();
+        choices.elevations = vec![0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0];
+        let without_below = choices.clone();
+        choices.below = choices.tables.clone();
+        for choices in [choices, without_below] {
+            let bands = choices.stay_bands();
+            assert_eq!(bands.len(), choices.elevations.len());
+            let mut bounds: Vec<f32> = vec![-7.5];
+            bounds.extend((0..9).flat_map(|c| [10.0 * c as f32 + 2.5, 10.0 * c as f32 + 7.5]));
+            let mut elevations: Vec<f32> = (-9000..=9000).map(|d| d as f32 * 0.01).collect();
+            for b in bounds {
+                elevations.extend((-100..=100).map(|k| b + k as f32 * 1e-3));
+            }
+            let (mut inside, mut outside) = (0, 0);
+            for &degrees in &elevations {
+                let sine = degrees.to_radians().sin();
+                // The degrees as the chooser measures them from the sine.
+                let measured = sine.asin().to_degrees();
+                for (c, &(lo, hi)) in bands.iter().enumerate() {
+                    if sine > lo && sine < hi {
+                        inside += 1;
+                        assert!(!choices.below_horizon(measured, false), "{degrees}° class {c}");
+                        assert_eq!(elevation_class_after(Some(c), measured, &choices.elevations), c, "{degrees}°");
+                    } else {
+                        outside += 1;
+                    }
+                }
+            }
+            assert!(inside > 10_000 && outside > 10_000, "{inside} inside, {outside} outside");
+            // The bands reach within a hundredth of a degree of the bounds.
+            let (lo, hi) = bands[3];
+            assert!(lo < (22.51f32).to_radians().sin() && hi > (37.49f32).to_radians().sin(), "{lo} {hi}");
+        }
+    }
+
+    /// The chooser follows each tree's elevation class, frame after frame, as the degrees of its
+    /// view elevation give it ([`elevation_class_after`] and [`Choices::below_horizon`] from last
+    /// frame's class): an eye rising from below the trees to far above them and coming down,
+    /// with trees tilted every way.
+    #[test]
+    fn the_chooser_follows_each_trees_elevation_class_as_the_degrees_give_it() {
+        use glam::Quat;
+        use treelod_build::SplitMix64;
+        let lods = [tall_lod()];
+        // Each class's table chooses a technique of its own at every height, so the choice
+        // shows the class it was made with.
+        let by_class =
+            |c: usize| [Technique::Spt, Technique::Crossed, Technique::Billboard, Technique::LodChain][c % 4];
+        let mut choices = spt_above_without_hysteresis();
+        let steps = choices.tables[0].steps.len();
+        let only = |t: Technique| Table { above: t, above_cost: (1.0, 1.0), steps: vec![t; steps] };
+        choices.elevations = (0..10).map(|c| 10.0 * c as f32).collect();
+        choices.tables = (0..10).map(|c| only(by_class(c))).collect();
+        choices.below = vec![only(Technique::Impostors)];
+        choices.uniform = None;
+        let choices = [Some(choices)];
+        let mut rng = SplitMix64(8);
+        let instances: Vec<Instance> = (0..2 * CHOOSE_CHUNK + 300)
+            .map(|_| {
+                let position = Vec3::new(rng.range(-150.0, 150.0), rng.range(-5.0, 5.0), rng.range(-300.0, -20.0));
+                let axis = Vec3::new(rng.range(-1.0, 1.0), 4.0, rng.range(-1.0, 1.0)).normalize();
+                let rotation = Quat::from_axis_angle(axis, rng.range(-0.6, 0.6));
+                Instance { model: 0, transform: Mat4::from_rotation_translation(rotation, position) }
+            })
+            .collect();
+        let mut state = PolicyState::default();
+        let mut reference = vec![NO_CLASS; instances.len()];
+        let mut out = Vec::new();
+        let mut classes_seen = std::collections::BTreeSet::new();
+        for frame in 0..40 {
+            // Up from 30 m below to 600 m above, then down again.
+            let t = if frame < 20 { frame as f32 } else { 40.0 - frame as f32 };
+            let eye = Vec3::new(0.0, -30.0 + t * t * 1.6, 40.0);
+            let camera = Camera::look_at(eye, Vec3::new(0.0, 0.0, -160.0), 1.2, 640, 480);
+            choose_instances(&instances, &lods, &choices, &camera, Technique::Spt, &mut state, &mut out);
+            let frustum = Frustum::from_view_proj(camera.view_proj);
+            let elevations = choices[0].as_ref().map(Choices::elevations).unwrap_or_default();
+            for (i, instance) in instances.iter().enumerate() {
+                let (centre, radius) = world_cull_sphere(&lods[0], instance.transform);
+                reference[i] = if frustum.intersects_sphere(centre, radius) {
+                    let degrees = view_elevation(&lods[0], instance.transform, eye);
+                    let choices = choices[0].as_ref().expect("choices");
+                    if choices.below_horizon(degrees, reference[i] == BELOW_CLASS) {
+                        BELOW_CLASS
+                    } else {
+                        let before = (reference[i] != NO_CLASS && reference[i] != BELOW_CLASS)
+                            .then_some(usize::from(reference[i]));
+                        u8::try_from(elevation_class_after(before, degrees, elevations)).expect("a class")
+                    }
+                } else {
+                    NO_CLASS
+                };
+            }
+            assert_eq!(state.elevations, reference, "frame {frame}");
+            let expected: Vec<Option<Technique>> = reference
+                .iter()
+                .map(|&c| match c {
+                    NO_CLASS => None,
+                    BELOW_CLASS => Some(Technique::Impostors),
+                    c => Some(by_class(usize::from(c))),
+                })
+                .collect();
+            assert_eq!(out, expected, "frame {frame}");
+            classes_seen.extend(reference.iter().copied());
+        }
+        assert!(classes_seen.len() >= 8, "classes met along the path: {classes_seen:?}");
+        assert!(classes_seen.contains(&BELOW_CLASS) && classes_seen.contains(&NO_CLASS), "{classes_seen:?}");
+    }
+
     /// Fractions lent for a choice are read by it and given back; the state's own are kept.
     #[test]
     fn visible_fractions_lent_for_a_choice_come_back() {
@@ -2957,7 +3126,8 @@ mod tests {
             let world_per_pixel = 0.001 + (i as f32) * 1e-6;
             let h = projected_height_at(&lod, transform, eye, world_per_pixel);
             assert_eq!(place.projected_height(eye, world_per_pixel).to_bits(), h.to_bits(), "{i}");
-            assert_eq!(place.elevation(eye).to_bits(), view_elevation(&lod, transform, eye).to_bits(), "{i}");
+            let elevation = place.sine(eye).asin().to_degrees();
+            assert_eq!(elevation.to_bits(), view_elevation(&lod, transform, eye).to_bits(), "{i}");
         }
     }
 
