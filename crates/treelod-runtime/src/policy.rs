@@ -1463,9 +1463,9 @@ pub fn choose_instances_coarsest(
 ///
 /// It also holds each instance's placement (48 bytes an instance): its culling sphere, block
 /// centre and height in world space and its unit up axis, which the chooser would otherwise
-/// compute from its transform every frame (two point transforms, four square roots). They are
-/// computed as the per-frame path computes them, so the choices are the same to the bit, and the
-/// chooser reads them in place of the instances' transforms. Measured (`bench --no-render
+/// compute from its transform every frame (three point transforms and three square roots).
+/// They are computed as the per-frame path computes them, so the choices are the same to the
+/// bit, and the chooser reads them in place of the instances' transforms. Measured (`bench --no-render
 /// --technique policy`, 48 frames, the binaries alternating; `docs/cli.md`): the shared pine's
 /// 10^6 trees select in 23.5 → 21.4 ms (mean of each frame's least over 3 runs), the orchid's
 /// 10^4 in 1.96 → 1.90 ms (5 runs), every count of the frames the same.
