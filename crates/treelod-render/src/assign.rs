@@ -61,6 +61,8 @@ impl Renderer {
         let mut assignment = std::mem::take(&mut self.assignment);
         self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
         self.assignment = assignment;
+        // `assign_view` chose with the policy (culling with `camera`) exactly when this holds.
+        self.assignment_culled = self.settings.policy.is_some_and(|p| self.policy.chooses(Some(&p)));
         self.note_drawn_with();
         self.note_transitions();
     }

@@ -160,6 +160,9 @@ pub struct Renderer {
     pub(crate) visible_fraction: Vec<f32>,
     /// This frame's trees per technique ([`Self::assign`]) from the camera's view.
     pub(crate) assignment: Assignment,
+    /// Whether [`Self::assignment`] was chosen by the policy for this frame's camera, which
+    /// leaves out the trees outside its frustum (`TechniqueSettings::culled`).
+    pub(crate) assignment_culled: bool,
     /// Per shadow cascade, this frame's trees per technique from the light's view.
     pub(crate) cascade_assignments: Vec<Assignment>,
     /// The trees in a transition ([`Policy::transition`]) under the technique each is leaving
@@ -339,6 +342,7 @@ impl Renderer {
             chain_levels: Vec::new(),
             visible_fraction: Vec::new(),
             assignment: Assignment::default(),
+            assignment_culled: false,
             cascade_assignments: Vec::new(),
             leaving_assignment: Assignment::default(),
             leaving: View::default(),
@@ -1077,6 +1081,8 @@ impl Renderer {
             pixel_level: settings.pixel_level(),
             lines: settings.lines,
             chain_policy: settings.policy.unwrap_or_default(),
+            // The camera's view's assignment, chosen by the policy for this camera.
+            culled: main && self.assignment_culled,
         };
         let prune_state =
             main.then_some(PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction });

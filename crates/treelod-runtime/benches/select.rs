@@ -184,6 +184,7 @@ impl<'a> PolicyFrame<'a> {
                 pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
                 lines: true,
                 chain_policy: policy,
+                culled: false,
             },
         }
     }

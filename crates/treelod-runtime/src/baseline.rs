@@ -46,7 +46,7 @@ use treelod_format::{Container, LodLevelRecord, Range, billboard_kind};
 #[cfg(doc)]
 use crate::draws::Representations;
 use crate::draws::{QuadDraw, Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
-use crate::frame::{Camera, Frustum, tau_per_metre};
+use crate::frame::{Camera, Frustum, tau_per_metre, usable_scale};
 #[cfg(doc)]
 use crate::impostor::ImpostorBark;
 use crate::policy::{Calibration, ChainChoices, ChainPick, Policy, projected_height_at};
@@ -342,13 +342,38 @@ pub fn select(
     };
     let main = state.is_some();
     let previous: &[Option<ChainPick>] = state.as_ref().map_or(&[], |s| &*s.previous);
+    // Quads need no `τ`; where the chooser culled the list with this camera, only the
+    // transforms it could not have tested as this selection does are tested again.
+    let trusted = settings.culled && baseline != Technique::LodChain;
     let chunks = by_chunks(list, |chunk, out: &mut BaselineChunk| {
         for &index in chunk {
             let Some((instance, lod, model)) = scene.get(index) else { continue };
-            let Some(tau) =
-                instance_tau(instance.transform, camera, &frustum, s_min, lod.cull_sphere(), model.block_centre)
-            else {
-                continue;
+            let tau = if trusted {
+                match usable_scale(instance.transform) {
+                    // The chooser's sphere test is this one for a scale of at least its floor
+                    // (`max_axis_scale`'s 1e-12): the tree is in view.
+                    Some(scale) if scale >= 1e-12 => 0.0,
+                    Some(_) => {
+                        let tau = instance_tau(
+                            instance.transform,
+                            camera,
+                            &frustum,
+                            s_min,
+                            lod.cull_sphere(),
+                            model.block_centre,
+                        );
+                        let Some(tau) = tau else { continue };
+                        tau
+                    }
+                    None => continue,
+                }
+            } else {
+                let Some(tau) =
+                    instance_tau(instance.transform, camera, &frustum, s_min, lod.cull_sphere(), model.block_centre)
+                else {
+                    continue;
+                };
+                tau
             };
             *out.draws.visible.get_mut(baseline) += 1;
             match (baseline, &model.chain, &model.billboards) {
@@ -477,6 +502,81 @@ mod tests {
         assert_eq!(chain.pick(0.02), Some(0));
     }
 
+    /// Trees the policy's chooser culled with the camera (`TechniqueSettings::culled`) give the
+    /// billboards and octahedral impostors that testing every tree here gives, transforms scaled
+    /// to nothing, to under the chooser's floor, and to infinity among them.
+    #[test]
+    fn quads_of_trees_the_chooser_culled_are_the_quads_culled_here() {
+        use treelod_build::{BuildConfig, ImpostorConfig, LodChainConfig, Placed, SplitMix64, build_block};
+        let tree = treelod_build::demo_tree(&treelod_build::DemoTreeConfig { leaves: 300, ..Default::default() });
+        // Billboards and octahedral impostors are baked with the impostors' atlas.
+        let config = BuildConfig {
+            baselines: Some(LodChainConfig::default()),
+            impostors: Some(ImpostorConfig::default()),
+            ..BuildConfig::default()
+        };
+        let built =
+            build_block("t", &[Placed { scene: &tree, translation: Vec3::ZERO }], &config, "t").expect("builds");
+        let container =
+            Container::from_bytes(&built.data.to_bytes(treelod_format::Compression::None).unwrap()).expect("opens");
+        let models = [Representations::from_container(&container).0];
+        let lods = [crate::frame::ModelLod::from_container(&container)];
+        assert!(models[0].octahedral > 0 && models[0].billboards.is_some(), "quads built");
+        let mut rng = SplitMix64(4);
+        let mut instances: Vec<crate::frame::Instance> = (0..600)
+            .map(|_| {
+                let at = Vec3::new(rng.range(-80.0, 80.0), 0.0, rng.range(-120.0, 10.0));
+                crate::frame::Instance {
+                    model: 0,
+                    transform: Mat4::from_scale_rotation_translation(
+                        Vec3::splat(rng.range(0.5, 2.0)),
+                        glam::Quat::from_rotation_y(rng.range(0.0, 6.0)),
+                        at,
+                    ),
+                }
+            })
+            .collect();
+        for (k, scale) in [0.0, 1e-13, 1e-30, f32::INFINITY, f32::NAN].into_iter().enumerate() {
+            instances[k].transform = Mat4::from_scale_rotation_translation(
+                Vec3::splat(scale),
+                glam::Quat::IDENTITY,
+                Vec3::new(0.0, 0.0, -30.0),
+            );
+        }
+        let camera = Camera::look_at(Vec3::new(0.0, 3.0, 20.0), Vec3::new(0.0, 3.0, 0.0), 0.9, 640, 480);
+        let frustum = Frustum::from_view_proj(camera.view_proj);
+        // The chooser's cull (`choose_instances`): the culling sphere scaled by `max_axis_scale`.
+        let every: Vec<u32> = (0..instances.len() as u32).collect();
+        let culled: Vec<u32> = every
+            .iter()
+            .copied()
+            .filter(|&i| {
+                let t = instances[i as usize].transform;
+                let (centre, radius) = lods[0].cull_sphere();
+                frustum.intersects_sphere(t.transform_point3(centre), radius * crate::max_axis_scale(t))
+            })
+            .collect();
+        assert!(culled.len() > 50 && culled.len() < 550, "{} of {} in view", culled.len(), every.len());
+        let scene = Scene { lods: &lods, models: &models, instances: &instances };
+        let settings = |culled: bool| TechniqueSettings {
+            s_min: 1.0,
+            lod: crate::frame::LodSettings::default(),
+            pruning: crate::prune::Pruning::default(),
+            impostor_bark: ImpostorBark::default(),
+            pixel_level: crate::spt_lod::PixelLevel { quality: 1.0, blend: 0.5 },
+            lines: true,
+            chain_policy: Policy::default(),
+            culled,
+        };
+        for baseline in [Technique::Octahedral, Technique::Billboard, Technique::Crossed] {
+            let (mut tested, mut trusted) = (TreeDraws::default(), TreeDraws::default());
+            select(&scene, &every, baseline, &camera, &settings(false), None, &mut tested);
+            select(&scene, &culled, baseline, &camera, &settings(true), None, &mut trusted);
+            assert_eq!(trusted, tested, "{baseline:?}");
+            assert!(tested.visible[baseline] > 50, "{baseline:?}");
+        }
+    }
+
     /// `scene` built with a LoD chain and calibration (two views), its selection inputs.
     fn built_chain(scene: &treelod_build::scene::Scene) -> (Container, Representations, crate::frame::ModelLod) {
         use treelod_build::{BuildConfig, CalibrationConfig, LodChainConfig, Placed, build_block};
@@ -515,6 +615,7 @@ mod tests {
             pixel_level: crate::spt_lod::PixelLevel { quality: 1.0, blend: 0.5 },
             lines: true,
             chain_policy: Policy::default(),
+            culled: false,
         };
         let mut out = TreeDraws::default();
         let mut previous = vec![None];

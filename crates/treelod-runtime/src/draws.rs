@@ -457,6 +457,11 @@ pub struct TechniqueSettings {
     /// a model has per-level tables ([`crate::baseline::select`]); the renderer's policy, else
     /// [`Policy::default`].
     pub chain_policy: Policy,
+    /// Whether the assignment's lists hold only trees whose culling sphere meets the camera's
+    /// frustum, as the policy's chooser leaves them for the camera it chose with
+    /// ([`crate::choose_instances`]): the billboards' and octahedral impostors' selections then
+    /// take each tree without testing it again ([`crate::baseline::select`]).
+    pub culled: bool,
 }
 
 /// Selects one view of every technique but the point tree and the full mesh: appends to `out`
@@ -556,6 +561,7 @@ mod tests {
             pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
             lines: true,
             chain_policy: Policy::default(),
+            culled: false,
         };
         let mut assignment = Assignment::default();
         assignment.assign(&instances, &models, |i, _| if i == 0 { Technique::LodChain } else { Technique::Spt });
@@ -603,6 +609,7 @@ mod tests {
             pixel_level: PixelLevel { quality: 1.0, blend: 0.5 },
             lines: true,
             chain_policy: Policy::default(),
+            culled: false,
         };
         for technique in Technique::ALL {
             let assignment = Assignment::forced(technique, &instances, &models);

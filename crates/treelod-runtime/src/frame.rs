@@ -955,15 +955,19 @@ pub(crate) fn tau_per_metre(
     s_min: f32,
     (centre, radius): (Vec3, f32),
 ) -> Option<f32> {
-    let (ax, ay, az) = (transform.x_axis.truncate(), transform.y_axis.truncate(), transform.z_axis.truncate());
-    let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
-    if !(scale > 0.0 && scale.is_finite()) {
-        return None;
-    }
+    let scale = usable_scale(transform)?;
     if !frustum.intersects_sphere(transform.transform_point3(centre), radius * scale) {
         return None;
     }
     Some(s_min.max(0.0) * camera.world_per_pixel() / scale)
+}
+
+/// The largest axis scale of `transform` (the length of its longest axis), `None` where it is
+/// not positive and finite (a transform nothing is drawn with): [`tau_per_metre`]'s.
+pub(crate) fn usable_scale(transform: Mat4) -> Option<f32> {
+    let (ax, ay, az) = (transform.x_axis.truncate(), transform.y_axis.truncate(), transform.z_axis.truncate());
+    let scale = ax.length_squared().max(ay.length_squared()).max(az.length_squared()).sqrt();
+    (scale > 0.0 && scale.is_finite()).then_some(scale)
 }
 
 /// Culls one instance (step 1 of [`select_frame`]).
