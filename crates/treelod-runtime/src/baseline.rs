@@ -348,25 +348,10 @@ pub fn select(
     let chunks = by_chunks(list, |chunk, out: &mut BaselineChunk| {
         for &index in chunk {
             let Some((instance, lod, model)) = scene.get(index) else { continue };
-            let tau = if trusted {
-                match usable_scale(instance.transform) {
-                    // The chooser's sphere test is this one for a scale of at least its floor
-                    // (`max_axis_scale`'s 1e-12): the tree is in view.
-                    Some(scale) if scale >= 1e-12 => 0.0,
-                    Some(_) => {
-                        let tau = instance_tau(
-                            instance.transform,
-                            camera,
-                            &frustum,
-                            s_min,
-                            lod.cull_sphere(),
-                            model.block_centre,
-                        );
-                        let Some(tau) = tau else { continue };
-                        tau
-                    }
-                    None => continue,
-                }
+            // The chooser's sphere test is this one for a scale of at least its floor
+            // (`max_axis_scale`'s 1e-12): such a tree is in view.
+            let tau = if trusted && usable_scale(instance.transform).is_some_and(|scale| scale >= 1e-12) {
+                0.0
             } else {
                 let Some(tau) =
                     instance_tau(instance.transform, camera, &frustum, s_min, lod.cull_sphere(), model.block_centre)
@@ -502,6 +487,20 @@ mod tests {
         assert_eq!(chain.pick(0.02), Some(0));
     }
 
+    /// Selection settings of one pixel, the default policy, nothing culled beforehand.
+    fn test_settings() -> TechniqueSettings {
+        TechniqueSettings {
+            s_min: 1.0,
+            lod: crate::frame::LodSettings::default(),
+            pruning: crate::prune::Pruning::default(),
+            impostor_bark: ImpostorBark::default(),
+            pixel_level: crate::spt_lod::PixelLevel { quality: 1.0, blend: 0.5 },
+            lines: true,
+            chain_policy: Policy::default(),
+            culled: false,
+        }
+    }
+
     /// Trees the policy's chooser culled with the camera (`TechniqueSettings::culled`) give the
     /// billboards and octahedral impostors that testing every tree here gives, transforms scaled
     /// to nothing, to under the chooser's floor, and to infinity among them.
@@ -558,16 +557,7 @@ mod tests {
             .collect();
         assert!(culled.len() > 50 && culled.len() < 550, "{} of {} in view", culled.len(), every.len());
         let scene = Scene { lods: &lods, models: &models, instances: &instances };
-        let settings = |culled: bool| TechniqueSettings {
-            s_min: 1.0,
-            lod: crate::frame::LodSettings::default(),
-            pruning: crate::prune::Pruning::default(),
-            impostor_bark: ImpostorBark::default(),
-            pixel_level: crate::spt_lod::PixelLevel { quality: 1.0, blend: 0.5 },
-            lines: true,
-            chain_policy: Policy::default(),
-            culled,
-        };
+        let settings = |culled: bool| TechniqueSettings { culled, ..test_settings() };
         for baseline in [Technique::Octahedral, Technique::Billboard, Technique::Crossed] {
             let (mut tested, mut trusted) = (TreeDraws::default(), TreeDraws::default());
             select(&scene, &every, baseline, &camera, &settings(false), None, &mut tested);
@@ -607,16 +597,7 @@ mod tests {
         let instances = [crate::frame::Instance { model: 0, transform: Mat4::IDENTITY }];
         let (lods, reps) = (std::slice::from_ref(lod), std::slice::from_ref(&models));
         let scene = Scene { lods, models: reps, instances: &instances };
-        let settings = TechniqueSettings {
-            s_min: 1.0,
-            lod: crate::frame::LodSettings::default(),
-            pruning: crate::prune::Pruning::default(),
-            impostor_bark: ImpostorBark::default(),
-            pixel_level: crate::spt_lod::PixelLevel { quality: 1.0, blend: 0.5 },
-            lines: true,
-            chain_policy: Policy::default(),
-            culled: false,
-        };
+        let settings = test_settings();
         let mut out = TreeDraws::default();
         let mut previous = vec![None];
         let state = ChainState { previous: &mut previous };
