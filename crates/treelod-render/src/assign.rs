@@ -59,10 +59,8 @@ impl Renderer {
     /// [`Self::transitions`].
     pub(crate) fn assign(&mut self, camera: &treelod_runtime::Camera) {
         let mut assignment = std::mem::take(&mut self.assignment);
-        self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
+        self.assignment_culled = self.assign_view(std::slice::from_ref(camera), None, &mut assignment);
         self.assignment = assignment;
-        // `assign_view` chose with the policy (culling with `camera`) exactly when this holds.
-        self.assignment_culled = self.settings.policy.is_some_and(|p| self.policy.chooses(Some(&p)));
         self.note_drawn_with();
         self.note_transitions();
     }
@@ -90,8 +88,12 @@ impl Renderer {
         out: &mut Assignment,
     ) {
         match casters {
-            Casters::Coarser => self.assign_view(&[camera, light], Some(k), out),
-            Casters::LightView => self.assign_view(&[light], Some(k), out),
+            Casters::Coarser => {
+                self.assign_view(&[camera, light], Some(k), out);
+            }
+            Casters::LightView => {
+                self.assign_view(&[light], Some(k), out);
+            }
             Casters::CameraView => out.clone_from(&self.assignment),
             Casters::Forced(technique) => out.assign(&self.instances, &self.representations, |_, _| technique),
         }
@@ -100,12 +102,18 @@ impl Renderer {
     /// Fills `out` with the trees per technique for one view: with a policy, each at the smallest
     /// of its projected heights for `cameras`, with the hysteresis of the camera's view
     /// (`cascade` `None`) or of shadow cascade `cascade`; without, every tree with
-    /// [`Settings::technique`].
-    fn assign_view(&mut self, cameras: &[treelod_runtime::Camera], cascade: Option<usize>, out: &mut Assignment) {
+    /// [`Settings::technique`]. Whether the policy chose: then the trees outside every view of
+    /// `cameras` are left out (`TechniqueSettings::culled`).
+    fn assign_view(
+        &mut self,
+        cameras: &[treelod_runtime::Camera],
+        cascade: Option<usize>,
+        out: &mut Assignment,
+    ) -> bool {
         let technique = self.settings.technique;
         let Some(policy) = self.settings.policy.filter(|p| self.policy.chooses(Some(p))) else {
             out.assign(&self.instances, &self.representations, |_, _| technique);
-            return;
+            return false;
         };
         let tables = &mut self.policy;
         if tables.made_for != Some(policy) {
@@ -150,6 +158,7 @@ impl Renderer {
         // Trees outside every view are not chosen, nor listed.
         let chosen = tables.chosen.iter().enumerate().filter_map(|(i, t)| Some((u32::try_from(i).ok()?, (*t)?)));
         out.assign_listed(&self.instances, &self.representations, chosen);
+        true
     }
 
     /// Each instance's technique from this frame's assignment (read when the draws are

@@ -888,10 +888,7 @@ struct Table {
 pub fn elevation_class_after(previous: Option<usize>, elevation: f32, centres: &[f32]) -> usize {
     let last = centres.len().saturating_sub(1);
     let elevation = if elevation.is_finite() { elevation } else { 0.0 };
-    let bound = |lower: usize, sign: f32| {
-        let (a, b) = (centres[lower], centres[lower + 1]);
-        0.5 * (a + b) + sign * 0.25 * (b - a)
-    };
+    let bound = |lower: usize, sign: f32| class_bound(centres, lower, sign);
     match previous.map(|p| p.min(last)) {
         None => (0..last).take_while(|&c| elevation >= bound(c, 0.0)).count(),
         Some(p) => {
@@ -900,6 +897,14 @@ pub fn elevation_class_after(previous: Option<usize>, elevation: f32, centres: &
             p + up - down
         }
     }
+}
+
+/// The bound of [`elevation_class_after`] between classes `lower` and `lower + 1` of `centres`:
+/// their midpoint (`sign` 0), or a quarter of their spacing past it upwards (`sign` 1, where a
+/// tree of the lower class moves up) or downwards (`sign` −1, where one of the upper moves down).
+fn class_bound(centres: &[f32], lower: usize, sign: f32) -> f32 {
+    let (a, b) = (centres[lower], centres[lower + 1]);
+    0.5 * (a + b) + sign * 0.25 * (b - a)
 }
 
 /// How far inside a class's bounds, in the sine of the elevation, the chooser takes a tree's
@@ -1068,16 +1073,21 @@ impl Choices {
     /// classes).
     #[must_use]
     pub fn below_horizon(&self, elevation: f32, was_below: bool) -> bool {
+        self.below_classes()
+            .is_some_and(|classes| elevation_class_after(Some(usize::from(!was_below)), elevation, &classes) == 0)
+    }
+
+    /// The two classes [`Self::below_horizon`] tells apart: below is a class of its own under
+    /// the lowest (at or under the horizon), one spacing down, so the classes' rule places its
+    /// bounds. `None` where nothing changes below.
+    fn below_classes(&self) -> Option<[f32; 2]> {
         let (Some(&lowest), Some(&next), false) =
             (self.elevations.first(), self.elevations.get(1), self.below.is_empty())
         else {
-            return false;
+            return None;
         };
-        // Below is a class of its own under the lowest (at or under the horizon), one spacing
-        // down: the classes' rule places its bounds.
         let floor = lowest.min(0.0);
-        let classes = [floor - (next - lowest), floor];
-        elevation_class_after(Some(usize::from(!was_below)), elevation, &classes) == 0
+        Some([floor - (next - lowest), floor])
     }
 
     /// Per elevation class `c`, the sines `(lo, hi)` of the elevations between which a tree of
@@ -1088,24 +1098,13 @@ impl Choices {
     fn stay_bands(&self) -> Vec<(f32, f32)> {
         let centres = &self.elevations;
         let last = centres.len().saturating_sub(1);
-        let bound = |lower: usize, sign: f32| {
-            let (a, b) = (centres[lower], centres[lower + 1]);
-            0.5 * (a + b) + sign * 0.25 * (b - a)
-        };
-        // Below the horizon past this elevation (`below_horizon`'s classes' lower bound).
-        let below = match (centres.first(), centres.get(1), self.below.is_empty()) {
-            (Some(&lowest), Some(&next), false) => {
-                let floor = lowest.min(0.0);
-                let classes = [floor - (next - lowest), floor];
-                0.5 * (classes[0] + classes[1]) - 0.25 * (classes[1] - classes[0])
-            }
-            _ => f32::NEG_INFINITY,
-        };
+        // Below the horizon at or under this elevation (where a tree not below moves down).
+        let below = self.below_classes().map_or(f32::NEG_INFINITY, |classes| class_bound(&classes, 0, -1.0));
         let sine = |degrees: f32| degrees.to_radians().sin();
         (0..centres.len())
             .map(|c| {
-                let lo = if c > 0 { bound(c - 1, -1.0).max(below) } else { below };
-                let hi = if c < last { bound(c, 1.0) } else { f32::INFINITY };
+                let lo = if c > 0 { class_bound(centres, c - 1, -1.0).max(below) } else { below };
+                let hi = if c < last { class_bound(centres, c, 1.0) } else { f32::INFINITY };
                 let lo = if lo > -90.0 { sine(lo) + STAY_MARGIN } else { f32::NEG_INFINITY };
                 let hi = if hi < 90.0 { sine(hi) - STAY_MARGIN } else { f32::INFINITY };
                 (lo, hi)
@@ -1536,14 +1535,19 @@ impl ChunkBounds {
     /// The chunks' spheres of `instances` drawing `lods`.
     #[must_use]
     pub fn new(instances: &[Instance], lods: &[ModelLod]) -> Self {
-        let spheres = instances
+        let placements: Vec<Placement> = instances
+            .iter()
+            .map(|i| {
+                lods.get(i.model as usize).map_or(Placement::UNKNOWN, |lod| Placement::of(i.model, lod, i.transform))
+            })
+            .collect();
+        let spheres = placements
             .chunks(CHOOSE_CHUNK)
             .map(|chunk| {
                 let mut spheres = Vec::with_capacity(chunk.len());
-                for instance in chunk {
-                    let Some(lod) = lods.get(instance.model as usize) else { return (Vec3::ZERO, f32::INFINITY) };
-                    let (centre, radius) = world_cull_sphere(lod, instance.transform);
-                    if !(centre.is_finite() && radius.is_finite()) {
+                for place in chunk {
+                    let (centre, radius) = place.cull;
+                    if place.model == Placement::UNKNOWN.model || !(centre.is_finite() && radius.is_finite()) {
                         return (Vec3::ZERO, f32::INFINITY);
                     }
                     spheres.push((centre, radius));
@@ -1556,12 +1560,6 @@ impl ChunkBounds {
                 // A margin for rounding: a chunk is culled only where each of its spheres is
                 // clearly outside.
                 (centre, radius * (1.0 + 1e-4) + 1e-3)
-            })
-            .collect();
-        let placements = instances
-            .iter()
-            .map(|i| {
-                lods.get(i.model as usize).map_or(Placement::UNKNOWN, |lod| Placement::of(i.model, lod, i.transform))
             })
             .collect();
         Self { spheres, placements, instances: instances.len() }
@@ -1656,28 +1654,27 @@ pub fn choose_instances_in_chunks(
                         .unwrap_or((0.0, Vec3::ZERO, None));
                     let seen = visibility_class_after(usize::from(*class), visible);
                     *class = u8::try_from(seen).unwrap_or(0);
-                    let sine = if choices.elevations().is_empty() { f32::NAN } else { place.sine(eye) };
-                    let stays = bands.get(m).and_then(|b| b.get(usize::from(*elevation)));
                     let elevation_class = if choices.elevations().is_empty() {
                         0
-                    } else if let Some(&(lo, hi)) = stays
-                        && sine > lo
-                        && sine < hi
-                    {
-                        // Inside its class's bounds, above the horizon: as the degrees give.
-                        usize::from(*elevation)
                     } else {
-                        let degrees = sine.asin().to_degrees();
-                        if choices.below_horizon(degrees, *elevation == BELOW_CLASS) {
-                            *elevation = BELOW_CLASS;
-                            BELOW_HORIZON
-                        } else {
-                            // A tree coming up from below is new to the classes.
-                            let before = (*elevation != NO_CLASS && *elevation != BELOW_CLASS)
-                                .then_some(usize::from(*elevation));
-                            let now = elevation_class_after(before, degrees, choices.elevations());
-                            *elevation = u8::try_from(now).unwrap_or(0);
-                            now
+                        let sine = place.sine(eye);
+                        match bands.get(m).and_then(|b| b.get(usize::from(*elevation))) {
+                            // Inside its class's bounds, above the horizon: as the degrees give.
+                            Some(&(lo, hi)) if sine > lo && sine < hi => usize::from(*elevation),
+                            _ => {
+                                let degrees = sine.asin().to_degrees();
+                                if choices.below_horizon(degrees, *elevation == BELOW_CLASS) {
+                                    *elevation = BELOW_CLASS;
+                                    BELOW_HORIZON
+                                } else {
+                                    // A tree coming up from below is new to the classes.
+                                    let before = (*elevation != NO_CLASS && *elevation != BELOW_CLASS)
+                                        .then_some(usize::from(*elevation));
+                                    let now = elevation_class_after(before, degrees, choices.elevations());
+                                    *elevation = u8::try_from(now).unwrap_or(0);
+                                    now
+                                }
+                            }
                         }
                     };
                     let chosen = match choices.uniform_below() {
