@@ -87,6 +87,15 @@
 //! order do not depend on its cell, so the occlusion is the same, bit for bit, with any cells
 //! (tested).
 //!
+//! Tracing one ray for the copies of a vertex (the same position and normal, bit for bit, in
+//! triangles of the same sides: a mesh's seams), the others adding what it kept, was measured
+//! and not taken. The occlusion is the same bit for bit (the maple's container was byte for
+//! byte the same), and the maple holds 74,955 such copies among its 716,535 vertices, all of
+//! them on its bark (the jacaranda 10 %, the oak 7.5 %, the others 5 % or none), but the stage
+//! took as long (four alternating builds each: 4.65–5.36 s before, 4.83–5.61 s after): a bark
+//! vertex's ray is stopped by the first triangle it meets, and its copy's cell is gathered for
+//! its neighbours anyway, so what the copies saved the lookups of their twins cost again.
+//!
 //! Where foliage is dense most leaf cards are buried, and every ray they cast is stopped. With
 //! 16 directions or more, the even ones are traced first (a Fibonacci lattice's every other
 //! point is spread evenly too); a small flat piece of [`crate::ambient`] (a leaf card's corners)
