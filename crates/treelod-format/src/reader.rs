@@ -790,7 +790,7 @@ fn decode_shuffled(stored: &[u8], record_size: usize, out: &mut [u8]) -> std::io
 /// The frame holds byte 0 of every record, then byte 1, and so on (planes of `n` bytes, `n` the
 /// record count). Where whole planes fit in `chunk`, each read holds as many as fit, and
 /// [`scatter_planes`] writes them into the records a tile at a time: a 49 MB section of 48-byte
-/// records (1.02 M points) then takes 6 passes over the output, not 48, each in cache-sized
+/// records (1.02 M points) then takes 12 passes over the output, not 48, each in cache-sized
 /// tiles. A plane longer than `chunk` is read in runs of one plane, each byte written to its
 /// record.
 fn decode_shuffled_by(stored: &[u8], record_size: usize, out: &mut [u8], chunk: usize) -> std::io::Result<()> {
