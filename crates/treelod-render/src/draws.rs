@@ -647,9 +647,12 @@ fn record_direct(
     out.recorded.push(record);
 }
 
-/// Number of leading `values` (sorted largest first) above `tau`.
+/// Number of leading `values` (sorted largest first) above `tau`: the selection's own count
+/// ([`treelod_runtime::frame::leading_above`], galloping from the front: a far cell's empty or
+/// short prefix costs a comparison or a few, where a binary search over the cell's thousands of
+/// triangles missed the cache at each step).
 fn leading_above(values: &[f32], tau: f32) -> usize {
-    values.partition_point(|&v| v > tau)
+    treelod_runtime::frame::leading_above(values, tau) as usize
 }
 
 #[cfg(test)]

@@ -1327,8 +1327,11 @@ impl<S: Sink> CellEmitter<'_, S> {
 }
 
 /// Number of leading `values` above `tau`, `values` sorted largest first: `partition_point(v > τ)`
-/// by galloping from the front, so a short prefix (a far cell) costs `O(log prefix)`.
-fn leading_above(values: &[f32], tau: f32) -> u32 {
+/// by galloping from the front, so a short prefix (a far cell) costs `O(log prefix)`, and an
+/// empty one (a cell whose largest value is not above `tau`) one comparison. The selection's
+/// prefixes, and the renderer's where streaming clamps them, are counted by it.
+#[must_use]
+pub fn leading_above(values: &[f32], tau: f32) -> u32 {
     let n = values.len();
     if !values.first().is_some_and(|&v| v > tau) {
         return 0;
