@@ -441,10 +441,12 @@ fn encode_sections<W: std::io::Write + std::io::Seek>(
     // on the maple's points (49 MB raw, level 6, one frame 0.66–0.80 s on one thread) one worker
     // took 0.49–0.52 s but held 38 MB more (its 8 MiB jobs), and with 2 MiB jobs 0.53 s and 9 MB
     // more; in the whole build (sections already compressed side by side on 2 cores) the write
-    // stage went from 0.96–1.09 s to 0.80–0.92 s, and the build's peak from 121 to 155 MB. A section whose frame is kept frees its raw array as soon
-    // as it is compressed, so the build's arrays and their compressed sections are never both
-    // whole in memory: the frames replace the arrays they come from, each array is freed once
-    // written, and what the writing adds is the frames in flight (at most the file's size).
+    // stage went from 0.96–1.09 s to 0.80–0.92 s, and the build's peak from 121 to 155 MB.
+    //
+    // A section whose frame is kept frees its raw array as soon as it is compressed, so the
+    // build's arrays and their compressed sections are never both whole in memory: the frames
+    // replace the arrays they come from, each array is freed once written, and what the writing
+    // adds is the frames in flight (at most the file's size).
     // Image formats of later minors mark the file too (spec §11): BC7 images are 1.6.
     let image_minor = sections
         .iter()
