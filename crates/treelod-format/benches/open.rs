@@ -1,6 +1,6 @@
 //! `Container::open` costs the same for a 1 MiB and a 1 GiB file: it reads the header, the section
 //! table, `META`, `BLOCK` and `CELLS`, never the bulk arrays (spec §9.1). A compressed section is
-//! decoded at open: `open compressed 48 MB` times a byte-shuffled `VERTICES` section of 1.8 M
+//! decoded at open: `open compressed 48 MB` times a byte-shuffled `VERTICES` section of 1.71 M
 //! records (spec §8), as the build's verification and every load of a distributed container pay it.
 //!
 //! Run with `cargo bench -p treelod-format --bench open`. The files are written once into a
