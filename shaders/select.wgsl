@@ -6,7 +6,7 @@
 //    `visible_out` and counted into the x of the indirect dispatch of pass 2.
 // 2. `select_instances`, one workgroup per visible block, one invocation per instance: the
 //    instance's culling, depth, thresholds and prefixes exactly as `select_frame` computes them
-//    (same operations, same order, same far path and roots range), and one `DrawInfo` +
+//    (same operations, same order, same far path and far-list range), and one `DrawInfo` +
 //    `DrawIndirectArgs` pair per non-empty range, appended to its model's triangle or point
 //    bucket by an atomic counter (the count `multi_draw_indirect_count` reads).
 //
@@ -73,7 +73,8 @@ struct InstanceDraw {
 
 // Rust twin: ModelGpu. Pool indices: `triangle_base + i` is container triangle `i` in the pool
 // bound as triangles, `point_base + i` container point `i` bound as points, `roots_at` the first
-// of the model's roots (`ModelLod::roots`, copied contiguously).
+// of the model's far list (`ModelLod::far_list`, the roots first, copied contiguously), whose
+// `hi` values are `keys[far_hi_at ..]`.
 struct ModelGpu {
     centre: array<f32, 3>,
     radius: f32,
@@ -82,12 +83,13 @@ struct ModelGpu {
     cull_half: array<f32, 3>,
     first_cell: u32,
     cell_count: u32,
-    roots_tau: f32,
+    far_tau: f32,
     largest: f32,
-    finite_hi0: f32,
-    root_count: u32,
+    cell_reach: f32,
+    far_count: u32,
     root_cells: u32,
     roots_at: u32,
+    far_hi_at: u32,
     triangle_base: u32,
     point_base: u32,
     // Triangle bucket, point bucket: first slot of the draw buffers, and slots.
@@ -253,6 +255,28 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
 }
 
+// ModelLod::far_only.
+fn far_only(lowest: vec2<f32>) -> bool {
+    return cur_model.far_count > 0u && lowest.x >= cur_model.far_tau && lowest.x < F32_MAX
+        && lowest.y >= cur_model.largest;
+}
+
+// CellEmitter::least_thresholds.
+fn least_thresholds(needs_z: bool, distance: f32) -> vec2<f32> {
+    if !needs_z {
+        return thresholds(0.0, distance);
+    }
+    return min(thresholds(-1.0, distance), thresholds(1.0, distance));
+}
+
+// CellEmitter::emit_far.
+fn emit_far(taus: vec2<f32>) {
+    let count = leading_above(cur_model.far_hi_at, cur_model.far_count, taus.x);
+    tally_cells += cur_model.root_cells;
+    tally_points += count;
+    write_range(1u, ROOTS_CELL, cur_model.roots_at, count, taus, shading_at(0.0));
+}
+
 // CellEmitter::emit.
 fn emit(c: CellGpu, z: f32, distance: f32) {
     let taus = thresholds(z, distance);
@@ -341,13 +365,8 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
         if needs_z {
             lowest = min(a, b);
         }
-        // ModelLod::roots_only.
-        let roots_only = cur_model.root_count > 0u && lowest.x >= cur_model.roots_tau && lowest.x < F32_MAX
-            && lowest.y >= cur_model.largest && lowest.x >= cur_model.finite_hi0;
-        if roots_only {
-            tally_cells += cur_model.root_cells;
-            tally_points += cur_model.root_count;
-            write_range(1u, ROOTS_CELL, cur_model.roots_at, cur_model.root_count, lowest, shading_at(0.0));
+        if far_only(lowest) {
+            emit_far(lowest);
         } else if needs_z && d_block > 0.0 {
             let to_z = vec3<f32>(dot(ax, to_block), dot(ay, to_block), dot(az, to_block)) * (inv_radius / d_block);
             for (var i = cur_model.first_cell; i < cell_end; i++) {
@@ -363,6 +382,9 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
                 emit(cells[i], 0.0, d_block);
             }
         }
+    } else if visibility != STRADDLES && far_only(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale)) {
+        // Every cell in view and none nearer than d_block − cell_reach·scale.
+        emit_far(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale));
     } else {
         // Near path: exact per-cell distances; cells culled on their own if the block straddles.
         // Per plane: n·p + w as a function of the model-space point, and the reach of a unit

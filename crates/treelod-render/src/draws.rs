@@ -381,6 +381,9 @@ impl Renderer {
     /// The draws of one selected cell (or one roots range), clamped to what is resident so that
     /// a missing prefix shows coarser data, never a hole:
     ///
+    /// - **The far list** (a [`Kind::Roots`] range): if only its first `r` entries are pinned
+    ///   (a small memory budget, `Model::far_pinned`), `τ_p` rises to the `hi` of the first entry
+    ///   not pinned.
     /// - **Points**: if only `r` leading points are resident, `τ_p` rises to the `hi` of the first
     ///   missing one, so every point the cut needs lies in the resident prefix; with nothing (or
     ///   less than the roots) resident, the cell draws its roots from the pinned copy.
@@ -413,7 +416,18 @@ impl Renderer {
         let (m, c) = (range.model as usize, range.cell as usize);
         let (Some(model), Some(lod)) = (self.models.get(m), self.lods.get(m)) else { return [None, None] };
         if range.kind == Kind::Roots {
-            return [None, Some(RecordedDraw { count: range.count, ..base })];
+            let pinned = model.far_pinned as usize;
+            let Some(&first_missing) = lod.far_hi().get(pinned).filter(|_| range.count as usize > pinned) else {
+                return [None, Some(RecordedDraw { count: range.count, ..base })];
+            };
+            // More than is pinned: `τ_p` rises to the first entry not pinned, as for a cell.
+            let tau_p = range.tau_points.max(first_missing);
+            let count = u32::try_from(leading_above(lod.far_hi(), tau_p)).unwrap_or(u32::MAX);
+            let tau_t = range.tau_triangles.max(tau_p);
+            return [
+                None,
+                Some(RecordedDraw { count, tau_points: tau_p, tau_triangles: tau_t, clamped: true, ..base }),
+            ];
         }
         let Some(cell) = model.cell_lod.get(c).and_then(|&i| lod.cells().get(i as usize)) else {
             return [None, None];

@@ -3,10 +3,11 @@
 //!
 //! **Data.** When it is turned on ([`crate::Renderer::enable_gpu_selection`]) every model's
 //! triangles and points are uploaded whole into a pool of their own (the streamed pool is left as
-//! it is), with a contiguous copy of its roots, so every prefix selection can ask for is resident;
+//! it is), with a contiguous copy of its far list (`ModelLod::far_list`, the roots first), so every prefix selection can ask for is resident;
 //! a model that does not fit the memory budget is refused. Next to it: per model the block sphere,
-//! culling box and roots-only bounds of its [`ModelLod`], per non-empty cell its bounds, ranges and
-//! first keys, and the cells' sorted keys (triangle sizes, point `hi`) in one array.
+//! culling box and far-list bounds of its [`ModelLod`], per non-empty cell its bounds, ranges and
+//! first keys, and the cells' sorted keys (triangle sizes, point `hi`) and the far list's `hi` in
+//! one array.
 //!
 //! **Instances** are sorted once per [`crate::Renderer::set_instances`] into blocks of
 //! [`BLOCK_INSTANCES`] by the Morton code of their culling sphere's centre (ties by index, so the
@@ -16,7 +17,7 @@
 //! **A frame** is one compute pass of two dispatches and O(models) CPU work: `cull_blocks` tests
 //! every block's sphere and appends the visible ones, counting them into the x of an indirect
 //! dispatch; `select_instances` runs one workgroup per visible block and selects each instance as
-//! the CPU does (culling, far path and roots range, near path with cell culling, Gilet's depth
+//! the CPU does (culling, far path and far-list range, near path with cell culling, Gilet's depth
 //! bias and shading, prefix search), appending one `DrawInfo` + `DrawIndirectArgs` pair per range
 //! to its model's triangle or point bucket through an atomic counter. The render pass draws each
 //! bucket with `multi_draw_indirect_count` (the counter is the count), or, on adapters without
@@ -144,12 +145,13 @@ struct ModelGpu {
     cull_half: [f32; 3],
     first_cell: u32,
     cell_count: u32,
-    roots_tau: f32,
+    far_tau: f32,
     largest: f32,
-    finite_hi0: f32,
-    root_count: u32,
+    cell_reach: f32,
+    far_count: u32,
     root_cells: u32,
     roots_at: u32,
+    far_hi_at: u32,
     triangle_base: u32,
     point_base: u32,
     bucket_first: [u32; 2],
@@ -209,7 +211,7 @@ const _: () = assert!(size_of::<InstanceDrawGpu>() == 8);
 const _: () = assert!(size_of::<SelectFrameGpu>() == 160);
 const _: () = assert!(size_of::<BlockGpu>() == 32);
 const _: () = assert!(size_of::<InstanceGpu>() == 80);
-const _: () = assert!(size_of::<ModelGpu>() == 100);
+const _: () = assert!(size_of::<ModelGpu>() == 104);
 const _: () = assert!(size_of::<CellGpu>() == 80);
 
 /// A key as the shader holds it: ±∞ as ±`f32::MAX`, NaN as `−f32::MAX` (selection's thresholds
@@ -260,11 +262,11 @@ struct Pending {
     state: Arc<AtomicU8>,
 }
 
-/// Pool units a model takes whole: its triangles, points and a copy of its roots.
+/// Pool units a model takes whole: its triangles, points and a copy of its far list (roots first).
 pub(crate) fn model_units(container: &Container, lod: &ModelLod) -> u64 {
     let triangles = u64::try_from(container.triangles().len()).unwrap_or(u64::MAX).div_ceil(2);
     let points = u64::try_from(container.points().len()).unwrap_or(u64::MAX);
-    let roots = u64::try_from(lod.roots().len()).unwrap_or(u64::MAX);
+    let roots = u64::try_from(lod.far_list().len()).unwrap_or(u64::MAX);
     triangles.saturating_add(points).saturating_add(roots)
 }
 
@@ -436,7 +438,7 @@ impl GpuSelection {
             let mut scratch = Vec::new();
             let triangles = container.triangles();
             let points = crate::upload::gpu_points(container, 0, container.points(), &mut scratch);
-            let roots: Vec<PointRecord> = lod.roots().iter().map(|&i| points[i as usize]).collect();
+            let roots: Vec<PointRecord> = lod.far_list().iter().map(|&i| points[i as usize]).collect();
             let triangles_at = at;
             let points_at = triangles_at + u64::try_from(triangles.len()).unwrap_or(0).div_ceil(2);
             let roots_at = points_at + u64::try_from(points.len()).unwrap_or(0);
@@ -450,7 +452,7 @@ impl GpuSelection {
                     queue.write_buffer(&self.pool, unit_at * UNIT, bytes);
                 }
             }
-            let (roots_tau, largest, finite_hi0) = lod.roots_only_bounds();
+            let (far_tau, largest) = lod.far_bounds();
             let (cull_centre, cull_half) = lod.cull_box();
             let first_cell = to_u32(cells.len());
             let mut with = [0u32; 2];
@@ -480,6 +482,8 @@ impl GpuSelection {
                 keys.extend(lod.point_hi(cell).iter().map(|&v| key(v)));
             }
             self.cells_with.push(with);
+            let far_hi_at = keys.len();
+            keys.extend(lod.far_hi().iter().map(|&v| key(v)));
             models.push(ModelGpu {
                 centre: lod.centre().to_array(),
                 radius: lod.radius(),
@@ -488,12 +492,13 @@ impl GpuSelection {
                 cull_half: cull_half.to_array(),
                 first_cell,
                 cell_count: to_u32(lod.cells().len()),
-                roots_tau: key(roots_tau),
+                far_tau: key(far_tau),
                 largest: key(largest),
-                finite_hi0: key(finite_hi0),
-                root_count: to_u32(roots.len()),
+                cell_reach: lod.cell_reach(),
+                far_count: to_u32(roots.len()),
                 root_cells: to_u32(lod.cells().iter().filter(|c| c.root_count() > 0).count()),
                 roots_at: unit(roots_at),
+                far_hi_at: to_u32(far_hi_at),
                 triangle_base: unit(2 * triangles_at),
                 point_base: unit(points_at),
                 bucket_first: [0; 2],

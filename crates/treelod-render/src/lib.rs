@@ -57,7 +57,7 @@
 //! dispatches (`shaders/select.wgsl`): blocks of 64 instances (Morton order, a bounding sphere
 //! each) are culled first, then one workgroup per visible block selects its instances as
 //! `select_frame` does — frustum culling of instances and cells, Gilet's depth bias and shading,
-//! the far path and its single roots range — and appends the indirect draws into one bucket per
+//! the far path and the far list's single range — and appends the indirect draws into one bucket per
 //! model and kind, drawn with `multi_draw_indirect_count` (ask for
 //! [`Renderer::gpu_selection_features`]). `prepare` and `render` stay the same calls with O(models)
 //! CPU work per frame. GPU selection keeps every model's triangles and points resident whole

@@ -608,7 +608,7 @@ impl Renderer {
                     } else {
                         model.cell_roots.get(draw.cell as usize).map_or(0, |r| r.0 as usize)
                     };
-                    lod.roots()
+                    lod.far_list()
                         .get(at..at + count)
                         .unwrap_or_default()
                         .iter()

@@ -20,6 +20,13 @@ use crate::textures;
 /// 64 passes over it when the model is added, and a sparser set reaches the same hull.
 const HULL_CANDIDATES: usize = 16_384;
 
+/// Each model's far list is pinned past its roots within this fraction of the streamed pool's
+/// budget (`ModelLod::far_list`: at most 3 KiB per cell, 255 KiB for the shared weeping willow's
+/// 83 cells with points): the whole list under the default 1 GiB budget for hundreds of models,
+/// and a budget of a few hundred kilobytes still holds two demo trees' roots and what they
+/// stream (`a_small_memory_budget_is_never_exceeded...` in `tests/render.rs`).
+const FAR_LIST_POOL_SHARE: u64 = 64;
+
 /// A vertex as the shaders read it: the record, then its ambient occlusion (0 without).
 /// WGSL twin: `VertexGpu` in `shaders/tree/common.wgsl`.
 #[repr(C)]
@@ -177,9 +184,11 @@ pub(crate) struct Model {
     pub(crate) groups: [Option<wgpu::BindGroup>; Bucket::COUNT],
     /// Bytes uploaded whole at [`Renderer::add_model`] (vertices, materials, images).
     pub(crate) static_bytes: u64,
-    /// Pool unit (= point index) of the pinned copy of [`ModelLod::roots`].
+    /// Pool unit (= point index) of the pinned copy of [`ModelLod::far_list`] (the roots first).
     pub(crate) roots_start: u32,
-    /// Per container cell: where its roots start in [`ModelLod::roots`], and how many.
+    /// Entries of [`ModelLod::far_list`] pinned from [`Self::roots_start`] on (the roots at least).
+    pub(crate) far_pinned: u32,
+    /// Per container cell: where its roots start in [`ModelLod::roots`] (the far list's head), and how many.
     pub(crate) cell_roots: Vec<(u32, u32)>,
     /// Per container cell: its index in [`ModelLod::cells`], `u32::MAX` if empty.
     pub(crate) cell_lod: Vec<u32>,
@@ -282,10 +291,17 @@ impl Renderer {
         let groups = upload_groups(&mut up)?;
         let (warnings, mut bytes) = (up.warnings, up.bytes);
 
-        // The roots, pinned in the pool: what a cell draws before its own points are resident.
+        // The far list, pinned in the pool: its head, the roots, is what a cell draws before its
+        // own points are resident; the list draws a far tree with one range. Past the roots it is
+        // pinned within `1/FAR_LIST_POOL_SHARE` of the pool (the whole list unless the budget is
+        // a few megabytes); a longer prefix is clamped to the pinned one (`Renderer::clamp`).
         let lod = ModelLod::from_container(&container);
-        let roots: Vec<PointRecord> =
-            lod.roots().iter().map(|&i| gpu_point(&container, i as usize, container.points()[i as usize])).collect();
+        let share = usize::try_from(self.pool_budget() / UNIT / FAR_LIST_POOL_SHARE).unwrap_or(usize::MAX);
+        let pinned = lod.far_list().len().min(lod.roots().len().saturating_add(share));
+        let roots: Vec<PointRecord> = lod.far_list()[..pinned]
+            .iter()
+            .map(|&i| gpu_point(&container, i as usize, container.points()[i as usize]))
+            .collect();
         let roots_len = u32::try_from(roots.len()).unwrap_or(u32::MAX);
         let cells = container.cells().len();
         let Some(roots_start) = self.residency.add_model(cells, roots_len) else {
@@ -378,6 +394,7 @@ impl Renderer {
             bind_group,
             static_bytes: bytes,
             roots_start,
+            far_pinned: roots_len,
             cell_roots,
             cell_lod,
             groups,

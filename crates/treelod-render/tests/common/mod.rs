@@ -314,19 +314,29 @@ pub fn keep(image: &Image, name: &str) {
 /// side.
 pub const ROUNDING: f32 = 1e-5;
 
-/// One range per (instance, cell, kind), a roots range spread over the cells it stands for.
+/// One range per (instance, cell, kind), a far-list range spread over the cells it stands for.
 pub type Key = (u32, u32, Kind);
-/// First, count, τ_p, τ_t, and whether it came from a roots range.
+/// First, count, τ_p, τ_t, and whether it came from a far-list range.
 pub type Entry = (u32, u32, f32, f32, bool);
 
 pub fn by_cell(ranges: &[DrawRange], lod: &ModelLod) -> BTreeMap<Key, Entry> {
     let mut map = BTreeMap::new();
     for r in ranges {
         if r.kind == Kind::Roots {
-            assert_eq!(r.count as usize, lod.roots().len(), "{r:?}");
-            for cell in lod.cells().iter().filter(|c| c.root_count() > 0) {
-                let entry = (cell.points().first, cell.root_count(), r.tau_points, r.tau_triangles, true);
-                assert!(map.insert((r.instance, cell.index(), Kind::Points), entry).is_none(), "{r:?}");
+            let far = lod.far_list();
+            assert!((lod.roots().len()..=far.len()).contains(&(r.count as usize)), "{r:?}");
+            let drawn = &far[..r.count as usize];
+            for cell in lod.cells().iter().filter(|c| c.points().count > 0) {
+                let points = cell.points().as_usize();
+                let mut mine: Vec<u32> = drawn.iter().copied().filter(|&i| points.contains(&(i as usize))).collect();
+                mine.sort_unstable();
+                let n = mine.len() as u32;
+                // A cell's share of the far list's prefix is a prefix of the cell's points.
+                assert_eq!(mine, (cell.points().first..cell.points().first + n).collect::<Vec<_>>(), "{r:?}");
+                if n > 0 {
+                    let entry = (cell.points().first, n, r.tau_points, r.tau_triangles, true);
+                    assert!(map.insert((r.instance, cell.index(), Kind::Points), entry).is_none(), "{r:?}");
+                }
             }
         } else {
             let entry = (r.first, r.count, r.tau_points, r.tau_triangles, false);
@@ -378,7 +388,7 @@ pub fn assert_same_selection(what: &str, cpu: &[DrawRange], gpu: &[DrawRange], l
         tolerated += 1;
     }
     if tolerated == 0 {
-        assert_eq!(roots(cpu), roots(gpu), "{what}: roots ranges");
+        assert_eq!(roots(cpu), roots(gpu), "{what}: far-list ranges");
     }
     tolerated
 }
