@@ -70,11 +70,11 @@ pub struct RecordedDraw {
     pub instance: u32,
     /// The instance's model.
     pub model: ModelId,
-    /// The container cell, or [`treelod_runtime::ROOTS_CELL`] for a far tree's roots.
+    /// The container cell, or [`treelod_runtime::ROOTS_CELL`] for a prefix of the far list.
     pub cell: u32,
     /// What is drawn.
     pub source: DrawSource,
-    /// Elements drawn: a prefix of the cell's range (or all the roots it stands for).
+    /// Elements drawn: a prefix of the cell's range (or of the model's far list).
     pub count: u32,
     /// `τ_p` the shader tests points with, model units (raised above the selection's when the
     /// resident prefix is shorter than the selection asked for); for pruned leaves, `λ`.

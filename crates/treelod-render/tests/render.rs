@@ -330,6 +330,44 @@ fn a_small_memory_budget_is_never_exceeded_and_evicts_what_is_no_longer_needed()
     }
 }
 
+/// A far tree drawn from its model's far list: under the default budget the whole prefix the
+/// selection asks for; under a budget that pins only part of the list, the pinned prefix, its
+/// `τ_p` raised to the first entry left out (a coarser cut, never a hole), and then the same
+/// points as the default renderer draws at that `τ_p`.
+#[test]
+fn a_far_tree_draws_the_far_list_clamped_to_what_a_small_budget_pins() {
+    let gpu = gpu();
+    let container = std::sync::Arc::new(demo_container());
+    let lod = treelod_runtime::ModelLod::from_container(&container);
+    let far_hi = lod.far_hi();
+    let far_draw = |renderer: &Renderer| -> RecordedDraw {
+        let draws: Vec<RecordedDraw> =
+            renderer.draws().iter().copied().filter(|d| d.cell == treelod_runtime::ROOTS_CELL).collect();
+        assert_eq!(draws.len(), 1, "one far-list draw: {:?}", renderer.draws());
+        draws[0]
+    };
+    let camera = camera(&container, 45.0, 128);
+    let mut whole = one_tree(&gpu, &container, Settings { technique: Technique::Spt, ..Settings::default() });
+    render_image(&gpu, &mut whole, &camera, BACKGROUND).expect("renders");
+    let asked = far_draw(&whole);
+    assert!(!asked.clamped && asked.count as usize > lod.roots().len(), "{asked:?}");
+    assert_eq!(asked.count as usize, far_hi.iter().filter(|&&hi| hi > asked.tau_points).count());
+
+    let small = Settings { technique: Technique::Spt, memory_budget: 256 << 10, ..Settings::default() };
+    let mut renderer = one_tree(&gpu, &container, small);
+    let (image, _) = render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+    let clamped = far_draw(&renderer);
+    assert!(
+        clamped.clamped && clamped.count < asked.count && clamped.count as usize >= lod.roots().len(),
+        "{clamped:?}"
+    );
+    assert!(clamped.tau_points > asked.tau_points && clamped.tau_triangles >= clamped.tau_points, "{clamped:?}");
+    // Every point the raised cut needs lies in the pinned prefix, and nothing after it.
+    assert_eq!(clamped.count as usize, far_hi.iter().filter(|&&hi| hi > clamped.tau_points).count());
+    assert_eq!(clamped.tau_points, far_hi[clamped.count as usize], "raised to the first entry left out");
+    assert!(covered(&image).iter().filter(|&&c| c).count() > 0, "the clamped tree is drawn");
+}
+
 /// Compares `image` with the golden PNG `tests/golden/{name}.png`, or writes it when
 /// `TREELOD_BLESS=1` (then look at it before committing). Tolerance, over the pixels covered in
 /// either image (a far tree covers few): rasterisers may differ on edge pixels, so at most 5 % of
