@@ -5,7 +5,7 @@
 //!
 //! **What is measured.** For each height `h` of [`HEIGHTS`] and each orthographic view of
 //! [`calibration_views`] (`views` around the tree at each elevation of [`ELEVATIONS`] below 90°,
-//! and one straight down), the block is drawn about `h` pixels high — each view at its own
+//! more under 64 pixels, [`views_at`], and one straight down), the block is drawn about `h` pixels high — each view at its own
 //! fraction of an octave around `h`, the views of one elevation spread evenly over the octave
 //! (with the default two, `h·2^(−1/4)` and `h·2^(1/4)`; the one straight down at `h`), so that a
 //! table holds the mean over the phases of the representations' level switches, as a forest's
@@ -155,34 +155,70 @@ pub const ELEVATIONS: [f32; 4] = [0.0, 30.0, 60.0, 90.0];
 /// Settings of the calibration (recorded in the metadata as `calibration.*`).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CalibrationConfig {
-    /// Orthographic views per elevation of [`ELEVATIONS`] below 90° ([`calibration_views`]); one
-    /// view straight down. Default 2: 7 views in all.
+    /// Orthographic views per elevation of [`ELEVATIONS`] below 90° ([`calibration_views`]) at
+    /// 64 pixels and above, more below ([`views_at`]); one view straight down. Default 2: 7 views
+    /// in all from 64 pixels up, 49 at 8 pixels.
     pub views: usize,
     /// Samples per pixel side of the reference. Default 4.
     pub supersample: u32,
+    /// Whether heights under 64 pixels take more views ([`views_at`]). Default `true`; `false`
+    /// takes `views` at every height, as builds before did (tests that count on one view a
+    /// height).
+    pub more_small_views: bool,
 }
 
 impl Default for CalibrationConfig {
     fn default() -> Self {
-        Self { views: 2, supersample: 4 }
+        Self { views: 2, supersample: 4, more_small_views: true }
     }
 }
 
 impl CalibrationConfig {
+    /// The views per elevation below 90° at a height of `pixels`: [`views_at`], or
+    /// [`Self::views`] without [`Self::more_small_views`].
+    #[must_use]
+    pub fn views_at(&self, pixels: f32) -> usize {
+        if self.more_small_views { views_at(self.views, pixels) } else { self.views.max(1) }
+    }
+
     /// The metadata settings recording this configuration (spec §7.1): `calibration.views`, the
-    /// views per elevation, and `calibration.elevations`, the elevations in degrees (files of
+    /// views per elevation from 64 pixels up, `calibration.views_by_height`, those at each of
+    /// [`HEIGHTS`] ([`views_at`]), and `calibration.elevations`, the elevations in degrees (files of
     /// format 1.5 and 1.6, without the latter, counted every view in `calibration.views`).
     #[must_use]
     pub fn settings(&self) -> Vec<Setting> {
         let elevations: Vec<String> = ELEVATIONS.iter().map(ToString::to_string).collect();
+        let by_height: Vec<String> = HEIGHTS.iter().map(|&h| self.views_at(h).to_string()).collect();
         vec![
             Setting { key: "calibration.views".into(), value: self.views.to_string() },
+            Setting { key: "calibration.views_by_height".into(), value: by_height.join(",") },
             Setting { key: "calibration.elevations".into(), value: elevations.join(",") },
             Setting { key: "calibration.supersample".into(), value: self.supersample.to_string() },
             Setting { key: "calibration.error".into(), value: "colour".into() },
         ]
     }
 }
+
+/// The views per elevation below 90° at a height of `pixels` for `views` at 64 pixels and above:
+/// `views · 64 / pixels` below (8 pixels: 8 times as many). A view's error is a mean over the
+/// few pixels the tree covers, and which of them a thin leaf or a splat lands on changes from view
+/// to view: with 2 views at every height the shared weeping willow's full mesh read 0.0507 from
+/// 30° at 8 pixels (0.0704 at 16) and its point tree 0.1044 (0.0614 at 16), a floor no cheap
+/// representation came within the target of, so a policy drew its small trees with the LoD
+/// chain's 15,037 triangles; with 8 views at every height the same entries read 0.0674 and
+/// 0.0794 and the point tree's row over every view fell with size at every height. Small images
+/// cost little beyond their primitives, so the views are added where they are noisiest and
+/// cheapest. The view straight down stays one.
+#[must_use]
+pub fn views_at(views: usize, pixels: f32) -> usize {
+    #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a factor of 1 to 8")]
+    let factor = (SMALL_HEIGHT / pixels).ceil().max(1.0) as usize;
+    views.max(1) * factor
+}
+
+/// The height from which the calibration takes `views` per elevation, and below which more
+/// ([`views_at`]).
+pub const SMALL_HEIGHT: f32 = 64.0;
 
 /// The calibration's views (unit directions towards the viewer) with the index of their
 /// elevation in [`ELEVATIONS`]: per elevation below 90°, `per_elevation` views (at least one)
@@ -355,33 +391,40 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
     let techniques: Vec<u32> =
         held.iter().copied().filter(|&t| !(per_level && t == calibration_technique::LOD_CHAIN)).collect();
     let (centre, radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
-    let directions = calibration_views(config.views);
+    // Per height, its views ([`views_at`]: more below 64 pixels).
+    let directions: Vec<Vec<(usize, Vec3)>> =
+        HEIGHTS.iter().map(|&pixels| calibration_views(config.views_at(pixels))).collect();
     // Each view measures its own fraction of an octave off the nominal height, the views of an
     // elevation spread evenly over the octave around it (module docs): a table then holds the
     // mean over the phases of the representations' level switches, as trees at every distance
     // in a forest show them, not the one phase an exact octave falls on.
     #[expect(clippy::cast_precision_loss, reason = "a few views")]
-    let offsets: Vec<f32> = (0..directions.len())
-        .map(|v| {
-            let elevation = directions[v].0;
-            let same = directions.iter().filter(|d| d.0 == elevation).count();
-            let k = directions[..v].iter().filter(|d| d.0 == elevation).count();
-            ((k as f32 + 0.5) / same as f32 - 0.5).exp2()
+    let offsets: Vec<Vec<f32>> = directions
+        .iter()
+        .map(|directions| {
+            (0..directions.len())
+                .map(|v| {
+                    let elevation = directions[v].0;
+                    let same = directions.iter().filter(|d| d.0 == elevation).count();
+                    let k = directions[..v].iter().filter(|d| d.0 == elevation).count();
+                    ((k as f32 + 0.5) / same as f32 - 0.5).exp2()
+                })
+                .collect()
         })
         .collect();
     let jobs: Vec<(usize, usize)> =
-        (0..HEIGHTS.len()).flat_map(|h| (0..directions.len()).map(move |v| (h, v))).collect();
+        (0..HEIGHTS.len()).flat_map(|h| (0..directions[h].len()).map(move |v| (h, v))).collect();
     // Per job: per technique, then per chain level, (error, primitives).
     let results: Vec<Vec<(f64, f64)>> = jobs
         .par_iter()
         .map(|&(h, v)| {
-            let pixels = HEIGHTS[h] * offsets[v];
+            let pixels = HEIGHTS[h] * offsets[h][v];
             let metres_per_pixel = height / pixels;
             let side = ((2.0 * radius / metres_per_pixel).ceil() as u32).max(4);
             let k = config.supersample.max(1).min((MAX_REFERENCE_SIDE / side).max(1));
             // The sphere fitted to exactly `side` pixels of `metres_per_pixel`.
             let fitted = 0.5 * side as f32 * metres_per_pixel;
-            let direction = directions[v].1;
+            let direction = directions[h][v].1;
             let view = View::fit(direction, centre, fitted, side);
             let reference = scene.reference(&View::fit(direction, centre, fitted, side * k), k);
             let measured = techniques.iter().map(|&t| {
@@ -461,7 +504,7 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
         for &technique in &held {
             for (h, &pixels) in HEIGHTS.iter().enumerate() {
                 if let Some(c) = column(technique, h) {
-                    let (error, primitives) = mean(c, h, &|v| directions[v].0 == e);
+                    let (error, primitives) = mean(c, h, &|v| directions[h][v].0 == e);
                     let record = ElevationCalibrationRecord { elevation, technique, height: pixels, error, primitives };
                     if technique >= calibration_technique::FIRST_ADDED {
                         calibrated.elevations_added.push(record);

@@ -5,7 +5,7 @@
 //! close than far away).
 
 use glam::Vec3;
-use treelod_build::calibrate::{CalibrationConfig, ELEVATIONS, HEIGHTS, calibrate};
+use treelod_build::calibrate::{CalibrationConfig, ELEVATIONS, HEIGHTS, calibrate, views_at};
 use treelod_build::{
     BuildConfig, DemoTreeConfig, EllipsoidConfig, ImpostorConfig, LineConfig, LodChainConfig, Placed, build_block,
     demo_tree,
@@ -18,7 +18,7 @@ fn config() -> BuildConfig {
         impostors: Some(ImpostorConfig::default()),
         ellipsoids: Some(EllipsoidConfig::default()),
         baselines: Some(LodChainConfig::default()),
-        calibration: Some(CalibrationConfig { views: 1, ..CalibrationConfig::default() }),
+        calibration: Some(CalibrationConfig { views: 1, more_small_views: false, ..CalibrationConfig::default() }),
         ..BuildConfig::default()
     }
 }
@@ -81,7 +81,12 @@ fn calibration_is_the_same_whatever_the_thread_count() {
     let built = build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config(), "t").expect("builds");
     let with = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a pool");
-        pool.install(|| calibrate(&built.data, &CalibrationConfig { views: 1, ..CalibrationConfig::default() }))
+        pool.install(|| {
+            calibrate(
+                &built.data,
+                &CalibrationConfig { views: 1, more_small_views: false, ..CalibrationConfig::default() },
+            )
+        })
     };
     let one = with(1);
     assert!(!one.mean.is_empty() && !one.elevations.is_empty() && !one.chain_levels.is_empty());
@@ -92,6 +97,37 @@ fn calibration_is_the_same_whatever_the_thread_count() {
     assert_eq!(one.added, built.data.calibration_added);
     assert_eq!(one.elevations_added, built.data.calibration_elevations_added);
     assert_eq!(one.chain_levels, built.data.chain_calibration, "and so are the chain's levels");
+}
+
+#[test]
+fn heights_under_64_pixels_take_more_views_and_the_metadata_records_them() {
+    assert_eq!(HEIGHTS.map(|h| views_at(2, h)), [16, 8, 4, 2, 2, 2]);
+    assert_eq!(HEIGHTS.map(|h| views_at(1, h)), [8, 4, 2, 1, 1, 1]);
+    let setting = |config: &CalibrationConfig| {
+        config.settings().into_iter().find(|s| s.key == "calibration.views_by_height").map(|s| s.value)
+    };
+    assert_eq!(setting(&CalibrationConfig::default()).as_deref(), Some("16,8,4,2,2,2"));
+    let fixed = CalibrationConfig { more_small_views: false, ..CalibrationConfig::default() };
+    assert_eq!(setting(&fixed).as_deref(), Some("2,2,2,2,2,2"));
+
+    // The same tree calibrated both ways: from 64 pixels up the same views and the same rows; below,
+    // more views, and rows that are their mean (at least one differs).
+    let scene = demo_tree(&DemoTreeConfig { leaves: 400, ..DemoTreeConfig::default() });
+    let built = build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config(), "t").expect("builds");
+    let one = CalibrationConfig { views: 1, more_small_views: false, ..CalibrationConfig::default() };
+    let (fixed, more) =
+        (calibrate(&built.data, &one), calibrate(&built.data, &CalibrationConfig { more_small_views: true, ..one }));
+    assert_eq!(fixed.mean.len(), more.mean.len());
+    let mut differ = 0;
+    for (a, b) in fixed.mean.iter().zip(&more.mean) {
+        assert_eq!((a.technique, a.height), (b.technique, b.height));
+        if a.height >= 64.0 {
+            assert_eq!(a, b, "from 64 pixels up one view per elevation either way");
+        } else {
+            differ += usize::from(a.error != b.error);
+        }
+    }
+    assert!(differ > 0, "the small heights' rows are measured from more views");
 }
 
 #[test]
@@ -108,7 +144,7 @@ fn a_build_without_calibration_writes_none() {
 fn the_error_is_of_the_shaded_image_so_a_darker_representation_reads_worse() {
     let scene = demo_tree(&DemoTreeConfig::default());
     let built = build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config(), "t").expect("builds");
-    let calibration = CalibrationConfig { views: 1, ..CalibrationConfig::default() };
+    let calibration = CalibrationConfig { views: 1, more_small_views: false, ..CalibrationConfig::default() };
     let before = row(&calibrate(&built.data, &calibration).mean, t::SPT);
     // The same points, same places and sizes, drawn black: the coverage is unchanged.
     let mut dark = built.data.clone();
@@ -137,7 +173,7 @@ fn impostor_rows_count_the_branch_lines_their_trees_draw_in_place_of_the_bark() 
     let scene = demo_tree(&DemoTreeConfig::default());
     let config = BuildConfig { lines: Some(LineConfig::default()), ..config() };
     let built = build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "t").expect("builds");
-    let calibration = CalibrationConfig { views: 1, ..CalibrationConfig::default() };
+    let calibration = CalibrationConfig { views: 1, more_small_views: false, ..CalibrationConfig::default() };
     let with_lines = row(&built.data.calibration, t::IMPOSTORS);
     // The same container without lines: its impostor trees draw the chain's bark (`ImpostorBark`).
     let mut without = built.data.clone();

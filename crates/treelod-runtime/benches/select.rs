@@ -55,7 +55,7 @@ fn policy_model() -> (ModelLod, Representations, Calibration) {
         ellipsoids: Some(EllipsoidConfig::default()),
         lines: Some(LineConfig::default()),
         baselines: Some(LodChainConfig::default()),
-        calibration: Some(CalibrationConfig { views: 1, ..CalibrationConfig::default() }),
+        calibration: Some(CalibrationConfig { views: 1, more_small_views: false, ..CalibrationConfig::default() }),
         ..BuildConfig::default()
     };
     let built = build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "bench")

@@ -572,7 +572,7 @@ mod tests {
         use treelod_build::{BuildConfig, CalibrationConfig, LodChainConfig, Placed, build_block};
         let config = BuildConfig {
             baselines: Some(LodChainConfig::default()),
-            calibration: Some(CalibrationConfig { views: 2, ..CalibrationConfig::default() }),
+            calibration: Some(CalibrationConfig { views: 2, more_small_views: false, ..CalibrationConfig::default() }),
             ..BuildConfig::default()
         };
         let built = build_block("t", &[Placed { scene, translation: Vec3::ZERO }], &config, "t").expect("builds");

@@ -396,9 +396,6 @@ pub struct ModelLod {
     root_count: u32,
     /// `far` holds every point with `hi > far_tau`.
     far_tau: f32,
-    /// Largest `next_hi` of the cells: at `τ_p ≥` it (and `τ_t` at or above every triangle) each
-    /// cell draws exactly its roots.
-    roots_tau: f32,
     /// The greatest distance of a grid cell's centre from the block centre, model space: the
     /// nearest cell of an instance is no nearer than `d_block` less it (times the scale).
     cell_reach: f32,
@@ -518,8 +515,6 @@ impl ModelLod {
         model.cells_by_hi0.sort_by(|a, b| b.total_cmp(a));
         model.cells_by_largest = model.cells.iter().map(|c| key(c.largest)).collect();
         model.cells_by_largest.sort_by(|a, b| b.total_cmp(a));
-        // A cell whose points are all roots, or that has none, adds no bound.
-        model.roots_tau = model.cells.iter().map(|c| key(c.next_hi)).fold(f32::NEG_INFINITY, f32::max);
         model.add_far_points(points);
         model
     }
@@ -542,8 +537,8 @@ impl ModelLod {
             rest.extend((first..end).filter_map(|i| points.get(i as usize).map(|p| (key(p.hi), i))));
         }
         rest.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        // Every `hi` after the roots is at most `roots_tau`, so `far_tau ≤ roots_tau`: the far list
-        // is drawn wherever the roots alone would be.
+        // `far_tau` is at most the largest `hi` after any cell's roots: the far list is drawn
+        // wherever every cell would draw its roots alone.
         self.far_tau = rest.get(room).map_or(0.0, |&(hi, _)| hi.max(0.0));
         for &(hi, index) in rest.iter().take_while(|&&(hi, _)| hi > self.far_tau) {
             self.far.push(index);
@@ -563,8 +558,8 @@ impl ModelLod {
     /// [`FAR_POINTS_PER_CELL`] per cell with points in all.
     ///
     /// Gilet's hierarchies are per cell, so a tree drawn cell by cell is at least one range per
-    /// cell, however few points each draws: the shared weeping willow's 97 cells drew 1,252
-    /// points between them 32 pixels high, 15 per range. Where one `τ_p ≥ far_tau` serves every
+    /// cell, however few points each draws: the shared weeping willow's 83 non-empty cells drew
+    /// 1,252 points between them 32 pixels high, 15 per cell. Where one `τ_p ≥ far_tau` serves every
     /// cell and no cell draws a triangle, the points every cell draws are the far list's prefix
     /// with `hi > τ_p` (its [`Self::far_hi`] sorted as a cell's), and [`select_frame`] emits that
     /// one [`Kind::Roots`] range instead of the cells' (a far tree, and one whose nearest cell
@@ -873,10 +868,10 @@ struct Frame<'a> {
 /// instance wholly in view, those at `d_block − cell_reach·scale`, no nearer than its nearest
 /// cell ([`ModelLod::cell_reach`]), so no cell is drawn coarser than its own thresholds would
 /// draw it. The cut is the cells' own at those thresholds. Measured with `bench --trees 10000
-/// --no-render --technique policy` on the shared weeping willow, 24 frames at 1536×864: up to
-/// 673,828 ranges a frame (7 points each on the descent) fell to at most 44,761, the mean
-/// selection from 25.8 to 5.7 ms, for 0.3 % more points (the cells farther than the nearest
-/// drawn at its thresholds).
+/// --no-render --technique policy` on the shared weeping willow, 48 frames at 1536×864, 3
+/// alternating runs: up to 704,118 ranges a frame (7 points each on the descent) fell to at most
+/// 45,275, the mean of each frame's least selection time from 22.1 to 4.2 ms, for 0.29 % more
+/// primitives (the cells farther than the nearest drawn at its thresholds).
 ///
 /// Instances whose `model` is not an index of `models`, or whose transform has a zero or
 /// non-finite scale, are skipped and counted in [`FrameStats::instances_invalid`].

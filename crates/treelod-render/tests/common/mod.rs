@@ -280,7 +280,7 @@ pub fn calibrated_demo() -> Arc<Container> {
     demo_built(&BuildConfig {
         impostors: Some(treelod_build::ImpostorConfig::default()),
         baselines: Some(treelod_build::LodChainConfig::default()),
-        calibration: Some(treelod_build::CalibrationConfig { views: 1, supersample: 2 }),
+        calibration: Some(treelod_build::CalibrationConfig { views: 1, supersample: 2, more_small_views: false }),
         ..BuildConfig::default()
     })
 }
