@@ -5,9 +5,10 @@
 //!
 //! **What is measured.** For each height `h` of [`HEIGHTS`] and each orthographic view of
 //! [`calibration_views`] (`views` around the tree at each elevation of [`ELEVATIONS`] below 90°,
-//! more under 64 pixels, [`views_at`], and one straight down), the block is drawn about `h` pixels high — each view at its own
-//! fraction of an octave around `h`, the views of one elevation spread evenly over the octave
-//! (with the default two, `h·2^(−1/4)` and `h·2^(1/4)`; the one straight down at `h`), so that a
+//! more under 64 pixels, [`views_at`], and one straight down), the block is drawn about `h`
+//! pixels high — each view at its own fraction of an octave around `h`, the views of one
+//! elevation spread evenly over the octave (with two, `h·2^(−1/4)` and `h·2^(1/4)`; the one
+//! straight down at `h`), so that a
 //! table holds the mean over the phases of the representations' level switches, as a forest's
 //! trees at every distance show them, not the one phase an exact octave falls on (measured on the
 //! shared pine, whose planes switch levels between 14 and 60 pixels: at exactly 32 pixels its

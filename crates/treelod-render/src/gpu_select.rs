@@ -3,11 +3,11 @@
 //!
 //! **Data.** When it is turned on ([`crate::Renderer::enable_gpu_selection`]) every model's
 //! triangles and points are uploaded whole into a pool of their own (the streamed pool is left as
-//! it is), with a contiguous copy of its far list (`ModelLod::far_list`, the roots first), so every prefix selection can ask for is resident;
-//! a model that does not fit the memory budget is refused. Next to it: per model the block sphere,
-//! culling box and far-list bounds of its [`ModelLod`], per non-empty cell its bounds, ranges and
-//! first keys, and the cells' sorted keys (triangle sizes, point `hi`) and the far list's `hi` in
-//! one array.
+//! it is), with a contiguous copy of its far list (`ModelLod::far_list`, the roots first), so
+//! every prefix selection can ask for is resident; a model that does not fit the memory budget is
+//! refused. Next to it: per model the block sphere, culling box and far-list bounds of its
+//! [`ModelLod`], per non-empty cell its bounds, ranges and first keys, and the cells' sorted keys
+//! (triangle sizes, point `hi`) and the far list's `hi` in one array.
 //!
 //! **Instances** are sorted once per [`crate::Renderer::set_instances`] into blocks of
 //! [`BLOCK_INSTANCES`] by the Morton code of their culling sphere's centre (ties by index, so the

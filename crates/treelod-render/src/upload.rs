@@ -188,7 +188,8 @@ pub(crate) struct Model {
     pub(crate) roots_start: u32,
     /// Entries of [`ModelLod::far_list`] pinned from [`Self::roots_start`] on (the roots at least).
     pub(crate) far_pinned: u32,
-    /// Per container cell: where its roots start in [`ModelLod::roots`] (the far list's head), and how many.
+    /// Per container cell: where its roots start in [`ModelLod::roots`] (the far list's head),
+    /// and how many.
     pub(crate) cell_roots: Vec<(u32, u32)>,
     /// Per container cell: its index in [`ModelLod::cells`], `u32::MAX` if empty.
     pub(crate) cell_lod: Vec<u32>,
