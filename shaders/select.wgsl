@@ -359,12 +359,7 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
 
     if radius < frame.pixels.w * d_block {
         far = 1u;
-        let a = thresholds(-1.0, d_block);
-        let b = thresholds(1.0, d_block);
-        var lowest = thresholds(0.0, d_block);
-        if needs_z {
-            lowest = min(a, b);
-        }
+        let lowest = least_thresholds(needs_z, d_block);
         if far_only(lowest) {
             emit_far(lowest);
         } else if needs_z && d_block > 0.0 {

@@ -496,7 +496,7 @@ impl GpuSelection {
                 largest: key(largest),
                 cell_reach: lod.cell_reach(),
                 far_count: to_u32(roots.len()),
-                root_cells: to_u32(lod.cells().iter().filter(|c| c.root_count() > 0).count()),
+                root_cells: lod.root_cells(),
                 roots_at: unit(roots_at),
                 far_hi_at: to_u32(far_hi_at),
                 triangle_base: unit(2 * triangles_at),

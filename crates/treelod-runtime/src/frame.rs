@@ -394,11 +394,19 @@ pub struct ModelLod {
     far_hi: Vec<f32>,
     /// Number of leading entries of `far` that are roots.
     root_count: u32,
+    /// Number of cells with roots: the cells a far-list range stands for in the statistics.
+    root_cells: u32,
     /// `far` holds every point with `hi > far_tau`.
     far_tau: f32,
     /// The greatest distance of a grid cell's centre from the block centre, model space: the
     /// nearest cell of an instance is no nearer than `d_block` less it (times the scale).
     cell_reach: f32,
+}
+
+/// A size or `hi` as a sort key: NaN compares like −∞ (never above a threshold), so it sorts as
+/// −∞, last in a largest-first list.
+fn sort_key(v: f32) -> f32 {
+    if v.is_nan() { f32::NEG_INFINITY } else { v }
 }
 
 /// The most points per cell (with points) the far list holds ([`ModelLod::far_list`]): a bound
@@ -509,12 +517,11 @@ impl ModelLod {
         model.cull_centre = 0.5 * (lo + hi);
         model.cull_half = 0.5 * (hi - lo);
         model.cull_radius = model.cull_half.length();
-        // NaN compares like −∞ (never above τ), so it sorts as −∞ here.
-        let key = |v: f32| if v.is_nan() { f32::NEG_INFINITY } else { v };
-        model.cells_by_hi0 = model.cells.iter().map(|c| key(c.hi0)).collect();
+        model.cells_by_hi0 = model.cells.iter().map(|c| sort_key(c.hi0)).collect();
         model.cells_by_hi0.sort_by(|a, b| b.total_cmp(a));
-        model.cells_by_largest = model.cells.iter().map(|c| key(c.largest)).collect();
+        model.cells_by_largest = model.cells.iter().map(|c| sort_key(c.largest)).collect();
         model.cells_by_largest.sort_by(|a, b| b.total_cmp(a));
+        model.root_cells = u32::try_from(model.cells.iter().filter(|c| c.roots > 0).count()).unwrap_or(u32::MAX);
         model.add_far_points(points);
         model
     }
@@ -529,12 +536,11 @@ impl ModelLod {
         let with_points = self.cells.iter().filter(|c| c.points.count > 0).count();
         let room = (FAR_POINTS_PER_CELL * with_points).saturating_sub(self.far.len());
         // NaN is never above a threshold: it sorts last and never enters the list.
-        let key = |v: f32| if v.is_nan() { f32::NEG_INFINITY } else { v };
         let mut rest: Vec<(f32, u32)> = Vec::new();
         for cell in &self.cells {
             let first = cell.points.first + cell.roots;
             let end = cell.points.first + cell.points.count;
-            rest.extend((first..end).filter_map(|i| points.get(i as usize).map(|p| (key(p.hi), i))));
+            rest.extend((first..end).filter_map(|i| points.get(i as usize).map(|p| (sort_key(p.hi), i))));
         }
         rest.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         // `far_tau` is at most the largest `hi` after any cell's roots: the far list is drawn
@@ -589,6 +595,12 @@ impl ModelLod {
     #[must_use]
     pub fn cell_reach(&self) -> f32 {
         self.cell_reach
+    }
+
+    /// The number of cells with roots: the cells a far-list range stands for.
+    #[must_use]
+    pub fn root_cells(&self) -> u32 {
+        self.root_cells
     }
 
     /// The largest triangle of any cell (`−∞` without triangles; NaN counts as `−∞`): no cell
@@ -1257,9 +1269,7 @@ fn select_instance<S: Sink>(
     if radius < frame.settings.far_ratio * d_block {
         // Far path: d_cell − d_block ≈ v̂·M·(c_i − c_block), so Z_i ≈ (c_i − c_block)·(Mᵀv̂)/R.
         tally.stats.instances_far += 1;
-        let (a, b) = (cells.thresholds(-1.0, d_block), cells.thresholds(1.0, d_block));
-        let (lowest_p, lowest_t) =
-            if frame.needs_z { (a.0.min(b.0), a.1.min(b.1)) } else { cells.thresholds(0.0, d_block) };
+        let (lowest_p, lowest_t) = cells.least_thresholds(frame.needs_z, d_block);
         if model.far_only(lowest_p, lowest_t) {
             cells.emit_far(lowest_p, lowest_t);
         } else if S::COUNT_ONLY
@@ -1375,7 +1385,7 @@ impl<S: Sink> CellEmitter<'_, S> {
             return;
         }
         let count = leading_above(&self.model.far_hi, tau_points);
-        self.cells += u32::try_from(self.model.cells.iter().filter(|c| c.roots > 0).count()).unwrap_or(u32::MAX);
+        self.cells += self.model.root_cells;
         self.points += u64::from(count);
         self.sink.push(DrawRange {
             instance: self.instance,
