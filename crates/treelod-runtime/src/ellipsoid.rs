@@ -138,7 +138,9 @@ pub fn far_ellipsoids(container: &Container) -> Option<(Vec<u32>, f32)> {
 /// instead of the cells' prefixes: there the far lines' level 0, copies of what the cells draw
 /// at `τ_s` (the build puts it where no cell is fading between levels), is drawn whole and level
 /// 1 not yet faded in (with a level blend up to an octave), so the switch does not show. Their
-/// draws index the lines as uploaded: `LINES` then `FAR_LINES` ([`Self::far_first`]).
+/// draws index the lines as uploaded: `LINES` then `FAR_LINES` ([`Self::far_first`]), then the
+/// copies of the cells' far list ([`SptLod::far_list`]), which a tree short of the switch draws
+/// as one range where its nearest cell's `τ` reaches it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LineLod {
     cells: SptLod,
@@ -247,8 +249,10 @@ impl LineLod {
     /// no lines.
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
-        let cells = SptLod::from_container(container, container.lines(), |cell| cell.lines)?;
+        let mut cells = SptLod::from_container(container, container.lines(), |cell| cell.lines)?;
         let records = container.far_lines();
+        // A renderer uploads the cells' far list after `LINES` and `FAR_LINES`.
+        cells.place_far_list(u32::try_from(container.lines().len().checked_add(records.len())?).ok()?);
         let switch = treelod_format::far_switch(records);
         let far = u32::try_from(container.lines().len())
             .ok()
@@ -739,8 +743,12 @@ mod tests {
             out
         };
         let at = |tau: f32| at_fov(tau, 0.02);
+        // Just short of the switch the cells' prefixes, or the one range of their far list
+        // (`SptLod::far_list`, uploaded after `FAR_LINES`) that stands for them.
+        let list_first = lines.cells.far_first().expect("a far list");
+        assert_eq!(list_first as usize, container.lines().len() + container.far_lines().len());
         let cells = at(from * 0.99);
-        assert!(cells.len() > 1 && cells.iter().all(|p| p.first + p.count <= far_first), "{cells:?}");
+        assert!(cells.iter().all(|p| p.first + p.count <= far_first || p.first >= list_first), "{cells:?}");
         let far = at(from * 1.01);
         assert_eq!(far.len(), 1, "{far:?}");
         assert!(far[0].tau >= from && far[0].tau < from * 1.01, "the nearest cell's τ: {far:?}");
@@ -760,8 +768,10 @@ mod tests {
         );
         // What each draws whole at `τ` (level_keep's range covering every dither value; `None`:
         // the prefix's own).
+        let copies = lines.far_list().iter().map(|&i| container.lines()[i as usize]);
+        let all: Vec<LineRecord> =
+            container.lines().iter().chain(container.far_lines()).copied().chain(copies).collect();
         let whole = |prefixes: &[CellPrefix], tau: Option<f32>| {
-            let all: Vec<LineRecord> = container.lines().iter().chain(container.far_lines()).copied().collect();
             let mut v: Vec<[u32; 4]> = prefixes
                 .iter()
                 .flat_map(|p| {
@@ -785,6 +795,111 @@ mod tests {
         let distant = at_fov(from * 64.0, 0.8);
         assert_eq!(distant.len(), 1);
         assert!(distant[0].count < coarsest, "{} far lines against {coarsest}", distant[0].count);
+    }
+
+    /// The far list of a kind drawn by prefixes (`SptLod::far_list`), on the demo tree's lines
+    /// with room for 2 records a cell (so that near trees fall short of it): it holds every
+    /// record with `hi > far_tau` by `hi`; a tree whose cells' least `τ` reaches it draws one
+    /// range that holds exactly the records the cells' prefixes at that `τ` hold, each cell's own
+    /// `τ` being no less (never coarser), in both units of `τ`; a nearer tree draws cell by cell.
+    #[test]
+    fn the_far_list_draws_in_one_range_what_the_cells_draw_at_their_least_tau() {
+        use treelod_build::{BuildConfig, LineConfig, Placed, build_block};
+        let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
+        let config = BuildConfig { lines: Some(LineConfig::default()), ..BuildConfig::default() };
+        let built =
+            build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "t").expect("builds");
+        let container = Container::from_bytes(&built.data.to_bytes(Compression::None).unwrap()).expect("opens");
+        let records = container.lines();
+        let mut lod = LineLod::from_container(&container).expect("lines").cells;
+        let placed = u32::try_from(records.len() + container.far_lines().len()).unwrap();
+        assert_eq!(lod.far_first(), Some(placed), "placed after LINES and FAR_LINES");
+        lod.build_far_list(2);
+        lod.place_far_list(placed);
+        let (list, tau) = (lod.far_list().to_vec(), lod.far_tau());
+        assert!(lod.cells().len() > 2 && !list.is_empty() && list.len() <= 2 * lod.cells().len());
+        assert!(tau > 0.0 && tau.is_finite(), "{tau}");
+        let hi = |i: u32| records[i as usize].hi;
+        assert!(list.windows(2).all(|w| hi(w[0]) > hi(w[1]) || (hi(w[0]) == hi(w[1]) && w[0] < w[1])));
+        let mut above: Vec<u32> = lod
+            .cells()
+            .iter()
+            .flat_map(|c| c.records.first..c.records.first + c.records.count)
+            .filter(|&i| hi(i) > tau)
+            .collect();
+        above.sort_unstable();
+        let mut held = list.clone();
+        held.sort_unstable();
+        assert_eq!(held, above, "every record above far_tau, nothing else");
+
+        let (min, max) =
+            (Vec3::from_array(container.block().bounds_min), Vec3::from_array(container.block().bounds_max));
+        let (centre, radius) = (0.5 * (min + max), 0.5 * (max - min).length());
+        let settings = LodSettings::default();
+        let level = PixelLevel { quality: 1.0, blend: 0.5 };
+        let widen = (-0.25f32).exp2();
+        let (mut far_trees, mut near_trees) = (0, 0);
+        for distance in [1.5, 3.0, 6.0, 12.0, 25.0, 50.0, 100.0, 200.0, 400.0].map(|k| k * radius) {
+            for (fovy, s_min) in [(0.3, 1.0), (0.9, 1.0), (0.9, 3.0)] {
+                let eye = centre + Vec3::new(0.5, 0.3, 0.8).normalize() * distance;
+                let camera = Camera::look_at(eye, centre, fovy, 640, 480);
+                let frustum = Frustum::from_view_proj(camera.view_proj);
+                let taus: Vec<(SptCell, f32)> = lod
+                    .cell_taus(Mat4::IDENTITY, &camera, &frustum, &settings, 1.0)
+                    .expect("in view")
+                    .map(|(c, t)| (*c, t))
+                    .collect();
+                let per_metre = camera.world_per_pixel() * s_min;
+                let pixel_taus: Vec<f32> =
+                    lod.cells().iter().map(|c| c.anchor.distance(camera.position) * per_metre).collect();
+                // Both units: metres per pixel with the blend's widening, metres at `s_min` pixels.
+                let cases = [
+                    (taus.iter().map(|&(_, t)| t).collect::<Vec<f32>>(), widen, {
+                        let mut out = Vec::new();
+                        assert!(lod.select_per_pixel_blended(
+                            Mat4::IDENTITY,
+                            &camera,
+                            &frustum,
+                            &settings,
+                            level,
+                            &mut out
+                        ));
+                        out
+                    }),
+                    (pixel_taus, 1.0, {
+                        let mut out = Vec::new();
+                        assert!(lod.select_at_pixels(Mat4::IDENTITY, &camera, &frustum, s_min, &mut out));
+                        out
+                    }),
+                ];
+                for (cell_taus, widen, out) in cases {
+                    let least = cell_taus.iter().copied().fold(f32::INFINITY, f32::min);
+                    if least * widen < tau {
+                        near_trees += 1;
+                        assert!(out.len() > 1 && out.iter().all(|p| p.first < placed), "{distance}: {out:?}");
+                        continue;
+                    }
+                    far_trees += 1;
+                    let [range] = out[..] else { panic!("{distance} m: one range, not {out:?}") };
+                    assert_eq!(range.cell as usize, container.block().grid_cell_count());
+                    assert!((range.tau - least).abs() <= 1e-5 * least, "{distance}: {} {least}", range.tau);
+                    assert!(cell_taus.iter().all(|&t| t >= range.tau * (1.0 - 1e-6)), "never coarser");
+                    let mut drawn: Vec<u32> = list[(range.first - placed) as usize..][..range.count as usize].to_vec();
+                    drawn.sort_unstable();
+                    let mut cells: Vec<u32> = lod
+                        .cells()
+                        .iter()
+                        .flat_map(|c| {
+                            let n = lod.prefix(c, range.tau * widen);
+                            c.records.first..c.records.first + n
+                        })
+                        .collect();
+                    cells.sort_unstable();
+                    assert_eq!(drawn, cells, "{distance} m: the cells' prefixes at the least τ");
+                }
+            }
+        }
+        assert!(far_trees >= 4 && near_trees >= 4, "{far_trees} far, {near_trees} near");
     }
 
     #[test]

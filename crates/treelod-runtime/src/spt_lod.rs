@@ -19,7 +19,9 @@
 use glam::{Mat4, Vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, PlaneRecord, Range};
 
-use crate::frame::{Camera, CellPrefix, Frustum, LodSettings, prefix_above, tau_per_metre};
+use crate::frame::{
+    Camera, CellPrefix, FAR_POINTS_PER_CELL, Frustum, LodSettings, leading_above, prefix_above, tau_per_metre,
+};
 
 /// A record of a kind drawn by prefixes ([`SptLod`]).
 pub trait SptRecord {
@@ -157,6 +159,23 @@ pub struct SptLod {
     /// The cells' anchors by coordinate (x, y, z), padded with copies of the first to a whole
     /// number of [`LANES`]: [`Self::least_tau`]'s scan.
     anchors: [Vec<f32>; 3],
+    /// The far list ([`Self::far_list`]): indices in the kind's array, by `hi` (largest first,
+    /// ties by index).
+    far: Vec<u32>,
+    /// `hi` of each entry of `far`: its prefixes, as a cell's.
+    far_hi: Vec<f32>,
+    /// `far` holds every record with `hi > far_tau`.
+    far_tau: f32,
+    /// Where the copies of `far` start in the records as uploaded ([`Self::place_far_list`]);
+    /// `None`: no far range is drawn.
+    far_first: Option<u32>,
+    /// The block cell's index in `CELLS`: the cell a far range names.
+    block_cell: u32,
+}
+
+/// A `hi` as a sort key: NaN is never above a threshold, so it sorts as −∞ (last).
+fn hi_key(hi: f32) -> f32 {
+    if hi.is_nan() { f32::NEG_INFINITY } else { hi }
 }
 
 /// Anchors measured at once by [`SptLod::least_tau`].
@@ -218,6 +237,11 @@ impl SptLod {
             block_radius: 0.5 * (max - min).length(),
             anchor_reach: 0.0,
             anchors: [Vec::new(), Vec::new(), Vec::new()],
+            far: Vec::new(),
+            far_hi: Vec::new(),
+            far_tau: f32::INFINITY,
+            far_first: None,
+            block_cell: u32::try_from(block_cell).unwrap_or(u32::MAX),
         };
         for (index, cell) in container.cells().iter().enumerate() {
             let cell_range = range(cell);
@@ -244,7 +268,33 @@ impl SptLod {
         lod.centre = 0.5 * (lo + hi);
         lod.radius = 0.5 * (hi - lo).length();
         lod.anchors = anchor_lanes(&lod.cells);
+        lod.build_far_list(FAR_POINTS_PER_CELL);
         Some(lod)
+    }
+
+    /// Fills the far list ([`Self::far_list`]): every record of every cell by `hi`, largest first
+    /// (ties by index: the same list on every machine), up to `per_cell` per cell with records,
+    /// ending where `hi` changes so that it holds every record with `hi > far_tau`. Empty with
+    /// fewer than two cells: one range per tree already.
+    pub(crate) fn build_far_list(&mut self, per_cell: usize) {
+        (self.far, self.far_hi, self.far_tau) = (Vec::new(), Vec::new(), f32::INFINITY);
+        if self.cells.len() < 2 {
+            return;
+        }
+        let mut all: Vec<(f32, u32)> = Vec::with_capacity(self.hi.len());
+        for cell in &self.cells {
+            let his = self.hi.get(cell.hi_at as usize..).unwrap_or_default();
+            all.extend(
+                his.iter().zip(cell.records.first..).take(cell.records.count as usize).map(|(&h, i)| (hi_key(h), i)),
+            );
+        }
+        all.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        let room = per_cell * self.cells.len();
+        // Where more records than the room share the first `hi` (+∞: more roots than room), the
+        // list is empty and never drawn.
+        self.far_tau = all.get(room).map_or(0.0, |&(hi, _)| hi.max(0.0));
+        let kept = all.iter().take_while(|&&(hi, _)| hi > self.far_tau);
+        (self.far_hi, self.far) = kept.copied().unzip();
     }
 
     /// A kind held as one hierarchy for the whole block rather than per cell (`FAR_LINES`,
@@ -279,6 +329,11 @@ impl SptLod {
             block_radius: 0.5 * (max - min).length(),
             anchor_reach: 0.0,
             anchors: anchor_lanes(&[cell]),
+            far: Vec::new(),
+            far_hi: Vec::new(),
+            far_tau: f32::INFINITY,
+            far_first: None,
+            block_cell: cell.cell,
         })
     }
 
@@ -293,6 +348,63 @@ impl SptLod {
     #[must_use]
     pub fn sphere(&self) -> (Vec3, f32) {
         (self.centre, self.radius)
+    }
+
+    /// The far list: indices in the kind's array of every record with `hi >` [`Self::far_tau`]
+    /// of every cell, by `hi` (largest first, ties by index), at most [`FAR_POINTS_PER_CELL`]
+    /// per cell with records in all; empty with fewer than two cells (and for [`Self::whole`]).
+    ///
+    /// The kind's twin of the points' far list (`ModelLod::far_list`): a tree drawn cell by
+    /// cell is at least one range per cell with records, however few each draws. The impostor
+    /// trees of a forest of the shared Japanese maple drew about 45 ranges each, one or two
+    /// planes or lines apiece. Where the least `τ` of an instance's cells is at least
+    /// [`Self::far_tau`], the list's prefix with `hi` above it is every record that any cell's
+    /// prefix at that `τ` holds: one range ([`Self::far_prefix`]) draws each cell as the nearest
+    /// one is drawn, never coarser than the cell's own `τ` would draw it. A renderer uploads
+    /// copies of the listed records after the kind's own ([`Self::place_far_list`]), so the range
+    /// is contiguous.
+    #[must_use]
+    pub fn far_list(&self) -> &[u32] {
+        &self.far
+    }
+
+    /// The far list holds every record with `hi` above this (0 where it holds every record;
+    /// `+∞` where it holds none).
+    #[must_use]
+    pub fn far_tau(&self) -> f32 {
+        self.far_tau
+    }
+
+    /// Says that copies of [`Self::far_list`]'s records, in its order, follow the kind's records
+    /// as uploaded from index `first` on: from then on [`Self::far_prefix`] draws them. A kind
+    /// whose copies are not uploaded keeps drawing cell by cell.
+    pub fn place_far_list(&mut self, first: u32) {
+        let len = u32::try_from(self.far.len()).ok();
+        self.far_first = len.filter(|&n| n > 0 && first.checked_add(n).is_some()).map(|_| first);
+    }
+
+    /// Where the copies of [`Self::far_list`] start in the records as uploaded; `None` where
+    /// they are not placed ([`Self::place_far_list`]) or the list is empty.
+    #[must_use]
+    pub fn far_first(&self) -> Option<u32> {
+        self.far_first
+    }
+
+    /// The one range of the far list that draws an instance whose cells' least `τ` is `least`
+    /// (`CellPrefix::tau`), each cell's prefix being its leading records with `hi > least ·
+    /// widen` (`widen` 1, or `2^(−β/2)` for a level blend): `Some` where the list is placed, `least
+    /// · widen` is finite and at least [`Self::far_tau`] (a `count` of 0 then draws nothing),
+    /// else `None` (draw cell by cell). The range names the block cell.
+    #[must_use]
+    pub fn far_prefix(&self, least: f32, widen: f32) -> Option<CellPrefix> {
+        let first = self.far_first?;
+        let tau = least * widen;
+        (tau.is_finite() && tau >= self.far_tau).then(|| CellPrefix {
+            cell: self.block_cell,
+            first,
+            count: leading_above(&self.far_hi, tau),
+            tau: least,
+        })
     }
 
     /// Number of leading records of `cell` with `hi > τ` (spec §10).
@@ -323,7 +435,9 @@ impl SptLod {
 
     /// [`Self::select_per_pixel`] with `level.quality` and a level blend of `β = level.blend`
     /// octaves ([`level_keep`]): each cell's prefix also holds the records still fading out, the
-    /// leading ones with `hi > τ · 2^(−β/2)`. `CellPrefix::tau` is `τ` itself.
+    /// leading ones with `hi > τ · 2^(−β/2)`. `CellPrefix::tau` is `τ` itself. Where the far list
+    /// is placed and the cells' least `τ` reaches it, its one range at that `τ` instead
+    /// ([`Self::far_prefix`]).
     pub fn select_per_pixel_blended(
         &self,
         transform: Mat4,
@@ -335,6 +449,16 @@ impl SptLod {
     ) -> bool {
         // 1 exactly for no blend: the prefix of `hi > τ`.
         let widen = (-0.5 * level.clamped_blend()).exp2();
+        // The cells' least τ, the nearest cell's: the far list where it reaches the list's `τ`.
+        if self.far_first.is_some() {
+            let Some(least) = self.least_tau(transform, camera, frustum, settings, level.quality) else {
+                return false;
+            };
+            if let Some(far) = self.far_prefix(least, widen) {
+                out.extend((far.count > 0).then_some(far));
+                return true;
+            }
+        }
         let Some(taus) = self.cell_taus(transform, camera, frustum, settings, level.quality) else {
             return false;
         };
@@ -390,6 +514,14 @@ impl SptLod {
         if self.cells.is_empty() {
             return Some(f32::INFINITY);
         }
+        let nearest = self.nearest_anchor(transform, camera);
+        Some(self.tau_at(&basis, settings, nearest, nearest == basis.d_block))
+    }
+
+    /// The least distance of a cell's anchor from the eye, world units: the same number as
+    /// `transform.transform_point3(anchor).distance(camera.position)` of the nearest anchor (∞
+    /// without cells).
+    fn nearest_anchor(&self, transform: Mat4, camera: &Camera) -> f32 {
         // `transform.transform_point3(anchor) - camera.position` and its `length_squared`, `LANES`
         // anchors at a time, each product and sum in glam's order (`w + (z·a_z + (y·a_y + x·a_x))`,
         // then `(x² + y²) + z²`; no fused multiply-add): the same numbers as `cell_taus` measures.
@@ -406,8 +538,7 @@ impl SptLod {
                 least[lane] = least[lane].min((dx * dx + dy * dy) + dz * dz);
             }
         }
-        let nearest = least.into_iter().fold(f32::INFINITY, f32::min).sqrt();
-        Some(self.tau_at(&basis, settings, nearest, nearest == basis.d_block))
+        least.into_iter().fold(f32::INFINITY, f32::min).sqrt()
     }
 
     /// A cell's `τ` from its anchor's distance `d_cell` ([`Self::cell_taus`]); `block_cell` gives
@@ -454,8 +585,9 @@ impl SptLod {
     /// The prefixes an instance with world-from-model `transform` draws for `camera` with `τ` in
     /// metres at `s_min` pixels (spec §10.1: `τ = s_min · d · 2·tan(fovy/2) / H`, divided by the
     /// transform's largest axis scale, `d` the distance to each cell's anchor; no depth bias),
-    /// appended to `out`. Returns `false`, appending nothing, if the instance's sphere lies
-    /// outside `frustum` or the transform is degenerate.
+    /// appended to `out`; where the far list is placed and the nearest anchor's `τ` reaches it,
+    /// its one range at that `τ` instead ([`Self::far_prefix`]). Returns `false`, appending
+    /// nothing, if the instance's sphere lies outside `frustum` or the transform is degenerate.
     pub fn select_at_pixels(
         &self,
         transform: Mat4,
@@ -467,6 +599,13 @@ impl SptLod {
         let Some(per_metre) = tau_per_metre(transform, camera, frustum, s_min, (self.centre, self.radius)) else {
             return false;
         };
+        // The nearest anchor's τ, the least: the far list where it reaches the list's `τ`.
+        if self.far_first.is_some()
+            && let Some(far) = self.far_prefix(self.nearest_anchor(transform, camera) * per_metre, 1.0)
+        {
+            out.extend((far.count > 0).then_some(far));
+            return true;
+        }
         for cell in &self.cells {
             let distance = transform.transform_point3(cell.anchor).distance(camera.position);
             let tau = distance * per_metre;

@@ -74,7 +74,8 @@ pub(crate) fn upload(
     let lines = if container.lines().is_empty() {
         None
     } else {
-        let buffer = up.buffer("LINES", bytemuck::cast_slice(&gpu_lines(container)))?;
+        let far = up.representations.lines.as_ref().map_or(&[][..], |lines| lines.far_list());
+        let buffer = up.buffer("LINES", bytemuck::cast_slice(&gpu_lines(container, far)))?;
         Some(up.group(Bucket::Lines, &[buffer.as_entire_binding()]))
     };
     Ok((ellipsoids, lines))
@@ -95,12 +96,16 @@ pub(crate) fn gpu_ellipsoids(container: &Container) -> Vec<EllipsoidRecord> {
     ellipsoids
 }
 
-/// The branch lines of `container` as uploaded, likewise: `LINES` then `FAR_LINES` (spec
-/// §6.9.1; the runtime's far line draws index them so, `LineLod::far_first`), each one's `flags`
-/// holding its `LINE_AO` or `FAR_LINE_AO` byte, never the file's flags.
-pub(crate) fn gpu_lines(container: &Container) -> Vec<LineRecord> {
+/// The branch lines of `container` as uploaded, likewise: `LINES`, `FAR_LINES` (spec §6.9.1;
+/// the runtime's far line draws index them so, `LineLod::far_first`), then copies of the lines
+/// `far` lists, the far list of the runtime's `LineLod` over the cells (`SptLod::far_list`,
+/// whose draws index them so, `SptLod::place_far_list`); each one's `flags` holding its
+/// `LINE_AO` or `FAR_LINE_AO` byte, never the file's flags.
+pub(crate) fn gpu_lines(container: &Container, far: &[u32]) -> Vec<LineRecord> {
     let with_ao = |l: LineRecord, flags| LineRecord { flags, ..l };
     let mut lines = with_ao_in_flags(container.lines(), container.line_ao(), with_ao);
+    let copies: Vec<LineRecord> = far.iter().filter_map(|&i| lines.get(i as usize).copied()).collect();
     lines.extend(with_ao_in_flags(container.far_lines(), container.far_line_ao(), with_ao));
+    lines.extend(copies);
     lines
 }
