@@ -706,18 +706,23 @@ mod tests {
         assert!((far[1].tau - d_block * per_metre).abs() < 1e-6 * far[1].tau.max(1.0), "{far:?}");
     }
 
+    /// The demo tree built with branch lines (and far lines).
+    fn demo_with_lines() -> Container {
+        use treelod_build::{BuildConfig, LineConfig, Placed, build_block};
+        let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
+        let config = BuildConfig { lines: Some(LineConfig::default()), ..BuildConfig::default() };
+        let built =
+            build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "t").expect("builds");
+        Container::from_bytes(&built.data.to_bytes(Compression::None).unwrap()).expect("opens")
+    }
+
     /// A tree whose nearest cell's `τ` is at least `τ_far · 2^(−β/2)` draws one prefix of the far
     /// lines (numbered after the cells' lines, as uploaded), a nearer one the cells'; where it
     /// switches, seen from afar through a narrow view (every cell at about one `τ`), the far
     /// prefix draws whole exactly the cells' lines of just before.
     #[test]
     fn far_trees_draw_the_far_lines_and_near_trees_the_cells() {
-        use treelod_build::{BuildConfig, LineConfig, Placed, build_block};
-        let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
-        let config = BuildConfig { lines: Some(LineConfig::default()), ..BuildConfig::default() };
-        let built =
-            build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "t").expect("builds");
-        let container = Container::from_bytes(&built.data.to_bytes(Compression::None).unwrap()).expect("opens");
+        let container = demo_with_lines();
         let lines = LineLod::from_container(&container).expect("lines");
         let far_first = lines.far_first().expect("far lines");
         assert_eq!(far_first as usize, container.lines().len());
@@ -804,12 +809,7 @@ mod tests {
     /// `τ` being no less (never coarser), in both units of `τ`; a nearer tree draws cell by cell.
     #[test]
     fn the_far_list_draws_in_one_range_what_the_cells_draw_at_their_least_tau() {
-        use treelod_build::{BuildConfig, LineConfig, Placed, build_block};
-        let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
-        let config = BuildConfig { lines: Some(LineConfig::default()), ..BuildConfig::default() };
-        let built =
-            build_block("t", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "t").expect("builds");
-        let container = Container::from_bytes(&built.data.to_bytes(Compression::None).unwrap()).expect("opens");
+        let container = demo_with_lines();
         let records = container.lines();
         let mut lod = LineLod::from_container(&container).expect("lines").cells;
         let placed = u32::try_from(records.len() + container.far_lines().len()).unwrap();
@@ -840,7 +840,7 @@ mod tests {
         let widen = (-0.25f32).exp2();
         let (mut far_trees, mut near_trees) = (0, 0);
         for distance in [1.5, 3.0, 6.0, 12.0, 25.0, 50.0, 100.0, 200.0, 400.0].map(|k| k * radius) {
-            for (fovy, s_min) in [(0.3, 1.0), (0.9, 1.0), (0.9, 3.0)] {
+            for (fovy, s_min) in [(0.3, 1.0), (0.9, 1.0), (0.9, 3.0), (0.9, 64.0)] {
                 let eye = centre + Vec3::new(0.5, 0.3, 0.8).normalize() * distance;
                 let camera = Camera::look_at(eye, centre, fovy, 640, 480);
                 let frustum = Frustum::from_view_proj(camera.view_proj);

@@ -363,6 +363,13 @@ impl SptLod {
     /// one is drawn, never coarser than the cell's own `τ` would draw it. A renderer uploads
     /// copies of the listed records after the kind's own ([`Self::place_far_list`]), so the range
     /// is contiguous.
+    ///
+    /// The cost: the cells beyond the nearest draw finer than their own `τ` asks, at most the
+    /// list's length in all. Measured on the shared oak's impostors (planes and bark lines, `eval
+    /// --orbit 2,8,32`): 1,855 → 1,951 primitives a frame at 128–512 pixels high and 309 → 393 at
+    /// 32–128, at the same error (RMSE .04300 → .04299 and .00564 → .00564), for one range in
+    /// place of one per cell with records — a few records per range saved, where a range costs
+    /// its draw record and the renderer's work for it.
     #[must_use]
     pub fn far_list(&self) -> &[u32] {
         &self.far
