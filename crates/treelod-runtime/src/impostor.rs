@@ -131,9 +131,8 @@ pub type PlaneCell = SptCell;
 pub type PlaneRange = CellPrefix;
 
 /// What drawing a model's planes needs of its container, made once: its [`SptLod`] over
-/// `PLANES`, and the image the planes sample. Its far list ([`SptLod::far_list`]) is placed
-/// after `PLANES` (a renderer uploads the copies there): a tree whose nearest cell's `τ` reaches
-/// it draws its planes as one range.
+/// `PLANES`, and the image the planes sample. Its far list ([`SptLod::far_list`]) is not placed:
+/// the planes treelod builds are one hierarchy in the block cell, one range per tree already.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlaneLod {
     spt: SptLod,
@@ -146,9 +145,7 @@ impl PlaneLod {
     #[must_use]
     pub fn from_container(container: &Container) -> Option<Self> {
         let image = container.planes().first()?.image;
-        let mut spt = SptLod::from_container(container, container.planes(), |cell| cell.planes)?;
-        // A renderer uploads the far list's copies after `PLANES`.
-        spt.place_far_list(u32::try_from(container.planes().len()).ok()?);
+        let spt = SptLod::from_container(container, container.planes(), |cell| cell.planes)?;
         Some(Self { spt, image })
     }
 

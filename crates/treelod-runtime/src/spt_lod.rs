@@ -356,8 +356,9 @@ impl SptLod {
     ///
     /// The kind's twin of the points' far list (`ModelLod::far_list`): a tree drawn cell by
     /// cell is at least one range per cell with records, however few each draws. The impostor
-    /// trees of a forest of the shared Japanese maple drew about 45 ranges each, one or two
-    /// planes or lines apiece. Where the least `τ` of an instance's cells is at least
+    /// trees of a forest of the shared Japanese maple drew about 45 ranges each, nearly all of
+    /// them the branch lines of their bark, a line or two apiece (their planes are one hierarchy
+    /// in the block cell, one range). Where the least `τ` of an instance's cells is at least
     /// [`Self::far_tau`], the list's prefix with `hi` above it is every record that any cell's
     /// prefix at that `τ` holds: one range ([`Self::far_prefix`]) draws each cell as the nearest
     /// one is drawn, never coarser than the cell's own `τ` would draw it. A renderer uploads
@@ -365,7 +366,7 @@ impl SptLod {
     /// is contiguous.
     ///
     /// The cost: the cells beyond the nearest draw finer than their own `τ` asks, at most the
-    /// list's length in all. Measured on the shared oak's impostors (planes and bark lines, `eval
+    /// list's length in all. Measured on the shared oak's impostors (their bark lines, `eval
     /// --orbit 2,8,32`): 1,855 → 1,951 primitives a frame at 128–512 pixels high and 309 → 393 at
     /// 32–128, at the same error (RMSE .04300 → .04299 and .00564 → .00564), for one range in
     /// place of one per cell with records — a few records per range saved, where a range costs

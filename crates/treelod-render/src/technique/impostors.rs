@@ -48,7 +48,7 @@ pub(crate) fn upload(up: &mut ModelUpload<'_>) -> Result<Option<wgpu::BindGroup>
     let Some(planes) = up.representations.planes.take() else { return Ok(None) };
     let Some(atlas) = up.decode_atlas(planes.image(), "impostor") else { return Ok(None) };
     let container = up.container;
-    let records = gpu_planes(container, planes.far_list(), &mut up.warnings);
+    let records = gpu_planes(container, &mut up.warnings);
     let buffer = up.buffer("PLANES", bytemuck::cast_slice(&records))?;
     drop(records);
     let leaves = up.buffer("PLANE_LEAVES", bytemuck::cast_slice(container.plane_leaves()))?;
@@ -90,11 +90,8 @@ pub(crate) fn group(
 /// `leaf_count` its ambient occlusion byte (spec §6.14) in bits 0–7 and its diffuse response
 /// (spec §6.10.2, [`pack_diffuse`]) above, and its `image` (bound separately) where
 /// its leaves start in `PLANE_LEAVES` if it is textured indirectly (spec §6.10.1), else
-/// 0xFFFFFFFF. After `PLANES`, copies of the planes `far` lists, the far list of the runtime's
-/// `PlaneLod` (whose far draws index them so, `SptLod::place_far_list`); a copy's parent is the
-/// original's, an index in `PLANES`. Says in `warnings` when `PLANE_LEAVES` does not hold what
-/// the planes need.
-pub(crate) fn gpu_planes(container: &Container, far: &[u32], warnings: &mut Vec<String>) -> Vec<PlaneRecord> {
+/// 0xFFFFFFFF. Says in `warnings` when `PLANE_LEAVES` does not hold what the planes need.
+pub(crate) fn gpu_planes(container: &Container, warnings: &mut Vec<String>) -> Vec<PlaneRecord> {
     let parents = treelod_runtime::plane_parents(container.planes(), container.cells().iter().map(|c| c.planes));
     let plane_ao = container.plane_ao();
     let plane_diffuse = container.plane_diffuse();
@@ -117,7 +114,7 @@ pub(crate) fn gpu_planes(container: &Container, far: &[u32], warnings: &mut Vec<
             u32::MAX
         }
     };
-    let mut planes: Vec<PlaneRecord> = container
+    container
         .planes()
         .iter()
         .zip(&parents)
@@ -129,10 +126,7 @@ pub(crate) fn gpu_planes(container: &Container, far: &[u32], warnings: &mut Vec<
                 | pack_diffuse(plane_diffuse.get(i).copied().unwrap_or(PlaneDiffuseRecord::FLAT)),
             ..*plane
         })
-        .collect();
-    let copies: Vec<PlaneRecord> = far.iter().filter_map(|&i| planes.get(i as usize).copied()).collect();
-    planes.extend(copies);
-    planes
+        .collect()
 }
 
 /// A plane's diffuse response as `vs_plane` reads it from the uploaded `leaf_count`: the share of
