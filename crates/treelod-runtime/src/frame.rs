@@ -405,7 +405,7 @@ pub struct ModelLod {
 
 /// A size or `hi` as a sort key: NaN compares like −∞ (never above a threshold), so it sorts as
 /// −∞, last in a largest-first list.
-fn sort_key(v: f32) -> f32 {
+pub(crate) fn sort_key(v: f32) -> f32 {
     if v.is_nan() { f32::NEG_INFINITY } else { v }
 }
 

@@ -20,7 +20,7 @@ use glam::{Mat4, Vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, PlaneRecord, Range};
 
 use crate::frame::{
-    Camera, CellPrefix, FAR_POINTS_PER_CELL, Frustum, LodSettings, leading_above, prefix_above, tau_per_metre,
+    Camera, CellPrefix, FAR_POINTS_PER_CELL, Frustum, LodSettings, leading_above, prefix_above, sort_key, tau_per_metre,
 };
 
 /// A record of a kind drawn by prefixes ([`SptLod`]).
@@ -173,11 +173,6 @@ pub struct SptLod {
     block_cell: u32,
 }
 
-/// A `hi` as a sort key: NaN is never above a threshold, so it sorts as −∞ (last).
-fn hi_key(hi: f32) -> f32 {
-    if hi.is_nan() { f32::NEG_INFINITY } else { hi }
-}
-
 /// Anchors measured at once by [`SptLod::least_tau`].
 const LANES: usize = 8;
 
@@ -285,7 +280,7 @@ impl SptLod {
         for cell in &self.cells {
             let his = self.hi.get(cell.hi_at as usize..).unwrap_or_default();
             all.extend(
-                his.iter().zip(cell.records.first..).take(cell.records.count as usize).map(|(&h, i)| (hi_key(h), i)),
+                his.iter().zip(cell.records.first..).take(cell.records.count as usize).map(|(&h, i)| (sort_key(h), i)),
             );
         }
         all.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
