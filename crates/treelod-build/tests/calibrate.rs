@@ -246,10 +246,11 @@ fn impostor_and_ellipsoid_rows_count_what_the_runtime_submits_with_its_level_ble
         .iter()
         .zip(row(&built.data.calibration, t::IMPOSTORS).iter().zip(&row(&built.data.calibration, t::ELLIPSOIDS)))
     {
-        // Far enough that every cell's τ is the block centre's to a fraction of a percent, with
+        // Far enough that every cell's τ is the block centre's to a twentieth of a percent (the
+        // runtime draws a far tree's lines at its nearest cell's τ, `SptLod::far_list`), with
         // the field of view that makes the block `h` pixels high (τ = p = H/h; with one view per
         // elevation every view measures at `h` itself).
-        let distance = 200.0 * radius;
+        let distance = 2000.0 * radius;
         let fovy = 2.0 * (height * 1000.0 / (2.0 * h * distance)).atan();
         let eye = centre + Vec3::new(0.6, 0.3, 0.8).normalize() * distance;
         let camera = Camera::look_at(eye, centre, fovy, 1000, 1000);
