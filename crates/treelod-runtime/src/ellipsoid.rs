@@ -326,6 +326,11 @@ impl LineLod {
                 }
                 return true;
             }
+            // Short of the switch: the cells' far list, or cell by cell, from the same `τ_near`.
+            if self.cells.push_far(tau_near, level, out) {
+                return true;
+            }
+            return self.cells.select_cells_blended(transform, camera, frustum, settings, level, out);
         }
         self.cells.select_per_pixel_blended(transform, camera, frustum, settings, level, out)
     }
@@ -806,7 +811,7 @@ mod tests {
     /// with room for 2 records a cell (so that near trees fall short of it): it holds every
     /// record with `hi > far_tau` by `hi`; a tree whose cells' least `τ` reaches it draws one
     /// range that holds exactly the records the cells' prefixes at that `τ` hold, each cell's own
-    /// `τ` being no less (never coarser), in both units of `τ`; a nearer tree draws cell by cell.
+    /// `τ` being no less (never coarser); a nearer tree draws cell by cell.
     #[test]
     fn the_far_list_draws_in_one_range_what_the_cells_draw_at_their_least_tau() {
         let container = demo_with_lines();
@@ -836,42 +841,32 @@ mod tests {
             (Vec3::from_array(container.block().bounds_min), Vec3::from_array(container.block().bounds_max));
         let (centre, radius) = (0.5 * (min + max), 0.5 * (max - min).length());
         let settings = LodSettings::default();
-        let level = PixelLevel { quality: 1.0, blend: 0.5 };
         let widen = (-0.25f32).exp2();
         let (mut far_trees, mut near_trees) = (0, 0);
         for distance in [1.5, 3.0, 6.0, 12.0, 25.0, 50.0, 100.0, 200.0, 400.0].map(|k| k * radius) {
-            for (fovy, s_min) in [(0.3, 1.0), (0.9, 1.0), (0.9, 3.0), (0.9, 64.0)] {
+            // Coarser qualities stand for larger point sizes: τ up to 64× the pixel's.
+            for (fovy, quality) in [(0.3, 1.0), (0.9, 1.0), (0.9, 1.0 / 3.0), (0.9, 1.0 / 64.0)] {
+                let level = PixelLevel { quality, blend: 0.5 };
                 let eye = centre + Vec3::new(0.5, 0.3, 0.8).normalize() * distance;
                 let camera = Camera::look_at(eye, centre, fovy, 640, 480);
                 let frustum = Frustum::from_view_proj(camera.view_proj);
                 let taus: Vec<(SptCell, f32)> = lod
-                    .cell_taus(Mat4::IDENTITY, &camera, &frustum, &settings, 1.0)
+                    .cell_taus(Mat4::IDENTITY, &camera, &frustum, &settings, quality)
                     .expect("in view")
                     .map(|(c, t)| (*c, t))
                     .collect();
-                let per_metre = camera.world_per_pixel() * s_min;
-                let pixel_taus: Vec<f32> =
-                    lod.cells().iter().map(|c| c.anchor.distance(camera.position) * per_metre).collect();
-                // Both units: metres per pixel with the blend's widening, metres at `s_min` pixels.
-                let cases = [
-                    (taus.iter().map(|&(_, t)| t).collect::<Vec<f32>>(), widen, {
-                        let mut out = Vec::new();
-                        assert!(lod.select_per_pixel_blended(
-                            Mat4::IDENTITY,
-                            &camera,
-                            &frustum,
-                            &settings,
-                            level,
-                            &mut out
-                        ));
-                        out
-                    }),
-                    (pixel_taus, 1.0, {
-                        let mut out = Vec::new();
-                        assert!(lod.select_at_pixels(Mat4::IDENTITY, &camera, &frustum, s_min, &mut out));
-                        out
-                    }),
-                ];
+                let cases = [(taus.iter().map(|&(_, t)| t).collect::<Vec<f32>>(), widen, {
+                    let mut out = Vec::new();
+                    assert!(lod.select_per_pixel_blended(
+                        Mat4::IDENTITY,
+                        &camera,
+                        &frustum,
+                        &settings,
+                        level,
+                        &mut out
+                    ));
+                    out
+                })];
                 for (cell_taus, widen, out) in cases {
                     let least = cell_taus.iter().copied().fold(f32::INFINITY, f32::min);
                     if least * widen < tau {

@@ -409,6 +409,20 @@ pub(crate) fn sort_key(v: f32) -> f32 {
     if v.is_nan() { f32::NEG_INFINITY } else { v }
 }
 
+/// The cut of a far list ([`ModelLod::far_list`], `SptLod::far_list`): sorts `candidates`
+/// (`(sort_key(hi), index)`) by `hi`, largest first (ties by index: the same list on every
+/// machine), and returns the list's `far_tau`, the `hi` of the first candidate past `room` (0
+/// where all fit), with the leading candidates whose `hi` is above it: the list ends where `hi`
+/// changes, so it holds every candidate with `hi > far_tau`. Where more than `room` candidates
+/// share the first `hi`, the list is empty.
+pub(crate) fn far_cut(mut candidates: Vec<(f32, u32)>, room: usize) -> (f32, Vec<(f32, u32)>) {
+    candidates.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let far_tau = candidates.get(room).map_or(0.0, |&(hi, _)| hi.max(0.0));
+    let kept = candidates.partition_point(|&(hi, _)| hi > far_tau);
+    candidates.truncate(kept);
+    (far_tau, candidates)
+}
+
 /// The most points per cell (with points) the far list holds ([`ModelLod::far_list`]): a bound
 /// of its copy's size, 3 KiB of 48-byte points per cell, whatever the model. Where the cells of
 /// a tree draw more than that between them, they draw enough per range that one range per cell
@@ -542,11 +556,11 @@ impl ModelLod {
             let end = cell.points.first + cell.points.count;
             rest.extend((first..end).filter_map(|i| points.get(i as usize).map(|p| (sort_key(p.hi), i))));
         }
-        rest.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         // `far_tau` is at most the largest `hi` after any cell's roots: the far list is drawn
         // wherever every cell would draw its roots alone.
-        self.far_tau = rest.get(room).map_or(0.0, |&(hi, _)| hi.max(0.0));
-        for &(hi, index) in rest.iter().take_while(|&&(hi, _)| hi > self.far_tau) {
+        let (far_tau, kept) = far_cut(rest, room);
+        self.far_tau = far_tau;
+        for (hi, index) in kept {
             self.far.push(index);
             self.far_hi.push(hi);
         }

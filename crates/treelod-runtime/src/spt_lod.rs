@@ -20,7 +20,8 @@ use glam::{Mat4, Vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, PlaneRecord, Range};
 
 use crate::frame::{
-    Camera, CellPrefix, FAR_POINTS_PER_CELL, Frustum, LodSettings, leading_above, prefix_above, sort_key, tau_per_metre,
+    Camera, CellPrefix, FAR_POINTS_PER_CELL, Frustum, LodSettings, far_cut, leading_above, prefix_above, sort_key,
+    tau_per_metre,
 };
 
 /// A record of a kind drawn by prefixes ([`SptLod`]).
@@ -283,13 +284,11 @@ impl SptLod {
                 his.iter().zip(cell.records.first..).take(cell.records.count as usize).map(|(&h, i)| (sort_key(h), i)),
             );
         }
-        all.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        let room = per_cell * self.cells.len();
         // Where more records than the room share the first `hi` (+∞: more roots than room), the
         // list is empty and never drawn.
-        self.far_tau = all.get(room).map_or(0.0, |&(hi, _)| hi.max(0.0));
-        let kept = all.iter().take_while(|&&(hi, _)| hi > self.far_tau);
-        (self.far_hi, self.far) = kept.copied().unzip();
+        let (far_tau, kept) = far_cut(all, per_cell * self.cells.len());
+        self.far_tau = far_tau;
+        (self.far_hi, self.far) = kept.into_iter().unzip();
     }
 
     /// A kind held as one hierarchy for the whole block rather than per cell (`FAR_LINES`,
@@ -450,18 +449,41 @@ impl SptLod {
         level: PixelLevel,
         out: &mut Vec<CellPrefix>,
     ) -> bool {
-        // 1 exactly for no blend: the prefix of `hi > τ`.
-        let widen = (-0.5 * level.clamped_blend()).exp2();
         // The cells' least τ, the nearest cell's: the far list where it reaches the list's `τ`.
         if self.far_first.is_some() {
             let Some(least) = self.least_tau(transform, camera, frustum, settings, level.quality) else {
                 return false;
             };
-            if let Some(far) = self.far_prefix(least, widen) {
-                out.extend((far.count > 0).then_some(far));
+            if self.push_far(least, level, out) {
                 return true;
             }
         }
+        self.select_cells_blended(transform, camera, frustum, settings, level, out)
+    }
+
+    /// Appends the far list's range ([`Self::far_prefix`]) of an instance whose cells' least `τ`
+    /// is `least` under the level blend of `level`, if it draws the instance; `true` if so.
+    pub(crate) fn push_far(&self, least: f32, level: PixelLevel, out: &mut Vec<CellPrefix>) -> bool {
+        let widen = (-0.5 * level.clamped_blend()).exp2();
+        let Some(far) = self.far_prefix(least, widen) else {
+            return false;
+        };
+        out.extend((far.count > 0).then_some(far));
+        true
+    }
+
+    /// [`Self::select_per_pixel_blended`] cell by cell, the far list aside.
+    pub(crate) fn select_cells_blended(
+        &self,
+        transform: Mat4,
+        camera: &Camera,
+        frustum: &Frustum,
+        settings: &LodSettings,
+        level: PixelLevel,
+        out: &mut Vec<CellPrefix>,
+    ) -> bool {
+        // 1 exactly for no blend: the prefix of `hi > τ`.
+        let widen = (-0.5 * level.clamped_blend()).exp2();
         let Some(taus) = self.cell_taus(transform, camera, frustum, settings, level.quality) else {
             return false;
         };
@@ -588,9 +610,9 @@ impl SptLod {
     /// The prefixes an instance with world-from-model `transform` draws for `camera` with `τ` in
     /// metres at `s_min` pixels (spec §10.1: `τ = s_min · d · 2·tan(fovy/2) / H`, divided by the
     /// transform's largest axis scale, `d` the distance to each cell's anchor; no depth bias),
-    /// appended to `out`; where the far list is placed and the nearest anchor's `τ` reaches it,
-    /// its one range at that `τ` instead ([`Self::far_prefix`]). Returns `false`, appending
-    /// nothing, if the instance's sphere lies outside `frustum` or the transform is degenerate.
+    /// appended to `out`, cell by cell: the far list is not read (the planes, drawn this way, are
+    /// one hierarchy in the block cell and place none). Returns `false`, appending nothing, if
+    /// the instance's sphere lies outside `frustum` or the transform is degenerate.
     pub fn select_at_pixels(
         &self,
         transform: Mat4,
@@ -602,13 +624,6 @@ impl SptLod {
         let Some(per_metre) = tau_per_metre(transform, camera, frustum, s_min, (self.centre, self.radius)) else {
             return false;
         };
-        // The nearest anchor's τ, the least: the far list where it reaches the list's `τ`.
-        if self.far_first.is_some()
-            && let Some(far) = self.far_prefix(self.nearest_anchor(transform, camera) * per_metre, 1.0)
-        {
-            out.extend((far.count > 0).then_some(far));
-            return true;
-        }
         for cell in &self.cells {
             let distance = transform.transform_point3(cell.anchor).distance(camera.position);
             let tau = distance * per_metre;
