@@ -203,7 +203,6 @@ var<private> cur_draw: InstanceDraw;
 var<private> model_index: u32;
 // World size per pixel per metre, divided by the instance's scale.
 var<private> per_metre: f32;
-var<private> draw_scale: f32;
 var<private> tally_cells: u32;
 var<private> tally_triangles: u32;
 var<private> tally_points: u32;
@@ -249,8 +248,8 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
         return;
     }
     let slot = cur_model.bucket_first[kind] + s;
-    draws[slot] = DrawInfo(current.transform, taus.x, max(taus.y, taus.x), cell, draw_scale, shading, 1.0,
-                           current.index, TECHNIQUE_TINTS[cur_draw.technique], cur_draw.fade);
+    draws[slot] = DrawInfo(taus.x, max(taus.y, taus.x), cell, shading, 1.0, current.index,
+                           TECHNIQUE_TINTS[cur_draw.technique], cur_draw.fade);
     let corners = select(6u, 3u, kind == 0u);
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
 }
@@ -326,7 +325,6 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     let az = m[2].xyz;
     let t = m[3].xyz;
     let scale = sqrt(max(max(dot(ax, ax), dot(ay, ay)), dot(az, az)));
-    draw_scale = max(scale, 1e-12);
 
     // cull_instance: the sphere, then the transformed box if the sphere straddles.
     let cc = v3(cur_model.cull_centre);

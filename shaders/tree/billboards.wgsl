@@ -8,7 +8,7 @@
 // about `axis_v` so that `axis_u × axis_v` points to the eye: the side its image was baked from.
 @vertex
 fn vs_billboard(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
-    let draw = draws[draw_index];
+    let draw = draw_at(draw_index);
     let quad = planes[vertex_index / 6u];
     let corner = CORNERS[vertex_index % 6u];
     let centre = (draw.model * vec4<f32>(quad.center[0], quad.center[1], quad.center[2], 1.0)).xyz;

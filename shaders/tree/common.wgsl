@@ -55,10 +55,34 @@ struct VertexGpu {
 @group(0) @binding(1) var<storage, read> draws: array<DrawInfo>;
 @group(0) @binding(2) var<storage, read> triangles: array<TriangleRecord>;
 @group(0) @binding(3) var<storage, read> points: array<PointRecord>;
+@group(0) @binding(4) var<storage, read> instance_transforms: array<InstanceTransform>;
 @group(1) @binding(0) var<storage, read> vertices: array<VertexGpu>;
 @group(1) @binding(1) var<storage, read> materials: array<MaterialGpu>;
 @group(1) @binding(2) var textures: texture_2d_array<f32>;
 @group(1) @binding(3) var linear_sampler: sampler;
+
+// A draw as the tree shaders read it: its `DrawInfo` joined to its instance's transform.
+struct Draw {
+    // Column-major world-from-model transform.
+    model: mat4x4<f32>,
+    tau_p: f32,
+    tau_t: f32,
+    cell: u32,
+    // The transform's largest axis scale, for splat and line radii.
+    scale: f32,
+    shading: f32,
+    leaf_scale: f32,
+    instance: u32,
+    tint: u32,
+    fade: u32,
+}
+
+// Draw `index` (the indirect draw's instance index) with its instance's transform.
+fn draw_at(index: u32) -> Draw {
+    let d = draws[index];
+    let t = instance_transforms[d.instance];
+    return Draw(t.model, d.tau_p, d.tau_t, d.cell, t.scale, d.shading, d.leaf_scale, d.instance, d.tint, d.fade);
+}
 
 // The material as uploaded: the record's fields that shading needs, 32 bytes. Rust twin:
 // MaterialGpu in crates/treelod-render/src/upload.rs.

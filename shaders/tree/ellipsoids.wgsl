@@ -57,7 +57,7 @@ struct EllipsoidFrame {
     inverse: mat3x3<f32>,
 }
 
-fn ellipsoid_frame(draw: DrawInfo, e: EllipsoidRecord) -> EllipsoidFrame {
+fn ellipsoid_frame(draw: Draw, e: EllipsoidRecord) -> EllipsoidFrame {
     let q4 = vec4<f32>(unpack2x16snorm(e.orientation[0]), unpack2x16snorm(e.orientation[1]));
     let q = select(vec4<f32>(0.0, 0.0, 0.0, 1.0), normalize(q4), dot(q4, q4) > 1e-12);
     let x = q.x;
@@ -105,7 +105,7 @@ fn offscreen_ellipsoid() -> EllipsoidVaryings {
 // exact for an orthographic view.
 @vertex
 fn vs_ellipsoid(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> EllipsoidVaryings {
-    let draw = draws[draw_index];
+    let draw = draw_at(draw_index);
     let index = vertex_index / 6u;
     let e = ellipsoids[index];
     let keep = level_keep(e.lo, e.hi, draw.tau_p, frame.level_blend);
@@ -176,7 +176,7 @@ struct EllipsoidHit {
 // the noise level from screen derivatives, so call it in uniform control flow.
 fn ellipsoid_hit(in: EllipsoidVaryings, push: f32) -> EllipsoidHit {
     let e = ellipsoids[in.ellipsoid];
-    let f = ellipsoid_frame(draws[in.draw], e);
+    let f = ellipsoid_frame(draw_at(in.draw), e);
     let ray = normalize(view_ray(in.world));
     let o = f.inverse * (in.world - f.centre);
     let d = f.inverse * ray;

@@ -49,7 +49,7 @@ struct LineFrame {
     rb: f32,
 }
 
-fn line_frame(draw: DrawInfo, l: LineRecord) -> LineFrame {
+fn line_frame(draw: Draw, l: LineRecord) -> LineFrame {
     var out: LineFrame;
     out.a = (draw.model * vec4<f32>(l.p0[0], l.p0[1], l.p0[2], 1.0)).xyz;
     out.b = (draw.model * vec4<f32>(l.p1[0], l.p1[1], l.p1[2], 1.0)).xyz;
@@ -103,7 +103,7 @@ fn sphere_pixels(p: vec3<f32>, r: f32, w: f32) -> f32 {
 // the trapezoid.
 @vertex
 fn vs_line(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> LineVaryings {
-    let draw = draws[draw_index];
+    let draw = draw_at(draw_index);
     let index = vertex_index / 6u;
     let l = lines[index];
     let keep = level_keep(l.lo, l.hi, draw.tau_p, frame.level_blend);
@@ -276,7 +276,7 @@ struct LineHit {
 // wide at the ray's nearest approach to its axis, else as the one-pixel band of coverage w (see
 // the section's head).
 fn line_hit(in: LineVaryings, push: f32) -> LineHit {
-    let f = line_frame(draws[in.draw], lines[in.line]);
+    let f = line_frame(draw_at(in.draw), lines[in.line]);
     let d = normalize(view_ray(in.world));
     let o = in.world;
     let s = f.b - f.a;

@@ -101,7 +101,7 @@ fn octahedral_diffuse(view: vec3<f32>, packed: u32) -> f32 {
 // transform is a rotation, a uniform scale and a translation).
 @vertex
 fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> OctahedralVaryings {
-    let draw = draws[draw_index];
+    let draw = draw_at(draw_index);
     let rec = impostors[vertex_index / 6u];
     let corner = CORNERS[vertex_index % 6u];
     let centre = vec3<f32>(rec.center[0], rec.center[1], rec.center[2]);

@@ -51,7 +51,7 @@ fn plane_drawn(p: PlaneRecord, tau: f32) -> bool {
 // over its last quarter it cross-fades with its parent (`crossfade`).
 @vertex
 fn vs_plane(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
-    let draw = draws[draw_index];
+    let draw = draw_at(draw_index);
     let plane = planes[vertex_index / 6u];
     let has_parent = plane.leaf_first != 0xFFFFFFFFu;
     // Rust twin: treelod_runtime::crossfade.
@@ -133,7 +133,7 @@ fn plane_diffuse(normal: vec3<f32>, view: vec3<f32>, packed: u32) -> f32 {
 // from the atlas rectangle `uv_min ..= uv_max` at `corner ∈ [−1, 1]²`, and `kinds` as its colour
 // in the kinds view.
 fn quad_corner(
-    draw: DrawInfo,
+    draw: Draw,
     world: vec3<f32>,
     normal: vec3<f32>,
     uv_min: u32,

@@ -3,7 +3,7 @@
 
 @vertex
 fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
-    let draw = draws[draw_index];
+    let draw = draw_at(draw_index);
     let point = points[vertex_index / 6u];
     // The prefix holds points whose interval lies below tau_p: they are not part of the cut.
     if !point_drawn(point, draw.tau_p, draw.tau_t) {

@@ -9,7 +9,7 @@
 // Pruned leaves (scaled by `leaf_scale` about their leaf's centre, spec §6.11) and bark.
 @vertex
 fn vs_pruned(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
-    let draw = draws[draw_index];
+    let draw = draw_at(draw_index);
     let tri = extra_triangles[vertex_index / 3u];
     let v = vertices[tri.indices[vertex_index % 3u]];
     var p = vec3<f32>(v.record.position[0], v.record.position[1], v.record.position[2]);

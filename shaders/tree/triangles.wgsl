@@ -2,7 +2,7 @@
 // The pruned leaves and bark (pruned.wgsl) reuse the corner and fragment stages.
 
 // One corner of triangle `tri`: vertex `v`, placed at `p` (model space).
-fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, vertex: VertexGpu, p: vec3<f32>) -> Varyings {
+fn triangle_corner(draw: Draw, tri: TriangleRecord, vertex: VertexGpu, p: vec3<f32>) -> Varyings {
     let v = vertex.record;
     let world = draw.model * vec4<f32>(p, 1.0);
     var out: Varyings;
@@ -27,7 +27,7 @@ fn triangle_corner(draw: DrawInfo, tri: TriangleRecord, vertex: VertexGpu, p: ve
 
 @vertex
 fn vs_triangle(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) draw_index: u32) -> Varyings {
-    let draw = draws[draw_index];
+    let draw = draw_at(draw_index);
     let tri = triangles[vertex_index / 3u];
     let v = vertices[tri.indices[vertex_index % 3u]];
     return triangle_corner(draw, tri, v, vec3<f32>(v.record.position[0], v.record.position[1], v.record.position[2]));

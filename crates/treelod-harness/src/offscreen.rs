@@ -28,6 +28,11 @@ pub fn settle_streaming(gpu: &Gpu, renderer: &mut Renderer, camera: &Camera) {
             break;
         }
     }
+    // The queue's copies of what settling streamed (tens of megabytes on a large model) run on
+    // the device after their submission: waited for here, so that the next frame's wall clock
+    // (`bench`'s `selection_ms`) is that frame's own work, not the tail of the loading's.
+    // A device lost here shows at the next frame's render or read-back.
+    let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
 }
 
 /// The camera: `eye` and `target` as given; a missing target is the centre of `bounds`; a missing

@@ -11,31 +11,53 @@ use crate::stats::FrameStats;
 use crate::streaming::Array;
 use crate::technique::{Bucket, DrawSource, prefix_lists};
 
-/// One draw's constants. WGSL twin: `DrawInfo` in `shaders/shared/draw.wgsl`.
+/// One draw's constants. WGSL twin: `DrawInfo` in `shaders/shared/draw.wgsl`. The instance's
+/// transform is not repeated here: the shaders read it from [`InstanceTransform`]s at
+/// `instance`, uploaded when the list of instances changes. (A range once carried its 64-byte
+/// matrix and scale, 112 bytes in all: on 10^4 weeping willows a frame of 45,000 ranges wrote
+/// 5 MB of them, each matrix once per cell of its tree.)
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub(crate) struct DrawInfo {
-    pub(crate) model: [[f32; 4]; 4],
     pub(crate) tau_p: f32,
     pub(crate) tau_t: f32,
     pub(crate) cell: u32,
-    pub(crate) scale: f32,
     pub(crate) shading: f32,
     /// Size factor of pruned leaves about their centres (1 for everything else).
     pub(crate) leaf_scale: f32,
-    /// Index of the instance in [`Renderer::set_instances`]' list (read by the shaders only to
-    /// seed the level blend's dither, `level_dither`).
+    /// Index of the instance in [`Renderer::set_instances`]' list: its [`InstanceTransform`],
+    /// and the seed of the level blend's dither (`level_dither`).
     pub(crate) instance: u32,
     /// The colour of [`DebugView::Techniques`](crate::DebugView) for the technique that made the
     /// draw ([`tint`]).
     pub(crate) tint: u32,
     /// The share of the transition dither the draw keeps ([`RecordedDraw::dither`]), as WGSL's
-    /// `pack2x16unorm` packs `[lo, hi)`: `0xFFFF0000` (`[0, 1)`) outside a transition.
+    /// `pack2x16unorm` packs it: `0xFFFF0000` (`[0, 1)`) outside a transition.
     pub(crate) fade: u32,
+}
+
+const _: () = assert!(size_of::<DrawInfo>() == 32);
+
+/// One instance's transform as the tree shaders read it, in the order of
+/// [`Renderer::set_instances`]' list. WGSL twin: `InstanceTransform` in
+/// `shaders/shared/draw.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(crate) struct InstanceTransform {
+    /// Column-major world-from-model transform.
+    pub(crate) model: [[f32; 4]; 4],
+    /// Its largest axis scale ([`max_axis_scale`]), for splat and line radii.
+    pub(crate) scale: f32,
     pub(crate) pad: [u32; 3],
 }
 
-const _: () = assert!(size_of::<DrawInfo>() == 112);
+const _: () = assert!(size_of::<InstanceTransform>() == 80);
+
+impl InstanceTransform {
+    pub(crate) fn new(transform: glam::Mat4) -> Self {
+        Self { model: transform.to_cols_array_2d(), scale: max_axis_scale(transform), pad: [0; 3] }
+    }
+}
 
 /// [`DrawInfo::fade`] of a dither range `[lo, hi)` (clamped to `[0, 1]`), as `pack2x16unorm`.
 pub(crate) fn pack_fade([lo, hi]: [f32; 2]) -> u32 {
@@ -292,19 +314,15 @@ impl Renderer {
                         let draw = RecordedDraw { technique, dither, ..draw };
                         out.clamped += u32::from(draw.clamped);
                         let (bucket, first_vertex, corners) = self.gpu_first(&draw);
-                        let transform = self.instances[draw.instance as usize].transform;
                         let info = DrawInfo {
-                            model: transform.to_cols_array_2d(),
                             tau_p: draw.tau_points,
                             tau_t: draw.tau_triangles,
                             cell: draw.cell,
-                            scale: max_axis_scale(transform),
                             shading: range.shading,
                             leaf_scale: 1.0,
                             instance: draw.instance,
                             tint: tints[technique.index()],
                             fade: pack_fade(dither),
-                            pad: [0; 3],
                         };
                         out.push(bucket, info, first_vertex, draw.count * corners);
                         out.recorded.push(draw);
@@ -332,7 +350,7 @@ impl Renderer {
                         technique,
                         dither,
                     };
-                    record_direct(&self.instances, out, record, draw.first, draw.leaf_scale);
+                    record_direct(out, record, draw.first, draw.leaf_scale);
                 }
             }
             // Prefixes of one cell's elements uploaded whole (impostor planes, ellipsoids,
@@ -353,7 +371,7 @@ impl Renderer {
                         technique,
                         dither,
                     };
-                    record_direct(&self.instances, out, record, range.first, 1.0);
+                    record_direct(out, record, range.first, 1.0);
                 }
             }
             // Baseline billboards: every quad of the chosen kind; and octahedral impostors.
@@ -372,7 +390,7 @@ impl Renderer {
                         technique,
                         dither,
                     };
-                    record_direct(&self.instances, out, record, first, 1.0);
+                    record_direct(out, record, first, 1.0);
                 }
             }
         }
@@ -634,27 +652,17 @@ struct Bucketed {
 /// whole): its `DrawInfo` (thresholds, technique and dither from `record`, unshaded) into the
 /// model's bucket of its source, drawing `record.count` elements from element `first`, and
 /// `record` itself.
-fn record_direct(
-    instances: &[treelod_runtime::Instance],
-    out: &mut Recording,
-    record: RecordedDraw,
-    first: u32,
-    leaf_scale: f32,
-) {
+fn record_direct(out: &mut Recording, record: RecordedDraw, first: u32, leaf_scale: f32) {
     let corners = record.source.corners();
-    let transform = instances[record.instance as usize].transform;
     let info = DrawInfo {
-        model: transform.to_cols_array_2d(),
         tau_p: record.tau_points,
         tau_t: record.tau_triangles,
         cell: record.cell,
-        scale: max_axis_scale(transform),
         shading: 1.0,
         leaf_scale,
         instance: record.instance,
         tint: tint(record.technique),
         fade: pack_fade(record.dither),
-        pad: [0; 3],
     };
     let bucket = record.source.bucket().of_model(record.model.0 as usize);
     out.push(bucket, info, corners * first, corners * record.count);

@@ -698,8 +698,15 @@ impl GpuSelection {
         self.every_instance_point_tree = false;
     }
 
-    /// Makes the render pass's frame bind group (uniform, draws, pool twice) if it is missing.
-    pub fn ensure_frame_group(&mut self, device: &wgpu::Device, layout: &wgpu::BindGroupLayout, frame: &wgpu::Buffer) {
+    /// Makes the render pass's frame bind group (uniform, draws, pool twice, the renderer's
+    /// instance transforms) if it is missing.
+    pub fn ensure_frame_group(
+        &mut self,
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        frame: &wgpu::Buffer,
+        transforms: &wgpu::Buffer,
+    ) {
         if self.frame_group.is_some() {
             return;
         }
@@ -711,8 +718,14 @@ impl GpuSelection {
                 wgpu::BindGroupEntry { binding: 1, resource: self.draws.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 2, resource: self.pool.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 3, resource: self.pool.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: transforms.as_entire_binding() },
             ],
         }));
+    }
+
+    /// Drops the frame bind group: one of the buffers it holds was replaced.
+    pub(crate) fn forget_frame_group(&mut self) {
+        self.frame_group = None;
     }
 
     /// Runs the selection for `frame` (its `block_count` and `stats_at` are filled here): one

@@ -41,10 +41,13 @@ impl Pipelines {
                     },
                     count: None,
                 },
-                // The draws: the ellipsoids' fragment stage reads their transforms too.
+                // The draws: the ellipsoids' and lines' fragment stages read them too.
                 storage(1, wgpu::ShaderStages::VERTEX_FRAGMENT),
                 storage(2, wgpu::ShaderStages::VERTEX),
                 storage(3, wgpu::ShaderStages::VERTEX),
+                // The instances' transforms, which the draws name (and the fragment stages
+                // that ray-cast in model space read).
+                storage(4, wgpu::ShaderStages::VERTEX_FRAGMENT),
             ],
         });
         let float = wgpu::TextureSampleType::Float { filterable: true };

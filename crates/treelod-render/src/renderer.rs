@@ -17,7 +17,7 @@ use treelod_runtime::{
 
 use crate::assign::PolicyModels;
 use crate::camera::Camera;
-use crate::draws::{DrawInfo, EVERY_PIXEL, RECORD_CHUNK, RecordedDraw, Recording, View, pack_fade};
+use crate::draws::{DrawInfo, EVERY_PIXEL, InstanceTransform, RECORD_CHUNK, RecordedDraw, Recording, View, pack_fade};
 use crate::gpu_select::{GpuDraw, GpuSelection, InstanceDrawGpu, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
 use crate::pipelines::Pipelines;
@@ -143,6 +143,10 @@ pub struct Renderer {
     /// [`FRAME_UNIFORM_STRIDE`] steps.
     frame_buffer: wgpu::Buffer,
     draw_buffer: wgpu::Buffer,
+    /// The instances' transforms ([`InstanceTransform`]), which the draws name by index.
+    transform_buffer: wgpu::Buffer,
+    /// The instances changed since their transforms were uploaded.
+    transforms_stale: bool,
     pub(crate) indirect_buffer: wgpu::Buffer,
     /// The streamed triangles and points of every model (see `streaming`).
     pub(crate) pool_buffer: wgpu::Buffer,
@@ -306,7 +310,10 @@ impl Renderer {
         let max_units = u32::try_from(settings.memory_budget.min(binding_limit) / UNIT).unwrap_or(u32::MAX).max(1);
         let pool = Pool::new(INITIAL_POOL_UNITS, max_units);
         let pool_buffer = storage_buffer(device, "treelod pool", u64::from(pool.capacity()).max(1) * UNIT, true);
-        let frame_bind_groups = frame_bind_groups(device, &frame_layout, &frame_buffer, &draw_buffer, &pool_buffer);
+        let transform_buffer =
+            storage_buffer(device, "treelod instance transforms", 64 * size_of::<InstanceTransform>() as u64, false);
+        let frame_bind_groups =
+            frame_bind_groups(device, &frame_layout, &frame_buffer, [&draw_buffer, &pool_buffer, &transform_buffer]);
         Self {
             formats,
             settings,
@@ -332,6 +339,8 @@ impl Renderer {
             noise_sampler,
             frame_buffer,
             draw_buffer,
+            transform_buffer,
+            transforms_stale: false,
             indirect_buffer,
             pool_buffer,
             frame_bind_groups,
@@ -523,8 +532,7 @@ impl Renderer {
         // after this copy.
         queue.submit([encoder.finish()]);
         self.pool_buffer = buffer;
-        self.frame_bind_groups =
-            frame_bind_groups(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
+        self.frame_bind_groups = self.frame_bind_groups_now(device);
     }
 
     /// How many entries of a view's lists one task records at most (default 512; at least 1).
@@ -566,6 +574,7 @@ impl Renderer {
         }
         self.scene_bounds = (lo.is_finite() && hi.is_finite() && lo.cmple(hi).all()).then_some((lo, hi));
         self.gpu_instances_stale = true;
+        self.transforms_stale = true;
     }
 
     /// The selection of the last [`Self::prepare`] (before residency clamped it).
@@ -722,6 +731,7 @@ impl Renderer {
             gpu.set_instances(device, queue, &self.instances, &self.lods);
         }
         self.gpu_instances_stale = false;
+        self.upload_transforms(device, queue);
         self.gpu_frame = false;
         // GPU selection takes the point tree's part of frames without shadows (see
         // `enable_gpu_selection`): the whole frame without a policy, the trees the policy draws
@@ -740,7 +750,7 @@ impl Renderer {
             self.main = View::default();
             gpu.point_tree_everywhere(queue);
             let counts = gpu.prepare(device, queue, select_frame_gpu(&runtime_camera, &lod_settings));
-            gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer);
+            gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
             let pool_bytes = gpu.pool_bytes();
             self.gpu_frame = true;
             self.write_frame_uniform(queue, camera);
@@ -870,12 +880,46 @@ impl Renderer {
 
     /// Uploads the recorded draw infos and indirect draws of the frame, growing their buffers
     /// (and the frame bind groups that name the draw infos) as needed.
+    /// Uploads the instances' transforms if they changed since the last upload, growing their
+    /// buffer (and the bind groups that hold it) to fit.
+    fn upload_transforms(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
+        if !self.transforms_stale {
+            return;
+        }
+        self.transforms_stale = false;
+        let bytes = (self.instances.len().max(1) * size_of::<InstanceTransform>()) as u64;
+        if bytes > self.transform_buffer.size() {
+            self.transform_buffer =
+                storage_buffer(device, "treelod instance transforms", bytes.next_power_of_two(), false);
+            self.frame_bind_groups = self.frame_bind_groups_now(device);
+            if let Some(gpu) = &mut self.gpu {
+                gpu.forget_frame_group();
+            }
+        }
+        if let Some(size) = wgpu::BufferSize::new((self.instances.len() * size_of::<InstanceTransform>()) as u64)
+            && let Some(mut staged) = queue.write_buffer_with(&self.transform_buffer, 0, size)
+        {
+            let transforms: Vec<InstanceTransform> =
+                self.instances.iter().map(|i| InstanceTransform::new(i.transform)).collect();
+            staged.slice(..).copy_from_slice(bytemuck::cast_slice(&transforms));
+        }
+    }
+
+    /// The frame bind groups of the renderer's buffers as they are now.
+    fn frame_bind_groups_now(&self, device: &wgpu::Device) -> Vec<wgpu::BindGroup> {
+        frame_bind_groups(
+            device,
+            &self.frame_layout,
+            &self.frame_buffer,
+            [&self.draw_buffer, &self.pool_buffer, &self.transform_buffer],
+        )
+    }
+
     fn upload_draws(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
         let draw_bytes = (self.info_count.max(1) * size_of::<DrawInfo>()) as u64;
         if draw_bytes > self.draw_buffer.size() {
             self.draw_buffer = storage_buffer(device, "treelod draws", draw_bytes.next_power_of_two(), false);
-            self.frame_bind_groups =
-                frame_bind_groups(device, &self.frame_layout, &self.frame_buffer, &self.draw_buffer, &self.pool_buffer);
+            self.frame_bind_groups = self.frame_bind_groups_now(device);
         }
         // The infos straight from the pieces' buckets into the queue's staging memory.
         if let Some(size) = wgpu::BufferSize::new((self.info_count * size_of::<DrawInfo>()) as u64)
@@ -968,7 +1012,7 @@ impl Renderer {
         let Some(gpu) = self.gpu.as_mut() else { unreachable!("prepare_hybrid runs with GPU selection") };
         gpu.set_instance_draws(queue, &draws);
         let gpu_counts = gpu.prepare(device, queue, select_frame_gpu(runtime_camera, lod_settings));
-        gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer);
+        gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
         let pool_bytes = gpu.pool_bytes();
         self.gpu_frame = true;
 
@@ -1364,8 +1408,7 @@ fn frame_bind_groups(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     frame: &wgpu::Buffer,
-    draws: &wgpu::Buffer,
-    pool: &wgpu::Buffer,
+    [draws, pool, transforms]: [&wgpu::Buffer; 3],
 ) -> Vec<wgpu::BindGroup> {
     (0..=MAX_CASCADES as u64)
         .map(|view| {
@@ -1384,6 +1427,7 @@ fn frame_bind_groups(
                     wgpu::BindGroupEntry { binding: 1, resource: draws.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 2, resource: pool.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 3, resource: pool.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 4, resource: transforms.as_entire_binding() },
                 ],
             })
         })

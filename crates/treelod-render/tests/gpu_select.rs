@@ -263,3 +263,56 @@ fn a_model_with_no_tree_in_view_does_not_hide_the_next_models_trees() {
     assert!(covered > 100, "the second model's trees are in view: {covered} pixels");
     assert!(diff * 200 <= covered, "{diff} of {covered} pixels differ");
 }
+
+/// The draws name their instance's transform in a buffer the renderer uploads when the list of
+/// instances changes. After a frame of one tree, a list of 300 (the buffer grows, and the bind
+/// groups of both paths that hold it are made anew) whose last tree is the one in view, then the
+/// same list with that tree moved (uploaded again, the buffer kept): each frame shows exactly what
+/// a renderer given that list first shows, with CPU selection and with GPU selection.
+#[test]
+fn changed_instances_are_drawn_at_their_new_transforms_on_both_paths() {
+    let gpu = gpu();
+    let container = demo_container();
+    let cam = Camera::look_at(vec3(0.0, 5.0, 16.0), vec3(0.0, 5.0, 0.0), 0.9, 160, 120);
+    let behind = Mat4::from_translation(vec3(0.0, 0.0, 500.0));
+    let row = |n: usize, seen: Mat4| -> Vec<Mat4> { (0..n).map(|i| if i + 1 == n { seen } else { behind }).collect() };
+    let lists = [
+        vec![Mat4::IDENTITY],
+        row(300, Mat4::from_translation(vec3(-4.0, 0.0, 0.0))),
+        row(
+            300,
+            Mat4::from_scale_rotation_translation(Vec3::splat(0.8), Quat::from_rotation_y(1.0), vec3(5.0, 0.0, 0.0)),
+        ),
+        // The transforms outgrow their buffer again (32,800 bytes past its 32 KiB), the
+        // selection's draws not.
+        row(410, Mat4::from_translation(vec3(3.0, 0.0, 0.0))),
+    ];
+    for gpu_selection in [false, true] {
+        let new_renderer = || {
+            let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+            let tree = renderer.add_model(&gpu.device, &gpu.queue, container.clone()).expect("uploads");
+            if gpu_selection {
+                renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("fits");
+            }
+            (renderer, tree)
+        };
+        let (mut renderer, tree) = new_renderer();
+        let mut images = Vec::new();
+        for (k, list) in lists.iter().enumerate() {
+            let instances: Vec<Instance> = list.iter().map(|&transform| Instance { model: tree, transform }).collect();
+            renderer.set_instances(&instances);
+            let (image, stats) = render_image(&gpu, &mut renderer, &cam, BACKGROUND).expect("renders");
+            // GPU selection's counts are read back from an earlier frame.
+            assert_eq!(stats.gpu_selection, gpu_selection, "list {k}");
+            assert!(gpu_selection || stats.instances_visible == 1, "list {k}: {stats:?}");
+            let (mut fresh, tree) = new_renderer();
+            fresh.set_instances(&list.iter().map(|&transform| Instance { model: tree, transform }).collect::<Vec<_>>());
+            let (reference, _) = render_image(&gpu, &mut fresh, &cam, BACKGROUND).expect("renders");
+            let (diff, covered) = differing(&image, &reference);
+            assert!(covered > 300 && diff == 0, "GPU selection {gpu_selection}, list {k}: {diff} of {covered} differ");
+            images.push(image);
+        }
+        let (moved, covered) = differing(&images[1], &images[2]);
+        assert!(moved * 4 > covered, "the moved tree is drawn elsewhere: {moved} of {covered} pixels differ");
+    }
+}
