@@ -36,29 +36,44 @@ struct VertexGpu {
     ao: f32,
 }
 
-/// Point `index` of `container` as the pool holds it: its `flags` (reserved in the file, spec
-/// §6.5) carry its ambient-occlusion byte (§6.14) in bits 0–7 and its facing byte (§6.5.1) in
-/// bits 8–15, each 0 without.
-fn gpu_point(container: &Container, index: usize, point: PointRecord) -> PointRecord {
-    let byte = |bytes: &[u8]| bytes.get(index).copied().map_or(0, u32::from);
-    PointRecord { flags: byte(container.point_ao()) | (byte(container.point_facing()) << 8), ..point }
+/// A point as the pool holds it: its `flags` (reserved in the file, spec §6.5) carry its
+/// ambient-occlusion byte (§6.14) in bits 0–7 and its facing byte (§6.5.1) in bits 8–15, each 0
+/// without. `PointAttributes` holds the container's two byte arrays, looked up once: a point
+/// stream of tens of thousands of points once looked up both sections per point, a seventh of
+/// the willow's frame time while it streamed.
+struct PointAttributes<'a> {
+    ao: &'a [u8],
+    facing: &'a [u8],
 }
 
-/// Points `first..` of `container` (`records`) as the pools hold them ([`gpu_point`]): the
-/// file's records themselves where they already are (no `POINT_AO`, no `POINT_FACING` and every
-/// reserved `flags` 0, which the shaders would otherwise read as occlusion and facing), else
-/// rewritten into `scratch`.
+impl<'a> PointAttributes<'a> {
+    fn of(container: &'a Container) -> Self {
+        Self { ao: container.point_ao(), facing: container.point_facing() }
+    }
+
+    /// Point `index` (`point`) as the pool holds it.
+    fn gpu_point(&self, index: usize, point: PointRecord) -> PointRecord {
+        let byte = |bytes: &[u8]| bytes.get(index).copied().map_or(0, u32::from);
+        PointRecord { flags: byte(self.ao) | (byte(self.facing) << 8), ..point }
+    }
+}
+
+/// Points `first..` of `container` (`records`) as the pools hold them
+/// ([`PointAttributes::gpu_point`]): the file's records themselves where they already are (no
+/// `POINT_AO`, no `POINT_FACING` and every reserved `flags` 0, which the shaders would otherwise
+/// read as occlusion and facing), else rewritten into `scratch`.
 pub(crate) fn gpu_points<'a>(
     container: &Container,
     first: usize,
     records: &'a [PointRecord],
     scratch: &'a mut Vec<PointRecord>,
 ) -> &'a [PointRecord] {
-    if container.point_ao().is_empty() && container.point_facing().is_empty() && records.iter().all(|p| p.flags == 0) {
+    let attributes = PointAttributes::of(container);
+    if attributes.ao.is_empty() && attributes.facing.is_empty() && records.iter().all(|p| p.flags == 0) {
         return records;
     }
     scratch.clear();
-    scratch.extend(records.iter().enumerate().map(|(k, &p)| gpu_point(container, first + k, p)));
+    scratch.extend(records.iter().enumerate().map(|(k, &p)| attributes.gpu_point(first + k, p)));
     scratch
 }
 
@@ -299,9 +314,10 @@ impl Renderer {
         let lod = ModelLod::from_container(&container);
         let share = usize::try_from(self.pool_budget() / UNIT / FAR_LIST_POOL_SHARE).unwrap_or(usize::MAX);
         let pinned = lod.far_list().len().min(lod.roots().len().saturating_add(share));
+        let attributes = PointAttributes::of(&container);
         let roots: Vec<PointRecord> = lod.far_list()[..pinned]
             .iter()
-            .map(|&i| gpu_point(&container, i as usize, container.points()[i as usize]))
+            .map(|&i| attributes.gpu_point(i as usize, container.points()[i as usize]))
             .collect();
         let roots_len = u32::try_from(roots.len()).unwrap_or(u32::MAX);
         let cells = container.cells().len();
