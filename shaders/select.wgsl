@@ -49,13 +49,11 @@ struct Block {
     _pad1: u32,
 }
 
-// Rust twin: InstanceGpu. `index` is the instance's index in `Renderer::set_instances`' list.
+// Rust twin: InstanceGpu. `index` is the instance's index in `Renderer::set_instances`' list,
+// where its transform is (`transforms`, the renderer's, which the tree shaders read too).
 struct InstanceGpu {
-    transform: mat4x4<f32>,
     model: u32,
     index: u32,
-    _pad0: u32,
-    _pad1: u32,
 }
 
 // Rust twin: InstanceDrawGpu. What the selection draws of one instance this frame, indexed by
@@ -150,6 +148,7 @@ struct DispatchArgs {
 @group(0) @binding(10) var<storage, read_write> draws: array<DrawInfo>;
 @group(0) @binding(11) var<storage, read_write> indirect: array<DrawIndirect>;
 @group(0) @binding(12) var<storage, read> instance_draws: array<InstanceDraw>;
+@group(0) @binding(13) var<storage, read> transforms: array<InstanceTransform>;
 
 fn v3(a: array<f32, 3>) -> vec3<f32> {
     return vec3<f32>(a[0], a[1], a[2]);
@@ -319,7 +318,7 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     cur_draw.technique = min(cur_draw.technique, TECHNIQUE_COUNT - 1u);
     model_index = current.model;
     cur_model = models[model_index];
-    let m = current.transform;
+    let m = transforms[current.index].model;
     let ax = m[0].xyz;
     let ay = m[1].xyz;
     let az = m[2].xyz;

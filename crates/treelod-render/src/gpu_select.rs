@@ -124,14 +124,14 @@ struct BlockGpu {
     _pad: [u32; 2],
 }
 
-/// An instance. WGSL twin: `InstanceGpu`.
+/// An instance in block order: its model, and its index in [`crate::Renderer::set_instances`]'
+/// list, where the selection reads its transform (the renderer's instance transforms, which the
+/// tree shaders read too: the transform is held once on the GPU). WGSL twin: `InstanceGpu`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct InstanceGpu {
-    transform: [[f32; 4]; 4],
     model: u32,
     index: u32,
-    _pad: [u32; 2],
 }
 
 /// A model's selection constants and buckets. WGSL twin: `ModelGpu`.
@@ -210,7 +210,7 @@ impl InstanceDrawGpu {
 const _: () = assert!(size_of::<InstanceDrawGpu>() == 8);
 const _: () = assert!(size_of::<SelectFrameGpu>() == 160);
 const _: () = assert!(size_of::<BlockGpu>() == 32);
-const _: () = assert!(size_of::<InstanceGpu>() == 80);
+const _: () = assert!(size_of::<InstanceGpu>() == 8);
 const _: () = assert!(size_of::<ModelGpu>() == 104);
 const _: () = assert!(size_of::<CellGpu>() == 80);
 
@@ -582,12 +582,7 @@ impl GpuSelection {
                 lo = lo.min(c - Vec3::splat(r));
                 hi = hi.max(c + Vec3::splat(r));
                 let instance = &instances[index as usize];
-                gpu_instances.push(InstanceGpu {
-                    transform: instance.transform.to_cols_array_2d(),
-                    model: instance.model,
-                    index,
-                    _pad: [0; 2],
-                });
+                gpu_instances.push(InstanceGpu { model: instance.model, index });
             }
             let centre = 0.5 * (lo + hi);
             let radius =
@@ -723,14 +718,24 @@ impl GpuSelection {
         }));
     }
 
-    /// Drops the frame bind group: one of the buffers it holds was replaced.
-    pub(crate) fn forget_frame_group(&mut self) {
+    /// Drops the bind groups that hold the renderer's instance transforms: that buffer was
+    /// replaced.
+    pub(crate) fn forget_transforms(&mut self) {
         self.frame_group = None;
+        self.select_group = None;
     }
 
     /// Runs the selection for `frame` (its `block_count` and `stats_at` are filled here): one
     /// submission; returns the counts of the latest frame read back so far.
-    pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, mut frame: SelectFrameGpu) -> GpuCounts {
+    /// `transforms` is the renderer's buffer of the instances' transforms (`InstanceTransform`),
+    /// uploaded before.
+    pub fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        mut frame: SelectFrameGpu,
+        transforms: &wgpu::Buffer,
+    ) -> GpuCounts {
         if self.collect(device) {
             self.layout_buckets(device, queue);
         }
@@ -767,6 +772,7 @@ impl GpuSelection {
                     wgpu::BindGroupEntry { binding: 10, resource: self.draws.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 11, resource: self.indirect.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 12, resource: self.instance_draws.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 13, resource: transforms.as_entire_binding() },
                 ],
             })
         });

@@ -749,7 +749,7 @@ impl Renderer {
             // GPU selection: one compute submission writes the draws; nothing per instance here.
             self.main = View::default();
             gpu.point_tree_everywhere(queue);
-            let counts = gpu.prepare(device, queue, select_frame_gpu(&runtime_camera, &lod_settings));
+            let counts = gpu.prepare(device, queue, select_frame_gpu(&runtime_camera, &lod_settings), &self.transform_buffer);
             gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
             let pool_bytes = gpu.pool_bytes();
             self.gpu_frame = true;
@@ -893,7 +893,7 @@ impl Renderer {
                 storage_buffer(device, "treelod instance transforms", bytes.next_power_of_two(), false);
             self.frame_bind_groups = self.frame_bind_groups_now(device);
             if let Some(gpu) = &mut self.gpu {
-                gpu.forget_frame_group();
+                gpu.forget_transforms();
             }
         }
         if let Some(size) = wgpu::BufferSize::new((self.instances.len() * size_of::<InstanceTransform>()) as u64)
@@ -1011,7 +1011,7 @@ impl Renderer {
 
         let Some(gpu) = self.gpu.as_mut() else { unreachable!("prepare_hybrid runs with GPU selection") };
         gpu.set_instance_draws(queue, &draws);
-        let gpu_counts = gpu.prepare(device, queue, select_frame_gpu(runtime_camera, lod_settings));
+        let gpu_counts = gpu.prepare(device, queue, select_frame_gpu(runtime_camera, lod_settings), &self.transform_buffer);
         gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
         let pool_bytes = gpu.pool_bytes();
         self.gpu_frame = true;
