@@ -749,7 +749,8 @@ impl Renderer {
             // GPU selection: one compute submission writes the draws; nothing per instance here.
             self.main = View::default();
             gpu.point_tree_everywhere(queue);
-            let counts = gpu.prepare(device, queue, select_frame_gpu(&runtime_camera, &lod_settings), &self.transform_buffer);
+            let counts =
+                gpu.prepare(device, queue, select_frame_gpu(&runtime_camera, &lod_settings), &self.transform_buffer);
             gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
             let pool_bytes = gpu.pool_bytes();
             self.gpu_frame = true;
@@ -878,8 +879,6 @@ impl Renderer {
         stats
     }
 
-    /// Uploads the recorded draw infos and indirect draws of the frame, growing their buffers
-    /// (and the frame bind groups that name the draw infos) as needed.
     /// Uploads the instances' transforms if they changed since the last upload, growing their
     /// buffer (and the bind groups that hold it) to fit.
     fn upload_transforms(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
@@ -899,9 +898,17 @@ impl Renderer {
         if let Some(size) = wgpu::BufferSize::new((self.instances.len() * size_of::<InstanceTransform>()) as u64)
             && let Some(mut staged) = queue.write_buffer_with(&self.transform_buffer, 0, size)
         {
-            let transforms: Vec<InstanceTransform> =
-                self.instances.iter().map(|i| InstanceTransform::new(i.transform)).collect();
-            staged.slice(..).copy_from_slice(bytemuck::cast_slice(&transforms));
+            // Into the staging memory a run at a time (10^6 instances are 80 MB).
+            let mut rest = staged.slice(..);
+            let mut run = Vec::with_capacity(1024);
+            for instances in self.instances.chunks(1024) {
+                run.clear();
+                run.extend(instances.iter().map(|i| InstanceTransform::new(i.transform)));
+                let bytes: &[u8] = bytemuck::cast_slice(&run);
+                let (mut head, tail) = rest.split_at(bytes.len());
+                head.copy_from_slice(bytes);
+                rest = tail;
+            }
         }
     }
 
@@ -915,6 +922,8 @@ impl Renderer {
         )
     }
 
+    /// Uploads the recorded draw infos and indirect draws of the frame, growing their buffers
+    /// (and the frame bind groups that name the draw infos) as needed.
     fn upload_draws(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) {
         let draw_bytes = (self.info_count.max(1) * size_of::<DrawInfo>()) as u64;
         if draw_bytes > self.draw_buffer.size() {
@@ -1011,7 +1020,8 @@ impl Renderer {
 
         let Some(gpu) = self.gpu.as_mut() else { unreachable!("prepare_hybrid runs with GPU selection") };
         gpu.set_instance_draws(queue, &draws);
-        let gpu_counts = gpu.prepare(device, queue, select_frame_gpu(runtime_camera, lod_settings), &self.transform_buffer);
+        let gpu_counts =
+            gpu.prepare(device, queue, select_frame_gpu(runtime_camera, lod_settings), &self.transform_buffer);
         gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
         let pool_bytes = gpu.pool_bytes();
         self.gpu_frame = true;
