@@ -28,7 +28,7 @@ use crate::shadows::{Cascade, Casters, MAX_CASCADES, ShadowMaps, ShadowUniform, 
 use crate::stats::{FrameStats, ShadowStats};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::technique::{Bucket, DrawSource};
-use crate::upload::{Model, gpu_points, storage_buffer};
+use crate::upload::{Model, storage_buffer, upload_gpu_points};
 
 /// A model added with [`Renderer::add_model`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -831,20 +831,24 @@ impl Renderer {
             self.wanted[request.model][request.cell] = [0; 2];
         }
         self.grow_pool_buffer(device, queue);
-        let mut points = Vec::new();
         for upload in &self.uploads {
             let Some(model) = self.models.get(upload.model) else { continue };
             let (first, end) = (upload.first as usize, (upload.first + upload.count) as usize);
-            let data: &[u8] = match upload.array {
-                Array::Triangles => bytemuck::cast_slice(&model.container.triangles()[first..end]),
-                Array::Points => bytemuck::cast_slice(gpu_points(
+            match upload.array {
+                Array::Triangles => queue.write_buffer(
+                    &self.pool_buffer,
+                    upload.offset,
+                    bytemuck::cast_slice(&model.container.triangles()[first..end]),
+                ),
+                Array::Points => upload_gpu_points(
+                    queue,
+                    &self.pool_buffer,
+                    upload.offset,
                     &model.container,
                     first,
                     &model.container.points()[first..end],
-                    &mut points,
-                )),
-            };
-            queue.write_buffer(&self.pool_buffer, upload.offset, data);
+                ),
+            }
         }
 
         // The draws of every view, clamped to what is resident, bucketed by model and kind.

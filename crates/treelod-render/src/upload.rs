@@ -77,6 +77,37 @@ pub(crate) fn gpu_points<'a>(
     scratch
 }
 
+/// Uploads points `first..` of `container` (`records`) to `buffer` at `offset` as the pools hold
+/// them ([`gpu_points`]): where they must be rewritten, straight into the queue's staging memory,
+/// a run at a time, rather than into a list first (the maple's frame that streams 43 MB copied
+/// its points twice).
+pub(crate) fn upload_gpu_points(
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    container: &Container,
+    first: usize,
+    records: &[PointRecord],
+) {
+    let attributes = PointAttributes::of(container);
+    if attributes.ao.is_empty() && attributes.facing.is_empty() && records.iter().all(|p| p.flags == 0) {
+        queue.write_buffer(buffer, offset, bytemuck::cast_slice(records));
+        return;
+    }
+    let Some(size) = wgpu::BufferSize::new(size_of_val(records) as u64) else { return };
+    let Some(mut staged) = queue.write_buffer_with(buffer, offset, size) else { return };
+    let mut rest = staged.slice(..);
+    let mut run = Vec::with_capacity(1024);
+    for (k, chunk) in records.chunks(1024).enumerate() {
+        run.clear();
+        run.extend(chunk.iter().enumerate().map(|(j, &p)| attributes.gpu_point(first + 1024 * k + j, p)));
+        let bytes: &[u8] = bytemuck::cast_slice(&run);
+        let (mut head, tail) = rest.split_at(bytes.len());
+        head.copy_from_slice(bytes);
+        rest = tail;
+    }
+}
+
 /// Records as the GPU holds them: each one's `flags` (reserved in the file, spec §6.8, §6.9, and
 /// not read) replaced by its ambient-occlusion byte `ao[i]` (§6.14), 0 where `ao` is empty (no
 /// `ELLIPSOID_AO`, `LINE_AO`).
