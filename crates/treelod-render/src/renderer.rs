@@ -28,7 +28,7 @@ use crate::shadows::{Cascade, Casters, MAX_CASCADES, ShadowMaps, ShadowUniform, 
 use crate::stats::{FrameStats, ShadowStats};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::technique::{Bucket, DrawSource};
-use crate::upload::{Model, storage_buffer, upload_gpu_points};
+use crate::upload::{Model, storage_buffer, upload_gpu_points, write_in_runs};
 
 /// A model added with [`Renderer::add_model`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -899,21 +899,11 @@ impl Renderer {
                 gpu.forget_transforms();
             }
         }
-        if let Some(size) = wgpu::BufferSize::new((self.instances.len() * size_of::<InstanceTransform>()) as u64)
-            && let Some(mut staged) = queue.write_buffer_with(&self.transform_buffer, 0, size)
-        {
-            // Into the staging memory a run at a time (10^6 instances are 80 MB).
-            let mut rest = staged.slice(..);
-            let mut run = Vec::with_capacity(1024);
-            for instances in self.instances.chunks(1024) {
-                run.clear();
-                run.extend(instances.iter().map(|i| InstanceTransform::new(i.transform)));
-                let bytes: &[u8] = bytemuck::cast_slice(&run);
-                let (mut head, tail) = rest.split_at(bytes.len());
-                head.copy_from_slice(bytes);
-                rest = tail;
-            }
-        }
+        // Into the staging memory a run at a time (10^6 instances are 80 MB).
+        let instances = &self.instances;
+        write_in_runs(queue, &self.transform_buffer, 0, instances.len(), |range, run| {
+            run.extend(instances[range].iter().map(|i| InstanceTransform::new(i.transform)));
+        });
     }
 
     /// The frame bind groups of the renderer's buffers as they are now.

@@ -51,6 +51,12 @@ impl<'a> PointAttributes<'a> {
         Self { ao: container.point_ao(), facing: container.point_facing() }
     }
 
+    /// Whether `records` are already as the pool holds them: no `POINT_AO`, no `POINT_FACING` and
+    /// every reserved `flags` 0 (which the shaders would otherwise read as occlusion and facing).
+    fn as_stored(&self, records: &[PointRecord]) -> bool {
+        self.ao.is_empty() && self.facing.is_empty() && records.iter().all(|p| p.flags == 0)
+    }
+
     /// Point `index` (`point`) as the pool holds it.
     fn gpu_point(&self, index: usize, point: PointRecord) -> PointRecord {
         let byte = |bytes: &[u8]| bytes.get(index).copied().map_or(0, u32::from);
@@ -59,9 +65,8 @@ impl<'a> PointAttributes<'a> {
 }
 
 /// Points `first..` of `container` (`records`) as the pools hold them
-/// ([`PointAttributes::gpu_point`]): the file's records themselves where they already are (no
-/// `POINT_AO`, no `POINT_FACING` and every reserved `flags` 0, which the shaders would otherwise
-/// read as occlusion and facing), else rewritten into `scratch`.
+/// ([`PointAttributes::gpu_point`]): the file's records themselves where they already are
+/// ([`PointAttributes::as_stored`]), else rewritten into `scratch`.
 pub(crate) fn gpu_points<'a>(
     container: &Container,
     first: usize,
@@ -69,7 +74,7 @@ pub(crate) fn gpu_points<'a>(
     scratch: &'a mut Vec<PointRecord>,
 ) -> &'a [PointRecord] {
     let attributes = PointAttributes::of(container);
-    if attributes.ao.is_empty() && attributes.facing.is_empty() && records.iter().all(|p| p.flags == 0) {
+    if attributes.as_stored(records) {
         return records;
     }
     scratch.clear();
@@ -90,17 +95,33 @@ pub(crate) fn upload_gpu_points(
     records: &[PointRecord],
 ) {
     let attributes = PointAttributes::of(container);
-    if attributes.ao.is_empty() && attributes.facing.is_empty() && records.iter().all(|p| p.flags == 0) {
+    if attributes.as_stored(records) {
         queue.write_buffer(buffer, offset, bytemuck::cast_slice(records));
         return;
     }
-    let Some(size) = wgpu::BufferSize::new(size_of_val(records) as u64) else { return };
+    write_in_runs(queue, buffer, offset, records.len(), |range, run: &mut Vec<PointRecord>| {
+        run.extend(records[range.clone()].iter().zip(range).map(|(&p, i)| attributes.gpu_point(first + i, p)));
+    });
+}
+
+/// Writes `count` records to `buffer` at `offset` straight into the queue's staging memory, a run
+/// of at most 1024 at a time: `fill(range, run)` appends records `range` of them to the empty
+/// `run`, exactly that many.
+pub(crate) fn write_in_runs<T: Pod>(
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    offset: u64,
+    count: usize,
+    mut fill: impl FnMut(std::ops::Range<usize>, &mut Vec<T>),
+) {
+    const RUN: usize = 1024;
+    let Some(size) = wgpu::BufferSize::new((count * size_of::<T>()) as u64) else { return };
     let Some(mut staged) = queue.write_buffer_with(buffer, offset, size) else { return };
     let mut rest = staged.slice(..);
-    let mut run = Vec::with_capacity(1024);
-    for (k, chunk) in records.chunks(1024).enumerate() {
+    let mut run = Vec::with_capacity(RUN.min(count));
+    for start in (0..count).step_by(RUN) {
         run.clear();
-        run.extend(chunk.iter().enumerate().map(|(j, &p)| attributes.gpu_point(first + 1024 * k + j, p)));
+        fill(start..(start + RUN).min(count), &mut run);
         let bytes: &[u8] = bytemuck::cast_slice(&run);
         let (mut head, tail) = rest.split_at(bytes.len());
         head.copy_from_slice(bytes);
