@@ -128,7 +128,7 @@ pub use renderer::{Instance, ModelId, RenderError, Renderer};
 pub use settings::{DebugView, DepthConvention, ImpostorBark, Pruning, RendererFormats, Settings, prune_scale};
 pub use shadows::{Cascade, Casters, MAX_CASCADES, Shadows, cascade_splits, fit_cascades};
 pub use sky::Sky;
-pub use stats::{FrameStats, ShadowStats};
+pub use stats::{FrameStats, PreparePhases, ShadowStats};
 pub use technique::DrawSource;
 
 /// WGSL for receiving the renderer's shadows in a host's own pipeline: declares group 2

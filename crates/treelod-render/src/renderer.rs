@@ -25,7 +25,7 @@ use crate::pipelines::Pipelines;
 use crate::settings::Pruning;
 use crate::settings::{DebugView, DepthConvention, RendererFormats, Settings, prune_scale};
 use crate::shadows::{Cascade, Casters, MAX_CASCADES, ShadowMaps, ShadowUniform, fit_cascades};
-use crate::stats::{FrameStats, ShadowStats};
+use crate::stats::{FrameStats, Laps, PreparePhases, ShadowStats};
 use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
 use crate::technique::{Bucket, DrawSource};
 use crate::upload::{Model, storage_buffer, upload_gpu_points, write_in_runs};
@@ -215,6 +215,8 @@ pub struct Renderer {
     pub(crate) indirect: Vec<wgpu::util::DrawIndirectArgs>,
     /// Scratch: [`Self::indirect`] as bytes for the upload.
     indirect_scratch: Vec<u8>,
+    /// Where the latest [`Self::prepare`] spent its time ([`Self::prepare_phases`]).
+    phases: PreparePhases,
 }
 
 /// What [`Renderer::select_view`] counted.
@@ -376,6 +378,7 @@ impl Renderer {
             info_count: 0,
             indirect: Vec::new(),
             indirect_scratch: Vec::new(),
+            phases: PreparePhases::default(),
         }
     }
 
@@ -589,6 +592,13 @@ impl Renderer {
         &self.main.recorded
     }
 
+    /// Where the latest [`Self::prepare`] spent its time on the CPU, phase by phase (zero before
+    /// the first): its selection time broken down, as `treelod bench` reports it.
+    #[must_use]
+    pub fn prepare_phases(&self) -> PreparePhases {
+        self.phases
+    }
+
     /// The points of the last [`Self::prepare`]'s draws that the vertex shader keeps (those in the
     /// cut: [`treelod_runtime::point_drawn`] at each draw's thresholds), as opposed to the points
     /// of [`FrameStats::submitted`], the prefixes submitted. A scan of the submitted points on the
@@ -694,6 +704,8 @@ impl Renderer {
 
     /// [`Self::prepare`] with the settings as they are.
     fn prepare_frame(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
+        self.phases = PreparePhases::default();
+        let mut laps = Laps::start();
         let settings = self.settings;
         let view_proj = camera.view_proj();
         let technique = settings.technique;
@@ -738,8 +750,9 @@ impl Renderer {
         // through the point tree's selection with one.
         let gpu_usable = self.cascades.is_empty() && self.gpu.as_ref().is_some_and(GpuSelection::usable);
         let policy_chooses = self.policy.chooses(settings.policy.as_ref());
+        laps.lap(&mut self.phases.setup);
         if gpu_usable && policy_chooses && !full_mesh {
-            return self.prepare_hybrid(device, queue, camera, &runtime_camera, &lod_settings);
+            return self.prepare_hybrid(device, queue, camera, &runtime_camera, &lod_settings, laps);
         }
         if gpu_usable
             && technique == Technique::Spt
@@ -754,7 +767,9 @@ impl Renderer {
             gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
             let pool_bytes = gpu.pool_bytes();
             self.gpu_frame = true;
+            laps.lap(&mut self.phases.select);
             self.write_frame_uniform(queue, camera);
+            laps.lap(&mut self.phases.upload);
             let mut instances = PerTechnique::default();
             instances[Technique::Spt] = counts.instances_visible;
             let mut submitted = PerPrimitive::default();
@@ -780,6 +795,7 @@ impl Renderer {
 
         // The camera's selection, then each cascade's, of the same assignment.
         self.assign(&runtime_camera);
+        laps.lap(&mut self.phases.assign);
         let mut main = std::mem::take(&mut self.main);
         let assignment = std::mem::take(&mut self.assignment);
         let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true, &assignment, full_mesh);
@@ -811,6 +827,7 @@ impl Renderer {
             shadow.instances += counts.instances;
         }
         self.cascade_assignments = assignments;
+        laps.lap(&mut self.phases.select);
 
         // What each cell needs: the largest prefix any view asked for.
         self.residency.begin_frame();
@@ -851,6 +868,8 @@ impl Renderer {
             }
         }
 
+        laps.lap(&mut self.phases.stream);
+
         // The draws of every view, clamped to what is resident, bucketed by model and kind.
         self.begin_draws();
         let mut stats = FrameStats {
@@ -877,9 +896,11 @@ impl Renderer {
         self.main = main;
         self.leaving = leaving;
         self.shadow_views = shadow_views;
+        laps.lap(&mut self.phases.record);
 
         self.write_frame_uniform(queue, camera);
         self.upload_draws(device, queue);
+        laps.lap(&mut self.phases.upload);
         stats
     }
 
@@ -971,8 +992,10 @@ impl Renderer {
         camera: &Camera,
         runtime_camera: &treelod_runtime::Camera,
         lod_settings: &LodSettings,
+        mut laps: Laps,
     ) -> FrameStats {
         self.assign(runtime_camera);
+        laps.lap(&mut self.phases.assign);
         let mut draws = std::mem::take(&mut self.gpu_instance_draws);
         draws.clear();
         draws.resize(self.instances.len(), InstanceDrawGpu::SKIP);
@@ -1019,6 +1042,7 @@ impl Renderer {
         gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
         let pool_bytes = gpu.pool_bytes();
         self.gpu_frame = true;
+        laps.lap(&mut self.phases.select);
 
         self.begin_draws();
         let mut instances = main.draws.visible;
@@ -1054,8 +1078,10 @@ impl Renderer {
         self.gpu_instance_draws = draws;
         self.main = main;
         self.leaving = leaving;
+        laps.lap(&mut self.phases.record);
         self.write_frame_uniform(queue, camera);
         self.upload_draws(device, queue);
+        laps.lap(&mut self.phases.upload);
         stats
     }
 

@@ -1,5 +1,8 @@
 //! The public statistics of a frame: what [`Renderer::prepare`] selected and submitted
-//! ([`FrameStats`]), and what its shadow pass draws ([`ShadowStats`]).
+//! ([`FrameStats`]), what its shadow pass draws ([`ShadowStats`]), and where its time went
+//! ([`PreparePhases`]).
+
+use std::time::{Duration, Instant};
 
 use treelod_runtime::{PerPrimitive, PerTechnique};
 
@@ -122,5 +125,58 @@ impl ShadowStats {
         self.draw_commands += view.draw_commands;
         self.ranges_clamped += view.ranges_clamped;
         self.submitted += view.submitted;
+    }
+}
+
+/// Where the latest [`Renderer::prepare`] spent its time on the CPU, phase by phase
+/// ([`Renderer::prepare_phases`]): what a host tuning its forest (the trees' count, the budgets,
+/// shadows) needs to see beside the frame's total. Wall clock, read with [`Instant`] at each
+/// phase's end; the phases follow one another, so they sum to the call's time but for the
+/// budget mode's steering around it.
+///
+/// With GPU selection the point tree's selection is the GPU's: `select` is then the CPU's
+/// selection of the other techniques' trees and the compute work's recording and submission,
+/// and `stream` is zero (every model is resident whole).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PreparePhases {
+    /// Before the trees: the occlusion queries' read-back, the shadow cascades' fitting and maps,
+    /// the instances' transforms when they changed.
+    pub setup: Duration,
+    /// The camera's assignment: the policy's choice of each tree's technique, its transitions.
+    pub assign: Duration,
+    /// Every view's selection: the camera's, that of the techniques trees in a transition leave,
+    /// and each shadow cascade's (its assignment from the light included).
+    pub select: Duration,
+    /// Streaming: what each cell needs, the residency's choice within the upload budget, the
+    /// pool's growth and the uploads of triangles and points.
+    pub stream: Duration,
+    /// The draw records of every view: prefixes clamped to what is resident, each range's draw
+    /// record in its bucket, the indirect draws.
+    pub record: Duration,
+    /// The frame's uniforms, draw records and indirect draws written to the GPU's queue.
+    pub upload: Duration,
+}
+
+impl PreparePhases {
+    /// The phases' sum.
+    #[must_use]
+    pub fn total(&self) -> Duration {
+        self.setup + self.assign + self.select + self.stream + self.record + self.upload
+    }
+}
+
+/// Charges the time since its last lap to one phase of [`PreparePhases`].
+pub(crate) struct Laps(Instant);
+
+impl Laps {
+    pub(crate) fn start() -> Self {
+        Self(Instant::now())
+    }
+
+    /// Adds the time since the last lap (or the start) to `phase`.
+    pub(crate) fn lap(&mut self, phase: &mut Duration) {
+        let now = Instant::now();
+        *phase += now.saturating_duration_since(self.0);
+        self.0 = now;
     }
 }

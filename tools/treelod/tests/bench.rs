@@ -39,7 +39,10 @@ precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primit
 trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
 trees_crossed,trees_octahedral,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,\
 primitives_impostors,primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed,\
-primitives_octahedral,noise,ref_noise,draw_commands";
+primitives_octahedral,noise,ref_noise,draw_commands,setup_ms,assign_ms,select_ms,stream_ms,record_ms,upload_ms";
+
+/// The CSV's phases of `Renderer::prepare`, in order.
+const PHASES: [&str; 6] = ["setup_ms", "assign_ms", "select_ms", "stream_ms", "record_ms", "upload_ms"];
 
 /// The techniques of the CSV's `trees_*` and `primitives_*` columns.
 const DRAWN_WITH: [&str; 10] = [
@@ -112,6 +115,14 @@ fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
         let (commands, ranges) = (number(&header, spt, "draw_commands"), number(&header, spt, "ranges"));
         assert!(commands > 0.0 && commands <= ranges, "{commands} draw commands for {ranges} ranges");
         assert_eq!(field(&header, full, "draw_commands"), "");
+        // `prepare`'s phases follow one another within the timed call; the point tree's frame
+        // selects and records ranges, and the counted full mesh has none.
+        let phases = PHASES.map(|p| number(&header, spt, p));
+        assert!(phases.iter().all(|&ms| ms >= 0.0), "{phases:?}");
+        let selection = number(&header, spt, "selection_ms");
+        assert!(phases.iter().sum::<f64>() <= selection + 1e-3, "{phases:?} within {selection} ms");
+        assert!(phases[2] > 0.0 && phases[4] > 0.0, "select and record take time: {phases:?}");
+        assert!(PHASES.iter().all(|p| field(&header, full, p).is_empty()), "{full:?}");
         // A forced technique changes no tree's technique; the counted full mesh has no draws.
         assert_eq!((field(&header, spt, "transitions"), field(&header, full, "transitions")), ("0", ""));
         // Every tree is drawn with the point tree, and the counted full mesh draws nothing.
@@ -126,6 +137,8 @@ fn a_short_fly_through_of_the_built_in_forest_writes_csv_json_and_plot() {
             assert_eq!((number(&header, spt, &trees), number(&header, spt, &primitives)), expected, "{technique}");
         }
     }
+    assert!(stdout.lines().any(|l| l.starts_with("spt prepare ms: setup ")), "{stdout}");
+    assert!(!stdout.contains("full prepare ms"), "{stdout}");
     let phases: Vec<&str> = rows.iter().step_by(2).map(|r| field(&header, r, "phase")).collect();
     assert_eq!(phases.first(), Some(&"overview"));
     assert_eq!(phases.last(), Some(&"back"));

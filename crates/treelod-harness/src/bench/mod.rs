@@ -28,7 +28,7 @@ use rayon::prelude::*;
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, render_image_timed, render_prepared_timed};
 use treelod_render::{
-    Camera, Instance, ModelId, PerTechnique, Policy, Primitive, Pruning, Renderer, Settings, Technique,
+    Camera, Instance, ModelId, PerTechnique, Policy, PreparePhases, Primitive, Pruning, Renderer, Settings, Technique,
 };
 
 use self::forest::{Forest, Shape};
@@ -291,6 +291,9 @@ pub struct Row {
     /// (`FrameStats::by_technique`: a transition's leaving draws under the technique left).
     /// `None` for the counted full mesh.
     pub drawn_with: Option<(PerTechnique<u32>, PerTechnique<u64>)>,
+    /// Where `Renderer::prepare` spent `selection_ms`, phase by phase
+    /// (`Renderer::prepare_phases`); `None` for the counted full mesh.
+    pub phases: Option<PreparePhases>,
 }
 
 impl Row {
@@ -663,6 +666,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                     bytes_uploaded: None,
                     bytes_resident: None,
                     selection_ms: ms,
+                    phases: None,
                     gpu_ms: reference_shot.as_ref().and_then(|(_, ms)| *ms),
                     shadow_primitives: None,
                     transitions: None,
@@ -706,6 +710,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 bytes_uploaded: Some(stats.bytes_uploaded),
                 bytes_resident: Some(stats.bytes_resident),
                 selection_ms,
+                phases: Some(f.renderer.prepare_phases()),
                 gpu_ms: None,
                 shadow_primitives: options.shadows.then(|| stats.shadow.primitives()),
                 transitions: Some(stats.transitions),

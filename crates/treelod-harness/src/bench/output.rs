@@ -409,8 +409,38 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 4]) -> String {
             .collect();
         let _ = writeln!(out, "{technique} drew its trees with: {}", parts.join("; "));
     }
+    for line in phase_lines(report) {
+        let _ = writeln!(out, "{line}");
+    }
     crate::eval::output::files_written(&mut out, &["csv", "json", "plot", "sheet"], &files, &report.sheet);
     out
+}
+
+/// Per technique the renderer drew, the mean over frames of each phase of `Renderer::prepare`
+/// (`Renderer::prepare_phases`), e.g. `policy prepare ms: setup 0.01, assign 0.35, …`.
+fn phase_lines(report: &Report) -> Vec<String> {
+    let mut lines = Vec::new();
+    for &(technique, _) in &report.techniques {
+        let phases: Vec<_> = report.rows.iter().filter(|r| r.technique == technique).filter_map(|r| r.phases).collect();
+        if phases.is_empty() {
+            continue;
+        }
+        let n = phases.len() as f64;
+        let mean = |f: fn(&treelod_render::PreparePhases) -> std::time::Duration| {
+            phases.iter().map(|p| f(p).as_secs_f64() * 1e3).sum::<f64>() / n
+        };
+        lines.push(format!(
+            "{} prepare ms: setup {:.2}, assign {:.2}, select {:.2}, stream {:.2}, record {:.2}, upload {:.2}",
+            technique.name(),
+            mean(|p| p.setup),
+            mean(|p| p.assign),
+            mean(|p| p.select),
+            mean(|p| p.stream),
+            mean(|p| p.record),
+            mean(|p| p.upload),
+        ));
+    }
+    lines
 }
 
 /// The CSV header.
@@ -420,7 +450,7 @@ precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primit
 trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
 trees_crossed,trees_octahedral,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,\
 primitives_impostors,primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed,\
-primitives_octahedral,noise,ref_noise,draw_commands";
+primitives_octahedral,noise,ref_noise,draw_commands,setup_ms,assign_ms,select_ms,stream_ms,record_ms,upload_ms";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -433,7 +463,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -471,9 +501,21 @@ pub fn csv(report: &Report) -> String {
             text(row.noise.map(|v| v.to_string())),
             text(row.reference_noise.map(|v| v.to_string())),
             text(row.draw_commands.map(|v| v.to_string())),
+            phase_fields(row),
         );
     }
     out
+}
+
+/// The CSV's `setup_ms` … `upload_ms` fields of `row`: where `Renderer::prepare` spent its
+/// `selection_ms` (empty for the counted full mesh).
+fn phase_fields(row: &Row) -> String {
+    match row.phases {
+        Some(p) => [p.setup, p.assign, p.select, p.stream, p.record, p.upload]
+            .map(|d| format!("{:.4}", d.as_secs_f64() * 1e3))
+            .join(","),
+        None => ",,,,,".to_owned(),
+    }
 }
 
 /// The CSV's `trees_*` and `primitives_*` fields of `row`, in [`Technique::ALL`]'s order (empty
