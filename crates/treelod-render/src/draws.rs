@@ -4,7 +4,9 @@
 
 use bytemuck::{Pod, Zeroable};
 use rayon::prelude::*;
-use treelod_runtime::{DrawList, DrawRange, Kind, ROOTS_CELL, Technique, TreeDraws, TriangleSource};
+use treelod_runtime::{
+    DrawList, DrawRange, Kind, PerPrimitive, PerTechnique, ROOTS_CELL, Technique, TreeDraws, TriangleSource,
+};
 
 use crate::renderer::{ModelId, Renderer, max_axis_scale};
 use crate::stats::FrameStats;
@@ -195,14 +197,12 @@ impl Renderer {
             let out = &recordings[r];
             view.recorded.extend_from_slice(&out.recorded);
             stats.ranges_clamped += out.clamped;
+            // What each kind of primitive and each technique submitted.
+            stats.submitted += out.submitted;
+            stats.by_technique += out.by_technique;
             if r >= leaving_from {
-                stats.leaving += out.recorded.iter().map(|d| u64::from(d.count)).sum::<u64>();
+                stats.leaving += out.elements;
             }
-        }
-        // What each kind of primitive and each technique submitted.
-        for draw in &view.recorded {
-            stats.submitted[draw.source.primitive()] += u64::from(draw.count);
-            stats.by_technique[draw.technique] += u64::from(draw.count);
         }
         // The view's draw infos, bucket after bucket, each bucket's pieces in turn; their copy
         // into the draw buffer waits for `upload_draws`. Here only their indirect draws.
@@ -325,7 +325,7 @@ impl Renderer {
                             fade: pack_fade(dither),
                         };
                         out.push(bucket, info, first_vertex, draw.count * corners);
-                        out.recorded.push(draw);
+                        out.keep(draw);
                     }
                 }
             }
@@ -613,6 +613,12 @@ pub(crate) struct Recording {
     written: Vec<usize>,
     recorded: Vec<RecordedDraw>,
     clamped: u32,
+    /// The elements of `recorded`, per primitive they are submitted as, per technique that
+    /// made them, and in all: counted as each draw is kept, so the frame's statistics add up
+    /// the pieces' sums instead of reading every draw again.
+    submitted: PerPrimitive<u64>,
+    by_technique: PerTechnique<u64>,
+    elements: u64,
 }
 
 impl Recording {
@@ -627,6 +633,18 @@ impl Recording {
         self.buckets.resize_with(buckets, Bucketed::default);
         self.recorded.clear();
         self.clamped = 0;
+        self.submitted = PerPrimitive::default();
+        self.by_technique = PerTechnique::default();
+        self.elements = 0;
+    }
+
+    /// Keeps `draw` in [`Self::recorded`] and counts its elements.
+    fn keep(&mut self, draw: RecordedDraw) {
+        let count = u64::from(draw.count);
+        self.submitted[draw.source.primitive()] += count;
+        self.by_technique[draw.technique] += count;
+        self.elements += count;
+        self.recorded.push(draw);
     }
 
     /// Adds a draw info to bucket `b`, drawing `vertex_count` vertices from `first_vertex`.
@@ -666,7 +684,7 @@ fn record_direct(out: &mut Recording, record: RecordedDraw, first: u32, leaf_sca
     };
     let bucket = record.source.bucket().of_model(record.model.0 as usize);
     out.push(bucket, info, corners * first, corners * record.count);
-    out.recorded.push(record);
+    out.keep(record);
 }
 
 /// Number of leading `values` (sorted largest first) above `tau`: the selection's own count
