@@ -156,8 +156,7 @@ impl Renderer {
             choose(state);
         }
         // Trees outside every view are not chosen, nor listed.
-        let chosen = tables.chosen.iter().enumerate().filter_map(|(i, t)| Some((u32::try_from(i).ok()?, (*t)?)));
-        out.assign_listed(&self.instances, &self.representations, chosen);
+        out.assign_chosen(&self.instances, &self.representations, &tables.chosen);
         true
     }
 
