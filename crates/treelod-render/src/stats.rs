@@ -158,10 +158,24 @@ pub struct PreparePhases {
 }
 
 impl PreparePhases {
+    /// The phases in the order `prepare` runs them, each with its name (the field's), e.g. for a
+    /// host's or a tool's table: `[("setup", …), ("assign", …), …, ("upload", …)]`.
+    #[must_use]
+    pub fn named(&self) -> [(&'static str, Duration); 6] {
+        [
+            ("setup", self.setup),
+            ("assign", self.assign),
+            ("select", self.select),
+            ("stream", self.stream),
+            ("record", self.record),
+            ("upload", self.upload),
+        ]
+    }
+
     /// The phases' sum.
     #[must_use]
     pub fn total(&self) -> Duration {
-        self.setup + self.assign + self.select + self.stream + self.record + self.upload
+        self.named().iter().map(|&(_, d)| d).sum()
     }
 }
 

@@ -9,8 +9,8 @@ use embedded_graphics::prelude::*;
 use embedded_graphics::primitives::Rectangle;
 use embedded_graphics::text::{Alignment, Baseline};
 use serde::Serialize;
-use treelod_render::Technique;
 use treelod_render::offscreen::Image;
+use treelod_render::{PreparePhases, Technique};
 
 use super::path::Phase;
 use super::{Report, Row};
@@ -426,19 +426,16 @@ fn phase_lines(report: &Report) -> Vec<String> {
             continue;
         }
         let n = phases.len() as f64;
-        let mean = |f: fn(&treelod_render::PreparePhases) -> std::time::Duration| {
-            phases.iter().map(|p| f(p).as_secs_f64() * 1e3).sum::<f64>() / n
-        };
-        lines.push(format!(
-            "{} prepare ms: setup {:.2}, assign {:.2}, select {:.2}, stream {:.2}, record {:.2}, upload {:.2}",
-            technique.name(),
-            mean(|p| p.setup),
-            mean(|p| p.assign),
-            mean(|p| p.select),
-            mean(|p| p.stream),
-            mean(|p| p.record),
-            mean(|p| p.upload),
-        ));
+        let means: Vec<String> = PreparePhases::default()
+            .named()
+            .iter()
+            .enumerate()
+            .map(|(i, (name, _))| {
+                let ms = phases.iter().map(|p| p.named()[i].1.as_secs_f64() * 1e3).sum::<f64>() / n;
+                format!("{name} {ms:.2}")
+            })
+            .collect();
+        lines.push(format!("{} prepare ms: {}", technique.name(), means.join(", ")));
     }
     lines
 }
@@ -511,9 +508,7 @@ pub fn csv(report: &Report) -> String {
 /// `selection_ms` (empty for the counted full mesh).
 fn phase_fields(row: &Row) -> String {
     match row.phases {
-        Some(p) => [p.setup, p.assign, p.select, p.stream, p.record, p.upload]
-            .map(|d| format!("{:.4}", d.as_secs_f64() * 1e3))
-            .join(","),
+        Some(p) => p.named().map(|(_, d)| format!("{:.4}", d.as_secs_f64() * 1e3)).join(","),
         None => ",,,,,".to_owned(),
     }
 }
