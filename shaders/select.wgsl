@@ -253,10 +253,15 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
 }
 
-// ModelLod::far_only.
-fn far_only(lowest: vec2<f32>) -> bool {
-    return cur_model.far_count > 0u && lowest.x >= cur_model.far_tau && lowest.x < F32_MAX
-        && lowest.y >= cur_model.largest;
+// ModelLod::far_points.
+fn far_points(lowest: vec2<f32>) -> bool {
+    return cur_model.far_count > 0u && lowest.x >= cur_model.far_tau && lowest.x > 0.0 && lowest.x < F32_MAX;
+}
+
+// ModelLod::far_list_pays (FAR_LIST_EXTRA is written before this file).
+fn far_list_pays(tau_near: f32, tau_centre: f32) -> bool {
+    let near = f32(leading_above(cur_model.far_hi_at, cur_model.far_count, tau_near));
+    return near <= FAR_LIST_EXTRA * f32(leading_above(cur_model.far_hi_at, cur_model.far_count, tau_centre));
 }
 
 // CellEmitter::least_thresholds.
@@ -267,8 +272,19 @@ fn least_thresholds(needs_z: bool, distance: f32) -> vec2<f32> {
     return min(thresholds(-1.0, distance), thresholds(1.0, distance));
 }
 
-// CellEmitter::emit_far.
+// CellEmitter::emit_far: each cell's triangle prefix at taus, then the far list's prefix.
 fn emit_far(taus: vec2<f32>) {
+    if taus.y < cur_model.largest {
+        let cell_end = cur_model.first_cell + cur_model.cell_count;
+        for (var i = cur_model.first_cell; i < cell_end; i++) {
+            let c = cells[i];
+            if c.largest > taus.y {
+                let triangles = leading_above(c.sizes_at, c.triangles_count, taus.y);
+                tally_triangles += triangles;
+                write_range(0u, c.index, cur_model.triangle_base + c.triangles_first, triangles, taus, shading_at(0.0));
+            }
+        }
+    }
     let count = leading_above(cur_model.far_hi_at, cur_model.far_count, taus.x);
     tally_cells += cur_model.root_cells;
     tally_points += count;
@@ -357,7 +373,7 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     if radius < frame.pixels.w * d_block {
         far = 1u;
         let lowest = least_thresholds(needs_z, d_block);
-        if far_only(lowest) {
+        if far_points(lowest) && far_list_pays(lowest.x, thresholds(0.0, d_block).x) {
             emit_far(lowest);
         } else if needs_z && d_block > 0.0 {
             let to_z = vec3<f32>(dot(ax, to_block), dot(ay, to_block), dot(az, to_block)) * (inv_radius / d_block);
@@ -374,8 +390,11 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
                 emit(cells[i], 0.0, d_block);
             }
         }
-    } else if visibility != STRADDLES && far_only(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale)) {
-        // Every cell in view and none nearer than d_block − cell_reach·scale.
+    } else if visibility != STRADDLES && frame.shading.z == 0.0
+        && far_points(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale))
+        && far_list_pays(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale).x, thresholds(0.0, d_block).x) {
+        // Every cell in view and none nearer than d_block − cell_reach·scale, where the far list
+        // draws few points more than the cells would.
         emit_far(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale));
     } else {
         // Near path: exact per-cell distances; cells culled on their own if the block straddles.

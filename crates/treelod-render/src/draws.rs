@@ -407,7 +407,8 @@ impl Renderer {
     ///   less than the roots) resident, the cell draws its roots from the pinned copy.
     /// - **Triangles**: `τ_t` rises to at least `τ_p` (the rule needs `τ_p ≤ τ_t`) and, if only `r`
     ///   leading triangles are resident, to the size of the first missing one; the smaller
-    ///   triangles are then drawn through their points.
+    ///   triangles are then drawn through their points (the cell's own, also where the far list
+    ///   draws the tree's points at the selection's `τ_t`).
     ///
     /// For any `τ_p ≤ τ_t` the drawn elements are an exact cut (spec §10), so a clamped cell is a
     /// valid coarser level of detail.
@@ -456,6 +457,17 @@ impl Renderer {
         let resident_p = self.residency.slot(m, c, Array::Points).resident as usize;
         let roots = model.cell_roots.get(c).map_or(0, |r| r.1) as usize;
         let triangles_complete = triangles.is_none_or(|t| resident_t >= t.count as usize);
+        // A cell whose points the far list draws (a triangle range alone, `select_frame`'s far
+        // list) draws its own points too when its triangles are clamped: the far list's `τ_t`
+        // leaves out the points of the triangles now left out (the far list draws the points
+        // below it a second time, never a hole).
+        let points = points.or_else(|| {
+            (!triangles_complete && !his.is_empty()).then(|| DrawRange {
+                kind: Kind::Points,
+                count: u32::try_from(leading_above(his, tau_p)).unwrap_or(u32::MAX),
+                ..range
+            })
+        });
         let mut point_draw = None;
         let mut clamped = false;
         if let Some(p) = points.filter(|_| !(full_mesh && triangles_complete)) {

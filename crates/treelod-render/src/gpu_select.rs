@@ -68,14 +68,17 @@ const SHADER: &str =
     concat!(include_str!("../../../shaders/shared/draw.wgsl"), include_str!("../../../shaders/select.wgsl"));
 
 /// The selection's WGSL: `TECHNIQUE_TINTS`, each technique's [`DrawInfo::tint`] by
-/// [`Technique::index`], then [`SHADER`].
+/// [`Technique::index`], and `FAR_LIST_EXTRA` ([`treelod_runtime::FAR_LIST_EXTRA`]), then
+/// [`SHADER`].
 fn shader() -> String {
     let tints: Vec<String> = Technique::ALL.map(|t| format!("{}u", crate::draws::tint(t))).to_vec();
     let n = Technique::COUNT;
     format!(
         "// DrawInfo::tint of each technique by Technique::index (crates/treelod-render/src/draws.rs, `tint`).\n\
-         const TECHNIQUE_COUNT: u32 = {n}u;\nconst TECHNIQUE_TINTS = array<u32, {n}>({});\n{SHADER}",
-        tints.join(", ")
+         const TECHNIQUE_COUNT: u32 = {n}u;\nconst TECHNIQUE_TINTS = array<u32, {n}>({});\n\
+         const FAR_LIST_EXTRA: f32 = {:?};\n{SHADER}",
+        tints.join(", "),
+        treelod_runtime::FAR_LIST_EXTRA,
     )
 }
 

@@ -21,7 +21,7 @@ use crate::textures;
 const HULL_CANDIDATES: usize = 16_384;
 
 /// Each model's far list is pinned past its roots within this fraction of the streamed pool's
-/// budget (`ModelLod::far_list`: at most 3 KiB per cell, 255 KiB for the shared weeping willow's
+/// budget (`ModelLod::far_list`: at most 12 KiB per cell, 1 MiB for the shared weeping willow's
 /// 83 cells with points): the whole list under the default 1 GiB budget for hundreds of models,
 /// and a budget of a few hundred kilobytes still holds two demo trees' roots and what they
 /// stream (`a_small_memory_budget_is_never_exceeded...` in `tests/render.rs`).

@@ -424,10 +424,21 @@ pub(crate) fn far_cut(mut candidates: Vec<(f32, u32)>, room: usize) -> (f32, Vec
 }
 
 /// The most points per cell (with points) the far list holds ([`ModelLod::far_list`]): a bound
-/// of its copy's size, 3 KiB of 48-byte points per cell, whatever the model. Where the cells of
+/// of its copy's size, 12 KiB of 48-byte points per cell, whatever the model. Where the cells of
 /// a tree draw more than that between them, they draw enough per range that one range per cell
-/// costs little beside their points.
-pub const FAR_POINTS_PER_CELL: usize = 64;
+/// costs little beside their points. (64 per cell left the shared weeping willow's trees nearer
+/// than about 50 radii, a few hundred in a forest of 10⁴, drawing 80–100 ranges each; with 256,
+/// and their triangles beside the list, `bench --trees 10000 --frames 48 --no-render --technique
+/// policy`, 3 alternating runs, drew 11,909 ranges a frame where it drew 20,923, in 2.39 ms where
+/// it took 3.40 (the mean of each frame's least), for 1.6 % more primitives; 1024 per cell, 10,444
+/// ranges in 2.22 ms against 2.35 ms in the same runs, for four times the copy.)
+pub const FAR_POINTS_PER_CELL: usize = 256;
+
+/// The most points a tree on the near path draws from the far list, at its nearest cell's
+/// thresholds, as a multiple of the list's points at its block centre's: beyond, it is drawn cell
+/// by cell (`ModelLod::far_list_pays`). A tree 10 radii away draws about `(10/9)² ≈ 1.23` times
+/// the points there, one 4 radii away `(4/3)² ≈ 1.8` times.
+pub const FAR_LIST_EXTRA: f32 = 1.25;
 
 impl ModelLod {
     /// The selection view of an open container.
@@ -580,12 +591,13 @@ impl ModelLod {
     /// Gilet's hierarchies are per cell, so a tree drawn cell by cell is at least one range per
     /// cell, however few points each draws: the shared weeping willow's 83 non-empty cells drew
     /// 1,252 points between them 32 pixels high, 15 per cell. Where one `τ_p ≥ far_tau` serves every
-    /// cell and no cell draws a triangle, the points every cell draws are the far list's prefix
-    /// with `hi > τ_p` (its [`Self::far_hi`] sorted as a cell's), and [`select_frame`] emits that
-    /// one [`Kind::Roots`] range instead of the cells' (a far tree, and one whose nearest cell
-    /// bounds them all, see there): a renderer keeps these points contiguous (a copy, pinned) and
-    /// draws the tree with one draw. The cut is the cells' own at that `τ_p` (spec §10); the
-    /// shader drops the prefix's points with `lo > τ_p` as in a cell's.
+    /// cell, the points every cell draws are the far list's prefix with `hi > τ_p` (its
+    /// [`Self::far_hi`] sorted as a cell's), and [`select_frame`] emits that one [`Kind::Roots`]
+    /// range instead of the cells' point ranges (a far tree, and one whose nearest cell bounds
+    /// them all, see there), beside the triangle prefix of each cell that draws triangles at the
+    /// same `τ_t`: a renderer keeps these points contiguous (a copy, pinned) and draws the tree's
+    /// points with one draw. The cut is the cells' own at those thresholds (spec §10); the shader
+    /// drops the prefix's points with `lo > τ_p`, or larger than `τ_t`, as in a cell's.
     #[must_use]
     pub fn far_list(&self) -> &[u32] {
         &self.far
@@ -624,14 +636,23 @@ impl ModelLod {
         self.cells_by_largest.first().copied().unwrap_or(f32::NEG_INFINITY)
     }
 
-    /// Whether an instance whose smallest thresholds over its cells are `(τ_p, τ_t)` draws, of
-    /// every cell, a prefix of the far list and no triangle: then the far list's prefix with
-    /// `hi > τ_p` is what every cell draws at that `τ_p`.
-    fn far_only(&self, tau_points: f32, tau_triangles: f32) -> bool {
-        !self.far.is_empty()
-            && tau_points >= self.far_tau
-            && tau_points < f32::INFINITY
-            && tau_triangles >= self.largest_triangle()
+    /// Whether an instance whose smallest `τ_p` over its cells is `tau_points` draws, of every
+    /// cell, points of the far list only: then the far list's prefix with `hi > τ_p` is what
+    /// every cell draws at that `τ_p` (and the triangles' `τ_t`, which the shader tests the points
+    /// against as a cell's). Not at `τ_p = 0`, the full mesh's thresholds, where no point is drawn
+    /// and a renderer drops the cells' point ranges.
+    fn far_points(&self, tau_points: f32) -> bool {
+        !self.far.is_empty() && tau_points >= self.far_tau && tau_points > 0.0 && tau_points < f32::INFINITY
+    }
+
+    /// Whether a tree on the near path whose far list is drawn at `tau_near` (its nearest cell's
+    /// `τ_p`, [`Self::far_points`]) draws at most [`FAR_LIST_EXTRA`] times the list's points at
+    /// `tau_centre` (its block centre's `τ_p`, about what its cells would draw at their own): the
+    /// far list trades a tree's ranges for points finer than its farther cells need, which pays
+    /// while the tree is far against its size and not when it is near.
+    fn far_list_pays(&self, tau_near: f32, tau_centre: f32) -> bool {
+        let near = leading_above(&self.far_hi, tau_near) as f32;
+        near <= FAR_LIST_EXTRA * leading_above(&self.far_hi, tau_centre) as f32
     }
 
     /// The block bounds, model space, metres.
@@ -656,8 +677,10 @@ impl ModelLod {
 
     /// The bounds under which an instance draws the far list (a [`Kind::Roots`] range), for
     /// mirrors of [`select_frame`]: at its smallest thresholds `(τ_p, τ_t)` it does exactly when
-    /// the list is not empty, `τ_p` is finite, `τ_p ≥ far_tau` and `τ_t ≥ largest_triangle`.
-    /// Returns `(far_tau, largest_triangle)` ([`Self::far_tau`], [`Self::largest_triangle`]).
+    /// the list is not empty, `τ_p` is finite and `τ_p ≥ far_tau`; then where `τ_t <
+    /// largest_triangle` each cell with a triangle larger than `τ_t` also draws its triangle
+    /// prefix at those thresholds. Returns `(far_tau, largest_triangle)` ([`Self::far_tau`],
+    /// [`Self::largest_triangle`]).
     #[must_use]
     pub fn far_bounds(&self) -> (f32, f32) {
         (self.far_tau, self.largest_triangle())
@@ -887,17 +910,22 @@ struct Frame<'a> {
 /// elements whose key lies within that threshold error. **Cell culling** happens only on the near
 /// path, and only for instances straddling the frustum.
 ///
-/// **Far list.** Where one instance's cells would draw no triangle and points only from the top
-/// of their hierarchies, it is drawn with one [`Kind::Roots`] range, a prefix of the model's far
-/// list ([`ModelLod::far_list`]), at one pair of thresholds for every cell: on the far path those
+/// **Far list.** Where one instance's cells would draw points only from the top of their
+/// hierarchies, its points are drawn with one [`Kind::Roots`] range, a prefix of the model's far
+/// list ([`ModelLod::far_list`]), and its triangles with each cell's prefix (cells without
+/// triangles that large have none), at one pair of thresholds for every cell: on the far path those
 /// of the nearest depth (`Z_i = ±1` with a bias, else the block's); on the near path, for an
-/// instance wholly in view, those at `d_block − cell_reach·scale`, no nearer than its nearest
-/// cell ([`ModelLod::cell_reach`]), so no cell is drawn coarser than its own thresholds would
-/// draw it. The cut is the cells' own at those thresholds. Measured with `bench --trees 10000
+/// instance wholly in view and drawn without shading, those at `d_block − cell_reach·scale`, no
+/// nearer than its nearest cell ([`ModelLod::cell_reach`]), so no cell is drawn coarser than its
+/// own thresholds would draw it. On either path only where the list's points at those thresholds
+/// are at most [`FAR_LIST_EXTRA`] times its points at the block centre's unbiased ones: a tree
+/// near against its size, or a strong depth bias, is drawn cell by cell. The cut is the cells' own at those thresholds. Measured with `bench --trees 10000
 /// --no-render --technique policy` on the shared weeping willow, 48 frames at 1536×864, 3
 /// alternating runs: up to 704,118 ranges a frame (7 points each on the descent) fell to at most
 /// 45,275, the mean of each frame's least selection time from 22.1 to 4.2 ms, for 0.29 % more
-/// primitives (the cells farther than the nearest drawn at its thresholds).
+/// primitives (the cells farther than the nearest drawn at its thresholds). Trees that draw
+/// triangles took the list too once it held more points ([`FAR_POINTS_PER_CELL`] gives the
+/// numbers): before, a tree drawing one triangle took a range per cell.
 ///
 /// Instances whose `model` is not an index of `models`, or whose transform has a zero or
 /// non-finite scale, are skipped and counted in [`FrameStats::instances_invalid`].
@@ -1284,7 +1312,7 @@ fn select_instance<S: Sink>(
         // Far path: d_cell − d_block ≈ v̂·M·(c_i − c_block), so Z_i ≈ (c_i − c_block)·(Mᵀv̂)/R.
         tally.stats.instances_far += 1;
         let (lowest_p, lowest_t) = cells.least_thresholds(frame.needs_z, d_block);
-        if model.far_only(lowest_p, lowest_t) {
+        if model.far_points(lowest_p) && model.far_list_pays(lowest_p, cells.thresholds(0.0, d_block).0) {
             cells.emit_far(lowest_p, lowest_t);
         } else if S::COUNT_ONLY
             && let Some(n) = count_far(model, &cells, d_block)
@@ -1301,12 +1329,14 @@ fn select_instance<S: Sink>(
                 cells.emit(cell, 0.0, d_block);
             }
         }
-    } else if let Some((tau_points, tau_triangles)) = (!straddles)
+    } else if let Some((tau_points, tau_triangles)) = (!straddles && frame.settings.shading.is_none())
         .then(|| cells.least_thresholds(frame.needs_z, d_block - model.cell_reach * scale))
-        .filter(|&(p, t)| model.far_only(p, t))
+        .filter(|&(p, _)| model.far_points(p) && model.far_list_pays(p, cells.thresholds(0.0, d_block).0))
     {
         // Every cell in view and none nearer than `d_block − cell_reach·scale`: the far list at
-        // that distance's thresholds, no coarser than any cell's own.
+        // that distance's thresholds, no coarser than any cell's own, where it draws few points
+        // more than the cells would, and without Gilet's shading, which darkens each cell by its
+        // own depth (the far list's range is shaded as the block centre).
         cells.emit_far(tau_points, tau_triangles);
     } else {
         // Near path: exact per-cell distances; cells culled on their own if the block straddles.
@@ -1392,8 +1422,14 @@ impl<S: Sink> CellEmitter<'_, S> {
     }
 
     /// Passes on one [`Kind::Roots`] range, the far list's prefix with `hi > τ_p`, at thresholds
-    /// under which [`ModelLod::far_only`] holds.
+    /// under which [`ModelLod::far_points`] holds, then the triangle prefix `size > τ_t` of each
+    /// cell that has one, at the same thresholds: every cell's cut at `(τ_p, τ_t)`.
     fn emit_far(&mut self, tau_points: f32, tau_triangles: f32) {
+        if tau_triangles < self.model.largest_triangle() {
+            for cell in &self.model.cells {
+                self.emit_triangles(cell, tau_points, tau_triangles);
+            }
+        }
         if S::COUNT_ONLY {
             self.sink.count(1);
             return;
@@ -1412,6 +1448,32 @@ impl<S: Sink> CellEmitter<'_, S> {
             tau_triangles,
             shading: self.settings.shading_at(0.0),
         });
+    }
+
+    /// Passes on the triangle prefix `size > τ_t` of `cell`, if not empty, at `(τ_p, τ_t)`: a
+    /// cell of a tree whose points the far list draws ([`Self::emit_far`]).
+    fn emit_triangles(&mut self, cell: &CellLod, tau_points: f32, tau_triangles: f32) {
+        if cell.largest <= tau_triangles {
+            return;
+        }
+        if S::COUNT_ONLY {
+            self.sink.count(1);
+            return;
+        }
+        let triangles = leading_above(self.model.triangle_sizes(cell), tau_triangles);
+        self.triangles += u64::from(triangles);
+        self.sink.push(DrawRange {
+            instance: self.instance,
+            model: self.model_index,
+            cell: cell.index,
+            kind: Kind::Triangles,
+            first: cell.triangles.first,
+            count: triangles,
+            tau_points,
+            tau_triangles,
+            shading: self.settings.shading_at(0.0),
+        });
+        self.triangle_ranges += 1;
     }
 
     /// Selects `cell` at depth `z` and distance `distance` (world metres) and passes on its ranges.

@@ -44,8 +44,8 @@ pub use ellipsoid::{
     line_drawn,
 };
 pub use frame::{
-    BudgetController, Camera, CellLod, CellPrefix, DrawList, DrawRange, FAR_POINTS_PER_CELL, FrameStats, Frustum,
-    Instance, Kind, LodSettings, ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
+    BudgetController, Camera, CellLod, CellPrefix, DrawList, DrawRange, FAR_LIST_EXTRA, FAR_POINTS_PER_CELL,
+    FrameStats, Frustum, Instance, Kind, LodSettings, ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
 };
 pub use impostor::{
     CROSSFADE, ImpostorBark, NO_PARENT, PlaneCell, PlaneLod, PlaneRange, crossfade, morph_corner, morph_share,

@@ -20,8 +20,7 @@ use glam::{Mat4, Vec3};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, PlaneRecord, Range};
 
 use crate::frame::{
-    Camera, CellPrefix, FAR_POINTS_PER_CELL, Frustum, LodSettings, far_cut, leading_above, prefix_above, sort_key,
-    tau_per_metre,
+    Camera, CellPrefix, Frustum, LodSettings, far_cut, leading_above, prefix_above, sort_key, tau_per_metre,
 };
 
 /// A record of a kind drawn by prefixes ([`SptLod`]).
@@ -177,6 +176,12 @@ pub struct SptLod {
 /// Anchors measured at once by [`SptLod::least_tau`].
 const LANES: usize = 8;
 
+/// The most records per cell (with records) a far list holds ([`SptLod::far_list`]): a bound of
+/// its copy's size, as [`crate::FAR_POINTS_PER_CELL`] is the points'. It stays at the 64 the
+/// points' list had when the lines' was made: the lines' selection was not measured with longer
+/// lists.
+const FAR_RECORDS_PER_CELL: usize = 64;
+
 /// `anchors` ([`SptLod::anchors`]) of `cells`.
 fn anchor_lanes(cells: &[SptCell]) -> [Vec<f32>; 3] {
     let padded = cells.len().div_ceil(LANES) * LANES;
@@ -264,7 +269,7 @@ impl SptLod {
         lod.centre = 0.5 * (lo + hi);
         lod.radius = 0.5 * (hi - lo).length();
         lod.anchors = anchor_lanes(&lod.cells);
-        lod.build_far_list(FAR_POINTS_PER_CELL);
+        lod.build_far_list(FAR_RECORDS_PER_CELL);
         Some(lod)
     }
 
@@ -345,7 +350,7 @@ impl SptLod {
     }
 
     /// The far list: indices in the kind's array of every record with `hi >` [`Self::far_tau`]
-    /// of every cell, by `hi` (largest first, ties by index), at most [`FAR_POINTS_PER_CELL`]
+    /// of every cell, by `hi` (largest first, ties by index), at most [`FAR_RECORDS_PER_CELL`]
     /// per cell with records in all; empty with fewer than two cells (and for [`Self::whole`]).
     ///
     /// The kind's twin of the points' far list (`ModelLod::far_list`): a tree drawn cell by
