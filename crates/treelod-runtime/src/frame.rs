@@ -1437,17 +1437,15 @@ impl<S: Sink> CellEmitter<'_, S> {
         let count = leading_above(&self.model.far_hi, tau_points);
         self.cells += self.model.root_cells;
         self.points += u64::from(count);
-        self.sink.push(DrawRange {
-            instance: self.instance,
-            model: self.model_index,
-            cell: ROOTS_CELL,
-            kind: Kind::Roots,
-            first: 0,
-            count,
-            tau_points,
-            tau_triangles,
-            shading: self.settings.shading_at(0.0),
-        });
+        let shading = self.settings.shading_at(0.0);
+        self.sink.push(self.range((ROOTS_CELL, Kind::Roots, 0, count), (tau_points, tau_triangles), shading));
+    }
+
+    /// A range of this instance: `(cell, kind, first, count)` at `(τ_p, τ_t)`, shaded `shading`.
+    #[inline(always)]
+    fn range(&self, (cell, kind, first, count): (u32, Kind, u32, u32), taus: (f32, f32), shading: f32) -> DrawRange {
+        let (instance, model) = (self.instance, self.model_index);
+        DrawRange { instance, model, cell, kind, first, count, tau_points: taus.0, tau_triangles: taus.1, shading }
     }
 
     /// Passes on the triangle prefix `size > τ_t` of `cell`, if not empty, at `(τ_p, τ_t)`: a
@@ -1462,17 +1460,13 @@ impl<S: Sink> CellEmitter<'_, S> {
         }
         let triangles = leading_above(self.model.triangle_sizes(cell), tau_triangles);
         self.triangles += u64::from(triangles);
-        self.sink.push(DrawRange {
-            instance: self.instance,
-            model: self.model_index,
-            cell: cell.index,
-            kind: Kind::Triangles,
-            first: cell.triangles.first,
-            count: triangles,
-            tau_points,
-            tau_triangles,
-            shading: self.settings.shading_at(0.0),
-        });
+        let shading = self.settings.shading_at(0.0);
+        let range = self.range(
+            (cell.index, Kind::Triangles, cell.triangles.first, triangles),
+            (tau_points, tau_triangles),
+            shading,
+        );
+        self.sink.push(range);
         self.triangle_ranges += 1;
     }
 
@@ -1500,17 +1494,12 @@ impl<S: Sink> CellEmitter<'_, S> {
         self.cells += 1;
         self.triangles += u64::from(triangles);
         self.points += u64::from(points);
-        let mut range = DrawRange {
-            instance: self.instance,
-            model: self.model_index,
-            cell: cell.index,
-            kind: Kind::Triangles,
-            first: cell.triangles.first,
-            count: triangles,
-            tau_points,
-            tau_triangles,
-            shading: self.settings.shading_at(z),
-        };
+        let taus = (tau_points, tau_triangles);
+        let mut range = self.range(
+            (cell.index, Kind::Triangles, cell.triangles.first, triangles),
+            taus,
+            self.settings.shading_at(z),
+        );
         if triangles > 0 {
             self.sink.push(range);
             self.triangle_ranges += 1;
