@@ -434,9 +434,9 @@ pub(crate) fn far_cut(mut candidates: Vec<(f32, u32)>, room: usize) -> (f32, Vec
 /// ranges in 2.22 ms against 2.35 ms in the same runs, for four times the copy.)
 pub const FAR_POINTS_PER_CELL: usize = 256;
 
-/// The most points a tree on the near path draws from the far list, at its nearest cell's
-/// thresholds, as a multiple of the list's points at its block centre's: beyond, it is drawn cell
-/// by cell (`ModelLod::far_list_pays`). A tree 10 radii away draws about `(10/9)² ≈ 1.23` times
+/// The most points a tree draws from the far list, at its nearest cell's thresholds (or its least
+/// biased depth's), as a multiple of the list's points at its block centre's unbiased ones: beyond,
+/// it is drawn cell by cell (`ModelLod::far_list_pays`). A tree 10 radii away draws about `(10/9)² ≈ 1.23` times
 /// the points there, one 4 radii away `(4/3)² ≈ 1.8` times.
 pub const FAR_LIST_EXTRA: f32 = 1.25;
 
@@ -645,8 +645,8 @@ impl ModelLod {
         !self.far.is_empty() && tau_points >= self.far_tau && tau_points > 0.0 && tau_points < f32::INFINITY
     }
 
-    /// Whether a tree on the near path whose far list is drawn at `tau_near` (its nearest cell's
-    /// `τ_p`, [`Self::far_points`]) draws at most [`FAR_LIST_EXTRA`] times the list's points at
+    /// Whether a tree whose far list is drawn at `tau_near` (the `τ_p` of its nearest cell, or of
+    /// its least biased depth, [`Self::far_points`]) draws at most [`FAR_LIST_EXTRA`] times the list's points at
     /// `tau_centre` (its block centre's `τ_p`, about what its cells would draw at their own): the
     /// far list trades a tree's ranges for points finer than its farther cells need, which pays
     /// while the tree is far against its size and not when it is near.
@@ -913,19 +913,20 @@ struct Frame<'a> {
 /// **Far list.** Where one instance's cells would draw points only from the top of their
 /// hierarchies, its points are drawn with one [`Kind::Roots`] range, a prefix of the model's far
 /// list ([`ModelLod::far_list`]), and its triangles with each cell's prefix (cells without
-/// triangles that large have none), at one pair of thresholds for every cell: on the far path those
-/// of the nearest depth (`Z_i = ±1` with a bias, else the block's); on the near path, for an
+/// triangles that large have none), at one pair of thresholds for every cell: on the far path
+/// those of the nearest depth (`Z_i = ±1` with a bias, else the block's); on the near path, for an
 /// instance wholly in view and drawn without shading, those at `d_block − cell_reach·scale`, no
 /// nearer than its nearest cell ([`ModelLod::cell_reach`]), so no cell is drawn coarser than its
 /// own thresholds would draw it. On either path only where the list's points at those thresholds
 /// are at most [`FAR_LIST_EXTRA`] times its points at the block centre's unbiased ones: a tree
-/// near against its size, or a strong depth bias, is drawn cell by cell. The cut is the cells' own at those thresholds. Measured with `bench --trees 10000
-/// --no-render --technique policy` on the shared weeping willow, 48 frames at 1536×864, 3
-/// alternating runs: up to 704,118 ranges a frame (7 points each on the descent) fell to at most
-/// 45,275, the mean of each frame's least selection time from 22.1 to 4.2 ms, for 0.29 % more
-/// primitives (the cells farther than the nearest drawn at its thresholds). Trees that draw
-/// triangles took the list too once it held more points ([`FAR_POINTS_PER_CELL`] gives the
-/// numbers): before, a tree drawing one triangle took a range per cell.
+/// near against its size, or a strong depth bias, is drawn cell by cell. The cut is the cells'
+/// own at those thresholds. Measured with `bench --trees 10000 --no-render --technique policy`
+/// on the shared weeping willow, 48 frames at 1536×864, 3 alternating runs: up to 704,118 ranges
+/// a frame (7 points each on the descent) fell to at most 45,275, the mean of each frame's least
+/// selection time from 22.1 to 4.2 ms, for 0.29 % more primitives (the cells farther than the
+/// nearest drawn at its thresholds). Trees that draw triangles took the list too once it held
+/// more points ([`FAR_POINTS_PER_CELL`] gives the numbers): before, a tree drawing one triangle
+/// took a range per cell.
 ///
 /// Instances whose `model` is not an index of `models`, or whose transform has a zero or
 /// non-finite scale, are skipped and counted in [`FrameStats::instances_invalid`].
