@@ -350,7 +350,7 @@ impl SptLod {
     }
 
     /// The far list: indices in the kind's array of every record with `hi >` [`Self::far_tau`]
-    /// of every cell, by `hi` (largest first, ties by index), at most [`FAR_RECORDS_PER_CELL`]
+    /// of every cell, by `hi` (largest first, ties by index), at most `FAR_RECORDS_PER_CELL` (64)
     /// per cell with records in all; empty with fewer than two cells (and for [`Self::whole`]).
     ///
     /// The kind's twin of the points' far list (`ModelLod::far_list`): a tree drawn cell by
