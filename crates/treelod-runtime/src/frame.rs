@@ -383,8 +383,6 @@ pub struct ModelLod {
     cells: Vec<CellLod>,
     triangle_sizes: Vec<f32>,
     point_hi: Vec<f32>,
-    /// The cells' `hi0`, largest first: how many cells draw points at one `τ_p`.
-    cells_by_hi0: Vec<f32>,
     /// The cells' `largest`, largest first: how many cells draw triangles at one `τ_t`.
     cells_by_largest: Vec<f32>,
     /// The far list ([`Self::far_list`]): `POINTS` indices of every cell's roots in cell order,
@@ -542,8 +540,6 @@ impl ModelLod {
         model.cull_centre = 0.5 * (lo + hi);
         model.cull_half = 0.5 * (hi - lo);
         model.cull_radius = model.cull_half.length();
-        model.cells_by_hi0 = model.cells.iter().map(|c| sort_key(c.hi0)).collect();
-        model.cells_by_hi0.sort_by(|a, b| b.total_cmp(a));
         model.cells_by_largest = model.cells.iter().map(|c| sort_key(c.largest)).collect();
         model.cells_by_largest.sort_by(|a, b| b.total_cmp(a));
         model.root_cells = u32::try_from(model.cells.iter().filter(|c| c.roots > 0).count()).unwrap_or(u32::MAX);
@@ -776,17 +772,13 @@ pub struct DrawRange {
 /// one list across frames: [`select_frame`] overwrites it and keeps its allocations.
 #[derive(Clone, Debug, Default)]
 pub struct DrawList {
-    /// Storage; the list is `storage[..len]`. Entries past `len` are stale ranges kept so the
-    /// parallel path can write into slices without clearing (or `unsafe`).
+    /// Storage; the list is `storage[..len]`.
     storage: Vec<DrawRange>,
     len: usize,
     triangle_ranges: u32,
     point_ranges: u32,
-    /// Per-chunk range counts and tallies of the parallel path, kept between frames.
-    chunk_lens: Vec<usize>,
-    chunk_tallies: Vec<(Tally, bool)>,
-    /// Per-instance culling results of the parallel path's first pass, replayed by the second.
-    visibility: Vec<Visibility>,
+    /// Per chunk of the parallel path, its ranges and tally, kept between frames.
+    chunks: Vec<(Vec<DrawRange>, Tally)>,
 }
 
 impl DrawList {
@@ -932,8 +924,8 @@ struct Frame<'a> {
 /// non-finite scale, are skipped and counted in [`FrameStats::instances_invalid`].
 ///
 /// **Threads.** From [`PARALLEL_MIN_INSTANCES`] instances on, chunks of [`CHUNK_INSTANCES`]
-/// instances run on rayon's pool in two passes: the first counts each chunk's ranges, the second
-/// writes each chunk into its own slice of the list. The output is the same as on one thread.
+/// instances run on rayon's pool, each into a list of its own kept between frames, and the lists
+/// are joined in chunk order. The output is the same as on one thread.
 pub fn select_frame(
     models: &[ModelLod],
     instances: &[Instance],
@@ -990,58 +982,6 @@ impl Tally {
     }
 }
 
-/// Where selected ranges go: appended to a vector, written into a slice sized by a counting pass,
-/// or only counted.
-trait Sink {
-    /// Whether only the number of ranges matters (no range is built).
-    const COUNT_ONLY: bool;
-    /// Takes one range.
-    fn push(&mut self, range: DrawRange);
-    /// Takes `n` ranges that were only counted.
-    fn count(&mut self, n: usize);
-}
-
-impl Sink for Vec<DrawRange> {
-    const COUNT_ONLY: bool = false;
-    #[inline(always)]
-    fn push(&mut self, range: DrawRange) {
-        Vec::push(self, range);
-    }
-    fn count(&mut self, _: usize) {}
-}
-
-/// Counts ranges (the first pass of the parallel path).
-struct Counter(usize);
-
-impl Sink for Counter {
-    const COUNT_ONLY: bool = true;
-    fn push(&mut self, _: DrawRange) {
-        self.0 += 1;
-    }
-    #[inline(always)]
-    fn count(&mut self, n: usize) {
-        self.0 += n;
-    }
-}
-
-/// Writes ranges into a slice that a [`Counter`] pass sized; `at` ends at its length.
-struct SliceSink<'a> {
-    slice: &'a mut [DrawRange],
-    at: usize,
-}
-
-impl Sink for SliceSink<'_> {
-    const COUNT_ONLY: bool = false;
-    #[inline(always)]
-    fn push(&mut self, range: DrawRange) {
-        if let Some(slot) = self.slice.get_mut(self.at) {
-            *slot = range;
-        }
-        self.at += 1;
-    }
-    fn count(&mut self, _: usize) {}
-}
-
 /// Whether an instance is drawn, and how it lies in the frustum.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 enum Visibility {
@@ -1054,16 +994,6 @@ enum Visibility {
     Inside,
     /// Crossing a plane: cells may be culled.
     Straddles,
-}
-
-/// How [`select_chunk`] learns the instances' [`Visibility`].
-enum Culling<'a> {
-    /// Cull each instance.
-    Compute,
-    /// Cull each instance and record the result (first pass of the parallel path).
-    Record(&'a mut [Visibility]),
-    /// Reuse recorded results (second pass).
-    Replay(&'a [Visibility]),
 }
 
 /// One prefix of a cell's elements of an SPT kind drawn as a whole range (impostor planes,
@@ -1137,29 +1067,17 @@ fn cull_instance(frame: &Frame<'_>, models: &[ModelLod], instance: &Instance) ->
 }
 
 /// Selects `instances`, numbering them from `first`.
-fn select_chunk<S: Sink>(
+fn select_chunk(
     frame: &Frame<'_>,
     models: &[ModelLod],
     first: usize,
     instances: &[Instance],
-    mut culling: Culling<'_>,
-    sink: &mut S,
+    sink: &mut Vec<DrawRange>,
     tally: &mut Tally,
 ) {
     for (offset, instance) in instances.iter().enumerate() {
-        let mut visibility = match &culling {
-            Culling::Replay(recorded) => recorded.get(offset).copied().unwrap_or_default(),
-            Culling::Compute | Culling::Record(_) => cull_instance(frame, models, instance),
-        };
         let index = u32::try_from(first + offset);
-        if index.is_err() {
-            visibility = Visibility::Invalid;
-        }
-        if let Culling::Record(recorded) = &mut culling
-            && let Some(slot) = recorded.get_mut(offset)
-        {
-            *slot = visibility;
-        }
+        let visibility = if index.is_ok() { cull_instance(frame, models, instance) } else { Visibility::Invalid };
         match (visibility, index, models.get(instance.model as usize)) {
             (Visibility::Hidden, ..) => {}
             (Visibility::Inside | Visibility::Straddles, Ok(index), Some(model)) => {
@@ -1175,96 +1093,36 @@ fn select_sequential(frame: &Frame<'_>, models: &[ModelLod], instances: &[Instan
     out.clear();
     out.storage.clear();
     let mut tally = Tally::default();
-    select_chunk(frame, models, 0, instances, Culling::Compute, &mut out.storage, &mut tally);
+    select_chunk(frame, models, 0, instances, &mut out.storage, &mut tally);
     out.len = out.storage.len();
     tally.finish(out)
 }
 
-/// Two passes over chunks of instances on rayon's pool: cull every instance and count each
-/// chunk's ranges (far instances by binary search over their cells' first keys, see
-/// [`count_far`]), then write each chunk into its own slice of the list, replaying the culling,
-/// so nothing is copied and the order is the sequential one. The count and the writes decide
-/// each range from the same comparisons, so they agree; should they ever not, the frame is redone
-/// sequentially (and debug builds panic).
+/// Chunks of instances on rayon's pool, each selected into its own list (kept between frames, so
+/// a frame allocates only where a chunk draws more than ever before), then the lists joined in
+/// chunk order: the sequential order. (Two passes, counting each chunk's ranges and then writing
+/// them into its slice of one list, measured slower: on 2 cores the counting pass cost about
+/// what the threads saved, and the parallel path no faster than the sequential one.)
 fn select_parallel(frame: &Frame<'_>, models: &[ModelLod], instances: &[Instance], out: &mut DrawList) -> FrameStats {
     use rayon::prelude::*;
     out.clear();
     let chunk_count = instances.len().div_ceil(CHUNK_INSTANCES);
-    out.chunk_lens.clear();
-    out.visibility.clear();
-    out.visibility.resize(instances.len(), Visibility::Hidden);
-    instances
-        .par_chunks(CHUNK_INSTANCES)
-        .zip(out.visibility.par_chunks_mut(CHUNK_INSTANCES))
-        .enumerate()
-        .map(|(c, (part, visibility))| {
-            let mut counter = Counter(0);
-            let culling = Culling::Record(visibility);
-            select_chunk(frame, models, c * CHUNK_INSTANCES, part, culling, &mut counter, &mut Tally::default());
-            counter.0
-        })
-        .collect_into_vec(&mut out.chunk_lens);
-    let total: usize = out.chunk_lens.iter().sum();
-    // Grow the storage only past its high-water mark; below it, stale entries are overwritten.
-    if out.storage.len() < total {
-        let filler = DrawRange {
-            instance: 0,
-            model: 0,
-            cell: 0,
-            kind: Kind::Points,
-            first: 0,
-            count: 0,
-            tau_points: 0.0,
-            tau_triangles: 0.0,
-            shading: 0.0,
-        };
-        out.storage.resize(total, filler);
-    }
-    out.chunk_tallies.clear();
-    let lens = &out.chunk_lens;
-    let slices = SplitAt { rest: &mut out.storage[..total], lens: lens.iter() };
-    slices
-        .collect::<Vec<_>>()
-        .into_par_iter()
-        .zip(instances.par_chunks(CHUNK_INSTANCES))
-        .zip(out.visibility.par_chunks(CHUNK_INSTANCES))
-        .enumerate()
-        .map(|(c, ((slice, part), visibility))| {
-            let len = slice.len();
-            let mut sink = SliceSink { slice, at: 0 };
-            let mut tally = Tally::default();
-            let culling = Culling::Replay(visibility);
-            select_chunk(frame, models, c * CHUNK_INSTANCES, part, culling, &mut sink, &mut tally);
-            (tally, sink.at == len)
-        })
-        .collect_into_vec(&mut out.chunk_tallies);
-    if out.chunk_tallies.len() != chunk_count || out.chunk_tallies.iter().any(|(_, exact)| !exact) {
-        debug_assert!(false, "the counting pass disagrees with the writing pass");
-        return select_sequential(frame, models, instances, out);
-    }
+    out.chunks.resize_with(chunk_count, Default::default);
+    instances.par_chunks(CHUNK_INSTANCES).zip(out.chunks.par_iter_mut()).enumerate().for_each(
+        |(c, (part, (ranges, tally)))| {
+            ranges.clear();
+            *tally = Tally::default();
+            select_chunk(frame, models, c * CHUNK_INSTANCES, part, ranges, tally);
+        },
+    );
+    out.storage.clear();
     let mut tally = Tally::default();
-    for (chunk, _) in &out.chunk_tallies {
+    for (ranges, chunk) in &out.chunks[..chunk_count] {
+        out.storage.extend_from_slice(ranges);
         tally.add(chunk);
     }
-    out.len = total;
+    out.len = out.storage.len();
     tally.finish(out)
-}
-
-/// Splits a slice into consecutive pieces of the given lengths.
-struct SplitAt<'a, I> {
-    rest: &'a mut [DrawRange],
-    lens: I,
-}
-
-impl<'a, I: Iterator<Item = &'a usize>> Iterator for SplitAt<'a, I> {
-    type Item = &'a mut [DrawRange];
-    fn next(&mut self) -> Option<Self::Item> {
-        let len = *self.lens.next()?;
-        let rest = std::mem::take(&mut self.rest);
-        let (head, tail) = rest.split_at_mut(len.min(rest.len()));
-        self.rest = tail;
-        Some(head)
-    }
 }
 
 /// Whether a cell may be in view by `planes` ([`Frustum::model_planes`] of its instance): its
@@ -1276,13 +1134,13 @@ pub(crate) fn cell_in_view(planes: &[(Vec4, Vec3); 6], cell: &CellLod) -> bool {
 
 /// Selects the cells of a visible instance (steps 2–4 of [`select_frame`]); `straddles` if it
 /// crosses a frustum plane, so its cells may be culled.
-fn select_instance<S: Sink>(
+fn select_instance(
     frame: &Frame<'_>,
     model: &ModelLod,
     index: u32,
     instance: &Instance,
     straddles: bool,
-    sink: &mut S,
+    sink: &mut Vec<DrawRange>,
     tally: &mut Tally,
 ) {
     let m = instance.transform;
@@ -1315,10 +1173,6 @@ fn select_instance<S: Sink>(
         let (lowest_p, lowest_t) = cells.least_thresholds(frame.needs_z, d_block);
         if model.far_points(lowest_p) && model.far_list_pays(lowest_p, cells.thresholds(0.0, d_block).0) {
             cells.emit_far(lowest_p, lowest_t);
-        } else if S::COUNT_ONLY
-            && let Some(n) = count_far(model, &cells, d_block)
-        {
-            cells.sink.count(n);
         } else if frame.needs_z && d_block > 0.0 {
             let to_z = Vec3::new(ax.dot(to_block), ay.dot(to_block), az.dot(to_block)) * (inv_radius / d_block);
             for cell in &model.cells {
@@ -1363,31 +1217,8 @@ fn select_instance<S: Sink>(
     tally.triangle_ranges += cells.triangle_ranges;
 }
 
-/// The number of ranges of a far instance at distance `d_block`, by binary search over the cells'
-/// first keys, if the depth bias leaves it unambiguous.
-///
-/// On the far path every cell's thresholds are `emitter.thresholds(z, d_block)` for some
-/// `z ∈ [−1, 1]`, monotone in `z` (also in floating point: every step rounds monotonically), so a
-/// cell whose first key is above the largest threshold has a range and one at or below the smallest
-/// has none. When the two counts agree they are exact; otherwise `None` and the caller counts cell
-/// by cell.
-fn count_far<S: Sink>(model: &ModelLod, emitter: &CellEmitter<'_, S>, d_block: f32) -> Option<usize> {
-    let (a, b) = (emitter.thresholds(-1.0, d_block), emitter.thresholds(1.0, d_block));
-    let mut n = 0;
-    for (keys, low, high) in
-        [(&model.cells_by_hi0, a.0.min(b.0), a.0.max(b.0)), (&model.cells_by_largest, a.1.min(b.1), a.1.max(b.1))]
-    {
-        let sure = keys.partition_point(|&key| key > high);
-        if keys.partition_point(|&key| key > low) != sure {
-            return None;
-        }
-        n += sure;
-    }
-    Some(n)
-}
-
-/// Selects the cells of one visible instance into a [`Sink`].
-struct CellEmitter<'a, S> {
+/// Selects the cells of one visible instance into a list of ranges.
+struct CellEmitter<'a> {
     /// A copy, so the hot loop reads it from registers or the stack, not through a pointer.
     settings: LodSettings,
     model: &'a ModelLod,
@@ -1395,14 +1226,14 @@ struct CellEmitter<'a, S> {
     model_index: u32,
     /// World per pixel per metre of distance, divided by the instance's scale.
     per_metre: f32,
-    sink: &'a mut S,
+    sink: &'a mut Vec<DrawRange>,
     cells: u32,
     triangle_ranges: u32,
     triangles: u64,
     points: u64,
 }
 
-impl<S: Sink> CellEmitter<'_, S> {
+impl CellEmitter<'_> {
     /// `(τ_p, τ_t)`, model space, of a cell at depth `z` and distance `distance` (world metres).
     #[inline(always)]
     fn thresholds(&self, z: f32, distance: f32) -> (f32, f32) {
@@ -1431,10 +1262,6 @@ impl<S: Sink> CellEmitter<'_, S> {
                 self.emit_triangles(cell, tau_points, tau_triangles);
             }
         }
-        if S::COUNT_ONLY {
-            self.sink.count(1);
-            return;
-        }
         let count = leading_above(&self.model.far_hi, tau_points);
         self.cells += self.model.root_cells;
         self.points += u64::from(count);
@@ -1453,10 +1280,6 @@ impl<S: Sink> CellEmitter<'_, S> {
     /// cell of a tree whose points the far list draws ([`Self::emit_far`]).
     fn emit_triangles(&mut self, cell: &CellLod, tau_points: f32, tau_triangles: f32) {
         if cell.largest <= tau_triangles {
-            return;
-        }
-        if S::COUNT_ONLY {
-            self.sink.count(1);
             return;
         }
         let triangles = leading_above(self.model.triangle_sizes(cell), tau_triangles);
@@ -1479,10 +1302,6 @@ impl<S: Sink> CellEmitter<'_, S> {
         // when the first key is above τ).
         let any_triangles = cell.largest > tau_triangles;
         let any_points = cell.hi0 > tau_points;
-        if S::COUNT_ONLY {
-            self.sink.count(usize::from(any_triangles) + usize::from(any_points));
-            return;
-        }
         let triangles = if any_triangles { leading_above(self.model.triangle_sizes(cell), tau_triangles) } else { 0 };
         let points = if !any_points {
             0
