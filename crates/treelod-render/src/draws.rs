@@ -441,7 +441,7 @@ impl Renderer {
             };
             // More than is pinned: `τ_p` rises to the first entry not pinned, as for a cell.
             let tau_p = range.tau_points.max(first_missing);
-            let count = u32::try_from(leading_above(lod.far_hi(), tau_p)).unwrap_or(u32::MAX);
+            let count = lod.far_above(tau_p);
             let tau_t = range.tau_triangles.max(tau_p);
             return [
                 None,
@@ -464,7 +464,7 @@ impl Renderer {
         let points = points.or_else(|| {
             (!triangles_complete && !his.is_empty()).then(|| DrawRange {
                 kind: Kind::Points,
-                count: u32::try_from(leading_above(his, tau_p)).unwrap_or(u32::MAX),
+                count: lod.points_above(cell, tau_p),
                 ..range
             })
         });
@@ -476,7 +476,7 @@ impl Renderer {
                 (DrawSource::Points, wanted)
             } else if resident_p >= roots.max(1) {
                 tau_p = tau_p.max(his[resident_p]);
-                (DrawSource::Points, leading_above(his, tau_p))
+                (DrawSource::Points, lod.points_above(cell, tau_p) as usize)
             } else {
                 tau_p = tau_p.max(his.get(roots).copied().unwrap_or(tau_p));
                 (DrawSource::Roots, roots)
@@ -487,10 +487,15 @@ impl Renderer {
             }
         }
         tau_t = tau_t.max(tau_p);
-        let mut count_t = leading_above(sizes, tau_t);
+        // At the selection's `τ_t`, its own count (no range: none), without searching again.
+        let mut count_t = if tau_t.to_bits() == range.tau_triangles.to_bits() {
+            triangles.map_or(0, |t| t.count as usize)
+        } else {
+            lod.triangles_above(cell, tau_t) as usize
+        };
         if count_t > resident_t {
             tau_t = tau_t.max(sizes[resident_t]);
-            count_t = leading_above(sizes, tau_t);
+            count_t = lod.triangles_above(cell, tau_t) as usize;
         }
         clamped |= triangles.is_some_and(|t| count_t < t.count as usize);
         let base = RecordedDraw { tau_points: tau_p, tau_triangles: tau_t, clamped, ..base };
@@ -697,14 +702,6 @@ fn record_direct(out: &mut Recording, record: RecordedDraw, first: u32, leaf_sca
     let bucket = record.source.bucket().of_model(record.model.0 as usize);
     out.push(bucket, info, corners * first, corners * record.count);
     out.keep(record);
-}
-
-/// Number of leading `values` (sorted largest first) above `tau`: the selection's own count
-/// ([`treelod_runtime::frame::leading_above`], galloping from the front: a far cell's empty or
-/// short prefix costs a comparison or a few, where a binary search over the cell's thousands of
-/// triangles missed the cache at each step).
-fn leading_above(values: &[f32], tau: f32) -> usize {
-    treelod_runtime::frame::leading_above(values, tau) as usize
 }
 
 #[cfg(test)]
