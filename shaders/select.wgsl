@@ -369,6 +369,9 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     var far = 0u;
     var culled = 0u;
     let cell_end = cur_model.first_cell + cur_model.cell_count;
+    // The least thresholds of a cell no nearer than d_block − cell_reach·scale: the near path's
+    // far list is drawn at them.
+    let nearest = least_thresholds(needs_z, d_block - cur_model.cell_reach * scale);
 
     if radius < frame.pixels.w * d_block {
         far = 1u;
@@ -391,11 +394,10 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
             }
         }
     } else if visibility != STRADDLES && frame.shading.z == 0.0
-        && far_points(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale))
-        && far_list_pays(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale).x, thresholds(0.0, d_block).x) {
+        && far_points(nearest) && far_list_pays(nearest.x, thresholds(0.0, d_block).x) {
         // Every cell in view and none nearer than d_block − cell_reach·scale, where the far list
         // draws few points more than the cells would.
-        emit_far(least_thresholds(needs_z, d_block - cur_model.cell_reach * scale));
+        emit_far(nearest);
     } else {
         // Near path: exact per-cell distances; cells culled on their own if the block straddles.
         // Per plane: n·p + w as a function of the model-space point, and the reach of a unit

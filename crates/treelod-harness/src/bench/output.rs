@@ -10,7 +10,7 @@ use embedded_graphics::primitives::Rectangle;
 use embedded_graphics::text::{Alignment, Baseline};
 use serde::Serialize;
 use treelod_render::offscreen::Image;
-use treelod_render::{PreparePhases, Technique};
+use treelod_render::Technique;
 
 use super::path::Phase;
 use super::{Report, Row};
@@ -426,7 +426,7 @@ fn phase_lines(report: &Report) -> Vec<String> {
             continue;
         }
         let n = phases.len() as f64;
-        let means: Vec<String> = PreparePhases::default()
+        let means: Vec<String> = phases[0]
             .named()
             .iter()
             .enumerate()
