@@ -9,8 +9,8 @@ use embedded_graphics::prelude::*;
 use embedded_graphics::primitives::Rectangle;
 use embedded_graphics::text::{Alignment, Baseline};
 use serde::Serialize;
-use treelod_render::offscreen::Image;
 use treelod_render::Technique;
+use treelod_render::offscreen::Image;
 
 use super::path::Phase;
 use super::{Report, Row};
