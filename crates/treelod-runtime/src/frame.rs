@@ -1143,11 +1143,11 @@ fn select_sequential(frame: &Frame<'_>, models: &[ModelLod], instances: &[Instan
 /// Chunks of instances on rayon's pool, each selected into its own list (kept between frames, so
 /// a frame allocates only where a chunk draws more than ever before), then the lists joined in
 /// chunk order: the sequential order. (The two passes this replaces, counting each chunk's
-/// ranges and then writing them into its slice of one list, made the selection of the willow's
-/// policy frames, 10^4 trees on 2 cores, slower than one thread's: 1.67–1.80 against 1.35–1.49
-/// ms a frame, 3 alternating runs. This path takes what one thread takes there, 2.67 against
-/// 2.70 ms, 5 runs: waking the pool's other thread costs about what it saves at a few thousand
-/// instances.)
+/// ranges and then writing them into its slice of one list, made the select phase of the
+/// willow's policy frames, 10^4 trees on 2 cores, slower than one thread's: 1.67–1.80 against
+/// 1.35–1.49 ms, 3 alternating runs. With this path a frame takes what it takes with one thread
+/// selecting, 2.67 against 2.70 ms, 5 runs: waking the pool's other thread costs about what it
+/// saves at a few thousand instances.)
 fn select_parallel(frame: &Frame<'_>, models: &[ModelLod], instances: &[Instance], out: &mut DrawList) -> FrameStats {
     use rayon::prelude::*;
     out.clear();
