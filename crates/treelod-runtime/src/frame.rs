@@ -814,9 +814,8 @@ pub struct DrawRange {
 /// one list across frames: [`select_frame`] overwrites it and keeps its allocations.
 #[derive(Clone, Debug, Default)]
 pub struct DrawList {
-    /// Storage; the list is `storage[..len]`.
+    /// The ranges.
     storage: Vec<DrawRange>,
-    len: usize,
     triangle_ranges: u32,
     point_ranges: u32,
     /// Per chunk of the parallel path, its ranges and tally, kept between frames.
@@ -838,7 +837,7 @@ impl DrawList {
 
     /// Empties the list, keeping its allocations.
     pub fn clear(&mut self) {
-        self.len = 0;
+        self.storage.clear();
         self.triangle_ranges = 0;
         self.point_ranges = 0;
     }
@@ -846,19 +845,19 @@ impl DrawList {
     /// The ranges.
     #[must_use]
     pub fn ranges(&self) -> &[DrawRange] {
-        self.storage.get(..self.len).unwrap_or_default()
+        &self.storage
     }
 
     /// Number of ranges.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.len
+        self.storage.len()
     }
 
     /// Whether the list holds no range.
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.len == 0
+        self.storage.is_empty()
     }
 
     /// Ranges the list holds without reallocating.
@@ -1017,7 +1016,7 @@ impl Tally {
     }
 
     fn finish(mut self, out: &mut DrawList) -> FrameStats {
-        self.stats.ranges = u32::try_from(out.len).unwrap_or(u32::MAX);
+        self.stats.ranges = u32::try_from(out.len()).unwrap_or(u32::MAX);
         out.triangle_ranges = self.triangle_ranges;
         out.point_ranges = self.stats.ranges.saturating_sub(self.triangle_ranges);
         self.stats
@@ -1133,10 +1132,8 @@ fn select_chunk(
 
 fn select_sequential(frame: &Frame<'_>, models: &[ModelLod], instances: &[Instance], out: &mut DrawList) -> FrameStats {
     out.clear();
-    out.storage.clear();
     let mut tally = Tally::default();
     select_chunk(frame, models, 0, instances, &mut out.storage, &mut tally);
-    out.len = out.storage.len();
     tally.finish(out)
 }
 
@@ -1160,13 +1157,11 @@ fn select_parallel(frame: &Frame<'_>, models: &[ModelLod], instances: &[Instance
             select_chunk(frame, models, c * CHUNK_INSTANCES, part, ranges, tally);
         },
     );
-    out.storage.clear();
     let mut tally = Tally::default();
     for (ranges, chunk) in &out.chunks[..chunk_count] {
         out.storage.extend_from_slice(ranges);
         tally.add(chunk);
     }
-    out.len = out.storage.len();
     tally.finish(out)
 }
 
