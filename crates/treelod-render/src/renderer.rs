@@ -672,7 +672,19 @@ impl Renderer {
     /// cheaper scene, released the bounds it had found, and switched trees again, which started
     /// new transitions: a frame that never settled. The settings themselves are not changed;
     /// [`Self::budget_steering`] reads what the controller holds.
+    ///
+    /// The call runs on a thread of rayon's global pool (the calling thread waits; a call from
+    /// one of the pool's threads runs where it is), so that the frame's parallel sections (the
+    /// policy's choice, each technique's selection, the draw records) are split by a thread of
+    /// the pool, which goes on with its share while another thread wakes, rather than by the
+    /// caller, which hands each whole section to the pool and sleeps until it is done: a wake-up
+    /// each way per section, where the call now pays one each way per frame.
     pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
+        rayon::scope(|_| self.prepare_on_pool(device, queue, camera))
+    }
+
+    /// [`Self::prepare`], on the calling thread.
+    fn prepare_on_pool(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
         let user = self.settings;
         let Some((policy, budget)) = user.policy.and_then(|p| p.budget.map(|n| (p, n))) else {
             self.policy.budget = None;
