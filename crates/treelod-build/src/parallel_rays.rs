@@ -41,6 +41,16 @@
 //! the points, 49 MB); run before it, 130 MB with each direction whole and 122.8 MB with bands
 //! (the same bytes written).
 //!
+//! The arrays of a direction (the rays' cells and places, the boxes, a band's lists and rays)
+//! are kept for the next one, but for the step that finds the pieces to settle, which would
+//! otherwise hold them beside its own. Each was allocated afresh per direction, above the
+//! allocator's mmap threshold, so the kernel mapped, zeroed and faulted in its pages every
+//! time, much of it on the thread that runs the stage's serial steps while the pool waits. The
+//! maple's default build, six alternating runs (2 cores, `--timings`): the stage 5.68 → 4.86 s
+//! (medians; every run faster), the build 8.8 → 8.1 s, system time 1.4–2.0 → 0.7–0.9 s, peak
+//! 120.5 → 121.1 MB; every shared model's container the same byte for byte (the willow's build
+//! peaks 2.6 MB higher, at 48.5 MB).
+//!
 //! Where the time goes on the maple (32 directions, 2 cores, 0.15 s a direction): listing the
 //! triangles a seventh, the rays (their cells, order and places) a quarter, tracing three fifths
 //! (gathering each cell's planes and sorting them, then the tests): the cell of a ray lists 110
@@ -241,16 +251,21 @@ fn occlusion(
     let mut seen = vec![0u8; vertices.len()];
     let half = directions.len().div_ceil(2);
     let mut projected = vec![Vec3::ZERO; vertices.len()];
+    // The arrays of a direction, kept for the next: allocated once, not mapped afresh (and
+    // faulted in page by page) for each of the directions.
+    let mut scratch = Scratch::default();
     let total = vertices.len() as u64;
     for (done, &k) in order.iter().enumerate() {
         if settle && done == half {
-            // The pieces only now, between two directions' grids and rays (the build's peak).
+            // The pieces only now, between two directions' grids and rays (the build's peak),
+            // without the arrays kept from the last direction.
+            scratch = Scratch::default();
             let groups = Groups::pieces(vertices, triangles, &used, PIECE_SIZE * diagonal);
             settle_pieces(&groups, &mut seen, &mut used);
         }
         let d = directions[k];
         let (u, w) = project(vertices, d, &mut projected);
-        let grid = Grid::new(&projected, triangles, mean_covered);
+        let grid = Grid::with_covered(&projected, triangles, mean_covered, std::mem::take(&mut scratch.covered));
         // A vertex's ray along the direction: its weight and origin (projected: across, across,
         // along), in its cell; none for a vertex that faces away or is in no triangle.
         let ray = |v: usize| -> Option<Ray> {
@@ -271,36 +286,38 @@ fn occlusion(
         // The rays' places in the order of their cells (then vertices), so that a cell's list is
         // gathered once for all of its rays, each traced with its neighbours in memory; rays
         // outside the grid last.
-        let cells: Vec<u32> = (0..vertices.len()).into_par_iter().map(|v| ray(v).map_or(NO_RAY, |r| r.cell)).collect();
-        let (starts, rank) = by_cell(&cells, grid.width * grid.height + 1);
-        drop(cells);
+        let Scratch { cells, starts, rank, next, sorted, band, .. } = &mut scratch;
+        (0..vertices.len()).into_par_iter().map(|v| ray(v).map_or(NO_RAY, |r| r.cell)).collect_into_vec(cells);
+        by_cell_into(cells, grid.width * grid.height + 1, [starts, rank, next]);
+        let (starts, rank) = (&*starts, &*rank);
         // A band of rows at a time (the rays outside the grid with the last): its triangles'
         // lists, then its rays, each written to its place from the vertices in their order (a
         // load at random waits, a store does not), traced, and added to its vertex's sums.
         let record = settle && done < half;
-        for rows in grid.bands(&starts, band_bytes) {
-            let band = grid.band(rows.clone());
-            let slots = starts[rows.start * grid.width]..starts[grid.cells_end(rows.end, &starts)];
+        for rows in grid.bands(starts, band_bytes) {
+            grid.band_into(rows.clone(), band);
+            let band = &*band;
+            let slots = starts[rows.start * grid.width]..starts[grid.cells_end(rows.end, starts)];
             let in_band = |slot: u32| slots.contains(&slot);
-            let mut sorted = vec![Ray { cell: NO_RAY, weight: 0.0, origin: Vec3::ZERO, kept: 0.0 }; slots.len()];
+            sorted.clear();
+            sorted.resize(slots.len(), Ray { cell: NO_RAY, weight: 0.0, origin: Vec3::ZERO, kept: 0.0 });
             let shared = SharedSlice(sorted.as_mut_ptr());
             rank.par_iter().enumerate().filter(|(_, slot)| in_band(**slot)).for_each(|(v, &slot)| {
                 if let Some(ray) = ray(v) {
-                    // SAFETY: the vertices' places are distinct (by_cell), and those of the band's
+                    // SAFETY: the vertices' places are distinct (by_cell_into), and those of the band's
                     // rays are inside `sorted` once its first place is taken off.
                     unsafe { shared.update((slot - slots.start) as usize, |_| ray) };
                 }
             });
             sorted.par_chunk_by_mut(|a, b| a.cell == b.cell).for_each_init(Gathered::default, |gathered, group| {
-                grid.gather(&band, group[0].cell, gathered);
+                grid.gather(band, group[0].cell, gathered);
                 for ray in group {
                     ray.kept = ray.weight * transmitted(gathered, ray.origin);
                 }
             });
-            drop(band);
             // Each vertex adds its ray's share to its sums in the order of the directions (and,
             // to settle, notes in the first half what its rays kept).
-            sums.par_iter_mut().zip(&mut seen).zip(&rank).filter(|(_, slot)| in_band(**slot)).for_each(
+            sums.par_iter_mut().zip(&mut seen).zip(rank).filter(|(_, slot)| in_band(**slot)).for_each(
                 |((sum, seen), &slot)| {
                     let ray = &sorted[(slot - slots.start) as usize];
                     *sum = (sum.0 + ray.kept, sum.1 + ray.weight);
@@ -312,6 +329,7 @@ fn occlusion(
                 },
             );
         }
+        scratch.covered = grid.covered;
         progress(total * (done as u64 + 1) / directions.len() as u64, total);
     }
     sums.iter()
@@ -393,31 +411,57 @@ struct Ray {
     kept: f32,
 }
 
-/// The rays ordered by their vertices' `cells` (cells past `buckets - 1`, outside the grid, as
-/// the last; [`NO_RAY`] for a vertex without one), then vertex: where each bucket's rays start
-/// in that order (and, last, their count), and per vertex its ray's place ([`NO_RAY`] for none).
+/// The arrays of one direction that [`occlusion`] keeps for the next (their contents are each
+/// direction's own).
+#[derive(Default)]
+struct Scratch {
+    /// Per vertex, its ray's cell ([`NO_RAY`] for none).
+    cells: Vec<u32>,
+    /// [`by_cell_into`]'s starts, places and running places.
+    starts: Vec<u32>,
+    rank: Vec<u32>,
+    next: Vec<u32>,
+    /// The grid's boxes ([`Grid::covered`]).
+    covered: Vec<[u16; 4]>,
+    /// A band's rays in the order of their cells.
+    sorted: Vec<Ray>,
+    /// A band's lists.
+    band: Band,
+}
+
+/// [`by_cell_into`] into new vectors: `(starts, rank)`.
+#[cfg(test)]
 fn by_cell(cells: &[u32], buckets: usize) -> (Vec<u32>, Vec<u32>) {
+    let (mut starts, mut rank) = (Vec::new(), Vec::new());
+    by_cell_into(cells, buckets, [&mut starts, &mut rank, &mut Vec::new()]);
+    (starts, rank)
+}
+
+/// The rays ordered by their vertices' `cells` (cells past `buckets - 1`, outside the grid, as
+/// the last; [`NO_RAY`] for a vertex without one), then vertex: into `starts`, where each
+/// bucket's rays start in that order (and, last, their count), and into `rank`, per vertex its
+/// ray's place ([`NO_RAY`] for none); `next` holds the places taken so far. The three are
+/// cleared first and their memory reused.
+fn by_cell_into(cells: &[u32], buckets: usize, [starts, rank, next]: [&mut Vec<u32>; 3]) {
     let bucket = |cell: u32| (cell as usize).min(buckets - 1);
-    let mut starts = vec![0u32; buckets + 1];
+    starts.clear();
+    starts.resize(buckets + 1, 0);
     for &cell in cells.iter().filter(|&&cell| cell != NO_RAY) {
         starts[bucket(cell) + 1] += 1;
     }
     for b in 0..buckets {
         starts[b + 1] += starts[b];
     }
-    let mut next = starts.clone();
-    let rank = cells
-        .iter()
-        .map(|&cell| {
-            if cell == NO_RAY {
-                return NO_RAY;
-            }
-            let slot = &mut next[bucket(cell)];
-            *slot += 1;
-            *slot - 1
-        })
-        .collect();
-    (starts, rank)
+    next.clone_from(starts);
+    rank.clear();
+    rank.extend(cells.iter().map(|&cell| {
+        if cell == NO_RAY {
+            return NO_RAY;
+        }
+        let slot = &mut next[bucket(cell)];
+        *slot += 1;
+        *slot - 1
+    }));
 }
 
 /// What a ray from `origin` (projected: across, across, along the direction) keeps through its
@@ -496,6 +540,7 @@ struct Grid<'a> {
 }
 
 /// The lists of a band of a [`Grid`]'s rows.
+#[derive(Default)]
 struct Band {
     /// The band's first cell and the end of its cells.
     cells: std::ops::Range<usize>,
@@ -503,13 +548,27 @@ struct Band {
     starts: Vec<u32>,
     /// Per cell, the triangles whose projection's bounding box meets it, ascending.
     entries: Vec<u32>,
+    /// Per chunk of the triangles, its entries per cell, then where they go ([`Grid::band_into`]).
+    counts: Vec<Vec<u32>>,
 }
 
 impl<'a> Grid<'a> {
+    /// [`Self::with_covered`] into a new vector.
+    #[cfg(test)]
+    fn new(projected: &'a [Vec3], triangles: &'a [AoTriangle], mean_covered: f64) -> Self {
+        Self::with_covered(projected, triangles, mean_covered, Vec::new())
+    }
+
     /// The grid of the `triangles` that stop any light, projected as `projected`: cells of
     /// [`CELLS_PER_TRIANGLE`], or larger where the triangles would cover more than `mean_covered`
-    /// of them on average ([`smallest_cell`]).
-    fn new(projected: &'a [Vec3], triangles: &'a [AoTriangle], mean_covered: f64) -> Self {
+    /// of them on average ([`smallest_cell`]). Its boxes are written into `covered`'s memory
+    /// (cleared first).
+    fn with_covered(
+        projected: &'a [Vec3],
+        triangles: &'a [AoTriangle],
+        mean_covered: f64,
+        mut covered: Vec<[u16; 4]>,
+    ) -> Self {
         let (lo, hi) = projected
             .iter()
             .fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(lo, hi), p| (lo.min(p.truncate()), hi.max(p.truncate())));
@@ -528,7 +587,7 @@ impl<'a> Grid<'a> {
             let c = (x * inverse_cell).max(0.0) as usize;
             c.min(max - 1)
         };
-        let covered = triangles
+        triangles
             .par_iter()
             .map(|AoTriangle { v: t, opacity, .. }| {
                 if *opacity <= 0.0 {
@@ -542,12 +601,12 @@ impl<'a> Grid<'a> {
                         .map(|c| c as u16);
                 r
             })
-            .collect();
+            .collect_into_vec(&mut covered);
         Self { projected, triangles, origin: lo, inverse_cell, width, height, covered }
     }
 
     /// The grid's rows in bands of about `bytes` each of lists (4 bytes an entry) and rays (a
-    /// [`Ray`] each; `starts`, the rays' places by cell of [`by_cell`], the rays outside the
+    /// [`Ray`] each; `starts`, the rays' places by cell of [`by_cell_into`], the rays outside the
     /// grid counted in the last row), a row at least: where the rays and lists of a direction
     /// are held a band at a time, memory is the band's. Integer counts, so the same whatever the
     /// thread count.
@@ -576,17 +635,26 @@ impl<'a> Grid<'a> {
         bands
     }
 
-    /// Where the rays of the rows before `row` end in `starts` ([`by_cell`]'s buckets): the
+    /// Where the rays of the rows before `row` end in `starts` ([`by_cell_into`]'s buckets): the
     /// rays outside the grid count in the last row.
     fn cells_end(&self, row: usize, starts: &[u32]) -> usize {
         if row == self.height { starts.len() - 1 } else { row * self.width }
     }
 
-    /// The lists of the cells of `rows`: the triangles whose boxes meet each cell, in the order
-    /// of the triangles. Counted and filled in chunks of the triangles, each chunk's entries of a
-    /// cell after the previous chunk's, so the lists do not depend on the chunks; each chunk
-    /// counts into a histogram of the band's cells, at most 8 of them whatever the thread count.
+    /// [`Self::band_into`] a new band.
+    #[cfg(test)]
     fn band(&self, rows: std::ops::Range<usize>) -> Band {
+        let mut band = Band::default();
+        self.band_into(rows, &mut band);
+        band
+    }
+
+    /// The lists of the cells of `rows`, into `band` (its memory reused): the triangles whose
+    /// boxes meet each cell, in the order of the triangles. Counted and filled in chunks of the
+    /// triangles, each chunk's entries of a cell after the previous chunk's, so the lists do not
+    /// depend on the chunks; each chunk counts into a histogram of the band's cells, at most 8 of
+    /// them whatever the thread count.
+    fn band_into(&self, rows: std::ops::Range<usize>, band: &mut Band) {
         let width = self.width;
         let cells = rows.start * width..rows.end * width;
         #[expect(clippy::cast_possible_truncation, reason = "at most 4097 rows")]
@@ -601,30 +669,31 @@ impl<'a> Grid<'a> {
             let ys = if x0 <= x1 { usize::from(y0.max(top))..usize::from(y1.min(last)) + 1 } else { 0..0 };
             ys.flat_map(move |y| (x0..=x1).map(move |x| (y - first_row) * width + x))
         };
-        let mut counts: Vec<Vec<u32>> = covered
-            .par_chunks(chunk)
-            .map(|part| {
-                let mut count = vec![0u32; cells.len()];
-                for &e in part.iter().filter(|e| e[2] <= last && e[3] >= top) {
-                    for c in cells_of(e) {
-                        count[c] += 1;
-                    }
+        let Band { cells: band_cells, starts, entries, counts } = band;
+        counts.resize_with(covered.len().div_ceil(chunk), Vec::new);
+        counts.par_iter_mut().zip(covered.par_chunks(chunk)).for_each(|(count, part)| {
+            count.clear();
+            count.resize(cells.len(), 0);
+            for &e in part.iter().filter(|e| e[2] <= last && e[3] >= top) {
+                for c in cells_of(e) {
+                    count[c] += 1;
                 }
-                count
-            })
-            .collect();
-        let mut starts = vec![0u32; cells.len() + 1];
+            }
+        });
+        starts.clear();
+        starts.resize(cells.len() + 1, 0);
         let mut total = 0u32;
         for c in 0..cells.len() {
             starts[c] = total;
-            for count in &mut counts {
+            for count in counts.iter_mut() {
                 let n = count[c];
                 count[c] = total;
                 total += n;
             }
         }
         starts[cells.len()] = total;
-        let mut entries = vec![0u32; total as usize];
+        entries.clear();
+        entries.resize(total as usize, 0);
         let shared = SharedSlice(entries.as_mut_ptr());
         covered.par_chunks(chunk).zip(counts.par_iter_mut()).enumerate().for_each(|(k, (part, next))| {
             for (i, &e) in part.iter().enumerate().filter(|(_, e)| e[2] <= last && e[3] >= top) {
@@ -638,7 +707,7 @@ impl<'a> Grid<'a> {
                 }
             }
         });
-        Band { cells, starts, entries }
+        *band_cells = cells;
     }
 
     /// The cell of a projected point; past the last cell for a point outside the grid.
