@@ -421,8 +421,11 @@ fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
 /// with several techniques, some of them in a transition, gives the same draws in the same
 /// order, the same counts and the same image whether each entry of the views' lists is a piece
 /// of its own, the lists are cut as by default, or all is one piece on the calling thread.
+/// Also: `prepare` runs on rayon's pool, on the caller's thread when that is one of a pool's, so
+/// frames prepared from inside pools of one and of three threads are the frames prepared from
+/// outside (the global pool).
 #[test]
-fn a_frame_recorded_in_pieces_is_the_frame_recorded_in_one_pass() {
+fn a_frame_recorded_in_pieces_or_on_any_pool_is_the_frame_recorded_in_one_pass() {
     let gpu = gpu();
     let container = calibrated_demo_without_octahedral();
     let policy = Policy { hysteresis: 0.0, transition: 3, ..Policy::default() };
@@ -488,6 +491,15 @@ fn a_frame_recorded_in_pieces_is_the_frame_recorded_in_one_pass() {
             assert_eq!(a.2, b.2, "chunk {chunk}, frame {frame}: the draws");
             assert_eq!(a.1, b.1, "chunk {chunk}, frame {frame}: the counts");
             assert!(a.0 == b.0, "chunk {chunk}, frame {frame}: the image");
+        }
+    }
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a pool");
+        let other = pool.install(|| run(7));
+        for (frame, (a, b)) in each.iter().zip(&other).enumerate() {
+            assert_eq!(a.2, b.2, "{threads} threads, frame {frame}: the draws");
+            assert_eq!(a.1, b.1, "{threads} threads, frame {frame}: the counts");
+            assert!(a.0 == b.0, "{threads} threads, frame {frame}: the image");
         }
     }
 }
