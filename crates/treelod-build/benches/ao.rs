@@ -10,7 +10,10 @@
 //! pieces settled by their first rays, and as parallel rays along 32 directions (the default,
 //! pieces settled by the even directions; and every vertex along all of them), each with its
 //! wall-clock and CPU time and its mean absolute difference per vertex from the
-//! reference. `TREELOD_AO_NO_REFERENCE=1` times only; `TREELOD_AO_ONLY=parallel` (or any part of
+//! reference. The input is in the container's order (vertices by first use, triangles by cell
+//! and size), less local than the source's that the build's stage reads: the maple's parallel
+//! rays take about a fifth longer here than in a build (`crate::parallel_rays` of the build
+//! crate). `TREELOD_AO_NO_REFERENCE=1` times only; `TREELOD_AO_ONLY=parallel` (or any part of
 //! a row's name) runs the rows that name it; `TREELOD_AO_RAYS=12,16` the parallel method at
 //! those ray counts (`2N` directions); `TREELOD_AO_SEEDS=1,2` each row with those seeds.
 

@@ -779,6 +779,10 @@ fn assemble(
     // size order; then the records, cell by cell, with vertices renumbered by first use. Cells are
     // built in parallel a few at a time (results kept in cell order), and each batch is copied out
     // and freed before the next, so the per-cell results never hold a second copy of the points.
+    // The batches keep both threads busy: on the maple the cells take 1.74 s of CPU, the largest
+    // 0.13 s, and the batches' largest cells sum to 0.85 s, less than half the work; copying the
+    // batches out takes 0.08 s. Integrating each cell's leaf points in parallel as well was
+    // measured and not taken (the stage 1.07–1.30 s against 1.14–1.31 s, 5 alternating builds).
     //
     // The vertices and triangles are not copied: the loop records the new vertex ids (`remap`),
     // the written order of the triangles (`order`) and each one's leaf (in its `part`, which only

