@@ -62,11 +62,20 @@ fn above_progress<R>(print: impl FnOnce() -> R) -> R {
 /// A directory is refused up front with a clear message (mapping one fails with an obscure
 /// operating-system error).
 pub fn open(path: &Path) -> Result<Container, Failed> {
+    open_unreported(path).map_err(|(message, class)| {
+        print_error(&message);
+        Failed { class }
+    })
+}
+
+/// [`open`] without printing: a failure is its message (`PATH: reason`, what [`print_error`]
+/// prints after `error: `) and its class, for a caller that prints it later (`verify` checks
+/// files side by side and reports them in the order given).
+pub fn open_unreported(path: &Path) -> Result<Container, (String, ErrorClass)> {
     if path.is_dir() {
-        print_error(&format!("{}: is a directory, not a .treelod file", path.display()));
-        return Err(Failed { class: ErrorClass::Io });
+        return Err((format!("{}: is a directory, not a .treelod file", path.display()), ErrorClass::Io));
     }
-    Container::open(path).map_err(|e| file_error(path, &e))
+    Container::open(path).map_err(|e| file_error_message(path, &e))
 }
 
 /// Prints `error: PATH: reason` for an error concerning `path` and returns its class.
@@ -74,8 +83,14 @@ pub fn open(path: &Path) -> Result<Container, Failed> {
 /// The format crate already wraps errors with a path ([`Error::InFile`], [`Error::Io`]); that
 /// wrapper is taken off here so the line names the file exactly once, as it was passed.
 pub fn file_error(path: &Path, error: &Error) -> Failed {
-    print_error(&format!("{}: {}", path.display(), reason(error)));
-    Failed { class: error.class() }
+    let (message, class) = file_error_message(path, error);
+    print_error(&message);
+    Failed { class }
+}
+
+/// What [`file_error`] prints after `error: `, and the error's class.
+pub fn file_error_message(path: &Path, error: &Error) -> (String, ErrorClass) {
+    (format!("{}: {}", path.display(), reason(error)), error.class())
 }
 
 /// The error's message without the path of its file.

@@ -1,12 +1,20 @@
 //! `treelod verify FILE...`: open every file and run the full check of format spec §9.2.
 //!
 //! Every file is checked, even after a failure; each valid one gets a line `FILE: ok (counters)` on
-//! stdout, each invalid one a line `error: FILE: reason` on stderr. The exit code is that of the
-//! first failure.
+//! stdout, each invalid one a line `error: FILE: reason` on stderr, in the order the files were
+//! given. The exit code is that of the first failure.
+//!
+//! Files are checked side by side, `--jobs` at once (default: the available cores), each worker
+//! taking the next file in the list; a file's lines are printed once every file before it is done,
+//! so at most `--jobs` containers are held decoded at once, and the lines of a file that is done
+//! wait only for the slower files before it.
 
+use std::num::NonZeroUsize;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, PoisonError};
 
-use treelod_format::VerifyReport;
+use treelod_format::{ErrorClass, VerifyReport};
 
 use crate::report::{self, Failed};
 
@@ -16,20 +24,82 @@ pub struct Args {
     /// The containers to check.
     #[arg(required = true, value_name = "FILE")]
     pub files: Vec<PathBuf>,
+    /// Files checked at once (default: the available cores). Each one is held decoded while it
+    /// is checked.
+    #[arg(short, long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub jobs: Option<u32>,
 }
+
+/// What checking one file found: its `ok` line, or its error message and class.
+type Outcome = Result<String, (String, ErrorClass)>;
 
 /// Runs `treelod verify`.
 pub fn run(args: &Args) -> Result<(), Failed> {
-    let mut first_failure = None;
-    for path in &args.files {
-        let outcome = report::open(path)
-            .and_then(|container| treelod_format::verify(&container).map_err(|e| report::file_error(path, &e)))
-            .and_then(|summary| report::write_stdout(&ok_line(&path.display().to_string(), &summary)));
-        if let Err(failed) = outcome {
-            first_failure.get_or_insert(failed);
+    let threads = args
+        .jobs
+        .map_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get), |n| n as usize)
+        .min(args.files.len())
+        .max(1);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| {
+        report::print_error(&format!("cannot start {threads} worker thread(s): {e}"));
+        Failed { class: ErrorClass::Io }
+    })?;
+    // The outcomes not printed yet, and the first file whose lines are not printed.
+    let printing = Mutex::new(Printing { outcomes: vec![None; args.files.len()], next: 0, first_failure: None });
+    let next = AtomicUsize::new(0);
+    pool.install(|| {
+        rayon::scope(|scope| {
+            for _ in 0..threads {
+                scope.spawn(|_| {
+                    loop {
+                        let index = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(path) = args.files.get(index) else { break };
+                        let outcome = check(path);
+                        printing.lock().unwrap_or_else(PoisonError::into_inner).done(index, outcome);
+                    }
+                });
+            }
+        });
+    });
+    let printing = printing.into_inner().unwrap_or_else(PoisonError::into_inner);
+    printing.first_failure.map_or(Ok(()), Err)
+}
+
+/// Opens and checks one file, printing nothing.
+fn check(path: &std::path::Path) -> Outcome {
+    let container = report::open_unreported(path)?;
+    let summary = treelod_format::verify(&container).map_err(|e| report::file_error_message(path, &e))?;
+    Ok(ok_line(&path.display().to_string(), &summary))
+}
+
+/// The files' outcomes, printed in list order as they become ready.
+struct Printing {
+    outcomes: Vec<Option<Outcome>>,
+    /// The first file not printed yet.
+    next: usize,
+    first_failure: Option<Failed>,
+}
+
+impl Printing {
+    /// Keeps file `index`'s outcome, then prints every outcome ready from the first unprinted.
+    fn done(&mut self, index: usize, outcome: Outcome) {
+        if let Some(slot) = self.outcomes.get_mut(index) {
+            *slot = Some(outcome);
+        }
+        while let Some(outcome) = self.outcomes.get_mut(self.next).and_then(Option::take) {
+            self.next += 1;
+            let printed = match outcome {
+                Ok(line) => report::write_stdout(&line),
+                Err((message, class)) => {
+                    report::print_error(&message);
+                    Err(Failed { class })
+                }
+            };
+            if let Err(failed) = printed {
+                self.first_failure.get_or_insert(failed);
+            }
         }
     }
-    first_failure.map_or(Ok(()), Err)
 }
 
 /// The line printed for a valid file: `FILE: ok (counters)`.

@@ -634,6 +634,36 @@ fn verify_checks_every_file_and_exits_with_the_first_failure() {
 }
 
 #[test]
+fn verify_with_several_jobs_reports_the_files_in_the_order_given() {
+    let dir = scratch("verify_jobs");
+    let good = write_tiny(&dir);
+    let missing = dir.join("missing.treelod");
+    let bad = dir.join("bad.treelod");
+    std::fs::write(&bad, b"not a container").expect("written");
+    let other = dir.join("other.treelod");
+    std::fs::copy(&good, &other).expect("copied");
+    let arg = |p: &Path| p.to_str().expect("UTF-8 path").to_owned();
+    let files = [&bad, &good, &missing, &other, &dir, &good, &bad];
+    let mut args = vec!["verify".to_owned(), "--jobs".to_owned(), String::new()];
+    args.extend(files.iter().map(|p| arg(p)));
+    let mut seen = Vec::new();
+    for jobs in ["1", "2", "3", "7", "64"] {
+        args[2] = jobs.to_owned();
+        let out = treelod(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        assert_eq!(out.status.code(), Some(3), "--jobs {jobs}: the first failure is the invalid file");
+        let ok: Vec<String> = stdout(&out).lines().map(|l| l.split(": ok").next().unwrap_or("").to_owned()).collect();
+        assert_eq!(ok, [arg(&good), arg(&other), arg(&good)], "--jobs {jobs}");
+        let err = stderr(&out);
+        let failed: Vec<&str> = err.lines().map(|l| l.split(": ").nth(1).unwrap_or("")).collect();
+        assert_eq!(failed, [arg(&bad), arg(&missing), arg(&dir), arg(&bad)], "--jobs {jobs}: {err}");
+        seen.push((stdout(&out), err));
+    }
+    assert!(seen.windows(2).all(|w| w[0] == w[1]), "the same lines whatever the jobs");
+    let out = treelod(&["verify", "--jobs", "0", &arg(&good)]);
+    assert_eq!(out.status.code(), Some(2), "no jobs is a usage error");
+}
+
+#[test]
 fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
     for args in [&[][..], &["dump"], &["verify"], &["dump", "--bogus", "x"], &["frobnicate"]] {
         let out = treelod(args);
