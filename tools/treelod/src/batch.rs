@@ -17,7 +17,6 @@
 
 use std::ffi::OsString;
 use std::io;
-use std::num::NonZeroUsize;
 use std::path::{Component, Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
@@ -29,6 +28,7 @@ use treelod_format::{Container, ErrorClass};
 
 use crate::build::{self, BuildOptions};
 use crate::report::{self, Failed};
+use crate::workers;
 
 /// Arguments of `treelod batch`.
 #[derive(Debug, clap::Args)]
@@ -166,37 +166,22 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     }
     let todo: Vec<usize> = (0..jobs.len()).filter(|&i| jobs[i].duplicate_of.is_none()).collect();
     if !todo.is_empty() {
-        let threads = args.jobs.map_or_else(
-            || std::thread::available_parallelism().map_or(1, NonZeroUsize::get),
-            |n| usize::try_from(n).unwrap_or(1),
-        );
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| {
-            report::print_error(&format!("cannot start {threads} worker thread(s): {e}"));
-            Failed { class: ErrorClass::Io }
-        })?;
         let bar = progress_bar(todo.len() as u64);
         report::set_progress_bar(Some(bar.clone()));
-        // Each worker takes the next file in list order, so at most `threads` trees are in memory
-        // and an interrupted run has done a prefix of the list (give or take the files in flight).
-        let next = AtomicUsize::new(0);
-        pool.install(|| {
-            rayon::scope(|scope| {
-                for _ in 0..threads.min(todo.len()) {
-                    scope.spawn(|_| {
-                        while let Some(&index) = todo.get(next.fetch_add(1, Ordering::Relaxed)) {
-                            let job = &jobs[index];
-                            bar.set_message(job.relative.clone());
-                            let outcome = convert(job, &args.options, args.force);
-                            print(line(job, &outcome, json));
-                            *outcomes[index].lock().unwrap_or_else(PoisonError::into_inner) = Some(outcome);
-                            bar.inc(1);
-                        }
-                    });
-                }
-            });
+        // At most `--jobs` trees are in memory; the pool keeps all its threads for the builds'
+        // cells when fewer files than threads are left.
+        let done = workers::on_workers(args.jobs, todo.len(), |k| {
+            let index = todo[k];
+            let job = &jobs[index];
+            bar.set_message(job.relative.clone());
+            let outcome = convert(job, &args.options, args.force);
+            print(line(job, &outcome, json));
+            *outcomes[index].lock().unwrap_or_else(PoisonError::into_inner) = Some(outcome);
+            bar.inc(1);
         });
         bar.finish_and_clear();
         report::set_progress_bar(None);
+        done?;
     }
 
     let outcomes: Vec<Outcome> =

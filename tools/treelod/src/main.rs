@@ -17,6 +17,7 @@ mod scene;
 mod table;
 mod verify;
 mod view;
+mod workers;
 
 use std::process::ExitCode;
 

@@ -9,14 +9,13 @@
 //! so at most `--jobs` containers are held decoded at once, and the lines of a file that is done
 //! wait only for the slower files before it.
 
-use std::num::NonZeroUsize;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 use treelod_format::{ErrorClass, VerifyReport};
 
 use crate::report::{self, Failed};
+use crate::workers;
 
 /// Arguments of `treelod verify`.
 #[derive(Debug, clap::Args)]
@@ -35,32 +34,14 @@ type Outcome = Result<String, (String, ErrorClass)>;
 
 /// Runs `treelod verify`.
 pub fn run(args: &Args) -> Result<(), Failed> {
-    let threads = args
-        .jobs
-        .map_or_else(|| std::thread::available_parallelism().map_or(1, NonZeroUsize::get), |n| n as usize)
-        .min(args.files.len())
-        .max(1);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| {
-        report::print_error(&format!("cannot start {threads} worker thread(s): {e}"));
-        Failed { class: ErrorClass::Io }
-    })?;
     // The outcomes not printed yet, and the first file whose lines are not printed.
     let printing = Mutex::new(Printing { outcomes: vec![None; args.files.len()], next: 0, first_failure: None });
-    let next = AtomicUsize::new(0);
-    pool.install(|| {
-        rayon::scope(|scope| {
-            for _ in 0..threads {
-                scope.spawn(|_| {
-                    loop {
-                        let index = next.fetch_add(1, Ordering::Relaxed);
-                        let Some(path) = args.files.get(index) else { break };
-                        let outcome = check(path);
-                        printing.lock().unwrap_or_else(PoisonError::into_inner).done(index, outcome);
-                    }
-                });
-            }
-        });
-    });
+    // A check runs on its worker alone, so the pool needs no more threads than files.
+    let files = u32::try_from(args.files.len()).unwrap_or(u32::MAX);
+    workers::on_workers(args.jobs.map(|n| n.min(files)), args.files.len(), |index| {
+        let outcome = check(&args.files[index]);
+        printing.lock().unwrap_or_else(PoisonError::into_inner).done(index, outcome);
+    })?;
     let printing = printing.into_inner().unwrap_or_else(PoisonError::into_inner);
     printing.first_failure.map_or(Ok(()), Err)
 }
