@@ -437,9 +437,11 @@ struct Ray {
 struct Scratch {
     /// Per vertex, its ray's cell ([`NO_RAY`] for none).
     cells: Vec<u32>,
-    /// [`by_cell_into`]'s starts, places and running places.
+    /// [`by_cell_into`]'s starts: per cell, where its rays start in cell order.
     starts: Vec<u32>,
+    /// [`by_cell_into`]'s places: per vertex, its ray's place in cell order.
     rank: Vec<u32>,
+    /// [`by_cell_into`]'s running places: per cell, the next place to hand out.
     next: Vec<u32>,
     /// The grid's boxes ([`Grid::covered`]).
     covered: Vec<[u16; 4]>,
@@ -486,8 +488,8 @@ fn by_cell_into(cells: &[u32], buckets: usize, [starts, rank, next]: [&mut Vec<u
 
 /// What a ray from `origin` (projected: across, across, along the direction) keeps through its
 /// cell's triangles as [`Grid::gather`] lays them out; hits nearer than its depth `origin.z` are
-/// ignored. Each block's triangles
-/// are tested for the origin's projection at once; the hits are then taken in the list's order.
+/// ignored. Each block's triangles are tested for the origin's projection at once; the hits are
+/// then taken in the list's order.
 fn transmitted(Gathered { reach, blocks, .. }: &Gathered, origin: Vec3) -> f32 {
     let first = reach.partition_point(|&r| r <= origin.z);
     let p = origin.truncate();
