@@ -16,8 +16,9 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     // it would keep its coverage only on average, appearing and disappearing as it crosses pixel
     // centres (measured: a slow orbit of the orchid at 8 radii, temporal noise .00324 -> .00398
     // against the reference's .00204; docs/cli.md). It is drawn as a one-pixel square that
-    // carries the disc's coverage, pi r^2 of the pixel (`splat_mask`), kept or dropped by its
-    // hash, the same way every frame while its coverage stays.
+    // carries the disc's coverage, pi r^2 of the pixel (`splat_mask`): half of such splats,
+    // chosen by their hash, are kept or dropped by it the same way every frame while their
+    // coverage stays, the other half drawn as their disc covers the pixel's centre.
     let depth = max((frame.view_proj * centre).w, 1e-6);
     let pixel = 2.0 * depth / (frame.right.w * frame.eye.w);
     // The record's disc holds the mean over directions of the area its surface projects; the
@@ -64,20 +65,38 @@ fn vs_point(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) d
     return out;
 }
 
+// The share of sub-pixel splats drawn as their disc covers the pixel's centre (`splat_mask`)
+// rather than kept or dropped whole by their hash (spec §10.1). Each way keeps the discs' expected
+// coverage. The hashed square ignores where in its pixel the point lies, so a point just inside a
+// crown's outline colours the background pixel it falls in as often as one at the pixel's centre;
+// the disc covers that pixel only when its centre is near the point, as the mesh does, but
+// appears and disappears as it moves across pixel centres. Measured with `eval` on the seven
+// shared models (docs/cli.md, `treelod build`, sub-pixel splats): drawing half of them as discs
+// lowers the point tree's RMSE at 32 bounding radii on six of them, by up to a seventh (the
+// Quaternius tree .00133 -> .00115; the orchid's +1 %), and keeps about half of the shimmer that
+// drawing them all as discs adds.
+const SPLAT_DISC_SHARE: f32 = 0.5;
+
 // The samples a splat of `coverage` (the share of its one-pixel square its disc covers) covers,
-// `id` its hash (0: discard it). With one sample, the whole square in a share `coverage` of the
-// splats, chosen by their hash: a splat is kept or dropped the same way every frame while its
-// coverage stays, so a far canopy keeps its density (the expected coverage is the discs') without
-// growing fat or shimmering; as the camera approaches, coverage grows and more splats appear, in
-// a fixed order. With MSAA, `coverage · sample_count` samples rounded up or down by the hash (so
-// the expected count is exact, down to splats of less than a sample), in a run starting at a
-// sample the hash picks: splats over one pixel cover different samples and add up.
-fn splat_mask(coverage: f32, id: u32) -> u32 {
+// `id` its hash (0: discard it), `offset2` the squared distance in pixels from the point to the
+// centre of the pixel being shaded. With one sample, a share `SPLAT_DISC_SHARE` of the splats,
+// chosen by a hash of `id`, cover the pixel when their disc holds its centre (`offset2 <
+// coverage / pi`); the others cover the whole square in a share `coverage` of them, chosen by
+// their hash: such a splat is kept or dropped the same way every frame while its coverage stays,
+// so a far canopy keeps its density (the expected coverage is the discs') without growing fat or
+// shimmering; as the camera approaches, coverage grows and more splats appear, in a fixed order.
+// With MSAA, `coverage · sample_count` samples rounded up or down by the hash (so the expected
+// count is exact, down to splats of less than a sample), in a run starting at a sample the hash
+// picks: splats over one pixel cover different samples and add up.
+fn splat_mask(coverage: f32, id: u32, offset2: f32) -> u32 {
     if coverage >= 1.0 {
         return 0xFFFFFFFFu;
     }
     let h = f32(id >> 8u) / 16777216.0;
     if sample_count == 1u {
+        if f32(mix_bits(id ^ 0x9e3779b9u) >> 8u) / 16777216.0 < SPLAT_DISC_SHARE {
+            return select(0u, 0xFFFFFFFFu, offset2 * 3.14159265 < coverage);
+        }
         return select(0u, 0xFFFFFFFFu, h < coverage);
     }
     return sample_run(u32(floor(coverage * f32(sample_count) + h)), mix_bits(id));
@@ -85,7 +104,9 @@ fn splat_mask(coverage: f32, id: u32) -> u32 {
 
 @fragment
 fn fs_point(in: Varyings) -> TriangleOut {
-    let mask = splat_mask(in.keep.y, in.id) & fade_mask(in.fade.x, in.fade.y, in.clip);
+    // On the one-pixel square (half-side half a pixel), `disc` reaches 1/sqrt(2) at its corners:
+    // the fragment lies `disc / sqrt(2)` pixels from the point.
+    let mask = splat_mask(in.keep.y, in.id, 0.5 * dot(in.disc, in.disc)) & fade_mask(in.fade.x, in.fade.y, in.clip);
     if dot(in.disc, in.disc) > 1.0 || mask == 0u {
         discard;
     }

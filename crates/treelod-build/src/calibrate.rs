@@ -24,7 +24,7 @@
 //!   the runtime's own selection rules at the metres per pixel `p = H/h` of that height (`H` the
 //!   block's height): Gilet's cut at the default pixel thresholds (`s_min` 1, `s_max` 2, no depth
 //!   bias), point discs of their radius (a sub-pixel disc as the one-pixel splat of spec §10.1,
-//!   drawn when a hash of the point falls below its coverage), pruned leaves at `λ(h)` scaled by
+//!   half of them drawn as their disc covers the pixel's centre), pruned leaves at `λ(h)` scaled by
 //!   `s_opt(λ)` or `1/λ`, impostor planes at `τ_p` with their atlas' alpha test, each morphing
 //!   towards its parent over the last octave of its interval and cross-fading with it over the
 //!   last quarter as the renderer draws them by default (`vs_plane`), the bark of both
@@ -1130,8 +1130,9 @@ impl<'a> Scene<'a> {
 
 /// A point's disc of `radius` metres at `centre`, facing the viewer, shaded as `surface` at the
 /// depth of its centre. A disc under half a pixel in radius is the renderer's one-pixel splat
-/// (spec §10.1): its pixel is drawn when a hash of the point falls below the disc's coverage
-/// `π·r²`.
+/// (spec §10.1, `splat_mask` in `shaders/tree/points.wgsl`): its pixel is drawn, for the share
+/// [`SPLAT_DISC_SHARE`] of the points that a hash picks, when the disc holds the pixel's centre,
+/// and for the others when a hash of the point falls below the disc's coverage `π·r²`.
 fn disc(canvas: &mut Canvas, view: &View, centre: Vec3, radius: f32, id: u64, surface: Surface) {
     let c = view.project(centre);
     let r = radius * view.scale;
@@ -1145,13 +1146,32 @@ fn disc(canvas: &mut Canvas, view: &View, centre: Vec3, radius: f32, id: u64, su
         });
         return;
     }
-    let coverage = std::f32::consts::PI * r * r;
-    let hash = crate::rng::SplitMix64(id).next_u64();
-    if ((hash >> 40) as f32) / ((1u64 << 24) as f32) < coverage && c.x >= 0.0 && c.y >= 0.0 {
+    if c.x >= 0.0 && c.y >= 0.0 && splat_kept(c, r, id) {
         let (x, y) = (c.x as usize, c.y as usize);
         if x < canvas.size() as usize && y < canvas.size() as usize {
             canvas.put(x, y, z, colour);
         }
+    }
+}
+
+/// The share of sub-pixel splats drawn as their disc covers their pixel's centre, the others kept
+/// whole by a hash (`SPLAT_DISC_SHARE` in `shaders/tree/points.wgsl`, spec §10.1).
+pub const SPLAT_DISC_SHARE: f32 = 0.5;
+
+/// Whether the one-pixel splat of a disc of radius `r < 1/2` pixels centred at `c` (pixels) covers
+/// the pixel holding `c` (the only one whose centre it can hold): for the share
+/// [`SPLAT_DISC_SHARE`] of the ids that a hash picks, when the disc holds the pixel's centre;
+/// for the others, when a hash of `id` falls below its coverage `π·r²`. Either way the expected
+/// coverage over the point's place in its pixel is `π·r²`.
+fn splat_kept(c: Vec2, r: f32, id: u64) -> bool {
+    let mut hashes = crate::rng::SplitMix64(id);
+    let unit = |h: u64| ((h >> 40) as f32) / ((1u64 << 24) as f32);
+    let keep = unit(hashes.next_u64());
+    if unit(hashes.next_u64()) < SPLAT_DISC_SHARE {
+        let offset = c - (c.floor() + Vec2::splat(0.5));
+        offset.length_squared() < r * r
+    } else {
+        keep < std::f32::consts::PI * r * r
     }
 }
 
@@ -1312,4 +1332,45 @@ fn atlas(data: &ContainerData, record: &ImageRecord) -> Option<Atlas> {
 fn linear_colour(packed: u32) -> Vec4 {
     let [r, g, b, a] = unpack_rgba8(packed);
     Vec4::new(texels::srgb_to_linear(r), texels::srgb_to_linear(g), texels::srgb_to_linear(b), a)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The share of 40,000 ids whose splat of radius `r` at `c` covers its pixel.
+    fn share_kept(c: Vec2, r: f32) -> f64 {
+        let n = 40_000u64;
+        (0..n).filter(|&id| splat_kept(c, r, id.wrapping_mul(0x9e37_79b9_7f4a_7c15))).count() as f64 / n as f64
+    }
+
+    #[test]
+    fn the_splats_disc_share_is_the_renderers() {
+        let shader = include_str!("../../../shaders/tree/points.wgsl");
+        let line = format!("const SPLAT_DISC_SHARE: f32 = {SPLAT_DISC_SHARE:?};");
+        assert!(shader.contains(&line), "shaders/tree/points.wgsl declares {line}");
+    }
+
+    #[test]
+    fn half_the_sub_pixel_splats_cover_their_pixel_as_their_disc_and_all_keep_their_coverage() {
+        let r = 0.3f32;
+        let coverage = f64::from(std::f32::consts::PI * r * r);
+        let disc = f64::from(SPLAT_DISC_SHARE);
+        // At the pixel's centre every disc holds it; the hashed ones are kept by their coverage.
+        let centre = share_kept(Vec2::new(5.5, 7.5), r);
+        assert!((centre - (disc + (1.0 - disc) * coverage)).abs() < 0.01, "at the centre: {centre}");
+        // Near a corner no disc holds the centre: only the hashed ones are drawn.
+        let corner = share_kept(Vec2::new(5.95, 7.05), r);
+        assert!((corner - (1.0 - disc) * coverage).abs() < 0.01, "near a corner: {corner}");
+        // Over the places in the pixel, the expected coverage is the disc's.
+        let steps = 16;
+        let mean = (0..steps * steps)
+            .map(|i| {
+                let offset = (Vec2::new((i % steps) as f32, (i / steps) as f32) + 0.5) / steps as f32;
+                share_kept(Vec2::new(3.0, 9.0) + offset, r)
+            })
+            .sum::<f64>()
+            / f64::from(steps * steps);
+        assert!((mean - coverage).abs() < 0.01, "mean {mean} against {coverage}");
+    }
 }

@@ -40,18 +40,36 @@ fn sheet() -> Scene {
             leaves.triangles.extend([[first, first + 1, first + 2], [first, first + 2, first + 3]]);
         }
     }
+    green("sheet", leaves, true)
+}
+
+/// A scene of `part` alone, its material an opaque green named after the scene.
+fn green(name: &str, part: Part, double_sided: bool) -> Scene {
     Scene {
-        name: "sheet".into(),
-        parts: vec![leaves],
+        name: name.into(),
+        parts: vec![part],
         materials: vec![Material {
-            name: "leaves".into(),
+            name: name.into(),
             base_color: [0.2, 0.6, 0.1, 1.0],
             alpha_mode: AlphaMode::Opaque,
-            double_sided: true,
+            double_sided,
             ..Material::default()
         }],
         ..Scene::default()
     }
+}
+
+/// `scene` built without ambient occlusion, as one block at the origin.
+fn built(scene: &Scene) -> ContainerData {
+    let config = BuildConfig { ao: None, ..BuildConfig::default() };
+    build_block(&scene.name, &[Placed { scene, translation: Vec3::ZERO }], &config, "test").expect("builds").data
+}
+
+/// The pixel mask of the sheet seen from `eye`, drawn with `technique`.
+fn covered_mask(gpu: &Gpu, container: &Arc<Container>, technique: Technique, eye: Vec3) -> Vec<bool> {
+    let mut renderer = one_tree(gpu, container, Settings { technique, ..Settings::default() });
+    let camera = Camera::look_at(eye, Vec3::ZERO, 0.8, SIZE, SIZE);
+    covered(&settled(gpu, &mut renderer, &camera).0)
 }
 
 /// Pixels covered by the sheet seen from `eye`, drawn with `technique`.
@@ -80,11 +98,7 @@ fn covered_pixels(
 
 #[test]
 fn sub_pixel_splats_cover_what_the_sheet_covers_from_every_direction() {
-    let scene = sheet();
-    let config = BuildConfig { ao: None, ..BuildConfig::default() };
-    let data = build_block("sheet", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test")
-        .expect("builds")
-        .data;
+    let data = built(&sheet());
     // Every point of the flat sheet faces along its normal: f = 1.
     assert_eq!(data.point_facing.len(), data.points.len());
     assert!(data.point_facing.iter().all(|&f| f == 255), "{:?}", data.point_facing);
@@ -114,12 +128,64 @@ fn sub_pixel_splats_cover_what_the_sheet_covers_from_every_direction() {
         "splats / mesh: with facing {face_with:.2} face on, {grazing_with:.2} at 75°; without {face_without:.2}, \
          {grazing_without:.2}"
     );
-    // Face on, the facing doubles each disc's coverage (2|n·v| = 2): more of the sheet is covered.
-    assert!(face_with > 1.5 * face_without, "face on: {face_with:.2} against {face_without:.2}");
+    // Face on, the facing doubles each disc's coverage (2|n·v| = 2): more of the sheet is covered
+    // (measured: 0.83 of the mesh's pixels against 0.53; with every splat kept by its hash, whose
+    // overlaps within a pixel lose more of it, 0.77 against 0.33).
+    assert!(face_with > 1.3 * face_without, "face on: {face_with:.2} against {face_without:.2}");
     // At 75°, the mesh covers about a third of what it covers face on, and so do the splats with
     // their facing (2 cos 75° ≈ 0.52 of the mean each): their share of the mesh's pixels stays
     // about the same. Without it each covers its mean share from every direction: the share
-    // grows as the sheet turns away.
+    // grows as the sheet turns away (measured: 0.53 face on, 0.82 at 75°, where the splats of
+    // the sheet's regular grid drawn as discs add up; with every splat kept by its hash, 0.33
+    // and 0.80).
     assert!((0.6..=1.4).contains(&(grazing_with / face_with)), "with facing: {grazing_with:.2} vs {face_with:.2}");
-    assert!(grazing_without > 2.0 * face_without, "without: {grazing_without:.2} vs {face_without:.2}");
+    assert!(grazing_without > 1.4 * face_without, "without: {grazing_without:.2} vs {face_without:.2}");
+}
+
+/// A closed, opaque UV sphere of radius 1 about the origin, `rings` rings of `2·rings` quads.
+fn ball(rings: u32) -> Scene {
+    let mut part = Part { mesh_name: "ball".into(), material: 0, ..Part::default() };
+    let segments = 2 * rings;
+    for j in 0..=rings {
+        let theta = std::f32::consts::PI * j as f32 / rings as f32;
+        for i in 0..=segments {
+            let phi = std::f32::consts::TAU * i as f32 / segments as f32;
+            let n = [theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()];
+            part.positions.push(n);
+            part.normals.push(n);
+        }
+    }
+    for j in 0..rings {
+        for i in 0..segments {
+            let a = j * (segments + 1) + i;
+            let b = a + segments + 1;
+            part.triangles.extend([[a, b, a + 1], [a + 1, b, b + 1]]);
+        }
+    }
+    green("ball", part, false)
+}
+
+/// Sub-pixel splats at a closed surface's outline (spec §10.1): the points just inside it fall in
+/// pixels whose centres the surface does not hold. Half of the splats cover their pixel as their
+/// disc covers its centre, so fewer of them colour those pixels than when every one is kept by
+/// its hash alone, while the ball keeps its coverage. Measured on lavapipe over 16 views of a ball
+/// 16 pixels across (3,328 pixels of the mesh): every splat kept by its hash, 26 pixels outside
+/// the mesh's and 2,945 inside; half of them as discs, 15 and 2,996.
+#[test]
+fn sub_pixel_splats_spill_less_past_a_closed_outline() {
+    let container = open_verified(&built(&ball(24)));
+    let gpu = gpu();
+    let (mut spill, mut inside, mut mesh_pixels) = (0, 0, 0);
+    for view in 0..16 {
+        let angle = std::f32::consts::TAU * view as f32 / 16.0 + 0.3;
+        let eye = 9.0 * vec3(angle.cos(), 0.35, angle.sin());
+        let mesh = covered_mask(&gpu, &container, Technique::Full, eye);
+        let splats = covered_mask(&gpu, &container, Technique::Spt, eye);
+        spill += splats.iter().zip(&mesh).filter(|&(&s, &m)| s && !m).count();
+        inside += splats.iter().zip(&mesh).filter(|&(&s, &m)| s && m).count();
+        mesh_pixels += count(&mesh);
+    }
+    eprintln!("mesh {mesh_pixels} pixels; splats {spill} past the outline, {inside} inside");
+    assert!(spill <= 20, "{spill} pixels past the outline");
+    assert!(inside as f64 > 0.87 * mesh_pixels as f64, "{inside} of {mesh_pixels} pixels inside");
 }
