@@ -15,7 +15,7 @@ use treelod_build::scene::{AlphaMode, Material, Part, Scene};
 use treelod_build::{BuildConfig, Placed, build_block};
 use treelod_format::{Container, ContainerData};
 use treelod_render::offscreen::Gpu;
-use treelod_render::{Camera, Primitive, Settings, Technique};
+use treelod_render::{Camera, FrameStats, Primitive, Settings, Technique};
 
 /// Leaf quads along each side of the sheet.
 const QUADS: u32 = 48;
@@ -65,11 +65,23 @@ fn built(scene: &Scene) -> ContainerData {
     build_block(&scene.name, &[Placed { scene, translation: Vec3::ZERO }], &config, "test").expect("builds").data
 }
 
-/// The pixel mask of the sheet seen from `eye`, drawn with `technique`.
-fn covered_mask(gpu: &Gpu, container: &Arc<Container>, technique: Technique, eye: Vec3) -> Vec<bool> {
+/// The pixel mask of the scene seen from `eye`, drawn with `technique` (selected on the GPU if
+/// `gpu_selection`), and the frame's statistics.
+fn covered_mask(
+    gpu: &Gpu,
+    container: &Arc<Container>,
+    technique: Technique,
+    gpu_selection: bool,
+    eye: Vec3,
+) -> (Vec<bool>, FrameStats) {
     let mut renderer = one_tree(gpu, container, Settings { technique, ..Settings::default() });
+    if gpu_selection {
+        renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("fits");
+    }
     let camera = Camera::look_at(eye, Vec3::ZERO, 0.8, SIZE, SIZE);
-    covered(&settled(gpu, &mut renderer, &camera).0)
+    let (image, stats) = settled(gpu, &mut renderer, &camera);
+    assert_eq!(stats.gpu_selection, gpu_selection);
+    (covered(&image), stats)
 }
 
 /// Pixels covered by the sheet seen from `eye`, drawn with `technique`.
@@ -80,20 +92,14 @@ fn covered_pixels(
     gpu_selection: bool,
     eye: Vec3,
 ) -> usize {
-    let mut renderer = one_tree(gpu, container, Settings { technique, ..Settings::default() });
-    if gpu_selection {
-        renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("fits");
-    }
-    let camera = Camera::look_at(eye, Vec3::ZERO, 0.8, SIZE, SIZE);
-    let (image, stats) = settled(gpu, &mut renderer, &camera);
-    assert_eq!(stats.gpu_selection, gpu_selection);
+    let (mask, stats) = covered_mask(gpu, container, technique, gpu_selection, eye);
     if technique == Technique::Spt && !gpu_selection {
         assert!(
             stats.submitted[Primitive::Point] > 0 && stats.submitted[Primitive::Triangle] == 0,
             "the sheet is drawn as points: {stats:?}"
         );
     }
-    count(&covered(&image))
+    count(&mask)
 }
 
 #[test]
@@ -179,8 +185,8 @@ fn sub_pixel_splats_spill_less_past_a_closed_outline() {
     for view in 0..16 {
         let angle = std::f32::consts::TAU * view as f32 / 16.0 + 0.3;
         let eye = 9.0 * vec3(angle.cos(), 0.35, angle.sin());
-        let mesh = covered_mask(&gpu, &container, Technique::Full, eye);
-        let splats = covered_mask(&gpu, &container, Technique::Spt, eye);
+        let (mesh, _) = covered_mask(&gpu, &container, Technique::Full, false, eye);
+        let (splats, _) = covered_mask(&gpu, &container, Technique::Spt, false, eye);
         spill += splats.iter().zip(&mesh).filter(|&(&s, &m)| s && !m).count();
         inside += splats.iter().zip(&mesh).filter(|&(&s, &m)| s && m).count();
         mesh_pixels += count(&mesh);
