@@ -3,7 +3,8 @@
 // hemi-octahedral map), the three views of the grid triangle holding the view direction blended
 // with barycentric weights, as engines' impostor bakers draw far trees.
 
-// Rust twin: treelod_format::OctahedralRecord (48 bytes, spec §6.13.1).
+// Rust twin: OctahedralGpu in crates/treelod-render/src/technique/baselines.rs, 64 bytes: the
+// file's OctahedralRecord (48 bytes, spec §6.13.1), then where its normals lie.
 struct OctahedralRecord {
     center: array<f32, 3>,
     radius: f32,
@@ -18,6 +19,11 @@ struct OctahedralRecord {
     // Reserved in the file; as uploaded, the index of the impostor's first view in
     // `view_planes` (technique/baselines.rs, `gpu_octahedral`).
     depth_first: u32,
+    // As uploaded (technique/baselines.rs, `OctahedralGpu`): the corner of the views' normal
+    // grid (treelod_format::OctahedralNormalRecord, spec §6.13.3), and 1 where there is one.
+    normals_uv_min: u32,
+    has_normals: u32,
+    padding: vec2<u32>,
 }
 
 // The planes' group layout (technique/impostors.rs, `GROUP`): the records in place of the planes,
@@ -59,6 +65,10 @@ struct OctahedralVaryings {
     @location(9) @interpolate(flat) normal: vec3<f32>,
     @location(10) @interpolate(flat) tint: vec3<f32>,
     @location(11) @interpolate(flat) fade: vec2<u32>,
+    // The normal grid's place relative to the colour grid (uv, xy) and 1 where the impostor has
+    // one (z); the sun's direction in block space, where the normals are (spec §6.13.3).
+    @location(12) @interpolate(flat) normals: vec3<f32>,
+    @location(13) @interpolate(flat) sun_block: vec3<f32>,
 }
 
 // The direction of view (i, j) of a grid of `n` a side, from the centre towards the viewer.
@@ -194,6 +204,8 @@ fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_ind
     let view = normalize(to_eye);
     out.light = vec2<f32>(octahedral_diffuse(view, rec.diffuse), rec.occlusion);
     out.normal = view;
+    out.normals = vec3<f32>(unpack2x16unorm(rec.normals_uv_min) - uv_min, f32(min(rec.has_normals, 1u)));
+    out.sun_block = normalize(transpose(rotation) * frame.sun.xyz);
     out.fade = vec2<u32>(draw.fade, draw.instance);
     switch frame.debug {
         case 1u: { out.tint = cell_tint(draw.cell); }
@@ -227,26 +239,59 @@ fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_ind
 // measured and not taken too: 200 jacarandas, whose policy draws 110 of 112 trees so, RMSE
 // .02041 -> .02040, FLIP .04330 -> .04325; the views' colours differ little, and what FLIP sees
 // is the far crowns drawn as solid shapes where the reference shows their gaps.)
-fn octahedral_texel(in: OctahedralVaryings) -> vec4<f32> {
+//
+// With `normals`, also the chosen view's normal texel (spec §6.13.3), at the same place of its
+// normal cell and from the same mip level; (0, 0, 0, 0) without.
+struct OctahedralTexel {
+    colour: vec4<f32>,
+    normal: vec4<f32>,
+}
+
+fn octahedral_texel(in: OctahedralVaryings, normals: bool) -> OctahedralTexel {
     let st = array<vec2<f32>, 3>(in.st0.xy / in.st0.z, in.st1.xy / in.st1.z, in.st2.xy / in.st2.z);
     let cells = array<vec2<f32>, 3>(in.cell01.xy, in.cell01.zw, in.cell2);
     let h = dither(in.clip);
     let chosen = select(select(2u, 1u, h < in.weights.x + in.weights.y), 0u, h < in.weights.x);
-    var out = vec4<f32>(0.0);
+    var out = OctahedralTexel(vec4<f32>(0.0), vec4<f32>(0.0));
+    var at = vec2<f32>(0.0);
+    var dx = vec2<f32>(0.0);
+    var dy = vec2<f32>(0.0);
     for (var k = 0u; k < 3u; k++) {
         let uv = cells[k] + clamp(0.5 * (st[k] + 1.0), vec2<f32>(0.0), vec2<f32>(1.0)) * in.cell_size;
         // One mip level finer than the pixel's footprint (half the derivatives): see above.
-        let texel = textureSampleGrad(atlas, atlas_sampler, uv, 0.5 * dpdx(uv), 0.5 * dpdy(uv));
+        let gx = 0.5 * dpdx(uv);
+        let gy = 0.5 * dpdy(uv);
+        let texel = textureSampleGrad(atlas, atlas_sampler, uv, gx, gy);
         if k == chosen && all(abs(st[k]) <= vec2<f32>(1.0)) {
-            out = texel;
+            out.colour = texel;
+            at = uv;
+            dx = gx;
+            dy = gy;
         }
+    }
+    if normals && in.normals.z > 0.5 && out.colour.a >= 0.5 {
+        out.normal = textureSampleGrad(atlas, atlas_sampler, at + in.normals.xy, dx, dy);
     }
     return out;
 }
 
+// The sun's diffuse factor of a texel whose decoded normal is `n` (block space; shorter where the
+// surfaces it covers disagree), `light` the sun's direction in block space and `mixture` the
+// impostor's diffuse mixture at this view: the surfaces' |n·l| where they agree (|n| = 1), the
+// mixture where they agree no more than normals turned towards the viewer from every direction do
+// (|n| ≤ 2/3), in between by c = 3|n| − 2. Rust twin:
+// treelod_format::OctahedralNormalRecord::sun_factor.
+fn octahedral_sun(n: vec3<f32>, light: vec3<f32>, mixture: f32) -> f32 {
+    let size = length(n);
+    let coherence = clamp(3.0 * size - 2.0, 0.0, 1.0);
+    let facing = abs(dot(n, light)) / max(size, 1e-6);
+    return clamp(coherence * facing + (1.0 - coherence) * mixture, 0.0, 1.0);
+}
+
 @fragment
 fn fs_octahedral(in: OctahedralVaryings) -> TriangleOut {
-    let texel = octahedral_texel(in);
+    let sampled = octahedral_texel(in, true);
+    let texel = sampled.colour;
     var mask = select(0u, 0xFFFFFFFFu, texel.a >= 0.5);
     mask &= fade_mask(in.fade.x, in.fade.y, in.clip);
     if mask == 0u {
@@ -255,13 +300,19 @@ fn fs_octahedral(in: OctahedralVaryings) -> TriangleOut {
     if frame.debug != 0u {
         return TriangleOut(vec4<f32>(in.tint, 1.0), mask);
     }
-    return TriangleOut(vec4<f32>(shade_diffuse(texel.rgb, in.light.x, in.normal, in.world, in.light.y) * in.tint, 1.0), mask);
+    // Per texel where the views have normals (spec §6.13.3): the sun by the texel's normal, the
+    // ambient light by its occlusion; else the whole view by the record's mixture and occlusion.
+    var light = in.light;
+    if in.normals.z > 0.5 {
+        light = vec2<f32>(octahedral_sun(2.0 * sampled.normal.rgb - 1.0, in.sun_block, in.light.x), sampled.normal.a);
+    }
+    return TriangleOut(vec4<f32>(shade_diffuse(texel.rgb, light.x, in.normal, in.world, light.y) * in.tint, 1.0), mask);
 }
 
 // The shadow pass: the same coverage as the colour pass.
 @fragment
 fn fs_shadow_octahedral(in: OctahedralVaryings) {
-    if octahedral_texel(in).a < 0.5 {
+    if octahedral_texel(in, false).colour.a < 0.5 {
         discard;
     }
 }

@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.13, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.15, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -96,6 +96,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -130,6 +131,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -151,6 +153,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -171,6 +174,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -189,6 +193,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -207,6 +212,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -227,6 +233,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -246,6 +253,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -264,6 +272,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -282,6 +291,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -299,6 +309,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -316,6 +327,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -332,6 +344,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 octahedral_depth: false,
                 point_facing: false,
+                octahedral_normals: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -344,7 +357,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           OCTAHEDRAL, CALIBRATION_ADDED and CALIBRATION_ELEVATIONS_ADDED, and the octahedral views' \
                           depth planes, OCTAHEDRAL_DEPTH), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, point_facing: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                point_facing: false,
+                octahedral_normals: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -354,6 +372,18 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE, \
                           OCTAHEDRAL, CALIBRATION_ADDED, CALIBRATION_ELEVATIONS_ADDED and OCTAHEDRAL_DEPTH, and the \
                           points' facing, POINT_FACING), zstd level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, octahedral_normals: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 15,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.15 (1.14's: the 1.5 kinds, a BC7 impostor atlas, \
+                          CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE, \
+                          OCTAHEDRAL, CALIBRATION_ADDED, CALIBRATION_ELEVATIONS_ADDED, OCTAHEDRAL_DEPTH and \
+                          POINT_FACING, and where the octahedral views' normals lie, OCTAHEDRAL_NORMALS), zstd level \
+                          19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -7,9 +7,9 @@ use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord,
-    NO_IMAGE, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
-    PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind,
-    calibration_technique, image_format,
+    NO_IMAGE, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
+    PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
+    billboard_kind, calibration_technique, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -120,6 +120,13 @@ pub struct SyntheticOptions {
     /// The points' facing (spec §6.5.1, 1.14): a random byte per point in `POINT_FACING`. Drawn
     /// last, so the rest of the container is the same as without it.
     pub point_facing: bool,
+    /// The octahedral views' normals (spec §6.13.3, 1.15): for each `OCTAHEDRAL` record, in order,
+    /// an `OctahedralNormalRecord` in `OCTAHEDRAL_NORMALS` whose grid of normal cells (of the
+    /// colour grid's size) lies right of the colour grid where the image has room, else left of
+    /// it, else against the image's right edge (over part of the colour grid): always inside the
+    /// image. Draws no random numbers, so the rest of the container is the same as without it.
+    /// Needs `octahedral`.
+    pub octahedral_normals: bool,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -169,6 +176,7 @@ impl SyntheticOptions {
             octahedral_frames: 2..=16,
             octahedral_depth: false,
             point_facing: false,
+            octahedral_normals: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -188,7 +196,7 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.14: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.15: a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
@@ -197,7 +205,7 @@ impl SyntheticOptions {
     /// per level, `CHAIN_CALIBRATION`), the block's far lines with their ambient occlusion
     /// (`FAR_LINES`, `FAR_LINE_AO`), the planes' diffuse response (`PLANE_DIFFUSE`), an
     /// octahedral impostor per tree (`OCTAHEDRAL`) with its views' depth planes
-    /// (`OCTAHEDRAL_DEPTH`), the calibration of the techniques added after 1.11
+    /// (`OCTAHEDRAL_DEPTH`) and normals (`OCTAHEDRAL_NORMALS`), the calibration of the techniques added after 1.11
     /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`) and the points' facing
     /// (`POINT_FACING`).
     #[must_use]
@@ -232,6 +240,7 @@ impl SyntheticOptions {
             octahedral_frames: 2..=16,
             octahedral_depth: true,
             point_facing: true,
+            octahedral_normals: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1210,7 +1219,28 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     if options.point_facing {
         b.data.point_facing = rng.bytes(b.data.points.len());
     }
+    if options.octahedral_normals {
+        b.data.octahedral_normals = b.data.octahedral.iter().map(normal_grid).collect();
+    }
     b.data
+}
+
+/// Where the normal grid of the octahedral impostor `o` lies (spec §6.13.3), in unorm16 steps: a
+/// grid of the colour grid's size right of it (`u` from the colour grid's `u_max`) where that fits
+/// in the image (`u + width ≤ 65536`), else left of it (ending at its `u_min`) where that fits,
+/// else against the image's right edge; `v` that of the colour grid. Always inside the image, as
+/// `verify` checks.
+fn normal_grid(o: &OctahedralRecord) -> OctahedralNormalRecord {
+    let (u0, v0, u1) = (o.uv_min & 0xFFFF, o.uv_min >> 16, o.uv_max & 0xFFFF);
+    let width = u1 - u0;
+    let u = if u1 + width <= 0x1_0000 {
+        u1
+    } else if width <= u0 {
+        u0 - width
+    } else {
+        0x1_0000 - width
+    };
+    OctahedralNormalRecord { uv_min: (v0 << 16) | u }
 }
 
 /// The block's far lines (spec §6.9.1): copies of the coarsest `lines` (those with `hi = +∞`, in

@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.14 (`tests/data/v1_0` to `tests/data/v1_14`): every file
+//! Golden files of format versions 1.0 to 1.15 (`tests/data/v1_0` to `tests/data/v1_15`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file (and 1.13's octahedral depth planes) decodes to literal values written out here (so
 //! a change in reading is caught even if writing changed the same way), and spec §13.1 holds the
@@ -26,7 +26,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -654,7 +654,7 @@ fn the_1_13_every_kind_file_has_every_kind_and_the_octahedral_depth_planes() {
 fn the_1_14_every_kind_file_has_every_kind_and_the_points_facing() {
     let c = Container::open(golden_dir_of(14).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 14, "{kind}");
     }
     assert_eq!(c.header().minor, 14);
     // A byte per point, of every kind: 0 (the mean coverage from every direction) to 255.
@@ -665,6 +665,32 @@ fn the_1_14_every_kind_file_has_every_kind_and_the_points_facing() {
     // Without POINT_FACING it is the 1.13 file, record for record, and the writer marks it 1.13:
     // a 1.13 reader draws the same points, each covering its mean share from every direction.
     is_the_previous_file_with(&c, 14, |data| data.point_facing.clear());
+}
+
+#[test]
+fn the_1_15_every_kind_file_has_every_kind_and_the_octahedral_normals() {
+    let c = Container::open(golden_dir_of(15).join("every-kind-zstd.treelod")).unwrap();
+    for kind in SectionKind::KNOWN {
+        assert!(c.section(kind).is_some(), "{kind} missing");
+    }
+    assert_eq!(c.header().minor, 15);
+    // One normal grid per impostor, in their order, each of its colour grid's size inside the
+    // image (unorm16 steps: at most 65536), and not where its colour grid starts.
+    let (octahedral, normals) = (c.octahedral(), c.octahedral_normals());
+    assert!(octahedral.len() >= 2, "{octahedral:?}");
+    assert_eq!(normals.len(), octahedral.len());
+    let corner = |uv: u32| (uv & 0xFFFF, uv >> 16);
+    for (k, (o, n)) in octahedral.iter().zip(normals).enumerate() {
+        let ((u0, v0), (u1, v1), (u, v)) = (corner(o.uv_min), corner(o.uv_max), corner(n.uv_min));
+        assert!(u0 < u1 && v0 < v1, "impostor {k}: a colour grid of some size");
+        assert!(u + (u1 - u0) <= 0x1_0000 && v + (v1 - v0) <= 0x1_0000, "impostor {k}: {n:?} of {o:?}");
+        assert_ne!((u, v), (u0, v0), "impostor {k}: the normals lie elsewhere than the colours");
+    }
+    let report = verify(&c).unwrap();
+    assert_eq!((report.octahedral, report.octahedral_normals), (octahedral.len() as u64, normals.len() as u64));
+    // Without OCTAHEDRAL_NORMALS it is the 1.14 file, record for record, and the writer marks it
+    // 1.14: a 1.14 reader draws the same impostors, each view lit as a whole.
+    is_the_previous_file_with(&c, 15, |data| data.octahedral_normals.clear());
 }
 
 /// The small 1.13 file: one octahedral impostor of 2 × 2 views and their four depth planes, view

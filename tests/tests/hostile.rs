@@ -227,9 +227,10 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds the points' facing (POINT_FACING), so it is a 1.14 file.
+    // The fixture holds where the octahedral views' normals lie (OCTAHEDRAL_NORMALS), so it is a
+    // 1.15 file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 14);
+    assert_eq!(minor, 15);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());

@@ -69,6 +69,9 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 octahedral_depth: grid[0] < 2 && grid[1] < 2,
                 // The points' facing with half of the grids.
                 point_facing: grid[2] >= 2,
+                // Where their views' normals lie with another half of those (drawing no random
+                // numbers, so the rest is the same as without them).
+                octahedral_normals: grid[0] < 2 && grid[1] >= 2,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -136,8 +139,21 @@ fn check_exact_cut<T: SptElement>(what: &str, cell: usize, elements: &[T]) -> Re
 /// The octahedral impostors (spec §6.13.1): each with 2 to 64 views per side, a finite centre, a
 /// finite radius above 0, an existing colour image, `uv_min ≤ uv_max`, a tree in range, its
 /// occlusion in `[0, 1]` and `reserved` 0; sorted by tree, at most one per tree. Their views' depth
-/// planes (spec §6.13.2): none, or `frames²` per impostor, every value in `[−1, 1]`.
+/// planes (spec §6.13.2): none, or `frames²` per impostor, every value in `[−1, 1]`. Their normal
+/// grids (spec §6.13.3): none, or one per impostor, of its colour grid's size inside the image.
 fn check_octahedral(data: &ContainerData) -> Result<(), String> {
+    let normals = &data.octahedral_normals;
+    if !normals.is_empty() && normals.len() != data.octahedral.len() {
+        return Err(format!("{} normal grids for {} octahedral impostors", normals.len(), data.octahedral.len()));
+    }
+    // In unorm16 steps: the far corner at most 65536 (1 and the one step of both corners' rounding).
+    let steps = |uv: u32| [uv & 0xFFFF, uv >> 16];
+    for (n, o) in normals.iter().zip(&data.octahedral) {
+        let ([u, v], [u0, v0], [u1, v1]) = (steps(n.uv_min), steps(o.uv_min), steps(o.uv_max));
+        if u0 > u1 || v0 > v1 || u + (u1 - u0) > 0x1_0000 || v + (v1 - v0) > 0x1_0000 {
+            return Err(format!("normal grid {n:?} of octahedral impostor {o:?} leaves the image"));
+        }
+    }
     let views: usize = data.octahedral.iter().map(|o| (o.frames as usize).pow(2)).sum();
     if !data.octahedral_depth.is_empty() && data.octahedral_depth.len() != views {
         return Err(format!("{} depth planes for {views} octahedral views", data.octahedral_depth.len()));
@@ -452,10 +468,11 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 14, "everything() holds the kinds of 1.14");
+    assert_eq!(container.header().minor, 15, "everything() holds the kinds of 1.15");
     assert_eq!(everything.octahedral.len(), everything.block.tree_count as usize, "an octahedral impostor per tree");
     let views: u32 = everything.octahedral.iter().map(|o| o.frames * o.frames).sum();
     assert_eq!(everything.octahedral_depth.len(), views as usize, "a depth plane per octahedral view");
+    assert_eq!(everything.octahedral_normals.len(), everything.octahedral.len(), "a normal grid per impostor");
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

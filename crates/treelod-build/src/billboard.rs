@@ -34,13 +34,15 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use treelod_format::{
-    BillboardRecord, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, billboard_kind, pack,
+    BillboardRecord, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, Setting,
+    billboard_kind, pack,
 };
 
 use crate::error::BuildError;
 use crate::impostor::{
-    ALIGN, Atlas, DepthMoments, GUTTER, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, SAMPLES, Winner, align, bake,
-    compose, diffuse_item, diffuse_mixture, diffuse_moments, may_cover, seen_triangle_occlusion, shelf_pack,
+    ALIGN, Atlas, Baked, DepthMoments, GUTTER, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, SAMPLES, Winner,
+    align, bake, compose, diffuse_item, diffuse_mixture, diffuse_moments, may_cover, seen_triangle_occlusion,
+    shelf_pack,
 };
 
 /// Views per side of a tree's octahedral impostor by default ([`OctahedralConfig::views`], spec
@@ -156,8 +158,11 @@ pub struct Billboards {
     /// Per tree with triangles, in tree order, its octahedral impostor (with `octahedral`);
     /// `image` 0: the caller sets the atlas's index.
     pub octahedral: Vec<OctahedralRecord>,
-    /// The same for each tree's octahedral views together.
+    /// The same for each tree's octahedral views together, their normal cells included.
     pub octahedral_texels: Vec<u64>,
+    /// Where each octahedral impostor's views' normals lie, in the order of `octahedral`: the
+    /// `OCTAHEDRAL_NORMALS` section (spec §6.13.3).
+    pub octahedral_normals: Vec<OctahedralNormalRecord>,
     /// Each octahedral view's depth plane, in the order of `octahedral` and of the views in
     /// each (`j · frames + i`): the `OCTAHEDRAL_DEPTH` section (spec §6.13.2).
     pub octahedral_depth: Vec<OctahedralDepthRecord>,
@@ -267,7 +272,8 @@ pub fn build_billboards(
             })
             .collect();
         let grid = views * cell;
-        regions.extend(spheres.iter().map(|_| Region::new(grid - 2 * GUTTER, grid - 2 * GUTTER)));
+        // The views' colour cells, then their normal cells to the right (spec §6.13.3).
+        regions.extend(spheres.iter().map(|_| Region::new(2 * grid - 2 * GUTTER, grid - 2 * GUTTER)));
         let (width, height) = pack_tight(&mut regions);
         if (width <= MAX_ATLAS && height <= MAX_ATLAS) || scale < 1e-9 {
             break (regions, width, height);
@@ -314,7 +320,7 @@ pub fn build_billboards(
             tris.iter().map(|&t| (t, mesh.triangles[t as usize].v.map(|v| position(v) - centre))).collect()
         })
         .collect();
-    let (baked, moments): (Vec<Vec<Vec<u8>>>, Vec<DepthMoments>) = jobs
+    let baked: Vec<Baked> = jobs
         .par_iter()
         .zip(&regions)
         .map(|(job, region)| {
@@ -345,8 +351,22 @@ pub fn build_billboards(
             let in_order: Vec<(u32, [DVec3; 3])> = order.iter().map(|&(_, k)| triangles[k as usize]).collect();
             bake(mesh, in_order.iter().copied(), &plane, Winner::Front, &job.quad, region, samples, octahedral_view)
         })
-        .unzip();
-    let texels = compose(&regions, &baked, width, height);
+        .collect();
+    // Each view's normal cell lies one grid side to the right of its colour cell.
+    let mut placed_regions = regions.clone();
+    let mut levels: Vec<Vec<Vec<u8>>> = Vec::with_capacity(baked.len());
+    let mut moments: Vec<DepthMoments> = Vec::with_capacity(baked.len());
+    let mut normal_levels = Vec::new();
+    for ((job, region), b) in jobs.iter().zip(&regions).zip(baked) {
+        if job.kind == OCTAHEDRAL_VIEW {
+            placed_regions.push(Region { x: region.x + views * cell, ..*region });
+            normal_levels.push(b.normals);
+        }
+        levels.push(b.levels);
+        moments.push(b.moments);
+    }
+    levels.extend(normal_levels);
+    let texels = compose(&placed_regions, &levels, width, height);
 
     // Stage: the records and each tree's texels.
     let mut facing_texels = vec![0u64; trees as usize];
@@ -358,7 +378,8 @@ pub fn build_billboards(
     let mut octahedral_depth = Vec::new();
     for ((job, region), moments) in jobs.iter().zip(&regions).zip(&moments) {
         if job.kind == OCTAHEDRAL_VIEW {
-            octahedral_texels[job.tree as usize] += region.texels();
+            // Its colour cell and its normal cell.
+            octahedral_texels[job.tree as usize] += 2 * region.texels();
             // In the record's units: the offset over its radius (the view's cell, gutter
             // included), the slopes as they are; none where the view shows nothing.
             let radius = job.quad.u.length() * f64::from(cell) / f64::from(view_content);
@@ -386,6 +407,16 @@ pub fn build_billboards(
             reserved: [0; 2],
         });
     }
+    // Each octahedral impostor's normal grid, to the right of its colour grid (spec §6.13.3).
+    let octahedral_normals = grids
+        .iter()
+        .map(|grid| {
+            let (x, y) = (f64::from(grid.x + views * cell) / f64::from(width), f64::from(grid.y) / f64::from(height));
+            #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]")]
+            let uv_min = pack::unorm16x2(x as f32, y as f32);
+            OctahedralNormalRecord { uv_min }
+        })
+        .collect();
     // Each octahedral impostor: the whole grid as its rectangle, each view's cell (gutter
     // included) as the square of `radius`.
     let octahedral = spheres
@@ -417,6 +448,7 @@ pub fn build_billboards(
         facing_texels,
         crossed_texels,
         octahedral_depth,
+        octahedral_normals,
         octahedral,
         octahedral_texels,
     }))
@@ -582,7 +614,13 @@ mod tests {
 
     /// The level-0 texel of view `(i, j)` of `record`'s grid where the block-space point `p`
     /// projects (spec §6.13.1).
-    fn view_texel_at(atlas: &Atlas, record: &OctahedralRecord, (i, j): (u32, u32), p: Vec3) -> [u8; 4] {
+    fn view_texel_at(atlas: &Atlas, record: &OctahedralRecord, view: (u32, u32), p: Vec3) -> [u8; 4] {
+        let (x, y) = view_texel_xy(atlas, record, view, p);
+        texel(atlas, x, y)
+    }
+
+    /// Where [`view_texel_at`] reads: the level-0 texel's column and row.
+    fn view_texel_xy(atlas: &Atlas, record: &OctahedralRecord, (i, j): (u32, u32), p: Vec3) -> (usize, usize) {
         let d = OctahedralRecord::view_direction(record.frames, i, j);
         let (right, up) = OctahedralRecord::view_basis(d);
         let q = p - Vec3::from_array(record.center);
@@ -592,7 +630,55 @@ mod tests {
         let n = record.frames as f32;
         let u = u0 + (i as f32 + (s + 1.0) * 0.5) / n * (u1 - u0);
         let v = v0 + (j as f32 + (t + 1.0) * 0.5) / n * (v1 - v0);
-        texel(atlas, (u * atlas.width as f32).floor() as usize, (v * atlas.height as f32).floor() as usize)
+        ((u * atlas.width as f32).floor() as usize, (v * atlas.height as f32).floor() as usize)
+    }
+
+    /// Each octahedral view's normal cell (spec §6.13.3) holds, where its colour cell shows a
+    /// surface, that surface's shading normal turned towards the viewer, `(n + 1)/2` sRGB-encoded,
+    /// and its ambient occlusion in alpha: from `+Z` the red card's normal tilted 45° towards `+X`
+    /// and its occlusion 0.5; from `−Z` the blue card's `+Z` normal turned to `−Z`, occlusion 0.
+    #[test]
+    fn octahedral_normal_cells_hold_the_front_surfaces_normals_and_occlusion() {
+        let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+        tree(&mut vertices, &mut triangles, 0.0, 0);
+        let tilted = Vec3::new(1.0, 0.0, 1.0).normalize();
+        for (k, v) in vertices.iter_mut().enumerate() {
+            // The blue card (0–3) faces +Z; the red one (4–7) is lit as if tilted.
+            let normal = if (4..8).contains(&k) { tilted } else { Vec3::Z };
+            v.normal = pack::oct_encode(normal.to_array());
+        }
+        let materials = materials();
+        let surfaces: Vec<Surface<'_>> = materials.iter().map(|m| Surface { material: m, image: None }).collect();
+        let occlusion: Vec<f32> = (0..triangles.len()).map(|t| if (2..4).contains(&t) { 0.5 } else { 0.0 }).collect();
+        let mesh =
+            ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &occlusion };
+        let out = build_billboards(&mesh, 1, &[20_000], Some(&OctahedralConfig::default())).unwrap().unwrap();
+        let (record, normals) = (&out.octahedral[0], &out.octahedral_normals[..]);
+        assert_eq!(normals.len(), 1);
+        let n = record.frames;
+        // The normal cell's texel: the colour cell's place, moved by the grids' offset.
+        let [u0, v0] = pack::unpack_unorm16x2(record.uv_min);
+        let [nu, nv] = pack::unpack_unorm16x2(normals[0].uv_min);
+        let (w, h) = (out.atlas.width as f32, out.atlas.height as f32);
+        let shift = (((nu - u0) * w).round() as usize, ((nv - v0) * h).round() as usize);
+        let normal_at = |view: (u32, u32), p: Vec3| {
+            let colour = view_texel_at(&out.atlas, record, view, p);
+            assert!(colour[3] >= 128, "the colour cell shows a surface at {p}: {colour:?}");
+            let (x, y) = view_texel_xy(&out.atlas, record, view, p);
+            let t = texel(&out.atlas, x + shift.0, y + shift.1);
+            let unit = |b: u8| 2.0 * crate::texture::srgb_to_linear_table()[b as usize] - 1.0;
+            (Vec3::new(unit(t[0]), unit(t[1]), unit(t[2])), f32::from(t[3]) / 255.0)
+        };
+        let front = Vec3::new(-0.5, 2.0, 0.6);
+        let (from_z, ao) = normal_at((n - 1, 0), front);
+        assert!(from_z.abs_diff_eq(tilted, 0.02), "{from_z}");
+        assert!((ao - 0.5).abs() < 0.01, "{ao}");
+        let (from_minus_z, ao) = normal_at((0, n - 1), front);
+        assert!(from_minus_z.abs_diff_eq(-Vec3::Z, 0.02), "{from_minus_z}");
+        assert!(ao.abs() < 0.01, "{ao}");
+        // A texel whose surfaces agree takes the sun by their normal alone, not the mixture.
+        let lit = OctahedralNormalRecord::sun_factor(from_z.to_array(), tilted.to_array(), 0.25);
+        assert!((lit - 1.0).abs() < 0.03, "a normal facing the sun takes it whole: {lit}");
     }
 
     /// Each octahedral view's depth plane (spec §6.13.2) is fitted to the front-most surfaces
@@ -679,7 +765,11 @@ mod tests {
             let c = config.texels;
             assert_eq!((x1 - x0, y1 - y0), (n * c, n * c), "{r:?}");
             assert_eq!((x0 % ALIGN, y0 % ALIGN), (0, 0));
-            assert_eq!(out.octahedral_texels[k], u64::from(n * n * c * c));
+            // The colour cells and as many normal cells (spec §6.13.3), right of them.
+            assert_eq!(out.octahedral_texels[k], u64::from(2 * n * n * c * c));
+            let [nu, nv] = pack::unpack_unorm16x2(out.octahedral_normals[k].uv_min);
+            let (w, h) = (out.atlas.width as f32, out.atlas.height as f32);
+            assert_eq!(((nu * w).round() as u32, (nv * h).round() as u32), (x0 + n * c, y0), "{r:?}");
             // The horizon at +Z is view (N − 1, 0), at −Z (0, N − 1), at +X (N − 1, N − 1).
             let front = Vec3::new(dx - 0.5, 2.0, 0.6);
             assert_eq!(view_texel_at(&out.atlas, r, (n - 1, 0), front)[..3], RED);
@@ -857,7 +947,8 @@ mod tests {
                 bake(&mesh, placed.iter().copied(), &plane, Winner::Front, &quad, &region, SAMPLES, fit_depth)
             })
         };
-        let (in_turn, moments) = bake_with(1, true);
+        let baked = bake_with(1, true);
+        let (in_turn, moments) = (baked.levels, baked.moments);
         assert!(moments.plane().is_some(), "the depth fit saw the red card");
         let level0 = &in_turn[0];
         // The red card covers the left half of every band's rows.
@@ -869,7 +960,7 @@ mod tests {
             assert_eq!(at(90, y)[3], 0, "row {y}");
         }
         for threads in [1, 3] {
-            assert!(bake_with(threads, false).0 == in_turn, "{threads} thread(s)");
+            assert!(bake_with(threads, false).levels == in_turn, "{threads} thread(s)");
         }
     }
 

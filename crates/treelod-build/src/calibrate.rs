@@ -37,7 +37,8 @@
 //!   each on its share of the pixels by a per-pixel dither, both submitted), the billboards, the
 //!   octahedral impostors (one quad per tree facing the view, each pixel textured by one of the
 //!   three baked views around the view direction with the probability of its weight, by the same
-//!   per-pixel dither, as `shaders/tree/octahedral.wgsl` draws it; their rows go to the sections
+//!   per-pixel dither, each pixel lit by the chosen view's normal texel where the container has
+//!   the views' normals, spec §6.13.3, as `shaders/tree/octahedral.wgsl` draws it; their rows go to the sections
 //!   of format 1.12, spec §6.18); and
 //!   each
 //!   level of the LoD chain, every tree's level of that number as the runtime switches a block's
@@ -108,9 +109,9 @@ use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
     CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE,
-    OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind,
-    calibration_technique, decode_ao, image, image_format, material_class, octahedral_depth_starts, point_facing_scale,
-    prune_leaves_drawn,
+    OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord,
+    billboard_kind, calibration_technique, decode_ao, image, image_format, material_class, octahedral_depth_starts,
+    point_facing_scale, prune_leaves_drawn,
 };
 use treelod_runtime::impostor::{
     BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
@@ -327,6 +328,10 @@ struct Quad {
     /// Mip levels finer than the pixel's footprint it is sampled from: 1 for an octahedral
     /// impostor's view (as `octahedral_texel` samples it), 0 for planes and billboards.
     finer: f32,
+    /// Where its normals lie relative to its colour, in atlas coordinates: an octahedral
+    /// impostor's view with normals (spec §6.13.3), each pixel lit by its normal texel as
+    /// `fs_octahedral` lights it; `None` for a quad lit as a whole.
+    normals: Option<Vec2>,
 }
 
 /// A quad's corners in its axes, in [`Quad::corners`] order: `(−1, −1)` at `uv_min`, then
@@ -345,6 +350,7 @@ impl Quad {
             uvs: QUAD_CORNERS.map(|(s, t)| lo + Vec2::new(0.5 * (s + 1.0), 0.5 * (t + 1.0)) * (hi - lo)),
             window: None,
             finer: 0.0,
+            normals: None,
         }
     }
 }
@@ -872,7 +878,7 @@ impl<'a> Scene<'a> {
                     let planes = starts
                         .as_ref()
                         .and_then(|s| d.octahedral_depth.get(s[k]..s[k] + (record.frames as usize).pow(2)));
-                    self.octahedral(canvas, view, record, planes);
+                    self.octahedral(canvas, view, record, planes, d.octahedral_normals.get(k));
                 }
                 d.octahedral.len() as u64
             }
@@ -889,6 +895,7 @@ impl<'a> Scene<'a> {
         let Some(atlas) = self.atlases.get(quad.image as usize).and_then(Option::as_ref) else { return };
         let corner = |q: Vec3, uv: Vec2| (view.project(q), uv, depth(view, q));
         let diffuse = Light::DEFAULT.plane_diffuse(quad.normal, view.direction, quad.diffuse);
+        let sun = Light::DEFAULT.sun.normalize_or(Vec3::Y).to_array();
         #[expect(clippy::cast_precision_loss, reason = "texture sides")]
         let texels = Vec2::new(atlas.size.0 as f32, atlas.size.1 as f32);
         let [a, b, c, e] = [0, 1, 2, 3].map(|i| corner(quad.corners[i], quad.uvs[i]));
@@ -906,6 +913,15 @@ impl<'a> Scene<'a> {
                 }
                 let [r, g, b, alpha] = texels::sample(&atlas.levels, atlas.size, uv.to_array(), lod, atlas.sampler);
                 if alpha >= 0.5 {
+                    let (diffuse, ao) = match quad.normals {
+                        Some(offset) => {
+                            let [nr, ng, nb, occlusion] =
+                                texels::sample(&atlas.levels, atlas.size, (uv + offset).to_array(), lod, atlas.sampler);
+                            let n = OctahedralNormalRecord::decode([nr, ng, nb]);
+                            (OctahedralNormalRecord::sun_factor(n, sun, diffuse), occlusion)
+                        }
+                        None => (diffuse, ao),
+                    };
                     canvas.put(x, y, z, Light::DEFAULT.shade_diffuse(Vec3::new(r, g, b), diffuse, ao));
                 }
             });
@@ -921,13 +937,15 @@ impl<'a> Scene<'a> {
     /// the `k`-th where the pixel's [`level_dither`] value lies past the weights of the views
     /// before it, at the place where the pixel's ray meets that view's plane (empty past its
     /// square); lit with the view as its normal by the record's diffuse mixture and its
-    /// occlusion. The view is orthographic: every ray runs along its direction.
+    /// occlusion, or where it has `normals` (spec §6.13.3) per pixel by the chosen view's normal
+    /// texel. The view is orthographic: every ray runs along its direction.
     fn octahedral(
         &self,
         canvas: &mut Canvas,
         view: &View,
         record: &OctahedralRecord,
         planes: Option<&[OctahedralDepthRecord]>,
+        normals: Option<&OctahedralNormalRecord>,
     ) {
         let frames = record.frames.max(2);
         let d = Vec3::new(view.direction.x, view.direction.y.max(0.0), view.direction.z);
@@ -964,6 +982,7 @@ impl<'a> Scene<'a> {
             (Vec2::from_array(unpack_unorm16x2(record.uv_min)), Vec2::from_array(unpack_unorm16x2(record.uv_max)));
         #[expect(clippy::cast_precision_loss, reason = "at most 64 frames")]
         let cell = (hi - lo) / frames as f32;
+        let normals = normals.map(|n| Vec2::from_array(unpack_unorm16x2(n.uv_min)) - lo);
         let mut from = 0.0;
         for (k, ((i, j, weight), ((rk, uk, dk), plane))) in blend.into_iter().zip(views).enumerate() {
             // The last view takes every pixel past the first two (the dither is below 1).
@@ -989,6 +1008,7 @@ impl<'a> Scene<'a> {
                     uvs,
                     window: Some((origin, origin + cell)),
                     finer: 1.0,
+                    normals,
                 };
                 self.quad(canvas, view, &quad, record.occlusion, (from, to));
             }

@@ -999,7 +999,7 @@ pub fn build_impostors(mesh: &ImpostorMesh<'_>, config: &ImpostorConfig) -> Resu
                         SAMPLES,
                         false,
                     )
-                    .0
+                    .levels
                 })
                 .collect();
             let texels = compose(&regions, &baked, width, height);
@@ -1310,8 +1310,9 @@ pub(crate) fn compose(regions: &[Region], baked: &[Vec<Vec<u8>>], width: u32, he
 /// `(rw >> l) × (rh >> l)`, each texel the mean of `samples × samples` samples ([`SAMPLES`] for
 /// planes and billboards). The sample at `quad.centre + s·u + t·v` lands at `((s + 1)/2,
 /// (t + 1)/2)` of the content rectangle, rows top to bottom (spec §6.10's texture coordinates).
-/// With `fit_depth`, also the sums that fit a plane to the covered samples' depths
-/// ([`DepthMoments`]; empty without).
+/// With `view` (an octahedral impostor's view, spec §6.13.2–§6.13.3), also the sums that fit a
+/// plane to the covered samples' depths ([`DepthMoments`]) and the region's normal levels
+/// ([`Baked::normals`]); both empty without.
 #[expect(clippy::too_many_arguments, reason = "the triangles, the quad, its sampling and what else to measure")]
 pub(crate) fn bake(
     mesh: &ImpostorMesh<'_>,
@@ -1321,8 +1322,8 @@ pub(crate) fn bake(
     quad: &Quad,
     region: &Region,
     samples: usize,
-    fit_depth: bool,
-) -> (Vec<Vec<u8>>, DepthMoments) {
+    view: bool,
+) -> Baked {
     let lut = srgb_to_linear_table();
     let mut moments = DepthMoments::default();
     let (sw, sh) = (region.tw as usize * samples, region.th as usize * samples);
@@ -1337,6 +1338,9 @@ pub(crate) fn bake(
     };
     let (rw, rh) = (region.rw as usize, region.rh as usize);
     let mut texels = vec![[0.0f32; 4]; rw * rh];
+    // With `view`: per texel the covered samples' mean normal (turned towards the viewer, the
+    // side of `plane.normal`) and mean ambient occlusion.
+    let mut normal_texels = vec![[0.0f32; 4]; if view { rw * rh } else { 0 }];
     let g = GUTTER as usize;
     // The samples of `BAND_ROWS` texel rows at a time, each band going over every triangle: a
     // sample sees the same triangles in the same order as in one pass, so the result is the
@@ -1351,14 +1355,22 @@ pub(crate) fn bake(
         .map(|surface| surface.image.filter(|img| sw * sh >= img.rgba.len() / 4).map(alpha_plane))
         .collect();
     // Band `b` of texel rows into `out`, its rows of the region (full width), with `scratch`'s
-    // buffers; adding the covered samples' depths to `moments` where given.
-    let band = |b: usize, out: &mut [[f32; 4]], scratch: &mut BandScratch, mut moments: Option<&mut DepthMoments>| {
-        let BandScratch { depth, colour, pending, located, alphas } = scratch;
+    // buffers; the texels' normals into `normals_out` and the covered samples' depths to
+    // `moments` where given.
+    let band = |b: usize,
+                out: &mut [[f32; 4]],
+                mut normals_out: Option<&mut [[f32; 4]]>,
+                scratch: &mut BandScratch,
+                mut moments: Option<&mut DepthMoments>| {
+        let BandScratch { depth, colour, normal, pending, located, alphas } = scratch;
         let band_start = b * band_samples;
         let band_end = (band_start + band_samples).min(sh);
         depth.clear();
         depth.resize(sw * band_samples.min(sh), f32::INFINITY);
         colour.resize(sw * band_samples.min(sh), [0.0; 3]);
+        if normals_out.is_some() {
+            normal.resize(sw * band_samples.min(sh), [0.0; 4]);
+        }
         for ((t, local), &(y0, y1)) in triangles.clone().zip(&rows) {
             if y1 as usize <= band_start || y0 as usize >= band_end {
                 continue;
@@ -1394,10 +1406,16 @@ pub(crate) fn bake(
             located.extend(pending.iter().map(|&(_, _, w)| shading.locate(w)));
             alphas.clear();
             alphas.extend(located.iter().map(|&n| shading.alpha(n)));
+            // The triangle's normal at a sample, towards the viewer, and its occlusion.
+            let occlusion = mesh.occlusion.get(t as usize).copied().unwrap_or(0.0).clamp(0.0, 1.0);
             for ((&(i, z, w), &n), &alpha) in pending.iter().zip(located.iter()).zip(alphas.iter()) {
                 if shading.passes(w, alpha) {
                     depth[i] = z;
                     colour[i] = shading.colour(w, shading.texel(n), lut);
+                    if normals_out.is_some() {
+                        let [nx, ny, nz] = shading.normal(w, &local, plane.normal);
+                        normal[i] = [nx, ny, nz, occlusion];
+                    }
                 }
             }
         }
@@ -1405,7 +1423,7 @@ pub(crate) fn bake(
         // Resolve the band's samples into the region's content.
         for ty in band_start / samples..band_end / samples {
             for tx in 0..region.tw as usize {
-                let (mut sum, mut covered) = ([0.0f32; 3], 0u32);
+                let (mut sum, mut normal_sum, mut covered) = ([0.0f32; 3], [0.0f32; 4], 0u32);
                 for sy in 0..samples {
                     let row = (ty * samples + sy - band_start) * sw + tx * samples;
                     for (sx, i) in (row..row + samples).enumerate() {
@@ -1418,13 +1436,21 @@ pub(crate) fn bake(
                             for c in 0..3 {
                                 sum[c] += colour[i][c];
                             }
+                            if normals_out.is_some() {
+                                for c in 0..4 {
+                                    normal_sum[c] += normal[i][c];
+                                }
+                            }
                         }
                     }
                 }
                 if covered > 0 {
                     let n = covered as f32;
-                    out[(ty - band_start / samples) * rw + tx + g] =
-                        [sum[0] / n, sum[1] / n, sum[2] / n, n / (samples * samples) as f32];
+                    let at = (ty - band_start / samples) * rw + tx + g;
+                    out[at] = [sum[0] / n, sum[1] / n, sum[2] / n, n / (samples * samples) as f32];
+                    if let Some(normals_out) = normals_out.as_deref_mut() {
+                        normals_out[at] = normal_sum.map(|v| v / n);
+                    }
                 }
             }
         }
@@ -1432,71 +1458,102 @@ pub(crate) fn bake(
     // The bands write disjoint rows, so they are baked in parallel, each sample as in one pass;
     // but the depth fit's sums are taken in the rows' order, one band after another.
     let content = &mut texels[g * rw..(g + region.th as usize) * rw];
-    if fit_depth {
+    if view {
         let mut scratch = BandScratch::default();
-        for (b, out) in content.chunks_mut(BAND_ROWS * rw).enumerate() {
-            band(b, out, &mut scratch, Some(&mut moments));
+        let normal_content = &mut normal_texels[g * rw..(g + region.th as usize) * rw];
+        for (b, (out, normals_out)) in
+            content.chunks_mut(BAND_ROWS * rw).zip(normal_content.chunks_mut(BAND_ROWS * rw)).enumerate()
+        {
+            band(b, out, Some(normals_out), &mut scratch, Some(&mut moments));
         }
     } else {
         content
             .par_chunks_mut(BAND_ROWS * rw)
             .enumerate()
-            .for_each_init(BandScratch::default, |scratch, (b, out)| band(b, out, scratch, None));
+            .for_each_init(BandScratch::default, |scratch, (b, out)| band(b, out, None, scratch, None));
     }
-    // Then dilate colour into transparent texels (below, per level).
+    // Each mip texel the mean of its four, weighted by their coverage, the normals by the same
+    // weights (the colour's alpha before coverage preservation); then each level dilated into
+    // its transparent texels.
     let mut levels = vec![texels];
+    let mut normal_levels = vec![normal_texels];
     let (mut w, mut h) = (rw, rh);
     for _ in 1..MIP_LEVELS {
-        let Some(prev) = levels.last() else { break };
+        let (Some(prev), Some(prev_normals)) = (levels.last(), normal_levels.last()) else { break };
         let (nw, nh) = (w / 2, h / 2);
         let mut next = Vec::with_capacity(nw * nh);
+        let mut next_normals = Vec::with_capacity(if view { nw * nh } else { 0 });
         for y in 0..nh {
             for x in 0..nw {
-                let block = [
-                    prev[2 * y * w + 2 * x],
-                    prev[2 * y * w + 2 * x + 1],
-                    prev[(2 * y + 1) * w + 2 * x],
-                    prev[(2 * y + 1) * w + 2 * x + 1],
-                ];
-                let alpha: f32 = block.iter().map(|t| t[3]).sum();
-                let rgb: [f32; 3] = std::array::from_fn(|c| {
-                    if alpha > 0.0 { block.iter().map(|t| t[c] * t[3]).sum::<f32>() / alpha } else { 0.0 }
-                });
-                next.push([rgb[0], rgb[1], rgb[2], alpha / 4.0]);
+                let four =
+                    [2 * y * w + 2 * x, 2 * y * w + 2 * x + 1, (2 * y + 1) * w + 2 * x, (2 * y + 1) * w + 2 * x + 1];
+                let alpha: f32 = four.iter().map(|&i| prev[i][3]).sum();
+                let mean = |texels: &[[f32; 4]], c: usize| {
+                    if alpha > 0.0 { four.iter().map(|&i| texels[i][c] * prev[i][3]).sum::<f32>() / alpha } else { 0.0 }
+                };
+                next.push([mean(prev, 0), mean(prev, 1), mean(prev, 2), alpha / 4.0]);
+                if view {
+                    next_normals.push(std::array::from_fn(|c| mean(prev_normals, c)));
+                }
             }
         }
         levels.push(next);
+        normal_levels.push(next_normals);
         (w, h) = (nw, nh);
     }
-    for (l, level) in levels.iter_mut().enumerate() {
-        dilate(level, rw >> l, rh >> l);
+    for (l, (level, normals)) in levels.iter_mut().zip(&mut normal_levels).enumerate() {
+        if view {
+            let covered: Vec<bool> = level.iter().map(|t| t[3] > 0.0).collect();
+            dilate(normals, rw >> l, rh >> l, covered, false);
+        }
+        let covered: Vec<bool> = level.iter().map(|t| t[3] > 0.0).collect();
+        dilate(level, rw >> l, rh >> l, covered, true);
     }
     preserve_coverage(&mut levels, rw, rh);
+    let byte = |v: f32| {
+        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "in 0..=255")]
+        let b = (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        b
+    };
+    let srgb = |v: f32| byte(linear_to_srgb(v));
     let bytes = levels
         .iter()
-        .map(|level| {
-            level
-                .iter()
-                .flat_map(|t| {
-                    let byte = |v: f32| {
-                        #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "in 0..=255")]
-                        let b = (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-                        b
-                    };
-                    [byte(linear_to_srgb(t[0])), byte(linear_to_srgb(t[1])), byte(linear_to_srgb(t[2])), byte(t[3])]
-                })
-                .collect()
-        })
+        .map(|level| level.iter().flat_map(|t| [srgb(t[0]), srgb(t[1]), srgb(t[2]), byte(t[3])]).collect())
         .collect();
-    (bytes, moments)
+    // A normal texel's RGB is `(n + 1)/2`, sRGB-encoded as the colour is (spec §6.13.3).
+    let unit = |v: f32| srgb(0.5 * v + 0.5);
+    let normals = if view {
+        normal_levels
+            .iter()
+            .map(|level| level.iter().flat_map(|t| [unit(t[0]), unit(t[1]), unit(t[2]), byte(t[3])]).collect())
+            .collect()
+    } else {
+        Vec::new()
+    };
+    Baked { levels: bytes, normals, moments }
 }
 
-/// A band's buffers in [`bake`]: per sample of the band its key and colour; one triangle's
-/// samples (index in the band, key, weights), their texels and alphas.
+/// What [`bake`] returns.
+pub(crate) struct Baked {
+    /// The region's levels, RGBA8 (RGB sRGB-encoded), largest first.
+    pub levels: Vec<Vec<u8>>,
+    /// With `view`, the region's normal levels, as `levels` (spec §6.13.3): RGB `(n + 1)/2` of the
+    /// covered samples' mean normal turned towards the viewer, sRGB-encoded; alpha their mean
+    /// ambient occlusion; each mip level the mean of its four texels weighted by their coverage,
+    /// the uncovered texels dilated as the colour's are. Empty without.
+    pub normals: Vec<Vec<u8>>,
+    /// With `view`, the sums that fit the view's depth plane ([`DepthMoments`]).
+    pub moments: DepthMoments,
+}
+
+/// A band's buffers in [`bake`]: per sample of the band its key, colour and (an octahedral
+/// view's) normal and occlusion; one triangle's samples (index in the band, key, weights), their
+/// texels and alphas.
 #[derive(Default)]
 struct BandScratch {
     depth: Vec<f32>,
     colour: Vec<[f32; 3]>,
+    normal: Vec<[f32; 4]>,
     pending: Vec<(usize, f32, [f32; 3])>,
     located: Vec<Option<usize>>,
     alphas: Vec<u8>,
@@ -1992,13 +2049,14 @@ fn preserve_coverage(levels: &mut [Vec<[f32; 4]>], width: usize, height: usize) 
 
 /// One triangle's inputs to [`shade`], looked up once per triangle rather than once per sample:
 /// its surface, its image's alpha plane if the caller made one ([`alpha_plane`]), and its
-/// corners' vertex colours (RGB linear through the table, alpha in `[0, 1]`) and texture
-/// coordinates.
+/// corners' vertex colours (RGB linear through the table, alpha in `[0, 1]`), texture
+/// coordinates and normals (octahedral, as stored).
 struct Shading<'a> {
     surface: &'a Surface<'a>,
     alpha: Option<&'a [u8]>,
     colour: [[f32; 4]; 3],
     uv: [[f32; 2]; 3],
+    normals: [u32; 3],
 }
 
 impl<'a> Shading<'a> {
@@ -2007,7 +2065,26 @@ impl<'a> Shading<'a> {
             let bytes = corner.color.to_le_bytes();
             std::array::from_fn(|i| if i < 3 { lut[bytes[i] as usize] } else { f32::from(bytes[3]) / 255.0 })
         });
-        Self { surface, alpha, colour, uv: corners.map(|corner| corner.uv) }
+        Self {
+            surface,
+            alpha,
+            colour,
+            uv: corners.map(|corner| corner.uv),
+            normals: corners.map(|corner| corner.normal),
+        }
+    }
+
+    /// The unit shading normal at weights `w` of the triangle placed at `corners` (its vertex
+    /// normals interpolated; its face's where they cancel), turned to the side of `towards`.
+    fn normal(&self, w: [f32; 3], corners: &[DVec3; 3], towards: DVec3) -> [f32; 3] {
+        let mut n = Vec3::ZERO;
+        for (k, &packed) in self.normals.iter().enumerate() {
+            n += w[k] * Vec3::from_array(pack::oct_decode(packed));
+        }
+        let face = (corners[1] - corners[0]).cross(corners[2] - corners[0]).as_vec3();
+        let n = n.try_normalize().or_else(|| face.try_normalize()).unwrap_or(Vec3::Y);
+        let n = if f64::from(n.dot(towards.as_vec3())) < 0.0 { -n } else { n };
+        n.to_array()
     }
 }
 
@@ -2132,12 +2209,13 @@ impl Shading<'_> {
     }
 }
 
-/// Gives the transparent texels within [`DILATION`] texels of a covered one the colour of the
-/// nearest (breadth first, eight neighbours, in raster order), keeping their alpha 0: all that
-/// bilinear filtering at that level reads next to coverage. Farther texels stay `(0, 0, 0, 0)`,
-/// which compresses to almost nothing.
-fn dilate(texels: &mut [[f32; 4]], w: usize, h: usize) {
-    let mut done: Vec<bool> = texels.iter().map(|t| t[3] > 0.0).collect();
+/// Gives the texels within [`DILATION`] texels of a `covered` one the value of the nearest
+/// (breadth first, eight neighbours, in raster order): all that bilinear filtering at that level
+/// reads next to coverage. A `colour` level's filled texels keep their alpha 0 (their coverage);
+/// a normal level's take all four channels. Farther texels stay `(0, 0, 0, 0)`, which compresses
+/// to almost nothing.
+fn dilate(texels: &mut [[f32; 4]], w: usize, h: usize, covered: Vec<bool>, colour: bool) {
+    let mut done = covered;
     let mut queue: std::collections::VecDeque<(usize, u32)> =
         (0..texels.len()).filter(|&i| done[i]).map(|i| (i, 0)).collect();
     while let Some((i, steps)) = queue.pop_front() {
@@ -2154,7 +2232,7 @@ fn dilate(texels: &mut [[f32; 4]], w: usize, h: usize) {
             let j = ny as usize * w + nx as usize;
             if !done[j] {
                 done[j] = true;
-                texels[j] = [texels[i][0], texels[i][1], texels[i][2], 0.0];
+                texels[j] = [texels[i][0], texels[i][1], texels[i][2], if colour { 0.0 } else { texels[i][3] }];
                 queue.push_back((j, steps + 1));
             }
         }

@@ -48,13 +48,14 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     // CALIBRATION_ELEVATIONS one of 1.7, the chain's per-level tables (CHAIN_CALIBRATION) one of
     // 1.8, the planes' diffuse response (PLANE_DIFFUSE) one of 1.10, the octahedral impostors of
     // the baselines (OCTAHEDRAL) one of 1.11, their calibration (CALIBRATION_ADDED) one of 1.12,
-    // their views' depth planes (OCTAHEDRAL_DEPTH) one of 1.13, and the points' facing
-    // (POINT_FACING) makes the file 1.14.
+    // their views' depth planes (OCTAHEDRAL_DEPTH) one of 1.13, the points' facing (POINT_FACING)
+    // one of 1.14, and the views' normals (OCTAHEDRAL_NORMALS) make the file 1.15.
     assert!(!container.chain_calibration().is_empty() && !container.plane_diffuse().is_empty());
     assert!(!container.octahedral().is_empty() && !container.octahedral_depth().is_empty());
+    assert_eq!(container.octahedral_normals().len(), container.octahedral().len());
     assert_eq!(container.point_facing().len(), container.points().len());
     assert_eq!(container.calibration_added(), out.data.calibration_added.as_slice());
-    assert_eq!(container.header().minor, 14, "the points' facing is a kind of 1.14");
+    assert_eq!(container.header().minor, 15, "the views' normals are a kind of 1.15");
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.

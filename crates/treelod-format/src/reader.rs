@@ -10,9 +10,9 @@ use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord,
-    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry,
-    SectionKind, TriangleRecord, VertexRecord,
+    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord,
+    PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE,
+    SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -510,6 +510,15 @@ impl Container {
         self.records(SectionKind::OCTAHEDRAL_DEPTH)
     }
 
+    /// Where each of [`Self::octahedral`]'s views' normals lie in its image (spec §6.13.3), one
+    /// record per impostor in order (checked at open). Empty without the section, as in every
+    /// file before 1.15: the views are then lit as a whole by each record's diffuse mixture and
+    /// occlusion. Since 1.15.
+    #[must_use]
+    pub fn octahedral_normals(&self) -> &[OctahedralNormalRecord] {
+        self.records(SectionKind::OCTAHEDRAL_NORMALS)
+    }
+
     /// Ambient occlusion of each vertex (spec §6.14; [`crate::decode_ao`]), empty if the file has
     /// none; otherwise as long as [`Container::vertices`] (checked at open).
     #[must_use]
@@ -898,9 +907,13 @@ pub(crate) fn check_block_and_cells(
         ));
     }
     // Spec §6.14, §6.10.2, §6.5.1: an ambient-occlusion section holds one byte per record of its
-    // array, `PLANE_DIFFUSE` one record per plane, `POINT_FACING` one byte per point.
-    let parallel =
-        [(SectionKind::PLANE_DIFFUSE, SectionKind::PLANES), (SectionKind::POINT_FACING, SectionKind::POINTS)];
+    // array, `PLANE_DIFFUSE` one record per plane, `POINT_FACING` one byte per point,
+    // `OCTAHEDRAL_NORMALS` (§6.13.3) one record per octahedral impostor.
+    let parallel = [
+        (SectionKind::PLANE_DIFFUSE, SectionKind::PLANES),
+        (SectionKind::POINT_FACING, SectionKind::POINTS),
+        (SectionKind::OCTAHEDRAL_NORMALS, SectionKind::OCTAHEDRAL),
+    ];
     for (kind, of) in AO_KINDS.into_iter().chain(parallel) {
         let (ao, records) = (count(kind), count(of));
         if ao != 0 && ao != records {

@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 14;
+pub const MINOR: u16 = 15;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -161,6 +161,9 @@ impl SectionKind {
     /// `OCTAHEDRAL` record in order, `frames²` records, view `(i, j)` at `j·frames + i` (spec
     /// §6.13.2). Since 1.13.
     pub const OCTAHEDRAL_DEPTH: Self = Self(0x0054);
+    /// Baseline: [`OctahedralNormalRecord`]s, where each `OCTAHEDRAL` record's views' normals
+    /// lie in its image, one per record in order (spec §6.13.3). Since 1.15.
+    pub const OCTAHEDRAL_NORMALS: Self = Self(0x0055);
     /// Ambient occlusion of each `VERTICES` record, one `unorm8` (spec §6.14). Since 1.2.
     pub const VERTEX_AO: Self = Self(0x0060);
     /// Ambient occlusion of each `POINTS` record, one `unorm8` (spec §6.14). Since 1.2.
@@ -198,7 +201,7 @@ impl SectionKind {
     pub const CALIBRATION_ELEVATIONS_ADDED: Self = Self(0x0074);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 36] = [
+    pub const KNOWN: [Self; 37] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -222,6 +225,7 @@ impl SectionKind {
         Self::BILLBOARDS,
         Self::OCTAHEDRAL,
         Self::OCTAHEDRAL_DEPTH,
+        Self::OCTAHEDRAL_NORMALS,
         Self::VERTEX_AO,
         Self::POINT_AO,
         Self::PLANE_AO,
@@ -264,6 +268,7 @@ impl SectionKind {
             Self::BILLBOARDS => "BILLBOARDS",
             Self::OCTAHEDRAL => "OCTAHEDRAL",
             Self::OCTAHEDRAL_DEPTH => "OCTAHEDRAL_DEPTH",
+            Self::OCTAHEDRAL_NORMALS => "OCTAHEDRAL_NORMALS",
             Self::VERTEX_AO => "VERTEX_AO",
             Self::POINT_AO => "POINT_AO",
             Self::PLANE_AO => "PLANE_AO",
@@ -312,6 +317,7 @@ impl SectionKind {
             Self::BILLBOARDS => size_of::<BillboardRecord>(),
             Self::OCTAHEDRAL => size_of::<OctahedralRecord>(),
             Self::OCTAHEDRAL_DEPTH => size_of::<OctahedralDepthRecord>(),
+            Self::OCTAHEDRAL_NORMALS => size_of::<OctahedralNormalRecord>(),
             Self::CALIBRATION | Self::CALIBRATION_ADDED => size_of::<CalibrationRecord>(),
             Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
             Self::CALIBRATION_ELEVATIONS | Self::CALIBRATION_ELEVATIONS_ADDED => {
@@ -333,7 +339,8 @@ impl SectionKind {
     /// (`PLANE_DIFFUSE`), 11 for the octahedral impostors (`OCTAHEDRAL`), 12 for the calibration
     /// of the techniques added after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), 13
     /// for the octahedral views' depth planes (`OCTAHEDRAL_DEPTH`), 14 for the points' facing
-    /// (`POINT_FACING`), 0 for the other known kinds and
+    /// (`POINT_FACING`), 15 for the octahedral views' normals (`OCTAHEDRAL_NORMALS`), 0 for the
+    /// other known kinds and
     /// for kinds this version does not know (private extensions do not raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
@@ -351,6 +358,7 @@ impl SectionKind {
             Self::CALIBRATION_ADDED | Self::CALIBRATION_ELEVATIONS_ADDED => 12,
             Self::OCTAHEDRAL_DEPTH => 13,
             Self::POINT_FACING => 14,
+            Self::OCTAHEDRAL_NORMALS => 15,
             _ => 0,
         }
     }
@@ -1266,6 +1274,50 @@ impl OctahedralDepthRecord {
     #[must_use]
     pub fn normal(&self, right: [f32; 3], up: [f32; 3], d: [f32; 3]) -> [f32; 3] {
         core::array::from_fn(|k| d[k] - self.slope_s * right[k] - self.slope_t * up[k])
+    }
+}
+
+/// Where an octahedral impostor's views' normals lie (spec §6.13.3): a second grid of `frames²`
+/// cells in the impostor's image, of the size of its colour grid, whose corner nearest `uv_min`
+/// is at `uv_min` here; view `(i, j)`'s normals in the cell at the place of its colour cell.
+///
+/// `OCTAHEDRAL_NORMALS` is empty or holds one record per [`OctahedralRecord`], in file order. A
+/// normal texel's RGB, decoded as the colour's is (sRGB), is `(n + 1)/2`: `n` the mean, over the
+/// area the texel covers, of the unit shading normals of the surfaces the view shows there, each
+/// turned towards the viewer (block space; shorter where they disagree); its alpha the mean ambient
+/// occlusion of those surfaces (§6.14). A reader lights the texel with
+/// [`OctahedralNormalRecord::sun_factor`] and scales the ambient light by one minus the alpha.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct OctahedralNormalRecord {
+    /// Corner of the grid of the views' normal cells, two unorm16 (u low, v high).
+    pub uv_min: u32,
+}
+const _: () = assert!(size_of::<OctahedralNormalRecord>() == 4);
+
+impl OctahedralNormalRecord {
+    /// The normal `n` a texel's decoded (linear) RGB stores: `2·rgb − 1`, of length at most 1.
+    #[must_use]
+    pub fn decode(rgb: [f32; 3]) -> [f32; 3] {
+        rgb.map(|c| 2.0 * c - 1.0)
+    }
+
+    /// The sun's diffuse factor of a texel whose decoded normal is `n` (block space; see
+    /// [`OctahedralNormalRecord::decode`]) under the unit light direction `light`, where the
+    /// impostor's own mixture ([`OctahedralRecord::diffuse`] at the view) gives `mixture`:
+    /// `c·|n̂·l| + (1 − c)·mixture` with `c = clamp(3|n| − 2, 0, 1)` (spec §6.13.3). Normals
+    /// turned towards the viewer from every direction, each seen in proportion to the area it
+    /// shows, average to a length of 2/3: a texel whose normals agree no more than that takes
+    /// the mixture's response, one whose normals agree (`|n| = 1`) its own `|n̂·l|`.
+    #[must_use]
+    pub fn sun_factor(n: [f32; 3], light: [f32; 3], mixture: f32) -> f32 {
+        let length = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let coherence = (3.0 * length - 2.0).clamp(0.0, 1.0);
+        if coherence == 0.0 {
+            return mixture.clamp(0.0, 1.0);
+        }
+        let facing = (n[0] * light[0] + n[1] * light[1] + n[2] * light[2]).abs() / length;
+        (coherence * facing + (1.0 - coherence) * mixture).clamp(0.0, 1.0)
     }
 }
 

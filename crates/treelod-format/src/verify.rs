@@ -14,9 +14,10 @@ use crate::reader::{Container, check_section_checksum};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
-    OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
-    PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind,
-    calibration_technique, far_switch, far_threshold, image_format, leaf_slots, lines_drawn_at, plane_leaf_bases,
+    OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord,
+    PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord,
+    billboard_kind, calibration_technique, far_switch, far_threshold, image_format, leaf_slots, lines_drawn_at,
+    plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -88,6 +89,9 @@ pub struct VerifyReport {
     /// `OCTAHEDRAL_DEPTH` records checked (spec §6.13.2): one depth plane per view of the
     /// `OCTAHEDRAL` records, each value finite and in `[−1, 1]`.
     pub octahedral_depth: u64,
+    /// `OCTAHEDRAL_NORMALS` records checked (spec §6.13.3): one per `OCTAHEDRAL` record, its
+    /// grid of normal cells inside the image.
+    pub octahedral_normals: u64,
     /// `CALIBRATION` records checked.
     pub calibration: u64,
     /// `CALIBRATION_ELEVATIONS` records checked (spec §6.16).
@@ -139,6 +143,9 @@ impl core::fmt::Display for VerifyReport {
             }
             if self.octahedral_depth > 0 {
                 write!(f, ", {} octahedral depth planes", self.octahedral_depth)?;
+            }
+            if self.octahedral_normals > 0 {
+                write!(f, ", {} octahedral normal grids", self.octahedral_normals)?;
             }
             writeln!(f)?;
         }
@@ -212,6 +219,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_billboards(c.billboards(), image_count, tree_count)?;
     check_octahedral(c.octahedral(), image_count, tree_count)?;
     check_octahedral_depth(c.octahedral_depth(), c.octahedral())?;
+    check_octahedral_normals(c.octahedral_normals(), c.octahedral())?;
     check_calibration(&BASE_TABLES, c.calibration())?;
     check_calibration_elevations(&BASE_TABLES, c.calibration_elevations(), c.calibration())?;
     check_calibration(&ADDED_TABLES, c.calibration_added())?;
@@ -261,6 +269,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.billboards = c.billboards().len() as u64;
     report.octahedral = c.octahedral().len() as u64;
     report.octahedral_depth = c.octahedral_depth().len() as u64;
+    report.octahedral_normals = c.octahedral_normals().len() as u64;
     report.calibration = c.calibration().len() as u64;
     report.calibration_elevations = c.calibration_elevations().len() as u64;
     report.chain_calibration = c.chain_calibration().len() as u64;
@@ -1139,6 +1148,31 @@ fn check_octahedral_depth(records: &[OctahedralDepthRecord], octahedral: &[Octah
             }
         }
         index += n * n;
+    }
+    Ok(())
+}
+
+/// Spec §6.13.3: each impostor's grid of normal cells, of its colour grid's size from `uv_min`,
+/// lies inside the image: `uv_min + (uv_max − uv_min) ≤ 65536` unorm16 steps per component (1 and
+/// the one step both corners' rounding may add). One record per `OCTAHEDRAL` record is checked at
+/// open.
+///
+/// Runs after [`check_octahedral`], so every colour grid has `uv_min ≤ uv_max`.
+fn check_octahedral_normals(records: &[OctahedralNormalRecord], octahedral: &[OctahedralRecord]) -> Result<()> {
+    let kind = SectionKind::OCTAHEDRAL_NORMALS;
+    for (i, (r, o)) in records.iter().zip(octahedral).enumerate() {
+        let (u, v) = (r.uv_min & 0xFFFF, r.uv_min >> 16);
+        let (w, h) = ((o.uv_max & 0xFFFF) - (o.uv_min & 0xFFFF), (o.uv_max >> 16) - (o.uv_min >> 16));
+        if u + w > 0x1_0000 || v + h > 0x1_0000 {
+            return Err(bad(
+                kind,
+                i,
+                format!(
+                    "the normal grid at ({u}, {v}) of the colour grid's size ({w}, {h}) leaves the image \
+                     (unorm16 steps, at most 65536)"
+                ),
+            ));
+        }
     }
     Ok(())
 }

@@ -18,9 +18,9 @@ use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, OctahedralDepthRecord, OctahedralRecord, PlaneDiffuseRecord,
-    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry,
-    SectionKind, TriangleRecord, VertexRecord, image_format,
+    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, OctahedralDepthRecord, OctahedralNormalRecord,
+    OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
+    SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord, image_format,
 };
 
 /// How sections are stored.
@@ -126,6 +126,9 @@ pub struct ContainerData {
     /// `OCTAHEDRAL_DEPTH`: empty, or each octahedral view's depth plane, `frames²` per `OCTAHEDRAL`
     /// record in its order (spec §6.13.2; since 1.13).
     pub octahedral_depth: Vec<OctahedralDepthRecord>,
+    /// `OCTAHEDRAL_NORMALS`: empty, or where each `OCTAHEDRAL` record's views' normals lie in its
+    /// image, one per record in its order (spec §6.13.3; since 1.15).
+    pub octahedral_normals: Vec<OctahedralNormalRecord>,
     /// `VERTEX_AO`: empty, or one byte per vertex ([`crate::encode_ao`]).
     pub vertex_ao: Vec<u8>,
     /// `POINT_AO`: empty, or one byte per point.
@@ -190,6 +193,7 @@ impl ContainerData {
             billboards: c.billboards().to_vec(),
             octahedral: c.octahedral().to_vec(),
             octahedral_depth: c.octahedral_depth().to_vec(),
+            octahedral_normals: c.octahedral_normals().to_vec(),
             vertex_ao: c.vertex_ao().to_vec(),
             point_ao: c.point_ao().to_vec(),
             plane_ao: c.plane_ao().to_vec(),
@@ -560,6 +564,7 @@ macro_rules! optional_sections {
             (SectionKind::BILLBOARDS, $payload!(billboards)),
             (SectionKind::OCTAHEDRAL, $payload!(octahedral)),
             (SectionKind::OCTAHEDRAL_DEPTH, $payload!(octahedral_depth)),
+            (SectionKind::OCTAHEDRAL_NORMALS, $payload!(octahedral_normals)),
             (SectionKind::VERTEX_AO, $payload!(vertex_ao)),
             (SectionKind::POINT_AO, $payload!(point_ao)),
             (SectionKind::PLANE_AO, $payload!(plane_ao)),

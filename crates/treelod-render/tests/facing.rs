@@ -9,9 +9,9 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{count, covered, gpu, one_tree, open_verified, settled};
+use common::{ball, count, covered, gpu, green, one_tree, open_verified, settled};
 use glam::{Vec3, vec3};
-use treelod_build::scene::{AlphaMode, Material, Part, Scene};
+use treelod_build::scene::{Part, Scene};
 use treelod_build::{BuildConfig, Placed, build_block};
 use treelod_format::{Container, ContainerData};
 use treelod_render::offscreen::Gpu;
@@ -41,22 +41,6 @@ fn sheet() -> Scene {
         }
     }
     green("sheet", leaves, true)
-}
-
-/// A scene of `part` alone, its material an opaque green named after the scene.
-fn green(name: &str, part: Part, double_sided: bool) -> Scene {
-    Scene {
-        name: name.into(),
-        parts: vec![part],
-        materials: vec![Material {
-            name: name.into(),
-            base_color: [0.2, 0.6, 0.1, 1.0],
-            alpha_mode: AlphaMode::Opaque,
-            double_sided,
-            ..Material::default()
-        }],
-        ..Scene::default()
-    }
 }
 
 /// `scene` built without ambient occlusion, as one block at the origin.
@@ -146,29 +130,6 @@ fn sub_pixel_splats_cover_what_the_sheet_covers_from_every_direction() {
     // and 0.80).
     assert!((0.6..=1.4).contains(&(grazing_with / face_with)), "with facing: {grazing_with:.2} vs {face_with:.2}");
     assert!(grazing_without > 1.4 * face_without, "without: {grazing_without:.2} vs {face_without:.2}");
-}
-
-/// A closed, opaque UV sphere of radius 1 about the origin, `rings` rings of `2·rings` quads.
-fn ball(rings: u32) -> Scene {
-    let mut part = Part { mesh_name: "ball".into(), material: 0, ..Part::default() };
-    let segments = 2 * rings;
-    for j in 0..=rings {
-        let theta = std::f32::consts::PI * j as f32 / rings as f32;
-        for i in 0..=segments {
-            let phi = std::f32::consts::TAU * i as f32 / segments as f32;
-            let n = [theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()];
-            part.positions.push(n);
-            part.normals.push(n);
-        }
-    }
-    for j in 0..rings {
-        for i in 0..segments {
-            let a = j * (segments + 1) + i;
-            let b = a + segments + 1;
-            part.triangles.extend([[a, b, a + 1], [a + 1, b, b + 1]]);
-        }
-    }
-    green("ball", part, false)
 }
 
 /// Sub-pixel splats at a closed surface's outline (spec §10.1): the points just inside it fall in

@@ -499,8 +499,9 @@ impl ImpostorInfo {
     }
 }
 
-/// The baselines of a container (spec §6.12, §6.13, §6.13.1, §6.13.2): each tree's LoD chain,
-/// billboards and octahedral impostor, and the impostors' depth planes.
+/// The baselines of a container (spec §6.12, §6.13, §6.13.1, §6.13.2, §6.13.3): each tree's LoD
+/// chain, billboards and octahedral impostor (with where its views' normals lie), and the
+/// impostors' depth planes.
 #[derive(Debug, Serialize)]
 struct BaselineInfo {
     /// `LOD_LEVELS` records in file order.
@@ -561,6 +562,24 @@ struct OctahedralInfo {
     /// How its surfaces take the sun (spec §6.13.1): the shares facing the viewer and turned
     /// every way, `flat / 65535` and `scattered / 65535`.
     diffuse: [f32; 2],
+    /// The corner of its views' normal grid, `[u, v]` (`OCTAHEDRAL_NORMALS`, spec §6.13.3,
+    /// version 1.15): a grid of the size of `uv_min .. uv_max` from here. Absent without the
+    /// section, as in the files of 1.14 and before, whose views are lit as a whole.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    normals_uv_min: Option<[f32; 2]>,
+    /// The normal grid's far corner, `normals_uv_min + (uv_max − uv_min)` in unorm16 steps (up to
+    /// 65536/65535); for the text form only.
+    #[serde(skip)]
+    normals_uv_max: Option<[f32; 2]>,
+}
+
+/// The corners of the normal grid at `normals` of the octahedral impostor `o` (spec §6.13.3):
+/// `normals` and `normals + (o.uv_max − o.uv_min)`, summed in unorm16 steps.
+fn normal_grid(o: &treelod_format::OctahedralRecord, normals: u32) -> ([f32; 2], [f32; 2]) {
+    let steps = |uv: u32| [uv & 0xFFFF, uv >> 16];
+    let ([u, v], [u0, v0], [u1, v1]) = (steps(normals), steps(o.uv_min), steps(o.uv_max));
+    let far = [u + u1.saturating_sub(u0), v + v1.saturating_sub(v0)];
+    (treelod_format::pack::unpack_unorm16x2(normals), far.map(|s| s as f32 / 65535.0))
 }
 
 /// The octahedral views' depth planes (spec §6.13.2): their spread over the `OCTAHEDRAL_DEPTH`
@@ -654,19 +673,26 @@ impl BaselineInfo {
                 _ => out.push(BillboardInfo { tree: b.tree, kind, quads: 1, texels }),
             }
         }
+        let normals = container.octahedral_normals();
         let octahedral = octahedral
             .iter()
-            .map(|o| OctahedralInfo {
-                tree: o.tree,
-                frames: o.frames,
-                center: o.center,
-                radius: o.radius,
-                image: o.image,
-                uv_min: treelod_format::pack::unpack_unorm16x2(o.uv_min),
-                uv_max: treelod_format::pack::unpack_unorm16x2(o.uv_max),
-                texels: rectangle_texels(container, o.image, o.uv_min, o.uv_max),
-                occlusion: o.occlusion,
-                diffuse: [f32::from(o.diffuse.flat) / 65535.0, f32::from(o.diffuse.scattered) / 65535.0],
+            .enumerate()
+            .map(|(k, o)| {
+                let normals = normals.get(k).map(|n| normal_grid(o, n.uv_min));
+                OctahedralInfo {
+                    tree: o.tree,
+                    frames: o.frames,
+                    center: o.center,
+                    radius: o.radius,
+                    image: o.image,
+                    uv_min: treelod_format::pack::unpack_unorm16x2(o.uv_min),
+                    uv_max: treelod_format::pack::unpack_unorm16x2(o.uv_max),
+                    texels: rectangle_texels(container, o.image, o.uv_min, o.uv_max),
+                    occlusion: o.occlusion,
+                    diffuse: [f32::from(o.diffuse.flat) / 65535.0, f32::from(o.diffuse.scattered) / 65535.0],
+                    normals_uv_min: normals.map(|(lo, _)| lo),
+                    normals_uv_max: normals.map(|(_, hi)| hi),
+                }
             })
             .collect();
         Some(Self { lod_levels, billboards: out, octahedral, octahedral_depth })
@@ -694,7 +720,7 @@ baselines
         for o in &self.octahedral {
             out.push_str(&format!(
                 "  octahedral tree {}: {}x{} views, radius {} m at {}, image {} rectangle [{}, {}] .. [{}, {}] ({} \
-                 texels), occlusion {}, diffuse flat {:.4} scattered {:.4}\n",
+                 texels), occlusion {}, diffuse flat {:.4} scattered {:.4}{}\n",
                 o.tree,
                 o.frames,
                 o.frames,
@@ -708,7 +734,11 @@ baselines
                 o.texels,
                 o.occlusion,
                 o.diffuse[0],
-                o.diffuse[1]
+                o.diffuse[1],
+                match (o.normals_uv_min, o.normals_uv_max) {
+                    (Some(lo), Some(hi)) => format!(", normals [{}, {}] .. [{}, {}]", lo[0], lo[1], hi[0], hi[1]),
+                    _ => String::new(),
+                }
             ));
         }
         if let Some(depth) = &self.octahedral_depth {

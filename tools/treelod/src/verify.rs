@@ -108,6 +108,7 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
         (report.billboards, "billboard quad", "billboard quads"),
         (report.octahedral, "octahedral impostor", "octahedral impostors"),
         (report.octahedral_depth, "octahedral depth plane", "octahedral depth planes"),
+        (report.octahedral_normals, "octahedral normal grid", "octahedral normal grids"),
         (report.calibration, "calibration record", "calibration records"),
         (report.calibration_elevations, "calibration record per elevation", "calibration records per elevation"),
         (report.chain_calibration, "chain calibration record", "chain calibration records"),
@@ -179,6 +180,13 @@ mod tests {
         assert!(ok_line("d", &report).contains("1 octahedral impostor, 4 octahedral depth planes, 5 ambient"));
         report.octahedral_depth = 1;
         assert!(ok_line("d", &report).contains("1 octahedral impostor, 1 octahedral depth plane, 5 ambient"));
+        // Where the octahedral views' normals lie (spec §6.13.3), after the depth planes.
+        report.octahedral_depth = 4;
+        report.octahedral_normals = 2;
+        assert!(ok_line("d", &report).contains("4 octahedral depth planes, 2 octahedral normal grids, 5 ambient"));
+        report.octahedral_normals = 1;
+        assert!(ok_line("d", &report).contains("4 octahedral depth planes, 1 octahedral normal grid, 5 ambient"));
+        report.octahedral_normals = 0;
         report.octahedral_depth = 0;
         // The points' facing (spec §6.5.1), after the ambient occlusion.
         report.point_facing = 3;

@@ -12,8 +12,9 @@ use std::process::{Command, Output};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CellRecord, Compression, ContainerData, EllipsoidRecord, ImageRecord, LineRecord,
-    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralRecord, PlaneDiffuseRecord, PointRecord, Range,
-    Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, image_format, material_class,
+    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord,
+    PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, image_format,
+    material_class,
 };
 
 /// Runs the binary with `args` in the current directory.
@@ -584,6 +585,38 @@ fn dump_and_verify_show_the_octahedral_impostors() {
     let out = treelod_in(&dir, &["verify", "octahedral.treelod"]);
     assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
     assert!(stdout(&out).contains(", 1 octahedral impostor;"), "{}", stdout(&out));
+    // Without OCTAHEDRAL_NORMALS (files before 1.15) there is no `normals_uv_min` key and no
+    // normals in the text.
+    assert!(o.get("normals_uv_min").is_none(), "{o}");
+    assert!(!text.contains("normals"), "{text}");
+
+    // With its views' normal grid on the atlas's right half (spec §6.13.3, format 1.15): the
+    // grid's corners on the impostor's line (the far one from the colour grid's size in unorm16
+    // steps, 32768 from 32768), its corner in the JSON, and the count in verify's line.
+    data.octahedral_normals = vec![OctahedralNormalRecord { uv_min: unorm16x2(0.5, 0.0) }];
+    data.write_to_path(dir.join("normals.treelod"), Compression::None).expect("valid");
+    let out = treelod_in(&dir, &["dump", "normals.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.lines().any(|l| l.starts_with("version") && l.ends_with("1.15")), "{text}");
+    assert!(text.contains("\n  OCTAHEDRAL_NORMALS "), "the section is listed: {text}");
+    assert!(
+        text.contains(
+            "\nbaselines\n  octahedral tree 0: 8x8 views, radius 0.75 m at [1, 0.5, 0.5], image 0 rectangle [0, 0] \
+             .. [0.5000076, 1] (8 texels), occlusion 0.25, diffuse flat 0.2500 scattered 0.5000, normals \
+             [0.5000076, 0] .. [1.0000153, 1]\n"
+        ),
+        "{text}"
+    );
+    let j = json("normals.treelod");
+    let o = &j["baselines"]["octahedral"][0];
+    let steps: Vec<f64> = o["normals_uv_min"].as_array().expect("[u, v]").iter().filter_map(|x| x.as_f64()).collect();
+    assert_eq!(steps.iter().map(|x| (x * 65535.0).round()).collect::<Vec<_>>(), [32768.0, 0.0], "{o}");
+    assert!(o.get("normals_uv_max").is_none(), "the far corner is the text's alone: {o}");
+    let out = treelod_in(&dir, &["verify", "normals.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    assert!(stdout(&out).contains(", 1 octahedral impostor, 1 octahedral normal grid;"), "{}", stdout(&out));
+    data.octahedral_normals.clear();
 
     // With a billboard on the same image, the views share the billboards' atlas and its bytes
     // count as the billboards'.
@@ -683,7 +716,7 @@ fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
 fn golden_dumps_match() {
     for version in [
         "v1_0", "v1_1", "v1_2", "v1_3", "v1_4", "v1_5", "v1_6", "v1_7", "v1_8", "v1_9", "v1_10", "v1_11", "v1_12",
-        "v1_13", "v1_14",
+        "v1_13", "v1_14", "v1_15",
     ] {
         golden_dumps_match_in(version);
     }

@@ -6,7 +6,10 @@
 //! `treelod_runtime::baseline::select`. WGSL: `shaders/tree/planes.wgsl` then
 //! `shaders/tree/billboards.wgsl`; `shaders/tree/octahedral.wgsl`.
 
-use treelod_format::{BillboardRecord, Container, OctahedralDepthRecord, OctahedralRecord, octahedral_depth_starts};
+use treelod_format::{
+    BillboardRecord, Container, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord,
+    octahedral_depth_starts,
+};
 use treelod_runtime::Billboards;
 #[cfg(doc)]
 use treelod_runtime::Technique;
@@ -92,19 +95,46 @@ pub(crate) fn upload(
     Ok((billboards, octahedral))
 }
 
+/// An octahedral impostor as uploaded (`OctahedralRecord` in `shaders/tree/octahedral.wgsl`, 64
+/// bytes): the record, its `reserved` (which no shader reads as such) holding the index of its
+/// first view's depth plane in `OCTAHEDRAL_DEPTH`, then where its views' normals lie (spec
+/// §6.13.3).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct OctahedralGpu {
+    pub record: OctahedralRecord,
+    /// The normal grid's corner, [`OctahedralNormalRecord::uv_min`].
+    pub normals_uv_min: u32,
+    /// 1 where the impostor has normals, else 0 (its views lit as a whole, as before 1.15).
+    pub has_normals: u32,
+    pub padding: [u32; 2],
+}
+const _: () = assert!(size_of::<OctahedralGpu>() == 64);
+
 /// The octahedral impostors of `container` as uploaded, and their views' depth planes (spec
-/// §6.13.2): each record's `reserved` (which no shader reads as such) holds the index of its first
-/// view's plane in `OCTAHEDRAL_DEPTH`. Where the container has no planes, or not one per view of
-/// every impostor, none are bound and each view is drawn on the plane through the centre across
-/// it, as before 1.13.
-pub(crate) fn gpu_octahedral(container: &Container) -> (Vec<OctahedralRecord>, &[OctahedralDepthRecord]) {
+/// §6.13.2). Where the container has no planes, or not one per view of every impostor, none are
+/// bound and each view is drawn on the plane through the centre across it, as before 1.13; where
+/// it has normals (one record per impostor, checked at open), each view is lit per texel.
+pub(crate) fn gpu_octahedral(container: &Container) -> (Vec<OctahedralGpu>, &[OctahedralDepthRecord]) {
     let (records, depth) = (container.octahedral(), container.octahedral_depth());
-    let Some(starts) = octahedral_depth_starts(records, depth.len()) else {
-        return (records.to_vec(), &[]);
-    };
-    #[expect(clippy::cast_possible_truncation, reason = "a section's records fit u32")]
-    let uploaded = records.iter().zip(starts).map(|(&r, start)| OctahedralRecord { reserved: start as u32, ..r });
-    (uploaded.collect(), depth)
+    let normals = container.octahedral_normals();
+    let starts = octahedral_depth_starts(records, depth.len());
+    let uploaded = records
+        .iter()
+        .enumerate()
+        .map(|(k, &r)| {
+            #[expect(clippy::cast_possible_truncation, reason = "a section's records fit u32")]
+            let reserved = starts.as_ref().map_or(0, |s| s[k] as u32);
+            let normal = normals.get(k);
+            OctahedralGpu {
+                record: OctahedralRecord { reserved, ..r },
+                normals_uv_min: normal.map_or(0, |n: &OctahedralNormalRecord| n.uv_min),
+                has_normals: u32::from(normal.is_some()),
+                padding: [0; 2],
+            }
+        })
+        .collect();
+    (uploaded, if starts.is_some() { depth } else { &[] })
 }
 
 /// The billboards of `container` as uploaded: the facing quads (`kinds.facing`), then the

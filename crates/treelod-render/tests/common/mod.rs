@@ -7,6 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 use glam::{Mat4, Vec3};
+use treelod_build::scene::{AlphaMode, Material, Part, Scene};
 use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
 use treelod_eval::metrics::Coverage;
 use treelod_format::{
@@ -294,6 +295,7 @@ pub fn calibrated_demo() -> Arc<Container> {
 pub fn calibrated_demo_without_octahedral() -> Arc<Container> {
     let mut data = ContainerData::from_container(&calibrated_demo());
     data.octahedral.clear();
+    data.octahedral_normals.clear();
     data.calibration_added.clear();
     data.calibration_elevations_added.clear();
     Arc::new(Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
@@ -403,4 +405,43 @@ pub fn differing(a: &Image, b: &Image) -> (usize, usize) {
         diff += usize::from(p.iter().zip(q).any(|(x, y)| x.abs_diff(*y) > 48));
     }
     (diff, any)
+}
+
+/// A scene of `part` alone, its material an opaque green named after the scene.
+pub fn green(name: &str, part: Part, double_sided: bool) -> Scene {
+    Scene {
+        name: name.into(),
+        parts: vec![part],
+        materials: vec![Material {
+            name: name.into(),
+            base_color: [0.2, 0.6, 0.1, 1.0],
+            alpha_mode: AlphaMode::Opaque,
+            double_sided,
+            ..Material::default()
+        }],
+        ..Scene::default()
+    }
+}
+
+/// A closed, opaque UV sphere of radius 1 about the origin, `rings` rings of `2·rings` quads.
+pub fn ball(rings: u32) -> Scene {
+    let mut part = Part { mesh_name: "ball".into(), material: 0, ..Part::default() };
+    let segments = 2 * rings;
+    for j in 0..=rings {
+        let theta = std::f32::consts::PI * j as f32 / rings as f32;
+        for i in 0..=segments {
+            let phi = std::f32::consts::TAU * i as f32 / segments as f32;
+            let n = [theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()];
+            part.positions.push(n);
+            part.normals.push(n);
+        }
+    }
+    for j in 0..rings {
+        for i in 0..segments {
+            let a = j * (segments + 1) + i;
+            let b = a + segments + 1;
+            part.triangles.extend([[a, b, a + 1], [a + 1, b, b + 1]]);
+        }
+    }
+    green("ball", part, false)
 }
