@@ -256,51 +256,58 @@ fn grids_up_to_the_image_edges_verify() {
 
 #[test]
 fn a_normal_grid_leaving_the_image_is_refused() {
-    // Tree 0's grid one step right of the right edge.
-    let mut data = fixture();
-    data.octahedral_normals[0].uv_min = steps(32769, 0);
-    expect_refused(
-        &data,
-        0,
-        "the normal grid at (32769, 0) of the colour grid's size (32768, 32768) leaves the image (unorm16 steps, at \
-         most 65536)",
-    );
-    // Tree 1's grid two steps below the bottom edge.
-    let mut data = fixture();
-    data.octahedral_normals[1].uv_min = steps(16384, 32770);
-    expect_refused(
-        &data,
-        1,
-        "the normal grid at (16384, 32770) of the colour grid's size (16384, 32767) leaves the image (unorm16 steps, \
-         at most 65536)",
-    );
-    // At the far corner of the image.
-    let mut data = fixture();
-    data.octahedral_normals[1].uv_min = steps(65535, 65535);
-    expect_refused(
-        &data,
-        1,
-        "the normal grid at (65535, 65535) of the colour grid's size (16384, 32767) leaves the image (unorm16 steps, \
-         at most 65536)",
-    );
-    // A larger colour grid moves the far corner out, the record unchanged.
-    let mut data = fixture();
-    data.octahedral[0].uv_max = steps(32769, 32768);
-    expect_refused(
-        &data,
-        0,
-        "the normal grid at (32768, 0) of the colour grid's size (32769, 32768) leaves the image (unorm16 steps, at \
-         most 65536)",
-    );
-    // The first record that leaves is reported.
-    let mut data = fixture();
-    data.octahedral_normals = vec![OctahedralNormalRecord { uv_min: steps(40000, 40000) }; 2];
-    expect_refused(
-        &data,
-        0,
-        "the normal grid at (40000, 40000) of the colour grid's size (32768, 32768) leaves the image (unorm16 steps, \
-         at most 65536)",
-    );
+    // What changes, the change, the record reported, its grid's corner, the colour grid's size.
+    type Case = (&'static str, fn(&mut ContainerData), usize, (u32, u32), (u32, u32));
+    let cases: [Case; 5] = [
+        (
+            "tree 0's grid one step right of the right edge",
+            |d| d.octahedral_normals[0].uv_min = steps(32769, 0),
+            0,
+            (32769, 0),
+            (32768, 32768),
+        ),
+        (
+            "tree 1's grid two steps below the bottom edge",
+            |d| d.octahedral_normals[1].uv_min = steps(16384, 32770),
+            1,
+            (16384, 32770),
+            (16384, 32767),
+        ),
+        (
+            "at the far corner of the image",
+            |d| d.octahedral_normals[1].uv_min = steps(65535, 65535),
+            1,
+            (65535, 65535),
+            (16384, 32767),
+        ),
+        (
+            "a larger colour grid moves the far corner out, the record unchanged",
+            |d| d.octahedral[0].uv_max = steps(32769, 32768),
+            0,
+            (32768, 0),
+            (32769, 32768),
+        ),
+        (
+            "the first record that leaves is reported",
+            |d| d.octahedral_normals = vec![OctahedralNormalRecord { uv_min: steps(40000, 40000) }; 2],
+            0,
+            (40000, 40000),
+            (32768, 32768),
+        ),
+    ];
+    for (what, change, index, (u, v), (w, h)) in cases {
+        let mut data = fixture();
+        change(&mut data);
+        eprintln!("{what}");
+        expect_refused(
+            &data,
+            index,
+            &format!(
+                "the normal grid at ({u}, {v}) of the colour grid's size ({w}, {h}) leaves the image (unorm16 steps, \
+                 at most 65536)"
+            ),
+        );
+    }
 }
 
 // ----------------------------------------------------------------------------------------------
