@@ -352,14 +352,16 @@ pub fn build_billboards(
             bake(mesh, in_order.iter().copied(), &plane, Winner::Front, &job.quad, region, samples, octahedral_view)
         })
         .collect();
-    // Each view's normal cell lies one grid side to the right of its colour cell.
+    // Each view's normal cell lies one grid side to the right of its colour cell (and so each
+    // impostor's normal grid right of its colour grid).
+    let normal_shift = views * cell;
     let mut placed_regions = regions.clone();
     let mut levels: Vec<Vec<Vec<u8>>> = Vec::with_capacity(baked.len());
     let mut moments: Vec<DepthMoments> = Vec::with_capacity(baked.len());
     let mut normal_levels = Vec::new();
     for ((job, region), b) in jobs.iter().zip(&regions).zip(baked) {
         if job.kind == OCTAHEDRAL_VIEW {
-            placed_regions.push(Region { x: region.x + views * cell, ..*region });
+            placed_regions.push(Region { x: region.x + normal_shift, ..*region });
             normal_levels.push(b.normals);
         }
         levels.push(b.levels);
@@ -411,7 +413,7 @@ pub fn build_billboards(
     let octahedral_normals = grids
         .iter()
         .map(|grid| {
-            let (x, y) = (f64::from(grid.x + views * cell) / f64::from(width), f64::from(grid.y) / f64::from(height));
+            let (x, y) = (f64::from(grid.x + normal_shift) / f64::from(width), f64::from(grid.y) / f64::from(height));
             #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]")]
             let uv_min = pack::unorm16x2(x as f32, y as f32);
             OctahedralNormalRecord { uv_min }

@@ -895,7 +895,6 @@ impl<'a> Scene<'a> {
         let Some(atlas) = self.atlases.get(quad.image as usize).and_then(Option::as_ref) else { return };
         let corner = |q: Vec3, uv: Vec2| (view.project(q), uv, depth(view, q));
         let diffuse = Light::DEFAULT.plane_diffuse(quad.normal, view.direction, quad.diffuse);
-        let sun = Light::DEFAULT.sun.normalize_or(Vec3::Y).to_array();
         #[expect(clippy::cast_precision_loss, reason = "texture sides")]
         let texels = Vec2::new(atlas.size.0 as f32, atlas.size.1 as f32);
         let [a, b, c, e] = [0, 1, 2, 3].map(|i| corner(quad.corners[i], quad.uvs[i]));
@@ -918,7 +917,7 @@ impl<'a> Scene<'a> {
                             let [nr, ng, nb, occlusion] =
                                 texels::sample(&atlas.levels, atlas.size, (uv + offset).to_array(), lod, atlas.sampler);
                             let n = OctahedralNormalRecord::decode([nr, ng, nb]);
-                            (OctahedralNormalRecord::sun_factor(n, sun, diffuse), occlusion)
+                            (Light::DEFAULT.octahedral_texel_diffuse(n, diffuse), occlusion)
                         }
                         None => (diffuse, ao),
                     };

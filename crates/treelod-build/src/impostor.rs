@@ -1502,11 +1502,10 @@ pub(crate) fn bake(
         (w, h) = (nw, nh);
     }
     for (l, (level, normals)) in levels.iter_mut().zip(&mut normal_levels).enumerate() {
-        if view {
-            let covered: Vec<bool> = level.iter().map(|t| t[3] > 0.0).collect();
-            dilate(normals, rw >> l, rh >> l, covered, false);
-        }
         let covered: Vec<bool> = level.iter().map(|t| t[3] > 0.0).collect();
+        if view {
+            dilate(normals, rw >> l, rh >> l, covered.clone(), false);
+        }
         dilate(level, rw >> l, rh >> l, covered, true);
     }
     preserve_coverage(&mut levels, rw, rh);

@@ -4,7 +4,7 @@
 //! with its defaults shows.
 
 use glam::Vec3;
-use treelod_format::PlaneDiffuseRecord;
+use treelod_format::{OctahedralNormalRecord, PlaneDiffuseRecord};
 
 /// A sun and an ambient share.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -27,7 +27,7 @@ impl Light {
     /// lit. A zero normal takes the sun's share as lit from the front.
     #[must_use]
     pub fn shade(&self, albedo: Vec3, normal: Vec3, ao: f32) -> Vec3 {
-        let diffuse = normal.try_normalize().map_or(1.0, |n| n.dot(self.sun.normalize_or(Vec3::Y)).abs());
+        let diffuse = normal.try_normalize().map_or(1.0, |n| n.dot(self.sun_direction()).abs());
         self.shade_diffuse(albedo, diffuse, ao)
     }
 
@@ -45,11 +45,25 @@ impl Light {
     /// normal or view takes the sun as lit from the front.
     #[must_use]
     pub fn plane_diffuse(&self, normal: Vec3, view: Vec3, record: PlaneDiffuseRecord) -> f32 {
-        let sun = self.sun.normalize_or(Vec3::Y);
+        let sun = self.sun_direction();
         match (normal.try_normalize(), view.try_normalize()) {
             (Some(n), Some(v)) => record.diffuse(n.to_array(), v.to_array(), sun.to_array()),
             _ => 1.0,
         }
+    }
+
+    /// The sun's diffuse factor of an octahedral impostor's texel whose decoded normal is `n`
+    /// (block space, [`OctahedralNormalRecord::decode`]) where the impostor's diffuse mixture
+    /// gives `mixture` (spec §6.13.3): [`OctahedralNormalRecord::sun_factor`] with this sun. The
+    /// twin of `octahedral_sun` in `shaders/tree/octahedral.wgsl`.
+    #[must_use]
+    pub fn octahedral_texel_diffuse(&self, n: [f32; 3], mixture: f32) -> f32 {
+        OctahedralNormalRecord::sun_factor(n, self.sun_direction().to_array(), mixture)
+    }
+
+    /// The unit direction towards the sun (`+Y` for a zero `sun`).
+    fn sun_direction(&self) -> Vec3 {
+        self.sun.normalize_or(Vec3::Y)
     }
 }
 
