@@ -19,11 +19,12 @@ struct OctahedralRecord {
     // Reserved in the file; as uploaded, the index of the impostor's first view in
     // `view_planes` (technique/baselines.rs, `gpu_octahedral`).
     depth_first: u32,
-    // As uploaded (technique/baselines.rs, `OctahedralGpu`): the corner of the views' normal
-    // grid (treelod_format::OctahedralNormalRecord, spec §6.13.3), and 1 where there is one.
+    // As uploaded (technique/baselines.rs, `OctahedralGpu`): the corners of the views' normal
+    // grid (treelod_format::OctahedralNormalGridRecord, spec §6.13.3), and 1 where there is one.
     normals_uv_min: u32,
+    normals_uv_max: u32,
     has_normals: u32,
-    padding: vec2<u32>,
+    padding: u32,
 }
 
 // The planes' group layout (technique/impostors.rs, `GROUP`): the records in place of the planes,
@@ -65,9 +66,10 @@ struct OctahedralVaryings {
     @location(9) @interpolate(flat) normal: vec3<f32>,
     @location(10) @interpolate(flat) tint: vec3<f32>,
     @location(11) @interpolate(flat) fade: vec2<u32>,
-    // The normal grid's place relative to the colour grid (uv, xy) and 1 where the impostor has
-    // one (z); the sun's direction in block space, where the normals are (spec §6.13.3).
-    @location(12) @interpolate(flat) normals: vec3<f32>,
+    // Where the normal grid lies (spec §6.13.3): the colour grid's point `uv` has its normal at
+    // `xy + uv · zw` (zw, the grids' ratio of sides, is 0 where the impostor has none); the sun's
+    // direction in block space, where the normals are.
+    @location(12) @interpolate(flat) normals: vec4<f32>,
     @location(13) @interpolate(flat) sun_block: vec3<f32>,
 }
 
@@ -204,7 +206,10 @@ fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_ind
     let view = normalize(to_eye);
     out.light = vec2<f32>(octahedral_diffuse(view, rec.diffuse), rec.occlusion);
     out.normal = view;
-    out.normals = vec3<f32>(unpack2x16unorm(rec.normals_uv_min) - uv_min, f32(min(rec.has_normals, 1u)));
+    let normal_min = unpack2x16unorm(rec.normals_uv_min);
+    let sides = (unpack2x16unorm(rec.normals_uv_max) - normal_min) / max(uv_max - uv_min, vec2<f32>(1e-9));
+    let ratio = select(vec2<f32>(0.0), sides, rec.has_normals != 0u);
+    out.normals = vec4<f32>(normal_min - uv_min * ratio, ratio);
     out.sun_block = normalize(transpose(rotation) * frame.sun.xyz);
     out.fade = vec2<u32>(draw.fade, draw.instance);
     switch frame.debug {
@@ -241,7 +246,8 @@ fn vs_octahedral(@builtin(vertex_index) vertex_index: u32, @builtin(instance_ind
 // is the far crowns drawn as solid shapes where the reference shows their gaps.)
 //
 // With `normals`, also the chosen view's normal texel (spec §6.13.3), at the same place of its
-// normal cell and from the same mip level; (0, 0, 0, 0) without.
+// normal cell (whose grid is smaller than the colour's, half its side as builders write it) and
+// from the level of the same footprint; (0, 0, 0, 0) without.
 struct OctahedralTexel {
     colour: vec4<f32>,
     normal: vec4<f32>,
@@ -269,8 +275,9 @@ fn octahedral_texel(in: OctahedralVaryings, normals: bool) -> OctahedralTexel {
             dy = gy;
         }
     }
-    if normals && in.normals.z > 0.5 && out.colour.a >= 0.5 {
-        out.normal = textureSampleGrad(atlas, atlas_sampler, at + in.normals.xy, dx, dy);
+    if normals && in.normals.z > 0.0 && out.colour.a >= 0.5 {
+        let ratio = in.normals.zw;
+        out.normal = textureSampleGrad(atlas, atlas_sampler, in.normals.xy + at * ratio, dx * ratio, dy * ratio);
     }
     return out;
 }
@@ -303,7 +310,7 @@ fn fs_octahedral(in: OctahedralVaryings) -> TriangleOut {
     // Per texel where the views have normals (spec §6.13.3): the sun by the texel's normal, the
     // ambient light by its occlusion; else the whole view by the record's mixture and occlusion.
     var light = in.light;
-    if in.normals.z > 0.5 {
+    if in.normals.z > 0.0 {
         light = vec2<f32>(octahedral_sun(2.0 * sampled.normal.rgb - 1.0, in.sun_block, in.light.x), sampled.normal.a);
     }
     return TriangleOut(vec4<f32>(shade_diffuse(texel.rgb, light.x, in.normal, in.world, light.y) * in.tint, 1.0), mask);

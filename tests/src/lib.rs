@@ -31,7 +31,7 @@ use std::path::PathBuf;
 
 pub use hexdump::spec_hex_dump;
 pub use rng::SplitMix64;
-pub use synth::{SyntheticOptions, synthetic};
+pub use synth::{NormalGrids, SyntheticOptions, synthetic};
 use treelod_format::Compression;
 
 /// One golden file of `tests/data/v1_<minor>`: how it was made.
@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.15, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.16, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -96,7 +96,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -131,7 +131,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -153,7 +153,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -174,7 +174,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -193,7 +193,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -212,7 +212,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -233,7 +233,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -253,7 +253,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -272,7 +272,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -291,7 +291,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -309,7 +309,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -327,7 +327,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 calibration_added: false,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -344,7 +344,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 octahedral_depth: false,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -360,7 +360,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
             options: SyntheticOptions {
                 bc7_atlas: true,
                 point_facing: false,
-                octahedral_normals: false,
+                octahedral_normals: NormalGrids::None,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -373,7 +373,11 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           OCTAHEDRAL, CALIBRATION_ADDED, CALIBRATION_ELEVATIONS_ADDED and OCTAHEDRAL_DEPTH, and the \
                           points' facing, POINT_FACING), zstd level 19 with byte shuffle where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, octahedral_normals: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                octahedral_normals: NormalGrids::None,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -384,6 +388,23 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           OCTAHEDRAL, CALIBRATION_ADDED, CALIBRATION_ELEVATIONS_ADDED, OCTAHEDRAL_DEPTH and \
                           POINT_FACING, and where the octahedral views' normals lie, OCTAHEDRAL_NORMALS), zstd level \
                           19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                octahedral_normals: NormalGrids::ColourSize,
+                ..SyntheticOptions::everything()
+            },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 16,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.16 but OCTAHEDRAL_NORMALS (1.15's: the 1.5 kinds, a BC7 impostor \
+                          atlas, CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE, \
+                          OCTAHEDRAL, CALIBRATION_ADDED, CALIBRATION_ELEVATIONS_ADDED, OCTAHEDRAL_DEPTH and \
+                          POINT_FACING, and the octahedral views' normal grids at half the colour grids' size, \
+                          OCTAHEDRAL_NORMAL_GRIDS, in place of OCTAHEDRAL_NORMALS), zstd level 19 with byte shuffle \
+                          where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -7,9 +7,9 @@ use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord,
-    NO_IMAGE, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
-    PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
-    billboard_kind, calibration_technique, image_format,
+    NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord,
+    PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting,
+    Source, Tree, TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -120,13 +120,14 @@ pub struct SyntheticOptions {
     /// The points' facing (spec §6.5.1, 1.14): a random byte per point in `POINT_FACING`. Drawn
     /// last, so the rest of the container is the same as without it.
     pub point_facing: bool,
-    /// The octahedral views' normals (spec §6.13.3, 1.15): for each `OCTAHEDRAL` record, in order,
-    /// an `OctahedralNormalRecord` in `OCTAHEDRAL_NORMALS` whose grid of normal cells (of the
-    /// colour grid's size) lies right of the colour grid where the image has room, else left of
-    /// it, else against the image's right edge (over part of the colour grid): always inside the
-    /// image. Draws no random numbers, so the rest of the container is the same as without it.
-    /// Needs `octahedral`.
-    pub octahedral_normals: bool,
+    /// The octahedral views' normals (spec §6.13.3): for each `OCTAHEDRAL` record, in order, a
+    /// grid of normal cells whose corner lies right of the colour grid where the image has room
+    /// for a grid of the colour grid's size, else left of it, else against the image's right edge
+    /// (over part of the colour grid): always inside the image. As 1.15's `OCTAHEDRAL_NORMALS`
+    /// (that grid, [`NormalGrids::ColourSize`]) or 1.16's `OCTAHEDRAL_NORMAL_GRIDS` (half of it
+    /// from the same corner, [`NormalGrids::HalfSize`]), or none. Draws no random numbers, so the
+    /// rest of the container is the same as without it. Needs `octahedral`.
+    pub octahedral_normals: NormalGrids,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -176,7 +177,7 @@ impl SyntheticOptions {
             octahedral_frames: 2..=16,
             octahedral_depth: false,
             point_facing: false,
-            octahedral_normals: false,
+            octahedral_normals: NormalGrids::None,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -196,7 +197,8 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.15: a 2×1×2 grid with triangles, points, ellipsoids, lines,
+    /// Every section kind of version 1.16 but 1.15's `OCTAHEDRAL_NORMALS` (a file holds it or
+    /// 1.16's `OCTAHEDRAL_NORMAL_GRIDS`): a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
     /// baseline LoD chain and facing and crossed billboards, ambient occlusion (of the ellipsoids
@@ -205,7 +207,8 @@ impl SyntheticOptions {
     /// per level, `CHAIN_CALIBRATION`), the block's far lines with their ambient occlusion
     /// (`FAR_LINES`, `FAR_LINE_AO`), the planes' diffuse response (`PLANE_DIFFUSE`), an
     /// octahedral impostor per tree (`OCTAHEDRAL`) with its views' depth planes
-    /// (`OCTAHEDRAL_DEPTH`) and normals (`OCTAHEDRAL_NORMALS`), the calibration of the techniques added after 1.11
+    /// (`OCTAHEDRAL_DEPTH`) and normals at half the colour's size (`OCTAHEDRAL_NORMAL_GRIDS`), the
+    /// calibration of the techniques added after 1.11
     /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`) and the points' facing
     /// (`POINT_FACING`).
     #[must_use]
@@ -240,7 +243,7 @@ impl SyntheticOptions {
             octahedral_frames: 2..=16,
             octahedral_depth: true,
             point_facing: true,
-            octahedral_normals: true,
+            octahedral_normals: NormalGrids::HalfSize,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1219,10 +1222,27 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     if options.point_facing {
         b.data.point_facing = rng.bytes(b.data.points.len());
     }
-    if options.octahedral_normals {
-        b.data.octahedral_normals = b.data.octahedral.iter().map(normal_grid).collect();
+    match options.octahedral_normals {
+        NormalGrids::None => {}
+        NormalGrids::ColourSize => b.data.octahedral_normals = b.data.octahedral.iter().map(normal_grid).collect(),
+        NormalGrids::HalfSize => {
+            b.data.octahedral_normal_grids = b.data.octahedral.iter().map(half_normal_grid).collect();
+        }
     }
     b.data
+}
+
+/// How [`synthetic`] gives the octahedral views' normals (spec §6.13.3).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NormalGrids {
+    /// Neither `OCTAHEDRAL_NORMALS` nor `OCTAHEDRAL_NORMAL_GRIDS`: every view lit as a whole.
+    #[default]
+    None,
+    /// 1.15's `OCTAHEDRAL_NORMALS`: a grid of the colour grid's size.
+    ColourSize,
+    /// 1.16's `OCTAHEDRAL_NORMAL_GRIDS`: a grid of half the colour grid's size (rounded down, in
+    /// unorm16 steps) from the corner `ColourSize` gives, as the `treelod` build stores them.
+    HalfSize,
 }
 
 /// Where the normal grid of the octahedral impostor `o` lies (spec §6.13.3), in unorm16 steps: a
@@ -1241,6 +1261,16 @@ fn normal_grid(o: &OctahedralRecord) -> OctahedralNormalRecord {
         0x1_0000 - width
     };
     OctahedralNormalRecord { uv_min: (v0 << 16) | u }
+}
+
+/// The normal grid of the octahedral impostor `o` at half its colour grid's size (spec §6.13.3,
+/// 1.16): from [`normal_grid`]'s corner, `(uv_max − uv_min)/2` steps across (rounded down). Inside
+/// the image, since the whole colour grid's size fits there, and not empty for a colour grid of
+/// at least two steps per side (the generator's are at least 0.1 of the image).
+fn half_normal_grid(o: &OctahedralRecord) -> OctahedralNormalGridRecord {
+    let uv_min = normal_grid(o).uv_min;
+    let (w, h) = (((o.uv_max & 0xFFFF) - (o.uv_min & 0xFFFF)) / 2, ((o.uv_max >> 16) - (o.uv_min >> 16)) / 2);
+    OctahedralNormalGridRecord { uv_min, uv_max: (((uv_min >> 16) + h) << 16) | ((uv_min & 0xFFFF) + w) }
 }
 
 /// The block's far lines (spec §6.9.1): copies of the coarsest `lines` (those with `hi = +∞`, in

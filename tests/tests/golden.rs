@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.15 (`tests/data/v1_0` to `tests/data/v1_15`): every file
+//! Golden files of format versions 1.0 to 1.16 (`tests/data/v1_0` to `tests/data/v1_16`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file (and 1.13's octahedral depth planes) decodes to literal values written out here (so
 //! a change in reading is caught even if writing changed the same way), and spec §13.1 holds the
@@ -8,9 +8,9 @@ use std::path::PathBuf;
 
 use treelod_format::{
     BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, LineRecord, MaterialInfo,
-    MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, PlaneDiffuseRecord, PointRecord, Range, SectionKind,
-    Setting, Source, Tree, TriangleRecord, VertexRecord, calibration_technique, far_switch, far_threshold,
-    image_format, leaf_slots, plane_leaf_bases, verify,
+    MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalRecord, PlaneDiffuseRecord, PointRecord,
+    Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, calibration_technique, far_switch,
+    far_threshold, image_format, leaf_slots, plane_leaf_bases, verify,
 };
 use treelod_tests::{
     SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
@@ -26,7 +26,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -671,7 +671,7 @@ fn the_1_14_every_kind_file_has_every_kind_and_the_points_facing() {
 fn the_1_15_every_kind_file_has_every_kind_and_the_octahedral_normals() {
     let c = Container::open(golden_dir_of(15).join("every-kind-zstd.treelod")).unwrap();
     for kind in SectionKind::KNOWN {
-        assert!(c.section(kind).is_some(), "{kind} missing");
+        assert_eq!(c.section(kind).is_some(), kind.since_minor() <= 15, "{kind}");
     }
     assert_eq!(c.header().minor, 15);
     // One normal grid per impostor, in their order, each of its colour grid's size inside the
@@ -691,6 +691,52 @@ fn the_1_15_every_kind_file_has_every_kind_and_the_octahedral_normals() {
     // Without OCTAHEDRAL_NORMALS it is the 1.14 file, record for record, and the writer marks it
     // 1.14: a 1.14 reader draws the same impostors, each view lit as a whole.
     is_the_previous_file_with(&c, 15, |data| data.octahedral_normals.clear());
+}
+
+#[test]
+fn the_1_16_every_kind_file_has_every_kind_and_the_octahedral_normal_grids() {
+    let c = Container::open(golden_dir_of(16).join("every-kind-zstd.treelod")).unwrap();
+    // Every kind but 1.15's OCTAHEDRAL_NORMALS, which OCTAHEDRAL_NORMAL_GRIDS replaces: a file
+    // holds one of the two.
+    for kind in SectionKind::KNOWN {
+        assert_eq!(c.section(kind).is_some(), kind != SectionKind::OCTAHEDRAL_NORMALS, "{kind}");
+    }
+    assert_eq!(c.header().minor, 16);
+    // One normal grid per impostor, in their order, each not empty, of half its colour grid's
+    // size (unorm16 steps, rounded down), and not where its colour grid starts; the reader's
+    // grid of each impostor is its record.
+    let (octahedral, grids) = (c.octahedral(), c.octahedral_normal_grids());
+    assert!(octahedral.len() >= 2, "{octahedral:?}");
+    assert_eq!(grids.len(), octahedral.len());
+    let corner = |uv: u32| (uv & 0xFFFF, uv >> 16);
+    for (k, (o, g)) in octahedral.iter().zip(grids).enumerate() {
+        let ((u0, v0), (u1, v1)) = (corner(o.uv_min), corner(o.uv_max));
+        let ((a0, b0), (a1, b1)) = (corner(g.uv_min), corner(g.uv_max));
+        assert!(u0 < u1 && v0 < v1, "impostor {k}: a colour grid of some size");
+        assert!(a0 < a1 && b0 < b1, "impostor {k}: a normal grid of some size, {g:?}");
+        assert_eq!((a1 - a0, b1 - b0), ((u1 - u0) / 2, (v1 - v0) / 2), "impostor {k}: half the size");
+        assert_ne!((a0, b0), (u0, v0), "impostor {k}: the normals lie elsewhere than the colours");
+        assert_eq!(c.octahedral_normal_grid(k), Some(*g), "impostor {k}");
+    }
+    assert_eq!(c.octahedral_normal_grid(octahedral.len()), None, "no such impostor");
+    let report = verify(&c).unwrap();
+    assert_eq!(
+        (report.octahedral, report.octahedral_normals, report.octahedral_normal_grids),
+        (octahedral.len() as u64, 0, grids.len() as u64)
+    );
+    // With 1.15's records at the grids' corners in place of the grids it is the 1.15 file, record
+    // for record, and the writer marks it 1.15: the grids start where 1.15's did, only smaller.
+    is_the_previous_file_with(&c, 16, |data| {
+        data.octahedral_normals =
+            data.octahedral_normal_grids.drain(..).map(|g| OctahedralNormalRecord { uv_min: g.uv_min }).collect();
+    });
+    // The 1.15 file's grids, read through the same accessor, are of the colour grids' size.
+    let previous = Container::open(golden_dir_of(15).join("every-kind-zstd.treelod")).unwrap();
+    for (k, (o, n)) in previous.octahedral().iter().zip(previous.octahedral_normals()).enumerate() {
+        let g = previous.octahedral_normal_grid(k).expect("a grid per impostor");
+        assert_eq!(g, n.grid(o), "impostor {k}");
+        assert_eq!(g.uv_min, n.uv_min, "impostor {k}");
+    }
 }
 
 /// The small 1.13 file: one octahedral impostor of 2 × 2 views and their four depth planes, view

@@ -7,7 +7,7 @@ use treelod_format::{
     CellRecord, Compression, Container, ContainerData, Error, ErrorClass, LineRecord, NO_IMAGE, SectionKind,
     SptElement, image_format, leaf_slots, verify,
 };
-use treelod_tests::{SyntheticOptions, synthetic};
+use treelod_tests::{NormalGrids, SyntheticOptions, synthetic};
 
 fn range(max_start: u32, max_span: u32) -> impl Strategy<Value = core::ops::RangeInclusive<u32>> {
     (0..=max_start, 0..=max_span).prop_map(|(lo, span)| lo..=lo + span)
@@ -70,8 +70,13 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 // The points' facing with half of the grids.
                 point_facing: grid[2] >= 2,
                 // Where their views' normals lie with another half of those (drawing no random
-                // numbers, so the rest is the same as without them).
-                octahedral_normals: grid[0] < 2 && grid[1] >= 2,
+                // numbers, so the rest is the same as without them): 1.16's grids with half of
+                // those, 1.15's with the other half.
+                octahedral_normals: match (grid[0] < 2 && grid[1] >= 2, grid[2] >= 2) {
+                    (false, _) => NormalGrids::None,
+                    (true, true) => NormalGrids::HalfSize,
+                    (true, false) => NormalGrids::ColourSize,
+                },
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -140,11 +145,24 @@ fn check_exact_cut<T: SptElement>(what: &str, cell: usize, elements: &[T]) -> Re
 /// finite radius above 0, an existing colour image, `uv_min ≤ uv_max`, a tree in range, its
 /// occlusion in `[0, 1]` and `reserved` 0; sorted by tree, at most one per tree. Their views' depth
 /// planes (spec §6.13.2): none, or `frames²` per impostor, every value in `[−1, 1]`. Their normal
-/// grids (spec §6.13.3): none, or one per impostor, of its colour grid's size inside the image.
+/// grids (spec §6.13.3): none, or one per impostor, either of its colour grid's size inside the
+/// image (1.15, `OCTAHEDRAL_NORMALS`) or with two corners of their own, `uv_min < uv_max` per
+/// component (1.16, `OCTAHEDRAL_NORMAL_GRIDS`), not both.
 fn check_octahedral(data: &ContainerData) -> Result<(), String> {
-    let normals = &data.octahedral_normals;
-    if !normals.is_empty() && normals.len() != data.octahedral.len() {
-        return Err(format!("{} normal grids for {} octahedral impostors", normals.len(), data.octahedral.len()));
+    let (normals, grids) = (&data.octahedral_normals, &data.octahedral_normal_grids);
+    for (what, count) in [("normal grids (1.15)", normals.len()), ("normal grids (1.16)", grids.len())] {
+        if count != 0 && count != data.octahedral.len() {
+            return Err(format!("{count} {what} for {} octahedral impostors", data.octahedral.len()));
+        }
+    }
+    if !normals.is_empty() && !grids.is_empty() {
+        return Err("both OCTAHEDRAL_NORMALS and OCTAHEDRAL_NORMAL_GRIDS".into());
+    }
+    for g in grids {
+        let ([u0, v0], [u1, v1]) = ([g.uv_min & 0xFFFF, g.uv_min >> 16], [g.uv_max & 0xFFFF, g.uv_max >> 16]);
+        if u0 >= u1 || v0 >= v1 {
+            return Err(format!("normal grid {g:?} is empty or reversed"));
+        }
     }
     // In unorm16 steps: the far corner at most 65536 (1 and the one step of both corners' rounding).
     let steps = |uv: u32| [uv & 0xFFFF, uv >> 16];
@@ -462,17 +480,24 @@ fn presets_hold_what_they_promise() {
     let everything = synthetic(3, &SyntheticOptions::everything());
     let bytes = everything.to_bytes(Compression::Zstd { level: 19 }).unwrap();
     let container = Container::from_bytes(&bytes).unwrap();
+    // Every kind but 1.15's normal grids, which 1.16's replace (a file holds one of the two).
     for kind in SectionKind::KNOWN {
-        assert!(container.section(kind).is_some(), "{kind} missing from SyntheticOptions::everything()");
+        let expected = kind != SectionKind::OCTAHEDRAL_NORMALS;
+        assert_eq!(container.section(kind).is_some(), expected, "{kind} in SyntheticOptions::everything()");
     }
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 15, "everything() holds the kinds of 1.15");
+    assert_eq!(container.header().minor, 16, "everything() holds the kinds of 1.16");
     assert_eq!(everything.octahedral.len(), everything.block.tree_count as usize, "an octahedral impostor per tree");
     let views: u32 = everything.octahedral.iter().map(|o| o.frames * o.frames).sum();
     assert_eq!(everything.octahedral_depth.len(), views as usize, "a depth plane per octahedral view");
-    assert_eq!(everything.octahedral_normals.len(), everything.octahedral.len(), "a normal grid per impostor");
+    assert_eq!(everything.octahedral_normal_grids.len(), everything.octahedral.len(), "a normal grid per impostor");
+    for (g, o) in everything.octahedral_normal_grids.iter().zip(&everything.octahedral) {
+        let size = |min: u32, max: u32| [(max & 0xFFFF) - (min & 0xFFFF), (max >> 16) - (min >> 16)];
+        let [w, h] = size(o.uv_min, o.uv_max);
+        assert_eq!(size(g.uv_min, g.uv_max), [w / 2, h / 2], "half the colour grid's size: {g:?} of {o:?}");
+    }
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

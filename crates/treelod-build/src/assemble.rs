@@ -15,9 +15,9 @@ use glam::{Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 use treelod_format::{
     BillboardRecord, BlockRecord, CellRecord, ContainerData, ImageRecord, LodLevelRecord, MATERIAL_DOUBLE_SIDED,
-    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord,
-    PointRecord, PruneLeafRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, encode_ao,
-    encode_point_facing, image_format, material_class, pack,
+    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord,
+    OctahedralRecord, PointRecord, PruneLeafRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord,
+    encode_ao, encode_point_facing, image_format, material_class, pack,
 };
 
 use crate::ambient::{AoConfig, AoTriangle, mean_occlusion, triangle_occlusion, vertex_occlusion};
@@ -1121,7 +1121,7 @@ fn assemble(
     let mut billboard_records: Vec<BillboardRecord> = Vec::new();
     let mut octahedral_records: Vec<OctahedralRecord> = Vec::new();
     let mut octahedral_depth: Vec<OctahedralDepthRecord> = Vec::new();
-    let mut octahedral_normals: Vec<OctahedralNormalRecord> = Vec::new();
+    let mut octahedral_normal_grids: Vec<OctahedralNormalGridRecord> = Vec::new();
     if let Some(billboards) = billboards {
         let atlas = billboards.atlas;
         let index = push_atlas(&mut images, &mut image_data, &atlas);
@@ -1129,7 +1129,7 @@ fn assemble(
         octahedral_records =
             billboards.octahedral.into_iter().map(|o| OctahedralRecord { image: index, ..o }).collect();
         octahedral_depth = billboards.octahedral_depth;
-        octahedral_normals = billboards.octahedral_normals;
+        octahedral_normal_grids = billboards.octahedral_normal_grids;
         stats.billboard_atlas = [atlas.width, atlas.height];
     }
     clock.lap(&mut stats, "images");
@@ -1216,7 +1216,7 @@ fn assemble(
         billboards: billboard_records,
         octahedral: octahedral_records,
         octahedral_depth,
-        octahedral_normals,
+        octahedral_normal_grids,
         vertex_ao: vertex_ao.map_or_else(Vec::new, |ao| ao.iter().map(|&a| encode_ao(a)).collect()),
         point_ao,
         point_facing,

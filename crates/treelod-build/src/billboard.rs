@@ -34,7 +34,7 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use treelod_format::{
-    BillboardRecord, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, Setting,
+    BillboardRecord, OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralRecord, PlaneDiffuseRecord, Setting,
     billboard_kind, pack,
 };
 
@@ -54,25 +54,32 @@ use crate::impostor::{
 pub const OCTAHEDRAL_FRAMES: u32 = 16;
 
 /// Texels per side of an octahedral view's cell by default ([`OctahedralConfig::texels`]; a
-/// multiple of 16, the atlas's alignment; its content is the cell less a 4-texel gutter on each
-/// side), before any shrinking: a tree up to about 88 pixels high on screen keeps a texel per
-/// pixel, 2.36 M texels per tree before mips. Where the atlas would exceed [`MAX_ATLAS`], cells
-/// shrink by 3/4 steps (to multiples of 16, 32 at least) as the billboards' budgets do.
+/// multiple of [`CELL_ALIGN`]; its content is the cell less a 4-texel gutter on each side),
+/// before any shrinking: a tree up to about 88 pixels high on screen keeps a texel per pixel,
+/// 2.36 M colour texels per tree before mips (and its normals a quarter of that). Where the atlas
+/// would exceed [`MAX_ATLAS`], cells shrink by 3/4 steps (to multiples of 32, 32 at least) as the
+/// billboards' budgets do.
 pub const OCTAHEDRAL_CELL: u32 = 96;
+
+/// What an octahedral view's cell is a multiple of: twice the atlas's alignment (16), so that
+/// the cell of its normals, at half the colour's resolution (spec §6.13.3), keeps that alignment
+/// and every mip level of both lies on whole texels.
+pub const CELL_ALIGN: u32 = 2 * ALIGN;
 
 /// How each tree's octahedral impostor is baked (`treelod build --octahedral-views`,
 /// `--octahedral-texels`): what impostor bakers let an artist trade, the views' density against
-/// the atlas's texels. The atlas of one tree holds `(views · texels)²` texels before mips (2.36 M
-/// by default); where the block's atlas would pass [`MAX_ATLAS`] texels a side, cells shrink in
-/// 3/4 steps (to multiples of 16, 32 at least).
+/// the atlas's texels. The atlas of one tree holds `(views · texels)²` colour texels before mips
+/// (2.36 M by default) and a quarter of that of normals; where the block's atlas would pass
+/// [`MAX_ATLAS`] texels a side, cells shrink in 3/4 steps (to multiples of 32, 32 at least).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct OctahedralConfig {
     /// Views per side of the hemi-octahedral grid (`frames`, spec §6.13.1), in
     /// [`OctahedralRecord::MIN_FRAMES`]`..=`[`OctahedralRecord::MAX_FRAMES`] (`2..=64`). Default
     /// [`OCTAHEDRAL_FRAMES`].
     pub views: u32,
-    /// Texels per side of a view's cell, a gutter of 4 on each side included: a multiple of 16
-    /// in [`Self::MIN_TEXELS`]`..=`[`Self::MAX_TEXELS`] (`32..=256`). Default [`OCTAHEDRAL_CELL`].
+    /// Texels per side of a view's cell, a gutter of 4 on each side included: a multiple of
+    /// [`CELL_ALIGN`] (32) in [`Self::MIN_TEXELS`]`..=`[`Self::MAX_TEXELS`] (`32..=256`). Default
+    /// [`OCTAHEDRAL_CELL`].
     pub texels: u32,
 }
 
@@ -84,7 +91,7 @@ impl Default for OctahedralConfig {
 
 impl OctahedralConfig {
     /// The fewest texels per side of a view's cell: the least the atlas's shrinking leaves.
-    pub const MIN_TEXELS: u32 = 2 * ALIGN;
+    pub const MIN_TEXELS: u32 = CELL_ALIGN;
     /// The most texels per side of a view's cell.
     pub const MAX_TEXELS: u32 = 256;
 
@@ -100,9 +107,9 @@ impl OctahedralConfig {
                 self.views
             )));
         }
-        if !(Self::MIN_TEXELS..=Self::MAX_TEXELS).contains(&self.texels) || !self.texels.is_multiple_of(ALIGN) {
+        if !(Self::MIN_TEXELS..=Self::MAX_TEXELS).contains(&self.texels) || !self.texels.is_multiple_of(CELL_ALIGN) {
             return Err(BuildError::Setting(format!(
-                "octahedral texels {}: a multiple of {ALIGN} from {} to {} texels per side of a view",
+                "octahedral texels {}: a multiple of {CELL_ALIGN} from {} to {} texels per side of a view",
                 self.texels,
                 Self::MIN_TEXELS,
                 Self::MAX_TEXELS
@@ -160,9 +167,9 @@ pub struct Billboards {
     pub octahedral: Vec<OctahedralRecord>,
     /// The same for each tree's octahedral views together, their normal cells included.
     pub octahedral_texels: Vec<u64>,
-    /// Where each octahedral impostor's views' normals lie, in the order of `octahedral`: the
-    /// `OCTAHEDRAL_NORMALS` section (spec §6.13.3).
-    pub octahedral_normals: Vec<OctahedralNormalRecord>,
+    /// Where each octahedral impostor's views' normals lie, at half the colour's resolution, in
+    /// the order of `octahedral`: the `OCTAHEDRAL_NORMAL_GRIDS` section (spec §6.13.3).
+    pub octahedral_normal_grids: Vec<OctahedralNormalGridRecord>,
     /// Each octahedral view's depth plane, in the order of `octahedral` and of the views in
     /// each (`j · frames + i`): the `OCTAHEDRAL_DEPTH` section (spec §6.13.2).
     pub octahedral_depth: Vec<OctahedralDepthRecord>,
@@ -272,14 +279,15 @@ pub fn build_billboards(
             })
             .collect();
         let grid = views * cell;
-        // The views' colour cells, then their normal cells to the right (spec §6.13.3).
-        regions.extend(spheres.iter().map(|_| Region::new(2 * grid - 2 * GUTTER, grid - 2 * GUTTER)));
+        // The views' colour cells, then their normal cells, at half the colour's resolution, to
+        // the right (spec §6.13.3).
+        regions.extend(spheres.iter().map(|_| Region::new(grid + grid / 2 - 2 * GUTTER, grid - 2 * GUTTER)));
         let (width, height) = pack_tight(&mut regions);
         if (width <= MAX_ATLAS && height <= MAX_ATLAS) || scale < 1e-9 {
             break (regions, width, height);
         }
         scale *= 0.75;
-        cell = (cell * 3 / 4 / ALIGN * ALIGN).max(2 * ALIGN);
+        cell = (cell * 3 / 4 / CELL_ALIGN * CELL_ALIGN).max(CELL_ALIGN);
     };
     // The grids' places, then each view as a job of its own in its cell: its content the cell
     // less a gutter, a square of the tree's bounding sphere seen along the view's direction.
@@ -352,16 +360,26 @@ pub fn build_billboards(
             bake(mesh, in_order.iter().copied(), &plane, Winner::Front, &job.quad, region, samples, octahedral_view)
         })
         .collect();
-    // Each view's normal cell lies one grid side to the right of its colour cell (and so each
-    // impostor's normal grid right of its colour grid).
+    // Each impostor's normal grid lies right of its colour grid, at half its size: a view's
+    // normal cell at half its colour cell's place in the grid.
     let normal_shift = views * cell;
     let mut placed_regions = regions.clone();
     let mut levels: Vec<Vec<Vec<u8>>> = Vec::with_capacity(baked.len());
     let mut moments: Vec<DepthMoments> = Vec::with_capacity(baked.len());
     let mut normal_levels = Vec::new();
+    let mut view_grids = grids.iter().flat_map(|grid| std::iter::repeat_n(grid, (views * views) as usize));
     for ((job, region), b) in jobs.iter().zip(&regions).zip(baked) {
-        if job.kind == OCTAHEDRAL_VIEW {
-            placed_regions.push(Region { x: region.x + normal_shift, ..*region });
+        if job.kind == OCTAHEDRAL_VIEW
+            && let Some(grid) = view_grids.next()
+        {
+            placed_regions.push(Region {
+                tw: region.tw / 2,
+                th: region.th / 2,
+                rw: region.rw / 2,
+                rh: region.rh / 2,
+                x: grid.x + normal_shift + (region.x - grid.x) / 2,
+                y: grid.y + (region.y - grid.y) / 2,
+            });
             normal_levels.push(b.normals);
         }
         levels.push(b.levels);
@@ -380,8 +398,8 @@ pub fn build_billboards(
     let mut octahedral_depth = Vec::new();
     for ((job, region), moments) in jobs.iter().zip(&regions).zip(&moments) {
         if job.kind == OCTAHEDRAL_VIEW {
-            // Its colour cell and its normal cell.
-            octahedral_texels[job.tree as usize] += 2 * region.texels();
+            // Its colour cell and its normal cell, a quarter of it.
+            octahedral_texels[job.tree as usize] += region.texels() + region.texels() / 4;
             // In the record's units: the offset over its radius (the view's cell, gutter
             // included), the slopes as they are; none where the view shows nothing.
             let radius = job.quad.u.length() * f64::from(cell) / f64::from(view_content);
@@ -409,14 +427,19 @@ pub fn build_billboards(
             reserved: [0; 2],
         });
     }
-    // Each octahedral impostor's normal grid, to the right of its colour grid (spec §6.13.3).
-    let octahedral_normals = grids
+    // Each octahedral impostor's normal grid, to the right of its colour grid, half its side
+    // (spec §6.13.3).
+    let octahedral_normal_grids = grids
         .iter()
         .map(|grid| {
-            let (x, y) = (f64::from(grid.x + normal_shift) / f64::from(width), f64::from(grid.y) / f64::from(height));
+            let (w, h) = (f64::from(width), f64::from(height));
+            let (x, y, side) = (f64::from(grid.x + normal_shift), f64::from(grid.y), f64::from(views * cell / 2));
             #[expect(clippy::cast_possible_truncation, reason = "uv in [0, 1]")]
-            let uv_min = pack::unorm16x2(x as f32, y as f32);
-            OctahedralNormalRecord { uv_min }
+            let record = OctahedralNormalGridRecord {
+                uv_min: pack::unorm16x2((x / w) as f32, (y / h) as f32),
+                uv_max: pack::unorm16x2(((x + side) / w) as f32, ((y + side) / h) as f32),
+            };
+            record
         })
         .collect();
     // Each octahedral impostor: the whole grid as its rectangle, each view's cell (gutter
@@ -450,7 +473,7 @@ pub fn build_billboards(
         facing_texels,
         crossed_texels,
         octahedral_depth,
-        octahedral_normals,
+        octahedral_normal_grids,
         octahedral,
         octahedral_texels,
     }))
@@ -655,19 +678,22 @@ mod tests {
         let mesh =
             ImpostorMesh { vertices: &vertices, triangles: &triangles, surfaces: &surfaces, occlusion: &occlusion };
         let out = build_billboards(&mesh, 1, &[20_000], Some(&OctahedralConfig::default())).unwrap().unwrap();
-        let (record, normals) = (&out.octahedral[0], &out.octahedral_normals[..]);
+        let (record, normals) = (&out.octahedral[0], &out.octahedral_normal_grids[..]);
         assert_eq!(normals.len(), 1);
         let n = record.frames;
-        // The normal cell's texel: the colour cell's place, moved by the grids' offset.
-        let [u0, v0] = pack::unpack_unorm16x2(record.uv_min);
-        let [nu, nv] = pack::unpack_unorm16x2(normals[0].uv_min);
+        // The normal cell's texel: the colour texel's place in the colour grid, halved, in the
+        // normal grid.
         let (w, h) = (out.atlas.width as f32, out.atlas.height as f32);
-        let shift = (((nu - u0) * w).round() as usize, ((nv - v0) * h).round() as usize);
+        let corner = |packed: u32| {
+            let [u, v] = pack::unpack_unorm16x2(packed);
+            ((u * w).round() as usize, (v * h).round() as usize)
+        };
+        let (colour_grid, normal_grid) = (corner(record.uv_min), corner(normals[0].uv_min));
         let normal_at = |view: (u32, u32), p: Vec3| {
             let colour = view_texel_at(&out.atlas, record, view, p);
             assert!(colour[3] >= 128, "the colour cell shows a surface at {p}: {colour:?}");
             let (x, y) = view_texel_xy(&out.atlas, record, view, p);
-            let t = texel(&out.atlas, x + shift.0, y + shift.1);
+            let t = texel(&out.atlas, normal_grid.0 + (x - colour_grid.0) / 2, normal_grid.1 + (y - colour_grid.1) / 2);
             let unit = |b: u8| 2.0 * crate::texture::srgb_to_linear_table()[b as usize] - 1.0;
             (Vec3::new(unit(t[0]), unit(t[1]), unit(t[2])), f32::from(t[3]) / 255.0)
         };
@@ -679,7 +705,7 @@ mod tests {
         assert!(from_minus_z.abs_diff_eq(-Vec3::Z, 0.02), "{from_minus_z}");
         assert!(ao.abs() < 0.01, "{ao}");
         // A texel whose surfaces agree takes the sun by their normal alone, not the mixture.
-        let lit = OctahedralNormalRecord::sun_factor(from_z.to_array(), tilted.to_array(), 0.25);
+        let lit = treelod_format::OctahedralNormalRecord::sun_factor(from_z.to_array(), tilted.to_array(), 0.25);
         assert!((lit - 1.0).abs() < 0.03, "a normal facing the sun takes it whole: {lit}");
     }
 
@@ -728,7 +754,7 @@ mod tests {
     /// others (`--octahedral-views`, `--octahedral-texels`).
     #[test]
     fn octahedral_views_show_the_tree_from_their_directions() {
-        for config in [OctahedralConfig::default(), OctahedralConfig { views: 7, texels: 48 }] {
+        for config in [OctahedralConfig::default(), OctahedralConfig { views: 7, texels: 64 }] {
             octahedral_views_as_configured(config);
         }
     }
@@ -767,11 +793,24 @@ mod tests {
             let c = config.texels;
             assert_eq!((x1 - x0, y1 - y0), (n * c, n * c), "{r:?}");
             assert_eq!((x0 % ALIGN, y0 % ALIGN), (0, 0));
-            // The colour cells and as many normal cells (spec §6.13.3), right of them.
-            assert_eq!(out.octahedral_texels[k], u64::from(2 * n * n * c * c));
-            let [nu, nv] = pack::unpack_unorm16x2(out.octahedral_normals[k].uv_min);
+            // The colour cells and as many normal cells at half their side (spec §6.13.3), right
+            // of them.
+            assert_eq!(out.octahedral_texels[k], u64::from(n * n * c * c + n * n * c * c / 4));
+            let grid = out.octahedral_normal_grids[k];
             let (w, h) = (out.atlas.width as f32, out.atlas.height as f32);
-            assert_eq!(((nu * w).round() as u32, (nv * h).round() as u32), (x0 + n * c, y0), "{r:?}");
+            let at = |packed: u32| {
+                let [u, v] = pack::unpack_unorm16x2(packed);
+                ((u * w).round() as u32, (v * h).round() as u32)
+            };
+            assert_eq!(
+                (at(grid.uv_min), at(grid.uv_max)),
+                ((x0 + n * c, y0), (x0 + n * c + n * c / 2, y0 + n * c / 2))
+            );
+            assert_eq!(
+                ((x0 + n * c) % ALIGN, (c / 2) % ALIGN),
+                (0, 0),
+                "each level of the normal cells on whole texels"
+            );
             // The horizon at +Z is view (N − 1, 0), at −Z (0, N − 1), at +X (N − 1, N − 1).
             let front = Vec3::new(dx - 0.5, 2.0, 0.6);
             assert_eq!(view_texel_at(&out.atlas, r, (n - 1, 0), front)[..3], RED);
@@ -796,9 +835,9 @@ mod tests {
     #[test]
     fn octahedral_settings_out_of_range_are_refused() {
         assert!(OctahedralConfig::default().validate().is_ok());
-        for (views, texels) in [(1, 96), (65, 96), (16, 16), (16, 100), (16, 272), (2, 32), (64, 256)] {
+        for (views, texels) in [(1, 96), (65, 96), (16, 16), (16, 100), (16, 48), (16, 272), (2, 32), (64, 256)] {
             let config = OctahedralConfig { views, texels };
-            let valid = (2..=64).contains(&views) && (32..=256).contains(&texels) && texels.is_multiple_of(16);
+            let valid = (2..=64).contains(&views) && (32..=256).contains(&texels) && texels.is_multiple_of(32);
             assert_eq!(config.validate().is_ok(), valid, "{config:?}");
         }
         let pairs: Vec<(String, String)> =

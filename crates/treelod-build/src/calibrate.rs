@@ -109,9 +109,9 @@ use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
     CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, ImageRecord, NO_IMAGE,
-    OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord,
-    billboard_kind, calibration_technique, decode_ao, image, image_format, material_class, octahedral_depth_starts,
-    point_facing_scale, prune_leaves_drawn,
+    OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord,
+    Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao, image, image_format, material_class,
+    octahedral_depth_starts, point_facing_scale, prune_leaves_drawn,
 };
 use treelod_runtime::impostor::{
     BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
@@ -328,10 +328,45 @@ struct Quad {
     /// Mip levels finer than the pixel's footprint it is sampled from: 1 for an octahedral
     /// impostor's view (as `octahedral_texel` samples it), 0 for planes and billboards.
     finer: f32,
-    /// Where its normals lie relative to its colour, in atlas coordinates: an octahedral
-    /// impostor's view with normals (spec §6.13.3), each pixel lit by its normal texel as
-    /// `fs_octahedral` lights it; `None` for a quad lit as a whole.
-    normals: Option<Vec2>,
+    /// Where its normals lie: an octahedral impostor's view with normals (spec §6.13.3), each
+    /// pixel lit by its normal texel as `fs_octahedral` lights it; `None` for a quad lit as a
+    /// whole.
+    normals: Option<NormalGrid>,
+}
+
+/// Where an octahedral impostor's normals lie in its atlas (spec §6.13.3): the colour grid's
+/// point `uv` has its normal at `normal_min + (uv − colour_min) · scale`, atlas coordinates.
+#[derive(Clone, Copy)]
+struct NormalGrid {
+    colour_min: Vec2,
+    normal_min: Vec2,
+    /// The normal grid's side over the colour grid's, per axis (½ as builders write it).
+    scale: Vec2,
+}
+
+impl NormalGrid {
+    /// The grid of `normals` for the colour grid of `record`.
+    fn new(record: &OctahedralRecord, normals: &OctahedralNormalGridRecord) -> Self {
+        let corner = |packed: u32| Vec2::from_array(unpack_unorm16x2(packed));
+        let (colour_min, colour_max) = (corner(record.uv_min), corner(record.uv_max));
+        let (normal_min, normal_max) = (corner(normals.uv_min), corner(normals.uv_max));
+        Self {
+            colour_min,
+            normal_min,
+            scale: (normal_max - normal_min) / (colour_max - colour_min).max(Vec2::splat(1e-9)),
+        }
+    }
+
+    /// The normal grid's point of the colour grid's `uv`.
+    fn uv(&self, uv: Vec2) -> Vec2 {
+        self.normal_min + (uv - self.colour_min) * self.scale
+    }
+
+    /// The mip level, of a colour texel's footprint `lod`, of its normal texel's (a texel of a
+    /// smaller grid covers more of the colour's).
+    fn lod(&self, lod: f32) -> f32 {
+        lod + self.scale.max_element().max(1e-9).log2()
+    }
 }
 
 /// A quad's corners in its axes, in [`Quad::corners`] order: `(−1, −1)` at `uv_min`, then
@@ -878,7 +913,7 @@ impl<'a> Scene<'a> {
                     let planes = starts
                         .as_ref()
                         .and_then(|s| d.octahedral_depth.get(s[k]..s[k] + (record.frames as usize).pow(2)));
-                    self.octahedral(canvas, view, record, planes, d.octahedral_normals.get(k));
+                    self.octahedral(canvas, view, record, planes, d.octahedral_normal_grid(k).as_ref());
                 }
                 d.octahedral.len() as u64
             }
@@ -913,9 +948,10 @@ impl<'a> Scene<'a> {
                 let [r, g, b, alpha] = texels::sample(&atlas.levels, atlas.size, uv.to_array(), lod, atlas.sampler);
                 if alpha >= 0.5 {
                     let (diffuse, ao) = match quad.normals {
-                        Some(offset) => {
+                        Some(grid) => {
+                            let (at, lod) = (grid.uv(uv).to_array(), grid.lod(lod));
                             let [nr, ng, nb, occlusion] =
-                                texels::sample(&atlas.levels, atlas.size, (uv + offset).to_array(), lod, atlas.sampler);
+                                texels::sample(&atlas.levels, atlas.size, at, lod, atlas.sampler);
                             let n = OctahedralNormalRecord::decode([nr, ng, nb]);
                             (Light::DEFAULT.octahedral_texel_diffuse(n, diffuse), occlusion)
                         }
@@ -944,7 +980,7 @@ impl<'a> Scene<'a> {
         view: &View,
         record: &OctahedralRecord,
         planes: Option<&[OctahedralDepthRecord]>,
-        normals: Option<&OctahedralNormalRecord>,
+        normals: Option<&OctahedralNormalGridRecord>,
     ) {
         let frames = record.frames.max(2);
         let d = Vec3::new(view.direction.x, view.direction.y.max(0.0), view.direction.z);
@@ -981,7 +1017,7 @@ impl<'a> Scene<'a> {
             (Vec2::from_array(unpack_unorm16x2(record.uv_min)), Vec2::from_array(unpack_unorm16x2(record.uv_max)));
         #[expect(clippy::cast_precision_loss, reason = "at most 64 frames")]
         let cell = (hi - lo) / frames as f32;
-        let normals = normals.map(|n| Vec2::from_array(unpack_unorm16x2(n.uv_min)) - lo);
+        let normals = normals.map(|n| NormalGrid::new(record, n));
         let mut from = 0.0;
         for (k, ((i, j, weight), ((rk, uk, dk), plane))) in blend.into_iter().zip(views).enumerate() {
             // The last view takes every pixel past the first two (the dither is below 1).

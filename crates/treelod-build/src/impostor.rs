@@ -1474,11 +1474,13 @@ pub(crate) fn bake(
     }
     // Each mip texel the mean of its four, weighted by their coverage, the normals by the same
     // weights (the colour's alpha before coverage preservation); then each level dilated into
-    // its transparent texels.
+    // its transparent texels. A view's normals are kept at half the colour's resolution (spec
+    // §6.13.3: its levels 1 to `MIP_LEVELS`), so a view computes one level more, which only its
+    // normals keep.
     let mut levels = vec![texels];
     let mut normal_levels = vec![normal_texels];
     let (mut w, mut h) = (rw, rh);
-    for _ in 1..MIP_LEVELS {
+    for _ in 1..MIP_LEVELS + u32::from(view) {
         let (Some(prev), Some(prev_normals)) = (levels.last(), normal_levels.last()) else { break };
         let (nw, nh) = (w / 2, h / 2);
         let mut next = Vec::with_capacity(nw * nh);
@@ -1508,6 +1510,7 @@ pub(crate) fn bake(
         }
         dilate(level, rw >> l, rh >> l, covered, true);
     }
+    levels.truncate(MIP_LEVELS as usize);
     preserve_coverage(&mut levels, rw, rh);
     let byte = |v: f32| {
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "in 0..=255")]
@@ -1524,6 +1527,7 @@ pub(crate) fn bake(
     let normals = if view {
         normal_levels
             .iter()
+            .skip(1)
             .map(|level| level.iter().flat_map(|t| [unit(t[0]), unit(t[1]), unit(t[2]), byte(t[3])]).collect())
             .collect()
     } else {
@@ -1539,7 +1543,8 @@ pub(crate) struct Baked {
     /// With `view`, the region's normal levels, as `levels` (spec §6.13.3): RGB `(n + 1)/2` of the
     /// covered samples' mean normal turned towards the viewer, sRGB-encoded; alpha their mean
     /// ambient occlusion; each mip level the mean of its four texels weighted by their coverage,
-    /// the uncovered texels dilated as the colour's are. Empty without.
+    /// the uncovered texels dilated as the colour's are; at half the colour's resolution (its
+    /// levels 1 to [`MIP_LEVELS`], `(rw >> (l + 1)) × (rh >> (l + 1))`). Empty without.
     pub normals: Vec<Vec<u8>>,
     /// With `view`, the sums that fit the view's depth plane ([`DepthMoments`]).
     pub moments: DepthMoments,

@@ -49,13 +49,15 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     // 1.8, the planes' diffuse response (PLANE_DIFFUSE) one of 1.10, the octahedral impostors of
     // the baselines (OCTAHEDRAL) one of 1.11, their calibration (CALIBRATION_ADDED) one of 1.12,
     // their views' depth planes (OCTAHEDRAL_DEPTH) one of 1.13, the points' facing (POINT_FACING)
-    // one of 1.14, and the views' normals (OCTAHEDRAL_NORMALS) make the file 1.15.
+    // one of 1.14, and the views' normals at half resolution (OCTAHEDRAL_NORMAL_GRIDS) make the
+    // file 1.16.
     assert!(!container.chain_calibration().is_empty() && !container.plane_diffuse().is_empty());
     assert!(!container.octahedral().is_empty() && !container.octahedral_depth().is_empty());
-    assert_eq!(container.octahedral_normals().len(), container.octahedral().len());
+    assert_eq!(container.octahedral_normal_grids().len(), container.octahedral().len());
+    assert!(container.octahedral_normals().is_empty(), "one of the two kinds");
     assert_eq!(container.point_facing().len(), container.points().len());
     assert_eq!(container.calibration_added(), out.data.calibration_added.as_slice());
-    assert_eq!(container.header().minor, 15, "the views' normals are a kind of 1.15");
+    assert_eq!(container.header().minor, 16, "the views' normal grids are a kind of 1.16");
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.

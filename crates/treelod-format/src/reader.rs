@@ -10,9 +10,9 @@ use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord,
-    PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE,
-    SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralDepthRecord, OctahedralNormalGridRecord,
+    OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -519,6 +519,29 @@ impl Container {
         self.records(SectionKind::OCTAHEDRAL_NORMALS)
     }
 
+    /// Where each of [`Self::octahedral`]'s views' normals lie in its image and at what size
+    /// (spec §6.13.3), one record per impostor in order (checked at open), as the section
+    /// `OCTAHEDRAL_NORMAL_GRIDS` holds them. Empty without the section. Since 1.16; readers
+    /// take [`Self::octahedral_normal_grid`], which also reads the grids of 1.15.
+    #[must_use]
+    pub fn octahedral_normal_grids(&self) -> &[OctahedralNormalGridRecord] {
+        self.records(SectionKind::OCTAHEDRAL_NORMAL_GRIDS)
+    }
+
+    /// The grid of the views' normals of impostor `index` of [`Self::octahedral`] (spec
+    /// §6.13.3): its `OCTAHEDRAL_NORMAL_GRIDS` record (1.16), else the grid of the colour grid's
+    /// size its `OCTAHEDRAL_NORMALS` record places (1.15, [`OctahedralNormalRecord::grid`]);
+    /// `None` where the file has neither (before 1.15: the views are lit as a whole by the
+    /// record's diffuse mixture and occlusion) or there is no such impostor.
+    #[must_use]
+    pub fn octahedral_normal_grid(&self, index: usize) -> Option<OctahedralNormalGridRecord> {
+        let octahedral = self.octahedral().get(index)?;
+        self.octahedral_normal_grids()
+            .get(index)
+            .copied()
+            .or_else(|| self.octahedral_normals().get(index).map(|n| n.grid(octahedral)))
+    }
+
     /// Ambient occlusion of each vertex (spec §6.14; [`crate::decode_ao`]), empty if the file has
     /// none; otherwise as long as [`Container::vertices`] (checked at open).
     #[must_use]
@@ -868,8 +891,9 @@ fn scatter_planes(planes: &[u8], n: usize, record_size: usize, first: usize, out
     }
 }
 
-/// Spec §6.1 grid and bounds, §6.2 cell count and tiling, §6.14 ambient-occlusion lengths: the
-/// checks every open makes, shared with the writer so it never emits a file the reader refuses.
+/// Spec §6.1 grid and bounds, §6.2 cell count and tiling, §6.14 ambient-occlusion lengths (and
+/// the other sections parallel to an array), §6.13.3 one kind of normal grids: the checks every
+/// open makes, shared with the writer so it never emits a file the reader refuses.
 /// `count` gives a section's record count.
 pub(crate) fn check_block_and_cells(
     blocks: &[BlockRecord],
@@ -908,17 +932,29 @@ pub(crate) fn check_block_and_cells(
     }
     // Spec §6.14, §6.10.2, §6.5.1: an ambient-occlusion section holds one byte per record of its
     // array, `PLANE_DIFFUSE` one record per plane, `POINT_FACING` one byte per point,
-    // `OCTAHEDRAL_NORMALS` (§6.13.3) one record per octahedral impostor.
+    // `OCTAHEDRAL_NORMALS` and `OCTAHEDRAL_NORMAL_GRIDS` (§6.13.3) one record per octahedral
+    // impostor.
     let parallel = [
         (SectionKind::PLANE_DIFFUSE, SectionKind::PLANES),
         (SectionKind::POINT_FACING, SectionKind::POINTS),
         (SectionKind::OCTAHEDRAL_NORMALS, SectionKind::OCTAHEDRAL),
+        (SectionKind::OCTAHEDRAL_NORMAL_GRIDS, SectionKind::OCTAHEDRAL),
     ];
     for (kind, of) in AO_KINDS.into_iter().chain(parallel) {
         let (ao, records) = (count(kind), count(of));
         if ao != 0 && ao != records {
             return Err(bad_record(kind, 0, format!("{ao} records, {of} has {records}: one per record or none")));
         }
+    }
+    // Spec §6.13.3: the normal grids are given by 1.15's `OCTAHEDRAL_NORMALS` or by 1.16's
+    // `OCTAHEDRAL_NORMAL_GRIDS`, never both (an empty section counts as absent).
+    let (normals, grids) = (SectionKind::OCTAHEDRAL_NORMALS, SectionKind::OCTAHEDRAL_NORMAL_GRIDS);
+    if count(normals) != 0 && count(grids) != 0 {
+        return Err(bad_record(
+            grids,
+            0,
+            format!("the file also holds {normals}; a file gives its normal grids by one of the two kinds"),
+        ));
     }
     for slot in 0..6 {
         let kind = cells[0].ranges()[slot].0;

@@ -12,7 +12,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 15;
+pub const MINOR: u16 = 16;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -164,6 +164,10 @@ impl SectionKind {
     /// Baseline: [`OctahedralNormalRecord`]s, where each `OCTAHEDRAL` record's views' normals
     /// lie in its image, one per record in order (spec §6.13.3). Since 1.15.
     pub const OCTAHEDRAL_NORMALS: Self = Self(0x0055);
+    /// Baseline: [`OctahedralNormalGridRecord`]s, where each `OCTAHEDRAL` record's views'
+    /// normals lie in its image and at what size, one per record in order (spec §6.13.3). Since
+    /// 1.16; a file holds it or `OCTAHEDRAL_NORMALS`, not both.
+    pub const OCTAHEDRAL_NORMAL_GRIDS: Self = Self(0x0056);
     /// Ambient occlusion of each `VERTICES` record, one `unorm8` (spec §6.14). Since 1.2.
     pub const VERTEX_AO: Self = Self(0x0060);
     /// Ambient occlusion of each `POINTS` record, one `unorm8` (spec §6.14). Since 1.2.
@@ -201,7 +205,7 @@ impl SectionKind {
     pub const CALIBRATION_ELEVATIONS_ADDED: Self = Self(0x0074);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 37] = [
+    pub const KNOWN: [Self; 38] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -226,6 +230,7 @@ impl SectionKind {
         Self::OCTAHEDRAL,
         Self::OCTAHEDRAL_DEPTH,
         Self::OCTAHEDRAL_NORMALS,
+        Self::OCTAHEDRAL_NORMAL_GRIDS,
         Self::VERTEX_AO,
         Self::POINT_AO,
         Self::PLANE_AO,
@@ -269,6 +274,7 @@ impl SectionKind {
             Self::OCTAHEDRAL => "OCTAHEDRAL",
             Self::OCTAHEDRAL_DEPTH => "OCTAHEDRAL_DEPTH",
             Self::OCTAHEDRAL_NORMALS => "OCTAHEDRAL_NORMALS",
+            Self::OCTAHEDRAL_NORMAL_GRIDS => "OCTAHEDRAL_NORMAL_GRIDS",
             Self::VERTEX_AO => "VERTEX_AO",
             Self::POINT_AO => "POINT_AO",
             Self::PLANE_AO => "PLANE_AO",
@@ -318,6 +324,7 @@ impl SectionKind {
             Self::OCTAHEDRAL => size_of::<OctahedralRecord>(),
             Self::OCTAHEDRAL_DEPTH => size_of::<OctahedralDepthRecord>(),
             Self::OCTAHEDRAL_NORMALS => size_of::<OctahedralNormalRecord>(),
+            Self::OCTAHEDRAL_NORMAL_GRIDS => size_of::<OctahedralNormalGridRecord>(),
             Self::CALIBRATION | Self::CALIBRATION_ADDED => size_of::<CalibrationRecord>(),
             Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
             Self::CALIBRATION_ELEVATIONS | Self::CALIBRATION_ELEVATIONS_ADDED => {
@@ -339,8 +346,8 @@ impl SectionKind {
     /// (`PLANE_DIFFUSE`), 11 for the octahedral impostors (`OCTAHEDRAL`), 12 for the calibration
     /// of the techniques added after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), 13
     /// for the octahedral views' depth planes (`OCTAHEDRAL_DEPTH`), 14 for the points' facing
-    /// (`POINT_FACING`), 15 for the octahedral views' normals (`OCTAHEDRAL_NORMALS`), 0 for the
-    /// other known kinds and
+    /// (`POINT_FACING`), 15 for the octahedral views' normals (`OCTAHEDRAL_NORMALS`), 16 for
+    /// their grids of any size (`OCTAHEDRAL_NORMAL_GRIDS`), 0 for the other known kinds and
     /// for kinds this version does not know (private extensions do not raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
@@ -359,6 +366,7 @@ impl SectionKind {
             Self::OCTAHEDRAL_DEPTH => 13,
             Self::POINT_FACING => 14,
             Self::OCTAHEDRAL_NORMALS => 15,
+            Self::OCTAHEDRAL_NORMAL_GRIDS => 16,
             _ => 0,
         }
     }
@@ -1295,7 +1303,37 @@ pub struct OctahedralNormalRecord {
 }
 const _: () = assert!(size_of::<OctahedralNormalRecord>() == 4);
 
+/// Where an octahedral impostor's views' normals lie and at what size (spec §6.13.3, since
+/// 1.16): a second grid of `frames²` cells in the impostor's image between `uv_min` and
+/// `uv_max`, view `(i, j)`'s normals in the cell at the place of its colour cell, the point at
+/// `(a, b)` of the colour grid's rectangle (`0..=1` across each side) at `(a, b)` of this one.
+/// The grid may be smaller than the colour grid: a builder stores the normals at half the
+/// colour's resolution, each normal texel the coverage-weighted mean of the four colour texels
+/// it covers. Its texels are as [`OctahedralNormalRecord`]'s. `OCTAHEDRAL_NORMAL_GRIDS` is empty
+/// or holds one record per [`OctahedralRecord`], in file order.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct OctahedralNormalGridRecord {
+    /// Corner of the grid of the views' normal cells, two unorm16 (u low, v high).
+    pub uv_min: u32,
+    /// Opposite corner.
+    pub uv_max: u32,
+}
+const _: () = assert!(size_of::<OctahedralNormalGridRecord>() == 8);
+
 impl OctahedralNormalRecord {
+    /// The grid this record places for `octahedral`, its impostor: of the colour grid's size,
+    /// its far corner `uv_max − uv_min` (in unorm16 steps) past `uv_min`, held inside the image
+    /// (at most 65535 steps; a verified file's corner passes that by at most the one step both
+    /// corners' rounding may add, §9.2).
+    #[must_use]
+    pub fn grid(&self, octahedral: &OctahedralRecord) -> OctahedralNormalGridRecord {
+        let corner = |packed: u32| [packed & 0xFFFF, packed >> 16];
+        let ([u0, v0], [u1, v1], [u, v]) = (corner(octahedral.uv_min), corner(octahedral.uv_max), corner(self.uv_min));
+        let far = |at: u32, lo: u32, hi: u32| (at + hi.saturating_sub(lo)).min(0xFFFF);
+        OctahedralNormalGridRecord { uv_min: self.uv_min, uv_max: (far(v, v0, v1) << 16) | far(u, u0, u1) }
+    }
+
     /// The normal `n` a texel's decoded (linear) RGB stores: `2·rgb − 1`, of length at most 1.
     #[must_use]
     pub fn decode(rgb: [f32; 3]) -> [f32; 3] {

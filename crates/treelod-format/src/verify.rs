@@ -14,10 +14,10 @@ use crate::reader::{Container, check_section_checksum};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
-    OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord,
-    PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord,
-    billboard_kind, calibration_technique, far_switch, far_threshold, image_format, leaf_slots, lines_drawn_at,
-    plane_leaf_bases,
+    OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord,
+    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement,
+    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, far_switch, far_threshold, image_format,
+    leaf_slots, lines_drawn_at, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -92,6 +92,10 @@ pub struct VerifyReport {
     /// `OCTAHEDRAL_NORMALS` records checked (spec §6.13.3): one per `OCTAHEDRAL` record, its
     /// grid of normal cells inside the image.
     pub octahedral_normals: u64,
+    /// `OCTAHEDRAL_NORMAL_GRIDS` records checked (spec §6.13.3, since 1.16): one per `OCTAHEDRAL`
+    /// record, its grid of normal cells not empty, `uv_min < uv_max` per component. A file holds
+    /// these or [`Self::octahedral_normals`], not both (checked at open).
+    pub octahedral_normal_grids: u64,
     /// `CALIBRATION` records checked.
     pub calibration: u64,
     /// `CALIBRATION_ELEVATIONS` records checked (spec §6.16).
@@ -146,6 +150,9 @@ impl core::fmt::Display for VerifyReport {
             }
             if self.octahedral_normals > 0 {
                 write!(f, ", {} octahedral normal grids", self.octahedral_normals)?;
+            }
+            if self.octahedral_normal_grids > 0 {
+                write!(f, ", {} octahedral normal grids", self.octahedral_normal_grids)?;
             }
             writeln!(f)?;
         }
@@ -220,6 +227,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     check_octahedral(c.octahedral(), image_count, tree_count)?;
     check_octahedral_depth(c.octahedral_depth(), c.octahedral())?;
     check_octahedral_normals(c.octahedral_normals(), c.octahedral())?;
+    check_octahedral_normal_grids(c.octahedral_normal_grids())?;
     check_calibration(&BASE_TABLES, c.calibration())?;
     check_calibration_elevations(&BASE_TABLES, c.calibration_elevations(), c.calibration())?;
     check_calibration(&ADDED_TABLES, c.calibration_added())?;
@@ -270,6 +278,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.octahedral = c.octahedral().len() as u64;
     report.octahedral_depth = c.octahedral_depth().len() as u64;
     report.octahedral_normals = c.octahedral_normals().len() as u64;
+    report.octahedral_normal_grids = c.octahedral_normal_grids().len() as u64;
     report.calibration = c.calibration().len() as u64;
     report.calibration_elevations = c.calibration_elevations().len() as u64;
     report.chain_calibration = c.chain_calibration().len() as u64;
@@ -1170,6 +1179,36 @@ fn check_octahedral_normals(records: &[OctahedralNormalRecord], octahedral: &[Oc
                 format!(
                     "the normal grid at ({u}, {v}) of the colour grid's size ({w}, {h}) leaves the image \
                      (unorm16 steps, at most 65536)"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Spec §6.13.3 (1.16): each impostor's grid of normal cells has `uv_min ≤ uv_max` per component
+/// and is not empty (`uv_min < uv_max` per component); its corners, two `unorm16` each, lie in the
+/// image by construction. Its size need not be the colour grid's. One record per `OCTAHEDRAL`
+/// record, and not with `OCTAHEDRAL_NORMALS`, is checked at open.
+fn check_octahedral_normal_grids(records: &[OctahedralNormalGridRecord]) -> Result<()> {
+    let kind = SectionKind::OCTAHEDRAL_NORMAL_GRIDS;
+    for (i, r) in records.iter().enumerate() {
+        let (min_u, min_v) = (r.uv_min & 0xFFFF, r.uv_min >> 16);
+        let (max_u, max_v) = (r.uv_max & 0xFFFF, r.uv_max >> 16);
+        if min_u > max_u || min_v > max_v {
+            return Err(bad(
+                kind,
+                i,
+                format!("uv_min ({min_u}, {min_v}) is not <= uv_max ({max_u}, {max_v}) per component"),
+            ));
+        }
+        if min_u == max_u || min_v == max_v {
+            return Err(bad(
+                kind,
+                i,
+                format!(
+                    "the normal grid ({min_u}, {min_v}) .. ({max_u}, {max_v}) is empty (uv_min < uv_max per \
+                     component)"
                 ),
             ));
         }

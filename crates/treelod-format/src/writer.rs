@@ -18,9 +18,10 @@ use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
     ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, OctahedralDepthRecord, OctahedralNormalRecord,
-    OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN,
-    SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord, image_format,
+    LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, OctahedralDepthRecord, OctahedralNormalGridRecord,
+    OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
+    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    image_format,
 };
 
 /// How sections are stored.
@@ -129,6 +130,10 @@ pub struct ContainerData {
     /// `OCTAHEDRAL_NORMALS`: empty, or where each `OCTAHEDRAL` record's views' normals lie in its
     /// image, one per record in its order (spec §6.13.3; since 1.15).
     pub octahedral_normals: Vec<OctahedralNormalRecord>,
+    /// `OCTAHEDRAL_NORMAL_GRIDS`: empty, or where each `OCTAHEDRAL` record's views' normals lie in
+    /// its image and at what size, one per record in its order (spec §6.13.3; since 1.16). A
+    /// file holds this or `octahedral_normals`, not both.
+    pub octahedral_normal_grids: Vec<OctahedralNormalGridRecord>,
     /// `VERTEX_AO`: empty, or one byte per vertex ([`crate::encode_ao`]).
     pub vertex_ao: Vec<u8>,
     /// `POINT_AO`: empty, or one byte per point.
@@ -165,6 +170,18 @@ pub struct ContainerData {
 }
 
 impl ContainerData {
+    /// The grid of the views' normals of impostor `index` of `octahedral`, as
+    /// [`Container::octahedral_normal_grid`] reads it: its `OCTAHEDRAL_NORMAL_GRIDS` record, else
+    /// the grid its `OCTAHEDRAL_NORMALS` record places.
+    #[must_use]
+    pub fn octahedral_normal_grid(&self, index: usize) -> Option<OctahedralNormalGridRecord> {
+        let octahedral = self.octahedral.get(index)?;
+        self.octahedral_normal_grids
+            .get(index)
+            .copied()
+            .or_else(|| self.octahedral_normals.get(index).map(|n| n.grid(octahedral)))
+    }
+
     /// Copies every section of an open container back into owned arrays.
     #[must_use]
     pub fn from_container(c: &Container) -> Self {
@@ -194,6 +211,7 @@ impl ContainerData {
             octahedral: c.octahedral().to_vec(),
             octahedral_depth: c.octahedral_depth().to_vec(),
             octahedral_normals: c.octahedral_normals().to_vec(),
+            octahedral_normal_grids: c.octahedral_normal_grids().to_vec(),
             vertex_ao: c.vertex_ao().to_vec(),
             point_ao: c.point_ao().to_vec(),
             plane_ao: c.plane_ao().to_vec(),
@@ -565,6 +583,7 @@ macro_rules! optional_sections {
             (SectionKind::OCTAHEDRAL, $payload!(octahedral)),
             (SectionKind::OCTAHEDRAL_DEPTH, $payload!(octahedral_depth)),
             (SectionKind::OCTAHEDRAL_NORMALS, $payload!(octahedral_normals)),
+            (SectionKind::OCTAHEDRAL_NORMAL_GRIDS, $payload!(octahedral_normal_grids)),
             (SectionKind::VERTEX_AO, $payload!(vertex_ao)),
             (SectionKind::POINT_AO, $payload!(point_ao)),
             (SectionKind::PLANE_AO, $payload!(plane_ao)),

@@ -4,13 +4,19 @@
 //! count other than `OCTAHEDRAL`'s (one per impostor, or none), `verify` refuses a normal grid that
 //! leaves the image with an error naming the section and the record, and a reader that does not
 //! know the kind (1.14 and before) skips it and reads everything else as it was.
+//!
+//! 1.16's `OCTAHEDRAL_NORMAL_GRIDS`, each grid with its own far corner, round-trips and makes a
+//! file 1.16; [`Container::octahedral_normal_grid`] reads a grid of 1.16 and of 1.15 alike (none
+//! where the file has neither); the writer, the reader at open and `verify` refuse another count
+//! than the impostors', both kinds in one file, a grid whose `uv_max` is below its `uv_min` and an
+//! empty grid (one table of cases); a reader of 1.15 skips the kind.
 
 mod common;
 
 use common::{assert_reads_back, bytes_of, check, relabel, resize_section};
 use treelod_format::{
-    Compression, Container, ContainerData, Error, ErrorClass, MINOR, OctahedralDepthRecord, OctahedralNormalRecord,
-    OctahedralRecord, PlaneDiffuseRecord, SectionKind, pack, verify,
+    Compression, Container, ContainerData, Error, ErrorClass, MINOR, OctahedralDepthRecord, OctahedralNormalGridRecord,
+    OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, SectionKind, pack, verify,
 };
 
 const KIND: SectionKind = SectionKind::OCTAHEDRAL_NORMALS;
@@ -342,4 +348,345 @@ fn a_reader_that_does_not_know_the_kind_skips_it_and_reads_the_rest_as_before() 
     let c = Container::from_bytes(&bytes_of(&without)).expect("opens");
     assert_eq!(c.header().minor, 11);
     verify(&c).expect("verifies");
+}
+
+// ----------------------------------------------------------------------------------------------
+// 1.16: OCTAHEDRAL_NORMAL_GRIDS, grids of their own size.
+
+const GRIDS: SectionKind = SectionKind::OCTAHEDRAL_NORMAL_GRIDS;
+
+/// A normal grid from `(u0, v0)` to `(u1, v1)`, unorm16 steps.
+fn grid(u0: u32, v0: u32, u1: u32, v1: u32) -> OctahedralNormalGridRecord {
+    OctahedralNormalGridRecord { uv_min: steps(u0, v0), uv_max: steps(u1, v1) }
+}
+
+/// [`fixture`]'s impostors with 1.16's grids in place of 1.15's records, each from the same
+/// corner at half its colour grid's size, as the `treelod` build stores them: tree 0's
+/// `[32768, 0] .. [49152, 16384]`, tree 1's `[16384, 32768] .. [24576, 49151]`. Verifies.
+fn grids_fixture() -> ContainerData {
+    ContainerData {
+        octahedral_normals: Vec::new(),
+        octahedral_normal_grids: vec![grid(32768, 0, 49152, 16384), grid(16384, 32768, 24576, 49151)],
+        ..fixture()
+    }
+}
+
+#[test]
+fn the_grids_kind_is_numbered_named_and_sized_as_the_spec_says() {
+    const { assert!(MINOR >= 16, "OCTAHEDRAL_NORMAL_GRIDS is format 1.16") };
+    assert_eq!(GRIDS.0, 0x0056);
+    assert_eq!(GRIDS.name(), Some("OCTAHEDRAL_NORMAL_GRIDS"));
+    assert_eq!(GRIDS.to_string(), "OCTAHEDRAL_NORMAL_GRIDS");
+    assert_eq!(GRIDS.record_size(), Some(8));
+    assert_eq!(size_of::<OctahedralNormalGridRecord>(), 8);
+    assert_eq!(GRIDS.since_minor(), 16);
+    assert!(GRIDS.compressible());
+    // Right after OCTAHEDRAL_NORMALS, which it replaces.
+    let at = SectionKind::KNOWN.iter().position(|&k| k == GRIDS).expect("known");
+    assert_eq!(SectionKind::KNOWN[at - 1], KIND);
+    // Two corners of two unorm16 each, u in the low half, v in the high, little endian.
+    let record = grid(0x8000, 0x4000, 0xC000, 0x8000);
+    assert_eq!(bytemuck::bytes_of(&record), [0x00, 0x80, 0x00, 0x40, 0x00, 0xC0, 0x00, 0x80]);
+}
+
+#[test]
+fn a_container_with_grids_of_their_own_size_round_trips_as_format_1_16_and_verifies() {
+    let data = grids_fixture();
+    for compression in [Compression::None, Compression::default()] {
+        let bytes = data.to_bytes(compression).expect("writes");
+        let c = Container::from_bytes(&bytes).expect("opens");
+        assert_eq!((c.header().major, c.header().minor), (1, 16), "{compression:?}");
+        assert_eq!(c.octahedral_normal_grids(), data.octahedral_normal_grids.as_slice());
+        assert!(c.octahedral_normals().is_empty() && c.section(KIND).is_none(), "one kind of the two");
+        let section = c.section(GRIDS).expect("present");
+        assert_eq!((section.entry.record_size, section.entry.raw_length), (8, 2 * 8));
+        assert_eq!(c.raw_bytes(GRIDS), bytemuck::cast_slice::<_, u8>(&data.octahedral_normal_grids));
+        let report = verify(&c).expect("verifies");
+        assert_eq!((report.octahedral, report.octahedral_normals, report.octahedral_normal_grids), (2, 0, 2));
+        let text = report.to_string();
+        assert!(text.contains("2 octahedral impostors, 2 octahedral normal grids\n"), "{text}");
+        assert_reads_back(&c, &data, &bytes, compression);
+    }
+    // With the views' depth planes (1.13) and the points' facing (1.14): still 1.16.
+    let data = ContainerData {
+        octahedral_depth: vec![OctahedralDepthRecord::default(); 4 + 9],
+        point_facing: vec![128],
+        ..grids_fixture()
+    };
+    let bytes = bytes_of(&data);
+    let c = Container::from_bytes(&bytes).expect("opens");
+    assert_eq!(c.header().minor, 16);
+    let report = verify(&c).expect("verifies");
+    assert!(report.to_string().contains("13 octahedral depth planes, 2 octahedral normal grids\n"), "{report}");
+    assert_reads_back(&c, &data, &bytes, Compression::None);
+    // Without the grids: the 1.14 file; with 1.15's records instead: 1.15.
+    let older = ContainerData { octahedral_normal_grids: Vec::new(), ..data.clone() };
+    assert_eq!(Container::from_bytes(&bytes_of(&older)).expect("opens").header().minor, 14);
+    let v1_15 = ContainerData { octahedral_normals: fixture().octahedral_normals, ..older };
+    assert_eq!(Container::from_bytes(&bytes_of(&v1_15)).expect("opens").header().minor, 15);
+}
+
+#[test]
+fn the_reader_gives_each_impostor_its_grid_of_1_16_or_of_1_15() {
+    // 1.16: the records as stored.
+    let c = Container::from_bytes(&bytes_of(&grids_fixture())).expect("opens");
+    assert_eq!(c.octahedral_normal_grid(0), Some(grid(32768, 0, 49152, 16384)));
+    assert_eq!(c.octahedral_normal_grid(1), Some(grid(16384, 32768, 24576, 49151)));
+    assert_eq!(c.octahedral_normal_grid(2), None, "no third impostor");
+    // 1.15: grids of the colour grids' size from the records' corners, the far corner held inside
+    // the image (tree 0's at 32768 + 32768 = 65536 steps is 65535), the same as the record's own
+    // `grid`; OCTAHEDRAL_NORMAL_GRIDS itself is empty.
+    let c = Container::from_bytes(&bytes_of(&fixture())).expect("opens");
+    assert!(c.octahedral_normal_grids().is_empty());
+    assert_eq!(c.octahedral_normal_grid(0), Some(grid(32768, 0, 65535, 32768)));
+    assert_eq!(c.octahedral_normal_grid(1), Some(grid(16384, 32768, 32768, 65535)));
+    for (k, (n, o)) in c.octahedral_normals().iter().zip(c.octahedral()).enumerate() {
+        assert_eq!(c.octahedral_normal_grid(k), Some(n.grid(o)), "impostor {k}");
+    }
+    assert_eq!(c.octahedral_normal_grid(2), None, "no third impostor");
+    // Neither kind (1.14 and before): no grid, every view lit as a whole.
+    let c = Container::from_bytes(&bytes_of(&ContainerData { octahedral_normals: Vec::new(), ..fixture() }))
+        .expect("opens");
+    assert_eq!((c.octahedral_normal_grid(0), c.octahedral_normal_grid(1)), (None, None));
+    // No impostors: none either.
+    let c = Container::from_bytes(&bytes_of(&common::one_leaf_cell("plain"))).expect("opens");
+    assert_eq!(c.octahedral_normal_grid(0), None);
+}
+
+#[test]
+fn grids_of_any_size_inside_the_image_verify() {
+    // Larger than the colour grid, the whole image, one step per side, over the colour grid: a
+    // grid needs only its two corners in order.
+    type Edit = fn(&mut ContainerData);
+    let cases: [(&str, Edit); 5] = [
+        ("the fixture", |_| {}),
+        ("larger than its colour grid", |d| d.octahedral_normal_grids[0] = grid(0, 0, 60000, 60000)),
+        ("the whole image", |d| d.octahedral_normal_grids[1] = grid(0, 0, 65535, 65535)),
+        ("one step per side", |d| d.octahedral_normal_grids[0] = grid(65534, 65534, 65535, 65535)),
+        ("the colour grid itself", |d| d.octahedral_normal_grids[0] = grid(0, 0, 32768, 32768)),
+    ];
+    for (what, edit) in cases {
+        let mut data = grids_fixture();
+        edit(&mut data);
+        let report = check(&data).unwrap_or_else(|e| panic!("{what}: {e}"));
+        assert_eq!(report.octahedral_normal_grids, 2, "{what}");
+    }
+}
+
+/// Where a refusal comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Stage {
+    /// The writer, [`ContainerData::to_bytes`] (`Error::Write`).
+    Write,
+    /// [`Container::from_bytes`].
+    Open,
+    /// [`verify`].
+    Verify,
+}
+
+/// What a refusal case starts from: data to write, or the bytes of a file.
+enum Input {
+    Data(Box<ContainerData>),
+    Bytes(Vec<u8>),
+}
+
+/// The first refusal of `input` on its way through the writer, the reader's open and `verify`.
+fn first_refusal(input: Input) -> Option<(Stage, Error)> {
+    let bytes = match input {
+        Input::Data(data) => match data.to_bytes(Compression::None) {
+            Ok(bytes) => bytes,
+            Err(e) => return Some((Stage::Write, e)),
+        },
+        Input::Bytes(bytes) => bytes,
+    };
+    let c = match Container::from_bytes(&bytes) {
+        Ok(c) => c,
+        Err(e) => return Some((Stage::Open, e)),
+    };
+    verify(&c).err().map(|e| (Stage::Verify, e))
+}
+
+/// [`grids_fixture`] changed by `edit`, to write.
+fn edited(edit: impl FnOnce(&mut ContainerData)) -> Input {
+    let mut data = grids_fixture();
+    edit(&mut data);
+    Input::Data(Box::new(data))
+}
+
+/// The grids' file with a section of 1.15's records at the grids' corners added: written as a
+/// kind this version does not know, then relabelled `OCTAHEDRAL_NORMALS` with its record size
+/// (the writer refuses to write both kinds).
+fn both_kinds_in_a_file() -> Vec<u8> {
+    let private = 0x0001_0055;
+    let normals: Vec<OctahedralNormalRecord> =
+        grids_fixture().octahedral_normal_grids.iter().map(|g| OctahedralNormalRecord { uv_min: g.uv_min }).collect();
+    let data = ContainerData {
+        extra_sections: vec![(private, bytemuck::cast_slice::<_, u8>(&normals).to_vec())],
+        ..grids_fixture()
+    };
+    let mut bytes = bytes_of(&data);
+    Container::from_bytes(&bytes).expect("the private kind is skipped");
+    // A private kind's records are bytes; 1.15's are 4 (spec §4: the entry's record size).
+    let at = common::entry_offset(&bytes, SectionKind(private));
+    bytes[at + 32..at + 36].copy_from_slice(&4u32.to_le_bytes());
+    relabel(&bytes, SectionKind(private), KIND.0)
+}
+
+#[test]
+fn the_grids_are_refused_where_the_spec_says() {
+    // What changes, where the refusal comes from, the record named (the writer's message names
+    // the kind in its text) and a part of the reason.
+    type Case = (&'static str, fn() -> Input, Stage, usize, &'static str);
+    let cases: [Case; 13] = [
+        // One record per impostor, or none (§9.1).
+        (
+            "one grid fewer",
+            || edited(|d| d.octahedral_normal_grids.truncate(1)),
+            Stage::Write,
+            0,
+            "1 records, OCTAHEDRAL has 2",
+        ),
+        (
+            "one grid more",
+            || edited(|d| d.octahedral_normal_grids.push(grid(0, 0, 1, 1))),
+            Stage::Write,
+            0,
+            "3 records, OCTAHEDRAL has 2",
+        ),
+        (
+            "grids without impostors",
+            || Input::Data(Box::new(ContainerData { octahedral: Vec::new(), ..grids_fixture() })),
+            Stage::Write,
+            0,
+            "2 records, OCTAHEDRAL has 0",
+        ),
+        (
+            "a file with one grid fewer",
+            || Input::Bytes(resize_section(&bytes_of(&grids_fixture()), GRIDS, -8)),
+            Stage::Open,
+            0,
+            "1 records, OCTAHEDRAL has 2",
+        ),
+        (
+            "a file whose impostors are of a kind this version does not know",
+            || Input::Bytes(relabel(&bytes_of(&grids_fixture()), SectionKind::OCTAHEDRAL, 0x0001_0053)),
+            Stage::Open,
+            0,
+            "2 records, OCTAHEDRAL has 0",
+        ),
+        // One kind of the two (§6.13.3, §9.1).
+        (
+            "both kinds written",
+            || {
+                Input::Data(Box::new(ContainerData {
+                    octahedral_normals: fixture().octahedral_normals,
+                    ..grids_fixture()
+                }))
+            },
+            Stage::Write,
+            0,
+            "the file also holds OCTAHEDRAL_NORMALS",
+        ),
+        (
+            "both kinds in a file",
+            || Input::Bytes(both_kinds_in_a_file()),
+            Stage::Open,
+            0,
+            "also holds OCTAHEDRAL_NORMALS",
+        ),
+        // Corners in order, the grid not empty (§9.2).
+        (
+            "uv_max left of uv_min",
+            || edited(|d| d.octahedral_normal_grids[0] = grid(32768, 0, 32767, 16384)),
+            Stage::Verify,
+            0,
+            "uv_min (32768, 0) is not <= uv_max (32767, 16384) per component",
+        ),
+        (
+            "uv_max above uv_min",
+            || edited(|d| d.octahedral_normal_grids[1] = grid(16384, 32768, 24576, 32767)),
+            Stage::Verify,
+            1,
+            "uv_min (16384, 32768) is not <= uv_max (24576, 32767) per component",
+        ),
+        (
+            "the corners swapped",
+            || edited(|d| d.octahedral_normal_grids[1] = grid(24576, 49151, 16384, 32768)),
+            Stage::Verify,
+            1,
+            "uv_min (24576, 49151) is not <= uv_max (16384, 32768) per component",
+        ),
+        (
+            "no width",
+            || edited(|d| d.octahedral_normal_grids[0] = grid(32768, 0, 32768, 16384)),
+            Stage::Verify,
+            0,
+            "the normal grid (32768, 0) .. (32768, 16384) is empty (uv_min < uv_max per component)",
+        ),
+        (
+            "a point",
+            || edited(|d| d.octahedral_normal_grids[1] = grid(0, 0, 0, 0)),
+            Stage::Verify,
+            1,
+            "the normal grid (0, 0) .. (0, 0) is empty (uv_min < uv_max per component)",
+        ),
+        (
+            "the first record refused is reported",
+            || edited(|d| d.octahedral_normal_grids = vec![grid(100, 200, 100, 300), grid(5, 5, 4, 4)]),
+            Stage::Verify,
+            0,
+            "the normal grid (100, 200) .. (100, 300) is empty",
+        ),
+    ];
+    for (what, input, stage, index, needle) in cases {
+        let Some((at, err)) = first_refusal(input()) else { panic!("{what}: accepted") };
+        assert_eq!(at, stage, "{what}: {err}");
+        assert_eq!(err.class(), ErrorClass::Invalid, "{what}: {err}");
+        let message = err.to_string();
+        match (&err, stage) {
+            (Error::Write(text), Stage::Write) => {
+                assert!(text.contains(&format!("OCTAHEDRAL_NORMAL_GRIDS record {index}: ")), "{what}: {message}");
+                assert!(text.contains(needle), "{what}: {message}");
+            }
+            (Error::BadRecord { kind, index: i, reason }, Stage::Open | Stage::Verify) => {
+                assert_eq!((*kind, *i), (GRIDS, index), "{what}: {message}");
+                assert!(reason.contains(needle), "{what}: {message}");
+                assert!(message.starts_with(&format!("OCTAHEDRAL_NORMAL_GRIDS record {index}: ")), "{what}: {message}");
+            }
+            _ => panic!("{what}: unexpected {err:?}"),
+        }
+    }
+    // A length that is not a whole number of records is refused at open as well, and an empty
+    // section is an absent one.
+    let bytes = bytes_of(&grids_fixture());
+    for delta in [-1, -4, -7, -9] {
+        let err = Container::from_bytes(&resize_section(&bytes, GRIDS, delta)).expect_err("a partial record");
+        assert_eq!(err.class(), ErrorClass::Invalid, "{delta:+}: {err}");
+        assert!(err.to_string().contains("OCTAHEDRAL_NORMAL_GRIDS"), "{delta:+}: {err}");
+    }
+    let c = Container::from_bytes(&resize_section(&bytes, GRIDS, -16)).expect("an empty section opens");
+    assert!(c.octahedral_normal_grids().is_empty() && c.octahedral_normal_grid(0).is_none());
+}
+
+#[test]
+fn a_reader_of_1_15_skips_the_grids_and_reads_the_rest_as_before() {
+    // Relabelled as a kind this version does not know, as a 1.15 reader sees 0x0056: skipped,
+    // the impostors read, no grid, and written back without it, the file of the smaller minor.
+    let data = grids_fixture();
+    let unknown = 0x0001_0056;
+    let c = Container::from_bytes(&relabel(&bytes_of(&data), GRIDS, unknown)).expect("opens");
+    assert!(c.octahedral_normal_grids().is_empty() && c.octahedral_normal_grid(0).is_none());
+    assert_eq!(c.octahedral(), data.octahedral.as_slice());
+    assert_eq!(c.header().minor, 16, "the header keeps the file's minor");
+    let back = ContainerData::from_container(&c);
+    let expected = ContainerData {
+        octahedral_normal_grids: Vec::new(),
+        extra_sections: vec![(unknown, bytemuck::cast_slice::<_, u8>(&data.octahedral_normal_grids).to_vec())],
+        ..data
+    };
+    assert_eq!(back, expected, "nothing else is skipped");
+    let report = verify(&c).expect("an unknown kind is only checksummed");
+    assert_eq!((report.octahedral, report.octahedral_normal_grids), (2, 0));
+    let without = ContainerData { extra_sections: Vec::new(), ..back };
+    assert_eq!(Container::from_bytes(&bytes_of(&without)).expect("opens").header().minor, 11);
 }

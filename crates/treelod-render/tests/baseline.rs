@@ -364,10 +364,10 @@ fn the_octahedral_views_normals_light_them_as_the_full_mesh_is_lit() {
 /// place of each leaf), lit per texel by its normals and lit as a whole without them.
 fn normals_against_a_whole_view(gpu: &Gpu, container: &Arc<Container>) -> (f64, f64) {
     let [record] = container.octahedral() else { panic!("one tree") };
-    assert_eq!(container.octahedral_normals().len(), 1, "the build writes the normals");
+    assert_eq!(container.octahedral_normal_grids().len(), 1, "the build writes the normals");
     let whole = {
         let mut data = ContainerData::from_container(container);
-        data.octahedral_normals.clear();
+        data.octahedral_normal_grids.clear();
         Arc::new(Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
     };
     let centre = Vec3::from_array(record.center);

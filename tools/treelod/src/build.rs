@@ -152,7 +152,7 @@ pub struct BuildOptions {
     #[arg(long, value_name = "N", default_value_t = treelod_build::billboard::OCTAHEDRAL_FRAMES, value_parser = parse_octahedral_views, requires = "baselines")]
     pub octahedral_views: u32,
     /// With --baselines: texels per side of each octahedral view's cell, a gutter of 4 on each
-    /// side included: a multiple of 16 from 32 to 256. The default keeps a texel per pixel for a
+    /// side included: a multiple of 32 from 32 to 256. The default keeps a texel per pixel for a
     /// tree up to about 88 pixels high; the atlas grows with the square.
     #[arg(long, value_name = "T", default_value_t = treelod_build::billboard::OCTAHEDRAL_CELL, value_parser = parse_octahedral_texels, requires = "baselines")]
     pub octahedral_texels: u32,

@@ -562,24 +562,16 @@ struct OctahedralInfo {
     /// How its surfaces take the sun (spec §6.13.1): the shares facing the viewer and turned
     /// every way, `flat / 65535` and `scattered / 65535`.
     diffuse: [f32; 2],
-    /// The corner of its views' normal grid, `[u, v]` (`OCTAHEDRAL_NORMALS`, spec §6.13.3,
-    /// version 1.15): a grid of the size of `uv_min .. uv_max` from here. Absent without the
-    /// section, as in the files of 1.14 and before, whose views are lit as a whole.
+    /// The corner of its views' normal grid, `[u, v]` (spec §6.13.3): `OCTAHEDRAL_NORMAL_GRIDS`'
+    /// `uv_min` (version 1.16) or `OCTAHEDRAL_NORMALS`' (1.15). Absent without either section, as
+    /// in the files of 1.14 and before, whose views are lit as a whole.
     #[serde(skip_serializing_if = "Option::is_none")]
     normals_uv_min: Option<[f32; 2]>,
-    /// The normal grid's far corner, `normals_uv_min + (uv_max − uv_min)` in unorm16 steps (up to
-    /// 65536/65535); for the text form only.
-    #[serde(skip)]
+    /// The normal grid's far corner, `[u, v]`: `OCTAHEDRAL_NORMAL_GRIDS`' `uv_max`, or for 1.15
+    /// the corner of a grid of the colour grid's size from `normals_uv_min` (held inside the image,
+    /// `OctahedralNormalRecord::grid`). Absent as `normals_uv_min` is.
+    #[serde(skip_serializing_if = "Option::is_none")]
     normals_uv_max: Option<[f32; 2]>,
-}
-
-/// The corners of the normal grid at `normals` of the octahedral impostor `o` (spec §6.13.3):
-/// `normals` and `normals + (o.uv_max − o.uv_min)`, summed in unorm16 steps.
-fn normal_grid(o: &treelod_format::OctahedralRecord, normals: u32) -> ([f32; 2], [f32; 2]) {
-    let steps = |uv: u32| [uv & 0xFFFF, uv >> 16];
-    let ([u, v], [u0, v0], [u1, v1]) = (steps(normals), steps(o.uv_min), steps(o.uv_max));
-    let far = [u + u1.saturating_sub(u0), v + v1.saturating_sub(v0)];
-    (treelod_format::pack::unpack_unorm16x2(normals), far.map(|s| s as f32 / 65535.0))
 }
 
 /// The octahedral views' depth planes (spec §6.13.2): their spread over the `OCTAHEDRAL_DEPTH`
@@ -673,12 +665,14 @@ impl BaselineInfo {
                 _ => out.push(BillboardInfo { tree: b.tree, kind, quads: 1, texels }),
             }
         }
-        let normals = container.octahedral_normals();
         let octahedral = octahedral
             .iter()
             .enumerate()
             .map(|(k, o)| {
-                let normals = normals.get(k).map(|n| normal_grid(o, n.uv_min));
+                // Spec §6.13.3: 1.16's record, or the grid 1.15's record places.
+                let normals = container.octahedral_normal_grid(k).map(|g| {
+                    (treelod_format::pack::unpack_unorm16x2(g.uv_min), treelod_format::pack::unpack_unorm16x2(g.uv_max))
+                });
                 OctahedralInfo {
                     tree: o.tree,
                     frames: o.frames,

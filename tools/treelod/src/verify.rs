@@ -109,6 +109,7 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
         (report.octahedral, "octahedral impostor", "octahedral impostors"),
         (report.octahedral_depth, "octahedral depth plane", "octahedral depth planes"),
         (report.octahedral_normals, "octahedral normal grid", "octahedral normal grids"),
+        (report.octahedral_normal_grids, "octahedral normal grid", "octahedral normal grids"),
         (report.calibration, "calibration record", "calibration records"),
         (report.calibration_elevations, "calibration record per elevation", "calibration records per elevation"),
         (report.chain_calibration, "chain calibration record", "chain calibration records"),
@@ -187,6 +188,13 @@ mod tests {
         report.octahedral_normals = 1;
         assert!(ok_line("d", &report).contains("4 octahedral depth planes, 1 octahedral normal grid, 5 ambient"));
         report.octahedral_normals = 0;
+        // 1.16's grids (OCTAHEDRAL_NORMAL_GRIDS) read as 1.15's, in the same place: a file holds
+        // one of the two kinds.
+        report.octahedral_normal_grids = 2;
+        assert!(ok_line("d", &report).contains("4 octahedral depth planes, 2 octahedral normal grids, 5 ambient"));
+        report.octahedral_normal_grids = 1;
+        assert!(ok_line("d", &report).contains("4 octahedral depth planes, 1 octahedral normal grid, 5 ambient"));
+        report.octahedral_normal_grids = 0;
         report.octahedral_depth = 0;
         // The points' facing (spec §6.5.1), after the ambient occlusion.
         report.point_facing = 3;

@@ -12,9 +12,9 @@ use std::process::{Command, Output};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CellRecord, Compression, ContainerData, EllipsoidRecord, ImageRecord, LineRecord,
-    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord,
-    PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, image_format,
-    material_class,
+    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralNormalGridRecord, OctahedralNormalRecord,
+    OctahedralRecord, PlaneDiffuseRecord, PointRecord, Range, Setting, Source, Tree, TriangleRecord, VertexRecord,
+    billboard_kind, image_format, material_class,
 };
 
 /// Runs the binary with `args` in the current directory.
@@ -585,14 +585,15 @@ fn dump_and_verify_show_the_octahedral_impostors() {
     let out = treelod_in(&dir, &["verify", "octahedral.treelod"]);
     assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
     assert!(stdout(&out).contains(", 1 octahedral impostor;"), "{}", stdout(&out));
-    // Without OCTAHEDRAL_NORMALS (files before 1.15) there is no `normals_uv_min` key and no
-    // normals in the text.
-    assert!(o.get("normals_uv_min").is_none(), "{o}");
+    // Without OCTAHEDRAL_NORMALS or OCTAHEDRAL_NORMAL_GRIDS (files before 1.15) there are no
+    // `normals_uv_min` and `normals_uv_max` keys and no normals in the text.
+    assert!(o.get("normals_uv_min").is_none() && o.get("normals_uv_max").is_none(), "{o}");
     assert!(!text.contains("normals"), "{text}");
 
     // With its views' normal grid on the atlas's right half (spec §6.13.3, format 1.15): the
-    // grid's corners on the impostor's line (the far one from the colour grid's size in unorm16
-    // steps, 32768 from 32768), its corner in the JSON, and the count in verify's line.
+    // grid's corners on the impostor's line and in the JSON (the far one from the colour grid's
+    // size in unorm16 steps, 32768 from 32768, held inside the image at 65535), and the count in
+    // verify's line.
     data.octahedral_normals = vec![OctahedralNormalRecord { uv_min: unorm16x2(0.5, 0.0) }];
     data.write_to_path(dir.join("normals.treelod"), Compression::None).expect("valid");
     let out = treelod_in(&dir, &["dump", "normals.treelod"]);
@@ -604,19 +605,55 @@ fn dump_and_verify_show_the_octahedral_impostors() {
         text.contains(
             "\nbaselines\n  octahedral tree 0: 8x8 views, radius 0.75 m at [1, 0.5, 0.5], image 0 rectangle [0, 0] \
              .. [0.5000076, 1] (8 texels), occlusion 0.25, diffuse flat 0.2500 scattered 0.5000, normals \
-             [0.5000076, 0] .. [1.0000153, 1]\n"
+             [0.5000076, 0] .. [1, 1]\n"
         ),
         "{text}"
     );
+    let steps = |o: &serde_json::Value, key: &str| -> Vec<f64> {
+        o[key].as_array().expect("[u, v]").iter().filter_map(|x| x.as_f64()).map(|x| (x * 65535.0).round()).collect()
+    };
     let j = json("normals.treelod");
     let o = &j["baselines"]["octahedral"][0];
-    let steps: Vec<f64> = o["normals_uv_min"].as_array().expect("[u, v]").iter().filter_map(|x| x.as_f64()).collect();
-    assert_eq!(steps.iter().map(|x| (x * 65535.0).round()).collect::<Vec<_>>(), [32768.0, 0.0], "{o}");
-    assert!(o.get("normals_uv_max").is_none(), "the far corner is the text's alone: {o}");
+    assert_eq!(steps(o, "normals_uv_min"), [32768.0, 0.0], "{o}");
+    assert_eq!(steps(o, "normals_uv_max"), [65535.0, 65535.0], "{o}");
     let out = treelod_in(&dir, &["verify", "normals.treelod"]);
     assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
     assert!(stdout(&out).contains(", 1 octahedral impostor, 1 octahedral normal grid;"), "{}", stdout(&out));
     data.octahedral_normals.clear();
+
+    // With a grid of its own size instead, half the colour grid's, on the right half's top left
+    // quarter (spec §6.13.3, format 1.16): its corners as stored, in the text and the JSON, and
+    // the same count in verify's line.
+    let at = |u: u32, v: u32| (v << 16) | u;
+    data.octahedral_normal_grids = vec![OctahedralNormalGridRecord { uv_min: at(32768, 0), uv_max: at(49152, 32768) }];
+    data.write_to_path(dir.join("grids.treelod"), Compression::None).expect("valid");
+    let out = treelod_in(&dir, &["dump", "grids.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.lines().any(|l| l.starts_with("version") && l.ends_with("1.16")), "{text}");
+    assert!(text.contains("\n  OCTAHEDRAL_NORMAL_GRIDS "), "the section is listed: {text}");
+    assert!(!text.contains("\n  OCTAHEDRAL_NORMALS "), "{text}");
+    assert!(
+        text.contains(
+            "(8 texels), occlusion 0.25, diffuse flat 0.2500 scattered 0.5000, normals [0.5000076, 0] .. [0.75001144, \
+             0.5000076]\n"
+        ),
+        "{text}"
+    );
+    let j = json("grids.treelod");
+    let o = &j["baselines"]["octahedral"][0];
+    assert_eq!(steps(o, "normals_uv_min"), [32768.0, 0.0], "{o}");
+    assert_eq!(steps(o, "normals_uv_max"), [49152.0, 32768.0], "{o}");
+    let out = treelod_in(&dir, &["verify", "grids.treelod"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    assert!(stdout(&out).contains(", 1 octahedral impostor, 1 octahedral normal grid;"), "{}", stdout(&out));
+    // An empty grid does not verify: the record and the reason are named.
+    data.octahedral_normal_grids[0].uv_max = at(32768, 32768);
+    data.write_to_path(dir.join("empty-grid.treelod"), Compression::None).expect("only verify checks the grid");
+    let out = treelod_in(&dir, &["verify", "empty-grid.treelod"]);
+    assert_eq!(out.status.code(), Some(3), "stdout: {}", stdout(&out));
+    assert!(stderr(&out).contains("OCTAHEDRAL_NORMAL_GRIDS record 0: the normal grid"), "{}", stderr(&out));
+    data.octahedral_normal_grids.clear();
 
     // With a billboard on the same image, the views share the billboards' atlas and its bytes
     // count as the billboards'.
@@ -716,7 +753,7 @@ fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
 fn golden_dumps_match() {
     for version in [
         "v1_0", "v1_1", "v1_2", "v1_3", "v1_4", "v1_5", "v1_6", "v1_7", "v1_8", "v1_9", "v1_10", "v1_11", "v1_12",
-        "v1_13", "v1_14", "v1_15",
+        "v1_13", "v1_14", "v1_15", "v1_16",
     ] {
         golden_dumps_match_in(version);
     }

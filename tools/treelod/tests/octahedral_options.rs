@@ -45,11 +45,14 @@ fn the_octahedral_impostor_has_the_views_and_texels_asked_for() {
 #[test]
 fn octahedral_options_out_of_range_or_without_baselines_are_usage_errors() {
     let dir = scratch(AREA, "usage");
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 6] = [
         (&["--baselines", "--octahedral-views", "1"], "--octahedral-views"),
         (&["--baselines", "--octahedral-views", "65"], "--octahedral-views"),
         (&["--baselines", "--octahedral-texels", "100"], "--octahedral-texels"),
         (&["--baselines", "--octahedral-texels", "16"], "--octahedral-texels"),
+        // A multiple of 16 but not of 32: its normal cells, half the side, would leave the
+        // atlas's alignment.
+        (&["--baselines", "--octahedral-texels", "48"], "--octahedral-texels"),
         (&["--octahedral-views", "8"], "--baselines"),
     ];
     assert_build_usage_errors(&dir, &[], &cases);

@@ -6,10 +6,7 @@
 //! `treelod_runtime::baseline::select`. WGSL: `shaders/tree/planes.wgsl` then
 //! `shaders/tree/billboards.wgsl`; `shaders/tree/octahedral.wgsl`.
 
-use treelod_format::{
-    BillboardRecord, Container, OctahedralDepthRecord, OctahedralNormalRecord, OctahedralRecord,
-    octahedral_depth_starts,
-};
+use treelod_format::{BillboardRecord, Container, OctahedralDepthRecord, OctahedralRecord, octahedral_depth_starts};
 use treelod_runtime::Billboards;
 #[cfg(doc)]
 use treelod_runtime::Technique;
@@ -103,11 +100,12 @@ pub(crate) fn upload(
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub(crate) struct OctahedralGpu {
     pub record: OctahedralRecord,
-    /// The normal grid's corner, [`OctahedralNormalRecord::uv_min`].
+    /// The normal grid's corners, [`treelod_format::OctahedralNormalGridRecord`]'s.
     pub normals_uv_min: u32,
+    pub normals_uv_max: u32,
     /// 1 where the impostor has normals, else 0 (its views lit as a whole, as before 1.15).
     pub has_normals: u32,
-    pub padding: [u32; 2],
+    pub padding: u32,
 }
 const _: () = assert!(size_of::<OctahedralGpu>() == 64);
 
@@ -117,7 +115,6 @@ const _: () = assert!(size_of::<OctahedralGpu>() == 64);
 /// it has normals (one record per impostor, checked at open), each view is lit per texel.
 pub(crate) fn gpu_octahedral(container: &Container) -> (Vec<OctahedralGpu>, &[OctahedralDepthRecord]) {
     let (records, depth) = (container.octahedral(), container.octahedral_depth());
-    let normals = container.octahedral_normals();
     let starts = octahedral_depth_starts(records, depth.len());
     let uploaded = records
         .iter()
@@ -125,12 +122,13 @@ pub(crate) fn gpu_octahedral(container: &Container) -> (Vec<OctahedralGpu>, &[Oc
         .map(|(k, &r)| {
             #[expect(clippy::cast_possible_truncation, reason = "a section's records fit u32")]
             let reserved = starts.as_ref().map_or(0, |s| s[k] as u32);
-            let normal = normals.get(k);
+            let normal = container.octahedral_normal_grid(k);
             OctahedralGpu {
                 record: OctahedralRecord { reserved, ..r },
-                normals_uv_min: normal.map_or(0, |n: &OctahedralNormalRecord| n.uv_min),
+                normals_uv_min: normal.map_or(0, |n| n.uv_min),
+                normals_uv_max: normal.map_or(0, |n| n.uv_max),
                 has_normals: u32::from(normal.is_some()),
-                padding: [0; 2],
+                padding: 0,
             }
         })
         .collect();

@@ -295,7 +295,7 @@ pub fn calibrated_demo() -> Arc<Container> {
 pub fn calibrated_demo_without_octahedral() -> Arc<Container> {
     let mut data = ContainerData::from_container(&calibrated_demo());
     data.octahedral.clear();
-    data.octahedral_normals.clear();
+    data.octahedral_normal_grids.clear();
     data.calibration_added.clear();
     data.calibration_elevations_added.clear();
     Arc::new(Container::from_bytes(&data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
