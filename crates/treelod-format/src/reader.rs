@@ -535,11 +535,12 @@ impl Container {
     /// record's diffuse mixture and occlusion) or there is no such impostor.
     #[must_use]
     pub fn octahedral_normal_grid(&self, index: usize) -> Option<OctahedralNormalGridRecord> {
-        let octahedral = self.octahedral().get(index)?;
-        self.octahedral_normal_grids()
-            .get(index)
-            .copied()
-            .or_else(|| self.octahedral_normals().get(index).map(|n| n.grid(octahedral)))
+        crate::records::octahedral_normal_grid(
+            self.octahedral(),
+            self.octahedral_normal_grids(),
+            self.octahedral_normals(),
+            index,
+        )
     }
 
     /// Ambient occlusion of each vertex (spec §6.14; [`crate::decode_ao`]), empty if the file has

@@ -1321,6 +1321,22 @@ pub struct OctahedralNormalGridRecord {
 }
 const _: () = assert!(size_of::<OctahedralNormalGridRecord>() == 8);
 
+/// The grid of the views' normals of impostor `index` of `octahedral` (spec §6.13.3), from a
+/// file's `OCTAHEDRAL_NORMAL_GRIDS` records `grids` (1.16), else from its `OCTAHEDRAL_NORMALS`
+/// records `normals` (1.15, [`OctahedralNormalRecord::grid`]); `None` where it has neither or
+/// there is no such impostor. What [`crate::Container::octahedral_normal_grid`] and
+/// [`crate::ContainerData::octahedral_normal_grid`] read.
+#[must_use]
+pub fn octahedral_normal_grid(
+    octahedral: &[OctahedralRecord],
+    grids: &[OctahedralNormalGridRecord],
+    normals: &[OctahedralNormalRecord],
+    index: usize,
+) -> Option<OctahedralNormalGridRecord> {
+    let record = octahedral.get(index)?;
+    grids.get(index).copied().or_else(|| normals.get(index).map(|n| n.grid(record)))
+}
+
 impl OctahedralNormalRecord {
     /// The grid this record places for `octahedral`, its impostor: of the colour grid's size,
     /// its far corner `uv_max − uv_min` (in unorm16 steps) past `uv_min`, held inside the image

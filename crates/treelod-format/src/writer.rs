@@ -175,11 +175,12 @@ impl ContainerData {
     /// the grid its `OCTAHEDRAL_NORMALS` record places.
     #[must_use]
     pub fn octahedral_normal_grid(&self, index: usize) -> Option<OctahedralNormalGridRecord> {
-        let octahedral = self.octahedral.get(index)?;
-        self.octahedral_normal_grids
-            .get(index)
-            .copied()
-            .or_else(|| self.octahedral_normals.get(index).map(|n| n.grid(octahedral)))
+        crate::records::octahedral_normal_grid(
+            &self.octahedral,
+            &self.octahedral_normal_grids,
+            &self.octahedral_normals,
+            index,
+        )
     }
 
     /// Copies every section of an open container back into owned arrays.
