@@ -58,6 +58,12 @@ pub fn unpack_unorm16x2(packed: u32) -> [f32; 2] {
     [f32::from((packed & 0xFFFF) as u16) / 65535.0, f32::from((packed >> 16) as u16) / 65535.0]
 }
 
+/// The two unorm16 values of `packed` as their steps, `0..=65535` (first from the low half).
+#[must_use]
+pub fn unorm16x2_steps(packed: u32) -> [u32; 2] {
+    [packed & 0xFFFF, packed >> 16]
+}
+
 fn sign(v: f32) -> f32 {
     if v >= 0.0 { 1.0 } else { -1.0 }
 }

@@ -3,6 +3,7 @@
 //! Every record is `Pod`, 4-byte aligned and free of implicit padding, so an array of them can be
 //! viewed in place from a memory map. A size assertion sits beside each struct.
 
+use crate::pack::unorm16x2_steps;
 use bytemuck::{Pod, Zeroable};
 
 /// The twelve magic bytes that open every file (spec §3): `\x89 TREELOD \r \n \x1A \n`.
@@ -1338,16 +1339,23 @@ pub fn octahedral_normal_grid(
 }
 
 impl OctahedralNormalRecord {
-    /// The grid this record places for `octahedral`, its impostor: of the colour grid's size,
-    /// its far corner `uv_max − uv_min` (in unorm16 steps) past `uv_min`, held inside the image
-    /// (at most 65535 steps; a verified file's corner passes that by at most the one step both
-    /// corners' rounding may add, §9.2).
+    /// The far corner of the grid this record places for `octahedral`, its impostor, in unorm16
+    /// steps: `uv_min` plus the colour grid's size, `uv_max − uv_min` of the impostor, per
+    /// component. It may pass 65535 (verify allows one step, the rounding of both corners,
+    /// §9.2).
+    #[must_use]
+    pub fn far_steps(&self, octahedral: &OctahedralRecord) -> [u32; 2] {
+        let ([u0, v0], [u1, v1]) = (unorm16x2_steps(octahedral.uv_min), unorm16x2_steps(octahedral.uv_max));
+        let [u, v] = unorm16x2_steps(self.uv_min);
+        [u + u1.saturating_sub(u0), v + v1.saturating_sub(v0)]
+    }
+
+    /// The grid this record places for `octahedral`, its impostor: of the colour grid's size from
+    /// `uv_min`, its far corner [`Self::far_steps`] held inside the image (at most 65535 steps).
     #[must_use]
     pub fn grid(&self, octahedral: &OctahedralRecord) -> OctahedralNormalGridRecord {
-        let corner = |packed: u32| [packed & 0xFFFF, packed >> 16];
-        let ([u0, v0], [u1, v1], [u, v]) = (corner(octahedral.uv_min), corner(octahedral.uv_max), corner(self.uv_min));
-        let far = |at: u32, lo: u32, hi: u32| (at + hi.saturating_sub(lo)).min(0xFFFF);
-        OctahedralNormalGridRecord { uv_min: self.uv_min, uv_max: (far(v, v0, v1) << 16) | far(u, u0, u1) }
+        let [u, v] = self.far_steps(octahedral).map(|s| s.min(0xFFFF));
+        OctahedralNormalGridRecord { uv_min: self.uv_min, uv_max: (v << 16) | u }
     }
 
     /// The normal `n` a texel's decoded (linear) RGB stores: `2·rgb − 1`, of length at most 1.

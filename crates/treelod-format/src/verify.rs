@@ -10,6 +10,7 @@ use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
 use crate::error::{Error, Result};
+use crate::pack::unorm16x2_steps;
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
@@ -737,8 +738,13 @@ fn check_atlas_rectangle(
     if image as usize >= image_count {
         return Err(bad(kind, i, format!("image {image} is out of range ({image_count} images)")));
     }
-    let (min_u, min_v) = (uv_min & 0xFFFF, uv_min >> 16);
-    let (max_u, max_v) = (uv_max & 0xFFFF, uv_max >> 16);
+    check_corner_order(kind, i, [uv_min, uv_max])
+}
+
+/// Record `i` of `kind`'s rectangle of the image, two packed `unorm16` corners: `uv_min ≤
+/// uv_max` per component (spec §6.10, §6.13, §6.13.3).
+fn check_corner_order(kind: SectionKind, i: usize, [uv_min, uv_max]: [u32; 2]) -> Result<()> {
+    let ([min_u, min_v], [max_u, max_v]) = (unorm16x2_steps(uv_min), unorm16x2_steps(uv_max));
     if min_u > max_u || min_v > max_v {
         return Err(bad(
             kind,
@@ -1170,9 +1176,9 @@ fn check_octahedral_depth(records: &[OctahedralDepthRecord], octahedral: &[Octah
 fn check_octahedral_normals(records: &[OctahedralNormalRecord], octahedral: &[OctahedralRecord]) -> Result<()> {
     let kind = SectionKind::OCTAHEDRAL_NORMALS;
     for (i, (r, o)) in records.iter().zip(octahedral).enumerate() {
-        let (u, v) = (r.uv_min & 0xFFFF, r.uv_min >> 16);
-        let (w, h) = ((o.uv_max & 0xFFFF) - (o.uv_min & 0xFFFF), (o.uv_max >> 16) - (o.uv_min >> 16));
-        if u + w > 0x1_0000 || v + h > 0x1_0000 {
+        let ([u, v], [far_u, far_v]) = (unorm16x2_steps(r.uv_min), r.far_steps(o));
+        let (w, h) = (far_u - u, far_v - v);
+        if far_u > 0x1_0000 || far_v > 0x1_0000 {
             return Err(bad(
                 kind,
                 i,
@@ -1193,15 +1199,8 @@ fn check_octahedral_normals(records: &[OctahedralNormalRecord], octahedral: &[Oc
 fn check_octahedral_normal_grids(records: &[OctahedralNormalGridRecord]) -> Result<()> {
     let kind = SectionKind::OCTAHEDRAL_NORMAL_GRIDS;
     for (i, r) in records.iter().enumerate() {
-        let (min_u, min_v) = (r.uv_min & 0xFFFF, r.uv_min >> 16);
-        let (max_u, max_v) = (r.uv_max & 0xFFFF, r.uv_max >> 16);
-        if min_u > max_u || min_v > max_v {
-            return Err(bad(
-                kind,
-                i,
-                format!("uv_min ({min_u}, {min_v}) is not <= uv_max ({max_u}, {max_v}) per component"),
-            ));
-        }
+        check_corner_order(kind, i, [r.uv_min, r.uv_max])?;
+        let ([min_u, min_v], [max_u, max_v]) = (unorm16x2_steps(r.uv_min), unorm16x2_steps(r.uv_max));
         if min_u == max_u || min_v == max_v {
             return Err(bad(
                 kind,
