@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.16, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.17, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -97,6 +97,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -132,6 +133,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -154,6 +156,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -175,6 +178,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -194,6 +198,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -213,6 +218,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -234,6 +240,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -254,6 +261,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -273,6 +281,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -292,6 +301,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -310,6 +320,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -328,6 +339,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -345,6 +357,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 octahedral_depth: false,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -361,6 +374,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -376,6 +390,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
             options: SyntheticOptions {
                 bc7_atlas: true,
                 octahedral_normals: NormalGrids::None,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -392,6 +407,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
             options: SyntheticOptions {
                 bc7_atlas: true,
                 octahedral_normals: NormalGrids::ColourSize,
+                calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -405,6 +421,19 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           POINT_FACING, and the octahedral views' normal grids at half the colour grids' size, \
                           OCTAHEDRAL_NORMAL_GRIDS, in place of OCTAHEDRAL_NORMALS), zstd level 19 with byte shuffle \
                           where it pays",
+            seed: 3,
+            options: SyntheticOptions { bc7_atlas: true, calibration_flip: false, ..SyntheticOptions::everything() },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 17,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.17 but OCTAHEDRAL_NORMALS (1.16's: the 1.5 kinds, a BC7 impostor \
+                          atlas, CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE, \
+                          OCTAHEDRAL, CALIBRATION_ADDED, CALIBRATION_ELEVATIONS_ADDED, OCTAHEDRAL_DEPTH, POINT_FACING \
+                          and OCTAHEDRAL_NORMAL_GRIDS, and the calibration's FLIP error, CALIBRATION_FLIP: rows over \
+                          every view and at 30 and 90 degrees, of full and octahedral at three heights each), zstd \
+                          level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -6,10 +6,11 @@ use treelod_build::{SptNode, flatten};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
     BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
-    ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord,
-    NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord,
-    PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting,
-    Source, Tree, TriangleRecord, VertexRecord, billboard_kind, calibration_technique, image_format,
+    ElevationCalibrationRecord, EllipsoidRecord, FlipCalibrationRecord, ImageRecord, LineRecord, LodLevelRecord,
+    MaterialInfo, MaterialRecord, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord,
+    OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
+    SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
+    image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -128,6 +129,14 @@ pub struct SyntheticOptions {
     /// from the same corner, [`NormalGrids::HalfSize`]), or none. Draws no random numbers, so the
     /// rest of the container is the same as without it. Needs `octahedral`.
     pub octahedral_normals: NormalGrids,
+    /// The calibration's FLIP error (spec §6.19, 1.17): rows over every view
+    /// ([`FlipCalibrationRecord::EVERY_VIEW`]) and at the elevations 30 and 90 degrees, each of the
+    /// techniques `FULL` and `OCTAHEDRAL` (a base code and an added one: the section holds any
+    /// code) at three heights growing strictly from a few pixels (the same for every row), a
+    /// falling FLIP error in `[0, 1]`, in `CALIBRATION_FLIP`. The rows are self-describing and
+    /// need no other section. Drawn last, so the rest of the container is the same as without
+    /// it.
+    pub calibration_flip: bool,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -178,6 +187,7 @@ impl SyntheticOptions {
             octahedral_depth: false,
             point_facing: false,
             octahedral_normals: NormalGrids::None,
+            calibration_flip: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -197,7 +207,7 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.16 but 1.15's `OCTAHEDRAL_NORMALS` (a file holds it or
+    /// Every section kind of version 1.17 but 1.15's `OCTAHEDRAL_NORMALS` (a file holds it or
     /// 1.16's `OCTAHEDRAL_NORMAL_GRIDS`): a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
@@ -209,8 +219,8 @@ impl SyntheticOptions {
     /// octahedral impostor per tree (`OCTAHEDRAL`) with its views' depth planes
     /// (`OCTAHEDRAL_DEPTH`) and normals at half the colour's size (`OCTAHEDRAL_NORMAL_GRIDS`), the
     /// calibration of the techniques added after 1.11
-    /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`) and the points' facing
-    /// (`POINT_FACING`).
+    /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), the points' facing
+    /// (`POINT_FACING`) and the calibration's FLIP error (`CALIBRATION_FLIP`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -244,6 +254,7 @@ impl SyntheticOptions {
             octahedral_depth: true,
             point_facing: true,
             octahedral_normals: NormalGrids::HalfSize,
+            calibration_flip: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1229,7 +1240,31 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
             b.data.octahedral_normal_grids = b.data.octahedral.iter().map(half_normal_grid).collect();
         }
     }
+    if options.calibration_flip {
+        b.data.calibration_flip = calibration_flip(&mut rng);
+    }
     b.data
+}
+
+/// The calibration's FLIP error (spec §6.19): rows over every view, then at 30 and 90 degrees,
+/// each of `FULL` and `OCTAHEDRAL` at three heights growing strictly from a few pixels (drawn
+/// once, the same for every technique and elevation, as the build measures them), each error
+/// the one before times a factor in `[0.2, 0.9]` from a first in `[0.05, 1]`.
+fn calibration_flip(rng: &mut SplitMix64) -> Vec<FlipCalibrationRecord> {
+    let first = rng.uniform(4.0, 16.0);
+    let second = first * rng.uniform(1.5, 3.0);
+    let heights = [first, second, second * rng.uniform(1.5, 3.0)];
+    let mut records = Vec::new();
+    for elevation in [FlipCalibrationRecord::EVERY_VIEW, 30.0, 90.0] {
+        for technique in [calibration_technique::FULL, calibration_technique::OCTAHEDRAL] {
+            let mut flip = rng.uniform(0.05, 1.0);
+            for height in heights {
+                records.push(FlipCalibrationRecord { elevation, technique, height, flip });
+                flip *= rng.uniform(0.2, 0.9);
+            }
+        }
+    }
+    records
 }
 
 /// How [`synthetic`] gives the octahedral views' normals (spec §6.13.3).

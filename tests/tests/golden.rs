@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.16 (`tests/data/v1_0` to `tests/data/v1_16`): every file
+//! Golden files of format versions 1.0 to 1.17 (`tests/data/v1_0` to `tests/data/v1_17`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file (and 1.13's octahedral depth planes) decodes to literal values written out here (so
 //! a change in reading is caught even if writing changed the same way), and spec §13.1 holds the
@@ -7,10 +7,10 @@
 use std::path::PathBuf;
 
 use treelod_format::{
-    BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, LineRecord, MaterialInfo,
-    MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalRecord, PlaneDiffuseRecord, PointRecord,
-    Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, calibration_technique, far_switch,
-    far_threshold, image_format, leaf_slots, plane_leaf_bases, verify,
+    BlockRecord, CellRecord, Compression, Container, ContainerData, FLAG_ZSTD, FlipCalibrationRecord, LineRecord,
+    MaterialInfo, MaterialRecord, Metadata, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalRecord,
+    PlaneDiffuseRecord, PointRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
+    calibration_technique, far_switch, far_threshold, image_format, leaf_slots, plane_leaf_bases, verify,
 };
 use treelod_tests::{
     SPEC_EXAMPLE_BEGIN, SPEC_EXAMPLE_END, golden_dir, golden_dir_of, golden_files, spec_hex_dump, spec_path,
@@ -26,7 +26,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -696,10 +696,11 @@ fn the_1_15_every_kind_file_has_every_kind_and_the_octahedral_normals() {
 #[test]
 fn the_1_16_every_kind_file_has_every_kind_and_the_octahedral_normal_grids() {
     let c = Container::open(golden_dir_of(16).join("every-kind-zstd.treelod")).unwrap();
-    // Every kind but 1.15's OCTAHEDRAL_NORMALS, which OCTAHEDRAL_NORMAL_GRIDS replaces: a file
-    // holds one of the two.
+    // Every kind of 1.16 but 1.15's OCTAHEDRAL_NORMALS, which OCTAHEDRAL_NORMAL_GRIDS replaces: a
+    // file holds one of the two.
     for kind in SectionKind::KNOWN {
-        assert_eq!(c.section(kind).is_some(), kind != SectionKind::OCTAHEDRAL_NORMALS, "{kind}");
+        let expected = kind != SectionKind::OCTAHEDRAL_NORMALS && kind.since_minor() <= 16;
+        assert_eq!(c.section(kind).is_some(), expected, "{kind}");
     }
     assert_eq!(c.header().minor, 16);
     // One normal grid per impostor, in their order, each not empty, of half its colour grid's
@@ -737,6 +738,35 @@ fn the_1_16_every_kind_file_has_every_kind_and_the_octahedral_normal_grids() {
         assert_eq!(g, n.grid(o), "impostor {k}");
         assert_eq!(g.uv_min, n.uv_min, "impostor {k}");
     }
+}
+
+#[test]
+fn the_1_17_every_kind_file_has_every_kind_and_the_calibration_flip() {
+    let c = Container::open(golden_dir_of(17).join("every-kind-zstd.treelod")).unwrap();
+    // Every kind but 1.15's OCTAHEDRAL_NORMALS, which OCTAHEDRAL_NORMAL_GRIDS replaces: a file
+    // holds one of the two.
+    for kind in SectionKind::KNOWN {
+        assert_eq!(c.section(kind).is_some(), kind != SectionKind::OCTAHEDRAL_NORMALS, "{kind}");
+    }
+    assert_eq!(c.header().minor, 17);
+    // Rows over every view first, then at 30 and 90 degrees; at each, a base technique (full)
+    // and an added one (octahedral), each at the same three heights, strictly increasing, with
+    // FLIP errors in [0, 1].
+    let flip = c.calibration_flip();
+    assert_eq!(flip.len(), 3 * 2 * 3, "{flip:?}");
+    let (full, octahedral) = (calibration_technique::FULL, calibration_technique::OCTAHEDRAL);
+    let heights: Vec<f32> = flip[..3].iter().map(|r| r.height).collect();
+    assert!(heights.windows(2).all(|w| w[0] < w[1]), "{heights:?}");
+    let elevations = [FlipCalibrationRecord::EVERY_VIEW, 30.0, 90.0];
+    for (k, r) in flip.iter().enumerate() {
+        let (elevation, technique, height) = (elevations[k / 6], [full, octahedral][k / 3 % 2], heights[k % 3]);
+        assert_eq!((r.elevation, r.technique, r.height), (elevation, technique, height), "record {k}");
+        assert!((0.0..=1.0).contains(&r.flip), "record {k}: {r:?}");
+    }
+    assert_eq!(verify(&c).unwrap().calibration_flip, flip.len() as u64);
+    // Without CALIBRATION_FLIP it is the 1.16 file, record for record, and the writer marks it
+    // 1.16: a 1.16 reader sees the same tables and chooses by their RMSE alone.
+    is_the_previous_file_with(&c, 17, |data| data.calibration_flip.clear());
 }
 
 /// The small 1.13 file: one octahedral impostor of 2 × 2 views and their four depth planes, view

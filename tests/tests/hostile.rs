@@ -227,10 +227,9 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 #[test]
 fn other_major_versions_are_unsupported() {
     let bytes = small_data().to_bytes(Compression::None).unwrap();
-    // The fixture holds the octahedral views' normal grids (OCTAHEDRAL_NORMAL_GRIDS), so it is a
-    // 1.16 file.
+    // The fixture holds the calibration's FLIP error (CALIBRATION_FLIP), so it is a 1.17 file.
     let minor = Container::from_bytes(&bytes).unwrap().header().minor;
-    assert_eq!(minor, 16);
+    assert_eq!(minor, 17);
     for major in [0u16, 2, 3, u16::MAX] {
         for reseal in [false, true] {
             let mut file = RawFile::new(bytes.clone());

@@ -4,8 +4,8 @@
 
 use proptest::prelude::*;
 use treelod_format::{
-    CellRecord, Compression, Container, ContainerData, Error, ErrorClass, LineRecord, NO_IMAGE, SectionKind,
-    SptElement, image_format, leaf_slots, verify,
+    CellRecord, Compression, Container, ContainerData, Error, ErrorClass, FlipCalibrationRecord, LineRecord, NO_IMAGE,
+    SectionKind, SptElement, image_format, leaf_slots, verify,
 };
 use treelod_tests::{NormalGrids, SyntheticOptions, synthetic};
 
@@ -77,6 +77,9 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                     (true, true) => NormalGrids::HalfSize,
                     (true, false) => NormalGrids::ColourSize,
                 },
+                // The calibration's FLIP error with a quarter of the grids (self-describing rows:
+                // it needs no other table).
+                calibration_flip: grid[1] < 2 && grid[2] >= 2,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -488,7 +491,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 16, "everything() holds the kinds of 1.16");
+    assert_eq!(container.header().minor, 17, "everything() holds the kinds of 1.17");
     assert_eq!(everything.octahedral.len(), everything.block.tree_count as usize, "an octahedral impostor per tree");
     let views: u32 = everything.octahedral.iter().map(|o| o.frames * o.frames).sum();
     assert_eq!(everything.octahedral_depth.len(), views as usize, "a depth plane per octahedral view");
@@ -498,6 +501,12 @@ fn presets_hold_what_they_promise() {
         let [w, h] = size(o.uv_min, o.uv_max);
         assert_eq!(size(g.uv_min, g.uv_max), [w / 2, h / 2], "half the colour grid's size: {g:?} of {o:?}");
     }
+    // FLIP rows over every view and at two elevations, of two techniques at three heights each.
+    let flip = &everything.calibration_flip;
+    assert_eq!(flip.len(), 3 * 2 * 3, "{flip:?}");
+    let mut elevations: Vec<f32> = flip.iter().map(|r| r.elevation).collect();
+    elevations.dedup();
+    assert_eq!(elevations, [FlipCalibrationRecord::EVERY_VIEW, 30.0, 90.0]);
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

@@ -57,7 +57,19 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     assert!(container.octahedral_normals().is_empty(), "one of the two kinds");
     assert_eq!(container.point_facing().len(), container.points().len());
     assert_eq!(container.calibration_added(), out.data.calibration_added.as_slice());
-    assert_eq!(container.header().minor, 16, "the views' normal grids are a kind of 1.16");
+    // Built with FLIP (the `flip` feature, which the command line enables), the calibration's
+    // FLIP error of every row of the four tables (CALIBRATION_FLIP) makes it 1.17.
+    let tables = [out.data.calibration.len(), out.data.calibration_added.len()];
+    let per_elevation = [out.data.calibration_elevations.len(), out.data.calibration_elevations_added.len()];
+    if cfg!(feature = "flip") {
+        let rows = tables.iter().chain(&per_elevation).sum::<usize>();
+        assert_eq!(container.calibration_flip().len(), rows, "a FLIP error per row");
+        assert!(container.calibration_flip().iter().all(|r| r.flip > 0.0 && r.flip < 1.0));
+        assert_eq!(container.header().minor, 17, "the calibration's FLIP error is a kind of 1.17");
+    } else {
+        assert!(container.calibration_flip().is_empty());
+        assert_eq!(container.header().minor, 16, "the views' normal grids are a kind of 1.16");
+    }
     verify(&container).expect("verifies");
 
     // The full mesh draws every triangle at every height.

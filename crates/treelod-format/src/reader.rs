@@ -9,10 +9,11 @@ use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
-    ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, HEADER_SIZE, Header, ImageRecord, LineRecord,
-    LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralDepthRecord, OctahedralNormalGridRecord,
-    OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord,
-    PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind, TriangleRecord, VertexRecord,
+    ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, FlipCalibrationRecord, HEADER_SIZE, Header,
+    ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralDepthRecord,
+    OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
+    PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
+    TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -467,6 +468,17 @@ impl Container {
     #[must_use]
     pub fn calibration_elevations_added(&self) -> &[ElevationCalibrationRecord] {
         self.records(SectionKind::CALIBRATION_ELEVATIONS_ADDED)
+    }
+
+    /// `CALIBRATION_FLIP` records (spec §6.19): each representation's mean LDR-FLIP error by
+    /// projected height, the rows over every view ([`FlipCalibrationRecord::EVERY_VIEW`]) first,
+    /// then per elevation, of the techniques of both [`Self::calibration`] and
+    /// [`Self::calibration_added`]. Empty without the section, as in every file before 1.17 and
+    /// in files built without FLIP; a reader then chooses by the RMSE of the other tables alone.
+    /// Since 1.17.
+    #[must_use]
+    pub fn calibration_flip(&self) -> &[FlipCalibrationRecord] {
+        self.records(SectionKind::CALIBRATION_FLIP)
     }
 
     /// `CHAIN_CALIBRATION` records (spec §6.17; empty without the section, as in every file

@@ -13,7 +13,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 16;
+pub const MINOR: u16 = 17;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -204,9 +204,14 @@ impl SectionKind {
     /// `CALIBRATION_ADDED` per elevation of the views, as `CALIBRATION_ELEVATIONS` is
     /// `CALIBRATION`'s (spec §6.18). Since 1.12.
     pub const CALIBRATION_ELEVATIONS_ADDED: Self = Self(0x0074);
+    /// [`FlipCalibrationRecord`]s: each representation's mean LDR-FLIP error by projected
+    /// height, over every view and per elevation of the views, of the same drawings as
+    /// `CALIBRATION`'s and `CALIBRATION_ELEVATIONS`' (and their added sections') (spec §6.19).
+    /// Since 1.17.
+    pub const CALIBRATION_FLIP: Self = Self(0x0075);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 38] = [
+    pub const KNOWN: [Self; 39] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -245,6 +250,7 @@ impl SectionKind {
         Self::CALIBRATION_ELEVATIONS,
         Self::CALIBRATION_ADDED,
         Self::CALIBRATION_ELEVATIONS_ADDED,
+        Self::CALIBRATION_FLIP,
     ];
 
     /// The spec's name of a known kind.
@@ -276,6 +282,7 @@ impl SectionKind {
             Self::OCTAHEDRAL_DEPTH => "OCTAHEDRAL_DEPTH",
             Self::OCTAHEDRAL_NORMALS => "OCTAHEDRAL_NORMALS",
             Self::OCTAHEDRAL_NORMAL_GRIDS => "OCTAHEDRAL_NORMAL_GRIDS",
+            Self::CALIBRATION_FLIP => "CALIBRATION_FLIP",
             Self::VERTEX_AO => "VERTEX_AO",
             Self::POINT_AO => "POINT_AO",
             Self::PLANE_AO => "PLANE_AO",
@@ -326,6 +333,7 @@ impl SectionKind {
             Self::OCTAHEDRAL_DEPTH => size_of::<OctahedralDepthRecord>(),
             Self::OCTAHEDRAL_NORMALS => size_of::<OctahedralNormalRecord>(),
             Self::OCTAHEDRAL_NORMAL_GRIDS => size_of::<OctahedralNormalGridRecord>(),
+            Self::CALIBRATION_FLIP => size_of::<FlipCalibrationRecord>(),
             Self::CALIBRATION | Self::CALIBRATION_ADDED => size_of::<CalibrationRecord>(),
             Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
             Self::CALIBRATION_ELEVATIONS | Self::CALIBRATION_ELEVATIONS_ADDED => {
@@ -348,8 +356,9 @@ impl SectionKind {
     /// of the techniques added after 1.11 (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), 13
     /// for the octahedral views' depth planes (`OCTAHEDRAL_DEPTH`), 14 for the points' facing
     /// (`POINT_FACING`), 15 for the octahedral views' normals (`OCTAHEDRAL_NORMALS`), 16 for
-    /// their grids of any size (`OCTAHEDRAL_NORMAL_GRIDS`), 0 for the other known kinds and
-    /// for kinds this version does not know (private extensions do not raise a file's minor).
+    /// their grids of any size (`OCTAHEDRAL_NORMAL_GRIDS`), 17 for the calibration's FLIP error
+    /// (`CALIBRATION_FLIP`), 0 for the other known kinds and for kinds this version does not
+    /// know (private extensions do not raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
         match self {
@@ -368,6 +377,7 @@ impl SectionKind {
             Self::POINT_FACING => 14,
             Self::OCTAHEDRAL_NORMALS => 15,
             Self::OCTAHEDRAL_NORMAL_GRIDS => 16,
+            Self::CALIBRATION_FLIP => 17,
             _ => 0,
         }
     }
@@ -1034,7 +1044,39 @@ pub struct ElevationCalibrationRecord {
 }
 const _: () = assert!(size_of::<ElevationCalibrationRecord>() == 20);
 
-/// The representations a [`CalibrationRecord`] names (spec §6.15, §6.18).
+/// One sample of a representation's calibration as FLIP sees it (spec §6.19): the mean LDR-FLIP
+/// error of the block drawn with `technique` when it is `height` pixels high on screen, over the
+/// views of one elevation or over every view, measured on the same drawings as the multi-scale
+/// RMSE of `CALIBRATION` and `CALIBRATION_ELEVATIONS` (spec §6.15, §6.16) and their added
+/// sections' (§6.18). The record of `CALIBRATION_FLIP` (since 1.17); rows are self-describing, so
+/// the section needs no other.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct FlipCalibrationRecord {
+    /// Elevation of the views the row is measured over, degrees above the block's horizontal
+    /// plane, `[0, 90]`; or [`Self::EVERY_VIEW`] (−1) for a row over every view, as
+    /// `CALIBRATION`'s rows are. Non-decreasing over the section (rows over every view first).
+    pub elevation: f32,
+    /// The representation, one of [`calibration_technique`] (any code, the base ones and those
+    /// added in 1.12 on alike). Non-decreasing within an elevation.
+    pub technique: u32,
+    /// Projected height of the block's bounds, pixels; strictly increasing within an elevation
+    /// and technique.
+    pub height: f32,
+    /// Mean LDR-FLIP error (Andersson et al. 2020, 67 pixels per degree) of the 8-bit sRGB shaded
+    /// image against the supersampled full mesh's, over the row's views, `[0, 1]`.
+    pub flip: f32,
+}
+const _: () = assert!(size_of::<FlipCalibrationRecord>() == 16);
+
+impl FlipCalibrationRecord {
+    /// The `elevation` of a row over every view of every elevation (spec §6.19), as
+    /// `CALIBRATION`'s rows are measured.
+    pub const EVERY_VIEW: f32 = -1.0;
+}
+
+/// The representations a [`CalibrationRecord`] names (spec §6.15, §6.18), and a
+/// [`FlipCalibrationRecord`] (§6.19).
 pub mod calibration_technique {
     /// Every triangle of `TRIANGLES`.
     pub const FULL: u32 = 0;

@@ -14,11 +14,11 @@ use crate::pack::unorm16x2_steps;
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
     AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
-    ElevationCalibrationRecord, EllipsoidRecord, ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE,
-    OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord,
-    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement,
-    TriangleRecord, VertexRecord, billboard_kind, calibration_technique, far_switch, far_threshold, image_format,
-    leaf_slots, lines_drawn_at, plane_leaf_bases,
+    ElevationCalibrationRecord, EllipsoidRecord, FlipCalibrationRecord, ImageRecord, LineRecord, LodLevelRecord,
+    MaterialRecord, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord,
+    OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
+    SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
+    far_switch, far_threshold, image_format, leaf_slots, lines_drawn_at, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -107,6 +107,9 @@ pub struct VerifyReport {
     pub calibration_added: u64,
     /// `CALIBRATION_ELEVATIONS_ADDED` records checked (spec §6.18).
     pub calibration_elevations_added: u64,
+    /// `CALIBRATION_FLIP` records checked (spec §6.19, since 1.17): each representation's mean
+    /// LDR-FLIP error by projected height, over every view and per elevation.
+    pub calibration_flip: u64,
     /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO`, `LINE_AO` and `FAR_LINE_AO` bytes (their
     /// counts are checked at open).
     pub ao: u64,
@@ -240,6 +243,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
         c.calibration_elevations_added(),
     )?;
     check_chain_calibration(c.chain_calibration(), c.lod_levels())?;
+    check_calibration_flip(c.calibration_flip())?;
     check_slot_images_only_for_planes(c)?;
     check_metadata(c)?;
 
@@ -285,6 +289,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.chain_calibration = c.chain_calibration().len() as u64;
     report.calibration_added = c.calibration_added().len() as u64;
     report.calibration_elevations_added = c.calibration_elevations_added().len() as u64;
+    report.calibration_flip = c.calibration_flip().len() as u64;
     report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
     report.point_facing = c.point_facing().len() as u64;
     Ok(report)
@@ -1526,6 +1531,54 @@ fn check_added_calibration(
             i,
             format!("has no records at elevation {missing}, an elevation of CALIBRATION_ELEVATIONS"),
         ));
+    }
+    Ok(())
+}
+
+/// Spec §6.19: the records of `CALIBRATION_FLIP` have elevations of exactly
+/// [`FlipCalibrationRecord::EVERY_VIEW`] (−1, a row over every view) or finite in `[0, 90]`,
+/// non-decreasing (so the rows over every view come first), techniques non-decreasing within an
+/// elevation, heights finite, positive and strictly increasing within an elevation and technique,
+/// and FLIP errors in `[0, 1]`.
+///
+/// Any technique code is valid, the base ones (§6.15) and the added ones (§6.18) alike, and codes
+/// no minor defines yet as well: as in `CALIBRATION_ELEVATIONS_ADDED` (§6.18), a reader skips the
+/// rows of a code it does not define, so a file of a later minor that adds a technique stays
+/// readable. The rows are self-describing: they need no other section, and are not paired with
+/// the RMSE tables' records.
+fn check_calibration_flip(records: &[FlipCalibrationRecord]) -> Result<()> {
+    let kind = SectionKind::CALIBRATION_FLIP;
+    for (i, r) in records.iter().enumerate() {
+        let every_view = r.elevation == FlipCalibrationRecord::EVERY_VIEW;
+        let at_elevation = r.elevation.is_finite() && (0.0..=90.0).contains(&r.elevation);
+        if !(every_view || at_elevation) {
+            return Err(bad(
+                kind,
+                i,
+                format!("elevation {} is neither -1 (every view) nor in [0, 90] degrees", r.elevation),
+            ));
+        }
+        if !(r.height.is_finite() && r.height > 0.0) {
+            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
+        }
+        if !unit(r.flip) {
+            return Err(bad(kind, i, format!("FLIP error {} lies outside [0, 1]", r.flip)));
+        }
+        let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) else {
+            continue;
+        };
+        if r.elevation < prev.elevation {
+            return Err(bad(kind, i, format!("elevation {} follows elevation {}", r.elevation, prev.elevation)));
+        }
+        if r.elevation > prev.elevation {
+            continue;
+        }
+        if r.technique < prev.technique {
+            return Err(bad(kind, i, format!("technique {} follows technique {}", r.technique, prev.technique)));
+        }
+        if r.technique == prev.technique && r.height <= prev.height {
+            return Err(bad(kind, i, format!("height {} does not increase strictly after {}", r.height, prev.height)));
+        }
     }
     Ok(())
 }

@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 use treelod_format::{
-    CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, ImageRecord, PlaneDiffuseRecord, Section, SectionKind, Setting,
-    Source, Tree, far_threshold, material_class,
+    CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, FlipCalibrationRecord, ImageRecord, PlaneDiffuseRecord, Section,
+    SectionKind, Setting, Source, Tree, far_threshold, material_class,
 };
 
 use crate::report::{self, Failed};
@@ -85,6 +85,11 @@ struct Dump<'a> {
     /// container has any of them.
     #[serde(skip_serializing_if = "Option::is_none")]
     calibration: Option<CalibrationInfo>,
+    /// The calibration's FLIP error (`CALIBRATION_FLIP`, spec §6.19, version 1.17): one object per
+    /// record, in file order; absent when the container has none (files before 1.17, or built
+    /// without FLIP).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    calibration_flip: Vec<FlipSample>,
     /// Texture bytes per representation (spec §6.7), when the container has images.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     textures: Vec<TextureUse>,
@@ -896,6 +901,12 @@ fn rows(samples: impl Iterator<Item = (u32, [f32; 3])>) -> Vec<CalibrationRow> {
 
 /// A calibration table: a row per representation, a column per height, `error (primitives)`.
 fn table(techniques: &[CalibrationRow]) -> Table {
+    table_of(techniques, |s| format!("{:.4} ({})", s[1], s[2].round()))
+}
+
+/// A table of `techniques`: a row per representation, a column per height, each sample
+/// `[height, value, …]` written by `cell`.
+fn table_of(techniques: &[CalibrationRow], cell: impl Fn(&[f32; 3]) -> String) -> Table {
     let mut heights: Vec<f32> = techniques.iter().flat_map(|t| t.samples.iter().map(|s| s[0])).collect();
     heights.sort_by(f32::total_cmp);
     heights.dedup();
@@ -905,15 +916,73 @@ fn table(techniques: &[CalibrationRow]) -> Table {
     let mut table = Table::new(&names);
     for t in techniques {
         let mut row = vec![t.technique.clone()];
-        row.extend(heights.iter().map(|h| {
-            t.samples
-                .iter()
-                .find(|s| s[0] == *h)
-                .map_or_else(String::new, |s| format!("{:.4} ({})", s[1], s[2].round()))
-        }));
+        row.extend(heights.iter().map(|h| t.samples.iter().find(|s| s[0] == *h).map_or_else(String::new, &cell)));
         table.row(row);
     }
     table
+}
+
+/// One record of the calibration's FLIP error (`CALIBRATION_FLIP`, spec §6.19).
+#[derive(Debug, Serialize)]
+struct FlipSample {
+    /// Degrees above the block's horizontal plane of the views measured, or -1 for a row over
+    /// every view.
+    elevation: f32,
+    /// The technique's name (`--technique`), or `technique N` for an undefined code, as the
+    /// calibration's rows name it.
+    technique: String,
+    /// Projected height of the block, pixels.
+    height: f32,
+    /// Mean LDR-FLIP error against the supersampled full mesh, `[0, 1]`.
+    flip: f32,
+}
+
+impl FlipSample {
+    /// The sample of record `r`.
+    fn of(r: &FlipCalibrationRecord) -> Self {
+        let technique = treelod_format::calibration_technique::name(r.technique)
+            .map_or_else(|| format!("technique {}", r.technique), str::to_owned);
+        Self { elevation: r.elevation, technique, height: r.height, flip: r.flip }
+    }
+
+    /// The text form of `samples`, the records in file order: the table of the rows over every
+    /// view, laid out as the calibration's (a row per representation, a column per height), then
+    /// one table per run of records of one elevation; empty without records.
+    fn text(samples: &[Self]) -> String {
+        let rows = |samples: &[&Self]| {
+            let mut out: Vec<CalibrationRow> = Vec::new();
+            for s in samples {
+                match out.last_mut() {
+                    Some(row) if row.technique == s.technique => row.samples.push([s.height, s.flip, 0.0]),
+                    _ => out.push(CalibrationRow {
+                        technique: s.technique.clone(),
+                        samples: vec![[s.height, s.flip, 0.0]],
+                    }),
+                }
+            }
+            table_of(&out, |s| format!("{:.4}", s[1])).render("  ")
+        };
+        let every_view: Vec<&Self> =
+            samples.iter().filter(|s| s.elevation == FlipCalibrationRecord::EVERY_VIEW).collect();
+        let mut out = String::new();
+        if !every_view.is_empty() {
+            out.push_str(&format!(
+                "\ncalibration FLIP (mean LDR-FLIP of the shaded colour against the supersampled full mesh, by the \
+                 block's projected height)\n{}",
+                rows(&every_view)
+            ));
+        }
+        let per_elevation: Vec<&Self> =
+            samples.iter().filter(|s| s.elevation != FlipCalibrationRecord::EVERY_VIEW).collect();
+        for run in per_elevation.chunk_by(|a, b| a.elevation == b.elevation) {
+            out.push_str(&format!(
+                "\ncalibration FLIP at {}° elevation (the same, from the views at that elevation)\n{}",
+                run[0].elevation,
+                rows(run)
+            ));
+        }
+        out
+    }
 }
 
 /// One non-empty cell.
@@ -1105,6 +1174,7 @@ impl<'a> Dump<'a> {
             impostors: ImpostorInfo::new(container),
             baselines: BaselineInfo::new(container),
             calibration: CalibrationInfo::new(container),
+            calibration_flip: container.calibration_flip().iter().map(FlipSample::of).collect(),
             textures: TextureUse::of(container),
             histograms,
         }
@@ -1159,6 +1229,7 @@ impl<'a> Dump<'a> {
         if let Some(calibration) = &self.calibration {
             out.push_str(&calibration.to_text());
         }
+        out.push_str(&FlipSample::text(&self.calibration_flip));
         out.push_str(&TextureUse::text(&self.textures));
         out.push_str(&self.histograms_text());
         out

@@ -119,6 +119,7 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
             "added-technique calibration record per elevation",
             "added-technique calibration records per elevation",
         ),
+        (report.calibration_flip, "FLIP calibration record", "FLIP calibration records"),
         (report.ao, "ambient-occlusion byte", "ambient-occlusion bytes"),
         (report.point_facing, "point facing byte", "point facing bytes"),
     ]
@@ -212,5 +213,10 @@ mod tests {
             ),
             "{line}"
         );
+        // The calibration's FLIP error (spec §6.19), after the RMSE tables.
+        report.calibration_flip = 18;
+        assert!(ok_line("f", &report).contains("per elevation, 18 FLIP calibration records, 5 ambient"));
+        report.calibration_flip = 1;
+        assert!(ok_line("f", &report).contains("per elevation, 1 FLIP calibration record, 5 ambient"));
     }
 }

@@ -742,6 +742,61 @@ fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
     }
 }
 
+/// The calibration's FLIP error (`CALIBRATION_FLIP`, spec §6.19, format 1.17) of the golden 1.17
+/// file: `dump` prints its table over every view after the RMSE tables, laid out as they are
+/// (a row per technique, a column per height, four decimals, no primitive counts), then one per
+/// elevation, and the JSON holds one object per record; `verify` accepts the file and counts the
+/// records. The 1.16 file, without the section, prints no FLIP table and has no JSON key.
+#[test]
+fn dump_and_verify_show_the_calibration_flip_of_the_1_17_golden_file() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/v1_17");
+    let name = "every-kind-zstd.treelod";
+    let out = treelod_in(&dir, &["dump", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.lines().any(|l| l.starts_with("version") && l.ends_with("1.17")), "{text}");
+    assert!(text.contains("\n  CALIBRATION_FLIP "), "the section is listed: {text}");
+    let every_view = "\ncalibration FLIP (mean LDR-FLIP of the shaded colour against the supersampled full mesh, by \
+                      the block's projected height)\n  technique ";
+    let (rmse, flip) = (text.find("\ncalibration at 90° elevation").expect("RMSE tables"), text.find(every_view));
+    assert!(flip.is_some_and(|flip| flip > rmse), "after the RMSE tables: {text}");
+    let table = &text[flip.unwrap_or(0)..];
+    for heading in ["calibration FLIP at 30° elevation", "calibration FLIP at 90° elevation"] {
+        assert!(table.contains(&format!("\n{heading} (the same, from the views at that elevation)\n")), "{text}");
+    }
+    // Rows named as the RMSE tables name them, each value with four decimals and no count.
+    let rows: Vec<&str> =
+        table.lines().filter(|l| l.starts_with("  full ") || l.starts_with("  octahedral ")).collect();
+    assert_eq!(rows.len(), 2 * 3, "two techniques in each of three tables: {table}");
+    for row in rows {
+        let values: Vec<&str> = row.split_whitespace().skip(1).collect();
+        assert_eq!(values.len(), 3, "{row}");
+        assert!(values.iter().all(|v| v.len() == 6 && v.starts_with("0.") && !v.contains('(')), "{row}");
+    }
+    let out = treelod_in(&dir, &["dump", "--json", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let records = j["calibration_flip"].as_array().expect("an array of records");
+    assert_eq!(records.len(), 18);
+    assert_eq!(records[0]["elevation"], -1.0);
+    assert_eq!(records[0]["technique"], "full");
+    assert_eq!(records[17]["elevation"], 90.0);
+    assert_eq!(records[17]["technique"], "octahedral");
+    assert!(records.iter().all(|r| r["height"].as_f64().is_some_and(|h| h > 0.0)));
+    assert!(records.iter().all(|r| r["flip"].as_f64().is_some_and(|f| (0.0..=1.0).contains(&f))));
+    let out = treelod_in(&dir, &["verify", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    assert!(stdout(&out).contains("per elevation, 18 FLIP calibration records, "), "{}", stdout(&out));
+
+    let dir = dir.join("../v1_16");
+    let out = treelod_in(&dir, &["dump", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    assert!(!stdout(&out).contains("FLIP"), "{}", stdout(&out));
+    let out = treelod_in(&dir, &["dump", "--json", name]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert!(j.get("calibration_flip").is_none(), "no key without the section");
+}
+
 /// Golden files: every `tests/data/v1_*/NAME.treelod` has `NAME.dump.txt` and `NAME.dump.json`
 /// beside it, the exact output of `treelod dump NAME.treelod` and `treelod dump --json
 /// NAME.treelod` run in that directory. With no `.treelod` there yet, the test passes; a
@@ -753,7 +808,7 @@ fn usage_errors_exit_with_2_and_help_documents_exit_codes() {
 fn golden_dumps_match() {
     for version in [
         "v1_0", "v1_1", "v1_2", "v1_3", "v1_4", "v1_5", "v1_6", "v1_7", "v1_8", "v1_9", "v1_10", "v1_11", "v1_12",
-        "v1_13", "v1_14", "v1_15", "v1_16",
+        "v1_13", "v1_14", "v1_15", "v1_16", "v1_17",
     ] {
         golden_dumps_match_in(version);
     }
