@@ -488,11 +488,13 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
             let direction = directions[h][v].1;
             let view = View::fit(direction, centre, fitted, side);
             let reference = scene.reference(&View::fit(direction, centre, fitted, side * k), k);
+            // Encoded for FLIP once, for every technique drawn in this view.
+            let flip_reference = FlipReference::new(&reference);
             let measured = techniques.iter().map(|&t| {
                 let mut canvas = Canvas::new(side, BACKGROUND);
                 let primitives = scene.draw(t, &view, metres_per_pixel, pixels, &mut canvas);
                 let image = canvas.image();
-                (error(&image, &reference), primitives as f64, flip(&image, &reference))
+                (error(&image, &reference), primitives as f64, flip(&image, &flip_reference))
             });
             let levels = scene.chain_levels.iter().map(|triangles| {
                 let mut canvas = Canvas::new(side, BACKGROUND);
@@ -627,18 +629,52 @@ fn error(image: &LinearImage, reference: &LinearImage) -> f64 {
     multiscale_rmse(image, reference).map_or(1.0, |m| m.summary())
 }
 
+/// A view's reference image as [`flip`] compares against it: encoded to 8-bit sRGB once per
+/// view, for every technique drawn in it.
+#[cfg(feature = "flip")]
+struct FlipReference {
+    width: u32,
+    height: u32,
+    /// Three bytes per pixel, rows top to bottom ([`LinearImage::to_srgb8`]).
+    srgb8: Vec<u8>,
+}
+
+#[cfg(feature = "flip")]
+impl FlipReference {
+    fn new(reference: &LinearImage) -> Self {
+        Self { width: reference.width, height: reference.height, srgb8: reference.to_srgb8() }
+    }
+}
+
 /// The mean LDR-FLIP error of `image` against `reference`, both encoded to 8-bit sRGB (spec
 /// §6.19; `treelod_eval::metrics::flip`, as `treelod eval` measures it); NaN without the `flip`
 /// feature, or where the images do not compare.
 #[cfg(feature = "flip")]
-fn flip(image: &LinearImage, reference: &LinearImage) -> f64 {
-    treelod_eval::metrics::flip::mean_flip(image, reference).unwrap_or(f64::NAN)
+fn flip(image: &LinearImage, reference: &FlipReference) -> f64 {
+    // As `mean_flip` does, with the reference encoded once per view: images of different sizes
+    // do not compare.
+    if (image.width, image.height) != (reference.width, reference.height) {
+        return f64::NAN;
+    }
+    treelod_eval::metrics::flip::mean_flip_srgb8(image.width, image.height, &image.to_srgb8(), &reference.srgb8)
+        .unwrap_or(f64::NAN)
+}
+
+/// Without the `flip` feature no reference is encoded for FLIP.
+#[cfg(not(feature = "flip"))]
+struct FlipReference;
+
+#[cfg(not(feature = "flip"))]
+impl FlipReference {
+    fn new(_: &LinearImage) -> Self {
+        Self
+    }
 }
 
 /// Without the `flip` feature the calibration measures no FLIP error (NaN: no `CALIBRATION_FLIP`
 /// rows).
 #[cfg(not(feature = "flip"))]
-fn flip(_: &LinearImage, _: &LinearImage) -> f64 {
+fn flip(_: &LinearImage, _: &FlipReference) -> f64 {
     f64::NAN
 }
 

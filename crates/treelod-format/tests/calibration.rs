@@ -8,8 +8,10 @@
 mod common;
 
 use treelod_format::{
-    CalibrationRecord, Compression, Container, ContainerData, Error, MINOR, SectionKind, calibration_technique, verify,
+    CalibrationRecord, Compression, Container, ContainerData, MINOR, SectionKind, calibration_technique, verify,
 };
+
+const KIND: SectionKind = SectionKind::CALIBRATION;
 
 fn sample(technique: u32, height: f32, error: f32, primitives: f32) -> CalibrationRecord {
     CalibrationRecord { technique, height, error, primitives }
@@ -33,22 +35,7 @@ fn fixture() -> ContainerData {
     data
 }
 
-use common::{bytes_of, check};
-
-/// Asserts a `BadRecord` of `CALIBRATION` at `index` whose reason mentions every needle, and
-/// whose message names the kind and the record.
-#[track_caller]
-fn expect_refused(data: &ContainerData, index: usize, needles: &[&str]) {
-    match check(data) {
-        Err(ref e @ Error::BadRecord { kind, index: i, ref reason })
-            if kind == SectionKind::CALIBRATION && i == index && needles.iter().all(|n| reason.contains(n)) =>
-        {
-            let message = e.to_string();
-            assert!(message.starts_with(&format!("CALIBRATION record {index}: ")), "{message}");
-        }
-        other => panic!("expected BadRecord CALIBRATION {index} ({needles:?}), got {other:?}"),
-    }
-}
+use common::{bytes_of, check, expect_refused};
 
 /// The fixture with record `index` changed by `edit`.
 fn edited(index: usize, edit: impl FnOnce(&mut CalibrationRecord)) -> ContainerData {
@@ -137,11 +124,16 @@ fn a_single_record_of_each_technique_and_edge_values_pass() {
 fn an_undefined_technique_is_refused() {
     // The octahedral impostor's code is defined, but only in CALIBRATION_ADDED (spec §6.18).
     let data = edited(7, |r| r.technique = calibration_technique::OCTAHEDRAL);
-    expect_refused(&data, 7, &["technique 9 is not defined here (0..9): octahedral belongs in CALIBRATION_ADDED"]);
+    expect_refused(
+        &data,
+        KIND,
+        7,
+        &["technique 9 is not defined here (0..9): octahedral belongs in CALIBRATION_ADDED"],
+    );
     let data = edited(7, |r| r.technique = calibration_technique::COUNT);
-    expect_refused(&data, 7, &["technique 10 is not defined here (0..9)"]);
+    expect_refused(&data, KIND, 7, &["technique 10 is not defined here (0..9)"]);
     let data = edited(0, |r| r.technique = u32::MAX);
-    expect_refused(&data, 0, &["technique 4294967295 is not defined"]);
+    expect_refused(&data, KIND, 0, &["technique 4294967295 is not defined"]);
 }
 
 #[test]
@@ -149,31 +141,31 @@ fn a_decreasing_technique_is_refused() {
     // FULL (0) after CROSSED (8): a record appended to the end goes back to the first technique.
     let mut data = fixture();
     data.calibration.push(sample(calibration_technique::FULL, 1.0e7, 0.0, 1.0));
-    expect_refused(&data, 8, &["technique 0 follows technique 8"]);
+    expect_refused(&data, KIND, 8, &["technique 0 follows technique 8"]);
     // The FULL table moved to the end.
     let mut data = fixture();
     data.calibration.rotate_left(3);
-    expect_refused(&data, 5, &["technique 0 follows technique 8"]);
+    expect_refused(&data, KIND, 5, &["technique 0 follows technique 8"]);
     // SPT and FULL interleaved.
     let mut data = fixture();
     data.calibration.swap(2, 3);
-    expect_refused(&data, 3, &["technique 0 follows technique 1"]);
+    expect_refused(&data, KIND, 3, &["technique 0 follows technique 1"]);
 }
 
 #[test]
 fn a_height_that_does_not_increase_within_a_technique_is_refused() {
     let data = edited(1, |r| r.height = 16.0);
-    expect_refused(&data, 1, &["height 16", "does not increase strictly after 16"]);
+    expect_refused(&data, KIND, 1, &["height 16", "does not increase strictly after 16"]);
     let data = edited(5, |r| r.height = 7.5);
-    expect_refused(&data, 5, &["height 7.5", "after 8"]);
+    expect_refused(&data, KIND, 5, &["height 7.5", "after 8"]);
 }
 
 #[test]
 fn a_non_positive_or_non_finite_height_is_refused() {
     for (height, text) in [(0.0, "height 0 "), (-0.0, "height -0 "), (-4.0, "height -4 "), (f32::NAN, "height NaN")] {
-        expect_refused(&edited(0, |r| r.height = height), 0, &[text, "not a positive number of pixels"]);
+        expect_refused(&edited(0, |r| r.height = height), KIND, 0, &[text, "not a positive number of pixels"]);
     }
-    expect_refused(&edited(6, |r| r.height = f32::INFINITY), 6, &["height inf", "not a positive"]);
+    expect_refused(&edited(6, |r| r.height = f32::INFINITY), KIND, 6, &["height inf", "not a positive"]);
 }
 
 #[test]
@@ -181,14 +173,14 @@ fn an_error_outside_0_1_is_refused() {
     for (error, text) in
         [(-0.01, "error -0.01 "), (1.5, "error 1.5 "), (f32::NAN, "error NaN"), (f32::INFINITY, "error inf")]
     {
-        expect_refused(&edited(4, |r| r.error = error), 4, &[text, "outside [0, 1]"]);
+        expect_refused(&edited(4, |r| r.error = error), KIND, 4, &[text, "outside [0, 1]"]);
     }
 }
 
 #[test]
 fn a_negative_or_non_finite_primitive_count_is_refused() {
     for (primitives, text) in [(-1.0, "count -1 "), (f32::NAN, "count NaN"), (f32::INFINITY, "count inf")] {
-        expect_refused(&edited(2, |r| r.primitives = primitives), 2, &[text, "not a finite count"]);
+        expect_refused(&edited(2, |r| r.primitives = primitives), KIND, 2, &[text, "not a finite count"]);
     }
 }
 
@@ -197,5 +189,5 @@ fn the_first_broken_record_is_reported() {
     let mut data = fixture();
     data.calibration[3].error = 2.0;
     data.calibration[6].technique = 0;
-    expect_refused(&data, 3, &["error 2"]);
+    expect_refused(&data, KIND, 3, &["error 2"]);
 }

@@ -12,9 +12,9 @@
 
 mod common;
 
-use common::{assert_reads_back, bytes_of, check, relabel};
+use common::{assert_reads_back, bytes_of, check, expect_refused, relabel};
 use treelod_format::{
-    CalibrationRecord, Compression, Container, ContainerData, ElevationCalibrationRecord, Error, MINOR, SectionKind,
+    CalibrationRecord, Compression, Container, ContainerData, ElevationCalibrationRecord, MINOR, SectionKind,
     calibration_technique, verify,
 };
 
@@ -63,21 +63,6 @@ fn fixture() -> ContainerData {
         data.calibration_elevations_added.extend(at(elevation, scale, &data.calibration_added));
     }
     data
-}
-
-/// Asserts a `BadRecord` of `kind` at `index` whose reason mentions every needle, and whose
-/// message names the kind and the record.
-#[track_caller]
-fn expect_refused(data: &ContainerData, kind: SectionKind, index: usize, needles: &[&str]) {
-    match check(data) {
-        Err(ref e @ Error::BadRecord { kind: k, index: i, ref reason })
-            if k == kind && i == index && needles.iter().all(|n| reason.contains(n)) =>
-        {
-            let message = e.to_string();
-            assert!(message.starts_with(&format!("{kind} record {index}: ")), "{message}");
-        }
-        other => panic!("expected BadRecord {kind} {index} ({needles:?}), got {other:?}"),
-    }
 }
 
 /// The fixture with record `index` of `CALIBRATION_ADDED` changed by `edit`.

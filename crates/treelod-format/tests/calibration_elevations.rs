@@ -9,11 +9,13 @@
 
 mod common;
 
-use common::{bytes_of, check};
+use common::{bytes_of, check, expect_refused};
 use treelod_format::{
-    CalibrationRecord, Compression, Container, ContainerData, ElevationCalibrationRecord, Error, MINOR, SectionKind,
+    CalibrationRecord, Compression, Container, ContainerData, ElevationCalibrationRecord, MINOR, SectionKind,
     calibration_technique, verify,
 };
+
+const KIND: SectionKind = SectionKind::CALIBRATION_ELEVATIONS;
 
 use calibration_technique::{FULL, SPT};
 
@@ -36,23 +38,6 @@ fn fixture() -> ContainerData {
         }));
     }
     data
-}
-
-/// Asserts a `BadRecord` of `CALIBRATION_ELEVATIONS` at `index` whose reason mentions every
-/// needle, and whose message names the kind and the record.
-#[track_caller]
-fn expect_refused(data: &ContainerData, index: usize, needles: &[&str]) {
-    match check(data) {
-        Err(ref e @ Error::BadRecord { kind, index: i, ref reason })
-            if kind == SectionKind::CALIBRATION_ELEVATIONS
-                && i == index
-                && needles.iter().all(|n| reason.contains(n)) =>
-        {
-            let message = e.to_string();
-            assert!(message.starts_with(&format!("CALIBRATION_ELEVATIONS record {index}: ")), "{message}");
-        }
-        other => panic!("expected BadRecord CALIBRATION_ELEVATIONS {index} ({needles:?}), got {other:?}"),
-    }
 }
 
 /// The fixture with record `index` changed by `edit`.
@@ -141,10 +126,10 @@ fn an_elevation_outside_0_90_is_refused() {
         (f32::NAN, "elevation NaN"),
         (f32::INFINITY, "elevation inf"),
     ] {
-        expect_refused(&edited(0, |r| r.elevation = elevation), 0, &[text, "outside [0, 90] degrees"]);
+        expect_refused(&edited(0, |r| r.elevation = elevation), KIND, 0, &[text, "outside [0, 90] degrees"]);
     }
     // The last elevation's records too.
-    expect_refused(&edited(11, |r| r.elevation = 91.0), 11, &["elevation 91 ", "outside [0, 90]"]);
+    expect_refused(&edited(11, |r| r.elevation = 91.0), KIND, 11, &["elevation 91 ", "outside [0, 90]"]);
 }
 
 #[test]
@@ -152,15 +137,15 @@ fn a_decreasing_elevation_is_refused() {
     // An elevation-0 record after the elevation 90.
     let mut data = fixture();
     data.calibration_elevations.push(sample(0.0, FULL, 1.0e7, 0.0, 1.0));
-    expect_refused(&data, 12, &["elevation 0 follows elevation 90"]);
+    expect_refused(&data, KIND, 12, &["elevation 0 follows elevation 90"]);
     // The elevation 30 moved to the end.
     let mut data = fixture();
     data.calibration_elevations[4..].rotate_left(4);
-    expect_refused(&data, 8, &["elevation 30 follows elevation 90"]);
+    expect_refused(&data, KIND, 8, &["elevation 30 follows elevation 90"]);
     // Two elevations interleaved: 0, 30, 0.
     let mut data = fixture();
     data.calibration_elevations[5].elevation = 0.0;
-    expect_refused(&data, 5, &["elevation 0 follows elevation 30"]);
+    expect_refused(&data, KIND, 5, &["elevation 0 follows elevation 30"]);
 }
 
 #[test]
@@ -168,13 +153,14 @@ fn an_undefined_technique_is_refused() {
     let data = edited(3, |r| r.technique = calibration_technique::FIRST_ADDED);
     expect_refused(
         &data,
+        KIND,
         3,
         &["technique 9 is not defined here (0..9): octahedral belongs in CALIBRATION_ELEVATIONS_ADDED"],
     );
     let data = edited(3, |r| r.technique = calibration_technique::COUNT);
-    expect_refused(&data, 3, &["technique 10 is not defined here (0..9)"]);
+    expect_refused(&data, KIND, 3, &["technique 10 is not defined here (0..9)"]);
     let data = edited(8, |r| r.technique = u32::MAX);
-    expect_refused(&data, 8, &["technique 4294967295 is not defined"]);
+    expect_refused(&data, KIND, 8, &["technique 4294967295 is not defined"]);
 }
 
 #[test]
@@ -182,24 +168,24 @@ fn a_decreasing_technique_within_an_elevation_is_refused() {
     // FULL after SPT within the elevation 30.
     let mut data = fixture();
     data.calibration_elevations[4..8].rotate_left(2);
-    expect_refused(&data, 6, &["technique 0 follows technique 1"]);
+    expect_refused(&data, KIND, 6, &["technique 0 follows technique 1"]);
 }
 
 #[test]
 fn a_height_that_does_not_increase_within_an_elevation_and_technique_is_refused() {
     let data = edited(1, |r| r.height = 16.0);
-    expect_refused(&data, 1, &["height 16", "does not increase strictly after 16"]);
+    expect_refused(&data, KIND, 1, &["height 16", "does not increase strictly after 16"]);
     let mut data = fixture();
     data.calibration_elevations.swap(6, 7);
-    expect_refused(&data, 7, &["height 8", "after 32"]);
+    expect_refused(&data, KIND, 7, &["height 8", "after 32"]);
 }
 
 #[test]
 fn a_non_positive_or_non_finite_height_is_refused() {
     for (height, text) in [(0.0, "height 0 "), (-0.0, "height -0 "), (-4.0, "height -4 "), (f32::NAN, "height NaN")] {
-        expect_refused(&edited(4, |r| r.height = height), 4, &[text, "not a positive number of pixels"]);
+        expect_refused(&edited(4, |r| r.height = height), KIND, 4, &[text, "not a positive number of pixels"]);
     }
-    expect_refused(&edited(11, |r| r.height = f32::INFINITY), 11, &["height inf", "not a positive"]);
+    expect_refused(&edited(11, |r| r.height = f32::INFINITY), KIND, 11, &["height inf", "not a positive"]);
 }
 
 #[test]
@@ -207,14 +193,14 @@ fn an_error_outside_0_1_is_refused() {
     for (error, text) in
         [(-0.01, "error -0.01 "), (1.5, "error 1.5 "), (f32::NAN, "error NaN"), (f32::INFINITY, "error inf")]
     {
-        expect_refused(&edited(5, |r| r.error = error), 5, &[text, "outside [0, 1]"]);
+        expect_refused(&edited(5, |r| r.error = error), KIND, 5, &[text, "outside [0, 1]"]);
     }
 }
 
 #[test]
 fn a_negative_or_non_finite_primitive_count_is_refused() {
     for (primitives, text) in [(-1.0, "count -1 "), (f32::NAN, "count NaN"), (f32::INFINITY, "count inf")] {
-        expect_refused(&edited(9, |r| r.primitives = primitives), 9, &[text, "not a finite count"]);
+        expect_refused(&edited(9, |r| r.primitives = primitives), KIND, 9, &[text, "not a finite count"]);
     }
 }
 
@@ -222,14 +208,14 @@ fn a_negative_or_non_finite_primitive_count_is_refused() {
 fn a_pair_that_calibration_lacks_is_refused() {
     // A height between CALIBRATION's, in order.
     let data = edited(1, |r| r.height = 17.0);
-    expect_refused(&data, 1, &["technique 0 at height 17 has no CALIBRATION record"]);
+    expect_refused(&data, KIND, 1, &["technique 0 at height 17 has no CALIBRATION record"]);
     // A technique CALIBRATION has no row for, after the others.
     let mut data = fixture();
     data.calibration_elevations.insert(8, sample(30.0, calibration_technique::CROSSED, 8.0, 0.5, 4.0));
-    expect_refused(&data, 8, &["technique 8 at height 8 has no CALIBRATION record"]);
+    expect_refused(&data, KIND, 8, &["technique 8 at height 8 has no CALIBRATION record"]);
     // Heights equal as stored: one ulp off is another height.
     let data = edited(10, |r| r.height = f32::from_bits(8.0f32.to_bits() + 1));
-    expect_refused(&data, 10, &["technique 1 at height 8.000001 has no CALIBRATION record"]);
+    expect_refused(&data, KIND, 10, &["technique 1 at height 8.000001 has no CALIBRATION record"]);
 }
 
 #[test]
@@ -239,28 +225,29 @@ fn an_elevation_without_every_pair_of_calibration_is_refused() {
     data.calibration_elevations.remove(5);
     expect_refused(
         &data,
+        KIND,
         4,
         &["elevation 30 holds 3 of the 4", "pairs of CALIBRATION", "not technique 0 at height 64"],
     );
     // The first elevation lacks its last pair.
     let mut data = fixture();
     data.calibration_elevations.remove(3);
-    expect_refused(&data, 0, &["elevation 0 holds 3 of the 4", "not technique 1 at height 32"]);
+    expect_refused(&data, KIND, 0, &["elevation 0 holds 3 of the 4", "not technique 1 at height 32"]);
     // The last elevation lacks its first pair.
     let mut data = fixture();
     data.calibration_elevations.remove(8);
-    expect_refused(&data, 8, &["elevation 90 holds 3 of the 4", "not technique 0 at height 16"]);
+    expect_refused(&data, KIND, 8, &["elevation 90 holds 3 of the 4", "not technique 0 at height 16"]);
     // A calibration row the elevations do not have.
     let mut data = fixture();
     data.calibration.push(CalibrationRecord { technique: calibration_technique::CROSSED, ..data.calibration[0] });
-    expect_refused(&data, 0, &["elevation 0 holds 4 of the 5", "not technique 8 at height 16"]);
+    expect_refused(&data, KIND, 0, &["elevation 0 holds 4 of the 5", "not technique 8 at height 16"]);
 }
 
 #[test]
 fn records_without_calibration_are_refused() {
     let mut data = fixture();
     data.calibration.clear();
-    expect_refused(&data, 0, &["no CALIBRATION"]);
+    expect_refused(&data, KIND, 0, &["no CALIBRATION"]);
 }
 
 #[test]
@@ -269,5 +256,5 @@ fn the_first_broken_record_is_reported() {
     data.calibration_elevations[6].error = 2.0;
     data.calibration_elevations[11].technique = 0;
     data.calibration_elevations.remove(10);
-    expect_refused(&data, 6, &["error 2"]);
+    expect_refused(&data, KIND, 6, &["error 2"]);
 }

@@ -9,9 +9,9 @@
 
 mod common;
 
-use common::{bytes_of, check, relabel};
+use common::{bytes_of, check, expect_refused, relabel};
 use treelod_format::{
-    CalibrationRecord, Compression, Container, ContainerData, Error, FlipCalibrationRecord, MINOR, SectionKind,
+    CalibrationRecord, Compression, Container, ContainerData, FlipCalibrationRecord, MINOR, SectionKind,
     calibration_technique, verify,
 };
 
@@ -35,21 +35,6 @@ fn fixture() -> ContainerData {
             .extend(rows.iter().map(|&(technique, height, flip)| row(elevation, technique, height, flip * scale)));
     }
     data
-}
-
-/// Asserts a `BadRecord` of `CALIBRATION_FLIP` at `index` whose reason mentions every needle, and
-/// whose message names the kind and the record.
-#[track_caller]
-fn expect_refused(data: &ContainerData, index: usize, needles: &[&str]) {
-    match check(data) {
-        Err(ref e @ Error::BadRecord { kind, index: i, ref reason })
-            if kind == KIND && i == index && needles.iter().all(|n| reason.contains(n)) =>
-        {
-            let message = e.to_string();
-            assert!(message.starts_with(&format!("CALIBRATION_FLIP record {index}: ")), "{message}");
-        }
-        other => panic!("expected BadRecord CALIBRATION_FLIP {index} ({needles:?}), got {other:?}"),
-    }
 }
 
 /// The fixture with record `index` changed by `edit`.
@@ -183,7 +168,7 @@ fn refusals() {
         (1, |r| r.height = 16.0, 1, &["height 16 does not increase strictly after 16"]),
     ];
     for (index, edit, reported, needles) in table {
-        expect_refused(&edited(index, edit), reported, needles);
+        expect_refused(&edited(index, edit), KIND, reported, needles);
     }
 }
 
@@ -192,15 +177,15 @@ fn a_decreasing_elevation_is_refused() {
     // A row over every view after the elevation 90.
     let mut data = fixture();
     data.calibration_flip.push(row(EVERY_VIEW, FULL, 1.0e7, 0.0));
-    expect_refused(&data, 15, &["elevation -1 follows elevation 90"]);
+    expect_refused(&data, KIND, 15, &["elevation -1 follows elevation 90"]);
     // The elevation 0 moved to the end.
     let mut data = fixture();
     data.calibration_flip[5..].rotate_left(5);
-    expect_refused(&data, 10, &["elevation 0 follows elevation 90"]);
+    expect_refused(&data, KIND, 10, &["elevation 0 follows elevation 90"]);
     // Two elevations interleaved: 0, 90, 0.
     let mut data = fixture();
     data.calibration_flip[6].elevation = 90.0;
-    expect_refused(&data, 7, &["elevation 0 follows elevation 90"]);
+    expect_refused(&data, KIND, 7, &["elevation 0 follows elevation 90"]);
 }
 
 #[test]
@@ -208,22 +193,22 @@ fn a_decreasing_technique_within_an_elevation_is_refused() {
     // FULL after SPT over every view.
     let mut data = fixture();
     data.calibration_flip[0..4].rotate_left(2);
-    expect_refused(&data, 2, &["technique 0 follows technique 1"]);
+    expect_refused(&data, KIND, 2, &["technique 0 follows technique 1"]);
     // OCTAHEDRAL before SPT at 90 degrees.
     let mut data = fixture();
     data.calibration_flip.swap(12, 14);
-    expect_refused(&data, 13, &["technique 1 follows technique 9"]);
+    expect_refused(&data, KIND, 13, &["technique 1 follows technique 9"]);
 }
 
 #[test]
 fn a_height_that_does_not_increase_within_an_elevation_and_technique_is_refused() {
     // Equal.
     let data = edited(1, |r| r.height = 16.0);
-    expect_refused(&data, 1, &["height 16 does not increase strictly after 16"]);
+    expect_refused(&data, KIND, 1, &["height 16 does not increase strictly after 16"]);
     // Decreasing.
     let mut data = fixture();
     data.calibration_flip.swap(7, 8);
-    expect_refused(&data, 8, &["height 8 does not increase strictly after 32"]);
+    expect_refused(&data, KIND, 8, &["height 8 does not increase strictly after 32"]);
     // A new technique or elevation restarts the heights.
     let mut data = fixture();
     data.calibration_flip[2].height = 1.0;
@@ -237,7 +222,7 @@ fn the_first_broken_record_is_reported() {
     data.calibration_flip[6].flip = 2.0;
     data.calibration_flip[11].technique = 0;
     data.calibration_flip[13].elevation = 91.0;
-    expect_refused(&data, 6, &["FLIP error 2 "]);
+    expect_refused(&data, KIND, 6, &["FLIP error 2 "]);
 }
 
 // ----------------------------------------------------------------------------------------------

@@ -7,11 +7,13 @@
 
 mod common;
 
-use common::{bytes_of, check};
+use common::{bytes_of, check, expect_refused};
 use treelod_format::{
-    CalibrationRecord, ChainCalibrationRecord, Compression, Container, ContainerData, Error, LodLevelRecord, MINOR,
-    Range, SectionKind, TriangleRecord, calibration_technique,
+    CalibrationRecord, ChainCalibrationRecord, Compression, Container, ContainerData, LodLevelRecord, MINOR, Range,
+    SectionKind, TriangleRecord, calibration_technique,
 };
+
+const KIND: SectionKind = SectionKind::CHAIN_CALIBRATION;
 
 fn sample(level: u32, height: f32, error: f32, primitives: f32) -> ChainCalibrationRecord {
     ChainCalibrationRecord { level, height, error, primitives }
@@ -36,21 +38,6 @@ fn fixture() -> ContainerData {
         vec![sample(0, 8.0, 0.1, 1.0), sample(0, 16.0, 0.05, 1.0), sample(1, 4.0, 0.2, 1.0), sample(1, 8.0, 0.1, 1.0)];
     data.chain_calibration.push(sample(1, 1.0e6, 0.0, 0.0));
     data
-}
-
-/// Asserts a `BadRecord` of `CHAIN_CALIBRATION` at `index` whose reason mentions every needle,
-/// and whose message names the kind and the record.
-#[track_caller]
-fn expect_refused(data: &ContainerData, index: usize, needles: &[&str]) {
-    match check(data) {
-        Err(ref e @ Error::BadRecord { kind, index: i, ref reason })
-            if kind == SectionKind::CHAIN_CALIBRATION && i == index && needles.iter().all(|n| reason.contains(n)) =>
-        {
-            let message = e.to_string();
-            assert!(message.starts_with(&format!("CHAIN_CALIBRATION record {index}: ")), "{message}");
-        }
-        other => panic!("expected BadRecord CHAIN_CALIBRATION {index} ({needles:?}), got {other:?}"),
-    }
 }
 
 /// The fixture with record `index` changed by `edit`.
@@ -103,21 +90,21 @@ fn without_the_kind_a_file_is_what_it_was_and_has_no_records() {
 
 #[test]
 fn each_rule_is_refused_on_its_own() {
-    expect_refused(&edited(0, |r| r.level = 2), 0, &["level 2", "0..2"]);
-    expect_refused(&edited(2, |r| r.level = 0), 2, &["height 4", "16"]);
-    expect_refused(&edited(4, |r| r.level = 0), 4, &["level 0 follows level 1"]);
-    expect_refused(&edited(1, |r| r.height = 8.0), 1, &["height 8", "8"]);
-    expect_refused(&edited(0, |r| r.height = 0.0), 0, &["height 0"]);
-    expect_refused(&edited(0, |r| r.height = f32::INFINITY), 0, &["height inf"]);
-    expect_refused(&edited(1, |r| r.error = 1.5), 1, &["error 1.5"]);
-    expect_refused(&edited(1, |r| r.error = f32::NAN), 1, &["error NaN"]);
-    expect_refused(&edited(3, |r| r.primitives = -1.0), 3, &["primitive count -1"]);
-    expect_refused(&edited(3, |r| r.primitives = f32::INFINITY), 3, &["primitive count inf"]);
+    expect_refused(&edited(0, |r| r.level = 2), KIND, 0, &["level 2", "0..2"]);
+    expect_refused(&edited(2, |r| r.level = 0), KIND, 2, &["height 4", "16"]);
+    expect_refused(&edited(4, |r| r.level = 0), KIND, 4, &["level 0 follows level 1"]);
+    expect_refused(&edited(1, |r| r.height = 8.0), KIND, 1, &["height 8", "8"]);
+    expect_refused(&edited(0, |r| r.height = 0.0), KIND, 0, &["height 0"]);
+    expect_refused(&edited(0, |r| r.height = f32::INFINITY), KIND, 0, &["height inf"]);
+    expect_refused(&edited(1, |r| r.error = 1.5), KIND, 1, &["error 1.5"]);
+    expect_refused(&edited(1, |r| r.error = f32::NAN), KIND, 1, &["error NaN"]);
+    expect_refused(&edited(3, |r| r.primitives = -1.0), KIND, 3, &["primitive count -1"]);
+    expect_refused(&edited(3, |r| r.primitives = f32::INFINITY), KIND, 3, &["primitive count inf"]);
     // Per-level tables need a chain.
     let mut data = fixture();
     data.lod_levels.clear();
     data.lod_triangles.clear();
-    expect_refused(&data, 0, &["level 0", "0..0"]);
+    expect_refused(&data, KIND, 0, &["level 0", "0..0"]);
 }
 
 #[test]
@@ -134,5 +121,5 @@ fn a_level_that_one_tree_lacks_is_refused() {
         error: 0.01,
         fraction: 0.5,
     });
-    expect_refused(&data, 2, &["level 1", "0..1"]);
+    expect_refused(&data, KIND, 2, &["level 1", "0..1"]);
 }

@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{assert_reads_back, bytes_of, check, relabel, resize_section};
+use common::{assert_reads_back, bytes_of, check, expect_refused, relabel, resize_section};
 use treelod_format::{
     Compression, Container, ContainerData, Error, ErrorClass, MINOR, OctahedralDepthRecord, OctahedralRecord,
     PlaneDiffuseRecord, SectionKind, pack, verify,
@@ -65,22 +65,6 @@ fn fixture() -> ContainerData {
     data.octahedral_depth = FIRST.to_vec();
     data.octahedral_depth.extend((0..3).flat_map(|j| (0..3).map(move |i| second(i, j))));
     data
-}
-
-/// Asserts a `BadRecord` of `OCTAHEDRAL_DEPTH` at `index` whose reason mentions every needle, and
-/// whose message names the kind and the record.
-#[track_caller]
-fn expect_refused(data: &ContainerData, index: usize, needles: &[&str]) {
-    match check(data) {
-        Err(ref e @ Error::BadRecord { kind, index: i, ref reason })
-            if kind == KIND && i == index && needles.iter().all(|n| reason.contains(n)) =>
-        {
-            let message = e.to_string();
-            assert!(message.starts_with(&format!("OCTAHEDRAL_DEPTH record {index}: ")), "{message}");
-            assert_eq!(e.class(), ErrorClass::Invalid, "{message}");
-        }
-        other => panic!("expected BadRecord OCTAHEDRAL_DEPTH {index} ({needles:?}), got {other:?}"),
-    }
 }
 
 // ----------------------------------------------------------------------------------------------
@@ -240,10 +224,10 @@ fn the_bounds_of_every_value_verify() {
 fn depth_planes_without_octahedral_impostors_are_refused() {
     let mut data = fixture();
     data.octahedral.clear();
-    expect_refused(&data, 0, &["the file has no OCTAHEDRAL"]);
+    expect_refused(&data, KIND, 0, &["the file has no OCTAHEDRAL"]);
     // Whatever their count.
     data.octahedral_depth.truncate(1);
-    expect_refused(&data, 0, &["no OCTAHEDRAL"]);
+    expect_refused(&data, KIND, 0, &["no OCTAHEDRAL"]);
 }
 
 #[test]
@@ -310,7 +294,7 @@ fn values_that_are_not_finite_or_outside_minus_one_to_one_are_refused() {
                 let mut data = fixture();
                 let r = &mut data.octahedral_depth[index];
                 *[&mut r.offset, &mut r.slope_s, &mut r.slope_t][field] = value;
-                expect_refused(&data, index, &[&format!("{name} {text} is not finite and in [-1, 1] ({view})")]);
+                expect_refused(&data, KIND, index, &[&format!("{name} {text} is not finite and in [-1, 1] ({view})")]);
             }
         }
     }
@@ -319,7 +303,7 @@ fn values_that_are_not_finite_or_outside_minus_one_to_one_are_refused() {
     data.octahedral_depth[5].slope_t = 2.0;
     data.octahedral_depth[5].slope_s = -2.0;
     data.octahedral_depth[6].offset = f32::NAN;
-    expect_refused(&data, 5, &["slope_s -2 is not finite"]);
+    expect_refused(&data, KIND, 5, &["slope_s -2 is not finite"]);
 }
 
 // ----------------------------------------------------------------------------------------------

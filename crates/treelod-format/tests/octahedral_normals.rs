@@ -13,7 +13,7 @@
 
 mod common;
 
-use common::{assert_reads_back, bytes_of, check, relabel, resize_section};
+use common::{assert_reads_back, bytes_of, check, expect_refused, relabel, resize_section};
 use treelod_format::{
     Compression, Container, ContainerData, Error, ErrorClass, MINOR, OctahedralDepthRecord, OctahedralNormalGridRecord,
     OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, SectionKind, pack, verify,
@@ -60,22 +60,6 @@ fn fixture() -> ContainerData {
         OctahedralNormalRecord { uv_min: steps(16384, 32768) },
     ];
     data
-}
-
-/// Asserts a `BadRecord` of `OCTAHEDRAL_NORMALS` at `index` from `verify` whose reason is `reason`,
-/// and whose message names the kind and the record.
-#[track_caller]
-fn expect_refused(data: &ContainerData, index: usize, reason: &str) {
-    match check(data) {
-        Err(ref e @ Error::BadRecord { kind, index: i, reason: ref r })
-            if kind == KIND && i == index && r == reason =>
-        {
-            let message = e.to_string();
-            assert_eq!(message, format!("OCTAHEDRAL_NORMALS record {index}: {reason}"));
-            assert_eq!(e.class(), ErrorClass::Invalid, "{message}");
-        }
-        other => panic!("expected BadRecord OCTAHEDRAL_NORMALS {index} ({reason}), got {other:?}"),
-    }
 }
 
 // ----------------------------------------------------------------------------------------------
@@ -305,14 +289,12 @@ fn a_normal_grid_leaving_the_image_is_refused() {
         let mut data = fixture();
         change(&mut data);
         eprintln!("{what}");
-        expect_refused(
-            &data,
-            index,
-            &format!(
-                "the normal grid at ({u}, {v}) of the colour grid's size ({w}, {h}) leaves the image (unorm16 steps, \
-                 at most 65536)"
-            ),
+        let reason = format!(
+            "the normal grid at ({u}, {v}) of the colour grid's size ({w}, {h}) leaves the image (unorm16 steps, \
+             at most 65536)"
         );
+        // The reason exactly, not only containing it.
+        assert_eq!(expect_refused(&data, KIND, index, &[&reason]), reason);
     }
 }
 

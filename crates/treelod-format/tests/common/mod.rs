@@ -197,3 +197,28 @@ pub fn assert_reads_back(
     assert_eq!(&back, data);
     assert_eq!(back.to_bytes(compression).expect("writes"), bytes, "{compression:?}");
 }
+
+/// Asserts that `verify` refuses `data` (written and opened, [`check`]) with a `BadRecord` of
+/// `kind` at `index` whose reason mentions every needle, whose message is the kind, the record and
+/// the reason, and whose class is `Invalid`. Returns the reason, for a test that expects it
+/// exactly.
+#[allow(dead_code, reason = "not every test binary uses every helper")]
+#[track_caller]
+pub fn expect_refused(
+    data: &ContainerData,
+    kind: treelod_format::SectionKind,
+    index: usize,
+    needles: &[&str],
+) -> String {
+    match check(data) {
+        Err(ref e @ treelod_format::Error::BadRecord { kind: k, index: i, ref reason })
+            if k == kind && i == index && needles.iter().all(|n| reason.contains(n)) =>
+        {
+            let message = e.to_string();
+            assert_eq!(message, format!("{kind} record {index}: {reason}"));
+            assert_eq!(e.class(), treelod_format::ErrorClass::Invalid, "{message}");
+            reason.clone()
+        }
+        other => panic!("expected BadRecord {kind} {index} ({needles:?}), got {other:?}"),
+    }
+}
