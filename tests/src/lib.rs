@@ -56,7 +56,7 @@ pub struct GoldenFile {
     pub compression: Compression,
 }
 
-/// The golden files of format versions 1.0 to 1.17, in the order `make-golden` writes them.
+/// The golden files of format versions 1.0 to 1.18, in the order `make-golden` writes them.
 #[must_use]
 pub fn golden_files() -> Vec<GoldenFile> {
     vec![
@@ -98,6 +98,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -134,6 +135,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -157,6 +159,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -179,6 +182,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -199,6 +203,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -219,6 +224,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -241,6 +247,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -262,6 +269,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -282,6 +290,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -302,6 +311,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -321,6 +331,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -340,6 +351,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -358,6 +370,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -375,6 +388,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 point_facing: false,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -391,6 +405,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 octahedral_normals: NormalGrids::None,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -408,6 +423,7 @@ pub fn golden_files() -> Vec<GoldenFile> {
                 bc7_atlas: true,
                 octahedral_normals: NormalGrids::ColourSize,
                 calibration_flip: false,
+                chain_calibration_flip: false,
                 ..SyntheticOptions::everything()
             },
             compression: Compression::Zstd { level: 19 },
@@ -422,7 +438,12 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           OCTAHEDRAL_NORMAL_GRIDS, in place of OCTAHEDRAL_NORMALS), zstd level 19 with byte shuffle \
                           where it pays",
             seed: 3,
-            options: SyntheticOptions { bc7_atlas: true, calibration_flip: false, ..SyntheticOptions::everything() },
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                calibration_flip: false,
+                chain_calibration_flip: false,
+                ..SyntheticOptions::everything()
+            },
             compression: Compression::Zstd { level: 19 },
         },
         GoldenFile {
@@ -434,6 +455,23 @@ pub fn golden_files() -> Vec<GoldenFile> {
                           and OCTAHEDRAL_NORMAL_GRIDS, and the calibration's FLIP error, CALIBRATION_FLIP: rows over \
                           every view and at 30 and 90 degrees, of full and octahedral at three heights each), zstd \
                           level 19 with byte shuffle where it pays",
+            seed: 3,
+            options: SyntheticOptions {
+                bc7_atlas: true,
+                chain_calibration_flip: false,
+                ..SyntheticOptions::everything()
+            },
+            compression: Compression::Zstd { level: 19 },
+        },
+        GoldenFile {
+            minor: 18,
+            name: "every-kind-zstd.treelod",
+            description: "every section kind of 1.18 but OCTAHEDRAL_NORMALS (1.17's: the 1.5 kinds, a BC7 impostor \
+                          atlas, CALIBRATION_ELEVATIONS, CHAIN_CALIBRATION, FAR_LINES, FAR_LINE_AO, PLANE_DIFFUSE, \
+                          OCTAHEDRAL, CALIBRATION_ADDED, CALIBRATION_ELEVATIONS_ADDED, OCTAHEDRAL_DEPTH, POINT_FACING, \
+                          OCTAHEDRAL_NORMAL_GRIDS and CALIBRATION_FLIP, and the chain levels' FLIP error, \
+                          CHAIN_CALIBRATION_FLIP: a row at the level and height of each CHAIN_CALIBRATION record, \
+                          three heights of each of the three levels), zstd level 19 with byte shuffle where it pays",
             seed: 3,
             options: SyntheticOptions { bc7_atlas: true, ..SyntheticOptions::everything() },
             compression: Compression::Zstd { level: 19 },

@@ -5,12 +5,12 @@ use core::ops::RangeInclusive;
 use treelod_build::{SptNode, flatten};
 use treelod_format::pack::{oct_encode, rgba8, unorm16x2};
 use treelod_format::{
-    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ContainerData, CurveSample,
-    ElevationCalibrationRecord, EllipsoidRecord, FlipCalibrationRecord, ImageRecord, LineRecord, LodLevelRecord,
-    MaterialInfo, MaterialRecord, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord,
-    OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
-    SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
-    image_format,
+    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ChainFlipCalibrationRecord,
+    ContainerData, CurveSample, ElevationCalibrationRecord, EllipsoidRecord, FlipCalibrationRecord, ImageRecord,
+    LineRecord, LodLevelRecord, MaterialInfo, MaterialRecord, NO_IMAGE, OctahedralDepthRecord,
+    OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
+    PlaneRecord, PointRecord, PruneLeafRecord, Range, SectionKind, Setting, Source, Tree, TriangleRecord, VertexRecord,
+    billboard_kind, calibration_technique, image_format,
 };
 
 use crate::rng::SplitMix64;
@@ -137,6 +137,12 @@ pub struct SyntheticOptions {
     /// need no other section. Drawn last, so the rest of the container is the same as without
     /// it.
     pub calibration_flip: bool,
+    /// The LoD chain levels' FLIP error (spec §6.20, 1.18): for each `CHAIN_CALIBRATION` record
+    /// (so it needs `chain_calibration`, and gives no rows without it), a row at its level and
+    /// height, as the build measures them on the same drawings, a falling FLIP error in `[0, 1]`
+    /// within each level, in `CHAIN_CALIBRATION_FLIP`. Drawn last, so the rest of the container
+    /// is the same as without it.
+    pub chain_calibration_flip: bool,
     /// The LoD chain's per-level calibration (spec §6.17, 1.8): for each level of the chain
     /// (`lod_levels`), three samples of growing projected height, falling error in `[0, 1]` and
     /// the level's triangle count, in `CHAIN_CALIBRATION`. Drawn last, so the rest of the
@@ -188,6 +194,7 @@ impl SyntheticOptions {
             point_facing: false,
             octahedral_normals: NormalGrids::None,
             calibration_flip: false,
+            chain_calibration_flip: false,
             bc7_atlas: false,
             name: Some("minimal".into()),
         }
@@ -207,7 +214,7 @@ impl SyntheticOptions {
         }
     }
 
-    /// Every section kind of version 1.17 but 1.15's `OCTAHEDRAL_NORMALS` (a file holds it or
+    /// Every section kind of version 1.18 but 1.15's `OCTAHEDRAL_NORMALS` (a file holds it or
     /// 1.16's `OCTAHEDRAL_NORMAL_GRIDS`): a 2×1×2 grid with triangles, points, ellipsoids, lines,
     /// planes and pruning lists in every cell, a block-cell ellipsoid hierarchy, both curves, three
     /// materials, two textures, an atlas and a PNG image, two trees, each with a three-level
@@ -220,7 +227,8 @@ impl SyntheticOptions {
     /// (`OCTAHEDRAL_DEPTH`) and normals at half the colour's size (`OCTAHEDRAL_NORMAL_GRIDS`), the
     /// calibration of the techniques added after 1.11
     /// (`CALIBRATION_ADDED`, `CALIBRATION_ELEVATIONS_ADDED`), the points' facing
-    /// (`POINT_FACING`) and the calibration's FLIP error (`CALIBRATION_FLIP`).
+    /// (`POINT_FACING`), the calibration's FLIP error (`CALIBRATION_FLIP`) and the chain levels'
+    /// (`CHAIN_CALIBRATION_FLIP`).
     #[must_use]
     pub fn everything() -> Self {
         Self {
@@ -255,6 +263,7 @@ impl SyntheticOptions {
             point_facing: true,
             octahedral_normals: NormalGrids::HalfSize,
             calibration_flip: true,
+            chain_calibration_flip: true,
             bc7_atlas: false,
             name: Some("everything".into()),
         }
@@ -1243,7 +1252,26 @@ pub fn synthetic(seed: u64, options: &SyntheticOptions) -> ContainerData {
     if options.calibration_flip {
         b.data.calibration_flip = calibration_flip(&mut rng);
     }
+    if options.chain_calibration_flip {
+        b.data.chain_calibration_flip = chain_calibration_flip(&mut rng, &b.data.chain_calibration);
+    }
     b.data
+}
+
+/// The LoD chain levels' FLIP error (spec §6.20): a row at the level and height of each record of
+/// `chain` (`CHAIN_CALIBRATION`, sorted by level, then height, and its levels every tree's, so the
+/// rows are too), each level's first error in `[0.05, 1]` and each next the one before times a
+/// factor in `[0.2, 0.9]`.
+fn chain_calibration_flip(rng: &mut SplitMix64, chain: &[ChainCalibrationRecord]) -> Vec<ChainFlipCalibrationRecord> {
+    let mut records: Vec<ChainFlipCalibrationRecord> = Vec::with_capacity(chain.len());
+    for r in chain {
+        let flip = match records.last() {
+            Some(prev) if prev.level == r.level => prev.flip * rng.uniform(0.2, 0.9),
+            _ => rng.uniform(0.05, 1.0),
+        };
+        records.push(ChainFlipCalibrationRecord { level: r.level, height: r.height, flip });
+    }
+    records
 }
 
 /// The calibration's FLIP error (spec §6.19): rows over every view, then at 30 and 90 degrees,

@@ -1,4 +1,4 @@
-//! Golden files of format versions 1.0 to 1.17 (`tests/data/v1_0` to `tests/data/v1_17`): every file
+//! Golden files of format versions 1.0 to 1.18 (`tests/data/v1_0` to `tests/data/v1_18`): every file
 //! opens and verifies with its version in its header, the
 //! minimal file (and 1.13's octahedral depth planes) decodes to literal values written out here (so
 //! a change in reading is caught even if writing changed the same way), and spec §13.1 holds the
@@ -26,7 +26,7 @@ fn open(name: &str) -> Container {
 
 #[test]
 fn every_golden_file_opens_and_verifies() {
-    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17] {
+    for minor in [0u16, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18] {
         golden_files_of_version_open_and_verify(minor);
     }
 }
@@ -743,10 +743,11 @@ fn the_1_16_every_kind_file_has_every_kind_and_the_octahedral_normal_grids() {
 #[test]
 fn the_1_17_every_kind_file_has_every_kind_and_the_calibration_flip() {
     let c = Container::open(golden_dir_of(17).join("every-kind-zstd.treelod")).unwrap();
-    // Every kind but 1.15's OCTAHEDRAL_NORMALS, which OCTAHEDRAL_NORMAL_GRIDS replaces: a file
-    // holds one of the two.
+    // Every kind of 1.17 but 1.15's OCTAHEDRAL_NORMALS, which OCTAHEDRAL_NORMAL_GRIDS replaces: a
+    // file holds one of the two.
     for kind in SectionKind::KNOWN {
-        assert_eq!(c.section(kind).is_some(), kind != SectionKind::OCTAHEDRAL_NORMALS, "{kind}");
+        let expected = kind != SectionKind::OCTAHEDRAL_NORMALS && kind.since_minor() <= 17;
+        assert_eq!(c.section(kind).is_some(), expected, "{kind}");
     }
     assert_eq!(c.header().minor, 17);
     // Rows over every view first, then at 30 and 90 degrees; at each, a base technique (full)
@@ -767,6 +768,35 @@ fn the_1_17_every_kind_file_has_every_kind_and_the_calibration_flip() {
     // Without CALIBRATION_FLIP it is the 1.16 file, record for record, and the writer marks it
     // 1.16: a 1.16 reader sees the same tables and chooses by their RMSE alone.
     is_the_previous_file_with(&c, 17, |data| data.calibration_flip.clear());
+}
+
+#[test]
+fn the_1_18_every_kind_file_has_every_kind_and_the_chain_calibration_flip() {
+    let c = Container::open(golden_dir_of(18).join("every-kind-zstd.treelod")).unwrap();
+    // Every kind but 1.15's OCTAHEDRAL_NORMALS, which OCTAHEDRAL_NORMAL_GRIDS replaces: a file
+    // holds one of the two.
+    for kind in SectionKind::KNOWN {
+        assert_eq!(c.section(kind).is_some(), kind != SectionKind::OCTAHEDRAL_NORMALS, "{kind}");
+    }
+    assert_eq!(c.header().minor, 18);
+    // A row at the level and height of each CHAIN_CALIBRATION record, in its order (levels from
+    // 0, three heights each, strictly increasing), with FLIP errors in [0, 1] falling within a
+    // level.
+    let (chain, flip) = (c.chain_calibration(), c.chain_calibration_flip());
+    assert_eq!(flip.len(), chain.len(), "{flip:?}");
+    let mut levels: Vec<u32> = flip.iter().map(|r| r.level).collect();
+    levels.dedup();
+    assert_eq!(levels, [0, 1, 2], "three levels of the chain");
+    assert_eq!(flip.len(), 3 * levels.len(), "{flip:?}");
+    for (k, (r, m)) in flip.iter().zip(chain).enumerate() {
+        assert_eq!((r.level, r.height), (m.level, m.height), "record {k}");
+        assert!((0.0..=1.0).contains(&r.flip), "record {k}: {r:?}");
+    }
+    assert!(flip.windows(2).filter(|w| w[0].level == w[1].level).all(|w| w[0].flip > w[1].flip), "{flip:?}");
+    assert_eq!(verify(&c).unwrap().chain_calibration_flip, flip.len() as u64);
+    // Without CHAIN_CALIBRATION_FLIP it is the 1.17 file, record for record, and the writer marks
+    // it 1.17: a 1.17 reader sees the same tables and picks the chain's level by its RMSE alone.
+    is_the_previous_file_with(&c, 18, |data| data.chain_calibration_flip.clear());
 }
 
 /// The small 1.13 file: one octahedral impostor of 2 × 2 views and their four depth planes, view

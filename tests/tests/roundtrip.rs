@@ -80,6 +80,9 @@ fn options() -> impl Strategy<Value = SyntheticOptions> {
                 // The calibration's FLIP error with a quarter of the grids (self-describing rows:
                 // it needs no other table).
                 calibration_flip: grid[1] < 2 && grid[2] >= 2,
+                // The chain levels' FLIP error with half of the chain's per-level tables (rows at
+                // their levels and heights: without them it gives none).
+                chain_calibration_flip: grid[1] >= 2 && curve_samples > 0 && grid[0] < 2,
                 // No BC7 atlas: its blocks lie after the images that follow it in IMAGES, which
                 // the generator check below refuses (the golden 1.6 to 1.8 files cover it).
                 bc7_atlas: false,
@@ -491,7 +494,7 @@ fn presets_hold_what_they_promise() {
     let block_cell = everything.cells.last().unwrap();
     assert!(block_cell.ellipsoids.count > 0, "the block cell has an ellipsoid hierarchy");
     assert!(everything.points.iter().any(|p| p.leaf_count > 1), "points have inner nodes");
-    assert_eq!(container.header().minor, 17, "everything() holds the kinds of 1.17");
+    assert_eq!(container.header().minor, 18, "everything() holds the kinds of 1.18");
     assert_eq!(everything.octahedral.len(), everything.block.tree_count as usize, "an octahedral impostor per tree");
     let views: u32 = everything.octahedral.iter().map(|o| o.frames * o.frames).sum();
     assert_eq!(everything.octahedral_depth.len(), views as usize, "a depth plane per octahedral view");
@@ -507,6 +510,13 @@ fn presets_hold_what_they_promise() {
     let mut elevations: Vec<f32> = flip.iter().map(|r| r.elevation).collect();
     elevations.dedup();
     assert_eq!(elevations, [FlipCalibrationRecord::EVERY_VIEW, 30.0, 90.0]);
+    // The chain levels' FLIP rows at the levels and heights of the chain's per-level tables.
+    let chain_flip = &everything.chain_calibration_flip;
+    assert!(!chain_flip.is_empty() && chain_flip.len() == everything.chain_calibration.len(), "{chain_flip:?}");
+    for (f, c) in chain_flip.iter().zip(&everything.chain_calibration) {
+        assert_eq!((f.level, f.height), (c.level, c.height), "{f:?} of {c:?}");
+        assert!((0.0..=1.0).contains(&f.flip), "{f:?}");
+    }
     assert!(
         everything.planes.iter().all(|p| everything.images[p.image as usize].format == image_format::LEAF_SLOTS),
         "the planes are textured indirectly"

@@ -1238,6 +1238,7 @@ fn assemble(
         data.calibration_added = calibrated.added;
         data.calibration_elevations_added = calibrated.elevations_added;
         data.calibration_flip = calibrated.flip;
+        data.chain_calibration_flip = calibrated.chain_flip;
         data.chain_calibration = calibrated.chain_levels;
         clock.lap(&mut stats, "calibration");
     }

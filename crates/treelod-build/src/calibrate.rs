@@ -87,8 +87,12 @@
 //! mean over the same views of each row of the four tables goes to `CALIBRATION_FLIP`
 //! ([`Calibrated::flip`]): the multi-scale RMSE counts a single pixel's difference as much as a
 //! crown's, FLIP weighs them as a viewer sees them, and the policy asks for both (spec §10.2).
-//! The chain's levels are chosen by their RMSE alone, so their images are not compared by FLIP,
-//! and the `lod-chain` rows have a FLIP error only at heights where the chain draws the full mesh.
+//! The chain's levels are compared too, their means over every view going to
+//! `CHAIN_CALIBRATION_FLIP` (spec §6.20, [`Calibrated::chain_flip`]): the runtime then picks the
+//! chain's level by both errors, as it picks a representation, and the `lod-chain` rows, the
+//! level so picked, have a FLIP error at every height. (Before format 1.18 the levels were chosen
+//! by their RMSE alone and the `lod-chain` rows had a FLIP error only where the chain drew the
+//! full mesh; measured below.)
 //! Measured on 2 cores, alternating builds with every
 //! representation: the oak's calibration stage 4.86–5.03 s → 8.04–8.29 s (the build 16.3 → 19.5 s),
 //! the maple's 10.6 → 20.1 s (43.7 → 53.7 s), the same peak memory.
@@ -120,10 +124,11 @@ use rayon::prelude::*;
 use treelod_eval::metrics::{LinearImage, multiscale_rmse};
 use treelod_format::pack::{oct_decode, unpack_rgba8, unpack_unorm16x2};
 use treelod_format::{
-    CalibrationRecord, ChainCalibrationRecord, ContainerData, ElevationCalibrationRecord, FlipCalibrationRecord,
-    ImageRecord, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord,
-    PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind, calibration_technique, decode_ao, image, image_format,
-    material_class, octahedral_depth_starts, point_facing_scale, prune_leaves_drawn,
+    CalibrationRecord, ChainCalibrationRecord, ChainFlipCalibrationRecord, ContainerData, ElevationCalibrationRecord,
+    FlipCalibrationRecord, ImageRecord, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord,
+    OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, Setting, TriangleRecord, billboard_kind,
+    calibration_technique, decode_ao, image, image_format, material_class, octahedral_depth_starts, point_facing_scale,
+    prune_leaves_drawn,
 };
 use treelod_runtime::impostor::{
     BARK_AREA_KEPT, BARK_ERROR_SHARE, NO_PARENT, area, crossfade, morph_corner, morph_share, plane_parents,
@@ -287,10 +292,12 @@ pub struct Calibrated {
     /// empty without a chain.
     pub chain_levels: Vec<ChainCalibrationRecord>,
     /// The mean FLIP error of every row of `mean`, `added`, `elevations` and `elevations_added`
-    /// but the `lod-chain` rows where the chain draws one of its levels (`CALIBRATION_FLIP`, spec
-    /// §6.19): the rows over every view first, then per elevation,
+    /// (`CALIBRATION_FLIP`, spec §6.19): the rows over every view first, then per elevation,
     /// each sorted by technique, then height. Empty without the `flip` feature.
     pub flip: Vec<FlipCalibrationRecord>,
+    /// The mean FLIP error of every record of `chain_levels`, in the same order
+    /// (`CHAIN_CALIBRATION_FLIP`, spec §6.20). Empty without the `flip` feature or a chain.
+    pub chain_flip: Vec<ChainFlipCalibrationRecord>,
 }
 
 /// What the calibration draws, gathered once from the container's arrays.
@@ -473,9 +480,8 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
         .collect();
     let jobs: Vec<(usize, usize)> =
         (0..HEIGHTS.len()).flat_map(|h| (0..directions[h].len()).map(move |v| (h, v))).collect();
-    // Per job: per technique, then per chain level, (error, primitives, FLIP error); the chain's
-    // levels are chosen by their error alone, so their FLIP is not measured (NaN, as without the
-    // `flip` feature).
+    // Per job: per technique, then per chain level, (error, primitives, FLIP error; NaN without
+    // the `flip` feature).
     let results: Vec<Vec<(f64, f64, f64)>> = jobs
         .par_iter()
         .map(|&(h, v)| {
@@ -499,7 +505,8 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
             let levels = scene.chain_levels.iter().map(|triangles| {
                 let mut canvas = Canvas::new(side, BACKGROUND);
                 scene.draw_triangles(&mut canvas, &view, triangles, false);
-                (error(&canvas.image(), &reference), triangles.len() as f64, f64::NAN)
+                let image = canvas.image();
+                (error(&image, &reference), triangles.len() as f64, flip(&image, &flip_reference))
             });
             measured.chain(levels).collect()
         })
@@ -527,24 +534,39 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
     let mut calibrated = Calibrated::default();
     for level in 0..scene.chain_levels.len() {
         for (h, &pixels) in HEIGHTS.iter().enumerate() {
-            let (error, primitives) = mean(techniques.len() + level, h, &every);
+            let (error, primitives, flip) = means(techniques.len() + level, h, &every);
             let level = u32::try_from(level).unwrap_or(u32::MAX);
             calibrated.chain_levels.push(ChainCalibrationRecord { level, height: pixels, error, primitives });
+            if !flip.is_nan() {
+                calibrated.chain_flip.push(ChainFlipCalibrationRecord { level, height: pixels, flip });
+            }
         }
     }
     // Per height, the chain's pick by image error over every view (the runtime's, at the default
     // target); empty without per-level tables.
     let picks: Vec<Option<ChainPick>> = if per_level {
-        let drawn: Vec<CalibrationRecord> = techniques
-            .iter()
-            .enumerate()
-            .flat_map(|(ti, &technique)| HEIGHTS.iter().enumerate().map(move |(h, &pixels)| (ti, technique, h, pixels)))
+        let cells = || {
+            techniques.iter().enumerate().flat_map(|(ti, &technique)| {
+                HEIGHTS.iter().enumerate().map(move |(h, &pixels)| (ti, technique, h, pixels))
+            })
+        };
+        let drawn: Vec<CalibrationRecord> = cells()
             .map(|(ti, technique, h, pixels)| {
                 let (error, primitives) = mean(ti, h, &every);
                 CalibrationRecord { technique, height: pixels, error, primitives }
             })
             .collect();
-        chain_picks(&drawn, &calibrated.chain_levels, &held)
+        // The FLIP rows over every view, so the picks ask for both errors as the runtime does.
+        let elevation = FlipCalibrationRecord::EVERY_VIEW;
+        let drawn_flip: Vec<FlipCalibrationRecord> = cells()
+            .map(|(ti, technique, h, pixels)| (technique, pixels, means(ti, h, &every).2))
+            .filter(|&(_, _, flip)| !flip.is_nan())
+            .map(|(technique, height, flip)| FlipCalibrationRecord { elevation, technique, height, flip })
+            .collect();
+        let tables = Calibration::from_records(&drawn).map(|c| {
+            c.with_chain_levels(&calibrated.chain_levels).with_flip(&drawn_flip).with_chain_flip(&calibrated.chain_flip)
+        });
+        chain_picks(tables.as_ref(), &held)
     } else {
         Vec::new()
     };
@@ -603,15 +625,11 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
 
 /// The LoD chain's pick at each of [`HEIGHTS`] by image error (spec §10.2): the full mesh or the
 /// level [`Calibration::chain_level`] picks with the default target (allowed at each height as
-/// [`target_at`] says, as the runtime allows it) from the tables over every
-/// view of the techniques `records` measures and the levels of `chain_levels`, the floor over
-/// the techniques `held`; `None` at a height where the tables hold no pick.
-fn chain_picks(
-    records: &[CalibrationRecord],
-    chain_levels: &[ChainCalibrationRecord],
-    held: &[u32],
-) -> Vec<Option<ChainPick>> {
-    let Some(tables) = Calibration::from_records(records).map(|c| c.with_chain_levels(chain_levels)) else {
+/// [`target_at`] says, as the runtime allows it) from `tables` over every view (the techniques
+/// measured here, the chain's levels, and with FLIP their FLIP errors), the floor over the
+/// techniques `held`; `None` at a height where the tables hold no pick.
+fn chain_picks(tables: Option<&Calibration>, held: &[u32]) -> Vec<Option<ChainPick>> {
+    let Some(tables) = tables else {
         return vec![None; HEIGHTS.len()];
     };
     let usable = |t: Technique| u32::try_from(t.index()).is_ok_and(|code| held.contains(&code));

@@ -58,9 +58,8 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
     assert_eq!(container.point_facing().len(), container.points().len());
     assert_eq!(container.calibration_added(), out.data.calibration_added.as_slice());
     // Built with FLIP (the `flip` feature, which the command line enables), the calibration's
-    // FLIP error of every row of the four tables (CALIBRATION_FLIP) makes it 1.17: every row but
-    // the LoD chain's where it draws one of its levels (on the demo tree, every height), whose
-    // images are not compared by FLIP.
+    // FLIP error of every row of the four tables (CALIBRATION_FLIP, a kind of 1.17) and of every
+    // record of the chain's per-level tables (CHAIN_CALIBRATION_FLIP) make it 1.18.
     let d = &out.data;
     let mut rows: Vec<(f32, u32, f32)> =
         d.calibration.iter().chain(&d.calibration_added).map(|r| (-1.0, r.technique, r.height)).collect();
@@ -74,11 +73,16 @@ fn the_demo_tree_is_calibrated_for_every_representation_it_holds() {
         let flip: Vec<(f32, u32, f32)> =
             container.calibration_flip().iter().map(|r| (r.elevation, r.technique, r.height)).collect();
         assert!(flip.iter().all(|r| rows.contains(r)), "each FLIP row is a table's row");
-        assert!(rows.iter().all(|r| r.1 == t::LOD_CHAIN || flip.contains(r)), "a FLIP error per row");
+        assert_eq!(flip.len(), rows.len(), "a FLIP error per row");
         assert!(container.calibration_flip().iter().all(|r| r.flip > 0.0 && r.flip < 1.0));
-        assert_eq!(container.header().minor, 17, "the calibration's FLIP error is a kind of 1.17");
+        let levels: Vec<(u32, f32)> = d.chain_calibration.iter().map(|r| (r.level, r.height)).collect();
+        let level_flips: Vec<(u32, f32)> =
+            container.chain_calibration_flip().iter().map(|r| (r.level, r.height)).collect();
+        assert_eq!(level_flips, levels, "a FLIP error per level and height");
+        assert!(container.chain_calibration_flip().iter().all(|r| r.flip > 0.0 && r.flip < 1.0));
+        assert_eq!(container.header().minor, 18, "the chain levels' FLIP error is a kind of 1.18");
     } else {
-        assert!(container.calibration_flip().is_empty());
+        assert!(container.calibration_flip().is_empty() && container.chain_calibration_flip().is_empty());
         assert_eq!(container.header().minor, 16, "the views' normal grids are a kind of 1.16");
     }
     verify(&container).expect("verifies");

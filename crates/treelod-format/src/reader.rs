@@ -8,12 +8,12 @@ use bytemuck::{Pod, Zeroable};
 use crate::error::{Error, Result};
 use crate::metadata::{MAX_META_BYTES, Metadata};
 use crate::records::{
-    AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
-    ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, FlipCalibrationRecord, HEADER_SIZE, Header,
-    ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord, OctahedralDepthRecord,
-    OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
-    PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
-    TriangleRecord, VertexRecord,
+    AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord,
+    ChainFlipCalibrationRecord, CurveSample, ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD,
+    FlipCalibrationRecord, HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MaterialRecord,
+    OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord,
+    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry,
+    SectionKind, TriangleRecord, VertexRecord,
 };
 
 /// Largest section table a reader accepts (spec §12).
@@ -479,6 +479,15 @@ impl Container {
     #[must_use]
     pub fn calibration_flip(&self) -> &[FlipCalibrationRecord] {
         self.records(SectionKind::CALIBRATION_FLIP)
+    }
+
+    /// `CHAIN_CALIBRATION_FLIP` records (spec §6.20): each LoD chain level's mean LDR-FLIP error
+    /// by projected height over every view, sorted by level, then height. Empty without the
+    /// section, as in every file before 1.18 and in files built without FLIP; a reader then picks
+    /// the chain's level by the RMSE of `CHAIN_CALIBRATION` alone. Since 1.18.
+    #[must_use]
+    pub fn chain_calibration_flip(&self) -> &[ChainFlipCalibrationRecord] {
+        self.records(SectionKind::CHAIN_CALIBRATION_FLIP)
     }
 
     /// `CHAIN_CALIBRATION` records (spec §6.17; empty without the section, as in every file

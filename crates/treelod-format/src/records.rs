@@ -13,7 +13,7 @@ pub const MAJOR: u16 = 1;
 /// The latest minor version this crate knows. The writer marks each file with the smallest minor
 /// whose section kinds it holds ([`SectionKind::since_minor`]), so a file without 1.1's kinds is
 /// a 1.0 file.
-pub const MINOR: u16 = 17;
+pub const MINOR: u16 = 18;
 /// Size of the fixed header in bytes (spec §3).
 pub const HEADER_SIZE: usize = 64;
 /// Size of one section-table entry in bytes (spec §4).
@@ -209,9 +209,13 @@ impl SectionKind {
     /// `CALIBRATION`'s and `CALIBRATION_ELEVATIONS`' (and their added sections') (spec §6.19).
     /// Since 1.17.
     pub const CALIBRATION_FLIP: Self = Self(0x0075);
+    /// [`ChainFlipCalibrationRecord`]s: each level of the baseline LoD chain's mean LDR-FLIP
+    /// error by projected height over every view, of the same drawings as `CHAIN_CALIBRATION`'s
+    /// (spec §6.20). Since 1.18.
+    pub const CHAIN_CALIBRATION_FLIP: Self = Self(0x0076);
 
     /// Every kind this version knows, in ascending order.
-    pub const KNOWN: [Self; 39] = [
+    pub const KNOWN: [Self; 40] = [
         Self::META,
         Self::BLOCK,
         Self::CELLS,
@@ -251,6 +255,7 @@ impl SectionKind {
         Self::CALIBRATION_ADDED,
         Self::CALIBRATION_ELEVATIONS_ADDED,
         Self::CALIBRATION_FLIP,
+        Self::CHAIN_CALIBRATION_FLIP,
     ];
 
     /// The spec's name of a known kind.
@@ -283,6 +288,7 @@ impl SectionKind {
             Self::OCTAHEDRAL_NORMALS => "OCTAHEDRAL_NORMALS",
             Self::OCTAHEDRAL_NORMAL_GRIDS => "OCTAHEDRAL_NORMAL_GRIDS",
             Self::CALIBRATION_FLIP => "CALIBRATION_FLIP",
+            Self::CHAIN_CALIBRATION_FLIP => "CHAIN_CALIBRATION_FLIP",
             Self::VERTEX_AO => "VERTEX_AO",
             Self::POINT_AO => "POINT_AO",
             Self::PLANE_AO => "PLANE_AO",
@@ -334,6 +340,7 @@ impl SectionKind {
             Self::OCTAHEDRAL_NORMALS => size_of::<OctahedralNormalRecord>(),
             Self::OCTAHEDRAL_NORMAL_GRIDS => size_of::<OctahedralNormalGridRecord>(),
             Self::CALIBRATION_FLIP => size_of::<FlipCalibrationRecord>(),
+            Self::CHAIN_CALIBRATION_FLIP => size_of::<ChainFlipCalibrationRecord>(),
             Self::CALIBRATION | Self::CALIBRATION_ADDED => size_of::<CalibrationRecord>(),
             Self::CHAIN_CALIBRATION => size_of::<ChainCalibrationRecord>(),
             Self::CALIBRATION_ELEVATIONS | Self::CALIBRATION_ELEVATIONS_ADDED => {
@@ -357,7 +364,8 @@ impl SectionKind {
     /// for the octahedral views' depth planes (`OCTAHEDRAL_DEPTH`), 14 for the points' facing
     /// (`POINT_FACING`), 15 for the octahedral views' normals (`OCTAHEDRAL_NORMALS`), 16 for
     /// their grids of any size (`OCTAHEDRAL_NORMAL_GRIDS`), 17 for the calibration's FLIP error
-    /// (`CALIBRATION_FLIP`), 0 for the other known kinds and for kinds this version does not
+    /// (`CALIBRATION_FLIP`), 18 for the LoD chain levels' FLIP error (`CHAIN_CALIBRATION_FLIP`), 0
+    /// for the other known kinds and for kinds this version does not
     /// know (private extensions do not raise a file's minor).
     #[must_use]
     pub fn since_minor(self) -> u16 {
@@ -378,6 +386,7 @@ impl SectionKind {
             Self::OCTAHEDRAL_NORMALS => 15,
             Self::OCTAHEDRAL_NORMAL_GRIDS => 16,
             Self::CALIBRATION_FLIP => 17,
+            Self::CHAIN_CALIBRATION_FLIP => 18,
             _ => 0,
         }
     }
@@ -1146,6 +1155,25 @@ pub struct ChainCalibrationRecord {
     pub primitives: f32,
 }
 const _: () = assert!(size_of::<ChainCalibrationRecord>() == 16);
+
+/// One sample of a LoD chain level's calibration as FLIP sees it (spec §6.20): the mean LDR-FLIP
+/// error of the block drawn at chain level `level` when it is `height` pixels high on screen,
+/// over every view, measured on the same drawings as the `CHAIN_CALIBRATION` record of that
+/// level and height (spec §6.17) and as `CALIBRATION_FLIP`'s (§6.19). The record of
+/// `CHAIN_CALIBRATION_FLIP` (since 1.18).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ChainFlipCalibrationRecord {
+    /// The chain level, 0 the finest: the `level` of `LOD_LEVELS` records. Non-decreasing over
+    /// the section.
+    pub level: u32,
+    /// Projected height of the block's bounds, pixels; strictly increasing within a level.
+    pub height: f32,
+    /// Mean LDR-FLIP error (Andersson et al. 2020, 67 pixels per degree) of the 8-bit sRGB shaded
+    /// image against the supersampled full mesh's, over every view, `[0, 1]`.
+    pub flip: f32,
+}
+const _: () = assert!(size_of::<ChainFlipCalibrationRecord>() == 12);
 
 /// One level of a tree's baseline level-of-detail chain (spec §6.12): a general mesh
 /// simplifier's output, drawn instead of the whole tree when its error projects small enough.

@@ -13,12 +13,13 @@ use crate::error::{Error, Result};
 use crate::pack::unorm16x2_steps;
 use crate::reader::{Container, check_section_checksum};
 use crate::records::{
-    AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
-    ElevationCalibrationRecord, EllipsoidRecord, FlipCalibrationRecord, ImageRecord, LineRecord, LodLevelRecord,
-    MaterialRecord, NO_IMAGE, OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord,
-    OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, Range,
-    SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord, VertexRecord, billboard_kind, calibration_technique,
-    far_switch, far_threshold, image_format, leaf_slots, lines_drawn_at, plane_leaf_bases,
+    AO_KINDS, BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord,
+    ChainFlipCalibrationRecord, CurveSample, ElevationCalibrationRecord, EllipsoidRecord, FlipCalibrationRecord,
+    ImageRecord, LineRecord, LodLevelRecord, MaterialRecord, NO_IMAGE, OctahedralDepthRecord,
+    OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
+    PlaneRecord, PointRecord, PruneLeafRecord, Range, SECTION_ENTRY_SIZE, SectionKind, SptElement, TriangleRecord,
+    VertexRecord, billboard_kind, calibration_technique, far_switch, far_threshold, image_format, leaf_slots,
+    lines_drawn_at, plane_leaf_bases,
 };
 
 /// Largest image side in texels (spec §6.7, §12).
@@ -110,6 +111,9 @@ pub struct VerifyReport {
     /// `CALIBRATION_FLIP` records checked (spec §6.19, since 1.17): each representation's mean
     /// LDR-FLIP error by projected height, over every view and per elevation.
     pub calibration_flip: u64,
+    /// `CHAIN_CALIBRATION_FLIP` records checked (spec §6.20, since 1.18): each LoD chain level's
+    /// mean LDR-FLIP error by projected height over every view.
+    pub chain_calibration_flip: u64,
     /// `VERTEX_AO`, `POINT_AO`, `PLANE_AO`, `ELLIPSOID_AO`, `LINE_AO` and `FAR_LINE_AO` bytes (their
     /// counts are checked at open).
     pub ao: u64,
@@ -244,6 +248,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     )?;
     check_chain_calibration(c.chain_calibration(), c.lod_levels())?;
     check_calibration_flip(c.calibration_flip())?;
+    check_chain_calibration_flip(c.chain_calibration_flip(), c.lod_levels())?;
     check_slot_images_only_for_planes(c)?;
     check_metadata(c)?;
 
@@ -290,6 +295,7 @@ pub fn verify(c: &Container) -> Result<VerifyReport> {
     report.calibration_added = c.calibration_added().len() as u64;
     report.calibration_elevations_added = c.calibration_elevations_added().len() as u64;
     report.calibration_flip = c.calibration_flip().len() as u64;
+    report.chain_calibration_flip = c.chain_calibration_flip().len() as u64;
     report.ao = AO_KINDS.iter().map(|&(kind, _)| c.raw_bytes(kind).len() as u64).sum();
     report.point_facing = c.point_facing().len() as u64;
     Ok(report)
@@ -1591,15 +1597,7 @@ fn check_chain_calibration(records: &[ChainCalibrationRecord], levels: &[LodLeve
     if records.is_empty() {
         return Ok(());
     }
-    // The levels every tree of the chain has: 0 .. the least of the trees' level counts.
-    let mut per_tree: Vec<(u32, u32)> = Vec::new();
-    for l in levels {
-        match per_tree.iter_mut().find(|(tree, _)| *tree == l.tree) {
-            Some(entry) => entry.1 = entry.1.max(l.level.saturating_add(1)),
-            None => per_tree.push((l.tree, l.level.saturating_add(1))),
-        }
-    }
-    let depth = per_tree.iter().map(|&(_, n)| n).min().unwrap_or(0);
+    let depth = chain_depth(levels);
     for (i, r) in records.iter().enumerate() {
         if r.level >= depth {
             return Err(bad(
@@ -1620,6 +1618,58 @@ fn check_chain_calibration(records: &[ChainCalibrationRecord], levels: &[LodLeve
                     format!("height {} does not increase strictly after {}", r.height, prev.height),
                 ));
             }
+        }
+    }
+    Ok(())
+}
+
+/// The levels every tree of the chain has: `0 .. depth`, the least of the trees' level counts
+/// (0 without a chain).
+fn chain_depth(levels: &[LodLevelRecord]) -> u32 {
+    let mut per_tree: Vec<(u32, u32)> = Vec::new();
+    for l in levels {
+        match per_tree.iter_mut().find(|(tree, _)| *tree == l.tree) {
+            Some(entry) => entry.1 = entry.1.max(l.level.saturating_add(1)),
+            None => per_tree.push((l.tree, l.level.saturating_add(1))),
+        }
+    }
+    per_tree.iter().map(|&(_, n)| n).min().unwrap_or(0)
+}
+
+/// Spec §6.20: the records of `CHAIN_CALIBRATION_FLIP` have levels non-decreasing, each a level
+/// every tree of `LOD_LEVELS` has (so the section needs a chain), heights finite, positive and
+/// strictly increasing within a level, and FLIP errors in `[0, 1]`.
+///
+/// As `CALIBRATION_FLIP`'s (§6.19), the rows are not paired with the RMSE table's records
+/// (`CHAIN_CALIBRATION`, §6.17): a reader interpolates each table on its own heights.
+fn check_chain_calibration_flip(records: &[ChainFlipCalibrationRecord], levels: &[LodLevelRecord]) -> Result<()> {
+    let kind = SectionKind::CHAIN_CALIBRATION_FLIP;
+    if records.is_empty() {
+        return Ok(());
+    }
+    let depth = chain_depth(levels);
+    for (i, r) in records.iter().enumerate() {
+        if r.level >= depth {
+            return Err(bad(
+                kind,
+                i,
+                format!("level {} is not a level of every tree's LoD chain (0..{depth})", r.level),
+            ));
+        }
+        if !(r.height.is_finite() && r.height > 0.0) {
+            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
+        }
+        if !unit(r.flip) {
+            return Err(bad(kind, i, format!("FLIP error {} lies outside [0, 1]", r.flip)));
+        }
+        let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) else {
+            continue;
+        };
+        if r.level < prev.level {
+            return Err(bad(kind, i, format!("level {} follows level {}", r.level, prev.level)));
+        }
+        if r.level == prev.level && r.height <= prev.height {
+            return Err(bad(kind, i, format!("height {} does not increase strictly after {}", r.height, prev.height)));
         }
     }
     Ok(())

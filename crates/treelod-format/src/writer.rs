@@ -16,12 +16,12 @@ use crate::metadata::MAX_META_BYTES;
 use crate::metadata::Metadata;
 use crate::reader::{Container, MAX_COMPRESSION_RATIO, check_block_and_cells};
 use crate::records::{
-    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, CurveSample,
-    ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, FlipCalibrationRecord, HEADER_SIZE, Header,
-    ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord, OctahedralDepthRecord,
-    OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord, PlaneLeafRecord,
-    PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry, SectionKind,
-    TriangleRecord, VertexRecord, image_format,
+    BillboardRecord, BlockRecord, CalibrationRecord, CellRecord, ChainCalibrationRecord, ChainFlipCalibrationRecord,
+    CurveSample, ElevationCalibrationRecord, EllipsoidRecord, FLAG_SHUFFLE, FLAG_ZSTD, FlipCalibrationRecord,
+    HEADER_SIZE, Header, ImageRecord, LineRecord, LodLevelRecord, MAGIC, MAJOR, MINOR, MaterialRecord,
+    OctahedralDepthRecord, OctahedralNormalGridRecord, OctahedralNormalRecord, OctahedralRecord, PlaneDiffuseRecord,
+    PlaneLeafRecord, PlaneRecord, PointRecord, PruneLeafRecord, SECTION_ALIGN, SECTION_ENTRY_SIZE, SectionEntry,
+    SectionKind, TriangleRecord, VertexRecord, image_format,
 };
 
 /// How sections are stored.
@@ -167,6 +167,9 @@ pub struct ContainerData {
     /// `CALIBRATION_FLIP`: empty, or each representation's mean LDR-FLIP error by projected height,
     /// over every view and per elevation of the views (spec §6.19; since 1.17).
     pub calibration_flip: Vec<FlipCalibrationRecord>,
+    /// `CHAIN_CALIBRATION_FLIP`: empty, or each LoD chain level's mean LDR-FLIP error by projected
+    /// height over every view (spec §6.20; since 1.18).
+    pub chain_calibration_flip: Vec<ChainFlipCalibrationRecord>,
     /// Sections of kinds this version does not define (kind, bytes): private extensions, or data of
     /// a later minor version carried through. Written uncompressed with `record_size` 1.
     pub extra_sections: Vec<(u32, Vec<u8>)>,
@@ -229,6 +232,7 @@ impl ContainerData {
             calibration_added: c.calibration_added().to_vec(),
             calibration_elevations_added: c.calibration_elevations_added().to_vec(),
             calibration_flip: c.calibration_flip().to_vec(),
+            chain_calibration_flip: c.chain_calibration_flip().to_vec(),
             extra_sections: c
                 .sections()
                 .iter()
@@ -602,6 +606,7 @@ macro_rules! optional_sections {
             (SectionKind::CALIBRATION_ADDED, $payload!(calibration_added)),
             (SectionKind::CALIBRATION_ELEVATIONS_ADDED, $payload!(calibration_elevations_added)),
             (SectionKind::CALIBRATION_FLIP, $payload!(calibration_flip)),
+            (SectionKind::CHAIN_CALIBRATION_FLIP, $payload!(chain_calibration_flip)),
         ]
     };
 }

@@ -58,7 +58,7 @@ fn the_kind_is_numbered_named_and_sized_as_the_spec_says() {
     assert_eq!(size_of::<FlipCalibrationRecord>(), 16);
     assert_eq!(KIND.since_minor(), 17);
     assert!(KIND.compressible());
-    assert_eq!(SectionKind::KNOWN.len(), 39);
+    assert_eq!(SectionKind::KNOWN.len(), 40);
     assert!(SectionKind::KNOWN.contains(&KIND));
     assert!(SectionKind::KNOWN.windows(2).all(|w| w[0] < w[1]));
     assert_eq!(EVERY_VIEW, -1.0);

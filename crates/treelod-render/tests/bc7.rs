@@ -84,9 +84,10 @@ fn the_build_stores_bc7_atlases_by_default_and_rgba8_when_asked() {
     assert_eq!(atlas_formats(&rgba8), (image_format::RGBA8_SRGB, image_format::RGBA8_SRGB));
     // BC7 is an image format of 1.6, which readers before it cannot sample; the octahedral views'
     // normal grids (OCTAHEDRAL_NORMAL_GRIDS, 1.16, which every build with baselines writes) mark
-    // both files 1.16, and readers before it skip the kind (1.17 where the build measured the
-    // calibration's FLIP error, CALIBRATION_FLIP: with its `flip` feature, as in a workspace build).
-    let minor = if bc7.calibration_flip().is_empty() { 16 } else { 17 };
+    // both files 1.16, and readers before it skip the kind (1.18 where the build measured the
+    // calibration's FLIP error, CALIBRATION_FLIP of 1.17 and the chain levels' CHAIN_CALIBRATION_FLIP
+    // of 1.18: with its `flip` feature, as in a workspace build).
+    let minor = if bc7.calibration_flip().is_empty() { 16 } else { 18 };
     assert_eq!((bc7.header().minor, rgba8.header().minor), (minor, minor));
     assert!(rgba8.images().iter().all(|i| i.format != image_format::BC7_SRGB && i.format != image_format::BC7_LINEAR));
     treelod_format::verify(&bc7).expect("the BC7 container verifies");

@@ -56,10 +56,12 @@
 //! share of the FLIP floor (the least FLIP error at `h` of the full mesh and every
 //! representation, from the same elevation class): `flip_t(h) ≤ flip_floor(h) · (1 + target_h /
 //! floor(h))`, so the one target means one thing for both errors, and no second knob or constant
-//! is needed. A technique without FLIP rows is judged by its RMSE alone: the LoD chain, whose rows
-//! have a FLIP error only where it draws the full mesh (the build does not compare its levels by
-//! FLIP), and drawn at another target than the build's default (budget mode) it reads the FLIP
-//! row of the chain at the default. When nothing qualifies, the technique whose larger share
+//! is needed. A technique without FLIP rows is judged by its RMSE alone. The LoD chain is judged by
+//! the level it draws: where the container has its levels' FLIP tables (`CHAIN_CALIBRATION_FLIP`,
+//! format 1.18) by that level's FLIP error over every view plus the chain's offset from the
+//! elevation class (its FLIP row there less its row over every view), as its RMSE is read; in a
+//! file of 1.17, whose `lod-chain` rows have a FLIP error only where it draws the full mesh, by
+//! that row (the chain at the build's default target). When nothing qualifies, the technique whose larger share
 //! over the two floors is least wins (without FLIP tables, the lowest error, as before).
 //! Measured with `bench
 //! --quality` over 200 trees of each shared model built with every representation (30 frames,
@@ -88,6 +90,15 @@
 //! every mesh loses to the alpha test), the fewest triangles within `target_h` of the least error
 //! among them: the policy
 //! would not pick the chain there, and a chain drawn anyway keeps its best image for less.
+//! Where the container has the levels' FLIP tables (`CHAIN_CALIBRATION_FLIP`, format 1.18), a
+//! level (or the full mesh) must also be within the same share of the FLIP floor over every
+//! view, the floor counting the levels' FLIP errors in place of the chain's own row, as a
+//! representation must be (above); where none is, the same shares of the chain's own least
+//! errors, then its RMSE alone. (Measured with `bench --quality` over 200 trees of each shared
+//! model built with every representation, 30 frames, 480×270: the Quaternius tree's chain at 64
+//! pixels draws 764 triangles where it drew 722, its forest 9,935 / .01182 / .01740 → 10,043 /
+//! .01170 / .01700 in primitives per frame / RMSE / FLIP, the point tree's .01204 / .01759; the
+//! other six models' forests are the same to the last digit.)
 //! [`ChainChoices`] tables it per model and policy as [`Choices`] does, with the same
 //! hysteresis; `baseline::select` looks it up per tree, and keeps the geometric rule (levels by
 //! meshoptimizer's error alone) for containers without the tables.
@@ -184,7 +195,8 @@
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 use treelod_format::{
-    CalibrationRecord, ChainCalibrationRecord, Container, ElevationCalibrationRecord, FlipCalibrationRecord,
+    CalibrationRecord, ChainCalibrationRecord, ChainFlipCalibrationRecord, Container, ElevationCalibrationRecord,
+    FlipCalibrationRecord,
 };
 
 use crate::draws::Representations;
@@ -331,6 +343,9 @@ pub struct Calibration {
     /// The same per elevation of [`Self::elevations`], index for index (empty curves where the
     /// tables have none at that elevation; no entries without FLIP tables).
     flip_elevations: Vec<PerTechnique<Vec<Sample>>>,
+    /// Per LoD chain level, its FLIP error over every view (`CHAIN_CALIBRATION_FLIP`, format
+    /// 1.18; each sample's `error` the FLIP error, its `primitives` 0); empty without them.
+    level_flips: Vec<Vec<Sample>>,
 }
 
 /// Appends `record`'s sample to `curves` if its technique is known, its values finite and its
@@ -419,6 +434,7 @@ impl Calibration {
             c.with_elevations(&elevations)
                 .with_chain_levels(container.chain_calibration())
                 .with_flip(container.calibration_flip())
+                .with_chain_flip(container.chain_calibration_flip())
         })
     }
 
@@ -473,14 +489,86 @@ impl Calibration {
 
     /// The FLIP floor at one height (elevation class `elevation`, as [`Self::flip_at`]): the
     /// least FLIP error of the full mesh and of every technique the FLIP tables hold and
-    /// `usable` accepts; `+∞` without FLIP tables.
+    /// `usable` accepts, and over every view the LoD chain's levels in place of its own row where
+    /// the tables hold their FLIP errors (as [`Self::floor`] counts them); `+∞` without FLIP
+    /// tables.
     #[must_use]
     pub fn flip_floor(&self, elevation: Option<usize>, height: f32, usable: impl Fn(Technique) -> bool) -> f32 {
-        Technique::ALL
+        let by_class = elevation.is_some_and(|e| e < self.flip_elevations.len());
+        let per_level = !self.level_flips.is_empty() && !by_class;
+        let techniques = Technique::ALL
             .into_iter()
-            .filter(|&t| t == Technique::Full || usable(t))
-            .filter_map(|t| self.flip_at(elevation, t, height))
-            .fold(f32::INFINITY, f32::min)
+            .filter(|&t| t == Technique::Full || (usable(t) && !(per_level && t == Technique::LodChain)))
+            .filter_map(|t| self.flip_at(elevation, t, height));
+        let chain = per_level && usable(Technique::LodChain);
+        #[expect(clippy::cast_possible_truncation, reason = "a chain has a few levels")]
+        let levels = (0..self.level_flips.len() as u32).filter(|_| chain).filter_map(|l| self.level_flip_at(l, height));
+        techniques.chain(levels).fold(f32::INFINITY, f32::min)
+    }
+
+    /// These tables with the LoD chain levels' FLIP tables of `records` (`CHAIN_CALIBRATION_FLIP`,
+    /// sorted as spec §6.20 asks), replacing any they had. Samples with non-finite values are
+    /// skipped; the levels end at the first level number without a valid sample. The chain's
+    /// level is then picked by both errors ([`Self::chain_level`]).
+    #[must_use]
+    pub fn with_chain_flip(mut self, records: &[ChainFlipCalibrationRecord]) -> Self {
+        self.level_flips.clear();
+        for record in records {
+            let Ok(level) = usize::try_from(record.level) else { break };
+            if level > self.level_flips.len() {
+                break;
+            }
+            if level == self.level_flips.len() {
+                self.level_flips.push(Vec::new());
+            }
+            push_to_curve(&mut self.level_flips[level], record.height, record.flip, 0.0);
+        }
+        while self.level_flips.last().is_some_and(Vec::is_empty) {
+            self.level_flips.pop();
+        }
+        if let Some(gap) = self.level_flips.iter().position(Vec::is_empty) {
+            self.level_flips.truncate(gap);
+        }
+        self
+    }
+
+    /// The FLIP error of the LoD chain's level `level` at a projected height of `height` pixels
+    /// over every view, if the tables hold it (`CHAIN_CALIBRATION_FLIP`).
+    #[must_use]
+    pub fn level_flip_at(&self, level: u32, height: f32) -> Option<f32> {
+        let curve = self.level_flips.get(usize::try_from(level).ok()?)?;
+        curve_at(curve, height.max(f32::MIN_POSITIVE).log2()).map(|(flip, _)| flip)
+    }
+
+    /// The FLIP error of the LoD chain drawn at `target` ([`Self::chain_level`]) at a projected
+    /// height of `height` pixels, seen from elevation class `elevation`: its level's FLIP error
+    /// over every view plus the chain's offset there, the elevation's `lod-chain` FLIP row less
+    /// the row over every view (as [`Self::level_at_elevation`] reads the RMSE), or the full
+    /// mesh's where it picks the full mesh. Without the levels' FLIP tables, the `lod-chain` row
+    /// (the chain at the default target). `None` where the tables hold neither.
+    fn chain_flip_at(
+        &self,
+        elevation: Option<usize>,
+        height: f32,
+        target: f32,
+        usable: impl Fn(Technique) -> bool,
+    ) -> Option<f32> {
+        if self.level_flips.is_empty() {
+            return self.flip_at(elevation, Technique::LodChain, height);
+        }
+        match self.chain_level(height, target, usable)? {
+            Some(level) => {
+                let offset = match (
+                    elevation.and_then(|_| self.flip_at(elevation, Technique::LodChain, height)),
+                    self.flip_at(None, Technique::LodChain, height),
+                ) {
+                    (Some(seen), Some(mean)) => seen - mean,
+                    _ => 0.0,
+                };
+                self.level_flip_at(level, height).map(|f| (f + offset).max(0.0))
+            }
+            None => self.flip_at(elevation, Technique::Full, height),
+        }
     }
 
     /// These tables with the tables per elevation of `records` (sorted as spec §6.16 asks),
@@ -712,41 +800,45 @@ impl Calibration {
         target: f32,
         usable: impl Fn(Technique) -> bool,
     ) -> Technique {
-        let candidates = || {
-            Technique::ALL
-                .into_iter()
-                .filter(|&t| t != Technique::Full && usable(t))
-                .filter_map(|t| self.measured(elevation, t, height, target, &usable).map(|(e, p)| (t, e, p)))
-        };
         let (floor, target) = (self.floor(elevation, height, &usable), sanitise(target));
         // With FLIP tables a technique must also be within its share of the FLIP floor: the
         // allowance is the same share of either floor (module docs), and where the FLIP tables
         // lack the technique, or either floor is not positive, the RMSE decides alone.
         let flip_floor = self.flip_floor(elevation, height, &usable);
         let flip_checked = floor > 0.0 && flip_floor.is_finite() && floor.is_finite();
+        // (technique, error, primitives, FLIP error where it is checked.)
+        let candidates: Vec<(Technique, f32, f32, Option<f32>)> = Technique::ALL
+            .into_iter()
+            .filter(|&t| t != Technique::Full && usable(t))
+            .filter_map(|t| {
+                let (e, p) = self.measured(elevation, t, height, target, &usable)?;
+                let f = if !flip_checked {
+                    None
+                } else if t == Technique::LodChain {
+                    self.chain_flip_at(elevation, height, target, &usable)
+                } else {
+                    self.flip_at(elevation, t, height)
+                };
+                Some((t, e, p, f))
+            })
+            .collect();
         // (The share of the floor each error lies above it, the larger of the two.)
-        let excess = |t: Technique, e: f32| {
+        let excess = |&(_, e, _, f): &(Technique, f32, f32, Option<f32>)| {
             let over = (e - floor) / floor;
-            match self.flip_at(elevation, t, height).filter(|_| flip_checked) {
-                Some(f) => over.max((f - flip_floor) / flip_floor.max(f32::MIN_POSITIVE)),
-                None => over,
-            }
+            f.map_or(over, |f| over.max((f - flip_floor) / flip_floor.max(f32::MIN_POSITIVE)))
         };
-        let within = |t: Technique, e: f32| {
-            e <= floor + target
-                && (!flip_checked
-                    || self.flip_at(elevation, t, height).is_none_or(|f| f <= flip_floor + target * flip_floor / floor))
+        let within = |&(_, e, _, f): &(Technique, f32, f32, Option<f32>)| {
+            e <= floor + target && f.is_none_or(|f| f <= flip_floor + target * flip_floor / floor)
         };
-        let cheapest = candidates()
-            .filter(|&(t, e, _)| within(t, e))
+        let cheapest = candidates
+            .iter()
+            .filter(|c| within(c))
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.0.cmp(&b.0)));
         // None within: the least error, or with FLIP tables the least share over the floors.
-        let key = |t: Technique, e: f32| if flip_checked { excess(t, e) } else { e };
-        let best = || {
-            candidates()
-                .min_by(|a, b| key(a.0, a.1).total_cmp(&key(b.0, b.1)).then(a.2.total_cmp(&b.2)).then(a.0.cmp(&b.0)))
-        };
-        cheapest.or_else(best).map_or(Technique::FALLBACK, |(t, _, _)| t)
+        let key = |c: &(Technique, f32, f32, Option<f32>)| if flip_checked { excess(c) } else { c.1 };
+        let best =
+            || candidates.iter().min_by(|a, b| key(a).total_cmp(&key(b)).then(a.2.total_cmp(&b.2)).then(a.0.cmp(&b.0)));
+        cheapest.or_else(best).map_or(Technique::FALLBACK, |c| c.0)
     }
 
     /// `(error, primitives)` of `technique` drawn under a policy of `target` seen from elevation
@@ -813,17 +905,40 @@ impl Calibration {
         // Per elevation class, the limit there (the floor from that class plus the target).
         let limits: Vec<f32> =
             (0..self.elevations.len()).map(|e| self.floor(Some(e), height, &usable) + target).collect();
-        let cheapest_within = |limit: f32, everywhere: bool| {
+        let floor = self.floor(None, height, &usable);
+        let flip_of = |pick: ChainPick| match pick {
+            Some(level) => self.level_flip_at(level, height),
+            None => self.flip_at(None, Technique::Full, height),
+        };
+        let flips = !self.level_flips.is_empty();
+        // The FLIP limit of the same share as `limit` (the RMSE one) of `flip_floor` over `floor`.
+        let flip_limit = |floor: f32, flip_floor: f32, limit: f32| {
+            (flips && floor > 0.0 && floor.is_finite() && flip_floor.is_finite())
+                .then(|| flip_floor + (limit - floor) * flip_floor / floor)
+        };
+        let cheapest_within = |limit: f32, everywhere: bool, flip_limit: Option<f32>| {
             candidates
                 .iter()
-                .filter(|c| c.1 <= limit && (!everywhere || self.within_from_every_elevation(c.0, height, &limits)))
+                .filter(|c| {
+                    c.1 <= limit
+                        && (!everywhere || self.within_from_every_elevation(c.0, height, &limits))
+                        && flip_limit.is_none_or(|l| flip_of(c.0).is_none_or(|f| f <= l))
+                })
                 .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.3.cmp(&b.3)))
         };
         let best = candidates.iter().map(|c| c.1).fold(f32::INFINITY, f32::min);
-        let limit = self.floor(None, height, &usable) + target;
-        cheapest_within(limit, true)
-            .or_else(|| cheapest_within(limit, false))
-            .or_else(|| cheapest_within(best + target, false))
+        let best_flip = candidates.iter().filter_map(|c| flip_of(c.0)).fold(f32::INFINITY, f32::min);
+        let limit = floor + target;
+        // With the levels' FLIP tables a level (or the full mesh) must also be within the same
+        // share of the FLIP floor over every view, as the policy's rule asks of a technique
+        // (module docs); a candidate without a FLIP error is judged by its RMSE alone. Where none
+        // is, the same shares of the chain's own least errors, then its RMSE alone.
+        let flip_at_floor = flip_limit(floor, self.flip_floor(None, height, &usable), limit);
+        let flip_at_best = flip_limit(best, best_flip, best + target);
+        cheapest_within(limit, true, flip_at_floor)
+            .or_else(|| cheapest_within(limit, false, flip_at_floor))
+            .or_else(|| cheapest_within(best + target, false, flip_at_best))
+            .or_else(|| cheapest_within(best + target, false, None))
             .map(|c| c.0)
     }
 
@@ -2026,6 +2141,60 @@ mod tests {
         // Rows of an elevation the tables lack are skipped; the rows over every view stand in.
         let odd = c.with_flip(&[rows[0], flip_row(45.0, code::SPT, 8.0, 0.5)]);
         assert_eq!(odd.flip_at(Some(0), Technique::Spt, 8.0), None);
+    }
+
+    fn level_flips(rows: &[(u32, f32, f32)]) -> Vec<ChainFlipCalibrationRecord> {
+        rows.iter().map(|&(level, height, flip)| ChainFlipCalibrationRecord { level, height, flip }).collect()
+    }
+
+    #[test]
+    fn with_level_flip_tables_the_chain_level_must_be_within_both_floors() {
+        let c = chain_table();
+        let every = FlipCalibrationRecord::EVERY_VIEW;
+        let rows = [flip_row(every, code::FULL, 8.0, 0.080), flip_row(every, code::SPT, 8.0, 0.085)];
+        // By RMSE alone at 8 px (floor 0.058, level 0's) level 2 (0.065, 100 triangles) is within
+        // 0.01, and the chain, drawn with it, is the cheapest technique.
+        assert_eq!(c.chain_level(8.0, 0.01, all), Some(Some(2)));
+        assert_eq!(c.choose(8.0, 0.01, all), Technique::LodChain);
+        // FLIP tables of the techniques alone change nothing for the level.
+        let f = c.clone().with_flip(&rows);
+        assert_eq!(f.chain_level(8.0, 0.01, all), Some(Some(2)));
+        assert_eq!(f.level_flip_at(0, 8.0), None);
+        // Level 2 reads far worse in FLIP: the same share of the FLIP floor (0.080, the full
+        // mesh's) allows 0.080 + 0.01 · 0.080 / 0.058 = 0.0938; level 1 (0.090) is within.
+        let levels = level_flips(&[(0, 8.0, 0.082), (1, 8.0, 0.090), (2, 8.0, 0.200)]);
+        let g = f.clone().with_chain_flip(&levels);
+        assert_eq!(g.level_flip_at(2, 8.0), Some(0.200));
+        assert_eq!(g.chain_level(8.0, 0.01, all), Some(Some(1)));
+        // The policy compares the chain it draws, level 1 (250 triangles, FLIP 0.090), still
+        // cheaper than the point tree.
+        assert_eq!(g.choose(8.0, 0.01, all), Technique::LodChain);
+        // Every level past the FLIP allowance: the chain draws the full mesh (1,000 triangles),
+        // and the point tree (400, within both) is chosen.
+        let levels = level_flips(&[(0, 8.0, 0.150), (1, 8.0, 0.160), (2, 8.0, 0.200)]);
+        let h = f.clone().with_chain_flip(&levels);
+        assert_eq!(h.chain_level(8.0, 0.01, all), Some(None));
+        assert_eq!(h.choose(8.0, 0.01, all), Technique::Spt);
+        // Over every view the levels' FLIP errors count in the FLIP floor, as their RMSE does.
+        let levels = level_flips(&[(0, 8.0, 0.070), (1, 8.0, 0.090), (2, 8.0, 0.200)]);
+        let k = f.with_chain_flip(&levels);
+        assert!((k.flip_floor(None, 8.0, all) - 0.070).abs() < 1e-6);
+        assert!((k.flip_floor(None, 8.0, |t| t != Technique::LodChain) - 0.080).abs() < 1e-6);
+        // Level 1 is then past 0.070 + 0.01 · 0.070 / 0.058 = 0.0821: level 0 (500 triangles).
+        assert_eq!(k.chain_level(8.0, 0.01, all), Some(Some(0)));
+    }
+
+    #[test]
+    fn level_flip_tables_end_at_the_first_missing_level() {
+        let levels = level_flips(&[(0, 8.0, 0.1), (0, 16.0, 0.08), (2, 8.0, 0.3)]);
+        let c = chain_table().with_chain_flip(&levels);
+        // Interpolated in log2 of the height, as every curve: halfway between 8 and 16 pixels.
+        assert_eq!(c.level_flip_at(0, 8.0 * std::f32::consts::SQRT_2).map(|f| (f * 1000.0).round()), Some(90.0));
+        assert_eq!(c.level_flip_at(2, 8.0), None, "level 1 is missing");
+        // A non-finite sample is skipped, and a level left empty ends the tables.
+        let c = chain_table().with_chain_flip(&level_flips(&[(0, 8.0, f32::NAN), (1, 8.0, 0.1)]));
+        assert_eq!(c.level_flip_at(1, 8.0), None);
+        assert_eq!(c.level_flip_at(0, 8.0), None);
     }
 
     #[test]

@@ -1,5 +1,5 @@
-//! Writes the golden files of format versions 1.0 to 1.17 into `tests/data/v1_0` to
-//! `tests/data/v1_17` (or the `v1_<minor>` directories of the directory given).
+//! Writes the golden files of format versions 1.0 to 1.18 into `tests/data/v1_0` to
+//! `tests/data/v1_18` (or the `v1_<minor>` directories of the directory given).
 //!
 //! Golden files are written once and kept forever (spec §11): an existing file is never replaced
 //! unless `--force` is given. A file that exists and equals what would be written is reported as

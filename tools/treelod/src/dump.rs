@@ -12,8 +12,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 use treelod_format::{
-    CellRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, FlipCalibrationRecord, ImageRecord, PlaneDiffuseRecord, Section,
-    SectionKind, Setting, Source, Tree, far_threshold, material_class,
+    CellRecord, ChainFlipCalibrationRecord, Container, FLAG_SHUFFLE, FLAG_ZSTD, FlipCalibrationRecord, ImageRecord,
+    PlaneDiffuseRecord, Section, SectionKind, Setting, Source, Tree, far_threshold, material_class,
 };
 
 use crate::report::{self, Failed};
@@ -90,6 +90,11 @@ struct Dump<'a> {
     /// without FLIP).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     calibration_flip: Vec<FlipSample>,
+    /// The LoD chain levels' FLIP error (`CHAIN_CALIBRATION_FLIP`, spec §6.20, version 1.18): one
+    /// object per record, in file order; absent when the container has none (files before 1.18,
+    /// or built without FLIP or without a chain).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    chain_calibration_flip: Vec<ChainFlipSample>,
     /// Texture bytes per representation (spec §6.7), when the container has images.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     textures: Vec<TextureUse>,
@@ -945,19 +950,20 @@ impl FlipSample {
         Self { elevation: r.elevation, technique, height: r.height, flip: r.flip }
     }
 
-    /// The text form of `samples`, the records in file order: the table of the rows over every
-    /// view, laid out as the calibration's (a row per representation, a column per height), then
-    /// one table per run of records of one elevation; empty without records.
-    fn text(samples: &[Self]) -> String {
-        let rows = |samples: &[&Self]| {
+    /// The text form of `samples`, the records in file order, and of the chain levels' `levels`:
+    /// the table of the rows over every view, laid out as the calibration's (a row per
+    /// representation, then per LoD chain level, `lod-chain level N`, as the calibration's table
+    /// over every view has them; a column per height), then one table per run of records of one
+    /// elevation; empty without records.
+    fn text(samples: &[Self], levels: &[ChainFlipSample]) -> String {
+        let rows = |samples: &[&Self], levels: &[ChainFlipSample]| {
             let mut out: Vec<CalibrationRow> = Vec::new();
-            for s in samples {
+            let named = samples.iter().map(|s| (s.technique.clone(), s.height, s.flip));
+            let levels = levels.iter().map(|l| (format!("lod-chain level {}", l.level), l.height, l.flip));
+            for (technique, height, flip) in named.chain(levels) {
                 match out.last_mut() {
-                    Some(row) if row.technique == s.technique => row.samples.push([s.height, s.flip, 0.0]),
-                    _ => out.push(CalibrationRow {
-                        technique: s.technique.clone(),
-                        samples: vec![[s.height, s.flip, 0.0]],
-                    }),
+                    Some(row) if row.technique == technique => row.samples.push([height, flip, 0.0]),
+                    _ => out.push(CalibrationRow { technique, samples: vec![[height, flip, 0.0]] }),
                 }
             }
             table_of(&out, |s| format!("{:.4}", s[1])).render("  ")
@@ -965,11 +971,11 @@ impl FlipSample {
         let every_view: Vec<&Self> =
             samples.iter().filter(|s| s.elevation == FlipCalibrationRecord::EVERY_VIEW).collect();
         let mut out = String::new();
-        if !every_view.is_empty() {
+        if !every_view.is_empty() || !levels.is_empty() {
             out.push_str(&format!(
                 "\ncalibration FLIP (mean LDR-FLIP of the shaded colour against the supersampled full mesh, by the \
                  block's projected height)\n{}",
-                rows(&every_view)
+                rows(&every_view, levels)
             ));
         }
         let per_elevation: Vec<&Self> =
@@ -978,10 +984,28 @@ impl FlipSample {
             out.push_str(&format!(
                 "\ncalibration FLIP at {}° elevation (the same, from the views at that elevation)\n{}",
                 run[0].elevation,
-                rows(run)
+                rows(run, &[])
             ));
         }
         out
+    }
+}
+
+/// One record of the LoD chain levels' FLIP error (`CHAIN_CALIBRATION_FLIP`, spec §6.20).
+#[derive(Debug, Serialize)]
+struct ChainFlipSample {
+    /// The chain level, 0 the finest.
+    level: u32,
+    /// Projected height of the block, pixels.
+    height: f32,
+    /// Mean LDR-FLIP error against the supersampled full mesh over every view, `[0, 1]`.
+    flip: f32,
+}
+
+impl ChainFlipSample {
+    /// The sample of record `r`.
+    fn of(r: &ChainFlipCalibrationRecord) -> Self {
+        Self { level: r.level, height: r.height, flip: r.flip }
     }
 }
 
@@ -1175,6 +1199,7 @@ impl<'a> Dump<'a> {
             baselines: BaselineInfo::new(container),
             calibration: CalibrationInfo::new(container),
             calibration_flip: container.calibration_flip().iter().map(FlipSample::of).collect(),
+            chain_calibration_flip: container.chain_calibration_flip().iter().map(ChainFlipSample::of).collect(),
             textures: TextureUse::of(container),
             histograms,
         }
@@ -1229,7 +1254,7 @@ impl<'a> Dump<'a> {
         if let Some(calibration) = &self.calibration {
             out.push_str(&calibration.to_text());
         }
-        out.push_str(&FlipSample::text(&self.calibration_flip));
+        out.push_str(&FlipSample::text(&self.calibration_flip, &self.chain_calibration_flip));
         out.push_str(&TextureUse::text(&self.textures));
         out.push_str(&self.histograms_text());
         out

@@ -120,6 +120,7 @@ fn ok_line(file: &str, report: &VerifyReport) -> String {
             "added-technique calibration records per elevation",
         ),
         (report.calibration_flip, "FLIP calibration record", "FLIP calibration records"),
+        (report.chain_calibration_flip, "chain FLIP calibration record", "chain FLIP calibration records"),
         (report.ao, "ambient-occlusion byte", "ambient-occlusion bytes"),
         (report.point_facing, "point facing byte", "point facing bytes"),
     ]
@@ -218,5 +219,14 @@ mod tests {
         assert!(ok_line("f", &report).contains("per elevation, 18 FLIP calibration records, 5 ambient"));
         report.calibration_flip = 1;
         assert!(ok_line("f", &report).contains("per elevation, 1 FLIP calibration record, 5 ambient"));
+        // The chain levels' FLIP error (spec §6.20), after the calibration's.
+        report.chain_calibration_flip = 9;
+        assert!(
+            ok_line("f", &report).contains(", 1 FLIP calibration record, 9 chain FLIP calibration records, 5 ambient")
+        );
+        report.chain_calibration_flip = 1;
+        assert!(
+            ok_line("f", &report).contains(", 1 FLIP calibration record, 1 chain FLIP calibration record, 5 ambient")
+        );
     }
 }

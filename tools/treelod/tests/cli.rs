@@ -797,6 +797,72 @@ fn dump_and_verify_show_the_calibration_flip_of_the_1_17_golden_file() {
     assert!(j.get("calibration_flip").is_none(), "no key without the section");
 }
 
+/// The LoD chain levels' FLIP error (`CHAIN_CALIBRATION_FLIP`, spec §6.20, format 1.18) of the
+/// golden 1.18 file: `dump` prints a row per level (`lod-chain level N`) in the FLIP table over
+/// every view, after the representations' rows, as the RMSE table over every view has the levels'
+/// rows (four decimals, no primitive counts; not in the tables per elevation), and the JSON holds
+/// one object per record; `verify` accepts the file and counts the records. The 1.17 file, without
+/// the section, prints no level rows in its FLIP table and has no JSON key.
+#[test]
+fn dump_and_verify_show_the_chain_calibration_flip_of_the_1_18_golden_file() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/v1_18");
+    let name = "every-kind-zstd.treelod";
+    let out = treelod_in(&dir, &["dump", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    assert!(text.lines().any(|l| l.starts_with("version") && l.ends_with("1.18")), "{text}");
+    assert!(text.contains("\n  CHAIN_CALIBRATION_FLIP "), "the section is listed: {text}");
+    let every_view = "\ncalibration FLIP (mean LDR-FLIP of the shaded colour against the supersampled full mesh, by \
+                      the block's projected height)\n  technique ";
+    let flip = text.find(every_view).expect("the FLIP table over every view");
+    let per_elevation = text.find("\ncalibration FLIP at 30° elevation").expect("the FLIP tables per elevation");
+    assert!(flip < per_elevation, "{text}");
+    // The levels' rows close the table over every view, each with a value at its three heights
+    // (four decimals, no count), and no table per elevation has them.
+    let table = &text[flip..per_elevation];
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("  lod-chain level ")).collect();
+    assert_eq!(rows.len(), 3, "three levels: {table}");
+    for (level, row) in rows.iter().enumerate() {
+        assert!(row.starts_with(&format!("  lod-chain level {level} ")), "{row}");
+        let values: Vec<&str> = row.split_whitespace().skip(3).collect();
+        assert_eq!(values.len(), 3, "{row}");
+        assert!(values.iter().all(|v| v.len() == 6 && v.starts_with("0.") && !v.contains('(')), "{row}");
+    }
+    let last_technique = table.find("\n  octahedral ").expect("the representations' rows");
+    assert!(table.find("\n  lod-chain level 0 ").is_some_and(|l| l > last_technique), "{table}");
+    assert!(!text[per_elevation..].contains("lod-chain level"), "{text}");
+
+    let out = treelod_in(&dir, &["dump", "--json", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let records = j["chain_calibration_flip"].as_array().expect("an array of records");
+    assert_eq!(records.len(), 9);
+    let levels: Vec<u64> = records.iter().map(|r| r["level"].as_u64().expect("a level")).collect();
+    assert_eq!(levels, [0, 0, 0, 1, 1, 1, 2, 2, 2]);
+    // At the heights of the chain's RMSE table, record for record.
+    let chain = j["calibration"]["chain_levels"].as_array().expect("the chain's RMSE table");
+    let heights = chain.iter().flat_map(|l| l["samples"].as_array().expect("samples").iter().map(|s| &s[0]));
+    assert!(records.iter().map(|r| &r["height"]).eq(heights), "{records:?}");
+    assert!(records.iter().all(|r| r["flip"].as_f64().is_some_and(|f| (0.0..=1.0).contains(&f))));
+    assert_eq!(j["calibration_flip"].as_array().map(Vec::len), Some(18), "the calibration's FLIP error too");
+    let out = treelod_in(&dir, &["verify", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let line = stdout(&out);
+    assert!(line.contains(", 18 FLIP calibration records, 9 chain FLIP calibration records, "), "{line}");
+
+    let dir = dir.join("../v1_17");
+    let out = treelod_in(&dir, &["dump", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    let flip = text.find("\ncalibration FLIP (").expect("1.17's FLIP tables");
+    assert!(!text[flip..].contains("lod-chain level"), "{text}");
+    let out = treelod_in(&dir, &["dump", "--json", name]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert!(j.get("chain_calibration_flip").is_none(), "no key without the section");
+    let out = treelod_in(&dir, &["verify", name]);
+    assert!(!stdout(&out).contains("chain FLIP"), "{}", stdout(&out));
+}
+
 /// Golden files: every `tests/data/v1_*/NAME.treelod` has `NAME.dump.txt` and `NAME.dump.json`
 /// beside it, the exact output of `treelod dump NAME.treelod` and `treelod dump --json
 /// NAME.treelod` run in that directory. With no `.treelod` there yet, the test passes; a
@@ -808,7 +874,7 @@ fn dump_and_verify_show_the_calibration_flip_of_the_1_17_golden_file() {
 fn golden_dumps_match() {
     for version in [
         "v1_0", "v1_1", "v1_2", "v1_3", "v1_4", "v1_5", "v1_6", "v1_7", "v1_8", "v1_9", "v1_10", "v1_11", "v1_12",
-        "v1_13", "v1_14", "v1_15", "v1_16", "v1_17",
+        "v1_13", "v1_14", "v1_15", "v1_16", "v1_17", "v1_18",
     ] {
         golden_dumps_match_in(version);
     }
