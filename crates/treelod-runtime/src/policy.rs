@@ -365,6 +365,27 @@ fn push_to_curve(curve: &mut Vec<Sample>, height: f32, error: f32, primitives: f
     }
 }
 
+/// Per LoD chain level from 0, its curve of the `(level, height, error, primitives)` samples
+/// (sorted by level, then height, spec §6.17, §6.20): samples with non-finite values are
+/// skipped, and the levels end at the first level number without a valid sample.
+fn level_curves(samples: impl Iterator<Item = (u32, f32, f32, f32)>) -> Vec<Vec<Sample>> {
+    let mut levels: Vec<Vec<Sample>> = Vec::new();
+    for (level, height, error, primitives) in samples {
+        let Ok(level) = usize::try_from(level) else { break };
+        if level > levels.len() {
+            break;
+        }
+        if level == levels.len() {
+            levels.push(Vec::new());
+        }
+        push_to_curve(&mut levels[level], height, error, primitives);
+    }
+    if let Some(gap) = levels.iter().position(Vec::is_empty) {
+        levels.truncate(gap);
+    }
+    levels
+}
+
 /// `(error, primitives)` of `curve` at `log2(height) = x`.
 fn curve_at(curve: &[Sample], x: f32) -> Option<(f32, f32)> {
     let (first, last) = (curve.first()?, curve.last()?);
@@ -512,23 +533,7 @@ impl Calibration {
     /// level is then picked by both errors ([`Self::chain_level`]).
     #[must_use]
     pub fn with_chain_flip(mut self, records: &[ChainFlipCalibrationRecord]) -> Self {
-        self.level_flips.clear();
-        for record in records {
-            let Ok(level) = usize::try_from(record.level) else { break };
-            if level > self.level_flips.len() {
-                break;
-            }
-            if level == self.level_flips.len() {
-                self.level_flips.push(Vec::new());
-            }
-            push_to_curve(&mut self.level_flips[level], record.height, record.flip, 0.0);
-        }
-        while self.level_flips.last().is_some_and(Vec::is_empty) {
-            self.level_flips.pop();
-        }
-        if let Some(gap) = self.level_flips.iter().position(Vec::is_empty) {
-            self.level_flips.truncate(gap);
-        }
+        self.level_flips = level_curves(records.iter().map(|r| (r.level, r.height, r.flip, 0.0)));
         self
     }
 
@@ -604,23 +609,7 @@ impl Calibration {
     /// the first level number without a valid sample (verified files have every level from 0).
     #[must_use]
     pub fn with_chain_levels(mut self, records: &[ChainCalibrationRecord]) -> Self {
-        self.levels.clear();
-        for record in records {
-            let Ok(level) = usize::try_from(record.level) else { break };
-            if level > self.levels.len() {
-                break;
-            }
-            if level == self.levels.len() {
-                self.levels.push(Vec::new());
-            }
-            push_to_curve(&mut self.levels[level], record.height, record.error, record.primitives);
-        }
-        while self.levels.last().is_some_and(Vec::is_empty) {
-            self.levels.pop();
-        }
-        if let Some(gap) = self.levels.iter().position(Vec::is_empty) {
-            self.levels.truncate(gap);
-        }
+        self.levels = level_curves(records.iter().map(|r| (r.level, r.height, r.error, r.primitives)));
         self
     }
 
