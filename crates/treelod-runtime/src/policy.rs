@@ -61,10 +61,9 @@
 //! format 1.18) by that level's FLIP error over every view plus the chain's offset from the
 //! elevation class (its FLIP row there less its row over every view), as its RMSE is read; in a
 //! file of 1.17, whose `lod-chain` rows have a FLIP error only where it draws the full mesh, by
-//! that row (the chain at the build's default target). When nothing qualifies, the technique whose larger share
-//! over the two floors is least wins (without FLIP tables, the lowest error, as before).
-//! Measured with `bench
-//! --quality` over 200 trees of each shared model built with every representation (30 frames,
+//! that row (the chain at the build's default target). When nothing qualifies, the technique
+//! whose larger share over the two floors is least wins (without FLIP tables, the lowest error,
+//! as before). Measured with `bench --quality` over 200 trees of each shared model built with every representation (30 frames,
 //! 480×270; primitives per frame / RMSE / FLIP, the RMSE tables alone → with the FLIP tables,
 //! the point tree's in the same runs after): the Quaternius tree 9,909 / .01182 / .01740 →
 //! 9,935 / .01182 / .01740 (.01204 / .01759), the oak 20,349 / .01763 / .03350 → 24,670 / .01711
