@@ -527,10 +527,6 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
             if flip.is_nan() { f32::NAN } else { (flip as f32).clamp(0.0, 1.0) },
         )
     };
-    let mean = |column: usize, h: usize, keep: &dyn Fn(usize) -> bool| -> (f32, f32) {
-        let (error, primitives, _) = means(column, h, keep);
-        (error, primitives)
-    };
     let every = |_: usize| true;
     let mut calibrated = Calibrated::default();
     for level in 0..scene.chain_levels.len() {
@@ -546,24 +542,19 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
     // Per height, the chain's pick by image error over every view (the runtime's, at the default
     // target); empty without per-level tables.
     let picks: Vec<Option<ChainPick>> = if per_level {
-        let cells = || {
-            techniques.iter().enumerate().flat_map(|(ti, &technique)| {
-                HEIGHTS.iter().enumerate().map(move |(h, &pixels)| (ti, technique, h, pixels))
-            })
-        };
-        let drawn: Vec<CalibrationRecord> = cells()
-            .map(|(ti, technique, h, pixels)| {
-                let (error, primitives) = mean(ti, h, &every);
-                CalibrationRecord { technique, height: pixels, error, primitives }
-            })
-            .collect();
-        // The FLIP rows over every view, so the picks ask for both errors as the runtime does.
-        let elevation = FlipCalibrationRecord::EVERY_VIEW;
-        let drawn_flip: Vec<FlipCalibrationRecord> = cells()
-            .map(|(ti, technique, h, pixels)| (technique, pixels, means(ti, h, &every).2))
-            .filter(|&(_, _, flip)| !flip.is_nan())
-            .map(|(technique, height, flip)| FlipCalibrationRecord { elevation, technique, height, flip })
-            .collect();
+        // The drawn techniques' rows over every view, and their FLIP rows where measured, so the
+        // picks ask for both errors as the runtime does.
+        let (mut drawn, mut drawn_flip) = (Vec::new(), Vec::new());
+        for (ti, &technique) in techniques.iter().enumerate() {
+            for (h, &height) in HEIGHTS.iter().enumerate() {
+                let (error, primitives, flip) = means(ti, h, &every);
+                drawn.push(CalibrationRecord { technique, height, error, primitives });
+                if !flip.is_nan() {
+                    let elevation = FlipCalibrationRecord::EVERY_VIEW;
+                    drawn_flip.push(FlipCalibrationRecord { elevation, technique, height, flip });
+                }
+            }
+        }
         let tables = Calibration::from_records(&drawn).map(|c| {
             c.with_chain_levels(&calibrated.chain_levels).with_flip(&drawn_flip).with_chain_flip(&calibrated.chain_flip)
         });

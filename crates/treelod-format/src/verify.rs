@@ -1594,33 +1594,13 @@ fn check_calibration_flip(records: &[FlipCalibrationRecord]) -> Result<()> {
 /// in `[0, 1]`, primitive counts finite and `≥ 0`.
 fn check_chain_calibration(records: &[ChainCalibrationRecord], levels: &[LodLevelRecord]) -> Result<()> {
     let kind = SectionKind::CHAIN_CALIBRATION;
-    if records.is_empty() {
-        return Ok(());
-    }
-    let depth = chain_depth(levels);
-    for (i, r) in records.iter().enumerate() {
-        if r.level >= depth {
-            return Err(bad(
-                kind,
-                i,
-                format!("level {} is not a level of every tree's LoD chain (0..{depth})", r.level),
-            ));
-        }
-        check_measurement(kind, i, (r.height, r.error, r.primitives))?;
-        if let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) {
-            if r.level < prev.level {
-                return Err(bad(kind, i, format!("level {} follows level {}", r.level, prev.level)));
-            }
-            if r.level == prev.level && r.height <= prev.height {
-                return Err(bad(
-                    kind,
-                    i,
-                    format!("height {} does not increase strictly after {}", r.height, prev.height),
-                ));
-            }
-        }
-    }
-    Ok(())
+    check_level_rows(
+        kind,
+        records,
+        levels,
+        |r| (r.level, r.height),
+        |i, r| check_measurement(kind, i, (r.height, r.error, r.primitives)),
+    )
 }
 
 /// The levels every tree of the chain has: `0 .. depth`, the least of the trees' level counts
@@ -1636,6 +1616,40 @@ fn chain_depth(levels: &[LodLevelRecord]) -> u32 {
     per_tree.iter().map(|&(_, n)| n).min().unwrap_or(0)
 }
 
+/// The rows of a per-level table of the LoD chain (`CHAIN_CALIBRATION`, §6.17;
+/// `CHAIN_CALIBRATION_FLIP`, §6.20), each `(level, height)` by `key`: per record, its level one
+/// every tree of `LOD_LEVELS` has, then its values by `values`, then the order, levels
+/// non-decreasing and heights strictly increasing within a level. No records: nothing to check.
+fn check_level_rows<R>(
+    kind: SectionKind,
+    records: &[R],
+    levels: &[LodLevelRecord],
+    key: impl Fn(&R) -> (u32, f32),
+    values: impl Fn(usize, &R) -> Result<()>,
+) -> Result<()> {
+    if records.is_empty() {
+        return Ok(());
+    }
+    let depth = chain_depth(levels);
+    for (i, r) in records.iter().enumerate() {
+        let (level, height) = key(r);
+        if level >= depth {
+            return Err(bad(kind, i, format!("level {level} is not a level of every tree's LoD chain (0..{depth})")));
+        }
+        values(i, r)?;
+        let Some((prev_level, prev_height)) = i.checked_sub(1).and_then(|p| records.get(p)).map(&key) else {
+            continue;
+        };
+        if level < prev_level {
+            return Err(bad(kind, i, format!("level {level} follows level {prev_level}")));
+        }
+        if level == prev_level && height <= prev_height {
+            return Err(bad(kind, i, format!("height {height} does not increase strictly after {prev_height}")));
+        }
+    }
+    Ok(())
+}
+
 /// Spec §6.20: the records of `CHAIN_CALIBRATION_FLIP` have levels non-decreasing, each a level
 /// every tree of `LOD_LEVELS` has (so the section needs a chain), heights finite, positive and
 /// strictly increasing within a level, and FLIP errors in `[0, 1]`.
@@ -1644,35 +1658,21 @@ fn chain_depth(levels: &[LodLevelRecord]) -> u32 {
 /// (`CHAIN_CALIBRATION`, §6.17): a reader interpolates each table on its own heights.
 fn check_chain_calibration_flip(records: &[ChainFlipCalibrationRecord], levels: &[LodLevelRecord]) -> Result<()> {
     let kind = SectionKind::CHAIN_CALIBRATION_FLIP;
-    if records.is_empty() {
-        return Ok(());
-    }
-    let depth = chain_depth(levels);
-    for (i, r) in records.iter().enumerate() {
-        if r.level >= depth {
-            return Err(bad(
-                kind,
-                i,
-                format!("level {} is not a level of every tree's LoD chain (0..{depth})", r.level),
-            ));
-        }
-        if !(r.height.is_finite() && r.height > 0.0) {
-            return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
-        }
-        if !unit(r.flip) {
-            return Err(bad(kind, i, format!("FLIP error {} lies outside [0, 1]", r.flip)));
-        }
-        let Some(prev) = i.checked_sub(1).and_then(|p| records.get(p)) else {
-            continue;
-        };
-        if r.level < prev.level {
-            return Err(bad(kind, i, format!("level {} follows level {}", r.level, prev.level)));
-        }
-        if r.level == prev.level && r.height <= prev.height {
-            return Err(bad(kind, i, format!("height {} does not increase strictly after {}", r.height, prev.height)));
-        }
-    }
-    Ok(())
+    check_level_rows(
+        kind,
+        records,
+        levels,
+        |r| (r.level, r.height),
+        |i, r| {
+            if !(r.height.is_finite() && r.height > 0.0) {
+                return Err(bad(kind, i, format!("height {} is not a positive number of pixels", r.height)));
+            }
+            if !unit(r.flip) {
+                return Err(bad(kind, i, format!("FLIP error {} lies outside [0, 1]", r.flip)));
+            }
+            Ok(())
+        },
+    )
 }
 
 fn check_curve(kind: SectionKind, samples: &[CurveSample]) -> Result<()> {
