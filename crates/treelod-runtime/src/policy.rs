@@ -544,23 +544,18 @@ impl Calibration {
         curve_at(curve, height.max(f32::MIN_POSITIVE).log2()).map(|(flip, _)| flip)
     }
 
-    /// The FLIP error of the LoD chain drawn at `target` ([`Self::chain_level`]) at a projected
-    /// height of `height` pixels, seen from elevation class `elevation`: its level's FLIP error
-    /// over every view plus the chain's offset there, the elevation's `lod-chain` FLIP row less
-    /// the row over every view (as [`Self::level_at_elevation`] reads the RMSE), or the full
-    /// mesh's where it picks the full mesh. Without the levels' FLIP tables, the `lod-chain` row
-    /// (the chain at the default target). `None` where the tables hold neither.
-    fn chain_flip_at(
-        &self,
-        elevation: Option<usize>,
-        height: f32,
-        target: f32,
-        usable: impl Fn(Technique) -> bool,
-    ) -> Option<f32> {
+    /// The FLIP error of the LoD chain drawn as `pick` ([`Self::chain_level`]'s at the policy's
+    /// target; `None`: the tables hold no pick) at a projected height of `height` pixels, seen
+    /// from elevation class `elevation`: its level's FLIP error over every view plus the chain's
+    /// offset there, the elevation's `lod-chain` FLIP row less the row over every view (as
+    /// [`Self::level_at_elevation`] reads the RMSE), or the full mesh's where it picks the full
+    /// mesh. Without the levels' FLIP tables, the `lod-chain` row (the chain at the default
+    /// target). `None` where the tables hold neither.
+    fn chain_flip_at(&self, elevation: Option<usize>, height: f32, pick: Option<ChainPick>) -> Option<f32> {
         if self.level_flips.is_empty() {
             return self.flip_at(elevation, Technique::LodChain, height);
         }
-        match self.chain_level(height, target, usable)? {
+        match pick? {
             Some(level) => {
                 let offset = match (
                     elevation.and_then(|_| self.flip_at(elevation, Technique::LodChain, height)),
@@ -799,11 +794,15 @@ impl Calibration {
             .into_iter()
             .filter(|&t| t != Technique::Full && usable(t))
             .filter_map(|t| {
-                let (e, p) = self.measured(elevation, t, height, target, &usable)?;
+                // The LoD chain as drawn at `target` (its stored row is the chain at the default
+                // target), its level picked once for both errors; the others by their rows.
+                let pick = if t == Technique::LodChain { self.chain_level(height, target, &usable) } else { None };
+                let drawn = pick.and_then(|pick| self.drawn_as(elevation, pick, height));
+                let (e, p) = drawn.or_else(|| self.at_elevation(elevation, t, height))?;
                 let f = if !flip_checked {
                     None
                 } else if t == Technique::LodChain {
-                    self.chain_flip_at(elevation, height, target, &usable)
+                    self.chain_flip_at(elevation, height, pick)
                 } else {
                     self.flip_at(elevation, t, height)
                 };
@@ -856,7 +855,13 @@ impl Calibration {
         target: f32,
         usable: impl Fn(Technique) -> bool,
     ) -> Option<(f32, f32)> {
-        match self.chain_level(height, target, usable)? {
+        self.drawn_as(elevation, self.chain_level(height, target, usable)?, height)
+    }
+
+    /// `(error, primitives)` of the LoD chain drawn as `pick` at a projected height of `height`
+    /// pixels, seen from elevation class `elevation` ([`Self::chain_at`]).
+    fn drawn_as(&self, elevation: Option<usize>, pick: ChainPick, height: f32) -> Option<(f32, f32)> {
+        match pick {
             Some(level) => self.level_at_elevation(elevation, level, height),
             None => self.at_elevation(elevation, Technique::Full, height),
         }
