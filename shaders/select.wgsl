@@ -8,7 +8,9 @@
 //    instance's culling, depth, thresholds and prefixes exactly as `select_frame` computes them
 //    (same operations, same order, same far path and far-list range), and one `DrawInfo` +
 //    `DrawIndirectArgs` pair per non-empty range, appended to its model's triangle or point
-//    bucket by an atomic counter (the count `multi_draw_indirect_count` reads).
+//    bucket by an atomic counter (the count `multi_draw_indirect_count` reads). An instance the
+//    CPU marks as drawn with its octahedral impostor (`QUADS` in `InstanceDraw::technique`; the
+//    CPU culled it) is appended to its model's quad bucket as one draw of its quads.
 //
 // Keys that the CPU holds as ±∞ are uploaded as ±f32::MAX (selection thresholds are finite and
 // non-negative, so every comparison gives the same result).
@@ -21,6 +23,11 @@ const INSIDE: u32 = 1u;
 const STRADDLES: u32 = 2u;
 const ROOTS_CELL: u32 = 0xFFFFFFFFu;
 const F32_MAX: f32 = 3.40282347e+38;
+// InstanceDraw::technique's flag of an instance drawn as its octahedral impostor
+// (InstanceDrawGpu::QUADS).
+const QUADS: u32 = 0x80000000u;
+// Buckets per model: triangles, points, quads (gpu_select.rs, BUCKET_KINDS).
+const BUCKET_KINDS: u32 = 3u;
 
 // Rust twin: SelectFrameGpu (crates/treelod-render/src/gpu_select.rs).
 struct SelectFrame {
@@ -33,7 +40,7 @@ struct SelectFrame {
     // L_m, L_M, shading on (1 or 0), Z needed (1 or 0: bias or shading on).
     shading: vec4<f32>,
     block_count: u32,
-    // Index of the first statistics counter in `counters` (= 2 × models).
+    // Index of the first statistics counter in `counters` (= BUCKET_KINDS × models).
     stats_at: u32,
     _pad0: u32,
     _pad1: u32,
@@ -63,7 +70,9 @@ struct InstanceGpu {
 //              (0xFFFF0000: every pixel). lo == 0: the technique it is assigned (counted as a
 //              visible instance); lo > 0: only the draws of the point tree it leaves in a
 //              transition (counted as leaving primitives).
-//   technique  Technique::index of the technique its draws are tinted with and counted under.
+//   technique  Technique::index of the technique its draws are tinted with and counted under;
+//              with QUADS (bit 31) set, the instance is drawn as its model's octahedral impostor
+//              quads (`quad_first`, `quad_count`) instead of through the point tree's selection.
 struct InstanceDraw {
     fade: u32,
     technique: u32,
@@ -90,9 +99,13 @@ struct ModelGpu {
     far_hi_at: u32,
     triangle_base: u32,
     point_base: u32,
-    // Triangle bucket, point bucket: first slot of the draw buffers, and slots.
-    bucket_first: array<u32, 2>,
-    bucket_capacity: array<u32, 2>,
+    // Triangle bucket, point bucket, quad bucket: first slot of the draw buffers, and slots.
+    bucket_first: array<u32, 3>,
+    bucket_capacity: array<u32, 3>,
+    // The model's octahedral impostor quads, as the CPU path draws them (QuadDraw::first, count;
+    // count 0 where the renderer cannot draw them).
+    quad_first: u32,
+    quad_count: u32,
 }
 
 // Rust twin: CellGpu. `sizes_at` / `hi_at` index `keys`.
@@ -141,9 +154,9 @@ struct DispatchArgs {
 @group(0) @binding(6) var<storage, read> models: array<ModelGpu>;
 @group(0) @binding(7) var<storage, read> cells: array<CellGpu>;
 @group(0) @binding(8) var<storage, read> keys: array<f32>;
-// Per bucket (2 × model + kind) the ranges appended, then the statistics: instances visible,
-// far, cells selected, cells culled, triangles, points, primitives of leaving draws, then
-// primitives per technique (Technique::index).
+// Per bucket (BUCKET_KINDS × model + kind) the ranges appended, then the statistics: instances
+// visible, far, cells selected, cells culled, triangles, points, primitives of leaving draws,
+// quads, then primitives per technique (Technique::index).
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 @group(0) @binding(10) var<storage, read_write> draws: array<DrawInfo>;
 @group(0) @binding(11) var<storage, read_write> indirect: array<DrawIndirect>;
@@ -242,7 +255,7 @@ fn leading_above(at: u32, n: u32, tau: f32) -> u32 {
 
 // Appends one range: `first` is a pool index (triangles or points), `kind` 0 triangles, 1 points.
 fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, shading: f32) {
-    let s = atomicAdd(&counters[2u * model_index + kind], 1u);
+    let s = atomicAdd(&counters[BUCKET_KINDS * model_index + kind], 1u);
     if s >= cur_model.bucket_capacity[kind] {
         return;
     }
@@ -251,6 +264,19 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
                            TECHNIQUE_TINTS[cur_draw.technique], cur_draw.fade);
     let corners = select(6u, 3u, kind == 0u);
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
+}
+
+// Appends the instance's octahedral impostor quads to its model's quad bucket, as the CPU path
+// records a `QuadDraw` (crates/treelod-render/src/draws.rs, `record_direct`).
+fn write_quads() {
+    let s = atomicAdd(&counters[BUCKET_KINDS * model_index + 2u], 1u);
+    if s >= cur_model.bucket_capacity[2] {
+        return;
+    }
+    let slot = cur_model.bucket_first[2] + s;
+    draws[slot] = DrawInfo(0.0, 0.0, ROOTS_CELL, 1.0, 1.0, current.index, TECHNIQUE_TINTS[cur_draw.technique],
+                           cur_draw.fade);
+    indirect[slot] = DrawIndirect(6u * cur_model.quad_count, 1u, 6u * cur_model.quad_first, slot);
 }
 
 // ModelLod::far_points.
@@ -331,9 +357,25 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     if cur_draw.fade == 0u {
         return;
     }
-    cur_draw.technique = min(cur_draw.technique, TECHNIQUE_COUNT - 1u);
+    let quads = (cur_draw.technique & QUADS) != 0u;
+    cur_draw.technique = min(cur_draw.technique & ~QUADS, TECHNIQUE_COUNT - 1u);
     model_index = current.model;
     cur_model = models[model_index];
+    let at = frame.stats_at;
+    if quads {
+        // The CPU culled the tree (the policy's chooser tests its sphere as the CPU path does)
+        // and counts it visible (its assignment is the impostor); here its quads.
+        if cur_model.quad_count == 0u {
+            return;
+        }
+        write_quads();
+        if (cur_draw.fade & 0xFFFFu) != 0u {
+            atomicAdd(&counters[at + 6u], cur_model.quad_count);
+        }
+        atomicAdd(&counters[at + 7u], cur_model.quad_count);
+        atomicAdd(&counters[at + 8u + cur_draw.technique], cur_model.quad_count);
+        return;
+    }
     let m = transforms[current.index].model;
     let ax = m[0].xyz;
     let ay = m[1].xyz;
@@ -437,7 +479,6 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
             emit(c, z, d_cell);
         }
     }
-    let at = frame.stats_at;
     let primitives = tally_triangles + tally_points;
     if (cur_draw.fade & 0xFFFFu) == 0u {
         atomicAdd(&counters[at], 1u);
@@ -445,7 +486,7 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     } else {
         atomicAdd(&counters[at + 6u], primitives);
     }
-    atomicAdd(&counters[at + 7u + cur_draw.technique], primitives);
+    atomicAdd(&counters[at + 8u + cur_draw.technique], primitives);
     atomicAdd(&counters[at + 2u], tally_cells);
     atomicAdd(&counters[at + 3u], culled);
     atomicAdd(&counters[at + 4u], tally_triangles);

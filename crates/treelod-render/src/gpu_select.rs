@@ -19,7 +19,8 @@
 //! dispatch; `select_instances` runs one workgroup per visible block and selects each instance as
 //! the CPU does (culling, far path and far-list range, near path with cell culling, Gilet's depth
 //! bias and shading, prefix search), appending one `DrawInfo` + `DrawIndirectArgs` pair per range
-//! to its model's triangle or point bucket through an atomic counter. The render pass draws each
+//! to its model's triangle or point bucket through an atomic counter (and, in a policy frame, one
+//! per octahedral impostor tree to its quad bucket). The render pass draws each
 //! bucket with `multi_draw_indirect_count` (the counter is the count), or, on adapters without
 //! `MULTI_DRAW_INDIRECT_COUNT`, with `multi_draw_indirect` over the whole bucket after the
 //! indirect buffer was cleared (unused slots are empty draws).
@@ -37,11 +38,19 @@
 //! transition dither its draws keep, the CPU path's `DrawInfo::fade` (`pack_fade` of the same
 //! share: `[0, shown)` entering, `[shown, 1)` leaving, every pixel outside a transition, and every
 //! pixel for a tree both entering and leaving the point tree's selection, whose two selections
-//! are one). Every other instance is skipped. Frames with shadows select wholly on the CPU.
+//! are one). The trees the policy draws with their octahedral impostor (most trees of a large
+//! forest: every one below about a hundred pixels) are given to the GPU too, flagged
+//! [`InstanceDrawGpu::QUADS`], where the point tree leaves their entry free (all but a tree
+//! fading between the two, whose impostor the CPU records): the CPU culled them, and
+//! `select_instances` appends each one's quads to its model's quad bucket as the CPU path records
+//! its `QuadDraw` (the same quads, tint and dither share), so the CPU neither records nor uploads
+//! a draw per impostor tree. Every other instance is skipped. Frames with shadows select wholly on
+//! the CPU.
 //!
 //! **Capacity.** Each bucket's slots are fixed on the CPU (the bind group and the render pass
 //! need them): `min(upper bound, max(2^16, what earlier frames needed × 1.25))`, the upper bound
-//! being the model's instances times its cells with triangles (points). Ranges past a bucket's
+//! being the model's instances times its cells with triangles (points), and its instances for the
+//! quads (none where the renderer draws no octahedral impostor of it). Ranges past a bucket's
 //! capacity are dropped that frame and counted; the counters are read back without blocking a
 //! frame or two later, and the buckets that overflowed grow for the next frames.
 //!
@@ -92,9 +101,12 @@ pub const MAX_BLOCKS: usize = 65_535;
 /// Slots a bucket starts with (if its upper bound is not smaller).
 const INITIAL_BUCKET_DRAWS: u32 = 1 << 16;
 
+/// Buckets per model: triangles, points, and the octahedral impostors' quads.
+const BUCKET_KINDS: usize = 3;
+
 /// Statistics counters after the bucket counters: instances visible, far, cells selected, cells
-/// culled, triangles, points, primitives of leaving draws, then primitives per technique.
-const STATS: usize = 7 + Technique::COUNT;
+/// culled, triangles, points, primitives of leaving draws, quads, then primitives per technique.
+const STATS: usize = 8 + Technique::COUNT;
 
 /// Bytes of one indirect draw.
 const INDIRECT_BYTES: u64 = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
@@ -157,8 +169,12 @@ struct ModelGpu {
     far_hi_at: u32,
     triangle_base: u32,
     point_base: u32,
-    bucket_first: [u32; 2],
-    bucket_capacity: [u32; 2],
+    bucket_first: [u32; BUCKET_KINDS],
+    bucket_capacity: [u32; BUCKET_KINDS],
+    /// The model's octahedral impostor quads (`QuadDraw::first`, `count`; count 0 where the
+    /// renderer cannot draw them).
+    quad_first: u32,
+    quad_count: u32,
 }
 
 /// A non-empty cell. WGSL twin: `CellGpu`.
@@ -189,7 +205,9 @@ struct CellGpu {
 /// fade       0: the GPU skips the instance (the CPU draws it, or nothing does);
 ///            else the DrawInfo::fade its draws carry: bits 0..16 lo, 16..32 hi of the
 ///            transition dither's share [lo, hi) (draws::pack_fade), 0xFFFF0000 = every pixel
-/// technique  Technique::index of the technique the draws count under and are tinted with
+/// technique  Technique::index of the technique the draws count under and are tinted with;
+///            with QUADS (bit 31), the instance is drawn as its model's octahedral impostor
+///            quads instead of through the point tree's selection
 /// ```
 ///
 /// `lo == 0` marks the technique the instance is assigned this frame (it counts as a visible
@@ -208,13 +226,22 @@ impl InstanceDrawGpu {
 
     /// Drawn with the point tree on every pixel: every instance of a frame without a policy.
     pub const POINT_TREE: Self = Self { fade: 0xFFFF_0000, technique: Technique::Spt.index() as u32 };
+
+    /// The flag in `technique` of an instance drawn as its octahedral impostor.
+    pub const QUADS: u32 = 1 << 31;
+
+    /// Drawn as its model's octahedral impostor quads on the dither share `fade` packs, tinted
+    /// and counted as `technique`.
+    pub fn quads(fade: u32, technique: Technique) -> Self {
+        Self { fade, technique: u32::try_from(technique.index()).unwrap_or(0) | Self::QUADS }
+    }
 }
 
 const _: () = assert!(size_of::<InstanceDrawGpu>() == 8);
 const _: () = assert!(size_of::<SelectFrameGpu>() == 160);
 const _: () = assert!(size_of::<BlockGpu>() == 32);
 const _: () = assert!(size_of::<InstanceGpu>() == 8);
-const _: () = assert!(size_of::<ModelGpu>() == 104);
+const _: () = assert!(size_of::<ModelGpu>() == 120);
 const _: () = assert!(size_of::<CellGpu>() == 80);
 
 /// A key as the shader holds it: ±∞ as ±`f32::MAX`, NaN as `−f32::MAX` (selection's thresholds
@@ -236,6 +263,8 @@ pub(crate) struct GpuCounts {
     pub points: u64,
     /// Primitives of the draws of instances only leaving the point tree (`lo > 0`).
     pub leaving: u64,
+    /// Octahedral impostor quads drawn.
+    pub quads: u64,
     /// Primitives per technique the instances' draws count under.
     pub by_technique: PerTechnique<u64>,
     pub ranges: u32,
@@ -254,6 +283,24 @@ pub struct GpuDraw {
     pub technique: Technique,
     /// The share `[lo, hi)` of the transition dither the draw keeps, as the shader unpacks it
     /// (16-bit unorm): as [`crate::RecordedDraw::dither`] to within 1/65535.
+    pub dither: [f32; 2],
+}
+
+/// One octahedral impostor draw the GPU selection appended, read back
+/// ([`crate::Renderer::read_gpu_quads`]): a [`treelod_runtime::QuadDraw`] of the CPU path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GpuQuadDraw {
+    /// The instance's index in [`crate::Renderer::set_instances`]' list.
+    pub instance: u32,
+    /// The instance's model.
+    pub model: u32,
+    /// The first of the model's quads drawn, as the CPU path's `QuadDraw::first`.
+    pub first: u32,
+    /// Quads drawn, as the CPU path's `QuadDraw::count`.
+    pub count: u32,
+    /// As [`GpuDraw::technique`].
+    pub technique: Technique,
+    /// As [`GpuDraw::dither`].
     pub dither: [f32; 2],
 }
 
@@ -305,10 +352,11 @@ pub(crate) struct GpuSelection {
     counters: wgpu::Buffer,
     draws: wgpu::Buffer,
     indirect: wgpu::Buffer,
-    /// Per model: cells with triangles, cells with points (the upper bounds per instance).
-    cells_with: Vec<[u32; 2]>,
+    /// Per model: cells with triangles, cells with points, and 1 if it has quads to draw (the
+    /// upper bounds of each bucket per instance).
+    cells_with: Vec<[u32; BUCKET_KINDS]>,
     /// Per model and kind: slots needed by the largest frame read back so far.
-    needed: Vec<[u32; 2]>,
+    needed: Vec<[u32; BUCKET_KINDS]>,
     cull_group: Option<wgpu::BindGroup>,
     select_group: Option<wgpu::BindGroup>,
     /// The render pass's frame bind group over the draws and the whole pool.
@@ -330,7 +378,8 @@ fn buffer(device: &wgpu::Device, label: &str, size: u64, usage: wgpu::BufferUsag
 const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE;
 
 impl GpuSelection {
-    /// The pipelines and the scene of `models` (checked against `budget` bytes).
+    /// The pipelines and the scene of `models` (checked against `budget` bytes); `quads` per
+    /// model, the octahedral impostor quads the renderer draws of each tree (0 for none).
     ///
     /// # Errors
     /// [`RenderError::GpuSelectionBudget`] if the models' triangles and points do not fit.
@@ -339,6 +388,7 @@ impl GpuSelection {
         queue: &wgpu::Queue,
         containers: &[&Container],
         lods: &[ModelLod],
+        quads: &[u32],
         budget: u64,
     ) -> Result<Self, RenderError> {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -393,7 +443,7 @@ impl GpuSelection {
             pending: None,
             last: GpuCounts::default(),
         };
-        selection.load_models(device, queue, containers, lods, budget)?;
+        selection.load_models(device, queue, containers, lods, quads, budget)?;
         Ok(selection)
     }
 
@@ -414,6 +464,7 @@ impl GpuSelection {
         queue: &wgpu::Queue,
         containers: &[&Container],
         lods: &[ModelLod],
+        quads: &[u32],
         budget: u64,
     ) -> Result<(), RenderError> {
         let limits = device.limits();
@@ -435,8 +486,9 @@ impl GpuSelection {
         let (mut models, mut cells, mut keys) = (Vec::new(), Vec::new(), Vec::<f32>::new());
         self.cells_with.clear();
         let mut at = 0u64;
-        for (container, lod) in containers.iter().zip(lods) {
+        for (m, (container, lod)) in containers.iter().zip(lods).enumerate() {
             let unit = |n: u64| u32::try_from(n).unwrap_or(u32::MAX);
+            let quad_count = quads.get(m).copied().unwrap_or(0);
             // The points with their ambient occlusion in `flags`, as the streamed pool holds them.
             let mut scratch = Vec::new();
             let triangles = container.triangles();
@@ -458,7 +510,7 @@ impl GpuSelection {
             let (far_tau, largest) = lod.far_bounds();
             let (cull_centre, cull_half) = lod.cull_box();
             let first_cell = to_u32(cells.len());
-            let mut with = [0u32; 2];
+            let mut with = [0, 0, u32::from(quad_count > 0)];
             for cell in lod.cells() {
                 let (centre, half) = cell.centre_half();
                 let (t, p) = (cell.triangles(), cell.points());
@@ -504,8 +556,10 @@ impl GpuSelection {
                 far_hi_at: to_u32(far_hi_at),
                 triangle_base: unit(2 * triangles_at),
                 point_base: unit(points_at),
-                bucket_first: [0; 2],
-                bucket_capacity: [0; 2],
+                bucket_first: [0; BUCKET_KINDS],
+                bucket_capacity: [0; BUCKET_KINDS],
+                quad_first: 0,
+                quad_count,
             });
         }
         let upload = |label, bytes: &[u8]| {
@@ -516,12 +570,12 @@ impl GpuSelection {
         self.cells = upload("treelod select cells", bytemuck::cast_slice(&cells));
         self.keys = upload("treelod select keys", bytemuck::cast_slice(&keys));
         self.models_cpu = models;
-        self.needed = vec![[0; 2]; self.models_cpu.len()];
+        self.needed = vec![[0; BUCKET_KINDS]; self.models_cpu.len()];
         self.per_model = vec![0; self.models_cpu.len()];
         self.counters = buffer(
             device,
             "treelod select counters",
-            4 * (2 * self.models_cpu.len() + STATS) as u64,
+            4 * (BUCKET_KINDS * self.models_cpu.len() + STATS) as u64,
             STORAGE | wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_SRC,
         );
         self.pending = None;
@@ -632,8 +686,8 @@ impl GpuSelection {
         let max_draws = limit / size_of::<DrawInfo>() as u64;
         let mut wanted = Vec::with_capacity(self.models_cpu.len());
         for ((&n, with), needed) in self.per_model.iter().zip(&self.cells_with).zip(&self.needed) {
-            let mut caps = [0u64; 2];
-            for kind in 0..2 {
+            let mut caps = [0u64; BUCKET_KINDS];
+            for kind in 0..BUCKET_KINDS {
                 let upper = u64::from(n) * u64::from(with[kind]);
                 let grown = u64::from(needed[kind]).saturating_mul(5).div_ceil(4).next_power_of_two();
                 caps[kind] = upper.min(grown.max(u64::from(INITIAL_BUCKET_DRAWS)));
@@ -743,9 +797,9 @@ impl GpuSelection {
             self.layout_buckets(device, queue);
         }
         frame.block_count = self.block_count;
-        frame.stats_at = u32::try_from(2 * self.models_cpu.len()).unwrap_or(u32::MAX);
+        frame.stats_at = u32::try_from(BUCKET_KINDS * self.models_cpu.len()).unwrap_or(u32::MAX);
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&frame));
-        let zeros = vec![0u32; 2 * self.models_cpu.len() + STATS];
+        let zeros = vec![0u32; BUCKET_KINDS * self.models_cpu.len() + STATS];
         queue.write_buffer(&self.counters, 0, bytemuck::cast_slice(&zeros));
         queue.write_buffer(&self.dispatch, 0, bytemuck::cast_slice(&[0u32, 1, 1]));
         let cull_group = self.cull_group.get_or_insert_with(|| {
@@ -837,11 +891,11 @@ impl GpuSelection {
         if let Ok(mapped) = pending.staging.slice(..).get_mapped_range() {
             let words: &[u32] = bytemuck::cast_slice(&mapped);
             let n = self.models_cpu.len();
-            if words.len() >= 2 * n + STATS {
+            if words.len() >= BUCKET_KINDS * n + STATS {
                 let mut counts = GpuCounts::default();
                 for (m, model) in self.models_cpu.iter().enumerate() {
-                    for kind in 0..2 {
-                        let (wanted, cap) = (words[2 * m + kind], model.bucket_capacity[kind]);
+                    for kind in 0..BUCKET_KINDS {
+                        let (wanted, cap) = (words[BUCKET_KINDS * m + kind], model.bucket_capacity[kind]);
                         counts.ranges += wanted.min(cap);
                         counts.dropped += wanted.saturating_sub(cap);
                         if wanted > cap {
@@ -850,7 +904,7 @@ impl GpuSelection {
                         self.needed[m][kind] = self.needed[m][kind].max(wanted);
                     }
                 }
-                let s = &words[2 * n..];
+                let s = &words[BUCKET_KINDS * n..];
                 counts.instances_visible = s[0];
                 counts.instances_far = s[1];
                 counts.cells_visible = s[2];
@@ -858,8 +912,9 @@ impl GpuSelection {
                 counts.triangles = u64::from(s[4]);
                 counts.points = u64::from(s[5]);
                 counts.leaving = u64::from(s[6]);
+                counts.quads = u64::from(s[7]);
                 for technique in Technique::ALL {
-                    counts.by_technique[technique] = u64::from(s[7 + technique.index()]);
+                    counts.by_technique[technique] = u64::from(s[8 + technique.index()]);
                 }
                 self.last = counts;
             }
@@ -869,13 +924,16 @@ impl GpuSelection {
         grow
     }
 
-    /// Records the draws into the host's pass: per kind (pipeline) and model, one
-    /// `multi_draw_indirect_count` over its bucket, with the model bind group `model_group(m)`.
+    /// Records the draws into the host's pass: per kind (pipeline: triangles, points, octahedral
+    /// impostors) and model, one `multi_draw_indirect_count` over its bucket, with the model bind
+    /// group `model_group(m)` and, for the quads, the model's octahedral impostors' group
+    /// `quad_group(m)` (group 3).
     pub fn render<'a>(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
-        pipelines: [&wgpu::RenderPipeline; 2],
+        pipelines: [&wgpu::RenderPipeline; BUCKET_KINDS],
         model_group: impl Fn(usize) -> Option<&'a wgpu::BindGroup>,
+        quad_group: impl Fn(usize) -> Option<&'a wgpu::BindGroup>,
     ) {
         let Some(frame_group) = &self.frame_group else { return };
         pass.set_bind_group(0, frame_group, &[]);
@@ -887,10 +945,14 @@ impl GpuSelection {
                 if capacity == 0 || self.per_model.get(m).is_none_or(|&n| n == 0) {
                     continue;
                 }
+                if kind == 2 {
+                    let Some(quads) = quad_group(m) else { continue };
+                    pass.set_bind_group(3, quads, &[]);
+                }
                 pass.set_bind_group(1, group, &[]);
                 let offset = u64::from(first) * INDIRECT_BYTES;
                 if self.count_feature {
-                    let count_at = 4 * (2 * m + kind) as u64;
+                    let count_at = 4 * (BUCKET_KINDS * m + kind) as u64;
                     pass.multi_draw_indirect_count(&self.indirect, offset, &self.counters, count_at, capacity);
                 } else {
                     pass.multi_draw_indirect(&self.indirect, offset, capacity);
@@ -901,12 +963,16 @@ impl GpuSelection {
 
     /// Reads the draws of the last [`Self::prepare`] back, blocking until the GPU is done: the
     /// ranges as the CPU selection would list them (in bucket order, not the CPU's), with the
-    /// technique and dither of each, for tests and tools. Ranges dropped for lack of capacity are
-    /// missing.
+    /// technique and dither of each, and the octahedral impostors' quad draws, for tests and
+    /// tools. Draws dropped for lack of capacity are missing.
     ///
     /// # Errors
     /// [`RenderError::Readback`] if mapping fails.
-    pub fn read_draws(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Vec<GpuDraw>, RenderError> {
+    pub fn read_draws(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<(Vec<GpuDraw>, Vec<GpuQuadDraw>), RenderError> {
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod select read") });
         let copy = |encoder: &mut wgpu::CommandEncoder, source: &wgpu::Buffer| {
@@ -943,13 +1009,33 @@ impl GpuSelection {
         let indirect: &[[u32; 4]] = bytemuck::cast_slice(&indirect[..indirect.len() / 16 * 16]);
         let tints = Technique::ALL.map(crate::draws::tint);
         let unorm = |v: u32| f32::from(u16::try_from(v & 0xFFFF).unwrap_or(u16::MAX)) / 65535.0;
+        let technique_of =
+            |tint: u32| Technique::ALL.into_iter().zip(tints).find(|&(_, t)| t == tint).map_or(Technique::Spt, |p| p.0);
+        let slots = |m: usize, kind: usize| {
+            let model = &self.models_cpu[m];
+            let n = counters.get(BUCKET_KINDS * m + kind).copied().unwrap_or(0).min(model.bucket_capacity[kind]);
+            (0..n).filter_map(move |s| {
+                let slot = (model.bucket_first[kind] + s) as usize;
+                Some((draws.get(slot)?, indirect.get(slot)?))
+            })
+        };
+        let mut quads = Vec::new();
+        for (m, model) in self.models_cpu.iter().enumerate() {
+            for (info, args) in slots(m, 2) {
+                quads.push(GpuQuadDraw {
+                    instance: info.instance,
+                    model: u32::try_from(m).unwrap_or(u32::MAX),
+                    first: args[2] / 6 - model.quad_first,
+                    count: args[0] / 6,
+                    technique: technique_of(info.tint),
+                    dither: [unorm(info.fade), unorm(info.fade >> 16)],
+                });
+            }
+        }
         let mut ranges = Vec::new();
         for (m, model) in self.models_cpu.iter().enumerate() {
             for kind in 0..2 {
-                let n = counters.get(2 * m + kind).copied().unwrap_or(0).min(model.bucket_capacity[kind]);
-                for s in 0..n {
-                    let slot = (model.bucket_first[kind] + s) as usize;
-                    let (Some(info), Some(args)) = (draws.get(slot), indirect.get(slot)) else { continue };
+                for (info, args) in slots(m, kind) {
                     let (kind, first, count) = match kind {
                         0 => (Kind::Triangles, args[2] / 3 - model.triangle_base, args[0] / 3),
                         _ if info.cell == ROOTS_CELL => (Kind::Roots, args[2] / 6 - model.roots_at, args[0] / 6),
@@ -966,16 +1052,12 @@ impl GpuSelection {
                         tau_triangles: info.tau_t,
                         shading: info.shading,
                     };
-                    let technique = Technique::ALL
-                        .into_iter()
-                        .zip(tints)
-                        .find(|&(_, t)| t == info.tint)
-                        .map_or(Technique::Spt, |p| p.0);
-                    ranges.push(GpuDraw { range, technique, dither: [unorm(info.fade), unorm(info.fade >> 16)] });
+                    let dither = [unorm(info.fade), unorm(info.fade >> 16)];
+                    ranges.push(GpuDraw { range, technique: technique_of(info.tint), dither });
                 }
             }
         }
-        Ok(ranges)
+        Ok((ranges, quads))
     }
 }
 

@@ -122,7 +122,7 @@ mod upload;
 
 pub use camera::Camera;
 pub use draws::RecordedDraw;
-pub use gpu_select::GpuDraw;
+pub use gpu_select::{GpuDraw, GpuQuadDraw};
 pub use ground::Ground;
 pub use renderer::{Instance, ModelId, RenderError, Renderer};
 pub use settings::{DebugView, DepthConvention, ImpostorBark, Pruning, RendererFormats, Settings, prune_scale};

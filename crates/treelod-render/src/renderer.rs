@@ -18,7 +18,7 @@ use treelod_runtime::{
 use crate::assign::PolicyModels;
 use crate::camera::Camera;
 use crate::draws::{DrawInfo, EVERY_PIXEL, InstanceTransform, RECORD_CHUNK, RecordedDraw, Recording, View, pack_fade};
-use crate::gpu_select::{GpuDraw, GpuSelection, InstanceDrawGpu, select_frame_gpu};
+use crate::gpu_select::{GpuDraw, GpuQuadDraw, GpuSelection, InstanceDrawGpu, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
 use crate::pipelines::Pipelines;
 #[cfg(doc)]
@@ -450,7 +450,8 @@ impl Renderer {
     pub fn enable_gpu_selection(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<(), RenderError> {
         let budget = self.gpu_budget(device);
         let containers: Vec<&Container> = self.models.iter().map(|m| &*m.container).collect();
-        let mut gpu = GpuSelection::new(device, queue, &containers, &self.lods, budget)?;
+        let quads: Vec<u32> = self.representations.iter().map(|r| r.octahedral).collect();
+        let mut gpu = GpuSelection::new(device, queue, &containers, &self.lods, &quads, budget)?;
         gpu.set_instances(device, queue, &self.instances, &self.lods);
         self.gpu = Some(gpu);
         self.gpu_instances_stale = false;
@@ -501,7 +502,25 @@ impl Renderer {
         queue: &wgpu::Queue,
     ) -> Result<Option<Vec<GpuDraw>>, RenderError> {
         match &self.gpu {
-            Some(gpu) if self.gpu_frame => gpu.read_draws(device, queue).map(Some),
+            Some(gpu) if self.gpu_frame => gpu.read_draws(device, queue).map(|(draws, _)| Some(draws)),
+            _ => Ok(None),
+        }
+    }
+
+    /// The octahedral impostors the GPU drew in the last [`Self::prepare`] of a policy frame with
+    /// GPU selection, read back (this blocks until the GPU has finished): the CPU path's
+    /// [`treelod_runtime::QuadDraw`]s of those trees, with the technique and dither of each, in no
+    /// fixed order. `None` if the last frame was selected on the CPU. For tests and tools.
+    ///
+    /// # Errors
+    /// [`RenderError::Readback`] if mapping the buffers fails.
+    pub fn read_gpu_quads(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Result<Option<Vec<GpuQuadDraw>>, RenderError> {
+        match &self.gpu {
+            Some(gpu) if self.gpu_frame => gpu.read_draws(device, queue).map(|(_, quads)| Some(quads)),
             _ => Ok(None),
         }
     }
@@ -984,7 +1003,8 @@ impl Renderer {
     /// assigns the trees ([`Self::assign`], transitions included) and selects and records those of
     /// every technique but the point tree, as a CPU frame does; the GPU selects the trees the CPU
     /// would draw through the point tree's selection, told per instance which ones and on which
-    /// share of the transition dither ([`InstanceDrawGpu`]).
+    /// share of the transition dither ([`InstanceDrawGpu`]), and appends the octahedral impostor
+    /// quads of the trees the policy draws so, where the point tree leaves their entry free.
     ///
     /// - The point tree's trees are the assignment's [`Technique::Full`] and [`Technique::Spt`]
     ///   lists and those the other techniques hand back ([`point_tree_list`]), drawn on the
@@ -995,8 +1015,14 @@ impl Renderer {
     ///   to, where the CPU path draws it twice on complementary pixels: the same image.
     /// - Nothing the CPU records here is streamed: the other techniques' data is uploaded whole
     ///   by `add_model`, and the point tree's is resident whole for GPU selection.
-    /// - Statistics: the CPU's counts of this frame's other techniques plus the GPU's of the
-    ///   point tree read back from an earlier frame ([`FrameStats::gpu_selection`]).
+    /// - The impostor trees: those of the assignment's [`Technique::Octahedral`] list, and of
+    ///   the trees leaving it in a transition, whose entry the point tree left free, are
+    ///   [`InstanceDrawGpu::quads`] on the share [`Self::drawn_by`] gives them, and the CPU records
+    ///   none of them; a tree fading between the impostor and the point tree keeps its impostor
+    ///   on the CPU.
+    /// - Statistics: the CPU's counts of this frame's other techniques (and of the impostor
+    ///   trees in view) plus the GPU's of the point tree and the impostors' quads read back from
+    ///   an earlier frame ([`FrameStats::gpu_selection`]).
     fn prepare_hybrid(
         &mut self,
         device: &wgpu::Device,
@@ -1041,6 +1067,22 @@ impl Renderer {
             }
         }
         self.leaving_assignment = leaving_assignment;
+        // The octahedral impostors' trees are the GPU's too where the point tree left their slot
+        // free (all but a tree fading between the two): it appends their quads as the CPU path
+        // records them, on the same share of the dither.
+        for (view, leaves) in [(&mut main, false), (&mut leaving, true)] {
+            if leaves && !fading {
+                continue;
+            }
+            view.draws.octahedral.retain(|d| {
+                let Some(slot) = draws.get_mut(d.instance as usize).filter(|s| **s == InstanceDrawGpu::SKIP) else {
+                    return true;
+                };
+                let (technique, dither) = self.drawn_by(d.instance, leaves);
+                *slot = InstanceDrawGpu::quads(pack_fade(dither), technique);
+                false
+            });
+        }
         // The point tree's ranges are the GPU's: the CPU records none.
         for view in [&mut main, &mut leaving] {
             view.selection.clear();
@@ -1076,6 +1118,7 @@ impl Renderer {
         stats.draw_commands += gpu_counts.ranges;
         stats.submitted[Primitive::Triangle] += gpu_counts.triangles;
         stats.submitted[Primitive::Point] += gpu_counts.points;
+        stats.submitted[Primitive::Billboard] += gpu_counts.quads;
         stats.by_technique += gpu_counts.by_technique;
         stats.leaving += gpu_counts.leaving;
         if self.policy_occlusion() {
@@ -1343,8 +1386,11 @@ impl Renderer {
                 pass.set_bind_group(0, &self.frame_bind_groups[0], &[]);
                 self.draw_view(pass, &self.main, &self.pipelines);
             }
-            let spt = [&self.pipelines[Bucket::Triangles as usize], &self.pipelines[Bucket::Points as usize]];
-            gpu.render(pass, spt, group);
+            let pipelines =
+                [Bucket::Triangles, Bucket::Points, Bucket::Octahedral].map(|b| &self.pipelines[b as usize]);
+            let quads =
+                |m: usize| self.models.get(m).and_then(|model| model.groups[Bucket::Octahedral as usize].as_ref());
+            gpu.render(pass, pipelines, group, quads);
             return;
         }
         pass.set_bind_group(0, &self.frame_bind_groups[0], &[]);

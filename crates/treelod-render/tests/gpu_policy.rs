@@ -1,7 +1,8 @@
 //! GPU selection with the policy on the Vulkan backend (Mesa lavapipe in CI): in a forest of a
-//! calibrated container, the CPU assigns the trees and draws every technique but the point tree,
-//! the GPU selects the point tree's trees and nothing else, on the same share of the transition
-//! dither as the CPU path, and the image is the CPU path's.
+//! calibrated container, the CPU assigns the trees and draws every technique but the point tree
+//! and the octahedral impostor, the GPU selects the point tree's trees and appends the
+//! impostors' quads and nothing else, on the same share of the transition dither as the CPU
+//! path, and the image is the CPU path's.
 
 mod common;
 
@@ -311,4 +312,118 @@ fn frames_without_a_policy_select_every_tree_on_the_gpu() {
     assert!(policy_trees < all, "the policy draws some trees with other techniques ({policy_trees} of {all})");
     hybrid.settings_mut().policy = None;
     assert_eq!(check(&mut hybrid, &mut cpu, "forced again"), all);
+}
+
+/// The calibrated demo tree with its octahedral impostor, which the policy draws every tree
+/// below about 100 pixels with (one quad each), and the 48 trees' [`positions`].
+fn octahedral_forest() -> (Arc<Container>, Vec<Vec3>) {
+    let container = common::calibrated_demo();
+    assert!(!container.octahedral().is_empty(), "the demo tree has its octahedral impostor");
+    let positions = positions(&ModelLod::from_container(&container));
+    (container, positions)
+}
+
+/// A frame's octahedral impostor draws as (instance, quads, technique, dither in 1/65535ths).
+type Quads = BTreeSet<(u32, u32, Technique, [u32; 2])>;
+
+/// The octahedral impostor draws a renderer recorded on the CPU.
+fn cpu_quads(renderer: &Renderer) -> Quads {
+    renderer
+        .draws()
+        .iter()
+        .filter(|d| d.source == DrawSource::Octahedral)
+        .map(|d| (d.instance, d.count, d.technique, unorm(d.dither)))
+        .collect()
+}
+
+/// The octahedral impostor draws the GPU appended in a renderer's last frame (each tree once).
+fn gpu_quads(gpu: &Gpu, renderer: &Renderer) -> Quads {
+    let quads = renderer.read_gpu_quads(&gpu.device, &gpu.queue).expect("reads back").expect("the GPU selected");
+    assert!(quads.iter().all(|q| q.first == 0 && q.model == 0), "{quads:?}");
+    let set: Quads = quads.iter().map(|q| (q.instance, q.count, q.technique, unorm(q.dither))).collect();
+    assert_eq!(set.len(), quads.len(), "each tree's quads once");
+    set
+}
+
+/// With the octahedral impostor among the choices, the hybrid frame draws the impostor's trees
+/// on the GPU too: its quad draws are the CPU path's (the same trees, quads, technique and
+/// dither), the CPU records none of them, the image is the CPU path's, and the statistics, once
+/// the GPU's counts are read back, count the quads as the CPU path does.
+#[test]
+fn octahedral_impostors_are_drawn_on_the_gpu() {
+    let gpu = gpu();
+    let (container, positions) = octahedral_forest();
+    let policy = Policy { transition: 0, occlusion: false, ..Policy::default() };
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    let mut cpu = renderer(&gpu, &container, settings, &positions, false);
+    let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+    let cameras = [
+        ("ahead", Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 256, 256)),
+        ("above", Camera::look_at(vec3(-20.0, 40.0, 30.0), vec3(5.0, 0.0, -120.0), 0.9, 256, 256)),
+    ];
+    for (name, camera) in cameras {
+        let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+        let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+        assert!(stats.gpu_selection, "{name}: {stats:?}");
+        assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "{name}: the same assignment");
+        let expected = cpu_quads(&cpu);
+        eprintln!("{name}: {:?}, {} impostor trees", cpu_stats.instances, expected.len());
+        assert!(expected.len() >= 10, "{name}: the far trees are drawn with the impostor: {expected:?}");
+        assert_eq!(gpu_quads(&gpu, &hybrid), expected, "{name}: the impostors' draws");
+        assert!(cpu_quads(&hybrid).is_empty(), "{name}: the CPU records no impostor");
+
+        let (diff, covered) = differing(&a, &b);
+        common::keep(&a, &format!("gpu-octahedral-{name}-cpu"));
+        common::keep(&b, &format!("gpu-octahedral-{name}-hybrid"));
+        eprintln!("{name}: {diff} of {covered} covered pixels differ");
+        assert!(covered > 500, "{name}: the forest is in view");
+        assert!(diff * 200 <= covered, "{name}: {diff} of {covered} pixels differ");
+
+        // The same frame again, until the GPU's counts of it are read back.
+        let mut again = stats;
+        for _ in 0..10 {
+            gpu.device.poll(wgpu::PollType::wait_indefinitely()).expect("polls");
+            again = hybrid.prepare(&gpu.device, &gpu.queue, &camera);
+            if again.by_technique[Technique::Octahedral] == cpu_stats.by_technique[Technique::Octahedral] {
+                break;
+            }
+        }
+        assert_eq!(again.instances, cpu_stats.instances, "{name}: {again:?}");
+        assert_eq!(again.by_technique[Technique::Octahedral], cpu_stats.by_technique[Technique::Octahedral], "{name}");
+        let quads = |s: &treelod_render::FrameStats| s.submitted[treelod_render::Primitive::Billboard];
+        assert_eq!(quads(&again), quads(&cpu_stats), "{name}: quads submitted");
+    }
+}
+
+/// The camera flies into the impostors' forest with transitions of 4 frames: every octahedral
+/// impostor draw of the CPU path is drawn by the hybrid frame with the same technique and share
+/// of the dither, by the GPU where the point tree leaves the tree's slot free (a tree fading
+/// between the impostor and the LoD chain, say) and by the CPU where it does not (a tree fading
+/// between the impostor and the point tree), and the images match.
+#[test]
+fn impostor_trees_fade_on_the_gpu_as_on_the_cpu() {
+    let gpu = gpu();
+    let (container, positions) = octahedral_forest();
+    let policy = Policy { hysteresis: 0.0, transition: 4, occlusion: false, ..Policy::default() };
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    let mut cpu = renderer(&gpu, &container, settings, &positions, false);
+    let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+    let (mut fading_on_gpu, mut on_cpu) = (0, 0);
+    for frame in 0..16 {
+        let z = 10.0 - 10.0 * frame as f32;
+        let camera = Camera::look_at(vec3(1.0, 2.0, z), vec3(1.0, 2.0, z - 100.0), 0.9, 192, 192);
+        let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+        let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+        assert_eq!(stats.transitions, cpu_stats.transitions, "frame {frame}");
+        assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "frame {frame}");
+        let (on_gpu, kept) = (gpu_quads(&gpu, &hybrid), cpu_quads(&hybrid));
+        assert!(on_gpu.is_disjoint(&kept), "frame {frame}: a tree's impostor drawn twice");
+        fading_on_gpu += on_gpu.iter().filter(|q| q.3 != [0, 65535]).count();
+        on_cpu += kept.len();
+        assert_eq!(&on_gpu | &kept, cpu_quads(&cpu), "frame {frame}: the impostors' draws");
+        let (diff, covered) = differing(&a, &b);
+        assert!(diff * 100 <= covered, "frame {frame}: {diff} of {covered} pixels differ");
+    }
+    eprintln!("{fading_on_gpu} impostor draws fading on the GPU, {on_cpu} left to the CPU");
+    assert!(fading_on_gpu > 0, "the flight has impostor trees in a transition");
 }
