@@ -156,7 +156,8 @@ struct DispatchArgs {
 @group(0) @binding(8) var<storage, read> keys: array<f32>;
 // Per bucket (BUCKET_KINDS × model + kind) the ranges appended, then the statistics: instances
 // visible, far, cells selected, cells culled, triangles, points, primitives of leaving draws,
-// quads, then primitives per technique (Technique::index).
+// quads, then primitives per technique (Technique::index); all but the quads of the point tree's
+// draws (the CPU counts the octahedral impostors' trees it hands over).
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 @group(0) @binding(10) var<storage, read_write> draws: array<DrawInfo>;
 @group(0) @binding(11) var<storage, read_write> indirect: array<DrawIndirect>;
@@ -364,16 +365,12 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     let at = frame.stats_at;
     if quads {
         // The CPU culled the tree (the policy's chooser tests its sphere as the CPU path does)
-        // and counts it visible (its assignment is the impostor); here its quads.
+        // and counts it and its quads in the frame's statistics; here only the quads drawn.
         if cur_model.quad_count == 0u {
             return;
         }
         write_quads();
-        if (cur_draw.fade & 0xFFFFu) != 0u {
-            atomicAdd(&counters[at + 6u], cur_model.quad_count);
-        }
         atomicAdd(&counters[at + 7u], cur_model.quad_count);
-        atomicAdd(&counters[at + 8u + cur_draw.technique], cur_model.quad_count);
         return;
     }
     let m = transforms[current.index].model;

@@ -263,9 +263,9 @@ pub(crate) struct GpuCounts {
     pub points: u64,
     /// Primitives of the draws of instances only leaving the point tree (`lo > 0`).
     pub leaving: u64,
-    /// Octahedral impostor quads drawn.
+    /// Octahedral impostor quads drawn (the CPU counts them in the frame's statistics).
     pub quads: u64,
-    /// Primitives per technique the instances' draws count under.
+    /// Primitives per technique the point tree's draws count under.
     pub by_technique: PerTechnique<u64>,
     pub ranges: u32,
     pub dropped: u32,
@@ -896,7 +896,8 @@ impl GpuSelection {
                 for (m, model) in self.models_cpu.iter().enumerate() {
                     for kind in 0..BUCKET_KINDS {
                         let (wanted, cap) = (words[BUCKET_KINDS * m + kind], model.bucket_capacity[kind]);
-                        counts.ranges += wanted.min(cap);
+                        // The quads' draws are counted by the CPU, which hands them over.
+                        counts.ranges += if kind < 2 { wanted.min(cap) } else { 0 };
                         counts.dropped += wanted.saturating_sub(cap);
                         if wanted > cap {
                             grow = true;

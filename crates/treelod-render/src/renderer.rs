@@ -198,6 +198,9 @@ pub struct Renderer {
     gpu_instances_stale: bool,
     /// Scratch: per instance, what GPU selection draws of it in a policy frame.
     gpu_instance_draws: Vec<InstanceDrawGpu>,
+    /// Scratch of policy frames with GPU selection: the trees whose octahedral impostor the GPU
+    /// draws.
+    gpu_quad_trees: Vec<u32>,
     // Scratch reused between frames.
     requests: Vec<Request>,
     uploads: Vec<Upload>,
@@ -368,6 +371,7 @@ impl Renderer {
             gpu_frame: false,
             gpu_instances_stale: false,
             gpu_instance_draws: Vec::new(),
+            gpu_quad_trees: Vec::new(),
             requests: Vec::new(),
             uploads: Vec::new(),
             wanted: Vec::new(),
@@ -1020,9 +1024,10 @@ impl Renderer {
     ///   [`InstanceDrawGpu::quads`] on the share [`Self::drawn_by`] gives them, and the CPU records
     ///   none of them; a tree fading between the impostor and the point tree keeps its impostor
     ///   on the CPU.
-    /// - Statistics: the CPU's counts of this frame's other techniques (and of the impostor
-    ///   trees in view) plus the GPU's of the point tree and the impostors' quads read back from
-    ///   an earlier frame ([`FrameStats::gpu_selection`]).
+    /// - Statistics: the CPU's counts of this frame's other techniques and of the impostor
+    ///   trees it hands over (their quads, ranges and draw commands: the GPU draws each of them)
+    ///   plus the GPU's of the point tree read back from an earlier frame
+    ///   ([`FrameStats::gpu_selection`]).
     fn prepare_hybrid(
         &mut self,
         device: &wgpu::Device,
@@ -1069,7 +1074,11 @@ impl Renderer {
         self.leaving_assignment = leaving_assignment;
         // The octahedral impostors' trees are the GPU's too where the point tree left their slot
         // free (all but a tree fading between the two): it appends their quads as the CPU path
-        // records them, on the same share of the dither.
+        // records them, on the same share of the dither. The CPU culled them and knows their
+        // quads, so it counts them in this frame's statistics itself.
+        let mut quad_trees = std::mem::take(&mut self.gpu_quad_trees);
+        quad_trees.clear();
+        let (mut quads_by_technique, mut quads_leaving) = (PerTechnique::<u64>::default(), 0u64);
         for (view, leaves) in [(&mut main, false), (&mut leaving, true)] {
             if leaves && !fading {
                 continue;
@@ -1080,6 +1089,9 @@ impl Renderer {
                 };
                 let (technique, dither) = self.drawn_by(d.instance, leaves);
                 *slot = InstanceDrawGpu::quads(pack_fade(dither), technique);
+                quad_trees.push(d.instance);
+                quads_by_technique[technique] += u64::from(d.count);
+                quads_leaving += if leaves { u64::from(d.count) } else { 0 };
                 false
             });
         }
@@ -1118,19 +1130,29 @@ impl Renderer {
         stats.draw_commands += gpu_counts.ranges;
         stats.submitted[Primitive::Triangle] += gpu_counts.triangles;
         stats.submitted[Primitive::Point] += gpu_counts.points;
-        stats.submitted[Primitive::Billboard] += gpu_counts.quads;
+        stats.submitted[Primitive::Billboard] += quads_by_technique.total();
+        stats.by_technique += quads_by_technique;
+        stats.leaving += quads_leaving;
+        let quad_draws = u32::try_from(quad_trees.len()).unwrap_or(u32::MAX);
+        stats.ranges += quad_draws;
+        stats.draw_commands += quad_draws;
         stats.by_technique += gpu_counts.by_technique;
         stats.leaving += gpu_counts.leaving;
         if self.policy_occlusion() {
-            // Every tree drawn is measured: the CPU's recorded ones, and those the GPU draws
-            // that lie in the view (the GPU culls them further; an extra job costs only time).
+            // Every tree drawn is measured: the CPU's recorded ones, the impostor trees (culled
+            // here), and those the GPU selects through the point tree that lie in the view (the
+            // GPU culls them further; an extra job costs only time).
             let frustum = treelod_runtime::Frustum::from_view_proj(runtime_camera.view_proj);
+            let point_tree =
+                |d: &InstanceDrawGpu| *d != InstanceDrawGpu::SKIP && d.technique & InstanceDrawGpu::QUADS == 0;
             let gpu_drawn = (0..u32::try_from(draws.len()).unwrap_or(u32::MAX))
-                .filter(|&index| draws[index as usize] != InstanceDrawGpu::SKIP && self.in_view(&frustum, index));
-            let drawn: Vec<u32> = main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).collect();
+                .filter(|&index| point_tree(&draws[index as usize]) && self.in_view(&frustum, index));
+            let drawn: Vec<u32> =
+                main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).chain(quad_trees.iter().copied()).collect();
             self.set_occlusion_jobs(drawn.into_iter());
         }
         self.gpu_instance_draws = draws;
+        self.gpu_quad_trees = quad_trees;
         self.main = main;
         self.leaving = leaving;
         laps.lap(&mut self.phases.record);

@@ -347,8 +347,8 @@ fn gpu_quads(gpu: &Gpu, renderer: &Renderer) -> Quads {
 
 /// With the octahedral impostor among the choices, the hybrid frame draws the impostor's trees
 /// on the GPU too: its quad draws are the CPU path's (the same trees, quads, technique and
-/// dither), the CPU records none of them, the image is the CPU path's, and the statistics, once
-/// the GPU's counts are read back, count the quads as the CPU path does.
+/// dither), the CPU records none of them, the image is the CPU path's, and the frame's statistics
+/// count the quads as the CPU path does (the CPU counts what it hands over).
 #[test]
 fn octahedral_impostors_are_drawn_on_the_gpu() {
     let gpu = gpu();
@@ -379,19 +379,13 @@ fn octahedral_impostors_are_drawn_on_the_gpu() {
         assert!(covered > 500, "{name}: the forest is in view");
         assert!(diff * 200 <= covered, "{name}: {diff} of {covered} pixels differ");
 
-        // The same frame again, until the GPU's counts of it are read back.
-        let mut again = stats;
-        for _ in 0..10 {
-            gpu.device.poll(wgpu::PollType::wait_indefinitely()).expect("polls");
-            again = hybrid.prepare(&gpu.device, &gpu.queue, &camera);
-            if again.by_technique[Technique::Octahedral] == cpu_stats.by_technique[Technique::Octahedral] {
-                break;
-            }
-        }
-        assert_eq!(again.instances, cpu_stats.instances, "{name}: {again:?}");
-        assert_eq!(again.by_technique[Technique::Octahedral], cpu_stats.by_technique[Technique::Octahedral], "{name}");
+        // (The point tree's counts are the GPU's, read back a frame or two later.)
+        let octahedral = Technique::Octahedral;
+        assert_eq!(stats.instances[octahedral], cpu_stats.instances[octahedral], "{name}: {stats:?}");
+        assert_eq!(stats.by_technique[octahedral], cpu_stats.by_technique[octahedral], "{name}: this frame's");
         let quads = |s: &treelod_render::FrameStats| s.submitted[treelod_render::Primitive::Billboard];
-        assert_eq!(quads(&again), quads(&cpu_stats), "{name}: quads submitted");
+        assert_eq!(quads(&stats), quads(&cpu_stats), "{name}: quads submitted");
+        assert!(quads(&stats) as usize >= expected.len(), "{name}");
     }
 }
 
