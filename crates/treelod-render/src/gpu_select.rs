@@ -44,8 +44,9 @@
 //! fading between the two, whose impostor the CPU records): the CPU culled them, and
 //! `select_instances` appends each one's quads to its model's quad bucket as the CPU path records
 //! its `QuadDraw` (the same quads, tint and dither share), so the CPU neither records nor uploads
-//! a draw per impostor tree. Every other instance is skipped. Frames with shadows select wholly on
-//! the CPU.
+//! a draw per impostor tree. Every other instance is skipped. With shadows, each cascade selects
+//! its trees on the CPU beside this (a policy frame), or the whole frame is the CPU's (without a
+//! policy).
 //!
 //! **Capacity.** Each bucket's slots are fixed on the CPU (the bind group and the render pass
 //! need them): `min(upper bound, max(2^16, what earlier frames needed × 1.25))`, the upper bound

@@ -26,7 +26,7 @@ use crate::settings::Pruning;
 use crate::settings::{DebugView, DepthConvention, RendererFormats, Settings, prune_scale};
 use crate::shadows::{Cascade, Casters, MAX_CASCADES, ShadowMaps, ShadowUniform, fit_cascades};
 use crate::stats::{FrameStats, Laps, PreparePhases, ShadowStats};
-use crate::streaming::{Array, Pool, Request, Residency, UNIT, Upload};
+use crate::streaming::{Array, Pool, Request, Residency, StreamStats, UNIT, Upload};
 use crate::technique::{Bucket, DrawSource};
 use crate::upload::{Model, storage_buffer, upload_gpu_points, write_in_runs};
 
@@ -435,13 +435,17 @@ impl Renderer {
     ///   the point tree's selection ([`Technique::Spt`], [`Technique::Full`] where the policy
     ///   chose it, pruned trees handed back), told per instance which, with which technique and
     ///   on which share of a transition's dither, so trees fading into or out of the point tree
-    ///   fade as on the CPU path. The render pass draws both. The CPU's work is then O(instances)
-    ///   for the assignment, but the point tree's per-cell selection, usually most of a frame's
-    ///   selection, and its streaming are the GPU's. [`FrameStats`] adds the CPU's counts of this
-    ///   frame's other techniques to the GPU's read back from an earlier frame.
+    ///   fade as on the CPU path; and it appends the quads of the trees drawn with their
+    ///   octahedral impostor ([`Technique::Octahedral`], most trees of a large forest). The
+    ///   render pass draws both. The CPU's work is then O(instances) for the assignment, but the
+    ///   point tree's per-cell selection, usually most of a frame's selection, and its streaming
+    ///   are the GPU's, and so are the impostor trees' draw records. [`FrameStats`] adds the
+    ///   CPU's counts of this frame's other techniques and impostor trees to the GPU's read back
+    ///   from an earlier frame. With [`Settings::shadows`], each cascade then selects and draws
+    ///   its own trees on the CPU as in a CPU frame, streaming what it needs.
     ///
-    /// Frames with [`Settings::shadows`] (each cascade selects its own trees), frames of another
-    /// forced technique without a policy, with [`Technique::Full`] as [`Settings::technique`]
+    /// Frames with [`Settings::shadows`] without a policy (each cascade selects its own trees),
+    /// frames of another forced technique without a policy, with [`Technique::Full`] as [`Settings::technique`]
     /// (the full mesh's zero thresholds), and more than about 4.19 M instances (`64 × 65535`, one
     /// dispatch of instance blocks) are selected on the CPU. Needs a device with
     /// [`wgpu::Features::MULTI_DRAW_INDIRECT_COUNT`] for best results; without it every bucket
@@ -780,16 +784,18 @@ impl Renderer {
         self.gpu_instances_stale = false;
         self.upload_transforms(device, queue);
         self.gpu_frame = false;
-        // GPU selection takes the point tree's part of frames without shadows (see
-        // `enable_gpu_selection`): the whole frame without a policy, the trees the policy draws
-        // through the point tree's selection with one.
-        let gpu_usable = self.cascades.is_empty() && self.gpu.as_ref().is_some_and(GpuSelection::usable);
+        // GPU selection takes the point tree's part of the camera's view (see
+        // `enable_gpu_selection`): the whole frame without a policy and without shadows, the
+        // trees the policy draws through the point tree's selection (and the impostor trees)
+        // with one, the shadow cascades then selected on the CPU.
+        let gpu_usable = self.gpu.as_ref().is_some_and(GpuSelection::usable);
         let policy_chooses = self.policy.chooses(settings.policy.as_ref());
         laps.lap(&mut self.phases.setup);
         if gpu_usable && policy_chooses && !full_mesh {
             return self.prepare_hybrid(device, queue, camera, &runtime_camera, &lod_settings, laps);
         }
         if gpu_usable
+            && self.cascades.is_empty()
             && technique == Technique::Spt
             && !policy_chooses
             && let Some(gpu) = self.gpu.as_mut()
@@ -844,41 +850,103 @@ impl Renderer {
         }
         self.leaving_assignment = leaving_assignment;
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
+        let (mut shadow, cascade_full) =
+            self.select_cascades(&mut shadow_views, &runtime_camera, &lod_settings, full_mesh);
+        laps.lap(&mut self.phases.select);
+
+        let mut views = vec![(&main, full_mesh)];
+        if fading {
+            views.push((&leaving, full_mesh));
+        }
+        views.extend(shadow_views.iter().map(|v| (v, cascade_full)));
+        let streamed = self.stream_views(device, queue, &views);
+        laps.lap(&mut self.phases.stream);
+
+        // The draws of every view, clamped to what is resident, bucketed by model and kind.
+        self.begin_draws();
+        let mut stats = FrameStats {
+            instances_visible: counts.instances.total(),
+            instances: counts.instances,
+            leaves_pruned: counts.leaves_pruned,
+            bytes_uploaded: streamed.bytes_uploaded,
+            bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
+                + u64::from(self.residency.pool.used()) * UNIT,
+            transitions: u32::try_from(self.transitions.len()).unwrap_or(u32::MAX),
+            ..FrameStats::default()
+        };
+        self.record_view(&mut main, fading.then_some(&leaving), full_mesh, &mut stats);
+        if self.policy_occlusion() {
+            // Every tree the camera draws is measured (pruned ones included, once).
+            self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance));
+        }
+        self.record_cascades(&mut shadow_views, cascade_full, &mut shadow);
+        stats.shadow = shadow;
+        self.main = main;
+        self.leaving = leaving;
+        self.shadow_views = shadow_views;
+        laps.lap(&mut self.phases.record);
+
+        self.write_frame_uniform(queue, camera);
+        self.upload_draws(device, queue);
+        laps.lap(&mut self.phases.upload);
+        stats
+    }
+
+    /// Each shadow cascade's selection ([`Settings::shadows`]; none without): its trees assigned
+    /// from the light's view as [`Casters`] asks and selected into `shadow_views` (one per
+    /// cascade). Returns the cascades' counts so far and whether they draw the full mesh.
+    fn select_cascades(
+        &mut self,
+        shadow_views: &mut Vec<View>,
+        runtime_camera: &treelod_runtime::Camera,
+        lod_settings: &LodSettings,
+        full_mesh: bool,
+    ) -> (ShadowStats, bool) {
         shadow_views.resize_with(self.cascades.len(), View::default);
         let mut shadow =
             ShadowStats { cascades: u32::try_from(self.cascades.len()).unwrap_or(0), ..ShadowStats::default() };
         let mut assignments = std::mem::take(&mut self.cascade_assignments);
         assignments.resize_with(self.cascades.len(), Assignment::default);
         // The cascades' casters: as the camera's trees, or forced (`Shadows::casters`).
-        let casters = settings.shadows.map_or(Casters::default(), |s| s.casters);
+        let casters = self.settings.shadows.map_or(Casters::default(), |s| s.casters);
         let cascade_full = casters.full_mesh(full_mesh);
         let cascade_lod =
-            if cascade_full { LodSettings { s_min: 0.0, s_max: 0.0, ..lod_settings } } else { lod_settings };
+            if cascade_full { LodSettings { s_min: 0.0, s_max: 0.0, ..*lod_settings } } else { *lod_settings };
         for (k, (view, assignment)) in shadow_views.iter_mut().zip(&mut assignments).enumerate() {
             let light = self.cascades[k].selection_camera();
-            self.assign_cascade(k, casters, runtime_camera, light, assignment);
+            self.assign_cascade(k, casters, *runtime_camera, light, assignment);
             let counts = self.select_view(view, &light, &cascade_lod, false, assignment, cascade_full);
             shadow.instances_visible += counts.instances.total();
             shadow.instances += counts.instances;
         }
         self.cascade_assignments = assignments;
-        laps.lap(&mut self.phases.select);
+        (shadow, cascade_full)
+    }
 
+    /// Records each cascade's draws (after [`Self::select_cascades`] and streaming), counting
+    /// them into `shadow`.
+    fn record_cascades(&mut self, shadow_views: &mut [View], cascade_full: bool, shadow: &mut ShadowStats) {
+        for (k, view) in shadow_views.iter_mut().enumerate() {
+            let mut counted = FrameStats::default();
+            self.record_view(view, None, cascade_full, &mut counted);
+            shadow.add_view(k, &counted);
+        }
+    }
+
+    /// Streams what `views` (each with whether it draws the full mesh) selected: per cell the
+    /// largest prefix any view asked for, within the upload budget.
+    fn stream_views(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, views: &[(&View, bool)]) -> StreamStats {
         // What each cell needs: the largest prefix any view asked for.
         self.residency.begin_frame();
         self.requests.clear();
-        self.request(&main, full_mesh);
-        if fading {
-            self.request(&leaving, full_mesh);
-        }
-        for view in &shadow_views {
-            self.request(view, cascade_full);
+        for &(view, full_mesh) in views {
+            self.request(view, full_mesh);
         }
         for request in &mut self.requests {
             request.wanted = self.wanted[request.model][request.cell][request.array as usize];
         }
         self.uploads.clear();
-        let streamed = self.residency.stream(&mut self.requests, settings.upload_budget, &mut self.uploads);
+        let streamed = self.residency.stream(&mut self.requests, self.settings.upload_budget, &mut self.uploads);
         for request in &self.requests {
             self.wanted[request.model][request.cell] = [0; 2];
         }
@@ -903,40 +971,7 @@ impl Renderer {
             }
         }
 
-        laps.lap(&mut self.phases.stream);
-
-        // The draws of every view, clamped to what is resident, bucketed by model and kind.
-        self.begin_draws();
-        let mut stats = FrameStats {
-            instances_visible: counts.instances.total(),
-            instances: counts.instances,
-            leaves_pruned: counts.leaves_pruned,
-            bytes_uploaded: streamed.bytes_uploaded,
-            bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
-                + u64::from(self.residency.pool.used()) * UNIT,
-            transitions: u32::try_from(self.transitions.len()).unwrap_or(u32::MAX),
-            ..FrameStats::default()
-        };
-        self.record_view(&mut main, fading.then_some(&leaving), full_mesh, &mut stats);
-        if self.policy_occlusion() {
-            // Every tree the camera draws is measured (pruned ones included, once).
-            self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance));
-        }
-        for (k, view) in shadow_views.iter_mut().enumerate() {
-            let mut counted = FrameStats::default();
-            self.record_view(view, None, cascade_full, &mut counted);
-            shadow.add_view(k, &counted);
-        }
-        stats.shadow = shadow;
-        self.main = main;
-        self.leaving = leaving;
-        self.shadow_views = shadow_views;
-        laps.lap(&mut self.phases.record);
-
-        self.write_frame_uniform(queue, camera);
-        self.upload_draws(device, queue);
-        laps.lap(&mut self.phases.upload);
-        stats
+        streamed
     }
 
     /// Uploads the instances' transforms if they changed since the last upload, growing their
@@ -1100,6 +1135,9 @@ impl Renderer {
             view.selection.clear();
             view.spt_remapped = false;
         }
+        // The shadow cascades, on the CPU as in a CPU frame.
+        let mut shadow_views = std::mem::take(&mut self.shadow_views);
+        let (mut shadow, cascade_full) = self.select_cascades(&mut shadow_views, runtime_camera, lod_settings, false);
 
         let Some(gpu) = self.gpu.as_mut() else { unreachable!("prepare_hybrid runs with GPU selection") };
         gpu.set_instance_draws(queue, &draws);
@@ -1109,6 +1147,14 @@ impl Renderer {
         let pool_bytes = gpu.pool_bytes();
         self.gpu_frame = true;
         laps.lap(&mut self.phases.select);
+        // Only the cascades stream: the point tree's trees of the camera's view are the GPU's,
+        // resident whole, and the other techniques' data is uploaded whole.
+        let mut bytes_uploaded = 0;
+        if !shadow_views.is_empty() {
+            let views: Vec<(&View, bool)> = shadow_views.iter().map(|v| (v, cascade_full)).collect();
+            bytes_uploaded = self.stream_views(device, queue, &views).bytes_uploaded;
+        }
+        laps.lap(&mut self.phases.stream);
 
         self.begin_draws();
         let mut instances = main.draws.visible;
@@ -1120,6 +1166,7 @@ impl Renderer {
             bytes_resident: self.models.iter().map(|m| m.static_bytes).sum::<u64>()
                 + u64::from(self.residency.pool.used()) * UNIT
                 + pool_bytes,
+            bytes_uploaded,
             transitions: u32::try_from(self.transitions.len()).unwrap_or(u32::MAX),
             gpu_selection: true,
             ranges_dropped: gpu_counts.dropped,
@@ -1151,10 +1198,13 @@ impl Renderer {
                 main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).chain(quad_trees.iter().copied()).collect();
             self.set_occlusion_jobs(drawn.into_iter());
         }
+        self.record_cascades(&mut shadow_views, cascade_full, &mut shadow);
+        stats.shadow = shadow;
         self.gpu_instance_draws = draws;
         self.gpu_quad_trees = quad_trees;
         self.main = main;
         self.leaving = leaving;
+        self.shadow_views = shadow_views;
         laps.lap(&mut self.phases.record);
         self.write_frame_uniform(queue, camera);
         self.upload_draws(device, queue);

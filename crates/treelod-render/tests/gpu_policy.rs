@@ -421,3 +421,47 @@ fn impostor_trees_fade_on_the_gpu_as_on_the_cpu() {
     eprintln!("{fading_on_gpu} impostor draws fading on the GPU, {on_cpu} left to the CPU");
     assert!(fading_on_gpu > 0, "the flight has impostor trees in a transition");
 }
+
+/// With shadows, the camera's view is selected as in a frame without them (the point tree's
+/// trees and the impostor trees on the GPU) and the cascades on the CPU as in a CPU frame,
+/// streaming what they select: the same cascades' statistics, the same impostor draws, and the
+/// same shadowed image, in the forests of the demo tree with and without its impostor (whose
+/// cascades draw impostors, and point trees).
+#[test]
+fn shadow_frames_select_the_camera_s_trees_on_the_gpu() {
+    let gpu = gpu();
+    let policy = Policy { transition: 0, occlusion: false, ..Policy::default() };
+    let shadows =
+        Some(treelod_render::Shadows { distance: 400.0, resolution: 1024, ..treelod_render::Shadows::default() });
+    let settings = Settings { policy: Some(policy), shadows, ..Settings::default() };
+    let (with_impostor, positions) = octahedral_forest();
+    let (without, _, _) = demo_forest();
+    let cameras = [
+        ("ahead", Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 256, 256)),
+        ("above", Camera::look_at(vec3(-20.0, 40.0, 30.0), vec3(5.0, 0.0, -120.0), 0.9, 256, 256)),
+    ];
+    let mut streamed_point_trees = 0;
+    for (forest, container) in [("impostor", with_impostor), ("point tree", without)] {
+        let mut cpu = renderer(&gpu, &container, settings, &positions, false);
+        let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+        for (name, camera) in cameras {
+            let name = format!("{forest}, {name}");
+            let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+            let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+            assert!(stats.gpu_selection && !cpu_stats.gpu_selection, "{name}: {stats:?}");
+            eprintln!("{name}: {:?}", stats.shadow);
+            assert!(stats.shadow.cascades > 0 && stats.shadow.submitted.total() > 0, "{name}: shadows are cast");
+            assert_eq!(stats.shadow, cpu_stats.shadow, "{name}: the cascades' selection");
+            streamed_point_trees += stats.shadow.instances[Technique::Spt];
+            assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "{name}");
+            assert_eq!(gpu_quads(&gpu, &hybrid), cpu_quads(&cpu), "{name}: the impostors' draws");
+            let (diff, covered) = differing(&a, &b);
+            common::keep(&a, &format!("gpu-shadows-{forest}-{name}-cpu"));
+            common::keep(&b, &format!("gpu-shadows-{forest}-{name}-hybrid"));
+            eprintln!("{name}: {diff} of {covered} covered pixels differ");
+            assert!(covered > 500, "{name}: the forest is in view");
+            assert!(diff * 200 <= covered, "{name}: {diff} of {covered} pixels differ");
+        }
+    }
+    assert!(streamed_point_trees > 0, "some cascade draws point trees, streamed on the CPU");
+}
