@@ -850,8 +850,7 @@ impl Renderer {
         }
         self.leaving_assignment = leaving_assignment;
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
-        let (mut shadow, cascade_full) =
-            self.select_cascades(&mut shadow_views, &runtime_camera, &lod_settings, full_mesh);
+        let (shadow, cascade_full) = self.select_cascades(&mut shadow_views, &runtime_camera, &lod_settings, full_mesh);
         laps.lap(&mut self.phases.select);
 
         let mut views = vec![(&main, full_mesh)];
@@ -879,17 +878,19 @@ impl Renderer {
             // Every tree the camera draws is measured (pruned ones included, once).
             self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance));
         }
-        self.record_cascades(&mut shadow_views, cascade_full, &mut shadow);
-        stats.shadow = shadow;
+        self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.main = main;
         self.leaving = leaving;
-        self.shadow_views = shadow_views;
         laps.lap(&mut self.phases.record);
+        self.upload_frame(device, queue, camera, &mut laps);
+        stats
+    }
 
+    /// The frame's uniform and its recorded draws uploaded (the last phase of [`Self::prepare`]).
+    fn upload_frame(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera, laps: &mut Laps) {
         self.write_frame_uniform(queue, camera);
         self.upload_draws(device, queue);
         laps.lap(&mut self.phases.upload);
-        stats
     }
 
     /// Each shadow cascade's selection ([`Settings::shadows`]; none without): its trees assigned
@@ -924,13 +925,22 @@ impl Renderer {
     }
 
     /// Records each cascade's draws (after [`Self::select_cascades`] and streaming), counting
-    /// them into `shadow`.
-    fn record_cascades(&mut self, shadow_views: &mut [View], cascade_full: bool, shadow: &mut ShadowStats) {
+    /// them into `shadow`, which becomes `stats.shadow`, and keeps the views for
+    /// [`Self::render_shadows`].
+    fn record_cascades(
+        &mut self,
+        mut shadow_views: Vec<View>,
+        cascade_full: bool,
+        mut shadow: ShadowStats,
+        stats: &mut FrameStats,
+    ) {
         for (k, view) in shadow_views.iter_mut().enumerate() {
             let mut counted = FrameStats::default();
             self.record_view(view, None, cascade_full, &mut counted);
             shadow.add_view(k, &counted);
         }
+        stats.shadow = shadow;
+        self.shadow_views = shadow_views;
     }
 
     /// Streams what `views` (each with whether it draws the full mesh) selected: per cell the
@@ -1137,7 +1147,7 @@ impl Renderer {
         }
         // The shadow cascades, on the CPU as in a CPU frame.
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
-        let (mut shadow, cascade_full) = self.select_cascades(&mut shadow_views, runtime_camera, lod_settings, false);
+        let (shadow, cascade_full) = self.select_cascades(&mut shadow_views, runtime_camera, lod_settings, false);
 
         let Some(gpu) = self.gpu.as_mut() else { unreachable!("prepare_hybrid runs with GPU selection") };
         gpu.set_instance_draws(queue, &draws);
@@ -1198,17 +1208,13 @@ impl Renderer {
                 main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).chain(quad_trees.iter().copied()).collect();
             self.set_occlusion_jobs(drawn.into_iter());
         }
-        self.record_cascades(&mut shadow_views, cascade_full, &mut shadow);
-        stats.shadow = shadow;
+        self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.gpu_instance_draws = draws;
         self.gpu_quad_trees = quad_trees;
         self.main = main;
         self.leaving = leaving;
-        self.shadow_views = shadow_views;
         laps.lap(&mut self.phases.record);
-        self.write_frame_uniform(queue, camera);
-        self.upload_draws(device, queue);
-        laps.lap(&mut self.phases.upload);
+        self.upload_frame(device, queue, camera, &mut laps);
         stats
     }
 

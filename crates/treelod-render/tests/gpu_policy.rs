@@ -74,6 +74,14 @@ fn cpu_point_tree_ranges(cpu: &Renderer) -> Vec<DrawRange> {
     cpu.selection().ranges().iter().map(|r| DrawRange { instance: list[r.instance as usize], ..*r }).collect()
 }
 
+/// Two views of the forest: from the ground at the first row, and from above behind it.
+fn cameras() -> [(&'static str, Camera); 2] {
+    [
+        ("ahead", Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 256, 256)),
+        ("above", Camera::look_at(vec3(-20.0, 40.0, 30.0), vec3(5.0, 0.0, -120.0), 0.9, 256, 256)),
+    ]
+}
+
 fn gpu_draws(gpu: &Gpu, renderer: &Renderer) -> Vec<GpuDraw> {
     renderer.read_gpu_draws(&gpu.device, &gpu.queue).expect("reads back").expect("the GPU selected")
 }
@@ -92,12 +100,8 @@ fn policy_frames_select_the_point_tree_s_trees_on_the_gpu() {
     let settings = Settings { policy: Some(policy), ..Settings::default() };
     let mut cpu = renderer(&gpu, &container, settings, &positions, false);
     let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
-    let cameras = [
-        ("ahead", Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 256, 256)),
-        ("above", Camera::look_at(vec3(-20.0, 40.0, 30.0), vec3(5.0, 0.0, -120.0), 0.9, 256, 256)),
-    ];
     let mut others_seen = BTreeSet::new();
-    for (name, camera) in cameras {
+    for (name, camera) in cameras() {
         let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
         let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
         assert!(!cpu_stats.gpu_selection && stats.gpu_selection, "{name}: {stats:?}");
@@ -357,11 +361,7 @@ fn octahedral_impostors_are_drawn_on_the_gpu() {
     let settings = Settings { policy: Some(policy), ..Settings::default() };
     let mut cpu = renderer(&gpu, &container, settings, &positions, false);
     let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
-    let cameras = [
-        ("ahead", Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 256, 256)),
-        ("above", Camera::look_at(vec3(-20.0, 40.0, 30.0), vec3(5.0, 0.0, -120.0), 0.9, 256, 256)),
-    ];
-    for (name, camera) in cameras {
+    for (name, camera) in cameras() {
         let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
         let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
         assert!(stats.gpu_selection, "{name}: {stats:?}");
@@ -436,15 +436,11 @@ fn shadow_frames_select_the_camera_s_trees_on_the_gpu() {
     let settings = Settings { policy: Some(policy), shadows, ..Settings::default() };
     let (with_impostor, positions) = octahedral_forest();
     let (without, _, _) = demo_forest();
-    let cameras = [
-        ("ahead", Camera::look_at(vec3(0.0, 2.0, 4.0), vec3(0.0, 2.0, -100.0), 0.9, 256, 256)),
-        ("above", Camera::look_at(vec3(-20.0, 40.0, 30.0), vec3(5.0, 0.0, -120.0), 0.9, 256, 256)),
-    ];
     let mut streamed_point_trees = 0;
     for (forest, container) in [("impostor", with_impostor), ("point tree", without)] {
         let mut cpu = renderer(&gpu, &container, settings, &positions, false);
         let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
-        for (name, camera) in cameras {
+        for (name, camera) in cameras() {
             let name = format!("{forest}, {name}");
             let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
             let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
