@@ -356,8 +356,11 @@ pub(crate) struct GpuSelection {
     /// Per model: cells with triangles, cells with points, and 1 if it has quads to draw (the
     /// upper bounds of each bucket per instance).
     cells_with: Vec<[u32; BUCKET_KINDS]>,
-    /// Per model and kind: slots needed by the largest frame read back so far.
+    /// Per model and kind: slots needed by the largest frame read back so far (for the quads,
+    /// also the largest count handed over, [`Self::set_instance_draws`]).
     needed: Vec<[u32; BUCKET_KINDS]>,
+    /// A quad bucket is smaller than the quads handed over for the next frame.
+    quads_grow: bool,
     cull_group: Option<wgpu::BindGroup>,
     select_group: Option<wgpu::BindGroup>,
     /// The render pass's frame bind group over the draws and the whole pool.
@@ -438,6 +441,7 @@ impl GpuSelection {
             indirect: empty("treelod select indirect"),
             cells_with: Vec::new(),
             needed: Vec::new(),
+            quads_grow: false,
             cull_group: None,
             select_group: None,
             frame_group: None,
@@ -743,12 +747,22 @@ impl GpuSelection {
 
     /// Sets what the next [`Self::prepare`] draws of each instance (one per instance of the
     /// renderer's list, as [`Self::set_instances`] was given it; extra entries are ignored).
-    pub fn set_instance_draws(&mut self, queue: &wgpu::Queue, draws: &[InstanceDrawGpu]) {
+    /// `quads` counts per model the instances flagged [`InstanceDrawGpu::QUADS`]: a quad bucket
+    /// too small for them grows before the frame is selected, so no impostor is dropped (the
+    /// CPU knows how many it hands over; the point tree's buckets grow from what frames read
+    /// back).
+    pub fn set_instance_draws(&mut self, queue: &wgpu::Queue, draws: &[InstanceDrawGpu], quads: &[u32]) {
         let n = draws.len().min(self.instance_draws_len);
         if n > 0 {
             queue.write_buffer(&self.instance_draws, 0, bytemuck::cast_slice(&draws[..n]));
         }
         self.every_instance_point_tree = false;
+        for ((needed, model), &count) in self.needed.iter_mut().zip(&self.models_cpu).zip(quads) {
+            if count > model.bucket_capacity[2] {
+                needed[2] = needed[2].max(count);
+                self.quads_grow = true;
+            }
+        }
     }
 
     /// Makes the render pass's frame bind group (uniform, draws, pool twice, the renderer's
@@ -794,7 +808,9 @@ impl GpuSelection {
         mut frame: SelectFrameGpu,
         transforms: &wgpu::Buffer,
     ) -> GpuCounts {
-        if self.collect(device) {
+        // (`collect` runs every frame: it reads the counters back.)
+        let grow = self.collect(device);
+        if grow || std::mem::take(&mut self.quads_grow) {
             self.layout_buckets(device, queue);
         }
         frame.block_count = self.block_count;

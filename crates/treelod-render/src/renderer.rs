@@ -201,6 +201,8 @@ pub struct Renderer {
     /// Scratch of policy frames with GPU selection: the trees whose octahedral impostor the GPU
     /// draws.
     gpu_quad_trees: Vec<u32>,
+    /// Scratch of policy frames with GPU selection: per model, the trees in `gpu_quad_trees`.
+    gpu_quads_per_model: Vec<u32>,
     // Scratch reused between frames.
     requests: Vec<Request>,
     uploads: Vec<Upload>,
@@ -372,6 +374,7 @@ impl Renderer {
             gpu_instances_stale: false,
             gpu_instance_draws: Vec::new(),
             gpu_quad_trees: Vec::new(),
+            gpu_quads_per_model: Vec::new(),
             requests: Vec::new(),
             uploads: Vec::new(),
             wanted: Vec::new(),
@@ -1062,8 +1065,9 @@ impl Renderer {
     ///   lists (a pruned tree below its height going to the point tree, say) has the same
     ///   selection in both, so the GPU draws it once on every pixel, under the technique it goes
     ///   to, where the CPU path draws it twice on complementary pixels: the same image.
-    /// - Nothing the CPU records here is streamed: the other techniques' data is uploaded whole
-    ///   by `add_model`, and the point tree's is resident whole for GPU selection.
+    /// - Nothing the camera's view records here is streamed: the other techniques' data is
+    ///   uploaded whole by `add_model`, and the point tree's is resident whole for GPU
+    ///   selection. The shadow cascades select, stream and record their trees as in a CPU frame.
     /// - The impostor trees: those of the assignment's [`Technique::Octahedral`] list, and of
     ///   the trees leaving it in a transition, whose entry the point tree left free, are
     ///   [`InstanceDrawGpu::quads`] on the share [`Self::drawn_by`] gives them, and the CPU records
@@ -1124,6 +1128,9 @@ impl Renderer {
         let mut quad_trees = std::mem::take(&mut self.gpu_quad_trees);
         quad_trees.clear();
         let (mut quads_by_technique, mut quads_leaving) = (PerTechnique::<u64>::default(), 0u64);
+        let mut quads_per_model = std::mem::take(&mut self.gpu_quads_per_model);
+        quads_per_model.clear();
+        quads_per_model.resize(self.models.len(), 0u32);
         for (view, leaves) in [(&mut main, false), (&mut leaving, true)] {
             if leaves && !fading {
                 continue;
@@ -1135,6 +1142,9 @@ impl Renderer {
                 let (technique, dither) = self.drawn_by(d.instance, leaves);
                 *slot = InstanceDrawGpu::quads(pack_fade(dither), technique);
                 quad_trees.push(d.instance);
+                if let Some(n) = quads_per_model.get_mut(d.model as usize) {
+                    *n += 1;
+                }
                 quads_by_technique[technique] += u64::from(d.count);
                 quads_leaving += if leaves { u64::from(d.count) } else { 0 };
                 false
@@ -1150,7 +1160,8 @@ impl Renderer {
         let (shadow, cascade_full) = self.select_cascades(&mut shadow_views, runtime_camera, lod_settings, false);
 
         let Some(gpu) = self.gpu.as_mut() else { unreachable!("prepare_hybrid runs with GPU selection") };
-        gpu.set_instance_draws(queue, &draws);
+        gpu.set_instance_draws(queue, &draws, &quads_per_model);
+        self.gpu_quads_per_model = quads_per_model;
         let gpu_counts =
             gpu.prepare(device, queue, select_frame_gpu(runtime_camera, lod_settings), &self.transform_buffer);
         gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);

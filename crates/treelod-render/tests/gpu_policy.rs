@@ -461,3 +461,27 @@ fn shadow_frames_select_the_camera_s_trees_on_the_gpu() {
     }
     assert!(streamed_point_trees > 0, "some cascade draws point trees, streamed on the CPU");
 }
+
+/// More impostor trees than a bucket starts with (2^16 slots) in the first frame: the quad
+/// bucket grows before the frame is selected, so every one is drawn (the point tree's buckets
+/// grow from what earlier frames read back; the CPU knows how many impostors it hands over).
+#[test]
+fn every_impostor_tree_is_drawn_from_the_first_frame() {
+    let gpu = gpu();
+    let (container, _) = octahedral_forest();
+    let centre = ModelLod::from_container(&container).centre();
+    // 100,000 trees 300 to 700 m ahead, 2 m apart: a few pixels each.
+    let positions: Vec<Vec3> = (0..100_000)
+        .map(|i| vec3((i % 500) as f32 * 2.0 - 500.0, -centre.y, -300.0 - (i / 500) as f32 * 2.0))
+        .collect();
+    let policy = Policy { transition: 0, occlusion: false, ..Policy::default() };
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+    let camera = Camera::look_at(vec3(0.0, 30.0, 0.0), vec3(0.0, 0.0, -500.0), 1.6, 128, 128);
+    let stats = hybrid.prepare(&gpu.device, &gpu.queue, &camera);
+    let impostors = stats.instances[Technique::Octahedral];
+    eprintln!("{impostors} impostor trees in view of {}: {:?}", positions.len(), stats.instances);
+    assert!(impostors > 1 << 16, "more impostor trees than a bucket's first slots: {impostors}");
+    let quads = gpu_quads(&gpu, &hybrid);
+    assert_eq!(quads.len(), impostors as usize, "every impostor tree drawn");
+}
