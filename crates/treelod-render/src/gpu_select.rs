@@ -53,7 +53,8 @@
 //! being the model's instances times its cells with triangles (points), and its instances for the
 //! quads (none where the renderer draws no octahedral impostor of it). Ranges past a bucket's
 //! capacity are dropped that frame and counted; the counters are read back without blocking a
-//! frame or two later, and the buckets that overflowed grow for the next frames.
+//! frame or two later, and the buckets that overflowed grow for the next frames. A quad bucket
+//! grows before the frame instead: the CPU knows how many impostor trees it hands over.
 //!
 //! **Order.** Within a bucket the draws come in the order the atomics hand out slots, which
 //! varies between runs: the set of draws equals the CPU selection's (up to `f32` rounding of keys
