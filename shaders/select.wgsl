@@ -155,9 +155,9 @@ struct DispatchArgs {
 @group(0) @binding(7) var<storage, read> cells: array<CellGpu>;
 @group(0) @binding(8) var<storage, read> keys: array<f32>;
 // Per bucket (BUCKET_KINDS × model + kind) the ranges appended, then the statistics: instances
-// visible, far, cells selected, cells culled, triangles, points, primitives of leaving draws,
-// quads, then primitives per technique (Technique::index); all but the quads of the point tree's
-// draws (the CPU counts the octahedral impostors' trees it hands over).
+// visible, far, cells selected, cells culled, triangles, points, primitives of leaving draws, then
+// primitives per technique (Technique::index), of the point tree's draws only (the CPU counts the
+// octahedral impostors' trees it hands over).
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 @group(0) @binding(10) var<storage, read_write> draws: array<DrawInfo>;
 @group(0) @binding(11) var<storage, read_write> indirect: array<DrawIndirect>;
@@ -254,7 +254,8 @@ fn leading_above(at: u32, n: u32, tau: f32) -> u32 {
     return lo;
 }
 
-// Appends one range: `first` is a pool index (triangles or points), `kind` 0 triangles, 1 points.
+// Appends one range: `kind` 0 triangles, 1 points (`first` a pool index), 2 the model's
+// octahedral impostor quads (`first` a quad index, as the CPU path records a `QuadDraw`).
 fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, shading: f32) {
     let s = atomicAdd(&counters[BUCKET_KINDS * model_index + kind], 1u);
     if s >= cur_model.bucket_capacity[kind] {
@@ -265,19 +266,6 @@ fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, sh
                            TECHNIQUE_TINTS[cur_draw.technique], cur_draw.fade);
     let corners = select(6u, 3u, kind == 0u);
     indirect[slot] = DrawIndirect(count * corners, 1u, first * corners, slot);
-}
-
-// Appends the instance's octahedral impostor quads to its model's quad bucket, as the CPU path
-// records a `QuadDraw` (crates/treelod-render/src/draws.rs, `record_direct`).
-fn write_quads() {
-    let s = atomicAdd(&counters[BUCKET_KINDS * model_index + 2u], 1u);
-    if s >= cur_model.bucket_capacity[2] {
-        return;
-    }
-    let slot = cur_model.bucket_first[2] + s;
-    draws[slot] = DrawInfo(0.0, 0.0, ROOTS_CELL, 1.0, 1.0, current.index, TECHNIQUE_TINTS[cur_draw.technique],
-                           cur_draw.fade);
-    indirect[slot] = DrawIndirect(6u * cur_model.quad_count, 1u, 6u * cur_model.quad_first, slot);
 }
 
 // ModelLod::far_points.
@@ -362,15 +350,13 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     cur_draw.technique = min(cur_draw.technique & ~QUADS, TECHNIQUE_COUNT - 1u);
     model_index = current.model;
     cur_model = models[model_index];
-    let at = frame.stats_at;
     if quads {
         // The CPU culled the tree (the policy's chooser tests its sphere as the CPU path does)
-        // and counts it and its quads in the frame's statistics; here only the quads drawn.
-        if cur_model.quad_count == 0u {
-            return;
+        // and counts it and its quads in the frame's statistics. Recorded as the CPU path's
+        // `record_direct` records a `QuadDraw` (crates/treelod-render/src/draws.rs).
+        if cur_model.quad_count > 0u {
+            write_range(2u, ROOTS_CELL, cur_model.quad_first, cur_model.quad_count, vec2<f32>(0.0), 1.0);
         }
-        write_quads();
-        atomicAdd(&counters[at + 7u], cur_model.quad_count);
         return;
     }
     let m = transforms[current.index].model;
@@ -476,6 +462,7 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
             emit(c, z, d_cell);
         }
     }
+    let at = frame.stats_at;
     let primitives = tally_triangles + tally_points;
     if (cur_draw.fade & 0xFFFFu) == 0u {
         atomicAdd(&counters[at], 1u);
@@ -483,7 +470,7 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     } else {
         atomicAdd(&counters[at + 6u], primitives);
     }
-    atomicAdd(&counters[at + 8u + cur_draw.technique], primitives);
+    atomicAdd(&counters[at + 7u + cur_draw.technique], primitives);
     atomicAdd(&counters[at + 2u], tally_cells);
     atomicAdd(&counters[at + 3u], culled);
     atomicAdd(&counters[at + 4u], tally_triangles);

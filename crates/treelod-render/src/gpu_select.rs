@@ -107,8 +107,8 @@ const INITIAL_BUCKET_DRAWS: u32 = 1 << 16;
 const BUCKET_KINDS: usize = 3;
 
 /// Statistics counters after the bucket counters: instances visible, far, cells selected, cells
-/// culled, triangles, points, primitives of leaving draws, quads, then primitives per technique.
-const STATS: usize = 8 + Technique::COUNT;
+/// culled, triangles, points, primitives of leaving draws, then primitives per technique.
+const STATS: usize = 7 + Technique::COUNT;
 
 /// Bytes of one indirect draw.
 const INDIRECT_BYTES: u64 = size_of::<wgpu::util::DrawIndirectArgs>() as u64;
@@ -265,8 +265,6 @@ pub(crate) struct GpuCounts {
     pub points: u64,
     /// Primitives of the draws of instances only leaving the point tree (`lo > 0`).
     pub leaving: u64,
-    /// Octahedral impostor quads drawn (the CPU counts them in the frame's statistics).
-    pub quads: u64,
     /// Primitives per technique the point tree's draws count under.
     pub by_technique: PerTechnique<u64>,
     pub ranges: u32,
@@ -305,6 +303,9 @@ pub struct GpuQuadDraw {
     /// As [`GpuDraw::dither`].
     pub dither: [f32; 2],
 }
+
+/// A frame's draws read back: the point tree's ranges and the impostors' quads.
+pub(crate) type ReadDraws = (Vec<GpuDraw>, Vec<GpuQuadDraw>);
 
 /// A counter read-back in flight.
 struct Pending {
@@ -931,9 +932,8 @@ impl GpuSelection {
                 counts.triangles = u64::from(s[4]);
                 counts.points = u64::from(s[5]);
                 counts.leaving = u64::from(s[6]);
-                counts.quads = u64::from(s[7]);
                 for technique in Technique::ALL {
-                    counts.by_technique[technique] = u64::from(s[8 + technique.index()]);
+                    counts.by_technique[technique] = u64::from(s[7 + technique.index()]);
                 }
                 self.last = counts;
             }
@@ -987,11 +987,7 @@ impl GpuSelection {
     ///
     /// # Errors
     /// [`RenderError::Readback`] if mapping fails.
-    pub fn read_draws(
-        &self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-    ) -> Result<(Vec<GpuDraw>, Vec<GpuQuadDraw>), RenderError> {
+    pub fn read_draws(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<ReadDraws, RenderError> {
         let mut encoder =
             device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("treelod select read") });
         let copy = |encoder: &mut wgpu::CommandEncoder, source: &wgpu::Buffer| {

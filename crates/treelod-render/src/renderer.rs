@@ -18,7 +18,7 @@ use treelod_runtime::{
 use crate::assign::PolicyModels;
 use crate::camera::Camera;
 use crate::draws::{DrawInfo, EVERY_PIXEL, InstanceTransform, RECORD_CHUNK, RecordedDraw, Recording, View, pack_fade};
-use crate::gpu_select::{GpuDraw, GpuQuadDraw, GpuSelection, InstanceDrawGpu, select_frame_gpu};
+use crate::gpu_select::{GpuDraw, GpuQuadDraw, GpuSelection, InstanceDrawGpu, ReadDraws, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
 use crate::pipelines::Pipelines;
 #[cfg(doc)]
@@ -448,11 +448,11 @@ impl Renderer {
     ///   its own trees on the CPU as in a CPU frame, streaming what it needs.
     ///
     /// Frames with [`Settings::shadows`] without a policy (each cascade selects its own trees),
-    /// frames of another forced technique without a policy, with [`Technique::Full`] as [`Settings::technique`]
-    /// (the full mesh's zero thresholds), and more than about 4.19 M instances (`64 × 65535`, one
-    /// dispatch of instance blocks) are selected on the CPU. Needs a device with
-    /// [`wgpu::Features::MULTI_DRAW_INDIRECT_COUNT`] for best results; without it every bucket
-    /// is drawn at its full capacity with unused slots as empty draws.
+    /// frames of another forced technique without a policy, with [`Technique::Full`] as
+    /// [`Settings::technique`] (the full mesh's zero thresholds), and more than about 4.19 M
+    /// instances (`64 × 65535`, one dispatch of instance blocks) are selected on the CPU. Needs a
+    /// device with [`wgpu::Features::MULTI_DRAW_INDIRECT_COUNT`] for best results; without it
+    /// every bucket is drawn at its full capacity with unused slots as empty draws.
     ///
     /// # Errors
     /// [`RenderError::GpuSelectionBudget`] if the models' triangles, points and roots do not fit
@@ -512,8 +512,14 @@ impl Renderer {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<Option<Vec<GpuDraw>>, RenderError> {
+        Ok(self.read_gpu(device, queue)?.map(|(draws, _)| draws))
+    }
+
+    /// The GPU selection's draws and impostor quads of the last frame, read back; `None` if the
+    /// CPU selected it.
+    fn read_gpu(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<Option<ReadDraws>, RenderError> {
         match &self.gpu {
-            Some(gpu) if self.gpu_frame => gpu.read_draws(device, queue).map(|(draws, _)| Some(draws)),
+            Some(gpu) if self.gpu_frame => gpu.read_draws(device, queue).map(Some),
             _ => Ok(None),
         }
     }
@@ -530,10 +536,7 @@ impl Renderer {
         device: &wgpu::Device,
         queue: &wgpu::Queue,
     ) -> Result<Option<Vec<GpuQuadDraw>>, RenderError> {
-        match &self.gpu {
-            Some(gpu) if self.gpu_frame => gpu.read_draws(device, queue).map(|(_, quads)| Some(quads)),
-            _ => Ok(None),
-        }
+        Ok(self.read_gpu(device, queue)?.map(|(_, quads)| quads))
     }
 
     /// Per instance of [`Self::set_instances`]' list, the technique it was drawn with in the last
