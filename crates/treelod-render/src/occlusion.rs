@@ -98,6 +98,8 @@ pub(crate) struct Occlusion {
     samples: Vec<[f32; 4]>,
     sample_buffer: Option<wgpu::Buffer>,
     pending: Option<Pending>,
+    /// The instances the last measurement read ([`Self::collect`]) gave a fraction.
+    read: Vec<u32>,
 }
 
 impl Occlusion {
@@ -164,7 +166,7 @@ impl Occlusion {
             },
             cache: None,
         });
-        Self { layout, pipeline, samples: Vec::new(), sample_buffer: None, pending: None }
+        Self { layout, pipeline, samples: Vec::new(), sample_buffer: None, pending: None, read: Vec::new() }
     }
 
     /// Adds a model's hull samples (model space); returns where they start.
@@ -274,8 +276,12 @@ impl Occlusion {
     }
 
     /// Reads a finished measurement, if any, into `fractions` (per instance, 1 = fully visible),
-    /// given the camera of the frame being prepared. Never blocks: a measurement whose commands
-    /// have not been submitted or finished yet is read by a later call.
+    /// given the camera of the frame being prepared: the trees it measured get their fraction,
+    /// and those the measurement before gave one and this one did not go back to 1, so that no
+    /// tree keeps an old measurement (the policy measures only the trees whose fraction matters
+    /// to it, `PolicyState::visibility_matters`: a tree that comes near again starts fully
+    /// visible, as one new to the view). Never blocks: a measurement whose commands have not
+    /// been submitted or finished yet is read by a later call.
     pub fn collect(&mut self, device: &wgpu::Device, eye: Vec3, forward: Vec3, fractions: &mut [f32]) {
         let Some(pending) = &mut self.pending else { return };
         if !pending.mapping {
@@ -300,6 +306,13 @@ impl Occlusion {
         let turned = forward.dot(pending.forward) < MAX_TURN_COS;
         let moved = eye.distance(pending.eye);
         if let Ok(mapped) = pending.staging.slice(..).get_mapped_range() {
+            for &instance in &self.read {
+                if let Some(fraction) = fractions.get_mut(instance as usize) {
+                    *fraction = 1.0;
+                }
+            }
+            self.read.clear();
+            self.read.extend(pending.jobs.iter().map(|&(instance, _)| instance));
             let counts: &[u32] = bytemuck::cast_slice(&mapped);
             for (&(instance, distance), pair) in pending.jobs.iter().zip(counts.chunks_exact(2)) {
                 let Some(fraction) = fractions.get_mut(instance as usize) else { continue };

@@ -881,7 +881,8 @@ impl Renderer {
         };
         self.record_view(&mut main, fading.then_some(&leaving), full_mesh, &mut stats);
         if self.policy_occlusion() {
-            // Every tree the camera draws is measured (pruned ones included, once).
+            // Every tree the camera draws is measured (pruned ones included, once), but those
+            // whose choice does not depend on it (`set_occlusion_jobs`).
             self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance));
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
@@ -1210,16 +1211,20 @@ impl Renderer {
         stats.by_technique += gpu_counts.by_technique;
         stats.leaving += gpu_counts.leaving;
         if self.policy_occlusion() {
-            // Every tree drawn is measured: the CPU's recorded ones, the impostor trees (culled
+            // Every tree drawn whose visible fraction matters to its choice is measured
+            // (`set_occlusion_jobs`): of the CPU's recorded ones, the impostor trees (culled
             // here), and those the GPU selects through the point tree that lie in the view (the
-            // GPU culls them further; an extra job costs only time).
+            // GPU culls them further; an extra job costs only time). The GPU's are looked for
+            // among the trees the policy lists as needing it (few: the near ones), not among
+            // every instance.
             let frustum = treelod_runtime::Frustum::from_view_proj(runtime_camera.view_proj);
-            let point_tree =
-                |d: &InstanceDrawGpu| *d != InstanceDrawGpu::SKIP && d.technique & InstanceDrawGpu::QUADS == 0;
-            let gpu_drawn = (0..u32::try_from(draws.len()).unwrap_or(u32::MAX))
-                .filter(|&index| point_tree(&draws[index as usize]) && self.in_view(&frustum, index));
-            let drawn: Vec<u32> =
-                main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).chain(quad_trees.iter().copied()).collect();
+            let gpu_drawn = self.policy.state.needing_visibility().filter(|&index| {
+                draws.get(index as usize).is_some_and(|d| {
+                    *d != InstanceDrawGpu::SKIP
+                        && (d.technique & InstanceDrawGpu::QUADS != 0 || self.in_view(&frustum, index))
+                })
+            });
+            let drawn: Vec<u32> = main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).collect();
             self.set_occlusion_jobs(drawn.into_iter());
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
@@ -1433,11 +1438,15 @@ impl Renderer {
     }
 
     /// The occlusion tests of the instances `drawn` lists (in any order, each any number of
-    /// times): one per instance, in the order of the instances ([`ascending_once`]).
+    /// times) whose visible fraction matters to the policy's choice
+    /// ([`PolicyState::visibility_matters`]): one per instance, in the order of the instances
+    /// ([`ascending_once`]).
     fn set_occlusion_jobs(&mut self, drawn: impl Iterator<Item = u32>) {
         let mut marks = std::mem::take(&mut self.occlusion_marks);
         let mut indices = std::mem::take(&mut self.occlusion_indices);
-        ascending_once(drawn, self.instances.len(), &mut marks, &mut indices);
+        let state = &self.policy.state;
+        let wanted = drawn.filter(|&index| state.visibility_matters(index as usize));
+        ascending_once(wanted, self.instances.len(), &mut marks, &mut indices);
         self.occlusion_jobs.clear();
         for &index in &indices {
             if let Some(job) = self.occlusion_job(index) {
@@ -1458,7 +1467,9 @@ impl Renderer {
     }
 
     /// The visible fraction of each instance's hull samples last measured by
-    /// [`Self::measure_occlusion`] (1 where never measured, off-screen or after a camera jump).
+    /// [`Self::measure_occlusion`] (1 where the last measurement read did not measure it: a
+    /// tree off-screen, or whose choice does not depend on it,
+    /// [`PolicyState::visibility_matters`]; and after a camera jump).
     #[must_use]
     pub fn visible_fractions(&self) -> &[f32] {
         &self.visible_fraction

@@ -13,8 +13,8 @@ use treelod_format::Container;
 use treelod_render::offscreen::render_image;
 use treelod_render::{Camera, DebugView, Instance, Policy, Renderer, Settings, Shadows, Technique};
 use treelod_runtime::{
-    Calibration, Choices, ModelLod, Representations, elevation_class_after, in_view_share, projected_height,
-    view_elevation,
+    Calibration, Choices, ModelLod, Representations, VISIBILITY_LEAD, elevation_class_after, in_view_share,
+    projected_height, view_elevation,
 };
 
 /// What the runtime reads of a calibrated container: its tables, point tree and representations.
@@ -413,6 +413,72 @@ fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
                 cheaper += usize::from(primitives(seen) < primitives(choices.choose(h, None)));
             }
             assert!(cheaper > 0, "some hidden tree is drawn cheaper than a visible one of its size");
+        }
+    }
+}
+
+/// A row of trees hidden behind a near one reaching out past the policy's uniform height
+/// (`Choices::uniform_below`): the trees whose choice can follow their visible fraction are
+/// measured hidden, while those under half that height (`VISIBILITY_LEAD`), drawn alike whatever
+/// their fraction, are not measured and keep a fraction of 1; each is drawn with the technique
+/// its measured fraction chooses.
+#[test]
+fn far_trees_drawn_alike_whatever_their_visibility_are_not_measured() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let (calibration, lod, representations) = read_back(&container);
+    let policy = Policy { hysteresis: 0.0, transition: 0, ..Policy::default() };
+    let choices = Choices::new(&calibration, &policy, &representations);
+    let (below, uniform) = choices.uniform_below().expect("one technique for the smallest trees");
+    let centre = lod.centre();
+    // The near tree fills most of the view.
+    let eye = vec3(0.0, centre.y, 5.0);
+    let (width, height) = (256, 256);
+    let camera = Camera::look_at(eye, eye - Vec3::Z, 0.9, width, height);
+    let runtime_camera = treelod_runtime::Camera::look_at(eye, eye - Vec3::Z, 0.9, width, height);
+    // The near tree, then trees of 1.5, 0.8, 0.6, 0.4 and 0.2 times the uniform height.
+    let shares = [1.5, 0.8, 0.6, 0.4, 0.2];
+    let (lo, hi) = lod.bounds();
+    let world_height = hi.y - lo.y;
+    let mut positions = vec![vec3(-centre.x, 0.0, -centre.z)];
+    positions.extend(shares.iter().map(|&share| {
+        let distance = world_height / (share * below * runtime_camera.world_per_pixel());
+        vec3(-centre.x, 0.0, eye.z - distance - centre.z)
+    }));
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    // On the CPU's selection and on the GPU's (which lists the trees it draws for the
+    // measurement apart, `Renderer::draws` holding only the CPU's).
+    for gpu_selection in [false, true] {
+        let mut renderer = forest(&gpu, &container, settings, &positions);
+        if gpu_selection {
+            renderer.enable_gpu_selection(&gpu.device, &gpu.queue).expect("fits");
+        }
+        for _ in 0..4 {
+            render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+        }
+        for frame in 4..6 {
+            render_image(&gpu, &mut renderer, &camera, BACKGROUND).expect("renders");
+            let fractions = renderer.visible_fractions().to_vec();
+            for (i, (&p, &f)) in positions.iter().zip(&fractions).enumerate().skip(1) {
+                let transform = Mat4::from_translation(p);
+                let h = projected_height(&lod, transform, &runtime_camera);
+                let visible = (-(treelod_runtime::policy::visibility_class_after(0, f) as f32)).exp2();
+                let elevation = elevation_class_after(None, view_elevation(&lod, transform, eye), choices.elevations());
+                let seen = choices.choose_framed(h, elevation, visible, 1.0, None);
+                let drawn: Vec<Technique> =
+                    renderer.draws().iter().filter(|d| d.instance == i as u32).map(|d| d.technique).collect();
+                assert!(drawn.iter().all(|&t| t == seen), "frame {frame}, tree {i} at {h} px ({f}): {drawn:?}");
+                let case = format!("GPU selection {gpu_selection}, frame {frame}, tree {i} at {h} px of {below}");
+                if h < VISIBILITY_LEAD * below {
+                    assert_eq!((f, seen), (1.0, uniform), "{case}");
+                } else {
+                    assert!(f < 0.7, "{case}: hidden, measured {f}");
+                }
+            }
+            let unmeasured = positions.iter().filter(|&&p| {
+                projected_height(&lod, Mat4::from_translation(p), &runtime_camera) < VISIBILITY_LEAD * below
+            });
+            assert_eq!(unmeasured.count(), 2, "the trees of 0.4 and 0.2 times the height");
         }
     }
 }

@@ -1489,6 +1489,20 @@ pub const fn converges(technique: Technique) -> bool {
     matches!(technique, Technique::Full | Technique::Spt | Technique::LodChain)
 }
 
+/// Whether `technique` reads a tree's visible fraction when it draws it: pruning thins a tree
+/// partly hidden (Neubert et al. 2011 §5), whatever chose it.
+const fn prunes(technique: Technique) -> bool {
+    matches!(technique, Technique::PruneOpt | Technique::PruneCook)
+}
+
+/// The share of [`Choices::uniform_below`]'s height from which a tree it chose is measured for
+/// occlusion ([`PolicyState::visibility_matters`]): one octave. A measurement is read a frame
+/// or more after it is taken, and it stands only while the eye has moved less than a quarter of
+/// the tree's distance (the renderer's occlusion test), in which time the tree grows by at most
+/// a third on screen: a tree that comes nearer without a jump has been measured at least twice
+/// before its visible fraction can change its choice.
+pub const VISIBILITY_LEAD: f32 = 0.5;
+
 /// The projected height in pixels of a model's block drawn by `instance` (its block bounds'
 /// height scaled by the instance's y axis, over the distance of its transformed block centre
 /// times [`Camera::world_per_pixel`]): the height the calibration tables are indexed by.
@@ -1532,6 +1546,9 @@ pub struct PolicyState {
     /// Per instance: the elevation class it was chosen by last frame ([`elevation_class_after`]),
     /// [`NO_CLASS`] for none, [`BELOW_CLASS`] for a view from below the tables.
     elevations: Vec<u8>,
+    /// Per instance: whether its visible fraction matters to its choice now or soon
+    /// ([`Self::visibility_matters`]).
+    measure: Vec<bool>,
     /// Per chunk of [`CHOOSE_CHUNK`] instances, whether the last choice left any of them in a
     /// transition (`false` only where none is), so that [`Self::transitions`] reads only those
     /// chunks; of another length than the chunks, every chunk is read.
@@ -1589,7 +1606,36 @@ impl PolicyState {
         self.visible.clear();
         self.classes.clear();
         self.elevations.clear();
+        self.measure.clear();
         self.busy.clear();
+    }
+
+    /// Whether instance `index`'s visible fraction ([`Self::set_visible`]) matters to the last
+    /// choice made for it, or will once it grows a little on screen: `false` for a tree out of
+    /// view, and for a tree the model's [`Choices::uniform_below`] chose (whatever its visible
+    /// fraction) that is also less than [`VISIBILITY_LEAD`] of that height high, unless the
+    /// technique it got prunes by its visible fraction. A host measuring occlusion measures only
+    /// the trees for which this is `true` (in a large forest most trees are far and small: 127,000
+    /// of the 127,200 a frame of the shared pine's 10^6 trees draws, `docs/cli.md`); the others'
+    /// fractions are not read until they matter again. `true` past the instances the last choice
+    /// had.
+    #[must_use]
+    pub fn visibility_matters(&self, index: usize) -> bool {
+        self.measure.get(index).copied().unwrap_or(true)
+    }
+
+    /// The instances the last choice found [`Self::visibility_matters`] for, ascending; chunks of
+    /// [`CHOOSE_CHUNK`] instances where it found none are skipped whole (no more than a byte
+    /// compare per instance), so the walk costs about the trees listed.
+    pub fn needing_visibility(&self) -> impl Iterator<Item = u32> + '_ {
+        self.measure
+            .chunks(CHOOSE_CHUNK)
+            .enumerate()
+            .filter(|(_, chunk)| chunk.contains(&true))
+            .flat_map(|(c, chunk)| {
+                chunk.iter().enumerate().filter(|(_, m)| **m).map(move |(k, _)| c * CHOOSE_CHUNK + k)
+            })
+            .filter_map(|i| u32::try_from(i).ok())
     }
 
     /// Sets the instances' visible fractions the next choices read (per instance, 1 = fully
@@ -1846,6 +1892,7 @@ pub fn choose_instances_in_chunks(
     state.visible.resize(instances.len(), 1.0);
     state.classes.resize(instances.len(), 0);
     state.elevations.resize(instances.len(), NO_CLASS);
+    state.measure.resize(instances.len(), true);
     state.busy.clear();
     state.busy.resize(instances.len().div_ceil(CHOOSE_CHUNK), false);
     out.clear();
@@ -1863,7 +1910,7 @@ pub fn choose_instances_in_chunks(
                   previous: &mut [Option<Technique>],
                   transitions: &mut [Option<(Technique, u16)>],
                   visible: &[f32],
-                  (classes, elevations): (&mut [u8], &mut [u8]),
+                  (classes, elevations, measure): (&mut [u8], &mut [u8], &mut [bool]),
                   out: &mut [Option<Technique>],
                   busy: &mut bool| {
         if let Some(&(centre, radius)) = spheres.and_then(|s| s.get(chunk))
@@ -1874,13 +1921,22 @@ pub fn choose_instances_in_chunks(
             previous.fill(None);
             transitions.fill(None);
             elevations.fill(NO_CLASS);
+            measure.fill(false);
             out.fill(None);
             return;
         }
         let placed = placements.map(|p| &p[chunk * CHOOSE_CHUNK..chunk * CHOOSE_CHUNK + instances.len()]);
-        let per_instance =
-            instances.iter().zip(previous).zip(transitions).zip(visible).zip(classes).zip(elevations).zip(out);
-        for (k, ((((((instance, previous), transition), &visible), class), elevation), out)) in per_instance.enumerate()
+        let per_instance = instances
+            .iter()
+            .zip(previous)
+            .zip(transitions)
+            .zip(visible)
+            .zip(classes)
+            .zip(elevations)
+            .zip(measure)
+            .zip(out);
+        for (k, (((((((instance, previous), transition), &visible), class), elevation), measure), out)) in
+            per_instance.enumerate()
         {
             // Without the placements, the instance's own; with them, the instance is read only
             // for its share in view.
@@ -1899,6 +1955,7 @@ pub fn choose_instances_in_chunks(
                 *previous = None;
                 *transition = None;
                 *elevation = NO_CLASS;
+                *measure = false;
                 *out = None;
                 continue;
             }
@@ -1937,10 +1994,14 @@ pub fn choose_instances_in_chunks(
                             }
                         }
                     };
+                    *measure = true;
                     let chosen = match choices.uniform_below() {
                         // Every elevation's tables choose the same under this height, whatever
                         // the tree's classes and last frame's choice: not looked up.
-                        Some((below, uniform)) if height < below && elevation_class != BELOW_HORIZON => uniform,
+                        Some((below, uniform)) if height < below && elevation_class != BELOW_HORIZON => {
+                            *measure = height >= VISIBILITY_LEAD * below || prunes(uniform);
+                            uniform
+                        }
                         _ => {
                             let in_view = match frustum {
                                 Some(f) if choices.above_range(height) => in_view_share(lod, instance.transform, f),
@@ -1960,13 +2021,14 @@ pub fn choose_instances_in_chunks(
                     *previous = None;
                     *transition = None;
                     *elevation = NO_CLASS;
+                    *measure = true;
                     otherwise
                 }
             });
         }
     };
     if instances.len() <= CHOOSE_CHUNK {
-        let classes = (&mut state.classes[..], &mut state.elevations[..]);
+        let classes = (&mut state.classes[..], &mut state.elevations[..], &mut state.measure[..]);
         let mut busy = false;
         choose(0, instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out, &mut busy);
         if let Some(slot) = state.busy.first_mut() {
@@ -1982,11 +2044,16 @@ pub fn choose_instances_in_chunks(
         .zip(state.visible.par_chunks(CHOOSE_CHUNK))
         .zip(state.classes.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.elevations.par_chunks_mut(CHOOSE_CHUNK))
+        .zip(state.measure.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.busy.par_iter_mut())
         .for_each(
-            |((((((((chunk, instances), previous), transitions), visible), classes), elevations), out), busy)| {
-                choose(chunk, instances, previous, transitions, visible, (classes, elevations), out, busy);
+            |(
+                ((((((((chunk, instances), previous), transitions), visible), classes), elevations), measure), out),
+                busy,
+            )| {
+                let classes = (classes, elevations, measure);
+                choose(chunk, instances, previous, transitions, visible, classes, out, busy);
             },
         );
 }
@@ -2058,6 +2125,12 @@ mod tests {
     /// A table shaped like a measured leafy tree: the full mesh, the point tree converging to it,
     /// crossed quads good only when small, the chain good only when large.
     fn table() -> Calibration {
+        table_with_cheap(None)
+    }
+
+    /// [`table`] with a row of technique `cheap.0` as good as the full mesh at every height, at
+    /// `cheap.1` primitives.
+    fn table_with_cheap(cheap: Option<(u32, f32)>) -> Calibration {
         let mut records = Vec::new();
         for (h, full, spt, spt_p, crossed, chain, chain_p) in [
             (8.0, 0.060, 0.064, 130.0, 0.067, 0.190, 220.0),
@@ -2069,6 +2142,9 @@ mod tests {
             records.push((code::SPT, record(code::SPT, h, spt, spt_p)));
             records.push((code::CROSSED, record(code::CROSSED, h, crossed, 3.0)));
             records.push((code::LOD_CHAIN, record(code::LOD_CHAIN, h, chain, chain_p)));
+            if let Some((technique, primitives)) = cheap {
+                records.push((technique, record(technique, h, full, primitives)));
+            }
         }
         records.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.height.total_cmp(&b.1.height)));
         Calibration::from_records(&records.into_iter().map(|(_, r)| r).collect::<Vec<_>>()).expect("rows")
@@ -2603,6 +2679,47 @@ mod tests {
         let differ = Choices::among(&table_with_elevations(), &policy, all);
         assert_ne!(differ.choose_viewed(8.0, 0, 1.0, None), differ.choose_viewed(8.0, 3, 1.0, None));
         assert_eq!(differ.uniform_below(), None);
+    }
+
+    /// Whose visible fraction matters ([`PolicyState::visibility_matters`]): not a tree out of
+    /// view, nor one the uniform height's technique chose under [`VISIBILITY_LEAD`] of that
+    /// height; a tree between that and the height, one above it and one of a model without
+    /// tables do, and where that technique prunes (it reads the fraction) so does every tree in
+    /// view.
+    #[test]
+    fn the_visible_fraction_matters_where_it_can_change_the_choice_or_the_pruning() {
+        let policy = Policy { hysteresis: 0.0, transition: 0, ..Policy::default() };
+        assert!(policy.occlusion, "on by default");
+        let lods = [tall_lod(), tall_lod()];
+        let eye = lods[0].centre();
+        let camera = Camera::look_at(eye, eye - Vec3::Z, 0.8, 256, 256);
+        for pruned in [false, true] {
+            // The crossed quads, or Cook's pruning as good as the full mesh in 60 primitives,
+            // for the smallest trees.
+            let calibration = if pruned { table_with_cheap(Some((code::PRUNE_COOK, 60.0))) } else { table() };
+            let choices = Choices::among(&calibration, &policy, |t| !(pruned && t == Technique::Crossed));
+            let (below, uniform) = choices.uniform_below().expect("one technique for the smallest trees");
+            assert_eq!(prunes(uniform), pruned, "{uniform:?}");
+            // (Height as a share of the uniform one, model, ahead of the eye or behind it.)
+            let trees = [(0.25, 0, true), (0.75, 0, true), (4.0, 0, true), (0.25, 1, true), (0.25, 0, false)];
+            let instances: Vec<Instance> = trees
+                .iter()
+                .map(|&(share, model, ahead)| {
+                    let distance = distance_for_height(&lods[0], share * below, &camera);
+                    let z = if ahead { -distance } else { distance };
+                    Instance { model, transform: Mat4::from_translation(Vec3::new(0.0, 0.0, z)) }
+                })
+                .collect();
+            let (choices, mut out, mut state) = ([Some(choices), None], Vec::new(), PolicyState::default());
+            choose_instances(&instances, &lods, &choices, &camera, Technique::Spt, &mut state, &mut out);
+            assert_eq!(out[..2], [Some(uniform), Some(uniform)], "under the height, in view");
+            assert_eq!((out[3], out[4]), (Some(Technique::Spt), None), "no tables; out of view");
+            let matters: Vec<bool> = (0..trees.len()).map(|i| state.visibility_matters(i)).collect();
+            assert_eq!(matters, [pruned, true, true, true, false], "{uniform:?} under {below} px");
+            let listed: Vec<u32> = state.needing_visibility().collect();
+            assert_eq!(listed, if pruned { vec![0, 1, 2, 3] } else { vec![1, 2, 3] });
+            assert!(state.visibility_matters(trees.len()), "past the instances chosen");
+        }
     }
 
     #[test]
@@ -3162,8 +3279,8 @@ mod tests {
             );
             assert_eq!(out, reference, "frame {frame}");
             assert_eq!(
-                (&chunked.previous, &chunked.transitions, &chunked.elevations),
-                (&alone.previous, &alone.transitions, &alone.elevations),
+                (&chunked.previous, &chunked.transitions, &chunked.elevations, &chunked.measure),
+                (&alone.previous, &alone.transitions, &alone.elevations, &alone.measure),
                 "frame {frame}"
             );
             let frustum = Frustum::from_view_proj(camera.view_proj);
