@@ -14,6 +14,12 @@
 //! are copied to a mappable buffer, mapped by a later [`crate::Renderer::prepare`] and turned into
 //! per-instance fractions; while a measurement is in flight no new one is recorded.
 //!
+//! With the policy's occlusion on (`Policy::occlusion`), the trees measured are the camera's
+//! drawn trees whose choice their fraction can change (`PolicyState::visibility_matters`): in a
+//! large forest most trees are far and drawn alike whatever their fraction, and each job is a
+//! workgroup and 96 bytes uploaded. A read gives the trees of its measurement their fraction and
+//! puts those of the read before that it lacks back to 1.
+//!
 //! A measurement is ignored (its trees count as fully visible) for a tree whose distance to the
 //! eye at measurement time is less than 4× how far the eye has moved since, or when the view
 //! direction has turned by more than 15°: after a camera jump the old depth says nothing.
