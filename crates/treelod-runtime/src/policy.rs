@@ -1615,10 +1615,10 @@ impl PolicyState {
     /// view, and for a tree the model's [`Choices::uniform_below`] chose (whatever its visible
     /// fraction) that is also less than [`VISIBILITY_LEAD`] of that height high, unless the
     /// technique it got prunes by its visible fraction. A host measuring occlusion measures only
-    /// the trees for which this is `true` (in a large forest most trees are far and small: 127,000
-    /// of the 127,200 a frame of the shared pine's 10^6 trees draws, `docs/cli.md`); the others'
-    /// fractions are not read until they matter again. `true` past the instances the last choice
-    /// had.
+    /// the trees for which this is `true` (in a large forest most trees are far and small: of the
+    /// about 127,000 trees a frame of the shared pine's 10^6 draws, 0 to 120, `docs/cli.md`); the
+    /// others' fractions are not read until they matter again. `true` past the instances the last
+    /// choice had.
     #[must_use]
     pub fn visibility_matters(&self, index: usize) -> bool {
         self.measure.get(index).copied().unwrap_or(true)
