@@ -9,8 +9,9 @@
 //    (same operations, same order, same far path and far-list range), and one `DrawInfo` +
 //    `DrawIndirectArgs` pair per non-empty range, appended to its model's triangle or point
 //    bucket by an atomic counter (the count `multi_draw_indirect_count` reads). An instance the
-//    CPU marks as drawn with its octahedral impostor (`QUADS` in `InstanceDraw::technique`; the
-//    CPU culled it) is appended to its model's quad bucket as one draw of its quads.
+//    CPU marks as drawn with its octahedral impostor or its billboards (the quad kind in the top
+//    bits of `InstanceDraw::technique`; the CPU culled it) is appended to its model's quad or
+//    billboard bucket as one draw of those quads.
 //
 // Keys that the CPU holds as ±∞ are uploaded as ±f32::MAX (selection thresholds are finite and
 // non-negative, so every comparison gives the same result).
@@ -23,11 +24,12 @@ const INSIDE: u32 = 1u;
 const STRADDLES: u32 = 2u;
 const ROOTS_CELL: u32 = 0xFFFFFFFFu;
 const F32_MAX: f32 = 3.40282347e+38;
-// InstanceDraw::technique's flag of an instance drawn as its octahedral impostor
-// (InstanceDrawGpu::QUADS).
-const QUADS: u32 = 0x80000000u;
-// Buckets per model: triangles, points, quads (gpu_select.rs, BUCKET_KINDS).
-const BUCKET_KINDS: u32 = 3u;
+// InstanceDraw::technique's first bit of the quads an instance is drawn with instead of the point
+// tree's selection (InstanceDrawGpu::QUAD_SHIFT): 0 none, else 1 + QuadKind::index.
+const QUAD_SHIFT: u32 = 30u;
+// Buckets per model: triangles, points, octahedral impostor quads, billboard quads (gpu_select.rs,
+// BUCKET_KINDS).
+const BUCKET_KINDS: u32 = 4u;
 
 // Rust twin: SelectFrameGpu (crates/treelod-render/src/gpu_select.rs).
 struct SelectFrame {
@@ -71,8 +73,9 @@ struct InstanceGpu {
 //              visible instance); lo > 0: only the draws of the point tree it leaves in a
 //              transition (counted as leaving primitives).
 //   technique  Technique::index of the technique its draws are tinted with and counted under;
-//              with QUADS (bit 31) set, the instance is drawn as its model's octahedral impostor
-//              quads (`quad_first`, `quad_count`) instead of through the point tree's selection.
+//              (bits 0..30); bits 30..32 (QUAD_SHIFT) k > 0: the instance is drawn as its
+//              model's quads of kind k - 1 (`ModelGpu::quads`: octahedral impostor, facing
+//              billboard, crossed billboards) instead of through the point tree's selection.
 struct InstanceDraw {
     fade: u32,
     technique: u32,
@@ -99,13 +102,14 @@ struct ModelGpu {
     far_hi_at: u32,
     triangle_base: u32,
     point_base: u32,
-    // Triangle bucket, point bucket, quad bucket: first slot of the draw buffers, and slots.
-    bucket_first: array<u32, 3>,
-    bucket_capacity: array<u32, 3>,
-    // The model's octahedral impostor quads, as the CPU path draws them (QuadDraw::first, count;
+    // Triangle, point, octahedral impostor and billboard bucket: first slot of the draw buffers,
+    // and slots.
+    bucket_first: array<u32, 4>,
+    bucket_capacity: array<u32, 4>,
+    // Per quad kind (QuadKind::index: octahedral impostor, facing billboard, crossed billboards)
+    // the model's quads, first and count, as the CPU path draws them (QuadDraw::first, count;
     // count 0 where the renderer cannot draw them).
-    quad_first: u32,
-    quad_count: u32,
+    quads: array<u32, 6>,
 }
 
 // Rust twin: CellGpu. `sizes_at` / `hi_at` index `keys`.
@@ -255,7 +259,8 @@ fn leading_above(at: u32, n: u32, tau: f32) -> u32 {
 }
 
 // Appends one range: `kind` 0 triangles, 1 points (`first` a pool index), 2 the model's
-// octahedral impostor quads (`first` a quad index, as the CPU path records a `QuadDraw`).
+// octahedral impostor quads, 3 its billboard quads (`first` a quad index, as the CPU path records
+// a `QuadDraw`).
 fn write_range(kind: u32, cell: u32, first: u32, count: u32, taus: vec2<f32>, shading: f32) {
     let s = atomicAdd(&counters[BUCKET_KINDS * model_index + kind], 1u);
     if s >= cur_model.bucket_capacity[kind] {
@@ -346,16 +351,19 @@ fn select_instances(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invo
     if cur_draw.fade == 0u {
         return;
     }
-    let quads = (cur_draw.technique & QUADS) != 0u;
-    cur_draw.technique = min(cur_draw.technique & ~QUADS, TECHNIQUE_COUNT - 1u);
+    let quads = min(cur_draw.technique >> QUAD_SHIFT, 3u);
+    cur_draw.technique = min(cur_draw.technique & ((1u << QUAD_SHIFT) - 1u), TECHNIQUE_COUNT - 1u);
     model_index = current.model;
     cur_model = models[model_index];
-    if quads {
+    if quads > 0u {
         // The CPU culled the tree (the policy's chooser tests its sphere as the CPU path does)
         // and counts it and its quads in the frame's statistics. Recorded as the CPU path's
-        // `record_direct` records a `QuadDraw` (crates/treelod-render/src/draws.rs).
-        if cur_model.quad_count > 0u {
-            write_range(2u, ROOTS_CELL, cur_model.quad_first, cur_model.quad_count, vec2<f32>(0.0), 1.0);
+        // `record_direct` records a `QuadDraw` (crates/treelod-render/src/draws.rs): the
+        // octahedral impostor to bucket 2, billboards to bucket 3.
+        let first = cur_model.quads[2u * (quads - 1u)];
+        let count = cur_model.quads[2u * (quads - 1u) + 1u];
+        if count > 0u {
+            write_range(select(3u, 2u, quads == 1u), ROOTS_CELL, first, count, vec2<f32>(0.0), 1.0);
         }
         return;
     }

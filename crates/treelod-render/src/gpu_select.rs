@@ -20,7 +20,8 @@
 //! the CPU does (culling, far path and far-list range, near path with cell culling, Gilet's depth
 //! bias and shading, prefix search), appending one `DrawInfo` + `DrawIndirectArgs` pair per range
 //! to its model's triangle or point bucket through an atomic counter (and, in a policy frame, one
-//! per octahedral impostor tree to its quad bucket). The render pass draws each
+//! per octahedral impostor tree to its quad bucket, one per billboard tree to its billboard
+//! bucket). The render pass draws each
 //! bucket with `multi_draw_indirect_count` (the counter is the count), or, on adapters without
 //! `MULTI_DRAW_INDIRECT_COUNT`, with `multi_draw_indirect` over the whole bucket after the
 //! indirect buffer was cleared (unused slots are empty draws).
@@ -39,22 +40,24 @@
 //! share: `[0, shown)` entering, `[shown, 1)` leaving, every pixel outside a transition, and every
 //! pixel for a tree both entering and leaving the point tree's selection, whose two selections
 //! are one). The trees the policy draws with their octahedral impostor (most trees of a large
-//! forest: every one below about a hundred pixels) are given to the GPU too, flagged
-//! [`InstanceDrawGpu::QUADS`], where the point tree leaves their entry free (all but a tree
-//! fading between the two, whose impostor the CPU records): the CPU culled them, and
-//! `select_instances` appends each one's quads to its model's quad bucket as the CPU path records
-//! its `QuadDraw` (the same quads, tint and dither share), so the CPU neither records nor uploads
-//! a draw per impostor tree. Every other instance is skipped. With shadows, each cascade selects
+//! forest: every one below about a hundred pixels) or their billboards (a facing one or the
+//! crossed ones: the far trees of a model whose tables find them as good, a sparse weeping
+//! willow's, say) are given to the GPU too, flagged with their [`QuadKind`]
+//! ([`InstanceDrawGpu::quads`]), where the point tree leaves their entry free (all but a tree
+//! fading between the two, whose quads the CPU records): the CPU culled them, and
+//! `select_instances` appends each one's quads to its model's quad or billboard bucket as the CPU
+//! path records its `QuadDraw` (the same quads, tint and dither share), so the CPU neither records
+//! nor uploads a draw per such tree. Every other instance is skipped. With shadows, each cascade selects
 //! its trees on the CPU beside this (a policy frame), or the whole frame is the CPU's (without a
 //! policy).
 //!
 //! **Capacity.** Each bucket's slots are fixed on the CPU (the bind group and the render pass
 //! need them): `min(upper bound, max(2^16, what earlier frames needed × 1.25))`, the upper bound
 //! being the model's instances times its cells with triangles (points), and its instances for the
-//! quads (none where the renderer draws no octahedral impostor of it). Ranges past a bucket's
-//! capacity are dropped that frame and counted; the counters are read back without blocking a
-//! frame or two later, and the buckets that overflowed grow for the next frames. A quad bucket
-//! grows before the frame instead: the CPU knows how many impostor trees it hands over.
+//! quads (none where the renderer draws no octahedral impostor, or no billboard, of it). Ranges
+//! past a bucket's capacity are dropped that frame and counted; the counters are read back without
+//! blocking a frame or two later, and the buckets that overflowed grow for the next frames. A quad
+//! or billboard bucket grows before the frame instead: the CPU knows how many trees it hands over.
 //!
 //! **Order.** Within a bucket the draws come in the order the atomics hand out slots, which
 //! varies between runs: the set of draws equals the CPU selection's (up to `f32` rounding of keys
@@ -72,6 +75,7 @@ use treelod_runtime::{DrawRange, Kind, ModelLod, PerTechnique, ROOTS_CELL, Techn
 use crate::draws::DrawInfo;
 use crate::renderer::RenderError;
 use crate::streaming::UNIT;
+use crate::technique::DrawSource;
 
 /// WGSL of the selection: the draw constants it writes, then the two compute entry points (after
 /// the table of technique tints, [`shader`]).
@@ -103,8 +107,8 @@ pub const MAX_BLOCKS: usize = 65_535;
 /// Slots a bucket starts with (if its upper bound is not smaller).
 const INITIAL_BUCKET_DRAWS: u32 = 1 << 16;
 
-/// Buckets per model: triangles, points, and the octahedral impostors' quads.
-const BUCKET_KINDS: usize = 3;
+/// Buckets per model: triangles, points, the octahedral impostors' quads, the billboards' quads.
+const BUCKET_KINDS: usize = 4;
 
 /// Statistics counters after the bucket counters: instances visible, far, cells selected, cells
 /// culled, triangles, points, primitives of leaving draws, then primitives per technique.
@@ -173,10 +177,35 @@ struct ModelGpu {
     point_base: u32,
     bucket_first: [u32; BUCKET_KINDS],
     bucket_capacity: [u32; BUCKET_KINDS],
-    /// The model's octahedral impostor quads (`QuadDraw::first`, `count`; count 0 where the
-    /// renderer cannot draw them).
-    quad_first: u32,
-    quad_count: u32,
+    /// Per [`QuadKind`] (by [`QuadKind::index`]) the model's quads a tree drawn so is drawn
+    /// with, first and count, as the CPU path's `QuadDraw::first`, `count` (count 0 where the
+    /// model has none, or the renderer cannot draw them).
+    quads: [u32; 2 * QuadKind::COUNT],
+}
+
+/// The quads a tree may be drawn with instead of through the point tree's selection, which the
+/// GPU appends as the CPU path records a [`treelod_runtime::QuadDraw`] of them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum QuadKind {
+    /// Its octahedral impostor ([`Technique::Octahedral`]): the quad bucket (kind 2).
+    Octahedral,
+    /// Its camera-facing billboard ([`Technique::Billboard`]): the billboard bucket (kind 3).
+    Facing,
+    /// Its crossed billboards ([`Technique::Crossed`]): the billboard bucket (kind 3).
+    Crossed,
+}
+
+impl QuadKind {
+    /// Kinds.
+    pub(crate) const COUNT: usize = 3;
+
+    /// Every kind, by [`Self::index`].
+    pub(crate) const ALL: [Self; Self::COUNT] = [Self::Octahedral, Self::Facing, Self::Crossed];
+
+    /// Index into a model's quad ranges.
+    pub(crate) const fn index(self) -> usize {
+        self as usize
+    }
 }
 
 /// A non-empty cell. WGSL twin: `CellGpu`.
@@ -208,8 +237,9 @@ struct CellGpu {
 ///            else the DrawInfo::fade its draws carry: bits 0..16 lo, 16..32 hi of the
 ///            transition dither's share [lo, hi) (draws::pack_fade), 0xFFFF0000 = every pixel
 /// technique  Technique::index of the technique the draws count under and are tinted with;
-///            with QUADS (bit 31), the instance is drawn as its model's octahedral impostor
-///            quads instead of through the point tree's selection
+///            (bits 0..30); bits 30..32: 0 drawn through the point tree's selection, else
+///            1 + the QuadKind::index of the model's quads it is drawn with instead
+///            (octahedral impostor, facing billboard, crossed billboards)
 /// ```
 ///
 /// `lo == 0` marks the technique the instance is assigned this frame (it counts as a visible
@@ -229,13 +259,20 @@ impl InstanceDrawGpu {
     /// Drawn with the point tree on every pixel: every instance of a frame without a policy.
     pub const POINT_TREE: Self = Self { fade: 0xFFFF_0000, technique: Technique::Spt.index() as u32 };
 
-    /// The flag in `technique` of an instance drawn as its octahedral impostor.
-    pub const QUADS: u32 = 1 << 31;
+    /// The first bit in `technique` of the quads an instance is drawn with (1 + [`QuadKind::index`]).
+    pub const QUAD_SHIFT: u32 = 30;
 
-    /// Drawn as its model's octahedral impostor quads on the dither share `fade` packs, tinted
-    /// and counted as `technique`.
-    pub fn quads(fade: u32, technique: Technique) -> Self {
-        Self { fade, technique: u32::try_from(technique.index()).unwrap_or(0) | Self::QUADS }
+    /// Whether the instance is drawn with quads ([`Self::quads`]) rather than through the point
+    /// tree's selection.
+    pub fn draws_quads(self) -> bool {
+        self.technique >> Self::QUAD_SHIFT != 0
+    }
+
+    /// Drawn as its model's quads of `kind` on the dither share `fade` packs, tinted and counted
+    /// as `technique`.
+    pub fn quads(kind: QuadKind, fade: u32, technique: Technique) -> Self {
+        let kind = u32::try_from(kind.index()).unwrap_or(0) + 1;
+        Self { fade, technique: u32::try_from(technique.index()).unwrap_or(0) | (kind << Self::QUAD_SHIFT) }
     }
 }
 
@@ -243,7 +280,7 @@ const _: () = assert!(size_of::<InstanceDrawGpu>() == 8);
 const _: () = assert!(size_of::<SelectFrameGpu>() == 160);
 const _: () = assert!(size_of::<BlockGpu>() == 32);
 const _: () = assert!(size_of::<InstanceGpu>() == 8);
-const _: () = assert!(size_of::<ModelGpu>() == 120);
+const _: () = assert!(size_of::<ModelGpu>() == 144);
 const _: () = assert!(size_of::<CellGpu>() == 80);
 
 /// A key as the shader holds it: ±∞ as ±`f32::MAX`, NaN as `−f32::MAX` (selection's thresholds
@@ -286,10 +323,13 @@ pub struct GpuDraw {
     pub dither: [f32; 2],
 }
 
-/// One octahedral impostor draw the GPU selection appended, read back
+/// One draw of an octahedral impostor or of billboards the GPU selection appended, read back
 /// ([`crate::Renderer::read_gpu_quads`]): a [`treelod_runtime::QuadDraw`] of the CPU path.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GpuQuadDraw {
+    /// What is drawn: [`DrawSource::Octahedral`] or [`DrawSource::Billboards`], as the CPU
+    /// path's [`crate::RecordedDraw::source`].
+    pub source: DrawSource,
     /// The instance's index in [`crate::Renderer::set_instances`]' list.
     pub instance: u32,
     /// The instance's model.
@@ -304,7 +344,7 @@ pub struct GpuQuadDraw {
     pub dither: [f32; 2],
 }
 
-/// A frame's draws read back: the point tree's ranges and the impostors' quads.
+/// A frame's draws read back: the point tree's ranges and the impostors' and billboards' quads.
 pub(crate) type ReadDraws = (Vec<GpuDraw>, Vec<GpuQuadDraw>);
 
 /// A counter read-back in flight.
@@ -355,11 +395,11 @@ pub(crate) struct GpuSelection {
     counters: wgpu::Buffer,
     draws: wgpu::Buffer,
     indirect: wgpu::Buffer,
-    /// Per model: cells with triangles, cells with points, and 1 if it has quads to draw (the
-    /// upper bounds of each bucket per instance).
+    /// Per model: cells with triangles, cells with points, and 1 if it has octahedral impostor
+    /// quads (billboard quads) to draw (the upper bounds of each bucket per instance).
     cells_with: Vec<[u32; BUCKET_KINDS]>,
-    /// Per model and kind: slots needed by the largest frame read back so far (for the quads,
-    /// also the largest count handed over, [`Self::set_instance_draws`]).
+    /// Per model and kind: slots needed by the largest frame read back so far (for the quads'
+    /// buckets, also the largest count handed over, [`Self::set_instance_draws`]).
     needed: Vec<[u32; BUCKET_KINDS]>,
     /// A quad bucket is smaller than the quads handed over for the next frame.
     quads_grow: bool,
@@ -385,7 +425,8 @@ const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE;
 
 impl GpuSelection {
     /// The pipelines and the scene of `models` (checked against `budget` bytes); `quads` per
-    /// model, the octahedral impostor quads the renderer draws of each tree (0 for none).
+    /// model and [`QuadKind`] (by [`QuadKind::index`]), the quads the renderer draws of a tree
+    /// drawn so, first and count (count 0 for none).
     ///
     /// # Errors
     /// [`RenderError::GpuSelectionBudget`] if the models' triangles and points do not fit.
@@ -394,7 +435,7 @@ impl GpuSelection {
         queue: &wgpu::Queue,
         containers: &[&Container],
         lods: &[ModelLod],
-        quads: &[u32],
+        quads: &[[(u32, u32); QuadKind::COUNT]],
         budget: u64,
     ) -> Result<Self, RenderError> {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -471,7 +512,7 @@ impl GpuSelection {
         queue: &wgpu::Queue,
         containers: &[&Container],
         lods: &[ModelLod],
-        quads: &[u32],
+        quads: &[[(u32, u32); QuadKind::COUNT]],
         budget: u64,
     ) -> Result<(), RenderError> {
         let limits = device.limits();
@@ -495,7 +536,8 @@ impl GpuSelection {
         let mut at = 0u64;
         for (m, (container, lod)) in containers.iter().zip(lods).enumerate() {
             let unit = |n: u64| u32::try_from(n).unwrap_or(u32::MAX);
-            let quad_count = quads.get(m).copied().unwrap_or(0);
+            let model_quads = quads.get(m).copied().unwrap_or_default();
+            let has = |kinds: &[QuadKind]| u32::from(kinds.iter().any(|k| model_quads[k.index()].1 > 0));
             // The points with their ambient occlusion in `flags`, as the streamed pool holds them.
             let mut scratch = Vec::new();
             let triangles = container.triangles();
@@ -517,7 +559,7 @@ impl GpuSelection {
             let (far_tau, largest) = lod.far_bounds();
             let (cull_centre, cull_half) = lod.cull_box();
             let first_cell = to_u32(cells.len());
-            let mut with = [0, 0, u32::from(quad_count > 0)];
+            let mut with = [0, 0, has(&[QuadKind::Octahedral]), has(&[QuadKind::Facing, QuadKind::Crossed])];
             for cell in lod.cells() {
                 let (centre, half) = cell.centre_half();
                 let (t, p) = (cell.triangles(), cell.points());
@@ -565,8 +607,10 @@ impl GpuSelection {
                 point_base: unit(points_at),
                 bucket_first: [0; BUCKET_KINDS],
                 bucket_capacity: [0; BUCKET_KINDS],
-                quad_first: 0,
-                quad_count,
+                quads: std::array::from_fn(|i| {
+                    let (first, count) = model_quads[i / 2];
+                    if i % 2 == 0 { first } else { count }
+                }),
             });
         }
         let upload = |label, bytes: &[u8]| {
@@ -749,20 +793,22 @@ impl GpuSelection {
 
     /// Sets what the next [`Self::prepare`] draws of each instance (one per instance of the
     /// renderer's list, as [`Self::set_instances`] was given it; extra entries are ignored).
-    /// `quads` counts per model the instances flagged [`InstanceDrawGpu::QUADS`]: a quad bucket
-    /// too small for them grows before the frame is selected, so no impostor is dropped (the
-    /// CPU knows how many it hands over; the point tree's buckets grow from what frames read
-    /// back).
-    pub fn set_instance_draws(&mut self, queue: &wgpu::Queue, draws: &[InstanceDrawGpu], quads: &[u32]) {
+    /// `quads` counts per model the instances drawn with its octahedral impostor, and with its
+    /// billboards ([`InstanceDrawGpu::quads`]): a quad bucket too small for them grows before
+    /// the frame is selected, so no impostor or billboard is dropped (the CPU knows how many it
+    /// hands over; the point tree's buckets grow from what frames read back).
+    pub fn set_instance_draws(&mut self, queue: &wgpu::Queue, draws: &[InstanceDrawGpu], quads: &[[u32; 2]]) {
         let n = draws.len().min(self.instance_draws_len);
         if n > 0 {
             queue.write_buffer(&self.instance_draws, 0, bytemuck::cast_slice(&draws[..n]));
         }
         self.every_instance_point_tree = false;
-        for ((needed, model), &count) in self.needed.iter_mut().zip(&self.models_cpu).zip(quads) {
-            if count > model.bucket_capacity[2] {
-                needed[2] = needed[2].max(count);
-                self.quads_grow = true;
+        for ((needed, model), counts) in self.needed.iter_mut().zip(&self.models_cpu).zip(quads) {
+            for (kind, &count) in [2, 3].into_iter().zip(counts) {
+                if count > model.bucket_capacity[kind] {
+                    needed[kind] = needed[kind].max(count);
+                    self.quads_grow = true;
+                }
             }
         }
     }
@@ -944,15 +990,15 @@ impl GpuSelection {
     }
 
     /// Records the draws into the host's pass: per kind (pipeline: triangles, points, octahedral
-    /// impostors) and model, one `multi_draw_indirect_count` over its bucket, with the model bind
-    /// group `model_group(m)` and, for the quads, the model's octahedral impostors' group
-    /// `quad_group(m)` (group 3).
+    /// impostors, billboards) and model, one `multi_draw_indirect_count` over its bucket, with
+    /// the model bind group `model_group(m)` and, for the quads, the model's octahedral
+    /// impostors' or billboards' group `quad_group(m, kind)` (group 3).
     pub fn render<'a>(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         pipelines: [&wgpu::RenderPipeline; BUCKET_KINDS],
         model_group: impl Fn(usize) -> Option<&'a wgpu::BindGroup>,
-        quad_group: impl Fn(usize) -> Option<&'a wgpu::BindGroup>,
+        quad_group: impl Fn(usize, usize) -> Option<&'a wgpu::BindGroup>,
     ) {
         let Some(frame_group) = &self.frame_group else { return };
         pass.set_bind_group(0, frame_group, &[]);
@@ -964,8 +1010,8 @@ impl GpuSelection {
                 if capacity == 0 || self.per_model.get(m).is_none_or(|&n| n == 0) {
                     continue;
                 }
-                if kind == 2 {
-                    let Some(quads) = quad_group(m) else { continue };
+                if kind >= 2 {
+                    let Some(quads) = quad_group(m, kind) else { continue };
                     pass.set_bind_group(3, quads, &[]);
                 }
                 pass.set_bind_group(1, group, &[]);
@@ -982,8 +1028,8 @@ impl GpuSelection {
 
     /// Reads the draws of the last [`Self::prepare`] back, blocking until the GPU is done: the
     /// ranges as the CPU selection would list them (in bucket order, not the CPU's), with the
-    /// technique and dither of each, and the octahedral impostors' quad draws, for tests and
-    /// tools. Draws dropped for lack of capacity are missing.
+    /// technique and dither of each, and the octahedral impostors' and billboards' quad draws,
+    /// for tests and tools. Draws dropped for lack of capacity are missing.
     ///
     /// # Errors
     /// [`RenderError::Readback`] if mapping fails.
@@ -1035,16 +1081,19 @@ impl GpuSelection {
             })
         };
         let mut quads = Vec::new();
-        for (m, model) in self.models_cpu.iter().enumerate() {
-            for (info, args) in slots(m, 2) {
-                quads.push(GpuQuadDraw {
-                    instance: info.instance,
-                    model: u32::try_from(m).unwrap_or(u32::MAX),
-                    first: args[2] / 6 - model.quad_first,
-                    count: args[0] / 6,
-                    technique: technique_of(info.tint),
-                    dither: [unorm(info.fade), unorm(info.fade >> 16)],
-                });
+        for m in 0..self.models_cpu.len() {
+            for (kind, source) in [(2, DrawSource::Octahedral), (3, DrawSource::Billboards)] {
+                for (info, args) in slots(m, kind) {
+                    quads.push(GpuQuadDraw {
+                        source,
+                        instance: info.instance,
+                        model: u32::try_from(m).unwrap_or(u32::MAX),
+                        first: args[2] / 6,
+                        count: args[0] / 6,
+                        technique: technique_of(info.tint),
+                        dither: [unorm(info.fade), unorm(info.fade >> 16)],
+                    });
+                }
             }
         }
         let mut ranges = Vec::new();

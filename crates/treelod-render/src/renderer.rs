@@ -18,7 +18,7 @@ use treelod_runtime::{
 use crate::assign::PolicyModels;
 use crate::camera::Camera;
 use crate::draws::{DrawInfo, EVERY_PIXEL, InstanceTransform, RECORD_CHUNK, RecordedDraw, Recording, View, pack_fade};
-use crate::gpu_select::{GpuDraw, GpuQuadDraw, GpuSelection, InstanceDrawGpu, ReadDraws, select_frame_gpu};
+use crate::gpu_select::{GpuDraw, GpuQuadDraw, GpuSelection, InstanceDrawGpu, QuadKind, ReadDraws, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
 use crate::pipelines::Pipelines;
 #[cfg(doc)]
@@ -198,11 +198,12 @@ pub struct Renderer {
     gpu_instances_stale: bool,
     /// Scratch: per instance, what GPU selection draws of it in a policy frame.
     gpu_instance_draws: Vec<InstanceDrawGpu>,
-    /// Scratch of policy frames with GPU selection: the trees whose octahedral impostor the GPU
-    /// draws.
+    /// Scratch of policy frames with GPU selection: the trees whose octahedral impostor or
+    /// billboards the GPU draws.
     gpu_quad_trees: Vec<u32>,
-    /// Scratch of policy frames with GPU selection: per model, the trees in `gpu_quad_trees`.
-    gpu_quads_per_model: Vec<u32>,
+    /// Scratch of policy frames with GPU selection: per model, the trees in `gpu_quad_trees`
+    /// drawn with the octahedral impostor, and with billboards.
+    gpu_quads_per_model: Vec<[u32; 2]>,
     // Scratch reused between frames.
     requests: Vec<Request>,
     uploads: Vec<Upload>,
@@ -439,12 +440,13 @@ impl Renderer {
     ///   chose it, pruned trees handed back), told per instance which, with which technique and
     ///   on which share of a transition's dither, so trees fading into or out of the point tree
     ///   fade as on the CPU path; and it appends the quads of the trees drawn with their
-    ///   octahedral impostor ([`Technique::Octahedral`], most trees of a large forest). The
-    ///   render pass draws both. The CPU's work is then O(instances) for the assignment, but the
-    ///   point tree's per-cell selection, usually most of a frame's selection, and its streaming
-    ///   are the GPU's, and so are the impostor trees' draw records. [`FrameStats`] adds the
-    ///   CPU's counts of this frame's other techniques and impostor trees to the GPU's read back
-    ///   from an earlier frame. With [`Settings::shadows`], each cascade then selects and draws
+    ///   octahedral impostor ([`Technique::Octahedral`], most trees of a large forest) or their
+    ///   billboards ([`Technique::Billboard`], [`Technique::Crossed`]). The render pass draws
+    ///   both. The CPU's work is then O(instances) for the assignment, but the point tree's
+    ///   per-cell selection, usually most of a frame's selection, and its streaming are the
+    ///   GPU's, and so are the impostor and billboard trees' draw records. [`FrameStats`] adds
+    ///   the CPU's counts of this frame's other techniques and of the quad trees to the GPU's
+    ///   read back from an earlier frame. With [`Settings::shadows`], each cascade then selects and draws
     ///   its own trees on the CPU as in a CPU frame, streaming what it needs.
     ///
     /// Frames with [`Settings::shadows`] without a policy (each cascade selects its own trees),
@@ -461,7 +463,8 @@ impl Renderer {
     pub fn enable_gpu_selection(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) -> Result<(), RenderError> {
         let budget = self.gpu_budget(device);
         let containers: Vec<&Container> = self.models.iter().map(|m| &*m.container).collect();
-        let quads: Vec<u32> = self.representations.iter().map(|r| r.octahedral).collect();
+        let quads: Vec<[(u32, u32); QuadKind::COUNT]> =
+            self.representations.iter().map(|r| QuadKind::ALL.map(|kind| quad_range(r, kind))).collect();
         let mut gpu = GpuSelection::new(device, queue, &containers, &self.lods, &quads, budget)?;
         gpu.set_instances(device, queue, &self.instances, &self.lods);
         self.gpu = Some(gpu);
@@ -524,10 +527,10 @@ impl Renderer {
         }
     }
 
-    /// The octahedral impostors the GPU drew in the last [`Self::prepare`] of a policy frame with
-    /// GPU selection, read back (this blocks until the GPU has finished): the CPU path's
-    /// [`treelod_runtime::QuadDraw`]s of those trees, with the technique and dither of each, in no
-    /// fixed order. `None` if the last frame was selected on the CPU. For tests and tools.
+    /// The octahedral impostors and billboards the GPU drew in the last [`Self::prepare`] of a
+    /// policy frame with GPU selection, read back (this blocks until the GPU has finished): the
+    /// CPU path's [`treelod_runtime::QuadDraw`]s of those trees, with the technique and dither of
+    /// each, in no fixed order. `None` if the last frame was selected on the CPU. For tests and tools.
     ///
     /// # Errors
     /// [`RenderError::Readback`] if mapping the buffers fails.
@@ -1060,7 +1063,8 @@ impl Renderer {
     /// every technique but the point tree, as a CPU frame does; the GPU selects the trees the CPU
     /// would draw through the point tree's selection, told per instance which ones and on which
     /// share of the transition dither ([`InstanceDrawGpu`]), and appends the octahedral impostor
-    /// quads of the trees the policy draws so, where the point tree leaves their entry free.
+    /// and billboard quads of the trees the policy draws so, where the point tree leaves their
+    /// entry free.
     ///
     /// - The point tree's trees are the assignment's [`Technique::Full`] and [`Technique::Spt`]
     ///   lists and those the other techniques hand back ([`point_tree_list`]), drawn on the
@@ -1072,13 +1076,14 @@ impl Renderer {
     /// - Nothing the camera's view records here is streamed: the other techniques' data is
     ///   uploaded whole by `add_model`, and the point tree's is resident whole for GPU
     ///   selection. The shadow cascades select, stream and record their trees as in a CPU frame.
-    /// - The impostor trees: those of the assignment's [`Technique::Octahedral`] list, and of
-    ///   the trees leaving it in a transition, whose entry the point tree left free, are
-    ///   [`InstanceDrawGpu::quads`] on the share [`Self::drawn_by`] gives them, and the CPU records
-    ///   none of them; a tree fading between the impostor and the point tree keeps its impostor
-    ///   on the CPU.
-    /// - Statistics: the CPU's counts of this frame's other techniques and of the impostor
-    ///   trees it hands over (their quads, ranges and draw commands: the GPU draws each of them)
+    /// - The quad trees: those of the assignment's [`Technique::Octahedral`],
+    ///   [`Technique::Billboard`] and [`Technique::Crossed`] lists, and of the trees leaving
+    ///   them in a transition, whose entry the point tree left free, are
+    ///   [`InstanceDrawGpu::quads`] (of their [`QuadKind`]) on the share [`Self::drawn_by`] gives
+    ///   them, and the CPU records none of them; a tree fading between its quads and the point
+    ///   tree keeps its quads on the CPU.
+    /// - Statistics: the CPU's counts of this frame's other techniques and of the quad trees it
+    ///   hands over (their quads, ranges and draw commands: the GPU draws each of them)
     ///   plus the GPU's of the point tree read back from an earlier frame
     ///   ([`FrameStats::gpu_selection`]).
     fn prepare_hybrid(
@@ -1125,34 +1130,43 @@ impl Renderer {
             }
         }
         self.leaving_assignment = leaving_assignment;
-        // The octahedral impostors' trees are the GPU's too where the point tree left their slot
-        // free (all but a tree fading between the two): it appends their quads as the CPU path
-        // records them, on the same share of the dither. The CPU culled them and knows their
-        // quads, so it counts them in this frame's statistics itself.
+        // The octahedral impostors' and the billboards' trees are the GPU's too where the point
+        // tree left their slot free (all but a tree fading between the two): it appends their
+        // quads as the CPU path records them, on the same share of the dither. The CPU culled
+        // them and knows their quads, so it counts them in this frame's statistics itself.
         let mut quad_trees = std::mem::take(&mut self.gpu_quad_trees);
         quad_trees.clear();
         let (mut quads_by_technique, mut quads_leaving) = (PerTechnique::<u64>::default(), 0u64);
         let mut quads_per_model = std::mem::take(&mut self.gpu_quads_per_model);
         quads_per_model.clear();
-        quads_per_model.resize(self.models.len(), 0u32);
+        quads_per_model.resize(self.models.len(), [0u32; 2]);
         for (view, leaves) in [(&mut main, false), (&mut leaving, true)] {
             if leaves && !fading {
                 continue;
             }
-            view.draws.octahedral.retain(|d| {
+            let mut hand_over = |d: &treelod_runtime::QuadDraw, billboards: bool| {
                 let Some(slot) = draws.get_mut(d.instance as usize).filter(|s| **s == InstanceDrawGpu::SKIP) else {
                     return true;
                 };
+                let Some(representations) = self.representations.get(d.model as usize) else { return true };
+                let kinds: &[QuadKind] =
+                    if billboards { &[QuadKind::Facing, QuadKind::Crossed] } else { &[QuadKind::Octahedral] };
+                // (The runtime's draws are always one of the model's ranges; any other stays the CPU's.)
+                let Some(&kind) = kinds.iter().find(|&&k| quad_range(representations, k) == (d.first, d.count)) else {
+                    return true;
+                };
                 let (technique, dither) = self.drawn_by(d.instance, leaves);
-                *slot = InstanceDrawGpu::quads(pack_fade(dither), technique);
+                *slot = InstanceDrawGpu::quads(kind, pack_fade(dither), technique);
                 quad_trees.push(d.instance);
                 if let Some(n) = quads_per_model.get_mut(d.model as usize) {
-                    *n += 1;
+                    n[usize::from(billboards)] += 1;
                 }
                 quads_by_technique[technique] += u64::from(d.count);
                 quads_leaving += if leaves { u64::from(d.count) } else { 0 };
                 false
-            });
+            };
+            view.draws.octahedral.retain(|d| hand_over(d, false));
+            view.draws.billboards.retain(|d| hand_over(d, true));
         }
         // The point tree's ranges are the GPU's: the CPU records none.
         for view in [&mut main, &mut leaving] {
@@ -1219,10 +1233,9 @@ impl Renderer {
             // every instance.
             let frustum = treelod_runtime::Frustum::from_view_proj(runtime_camera.view_proj);
             let gpu_drawn = self.policy.state.needing_visibility().filter(|&index| {
-                draws.get(index as usize).is_some_and(|d| {
-                    *d != InstanceDrawGpu::SKIP
-                        && (d.technique & InstanceDrawGpu::QUADS != 0 || self.in_view(&frustum, index))
-                })
+                draws
+                    .get(index as usize)
+                    .is_some_and(|d| *d != InstanceDrawGpu::SKIP && (d.draws_quads() || self.in_view(&frustum, index)))
             });
             let drawn: Vec<u32> = main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).collect();
             self.set_occlusion_jobs(drawn.into_iter());
@@ -1489,10 +1502,12 @@ impl Renderer {
                 pass.set_bind_group(0, &self.frame_bind_groups[0], &[]);
                 self.draw_view(pass, &self.main, &self.pipelines);
             }
-            let pipelines =
-                [Bucket::Triangles, Bucket::Points, Bucket::Octahedral].map(|b| &self.pipelines[b as usize]);
-            let quads =
-                |m: usize| self.models.get(m).and_then(|model| model.groups[Bucket::Octahedral as usize].as_ref());
+            const BUCKETS: [Bucket; 4] = [Bucket::Triangles, Bucket::Points, Bucket::Octahedral, Bucket::Billboards];
+            let pipelines = BUCKETS.map(|b| &self.pipelines[b as usize]);
+            let quads = |m: usize, kind: usize| {
+                let bucket = *BUCKETS.get(kind)?;
+                self.models.get(m).and_then(|model| model.groups[bucket as usize].as_ref())
+            };
             gpu.render(pass, pipelines, group, quads);
             return;
         }
@@ -1551,6 +1566,17 @@ impl Renderer {
     #[must_use]
     pub fn shadow_bind_group(&self) -> &wgpu::BindGroup {
         &self.shadow_maps.bind_group
+    }
+}
+
+/// The quads of `representations` a tree drawn with `kind` is drawn with, first and count, as the
+/// runtime's [`treelod_runtime::QuadDraw`] of it lists them (count 0 where the model has none).
+fn quad_range(representations: &Representations, kind: QuadKind) -> (u32, u32) {
+    match (kind, &representations.billboards) {
+        (QuadKind::Octahedral, _) => (0, representations.octahedral),
+        (QuadKind::Facing, Some(billboards)) => billboards.facing,
+        (QuadKind::Crossed, Some(billboards)) => billboards.crossed,
+        (QuadKind::Facing | QuadKind::Crossed, None) => (0, 0),
     }
 }
 

@@ -1,8 +1,8 @@
 //! GPU selection with the policy on the Vulkan backend (Mesa lavapipe in CI): in a forest of a
-//! calibrated container, the CPU assigns the trees and draws every technique but the point tree
-//! and the octahedral impostor, the GPU selects the point tree's trees and appends the
-//! impostors' quads and nothing else, on the same share of the transition dither as the CPU
-//! path, and the image is the CPU path's.
+//! calibrated container, the CPU assigns the trees and draws every technique but the point tree,
+//! the octahedral impostor and the billboards, the GPU selects the point tree's trees and appends
+//! the impostors' and billboards' quads and nothing else, on the same share of the transition
+//! dither as the CPU path, and the image is the CPU path's.
 
 mod common;
 
@@ -125,13 +125,23 @@ fn policy_frames_select_the_point_tree_s_trees_on_the_gpu() {
             assert!(point_tree(t), "{name}: the GPU drew tree {} assigned {t}: {d:?}", d.range.instance);
             assert_eq!((d.technique, d.dither), (t, [0.0, 1.0]), "{name}: {d:?}");
         }
-        // The other techniques are the CPU's draws, the same in both paths.
+        // The other techniques are the CPU's draws, the same in both paths, but the billboards'
+        // quads, which the GPU appends as the CPU path records them.
         let others = |r: &Renderer| -> Vec<_> {
             r.draws().iter().map(|d| (d.instance, d.source, d.count, d.technique, d.tau_points)).collect()
         };
-        assert_eq!(others(&hybrid), others(&cpu).into_iter().filter(|d| !point_tree(d.3)).collect::<Vec<_>>());
-        assert!(hybrid.draws().iter().all(|d| !matches!(d.source, DrawSource::Points | DrawSource::Roots)));
+        let cpu_others = others(&cpu).into_iter().filter(|d| !point_tree(d.3) && d.1 != DrawSource::Billboards);
+        assert_eq!(others(&hybrid), cpu_others.collect::<Vec<_>>());
+        assert!(
+            hybrid
+                .draws()
+                .iter()
+                .all(|d| !matches!(d.source, DrawSource::Points | DrawSource::Roots | DrawSource::Billboards))
+        );
+        let billboards = cpu_quads_of(&cpu, DrawSource::Billboards);
+        assert_eq!(gpu_quads_of(&gpu, &hybrid, DrawSource::Billboards), billboards, "{name}: the billboards");
         others_seen.extend(hybrid.draws().iter().map(|d| d.technique));
+        others_seen.extend(billboards.iter().map(|q| q.2));
 
         let (diff, covered) = differing(&a, &b);
         common::keep(&a, &format!("gpu-policy-{name}-cpu"));
@@ -327,23 +337,36 @@ fn octahedral_forest() -> (Arc<Container>, Vec<Vec3>) {
     (container, positions)
 }
 
-/// A frame's octahedral impostor draws as (instance, quads, technique, dither in 1/65535ths).
+/// A frame's octahedral impostor (or billboard) draws as (instance, quads, technique, dither in
+/// 1/65535ths).
 type Quads = BTreeSet<(u32, u32, Technique, [u32; 2])>;
 
 /// The octahedral impostor draws a renderer recorded on the CPU.
 fn cpu_quads(renderer: &Renderer) -> Quads {
+    cpu_quads_of(renderer, DrawSource::Octahedral)
+}
+
+/// The draws of `source` (octahedral impostors or billboards) a renderer recorded on the CPU.
+fn cpu_quads_of(renderer: &Renderer, source: DrawSource) -> Quads {
     renderer
         .draws()
         .iter()
-        .filter(|d| d.source == DrawSource::Octahedral)
+        .filter(|d| d.source == source)
         .map(|d| (d.instance, d.count, d.technique, unorm(d.dither)))
         .collect()
 }
 
 /// The octahedral impostor draws the GPU appended in a renderer's last frame (each tree once).
 fn gpu_quads(gpu: &Gpu, renderer: &Renderer) -> Quads {
+    gpu_quads_of(gpu, renderer, DrawSource::Octahedral)
+}
+
+/// The draws of `source` (octahedral impostors, whose quads start at 0, or billboards) the GPU
+/// appended in a renderer's last frame (each tree once).
+fn gpu_quads_of(gpu: &Gpu, renderer: &Renderer, source: DrawSource) -> Quads {
     let quads = renderer.read_gpu_quads(&gpu.device, &gpu.queue).expect("reads back").expect("the GPU selected");
-    assert!(quads.iter().all(|q| q.first == 0), "{quads:?}");
+    let quads: Vec<_> = quads.into_iter().filter(|q| q.source == source).collect();
+    assert!(source != DrawSource::Octahedral || quads.iter().all(|q| q.first == 0), "{quads:?}");
     let set: Quads = quads.iter().map(|q| (q.instance, q.count, q.technique, unorm(q.dither))).collect();
     assert_eq!(set.len(), quads.len(), "each tree's quads once");
     set
@@ -520,10 +543,114 @@ fn each_model_s_impostors_go_to_its_own_bucket() {
         assert!(stats.gpu_selection, "{name}");
         assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "{name}");
         let quads = hybrid.read_gpu_quads(&gpu.device, &gpu.queue).expect("reads back").expect("the GPU selected");
+        let quads: Vec<_> = quads.into_iter().filter(|q| q.source == DrawSource::Octahedral).collect();
         assert!(!quads.is_empty() && quads.iter().all(|q| q.model == 1 && q.instance % 2 == 1), "{name}: {quads:?}");
         assert_eq!(gpu_quads(&gpu, &hybrid), cpu_quads(&cpu), "{name}: the impostors' draws");
         let (diff, covered) = differing(&a, &b);
         eprintln!("{name}: {} impostor trees, {diff} of {covered} covered pixels differ", quads.len());
         assert!(covered > 500 && diff * 200 <= covered, "{name}: {diff} of {covered} pixels differ");
+    }
+}
+
+/// [`calibrated_demo_without_octahedral`], and the same without its facing billboard (its
+/// crossed billboards only), as a container of 1.11 reads (the policy then has the crossed
+/// billboards where it had the facing one).
+fn billboard_containers() -> [(&'static str, Arc<Container>); 2] {
+    let both = calibrated_demo_without_octahedral();
+    let mut data = treelod_format::ContainerData::from_container(&both);
+    assert!(data.billboards.iter().any(|b| b.kind == treelod_format::billboard_kind::FACING), "a facing billboard");
+    data.billboards.retain(|b| b.kind == treelod_format::billboard_kind::CROSSED);
+    assert!(!data.billboards.is_empty(), "crossed billboards");
+    let bytes = data.to_bytes(treelod_format::Compression::None).expect("encodes");
+    let crossed = Arc::new(Container::from_bytes(&bytes).expect("opens"));
+    [("facing", both), ("crossed", crossed)]
+}
+
+/// The billboard draws the GPU appended in a renderer's last frame (each tree once), each of the
+/// model's facing or crossed range (`ranges`: first and count of each).
+fn gpu_billboards(gpu: &Gpu, renderer: &Renderer, ranges: &[(u32, u32)]) -> Quads {
+    let quads = renderer.read_gpu_quads(&gpu.device, &gpu.queue).expect("reads back").expect("the GPU selected");
+    let quads: Vec<_> = quads.into_iter().filter(|q| q.source == DrawSource::Billboards).collect();
+    assert!(quads.iter().all(|q| ranges.contains(&(q.first, q.count))), "{quads:?} of {ranges:?}");
+    gpu_quads_of(gpu, renderer, DrawSource::Billboards)
+}
+
+/// With billboards among the choices (the policy's target raised until they are the cheapest
+/// that meet it, and at the default target), the hybrid frame draws the billboard trees on the
+/// GPU: its billboard draws are the CPU path's (the same trees, range, technique and dither),
+/// the CPU records none of them, the image is the CPU path's, and the statistics count the quads
+/// as the CPU path does; then along a flight with transitions of 4 frames (facing and crossed
+/// billboards, the point tree and the LoD chain at the default target), every billboard draw
+/// of the CPU path is drawn by the hybrid frame, by the GPU or (a tree fading between its
+/// billboards and the point tree) the CPU, never both.
+#[test]
+fn billboard_trees_are_drawn_on_the_gpu() {
+    let gpu = gpu();
+    for (kind, container) in billboard_containers() {
+        let (representations, _) = treelod_runtime::Representations::from_container(&container);
+        let billboards = representations.billboards.expect("the demo tree has billboards");
+        let ranges = [billboards.facing, billboards.crossed];
+        let technique = if kind == "facing" { Technique::Billboard } else { Technique::Crossed };
+        let positions = positions(&ModelLod::from_container(&container));
+        // (At the default target the demo tree's far trees are crossed billboards in either
+        // container: the second's would repeat the first's.)
+        let targets: &[f32] = if kind == "facing" { &[1.0, Policy::DEFAULT_TARGET] } else { &[1.0] };
+        for &target in targets {
+            let policy = Policy { target, transition: 0, occlusion: false, ..Policy::default() };
+            let settings = Settings { policy: Some(policy), ..Settings::default() };
+            let mut cpu = renderer(&gpu, &container, settings, &positions, false);
+            let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+            for (name, camera) in cameras() {
+                let name = format!("{kind}, target {target}, {name}");
+                let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+                let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+                assert!(stats.gpu_selection, "{name}: {stats:?}");
+                assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "{name}: the same assignment");
+                let expected = cpu_quads_of(&cpu, DrawSource::Billboards);
+                eprintln!("{name}: {:?}, {} billboard trees", cpu_stats.instances, expected.len());
+                if target == 1.0 {
+                    assert!(expected.len() >= 10, "{name}: the trees are drawn with billboards: {expected:?}");
+                    assert!(cpu_stats.instances[technique] as usize >= expected.len(), "{name}: {cpu_stats:?}");
+                }
+                assert_eq!(gpu_billboards(&gpu, &hybrid, &ranges), expected, "{name}: the billboards' draws");
+                assert!(cpu_quads_of(&hybrid, DrawSource::Billboards).is_empty(), "{name}: the CPU records none");
+                let (diff, covered) = differing(&a, &b);
+                common::keep(&a, &format!("gpu-billboards-{kind}-{name}-cpu"));
+                common::keep(&b, &format!("gpu-billboards-{kind}-{name}-hybrid"));
+                eprintln!("{name}: {diff} of {covered} covered pixels differ");
+                assert!(covered > 500, "{name}: the forest is in view");
+                assert!(diff * 200 <= covered, "{name}: {diff} of {covered} pixels differ");
+                assert_eq!(stats.instances[technique], cpu_stats.instances[technique], "{name}: {stats:?}");
+                assert_eq!(stats.by_technique[technique], cpu_stats.by_technique[technique], "{name}: this frame's");
+                let quads = |s: &treelod_render::FrameStats| s.submitted[treelod_render::Primitive::Billboard];
+                assert_eq!(quads(&stats), quads(&cpu_stats), "{name}: quads submitted");
+            }
+        }
+        if kind != "facing" {
+            continue;
+        }
+        let policy = Policy { hysteresis: 0.0, transition: 4, occlusion: false, ..Policy::default() };
+        let settings = Settings { policy: Some(policy), ..Settings::default() };
+        let mut cpu = renderer(&gpu, &container, settings, &positions, false);
+        let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+        let (mut drawn_on_gpu, mut fading_on_gpu) = (0, 0);
+        for frame in 0..16 {
+            let z = 10.0 - 10.0 * frame as f32;
+            let camera = Camera::look_at(vec3(1.0, 2.0, z), vec3(1.0, 2.0, z - 100.0), 0.9, 192, 192);
+            let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
+            let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
+            assert_eq!(stats.transitions, cpu_stats.transitions, "{kind}, frame {frame}");
+            assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "{kind}, frame {frame}");
+            let (on_gpu, kept) =
+                (gpu_billboards(&gpu, &hybrid, &ranges), cpu_quads_of(&hybrid, DrawSource::Billboards));
+            assert!(on_gpu.is_disjoint(&kept), "{kind}, frame {frame}: a tree's billboards drawn twice");
+            drawn_on_gpu += on_gpu.len();
+            fading_on_gpu += on_gpu.iter().filter(|q| q.3 != [0, 65535]).count();
+            assert_eq!(&on_gpu | &kept, cpu_quads_of(&cpu, DrawSource::Billboards), "{kind}, frame {frame}");
+            let (diff, covered) = differing(&a, &b);
+            assert!(diff * 100 <= covered, "{kind}, frame {frame}: {diff} of {covered} pixels differ");
+        }
+        eprintln!("{kind}: {drawn_on_gpu} billboard draws on the GPU along the flight, {fading_on_gpu} fading");
+        assert!(drawn_on_gpu > 0, "{kind}: the flight draws billboard trees on the GPU");
     }
 }

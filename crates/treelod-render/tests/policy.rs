@@ -445,6 +445,10 @@ fn far_trees_drawn_alike_whatever_their_visibility_are_not_measured() {
         let distance = world_height / (share * below * runtime_camera.world_per_pixel());
         vec3(-centre.x, 0.0, eye.z - distance - centre.z)
     }));
+    let unmeasured = positions
+        .iter()
+        .filter(|&&p| projected_height(&lod, Mat4::from_translation(p), &runtime_camera) < VISIBILITY_LEAD * below);
+    assert_eq!(unmeasured.count(), 2, "the trees of 0.4 and 0.2 times the height");
     let settings = Settings { policy: Some(policy), ..Settings::default() };
     // On the CPU's selection and on the GPU's (which lists the trees it draws for the
     // measurement apart, `Renderer::draws` holding only the CPU's).
@@ -475,10 +479,6 @@ fn far_trees_drawn_alike_whatever_their_visibility_are_not_measured() {
                     assert!(f < 0.7, "{case}: hidden, measured {f}");
                 }
             }
-            let unmeasured = positions.iter().filter(|&&p| {
-                projected_height(&lod, Mat4::from_translation(p), &runtime_camera) < VISIBILITY_LEAD * below
-            });
-            assert_eq!(unmeasured.count(), 2, "the trees of 0.4 and 0.2 times the height");
         }
     }
 }
