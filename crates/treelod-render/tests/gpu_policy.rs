@@ -202,6 +202,20 @@ fn a_frame_the_gpu_draws_nothing_of_shows_the_cpu_s_draws() {
 /// Per instance, the (technique, dither) of its point-tree draws.
 type Fades = BTreeMap<u32, BTreeSet<(Technique, [u32; 2])>>;
 
+/// A renderer of the forest on the CPU path and one with GPU selection, both with a policy whose
+/// transitions take 4 frames (no hysteresis, no occlusion measurement), for the flights below.
+fn fading_renderers(gpu: &Gpu, container: &Arc<Container>, positions: &[Vec3]) -> (Renderer, Renderer) {
+    let policy = Policy { hysteresis: 0.0, transition: 4, occlusion: false, ..Policy::default() };
+    let settings = Settings { policy: Some(policy), ..Settings::default() };
+    (renderer(gpu, container, settings, positions, false), renderer(gpu, container, settings, positions, true))
+}
+
+/// The camera of a flight into the forest along -z, `step` units a frame.
+fn flight_camera(frame: usize, step: f32) -> Camera {
+    let z = 10.0 - step * frame as f32;
+    Camera::look_at(vec3(1.0, 2.0, z), vec3(1.0, 2.0, z - 100.0), 0.9, 192, 192)
+}
+
 /// A dither range in 1/65535ths, as the shader holds it.
 fn unorm([lo, hi]: [f32; 2]) -> [u32; 2] {
     [(lo * 65535.0).round() as u32, (hi * 65535.0).round() as u32]
@@ -215,14 +229,10 @@ fn unorm([lo, hi]: [f32; 2]) -> [u32; 2] {
 fn trees_fading_into_and_out_of_the_point_tree_fade_on_the_gpu_as_on_the_cpu() {
     let gpu = gpu();
     let (container, _, positions) = demo_forest();
-    let policy = Policy { hysteresis: 0.0, transition: 4, occlusion: false, ..Policy::default() };
-    let settings = Settings { policy: Some(policy), ..Settings::default() };
-    let mut cpu = renderer(&gpu, &container, settings, &positions, false);
-    let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+    let (mut cpu, mut hybrid) = fading_renderers(&gpu, &container, &positions);
     let (mut fading_in, mut fading_out, mut max_diff) = (0, 0, 0.0f64);
     for frame in 0..16 {
-        let z = 10.0 - 6.0 * frame as f32;
-        let camera = Camera::look_at(vec3(1.0, 2.0, z), vec3(1.0, 2.0, z - 100.0), 0.9, 192, 192);
+        let camera = flight_camera(frame, 6.0);
         let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
         let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
         assert_eq!(stats.transitions, cpu_stats.transitions, "frame {frame}");
@@ -421,14 +431,10 @@ fn octahedral_impostors_are_drawn_on_the_gpu() {
 fn impostor_trees_fade_on_the_gpu_as_on_the_cpu() {
     let gpu = gpu();
     let (container, positions) = octahedral_forest();
-    let policy = Policy { hysteresis: 0.0, transition: 4, occlusion: false, ..Policy::default() };
-    let settings = Settings { policy: Some(policy), ..Settings::default() };
-    let mut cpu = renderer(&gpu, &container, settings, &positions, false);
-    let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+    let (mut cpu, mut hybrid) = fading_renderers(&gpu, &container, &positions);
     let (mut fading_on_gpu, mut on_cpu) = (0, 0);
     for frame in 0..16 {
-        let z = 10.0 - 10.0 * frame as f32;
-        let camera = Camera::look_at(vec3(1.0, 2.0, z), vec3(1.0, 2.0, z - 100.0), 0.9, 192, 192);
+        let camera = flight_camera(frame, 10.0);
         let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
         let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
         assert_eq!(stats.transitions, cpu_stats.transitions, "frame {frame}");
@@ -629,14 +635,10 @@ fn billboard_trees_are_drawn_on_the_gpu() {
         if kind != "facing" {
             continue;
         }
-        let policy = Policy { hysteresis: 0.0, transition: 4, occlusion: false, ..Policy::default() };
-        let settings = Settings { policy: Some(policy), ..Settings::default() };
-        let mut cpu = renderer(&gpu, &container, settings, &positions, false);
-        let mut hybrid = renderer(&gpu, &container, settings, &positions, true);
+        let (mut cpu, mut hybrid) = fading_renderers(&gpu, &container, &positions);
         let (mut drawn_on_gpu, mut fading_on_gpu) = (0, 0);
         for frame in 0..16 {
-            let z = 10.0 - 10.0 * frame as f32;
-            let camera = Camera::look_at(vec3(1.0, 2.0, z), vec3(1.0, 2.0, z - 100.0), 0.9, 192, 192);
+            let camera = flight_camera(frame, 10.0);
             let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
             let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
             assert_eq!(stats.transitions, cpu_stats.transitions, "{kind}, frame {frame}");
