@@ -2,7 +2,8 @@
 // its hull samples face the camera and how many of those the depth buffer shows.
 //
 // One workgroup per tree (a 2D dispatch of rows of 65535), one invocation per sample.
-// `DEPTH_TEXTURE` is replaced by `texture_depth_2d` or `texture_depth_multisampled_2d`.
+// `DEPTH_TEXTURE` is replaced by `texture_depth_2d` or `texture_depth_multisampled_2d`. Preceded by
+// shaders/shared/draw.wgsl (`InstanceTransform`).
 
 struct OcclusionFrame {
     view_proj: mat4x4<f32>,
@@ -13,11 +14,19 @@ struct OcclusionFrame {
     _pad: u32,
 }
 
+// One tree. Rust twin: `Job` in crates/treelod-render/src/occlusion.rs.
 struct OcclusionJob {
-    // World from model.
-    model: mat4x4<f32>,
-    // Hull centre (xyz), model space; how far samples move towards the eye (w), world units.
+    // Into the renderer's instance transforms.
+    instance: u32,
+    // Into `models`.
+    model: u32,
+}
+
+// A model's hull. Rust twin: `ModelGpu`.
+struct OcclusionModel {
+    // Hull centre (xyz) and culling radius (w), model space.
     centre: vec4<f32>,
+    // Its samples.
     first: u32,
     count: u32,
     _pad0: u32,
@@ -30,8 +39,12 @@ struct OcclusionJob {
 // Per job: samples facing the camera, and of those the visible ones.
 @group(0) @binding(3) var<storage, read_write> counts: array<atomic<u32>>;
 @group(0) @binding(4) var depth: DEPTH_TEXTURE;
+@group(0) @binding(5) var<storage, read> transforms: array<InstanceTransform>;
+@group(0) @binding(6) var<storage, read> models: array<OcclusionModel>;
 // The depth buffer runs from 1 near to 0 far (settings.rs `DepthConvention::Reverse`).
 override reverse_z: bool = false;
+// How far samples move towards the eye, in culling radii (occlusion.rs `SAMPLE_MARGIN`).
+override sample_margin: f32 = 0.25;
 
 @compute @workgroup_size(64)
 fn measure(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) i: u32) {
@@ -40,12 +53,14 @@ fn measure(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_in
         return;
     }
     let job = jobs[j];
-    if i >= job.count {
+    let model = models[job.model];
+    if i >= model.count {
         return;
     }
-    let s = samples[job.first + i];
-    let world = (job.model * vec4<f32>(s.xyz, 1.0)).xyz;
-    let centre = (job.model * vec4<f32>(job.centre.xyz, 1.0)).xyz;
+    let transform = transforms[job.instance];
+    let s = samples[model.first + i];
+    let world = (transform.model * vec4<f32>(s.xyz, 1.0)).xyz;
+    let centre = (transform.model * vec4<f32>(model.centre.xyz, 1.0)).xyz;
     let to_eye = frame.eye.xyz - world;
     // The far side of the hull is hidden by the tree itself: it says nothing about occluders.
     if dot(world - centre, to_eye) <= 0.0 {
@@ -53,7 +68,7 @@ fn measure(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_in
     }
     atomicAdd(&counts[2u * j], 1u);
     // Off the leaf the sample sits on, towards the eye.
-    let p = world + normalize(to_eye) * job.centre.w;
+    let p = world + normalize(to_eye) * (sample_margin * (model.centre.w * transform.scale));
     let clip = frame.view_proj * vec4<f32>(p, 1.0);
     var visible = true;
     if clip.w > 0.0 {

@@ -262,12 +262,6 @@ impl InstanceDrawGpu {
     /// The first bit in `technique` of the quads an instance is drawn with (1 + [`QuadKind::index`]).
     pub const QUAD_SHIFT: u32 = 30;
 
-    /// Whether the instance is drawn with quads ([`Self::quads`]) rather than through the point
-    /// tree's selection.
-    pub fn draws_quads(self) -> bool {
-        self.technique >> Self::QUAD_SHIFT != 0
-    }
-
     /// Drawn as its model's quads of `kind` on the dither share `fade` packs, tinted and counted
     /// as `technique`.
     pub fn quads(kind: QuadKind, fade: u32, technique: Technique) -> Self {

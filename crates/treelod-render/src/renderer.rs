@@ -1226,17 +1226,18 @@ impl Renderer {
         stats.leaving += gpu_counts.leaving;
         if self.policy_occlusion() {
             // Every tree drawn whose visible fraction matters to its choice is measured
-            // (`set_occlusion_jobs`): of the CPU's recorded ones, the impostor trees (culled
-            // here), and those the GPU selects through the point tree that lie in the view (the
-            // GPU culls them further; an extra job costs only time). The GPU's are looked for
-            // among the trees the policy lists as needing it (few: the near ones), not among
-            // every instance.
-            let frustum = treelod_runtime::Frustum::from_view_proj(runtime_camera.view_proj);
-            let gpu_drawn = self.policy.state.needing_visibility().filter(|&index| {
-                draws
-                    .get(index as usize)
-                    .is_some_and(|d| *d != InstanceDrawGpu::SKIP && (d.draws_quads() || self.in_view(&frustum, index)))
-            });
+            // (`set_occlusion_jobs`): of the CPU's recorded ones, and of those the GPU draws (the
+            // point tree's, and the impostors' and billboards' handed over), looked for among the
+            // trees the policy lists as needing it, not among every instance. The policy lists
+            // only trees its choice found in the camera's view, by the culling sphere and frustum
+            // a test here would use, so none is tested again: on the willow's 10^6 trees that
+            // test took about half of the frame's `record` (`docs/cli.md`). (The GPU culls them
+            // further; an extra job costs only time.)
+            let gpu_drawn = self
+                .policy
+                .state
+                .needing_visibility()
+                .filter(|&index| draws.get(index as usize).is_some_and(|d| *d != InstanceDrawGpu::SKIP));
             let drawn: Vec<u32> = main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).collect();
             self.set_occlusion_jobs(drawn.into_iter());
         }
@@ -1248,15 +1249,6 @@ impl Renderer {
         laps.lap(&mut self.phases.record);
         self.upload_frame(device, queue, camera, &mut laps);
         stats
-    }
-
-    /// Whether instance `index`'s culling sphere meets `frustum`.
-    fn in_view(&self, frustum: &treelod_runtime::Frustum, index: u32) -> bool {
-        let Some(instance) = self.instances.get(index as usize) else { return false };
-        let Some(lod) = self.lods.get(instance.model as usize) else { return false };
-        let (centre, radius) = lod.cull_sphere();
-        let transform = instance.transform;
-        frustum.intersects_sphere(transform.transform_point3(centre), radius * max_axis_scale(transform))
     }
 
     /// Selects one view (its lists cleared first): each technique's runtime selection over the
@@ -1435,7 +1427,16 @@ impl Renderer {
     ) {
         let on = self.measures_occlusion();
         let Some((view_proj, eye, forward, size)) = self.last_camera.filter(|_| on) else { return };
-        self.occlusion.record(device, encoder, depth_view, size, view_proj, eye, forward, &self.occlusion_jobs);
+        let instances = (&self.instances[..], &self.transform_buffer);
+        self.occlusion.record(
+            device,
+            encoder,
+            depth_view,
+            size,
+            (view_proj, eye, forward),
+            instances,
+            &self.occlusion_jobs,
+        );
     }
 
     /// Whether this frame's trees are measured for occlusion ([`Self::measure_occlusion`]):
@@ -1471,12 +1472,9 @@ impl Renderer {
 
     /// The occlusion test of instance `index` with its model's hull samples, if it has any.
     fn occlusion_job(&self, index: u32) -> Option<Job> {
-        let instance = self.instances.get(index as usize)?;
-        let m = instance.model as usize;
-        let (first, count) = self.models.get(m)?.samples;
-        let (centre, radius) = self.lods.get(m)?.cull_sphere();
-        let radius = radius * max_axis_scale(instance.transform);
-        (count > 0).then_some(Job { instance: index, transform: instance.transform, centre, radius, first, count })
+        let model = self.instances.get(index as usize)?.model;
+        let (_, count) = self.models.get(model as usize)?.samples;
+        (count > 0).then_some(Job { instance: index, model })
     }
 
     /// The visible fraction of each instance's hull samples last measured by

@@ -468,7 +468,8 @@ impl Renderer {
                 treelod_runtime::hull_samples(points.iter().step_by(stride).map(|p| p.position))
             }
         };
-        let samples = (self.occlusion.add_samples(&samples), u32::try_from(samples.len()).unwrap_or(0));
+        let (centre, radius) = lod.cull_sphere();
+        let samples = (self.occlusion.add_model(&samples, centre, radius), u32::try_from(samples.len()).unwrap_or(0));
         self.models.push(Model {
             samples,
             container,
