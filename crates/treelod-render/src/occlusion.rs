@@ -229,26 +229,19 @@ impl Occlusion {
             return;
         }
         let jobs = &jobs[..jobs.len().min(MAX_JOBS)];
-        let samples = self.sample_buffer.get_or_insert_with(|| {
+        let init = |label, contents: &[u8], usage| {
             wgpu::util::DeviceExt::create_buffer_init(
                 device,
-                &wgpu::util::BufferInitDescriptor {
-                    label: Some("treelod occlusion samples"),
-                    contents: bytemuck::cast_slice(&self.samples),
-                    usage: wgpu::BufferUsages::STORAGE,
-                },
+                &wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage },
             )
-        });
-        let models = self.model_buffer.get_or_insert_with(|| {
-            wgpu::util::DeviceExt::create_buffer_init(
-                device,
-                &wgpu::util::BufferInitDescriptor {
-                    label: Some("treelod occlusion models"),
-                    contents: bytemuck::cast_slice(&self.models),
-                    usage: wgpu::BufferUsages::STORAGE,
-                },
-            )
-        });
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        let samples = self
+            .sample_buffer
+            .get_or_insert_with(|| init("treelod occlusion samples", bytemuck::cast_slice(&self.samples), storage));
+        let models = self
+            .model_buffer
+            .get_or_insert_with(|| init("treelod occlusion models", bytemuck::cast_slice(&self.models), storage));
         let count = u32::try_from(jobs.len()).unwrap_or(u32::MAX);
         #[expect(clippy::cast_precision_loss, reason = "viewport sizes are far below 2^24")]
         let frame = FrameGpu {
@@ -258,14 +251,8 @@ impl Occlusion {
             jobs: count,
             _pad: 0,
         };
-        let init = |label, contents: &[u8], usage| {
-            wgpu::util::DeviceExt::create_buffer_init(
-                device,
-                &wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage },
-            )
-        };
         let frame_buffer = init("treelod occlusion frame", bytemuck::bytes_of(&frame), wgpu::BufferUsages::UNIFORM);
-        let job_buffer = init("treelod occlusion jobs", bytemuck::cast_slice(jobs), wgpu::BufferUsages::STORAGE);
+        let job_buffer = init("treelod occlusion jobs", bytemuck::cast_slice(jobs), storage);
         let counts_size = u64::from(count) * 8;
         // A new buffer reads as zeros (wgpu clears it): nothing to upload.
         let counts = device.create_buffer(&wgpu::BufferDescriptor {
