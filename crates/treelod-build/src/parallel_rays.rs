@@ -127,7 +127,7 @@
 //!   above what the build's stage takes.)
 //!
 //! A cell's gathered list leaves out the triangles that reach no farther along the direction
-//! than the nearest origin of its rays: each ray skips those anyway ([`transmitted`] tests only
+//! than the nearest origin of its rays: each ray skips those anyway (`transmitted` tests only
 //! what reaches past its own origin), so the hits and their order are the same and so is the
 //! output (every shared model's default container compared byte for byte), without their
 //! planes or their place in the sort. Default builds of the maple, 5 alternating runs each (2
