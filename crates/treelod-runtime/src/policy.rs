@@ -1201,9 +1201,8 @@ pub const VISIBILITY_CLASSES: usize = 4;
 pub fn visibility_class(visible: f32) -> usize {
     let v = if visible.is_finite() { visible } else { 1.0 };
     // Class k stands for v = 2^-k; its lower bound is 2^-(k + 1/2).
-    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-    let class = (0..VISIBILITY_CLASSES - 1).find(|&k| v >= (-(k as f32) - 0.5).exp2());
-    class.unwrap_or(VISIBILITY_CLASSES - 1)
+    let lower = &class_bounds().lower;
+    (0..VISIBILITY_CLASSES - 1).find(|&k| v >= lower[k]).unwrap_or(VISIBILITY_CLASSES - 1)
 }
 
 /// The visibility class of a tree of class `previous` last frame whose visible fraction is now
@@ -1214,14 +1213,37 @@ pub fn visibility_class(visible: f32) -> usize {
 pub fn visibility_class_after(previous: usize, visible: f32) -> usize {
     let now = visibility_class(visible);
     let v = if visible.is_finite() { visible } else { 1.0 };
+    let bounds = class_bounds();
     #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-    let k = previous as f32;
+    let bound = |table: &[f32; VISIBILITY_CLASSES], offset: f32| {
+        table.get(previous).copied().unwrap_or_else(|| (-(previous as f32) + offset).exp2())
+    };
     let far_enough = match now.cmp(&previous) {
-        std::cmp::Ordering::Greater => v < (-k - 0.75).exp2(),
-        std::cmp::Ordering::Less => v >= (-k + 0.75).exp2(),
+        std::cmp::Ordering::Greater => v < bound(&bounds.down, -0.75),
+        std::cmp::Ordering::Less => v >= bound(&bounds.up, 0.75),
         std::cmp::Ordering::Equal => true,
     };
     if far_enough { now } else { previous }
+}
+
+/// The bounds [`visibility_class`] and [`visibility_class_after`] compare a visible fraction
+/// with, per class `k`: `2^-(k + 1/2)`, `2^-(k + 3/4)` and `2^-(k − 3/4)`. Computed once with
+/// [`f32::exp2`] as the rules state them (the same bits), where the chooser took three or more
+/// `exp2` a tree every frame.
+struct ClassBounds {
+    lower: [f32; VISIBILITY_CLASSES],
+    down: [f32; VISIBILITY_CLASSES],
+    up: [f32; VISIBILITY_CLASSES],
+}
+
+fn class_bounds() -> &'static ClassBounds {
+    static BOUNDS: std::sync::OnceLock<ClassBounds> = std::sync::OnceLock::new();
+    BOUNDS.get_or_init(|| {
+        // `-k + offset` is `-k - |offset|` for a negative offset, to the bit.
+        #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+        let at = |offset: f32| std::array::from_fn(|k| (-(k as f32) + offset).exp2());
+        ClassBounds { lower: at(-0.5), down: at(-0.75), up: at(0.75) }
+    })
 }
 
 impl Choices {
@@ -1413,7 +1435,20 @@ impl Choices {
         in_view: f32,
         previous: Option<Technique>,
     ) -> Technique {
-        let k = visibility_class(visible).min(self.visibility - 1);
+        self.choose_in_class(height, elevation, visibility_class(visible), in_view, previous)
+    }
+
+    /// [`Self::choose_framed`] for a tree of visibility class `class` ([`visibility_class`]),
+    /// which the chooser knows: a fraction of exactly `2^-class` reads as that class.
+    fn choose_in_class(
+        &self,
+        height: f32,
+        elevation: usize,
+        class: usize,
+        in_view: f32,
+        previous: Option<Technique>,
+    ) -> Technique {
+        let k = class.min(self.visibility - 1);
         let table = match self.below.get(k) {
             Some(below) if elevation == BELOW_HORIZON => below,
             _ => {
@@ -2007,9 +2042,7 @@ pub fn choose_instances_in_chunks(
                                 Some(f) if choices.above_range(height) => in_view_share(lod, instance.transform, f),
                                 _ => 1.0,
                             };
-                            #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-                            let visible = (-(seen as f32)).exp2();
-                            choices.choose_framed(height, elevation_class, visible, in_view, *previous)
+                            choices.choose_in_class(height, elevation_class, seen, in_view, *previous)
                         }
                     };
                     *transition = advance(*previous, chosen, *transition, frames);
@@ -3047,6 +3080,21 @@ mod tests {
         assert_eq!([0.32, 0.28, 0.8, 0.85, 1.0].map(|v| visibility_class_after(1, v)), [1, 2, 1, 0, 0]);
         assert_eq!(visibility_class_after(3, 0.2), 3, "0.2 is class 2, not a quarter past the bound 0.177");
         assert_eq!(visibility_class_after(0, 0.0), 3);
+        // The bounds are looked up, the same bits as the rules' powers of two; a fraction of
+        // exactly 2^-k reads as class k (the chooser passes its class on, `choose_in_class`).
+        let bounds = class_bounds();
+        for k in 0..VISIBILITY_CLASSES {
+            let x = k as f32;
+            assert_eq!(bounds.lower[k].to_bits(), (-x - 0.5).exp2().to_bits());
+            assert_eq!(bounds.down[k].to_bits(), (-x - 0.75).exp2().to_bits());
+            assert_eq!(bounds.up[k].to_bits(), (-x + 0.75).exp2().to_bits());
+        }
+        for k in 0..VISIBILITY_CLASSES + 3 {
+            assert_eq!(visibility_class((-(k as f32)).exp2()), k.min(VISIBILITY_CLASSES - 1));
+        }
+        // Past the table (a class no state holds) the bounds are computed as before.
+        assert_eq!(visibility_class_after(5, 0.0), 5);
+        assert_eq!(visibility_class_after(5, 1.0), 0);
         let c = table();
         let policy = Policy { target: 0.005, hysteresis: 0.0, budget: None, transition: 0, occlusion: true };
         let choices = Choices::among(&c, &policy, all);
