@@ -134,6 +134,11 @@
 //! cores, `--timings`): the stage 3.80–4.03 s → 3.69–3.80 s (medians 3.84 → 3.73), the build
 //! 6.23–6.50 → 6.08–6.24 s; the willow's within the runs' noise (1.15–1.23 → 1.12–1.27 s).
 //!
+//! Decoding the vertices' normals once for all the directions (instead of in each ray's setup,
+//! twice a direction) was measured and not taken: the maple's stage took as long within the
+//! runs' noise (3 alternating default builds: 3.68–4.65 s against 4.01–4.38 s) and the build
+//! peaked 7 MB higher (127.7 MB, over four times the source).
+//!
 //! Where foliage is dense most leaf cards are buried, and every ray they cast is stopped. With
 //! 16 directions or more, the even ones are traced first (a Fibonacci lattice's every other
 //! point is spread evenly too); a small flat piece of [`crate::ambient`] (a leaf card's corners)

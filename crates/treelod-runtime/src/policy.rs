@@ -1536,6 +1536,15 @@ const fn prunes(technique: Technique) -> bool {
 /// the tree's distance (the renderer's occlusion test), in which time the tree grows by at most
 /// a third on screen: a tree that comes nearer without a jump has been measured at least twice
 /// before its visible fraction can change its choice.
+///
+/// Measured and not taken: a height per model under which no visibility class's tables choose
+/// differently from the fully visible one's in any elevation class (what
+/// [`Choices::uniform_below`] bounds across elevations, taken across visibility classes), to
+/// measure fewer trees of models whose elevation classes choose differently for their smallest
+/// trees. On the shared weeping willow and orchid (built with every representation, the models
+/// without a [`Choices::uniform_below`]) the tables differ between visibility classes from their
+/// smallest step (a hidden far willow takes billboards where a visible one takes the point
+/// tree), so it measured no tree less.
 pub const VISIBILITY_LEAD: f32 = 0.5;
 
 /// The projected height in pixels of a model's block drawn by `instance` (its block bounds'
