@@ -137,7 +137,7 @@
 //! Decoding the vertices' normals once for all the directions (instead of in each ray's setup,
 //! twice a direction) was measured and not taken: the maple's stage took as long within the
 //! runs' noise (3 alternating default builds: 3.68–4.65 s against 4.01–4.38 s) and the build
-//! peaked 7 MB higher (127.7 MB, over four times the source).
+//! peaked 7 MB higher (127.3–127.8 MB against 119.9–120.6, over four times the source's 31.6).
 //!
 //! Where foliage is dense most leaf cards are buried, and every ray they cast is stopped. With
 //! 16 directions or more, the even ones are traced first (a Fibonacci lattice's every other
