@@ -199,15 +199,20 @@ impl Occlusion {
 
     /// Adds the next model (models are added in the renderer's order, a job names its model by
     /// that index): its hull samples, and the centre and radius of its culling sphere, all model
-    /// space. Returns where its samples start.
-    pub fn add_model(&mut self, samples: &[Vec3], centre: Vec3, radius: f32) -> u32 {
+    /// space.
+    pub fn add_model(&mut self, samples: &[Vec3], centre: Vec3, radius: f32) {
         let first = u32::try_from(self.samples.len()).unwrap_or(u32::MAX);
         let count = u32::try_from(samples.len()).unwrap_or(u32::MAX);
         self.samples.extend(samples.iter().map(|s| s.extend(1.0).to_array()));
         self.models.push(ModelGpu { centre: centre.extend(radius).to_array(), first, count, _pad: [0; 2] });
         self.sample_buffer = None;
         self.model_buffer = None;
-        first
+    }
+
+    /// The hull samples of model `model` (an index of [`Self::add_model`]'s); 0 for an unknown
+    /// model. A tree of a model without samples is not measured.
+    pub fn sample_count(&self, model: u32) -> u32 {
+        self.models.get(model as usize).map_or(0, |m| m.count)
     }
 
     /// Records the measurement of `jobs` against `depth` (drawn with `view_proj` from `eye`) into

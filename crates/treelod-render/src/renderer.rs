@@ -1473,8 +1473,7 @@ impl Renderer {
     /// The occlusion test of instance `index` with its model's hull samples, if it has any.
     fn occlusion_job(&self, index: u32) -> Option<Job> {
         let model = self.instances.get(index as usize)?.model;
-        let (_, count) = self.models.get(model as usize)?.samples;
-        (count > 0).then_some(Job { instance: index, model })
+        (self.occlusion.sample_count(model) > 0).then_some(Job { instance: index, model })
     }
 
     /// The visible fraction of each instance's hull samples last measured by

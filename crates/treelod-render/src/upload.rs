@@ -272,8 +272,6 @@ pub(crate) struct Model {
     pub(crate) cell_roots: Vec<(u32, u32)>,
     /// Per container cell: its index in [`ModelLod::cells`], `u32::MAX` if empty.
     pub(crate) cell_lod: Vec<u32>,
-    /// The hull samples of the occlusion test: first and count in the sample buffer.
-    pub(crate) samples: (u32, u32),
 }
 
 impl Renderer {
@@ -469,9 +467,8 @@ impl Renderer {
             }
         };
         let (centre, radius) = lod.cull_sphere();
-        let samples = (self.occlusion.add_model(&samples, centre, radius), u32::try_from(samples.len()).unwrap_or(0));
+        self.occlusion.add_model(&samples, centre, radius);
         self.models.push(Model {
-            samples,
             container,
             bind_group,
             static_bytes: bytes,

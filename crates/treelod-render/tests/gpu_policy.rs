@@ -12,7 +12,7 @@ use std::sync::Arc;
 use common::{BACKGROUND, assert_same_selection, calibrated_demo_without_octahedral, differing};
 use glam::{Mat4, Vec3, vec3};
 use treelod_format::Container;
-use treelod_render::offscreen::{Gpu, render_image};
+use treelod_render::offscreen::{Gpu, Image, render_image};
 use treelod_render::{Camera, DrawSource, GpuDraw, Instance, Policy, Renderer, Settings, Technique};
 use treelod_runtime::{DrawRange, ModelLod};
 
@@ -217,6 +217,34 @@ fn flight_camera(frame: usize, step: f32) -> Camera {
     Camera::look_at(vec3(1.0, 2.0, z), vec3(1.0, 2.0, z - 100.0), 0.9, 192, 192)
 }
 
+/// Frame `frame` of a flight (`step` units a frame) drawn by both renderers: the same
+/// transitions and techniques per tree on both paths (`label` names the case in failures). The
+/// images, CPU path first.
+fn flight_frame(
+    gpu: &Gpu,
+    (cpu, hybrid): (&mut Renderer, &mut Renderer),
+    frame: usize,
+    step: f32,
+    label: &str,
+) -> (Image, Image) {
+    let camera = flight_camera(frame, step);
+    let (a, cpu_stats) = render_image(gpu, cpu, &camera, BACKGROUND).expect("renders");
+    let (b, stats) = render_image(gpu, hybrid, &camera, BACKGROUND).expect("renders");
+    assert_eq!(stats.transitions, cpu_stats.transitions, "{label}frame {frame}");
+    assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "{label}frame {frame}");
+    (a, b)
+}
+
+/// A flight frame's quad draws of one kind: each drawn by the GPU (`on_gpu`) or left to the CPU
+/// (`kept`), never both, together the CPU path's (`expected`), and the two paths' images (CPU
+/// first) within 1 % of their covered pixels of each other.
+fn assert_quads_split(on_gpu: &Quads, kept: &Quads, expected: &Quads, (a, b): (&Image, &Image), label: &str) {
+    assert!(on_gpu.is_disjoint(kept), "{label}: a tree's quads drawn twice");
+    assert_eq!(&(on_gpu | kept), expected, "{label}: the quads' draws");
+    let (diff, covered) = differing(a, b);
+    assert!(diff * 100 <= covered, "{label}: {diff} of {covered} pixels differ");
+}
+
 /// A dither range in 1/65535ths, as the shader holds it.
 fn unorm([lo, hi]: [f32; 2]) -> [u32; 2] {
     [(lo * 65535.0).round() as u32, (hi * 65535.0).round() as u32]
@@ -233,11 +261,7 @@ fn trees_fading_into_and_out_of_the_point_tree_fade_on_the_gpu_as_on_the_cpu() {
     let (mut cpu, mut hybrid) = fading_renderers(&gpu, &container, &positions, Policy::DEFAULT_TARGET);
     let (mut fading_in, mut fading_out, mut max_diff) = (0, 0, 0.0f64);
     for frame in 0..16 {
-        let camera = flight_camera(frame, 6.0);
-        let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
-        let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
-        assert_eq!(stats.transitions, cpu_stats.transitions, "frame {frame}");
-        assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "frame {frame}");
+        let (a, b) = flight_frame(&gpu, (&mut cpu, &mut hybrid), frame, 6.0, "");
 
         let mut expected = Fades::new();
         for d in cpu.draws() {
@@ -435,18 +459,11 @@ fn impostor_trees_fade_on_the_gpu_as_on_the_cpu() {
     let (mut cpu, mut hybrid) = fading_renderers(&gpu, &container, &positions, Policy::DEFAULT_TARGET);
     let (mut fading_on_gpu, mut on_cpu) = (0, 0);
     for frame in 0..16 {
-        let camera = flight_camera(frame, 10.0);
-        let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
-        let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
-        assert_eq!(stats.transitions, cpu_stats.transitions, "frame {frame}");
-        assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "frame {frame}");
+        let (a, b) = flight_frame(&gpu, (&mut cpu, &mut hybrid), frame, 10.0, "");
         let (on_gpu, kept) = (gpu_quads(&gpu, &hybrid), cpu_quads(&hybrid));
-        assert!(on_gpu.is_disjoint(&kept), "frame {frame}: a tree's impostor drawn twice");
+        assert_quads_split(&on_gpu, &kept, &cpu_quads(&cpu), (&a, &b), &format!("frame {frame}"));
         fading_on_gpu += on_gpu.iter().filter(|q| q.3 != [0, 65535]).count();
         on_cpu += kept.len();
-        assert_eq!(&on_gpu | &kept, cpu_quads(&cpu), "frame {frame}: the impostors' draws");
-        let (diff, covered) = differing(&a, &b);
-        assert!(diff * 100 <= covered, "frame {frame}: {diff} of {covered} pixels differ");
     }
     eprintln!("{fading_on_gpu} impostor draws fading on the GPU, {on_cpu} left to the CPU");
     assert!(fading_on_gpu > 0, "the flight has impostor trees in a transition");
@@ -654,19 +671,13 @@ fn billboard_trees_are_drawn_on_the_gpu() {
         let (mut cpu, mut hybrid) = fading_renderers(&gpu, &container, &positions, target);
         let (mut drawn_on_gpu, mut fading_on_gpu) = (0, 0);
         for frame in 0..16 {
-            let camera = flight_camera(frame, 10.0);
-            let (a, cpu_stats) = render_image(&gpu, &mut cpu, &camera, BACKGROUND).expect("renders");
-            let (b, stats) = render_image(&gpu, &mut hybrid, &camera, BACKGROUND).expect("renders");
-            assert_eq!(stats.transitions, cpu_stats.transitions, "{kind}, frame {frame}");
-            assert_eq!(hybrid.instance_techniques(), cpu.instance_techniques(), "{kind}, frame {frame}");
+            let (a, b) = flight_frame(&gpu, (&mut cpu, &mut hybrid), frame, 10.0, &format!("{kind}, "));
             let (on_gpu, kept) =
                 (gpu_billboards(&gpu, &hybrid, &ranges), cpu_quads_of(&hybrid, DrawSource::Billboards));
-            assert!(on_gpu.is_disjoint(&kept), "{kind}, frame {frame}: a tree's billboards drawn twice");
+            let expected = cpu_quads_of(&cpu, DrawSource::Billboards);
+            assert_quads_split(&on_gpu, &kept, &expected, (&a, &b), &format!("{kind}, frame {frame}"));
             drawn_on_gpu += on_gpu.len();
             fading_on_gpu += on_gpu.iter().filter(|q| q.3 != [0, 65535]).count();
-            assert_eq!(&on_gpu | &kept, cpu_quads_of(&cpu, DrawSource::Billboards), "{kind}, frame {frame}");
-            let (diff, covered) = differing(&a, &b);
-            assert!(diff * 100 <= covered, "{kind}, frame {frame}: {diff} of {covered} pixels differ");
         }
         eprintln!("{kind}: {drawn_on_gpu} billboard draws on the GPU along the flight, {fading_on_gpu} fading");
         assert!(drawn_on_gpu > 0, "{kind}: the flight draws billboard trees on the GPU");
