@@ -23,7 +23,7 @@ pub(crate) struct PolicyModels {
     pub(crate) made_for: Option<Policy>,
     /// Per instance: last frame's choice (hysteresis).
     pub(crate) state: PolicyState,
-    /// Scratch: this frame's choice per instance (`None`: outside every view).
+    /// Scratch: this frame's choice per instance (`None`: outside the view).
     pub(crate) chosen: Vec<Option<Technique>>,
     /// The instances' chunks' spheres (made by `Renderer::set_instances`): whole chunks out of
     /// every view are culled without reading their instances.
@@ -89,7 +89,9 @@ impl Renderer {
     ) {
         match casters {
             Casters::Coarser => {
-                self.assign_view(&[camera, light], Some(k), out);
+                // The light's view first: it alone culls (a caster outside the cascade's frustum
+                // casts nothing into it), the camera's bounds the detail.
+                self.assign_view(&[light, camera], Some(k), out);
             }
             Casters::LightView => {
                 self.assign_view(&[light], Some(k), out);
@@ -102,8 +104,9 @@ impl Renderer {
     /// Fills `out` with the trees per technique for one view: with a policy, each at the smallest
     /// of its projected heights for `cameras`, with the hysteresis of the camera's view
     /// (`cascade` `None`) or of shadow cascade `cascade`; without, every tree with
-    /// [`Settings::technique`]. Whether the policy chose: then the trees outside every view of
-    /// `cameras` are left out (`TechniqueSettings::culled`).
+    /// [`Settings::technique`]. Whether the policy chose: then the trees outside the view of
+    /// `cameras[0]` (the view drawn: the camera's, or the cascade's light) are left out
+    /// (`TechniqueSettings::culled`).
     fn assign_view(
         &mut self,
         cameras: &[treelod_runtime::Camera],
@@ -155,7 +158,7 @@ impl Renderer {
         } else {
             choose(state);
         }
-        // Trees outside every view are not chosen, nor listed.
+        // Trees outside the view are not chosen, nor listed.
         out.assign_chosen(&self.instances, &self.representations, &tables.chosen);
         true
     }
