@@ -551,6 +551,18 @@ impl SptLod {
     /// The least distance of a cell's anchor from the eye, world units: the same number as
     /// `transform.transform_point3(anchor).distance(camera.position)` of the nearest anchor (∞
     /// without cells).
+    ///
+    /// Every anchor is measured. Skipping those out of reach was measured and not taken: the
+    /// anchors in chunks of [`LANES`] along a Morton curve, each chunk bounded (by its box seen
+    /// along the direction to it, or by a sphere compared in squared distances), the chunk of
+    /// the nearest bound scanned first and then only the chunks that could hold a nearer anchor
+    /// (the same number to the bit, tested against the full scan on random anchors, transforms
+    /// and eyes). From afar a 6 × 4 × 6 grid's tree scanned a quarter to a half of its chunks,
+    /// but a chunk's bound costs about as much as scanning its eight anchors four lanes at a
+    /// time: the orchid's 10^6 trees with every representation (`bench --gpu-selection
+    /// --technique policy --no-render --frames 12`, whose impostor trees' lines measure it per
+    /// tree) selected in 148–168 ms with boxes and 106–112 ms with spheres, against 96–117 ms
+    /// scanning every anchor (alternating runs).
     fn nearest_anchor(&self, transform: Mat4, camera: &Camera) -> f32 {
         // `transform.transform_point3(anchor) - camera.position` and its `length_squared`, `LANES`
         // anchors at a time, each product and sum in glam's order (`w + (z·a_z + (y·a_y + x·a_x))`,
