@@ -66,7 +66,8 @@ pub struct Shadows {
 pub enum Casters {
     /// At the smaller of the tree's heights on screen and in the cascade's selection pixels
     /// ([`Shadows::lod_texels`] texels): a tree casts no more detail than the screen shows or
-    /// the map resolves.
+    /// the map resolves. As with every choice, a cascade chooses only the trees in its own
+    /// frustum: a tree the camera sees outside it casts nothing into that cascade.
     #[default]
     Coarser,
     /// From the light's view alone, at the tree's height in the cascade's selection pixels: a
