@@ -1081,7 +1081,9 @@ impl Renderer {
     ///   them in a transition, whose entry the point tree left free, are
     ///   [`InstanceDrawGpu::quads`] (of their [`QuadKind`]) on the share [`Self::drawn_by`] gives
     ///   them, and the CPU records none of them; a tree fading between its quads and the point
-    ///   tree keeps its quads on the CPU.
+    ///   tree keeps its quads on the CPU. Those outside a transition are not selected on the CPU
+    ///   at all (`hand_quads_over`: the chooser culled them, and their quads are their model's);
+    ///   those in one are selected with the other techniques and handed over after.
     /// - Statistics: the CPU's counts of this frame's other techniques and of the quad trees it
     ///   hands over (their quads, ranges and draw commands: the GPU draws each of them)
     ///   plus the GPU's of the point tree read back from an earlier frame
@@ -1103,8 +1105,29 @@ impl Renderer {
         let technique_index = |t: Technique| u32::try_from(t.index()).unwrap_or(0);
 
         let mut main = std::mem::take(&mut self.main);
-        let assignment = std::mem::take(&mut self.assignment);
+        let mut assignment = std::mem::take(&mut self.assignment);
+        // The octahedral impostors' and the billboards' trees outside a transition are the GPU's
+        // outright (`hand_quads_over`), not selected on the CPU first; the others are selected as
+        // the rest are, and handed over below.
+        let mut quad_trees = std::mem::take(&mut self.gpu_quad_trees);
+        quad_trees.clear();
+        let mut quads_per_model = std::mem::take(&mut self.gpu_quads_per_model);
+        quads_per_model.clear();
+        quads_per_model.resize(self.models.len(), [0u32; 2]);
+        let (mut quads_by_technique, mut quads_leaving) = (PerTechnique::<u64>::default(), 0u64);
+        let whole = self.hand_quads_over(&mut assignment, &mut draws, &mut quad_trees, &mut quads_per_model);
         self.select_techniques_of(&mut main, runtime_camera, lod_settings, true, &assignment);
+        for (technique, list) in whole {
+            let selected = std::mem::replace(&mut assignment[technique], list);
+            let handed = assignment[technique].len() - selected.len();
+            *main.draws.visible.get_mut(technique) += u32::try_from(handed).unwrap_or(u32::MAX);
+        }
+        for &i in &quad_trees {
+            let Some(instance) = self.instances.get(i as usize) else { continue };
+            let Some(representations) = self.representations.get(instance.model as usize) else { continue };
+            let technique = self.technique_of(i);
+            quads_by_technique[technique] += u64::from(quad_range(representations, quad_kind(technique)).1);
+        }
         point_tree_list(&assignment, &main, &mut self.spt_list);
         self.assignment = assignment;
         for &i in &self.spt_list {
@@ -1130,16 +1153,11 @@ impl Renderer {
             }
         }
         self.leaving_assignment = leaving_assignment;
-        // The octahedral impostors' and the billboards' trees are the GPU's too where the point
-        // tree left their slot free (all but a tree fading between the two): it appends their
-        // quads as the CPU path records them, on the same share of the dither. The CPU culled
-        // them and knows their quads, so it counts them in this frame's statistics itself.
-        let mut quad_trees = std::mem::take(&mut self.gpu_quad_trees);
-        quad_trees.clear();
-        let (mut quads_by_technique, mut quads_leaving) = (PerTechnique::<u64>::default(), 0u64);
-        let mut quads_per_model = std::mem::take(&mut self.gpu_quads_per_model);
-        quads_per_model.clear();
-        quads_per_model.resize(self.models.len(), [0u32; 2]);
+        // The octahedral impostors' and the billboards' trees the CPU selected (those in a
+        // transition) are the GPU's too where the point tree left their slot free (all but a tree
+        // fading between the two): it appends their quads as the CPU path records them, on the
+        // same share of the dither. The CPU culled them and knows their quads, so it counts them
+        // in this frame's statistics itself.
         for (view, leaves) in [(&mut main, false), (&mut leaving, true)] {
             if leaves && !fading {
                 continue;
@@ -1249,6 +1267,60 @@ impl Renderer {
         laps.lap(&mut self.phases.record);
         self.upload_frame(device, queue, camera, &mut laps);
         stats
+    }
+
+    /// Hands the trees of `assignment` drawn with their octahedral impostor or billboards to the
+    /// GPU outright in a frame the policy chose (`Self::assignment_culled`): each one outside a
+    /// transition, in view by the chooser's cull ([`treelod_runtime::chosen_in_view`]) and of a
+    /// model that has its quads gets its entry of `draws` ([`InstanceDrawGpu::quads`], every
+    /// pixel), is listed in `quad_trees` and counted in `quads_per_model`, and is taken out of
+    /// `assignment`, so the CPU neither selects nor records it. Returns the lists as they were,
+    /// per technique, to be put back once the CPU has selected the rest.
+    ///
+    /// The CPU's selection of such a tree does nothing but count it and name its model's quads
+    /// (`treelod_runtime::baseline::select` trusts the chooser's cull), after which the frame
+    /// handed each of those draws over one by one (see `docs/cli.md` for what it cost).
+    fn hand_quads_over(
+        &self,
+        assignment: &mut Assignment,
+        draws: &mut [InstanceDrawGpu],
+        quad_trees: &mut Vec<u32>,
+        quads_per_model: &mut [[u32; 2]],
+    ) -> Vec<(Technique, Vec<u32>)> {
+        if !self.assignment_culled {
+            return Vec::new();
+        }
+        let mut whole = Vec::new();
+        for technique in [Technique::Octahedral, Technique::Billboard, Technique::Crossed] {
+            let kind = quad_kind(technique);
+            let list = std::mem::take(&mut assignment[technique]);
+            let mut rest = Vec::new();
+            for &i in &list {
+                let given = self.instances.get(i as usize).and_then(|instance| {
+                    let representations = self.representations.get(instance.model as usize)?;
+                    let slot = draws.get_mut(i as usize)?;
+                    let drawn = quad_range(representations, kind).1 > 0
+                        && self.transition(i).is_none()
+                        && treelod_runtime::chosen_in_view(instance.transform);
+                    drawn.then(|| {
+                        *slot = InstanceDrawGpu::quads(kind, pack_fade(EVERY_PIXEL), technique);
+                        instance.model as usize
+                    })
+                });
+                match given {
+                    Some(model) => {
+                        quad_trees.push(i);
+                        if let Some(n) = quads_per_model.get_mut(model) {
+                            n[usize::from(kind != QuadKind::Octahedral)] += 1;
+                        }
+                    }
+                    None => rest.push(i),
+                }
+            }
+            assignment[technique] = rest;
+            whole.push((technique, list));
+        }
+        whole
     }
 
     /// Selects one view (its lists cleared first): each technique's runtime selection over the
@@ -1563,6 +1635,15 @@ impl Renderer {
     #[must_use]
     pub fn shadow_bind_group(&self) -> &wgpu::BindGroup {
         &self.shadow_maps.bind_group
+    }
+}
+
+/// The quads a tree drawn with `technique` (the octahedral impostor or a billboard) is drawn with.
+fn quad_kind(technique: Technique) -> QuadKind {
+    match technique {
+        Technique::Billboard => QuadKind::Facing,
+        Technique::Crossed => QuadKind::Crossed,
+        _ => QuadKind::Octahedral,
     }
 }
 

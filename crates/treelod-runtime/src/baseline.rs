@@ -312,6 +312,17 @@ struct BaselineChunk {
     levels: Vec<(u32, Option<ChainPick>)>,
 }
 
+/// Whether a tree the policy's chooser found in the camera's view (`TechniqueSettings::culled`)
+/// is in view for its quads' selection ([`select`]) without testing it again: the chooser's
+/// sphere test is the selection's for any transform whose largest axis scale is at least the
+/// floor the chooser's scale takes (`1e-12`); a tree of a smaller or unusable scale is tested
+/// again. A renderer that hands such trees' quads to the GPU without selecting them on the CPU
+/// asks this to draw the same trees.
+#[must_use]
+pub fn chosen_in_view(transform: Mat4) -> bool {
+    usable_scale(transform).is_some_and(|scale| scale >= 1e-12)
+}
+
 /// The trees of `list` drawn with the baseline `baseline` ([`Technique::LodChain`],
 /// [`Technique::Billboard`], [`Technique::Crossed`] or [`Technique::Octahedral`]; every model of
 /// `list` holds it, see
@@ -350,7 +361,7 @@ pub fn select(
             let Some((instance, lod, model)) = scene.get(index) else { continue };
             // The chooser's sphere test is this one for a scale of at least its floor
             // (`max_axis_scale`'s 1e-12): such a tree is in view.
-            let tau = if trusted && usable_scale(instance.transform).is_some_and(|scale| scale >= 1e-12) {
+            let tau = if trusted && chosen_in_view(instance.transform) {
                 0.0
             } else {
                 let Some(tau) =
