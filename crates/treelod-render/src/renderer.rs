@@ -1115,18 +1115,13 @@ impl Renderer {
         quads_per_model.clear();
         quads_per_model.resize(self.models.len(), [0u32; 2]);
         let (mut quads_by_technique, mut quads_leaving) = (PerTechnique::<u64>::default(), 0u64);
-        let whole = self.hand_quads_over(&mut assignment, &mut draws, &mut quad_trees, &mut quads_per_model);
+        let quads = (&mut quad_trees, &mut quads_per_model[..], &mut quads_by_technique);
+        let whole = self.hand_quads_over(&mut assignment, &mut draws, quads);
         self.select_techniques_of(&mut main, runtime_camera, lod_settings, true, &assignment);
         for (technique, list) in whole {
             let selected = std::mem::replace(&mut assignment[technique], list);
             let handed = assignment[technique].len() - selected.len();
             *main.draws.visible.get_mut(technique) += u32::try_from(handed).unwrap_or(u32::MAX);
-        }
-        for &i in &quad_trees {
-            let Some(instance) = self.instances.get(i as usize) else { continue };
-            let Some(representations) = self.representations.get(instance.model as usize) else { continue };
-            let technique = self.technique_of(i);
-            quads_by_technique[technique] += u64::from(quad_range(representations, quad_kind(technique)).1);
         }
         point_tree_list(&assignment, &main, &mut self.spt_list);
         self.assignment = assignment;
@@ -1273,9 +1268,10 @@ impl Renderer {
     /// GPU outright in a frame the policy chose (`Self::assignment_culled`): each one outside a
     /// transition, in view by the chooser's cull ([`treelod_runtime::chosen_in_view`]) and of a
     /// model that has its quads gets its entry of `draws` ([`InstanceDrawGpu::quads`], every
-    /// pixel), is listed in `quad_trees` and counted in `quads_per_model`, and is taken out of
-    /// `assignment`, so the CPU neither selects nor records it. Returns the lists as they were,
-    /// per technique, to be put back once the CPU has selected the rest.
+    /// pixel), is listed in the quad trees and counted in the trees per model and the quads per
+    /// technique (`quads`), and is taken out of `assignment`, so the CPU neither selects nor
+    /// records it. Returns the lists as they were, per technique, to be put back once the CPU
+    /// has selected the rest.
     ///
     /// The CPU's selection of such a tree does nothing but count it and name its model's quads
     /// (`treelod_runtime::baseline::select` trusts the chooser's cull), after which the frame
@@ -1284,8 +1280,7 @@ impl Renderer {
         &self,
         assignment: &mut Assignment,
         draws: &mut [InstanceDrawGpu],
-        quad_trees: &mut Vec<u32>,
-        quads_per_model: &mut [[u32; 2]],
+        (quad_trees, quads_per_model, quads_by_technique): (&mut Vec<u32>, &mut [[u32; 2]], &mut PerTechnique<u64>),
     ) -> Vec<(Technique, Vec<u32>)> {
         if !self.assignment_culled {
             return Vec::new();
@@ -1299,20 +1294,22 @@ impl Renderer {
                 let given = self.instances.get(i as usize).and_then(|instance| {
                     let representations = self.representations.get(instance.model as usize)?;
                     let slot = draws.get_mut(i as usize)?;
-                    let drawn = quad_range(representations, kind).1 > 0
+                    let count = quad_range(representations, kind).1;
+                    let drawn = count > 0
                         && self.transition(i).is_none()
                         && treelod_runtime::chosen_in_view(instance.transform);
                     drawn.then(|| {
                         *slot = InstanceDrawGpu::quads(kind, pack_fade(EVERY_PIXEL), technique);
-                        instance.model as usize
+                        (instance.model as usize, count)
                     })
                 });
                 match given {
-                    Some(model) => {
+                    Some((model, count)) => {
                         quad_trees.push(i);
                         if let Some(n) = quads_per_model.get_mut(model) {
                             n[usize::from(kind != QuadKind::Octahedral)] += 1;
                         }
+                        quads_by_technique[technique] += u64::from(count);
                     }
                     None => rest.push(i),
                 }
