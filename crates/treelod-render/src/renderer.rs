@@ -199,11 +199,8 @@ pub struct Renderer {
     /// Scratch: per instance, what GPU selection draws of it in a policy frame.
     gpu_instance_draws: Vec<InstanceDrawGpu>,
     /// Scratch of policy frames with GPU selection: the trees whose octahedral impostor or
-    /// billboards the GPU draws.
-    gpu_quad_trees: Vec<u32>,
-    /// Scratch of policy frames with GPU selection: per model, the trees in `gpu_quad_trees`
-    /// drawn with the octahedral impostor, and with billboards.
-    gpu_quads_per_model: Vec<[u32; 2]>,
+    /// billboards the GPU draws, counted.
+    gpu_quads: HandedQuads,
     // Scratch reused between frames.
     requests: Vec<Request>,
     uploads: Vec<Upload>,
@@ -231,6 +228,56 @@ struct ViewCounts {
     /// Visible instances by the technique each is drawn with.
     instances: PerTechnique<u32>,
     leaves_pruned: u64,
+}
+
+/// The trees of a policy frame with GPU selection whose octahedral impostor or billboards the
+/// GPU draws ([`InstanceDrawGpu::quads`]), counted as each is handed over: by
+/// `Renderer::hand_quads_over` (trees outside a transition) and after the CPU's selection
+/// (trees in one), the same way.
+#[derive(Default)]
+struct HandedQuads {
+    /// Trees handed over: one range and one draw command each.
+    trees: u32,
+    /// Per model, the trees handed over drawn with the octahedral impostor, and with billboards.
+    per_model: Vec<[u32; 2]>,
+    /// Quads handed over, per technique.
+    by_technique: PerTechnique<u64>,
+    /// Quads handed over of trees leaving in a transition.
+    leaving: u64,
+}
+
+impl HandedQuads {
+    /// Empties the counts for a frame of `models` models.
+    fn clear(&mut self, models: usize) {
+        self.trees = 0;
+        self.per_model.clear();
+        self.per_model.resize(models, [0; 2]);
+        self.by_technique = PerTechnique::default();
+        self.leaving = 0;
+    }
+
+    /// Hands one tree of `model` to the GPU: its entry `slot` draws its `count` quads of `kind`
+    /// for `technique` on the share `dither` of the pixels; `leaving`: it is the tree's leaving
+    /// draw in a transition.
+    fn hand(
+        &mut self,
+        slot: &mut InstanceDrawGpu,
+        model: usize,
+        (kind, technique): (QuadKind, Technique),
+        dither: [f32; 2],
+        count: u32,
+        leaving: bool,
+    ) {
+        *slot = InstanceDrawGpu::quads(kind, pack_fade(dither), technique);
+        self.trees += 1;
+        if let Some(n) = self.per_model.get_mut(model) {
+            n[usize::from(kind != QuadKind::Octahedral)] += 1;
+        }
+        self.by_technique[technique] += u64::from(count);
+        if leaving {
+            self.leaving += u64::from(count);
+        }
+    }
 }
 
 /// Bytes between the frame uniforms of the views (WebGPU's largest uniform offset alignment).
@@ -374,8 +421,7 @@ impl Renderer {
             gpu_frame: false,
             gpu_instances_stale: false,
             gpu_instance_draws: Vec::new(),
-            gpu_quad_trees: Vec::new(),
-            gpu_quads_per_model: Vec::new(),
+            gpu_quads: HandedQuads::default(),
             requests: Vec::new(),
             uploads: Vec::new(),
             wanted: Vec::new(),
@@ -1109,14 +1155,9 @@ impl Renderer {
         // The octahedral impostors' and the billboards' trees outside a transition are the GPU's
         // outright (`hand_quads_over`), not selected on the CPU first; the others are selected as
         // the rest are, and handed over below.
-        let mut quad_trees = std::mem::take(&mut self.gpu_quad_trees);
-        quad_trees.clear();
-        let mut quads_per_model = std::mem::take(&mut self.gpu_quads_per_model);
-        quads_per_model.clear();
-        quads_per_model.resize(self.models.len(), [0u32; 2]);
-        let (mut quads_by_technique, mut quads_leaving) = (PerTechnique::<u64>::default(), 0u64);
-        let quads = (&mut quad_trees, &mut quads_per_model[..], &mut quads_by_technique);
-        let whole = self.hand_quads_over(&mut assignment, &mut draws, quads);
+        let mut quads = std::mem::take(&mut self.gpu_quads);
+        quads.clear(self.models.len());
+        let whole = self.hand_quads_over(&mut assignment, &mut draws, &mut quads);
         self.select_techniques_of(&mut main, runtime_camera, lod_settings, true, &assignment);
         for (technique, list) in whole {
             let selected = std::mem::replace(&mut assignment[technique], list);
@@ -1169,13 +1210,7 @@ impl Renderer {
                     return true;
                 };
                 let (technique, dither) = self.drawn_by(d.instance, leaves);
-                *slot = InstanceDrawGpu::quads(kind, pack_fade(dither), technique);
-                quad_trees.push(d.instance);
-                if let Some(n) = quads_per_model.get_mut(d.model as usize) {
-                    n[usize::from(billboards)] += 1;
-                }
-                quads_by_technique[technique] += u64::from(d.count);
-                quads_leaving += if leaves { u64::from(d.count) } else { 0 };
+                quads.hand(slot, d.model as usize, (kind, technique), dither, d.count, leaves);
                 false
             };
             view.draws.octahedral.retain(|d| hand_over(d, false));
@@ -1191,8 +1226,7 @@ impl Renderer {
         let (shadow, cascade_full) = self.select_cascades(&mut shadow_views, runtime_camera, lod_settings, false);
 
         let Some(gpu) = self.gpu.as_mut() else { unreachable!("prepare_hybrid runs with GPU selection") };
-        gpu.set_instance_draws(queue, &draws, &quads_per_model);
-        self.gpu_quads_per_model = quads_per_model;
+        gpu.set_instance_draws(queue, &draws, &quads.per_model);
         let gpu_counts =
             gpu.prepare(device, queue, select_frame_gpu(runtime_camera, lod_settings), &self.transform_buffer);
         gpu.ensure_frame_group(device, &self.frame_layout, &self.frame_buffer, &self.transform_buffer);
@@ -1229,12 +1263,11 @@ impl Renderer {
         stats.draw_commands += gpu_counts.ranges;
         stats.submitted[Primitive::Triangle] += gpu_counts.triangles;
         stats.submitted[Primitive::Point] += gpu_counts.points;
-        stats.submitted[Primitive::Billboard] += quads_by_technique.total();
-        stats.by_technique += quads_by_technique;
-        stats.leaving += quads_leaving;
-        let quad_draws = u32::try_from(quad_trees.len()).unwrap_or(u32::MAX);
-        stats.ranges += quad_draws;
-        stats.draw_commands += quad_draws;
+        stats.submitted[Primitive::Billboard] += quads.by_technique.total();
+        stats.by_technique += quads.by_technique;
+        stats.leaving += quads.leaving;
+        stats.ranges += quads.trees;
+        stats.draw_commands += quads.trees;
         stats.by_technique += gpu_counts.by_technique;
         stats.leaving += gpu_counts.leaving;
         if self.policy_occlusion() {
@@ -1256,7 +1289,7 @@ impl Renderer {
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.gpu_instance_draws = draws;
-        self.gpu_quad_trees = quad_trees;
+        self.gpu_quads = quads;
         self.main = main;
         self.leaving = leaving;
         laps.lap(&mut self.phases.record);
@@ -1268,8 +1301,7 @@ impl Renderer {
     /// GPU outright in a frame the policy chose (`Self::assignment_culled`): each one outside a
     /// transition, in view by the chooser's cull ([`treelod_runtime::chosen_in_view`]) and of a
     /// model that has its quads gets its entry of `draws` ([`InstanceDrawGpu::quads`], every
-    /// pixel), is listed in the quad trees and counted in the trees per model and the quads per
-    /// technique (`quads`), and is taken out of `assignment`, so the CPU neither selects nor
+    /// pixel) and is counted in `quads`, and is taken out of `assignment`, so the CPU neither selects nor
     /// records it. Returns the lists as they were, per technique, to be put back once the CPU
     /// has selected the rest.
     ///
@@ -1280,7 +1312,7 @@ impl Renderer {
         &self,
         assignment: &mut Assignment,
         draws: &mut [InstanceDrawGpu],
-        (quad_trees, quads_per_model, quads_by_technique): (&mut Vec<u32>, &mut [[u32; 2]], &mut PerTechnique<u64>),
+        quads: &mut HandedQuads,
     ) -> Vec<(Technique, Vec<u32>)> {
         if !self.assignment_culled {
             return Vec::new();
@@ -1299,19 +1331,11 @@ impl Renderer {
                         && self.transition(i).is_none()
                         && treelod_runtime::chosen_in_view(instance.transform);
                     drawn.then(|| {
-                        *slot = InstanceDrawGpu::quads(kind, pack_fade(EVERY_PIXEL), technique);
-                        (instance.model as usize, count)
+                        quads.hand(slot, instance.model as usize, (kind, technique), EVERY_PIXEL, count, false)
                     })
                 });
-                match given {
-                    Some((model, count)) => {
-                        quad_trees.push(i);
-                        if let Some(n) = quads_per_model.get_mut(model) {
-                            n[usize::from(kind != QuadKind::Octahedral)] += 1;
-                        }
-                        quads_by_technique[technique] += u64::from(count);
-                    }
-                    None => rest.push(i),
+                if given.is_none() {
+                    rest.push(i);
                 }
             }
             assignment[technique] = rest;
