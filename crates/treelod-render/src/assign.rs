@@ -159,7 +159,7 @@ impl Renderer {
             choose(state);
         }
         // Trees outside the view are not chosen, nor listed.
-        out.assign_chosen(&self.instances, &self.representations, &tables.chosen);
+        out.assign_chosen(&self.instance_models, &self.representations, &tables.chosen);
         true
     }
 

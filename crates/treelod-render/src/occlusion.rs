@@ -215,6 +215,12 @@ impl Occlusion {
         self.models.get(model as usize).map_or(0, |m| m.count)
     }
 
+    /// Whether a measurement is recorded and not read yet: [`Self::record`] records none until
+    /// [`Self::collect`] has read it, so a frame prepared meanwhile needs no jobs.
+    pub fn in_flight(&self) -> bool {
+        self.pending.is_some()
+    }
+
     /// Records the measurement of `jobs` against `depth` (drawn with `view_proj` from `eye`) into
     /// `encoder`, unless one is still in flight or there is nothing to measure. `instances` and
     /// `transforms` are the renderer's list and the buffer of their transforms

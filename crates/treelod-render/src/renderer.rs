@@ -185,9 +185,12 @@ pub struct Renderer {
     /// The occlusion measurement, and the trees to measure after this frame.
     pub(crate) occlusion: Occlusion,
     pub(crate) occlusion_jobs: Vec<Job>,
-    /// Scratch of [`Self::set_occlusion_jobs`]: a bit per instance, and the instances marked.
+    /// Scratch of [`Self::set_occlusion_jobs`]: a bit per instance.
     occlusion_marks: Vec<u64>,
-    occlusion_indices: Vec<u32>,
+    /// Per instance, its model: what an occlusion job and the assignment's lists read of it, 4
+    /// bytes where an entry of `instances` takes 80 (10^6 willows list up to 887k jobs a frame;
+    /// `docs/cli.md`).
+    pub(crate) instance_models: Vec<u32>,
     /// The camera of the last `prepare`: view-projection, eye, forward, viewport size.
     last_camera: Option<(Mat4, Vec3, Vec3, (u32, u32))>,
     /// GPU-driven selection, when enabled ([`Self::enable_gpu_selection`]).
@@ -415,7 +418,7 @@ impl Renderer {
             occlusion: Occlusion::new(device, formats.sample_count.max(1), depth),
             occlusion_jobs: Vec::new(),
             occlusion_marks: Vec::new(),
-            occlusion_indices: Vec::new(),
+            instance_models: Vec::new(),
             last_camera: None,
             gpu: None,
             gpu_frame: false,
@@ -641,6 +644,8 @@ impl Renderer {
                 .filter(|i| (i.model.0 as usize) < self.models.len())
                 .map(|i| treelod_runtime::Instance { model: i.model.0, transform: i.transform }),
         );
+        self.instance_models.clear();
+        self.instance_models.extend(self.instances.iter().map(|i| i.model));
         if self.instances.len() != before {
             self.prune_shown = vec![None; self.instances.len()];
             self.chain_levels = vec![None; self.instances.len()];
@@ -932,7 +937,7 @@ impl Renderer {
         if self.policy_occlusion() {
             // Every tree the camera draws is measured (pruned ones included, once), but those
             // whose choice does not depend on it (`set_occlusion_jobs`).
-            self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance));
+            self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance), &[]);
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.main = main;
@@ -1279,13 +1284,7 @@ impl Renderer {
             // a test here would use, so none is tested again: on the willow's 10^6 trees that
             // test took about half of the frame's `record` (`docs/cli.md`). (The GPU culls them
             // further; an extra job costs only time.)
-            let gpu_drawn = self
-                .policy
-                .state
-                .needing_visibility()
-                .filter(|&index| draws.get(index as usize).is_some_and(|d| *d != InstanceDrawGpu::SKIP));
-            let drawn: Vec<u32> = main.recorded.iter().map(|d| d.instance).chain(gpu_drawn).collect();
-            self.set_occlusion_jobs(drawn.into_iter());
+            self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance), &draws);
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.gpu_instance_draws = draws;
@@ -1414,7 +1413,9 @@ impl Renderer {
         select_techniques(&scene, assignment, camera, &technique_settings, prune_state, chain_state, &mut view.draws);
         if main {
             self.occlusion_jobs.clear();
-            for &index in &view.draws.occlusion {
+            // (None while the measurement recorded earlier is not read: `set_occlusion_jobs`.)
+            let jobs = if self.occlusion.in_flight() { &[][..] } else { &view.draws.occlusion[..] };
+            for &index in jobs {
                 if let Some(job) = self.occlusion_job(index) {
                     self.occlusion_jobs.push(job);
                 }
@@ -1544,28 +1545,37 @@ impl Renderer {
         self.settings.policy.is_some_and(|p| p.occlusion && self.policy.chooses(Some(&p)))
     }
 
-    /// The occlusion tests of the instances `drawn` lists (in any order, each any number of
-    /// times) whose visible fraction matters to the policy's choice
-    /// ([`PolicyState::visibility_matters`]): one per instance, in the order of the instances
-    /// ([`ascending_once`]).
-    fn set_occlusion_jobs(&mut self, drawn: impl Iterator<Item = u32>) {
-        let mut marks = std::mem::take(&mut self.occlusion_marks);
-        let mut indices = std::mem::take(&mut self.occlusion_indices);
-        let state = &self.policy.state;
-        let wanted = drawn.filter(|&index| state.visibility_matters(index as usize));
-        ascending_once(wanted, self.instances.len(), &mut marks, &mut indices);
+    /// The occlusion tests of the instances drawn this frame whose visible fraction matters to
+    /// the policy's choice ([`PolicyState::visibility_matters`]): those `recorded` lists (in any
+    /// order, each any number of times) and those `gpu` draws (its entries not
+    /// [`InstanceDrawGpu::SKIP`]; empty in a CPU frame), one per instance, in the order of the
+    /// instances ([`occlusion_candidates`]). None while the measurement recorded earlier is not
+    /// read yet ([`Occlusion::in_flight`]): [`Occlusion::record`] would record nothing this frame.
+    fn set_occlusion_jobs(&mut self, recorded: impl Iterator<Item = u32>, gpu: &[InstanceDrawGpu]) {
+        use rayon::prelude::*;
         self.occlusion_jobs.clear();
-        for &index in &indices {
-            if let Some(job) = self.occlusion_job(index) {
-                self.occlusion_jobs.push(job);
-            }
+        if self.occlusion.in_flight() {
+            return;
         }
-        (self.occlusion_marks, self.occlusion_indices) = (marks, indices);
+        let mut marks = std::mem::take(&mut self.occlusion_marks);
+        let count = self.instances.len();
+        marks.clear();
+        marks.resize(count.div_ceil(64), 0);
+        for index in recorded.filter(|&i| (i as usize) < count) {
+            marks[index as usize / 64] |= 1 << (index % 64);
+        }
+        let mut jobs = std::mem::take(&mut self.occlusion_jobs);
+        let flags = self.policy.state.visibility_flags();
+        let chunks = (0..count.div_ceil(treelod_runtime::CHOOSE_CHUNK)).into_par_iter();
+        jobs.par_extend(chunks.flat_map_iter(|chunk| {
+            occlusion_candidates(chunk, count, (&marks, flags, gpu)).filter_map(|index| self.occlusion_job(index))
+        }));
+        (self.occlusion_jobs, self.occlusion_marks) = (jobs, marks);
     }
 
     /// The occlusion test of instance `index` with its model's hull samples, if it has any.
     fn occlusion_job(&self, index: u32) -> Option<Job> {
-        let model = self.instances.get(index as usize)?.model;
+        let model = *self.instance_models.get(index as usize)?;
         (self.occlusion.sample_count(model) > 0).then_some(Job { instance: index, model })
     }
 
@@ -1750,24 +1760,28 @@ fn frame_bind_groups(
         .collect()
 }
 
-/// The indices below `count` that `drawn` lists (in any order, each any number of times),
-/// ascending and each once, into `out`: marked in `marks`, a bit per index, then read back in
-/// order, a bit per instance where the list of draws (about two per tree) was sorted: the
-/// occlusion jobs of the orchid's 10^4 trees took 0.19 → 0.09 ms a frame.
-fn ascending_once(drawn: impl Iterator<Item = u32>, count: usize, marks: &mut Vec<u64>, out: &mut Vec<u32>) {
-    marks.clear();
-    marks.resize(count.div_ceil(64), 0);
-    for index in drawn.filter(|&i| (i as usize) < count) {
-        marks[index as usize / 64] |= 1 << (index % 64);
-    }
-    out.clear();
-    for (w, &word) in marks.iter().enumerate() {
-        let mut bits = word;
-        while bits != 0 {
-            out.push(u32::try_from(w * 64).unwrap_or(u32::MAX) | bits.trailing_zeros());
-            bits &= bits - 1;
-        }
-    }
+/// Of chunk `chunk` of `count` instances ([`treelod_runtime::CHOOSE_CHUNK`] each), those marked
+/// in `recorded` (a bit per instance; the CPU's draws, marked once however often they are listed,
+/// where sorting the list of draws took the orchid's 10^4 trees twice as long) or drawn by `gpu`
+/// (entries not [`InstanceDrawGpu::SKIP`]) whose flag in `flags` is set (instances past its end:
+/// set), ascending and each once; none at all, after a byte compare per instance, where the
+/// chunk's flags are all unset. The willow's 10^6 trees list up to 887k a frame (`docs/cli.md`).
+fn occlusion_candidates<'a>(
+    chunk: usize,
+    count: usize,
+    (recorded, flags, gpu): (&'a [u64], &'a [bool], &'a [InstanceDrawGpu]),
+) -> impl Iterator<Item = u32> + 'a {
+    const CHUNK: usize = treelod_runtime::CHOOSE_CHUNK;
+    let indices = (chunk * CHUNK).min(count)..count.min((chunk + 1) * CHUNK);
+    let skip = indices.end <= flags.len() && !flags[indices.clone()].contains(&true);
+    let indices = if skip { 0..0 } else { indices };
+    indices
+        .filter(move |&i| {
+            let drawn = recorded.get(i / 64).is_some_and(|word| word >> (i % 64) & 1 != 0)
+                || gpu.get(i).is_some_and(|d| *d != InstanceDrawGpu::SKIP);
+            drawn && flags.get(i).copied().unwrap_or(true)
+        })
+        .filter_map(|i| u32::try_from(i).ok())
 }
 
 #[cfg(test)]
@@ -1775,20 +1789,35 @@ mod tests {
     use super::*;
 
     proptest::proptest! {
-        /// The marked instances read back as the list of draws sorted, without repeats and
-        /// without indices past the instances, whatever the scratch held before.
+        /// The candidates are the instances below the count that the CPU recorded or the GPU
+        /// draws and whose flag is set (or that lie past the flags), ascending and once each,
+        /// whatever the chunks' sizes against the count.
         #[test]
-        fn drawn_instances_come_back_ascending_and_once(
-            drawn in proptest::collection::vec(0u32..300, 0..400),
-            count in 0usize..260,
-            stale in proptest::collection::vec(proptest::prelude::any::<u64>(), 0..8),
+        fn occlusion_candidates_are_the_drawn_flagged_instances_ascending_and_once(
+            recorded in proptest::collection::vec(0u32..3000, 0..400),
+            gpu in proptest::collection::vec(proptest::prelude::any::<bool>(), 0..2600),
+            flags in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..2600),
+            count in 0usize..2600,
         ) {
-            let (mut marks, mut out) = (stale, vec![7, 7, 7]);
-            ascending_once(drawn.iter().copied(), count, &mut marks, &mut out);
-            let mut expected: Vec<u32> = drawn.into_iter().filter(|&i| (i as usize) < count).collect();
-            expected.sort_unstable();
-            expected.dedup();
-            proptest::prop_assert_eq!(out, expected);
+            // Flags mostly unset, so that whole chunks are skipped.
+            let flags: Vec<bool> = flags.iter().map(|&f| f < 16).collect();
+            let mut marks = vec![0u64; count.div_ceil(64)];
+            for &i in recorded.iter().filter(|&&i| (i as usize) < count) {
+                marks[i as usize / 64] |= 1 << (i % 64);
+            }
+            let draws: Vec<InstanceDrawGpu> = gpu
+                .iter()
+                .map(|&d| if d { InstanceDrawGpu::POINT_TREE } else { InstanceDrawGpu::SKIP })
+                .collect();
+            let chunks = count.div_ceil(treelod_runtime::CHOOSE_CHUNK) + 1;
+            let got: Vec<u32> =
+                (0..chunks).flat_map(|chunk| occlusion_candidates(chunk, count, (&marks, &flags, &draws))).collect();
+            let expected: Vec<u32> = (0..count)
+                .filter(|&i| recorded.contains(&u32::try_from(i).unwrap()) || gpu.get(i) == Some(&true))
+                .filter(|&i| flags.get(i).copied().unwrap_or(true))
+                .map(|i| u32::try_from(i).unwrap())
+                .collect();
+            proptest::prop_assert_eq!(got, expected);
         }
     }
 

@@ -206,11 +206,22 @@ impl PerTechnique<Vec<u32>> {
         models: &[Representations],
         listed: impl IntoIterator<Item = (u32, Technique)>,
     ) {
+        self.list(|i| instances.get(i as usize).map(|instance| instance.model), models, listed);
+    }
+
+    /// [`Self::assign_listed`] with each instance's model given by `model_of` (`None`: an unknown
+    /// instance).
+    fn list(
+        &mut self,
+        model_of: impl Fn(u32) -> Option<u32>,
+        models: &[Representations],
+        listed: impl IntoIterator<Item = (u32, Technique)>,
+    ) {
         for list in &mut self.0 {
             list.clear();
         }
         for (i, chosen) in listed {
-            let Some(model) = instances.get(i as usize).and_then(|instance| models.get(instance.model as usize)) else {
+            let Some(model) = model_of(i).and_then(|model| models.get(model as usize)) else {
                 continue;
             };
             let technique = if model.holds(chosen) { chosen } else { Technique::FALLBACK };
@@ -221,13 +232,16 @@ impl PerTechnique<Vec<u32>> {
     /// [`Self::assign_listed`] of the instances whose `chosen[i]` is a technique (a chooser's
     /// output, [`crate::choose_instances_in_chunks`]; `None` goes nowhere), the same lists, made
     /// by chunks of instances on rayon's pool and joined in order: at 10^6 trees the listing
-    /// was a fifth of the renderer's assignment, on one thread.
-    pub fn assign_chosen(&mut self, instances: &[Instance], models: &[Representations], chosen: &[Option<Technique>]) {
+    /// was a fifth of the renderer's assignment, on one thread. `instance_models[i]` is
+    /// instance `i`'s model ([`Instance::model`]): 4 bytes a tree read where an [`Instance`]
+    /// takes 80, a cache line for each of up to 887k trees a frame of 10^6 willows
+    /// (`docs/cli.md`).
+    pub fn assign_chosen(&mut self, instance_models: &[u32], models: &[Representations], chosen: &[Option<Technique>]) {
         /// Instances per chunk: a few tens of microseconds of work.
         const CHUNK: usize = 1 << 14;
         let list = |first: usize, part: &[Option<Technique>], lists: &mut Self| {
             let listed = part.iter().enumerate().filter_map(|(k, t)| Some((u32::try_from(first + k).ok()?, (*t)?)));
-            lists.assign_listed(instances, models, listed);
+            lists.list(|i| instance_models.get(i as usize).copied(), models, listed);
         };
         if chosen.len() <= CHUNK {
             list(0, chosen, self);
@@ -596,7 +610,8 @@ mod tests {
         one_pass.assign_listed(&instances, &models, listed);
         let mut by_chunks = Assignment::default();
         by_chunks[Technique::Spt].push(3);
-        by_chunks.assign_chosen(&instances, &models, &chosen);
+        let instance_models: Vec<u32> = instances.iter().map(|i| i.model).collect();
+        by_chunks.assign_chosen(&instance_models, &models, &chosen);
         assert_eq!(by_chunks, one_pass);
         assert!(one_pass[Technique::LodChain].len() > 1000 && one_pass[Technique::FALLBACK].len() > 1000);
         assert!(one_pass[Technique::Ellipsoids].is_empty(), "no model holds ellipsoids");

@@ -1668,18 +1668,12 @@ impl PolicyState {
         self.measure.get(index).copied().unwrap_or(true)
     }
 
-    /// The instances the last choice found [`Self::visibility_matters`] for, ascending; chunks of
-    /// [`CHOOSE_CHUNK`] instances where it found none are skipped whole (no more than a byte
-    /// compare per instance), so the walk costs about the trees listed.
-    pub fn needing_visibility(&self) -> impl Iterator<Item = u32> + '_ {
-        self.measure
-            .chunks(CHOOSE_CHUNK)
-            .enumerate()
-            .filter(|(_, chunk)| chunk.contains(&true))
-            .flat_map(|(c, chunk)| {
-                chunk.iter().enumerate().filter(|(_, m)| **m).map(move |(k, _)| c * CHOOSE_CHUNK + k)
-            })
-            .filter_map(|i| u32::try_from(i).ok())
+    /// Per instance the last choice was made for, [`Self::visibility_matters`]: a host walks it
+    /// in chunks of [`CHOOSE_CHUNK`] (in parallel, skipping a chunk of none with no more than a
+    /// byte compare per instance) to list the trees to measure. Instances past its end matter.
+    #[must_use]
+    pub fn visibility_flags(&self) -> &[bool] {
+        &self.measure
     }
 
     /// Sets the instances' visible fractions the next choices read (per instance, 1 = fully
@@ -2766,8 +2760,7 @@ mod tests {
             assert_eq!((out[3], out[4]), (Some(Technique::Spt), None), "no tables; out of view");
             let matters: Vec<bool> = (0..trees.len()).map(|i| state.visibility_matters(i)).collect();
             assert_eq!(matters, [pruned, true, true, true, false], "{uniform:?} under {below} px");
-            let listed: Vec<u32> = state.needing_visibility().collect();
-            assert_eq!(listed, if pruned { vec![0, 1, 2, 3] } else { vec![1, 2, 3] });
+            assert_eq!(state.visibility_flags(), matters, "the flags are the same answers");
             assert!(state.visibility_matters(trees.len()), "past the instances chosen");
         }
     }
