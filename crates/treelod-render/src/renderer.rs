@@ -191,6 +191,9 @@ pub struct Renderer {
     /// bytes where an entry of `instances` takes 80 (10^6 willows list up to 887k jobs a frame;
     /// `docs/cli.md`).
     pub(crate) instance_models: Vec<u32>,
+    /// Per instance, [`treelod_runtime::chosen_in_view`] of its transform: made with the list,
+    /// read for each quad tree handed to the GPU (`Self::hand_quads_over`).
+    cull_trusted: Vec<bool>,
     /// The camera of the last `prepare`: view-projection, eye, forward, viewport size.
     last_camera: Option<(Mat4, Vec3, Vec3, (u32, u32))>,
     /// GPU-driven selection, when enabled ([`Self::enable_gpu_selection`]).
@@ -257,6 +260,17 @@ impl HandedQuads {
         self.per_model.resize(models, [0; 2]);
         self.by_technique = PerTechnique::default();
         self.leaving = 0;
+    }
+
+    /// Adds the counts of `other` (trees handed over elsewhere) to these.
+    fn add(&mut self, other: &Self) {
+        self.trees += other.trees;
+        for (n, m) in self.per_model.iter_mut().zip(&other.per_model) {
+            n[0] += m[0];
+            n[1] += m[1];
+        }
+        self.by_technique += other.by_technique;
+        self.leaving += other.leaving;
     }
 
     /// Hands one tree of `model` to the GPU: its entry `slot` draws its `count` quads of `kind`
@@ -419,6 +433,7 @@ impl Renderer {
             occlusion_jobs: Vec::new(),
             occlusion_marks: Vec::new(),
             instance_models: Vec::new(),
+            cull_trusted: Vec::new(),
             last_camera: None,
             gpu: None,
             gpu_frame: false,
@@ -646,6 +661,8 @@ impl Renderer {
         );
         self.instance_models.clear();
         self.instance_models.extend(self.instances.iter().map(|i| i.model));
+        self.cull_trusted.clear();
+        self.cull_trusted.extend(self.instances.iter().map(|i| treelod_runtime::chosen_in_view(i.transform)));
         if self.instances.len() != before {
             self.prune_shown = vec![None; self.instances.len()];
             self.chain_levels = vec![None; self.instances.len()];
@@ -1316,26 +1333,47 @@ impl Renderer {
         if !self.assignment_culled {
             return Vec::new();
         }
+        /// List entries per task.
+        const CHUNK: usize = 4096;
+        let models = self.models.len();
         let mut whole = Vec::new();
         for technique in [Technique::Octahedral, Technique::Billboard, Technique::Crossed] {
             let kind = quad_kind(technique);
             let list = std::mem::take(&mut assignment[technique]);
-            let mut rest = Vec::new();
-            for &i in &list {
-                let given = self.instances.get(i as usize).and_then(|instance| {
-                    let representations = self.representations.get(instance.model as usize)?;
-                    let slot = draws.get_mut(i as usize)?;
-                    let count = quad_range(representations, kind).1;
-                    let drawn = count > 0
-                        && self.transition(i).is_none()
-                        && treelod_runtime::chosen_in_view(instance.transform);
-                    drawn.then(|| {
-                        quads.hand(slot, instance.model as usize, (kind, technique), EVERY_PIXEL, count, false)
-                    })
-                });
-                if given.is_none() {
-                    rest.push(i);
+            // Hands tree `i` over through its entry `slot` of `draws`, counted in `handed`;
+            // false where the CPU keeps it.
+            let hand = |i: u32, slot: Option<&mut InstanceDrawGpu>, handed: &mut HandedQuads| {
+                let Some(model) = self.instance_models.get(i as usize).map(|&m| m as usize) else { return false };
+                let count = self.representations.get(model).map_or(0, |r| quad_range(r, kind).1);
+                let drawn = count > 0
+                    && self.cull_trusted.get(i as usize).copied().unwrap_or(false)
+                    && self.transition(i).is_none();
+                match slot {
+                    Some(slot) if drawn => {
+                        handed.hand(slot, model, (kind, technique), EVERY_PIXEL, count, false);
+                        true
+                    }
+                    _ => false,
                 }
+            };
+            // The list is ascending (`Assignment::assign_chosen`), so each chunk's entries of
+            // `draws` lie in a part of it of their own, from the chunk's first tree to the next
+            // chunk's: the chunks are handed over in parallel, their counts and the trees they
+            // leave to the CPU joined in order. (Any other list on this thread.)
+            let mut rest = Vec::new();
+            let handed = in_ascending_chunks(&list, draws, CHUNK, |chunk, part, offset| {
+                let mut handed = HandedQuads::default();
+                handed.clear(models);
+                let kept = chunk.iter().copied().filter(|&i| !hand(i, part.get_mut(i as usize - offset), &mut handed));
+                (kept.collect::<Vec<u32>>(), handed)
+            });
+            if let Some(handed) = handed {
+                for (kept, handed) in &handed {
+                    rest.extend_from_slice(kept);
+                    quads.add(handed);
+                }
+            } else {
+                rest.extend(list.iter().copied().filter(|&i| !hand(i, draws.get_mut(i as usize), quads)));
             }
             assignment[technique] = rest;
             whole.push((technique, list));
@@ -1760,6 +1798,35 @@ fn frame_bind_groups(
         .collect()
 }
 
+/// `f(chunk, part, offset)` for each chunk of `chunk` entries of `list` (at least 1), in
+/// parallel, with `part` the entries of `items` from the chunk's first index (`offset`) to the
+/// next chunk's (the last: to the end), so that the chunk's every index `i` is `part[i - offset]`
+/// and no two parts overlap; the results in the chunks' order. `None` (nothing called) unless
+/// `list` is strictly ascending and within `items`, or where it is empty.
+fn in_ascending_chunks<T: Send, R: Send>(
+    list: &[u32],
+    items: &mut [T],
+    chunk: usize,
+    f: impl Fn(&[u32], &mut [T], usize) -> R + Sync,
+) -> Option<Vec<R>> {
+    use rayon::prelude::*;
+    let ascending = list.windows(2).all(|w| w[0] < w[1]) && list.last().is_some_and(|&l| (l as usize) < items.len());
+    if !ascending {
+        return None;
+    }
+    let chunks: Vec<&[u32]> = list.chunks(chunk.max(1)).collect();
+    let mut offset = chunks.first()?.first().map(|&i| i as usize)?;
+    let mut after = &mut items[offset..];
+    let mut parts = Vec::with_capacity(chunks.len());
+    for (k, &chunk) in chunks.iter().enumerate() {
+        let end = chunks.get(k + 1).map_or(offset + after.len(), |next| next[0] as usize);
+        let (part, tail) = std::mem::take(&mut after).split_at_mut(end - offset);
+        parts.push((chunk, part, offset));
+        (after, offset) = (tail, end);
+    }
+    Some(parts.into_par_iter().map(|(chunk, part, offset)| f(chunk, part, offset)).collect())
+}
+
 /// Of chunk `chunk` of `count` instances ([`treelod_runtime::CHOOSE_CHUNK`] each), those marked
 /// in `recorded` (a bit per instance; the CPU's draws, marked once however often they are listed,
 /// where sorting the list of draws took the orchid's 10^4 trees twice as long) or drawn by `gpu`
@@ -1818,6 +1885,47 @@ mod tests {
                 .map(|i| u32::try_from(i).unwrap())
                 .collect();
             proptest::prop_assert_eq!(got, expected);
+        }
+    }
+
+    proptest::proptest! {
+        /// Each chunk's part holds exactly its own indices, at their index less its offset, the
+        /// results come in the chunks' order, and any list not ascending or not within the items
+        /// is refused.
+        #[test]
+        fn ascending_chunks_write_their_own_parts(
+            picks in proptest::collection::vec(proptest::prelude::any::<bool>(), 0..300),
+            chunk in 1usize..40,
+            unsorted in proptest::prelude::any::<bool>(),
+        ) {
+            let mut list: Vec<u32> =
+                picks.iter().enumerate().filter(|(_, p)| **p).map(|(i, _)| u32::try_from(i).unwrap()).collect();
+            if unsorted && list.len() > 1 {
+                list.swap(0, 1);
+            }
+            let mut items = vec![u32::MAX; picks.len()];
+            let got = in_ascending_chunks(&list, &mut items, chunk, |c, part, offset| {
+                for &i in c {
+                    part[i as usize - offset] = i;
+                }
+                (c.to_vec(), part.len())
+            });
+            if list.is_empty() || (unsorted && list.len() > 1) {
+                proptest::prop_assert!(got.is_none());
+                proptest::prop_assert!(items.iter().all(|&v| v == u32::MAX));
+            } else {
+                let got = got.expect("an ascending list");
+                let joined: Vec<u32> = got.iter().flat_map(|(c, _)| c.iter().copied()).collect();
+                proptest::prop_assert_eq!(&joined, &list);
+                proptest::prop_assert_eq!(got.iter().map(|(_, n)| n).sum::<usize>(), items.len() - list[0] as usize);
+                for (i, &v) in items.iter().enumerate() {
+                    let listed = list.contains(&u32::try_from(i).unwrap());
+                    proptest::prop_assert_eq!(v, if listed { u32::try_from(i).unwrap() } else { u32::MAX });
+                }
+            }
+            let mut short = vec![0u32; list.last().map_or(0, |&l| l as usize)];
+            let refused = in_ascending_chunks(&list, &mut short, chunk, |_, _, _| ());
+            proptest::prop_assert!(refused.is_none(), "the last index past the items");
         }
     }
 
