@@ -1317,9 +1317,9 @@ impl Renderer {
     /// GPU outright in a frame the policy chose (`Self::assignment_culled`): each one outside a
     /// transition, in view by the chooser's cull ([`treelod_runtime::chosen_in_view`]) and of a
     /// model that has its quads gets its entry of `draws` ([`InstanceDrawGpu::quads`], every
-    /// pixel) and is counted in `quads`, and is taken out of `assignment`, so the CPU neither selects nor
-    /// records it. Returns the lists as they were, per technique, to be put back once the CPU
-    /// has selected the rest.
+    /// pixel), is counted in `quads` and is taken out of `assignment`, so the CPU neither
+    /// selects nor records it. Returns the lists as they were, per technique, to be put back
+    /// once the CPU has selected the rest.
     ///
     /// The CPU's selection of such a tree does nothing but count it and name its model's quads
     /// (`treelod_runtime::baseline::select` trusts the chooser's cull), after which the frame
