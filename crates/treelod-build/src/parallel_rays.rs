@@ -134,6 +134,22 @@
 //! cores, `--timings`): the stage 3.80–4.03 s → 3.69–3.80 s (medians 3.84 → 3.73), the build
 //! 6.23–6.50 → 6.08–6.24 s; the willow's within the runs' noise (1.15–1.23 → 1.12–1.27 s).
 //!
+//! Two more were measured and not taken (`benches/ao`, the maple, alternating runs on 2 cores):
+//! - Each triangle's plane and reach computed once per direction (a pass over the triangles in
+//!   their order, 44 bytes each) and copied where a cell is gathered, instead of computed there
+//!   from its three projected corners, loaded at random, in each of the about 4 cells that list
+//!   it: the same output, 3.72–3.83 s against 4.07–4.10 s (2 runs each), but the 29 MB of planes
+//!   held per direction would raise the build's peak past four times the source's size (the
+//!   stage peaks about 6 MB under the build's 121 MB, the source is 31.6 MB); the reach alone
+//!   (4 bytes a triangle, to leave out what reaches no farther than the cell's nearest origin
+//!   before loading its corners) read within the runs' noise (4.66–5.65 s against 5.04–5.93 s,
+//!   3 runs each).
+//! - Grazing rays left out (a direction whose cosine to the normal is under 0.15 or 0.25, a
+//!   fifth or a quarter of a vertex's rays and 2–6 % of their weight): the error against 256
+//!   traced rays rose on every model (pine 0.0207 → 0.0214 → 0.0229, oak 0.0203 → 0.0210 →
+//!   0.0224, orchid 0.0589 → 0.0602 → 0.0626, jacaranda 0.0532 → 0.0545 → 0.0566, willow 0.0536
+//!   → 0.0549 → 0.0571, Quaternius tree 0.0220 → 0.0242 → 0.0275) for times within the noise.
+//!
 //! Decoding the vertices' normals once for all the directions (instead of in each ray's setup,
 //! twice a direction) was measured and not taken: the maple's stage took as long within the
 //! runs' noise (3 alternating default builds: 3.68–4.65 s against 4.01–4.38 s) and the build

@@ -123,8 +123,10 @@ pub(crate) const EVERY_PIXEL: [f32; 2] = [0.0, 1.0];
 #[derive(Default)]
 pub(crate) struct View {
     pub(crate) selection: DrawList,
-    /// The draws, as recorded for the GPU.
-    pub(crate) recorded: Vec<RecordedDraw>,
+    /// The pieces of the renderer's recordings that hold the view's draws as recorded for the
+    /// GPU, in order (its own, then those of the techniques trees in a transition leave): read in
+    /// place ([`Renderer::recorded`]), not copied into one list each frame.
+    pub(crate) recorded: std::ops::Range<usize>,
     /// Instances drawn with the sequential point tree when not every instance is (the
     /// assignment's full-mesh and point-tree lists and what techniques handed back), and their
     /// indices in `instances` (see `spt_remapped`).
@@ -191,11 +193,10 @@ impl Renderer {
             (first..first + pieces.len(), leaving_from)
         };
         self.recordings_used = used.end;
-        view.recorded.clear();
+        view.recorded = used.clone();
         stats.leaving = 0;
         for r in used.clone() {
             let out = &recordings[r];
-            view.recorded.extend_from_slice(&out.recorded);
             stats.ranges_clamped += out.clamped;
             // What each kind of primitive and each technique submitted.
             stats.submitted += out.submitted;
@@ -260,6 +261,15 @@ impl Renderer {
         self.info_segments.clear();
         self.info_count = 0;
         self.indirect.clear();
+    }
+
+    /// The draws of `view` as recorded for the GPU, in order: those of its pieces of
+    /// `recordings` ([`View::recorded`]).
+    pub(crate) fn recorded<'a>(
+        recordings: &'a [Recording],
+        view: &View,
+    ) -> impl Iterator<Item = &'a RecordedDraw> + 'a {
+        recordings.get(view.recorded.clone()).unwrap_or_default().iter().flat_map(|r| r.recorded.iter())
     }
 
     /// Copies the frame's draw infos, in the order [`Self::record_view`] gave them their

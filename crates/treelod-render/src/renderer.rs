@@ -214,6 +214,9 @@ pub struct Renderer {
     pub(crate) wanted: Vec<Vec<[u32; 2]>>,
     /// What each piece of a view's draws recorded ([`Self::record_view`]).
     pub(crate) recordings: Vec<Recording>,
+    /// The camera's view's draws of the last frame in one list, made when [`Self::draws`] is
+    /// first asked for them (emptied as each frame is prepared).
+    pub(crate) draws: std::sync::OnceLock<Vec<RecordedDraw>>,
     /// The most entries of a view's lists one piece records ([`RECORD_CHUNK`]).
     pub(crate) record_chunk: usize,
     /// How many of `recordings` this frame's views used, the runs of draw infos in the order
@@ -444,6 +447,7 @@ impl Renderer {
             uploads: Vec::new(),
             wanted: Vec::new(),
             recordings: Vec::new(),
+            draws: std::sync::OnceLock::new(),
             record_chunk: RECORD_CHUNK,
             recordings_used: 0,
             info_segments: Vec::new(),
@@ -693,7 +697,9 @@ impl Renderer {
     /// The draws of the last [`Self::prepare`], as recorded for the GPU, in selection order.
     #[must_use]
     pub fn draws(&self) -> &[RecordedDraw] {
-        &self.main.recorded
+        // The pieces' draws are read in place by the frame; joined only for a caller that asks
+        // (tools and tests), so a frame of 10^6 trees does not copy a list of 48 bytes a draw.
+        self.draws.get_or_init(|| Self::recorded(&self.recordings, &self.main).copied().collect())
     }
 
     /// Where the latest [`Self::prepare`] spent its time on the CPU, phase by phase (zero before
@@ -710,7 +716,7 @@ impl Renderer {
     #[must_use]
     pub fn points_in_cut(&self) -> u64 {
         let mut drawn = 0u64;
-        for draw in &self.main.recorded {
+        for draw in Self::recorded(&self.recordings, &self.main) {
             let (Some(model), Some(lod)) =
                 (self.models.get(draw.model.0 as usize), self.lods.get(draw.model.0 as usize))
             else {
@@ -820,6 +826,7 @@ impl Renderer {
 
     /// [`Self::prepare`] with the settings as they are.
     fn prepare_frame(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
+        self.draws = std::sync::OnceLock::new();
         self.phases = PreparePhases::default();
         let mut laps = Laps::start();
         let settings = self.settings;
@@ -954,7 +961,9 @@ impl Renderer {
         if self.policy_occlusion() {
             // Every tree the camera draws is measured (pruned ones included, once), but those
             // whose choice does not depend on it (`set_occlusion_jobs`).
-            self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance), &[]);
+            let recordings = std::mem::take(&mut self.recordings);
+            self.set_occlusion_jobs(Self::recorded(&recordings, &main).map(|d| d.instance), &[]);
+            self.recordings = recordings;
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.main = main;
@@ -1301,7 +1310,9 @@ impl Renderer {
             // a test here would use, so none is tested again: on the willow's 10^6 trees that
             // test took about half of the frame's `record` (`docs/cli.md`). (The GPU culls them
             // further; an extra job costs only time.)
-            self.set_occlusion_jobs(main.recorded.iter().map(|d| d.instance), &draws);
+            let recordings = std::mem::take(&mut self.recordings);
+            self.set_occlusion_jobs(Self::recorded(&recordings, &main).map(|d| d.instance), &draws);
+            self.recordings = recordings;
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.gpu_instance_draws = draws;

@@ -283,6 +283,14 @@ fn with_unlimited_budgets_the_draws_are_the_cpu_selection() {
         "{in_cut} of {} submitted points are in the cut",
         stats.submitted[Primitive::Point]
     );
+    // The draws joined for the frame above are not held into the next: with the far tree alone
+    // in view, the next frame's draws are its own (its one far-list range), and the selection's.
+    renderer.set_instances(&[Instance { model: tree, transform: far }]);
+    let stats = renderer.prepare(&gpu.device, &gpu.queue, &camera(&container, 15.0, 256));
+    let draws = renderer.draws();
+    assert_eq!(draws.len(), renderer.selection().ranges().len());
+    assert_eq!(stats.ranges as usize, draws.len());
+    assert!(draws.iter().all(|d| d.instance == 0 && d.source == DrawSource::Roots), "{draws:?}");
 }
 
 #[test]
