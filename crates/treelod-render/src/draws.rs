@@ -219,27 +219,29 @@ impl Renderer {
                 let start = self.indirect.len();
                 let bucket = m * Bucket::COUNT + kind;
                 while let Some((_, r)) = written.next_if(|&(b, _)| b == bucket) {
-                    let spans = &recordings[r].buckets[bucket].spans;
+                    let runs = &recordings[r].buckets[bucket].runs;
                     self.info_segments.push((r, bucket));
-                    for &(first_vertex, vertex_count) in spans {
+                    for &[first_vertex, vertex_count, draws] in runs {
                         let index = u32::try_from(self.info_count).unwrap_or(u32::MAX);
-                        self.info_count += 1;
-                        // A range that draws the same elements as the bucket's last draw (each
+                        self.info_count += draws as usize;
+                        // Ranges that draw the same elements as the bucket's last draw (each
                         // tree's octahedral or billboard quads, far ellipsoids, equal prefixes)
-                        // joins it as its next instance: the shaders read the range's `DrawInfo`
+                        // join it as its next instances: the shaders read a range's `DrawInfo`
                         // at the instance index, which runs on from the draw's first. One
                         // indirect draw then stands for a run of trees, where the GPU would
-                        // otherwise walk a command per tree.
+                        // otherwise walk a command per tree. (A piece's run of such ranges is
+                        // one entry here: each of them after its first would join the draw the
+                        // one before it made or joined.)
                         if let Some(last) = self.indirect[start..].last_mut()
                             && (last.first_vertex, last.vertex_count) == (first_vertex, vertex_count)
                             && last.first_instance.checked_add(last.instance_count) == Some(index)
                         {
-                            last.instance_count += 1;
+                            last.instance_count += draws;
                             continue;
                         }
                         self.indirect.push(wgpu::util::DrawIndirectArgs {
                             vertex_count,
-                            instance_count: 1,
+                            instance_count: draws,
                             first_vertex,
                             first_instance: index,
                         });
@@ -654,7 +656,7 @@ impl Recording {
         for b in self.written.drain(..) {
             if let Some(bucket) = self.buckets.get_mut(b) {
                 bucket.infos.clear();
-                bucket.spans.clear();
+                bucket.runs.clear();
             }
         }
         self.buckets.resize_with(buckets, Bucketed::default);
@@ -681,16 +683,22 @@ impl Recording {
             self.written.push(b);
         }
         bucket.infos.push(info);
-        bucket.spans.push((first_vertex, vertex_count));
+        match bucket.runs.last_mut() {
+            Some([first, count, draws]) if (*first, *count) == (first_vertex, vertex_count) => *draws += 1,
+            _ => bucket.runs.push([first_vertex, vertex_count, 1]),
+        }
     }
 }
 
-/// A piece's draws of one bucket: their draw infos, and each one's first vertex and vertex
-/// count (apart, so that the indirect draws are made without reading the infos).
+/// A piece's draws of one bucket: their draw infos, and, apart (so that the indirect draws are
+/// made without reading the infos), runs of consecutive draws of the same vertices: the first
+/// vertex, the vertex count and the draws in the run. A frame's far trees draw the same ranges
+/// (the orchid's 10^6 trees: up to 1.63 million draws a frame), which the frame's one pass over
+/// the pieces then takes a run at a time (`docs/cli.md`).
 #[derive(Default)]
 struct Bucketed {
     infos: Vec<DrawInfo>,
-    spans: Vec<(u32, u32)>,
+    runs: Vec<[u32; 3]>,
 }
 
 /// Records a draw that streaming does not clamp (pruned leaves, bark, impostor planes: uploaded
