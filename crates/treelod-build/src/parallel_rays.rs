@@ -139,9 +139,9 @@
 //!   their order, 44 bytes each) and copied where a cell is gathered, instead of computed there
 //!   from its three projected corners, loaded at random, in each of the about 4 cells that list
 //!   it: the same arithmetic (the outputs not compared), 3.72–3.83 s against 4.07–4.10 s (2 runs
-//!   each), but the 29 MB of planes
-//!   held per direction would raise the build's peak past four times the source's size (the
-//!   stage peaks about 6 MB under the build's 121 MB, the source is 31.6 MB); the reach alone
+//!   each), but the 29 MB of planes held per direction would raise the build's peak past four
+//!   times the source's size (the stage peaks about 6 MB under the build's 121 MB, the source is
+//!   31.6 MB); the reach alone
 //!   (4 bytes a triangle, to leave out what reaches no farther than the cell's nearest origin
 //!   before loading its corners) read within the runs' noise (4.66–5.65 s against 5.04–5.93 s,
 //!   3 runs each).

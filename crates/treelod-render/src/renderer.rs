@@ -961,9 +961,7 @@ impl Renderer {
         if self.policy_occlusion() {
             // Every tree the camera draws is measured (pruned ones included, once), but those
             // whose choice does not depend on it (`set_occlusion_jobs`).
-            let recordings = std::mem::take(&mut self.recordings);
-            self.set_occlusion_jobs(Self::recorded(&recordings, &main).map(|d| d.instance), &[]);
-            self.recordings = recordings;
+            self.set_occlusion_jobs(&main, &[]);
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.main = main;
@@ -1310,9 +1308,7 @@ impl Renderer {
             // a test here would use, so none is tested again: on the willow's 10^6 trees that
             // test took about half of the frame's `record` (`docs/cli.md`). (The GPU culls them
             // further; an extra job costs only time.)
-            let recordings = std::mem::take(&mut self.recordings);
-            self.set_occlusion_jobs(Self::recorded(&recordings, &main).map(|d| d.instance), &draws);
-            self.recordings = recordings;
+            self.set_occlusion_jobs(&main, &draws);
         }
         self.record_cascades(shadow_views, cascade_full, shadow, &mut stats);
         self.gpu_instance_draws = draws;
@@ -1595,12 +1591,13 @@ impl Renderer {
     }
 
     /// The occlusion tests of the instances drawn this frame whose visible fraction matters to
-    /// the policy's choice ([`PolicyState::visibility_matters`]): those `recorded` lists (in any
-    /// order, each any number of times) and those `gpu` draws (its entries not
-    /// [`InstanceDrawGpu::SKIP`]; empty in a CPU frame), one per instance, in the order of the
-    /// instances ([`occlusion_candidates`]). None while the measurement recorded earlier is not
-    /// read yet ([`Occlusion::in_flight`]): [`Occlusion::record`] would record nothing this frame.
-    fn set_occlusion_jobs(&mut self, recorded: impl Iterator<Item = u32>, gpu: &[InstanceDrawGpu]) {
+    /// the policy's choice ([`PolicyState::visibility_matters`]): the instances of `view`'s
+    /// recorded draws ([`Self::recorded`]; each any number of times) and those `gpu` draws (its
+    /// entries not [`InstanceDrawGpu::SKIP`]; empty in a CPU frame), one per instance, in the
+    /// order of the instances ([`occlusion_candidates`]). None while the measurement recorded
+    /// earlier is not read yet ([`Occlusion::in_flight`]): [`Occlusion::record`] would record
+    /// nothing this frame.
+    fn set_occlusion_jobs(&mut self, view: &View, gpu: &[InstanceDrawGpu]) {
         use rayon::prelude::*;
         self.occlusion_jobs.clear();
         if self.occlusion.in_flight() {
@@ -1610,7 +1607,7 @@ impl Renderer {
         let count = self.instances.len();
         marks.clear();
         marks.resize(count.div_ceil(64), 0);
-        for index in recorded.filter(|&i| (i as usize) < count) {
+        for index in Self::recorded(&self.recordings, view).map(|d| d.instance).filter(|&i| (i as usize) < count) {
             marks[index as usize / 64] |= 1 << (index % 64);
         }
         let mut jobs = std::mem::take(&mut self.occlusion_jobs);
