@@ -63,6 +63,10 @@ impl InstanceTransform {
 
 /// [`DrawInfo::fade`] of a dither range `[lo, hi)` (clamped to `[0, 1]`), as `pack2x16unorm`.
 pub(crate) fn pack_fade([lo, hi]: [f32; 2]) -> u32 {
+    // Every pixel, the share of all but a transition's draws, without the arithmetic.
+    if lo == 0.0 && hi == 1.0 {
+        return 0xFFFF_0000;
+    }
     unorm(lo, 65535.0) | (unorm(hi, 65535.0) << 16)
 }
 
@@ -306,9 +310,20 @@ impl Renderer {
     /// techniques trees in a transition leave) into `out`.
     fn record_piece(&self, piece: &Piece<'_>, full_mesh: bool, out: &mut Recording) {
         let Piece { view, leaving, part } = *piece;
+        let tints = Technique::ALL.map(tint);
+        // A tree's draws come one after another in each list (a far tree's branch lines, a
+        // pruned tree's leaves and bark): its technique and dither are looked up once.
+        let mut last: Option<(u32, (Technique, [f32; 2]))> = None;
+        let mut drawn_by = |instance: u32| match last {
+            Some((i, by)) if i == instance => by,
+            _ => {
+                let by = self.drawn_by(instance, leaving);
+                last = Some((instance, by));
+                by
+            }
+        };
         match part {
             Part::Ranges(ranges) => {
-                let tints = Technique::ALL.map(tint);
                 let mut i = 0;
                 while i < ranges.len() {
                     let range = ranges[i];
@@ -320,7 +335,7 @@ impl Renderer {
                         Kind::Points | Kind::Roots => (None, Some(range)),
                     };
                     let instance = view.instance_index(range.instance);
-                    let (technique, dither) = self.drawn_by(instance, leaving);
+                    let (technique, dither) = drawn_by(instance);
                     for draw in self.clamp(instance, range, triangles, points, full_mesh) {
                         let Some(draw) = draw else { continue };
                         let draw = RecordedDraw { technique, dither, ..draw };
@@ -345,7 +360,7 @@ impl Renderer {
             // Gilet's per-cell estimate (it is a property of the point hierarchy's cells).
             Part::Triangles(draws) => {
                 for draw in draws {
-                    let (technique, dither) = self.drawn_by(draw.instance, leaving);
+                    let (technique, dither) = drawn_by(draw.instance);
                     let record = RecordedDraw {
                         instance: draw.instance,
                         model: ModelId(draw.model),
@@ -362,7 +377,7 @@ impl Renderer {
                         technique,
                         dither,
                     };
-                    record_direct(out, record, draw.first, draw.leaf_scale);
+                    record_direct(out, record, draw.first, draw.leaf_scale, &tints);
                 }
             }
             // Prefixes of one cell's elements uploaded whole (impostor planes, ellipsoids,
@@ -370,7 +385,7 @@ impl Renderer {
             Part::Prefixes(draws, source) => {
                 for draw in draws {
                     let range = draw.range;
-                    let (technique, dither) = self.drawn_by(draw.instance, leaving);
+                    let (technique, dither) = drawn_by(draw.instance);
                     let record = RecordedDraw {
                         instance: draw.instance,
                         model: ModelId(draw.model),
@@ -383,13 +398,13 @@ impl Renderer {
                         technique,
                         dither,
                     };
-                    record_direct(out, record, range.first, 1.0);
+                    record_direct(out, record, range.first, 1.0, &tints);
                 }
             }
             // Baseline billboards: every quad of the chosen kind; and octahedral impostors.
             Part::Quads(draws, source) => {
                 for &treelod_runtime::QuadDraw { instance, model, first, count } in draws {
-                    let (technique, dither) = self.drawn_by(instance, leaving);
+                    let (technique, dither) = drawn_by(instance);
                     let record = RecordedDraw {
                         instance,
                         model: ModelId(model),
@@ -402,7 +417,7 @@ impl Renderer {
                         technique,
                         dither,
                     };
-                    record_direct(out, record, first, 1.0);
+                    record_direct(out, record, first, 1.0, &tints);
                 }
             }
         }
@@ -704,8 +719,14 @@ struct Bucketed {
 /// Records a draw that streaming does not clamp (pruned leaves, bark, impostor planes: uploaded
 /// whole): its `DrawInfo` (thresholds, technique and dither from `record`, unshaded) into the
 /// model's bucket of its source, drawing `record.count` elements from element `first`, and
-/// `record` itself.
-fn record_direct(out: &mut Recording, record: RecordedDraw, first: u32, leaf_scale: f32) {
+/// `record` itself. `tints`: each technique's [`tint`] by [`Technique::index`].
+fn record_direct(
+    out: &mut Recording,
+    record: RecordedDraw,
+    first: u32,
+    leaf_scale: f32,
+    tints: &[u32; Technique::COUNT],
+) {
     let corners = record.source.corners();
     let info = DrawInfo {
         tau_p: record.tau_points,
@@ -714,7 +735,7 @@ fn record_direct(out: &mut Recording, record: RecordedDraw, first: u32, leaf_sca
         shading: 1.0,
         leaf_scale,
         instance: record.instance,
-        tint: tint(record.technique),
+        tint: tints[record.technique.index()],
         fade: pack_fade(record.dither),
     };
     let bucket = record.source.bucket().of_model(record.model.0 as usize);
@@ -724,7 +745,18 @@ fn record_direct(out: &mut Recording, record: RecordedDraw, first: u32, leaf_sca
 
 #[cfg(test)]
 mod tests {
-    use super::unorm;
+    use super::{EVERY_PIXEL, pack_fade, unorm};
+
+    #[test]
+    fn every_pixel_packs_as_its_shares_do() {
+        let packed = |[lo, hi]: [f32; 2]| unorm(lo, 65535.0) | (unorm(hi, 65535.0) << 16);
+        assert_eq!(pack_fade(EVERY_PIXEL), packed(EVERY_PIXEL));
+        assert_eq!(pack_fade(EVERY_PIXEL), 0xFFFF_0000);
+        assert_eq!(pack_fade([-0.0, 1.0]), 0xFFFF_0000);
+        for shares in [[0.0, 0.25], [0.25, 1.0], [0.0, 0.999_999], [1e-7, 1.0], [0.5, 0.5]] {
+            assert_eq!(pack_fade(shares), packed(shares), "{shares:?}");
+        }
+    }
 
     #[test]
     fn unorm_rounds_as_round_does() {
