@@ -16,7 +16,7 @@
 //! complementary dithered pixels ([`level_keep`]), so the prefix also holds the records still
 //! fading out ([`SptLod::select_per_pixel_blended`]).
 
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec3, Vec4};
 use treelod_format::{CellRecord, Container, EllipsoidRecord, LineRecord, PlaneRecord, Range};
 
 use crate::frame::{
@@ -173,8 +173,8 @@ pub struct SptLod {
     block_cell: u32,
 }
 
-/// Anchors measured at once by [`SptLod::least_tau`].
-const LANES: usize = 8;
+/// Anchors measured at once by [`SptLod::least_tau`]: one [`Vec4`].
+const LANES: usize = 4;
 
 /// The most records per cell (with records) a far list holds ([`SptLod::far_list`]): a bound of
 /// its copy's size, as [`crate::FAR_POINTS_PER_CELL`] is the points'. It stays at the 64 the
@@ -553,7 +553,7 @@ impl SptLod {
     /// without cells).
     ///
     /// Every anchor is measured. Skipping those out of reach was measured and not taken: the
-    /// anchors in chunks of [`LANES`] along a Morton curve, each chunk bounded (by its box seen
+    /// anchors in chunks of eight along a Morton curve, each chunk bounded (by its box seen
     /// along the direction to it, or by a sphere compared in squared distances), the chunk of
     /// the nearest bound scanned first and then only the chunks that could hold a nearer anchor
     /// (the same number to the bit, tested against the full scan on random anchors, transforms
@@ -570,23 +570,32 @@ impl SptLod {
     /// anchors a tree; the check, the margin and the second pass cost more than the
     /// transforms they saved).
     fn nearest_anchor(&self, transform: Mat4, camera: &Camera) -> f32 {
-        // `transform.transform_point3(anchor) - camera.position` and its `length_squared`, `LANES`
-        // anchors at a time, each product and sum in glam's order (`w + (z·a_z + (y·a_y + x·a_x))`,
-        // then `(x² + y²) + z²`; no fused multiply-add): the same numbers as `cell_taus` measures.
+        // `transform.transform_point3(anchor) - camera.position` and its `length_squared`, four
+        // anchors at a time in glam's SIMD vectors, each product and sum in glam's order
+        // (`w + (z·a_z + (y·a_y + x·a_x))`, then `(x² + y²) + z²`; no fused multiply-add): the
+        // same numbers as `cell_taus` measures. The least is kept by comparison (a NaN distance,
+        // of a degenerate transform, never replaces it, as `f32::min` has it). Written with
+        // arrays of eight anchors instead, the compiler's vectors shuffled and spilled: the
+        // scan took about a tenth of the orchid's 10^6-tree flight (`docs/cli.md`).
         let [mx, my, mz, mw] = [transform.x_axis, transform.y_axis, transform.z_axis, transform.w_axis];
         let eye = camera.position;
-        let mut least = [f32::INFINITY; LANES];
+        let s = Vec4::splat;
+        let (xx, xy, xz) = (s(mx.x), s(my.x), s(mz.x));
+        let (yx, yy, yz) = (s(mx.y), s(my.y), s(mz.y));
+        let (zx, zy, zz) = (s(mx.z), s(my.z), s(mz.z));
+        let (wx, wy, wz) = (s(mw.x), s(mw.y), s(mw.z));
+        let (ex, ey, ez) = (s(eye.x), s(eye.y), s(eye.z));
+        let mut least = Vec4::INFINITY;
         let [xs, ys, zs] = &self.anchors;
         for ((x, y), z) in xs.chunks_exact(LANES).zip(ys.chunks_exact(LANES)).zip(zs.chunks_exact(LANES)) {
-            for lane in 0..LANES {
-                let (ax, ay, az) = (x[lane], y[lane], z[lane]);
-                let dx = (((mx.x * ax) + (my.x * ay)) + (mz.x * az)) + mw.x - eye.x;
-                let dy = (((mx.y * ax) + (my.y * ay)) + (mz.y * az)) + mw.y - eye.y;
-                let dz = (((mx.z * ax) + (my.z * ay)) + (mz.z * az)) + mw.z - eye.z;
-                least[lane] = least[lane].min((dx * dx + dy * dy) + dz * dz);
-            }
+            let (ax, ay, az) = (Vec4::from_slice(x), Vec4::from_slice(y), Vec4::from_slice(z));
+            let dx = (((xx * ax) + (xy * ay)) + (xz * az)) + wx - ex;
+            let dy = (((yx * ax) + (yy * ay)) + (yz * az)) + wy - ey;
+            let dz = (((zx * ax) + (zy * ay)) + (zz * az)) + wz - ez;
+            let d = (dx * dx + dy * dy) + dz * dz;
+            least = Vec4::select(d.cmplt(least), d, least);
         }
-        least.into_iter().fold(f32::INFINITY, f32::min).sqrt()
+        least.to_array().into_iter().fold(f32::INFINITY, f32::min).sqrt()
     }
 
     /// A cell's `τ` from its anchor's distance `d_cell` ([`Self::cell_taus`]); `block_cell` gives
@@ -656,5 +665,73 @@ impl SptLod {
             }
         }
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Quat;
+    use proptest::prelude::*;
+
+    use super::*;
+
+    /// An `SptLod` whose cells have `anchors` (one record each), for the anchors' scan alone.
+    fn with_anchors(anchors: &[Vec3]) -> SptLod {
+        let cells: Vec<SptCell> = (0u32..)
+            .zip(anchors)
+            .map(|(i, &anchor)| SptCell {
+                cell: i,
+                records: Range { first: i, count: 1 },
+                anchor,
+                block_cell: false,
+                hi_at: i,
+            })
+            .collect();
+        SptLod {
+            anchors: anchor_lanes(&cells),
+            hi: vec![1.0; cells.len()],
+            cells,
+            centre: Vec3::ZERO,
+            radius: 1.0,
+            block_centre: Vec3::ZERO,
+            block_radius: 1.0,
+            anchor_reach: 0.0,
+            far: Vec::new(),
+            far_hi: Vec::new(),
+            far_tau: f32::INFINITY,
+            far_first: None,
+            block_cell: 0,
+        }
+    }
+
+    fn vec3(range: std::ops::Range<f32>) -> impl Strategy<Value = Vec3> {
+        (range.clone(), range.clone(), range).prop_map(|(x, y, z)| Vec3::new(x, y, z))
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+
+        /// The scan four anchors at a time gives the nearest anchor's distance to the bit, as
+        /// `transform_point3` and `distance` measure each anchor (what `cell_taus` measures),
+        /// whatever the number of anchors (the last lanes padded) and the transform.
+        #[test]
+        fn the_nearest_anchor_is_the_least_distance_to_the_bit(
+            anchors in prop::collection::vec(vec3(-20.0..20.0), 1..40),
+            scale in vec3(0.05..8.0),
+            axis in vec3(-1.0..1.0),
+            angle in -3.2f32..3.2,
+            translation in vec3(-500.0..500.0),
+            eye in vec3(-2000.0..2000.0),
+        ) {
+            let rotation = Quat::from_axis_angle(axis.try_normalize().unwrap_or(Vec3::Y), angle);
+            let transform = Mat4::from_scale_rotation_translation(scale, rotation, translation);
+            let camera = Camera::look_at(eye, translation, 0.8, 480, 270);
+            let lod = with_anchors(&anchors);
+            let expected = anchors
+                .iter()
+                .map(|&a| transform.transform_point3(a).distance(eye))
+                .fold(f32::INFINITY, f32::min);
+            prop_assert_eq!(lod.nearest_anchor(transform, &camera).to_bits(), expected.to_bits());
+        }
     }
 }
