@@ -2,10 +2,12 @@
 //! typed error of the right class (never a panic), found before the reader allocates more than
 //! the file justifies.
 //!
-//! A counting global allocator records, per thread, the peak of live heap bytes while a hostile
-//! file is opened and verified; every case asserts that peak stays under 64 × the file size plus
-//! a small constant, so a lying length can never make the reader allocate what the file does not
-//! back.
+//! A counting global allocator records the process's peak of live heap bytes while a hostile
+//! file is opened and verified (the reader decodes sections on rayon's workers, so the calling
+//! thread's own peak would not see them); every case asserts that peak stays under 64 × the file
+//! size plus a small constant, so a lying length can never make the reader allocate what the file
+//! does not back. Each test runs alone among this binary's tests ([`exclusive`]), so the peak is
+//! its own under `cargo test`'s threads too.
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
@@ -13,7 +15,7 @@ use treelod_format::{
     Compression, Container, ContainerData, Error, ErrorClass, FLAG_SHUFFLE, FLAG_ZSTD, OpenOptions, PlaneLeafRecord,
     SectionKind, image_format, verify,
 };
-use treelod_tests::alloc::{self, CountingAllocator};
+use treelod_tests::alloc::{self, CountingAllocator, exclusive};
 use treelod_tests::raw::{Part, RawFile, layout};
 use treelod_tests::{SyntheticOptions, synthetic};
 
@@ -23,10 +25,11 @@ use treelod_tests::{SyntheticOptions, synthetic};
 #[global_allocator]
 static ALLOCATOR: CountingAllocator = CountingAllocator;
 
-/// Runs `f` and returns its result with the peak of extra live heap bytes on this thread meanwhile.
+/// Runs `f` and returns its result with the peak of extra live heap bytes in the process
+/// meanwhile (the caller's test holds [`exclusive`]).
 fn peak_during<R>(f: impl FnOnce() -> R) -> (R, usize) {
     let (result, peak) = alloc::peak_during(f);
-    (result, peak.thread)
+    (result, peak.process)
 }
 
 /// Heap a reader may use beyond 64 × the file size: error messages, the section list, metadata.
@@ -121,6 +124,7 @@ fn compressed_index(file: &RawFile, record_size_above_one: bool) -> usize {
 
 #[test]
 fn fixtures_are_small_and_valid() {
+    let _alone = exclusive();
     for (name, bytes) in variants() {
         // Under 10 KiB: 8 KiB until 1.12's tables of the added techniques (CALIBRATION_ADDED,
         // CALIBRATION_ELEVATIONS_ADDED) took it past 8.4 KiB, 9 KiB until 1.18's chain levels' FLIP
@@ -139,6 +143,7 @@ fn fixtures_are_small_and_valid() {
 
 #[test]
 fn every_prefix_is_truncated() {
+    let _alone = exclusive();
     for (name, bytes) in variants() {
         for len in 0..bytes.len() {
             let case = format!("{name} prefix of {len} bytes");
@@ -151,6 +156,7 @@ fn every_prefix_is_truncated() {
 
 #[test]
 fn trailing_bytes_are_refused() {
+    let _alone = exclusive();
     for (name, bytes) in variants() {
         for (extra, fill) in [(1usize, 0u8), (15, 0), (16, 0xFF), (4096, 0)] {
             let mut longer = bytes.clone();
@@ -170,6 +176,7 @@ fn trailing_bytes_are_refused() {
 
 #[test]
 fn bad_magic_is_refused() {
+    let _alone = exclusive();
     let bytes = small_data().to_bytes(Compression::None).unwrap();
     for i in 0..12 {
         let mut bad = bytes.clone();
@@ -193,6 +200,7 @@ fn bad_magic_is_refused() {
 
 #[test]
 fn text_mode_mangling_is_detected_by_the_magic() {
+    let _alone = exclusive();
     fn replace(bytes: &[u8], from: &[u8], to: &[u8]) -> Vec<u8> {
         let mut out = Vec::with_capacity(bytes.len() * 2);
         let mut i = 0;
@@ -227,6 +235,7 @@ fn text_mode_mangling_is_detected_by_the_magic() {
 
 #[test]
 fn other_major_versions_are_unsupported() {
+    let _alone = exclusive();
     let bytes = small_data().to_bytes(Compression::None).unwrap();
     // The fixture holds the chain levels' FLIP error (CHAIN_CALIBRATION_FLIP), so it is a 1.18
     // file.
@@ -264,6 +273,7 @@ fn other_major_versions_are_unsupported() {
 
 #[test]
 fn header_bit_flips_are_refused() {
+    let _alone = exclusive();
     for (name, bytes) in variants() {
         for bit in 0..64 * 8 {
             let mut bad = bytes.clone();
@@ -285,6 +295,7 @@ fn header_bit_flips_are_refused() {
 
 #[test]
 fn table_bit_flips_are_caught_by_the_header_checksum() {
+    let _alone = exclusive();
     for (name, bytes) in variants() {
         let file = RawFile::new(bytes.clone());
         let table = file.entry_offset(0)..file.entry_offset(file.section_count());
@@ -300,6 +311,7 @@ fn table_bit_flips_are_caught_by_the_header_checksum() {
 
 #[test]
 fn resealed_table_bit_flips_never_panic() {
+    let _alone = exclusive();
     // With the header checksum recomputed, a flip reaches the table rules: most are refused,
     // a few (reserved fields, an uncompressed section's checksum) only by verify, and a kind
     // turned unknown may be skipped; none may panic or allocate beyond the file's size.
@@ -327,6 +339,7 @@ fn resealed_table_bit_flips_never_panic() {
 
 #[test]
 fn every_single_bit_flip_is_rejected_by_open_or_verify() {
+    let _alone = exclusive();
     for (name, bytes) in variants() {
         let file = RawFile::new(bytes.clone());
         // Sections open reads at every open: a flip there is caught by open itself.
@@ -356,6 +369,7 @@ fn every_single_bit_flip_is_rejected_by_open_or_verify() {
 
 #[test]
 fn oversize_counts_and_lengths_are_refused() {
+    let _alone = exclusive();
     let bytes = small_data().to_bytes(Compression::None).unwrap();
     let file = RawFile::new(bytes.clone());
     let cells = index_of(&file, SectionKind::CELLS);
@@ -440,6 +454,7 @@ fn oversize_counts_and_lengths_are_refused() {
 
 #[test]
 fn block_and_cell_content_is_checked_at_open() {
+    let _alone = exclusive();
     let bytes = small_data().to_bytes(Compression::None).unwrap();
     let file = RawFile::new(bytes.clone());
     let block = index_of(&file, SectionKind::BLOCK);
@@ -478,6 +493,7 @@ fn block_and_cell_content_is_checked_at_open() {
 
 #[test]
 fn overlapping_and_unordered_sections_are_refused() {
+    let _alone = exclusive();
     let bytes = small_data().to_bytes(Compression::None).unwrap();
     let file = RawFile::new(bytes.clone());
     for index in 1..file.section_count() {
@@ -505,6 +521,7 @@ fn overlapping_and_unordered_sections_are_refused() {
 
 #[test]
 fn duplicate_kinds_are_refused() {
+    let _alone = exclusive();
     let bytes = small_data().to_bytes(Compression::None).unwrap();
     let file = RawFile::new(bytes.clone());
     for index in 1..file.section_count() {
@@ -524,6 +541,7 @@ fn duplicate_kinds_are_refused() {
 
 #[test]
 fn unknown_flag_bits_on_known_kinds_are_unsupported() {
+    let _alone = exclusive();
     for (name, bytes) in variants() {
         let file = RawFile::new(bytes.clone());
         for (index, entry) in file.entries().iter().enumerate() {
@@ -551,6 +569,7 @@ fn unknown_flag_bits_on_known_kinds_are_unsupported() {
 
 #[test]
 fn unknown_kinds_are_skipped_whatever_their_flags() {
+    let _alone = exclusive();
     let data = small_data();
     let expected_known = ContainerData { extra_sections: Vec::new(), ..data.clone() };
     for (name, bytes) in variants() {
@@ -589,6 +608,7 @@ fn unknown_kinds_are_skipped_whatever_their_flags() {
 
 #[test]
 fn plane_leaves_of_a_wrong_length_or_record_size() {
+    let _alone = exclusive();
     // Spec §6.10.1: PLANE_LEAVES' length against the planes is a verify rule, not an open rule: a
     // section one record short or long opens and fails verify; a record size other than the
     // kind's is refused at open (§4).
@@ -621,6 +641,7 @@ fn plane_leaves_of_a_wrong_length_or_record_size() {
 
 #[test]
 fn missing_required_sections_are_refused() {
+    let _alone = exclusive();
     for (name, bytes) in variants() {
         for kind in [SectionKind::META, SectionKind::BLOCK, SectionKind::CELLS] {
             let parts: Vec<Part> =
@@ -636,6 +657,7 @@ fn missing_required_sections_are_refused() {
 
 #[test]
 fn hostile_metadata_is_a_typed_error() {
+    let _alone = exclusive();
     let bytes = small_data().to_bytes(Compression::None).unwrap();
     let file = RawFile::new(bytes);
     let meta = index_of(&file, SectionKind::META);
@@ -699,6 +721,7 @@ fn with_section(index: usize, flags: u32, raw_length: u64, stored: Vec<u8>) -> V
 
 #[test]
 fn a_declared_size_beyond_1024_times_the_stored_size_is_refused_before_decoding() {
+    let _alone = exclusive();
     let file = RawFile::new(compressed());
     for index in [compressed_index(&file, true), compressed_index(&file, false)] {
         let entry = file.entry(index);
@@ -721,6 +744,7 @@ fn a_declared_size_beyond_1024_times_the_stored_size_is_refused_before_decoding(
 
 #[test]
 fn a_zstd_bomb_is_refused_before_any_allocation() {
+    let _alone = exclusive();
     // A real frame of 64 MiB of zeros (a few KiB stored) in VERTICES, honestly declared.
     let raw_length = (64u64 << 20) / 28 * 28;
     let mut encoder = zstd::stream::Encoder::new(Vec::new(), 19).unwrap();
@@ -762,6 +786,7 @@ fn a_zstd_bomb_is_refused_before_any_allocation() {
 
 #[test]
 fn frames_that_disagree_with_the_table_are_refused() {
+    let _alone = exclusive();
     let file = RawFile::new(compressed());
     for index in [compressed_index(&file, true), compressed_index(&file, false)] {
         let entry = file.entry(index);
@@ -824,6 +849,7 @@ fn frames_that_disagree_with_the_table_are_refused() {
 
 #[test]
 fn the_decode_budget_bounds_all_compressed_sections_together() {
+    let _alone = exclusive();
     let bytes = compressed();
     let file = RawFile::new(bytes.clone());
     let total: u64 = file
@@ -847,7 +873,52 @@ fn the_decode_budget_bounds_all_compressed_sections_together() {
 }
 
 #[test]
+fn of_several_bad_sections_open_names_the_first_in_table_order() {
+    let _alone = exclusive();
+    // Sections are decoded side by side; the error must still be the one a reader going through
+    // the table one section after the other meets first.
+    let file = RawFile::new(compressed());
+    let decoded: Vec<usize> = (0..file.section_count())
+        .filter(|&i| {
+            let e = file.entry(i);
+            e.flags & FLAG_ZSTD != 0 && SectionKind(e.kind).record_size().is_some() && e.kind != SectionKind::META.0
+        })
+        .collect();
+    let (&first, &last) = (decoded.first().unwrap(), decoded.last().unwrap());
+    assert!(first < last, "the fixture has two decoded sections: {decoded:?}");
+    let kind = |i: usize| SectionKind(file.entry(i).kind);
+    let bad_checksum = |file: &mut RawFile, i: usize| file.payload_mut(i)[0] ^= 1;
+    let past_ratio = |file: &mut RawFile, i: usize| {
+        file.patch_entry(i, |e| {
+            e.raw_length = (e.length * 1024 / u64::from(e.record_size) + 1) * u64::from(e.record_size)
+        });
+    };
+    let checksum_of = |err: &Error| match err {
+        Error::ChecksumMismatch { what, .. } => what.clone(),
+        other => panic!("expected a checksum mismatch, got {other:?}"),
+    };
+    // Two bad checksums: the first section's.
+    let mut both = RawFile::new(compressed());
+    bad_checksum(&mut both, first);
+    bad_checksum(&mut both, last);
+    assert_eq!(checksum_of(&open_error("two checksums", &both.bytes)), format!("section {}", kind(first)));
+    // A bad checksum before a section past a limit: the checksum.
+    let mut checksum_then_limit = RawFile::new(compressed());
+    bad_checksum(&mut checksum_then_limit, first);
+    past_ratio(&mut checksum_then_limit, last);
+    let err = open_error("checksum, then limit", &checksum_then_limit.bytes);
+    assert_eq!(checksum_of(&err), format!("section {}", kind(first)));
+    // A section past a limit before a bad checksum: the limit.
+    let mut limit_then_checksum = RawFile::new(compressed());
+    past_ratio(&mut limit_then_checksum, first);
+    bad_checksum(&mut limit_then_checksum, last);
+    let err = open_error("limit, then checksum", &limit_then_checksum.bytes);
+    assert!(matches!(err, Error::DecodeLimit { kind: k, .. } if k == kind(first)), "{err:?}");
+}
+
+#[test]
 fn the_allocation_counter_sees_large_allocations() {
+    let _alone = exclusive();
     let (len, peak) = peak_during(|| vec![1u8; 1 << 20].len());
     assert_eq!(len, 1 << 20);
     assert!(peak >= 1 << 20, "peak {peak}");
@@ -879,6 +950,7 @@ fn cell_with_two_sizes(data: &ContainerData) -> core::ops::Range<usize> {
 
 #[test]
 fn verify_refuses_content_that_breaks_the_rules() {
+    let _alone = exclusive();
     use SectionKind as K;
     let good = synthetic(5, &SyntheticOptions::everything());
     Container::from_bytes(&good.to_bytes(Compression::None).unwrap()).and_then(|c| verify(&c)).unwrap();
@@ -1147,6 +1219,7 @@ fn reseal_all(bytes: Vec<u8>) -> Vec<u8> {
 
 #[test]
 fn every_bit_flip_behind_valid_checksums_is_handled() {
+    let _alone = exclusive();
     // With every checksum recomputed, a flipped bit may still make a valid file (a colour, a uv);
     // what matters is that nothing panics or over-allocates and that errors are typed.
     for (name, bytes) in variants() {
@@ -1179,6 +1252,7 @@ mod random_patches {
             compress in any::<bool>(),
             patches in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>(), 1usize..=4), 1..=6),
         ) {
+            let _alone = exclusive();
             let options = SyntheticOptions { grid: [1, 2, 1], ..small_options() };
             let compression = if compress { Compression::Zstd { level: 1 } } else { Compression::None };
             let mut bytes = synthetic(seed, &options).to_bytes(compression).unwrap();
