@@ -989,37 +989,29 @@ trait Word: Copy + core::ops::BitXor<Output = Self> + core::ops::BitAnd<Output =
     const MASKS: [Self; 3];
 }
 
-impl Word for u64 {
-    fn read(bytes: &[u8]) -> Self {
-        Self::from_le_bytes(bytes[..8].try_into().expect("eight bytes"))
-    }
-    fn write(self, out: &mut [u8]) {
-        out[..8].copy_from_slice(&self.to_le_bytes());
-    }
-    fn shr(self, bits: u32) -> Self {
-        self >> bits
-    }
-    fn shl(self, bits: u32) -> Self {
-        self << bits
-    }
-    const MASKS: [Self; 3] = [0x00FF_00FF_00FF_00FF, 0x0000_FFFF_0000_FFFF, 0x0000_0000_FFFF_FFFF];
+/// [`Word`] for an unsigned integer type, with its masks.
+macro_rules! word {
+    ($t:ty, $masks:expr) => {
+        impl Word for $t {
+            fn read(bytes: &[u8]) -> Self {
+                Self::from_le_bytes(bytes[..size_of::<Self>()].try_into().expect("a word's bytes"))
+            }
+            fn write(self, out: &mut [u8]) {
+                out[..size_of::<Self>()].copy_from_slice(&self.to_le_bytes());
+            }
+            fn shr(self, bits: u32) -> Self {
+                self >> bits
+            }
+            fn shl(self, bits: u32) -> Self {
+                self << bits
+            }
+            const MASKS: [Self; 3] = $masks;
+        }
+    };
 }
 
-impl Word for u32 {
-    fn read(bytes: &[u8]) -> Self {
-        Self::from_le_bytes(bytes[..4].try_into().expect("four bytes"))
-    }
-    fn write(self, out: &mut [u8]) {
-        out[..4].copy_from_slice(&self.to_le_bytes());
-    }
-    fn shr(self, bits: u32) -> Self {
-        self >> bits
-    }
-    fn shl(self, bits: u32) -> Self {
-        self << bits
-    }
-    const MASKS: [Self; 3] = [0x00FF_00FF, 0x0000_FFFF, 0];
-}
+word!(u64, [0x00FF_00FF_00FF_00FF, 0x0000_FFFF_0000_FFFF, 0x0000_0000_FFFF_FFFF]);
+word!(u32, [0x00FF_00FF, 0x0000_FFFF, 0]);
 
 /// The `N` × `N` bytes of `words` transposed: byte `j` of word `i` becomes byte `i` of word `j`
 /// (bytes counted from the least significant). Rounds of swaps of single bytes between words one
