@@ -880,11 +880,11 @@ fn decode_shuffled(stored: &[u8], record_size: usize, out: &mut [u8]) -> std::io
 ///
 /// The frame holds byte 0 of every record, then byte 1, and so on (planes of `n` bytes, `n` the
 /// record count). Where whole planes fit in `chunk`, each read holds as many as fit (a multiple
-/// of four where four fit; four where four fit in twice `chunk`), and [`scatter_planes`] writes them into the records a tile at a time,
-/// the tiles side by side, four or eight planes of as many records at once (words transposed): a
-/// 49 MB section of 48-byte records (1.02 M points) then takes 12 passes over the output, not 48,
-/// each in cache-sized tiles. A plane longer than `chunk` is read in runs of one plane, each byte
-/// written to its record.
+/// of four where four fit; four where four fit in twice `chunk`), and [`scatter_planes`] writes
+/// them into the records a tile at a time, the tiles side by side, four or eight planes of as
+/// many records at once (words transposed): a 49 MB section of 48-byte records (1.02 M points)
+/// then takes 12 passes over the output, not 48, each in cache-sized tiles. A plane longer than
+/// `chunk` is read in runs of one plane, each byte written to its record.
 fn decode_shuffled_by(stored: &[u8], record_size: usize, out: &mut [u8], chunk: usize) -> std::io::Result<()> {
     use std::io::Read as _;
     let raw_len = out.len();
