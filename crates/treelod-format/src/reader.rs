@@ -962,15 +962,10 @@ fn scatter_planes(planes: &[u8], n: usize, record_size: usize, first: usize, out
         for q in (eights..fours).step_by(4) {
             transpose_group::<4, u32>(planes, n, record_size, first, q, start, whole, records);
         }
-        for q in 0..fours {
-            let plane = &planes[q * n + start + whole..q * n + end];
-            for (record, &byte) in records[whole * record_size..].chunks_exact_mut(record_size).zip(plane) {
-                record[first + q] = byte;
-            }
-        }
-        for q in fours..count {
-            let plane = &planes[q * n + start..q * n + end];
-            for (record, &byte) in records.chunks_exact_mut(record_size).zip(plane) {
+        for q in 0..count {
+            let done = if q < fours { whole } else { 0 };
+            let plane = &planes[q * n + start + done..q * n + end];
+            for (record, &byte) in records[done * record_size..].chunks_exact_mut(record_size).zip(plane) {
                 record[first + q] = byte;
             }
         }
@@ -978,13 +973,18 @@ fn scatter_planes(planes: &[u8], n: usize, record_size: usize, first: usize, out
 }
 
 /// A word of `N` bytes that [`transpose_group`] reads `N` of at a time.
-trait Word: Copy + core::ops::BitXor<Output = Self> + core::ops::BitAnd<Output = Self> + core::ops::BitXorAssign {
+trait Word:
+    Copy
+    + core::ops::BitXor<Output = Self>
+    + core::ops::BitAnd<Output = Self>
+    + core::ops::BitXorAssign
+    + core::ops::Shr<u32, Output = Self>
+    + core::ops::Shl<u32, Output = Self>
+{
     /// The word of `bytes` (least significant first).
     fn read(bytes: &[u8]) -> Self;
     /// The word's bytes into `out` (least significant first).
     fn write(self, out: &mut [u8]);
-    fn shr(self, bits: u32) -> Self;
-    fn shl(self, bits: u32) -> Self;
     /// Per round of [`transpose_words`], the mask of the low element of each pair it swaps.
     const MASKS: [Self; 3];
 }
@@ -998,12 +998,6 @@ macro_rules! word {
             }
             fn write(self, out: &mut [u8]) {
                 out[..size_of::<Self>()].copy_from_slice(&self.to_le_bytes());
-            }
-            fn shr(self, bits: u32) -> Self {
-                self >> bits
-            }
-            fn shl(self, bits: u32) -> Self {
-                self << bits
             }
             const MASKS: [Self; 3] = $masks;
         }
@@ -1022,9 +1016,9 @@ fn transpose_words<const N: usize, W: Word>(words: &mut [W; N]) {
         #[expect(clippy::cast_possible_truncation, reason = "at most 32 bits")]
         let bits = (8 * apart) as u32;
         for k in (0..N).filter(|k| k & apart == 0) {
-            let t = (words[k].shr(bits) ^ words[k + apart]) & mask;
+            let t = ((words[k] >> bits) ^ words[k + apart]) & mask;
             words[k + apart] ^= t;
-            words[k] ^= t.shl(bits);
+            words[k] ^= t << bits;
         }
         apart *= 2;
     }
