@@ -275,7 +275,13 @@ impl Renderer {
         recordings: &'a [Recording],
         view: &View,
     ) -> impl Iterator<Item = &'a RecordedDraw> + 'a {
-        recordings.get(view.recorded.clone()).unwrap_or_default().iter().flat_map(|r| r.recorded.iter())
+        Self::recorded_pieces(recordings, view).iter().flat_map(Recording::draws)
+    }
+
+    /// The pieces of `recordings` that hold [`Self::recorded`], in order ([`Recording::draws`]
+    /// each), for a reader that takes them side by side.
+    pub(crate) fn recorded_pieces<'a>(recordings: &'a [Recording], view: &View) -> &'a [Recording] {
+        recordings.get(view.recorded.clone()).unwrap_or_default()
     }
 
     /// Copies the frame's draw infos, in the order [`Self::record_view`] gave them their
@@ -668,6 +674,11 @@ pub(crate) struct Recording {
 }
 
 impl Recording {
+    /// The piece's draws as recorded for the GPU, in order.
+    pub(crate) fn draws(&self) -> &[RecordedDraw] {
+        &self.recorded
+    }
+
     /// Empty, with `buckets` buckets (their storage kept for the next frame).
     fn clear(&mut self, buckets: usize) {
         for b in self.written.drain(..) {

@@ -713,50 +713,56 @@ impl Renderer {
     /// cut: [`treelod_runtime::point_drawn`] at each draw's thresholds), as opposed to the points
     /// of [`FrameStats::submitted`], the prefixes submitted. A scan of the submitted points on the
     /// CPU, for tools and reports, not for every frame of a host; 0 after a GPU-selected frame.
+    /// The pieces of the frame's draws are scanned side by side on rayon's pool (the count is
+    /// the same whatever the thread count).
     #[must_use]
     pub fn points_in_cut(&self) -> u64 {
-        let mut drawn = 0u64;
-        for draw in Self::recorded(&self.recordings, &self.main) {
-            let (Some(model), Some(lod)) =
-                (self.models.get(draw.model.0 as usize), self.lods.get(draw.model.0 as usize))
-            else {
-                continue;
-            };
-            let points = model.container.points();
-            let t = treelod_runtime::Thresholds { points: draw.tau_points, triangles: draw.tau_triangles };
-            let count = draw.count as usize;
-            let kept = |p: &PointRecord| treelod_runtime::point_drawn(p, t);
-            drawn += match draw.source {
-                DrawSource::Points => {
-                    let first = model.container.cells().get(draw.cell as usize).map_or(0, |c| c.points.first as usize);
-                    points.get(first..first + count).unwrap_or_default().iter().filter(|p| kept(p)).count()
-                }
-                DrawSource::Roots => {
-                    let at = if draw.cell == ROOTS_CELL {
-                        0
-                    } else {
-                        model.cell_roots.get(draw.cell as usize).map_or(0, |r| r.0 as usize)
-                    };
-                    lod.far_list()
-                        .get(at..at + count)
-                        .unwrap_or_default()
-                        .iter()
-                        .filter_map(|&i| points.get(i as usize))
-                        .filter(|p| kept(p))
-                        .count()
-                }
-                DrawSource::Triangles
-                | DrawSource::PrunedLeaves
-                | DrawSource::Bark
-                | DrawSource::Planes
-                | DrawSource::LodLevel
-                | DrawSource::Billboards
-                | DrawSource::Octahedral
-                | DrawSource::Ellipsoids
-                | DrawSource::Lines => 0,
-            } as u64;
-        }
-        drawn
+        use rayon::prelude::*;
+        Self::recorded_pieces(&self.recordings, &self.main)
+            .par_iter()
+            .map(|piece| piece.draws().iter().map(|draw| self.points_in_cut_of(draw)).sum::<u64>())
+            .sum()
+    }
+
+    /// [`Self::points_in_cut`] of one draw.
+    fn points_in_cut_of(&self, draw: &RecordedDraw) -> u64 {
+        let (Some(model), Some(lod)) = (self.models.get(draw.model.0 as usize), self.lods.get(draw.model.0 as usize))
+        else {
+            return 0;
+        };
+        let points = model.container.points();
+        let t = treelod_runtime::Thresholds { points: draw.tau_points, triangles: draw.tau_triangles };
+        let count = draw.count as usize;
+        let kept = |p: &PointRecord| treelod_runtime::point_drawn(p, t);
+        (match draw.source {
+            DrawSource::Points => {
+                let first = model.container.cells().get(draw.cell as usize).map_or(0, |c| c.points.first as usize);
+                points.get(first..first + count).unwrap_or_default().iter().filter(|p| kept(p)).count()
+            }
+            DrawSource::Roots => {
+                let at = if draw.cell == ROOTS_CELL {
+                    0
+                } else {
+                    model.cell_roots.get(draw.cell as usize).map_or(0, |r| r.0 as usize)
+                };
+                lod.far_list()
+                    .get(at..at + count)
+                    .unwrap_or_default()
+                    .iter()
+                    .filter_map(|&i| points.get(i as usize))
+                    .filter(|p| kept(p))
+                    .count()
+            }
+            DrawSource::Triangles
+            | DrawSource::PrunedLeaves
+            | DrawSource::Bark
+            | DrawSource::Planes
+            | DrawSource::LodLevel
+            | DrawSource::Billboards
+            | DrawSource::Octahedral
+            | DrawSource::Ellipsoids
+            | DrawSource::Lines => 0,
+        }) as u64
     }
 
     /// Leading triangles and points of a cell's ranges that are resident on the GPU.
