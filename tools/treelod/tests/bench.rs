@@ -468,6 +468,37 @@ fn without_rendering_only_selection_is_measured() {
         "full".as_ref(),
     ]);
     assert!(stdout.contains("adapter: none opened"), "{stdout}");
+    // Without `full`, the full mesh drawn at 1× gives the ratios: the same triangles.
+    let json = dir.join("n.json");
+    let counted = |techniques: &str| {
+        bench_ok(&[
+            demo().as_os_str(),
+            "--trees".as_ref(),
+            "100".as_ref(),
+            "--frames".as_ref(),
+            "2".as_ref(),
+            "--no-render".as_ref(),
+            "--technique".as_ref(),
+            techniques.as_ref(),
+            "--json".as_ref(),
+            json.as_os_str(),
+        ]);
+        let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).expect("json")).expect("parses");
+        let summary = |name: &str| {
+            json["techniques"].as_array().expect("techniques").iter().find(|t| t["name"] == name).expect(name)
+                ["summary"]
+                .clone()
+        };
+        (summary("full-1x"), summary("spt"))
+    };
+    let (full_1x, spt) = counted("full-1x,spt");
+    let ratio = full_1x["primitives"].as_f64().unwrap() / spt["primitives"].as_f64().unwrap();
+    assert!(ratio > 1.0, "{full_1x} {spt}");
+    assert_eq!(spt["full_ratio"].as_f64(), Some(ratio), "{spt}");
+    assert_eq!(full_1x["full_ratio"].as_f64(), Some(1.0), "{full_1x}");
+    let (with_full, spt_with_full) = counted("full,full-1x,spt");
+    assert_eq!(with_full["primitives"], full_1x["primitives"], "the counted full mesh and the drawn one");
+    assert_eq!(spt_with_full["full_ratio"], spt["full_ratio"], "{spt_with_full}");
 }
 
 #[test]
