@@ -485,19 +485,28 @@ fn without_rendering_only_selection_is_measured() {
         ]);
         let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).expect("json")).expect("parses");
         let summary = |name: &str| {
-            json["techniques"].as_array().expect("techniques").iter().find(|t| t["name"] == name).expect(name)
-                ["summary"]
-                .clone()
+            json["techniques"]
+                .as_array()
+                .expect("techniques")
+                .iter()
+                .find(|t| t["name"] == name)
+                .map(|t| t["summary"].clone())
         };
-        (summary("full-1x"), summary("spt"))
+        (summary("full"), summary("full-1x").expect("full-1x"), summary("spt").expect("spt"))
     };
-    let (full_1x, spt) = counted("full-1x,spt");
+    let (no_full, full_1x, spt) = counted("full-1x,spt");
+    assert!(no_full.is_none(), "full was not asked for");
     let ratio = full_1x["primitives"].as_f64().unwrap() / spt["primitives"].as_f64().unwrap();
     assert!(ratio > 1.0, "{full_1x} {spt}");
     assert_eq!(spt["full_ratio"].as_f64(), Some(ratio), "{spt}");
     assert_eq!(full_1x["full_ratio"].as_f64(), Some(1.0), "{full_1x}");
-    let (with_full, spt_with_full) = counted("full,full-1x,spt");
-    assert_eq!(with_full["primitives"], full_1x["primitives"], "the counted full mesh and the drawn one");
+    let (full, full_1x_flown, spt_with_full) = counted("full,full-1x,spt");
+    let full = full.expect("full");
+    assert_eq!(
+        full["primitives"], full_1x_flown["primitives"],
+        "the counted full mesh and the drawn one: {full} {full_1x_flown}"
+    );
+    assert_eq!(full_1x_flown["primitives"], full_1x["primitives"], "the same flight twice");
     assert_eq!(spt_with_full["full_ratio"], spt["full_ratio"], "{spt_with_full}");
 }
 
