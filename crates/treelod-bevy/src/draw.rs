@@ -204,13 +204,17 @@ fn prepare(
 }
 
 /// Draws the current view's trees: its cascades first when [`Settings::shadows`] is on, then a
-/// pass over the view's colour target and depth buffer, both loaded and stored.
+/// pass over the view's colour target and depth buffer, both loaded and stored; then, where the
+/// settings use the trees' visible fractions ([`Settings::measures_occlusion`]), measures them
+/// in that depth buffer ([`Renderer::measure_occlusion`]), Bevy's opaque meshes included, for
+/// the choices of later frames.
 fn draw(
     view: ViewQuery<(&ExtractedCamera, &ViewTarget, &ViewDepthStencilTexture, Option<&MainPassResolutionOverride>)>,
-    views: Res<Views>,
+    mut views: ResMut<Views>,
+    device: Res<RenderDevice>,
     mut ctx: RenderContext,
 ) {
-    let Some(entry) = views.views.get(&view.entity()) else { return };
+    let Some(entry) = views.views.get_mut(&view.entity()) else { return };
     if entry.instances == 0 {
         return;
     }
@@ -229,4 +233,19 @@ fn draw(
         pass.set_camera_viewport(&viewport);
     }
     entry.renderer.render(pass.wgpu_pass());
+    drop(pass);
+    if occlusion_measurable(camera, depth, resolution_override.is_some()) {
+        let depth_view: &wgpu::TextureView = &depth.attachment.texture.default_view;
+        entry.renderer.measure_occlusion(device.wgpu_device(), ctx.command_encoder(), depth_view);
+    }
+}
+
+/// Whether the trees' visible fractions can be measured in a view's depth buffer: it can be
+/// sampled (`TEXTURE_BINDING`, which [`crate::samplable_depth`] asks of Bevy's `Camera3d` while the
+/// settings measure occlusion; not yet in the frame they start to), and the view's pixels are the
+/// buffer's from its corner on, as the measurement reads them: no viewport offset, no main-pass
+/// resolution override. Elsewhere every tree counts as fully visible.
+fn occlusion_measurable(camera: &ExtractedCamera, depth: &ViewDepthStencilTexture, resolution_override: bool) -> bool {
+    let at_corner = camera.viewport.as_ref().is_none_or(|v| v.physical_position == bevy_math::UVec2::ZERO);
+    depth.texture().usage().contains(wgpu::TextureUsages::TEXTURE_BINDING) && at_corner && !resolution_override
 }

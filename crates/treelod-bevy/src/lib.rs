@@ -35,6 +35,14 @@
 //! [`treelod_render::DepthConvention::Reverse`] so their depth test matches. Orthographic cameras
 //! are skipped (selection measures sizes in pixels through a field of view).
 //!
+//! **Occlusion.** After its trees' pass each camera's renderer measures how much of each tree
+//! its depth buffer shows ([`treelod_render::Renderer::measure_occlusion`]), Bevy's opaque meshes
+//! included, and the policy chooses a partly hidden tree at that visible fraction
+//! ([`treelod_render::Policy::occlusion`], on by default), often with a cheaper representation.
+//! While the settings measure occlusion ([`Settings::measures_occlusion`]) the plugin asks every
+//! [`Camera3d`]'s depth buffer to be samplable (`TEXTURE_BINDING`); a camera whose viewport does
+//! not start at its target's corner, or with a main-pass resolution override, is not measured.
+//!
 //! **Light.** Trees are shaded by treelod's own model (albedo × (ambient + direct · |n·l|), with
 //! the containers' ambient occlusion), not by Bevy's PBR: with
 //! [`TreelodSettings::sun_from_directional_light`] (the default) the direction and colour of the
@@ -62,6 +70,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use bevy_app::{App, Plugin, PostUpdate};
 use bevy_asset::AssetApp;
+use bevy_camera::Camera3d;
 use bevy_camera::visibility::VisibilitySystems;
 use bevy_ecs::prelude::*;
 use bevy_transform::TransformSystems;
@@ -88,7 +97,10 @@ impl Plugin for TreelodPlugin {
             .init_resource::<TreelodScene>()
             .add_systems(
                 PostUpdate,
-                collect_scene.after(TransformSystems::Propagate).after(VisibilitySystems::VisibilityPropagate),
+                (
+                    collect_scene.after(TransformSystems::Propagate).after(VisibilitySystems::VisibilityPropagate),
+                    samplable_depth,
+                ),
             );
     }
 
@@ -96,6 +108,23 @@ impl Plugin for TreelodPlugin {
         // Here rather than in `build`: the `Core3d` schedule and the render device exist by now
         // whatever the order of the plugins.
         draw::setup_render_app(app);
+    }
+}
+
+/// While the settings use the trees' visible fractions ([`Settings::measures_occlusion`]: the
+/// policy's occlusion, on by default), asks every 3D camera's depth buffer to be samplable
+/// (`TEXTURE_BINDING` in [`Camera3d::depth_texture_usages`], as Bevy's own occlusion culling
+/// does), so that each camera's renderer can measure them there after drawing its trees. The flag
+/// stays when the settings change (Bevy would otherwise make the buffer again).
+fn samplable_depth(settings: Res<TreelodSettings>, mut cameras: Query<&mut Camera3d>) {
+    if !settings.render.measures_occlusion() {
+        return;
+    }
+    let binding = wgpu::TextureUsages::TEXTURE_BINDING.bits();
+    for mut camera in &mut cameras {
+        if camera.depth_texture_usages.0 & binding == 0 {
+            camera.depth_texture_usages.0 |= binding;
+        }
     }
 }
 

@@ -273,3 +273,121 @@ fn a_malformed_container_fails_to_load_with_its_error() {
         );
     }
 }
+
+/// Trees hidden behind a Bevy mesh are measured in Bevy's depth buffer after the trees' pass and
+/// chosen at their visible fraction (the policy's occlusion, on by default): a wall in front of a
+/// row of trees makes them cheaper, and without it the measurement changes nothing (each tree is
+/// seen whole, so Bevy's reverse-Z depth is read the right way round).
+#[test]
+fn trees_behind_a_bevy_wall_are_chosen_hidden() {
+    use treelod_bevy::TreelodSettings;
+    use treelod_bevy::treelod_render::{Policy, Technique};
+
+    // The demo tree with impostor planes and the build's calibration tables: the policy draws a
+    // tree of about 60 pixels with the point tree when it is seen, with planes when hidden.
+    let tree = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
+    let placed = [treelod_build::Placed { scene: &tree, translation: glam::Vec3::ZERO }];
+    let config = treelod_build::BuildConfig {
+        impostors: Some(treelod_build::ImpostorConfig::default()),
+        calibration: Some(treelod_build::CalibrationConfig { views: 1, supersample: 2, more_small_views: false }),
+        ..treelod_build::BuildConfig::default()
+    };
+    let built = treelod_build::build_block("demo", &placed, &config, "treelod-bevy occlusion test").expect("builds");
+    let bytes = built.data.to_bytes(treelod_format::Compression::None).expect("encodes");
+    let assets = tempfile::tempdir().expect("a temporary directory");
+    std::fs::write(assets.path().join("calibrated.treelod"), &bytes).expect("writes the container");
+    let block = *TreelodContainer::from_bytes(&bytes).expect("opens").container().block();
+    let height = block.bounds_max[1] - block.bounds_min[1];
+
+    let mut app = App::new();
+    scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
+    let policy = Policy { hysteresis: 0.0, transition: 0, ..Policy::default() };
+    assert!(policy.occlusion, "on by default");
+    let mut settings = TreelodSettings::default();
+    settings.render.policy = Some(policy);
+    app.insert_resource(settings);
+    // Side by side, none in front of another: at 25, 35 and 50 m, left to right.
+    let trees = [Vec3::new(-10.0, 0.0, -25.0), Vec3::new(0.0, 0.0, -35.0), Vec3::new(10.0, 0.0, -50.0)];
+    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("calibrated.treelod");
+    let forest = handle.clone();
+    let wall = app
+        .world_mut()
+        .spawn((Transform::from_xyz(0.0, 0.5 * height, -10.0), bevy_camera::visibility::Visibility::Hidden))
+        .id();
+    app.add_systems(
+        Startup,
+        move |mut commands: Commands,
+              mut meshes: ResMut<Assets<Mesh>>,
+              mut materials: ResMut<Assets<StandardMaterial>>| {
+            commands.spawn(treelod_bevy::TreelodForest::new(forest.clone(), trees.map(Transform::from_translation)));
+            // Wider and taller than the view 10 m away: everything behind it is hidden.
+            commands.entity(wall).insert((
+                Mesh3d(meshes.add(Cuboid::new(60.0, 40.0, 0.5))),
+                MeshMaterial3d(materials.add(StandardMaterial {
+                    base_color: Color::srgb_u8(RED[0], RED[1], RED[2]),
+                    unlit: true,
+                    ..StandardMaterial::default()
+                })),
+            ));
+        },
+    );
+    let target = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(scene::target_image());
+    scene::finish(&mut app);
+    let eye = Vec3::new(0.0, 0.5 * height, 0.0);
+    let camera = app
+        .world_mut()
+        .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into())))
+        .insert(Transform::from_translation(eye).looking_at(eye - Vec3::Z, Vec3::Y))
+        .id();
+    for _ in 0..500 {
+        app.update();
+        match app.world().resource::<AssetServer>().load_state(&handle) {
+            LoadState::Loaded => break,
+            LoadState::Failed(e) => panic!("the container fails to load: {e}"),
+            _ => std::thread::sleep(std::time::Duration::from_millis(10)),
+        }
+    }
+    // A few frames with the settings: the first ones make the depth buffer samplable, measure,
+    // and read the measurement back (mapped without waiting).
+    let run = |app: &mut App, occlusion: bool, wall_shown: bool| {
+        app.world_mut().resource_mut::<TreelodSettings>().render.policy = Some(Policy { occlusion, ..policy });
+        *app.world_mut().get_mut::<bevy_camera::visibility::Visibility>(wall).expect("the wall") = if wall_shown {
+            bevy_camera::visibility::Visibility::Visible
+        } else {
+            bevy_camera::visibility::Visibility::Hidden
+        };
+        for _ in 0..8 {
+            app.update();
+        }
+        app.world().resource::<TreelodStats>().get(camera).expect("the camera drew trees")
+    };
+    let seen = run(&mut app, true, false);
+    let seen_unmeasured = run(&mut app, false, false);
+    let hidden_unmeasured = run(&mut app, false, true);
+    let hidden = run(&mut app, true, true);
+    for (name, stats) in [
+        ("seen", &seen),
+        ("seen, not measured", &seen_unmeasured),
+        ("hidden, not measured", &hidden_unmeasured),
+        ("hidden", &hidden),
+    ] {
+        eprintln!("{name}: {:?}, {} primitives", stats.instances, stats.primitives());
+        assert_eq!(stats.instances_visible, 3, "{name}: every tree is in view");
+    }
+    assert!(seen.instances[Technique::Spt] > 0, "a tree seen whole is drawn with the point tree: {:?}", seen.instances);
+    assert_eq!(seen.instances, seen_unmeasured.instances, "trees seen whole measure visible");
+    assert_eq!(seen.primitives(), seen_unmeasured.primitives());
+    assert_eq!(hidden_unmeasured.instances, seen_unmeasured.instances, "unmeasured, the wall changes no choice");
+    assert!(
+        hidden.instances[Technique::Impostors] > seen.instances[Technique::Impostors],
+        "hidden trees take planes: {:?} against {:?}",
+        hidden.instances,
+        seen.instances
+    );
+    assert!(
+        2 * hidden.primitives() < seen.primitives(),
+        "hidden trees cost less: {} against {} primitives",
+        hidden.primitives(),
+        seen.primitives()
+    );
+}

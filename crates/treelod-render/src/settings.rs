@@ -245,6 +245,16 @@ impl Settings {
 }
 
 impl Settings {
+    /// Whether these settings use the trees' visible fractions, which
+    /// [`Renderer::measure_occlusion`] measures from a pass's depth buffer: a policy that chooses
+    /// with occlusion ([`Policy::occlusion`], on by default), or pruning forced with its
+    /// occlusion factor ([`Pruning::occlusion`]). A host whose depth attachment cannot be
+    /// sampled makes it samplable ([`wgpu::TextureUsages::TEXTURE_BINDING`]) when this holds.
+    #[must_use]
+    pub fn measures_occlusion(&self) -> bool {
+        self.policy.is_some_and(|p| p.occlusion) || (prune_scale(self.technique).is_some() && self.pruning.occlusion)
+    }
+
     /// The default settings drawing every tree with `technique`, without the policy (for
     /// comparisons and tools that force one).
     #[must_use]
