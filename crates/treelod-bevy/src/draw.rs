@@ -54,6 +54,8 @@ pub(crate) fn setup_render_app(app: &mut bevy_app::App) {
 struct Extracted {
     scene: TreelodScene,
     settings: Settings,
+    /// [`TreelodSettings::gpu_selection`].
+    gpu_selection: bool,
 }
 
 /// Copies the scene when its revision changed, and the settings, taking the sun from the
@@ -79,6 +81,7 @@ fn extract(
         render.sun_colour = glam::Vec3::from_array(light.color.to_linear().to_vec3().to_array());
     }
     extracted.settings = render;
+    extracted.gpu_selection = settings.gpu_selection;
 }
 
 /// One camera's renderer and what it holds.
@@ -91,6 +94,9 @@ struct ViewRenderer {
     revision: Option<u64>,
     /// Instances set.
     instances: usize,
+    /// GPU selection was asked for and refused (the models do not fit the memory budget): said
+    /// once, not tried again until the setting is turned off and on or the renderer is made anew.
+    gpu_refused: bool,
 }
 
 /// The renderers, by render-world camera entity.
@@ -168,9 +174,12 @@ fn prepare(
             models: HashMap::new(),
             revision: None,
             instances: 0,
+            gpu_refused: false,
         });
+        let mut added = false;
         for (id, container) in &scene.models {
             if !entry.models.contains_key(id) {
+                added = true;
                 let model = entry
                     .renderer
                     .add_model(device.wgpu_device(), &queue, Arc::clone(container))
@@ -192,6 +201,18 @@ fn prepare(
             entry.revision = Some(scene.revision);
         }
         *entry.renderer.settings_mut() = extracted.settings;
+        if !extracted.gpu_selection {
+            if entry.renderer.gpu_selection_enabled() {
+                entry.renderer.disable_gpu_selection();
+            }
+            entry.gpu_refused = false;
+        } else if (added || !entry.renderer.gpu_selection_enabled()) && !entry.gpu_refused {
+            // Made anew with every model: a model added since is not in the GPU's tables.
+            if let Err(e) = entry.renderer.enable_gpu_selection(device.wgpu_device(), &queue) {
+                error!("treelod: camera {main_entity:?} selects on the CPU: {e}");
+                entry.gpu_refused = true;
+            }
+        }
         let camera = Camera::from_matrices(
             to_glam(view.world_from_view.to_matrix().inverse()),
             to_glam(view.clip_from_view),

@@ -148,13 +148,20 @@ pub struct TreelodSettings {
     /// [`DirectionalLight`](bevy_light::DirectionalLight) (towards the light, and its colour in
     /// linear RGB); without one, or when `false`, `render`'s are used.
     pub sun_from_directional_light: bool,
+    /// Select on the GPU ([`treelod_render::Renderer::enable_gpu_selection`]): compute shaders
+    /// cull the instances and select the point tree's trees and the impostor and billboard
+    /// quads, so a forest of 10^5–10^6 trees costs the CPU little more than the policy's choice
+    /// per tree. Every container's triangles and points are then kept on the GPU whole; where
+    /// they do not fit `render.memory_budget` an error is logged once per camera and that camera
+    /// selects on the CPU. Turned on again whenever a container is added. Default `false`.
+    pub gpu_selection: bool,
 }
 
 impl Default for TreelodSettings {
     /// [`Settings::default`] (one-pixel points, triangles from two pixels), the sun from Bevy's
-    /// directional light.
+    /// directional light, selection on the CPU.
     fn default() -> Self {
-        Self { render: Settings::default(), sun_from_directional_light: true }
+        Self { render: Settings::default(), sun_from_directional_light: true, gpu_selection: false }
     }
 }
 

@@ -390,4 +390,17 @@ fn trees_behind_a_bevy_wall_are_chosen_hidden() {
         hidden.primitives(),
         seen.primitives()
     );
+
+    // Selected on the GPU (`TreelodSettings::gpu_selection`): the same choices, measured the same
+    // way; the GPU's counts are read back a frame or two late, the same for a still camera.
+    app.world_mut().resource_mut::<TreelodSettings>().gpu_selection = true;
+    let seen_gpu = run(&mut app, true, false);
+    let hidden_gpu = run(&mut app, true, true);
+    for (name, gpu, cpu) in [("seen", &seen_gpu, &seen), ("hidden", &hidden_gpu, &hidden)] {
+        eprintln!("{name}, GPU selection: {:?}, {} primitives", gpu.instances, gpu.primitives());
+        assert!(gpu.gpu_selection, "{name}: selected on the GPU");
+        assert_eq!(gpu.instances, cpu.instances, "{name}: the CPU's choices");
+        let (g, c) = (gpu.primitives() as f64, cpu.primitives() as f64);
+        assert!((g - c).abs() <= 0.01 * c, "{name}: {g} primitives on the GPU path, {c} on the CPU's");
+    }
 }

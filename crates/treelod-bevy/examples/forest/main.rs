@@ -13,7 +13,7 @@
 //!
 //! Keys: W A S D to move, Q E down and up, Shift faster, the right mouse button held to look
 //! around; K colours triangles red and points blue, F draws the full mesh, L toggles treelod's
-//! shadows. The window title shows what the renderer drew.
+//! shadows, G selection on the GPU. The window title shows what the renderer drew.
 
 mod scene;
 
@@ -228,6 +228,9 @@ fn keys(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<TreelodSettings>) 
     if keys.just_pressed(KeyCode::KeyL) {
         render.shadows = if render.shadows.is_some() { None } else { Some(Shadows::default()) };
     }
+    if keys.just_pressed(KeyCode::KeyG) {
+        settings.gpu_selection = !settings.gpu_selection;
+    }
 }
 
 /// The window title: trees in view, triangles and points drawn.
@@ -235,10 +238,11 @@ fn title(stats: Res<TreelodStats>, cameras: Query<Entity, With<Fly>>, mut window
     let (Ok(camera), Ok(mut window)) = (cameras.single(), windows.single_mut()) else { return };
     if let Some(frame) = stats.get(camera) {
         let title = format!(
-            "treelod in Bevy: {} trees in view, {} triangles, {} points",
+            "treelod in Bevy: {} trees in view, {} triangles, {} points{}",
             frame.instances_visible,
             frame.submitted[Primitive::Triangle],
-            frame.submitted[Primitive::Point]
+            frame.submitted[Primitive::Point],
+            if frame.gpu_selection { " (GPU selection)" } else { "" }
         );
         // Only on a change: a changed `Window` is sent to the windowing system.
         if window.title != title {
