@@ -77,6 +77,20 @@ fn blue_right((centre, half): (Vec3, Vec3)) -> u32 {
     projected(centre, half).2
 }
 
+/// Runs frames until `handle` has loaded (loading runs on the task pool; frames run meanwhile,
+/// with no trees); panics if it fails or takes more than 500 frames.
+fn wait_for_load(app: &mut App, handle: &bevy_asset::Handle<TreelodContainer>) {
+    for _ in 0..500 {
+        app.update();
+        match app.world().resource::<AssetServer>().load_state(handle) {
+            LoadState::Loaded => return,
+            LoadState::Failed(e) => panic!("the container fails to load: {e}"),
+            _ => std::thread::sleep(std::time::Duration::from_millis(10)),
+        }
+    }
+    panic!("the container did not load in 500 frames");
+}
+
 #[test]
 fn bevy_draws_the_forest_in_its_main_pass() {
     let started = Instant::now();
@@ -165,16 +179,7 @@ fn bevy_draws_the_forest_in_its_main_pass() {
             bevy_camera::RenderTarget::Image(small.clone().into()),
         ))
         .id();
-    // Loading runs on the task pool; frames run meanwhile (with no trees).
-    for _ in 0..500 {
-        app.update();
-        match app.world().resource::<AssetServer>().load_state(&handle) {
-            LoadState::Loaded => break,
-            LoadState::Failed(e) => panic!("the demo container fails to load: {e}"),
-            _ => std::thread::sleep(std::time::Duration::from_millis(10)),
-        }
-    }
-    assert!(app.world().resource::<AssetServer>().is_loaded(&handle), "the demo container loads");
+    wait_for_load(&mut app, &handle);
     let loaded = started.elapsed();
     // One frame with the trees before the captured one: their upload completes in the first
     // (`Settings::upload_budget` exceeds the container).
@@ -339,14 +344,7 @@ fn trees_behind_a_bevy_wall_are_chosen_hidden() {
         .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into())))
         .insert(Transform::from_translation(eye).looking_at(eye - Vec3::Z, Vec3::Y))
         .id();
-    for _ in 0..500 {
-        app.update();
-        match app.world().resource::<AssetServer>().load_state(&handle) {
-            LoadState::Loaded => break,
-            LoadState::Failed(e) => panic!("the container fails to load: {e}"),
-            _ => std::thread::sleep(std::time::Duration::from_millis(10)),
-        }
-    }
+    wait_for_load(&mut app, &handle);
     // A few frames with the settings: the first ones make the depth buffer samplable, measure,
     // and read the measurement back (mapped without waiting).
     let run = |app: &mut App, occlusion: bool, wall_shown: bool| {
