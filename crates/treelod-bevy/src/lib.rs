@@ -150,8 +150,8 @@ pub struct TreelodSettings {
     pub sun_from_directional_light: bool,
     /// Select on the GPU ([`treelod_render::Renderer::enable_gpu_selection`]): compute shaders
     /// cull the instances and select the point tree's trees and the impostor and billboard
-    /// quads, so a forest of 10^5–10^6 trees costs the CPU little more than the policy's choice
-    /// per tree. Every container's triangles and points are then kept on the GPU whole; where
+    /// quads, so in a forest of 10^5–10^6 trees the CPU keeps mostly the policy's choice per
+    /// tree and the other representations' trees. Every container's triangles and points are then kept on the GPU whole; where
     /// they do not fit `render.memory_budget` an error is logged once per camera and that camera
     /// selects on the CPU. Turned on again whenever a container is added. Default `false`.
     pub gpu_selection: bool,
