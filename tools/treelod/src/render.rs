@@ -577,6 +577,18 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let drawn = stats.instances.get(technique);
     if renderer.settings().policy.is_some() {
         line.push_str(&format!(", policy: {}", technique_counts(&stats.instances)));
+        // A default build holds the point tree alone, and so no tables to choose by: say so.
+        let without = scene
+            .models
+            .iter()
+            .filter(|path| treelod_format::Container::open(path).is_ok_and(|c| c.calibration().is_empty()))
+            .count();
+        if without > 0 {
+            line.push_str(&format!(
+                " ({without} of {} container(s) without calibration tables, their trees drawn with {technique})",
+                scene.models.len()
+            ));
+        }
     }
     if renderer.settings().policy.is_none() && !matches!(technique, Technique::Full | Technique::Spt) {
         line.push_str(&format!(", {drawn} tree(s) drawn with {technique} submitting {}", submitted(&stats)));

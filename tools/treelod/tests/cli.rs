@@ -1709,6 +1709,15 @@ fn render_writes_a_png_of_the_requested_size_showing_the_tree() {
     let png = dir.join("tree.png");
     let stdout = render_ok(demo, &png, &["--size", "256x192", "--background", "336699"]);
     assert!(stdout.starts_with(&format!("{}: 256x192, 1 of 1 instance(s) visible, ", png.display())), "{stdout}");
+    // A default build holds no calibration tables: the line says why the policy chose the point tree.
+    assert!(
+        stdout.contains(", policy: 1 spt (1 of 1 container(s) without calibration tables, their trees drawn with spt)"),
+        "{stdout}"
+    );
+    // A container with tables has the policy's choice alone.
+    let golden = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/v1_18/every-kind-zstd.treelod");
+    let calibrated = render_ok(&golden, &dir.join("golden.png"), &["--size", "64x48"]);
+    assert!(calibrated.contains(", policy: 1 ") && !calibrated.contains("calibration tables"), "{calibrated}");
     let (width, height, pixels) = read_png(&png);
     assert_eq!((width, height), (256, 192));
     assert!(pixels.iter().all(|p| p[3] == 255), "opaque");
