@@ -529,8 +529,9 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     args.impostor.apply(&mut settings);
     args.ellipsoid.apply(&mut settings);
     let mut renderer = Renderer::new(&gpu.device, Gpu::formats_msaa(args.msaa), settings);
+    let models = scene::open_models(&scene).map_err(|e| scene_failed(&e))?;
     let bounds =
-        scene::add_to_renderer(&scene, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
+        scene::add_opened(&scene, &models, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
     args.technique.warn_without(&scene.models);
     // With shadows, a ground under the trees receives them.
     let ground = renderer.settings().shadows.is_some().then(|| Ground::under_instances(&gpu.device, &renderer));
@@ -578,15 +579,11 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     if renderer.settings().policy.is_some() {
         line.push_str(&format!(", policy: {}", technique_counts(&stats.instances)));
         // A default build holds the point tree alone, and so no tables to choose by: say so.
-        let without = scene
-            .models
-            .iter()
-            .filter(|path| treelod_format::Container::open(path).is_ok_and(|c| c.calibration().is_empty()))
-            .count();
+        let without = models.iter().filter(|c| c.calibration().is_empty()).count();
         if without > 0 {
             line.push_str(&format!(
                 " ({without} of {} container(s) without calibration tables, their trees drawn with {technique})",
-                scene.models.len()
+                models.len()
             ));
         }
     }
