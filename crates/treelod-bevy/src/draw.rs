@@ -1,7 +1,9 @@
 //! The render world: a treelod [`Renderer`] per 3D camera, made for that view's targets, which
 //! selects each frame (in `Render`'s `PrepareBindGroups`, after Bevy made the view's textures)
 //! and draws in the `Core3d` main pass, after the opaque and alpha-masked phases and before the
-//! transparent one, into the view's colour target and depth buffer.
+//! transparent one, into the view's colour target and depth buffer; before the main pass, after
+//! Bevy's shadow passes, it casts the trees into the camera's cascades of Bevy's directional
+//! lights.
 //!
 //! Bevy draws with reverse Z (depth cleared to 0, near at 1, an infinite far plane), so the
 //! renderers are made with [`DepthConvention::Reverse`] and the camera's own projection; colour
@@ -19,6 +21,9 @@ use bevy_core_pipeline::{Core3dSystems, schedule::Core3d};
 use bevy_ecs::prelude::*;
 use bevy_light::DirectionalLight;
 use bevy_log::{error, warn};
+use bevy_pbr::{
+    CORE_3D_SHADOW_MAP_FORMAT, LATE_SHADOW_PASS, LightEntity, ShadowView, ViewLightEntities, per_view_shadow_pass,
+};
 use bevy_render::camera::ExtractedCamera;
 use bevy_render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
 use bevy_render::sync_world::MainEntity;
@@ -26,7 +31,10 @@ use bevy_render::view::{ExtractedView, ViewDepthStencilTexture, ViewTarget};
 use bevy_render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
 use bevy_transform::components::GlobalTransform;
 use treelod_format::Container;
-use treelod_render::{Camera, DepthConvention, Instance, ModelId, Renderer, RendererFormats, Settings};
+use treelod_render::{
+    Camera, Cascade, DepthConvention, HostShadowView, Instance, MAX_HOST_SHADOW_VIEWS, ModelId, Renderer,
+    RendererFormats, Settings,
+};
 
 use crate::asset::TreelodContainer;
 use crate::forest::{TreelodScene, to_glam};
@@ -44,7 +52,10 @@ pub(crate) fn setup_render_app(app: &mut bevy_app::App) {
         .add_systems(Render, prepare.in_set(RenderSystems::PrepareBindGroups))
         .add_systems(
             Core3d,
-            draw.after(main_opaque_pass_3d).before(main_transparent_pass_3d).in_set(Core3dSystems::MainPass),
+            (
+                draw_shadows.after(per_view_shadow_pass::<LATE_SHADOW_PASS>).before(Core3dSystems::MainPass),
+                draw.after(main_opaque_pass_3d).before(main_transparent_pass_3d).in_set(Core3dSystems::MainPass),
+            ),
         );
 }
 
@@ -56,6 +67,8 @@ struct Extracted {
     settings: Settings,
     /// [`TreelodSettings::gpu_selection`].
     gpu_selection: bool,
+    /// [`TreelodSettings::cast_bevy_shadows`].
+    cast_bevy_shadows: bool,
 }
 
 /// Copies the scene when its revision changed, and the settings, taking the sun from the
@@ -82,6 +95,7 @@ fn extract(
     }
     extracted.settings = render;
     extracted.gpu_selection = settings.gpu_selection;
+    extracted.cast_bevy_shadows = settings.cast_bevy_shadows;
 }
 
 /// One camera's renderer and what it holds.
@@ -97,6 +111,10 @@ struct ViewRenderer {
     /// GPU selection was asked for and refused (the models do not fit the memory budget): said
     /// once, not tried again until the setting is turned off and on or the renderer is made anew.
     gpu_refused: bool,
+    /// The render-world entities of the shadow cascades of Bevy's directional lights the trees
+    /// are cast into this frame, host map `k` of the renderer at `k`
+    /// ([`Renderer::set_host_shadow_views`]).
+    bevy_shadows: Vec<Entity>,
 }
 
 /// The renderers, by render-world camera entity.
@@ -109,14 +127,28 @@ struct Views {
     orthographic_reported: bool,
 }
 
+/// What `prepare` reads of a 3D camera: its entities, view, targets and the shadow cascades of
+/// Bevy's directional lights for it.
+type CameraItem = (
+    Entity,
+    &'static MainEntity,
+    &'static ExtractedView,
+    &'static ViewTarget,
+    &'static ViewDepthStencilTexture,
+    Option<&'static ViewLightEntities>,
+);
+
 /// Per 3D camera: makes (or remakes) its renderer for the view's formats and the scene's
-/// containers, sets the instances when the scene changed, the settings, and selects for the
-/// camera ([`Renderer::prepare`]), keeping the counts in [`TreelodStats`].
+/// containers, sets the instances when the scene changed, the settings and the shadow cascades
+/// of Bevy's directional lights for the camera ([`crate::TreelodSettings::cast_bevy_shadows`]),
+/// and selects for the camera and those cascades ([`Renderer::prepare`]), keeping the counts in
+/// [`TreelodStats`].
 fn prepare(
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
     extracted: Res<Extracted>,
-    cameras: Query<(Entity, &MainEntity, &ExtractedView, &ViewTarget, &ViewDepthStencilTexture), With<Camera3d>>,
+    cameras: Query<CameraItem, With<Camera3d>>,
+    light_views: Query<(&ExtractedView, &LightEntity), With<ShadowView>>,
     mut views: ResMut<Views>,
     stats: Res<TreelodStats>,
 ) {
@@ -139,7 +171,7 @@ fn prepare(
     if scene.instances.is_empty() {
         return;
     }
-    for (entity, main_entity, view, target, depth) in &cameras {
+    for (entity, main_entity, view, target, depth, lights) in &cameras {
         if view.clip_from_view.w_axis.w == 1.0 {
             // Nothing drawn, not even a renderer's last selection from before the switch.
             views.views.remove(&entity);
@@ -175,6 +207,7 @@ fn prepare(
             revision: None,
             instances: 0,
             gpu_refused: false,
+            bevy_shadows: Vec::new(),
         });
         let mut added = false;
         for (id, container) in &scene.models {
@@ -213,6 +246,26 @@ fn prepare(
                 entry.gpu_refused = true;
             }
         }
+        // Bevy's directional shadow cascades of this camera, drawn by `draw_shadows`.
+        let mut host = Vec::new();
+        entry.bevy_shadows.clear();
+        if extracted.cast_bevy_shadows {
+            for &light in lights.map_or(&[][..], |l| &l.lights[..]) {
+                let Ok((light_view, LightEntity::Directional { .. })) = light_views.get(light) else { continue };
+                let clip_from_world = light_view
+                    .clip_from_world
+                    .unwrap_or_else(|| light_view.clip_from_view * light_view.world_from_view.to_matrix().inverse());
+                let view =
+                    HostShadowView { clip_from_world: to_glam(clip_from_world), resolution: light_view.viewport.z };
+                if host.len() < MAX_HOST_SHADOW_VIEWS
+                    && Cascade::from_host(&view, DepthConvention::Reverse, 1.0, None).is_some()
+                {
+                    host.push(view);
+                    entry.bevy_shadows.push(light);
+                }
+            }
+        }
+        entry.renderer.set_host_shadow_views(device.wgpu_device(), CORE_3D_SHADOW_MAP_FORMAT, &host);
         let camera = Camera::from_matrices(
             to_glam(view.world_from_view.to_matrix().inverse()),
             to_glam(view.clip_from_view),
@@ -221,6 +274,35 @@ fn prepare(
         );
         let frame = entry.renderer.prepare(device.wgpu_device(), &queue, &camera);
         stats.insert(main_entity.id(), frame);
+    }
+}
+
+/// Casts the current view's trees into the shadow cascades of Bevy's directional lights that
+/// `prepare` named ([`crate::TreelodSettings::cast_bevy_shadows`]): one depth-only pass per
+/// cascade over Bevy's map, after Bevy's own casters drew into it and before the main pass,
+/// whose receivers sample it.
+fn draw_shadows(
+    view: ViewQuery<&ExtractedView>,
+    views: Res<Views>,
+    shadow_views: Query<&ShadowView>,
+    mut ctx: RenderContext,
+) {
+    let Some(entry) = views.views.get(&view.entity()) else { return };
+    if entry.instances == 0 {
+        return;
+    }
+    for (k, light) in entry.bevy_shadows.iter().enumerate() {
+        let Ok(shadow) = shadow_views.get(*light) else { continue };
+        let mut pass = ctx.begin_tracked_render_pass(wgpu::RenderPassDescriptor {
+            label: Some("treelod shadow"),
+            color_attachments: &[],
+            // Loaded where Bevy's casters drew first this frame, cleared otherwise.
+            depth_stencil_attachment: Some(shadow.depth_attachment.get_attachment(wgpu::StoreOp::Store)),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        entry.renderer.render_host_shadow(k, pass.wgpu_pass());
     }
 }
 

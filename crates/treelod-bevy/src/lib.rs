@@ -47,10 +47,17 @@
 //! the containers' ambient occlusion), not by Bevy's PBR: with
 //! [`TreelodSettings::sun_from_directional_light`] (the default) the direction and colour of the
 //! brightest visible [`DirectionalLight`](bevy_light::DirectionalLight) are its sun; its
-//! illuminance, the camera's exposure and Bevy's ambient light are not used. Trees do not cast
-//! into Bevy's shadow maps, nor receive them; with [`treelod_render::Settings::shadows`] they
-//! cast treelod's own cascades (selected from the sun's view at the detail each cascade resolves)
-//! onto each other.
+//! illuminance, the camera's exposure and Bevy's ambient light are not used.
+//!
+//! **Shadows.** With [`TreelodSettings::cast_bevy_shadows`] (the default) the trees cast into
+//! the shadow cascades of Bevy's directional lights that have `shadow_maps_enabled`, so Bevy's
+//! meshes receive them: each camera's renderer selects the trees from each cascade's light view
+//! at the detail the cascade resolves ([`treelod_render::Renderer::set_host_shadow_views`]), and
+//! a system in the `Core3d` schedule, after Bevy's shadow passes and before the main pass,
+//! draws them depth-only into Bevy's maps (depth clamped to a cascade's near plane where the
+//! device has `DEPTH_CLIP_CONTROL`, as Bevy's own casters are). The trees do not receive Bevy's
+//! shadows: with [`treelod_render::Settings::shadows`] they cast treelod's own cascades
+//! (selected the same way) onto each other.
 //!
 //! **Assets.** See [`TreelodLoader`] for how `.treelod` files are read (bytes from Bevy's asset
 //! reader; [`TreelodContainer::open`] keeps a file memory-mapped instead). A malformed file fails
@@ -155,13 +162,25 @@ pub struct TreelodSettings {
     /// they do not fit `render.memory_budget` an error is logged once per camera and that camera
     /// selects on the CPU. Turned on again whenever a container is added. Default `false`.
     pub gpu_selection: bool,
+    /// Cast the trees into the shadow maps of Bevy's directional lights (those with
+    /// `shadow_maps_enabled`): each camera's renderer selects the trees from each of the camera's
+    /// cascades as it selects for its own cascades ([`treelod_render::Shadows::casters`] and
+    /// `lod_texels` of `render.shadows`, their defaults without), and draws them depth-only into
+    /// Bevy's map after Bevy's own casters, so Bevy's meshes receive the trees' shadows. Up to
+    /// [`treelod_render::MAX_HOST_SHADOW_VIEWS`] cascades per camera. Default `true`.
+    pub cast_bevy_shadows: bool,
 }
 
 impl Default for TreelodSettings {
     /// [`Settings::default`] (one-pixel points, triangles from two pixels), the sun from Bevy's
-    /// directional light, selection on the CPU.
+    /// directional light, selection on the CPU, the trees cast into Bevy's shadow maps.
     fn default() -> Self {
-        Self { render: Settings::default(), sun_from_directional_light: true, gpu_selection: false }
+        Self {
+            render: Settings::default(),
+            sun_from_directional_light: true,
+            gpu_selection: false,
+            cast_bevy_shadows: true,
+        }
     }
 }
 

@@ -4,6 +4,8 @@
 //! it, a Bevy cube standing in front of the trees must hide them (Bevy's depth buffer is read with
 //! its reverse-Z convention), and the trees must hide part of a Bevy cube behind them (they write
 //! that depth buffer). A malformed `.treelod` asset fails to load with the container's error.
+//! Trees behind a Bevy wall are chosen hidden, and a tree casts its shadow onto Bevy's ground
+//! through the cascades of a Bevy directional light.
 
 #[path = "../examples/forest/scene.rs"]
 mod scene;
@@ -401,4 +403,88 @@ fn trees_behind_a_bevy_wall_are_chosen_hidden() {
         let (g, c) = (gpu.primitives() as f64, cpu.primitives() as f64);
         assert!((g - c).abs() <= 0.01 * c, "{name}: {g} primitives on the GPU path, {c} on the CPU's");
     }
+}
+
+#[test]
+fn trees_cast_into_the_shadow_maps_of_bevy_lights() {
+    use bevy_light::DirectionalLight;
+    use bevy_mesh::{MeshBuilder, Meshable};
+    use bevy_shape::Plane3d;
+    use treelod_bevy::TreelodSettings;
+
+    let assets = tempfile::tempdir().expect("a temporary directory");
+    let bytes = scene::demo_container_bytes();
+    std::fs::write(assets.path().join("demo.treelod"), &bytes).expect("writes the container");
+    let block = *TreelodContainer::from_bytes(&bytes).expect("opens").container().block();
+    let height = block.bounds_max[1] - block.bounds_min[1];
+    let mut app = App::new();
+    scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
+    app.insert_resource(TreelodSettings::default());
+    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
+    let forest = handle.clone();
+    // A low sun from the west: the tree's shadow falls east of it, about 1.4 heights long.
+    let sun = Vec3::new(0.7, -0.5, -0.2).normalize();
+    app.add_systems(
+        Startup,
+        move |mut commands: Commands,
+              mut meshes: ResMut<Assets<Mesh>>,
+              mut materials: ResMut<Assets<StandardMaterial>>| {
+            commands.spawn(treelod_bevy::TreelodForest::new(forest.clone(), [Transform::IDENTITY]));
+            let [r, g, b] = scene::GROUND;
+            commands.spawn((
+                Mesh3d(meshes.add(Plane3d::default().mesh().size(200.0, 200.0).build())),
+                MeshMaterial3d(materials.add(StandardMaterial {
+                    base_color: Color::srgb_u8(r, g, b),
+                    perceptual_roughness: 1.0,
+                    ..StandardMaterial::default()
+                })),
+            ));
+            commands.spawn((
+                DirectionalLight { shadow_maps_enabled: true, ..DirectionalLight::default() },
+                Transform::default().looking_to(sun, Vec3::Y),
+            ));
+        },
+    );
+    let target = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(scene::target_image());
+    scene::finish(&mut app);
+    // Above the ground east of the tree, looking down on where its shadow falls.
+    let (eye, at) = (Vec3::new(1.2 * height, 1.6 * height, 1.0 * height), Vec3::new(1.2 * height, 0.0, -0.3 * height));
+    let camera = app
+        .world_mut()
+        .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into())))
+        .insert(Transform::from_translation(eye).looking_at(at, Vec3::Y))
+        .id();
+    wait_for_load(&mut app, &handle);
+    let mut run = |cast: bool| {
+        app.world_mut().resource_mut::<TreelodSettings>().cast_bevy_shadows = cast;
+        let frame = scene::render_frames(&mut app, &[(camera, target.clone())], 6).expect("a frame").remove(0);
+        let stats = app.world().resource::<TreelodStats>().get(camera).expect("the camera drew trees");
+        (frame, stats)
+    };
+    let (lit, lit_stats) = run(false);
+    let (shaded, stats) = run(true);
+    if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
+        lit.write_png(&std::path::Path::new(&dir).join("bevy-shadow-off.png")).expect("writes");
+        shaded.write_png(&std::path::Path::new(&dir).join("bevy-shadow-on.png")).expect("writes");
+    }
+    eprintln!("cast: {:?}", stats.host_shadow);
+    assert_eq!(lit_stats.host_shadow.cascades, 0, "not cast: no host maps");
+    assert!(stats.host_shadow.cascades >= 1, "Bevy's cascades are taken: {:?}", stats.host_shadow);
+    assert!(stats.host_shadow.instances_visible >= 1 && stats.host_shadow.primitives() > 0);
+    // The ground the trees' shadow darkens: pixels of the lit frame's ground at least a third
+    // darker; the trees' own pixels and the rest of the ground are the same in both frames.
+    let (width, height_px) = IMAGE_SIZE;
+    let (mut darker, mut lighter, mut ground) = (0u32, 0u32, 0u32);
+    for y in 0..height_px {
+        for x in 0..width {
+            let (a, b) = (lit.pixel(x, y), shaded.pixel(x, y));
+            let luma = |p: [u8; 4]| u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2]);
+            ground += u32::from(!leaf(a));
+            darker += u32::from(!leaf(a) && 3 * luma(b) < 2 * luma(a));
+            lighter += u32::from(3 * luma(a) < 2 * luma(b));
+        }
+    }
+    eprintln!("{darker} of {ground} ground pixels darker with the trees' shadow, {lighter} lighter");
+    assert!(darker * 20 > ground, "the trees' shadow falls on Bevy's ground: {darker} of {ground} pixels");
+    assert_eq!(lighter, 0, "a shadow only darkens");
 }

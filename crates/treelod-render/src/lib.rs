@@ -100,6 +100,14 @@
 //! distant canopy's shadow keeps its density. [`FrameStats::shadow`] counts what the shadow pass
 //! draws: on the built-in 10,000-tree fly-through (`treelod bench --shadows`), with the default
 //! three 2048² cascades over 150 m, 0.78× the primitives of the main pass with the point trees.
+//!
+//! **Host shadow maps.** An engine that renders and samples shadow maps of its own (a
+//! directional light's cascades) names them with [`Renderer::set_host_shadow_views`] (each map's
+//! orthographic `clip_from_world` in the renderer's depth convention, and its size); `prepare`
+//! then selects the trees from each map's light view as it selects for its own cascades, and
+//! [`Renderer::render_host_shadow`] draws them depth-only into map `k` in the host's pass over
+//! it, with the host's matrix, so the host's receivers read the trees' depth as its own
+//! casters'. [`FrameStats::host_shadow`] counts what they drew.
 
 mod assign;
 mod camera;
@@ -126,7 +134,9 @@ pub use gpu_select::{GpuDraw, GpuQuadDraw};
 pub use ground::Ground;
 pub use renderer::{Instance, ModelId, RenderError, Renderer};
 pub use settings::{DebugView, DepthConvention, ImpostorBark, Pruning, RendererFormats, Settings, prune_scale};
-pub use shadows::{Cascade, Casters, MAX_CASCADES, Shadows, cascade_splits, fit_cascades};
+pub use shadows::{
+    Cascade, Casters, HostShadowView, MAX_CASCADES, MAX_HOST_SHADOW_VIEWS, Shadows, cascade_splits, fit_cascades,
+};
 pub use sky::Sky;
 pub use stats::{FrameStats, PreparePhases, ShadowStats};
 pub use technique::DrawSource;

@@ -43,7 +43,8 @@ impl Gpu {
     /// Opens the first adapter the environment allows (`WGPU_BACKEND` may restrict it) with the
     /// features [`Renderer::required_features`] names, and where the adapter offers them
     /// timestamp queries (for [`render_image_timed`]), `TEXTURE_COMPRESSION_BC` (BC7 atlases are then
-    /// uploaded as stored) and [`Renderer::gpu_selection_features`].
+    /// uploaded as stored), `DEPTH_CLIP_CONTROL` (host shadow maps' casters clamped to their near
+    /// plane) and [`Renderer::gpu_selection_features`].
     ///
     /// # Errors
     /// [`GpuError`] if there is no adapter or it lacks the features.
@@ -72,10 +73,12 @@ impl Gpu {
             return Err(GpuError::MissingFeatures { adapter: info.name, missing });
         }
         // Timestamps for the timed renders, the indirect count for GPU selection, where offered;
-        // BC textures for BC7 atlases (else they are decoded to RGBA8 on upload).
+        // BC textures for BC7 atlases (else they are decoded to RGBA8 on upload); depth clamping
+        // for host shadow maps (`Renderer::set_host_shadow_views`).
         let optional = adapter.features()
             & (wgpu::Features::TIMESTAMP_QUERY
                 | wgpu::Features::TEXTURE_COMPRESSION_BC
+                | wgpu::Features::DEPTH_CLIP_CONTROL
                 | Renderer::gpu_selection_features())
             & !excluded;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {

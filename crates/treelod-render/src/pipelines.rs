@@ -23,6 +23,8 @@ pub(crate) struct Pipelines {
     pub(crate) colour: [wgpu::RenderPipeline; Bucket::COUNT],
     /// The shadow pass's depth-only pipelines.
     pub(crate) shadow: [wgpu::RenderPipeline; Bucket::COUNT],
+    /// What more depth-only pipelines are made from.
+    pub(crate) casters: Casters,
 }
 
 impl Pipelines {
@@ -108,23 +110,20 @@ impl Pipelines {
             ("sample_count", f64::from(formats.sample_count.max(1))),
             ("crossfade", f64::from(treelod_runtime::CROSSFADE)),
         ];
-        // The shadow pass: depth only, one sample, a slope-scaled bias against self-shadowing.
-        let caster_overrides = [("sample_count", 1.0), ("crossfade", f64::from(treelod_runtime::CROSSFADE))];
         let colour_target =
             [Some(wgpu::ColorTargetState { format: formats.color, blend: None, write_mask: wgpu::ColorWrites::ALL })];
-        // A pipeline of the host's pass, or (`caster`) of the shadow pass.
-        let pipeline = |bucket: Bucket, label: &str, fs: &str, caster: bool| {
-            let (module, vs) = (&modules[bucket as usize], bucket.stages().vs);
+        let colour = Bucket::ALL.map(|bucket| {
+            let (module, stages) = (&modules[bucket as usize], bucket.stages());
             let constants = || wgpu::PipelineCompilationOptions {
-                constants: if caster { &caster_overrides } else { &overrides },
+                constants: &overrides,
                 ..wgpu::PipelineCompilationOptions::default()
             };
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(if caster { &caster_layouts[bucket as usize] } else { &colour_layouts[bucket as usize] }),
+                label: Some(stages.label),
+                layout: Some(&colour_layouts[bucket as usize]),
                 vertex: wgpu::VertexState {
                     module,
-                    entry_point: Some(vs),
+                    entry_point: Some(stages.vs),
                     compilation_options: constants(),
                     buffers: &[],
                 },
@@ -135,35 +134,108 @@ impl Pipelines {
                     ..wgpu::PrimitiveState::default()
                 },
                 depth_stencil: Some(wgpu::DepthStencilState {
-                    format: if caster { SHADOW_FORMAT } else { formats.depth },
+                    format: formats.depth,
                     depth_write_enabled: Some(true),
-                    // The shadow maps are the renderer's own, always standard.
-                    depth_compare: Some(if caster { wgpu::CompareFunction::Less } else { depth.compare() }),
+                    depth_compare: Some(depth.compare()),
                     stencil: wgpu::StencilState::default(),
-                    bias: if caster {
-                        wgpu::DepthBiasState { constant: 2, slope_scale: 2.0, clamp: 0.0 }
-                    } else {
-                        wgpu::DepthBiasState::default()
-                    },
+                    bias: wgpu::DepthBiasState::default(),
                 }),
                 multisample: wgpu::MultisampleState {
-                    count: if caster { 1 } else { formats.sample_count.max(1) },
+                    count: formats.sample_count.max(1),
                     mask: !0,
                     alpha_to_coverage_enabled: false,
                 },
                 fragment: Some(wgpu::FragmentState {
                     module,
-                    entry_point: Some(fs),
+                    entry_point: Some(stages.fs),
                     compilation_options: constants(),
-                    targets: if caster { &[] } else { &colour_target },
+                    targets: &colour_target,
                 }),
                 multiview_mask: None,
                 cache: None,
             })
-        };
-        let colour = Bucket::ALL.map(|bucket| pipeline(bucket, bucket.stages().label, bucket.stages().fs, false));
-        let shadow =
-            Bucket::ALL.map(|bucket| pipeline(bucket, bucket.stages().shadow_label, bucket.stages().shadow_fs, true));
-        Self { frame_layout, model_layout, group_layouts, shadow_layout, colour, shadow }
+        });
+        let casters = Casters { modules, layouts: caster_layouts };
+        // The renderer's own maps are always standard depth, with a slope-scaled bias against
+        // self-shadowing (its receivers add no bias of their own but the normal offset).
+        let shadow = casters.pipelines(
+            device,
+            CasterTarget {
+                format: SHADOW_FORMAT,
+                compare: wgpu::CompareFunction::Less,
+                bias: wgpu::DepthBiasState { constant: 2, slope_scale: 2.0, clamp: 0.0 },
+                unclipped_depth: false,
+            },
+        );
+        Self { frame_layout, model_layout, group_layouts, shadow_layout, colour, shadow, casters }
+    }
+}
+
+/// What a depth-only caster pipeline draws into.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct CasterTarget {
+    pub(crate) format: wgpu::TextureFormat,
+    pub(crate) compare: wgpu::CompareFunction,
+    pub(crate) bias: wgpu::DepthBiasState,
+    /// Depth clamped instead of clipped (`wgpu::Features::DEPTH_CLIP_CONTROL`): casters between
+    /// the light and the map's near plane are pancaked onto it.
+    pub(crate) unclipped_depth: bool,
+}
+
+/// The shader modules and caster layouts the depth-only pipelines are made from: kept, so that
+/// pipelines for a host's shadow maps ([`CasterTarget`]) can be made when the host names them.
+pub(crate) struct Casters {
+    modules: [wgpu::ShaderModule; Bucket::COUNT],
+    layouts: [wgpu::PipelineLayout; Bucket::COUNT],
+}
+
+impl Casters {
+    /// One depth-only pipeline per bucket (the bucket's shadow stages: alpha-tested leaves, no
+    /// colour), one sample.
+    pub(crate) fn pipelines(
+        &self,
+        device: &wgpu::Device,
+        target: CasterTarget,
+    ) -> [wgpu::RenderPipeline; Bucket::COUNT] {
+        let overrides = [("sample_count", 1.0), ("crossfade", f64::from(treelod_runtime::CROSSFADE))];
+        Bucket::ALL.map(|bucket| {
+            let (module, stages) = (&self.modules[bucket as usize], bucket.stages());
+            let constants = || wgpu::PipelineCompilationOptions {
+                constants: &overrides,
+                ..wgpu::PipelineCompilationOptions::default()
+            };
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(stages.shadow_label),
+                layout: Some(&self.layouts[bucket as usize]),
+                vertex: wgpu::VertexState {
+                    module,
+                    entry_point: Some(stages.vs),
+                    compilation_options: constants(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    unclipped_depth: target.unclipped_depth,
+                    ..wgpu::PrimitiveState::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: target.format,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(target.compare),
+                    stencil: wgpu::StencilState::default(),
+                    bias: target.bias,
+                }),
+                multisample: wgpu::MultisampleState { count: 1, mask: !0, alpha_to_coverage_enabled: false },
+                fragment: Some(wgpu::FragmentState {
+                    module,
+                    entry_point: Some(stages.shadow_fs),
+                    compilation_options: constants(),
+                    targets: &[],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        })
     }
 }

@@ -20,11 +20,13 @@ use crate::camera::Camera;
 use crate::draws::{DrawInfo, EVERY_PIXEL, InstanceTransform, RECORD_CHUNK, RecordedDraw, Recording, View, pack_fade};
 use crate::gpu_select::{GpuDraw, GpuQuadDraw, GpuSelection, InstanceDrawGpu, QuadKind, ReadDraws, select_frame_gpu};
 use crate::occlusion::{Job, Occlusion};
-use crate::pipelines::Pipelines;
+use crate::pipelines::{CasterTarget, Pipelines};
 #[cfg(doc)]
 use crate::settings::Pruning;
 use crate::settings::{DebugView, DepthConvention, RendererFormats, Settings, prune_scale};
-use crate::shadows::{Cascade, Casters, MAX_CASCADES, ShadowMaps, ShadowUniform, fit_cascades};
+use crate::shadows::{
+    Cascade, Casters, HostShadowView, MAX_CASCADES, MAX_HOST_SHADOW_VIEWS, ShadowMaps, ShadowUniform, fit_cascades,
+};
 use crate::stats::{FrameStats, Laps, PreparePhases, ShadowStats};
 use crate::streaming::{Array, Pool, Request, Residency, StreamStats, UNIT, Upload};
 use crate::technique::{Bucket, DrawSource};
@@ -123,6 +125,14 @@ pub struct Renderer {
     pipelines: [wgpu::RenderPipeline; Bucket::COUNT],
     /// The shadow pass's depth-only pipelines, in bucket order.
     shadow_pipelines: [wgpu::RenderPipeline; Bucket::COUNT],
+    /// What the host shadow maps' pipelines are made from, and those pipelines with the target
+    /// they were made for ([`Self::set_host_shadow_views`]).
+    casters: crate::pipelines::Casters,
+    host_pipelines: Option<(CasterTarget, [wgpu::RenderPipeline; Bucket::COUNT])>,
+    /// The host's shadow maps the trees are cast into, each with the cascade its trees are
+    /// selected with (remade by every [`Self::prepare`] with the scene's bounds and the
+    /// settings' `lod_texels`).
+    host_shadows: Vec<(HostShadowView, Cascade)>,
     /// The receivers' bind group layout (group 2) and the maps.
     shadow_layout: wgpu::BindGroupLayout,
     shadow_maps: ShadowMaps,
@@ -303,6 +313,15 @@ impl HandedQuads {
 /// Bytes between the frame uniforms of the views (WebGPU's largest uniform offset alignment).
 const FRAME_UNIFORM_STRIDE: u64 = 256;
 
+/// The views with a frame uniform: the camera, each of the renderer's cascades, each host
+/// shadow map.
+const FRAME_VIEWS: u64 = 1 + MAX_CASCADES as u64 + MAX_HOST_SHADOW_VIEWS as u64;
+
+/// The frame uniform slot of host shadow map `k`.
+const fn host_slot(k: usize) -> usize {
+    1 + MAX_CASCADES + k
+}
+
 /// Pool units the pool buffer starts with (1.5 MiB).
 const INITIAL_POOL_UNITS: u32 = 1 << 15;
 
@@ -349,6 +368,7 @@ impl Renderer {
             shadow_layout,
             colour: pipelines,
             shadow: shadow_pipelines,
+            casters,
         } = Pipelines::new(device, formats, depth);
         let shadow_maps = ShadowMaps::new(device, &shadow_layout, 1, 1);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -374,7 +394,7 @@ impl Renderer {
         let noise_sampler = crate::noise::sampler(device);
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("treelod frame"),
-            size: FRAME_UNIFORM_STRIDE * (1 + MAX_CASCADES as u64),
+            size: FRAME_UNIFORM_STRIDE * FRAME_VIEWS,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -404,6 +424,9 @@ impl Renderer {
             frame_layout,
             pipelines,
             shadow_pipelines,
+            casters,
+            host_pipelines: None,
+            host_shadows: Vec::new(),
             shadow_layout,
             shadow_maps,
             cascades: Vec::new(),
@@ -866,6 +889,12 @@ impl Renderer {
             None => Vec::new(),
         };
         self.ensure_shadow_maps(device, queue);
+        let lod_texels = settings.shadows.unwrap_or_default().lod_texels;
+        for (view, cascade) in &mut self.host_shadows {
+            if let Some(now) = Cascade::from_host(view, self.depth_convention, lod_texels, self.scene_bounds) {
+                *cascade = now;
+            }
+        }
         if self.gpu_instances_stale
             && let Some(gpu) = &mut self.gpu
         {
@@ -886,6 +915,7 @@ impl Renderer {
         }
         if gpu_usable
             && self.cascades.is_empty()
+            && self.host_shadows.is_empty()
             && technique == Technique::Spt
             && !policy_chooses
             && let Some(gpu) = self.gpu.as_mut()
@@ -984,53 +1014,72 @@ impl Renderer {
         laps.lap(&mut self.phases.upload);
     }
 
-    /// Each shadow cascade's selection ([`Settings::shadows`]; none without): its trees assigned
-    /// from the light's view as [`Casters`] asks and selected into `shadow_views` (one per
-    /// cascade). Returns the cascades' counts so far and whether they draw the full mesh.
+    /// Each shadow cascade's selection ([`Settings::shadows`]; none without), then each host
+    /// shadow map's ([`Self::set_host_shadow_views`]): its trees assigned from the light's view
+    /// as [`Casters`] asks and selected into `shadow_views` (one per cascade, then one per host
+    /// map). Returns the counts so far (the cascades', the host maps') and whether they draw
+    /// the full mesh.
     fn select_cascades(
         &mut self,
         shadow_views: &mut Vec<View>,
         runtime_camera: &treelod_runtime::Camera,
         lod_settings: &LodSettings,
         full_mesh: bool,
-    ) -> (ShadowStats, bool) {
-        shadow_views.resize_with(self.cascades.len(), View::default);
+    ) -> ([ShadowStats; 2], bool) {
+        // The renderer's own cascades, then the host's shadow maps (each with hysteresis of its
+        // own, by its index here).
+        let lights: Vec<treelod_runtime::Camera> = self
+            .cascades
+            .iter()
+            .chain(self.host_shadows.iter().map(|(_, cascade)| cascade))
+            .map(Cascade::selection_camera)
+            .collect();
+        shadow_views.resize_with(lights.len(), View::default);
         let mut shadow =
             ShadowStats { cascades: u32::try_from(self.cascades.len()).unwrap_or(0), ..ShadowStats::default() };
         let mut assignments = std::mem::take(&mut self.cascade_assignments);
-        assignments.resize_with(self.cascades.len(), Assignment::default);
+        assignments.resize_with(lights.len(), Assignment::default);
         // The cascades' casters: as the camera's trees, or forced (`Shadows::casters`).
         let casters = self.settings.shadows.map_or(Casters::default(), |s| s.casters);
         let cascade_full = casters.full_mesh(full_mesh);
         let cascade_lod =
             if cascade_full { LodSettings { s_min: 0.0, s_max: 0.0, ..*lod_settings } } else { *lod_settings };
-        for (k, (view, assignment)) in shadow_views.iter_mut().zip(&mut assignments).enumerate() {
-            let light = self.cascades[k].selection_camera();
+        let mut host =
+            ShadowStats { cascades: u32::try_from(self.host_shadows.len()).unwrap_or(0), ..ShadowStats::default() };
+        for (k, ((view, assignment), light)) in shadow_views.iter_mut().zip(&mut assignments).zip(lights).enumerate() {
             self.assign_cascade(k, casters, *runtime_camera, light, assignment);
             let counts = self.select_view(view, &light, &cascade_lod, false, assignment, cascade_full);
-            shadow.instances_visible += counts.instances.total();
-            shadow.instances += counts.instances;
+            let sums = if k < self.cascades.len() { &mut shadow } else { &mut host };
+            sums.instances_visible += counts.instances.total();
+            sums.instances += counts.instances;
         }
         self.cascade_assignments = assignments;
-        (shadow, cascade_full)
+        ([shadow, host], cascade_full)
     }
 
-    /// Records each cascade's draws (after [`Self::select_cascades`] and streaming), counting
-    /// them into `shadow`, which becomes `stats.shadow`, and keeps the views for
-    /// [`Self::render_shadows`].
+    /// Records each cascade's and host map's draws (after [`Self::select_cascades`] and
+    /// streaming), counting them into `shadow` and `host`, which become `stats.shadow` and
+    /// `stats.host_shadow`, and keeps the views for [`Self::render_shadows`] and
+    /// [`Self::render_host_shadow`].
     fn record_cascades(
         &mut self,
         mut shadow_views: Vec<View>,
         cascade_full: bool,
-        mut shadow: ShadowStats,
+        [mut shadow, mut host]: [ShadowStats; 2],
         stats: &mut FrameStats,
     ) {
+        let own = self.cascades.len();
         for (k, view) in shadow_views.iter_mut().enumerate() {
             let mut counted = FrameStats::default();
             self.record_view(view, None, cascade_full, &mut counted);
-            shadow.add_view(k, &counted);
+            if k < own {
+                shadow.add_view(k, &counted);
+            } else {
+                host.add_view(k - own, &counted);
+            }
         }
         stats.shadow = shadow;
+        stats.host_shadow = host;
         self.shadow_views = shadow_views;
     }
 
@@ -1554,6 +1603,21 @@ impl Renderer {
             };
             queue.write_buffer(&self.frame_buffer, (k as u64 + 1) * FRAME_UNIFORM_STRIDE, bytemuck::bytes_of(&light));
         }
+        // The host's maps: drawn with the host's own matrix, so that its receivers read the
+        // depths its casters write; facing and splat sizes from the selection's cascade.
+        for (k, (view, cascade)) in self.host_shadows.iter().enumerate() {
+            let (eye, right, up) = crate::shadows::cascade_frame(cascade);
+            let light = FrameUniform {
+                view_proj: view.clip_from_world.to_cols_array_2d(),
+                eye: eye.to_array(),
+                right: right.to_array(),
+                up: up.extend(settings.point_scale.max(0.0)).to_array(),
+                debug: 0,
+                ..uniform
+            };
+            let offset = host_slot(k) as u64 * FRAME_UNIFORM_STRIDE;
+            queue.write_buffer(&self.frame_buffer, offset, bytemuck::bytes_of(&light));
+        }
     }
 
     /// Measures which of the trees drawn this frame are hidden, for the occlusion factor of later
@@ -1691,6 +1755,66 @@ impl Renderer {
         }
     }
 
+    /// Casts the trees into shadow maps the host renders and samples itself (an engine's
+    /// directional-light cascades), from the next [`Self::prepare`] on: each frame the trees are
+    /// selected from each map's light view (as the renderer's own cascades are:
+    /// [`Shadows::casters`](crate::Shadows::casters) and
+    /// [`Shadows::lod_texels`](crate::Shadows::lod_texels) of [`Settings::shadows`], their
+    /// defaults without) and [`Self::render_host_shadow`] draws them depth-only into map `k`.
+    /// Call it each frame the maps change (an empty list stops). The maps have the renderer's
+    /// depth convention and `format`; where the device has `DEPTH_CLIP_CONTROL`, depth is
+    /// clamped rather than clipped, so that casters between the light and a map's near plane
+    /// are pancaked onto it (as engines fit a cascade's depth to the view and clamp the rest).
+    /// A view that is not an orthographic projection is left out, as are those past
+    /// [`MAX_HOST_SHADOW_VIEWS`]; returns how many views were taken, in order (`k` counts those).
+    pub fn set_host_shadow_views(
+        &mut self,
+        device: &wgpu::Device,
+        format: wgpu::TextureFormat,
+        views: &[HostShadowView],
+    ) -> usize {
+        let lod_texels = self.settings.shadows.unwrap_or_default().lod_texels;
+        self.host_shadows = views
+            .iter()
+            .filter_map(|view| {
+                Cascade::from_host(view, self.depth_convention, lod_texels, self.scene_bounds).map(|c| (*view, c))
+            })
+            .take(MAX_HOST_SHADOW_VIEWS)
+            .collect();
+        if !self.host_shadows.is_empty() {
+            // The nearer of two depths wins, or is equal (a map the host's casters wrote first).
+            let compare = match self.depth_convention {
+                DepthConvention::Standard => wgpu::CompareFunction::LessEqual,
+                DepthConvention::Reverse => wgpu::CompareFunction::GreaterEqual,
+            };
+            let target = CasterTarget {
+                format,
+                compare,
+                bias: wgpu::DepthBiasState::default(),
+                unclipped_depth: device.features().contains(wgpu::Features::DEPTH_CLIP_CONTROL),
+            };
+            if self.host_pipelines.as_ref().is_none_or(|(made, _)| *made != target) {
+                self.host_pipelines = Some((target, self.casters.pipelines(device, target)));
+            }
+        }
+        self.host_shadows.len()
+    }
+
+    /// Records the trees' depth into host shadow map `k` ([`Self::set_host_shadow_views`]),
+    /// in the host's pass over that map (after [`Self::prepare`]): what the map's light view
+    /// selected this frame. Does nothing for a `k` out of range.
+    pub fn render_host_shadow(&self, k: usize, pass: &mut wgpu::RenderPass<'_>) {
+        let (Some((_, pipelines)), Some(view), Some(group)) = (
+            self.host_pipelines.as_ref(),
+            self.shadow_views.get(self.cascades.len() + k).filter(|_| k < self.host_shadows.len()),
+            self.frame_bind_groups.get(host_slot(k)),
+        ) else {
+            return;
+        };
+        pass.set_bind_group(0, group, &[]);
+        self.draw_view(pass, view, pipelines);
+    }
+
     /// World bounds (min, max) of the instances: the union of their containers' block bounds,
     /// transformed; `None` without instances (or with only empty or non-finite blocks).
     #[must_use]
@@ -1788,7 +1912,7 @@ fn frame_bind_groups(
     frame: &wgpu::Buffer,
     [draws, pool, transforms]: [&wgpu::Buffer; 3],
 ) -> Vec<wgpu::BindGroup> {
-    (0..=MAX_CASCADES as u64)
+    (0..FRAME_VIEWS)
         .map(|view| {
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("treelod frame"),

@@ -251,6 +251,87 @@ pub fn fit_cascades(camera: &Camera, sun: Vec3, shadows: &Shadows, scene: Option
         .collect()
 }
 
+/// The most host shadow maps a renderer draws into each frame
+/// ([`crate::Renderer::set_host_shadow_views`]).
+pub const MAX_HOST_SHADOW_VIEWS: usize = 8;
+
+/// A shadow map the host renders and samples itself (an engine's directional-light cascade),
+/// which the trees are cast into: selected from its light's view as the renderer's own cascades
+/// are ([`Shadows::casters`], [`Shadows::lod_texels`]) and drawn depth-only into it by
+/// [`crate::Renderer::render_host_shadow`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HostShadowView {
+    /// World to clip of the map's orthographic light view, in the renderer's depth convention
+    /// ([`crate::DepthConvention`]: near the light at 1 for `Reverse`), as the host's own casters
+    /// draw with and its receivers sample with.
+    pub clip_from_world: Mat4,
+    /// Texels per side of the map.
+    pub resolution: u32,
+}
+
+impl Cascade {
+    /// The cascade the trees cast into `view` with are selected with: `view`'s square (its
+    /// larger half-extent across the light), and casters towards the light up to the farthest
+    /// corner of `scene` along it (beyond the map's near plane: a host whose casters there are
+    /// pancaked onto it, as unclipped depth does, gets their shadows). `None` for a view that
+    /// is not an invertible orthographic projection. `view_proj` is the renderer's own for
+    /// selection (standard depth); the trees are drawn with `view.clip_from_world`.
+    #[must_use]
+    pub fn from_host(
+        view: &HostShadowView,
+        depth: crate::DepthConvention,
+        lod_texels: f32,
+        scene: Option<(Vec3, Vec3)>,
+    ) -> Option<Self> {
+        let m = view.clip_from_world;
+        // Orthographic: the clip w does not depend on the position.
+        let w = m.row(3);
+        if !m.is_finite() || w.truncate().length_squared() > 1e-12 || (w.w - 1.0).abs() > 1e-6 {
+            return None;
+        }
+        let inverse = m.inverse();
+        if !inverse.is_finite() {
+            return None;
+        }
+        let near_z = 1.0 - depth.far();
+        let at = |x: f32, y: f32, z: f32| inverse.project_point3(Vec3::new(x, y, z));
+        let (near, far) = (at(0.0, 0.0, near_z), at(0.0, 0.0, depth.far()));
+        let centre = 0.5 * (near + far);
+        let towards = near - far;
+        let half_depth = 0.5 * towards.length();
+        let sun = towards.try_normalize()?;
+        let (right, up) = (at(1.0, 0.0, 0.5) - at(0.0, 0.0, 0.5), at(0.0, 1.0, 0.5) - at(0.0, 0.0, 0.5));
+        let radius = right.length().max(up.length());
+        let (right, up) = (right.try_normalize()?, up.try_normalize()?);
+        if !(radius > 0.0 && radius.is_finite() && half_depth.is_finite()) {
+            return None;
+        }
+        #[expect(clippy::cast_precision_loss, reason = "shadow-map resolutions are far below 2^24")]
+        let texels = view.resolution.max(1) as f32;
+        let reach = scene.map_or(half_depth, |(min, max)| {
+            let farthest = (0.5 * (min + max) - centre).dot(sun) + (0.5 * (max - min)).dot(sun.abs());
+            farthest.max(half_depth)
+        });
+        let eye = centre + sun * reach;
+        let look = glam::camera::rh::view::look_to_mat4(eye, -sun, up);
+        let proj =
+            glam::camera::rh::proj::directx::orthographic(-radius, radius, -radius, radius, 0.0, reach + half_depth);
+        Some(Self {
+            view_proj: proj * look,
+            centre,
+            radius,
+            texel: 2.0 * radius / texels,
+            split: (0.0, 0.0),
+            sun,
+            right,
+            up,
+            reach,
+            resolution: view.resolution.max(1),
+            lod_texels,
+        })
+    }
+}
+
 /// The receivers' uniform. WGSL twin: `ShadowCascades` in `shaders/shared/shadow.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]

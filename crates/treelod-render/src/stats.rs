@@ -73,6 +73,9 @@ pub struct FrameStats {
     pub ranges_dropped: u32,
     /// What the shadow pass draws, all cascades together ([`Settings::shadows`]; zero without).
     pub shadow: ShadowStats,
+    /// What the host's shadow maps drew ([`Renderer::set_host_shadow_views`]; `cascades` is the
+    /// number of maps, `per_cascade` their first [`crate::MAX_CASCADES`]).
+    pub host_shadow: ShadowStats,
 }
 
 impl FrameStats {
