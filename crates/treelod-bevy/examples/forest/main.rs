@@ -13,7 +13,8 @@
 //!
 //! Keys: W A S D to move, Q E down and up, Shift faster, the right mouse button held to look
 //! around; K colours triangles red and points blue, F draws the full mesh, L toggles treelod's
-//! shadows, G selection on the GPU. The window title shows what the renderer drew.
+//! shadows, B the sun's Bevy shadow maps (the trees cast into them onto the ground), G selection
+//! on the GPU. The window title shows what the renderer drew.
 
 mod scene;
 
@@ -213,8 +214,18 @@ fn fly(
     }
 }
 
-/// K: triangles red, points blue; F: the full mesh; L: treelod's shadow cascades.
-fn keys(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<TreelodSettings>) {
+/// K: triangles red, points blue; F: the full mesh; L: treelod's shadow cascades; B: the sun's
+/// Bevy shadow maps; G: selection on the GPU.
+fn keys(
+    keys: Res<ButtonInput<KeyCode>>,
+    mut settings: ResMut<TreelodSettings>,
+    mut suns: Query<&mut bevy_light::DirectionalLight>,
+) {
+    if keys.just_pressed(KeyCode::KeyB) {
+        for mut sun in &mut suns {
+            sun.shadow_maps_enabled = !sun.shadow_maps_enabled;
+        }
+    }
     let render = &mut settings.render;
     if keys.just_pressed(KeyCode::KeyK) {
         render.debug = if render.debug == DebugView::Kinds { DebugView::Shaded } else { DebugView::Kinds };
@@ -238,10 +249,15 @@ fn title(stats: Res<TreelodStats>, cameras: Query<Entity, With<Fly>>, mut window
     let (Ok(camera), Ok(mut window)) = (cameras.single(), windows.single_mut()) else { return };
     if let Some(frame) = stats.get(camera) {
         let title = format!(
-            "treelod in Bevy: {} trees in view, {} triangles, {} points{}",
+            "treelod in Bevy: {} trees in view, {} triangles, {} points{}{}",
             frame.instances_visible,
             frame.submitted[Primitive::Triangle],
             frame.submitted[Primitive::Point],
+            if frame.host_shadow.cascades > 0 {
+                format!(", {} cast into Bevy's {} cascades", frame.host_shadow.primitives(), frame.host_shadow.cascades)
+            } else {
+                String::new()
+            },
             if frame.gpu_selection { " (GPU selection)" } else { "" }
         );
         // Only on a change: a changed `Window` is sent to the windowing system.
