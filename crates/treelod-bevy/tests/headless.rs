@@ -4,8 +4,9 @@
 //! it, a Bevy cube standing in front of the trees must hide them (Bevy's depth buffer is read with
 //! its reverse-Z convention), and the trees must hide part of a Bevy cube behind them (they write
 //! that depth buffer). A malformed `.treelod` asset fails to load with the container's error.
-//! Trees behind a Bevy wall are chosen hidden, and a tree casts its shadow onto Bevy's ground
-//! through the cascades of a Bevy directional light.
+//! Trees behind a Bevy wall are chosen hidden, a tree casts its shadow onto Bevy's ground through
+//! the cascades of a Bevy directional light, and GPU selection over the memory budget is refused
+//! (the camera selects on the CPU).
 
 #[path = "../examples/forest/scene.rs"]
 mod scene;
@@ -487,4 +488,60 @@ fn trees_cast_into_the_shadow_maps_of_bevy_lights() {
     eprintln!("{darker} of {ground} ground pixels darker with the trees' shadow, {lighter} lighter");
     assert!(darker * 20 > ground, "the trees' shadow falls on Bevy's ground: {darker} of {ground} pixels");
     assert_eq!(lighter, 0, "a shadow only darkens");
+}
+
+#[test]
+fn gpu_selection_over_the_memory_budget_selects_on_the_cpu() {
+    use treelod_bevy::TreelodSettings;
+
+    let assets = tempfile::tempdir().expect("a temporary directory");
+    let bytes = scene::demo_container_bytes();
+    std::fs::write(assets.path().join("demo.treelod"), &bytes).expect("writes the container");
+    let mut app = App::new();
+    scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
+    // A budget far below the demo tree's triangles and points: GPU selection, which keeps them
+    // whole on the GPU, is refused; the CPU's selection streams what fits.
+    let mut settings = TreelodSettings { gpu_selection: true, ..TreelodSettings::default() };
+    settings.render.memory_budget = 64 * 1024;
+    app.insert_resource(settings);
+    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
+    let forest = handle.clone();
+    app.add_systems(Startup, move |mut commands: Commands| {
+        let trees = [Vec3::new(-6.0, 0.0, -20.0), Vec3::new(6.0, 0.0, -30.0)];
+        commands.spawn(treelod_bevy::TreelodForest::new(forest.clone(), trees.map(Transform::from_translation)));
+    });
+    let target = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(scene::target_image());
+    scene::finish(&mut app);
+    let camera = app
+        .world_mut()
+        .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into())))
+        .insert(Transform::from_xyz(0.0, 4.0, 0.0).looking_at(Vec3::new(0.0, 4.0, -25.0), Vec3::Y))
+        .id();
+    wait_for_load(&mut app, &handle);
+    for _ in 0..6 {
+        app.update();
+    }
+    let refused = app.world().resource::<TreelodStats>().get(camera).expect("the camera drew trees");
+    eprintln!("over the budget: {refused:?}");
+    assert!(!refused.gpu_selection, "GPU selection is refused over the memory budget");
+    assert_eq!(refused.instances_visible, 2, "the CPU selects and draws every tree");
+    assert!(refused.primitives() > 0);
+    assert!(refused.ranges_clamped > 0, "the budget holds coarser draws than selected: {refused:?}");
+
+    // Within the budget, a new camera (whose renderer reads the budget when it is made) selects
+    // on the GPU.
+    app.world_mut().resource_mut::<TreelodSettings>().render.memory_budget = 1 << 30;
+    app.world_mut().despawn(camera);
+    let second = app
+        .world_mut()
+        .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.into())))
+        .insert(Transform::from_xyz(0.0, 4.0, 0.0).looking_at(Vec3::new(0.0, 4.0, -25.0), Vec3::Y))
+        .id();
+    for _ in 0..6 {
+        app.update();
+    }
+    let taken = app.world().resource::<TreelodStats>().get(second).expect("the new camera drew trees");
+    eprintln!("within the budget: {taken:?}");
+    assert!(taken.gpu_selection, "GPU selection is taken within the budget");
+    assert_eq!(taken.instances_visible, 2);
 }
