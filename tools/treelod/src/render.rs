@@ -129,15 +129,13 @@ impl TechniqueArgs {
         };
     }
 
-    /// Warns about each model of `models` that lacks the forced technique's data (its trees are
-    /// drawn with the point tree instead).
-    pub fn warn_without(&self, models: &[PathBuf]) {
+    /// Warns about each model of `models` (its path and the container opened from it) that lacks
+    /// the forced technique's data (its trees are drawn with the point tree instead).
+    pub fn warn_without<'a>(&self, models: impl IntoIterator<Item = (&'a Path, &'a treelod_format::Container)>) {
         let Some(technique) = self.technique else { return };
         let Some(data) = technique.needs() else { return };
-        for path in models {
-            if let Ok(container) = treelod_format::Container::open(path)
-                && !technique.held_by(&container)
-            {
+        for (path, container) in models {
+            if !technique.held_by(container) {
                 let message = format!(
                     "holds no {}; its trees are drawn with {} instead of {}",
                     data.description(),
@@ -532,7 +530,7 @@ pub fn run(args: &Args) -> Result<(), Failed> {
     let models = scene::open_models(&scene).map_err(|e| scene_failed(&e))?;
     let bounds =
         scene::add_opened(&scene, &models, &gpu.device, &gpu.queue, &mut renderer).map_err(|e| scene_failed(&e))?;
-    args.technique.warn_without(&scene.models);
+    args.technique.warn_without(scene.models.iter().map(PathBuf::as_path).zip(models.iter().map(|m| &**m)));
     // With shadows, a ground under the trees receives them.
     let ground = renderer.settings().shadows.is_some().then(|| Ground::under_instances(&gpu.device, &renderer));
     if args.gpu_selection {
@@ -588,7 +586,16 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         }
     }
     if renderer.settings().policy.is_none() && !matches!(technique, Technique::Full | Technique::Spt) {
-        line.push_str(&format!(", {drawn} tree(s) drawn with {technique} submitting {}", submitted(&stats)));
+        // Trees whose containers lack the technique's data (warned about above) are drawn with
+        // the point tree: counted apart, so the line does not credit the technique with them.
+        let mut stead = stats.instances;
+        stead[technique] = 0;
+        let stead = if stead.iter().any(|(_, n)| n > 0) {
+            format!(", {} in their stead,", technique_counts(&stead))
+        } else {
+            String::new()
+        };
+        line.push_str(&format!(", {drawn} tree(s) drawn with {technique}{stead} submitting {}", submitted(&stats)));
     }
     if renderer.settings().shadows.is_some() {
         line.push_str("; ");

@@ -1731,6 +1731,25 @@ fn render_writes_a_png_of_the_requested_size_showing_the_tree() {
     };
     assert!(pixels.iter().enumerate().all(|(i, p)| !border(i) || close_to(*p, [0x33, 0x66, 0x99])), "framed");
 
+    // A technique the container lacks: a warning naming the file, the trees drawn with spt.
+    let args: Vec<std::ffi::OsString> = vec![
+        "render".into(),
+        demo.into(),
+        "-o".into(),
+        dir.join("planes.png").into(),
+        "--technique".into(),
+        "impostors".into(),
+    ];
+    let out = run_os(&args);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let warning = format!(
+        "{}: holds no impostor planes (build with --impostors); its trees are drawn with spt instead of impostors",
+        demo.display()
+    );
+    assert!(stderr(&out).contains(&warning), "{}", stderr(&out));
+    let line = String::from_utf8_lossy(&out.stdout);
+    assert!(line.contains(", 0 tree(s) drawn with impostors, 1 spt in their stead, submitting "), "{line}");
+
     // An explicit camera looking away from the tree sees only background.
     let away = dir.join("away.png");
     let stdout = render_ok(demo, &away, &["--size", "64x48", "--eye", "0,2,-10", "--target", "0,2,-20"]);

@@ -213,10 +213,8 @@ pub fn run(args: &Args) -> Result<(), Failed> {
         Scene { models: Vec::new(), instances: Vec::new() }
     } else {
         let scene = scene::load(&args.input).map_err(|e| scene_failed(&e))?;
-        for model in &scene.models {
-            report::open(model)?;
-        }
-        args.technique.warn_without(&scene.models);
+        let opened = scene.models.iter().map(|model| report::open(model)).collect::<Result<Vec<_>, _>>()?;
+        args.technique.warn_without(scene.models.iter().map(PathBuf::as_path).zip(&opened));
         scene
     };
     if let Some(path) = args.screenshot.as_deref().filter(|p| p.is_dir()) {
