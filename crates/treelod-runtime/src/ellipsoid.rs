@@ -31,7 +31,7 @@ use std::ops::Deref;
 use glam::Mat4;
 use treelod_format::{Container, EllipsoidRecord, LineRecord};
 
-use crate::draws::{PrefixDraw, Scene, TreeDraws, by_chunks};
+use crate::draws::{PrefixDraw, Scene, TreeDraws, select_into};
 use crate::frame::{Camera, CellPrefix, Frustum, LodSettings};
 #[cfg(doc)]
 use crate::spt_lod::level_keep;
@@ -373,7 +373,7 @@ pub fn select(
     out: &mut TreeDraws,
 ) {
     let frustum = Frustum::from_view_proj(camera.view_proj);
-    for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {
+    select_into(list, out, |chunk, out| {
         let (mut ellipsoid_ranges, mut line_ranges) = (Vec::new(), Vec::new());
         for &index in chunk {
             let Some((instance, _, model)) = scene.get(index) else { continue };
@@ -406,9 +406,7 @@ pub fn select(
                 out.triangles.extend(model.bark_draw(index, instance.model, 1.0));
             }
         }
-    }) {
-        out.append(&mut chunk);
-    }
+    });
 }
 
 #[cfg(test)]

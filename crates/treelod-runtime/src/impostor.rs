@@ -18,7 +18,7 @@ use treelod_format::{Container, PlaneRecord, Range, TriangleRecord, VertexRecord
 
 use crate::baseline::instance_tau;
 use crate::draws::{
-    PrefixDraw, Representations, Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, by_chunks,
+    PrefixDraw, Representations, Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, select_into,
 };
 use crate::frame::{Camera, CellPrefix, Frustum, Instance, ModelLod};
 use crate::spt_lod::{SptCell, SptLod, spt_drawn};
@@ -250,7 +250,7 @@ pub fn area(vertices: &[VertexRecord], triangles: &[TriangleRecord]) -> f64 {
 /// ([`ImpostorBark`]), and counts it visible.
 pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, settings: &TechniqueSettings, out: &mut TreeDraws) {
     let frustum = Frustum::from_view_proj(camera.view_proj);
-    for mut chunk in by_chunks(list, |chunk, out: &mut TreeDraws| {
+    select_into(list, out, |chunk, out| {
         let (mut ranges, mut bark_ranges) = (Vec::new(), Vec::new());
         for &index in chunk {
             let Some((instance, lod, model)) = scene.get(index) else { continue };
@@ -266,9 +266,7 @@ pub fn select(scene: &Scene<'_>, list: &[u32], camera: &Camera, settings: &Techn
             let tree = (index, instance, lod, model);
             push_bark(tree, camera, &frustum, settings, settings.impostor_bark, 1.0, &mut bark_ranges, out);
         }
-    }) {
-        out.append(&mut chunk);
-    }
+    });
 }
 
 /// Appends to `out` the bark of instance `index` (with its model's point tree and
