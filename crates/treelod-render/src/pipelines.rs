@@ -113,47 +113,27 @@ impl Pipelines {
         let colour_target =
             [Some(wgpu::ColorTargetState { format: formats.color, blend: None, write_mask: wgpu::ColorWrites::ALL })];
         let colour = Bucket::ALL.map(|bucket| {
-            let (module, stages) = (&modules[bucket as usize], bucket.stages());
-            let constants = || wgpu::PipelineCompilationOptions {
-                constants: &overrides,
-                ..wgpu::PipelineCompilationOptions::default()
-            };
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(stages.label),
-                layout: Some(&colour_layouts[bucket as usize]),
-                vertex: wgpu::VertexState {
-                    module,
-                    entry_point: Some(stages.vs),
-                    compilation_options: constants(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    // Leaves are cards seen from both sides; splats always face the camera.
-                    cull_mode: None,
-                    ..wgpu::PrimitiveState::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: formats.depth,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(depth.compare()),
-                    stencil: wgpu::StencilState::default(),
-                    bias: wgpu::DepthBiasState::default(),
-                }),
-                multisample: wgpu::MultisampleState {
-                    count: formats.sample_count.max(1),
-                    mask: !0,
-                    alpha_to_coverage_enabled: false,
-                },
-                fragment: Some(wgpu::FragmentState {
-                    module,
-                    entry_point: Some(stages.fs),
-                    compilation_options: constants(),
+            let stages = bucket.stages();
+            tree_pipeline(
+                device,
+                &TreePipeline {
+                    label: stages.label,
+                    layout: &colour_layouts[bucket as usize],
+                    module: &modules[bucket as usize],
+                    entry_points: (stages.vs, stages.fs),
+                    overrides: &overrides,
+                    depth: wgpu::DepthStencilState {
+                        format: formats.depth,
+                        depth_write_enabled: Some(true),
+                        depth_compare: Some(depth.compare()),
+                        stencil: wgpu::StencilState::default(),
+                        bias: wgpu::DepthBiasState::default(),
+                    },
+                    sample_count: formats.sample_count.max(1),
                     targets: &colour_target,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+                    unclipped_depth: false,
+                },
+            )
         });
         let casters = Casters { modules, layouts: caster_layouts };
         // The renderer's own maps are always standard depth, with a slope-scaled bias against
@@ -199,43 +179,74 @@ impl Casters {
     ) -> [wgpu::RenderPipeline; Bucket::COUNT] {
         let overrides = [("sample_count", 1.0), ("crossfade", f64::from(treelod_runtime::CROSSFADE))];
         Bucket::ALL.map(|bucket| {
-            let (module, stages) = (&self.modules[bucket as usize], bucket.stages());
-            let constants = || wgpu::PipelineCompilationOptions {
-                constants: &overrides,
-                ..wgpu::PipelineCompilationOptions::default()
-            };
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(stages.shadow_label),
-                layout: Some(&self.layouts[bucket as usize]),
-                vertex: wgpu::VertexState {
-                    module,
-                    entry_point: Some(stages.vs),
-                    compilation_options: constants(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    cull_mode: None,
-                    unclipped_depth: target.unclipped_depth,
-                    ..wgpu::PrimitiveState::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: target.format,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(target.compare),
-                    stencil: wgpu::StencilState::default(),
-                    bias: target.bias,
-                }),
-                multisample: wgpu::MultisampleState { count: 1, mask: !0, alpha_to_coverage_enabled: false },
-                fragment: Some(wgpu::FragmentState {
-                    module,
-                    entry_point: Some(stages.shadow_fs),
-                    compilation_options: constants(),
+            let stages = bucket.stages();
+            tree_pipeline(
+                device,
+                &TreePipeline {
+                    label: stages.shadow_label,
+                    layout: &self.layouts[bucket as usize],
+                    module: &self.modules[bucket as usize],
+                    entry_points: (stages.vs, stages.shadow_fs),
+                    overrides: &overrides,
+                    depth: wgpu::DepthStencilState {
+                        format: target.format,
+                        depth_write_enabled: Some(true),
+                        depth_compare: Some(target.compare),
+                        stencil: wgpu::StencilState::default(),
+                        bias: target.bias,
+                    },
+                    sample_count: 1,
                     targets: &[],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+                    unclipped_depth: target.unclipped_depth,
+                },
+            )
         })
     }
+}
+
+/// What differs between the tree pipelines: the host's pass's and the depth-only casters'.
+struct TreePipeline<'a> {
+    label: &'a str,
+    layout: &'a wgpu::PipelineLayout,
+    module: &'a wgpu::ShaderModule,
+    /// The vertex and fragment entry points.
+    entry_points: (&'a str, &'a str),
+    overrides: &'a [(&'a str, f64)],
+    depth: wgpu::DepthStencilState,
+    sample_count: u32,
+    targets: &'a [Option<wgpu::ColorTargetState>],
+    unclipped_depth: bool,
+}
+
+/// A tree pipeline: triangle lists from no vertex buffers (the stages read the draws), both
+/// faces drawn (leaves are cards seen from both sides; splats always face the camera).
+fn tree_pipeline(device: &wgpu::Device, p: &TreePipeline<'_>) -> wgpu::RenderPipeline {
+    let constants =
+        || wgpu::PipelineCompilationOptions { constants: p.overrides, ..wgpu::PipelineCompilationOptions::default() };
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(p.label),
+        layout: Some(p.layout),
+        vertex: wgpu::VertexState {
+            module: p.module,
+            entry_point: Some(p.entry_points.0),
+            compilation_options: constants(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            cull_mode: None,
+            unclipped_depth: p.unclipped_depth,
+            ..wgpu::PrimitiveState::default()
+        },
+        depth_stencil: Some(p.depth.clone()),
+        multisample: wgpu::MultisampleState { count: p.sample_count, mask: !0, alpha_to_coverage_enabled: false },
+        fragment: Some(wgpu::FragmentState {
+            module: p.module,
+            entry_point: Some(p.entry_points.1),
+            compilation_options: constants(),
+            targets: p.targets,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }

@@ -1591,32 +1591,27 @@ impl Renderer {
             pad: [0; 3],
         };
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&uniform));
-        for (k, cascade) in self.cascades.iter().enumerate() {
+        // A shadow map's uniform at slot `slot`: drawn with `view_proj`, facing and splat sizes
+        // from `cascade`.
+        let write_light = |slot: usize, view_proj: Mat4, cascade: &Cascade| {
             let (eye, right, up) = crate::shadows::cascade_frame(cascade);
             let light = FrameUniform {
-                view_proj: cascade.view_proj.to_cols_array_2d(),
+                view_proj: view_proj.to_cols_array_2d(),
                 eye: eye.to_array(),
                 right: right.to_array(),
                 up: up.extend(settings.point_scale.max(0.0)).to_array(),
                 debug: 0,
                 ..uniform
             };
-            queue.write_buffer(&self.frame_buffer, (k as u64 + 1) * FRAME_UNIFORM_STRIDE, bytemuck::bytes_of(&light));
+            queue.write_buffer(&self.frame_buffer, slot as u64 * FRAME_UNIFORM_STRIDE, bytemuck::bytes_of(&light));
+        };
+        for (k, cascade) in self.cascades.iter().enumerate() {
+            write_light(k + 1, cascade.view_proj, cascade);
         }
         // The host's maps: drawn with the host's own matrix, so that its receivers read the
-        // depths its casters write; facing and splat sizes from the selection's cascade.
+        // depths its casters write.
         for (k, (view, cascade)) in self.host_shadows.iter().enumerate() {
-            let (eye, right, up) = crate::shadows::cascade_frame(cascade);
-            let light = FrameUniform {
-                view_proj: view.clip_from_world.to_cols_array_2d(),
-                eye: eye.to_array(),
-                right: right.to_array(),
-                up: up.extend(settings.point_scale.max(0.0)).to_array(),
-                debug: 0,
-                ..uniform
-            };
-            let offset = host_slot(k) as u64 * FRAME_UNIFORM_STRIDE;
-            queue.write_buffer(&self.frame_buffer, offset, bytemuck::bytes_of(&light));
+            write_light(host_slot(k), view.clip_from_world, cascade);
         }
     }
 

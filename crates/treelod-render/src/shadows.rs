@@ -224,12 +224,7 @@ pub fn fit_cascades(camera: &Camera, sun: Vec3, shadows: &Shadows, scene: Option
             local.x = (local.x / texel).round() * texel;
             local.y = (local.y / texel).round() * texel;
             let centre = unbasis.transform_point3(local);
-            // Casters towards the sun beyond the sphere: up to the scene's farthest corner along
-            // the sun (its centre's distance plus the half-extents projected on |sun|).
-            let reach = scene.map_or(radius, |(min, max)| {
-                let farthest = (0.5 * (min + max) - centre).dot(sun) + (0.5 * (max - min)).dot(sun.abs());
-                farthest.max(radius)
-            });
+            let reach = casters_reach(scene, centre, sun, radius);
             let eye = centre + sun * reach;
             let view = glam::camera::rh::view::look_to_mat4(eye, -sun, up_ref);
             let proj =
@@ -308,10 +303,7 @@ impl Cascade {
         }
         #[expect(clippy::cast_precision_loss, reason = "shadow-map resolutions are far below 2^24")]
         let texels = view.resolution.max(1) as f32;
-        let reach = scene.map_or(half_depth, |(min, max)| {
-            let farthest = (0.5 * (min + max) - centre).dot(sun) + (0.5 * (max - min)).dot(sun.abs());
-            farthest.max(half_depth)
-        });
+        let reach = casters_reach(scene, centre, sun, half_depth);
         let eye = centre + sun * reach;
         let look = glam::camera::rh::view::look_to_mat4(eye, -sun, up);
         let proj =
@@ -330,6 +322,16 @@ impl Cascade {
             lod_texels,
         })
     }
+}
+
+/// How far towards the sun from `centre` a map's casters reach: up to the farthest corner of
+/// `scene` along the sun (its centre's distance plus the half-extents projected on |sun|), at
+/// least `least` (the map's own half-depth; `scene` `None`: that alone).
+fn casters_reach(scene: Option<(Vec3, Vec3)>, centre: Vec3, sun: Vec3, least: f32) -> f32 {
+    scene.map_or(least, |(min, max)| {
+        let farthest = (0.5 * (min + max) - centre).dot(sun) + (0.5 * (max - min)).dot(sun.abs());
+        farthest.max(least)
+    })
 }
 
 /// The receivers' uniform. WGSL twin: `ShadowCascades` in `shaders/shared/shadow.wgsl`.
