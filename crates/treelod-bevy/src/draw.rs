@@ -31,10 +31,7 @@ use bevy_render::view::{ExtractedView, ViewDepthStencilTexture, ViewTarget};
 use bevy_render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
 use bevy_transform::components::GlobalTransform;
 use treelod_format::Container;
-use treelod_render::{
-    Camera, Cascade, DepthConvention, HostShadowView, Instance, MAX_HOST_SHADOW_VIEWS, ModelId, Renderer,
-    RendererFormats, Settings,
-};
+use treelod_render::{Camera, DepthConvention, HostShadowView, Instance, ModelId, Renderer, RendererFormats, Settings};
 
 use crate::asset::TreelodContainer;
 use crate::forest::{TreelodScene, to_glam};
@@ -111,9 +108,8 @@ struct ViewRenderer {
     /// GPU selection was asked for and refused (the models do not fit the memory budget): said
     /// once, not tried again until the setting is turned off and on or the renderer is made anew.
     gpu_refused: bool,
-    /// The render-world entities of the shadow cascades of Bevy's directional lights the trees
-    /// are cast into this frame, host map `k` of the renderer at `k`
-    /// ([`Renderer::set_host_shadow_views`]).
+    /// The render-world entities of the shadow cascades of Bevy's directional lights handed to
+    /// the renderer this frame, host map `k` ([`Renderer::set_host_shadow_views`]) at `k`.
     bevy_shadows: Vec<Entity>,
 }
 
@@ -255,14 +251,11 @@ fn prepare(
                 let clip_from_world = light_view
                     .clip_from_world
                     .unwrap_or_else(|| light_view.clip_from_view * light_view.world_from_view.to_matrix().inverse());
-                let view =
-                    HostShadowView { clip_from_world: to_glam(clip_from_world), resolution: light_view.viewport.z };
-                if host.len() < MAX_HOST_SHADOW_VIEWS
-                    && Cascade::from_host(&view, DepthConvention::Reverse, 1.0, None).is_some()
-                {
-                    host.push(view);
-                    entry.bevy_shadows.push(light);
-                }
+                host.push(HostShadowView {
+                    clip_from_world: to_glam(clip_from_world),
+                    resolution: light_view.viewport.z,
+                });
+                entry.bevy_shadows.push(light);
             }
         }
         entry.renderer.set_host_shadow_views(device.wgpu_device(), CORE_3D_SHADOW_MAP_FORMAT, &host);

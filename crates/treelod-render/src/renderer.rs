@@ -129,10 +129,10 @@ pub struct Renderer {
     /// they were made for ([`Self::set_host_shadow_views`]).
     casters: crate::pipelines::Casters,
     host_pipelines: Option<(CasterTarget, [wgpu::RenderPipeline; Bucket::COUNT])>,
-    /// The host's shadow maps the trees are cast into, each with the cascade its trees are
-    /// selected with (remade by every [`Self::prepare`] with the scene's bounds and the
-    /// settings' `lod_texels`).
-    host_shadows: Vec<(HostShadowView, Cascade)>,
+    /// The host's shadow maps the trees are cast into, each with its index in the host's list
+    /// and the cascade its trees are selected with (remade by every [`Self::prepare`] with the
+    /// scene's bounds and the settings' `lod_texels`).
+    host_shadows: Vec<(usize, HostShadowView, Cascade)>,
     /// The receivers' bind group layout (group 2) and the maps.
     shadow_layout: wgpu::BindGroupLayout,
     shadow_maps: ShadowMaps,
@@ -890,7 +890,7 @@ impl Renderer {
         };
         self.ensure_shadow_maps(device, queue);
         let lod_texels = settings.shadows.unwrap_or_default().lod_texels;
-        for (view, cascade) in &mut self.host_shadows {
+        for (_, view, cascade) in &mut self.host_shadows {
             if let Some(now) = Cascade::from_host(view, self.depth_convention, lod_texels, self.scene_bounds) {
                 *cascade = now;
             }
@@ -1031,7 +1031,7 @@ impl Renderer {
         let lights: Vec<treelod_runtime::Camera> = self
             .cascades
             .iter()
-            .chain(self.host_shadows.iter().map(|(_, cascade)| cascade))
+            .chain(self.host_shadows.iter().map(|(_, _, cascade)| cascade))
             .map(Cascade::selection_camera)
             .collect();
         shadow_views.resize_with(lights.len(), View::default);
@@ -1610,7 +1610,7 @@ impl Renderer {
         }
         // The host's maps: drawn with the host's own matrix, so that its receivers read the
         // depths its casters write.
-        for (k, (view, cascade)) in self.host_shadows.iter().enumerate() {
+        for (k, (_, view, cascade)) in self.host_shadows.iter().enumerate() {
             write_light(host_slot(k), view.clip_from_world, cascade);
         }
     }
@@ -1760,8 +1760,9 @@ impl Renderer {
     /// depth convention and `format`; where the device has `DEPTH_CLIP_CONTROL`, depth is
     /// clamped rather than clipped, so that casters between the light and a map's near plane
     /// are pancaked onto it (as engines fit a cascade's depth to the view and clamp the rest).
-    /// A view that is not an orthographic projection is left out, as are those past
-    /// [`MAX_HOST_SHADOW_VIEWS`]; returns how many views were taken, in order (`k` counts those).
+    /// `k` is a view's index in `views`. A view that is not an orthographic projection is left
+    /// out (it draws nothing), as are those past the first [`MAX_HOST_SHADOW_VIEWS`] taken;
+    /// returns how many views were taken.
     pub fn set_host_shadow_views(
         &mut self,
         device: &wgpu::Device,
@@ -1771,8 +1772,9 @@ impl Renderer {
         let lod_texels = self.settings.shadows.unwrap_or_default().lod_texels;
         self.host_shadows = views
             .iter()
-            .filter_map(|view| {
-                Cascade::from_host(view, self.depth_convention, lod_texels, self.scene_bounds).map(|c| (*view, c))
+            .enumerate()
+            .filter_map(|(k, view)| {
+                Cascade::from_host(view, self.depth_convention, lod_texels, self.scene_bounds).map(|c| (k, *view, c))
             })
             .take(MAX_HOST_SHADOW_VIEWS)
             .collect();
@@ -1797,12 +1799,13 @@ impl Renderer {
 
     /// Records the trees' depth into host shadow map `k` ([`Self::set_host_shadow_views`]),
     /// in the host's pass over that map (after [`Self::prepare`]): what the map's light view
-    /// selected this frame. Does nothing for a `k` out of range.
+    /// selected this frame. Does nothing for a `k` not taken.
     pub fn render_host_shadow(&self, k: usize, pass: &mut wgpu::RenderPass<'_>) {
+        let Some(taken) = self.host_shadows.iter().position(|(index, _, _)| *index == k) else { return };
         let (Some((_, pipelines)), Some(view), Some(group)) = (
             self.host_pipelines.as_ref(),
-            self.shadow_views.get(self.cascades.len() + k).filter(|_| k < self.host_shadows.len()),
-            self.frame_bind_groups.get(host_slot(k)),
+            self.shadow_views.get(self.cascades.len() + taken),
+            self.frame_bind_groups.get(host_slot(taken)),
         ) else {
             return;
         };

@@ -38,7 +38,7 @@ fn light_view(centre: Vec3, sun: Vec3, radius: f32, near: f32, depth: f32, conve
 
 /// The host's map after the renderer drew its trees into it (cleared to the convention's far
 /// depth first): each texel's depth, rows top to bottom.
-fn host_map(gpu: &Gpu, renderer: &Renderer, convention: DepthConvention) -> Vec<f32> {
+fn host_map(gpu: &Gpu, renderer: &Renderer, convention: DepthConvention, k: usize) -> Vec<f32> {
     let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
         label: Some("host shadow map"),
         size: wgpu::Extent3d { width: MAP, height: MAP, depth_or_array_layers: 1 },
@@ -65,7 +65,7 @@ fn host_map(gpu: &Gpu, renderer: &Renderer, convention: DepthConvention) -> Vec<
             }),
             ..wgpu::RenderPassDescriptor::default()
         });
-        renderer.render_host_shadow(0, &mut pass);
+        renderer.render_host_shadow(k, &mut pass);
     }
     let readback = Readback::record(&gpu.device, &mut encoder, &texture);
     gpu.queue.submit([encoder.finish()]);
@@ -97,7 +97,7 @@ fn cast(
     for _ in 0..4 {
         stats = renderer.prepare(&gpu.device, &gpu.queue, camera);
     }
-    (stats, host_map(gpu, &renderer, convention))
+    (stats, host_map(gpu, &renderer, convention, 0))
 }
 
 /// The texels the trees cover: nearer than the cleared far depth.
@@ -165,6 +165,10 @@ fn host_views_that_are_not_orthographic_are_refused() {
     let stats = renderer.prepare(&gpu.device, &gpu.queue, &camera);
     assert_eq!(stats.host_shadow.cascades, 1);
     assert!(stats.host_shadow.instances_visible == 1, "{:?}", stats.host_shadow);
+    // `k` is the view's index in the list given: the refused views draw nothing.
+    let standard = DepthConvention::Standard;
+    assert!(count(&covered(&host_map(&gpu, &renderer, standard, 2), standard)) > 1000, "view 2 casts");
+    assert_eq!(count(&covered(&host_map(&gpu, &renderer, standard, 0), standard)), 0, "view 0 was refused");
     let many = vec![views[2]; 12];
     assert_eq!(renderer.set_host_shadow_views(&gpu.device, FORMAT, &many), treelod_render::MAX_HOST_SHADOW_VIEWS);
     assert_eq!(renderer.set_host_shadow_views(&gpu.device, FORMAT, &[]), 0);
