@@ -107,7 +107,10 @@
 //! then selects the trees from each map's light view as it selects for its own cascades, and
 //! [`Renderer::render_host_shadow`] draws them depth-only into map `k` in the host's pass over
 //! it, with the host's matrix, so the host's receivers read the trees' depth as its own
-//! casters'. [`FrameStats::host_shadow`] counts what they drew.
+//! casters'. [`FrameStats::host_shadow`] counts what they drew. The trees receive the host's maps
+//! in place of the renderer's own with [`Renderer::receive_host_shadows`] (the host's depth
+//! texture array and its cascades' matrices and layers): shadows of the host's casters fall on
+//! the trees, and the trees' own on each other.
 
 mod assign;
 mod camera;
@@ -135,7 +138,8 @@ pub use ground::Ground;
 pub use renderer::{Instance, ModelId, RenderError, Renderer};
 pub use settings::{DebugView, DepthConvention, ImpostorBark, Pruning, RendererFormats, Settings, prune_scale};
 pub use shadows::{
-    Cascade, Casters, HostShadowView, MAX_CASCADES, MAX_HOST_SHADOW_VIEWS, Shadows, cascade_splits, fit_cascades,
+    Cascade, Casters, HostShadowCascade, HostShadowError, HostShadowView, MAX_CASCADES, MAX_HOST_SHADOW_VIEWS, Shadows,
+    cascade_splits, fit_cascades,
 };
 pub use sky::Sky;
 pub use stats::{FrameStats, PreparePhases, ShadowStats};

@@ -25,7 +25,8 @@ use crate::pipelines::{CasterTarget, Pipelines};
 use crate::settings::Pruning;
 use crate::settings::{DebugView, DepthConvention, RendererFormats, Settings, prune_scale};
 use crate::shadows::{
-    Cascade, Casters, HostShadowView, MAX_CASCADES, MAX_HOST_SHADOW_VIEWS, ShadowMaps, ShadowUniform, fit_cascades,
+    Cascade, Casters, HostReceiver, HostShadowCascade, HostShadowError, HostShadowView, MAX_CASCADES,
+    MAX_HOST_SHADOW_VIEWS, ShadowMaps, ShadowUniform, fit_cascades,
 };
 use crate::stats::{FrameStats, Laps, PreparePhases, ShadowStats};
 use crate::streaming::{Array, Pool, Request, Residency, StreamStats, UNIT, Upload};
@@ -136,6 +137,9 @@ pub struct Renderer {
     /// The receivers' bind group layout (group 2) and the maps.
     shadow_layout: wgpu::BindGroupLayout,
     shadow_maps: ShadowMaps,
+    /// The host's shadow maps the trees receive instead of the renderer's own
+    /// ([`Self::receive_host_shadows`]).
+    host_receiver: Option<HostReceiver>,
     /// This frame's cascades (empty without shadows).
     cascades: Vec<Cascade>,
     /// World bounds of the instances (their transformed blocks), for the cascades' casters and
@@ -429,6 +433,7 @@ impl Renderer {
             host_shadows: Vec::new(),
             shadow_layout,
             shadow_maps,
+            host_receiver: None,
             cascades: Vec::new(),
             scene_bounds: None,
             sampler,
@@ -881,12 +886,13 @@ impl Renderer {
         if self.measures_occlusion() {
             self.occlusion.collect(device, camera.position, forward, &mut self.visible_fraction);
         }
+        // While the trees receive the host's maps, the renderer's own are neither fitted nor drawn.
         self.cascades = match settings.shadows {
-            Some(mut shadows) => {
+            Some(mut shadows) if self.host_receiver.is_none() => {
                 shadows.resolution = shadows.resolution.clamp(1, device.limits().max_texture_dimension_2d);
                 fit_cascades(camera, settings.sun, &shadows, self.scene_bounds)
             }
-            None => Vec::new(),
+            _ => Vec::new(),
         };
         self.ensure_shadow_maps(device, queue);
         let lod_texels = settings.shadows.unwrap_or_default().lod_texels;
@@ -1560,8 +1566,20 @@ impl Renderer {
             self.shadow_maps = ShadowMaps::new(device, &self.shadow_layout, size.0, size.1);
         }
         let normal_offset = self.settings.shadows.map_or(0.0, |s| s.normal_offset);
-        let uniform = ShadowUniform::new(&self.cascades, normal_offset);
+        let resolution = self.cascades.first().map_or(1, |c| c.resolution);
+        let own = self.cascades.iter().zip(0..).map(|(c, layer)| (c.view_proj, c.texel, layer));
+        let uniform = ShadowUniform::new(own, resolution, normal_offset, false);
         queue.write_buffer(&self.shadow_maps.uniform, 0, bytemuck::bytes_of(&uniform));
+        self.write_host_receiver(queue);
+    }
+
+    /// Writes the uniform of the host's shadow maps the trees receive, if any.
+    fn write_host_receiver(&self, queue: &wgpu::Queue) {
+        if let Some(receiver) = &self.host_receiver {
+            let normal_offset = self.settings.shadows.unwrap_or_default().normal_offset;
+            let uniform = receiver.uniform(normal_offset, self.depth_convention);
+            queue.write_buffer(&receiver.uniform, 0, bytemuck::bytes_of(&uniform));
+        }
     }
 
     /// Writes the frame uniforms (camera, light, debug view) for `camera` and for each cascade's
@@ -1705,7 +1723,7 @@ impl Renderer {
             && let Some(gpu) = &self.gpu
         {
             let group = |m: usize| self.models.get(m).map(|model| &model.bind_group);
-            pass.set_bind_group(2, &self.shadow_maps.bind_group, &[]);
+            pass.set_bind_group(2, self.shadow_bind_group(), &[]);
             if !self.main.model_draws.is_empty() {
                 // A policy frame: the other techniques' draws, recorded on the CPU. Drawn before
                 // the GPU's buckets: on lavapipe, draws recorded after a `multi_draw_indirect_count`
@@ -1723,7 +1741,7 @@ impl Renderer {
             return;
         }
         pass.set_bind_group(0, &self.frame_bind_groups[0], &[]);
-        pass.set_bind_group(2, &self.shadow_maps.bind_group, &[]);
+        pass.set_bind_group(2, self.shadow_bind_group(), &[]);
         self.draw_view(pass, &self.main, &self.pipelines);
     }
 
@@ -1835,11 +1853,52 @@ impl Renderer {
     }
 
     /// The receivers' bind group: this frame's cascades' matrices, the shadow maps and their
-    /// comparison sampler (everything lit without [`Settings::shadows`]). It may be replaced by
+    /// comparison sampler (everything lit without [`Settings::shadows`]); the host's maps while
+    /// the trees receive them ([`Self::receive_host_shadows`]). It may be replaced by
     /// [`Self::prepare`] when the shadow settings change: fetch it each frame.
     #[must_use]
     pub fn shadow_bind_group(&self) -> &wgpu::BindGroup {
-        &self.shadow_maps.bind_group
+        self.host_receiver.as_ref().map_or(&self.shadow_maps.bind_group, |host| &host.bind_group)
+    }
+
+    /// The trees (and host pipelines bound to [`Self::shadow_bind_group`]) receive the host's
+    /// own shadow maps of the sun ([`Settings::sun`]) in place of the renderer's cascades: the
+    /// cascades of a directional light whose maps the host renders, its casters' and, with
+    /// [`Self::set_host_shadow_views`] and [`Self::render_host_shadow`], the trees'. `maps` is
+    /// the host's depth texture (a 2D array, or a 2D texture with one layer: sampled, single
+    /// sampled), `cascades` the light views of its layers in the renderer's depth convention.
+    /// The orthographic ones are taken, finest first, at most [`MAX_CASCADES`]; each point
+    /// reads the finest that holds it, with the same filter and normal offset
+    /// ([`Shadows::normal_offset`](crate::Shadows::normal_offset)) as the renderer's own maps.
+    /// Call it each frame (its matrices move with the view; an empty list, or
+    /// [`Self::stop_receiving_host_shadows`], stops), before the pass that calls [`Self::render`]
+    /// and after the host's shadow passes have been recorded. While the trees receive the host's
+    /// maps, the renderer's own cascades are neither fitted nor drawn ([`FrameStats::shadow`]
+    /// counts none); [`Settings::shadows`] still gives the casters, `lod_texels` and
+    /// `normal_offset`. Returns how many cascades were taken.
+    ///
+    /// # Errors
+    /// [`HostShadowError`] if `maps` is not a sampled, single-sampled 2D depth texture or a
+    /// cascade names a layer it does not have; the trees then stop receiving the host's maps.
+    pub fn receive_host_shadows(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        maps: &wgpu::Texture,
+        cascades: &[HostShadowCascade],
+    ) -> Result<usize, HostShadowError> {
+        let uniform = self.host_receiver.take().map(|host| host.uniform);
+        self.host_receiver =
+            HostReceiver::new(device, &self.shadow_layout, maps, cascades, self.depth_convention, uniform)?;
+        self.write_host_receiver(queue);
+        Ok(self.host_receiver.as_ref().map_or(0, |host| host.cascades.len()))
+    }
+
+    /// The trees receive the renderer's own shadow maps again ([`Settings::shadows`]; none
+    /// without), not the host's ([`Self::receive_host_shadows`]), from the next
+    /// [`Self::prepare`] on.
+    pub fn stop_receiving_host_shadows(&mut self) {
+        self.host_receiver = None;
     }
 }
 

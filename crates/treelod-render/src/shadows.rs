@@ -340,29 +340,38 @@ fn casters_reach(scene: Option<(Vec3, Vec3)>, centre: Vec3, sun: Vec3, least: f3
 pub(crate) struct ShadowUniform {
     view_proj: [[[f32; 4]; 4]; MAX_CASCADES],
     texel: [f32; 4],
+    layer: [u32; 4],
     count: u32,
     normal_offset: f32,
     inv_size: f32,
-    _pad: u32,
+    reverse_z: u32,
 }
 
 impl ShadowUniform {
-    /// The uniform of `cascades` (none: shadows off).
-    pub(crate) fn new(cascades: &[Cascade], normal_offset: f32) -> Self {
+    /// The uniform of `cascades` (none: shadows off), finest first, each its world-to-clip
+    /// matrix, metres per texel and layer of maps of `resolution`² texels, in standard depth
+    /// (`reverse_z` false: nearer the light is smaller) or reverse depth.
+    pub(crate) fn new(
+        cascades: impl IntoIterator<Item = (Mat4, f32, u32)>,
+        resolution: u32,
+        normal_offset: f32,
+        reverse_z: bool,
+    ) -> Self {
+        #[expect(clippy::cast_precision_loss, reason = "shadow-map resolutions are far below 2^24")]
+        let inv_size = 1.0 / resolution.max(1) as f32;
         let mut uniform = Self {
             view_proj: [Mat4::IDENTITY.to_cols_array_2d(); MAX_CASCADES],
             texel: [0.0; 4],
+            layer: [0; 4],
             count: 0,
             normal_offset,
-            inv_size: 1.0,
-            _pad: 0,
+            inv_size,
+            reverse_z: u32::from(reverse_z),
         };
-        for (k, cascade) in cascades.iter().take(MAX_CASCADES).enumerate() {
-            uniform.view_proj[k] = cascade.view_proj.to_cols_array_2d();
-            uniform.texel[k] = cascade.texel;
-            #[expect(clippy::cast_precision_loss, reason = "shadow-map resolutions are far below 2^24")]
-            let size = cascade.resolution.max(1) as f32;
-            uniform.inv_size = 1.0 / size;
+        for (k, (view_proj, texel, layer)) in cascades.into_iter().take(MAX_CASCADES).enumerate() {
+            uniform.view_proj[k] = view_proj.to_cols_array_2d();
+            uniform.texel[k] = texel;
+            uniform.layer[k] = layer;
             uniform.count = u32::try_from(k + 1).unwrap_or(0);
         }
         uniform
@@ -448,35 +457,166 @@ impl ShadowMaps {
                 })
             })
             .collect();
-        let uniform = wgpu::util::DeviceExt::create_buffer_init(
-            device,
-            &wgpu::util::BufferInitDescriptor {
-                label: Some("treelod shadow cascades"),
-                contents: bytemuck::bytes_of(&ShadowUniform::new(&[], 0.0)),
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            },
-        );
-        // Lit where the receiver's depth is at most the map's; linear: the hardware's 2×2
-        // percentage-closer filter.
-        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("treelod shadow sampler"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            compare: Some(wgpu::CompareFunction::LessEqual),
-            ..wgpu::SamplerDescriptor::default()
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("treelod shadows"),
-            layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&array) },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&sampler) },
-            ],
-        });
+        let uniform = receivers_uniform(device);
+        let bind_group = receivers_group(device, layout, &uniform, &array, wgpu::CompareFunction::LessEqual);
         Self { size: (resolution, layers), layers: views, uniform, bind_group }
+    }
+}
+
+/// A receivers' uniform buffer, saying no cascade is in use.
+fn receivers_uniform(device: &wgpu::Device) -> wgpu::Buffer {
+    wgpu::util::DeviceExt::create_buffer_init(
+        device,
+        &wgpu::util::BufferInitDescriptor {
+            label: Some("treelod shadow cascades"),
+            contents: bytemuck::bytes_of(&ShadowUniform::new([], 1, 0.0, false)),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        },
+    )
+}
+
+/// The receivers' bind group of `uniform` and the maps `array` (a depth 2D array view), with a
+/// comparison sampler lit where `compare(receiver, map)` holds.
+fn receivers_group(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    uniform: &wgpu::Buffer,
+    array: &wgpu::TextureView,
+    compare: wgpu::CompareFunction,
+) -> wgpu::BindGroup {
+    // Linear: the hardware's 2×2 percentage-closer filter.
+    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("treelod shadow sampler"),
+        address_mode_u: wgpu::AddressMode::ClampToEdge,
+        address_mode_v: wgpu::AddressMode::ClampToEdge,
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        compare: Some(compare),
+        ..wgpu::SamplerDescriptor::default()
+    });
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("treelod shadows"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(array) },
+            wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::Sampler(&sampler) },
+        ],
+    })
+}
+
+/// A cascade of the host's shadow maps the trees receive ([`crate::Renderer::receive_host_shadows`]):
+/// its light view and the layer of the host's depth texture array it is in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HostShadowCascade {
+    /// World to clip of the cascade's orthographic light view, in the renderer's depth
+    /// convention, as the host's casters drew the layer with.
+    pub clip_from_world: Mat4,
+    /// The layer of the host's texture array.
+    pub layer: u32,
+}
+
+/// Why the host's shadow maps cannot be received ([`crate::Renderer::receive_host_shadows`]).
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum HostShadowError {
+    /// The texture is not a 2D texture of a depth format.
+    #[error("the host's shadow maps are a {dimension:?} texture of format {format:?}, not a 2D depth texture array")]
+    NotDepth {
+        /// Its dimension.
+        dimension: wgpu::TextureDimension,
+        /// Its format.
+        format: wgpu::TextureFormat,
+    },
+    /// The texture cannot be sampled.
+    #[error("the host's shadow maps lack TEXTURE_BINDING usage, so the trees cannot sample them")]
+    NotSampled,
+    /// The texture is multisampled.
+    #[error("the host's shadow maps have {0} samples per texel; a receiver samples single-sampled maps")]
+    Multisampled(u32),
+    /// A cascade names a layer the texture does not have.
+    #[error("a host shadow cascade names layer {layer}, the host's shadow maps have {layers} layer(s)")]
+    NoLayer {
+        /// The layer named.
+        layer: u32,
+        /// Layers of the texture.
+        layers: u32,
+    },
+}
+
+/// The host's shadow maps the trees receive: the cascades taken (finest first, each with the
+/// cascade its texel size comes from), the receivers' uniform and its bind group over the host's
+/// texture.
+pub(crate) struct HostReceiver {
+    pub(crate) cascades: Vec<(HostShadowCascade, Cascade)>,
+    pub(crate) resolution: u32,
+    pub(crate) uniform: wgpu::Buffer,
+    pub(crate) bind_group: wgpu::BindGroup,
+}
+
+impl HostReceiver {
+    /// The receiver of `cascades` of the host's depth texture array `maps` (`uniform`: the
+    /// buffer of an earlier one, reused), the orthographic ones among them, finest first, at
+    /// most [`MAX_CASCADES`]; `Ok(None)` when none is.
+    ///
+    /// # Errors
+    /// [`HostShadowError`] when `maps` is not a single-sampled, sampled 2D depth texture or a
+    /// cascade's layer is not in it.
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+        maps: &wgpu::Texture,
+        cascades: &[HostShadowCascade],
+        depth: crate::DepthConvention,
+        uniform: Option<wgpu::Buffer>,
+    ) -> Result<Option<Self>, HostShadowError> {
+        let format = maps.format();
+        if maps.dimension() != wgpu::TextureDimension::D2 || !format.has_depth_aspect() {
+            return Err(HostShadowError::NotDepth { dimension: maps.dimension(), format });
+        }
+        if !maps.usage().contains(wgpu::TextureUsages::TEXTURE_BINDING) {
+            return Err(HostShadowError::NotSampled);
+        }
+        if maps.sample_count() > 1 {
+            return Err(HostShadowError::Multisampled(maps.sample_count()));
+        }
+        let layers = maps.depth_or_array_layers();
+        if let Some(bad) = cascades.iter().find(|c| c.layer >= layers) {
+            return Err(HostShadowError::NoLayer { layer: bad.layer, layers });
+        }
+        let resolution = maps.width();
+        let mut taken: Vec<(HostShadowCascade, Cascade)> = cascades
+            .iter()
+            .filter_map(|c| {
+                let view = HostShadowView { clip_from_world: c.clip_from_world, resolution };
+                Some((*c, Cascade::from_host(&view, depth, 1.0, None)?))
+            })
+            .collect();
+        // The shader takes the first cascade that holds the point: the finest first.
+        taken.sort_by(|a, b| a.1.texel.total_cmp(&b.1.texel));
+        taken.truncate(MAX_CASCADES);
+        if taken.is_empty() {
+            return Ok(None);
+        }
+        let array = maps.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("treelod host shadow maps"),
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            aspect: wgpu::TextureAspect::DepthOnly,
+            ..wgpu::TextureViewDescriptor::default()
+        });
+        let uniform = uniform.unwrap_or_else(|| receivers_uniform(device));
+        // Lit where the receiver is at least as near the light as the map's caster.
+        let compare = match depth {
+            crate::DepthConvention::Standard => wgpu::CompareFunction::LessEqual,
+            crate::DepthConvention::Reverse => wgpu::CompareFunction::GreaterEqual,
+        };
+        let bind_group = receivers_group(device, layout, &uniform, &array, compare);
+        Ok(Some(Self { cascades: taken, resolution, uniform, bind_group }))
+    }
+
+    /// The receivers' uniform of the cascades.
+    pub(crate) fn uniform(&self, normal_offset: f32, depth: crate::DepthConvention) -> ShadowUniform {
+        let cascades = self.cascades.iter().map(|(host, cascade)| (host.clip_from_world, cascade.texel, host.layer));
+        ShadowUniform::new(cascades, self.resolution, normal_offset, depth == crate::DepthConvention::Reverse)
     }
 }
 

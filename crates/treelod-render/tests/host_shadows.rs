@@ -2,18 +2,22 @@
 //! cascades, `Renderer::set_host_shadow_views`), on the Vulkan backend (Mesa lavapipe in CI):
 //! the map's texels the trees cover against the full mesh's, in both depth conventions, with the
 //! map's near plane cutting the tree (casters pancaked onto it where depth can be clamped), and
-//! what is refused.
+//! what is refused; and trees receiving the host's maps (`Renderer::receive_host_shadows`) as
+//! they receive the renderer's own.
 
 mod common;
 
 use std::sync::Arc;
 
-use common::{ball, demo_built, gpu, mask_precision_recall, open_verified};
+use common::{BACKGROUND, ball, demo_built, gpu, mask_precision_recall, open_verified};
 use glam::{Mat4, Vec3, Vec4, vec3};
 use treelod_build::{BuildConfig, Placed, build_block};
 use treelod_format::Container;
-use treelod_render::offscreen::{Gpu, Readback};
-use treelod_render::{Camera, DepthConvention, FrameStats, HostShadowView, Instance, Renderer, Settings, Technique};
+use treelod_render::offscreen::{Gpu, Image, Readback, render_prepared_timed};
+use treelod_render::{
+    Camera, DepthConvention, FrameStats, HostShadowCascade, HostShadowError, HostShadowView, Instance, Renderer,
+    Settings, Shadows, Technique,
+};
 
 /// Texels per side of the host's map.
 const MAP: u32 = 256;
@@ -227,4 +231,241 @@ fn reverse_z_host_maps_hold_the_same_depths_mirrored() {
     } else {
         assert_eq!(on_near, 0, "without clamping the near half is clipped");
     }
+}
+
+/// A host's depth texture array of `layers` layers of `size`² texels, as an engine's
+/// directional-light maps: drawn into and sampled.
+fn host_array(gpu: &Gpu, size: u32, layers: u32, usage: wgpu::TextureUsages) -> wgpu::Texture {
+    gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("host shadow maps"),
+        size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: layers },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: FORMAT,
+        usage,
+        view_formats: &[],
+    })
+}
+
+/// Mean green of the leaves (green well above red; the background is white) in each of
+/// `regions` (pixel rectangles x0, y0, x1, y1).
+fn leaf_green(image: &Image, regions: &[(f32, f32, f32, f32)]) -> Vec<f64> {
+    let (w, h) = (image.width as f32 - 1.0, image.height as f32 - 1.0);
+    regions
+        .iter()
+        .map(|&(x0, y0, x1, y1)| {
+            let (mut sum, mut n) = (0.0, 0.0);
+            for y in (y0.max(0.0) as u32)..(y1.min(h) as u32) {
+                for x in (x0.max(0.0) as u32)..(x1.min(w) as u32) {
+                    let p = image.pixel(x, y);
+                    if f32::from(p[1]) > 1.15 * f32::from(p[0]) {
+                        sum += f64::from(p[1]);
+                        n += 1.0;
+                    }
+                }
+            }
+            sum / f64::max(n, 1.0)
+        })
+        .collect()
+}
+
+/// Texels per side of the maps the trees receive.
+const RECEIVED: u32 = 1024;
+
+#[test]
+fn trees_receive_the_host_shadow_maps_as_they_receive_their_own() {
+    let gpu = gpu();
+    let container = demo_built(&BuildConfig::default());
+    let block = container.block();
+    let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+    let height = max.y - min.y;
+    // The sun nearly overhead: a tree above another shadows it, a third beside them is lit.
+    let sun = vec3(0.05, 1.0, 0.03).normalize();
+    let above = Mat4::from_translation(vec3(0.0, 1.5 * height, 0.0));
+    let beside = Mat4::from_translation(vec3(2.0 * (max.x - min.x), 0.0, 0.0));
+    let transforms = [Mat4::IDENTITY, above, beside];
+    let look = 0.5 * (min + max) + vec3(max.x - min.x, 0.75 * height, 0.0);
+    let camera = Camera::look_at(look + vec3(0.0, 0.0, 6.0 * height), look, 0.8, 240, 240);
+    let project = |p: Vec3| {
+        let ndc = camera.view_proj().project_point3(p);
+        ((0.5 * ndc.x + 0.5) * 240.0, (0.5 - 0.5 * ndc.y) * 240.0)
+    };
+    let regions = transforms.map(|t| {
+        let (a, b) = (project(t.transform_point3(min)), project(t.transform_point3(max)));
+        (a.0.min(b.0), a.1.min(b.1), a.0.max(b.0), a.1.max(b.1))
+    });
+    let lit = Settings { sun, ambient: 0.3, ..Settings::default() };
+    let renderer_with = |settings: Settings, convention: DepthConvention| {
+        let mut renderer = Renderer::with_depth_convention(&gpu.device, Gpu::formats(), settings, convention);
+        let tree = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("uploads");
+        renderer.set_instances(&transforms.map(|transform| Instance { model: tree, transform }));
+        renderer
+    };
+    // Four frames each: the streaming and the policy's state settle.
+    let settle = |renderer: &mut Renderer, host: Option<&dyn Fn(&Renderer)>| {
+        let mut image = None;
+        for _ in 0..4 {
+            let stats = renderer.prepare(&gpu.device, &gpu.queue, &camera);
+            let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+            renderer.render_shadows(&mut encoder);
+            gpu.queue.submit([encoder.finish()]);
+            if let Some(host) = host {
+                host(renderer);
+            }
+            image = Some((
+                leaf_green(&render_prepared_timed(&gpu, renderer, &camera, BACKGROUND).expect("renders").0, &regions),
+                stats,
+            ));
+        }
+        image.expect("four frames")
+    };
+
+    let (unshadowed, _) = settle(&mut renderer_with(lit, DepthConvention::Standard), None);
+    let own_settings = Settings {
+        shadows: Some(Shadows { resolution: RECEIVED, cascades: 2, distance: 8.0 * height, ..Shadows::default() }),
+        ..lit
+    };
+    let (own, stats) = settle(&mut renderer_with(own_settings, DepthConvention::Standard), None);
+    assert_eq!(stats.shadow.cascades, 2);
+    eprintln!("mean leaf green (below, above, beside): unshadowed {unshadowed:?}, the renderer's own maps {own:?}");
+    assert!(own[0] < 0.8 * unshadowed[0], "own maps: the tree below is shadowed");
+
+    for convention in [DepthConvention::Standard, DepthConvention::Reverse] {
+        // The renderer's own cascades are set too: the host's maps replace them.
+        let mut renderer = renderer_with(own_settings, convention);
+        let (lo, hi) = renderer.instance_bounds().expect("bounds");
+        let radius = 0.5 * (hi - lo).length();
+        let light = light_view(0.5 * (lo + hi), sun, radius, 2.0 * radius, 4.0 * radius, convention);
+        // The trees' map in layer 1; layer 0 holds a caster in front of everything, so reading
+        // the wrong layer would shadow every tree.
+        let maps = host_array(
+            &gpu,
+            RECEIVED,
+            2,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let layer = |k: u32| {
+            maps.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2),
+                base_array_layer: k,
+                array_layer_count: Some(1),
+                ..wgpu::TextureViewDescriptor::default()
+            })
+        };
+        let (front, trees) = (layer(0), layer(1));
+        assert_eq!(
+            renderer.set_host_shadow_views(
+                &gpu.device,
+                FORMAT,
+                &[HostShadowView { clip_from_world: light, resolution: RECEIVED }]
+            ),
+            1
+        );
+        let cascade = HostShadowCascade { clip_from_world: light, layer: 1 };
+        assert_eq!(renderer.receive_host_shadows(&gpu.device, &gpu.queue, &maps, &[cascade]), Ok(1));
+        let host = |renderer: &Renderer| {
+            let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+            for (view, depth) in [(&front, 1.0 - convention.far()), (&trees, convention.far())] {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("host shadow pass"),
+                    color_attachments: &[],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(depth),
+                            store: wgpu::StoreOp::Store,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    ..wgpu::RenderPassDescriptor::default()
+                });
+                if std::ptr::eq(view, &trees) {
+                    renderer.render_host_shadow(0, &mut pass);
+                }
+            }
+            gpu.queue.submit([encoder.finish()]);
+        };
+        let (received, stats) = settle(&mut renderer, Some(&host));
+        eprintln!("{convention:?}: the host's maps {received:?}");
+        assert_eq!(stats.shadow.cascades, 0, "{convention:?}: the renderer's own cascades are not fitted");
+        assert_eq!(stats.host_shadow.cascades, 1);
+        assert!(received[0] < 0.8 * unshadowed[0], "{convention:?}: the tree below is shadowed: {received:?}");
+        assert!(received[1] > 0.8 * unshadowed[1], "{convention:?}: the tree above is lit: {received:?}");
+        assert!(received[2] > 0.8 * unshadowed[2], "{convention:?}: the tree beside is lit: {received:?}");
+        // Each crown shadows itself; the tree below is also in the shadow of the one above.
+        assert!(received[0] < 0.95 * received[1].min(received[2]), "{convention:?}: {received:?}");
+        for k in 0..3 {
+            let (host_share, own_share) = (received[k] / unshadowed[k], own[k] / unshadowed[k]);
+            assert!(
+                (host_share - own_share).abs() < 0.1,
+                "tree {k}: {host_share:.3} of the light with the host's maps, {own_share:.3} with the renderer's"
+            );
+        }
+
+        // An empty list stops: the trees receive the renderer's own cascades again.
+        assert_eq!(renderer.receive_host_shadows(&gpu.device, &gpu.queue, &maps, &[]), Ok(0));
+        let (stopped, stats) = settle(&mut renderer, Some(&host));
+        eprintln!("{convention:?}: stopped {stopped:?}");
+        assert_eq!(stats.shadow.cascades, 2);
+        // The same as a renderer of this convention that never received the host's maps.
+        let (own_here, _) = settle(&mut renderer_with(own_settings, convention), None);
+        for k in 0..3 {
+            assert!(
+                (stopped[k] / own_here[k] - 1.0).abs() < 0.01,
+                "{convention:?}: own maps again: {stopped:?} vs {own_here:?}"
+            );
+        }
+        // So does stopping outright; without own cascades the trees are lit.
+        assert_eq!(renderer.receive_host_shadows(&gpu.device, &gpu.queue, &maps, &[cascade]), Ok(1));
+        renderer.stop_receiving_host_shadows();
+        renderer.settings_mut().shadows = None;
+        let (lit_again, _) = settle(&mut renderer, Some(&host));
+        for k in 0..3 {
+            assert!((lit_again[k] / unshadowed[k] - 1.0).abs() < 0.02, "{convention:?}: lit: {lit_again:?}");
+        }
+    }
+}
+
+#[test]
+fn host_shadow_maps_that_cannot_be_received_are_refused() {
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::default());
+    let light = light_view(Vec3::ZERO, vec3(0.3, 0.9, 0.2).normalize(), 10.0, 10.0, 20.0, DepthConvention::Standard);
+    let sampled = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+    let receive = |renderer: &mut Renderer, maps: &wgpu::Texture, layer: u32| {
+        renderer.receive_host_shadows(
+            &gpu.device,
+            &gpu.queue,
+            maps,
+            &[HostShadowCascade { clip_from_world: light, layer }],
+        )
+    };
+    let maps = host_array(&gpu, MAP, 2, sampled);
+    assert_eq!(receive(&mut renderer, &maps, 2), Err(HostShadowError::NoLayer { layer: 2, layers: 2 }));
+    let unsampled = host_array(&gpu, MAP, 2, wgpu::TextureUsages::RENDER_ATTACHMENT);
+    assert_eq!(receive(&mut renderer, &unsampled, 0), Err(HostShadowError::NotSampled));
+    let colour = gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("not a depth texture"),
+        size: wgpu::Extent3d { width: MAP, height: MAP, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8Unorm,
+        usage: sampled,
+        view_formats: &[],
+    });
+    let error = receive(&mut renderer, &colour, 0).expect_err("a colour texture is refused");
+    assert!(error.to_string().contains("not a 2D depth texture array"), "{error}");
+    // Perspective views are left out; one layer of a 2D texture is taken.
+    let perspective = glam::camera::rh::proj::directx::perspective(0.8, 1.0, 0.1, 100.0)
+        * glam::camera::rh::view::look_at_mat4(Vec3::splat(20.0), Vec3::ZERO, Vec3::Y);
+    let single = host_array(&gpu, MAP, 1, sampled);
+    let cascades = [
+        HostShadowCascade { clip_from_world: perspective, layer: 0 },
+        HostShadowCascade { clip_from_world: light, layer: 0 },
+    ];
+    assert_eq!(renderer.receive_host_shadows(&gpu.device, &gpu.queue, &single, &cascades), Ok(1));
+    let many = vec![HostShadowCascade { clip_from_world: light, layer: 1 }; 6];
+    assert_eq!(renderer.receive_host_shadows(&gpu.device, &gpu.queue, &maps, &many), Ok(treelod_render::MAX_CASCADES));
 }
