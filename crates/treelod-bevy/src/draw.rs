@@ -22,7 +22,8 @@ use bevy_ecs::prelude::*;
 use bevy_light::DirectionalLight;
 use bevy_log::{error, warn};
 use bevy_pbr::{
-    CORE_3D_SHADOW_MAP_FORMAT, LATE_SHADOW_PASS, LightEntity, ShadowView, ViewLightEntities, per_view_shadow_pass,
+    CORE_3D_SHADOW_MAP_FORMAT, ExtractedDirectionalLight, LATE_SHADOW_PASS, LightEntity, ShadowView, ViewLightEntities,
+    ViewShadowBindings, per_view_shadow_pass,
 };
 use bevy_render::camera::ExtractedCamera;
 use bevy_render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
@@ -31,7 +32,9 @@ use bevy_render::view::{ExtractedView, ViewDepthStencilTexture, ViewTarget};
 use bevy_render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
 use bevy_transform::components::GlobalTransform;
 use treelod_format::Container;
-use treelod_render::{Camera, DepthConvention, HostShadowView, Instance, ModelId, Renderer, RendererFormats, Settings};
+use treelod_render::{
+    Camera, DepthConvention, HostShadowCascade, HostShadowView, Instance, ModelId, Renderer, RendererFormats, Settings,
+};
 
 use crate::asset::TreelodContainer;
 use crate::forest::{TreelodScene, to_glam};
@@ -66,6 +69,8 @@ struct Extracted {
     gpu_selection: bool,
     /// [`TreelodSettings::cast_bevy_shadows`].
     cast_bevy_shadows: bool,
+    /// [`TreelodSettings::receive_bevy_shadows`].
+    receive_bevy_shadows: bool,
 }
 
 /// Copies the scene when its revision changed, and the settings, taking the sun from the
@@ -93,6 +98,7 @@ fn extract(
     extracted.settings = render;
     extracted.gpu_selection = settings.gpu_selection;
     extracted.cast_bevy_shadows = settings.cast_bevy_shadows;
+    extracted.receive_bevy_shadows = settings.receive_bevy_shadows;
 }
 
 /// One camera's renderer and what it holds.
@@ -111,6 +117,8 @@ struct ViewRenderer {
     /// The render-world entities of the shadow cascades of Bevy's directional lights handed to
     /// the renderer this frame, host map `k` ([`Renderer::set_host_shadow_views`]) at `k`.
     bevy_shadows: Vec<Entity>,
+    /// Receiving Bevy's shadow maps failed: said once, until it succeeds again.
+    receive_refused: bool,
 }
 
 /// The renderers, by render-world camera entity.
@@ -123,8 +131,8 @@ struct Views {
     orthographic_reported: bool,
 }
 
-/// What `prepare` reads of a 3D camera: its entities, view, targets and the shadow cascades of
-/// Bevy's directional lights for it.
+/// What `prepare` reads of a 3D camera: its entities, view, targets, and the shadow cascades of
+/// Bevy's directional lights for it and the texture they are in.
 type CameraItem = (
     Entity,
     &'static MainEntity,
@@ -132,19 +140,23 @@ type CameraItem = (
     &'static ViewTarget,
     &'static ViewDepthStencilTexture,
     Option<&'static ViewLightEntities>,
+    Option<&'static ViewShadowBindings>,
 );
 
 /// Per 3D camera: makes (or remakes) its renderer for the view's formats and the scene's
 /// containers, sets the instances when the scene changed, the settings and the shadow cascades
-/// of Bevy's directional lights for the camera ([`crate::TreelodSettings::cast_bevy_shadows`]),
+/// of Bevy's directional lights for the camera to cast into and receive
+/// ([`crate::TreelodSettings::cast_bevy_shadows`], [`crate::TreelodSettings::receive_bevy_shadows`]),
 /// and selects for the camera and those cascades ([`Renderer::prepare`]), keeping the counts in
 /// [`TreelodStats`].
+#[expect(clippy::too_many_arguments, reason = "a Bevy system's parameters")]
 fn prepare(
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
     extracted: Res<Extracted>,
     cameras: Query<CameraItem, With<Camera3d>>,
     light_views: Query<(&ExtractedView, &LightEntity), With<ShadowView>>,
+    directional: Query<&ExtractedDirectionalLight>,
     mut views: ResMut<Views>,
     stats: Res<TreelodStats>,
 ) {
@@ -167,7 +179,7 @@ fn prepare(
     if scene.instances.is_empty() {
         return;
     }
-    for (entity, main_entity, view, target, depth, lights) in &cameras {
+    for (entity, main_entity, view, target, depth, lights, shadow_bindings) in &cameras {
         if view.clip_from_view.w_axis.w == 1.0 {
             // Nothing drawn, not even a renderer's last selection from before the switch.
             views.views.remove(&entity);
@@ -204,6 +216,7 @@ fn prepare(
             instances: 0,
             gpu_refused: false,
             bevy_shadows: Vec::new(),
+            receive_refused: false,
         });
         let mut added = false;
         for (id, container) in &scene.models {
@@ -242,23 +255,57 @@ fn prepare(
                 entry.gpu_refused = true;
             }
         }
-        // Bevy's directional shadow cascades of this camera, drawn by `draw_shadows`.
+        // Bevy's directional shadow cascades of this camera: the trees are drawn into them by
+        // `draw_shadows`, and receive those of the light that is their sun.
         let mut host = Vec::new();
+        let mut received = Vec::new();
         entry.bevy_shadows.clear();
-        if extracted.cast_bevy_shadows {
-            for &light in lights.map_or(&[][..], |l| &l.lights[..]) {
-                let Ok((light_view, LightEntity::Directional { .. })) = light_views.get(light) else { continue };
-                let clip_from_world = light_view
+        let sun = extracted.settings.sun.normalize_or_zero();
+        let mut sun_light = None;
+        // A light's cascades are the layers of Bevy's directional shadow texture in the order its
+        // views are listed, each light's in turn.
+        let directional_views = lights.map_or(&[][..], |l| &l.lights[..]).iter().filter_map(|&light| {
+            let (light_view, kind) = light_views.get(light).ok()?;
+            let LightEntity::Directional { light_entity, .. } = *kind else { return None };
+            Some((light, light_view, light_entity))
+        });
+        for ((light, light_view, light_entity), layer) in directional_views.zip(0u32..) {
+            let clip_from_world = to_glam(
+                light_view
                     .clip_from_world
-                    .unwrap_or_else(|| light_view.clip_from_view * light_view.world_from_view.to_matrix().inverse());
-                host.push(HostShadowView {
-                    clip_from_world: to_glam(clip_from_world),
-                    resolution: light_view.viewport.z,
-                });
+                    .unwrap_or_else(|| light_view.clip_from_view * light_view.world_from_view.to_matrix().inverse()),
+            );
+            if extracted.cast_bevy_shadows {
+                host.push(HostShadowView { clip_from_world, resolution: light_view.viewport.z });
                 entry.bevy_shadows.push(light);
+            }
+            // The first light shining from the sun's direction.
+            let is_sun = || {
+                directional.get(light_entity).is_ok_and(|l| {
+                    glam::Vec3::from_array(l.transform.back().to_array()).normalize_or_zero().dot(sun) > 0.9999
+                })
+            };
+            if extracted.receive_bevy_shadows && sun_light.is_none_or(|s| s == light_entity) && is_sun() {
+                sun_light = Some(light_entity);
+                received.push(HostShadowCascade { clip_from_world, layer });
             }
         }
         entry.renderer.set_host_shadow_views(device.wgpu_device(), CORE_3D_SHADOW_MAP_FORMAT, &host);
+        match shadow_bindings {
+            Some(bindings) if !received.is_empty() => {
+                let maps: &wgpu::Texture = &bindings.directional_light_depth_texture;
+                match entry.renderer.receive_host_shadows(device.wgpu_device(), &queue, maps, &received) {
+                    Ok(_) => entry.receive_refused = false,
+                    Err(e) => {
+                        if !entry.receive_refused {
+                            error!("treelod: camera {main_entity:?} cannot receive Bevy's shadow maps: {e}");
+                            entry.receive_refused = true;
+                        }
+                    }
+                }
+            }
+            _ => entry.renderer.stop_receiving_host_shadows(),
+        }
         let camera = Camera::from_matrices(
             to_glam(view.world_from_view.to_matrix().inverse()),
             to_glam(view.clip_from_view),

@@ -55,9 +55,14 @@
 //! at the detail the cascade resolves ([`treelod_render::Renderer::set_host_shadow_views`]), and
 //! a system in the `Core3d` schedule, after Bevy's shadow passes and before the main pass,
 //! draws them depth-only into Bevy's maps (depth clamped to a cascade's near plane where the
-//! device has `DEPTH_CLIP_CONTROL`, as Bevy's own casters are). The trees do not receive Bevy's
-//! shadows: with [`treelod_render::Settings::shadows`] they cast treelod's own cascades
-//! (selected the same way) onto each other.
+//! device has `DEPTH_CLIP_CONTROL`, as Bevy's own casters are). With
+//! [`TreelodSettings::receive_bevy_shadows`] (the default) the trees receive the cascades of the
+//! directional light that is their sun, read from Bevy's shadow texture with the cascades'
+//! matrices ([`treelod_render::Renderer::receive_host_shadows`]), in place of treelod's own
+//! cascades: Bevy's meshes shadow the trees, and the trees each other. The finest cascade that
+//! holds a point is read, with treelod's 3×3 filter and normal offset (Bevy's cascade blending,
+//! soft shadows and the light's depth and normal biases are not used). Without a shadowed sun,
+//! [`treelod_render::Settings::shadows`] gives the trees treelod's own cascades.
 //!
 //! **Assets.** See [`TreelodLoader`] for how `.treelod` files are read (bytes from Bevy's asset
 //! reader; [`TreelodContainer::open`] keeps a file memory-mapped instead). A malformed file fails
@@ -169,17 +174,27 @@ pub struct TreelodSettings {
     /// Bevy's map after Bevy's own casters, so Bevy's meshes receive the trees' shadows. Up to
     /// [`treelod_render::MAX_HOST_SHADOW_VIEWS`] cascades per camera. Default `true`.
     pub cast_bevy_shadows: bool,
+    /// The trees receive the shadow maps of the Bevy directional light that is their sun (with
+    /// `shadow_maps_enabled`, its direction that of `render.sun`, as
+    /// [`Self::sun_from_directional_light`] makes it) in place of treelod's own cascades
+    /// ([`treelod_render::Renderer::receive_host_shadows`]): the shadows of Bevy's meshes fall
+    /// on the trees, and with [`Self::cast_bevy_shadows`] the trees' shadows on each other.
+    /// While they do, `render.shadows`' own cascades are not rendered (its `normal_offset`,
+    /// `casters` and `lod_texels` still apply). Default `true`.
+    pub receive_bevy_shadows: bool,
 }
 
 impl Default for TreelodSettings {
     /// [`Settings::default`] (one-pixel points, triangles from two pixels), the sun from Bevy's
-    /// directional light, selection on the CPU, the trees cast into Bevy's shadow maps.
+    /// directional light, selection on the CPU, the trees cast into and receive Bevy's shadow
+    /// maps.
     fn default() -> Self {
         Self {
             render: Settings::default(),
             sun_from_directional_light: true,
             gpu_selection: false,
             cast_bevy_shadows: true,
+            receive_bevy_shadows: true,
         }
     }
 }

@@ -5,8 +5,8 @@
 //! its reverse-Z convention), and the trees must hide part of a Bevy cube behind them (they write
 //! that depth buffer). A malformed `.treelod` asset fails to load with the container's error.
 //! Trees behind a Bevy wall are chosen hidden, a tree casts its shadow onto Bevy's ground through
-//! the cascades of a Bevy directional light, and GPU selection over the memory budget is refused
-//! (the camera selects on the CPU).
+//! the cascades of a Bevy directional light and receives the shadow a Bevy mesh casts, and GPU
+//! selection over the memory budget is refused (the camera selects on the CPU).
 
 #[path = "../examples/forest/scene.rs"]
 mod scene;
@@ -488,6 +488,88 @@ fn trees_cast_into_the_shadow_maps_of_bevy_lights() {
     eprintln!("{darker} of {ground} ground pixels darker with the trees' shadow, {lighter} lighter");
     assert!(darker * 20 > ground, "the trees' shadow falls on Bevy's ground: {darker} of {ground} pixels");
     assert_eq!(lighter, 0, "a shadow only darkens");
+}
+
+#[test]
+fn trees_receive_the_shadows_of_bevy_meshes() {
+    use bevy_light::DirectionalLight;
+    use treelod_bevy::TreelodSettings;
+
+    let assets = tempfile::tempdir().expect("a temporary directory");
+    let bytes = scene::demo_container_bytes();
+    std::fs::write(assets.path().join("demo.treelod"), &bytes).expect("writes the container");
+    let block = *TreelodContainer::from_bytes(&bytes).expect("opens").container().block();
+    let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
+    let (height, width) = (max.y - min.y, max.x - min.x);
+    let mut app = App::new();
+    scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
+    // Only Bevy's board casts: what the trees receive is Bevy's meshes' shadow alone.
+    app.insert_resource(TreelodSettings { cast_bevy_shadows: false, ..TreelodSettings::default() });
+    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
+    let forest = handle.clone();
+    // The sun nearly overhead; a board above the tree's west half (x below the trunk).
+    let sun = Vec3::new(0.05, -1.0, 0.03).normalize();
+    let board_centre = Vec3::new(min.x - 0.5 * width, max.y + 0.5 * height, 0.5 * (min.z + max.z));
+    let board_size = Vec3::new(2.0 * width, 0.05 * height, 4.0 * (max.z - min.z));
+    app.add_systems(
+        Startup,
+        move |mut commands: Commands,
+              mut meshes: ResMut<Assets<Mesh>>,
+              mut materials: ResMut<Assets<StandardMaterial>>| {
+            commands.spawn(treelod_bevy::TreelodForest::new(forest.clone(), [Transform::IDENTITY]));
+            commands.spawn((
+                Mesh3d(meshes.add(Cuboid::new(board_size.x, board_size.y, board_size.z))),
+                MeshMaterial3d(materials.add(StandardMaterial::from(Color::srgb(0.4, 0.4, 0.4)))),
+                Transform::from_translation(board_centre),
+            ));
+            commands.spawn((
+                DirectionalLight { shadow_maps_enabled: true, ..DirectionalLight::default() },
+                Transform::default().looking_to(sun, Vec3::Z),
+            ));
+        },
+    );
+    let target = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(scene::target_image());
+    scene::finish(&mut app);
+    // In front of the tree (south), level with its crown: west is the image's left.
+    let at = 0.5 * (min + max);
+    let eye = at + Vec3::new(0.0, 0.1 * height, 1.6 * height);
+    let camera = app
+        .world_mut()
+        .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into())))
+        .insert(Transform::from_translation(eye).looking_at(at, Vec3::Y))
+        .id();
+    wait_for_load(&mut app, &handle);
+    let mut run = |receive: bool| {
+        app.world_mut().resource_mut::<TreelodSettings>().receive_bevy_shadows = receive;
+        scene::render_frames(&mut app, &[(camera, target.clone())], 6).expect("a frame").remove(0)
+    };
+    let (lit, shaded) = (run(false), run(true));
+    if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
+        lit.write_png(&std::path::Path::new(&dir).join("bevy-receive-off.png")).expect("writes");
+        shaded.write_png(&std::path::Path::new(&dir).join("bevy-receive-on.png")).expect("writes");
+    }
+    // The leaves' brightness with Bevy's shadows over that without, in the image's left and
+    // right halves (the tree's west and east halves), over pixels that are leaves in both frames.
+    let (image_width, image_height) = IMAGE_SIZE;
+    let luma = |p: [u8; 4]| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]);
+    let mut sums = [[0.0f64; 2]; 2];
+    let mut leaves = [0u32; 2];
+    for y in 0..image_height {
+        for x in 0..image_width {
+            let (a, b) = (lit.pixel(x, y), shaded.pixel(x, y));
+            if leaf(a) && leaf(b) {
+                let side = usize::from(2 * x >= image_width);
+                sums[side][0] += luma(a);
+                sums[side][1] += luma(b);
+                leaves[side] += 1;
+            }
+        }
+    }
+    let [west, east] = sums.map(|[a, b]| b / a.max(1.0));
+    eprintln!("leaf pixels {leaves:?}: with Bevy's shadows west {west:.3}, east {east:.3} of the light without");
+    assert!(leaves.iter().all(|n| *n > 500), "the tree fills both halves: {leaves:?}");
+    assert!(west < 0.8, "the board's shadow darkens the tree's west half: {west:.3}");
+    assert!((east - 1.0).abs() < 0.05, "the east half stays lit: {east:.3}");
 }
 
 #[test]

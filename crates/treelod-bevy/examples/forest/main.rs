@@ -13,8 +13,8 @@
 //!
 //! Keys: W A S D to move, Q E down and up, Shift faster, the right mouse button held to look
 //! around; K colours triangles red and points blue, F draws the full mesh, L toggles treelod's
-//! shadows, B the sun's Bevy shadow maps (the trees cast into them onto the ground), G selection
-//! on the GPU. The window title shows what the renderer drew.
+//! shadows, B the sun's Bevy shadow maps (the trees cast into them, onto the ground and onto each
+//! other), G selection on the GPU. The window title shows what the renderer drew.
 
 mod scene;
 
