@@ -45,7 +45,7 @@ use treelod_format::{Container, LodLevelRecord, Range, billboard_kind};
 
 #[cfg(doc)]
 use crate::draws::Representations;
-use crate::draws::{QuadDraw, Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, by_chunks};
+use crate::draws::{QuadDraw, Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, select_into_with};
 use crate::frame::{Camera, Frustum, tau_per_metre, usable_scale};
 #[cfg(doc)]
 use crate::impostor::ImpostorBark;
@@ -305,13 +305,6 @@ pub struct ChainState<'a> {
     pub previous: &'a mut [Option<ChainPick>],
 }
 
-/// What one chunk of [`select`] produced: its draws, and the chain levels of its instances.
-#[derive(Default)]
-struct BaselineChunk {
-    draws: TreeDraws,
-    levels: Vec<(u32, Option<ChainPick>)>,
-}
-
 /// Whether a tree the policy's chooser found in the camera's view (`TechniqueSettings::culled`)
 /// is in view for its quads' selection ([`select`]) without testing it again: the chooser's
 /// sphere test is the selection's for any transform whose largest axis scale is at least the
@@ -356,7 +349,9 @@ pub fn select(
     // Quads need no `τ`; where the chooser culled the list with this camera, only the
     // transforms it could not have tested as this selection does are tested again.
     let trusted = settings.culled && baseline != Technique::LodChain;
-    let chunks = by_chunks(list, |chunk, out: &mut BaselineChunk| {
+    // The chain levels of the camera's view's instances, written once every chunk has read them.
+    let mut levels: Vec<(u32, Option<ChainPick>)> = Vec::new();
+    select_into_with(list, out, &mut levels, |chunk, draws, levels| {
         for &index in chunk {
             let Some((instance, lod, model)) = scene.get(index) else { continue };
             // The chooser's sphere test is this one for a scale of at least its floor
@@ -371,7 +366,7 @@ pub fn select(
                 };
                 tau
             };
-            *out.draws.visible.get_mut(baseline) += 1;
+            *draws.visible.get_mut(baseline) += 1;
             match (baseline, &model.chain, &model.billboards) {
                 (Technique::LodChain, Some(chain), _) => {
                     let by_image = choices.get(instance.model as usize).and_then(Option::as_deref);
@@ -381,13 +376,13 @@ pub fn select(
                             let last = previous.get(index as usize).copied().flatten();
                             let pick = choices.choose(height, last, || chain.chain.pick(tau));
                             if main {
-                                out.levels.push((index, Some(pick)));
+                                levels.push((index, Some(pick)));
                             }
                             pick
                         }
                         None => {
                             if main {
-                                out.levels.push((index, None));
+                                levels.push((index, None));
                             }
                             chain.chain.pick(tau)
                         }
@@ -399,7 +394,7 @@ pub fn select(
                         ),
                         None => (chain.full, 0.0),
                     };
-                    out.draws.triangles.extend(TriangleDraw::whole(
+                    draws.triangles.extend(TriangleDraw::whole(
                         index,
                         instance.model,
                         TriangleSource::LodLevel,
@@ -409,7 +404,7 @@ pub fn select(
                     ));
                 }
                 (Technique::Octahedral, _, _) if model.octahedral > 0 => {
-                    out.draws.octahedral.push(QuadDraw {
+                    draws.octahedral.push(QuadDraw {
                         instance: index,
                         model: instance.model,
                         first: 0,
@@ -420,21 +415,17 @@ pub fn select(
                     let (first, count) =
                         if baseline == Technique::Crossed { billboards.crossed } else { billboards.facing };
                     if count > 0 {
-                        out.draws.billboards.push(QuadDraw { instance: index, model: instance.model, first, count });
+                        draws.billboards.push(QuadDraw { instance: index, model: instance.model, first, count });
                     }
                 }
                 _ => {}
             }
         }
     });
-    let mut state = state;
-    for mut chunk in chunks {
-        out.append(&mut chunk.draws);
-        if let Some(state) = state.as_mut() {
-            for (index, level) in chunk.levels {
-                if let Some(slot) = state.previous.get_mut(index as usize) {
-                    *slot = level;
-                }
+    if let Some(state) = state {
+        for (index, level) in levels {
+            if let Some(slot) = state.previous.get_mut(index as usize) {
+                *slot = level;
             }
         }
     }

@@ -19,7 +19,9 @@
 use glam::Vec3;
 use treelod_format::{Container, CurveSample, PruneLeafRecord, Range, TriangleRecord};
 
-use crate::draws::{Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, by_chunks, max_axis_scale};
+use crate::draws::{
+    Scene, TechniqueSettings, TreeDraws, TriangleDraw, TriangleSource, max_axis_scale, select_into_with,
+};
 use crate::frame::{Camera, Frustum};
 use crate::impostor::{ImpostorBark, push_bark};
 use crate::technique::Technique;
@@ -353,13 +355,6 @@ pub struct PruneState<'a> {
     pub visible_fraction: &'a [f32],
 }
 
-/// What one chunk of [`select`] produced: its draws, and the held `λ` of its instances.
-#[derive(Default)]
-struct PrunedChunk {
-    draws: TreeDraws,
-    shown: Vec<(u32, Option<f32>)>,
-}
-
 /// The trees of `list` drawn pruned (`technique`, [`Technique::PruneOpt`] or
 /// [`Technique::PruneCook`], survivors scaled as [`PruneScale::of`] it says; every model of `list` has priority
 /// lists): appends to `out` each visible tree's leaf prefixes and bark, and counts it and its
@@ -386,7 +381,9 @@ pub fn select(
         Some(s) => (&*s.shown, s.visible_fraction),
         None => (&[][..], &[][..]),
     };
-    let chunks = by_chunks(list, |chunk, out: &mut PrunedChunk| {
+    // The held `λ` of the camera's view's instances, written once every chunk has read them.
+    let mut held: Vec<(u32, Option<f32>)> = Vec::new();
+    select_into_with(list, out, &mut held, |chunk, draws, held| {
         let mut bark_ranges = Vec::new();
         for &index in chunk {
             let i = index as usize;
@@ -399,20 +396,20 @@ pub fn select(
             });
             let Some(prune) = model.prune.as_ref().filter(|_| height >= pruning.spt_below_pixels) else {
                 if main {
-                    out.shown.push((index, None));
+                    held.push((index, None));
                 }
-                out.draws.point_tree.push(index);
+                draws.point_tree.push(index);
                 continue;
             };
             if !frustum.intersects_sphere(world_centre, radius * scale_of) {
                 if main {
-                    out.shown.push((index, None));
+                    held.push((index, None));
                 }
                 continue;
             }
-            *out.draws.visible.get_mut(technique) += 1;
+            *draws.visible.get_mut(technique) += 1;
             if main && pruning.occlusion && !prune.samples().is_empty() {
-                out.draws.occlusion.push(index);
+                draws.occlusion.push(index);
             }
             let target = pruning.lambda.unwrap_or_else(|| prune.lambda_at(height));
             let lambda = if main {
@@ -422,7 +419,7 @@ pub fn select(
                     1.0
                 };
                 let lambda = pruning.hysteresis.update(shown.get(i).copied().flatten(), target * seen);
-                out.shown.push((index, Some(lambda)));
+                held.push((index, Some(lambda)));
                 lambda
             } else {
                 target
@@ -431,9 +428,9 @@ pub fn select(
             for cell in prune.cells() {
                 let drawn = leaves_drawn(cell.leaves.count, lambda);
                 let (first, count) = prune.prefix_triangles(cell, drawn);
-                out.draws.leaves_pruned += u64::from(drawn);
+                draws.leaves_pruned += u64::from(drawn);
                 if count > 0 {
-                    out.draws.triangles.push(TriangleDraw {
+                    draws.triangles.push(TriangleDraw {
                         instance: index,
                         model: instance.model,
                         cell: cell.cell,
@@ -447,18 +444,13 @@ pub fn select(
                 }
             }
             let tree = (index, instance, lod, model);
-            push_bark(tree, camera, &frustum, settings, pruning.bark, lambda, &mut bark_ranges, &mut out.draws);
+            push_bark(tree, camera, &frustum, settings, pruning.bark, lambda, &mut bark_ranges, draws);
         }
     });
-    // The held `λ` is written once every chunk has read it.
-    let mut state = state;
-    for mut chunk in chunks {
-        out.append(&mut chunk.draws);
-        if let Some(state) = &mut state {
-            for (index, lambda) in chunk.shown {
-                if let Some(slot) = state.shown.get_mut(index as usize) {
-                    *slot = lambda;
-                }
+    if let Some(state) = state {
+        for (index, lambda) in held {
+            if let Some(slot) = state.shown.get_mut(index as usize) {
+                *slot = lambda;
             }
         }
     }
