@@ -1887,9 +1887,9 @@ impl Renderer {
         maps: &wgpu::Texture,
         cascades: &[HostShadowCascade],
     ) -> Result<usize, HostShadowError> {
-        let uniform = self.host_receiver.take().map(|host| host.uniform);
+        let previous = self.host_receiver.take();
         self.host_receiver =
-            HostReceiver::new(device, &self.shadow_layout, maps, cascades, self.depth_convention, uniform)?;
+            HostReceiver::new(device, &self.shadow_layout, maps, cascades, self.depth_convention, previous)?;
         self.write_host_receiver(queue);
         Ok(self.host_receiver.as_ref().map_or(0, |host| host.cascades.len()))
     }

@@ -544,19 +544,21 @@ pub enum HostShadowError {
 }
 
 /// The host's shadow maps the trees receive: the cascades taken (finest first, each with the
-/// cascade its texel size comes from), the receivers' uniform and its bind group over the host's
-/// texture.
+/// cascade its texel size comes from), the host's texture, the receivers' uniform and its bind
+/// group over that texture.
 pub(crate) struct HostReceiver {
     pub(crate) cascades: Vec<(HostShadowCascade, Cascade)>,
+    maps: wgpu::Texture,
     pub(crate) resolution: u32,
     pub(crate) uniform: wgpu::Buffer,
     pub(crate) bind_group: wgpu::BindGroup,
 }
 
 impl HostReceiver {
-    /// The receiver of `cascades` of the host's depth texture array `maps` (`uniform`: the
-    /// buffer of an earlier one, reused), the orthographic ones among them, finest first, at
-    /// most [`MAX_CASCADES`]; `Ok(None)` when none is.
+    /// The receiver of `cascades` of the host's depth texture array `maps` (`previous`: an
+    /// earlier one, whose uniform buffer is reused, and its bind group too when it was made
+    /// over the same texture, as a host's per-frame calls mostly are), the orthographic ones
+    /// among them, finest first, at most [`MAX_CASCADES`]; `Ok(None)` when none is.
     ///
     /// # Errors
     /// [`HostShadowError`] when `maps` is not a single-sampled, sampled 2D depth texture or a
@@ -567,7 +569,7 @@ impl HostReceiver {
         maps: &wgpu::Texture,
         cascades: &[HostShadowCascade],
         depth: crate::DepthConvention,
-        uniform: Option<wgpu::Buffer>,
+        previous: Option<Self>,
     ) -> Result<Option<Self>, HostShadowError> {
         let format = maps.format();
         if maps.dimension() != wgpu::TextureDimension::D2 || !format.has_depth_aspect() {
@@ -597,20 +599,26 @@ impl HostReceiver {
         if taken.is_empty() {
             return Ok(None);
         }
+        let previous = match previous {
+            Some(previous) if previous.maps == *maps => {
+                return Ok(Some(Self { cascades: taken, resolution, ..previous }));
+            }
+            other => other,
+        };
         let array = maps.create_view(&wgpu::TextureViewDescriptor {
             label: Some("treelod host shadow maps"),
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             aspect: wgpu::TextureAspect::DepthOnly,
             ..wgpu::TextureViewDescriptor::default()
         });
-        let uniform = uniform.unwrap_or_else(|| receivers_uniform(device));
+        let uniform = previous.map_or_else(|| receivers_uniform(device), |p| p.uniform);
         // Lit where the receiver is at least as near the light as the map's caster.
         let compare = match depth {
             crate::DepthConvention::Standard => wgpu::CompareFunction::LessEqual,
             crate::DepthConvention::Reverse => wgpu::CompareFunction::GreaterEqual,
         };
         let bind_group = receivers_group(device, layout, &uniform, &array, compare);
-        Ok(Some(Self { cascades: taken, resolution, uniform, bind_group }))
+        Ok(Some(Self { cascades: taken, maps: maps.clone(), resolution, uniform, bind_group }))
     }
 
     /// The receivers' uniform of the cascades.

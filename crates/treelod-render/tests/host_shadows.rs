@@ -468,4 +468,11 @@ fn host_shadow_maps_that_cannot_be_received_are_refused() {
     assert_eq!(renderer.receive_host_shadows(&gpu.device, &gpu.queue, &single, &cascades), Ok(1));
     let many = vec![HostShadowCascade { clip_from_world: light, layer: 1 }; 6];
     assert_eq!(renderer.receive_host_shadows(&gpu.device, &gpu.queue, &maps, &many), Ok(treelod_render::MAX_CASCADES));
+    // Each frame's call over the same texture keeps the bind group; another texture gets its own.
+    let bound = renderer.shadow_bind_group().clone();
+    assert_eq!(receive(&mut renderer, &maps, 0), Ok(1));
+    assert_eq!(&bound, renderer.shadow_bind_group(), "the same texture, the same bind group");
+    assert_eq!(receive(&mut renderer, &single, 0), Ok(1));
+    assert_ne!(&bound, renderer.shadow_bind_group(), "another texture");
+    renderer.stop_receiving_host_shadows();
 }
