@@ -541,9 +541,13 @@ fn trees_receive_the_shadows_of_bevy_meshes() {
     wait_for_load(&mut app, &handle);
     let mut run = |receive: bool| {
         app.world_mut().resource_mut::<TreelodSettings>().receive_bevy_shadows = receive;
-        scene::render_frames(&mut app, &[(camera, target.clone())], 6).expect("a frame").remove(0)
+        let frame = scene::render_frames(&mut app, &[(camera, target.clone())], 6).expect("a frame").remove(0);
+        let stats = app.world().resource::<TreelodStats>().get(camera).expect("the camera drew trees");
+        (frame, stats.host_shadows_received)
     };
-    let (lit, shaded) = (run(false), run(true));
+    let ((lit, off), (shaded, on)) = (run(false), run(true));
+    assert_eq!(off, 0, "not received");
+    assert_eq!(on, 4, "Bevy's four cascades of the sun are received");
     if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
         lit.write_png(&std::path::Path::new(&dir).join("bevy-receive-off.png")).expect("writes");
         shaded.write_png(&std::path::Path::new(&dir).join("bevy-receive-on.png")).expect("writes");

@@ -824,7 +824,10 @@ impl Renderer {
     /// caller, which hands each whole section to the pool and sleeps until it is done: a wake-up
     /// each way per section, where the call now pays one each way per frame.
     pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
-        rayon::scope(|_| self.prepare_on_pool(device, queue, camera))
+        let mut stats = rayon::scope(|_| self.prepare_on_pool(device, queue, camera));
+        stats.host_shadows_received =
+            self.host_receiver.as_ref().map_or(0, |host| u32::try_from(host.cascades.len()).unwrap_or(0));
+        stats
     }
 
     /// [`Self::prepare`], on the calling thread.

@@ -76,6 +76,10 @@ pub struct FrameStats {
     /// What the host's shadow maps drew ([`Renderer::set_host_shadow_views`]; `cascades` is the
     /// number of maps, `per_cascade` their first [`crate::MAX_CASCADES`]).
     pub host_shadow: ShadowStats,
+    /// Cascades of the host's shadow maps the trees receive in place of the renderer's own
+    /// ([`Renderer::receive_host_shadows`]); zero while they receive the renderer's own cascades
+    /// (or none).
+    pub host_shadows_received: u32,
 }
 
 impl FrameStats {

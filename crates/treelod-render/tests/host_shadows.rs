@@ -390,6 +390,7 @@ fn trees_receive_the_host_shadow_maps_as_they_receive_their_own() {
         eprintln!("{convention:?}: the host's maps {received:?}");
         assert_eq!(stats.shadow.cascades, 0, "{convention:?}: the renderer's own cascades are not fitted");
         assert_eq!(stats.host_shadow.cascades, 1);
+        assert_eq!(stats.host_shadows_received, 1);
         assert!(received[0] < 0.8 * unshadowed[0], "{convention:?}: the tree below is shadowed: {received:?}");
         assert!(received[1] > 0.8 * unshadowed[1], "{convention:?}: the tree above is lit: {received:?}");
         assert!(received[2] > 0.8 * unshadowed[2], "{convention:?}: the tree beside is lit: {received:?}");
@@ -408,6 +409,7 @@ fn trees_receive_the_host_shadow_maps_as_they_receive_their_own() {
         let (stopped, stats) = settle(&mut renderer, Some(&host));
         eprintln!("{convention:?}: stopped {stopped:?}");
         assert_eq!(stats.shadow.cascades, 2);
+        assert_eq!(stats.host_shadows_received, 0);
         // The same as a renderer of this convention that never received the host's maps.
         let (own_here, _) = settle(&mut renderer_with(own_settings, convention), None);
         for k in 0..3 {

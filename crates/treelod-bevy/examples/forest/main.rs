@@ -249,12 +249,17 @@ fn title(stats: Res<TreelodStats>, cameras: Query<Entity, With<Fly>>, mut window
     let (Ok(camera), Ok(mut window)) = (cameras.single(), windows.single_mut()) else { return };
     if let Some(frame) = stats.get(camera) {
         let title = format!(
-            "treelod in Bevy: {} trees in view, {} triangles, {} points{}{}",
+            "treelod in Bevy: {} trees in view, {} triangles, {} points{}{}{}",
             frame.instances_visible,
             frame.submitted[Primitive::Triangle],
             frame.submitted[Primitive::Point],
             if frame.host_shadow.cascades > 0 {
                 format!(", {} cast into Bevy's {} cascades", frame.host_shadow.primitives(), frame.host_shadow.cascades)
+            } else {
+                String::new()
+            },
+            if frame.host_shadows_received > 0 {
+                format!(", receiving {} of Bevy's cascades", frame.host_shadows_received)
             } else {
                 String::new()
             },
