@@ -94,15 +94,58 @@ fn wait_for_load(app: &mut App, handle: &bevy_asset::Handle<TreelodContainer>) {
     panic!("the container did not load in 500 frames");
 }
 
-#[test]
-fn bevy_draws_the_forest_in_its_main_pass() {
-    let started = Instant::now();
+/// An app with the plugins (headless), `settings`, and the demo tree's container loading from a
+/// temporary asset folder: the app, the folder (kept while the app runs), the container's
+/// handle and its block's bounds (min, max).
+fn demo_app(
+    settings: treelod_bevy::TreelodSettings,
+) -> (App, tempfile::TempDir, bevy_asset::Handle<TreelodContainer>, (Vec3, Vec3)) {
     let assets = tempfile::tempdir().expect("a temporary directory");
     let bytes = scene::demo_container_bytes();
     std::fs::write(assets.path().join("demo.treelod"), &bytes).expect("writes the container");
     let block = *TreelodContainer::from_bytes(&bytes).expect("opens").container().block();
     let mut app = App::new();
     scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
+    app.insert_resource(settings);
+    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
+    (app, assets, handle, (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max)))
+}
+
+/// A camera at `eye` looking at `at` into a new image target, once the scene is finished and
+/// the container `handle` loaded: the camera and its target.
+fn image_camera(
+    app: &mut App,
+    handle: &bevy_asset::Handle<TreelodContainer>,
+    eye: Vec3,
+    at: Vec3,
+) -> (Entity, bevy_asset::Handle<bevy_image::Image>) {
+    let target = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(scene::target_image());
+    scene::finish(app);
+    let camera = app
+        .world_mut()
+        .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into())))
+        .insert(Transform::from_translation(eye).looking_at(at, Vec3::Y))
+        .id();
+    wait_for_load(app, handle);
+    (camera, target)
+}
+
+/// `camera`'s frame into `target` after `change` to the settings and six frames to settle, and
+/// the camera's counts.
+fn frame_after(
+    app: &mut App,
+    (camera, target): &(Entity, bevy_asset::Handle<bevy_image::Image>),
+    change: impl FnOnce(&mut treelod_bevy::TreelodSettings),
+) -> (Frame, treelod_render::FrameStats) {
+    change(&mut app.world_mut().resource_mut::<treelod_bevy::TreelodSettings>());
+    let frame = scene::render_frames(app, &[(*camera, target.clone())], 6).expect("a frame").remove(0);
+    (frame, app.world().resource::<TreelodStats>().get(*camera).expect("the camera drew trees"))
+}
+
+#[test]
+fn bevy_draws_the_forest_in_its_main_pass() {
+    let started = Instant::now();
+    let (mut app, _assets, handle, (min, max)) = demo_app(treelod_bevy::TreelodSettings::default());
 
     // The camera and the forest as in the example; a red cube in front of the first trees; a blue
     // cube behind the tree nearest the camera's view axis in the first row.
@@ -111,8 +154,7 @@ fn bevy_draws_the_forest_in_its_main_pass() {
         (camera.translation + camera.forward() * 4.0 + camera.left() * 2.0 + camera.down() * 0.9, Vec3::splat(0.7));
     let trees = scene::forest_instances();
     // Nothing of any tree reaches the red cube: it stands wholly in front of the forest.
-    let reach =
-        Vec3::from_array(block.bounds_min).abs().max(Vec3::from_array(block.bounds_max).abs()).with_y(0.0).length();
+    let reach = min.abs().max(max.abs()).with_y(0.0).length();
     let forest_front = trees.iter().map(|t| t.translation.z + reach * t.scale.x).fold(f32::MIN, f32::max);
     assert!(
         red.0.z - red.1.z > forest_front,
@@ -126,12 +168,11 @@ fn bevy_draws_the_forest_in_its_main_pass() {
         .expect("a first row");
     let away = (front.translation - camera.translation).with_y(0.0).normalize();
     // A little behind the tree, over the middle half of its height.
-    let (low, high) = (block.bounds_min[1] * front.scale.y, block.bounds_max[1] * front.scale.y);
+    let (low, high) = (min.y * front.scale.y, max.y * front.scale.y);
     let blue = (
         front.translation + away * 3.0 + Vec3::Y * 0.5 * (low + high),
         Vec3::new(0.25 * (high - low), 0.25 * (high - low), 0.5),
     );
-    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
     let forest = handle.clone();
     app.add_systems(
         Startup,
@@ -413,15 +454,8 @@ fn trees_cast_into_the_shadow_maps_of_bevy_lights() {
     use bevy_shape::Plane3d;
     use treelod_bevy::TreelodSettings;
 
-    let assets = tempfile::tempdir().expect("a temporary directory");
-    let bytes = scene::demo_container_bytes();
-    std::fs::write(assets.path().join("demo.treelod"), &bytes).expect("writes the container");
-    let block = *TreelodContainer::from_bytes(&bytes).expect("opens").container().block();
-    let height = block.bounds_max[1] - block.bounds_min[1];
-    let mut app = App::new();
-    scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
-    app.insert_resource(TreelodSettings::default());
-    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
+    let (mut app, _assets, handle, (min, max)) = demo_app(TreelodSettings::default());
+    let height = max.y - min.y;
     let forest = handle.clone();
     // A low sun from the west: the tree's shadow falls east of it, about 1.4 heights long.
     let sun = Vec3::new(0.7, -0.5, -0.2).normalize();
@@ -446,24 +480,11 @@ fn trees_cast_into_the_shadow_maps_of_bevy_lights() {
             ));
         },
     );
-    let target = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(scene::target_image());
-    scene::finish(&mut app);
     // Above the ground east of the tree, looking down on where its shadow falls.
     let (eye, at) = (Vec3::new(1.2 * height, 1.6 * height, 1.0 * height), Vec3::new(1.2 * height, 0.0, -0.3 * height));
-    let camera = app
-        .world_mut()
-        .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into())))
-        .insert(Transform::from_translation(eye).looking_at(at, Vec3::Y))
-        .id();
-    wait_for_load(&mut app, &handle);
-    let mut run = |cast: bool| {
-        app.world_mut().resource_mut::<TreelodSettings>().cast_bevy_shadows = cast;
-        let frame = scene::render_frames(&mut app, &[(camera, target.clone())], 6).expect("a frame").remove(0);
-        let stats = app.world().resource::<TreelodStats>().get(camera).expect("the camera drew trees");
-        (frame, stats)
-    };
-    let (lit, lit_stats) = run(false);
-    let (shaded, stats) = run(true);
+    let view = image_camera(&mut app, &handle, eye, at);
+    let (lit, lit_stats) = frame_after(&mut app, &view, |s| s.cast_bevy_shadows = false);
+    let (shaded, stats) = frame_after(&mut app, &view, |s| s.cast_bevy_shadows = true);
     if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
         lit.write_png(&std::path::Path::new(&dir).join("bevy-shadow-off.png")).expect("writes");
         shaded.write_png(&std::path::Path::new(&dir).join("bevy-shadow-on.png")).expect("writes");
@@ -495,17 +516,10 @@ fn trees_receive_the_shadows_of_bevy_meshes() {
     use bevy_light::DirectionalLight;
     use treelod_bevy::TreelodSettings;
 
-    let assets = tempfile::tempdir().expect("a temporary directory");
-    let bytes = scene::demo_container_bytes();
-    std::fs::write(assets.path().join("demo.treelod"), &bytes).expect("writes the container");
-    let block = *TreelodContainer::from_bytes(&bytes).expect("opens").container().block();
-    let (min, max) = (Vec3::from_array(block.bounds_min), Vec3::from_array(block.bounds_max));
-    let (height, width) = (max.y - min.y, max.x - min.x);
-    let mut app = App::new();
-    scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
     // Only Bevy's board casts: what the trees receive is Bevy's meshes' shadow alone.
-    app.insert_resource(TreelodSettings { cast_bevy_shadows: false, ..TreelodSettings::default() });
-    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
+    let (mut app, _assets, handle, (min, max)) =
+        demo_app(TreelodSettings { cast_bevy_shadows: false, ..TreelodSettings::default() });
+    let (height, width) = (max.y - min.y, max.x - min.x);
     let forest = handle.clone();
     // The sun nearly overhead; a board above the tree's west half (x below the trunk).
     let sun = Vec3::new(0.05, -1.0, 0.03).normalize();
@@ -528,24 +542,12 @@ fn trees_receive_the_shadows_of_bevy_meshes() {
             ));
         },
     );
-    let target = app.world_mut().resource_mut::<Assets<bevy_image::Image>>().add(scene::target_image());
-    scene::finish(&mut app);
     // In front of the tree (south), level with its crown: west is the image's left.
     let at = 0.5 * (min + max);
-    let eye = at + Vec3::new(0.0, 0.1 * height, 1.6 * height);
-    let camera = app
-        .world_mut()
-        .spawn((scene::camera(), bevy_camera::RenderTarget::Image(target.clone().into())))
-        .insert(Transform::from_translation(eye).looking_at(at, Vec3::Y))
-        .id();
-    wait_for_load(&mut app, &handle);
-    let mut run = |receive: bool| {
-        app.world_mut().resource_mut::<TreelodSettings>().receive_bevy_shadows = receive;
-        let frame = scene::render_frames(&mut app, &[(camera, target.clone())], 6).expect("a frame").remove(0);
-        let stats = app.world().resource::<TreelodStats>().get(camera).expect("the camera drew trees");
-        (frame, stats.host_shadows_received)
-    };
-    let ((lit, off), (shaded, on)) = (run(false), run(true));
+    let view = image_camera(&mut app, &handle, at + Vec3::new(0.0, 0.1 * height, 1.6 * height), at);
+    let (lit, off) = frame_after(&mut app, &view, |s| s.receive_bevy_shadows = false);
+    let (shaded, on) = frame_after(&mut app, &view, |s| s.receive_bevy_shadows = true);
+    let (off, on) = (off.host_shadows_received, on.host_shadows_received);
     assert_eq!(off, 0, "not received");
     assert_eq!(on, 4, "Bevy's four cascades of the sun are received");
     if let Some(dir) = std::env::var_os("TREELOD_TEST_IMAGES") {
@@ -580,17 +582,11 @@ fn trees_receive_the_shadows_of_bevy_meshes() {
 fn gpu_selection_over_the_memory_budget_selects_on_the_cpu() {
     use treelod_bevy::TreelodSettings;
 
-    let assets = tempfile::tempdir().expect("a temporary directory");
-    let bytes = scene::demo_container_bytes();
-    std::fs::write(assets.path().join("demo.treelod"), &bytes).expect("writes the container");
-    let mut app = App::new();
-    scene::add_plugins(&mut app, &Output::Headless, Some(assets.path().to_string_lossy().into_owned()));
     // A budget far below the demo tree's triangles and points: GPU selection, which keeps them
     // whole on the GPU, is refused; the CPU's selection streams what fits.
     let mut settings = TreelodSettings { gpu_selection: true, ..TreelodSettings::default() };
     settings.render.memory_budget = 64 * 1024;
-    app.insert_resource(settings);
-    let handle = app.world().resource::<AssetServer>().load::<TreelodContainer>("demo.treelod");
+    let (mut app, _assets, handle, _) = demo_app(settings);
     let forest = handle.clone();
     app.add_systems(Startup, move |mut commands: Commands| {
         let trees = [Vec3::new(-6.0, 0.0, -20.0), Vec3::new(6.0, 0.0, -30.0)];
