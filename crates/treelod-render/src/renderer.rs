@@ -1841,8 +1841,9 @@ impl Renderer {
         self.scene_bounds
     }
 
-    /// This frame's shadow cascades (empty without [`Settings::shadows`]): what a host needs to
-    /// draw its own receivers with [`Self::shadow_bind_group`].
+    /// This frame's shadow cascades (empty without [`Settings::shadows`], and while the trees
+    /// receive the host's maps, [`Self::receive_host_shadows`]): what a host needs to draw its
+    /// own receivers with [`Self::shadow_bind_group`].
     #[must_use]
     pub fn shadow_cascades(&self) -> &[Cascade] {
         &self.cascades
