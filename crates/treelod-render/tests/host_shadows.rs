@@ -403,6 +403,16 @@ fn trees_receive_the_host_shadow_maps_as_they_receive_their_own() {
                 "tree {k}: {host_share:.3} of the light with the host's maps, {own_share:.3} with the renderer's"
             );
         }
+        // A renderer selecting on the GPU receives the same maps (the first one casts into them).
+        let mut gpu_selected = renderer_with(lit, convention);
+        gpu_selected.enable_gpu_selection(&gpu.device, &gpu.queue).expect("GPU selection");
+        assert_eq!(gpu_selected.receive_host_shadows(&gpu.device, &gpu.queue, &maps, &[cascade]), Ok(1));
+        let (on_gpu, stats) = settle(&mut gpu_selected, Some(&|_: &Renderer| host(&renderer)));
+        eprintln!("{convention:?}: the host's maps, GPU selection {on_gpu:?}");
+        assert!(stats.gpu_selection && stats.host_shadows_received == 1, "{stats:?}");
+        for k in 0..3 {
+            assert!((on_gpu[k] / received[k] - 1.0).abs() < 0.05, "{convention:?}: {on_gpu:?} vs {received:?}");
+        }
 
         // An empty list stops: the trees receive the renderer's own cascades again.
         assert_eq!(renderer.receive_host_shadows(&gpu.device, &gpu.queue, &maps, &[]), Ok(0));
