@@ -1800,14 +1800,9 @@ impl Renderer {
             .take(MAX_HOST_SHADOW_VIEWS)
             .collect();
         if !self.host_shadows.is_empty() {
-            // The nearer of two depths wins, or is equal (a map the host's casters wrote first).
-            let compare = match self.depth_convention {
-                DepthConvention::Standard => wgpu::CompareFunction::LessEqual,
-                DepthConvention::Reverse => wgpu::CompareFunction::GreaterEqual,
-            };
             let target = CasterTarget {
                 format,
-                compare,
+                compare: self.depth_convention.nearer_or_equal(),
                 bias: wgpu::DepthBiasState::default(),
                 unclipped_depth: device.features().contains(wgpu::Features::DEPTH_CLIP_CONTROL),
             };

@@ -55,6 +55,17 @@ impl DepthConvention {
         }
     }
 
+    /// The depth comparison that passes the nearer of two depths or an equal one: a caster
+    /// drawn into a map the host's casters wrote first, and a receiver lit where it is at least
+    /// as near the light as the map's caster.
+    #[must_use]
+    pub(crate) fn nearer_or_equal(self) -> wgpu::CompareFunction {
+        match self {
+            Self::Standard => wgpu::CompareFunction::LessEqual,
+            Self::Reverse => wgpu::CompareFunction::GreaterEqual,
+        }
+    }
+
     /// The depth a buffer is cleared to: the far end of the range.
     #[must_use]
     pub fn far(self) -> f32 {

@@ -458,7 +458,9 @@ impl ShadowMaps {
             })
             .collect();
         let uniform = receivers_uniform(device);
-        let bind_group = receivers_group(device, layout, &uniform, &array, wgpu::CompareFunction::LessEqual);
+        // The renderer's own maps hold standard depth.
+        let compare = crate::DepthConvention::Standard.nearer_or_equal();
+        let bind_group = receivers_group(device, layout, &uniform, &array, compare);
         Self { size: (resolution, layers), layers: views, uniform, bind_group }
     }
 }
@@ -543,11 +545,11 @@ pub enum HostShadowError {
     },
 }
 
-/// The host's shadow maps the trees receive: the cascades taken (finest first, each with the
-/// cascade its texel size comes from), the host's texture, the receivers' uniform and its bind
+/// The host's shadow maps the trees receive: the cascades taken (finest first, each with its
+/// metres per texel), the host's texture, the receivers' uniform and its bind
 /// group over that texture.
 pub(crate) struct HostReceiver {
-    pub(crate) cascades: Vec<(HostShadowCascade, Cascade)>,
+    pub(crate) cascades: Vec<(HostShadowCascade, f32)>,
     maps: wgpu::Texture,
     pub(crate) resolution: u32,
     pub(crate) uniform: wgpu::Buffer,
@@ -586,15 +588,15 @@ impl HostReceiver {
             return Err(HostShadowError::NoLayer { layer: bad.layer, layers });
         }
         let resolution = maps.width();
-        let mut taken: Vec<(HostShadowCascade, Cascade)> = cascades
+        let mut taken: Vec<(HostShadowCascade, f32)> = cascades
             .iter()
             .filter_map(|c| {
                 let view = HostShadowView { clip_from_world: c.clip_from_world, resolution };
-                Some((*c, Cascade::from_host(&view, depth, 1.0, None)?))
+                Some((*c, Cascade::from_host(&view, depth, 1.0, None)?.texel))
             })
             .collect();
         // The shader takes the first cascade that holds the point: the finest first.
-        taken.sort_by(|a, b| a.1.texel.total_cmp(&b.1.texel));
+        taken.sort_by(|a, b| a.1.total_cmp(&b.1));
         taken.truncate(MAX_CASCADES);
         if taken.is_empty() {
             return Ok(None);
@@ -612,18 +614,13 @@ impl HostReceiver {
             ..wgpu::TextureViewDescriptor::default()
         });
         let uniform = previous.map_or_else(|| receivers_uniform(device), |p| p.uniform);
-        // Lit where the receiver is at least as near the light as the map's caster.
-        let compare = match depth {
-            crate::DepthConvention::Standard => wgpu::CompareFunction::LessEqual,
-            crate::DepthConvention::Reverse => wgpu::CompareFunction::GreaterEqual,
-        };
-        let bind_group = receivers_group(device, layout, &uniform, &array, compare);
+        let bind_group = receivers_group(device, layout, &uniform, &array, depth.nearer_or_equal());
         Ok(Some(Self { cascades: taken, maps: maps.clone(), resolution, uniform, bind_group }))
     }
 
     /// The receivers' uniform of the cascades.
     pub(crate) fn uniform(&self, normal_offset: f32, depth: crate::DepthConvention) -> ShadowUniform {
-        let cascades = self.cascades.iter().map(|(host, cascade)| (host.clip_from_world, cascade.texel, host.layer));
+        let cascades = self.cascades.iter().map(|(host, texel)| (host.clip_from_world, *texel, host.layer));
         ShadowUniform::new(cascades, self.resolution, normal_offset, depth == crate::DepthConvention::Reverse)
     }
 }

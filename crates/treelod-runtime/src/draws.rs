@@ -487,12 +487,10 @@ pub(crate) fn select_into_with<X: Send>(
         return;
     }
     let count = list.len().div_ceil(CHUNK);
-    let lock = |pool: &'static std::sync::Mutex<Vec<TreeDraws>>| {
-        // The pool holds emptied lists only: one a panicking selection left is still usable.
-        pool.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-    };
+    // The pool holds emptied lists only: one a panicking selection left is still usable.
+    let lock = || CHUNK_POOL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let mut chunks = {
-        let mut pool = lock(&CHUNK_POOL);
+        let mut pool = lock();
         let keep = pool.len().saturating_sub(count);
         pool.split_off(keep)
     };
@@ -508,7 +506,7 @@ pub(crate) fn select_into_with<X: Send>(
         chunk.clear();
         extra.append(&mut records);
     }
-    lock(&CHUNK_POOL).append(&mut chunks);
+    lock().append(&mut chunks);
 }
 
 /// The largest axis scale of an affine transform (what selection converts sizes with).
