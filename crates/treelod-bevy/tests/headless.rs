@@ -142,6 +142,27 @@ fn frame_after(
     (frame, app.world().resource::<TreelodStats>().get(*camera).expect("the camera drew trees"))
 }
 
+/// Spawns at start-up the demo tree `forest` at the origin, a Bevy mesh (its material and
+/// transform), and a directional light with shadow maps, placed by `sun`.
+fn one_tree_in_the_sun(
+    app: &mut App,
+    forest: &bevy_asset::Handle<TreelodContainer>,
+    (mesh, material, at): (Mesh, StandardMaterial, Transform),
+    sun: Transform,
+) {
+    let forest = forest.clone();
+    app.add_systems(
+        Startup,
+        move |mut commands: Commands,
+              mut meshes: ResMut<Assets<Mesh>>,
+              mut materials: ResMut<Assets<StandardMaterial>>| {
+            commands.spawn(treelod_bevy::TreelodForest::new(forest.clone(), [Transform::IDENTITY]));
+            commands.spawn((Mesh3d(meshes.add(mesh.clone())), MeshMaterial3d(materials.add(material.clone())), at));
+            commands.spawn((bevy_light::DirectionalLight { shadow_maps_enabled: true, ..Default::default() }, sun));
+        },
+    );
+}
+
 #[test]
 fn bevy_draws_the_forest_in_its_main_pass() {
     let started = Instant::now();
@@ -449,36 +470,26 @@ fn trees_behind_a_bevy_wall_are_chosen_hidden() {
 
 #[test]
 fn trees_cast_into_the_shadow_maps_of_bevy_lights() {
-    use bevy_light::DirectionalLight;
     use bevy_mesh::{MeshBuilder, Meshable};
     use bevy_shape::Plane3d;
     use treelod_bevy::TreelodSettings;
 
     let (mut app, _assets, handle, (min, max)) = demo_app(TreelodSettings::default());
     let height = max.y - min.y;
-    let forest = handle.clone();
     // A low sun from the west: the tree's shadow falls east of it, about 1.4 heights long.
     let sun = Vec3::new(0.7, -0.5, -0.2).normalize();
-    app.add_systems(
-        Startup,
-        move |mut commands: Commands,
-              mut meshes: ResMut<Assets<Mesh>>,
-              mut materials: ResMut<Assets<StandardMaterial>>| {
-            commands.spawn(treelod_bevy::TreelodForest::new(forest.clone(), [Transform::IDENTITY]));
-            let [r, g, b] = scene::GROUND;
-            commands.spawn((
-                Mesh3d(meshes.add(Plane3d::default().mesh().size(200.0, 200.0).build())),
-                MeshMaterial3d(materials.add(StandardMaterial {
-                    base_color: Color::srgb_u8(r, g, b),
-                    perceptual_roughness: 1.0,
-                    ..StandardMaterial::default()
-                })),
-            ));
-            commands.spawn((
-                DirectionalLight { shadow_maps_enabled: true, ..DirectionalLight::default() },
-                Transform::default().looking_to(sun, Vec3::Y),
-            ));
-        },
+    let [r, g, b] = scene::GROUND;
+    let ground = StandardMaterial {
+        base_color: Color::srgb_u8(r, g, b),
+        perceptual_roughness: 1.0,
+        ..StandardMaterial::default()
+    };
+    let plane = Plane3d::default().mesh().size(200.0, 200.0).build();
+    one_tree_in_the_sun(
+        &mut app,
+        &handle,
+        (plane, ground, Transform::IDENTITY),
+        Transform::default().looking_to(sun, Vec3::Y),
     );
     // Above the ground east of the tree, looking down on where its shadow falls.
     let (eye, at) = (Vec3::new(1.2 * height, 1.6 * height, 1.0 * height), Vec3::new(1.2 * height, 0.0, -0.3 * height));
@@ -513,34 +524,22 @@ fn trees_cast_into_the_shadow_maps_of_bevy_lights() {
 
 #[test]
 fn trees_receive_the_shadows_of_bevy_meshes() {
-    use bevy_light::DirectionalLight;
     use treelod_bevy::TreelodSettings;
 
     // Only Bevy's board casts: what the trees receive is Bevy's meshes' shadow alone.
     let (mut app, _assets, handle, (min, max)) =
         demo_app(TreelodSettings { cast_bevy_shadows: false, ..TreelodSettings::default() });
     let (height, width) = (max.y - min.y, max.x - min.x);
-    let forest = handle.clone();
     // The sun nearly overhead; a board above the tree's west half (x below the trunk).
     let sun = Vec3::new(0.05, -1.0, 0.03).normalize();
     let board_centre = Vec3::new(min.x - 0.5 * width, max.y + 0.5 * height, 0.5 * (min.z + max.z));
-    let board_size = Vec3::new(2.0 * width, 0.05 * height, 4.0 * (max.z - min.z));
-    app.add_systems(
-        Startup,
-        move |mut commands: Commands,
-              mut meshes: ResMut<Assets<Mesh>>,
-              mut materials: ResMut<Assets<StandardMaterial>>| {
-            commands.spawn(treelod_bevy::TreelodForest::new(forest.clone(), [Transform::IDENTITY]));
-            commands.spawn((
-                Mesh3d(meshes.add(Cuboid::new(board_size.x, board_size.y, board_size.z))),
-                MeshMaterial3d(materials.add(StandardMaterial::from(Color::srgb(0.4, 0.4, 0.4)))),
-                Transform::from_translation(board_centre),
-            ));
-            commands.spawn((
-                DirectionalLight { shadow_maps_enabled: true, ..DirectionalLight::default() },
-                Transform::default().looking_to(sun, Vec3::Z),
-            ));
-        },
+    let board = Mesh::from(Cuboid::new(2.0 * width, 0.05 * height, 4.0 * (max.z - min.z)));
+    let grey = StandardMaterial::from(Color::srgb(0.4, 0.4, 0.4));
+    one_tree_in_the_sun(
+        &mut app,
+        &handle,
+        (board, grey, Transform::from_translation(board_centre)),
+        Transform::default().looking_to(sun, Vec3::Z),
     );
     // In front of the tree (south), level with its crown: west is the image's left.
     let at = 0.5 * (min + max);
