@@ -50,6 +50,9 @@
 //!   of earlier builds drew 1.7× as dark as the reference at 64–256 pixels, where the renderer
 //!   draws it 1.15× as dark); planes and billboards sample their atlases' stored mips.
 //!
+//! Each view is a square image the width of the block's bounding sphere, at most
+//! [`MAX_VIEW_HEIGHTS`] heights across (`view_side`); of a block wider than that it shows the middle.
+//!
 //! Every image is shaded ([`crate::shade`]): each surface's albedo (material colour, vertex or
 //! record colour, texture at the mip level the renderer samples), its normal and its ambient
 //! occlusion, lit by the renderer's default light ([`treelod_runtime::Light::DEFAULT`]) without
@@ -152,6 +155,26 @@ use crate::shade::{Canvas, Surface, depth, triangle_pixels};
 /// point tree), so the table stops here and the build spends its time where the choice is made
 /// (the images of 512 pixels would cost four times all the others).
 pub const HEIGHTS: [f32; 6] = [8.0, 16.0, 32.0, 64.0, 128.0, 256.0];
+
+/// The widest a view's image is, in heights of the block (the `h` pixels it is drawn at): the
+/// block's sphere is `2·radius/p` pixels across at `p` metres per pixel, and a view whose sphere
+/// is wider shows the middle of it, this many heights across, in the reference and every
+/// representation alike — as a screen frames a tree. The shared models' spheres are 1.32–2.23
+/// heights across (the pine's and the orchid's), so no view of theirs is cut. A block far wider
+/// than high — a stray vertex a hundred metres from a 2.5-metre tree — would otherwise draw
+/// every image thousands of pixels wide at the largest heights, and its calibration, whose cost
+/// grows with the square of that width, took minutes (measured: `--baselines` on a 3k-triangle
+/// tree over 120 s); cut, a view costs at most (4 / 2.23)² ≈ 3.2 times the orchid's.
+pub const MAX_VIEW_HEIGHTS: f32 = 4.0;
+
+/// The side of a view's square image, pixels, for a block of bounding-sphere `radius` drawn at
+/// `metres_per_pixel`, `pixels` high: the sphere's width, at most [`MAX_VIEW_HEIGHTS`] times
+/// `pixels`, at least 4.
+#[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "rounded up, saturating")]
+fn view_side(radius: f32, metres_per_pixel: f32, pixels: f32) -> u32 {
+    let widest = (MAX_VIEW_HEIGHTS * pixels).ceil() as u32;
+    ((2.0 * radius / metres_per_pixel).ceil() as u32).min(widest).max(4)
+}
 
 /// The largest side of a supersampled reference image, samples: the supersampling is lowered
 /// where a view would be larger (a block much wider than high at 256 pixels).
@@ -488,7 +511,7 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
         .map(|&(h, v)| {
             let pixels = HEIGHTS[h] * offsets[h][v];
             let metres_per_pixel = height / pixels;
-            let side = ((2.0 * radius / metres_per_pixel).ceil() as u32).max(4);
+            let side = view_side(radius, metres_per_pixel, pixels);
             let k = config.supersample.max(1).min((MAX_REFERENCE_SIDE / side).max(1));
             // The sphere fitted to exactly `side` pixels of `metres_per_pixel`.
             let fitted = 0.5 * side as f32 * metres_per_pixel;
@@ -1497,6 +1520,22 @@ mod tests {
     fn share_kept(c: Vec2, r: f32) -> f64 {
         let n = 40_000u64;
         (0..n).filter(|&id| splat_kept(c, r, id.wrapping_mul(0x9e37_79b9_7f4a_7c15))).count() as f64 / n as f64
+    }
+
+    #[test]
+    fn a_view_is_the_spheres_width_up_to_four_heights() {
+        for pixels in [8.0, 11.3, 64.0, 256.0, 362.0] {
+            let metres_per_pixel = 10.0 / pixels; // a 10-metre block
+            // Spheres 1.32 and 2.23 heights across (the shared pine's and orchid's): their width.
+            for across in [1.32f32, 2.23] {
+                let side = view_side(0.5 * across * 10.0, metres_per_pixel, pixels);
+                assert_eq!(side, ((across * pixels).ceil() as u32).max(4), "{across} heights at {pixels} px");
+            }
+            // A stray vertex 100 m away: cut to four heights.
+            assert_eq!(view_side(100.0, metres_per_pixel, pixels), ((4.0 * pixels).ceil() as u32).max(4));
+            assert!(view_side(f32::INFINITY, metres_per_pixel, pixels) <= (4.0 * pixels).ceil() as u32 + 4);
+        }
+        assert_eq!(view_side(0.0, 1.0, 8.0), 4, "at least 4 pixels");
     }
 
     #[test]
