@@ -1232,6 +1232,21 @@ fn assemble(
     clock.lap(&mut stats, "precision");
     // Stage: calibration, of what is written (after the precision trim).
     if let Some(calibration) = &config.calibration {
+        // A block whose sphere is wider than the views show (a stray vertex far from the tree,
+        // or a row of trees in one block) is measured in the middle of each view: said, since
+        // its bounds are likely not what the artist meant.
+        let (lo, hi) = (Vec3::from_array(data.block.bounds_min), Vec3::from_array(data.block.bounds_max));
+        let across = (hi - lo).length() / (hi.y - lo.y);
+        if hi.y > lo.y && across > crate::calibrate::MAX_VIEW_HEIGHTS {
+            warnings.push(format!(
+                "the block's bounding sphere is {across:.1} times as wide as the block is high \
+                 (bounds {:?} .. {:?}): calibration measures the middle {} heights of each view; \
+                 are some vertices far from the rest?",
+                data.block.bounds_min,
+                data.block.bounds_max,
+                crate::calibrate::MAX_VIEW_HEIGHTS
+            ));
+        }
         let calibrated = crate::calibrate::calibrate(&data, calibration);
         data.calibration = calibrated.mean;
         data.calibration_elevations = calibrated.elevations;

@@ -357,3 +357,23 @@ fn octahedral_impostors_are_calibrated_in_the_added_sections_and_hold_up_from_ab
         assert_eq!(crossed, at(elevation, t::CROSSED), "elevation {elevation}");
     }
 }
+
+#[test]
+fn a_block_far_wider_than_high_is_calibrated_in_the_middle_of_its_views_and_the_build_says_so() {
+    let scene = demo_tree(&DemoTreeConfig { leaves: 200, ..DemoTreeConfig::default() });
+    let config = BuildConfig {
+        calibration: Some(CalibrationConfig { views: 1, more_small_views: false, ..CalibrationConfig::default() }),
+        ..BuildConfig::default()
+    };
+    let placed = |x: f32| Placed { scene: &scene, translation: Vec3::new(x, 0.0, 0.0) };
+    let one = build_block("t", &[placed(0.0)], &config, "t").expect("builds");
+    let said = |warnings: &[String]| warnings.iter().any(|w| w.contains("calibration measures the middle"));
+    assert!(!said(&one.warnings), "{:?}", one.warnings);
+    // The same tree and another 30 of its heights away: one block about 30 heights wide.
+    let height = one.data.block.bounds_max[1] - one.data.block.bounds_min[1];
+    let two = build_block("t", &[placed(0.0), placed(30.0 * height)], &config, "t").expect("builds");
+    assert!(said(&two.warnings), "{:?}", two.warnings);
+    // Calibrated all the same: a row per technique and height, every number finite.
+    assert_eq!(row(&two.data.calibration, t::SPT).len(), HEIGHTS.len());
+    assert!(two.data.calibration.iter().all(|r| r.error.is_finite() && r.primitives.is_finite()));
+}
