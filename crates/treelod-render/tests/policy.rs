@@ -418,7 +418,7 @@ fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
 }
 
 /// A row of trees hidden behind a near one reaching out past the policy's uniform height
-/// (`Choices::uniform_below`): the trees whose choice can follow their visible fraction are
+/// (`Choices::uniform_below_in` of the side views): the trees whose choice can follow their visible fraction are
 /// measured hidden, while those under half that height (`VISIBILITY_LEAD`), drawn alike whatever
 /// their fraction, are not measured and keep a fraction of 1; each is drawn with the technique
 /// its measured fraction chooses.
@@ -429,7 +429,9 @@ fn far_trees_drawn_alike_whatever_their_visibility_are_not_measured() {
     let (calibration, lod, representations) = read_back(&container);
     let policy = Policy { hysteresis: 0.0, transition: 0, ..Policy::default() };
     let choices = Choices::new(&calibration, &policy, &representations);
-    let (below, uniform) = choices.uniform_below().expect("one technique for the smallest trees");
+    // The trees are seen from the side (elevation class 0), whose smallest trees take one
+    // technique.
+    let (below, uniform) = choices.uniform_below_in(0).expect("one technique for the smallest trees");
     let centre = lod.centre();
     // The near tree fills most of the view.
     let eye = vec3(0.0, centre.y, 5.0);
