@@ -154,7 +154,31 @@ use crate::shade::{Canvas, Surface, depth, triangle_pixels};
 /// and near: a policy draws them with the representation that converges to the full mesh (the
 /// point tree), so the table stops here and the build spends its time where the choice is made
 /// (the images of 512 pixels would cost four times all the others).
-pub const HEIGHTS: [f32; 6] = [8.0, 16.0, 32.0, 64.0, 128.0, 256.0];
+///
+/// The table starts at 4 pixels (builds before it started at 8): below its smallest height a
+/// policy draws every tree as it draws one of that height, and a large forest's trees are mostly
+/// smaller than 8 pixels. With the table from 8 pixels the shared orchid's 10⁶ trees (`bench
+/// --trees 1000000 --frames 12 --size 480x270 --technique policy --no-render`) drew 349,115
+/// trees a frame with impostor planes and their branch lines, 8.56 million primitives, the
+/// 8-pixel choice seen from low; the weeping willow's drew 336,390 with the point tree, 28.0
+/// million. Measured at 4 pixels, the cheap quads come within the target there (the orchid's
+/// billboard is the least error over every view at 4 pixels, 0.0894, where the impostors read
+/// 0.0751 at 8 pixels and 0.0903 at 4), and the same flights submit 2.38 and 1.36 million
+/// primitives. The 1,000-orchid forest (`--trees 1000 --frames 30 --quality`), whose overview
+/// holds about 940 trees under 8 pixels, drew them as billboards and crossed quads and read
+/// RMSE .03568 → .03468, FLIP .06217 → .06019 and temporal noise 1.08 → 1.05 times the
+/// reference's, with 398,025 → 394,545 primitives a frame. Its recall fell (.893 → .816; in the
+/// overview .91 → .54, precision .75 → .78): the planes had covered 1.2 times the reference's
+/// pixels there, the quads cover 0.7 of them, each pixel nearer the reference's colour. The
+/// other shared models' forests and flights, whose small trees were already one octahedral quad
+/// each, draw the same. The 49 views more cost the maple's build with every representation
+/// 17.6 → 20.9 s of calibration (49.4 → 52.2 s in all, one run each, 2 cores), the jacaranda's
+/// 6.8–7.1 → 7.1–8.1 s and the orchid's within the runs' noise (7.8–8.9 → 7.9–8.2 s; two
+/// alternating runs each). A 2-pixel height was measured and not taken: there the full mesh (its
+/// mip-filtered alpha test on a few pixels) becomes the least error of all (the orchid 0.0870
+/// against its billboard's 0.0972), and the tables would put every representation but the LoD
+/// chain past the target.
+pub const HEIGHTS: [f32; 7] = [4.0, 8.0, 16.0, 32.0, 64.0, 128.0, 256.0];
 
 /// The widest a view's image is, in heights of the block (the `h` pixels it is drawn at): the
 /// block's sphere is `2·radius/p` pixels across at `p` metres per pixel, and a view whose sphere
@@ -200,7 +224,7 @@ pub const ELEVATIONS: [f32; 4] = [0.0, 30.0, 60.0, 90.0];
 pub struct CalibrationConfig {
     /// Orthographic views per elevation of [`ELEVATIONS`] below 90° ([`calibration_views`]) at
     /// 64 pixels and above, more below ([`views_at`]); one view straight down. Default 2: 7 views
-    /// in all from 64 pixels up, 49 at 8 pixels.
+    /// in all from 64 pixels up, 49 at 8 and 4 pixels.
     pub views: usize,
     /// Samples per pixel side of the reference. Default 4.
     pub supersample: u32,
@@ -243,7 +267,7 @@ impl CalibrationConfig {
 }
 
 /// The views per elevation below 90° at a height of `pixels` for `views` at 64 pixels and above:
-/// `views · 64 / pixels` below (8 pixels: 8 times as many). A view's error is a mean over the
+/// `views · 64 / pixels` below, at most 8 times as many (8 and 4 pixels: 8 times). A view's error is a mean over the
 /// few pixels the tree covers, and which of them a thin leaf or a splat lands on changes from view
 /// to view: with 2 views at every height the shared weeping willow's full mesh read 0.0507 from
 /// 30° at 8 pixels (0.0704 at 16) and its point tree 0.1044 (0.0614 at 16), a floor no cheap
@@ -251,11 +275,12 @@ impl CalibrationConfig {
 /// chain's 15,037 triangles; with 8 views at every height the same entries read 0.0674 and
 /// 0.0794 and the point tree's row over every view fell with size at every height. Small images
 /// cost little beyond their primitives, so the views are added where they are noisiest and
-/// cheapest. The view straight down stays one.
+/// cheapest. The view straight down stays one. At 4 pixels the views stay as many as at 8
+/// (16 times would add as many again for a table a policy reads only below 8 pixels).
 #[must_use]
 pub fn views_at(views: usize, pixels: f32) -> usize {
     #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a factor of 1 to 8")]
-    let factor = (SMALL_HEIGHT / pixels).ceil().max(1.0) as usize;
+    let factor = (SMALL_HEIGHT / pixels).ceil().clamp(1.0, 8.0) as usize;
     views.max(1) * factor
 }
 

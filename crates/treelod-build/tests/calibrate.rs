@@ -131,14 +131,15 @@ fn calibration_is_the_same_whatever_the_thread_count() {
 
 #[test]
 fn heights_under_64_pixels_take_more_views_and_the_metadata_records_them() {
-    assert_eq!(HEIGHTS.map(|h| views_at(2, h)), [16, 8, 4, 2, 2, 2]);
-    assert_eq!(HEIGHTS.map(|h| views_at(1, h)), [8, 4, 2, 1, 1, 1]);
+    assert_eq!(HEIGHTS.map(|h| views_at(2, h)), [16, 16, 8, 4, 2, 2, 2]);
+    assert_eq!(HEIGHTS.map(|h| views_at(1, h)), [8, 8, 4, 2, 1, 1, 1]);
+    assert_eq!(views_at(2, 2.0), 16, "at most 8 times the views");
     let setting = |config: &CalibrationConfig| {
         config.settings().into_iter().find(|s| s.key == "calibration.views_by_height").map(|s| s.value)
     };
-    assert_eq!(setting(&CalibrationConfig::default()).as_deref(), Some("16,8,4,2,2,2"));
+    assert_eq!(setting(&CalibrationConfig::default()).as_deref(), Some("16,16,8,4,2,2,2"));
     let fixed = CalibrationConfig { more_small_views: false, ..CalibrationConfig::default() };
-    assert_eq!(setting(&fixed).as_deref(), Some("2,2,2,2,2,2"));
+    assert_eq!(setting(&fixed).as_deref(), Some("2,2,2,2,2,2,2"));
 
     // The same tree calibrated both ways: from 64 pixels up the same views and the same rows; below,
     // more views, and rows that are their mean (at least one differs).

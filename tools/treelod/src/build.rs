@@ -168,8 +168,9 @@ pub struct BuildOptions {
     #[arg(long, value_enum, value_name = "METHOD", default_value_t = AoMethodArg::Parallel)]
     pub ao_method: AoMethodArg,
     /// Calibration views per elevation (spec §6.15, §6.16): every representation built is drawn
-    /// at 6 projected heights (8 to 256 pixels) on the CPU, from N orthographic views around the
-    /// tree at each of 0°, 30° and 60° elevation (N·64/h at a height h under 64 pixels) and one
+    /// at 7 projected heights (4 to 256 pixels) on the CPU, from N orthographic views around the
+    /// tree at each of 0°, 30° and 60° elevation (N·64/h at a height h under 64 pixels, at most
+    /// 8N) and one
     /// straight down, and its image error
     /// against the supersampled full mesh and its primitive count are stored, over every view and
     /// per elevation, for the renderer's policy to choose representations with. Default: 2 when
