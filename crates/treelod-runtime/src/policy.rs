@@ -1565,8 +1565,7 @@ const fn prunes(technique: Technique) -> bool {
 }
 
 /// The share of [`Choices::uniform_below_in`]'s height (the tree's elevation class's) from which
-/// a tree it chose is measured for
-/// occlusion ([`PolicyState::visibility_matters`]): one octave. A measurement is read a frame
+/// a tree it chose is measured for occlusion ([`PolicyState::visibility_matters`]): one octave. A measurement is read a frame
 /// or more after it is taken, and it stands only while the eye has moved less than a quarter of
 /// the tree's distance (the renderer's occlusion test), in which time the tree grows by at most
 /// a third on screen: a tree that comes nearer without a jump has been measured at least twice
@@ -2762,7 +2761,8 @@ mod tests {
         assert_eq!(differ.uniform_below(), None);
         // Each class keeps its own height: under it, whatever the visibility, share in view and
         // past, that class's smallest trees' technique.
-        let (side, above) = (differ.uniform_below_in(0), differ.uniform_below_in(3));
+        let last = differ.elevations().len() - 1;
+        let (side, above) = (differ.uniform_below_in(0), differ.uniform_below_in(last));
         assert!(side.zip(above).is_some_and(|(s, a)| s.1 != a.1), "{side:?} {above:?}");
         assert_eq!(differ.uniform_below_in(BELOW_HORIZON), None);
         assert_eq!(differ.uniform_below_in(99), above, "past the last class: the last");
