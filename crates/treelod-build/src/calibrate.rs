@@ -267,9 +267,9 @@ impl CalibrationConfig {
 }
 
 /// The views per elevation below 90° at a height of `pixels` for `views` at 64 pixels and above:
-/// `views · 64 / pixels` below, at most 8 times as many (8 and 4 pixels: 8 times). A view's error is a mean over the
-/// few pixels the tree covers, and which of them a thin leaf or a splat lands on changes from view
-/// to view: with 2 views at every height the shared weeping willow's full mesh read 0.0507 from
+/// `views · 64 / pixels` below, at most 8 times as many (8 and 4 pixels: 8 times). A view's
+/// error is a mean over the few pixels the tree covers, and which of them a thin leaf or a splat
+/// lands on changes from view to view: with 2 views at every height the shared weeping willow's full mesh read 0.0507 from
 /// 30° at 8 pixels (0.0704 at 16) and its point tree 0.1044 (0.0614 at 16), a floor no cheap
 /// representation came within the target of, so a policy drew its small trees with the LoD
 /// chain's 15,037 triangles; with 8 views at every height the same entries read 0.0674 and
