@@ -1102,11 +1102,8 @@ pub struct Choices {
     below: Vec<Table>,
     /// Steps either side within which a tree keeps last frame's technique.
     hysteresis_steps: usize,
-    /// The technique every elevation's tables choose below a height, and that height
-    /// ([`Self::uniform_below`]).
-    uniform: Option<(f32, Technique)>,
     /// Per elevation class, the technique its tables choose below a height, and that height
-    /// ([`Self::uniform_below_in`]).
+    /// ([`Self::uniform_below_in`]; [`Self::uniform_below`] follows from them).
     uniform_by_class: Vec<Option<(f32, Technique)>>,
 }
 
@@ -1316,16 +1313,14 @@ impl Choices {
             visibility,
             below,
             hysteresis_steps: hysteresis_steps(policy),
-            uniform: None,
             uniform_by_class: Vec::new(),
         };
         choices.measure_uniform();
         choices
     }
 
-    /// Sets [`Self::uniform_below`] and [`Self::uniform_below_in`] from the tables.
+    /// Sets [`Self::uniform_below_in`] (and so [`Self::uniform_below`]) from the tables.
     fn measure_uniform(&mut self) {
-        self.uniform = self.uniform(&self.tables);
         self.uniform_by_class = self.tables.chunks(self.visibility.max(1)).map(|class| self.uniform(class)).collect();
     }
 
@@ -1336,9 +1331,16 @@ impl Choices {
     /// differs. The chooser takes it without looking the tree up (`choose_instances`): in a
     /// large forest most trees are that small. (Seen from below, a tree whose smallest choice is
     /// the octahedral impostor gets another: those are looked up.)
+    ///
+    /// Every class's [`Self::uniform_below_in`] with one technique, and the least of their
+    /// heights: the run of that technique the classes' tables share is the shortest class's, and
+    /// the height grows with the run.
     #[must_use]
     pub fn uniform_below(&self) -> Option<(f32, Technique)> {
-        self.uniform
+        let (first, rest) = self.uniform_by_class.split_first()?;
+        rest.iter().try_fold((*first)?, |(height, technique), class| {
+            class.filter(|c| c.1 == technique).map(|c| (height.min(c.0), technique))
+        })
     }
 
     /// [`Self::uniform_below`] for the trees of elevation class `elevation` alone (an index into
@@ -1564,12 +1566,12 @@ const fn prunes(technique: Technique) -> bool {
     matches!(technique, Technique::PruneOpt | Technique::PruneCook)
 }
 
-/// The share of [`Choices::uniform_below_in`]'s height (the tree's elevation class's) from which
-/// a tree it chose is measured for occlusion ([`PolicyState::visibility_matters`]): one octave. A measurement is read a frame
-/// or more after it is taken, and it stands only while the eye has moved less than a quarter of
-/// the tree's distance (the renderer's occlusion test), in which time the tree grows by at most
-/// a third on screen: a tree that comes nearer without a jump has been measured at least twice
-/// before its visible fraction can change its choice.
+/// The share of [`Choices::uniform_below_in`]'s height (the tree's elevation class's) from which a
+/// tree it chose is measured for occlusion ([`PolicyState::visibility_matters`]): one octave. A
+/// measurement is read a frame or more after it is taken, and it stands only while the eye has
+/// moved less than a quarter of the tree's distance (the renderer's occlusion test), in which time
+/// the tree grows by at most a third on screen: a tree that comes nearer without a jump has been
+/// measured at least twice before its visible fraction can change its choice.
 ///
 /// Measured and not taken: a height per model under which no visibility class's tables choose
 /// differently from the fully visible one's in any elevation class (what
@@ -3069,7 +3071,6 @@ mod tests {
             visibility: 1,
             below: Vec::new(),
             hysteresis_steps: 2,
-            uniform: None,
             uniform_by_class: Vec::new(),
         };
         // Find the boundary between crossed (small) and the point tree (larger).
@@ -3234,7 +3235,6 @@ mod tests {
             visibility: 1,
             below: Vec::new(),
             hysteresis_steps: 0,
-            uniform: None,
             uniform_by_class: Vec::new(),
         }
     }
@@ -3490,7 +3490,6 @@ mod tests {
                     visibility: 1,
                     below: Vec::new(),
                     hysteresis_steps: 2,
-                    uniform: None,
                     uniform_by_class: Vec::new(),
                 };
                 // The chunks take the technique every table shares under its height without
@@ -3637,7 +3636,7 @@ mod tests {
         choices.elevations = (0..10).map(|c| 10.0 * c as f32).collect();
         choices.tables = (0..10).map(|c| only(by_class(c))).collect();
         choices.below = vec![only(Technique::Impostors)];
-        choices.uniform = None;
+        choices.uniform_by_class = Vec::new();
         let choices = [Some(choices)];
         let mut rng = SplitMix64(8);
         let instances: Vec<Instance> = (0..2 * CHOOSE_CHUNK + 300)
