@@ -267,16 +267,16 @@ impl CalibrationConfig {
 }
 
 /// The views per elevation below 90° at a height of `pixels` for `views` at 64 pixels and above:
-/// `views · 64 / pixels` below, at most 8 times as many (8 and 4 pixels: 8 times). A view's
-/// error is a mean over the few pixels the tree covers, and which of them a thin leaf or a splat
-/// lands on changes from view to view: with 2 views at every height the shared weeping willow's full mesh read 0.0507 from
-/// 30° at 8 pixels (0.0704 at 16) and its point tree 0.1044 (0.0614 at 16), a floor no cheap
-/// representation came within the target of, so a policy drew its small trees with the LoD
-/// chain's 15,037 triangles; with 8 views at every height the same entries read 0.0674 and
+/// `views · 64 / pixels` below, at most 8 times as many (8 and 4 pixels: 8 times). A view's error
+/// is a mean over the few pixels the tree covers, and which of them a thin leaf or a splat lands on
+/// changes from view to view: with 2 views at every height the shared weeping willow's full mesh
+/// read 0.0507 from 30° at 8 pixels (0.0704 at 16) and its point tree 0.1044 (0.0614 at 16), a
+/// floor no cheap representation came within the target of, so a policy drew its small trees with
+/// the LoD chain's 15,037 triangles; with 8 views at every height the same entries read 0.0674 and
 /// 0.0794 and the point tree's row over every view fell with size at every height. Small images
 /// cost little beyond their primitives, so the views are added where they are noisiest and
-/// cheapest. The view straight down stays one. At 4 pixels the views stay as many as at 8
-/// (16 times would add as many again for a table a policy reads only below 8 pixels).
+/// cheapest. The view straight down stays one. At 4 pixels the views stay as many as at 8 (16 times
+/// would add as many again for a table a policy reads only below 8 pixels).
 #[must_use]
 pub fn views_at(views: usize, pixels: f32) -> usize {
     #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a factor of 1 to 8")]

@@ -418,10 +418,10 @@ fn trees_hidden_behind_another_are_chosen_at_their_visible_fraction() {
 }
 
 /// A row of trees hidden behind a near one reaching out past the policy's uniform height
-/// (`Choices::uniform_below_in` of the side views): the trees whose choice can follow their visible fraction are
-/// measured hidden, while those under half that height (`VISIBILITY_LEAD`), drawn alike whatever
-/// their fraction, are not measured and keep a fraction of 1; each is drawn with the technique
-/// its measured fraction chooses.
+/// (`Choices::uniform_below_in` of the side views): the trees whose choice can follow their visible
+/// fraction are measured hidden, while those under half that height (`VISIBILITY_LEAD`), drawn
+/// alike whatever their fraction, are not measured and keep a fraction of 1; each is drawn with the
+/// technique its measured fraction chooses.
 #[test]
 fn far_trees_drawn_alike_whatever_their_visibility_are_not_measured() {
     let gpu = gpu();
