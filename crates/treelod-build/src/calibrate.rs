@@ -5,11 +5,11 @@
 //!
 //! **What is measured.** For each height `h` of [`HEIGHTS`] and each orthographic view of
 //! [`calibration_views`] (`views` around the tree at each elevation of [`ELEVATIONS`] below 90°,
-//! more under 64 pixels, [`views_at`], and one straight down), the block is drawn about `h`
-//! pixels high — each view at its own fraction of an octave around `h`, the views of one
-//! elevation spread evenly over the octave (with two, `h·2^(−1/4)` and `h·2^(1/4)`; the one
-//! straight down at `h`), so that a
-//! table holds the mean over the phases of the representations' level switches, as a forest's
+//! more under 64 pixels, [`views_at`], and straight down, one from 64 pixels up and more below,
+//! each turned about the vertical, [`down_views_at`]), the block is drawn about `h` pixels high —
+//! each view at its own fraction of an octave around `h`, the views of one elevation spread evenly
+//! over the octave (with two, `h·2^(−1/4)` and `h·2^(1/4)`; one alone at `h`), so that a table
+//! holds the mean over the phases of the representations' level switches, as a forest's
 //! trees at every distance show them, not the one phase an exact octave falls on (measured on the
 //! shared pine, whose planes switch levels between 14 and 60 pixels: at exactly 32 pixels its
 //! impostors read 0.0473 against its point tree's 0.0331, mid-morph; over the octave, 0.0441
@@ -223,14 +223,15 @@ pub const ELEVATIONS: [f32; 4] = [0.0, 30.0, 60.0, 90.0];
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct CalibrationConfig {
     /// Orthographic views per elevation of [`ELEVATIONS`] below 90° ([`calibration_views`]) at
-    /// 64 pixels and above, more below ([`views_at`]); one view straight down. Default 2: 7 views
-    /// in all from 64 pixels up, 49 at 8 and 4 pixels.
+    /// 64 pixels and above, more below ([`views_at`]); one view straight down from 64 pixels up,
+    /// more below ([`down_views_at`]). Default 2: 7 views in all from 64 pixels up, 56 at 8 and 4
+    /// pixels.
     pub views: usize,
     /// Samples per pixel side of the reference. Default 4.
     pub supersample: u32,
-    /// Whether heights under 64 pixels take more views ([`views_at`]). Default `true`; `false`
-    /// takes `views` at every height, as builds before did (tests that count on one view a
-    /// height).
+    /// Whether heights under 64 pixels take more views ([`views_at`], [`down_views_at`]). Default
+    /// `true`; `false` takes `views` and one straight down at every height, as builds before did
+    /// (tests that count on one view a height).
     pub more_small_views: bool,
 }
 
@@ -248,17 +249,28 @@ impl CalibrationConfig {
         if self.more_small_views { views_at(self.views, pixels) } else { self.views.max(1) }
     }
 
+    /// The views straight down at a height of `pixels`: [`down_views_at`], or one without
+    /// [`Self::more_small_views`].
+    #[must_use]
+    pub fn down_views_at(&self, pixels: f32) -> usize {
+        if self.more_small_views { down_views_at(pixels) } else { 1 }
+    }
+
     /// The metadata settings recording this configuration (spec §7.1): `calibration.views`, the
     /// views per elevation from 64 pixels up, `calibration.views_by_height`, those at each of
-    /// [`HEIGHTS`] ([`views_at`]), and `calibration.elevations`, the elevations in degrees (files of
-    /// format 1.5 and 1.6, without the latter, counted every view in `calibration.views`).
+    /// [`HEIGHTS`] ([`views_at`]), `calibration.views_down_by_height`, the views straight down at
+    /// each ([`down_views_at`]; files without it took one), and `calibration.elevations`, the
+    /// elevations in degrees (files of format 1.5 and 1.6, without the latter, counted every view
+    /// in `calibration.views`).
     #[must_use]
     pub fn settings(&self) -> Vec<Setting> {
         let elevations: Vec<String> = ELEVATIONS.iter().map(ToString::to_string).collect();
         let by_height: Vec<String> = HEIGHTS.iter().map(|&h| self.views_at(h).to_string()).collect();
+        let down: Vec<String> = HEIGHTS.iter().map(|&h| self.down_views_at(h).to_string()).collect();
         vec![
             Setting { key: "calibration.views".into(), value: self.views.to_string() },
             Setting { key: "calibration.views_by_height".into(), value: by_height.join(",") },
+            Setting { key: "calibration.views_down_by_height".into(), value: down.join(",") },
             Setting { key: "calibration.elevations".into(), value: elevations.join(",") },
             Setting { key: "calibration.supersample".into(), value: self.supersample.to_string() },
             Setting { key: "calibration.error".into(), value: "colour".into() },
@@ -275,8 +287,8 @@ impl CalibrationConfig {
 /// the LoD chain's 15,037 triangles; with 8 views at every height the same entries read 0.0674 and
 /// 0.0794 and the point tree's row over every view fell with size at every height. Small images
 /// cost little beyond their primitives, so the views are added where they are noisiest and
-/// cheapest. The view straight down stays one. At 4 pixels the views stay as many as at 8 (16 times
-/// would add as many again for a table a policy reads only below 8 pixels).
+/// cheapest; the same holds straight down ([`down_views_at`]). At 4 pixels the views stay as many
+/// as at 8 (16 times would add as many again for a table a policy reads only below 8 pixels).
 #[must_use]
 pub fn views_at(views: usize, pixels: f32) -> usize {
     #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a factor of 1 to 8")]
@@ -287,6 +299,23 @@ pub fn views_at(views: usize, pixels: f32) -> usize {
 /// The height from which the calibration takes `views` per elevation, and below which more
 /// ([`views_at`]).
 pub const SMALL_HEIGHT: f32 = 64.0;
+
+/// The views straight down at a height of `pixels`: one from 64 pixels up, below as many more as
+/// [`views_at`] takes around the tree (`64 / pixels`, at most 8: 8, 8, 4 and 2 at 4, 8, 16 and 32
+/// pixels), each turned about the vertical a step of a full turn further and drawn at its own
+/// phase of the octave. One view straight down is as noisy at a few pixels as one from the side:
+/// which pixels the crown's gaps fall on changes with the turn of the pixel grid. Measured on the
+/// shared orchid, whose one view read its point tree 0.0748 at 4 pixels, 0.1092 at 8 and 0.0547 at
+/// 16, so that its trees under 8 pixels seen from above took the point tree (11,947 trees a frame
+/// of a 10⁶-tree flight); over 8 views 0.1279, 0.0820 and 0.0595, its impostor planes the least
+/// error at 4 and 8 pixels (0.0970 and 0.0768), which `treelod eval` from 84–86° confirms. The
+/// maple's one view had read its octahedral quad 0.0659 at 4 pixels, the least there; over 8
+/// views 0.0887 against its planes' 0.0817, where `eval` from 84–86° still reads the quad best
+/// (the calibration and `eval` weigh a few-pixel tree differently: its image or a whole frame).
+#[must_use]
+pub fn down_views_at(pixels: f32) -> usize {
+    views_at(1, pixels)
+}
 
 /// The calibration's views (unit directions towards the viewer) with the index of their
 /// elevation in [`ELEVATIONS`]: per elevation below 90°, `per_elevation` views (at least one)
@@ -300,12 +329,18 @@ pub const SMALL_HEIGHT: f32 = 64.0;
 /// and 0.059 at 32, 64 and 128 pixels, close enough to its impostor planes for a policy to draw
 /// far trees with it; with views at 45° and 135°, 0.068, 0.075 and 0.080.
 #[must_use]
-pub fn calibration_views(per_elevation: usize) -> Vec<(usize, Vec3)> {
+pub fn calibration_views(per_elevation: usize, down: usize) -> Vec<CalibrationView> {
     let n = per_elevation.max(1);
     let mut views = Vec::new();
     for (e, &degrees) in ELEVATIONS.iter().enumerate() {
         if degrees >= 90.0 {
-            views.push((e, Vec3::Y));
+            let m = down.max(1);
+            #[expect(clippy::cast_precision_loss, reason = "a few views")]
+            views.extend((0..m).map(|k| CalibrationView {
+                elevation: e,
+                direction: Vec3::Y,
+                roll: std::f32::consts::TAU * k as f32 / m as f32,
+            }));
             continue;
         }
         let elevation = degrees.to_radians();
@@ -314,10 +349,23 @@ pub fn calibration_views(per_elevation: usize) -> Vec<(usize, Vec3)> {
         for k in 0..n {
             let azimuth = turn * (k as f32 + 0.5 + 0.25 * e as f32) / n as f32;
             let (s, c) = azimuth.sin_cos();
-            views.push((e, Vec3::new(elevation.cos() * s, elevation.sin(), elevation.cos() * c)));
+            let direction = Vec3::new(elevation.cos() * s, elevation.sin(), elevation.cos() * c);
+            views.push(CalibrationView { elevation: e, direction, roll: 0.0 });
         }
     }
     views
+}
+
+/// One of the calibration's views ([`calibration_views`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CalibrationView {
+    /// The index of its elevation in [`ELEVATIONS`].
+    pub elevation: usize,
+    /// The unit direction towards the viewer.
+    pub direction: Vec3,
+    /// The turn of its image about the direction, radians ([`View::rolled`]): 0 but for the
+    /// views straight down after the first.
+    pub roll: f32,
 }
 
 /// What [`calibrate`] measured: the tables over every view (`CALIBRATION`, spec §6.15), per
@@ -507,8 +555,10 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
         held.iter().copied().filter(|&t| !(per_level && t == calibration_technique::LOD_CHAIN)).collect();
     let (centre, radius) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
     // Per height, its views ([`views_at`]: more below 64 pixels).
-    let directions: Vec<Vec<(usize, Vec3)>> =
-        HEIGHTS.iter().map(|&pixels| calibration_views(config.views_at(pixels))).collect();
+    let directions: Vec<Vec<CalibrationView>> = HEIGHTS
+        .iter()
+        .map(|&pixels| calibration_views(config.views_at(pixels), config.down_views_at(pixels)))
+        .collect();
     // Each view measures its own fraction of an octave off the nominal height, the views of an
     // elevation spread evenly over the octave around it (module docs): a table then holds the
     // mean over the phases of the representations' level switches, as trees at every distance
@@ -519,9 +569,9 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
         .map(|directions| {
             (0..directions.len())
                 .map(|v| {
-                    let elevation = directions[v].0;
-                    let same = directions.iter().filter(|d| d.0 == elevation).count();
-                    let k = directions[..v].iter().filter(|d| d.0 == elevation).count();
+                    let elevation = directions[v].elevation;
+                    let same = directions.iter().filter(|d| d.elevation == elevation).count();
+                    let k = directions[..v].iter().filter(|d| d.elevation == elevation).count();
                     ((k as f32 + 0.5) / same as f32 - 0.5).exp2()
                 })
                 .collect()
@@ -540,9 +590,9 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
             let k = config.supersample.max(1).min((MAX_REFERENCE_SIDE / side).max(1));
             // The sphere fitted to exactly `side` pixels of `metres_per_pixel`.
             let fitted = 0.5 * side as f32 * metres_per_pixel;
-            let direction = directions[h][v].1;
-            let view = View::fit(direction, centre, fitted, side);
-            let reference = scene.reference(&View::fit(direction, centre, fitted, side * k), k);
+            let CalibrationView { direction, roll, .. } = directions[h][v];
+            let view = View::fit(direction, centre, fitted, side).rolled(roll);
+            let reference = scene.reference(&View::fit(direction, centre, fitted, side * k).rolled(roll), k);
             // Encoded for FLIP once, for every technique drawn in this view.
             let flip_reference = FlipReference::new(&reference);
             let measured = techniques.iter().map(|&t| {
@@ -560,15 +610,32 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
             measured.chain(levels).collect()
         })
         .collect();
-    // The means of column `column` of the results at height `h` over the views `keep` accepts,
-    // in view order: error, primitives and FLIP error (NaN where not measured).
+    // A view's weight in the means: one, but the views straight down share one view's weight, so
+    // that over every view the elevations weigh as they did with one view straight down (more
+    // views there make its own rows less noisy, not the rows over every view more top-down).
+    #[expect(clippy::cast_precision_loss, reason = "a few views")]
+    let weight = |h: usize, v: usize| -> f64 {
+        let elevation = directions[h][v].elevation;
+        if ELEVATIONS[elevation] >= 90.0 {
+            1.0 / directions[h].iter().filter(|d| d.elevation == elevation).count() as f64
+        } else {
+            1.0
+        }
+    };
+    // The weighted means of column `column` of the results at height `h` over the views `keep`
+    // accepts, in view order: error, primitives and FLIP error (NaN where not measured).
     let means = |column: usize, h: usize, keep: &dyn Fn(usize) -> bool| -> (f32, f32, f32) {
-        let per_view: Vec<(f64, f64, f64)> =
-            jobs.iter().zip(&results).filter(|((jh, v), _)| *jh == h && keep(*v)).map(|(_, r)| r[column]).collect();
-        let n = per_view.len().max(1) as f64;
-        let error = per_view.iter().map(|r| r.0).sum::<f64>() / n;
-        let primitives = per_view.iter().map(|r| r.1).sum::<f64>() / n;
-        let flip = per_view.iter().map(|r| r.2).sum::<f64>() / n;
+        let per_view: Vec<(f64, (f64, f64, f64))> = jobs
+            .iter()
+            .zip(&results)
+            .filter(|((jh, v), _)| *jh == h && keep(*v))
+            .map(|(&(_, v), r)| (weight(h, v), r[column]))
+            .collect();
+        let n = per_view.iter().map(|r| r.0).sum::<f64>();
+        let n = if n > 0.0 { n } else { 1.0 };
+        let error = per_view.iter().map(|(w, r)| w * r.0).sum::<f64>() / n;
+        let primitives = per_view.iter().map(|(w, r)| w * r.1).sum::<f64>() / n;
+        let flip = per_view.iter().map(|(w, r)| w * r.2).sum::<f64>() / n;
         (
             (error as f32).clamp(0.0, 1.0),
             primitives as f32,
@@ -643,7 +710,7 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
         for &technique in &held {
             for (h, &pixels) in HEIGHTS.iter().enumerate() {
                 if let Some(c) = column(technique, h) {
-                    let (error, primitives, flip) = means(c, h, &|v| directions[h][v].0 == e);
+                    let (error, primitives, flip) = means(c, h, &|v| directions[h][v].elevation == e);
                     if !flip.is_nan() {
                         calibrated.flip.push(FlipCalibrationRecord { elevation, technique, height: pixels, flip });
                     }

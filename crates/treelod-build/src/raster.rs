@@ -255,6 +255,19 @@ impl View {
         Self { direction, right, up, centre, scale: size as f32 / (2.0 * radius), size }
     }
 
+    /// The same view with what it shows turned by `radians` counter-clockwise on the image (the
+    /// camera rolled about its direction): the calibration's views straight down, which see the
+    /// crown through several turns of the pixel grid.
+    #[must_use]
+    pub fn rolled(self, radians: f32) -> Self {
+        if radians == 0.0 {
+            return self;
+        }
+        let (s, c) = radians.sin_cos();
+        let (right, up) = (self.right * c - self.up * s, self.up * c + self.right * s);
+        Self { right, up, ..self }
+    }
+
     /// Pixel coordinates of a model-space point (`x` right, `y` down, pixel centres at `+½`).
     #[must_use]
     pub fn project(&self, p: Vec3) -> Vec2 {
@@ -1162,6 +1175,12 @@ mod tests {
         assert!(view.project(Vec3::new(2.0, 1.0, 5.0)).abs_diff_eq(Vec2::new(100.0, 50.0), 1e-4));
         let top = View::fit(Vec3::Y, Vec3::ZERO, 1.0, 10);
         assert!(top.right.is_normalized() && top.up.is_normalized() && top.right.dot(top.up).abs() < 1e-6);
+        // Turned a quarter counter-clockwise, the point at the image's right edge is at its top.
+        let turned = view.rolled(std::f32::consts::FRAC_PI_2);
+        assert!(turned.project(Vec3::new(2.0, 1.0, 5.0)).abs_diff_eq(Vec2::new(50.0, 0.0), 1e-4));
+        assert!(turned.project(Vec3::new(0.0, 3.0, 0.0)).abs_diff_eq(Vec2::new(0.0, 50.0), 1e-4));
+        assert_eq!((turned.direction, turned.centre, turned.scale), (view.direction, view.centre, view.scale));
+        assert_eq!(view.rolled(0.0), view);
         let (c, r) = bounding_sphere([Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0)].into_iter());
         assert_eq!((c, r), (Vec3::new(1.0, 0.5, 0.0), 1.25f32.sqrt()));
     }

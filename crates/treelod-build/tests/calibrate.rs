@@ -5,7 +5,9 @@
 //! close than far away).
 
 use glam::Vec3;
-use treelod_build::calibrate::{CalibrationConfig, ELEVATIONS, HEIGHTS, calibrate, views_at};
+use treelod_build::calibrate::{
+    CalibrationConfig, ELEVATIONS, HEIGHTS, calibrate, calibration_views, down_views_at, views_at,
+};
 use treelod_build::{
     BuildConfig, DemoTreeConfig, EllipsoidConfig, ImpostorConfig, LineConfig, LodChainConfig, Placed, build_block,
     demo_tree,
@@ -140,6 +142,20 @@ fn heights_under_64_pixels_take_more_views_and_the_metadata_records_them() {
     assert_eq!(setting(&CalibrationConfig::default()).as_deref(), Some("16,16,8,4,2,2,2"));
     let fixed = CalibrationConfig { more_small_views: false, ..CalibrationConfig::default() };
     assert_eq!(setting(&fixed).as_deref(), Some("2,2,2,2,2,2,2"));
+    assert_eq!(HEIGHTS.map(down_views_at), [8, 8, 4, 2, 1, 1, 1], "straight down too");
+    let down = |config: &CalibrationConfig| {
+        config.settings().into_iter().find(|s| s.key == "calibration.views_down_by_height").map(|s| s.value)
+    };
+    assert_eq!(down(&CalibrationConfig::default()).as_deref(), Some("8,8,4,2,1,1,1"));
+    assert_eq!(down(&fixed).as_deref(), Some("1,1,1,1,1,1,1"));
+    // The views straight down are one direction, each turned a step of a full turn further.
+    let views = calibration_views(2, 4);
+    let straight_down: Vec<_> = views.iter().filter(|v| ELEVATIONS[v.elevation] >= 90.0).collect();
+    assert_eq!(views.len(), 3 * 2 + 4);
+    assert!(straight_down.iter().all(|v| v.direction == Vec3::Y));
+    let rolls: Vec<f32> = straight_down.iter().map(|v| v.roll.to_degrees().round()).collect();
+    assert_eq!(rolls, [0.0, 90.0, 180.0, 270.0]);
+    assert!(views.iter().filter(|v| ELEVATIONS[v.elevation] < 90.0).all(|v| v.roll == 0.0));
 
     // The same tree calibrated both ways: from 64 pixels up the same views and the same rows; below,
     // more views, and rows that are their mean (at least one differs).
@@ -159,6 +175,32 @@ fn heights_under_64_pixels_take_more_views_and_the_metadata_records_them() {
         }
     }
     assert!(differ > 0, "the small heights' rows are measured from more views");
+
+    // Over every view the views straight down weigh as one view, however many they are: each row
+    // of `CALIBRATION` is the elevations' rows weighted by their views around the tree and one.
+    for (h, &height) in HEIGHTS.iter().enumerate() {
+        let n = one.views_at(height) as f32;
+        let n_more = CalibrationConfig { more_small_views: true, ..one }.views_at(height) as f32;
+        for (calibrated, n) in [(&fixed, n), (&more, n_more)] {
+            for mean in calibrated.mean.iter().filter(|r| r.height == height) {
+                let per_elevation: Vec<f32> = calibrated
+                    .elevations
+                    .iter()
+                    .filter(|r| r.technique == mean.technique && r.height == height)
+                    .map(|r| r.error)
+                    .collect();
+                assert_eq!(per_elevation.len(), ELEVATIONS.len());
+                let sides: f32 = per_elevation[..3].iter().sum();
+                let weighted = (n * sides + per_elevation[3]) / (3.0 * n + 1.0);
+                assert!(
+                    (weighted - mean.error).abs() <= 1e-5 * mean.error.max(1e-3),
+                    "{} at {height} px (index {h}): {} over every view, {weighted} from the elevations",
+                    t::name(mean.technique).unwrap_or("?"),
+                    mean.error
+                );
+            }
+        }
+    }
 }
 
 #[test]

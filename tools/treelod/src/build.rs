@@ -170,8 +170,8 @@ pub struct BuildOptions {
     /// Calibration views per elevation (spec §6.15, §6.16): every representation built is drawn
     /// at 7 projected heights (4 to 256 pixels) on the CPU, from N orthographic views around the
     /// tree at each of 0°, 30° and 60° elevation (N·64/h at a height h under 64 pixels, at most
-    /// 8N) and one
-    /// straight down, and its image error
+    /// 8N) and straight down (one, 64/h under 64 pixels, each turned about the vertical), and its
+    /// image error
     /// against the supersampled full mesh and its primitive count are stored, over every view and
     /// per elevation, for the renderer's policy to choose representations with. Default: 2 when
     /// the build holds a representation to choose besides the point tree (--prune, --impostors,
