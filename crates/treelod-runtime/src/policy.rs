@@ -1546,6 +1546,24 @@ impl Choices {
         let e = elevation.min(self.elevations.len().saturating_sub(1));
         &self.tables[e * self.visibility].steps
     }
+
+    /// [`Self::steps_at`] as runs: each technique with the projected height, pixels, of the first
+    /// step of its run, smallest first (the first at the smallest calibrated height). A tree of
+    /// elevation class `elevation`, fully visible, wholly in view and chosen afresh, gets a run's
+    /// technique from that height up to the next run's (up to the hysteresis, [`Self::choose`]).
+    /// For `treelod dump` and panels.
+    #[must_use]
+    pub fn runs_at(&self, elevation: usize) -> Vec<(f32, Technique)> {
+        let mut runs: Vec<(f32, Technique)> = Vec::new();
+        for (i, &technique) in self.steps_at(elevation).iter().enumerate() {
+            if runs.last().is_none_or(|&(_, t)| t != technique) {
+                #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+                let height = (self.log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
+                runs.push((height, technique));
+            }
+        }
+        runs
+    }
 }
 
 /// Whether `technique` converges to the full mesh as a tree comes nearer, so that the choice at
@@ -2778,6 +2796,36 @@ mod tests {
                 assert_eq!(chosen, uniform, "{height} px, class {e}, {visible}, {in_view}, after {previous:?}");
             }
         }
+    }
+
+    /// The runs of a class's steps start where its technique changes, at the heights a fresh
+    /// choice changes at, and expand back to the steps.
+    #[test]
+    fn runs_start_where_the_choice_changes_and_expand_to_the_steps() {
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
+        let choices = Choices::among(&table_with_elevations(), &policy, all);
+        let mut changes = 0;
+        for e in 0..choices.elevations().len() {
+            let runs = choices.runs_at(e);
+            let steps = choices.steps_at(e);
+            assert_eq!(runs[0].0, table_with_elevations().heights().0, "the first from the smallest height");
+            assert!(runs.windows(2).all(|w| w[0].0 < w[1].0 && w[0].1 != w[1].1), "{runs:?}");
+            // Expanded: each step's technique is its run's.
+            let expanded: Vec<Technique> = (0..steps.len())
+                .map(|i| {
+                    let height = runs[0].0 * (i as f32 / STEPS_PER_OCTAVE).exp2();
+                    runs.iter().rev().find(|r| r.0 <= height * 1.0001).map(|r| r.1).expect("a run")
+                })
+                .collect();
+            assert_eq!(expanded, steps, "class {e}");
+            // A fresh choice just under a run's start is the run before's, at it the run's own.
+            for w in runs.windows(2) {
+                assert_eq!(choices.choose_viewed(w[1].0 * 1.001, e, 1.0, None), w[1].1);
+                assert_eq!(choices.choose_viewed(w[1].0 * (-1.0 / STEPS_PER_OCTAVE).exp2(), e, 1.0, None), w[0].1);
+                changes += 1;
+            }
+        }
+        assert!(changes > 0, "the tables choose more than one technique");
     }
 
     /// Whose visible fraction matters ([`PolicyState::visibility_matters`]): not a tree out of

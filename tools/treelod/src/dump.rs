@@ -95,6 +95,10 @@ struct Dump<'a> {
     /// or built without FLIP or without a chain).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     chain_calibration_flip: Vec<ChainFlipSample>,
+    /// What the renderer's policy draws a tree with by default, from the calibration (spec
+    /// §10.2), when the container has calibration tables and verifies.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    policy: Option<PolicyInfo>,
     /// Texture bytes per representation (spec §6.7), when the container has images.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     textures: Vec<TextureUse>,
@@ -876,6 +880,102 @@ impl CalibrationInfo {
     }
 }
 
+/// What the renderer's policy ([`treelod_runtime::Policy::default`]: its default target, spec
+/// §10.2) draws a tree of this model with, by the elevation class it is seen from and its projected
+/// height, chosen afresh (no hysteresis), fully visible and wholly in view, among the
+/// representations the renderer can draw from the file ([`treelod_runtime::Representations`]): the
+/// renderer's own [`treelod_runtime::Choices`], so an artist sees which representation each
+/// distance gets before placing a forest.
+#[derive(Debug, Serialize)]
+struct PolicyInfo {
+    /// The policy's target (multi-scale RMSE over the floor, spec §10.2).
+    target: f32,
+    /// One entry per elevation class (every 10° between the tables' elevations; one entry,
+    /// `elevation` null, for a file whose tables are over every view only), lowest first.
+    classes: Vec<PolicyClass>,
+}
+
+/// The policy's choices for the trees of one elevation class.
+#[derive(Debug, Serialize)]
+struct PolicyClass {
+    /// Degrees above the horizontal plane the class's trees are seen from; null: every view.
+    elevation: Option<f32>,
+    /// `[height in pixels, technique]`: the technique from that height up to the next entry's,
+    /// the first from the smallest calibrated height (above the largest: the last, or the point
+    /// tree where only part of a tree is in view).
+    runs: Vec<(f32, &'static str)>,
+    /// `[height in pixels, technique]`: under that height every tree of the class gets that
+    /// technique whatever its visibility and last choice, without being looked up
+    /// (`Choices::uniform_below_in`); absent where none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    uniform_below: Option<(f32, &'static str)>,
+}
+
+impl PolicyInfo {
+    /// The policy's choices for `container`: `None` without calibration tables, or where the
+    /// file does not verify (spec §9.2; the renderer reads only verified files, and the
+    /// representations' ranges are read from the records).
+    fn new(container: &Container) -> Option<Self> {
+        if container.calibration().is_empty() && container.calibration_added().is_empty() {
+            return None;
+        }
+        treelod_format::verify(container).ok()?;
+        let calibration = treelod_runtime::Calibration::from_container(container)?;
+        let (representations, _) = treelod_runtime::Representations::from_container(container);
+        let policy = treelod_runtime::Policy::default();
+        let choices = treelod_runtime::Choices::new(&calibration, &policy, &representations);
+        let elevations: Vec<Option<f32>> = if choices.elevations().is_empty() {
+            vec![None]
+        } else {
+            choices.elevations().iter().copied().map(Some).collect()
+        };
+        let classes = elevations
+            .into_iter()
+            .enumerate()
+            .map(|(e, elevation)| PolicyClass {
+                elevation,
+                runs: choices.runs_at(e).into_iter().map(|(h, t)| (h, t.name())).collect(),
+                uniform_below: choices.uniform_below_in(e).map(|(h, t)| (h, t.name())),
+            })
+            .collect();
+        Some(Self { target: policy.target(), classes })
+    }
+
+    /// The text form: a line per elevation class, each run as `height: technique` (the height to
+    /// three significant digits), and the uniform height where the class has one.
+    fn to_text(&self) -> String {
+        let mut out = format!(
+            "
+policy (what the renderer draws a tree with by default, target {}: from each projected height up, \
+             by the elevation it is seen from; fully visible, wholly in view, chosen afresh)\n",
+            self.target
+        );
+        for class in &self.classes {
+            let elevation = class.elevation.map_or_else(|| "every view".to_owned(), |e| format!("{e}°"));
+            let runs: Vec<String> = class.runs.iter().map(|(h, t)| format!("{} px: {t}", pixels(*h))).collect();
+            let uniform = class
+                .uniform_below
+                .map(|(h, t)| format!(" (every tree under {} px: {t})", pixels(h)))
+                .unwrap_or_default();
+            out.push_str(&format!("  {elevation:>10}  {}{uniform}\n", runs.join(", ")));
+        }
+        out
+    }
+}
+
+/// A height in pixels to three significant digits (`4`, `5.66`, `45.3`, `215`).
+fn pixels(h: f32) -> String {
+    let decimals = if h < 10.0 {
+        2
+    } else if h < 100.0 {
+        1
+    } else {
+        0
+    };
+    let text = format!("{h:.decimals$}");
+    if text.contains('.') { text.trim_end_matches('0').trim_end_matches('.').to_owned() } else { text }
+}
+
 /// One table per run of records of one elevation, in file order.
 fn elevation_tables(records: &[treelod_format::ElevationCalibrationRecord]) -> Vec<ElevationCalibration> {
     records
@@ -1200,6 +1300,7 @@ impl<'a> Dump<'a> {
             calibration: CalibrationInfo::new(container),
             calibration_flip: container.calibration_flip().iter().map(FlipSample::of).collect(),
             chain_calibration_flip: container.chain_calibration_flip().iter().map(ChainFlipSample::of).collect(),
+            policy: PolicyInfo::new(container),
             textures: TextureUse::of(container),
             histograms,
         }
@@ -1255,6 +1356,9 @@ impl<'a> Dump<'a> {
             out.push_str(&calibration.to_text());
         }
         out.push_str(&FlipSample::text(&self.calibration_flip, &self.chain_calibration_flip));
+        if let Some(policy) = &self.policy {
+            out.push_str(&policy.to_text());
+        }
         out.push_str(&TextureUse::text(&self.textures));
         out.push_str(&self.histograms_text());
         out

@@ -863,6 +863,76 @@ fn dump_and_verify_show_the_chain_calibration_flip_of_the_1_18_golden_file() {
     assert!(!stdout(&out).contains("chain FLIP"), "{}", stdout(&out));
 }
 
+/// What the renderer's policy draws by default (`dump`'s `policy` part, from the calibration): on
+/// the golden 1.18 file a line per elevation class, 0° to 90° every 10°, after the FLIP tables, each
+/// from the tables' smallest height with heights ascending and techniques of the file's tables; the
+/// JSON holds the same classes. The 1.5 file, whose tables are over every view only, has one class
+/// without an elevation; the 1.0 file, without tables, none.
+#[test]
+fn dump_shows_what_the_policy_draws_by_elevation_and_height() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/v1_18");
+    let name = "every-kind-zstd.treelod";
+    let out = treelod_in(&dir, &["dump", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    let text = stdout(&out);
+    let heading = "\npolicy (what the renderer draws a tree with by default, target 0.01: from each projected height up, \
+                   by the elevation it is seen from; fully visible, wholly in view, chosen afresh)\n";
+    let at = text.find(heading).expect("the policy part");
+    assert!(text.find("\ncalibration FLIP (").is_some_and(|flip| flip < at), "after the FLIP tables: {text}");
+    let lines: Vec<&str> = text[at + heading.len()..].lines().take_while(|l| !l.is_empty()).collect();
+    let elevations: Vec<&str> = lines.iter().filter_map(|l| l.split_whitespace().next()).collect();
+    assert_eq!(elevations, ["0°", "10°", "20°", "30°", "40°", "50°", "60°", "70°", "80°", "90°"], "{text}");
+
+    let out = treelod_in(&dir, &["dump", "--json", name]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    // The smallest height of the representations' tables, the added ones' included.
+    let c = &j["calibration"];
+    let smallest = ["techniques", "added_techniques"]
+        .iter()
+        .flat_map(|key| c[key].as_array().into_iter().flatten())
+        .flat_map(|t| t["samples"].as_array().expect("samples").iter().map(|s| s[0].as_f64().expect("a height")))
+        .fold(f64::INFINITY, f64::min);
+    // The techniques with tables: the chain's by its levels' where it has them.
+    let mut held: Vec<&str> = ["techniques", "added_techniques"]
+        .iter()
+        .flat_map(|key| c[key].as_array().into_iter().flatten())
+        .map(|t| t["technique"].as_str().expect("a name"))
+        .collect();
+    if c["chain_levels"].as_array().is_some_and(|levels| !levels.is_empty()) {
+        held.push("lod-chain");
+    }
+    assert_eq!(j["policy"]["target"], 0.01);
+    let classes = j["policy"]["classes"].as_array().expect("the classes");
+    assert_eq!(classes.len(), 10);
+    for (k, (class, line)) in classes.iter().zip(&lines).enumerate() {
+        assert_eq!(class["elevation"].as_f64(), Some(10.0 * k as f64));
+        let runs = class["runs"].as_array().expect("runs");
+        let heights: Vec<f64> = runs.iter().map(|r| r[0].as_f64().expect("a height")).collect();
+        assert!((heights[0] - smallest).abs() < 1e-3 * smallest, "from the smallest height: {heights:?}");
+        assert!(heights.windows(2).all(|w| w[0] < w[1]), "{heights:?}");
+        for run in runs {
+            let technique = run[1].as_str().expect("a technique");
+            assert!(held.contains(&technique), "{technique} has tables: {held:?}");
+            assert!(line.contains(&format!(" px: {technique}")), "{line}");
+        }
+        if let Some(uniform) = class.get("uniform_below") {
+            assert_eq!(uniform[1], runs[0][1], "the smallest trees' technique");
+            assert!(line.contains("(every tree under "), "{line}");
+        }
+    }
+
+    let out = treelod_in(&dir.join("../v1_5"), &["dump", "--json", name]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let classes = j["policy"]["classes"].as_array().expect("the classes");
+    assert_eq!(classes.len(), 1);
+    assert!(classes[0]["elevation"].is_null(), "over every view");
+    let out = treelod_in(&dir.join("../v1_5"), &["dump", name]);
+    assert!(stdout(&out).contains("\n  every view  "), "{}", stdout(&out));
+    let out = treelod_in(&dir.join("../v1_0"), &["dump", "--json", name]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert!(j.get("policy").is_none(), "no tables, no policy");
+}
+
 /// Golden files: every `tests/data/v1_*/NAME.treelod` has `NAME.dump.txt` and `NAME.dump.json`
 /// beside it, the exact output of `treelod dump NAME.treelod` and `treelod dump --json
 /// NAME.treelod` run in that directory. With no `.treelod` there yet, the test passes; a
