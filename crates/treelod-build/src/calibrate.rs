@@ -307,11 +307,11 @@ pub const SMALL_HEIGHT: f32 = 64.0;
 /// which pixels the crown's gaps fall on changes with the turn of the pixel grid. Measured on the
 /// shared orchid, whose one view read its point tree 0.0748 at 4 pixels, 0.1092 at 8 and 0.0547 at
 /// 16, so that its trees under 8 pixels seen from above took the point tree (11,947 trees a frame
-/// of a 10⁶-tree flight); over 8 views 0.1279, 0.0820 and 0.0595, its impostor planes the least
-/// error at 4 and 8 pixels (0.0970 and 0.0768), which `treelod eval` from 84–86° confirms. The
+/// of a 10⁶-tree flight); over 8 views 0.1279, 0.0800 and 0.0609, its impostor planes the least
+/// error at 4 and 8 pixels (0.0968 and 0.0796), which `treelod eval` from 84–86° confirms. The
 /// maple's one view had read its octahedral quad 0.0659 at 4 pixels, the least there; over 8
 /// views 0.0887 against its planes' 0.0817, where `eval` from 84–86° still reads the quad best
-/// (the calibration and `eval` weigh a few-pixel tree differently: its image or a whole frame).
+/// (the calibration and `eval` still disagree on some models' trees of a few pixels).
 #[must_use]
 pub fn down_views_at(pixels: f32) -> usize {
     views_at(1, pixels)
