@@ -931,6 +931,24 @@ fn dump_shows_what_the_policy_draws_by_elevation_and_height() {
     let out = treelod_in(&dir.join("../v1_0"), &["dump", "--json", name]);
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     assert!(j.get("policy").is_none(), "no tables, no policy");
+
+    // A file that does not verify (one byte of its vertices' occlusion changed, its checksum no
+    // longer matching) dumps its tables but no policy: the renderer would not read it.
+    let out = treelod_in(&dir, &["dump", "--json", name]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let section = j["sections"].as_array().expect("sections").iter().find(|s| s["name"] == "VERTEX_AO");
+    let offset = section.and_then(|s| s["offset"].as_u64()).expect("the occlusion section");
+    let mut bytes = std::fs::read(dir.join(name)).expect("the golden file");
+    let at = usize::try_from(offset).expect("an offset");
+    bytes[at] ^= 0x01;
+    let broken = scratch("dump_policy_unverified");
+    std::fs::write(broken.join(name), &bytes).expect("the copy");
+    let out = treelod_in(&broken, &["verify", name]);
+    assert_ne!(out.status.code(), Some(0), "the copy does not verify");
+    let out = treelod_in(&broken, &["dump", name]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", stderr(&out));
+    assert!(stdout(&out).contains("\ncalibration at 90° elevation"), "{}", stdout(&out));
+    assert!(!stdout(&out).contains("\npolicy ("), "{}", stdout(&out));
 }
 
 /// Golden files: every `tests/data/v1_*/NAME.treelod` has `NAME.dump.txt` and `NAME.dump.json`
