@@ -945,9 +945,8 @@ impl PolicyInfo {
     /// three significant digits), and the uniform height where the class has one.
     fn to_text(&self) -> String {
         let mut out = format!(
-            "
-policy (what the renderer draws a tree with by default, target {}: from each projected height up, \
-             by the elevation it is seen from; fully visible, wholly in view, chosen afresh)\n",
+            "\npolicy (what the renderer draws a tree with by default, target {}: from each projected height \
+             up, by the elevation it is seen from; fully visible, wholly in view, chosen afresh)\n",
             self.target
         );
         for class in &self.classes {
