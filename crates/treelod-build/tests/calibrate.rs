@@ -6,7 +6,7 @@
 
 use glam::Vec3;
 use treelod_build::calibrate::{
-    CalibrationConfig, ELEVATIONS, HEIGHTS, calibrate, calibration_views, down_views_at, views_at,
+    CalibrationConfig, ELEVATIONS, HEIGHTS, calibrate, calibration_views, down_views_at, splat_seeds_at, views_at,
 };
 use treelod_build::{
     BuildConfig, DemoTreeConfig, EllipsoidConfig, ImpostorConfig, LineConfig, LodChainConfig, Placed, build_block,
@@ -148,6 +148,13 @@ fn heights_under_64_pixels_take_more_views_and_the_metadata_records_them() {
     };
     assert_eq!(down(&CalibrationConfig::default()).as_deref(), Some("8,8,4,2,1,1,1"));
     assert_eq!(down(&fixed).as_deref(), Some("1,1,1,1,1,1,1"));
+    // So many draws of the point tree's splats per view, each kept by another hash.
+    assert_eq!(HEIGHTS.map(splat_seeds_at), [8, 8, 4, 2, 1, 1, 1]);
+    let seeds = |config: &CalibrationConfig| {
+        config.settings().into_iter().find(|s| s.key == "calibration.splat_seeds_by_height").map(|s| s.value)
+    };
+    assert_eq!(seeds(&CalibrationConfig::default()).as_deref(), Some("8,8,4,2,1,1,1"));
+    assert_eq!(seeds(&fixed).as_deref(), Some("1,1,1,1,1,1,1"));
     // The views straight down are one direction, each turned a step of a full turn further.
     let views = calibration_views(2, 4);
     let straight_down: Vec<_> = views.iter().filter(|v| ELEVATIONS[v.elevation] >= 90.0).collect();
