@@ -651,12 +651,7 @@ pub fn calibrate(data: &ContainerData, config: &CalibrationConfig) -> Calibrated
     // views there make its own rows less noisy, not the rows over every view more top-down).
     #[expect(clippy::cast_precision_loss, reason = "a few views")]
     let weight = |h: usize, v: usize| -> f64 {
-        let elevation = directions[h][v].elevation;
-        if ELEVATIONS[elevation] >= 90.0 {
-            1.0 / directions[h].iter().filter(|d| d.elevation == elevation).count() as f64
-        } else {
-            1.0
-        }
+        if ELEVATIONS[directions[h][v].elevation] >= 90.0 { 1.0 / config.down_views_at(HEIGHTS[h]) as f64 } else { 1.0 }
     };
     // The weighted means of column `column` of the results at height `h` over the views `keep`
     // accepts, in view order: error, primitives and FLIP error (NaN where not measured).

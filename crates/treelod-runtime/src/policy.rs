@@ -978,9 +978,7 @@ impl StepGrid {
 
     /// The projected height of step `i`, pixels.
     fn height(&self, i: usize) -> f32 {
-        #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-        let octaves = i as f32 / STEPS_PER_OCTAVE;
-        (self.log2_min + octaves).exp2()
+        height_of_step(self.log2_min, i)
     }
 
     /// Where [`step_of`] measures from: `log2` of the smallest height, 0 where that is not finite.
@@ -1001,6 +999,14 @@ fn hysteresis_steps(policy: &Policy) -> usize {
 /// smallest calibrated height), fractional, [`STEPS_PER_OCTAVE`] steps per octave.
 fn step_of(log2_min: f32, height: f32) -> f32 {
     (height.max(f32::MIN_POSITIVE).log2() - log2_min) * STEPS_PER_OCTAVE
+}
+
+/// The projected height, pixels, of step `i` of a table of choices whose step 0 is at `log2_min`
+/// ([`step_of`]'s inverse at whole steps).
+fn height_of_step(log2_min: f32, i: usize) -> f32 {
+    #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
+    let octaves = i as f32 / STEPS_PER_OCTAVE;
+    (log2_min + octaves).exp2()
 }
 
 /// The hysteresis of a table of choices read at step `x` by `at` (module docs): `previous`
@@ -1557,9 +1563,7 @@ impl Choices {
         let mut runs: Vec<(f32, Technique)> = Vec::new();
         for (i, &technique) in self.steps_at(elevation).iter().enumerate() {
             if runs.last().is_none_or(|&(_, t)| t != technique) {
-                #[expect(clippy::cast_precision_loss, reason = "a few dozen steps")]
-                let height = (self.log2_min + i as f32 / STEPS_PER_OCTAVE).exp2();
-                runs.push((height, technique));
+                runs.push((height_of_step(self.log2_min, i), technique));
             }
         }
         runs
