@@ -128,6 +128,40 @@
 //! move that much further before it switches back), so a tree hovering at a boundary does not
 //! flicker.
 //!
+//! **Short runs.** The rule at one height does not look at the next, and where two
+//! representations' errors lie near the target the choice can change for a few steps and back
+//! (the shared jacaranda seen from 10° went octahedral, spt, octahedral, spt, Cook's pruning, the
+//! chain). The hysteresis keeps a tree moving through a run of up to its own width on what it
+//! drew; a longer run costs a cross-fade in and another out. So each table's runs shorter than an
+//! octave ([`SHORTEST_RUN_STEPS`]) that lie between two others are merged into a neighbour
+//! admissible at every step of the run (within the target of both floors there, as the rule
+//! asks) that draws at most [`MERGE_COST`] (two) times the primitives of the rule's choices over
+//! the run — what a tree fading between two techniques draws, both at once — the cheaper of the
+//! two neighbours, the shortest run first, until none can be. Every step still draws a technique
+//! within the target. Measured on the shared models built with every representation, summed
+//! over the ten elevation classes from 4 to 256 pixels: the technique changes of the tables
+//! (`treelod dump`'s runs) 18, 20, 26, 44, 39, 44 and 49 → 18, 20, 21, 29, 37, 36 and 34 (the
+//! Quaternius tree, oak, pine, willow, orchid, maple, jacaranda), and those a tree coming nearer
+//! goes through (counted on those runs with the hysteresis's rule, a step at a time) 12, 15, 18,
+//! 37, 35, 28 and 35 → 12, 15, 18, 29, 35, 25 and 25. `bench --trees 1000000 --frames 12 --size 480x270 --no-render`, primitives per frame:
+//! the pine 178,047 → 176,957, the willow 1,080,022 → 1,080,828, the jacaranda 464,910 →
+//! 477,937, the other four the same; over 1,000 trees (30 frames): the pine 46,832 → 45,197, the
+//! orchid 382,122 → 382,389, the jacaranda 126,817 → 146,240, the willow 347,896 → 348,565, the
+//! maple 378,041 → 375,377. Merged without the cost bound the maple's 1,000 trees drew 453,342
+//! (its small trees' point trees went to impostor planes of many times their primitives).
+//! Merging runs of up to half an octave, a tree coming nearer goes through 33, 27 and 34 changes
+//! on the willow, maple and jacaranda; up to two octaves, 25, 25 and 20, and the jacaranda's
+//! 1,000 trees draw 183,024. `bench --quality` over 200 trees (30 frames, 480×270; primitives per
+//! frame / RMSE / FLIP / temporal noise): the jacaranda 115,433 / .02050 / .04246 / .18359 →
+//! 135,306 / .01985 / .04230 / .18414 (the reference's noise .17847), the willow 276,993 /
+//! .03103 / .05480 / .18020 → 277,542 / .03072 / .05440 / .17983, the pine 39,845 / .01812 /
+//! .03822 / .18605 → 40,904 / .01801 / .03827 / .18603, the orchid 262,108 → 262,476 at the same
+//! errors. `eval --path` over 240 poses coming nearer to the jacaranda from 3 to 300 pixels high
+//! (320×240), at 0° and at 60° above it: in the 32–128 pixel band 15,091 → 16,810 primitives,
+//! RMSE .01418 → .01400, FLIP .01286 → .01317, and 9,518 → 11,665, .01494 → .01375, .01743 →
+//! .01607; the temporal noise over the path .01911 → .01923 and .02028 → .02031 (the
+//! reference's .01316 and .01503); the other bands the same.
+//!
 //! **Transitions.** A tree that changes technique is not switched at once: for
 //! [`Policy::transition`] frames it is drawn with both, on complementary pixels of a screen-door
 //! dither whose share moves from the old technique to the new one a step per frame
@@ -783,14 +817,35 @@ impl Calibration {
         target: f32,
         usable: impl Fn(Technique) -> bool,
     ) -> Technique {
+        self.judge(elevation, height, target, usable).choice()
+    }
+
+    /// The techniques the rule lets a tree `height` pixels high seen from elevation class
+    /// `elevation` take under `target` ([`Self::choose_at_elevation`]), each with its
+    /// primitives there: those within the target of the floor (of both floors with FLIP
+    /// tables), least primitives first; where none is, the rule's choice alone.
+    #[must_use]
+    pub fn admissible_at_elevation(
+        &self,
+        elevation: Option<usize>,
+        height: f32,
+        target: f32,
+        usable: impl Fn(Technique) -> bool,
+    ) -> Vec<(Technique, f32)> {
+        self.judge(elevation, height, target, usable).admissible()
+    }
+
+    /// Every technique the tables hold and `usable` accepts, less the full mesh, judged at one
+    /// height against the floors (module docs): what [`Self::choose_at_elevation`] and
+    /// [`Self::admissible_at_elevation`] read.
+    fn judge(&self, elevation: Option<usize>, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Judged {
         let (floor, target) = (self.floor(elevation, height, &usable), sanitise(target));
         // With FLIP tables a technique must also be within its share of the FLIP floor: the
         // allowance is the same share of either floor (module docs), and where the FLIP tables
         // lack the technique, or either floor is not positive, the RMSE decides alone.
         let flip_floor = self.flip_floor(elevation, height, &usable);
         let flip_checked = floor > 0.0 && flip_floor.is_finite() && floor.is_finite();
-        // (technique, error, primitives, FLIP error where it is checked.)
-        let candidates: Vec<(Technique, f32, f32, Option<f32>)> = Technique::ALL
+        let candidates = Technique::ALL
             .into_iter()
             .filter(|&t| t != Technique::Full && usable(t))
             .filter_map(|t| {
@@ -806,26 +861,10 @@ impl Calibration {
                 } else {
                     self.flip_at(elevation, t, height)
                 };
-                Some((t, e, p, f))
+                Some(Candidate { technique: t, error: e, primitives: p, flip: f })
             })
             .collect();
-        // (The share of the floor each error lies above it, the larger of the two.)
-        let excess = |&(_, e, _, f): &(Technique, f32, f32, Option<f32>)| {
-            let over = (e - floor) / floor;
-            f.map_or(over, |f| over.max((f - flip_floor) / flip_floor.max(f32::MIN_POSITIVE)))
-        };
-        let within = |&(_, e, _, f): &(Technique, f32, f32, Option<f32>)| {
-            e <= floor + target && f.is_none_or(|f| f <= flip_floor + target * flip_floor / floor)
-        };
-        let cheapest = candidates
-            .iter()
-            .filter(|c| within(c))
-            .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.0.cmp(&b.0)));
-        // None within: the least error, or with FLIP tables the least share over the floors.
-        let key = |c: &(Technique, f32, f32, Option<f32>)| if flip_checked { excess(c) } else { c.1 };
-        let best =
-            || candidates.iter().min_by(|a, b| key(a).total_cmp(&key(b)).then(a.2.total_cmp(&b.2)).then(a.0.cmp(&b.0)));
-        cheapest.or_else(best).map_or(Technique::FALLBACK, |c| c.0)
+        Judged { candidates, floor, flip_floor, flip_checked, target }
     }
 
     /// `(error, primitives)` of `technique` drawn under a policy of `target` seen from elevation
@@ -951,6 +990,77 @@ impl Calibration {
             };
             error.is_none_or(|(error, _)| error <= limit)
         })
+    }
+}
+
+/// One technique judged at one height ([`Calibration::judge`]): its error, primitives and FLIP
+/// error where the FLIP floor is checked.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    technique: Technique,
+    error: f32,
+    primitives: f32,
+    flip: Option<f32>,
+}
+
+/// The techniques at one height and the floors they are judged against ([`Calibration::judge`]).
+struct Judged {
+    candidates: Vec<Candidate>,
+    floor: f32,
+    flip_floor: f32,
+    flip_checked: bool,
+    /// The error allowed over the floor (sanitised).
+    target: f32,
+}
+
+impl Judged {
+    /// Whether `c` is within the target of the floor, and with FLIP tables within the same share
+    /// of the FLIP floor.
+    fn within(&self, c: &Candidate) -> bool {
+        c.error <= self.floor + self.target
+            && c.flip.is_none_or(|f| f <= self.flip_floor + self.target * self.flip_floor / self.floor)
+    }
+
+    /// The order of the candidates within the target: least primitives, then lower error, then
+    /// the technique's order.
+    fn cheaper(a: &Candidate, b: &Candidate) -> std::cmp::Ordering {
+        a.primitives.total_cmp(&b.primitives).then(a.error.total_cmp(&b.error)).then(a.technique.cmp(&b.technique))
+    }
+
+    /// The candidate within the target of least primitives (ties: lower error); none within: the
+    /// least error, or with FLIP tables the least share over the floors (the larger of the two).
+    fn chosen(&self) -> Option<&Candidate> {
+        let cheapest = self.candidates.iter().filter(|c| self.within(c)).min_by(|a, b| Self::cheaper(a, b));
+        let excess = |c: &Candidate| {
+            let over = (c.error - self.floor) / self.floor;
+            c.flip.map_or(over, |f| over.max((f - self.flip_floor) / self.flip_floor.max(f32::MIN_POSITIVE)))
+        };
+        let key = |c: &Candidate| if self.flip_checked { excess(c) } else { c.error };
+        let best = || {
+            self.candidates.iter().min_by(|a, b| {
+                key(a)
+                    .total_cmp(&key(b))
+                    .then(a.primitives.total_cmp(&b.primitives))
+                    .then(a.technique.cmp(&b.technique))
+            })
+        };
+        cheapest.or_else(best)
+    }
+
+    /// The rule's choice; [`Technique::FALLBACK`] when no technique is left.
+    fn choice(&self) -> Technique {
+        self.chosen().map_or(Technique::FALLBACK, |c| c.technique)
+    }
+
+    /// The candidates within the target with their primitives, least first; none within: the
+    /// choice alone ([`Calibration::admissible_at_elevation`]).
+    fn admissible(&self) -> Vec<(Technique, f32)> {
+        let mut within: Vec<&Candidate> = self.candidates.iter().filter(|c| self.within(c)).collect();
+        within.sort_by(|a, b| Self::cheaper(a, b));
+        if within.is_empty() {
+            return self.chosen().map(|c| vec![(c.technique, c.primitives)]).unwrap_or_default();
+        }
+        within.into_iter().map(|c| (c.technique, c.primitives)).collect()
     }
 }
 
@@ -1088,7 +1198,9 @@ impl ChainChoices {
 /// A model's choices under one policy, every [`STEPS_PER_OCTAVE`]-th of an octave of projected
 /// height over its calibrated range (module docs): what [`Choices::choose`] looks up per tree —
 /// one table per elevation class of the calibration's views (one over every view without tables
-/// per elevation) and per visibility class (one without [`Policy::occlusion`]).
+/// per elevation) and per visibility class (one without [`Policy::occlusion`]), each with its runs
+/// shorter than [`SHORTEST_RUN_STEPS`] merged into a neighbour where [`MERGE_COST`] allows (module
+/// docs, *Short runs*).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Choices {
     /// `log2` of the smallest calibrated height.
@@ -1140,7 +1252,8 @@ struct Table {
     /// The primitives of [`Self::above`] and of the point tree at the largest height (whole
     /// trees), for trees partly in view.
     above_cost: (f32, f32),
-    /// The choice at `log2_min + i / STEPS_PER_OCTAVE`, up to the largest calibrated height.
+    /// The choice at `log2_min + i / STEPS_PER_OCTAVE`, up to the largest calibrated height,
+    /// short runs merged.
     steps: Vec<Technique>,
 }
 
@@ -1268,12 +1381,15 @@ impl Choices {
         let calibration = &calibration.with_elevations_between(ELEVATION_SUBDIVISIONS);
         let grid = StepGrid::of(calibration);
         let table = |elevation: Option<usize>, target: f32, usable: &dyn Fn(Technique) -> bool| -> Table {
-            let steps: Vec<Technique> = (0..grid.count)
+            let judged: Vec<Judged> = (0..grid.count)
                 .map(|i| {
                     let height = grid.height(i);
-                    calibration.choose_at_elevation(elevation, height, target_at(target, height), usable)
+                    calibration.judge(elevation, height, target_at(target, height), usable)
                 })
                 .collect();
+            let mut steps: Vec<Technique> = judged.iter().map(Judged::choice).collect();
+            let admissible: Vec<Vec<(Technique, f32)>> = judged.iter().map(Judged::admissible).collect();
+            merge_short_runs(&mut steps, &admissible);
             let top = grid.height(grid.count - 1);
             let top_target = target_at(target, top);
             let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
@@ -1560,14 +1676,66 @@ impl Choices {
     /// For `treelod dump` and panels.
     #[must_use]
     pub fn runs_at(&self, elevation: usize) -> Vec<(f32, Technique)> {
-        let mut runs: Vec<(f32, Technique)> = Vec::new();
-        for (i, &technique) in self.steps_at(elevation).iter().enumerate() {
-            if runs.last().is_none_or(|&(_, t)| t != technique) {
-                runs.push((height_of_step(self.log2_min, i), technique));
+        let steps = self.steps_at(elevation);
+        runs_of(steps).into_iter().map(|run| (height_of_step(self.log2_min, run.start), steps[run.start])).collect()
+    }
+}
+
+/// The shortest run of one technique between two others that [`Choices`] keeps unmerged: an
+/// octave of projected height, [`STEPS_PER_OCTAVE`] steps (module docs, *Short runs*).
+#[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a whole number of steps")]
+pub const SHORTEST_RUN_STEPS: usize = STEPS_PER_OCTAVE as usize;
+
+/// The most primitives a merged run may draw, as a multiple of what the rule's own choices draw
+/// over it ([`Choices`]): two, what a tree draws while it fades from one technique to
+/// the other, both at once (module docs, *Short runs*).
+pub const MERGE_COST: f32 = 2.0;
+
+/// Merges into a neighbour each run of `steps` (one technique over consecutive steps) shorter
+/// than [`SHORTEST_RUN_STEPS`] that lies between two others, where a neighbour's technique is
+/// admissible at every step of the run (`admissible[i]`: the techniques the rule lets step `i`
+/// take, with their primitives, the rule's choice `steps[i]` among them;
+/// [`Calibration::admissible_at_elevation`]) and draws at most [`MERGE_COST`] times the
+/// primitives of the rule's choices over the run: the neighbour of fewer primitives (ties: the
+/// smaller heights' side). The shortest run is merged first, then the runs are measured again,
+/// until no short run can be merged; the cost is always against the rule's choices, so merges
+/// do not compound. The first and last runs stay: below the smallest height the first step's
+/// choice holds, and above the largest the last's or the one that converges (module docs).
+fn merge_short_runs(steps: &mut [Technique], admissible: &[Vec<(Technique, f32)>]) {
+    let primitives = |i: usize, t: Technique| admissible[i].iter().find(|c| c.0 == t).map(|c| c.1);
+    let chosen: Vec<f32> = steps.iter().enumerate().map(|(i, &t)| primitives(i, t).unwrap_or(0.0)).collect();
+    loop {
+        let runs = runs_of(steps);
+        let mut shortest: Option<(std::ops::Range<usize>, Technique)> = None;
+        for run in runs.iter().skip(1).take(runs.len().saturating_sub(2)) {
+            if run.len() >= SHORTEST_RUN_STEPS || shortest.as_ref().is_some_and(|(s, _)| s.len() <= run.len()) {
+                continue;
+            }
+            let allowed = MERGE_COST * chosen[run.clone()].iter().sum::<f32>();
+            let merged = [steps[run.start - 1], steps[run.end]]
+                .into_iter()
+                .filter_map(|t| run.clone().map(|i| primitives(i, t)).sum::<Option<f32>>().map(|c| (t, c)))
+                .filter(|&(_, c)| c <= allowed)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((technique, _)) = merged {
+                shortest = Some((run.clone(), technique));
             }
         }
-        runs
+        let Some((run, technique)) = shortest else { return };
+        steps[run].fill(technique);
     }
+}
+
+/// The runs of `steps`: the ranges of consecutive steps of one technique, in order.
+fn runs_of(steps: &[Technique]) -> Vec<std::ops::Range<usize>> {
+    let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
+    for (i, &t) in steps.iter().enumerate() {
+        match runs.last_mut() {
+            Some(run) if steps[run.start] == t => run.end = i + 1,
+            _ => runs.push(i..i + 1),
+        }
+    }
+    runs
 }
 
 /// Whether `technique` converges to the full mesh as a tree comes nearer, so that the choice at
@@ -2830,6 +2998,103 @@ mod tests {
             }
         }
         assert!(changes > 0, "the tables choose more than one technique");
+    }
+
+    /// A short run between two others takes the neighbour admissible over all of it, the one of
+    /// fewer primitives over the run, where that draws at most [`MERGE_COST`] times the run's
+    /// own; a run an octave long, a run no neighbour can take or only at a higher cost, and the
+    /// first and last runs stay.
+    #[test]
+    fn a_short_run_merges_into_a_neighbour_admissible_over_it() {
+        use Technique::{Billboard as B, Crossed as C, Ellipsoids as E, Impostors as I, Spt as S};
+        let n = SHORTEST_RUN_STEPS;
+        // (technique, primitives) admissible at each step, then the steps as chosen.
+        let mut admissible: Vec<Vec<(Technique, f32)>> = Vec::new();
+        let mut steps = Vec::new();
+        let mut run = |t: Technique, own: f32, len: usize, others: &[(Technique, f32)]| {
+            for _ in 0..len {
+                steps.push(t);
+                admissible.push([&[(t, own)][..], others].concat());
+            }
+        };
+        run(B, 1.0, 2, &[]); // first: short, stays
+        run(S, 100.0, 5, &[]);
+        run(C, 30.0, 3, &[(S, 100.0), (I, 40.0)]); // the impostors: admissible, cheaper, within 2×
+        run(I, 40.0, 2 * n, &[]);
+        run(E, 200.0, n, &[(I, 40.0)]); // an octave: stays
+        run(S, 300.0, n - 1, &[(E, 600.0)]); // the ellipsoids: twice the run's primitives, merges
+        run(C, 3.0, 2, &[(B, 1.0)]); // no neighbour admissible (billboards are not one): stays
+        run(I, 40.0, 4, &[]);
+        run(S, 100.0, 2, &[(I, 201.0)]); // the impostors admissible, but over twice: stays
+        run(I, 40.0, 3, &[]);
+        run(B, 1.0, 1, &[]); // last: short, stays
+        let mut merged = steps.clone();
+        merge_short_runs(&mut merged, &admissible);
+        let lengths = |s: &[Technique]| runs_of(s).into_iter().map(|r| (s[r.start], r.len())).collect::<Vec<_>>();
+        assert_eq!(
+            lengths(&merged),
+            [(B, 2), (S, 5), (I, 3 + 2 * n), (E, 2 * n - 1), (C, 2), (I, 4), (S, 2), (I, 3), (B, 1)],
+            "from {:?}",
+            lengths(&steps)
+        );
+        // Every step keeps a technique admissible there.
+        assert!(merged.iter().zip(&admissible).all(|(t, a)| a.iter().any(|c| c.0 == *t)));
+        // A run between two of one technique takes it, and the two merge: A B A is one run.
+        let mut steps = vec![S, S, C, S, S];
+        let admissible: Vec<Vec<(Technique, f32)>> =
+            (0..5).map(|i| if i == 2 { vec![(C, 3.0), (S, 5.0)] } else { vec![(S, 5.0)] }).collect();
+        merge_short_runs(&mut steps, &admissible);
+        assert_eq!(steps, [S; 5]);
+        // Merges do not compound: each is held to the rule's own choices. A run of one step
+        // (1 primitive) takes its neighbour (2); that run, now 3 steps, may not take the next
+        // (4 a step: 12 against twice the rule's 1 + 2 + 2), though it may against its own 6.
+        let mut steps = [[C; 8].as_slice(), &[B], &[I, I], &[E; 8], &[S; 8]].concat();
+        let admissible: Vec<Vec<(Technique, f32)>> = steps
+            .iter()
+            .map(|&t| match t {
+                B => vec![(B, 1.0), (I, 2.0), (E, 4.0)],
+                I => vec![(I, 2.0), (E, 4.0)],
+                _ => vec![(t, 4.0)],
+            })
+            .collect();
+        merge_short_runs(&mut steps, &admissible);
+        assert_eq!(lengths(&steps), [(C, 8), (I, 3), (E, 8), (S, 8)]);
+    }
+
+    /// A representation within the target over less than an octave (ellipsoids measured near the
+    /// full mesh at 16 pixels alone) leaves no run of its own between the point tree's where the
+    /// point tree, admissible there, draws at most twice its primitives; it keeps its run where
+    /// the point tree draws more, or where it is within the target over more than an octave.
+    #[test]
+    fn the_choices_merge_a_technique_within_the_target_over_less_than_an_octave() {
+        let with_ellipsoids = |good: &[f32], share: f32| {
+            let mut records = Vec::new();
+            for h in [8.0, 16.0, 32.0, 64.0] {
+                records.push(record(code::FULL, h, 0.050, 10_000.0));
+                records.push(record(code::SPT, h, 0.052, 100.0 * h));
+                let error = if good.contains(&h) { 0.055 } else { 0.080 };
+                records.push(record(code::ELLIPSOIDS, h, error, share * 100.0 * h));
+            }
+            Calibration::from_records(&records).expect("rows")
+        };
+        let policy = Policy { target: 0.01, hysteresis: 0.0, budget: None, transition: 0, occlusion: false };
+        let techniques = |c: &Choices| c.runs_at(0).into_iter().map(|r| r.1).collect::<Vec<_>>();
+        let (spt, ellipsoids) = (Technique::Spt, Technique::Ellipsoids);
+        let narrow = with_ellipsoids(&[16.0], 0.6);
+        // The rule alone takes the ellipsoids about 16 pixels, for under an octave.
+        assert_eq!(narrow.choose(16.0, 0.01, all), ellipsoids);
+        assert_eq!(narrow.choose(11.0, 0.01, all), spt);
+        assert_eq!(narrow.choose(23.0, 0.01, all), spt);
+        let choices = Choices::among(&narrow, &policy, all);
+        assert_eq!(techniques(&choices), [spt]);
+        assert_eq!(choices.choose(16.0, None), spt);
+        // The point tree at over twice the ellipsoids' primitives: they keep their run.
+        let cheap = Choices::among(&with_ellipsoids(&[16.0], 0.4), &policy, all);
+        assert_eq!(techniques(&cheap), [spt, ellipsoids, spt]);
+        // Over 16 to 32 pixels, an octave and more, the ellipsoids keep their run.
+        let wide = Choices::among(&with_ellipsoids(&[16.0, 32.0], 0.6), &policy, all);
+        assert_eq!(techniques(&wide), [spt, ellipsoids, spt]);
+        assert_eq!(wide.choose(22.6, None), ellipsoids);
     }
 
     /// Whose visible fraction matters ([`PolicyState::visibility_matters`]): not a tree out of
