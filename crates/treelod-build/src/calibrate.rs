@@ -339,7 +339,10 @@ pub fn down_views_at(pixels: f32) -> usize {
 /// views, and the one draw of earlier builds read 0.0727 where the mean of 8 reads 0.0925 (at 8
 /// pixels 0.0758 and 0.0782). Earlier builds, one draw a view, ranked the point tree first among
 /// the willow's representations at 4 pixels, where `treelod eval` ranks the octahedral quad
-/// first.
+/// first. The full mesh's and the pruned trees' triangles keep one draw a view: the renderer
+/// alpha-tests them with the plain test by default (`Settings::stochastic_alpha` off), which
+/// reads the texture at the pixel and no hash, as the calibration draws them; only the
+/// reference takes the stochastic test, over `supersample²` samples a pixel.
 #[must_use]
 pub fn splat_seeds_at(pixels: f32) -> usize {
     views_at(1, pixels)

@@ -128,39 +128,40 @@
 //! move that much further before it switches back), so a tree hovering at a boundary does not
 //! flicker.
 //!
-//! **Short runs.** The rule at one height does not look at the next, and where two
-//! representations' errors lie near the target the choice can change for a few steps and back
-//! (the shared jacaranda seen from 10° went octahedral, spt, octahedral, spt, Cook's pruning, the
-//! chain). The hysteresis keeps a tree moving through a run of up to its own width on what it
-//! drew; a longer run costs a cross-fade in and another out. So each table's runs shorter than an
-//! octave ([`SHORTEST_RUN_STEPS`]) that lie between two others are merged into a neighbour
-//! admissible at every step of the run (within the target of both floors there, as the rule
-//! asks) that draws at most [`MERGE_COST`] (two) times the primitives of the rule's choices over
-//! the run — what a tree fading between two techniques draws, both at once — the cheaper of the
-//! two neighbours, the shortest run first, until none can be. Every step still draws a technique
-//! within the target. Measured on the shared models built with every representation, summed
-//! over the ten elevation classes from 4 to 256 pixels: the technique changes of the tables
-//! (`treelod dump`'s runs) 18, 20, 26, 44, 39, 44 and 49 → 18, 20, 21, 29, 37, 36 and 34 (the
-//! Quaternius tree, oak, pine, willow, orchid, maple, jacaranda), and those a tree coming nearer
-//! goes through (counted on those runs with the hysteresis's rule, a step at a time) 12, 15, 18,
-//! 37, 35, 28 and 35 → 12, 15, 18, 29, 35, 25 and 25. `bench --trees 1000000 --frames 12 --size 480x270 --no-render`, primitives per frame:
-//! the pine 178,047 → 176,957, the willow 1,080,022 → 1,080,828, the jacaranda 464,910 →
+//! **Short runs.** The rule at one height does not look at the next, and where two representations'
+//! errors lie near the target the choice can change for a few steps and back (the shared jacaranda
+//! seen from 10° went octahedral, spt, octahedral, spt, Cook's pruning, the chain). The hysteresis
+//! keeps a tree moving through a run of up to its own width on what it drew; a longer run costs a
+//! cross-fade in and another out. So each table's runs shorter than an octave
+//! ([`SHORTEST_RUN_STEPS`]) that lie between two others are merged into a neighbour admissible at
+//! every step of the run (within the target of both floors there, as the rule asks) that draws at
+//! most [`MERGE_COST`] (two) times the primitives of the rule's choices over the run — what a tree
+//! fading between two techniques draws, both at once — the cheaper of the two neighbours, the
+//! shortest run first, until none can be. Every step still draws a technique the rule allows there.
+//! Measured on the shared models built with every representation, summed over the ten elevation
+//! classes from 4 to 256 pixels: the technique changes of the tables (`treelod dump`'s runs) 18,
+//! 20, 26, 44, 39, 44 and 49 → 18, 20, 21, 29, 37, 36 and 34 (the Quaternius tree, oak, pine,
+//! willow, orchid, maple, jacaranda), and those a tree coming nearer goes through (counted on those
+//! runs with the hysteresis's rule, a step at a time) 12, 15, 18, 37, 35, 28 and 35 → 12, 15, 18,
+//! 29, 35, 25 and 25. `bench --trees 1000000 --frames 12 --size 480x270 --no-render`, primitives
+//! per frame: the pine 178,047 → 176,957, the willow 1,080,022 → 1,080,828, the jacaranda 464,910 →
 //! 477,937, the other four the same; over 1,000 trees (30 frames): the pine 46,832 → 45,197, the
 //! orchid 382,122 → 382,389, the jacaranda 126,817 → 146,240, the willow 347,896 → 348,565, the
-//! maple 378,041 → 375,377. Merged without the cost bound the maple's 1,000 trees drew 453,342
-//! (its small trees' point trees went to impostor planes of many times their primitives).
-//! Merging runs of up to half an octave, a tree coming nearer goes through 33, 27 and 34 changes
-//! on the willow, maple and jacaranda; up to two octaves, 25, 25 and 20, and the jacaranda's
-//! 1,000 trees draw 183,024. `bench --quality` over 200 trees (30 frames, 480×270; primitives per
-//! frame / RMSE / FLIP / temporal noise): the jacaranda 115,433 / .02050 / .04246 / .18359 →
-//! 135,306 / .01985 / .04230 / .18414 (the reference's noise .17847), the willow 276,993 /
-//! .03103 / .05480 / .18020 → 277,542 / .03072 / .05440 / .17983, the pine 39,845 / .01812 /
-//! .03822 / .18605 → 40,904 / .01801 / .03827 / .18603, the orchid 262,108 → 262,476 at the same
-//! errors. `eval --path` over 240 poses coming nearer to the jacaranda from 3 to 300 pixels high
-//! (320×240), at 0° and at 60° above it: in the 32–128 pixel band 15,091 → 16,810 primitives,
-//! RMSE .01418 → .01400, FLIP .01286 → .01317, and 9,518 → 11,665, .01494 → .01375, .01743 →
-//! .01607; the temporal noise over the path .01911 → .01923 and .02028 → .02031 (the
-//! reference's .01316 and .01503); the other bands the same.
+//! maple 378,041 → 375,377, the other two the same. Merged without the cost bound, the maple's
+//! 1,000 trees drew 453,342 (its small trees' point trees went to impostor planes of many times
+//! their primitives). Merging runs of up to half an octave, a tree coming nearer goes through 33,
+//! 27 and 34 changes on the willow, maple and jacaranda; up to two octaves, 25, 25 and 20, and the
+//! jacaranda's 1,000 trees draw 183,024. `bench --quality` over 200 trees (30 frames, 480×270;
+//! primitives per frame / RMSE / FLIP / temporal noise): the jacaranda 115,433 / .02050 / .04246 /
+//! .18359 → 135,306 / .01985 / .04230 / .18414 (the reference's noise .17847), the willow 276,993 /
+//! .03103 / .05480 / .18020 → 277,542 / .03072 / .05440 / .17983, the pine 39,845 / .01812 / .03822
+//! / .18605 → 40,904 / .01801 / .03827 / .18603, the orchid 262,108 → 262,476 at the same errors,
+//! the maple 402,476 / .03491 / .05845 / .17435 → 399,148 / .03459 / .05821 / .17405. `eval --path`
+//! over 240 poses coming nearer to the jacaranda from 3 to 300 pixels high (320×240), at 0° and at
+//! 60° above it: in the 32–128 pixel band 15,091 → 16,810 primitives, RMSE .01418 → .01400, FLIP
+//! .01286 → .01317, and 9,518 → 11,665, .01494 → .01375, .01743 → .01607; the temporal noise over
+//! the path .01911 → .01923 and .02028 → .02031 (the reference's .01316 and .01503); the other
+//! bands the same.
 //!
 //! **Transitions.** A tree that changes technique is not switched at once: for
 //! [`Policy::transition`] frames it is drawn with both, on complementary pixels of a screen-door
