@@ -8,7 +8,9 @@
 //! The same fly-through is then selected with the policy (spec §10.2), as the renderer does it on
 //! the CPU every frame: the demo tree built with every representation the policy chooses among and
 //! its calibration tables, each tree's choice with its hysteresis, the assignment, each technique's
-//! selection ([`select_techniques`]) and the point tree's ([`select_frame`]) over its trees.
+//! selection ([`select_techniques`]) and the point tree's ([`select_frame`]) over its trees; and
+//! the making of the demo tree's choices under a policy ([`Choices::new`]), which budget mode
+//! repeats each frame its target moves.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -363,7 +365,8 @@ fn select(c: &mut Criterion) {
     let (policy_lod, representations, calibration) = policy_model();
     let policy_lods = [policy_lod];
     let policy_models = [representations];
-    let mut policy = PolicyFrame::new(&policy_lods, &policy_models, &[calibration], &instances);
+    let calibrations = [calibration];
+    let mut policy = PolicyFrame::new(&policy_lods, &policy_models, &calibrations, &instances);
     print_policy_table(&mut policy, &poses);
 
     let mut group = c.benchmark_group("select_frame");
@@ -390,6 +393,16 @@ fn select(c: &mut Criterion) {
             let camera = &poses[next % poses.len()].1;
             next += 1;
             black_box(policy.select(camera))
+        });
+    });
+    // Budget mode makes a model's choices again each frame its target moves (spec §10.2).
+    let mut step = 0u16;
+    group.bench_function("policy choices, a new target per iteration", |b| {
+        b.iter(|| {
+            step = step.wrapping_add(1);
+            let target = Policy::DEFAULT_TARGET * (1.0 + f32::from(step % 512) / 256.0);
+            let policy = Policy { target, ..Policy::default() };
+            black_box(Choices::new(&calibrations[0], &policy, &policy_models[0]))
         });
     });
     for (name, frame) in [("overview (frame 0)", 0), ("descent (frame 22)", 22), ("inside (frame 45)", 45)] {
