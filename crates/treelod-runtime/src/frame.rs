@@ -1983,28 +1983,36 @@ mod tests {
         }
     }
 
+    /// `frames` frames of a scene whose count is `scene` of the policy target, steered by
+    /// `controller` from target `t`: the counts, and the target after the last frame.
+    fn run_policy_scene(
+        controller: &mut BudgetController,
+        mut t: f32,
+        scene: impl Fn(f32) -> u64,
+        frames: usize,
+    ) -> (Vec<u64>, f32) {
+        let mut counts = Vec::with_capacity(frames);
+        for _ in 0..frames {
+            counts.push(scene(t));
+            t = controller.update_policy(scene(t)).1;
+        }
+        (counts, t)
+    }
+
     #[test]
     fn policy_budget_settles_under_the_budget_where_the_count_jumps_across_it() {
         // Every tree switches at one target: 65k primitives below it, 37k above; a budget
         // between them cannot be met, and must not be flickered across.
         let scene = |t: f32| if t < 0.02 { 65_000 } else { 37_000 };
         let mut controller = BudgetController::for_policy(45_000, 1.0, Policy::DEFAULT_TARGET);
-        let mut t = controller.target();
-        let mut counts = Vec::new();
-        for _ in 0..100 {
-            counts.push(scene(t));
-            t = controller.update_policy(scene(t)).1;
-        }
+        let start = controller.target();
+        let (counts, t) = run_policy_scene(&mut controller, start, scene, 100);
         assert!(counts[40..].iter().all(|&c| c == 37_000), "settled under the budget: {counts:?}");
         assert!(t < 0.021, "at the least target seen under the budget: {t}");
         // The scene gets cheaper (the camera moved): the count falls while the steering holds,
         // so the bounds are dropped and the new cheap count is met.
         let scene = |t: f32| if t < 0.005 { 44_000 } else { 20_000 };
-        let mut counts = Vec::new();
-        for _ in 0..60 {
-            counts.push(scene(t));
-            t = controller.update_policy(scene(t)).1;
-        }
+        let (counts, _) = run_policy_scene(&mut controller, t, scene, 60);
         assert_eq!(*counts.last().unwrap(), 44_000, "{counts:?}");
     }
 
@@ -2017,12 +2025,8 @@ mod tests {
         let cliff = 0.004;
         let scene = |t: f32| if t < cliff { 10_000_000 } else { 1_000 };
         let mut controller = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
-        let mut t = controller.target();
-        let mut counts = Vec::new();
-        for _ in 0..100 {
-            counts.push(scene(t));
-            t = controller.update_policy(scene(t)).1;
-        }
+        let start = controller.target();
+        let (counts, t) = run_policy_scene(&mut controller, start, scene, 100);
         let over: Vec<usize> = (0..counts.len()).filter(|&i| counts[i] > 200_000).collect();
         assert_eq!(over.len(), 1, "one frame over the cliff: {counts:?}");
         assert!(counts[over[0] + 1..].iter().all(|&c| c == 1_000), "held above it: {counts:?}");
@@ -2031,12 +2035,9 @@ mod tests {
         // controller tries again, meeting the cliff (now lower) once more and no more.
         let cliff = 0.001;
         let scene = |t: f32| if t < cliff { 10_000_000 } else { 500 };
-        let mut counts = Vec::new();
-        for _ in 0..100 {
-            counts.push(scene(t));
-            t = controller.update_policy(scene(t)).1;
-        }
+        let (counts, t) = run_policy_scene(&mut controller, t, scene, 100);
         assert!(counts.iter().filter(|&&c| c > 200_000).count() <= 1, "{counts:?}");
+        assert!(t >= cliff && t < 0.004, "tried again below the old hold: {t}");
         // A step of less than twice the budget is still halved to settle under it (above,
         // `policy_budget_settles_under_the_budget_where_the_count_jumps_across_it`).
     }
