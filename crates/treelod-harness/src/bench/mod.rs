@@ -365,6 +365,10 @@ pub struct Report {
     pub sheet: Vec<SheetFrame>,
     /// Seconds the whole run took (models, layout, warm-up and frames).
     pub seconds: f64,
+    /// The primitives per frame the policy's budget mode aimed for ([`Options::policy`]'s
+    /// [`Policy::budget`]), if it was on: the `policy` technique's summary says how its frames
+    /// met it ([`output::BudgetSummary`]).
+    pub budget: Option<u64>,
 }
 
 /// The full mesh's primitives, counted by the runtime's selection with both thresholds 0 (what
@@ -770,6 +774,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
         rows,
         sheet,
         seconds: started.elapsed().as_secs_f64(),
+        budget: options.policy.budget,
     };
     Ok(report)
 }

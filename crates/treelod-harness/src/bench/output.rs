@@ -119,6 +119,57 @@ pub struct Summary {
     /// tree or a primitive in some frame: the policy's mix, or a forced technique and the point
     /// tree drawing the trees whose models lack its data. Empty for the counted full mesh.
     pub drawn_with: Vec<DrawnWith>,
+    /// For the policy in budget mode ([`Report::budget`]), how its frames met the budget.
+    pub budget: Option<BudgetSummary>,
+}
+
+/// How the frames of the policy's budget mode met its budget: each frame's primitives (every
+/// draw, those of the techniques trees in a transition leave included, which the steering does
+/// not count) against it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct BudgetSummary {
+    /// The budget, primitives per frame.
+    pub budget: u64,
+    /// The median frame's primitives (as [`Spread::median`]).
+    pub median: f64,
+    /// Frames over the budget by more than a tenth of it.
+    pub over_tenth: usize,
+    /// Frames over twice the budget.
+    pub over_twice: usize,
+    /// Frames under half of the budget.
+    pub under_half: usize,
+    /// Frames in all.
+    pub frames: usize,
+}
+
+impl BudgetSummary {
+    /// The summary of frames of `primitives` each against `budget`.
+    #[must_use]
+    pub fn of(budget: u64, primitives: &[u64]) -> Self {
+        #[expect(clippy::cast_precision_loss, reason = "a median needs no integer precision")]
+        let all: Vec<f64> = primitives.iter().map(|&p| p as f64).collect();
+        let count = |f: &dyn Fn(u128) -> bool| primitives.iter().filter(|&&p| f(u128::from(p))).count();
+        // In whole numbers: `p > 1.1 N` as `10 p > 11 N`, `p < N / 2` as `2 p < N`.
+        let n = u128::from(budget);
+        Self {
+            budget,
+            median: spread(&all).map_or(0.0, |s| s.median),
+            over_tenth: count(&|p| 10 * p > 11 * n),
+            over_twice: count(&|p| p > 2 * n),
+            under_half: count(&|p| 2 * p < n),
+            frames: primitives.len(),
+        }
+    }
+
+    /// The summary in one line for `technique`'s report.
+    #[must_use]
+    pub fn line(&self, technique: &str) -> String {
+        format!(
+            "{technique} budget {} primitives a frame: median frame {:.0}; of {} frames {} over it by more than 10 %, {} \
+             over twice it, {} under half of it (the draws of trees in a transition counted)",
+            self.budget, self.median, self.frames, self.over_tenth, self.over_twice, self.under_half
+        )
+    }
 }
 
 /// Of a technique's frames, the trees drawn with one technique and what they submitted.
@@ -210,6 +261,10 @@ pub fn summarise(report: &Report, technique: TechniqueName) -> Summary {
         noise: mean_of(rows.iter().filter_map(|r| r.noise).collect()),
         reference_noise: mean_of(rows.iter().filter_map(|r| r.reference_noise).collect()),
         drawn_with: drawn_with(&rows),
+        budget: report
+            .budget
+            .filter(|_| technique == TechniqueName::Policy)
+            .map(|budget| BudgetSummary::of(budget, &rows.iter().map(|r| r.primitives()).collect::<Vec<_>>())),
     }
 }
 
@@ -354,6 +409,7 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 4]) -> String {
     // Where a technique's trees were drawn with more than one (the policy's mix; a forced
     // technique and the point tree for models lacking its data): which, and what each cost.
     let mut mixes = Vec::new();
+    let mut budgets = Vec::new();
     for (technique, availability) in &report.techniques {
         if *availability != Availability::Measured {
             continue;
@@ -396,6 +452,9 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 4]) -> String {
             cells.push(opt(s.transitions, 1));
         }
         table.row(cells);
+        if let Some(budget) = s.budget {
+            budgets.push(budget.line(technique.name()));
+        }
         if s.drawn_with.len() > 1 {
             mixes.push((technique.name(), s.drawn_with));
         }
@@ -416,6 +475,9 @@ pub fn text(report: &Report, files: [&Option<PathBuf>; 4]) -> String {
             })
             .collect();
         let _ = writeln!(out, "{technique} drew its trees with: {}", parts.join("; "));
+    }
+    for line in budgets {
+        let _ = writeln!(out, "{line}");
     }
     for line in phase_lines(report) {
         let _ = writeln!(out, "{line}");
@@ -689,5 +751,22 @@ mod tests {
         let s = spread(&values).expect("values");
         assert_eq!((s.median, s.p95, s.max), (50.5, 95.0, 100.0));
         assert_eq!(spread(&[7.0]).expect("one").p95, 7.0);
+    }
+
+    #[test]
+    fn a_budget_summary_counts_the_frames_over_and_under_it() {
+        // At the bounds exactly: 110 and 200 are not over, 50 is not under.
+        let frames = [0, 49, 50, 100, 110, 111, 200, 201, 1_000];
+        let s = BudgetSummary::of(100, &frames);
+        assert_eq!((s.budget, s.frames, s.median), (100, 9, 110.0));
+        assert_eq!((s.over_tenth, s.over_twice, s.under_half), (4, 2, 2));
+        assert_eq!(
+            s.line("policy"),
+            "policy budget 100 primitives a frame: median frame 110; of 9 frames 4 over it by more than 10 %, 2 over \
+             twice it, 2 under half of it (the draws of trees in a transition counted)"
+        );
+        assert_eq!(BudgetSummary::of(100, &[]), BudgetSummary { budget: 100, ..BudgetSummary::default() });
+        // Counts near u64::MAX do not overflow.
+        assert_eq!(BudgetSummary::of(u64::MAX, &[u64::MAX]).over_tenth, 0);
     }
 }
