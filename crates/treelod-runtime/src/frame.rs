@@ -1488,7 +1488,8 @@ pub struct BudgetController {
 struct Steering {
     start: (f32, f32),
     pressure: f64,
-    /// Greatest pressure whose frame was over the budget.
+    /// Greatest pressure whose frame was over the budget; after a cliff, just under the pressure
+    /// held, so that every pressure below it counts as over ([`CLIFF`]).
     over: Option<f64>,
     /// Least pressure whose frame was under the budget.
     under: Option<f64>,

@@ -3181,10 +3181,6 @@ mod tests {
         assert_eq!(lengths(&steps), [(C, 8), (I, 3), (E, 8), (S, 8)]);
     }
 
-    /// A representation within the target over less than an octave (ellipsoids measured near the
-    /// full mesh at 16 pixels alone) leaves no run of its own between the point tree's where the
-    /// point tree, admissible there, draws at most twice its primitives; it keeps its run where
-    /// the point tree draws more, or where it is within the target over more than an octave.
     /// `Choices::among` reads once what does not depend on the target (the judgements but the
     /// chain's, the floors) and picks the chain's level once for every elevation class, in
     /// parallel: its tables are those of each table judged on its own at every height
@@ -3236,6 +3232,10 @@ mod tests {
         }
     }
 
+    /// A representation within the target over less than an octave (ellipsoids measured near the
+    /// full mesh at 16 pixels alone) leaves no run of its own between the point tree's where the
+    /// point tree, admissible there, draws at most twice its primitives; it keeps its run where
+    /// the point tree draws more, or where it is within the target over more than an octave.
     #[test]
     fn the_choices_merge_a_technique_within_the_target_over_less_than_an_octave() {
         let with_ellipsoids = |good: &[f32], share: f32| {
