@@ -814,7 +814,10 @@ impl Renderer {
     /// transition leave. Those last a transition's frames and then stop on their own, so the
     /// controller counting them saw the frame's cost fall while its steering held, took it for a
     /// cheaper scene, released the bounds it had found, and switched trees again, which started
-    /// new transitions: a frame that never settled. The settings themselves are not changed;
+    /// new transitions: a frame that never settled. Where the controller steps the target down,
+    /// the step's count is predicted before it is drawn (`Renderer::predict_count`), and a step
+    /// predicted over [`BudgetController::cliff_count`] is refused
+    /// ([`BudgetController::refuse`]; spec §10.2). The settings themselves are not changed;
     /// [`Self::budget_steering`] reads what the controller holds.
     ///
     /// The call runs on a thread of rayon's global pool (the calling thread waits; a call from
@@ -848,8 +851,27 @@ impl Renderer {
         self.settings.policy = Some(Policy { target, ..policy });
         let stats = self.prepare_frame(device, queue, camera);
         self.settings = user;
-        if let Some(controller) = &mut self.policy.budget {
-            controller.update_policy(stats.primitives().saturating_sub(stats.leaving));
+        let count = stats.primitives().saturating_sub(stats.leaving);
+        let Some(controller) = &mut self.policy.budget else { return stats };
+        controller.update_policy(count);
+        if controller.steps_down_from(target) {
+            // Look before stepping down: a step that would meet a cliff is refused undrawn.
+            let started = std::time::Instant::now();
+            let next = Policy { target: controller.target(), ..policy };
+            let runtime_camera = treelod_runtime::Camera {
+                position: camera.position,
+                view_proj: camera.view_proj(),
+                viewport_height: camera.height as f32,
+                fovy: camera.fovy,
+            };
+            let s_min = controller.s_min();
+            let predicted = self.predict_count(&runtime_camera, next, s_min, count);
+            if let Some(controller) = &mut self.policy.budget
+                && predicted > controller.cliff_count()
+            {
+                controller.refuse();
+            }
+            self.phases.assign += started.elapsed();
         }
         stats
     }

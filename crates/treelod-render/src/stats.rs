@@ -149,7 +149,8 @@ pub struct PreparePhases {
     /// Before the trees: the occlusion queries' read-back, the shadow cascades' fitting and maps,
     /// the instances' transforms when they changed.
     pub setup: Duration,
-    /// The camera's assignment: the policy's choice of each tree's technique, its transitions.
+    /// The camera's assignment: the policy's choice of each tree's technique, its transitions;
+    /// in budget mode, the look-ahead before a step down of the target.
     pub assign: Duration,
     /// Every view's selection: the camera's, that of the techniques trees in a transition leave,
     /// and each shadow cascade's (its assignment from the light included).

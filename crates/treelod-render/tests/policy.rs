@@ -12,6 +12,7 @@ use treelod_build::{BuildConfig, LodChainConfig};
 use treelod_format::Container;
 use treelod_render::offscreen::render_image;
 use treelod_render::{Camera, DebugView, Instance, Policy, Renderer, Settings, Shadows, Technique};
+use treelod_runtime::BudgetController;
 use treelod_runtime::{
     Calibration, Choices, ModelLod, Representations, VISIBILITY_LEAD, elevation_class_after, in_view_share,
     projected_height, view_elevation,
@@ -267,6 +268,61 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
             assert!(last.iter().all(|&r| r <= 1.1), "budget {budget}: {counts:?}");
         }
     }
+}
+
+/// Budget mode looks before it steps the target down (spec §10.2): trees all at one size on
+/// screen switch technique at one target, and where the steering would step down to a target at
+/// which they switch to a representation of many more primitives, the step is refused undrawn.
+#[test]
+fn budget_mode_refuses_a_step_down_that_would_switch_every_tree_at_once() {
+    let gpu = gpu();
+    let container = calibrated_demo();
+    let (calibration, lod, representations) = read_back(&container);
+    let (width, height) = (320, 240);
+    let runtime_camera = treelod_runtime::Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    // The tables' primitives of a tree `h` pixels high under `target`, drawn with what the
+    // default target chooses before (hysteresis).
+    let choose = |target: f32, h: f32, previous: Option<Technique>| {
+        Choices::new(&calibration, &Policy { target, ..Policy::default() }, &representations).choose(h, previous)
+    };
+    let cost = |target: f32, h: f32| {
+        let technique = choose(target, h, Some(choose(Policy::DEFAULT_TARGET, h, None)));
+        calibration.at(technique, h).map_or(0.0, |(_, primitives)| primitives)
+    };
+    // A height where the default target draws a tree with a few primitives and the least target
+    // the steering reaches with many: the cliff.
+    let (min, _) = calibration.heights();
+    let floor = BudgetController::new(1, 1.0).target_floor;
+    let h = (0..24)
+        .map(|i| min * (i as f32 / 8.0).exp2())
+        .filter(|&h| h <= 48.0)
+        .max_by(|&a, &b| {
+            let rise = |h: f32| cost(floor, h) / cost(Policy::DEFAULT_TARGET, h).max(1.0);
+            rise(a).total_cmp(&rise(b))
+        })
+        .expect("heights");
+    let rise = cost(floor, h) / cost(Policy::DEFAULT_TARGET, h).max(1.0);
+    assert!(rise > 40.0, "no cliff in the demo's tables: ×{rise} at {h} px");
+    // Twelve trees along an arc at the distance that gives them that height.
+    let d = treelod_runtime::policy::distance_for_height(&lod, h, &runtime_camera);
+    let positions: Vec<Vec3> = (0..12)
+        .map(|i| {
+            let angle = (i as f32 / 11.0 - 0.5) * 0.9;
+            vec3(angle.sin() * d, 0.0, -angle.cos() * d) - lod.centre()
+        })
+        .collect();
+    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, width, height);
+    let mut free = forest(&gpu, &container, Settings::default(), &positions);
+    let unbudgeted = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+    // A budget the default target leaves mostly unspent, and the cliff more than twice over.
+    let budget = 4 * unbudgeted.max(12);
+    let policy = Policy { budget: Some(budget), transition: 0, ..Policy::default() };
+    let mut renderer = forest(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
+    let counts: Vec<u64> = (0..40).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
+    assert!(counts.iter().all(|&c| c <= 2 * budget), "budget {budget}: {counts:?}");
+    let (_, target) = renderer.budget_steering().expect("steering");
+    assert!(target < Policy::DEFAULT_TARGET, "stepped down towards the cliff: {target}");
+    assert!(cost(target, h) * 12.0 <= 2.0 * budget as f32, "held above it: {target}, {counts:?}");
 }
 
 /// A tree that crosses a boundary of the tables is drawn with both techniques for the

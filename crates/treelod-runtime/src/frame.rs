@@ -1509,6 +1509,9 @@ struct Steering {
     /// Frames a hold after a cliff lasts before the steering tries below it again, whatever the
     /// count did; 0 until a cliff is met ([`RETRY_FRAMES`]).
     retry_after: u32,
+    /// The pressure of the last frame given to [`BudgetController::update_policy`]
+    /// ([`BudgetController::refuse`] goes back to it).
+    drawn: Option<f64>,
 }
 
 impl Steering {
@@ -1571,6 +1574,7 @@ impl BudgetController {
                 cliff: None,
                 held: 0,
                 retry_after: 0,
+                drawn: None,
             },
         }
     }
@@ -1741,6 +1745,14 @@ impl BudgetController {
                 }
             }
         }
+        steering.drawn = Some(p);
+        self.set_pressure(next)
+    }
+
+    /// Moves the steering to pressure `next` (clamped to where it still acts) and sets `s_min`
+    /// and the target from it.
+    fn set_pressure(&mut self, next: f64) -> (f32, f32) {
+        let steering = &mut self.steering;
         let (s0, t0) = (f64::from(steering.start.0.max(f32::MIN_POSITIVE)), f64::from(steering.start.1));
         let t_floor = f64::from(self.target_floor.max(f32::MIN_POSITIVE));
         let t_ceiling = f64::from(self.target_ceiling).max(t_floor);
@@ -1757,6 +1769,43 @@ impl BudgetController {
             self.target = (t0 * (2.0 * p).exp()).clamp(t_floor, t_ceiling) as f32;
         }
         (self.s_min, self.target)
+    }
+
+    /// The count over which [`Self::update_policy`] takes a frame over the budget for a cliff:
+    /// twice the budget.
+    #[must_use]
+    pub fn cliff_count(&self) -> u64 {
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            clippy::cast_precision_loss,
+            reason = "twice a count"
+        )]
+        let limit = (CLIFF * self.target_primitives as f64) as u64;
+        limit
+    }
+
+    /// Whether the steering [`Self::update_policy`] just returned lowers the policy target from
+    /// `before` (the target of the frame it was given): a step down, which may meet a cliff.
+    #[must_use]
+    pub fn steps_down_from(&self, before: f32) -> bool {
+        self.target < before
+    }
+
+    /// Budget mode's look-ahead: a host that predicts the count of the steering
+    /// [`Self::update_policy`] just returned (from the calibration tables, before drawing it),
+    /// and finds it over [`Self::cliff_count`], refuses the step here: the steering goes back to
+    /// the pressure of the frame last given to [`Self::update_policy`], and the refused one
+    /// counts as over the budget. The next step down is then half as far (the bracket of
+    /// [`Self::update_policy`]), predicted again, so the steering closes in on the cliff without
+    /// drawing a frame over it. Returns the `s_min` and target to draw with; without a frame
+    /// given yet, changes nothing.
+    pub fn refuse(&mut self) -> (f32, f32) {
+        let steering = &mut self.steering;
+        let Some(back) = steering.drawn else { return (self.s_min, self.target) };
+        let refused = steering.pressure;
+        steering.over = Some(steering.over.map_or(refused, |o| o.max(refused)));
+        self.set_pressure(back)
     }
 
     /// The factor of this frame's step (the type's documentation), `None` while idle.
@@ -2170,6 +2219,34 @@ mod tests {
         let (counts, _) = held(10, 90_000);
         assert_eq!(cliff_frames(&counts), 0, "{counts:?}");
         assert_eq!(counts.last(), Some(&90_000), "{counts:?}");
+    }
+
+    #[test]
+    fn policy_budget_refuses_a_predicted_cliff_and_closes_in_on_it_undrawn() {
+        // The cliff of `policy_budget_steps_back_from_a_cliff_and_holds`, with a host that
+        // predicts each step down (here exactly) and refuses one that would be a cliff.
+        let cliff = 0.004;
+        let scene = |t: f32| if t < cliff { 10_000_000 } else { 1_000 };
+        let mut controller = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
+        let mut t = controller.target();
+        let (mut counts, mut refused) = (Vec::new(), 0);
+        for _ in 0..100 {
+            counts.push(scene(t));
+            controller.update_policy(scene(t));
+            if controller.steps_down_from(t) && scene(controller.target()) > controller.cliff_count() {
+                controller.refuse();
+                refused += 1;
+            }
+            t = controller.target();
+        }
+        assert_eq!(cliff_frames(&counts), 0, "no frame drawn over the cliff: {counts:?}");
+        assert!(refused >= 2, "the steps down were refused and halved: {refused}");
+        // Closer to the cliff than the pressure's resolution (4 % in the target) allows telling.
+        assert!(t >= cliff && t < cliff * 1.05, "closed in on the cliff: {t}");
+        assert!(counts[50..].iter().all(|&c| c == 1_000), "{counts:?}");
+        // Without a frame given yet, refusing changes nothing.
+        let mut fresh = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
+        assert_eq!(fresh.refuse(), (1.0, Policy::DEFAULT_TARGET));
     }
 
     #[test]

@@ -2043,6 +2043,28 @@ impl PolicyState {
         result
     }
 
+    /// The state of the instances of chunks `chunks` of [`CHOOSE_CHUNK`] instances (ascending,
+    /// each at most once), of `instances` in all, laid end to end: what a choice made for those
+    /// instances alone reads (budget mode's look-ahead samples a large forest's chunks). Entries
+    /// the state lacks read as a new instance's; the visible fractions are not copied.
+    #[must_use]
+    pub fn sampled(&self, chunks: &[usize], instances: usize) -> Self {
+        let ranges = || chunks.iter().map(|&c| c * CHOOSE_CHUNK..instances.min((c + 1) * CHOOSE_CHUNK));
+        fn gather<T: Copy>(all: &[T], ranges: impl Iterator<Item = std::ops::Range<usize>>, default: T) -> Vec<T> {
+            ranges.flat_map(|r| r.map(|i| all.get(i).copied().unwrap_or(default))).collect()
+        }
+        Self {
+            previous: gather(&self.previous, ranges(), None),
+            transitions: gather(&self.transitions, ranges(), None),
+            frames: self.frames,
+            visible: Vec::new(),
+            classes: gather(&self.classes, ranges(), 0),
+            elevations: gather(&self.elevations, ranges(), NO_CLASS),
+            measure: gather(&self.measure, ranges(), true),
+            busy: Vec::new(),
+        }
+    }
+
     /// Instance `index`'s transition this frame, if it is changing technique: the technique it
     /// leaves and the share the new one covers.
     #[must_use]
@@ -3910,6 +3932,77 @@ mod tests {
             &mut out,
         );
         assert!(out.iter().all(Option::is_some), "moved behind the camera, in its view");
+    }
+
+    #[test]
+    fn a_sampled_state_chooses_its_chunks_as_the_whole_state_does() {
+        let lods = [tall_lod()];
+        let choices = [Some(spt_above_without_hysteresis())];
+        // Five chunks and a half of trees in rows along -z, the last chunk short.
+        let n = 5 * CHOOSE_CHUNK + CHOOSE_CHUNK / 2;
+        let instances: Vec<Instance> = (0..n)
+            .map(|i| {
+                #[expect(clippy::cast_precision_loss, reason = "small numbers")]
+                let at = Vec3::new(4.0 * (i % 40) as f32, 0.0, -4.0 * (i / 40) as f32);
+                Instance { model: 0, transform: Mat4::from_translation(at) }
+            })
+            .collect();
+        let bounds = ChunkBounds::new(&instances, &lods);
+        let mut state = PolicyState::with_transition(4);
+        let mut out = Vec::new();
+        // The camera comes nearer over frames, so trees change technique and are in transitions.
+        let camera = |frame: usize| {
+            #[expect(clippy::cast_precision_loss, reason = "small numbers")]
+            let eye = Vec3::new(80.0, 6.0, 120.0 - 60.0 * frame as f32);
+            Camera::look_at(eye, eye - Vec3::Z, 0.9, 640, 480)
+        };
+        for frame in 0..3 {
+            choose_instances_in_chunks(
+                &instances,
+                &lods,
+                &bounds,
+                &choices,
+                &[camera(frame)],
+                Technique::Spt,
+                &mut state,
+                &mut out,
+            );
+        }
+        let picked = [1, 3, 5];
+        let index: Vec<usize> = picked.iter().flat_map(|&c| c * CHOOSE_CHUNK..n.min((c + 1) * CHOOSE_CHUNK)).collect();
+        let sampled_instances: Vec<Instance> = index.iter().map(|&i| instances[i]).collect();
+        let mut sampled = state.sampled(&picked, n);
+        assert_eq!(sampled.previous.len(), index.len());
+        let mut sampled_out = Vec::new();
+        let sampled_bounds = ChunkBounds::new(&sampled_instances, &lods);
+        let cameras = [camera(3)];
+        choose_instances_in_chunks(
+            &sampled_instances,
+            &lods,
+            &sampled_bounds,
+            &choices,
+            &cameras,
+            Technique::Spt,
+            &mut sampled,
+            &mut sampled_out,
+        );
+        choose_instances_in_chunks(
+            &instances,
+            &lods,
+            &bounds,
+            &choices,
+            &cameras,
+            Technique::Spt,
+            &mut state,
+            &mut out,
+        );
+        let whole: Vec<Option<Technique>> = index.iter().map(|&i| out[i]).collect();
+        assert_eq!(sampled_out, whole);
+        let transitions: Vec<Option<Transition>> = index.iter().map(|&i| state.transition(i)).collect();
+        let sampled_transitions: Vec<Option<Transition>> = (0..index.len()).map(|j| sampled.transition(j)).collect();
+        assert_eq!(sampled_transitions, transitions);
+        assert!(transitions.iter().any(Option::is_some), "trees in a transition were sampled");
+        assert!(whole.iter().flatten().count() > 100, "trees in view were sampled: {whole:?}");
     }
 
     /// The choices of a frame, made one instance at a time with [`projected_height`] and
