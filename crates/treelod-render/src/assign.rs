@@ -4,7 +4,7 @@
 
 use treelod_runtime::{
     Assignment, BudgetController, CHOOSE_CHUNK, Calibration, Choices, ChunkBounds, Instance, Policy, PolicyState,
-    Technique, Transition, choose_instances_in_chunks, projected_height,
+    Representations, Technique, Transition, choose_instances_in_chunks, projected_height,
 };
 
 /// Chunks of [`CHOOSE_CHUNK`] instances budget mode's look-ahead chooses again at most
@@ -49,6 +49,20 @@ impl PolicyModels {
     /// Forgets the choices (a model was added) so the next frame makes them again.
     pub(crate) fn models_changed(&mut self) {
         self.made_for = None;
+    }
+
+    /// Makes each model's choices under `policy` among what its representations hold
+    /// (`representations`, per model), unless they were made for it.
+    fn choose_under(&mut self, representations: &[Representations], policy: Policy) {
+        if self.made_for != Some(policy) {
+            self.choices = self
+                .calibrations
+                .iter()
+                .zip(representations)
+                .map(|(calibration, models)| calibration.as_ref().map(|c| Choices::new(c, &policy, models)))
+                .collect();
+            self.made_for = Some(policy);
+        }
     }
 }
 
@@ -124,15 +138,7 @@ impl Renderer {
             return false;
         };
         let tables = &mut self.policy;
-        if tables.made_for != Some(policy) {
-            tables.choices = tables
-                .calibrations
-                .iter()
-                .zip(&self.representations)
-                .map(|(calibration, models)| calibration.as_ref().map(|c| Choices::new(c, &policy, models)))
-                .collect();
-            tables.made_for = Some(policy);
-        }
+        tables.choose_under(&self.representations, policy);
         let state = match cascade {
             None => {
                 // Only the camera's view fades between techniques; a cascade switches at once
@@ -196,13 +202,7 @@ impl Renderer {
         };
         let technique = self.settings.technique;
         let tables = &mut self.policy;
-        tables.choices = tables
-            .calibrations
-            .iter()
-            .zip(&self.representations)
-            .map(|(calibration, models)| calibration.as_ref().map(|c| Choices::new(c, &next, models)))
-            .collect();
-        tables.made_for = Some(next);
+        tables.choose_under(&self.representations, next);
         let n = self.instances.len();
         let stride = n.div_ceil(CHOOSE_CHUNK).div_ceil(PREDICTED_CHUNKS).max(1);
         let picked: Vec<usize> = (0..n.div_ceil(CHOOSE_CHUNK)).step_by(stride).collect();
