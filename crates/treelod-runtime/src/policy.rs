@@ -3947,55 +3947,39 @@ mod tests {
                 Instance { model: 0, transform: Mat4::from_translation(at) }
             })
             .collect();
-        let bounds = ChunkBounds::new(&instances, &lods);
-        let mut state = PolicyState::with_transition(4);
-        let mut out = Vec::new();
         // The camera comes nearer over frames, so trees change technique and are in transitions.
         let camera = |frame: usize| {
             #[expect(clippy::cast_precision_loss, reason = "small numbers")]
             let eye = Vec3::new(80.0, 6.0, 120.0 - 60.0 * frame as f32);
             Camera::look_at(eye, eye - Vec3::Z, 0.9, 640, 480)
         };
-        for frame in 0..3 {
+        // The frame of `instances` for camera `frame` with `state`.
+        let frame = |instances: &[Instance], frame: usize, state: &mut PolicyState| {
+            let mut out = Vec::new();
+            let bounds = ChunkBounds::new(instances, &lods);
             choose_instances_in_chunks(
-                &instances,
+                instances,
                 &lods,
                 &bounds,
                 &choices,
                 &[camera(frame)],
                 Technique::Spt,
-                &mut state,
+                state,
                 &mut out,
             );
+            out
+        };
+        let mut state = PolicyState::with_transition(4);
+        for k in 0..3 {
+            frame(&instances, k, &mut state);
         }
         let picked = [1, 3, 5];
         let index: Vec<usize> = picked.iter().flat_map(|&c| c * CHOOSE_CHUNK..n.min((c + 1) * CHOOSE_CHUNK)).collect();
         let sampled_instances: Vec<Instance> = index.iter().map(|&i| instances[i]).collect();
         let mut sampled = state.sampled(&picked, n);
         assert_eq!(sampled.previous.len(), index.len());
-        let mut sampled_out = Vec::new();
-        let sampled_bounds = ChunkBounds::new(&sampled_instances, &lods);
-        let cameras = [camera(3)];
-        choose_instances_in_chunks(
-            &sampled_instances,
-            &lods,
-            &sampled_bounds,
-            &choices,
-            &cameras,
-            Technique::Spt,
-            &mut sampled,
-            &mut sampled_out,
-        );
-        choose_instances_in_chunks(
-            &instances,
-            &lods,
-            &bounds,
-            &choices,
-            &cameras,
-            Technique::Spt,
-            &mut state,
-            &mut out,
-        );
+        let sampled_out = frame(&sampled_instances, 3, &mut sampled);
+        let out = frame(&instances, 3, &mut state);
         let whole: Vec<Option<Technique>> = index.iter().map(|&i| out[i]).collect();
         assert_eq!(sampled_out, whole);
         let transitions: Vec<Option<Transition>> = index.iter().map(|&i| state.transition(i)).collect();
