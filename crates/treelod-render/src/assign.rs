@@ -4,7 +4,7 @@
 
 use treelod_runtime::{
     Assignment, BudgetController, CHOOSE_CHUNK, Calibration, Choices, ChunkBounds, Instance, Policy, PolicyState,
-    Representations, Technique, Transition, choose_instances_in_chunks, projected_height,
+    Representations, Technique, Transition, choose_instances_in_chunks, chunk_range, projected_height,
 };
 
 /// Chunks of [`CHOOSE_CHUNK`] instances budget mode's look-ahead chooses again at most
@@ -207,7 +207,7 @@ impl Renderer {
         let stride = n.div_ceil(CHOOSE_CHUNK).div_ceil(PREDICTED_CHUNKS).max(1);
         let picked: Vec<usize> = (0..n.div_ceil(CHOOSE_CHUNK)).step_by(stride).collect();
         // The sampled instances, and each one's index in the forest.
-        let index: Vec<usize> = picked.iter().flat_map(|&c| c * CHOOSE_CHUNK..n.min((c + 1) * CHOOSE_CHUNK)).collect();
+        let index: Vec<usize> = picked.iter().flat_map(|&c| chunk_range(c, n)).collect();
         let (instances, bounds, mut state) = if stride == 1 {
             (std::borrow::Cow::Borrowed(&self.instances[..]), None, tables.state.clone())
         } else {
@@ -234,14 +234,14 @@ impl Renderer {
         for (then, &i) in chosen.iter().zip(&index) {
             let Some(then) = *then else { continue };
             let now = self.drawn_with.get(i).copied().unwrap_or(Technique::FALLBACK);
+            if then == now {
+                continue;
+            }
             let instance = &self.instances[i];
             let model = instance.model as usize;
             let (Some(Some(calibration)), Some(lod)) = (tables.calibrations.get(model), lods.get(model)) else {
                 continue;
             };
-            if then == now {
-                continue;
-            }
             let height = projected_height(lod, instance.transform, camera);
             if let (Some((_, after)), Some((_, before))) = (calibration.at(then, height), calibration.at(now, height)) {
                 delta += cost(then, after) - cost(now, before);

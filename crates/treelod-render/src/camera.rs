@@ -50,6 +50,18 @@ impl Camera {
         self.proj * self.view
     }
 
+    /// The camera as the runtime's selection and policy read it: the eye, `proj · view`, the
+    /// viewport's height in pixels and the vertical field of view.
+    #[must_use]
+    pub(crate) fn selection(&self) -> treelod_runtime::Camera {
+        treelod_runtime::Camera {
+            position: self.position,
+            view_proj: self.view_proj(),
+            viewport_height: self.height as f32,
+            fovy: self.fovy,
+        }
+    }
+
     /// The camera's right and up directions in world space.
     #[must_use]
     pub fn right_up(&self) -> (Vec3, Vec3) {

@@ -858,14 +858,8 @@ impl Renderer {
             // Look before stepping down: a step that would meet a cliff is refused undrawn.
             let started = std::time::Instant::now();
             let next = Policy { target: controller.target(), ..policy };
-            let runtime_camera = treelod_runtime::Camera {
-                position: camera.position,
-                view_proj: camera.view_proj(),
-                viewport_height: camera.height as f32,
-                fovy: camera.fovy,
-            };
             let s_min = controller.s_min();
-            let predicted = self.predict_count(&runtime_camera, next, s_min, count);
+            let predicted = self.predict_count(&camera.selection(), next, s_min, count);
             if let Some(controller) = &mut self.policy.budget
                 && predicted > controller.cliff_count()
             {
@@ -889,7 +883,6 @@ impl Renderer {
         self.phases = PreparePhases::default();
         let mut laps = Laps::start();
         let settings = self.settings;
-        let view_proj = camera.view_proj();
         let technique = settings.technique;
         let full_mesh = technique == Technique::Full;
         let (s_min, s_max) = if full_mesh { (0.0, 0.0) } else { (settings.s_min, settings.s_max) };
@@ -900,14 +893,9 @@ impl Renderer {
             shading: settings.shading,
             ..LodSettings::default()
         };
-        let runtime_camera = treelod_runtime::Camera {
-            position: camera.position,
-            view_proj,
-            viewport_height: camera.height as f32,
-            fovy: camera.fovy,
-        };
+        let runtime_camera = camera.selection();
         let forward = -camera.view.row(2).truncate().normalize_or(Vec3::NEG_Z);
-        self.last_camera = Some((view_proj, camera.position, forward, (camera.width, camera.height)));
+        self.last_camera = Some((runtime_camera.view_proj, camera.position, forward, (camera.width, camera.height)));
         if self.measures_occlusion() {
             self.occlusion.collect(device, camera.position, forward, &mut self.visible_fraction);
         }

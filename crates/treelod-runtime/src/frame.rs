@@ -1661,6 +1661,8 @@ impl BudgetController {
     /// ([`Self::refuse`]; the renderer does): the jacaranda's worst frame then read 0.40 million.
     pub fn update_policy(&mut self, last_frame_primitives: u64) -> (f32, f32) {
         let over_budget = last_frame_primitives > self.target_primitives;
+        #[expect(clippy::cast_precision_loss, reason = "counts need no integer precision here")]
+        let cliff_limit = self.cliff_count() as f64;
         let steering = &mut self.steering;
         let p = steering.pressure;
         // Bounds are stale once the scene changes under them: the count fell while the pressure
@@ -1672,8 +1674,6 @@ impl BudgetController {
         let fell = steering
             .last
             .is_some_and(|(q, count)| q == p && (last_frame_primitives as f64) < count as f64 * (1.0 - band));
-        #[expect(clippy::cast_precision_loss, reason = "counts need no integer precision here")]
-        let cliff_limit = CLIFF * self.target_primitives as f64;
         if fell {
             // After a cliff, the count at the hold falling (trees leaving the view) does not
             // make the frame below it cheaper by more than the same share: the hold stays until

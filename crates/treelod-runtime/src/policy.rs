@@ -2049,7 +2049,7 @@ impl PolicyState {
     /// the state lacks read as a new instance's; the visible fractions are not copied.
     #[must_use]
     pub fn sampled(&self, chunks: &[usize], instances: usize) -> Self {
-        let ranges = || chunks.iter().map(|&c| c * CHOOSE_CHUNK..instances.min((c + 1) * CHOOSE_CHUNK));
+        let ranges = || chunks.iter().map(|&c| chunk_range(c, instances));
         fn gather<T: Copy>(all: &[T], ranges: impl Iterator<Item = std::ops::Range<usize>>, default: T) -> Vec<T> {
             ranges.flat_map(|r| r.map(|i| all.get(i).copied().unwrap_or(default))).collect()
         }
@@ -2081,7 +2081,7 @@ impl PolicyState {
         let known = self.busy.len() == chunks;
         (0..chunks)
             .filter(move |&c| !known || self.busy[c])
-            .flat_map(move |c| c * CHOOSE_CHUNK..n.min((c + 1) * CHOOSE_CHUNK))
+            .flat_map(move |c| chunk_range(c, n))
             .filter_map(|i| Some((u32::try_from(i).ok()?, self.transition(i)?)))
     }
 }
@@ -2112,6 +2112,13 @@ fn advance(
 /// nanoseconds, so a task of a thousand outweighs rayon's cost of a task, and 10^4 trees still
 /// split into enough tasks to balance two to eight threads.
 pub const CHOOSE_CHUNK: usize = 1024;
+
+/// The instances of chunk `chunk` of [`CHOOSE_CHUNK`] among `instances` in all (the last chunk
+/// may be short).
+#[must_use]
+pub fn chunk_range(chunk: usize, instances: usize) -> std::ops::Range<usize> {
+    (chunk * CHOOSE_CHUNK).min(instances)..instances.min((chunk + 1) * CHOOSE_CHUNK)
+}
 
 /// Chooses each instance's technique for one frame: the policy's [`Choices`] of its model where
 /// the model has them (`choices[model]`, `None` for a model without calibration tables), else
@@ -3974,7 +3981,7 @@ mod tests {
             frame(&instances, k, &mut state);
         }
         let picked = [1, 3, 5];
-        let index: Vec<usize> = picked.iter().flat_map(|&c| c * CHOOSE_CHUNK..n.min((c + 1) * CHOOSE_CHUNK)).collect();
+        let index: Vec<usize> = picked.iter().flat_map(|&c| chunk_range(c, n)).collect();
         let sampled_instances: Vec<Instance> = index.iter().map(|&i| instances[i]).collect();
         let mut sampled = state.sampled(&picked, n);
         assert_eq!(sampled.previous.len(), index.len());
