@@ -3,8 +3,8 @@
 //! and for each shadow cascade ([`Settings::shadows`]' [`Casters`]).
 
 use treelod_runtime::{
-    Assignment, BudgetController, CHOOSE_CHUNK, Calibration, Choices, ChunkBounds, Instance, Policy, PolicyState,
-    Representations, Technique, Transition, choose_instances_in_chunks, chunk_range, projected_height,
+    Assignment, BudgetController, CACHED_POLICIES, CHOOSE_CHUNK, Calibration, Choices, ChunkBounds, Instance, Policy,
+    PolicyState, Representations, Technique, Transition, choose_instances_in_chunks, chunk_range, projected_height,
 };
 
 /// Chunks of [`CHOOSE_CHUNK`] instances budget mode's look-ahead chooses again at most
@@ -26,6 +26,11 @@ pub(crate) struct PolicyModels {
     pub(crate) choices: Vec<Option<Choices>>,
     /// The policy the choices were made for; `None`: to be made.
     pub(crate) made_for: Option<Policy>,
+    /// The choices made for the policies before [`Self::made_for`], the most recent last, up to
+    /// [`CACHED_POLICIES`] − 1 of them: budget mode's steering and its predictions go back and
+    /// forth between a few targets, and making a model's tables again costs about a
+    /// millisecond.
+    recent: Vec<(Policy, Vec<Option<Choices>>)>,
     /// Per instance: last frame's choice (hysteresis).
     pub(crate) state: PolicyState,
     /// Scratch: this frame's choice per instance (`None`: outside the view).
@@ -38,6 +43,9 @@ pub(crate) struct PolicyModels {
     /// Budget mode ([`Policy::budget`]): what steers the target and `s_min` from frame to frame;
     /// made when budget mode starts, dropped when it ends.
     pub(crate) budget: Option<BudgetController>,
+    /// Budget mode: the last frame's camera (its view-projection) and what it drew, from which
+    /// the next frame is predicted where the camera moved (`Renderer::prepare`).
+    pub(crate) last_frame: Option<(glam::Mat4, Drawn)>,
 }
 
 impl PolicyModels {
@@ -49,19 +57,31 @@ impl PolicyModels {
     /// Forgets the choices (a model was added) so the next frame makes them again.
     pub(crate) fn models_changed(&mut self) {
         self.made_for = None;
+        self.recent.clear();
     }
 
     /// Makes each model's choices under `policy` among what its representations hold
     /// (`representations`, per model), unless they were made for it.
     fn choose_under(&mut self, representations: &[Representations], policy: Policy) {
-        if self.made_for != Some(policy) {
-            self.choices = self
+        if self.made_for == Some(policy) {
+            return;
+        }
+        let choices = match self.recent.iter().rposition(|(made_for, _)| *made_for == policy) {
+            Some(at) => self.recent.remove(at).1,
+            None => self
                 .calibrations
                 .iter()
                 .zip(representations)
                 .map(|(calibration, models)| calibration.as_ref().map(|c| Choices::new(c, &policy, models)))
-                .collect();
-            self.made_for = Some(policy);
+                .collect(),
+        };
+        if let Some(before) = self.made_for.replace(policy) {
+            if self.recent.len() + 1 >= CACHED_POLICIES {
+                self.recent.remove(0);
+            }
+            self.recent.push((before, std::mem::replace(&mut self.choices, choices)));
+        } else {
+            self.choices = choices;
         }
     }
 }
@@ -175,13 +195,22 @@ impl Renderer {
     }
 
     /// Budget mode's look-ahead ([`BudgetController::refuse`], spec §10.2): the count of the
-    /// camera's view `camera` were its trees chosen under `next` and `s_min`, predicted from this
-    /// frame's `count` (chosen under the policy's current target): the trees' choices are made
-    /// again under `next` on a copy of the policy's state (the same hysteresis), and for each
-    /// tree whose technique changes, the calibration tables' primitives of the new technique at
-    /// its projected height less those of the one it is drawn with now are added. A forest of
-    /// more than [`PREDICTED_CHUNKS`] chunks of [`CHOOSE_CHUNK`] instances is sampled: every
-    /// `k`-th chunk, so that at most that many are chosen again, their changes counted `k` times.
+    /// camera's view `camera` were its trees chosen under `next` and `s_min`, predicted from
+    /// what this frame drew under the policy's current target (`drawn`): the trees' choices are
+    /// made again under `next` on a copy of the policy's state (the same hysteresis,
+    /// [`Self::choose_again`]), and the difference each tree's cost makes is added (its changes
+    /// counted `k` times where every `k`-th chunk was chosen):
+    /// - a tree whose technique changes: the calibration tables' primitives of the new technique
+    ///   at its projected height less those of the one it is drawn with now, a LoD chain's
+    ///   counted as the triangles of its level ([`Self::chain_triangles`]);
+    /// - a tree drawn with the LoD chain before and after: the triangles of the level it would
+    ///   draw less those of the level it drew (near trees above the tables' heights pick their
+    ///   level by the chain's geometric error at `s_min`, and a step down can take a few of
+    ///   them from a coarse level to the full mesh: on the shared maple five trees went from
+    ///   53,000 triangles to 1.3 million in one step);
+    /// - the point trees drawn now: their cut scaled by the square of `drawn.s_min / s_min` (the
+    ///   cut's elements are areas).
+    ///
     /// The tables made for `next` are kept: the next frame's assignment uses them when the
     /// steering takes the step.
     pub(crate) fn predict_count(
@@ -189,20 +218,151 @@ impl Renderer {
         camera: &treelod_runtime::Camera,
         next: Policy,
         s_min: f32,
-        count: u64,
+        drawn: Drawn,
     ) -> u64 {
-        // The tables hold the point tree's cut at the default `s_min`; the steering's `s_min`
-        // scales it as the cut's elements are areas (measured on the shared willow: unscaled,
-        // twenty trees switching to the point tree at `s_min` 3.4 read 2.4 million primitives
-        // where the frame drew 214,000).
-        let calibrated = treelod_runtime::LodSettings::default().s_min;
-        let spt_scale = if s_min > 0.0 { f64::from(calibrated / s_min).powi(2) } else { 1.0 };
-        let cost = |technique: Technique, primitives: f32| {
-            f64::from(primitives) * if technique == Technique::Spt { spt_scale } else { 1.0 }
+        let cost = spt_cost(s_min);
+        let (chosen, index, stride) = self.choose_again(camera, next);
+        let frustum = treelod_runtime::Frustum::from_view_proj(camera.view_proj);
+        let mut delta = 0.0f64;
+        for (then, &i) in chosen.iter().zip(&index) {
+            let Some(then) = *then else { continue };
+            let now = self.drawn_with.get(i).copied().unwrap_or(Technique::FALLBACK);
+            let last_level = self.chain_levels.get(i).copied().flatten();
+            if then == now {
+                if then == Technique::LodChain
+                    && let Some(last) = last_level
+                    && let Some(after) = self.chain_triangles(i, &next, s_min, camera, &frustum, Some(last))
+                {
+                    delta += after - self.level_triangles(i, last).unwrap_or(after);
+                }
+                continue;
+            }
+            let instance = &self.instances[i];
+            let model = instance.model as usize;
+            let (Some(Some(calibration)), Some(lod)) = (self.policy.calibrations.get(model), self.lods.get(model))
+            else {
+                continue;
+            };
+            let height = projected_height(lod, instance.transform, camera);
+            let (Some((_, after)), Some((_, before))) = (calibration.at(then, height), calibration.at(now, height))
+            else {
+                continue;
+            };
+            let after = if then == Technique::LodChain {
+                self.chain_triangles(i, &next, s_min, camera, &frustum, None).unwrap_or_else(|| cost(then, after))
+            } else {
+                cost(then, after)
+            };
+            let before = match last_level {
+                Some(level) if now == Technique::LodChain => self.level_triangles(i, level),
+                _ => None,
+            }
+            .unwrap_or_else(|| cost(now, before));
+            delta += after - before;
+        }
+        // The point trees that keep their technique draw a cut of the new `s_min`.
+        let spt = if s_min > 0.0 && drawn.s_min > 0.0 {
+            drawn.spt as f64 * (f64::from(drawn.s_min / s_min).powi(2) - 1.0)
+        } else {
+            0.0
         };
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            clippy::cast_precision_loss,
+            reason = "a count of primitives, clamped at 0"
+        )]
+        let predicted = (drawn.count as f64 + spt + delta * stride as f64).max(0.0) as u64;
+        predicted
+    }
+
+    /// The triangles instance `i`'s LoD chain level would have under `policy` at `s_min` for
+    /// `camera` (`previous`: its level last frame, for the hysteresis), as the chain's selection
+    /// picks it (`treelod_runtime::baseline::select`): by the per-level tables, and above their
+    /// heights the finer of the largest height's level and the geometric rule's. `None` where
+    /// the model has no chain, or no per-level tables (the count is then the tables' row), or
+    /// the tree is out of view.
+    fn chain_triangles(
+        &self,
+        i: usize,
+        policy: &Policy,
+        s_min: f32,
+        camera: &treelod_runtime::Camera,
+        frustum: &treelod_runtime::Frustum,
+        previous: Option<treelod_runtime::ChainPick>,
+    ) -> Option<f64> {
+        let instance = self.instances.get(i)?;
+        let model = instance.model as usize;
+        let (lod, representations) = (self.lods.get(model)?, self.representations.get(model)?);
+        let chain = representations.chain.as_ref()?;
+        let choices = chain.choices(policy, |t| representations.holds(t))?;
+        let tau = treelod_runtime::instance_tau(
+            instance.transform,
+            camera,
+            frustum,
+            s_min,
+            lod.cull_sphere(),
+            representations.block_centre,
+        )?;
+        let height = projected_height(lod, instance.transform, camera);
+        let pick = choices.choose(height, previous, || chain.chain.pick(tau));
+        self.level_triangles(i, pick)
+    }
+
+    /// The triangles of LoD chain level `pick` (`None`: the full mesh) of instance `i`'s model.
+    fn level_triangles(&self, i: usize, pick: treelod_runtime::ChainPick) -> Option<f64> {
+        let model = self.instances.get(i)?.model as usize;
+        let chain = self.representations.get(model)?.chain.as_ref()?;
+        let (_, count) = pick.and_then(|l| chain.levels.get(l as usize).copied()).unwrap_or(chain.full);
+        Some(f64::from(count))
+    }
+
+    /// Budget mode's first frame ([`BudgetController::start_within`], spec §10.2): the count of
+    /// the camera's view `camera` were its trees chosen under `policy` and `s_min`, from the
+    /// calibration tables alone: the trees are chosen as [`Self::predict_count`] chooses them,
+    /// and each one in view adds the tables' primitives of its technique at its projected height
+    /// (read at the tables' last height above it, so a near tree counts less than it draws).
+    /// Trees of models without tables add nothing.
+    pub(crate) fn predict_total(&mut self, camera: &treelod_runtime::Camera, policy: Policy, s_min: f32) -> u64 {
+        let cost = spt_cost(s_min);
+        let (chosen, index, stride) = self.choose_again(camera, policy);
+        let mut total = 0.0f64;
+        for (technique, &i) in chosen.iter().zip(&index) {
+            let Some(technique) = *technique else { continue };
+            let instance = &self.instances[i];
+            let model = instance.model as usize;
+            let (Some(Some(calibration)), Some(lod)) = (self.policy.calibrations.get(model), self.lods.get(model))
+            else {
+                continue;
+            };
+            let height = projected_height(lod, instance.transform, camera);
+            if let Some((_, primitives)) = calibration.at(technique, height) {
+                total += cost(technique, primitives);
+            }
+        }
+        #[expect(
+            clippy::cast_possible_truncation,
+            clippy::cast_sign_loss,
+            clippy::cast_precision_loss,
+            reason = "a count of primitives"
+        )]
+        let predicted = (total * stride as f64) as u64;
+        predicted
+    }
+
+    /// The trees of the camera's view `camera` chosen again under `policy` on a copy of the
+    /// policy's state (the same hysteresis): the choices, each one's instance, and the stride
+    /// `k` of the chunks chosen. A forest of more than [`PREDICTED_CHUNKS`] chunks of
+    /// [`CHOOSE_CHUNK`] instances is sampled: every `k`-th chunk, so that at most that many are
+    /// chosen again. The tables made for `policy` are kept.
+    fn choose_again(
+        &mut self,
+        camera: &treelod_runtime::Camera,
+        policy: Policy,
+    ) -> (Vec<Option<Technique>>, Vec<usize>, usize) {
         let technique = self.settings.technique;
         let tables = &mut self.policy;
-        tables.choose_under(&self.representations, next);
+        tables.choose_under(&self.representations, policy);
         let n = self.instances.len();
         let stride = n.div_ceil(CHOOSE_CHUNK).div_ceil(PREDICTED_CHUNKS).max(1);
         let picked: Vec<usize> = (0..n.div_ceil(CHOOSE_CHUNK)).step_by(stride).collect();
@@ -224,37 +384,13 @@ impl Renderer {
             let cameras = std::slice::from_ref(camera);
             choose_instances_in_chunks(&instances, lods, chunks, choices, cameras, technique, state, &mut chosen);
         };
-        if next.occlusion {
+        if policy.occlusion {
             state.with_visible(&mut visible, choose);
         } else {
             state.set_visible(&[]);
             choose(&mut state);
         }
-        let mut delta = 0.0f64;
-        for (then, &i) in chosen.iter().zip(&index) {
-            let Some(then) = *then else { continue };
-            let now = self.drawn_with.get(i).copied().unwrap_or(Technique::FALLBACK);
-            if then == now {
-                continue;
-            }
-            let instance = &self.instances[i];
-            let model = instance.model as usize;
-            let (Some(Some(calibration)), Some(lod)) = (tables.calibrations.get(model), lods.get(model)) else {
-                continue;
-            };
-            let height = projected_height(lod, instance.transform, camera);
-            if let (Some((_, after)), Some((_, before))) = (calibration.at(then, height), calibration.at(now, height)) {
-                delta += cost(then, after) - cost(now, before);
-            }
-        }
-        #[expect(
-            clippy::cast_possible_truncation,
-            clippy::cast_sign_loss,
-            clippy::cast_precision_loss,
-            reason = "a count of primitives, clamped at 0"
-        )]
-        let predicted = (count as f64 + delta * stride as f64).max(0.0) as u64;
-        predicted
+        (chosen, index, stride)
     }
 
     /// Each instance's technique from this frame's assignment (read when the draws are
@@ -282,4 +418,26 @@ impl Renderer {
     pub(crate) fn technique_of(&self, instance: u32) -> Technique {
         self.drawn_with.get(instance as usize).copied().unwrap_or(Technique::FALLBACK)
     }
+}
+
+/// A tree's cost in primitives from the calibration tables' `primitives` for `technique`, at
+/// the steering's `s_min`. The tables hold the point tree's cut at the default `s_min`; the
+/// steering's `s_min` scales it as the cut's elements are areas (measured on the shared willow:
+/// unscaled, twenty trees switching to the point tree at `s_min` 3.4 read 2.4 million
+/// primitives where the frame drew 214,000).
+fn spt_cost(s_min: f32) -> impl Fn(Technique, f32) -> f64 {
+    let calibrated = treelod_runtime::LodSettings::default().s_min;
+    let spt_scale = if s_min > 0.0 { f64::from(calibrated / s_min).powi(2) } else { 1.0 };
+    move |technique, primitives| f64::from(primitives) * if technique == Technique::Spt { spt_scale } else { 1.0 }
+}
+
+/// What a frame drew, as budget mode's look-ahead reads it (`Renderer::predict_count`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Drawn {
+    /// Its count, less the draws of trees leaving a technique in a transition.
+    pub(crate) count: u64,
+    /// The `s_min` it was selected with.
+    pub(crate) s_min: f32,
+    /// The primitives of its point trees.
+    pub(crate) spt: u64,
 }

@@ -15,7 +15,7 @@ use treelod_runtime::{
     TechniqueSettings, Transition, merge_ascending, select_frame, select_techniques,
 };
 
-use crate::assign::PolicyModels;
+use crate::assign::{Drawn, PolicyModels};
 use crate::camera::Camera;
 use crate::draws::{DrawInfo, EVERY_PIXEL, InstanceTransform, RECORD_CHUNK, RecordedDraw, Recording, View, pack_fade};
 use crate::gpu_select::{GpuDraw, GpuQuadDraw, GpuSelection, InstanceDrawGpu, QuadKind, ReadDraws, select_frame_gpu};
@@ -817,7 +817,15 @@ impl Renderer {
     /// new transitions: a frame that never settled. Where the controller steps the target down,
     /// the step's count is predicted before it is drawn (`Renderer::predict_count`), and a step
     /// predicted over [`BudgetController::cliff_count`] is refused
-    /// ([`BudgetController::refuse`]; spec §10.2). The settings themselves are not changed;
+    /// ([`BudgetController::refuse`]; spec §10.2). Frames are predicted before they are drawn
+    /// in two more places: the first frame of budget mode from the calibration tables alone,
+    /// which starts the steering within the budget ([`BudgetController::start_within`]); and a
+    /// frame whose camera moved since the last one, from the last one, raised before it is
+    /// drawn where it is predicted over [`BudgetController::cliff_count`]
+    /// ([`BudgetController::raise_within`]). A prediction counts each LoD chain tree by the
+    /// triangles of the level its selection would pick (near trees above the tables' heights
+    /// pick it by geometric error at `s_min`) and the point trees' cut scaled by `s_min`. The
+    /// settings themselves are not changed;
     /// [`Self::budget_steering`] reads what the controller holds.
     ///
     /// The call runs on a thread of rayon's global pool (the calling thread waits; a call from
@@ -837,21 +845,51 @@ impl Renderer {
     fn prepare_on_pool(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
         let user = self.settings;
         let Some((policy, budget)) = user.policy.and_then(|p| p.budget.map(|n| (p, n))) else {
-            self.policy.budget = None;
+            (self.policy.budget, self.policy.last_frame) = (None, None);
             return self.prepare_frame(device, queue, camera);
         };
-        let controller =
-            self.policy.budget.get_or_insert_with(|| BudgetController::for_policy(budget, user.s_min, policy.target()));
+        let mut controller = (self.policy.budget.take())
+            .unwrap_or_else(|| BudgetController::for_policy(budget, user.s_min, policy.target()));
         controller.target_primitives = budget;
-        let (s_min, target) = (controller.s_min(), controller.target());
-        self.settings.s_min = s_min;
+        let clock = std::time::Instant::now();
+        let selection = camera.selection();
+        let predict = |renderer: &mut Self, s_min: f32, target: f32, drawn: Option<Drawn>| {
+            let policy = Policy { target, ..policy };
+            match drawn {
+                None => renderer.predict_total(&selection, policy, s_min),
+                Some(drawn) => renderer.predict_count(&selection, policy, s_min, drawn),
+            }
+        };
+        let mut predicted = false;
+        if controller.awaits_first_frame() {
+            // The first frame is predicted before it is drawn, and starts within the budget.
+            controller.start_within(|s_min, target| predict(self, s_min, target, None));
+            predicted = true;
+        } else if let Some((view_proj, drawn)) = self.policy.last_frame
+            && view_proj != selection.view_proj
+        {
+            // The camera moved: the frame is predicted from the last one before it is drawn,
+            // and raised where it would meet a cliff.
+            let (s_min, target) = (controller.s_min(), controller.target());
+            if predict(self, s_min, target, Some(drawn)) > controller.cliff_count() {
+                controller.raise_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
+            }
+            predicted = true;
+        }
+        let started = predicted.then(|| clock.elapsed());
+        let (drawn_s_min, target) = (controller.s_min(), controller.target());
+        self.policy.budget = Some(controller);
+        self.settings.s_min = drawn_s_min;
         if user.s_min > 0.0 {
-            self.settings.s_max = user.s_max * s_min / user.s_min;
+            self.settings.s_max = user.s_max * drawn_s_min / user.s_min;
         }
         self.settings.policy = Some(Policy { target, ..policy });
         let stats = self.prepare_frame(device, queue, camera);
+        self.phases.assign += started.unwrap_or_default();
         self.settings = user;
         let count = stats.primitives().saturating_sub(stats.leaving);
+        let drawn = Drawn { count, s_min: drawn_s_min, spt: stats.by_technique[Technique::Spt] };
+        self.policy.last_frame = Some((selection.view_proj, drawn));
         let Some(controller) = &mut self.policy.budget else { return stats };
         controller.update_policy(count);
         if controller.steps_down_from(target) {
@@ -859,7 +897,7 @@ impl Renderer {
             let started = std::time::Instant::now();
             let next = Policy { target: controller.target(), ..policy };
             let s_min = controller.s_min();
-            let predicted = self.predict_count(&camera.selection(), next, s_min, count);
+            let predicted = self.predict_count(&selection, next, s_min, drawn);
             if let Some(controller) = &mut self.policy.budget
                 && predicted > controller.cliff_count()
             {

@@ -270,6 +270,34 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
     }
 }
 
+/// Budget mode predicts its first frame before drawing it (spec §10.2): a forest the default
+/// target draws at four times the budget starts near the budget, not at four times it, and the
+/// steering goes on from there.
+#[test]
+fn budget_mode_predicts_its_first_frame_and_starts_within_the_budget() {
+    let gpu = gpu();
+    let container = calibrated_demo_without_octahedral();
+    let lod = ModelLod::from_container(&container);
+    let centre = lod.centre();
+    let positions: Vec<Vec3> = (0..6)
+        .flat_map(|row| (0..6).map(move |col| (row, col)))
+        .map(|(row, col)| {
+            vec3((col as f32 - 2.5) * 6.0, -centre.y, -8.0 - 9.0 * row as f32 * (1.0 + 0.3 * row as f32))
+                - vec3(centre.x, 0.0, centre.z)
+        })
+        .collect();
+    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, -0.1, -1.0), 0.9, 320, 240);
+    let mut free = forest(&gpu, &container, Settings::default(), &positions);
+    let unbudgeted = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+    let budget = unbudgeted / 4;
+    let policy = Policy { budget: Some(budget), ..Policy::default() };
+    let mut renderer = forest(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
+    let first = renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+    assert!(first <= 2 * budget, "first frame {first} against a budget of {budget} ({unbudgeted} unbudgeted)");
+    let counts: Vec<u64> = (0..40).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
+    assert!(counts[20..].iter().all(|&c| c <= budget * 21 / 20), "budget {budget}: {first}, {counts:?}");
+}
+
 /// Budget mode looks before it steps the target down (spec §10.2): trees all at one size on
 /// screen switch technique at one target, and where the steering would step down to a target at
 /// which they switch to a representation of many more primitives, the step is refused undrawn.

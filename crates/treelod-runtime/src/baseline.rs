@@ -219,15 +219,20 @@ pub struct ChainRanges {
     pub(crate) choices: ChoicesCache,
 }
 
-/// A chain's levels by image error under the policy they were last made for: [`select`] runs
-/// every frame and for every shadow cascade, and the table (a few dozen steps of
-/// [`Calibration::chain_level`]) changes only with the policy. A cache, not state: two chains
-/// compare equal whatever it holds.
+/// A chain's levels by image error under the last [`CACHED_POLICIES`] policies they were made
+/// for, the most recent last: [`select`] runs every frame and for every shadow cascade, and the
+/// table (a few dozen steps of [`Calibration::chain_level`]) changes only with the policy; budget
+/// mode's predictions ask for the targets next to the one drawn, and back. A cache, not state:
+/// two chains compare equal whatever it holds.
 #[derive(Default)]
-pub(crate) struct ChoicesCache(Mutex<Option<(Policy, Option<Arc<ChainChoices>>)>>);
+pub(crate) struct ChoicesCache(Mutex<Vec<(Policy, Option<Arc<ChainChoices>>)>>);
+
+/// How many policies' tables of choices a chain keeps ([`ChainRanges::choices`]; the renderer's
+/// tables of representations keep as many).
+pub const CACHED_POLICIES: usize = 8;
 
 impl ChoicesCache {
-    fn lock(&self) -> std::sync::MutexGuard<'_, Option<(Policy, Option<Arc<ChainChoices>>)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(Policy, Option<Arc<ChainChoices>>)>> {
         self.0.lock().unwrap_or_else(PoisonError::into_inner)
     }
 }
@@ -260,19 +265,23 @@ impl ChainRanges {
 
     /// The chain's levels by image error under `policy` ([`ChainChoices::new`] over the
     /// techniques `usable` accepts, which must not change between calls: the model's), made on
-    /// the first call with that policy and kept until a call with another; `None` without
-    /// per-level tables.
+    /// the first call with that policy and kept while it is among the last [`CACHED_POLICIES`]
+    /// asked for; `None` without per-level tables.
     pub fn choices(&self, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Option<Arc<ChainChoices>> {
         let calibration = self.calibration.as_ref()?;
         let mut cache = self.choices.lock();
-        match &*cache {
-            Some((made_for, choices)) if made_for == policy => choices.clone(),
-            _ => {
-                let choices = ChainChoices::new(calibration, policy, usable).map(Arc::new);
-                *cache = Some((*policy, choices.clone()));
-                choices
-            }
+        if let Some(at) = cache.iter().rposition(|(made_for, _)| made_for == policy) {
+            let entry = cache.remove(at);
+            let choices = entry.1.clone();
+            cache.push(entry);
+            return choices;
         }
+        let choices = ChainChoices::new(calibration, policy, usable).map(Arc::new);
+        if cache.len() >= CACHED_POLICIES {
+            cache.remove(0);
+        }
+        cache.push((*policy, choices.clone()));
+        choices
     }
 }
 
@@ -648,7 +657,8 @@ mod tests {
     }
 
     /// The chain's levels by image error are made once per policy and kept: the next frame
-    /// (and each shadow cascade) reads the same table, another policy makes its own.
+    /// (and each shadow cascade) reads the same table, another policy makes its own, and the
+    /// last `CACHED_POLICIES` policies' tables are kept.
     #[test]
     fn the_chain_s_levels_by_image_error_are_made_once_per_policy() {
         let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
@@ -666,6 +676,17 @@ mod tests {
         assert_eq!(*other, ChainChoices::new(calibration, &loose, all).expect("levels"));
         assert_ne!(other.steps(), first.steps(), "a looser target picks coarser levels somewhere");
         assert!(chain.clone().choices(&loose, all).is_some_and(|c| !Arc::ptr_eq(&c, &other)), "a clone makes its own");
+        // The first policy's table is still kept, until `CACHED_POLICIES` others were asked for
+        // after it (budget mode's steering goes back and forth between a few targets).
+        assert!(Arc::ptr_eq(&first, &chain.choices(&policy, all).expect("levels")), "kept beside another");
+        for i in 1..CACHED_POLICIES {
+            chain.choices(&Policy { target: 0.1 + 0.01 * i as f32, ..policy }, all);
+        }
+        assert!(Arc::ptr_eq(&first, &chain.choices(&policy, all).expect("levels")), "kept beside 7 others");
+        for i in 1..=CACHED_POLICIES {
+            chain.choices(&Policy { target: 0.011 * i as f32, ..policy }, all);
+        }
+        assert!(!Arc::ptr_eq(&first, &chain.choices(&policy, all).expect("levels")), "dropped after 8 others");
     }
 
     /// The shared oak (about 76 pixels high at 8 bounding radii in `eval`'s default 640×480

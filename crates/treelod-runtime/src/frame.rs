@@ -1665,6 +1665,7 @@ impl BudgetController {
         let cliff_limit = self.cliff_count() as f64;
         let steering = &mut self.steering;
         let p = steering.pressure;
+        steering.drawn = Some(p);
         // Bounds are stale once the scene changes under them: the count fell while the pressure
         // held (compared with the first frame at this pressure, so that a slow drift counts
         // too), or the frame contradicts one of them. Only a fall releases a hold under the
@@ -1746,23 +1747,112 @@ impl BudgetController {
                 }
             }
         }
-        steering.drawn = Some(p);
         self.set_pressure(next)
+    }
+
+    /// Whether no frame has been given to [`Self::update_policy`] yet: the steering is where it
+    /// started, and [`Self::start_within`] may move it before the first frame is drawn.
+    #[must_use]
+    pub fn awaits_first_frame(&self) -> bool {
+        self.steering.drawn.is_none()
+    }
+
+    /// Budget mode's first frame, predicted before it is drawn: a host that can predict the
+    /// count of a frame selected with a given `s_min` and policy target (`predict(s_min,
+    /// target)`, from the calibration tables) starts the steering at the least pressure whose
+    /// predicted count is within the budget, rather than drawing its first frames at the
+    /// starting target and stepping down by at most [`Self::max_step`] a frame (1,000 trees of
+    /// the shared maple, `bench --budget 100000`, drew their first three frames at 15 to 22 times
+    /// the budget, the willow's their first four at 8 to 29 times; started within it, the first
+    /// frames read 100,000 and 118,000 on the maple's two paths, and the willow's 1,000). The
+    /// pressure is found as [`Self::raise_within`] finds it (to within half a largest step, the
+    /// steering's own steps down closing the rest). The predictions mark no bound: the
+    /// frames drawn then steer as from any start. Returns the `s_min` and target to draw with;
+    /// once a frame has been given ([`Self::awaits_first_frame`]), changes nothing and predicts
+    /// nothing.
+    pub fn start_within(&mut self, mut predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
+        if !self.awaits_first_frame() || predict(self.s_min, self.target) <= self.target_primitives {
+            return (self.s_min, self.target);
+        }
+        self.search_up(predict)
+    }
+
+    /// Budget mode between frames: a host that predicts the next frame at the steering it is
+    /// about to draw with (the camera moved since the last frame: near trees above the
+    /// calibration tables' heights, whose LoD chain level or point tree cut follows `s_min`,
+    /// can take a frame from under the budget to many times it) and finds it over
+    /// [`Self::cliff_count`] raises the steering here before drawing it: the pressure predicted
+    /// over counts as over the budget (as a refused step does, [`Self::refuse`]), and the
+    /// steering moves to a pressure above it whose predicted count (`predict(s_min, target)`) is
+    /// within the budget: the least to within half a largest step ([`Self::max_step`]), or the
+    /// greatest that still acts if that one is predicted over too. The search gallops up by a
+    /// largest step, then twice that, four times…, then halves the bracket it found: a frame a
+    /// step or two over costs two or three predictions, a frame 20 times over about six (each
+    /// prediction chooses the trees again and, at a new target, makes the models' tables of
+    /// choices again). Returns the `s_min` and target to draw with.
+    pub fn raise_within(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
+        let steering = &mut self.steering;
+        steering.over = Some(steering.over.map_or(steering.pressure, |o| o.max(steering.pressure)));
+        self.search_up(predict)
+    }
+
+    /// [`Self::raise_within`]'s search from the current pressure (predicted over the budget),
+    /// without marking it: the steering moves where it ends.
+    fn search_up(&mut self, mut predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
+        let mut over = self.steering.pressure;
+        let (_, highest) = self.pressure_range();
+        let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
+        let resolution = (0.5 * step).max(PRESSURE_RESOLUTION);
+        let mut reach = step;
+        let under = loop {
+            let next = (over + reach).min(highest);
+            let (s_min, target) = self.set_pressure(next);
+            if predict(s_min, target) <= self.target_primitives {
+                break next;
+            }
+            if next >= highest {
+                return self.set_pressure(highest);
+            }
+            over = next;
+            reach *= 2.0;
+        };
+        let mut under = under;
+        while under - over > resolution {
+            let mid = 0.5 * (over + under);
+            let (s_min, target) = self.set_pressure(mid);
+            if predict(s_min, target) <= self.target_primitives {
+                under = mid;
+            } else {
+                over = mid;
+            }
+        }
+        self.set_pressure(under)
+    }
+
+    /// The least and the greatest pressure that still act: past both clamps (`s_min`'s and the
+    /// target's) a pressure changes nothing.
+    fn pressure_range(&self) -> (f64, f64) {
+        let (s0, t0) = (f64::from(self.steering.start.0.max(f32::MIN_POSITIVE)), f64::from(self.steering.start.1));
+        let t_floor = f64::from(self.target_floor.max(f32::MIN_POSITIVE));
+        let t_ceiling = f64::from(self.target_ceiling).max(t_floor);
+        let s_floor = f64::from(self.s_min_floor.max(f32::MIN_POSITIVE));
+        let s_ceiling = f64::from(self.s_min_ceiling).max(s_floor);
+        let lowest = (s_floor / s0).ln().min(0.5 * (t_floor / t0).ln());
+        let highest = (s_ceiling / s0).ln().max(0.5 * (t_ceiling / t0).ln());
+        (lowest.min(highest), highest)
     }
 
     /// Moves the steering to pressure `next` (clamped to where it still acts) and sets `s_min`
     /// and the target from it.
     fn set_pressure(&mut self, next: f64) -> (f32, f32) {
+        let (lowest, highest) = self.pressure_range();
         let steering = &mut self.steering;
         let (s0, t0) = (f64::from(steering.start.0.max(f32::MIN_POSITIVE)), f64::from(steering.start.1));
         let t_floor = f64::from(self.target_floor.max(f32::MIN_POSITIVE));
         let t_ceiling = f64::from(self.target_ceiling).max(t_floor);
         let s_floor = f64::from(self.s_min_floor.max(f32::MIN_POSITIVE));
         let s_ceiling = f64::from(self.s_min_ceiling).max(s_floor);
-        // Past both clamps a pressure changes nothing: keep it where it still acts.
-        let lowest = (s_floor / s0).ln().min(0.5 * (t_floor / t0).ln());
-        let highest = (s_ceiling / s0).ln().max(0.5 * (t_ceiling / t0).ln());
-        steering.pressure = next.clamp(lowest.min(highest), highest);
+        steering.pressure = next.clamp(lowest, highest);
         let p = steering.pressure;
         #[expect(clippy::cast_possible_truncation, reason = "s_min in pixels and the target in [0, 1]")]
         {
@@ -2248,6 +2338,79 @@ mod tests {
         // Without a frame given yet, refusing changes nothing.
         let mut fresh = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
         assert_eq!(fresh.refuse(), (1.0, Policy::DEFAULT_TARGET));
+    }
+
+    #[test]
+    fn policy_budget_starts_at_the_least_pressure_predicted_within_the_budget() {
+        // A scene whose count falls as the target rises, 20 times the budget at the start.
+        let scene = |_: f32, t: f32| (2_000_000.0 * Policy::DEFAULT_TARGET / t) as u64;
+        let mut controller = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
+        assert!(controller.awaits_first_frame());
+        let mut predictions = 0;
+        let (_, t) = controller.start_within(|s, t| {
+            predictions += 1;
+            scene(s, t)
+        });
+        assert!(scene(0.0, t) <= 100_000, "within the budget: {t}");
+        // The least such pressure to within half a largest step (×1.25² in the target).
+        assert!(scene(0.0, t / 1.25) > 100_000, "no higher than it needs: {t}");
+        assert!(predictions <= 8, "{predictions} predictions");
+        // The frames drawn from there close in on the budget, and hold within its dead band.
+        let counts: Vec<u64> = (0..30)
+            .map(|_| {
+                let count = scene(controller.s_min(), controller.target());
+                controller.update_policy(count);
+                count
+            })
+            .collect();
+        assert!(counts.iter().all(|&c| c <= 100_000), "{counts:?}");
+        assert!(counts[10..].iter().all(|&c| c >= 90_000), "{counts:?}");
+        assert!(!controller.awaits_first_frame());
+        // Once a frame is given, nothing is predicted and nothing moves.
+        let before = (controller.s_min(), controller.target());
+        assert_eq!(controller.start_within(|_, _| panic!("predicted after the first frame")), before);
+
+        // A scene within the budget at the start: one prediction, no move.
+        let mut controller = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
+        let mut predictions = 0;
+        let start = controller.start_within(|_, _| {
+            predictions += 1;
+            50_000
+        });
+        assert_eq!((start, predictions), ((1.0, Policy::DEFAULT_TARGET), 1));
+        // A scene over the budget however coarse: the coarsest steering.
+        let mut controller = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
+        let (s, t) = controller.start_within(|_, _| 1_000_000);
+        assert_eq!((s, t), (controller.s_min_ceiling, controller.target_ceiling), "the coarsest");
+    }
+
+    #[test]
+    fn policy_budget_raises_a_frame_predicted_over_a_cliff_before_it_is_drawn() {
+        // Settled on a scene, the camera moves to one that costs 3 times as much at every
+        // target (near trees' chain levels follow `s_min`).
+        let scene = |t: f32, scale: f64| (scale * 2_000_000.0 * f64::from(Policy::DEFAULT_TARGET / t)) as u64;
+        let mut controller = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
+        controller.start_within(|_, t| scene(t, 1.0));
+        for _ in 0..30 {
+            controller.update_policy(scene(controller.target(), 1.0));
+        }
+        let settled = controller.target();
+        assert!(scene(settled, 3.0) > controller.cliff_count(), "the move meets a cliff");
+        let mut predictions = 0;
+        let (_, t) = controller.raise_within(|_, t| {
+            predictions += 1;
+            scene(t, 3.0)
+        });
+        assert!(scene(t, 3.0) <= 100_000, "raised within the budget: {settled} → {t}");
+        assert!(scene(t / 1.25, 3.0) > 100_000, "no higher than it needs: {t}");
+        assert!(predictions <= 6, "a step or two over costs few predictions: {predictions}");
+        // The frames drawn from there close in on the budget without crossing the cliff, nor
+        // stepping back down to the pressure predicted over (it counts as over).
+        for _ in 0..30 {
+            let t = controller.target();
+            assert!(t > settled && scene(t, 3.0) <= controller.cliff_count(), "{t} after {settled}");
+            controller.update_policy(scene(t, 3.0));
+        }
     }
 
     #[test]

@@ -33,8 +33,8 @@ pub mod technique;
 pub mod texels;
 
 pub use baseline::{
-    BillboardKind, BillboardRanges, Billboards, ChainLevel, ChainRanges, ChainState, LodChain, chosen_in_view,
-    instance_tau,
+    BillboardKind, BillboardRanges, Billboards, CACHED_POLICIES, ChainLevel, ChainRanges, ChainState, LodChain,
+    chosen_in_view, instance_tau,
 };
 pub use draws::{
     Assignment, PrefixDraw, QuadDraw, Representations, Scene, TechniqueSettings, TreeDraws, TriangleDraw,
