@@ -43,6 +43,9 @@ pub(crate) struct PolicyModels {
     /// Budget mode ([`Policy::budget`]): what steers the target and `s_min` from frame to frame;
     /// made when budget mode starts, dropped when it ends.
     pub(crate) budget: Option<BudgetController>,
+    /// Budget mode's sample of a large forest ([`Sample`]), made when a prediction first needs
+    /// it and kept until the instances or the models change.
+    pub(crate) sample: Option<Sample>,
     /// Budget mode: the last frame's camera (its view-projection) and what it drew, from which
     /// the next frame is predicted where the camera moved (`Renderer::prepare`).
     pub(crate) last_frame: Option<(glam::Mat4, Drawn)>,
@@ -58,6 +61,7 @@ impl PolicyModels {
     pub(crate) fn models_changed(&mut self) {
         self.made_for = None;
         self.recent.clear();
+        self.sample = None;
     }
 
     /// Makes each model's choices under `policy` among what its representations hold
@@ -202,7 +206,9 @@ impl Renderer {
     /// counted `k` times where every `k`-th chunk was chosen):
     /// - a tree whose technique changes: the calibration tables' primitives of the new technique
     ///   at its projected height less those of the one it is drawn with now, a LoD chain's
-    ///   counted as the triangles of its level ([`Self::chain_triangles`]);
+    ///   counted as the triangles of its level ([`Self::chain_triangles`]); a tree coming into
+    ///   the view adds its new cost, one leaving it takes away what it costs now (where the
+    ///   camera moved, `Renderer::prepare`);
     /// - a tree drawn with the LoD chain before and after: the triangles of the level it would
     ///   draw less those of the level it drew (near trees above the tables' heights pick their
     ///   level by the chain's geometric error at `s_min`, and a step down can take a few of
@@ -224,11 +230,15 @@ impl Renderer {
         let (chosen, index, stride) = self.choose_again(camera, next);
         let frustum = treelod_runtime::Frustum::from_view_proj(camera.view_proj);
         let mut delta = 0.0f64;
-        for (then, &i) in chosen.iter().zip(&index) {
-            let Some(then) = *then else { continue };
-            let now = self.drawn_with.get(i).copied().unwrap_or(Technique::FALLBACK);
+        for (&then, &i) in chosen.iter().zip(&index) {
+            let now = self.assigned.get(i).copied().unwrap_or(false).then(|| self.drawn_with[i]);
+            if then.is_none() && now.is_none() {
+                continue;
+            }
             let last_level = self.chain_levels.get(i).copied().flatten();
-            if then == now {
+            if let (Some(then), Some(now)) = (then, now)
+                && then == now
+            {
                 if then == Technique::LodChain
                     && let Some(last) = last_level
                     && let Some(after) = self.chain_triangles(i, &next, s_min, camera, &frustum, Some(last))
@@ -244,21 +254,29 @@ impl Renderer {
                 continue;
             };
             let height = projected_height(lod, instance.transform, camera);
-            let (Some((_, after)), Some((_, before))) = (calibration.at(then, height), calibration.at(now, height))
-            else {
-                continue;
-            };
-            let after = if then == Technique::LodChain {
-                self.chain_triangles(i, &next, s_min, camera, &frustum, None).unwrap_or_else(|| cost(then, after))
-            } else {
-                cost(then, after)
-            };
-            let before = match last_level {
-                Some(level) if now == Technique::LodChain => self.level_triangles(i, level),
-                _ => None,
+            // What the tree costs under `next` (nothing out of view) and what it cost this frame
+            // (nothing where it was not drawn: it came into view).
+            let after = then.map_or(Some(0.0), |then| {
+                let (_, primitives) = calibration.at(then, height)?;
+                Some(if then == Technique::LodChain {
+                    self.chain_triangles(i, &next, s_min, camera, &frustum, None)
+                        .unwrap_or_else(|| cost(then, primitives))
+                } else {
+                    cost(then, primitives)
+                })
+            });
+            let before = now.map_or(Some(0.0), |now| {
+                let (_, primitives) = calibration.at(now, height)?;
+                Some(match last_level {
+                    Some(level) if now == Technique::LodChain => {
+                        self.level_triangles(i, level).unwrap_or_else(|| cost(now, primitives))
+                    }
+                    _ => cost(now, primitives),
+                })
+            });
+            if let (Some(after), Some(before)) = (after, before) {
+                delta += after - before;
             }
-            .unwrap_or_else(|| cost(now, before));
-            delta += after - before;
         }
         // The point trees that keep their technique draw a cut of the new `s_min`.
         let spt = if s_min > 0.0 && drawn.s_min > 0.0 {
@@ -364,25 +382,20 @@ impl Renderer {
         let tables = &mut self.policy;
         tables.choose_under(&self.representations, policy);
         let n = self.instances.len();
-        let stride = n.div_ceil(CHOOSE_CHUNK).div_ceil(PREDICTED_CHUNKS).max(1);
-        let picked: Vec<usize> = (0..n.div_ceil(CHOOSE_CHUNK)).step_by(stride).collect();
-        // The sampled instances, and each one's index in the forest.
-        let index: Vec<usize> = picked.iter().flat_map(|&c| chunk_range(c, n)).collect();
-        let (instances, bounds, mut state) = if stride == 1 {
-            (std::borrow::Cow::Borrowed(&self.instances[..]), None, tables.state.clone())
+        let sample = tables.sample.get_or_insert_with(|| Sample::new(&self.instances, &self.lods, &tables.chunks));
+        let (index, stride) = (sample.index.clone(), sample.stride);
+        let (instances, chunks, mut state) = if stride == 1 {
+            (&self.instances[..], &tables.chunks, tables.state.clone())
         } else {
-            let sampled: Vec<Instance> = index.iter().map(|&i| self.instances[i]).collect();
-            let bounds = ChunkBounds::new(&sampled, &self.lods);
-            (std::borrow::Cow::Owned(sampled), Some(bounds), tables.state.sampled(&picked, n))
+            (&sample.instances[..], &sample.bounds, tables.state.sampled(&sample.picked, n))
         };
         let mut visible: Vec<f32> =
             index.iter().map(|&i| self.visible_fraction.get(i).copied().unwrap_or(1.0)).collect();
         let mut chosen = Vec::new();
         let (lods, choices) = (&self.lods, &tables.choices);
-        let chunks = bounds.as_ref().unwrap_or(&tables.chunks);
         let mut choose = |state: &mut PolicyState| {
             let cameras = std::slice::from_ref(camera);
-            choose_instances_in_chunks(&instances, lods, chunks, choices, cameras, technique, state, &mut chosen);
+            choose_instances_in_chunks(instances, lods, chunks, choices, cameras, technique, state, &mut chosen);
         };
         if policy.occlusion {
             state.with_visible(&mut visible, choose);
@@ -398,10 +411,14 @@ impl Renderer {
     fn note_drawn_with(&mut self) {
         self.drawn_with.clear();
         self.drawn_with.resize(self.instances.len(), Technique::FALLBACK);
+        self.assigned.clear();
+        self.assigned.resize(self.instances.len(), false);
         for technique in Technique::ALL {
             for &i in &self.assignment[technique] {
-                if let Some(slot) = self.drawn_with.get_mut(i as usize) {
-                    *slot = technique;
+                if let (Some(slot), Some(listed)) =
+                    (self.drawn_with.get_mut(i as usize), self.assigned.get_mut(i as usize))
+                {
+                    (*slot, *listed) = (technique, true);
                 }
             }
         }
@@ -440,4 +457,37 @@ pub(crate) struct Drawn {
     pub(crate) s_min: f32,
     /// The primitives of its point trees.
     pub(crate) spt: u64,
+}
+
+/// Budget mode's sample of a forest of more than [`PREDICTED_CHUNKS`] chunks of
+/// [`CHOOSE_CHUNK`] instances: every `stride`-th chunk, which its predictions choose again
+/// (`Renderer::predict_count`). Kept from frame to frame: copying the instances and their bounds
+/// every frame took 1.7 ms for 10^6 trees on 2 cores, most of it faulting in the fresh pages.
+pub(crate) struct Sample {
+    /// Every how many chunks one is sampled (1: every instance, nothing copied).
+    stride: usize,
+    /// The sampled chunks, ascending.
+    picked: Vec<usize>,
+    /// Each sampled instance's index in the forest.
+    index: Vec<usize>,
+    /// The sampled instances, laid end to end (empty with a stride of 1).
+    instances: Vec<Instance>,
+    /// Their chunks' bounds (empty with a stride of 1).
+    bounds: ChunkBounds,
+}
+
+impl Sample {
+    /// The sample of `instances` drawing `lods`, whose chunks' bounds are `chunks`.
+    fn new(instances: &[Instance], lods: &[treelod_runtime::ModelLod], chunks: &ChunkBounds) -> Self {
+        let n = instances.len();
+        let stride = n.div_ceil(CHOOSE_CHUNK).div_ceil(PREDICTED_CHUNKS).max(1);
+        let picked: Vec<usize> = (0..n.div_ceil(CHOOSE_CHUNK)).step_by(stride).collect();
+        let index: Vec<usize> = picked.iter().flat_map(|&c| chunk_range(c, n)).collect();
+        if stride == 1 {
+            return Self { stride, picked, index, instances: Vec::new(), bounds: ChunkBounds::default() };
+        }
+        let sampled: Vec<Instance> = index.iter().map(|&i| instances[i]).collect();
+        let bounds = chunks.sampled(&picked, n).unwrap_or_else(|| ChunkBounds::new(&sampled, lods));
+        Self { stride, picked, index, instances: sampled, bounds }
+    }
 }

@@ -194,6 +194,9 @@ pub struct Renderer {
     /// Per instance, the technique it is drawn with this frame (this frame's assignment), for
     /// [`DebugView::Techniques`] and [`FrameStats::by_technique`].
     pub(crate) drawn_with: Vec<Technique>,
+    /// Per instance, whether this frame's assignment lists it (with a policy: in the camera's
+    /// view), which [`Self::drawn_with`] alone does not tell from the point tree.
+    pub(crate) assigned: Vec<bool>,
     /// Scratch: the instance indices the point tree selects in a view.
     spt_list: Vec<u32>,
     /// The occlusion measurement, and the trees to measure after this frame.
@@ -422,6 +425,7 @@ impl Renderer {
             representations: Vec::new(),
             policy: PolicyModels::default(),
             drawn_with: Vec::new(),
+            assigned: Vec::new(),
             instances: Vec::new(),
             model_layout,
             group_layouts,
@@ -703,6 +707,7 @@ impl Renderer {
             self.policy.cascade_states.iter_mut().for_each(PolicyState::reset);
         }
         self.policy.chunks = treelod_runtime::ChunkBounds::new(&self.instances, &self.lods);
+        self.policy.sample = None;
         // The union of the instances' transformed blocks (their container's bounds).
         let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
         for instance in &self.instances {

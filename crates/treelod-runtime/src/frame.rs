@@ -1764,7 +1764,7 @@ impl BudgetController {
     /// starting target and stepping down by at most [`Self::max_step`] a frame (1,000 trees of
     /// the shared maple, `bench --budget 100000`, drew their first three frames at 15 to 22 times
     /// the budget, the willow's their first four at 8 to 29 times; started within it, the first
-    /// frames read 100,000 and 118,000 on the maple's two paths, and the willow's 1,000). The
+    /// frames read 99,400 and 26,900 on the maple's two paths, and the willow's 1,000). The
     /// pressure is found as [`Self::raise_within`] finds it (to within half a largest step, the
     /// steering's own steps down closing the rest). The predictions mark no bound: the
     /// frames drawn then steer as from any start. Returns the `s_min` and target to draw with;

@@ -2293,6 +2293,25 @@ impl ChunkBounds {
             .collect();
         Self { spheres, placements, instances: instances.len() }
     }
+
+    /// The bounds of the instances of chunks `chunks` (ascending, each at most once) laid end to
+    /// end, as [`Self::new`] makes them of those instances, copied rather than computed again
+    /// (budget mode's look-ahead samples a large forest's chunks every frame: computing the
+    /// placements of 16 chunks of 10^6 trees took 2 ms on 2 cores). `None` where these bounds
+    /// were not made of `instances` instances, or a chunk is not one of theirs.
+    #[must_use]
+    pub fn sampled(&self, chunks: &[usize], instances: usize) -> Option<Self> {
+        if self.instances != instances {
+            return None;
+        }
+        let mut placements = Vec::new();
+        let mut spheres = Vec::with_capacity(chunks.len());
+        for &c in chunks {
+            spheres.push(*self.spheres.get(c)?);
+            placements.extend_from_slice(self.placements.get(chunk_range(c, self.instances))?);
+        }
+        Some(Self { spheres, instances: placements.len(), placements })
+    }
 }
 
 /// [`choose_instances_coarsest`], culling first each chunk of [`CHOOSE_CHUNK`] instances whose
@@ -3994,6 +4013,11 @@ mod tests {
         assert_eq!(sampled_transitions, transitions);
         assert!(transitions.iter().any(Option::is_some), "trees in a transition were sampled");
         assert!(whole.iter().flatten().count() > 100, "trees in view were sampled: {whole:?}");
+        // The whole forest's bounds sampled are the sampled instances' bounds.
+        let bounds = ChunkBounds::new(&instances, &lods);
+        assert_eq!(bounds.sampled(&picked, n), Some(ChunkBounds::new(&sampled_instances, &lods)));
+        assert_eq!(bounds.sampled(&picked, n - 1), None, "made of other instances");
+        assert_eq!(bounds.sampled(&[6], n), None, "no such chunk");
     }
 
     /// The choices of a frame, made one instance at a time with [`projected_height`] and
