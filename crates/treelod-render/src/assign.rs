@@ -247,13 +247,7 @@ impl Renderer {
                 }
                 continue;
             }
-            let instance = &self.instances[i];
-            let model = instance.model as usize;
-            let (Some(Some(calibration)), Some(lod)) = (self.policy.calibrations.get(model), self.lods.get(model))
-            else {
-                continue;
-            };
-            let height = projected_height(lod, instance.transform, camera);
+            let Some((calibration, height)) = self.calibrated_height(i, camera) else { continue };
             // What the tree costs under `next` (nothing out of view) and what it cost this frame
             // (nothing where it was not drawn: it came into view).
             let after = then.map_or(Some(0.0), |then| {
@@ -292,6 +286,15 @@ impl Renderer {
         )]
         let predicted = (drawn.count as f64 + spt + delta * stride as f64).max(0.0) as u64;
         predicted
+    }
+
+    /// Instance `i`'s model's calibration tables and its projected height for `camera`, where
+    /// the model has tables.
+    fn calibrated_height(&self, i: usize, camera: &treelod_runtime::Camera) -> Option<(&Calibration, f32)> {
+        let instance = self.instances.get(i)?;
+        let model = instance.model as usize;
+        let calibration = self.policy.calibrations.get(model)?.as_ref()?;
+        Some((calibration, projected_height(self.lods.get(model)?, instance.transform, camera)))
     }
 
     /// The triangles instance `i`'s LoD chain level would have under `policy` at `s_min` for
@@ -347,13 +350,7 @@ impl Renderer {
         let mut total = 0.0f64;
         for (technique, &i) in chosen.iter().zip(&index) {
             let Some(technique) = *technique else { continue };
-            let instance = &self.instances[i];
-            let model = instance.model as usize;
-            let (Some(Some(calibration)), Some(lod)) = (self.policy.calibrations.get(model), self.lods.get(model))
-            else {
-                continue;
-            };
-            let height = projected_height(lod, instance.transform, camera);
+            let Some((calibration, height)) = self.calibrated_height(i, camera) else { continue };
             if let Some((_, primitives)) = calibration.at(technique, height) {
                 total += cost(technique, primitives);
             }

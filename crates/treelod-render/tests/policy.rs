@@ -226,21 +226,24 @@ fn hysteresis_holds_a_tree_at_a_boundary_until_it_moves_past_it() {
     }
 }
 
-#[test]
-fn budget_mode_steers_the_frame_to_the_primitive_count() {
-    let gpu = gpu();
-    let container = calibrated_demo_without_octahedral();
-    let lod = ModelLod::from_container(&container);
+/// A field of 36 trees of `lod` from near to far in front of the camera, and the camera.
+fn field_of_trees(lod: &ModelLod) -> (Vec<Vec3>, Camera) {
     let centre = lod.centre();
-    // A field of trees from near to far in front of the camera.
-    let positions: Vec<Vec3> = (0..6)
+    let positions = (0..6)
         .flat_map(|row| (0..6).map(move |col| (row, col)))
         .map(|(row, col)| {
             vec3((col as f32 - 2.5) * 6.0, -centre.y, -8.0 - 9.0 * row as f32 * (1.0 + 0.3 * row as f32))
                 - vec3(centre.x, 0.0, centre.z)
         })
         .collect();
-    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, -0.1, -1.0), 0.9, 320, 240);
+    (positions, Camera::look_at(Vec3::ZERO, vec3(0.0, -0.1, -1.0), 0.9, 320, 240))
+}
+
+#[test]
+fn budget_mode_steers_the_frame_to_the_primitive_count() {
+    let gpu = gpu();
+    let container = calibrated_demo_without_octahedral();
+    let (positions, camera) = field_of_trees(&ModelLod::from_container(&container));
     let mut free = forest(&gpu, &container, Settings::default(), &positions);
     let unbudgeted = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
     assert!(free.budget_steering().is_none(), "no budget, no steering");
@@ -277,16 +280,7 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
 fn budget_mode_predicts_its_first_frame_and_starts_within_the_budget() {
     let gpu = gpu();
     let container = calibrated_demo_without_octahedral();
-    let lod = ModelLod::from_container(&container);
-    let centre = lod.centre();
-    let positions: Vec<Vec3> = (0..6)
-        .flat_map(|row| (0..6).map(move |col| (row, col)))
-        .map(|(row, col)| {
-            vec3((col as f32 - 2.5) * 6.0, -centre.y, -8.0 - 9.0 * row as f32 * (1.0 + 0.3 * row as f32))
-                - vec3(centre.x, 0.0, centre.z)
-        })
-        .collect();
-    let camera = Camera::look_at(Vec3::ZERO, vec3(0.0, -0.1, -1.0), 0.9, 320, 240);
+    let (positions, camera) = field_of_trees(&ModelLod::from_container(&container));
     let mut free = forest(&gpu, &container, Settings::default(), &positions);
     let unbudgeted = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
     let budget = unbudgeted / 4;
