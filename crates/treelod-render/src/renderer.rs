@@ -883,7 +883,6 @@ impl Renderer {
         }
         let started = predicted.then(|| clock.elapsed());
         let (drawn_s_min, target) = (controller.s_min(), controller.target());
-        self.policy.budget = Some(controller);
         self.settings.s_min = drawn_s_min;
         if user.s_min > 0.0 {
             self.settings.s_max = user.s_max * drawn_s_min / user.s_min;
@@ -895,21 +894,16 @@ impl Renderer {
         let count = stats.primitives().saturating_sub(stats.leaving);
         let drawn = Drawn { count, s_min: drawn_s_min, spt: stats.by_technique[Technique::Spt] };
         self.policy.last_frame = Some((selection.view_proj, drawn));
-        let Some(controller) = &mut self.policy.budget else { return stats };
         controller.update_policy(count);
         if controller.steps_down_from(target) {
             // Look before stepping down: a step that would meet a cliff is refused undrawn.
             let started = std::time::Instant::now();
-            let next = Policy { target: controller.target(), ..policy };
-            let s_min = controller.s_min();
-            let predicted = self.predict_count(&selection, next, s_min, drawn);
-            if let Some(controller) = &mut self.policy.budget
-                && predicted > controller.cliff_count()
-            {
+            if predict(self, controller.s_min(), controller.target(), Some(drawn)) > controller.cliff_count() {
                 controller.refuse();
             }
             self.phases.assign += started.elapsed();
         }
+        self.policy.budget = Some(controller);
         stats
     }
 

@@ -1791,9 +1791,15 @@ impl BudgetController {
     /// prediction chooses the trees again and, at a new target, makes the models' tables of
     /// choices again). Returns the `s_min` and target to draw with.
     pub fn raise_within(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
+        self.mark_over();
+        self.search_up(predict)
+    }
+
+    /// Counts the current pressure as over the budget though no frame was drawn there (a
+    /// prediction found it over: [`Self::refuse`], [`Self::raise_within`]).
+    fn mark_over(&mut self) {
         let steering = &mut self.steering;
         steering.over = Some(steering.over.map_or(steering.pressure, |o| o.max(steering.pressure)));
-        self.search_up(predict)
     }
 
     /// [`Self::raise_within`]'s search from the current pressure (predicted over the budget),
@@ -1804,7 +1810,7 @@ impl BudgetController {
         let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
         let resolution = (0.5 * step).max(PRESSURE_RESOLUTION);
         let mut reach = step;
-        let under = loop {
+        let mut under = loop {
             let next = (over + reach).min(highest);
             let (s_min, target) = self.set_pressure(next);
             if predict(s_min, target) <= self.target_primitives {
@@ -1816,7 +1822,6 @@ impl BudgetController {
             over = next;
             reach *= 2.0;
         };
-        let mut under = under;
         while under - over > resolution {
             let mid = 0.5 * (over + under);
             let (s_min, target) = self.set_pressure(mid);
@@ -1829,14 +1834,20 @@ impl BudgetController {
         self.set_pressure(under)
     }
 
+    /// Where the steering started, `(s_min, target)`, and the clamps of `s_min` and of the
+    /// target, `(floor, ceiling)` each, as the pressure reads them.
+    fn clamps(&self) -> ((f64, f64), (f64, f64), (f64, f64)) {
+        let (s0, t0) = (f64::from(self.steering.start.0.max(f32::MIN_POSITIVE)), f64::from(self.steering.start.1));
+        let t_floor = f64::from(self.target_floor.max(f32::MIN_POSITIVE));
+        let s_floor = f64::from(self.s_min_floor.max(f32::MIN_POSITIVE));
+        let s_ceiling = f64::from(self.s_min_ceiling).max(s_floor);
+        ((s0, t0), (s_floor, s_ceiling), (t_floor, f64::from(self.target_ceiling).max(t_floor)))
+    }
+
     /// The least and the greatest pressure that still act: past both clamps (`s_min`'s and the
     /// target's) a pressure changes nothing.
     fn pressure_range(&self) -> (f64, f64) {
-        let (s0, t0) = (f64::from(self.steering.start.0.max(f32::MIN_POSITIVE)), f64::from(self.steering.start.1));
-        let t_floor = f64::from(self.target_floor.max(f32::MIN_POSITIVE));
-        let t_ceiling = f64::from(self.target_ceiling).max(t_floor);
-        let s_floor = f64::from(self.s_min_floor.max(f32::MIN_POSITIVE));
-        let s_ceiling = f64::from(self.s_min_ceiling).max(s_floor);
+        let ((s0, t0), (s_floor, s_ceiling), (t_floor, t_ceiling)) = self.clamps();
         let lowest = (s_floor / s0).ln().min(0.5 * (t_floor / t0).ln());
         let highest = (s_ceiling / s0).ln().max(0.5 * (t_ceiling / t0).ln());
         (lowest.min(highest), highest)
@@ -1846,12 +1857,8 @@ impl BudgetController {
     /// and the target from it.
     fn set_pressure(&mut self, next: f64) -> (f32, f32) {
         let (lowest, highest) = self.pressure_range();
+        let ((s0, t0), (s_floor, s_ceiling), (t_floor, t_ceiling)) = self.clamps();
         let steering = &mut self.steering;
-        let (s0, t0) = (f64::from(steering.start.0.max(f32::MIN_POSITIVE)), f64::from(steering.start.1));
-        let t_floor = f64::from(self.target_floor.max(f32::MIN_POSITIVE));
-        let t_ceiling = f64::from(self.target_ceiling).max(t_floor);
-        let s_floor = f64::from(self.s_min_floor.max(f32::MIN_POSITIVE));
-        let s_ceiling = f64::from(self.s_min_ceiling).max(s_floor);
         steering.pressure = next.clamp(lowest, highest);
         let p = steering.pressure;
         #[expect(clippy::cast_possible_truncation, reason = "s_min in pixels and the target in [0, 1]")]
@@ -1892,10 +1899,8 @@ impl BudgetController {
     /// drawing a frame over it. Returns the `s_min` and target to draw with; without a frame
     /// given yet, changes nothing.
     pub fn refuse(&mut self) -> (f32, f32) {
-        let steering = &mut self.steering;
-        let Some(back) = steering.drawn else { return (self.s_min, self.target) };
-        let refused = steering.pressure;
-        steering.over = Some(steering.over.map_or(refused, |o| o.max(refused)));
+        let Some(back) = self.steering.drawn else { return (self.s_min, self.target) };
+        self.mark_over();
         self.set_pressure(back)
     }
 
