@@ -3,8 +3,9 @@
 //! and for each shadow cascade ([`Settings::shadows`]' [`Casters`]).
 
 use treelod_runtime::{
-    Assignment, BudgetController, CACHED_POLICIES, CHOOSE_CHUNK, Calibration, Choices, ChunkBounds, Instance, Policy,
-    PolicyState, Representations, Technique, Transition, choose_instances_in_chunks, chunk_range, projected_height,
+    Assignment, BudgetController, CACHED_POLICIES, CHOOSE_CHUNK, Calibration, ChoiceBasis, Choices, ChunkBounds,
+    Instance, Policy, PolicyState, Representations, Technique, Transition, choose_instances_in_chunks, chunk_range,
+    projected_height,
 };
 
 /// Chunks of [`CHOOSE_CHUNK`] instances budget mode's look-ahead chooses again at most
@@ -22,6 +23,9 @@ use crate::shadows::Casters;
 pub(crate) struct PolicyModels {
     /// Per model: its calibration tables, if its container has them.
     pub(crate) calibrations: Vec<Option<Calibration>>,
+    /// Per model: what its choices read whatever the policy ([`ChoiceBasis`]), made when a
+    /// policy first needs it and kept until the models change.
+    bases: Vec<Option<ChoiceBasis>>,
     /// Per model: its choices under [`Self::made_for`] (`None` without tables).
     pub(crate) choices: Vec<Option<Choices>>,
     /// The policy the choices were made for; `None`: to be made.
@@ -61,6 +65,7 @@ impl PolicyModels {
     pub(crate) fn models_changed(&mut self) {
         self.made_for = None;
         self.recent.clear();
+        self.bases.clear();
         self.sample = None;
     }
 
@@ -72,12 +77,14 @@ impl PolicyModels {
         }
         let choices = match self.recent.iter().rposition(|(made_for, _)| *made_for == policy) {
             Some(at) => self.recent.remove(at).1,
-            None => self
-                .calibrations
-                .iter()
-                .zip(representations)
-                .map(|(calibration, models)| calibration.as_ref().map(|c| Choices::new(c, &policy, models)))
-                .collect(),
+            None => {
+                if self.bases.len() != self.calibrations.len() {
+                    self.bases = (self.calibrations.iter().zip(representations))
+                        .map(|(calibration, models)| calibration.as_ref().map(|c| ChoiceBasis::new(c, models)))
+                        .collect();
+                }
+                self.bases.iter().map(|basis| basis.as_ref().map(|b| Choices::from_basis(b, &policy))).collect()
+            }
         };
         if let Some(before) = self.made_for.replace(policy) {
             if self.recent.len() + 1 >= CACHED_POLICIES {

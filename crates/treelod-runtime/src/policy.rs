@@ -886,6 +886,7 @@ impl Calibration {
     /// `(error, primitives)` of `technique` drawn under a policy of `target` seen from elevation
     /// class `elevation`: its row, or for the LoD chain with per-level tables the chain as drawn
     /// at `target` ([`Self::chain_at`]; its stored row is the chain at the default target).
+    #[cfg(test)]
     fn measured(
         &self,
         elevation: Option<usize>,
@@ -941,88 +942,49 @@ impl Calibration {
         if self.levels.is_empty() {
             return None;
         }
-        self.chain_level_over(height, target, &self.floors_at(height, usable))
+        self.chain_basis(height, usable).pick(target)
     }
 
-    /// The floors at one height that [`Self::chain_level`] judges the chain's levels against.
-    fn floors_at(&self, height: f32, usable: impl Fn(Technique) -> bool) -> Floors {
-        Floors {
+    /// What [`Self::chain_level`] reads at one height whatever the target ([`ChainBasis`]):
+    /// [`ChoiceBasis`] makes it once per height for every target.
+    fn chain_basis(&self, height: f32, usable: impl Fn(Technique) -> bool) -> ChainBasis {
+        let floors = Floors {
             by_class: (0..self.elevations.len()).map(|e| self.floor(Some(e), height, &usable)).collect(),
             all: self.floor(None, height, &usable),
             flip_all: self.flip_floor(None, height, &usable),
-        }
-    }
-
-    /// [`Self::chain_level`] against `floors` ([`Self::floors_at`] the same height), which do
-    /// not depend on the target: [`Choices::among`] reads them once for all of its targets.
-    fn chain_level_over(&self, height: f32, target: f32, floors: &Floors) -> Option<ChainPick> {
-        if self.levels.is_empty() {
-            return None;
-        }
-        let target = sanitise(target);
-        // (pick, error, primitives, order: the full mesh first, then finest to coarsest).
-        let full = self.at(Technique::Full, height).map(|(e, p)| (None, e, p, 0usize));
-        let levels = (0..self.levels.len()).filter_map(|i| {
-            let level = u32::try_from(i).ok()?;
-            let (e, p) = self.level_at(level, height)?;
-            Some((Some(level), e, p, i + 1))
-        });
-        let candidates: Vec<(ChainPick, f32, f32, usize)> = full.into_iter().chain(levels).collect();
-        // Per elevation class, the limit there (the floor from that class plus the target).
-        let limits: Vec<f32> = floors.by_class.iter().map(|floor| floor + target).collect();
-        let floor = floors.all;
-        let flip_of = |pick: ChainPick| match pick {
-            Some(level) => self.level_flip_at(level, height),
-            None => self.flip_at(None, Technique::Full, height),
         };
         let flips = !self.level_flips.is_empty();
-        // The FLIP limit of the same share as `limit` (the RMSE one) of `flip_floor` over `floor`.
-        let flip_limit = |floor: f32, flip_floor: f32, limit: f32| {
-            (flips && floor > 0.0 && floor.is_finite() && flip_floor.is_finite())
-                .then(|| flip_floor + (limit - floor) * flip_floor / floor)
-        };
-        let cheapest_within = |limit: f32, everywhere: bool, flip_limit: Option<f32>| {
-            candidates
-                .iter()
-                .filter(|c| {
-                    c.1 <= limit
-                        && (!everywhere || self.within_from_every_elevation(c.0, height, &limits))
-                        && flip_limit.is_none_or(|l| flip_of(c.0).is_none_or(|f| f <= l))
-                })
-                .min_by(|a, b| a.2.total_cmp(&b.2).then(a.1.total_cmp(&b.1)).then(a.3.cmp(&b.3)))
-        };
-        let best = candidates.iter().map(|c| c.1).fold(f32::INFINITY, f32::min);
-        let best_flip = candidates.iter().filter_map(|c| flip_of(c.0)).fold(f32::INFINITY, f32::min);
-        let limit = floor + target;
-        // With the levels' FLIP tables a level (or the full mesh) must also be within the same
-        // share of the FLIP floor over every view, as the policy's rule asks of a technique
-        // (module docs); a candidate without a FLIP error is judged by its RMSE alone. Where none
-        // is, the same shares of the chain's own least errors, then its RMSE alone.
-        let flip_at_floor = flip_limit(floor, floors.flip_all, limit);
-        let flip_at_best = flip_limit(best, best_flip, best + target);
-        cheapest_within(limit, true, flip_at_floor)
-            .or_else(|| cheapest_within(limit, false, flip_at_floor))
-            .or_else(|| cheapest_within(best + target, false, flip_at_best))
-            .or_else(|| cheapest_within(best + target, false, None))
-            .map(|c| c.0)
-    }
-
-    /// Whether the chain drawn as `pick` at `height` is within `limits` from every elevation
-    /// class the tables hold (per class, its floor plus the target; [`Self::level_at_elevation`],
-    /// [`Self::floor`]); true without tables per elevation. One level is drawn whatever the
-    /// elevation a tree is seen from, so it must keep the image from each: a level of every leaf
-    /// and a quarter of the bark (spec §6.12) can be within the target over every view yet not
-    /// from the side, where the trunk shows (the shared Quaternius tree at 256 pixels: 0.0060
-    /// over every view, 0.0095 from 0° against a floor of 0.0050 there), and the policy would
-    /// then draw the point tree where the full mesh keeps the image for less.
-    fn within_from_every_elevation(&self, pick: ChainPick, height: f32, limits: &[f32]) -> bool {
-        limits.iter().enumerate().all(|(e, &limit)| {
-            let error = match pick {
-                Some(level) => self.level_at_elevation(Some(e), level, height),
-                None => self.at_elevation(Some(e), Technique::Full, height),
+        let classes = floors.by_class.len();
+        let candidate = |pick: ChainPick, (error, primitives): (f32, f32), order: usize| {
+            let flip = if flips {
+                match pick {
+                    Some(level) => self.level_flip_at(level, height),
+                    None => self.flip_at(None, Technique::Full, height),
+                }
+            } else {
+                None
             };
-            error.is_none_or(|(error, _)| error <= limit)
-        })
+            let by_class = (0..classes)
+                .map(|e| {
+                    let error = match pick {
+                        Some(level) => self.level_at_elevation(Some(e), level, height),
+                        None => self.at_elevation(Some(e), Technique::Full, height),
+                    };
+                    error.map(|(error, _)| error)
+                })
+                .collect();
+            ChainCandidate { pick, error, primitives, order, flip, by_class }
+        };
+        // The full mesh first, then finest to coarsest.
+        let full = self.at(Technique::Full, height).map(|ep| candidate(None, ep, 0));
+        let levels = (0..self.levels.len()).filter_map(|i| {
+            let level = u32::try_from(i).ok()?;
+            Some(candidate(Some(level), self.level_at(level, height)?, i + 1))
+        });
+        let candidates: Vec<ChainCandidate> = full.into_iter().chain(levels).collect();
+        let best = candidates.iter().map(|c| c.error).fold(f32::INFINITY, f32::min);
+        let best_flip = candidates.iter().filter_map(|c| c.flip).fold(f32::INFINITY, f32::min);
+        ChainBasis { candidates, floors, flips, best, best_flip }
     }
 }
 
@@ -1037,6 +999,7 @@ struct Candidate {
 }
 
 /// The techniques at one height and the floors they are judged against ([`Calibration::judge`]).
+#[derive(Debug)]
 struct Judged {
     candidates: Vec<Candidate>,
     floor: f32,
@@ -1046,8 +1009,8 @@ struct Judged {
     target: f32,
 }
 
-/// The floors at one height that [`Calibration::chain_level`] judges the chain's levels against
-/// ([`Calibration::floors_at`]).
+/// The floors at one height that [`Calibration::chain_level`] judges the chain's levels against.
+#[derive(Debug)]
 struct Floors {
     /// Per elevation class the tables hold, [`Calibration::floor`] there.
     by_class: Vec<f32>,
@@ -1055,6 +1018,89 @@ struct Floors {
     all: f32,
     /// [`Calibration::flip_floor`] over every view.
     flip_all: f32,
+}
+
+/// The full mesh or one of the LoD chain's levels at one height ([`ChainBasis`]).
+#[derive(Debug)]
+struct ChainCandidate {
+    pick: ChainPick,
+    /// Its error and primitives over every view.
+    error: f32,
+    primitives: f32,
+    /// The order of ties: the full mesh first (0), then finest to coarsest.
+    order: usize,
+    /// Its FLIP error over every view, where the tables hold the levels' FLIP errors.
+    flip: Option<f32>,
+    /// Its error from each elevation class the tables hold ([`Calibration::level_at_elevation`]).
+    by_class: Vec<Option<f32>>,
+}
+
+/// What [`Calibration::chain_level`] reads at one height whatever the target: the candidates'
+/// errors (over every view, from each elevation class, FLIP) and the floors they are judged
+/// against, each a lookup in the tables. Picking among them for a target
+/// ([`ChainBasis::pick`]) is arithmetic: budget mode's tables for a new target
+/// ([`ChoiceBasis`]) read these once per height instead of once per height and target.
+#[derive(Debug)]
+struct ChainBasis {
+    candidates: Vec<ChainCandidate>,
+    floors: Floors,
+    /// Whether the tables hold the levels' FLIP errors.
+    flips: bool,
+    /// The least error and the least FLIP error among the candidates.
+    best: f32,
+    best_flip: f32,
+}
+
+impl ChainBasis {
+    /// [`Calibration::chain_level`] at this height under `target`.
+    fn pick(&self, target: f32) -> Option<ChainPick> {
+        let target = sanitise(target);
+        // Per elevation class, the limit there (the floor from that class plus the target).
+        let limits: Vec<f32> = self.floors.by_class.iter().map(|floor| floor + target).collect();
+        let floor = self.floors.all;
+        // The FLIP limit of the same share as `limit` (the RMSE one) of `flip_floor` over `floor`.
+        let flip_limit = |floor: f32, flip_floor: f32, limit: f32| {
+            (self.flips && floor > 0.0 && floor.is_finite() && flip_floor.is_finite())
+                .then(|| flip_floor + (limit - floor) * flip_floor / floor)
+        };
+        let cheapest_within = |limit: f32, everywhere: bool, flip_limit: Option<f32>| {
+            self.candidates
+                .iter()
+                .filter(|c| {
+                    c.error <= limit
+                        && (!everywhere || Self::within_from_every_elevation(c, &limits))
+                        && flip_limit.is_none_or(|l| c.flip.is_none_or(|f| f <= l))
+                })
+                .min_by(|a, b| {
+                    a.primitives.total_cmp(&b.primitives).then(a.error.total_cmp(&b.error)).then(a.order.cmp(&b.order))
+                })
+        };
+        let (best, best_flip) = (self.best, self.best_flip);
+        let limit = floor + target;
+        // With the levels' FLIP tables a level (or the full mesh) must also be within the same
+        // share of the FLIP floor over every view, as the policy's rule asks of a technique
+        // (module docs); a candidate without a FLIP error is judged by its RMSE alone. Where none
+        // is, the same shares of the chain's own least errors, then its RMSE alone.
+        let flip_at_floor = flip_limit(floor, self.floors.flip_all, limit);
+        let flip_at_best = flip_limit(best, best_flip, best + target);
+        cheapest_within(limit, true, flip_at_floor)
+            .or_else(|| cheapest_within(limit, false, flip_at_floor))
+            .or_else(|| cheapest_within(best + target, false, flip_at_best))
+            .or_else(|| cheapest_within(best + target, false, None))
+            .map(|c| c.pick)
+    }
+
+    /// Whether the chain drawn as candidate `c` is within `limits` from every elevation class
+    /// the tables hold (per class, its floor plus the target; [`Calibration::level_at_elevation`],
+    /// [`Calibration::floor`]); true without tables per elevation. One level is drawn whatever the
+    /// elevation a tree is seen from, so it must keep the image from each: a level of every leaf
+    /// and a quarter of the bark (spec §6.12) can be within the target over every view yet not
+    /// from the side, where the trunk shows (the shared Quaternius tree at 256 pixels: 0.0060
+    /// over every view, 0.0095 from 0° against a floor of 0.0050 there), and the policy would
+    /// then draw the point tree where the full mesh keeps the image for less.
+    fn within_from_every_elevation(c: &ChainCandidate, limits: &[f32]) -> bool {
+        limits.iter().zip(&c.by_class).all(|(&limit, error)| error.is_none_or(|error| error <= limit))
+    }
 }
 
 impl Judged {
@@ -1069,9 +1115,16 @@ impl Judged {
         target: f32,
         chain: Option<Option<ChainPick>>,
     ) -> Self {
-        let mut candidates = self.candidates.clone();
-        candidates
-            .extend(chain.and_then(|pick| calibration.chain_candidate(elevation, height, pick, self.flip_checked)));
+        let candidate = chain.and_then(|pick| calibration.chain_candidate(elevation, height, pick, self.flip_checked));
+        self.with_candidate(target, candidate)
+    }
+
+    /// These judgements under `target` with the LoD chain judged as `chain` (`None`: not
+    /// usable, or not in the tables).
+    fn with_candidate(&self, target: f32, chain: Option<Candidate>) -> Self {
+        let mut candidates = Vec::with_capacity(self.candidates.len() + 1);
+        candidates.extend_from_slice(&self.candidates);
+        candidates.extend(chain);
         Self { candidates, target: sanitise(target), ..*self }
     }
 
@@ -1111,6 +1164,16 @@ impl Judged {
     /// The rule's choice; [`Technique::FALLBACK`] when no technique is left.
     fn choice(&self) -> Technique {
         self.chosen().map_or(Technique::FALLBACK, |c| c.technique)
+    }
+
+    /// The primitives of `technique` where it is among [`Self::admissible`] (without sorting
+    /// them or making the list: [`merge_short_runs`] reads a few of them per table).
+    fn admissible_primitives(&self, technique: Technique) -> Option<f32> {
+        if self.candidates.iter().any(|c| self.within(c)) {
+            self.candidates.iter().find(|c| c.technique == technique && self.within(c)).map(|c| c.primitives)
+        } else {
+            self.chosen().filter(|c| c.technique == technique).map(|c| c.primitives)
+        }
     }
 
     /// The candidates within the target with their primitives, least first; none within: the
@@ -1426,6 +1489,194 @@ fn class_bounds() -> &'static ClassBounds {
     })
 }
 
+/// What a model's tables of choices ([`Choices::among`]) read from its calibration whatever the
+/// policy: the calibration with its elevation classes ([`Calibration::with_elevations_between`]),
+/// the heights of the tables' steps, and at each step every technique's judgement but the LoD
+/// chain's (its errors and the floors, [`Calibration::floor`]) and what picking the chain's
+/// level reads (its levels' errors from every elevation class). [`Choices::from_basis`] then
+/// makes the tables for a policy from these alone: budget mode makes a model's choices again
+/// each time its target moves, and a host keeps one basis per model for every target.
+#[derive(Debug)]
+pub struct ChoiceBasis {
+    /// The calibration with its elevation classes.
+    calibration: Calibration,
+    /// `log2` of the smallest calibrated height ([`StepGrid::origin`]).
+    log2_min: f32,
+    /// The steps' heights, pixels.
+    heights: Vec<f32>,
+    /// Among the techniques the host can draw.
+    all: Judgements,
+    /// Among those that are not [`upper_hemisphere_only`], from the lowest elevation class: the
+    /// tables for a tree seen from below ([`Choices::below_horizon`]); `None` where that changes
+    /// nothing.
+    below: Option<Judgements>,
+}
+
+impl ChoiceBasis {
+    /// The basis of a model with `calibration` whose representations are `representations`
+    /// ([`Representations::holds`]).
+    #[must_use]
+    pub fn new(calibration: &Calibration, representations: &Representations) -> Self {
+        Self::among(calibration, |t| representations.holds(t))
+    }
+
+    /// [`Self::new`] among the techniques `usable` accepts.
+    #[must_use]
+    pub fn among(calibration: &Calibration, usable: impl Fn(Technique) -> bool) -> Self {
+        let calibration = calibration.with_elevations_between(ELEVATION_SUBDIVISIONS);
+        let grid = StepGrid::of(&calibration);
+        let heights: Vec<f32> = (0..grid.count).map(|i| grid.height(i)).collect();
+        let elevations = calibration.elevations().len();
+        let classes: Vec<Option<usize>> =
+            if elevations == 0 { vec![None] } else { (0..elevations).map(Some).collect() };
+        // `usable` read once per technique, so that the judgements are made in parallel.
+        let usable = PerTechnique(Technique::ALL.map(usable));
+        let all = Judgements::new(&calibration, &heights, classes, usable);
+        let below = (elevations >= 2 && Technique::ALL.into_iter().any(|t| upper_hemisphere_only(t) && usable[t]))
+            .then(|| {
+                let above_only = PerTechnique(Technique::ALL.map(|t| usable[t] && !upper_hemisphere_only(t)));
+                Judgements::new(&calibration, &heights, vec![Some(0)], above_only)
+            });
+        Self { log2_min: grid.origin(), calibration, heights, all, below }
+    }
+}
+
+/// [`ChoiceBasis`] among one set of techniques.
+#[derive(Debug)]
+struct Judgements {
+    /// The techniques judged.
+    usable: PerTechnique<bool>,
+    /// The elevation classes of the tables (`None`: one, every view).
+    classes: Vec<Option<usize>>,
+    /// Per class, per height: [`Calibration::judge_but_chain`].
+    judged: Vec<Vec<Judged>>,
+    /// Per height, what picking the chain's level reads ([`Calibration::chain_basis`]); empty
+    /// where the chain is not usable or the tables hold no levels.
+    chain: Vec<ChainBasis>,
+    /// Per class, per height, the chain judged as each pick it can be drawn as
+    /// ([`Calibration::chain_candidate`], at [`pick_index`]); empty where it is not usable.
+    chain_judged: Vec<Vec<Vec<Option<Candidate>>>>,
+    /// Per class, at the largest height, [`Calibration::judge_but_chain`] among the techniques
+    /// that converge ([`converges`]): what a table holds above the tables where its last step
+    /// does not converge.
+    converging: Vec<Judged>,
+    /// [`Self::chain`] at the largest height among the techniques that converge.
+    converging_chain: Option<ChainBasis>,
+}
+
+/// Where [`Judgements::chain_judged`] keeps the LoD chain judged as `pick`: 0 for none (the
+/// chain's own row), 1 for the full mesh, `2 + l` for level `l`.
+fn pick_index(pick: Option<ChainPick>) -> usize {
+    match pick {
+        None => 0,
+        Some(None) => 1,
+        Some(Some(level)) => 2 + level as usize,
+    }
+}
+
+impl Judgements {
+    /// The judgements of `calibration` at `heights` from `classes` among `usable`, made in
+    /// parallel, each alone, so the same whatever the thread count.
+    fn new(
+        calibration: &Calibration,
+        heights: &[f32],
+        classes: Vec<Option<usize>>,
+        usable: PerTechnique<bool>,
+    ) -> Self {
+        let judge = |t: Technique| usable[t];
+        let judged = classes
+            .par_iter()
+            .map(|&e| heights.iter().map(|&h| calibration.judge_but_chain(e, h, judge)).collect())
+            .collect();
+        let chain = if usable[Technique::LodChain] && calibration.chain_levels() > 0 {
+            heights.par_iter().map(|&h| calibration.chain_basis(h, judge)).collect()
+        } else {
+            Vec::new()
+        };
+        let chain_judged = if usable[Technique::LodChain] {
+            #[expect(clippy::cast_possible_truncation, reason = "a chain has a few levels")]
+            let picks: Vec<Option<ChainPick>> = [None, Some(None)]
+                .into_iter()
+                .chain((0..calibration.chain_levels() as u32).map(|l| Some(Some(l))))
+                .collect();
+            classes
+                .par_iter()
+                .zip(&judged)
+                .map(|(&e, judged): (&Option<usize>, &Vec<Judged>)| {
+                    let each = |(&h, j): (&f32, &Judged)| {
+                        picks.iter().map(|&pick| calibration.chain_candidate(e, h, pick, j.flip_checked)).collect()
+                    };
+                    heights.iter().zip(judged).map(each).collect()
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let top = heights.last().copied().unwrap_or(1.0);
+        let converging_usable = |t: Technique| converges(t) && usable[t];
+        let converging = classes.iter().map(|&e| calibration.judge_but_chain(e, top, converging_usable)).collect();
+        let converging_chain = (converging_usable(Technique::LodChain) && calibration.chain_levels() > 0)
+            .then(|| calibration.chain_basis(top, converging_usable));
+        Self { usable, classes, judged, chain, chain_judged, converging, converging_chain }
+    }
+
+    /// The tables for each class (outer) and each of `targets` (visibility classes, inner) of
+    /// [`Choices::from_basis`], from the judgements: the LoD chain's level picked once per
+    /// target and height for every class ([`ChainBasis::pick`]), each table made in parallel and
+    /// alone, so the same whatever the thread count. Budget mode makes the choices again each
+    /// frame the target moves, so this is a frame's cost there.
+    fn tables(&self, calibration: &Calibration, heights: &[f32], targets: &[f32]) -> Vec<Table> {
+        let usable = |t: Technique| self.usable[t];
+        let chain = usable(Technique::LodChain);
+        let picks: Vec<Vec<Option<ChainPick>>> = targets
+            .iter()
+            .map(|&target| {
+                let at = |(i, &h): (usize, &f32)| self.chain.get(i).and_then(|b| b.pick(target_at(target, h)));
+                heights.iter().enumerate().map(at).collect()
+            })
+            .collect();
+        let each: Vec<(usize, usize)> =
+            (0..self.classes.len()).flat_map(|c| (0..targets.len()).map(move |k| (c, k))).collect();
+        each.into_par_iter()
+            .map(|(c, k)| {
+                let target = targets[k];
+                let judged: Vec<Judged> = (self.judged[c].iter().zip(heights).zip(&picks[k]).enumerate())
+                    .map(|(i, ((j, &h), &pick))| {
+                        let candidate =
+                            chain.then(|| self.chain_judged[c][i].get(pick_index(pick)).copied().flatten()).flatten();
+                        j.with_candidate(target_at(target, h), candidate)
+                    })
+                    .collect();
+                self.table(calibration, heights, c, target, &judged)
+            })
+            .collect()
+    }
+
+    /// [`Choices::table`] of class `c` under `target` from its `judged` steps, reading what it
+    /// needs at the largest height from the basis (the last step's floor and chain, the
+    /// converging judgements).
+    fn table(&self, calibration: &Calibration, heights: &[f32], c: usize, target: f32, judged: &[Judged]) -> Table {
+        let usable = |t: Technique| self.usable[t];
+        let elevation = self.classes[c];
+        let top = heights[heights.len() - 1];
+        let top_target = target_at(target, top);
+        let converging = || {
+            let chain = (converges(Technique::LodChain) && usable(Technique::LodChain))
+                .then(|| self.converging_chain.as_ref().and_then(|b| b.pick(top_target)));
+            self.converging[c].with_chain(calibration, elevation, top, top_target, chain).choice()
+        };
+        // A technique as drawn at the top: its row, or the chain as drawn at the target there
+        // ([`Calibration::measured`]).
+        let at = |t: Technique| {
+            let chain = (t == Technique::LodChain)
+                .then(|| self.chain.last().and_then(|b| calibration.drawn_as(elevation, b.pick(top_target)?, top)));
+            chain.flatten().or_else(|| calibration.at_elevation(elevation, t, top))
+        };
+        let floor = judged.last().map_or(f32::INFINITY, |j| j.floor);
+        Choices::table_from(judged, converging, at, floor, top_target, &usable)
+    }
+}
+
 impl Choices {
     /// The choices of a model with `calibration` under `policy`, among the techniques
     /// `representations` can draw ([`Representations::holds`]).
@@ -1439,31 +1690,26 @@ impl Choices {
     /// [`ELEVATION_SUBDIVISIONS`] (module docs).
     #[must_use]
     pub fn among(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Self {
-        let calibration = &calibration.with_elevations_between(ELEVATION_SUBDIVISIONS);
-        let grid = StepGrid::of(calibration);
-        let heights: Vec<f32> = (0..grid.count).map(|i| grid.height(i)).collect();
+        Self::from_basis(&ChoiceBasis::among(calibration, usable), policy)
+    }
+
+    /// [`Self::among`] from what it reads whatever the policy, made once ([`ChoiceBasis`]): the
+    /// same choices, for a fraction of the cost where a host makes a model's choices for many
+    /// targets (budget mode).
+    #[must_use]
+    pub fn from_basis(basis: &ChoiceBasis, policy: &Policy) -> Self {
         let target = policy.target();
-        let elevations = calibration.elevations();
-        let classes: Vec<Option<usize>> =
-            if elevations.is_empty() { vec![None] } else { (0..elevations.len()).map(Some).collect() };
         let visibility = if policy.occlusion { VISIBILITY_CLASSES } else { 1 };
         // Class k stands for a visible fraction 2^-k: the target over its square root.
         #[expect(clippy::cast_precision_loss, reason = "a few classes")]
         let targets: Vec<f32> = (0..visibility).map(|k| target * (k as f32 * 0.5).exp2()).collect();
-        // `usable` read once per technique, so that the tables are made in parallel.
-        let usable = PerTechnique(Technique::ALL.map(usable));
-        let all = |t: Technique| usable[t];
-        let tables = Self::tables(calibration, &heights, &classes, &targets, &all);
-        let below =
-            if elevations.len() >= 2 && Technique::ALL.into_iter().any(|t| upper_hemisphere_only(t) && usable[t]) {
-                Self::tables(calibration, &heights, &[Some(0)], &targets, &|t| usable[t] && !upper_hemisphere_only(t))
-            } else {
-                Vec::new()
-            };
+        let (calibration, heights) = (&basis.calibration, &basis.heights);
+        let tables = basis.all.tables(calibration, heights, &targets);
+        let below = basis.below.as_ref().map_or_else(Vec::new, |b| b.tables(calibration, heights, &targets));
         let mut choices = Self {
-            log2_min: grid.origin(),
+            log2_min: basis.log2_min,
             tables,
-            elevations,
+            elevations: basis.calibration.elevations(),
             visibility,
             below,
             hysteresis_steps: hysteresis_steps(policy),
@@ -1473,67 +1719,11 @@ impl Choices {
         choices
     }
 
-    /// The tables of [`Self::among`] for each of `classes` (elevation classes, outer) and each of
-    /// `targets` (visibility classes, inner), at `heights` (a [`StepGrid`]'s), among the
-    /// techniques `usable` accepts. What does not depend on the target is read once for all of
-    /// them: each class's judgements but the chain's ([`Calibration::judge_but_chain`]) and
-    /// each height's floors ([`Calibration::floors_at`]); the LoD chain's level is picked once
-    /// per target and height for every class. Made in parallel, each table alone, so the same
-    /// whatever the thread count. Budget mode makes the choices again each frame the target
-    /// moves, so this is a frame's cost there. Measured on the shared models' containers built
-    /// with every representation (release, 2 cores, the mean of 100 makings under the default
-    /// policy, the tables compared equal): 5.9–8.1 ms a model when every table judged every
-    /// height on its own, 1.2–1.7 ms on one thread and 0.6–0.9 ms on two now; `bench` of 1,000
-    /// trees of the seven models with `--budget 200000` (300 frames, `--no-render`) spent 32.7
-    /// ms a frame on the assignment before, 4.0 ms now (medians 45.3 and 5.4), drawing the same.
-    fn tables(
-        calibration: &Calibration,
-        heights: &[f32],
-        classes: &[Option<usize>],
-        targets: &[f32],
-        usable: &(dyn Fn(Technique) -> bool + Sync),
-    ) -> Vec<Table> {
-        let judged: Vec<Vec<Judged>> = classes
-            .par_iter()
-            .map(|&e| heights.iter().map(|&h| calibration.judge_but_chain(e, h, usable)).collect())
-            .collect();
-        let chain = usable(Technique::LodChain);
-        let floors: Vec<Floors> = if chain && calibration.chain_levels() > 0 {
-            heights.par_iter().map(|&h| calibration.floors_at(h, usable)).collect()
-        } else {
-            Vec::new()
-        };
-        let picks: Vec<Vec<Option<ChainPick>>> = targets
-            .par_iter()
-            .map(|&target| {
-                heights
-                    .iter()
-                    .enumerate()
-                    .map(|(i, &h)| floors.get(i).and_then(|f| calibration.chain_level_over(h, target_at(target, h), f)))
-                    .collect()
-            })
-            .collect();
-        let each: Vec<(usize, usize)> =
-            (0..classes.len()).flat_map(|c| (0..targets.len()).map(move |k| (c, k))).collect();
-        each.into_par_iter()
-            .map(|(c, k)| {
-                let (elevation, target) = (classes[c], targets[k]);
-                let judged: Vec<Judged> = judged[c]
-                    .iter()
-                    .zip(heights)
-                    .zip(&picks[k])
-                    .map(|((j, &h), &pick)| {
-                        j.with_chain(calibration, elevation, h, target_at(target, h), chain.then_some(pick))
-                    })
-                    .collect();
-                Self::table(calibration, heights, elevation, target, usable, &judged)
-            })
-            .collect()
-    }
-
     /// The table of elevation class `elevation` under `target` from its `judged` steps at
-    /// `heights` ([`Self::tables`]): the rule's choices with the short runs merged, and what is
-    /// drawn above the largest height.
+    /// `heights`, each judged by the calibration alone: the rule's choices with the short runs
+    /// merged, and what is drawn above the largest height. [`Judgements::tables`] makes the same
+    /// from its basis; this is the reference the tests compare it with.
+    #[cfg(test)]
     fn table(
         calibration: &Calibration,
         heights: &[f32],
@@ -1542,19 +1732,35 @@ impl Choices {
         usable: &dyn Fn(Technique) -> bool,
         judged: &[Judged],
     ) -> Table {
-        let mut steps: Vec<Technique> = judged.iter().map(Judged::choice).collect();
-        let admissible: Vec<Vec<(Technique, f32)>> = judged.iter().map(Judged::admissible).collect();
-        merge_short_runs(&mut steps, &admissible);
         let top = heights[heights.len() - 1];
         let top_target = target_at(target, top);
+        let converging = || calibration.choose_at_elevation(elevation, top, top_target, |t| converges(t) && usable(t));
+        let at = |t: Technique| calibration.measured(elevation, t, top, top_target, usable);
+        let floor = calibration.floor(elevation, top, usable);
+        Self::table_from(judged, converging, at, floor, top_target, usable)
+    }
+
+    /// The table of [`Self::table`] from its `judged` steps and what it reads at the largest
+    /// height: the rule's choice there among the techniques that converge (`converging`, read
+    /// where the last step does not converge), a technique's `(error, primitives)` as drawn
+    /// there (`at`), the floor there and the target allowed there.
+    fn table_from(
+        judged: &[Judged],
+        converging: impl FnOnce() -> Technique,
+        at: impl Fn(Technique) -> Option<(f32, f32)>,
+        floor: f32,
+        top_target: f32,
+        usable: &dyn Fn(Technique) -> bool,
+    ) -> Table {
+        let mut steps: Vec<Technique> = judged.iter().map(Judged::choice).collect();
+        merge_short_runs(&mut steps, |i, t| judged[i].admissible_primitives(t));
         let above = steps.last().copied().filter(|&t| converges(t)).unwrap_or_else(|| {
-            let converging = calibration.choose_at_elevation(elevation, top, top_target, |t| converges(t) && usable(t));
+            let converging = converging();
             if converges(converging) { converging } else { Technique::FALLBACK }
         });
-        let at = |t: Technique| calibration.measured(elevation, t, top, top_target, usable);
         // The point tree may stand in for a tree partly in view only where its image at the
         // top is within the target, as any choice there.
-        let limit = calibration.floor(elevation, top, usable) + sanitise(top_target);
+        let limit = floor + sanitise(top_target);
         let point_tree = at(Technique::FALLBACK)
             .filter(|&(e, _)| usable(Technique::FALLBACK) && e <= limit)
             .map_or(f32::INFINITY, |(_, p)| p);
@@ -1821,8 +2027,7 @@ pub const MERGE_COST: f32 = 2.0;
 /// until no short run can be merged; the cost is always against the rule's choices, so merges
 /// do not compound. The first and last runs stay: below the smallest height the first step's
 /// choice holds, and above the largest the last's or the one that converges (module docs).
-fn merge_short_runs(steps: &mut [Technique], admissible: &[Vec<(Technique, f32)>]) {
-    let primitives = |i: usize, t: Technique| admissible[i].iter().find(|c| c.0 == t).map(|c| c.1);
+fn merge_short_runs(steps: &mut [Technique], primitives: impl Fn(usize, Technique) -> Option<f32>) {
     let chosen: Vec<f32> = steps.iter().enumerate().map(|(i, &t)| primitives(i, t).unwrap_or(0.0)).collect();
     loop {
         let runs = runs_of(steps);
@@ -2556,6 +2761,12 @@ pub fn distance_for_height(lod: &ModelLod, height: f32, camera: &Camera) -> f32 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// [`merge_short_runs`]' reading of lists of admissible techniques and their primitives per
+    /// step (as [`Judged::admissible`] gives them).
+    fn listed(admissible: &[Vec<(Technique, f32)>]) -> impl Fn(usize, Technique) -> Option<f32> + '_ {
+        move |i, t| admissible[i].iter().find(|c| c.0 == t).map(|c| c.1)
+    }
     use treelod_format::calibration_technique as code;
 
     fn record(technique: u32, height: f32, error: f32, primitives: f32) -> CalibrationRecord {
@@ -3197,7 +3408,7 @@ mod tests {
         run(I, 40.0, 3, &[]);
         run(B, 1.0, 1, &[]); // last: short, stays
         let mut merged = steps.clone();
-        merge_short_runs(&mut merged, &admissible);
+        merge_short_runs(&mut merged, listed(&admissible));
         let lengths = |s: &[Technique]| runs_of(s).into_iter().map(|r| (s[r.start], r.len())).collect::<Vec<_>>();
         assert_eq!(
             lengths(&merged),
@@ -3211,7 +3422,7 @@ mod tests {
         let mut steps = vec![S, S, C, S, S];
         let admissible: Vec<Vec<(Technique, f32)>> =
             (0..5).map(|i| if i == 2 { vec![(C, 3.0), (S, 5.0)] } else { vec![(S, 5.0)] }).collect();
-        merge_short_runs(&mut steps, &admissible);
+        merge_short_runs(&mut steps, listed(&admissible));
         assert_eq!(steps, [S; 5]);
         // Merges do not compound: each is held to the rule's own choices. A run of one step
         // (1 primitive) takes its neighbour (2); that run, now 3 steps, may not take the next
@@ -3225,7 +3436,7 @@ mod tests {
                 _ => vec![(t, 4.0)],
             })
             .collect();
-        merge_short_runs(&mut steps, &admissible);
+        merge_short_runs(&mut steps, listed(&admissible));
         assert_eq!(lengths(&steps), [(C, 8), (I, 3), (E, 8), (S, 8)]);
     }
 
@@ -3252,10 +3463,13 @@ mod tests {
             pool.install(|| Choices::among(c, policy, all))
         };
         for c in [&plain, &flip] {
+            // One basis serves every policy.
+            let basis = ChoiceBasis::among(c, all);
             for (target, occlusion) in [(0.0, false), (0.003, true), (0.01, true), (0.05, false)] {
                 let policy = Policy { target, occlusion, ..Policy::default() };
                 let choices = in_pool(1, c, &policy);
                 assert_eq!(choices, in_pool(3, c, &policy));
+                assert_eq!(choices, Choices::from_basis(&basis, &policy));
                 let between = c.with_elevations_between(ELEVATION_SUBDIVISIONS);
                 let grid = StepGrid::of(&between);
                 let heights: Vec<f32> = (0..grid.count).map(|i| grid.height(i)).collect();
