@@ -1496,6 +1496,12 @@ fn class_bounds() -> &'static ClassBounds {
 /// level reads (its levels' errors from every elevation class). [`Choices::from_basis`] then
 /// makes the tables for a policy from these alone: budget mode makes a model's choices again
 /// each time its target moves, and a host keeps one basis per model for every target.
+///
+/// Measured on the shared models' containers with every representation (release, 2 cores, the
+/// mean of 100 makings at 100 targets): [`Choices::new`] took 1.5–2.2 ms a model when it read
+/// the tables again for every target; from a basis the tables take 0.15–0.20 ms, and the basis
+/// about 1 ms, once (the same tables: a digest of the choices over 8 targets, with and without
+/// occlusion, among two sets of techniques, on the seven containers).
 #[derive(Debug)]
 pub struct ChoiceBasis {
     /// The calibration with its elevation classes.
