@@ -255,15 +255,19 @@ impl Renderer {
                 continue;
             }
             let Some((calibration, height)) = self.calibrated_height(i, camera) else { continue };
+            let above = height > calibration.heights().1;
             // What the tree costs under `next` (nothing out of view) and what it cost this frame
             // (nothing where it was not drawn: it came into view).
             let after = then.map_or(Some(0.0), |then| {
                 let (_, primitives) = calibration.at(then, height)?;
-                Some(if then == Technique::LodChain {
-                    self.chain_triangles(i, &next, s_min, camera, &frustum, None)
-                        .unwrap_or_else(|| cost(then, primitives))
-                } else {
-                    cost(then, primitives)
+                Some(match then {
+                    Technique::LodChain => self
+                        .chain_triangles(i, &next, s_min, camera, &frustum, None)
+                        .unwrap_or_else(|| cost(then, primitives)),
+                    Technique::Spt if above => {
+                        self.spt_cut(i, s_min, camera, &frustum).unwrap_or_else(|| cost(then, primitives))
+                    }
+                    _ => cost(then, primitives),
                 })
             });
             let before = now.map_or(Some(0.0), |now| {
@@ -272,6 +276,9 @@ impl Renderer {
                     Some(level) if now == Technique::LodChain => {
                         self.level_triangles(i, level).unwrap_or_else(|| cost(now, primitives))
                     }
+                    _ if now == Technique::Spt && above => self
+                        .spt_cut(i, drawn.s_min, camera, &frustum)
+                        .unwrap_or_else(|| spt_cost(drawn.s_min)(now, primitives)),
                     _ => cost(now, primitives),
                 })
             });
@@ -337,12 +344,48 @@ impl Renderer {
         self.level_triangles(i, pick)
     }
 
+    /// The point tree's cut of instance `i` at `s_min` for `camera` (`s_max` at the renderer's
+    /// ratio to it), counted per cell at the thresholds of the tree's block centre (as the far
+    /// path draws: without the depth bias or each cell's own distance), or `None` out of view.
+    /// The calibration tables hold a tree up to their largest height; above it the cut keeps
+    /// growing with the tree's area on the screen, and a prediction that read the tables' top row
+    /// there counted a near tree switching to the point tree at a fraction of what it draws
+    /// (the shared maple: two near trees predicted within a budget of 100,000 drew 184,000
+    /// points and triangles).
+    fn spt_cut(
+        &self,
+        i: usize,
+        s_min: f32,
+        camera: &treelod_runtime::Camera,
+        frustum: &treelod_runtime::Frustum,
+    ) -> Option<f64> {
+        let instance = self.instances.get(i)?;
+        let model = instance.model as usize;
+        let (lod, representations) = (self.lods.get(model)?, self.representations.get(model)?);
+        let (sphere, anchor) = (lod.cull_sphere(), representations.block_centre);
+        let tau_points = treelod_runtime::instance_tau(instance.transform, camera, frustum, s_min, sphere, anchor)?;
+        let ratio = if self.settings.s_min > 0.0 { self.settings.s_max / self.settings.s_min } else { 1.0 };
+        let tau_triangles = tau_points * ratio;
+        let cut = lod.cells().iter().map(|cell| {
+            f64::from(lod.points_above(cell, tau_points)) + f64::from(lod.triangles_above(cell, tau_triangles))
+        });
+        Some(cut.sum())
+    }
+
     /// The triangles of LoD chain level `pick` (`None`: the full mesh) of instance `i`'s model.
     fn level_triangles(&self, i: usize, pick: treelod_runtime::ChainPick) -> Option<f64> {
         let model = self.instances.get(i)?.model as usize;
         let chain = self.representations.get(model)?.chain.as_ref()?;
         let (_, count) = pick.and_then(|l| chain.levels.get(l as usize).copied()).unwrap_or(chain.full);
         Some(f64::from(count))
+    }
+
+    /// Whether budget mode's predictions choose a sample of the forest (more than
+    /// [`PREDICTED_CHUNKS`] chunks of [`CHOOSE_CHUNK`] instances, [`Sample`]): they then miss
+    /// the near trees of the chunks left out, and the renderer does not lower such a forest's
+    /// steering by prediction ([`BudgetController::lower_within`]).
+    pub(crate) fn predicts_from_a_sample(&self) -> bool {
+        self.instances.len().div_ceil(CHOOSE_CHUNK) > PREDICTED_CHUNKS
     }
 
     /// Budget mode's first frame ([`BudgetController::start_within`], spec §10.2): the count of
@@ -354,12 +397,15 @@ impl Renderer {
     pub(crate) fn predict_total(&mut self, camera: &treelod_runtime::Camera, policy: Policy, s_min: f32) -> u64 {
         let cost = spt_cost(s_min);
         let (chosen, index, stride) = self.choose_again(camera, policy);
+        let frustum = treelod_runtime::Frustum::from_view_proj(camera.view_proj);
         let mut total = 0.0f64;
         for (technique, &i) in chosen.iter().zip(&index) {
             let Some(technique) = *technique else { continue };
             let Some((calibration, height)) = self.calibrated_height(i, camera) else { continue };
             if let Some((_, primitives)) = calibration.at(technique, height) {
-                total += cost(technique, primitives);
+                let near_spt = technique == Technique::Spt && height > calibration.heights().1;
+                let cut = near_spt.then(|| self.spt_cut(i, s_min, camera, &frustum)).flatten();
+                total += cut.unwrap_or_else(|| cost(technique, primitives));
             }
         }
         #[expect(

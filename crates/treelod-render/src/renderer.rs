@@ -821,15 +821,19 @@ impl Renderer {
     /// cheaper scene, released the bounds it had found, and switched trees again, which started
     /// new transitions: a frame that never settled. Where the controller steps the target down,
     /// the step's count is predicted before it is drawn (`Renderer::predict_count`), and a step
-    /// predicted over [`BudgetController::cliff_count`] is refused
+    /// predicted over [`BudgetController::raise_count`] (1.1 times the budget) is refused
     /// ([`BudgetController::refuse`]; spec §10.2). Frames are predicted before they are drawn
-    /// in two more places: the first frame of budget mode from the calibration tables alone,
-    /// which starts the steering within the budget ([`BudgetController::start_within`]); and a
+    /// in three more places: the first frame of budget mode from the calibration tables alone,
+    /// which starts the steering within the budget ([`BudgetController::start_within`]); a
     /// frame whose camera moved since the last one, from the last one, raised before it is
-    /// drawn where it is predicted over [`BudgetController::cliff_count`]
-    /// ([`BudgetController::raise_within`]). A prediction counts each LoD chain tree by the
+    /// drawn where it is predicted over [`BudgetController::raise_count`]
+    /// ([`BudgetController::raise_within`]); and after a frame far under the budget, the
+    /// steering moved on down to the least pressure predicted within it
+    /// ([`BudgetController::lower_within`]; not for a forest predicted from a sample, whose
+    /// predictions fall short near the camera). A prediction counts each LoD chain tree by the
     /// triangles of the level its selection would pick (near trees above the tables' heights
-    /// pick it by geometric error at `s_min`) and the point trees' cut scaled by `s_min`. The
+    /// pick it by geometric error at `s_min`), the point trees' cut scaled by `s_min`, and a
+    /// point tree above the tables' heights by its cut at its distance. The
     /// settings themselves are not changed;
     /// [`Self::budget_steering`] reads what the controller holds.
     ///
@@ -876,7 +880,7 @@ impl Renderer {
             // The camera moved: the frame is predicted from the last one before it is drawn,
             // and raised where it would meet a cliff.
             let (s_min, target) = (controller.s_min(), controller.target());
-            if predict(self, s_min, target, Some(drawn)) > controller.cliff_count() {
+            if predict(self, s_min, target, Some(drawn)) > controller.raise_count() {
                 controller.raise_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
             }
             predicted = true;
@@ -895,14 +899,18 @@ impl Renderer {
         let drawn = Drawn { count, s_min: drawn_s_min, spt: stats.by_technique[Technique::Spt] };
         self.policy.last_frame = Some((selection.view_proj, drawn));
         controller.update_policy(count);
-        if controller.steps_down_from(target) {
-            // Look before stepping down: a step that would meet a cliff is refused undrawn.
-            let started = std::time::Instant::now();
-            if predict(self, controller.s_min(), controller.target(), Some(drawn)) > controller.cliff_count() {
-                controller.refuse();
-            }
-            self.phases.assign += started.elapsed();
+        let started = std::time::Instant::now();
+        if controller.steps_down_from(target)
+            && predict(self, controller.s_min(), controller.target(), Some(drawn)) > controller.raise_count()
+        {
+            // Look before stepping down: a step predicted over the budget is refused undrawn.
+            controller.refuse();
+        } else if controller.far_under(count) && !self.predicts_from_a_sample() {
+            // Far under the budget: on down by prediction, not a step a frame (a sample's
+            // predictions fall short near the camera, and a large forest steps).
+            controller.lower_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
         }
+        self.phases.assign += started.elapsed();
         self.policy.budget = Some(controller);
         stats
     }

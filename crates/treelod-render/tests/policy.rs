@@ -292,6 +292,26 @@ fn budget_mode_predicts_its_first_frame_and_starts_within_the_budget() {
     assert!(counts[20..].iter().all(|&c| c <= budget * 21 / 20), "budget {budget}: {first}, {counts:?}");
 }
 
+/// Budget mode started at the coarsest target, far under its budget, moves on down by
+/// prediction (spec §10.2, `BudgetController::lower_within`): its second frame is within the
+/// budget's band, where stepping down a largest step a frame took many frames to get there.
+#[test]
+fn budget_mode_lowers_a_frame_far_under_the_budget_by_prediction() {
+    let gpu = gpu();
+    let container = calibrated_demo_without_octahedral();
+    let (positions, camera) = field_of_trees(&ModelLod::from_container(&container));
+    let mut free = forest(&gpu, &container, Settings::default(), &positions);
+    let budget = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+    let policy = Policy { target: 1.0, budget: Some(budget), ..Policy::default() };
+    let mut renderer = forest(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
+    let counts: Vec<u64> = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
+    assert!(2 * counts[0] < budget, "the coarsest target is far under the budget {budget}: {counts:?}");
+    assert!(
+        counts[1..].iter().all(|&c| 2 * c >= budget && 10 * c <= 11 * budget),
+        "on down within the budget {budget} at once: {counts:?}"
+    );
+}
+
 /// Budget mode looks before it steps the target down (spec §10.2): trees all at one size on
 /// screen switch technique at one target, and where the steering would step down to a target at
 /// which they switch to a representation of many more primitives, the step is refused undrawn.

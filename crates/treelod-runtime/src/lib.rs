@@ -45,7 +45,7 @@ pub use ellipsoid::{
     line_drawn,
 };
 pub use frame::{
-    BudgetController, Camera, CellLod, CellPrefix, DrawList, DrawRange, FAR_LIST_EXTRA, FAR_POINTS_PER_CELL,
+    BudgetController, Camera, CellLod, CellPrefix, DrawList, DrawRange, FAR_LIST_EXTRA, FAR_POINTS_PER_CELL, FAR_UNDER,
     FrameStats, Frustum, Instance, Kind, LodSettings, ModelError, ModelLod, ROOTS_CELL, look_at_matrices, select_frame,
 };
 pub use impostor::{
