@@ -174,6 +174,10 @@ pub struct Renderer {
     pub(crate) prune_shown: Vec<Option<f32>>,
     /// Per instance: the LoD chain level it was drawn with last frame (hysteresis).
     pub(crate) chain_levels: Vec<Option<treelod_runtime::ChainPick>>,
+    /// Per instance: for the trees leaving the LoD chain in a transition, the level they drew
+    /// before the camera's view forgot it, which they hold while they fade (`ChainState::hold`;
+    /// an entry outlives its transition, and is replaced when the tree next leaves the chain).
+    leaving_chain_levels: Vec<Option<treelod_runtime::ChainPick>>,
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     pub(crate) visible_fraction: Vec<f32>,
     /// This frame's trees per technique ([`Self::assign`]) from the camera's view.
@@ -456,6 +460,7 @@ impl Renderer {
             shadow_views: Vec::new(),
             prune_shown: Vec::new(),
             chain_levels: Vec::new(),
+            leaving_chain_levels: Vec::new(),
             visible_fraction: Vec::new(),
             assignment: Assignment::default(),
             assignment_culled: false,
@@ -702,6 +707,7 @@ impl Renderer {
         if self.instances.len() != before {
             self.prune_shown = vec![None; self.instances.len()];
             self.chain_levels = vec![None; self.instances.len()];
+            self.leaving_chain_levels = vec![None; self.instances.len()];
             self.visible_fraction = vec![1.0; self.instances.len()];
             self.policy.state.reset();
             self.policy.cascade_states.iter_mut().for_each(PolicyState::reset);
@@ -1023,14 +1029,21 @@ impl Renderer {
         laps.lap(&mut self.phases.assign);
         let mut main = std::mem::take(&mut self.main);
         let assignment = std::mem::take(&mut self.assignment);
-        let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, true, &assignment, full_mesh);
+        let counts = self.select_view(&mut main, &runtime_camera, &lod_settings, Role::Camera, &assignment, full_mesh);
         self.assignment = assignment;
         // Trees in a transition: the same view of the techniques they are leaving.
         let mut leaving = std::mem::take(&mut self.leaving);
         let leaving_assignment = std::mem::take(&mut self.leaving_assignment);
         let fading = !self.transitions.is_empty();
         if fading {
-            self.select_view(&mut leaving, &runtime_camera, &lod_settings, false, &leaving_assignment, full_mesh);
+            self.select_view(
+                &mut leaving,
+                &runtime_camera,
+                &lod_settings,
+                Role::Leaving,
+                &leaving_assignment,
+                full_mesh,
+            );
         }
         self.leaving_assignment = leaving_assignment;
         let mut shadow_views = std::mem::take(&mut self.shadow_views);
@@ -1112,7 +1125,7 @@ impl Renderer {
             ShadowStats { cascades: u32::try_from(self.host_shadows.len()).unwrap_or(0), ..ShadowStats::default() };
         for (k, ((view, assignment), light)) in shadow_views.iter_mut().zip(&mut assignments).zip(lights).enumerate() {
             self.assign_cascade(k, casters, *runtime_camera, light, assignment);
-            let counts = self.select_view(view, &light, &cascade_lod, false, assignment, cascade_full);
+            let counts = self.select_view(view, &light, &cascade_lod, Role::Shadow, assignment, cascade_full);
             let sums = if k < self.cascades.len() { &mut shadow } else { &mut host };
             sums.instances_visible += counts.instances.total();
             sums.instances += counts.instances;
@@ -1306,7 +1319,7 @@ impl Renderer {
         let mut quads = std::mem::take(&mut self.gpu_quads);
         quads.clear(self.models.len());
         let whole = self.hand_quads_over(&mut assignment, &mut draws, &mut quads);
-        self.select_techniques_of(&mut main, runtime_camera, lod_settings, true, &assignment);
+        self.select_techniques_of(&mut main, runtime_camera, lod_settings, Role::Camera, &assignment);
         for (technique, list) in whole {
             let selected = std::mem::replace(&mut assignment[technique], list);
             let handed = assignment[technique].len() - selected.len();
@@ -1324,7 +1337,7 @@ impl Renderer {
         let leaving_assignment = std::mem::take(&mut self.leaving_assignment);
         let fading = !self.transitions.is_empty();
         if fading {
-            self.select_techniques_of(&mut leaving, runtime_camera, lod_settings, false, &leaving_assignment);
+            self.select_techniques_of(&mut leaving, runtime_camera, lod_settings, Role::Leaving, &leaving_assignment);
             point_tree_list(&leaving_assignment, &leaving, &mut self.spt_list);
             for &i in &self.spt_list {
                 let (technique, dither) = self.drawn_by(i, true);
@@ -1521,11 +1534,11 @@ impl Renderer {
         view: &mut View,
         camera: &treelod_runtime::Camera,
         lod_settings: &LodSettings,
-        main: bool,
+        role: Role,
         assignment: &Assignment,
         full_mesh: bool,
     ) -> ViewCounts {
-        self.select_techniques_of(view, camera, lod_settings, main, assignment);
+        self.select_techniques_of(view, camera, lod_settings, role, assignment);
         // The point tree: over every instance where all are its (no remapping), else over its own.
         point_tree_list(assignment, view, &mut self.spt_list);
         view.spt_remapped = self.spt_list.len() != self.instances.len();
@@ -1548,15 +1561,29 @@ impl Renderer {
     /// The part of [`Self::select_view`] before the point tree: `view`'s draws cleared, then each
     /// technique's runtime selection but the point tree's over the trees `assignment` gives it
     /// ([`select_techniques`], which lists the trees they hand back to the point tree), and, for
-    /// the camera's view (`main`), the pruned trees to measure for occlusion.
+    /// the camera's view, the pruned trees to measure for occlusion.
     fn select_techniques_of(
         &mut self,
         view: &mut View,
         camera: &treelod_runtime::Camera,
         lod_settings: &LodSettings,
-        main: bool,
+        role: Role,
         assignment: &Assignment,
     ) {
+        let main = role == Role::Camera;
+        if main && !self.transitions.is_empty() {
+            // The trees leaving the chain keep the level they drew, which the camera's view
+            // forgets in the first frame they are drawn otherwise (later frames of the
+            // transition find it forgotten, and keep what was kept).
+            for &i in &self.leaving_assignment[Technique::LodChain] {
+                let i = i as usize;
+                if let (Some(slot), Some(&Some(level))) =
+                    (self.leaving_chain_levels.get_mut(i), self.chain_levels.get(i))
+                {
+                    *slot = Some(level);
+                }
+            }
+        }
         let settings = self.settings;
         view.draws.clear();
         let scene = Scene { lods: &self.lods, models: &self.representations, instances: &self.instances };
@@ -1573,7 +1600,11 @@ impl Renderer {
         };
         let prune_state =
             main.then_some(PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction });
-        let chain_state = main.then_some(ChainState { previous: &mut self.chain_levels });
+        let chain_state = match role {
+            Role::Camera => Some(ChainState { previous: &mut self.chain_levels, hold: false }),
+            Role::Leaving => Some(ChainState { previous: &mut self.leaving_chain_levels, hold: true }),
+            Role::Shadow => None,
+        };
         select_techniques(&scene, assignment, camera, &technique_settings, prune_state, chain_state, &mut view.draws);
         if main {
             self.occlusion_jobs.clear();
@@ -2188,4 +2219,13 @@ mod tests {
         let (lo, hi) = transformed_bounds(t, Vec3::ONE, Vec3::ZERO);
         assert!(lo.x > hi.x, "an empty box stays empty");
     }
+}
+
+/// Which view [`Renderer::select_view`] selects: the camera's, the camera's for the techniques
+/// trees in a transition are leaving, or a shadow cascade's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Role {
+    Camera,
+    Leaving,
+    Shadow,
 }

@@ -208,7 +208,7 @@ impl<'a> PolicyFrame<'a> {
         self.draws.clear();
         let scene = Scene { lods: self.lods, models: self.models, instances: self.instances };
         let prune_state = PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction };
-        let chain_state = treelod_runtime::ChainState { previous: &mut self.chain_levels };
+        let chain_state = treelod_runtime::ChainState { previous: &mut self.chain_levels, hold: false };
         let technique = &self.technique;
         select_techniques(
             &scene,

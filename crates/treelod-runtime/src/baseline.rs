@@ -310,8 +310,15 @@ impl BillboardRanges {
 /// Per instance, the LoD chain's level it was drawn with last frame on the camera's view
 /// (`None`: not drawn with the chain by image error), for the hysteresis of [`select`].
 pub struct ChainState<'a> {
-    /// Per instance: last frame's level, updated by [`select`].
+    /// Per instance: last frame's level, updated by [`select`] (unless [`Self::hold`]).
     pub previous: &'a mut [Option<ChainPick>],
+    /// The trees draw the level [`Self::previous`] holds for them, where it holds one, and
+    /// nothing is written: trees leaving the chain in a transition (`Policy::transition`),
+    /// which fade out as they were drawn. Picked again, a near tree above the calibration
+    /// tables' heights takes its level by geometric error at the frame's `s_min`, and where
+    /// budget mode lowered `s_min` the fading tree drew its full mesh (the shared maple, 1,000
+    /// trees, `bench --budget 100000`: 324,000 triangles of trees leaving the chain in a frame).
+    pub hold: bool,
 }
 
 /// Whether a tree the policy's chooser found in the camera's view (`TechniqueSettings::culled`)
@@ -353,7 +360,8 @@ pub fn select(
     } else {
         Vec::new()
     };
-    let main = state.is_some();
+    let hold = state.as_ref().is_some_and(|s| s.hold);
+    let main = state.is_some() && !hold;
     let previous: &[Option<ChainPick>] = state.as_ref().map_or(&[], |s| &*s.previous);
     // Quads need no `τ`; where the chooser culled the list with this camera, only the
     // transforms it could not have tested as this selection does are tested again.
@@ -383,7 +391,10 @@ pub fn select(
                         Some(choices) => {
                             let height = projected_height_at(lod, instance.transform, camera.position, world_per_pixel);
                             let last = previous.get(index as usize).copied().flatten();
-                            let pick = choices.choose(height, last, || chain.chain.pick(tau));
+                            let pick = match last {
+                                Some(last) if hold => last,
+                                _ => choices.choose(height, last, || chain.chain.pick(tau)),
+                            };
                             if main {
                                 levels.push((index, Some(pick)));
                             }
@@ -431,7 +442,7 @@ pub fn select(
             }
         }
     });
-    if let Some(state) = state {
+    if let Some(state) = state.filter(|s| !s.hold) {
         for (index, level) in levels {
             if let Some(slot) = state.previous.get_mut(index as usize) {
                 *slot = level;
@@ -597,6 +608,21 @@ mod tests {
     /// The triangles the chain draws for one tree `height` pixels high (the camera's view, no
     /// previous level) with `models`' per-level tables, or (`geometric`) without them.
     fn chain_draw(models: &Representations, lod: &crate::frame::ModelLod, height: f32, geometric: bool) -> u32 {
+        let mut previous = vec![None];
+        let count = chain_draw_with(models, lod, height, geometric, (&mut previous, false));
+        assert_eq!(previous[0].is_some(), !geometric, "the level by image error is held for the next frame");
+        count
+    }
+
+    /// [`chain_draw`] with the tree's level last frame and whether it holds it
+    /// ([`ChainState`]).
+    fn chain_draw_with(
+        models: &Representations,
+        lod: &crate::frame::ModelLod,
+        height: f32,
+        geometric: bool,
+        (previous, hold): (&mut Vec<Option<ChainPick>>, bool),
+    ) -> u32 {
         let mut models = models.clone();
         if geometric {
             models.chain.as_mut().expect("a chain").calibration = None;
@@ -610,12 +636,35 @@ mod tests {
         let scene = Scene { lods, models: reps, instances: &instances };
         let settings = test_settings();
         let mut out = TreeDraws::default();
-        let mut previous = vec![None];
-        let state = ChainState { previous: &mut previous };
+        let state = ChainState { previous, hold };
         select(&scene, &[0], Technique::LodChain, &camera, &settings, Some(state), &mut out);
         assert_eq!(out.triangles.len(), 1, "one draw of the tree");
-        assert_eq!(previous[0].is_some(), !geometric, "the level by image error is held for the next frame");
         out.triangles[0].count
+    }
+
+    /// A tree leaving the chain in a transition draws the level it drew, where picked again
+    /// a near tree takes the full mesh, and its level is not written.
+    #[test]
+    fn a_tree_leaving_the_chain_holds_the_level_it_drew() {
+        let scene = treelod_build::demo_tree(&treelod_build::DemoTreeConfig::default());
+        let (container, models, lod) = built_chain(&scene);
+        let chain = LodChain::from_container(&container).unwrap();
+        let coarse = u32::try_from(chain.levels().len() - 1).unwrap();
+        let level_triangles = models.chain.as_ref().unwrap().levels[coarse as usize].1;
+        let full = container.triangles().len() as u32;
+        assert!(level_triangles < full / 4, "{level_triangles} of {full}");
+        // Above the tables' heights, picked again: the full mesh.
+        let mut previous = vec![Some(Some(coarse))];
+        assert_eq!(chain_draw_with(&models, &lod, 4096.0, false, (&mut previous, false)), full);
+        assert_eq!(previous, [Some(None)], "the camera's view writes its level");
+        // Held: the coarse level it drew, nothing written.
+        let mut previous = vec![Some(Some(coarse))];
+        assert_eq!(chain_draw_with(&models, &lod, 4096.0, false, (&mut previous, true)), level_triangles);
+        assert_eq!(previous, [Some(Some(coarse))]);
+        // A tree without a level to hold picks one, and nothing is written.
+        let mut previous = vec![None];
+        assert_eq!(chain_draw_with(&models, &lod, 4096.0, false, (&mut previous, true)), full);
+        assert_eq!(previous, [None]);
     }
 
     /// At `height` pixels: the triangles the chain draws by image error and by geometric error,

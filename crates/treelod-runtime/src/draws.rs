@@ -558,8 +558,8 @@ pub struct TechniqueSettings {
 /// (not cleared) the draws of each technique's selection over its list of `assignment`, in
 /// [`Technique::ALL`] order. `prune_state`: the camera's view's pruning state (see
 /// [`prune::select`](crate::prune::select)); `chain_state`: the camera's view's LoD chain levels
-/// (see [`baseline::select`](crate::baseline::select)); `None` for other views (shadow
-/// cascades).
+/// (see [`baseline::select`](crate::baseline::select)), or those the trees leaving the chain in a
+/// transition hold ([`ChainState::hold`]); `None` for other views (shadow cascades).
 ///
 /// The point tree's trees are then `assignment`'s [`Technique::Full`] and [`Technique::Spt`]
 /// lists and `out`'s [`TreeDraws::point_tree`] ([`merge_ascending`]), for
@@ -575,7 +575,7 @@ pub fn select_techniques(
 ) {
     // A tree not drawn with the chain this frame forgets its level (`ChainState`: `None`), so
     // one that comes back picks afresh rather than holding a level from frames ago.
-    if let Some(state) = chain_state.as_mut() {
+    if let Some(state) = chain_state.as_mut().filter(|s| !s.hold) {
         let kept: Vec<(usize, Option<ChainPick>)> = assignment[Technique::LodChain]
             .iter()
             .map(|&i| (i as usize, state.previous.get(i as usize).copied().flatten()))
@@ -608,7 +608,7 @@ pub fn select_techniques(
                 crate::ellipsoid::select(scene, list, camera, &settings.lod, level, lines, out);
             }
             Technique::LodChain | Technique::Billboard | Technique::Crossed | Technique::Octahedral => {
-                let state = chain_state.as_mut().map(|s| ChainState { previous: &mut *s.previous });
+                let state = chain_state.as_mut().map(|s| ChainState { previous: &mut *s.previous, hold: s.hold });
                 crate::baseline::select(scene, list, technique, camera, settings, state, out);
             }
         }
@@ -685,7 +685,7 @@ mod tests {
         let mut assignment = Assignment::default();
         assignment.assign(&instances, &models, |i, _| if i == 0 { Technique::LodChain } else { Technique::Spt });
         let mut previous = vec![Some(Some(1)), Some(Some(1))];
-        let state = ChainState { previous: &mut previous };
+        let state = ChainState { previous: &mut previous, hold: false };
         select_techniques(&scene, &assignment, &camera, &settings, None, Some(state), &mut TreeDraws::default());
         assert_eq!(previous[1], None, "tree 1 went to the point tree: its level is forgotten");
         assert_eq!(previous[0].is_some(), models[0].chain.as_ref().is_some_and(|c| c.calibration.is_some()));
@@ -744,7 +744,7 @@ mod tests {
                     let visible_fraction = vec![1.0; instances.len()];
                     let state = PruneState { shown: &mut shown, visible_fraction: &visible_fraction };
                     let mut levels = vec![None; instances.len()];
-                    let chain = ChainState { previous: &mut levels };
+                    let chain = ChainState { previous: &mut levels, hold: false };
                     let mut out = TreeDraws::default();
                     select_techniques(&scene, &assignment, &camera, &settings, Some(state), Some(chain), &mut out);
                     (out, shown, levels)
