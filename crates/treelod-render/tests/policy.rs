@@ -239,14 +239,21 @@ fn field_of_trees(lod: &ModelLod) -> (Vec<Vec3>, Camera) {
     (positions, Camera::look_at(Vec3::ZERO, vec3(0.0, -0.1, -1.0), 0.9, 320, 240))
 }
 
+/// The field of demo trees the budget tests draw ([`field_of_trees`] of the demo tree without the
+/// octahedral impostor), its camera, and the primitives its frame draws without a budget.
+fn budget_field(gpu: &treelod_render::offscreen::Gpu) -> (Arc<Container>, Vec<Vec3>, Camera, u64) {
+    let container = calibrated_demo_without_octahedral();
+    let (positions, camera) = field_of_trees(&ModelLod::from_container(&container));
+    let mut free = forest(gpu, &container, Settings::default(), &positions);
+    let unbudgeted = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+    assert!(free.budget_steering().is_none(), "no budget, no steering");
+    (container, positions, camera, unbudgeted)
+}
+
 #[test]
 fn budget_mode_steers_the_frame_to_the_primitive_count() {
     let gpu = gpu();
-    let container = calibrated_demo_without_octahedral();
-    let (positions, camera) = field_of_trees(&ModelLod::from_container(&container));
-    let mut free = forest(&gpu, &container, Settings::default(), &positions);
-    let unbudgeted = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
-    assert!(free.budget_steering().is_none(), "no budget, no steering");
+    let (container, positions, camera, unbudgeted) = budget_field(&gpu);
     assert!(unbudgeted > 1000, "{unbudgeted}");
 
     for budget in [unbudgeted / 4, unbudgeted * 2] {
@@ -279,10 +286,7 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
 #[test]
 fn budget_mode_predicts_its_first_frame_and_starts_within_the_budget() {
     let gpu = gpu();
-    let container = calibrated_demo_without_octahedral();
-    let (positions, camera) = field_of_trees(&ModelLod::from_container(&container));
-    let mut free = forest(&gpu, &container, Settings::default(), &positions);
-    let unbudgeted = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+    let (container, positions, camera, unbudgeted) = budget_field(&gpu);
     let budget = unbudgeted / 4;
     let policy = Policy { budget: Some(budget), ..Policy::default() };
     let mut renderer = forest(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
@@ -298,10 +302,7 @@ fn budget_mode_predicts_its_first_frame_and_starts_within_the_budget() {
 #[test]
 fn budget_mode_lowers_a_frame_far_under_the_budget_by_prediction() {
     let gpu = gpu();
-    let container = calibrated_demo_without_octahedral();
-    let (positions, camera) = field_of_trees(&ModelLod::from_container(&container));
-    let mut free = forest(&gpu, &container, Settings::default(), &positions);
-    let budget = free.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+    let (container, positions, camera, budget) = budget_field(&gpu);
     let policy = Policy { target: 1.0, budget: Some(budget), ..Policy::default() };
     let mut renderer = forest(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
     let counts: Vec<u64> = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();

@@ -1940,13 +1940,18 @@ impl BudgetController {
     /// twice the budget.
     #[must_use]
     pub fn cliff_count(&self) -> u64 {
+        self.times_budget(CLIFF)
+    }
+
+    /// `share` times the budget, a count.
+    fn times_budget(&self, share: f64) -> u64 {
         #[expect(
             clippy::cast_possible_truncation,
             clippy::cast_sign_loss,
             clippy::cast_precision_loss,
-            reason = "twice a count"
+            reason = "a multiple of a count"
         )]
-        let limit = (CLIFF * self.target_primitives as f64) as u64;
+        let limit = (share * self.target_primitives as f64) as u64;
         limit
     }
 
@@ -1960,14 +1965,7 @@ impl BudgetController {
     /// budget); the `assign` phase, where the predictions run, 0.23 → 0.27 ms a frame on average.
     #[must_use]
     pub fn raise_count(&self) -> u64 {
-        #[expect(
-            clippy::cast_possible_truncation,
-            clippy::cast_sign_loss,
-            clippy::cast_precision_loss,
-            reason = "a share of a count"
-        )]
-        let limit = (PREDICTED_OVER * self.target_primitives as f64) as u64;
-        limit
+        self.times_budget(PREDICTED_OVER)
     }
 
     /// Whether a frame of `count` primitives is far under the budget (under [`FAR_UNDER`] of it),
