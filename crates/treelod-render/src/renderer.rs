@@ -2131,6 +2131,15 @@ fn occlusion_candidates<'a>(
         .filter_map(|i| u32::try_from(i).ok())
 }
 
+/// Which view [`Renderer::select_view`] selects: the camera's, the camera's for the techniques
+/// trees in a transition are leaving, or a shadow cascade's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Role {
+    Camera,
+    Leaving,
+    Shadow,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -2219,13 +2228,4 @@ mod tests {
         let (lo, hi) = transformed_bounds(t, Vec3::ONE, Vec3::ZERO);
         assert!(lo.x > hi.x, "an empty box stays empty");
     }
-}
-
-/// Which view [`Renderer::select_view`] selects: the camera's, the camera's for the techniques
-/// trees in a transition are leaving, or a shadow cascade's.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Role {
-    Camera,
-    Leaving,
-    Shadow,
 }
