@@ -326,22 +326,30 @@ impl Renderer {
         frustum: &treelod_runtime::Frustum,
         previous: Option<treelod_runtime::ChainPick>,
     ) -> Option<f64> {
-        let instance = self.instances.get(i)?;
-        let model = instance.model as usize;
-        let (lod, representations) = (self.lods.get(model)?, self.representations.get(model)?);
+        let (tau, instance, lod, representations) = self.tau_of(i, s_min, camera, frustum)?;
         let chain = representations.chain.as_ref()?;
         let choices = chain.choices(policy, |t| representations.holds(t))?;
-        let tau = treelod_runtime::instance_tau(
-            instance.transform,
-            camera,
-            frustum,
-            s_min,
-            lod.cull_sphere(),
-            representations.block_centre,
-        )?;
         let height = projected_height(lod, instance.transform, camera);
         let pick = choices.choose(height, previous, || chain.chain.pick(tau));
         self.level_triangles(i, pick)
+    }
+
+    /// Instance `i`'s `τ` at `s_min` for `camera` (`treelod_runtime::instance_tau`, at its
+    /// model's block centre), with the instance, its model's LoD and its representations; `None`
+    /// out of view.
+    fn tau_of(
+        &self,
+        i: usize,
+        s_min: f32,
+        camera: &treelod_runtime::Camera,
+        frustum: &treelod_runtime::Frustum,
+    ) -> Option<(f32, &Instance, &treelod_runtime::ModelLod, &Representations)> {
+        let instance = self.instances.get(i)?;
+        let model = instance.model as usize;
+        let (lod, representations) = (self.lods.get(model)?, self.representations.get(model)?);
+        let (sphere, anchor) = (lod.cull_sphere(), representations.block_centre);
+        let tau = treelod_runtime::instance_tau(instance.transform, camera, frustum, s_min, sphere, anchor)?;
+        Some((tau, instance, lod, representations))
     }
 
     /// The point tree's cut of instance `i` at `s_min` for `camera` (`s_max` at the renderer's
@@ -359,11 +367,7 @@ impl Renderer {
         camera: &treelod_runtime::Camera,
         frustum: &treelod_runtime::Frustum,
     ) -> Option<f64> {
-        let instance = self.instances.get(i)?;
-        let model = instance.model as usize;
-        let (lod, representations) = (self.lods.get(model)?, self.representations.get(model)?);
-        let (sphere, anchor) = (lod.cull_sphere(), representations.block_centre);
-        let tau_points = treelod_runtime::instance_tau(instance.transform, camera, frustum, s_min, sphere, anchor)?;
+        let (tau_points, _, lod, _) = self.tau_of(i, s_min, camera, frustum)?;
         let ratio = if self.settings.s_min > 0.0 { self.settings.s_max / self.settings.s_min } else { 1.0 };
         let tau_triangles = tau_points * ratio;
         let cut = lod.cells().iter().map(|cell| {
@@ -385,7 +389,7 @@ impl Renderer {
     /// the near trees of the chunks left out, and the renderer does not lower such a forest's
     /// steering by prediction ([`BudgetController::lower_within`]).
     pub(crate) fn predicts_from_a_sample(&self) -> bool {
-        self.instances.len().div_ceil(CHOOSE_CHUNK) > PREDICTED_CHUNKS
+        Sample::stride(self.instances.len()) > 1
     }
 
     /// Budget mode's first frame ([`BudgetController::start_within`], spec §10.2): the count of
@@ -527,10 +531,15 @@ pub(crate) struct Sample {
 }
 
 impl Sample {
+    /// Every how many chunks the sample of a forest of `n` instances takes one (1: all of them).
+    fn stride(n: usize) -> usize {
+        n.div_ceil(CHOOSE_CHUNK).div_ceil(PREDICTED_CHUNKS).max(1)
+    }
+
     /// The sample of `instances` drawing `lods`, whose chunks' bounds are `chunks`.
     fn new(instances: &[Instance], lods: &[treelod_runtime::ModelLod], chunks: &ChunkBounds) -> Self {
         let n = instances.len();
-        let stride = n.div_ceil(CHOOSE_CHUNK).div_ceil(PREDICTED_CHUNKS).max(1);
+        let stride = Self::stride(n);
         let picked: Vec<usize> = (0..n.div_ceil(CHOOSE_CHUNK)).step_by(stride).collect();
         let index: Vec<usize> = picked.iter().flat_map(|&c| chunk_range(c, n)).collect();
         if stride == 1 {

@@ -1825,34 +1825,10 @@ impl BudgetController {
     /// 1000000`) they alternated frames far under the budget with frames twice over it, even
     /// where the search kept above the pressures drawn frames had found over, and the renderer
     /// does not lower such a forest by prediction. Returns the `s_min` and target to draw with.
-    pub fn lower_within(&mut self, mut predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
+    pub fn lower_within(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
         let (lowest, _) = self.pressure_range();
-        let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
-        let resolution = (0.5 * step).max(PRESSURE_RESOLUTION);
         let start = self.steering.pressure;
-        let mut under = start;
-        let mut reach = step;
-        let mut over = loop {
-            let next = (under - reach).max(lowest);
-            if next >= under {
-                break None;
-            }
-            let (s_min, target) = self.set_pressure(next);
-            if predict(s_min, target) > self.target_primitives {
-                break Some(next);
-            }
-            under = next;
-            reach *= 2.0;
-        };
-        while let Some(o) = over.filter(|&o| under - o > resolution) {
-            let mid = 0.5 * (o + under);
-            let (s_min, target) = self.set_pressure(mid);
-            if predict(s_min, target) <= self.target_primitives {
-                under = mid;
-            } else {
-                over = Some(mid);
-            }
-        }
+        let (under, over) = self.gallop(start, lowest, false, predict);
         let steering = &mut self.steering;
         if under < start {
             (steering.over, steering.cliff) = (over, None);
@@ -1871,34 +1847,55 @@ impl BudgetController {
 
     /// [`Self::raise_within`]'s search from the current pressure (predicted over the budget),
     /// without marking it: the steering moves where it ends.
-    fn search_up(&mut self, mut predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
-        let mut over = self.steering.pressure;
+    fn search_up(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
         let (_, highest) = self.pressure_range();
+        let (over, under) = self.gallop(self.steering.pressure, highest, true, predict);
+        self.set_pressure(under.unwrap_or(over))
+    }
+
+    /// The search of [`Self::raise_within`] and [`Self::lower_within`]: from pressure `from`,
+    /// whose frame is taken to be over the budget (`from_over`) or within it, gallops towards
+    /// `bound` by a largest step, then twice that, four times…, until a pressure is predicted on
+    /// the other side of the budget (`predict(s_min, target)`), then halves the bracket to half a
+    /// largest step. Returns the last pressure found on `from`'s side and the first on the other
+    /// (`None` where `bound` was reached without one); the steering is left where it predicted
+    /// last.
+    fn gallop(
+        &mut self,
+        from: f64,
+        bound: f64,
+        from_over: bool,
+        mut predict: impl FnMut(f32, f32) -> u64,
+    ) -> (f64, Option<f64>) {
         let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
         let resolution = (0.5 * step).max(PRESSURE_RESOLUTION);
-        let mut reach = step;
-        let mut under = loop {
-            let next = (over + reach).min(highest);
-            let (s_min, target) = self.set_pressure(next);
-            if predict(s_min, target) <= self.target_primitives {
-                break next;
+        let mut over_at = |controller: &mut Self, pressure: f64| {
+            let (s_min, target) = controller.set_pressure(pressure);
+            predict(s_min, target) > controller.target_primitives
+        };
+        let up = bound >= from;
+        let (mut last, mut reach) = (from, step);
+        let mut other = loop {
+            let next = if up { (last + reach).min(bound) } else { (last - reach).max(bound) };
+            let moved = if up { next > last } else { next < last };
+            if !moved {
+                break None;
             }
-            if next >= highest {
-                return self.set_pressure(highest);
+            if over_at(self, next) != from_over {
+                break Some(next);
             }
-            over = next;
+            last = next;
             reach *= 2.0;
         };
-        while under - over > resolution {
-            let mid = 0.5 * (over + under);
-            let (s_min, target) = self.set_pressure(mid);
-            if predict(s_min, target) <= self.target_primitives {
-                under = mid;
+        while let Some(o) = other.filter(|&o| (o - last).abs() > resolution) {
+            let mid = 0.5 * (o + last);
+            if over_at(self, mid) == from_over {
+                last = mid;
             } else {
-                over = mid;
+                other = Some(mid);
             }
         }
-        self.set_pressure(under)
+        (last, other)
     }
 
     /// Where the steering started, `(s_min, target)`, and the clamps of `s_min` and of the
