@@ -820,12 +820,11 @@ impl Renderer {
     /// In the policy's budget mode ([`Policy::budget`]) the frame is selected with the target and
     /// `s_min` a [`BudgetController`] keeps (made from [`Settings::policy`]'s target and
     /// [`Settings::s_min`] when budget mode starts; `s_max` keeps its ratio to `s_min`), which
-    /// then takes the frame's [`FrameStats::primitives`] less [`FrameStats::leaving`] for the
-    /// next frame: what the frame's choices cost, without the draws of the techniques trees in a
-    /// transition leave. Those last a transition's frames and then stop on their own, so the
-    /// controller counting them saw the frame's cost fall while its steering held, took it for a
-    /// cheaper scene, released the bounds it had found, and switched trees again, which started
-    /// new transitions: a frame that never settled. Where the controller steps the target down,
+    /// then takes the frame's [`FrameStats::primitives`] for the next frame, the draws of the
+    /// techniques trees in a transition leave ([`FrameStats::leaving`]) included: steered
+    /// without them, the frames settled within the budget and the transitions their choices
+    /// started drew on top of it, up to 1.5 times the budget for a transition's frames (spec
+    /// §10.2 has the measurements). Where the controller steps the target down,
     /// the step's count is predicted before it is drawn (`Renderer::predict_count`), and a step
     /// predicted over [`BudgetController::raise_count`] (1.1 times the budget) is refused
     /// ([`BudgetController::refuse`]; spec §10.2). Frames are predicted before they are drawn
@@ -839,7 +838,8 @@ impl Renderer {
     /// predictions fall short near the camera). A prediction counts each LoD chain tree by the
     /// triangles of the level its selection would pick (near trees above the tables' heights
     /// pick it by geometric error at `s_min`), the point trees' cut scaled by `s_min`, and a
-    /// point tree above the tables' heights by its cut at its distance. The
+    /// point tree above the tables' heights by the cut its selection draws, cells out of view
+    /// culled; what a tree cost in the last frame is read at that frame's camera. The
     /// settings themselves are not changed;
     /// [`Self::budget_steering`] reads what the controller holds.
     ///
@@ -880,8 +880,8 @@ impl Renderer {
             // The first frame is predicted before it is drawn, and starts within the budget.
             controller.start_within(|s_min, target| predict(self, s_min, target, None));
             predicted = true;
-        } else if let Some((view_proj, drawn)) = self.policy.last_frame
-            && view_proj != selection.view_proj
+        } else if let Some(drawn) = self.policy.last_frame
+            && drawn.camera.view_proj != selection.view_proj
         {
             // The camera moved: the frame is predicted from the last one before it is drawn,
             // and raised where it would meet a cliff.
@@ -901,9 +901,10 @@ impl Renderer {
         let stats = self.prepare_frame(device, queue, camera);
         self.phases.assign += started.unwrap_or_default();
         self.settings = user;
-        let count = stats.primitives().saturating_sub(stats.leaving);
-        let drawn = Drawn { count, s_min: drawn_s_min, spt: stats.by_technique[Technique::Spt] };
-        self.policy.last_frame = Some((selection.view_proj, drawn));
+        // What the frame drew, the leaving draws included (the documentation above).
+        let count = stats.primitives();
+        let drawn = Drawn { camera: selection, count, s_min: drawn_s_min, spt: stats.by_technique[Technique::Spt] };
+        self.policy.last_frame = Some(drawn);
         controller.update_policy(count);
         let started = std::time::Instant::now();
         if controller.steps_down_from(target)
