@@ -2154,6 +2154,9 @@ pub struct PolicyState {
     /// transition (`false` only where none is), so that [`Self::transitions`] reads only those
     /// chunks; of another length than the chunks, every chunk is read.
     busy: Vec<bool>,
+    /// Per chunk of [`CHOOSE_CHUNK`] instances, the largest projected height (pixels) of its
+    /// trees in view in the last choice of a model with tables (0 for none).
+    tallest: Vec<f32>,
 }
 
 /// [`PolicyState`]'s elevation class of a tree not chosen by elevation last frame.
@@ -2273,6 +2276,7 @@ impl PolicyState {
             elevations: gather(&self.elevations, ranges(), NO_CLASS),
             measure: gather(&self.measure, ranges(), true),
             busy: Vec::new(),
+            tallest: Vec::new(),
         }
     }
 
@@ -2282,6 +2286,14 @@ impl PolicyState {
     pub fn transition(&self, index: usize) -> Option<Transition> {
         let (from, k) = (*self.transitions.get(index)?)?;
         Some(Transition { from, shown: f32::from(k) / f32::from(self.frames.max(1)) })
+    }
+
+    /// Per chunk of [`CHOOSE_CHUNK`] instances, the largest projected height (pixels) of its
+    /// trees in view in the last choice, among the trees of models with calibration tables (0
+    /// where none is): budget mode's look-ahead chooses the chunks of the nearest trees whole.
+    #[must_use]
+    pub fn tallest(&self) -> &[f32] {
+        &self.tallest
     }
 
     /// Every instance in a transition this frame, ascending: its index and [`Self::transition`].
@@ -2548,6 +2560,8 @@ pub fn choose_instances_in_chunks(
     state.measure.resize(instances.len(), true);
     state.busy.clear();
     state.busy.resize(instances.len().div_ceil(CHOOSE_CHUNK), false);
+    state.tallest.clear();
+    state.tallest.resize(instances.len().div_ceil(CHOOSE_CHUNK), 0.0);
     out.clear();
     out.resize(instances.len(), None);
     let frames = state.frames;
@@ -2565,7 +2579,7 @@ pub fn choose_instances_in_chunks(
                   visible: &[f32],
                   (classes, elevations, measure): (&mut [u8], &mut [u8], &mut [bool]),
                   out: &mut [Option<Technique>],
-                  busy: &mut bool| {
+                  (busy, tallest): (&mut bool, &mut f32)| {
         if let Some(&(centre, radius)) = spheres.and_then(|s| s.get(chunk))
             && eyes.first().is_some_and(|(_, _, frustum)| !frustum.intersects_sphere(centre, radius))
         {
@@ -2622,6 +2636,7 @@ pub fn choose_instances_in_chunks(
                         })
                         .reduce(|a, b| if b.0 < a.0 { b } else { a })
                         .unwrap_or((0.0, Vec3::ZERO, None));
+                    *tallest = tallest.max(height);
                     let seen = visibility_class_after(usize::from(*class), visible);
                     *class = u8::try_from(seen).unwrap_or(0);
                     let elevation_class = if choices.elevations().is_empty() {
@@ -2680,10 +2695,11 @@ pub fn choose_instances_in_chunks(
     };
     if instances.len() <= CHOOSE_CHUNK {
         let classes = (&mut state.classes[..], &mut state.elevations[..], &mut state.measure[..]);
-        let mut busy = false;
-        choose(0, instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out, &mut busy);
-        if let Some(slot) = state.busy.first_mut() {
-            *slot = busy;
+        let (mut busy, mut tallest) = (false, 0.0);
+        let flags = (&mut busy, &mut tallest);
+        choose(0, instances, &mut state.previous, &mut state.transitions, &state.visible, classes, out, flags);
+        if let (Some(slot), Some(tall)) = (state.busy.first_mut(), state.tallest.first_mut()) {
+            (*slot, *tall) = (busy, tallest);
         }
         return;
     }
@@ -2697,14 +2713,14 @@ pub fn choose_instances_in_chunks(
         .zip(state.elevations.par_chunks_mut(CHOOSE_CHUNK))
         .zip(state.measure.par_chunks_mut(CHOOSE_CHUNK))
         .zip(out.par_chunks_mut(CHOOSE_CHUNK))
-        .zip(state.busy.par_iter_mut())
+        .zip(state.busy.par_iter_mut().zip(state.tallest.par_iter_mut()))
         .for_each(
             |(
                 ((((((((chunk, instances), previous), transitions), visible), classes), elevations), measure), out),
-                busy,
+                flags,
             )| {
                 let classes = (classes, elevations, measure);
-                choose(chunk, instances, previous, transitions, visible, classes, out, busy);
+                choose(chunk, instances, previous, transitions, visible, classes, out, flags);
             },
         );
 }
@@ -4126,7 +4142,7 @@ mod tests {
         // so the state carries from frame to frame.
         let (mut chunked, mut alone) = (PolicyState::with_transition(4), PolicyState::with_transition(4));
         let (mut out, mut reference) = (Vec::new(), Vec::new());
-        let mut culled_whole = 0;
+        let (mut culled_whole, mut seen_tall) = (0, 0);
         for frame in 0..14 {
             #[expect(clippy::cast_precision_loss, reason = "small numbers")]
             let eye = Vec3::new(-100.0 + 120.0 * frame as f32, 6.0, 60.0);
@@ -4158,10 +4174,22 @@ mod tests {
                 (&alone.previous, &alone.transitions, &alone.elevations, &alone.measure),
                 "frame {frame}"
             );
+            // Each chunk's tallest tree in view, 0 for none (budget mode's sample reads it).
+            for (c, &tallest) in chunked.tallest().iter().enumerate() {
+                let expected = chunk_range(c, instances.len())
+                    .filter(|&i| out[i].is_some() && instances[i].model == 0)
+                    .map(|i| projected_height(&lods[0], instances[i].transform, &camera))
+                    .fold(0.0f32, f32::max);
+                let close = (tallest - expected).abs() <= 1e-3 * expected.max(1.0);
+                assert!(close, "frame {frame}, chunk {c}: {tallest} against {expected}");
+            }
+            assert_eq!(chunked.tallest().len(), 6, "one per chunk");
+            seen_tall += usize::from(chunked.tallest().iter().any(|&h| h > 0.0));
             let frustum = Frustum::from_view_proj(camera.view_proj);
             culled_whole += bounds.spheres.iter().filter(|(c, r)| !frustum.intersects_sphere(*c, *r)).count();
         }
         assert!(culled_whole >= 20, "chunks culled whole: {culled_whole}");
+        assert!(seen_tall >= 10, "frames with trees in view: {seen_tall}");
         assert!(out.iter().any(Option::is_some) && out[5 * CHOOSE_CHUNK] == Some(Technique::Spt));
         // Bounds of other instances (one fewer) are not used: every tree is tested on its own.
         let short = ChunkBounds::new(&instances[1..], &lods);
