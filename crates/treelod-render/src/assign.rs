@@ -239,7 +239,6 @@ impl Renderer {
         s_min: f32,
         drawn: Drawn,
     ) -> u64 {
-        let cost = spt_cost(s_min);
         let (chosen, index, weight) = self.choose_again(camera, next);
         let frustum = treelod_runtime::Frustum::from_view_proj(camera.view_proj);
         let drawn_frustum = treelod_runtime::Frustum::from_view_proj(drawn.camera.view_proj);
@@ -275,36 +274,19 @@ impl Renderer {
             // frame (nothing where it was not drawn: it came into view).
             let after = match then {
                 None => Some(0.0),
-                Some(then) => self.calibrated_height(i, camera).and_then(|(calibration, height)| {
-                    let (_, primitives) = calibration.at(then, height)?;
-                    let above = height > calibration.heights().1;
-                    Some(match then {
-                        Technique::LodChain => self
-                            .chain_triangles(i, &next, s_min, camera, &frustum, None)
-                            .unwrap_or_else(|| cost(then, primitives)),
-                        Technique::Spt if above => {
-                            self.spt_cut(i, s_min, camera, &frustum).unwrap_or_else(|| cost(then, primitives))
-                        }
-                        _ => cost(then, primitives),
-                    })
+                Some(then) => self.table_cost(i, then, camera, &frustum, s_min).map(|row| match then {
+                    Technique::LodChain => self.chain_triangles(i, &next, s_min, camera, &frustum, None).unwrap_or(row),
+                    _ => row,
                 }),
             };
             let before = match now {
                 None => Some(0.0),
-                Some(now) => self.calibrated_height(i, &drawn.camera).and_then(|(calibration, height)| {
-                    let (_, primitives) = calibration.at(now, height)?;
-                    let above = height > calibration.heights().1;
-                    Some(match last_level {
-                        Some(level) if now == Technique::LodChain => {
-                            self.level_triangles(i, level).unwrap_or_else(|| cost(now, primitives))
-                        }
-                        _ if now == Technique::Spt && above => self
-                            .spt_cut(i, drawn.s_min, &drawn.camera, &drawn_frustum)
-                            .unwrap_or_else(|| spt_cost(drawn.s_min)(now, primitives)),
-                        _ if now == Technique::Spt => spt_cost(drawn.s_min)(now, primitives),
-                        _ => cost(now, primitives),
+                Some(now) => {
+                    self.table_cost(i, now, &drawn.camera, &drawn_frustum, drawn.s_min).map(|row| match last_level {
+                        Some(level) if now == Technique::LodChain => self.level_triangles(i, level).unwrap_or(row),
+                        _ => row,
                     })
-                }),
+                }
             };
             if let (Some(after), Some(before)) = (after, before) {
                 delta += weight * (after - before);
@@ -324,6 +306,26 @@ impl Renderer {
         )]
         let predicted = (drawn.count as f64 + spt + delta).max(0.0) as u64;
         predicted
+    }
+
+    /// Instance `i`'s primitives drawn with `technique` for `camera` at `s_min`, as the
+    /// calibration tables give them at its projected height (the point tree's row scaled by
+    /// `s_min`, [`spt_cost`]), a point tree above the tables' heights by its cut
+    /// ([`Self::spt_cut`]; the scaled row where it is out of view). `None` where its model has
+    /// no tables or they lack `technique`.
+    fn table_cost(
+        &self,
+        i: usize,
+        technique: Technique,
+        camera: &treelod_runtime::Camera,
+        frustum: &treelod_runtime::Frustum,
+        s_min: f32,
+    ) -> Option<f64> {
+        let (calibration, height) = self.calibrated_height(i, camera)?;
+        let (_, primitives) = calibration.at(technique, height)?;
+        let row = spt_cost(s_min)(technique, primitives);
+        let near_spt = technique == Technique::Spt && height > calibration.heights().1;
+        Some(if near_spt { self.spt_cut(i, s_min, camera, frustum).unwrap_or(row) } else { row })
     }
 
     /// Whether instance `i` is above its model's calibration tables' heights for `camera` or
@@ -445,17 +447,12 @@ impl Renderer {
     /// (read at the tables' last height above it, so a near tree counts less than it draws).
     /// Trees of models without tables add nothing.
     pub(crate) fn predict_total(&mut self, camera: &treelod_runtime::Camera, policy: Policy, s_min: f32) -> u64 {
-        let cost = spt_cost(s_min);
         let (chosen, index, weight) = self.choose_again(camera, policy);
         let frustum = treelod_runtime::Frustum::from_view_proj(camera.view_proj);
         let mut total = 0.0f64;
         for ((technique, &i), &weight) in chosen.iter().zip(&index).zip(&weight) {
-            let Some(technique) = *technique else { continue };
-            let Some((calibration, height)) = self.calibrated_height(i, camera) else { continue };
-            if let Some((_, primitives)) = calibration.at(technique, height) {
-                let near_spt = technique == Technique::Spt && height > calibration.heights().1;
-                let cut = near_spt.then(|| self.spt_cut(i, s_min, camera, &frustum)).flatten();
-                total += weight * cut.unwrap_or_else(|| cost(technique, primitives));
+            if let Some(cost) = technique.and_then(|t| self.table_cost(i, t, camera, &frustum, s_min)) {
+                total += weight * cost;
             }
         }
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a count of primitives")]
@@ -506,25 +503,28 @@ impl Renderer {
             chosen
         };
         if sample.stride == 1 {
-            let chosen = choose(&self.instances, &tables.chunks, tables.state.clone(), &sample.index);
+            let index = &sample.sampled.index;
+            let chosen = choose(&self.instances, &tables.chunks, tables.state.clone(), index);
             let weight = vec![1.0; chosen.len()];
-            return (chosen, sample.index.clone(), weight);
+            return (chosen, index.clone(), weight);
         }
         let near = near_chunks(tables.state.tallest());
-        let mut chosen =
-            choose(&sample.instances, &sample.bounds, tables.state.sampled(&sample.picked, n), &sample.index);
-        let mut index = sample.index.clone();
-        let mut weight: Vec<f64> = Vec::with_capacity(index.len());
-        for &c in &sample.picked {
-            weight.extend(std::iter::repeat_n(sample.weight(c, n, &near), chunk_range(c, n).len()));
+        if near != sample.near.chunks {
+            // Every prediction of a frame reads the same chunks: copied once.
+            sample.near = Gathered::new(near, &self.instances, lods, &tables.chunks, true);
         }
-        if !near.is_empty() {
-            let near_index: Vec<usize> = near.iter().flat_map(|&c| chunk_range(c, n)).collect();
-            let instances: Vec<Instance> = near_index.iter().map(|&i| self.instances[i]).collect();
-            let bounds = tables.chunks.sampled(&near, n).unwrap_or_else(|| ChunkBounds::new(&instances, lods));
-            chosen.extend(choose(&instances, &bounds, tables.state.sampled(&near, n), &near_index));
+        let (sampled, near) = (&sample.sampled, &sample.near);
+        let mut chosen =
+            choose(&sampled.instances, &sampled.bounds, tables.state.sampled(&sampled.chunks, n), &sampled.index);
+        let mut index = sampled.index.clone();
+        let mut weight: Vec<f64> = Vec::with_capacity(index.len());
+        for &c in &sampled.chunks {
+            weight.extend(std::iter::repeat_n(sample.weight(c, n, &near.chunks), chunk_range(c, n).len()));
+        }
+        if !near.chunks.is_empty() {
+            chosen.extend(choose(&near.instances, &near.bounds, tables.state.sampled(&near.chunks, n), &near.index));
             weight.resize(chosen.len(), 1.0);
-            index.extend(near_index);
+            index.extend_from_slice(&near.index);
         }
         (chosen, index, weight)
     }
@@ -587,23 +587,56 @@ pub(crate) struct Drawn {
 
 /// Budget mode's sample of a forest of more than [`PREDICTED_CHUNKS`] chunks of
 /// [`CHOOSE_CHUNK`] instances: every `stride`-th chunk, which its predictions choose again
-/// (`Renderer::predict_count`). Kept from frame to frame: copying the instances and their bounds
-/// every frame took 1.7 ms for 10^6 trees on 2 cores, most of it faulting in the fresh pages.
+/// (`Renderer::predict_count`), and the chunks of the tallest trees, chosen again whole beside
+/// them. Kept from frame to frame: copying the instances and their bounds every frame took
+/// 1.7 ms for 10^6 trees on 2 cores, most of it faulting in the fresh pages.
 pub(crate) struct Sample {
     /// Every how many chunks one is sampled (1: every instance, nothing copied).
     stride: usize,
-    /// The sampled chunks, ascending.
-    picked: Vec<usize>,
-    /// Each sampled instance's index in the forest.
+    /// The sampled chunks (with a stride of 1, every chunk, listed and not copied).
+    sampled: Gathered,
+    /// The chunks of the tallest trees ([`near_chunks`]) last chosen whole beside them, copied
+    /// again only when they change (every prediction of a frame reads the same ones).
+    near: Gathered,
+}
+
+/// Chunks of [`CHOOSE_CHUNK`] instances laid end to end for budget mode's predictions to
+/// choose again ([`Sample`]).
+#[derive(Default)]
+struct Gathered {
+    /// The chunks, ascending.
+    chunks: Vec<usize>,
+    /// Each of their instances' index in the forest.
     index: Vec<usize>,
-    /// The sampled instances, laid end to end (empty with a stride of 1).
+    /// Their instances, laid end to end (empty where they are listed, not copied).
     instances: Vec<Instance>,
-    /// Their chunks' bounds (empty with a stride of 1).
+    /// Their chunks' bounds (empty where they are listed, not copied).
     bounds: ChunkBounds,
 }
 
+impl Gathered {
+    /// Chunks `chunks` (ascending) of `instances` drawing `lods`, whose chunks' bounds are
+    /// `bounds`: copied, or (`copy` false) only listed.
+    fn new(
+        chunks: Vec<usize>,
+        instances: &[Instance],
+        lods: &[treelod_runtime::ModelLod],
+        bounds: &ChunkBounds,
+        copy: bool,
+    ) -> Self {
+        let n = instances.len();
+        let index: Vec<usize> = chunks.iter().flat_map(|&c| chunk_range(c, n)).collect();
+        if !copy {
+            return Self { chunks, index, ..Self::default() };
+        }
+        let gathered: Vec<Instance> = index.iter().map(|&i| instances[i]).collect();
+        let bounds = bounds.sampled(&chunks, n).unwrap_or_else(|| ChunkBounds::new(&gathered, lods));
+        Self { chunks, index, instances: gathered, bounds }
+    }
+}
+
 /// The chunks of a sampled forest's predictions chosen again whole beside the sample
-/// (`Renderer::choose_again`): those in view nearest the camera.
+/// (`Renderer::choose_again`): those whose trees were tallest on the screen ([`near_chunks`]).
 pub(crate) const NEAR_CHUNKS: usize = 8;
 
 /// The [`NEAR_CHUNKS`] chunks whose trees were tallest on the screen in the last choice
@@ -642,13 +675,8 @@ impl Sample {
         let n = instances.len();
         let stride = Self::stride(n);
         let picked: Vec<usize> = (0..n.div_ceil(CHOOSE_CHUNK)).step_by(stride).collect();
-        let index: Vec<usize> = picked.iter().flat_map(|&c| chunk_range(c, n)).collect();
-        if stride == 1 {
-            return Self { stride, picked, index, instances: Vec::new(), bounds: ChunkBounds::default() };
-        }
-        let sampled: Vec<Instance> = index.iter().map(|&i| instances[i]).collect();
-        let bounds = chunks.sampled(&picked, n).unwrap_or_else(|| ChunkBounds::new(&sampled, lods));
-        Self { stride, picked, index, instances: sampled, bounds }
+        let sampled = Gathered::new(picked, instances, lods, chunks, stride > 1);
+        Self { stride, sampled, near: Gathered::default() }
     }
 }
 
@@ -660,7 +688,7 @@ mod tests {
     use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
     use treelod_format::{Compression, Container};
 
-    use super::{CHOOSE_CHUNK, ChunkBounds, NEAR_CHUNKS, Sample, near_chunks};
+    use super::{CHOOSE_CHUNK, Gathered, NEAR_CHUNKS, Sample, near_chunks};
     use crate::offscreen::Gpu;
     use crate::{Camera, Instance, Renderer, Settings, Technique};
 
@@ -679,15 +707,10 @@ mod tests {
         assert_eq!(near_chunks(&many), (22..30).collect::<Vec<_>>(), "the {NEAR_CHUNKS} tallest");
 
         let n = 20 * CHOOSE_CHUNK - 5;
-        let sample = Sample {
-            stride: 6,
-            picked: vec![0, 6, 12, 18],
-            index: Vec::new(),
-            instances: Vec::new(),
-            bounds: ChunkBounds::default(),
-        };
+        let sampled = Gathered { chunks: vec![0, 6, 12, 18], ..Gathered::default() };
+        let sample = Sample { stride: 6, sampled, near: Gathered::default() };
         let near = [2, 3, 7, 9];
-        let weights: Vec<f64> = sample.picked.iter().map(|&c| sample.weight(c, n, &near)).collect();
+        let weights: Vec<f64> = sample.sampled.chunks.iter().map(|&c| sample.weight(c, n, &near)).collect();
         assert_eq!(weights, vec![4.0, 4.0, 6.0, 2.0]);
         assert_eq!(weights.iter().sum::<f64>() + near.len() as f64, 20.0, "every chunk once");
         // A sampled chunk among the near ones counts once, chosen whole: the chunks it stood for
