@@ -835,7 +835,11 @@ impl Renderer {
     /// ([`BudgetController::raise_within`]); and after a frame far under the budget, the
     /// steering moved on down to the least pressure predicted within it
     /// ([`BudgetController::lower_within`]; not for a forest predicted from a sample, whose
-    /// predictions fall short near the camera). A prediction counts each LoD chain tree by the
+    /// predictions fall short near the camera). Far under is read without the leaving draws:
+    /// they end within a transition's frames, and a frame under half the budget once they
+    /// have ended is far under it already (1,000 trees of each shared model, `bench --budget
+    /// 100000`, 4,200 frames: within ½–1.1 times the budget 2,783 → 2,823, under half 1,251 →
+    /// 1,215, over 1.1 times 166 → 162). A prediction counts each LoD chain tree by the
     /// triangles of the level its selection would pick (near trees above the tables' heights
     /// pick it by geometric error at `s_min`), the point trees' cut scaled by `s_min`, and a
     /// point tree above the tables' heights by the cut its selection draws, cells out of view
@@ -912,9 +916,10 @@ impl Renderer {
         {
             // Look before stepping down: a step predicted over the budget is refused undrawn.
             controller.refuse();
-        } else if controller.far_under(count) && !self.predicts_from_a_sample() {
-            // Far under the budget: on down by prediction, not a step a frame (a sample's
-            // predictions fall short near the camera, and a large forest steps).
+        } else if controller.far_under(count - stats.leaving.min(count)) && !self.predicts_from_a_sample() {
+            // Far under the budget once the transitions end: on down by prediction, not a step
+            // a frame (a sample's predictions fall short near the camera, and a large forest
+            // steps).
             controller.lower_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
         }
         self.phases.assign += started.elapsed();
