@@ -177,7 +177,7 @@ pub struct Renderer {
     /// Per instance: for the trees leaving the LoD chain in a transition, the level they drew
     /// before the camera's view forgot it, which they hold while they fade (`ChainState::hold`;
     /// an entry outlives its transition, and is replaced when the tree next leaves the chain).
-    leaving_chain_levels: Vec<Option<treelod_runtime::ChainPick>>,
+    pub(crate) leaving_chain_levels: Vec<Option<treelod_runtime::ChainPick>>,
     /// Per instance: the visible fraction of its hull samples last measured (1 if never).
     pub(crate) visible_fraction: Vec<f32>,
     /// This frame's trees per technique ([`Self::assign`]) from the camera's view.
@@ -907,7 +907,13 @@ impl Renderer {
         self.settings = user;
         // What the frame drew, the leaving draws included (the documentation above).
         let count = stats.primitives();
-        let drawn = Drawn { camera: selection, count, s_min: drawn_s_min, spt: stats.by_technique[Technique::Spt] };
+        let drawn = Drawn {
+            camera: selection,
+            count,
+            s_min: drawn_s_min,
+            spt: stats.by_technique[Technique::Spt],
+            leaving: stats.leaving,
+        };
         self.policy.last_frame = Some(drawn);
         controller.update_policy(count);
         let started = std::time::Instant::now();
