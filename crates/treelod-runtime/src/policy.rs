@@ -1961,7 +1961,9 @@ impl Choices {
         // Above the range: one step per STEPS_PER_OCTAVE past its end reads as the fallback.
         let above = |i: f32| i > last as f32 + 0.5;
         #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "clamped to the table")]
-        let at = |i: f32| if above(i) { above_range } else { steps[i.round().max(0.0) as usize] };
+        // A step half way past the last (`above` is false there) rounds up to one past it: the
+        // last step's choice.
+        let at = |i: f32| if above(i) { above_range } else { steps[(i.round().max(0.0) as usize).min(last)] };
         held(at, x, self.hysteresis_steps, previous)
     }
 
@@ -4009,6 +4011,25 @@ mod tests {
             hysteresis_steps: 0,
             uniform_by_class: Vec::new(),
         }
+    }
+
+    /// A tree whose height falls exactly half a step past the tables' last step (`above` is
+    /// false there, and the step rounds up to one past the last) is chosen with the last step's
+    /// technique: its lookup indexed one past the tables and panicked (met by budget mode
+    /// among 1,000 trees of the shared pine, their heights looked up at per-tree factors).
+    #[test]
+    fn a_height_half_a_step_past_the_tables_is_chosen_with_the_last_step() {
+        let choices = spt_above_without_hysteresis();
+        let last = choices.tables[0].steps.len() - 1;
+        let edge = last as f32 + 0.5;
+        let analytic = (choices.log2_min + edge / STEPS_PER_OCTAVE).exp2();
+        // The f32 heights around it, one of which falls on the edge exactly.
+        let height = (-64..=64)
+            .map(|k: i32| f32::from_bits(analytic.to_bits().wrapping_add_signed(k)))
+            .find(|&h| choices.step(h) == edge)
+            .expect("a height on the edge");
+        let chosen = choices.choose_in_class(height, 0, 0, 1.0, None);
+        assert_eq!(chosen, choices.tables[0].steps[last]);
     }
 
     /// Trees chosen frame after frame along a path: those that change technique are in a
