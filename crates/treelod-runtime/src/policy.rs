@@ -1347,6 +1347,9 @@ pub struct Choices {
     /// Per elevation class, the technique its tables choose below a height, and that height
     /// ([`Self::uniform_below_in`]; [`Self::uniform_below`] follows from them).
     uniform_by_class: Vec<Option<(f32, Technique)>>,
+    /// `log2` of the largest factor a tree's height is chosen at ([`Self::dithered_height`]):
+    /// [`BUDGET_DITHER_OCTAVES`] in budget mode, else 0.
+    dither: f32,
 }
 
 /// The elevation class (an index for [`Choices::choose_framed`]) of a tree seen from below the
@@ -1354,6 +1357,20 @@ pub struct Choices {
 /// lowest class's tables without the techniques whose representations hold only the upper
 /// hemisphere ([`upper_hemisphere_only`]).
 pub const BELOW_HORIZON: usize = usize::MAX;
+
+/// In budget mode, the octaves either side of its projected height a tree is chosen at
+/// ([`Choices::dithered_height`]): two of the tables' steps ([`STEPS_PER_OCTAVE`]).
+///
+/// One model's trees at like distances switch representation at one target, and the frame's
+/// count falls off a cliff there: budget mode then holds far under the budget rather than
+/// draw a frame many times over it (spec §10.2). With each tree chosen at its height times a
+/// factor of its own, the trees at one height switch over a range of targets, and the count
+/// falls in smaller steps. Measured (`bench --trees 1000 --frames 300 --budget 100000
+/// --no-render`, every shared model, seeds 1 and 2: 4,200 frames), none → two steps → four:
+/// frames within ½–1.1 times the budget 3,143 → 3,255 → 3,289, under half of it 830 → 707 →
+/// 648, over 1.1 times it 227 → 238 → 263 (the primitives over it summed 8.72 → 9.39 → 9.78
+/// million); one step: 3,154, 792 and 254.
+pub const BUDGET_DITHER_OCTAVES: f32 = 2.0 / STEPS_PER_OCTAVE;
 
 /// Whether technique `t`'s representation shows a tree only from the upper hemisphere: the
 /// octahedral impostor, whose views (spec §6.13.1) are all taken from above the horizon and which
@@ -1699,6 +1716,28 @@ impl Choices {
         Self::from_basis(&ChoiceBasis::among(calibration, usable), policy)
     }
 
+    /// The height a tree `height` pixels high placed by `transform` is chosen at. In budget mode
+    /// ([`Policy::budget`]), `height` times a factor of the tree's own, `2^(±`
+    /// [`BUDGET_DITHER_OCTAVES`]`)` at most, drawn from where it stands (the translation's
+    /// bits, so the same every frame and in every view), so that trees at like heights switch
+    /// representation at different targets; otherwise `height`.
+    #[must_use]
+    pub fn dithered_height(&self, height: f32, transform: &Mat4) -> f32 {
+        if self.dither == 0.0 {
+            return height;
+        }
+        let t = transform.w_axis;
+        let key = (u64::from(t.x.to_bits()) << 32) ^ u64::from(t.z.to_bits()) ^ (u64::from(t.y.to_bits()) << 16);
+        let mut z = key.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        // 24 bits, uniform in [0, 1).
+        #[expect(clippy::cast_precision_loss, reason = "24 bits")]
+        let u = (z >> 40) as f32 / (1u64 << 24) as f32;
+        height * ((2.0 * u - 1.0) * self.dither).exp2()
+    }
+
     /// [`Self::among`] from what it reads whatever the policy, made once ([`ChoiceBasis`]): the
     /// same choices, for a fraction of the cost where a host makes a model's choices for many
     /// targets (budget mode).
@@ -1720,6 +1759,7 @@ impl Choices {
             below,
             hysteresis_steps: hysteresis_steps(policy),
             uniform_by_class: Vec::new(),
+            dither: if policy.budget.is_some() { BUDGET_DITHER_OCTAVES } else { 0.0 },
         };
         choices.measure_uniform();
         choices
@@ -2665,11 +2705,12 @@ pub fn choose_instances_in_chunks(
                         }
                     };
                     *measure = true;
+                    let looked = choices.dithered_height(height, &instance.transform);
                     let chosen = match choices.uniform_below_in(elevation_class) {
                         // The class's tables choose the same under this height, whatever the
                         // tree's visibility and last frame's choice: not looked up.
-                        Some((below, uniform)) if height < below => {
-                            *measure = height >= VISIBILITY_LEAD * below || prunes(uniform);
+                        Some((below, uniform)) if looked < below => {
+                            *measure = looked >= VISIBILITY_LEAD * below || prunes(uniform);
                             uniform
                         }
                         _ => {
@@ -2677,7 +2718,7 @@ pub fn choose_instances_in_chunks(
                                 Some(f) if choices.above_range(height) => in_view_share(lod, instance.transform, f),
                                 _ => 1.0,
                             };
-                            choices.choose_in_class(height, elevation_class, seen, in_view, *previous)
+                            choices.choose_in_class(looked, elevation_class, seen, in_view, *previous)
                         }
                     };
                     *transition = advance(*previous, chosen, *transition, frames);
@@ -3845,6 +3886,7 @@ mod tests {
             visibility: 1,
             below: Vec::new(),
             hysteresis_steps: 2,
+            dither: 0.0,
             uniform_by_class: Vec::new(),
         };
         // Find the boundary between crossed (small) and the point tree (larger).
@@ -4009,6 +4051,7 @@ mod tests {
             visibility: 1,
             below: Vec::new(),
             hysteresis_steps: 0,
+            dither: 0.0,
             uniform_by_class: Vec::new(),
         }
     }
@@ -4030,6 +4073,44 @@ mod tests {
             .expect("a height on the edge");
         let chosen = choices.choose_in_class(height, 0, 0, 1.0, None);
         assert_eq!(chosen, choices.tables[0].steps[last]);
+    }
+
+    /// In budget mode trees at one height are chosen at heights of their own within
+    /// [`BUDGET_DITHER_OCTAVES`] of it, the same every time, so that at a boundary of the tables
+    /// some of them are chosen either side of it; without a budget, at their height.
+    #[test]
+    fn in_budget_mode_trees_at_one_height_switch_over_a_range_of_heights() {
+        let mut choices = spt_above_without_hysteresis();
+        let steps = choices.tables[0].steps.clone();
+        let i = (0..steps.len() - 1).find(|&i| steps[i] != steps[i + 1]).expect("a boundary");
+        let boundary = (choices.log2_min + (i as f32 + 0.5) / STEPS_PER_OCTAVE).exp2();
+        let trees: Vec<Mat4> = (0..400)
+            .map(|k| Mat4::from_translation(Vec3::new(3.0 * (k % 20) as f32, 0.0, -3.0 * (k / 20) as f32)))
+            .collect();
+        let finer = |choices: &Choices, height: f32| {
+            trees
+                .iter()
+                .filter(|t| {
+                    choices.choose_in_class(choices.dithered_height(height, t), 0, 0, 1.0, None) == steps[i + 1]
+                })
+                .count()
+        };
+        // Without a budget: every tree on the same side.
+        for factor in [0.9f32, 1.1] {
+            let n = finer(&choices, boundary * factor);
+            assert!(n == 0 || n == trees.len(), "{n} at {factor}");
+        }
+        choices.dither = BUDGET_DITHER_OCTAVES;
+        for t in &trees {
+            let h = choices.dithered_height(100.0, t);
+            assert!((h / 100.0).log2().abs() <= BUDGET_DITHER_OCTAVES, "{h}");
+            assert_eq!(h, choices.dithered_height(100.0, t), "the same every time");
+        }
+        // With it: a share either side near the boundary, growing across it.
+        let shares: Vec<usize> = [0.85f32, 0.95, 1.05, 1.15].iter().map(|&f| finer(&choices, boundary * f)).collect();
+        assert!(shares.windows(2).all(|w| w[0] <= w[1]), "{shares:?}");
+        assert!(shares[1] > 0 && shares[2] < trees.len(), "{shares:?}");
+        assert!(shares[1] < shares[2], "{shares:?}");
     }
 
     /// Trees chosen frame after frame along a path: those that change technique are in a
@@ -4355,6 +4436,7 @@ mod tests {
                     visibility: 1,
                     below: Vec::new(),
                     hysteresis_steps: 2,
+                    dither: 0.0,
                     uniform_by_class: Vec::new(),
                 };
                 // The chunks take the technique every table shares under its height without
