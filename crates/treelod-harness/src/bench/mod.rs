@@ -272,6 +272,9 @@ pub struct Row {
     /// Trees drawn with two techniques, in a transition from one to the other
     /// (`FrameStats::transitions`; `None` for the counted full mesh).
     pub transitions: Option<u32>,
+    /// Primitives of the draws of the techniques those trees are leaving (`FrameStats::leaving`,
+    /// counted in the row's primitives; `None` for the counted full mesh).
+    pub leaving: Option<u64>,
     /// Coverage against the reference (with `--quality`, not for the reference itself).
     pub coverage: Option<Coverage>,
     /// Multi-scale RMSE summary against the reference.
@@ -674,6 +677,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                     gpu_ms: reference_shot.as_ref().and_then(|(_, ms)| *ms),
                     shadow_primitives: None,
                     transitions: None,
+                    leaving: None,
                     coverage: None,
                     rmse: None,
                     flip: None,
@@ -718,6 +722,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 gpu_ms: None,
                 shadow_primitives: options.shadows.then(|| stats.shadow.primitives()),
                 transitions: Some(stats.transitions),
+                leaving: Some(stats.leaving),
                 coverage: None,
                 rmse: None,
                 flip: None,
