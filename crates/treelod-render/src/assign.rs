@@ -230,7 +230,14 @@ impl Renderer {
     /// - the other point trees drawn before and after: their cut scaled by the square of
     ///   `drawn.s_min / s_min` (the cut's elements are areas);
     /// - the draws of the techniques trees in a transition are leaving: kept as drawn, less
-    ///   those of the transitions that end before the next frame ([`Self::leaving_ended`]).
+    ///   those of the transitions that end before the next frame ([`Self::leaving_ended`]); and
+    ///   a tree in view that changes technique under `next` with transitions of more than one
+    ///   frame ([`Policy::transition`]) keeps what it cost beside its new cost, as the next
+    ///   frame draws both. Counted as a switch at once, the frames over 1.1 times the budget
+    ///   were mostly trees fading: 205 of 238 on 1,000 trees of each shared model (`bench
+    ///   --budget 100000`, 4,200 frames), where counting both took them to 73 (within ½–1.1
+    ///   times the budget 3,255 → 3,393, under half 707 → 734, the worst frame 0.20 → 0.14
+    ///   million).
     ///
     /// The tables made for `next` are kept: the next frame's assignment uses them when the
     /// steering takes the step.
@@ -291,7 +298,10 @@ impl Renderer {
                 }
             };
             if let (Some(after), Some(before)) = (after, before) {
-                delta += weight * (after - before);
+                // A tree that changes technique in view is drawn with both for the transition's
+                // frames: what it drew goes on beside what it will draw.
+                let fading = then.is_some() && now.is_some() && next.transition() > 1;
+                delta += weight * if fading { after } else { after - before };
             }
         }
         // The other point trees that keep their technique draw a cut of the new `s_min`.
@@ -864,6 +874,44 @@ mod tests {
             stats = next;
         }
         assert!(ended >= 1, "no transition ended while the camera held");
+    }
+
+    /// Budget mode's prediction of a frame counts a tree whose technique changes with
+    /// transitions at both its old and its new cost: the frame draws both while the tree fades.
+    /// The field of demo trees under the policy with transitions of 3 frames, the camera held,
+    /// the target raised fourfold: the frame predicted at it is what the next frame draws (its
+    /// fading trees' old draws included, which a switch at once would leave out).
+    #[test]
+    fn a_prediction_counts_a_fading_tree_at_both_its_costs() {
+        let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+        let container = calibrated_demo();
+        let policy = Policy { transition: 3, ..Policy::default() };
+        let (mut renderer, camera) = field(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() });
+        let selection = camera.selection();
+        let s_min = renderer.settings.s_min;
+        let stats = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera)).last().expect("frames");
+        assert_eq!(stats.leaving, 0, "settled");
+        let drawn = Drawn {
+            camera: selection,
+            count: stats.primitives(),
+            s_min,
+            spt: stats.by_technique[Technique::Spt],
+            leaving: 0,
+        };
+        let raised = Policy { target: 4.0 * policy.target(), ..policy };
+        let predicted = renderer.predict_count(&selection, raised, s_min, drawn);
+        renderer.settings.policy = Some(raised);
+        let next = renderer.prepare(&gpu.device, &gpu.queue, &camera);
+        assert!(next.leaving > 0 && next.transitions > 0, "no tree changed technique: {next:?}");
+        let (p, n) = (predicted as f64, next.primitives() as f64);
+        assert!(
+            (p - n).abs() <= 0.02 * n,
+            "predicted {predicted}, drew {} ({} leaving)",
+            next.primitives(),
+            next.leaving
+        );
+        // Counted as a switch at once, the prediction is short by about the leaving draws.
+        assert!(p - next.leaving as f64 <= 0.9 * n, "the leaving draws do not matter here: {predicted}, {next:?}");
     }
 
     /// The chunks chosen whole beside a sample are those of the tallest trees, ascending, none

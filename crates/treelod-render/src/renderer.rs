@@ -841,9 +841,11 @@ impl Renderer {
     /// 100000`, 4,200 frames: within ½–1.1 times the budget 2,783 → 2,823, under half 1,251 →
     /// 1,215, over 1.1 times 166 → 162). A prediction counts each LoD chain tree by the
     /// triangles of the level its selection would pick (near trees above the tables' heights
-    /// pick it by geometric error at `s_min`), the point trees' cut scaled by `s_min`, and a
-    /// point tree above the tables' heights by the cut its selection draws, cells out of view
-    /// culled; what a tree cost in the last frame is read at that frame's camera. The
+    /// pick it by geometric error at `s_min`), the point trees that stay point trees by their
+    /// cut scaled by `s_min`, and a point tree that changes technique, or stays one above the
+    /// tables' heights, by the cut its selection draws, cells out of view culled; what a tree cost in the last frame is read at that frame's camera; a tree that
+    /// changes technique counts both its old and its new cost while it fades, and the leaving
+    /// draws of transitions that end come off. The
     /// settings themselves are not changed;
     /// [`Self::budget_steering`] reads what the controller holds.
     ///
