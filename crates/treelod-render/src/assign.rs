@@ -790,6 +790,26 @@ mod tests {
         (renderer, Camera::look_at(Vec3::ZERO, vec3(0.0, -0.1, -1.0), 0.9, 320, 240))
     }
 
+    /// [`field`] of [`calibrated_demo`] under the policy with transitions of 3 frames, with the
+    /// policy, on `gpu`.
+    fn fading_field(gpu: &Gpu) -> (Renderer, Camera, Policy) {
+        let policy = Policy { transition: 3, ..Policy::default() };
+        let (renderer, camera) =
+            field(gpu, &calibrated_demo(), Settings { policy: Some(policy), ..Settings::default() });
+        (renderer, camera, policy)
+    }
+
+    /// What a frame of `stats` drew for `camera` at `s_min`, as budget mode keeps it.
+    fn drawn(camera: treelod_runtime::Camera, s_min: f32, stats: &crate::FrameStats) -> Drawn {
+        Drawn {
+            camera,
+            count: stats.primitives(),
+            s_min,
+            spt: stats.by_technique[Technique::Spt],
+            leaving: stats.leaving,
+        }
+    }
+
     /// Budget mode counts every point tree it predicts by its cut (`Renderer::table_cost`), not
     /// only those above the calibration tables' heights: the field of demo trees drawn as point
     /// trees at three `s_min`, the trees' predicted costs add up to what the frame submits,
@@ -831,17 +851,14 @@ mod tests {
 
     /// Budget mode's prediction of a frame leaves out the draws of the techniques trees were
     /// leaving in transitions that have ended by then (`Renderer::leaving_ended`): the field of
-    /// demo trees under the policy with transitions of 3 frames, the camera stepped nearer once
-    /// (some trees change technique and fade over the next frames) and then held; each frame's
-    /// prediction of the next, at the same camera and steering, is what the next frame draws,
-    /// and a frame whose leaving draws then end would have been predicted at its own count with
-    /// them.
+    /// demo trees under the policy with transitions of 3 frames, the camera walked into it until
+    /// trees change technique and fade, then held; each frame's prediction of the next, at the
+    /// same camera and steering, is what the next frame draws, and a frame whose leaving draws
+    /// then end would have been predicted at its own count with them.
     #[test]
     fn a_prediction_leaves_out_the_leaving_draws_of_transitions_that_end() {
         let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
-        let container = calibrated_demo();
-        let policy = Policy { transition: 3, ..Policy::default() };
-        let (mut renderer, camera) = field(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() });
+        let (mut renderer, camera, policy) = fading_field(&gpu);
         // Walked into the field until trees change technique.
         let ahead = vec3(0.0, -0.1, -1.0);
         let (mut stats, mut held) = (renderer.prepare(&gpu.device, &gpu.queue, &camera), camera);
@@ -858,14 +875,7 @@ mod tests {
         let s_min = renderer.settings.s_min;
         let mut ended = 0;
         for _ in 0..5 {
-            let drawn = Drawn {
-                camera: selection,
-                count: stats.primitives(),
-                s_min,
-                spt: stats.by_technique[Technique::Spt],
-                leaving: stats.leaving,
-            };
-            let predicted = renderer.predict_count(&selection, policy, s_min, drawn);
+            let predicted = renderer.predict_count(&selection, policy, s_min, drawn(selection, s_min, &stats));
             let next = renderer.prepare(&gpu.device, &gpu.queue, &held);
             assert_eq!(predicted, next.primitives(), "leaving {} → {}", stats.leaving, next.leaving);
             if stats.leaving > 0 && next.leaving == 0 {
@@ -884,22 +894,13 @@ mod tests {
     #[test]
     fn a_prediction_counts_a_fading_tree_at_both_its_costs() {
         let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
-        let container = calibrated_demo();
-        let policy = Policy { transition: 3, ..Policy::default() };
-        let (mut renderer, camera) = field(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() });
+        let (mut renderer, camera, policy) = fading_field(&gpu);
         let selection = camera.selection();
         let s_min = renderer.settings.s_min;
         let stats = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera)).last().expect("frames");
         assert_eq!(stats.leaving, 0, "settled");
-        let drawn = Drawn {
-            camera: selection,
-            count: stats.primitives(),
-            s_min,
-            spt: stats.by_technique[Technique::Spt],
-            leaving: 0,
-        };
         let raised = Policy { target: 4.0 * policy.target(), ..policy };
-        let predicted = renderer.predict_count(&selection, raised, s_min, drawn);
+        let predicted = renderer.predict_count(&selection, raised, s_min, drawn(selection, s_min, &stats));
         renderer.settings.policy = Some(raised);
         let next = renderer.prepare(&gpu.device, &gpu.queue, &camera);
         assert!(next.leaving > 0 && next.transitions > 0, "no tree changed technique: {next:?}");
