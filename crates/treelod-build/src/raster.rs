@@ -744,12 +744,9 @@ fn noise_table() -> &'static (Vec<u8>, Vec<usize>) {
     })
 }
 
-/// SplitMix64's finaliser, as the renderer's noise hashes its texels.
-fn noise_mix(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
+/// One SplitMix64 step from `x`: the hash the renderer's noise chains over its texels.
+fn noise_mix(x: u64) -> u64 {
+    crate::rng::SplitMix64(x).next_u64()
 }
 
 /// The ellipsoid `{centre + Σ u_i·axes[i] : |u| ≤ 1}` (`axes` orthogonal, as a record's frame)

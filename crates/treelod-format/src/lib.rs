@@ -21,6 +21,7 @@ mod metadata;
 pub mod pack;
 mod reader;
 mod records;
+mod rng;
 mod verify;
 mod writer;
 
@@ -31,6 +32,7 @@ pub use reader::{
     MAX_SECTIONS, OpenOptions, Section,
 };
 pub use records::*;
+pub use rng::SplitMix64;
 pub use verify::{SptSummary, VerifyReport, check_far_lines, check_point_cut, check_spt, triangle_leaf_sizes, verify};
 pub use writer::{
     Compression, ContainerData, DEFAULT_LEVEL, SMALL_SECTION, section_level, temporary_target, verify_written,

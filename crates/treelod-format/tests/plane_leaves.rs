@@ -6,8 +6,8 @@ mod common;
 
 use treelod_format::{
     CellRecord, Compression, Container, ContainerData, Error, ImageRecord, MINOR, MaterialInfo, MaterialRecord,
-    NO_IMAGE, PlaneLeafRecord, PlaneRecord, Range, SectionKind, image_format, leaf_slots, pack, plane_leaf_bases,
-    verify,
+    NO_IMAGE, PlaneLeafRecord, PlaneRecord, Range, SectionKind, SplitMix64, image_format, leaf_slots, pack,
+    plane_leaf_bases, verify,
 };
 
 const INF: f32 = f32::INFINITY;
@@ -350,21 +350,9 @@ fn slots_of_images_that_planes_do_not_sample_indirectly_are_not_read() {
     check(&data).expect("valid");
 }
 
-/// A small SplitMix64 for the randomised comparison below.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: u32) -> u32 {
-        (self.next() % u64::from(n)) as u32
-    }
+/// Uniform in `0..n` for the randomised comparison below.
+fn below(rng: &mut SplitMix64, n: u32) -> u32 {
+    u32::try_from(rng.below(u64::from(n))).expect("below a u32")
 }
 
 #[test]
@@ -372,16 +360,17 @@ fn the_slot_check_agrees_with_reading_every_texel_of_every_rectangle() {
     // Random images (up to 70×40, so the pyramid of 4×4 blocks has a few levels) and random
     // overlapping rectangles, each plane a root of its own leaves: verify's answer equals a
     // brute-force scan of every rectangle's texels (the texels whose area meets the rectangle).
-    let mut rng = Rng(0x5107_5107);
+    let mut rng = SplitMix64(0x5107_5107);
     let mut refused = 0;
     for case in 0..300 {
         let mut data = fixture();
-        let (w, h) = (1 + rng.below(70), 1 + rng.below(40));
+        let (w, h) = (1 + below(&mut rng, 70), 1 + below(&mut rng, 40));
         let mut texels = vec![0u8; (w * h * 4) as usize];
-        let high = 1 + rng.below(6);
+        let high = 1 + below(&mut rng, 6);
         for t in texels.chunks_exact_mut(4) {
             // Mostly slots 0 and 1, which every plane allows; rarely one up to 6.
-            let pick = |rng: &mut Rng| (if rng.below(400) == 0 { 1 + rng.below(high) } else { rng.below(2) }) as u16;
+            let pick =
+                |rng: &mut SplitMix64| (if below(rng, 400) == 0 { 1 + below(rng, high) } else { below(rng, 2) }) as u16;
             let (a, b) = (pick(&mut rng), pick(&mut rng));
             t.copy_from_slice(&[a.to_le_bytes(), b.to_le_bytes()].concat());
         }
@@ -395,14 +384,14 @@ fn the_slot_check_agrees_with_reading_every_texel_of_every_rectangle() {
         };
         data.image_data.truncate(16);
         data.image_data.extend_from_slice(&texels);
-        let count = 1 + rng.below(6);
+        let count = 1 + below(&mut rng, 6);
         data.planes.clear();
         data.plane_leaves.clear();
         let mut first = 0;
         for _ in 0..count {
-            let leaves = 1 + rng.below(4);
-            let (u0, u1) = (rng.below(65_536), rng.below(65_536));
-            let (v0, v1) = (rng.below(65_536), rng.below(65_536));
+            let leaves = 1 + below(&mut rng, 4);
+            let (u0, u1) = (below(&mut rng, 65_536), below(&mut rng, 65_536));
+            let (v0, v1) = (below(&mut rng, 65_536), below(&mut rng, 65_536));
             let (u0, u1) = (u0.min(u1), u0.max(u1));
             let (v0, v1) = (v0.min(v1), v0.max(v1));
             data.planes.push(PlaneRecord {

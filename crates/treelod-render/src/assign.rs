@@ -316,9 +316,30 @@ impl Renderer {
             clippy::cast_precision_loss,
             reason = "a count of primitives, clamped at 0"
         )]
-        let predicted =
-            (drawn.count as f64 + spt + delta - self.leaving_ended(next, &drawn, &drawn_frustum)).max(0.0) as u64;
+        let predicted = (drawn.count as f64 + spt + delta - drawn.leaving_ended).max(0.0) as u64;
         predicted
+    }
+
+    /// What a frame of `stats` drew for `camera` at `s_min` under transitions of `policy`, as
+    /// budget mode keeps it for the predictions from it ([`Self::predict_count`]), the share of
+    /// its leaving draws that end before the next frame counted once.
+    pub(crate) fn drawn(
+        &self,
+        camera: treelod_runtime::Camera,
+        s_min: f32,
+        stats: &crate::FrameStats,
+        policy: Policy,
+    ) -> Drawn {
+        let mut drawn = Drawn {
+            camera,
+            count: stats.primitives(),
+            s_min,
+            spt: stats.by_technique[Technique::Spt],
+            leaving: stats.leaving,
+            leaving_ended: 0.0,
+        };
+        drawn.leaving_ended = self.leaving_ended(policy, &drawn);
+        drawn
     }
 
     /// The share of `drawn`'s leaving draws ([`Drawn::leaving`]) whose transitions end before
@@ -330,10 +351,11 @@ impl Renderer {
     /// finished fading out were predicted to go on: of the frames predicted more than 1.25
     /// times what they drew, most followed a frame whose leaving draws were over a fifth of its
     /// count.
-    fn leaving_ended(&self, policy: Policy, drawn: &Drawn, frustum: &treelod_runtime::Frustum) -> f64 {
+    fn leaving_ended(&self, policy: Policy, drawn: &Drawn) -> f64 {
         if drawn.leaving == 0 || self.transitions.is_empty() {
             return 0.0;
         }
+        let frustum = &treelod_runtime::Frustum::from_view_proj(drawn.camera.view_proj);
         #[expect(clippy::cast_precision_loss, reason = "a transition's frames")]
         let step = 1.0 / policy.transition().max(1) as f32;
         let (mut ending, mut all) = (0.0f64, 0.0f64);
@@ -640,6 +662,9 @@ pub(crate) struct Drawn {
     /// The primitives of the draws of the techniques its trees in a transition were leaving
     /// (`FrameStats::leaving`, counted in [`Self::count`]).
     pub(crate) leaving: u64,
+    /// The share of [`Self::leaving`] whose transitions end before the next frame
+    /// (`Renderer::leaving_ended`), which every prediction from this frame takes off.
+    pub(crate) leaving_ended: f64,
 }
 
 /// Budget mode's sample of a forest of more than [`PREDICTED_CHUNKS`] chunks of
@@ -745,7 +770,7 @@ mod tests {
     use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
     use treelod_format::{Compression, Container};
 
-    use super::{CHOOSE_CHUNK, Drawn, Gathered, NEAR_CHUNKS, Sample, near_chunks, spt_cost};
+    use super::{CHOOSE_CHUNK, Gathered, NEAR_CHUNKS, Sample, near_chunks, spt_cost};
     use crate::offscreen::Gpu;
     use crate::{Camera, Instance, Policy, Renderer, Settings, Technique};
 
@@ -797,17 +822,6 @@ mod tests {
         let (renderer, camera) =
             field(gpu, &calibrated_demo(), Settings { policy: Some(policy), ..Settings::default() });
         (renderer, camera, policy)
-    }
-
-    /// What a frame of `stats` drew for `camera` at `s_min`, as budget mode keeps it.
-    fn drawn(camera: treelod_runtime::Camera, s_min: f32, stats: &crate::FrameStats) -> Drawn {
-        Drawn {
-            camera,
-            count: stats.primitives(),
-            s_min,
-            spt: stats.by_technique[Technique::Spt],
-            leaving: stats.leaving,
-        }
     }
 
     /// Budget mode counts every point tree it predicts by its cut (`Renderer::table_cost`), not
@@ -875,7 +889,10 @@ mod tests {
         let s_min = renderer.settings.s_min;
         let mut ended = 0;
         for _ in 0..5 {
-            let predicted = renderer.predict_count(&selection, policy, s_min, drawn(selection, s_min, &stats));
+            let predicted = {
+                let drawn = renderer.drawn(selection, s_min, &stats, policy);
+                renderer.predict_count(&selection, policy, s_min, drawn)
+            };
             let next = renderer.prepare(&gpu.device, &gpu.queue, &held);
             assert_eq!(predicted, next.primitives(), "leaving {} → {}", stats.leaving, next.leaving);
             if stats.leaving > 0 && next.leaving == 0 {
@@ -900,7 +917,10 @@ mod tests {
         let stats = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera)).last().expect("frames");
         assert_eq!(stats.leaving, 0, "settled");
         let raised = Policy { target: 4.0 * policy.target(), ..policy };
-        let predicted = renderer.predict_count(&selection, raised, s_min, drawn(selection, s_min, &stats));
+        let predicted = {
+            let drawn = renderer.drawn(selection, s_min, &stats, policy);
+            renderer.predict_count(&selection, raised, s_min, drawn)
+        };
         renderer.settings.policy = Some(raised);
         let next = renderer.prepare(&gpu.device, &gpu.queue, &camera);
         assert!(next.leaving > 0 && next.transitions > 0, "no tree changed technique: {next:?}");

@@ -18,12 +18,10 @@ pub const NOISE_SIZE: u32 = 64;
 /// Mip levels of the cube: `NOISE_SIZE` down to 1.
 pub const NOISE_LEVELS: u32 = NOISE_SIZE.ilog2() + 1;
 
-/// SplitMix64's finaliser: a well-mixed 64-bit hash of `x`.
-fn mix(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
+/// One SplitMix64 step from `x` ([`treelod_format::SplitMix64`]): a well-mixed 64-bit hash of `x`,
+/// chained over a texel's values.
+fn mix(x: u64) -> u64 {
+    treelod_format::SplitMix64(x).next_u64()
 }
 
 /// The RGBA8 texels of one face at one level, rows top to bottom.

@@ -909,13 +909,7 @@ impl Renderer {
         self.settings = user;
         // What the frame drew, the leaving draws included (the documentation above).
         let count = stats.primitives();
-        let drawn = Drawn {
-            camera: selection,
-            count,
-            s_min: drawn_s_min,
-            spt: stats.by_technique[Technique::Spt],
-            leaving: stats.leaving,
-        };
+        let drawn = self.drawn(selection, drawn_s_min, &stats, policy);
         self.policy.last_frame = Some(drawn);
         controller.update_policy(count);
         let started = std::time::Instant::now();
@@ -924,7 +918,7 @@ impl Renderer {
         {
             // Look before stepping down: a step predicted over the budget is refused undrawn.
             controller.refuse();
-        } else if controller.far_under(count - stats.leaving.min(count)) && !self.predicts_from_a_sample() {
+        } else if controller.far_under(count.saturating_sub(stats.leaving)) && !self.predicts_from_a_sample() {
             // Far under the budget once the transitions end: on down by prediction, not a step
             // a frame (a sample's predictions fall short near the camera, and a large forest
             // steps).

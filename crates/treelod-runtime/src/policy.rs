@@ -1728,13 +1728,7 @@ impl Choices {
         }
         let t = transform.w_axis;
         let key = (u64::from(t.x.to_bits()) << 32) ^ u64::from(t.z.to_bits()) ^ (u64::from(t.y.to_bits()) << 16);
-        let mut z = key.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        // 24 bits, uniform in [0, 1).
-        #[expect(clippy::cast_precision_loss, reason = "24 bits")]
-        let u = (z >> 40) as f32 / (1u64 << 24) as f32;
+        let u = treelod_format::SplitMix64(key).unit();
         height * ((2.0 * u - 1.0) * self.dither).exp2()
     }
 
