@@ -4,8 +4,8 @@
 
 use treelod_runtime::{
     Assignment, BudgetController, CACHED_POLICIES, CHOOSE_CHUNK, Calibration, ChoiceBasis, Choices, ChunkBounds,
-    Instance, Policy, PolicyState, Representations, Technique, Transition, choose_instances_in_chunks, chunk_range,
-    projected_height,
+    Instance, Policy, PolicyState, Representations, TablesKey, Technique, Transition, choose_instances_in_chunks,
+    chunk_range, projected_height,
 };
 
 /// Chunks of [`CHOOSE_CHUNK`] instances budget mode's look-ahead chooses again at most
@@ -28,13 +28,14 @@ pub(crate) struct PolicyModels {
     bases: Vec<Option<ChoiceBasis>>,
     /// Per model: its choices under [`Self::made_for`] (`None` without tables).
     pub(crate) choices: Vec<Option<Choices>>,
-    /// The policy the choices were made for; `None`: to be made.
-    pub(crate) made_for: Option<Policy>,
-    /// The choices made for the policies before [`Self::made_for`], the most recent last, up to
+    /// What the choices' tables were made for ([`Choices::tables_key`]: the policy, in budget
+    /// mode with the cell of its target); `None`: to be made.
+    pub(crate) made_for: Option<TablesKey>,
+    /// The choices made for the keys before [`Self::made_for`], the most recent last, up to
     /// [`CACHED_POLICIES`] − 1 of them: budget mode's steering and its predictions go back and
     /// forth between a few targets, and making a model's tables again from its basis costs
     /// 0.15–0.20 ms on the shared models (2 cores).
-    recent: Vec<(Policy, Vec<Option<Choices>>)>,
+    recent: Vec<(TablesKey, Vec<Option<Choices>>)>,
     /// Per instance: last frame's choice (hysteresis).
     pub(crate) state: PolicyState,
     /// Scratch: this frame's choice per instance (`None`: outside the view).
@@ -72,10 +73,12 @@ impl PolicyModels {
     /// Makes each model's choices under `policy` among what its representations hold
     /// (`representations`, per model), unless they were made for it.
     fn choose_under(&mut self, representations: &[Representations], policy: Policy) {
-        if self.made_for == Some(policy) {
+        let key = Choices::tables_key(&policy);
+        if self.made_for == Some(key) {
+            self.choices.iter_mut().flatten().for_each(|c| c.retarget(&policy));
             return;
         }
-        let choices = match self.recent.iter().rposition(|(made_for, _)| *made_for == policy) {
+        let mut choices = match self.recent.iter().rposition(|(made_for, _)| *made_for == key) {
             Some(at) => self.recent.remove(at).1,
             None => {
                 if self.bases.len() != self.calibrations.len() {
@@ -86,7 +89,8 @@ impl PolicyModels {
                 self.bases.iter().map(|basis| basis.as_ref().map(|b| Choices::from_basis(b, &policy))).collect()
             }
         };
-        if let Some(before) = self.made_for.replace(policy) {
+        choices.iter_mut().flatten().for_each(|c| c.retarget(&policy));
+        if let Some(before) = self.made_for.replace(key) {
             if self.recent.len() + 1 >= CACHED_POLICIES {
                 self.recent.remove(0);
             }

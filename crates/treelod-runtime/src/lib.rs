@@ -55,7 +55,7 @@ pub use impostor::{
 pub use light::Light;
 pub use policy::{
     CHOOSE_CHUNK, Calibration, ChainChoices, ChainPick, ChoiceBasis, Choices, ChunkBounds, Policy, PolicyState,
-    Transition, VISIBILITY_CLASSES, VISIBILITY_LEAD, choose_instances, choose_instances_coarsest,
+    TablesKey, Transition, VISIBILITY_CLASSES, VISIBILITY_LEAD, choose_instances, choose_instances_coarsest,
     choose_instances_in_chunks, chunk_range, elevation_class_after, in_view_share, projected_height, view_elevation,
     visibility_class, visibility_class_after,
 };

@@ -861,9 +861,11 @@ impl Calibration {
                 let (e, p) = self.at_elevation(elevation, t, height)?;
                 let f = if flip_checked { self.flip_at(elevation, t, height) } else { None };
                 Some(Candidate { technique: t, error: e, primitives: p, flip: f })
-            })
-            .collect();
-        Judged { candidates, floor, flip_floor, flip_checked, target: 0.0 }
+            });
+        let mut judged =
+            Judged { slots: [Candidate::NONE; CANDIDATES], len: 0, floor, flip_floor, flip_checked, target: 0.0 };
+        candidates.for_each(|c| judged.push(c));
+        judged
     }
 
     /// The LoD chain judged at one height from elevation class `elevation`, drawn as `pick`
@@ -998,10 +1000,23 @@ struct Candidate {
     flip: Option<f32>,
 }
 
+impl Candidate {
+    /// An empty slot of [`Judged`].
+    const NONE: Self = Self { technique: Technique::Full, error: f32::INFINITY, primitives: f32::INFINITY, flip: None };
+}
+
+/// The most candidates a [`Judged`] holds: one per technique.
+const CANDIDATES: usize = Technique::ALL.len();
+
 /// The techniques at one height and the floors they are judged against ([`Calibration::judge`]).
+/// The candidates are held in place, not in a `Vec`: budget mode judges every height again for
+/// each target it predicts (`Judged::with_candidate`), and allocating each copy was a tenth of
+/// its choice tables' time.
 #[derive(Debug)]
 struct Judged {
-    candidates: Vec<Candidate>,
+    /// The candidates, the first [`Self::len`] of them ([`Self::candidates`]).
+    slots: [Candidate; CANDIDATES],
+    len: usize,
     floor: f32,
     flip_floor: f32,
     flip_checked: bool,
@@ -1122,10 +1137,20 @@ impl Judged {
     /// These judgements under `target` with the LoD chain judged as `chain` (`None`: not
     /// usable, or not in the tables).
     fn with_candidate(&self, target: f32, chain: Option<Candidate>) -> Self {
-        let mut candidates = Vec::with_capacity(self.candidates.len() + 1);
-        candidates.extend_from_slice(&self.candidates);
-        candidates.extend(chain);
-        Self { candidates, target: sanitise(target), ..*self }
+        let mut judged = Self { target: sanitise(target), ..*self };
+        chain.into_iter().for_each(|c| judged.push(c));
+        judged
+    }
+
+    /// The candidates.
+    fn candidates(&self) -> &[Candidate] {
+        &self.slots[..self.len]
+    }
+
+    /// Adds `candidate` (at most one per technique: [`CANDIDATES`] in all).
+    fn push(&mut self, candidate: Candidate) {
+        self.slots[self.len] = candidate;
+        self.len += 1;
     }
 
     /// Whether `c` is within the target of the floor, and with FLIP tables within the same share
@@ -1144,14 +1169,14 @@ impl Judged {
     /// The candidate within the target of least primitives (ties: lower error); none within: the
     /// least error, or with FLIP tables the least share over the floors (the larger of the two).
     fn chosen(&self) -> Option<&Candidate> {
-        let cheapest = self.candidates.iter().filter(|c| self.within(c)).min_by(|a, b| Self::cheaper(a, b));
+        let cheapest = self.candidates().iter().filter(|c| self.within(c)).min_by(|a, b| Self::cheaper(a, b));
         let excess = |c: &Candidate| {
             let over = (c.error - self.floor) / self.floor;
             c.flip.map_or(over, |f| over.max((f - self.flip_floor) / self.flip_floor.max(f32::MIN_POSITIVE)))
         };
         let key = |c: &Candidate| if self.flip_checked { excess(c) } else { c.error };
         let best = || {
-            self.candidates.iter().min_by(|a, b| {
+            self.candidates().iter().min_by(|a, b| {
                 key(a)
                     .total_cmp(&key(b))
                     .then(a.primitives.total_cmp(&b.primitives))
@@ -1169,8 +1194,8 @@ impl Judged {
     /// The primitives of `technique` where it is among [`Self::admissible`] (without sorting
     /// them or making the list: [`merge_short_runs`] reads a few of them per table).
     fn admissible_primitives(&self, technique: Technique) -> Option<f32> {
-        if self.candidates.iter().any(|c| self.within(c)) {
-            self.candidates.iter().find(|c| c.technique == technique && self.within(c)).map(|c| c.primitives)
+        if self.candidates().iter().any(|c| self.within(c)) {
+            self.candidates().iter().find(|c| c.technique == technique && self.within(c)).map(|c| c.primitives)
         } else {
             self.chosen().filter(|c| c.technique == technique).map(|c| c.primitives)
         }
@@ -1179,7 +1204,7 @@ impl Judged {
     /// The candidates within the target with their primitives, least first; none within: the
     /// choice alone ([`Calibration::admissible_at_elevation`]).
     fn admissible(&self) -> Vec<(Technique, f32)> {
-        let mut within: Vec<&Candidate> = self.candidates.iter().filter(|c| self.within(c)).collect();
+        let mut within: Vec<&Candidate> = self.candidates().iter().filter(|c| self.within(c)).collect();
         within.sort_by(|a, b| Self::cheaper(a, b));
         if within.is_empty() {
             return self.chosen().map(|c| vec![(c.technique, c.primitives)]).unwrap_or_default();
@@ -1347,9 +1372,15 @@ pub struct Choices {
     /// Per elevation class, the technique its tables choose below a height, and that height
     /// ([`Self::uniform_below_in`]; [`Self::uniform_below`] follows from them).
     uniform_by_class: Vec<Option<(f32, Technique)>>,
-    /// `log2` of the largest factor a tree's height is chosen at ([`Self::dithered_height`]):
+    /// `log2` of the largest factor a tree's height is chosen at ([`Self::dither`]):
     /// [`BUDGET_DITHER_OCTAVES`] in budget mode, else 0.
     dither: f32,
+    /// Target classes per visibility class ([`Self::dither`], [`class_targets`]):
+    /// [`BUDGET_TARGET_SPREAD`]` + 1` in budget mode, else 1.
+    dithers: usize,
+    /// In budget mode, where the target falls on the lattice of targets ([`lattice_cell`]): the
+    /// cell of the first target class's tables and the fraction of a step past it.
+    cell: Option<(i32, f32)>,
 }
 
 /// The elevation class (an index for [`Choices::choose_framed`]) of a tree seen from below the
@@ -1359,7 +1390,7 @@ pub struct Choices {
 pub const BELOW_HORIZON: usize = usize::MAX;
 
 /// In budget mode, the octaves either side of its projected height a tree is chosen at
-/// ([`Choices::dithered_height`]): two of the tables' steps ([`STEPS_PER_OCTAVE`]).
+/// ([`Choices::dither`]): two of the tables' steps ([`STEPS_PER_OCTAVE`]).
 ///
 /// One model's trees at like distances switch representation at one target, and the frame's
 /// count falls off a cliff there: budget mode then holds far under the budget rather than
@@ -1371,6 +1402,77 @@ pub const BELOW_HORIZON: usize = usize::MAX;
 /// 648, over 1.1 times it 227 → 238 → 263 (the primitives over it summed 8.72 → 9.39 → 9.78
 /// million); one step: 3,154, 792 and 254.
 pub const BUDGET_DITHER_OCTAVES: f32 = 2.0 / STEPS_PER_OCTAVE;
+
+/// In budget mode, the octaves between the targets of the lattice trees are chosen under
+/// ([`Choices::dither`], [`lattice_cell`]): a quarter.
+///
+/// Where a technique's error hardly changes with height, a factor on the height
+/// ([`BUDGET_DITHER_OCTAVES`]) does not spread the trees' switches: the shared willow's
+/// octahedral impostor reads 0.070–0.075 from 4 to 64 pixels, its impostor planes 0.061–0.072,
+/// so its 1,000 trees seen from afar switched between them within 4 % of target, and the count
+/// went from 6,900 primitives to 190,800 in one step of the steering (a frame far under the
+/// budget or twice over it). Each tree is therefore chosen under a target of its own: the
+/// policy's target rounded to this lattice, down or up by a share of the tree's own (a hash of
+/// where it stands) and spread over [`BUDGET_TARGET_SPREAD`] steps, so that as the target moves
+/// the trees move to the next lattice target one at a time, each at a target of its own. The
+/// tables are made for the lattice's targets, so the targets within one step share them
+/// (budget mode's predictions and steering move the target by a few percent at a time).
+///
+/// Measured (`bench --trees 1000 --frames 300 --budget 100000 --no-render`, every shared model,
+/// seeds 1 and 2: 4,200 frames; the `assign` phase's mean on 2 cores), steps of an eighth / a
+/// sixth / a quarter of an octave over a spread of 1, 2, 3 or 4 of them, against none: within
+/// ½–1.1 times the budget 3,393 without; an eighth over 2 steps 3,501, over 4 steps 3,566; a
+/// sixth over 3 steps 3,540; a quarter over 2 steps 3,545, over 4 steps 3,606 (a tree's
+/// target then up to 2^±0.75 off the policy's); under half the budget 734 → 631, 563, 594, 585
+/// and 517; over 1.1 times it 73 → 68, 71, 66, 70 and 77; `assign` 0.69 ms → 0.68, 0.82–0.92,
+/// 0.74, 0.57 and 0.63 (targets within a cell share the tables). A quarter over 2 steps (3
+/// tables per class) taken; an eighth over 4 (5 tables) drew the four-model forest's frames
+/// (`--budget 300000`) with `assign` at 2.60–2.70 ms against 1.67 ms.
+pub const BUDGET_TARGET_STEP: f32 = 0.25;
+
+/// In budget mode, the steps of [`BUDGET_TARGET_STEP`] over which the trees' targets are spread
+/// ([`lattice_cell`]): a tree's target is within `spread/2 + 1` steps of the policy's (half an
+/// octave), and the choices hold `spread + 1` tables per class.
+pub const BUDGET_TARGET_SPREAD: usize = 2;
+
+/// What a model's [`Choices`]' tables depend on ([`Choices::tables_key`]): the policy, in budget
+/// mode with its target replaced by 0 beside the cell of the lattice of targets it falls in.
+pub type TablesKey = (Policy, i32);
+
+/// Where `target` falls on budget mode's lattice of targets (`2^(k · BUDGET_TARGET_STEP)`): the
+/// cell `k` of the lowest target its trees are chosen under and the fraction `f ∈ [0, 1)` of a
+/// step past it. A tree whose share is `u ∈ [0, 1)` is chosen under the lattice target
+/// `k + ⌊f + u · BUDGET_TARGET_SPREAD⌋`, whose `log2` is `log2(target)` on average over the
+/// trees: the cell is placed half the spread less half a step below it.
+#[must_use]
+pub fn lattice_cell(target: f32) -> (i32, f32) {
+    #[expect(clippy::cast_precision_loss, reason = "a few steps")]
+    let half = BUDGET_TARGET_SPREAD as f32 / 2.0 - 0.5;
+    let x = sanitise(target).max(f32::MIN_POSITIVE).log2() / BUDGET_TARGET_STEP - half;
+    let k = x.floor();
+    #[expect(clippy::cast_possible_truncation, reason = "log2 of an f32 over a step: within i32")]
+    (k as i32, (x - k).clamp(0.0, 1.0 - f32::EPSILON))
+}
+
+/// The targets of [`Choices`]' classes under `target`: per visibility class `k` (outer) the
+/// target raised to `target / √(2^-k)`; in budget mode (`cell`, [`lattice_cell`]) per target
+/// class `j` (inner) the lattice target `2^((cell + j) · BUDGET_TARGET_STEP)` raised so, `j` up
+/// to [`BUDGET_TARGET_SPREAD`].
+#[must_use]
+fn class_targets(target: f32, visibility: usize, cell: Option<i32>) -> Vec<f32> {
+    #[expect(clippy::cast_precision_loss, reason = "a few classes")]
+    let raise = |k: usize| (k as f32 * 0.5).exp2();
+    match cell {
+        None => (0..visibility).map(|k| target * raise(k)).collect(),
+        Some(cell) => (0..visibility)
+            .flat_map(|k| {
+                #[expect(clippy::cast_precision_loss, clippy::cast_possible_wrap, reason = "a few steps")]
+                let lattice = move |j: usize| ((cell + j as i32) as f32 * BUDGET_TARGET_STEP).exp2();
+                (0..=BUDGET_TARGET_SPREAD).map(move |j| lattice(j) * raise(k))
+            })
+            .collect(),
+    }
+}
 
 /// Whether technique `t`'s representation shows a tree only from the upper hemisphere: the
 /// octahedral impostor, whose views (spec §6.13.1) are all taken from above the horizon and which
@@ -1716,20 +1818,62 @@ impl Choices {
         Self::from_basis(&ChoiceBasis::among(calibration, usable), policy)
     }
 
-    /// The height a tree `height` pixels high placed by `transform` is chosen at. In budget mode
-    /// ([`Policy::budget`]), `height` times a factor of the tree's own, `2^(±`
-    /// [`BUDGET_DITHER_OCTAVES`]`)` at most, drawn from where it stands (the translation's
-    /// bits, so the same every frame and in every view), so that trees at like heights switch
-    /// representation at different targets; otherwise `height`.
+    /// The height a tree `height` pixels high placed by `transform` is chosen at, and its target
+    /// class (which of the tables the chooser reads). In budget mode ([`Policy::budget`]), `height`
+    /// times a factor of the tree's own, `2^(±`[`BUDGET_DITHER_OCTAVES`]`)` at most, and the
+    /// class of the lattice target its share rounds the policy's target to ([`lattice_cell`]),
+    /// both drawn from where it stands (the translation's bits, so the same every frame and in
+    /// every view), so that trees at like heights switch representation at different targets;
+    /// otherwise `height` and class 0 (the policy's target).
     #[must_use]
-    pub fn dithered_height(&self, height: f32, transform: &Mat4) -> f32 {
-        if self.dither == 0.0 {
-            return height;
+    pub fn dither(&self, height: f32, transform: &Mat4) -> (f32, usize) {
+        if self.dither == 0.0 && self.dithers <= 1 {
+            return (height, 0);
         }
         let t = transform.w_axis;
         let key = (u64::from(t.x.to_bits()) << 32) ^ u64::from(t.z.to_bits()) ^ (u64::from(t.y.to_bits()) << 16);
-        let u = treelod_format::SplitMix64(key).unit();
-        height * ((2.0 * u - 1.0) * self.dither).exp2()
+        let bits = treelod_format::SplitMix64(key).next_u64();
+        // The top 24 bits for the height (uniform in [0, 1)), the low 32 for the class.
+        #[expect(clippy::cast_precision_loss, reason = "24 bits")]
+        let u = (bits >> 40) as f32 / (1u64 << 24) as f32;
+        // The low 32 bits, a share in [0, 1), spread over the lattice's steps past the cell.
+        #[expect(clippy::cast_precision_loss, reason = "a share")]
+        let share = (bits & 0xFFFF_FFFF) as f32 / (1u64 << 32) as f32;
+        let class = self.cell.map_or(0, |(_, fraction)| {
+            #[expect(
+                clippy::cast_precision_loss,
+                clippy::cast_possible_truncation,
+                clippy::cast_sign_loss,
+                reason = "a few steps"
+            )]
+            let j = (fraction + share * BUDGET_TARGET_SPREAD as f32).floor().max(0.0) as usize;
+            j.min(self.dithers - 1)
+        });
+        (height * ((2.0 * u - 1.0) * self.dither).exp2(), class)
+    }
+
+    /// What the tables of the choices under `policy` depend on: `policy` itself, but in budget
+    /// mode with its target replaced by the cell of the lattice its tables are made at
+    /// ([`lattice_cell`]), so that a host keeps one model's choices for every target within a
+    /// cell and moves them to the target with [`Self::retarget`].
+    #[must_use]
+    pub fn tables_key(policy: &Policy) -> TablesKey {
+        if policy.budget.is_some() {
+            (Policy { target: 0.0, ..*policy }, lattice_cell(policy.target()).0)
+        } else {
+            (*policy, 0)
+        }
+    }
+
+    /// These choices moved to `policy`'s target, whose [`Self::tables_key`] must be theirs: in
+    /// budget mode the fraction of a lattice step the trees' targets are rounded from
+    /// ([`lattice_cell`]); otherwise nothing changes.
+    pub fn retarget(&mut self, policy: &Policy) {
+        if let Some((cell, fraction)) = &mut self.cell {
+            let (now, f) = lattice_cell(policy.target());
+            debug_assert_eq!(now, *cell, "retargeted across cells");
+            *fraction = if now == *cell { f } else { *fraction };
+        }
     }
 
     /// [`Self::among`] from what it reads whatever the policy, made once ([`ChoiceBasis`]): the
@@ -1739,9 +1883,10 @@ impl Choices {
     pub fn from_basis(basis: &ChoiceBasis, policy: &Policy) -> Self {
         let target = policy.target();
         let visibility = if policy.occlusion { VISIBILITY_CLASSES } else { 1 };
+        let cell = policy.budget.is_some().then(|| lattice_cell(target));
+        let dithers = if cell.is_some() { BUDGET_TARGET_SPREAD + 1 } else { 1 };
         // Class k stands for a visible fraction 2^-k: the target over its square root.
-        #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-        let targets: Vec<f32> = (0..visibility).map(|k| target * (k as f32 * 0.5).exp2()).collect();
+        let targets = class_targets(target, visibility, cell.map(|c| c.0));
         let (calibration, heights) = (&basis.calibration, &basis.heights);
         let tables = basis.all.tables(calibration, heights, &targets);
         let below = basis.below.as_ref().map_or_else(Vec::new, |b| b.tables(calibration, heights, &targets));
@@ -1754,6 +1899,8 @@ impl Choices {
             hysteresis_steps: hysteresis_steps(policy),
             uniform_by_class: Vec::new(),
             dither: if policy.budget.is_some() { BUDGET_DITHER_OCTAVES } else { 0.0 },
+            dithers,
+            cell,
         };
         choices.measure_uniform();
         choices
@@ -1809,7 +1956,8 @@ impl Choices {
 
     /// Sets [`Self::uniform_below_in`] (and so [`Self::uniform_below`]) from the tables.
     fn measure_uniform(&mut self) {
-        self.uniform_by_class = self.tables.chunks(self.visibility.max(1)).map(|class| self.uniform(class)).collect();
+        self.uniform_by_class =
+            self.tables.chunks((self.visibility * self.dithers).max(1)).map(|class| self.uniform(class)).collect();
     }
 
     /// The technique [`Self::choose_framed`] gives every tree under a height in every elevation
@@ -1959,26 +2107,28 @@ impl Choices {
         in_view: f32,
         previous: Option<Technique>,
     ) -> Technique {
-        self.choose_in_class(height, elevation, visibility_class(visible), in_view, previous)
+        self.choose_in_class(height, elevation, visibility_class(visible), 0, in_view, previous)
     }
 
     /// [`Self::choose_framed`] for a tree of visibility class `class` ([`visibility_class`]),
-    /// which the chooser knows: a fraction of exactly `2^-class` reads as that class.
+    /// which the chooser knows: a fraction of exactly `2^-class` reads as that class; in target
+    /// class `dither` ([`Self::dither`]; 0, the policy's target, where there is one).
     fn choose_in_class(
         &self,
         height: f32,
         elevation: usize,
         class: usize,
+        dither: usize,
         in_view: f32,
         previous: Option<Technique>,
     ) -> Technique {
-        let k = class.min(self.visibility - 1);
+        let k = class.min(self.visibility - 1) * self.dithers + dither.min(self.dithers - 1);
         let table = match self.below.get(k) {
             Some(below) if elevation == BELOW_HORIZON => below,
             _ => {
                 let e =
                     if elevation == BELOW_HORIZON { 0 } else { elevation.min(self.elevations.len().saturating_sub(1)) };
-                &self.tables[e * self.visibility + k]
+                &self.tables[e * self.visibility * self.dithers + k]
             }
         };
         let (whole, culled) = (table.above_cost.0, table.above_cost.1 * in_view.clamp(0.0, 1.0));
@@ -2034,7 +2184,7 @@ impl Choices {
     #[must_use]
     pub fn steps_at(&self, elevation: usize) -> &[Technique] {
         let e = elevation.min(self.elevations.len().saturating_sub(1));
-        &self.tables[e * self.visibility].steps
+        &self.tables[e * self.visibility * self.dithers].steps
     }
 
     /// [`Self::steps_at`] as runs: each technique with the projected height, pixels, of the first
@@ -2699,7 +2849,7 @@ pub fn choose_instances_in_chunks(
                         }
                     };
                     *measure = true;
-                    let looked = choices.dithered_height(height, &instance.transform);
+                    let (looked, dither) = choices.dither(height, &instance.transform);
                     let chosen = match choices.uniform_below_in(elevation_class) {
                         // The class's tables choose the same under this height, whatever the
                         // tree's visibility and last frame's choice: not looked up.
@@ -2712,7 +2862,7 @@ pub fn choose_instances_in_chunks(
                                 Some(f) if choices.above_range(height) => in_view_share(lod, instance.transform, f),
                                 _ => 1.0,
                             };
-                            choices.choose_in_class(looked, elevation_class, seen, in_view, *previous)
+                            choices.choose_in_class(looked, elevation_class, seen, dither, in_view, *previous)
                         }
                     };
                     *transition = advance(*previous, chosen, *transition, frames);
@@ -3537,8 +3687,7 @@ mod tests {
                         heights.iter().map(|&h| between.judge(elevation, h, target_at(target, h), usable)).collect();
                     Choices::table(&between, &heights, elevation, target, usable, &judged)
                 };
-                #[expect(clippy::cast_precision_loss, reason = "a few classes")]
-                let targets: Vec<f32> = (0..choices.visibility).map(|k| target * (k as f32 * 0.5).exp2()).collect();
+                let targets = class_targets(target, choices.visibility, choices.cell.map(|c| c.0));
                 let tables: Vec<Table> = (0..between.elevations().len())
                     .flat_map(|e| targets.iter().map(move |&t| (e, t)))
                     .map(|(e, t)| own(Some(e), t, &all))
@@ -3881,6 +4030,8 @@ mod tests {
             below: Vec::new(),
             hysteresis_steps: 2,
             dither: 0.0,
+            dithers: 1,
+            cell: None,
             uniform_by_class: Vec::new(),
         };
         // Find the boundary between crossed (small) and the point tree (larger).
@@ -4046,6 +4197,8 @@ mod tests {
             below: Vec::new(),
             hysteresis_steps: 0,
             dither: 0.0,
+            dithers: 1,
+            cell: None,
             uniform_by_class: Vec::new(),
         }
     }
@@ -4065,7 +4218,7 @@ mod tests {
             .map(|k: i32| f32::from_bits(analytic.to_bits().wrapping_add_signed(k)))
             .find(|&h| choices.step(h) == edge)
             .expect("a height on the edge");
-        let chosen = choices.choose_in_class(height, 0, 0, 1.0, None);
+        let chosen = choices.choose_in_class(height, 0, 0, 0, 1.0, None);
         assert_eq!(chosen, choices.tables[0].steps[last]);
     }
 
@@ -4084,9 +4237,7 @@ mod tests {
         let finer = |choices: &Choices, height: f32| {
             trees
                 .iter()
-                .filter(|t| {
-                    choices.choose_in_class(choices.dithered_height(height, t), 0, 0, 1.0, None) == steps[i + 1]
-                })
+                .filter(|t| choices.choose_in_class(choices.dither(height, t).0, 0, 0, 0, 1.0, None) == steps[i + 1])
                 .count()
         };
         // Without a budget: every tree on the same side.
@@ -4096,15 +4247,111 @@ mod tests {
         }
         choices.dither = BUDGET_DITHER_OCTAVES;
         for t in &trees {
-            let h = choices.dithered_height(100.0, t);
+            let (h, _) = choices.dither(100.0, t);
             assert!((h / 100.0).log2().abs() <= BUDGET_DITHER_OCTAVES, "{h}");
-            assert_eq!(h, choices.dithered_height(100.0, t), "the same every time");
+            assert_eq!(h, choices.dither(100.0, t).0, "the same every time");
         }
         // With it: a share either side near the boundary, growing across it.
         let shares: Vec<usize> = [0.85f32, 0.95, 1.05, 1.15].iter().map(|&f| finer(&choices, boundary * f)).collect();
         assert!(shares.windows(2).all(|w| w[0] <= w[1]), "{shares:?}");
         assert!(shares[1] > 0 && shares[2] < trees.len(), "{shares:?}");
         assert!(shares[1] < shares[2], "{shares:?}");
+    }
+
+    /// Budget mode's lattice of targets: the cell of a target and the fraction past it place it
+    /// half the spread less half a step above the cell's target; a tree's class is the lattice
+    /// target its share rounds to, and over the trees the `log2` of their targets averages the
+    /// policy's; the tables are made for the cell's targets, raised for each visibility class.
+    #[test]
+    fn budget_mode_rounds_each_tree_s_target_to_the_lattice_and_keeps_the_mean() {
+        assert_eq!(class_targets(0.02, 1, None), vec![0.02]);
+        let spread = BUDGET_TARGET_SPREAD as f32;
+        for target in [0.003f32, 0.01, 0.0123, 0.5] {
+            let (cell, fraction) = lattice_cell(target);
+            assert!((0.0..1.0).contains(&fraction), "{fraction}");
+            let x = (cell as f32 + fraction + spread / 2.0 - 0.5) * BUDGET_TARGET_STEP;
+            assert!((x - target.log2()).abs() < 1e-4, "{target}: {x}");
+            let targets = class_targets(target, 2, Some(cell));
+            assert_eq!(targets.len(), 2 * (BUDGET_TARGET_SPREAD + 1));
+            for (k, class) in targets.chunks(BUDGET_TARGET_SPREAD + 1).enumerate() {
+                for (j, t) in class.iter().enumerate() {
+                    let expected = (cell + j as i32) as f32 * BUDGET_TARGET_STEP + k as f32 * 0.5;
+                    assert!((t.log2() - expected).abs() < 1e-4, "{target}: {class:?}");
+                }
+            }
+        }
+        let policy = Policy { target: 0.0123, budget: Some(1000), ..Policy::default() };
+        let mut choices = Choices::among(&table(), &policy, all);
+        let trees: Vec<Mat4> = (0..2000)
+            .map(|k| Mat4::from_translation(Vec3::new(1.5 * (k % 40) as f32, 0.0, -1.5 * (k / 40) as f32)))
+            .collect();
+        let (cell, _) = lattice_cell(0.0123);
+        for target in [0.0123f32, 0.0127, 0.0131] {
+            let moved = Policy { target, ..policy };
+            assert_eq!(Choices::tables_key(&moved), Choices::tables_key(&policy), "{target}: one cell");
+            choices.retarget(&moved);
+            assert_eq!(choices, Choices::among(&table(), &moved, all), "{target}: as if made for it");
+            let mean = trees
+                .iter()
+                .map(|t| {
+                    let (_, class) = choices.dither(50.0, t);
+                    assert!(class <= BUDGET_TARGET_SPREAD);
+                    (cell + class as i32) as f32 * BUDGET_TARGET_STEP
+                })
+                .sum::<f32>()
+                / trees.len() as f32;
+            assert!((mean - target.log2()).abs() < 0.1 * BUDGET_TARGET_STEP, "{target}: {mean}");
+        }
+        let without = Policy { budget: None, ..policy };
+        assert!(trees.iter().all(|t| Choices::among(&table(), &without, all).dither(50.0, t) == (50.0, 0)));
+    }
+
+    /// In budget mode trees whose representations' errors do not change with height (no factor
+    /// on the height spreads their switches) switch over a range of targets, each tree in a
+    /// target class of its own: 400 trees at one height, the billboard within the target from
+    /// 0.03 and impostor planes from 0.01 at every height; without a budget every tree switches
+    /// at 0.03, with one the share of billboards grows across it, a few trees at a time, and
+    /// each tree's class is the same every time.
+    #[test]
+    fn in_budget_mode_trees_with_errors_flat_in_height_switch_over_a_range_of_targets() {
+        let mut records = Vec::new();
+        for (technique, error, primitives) in
+            [(code::FULL, 0.05, 10_000.0), (code::IMPOSTORS, 0.06, 500.0), (code::BILLBOARD, 0.08, 1.0)]
+        {
+            for h in [8.0, 16.0, 32.0, 64.0] {
+                records.push(record(technique, h, error, primitives));
+            }
+        }
+        let calibration = Calibration::from_records(&records).expect("rows");
+        let trees: Vec<Mat4> = (0..400)
+            .map(|k| Mat4::from_translation(Vec3::new(3.0 * (k % 20) as f32, 0.0, -3.0 * (k / 20) as f32)))
+            .collect();
+        let billboards = |budget: Option<u64>, target: f32| {
+            let choices = Choices::among(&calibration, &Policy { target, budget, ..Policy::default() }, all);
+            trees
+                .iter()
+                .filter(|t| {
+                    let (h, class) = choices.dither(20.0, t);
+                    assert_eq!((h, class), choices.dither(20.0, t), "the same every time");
+                    choices.choose_in_class(h, 0, 0, class, 1.0, None) == Technique::Billboard
+                })
+                .count()
+        };
+        // From well under the spread to well over it, in twentieths of a step.
+        let reach = (BUDGET_TARGET_SPREAD as f32 / 2.0 + 1.5) * BUDGET_TARGET_STEP;
+        // (Not at 0.03 itself, where the billboard's error equals the floor plus the target.)
+        let factors: Vec<f32> = (-20..=20).filter(|&k| k != 0).map(|k| (k as f32 / 20.0 * reach).exp2()).collect();
+        for &f in &factors {
+            let n = billboards(None, 0.03 * f);
+            assert_eq!(n, if f >= 1.0 { trees.len() } else { 0 }, "without a budget at {f}");
+        }
+        let shares: Vec<usize> = factors.iter().map(|&f| billboards(Some(100_000), 0.03 * f)).collect();
+        assert!(shares.windows(2).all(|w| w[0] <= w[1]), "{shares:?}");
+        assert_eq!((shares[0], shares[shares.len() - 1]), (0, trees.len()), "{shares:?}");
+        let mut distinct = shares.clone();
+        distinct.dedup();
+        // Many counts between none and all: more than the two of one switch.
+        assert!(distinct.len() >= 10, "{shares:?}");
     }
 
     /// Trees chosen frame after frame along a path: those that change technique are in a
@@ -4431,6 +4678,8 @@ mod tests {
                     below: Vec::new(),
                     hysteresis_steps: 2,
                     dither: 0.0,
+                    dithers: 1,
+                    cell: None,
                     uniform_by_class: Vec::new(),
                 };
                 // The chunks take the technique every table shares under its height without
