@@ -1375,11 +1375,9 @@ pub struct Choices {
     /// `log2` of the largest factor a tree's height is chosen at ([`Self::dither`]):
     /// [`BUDGET_DITHER_OCTAVES`] in budget mode, else 0.
     dither: f32,
-    /// Target classes per visibility class ([`Self::dither`], [`class_targets`]):
-    /// [`BUDGET_TARGET_SPREAD`]` + 1` in budget mode, else 1.
-    dithers: usize,
     /// In budget mode, where the target falls on the lattice of targets ([`lattice_cell`]): the
-    /// cell of the first target class's tables and the fraction of a step past it.
+    /// cell of the first target class's tables and the fraction of a step past it. The number
+    /// of target classes follows from it ([`Self::dithers`]).
     cell: Option<(i32, f32)>,
 }
 
@@ -1827,7 +1825,7 @@ impl Choices {
     /// otherwise `height` and class 0 (the policy's target).
     #[must_use]
     pub fn dither(&self, height: f32, transform: &Mat4) -> (f32, usize) {
-        if self.dither == 0.0 && self.dithers <= 1 {
+        if self.dither == 0.0 && self.cell.is_none() {
             return (height, 0);
         }
         let t = transform.w_axis;
@@ -1847,9 +1845,30 @@ impl Choices {
                 reason = "a few steps"
             )]
             let j = (fraction + share * BUDGET_TARGET_SPREAD as f32).floor().max(0.0) as usize;
-            j.min(self.dithers - 1)
+            j.min(self.dithers() - 1)
         });
         (height * ((2.0 * u - 1.0) * self.dither).exp2(), class)
+    }
+
+    /// Target classes per visibility class ([`Self::dither`], [`class_targets`]):
+    /// [`BUDGET_TARGET_SPREAD`]` + 1` in budget mode, else 1.
+    fn dithers(&self) -> usize {
+        if self.cell.is_some() { BUDGET_TARGET_SPREAD + 1 } else { 1 }
+    }
+
+    /// The target class whose lattice target lies nearest the policy's own (within half a
+    /// lattice step): in budget mode the middle one of the [`BUDGET_TARGET_SPREAD`]` + 1`, since
+    /// the classes' `log2` targets average the policy's ([`lattice_cell`]); otherwise 0, the
+    /// policy's target. What a tree is chosen under when no share of its own is drawn
+    /// ([`Self::choose_framed`], [`Self::steps_at`]).
+    fn target_class(&self) -> usize {
+        self.cell.map_or(0, |(_, fraction)| {
+            #[expect(clippy::cast_precision_loss, reason = "a few steps")]
+            let half = BUDGET_TARGET_SPREAD as f32 / 2.0 - 0.5;
+            #[expect(clippy::cast_possible_truncation, clippy::cast_sign_loss, reason = "a few steps, not negative")]
+            let j = (fraction + half).round().max(0.0) as usize;
+            j.min(BUDGET_TARGET_SPREAD)
+        })
     }
 
     /// What the tables of the choices under `policy` depend on: `policy` itself, but in budget
@@ -1884,7 +1903,6 @@ impl Choices {
         let target = policy.target();
         let visibility = if policy.occlusion { VISIBILITY_CLASSES } else { 1 };
         let cell = policy.budget.is_some().then(|| lattice_cell(target));
-        let dithers = if cell.is_some() { BUDGET_TARGET_SPREAD + 1 } else { 1 };
         // Class k stands for a visible fraction 2^-k: the target over its square root.
         let targets = class_targets(target, visibility, cell.map(|c| c.0));
         let (calibration, heights) = (&basis.calibration, &basis.heights);
@@ -1899,7 +1917,6 @@ impl Choices {
             hysteresis_steps: hysteresis_steps(policy),
             uniform_by_class: Vec::new(),
             dither: if policy.budget.is_some() { BUDGET_DITHER_OCTAVES } else { 0.0 },
-            dithers,
             cell,
         };
         choices.measure_uniform();
@@ -1957,7 +1974,7 @@ impl Choices {
     /// Sets [`Self::uniform_below_in`] (and so [`Self::uniform_below`]) from the tables.
     fn measure_uniform(&mut self) {
         self.uniform_by_class =
-            self.tables.chunks((self.visibility * self.dithers).max(1)).map(|class| self.uniform(class)).collect();
+            self.tables.chunks((self.visibility * self.dithers()).max(1)).map(|class| self.uniform(class)).collect();
     }
 
     /// The technique [`Self::choose_framed`] gives every tree under a height in every elevation
@@ -2097,7 +2114,8 @@ impl Choices {
     /// cells the view holds ([`in_view_share`]; 1: wholly in view): above the calibrated range
     /// the point tree, which culls per cell, where its primitives at the largest height times
     /// that share are fewer than the whole tree of the table's choice there (with a quarter of
-    /// hysteresis either way against last frame's technique); module docs.
+    /// hysteresis either way against last frame's technique); module docs. In budget mode, under
+    /// the lattice target nearest the policy's (a tree's own is drawn by [`Self::dither`]).
     #[must_use]
     pub fn choose_framed(
         &self,
@@ -2107,12 +2125,12 @@ impl Choices {
         in_view: f32,
         previous: Option<Technique>,
     ) -> Technique {
-        self.choose_in_class(height, elevation, visibility_class(visible), 0, in_view, previous)
+        self.choose_in_class(height, elevation, visibility_class(visible), self.target_class(), in_view, previous)
     }
 
     /// [`Self::choose_framed`] for a tree of visibility class `class` ([`visibility_class`]),
     /// which the chooser knows: a fraction of exactly `2^-class` reads as that class; in target
-    /// class `dither` ([`Self::dither`]; 0, the policy's target, where there is one).
+    /// class `dither` ([`Self::dither`]; without a budget there is one, 0, the policy's target).
     fn choose_in_class(
         &self,
         height: f32,
@@ -2122,13 +2140,13 @@ impl Choices {
         in_view: f32,
         previous: Option<Technique>,
     ) -> Technique {
-        let k = class.min(self.visibility - 1) * self.dithers + dither.min(self.dithers - 1);
+        let k = class.min(self.visibility - 1) * self.dithers() + dither.min(self.dithers() - 1);
         let table = match self.below.get(k) {
             Some(below) if elevation == BELOW_HORIZON => below,
             _ => {
                 let e =
                     if elevation == BELOW_HORIZON { 0 } else { elevation.min(self.elevations.len().saturating_sub(1)) };
-                &self.tables[e * self.visibility * self.dithers + k]
+                &self.tables[e * self.visibility * self.dithers() + k]
             }
         };
         let (whole, culled) = (table.above_cost.0, table.above_cost.1 * in_view.clamp(0.0, 1.0));
@@ -2174,7 +2192,7 @@ impl Choices {
     }
 
     /// The choice at each step seen from the side and fully visible, smallest height first (for
-    /// tests and panels).
+    /// tests and panels); in budget mode under the lattice target nearest the policy's.
     #[must_use]
     pub fn steps(&self) -> &[Technique] {
         self.steps_at(0)
@@ -2184,7 +2202,7 @@ impl Choices {
     #[must_use]
     pub fn steps_at(&self, elevation: usize) -> &[Technique] {
         let e = elevation.min(self.elevations.len().saturating_sub(1));
-        &self.tables[e * self.visibility * self.dithers].steps
+        &self.tables[e * self.visibility * self.dithers() + self.target_class()].steps
     }
 
     /// [`Self::steps_at`] as runs: each technique with the projected height, pixels, of the first
@@ -4030,7 +4048,6 @@ mod tests {
             below: Vec::new(),
             hysteresis_steps: 2,
             dither: 0.0,
-            dithers: 1,
             cell: None,
             uniform_by_class: Vec::new(),
         };
@@ -4197,7 +4214,6 @@ mod tests {
             below: Vec::new(),
             hysteresis_steps: 0,
             dither: 0.0,
-            dithers: 1,
             cell: None,
             uniform_by_class: Vec::new(),
         }
@@ -4352,6 +4368,20 @@ mod tests {
         distinct.dedup();
         // Many counts between none and all: more than the two of one switch.
         assert!(distinct.len() >= 10, "{shares:?}");
+        // A tree chosen without a share of its own reads the lattice target nearest the
+        // policy's: the switch within half a lattice step of 0.03 either way.
+        for &f in &factors {
+            let choices = Choices::among(
+                &calibration,
+                &Policy { target: 0.03 * f, budget: Some(100_000), ..Policy::default() },
+                all,
+            );
+            let (cell, _) = lattice_cell(0.03 * f);
+            let nearest = ((cell + choices.target_class() as i32) as f32 * BUDGET_TARGET_STEP).exp2();
+            assert!((nearest / (0.03 * f)).log2().abs() <= 0.5 * BUDGET_TARGET_STEP + 1e-4, "{f}: {nearest}");
+            let billboard = choices.choose_seen(20.0, 1.0, None) == Technique::Billboard;
+            assert_eq!(billboard, nearest >= 0.03, "{f}: nearest lattice target {nearest}");
+        }
     }
 
     /// Trees chosen frame after frame along a path: those that change technique are in a
@@ -4678,7 +4708,6 @@ mod tests {
                     below: Vec::new(),
                     hysteresis_steps: 2,
                     dither: 0.0,
-                    dithers: 1,
                     cell: None,
                     uniform_by_class: Vec::new(),
                 };
