@@ -444,7 +444,8 @@ impl Renderer {
         let chain = representations.chain.as_ref()?;
         let choices = chain.choices(policy, |t| representations.holds(t))?;
         let height = projected_height(lod, instance.transform, camera);
-        let pick = choices.choose(height, previous, || chain.chain.pick(tau));
+        let (height, class) = treelod_runtime::TreeDither::of(policy).apply(height, &instance.transform);
+        let pick = choices.choose_in(height, class, previous, || chain.chain.pick(tau));
         self.level_triangles(i, pick)
     }
 

@@ -49,7 +49,9 @@ use crate::draws::{QuadDraw, Scene, TechniqueSettings, TreeDraws, TriangleDraw, 
 use crate::frame::{Camera, Frustum, tau_per_metre, usable_scale};
 #[cfg(doc)]
 use crate::impostor::ImpostorBark;
-use crate::policy::{Calibration, ChainChoices, ChainPick, Policy, projected_height_at};
+use crate::policy::{
+    Calibration, ChainChoices, ChainPick, Choices, Policy, TablesKey, TreeDither, projected_height_at,
+};
 use crate::technique::Technique;
 
 /// One level of a block's chain: every tree's level of that number.
@@ -225,14 +227,14 @@ pub struct ChainRanges {
 /// mode's predictions ask for the targets next to the one drawn, and back. A cache, not state:
 /// two chains compare equal whatever it holds.
 #[derive(Default)]
-pub(crate) struct ChoicesCache(Mutex<Vec<(Policy, Option<Arc<ChainChoices>>)>>);
+pub(crate) struct ChoicesCache(Mutex<Vec<(TablesKey, Option<Arc<ChainChoices>>)>>);
 
 /// How many policies' tables of choices a chain keeps ([`ChainRanges::choices`]; the renderer's
 /// tables of representations keep as many).
 pub const CACHED_POLICIES: usize = 8;
 
 impl ChoicesCache {
-    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(Policy, Option<Arc<ChainChoices>>)>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<(TablesKey, Option<Arc<ChainChoices>>)>> {
         self.0.lock().unwrap_or_else(PoisonError::into_inner)
     }
 }
@@ -266,11 +268,13 @@ impl ChainRanges {
     /// The chain's levels by image error under `policy` ([`ChainChoices::new`] over the
     /// techniques `usable` accepts, which must not change between calls: the model's), made on
     /// the first call with that policy and kept while it is among the last [`CACHED_POLICIES`]
-    /// asked for; `None` without per-level tables.
+    /// asked for (in budget mode, every target within one cell of the lattice of targets shares
+    /// them, [`Choices::tables_key`]); `None` without per-level tables.
     pub fn choices(&self, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Option<Arc<ChainChoices>> {
         let calibration = self.calibration.as_ref()?;
+        let key = Choices::tables_key(policy);
         let mut cache = self.choices.lock();
-        if let Some(at) = cache.iter().rposition(|(made_for, _)| made_for == policy) {
+        if let Some(at) = cache.iter().rposition(|(made_for, _)| *made_for == key) {
             let entry = cache.remove(at);
             let choices = entry.1.clone();
             cache.push(entry);
@@ -280,7 +284,7 @@ impl ChainRanges {
         if cache.len() >= CACHED_POLICIES {
             cache.remove(0);
         }
-        cache.push((*policy, choices.clone()));
+        cache.push((key, choices.clone()));
         choices
     }
 }
@@ -337,7 +341,9 @@ pub fn chosen_in_view(transform: Mat4) -> bool {
 /// `list` holds it, see
 /// [`Representations::holds`]): appends to `out` a LoD chain draw (module docs: the level by image
 /// error where the model has per-level tables, with `settings.chain_policy`'s target and
-/// hysteresis and `state`'s last levels, else the coarsest level whose error projects below
+/// hysteresis (in budget mode each tree at its own height factor and lattice target,
+/// [`TreeDither`], as its technique was chosen) and `state`'s last levels, else the coarsest
+/// level whose error projects below
 /// `settings.s_min` pixels at the block centre, [`LodChain::pick`], or the full mesh), the
 /// billboard quads or the octahedral impostors of each instance inside the frustum, and counts
 /// them visible. `state`: the
@@ -355,6 +361,9 @@ pub fn select(
     let frustum = Frustum::from_view_proj(camera.view_proj);
     let world_per_pixel = camera.world_per_pixel();
     // Per model, its levels by image error under the policy (made once per policy).
+    // In budget mode each tree's level is chosen at its own height factor and target class,
+    // as its technique was ([`TreeDither`]).
+    let dither = TreeDither::of(&settings.chain_policy);
     let choices: Vec<Option<Arc<ChainChoices>>> = if baseline == Technique::LodChain {
         scene.models.iter().map(|m| m.chain.as_ref()?.choices(&settings.chain_policy, |t| m.holds(t))).collect()
     } else {
@@ -390,10 +399,11 @@ pub fn select(
                     let pick = match by_image {
                         Some(choices) => {
                             let height = projected_height_at(lod, instance.transform, camera.position, world_per_pixel);
+                            let (height, class) = dither.apply(height, &instance.transform);
                             let last = previous.get(index as usize).copied().flatten();
                             let pick = match last {
                                 Some(last) if hold => last,
-                                _ => choices.choose(height, last, || chain.chain.pick(tau)),
+                                _ => choices.choose_in(height, class, last, || chain.chain.pick(tau)),
                             };
                             if main {
                                 levels.push((index, Some(pick)));
@@ -736,6 +746,13 @@ mod tests {
             chain.choices(&Policy { target: 0.011 * i as f32, ..policy }, all);
         }
         assert!(!Arc::ptr_eq(&first, &chain.choices(&policy, all).expect("levels")), "dropped after 8 others");
+        // In budget mode the targets within one cell of the lattice of targets share the tables.
+        let budget = Policy { target: 0.0123, budget: Some(100_000), ..policy };
+        let moved = Policy { target: 0.0127, ..budget };
+        assert_eq!(Choices::tables_key(&budget), Choices::tables_key(&moved), "one cell");
+        let first = chain.choices(&budget, all).expect("levels");
+        assert!(Arc::ptr_eq(&first, &chain.choices(&moved, all).expect("levels")), "shared within the cell");
+        assert_eq!(*first, ChainChoices::new(calibration, &moved, all).expect("levels"));
     }
 
     /// The shared oak (about 76 pixels high at 8 bounding radii in `eval`'s default 640×480

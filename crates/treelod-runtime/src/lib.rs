@@ -55,9 +55,9 @@ pub use impostor::{
 pub use light::Light;
 pub use policy::{
     CHOOSE_CHUNK, Calibration, ChainChoices, ChainPick, ChoiceBasis, Choices, ChunkBounds, Policy, PolicyState,
-    TablesKey, Transition, VISIBILITY_CLASSES, VISIBILITY_LEAD, choose_instances, choose_instances_coarsest,
-    choose_instances_in_chunks, chunk_range, elevation_class_after, in_view_share, projected_height, view_elevation,
-    visibility_class, visibility_class_after,
+    TablesKey, Transition, TreeDither, VISIBILITY_CLASSES, VISIBILITY_LEAD, choose_instances,
+    choose_instances_coarsest, choose_instances_in_chunks, chunk_range, elevation_class_after, in_view_share,
+    projected_height, view_elevation, visibility_class, visibility_class_after,
 };
 pub use prune::{Hysteresis, PruneCell, PruneLod, PruneScale, PruneState, Pruning, hull_samples};
 pub use select::{CellSelection, Thresholds, pixels_to_world, point_drawn, select_cell, triangle_drawn};
