@@ -1304,7 +1304,7 @@ pub struct ChainChoices {
 impl ChainChoices {
     /// The chain's levels of a model with `calibration` under `policy` (its target, allowed at
     /// each height as [`target_at`] says, and its hysteresis; in budget mode the targets of the
-    /// lattice cell it falls in, [`class_targets`]), the floor over the techniques `usable`
+    /// lattice cell it falls in, [`lattice_cell`]), the floor over the techniques `usable`
     /// accepts; `None` when the tables hold no chain levels.
     #[must_use]
     pub fn new(calibration: &Calibration, policy: &Policy, usable: impl Fn(Technique) -> bool) -> Option<Self> {
