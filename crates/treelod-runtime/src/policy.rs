@@ -1402,13 +1402,11 @@ pub struct Choices {
     /// Per elevation class, the technique its tables choose below a height, and that height
     /// ([`Self::uniform_below_in`]; [`Self::uniform_below`] follows from them).
     uniform_by_class: Vec<Option<(f32, Technique)>>,
-    /// `log2` of the largest factor a tree's height is chosen at ([`Self::dither`]):
-    /// [`BUDGET_DITHER_OCTAVES`] in budget mode, else 0.
-    dither: f32,
-    /// In budget mode, where the target falls on the lattice of targets ([`lattice_cell`]): the
-    /// cell of the first target class's tables and the fraction of a step past it. The number
-    /// of target classes follows from it ([`Self::dithers`]).
-    cell: Option<(i32, f32)>,
+    /// How budget mode varies each tree's choice ([`Self::dither`]): in budget mode where the
+    /// target falls on the lattice of targets, the cell of the first target class's tables and
+    /// the fraction of a step past it; the number of target classes follows from it
+    /// ([`Self::dithers`]).
+    dither: TreeDither,
 }
 
 /// The elevation class (an index for [`Choices::choose_framed`]) of a tree seen from below the
@@ -1471,26 +1469,41 @@ pub type TablesKey = (Policy, i32);
 const _: () = assert!(BUDGET_TARGET_SPREAD.is_multiple_of(2), "an even spread");
 
 /// How budget mode varies each tree's choice under one policy ([`Choices::dither`],
-/// [`ChainChoices::choose_in`]): the octaves of the factor on its height and where the target
-/// falls on the lattice of targets; without a budget, neither.
+/// [`ChainChoices::choose_in`]): a factor on its height of up to [`BUDGET_DITHER_OCTAVES`] either
+/// way and a target of its own on the lattice of targets; without a budget, neither.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TreeDither {
-    /// `log2` of the largest factor a tree's height is chosen at.
-    octaves: f32,
-    /// The lattice cell and fraction of the policy's target ([`lattice_cell`]).
+    /// In budget mode, the lattice cell and fraction of the policy's target ([`lattice_cell`]).
     cell: Option<(i32, f32)>,
 }
 
 impl TreeDither {
-    /// The dither of `policy`: [`BUDGET_DITHER_OCTAVES`] and its target's [`lattice_cell`] in
-    /// budget mode, else none.
+    /// No dither: every tree at its own height, under the policy's target.
+    pub const NONE: Self = Self { cell: None };
+
+    /// The dither of `policy`: its target's [`lattice_cell`] in budget mode, else none.
     #[must_use]
     pub fn of(policy: &Policy) -> Self {
-        if policy.budget.is_some() {
-            Self { octaves: BUDGET_DITHER_OCTAVES, cell: Some(lattice_cell(policy.target())) }
-        } else {
-            Self { octaves: 0.0, cell: None }
-        }
+        Self { cell: policy.budget.is_some().then(|| lattice_cell(policy.target())) }
+    }
+
+    /// `log2` of the largest factor a tree's height is chosen at: [`BUDGET_DITHER_OCTAVES`] in
+    /// budget mode, else 0.
+    fn octaves(self) -> f32 {
+        if self.cell.is_some() { BUDGET_DITHER_OCTAVES } else { 0.0 }
+    }
+
+    /// Target classes ([`class_targets`]): [`BUDGET_TARGET_SPREAD`]` + 1` in budget mode, else 1.
+    fn classes(self) -> usize {
+        if self.cell.is_some() { BUDGET_TARGET_SPREAD + 1 } else { 1 }
+    }
+
+    /// The target class whose lattice target lies nearest the policy's own (within half a
+    /// lattice step): in budget mode the middle one whatever the fraction, since the classes'
+    /// `log2` targets average the policy's ([`lattice_cell`]; the spread is even); otherwise 0,
+    /// the policy's target.
+    fn nearest_class(self) -> usize {
+        if self.cell.is_some() { BUDGET_TARGET_SPREAD / 2 } else { 0 }
     }
 
     /// The height a tree `height` pixels high placed by `transform` is chosen at, and its
@@ -1500,7 +1513,7 @@ impl TreeDither {
     /// without a budget `height` and class 0.
     #[must_use]
     pub fn apply(&self, height: f32, transform: &Mat4) -> (f32, usize) {
-        if self.octaves == 0.0 && self.cell.is_none() {
+        if self.cell.is_none() {
             return (height, 0);
         }
         let t = transform.w_axis;
@@ -1522,7 +1535,7 @@ impl TreeDither {
             let j = (fraction + share * BUDGET_TARGET_SPREAD as f32).floor().max(0.0) as usize;
             j.min(BUDGET_TARGET_SPREAD)
         });
-        (height * ((2.0 * u - 1.0) * self.octaves).exp2(), class)
+        (height * ((2.0 * u - 1.0) * self.octaves()).exp2(), class)
     }
 }
 
@@ -1914,22 +1927,19 @@ impl Choices {
     /// otherwise `height` and class 0 (the policy's target).
     #[must_use]
     pub fn dither(&self, height: f32, transform: &Mat4) -> (f32, usize) {
-        TreeDither { octaves: self.dither, cell: self.cell }.apply(height, transform)
+        self.dither.apply(height, transform)
     }
 
-    /// Target classes per visibility class ([`Self::dither`], [`class_targets`]):
-    /// [`BUDGET_TARGET_SPREAD`]` + 1` in budget mode, else 1.
+    /// Target classes per visibility class ([`Self::dither`], [`TreeDither::classes`]).
     fn dithers(&self) -> usize {
-        if self.cell.is_some() { BUDGET_TARGET_SPREAD + 1 } else { 1 }
+        self.dither.classes()
     }
 
-    /// The target class whose lattice target lies nearest the policy's own (within half a
-    /// lattice step): in budget mode the middle one of the [`BUDGET_TARGET_SPREAD`]` + 1`
-    /// whatever the fraction, since the classes' `log2` targets average the policy's
-    /// ([`lattice_cell`]; the spread is even); otherwise 0, the policy's target. What a tree is chosen under when no share of its own is drawn
-    /// ([`Self::choose_framed`], [`Self::steps_at`]).
+    /// The target class a tree is chosen under when no share of its own is drawn
+    /// ([`Self::choose_framed`], [`Self::steps_at`]): the lattice target nearest the policy's
+    /// ([`TreeDither::nearest_class`]).
     fn target_class(&self) -> usize {
-        if self.cell.is_some() { BUDGET_TARGET_SPREAD / 2 } else { 0 }
+        self.dither.nearest_class()
     }
 
     /// What the tables of the choices under `policy` depend on: `policy` itself, but in budget
@@ -1949,7 +1959,7 @@ impl Choices {
     /// budget mode the fraction of a lattice step the trees' targets are rounded from
     /// ([`lattice_cell`]); otherwise nothing changes.
     pub fn retarget(&mut self, policy: &Policy) {
-        if let Some((cell, fraction)) = &mut self.cell {
+        if let Some((cell, fraction)) = &mut self.dither.cell {
             let (now, f) = lattice_cell(policy.target());
             debug_assert_eq!(now, *cell, "retargeted across cells");
             *fraction = if now == *cell { f } else { *fraction };
@@ -1963,9 +1973,9 @@ impl Choices {
     pub fn from_basis(basis: &ChoiceBasis, policy: &Policy) -> Self {
         let target = policy.target();
         let visibility = if policy.occlusion { VISIBILITY_CLASSES } else { 1 };
-        let cell = policy.budget.is_some().then(|| lattice_cell(target));
+        let dither = TreeDither::of(policy);
         // Class k stands for a visible fraction 2^-k: the target over its square root.
-        let targets = class_targets(target, visibility, cell.map(|c| c.0));
+        let targets = class_targets(target, visibility, dither.cell.map(|c| c.0));
         let (calibration, heights) = (&basis.calibration, &basis.heights);
         let tables = basis.all.tables(calibration, heights, &targets);
         let below = basis.below.as_ref().map_or_else(Vec::new, |b| b.tables(calibration, heights, &targets));
@@ -1977,8 +1987,7 @@ impl Choices {
             below,
             hysteresis_steps: hysteresis_steps(policy),
             uniform_by_class: Vec::new(),
-            dither: if policy.budget.is_some() { BUDGET_DITHER_OCTAVES } else { 0.0 },
-            cell,
+            dither,
         };
         choices.measure_uniform();
         choices
@@ -3814,7 +3823,7 @@ mod tests {
                         heights.iter().map(|&h| between.judge(elevation, h, target_at(target, h), usable)).collect();
                     Choices::table(&between, &heights, elevation, target, usable, &judged)
                 };
-                let targets = class_targets(target, choices.visibility, choices.cell.map(|c| c.0));
+                let targets = class_targets(target, choices.visibility, choices.dither.cell.map(|c| c.0));
                 let tables: Vec<Table> = (0..between.elevations().len())
                     .flat_map(|e| targets.iter().map(move |&t| (e, t)))
                     .map(|(e, t)| own(Some(e), t, &all))
@@ -4156,8 +4165,7 @@ mod tests {
             visibility: 1,
             below: Vec::new(),
             hysteresis_steps: 2,
-            dither: 0.0,
-            cell: None,
+            dither: TreeDither::NONE,
             uniform_by_class: Vec::new(),
         };
         // Find the boundary between crossed (small) and the point tree (larger).
@@ -4322,8 +4330,7 @@ mod tests {
             visibility: 1,
             below: Vec::new(),
             hysteresis_steps: 0,
-            dither: 0.0,
-            cell: None,
+            dither: TreeDither::NONE,
             uniform_by_class: Vec::new(),
         }
     }
@@ -4370,7 +4377,8 @@ mod tests {
             let n = finer(&choices, boundary * factor);
             assert!(n == 0 || n == trees.len(), "{n} at {factor}");
         }
-        choices.dither = BUDGET_DITHER_OCTAVES;
+        // Budget mode's dither (the height factor; the class is not read: one table).
+        choices.dither = TreeDither { cell: Some((0, 0.0)) };
         for t in &trees {
             let (h, _) = choices.dither(100.0, t);
             assert!((h / 100.0).log2().abs() <= BUDGET_DITHER_OCTAVES, "{h}");
@@ -4816,8 +4824,7 @@ mod tests {
                     visibility: 1,
                     below: Vec::new(),
                     hysteresis_steps: 2,
-                    dither: 0.0,
-                    cell: None,
+                    dither: TreeDither::NONE,
                     uniform_by_class: Vec::new(),
                 };
                 // The chunks take the technique every table shares under its height without
