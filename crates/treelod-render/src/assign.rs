@@ -54,6 +54,8 @@ pub(crate) struct PolicyModels {
     /// Budget mode: what the last frame drew, and the camera it drew it for, from which the next
     /// frame is predicted where the camera moved (`Renderer::prepare`).
     pub(crate) last_frame: Option<Drawn>,
+    /// Budget mode: the steering the last frame was selected with (`Renderer::budget_frame`).
+    pub(crate) steered: Option<crate::BudgetFrame>,
 }
 
 impl PolicyModels {

@@ -142,7 +142,7 @@ pub use shadows::{
     cascade_splits, fit_cascades,
 };
 pub use sky::Sky;
-pub use stats::{FrameStats, PreparePhases, ShadowStats};
+pub use stats::{BudgetFrame, FrameStats, PreparePhases, ShadowStats};
 pub use technique::DrawSource;
 
 /// WGSL for receiving the renderer's shadows in a host's own pipeline: declares group 2

@@ -28,7 +28,7 @@ use crate::shadows::{
     Cascade, Casters, HostReceiver, HostShadowCascade, HostShadowError, HostShadowView, MAX_CASCADES,
     MAX_HOST_SHADOW_VIEWS, ShadowMaps, ShadowUniform, fit_cascades,
 };
-use crate::stats::{FrameStats, Laps, PreparePhases, ShadowStats};
+use crate::stats::{BudgetFrame, FrameStats, Laps, PreparePhases, ShadowStats};
 use crate::streaming::{Array, Pool, Request, Residency, StreamStats, UNIT, Upload};
 use crate::technique::{Bucket, DrawSource};
 use crate::upload::{Model, storage_buffer, upload_gpu_points, write_in_runs};
@@ -866,7 +866,7 @@ impl Renderer {
     fn prepare_on_pool(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
         let user = self.settings;
         let Some((policy, budget)) = user.policy.and_then(|p| p.budget.map(|n| (p, n))) else {
-            (self.policy.budget, self.policy.last_frame) = (None, None);
+            (self.policy.budget, self.policy.last_frame, self.policy.steered) = (None, None, None);
             return self.prepare_frame(device, queue, camera);
         };
         let mut controller = (self.policy.budget.take())
@@ -899,6 +899,7 @@ impl Renderer {
         }
         let started = predicted.then(|| clock.elapsed());
         let (drawn_s_min, target) = (controller.s_min(), controller.target());
+        self.policy.steered = Some(BudgetFrame { s_min: drawn_s_min, target, finest: controller.at_finest() });
         self.settings.s_min = drawn_s_min;
         if user.s_min > 0.0 {
             self.settings.s_max = user.s_max * drawn_s_min / user.s_min;
@@ -934,6 +935,14 @@ impl Renderer {
     #[must_use]
     pub fn budget_steering(&self) -> Option<(f32, f32)> {
         self.policy.budget.as_ref().map(|c| (c.s_min(), c.target()))
+    }
+
+    /// In the policy's budget mode, the `s_min` and the policy target the latest frame was
+    /// selected with ([`Self::prepare`]), and whether that was the finest steering; `None`
+    /// outside it.
+    #[must_use]
+    pub fn budget_frame(&self) -> Option<BudgetFrame> {
+        self.policy.steered
     }
 
     /// [`Self::prepare`] with the settings as they are.

@@ -91,6 +91,21 @@ impl FrameStats {
     }
 }
 
+/// How the policy's budget mode steered the latest frame ([`Renderer::budget_frame`]): the
+/// `s_min` and the policy target it was selected with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BudgetFrame {
+    /// `s_min`, pixels.
+    pub s_min: f32,
+    /// The policy's error target.
+    pub target: f32,
+    /// Whether both were at their floors ([`BudgetController::at_finest`]): no steering draws
+    /// more detail, so a frame far under the budget had nothing left to spend it on.
+    ///
+    /// [`BudgetController::at_finest`]: treelod_runtime::BudgetController::at_finest
+    pub finest: bool,
+}
+
 /// What the shadow pass of a frame draws, summed over its cascades (a tree in two cascades
 /// counts twice).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -260,8 +260,23 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
         let policy = Policy { budget: Some(budget), ..Policy::default() };
         let settings = Settings { policy: Some(policy), ..Settings::default() };
         let mut renderer = forest(&gpu, &container, settings, &positions);
-        let counts: Vec<u64> =
-            (0..80).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
+        assert!(renderer.budget_frame().is_none(), "no frame yet");
+        let counts: Vec<u64> = (0..80)
+            .map(|i| {
+                let next = renderer.budget_steering();
+                let count = renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives();
+                let drawn = renderer.budget_frame().expect("a budget frame");
+                if i > 0 {
+                    // The camera holds still: the frame is drawn with the steering its last one
+                    // left (only the first frame, or one whose camera moved, is predicted first).
+                    assert_eq!(next, Some((drawn.s_min, drawn.target)), "frame {i}");
+                }
+                if budget < unbudgeted {
+                    assert!(!drawn.finest, "fewer primitives wanted than the default draws: frame {i}");
+                }
+                count
+            })
+            .collect();
         assert_eq!(renderer.settings().policy, Some(policy), "the settings are not changed");
         let (s_min, target) = renderer.budget_steering().expect("steering");
         let last: Vec<f64> = counts[60..].iter().map(|&c| c as f64 / budget as f64).collect();
@@ -278,6 +293,28 @@ fn budget_mode_steers_the_frame_to_the_primitive_count() {
             assert!(last.iter().all(|&r| r <= 1.1), "budget {budget}: {counts:?}");
         }
     }
+}
+
+/// A budget the forest cannot spend: the steering goes down to its finest (`s_min` and the
+/// target at their floors), where the frame draws everything the policy would refine and stays
+/// far under the budget, and `Renderer::budget_frame` says so, as `bench` counts such frames.
+#[test]
+fn a_budget_the_forest_cannot_spend_steers_to_the_finest_and_says_so() {
+    let gpu = gpu();
+    let (container, positions, camera, unbudgeted) = budget_field(&gpu);
+    let budget = 1000 * unbudgeted;
+    let policy = Policy { budget: Some(budget), ..Policy::default() };
+    let mut renderer = forest(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
+    let counts: Vec<u64> = (0..20).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
+    let drawn = renderer.budget_frame().expect("a budget frame");
+    let floors = BudgetController::new(budget, 1.0);
+    assert!(drawn.finest, "{drawn:?}: {counts:?}");
+    assert_eq!((drawn.s_min, drawn.target), (floors.s_min_floor, floors.target_floor));
+    assert!(counts[19] > unbudgeted && 2 * counts[19] < budget, "{counts:?} against {budget}");
+    // Without a budget, no budget frame.
+    renderer.settings_mut().policy = Some(Policy::default());
+    renderer.prepare(&gpu.device, &gpu.queue, &camera);
+    assert!(renderer.budget_frame().is_none());
 }
 
 /// Budget mode predicts its first frame before drawing it (spec §10.2): a forest the default

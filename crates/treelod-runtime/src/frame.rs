@@ -1613,6 +1613,15 @@ impl BudgetController {
         self.s_min
     }
 
+    /// Whether the steering is at its finest: `s_min` at [`Self::s_min_floor`] and the policy
+    /// target at [`Self::target_floor`], the least pressure that still acts. No steering draws
+    /// more detail there, so a frame far under the budget at it has nothing left to spend the
+    /// budget on: its forest, at the finest the policy chooses, costs less.
+    #[must_use]
+    pub fn at_finest(&self) -> bool {
+        self.s_min <= self.s_min_floor && self.target <= self.target_floor
+    }
+
     /// Takes the primitive count of the last frame ([`FrameStats::primitives`]) and returns the
     /// `s_min` for the next one (see the type's documentation for the rule).
     pub fn update(&mut self, last_frame_primitives: u64) -> f32 {
@@ -2610,16 +2619,20 @@ mod tests {
     fn policy_budget_clamps_the_target() {
         let mut controller = BudgetController::for_policy(10, 1.0, 0.0);
         assert_eq!(controller.target(), controller.target_floor, "a target of 0 starts at the floor");
+        assert!(!controller.at_finest(), "s_min 1 is above its floor: there is finer to go");
         let (_, t) = controller.update_policy(1_000);
         assert!((t / controller.target_floor - 1.5625).abs() < 1e-4, "one step, squared: {t}");
         for _ in 0..200 {
             controller.update_policy(1_000_000);
         }
         assert_eq!(controller.target(), 1.0);
+        assert!(!controller.at_finest());
         for _ in 0..200 {
             controller.update_policy(0);
         }
         assert_eq!(controller.target(), 1.0 / 1024.0);
+        assert_eq!(controller.s_min(), controller.s_min_floor);
+        assert!(controller.at_finest(), "both at their floors: nothing finer to draw");
         assert_eq!(BudgetController::for_policy(10, 1.0, f32::NAN).target(), 1.0);
     }
 

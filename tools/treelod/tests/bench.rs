@@ -39,7 +39,8 @@ precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primit
 trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
 trees_crossed,trees_octahedral,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,\
 primitives_impostors,primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed,\
-primitives_octahedral,noise,ref_noise,draw_commands,setup_ms,assign_ms,select_ms,stream_ms,record_ms,upload_ms";
+primitives_octahedral,noise,ref_noise,draw_commands,setup_ms,assign_ms,select_ms,stream_ms,record_ms,upload_ms,\
+budget_s_min,budget_target,budget_finest";
 
 /// The CSV's phases of `Renderer::prepare`, in order.
 const PHASES: [&str; 6] = ["setup_ms", "assign_ms", "select_ms", "stream_ms", "record_ms", "upload_ms"];
@@ -435,6 +436,55 @@ fn each_tree_counts_under_the_technique_it_was_drawn_with() {
     assert!(rows.iter().any(|r| number(&header, r, spt) > 0.0 && number(&header, r, impostors) > 0.0), "{rows:?}");
     let line = stdout.lines().find(|l| l.starts_with("impostors drew its trees with: spt ")).expect(&stdout);
     assert!(line.contains(" trees, ") && line.contains("; impostors "), "{line}");
+}
+
+#[test]
+fn budget_mode_records_its_steering_and_the_frames_with_nothing_left_to_spend() {
+    let dir = scratch("budget");
+    let run_with = |budget: &str, name: &str| {
+        let csv = dir.join(name);
+        let stdout = bench_ok(&[
+            demo().as_os_str(),
+            "--trees".as_ref(),
+            "60".as_ref(),
+            "--frames".as_ref(),
+            "6".as_ref(),
+            "--no-render".as_ref(),
+            "--technique".as_ref(),
+            "policy,spt".as_ref(),
+            "--budget".as_ref(),
+            budget.as_ref(),
+            "--csv".as_ref(),
+            csv.as_os_str(),
+        ]);
+        let (header, rows) = read_csv(&csv);
+        assert_eq!(rows.len(), 12, "{rows:?}");
+        let line = stdout.lines().find(|l| l.starts_with("policy budget ")).expect(&stdout).to_owned();
+        (header, rows, line)
+    };
+    // A budget no frame of the forest comes near: every frame is drawn at the finest steering
+    // (`s_min` 0.5 pixels, the target 1/1024), under half the budget with nothing left to spend.
+    let (header, rows, line) = run_with("1000000000", "finest.csv");
+    for row in &rows {
+        if field(&header, row, "technique") == "policy" {
+            assert_eq!(number(&header, row, "budget_finest"), 1.0, "{row:?}");
+            assert_eq!(number(&header, row, "budget_s_min"), 0.5, "{row:?}");
+            assert_eq!(number(&header, row, "budget_target"), 1.0 / 1024.0, "{row:?}");
+        } else {
+            // Budget mode is the policy's alone.
+            for column in ["budget_s_min", "budget_target", "budget_finest"] {
+                assert_eq!(field(&header, row, column), "", "{column}: {row:?}");
+            }
+        }
+    }
+    assert!(line.ends_with("6 under half of it (the draws of trees in a transition counted; 6 of them at the finest steering, nothing left to spend)"), "{line}");
+    // A budget under what the default target draws: the steering coarsens, never at its finest.
+    let (header, rows, line) = run_with("2000", "coarse.csv");
+    for row in rows.iter().filter(|r| field(&header, r, "technique") == "policy") {
+        assert_eq!(number(&header, row, "budget_finest"), 0.0, "{row:?}");
+        assert!(number(&header, row, "budget_s_min") > 0.5, "{row:?}");
+    }
+    assert!(line.ends_with("; 0 of them at the finest steering, nothing left to spend)"), "{line}");
 }
 
 #[test]

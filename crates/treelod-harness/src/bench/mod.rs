@@ -28,7 +28,8 @@ use rayon::prelude::*;
 use treelod_format::{Compression, Container};
 use treelod_render::offscreen::{Gpu, render_image_timed, render_prepared_timed};
 use treelod_render::{
-    Camera, Instance, ModelId, PerTechnique, Policy, PreparePhases, Primitive, Pruning, Renderer, Settings, Technique,
+    BudgetFrame, Camera, Instance, ModelId, PerTechnique, Policy, PreparePhases, Primitive, Pruning, Renderer,
+    Settings, Technique,
 };
 
 use self::forest::{Forest, Shape};
@@ -297,6 +298,9 @@ pub struct Row {
     /// Where `Renderer::prepare` spent `selection_ms`, phase by phase
     /// (`Renderer::prepare_phases`); `None` for the counted full mesh.
     pub phases: Option<PreparePhases>,
+    /// The policy's budget mode: the steering the frame was selected with
+    /// (`Renderer::budget_frame`); `None` outside it.
+    pub budget: Option<BudgetFrame>,
 }
 
 impl Row {
@@ -684,6 +688,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                     noise: None,
                     reference_noise: None,
                     drawn_with: None,
+                    budget: None,
                 });
                 continue;
             }
@@ -729,6 +734,7 @@ pub fn run_with_progress(options: &Options, progress: &mut dyn FnMut(usize, usiz
                 noise: None,
                 reference_noise: None,
                 drawn_with: Some((stats.instances, stats.by_technique)),
+                budget: f.renderer.budget_frame(),
             };
             if options.render {
                 let (image, gpu_ms) = guarded(gpu, &label, || {

@@ -141,16 +141,21 @@ pub struct BudgetSummary {
     pub over_twice: usize,
     /// Frames under half of the budget.
     pub under_half: usize,
+    /// Of those, the frames drawn at the finest steering (`s_min` and the policy target at their
+    /// floors, `BudgetFrame::finest`): the forest at the finest the policy chooses cost less than
+    /// half the budget, so there was nothing left to spend it on.
+    pub under_half_finest: usize,
     /// Frames in all.
     pub frames: usize,
 }
 
 impl BudgetSummary {
     /// The summary of frames of `primitives` each, `leaving` of them the draws of trees in a
-    /// transition (`(primitives, leaving)` per frame), against `budget`.
+    /// transition, drawn at the finest steering or not (`(primitives, leaving, finest)` per
+    /// frame), against `budget`.
     #[must_use]
-    pub fn of(budget: u64, frames: &[(u64, u64)]) -> Self {
-        let primitives: Vec<u64> = frames.iter().map(|&(p, _)| p).collect();
+    pub fn of(budget: u64, frames: &[(u64, u64, bool)]) -> Self {
+        let primitives: Vec<u64> = frames.iter().map(|&(p, _, _)| p).collect();
         #[expect(clippy::cast_precision_loss, reason = "a median needs no integer precision")]
         let all: Vec<f64> = primitives.iter().map(|&p| p as f64).collect();
         let count = |f: &dyn Fn(u128) -> bool| primitives.iter().filter(|&&p| f(u128::from(p))).count();
@@ -161,9 +166,10 @@ impl BudgetSummary {
             budget,
             median: spread(&all).map_or(0.0, |s| s.median),
             over_tenth: count(&|p| 10 * p > 11 * n),
-            over_tenth_fading: frames.iter().filter(|&&(p, l)| over(p) && !over(p.saturating_sub(l))).count(),
+            over_tenth_fading: frames.iter().filter(|&&(p, l, _)| over(p) && !over(p.saturating_sub(l))).count(),
             over_twice: count(&|p| p > 2 * n),
             under_half: count(&|p| 2 * p < n),
+            under_half_finest: frames.iter().filter(|&&(p, _, finest)| finest && 2 * u128::from(p) < n).count(),
             frames: primitives.len(),
         }
     }
@@ -174,14 +180,15 @@ impl BudgetSummary {
         format!(
             "{technique} budget {} primitives a frame: median frame {:.0}; of {} frames {} over it by more than 10 % ({} \
              of them only by the draws of trees in a transition), {} over twice it, {} under half of it (the draws of \
-             trees in a transition counted)",
+             trees in a transition counted; {} of them at the finest steering, nothing left to spend)",
             self.budget,
             self.median,
             self.frames,
             self.over_tenth,
             self.over_tenth_fading,
             self.over_twice,
-            self.under_half
+            self.under_half,
+            self.under_half_finest
         )
     }
 }
@@ -278,7 +285,10 @@ pub fn summarise(report: &Report, technique: TechniqueName) -> Summary {
         budget: report.budget.filter(|_| technique == TechniqueName::Policy).map(|budget| {
             BudgetSummary::of(
                 budget,
-                &rows.iter().map(|r| (r.primitives(), r.leaving.unwrap_or(0))).collect::<Vec<_>>(),
+                &rows
+                    .iter()
+                    .map(|r| (r.primitives(), r.leaving.unwrap_or(0), r.budget.is_some_and(|b| b.finest)))
+                    .collect::<Vec<_>>(),
             )
         }),
     }
@@ -533,7 +543,8 @@ precision,recall,q,rmse,flip,points_in_cut,primitives_in_cut,quads,shadow_primit
 trees_full,trees_spt,trees_prune_opt,trees_prune_cook,trees_impostors,trees_ellipsoids,trees_lod_chain,trees_billboard,\
 trees_crossed,trees_octahedral,primitives_full,primitives_spt,primitives_prune_opt,primitives_prune_cook,\
 primitives_impostors,primitives_ellipsoids,primitives_lod_chain,primitives_billboard,primitives_crossed,\
-primitives_octahedral,noise,ref_noise,draw_commands,setup_ms,assign_ms,select_ms,stream_ms,record_ms,upload_ms";
+primitives_octahedral,noise,ref_noise,draw_commands,setup_ms,assign_ms,select_ms,stream_ms,record_ms,upload_ms,\
+budget_s_min,budget_target,budget_finest";
 
 /// One CSV row per frame and technique, with a header line; empty fields where a figure was not
 /// measured.
@@ -546,7 +557,7 @@ pub fn csv(report: &Report) -> String {
         let (eye, target) = (frame.pose.eye, frame.pose.target);
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             row.frame,
             frame.phase.name(),
             row.technique.name(),
@@ -586,9 +597,19 @@ pub fn csv(report: &Report) -> String {
             text(row.reference_noise.map(|v| v.to_string())),
             text(row.draw_commands.map(|v| v.to_string())),
             phase_fields(row),
+            budget_fields(row),
         );
     }
     out
+}
+
+/// The CSV's `budget_s_min`, `budget_target` and `budget_finest` (1 or 0) fields of `row`: the
+/// steering of the policy's budget mode its frame was selected with (empty outside it).
+fn budget_fields(row: &Row) -> String {
+    match row.budget {
+        Some(b) => format!("{},{},{}", b.s_min, b.target, u8::from(b.finest)),
+        None => ",,".to_owned(),
+    }
 }
 
 /// The CSV's `setup_ms` … `upload_ms` fields of `row`: where `Renderer::prepare` spent its
@@ -775,18 +796,31 @@ mod tests {
         // At the bounds exactly: 110 and 200 are not over, 50 is not under.
         // The frames over by more than a tenth: 111 with 1 leaving (110 without: over only by the
         // fading), 200 with 95 leaving (105), 201 with 90 (111: over without it too), 1,000.
-        let frames = [(0, 0), (49, 0), (50, 0), (100, 0), (110, 5), (111, 1), (200, 95), (201, 90), (1_000, 0)];
+        // Of the frames under half, the one of 49 was drawn at the finest steering; so were those of
+        // 50 (not under half) and 1,000 (over: the finest steering is no cap).
+        let frames = [
+            (0, 0, false),
+            (49, 0, true),
+            (50, 0, true),
+            (100, 0, false),
+            (110, 5, false),
+            (111, 1, false),
+            (200, 95, false),
+            (201, 90, false),
+            (1_000, 0, true),
+        ];
         let s = BudgetSummary::of(100, &frames);
         assert_eq!((s.budget, s.frames, s.median), (100, 9, 110.0));
         assert_eq!((s.over_tenth, s.over_tenth_fading, s.over_twice, s.under_half), (4, 2, 2, 2));
+        assert_eq!(s.under_half_finest, 1);
         assert_eq!(
             s.line("policy"),
             "policy budget 100 primitives a frame: median frame 110; of 9 frames 4 over it by more than 10 % (2 of \
              them only by the draws of trees in a transition), 2 over twice it, 2 under half of it (the draws of trees \
-             in a transition counted)"
+             in a transition counted; 1 of them at the finest steering, nothing left to spend)"
         );
         assert_eq!(BudgetSummary::of(100, &[]), BudgetSummary { budget: 100, ..BudgetSummary::default() });
         // Counts near u64::MAX do not overflow.
-        assert_eq!(BudgetSummary::of(u64::MAX, &[(u64::MAX, 0)]).over_tenth, 0);
+        assert_eq!(BudgetSummary::of(u64::MAX, &[(u64::MAX, 0, true)]).over_tenth, 0);
     }
 }
