@@ -919,10 +919,12 @@ impl Renderer {
         {
             // Look before stepping down: a step predicted over the budget is refused undrawn.
             controller.refuse();
-        } else if controller.far_under(count.saturating_sub(stats.leaving)) && !self.predicts_from_a_sample() {
+        }
+        if controller.far_under(count.saturating_sub(stats.leaving)) && !self.predicts_from_a_sample() {
             // Far under the budget once the transitions end: on down by prediction, not a step
             // a frame (a sample's predictions fall short near the camera, and a large forest
-            // steps).
+            // steps). After a refused step too, from the pressure drawn: the refusal alone held
+            // the frame where it was whenever the scene changed before the bracket closed.
             controller.lower_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
         }
         self.phases.assign += started.elapsed();
