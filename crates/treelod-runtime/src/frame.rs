@@ -1818,9 +1818,31 @@ impl BudgetController {
     /// largest step, then twice that, four times…, then halves the bracket it found: a frame a
     /// step or two over costs two or three predictions, a frame 20 times over about six (each
     /// prediction chooses the trees again and, at a new target, makes the models' tables of
-    /// choices again). Returns the `s_min` and target to draw with.
-    pub fn raise_within(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
+    /// choices again).
+    ///
+    /// Where a search down ([`Self::lower_within`]) left the steering below the pressure of the
+    /// frame last drawn, the raise goes back no further than that pressure, whose frame was
+    /// drawn, and closes its bracket as the search down does (0.5 % in `s_min`); only where that
+    /// pressure too is predicted over does it go on up as above. Raised by half a largest step at
+    /// a time, such a frame went from the foot of a step the search down had found to past its
+    /// top: on 1,000 trees of the shared orchid (`bench --budget 100000 --seed 2`, frames 61–63)
+    /// the search down took the target from 0.0107, drawn at 966 primitives, to 0.0086–0.0092,
+    /// predicted within the budget; the camera moved, those were predicted at 137,000–140,000,
+    /// and the raise went to 0.0108–0.0115, drawing 955 and 949 primitives, where 0.0096 drew
+    /// 99,600 the next frame. Returns the `s_min` and target to draw with.
+    pub fn raise_within(&mut self, mut predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
         self.mark_over();
+        let from = self.steering.pressure;
+        if let Some(drawn) = self.steering.drawn.filter(|&d| d - from > LOWER_RESOLUTION) {
+            // A search down left the steering below the pressure of the frame last drawn: the
+            // raise goes back no further than that pressure, to the search down's bracket.
+            let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
+            let (_, under) = self.gallop(from, drawn, true, step, LOWER_RESOLUTION, &mut predict);
+            if let Some(under) = under {
+                return self.set_pressure(under);
+            }
+            self.set_pressure(drawn);
+        }
         self.search_up(predict)
     }
 
@@ -1850,7 +1872,8 @@ impl BudgetController {
     pub fn lower_within(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
         let (lowest, _) = self.pressure_range();
         let start = self.steering.pressure;
-        let (under, over) = self.gallop(start, lowest, false, predict);
+        let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
+        let (under, over) = self.gallop(start, lowest, false, step, LOWER_RESOLUTION, predict);
         let steering = &mut self.steering;
         if under < start {
             (steering.over, steering.cliff) = (over, None);
@@ -1871,15 +1894,18 @@ impl BudgetController {
     /// without marking it: the steering moves where it ends.
     fn search_up(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
         let (_, highest) = self.pressure_range();
-        let (over, under) = self.gallop(self.steering.pressure, highest, true, predict);
+        let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
+        let (over, under) =
+            self.gallop(self.steering.pressure, highest, true, step, (0.5 * step).max(PRESSURE_RESOLUTION), predict);
         self.set_pressure(under.unwrap_or(over))
     }
 
     /// The search of [`Self::raise_within`] and [`Self::lower_within`]: from pressure `from`,
     /// whose frame is taken to be over the budget (`from_over`) or within it, gallops towards
     /// `bound` by a largest step, then twice that, four times…, until a pressure is predicted on
-    /// the other side of the budget (`predict(s_min, target)`), then halves the bracket: up, to
-    /// half a largest step; down, to [`LOWER_RESOLUTION`] ([`Self::lower_within`]). Returns the
+    /// the other side of the budget (`predict(s_min, target)`), then halves the bracket to
+    /// `resolution` (up, half a largest step; down, and up back to a pressure drawn,
+    /// [`LOWER_RESOLUTION`]). Returns the
     /// last pressure found on `from`'s side and the first on the other (`None` where `bound` was
     /// reached without one); the steering is left where it predicted last.
     ///
@@ -1893,10 +1919,10 @@ impl BudgetController {
         from: f64,
         bound: f64,
         from_over: bool,
+        step: f64,
+        resolution: f64,
         mut predict: impl FnMut(f32, f32) -> u64,
     ) -> (f64, Option<f64>) {
-        let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
-        let resolution = if from_over { (0.5 * step).max(PRESSURE_RESOLUTION) } else { LOWER_RESOLUTION };
         let mut over_at = |controller: &mut Self, pressure: f64| {
             let (s_min, target) = controller.set_pressure(pressure);
             predict(s_min, target) > controller.target_primitives
@@ -2536,6 +2562,31 @@ mod tests {
             assert!(t > settled && scene(t, 3.0) <= controller.cliff_count(), "{t} after {settled}");
             controller.update_policy(scene(t, 3.0));
         }
+    }
+
+    #[test]
+    fn a_raise_after_a_search_down_goes_back_no_further_than_the_pressure_drawn() {
+        let mut controller = BudgetController::for_policy(100_000, 1.0, 0.1);
+        // A frame far under the budget at target 0.1, then a search down: the scene predicted
+        // within the budget down to target 0.02, a cliff below it.
+        controller.update_policy(1_000);
+        let drawn = 0.1f32;
+        let (_, lowered) = controller.lower_within(|_, t| if t >= 0.02 { 90_000 } else { 10_000_000 });
+        assert!((0.02..0.021).contains(&lowered), "{lowered}");
+        // The camera moves before the next frame: the lowered target is predicted over 1.1 times
+        // the budget, a target of 0.05 or more within it.
+        let moved = |t: f32| if t < 0.05 { 150_000 } else { 60_000 };
+        let (_, raised) = controller.raise_within(|_, t| moved(t));
+        // Back to the edge to the search down's bracket (0.5 % in `s_min`, 1 % in the target),
+        // never past the target drawn: a raise by half a largest step from 0.02 at a time
+        // (×1.25 in the target) would have stopped up to a quarter above it.
+        assert!(moved(raised) <= 100_000 && raised <= 0.05 * 1.011 && raised <= drawn, "{raised}");
+        // Where even the target drawn is predicted over, the raise goes on past it as before.
+        let mut controller = BudgetController::for_policy(100_000, 1.0, 0.1);
+        controller.update_policy(1_000);
+        controller.lower_within(|_, t| if t >= 0.02 { 90_000 } else { 10_000_000 });
+        let (_, raised) = controller.raise_within(|_, t| if t < 0.3 { 150_000 } else { 60_000 });
+        assert!(raised >= 0.3, "{raised}");
     }
 
     #[test]
