@@ -1836,8 +1836,7 @@ impl BudgetController {
         if let Some(drawn) = self.steering.drawn.filter(|&d| d - from > LOWER_RESOLUTION) {
             // A search down left the steering below the pressure of the frame last drawn: the
             // raise goes back no further than that pressure, to the search down's bracket.
-            let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
-            let (_, under) = self.gallop(from, drawn, true, step, LOWER_RESOLUTION, &mut predict);
+            let (_, under) = self.gallop(from, drawn, true, LOWER_RESOLUTION, &mut predict);
             if let Some(under) = under {
                 return self.set_pressure(under);
             }
@@ -1872,8 +1871,7 @@ impl BudgetController {
     pub fn lower_within(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
         let (lowest, _) = self.pressure_range();
         let start = self.steering.pressure;
-        let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
-        let (under, over) = self.gallop(start, lowest, false, step, LOWER_RESOLUTION, predict);
+        let (under, over) = self.gallop(start, lowest, false, LOWER_RESOLUTION, predict);
         let steering = &mut self.steering;
         if under < start {
             (steering.over, steering.cliff) = (over, None);
@@ -1881,6 +1879,11 @@ impl BudgetController {
             steering.over = Some(steering.over.map_or(o, |before| before.max(o)));
         }
         self.set_pressure(under)
+    }
+
+    /// A largest step ([`Self::max_step`]) in pressure, at least [`PRESSURE_RESOLUTION`].
+    fn largest_step(&self) -> f64 {
+        f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION)
     }
 
     /// Counts the current pressure as over the budget though no frame was drawn there (a
@@ -1894,9 +1897,8 @@ impl BudgetController {
     /// without marking it: the steering moves where it ends.
     fn search_up(&mut self, predict: impl FnMut(f32, f32) -> u64) -> (f32, f32) {
         let (_, highest) = self.pressure_range();
-        let step = f64::from(self.max_step.max(1.0)).ln().max(PRESSURE_RESOLUTION);
-        let (over, under) =
-            self.gallop(self.steering.pressure, highest, true, step, (0.5 * step).max(PRESSURE_RESOLUTION), predict);
+        let resolution = (0.5 * self.largest_step()).max(PRESSURE_RESOLUTION);
+        let (over, under) = self.gallop(self.steering.pressure, highest, true, resolution, predict);
         self.set_pressure(under.unwrap_or(over))
     }
 
@@ -1919,10 +1921,10 @@ impl BudgetController {
         from: f64,
         bound: f64,
         from_over: bool,
-        step: f64,
         resolution: f64,
         mut predict: impl FnMut(f32, f32) -> u64,
     ) -> (f64, Option<f64>) {
+        let step = self.largest_step();
         let mut over_at = |controller: &mut Self, pressure: f64| {
             let (s_min, target) = controller.set_pressure(pressure);
             predict(s_min, target) > controller.target_primitives
