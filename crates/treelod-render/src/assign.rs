@@ -54,8 +54,6 @@ pub(crate) struct PolicyModels {
     /// Budget mode: what the last frame drew, and the camera it drew it for, from which the next
     /// frame is predicted where the camera moved (`Renderer::prepare`).
     pub(crate) last_frame: Option<Drawn>,
-    /// Budget mode: the steering the last frame was selected with (`Renderer::budget_frame`).
-    pub(crate) steered: Option<crate::BudgetFrame>,
 }
 
 impl PolicyModels {
@@ -234,7 +232,7 @@ impl Renderer {
     /// - a point tree above the tables' heights drawn before and after: its cut for `camera` at
     ///   `s_min` less its cut for the last frame's camera at its `s_min`;
     /// - the other point trees drawn before and after: their cut scaled by the square of
-    ///   `drawn.s_min / s_min` (the cut's elements are areas);
+    ///   `drawn.steering.s_min / s_min` (the cut's elements are areas);
     /// - the draws of the techniques trees in a transition are leaving: kept as drawn, less
     ///   those of the transitions that end before the next frame ([`Self::leaving_ended`]); and
     ///   a tree in view that changes technique under `next` with transitions of more than one
@@ -277,7 +275,7 @@ impl Renderer {
                     delta += weight * (after - self.level_triangles(i, last).unwrap_or(after));
                 } else if then == Technique::Spt
                     && self.above_tables(i, camera, &drawn.camera)
-                    && let Some(before) = self.spt_cut(i, drawn.s_min, &drawn.camera, &drawn_frustum)
+                    && let Some(before) = self.spt_cut(i, drawn.steering.s_min, &drawn.camera, &drawn_frustum)
                 {
                     let after = self.spt_cut(i, s_min, camera, &frustum).unwrap_or(0.0);
                     near_spt += weight * before;
@@ -296,12 +294,12 @@ impl Renderer {
             };
             let before = match now {
                 None => Some(0.0),
-                Some(now) => {
-                    self.table_cost(i, now, &drawn.camera, &drawn_frustum, drawn.s_min).map(|row| match last_level {
+                Some(now) => self.table_cost(i, now, &drawn.camera, &drawn_frustum, drawn.steering.s_min).map(|row| {
+                    match last_level {
                         Some(level) if now == Technique::LodChain => self.level_triangles(i, level).unwrap_or(row),
                         _ => row,
-                    })
-                }
+                    }
+                }),
             };
             if let (Some(after), Some(before)) = (after, before) {
                 // A tree that changes technique in view is drawn with both for the transition's
@@ -311,8 +309,8 @@ impl Renderer {
             }
         }
         // The other point trees that keep their technique draw a cut of the new `s_min`.
-        let spt = if s_min > 0.0 && drawn.s_min > 0.0 {
-            (drawn.spt as f64 - near_spt).max(0.0) * (f64::from(drawn.s_min / s_min).powi(2) - 1.0)
+        let spt = if s_min > 0.0 && drawn.steering.s_min > 0.0 {
+            (drawn.spt as f64 - near_spt).max(0.0) * (f64::from(drawn.steering.s_min / s_min).powi(2) - 1.0)
         } else {
             0.0
         };
@@ -332,14 +330,14 @@ impl Renderer {
     pub(crate) fn drawn(
         &self,
         camera: treelod_runtime::Camera,
-        s_min: f32,
+        steering: crate::BudgetFrame,
         stats: &crate::FrameStats,
         policy: Policy,
     ) -> Drawn {
         let mut drawn = Drawn {
             camera,
             count: stats.primitives(),
-            s_min,
+            steering,
             spt: stats.by_technique[Technique::Spt],
             leaving: stats.leaving,
             leaving_ended: 0.0,
@@ -370,7 +368,7 @@ impl Renderer {
             let held = self.leaving_chain_levels.get(i).copied().flatten();
             let cost = match (transition.from, held) {
                 (Technique::LodChain, Some(level)) => self.level_triangles(i, level),
-                _ => self.table_cost(i, transition.from, &drawn.camera, frustum, drawn.s_min),
+                _ => self.table_cost(i, transition.from, &drawn.camera, frustum, drawn.steering.s_min),
             };
             let Some(cost) = cost else { continue };
             all += cost;
@@ -662,8 +660,8 @@ pub(crate) struct Drawn {
     /// Its count, the draws of trees leaving a technique in a transition included (what the
     /// steering steers, `Renderer::prepare`).
     pub(crate) count: u64,
-    /// The `s_min` it was selected with.
-    pub(crate) s_min: f32,
+    /// The steering it was selected with (`s_min`, the target; `Renderer::budget_frame`).
+    pub(crate) steering: crate::BudgetFrame,
     /// The primitives of its point trees.
     pub(crate) spt: u64,
     /// The primitives of the draws of the techniques its trees in a transition were leaving
@@ -897,7 +895,8 @@ mod tests {
         let mut ended = 0;
         for _ in 0..5 {
             let predicted = {
-                let drawn = renderer.drawn(selection, s_min, &stats, policy);
+                let steering = crate::BudgetFrame { s_min, target: policy.target(), finest: false };
+                let drawn = renderer.drawn(selection, steering, &stats, policy);
                 renderer.predict_count(&selection, policy, s_min, drawn)
             };
             let next = renderer.prepare(&gpu.device, &gpu.queue, &held);
@@ -925,7 +924,8 @@ mod tests {
         assert_eq!(stats.leaving, 0, "settled");
         let raised = Policy { target: 4.0 * policy.target(), ..policy };
         let predicted = {
-            let drawn = renderer.drawn(selection, s_min, &stats, policy);
+            let steering = crate::BudgetFrame { s_min, target: policy.target(), finest: false };
+            let drawn = renderer.drawn(selection, steering, &stats, policy);
             renderer.predict_count(&selection, raised, s_min, drawn)
         };
         renderer.settings.policy = Some(raised);

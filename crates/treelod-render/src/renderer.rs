@@ -866,7 +866,7 @@ impl Renderer {
     fn prepare_on_pool(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, camera: &Camera) -> FrameStats {
         let user = self.settings;
         let Some((policy, budget)) = user.policy.and_then(|p| p.budget.map(|n| (p, n))) else {
-            (self.policy.budget, self.policy.last_frame, self.policy.steered) = (None, None, None);
+            (self.policy.budget, self.policy.last_frame) = (None, None);
             return self.prepare_frame(device, queue, camera);
         };
         let mut controller = (self.policy.budget.take())
@@ -899,7 +899,7 @@ impl Renderer {
         }
         let started = predicted.then(|| clock.elapsed());
         let (drawn_s_min, target) = (controller.s_min(), controller.target());
-        self.policy.steered = Some(BudgetFrame { s_min: drawn_s_min, target, finest: controller.at_finest() });
+        let steering = BudgetFrame { s_min: drawn_s_min, target, finest: controller.at_finest() };
         self.settings.s_min = drawn_s_min;
         if user.s_min > 0.0 {
             self.settings.s_max = user.s_max * drawn_s_min / user.s_min;
@@ -910,7 +910,7 @@ impl Renderer {
         self.settings = user;
         // What the frame drew, the leaving draws included (the documentation above).
         let count = stats.primitives();
-        let drawn = self.drawn(selection, drawn_s_min, &stats, policy);
+        let drawn = self.drawn(selection, steering, &stats, policy);
         self.policy.last_frame = Some(drawn);
         controller.update_policy(count);
         let started = std::time::Instant::now();
@@ -944,7 +944,7 @@ impl Renderer {
     /// outside it.
     #[must_use]
     pub fn budget_frame(&self) -> Option<BudgetFrame> {
-        self.policy.steered
+        self.policy.last_frame.map(|drawn| drawn.steering)
     }
 
     /// [`Self::prepare`] with the settings as they are.
