@@ -442,19 +442,19 @@ struct Scene<'a> {
     /// Per vertex: its normal, its colour (linear RGBA) and its ambient occlusion.
     vertices: Vec<(Vec3, Vec4, f32)>,
     /// Every triangle of `TRIANGLES`, ready to rasterise (the reference and the full mesh).
-    full: Vec<Tri>,
+    full: Tris,
     /// The triangles of `TRIANGLES` that are not of a leaf material (pruned and impostor trees
     /// draw them all where the container has no chain, and near).
-    bark: Vec<Tri>,
+    bark: Tris,
     /// The LoD chain's bark levels as the runtime keeps them for pruned and impostor trees
     /// (`treelod_runtime::ChainRanges::bark_levels`): per level, finest first, its block error
     /// (the largest of its trees', kept non-decreasing) and its bark triangles, while they keep
     /// [`BARK_AREA_KEPT`] of the full bark's area; empty without a chain, planes or pruning.
-    chain_bark: Vec<(f32, Vec<Tri>)>,
+    chain_bark: Vec<(f32, Tris)>,
     /// The LoD chain's levels as the runtime switches a block's trees together
     /// ([`LodChain::from_records`]): per level, finest first, every tree's triangles of that
     /// level; empty without a chain.
-    chain_levels: Vec<Vec<Tri>>,
+    chain_levels: Vec<Tris>,
     /// Whether the impostor planes can be drawn (an RGBA atlas, not leaf slots).
     planes_drawable: bool,
     /// Per plane, its parent's index or [`NO_PARENT`] ([`plane_parents`]).
@@ -554,11 +554,55 @@ struct Atlas {
 struct Tri {
     /// Corners, metres.
     positions: [Vec3; 3],
+    /// What it is made of.
+    made_of: MadeOf,
+}
+
+/// What a [`Tri`] is made of: read only where it holds a pixel centre.
+#[derive(Clone, Copy, Debug)]
+struct MadeOf {
     /// Texture coordinates of the corners.
     uvs: [Vec2; 3],
     /// Its corners' vertices (their normals, colours and ambient occlusion).
     indices: [u32; 3],
     material: u32,
+}
+
+/// Triangles to draw, their corners apart from what they are made of: every view projects each
+/// triangle's corners, but most triangles of a large tree in a small view hold no pixel centre,
+/// and only the others read the rest (two fifths of a [`Tri`]'s bytes are its corners, so the
+/// views stream half as much memory).
+#[derive(Default)]
+struct Tris {
+    positions: Vec<[Vec3; 3]>,
+    made_of: Vec<MadeOf>,
+}
+
+impl Tris {
+    fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    fn push(&mut self, Tri { positions, made_of }: Tri) {
+        self.positions.push(positions);
+        self.made_of.push(made_of);
+    }
+}
+
+impl Extend<Tri> for Tris {
+    fn extend<I: IntoIterator<Item = Tri>>(&mut self, iter: I) {
+        for tri in iter {
+            self.push(tri);
+        }
+    }
+}
+
+impl FromIterator<Tri> for Tris {
+    fn from_iter<I: IntoIterator<Item = Tri>>(iter: I) -> Self {
+        let mut tris = Self::default();
+        tris.extend(iter);
+        tris
+    }
 }
 
 /// The calibration of `data` (spec §6.15–§6.17): for every representation it holds, its error
@@ -887,8 +931,8 @@ impl<'a> Scene<'a> {
             })
             .collect();
         let raster = |t: &TriangleRecord| tri(data, t, 1.0, None);
-        let full: Vec<Tri> = data.triangles.iter().map(raster).collect();
-        let bark: Vec<Tri> = data
+        let full: Tris = data.triangles.iter().map(raster).collect();
+        let bark: Tris = data
             .triangles
             .iter()
             .filter(|t| data.materials.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF))
@@ -959,26 +1003,30 @@ impl<'a> Scene<'a> {
     /// (its renderer settings' stochastic alpha): a minified fragment is kept where its filtered
     /// coverage exceeds a hash of its pixel and depth, so on average the leaves cover what their
     /// texels cover.
-    fn draw_triangles(&self, canvas: &mut Canvas, view: &View, triangles: &[Tri], reference: bool) {
+    fn draw_triangles(&self, canvas: &mut Canvas, view: &View, triangles: &Tris, reference: bool) {
         let size = self.layers.size;
         #[expect(clippy::cast_precision_loss, reason = "a texture side")]
         let side = Vec2::splat(size as f32);
-        for t in triangles {
-            let p = t.positions.map(|q| view.project(q));
-            let uvs = t.uvs;
-            let (base, layer, cutoff) =
-                self.materials.get(t.material as usize).copied().unwrap_or((Vec4::ONE, None, None));
-            let levels = layer.and_then(|l| self.layers.levels.get(l));
-            let depths = t.positions.map(|q| depth(view, q));
+        for (positions, t) in triangles.positions.iter().zip(&triangles.made_of) {
+            // Written out: `map` here was a call per corner (its closure not inlined).
+            let p = [view.project(positions[0]), view.project(positions[1]), view.project(positions[2])];
+            // The corners' depths and the material, found at the first pixel centre the
+            // triangle holds: most triangles of a large tree in a small view hold none.
+            let mut found = None;
             // Texels per pixel (constant over an orthographic triangle), the level of detail and
-            // the corners, found at the first pixel that passes the depth test: most triangles
-            // of a large tree in a small view have none.
+            // the corners, found at the first pixel that passes the depth test.
             let mut shading = None;
             triangle_pixels(canvas.size(), p, |x, y, b| {
+                let &mut (depths, (base, layer, cutoff)) = found.get_or_insert_with(|| {
+                    let material = self.materials.get(t.material as usize).copied().unwrap_or((Vec4::ONE, None, None));
+                    (positions.map(|q| depth(view, q)), material)
+                });
                 let z = depths[0] * b[0] + depths[1] * b[1] + depths[2] * b[2];
                 if !canvas.nearer(x, y, z) {
                     return;
                 }
+                let uvs = t.uvs;
+                let levels = layer.and_then(|l| self.layers.levels.get(l));
                 let &mut (footprint, lod, corners) = shading.get_or_insert_with(|| {
                     let footprint = texel_footprint(p, uvs, side);
                     let corners =
@@ -1068,7 +1116,7 @@ impl<'a> Scene<'a> {
                 let lambda = curve_at(&d.prune_lambda, pixels).unwrap_or(1.0).clamp(0.0, 1.0);
                 let grow = size_factor(leaf_scale(mode, &d.prune_scale, lambda));
                 let mut drawn = self.draw_bark(view, p, false, canvas);
-                let mut leaves = Vec::new();
+                let mut leaves = Tris::default();
                 for cell in &d.cells {
                     let list = d.prune_leaves.get(cell.prune_leaves.as_usize()).unwrap_or(&[]);
                     let n = prune_leaves_drawn(u32::try_from(list.len()).unwrap_or(u32::MAX), lambda) as usize;
@@ -1126,7 +1174,7 @@ impl<'a> Scene<'a> {
                     self.draw_triangles(canvas, view, &self.full, false);
                     return self.full.len() as u64;
                 }
-                let tris: Vec<Tri> = chosen
+                let tris: Tris = chosen
                     .iter()
                     .flatten()
                     .flat_map(|l| d.lod_triangles.get(l.triangles.as_usize()).unwrap_or(&[]))
@@ -1306,7 +1354,7 @@ impl<'a> Scene<'a> {
     /// point alone).
     fn draw_spt(&self, view: &View, thresholds: Thresholds, seed: u64, canvas: &mut Canvas) -> u64 {
         let d = self.data;
-        let mut tris = Vec::new();
+        let mut tris = Tris::default();
         let mut drawn = 0u64;
         for cell in &d.cells {
             for t in d.triangles.get(cell.triangles.as_usize()).unwrap_or(&[]) {
@@ -1534,7 +1582,7 @@ fn capsule(
 /// levels of [`LodChain::from_records`], each with its error and the non-leaf triangles of its
 /// trees' ranges, up to the first whose bark keeps less than [`BARK_AREA_KEPT`] of the full
 /// bark's area ([`area`]).
-fn chain_bark_levels(data: &ContainerData) -> Vec<(f32, Vec<Tri>)> {
+fn chain_bark_levels(data: &ContainerData) -> Vec<(f32, Tris)> {
     let is_bark =
         |t: &&TriangleRecord| data.materials.get(t.material as usize).is_none_or(|m| m.class != material_class::LEAF);
     let Some(chain) = LodChain::from_records(&data.lod_levels) else { return Vec::new() };
@@ -1568,9 +1616,7 @@ fn tri(data: &ContainerData, t: &TriangleRecord, grow: f32, centre: Option<Vec3>
     };
     Tri {
         positions: corners.map(|v| position(v.position)),
-        uvs: corners.map(|v| Vec2::from_array(v.uv)),
-        indices: t.indices,
-        material: t.material,
+        made_of: MadeOf { uvs: corners.map(|v| Vec2::from_array(v.uv)), indices: t.indices, material: t.material },
     }
 }
 

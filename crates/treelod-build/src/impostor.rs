@@ -1643,10 +1643,13 @@ struct Projected {
 fn project(local: &[DVec3; 3], quad: &Quad, (sw, sh): (usize, usize)) -> Option<Projected> {
     let (hu2, hv2) = (quad.u.length_squared(), quad.v.length_squared());
     // Sample coordinates: s = −1 ↦ 0, s = +1 ↦ sw (likewise t and sh).
-    let xy = local.map(|p| {
+    let at = |p: DVec3| {
         let d = p - quad.centre;
         DVec2::new((d.dot(quad.u) / hu2 + 1.0) * 0.5 * sw as f64, (d.dot(quad.v) / hv2 + 1.0) * 0.5 * sh as f64)
-    });
+    };
+    // Written out: `local.map(at)` was a call per corner (its closure not inlined), on the path
+    // every triangle takes once per view.
+    let xy = [at(local[0]), at(local[1]), at(local[2])];
     let area = (xy[1] - xy[0]).perp_dot(xy[2] - xy[0]);
     if area.abs() < 1e-12 || !area.is_finite() {
         return None;

@@ -327,7 +327,7 @@ pub fn fill_triangle(mask: &mut Mask, p: [Vec2; 3], uv: [Vec2; 3], alpha: Option
     let slope = edges.map(|e| -e.dy * SUBPIXEL);
     #[expect(clippy::cast_precision_loss, reason = "an estimate, corrected exactly")]
     let inverse = slope.map(|s| if s == 0 { 0.0 } else { 1.0 / s as f64 });
-    let mut row_start = edges.map(|e| e.at(x0, y0));
+    let mut row_start = [edges[0].at(x0, y0), edges[1].at(x0, y0), edges[2].at(x0, y0)];
     let width = x1 - x0;
     #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
     let inv_area = 1.0 / area as f32;
@@ -416,7 +416,7 @@ pub fn triangle_pixels(size: u32, p: [Vec2; 3], mut pixel: impl FnMut(usize, usi
     #[expect(clippy::cast_precision_loss, reason = "barycentric weights need no more")]
     let inv_area = 1.0 / area as f32;
     for y in y0..=y1 {
-        let mut w = edges.map(|e| e.at(x0, y));
+        let mut w = [edges[0].at(x0, y), edges[1].at(x0, y), edges[2].at(x0, y)];
         for x in x0..=x1 {
             if w[0] >= 0 && w[1] >= 0 && w[2] >= 0 {
                 let mut b = [0.0; 3];
@@ -457,7 +457,11 @@ impl Setup {
         if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= side && min.y <= side) {
             return None;
         }
-        let mut v = p.map(|q| (snap(q.x), snap(q.y)));
+        if holds_no_centre(min, max) {
+            return None;
+        }
+        let corner = |q: Vec2| (snap(q.x), snap(q.y));
+        let mut v = [corner(p[0]), corner(p[1]), corner(p[2])];
         // Pixel centres inside the snapped box: x·256 + 128 ∈ [min, max] (shifts divide by 256,
         // rounding down).
         let half = SUBPIXEL / 2;
@@ -493,6 +497,31 @@ impl Setup {
         });
         Some(Self { x0, x1, y0, y1, area, swapped, edges })
     }
+}
+
+/// How far past a box [`holds_no_centre`] looks for a pixel centre, pixels: more than snapping
+/// moves a corner (half of 1/256 pixel, and the rounding of `v·256 + 0.5`, at most 1/4096 pixel
+/// within [`NO_CENTRE_REACH`]) plus the rounding of the test's own sums (at most 1/1024 pixel
+/// there).
+const NO_CENTRE_MARGIN: f32 = 1.0 / 64.0;
+
+/// The coordinates, pixels, within which [`holds_no_centre`] tests a box (beyond them it answers
+/// `false` and the snapped test decides).
+const NO_CENTRE_REACH: f32 = 4096.0;
+
+/// Whether the box `min..max` (pixel coordinates) is sure to hold no pixel centre once its
+/// corners are snapped: along x or y no `k + 0.5` lies within it, even widened by
+/// [`NO_CENTRE_MARGIN`]. A test in floats before snapping, for the triangles far smaller than a
+/// pixel that make most of a large tree drawn in a small image; it answers `true` only where the
+/// snapped box holds no centre either (so [`Setup::new`] returns what it would without it).
+fn holds_no_centre(min: Vec2, max: Vec2) -> bool {
+    if !(min.x > -NO_CENTRE_REACH && min.y > -NO_CENTRE_REACH && max.x < NO_CENTRE_REACH && max.y < NO_CENTRE_REACH) {
+        return false;
+    }
+    // The last centre at or before `hi` (widened) is before `lo` (widened).
+    #[expect(clippy::cast_precision_loss, reason = "|k| ≤ 4097")]
+    let gap = |lo: f32, hi: f32| (floor_i64(hi - 0.5 + NO_CENTRE_MARGIN) as f32) < lo - 0.5 - NO_CENTRE_MARGIN;
+    gap(min.x, max.x) || gap(min.y, max.y)
 }
 
 /// A pixel coordinate in fixed point: the nearest multiple of 1/256 pixel, clamped to ±2^24.
@@ -545,7 +574,9 @@ impl Edge {
 pub fn rasterize(mask: &mut Mask, view: &View, triangles: &[RasterTriangle], alphas: &[AlphaMask]) {
     for t in triangles {
         let alpha = alphas.get(t.alpha as usize);
-        fill_triangle(mask, t.positions.map(|p| view.project(p)), t.uvs, alpha);
+        // Written out: `map` here was a call per corner (its closure not inlined).
+        let [a, b, c] = t.positions;
+        fill_triangle(mask, [view.project(a), view.project(b), view.project(c)], t.uvs, alpha);
     }
 }
 
@@ -1030,6 +1061,44 @@ mod tests {
                 assert_eq!(mask.get(x, y), (2..6).contains(&x) && (5..8).contains(&y), "pixel ({x}, {y})");
             }
         }
+    }
+
+    #[test]
+    fn a_box_said_to_hold_no_centre_holds_none_once_snapped() {
+        // Boxes near centres and near pixel edges, tiny to a pixel wide, at coordinates up to
+        // the test's reach and past it: wherever the float test rejects one, the snapped box
+        // (pixel centres x·256 + 128 between its snapped ends) holds no centre either; and it
+        // rejects most boxes far narrower than a pixel.
+        let mut state = 11u64;
+        let mut next = || {
+            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let centre_between = |lo: f32, hi: f32| {
+            let (a, b) = (snap(lo), snap(hi));
+            // Some x with a ≤ 256·x + 128 ≤ b.
+            (-((SUBPIXEL / 2 - a) >> SUBPIXEL_BITS)) <= ((b - SUBPIXEL / 2) >> SUBPIXEL_BITS)
+        };
+        let (mut rejected, mut tiny) = (0, 0);
+        for i in 0..200_000 {
+            let scale = [4.0, 64.0, 4000.0, 4200.0][i % 4];
+            let base = Vec2::new((next() * 2.0 - 1.0) * scale, (next() * 2.0 - 1.0) * scale);
+            // Snapped to a centre or an edge, then nudged by a few 256ths of a pixel.
+            let anchor = if i % 3 == 0 { base.floor() + 0.5 } else { base.floor() };
+            let nudge = Vec2::new(next() - 0.5, next() - 0.5) * (8.0 / 256.0);
+            let size = Vec2::new(next(), next()) * [0.001, 0.005, 0.2, 1.2][(i / 4) % 4];
+            let min = if i % 2 == 0 { anchor + nudge } else { base };
+            let max = min + size;
+            if holds_no_centre(min, max) {
+                rejected += 1;
+                assert!(
+                    !(centre_between(min.x, max.x) && centre_between(min.y, max.y)),
+                    "{min} – {max} holds a centre once snapped"
+                );
+            }
+            tiny += usize::from(size.max_element() < 0.01 && min.abs().max(max.abs()).max_element() < 4000.0);
+        }
+        assert!(rejected > tiny / 2, "{rejected} of {tiny} tiny boxes rejected");
     }
 
     #[test]
