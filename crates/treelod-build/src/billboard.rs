@@ -40,9 +40,8 @@ use treelod_format::{
 
 use crate::error::BuildError;
 use crate::impostor::{
-    ALIGN, Atlas, Baked, DepthMoments, GUTTER, ImpostorMesh, MIP_LEVELS, PlaneFit, Quad, Region, SAMPLES, Winner,
-    align, bake, compose, diffuse_item, diffuse_mixture, diffuse_moments, may_cover, seen_triangle_occlusion,
-    shelf_pack,
+    ALIGN, Atlas, Baked, DepthMoments, GUTTER, ImpostorMesh, MIP_LEVELS, MayCover, PlaneFit, Quad, Region, SAMPLES,
+    Winner, align, bake, compose, diffuse_item, diffuse_mixture, diffuse_moments, seen_triangle_occlusion, shelf_pack,
 };
 
 /// Views per side of a tree's octahedral impostor by default ([`OctahedralConfig::views`], spec
@@ -344,10 +343,11 @@ pub fn build_billboards(
             // whose box holds a sample, which are all that draw, so the rest are not sorted
             // (the maple's octahedral views, 176 samples across, keep 118k–154k of its 669k
             // triangles; the bytes are the same, and the stage took 15.7 s instead of 27.4).
+            let may_cover = MayCover::new(&job.quad, grid);
             let mut order: Vec<(f64, u32)> = triangles
                 .iter()
                 .enumerate()
-                .filter(|(_, (_, corners))| may_cover(corners, &job.quad, grid))
+                .filter(|(_, (_, corners))| may_cover.test(corners))
                 .map(|(k, (_, corners))| {
                     #[expect(clippy::cast_possible_truncation, reason = "a tree's triangles fit u32")]
                     let k = k as u32;

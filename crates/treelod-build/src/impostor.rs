@@ -1665,10 +1665,60 @@ fn project(local: &[DVec3; 3], quad: &Quad, (sw, sh): (usize, usize)) -> Option<
     Some(Projected { xy, area, x0, x1, y0, y1 })
 }
 
-/// Whether the bounding box of `local` projected onto `quad`'s `samples` (columns, rows) holds a
-/// sample centre: a triangle for which it does not draws nothing there ([`bake`] skips it).
-pub(crate) fn may_cover(local: &[DVec3; 3], quad: &Quad, samples: (usize, usize)) -> bool {
-    boxed_rows(local, quad, samples).is_some()
+/// Whether a triangle may cover a sample of a quad's grid: the bounding box of its corners
+/// projected onto `quad`'s `samples` (columns, rows), widened by [`MayCover::MARGIN`], holds a
+/// sample centre. It says `true` of every triangle whose box [`project`] finds holding one (the
+/// others draw nothing there, and [`bake`] skips them), with one product and sum per axis and
+/// corner where `project` divides: a view of many samples tests every triangle of its tree, and
+/// bakes only the few that may cover a sample.
+pub(crate) struct MayCover {
+    /// Per axis, the sample coordinate of a corner `p` (relative to the origin of work) is
+    /// `p · scale + offset`.
+    scale: [DVec3; 2],
+    offset: [f64; 2],
+    /// The last sample column and row.
+    last: [f64; 2],
+}
+
+impl MayCover {
+    /// How far past a triangle's box, in samples, a centre is still taken as in it: far more than
+    /// the rounding by which these products and sums differ from [`project`]'s quotients (about
+    /// 10⁻¹¹ samples for a tree 100 metres across in a grid of 8,192 samples).
+    const MARGIN: f64 = 1e-6;
+
+    pub(crate) fn new(quad: &Quad, (sw, sh): (usize, usize)) -> Self {
+        #[expect(clippy::cast_precision_loss, reason = "sample counts")]
+        let (sw, sh) = (sw as f64, sh as f64);
+        // (d·u/|u|² + 1)·sw/2 with d = p − centre.
+        let scale = [quad.u * (0.5 * sw / quad.u.length_squared()), quad.v * (0.5 * sh / quad.v.length_squared())];
+        let offset = [0.5 * sw - quad.centre.dot(scale[0]), 0.5 * sh - quad.centre.dot(scale[1])];
+        Self { scale, offset, last: [sw - 1.0, sh - 1.0] }
+    }
+
+    /// Whether `local` may cover a sample (the documentation of [`MayCover`]).
+    pub(crate) fn test(&self, local: &[DVec3; 3]) -> bool {
+        (0..2).all(|axis| {
+            let at = |p: DVec3| p.dot(self.scale[axis]) + self.offset[axis];
+            let (a, b, c) = (at(local[0]), at(local[1]), at(local[2]));
+            let (lo, hi) = (a.min(b).min(c) - 0.5 - Self::MARGIN, a.max(b).max(c) - 0.5 + Self::MARGIN);
+            // Some whole k with max(lo, 0) ≤ k ≤ min(hi, last): the largest whole number up to
+            // the upper end is not below the lower end. (`max` and `min` pass over a NaN; a
+            // corner that is not finite gives `project` no box.)
+            let (lo, hi) = (lo.max(0.0), hi.min(self.last[axis]));
+            floor_f64(hi) >= lo
+        })
+    }
+}
+
+/// `floor(v)` without a libm call (`v` itself past 2⁵², where every float is whole, and where it
+/// is not finite).
+#[expect(clippy::cast_possible_truncation, clippy::cast_precision_loss, reason = "whole values below 2^52")]
+fn floor_f64(v: f64) -> f64 {
+    if v.is_nan() || v.abs() >= 4_503_599_627_370_496.0 {
+        return v;
+    }
+    let whole = v as i64 as f64;
+    if whole > v { whole - 1.0 } else { whole }
 }
 
 /// The sample rows `y0..y1` of the bounding box of `local` projected onto `quad`'s `samples`,
@@ -2249,6 +2299,52 @@ fn dilate(texels: &mut [[f32; 4]], w: usize, h: usize, covered: Vec<bool>, colou
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn may_cover_keeps_every_triangle_whose_box_holds_a_sample() {
+        // Tilted quads over grids of a few to thousands of samples, and triangles from a
+        // sample's width to far under it, near sample centres and the grid's edges: every one
+        // whose projected box holds a centre (as `bake` finds it) is kept, and most of the tiny
+        // ones are not.
+        let mut state = 5u64;
+        let mut next = || {
+            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            f64::from((state >> 40) as u32) / f64::from(1u32 << 24)
+        };
+        let (mut kept, mut boxed, mut tiny_kept, mut tiny) = (0, 0, 0, 0);
+        for i in 0..40_000 {
+            let samples = [(8, 8), (176, 176), (3000, 1700), (8192, 64)][i % 4];
+            let turn = DQuat::from_rotation_y(next() * 6.0) * DQuat::from_rotation_x(next() - 0.5);
+            let quad = Quad {
+                centre: DVec3::new(next() - 0.5, next() * 3.0, next() - 0.5),
+                u: turn * DVec3::X * (1.0 + 9.0 * next()),
+                v: turn * DVec3::Y * (1.0 + 9.0 * next()),
+            };
+            let may_cover = MayCover::new(&quad, samples);
+            // A point of the quad at sample coordinates (x, y), and off it along its normal.
+            let point = |x: f64, y: f64, off: f64| {
+                quad.centre
+                    + quad.u * (2.0 * x / samples.0 as f64 - 1.0)
+                    + quad.v * (2.0 * y / samples.1 as f64 - 1.0)
+                    + quad.u.cross(quad.v).normalize() * off
+            };
+            let size = [1.0, 0.1, 0.01, 1e-4][(i / 4) % 4];
+            let (x, y) = (next() * (samples.0 as f64 + 2.0) - 1.0, next() * (samples.1 as f64 + 2.0) - 1.0);
+            // Half of them with a corner on a centre or an edge of the samples.
+            let (x, y) =
+                if i % 2 == 0 { ((x.floor() + 0.5 * f64::from(i as u32 % 3)), y.floor() + 0.5) } else { (x, y) };
+            let local = [point(x, y, 0.0), point(x + size * next(), y, next()), point(x, y + size * next(), -next())];
+            let exact = boxed_rows(&local, &quad, samples).is_some();
+            let test = may_cover.test(&local);
+            assert!(test || !exact, "{local:?} on {samples:?}: its box holds a sample, but it was not kept");
+            (kept, boxed) = (kept + usize::from(test), boxed + usize::from(exact));
+            if size < 0.05 && i % 2 == 1 {
+                (tiny, tiny_kept) = (tiny + 1, tiny_kept + usize::from(test));
+            }
+        }
+        assert!(boxed > 1000 && kept >= boxed, "{kept} kept, {boxed} boxed");
+        assert!(tiny_kept * 4 < tiny, "{tiny_kept} of {tiny} tiny triangles kept");
+    }
     use crate::raster::{
         AlphaMask, Mask, RasterTriangle, View, bounding_sphere, coverage, render_views, view_directions,
     };
