@@ -894,7 +894,10 @@ impl CentreGrid {
 
     /// The `m` centres nearest to `p` (ties: lower id) as (squared distance, id), nearest first:
     /// rings of grid cells around `p`'s until the `m`-th nearest found is nearer than anything
-    /// outside the rings can be.
+    /// outside the rings can be. (Passing over a ring's cells whose box is farther than the
+    /// `m`-th nearest so far was measured and not taken: with about two centres a cell the test
+    /// costs what it saves, the maple's `--ellipsoids` stage 7.77–7.94 s without it and
+    /// 8.09–8.23 s with it, two alternating runs each, the same bytes.)
     fn nearest(&self, centres: &[DVec3], p: DVec3, m: usize, out: &mut Vec<(f64, u32)>) {
         out.clear();
         if self.ids.is_empty() || m == 0 {
@@ -1407,4 +1410,46 @@ pub fn leaf_ellipsoid(positions: &[[Vec3; 3]], samples: u32) -> (Vec3, [Vec3; 3]
     #[expect(clippy::cast_possible_truncation, reason = "metres")]
     let radii = s.radii.map(|r| r as f32);
     (e.mean.as_vec3(), s.axes.map(|a| a.as_vec3()), radii)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_centre_grid_finds_the_nearest_centres_as_a_search_of_all_of_them_does() {
+        // Centres spread through a box, clumped on a few points, strung along a line long
+        // enough that the grid's cells are clamped (128 a side), and on the corners of a square,
+        // some not alive; points inside and outside: the m nearest alive centres (ties by id)
+        // are those a sort of every centre gives.
+        let mut rng = SplitMix64(3);
+        let mut at = |lo: f64, hi: f64| lo + (hi - lo) * rng.next_f64();
+        for case in 0..12 {
+            let n = [40, 400, 3000][case % 3];
+            let centres: Vec<DVec3> = (0..n)
+                .map(|i| match case / 3 {
+                    0 => DVec3::new(at(-1.0, 1.0), at(0.0, 3.0), at(-1.0, 1.0)),
+                    1 => DVec3::splat((i % 5) as f64) + 0.01 * DVec3::new(at(0.0, 1.0), 0.0, 0.0),
+                    2 => DVec3::new(i as f64 * 0.37, at(0.0, 0.01), 0.0),
+                    _ => DVec3::new(at(0.0, 1.0), 0.0, at(0.0, 1.0)).round(),
+                })
+                .collect();
+            let alive: Vec<bool> = (0..n).map(|i| i % 7 != 3).collect();
+            let grid = CentreGrid::new(&centres, &alive);
+            let mut out = Vec::new();
+            for _ in 0..200 {
+                let scale = if case / 3 == 2 { 100.0 } else { 1.0 };
+                let p = DVec3::new(at(-2.0, 4.0), at(-1.0, 4.0), at(-2.0, 2.0)) * scale;
+                for m in [1, 8, 20] {
+                    grid.nearest(&centres, p, m, &mut out);
+                    #[expect(clippy::cast_possible_truncation, reason = "a few centres")]
+                    let mut all: Vec<(f64, u32)> =
+                        (0..n).filter(|&i| alive[i]).map(|i| (centres[i].distance_squared(p), i as u32)).collect();
+                    all.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    all.truncate(m);
+                    assert_eq!(out, all, "case {case}, m {m}, p {p}");
+                }
+            }
+        }
+    }
 }
