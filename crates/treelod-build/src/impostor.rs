@@ -88,7 +88,7 @@ use treelod_format::{PlaneDiffuseRecord, PlaneLeafRecord, PlaneRecord, Setting, 
 
 use crate::error::BuildError;
 use crate::prune::{MeshTriangle, PruneMesh, find_leaves};
-use crate::raster::NO_ALPHA;
+use crate::raster::{NO_ALPHA, floor_f64};
 use crate::rng::SplitMix64;
 use crate::scene::{AlphaMode, Image, Material};
 use crate::spt::flatten;
@@ -1705,20 +1705,11 @@ impl MayCover {
             // the upper end is not below the lower end. (`max` and `min` pass over a NaN; a
             // corner that is not finite gives `project` no box.)
             let (lo, hi) = (lo.max(0.0), hi.min(self.last[axis]));
-            floor_f64(hi) >= lo
+            #[expect(clippy::cast_precision_loss, reason = "at most the last sample; far below 0, it stays below")]
+            let last_whole = floor_f64(hi) as f64;
+            last_whole >= lo
         })
     }
-}
-
-/// `floor(v)` without a libm call (`v` itself past 2⁵², where every float is whole, and where it
-/// is not finite).
-#[expect(clippy::cast_possible_truncation, clippy::cast_precision_loss, reason = "whole values below 2^52")]
-fn floor_f64(v: f64) -> f64 {
-    if v.is_nan() || v.abs() >= 4_503_599_627_370_496.0 {
-        return v;
-    }
-    let whole = v as i64 as f64;
-    if whole > v { whole - 1.0 } else { whole }
 }
 
 /// The sample rows `y0..y1` of the bounding box of `local` projected onto `quad`'s `samples`,
@@ -2306,11 +2297,8 @@ mod tests {
         // sample's width to far under it, near sample centres and the grid's edges: every one
         // whose projected box holds a centre (as `bake` finds it) is kept, and most of the tiny
         // ones are not.
-        let mut state = 5u64;
-        let mut next = || {
-            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-            f64::from((state >> 40) as u32) / f64::from(1u32 << 24)
-        };
+        let mut rng = SplitMix64(5);
+        let mut next = || rng.next_f64();
         let (mut kept, mut boxed, mut tiny_kept, mut tiny) = (0, 0, 0, 0);
         for i in 0..40_000 {
             let samples = [(8, 8), (176, 176), (3000, 1700), (8192, 64)][i % 4];

@@ -538,7 +538,7 @@ fn floor_i64(v: f32) -> i64 {
 
 /// `floor(v)` of an `f64` as an integer (saturating).
 #[expect(clippy::cast_possible_truncation, clippy::cast_precision_loss, reason = "saturating conversion")]
-fn floor_f64(v: f64) -> i64 {
+pub(crate) fn floor_f64(v: f64) -> i64 {
     let i = v as i64;
     if (i as f64) > v { i.saturating_sub(1) } else { i }
 }
@@ -1069,11 +1069,8 @@ mod tests {
         // the test's reach and past it: wherever the float test rejects one, the snapped box
         // (pixel centres x·256 + 128 between its snapped ends) holds no centre either; and it
         // rejects most boxes far narrower than a pixel.
-        let mut state = 11u64;
-        let mut next = || {
-            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-            (state >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::rng::SplitMix64(11);
+        let mut next = || rng.unit();
         let centre_between = |lo: f32, hi: f32| {
             let (a, b) = (snap(lo), snap(hi));
             // Some x with a ≤ 256·x + 128 ≤ b.
