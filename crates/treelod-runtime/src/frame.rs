@@ -1544,6 +1544,19 @@ const PRESSURE_RESOLUTION: f64 = 0.02;
 /// to 95,000: a search closed to [`PRESSURE_RESOLUTION`] stops short of a pressure 0.012 away.
 const LOWER_RESOLUTION: f64 = 0.25 * PRESSURE_RESOLUTION;
 
+/// The bracket [`BudgetController::lower_within`] and [`BudgetController::raise_within`] go on
+/// closing to where the end within the budget is still predicted far under it ([`FAR_UNDER`]):
+/// a fortieth of [`PRESSURE_RESOLUTION`] (0.05 % in `s_min`, 0.1 % in the target). In budget
+/// mode each tree is chosen under a target of its own ([`crate::policy::BUDGET_TARGET_STEP`]),
+/// so a step of the target moves a share of the trees, and where a model's trees have nothing
+/// between one quad and tens of thousands of primitives at their heights, the share that
+/// [`LOWER_RESOLUTION`] moves is already many times the budget: on 1,000 trees of the shared
+/// jacaranda (`bench --budget 100000 --seed 2`, frames 284–292, flying away from the forest)
+/// 767–829 trees, each one octahedral quad, were drawn at a target of 0.01013, where 0.7 % lower
+/// was predicted at 280,000–413,000 primitives (a few trees leaving the quad for techniques of
+/// 4,000–35,000 primitives), and the steering held there for nine frames.
+const CLIFF_RESOLUTION: f64 = 0.025 * PRESSURE_RESOLUTION;
+
 /// A frame over this many times the budget at a pressure under one whose frame was under it: a
 /// cliff in the count, not probed again ([`BudgetController::update_policy`]).
 const CLIFF: f64 = 2.0;
@@ -1822,7 +1835,8 @@ impl BudgetController {
     ///
     /// Where a search down ([`Self::lower_within`]) left the steering below the pressure of the
     /// frame last drawn, the raise goes back no further than that pressure, whose frame was
-    /// drawn, and closes its bracket as the search down does (0.5 % in `s_min`); only where that
+    /// drawn, and closes its bracket as the search down does (0.5 % in `s_min`, on to 0.05 % while
+    /// the end within the budget is predicted far under it); only where that
     /// pressure too is predicted over does it go on up as above. Raised by half a largest step at
     /// a time, such a frame went from the foot of a step the search down had found to past its
     /// top: on 1,000 trees of the shared orchid (`bench --budget 100000 --seed 2`, frames 61–63)
@@ -1857,7 +1871,8 @@ impl BudgetController {
     /// (their count could not fall, which is what releases a hold). The search gallops down by a
     /// largest step, then twice that, four times…, until a pressure is predicted over the
     /// budget or the lowest that acts is reached, then halves the bracket to 0.5 % in `s_min` (1 %
-    /// in the target), not half a largest step as a raise does: where the count falls off a cliff just above
+    /// in the target; on to 0.05 % while the end within the budget is predicted far under it),
+    /// not half a largest step as a raise does: where the count falls off a cliff just above
     /// the least pressure within the budget, a search that stopped within half a largest step
     /// of it left the frame far under the budget, and a hold next to the cliff kept it there (the
     /// shared pine's forest seen from above: 37,000 primitives for 30 frames, where a pressure
@@ -1907,7 +1922,22 @@ impl BudgetController {
     /// `bound` by a largest step, then twice that, four times…, until a pressure is predicted on
     /// the other side of the budget (`predict(s_min, target)`), then halves the bracket to
     /// `resolution` (up, half a largest step; down, and up back to a pressure drawn,
-    /// [`LOWER_RESOLUTION`]). Returns the
+    /// [`LOWER_RESOLUTION`]), and on to [`CLIFF_RESOLUTION`] while the end of the bracket within
+    /// the budget is predicted under [`FAR_UNDER`] of it (a search down that has not moved
+    /// counts its start, a frame drawn far under the budget, so). Measured (`bench --trees 1000
+    /// --frames 300 --budget 100000 --no-render`, every shared model with every representation,
+    /// 4,200 frames a pair of seeds; frames within ½–1.1 times the budget, under half of it
+    /// with something left to spend, over 1.1 times it, before → after): seeds 1 and 2 3,772 →
+    /// 3,827, 162 → 126, 91 → 72; seeds 3 and 4 3,801 → 3,844, 144 → 110, 99 → 90; with
+    /// 15-frame transitions (seeds 1 and 2) 3,755 → 3,814, 163 → 129, 119 → 96; 10^4 trees of
+    /// the oak, maple and jacaranda (120 frames each) 200 → 217, 79 → 62, 13 → 14; the
+    /// four-model forest and 10^6 pine trees (predicted from a sample, never lowered) the same
+    /// counts. Every search closed to [`CLIFF_RESOLUTION`] instead: 3,798, 146 and 81 (seeds 1
+    /// and 2), with 15-frame transitions 3,776, 127 and 134; to a tenth of
+    /// [`PRESSURE_RESOLUTION`]: 3,806, 144, 75 (seeds 1 and 2), 3,802, 139, 95 (seeds 3 and 4);
+    /// the finer bracket in the searches down alone: 3,789, 148, 88 and 3,811, 134, 99.
+    /// `assign` on 10^4 jacaranda trees read 2.33–3.08 ms a frame before and 2.45–2.97 ms
+    /// after (three alternating runs each). Returns the
     /// last pressure found on `from`'s side and the first on the other (`None` where `bound` was
     /// reached without one); the steering is left where it predicted last.
     ///
@@ -1925,27 +1955,50 @@ impl BudgetController {
         mut predict: impl FnMut(f32, f32) -> u64,
     ) -> (f64, Option<f64>) {
         let step = self.largest_step();
+        // Whether the count predicted at `pressure` is over the budget, and that count.
         let mut over_at = |controller: &mut Self, pressure: f64| {
             let (s_min, target) = controller.set_pressure(pressure);
-            predict(s_min, target) > controller.target_primitives
+            let count = predict(s_min, target);
+            (count > controller.target_primitives, count)
         };
         let up = bound >= from;
         let (mut last, mut reach) = (from, step);
+        // The count predicted at the end of the bracket within the budget; `None` while that
+        // end is `from` (a frame drawn, which a search down starts from because it was far under).
+        let mut under_count = None;
         let mut other = loop {
             let next = if up { (last + reach).min(bound) } else { (last - reach).max(bound) };
             let moved = if up { next > last } else { next < last };
             if !moved {
                 break None;
             }
-            if over_at(self, next) != from_over {
+            let (over, count) = over_at(self, next);
+            if over != from_over {
+                if from_over {
+                    under_count = Some(count);
+                }
                 break Some(next);
+            }
+            if !from_over {
+                under_count = Some(count);
             }
             last = next;
             reach *= 2.0;
         };
-        while let Some(o) = other.filter(|&o| (o - last).abs() > resolution) {
+        #[expect(clippy::cast_precision_loss, reason = "a share of a count")]
+        let far = FAR_UNDER * self.target_primitives as f64;
+        #[expect(clippy::cast_precision_loss, reason = "a count compared with a share of the budget")]
+        let far_under = |count: Option<u64>| count.is_none_or(|c| (c as f64) < far);
+        while let Some(o) = other.filter(|&o| {
+            let gap = (o - last).abs();
+            gap > resolution || (gap > CLIFF_RESOLUTION && far_under(under_count))
+        }) {
             let mid = 0.5 * (o + last);
-            if over_at(self, mid) == from_over {
+            let (over, count) = over_at(self, mid);
+            if !over {
+                under_count = Some(count);
+            }
+            if over == from_over {
                 last = mid;
             } else {
                 other = Some(mid);
@@ -2639,8 +2692,9 @@ mod tests {
         }
 
         // Where every pressure below is predicted over the budget, nothing moves: a largest step,
-        // then its halves down to the resolution (ln 1.25 ≈ 0.223 halved six times to 0.0035, under
-        // `LOWER_RESOLUTION`), are predicted.
+        // then its halves down to the resolution, are predicted (the end within the budget is the
+        // frame drawn, far under it, so `CLIFF_RESOLUTION`: ln 1.25 ≈ 0.223 halved nine times
+        // to 0.00044).
         let mut controller = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
         let before = (controller.s_min(), controller.target());
         let mut predictions = 0;
@@ -2648,7 +2702,49 @@ mod tests {
             predictions += 1;
             1_000_000
         });
-        assert_eq!((after, predictions), (before, 7));
+        assert_eq!((after, predictions), (before, 10));
+    }
+
+    #[test]
+    fn policy_budget_lowers_to_a_narrow_step_above_a_cliff() {
+        // A far forest of one quad a tree, drawn at 800 primitives: a share of the trees moves
+        // to the next lattice target with each step of the target, and a few of them switching
+        // from the quad to a tree of tens of thousands of primitives take the count to 75,000
+        // within 0.3 % of the target, and to 300,000 below (the shared jacaranda's forest).
+        let mut controller = BudgetController::for_policy(100_000, 1.0, Policy::DEFAULT_TARGET);
+        controller.update_policy(800);
+        let edge = controller.target() * 0.95;
+        let scene = move |t: f32| match t {
+            t if t >= edge => 800,
+            t if t >= edge * 0.997 => 75_000,
+            _ => 300_000,
+        };
+        let mut predictions = 0;
+        let (_, t) = controller.lower_within(|_, t| {
+            predictions += 1;
+            scene(t)
+        });
+        // A bracket closed to `LOWER_RESOLUTION` (1 % in the target) stops on either side of the
+        // step; closed on to `CLIFF_RESOLUTION` while its end within the budget is far under it,
+        // on the step.
+        assert_eq!(scene(t), 75_000, "on the step: target {t}, edge {edge}");
+        assert!(predictions <= 12, "{predictions} predictions");
+        // A smooth count stops at `LOWER_RESOLUTION` as before: the end within the budget is not
+        // far under it once the bracket is closed.
+        let smooth = |t: f32| (2_000.0 * Policy::DEFAULT_TARGET / t) as u64 * 50;
+        let mut controller = BudgetController::for_policy(100_000, 1.0, 1.0);
+        controller.update_policy(smooth(controller.target()));
+        let mut gaps = Vec::new();
+        let mut last = None;
+        controller.lower_within(|_, t| {
+            if let Some(l) = last {
+                gaps.push(f64::from(t / l).ln().abs() / 2.0);
+            }
+            last = Some(t);
+            smooth(t)
+        });
+        let closest = gaps.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(closest > 0.5 * LOWER_RESOLUTION * 0.99, "no halving past the resolution: {closest}");
     }
 
     #[test]
