@@ -832,7 +832,9 @@ impl Renderer {
     /// which starts the steering within the budget ([`BudgetController::start_within`]); a
     /// frame whose camera moved since the last one, from the last one, raised before it is
     /// drawn where it is predicted over [`BudgetController::raise_count`]
-    /// ([`BudgetController::raise_within`]); and after a frame far under the budget, the
+    /// ([`BudgetController::raise_within`]), and lowered as below where it is predicted far
+    /// under the budget (trees that leave the view, or the camera turning from near ones, take
+    /// the frame far under it in one move); and after a frame far under the budget, the
     /// steering moved on down to the least pressure predicted within it
     /// ([`BudgetController::lower_within`]; not for a forest predicted from a sample, whose
     /// predictions fall short near the camera). Far under is read without the leaving draws:
@@ -897,10 +899,14 @@ impl Renderer {
             && drawn.camera.view_proj != selection.view_proj
         {
             // The camera moved: the frame is predicted from the last one before it is drawn,
-            // and raised where it would meet a cliff.
+            // raised where it would meet a cliff, and lowered where it would be far under the
+            // budget (a sample's predictions fall short near the camera: not lowered so).
             let (s_min, target) = (controller.s_min(), controller.target());
-            if predict(self, s_min, target, Some(drawn)) > controller.raise_count() {
+            let count = predict(self, s_min, target, Some(drawn));
+            if count > controller.raise_count() {
                 controller.raise_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
+            } else if controller.far_under(count) && !self.predicts_from_a_sample() {
+                controller.lower_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
             }
             predicted = true;
         }

@@ -1859,7 +1859,8 @@ impl BudgetController {
         self.search_up(predict)
     }
 
-    /// Budget mode after a frame far under the budget (under [`FAR_UNDER`] of it): a host that
+    /// Budget mode after a frame far under the budget (under [`FAR_UNDER`] of it), or before one
+    /// predicted so (the camera moved; the renderer lowers such a frame before drawing it): a host that
     /// predicts the count of a frame selected with a given `s_min` and policy target
     /// (`predict(s_min, target)`, as for [`Self::raise_within`]) moves the steering from where
     /// [`Self::update_policy`] left it on down, by prediction, to the least pressure predicted
