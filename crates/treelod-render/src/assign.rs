@@ -900,6 +900,30 @@ mod tests {
         (renderer, camera, policy)
     }
 
+    /// [`fading_field`] after four frames with the camera held, and the last frame's stats: no
+    /// tree in a transition.
+    fn settled_fading_field(gpu: &Gpu) -> (Renderer, Camera, Policy, crate::FrameStats) {
+        let (mut renderer, camera, policy) = fading_field(gpu);
+        let stats = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera)).last().expect("frames");
+        assert_eq!(stats.leaving, 0, "settled");
+        (renderer, camera, policy, stats)
+    }
+
+    /// Budget mode's prediction (`Renderer::predict_count`), from the frame of `stats` drawn for
+    /// `camera` under `drawn_under` at the renderer's `s_min`, of the frame under `next`.
+    fn predicted(
+        renderer: &mut Renderer,
+        camera: &Camera,
+        stats: &crate::FrameStats,
+        drawn_under: Policy,
+        next: Policy,
+    ) -> u64 {
+        let (selection, s_min) = (camera.selection(), renderer.settings.s_min);
+        let steering = crate::BudgetFrame { s_min, target: drawn_under.target(), finest: false };
+        let drawn = renderer.drawn(selection, steering, stats, drawn_under);
+        renderer.predict_count(&selection, next, s_min, drawn)
+    }
+
     /// Budget mode counts every point tree it predicts by its cut (`Renderer::table_cost`), not
     /// only those above the calibration tables' heights: the field of demo trees drawn as point
     /// trees at three `s_min`, the trees' predicted costs add up to what the frame submits,
@@ -961,15 +985,9 @@ mod tests {
             stats = renderer.prepare(&gpu.device, &gpu.queue, &held);
         }
         assert!(stats.leaving > 0, "no tree changed technique along the walk");
-        let selection = held.selection();
-        let s_min = renderer.settings.s_min;
         let mut ended = 0;
         for _ in 0..5 {
-            let predicted = {
-                let steering = crate::BudgetFrame { s_min, target: policy.target(), finest: false };
-                let drawn = renderer.drawn(selection, steering, &stats, policy);
-                renderer.predict_count(&selection, policy, s_min, drawn)
-            };
+            let predicted = predicted(&mut renderer, &held, &stats, policy, policy);
             let next = renderer.prepare(&gpu.device, &gpu.queue, &held);
             assert_eq!(predicted, next.primitives(), "leaving {} → {}", stats.leaving, next.leaving);
             if stats.leaving > 0 && next.leaving == 0 {
@@ -988,17 +1006,9 @@ mod tests {
     #[test]
     fn a_prediction_counts_a_fading_tree_at_both_its_costs() {
         let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
-        let (mut renderer, camera, policy) = fading_field(&gpu);
-        let selection = camera.selection();
-        let s_min = renderer.settings.s_min;
-        let stats = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera)).last().expect("frames");
-        assert_eq!(stats.leaving, 0, "settled");
+        let (mut renderer, camera, policy, stats) = settled_fading_field(&gpu);
         let raised = Policy { target: 4.0 * policy.target(), ..policy };
-        let predicted = {
-            let steering = crate::BudgetFrame { s_min, target: policy.target(), finest: false };
-            let drawn = renderer.drawn(selection, steering, &stats, policy);
-            renderer.predict_count(&selection, raised, s_min, drawn)
-        };
+        let predicted = predicted(&mut renderer, &camera, &stats, policy, raised);
         renderer.settings.policy = Some(raised);
         let next = renderer.prepare(&gpu.device, &gpu.queue, &camera);
         assert!(next.leaving > 0 && next.transitions > 0, "no tree changed technique: {next:?}");
@@ -1025,20 +1035,12 @@ mod tests {
     #[test]
     fn a_prediction_counts_a_tree_going_back_at_once_at_one_cost() {
         let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
-        let (mut renderer, camera, policy) = fading_field(&gpu);
-        let selection = camera.selection();
-        let s_min = renderer.settings.s_min;
-        let settled = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera)).last().expect("frames");
-        assert_eq!(settled.leaving, 0, "settled");
+        let (mut renderer, camera, policy, _) = settled_fading_field(&gpu);
         let raised = Policy { target: 4.0 * policy.target(), ..policy };
         renderer.settings.policy = Some(raised);
         let stats = renderer.prepare(&gpu.device, &gpu.queue, &camera);
         assert!(stats.leaving > 0 && stats.transitions > 0, "no tree changed technique: {stats:?}");
-        let predicted = {
-            let steering = crate::BudgetFrame { s_min, target: raised.target(), finest: false };
-            let drawn = renderer.drawn(selection, steering, &stats, raised);
-            renderer.predict_count(&selection, policy, s_min, drawn)
-        };
+        let predicted = predicted(&mut renderer, &camera, &stats, raised, policy);
         renderer.settings.policy = Some(policy);
         let next = renderer.prepare(&gpu.device, &gpu.queue, &camera);
         assert_eq!((next.leaving, next.transitions), (0, 0), "every tree went back at once: {next:?}");

@@ -250,6 +250,16 @@ fn budget_field(gpu: &treelod_render::offscreen::Gpu) -> (Arc<Container>, Vec<Ve
     (container, positions, camera, unbudgeted)
 }
 
+/// [`budget_field`] drawn in budget mode at a quarter of what it draws without a budget: the
+/// renderer (no frame drawn yet), its camera, the unbudgeted count and the budget.
+fn quarter_budget_field(gpu: &treelod_render::offscreen::Gpu) -> (Renderer, Camera, u64, u64) {
+    let (container, positions, camera, unbudgeted) = budget_field(gpu);
+    let budget = unbudgeted / 4;
+    let policy = Policy { budget: Some(budget), ..Policy::default() };
+    let renderer = forest(gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
+    (renderer, camera, unbudgeted, budget)
+}
+
 #[test]
 fn budget_mode_steers_the_frame_to_the_primitive_count() {
     let gpu = gpu();
@@ -328,10 +338,7 @@ fn a_budget_the_forest_cannot_spend_steers_to_the_finest_and_says_so() {
 #[test]
 fn budget_mode_predicts_its_first_frame_and_starts_within_the_budget() {
     let gpu = gpu();
-    let (container, positions, camera, unbudgeted) = budget_field(&gpu);
-    let budget = unbudgeted / 4;
-    let policy = Policy { budget: Some(budget), ..Policy::default() };
-    let mut renderer = forest(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
+    let (mut renderer, camera, unbudgeted, budget) = quarter_budget_field(&gpu);
     let first = renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives();
     assert!(first <= 2 * budget, "first frame {first} against a budget of {budget} ({unbudgeted} unbudgeted)");
     let counts: Vec<u64> = (0..40).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
