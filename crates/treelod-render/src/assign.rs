@@ -289,7 +289,7 @@ impl Renderer {
                 && leaves != Some(before.from)
                 && !ends_by_itself(before, next)
             {
-                cut_short += self.leaving_share(i, before, &drawn);
+                cut_short += self.leaving_share(i, before, &drawn, &drawn_frustum);
             }
             let now = self.assigned.get(i).copied().unwrap_or(false).then(|| self.drawn_with[i]);
             if then.is_none() && now.is_none() {
@@ -427,11 +427,16 @@ impl Renderer {
 
     /// Tree `i`'s share of `drawn`'s leaving draws, in `transition`: the leaving draws in the
     /// proportion of its [`Self::leaving_cost`] to all of theirs ([`Drawn::leaving_costs`]).
-    fn leaving_share(&self, i: usize, transition: Transition, drawn: &Drawn) -> f64 {
+    fn leaving_share(
+        &self,
+        i: usize,
+        transition: Transition,
+        drawn: &Drawn,
+        frustum: &treelod_runtime::Frustum,
+    ) -> f64 {
         if drawn.leaving == 0 || drawn.leaving_costs <= 0.0 {
             return 0.0;
         }
-        let frustum = &treelod_runtime::Frustum::from_view_proj(drawn.camera.view_proj);
         let cost = self.leaving_cost(i, transition, drawn, frustum).unwrap_or(0.0);
         #[expect(clippy::cast_precision_loss, reason = "a count of primitives")]
         let leaving = drawn.leaving as f64;
@@ -929,10 +934,23 @@ mod tests {
         drawn_under: Policy,
         next: Policy,
     ) -> u64 {
+        let s_min = renderer.settings.s_min;
+        predicted_at(renderer, camera, stats, drawn_under, next, s_min)
+    }
+
+    /// [`predicted`] of the frame at `next_s_min` instead of the renderer's `s_min`.
+    fn predicted_at(
+        renderer: &mut Renderer,
+        camera: &Camera,
+        stats: &crate::FrameStats,
+        drawn_under: Policy,
+        next: Policy,
+        next_s_min: f32,
+    ) -> u64 {
         let (selection, s_min) = (camera.selection(), renderer.settings.s_min);
         let steering = crate::BudgetFrame { s_min, target: drawn_under.target(), finest: false };
         let drawn = renderer.drawn(selection, steering, stats, drawn_under);
-        renderer.predict_count(&selection, next, s_min, drawn)
+        renderer.predict_count(&selection, next, next_s_min, drawn)
     }
 
     /// Budget mode counts every point tree it predicts by its cut (`Renderer::table_cost`), not
@@ -1083,12 +1101,8 @@ mod tests {
             field(&gpu, &calibrated_demo(), Settings { policy: Some(policy), ..Settings::default() });
         let stats = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera)).last().expect("frames");
         let raised = Policy { target: 4.0 * policy.target(), ..policy };
-        let (selection, s_min) = (camera.selection(), renderer.settings.s_min);
-        let predicted = {
-            let steering = crate::BudgetFrame { s_min, target: policy.target(), finest: false };
-            let drawn = renderer.drawn(selection, steering, &stats, policy);
-            renderer.predict_count(&selection, raised, 0.25 * s_min, drawn)
-        };
+        let s_min = renderer.settings.s_min;
+        let predicted = predicted_at(&mut renderer, &camera, &stats, policy, raised, 0.25 * s_min);
         renderer.settings.policy = Some(raised);
         renderer.settings.s_min = 0.25 * s_min;
         renderer.settings.s_max *= 0.25;

@@ -250,14 +250,25 @@ fn budget_field(gpu: &treelod_render::offscreen::Gpu) -> (Arc<Container>, Vec<Ve
     (container, positions, camera, unbudgeted)
 }
 
-/// [`budget_field`] drawn in budget mode at a quarter of what it draws without a budget: the
-/// renderer (no frame drawn yet), its camera, the unbudgeted count and the budget.
-fn quarter_budget_field(gpu: &treelod_render::offscreen::Gpu) -> (Renderer, Camera, u64, u64) {
+/// [`budget_field`] drawn in budget mode at a quarter of what it draws without a budget.
+struct QuarterBudget {
+    /// The renderer, no frame drawn yet.
+    renderer: Renderer,
+    container: Arc<Container>,
+    positions: Vec<Vec3>,
+    camera: Camera,
+    /// What the field draws without a budget.
+    unbudgeted: u64,
+    budget: u64,
+    policy: Policy,
+}
+
+fn quarter_budget_field(gpu: &treelod_render::offscreen::Gpu) -> QuarterBudget {
     let (container, positions, camera, unbudgeted) = budget_field(gpu);
     let budget = unbudgeted / 4;
     let policy = Policy { budget: Some(budget), ..Policy::default() };
     let renderer = forest(gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
-    (renderer, camera, unbudgeted, budget)
+    QuarterBudget { renderer, container, positions, camera, unbudgeted, budget, policy }
 }
 
 #[test]
@@ -338,7 +349,7 @@ fn a_budget_the_forest_cannot_spend_steers_to_the_finest_and_says_so() {
 #[test]
 fn budget_mode_predicts_its_first_frame_and_starts_within_the_budget() {
     let gpu = gpu();
-    let (mut renderer, camera, unbudgeted, budget) = quarter_budget_field(&gpu);
+    let QuarterBudget { mut renderer, camera, unbudgeted, budget, .. } = quarter_budget_field(&gpu);
     let first = renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives();
     assert!(first <= 2 * budget, "first frame {first} against a budget of {budget} ({unbudgeted} unbudgeted)");
     let counts: Vec<u64> = (0..40).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
@@ -764,10 +775,7 @@ fn budget_mode_counts_the_draws_of_trees_in_a_transition() {
 #[test]
 fn budget_mode_lowers_a_moved_frame_predicted_far_under_before_drawing_it() {
     let gpu = gpu();
-    let (container, positions, camera, unbudgeted) = budget_field(&gpu);
-    let budget = unbudgeted / 4;
-    let policy = Policy { budget: Some(budget), ..Policy::default() };
-    let mut renderer = forest(&gpu, &container, Settings { policy: Some(policy), ..Settings::default() }, &positions);
+    let QuarterBudget { mut renderer, container, positions, camera, budget, policy, .. } = quarter_budget_field(&gpu);
     let settled: Vec<u64> = (0..30).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
     assert!(settled[20..].iter().all(|&c| 2 * c >= budget && 10 * c <= 11 * budget), "settled: {settled:?}");
     let (s_min, target) = renderer.budget_steering().expect("steering");

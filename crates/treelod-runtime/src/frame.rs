@@ -1986,13 +1986,9 @@ impl BudgetController {
             last = next;
             reach *= 2.0;
         };
-        #[expect(clippy::cast_precision_loss, reason = "a share of a count")]
-        let far = FAR_UNDER * self.target_primitives as f64;
-        #[expect(clippy::cast_precision_loss, reason = "a count compared with a share of the budget")]
-        let far_under = |count: Option<u64>| count.is_none_or(|c| (c as f64) < far);
         while let Some(o) = other.filter(|&o| {
             let gap = (o - last).abs();
-            gap > resolution || (gap > CLIFF_RESOLUTION && far_under(under_count))
+            gap > resolution || (gap > CLIFF_RESOLUTION && under_count.is_none_or(|c| self.far_under(c)))
         }) {
             let mid = 0.5 * (o + last);
             let (over, count) = over_at(self, mid);
