@@ -271,7 +271,7 @@ impl Renderer {
         s_min: f32,
         drawn: Drawn,
     ) -> u64 {
-        let Chosen { chosen, index, weight, leaves } = self.choose_again(camera, next);
+        let Chosen { chosen, index, weight, leaves } = self.choose_again(camera, Some(&drawn.camera), next);
         let frustum = treelod_runtime::Frustum::from_view_proj(camera.view_proj);
         let drawn_frustum = treelod_runtime::Frustum::from_view_proj(drawn.camera.view_proj);
         let mut delta = 0.0f64;
@@ -572,17 +572,6 @@ impl Renderer {
         Some(f64::from(count))
     }
 
-    /// Whether budget mode's predictions choose a sample of the forest (more than
-    /// [`PREDICTED_CHUNKS`] chunks of [`CHOOSE_CHUNK`] instances, [`Sample`]): the renderer does
-    /// not lower such a forest's steering by prediction ([`BudgetController::lower_within`]).
-    /// The sample holds the chunks of the nearest trees but misses trees coming near in the
-    /// others: lowered by prediction, 10^6 pine trees (`bench --budget 1000000`, 120 frames) drew
-    /// 21 frames within ½–1.1 of the budget against 18, but 7 over 1.1 times it against none,
-    /// the worst 3.8 million primitives.
-    pub(crate) fn predicts_from_a_sample(&self) -> bool {
-        Sample::stride(self.instances.len()) > 1
-    }
-
     /// Budget mode's first frame ([`BudgetController::start_within`], spec §10.2): the count of
     /// the camera's view `camera` were its trees chosen under `policy` and `s_min`, from the
     /// calibration tables alone: the trees are chosen as [`Self::predict_count`] chooses them,
@@ -590,7 +579,7 @@ impl Renderer {
     /// (read at the tables' last height above it, so a near tree counts less than it draws).
     /// Trees of models without tables add nothing.
     pub(crate) fn predict_total(&mut self, camera: &treelod_runtime::Camera, policy: Policy, s_min: f32) -> u64 {
-        let Chosen { chosen, index, weight, .. } = self.choose_again(camera, policy);
+        let Chosen { chosen, index, weight, .. } = self.choose_again(camera, None, policy);
         let frustum = treelod_runtime::Frustum::from_view_proj(camera.view_proj);
         let mut total = 0.0f64;
         for ((technique, &i), &weight) in chosen.iter().zip(&index).zip(&weight) {
@@ -606,21 +595,29 @@ impl Renderer {
     /// The trees of the camera's view `camera` chosen again under `policy` on a copy of the
     /// policy's state (the same hysteresis): the choices, each one's instance, and the weight its
     /// change counts with. A forest of more than [`PREDICTED_CHUNKS`] chunks of [`CHOOSE_CHUNK`]
-    /// instances is sampled ([`Sample`]): every `k`-th chunk, each counted for itself and the
-    /// chunks after it up to the next, and chosen whole beside them the [`NEAR_CHUNKS`] chunks
-    /// whose trees were tallest on the screen in the last choice ([`PolicyState::tallest`]),
-    /// each counted once and left out of the count of the sampled chunk before it (a sampled
-    /// chunk that is itself one of them counts 0, and the chunks after it go uncounted). The near
-    /// trees, few and of many primitives each, are where a step's count changes most: counted
-    /// `k` times where their chunk was sampled and not at all where it was not, a sample of 10^6
-    /// pine trees predicted every pressure from the budget's floor to its ceiling at the count
-    /// of a frame that drew twice the budget, and the steering went from one end to the other.
+    /// instances is sampled ([`Sample`]): every `k`-th chunk, each tree counted for itself and
+    /// the trees at its place in the chunks after it up to the next sampled one; and chosen whole
+    /// beside them, each counted once, the [`NEAR_TREES`] trees tallest on the screen in
+    /// `camera`'s view and in that of `before` (the camera of the frame predicted from, whose
+    /// trees leaving the view take their cost away), wherever they stand in the instance order
+    /// ([`ChunkBounds::tallest_in_view`]); a sampled tree among them counts 0 in the sample. The
+    /// near trees, few and of many primitives each, are where a step's count changes most:
+    /// counted `k` times where their chunk was sampled and not at all where it was not, a sample
+    /// of 10^6 pine trees predicted every pressure from the budget's floor to its ceiling at the
+    /// count of a frame that drew twice the budget, and the steering went from one end to the
+    /// other. Chosen by chunks (the 8 chunks whose trees were tallest in the last choice), they
+    /// missed trees coming near in the other chunks where the instances of a chunk stand far
+    /// apart (the benchmark's forests plant each group's trees in random order).
     /// The tables made for `policy` are kept.
-    fn choose_again(&mut self, camera: &treelod_runtime::Camera, policy: Policy) -> Chosen {
+    fn choose_again(
+        &mut self,
+        camera: &treelod_runtime::Camera,
+        before: Option<&treelod_runtime::Camera>,
+        policy: Policy,
+    ) -> Chosen {
         let technique = self.settings.technique;
         let tables = &mut self.policy;
         tables.choose_under(&self.representations, policy);
-        let n = self.instances.len();
         let sample = tables.sample.get_or_insert_with(|| Sample::new(&self.instances, &self.lods, &tables.chunks));
         let (lods, choices, visible_fraction) = (&self.lods, &tables.choices, &self.visible_fraction);
         // The trees of `instances` (those of `index`, in chunks bounded by `chunks`) chosen again
@@ -648,22 +645,24 @@ impl Renderer {
             let weight = vec![1.0; chosen.len()];
             return Chosen { chosen, index: index.clone(), weight, leaves };
         }
-        let near = near_chunks(tables.state.tallest());
-        if near != sample.near.chunks {
-            // Every prediction of a frame reads the same chunks: copied once.
-            sample.near = Gathered::new(near, &self.instances, lods, &tables.chunks, true);
+        let near = sample.tallest_for(&tables.chunks, camera, before);
+        if near != sample.near.index {
+            // Every prediction of a frame reads the same trees: copied once.
+            sample.near = Gathered::of(Vec::new(), near, &self.instances, lods, &tables.chunks);
         }
         let (sampled, near) = (&sample.sampled, &sample.near);
         let (mut chosen, mut leaves) =
-            choose(&sampled.instances, &sampled.bounds, tables.state.sampled(&sampled.chunks, n), &sampled.index);
-        let mut index = sampled.index.clone();
-        let mut weight: Vec<f64> = Vec::with_capacity(index.len());
+            choose(&sampled.instances, &sampled.bounds, tables.state.gathered(&sampled.index), &sampled.index);
+        let mut weight: Vec<f64> = Vec::with_capacity(sampled.index.len() + near.index.len());
+        let n = self.instances.len();
         for &c in &sampled.chunks {
-            weight.extend(std::iter::repeat_n(sample.weight(c, n, &near.chunks), chunk_range(c, n).len()));
+            let span = sample.span(c, n);
+            weight.extend(chunk_range(c, n).map(|i| if near.index.binary_search(&i).is_ok() { 0.0 } else { span }));
         }
-        if !near.chunks.is_empty() {
+        let mut index = sampled.index.clone();
+        if !near.index.is_empty() {
             let (near_chosen, near_leaves) =
-                choose(&near.instances, &near.bounds, tables.state.sampled(&near.chunks, n), &near.index);
+                choose(&near.instances, &near.bounds, tables.state.gathered(&near.index), &near.index);
             chosen.extend(near_chosen);
             leaves.extend(near_leaves);
             weight.resize(chosen.len(), 1.0);
@@ -761,26 +760,45 @@ pub(crate) struct Drawn {
 
 /// Budget mode's sample of a forest of more than [`PREDICTED_CHUNKS`] chunks of
 /// [`CHOOSE_CHUNK`] instances: every `stride`-th chunk, which its predictions choose again
-/// (`Renderer::predict_count`), and the chunks of the tallest trees, chosen again whole beside
+/// (`Renderer::predict_count`), and the tallest trees on the screen, chosen again whole beside
 /// them. Kept from frame to frame: copying the instances and their bounds every frame took
 /// 1.7 ms for 10^6 trees on 2 cores, most of it faulting in the fresh pages.
 pub(crate) struct Sample {
+    /// The instances of the forest it samples.
+    instances: usize,
     /// Every how many chunks one is sampled (1: every instance, nothing copied).
     stride: usize,
     /// The sampled chunks (with a stride of 1, every chunk, listed and not copied).
     sampled: Gathered,
-    /// The chunks of the tallest trees ([`near_chunks`]) last chosen whole beside them, copied
-    /// again only when they change (every prediction of a frame reads the same ones).
+    /// The [`NEAR_TREES`] tallest trees in view of the last two cameras predicted for
+    /// ([`ChunkBounds::tallest_in_view`]), the latest last: each frame's predictions read its
+    /// own camera's and the camera of the frame before, so each is found once.
+    tallest: Vec<(CameraKey, Vec<usize>)>,
+    /// Scratch for [`ChunkBounds::tallest_in_view`]: a height per instance.
+    heights: Vec<f32>,
+    /// The trees last chosen whole beside the sample ([`Self::tallest_for`]), copied again only
+    /// when they change (every prediction of a frame reads the same ones).
     near: Gathered,
 }
 
-/// Chunks of [`CHOOSE_CHUNK`] instances laid end to end for budget mode's predictions to
-/// choose again ([`Sample`]).
+/// What tells one camera's view from another's for [`Sample::tallest`]: its view-projection,
+/// position and pixel size, bit for bit.
+type CameraKey = ([u32; 16], [u32; 3], u32);
+
+fn camera_key(camera: &treelod_runtime::Camera) -> CameraKey {
+    (
+        camera.view_proj.to_cols_array().map(f32::to_bits),
+        camera.position.to_array().map(f32::to_bits),
+        camera.world_per_pixel().to_bits(),
+    )
+}
+
+/// Instances laid end to end for budget mode's predictions to choose again ([`Sample`]).
 #[derive(Default)]
 struct Gathered {
-    /// The chunks, ascending.
+    /// The chunks they make up, ascending (empty where they are trees picked one by one).
     chunks: Vec<usize>,
-    /// Each of their instances' index in the forest.
+    /// Each of their instances' index in the forest, ascending.
     index: Vec<usize>,
     /// Their instances, laid end to end (empty where they are listed, not copied).
     instances: Vec<Instance>,
@@ -789,54 +807,46 @@ struct Gathered {
 }
 
 impl Gathered {
-    /// Chunks `chunks` (ascending) of `instances` drawing `lods`, whose chunks' bounds are
-    /// `bounds`: copied, or (`copy` false) only listed.
-    fn new(
+    /// Chunks `chunks` (ascending) of `instances`, listed and not copied.
+    fn listed(chunks: Vec<usize>, instances: usize) -> Self {
+        let index = chunks.iter().flat_map(|&c| chunk_range(c, instances)).collect();
+        Self { chunks, index, ..Self::default() }
+    }
+
+    /// Instances `index` (ascending) of `instances` drawing `lods`, whose chunks' bounds are
+    /// `bounds`, copied; `chunks`: the chunks they make up, if they are whole chunks.
+    fn of(
         chunks: Vec<usize>,
+        index: Vec<usize>,
         instances: &[Instance],
         lods: &[treelod_runtime::ModelLod],
         bounds: &ChunkBounds,
-        copy: bool,
     ) -> Self {
-        let n = instances.len();
-        let index: Vec<usize> = chunks.iter().flat_map(|&c| chunk_range(c, n)).collect();
-        if !copy {
-            return Self { chunks, index, ..Self::default() };
-        }
         let gathered: Vec<Instance> = index.iter().map(|&i| instances[i]).collect();
-        let bounds = bounds.sampled(&chunks, n).unwrap_or_else(|| ChunkBounds::new(&gathered, lods));
+        let bounds = bounds.gathered(&index, instances.len()).unwrap_or_else(|| ChunkBounds::new(&gathered, lods));
         Self { chunks, index, instances: gathered, bounds }
     }
 }
 
-/// The chunks of a sampled forest's predictions chosen again whole beside the sample
-/// (`Renderer::choose_again`): those whose trees were tallest on the screen ([`near_chunks`]).
-pub(crate) const NEAR_CHUNKS: usize = 8;
-
-/// The [`NEAR_CHUNKS`] chunks whose trees were tallest on the screen in the last choice
-/// (`tallest`, per chunk, [`PolicyState::tallest`]), of those with any, ascending.
-fn near_chunks(tallest: &[f32]) -> Vec<usize> {
-    let mut near: Vec<(f32, usize)> =
-        tallest.iter().enumerate().filter(|(_, h)| **h > 0.0).map(|(c, &h)| (h, c)).collect();
-    near.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-    let mut chunks: Vec<usize> = near.into_iter().take(NEAR_CHUNKS).map(|(_, c)| c).collect();
-    chunks.sort_unstable();
-    chunks
-}
+/// The trees a sampled forest's predictions choose again whole beside the sample, per camera
+/// (`Renderer::choose_again`): those tallest on the screen ([`ChunkBounds::tallest_in_view`]),
+/// half as many as the 8 chunks of [`CHOOSE_CHUNK`] chosen whole before. Measured with 8,192,
+/// 4,096 and 2,048 (`bench --budget`, 120 frames, 10^6 pine trees and 10^5 of the oak,
+/// jacaranda, maple and orchid, seeds 1 and 2): 4,096 drew the frames 8,192 drew within a few
+/// (within ½–1.1 times the budget 786 frames of 1,200 with either, over 1.1 times it 32 with
+/// either), 2,048 fewer within (757) and more over (45, the maple's 12 → 22); along the
+/// 600-frame path, the `assign` phase took 11.8 ms
+/// a frame for the pine's 10^6 trees and 7.9 ms for the maple's 10^5 against 14.4 and 10.9 ms
+/// with 8,192.
+pub(crate) const NEAR_TREES: usize = 4 * CHOOSE_CHUNK;
 
 impl Sample {
-    /// The weight the changes of sampled chunk `chunk` of a forest of `n` instances count with
-    /// where chunks `near` (ascending) are chosen again whole: the chunks it stands for (itself
-    /// and those after it up to the next sampled one) less those of `near`; 0 for a chunk of
-    /// `near` itself, which counts once where it is chosen whole.
-    fn weight(&self, chunk: usize, n: usize, near: &[usize]) -> f64 {
-        if near.binary_search(&chunk).is_ok() {
-            return 0.0;
-        }
-        let end = (chunk + self.stride).min(n.div_ceil(CHOOSE_CHUNK));
+    /// The trees counted as many times as sampled chunk `chunk` of a forest of `n` instances
+    /// stands for: itself and those after it up to the next sampled one.
+    fn span(&self, chunk: usize, n: usize) -> f64 {
         #[expect(clippy::cast_precision_loss, reason = "a count of chunks")]
-        let weight = (chunk..end).filter(|c| near.binary_search(c).is_err()).count() as f64;
-        weight
+        let span = ((chunk + self.stride).min(n.div_ceil(CHOOSE_CHUNK)) - chunk) as f64;
+        span
     }
 
     /// Every how many chunks the sample of a forest of `n` instances takes one (1: all of them).
@@ -849,8 +859,48 @@ impl Sample {
         let n = instances.len();
         let stride = Self::stride(n);
         let picked: Vec<usize> = (0..n.div_ceil(CHOOSE_CHUNK)).step_by(stride).collect();
-        let sampled = Gathered::new(picked, instances, lods, chunks, stride > 1);
-        Self { stride, sampled, near: Gathered::default() }
+        let sampled = if stride > 1 {
+            let index = picked.iter().flat_map(|&c| chunk_range(c, n)).collect();
+            Gathered::of(picked, index, instances, lods, chunks)
+        } else {
+            Gathered::listed(picked, n)
+        };
+        Self { instances: n, stride, sampled, tallest: Vec::new(), heights: Vec::new(), near: Gathered::default() }
+    }
+
+    /// The trees to choose whole beside the sample for a prediction of `camera`'s view from the
+    /// frame drawn for `before`: the [`NEAR_TREES`] tallest in each view, ascending, each once.
+    fn tallest_for(
+        &mut self,
+        bounds: &ChunkBounds,
+        camera: &treelod_runtime::Camera,
+        before: Option<&treelod_runtime::Camera>,
+    ) -> Vec<usize> {
+        let mut near = self.tallest_in(bounds, camera).to_vec();
+        if let Some(before) = before.filter(|b| camera_key(b) != camera_key(camera)) {
+            near.extend_from_slice(self.tallest_in(bounds, before));
+            near.sort_unstable();
+            near.dedup();
+        }
+        near
+    }
+
+    /// The [`NEAR_TREES`] tallest trees in `camera`'s view, found once per camera
+    /// ([`Self::tallest`]).
+    fn tallest_in(&mut self, bounds: &ChunkBounds, camera: &treelod_runtime::Camera) -> &[usize] {
+        let key = camera_key(camera);
+        let at = match self.tallest.iter().position(|(k, _)| *k == key) {
+            Some(at) => at,
+            None => {
+                if self.tallest.len() >= 2 {
+                    self.tallest.remove(0);
+                }
+                let found = bounds.tallest_in_view(camera, NEAR_TREES, self.instances, &mut self.heights);
+                self.tallest.push((key, found));
+                self.tallest.len() - 1
+            }
+        };
+        &self.tallest[at].1
     }
 }
 
@@ -862,7 +912,7 @@ mod tests {
     use treelod_build::{BuildConfig, DemoTreeConfig, Placed, build_block, demo_tree};
     use treelod_format::{Compression, Container};
 
-    use super::{CHOOSE_CHUNK, Gathered, NEAR_CHUNKS, Sample, near_chunks, spt_cost};
+    use super::{CHOOSE_CHUNK, Gathered, Sample, spt_cost};
     use crate::offscreen::Gpu;
     use crate::{Camera, Instance, Policy, Renderer, Settings, Technique};
 
@@ -1113,30 +1163,25 @@ mod tests {
         assert!((p - n).abs() <= 0.15 * n, "predicted {predicted}, drew {}", next.primitives());
     }
 
-    /// The chunks chosen whole beside a sample are those of the tallest trees, ascending, none
-    /// without a tree in view; and each of the other chunks is counted once, by the sampled
-    /// chunk before it (the sampled chunks of a forest of 20 chunks, every 6th: 0, 6, 12, 18).
+    /// Each sampled chunk counts for itself and the chunks after it up to the next sampled one,
+    /// so that every chunk is counted once (the sampled chunks of a forest of 20 chunks, every
+    /// 6th: 0, 6, 12, 18).
     #[test]
-    fn a_sample_counts_each_chunk_once_beside_the_chunks_of_the_tallest_trees() {
-        let mut tallest = vec![0.0f32; 20];
-        for (c, h) in [(3, 40.0), (7, 900.0), (12, 300.0), (13, 5.0), (2, 41.0), (9, 60.0)] {
-            tallest[c] = h;
-        }
-        tallest.extend([1.0; 10]);
-        assert_eq!(near_chunks(&tallest[..20]), vec![2, 3, 7, 9, 12, 13]);
-        let many: Vec<f32> = (0..30).map(|c| c as f32).collect();
-        assert_eq!(near_chunks(&many), (22..30).collect::<Vec<_>>(), "the {NEAR_CHUNKS} tallest");
-
+    fn a_sample_counts_each_chunk_once() {
         let n = 20 * CHOOSE_CHUNK - 5;
-        let sampled = Gathered { chunks: vec![0, 6, 12, 18], ..Gathered::default() };
-        let sample = Sample { stride: 6, sampled, near: Gathered::default() };
-        let near = [2, 3, 7, 9];
-        let weights: Vec<f64> = sample.sampled.chunks.iter().map(|&c| sample.weight(c, n, &near)).collect();
-        assert_eq!(weights, vec![4.0, 4.0, 6.0, 2.0]);
-        assert_eq!(weights.iter().sum::<f64>() + near.len() as f64, 20.0, "every chunk once");
-        // A sampled chunk among the near ones counts once, chosen whole: the chunks it stood for
-        // are not counted.
-        assert_eq!(sample.weight(12, n, &[12, 13]), 0.0);
+        assert_eq!(Sample::stride(n), 2);
+        let sampled = Gathered::listed(vec![0, 6, 12, 18], n);
+        let sample = Sample {
+            instances: n,
+            stride: 6,
+            sampled,
+            tallest: Vec::new(),
+            heights: Vec::new(),
+            near: Gathered::default(),
+        };
+        let spans: Vec<f64> = sample.sampled.chunks.iter().map(|&c| sample.span(c, n)).collect();
+        assert_eq!(spans, vec![6.0, 6.0, 6.0, 2.0]);
+        assert_eq!(sample.sampled.index.len(), 4 * CHOOSE_CHUNK);
     }
 
     /// Budget mode counts a near point tree by the cut its frame draws (`Renderer::spt_cut`):
@@ -1188,5 +1233,49 @@ mod tests {
             }
         }
         assert!(culled >= 1, "no view left enough of the tree out to matter");
+    }
+
+    /// A sampled forest's prediction counts a tree coming into the view in a chunk it does not
+    /// sample: 17 chunks of demo trees, every second one sampled, the camera turning from a
+    /// field of trees in chunks 2–15 (three each, 20–59 m away) to one tree of chunk 1 9 m away,
+    /// behind it before (every other tree stands far behind both views). The prediction from
+    /// the field's frame of the turned view must be within 15 % of what that view draws. Chosen
+    /// by the chunks whose trees were tallest in the frame before (8 of chunks 2–15), the near
+    /// tree went uncounted.
+    #[test]
+    fn a_sampled_forest_s_prediction_counts_a_tree_coming_near_in_a_chunk_it_does_not_sample() {
+        let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
+        let policy = Policy { transition: 0, ..Policy::default() };
+        let mut renderer =
+            Renderer::new(&gpu.device, Gpu::formats(), Settings { policy: Some(policy), ..Settings::default() });
+        let model = renderer.add_model(&gpu.device, &gpu.queue, calibrated_demo()).expect("model");
+        let centre = renderer.lods[0].centre();
+        // A tree whose block's centre stands at (x, 0, z).
+        let tree = |x: f32, z: f32| Instance { model, transform: Mat4::from_translation(vec3(x, 0.0, z) - centre) };
+        let n = 16 * CHOOSE_CHUNK + 1;
+        assert_eq!(Sample::stride(n), 2, "every second chunk sampled");
+        let mut instances = vec![tree(-3000.0, 3000.0); n];
+        for c in 2..16 {
+            for k in 0..3 {
+                instances[c * CHOOSE_CHUNK + k] = tree(6.0 * (k as f32 - 1.0), -20.0 - 3.0 * (c - 2) as f32);
+            }
+        }
+        let near = vec3(7.2, 0.0, 5.4);
+        instances[CHOOSE_CHUNK + 5] = tree(near.x, near.z);
+        renderer.set_instances(&instances);
+        let field = Camera::look_at(Vec3::ZERO, vec3(0.0, 0.0, -1.0), 0.9, 320, 240);
+        let turned = Camera::look_at(Vec3::ZERO, near, 0.9, 320, 240);
+        // Drawn once the prefixes are resident: a few frames.
+        let stats = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &field)).last().expect("frames");
+        assert!(!renderer.assigned[CHOOSE_CHUNK + 5], "the near tree is out of the field's view");
+        let s_min = renderer.settings.s_min;
+        let steering = crate::BudgetFrame { s_min, target: policy.target(), finest: false };
+        let drawn = renderer.drawn(field.selection(), steering, &stats, policy);
+        let predicted = renderer.predict_count(&turned.selection(), policy, s_min, drawn);
+        let next = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &turned)).last().expect("frames");
+        assert!(renderer.assigned[CHOOSE_CHUNK + 5], "the near tree is in the turned view");
+        assert_eq!(renderer.assigned.iter().filter(|&&a| a).count(), 1, "only the near tree in the turned view");
+        let (p, drew) = (predicted as f64, next.primitives() as f64);
+        assert!(drew > 0.0 && (p - drew).abs() <= 0.15 * drew, "predicted {predicted}, drew {}", next.primitives());
     }
 }

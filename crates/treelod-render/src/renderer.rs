@@ -900,12 +900,12 @@ impl Renderer {
         {
             // The camera moved: the frame is predicted from the last one before it is drawn,
             // raised where it would meet a cliff, and lowered where it would be far under the
-            // budget (a sample's predictions fall short near the camera: not lowered so).
+            // budget.
             let (s_min, target) = (controller.s_min(), controller.target());
             let count = predict(self, s_min, target, Some(drawn));
             if count > controller.raise_count() {
                 controller.raise_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
-            } else if controller.far_under(count) && !self.predicts_from_a_sample() {
+            } else if controller.far_under(count) {
                 controller.lower_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
             }
             predicted = true;
@@ -933,10 +933,9 @@ impl Renderer {
             // Look before stepping down: a step predicted over the budget is refused undrawn.
             controller.refuse();
         }
-        if controller.far_under(count.saturating_sub(stats.leaving)) && !self.predicts_from_a_sample() {
+        if controller.far_under(count.saturating_sub(stats.leaving)) {
             // Far under the budget once the transitions end: on down by prediction, not a step
-            // a frame (a sample's predictions fall short near the camera, and a large forest
-            // steps). After a refused step too, from the pressure drawn: the refusal alone held
+            // a frame. After a refused step too, from the pressure drawn: the refusal alone held
             // the frame where it was whenever the scene changed before the bracket closed.
             controller.lower_within(|s_min, target| predict(self, s_min, target, Some(drawn)));
         }

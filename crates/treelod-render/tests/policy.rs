@@ -771,24 +771,44 @@ fn budget_mode_counts_the_draws_of_trees_in_a_transition() {
 /// on the field of demo trees at a quarter of what the default draws, the camera turns away
 /// from most of the trees; the first frame of the new view is drawn within half to 1.1 times
 /// the budget, where the steering it held draws that view (without a budget, at the held
-/// target and `s_min`) under half of it.
+/// target and `s_min`) under half of it. The same with the field's trees spread over a forest
+/// of 17 chunks of `CHOOSE_CHUNK` (the others far behind both views), which budget mode's
+/// predictions sample: such a forest was not lowered by prediction before its nearest trees
+/// were chosen whole wherever they stand (`ChunkBounds::tallest_in_view`).
 #[test]
 fn budget_mode_lowers_a_moved_frame_predicted_far_under_before_drawing_it() {
     let gpu = gpu();
-    let QuarterBudget { mut renderer, container, positions, camera, budget, policy, .. } = quarter_budget_field(&gpu);
-    let settled: Vec<u64> = (0..30).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
-    assert!(settled[20..].iter().all(|&c| 2 * c >= budget && 10 * c <= 11 * budget), "settled: {settled:?}");
-    let (s_min, target) = renderer.budget_steering().expect("steering");
-    let turned = Camera::look_at(Vec3::ZERO, vec3(3.0, -0.1, -1.0), 0.9, 320, 240);
-    let defaults = Settings::default();
-    let held = Settings {
-        s_min,
-        s_max: defaults.s_max * s_min / defaults.s_min,
-        policy: Some(Policy { target, budget: None, ..policy }),
-        ..defaults
-    };
-    let at_held = forest(&gpu, &container, held, &positions).prepare(&gpu.device, &gpu.queue, &turned).primitives();
-    assert!(2 * at_held < budget, "the turned view at the held steering is far under the budget {budget}: {at_held}");
-    let first = renderer.prepare(&gpu.device, &gpu.queue, &turned).primitives();
-    assert!(2 * first >= budget && 10 * first <= 11 * budget, "the first frame turned: {first} against {budget}");
+    let QuarterBudget { container, positions, camera, budget, policy, .. } = quarter_budget_field(&gpu);
+    let n = 16 * treelod_runtime::CHOOSE_CHUNK + 1;
+    let mut sampled = vec![vec3(0.0, 0.0, 5000.0); n];
+    for (k, &p) in positions.iter().enumerate() {
+        sampled[(k * 997) % n] = p;
+    }
+    for positions in [positions, sampled] {
+        let settings = Settings { policy: Some(policy), ..Settings::default() };
+        let mut renderer = forest(&gpu, &container, settings, &positions);
+        let settled: Vec<u64> =
+            (0..30).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).collect();
+        assert!(settled[20..].iter().all(|&c| 2 * c >= budget && 10 * c <= 11 * budget), "settled: {settled:?}");
+        let (s_min, target) = renderer.budget_steering().expect("steering");
+        let turned = Camera::look_at(Vec3::ZERO, vec3(3.0, -0.1, -1.0), 0.9, 320, 240);
+        let defaults = Settings::default();
+        let held = Settings {
+            s_min,
+            s_max: defaults.s_max * s_min / defaults.s_min,
+            policy: Some(Policy { target, budget: None, ..policy }),
+            ..defaults
+        };
+        let at_held = forest(&gpu, &container, held, &positions).prepare(&gpu.device, &gpu.queue, &turned).primitives();
+        let trees = positions.len();
+        assert!(
+            2 * at_held < budget,
+            "{trees} trees: the turned view at the held steering is far under {budget}: {at_held}"
+        );
+        let first = renderer.prepare(&gpu.device, &gpu.queue, &turned).primitives();
+        assert!(
+            2 * first >= budget && 10 * first <= 11 * budget,
+            "{trees} trees: the first frame turned: {first} against {budget}"
+        );
+    }
 }
