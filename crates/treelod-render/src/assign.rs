@@ -835,14 +835,15 @@ impl Gathered {
 /// jacaranda, maple and orchid, seeds 1 and 2): 4,096 drew the frames 8,192 drew within a few
 /// (within ½–1.1 times the budget 786 frames of 1,200 with either, over 1.1 times it 32 with
 /// either), 2,048 fewer within (757) and more over (45, the maple's 12 → 22); along the
-/// 600-frame path, the `assign` phase took 11.8 ms
-/// a frame for the pine's 10^6 trees and 7.9 ms for the maple's 10^5 against 14.4 and 10.9 ms
-/// with 8,192.
+/// 600-frame path, the `assign` phase took 11.8 ms a frame for the pine's 10^6 trees and 7.9 ms
+/// for the maple's 10^5 against 14.4 and 10.9 ms with 8,192 (the tallest trees then found by a
+/// pass over every tree in view).
 pub(crate) const NEAR_TREES: usize = 4 * CHOOSE_CHUNK;
 
 impl Sample {
-    /// The trees counted as many times as sampled chunk `chunk` of a forest of `n` instances
-    /// stands for: itself and those after it up to the next sampled one.
+    /// How many times each tree of sampled chunk `chunk` of a forest of `n` instances counts
+    /// (beside the trees chosen whole): the chunks it stands for, itself and those after it up
+    /// to the next sampled one.
     fn span(&self, chunk: usize, n: usize) -> f64 {
         #[expect(clippy::cast_precision_loss, reason = "a count of chunks")]
         let span = ((chunk + self.stride).min(n.div_ceil(CHOOSE_CHUNK)) - chunk) as f64;
