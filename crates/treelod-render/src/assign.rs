@@ -645,7 +645,7 @@ impl Renderer {
             let weight = vec![1.0; chosen.len()];
             return Chosen { chosen, index: index.clone(), weight, leaves };
         }
-        let near = sample.tallest_for(&tables.chunks, camera, before);
+        let near = sample.tallest_for(&tables.chunks, self.instances.len(), camera, before);
         if near != sample.near.index {
             // Every prediction of a frame reads the same trees: copied once.
             sample.near = Gathered::of(Vec::new(), near, &self.instances, lods, &tables.chunks);
@@ -764,8 +764,6 @@ pub(crate) struct Drawn {
 /// them. Kept from frame to frame: copying the instances and their bounds every frame took
 /// 1.7 ms for 10^6 trees on 2 cores, most of it faulting in the fresh pages.
 pub(crate) struct Sample {
-    /// The instances of the forest it samples.
-    instances: usize,
     /// Every how many chunks one is sampled (1: every instance, nothing copied).
     stride: usize,
     /// The sampled chunks (with a stride of 1, every chunk, listed and not copied).
@@ -866,20 +864,22 @@ impl Sample {
         } else {
             Gathered::listed(picked, n)
         };
-        Self { instances: n, stride, sampled, tallest: Vec::new(), heights: Vec::new(), near: Gathered::default() }
+        Self { stride, sampled, tallest: Vec::new(), heights: Vec::new(), near: Gathered::default() }
     }
 
-    /// The trees to choose whole beside the sample for a prediction of `camera`'s view from the
-    /// frame drawn for `before`: the [`NEAR_TREES`] tallest in each view, ascending, each once.
+    /// The trees of the forest of `n` instances bounded by `bounds` to choose whole beside the
+    /// sample for a prediction of `camera`'s view from the frame drawn for `before`: the
+    /// [`NEAR_TREES`] tallest in each view, ascending, each once.
     fn tallest_for(
         &mut self,
         bounds: &ChunkBounds,
+        n: usize,
         camera: &treelod_runtime::Camera,
         before: Option<&treelod_runtime::Camera>,
     ) -> Vec<usize> {
-        let mut near = self.tallest_in(bounds, camera).to_vec();
+        let mut near = self.tallest_in(bounds, n, camera).to_vec();
         if let Some(before) = before.filter(|b| camera_key(b) != camera_key(camera)) {
-            near.extend_from_slice(self.tallest_in(bounds, before));
+            near.extend_from_slice(self.tallest_in(bounds, n, before));
             near.sort_unstable();
             near.dedup();
         }
@@ -888,7 +888,7 @@ impl Sample {
 
     /// The [`NEAR_TREES`] tallest trees in `camera`'s view, found once per camera
     /// ([`Self::tallest`]).
-    fn tallest_in(&mut self, bounds: &ChunkBounds, camera: &treelod_runtime::Camera) -> &[usize] {
+    fn tallest_in(&mut self, bounds: &ChunkBounds, n: usize, camera: &treelod_runtime::Camera) -> &[usize] {
         let key = camera_key(camera);
         let at = match self.tallest.iter().position(|(k, _)| *k == key) {
             Some(at) => at,
@@ -896,7 +896,7 @@ impl Sample {
                 if self.tallest.len() >= 2 {
                     self.tallest.remove(0);
                 }
-                let found = bounds.tallest_in_view(camera, NEAR_TREES, self.instances, &mut self.heights);
+                let found = bounds.tallest_in_view(camera, NEAR_TREES, n, &mut self.heights);
                 self.tallest.push((key, found));
                 self.tallest.len() - 1
             }
@@ -1172,14 +1172,7 @@ mod tests {
         let n = 20 * CHOOSE_CHUNK - 5;
         assert_eq!(Sample::stride(n), 2);
         let sampled = Gathered::listed(vec![0, 6, 12, 18], n);
-        let sample = Sample {
-            instances: n,
-            stride: 6,
-            sampled,
-            tallest: Vec::new(),
-            heights: Vec::new(),
-            near: Gathered::default(),
-        };
+        let sample = Sample { stride: 6, sampled, tallest: Vec::new(), heights: Vec::new(), near: Gathered::default() };
         let spans: Vec<f64> = sample.sampled.chunks.iter().map(|&c| sample.span(c, n)).collect();
         assert_eq!(spans, vec![6.0, 6.0, 6.0, 2.0]);
         assert_eq!(sample.sampled.index.len(), 4 * CHOOSE_CHUNK);

@@ -2743,11 +2743,12 @@ impl Grid {
     /// The grid of `placements`.
     fn new(placements: &[Placement]) -> Self {
         let usable = |p: &Placement| p.model != Placement::UNKNOWN.model && p.centre.is_finite();
-        let (lo, hi) = placements
+        let (lo, hi, known) = placements
             .iter()
             .filter(|p| usable(p))
-            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(p.centre), hi.max(p.centre)));
-        let known = placements.iter().filter(|p| usable(p)).count();
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY, 0usize), |(lo, hi, known), p| {
+                (lo.min(p.centre), hi.max(p.centre), known + 1)
+            });
         let extent = if known == 0 { Vec3::ZERO } else { (hi - lo).max(Vec3::ZERO) };
         let dims = grid_dims(extent, known);
         let cell_of = |centre: Vec3| -> usize {
@@ -2862,6 +2863,15 @@ impl Placement {
         height_from(self.height, self.centre, eye, world_per_pixel)
     }
 
+    /// Its projected height where [`ChunkBounds::tallest_in_view`] counts it: of a known model,
+    /// in `view` (`Self::in_view`), the height finite and positive.
+    fn height_in_view(&self, view: &(Vec3, f32, Frustum)) -> Option<f32> {
+        let (eye, world_per_pixel, _) = *view;
+        (self.model != Self::UNKNOWN.model && self.in_view(Some(view)))
+            .then(|| self.projected_height(eye, world_per_pixel))
+            .filter(|h| h.is_finite() && *h > 0.0)
+    }
+
     /// The sine of the instance's [`view_elevation`].
     fn sine(&self, eye: Vec3) -> f32 {
         sine_from(self.centre, self.up, eye)
@@ -2949,7 +2959,7 @@ impl ChunkBounds {
         }
         let (eye, world_per_pixel) = (camera.position, camera.world_per_pixel());
         let frustum = Frustum::from_view_proj(camera.view_proj);
-        let view = Some((eye, world_per_pixel, frustum));
+        let view = (eye, world_per_pixel, frustum);
         heights.clear();
         heights.resize(self.placements.len(), 0.0);
         let histogram = self
@@ -2964,11 +2974,7 @@ impl ChunkBounds {
                 || vec![0u32; BINS],
                 |mut bins, (_, (chunk, heights))| {
                     for (place, out) in chunk.iter().zip(heights) {
-                        if place.model == Placement::UNKNOWN.model || !place.in_view(view.as_ref()) {
-                            continue;
-                        }
-                        let height = place.projected_height(eye, world_per_pixel);
-                        if height.is_finite() && height > 0.0 {
+                        if let Some(height) = place.height_in_view(&view) {
                             *out = height;
                             bins[bin(height).min(BINS - 1)] += 1;
                         }
@@ -3012,7 +3018,7 @@ impl ChunkBounds {
         let grid = self.grid.0.get_or_init(|| Grid::new(&self.placements));
         let (eye, world_per_pixel) = (camera.position, camera.world_per_pixel());
         let frustum = Frustum::from_view_proj(camera.view_proj);
-        let view = Some((eye, world_per_pixel, frustum));
+        let view = (eye, world_per_pixel, frustum);
         let mut cells: std::collections::BinaryHeap<(u32, usize)> = (grid.cells.iter().enumerate())
             .filter(|&(c, cell)| {
                 // Every culling sphere of the cell's trees lies within this one (a margin for
@@ -3039,12 +3045,8 @@ impl ChunkBounds {
                 break;
             }
             for &i in &grid.order[grid.starts[c] as usize..grid.starts[c + 1] as usize] {
-                let place = &self.placements[i as usize];
-                if place.in_view(view.as_ref()) {
-                    let height = place.projected_height(eye, world_per_pixel);
-                    if height.is_finite() && height > 0.0 {
-                        tall.push((height, i as usize));
-                    }
+                if let Some(height) = self.placements[i as usize].height_in_view(&view) {
+                    tall.push((height, i as usize));
                 }
             }
             if tall.len() >= next_kth {
