@@ -112,6 +112,17 @@ impl Frustum {
         self.classify_sphere(centre, radius) != Containment::Outside
     }
 
+    /// Whether the model-space sphere `(centre, radius)` of an instance drawn by `transform` lies
+    /// wholly inside the frustum (on the inner side of every plane by at least its radius, scaled
+    /// by the transform's largest axis): none of the instance's cells is culled. `false` where the
+    /// transform is degenerate.
+    #[must_use]
+    pub fn contains_instance_sphere(&self, transform: Mat4, (centre, radius): (Vec3, f32)) -> bool {
+        usable_scale(transform).is_some_and(|scale| {
+            self.classify_sphere(transform.transform_point3(centre), radius * scale) == Containment::Inside
+        })
+    }
+
     fn classify_sphere(&self, centre: Vec3, radius: f32) -> Containment {
         let mut inside = true;
         for p in &self.planes {
@@ -2213,6 +2224,13 @@ mod tests {
         assert!((d - 10.0 * 0.5f32.sin()).abs() < 1e-3, "{d}");
         assert_eq!(f.classify_sphere(Vec3::new(0.0, 0.0, -10.0), 0.1), Containment::Inside);
         assert_eq!(f.classify_sphere(Vec3::new(0.0, 0.0, -10.0), 6.0), Containment::Straddles);
+        // An instance's sphere: moved by its transform and grown by its largest axis.
+        let sphere = (Vec3::new(0.0, 1.0, 0.0), 1.0);
+        let at = Mat4::from_translation(Vec3::new(0.0, -1.0, -10.0));
+        assert!(f.contains_instance_sphere(at, sphere));
+        assert!(!f.contains_instance_sphere(at * Mat4::from_scale(Vec3::new(1.0, 1.0, 6.0)), sphere), "grown");
+        assert!(!f.contains_instance_sphere(Mat4::from_translation(Vec3::new(6.8, -1.0, -10.0)), sphere), "cut");
+        assert!(!f.contains_instance_sphere(Mat4::ZERO, sphere), "degenerate");
     }
 
     #[test]
