@@ -530,6 +530,7 @@ impl Renderer {
     /// jacaranda's trees (`bench --budget 100000 --seed 4`) a frame whose five pruned trees drew
     /// 144,935 of its 145,010 primitives had been predicted at 105,137 from their rows, and the
     /// raise that followed went to the coarsest steering.
+    // Called for a few trees a prediction: kept out of the loop over every tree that calls it.
     #[inline(never)]
     fn selected_cost(
         &self,
@@ -545,17 +546,9 @@ impl Renderer {
         assignment[technique].push(index);
         let scene =
             treelod_runtime::Scene { lods: &self.lods, models: &self.representations, instances: &self.instances };
-        let ratio = if self.settings.s_min > 0.0 { self.settings.s_max / self.settings.s_min } else { 1.0 };
-        let lod = treelod_runtime::LodSettings {
-            s_min,
-            s_max: s_min * ratio,
-            depth_bias_k: self.settings.depth_bias_k,
-            shading: self.settings.shading,
-            ..treelod_runtime::LodSettings::default()
-        };
         let settings = treelod_runtime::TechniqueSettings {
             s_min,
-            lod,
+            lod: self.lod_settings_at(s_min),
             pruning: self.settings.pruning,
             impostor_bark: self.settings.impostor_bark,
             pixel_level: self.settings.pixel_level(),
@@ -676,20 +669,26 @@ impl Renderer {
         frustum: &treelod_runtime::Frustum,
     ) -> Option<f64> {
         self.tau_of(i, s_min, camera, frustum)?;
-        let ratio = if self.settings.s_min > 0.0 { self.settings.s_max / self.settings.s_min } else { 1.0 };
-        let settings = treelod_runtime::LodSettings {
-            s_min,
-            s_max: s_min * ratio,
-            depth_bias_k: self.settings.depth_bias_k,
-            shading: self.settings.shading,
-            ..treelod_runtime::LodSettings::default()
-        };
+        let settings = self.lod_settings_at(s_min);
         let instance = std::slice::from_ref(self.instances.get(i)?);
         let mut scratch = treelod_runtime::DrawList::default();
         let selected = treelod_runtime::select_frame(&self.lods, instance, camera, &settings, &mut scratch);
         #[expect(clippy::cast_precision_loss, reason = "a count of primitives")]
         let cut = selected.primitives() as f64;
         Some(cut)
+    }
+
+    /// The point tree's settings the renderer selects with at `s_min` (`s_max` at the renderer's
+    /// ratio to it, its depth bias and shading), as a prediction reads them.
+    fn lod_settings_at(&self, s_min: f32) -> treelod_runtime::LodSettings {
+        let ratio = if self.settings.s_min > 0.0 { self.settings.s_max / self.settings.s_min } else { 1.0 };
+        treelod_runtime::LodSettings {
+            s_min,
+            s_max: s_min * ratio,
+            depth_bias_k: self.settings.depth_bias_k,
+            shading: self.settings.shading,
+            ..treelod_runtime::LodSettings::default()
+        }
     }
 
     /// The triangles of LoD chain level `pick` (`None`: the full mesh) of instance `i`'s model.
@@ -1076,22 +1075,24 @@ mod tests {
     use crate::offscreen::Gpu;
     use crate::{Camera, Instance, Policy, Renderer, Settings, Technique};
 
+    /// The demo tree built with `config`, as a container.
+    fn demo_built(config: &BuildConfig) -> Arc<Container> {
+        let scene = demo_tree(&DemoTreeConfig::default());
+        let built =
+            build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], config, "test").expect("builds");
+        Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"))
+    }
+
     /// The demo tree with impostors, its baselines and calibration tables, as the policy's tests
     /// build it, without the octahedral impostor (which would draw every tree below about 100
     /// pixels with one quad): the point tree then draws the trees over a range of heights.
     fn calibrated_demo() -> Arc<Container> {
-        let scene = demo_tree(&DemoTreeConfig::default());
-        let config = BuildConfig {
+        let mut data = treelod_format::ContainerData::from_container(&demo_built(&BuildConfig {
             impostors: Some(treelod_build::ImpostorConfig::default()),
             baselines: Some(treelod_build::LodChainConfig::default()),
             calibration: Some(treelod_build::CalibrationConfig { views: 1, supersample: 2, more_small_views: false }),
             ..BuildConfig::default()
-        };
-        let built =
-            build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
-        let mut data = treelod_format::ContainerData::from_container(
-            &Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"),
-        );
+        }));
         data.octahedral.clear();
         data.octahedral_normal_grids.clear();
         data.calibration_added.clear();
@@ -1210,16 +1211,11 @@ mod tests {
     #[test]
     fn every_pruned_tree_s_predicted_cost_is_what_its_selection_draws() {
         let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
-        let scene = demo_tree(&DemoTreeConfig::default());
-        let config = BuildConfig {
+        let container = demo_built(&BuildConfig {
             prune: Some(treelod_build::PruneConfig::default()),
             calibration: Some(treelod_build::CalibrationConfig { views: 1, supersample: 2, more_small_views: false }),
             ..BuildConfig::default()
-        };
-        let built =
-            build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
-        let container =
-            Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"));
+        });
         let (mut renderer, camera) = field(&gpu, &container, Settings::forced(Technique::PruneCook));
         // Drawn once the prefixes are resident and the held `λ` settled: a few frames.
         let drawn = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &camera).primitives()).last();
@@ -1386,12 +1382,7 @@ mod tests {
     fn a_point_tree_s_predicted_cut_is_what_its_frame_draws_with_part_of_it_out_of_view() {
         let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
         assert_eq!(gpu.info.backend, wgpu::Backend::Vulkan, "rendering tests run on Vulkan, got {:?}", gpu.info);
-        let scene = demo_tree(&DemoTreeConfig::default());
-        let built =
-            build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &BuildConfig::default(), "test")
-                .expect("builds");
-        let container =
-            Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"));
+        let container = demo_built(&BuildConfig::default());
         let mut renderer = Renderer::new(&gpu.device, Gpu::formats(), Settings::forced(Technique::Spt));
         let model = renderer.add_model(&gpu.device, &gpu.queue, Arc::clone(&container)).expect("model");
         renderer.set_instances(&[Instance { model, transform: Mat4::IDENTITY }]);
@@ -1482,15 +1473,10 @@ mod tests {
     fn a_moved_frame_s_point_trees_are_predicted_by_their_rows() {
         let gpu = Gpu::new().expect("a GPU adapter (install mesa-vulkan-drivers for lavapipe)");
         let policy = Policy { transition: 0, ..Policy::default() };
-        let scene = demo_tree(&DemoTreeConfig::default());
-        let config = BuildConfig {
+        let container = demo_built(&BuildConfig {
             calibration: Some(treelod_build::CalibrationConfig { views: 1, supersample: 2, more_small_views: false }),
             ..BuildConfig::default()
-        };
-        let built =
-            build_block("demo", &[Placed { scene: &scene, translation: Vec3::ZERO }], &config, "test").expect("builds");
-        let container =
-            Arc::new(Container::from_bytes(&built.data.to_bytes(Compression::None).expect("encodes")).expect("opens"));
+        });
         let mut renderer =
             Renderer::new(&gpu.device, Gpu::formats(), Settings { policy: Some(policy), ..Settings::default() });
         let model = renderer.add_model(&gpu.device, &gpu.queue, container).expect("model");
