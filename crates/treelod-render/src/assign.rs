@@ -220,9 +220,10 @@ impl Renderer {
     ///   level ([`Self::chain_triangles`]), a point tree as its cut ([`Self::spt_cut`],
     ///   [`Self::table_cost`]), and a pruned tree, or one drawn with impostor planes or
     ///   ellipsoids above the tables' heights, by what its own selection picks
-    ///   ([`Self::selected_cost`], [`counted_by_selection`]), less what it cost in the last frame, as seen by that frame's
-    ///   camera; a tree coming into the view adds its new cost, one leaving it takes away what it
-    ///   cost (where the camera moved, `Renderer::prepare`). What a tree cost is read at the
+    ///   ([`Self::selected_cost`], [`counted_by_selection`]), less what it cost in the last
+    ///   frame, as seen by that frame's camera; a tree coming into the view adds its new cost,
+    ///   one leaving it takes away what it cost (where the camera moved, `Renderer::prepare`).
+    ///   What a tree cost is read at the
     ///   camera that drew it: a near point tree's cut read at the next camera, nearer, took away
     ///   more than the last frame held (on the shared oak, three such trees drawn with 23,000
     ///   primitives between them took away 90,000, and a frame predicted at 32,000 drew 121,000);
@@ -838,10 +839,10 @@ fn ends_by_itself(transition: Transition, policy: Policy) -> bool {
 }
 
 /// Whether `technique`'s trees draw a prefix per cell that follows their size on the screen and
-/// `s_min` (pruned leaves, impostor planes, ellipsoids and lines): above the calibration
-/// tables' heights budget mode counts them by their own selection
-/// (`Renderer::selected_cost`). The point tree has its own count (`Renderer::spt_cut`), the
-/// LoD chain its levels, the billboards and the octahedral impostor a fixed count of quads.
+/// `s_min` (pruned leaves, impostor planes, ellipsoids and lines), which budget mode can count
+/// by their own selection (`Renderer::selected_cost`, where [`counted_by_selection`] says so).
+/// The point tree has its own count (`Renderer::spt_cut`), the LoD chain its levels, the
+/// billboards and the octahedral impostor a fixed count of quads.
 fn selected_per_cell(technique: Technique) -> bool {
     matches!(technique, Technique::PruneOpt | Technique::PruneCook | Technique::Impostors | Technique::Ellipsoids)
 }
@@ -852,9 +853,10 @@ fn selected_per_cell(technique: Technique) -> bool {
 /// heights. A pruned tree's leaves follow `λ` at its height, which its rows do not: on the
 /// shared jacaranda's forest (`bench --budget 100000 --seed 4`) pruned trees of 44–73 pixels
 /// were read at about 28,000 primitives each by their rows, where their selection picked
-/// 7,000–33,000 (the demo tree's field drawn pruned: 305,673 by the rows, 161,123 drawn). Below the
-/// tables' heights the rows of the planes and the ellipsoids are within a tenth of their
-/// selection's count in the median tree (1,000 trees of the maple, orchid, oak and willow).
+/// 7,000–33,000 (the demo tree's field drawn pruned: 305,673 by the rows, 161,123 drawn).
+/// Below the tables' heights the rows of the planes and the ellipsoids are within a tenth of
+/// their selection's count in the median tree (1,000 trees of the maple, orchid, oak and
+/// willow).
 fn counted_by_selection(technique: Technique, above: bool) -> bool {
     match technique {
         Technique::PruneOpt | Technique::PruneCook => true,
