@@ -520,8 +520,8 @@ impl Renderer {
         Some(cut.unwrap_or(row))
     }
 
-    /// The primitives instance `i` draws with `technique` (one [`selected_per_cell`]) for
-    /// `camera` at `s_min`, as that technique's own selection picks them
+    /// The primitives instance `i` draws with `technique` (pruned, impostor planes or
+    /// ellipsoids) for `camera` at `s_min`, as that technique's own selection picks them
     /// ([`treelod_runtime::select_techniques`] over the one tree: the pruned leaves' prefixes at
     /// its `λ` and its bark, the impostor planes' level and bark, the ellipsoids' and lines'
     /// prefixes; a pruned tree below its height handed back to the point tree counts that
@@ -838,15 +838,6 @@ fn ends_by_itself(transition: Transition, policy: Policy) -> bool {
     transition.shown + step >= 1.0 - 0.5 * step
 }
 
-/// Whether `technique`'s trees draw a prefix per cell that follows their size on the screen and
-/// `s_min` (pruned leaves, impostor planes, ellipsoids and lines), which budget mode can count
-/// by their own selection (`Renderer::selected_cost`, where [`counted_by_selection`] says so).
-/// The point tree has its own count (`Renderer::spt_cut`), the LoD chain its levels, the
-/// billboards and the octahedral impostor a fixed count of quads.
-fn selected_per_cell(technique: Technique) -> bool {
-    matches!(technique, Technique::PruneOpt | Technique::PruneCook | Technique::Impostors | Technique::Ellipsoids)
-}
-
 /// Whether budget mode counts a tree drawn with `technique` by its own selection
 /// (`Renderer::selected_cost`) rather than by the calibration tables' row at its height:
 /// pruned trees at every height, and impostor planes and ellipsoids `above` the tables'
@@ -856,11 +847,13 @@ fn selected_per_cell(technique: Technique) -> bool {
 /// 7,000–33,000 (the demo tree's field drawn pruned: 305,673 by the rows, 161,123 drawn).
 /// Below the tables' heights the rows of the planes and the ellipsoids are within a tenth of
 /// their selection's count in the median tree (1,000 trees of the maple, orchid, oak and
-/// willow).
+/// willow). The point tree has its own count (`Renderer::spt_cut`), the LoD chain its levels,
+/// the billboards and the octahedral impostor a fixed count of quads.
 fn counted_by_selection(technique: Technique, above: bool) -> bool {
     match technique {
         Technique::PruneOpt | Technique::PruneCook => true,
-        t => above && selected_per_cell(t),
+        Technique::Impostors | Technique::Ellipsoids => above,
+        _ => false,
     }
 }
 
@@ -876,8 +869,7 @@ fn s_min_scale(before: f32, s_min: f32) -> f64 {
 /// unscaled, twenty trees switching to the point tree at `s_min` 3.4 read 2.4 million
 /// primitives where the frame drew 214,000).
 fn spt_cost(s_min: f32) -> impl Fn(Technique, f32) -> f64 {
-    let calibrated = treelod_runtime::LodSettings::default().s_min;
-    let spt_scale = if s_min > 0.0 { f64::from(calibrated / s_min).powi(2) } else { 1.0 };
+    let spt_scale = s_min_scale(treelod_runtime::LodSettings::default().s_min, s_min);
     move |technique, primitives| f64::from(primitives) * if technique == Technique::Spt { spt_scale } else { 1.0 }
 }
 
@@ -1160,10 +1152,23 @@ mod tests {
         next: Policy,
         next_s_min: f32,
     ) -> u64 {
-        let (selection, s_min) = (camera.selection(), renderer.settings.s_min);
+        predicted_from(renderer, camera, camera, stats, drawn_under, next, next_s_min)
+    }
+
+    /// [`predicted_at`] of `camera`'s view from the frame of `stats` drawn for `drawn_camera`.
+    fn predicted_from(
+        renderer: &mut Renderer,
+        drawn_camera: &Camera,
+        camera: &Camera,
+        stats: &crate::FrameStats,
+        drawn_under: Policy,
+        next: Policy,
+        next_s_min: f32,
+    ) -> u64 {
+        let s_min = renderer.settings.s_min;
         let steering = crate::BudgetFrame { s_min, target: drawn_under.target(), finest: false };
-        let drawn = renderer.drawn(selection, steering, stats, drawn_under);
-        renderer.predict_count(&selection, next, next_s_min, drawn)
+        let drawn = renderer.drawn(drawn_camera.selection(), steering, stats, drawn_under);
+        renderer.predict_count(&camera.selection(), next, next_s_min, drawn)
     }
 
     /// Budget mode counts every point tree it predicts by its cut (`Renderer::table_cost`), not
@@ -1454,9 +1459,7 @@ mod tests {
         let stats = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &field)).last().expect("frames");
         assert!(!renderer.assigned[CHOOSE_CHUNK + 5], "the near tree is out of the field's view");
         let s_min = renderer.settings.s_min;
-        let steering = crate::BudgetFrame { s_min, target: policy.target(), finest: false };
-        let drawn = renderer.drawn(field.selection(), steering, &stats, policy);
-        let predicted = renderer.predict_count(&turned.selection(), policy, s_min, drawn);
+        let predicted = predicted_from(&mut renderer, &field, &turned, &stats, policy, policy, s_min);
         let next = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &turned)).last().expect("frames");
         assert!(renderer.assigned[CHOOSE_CHUNK + 5], "the near tree is in the turned view");
         assert_eq!(renderer.assigned.iter().filter(|&&a| a).count(), 1, "only the near tree in the turned view");
@@ -1502,9 +1505,7 @@ mod tests {
                 let frustum = treelod_runtime::Frustum::from_view_proj(moved.selection().view_proj);
                 assert!((0..30).all(|i| renderer.wholly_in_view(i, &frustum)), "a tree cut by the view");
                 let s_min = renderer.settings.s_min;
-                let steering = crate::BudgetFrame { s_min, target: policy.target(), finest: false };
-                let drawn = renderer.drawn(camera.selection(), steering, &stats, policy);
-                let predicted = renderer.predict_count(&moved.selection(), policy, s_min, drawn);
+                let predicted = predicted_from(&mut renderer, &camera, &moved, &stats, policy, policy, s_min);
                 let next = (0..4).map(|_| renderer.prepare(&gpu.device, &gpu.queue, &moved)).last().expect("frames");
                 assert_eq!(
                     (stats.by_technique[Technique::Spt], next.by_technique[Technique::Spt]),
