@@ -147,7 +147,7 @@ use treelod_runtime::{
 use treelod_runtime::policy::target_at;
 use treelod_runtime::texels::{self, Sampler, Texels};
 
-use crate::raster::{NOISE_SIZE, View, ellipse_spans, ellipsoid_hits, noise_cut};
+use crate::raster::{CHUNK, NOISE_SIZE, ProjectedChunk, View, ellipse_spans, ellipsoid_hits, noise_cut};
 use crate::shade::{Canvas, Surface, depth, triangle_pixels};
 
 /// Projected heights of the block at which every representation is measured, pixels: octaves
@@ -571,23 +571,52 @@ struct MadeOf {
 /// Triangles to draw, their corners apart from what they are made of: every view projects each
 /// triangle's corners, but most triangles of a large tree in a small view hold no pixel centre,
 /// and only the others read the rest (a [`Tri`]'s corners are 36 of its 76 bytes, so the views
-/// stream under half as much memory).
+/// stream under half as much memory). The corners are stored coordinate by coordinate, so that a
+/// view projects [`CHUNK`] triangles at once ([`View::project_chunk`]).
 #[derive(Default)]
 struct Tris {
-    /// Per triangle, its corners.
-    positions: Vec<[Vec3; 3]>,
+    /// `corners[3·c + a][i]`: axis `a` (x, y, z) of corner `c` of triangle `i`, metres.
+    corners: [Vec<f32>; 9],
     /// Per triangle, what it is made of.
     made_of: Vec<MadeOf>,
 }
 
 impl Tris {
     fn len(&self) -> usize {
-        self.positions.len()
+        self.made_of.len()
     }
 
     fn push(&mut self, Tri { positions, made_of }: Tri) {
-        self.positions.push(positions);
+        for (k, corner) in positions.iter().enumerate() {
+            self.corners[3 * k].push(corner.x);
+            self.corners[3 * k + 1].push(corner.y);
+            self.corners[3 * k + 2].push(corner.z);
+        }
         self.made_of.push(made_of);
+    }
+
+    /// The corners of triangle `i`.
+    fn positions(&self, i: usize) -> [Vec3; 3] {
+        let c = &self.corners;
+        core::array::from_fn(|k| Vec3::new(c[3 * k][i], c[3 * k + 1][i], c[3 * k + 2][i]))
+    }
+
+    /// The corners of the triangles from `start` on as [`View::project_chunk`] takes them: read in
+    /// place, or copied into `padded` where fewer than [`CHUNK`] are left (the rest NaN, holding
+    /// no pixel centre).
+    fn chunk<'a>(&'a self, start: usize, padded: &'a mut [[f32; CHUNK]; 9]) -> [&'a [f32; CHUNK]; 9] {
+        let mut axes = self.corners.iter();
+        padded.each_mut().map(|pad| {
+            let rest = axes.next().and_then(|axis| axis.get(start..)).unwrap_or(&[]);
+            match rest.first_chunk::<CHUNK>() {
+                Some(whole) => whole,
+                None => {
+                    pad[..rest.len()].copy_from_slice(rest);
+                    pad[rest.len()..].fill(f32::NAN);
+                    pad
+                }
+            }
+        })
     }
 }
 
@@ -1006,62 +1035,79 @@ impl<'a> Scene<'a> {
     /// coverage exceeds a hash of its pixel and depth, so on average the leaves cover what their
     /// texels cover.
     fn draw_triangles(&self, canvas: &mut Canvas, view: &View, triangles: &Tris, reference: bool) {
+        let (mut padded, mut chunk) = ([[0.0; CHUNK]; 9], ProjectedChunk::default());
+        for start in (0..triangles.len()).step_by(CHUNK) {
+            view.project_chunk(canvas.size(), triangles.chunk(start, &mut padded), &mut chunk);
+            for (j, t) in triangles.made_of[start..].iter().take(CHUNK).enumerate() {
+                if chunk.may_hold[j] {
+                    self.draw_triangle(canvas, view, chunk.corners(j), triangles.positions(start + j), t, reference);
+                }
+            }
+        }
+    }
+
+    /// [`Self::draw_triangles`]'s triangle of pixel corners `p`, model-space corners `positions`.
+    fn draw_triangle(
+        &self,
+        canvas: &mut Canvas,
+        view: &View,
+        p: [Vec2; 3],
+        positions: [Vec3; 3],
+        t: &MadeOf,
+        reference: bool,
+    ) {
         let size = self.layers.size;
         #[expect(clippy::cast_precision_loss, reason = "a texture side")]
         let side = Vec2::splat(size as f32);
-        for (positions, t) in triangles.positions.iter().zip(&triangles.made_of) {
-            // Written out: `map` here was a call per corner (its closure not inlined).
-            let p = [view.project(positions[0]), view.project(positions[1]), view.project(positions[2])];
-            // The corners' depths and the material, found at the first pixel centre the
-            // triangle holds: most triangles of a large tree in a small view hold none.
-            let mut found = None;
-            // Texels per pixel (constant over an orthographic triangle), the level of detail and
-            // the corners, found at the first pixel that passes the depth test.
-            let mut shading = None;
-            triangle_pixels(canvas.size(), p, |x, y, b| {
-                let &mut (depths, (base, layer, cutoff)) = found.get_or_insert_with(|| {
-                    let material = self.materials.get(t.material as usize).copied().unwrap_or((Vec4::ONE, None, None));
-                    (positions.map(|q| depth(view, q)), material)
-                });
-                let z = depths[0] * b[0] + depths[1] * b[1] + depths[2] * b[2];
-                if !canvas.nearer(x, y, z) {
+        // The corners' depths and the material, found at the first pixel centre the
+        // triangle holds: most triangles of a large tree in a small view hold none.
+        let mut found = None;
+        // Texels per pixel (constant over an orthographic triangle), the level of detail and
+        // the corners, found at the first pixel that passes the depth test.
+        let mut shading = None;
+        triangle_pixels(canvas.size(), p, |x, y, b| {
+            let &mut (depths, (base, layer, cutoff)) = found.get_or_insert_with(|| {
+                let material = self.materials.get(t.material as usize).copied().unwrap_or((Vec4::ONE, None, None));
+                (positions.map(|q| depth(view, q)), material)
+            });
+            let z = depths[0] * b[0] + depths[1] * b[1] + depths[2] * b[2];
+            if !canvas.nearer(x, y, z) {
+                return;
+            }
+            let uvs = t.uvs;
+            let levels = layer.and_then(|l| self.layers.levels.get(l));
+            let &mut (footprint, lod, corners) = shading.get_or_insert_with(|| {
+                let footprint = texel_footprint(p, uvs, side);
+                let corners =
+                    t.indices.map(|i| self.vertices.get(i as usize).copied().unwrap_or((Vec3::Y, Vec4::ONE, 0.0)));
+                (footprint, footprint.max(1e-6).log2(), corners)
+            });
+            let uv = uvs[0] * b[0] + uvs[1] * b[1] + uvs[2] * b[2];
+            let colour = corners[0].1 * b[0] + corners[1].1 * b[1] + corners[2].1 * b[2];
+            if let Some(cutoff) = cutoff {
+                let texel = levels
+                    .map_or(1.0, |l| texels::sample_alpha(l, (size, size), uv.to_array(), lod, Sampler::MATERIALS));
+                let alpha = base.w * colour.w * texel;
+                let kept = if reference {
+                    filtered_coverage(alpha, cutoff, footprint) > pixel_depth_hash(x, y, z)
+                } else {
+                    alpha >= cutoff
+                };
+                if !kept {
                     return;
                 }
-                let uvs = t.uvs;
-                let levels = layer.and_then(|l| self.layers.levels.get(l));
-                let &mut (footprint, lod, corners) = shading.get_or_insert_with(|| {
-                    let footprint = texel_footprint(p, uvs, side);
-                    let corners =
-                        t.indices.map(|i| self.vertices.get(i as usize).copied().unwrap_or((Vec3::Y, Vec4::ONE, 0.0)));
-                    (footprint, footprint.max(1e-6).log2(), corners)
-                });
-                let uv = uvs[0] * b[0] + uvs[1] * b[1] + uvs[2] * b[2];
-                let colour = corners[0].1 * b[0] + corners[1].1 * b[1] + corners[2].1 * b[2];
-                if let Some(cutoff) = cutoff {
-                    let texel = levels
-                        .map_or(1.0, |l| texels::sample_alpha(l, (size, size), uv.to_array(), lod, Sampler::MATERIALS));
-                    let alpha = base.w * colour.w * texel;
-                    let kept = if reference {
-                        filtered_coverage(alpha, cutoff, footprint) > pixel_depth_hash(x, y, z)
-                    } else {
-                        alpha >= cutoff
-                    };
-                    if !kept {
-                        return;
-                    }
-                }
-                let texel = levels.map_or(Vec4::ONE, |levels| {
-                    Vec4::from_array(texels::sample(levels, (size, size), uv.to_array(), lod, Sampler::MATERIALS))
-                });
-                let albedo = base * colour * texel;
-                let surface = Surface {
-                    albedo: albedo.truncate(),
-                    normal: corners[0].0 * b[0] + corners[1].0 * b[1] + corners[2].0 * b[2],
-                    ao: corners[0].2 * b[0] + corners[1].2 * b[1] + corners[2].2 * b[2],
-                };
-                canvas.put(x, y, z, surface.shaded());
+            }
+            let texel = levels.map_or(Vec4::ONE, |levels| {
+                Vec4::from_array(texels::sample(levels, (size, size), uv.to_array(), lod, Sampler::MATERIALS))
             });
-        }
+            let albedo = base * colour * texel;
+            let surface = Surface {
+                albedo: albedo.truncate(),
+                normal: corners[0].0 * b[0] + corners[1].0 * b[1] + corners[2].0 * b[2],
+                ao: corners[0].2 * b[0] + corners[1].2 * b[1] + corners[2].2 * b[2],
+            };
+            canvas.put(x, y, z, surface.shaded());
+        });
     }
 
     /// The techniques the container holds data for, in code order.

@@ -275,6 +275,82 @@ impl View {
         let half = 0.5 * self.size as f32;
         Vec2::new(half + d.dot(self.right) * self.scale, half - d.dot(self.up) * self.scale)
     }
+
+    /// [`Self::project`] of the corners of [`CHUNK`] triangles at once, with whether each may
+    /// hold a pixel centre of a `size × size` image: `corners[3·c + a]` holds axis `a` (x, y, z)
+    /// of corner `c` of every triangle of the chunk (a padding triangle of NaN corners holds
+    /// none). The arithmetic is [`Self::project`]'s and [`Setup::new`]'s tests before snapping,
+    /// term for term, so a triangle marked as holding none is one [`triangle_pixels`] visits no
+    /// pixel of, and the corners are the same floats; written a lane per triangle, without
+    /// branches, so that the compiler runs the lanes side by side in vector registers. Most
+    /// triangles of a large tree drawn in a small image hold no pixel centre, and testing them
+    /// one at a time was most of what the calibration's small views cost (spec §6.15).
+    #[expect(clippy::cast_precision_loss, reason = "an image side")]
+    #[expect(clippy::needless_range_loop, reason = "lane `j` of nine arrays and three outputs")]
+    pub fn project_chunk(&self, size: u32, corners: [&[f32; CHUNK]; 9], out: &mut ProjectedChunk) {
+        let half = 0.5 * self.size as f32;
+        let side = size as f32;
+        let (c, r, u, scale) = (self.centre, self.right, self.up, self.scale);
+        for j in 0..CHUNK {
+            let mut x = [0.0f32; 3];
+            let mut y = [0.0f32; 3];
+            for k in 0..3 {
+                let (dx, dy, dz) = (corners[3 * k][j] - c.x, corners[3 * k + 1][j] - c.y, corners[3 * k + 2][j] - c.z);
+                // `Vec3::dot`'s order: (x·x + y·y) + z·z.
+                x[k] = half + (dx * r.x + dy * r.y + dz * r.z) * scale;
+                y[k] = half - (dx * u.x + dy * u.y + dz * u.z) * scale;
+                out.x[k][j] = x[k];
+                out.y[k][j] = y[k];
+            }
+            // `Vec2::min` and `max` as `Setup::new` takes them, corner 0, then 1, then 2: glam's
+            // compare and select (not `f32::min`, which passes over a NaN where they keep it).
+            let min = |a: f32, b: f32| if a < b { a } else { b };
+            let max = |a: f32, b: f32| if a > b { a } else { b };
+            let (min_x, max_x) = (min(min(x[0], x[1]), x[2]), max(max(x[0], x[1]), x[2]));
+            let (min_y, max_y) = (min(min(y[0], y[1]), y[2]), max(max(y[0], y[1]), y[2]));
+            let outside = !((max_x >= 0.0) & (max_y >= 0.0) & (min_x <= side) & (min_y <= side));
+            // `holds_no_centre`, whose floors are exact in floats within its reach.
+            let within = (min_x > -NO_CENTRE_REACH)
+                & (min_y > -NO_CENTRE_REACH)
+                & (max_x < NO_CENTRE_REACH)
+                & (max_y < NO_CENTRE_REACH);
+            let gap = |lo: f32, hi: f32| floor_small(hi - 0.5 + NO_CENTRE_MARGIN) < lo - 0.5 - NO_CENTRE_MARGIN;
+            out.may_hold[j] = !(outside | (within & (gap(min_x, max_x) | gap(min_y, max_y))));
+        }
+    }
+}
+
+/// Triangles projected at a time by [`View::project_chunk`].
+pub const CHUNK: usize = 64;
+
+/// A chunk of triangles projected by [`View::project_chunk`]: per corner and triangle its pixel
+/// coordinates, and per triangle whether it may hold a pixel centre.
+#[derive(Clone, Debug)]
+pub struct ProjectedChunk {
+    /// `x[c][j]`: the `x` of corner `c` of triangle `j`.
+    pub x: [[f32; CHUNK]; 3],
+    /// `y[c][j]`: the `y` of corner `c` of triangle `j`.
+    pub y: [[f32; CHUNK]; 3],
+    /// Whether triangle `j` may hold a pixel centre (else [`triangle_pixels`] visits none).
+    pub may_hold: [bool; CHUNK],
+}
+
+impl Default for ProjectedChunk {
+    fn default() -> Self {
+        Self { x: [[0.0; CHUNK]; 3], y: [[0.0; CHUNK]; 3], may_hold: [false; CHUNK] }
+    }
+}
+
+impl ProjectedChunk {
+    /// The pixel corners of triangle `j`.
+    #[must_use]
+    pub fn corners(&self, j: usize) -> [Vec2; 3] {
+        [
+            Vec2::new(self.x[0][j], self.y[0][j]),
+            Vec2::new(self.x[1][j], self.y[1][j]),
+            Vec2::new(self.x[2][j], self.y[2][j]),
+        ]
+    }
 }
 
 /// `count` unit view directions (towards the viewer): `ceil(2·count/3)` around the vertical
@@ -534,6 +610,16 @@ fn snap(v: f32) -> i64 {
 fn floor_i64(v: f32) -> i64 {
     let i = v as i64;
     if (i as f32) > v { i.saturating_sub(1) } else { i }
+}
+
+/// `floor(v)` in floats alone, exact for `|v| ≤ 2²²` ([`floor_i64`]'s value there; beyond it
+/// not, and [`View::project_chunk`] does not read it there): adding `1.5·2²³` rounds `v` to the
+/// nearest integer, which is one more than the floor where it lies above `v`. Branch-free, so
+/// the compiler runs it in vector lanes.
+fn floor_small(v: f32) -> f32 {
+    const ROUND: f32 = 12_582_912.0;
+    let nearest = (v + ROUND) - ROUND;
+    if nearest > v { nearest - 1.0 } else { nearest }
 }
 
 /// `floor(v)` of an `f64` as an integer (saturating).
@@ -1096,6 +1182,80 @@ mod tests {
             tiny += usize::from(size.max_element() < 0.01 && min.abs().max(max.abs()).max_element() < 4000.0);
         }
         assert!(rejected > tiny / 2, "{rejected} of {tiny} tiny boxes rejected");
+    }
+
+    #[test]
+    #[expect(clippy::needless_range_loop, reason = "lane `j` of nine arrays")]
+    fn a_chunk_projects_as_one_corner_at_a_time_and_rejects_as_setup_does() {
+        // Triangles far under a pixel to wider than the image, near pixel centres and edges, out
+        // of the image, past the float test's reach, and not finite, in views of 5 to 700
+        // pixels: each corner is `View::project`'s float, bit for bit, and a triangle is marked
+        // as holding no centre exactly where `Setup::new` rejects its box before snapping (so
+        // wherever `triangle_pixels` visits a pixel it is marked as holding one).
+        let mut rng = crate::rng::SplitMix64(23);
+        let mut next = || rng.unit();
+        let mut chunk = ProjectedChunk::default();
+        let (mut held, mut not_held) = (0, 0);
+        for round in 0..400 {
+            let size = [5, 16, 64, 700][round % 4];
+            let direction = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+            let view = View::fit(direction, Vec3::new(1.0, 5.0, -2.0), 3.0 + 4.0 * next(), size);
+            let mut corners = [[0.0f32; CHUNK]; 9];
+            for j in 0..CHUNK {
+                let reach = [0.001, 0.01, 0.3, 8.0, 5000.0][(round + j) % 5];
+                let centre = Vec3::new(1.0, 5.0, -2.0) + Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * 10.0;
+                for k in 0..3 {
+                    let p = centre + Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * reach;
+                    corners[3 * k][j] = p.x;
+                    corners[3 * k + 1][j] = p.y;
+                    corners[3 * k + 2][j] = p.z;
+                }
+            }
+            corners[round % 9][round % CHUNK] = [f32::NAN, f32::INFINITY][round % 2];
+            view.project_chunk(size, corners.each_ref(), &mut chunk);
+            for j in 0..CHUNK {
+                let p: [Vec2; 3] = core::array::from_fn(|k| {
+                    view.project(Vec3::new(corners[3 * k][j], corners[3 * k + 1][j], corners[3 * k + 2][j]))
+                });
+                let got = chunk.corners(j);
+                for k in 0..3 {
+                    assert_eq!(got[k].x.to_bits(), p[k].x.to_bits(), "round {round}, triangle {j}, corner {k}");
+                    assert_eq!(got[k].y.to_bits(), p[k].y.to_bits(), "round {round}, triangle {j}, corner {k}");
+                }
+                let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+                let side = size as f32;
+                let outside = !(max.x >= 0.0 && max.y >= 0.0 && min.x <= side && min.y <= side);
+                let rejected = outside || holds_no_centre(min, max);
+                assert_eq!(chunk.may_hold[j], !rejected, "round {round}, triangle {j}: {p:?}");
+                if chunk.may_hold[j] {
+                    held += 1;
+                } else {
+                    not_held += 1;
+                    let mut visited = false;
+                    triangle_pixels(size, p, |_, _, _| visited = true);
+                    assert!(!visited, "round {round}, triangle {j} marked as holding no centre holds one");
+                }
+            }
+        }
+        assert!(held > 1000 && not_held > 1000, "{held} held, {not_held} not");
+    }
+
+    #[test]
+    fn floor_in_floats_is_the_integer_floor_within_its_reach() {
+        let mut rng = crate::rng::SplitMix64(5);
+        for i in 0..100_000 {
+            let whole = (rng.unit() * 16_000.0 - 8_000.0).floor();
+            // Whole numbers, halves, and a few ulps either side of them.
+            let v = match i % 4 {
+                0 => whole,
+                1 => whole + 0.5,
+                2 => f32::from_bits(whole.to_bits().wrapping_add(1)),
+                _ => whole - rng.unit() * 1e-3,
+            };
+            #[expect(clippy::cast_precision_loss, reason = "|v| ≤ 8001")]
+            let expected = floor_i64(v) as f32;
+            assert_eq!(floor_small(v), expected, "{v}");
+        }
     }
 
     #[test]
