@@ -303,7 +303,7 @@ impl View {
                 out.y[k][j] = y[k];
             }
             // `Vec2::min` and `max` as `Setup::new` takes them, corner 0, then 1, then 2: glam's
-            // compare and select (not `f32::min`, which passes over a NaN where they keep it).
+            // compare and select (`f32::min` and `max` answer otherwise where a corner is NaN).
             let min = |a: f32, b: f32| if a < b { a } else { b };
             let max = |a: f32, b: f32| if a > b { a } else { b };
             let (min_x, max_x) = (min(min(x[0], x[1]), x[2]), max(max(x[0], x[1]), x[2]));
