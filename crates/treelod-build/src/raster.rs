@@ -279,7 +279,7 @@ impl View {
     /// [`Self::project`] of the corners of [`CHUNK`] triangles at once, with whether each may
     /// hold a pixel centre of a `size × size` image: `corners[3·c + a]` holds axis `a` (x, y, z)
     /// of corner `c` of every triangle of the chunk (a padding triangle of NaN corners holds
-    /// none). The arithmetic is [`Self::project`]'s and [`Setup::new`]'s tests before snapping,
+    /// none). The arithmetic is [`Self::project`]'s and `Setup::new`'s tests before snapping,
     /// term for term, so a triangle marked as holding none is one [`triangle_pixels`] visits no
     /// pixel of, and the corners are the same floats; written a lane per triangle, without
     /// branches, so that the compiler runs the lanes side by side in vector registers. Most
