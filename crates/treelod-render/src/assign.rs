@@ -547,16 +547,7 @@ impl Renderer {
         assignment[technique].push(index);
         let scene =
             treelod_runtime::Scene { lods: &self.lods, models: &self.representations, instances: &self.instances };
-        let settings = treelod_runtime::TechniqueSettings {
-            s_min,
-            lod: self.lod_settings_at(s_min),
-            pruning: self.settings.pruning,
-            impostor_bark: self.settings.impostor_bark,
-            pixel_level: self.settings.pixel_level(),
-            lines: self.settings.lines,
-            chain_policy: self.settings.policy.unwrap_or_default(),
-            culled: false,
-        };
+        let settings = self.technique_settings(s_min, self.lod_settings_at(s_min), false);
         let mut out = treelod_runtime::TreeDraws::default();
         treelod_runtime::select_techniques(&scene, &assignment, camera, &settings, None, None, &mut out);
         let prefixes =

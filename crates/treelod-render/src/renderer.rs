@@ -1616,17 +1616,8 @@ impl Renderer {
         let settings = self.settings;
         view.draws.clear();
         let scene = Scene { lods: &self.lods, models: &self.representations, instances: &self.instances };
-        let technique_settings = TechniqueSettings {
-            s_min: settings.s_min,
-            lod: *lod_settings,
-            pruning: settings.pruning,
-            impostor_bark: settings.impostor_bark,
-            pixel_level: settings.pixel_level(),
-            lines: settings.lines,
-            chain_policy: settings.policy.unwrap_or_default(),
-            // The camera's view's assignment, chosen by the policy for this camera.
-            culled: main && self.assignment_culled,
-        };
+        // The camera's view's assignment, chosen by the policy for this camera, is culled.
+        let technique_settings = self.technique_settings(settings.s_min, *lod_settings, main && self.assignment_culled);
         let prune_state =
             main.then_some(PruneState { shown: &mut self.prune_shown, visible_fraction: &self.visible_fraction });
         let chain_state = match role {
@@ -1644,6 +1635,24 @@ impl Renderer {
                     self.occlusion_jobs.push(job);
                 }
             }
+        }
+    }
+
+    /// The settings the techniques other than the point tree select with ([`select_techniques`])
+    /// at `s_min`, the point tree's `lod` settings, and whether the assignment is `culled`
+    /// already: the rest from the renderer's settings. The frame's views and budget mode's
+    /// predictions of one tree (`Renderer::selected_cost`) take them from here alike.
+    pub(crate) fn technique_settings(&self, s_min: f32, lod: LodSettings, culled: bool) -> TechniqueSettings {
+        let settings = &self.settings;
+        TechniqueSettings {
+            s_min,
+            lod,
+            pruning: settings.pruning,
+            impostor_bark: settings.impostor_bark,
+            pixel_level: settings.pixel_level(),
+            lines: settings.lines,
+            chain_policy: settings.policy.unwrap_or_default(),
+            culled,
         }
     }
 
