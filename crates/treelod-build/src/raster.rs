@@ -302,20 +302,11 @@ impl View {
                 out.x[k][j] = x[k];
                 out.y[k][j] = y[k];
             }
-            // `Vec2::min` and `max` as `Setup::new` takes them, corner 0, then 1, then 2: glam's
-            // compare and select (`f32::min` and `max` answer otherwise where a corner is NaN).
-            let min = |a: f32, b: f32| if a < b { a } else { b };
-            let max = |a: f32, b: f32| if a > b { a } else { b };
-            let (min_x, max_x) = (min(min(x[0], x[1]), x[2]), max(max(x[0], x[1]), x[2]));
-            let (min_y, max_y) = (min(min(y[0], y[1]), y[2]), max(max(y[0], y[1]), y[2]));
-            let outside = !((max_x >= 0.0) & (max_y >= 0.0) & (min_x <= side) & (min_y <= side));
-            // `holds_no_centre`, whose floors are exact in floats within its reach.
-            let within = (min_x > -NO_CENTRE_REACH)
-                & (min_y > -NO_CENTRE_REACH)
-                & (max_x < NO_CENTRE_REACH)
-                & (max_y < NO_CENTRE_REACH);
-            let gap = |lo: f32, hi: f32| floor_small(hi - 0.5 + NO_CENTRE_MARGIN) < lo - 0.5 - NO_CENTRE_MARGIN;
-            out.may_hold[j] = !(outside | (within & (gap(min_x, max_x) | gap(min_y, max_y))));
+            // The box as `Setup::new` takes it, corner 0, then 1, then 2 (glam's `min` and `max`
+            // compare and select: `f32::min` and `max` answer otherwise where a corner is NaN).
+            let p = [Vec2::new(x[0], y[0]), Vec2::new(x[1], y[1]), Vec2::new(x[2], y[2])];
+            let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            out.may_hold[j] = !rejected_before_snapping(side, min, max);
         }
     }
 }
@@ -530,10 +521,7 @@ impl Setup {
         let side = size as f32;
         // Entirely outside the image, or not finite: nothing to do.
         let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-        if !(max.x >= 0.0 && max.y >= 0.0 && min.x <= side && min.y <= side) {
-            return None;
-        }
-        if holds_no_centre(min, max) {
+        if rejected_before_snapping(side, min, max) {
             return None;
         }
         let corner = |q: Vec2| (snap(q.x), snap(q.y));
@@ -591,13 +579,22 @@ const NO_CENTRE_REACH: f32 = 4096.0;
 /// pixel that make most of a large tree drawn in a small image; it answers `true` only where the
 /// snapped box holds no centre either (so [`Setup::new`] returns what it would without it).
 fn holds_no_centre(min: Vec2, max: Vec2) -> bool {
-    if !(min.x > -NO_CENTRE_REACH && min.y > -NO_CENTRE_REACH && max.x < NO_CENTRE_REACH && max.y < NO_CENTRE_REACH) {
-        return false;
-    }
-    // The last centre at or before `hi` (widened) is before `lo` (widened).
-    #[expect(clippy::cast_precision_loss, reason = "|k| ≤ 4097")]
-    let gap = |lo: f32, hi: f32| (floor_i64(hi - 0.5 + NO_CENTRE_MARGIN) as f32) < lo - 0.5 - NO_CENTRE_MARGIN;
-    gap(min.x, max.x) || gap(min.y, max.y)
+    let within =
+        (min.x > -NO_CENTRE_REACH) & (min.y > -NO_CENTRE_REACH) & (max.x < NO_CENTRE_REACH) & (max.y < NO_CENTRE_REACH);
+    // The last centre at or before `hi` (widened) is before `lo` (widened); the floors are exact
+    // in floats within the reach ([`floor_small`]).
+    let gap = |lo: f32, hi: f32| floor_small(hi - 0.5 + NO_CENTRE_MARGIN) < lo - 0.5 - NO_CENTRE_MARGIN;
+    within & (gap(min.x, max.x) | gap(min.y, max.y))
+}
+
+/// Whether [`Setup::new`] rejects the box `min..max` (pixel coordinates) of a triangle before
+/// snapping its corners: entirely outside a `side × side` image or not finite, or sure to hold
+/// no pixel centre ([`holds_no_centre`]). Without branches, so that [`View::project_chunk`]'s
+/// lanes run it side by side in vector registers; `Setup::new` asks the same of one triangle.
+#[inline(always)]
+fn rejected_before_snapping(side: f32, min: Vec2, max: Vec2) -> bool {
+    let outside = !((max.x >= 0.0) & (max.y >= 0.0) & (min.x <= side) & (min.y <= side));
+    outside | holds_no_centre(min, max)
 }
 
 /// A pixel coordinate in fixed point: the nearest multiple of 1/256 pixel, clamped to ±2^24.
@@ -613,7 +610,7 @@ fn floor_i64(v: f32) -> i64 {
 }
 
 /// `floor(v)` in floats alone, exact for `|v| ≤ 2²²` ([`floor_i64`]'s value there; beyond it
-/// not, and [`View::project_chunk`] does not read it there): adding `1.5·2²³` rounds `v` to the
+/// not, and [`holds_no_centre`] does not read it there): adding `1.5·2²³` rounds `v` to the
 /// nearest integer, which is one more than the floor where it lies above `v`. Branch-free, so
 /// the compiler runs it in vector lanes.
 fn floor_small(v: f32) -> f32 {
